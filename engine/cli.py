@@ -1,0 +1,179 @@
+"""Command line: ``python -m engine render …`` and ``python -m engine mueller …``.
+
+User mistakes (bad scene files, parameters out of range) end with a one-line
+message naming the field and exit status 2, never a traceback.  Ctrl-C during
+a render stops after the current batch and writes the finished samples.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+
+from engine.scene.errors import SceneError
+
+
+class ProgressBar:
+    """A one-line progress bar on stderr (only redrawn when it changes visibly)."""
+
+    def __init__(self, label: str, stream=sys.stderr, width: int = 30):
+        self.label, self.stream, self.width = label, stream, width
+        self.t0 = time.perf_counter()
+        self._last = None
+
+    def __call__(self, fraction: float, stats: dict) -> None:
+        filled = int(round(fraction * self.width))
+        elapsed = time.perf_counter() - self.t0
+        eta = elapsed * (1 - fraction) / fraction if fraction > 0 else 0.0
+        rate = stats.get("samples", 0) / max(elapsed, 1e-9) / 1e3
+        line = (f"\r{self.label} [{'#' * filled}{'.' * (self.width - filled)}] {100 * fraction:5.1f}% "
+                f"{elapsed:6.1f}s elapsed, {eta:6.1f}s left, {rate:7.1f} ksamples/s")
+        if line != self._last:
+            self.stream.write(line)
+            self.stream.flush()
+            self._last = line
+
+    def close(self):
+        if self._last is not None:
+            self.stream.write("\n")
+            self.stream.flush()
+
+
+def _render(args) -> int:
+    from engine.output.exr import write_stokes_exr
+    from engine.output.previews import write_previews
+    from engine.render.renderer import Renderer
+    from engine.scene.loader import load_scene, parse_settings
+
+    scene = load_scene(args.scene)
+    st = scene.settings
+    overrides = {k: v for k, v in (("spp", args.spp), ("seed", args.seed), ("max_depth", args.max_depth),
+                                   ("spectral", args.spectral), ("polarisation", args.polarisation),
+                                   ("wavelength_nm", args.wavelength_nm)) if v is not None}
+    if overrides:
+        merged = {**{k: getattr(st, k) for k in ("spp", "max_depth", "rr_depth", "seed", "spectral",
+                                                  "wavelength_nm", "polarisation", "batch_rays")}, **overrides}
+        st = parse_settings(merged, "option")
+        scene.settings = st
+    out = args.output
+    if not out.lower().endswith(".exr"):
+        raise SceneError("-o", f"the output must be an .exr file, got {out!r}")
+    out_dir = os.path.dirname(os.path.abspath(out))
+    if not os.path.isdir(out_dir):
+        raise SceneError("-o", f"the output folder {out_dir!r} does not exist")
+
+    renderer = Renderer(scene)
+    cam = scene.camera
+    print(f"polar: {os.path.basename(args.scene)}: {cam.width}×{cam.height}, {st.spp} spp, "
+          f"{len(renderer.compiled.faces)} triangles, {len(renderer.lights)} lights, "
+          f"polarisation {st.polarisation}, {st.spectral}"
+          f"{'' if st.spectral == 'spectral' else f' at {st.wavelength_nm:g} nm'}", file=sys.stderr)
+    stop = {"requested": False}
+    bar = None if args.quiet else ProgressBar("rendering")
+    try:
+        result = renderer.render(st, progress=bar, should_stop=lambda: stop["requested"])
+    except KeyboardInterrupt:
+        # The renderer only returns finished units; a second run keeps nothing.
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    stats = result.stats
+    film = result.film
+    spp_image = film.spp_image()
+    meta = {"polar.spp": int(st.spp), "polar.spp_min": int(spp_image.min()), "polar.spp_max": int(spp_image.max()),
+            "polar.seed": int(st.seed), "polar.max_depth": int(st.max_depth), "polar.spectral": st.spectral,
+            "polar.polarisation": st.polarisation, "polar.scene": os.path.basename(args.scene),
+            "polar.render_seconds": float(stats["seconds"]), "polar.nonfinite_samples": int(stats["nonfinite"])}
+    if st.spectral == "mono":
+        meta["polar.wavelength_nm"] = float(st.wavelength_nm)
+    extra = {"spp": spp_image.astype("uint32")}
+    if args.stderr:
+        se = film.stderr_luminance()
+        for i in range(4):
+            extra[f"S{i}.Y.stderr"] = se[i].astype("float32")
+    write_stokes_exr(out, result.stokes(), metadata=meta, extra=extra)
+    written = [out]
+    if not args.no_previews:
+        written += write_previews(os.path.splitext(out)[0], result.stokes(), exposure=args.exposure)
+    msamples = stats["samples"] / max(stats["seconds"], 1e-9) / 1e6
+    print(f"polar: {stats['samples']} samples in {stats['seconds']:.2f} s ({msamples:.3f} Msamples/s), "
+          f"{stats['rays']} rays + {stats['shadow_rays']} shadow rays"
+          f"{'; dropped non-finite samples: ' + str(stats['nonfinite']) if stats['nonfinite'] else ''}",
+          file=sys.stderr)
+    for path in written:
+        print(path)
+    return 0
+
+
+def _parse_params(pairs):
+    params = {}
+    for item in pairs or []:
+        if "=" not in item:
+            raise SceneError("--param", f"must look like NAME=VALUE, got {item!r}")
+        key, value = item.split("=", 1)
+        params[key.strip()] = value.strip()
+    return params
+
+
+def _mueller(args) -> int:
+    from engine.materials.catalogue import make_model
+    from engine.materials.evaluate import mueller_at
+
+    for name, v, lo, hi in (("--theta-i", args.theta_i, 0, 90), ("--theta-o", args.theta_o, 0, 90),
+                            ("--wavelength-nm", args.wavelength_nm, 360, 830)):
+        if not (lo <= v <= hi):
+            raise SceneError(name, f"must be in [{lo}, {hi}], got {v:g}")
+    model = make_model(args.model, _parse_params(args.param))
+    result = mueller_at(model, args.theta_i, args.theta_o, args.phi_o, args.wavelength_nm, args.basis)
+    result.update(model=args.model, params=_parse_params(args.param),
+                  geometry={"theta_i_deg": args.theta_i, "theta_o_deg": args.theta_o, "phi_o_deg": args.phi_o,
+                            "wavelength_nm": args.wavelength_nm})
+    print(json.dumps(result))
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="python -m engine", description="Polar: polarised spectral path tracer")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("render", help="render a scene file to a Stokes EXR (+ PNG previews)")
+    r.add_argument("scene", help="scene JSON (engine format or a shared/peers scene)")
+    r.add_argument("-o", "--output", required=True, help="output .exr path")
+    r.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
+    r.add_argument("--seed", type=int, help="random seed (default: the scene's)")
+    r.add_argument("--max-depth", type=int, help="maximum path segments (1 = emitters only)")
+    r.add_argument("--spectral", choices=("spectral", "mono"), help="4 wavelengths per path or one")
+    r.add_argument("--wavelength-nm", type=float, help="wavelength of --spectral mono (nm)")
+    r.add_argument("--polarisation", choices=("full", "off"), help="full Mueller transport or scalar")
+    r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
+    r.add_argument("--no-previews", action="store_true", help="write only the EXR")
+    r.add_argument("--stderr", action="store_true", help="also write per-pixel standard errors")
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(func=_render)
+
+    m = sub.add_parser("mueller", help="print one model's Mueller BRDF at one geometry as JSON")
+    m.add_argument("--model", required=True, help="lambert | fresnel")
+    m.add_argument("--param", action="append", metavar="NAME=VALUE", help="model parameter (repeatable)")
+    m.add_argument("--theta-i", type=float, required=True, help="incidence angle (deg)")
+    m.add_argument("--theta-o", type=float, required=True, help="viewing angle (deg)")
+    m.add_argument("--phi-o", type=float, default=0.0, help="viewing azimuth (deg), 0 = forward side")
+    m.add_argument("--wavelength-nm", type=float, default=550.0, help="wavelength (nm)")
+    m.add_argument("--basis", choices=("sp", "scattering"), default="sp", help="Stokes basis of the result")
+    m.set_defaults(func=_mueller)
+    return ap
+
+
+def main(argv=None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except SceneError as e:
+        print(f"error: {e}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("\ninterrupted", file=sys.stderr)
+        return 130

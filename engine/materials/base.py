@@ -1,0 +1,144 @@
+"""The interface every material model implements (like Mitsuba 3's BSDF / pbrt-v4's BxDF).
+
+Directions (physics.md §0): ``wi`` points from the surface towards the light,
+``wo`` towards the viewer (the previous path vertex).  A Mueller value always
+describes the *physical* light flow: light travelling along k_i = −wi is
+scattered into k_o = wo, and the matrix maps Stokes vectors given in the frame
+``x_in`` (⟂ k_i) to Stokes vectors in the frame ``x_out`` (⟂ k_o), with
+y = k × x as everywhere.
+
+Batches: vectors are (3, N), per-wavelength values are (L, N) where L is the
+number of wavelengths carried by each path (4, or 1 in monochrome mode).
+
+Every model provides
+- ``eval(sp, wi)``   – the non-delta Mueller BRDF/BTDF f (1/sr, *no* cosine),
+- ``pdf(sp, wi)``    – the solid-angle density with which ``sample`` picks wi
+                       for the non-delta lobes,
+- ``sample(sp, u_lobe, u_dir)`` – a direction wi with weight f·|cosθ_i|/pdf
+                       (for Dirac lobes: the lobe's Mueller weight), and
+- ``delta_reflection(sp)`` – the Mueller weight of a mirror (Dirac) reflection
+                       lobe into the mirror direction of wo, or None.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from engine.polarisation.mueller import abcs_matrix, depolariser
+
+
+@dataclass
+class ShadingPoint:
+    """A batch of surface hits as seen by a material (all world space)."""
+
+    p: np.ndarray          # (3, N) position
+    n_s: np.ndarray        # (3, N) unit shading normal, front side
+    n_g: np.ndarray        # (3, N) unit geometric normal, same side as n_s
+    wo: np.ndarray         # (3, N) unit direction towards the viewer
+    lam: np.ndarray        # (L, N) wavelengths in nm
+    mono: bool = False     # monochrome mode: spectra return their mono value
+
+    @property
+    def n(self) -> int:
+        return self.wo.shape[1]
+
+    @property
+    def cos_o(self) -> np.ndarray:
+        return self.n_s[0] * self.wo[0] + self.n_s[1] * self.wo[1] + self.n_s[2] * self.wo[2]
+
+    def spectrum(self, spec) -> np.ndarray:
+        """A material parameter (engine.spectral Spectrum) at this batch's wavelengths, (L, N)."""
+        return spec.eval(self.lam, mono=self.mono)
+
+
+@dataclass
+class MuellerValue:
+    """A batch of Mueller matrices with the frames they are expressed in.
+
+    ``kind`` is one of
+    - ``"depolarising"``: only ``A`` (= M00) is set; frame-independent.
+    - ``"abcs"``: the block form [[A,B,0,0],[B,A,0,0],[0,0,C,S],[0,0,−S,C]]
+      (Fresnel reflection, diattenuators, single-facet models).
+    - ``"general"``: a full matrix ``M`` (4, 4, L, N).
+    Arrays A, B, C, S are (L, N).  ``x_in``/``x_out`` are (3, N).
+    """
+
+    kind: str
+    x_in: np.ndarray
+    x_out: np.ndarray
+    A: np.ndarray | None = None
+    B: np.ndarray | None = None
+    C: np.ndarray | None = None
+    S: np.ndarray | None = None
+    M: np.ndarray | None = None
+
+    def matrix(self) -> np.ndarray:
+        """The full (4, 4, L, N) matrix."""
+        if self.kind == "general":
+            return self.M
+        if self.kind == "depolarising":
+            return depolariser(self.A)
+        return abcs_matrix(self.A, self.B, self.C, self.S)
+
+    def scaled(self, factor: np.ndarray) -> "MuellerValue":
+        """This value times a scalar factor broadcastable to (L, N)."""
+        if self.kind == "general":
+            return MuellerValue("general", self.x_in, self.x_out, M=self.M * factor)
+        sc = lambda v: None if v is None else v * factor  # noqa: E731
+        return MuellerValue(self.kind, self.x_in, self.x_out, sc(self.A), sc(self.B), sc(self.C), sc(self.S))
+
+    def masked(self, keep: np.ndarray) -> "MuellerValue":
+        """Zero the entries where ``keep`` (N,) is False."""
+        return self.scaled(keep.astype(np.float64)[None, :])
+
+
+def depolarising_value(a: np.ndarray, n: int) -> MuellerValue:
+    """A depolariser a·diag(1,0,0,0) (frames irrelevant, filled with zeros)."""
+    zeros = np.zeros((3, n))
+    return MuellerValue("depolarising", zeros, zeros, A=a)
+
+
+@dataclass
+class BSDFSample:
+    """Result of ``BSDF.sample`` for a batch of N shading points."""
+
+    wi: np.ndarray             # (3, N) unit direction towards the light
+    weight: MuellerValue       # f·|cosθ_i|/pdf (Dirac lobes: their Mueller weight), incl. radiance scale
+    pdf: np.ndarray            # (N,) solid-angle pdf of wi (0 for Dirac lobes)
+    is_delta: np.ndarray       # (N,) bool: wi was chosen from a Dirac lobe
+    valid: np.ndarray          # (N,) bool: False where no direction could be sampled
+    eta_sq: np.ndarray = field(default=None)  # (N,) radiance scale undone for Russian roulette (1 = none)
+
+
+class BSDF:
+    """Base class of the material models.  Subclasses set the flags below."""
+
+    #: Every lobe is a Dirac delta (no next-event estimation at such vertices).
+    delta_only: bool = False
+    #: The model can change the polarisation state (False for Lambert).
+    polarising: bool = True
+    #: The model can create circular polarisation (complex index, TIR, retarders).
+    creates_circular: bool = True
+    #: Light can pass through the surface (two-sided, refraction).
+    transmits: bool = False
+
+    name: str = "bsdf"
+
+    def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
+        raise NotImplementedError
+
+    def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        raise NotImplementedError
+
+    def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        raise NotImplementedError
+
+    def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
+        """Mueller weight of the mirror (Dirac) lobe for reflection of wo, or None."""
+        return None
+
+    def describe(self) -> dict:
+        """Parameters for logs and file headers."""
+        return {"type": self.name}

@@ -1,0 +1,24 @@
+"""Black glass: the smooth interface of an infinitely absorbing dielectric.
+
+Only the Fresnel reflection of a real index n exists (the thesis's floor);
+transmitted light is absorbed.  Its Mueller matrix is the conductor's with
+κ = 0: a pure diattenuator (no retardance) that fully s-polarises at
+Brewster's angle.  One-sided.
+"""
+
+from __future__ import annotations
+
+from engine.materials.conductor import SmoothConductor
+from engine.spectral import ConstantSpectrum
+
+
+class BlackGlass(SmoothConductor):
+    name = "black_glass"
+
+    def __init__(self, n, exterior_n=1.0):
+        super().__init__(n, ConstantSpectrum(0.0), exterior_n)
+        # A real index below the critical angle never retards (S = 0).
+        self.creates_circular = False
+
+    def describe(self):
+        return {"type": self.name, "n": repr(self.n), "exterior_n": self.exterior_n}

@@ -1,0 +1,61 @@
+"""Smooth conductor: a perfect Fresnel mirror with complex index η = n + iκ.
+
+The relative index is η/n_exterior.  The Dirac lobe reflects wo about the
+shading normal with the Fresnel Mueller matrix M_F(cosθ) of physics.md §0 in
+the plane-of-incidence frames x = s = unit(n × k) (shared by both beams).
+One-sided: zero when wo lies behind the shading normal.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.materials.base import BSDF, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from engine.polarisation.frames import plane_of_incidence_axis
+from engine.polarisation.fresnel import fresnel_reflection_abcs
+from engine.vec3 import reflect
+
+
+def mirror_reflection(sp: ShadingPoint, eta: np.ndarray):
+    """(wi, MuellerValue, valid) of a smooth-interface mirror reflection of wo.
+
+    ``eta`` is the relative complex index (L, N) seen from the wo side.
+    """
+    cos_o = sp.cos_o
+    valid = cos_o >= 0  # cosθ = 0 is the grazing limit M_F → identity, not "behind"
+    wi = reflect(sp.wo, sp.n_s)
+    s = plane_of_incidence_axis(sp.n_s, -wi)
+    A, B, C, S = fresnel_reflection_abcs(np.maximum(cos_o, 0.0)[None, :], eta)
+    m = valid.astype(np.float64)[None, :]
+    return wi, MuellerValue("abcs", s, s, A * m, B * m, C * m, S * m), valid
+
+
+class SmoothConductor(BSDF):
+    name = "conductor"
+    delta_only = True
+
+    def __init__(self, n, k, exterior_n=1.0):
+        self.n = n
+        self.k = k
+        self.exterior_n = float(exterior_n)
+        self.creates_circular = True
+
+    def relative_eta(self, sp: ShadingPoint) -> np.ndarray:
+        return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
+
+    def eval(self, sp, wi):
+        return depolarising_value(np.zeros_like(sp.lam), sp.n)
+
+    def pdf(self, sp, wi):
+        return np.zeros(sp.n)
+
+    def delta_reflection(self, sp):
+        return mirror_reflection(sp, self.relative_eta(sp))[1]
+
+    def sample(self, sp, u_lobe, u_dir) -> BSDFSample:
+        wi, value, valid = mirror_reflection(sp, self.relative_eta(sp))
+        return BSDFSample(wi=wi, weight=value, pdf=np.zeros(sp.n), is_delta=np.ones(sp.n, bool),
+                          valid=valid, eta_sq=np.ones(sp.n))
+
+    def describe(self):
+        return {"type": self.name, "n": repr(self.n), "k": repr(self.k), "exterior_n": self.exterior_n}

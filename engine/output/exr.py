@@ -1,0 +1,199 @@
+"""Multi-channel OpenEXR files holding a Stokes image and its derived maps.
+
+Channel layout written by :func:`write_stokes_exr` (one scanline part, ZIP
+compression, float32 unless ``half=True``):
+
+``S0.R S0.G S0.B … S3.R S3.G S3.B``
+    the Stokes image, linear sRGB radiance (same units as the renderer's S0);
+``R G B``
+    a copy of S0, so ordinary viewers show the unpolarised image;
+``DoP DoLP DoCP``
+    dimensionless, from the luminance Stokes vector (0 where S0 = 0); DoCP signed;
+``AoLP``
+    radians in (−π/2, π/2], from image-right towards image-up;
+extra channels
+    anything passed in ``extra`` (e.g. ``spp``, ``S0.Y.stderr``); integer
+    arrays are stored as EXR UINT, floating ones like the Stokes channels.
+
+The frame convention is stored as the string attribute ``polar.conventions``
+(:data:`STOKES_EXR_CONVENTIONS`).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import OpenEXR
+
+from engine.output import atomic_output_path, check_stokes_image, luminance_stokes
+from engine.polarisation import stokes as st
+
+STOKES_EXR_CONVENTIONS = (
+    "Polar Stokes EXR. Channels Sk.R/G/B (k=0..3): Stokes vector per linear sRGB "
+    "(Rec.709, D65) channel; R,G,B = S0. Frame: x = image right, y = image up, light "
+    "travelling towards the camera. S1>0: linear along x; S2>0: linear along (x+y)/sqrt2; "
+    "S3 = 2 Im(Ex Ey*) > 0: right-circular (optics convention). AoLP = 0.5 atan2(S2,S1) "
+    "in radians, from image right towards image up, in (-pi/2, pi/2]. DoP, DoLP, AoLP, "
+    "DoCP (signed, S3/S0) are computed from the luminance Stokes vector "
+    "Y = 0.2126 R + 0.7152 G + 0.0722 B; ratios are 0 where S0 = 0."
+)
+
+STOKES_CHANNELS = tuple(f"S{k}.{c}" for k in range(4) for c in "RGB")
+DERIVED_CHANNELS = ("DoP", "DoLP", "AoLP", "DoCP")
+_BUILTIN_CHANNELS = frozenset(STOKES_CHANNELS + ("R", "G", "B") + DERIVED_CHANNELS)
+
+# Standard / structural EXR attributes the caller's metadata must not override.
+_RESERVED_ATTRIBUTES = frozenset({
+    "channels", "compression", "dataWindow", "displayWindow", "lineOrder",
+    "pixelAspectRatio", "screenWindowCenter", "screenWindowWidth", "type",
+    "tiles", "name", "version", "chunkCount", "chromaticities",
+})
+# Rec. 709 / sRGB primaries and D65 white (CIE xy): red, green, blue, white.
+_REC709_CHROMATICITIES = (0.64, 0.33, 0.30, 0.60, 0.15, 0.06, 0.3127, 0.3290)
+_HALF_MAX = float(np.finfo(np.float16).max)
+_INT32 = (-(2**31), 2**31 - 1)
+
+
+def _header_value(key: str, value):
+    """Map a Python metadata value to what the OpenEXR bindings store with a proper type.
+
+    str → string; bool/int in int32 range → int; other ints → decimal string;
+    float → double (a 1-element float64 array is how the bindings write an
+    EXR ``double``; a bare Python float would be truncated to float32).
+    """
+    if isinstance(value, str):
+        return value
+    if isinstance(value, (bool, np.bool_)):
+        return int(value)
+    if isinstance(value, (int, np.integer)):
+        value = int(value)
+        return value if _INT32[0] <= value <= _INT32[1] else str(value)
+    if isinstance(value, (float, np.floating)):
+        return np.array([float(value)], dtype=np.float64)
+    raise ValueError(
+        f"metadata {key!r}: unsupported type {type(value).__name__} (use str, int or float)"
+    )
+
+
+def _check_metadata(metadata: dict) -> dict:
+    out = {}
+    for key, value in metadata.items():
+        if not isinstance(key, str) or not key:
+            raise ValueError(f"metadata keys must be non-empty strings; got {key!r}")
+        if key in _RESERVED_ATTRIBUTES:
+            raise ValueError(f"metadata key {key!r} is a reserved EXR attribute")
+        out[key] = _header_value(key, value)
+    return out
+
+
+def _float_channel(name: str, values: np.ndarray, half: bool) -> np.ndarray:
+    if half:
+        big = np.abs(values) > _HALF_MAX
+        if big.any():
+            raise ValueError(
+                f"channel {name!r}: {int(big.sum())} value(s) exceed the half-float maximum "
+                f"{_HALF_MAX:g}; write with half=False"
+            )
+        return values.astype(np.float16)
+    return values.astype(np.float32)
+
+
+def _extra_channel(name, values, shape, half: bool) -> np.ndarray:
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"extra channel names must be non-empty strings; got {name!r}")
+    if name in _BUILTIN_CHANNELS:
+        raise ValueError(f"extra channel {name!r} clashes with a built-in channel")
+    a = np.asarray(values)
+    if a.shape != shape:
+        raise ValueError(f"extra channel {name!r} has shape {a.shape}; expected {shape} (H, W)")
+    if np.issubdtype(a.dtype, np.integer) or a.dtype == np.bool_:
+        if a.size and (a.min() < 0 or a.max() > 2**32 - 1):
+            raise ValueError(f"extra channel {name!r}: integer values must lie in [0, 2**32 - 1]")
+        return a.astype(np.uint32)
+    if not np.issubdtype(a.dtype, np.floating):
+        raise ValueError(f"extra channel {name!r}: dtype {a.dtype} is not integer or float")
+    bad = ~np.isfinite(a)
+    if bad.any():
+        raise ValueError(f"extra channel {name!r} has {int(bad.sum())} non-finite value(s)")
+    return _float_channel(name, a, half)
+
+
+def write_stokes_exr(
+    path: str | os.PathLike,
+    stokes_rgb,
+    metadata: dict | None = None,
+    extra: dict[str, np.ndarray] | None = None,
+    half: bool = False,
+) -> None:
+    """Write a Stokes image (4, H, W, 3) to a ZIP-compressed multi-channel EXR, atomically.
+
+    Channels are described in the module docstring.  ``metadata`` maps header
+    attribute names (e.g. ``polar.spp``, ``polar.seed``) to str / int / float;
+    ints outside int32 are stored as strings, floats as EXR doubles.
+    ``polar.conventions`` defaults to :data:`STOKES_EXR_CONVENTIONS`.
+    ``half=True`` stores floating channels as 16-bit half (ValueError if a
+    value exceeds 65504).  The file is written to a hidden temporary file in
+    the target directory and renamed into place, so a failure never leaves a
+    truncated file and never damages an existing one.  Raises ValueError for
+    bad shapes, non-finite values or unsupported metadata.
+    """
+    s = check_stokes_image(stokes_rgb)
+    _, height, width, _ = s.shape
+    header = {"polar.conventions": STOKES_EXR_CONVENTIONS}
+    header.update(_check_metadata(metadata or {}))
+    header.update({
+        "compression": OpenEXR.ZIP_COMPRESSION,
+        "type": OpenEXR.scanlineimage,
+        "chromaticities": _REC709_CHROMATICITIES,
+    })
+
+    channels: dict[str, np.ndarray] = {}
+    for k in range(4):
+        for c, cname in enumerate("RGB"):
+            channels[f"S{k}.{cname}"] = _float_channel(f"S{k}.{cname}", s[k, :, :, c], half)
+    for c, cname in enumerate("RGB"):
+        channels[cname] = channels[f"S0.{cname}"]
+    y = luminance_stokes(s)
+    derived = {
+        "DoP": st.degree_of_polarisation(y),
+        "DoLP": st.degree_of_linear_polarisation(y),
+        "AoLP": st.angle_of_linear_polarisation(y),
+        "DoCP": st.degree_of_circular_polarisation(y),
+    }
+    for name, values in derived.items():
+        channels[name] = _float_channel(name, values, half)
+    for name, values in (extra or {}).items():
+        channels[name] = _extra_channel(name, values, (height, width), half)
+
+    # The bindings need C-contiguous arrays (slices of s are strided).
+    channels = {n: np.ascontiguousarray(a) for n, a in channels.items()}
+    exr = OpenEXR.File(header, channels)
+    with atomic_output_path(path) as tmp:
+        exr.write(tmp)
+
+
+def read_stokes_exr(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, np.ndarray], dict]:
+    """Read a file written by :func:`write_stokes_exr`.
+
+    Returns ``(stokes_rgb, channels, header)``: the Stokes image as float32
+    (4, H, W, 3), every stored channel by name (dtype as stored: float32,
+    float16 or uint32) and the header dict, with EXR doubles turned back into
+    Python floats.  Raises ValueError if a Stokes channel is missing.
+    """
+    f = OpenEXR.File(os.fspath(path), separate_channels=True)
+    channels = {name: ch.pixels for name, ch in f.channels().items()}
+    missing = [n for n in STOKES_CHANNELS if n not in channels]
+    if missing:
+        raise ValueError(f"{os.fspath(path)}: not a Stokes EXR, missing channels {missing}")
+    height, width = channels["S0.R"].shape
+    stokes_rgb = np.empty((4, height, width, 3), dtype=np.float32)
+    for k in range(4):
+        for c, cname in enumerate("RGB"):
+            stokes_rgb[k, :, :, c] = channels[f"S{k}.{cname}"]
+    header = {}
+    for key, value in f.header().items():
+        if isinstance(value, np.ndarray) and value.dtype == np.float64 and value.shape == (1,):
+            value = float(value[0])
+        header[key] = value
+    return stokes_rgb, channels, header

@@ -1,0 +1,133 @@
+"""The compiled scene: all meshes merged into one Embree BVH plus per-triangle data.
+
+Embree (through embreex) works in float32 and has no t_near, so secondary
+rays start at a point offset along the geometric normal (see
+``offset_origin``).  Positions on surfaces are reconstructed in float64 from
+the barycentric coordinates rather than from o + t·d.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from embreex import rtcore_scene as rtcs
+from embreex.mesh_construction import TriangleMesh
+
+from engine.scene.description import Scene
+from engine.scene.errors import SceneError
+
+# Mitsuba 3's float32 ray epsilon: offsets scale with (1 + max|p_i|).
+RAY_EPSILON = 8.9e-5
+
+
+class Hits:
+    """Closest hits of a ray batch: ``prim`` (N,) global triangle index (−1 = miss), barycentrics u, v, distance t."""
+
+    __slots__ = ("prim", "u", "v", "t")
+
+    def __init__(self, prim, u, v, t):
+        self.prim, self.u, self.v, self.t = prim, u, v, t
+
+
+class CompiledScene:
+    """Geometry ready for ray casting: merged triangles, normals, material and emitter ids."""
+
+    def __init__(self, scene: Scene):
+        if not scene.meshes:
+            raise SceneError("objects", "the scene has no geometry: add at least one object")
+        self.material_names = list(scene.materials)
+        self.materials = [scene.materials[n] for n in self.material_names]
+        mat_index = {n: i for i, n in enumerate(self.material_names)}
+
+        verts, faces, tri_mat, tri_mesh, vnormals, has_vn = [], [], [], [], [], []
+        offset = 0
+        for mi, mesh in enumerate(scene.meshes):
+            v = np.asarray(mesh.vertices, np.float64)
+            f = np.asarray(mesh.faces, np.int64) + offset
+            verts.append(v)
+            faces.append(f)
+            lut = np.array([mat_index[m] for m in mesh.materials], dtype=np.int32)
+            tri_mat.append(lut[mesh.material_ids])
+            tri_mesh.append(np.full(len(f), mi, np.int32))
+            if mesh.normals is not None:
+                vnormals.append(np.asarray(mesh.normals, np.float64))
+                has_vn.append(np.ones(len(f), bool))
+            else:
+                vnormals.append(np.zeros_like(v))
+                has_vn.append(np.zeros(len(f), bool))
+            offset += len(v)
+        self.vertices = np.concatenate(verts)
+        self.faces = np.concatenate(faces)
+        self.tri_material = np.concatenate(tri_mat)
+        self.tri_mesh = np.concatenate(tri_mesh)
+        self.vertex_normals = np.concatenate(vnormals)
+        self.tri_has_normals = np.concatenate(has_vn)
+        self.any_vertex_normals = bool(self.tri_has_normals.any())
+
+        v0, v1, v2 = (self.vertices[self.faces[:, i]] for i in range(3))
+        cross = np.cross(v1 - v0, v2 - v0)
+        length = np.linalg.norm(cross, axis=1)
+        self.tri_area = 0.5 * length
+        self.tri_normal = cross / np.where(length > 0, length, 1.0)[:, None]
+        self.scene_extent = float(np.abs(self.vertices).max()) if len(self.vertices) else 1.0
+
+        self.embree = rtcs.EmbreeScene()
+        TriangleMesh(self.embree, self.vertices.astype(np.float32), self.faces.astype(np.int32))
+        # tri_emitter is filled in by the light set (area lights).
+        self.tri_emitter = np.full(len(self.faces), -1, np.int32)
+
+    # ------------------------------------------------------------------ ray casting
+
+    def intersect(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray | None = None) -> Hits:
+        """Closest hits for origins o and unit directions d, both (3, N)."""
+        of = np.ascontiguousarray(o.T, dtype=np.float32)
+        df = np.ascontiguousarray(d.T, dtype=np.float32)
+        if t_max is None:
+            res = self.embree.run(of, df, output=1)
+        else:
+            dists = np.minimum(t_max, 1e37).astype(np.float32)
+            res = self.embree.run(of, df, dists=dists, output=1)
+        prim = res["primID"].astype(np.int64)
+        return Hits(prim, res["u"].astype(np.float64), res["v"].astype(np.float64),
+                    res["tfar"].astype(np.float64))
+
+    def occluded(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray) -> np.ndarray:
+        """True where the segment o → o + t_max·d is blocked."""
+        of = np.ascontiguousarray(o.T, dtype=np.float32)
+        df = np.ascontiguousarray(d.T, dtype=np.float32)
+        dists = np.minimum(t_max, 1e37).astype(np.float32)
+        res = self.embree.run(of, df, dists=dists, query="OCCLUDED")
+        return res == 0
+
+    # ------------------------------------------------------------------ surface data
+
+    def surface(self, prim: np.ndarray, u: np.ndarray, v: np.ndarray):
+        """(p, n_g, n_s) as (3, N) float64 at the hits ``prim`` with barycentrics (u, v).
+
+        n_g is the face normal by winding; n_s the interpolated vertex normal
+        (or n_g for flat faces), flipped if needed so that it lies on n_g's side.
+        """
+        tri = self.faces[prim]
+        w0 = 1.0 - u - v
+        V = self.vertices
+        p = (V[tri[:, 0]] * w0[:, None] + V[tri[:, 1]] * u[:, None] + V[tri[:, 2]] * v[:, None]).T
+        n_g = self.tri_normal[prim].T
+        if not self.any_vertex_normals:
+            return p, n_g, n_g
+        N = self.vertex_normals
+        n_s = (N[tri[:, 0]] * w0[:, None] + N[tri[:, 1]] * u[:, None] + N[tri[:, 2]] * v[:, None]).T
+        length = np.sqrt((n_s * n_s).sum(0))
+        smooth = self.tri_has_normals[prim] & (length > 0)
+        n_s = np.where(smooth[None, :], n_s / np.where(length > 0, length, 1.0), n_g)
+        return p, n_g, n_s
+
+
+def offset_origin(p: np.ndarray, n_g: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Start point of a ray leaving surface point p in direction w (all (3, N)).
+
+    Moved along the geometric normal to the side w leaves from, by
+    (1 + max|p_i|)·8.9e-5 (Mitsuba 3's rule), which keeps float32 Embree from
+    re-hitting the same triangle at grazing angles.
+    """
+    side = np.where((n_g * w).sum(0) >= 0, 1.0, -1.0)
+    mag = (1.0 + np.abs(p).max(axis=0)) * RAY_EPSILON
+    return p + (side * mag)[None, :] * n_g

@@ -1,0 +1,56 @@
+"""Pixel accumulation with a box filter: per-pixel sums of whole path samples.
+
+Sums are float64 and added in a fixed order, so a render is deterministic.
+Besides the Stokes sums (4 components × linear sRGB) the film keeps the sum
+of squares of the luminance Stokes vector per pixel, from which the standard
+error of each pixel mean follows (used by tests and the peer comparisons).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+class Film:
+    def __init__(self, width: int, height: int):
+        self.width, self.height = width, height
+        n = width * height
+        self.sums = np.zeros((4, 3, n))
+        self.sumsq_y = np.zeros((4, n))
+        self.count = np.zeros(n, np.int64)
+
+    def add_samples(self, pixel: np.ndarray, stokes_rgb: np.ndarray) -> None:
+        """Add complete samples: ``stokes_rgb`` (4, 3, N) for flat pixel indices (N,)."""
+        n = self.count.shape[0]
+        for s in range(4):
+            for c in range(3):
+                self.sums[s, c] += np.bincount(pixel, weights=stokes_rgb[s, c], minlength=n)
+        y = np.einsum("c,scn->sn", LUMINANCE, stokes_rgb)
+        for s in range(4):
+            self.sumsq_y[s] += np.bincount(pixel, weights=y[s] * y[s], minlength=n)
+        self.count += np.bincount(pixel, minlength=n)
+
+    def merge(self, other: "Film") -> None:
+        self.sums += other.sums
+        self.sumsq_y += other.sumsq_y
+        self.count += other.count
+
+    def mean(self) -> np.ndarray:
+        """Stokes image (4, H, W, 3): pixel means (0 where a pixel has no sample yet)."""
+        c = np.maximum(self.count, 1)
+        m = self.sums / c
+        return m.reshape(4, 3, self.height, self.width).transpose(0, 2, 3, 1)
+
+    def stderr_luminance(self) -> np.ndarray:
+        """Standard error of the luminance Stokes pixel means, (4, H, W) (0 where spp < 2)."""
+        c = self.count.astype(np.float64)
+        y_mean = np.einsum("c,scn->sn", LUMINANCE, self.sums) / np.maximum(c, 1)
+        var = (self.sumsq_y / np.maximum(c, 1) - y_mean ** 2) * c / np.maximum(c - 1, 1)
+        se = np.sqrt(np.maximum(var, 0.0) / np.maximum(c, 1))
+        se[:, c < 2] = 0.0
+        return se.reshape(4, self.height, self.width)
+
+    def spp_image(self) -> np.ndarray:
+        return self.count.reshape(self.height, self.width)

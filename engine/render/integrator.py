@@ -1,0 +1,304 @@
+"""Wavefront polarised path tracer.
+
+Each path carries, per wavelength, the Mueller product T of everything seen
+so far *from the camera side* (T = M_1 · R · M_2 · R · …), as an array
+(P, P, L, N): P = 4 (full Stokes) or 1 (polarisation off), L wavelengths, N
+paths.  T maps a Stokes vector expressed in the path's current frame
+``x_T`` (⟂ the current segment) to the camera's per-pixel output frame
+(physics.md §0: x = unit(d × u_cam), k = −d).  At a vertex whose Mueller
+value M is given in frames (x_in, x_out):
+
+    T ← T · R(x_out → x_T) · M,   x_T ← x_in.
+
+Lights are unpolarised, so a light of radiance L_e adds T[:, 0]·L_e.  Paths
+are traced in bounded batches; all paths of a batch are at the same depth,
+random numbers come from the stateless sampler (engine.render.sampler), so
+results do not depend on batching.
+
+Next-event estimation at non-delta vertices is combined with BSDF sampling
+by the power heuristic (as Mitsuba 3's ``path``).  ``max_depth`` counts
+path segments; Russian roulette from ``rr_depth`` on uses
+q = min(max_λ T00 · η², 0.95), η² undoing the refraction radiance scale.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from engine.materials.base import MuellerValue, ShadingPoint
+from engine.polarisation.frames import frame_rotation
+from engine.render.accel import offset_origin
+from engine.render.sampler import PathSampler, path_keys
+from engine.spectral import rgb_weights, sample_wavelengths
+from engine.vec3 import dot
+
+
+# ----------------------------------------------------------------------------- Mueller kernels
+
+def rotate_columns(T: np.ndarray, c2: np.ndarray, s2: np.ndarray) -> None:
+    """In place: T ← T · R(φ) for a frame rotation with cos2φ, sin2φ of shape (N,)."""
+    if T.shape[1] < 3:
+        return
+    t1 = T[:, 1].copy()
+    t2 = T[:, 2]
+    T[:, 1] = t1 * c2 - t2 * s2
+    T[:, 2] = t1 * s2 + t2 * c2
+
+
+def multiply_right(T: np.ndarray, m: MuellerValue) -> np.ndarray:
+    """T · M for a Mueller value in its own frames (rotation handled by the caller)."""
+    P = T.shape[0]
+    if m.kind == "depolarising":
+        out = np.zeros_like(T)
+        out[:, 0] = T[:, 0] * m.A
+        return out
+    if m.kind == "abcs":
+        out = np.empty_like(T)
+        if P == 1:
+            out[:, 0] = T[:, 0] * m.A
+            return out
+        t0, t1 = T[:, 0], T[:, 1]
+        out[:, 0] = m.A * t0 + m.B * t1
+        out[:, 1] = m.B * t0 + m.A * t1
+        if P == 4:
+            t2, t3 = T[:, 2], T[:, 3]
+            out[:, 2] = m.C * t2 - m.S * t3
+            out[:, 3] = m.S * t2 + m.C * t3
+        else:
+            out[:, 2] = m.C * T[:, 2]
+        return out
+    M = m.M[:P, :P]
+    return np.einsum("ijln,jkln->ikln", T, M)
+
+
+def unpolarised_response(m: MuellerValue, P: int) -> np.ndarray:
+    """M · (1, 0, 0, 0): the Stokes vector (P, L, N) scattered from unpolarised light, in frame x_out."""
+    L, N = m.A.shape if m.A is not None else m.M.shape[2:]
+    out = np.zeros((P, L, N))
+    if m.kind == "general":
+        out[:] = m.M[:P, 0]
+        return out
+    out[0] = m.A
+    if m.kind == "abcs" and P > 1:
+        out[1] = m.B
+    return out
+
+
+def rotate_stokes(S: np.ndarray, c2, s2) -> np.ndarray:
+    """Stokes vectors S (P, L, N) re-expressed in a frame rotated by (cos2φ, sin2φ)."""
+    if S.shape[0] < 3:
+        return S
+    out = S.copy()
+    out[1] = c2 * S[1] + s2 * S[2]
+    out[2] = -s2 * S[1] + c2 * S[2]
+    return out
+
+
+def apply_T(T: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """T · S for T (P, P, L, N) and S (P, L, N)."""
+    return np.einsum("ijln,jln->iln", T, S)
+
+
+def power_heuristic(a, b):
+    a2 = a * a
+    b2 = b * b
+    den = a2 + b2
+    return np.where(den > 0, a2 / np.where(den > 0, den, 1.0), 0.0)
+
+
+# ----------------------------------------------------------------------------- tracer
+
+class PathTracer:
+    """Traces batches of camera paths for one compiled scene."""
+
+    def __init__(self, compiled, lights, camera, settings):
+        self.scene = compiled
+        self.lights = lights
+        self.camera = camera
+        self.settings = settings
+        self.P = 4 if settings.polarisation == "full" else 1
+        self.mono = settings.spectral == "mono"
+        self.n_lambda = 1 if self.mono else 4
+
+    def _wavelengths(self, sampler: PathSampler, n: int):
+        if self.mono:
+            lam = np.full((1, n), self.settings.wavelength_nm)
+            return lam, np.ones((3, 1, n))
+        u = sampler.next(1)[0]
+        lam, pdf = sample_wavelengths(u, self.n_lambda)
+        return lam, rgb_weights(lam, pdf)
+
+    def trace(self, pixel: np.ndarray, sample: np.ndarray):
+        """Trace one path per (pixel, sample) pair; returns (stokes_rgb (4, 3, N), stats dict)."""
+        st = self.settings
+        P, n_total = self.P, pixel.shape[0]
+        sampler = PathSampler(path_keys(st.seed, pixel, sample))
+        o, d, x_T, t_min, t_max = self.camera.generate(pixel, sampler.next(2))
+        lam, w_rgb = self._wavelengths(sampler, n_total)
+        L = lam.shape[0]
+        if np.any(t_min > 0):
+            o = o + d * t_min[None, :]
+            t_max = t_max - t_min
+
+        radiance = np.zeros((P, L, n_total))
+        path = np.arange(n_total)
+        T = np.zeros((P, P, L, n_total))
+        for i in range(P):
+            T[i, i] = 1.0
+        prev_delta = np.ones(n_total, bool)
+        prev_pdf = np.zeros(n_total)
+        eta_sq = np.ones(n_total)
+        stats = {"rays": 0, "shadow_rays": 0}
+        light_set = self.lights
+        env = light_set.environment
+        compiled = self.scene
+
+        for bounce in range(st.max_depth):
+            n = path.shape[0]
+            if n == 0:
+                break
+            hits = compiled.intersect(o, d, t_max)
+            stats["rays"] += n
+            hit = hits.prim >= 0
+
+            # --- light reached by this segment ----------------------------------------
+            if env is not None and (~hit).any():
+                miss = ~hit
+                Le = env.radiance(lam[:, miss], self.mono)
+                w = np.ones(int(miss.sum()))
+                nd = ~prev_delta[miss]
+                if nd.any():
+                    p_light = env.pdf(d[:, miss]) * light_set.select_prob
+                    w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
+                radiance[:, :, path[miss]] += T[:, 0][:, :, miss] * (Le * w)
+            prim_all = np.where(hit, hits.prim, 0)
+            emitter = np.where(hit, compiled.tri_emitter[prim_all], -1)
+            front = dot(d, compiled.tri_normal[prim_all].T) < 0
+            lit = (emitter >= 0) & front
+            if lit.any():
+                idx = lit.nonzero()[0]
+                for li in np.unique(emitter[idx]):
+                    light = light_set.lights[li]
+                    sel = idx[emitter[idx] == li]
+                    Le = light.radiance(lam[:, sel], self.mono)
+                    cos_l = -dot(d[:, sel], compiled.tri_normal[hits.prim[sel]].T)
+                    p_light = light.pdf_hit(hits.t[sel], cos_l) * light_set.select_prob
+                    wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
+                    radiance[:, :, path[sel]] += T[:, 0][:, :, sel] * (Le * wsel)
+
+            if bounce + 1 >= st.max_depth:
+                break
+
+            # --- keep the paths that hit something --------------------------------------
+            keep = hit
+            path, T, x_T, d, lam, eta_sq = path[keep], T[..., keep], x_T[:, keep], d[:, keep], lam[:, keep], eta_sq[keep]
+            prim, u, v = hits.prim[keep], hits.u[keep], hits.v[keep]
+            sampler.compact(keep)
+            n = path.shape[0]
+            if n == 0:
+                break
+            p, n_g, n_s = compiled.surface(prim, u, v)
+            wo = -d
+            # Stokes frame of the arriving segment: x_T is already ⟂ d.
+            mat = compiled.tri_material[prim]
+            u_light = sampler.next(4)
+            u_bsdf = sampler.next(3)
+            u_rr = sampler.next(1)[0]
+
+            new_d = np.zeros((3, n))
+            new_xT = np.zeros((3, n))
+            newT = np.zeros_like(T)
+            valid = np.zeros(n, bool)
+            is_delta = np.ones(n, bool)
+            pdf_next = np.zeros(n)
+            eta_step = np.ones(n)
+
+            for m in np.unique(mat):
+                sel = np.nonzero(mat == m)[0]
+                bsdf = compiled.materials[m]
+                sp = ShadingPoint(p[:, sel], n_s[:, sel], n_g[:, sel], wo[:, sel], lam[:, sel], self.mono)
+                Tm = T[..., sel]
+                xTm = x_T[:, sel]
+
+                if not bsdf.delta_only and len(light_set) and bounce + 2 <= st.max_depth:
+                    contrib = self._next_event(sp, bsdf, Tm, xTm, u_light[:, sel], stats)
+                    radiance[:, :, path[sel]] += contrib
+
+                bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
+                c2, s2 = frame_rotation(bs.weight.x_out, xTm, wo[:, sel])
+                Tm = Tm.copy()
+                rotate_columns(Tm, c2, s2)
+                newT[..., sel] = multiply_right(Tm, bs.weight)
+                new_d[:, sel] = bs.wi
+                new_xT[:, sel] = bs.weight.x_in
+                valid[sel] = bs.valid
+                is_delta[sel] = bs.is_delta
+                pdf_next[sel] = bs.pdf
+                if bs.eta_sq is not None:
+                    eta_step[sel] = bs.eta_sq
+
+            eta_sq = eta_sq * eta_step
+            # --- Russian roulette ------------------------------------------------------
+            if bounce + 1 >= st.rr_depth:
+                q = np.minimum(np.max(newT[0, 0], axis=0) * eta_sq, 0.95)
+                survive = u_rr < q
+                newT = newT / np.where(survive, q, 1.0)
+                valid &= survive
+            valid &= np.isfinite(newT).all(axis=(0, 1, 2)) & (np.abs(newT[0, 0]).max(axis=0) > 0)
+
+            keep = valid
+            path, T, x_T = path[keep], newT[..., keep], new_xT[:, keep]
+            d = new_d[:, keep]
+            lam, eta_sq = lam[:, keep], eta_sq[keep]
+            prev_delta, prev_pdf = is_delta[keep], pdf_next[keep]
+            o = offset_origin(p[:, keep], n_g[:, keep], d)
+            t_max = None
+            sampler.compact(keep)
+
+        rgb = np.einsum("pln,cln->pcn", radiance, w_rgb)
+        out = np.zeros((4, 3, n_total))
+        out[:P] = rgb
+        finite = np.isfinite(out).all(axis=(0, 1))
+        stats["nonfinite"] = int((~finite).sum())
+        out[:, :, ~finite] = 0.0
+        return out, stats
+
+    def _next_event(self, sp, bsdf, T, x_T, u, stats):
+        """Direct light at non-delta vertices, MIS-weighted against BSDF sampling; (P, L, n)."""
+        light_set = self.lights
+        n = sp.n
+        P = self.P
+        out = np.zeros((P, sp.lam.shape[0], n))
+        choice = np.minimum((u[0] * len(light_set)).astype(np.int64), len(light_set) - 1)
+        for li in np.unique(choice):
+            sel = np.nonzero(choice == li)[0]
+            light = light_set.lights[li]
+            p = sp.p[:, sel]
+            # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
+            u_tri = u[0, sel] * len(light_set) - li
+            wi, dist, value, pdf_l, ok = light.sample(p, np.stack((u_tri, u[1, sel], u[2, sel])),
+                                                      sp.lam[:, sel], sp.mono)
+            sub = ShadingPoint(p, sp.n_s[:, sel], sp.n_g[:, sel], sp.wo[:, sel], sp.lam[:, sel], sp.mono)
+            cos_i = np.abs(dot(sub.n_s, wi))
+            ok &= cos_i > 0
+            if not ok.any():
+                continue
+            f = bsdf.eval(sub, wi)
+            S = unpolarised_response(f, P)
+            if P > 1 and f.kind != "depolarising":
+                c2, s2 = frame_rotation(f.x_out, x_T[:, sel], sub.wo)
+                S = rotate_stokes(S, c2, s2)
+            if light.is_delta:
+                mis = np.ones(sel.size)
+            else:
+                mis = power_heuristic(pdf_l * light_set.select_prob, bsdf.pdf(sub, wi))
+            weight = value * (cos_i * mis / light_set.select_prob * ok)[None, :]
+            origin = offset_origin(p, sub.n_g, wi)
+            t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
+            blocked = np.zeros(sel.size, bool)
+            test = ok.nonzero()[0]
+            blocked[test] = self.scene.occluded(origin[:, test], wi[:, test], t_max[test])
+            stats["shadow_rays"] += test.size
+            weight = weight * (~blocked)[None, :]
+            out[:, :, sel] = apply_T(T[..., sel], S * weight[None])
+        return out

@@ -1,0 +1,104 @@
+"""Render a Scene: split the image into work units, trace them, merge the film.
+
+A work unit is a band of image rows × a range of sample passes, sized so that
+one unit traces at most ``settings.batch_rays`` camera paths (bounded
+memory).  Units are processed in a fixed order and the stateless sampler
+makes every sample independent of the split, so the image is deterministic
+for a seed.  Between units the renderer reports progress and asks whether to
+stop; a cancelled render returns the finished samples (the film records the
+true per-pixel sample count).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from engine.render.accel import CompiledScene
+from engine.render.camera import CameraModel
+from engine.render.film import Film
+from engine.render.integrator import PathTracer
+from engine.render.lights import LightSet
+from engine.scene.description import Scene
+
+
+@dataclass
+class RenderResult:
+    film: Film
+    settings: object
+    stats: dict = field(default_factory=dict)
+    cancelled: bool = False
+
+    def stokes(self) -> np.ndarray:
+        """Stokes image (4, H, W, 3) in the per-pixel camera frame (linear sRGB)."""
+        return self.film.mean()
+
+    def stokes_luminance(self) -> np.ndarray:
+        """Luminance Stokes image (4, H, W)."""
+        return np.einsum("shwc,c->shw", self.stokes(), np.array([0.2126, 0.7152, 0.0722]))
+
+
+def work_units(width: int, height: int, spp: int, batch_rays: int, first_pass: int = 0):
+    """Yield (row0, row1, pass0, pass1) covering the image × passes [first_pass, spp)."""
+    rows_per_unit = max(1, min(height, batch_rays // max(width, 1)))
+    passes_per_unit = max(1, batch_rays // (rows_per_unit * width))
+    for p0 in range(first_pass, spp, passes_per_unit):
+        p1 = min(spp, p0 + passes_per_unit)
+        for r0 in range(0, height, rows_per_unit):
+            yield r0, min(height, r0 + rows_per_unit), p0, p1
+
+
+class Renderer:
+    """Compiles a scene once; ``render`` may then be called repeatedly."""
+
+    def __init__(self, scene: Scene):
+        self.scene = scene
+        t0 = time.perf_counter()
+        self.compiled = CompiledScene(scene)
+        self.lights = LightSet(scene, self.compiled)
+        self.camera = CameraModel(scene.camera)
+        self.compile_seconds = time.perf_counter() - t0
+
+    def render(self, settings=None, progress=None, should_stop=None) -> RenderResult:
+        """Render with ``settings`` (default: the scene's).
+
+        ``progress(done_fraction, stats)`` is called after every work unit;
+        ``should_stop()`` is polled between units and ends the render early.
+        """
+        st = settings or self.scene.settings
+        cam = self.scene.camera
+        W, H = cam.width, cam.height
+        film = Film(W, H)
+        tracer = PathTracer(self.compiled, self.lights, self.camera, st)
+        stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0,
+                 "compile_seconds": self.compile_seconds}
+        units = list(work_units(W, H, st.spp, st.batch_rays))
+        total = sum((r1 - r0) * W * (p1 - p0) for r0, r1, p0, p1 in units)
+        t0 = time.perf_counter()
+        cancelled = False
+        done = 0
+        for r0, r1, p0, p1 in units:
+            if should_stop is not None and should_stop():
+                cancelled = True
+                break
+            pix = np.arange(r0 * W, r1 * W, dtype=np.int64)
+            pixel = np.tile(pix, p1 - p0)
+            sample = np.repeat(np.arange(p0, p1, dtype=np.int64), pix.size)
+            values, s = tracer.trace(pixel, sample)
+            film.add_samples(pixel, values)
+            for k in ("rays", "shadow_rays", "nonfinite"):
+                stats[k] += s[k]
+            done += pixel.size
+            stats["samples"] = done
+            stats["seconds"] = time.perf_counter() - t0
+            if progress is not None:
+                progress(done / total, stats)
+        stats["seconds"] = time.perf_counter() - t0
+        return RenderResult(film=film, settings=st, stats=stats, cancelled=cancelled)
+
+
+def render(scene: Scene, settings=None, progress=None, should_stop=None) -> RenderResult:
+    """Convenience: compile and render ``scene`` once."""
+    return Renderer(scene).render(settings, progress, should_stop)

@@ -1,0 +1,113 @@
+"""The in-memory scene: what the JSON loader, the Python API and the Blender
+exporter all produce, and what the renderer compiles.
+
+Units: lengths in scene units, angles in degrees at this level, wavelengths
+in nm.  Radiance and intensity are relative ("radiance 1" white light develops
+to linear sRGB (1, 1, 1)).  World space is right-handed; any axis may be up.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Camera:
+    """Pinhole (perspective) or orthographic camera looking from origin to target.
+
+    Basis: f = unit(target − origin), r = unit(f × up), u_cam = r × f.
+    ``fov_deg`` is the full angle along ``fov_axis`` ("x": horizontal,
+    "y": vertical).  ``ortho_width`` is the full width of an orthographic view.
+    ``shift`` is the lens shift in units of the larger image side (Blender).
+    Rays start at ``clip_start`` and end at ``clip_end`` along the ray.
+    """
+
+    origin: np.ndarray
+    target: np.ndarray
+    up: np.ndarray
+    width: int
+    height: int
+    fov_deg: float = 40.0
+    fov_axis: str = "x"
+    projection: str = "perspective"
+    ortho_width: float = 2.0
+    shift: tuple = (0.0, 0.0)
+    clip_start: float = 0.0
+    clip_end: float = float("inf")
+
+
+@dataclass
+class Mesh:
+    """A triangle mesh in world space.
+
+    ``faces`` are counter-clockwise seen from the front (geometric normal
+    (v1 − v0) × (v2 − v0)).  ``normals`` are per-vertex shading normals or None
+    (flat shading).  ``material_ids`` index ``materials`` (names in
+    Scene.materials) per face.  ``emission`` (a spectral radiance, or None)
+    makes the mesh a one-sided area light emitting along its front side.
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    materials: list
+    material_ids: np.ndarray
+    normals: np.ndarray | None = None
+    emission: object | None = None
+
+
+@dataclass
+class PointLight:
+    position: np.ndarray
+    intensity: object             # spectrum: radiant intensity (radiance × area / sr)
+
+
+@dataclass
+class SpotLight:
+    position: np.ndarray
+    direction: np.ndarray         # unit axis of the cone (direction light travels)
+    intensity: object
+    cone_angle_deg: float = 45.0  # full opening angle
+    blend: float = 0.0            # fraction of the half-angle with a smooth falloff
+
+
+@dataclass
+class DirectionalLight:
+    direction: np.ndarray         # unit direction in which the light travels
+    irradiance: object            # spectrum: irradiance on a surface ⟂ direction
+
+
+@dataclass
+class EnvironmentLight:
+    radiance: object              # constant spectral radiance from every direction
+
+
+@dataclass
+class RenderSettings:
+    """How to render.  ``max_depth`` counts path segments (as Mitsuba 3):
+    1 = only directly visible light, 2 = direct lighting, ….
+    ``polarisation``: "full" (4×4 Mueller), "off" (scalar, S1..S3 = 0).
+    ``spectral``: "spectral" (4 wavelengths per path over 360–830 nm) or
+    "mono" (one wavelength ``wavelength_nm``; RGB colours by their luminance).
+    """
+
+    spp: int = 16
+    max_depth: int = 16
+    rr_depth: int = 5
+    seed: int = 0
+    spectral: str = "spectral"
+    wavelength_nm: float = 550.0
+    polarisation: str = "full"
+    batch_rays: int = 1 << 17
+
+
+@dataclass
+class Scene:
+    camera: Camera
+    meshes: list = field(default_factory=list)
+    materials: dict = field(default_factory=dict)   # name → BSDF
+    lights: list = field(default_factory=list)
+    settings: RenderSettings = field(default_factory=RenderSettings)
+    source: str = ""

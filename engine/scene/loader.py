@@ -1,0 +1,421 @@
+"""Scene files (JSON) → engine.scene.description.Scene, validated on load.
+
+Two formats are read:
+
+- the engine's own format (``"format": "polar-scene/1"``, documented in the
+  README, section "Scene files"), and
+- the renderer-neutral peer format of ``shared/peers/scenes/*.json``
+  (recognised by its top-level ``light`` and ``integrator``), converted by
+  engine.scene.peer_format.
+
+Every problem raises SceneError naming the field (``objects[1].radius``) and
+the allowed range.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+
+import numpy as np
+
+from engine.materials.black_glass import BlackGlass
+from engine.materials.conductor import SmoothConductor
+from engine.materials.dielectric import SmoothDielectric
+from engine.materials.lambert import Lambert
+from engine.scene.description import (Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
+                                      RenderSettings, Scene, SpotLight)
+from engine.scene.errors import SceneError
+from engine.scene.meshio import read_mesh
+from engine.scene.shapes import icosphere, quad, transform_matrix, transform_mesh
+from engine.spectral import ConstantSpectrum, RGBIlluminantSpectrum, named_ior, parse_spectrum
+
+FORMAT = "polar-scene/1"
+
+
+# --------------------------------------------------------------------------- field readers
+
+def _type_name(v) -> str:
+    return type(v).__name__ if v is not None else "null"
+
+
+def _require(d: dict, key: str, field: str):
+    if not isinstance(d, dict):
+        raise SceneError(field, f"must be an object, got {_type_name(d)}")
+    if key not in d:
+        raise SceneError(f"{field}.{key}" if field else key, "is required but missing")
+    return d[key]
+
+
+def number(value, field: str, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=False) -> float:
+    """A finite number within [lo, hi] (open ends where asked)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise SceneError(field, f"must be a number, got {value!r}")
+    v = float(value)
+    rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+    if not math.isfinite(v):
+        raise SceneError(field, f"must be a finite number in {rng}, got {value!r}")
+    if v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi):
+        raise SceneError(field, f"must be in {rng}, got {v:g}")
+    return v
+
+
+def integer(value, field: str, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or float(value) != int(value):
+        raise SceneError(field, f"must be a whole number in [{lo}, {hi}], got {value!r}")
+    v = int(value)
+    if v < lo or v > hi:
+        raise SceneError(field, f"must be a whole number in [{lo}, {hi}], got {v}")
+    return v
+
+
+def vec3(value, field: str, unit=False) -> np.ndarray:
+    if not isinstance(value, (list, tuple)) or len(value) != 3:
+        raise SceneError(field, f"must be a list of 3 numbers, got {value!r}")
+    v = np.array([number(x, f"{field}[{i}]") for i, x in enumerate(value)])
+    if unit:
+        n = np.linalg.norm(v)
+        if not n > 0:
+            raise SceneError(field, "must be a non-zero vector")
+        v = v / n
+    return v
+
+
+def choice(value, field: str, allowed) -> str:
+    if value not in allowed:
+        raise SceneError(field, f"must be one of {', '.join(map(repr, allowed))}, got {value!r}")
+    return value
+
+
+def _check_keys(d: dict, field: str, allowed: set):
+    unknown = sorted(set(d) - allowed)
+    if unknown:
+        raise SceneError(f"{field}.{unknown[0]}" if field else unknown[0],
+                         f"unknown field (allowed: {', '.join(sorted(allowed))})")
+
+
+# --------------------------------------------------------------------------- sections
+
+def parse_camera(d: dict, field: str = "camera") -> Camera:
+    if not isinstance(d, dict):
+        raise SceneError(field, "must be an object")
+    _check_keys(d, field, {"projection", "origin", "target", "up", "fov_deg", "fov_axis", "width",
+                           "height", "ortho_width", "shift", "clip_start", "clip_end", "note"})
+    projection = choice(d.get("projection", "perspective"), f"{field}.projection",
+                        ("perspective", "orthographic"))
+    origin = vec3(_require(d, "origin", field), f"{field}.origin")
+    target = vec3(_require(d, "target", field), f"{field}.target")
+    up = vec3(d.get("up", [0, 0, 1]), f"{field}.up", unit=True)
+    forward = target - origin
+    if not np.linalg.norm(forward) > 0:
+        raise SceneError(f"{field}.target", "must differ from camera.origin")
+    if np.linalg.norm(np.cross(forward / np.linalg.norm(forward), up)) < 1e-6:
+        raise SceneError(f"{field}.up", "must not be parallel to the viewing direction (target − origin)")
+    cam = Camera(
+        origin=origin, target=target, up=up,
+        width=integer(_require(d, "width", field), f"{field}.width", 1, 65536),
+        height=integer(_require(d, "height", field), f"{field}.height", 1, 65536),
+        fov_deg=number(d.get("fov_deg", 40.0), f"{field}.fov_deg", 0, 180, lo_open=True, hi_open=True),
+        fov_axis=choice(d.get("fov_axis", "x"), f"{field}.fov_axis", ("x", "y")),
+        projection=projection,
+        ortho_width=number(d.get("ortho_width", 2.0), f"{field}.ortho_width", 0, math.inf, lo_open=True),
+        clip_start=number(d.get("clip_start", 0.0), f"{field}.clip_start", 0),
+        clip_end=number(d.get("clip_end", 1e30), f"{field}.clip_end", 0, lo_open=True),
+    )
+    shift = d.get("shift", [0.0, 0.0])
+    if not isinstance(shift, (list, tuple)) or len(shift) != 2:
+        raise SceneError(f"{field}.shift", "must be a list of 2 numbers")
+    cam.shift = tuple(number(s, f"{field}.shift[{i}]", -10, 10) for i, s in enumerate(shift))
+    if cam.clip_end <= cam.clip_start:
+        raise SceneError(f"{field}.clip_end", f"must be greater than clip_start ({cam.clip_start:g})")
+    return cam
+
+
+def parse_settings(d: dict, field: str = "render") -> RenderSettings:
+    if not isinstance(d, dict):
+        raise SceneError(field, "must be an object")
+    _check_keys(d, field, {"spp", "max_depth", "rr_depth", "seed", "spectral", "wavelength_nm",
+                           "polarisation", "batch_rays"})
+    s = RenderSettings()
+    s.spp = integer(d.get("spp", s.spp), f"{field}.spp", 1, 1 << 24)
+    s.max_depth = integer(d.get("max_depth", s.max_depth), f"{field}.max_depth", 1, 1024)
+    s.rr_depth = integer(d.get("rr_depth", s.rr_depth), f"{field}.rr_depth", 1, 1024)
+    s.seed = integer(d.get("seed", s.seed), f"{field}.seed", 0, 2 ** 63 - 1)
+    s.spectral = choice(d.get("spectral", s.spectral), f"{field}.spectral", ("spectral", "mono"))
+    s.wavelength_nm = number(d.get("wavelength_nm", s.wavelength_nm), f"{field}.wavelength_nm", 360, 830)
+    s.polarisation = choice(d.get("polarisation", s.polarisation), f"{field}.polarisation", ("full", "off"))
+    s.batch_rays = integer(d.get("batch_rays", s.batch_rays), f"{field}.batch_rays", 1024, 1 << 24)
+    return s
+
+
+def parse_material(d: dict, field: str):
+    if not isinstance(d, dict):
+        raise SceneError(field, "must be an object with a 'type'")
+    kind = choice(_require(d, "type", field), f"{field}.type",
+                  ("lambert", "conductor", "dielectric", "black_glass"))
+    common = {"type", "note", "name"}
+    if kind == "lambert":
+        _check_keys(d, field, common | {"albedo"})
+        return Lambert(parse_spectrum(d.get("albedo", 0.8), f"{field}.albedo", kind="reflectance"))
+    if kind == "conductor":
+        _check_keys(d, field, common | {"n", "k", "metal", "exterior_n"})
+        ext = number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True)
+        if "metal" in d:
+            if "n" in d or "k" in d:
+                raise SceneError(f"{field}.metal", "give either 'metal' or 'n' and 'k', not both")
+            n, k = named_ior(d["metal"], field=f"{field}.metal")
+            return SmoothConductor(n, k, ext)
+        n = parse_spectrum(_require(d, "n", field), f"{field}.n", kind="unbounded")
+        k = parse_spectrum(_require(d, "k", field), f"{field}.k", kind="unbounded")
+        _check_positive_spectrum(n, f"{field}.n", strict=True)
+        _check_positive_spectrum(k, f"{field}.k", strict=False)
+        return SmoothConductor(n, k, ext)
+    if kind == "dielectric":
+        _check_keys(d, field, common | {"n", "exterior_n"})
+        return SmoothDielectric(number(_require(d, "n", field), f"{field}.n", 0, math.inf, lo_open=True),
+                                number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf,
+                                       lo_open=True))
+    _check_keys(d, field, common | {"n", "k", "exterior_n"})
+    if "k" in d:
+        number(d["k"], f"{field}.k", 0, 0)  # black glass has a real index: only k = 0 is allowed
+    n = parse_spectrum(d.get("n", 1.5), f"{field}.n", kind="unbounded")
+    _check_positive_spectrum(n, f"{field}.n", strict=True)
+    return BlackGlass(n, number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True))
+
+
+def _check_positive_spectrum(spec, field: str, strict: bool):
+    """Constant or tabulated index parts: n > 0, κ ≥ 0 over 360–830 nm."""
+    lam = np.linspace(360.0, 830.0, 95)
+    try:
+        v = spec.eval(lam)
+    except SceneError:
+        raise
+    bad = (v <= 0) if strict else (v < 0)
+    if np.any(bad) or not np.all(np.isfinite(v)):
+        raise SceneError(field, f"must be {'> 0' if strict else '≥ 0'} at every wavelength in 360–830 nm")
+
+
+def _parse_emission(d, field: str):
+    if not isinstance(d, dict):
+        raise SceneError(field, "must be an object like {\"radiance\": 10, \"color\": [1, 1, 1]}")
+    _check_keys(d, field, {"radiance", "color", "spectrum", "note"})
+    scale = number(d.get("radiance", 1.0), f"{field}.radiance", 0)
+    return _illuminant(d, field, scale)
+
+
+def _illuminant(d: dict, field: str, scale: float):
+    color = d.get("color", [1.0, 1.0, 1.0])
+    if not isinstance(color, (list, tuple)) or len(color) != 3:
+        raise SceneError(f"{field}.color", "must be a list of 3 numbers ≥ 0")
+    rgb = [number(c, f"{field}.color[{i}]", 0) for i, c in enumerate(color)]
+    return RGBIlluminantSpectrum(rgb, scale)
+
+
+def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
+    if not isinstance(d, dict):
+        raise SceneError(field, "must be an object")
+    shape = choice(_require(d, "shape", field), f"{field}.shape", ("mesh", "sphere", "quad", "triangles"))
+    name = str(d.get("name", field))
+    allowed = {"name", "shape", "material", "materials", "emission", "transform", "note", "normal"}
+    per_shape = {"mesh": {"file", "smooth"}, "sphere": {"center", "radius", "subdivisions"},
+                 "quad": {"vertices"}, "triangles": {"vertices", "faces", "normals", "material_ids"}}
+    _check_keys(d, field, allowed | per_shape[shape])
+
+    group_names = None
+    if shape == "mesh":
+        path = _require(d, "file", field)
+        if not isinstance(path, str):
+            raise SceneError(f"{field}.file", "must be a file path (string)")
+        data = read_mesh(os.path.join(base_dir, path), field=f"{field}.file")
+        group_names = data.group_names
+        if d.get("smooth", True) is False:
+            data.vertex_normals = None
+    elif shape == "sphere":
+        center = vec3(d.get("center", [0, 0, 0]), f"{field}.center")
+        radius = number(d.get("radius", 1.0), f"{field}.radius", 0, math.inf, lo_open=True)
+        data = icosphere(integer(d.get("subdivisions", 6), f"{field}.subdivisions", 0, 9))
+        data = transform_mesh(data, transform_matrix(translate=center, scale=radius))
+    elif shape == "quad":
+        verts = _require(d, "vertices", field)
+        if not isinstance(verts, list) or len(verts) != 4:
+            raise SceneError(f"{field}.vertices", "must be a list of 4 points [x, y, z]")
+        data = quad(*[vec3(v, f"{field}.vertices[{i}]") for i, v in enumerate(verts)])
+    else:
+        data = _parse_triangles(d, field)
+
+    if "transform" in d:
+        data = transform_mesh(data, parse_transform(d["transform"], f"{field}.transform"))
+
+    faces = np.asarray(data.faces, dtype=np.int64)
+    n_faces = len(faces)
+    if n_faces == 0:
+        raise SceneError(field, f"object {name!r} has no triangles")
+    if not np.all(np.isfinite(data.vertices)):
+        raise SceneError(field, f"object {name!r} has non-finite vertex coordinates")
+
+    # Materials: one for the whole object, or a list indexed per face.
+    if "materials" in d:
+        mats = d["materials"]
+        if isinstance(mats, dict) and group_names is not None:
+            mat_list = []
+            for g in group_names:
+                if g not in mats:
+                    raise SceneError(f"{field}.materials", f"has no entry for the mesh's material group {g!r}")
+                mat_list.append(mats[g])
+        elif isinstance(mats, list) and mats:
+            mat_list = mats
+        else:
+            raise SceneError(f"{field}.materials", "must be a non-empty list of material names (or, for OBJ "
+                                                   "files, an object mapping usemtl names to materials)")
+        ids = d.get("material_ids") if shape == "triangles" else data.face_groups
+        if ids is None:
+            ids = np.zeros(n_faces, dtype=np.int64)
+        ids = np.asarray(ids)
+        if ids.shape != (n_faces,) or (ids.size and (ids.min() < 0 or ids.max() >= len(mat_list))):
+            raise SceneError(f"{field}.material_ids",
+                             f"must hold one index in [0, {len(mat_list) - 1}] per triangle ({n_faces})")
+    else:
+        mat_list = [_require(d, "material", field)]
+        ids = np.zeros(n_faces, dtype=np.int64)
+    for i, m in enumerate(mat_list):
+        if m not in material_names:
+            f = f"{field}.material" if "materials" not in d else f"{field}.materials[{i}]"
+            raise SceneError(f, f"unknown material {m!r} (defined: {', '.join(sorted(material_names)) or 'none'})")
+
+    emission = _parse_emission(d["emission"], f"{field}.emission") if d.get("emission") is not None else None
+    return Mesh(name=name, vertices=np.asarray(data.vertices, dtype=np.float64), faces=faces,
+                materials=list(mat_list), material_ids=ids.astype(np.int32), normals=data.vertex_normals,
+                emission=emission)
+
+
+def _parse_triangles(d, field):
+    from engine.scene.meshio import MeshData
+    try:
+        v = np.asarray(_require(d, "vertices", field), dtype=np.float64)
+        f = np.asarray(_require(d, "faces", field), dtype=np.int64)
+    except (TypeError, ValueError):
+        raise SceneError(field, "vertices must be a list of [x, y, z] and faces a list of [i, j, k]") from None
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise SceneError(f"{field}.vertices", "must be a list of [x, y, z] points")
+    if f.ndim != 2 or f.shape[1] != 3:
+        raise SceneError(f"{field}.faces", "must be a list of [i, j, k] vertex index triples")
+    if f.size and (f.min() < 0 or f.max() >= len(v)):
+        raise SceneError(f"{field}.faces", f"vertex indices must be in [0, {len(v) - 1}]")
+    normals = None
+    if d.get("normals") is not None:
+        normals = np.asarray(d["normals"], dtype=np.float64)
+        if normals.shape != v.shape:
+            raise SceneError(f"{field}.normals", "must hold one [nx, ny, nz] per vertex")
+        lengths = np.linalg.norm(normals, axis=1)
+        if not np.all(lengths > 0) or not np.all(np.isfinite(lengths)):
+            raise SceneError(f"{field}.normals", "must be finite, non-zero vectors")
+        normals = normals / lengths[:, None]
+    return MeshData(vertices=v, faces=f.astype(np.int32), vertex_normals=normals)
+
+
+def parse_transform(d, field: str) -> np.ndarray:
+    if not isinstance(d, dict):
+        raise SceneError(field, "must be an object with translate/scale/rotate_deg or matrix")
+    _check_keys(d, field, {"translate", "scale", "rotate_deg", "matrix"})
+    if "matrix" in d:
+        if len(d) > 1:
+            raise SceneError(f"{field}.matrix", "cannot be combined with translate/scale/rotate_deg")
+        m = np.asarray(d["matrix"], dtype=np.float64) if isinstance(d["matrix"], list) else None
+        if m is None or m.shape != (4, 4) or not np.all(np.isfinite(m)):
+            raise SceneError(f"{field}.matrix", "must be a 4×4 list of finite numbers (row-major)")
+        if abs(np.linalg.det(m[:3, :3])) < 1e-300:
+            raise SceneError(f"{field}.matrix", "is singular (its 3×3 part has determinant 0)")
+        return m
+    scale = d.get("scale", 1.0)
+    if isinstance(scale, list):
+        scale = vec3(scale, f"{field}.scale")
+        if np.any(scale == 0):
+            raise SceneError(f"{field}.scale", "components must be non-zero")
+    else:
+        scale = number(scale, f"{field}.scale", 0, math.inf, lo_open=True)
+    return transform_matrix(translate=vec3(d.get("translate", [0, 0, 0]), f"{field}.translate"),
+                            scale=scale, rotate_deg=vec3(d.get("rotate_deg", [0, 0, 0]), f"{field}.rotate_deg"))
+
+
+def parse_light(d: dict, field: str):
+    if not isinstance(d, dict):
+        raise SceneError(field, "must be an object with a 'type'")
+    kind = choice(_require(d, "type", field), f"{field}.type", ("environment", "point", "spot", "directional"))
+    if kind == "environment":
+        _check_keys(d, field, {"type", "radiance", "color", "note"})
+        return EnvironmentLight(_illuminant(d, field, number(d.get("radiance", 1.0), f"{field}.radiance", 0)))
+    if kind == "point":
+        _check_keys(d, field, {"type", "position", "intensity", "color", "note"})
+        return PointLight(vec3(_require(d, "position", field), f"{field}.position"),
+                          _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)))
+    if kind == "spot":
+        _check_keys(d, field, {"type", "position", "direction", "target", "intensity", "color",
+                               "cone_angle_deg", "blend", "note"})
+        pos = vec3(_require(d, "position", field), f"{field}.position")
+        if "target" in d:
+            direction = vec3(d["target"], f"{field}.target") - pos
+            if not np.linalg.norm(direction) > 0:
+                raise SceneError(f"{field}.target", "must differ from the position")
+            direction /= np.linalg.norm(direction)
+        else:
+            direction = vec3(_require(d, "direction", field), f"{field}.direction", unit=True)
+        return SpotLight(pos, direction,
+                         _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)),
+                         number(d.get("cone_angle_deg", 45.0), f"{field}.cone_angle_deg", 0, 180, lo_open=True),
+                         number(d.get("blend", 0.0), f"{field}.blend", 0, 1))
+    _check_keys(d, field, {"type", "direction", "irradiance", "color", "note"})
+    return DirectionalLight(vec3(_require(d, "direction", field), f"{field}.direction", unit=True),
+                            _illuminant(d, field, number(d.get("irradiance", 1.0), f"{field}.irradiance", 0)))
+
+
+def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
+    """A validated Scene from a parsed engine-format (or peer-format) JSON object."""
+    if not isinstance(data, dict):
+        raise SceneError("", "a scene file must hold a JSON object")
+    from engine.scene.peer_format import is_peer_scene, peer_to_engine
+    if is_peer_scene(data):
+        data = peer_to_engine(data)
+    fmt = data.get("format")
+    if fmt != FORMAT:
+        raise SceneError("format", f"must be {FORMAT!r} (or a peer scene with 'light' and 'integrator'), "
+                                   f"got {fmt!r}")
+    _check_keys(data, "", {"format", "camera", "render", "materials", "objects", "lights", "description",
+                           "note", "name"})
+    camera = parse_camera(_require(data, "camera", ""), "camera")
+    settings = parse_settings(data.get("render", {}), "render")
+    mats_in = data.get("materials", {})
+    if not isinstance(mats_in, dict):
+        raise SceneError("materials", "must be an object mapping names to materials")
+    materials = {name: parse_material(m, f"materials.{name}") for name, m in mats_in.items()}
+    objects = data.get("objects", [])
+    if not isinstance(objects, list):
+        raise SceneError("objects", "must be a list")
+    meshes = [parse_object(o, f"objects[{i}]", base_dir, materials) for i, o in enumerate(objects)]
+    lights_in = data.get("lights", [])
+    if not isinstance(lights_in, list):
+        raise SceneError("lights", "must be a list")
+    lights = [parse_light(l, f"lights[{i}]") for i, l in enumerate(lights_in)]
+    if sum(isinstance(l, EnvironmentLight) for l in lights) > 1:
+        raise SceneError("lights", "at most one environment light is allowed")
+    scene = Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings,
+                  source=source)
+    return scene
+
+
+def load_scene(path: str) -> Scene:
+    """Read and validate a scene file (engine or peer format)."""
+    try:
+        with open(path, "r", encoding="utf-8") as fh:
+            data = json.load(fh)
+    except FileNotFoundError:
+        raise SceneError("", f"scene file {path!r} does not exist") from None
+    except json.JSONDecodeError as e:
+        raise SceneError("", f"{path}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
+    except OSError as e:
+        raise SceneError("", f"cannot read scene file {path!r}: {e.strerror}") from None
+    return parse_scene(data, os.path.dirname(os.path.abspath(path)), source=path)
+
+
+__all__ = ["FORMAT", "load_scene", "parse_scene", "parse_camera", "parse_material", "parse_light",
+           "parse_settings", "parse_object", "ConstantSpectrum"]

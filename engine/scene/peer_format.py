@@ -1,0 +1,83 @@
+"""The renderer-neutral peer scene format (shared/peers/README.md) → engine format.
+
+Peer scenes describe one light (``light``), quads and PLY meshes placed by
+``translate`` + uniform ``scale``, Mitsuba-style materials and the path
+integrator's ``max_depth``/``rr_depth`` (max_depth counts path segments, as
+ours does).  The conversion is purely structural; the engine loader then
+validates the result like any scene file, so errors still name fields.
+"""
+
+from __future__ import annotations
+
+from engine.scene.errors import SceneError
+
+
+def is_peer_scene(data: dict) -> bool:
+    return isinstance(data, dict) and "light" in data and "objects" in data and "format" not in data
+
+
+def _material(m: dict, field: str) -> dict:
+    if not isinstance(m, dict) or "type" not in m:
+        raise SceneError(field, "must be an object with a 'type'")
+    t = m["type"]
+    if t == "diffuse":
+        return {"type": "lambert", "albedo": m.get("albedo_linear_srgb", [0.5, 0.5, 0.5])}
+    if t == "conductor":
+        if m.get("named"):
+            return {"type": "conductor", "metal": m["named"]}
+        return {"type": "conductor", "n": m.get("n"), "k": m.get("k", 0.0)}
+    if t == "black_glass":
+        return {"type": "black_glass", "n": m.get("n", 1.5)}
+    if t == "dielectric":
+        return {"type": "dielectric", "n": m.get("n", 1.5), "exterior_n": m.get("exterior_n", 1.0)}
+    if t == "rough_conductor":
+        raise SceneError(f"{field}.type", "'rough_conductor' (Torrance–Sparrow) is not available in this "
+                                          "version of the engine yet")
+    raise SceneError(f"{field}.type", f"unknown peer material type {t!r} (allowed: diffuse, conductor, "
+                                      "black_glass, dielectric, rough_conductor)")
+
+
+def peer_to_engine(data: dict) -> dict:
+    """Convert a parsed peer scene into an engine-format scene dict."""
+    cam = dict(data.get("camera", {}))
+    for key in ("model", "pixel_filter"):
+        allowed = {"model": "pinhole", "pixel_filter": "box"}[key]
+        if cam.pop(key, allowed) != allowed:
+            raise SceneError(f"camera.{key}", f"only {allowed!r} is supported")
+    out = {"format": "polar-scene/1", "camera": cam,
+           "materials": {name: _material(m, f"materials.{name}") for name, m in data.get("materials", {}).items()},
+           "objects": [], "lights": []}
+
+    integ = data.get("integrator", {})
+    out["render"] = {"max_depth": integ.get("max_depth", 16), "rr_depth": integ.get("rr_depth", 5)}
+
+    light = data["light"]
+    if not isinstance(light, dict):
+        raise SceneError("light", "must be an object")
+    if light.get("type") == "constant_environment":
+        out["lights"].append({"type": "environment", "radiance": light.get("radiance", 1.0)})
+    elif light.get("type") != "area_light":
+        raise SceneError("light.type", "must be 'constant_environment' or 'area_light'")
+
+    for i, obj in enumerate(data["objects"]):
+        field = f"objects[{i}]"
+        if not isinstance(obj, dict):
+            raise SceneError(field, "must be an object")
+        o = {"name": obj.get("name", field), "material": obj.get("material")}
+        shape = obj.get("shape")
+        if shape == "quad":
+            o.update(shape="quad", vertices=obj.get("vertices"))
+        elif shape == "mesh":
+            o.update(shape="mesh", file=obj.get("file"))
+            tr = obj.get("transform")
+            if tr is not None:
+                if not isinstance(tr, dict) or set(tr) - {"translate", "scale"}:
+                    raise SceneError(f"{field}.transform", "peer scenes allow only 'translate' and 'scale'")
+                o["transform"] = tr
+        else:
+            raise SceneError(f"{field}.shape", f"must be 'quad' or 'mesh', got {shape!r}")
+        if obj.get("emitter") is not None:
+            em = obj["emitter"]
+            o["emission"] = {"radiance": em.get("radiance", 1.0) if isinstance(em, dict) else em}
+        out["objects"].append(o)
+    return out
