@@ -99,6 +99,17 @@ def apply_T(T: np.ndarray, S: np.ndarray) -> np.ndarray:
     return np.einsum("ijln,jln->iln", T, S)
 
 
+def keep_paths(mask: np.ndarray, *arrays):
+    """The arrays restricted to the paths where ``mask`` is True (paths on the last axis).
+
+    np.compress is ~3× faster than boolean fancy indexing on the last axis; a
+    full mask returns the arrays themselves.
+    """
+    if mask.all():
+        return arrays
+    return tuple(np.compress(mask, a, axis=-1) for a in arrays)
+
+
 def power_heuristic(a, b):
     a2 = a * a
     b2 = b * b
@@ -190,10 +201,8 @@ class PathTracer:
                 break
 
             # --- keep the paths that hit something --------------------------------------
-            keep = hit
-            path, T, x_T, d, lam, eta_sq = path[keep], T[..., keep], x_T[:, keep], d[:, keep], lam[:, keep], eta_sq[keep]
-            prim, u, v = hits.prim[keep], hits.u[keep], hits.v[keep]
-            sampler.compact(keep)
+            path, T, x_T, d, lam, eta_sq, prim, u, v, sampler.keys = keep_paths(
+                hit, path, T, x_T, d, lam, eta_sq, hits.prim, hits.u, hits.v, sampler.keys)
             n = path.shape[0]
             if n == 0:
                 break
@@ -213,8 +222,10 @@ class PathTracer:
             pdf_next = np.zeros(n)
             eta_step = np.ones(n)
 
-            for m in np.unique(mat):
-                sel = np.nonzero(mat == m)[0]
+            groups = np.unique(mat)
+            for m in groups:
+                # One material covers every path: use whole arrays instead of gathered copies.
+                sel = slice(None) if len(groups) == 1 else np.nonzero(mat == m)[0]
                 bsdf = compiled.materials[m]
                 sp = ShadingPoint(p[:, sel], n_s[:, sel], n_g[:, sel], wo[:, sel], lam[:, sel], self.mono)
                 Tm = T[..., sel]
@@ -226,8 +237,8 @@ class PathTracer:
 
                 bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
                 c2, s2 = frame_rotation(bs.weight.x_out, xTm, wo[:, sel])
-                Tm = Tm.copy()
-                rotate_columns(Tm, c2, s2)
+                if bs.weight.kind != "depolarising":
+                    rotate_columns(Tm, c2, s2)  # in place: T is replaced by newT below
                 newT[..., sel] = multiply_right(Tm, bs.weight)
                 new_d[:, sel] = bs.wi
                 new_xT[:, sel] = bs.weight.x_in
@@ -246,14 +257,10 @@ class PathTracer:
                 valid &= survive
             valid &= np.isfinite(newT).all(axis=(0, 1, 2)) & (np.abs(newT[0, 0]).max(axis=0) > 0)
 
-            keep = valid
-            path, T, x_T = path[keep], newT[..., keep], new_xT[:, keep]
-            d = new_d[:, keep]
-            lam, eta_sq = lam[:, keep], eta_sq[keep]
-            prev_delta, prev_pdf = is_delta[keep], pdf_next[keep]
-            o = offset_origin(p[:, keep], n_g[:, keep], d)
+            path, T, x_T, d, lam, eta_sq, prev_delta, prev_pdf, p, n_g, sampler.keys = keep_paths(
+                valid, path, newT, new_xT, new_d, lam, eta_sq, is_delta, pdf_next, p, n_g, sampler.keys)
+            o = offset_origin(p, n_g, d)
             t_max = None
-            sampler.compact(keep)
 
         rgb = np.einsum("pln,cln->pcn", radiance, w_rgb)
         out = np.zeros((4, 3, n_total))
