@@ -62,8 +62,10 @@ def _render(args) -> int:
     if not out.lower().endswith(".exr"):
         raise SceneError("-o", f"the output must be an .exr file, got {out!r}")
     out_dir = os.path.dirname(os.path.abspath(out))
-    if not os.path.isdir(out_dir):
-        raise SceneError("-o", f"the output folder {out_dir!r} does not exist")
+    try:
+        os.makedirs(out_dir, exist_ok=True)
+    except OSError as e:
+        raise SceneError("-o", f"cannot create the output folder {out_dir!r}: {e.strerror}") from None
 
     renderer = Renderer(scene)
     cam = scene.camera

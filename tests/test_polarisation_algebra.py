@@ -54,7 +54,7 @@ def test_transmission_is_a_realisable_diattenuator_conserving_energy(c, n):
     if sin2_t < 1:                       # below the critical angle: R + T = 1 per polarisation
         assert abs((Ar + Br) + (At + Bt) - 1) < 1e-12
         assert abs((Ar - Br) + (At - Bt) - 1) < 1e-12
-    else:                                # total internal reflection: nothing is transmitted
+    elif sin2_t > 1:                     # total internal reflection: nothing is transmitted
         assert At == 0 and abs(Ar - 1) < 1e-12
     assert St == 0
     assert is_realisable(fresnel_transmission_mueller(c, n), tol=1e-9)
@@ -157,3 +157,14 @@ def test_derived_quantities():
     np.testing.assert_allclose(degree_of_linear_polarisation(S), [math.sqrt(2) / 2, 0.0])
     np.testing.assert_allclose(degree_of_circular_polarisation(S), [-0.5, 0.0])
     np.testing.assert_allclose(angle_of_linear_polarisation(S)[0], math.pi / 8)
+
+
+def test_index_matched_and_subnormal_grazing_cases_stay_finite():
+    # Found by hypothesis: a subnormal cosθ overflowed complex division; an index-matched
+    # grazing ray was treated as total internal reflection.
+    for c in (2.225073858507e-311, 5e-324, 0.0):
+        for eta in (1.0, 1.5, 1 / 1.5, 0.47 + 2.4j):
+            M = fresnel_reflection_mueller(c, eta)
+            assert np.all(np.isfinite(M)) and is_realisable(M)
+    At, Bt, Ct, _ = fresnel_transmission_abcs(0.0, 1.0)
+    assert At == 1.0 and Bt == 0.0 and Ct == 1.0      # no interface: everything passes

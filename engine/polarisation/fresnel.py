@@ -22,6 +22,9 @@ import numpy as np
 from engine.polarisation.mueller import abcs_matrix
 
 
+_TINY = 1e-200
+
+
 def fresnel_amplitudes(cos_theta, eta):
     """Complex reflection amplitudes (r_s, r_p) for incidence cosine cosθ ∈ [0, 1].
 
@@ -30,12 +33,16 @@ def fresnel_amplitudes(cos_theta, eta):
     cosθ = 0) the amplitudes are defined as 0.
     """
     c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
+    # Complex division overflows for subnormal denominators; angles within 1e-200 rad
+    # of grazing are grazing.
+    c = np.where(c < _TINY, 0.0, c)
     eta = np.asarray(eta, dtype=np.complex128)
     eta2 = eta * eta
     u = np.sqrt(eta2 - (1.0 - c * c) + 0j)
     # Principal sqrt has Re u ≥ 0; a negative-zero imaginary part would put u on
     # the wrong branch for TIR, so enforce Im u ≥ 0 explicitly.
     u = np.where(u.imag < 0, -u, u)
+    u = np.where(np.abs(u) < _TINY, 0.0, u)
     den_s = c + u
     den_p = eta2 * c + u
     ok_s = den_s != 0
@@ -73,7 +80,7 @@ def refracted_cosine(cos_theta, eta):
     c = np.clip(np.asarray(cos_theta, dtype=np.float64), 0.0, 1.0)
     eta = np.asarray(eta, dtype=np.float64)
     sin2_t = (1.0 - c * c) / (eta * eta)
-    tir = sin2_t >= 1.0
+    tir = sin2_t > 1.0  # sin²θ_t = 1 exactly is grazing refraction (or an index-matched grazing ray)
     cos_t = np.sqrt(np.maximum(1.0 - sin2_t, 0.0))
     return cos_t, tir
 
