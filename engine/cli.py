@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import signal
 import sys
 import time
 
@@ -74,19 +75,26 @@ def _render(args) -> int:
           f"polarisation {st.polarisation}, {st.spectral}"
           f"{'' if st.spectral == 'spectral' else f' at {st.wavelength_nm:g} nm'}", file=sys.stderr)
     stop = {"requested": False}
+
+    def on_interrupt(signum, frame):
+        # First Ctrl-C: finish the current batch and write what is done; a second one aborts.
+        stop["requested"] = True
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
+    previous = signal.signal(signal.SIGINT, on_interrupt)
     bar = None if args.quiet else ProgressBar("rendering")
     try:
         result = renderer.render(st, progress=bar, should_stop=lambda: stop["requested"])
-    except KeyboardInterrupt:
-        # The renderer only returns finished units; a second run keeps nothing.
-        raise
     finally:
+        signal.signal(signal.SIGINT, previous)
         if bar is not None:
             bar.close()
+    if result.cancelled:
+        print(f"polar: interrupted — writing the {result.stats['samples']} finished samples", file=sys.stderr)
     stats = result.stats
     film = result.film
     spp_image = film.spp_image()
-    meta = {"polar.spp": int(st.spp), "polar.spp_min": int(spp_image.min()), "polar.spp_max": int(spp_image.max()),
+    meta = {"polar.spp": int(st.spp), "polar.complete": int(not result.cancelled), "polar.spp_min": int(spp_image.min()), "polar.spp_max": int(spp_image.max()),
             "polar.seed": int(st.seed), "polar.max_depth": int(st.max_depth), "polar.spectral": st.spectral,
             "polar.polarisation": st.polarisation, "polar.scene": os.path.basename(args.scene),
             "polar.render_seconds": float(stats["seconds"]), "polar.nonfinite_samples": int(stats["nonfinite"])}
@@ -108,7 +116,7 @@ def _render(args) -> int:
           file=sys.stderr)
     for path in written:
         print(path)
-    return 0
+    return 130 if result.cancelled else 0
 
 
 def _parse_params(pairs):
