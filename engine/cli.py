@@ -92,11 +92,12 @@ def _render(args) -> int:
     if result.cancelled:
         print(f"polar: interrupted — writing the {result.stats['samples']} finished samples", file=sys.stderr)
     stats = result.stats
+    print(f"polar: transport: {stats['transport_reason']}", file=sys.stderr)
     film = result.film
     spp_image = film.spp_image()
     meta = {"polar.spp": int(st.spp), "polar.complete": int(not result.cancelled), "polar.spp_min": int(spp_image.min()), "polar.spp_max": int(spp_image.max()),
             "polar.seed": int(st.seed), "polar.max_depth": int(st.max_depth), "polar.spectral": st.spectral,
-            "polar.polarisation": st.polarisation, "polar.scene": os.path.basename(args.scene),
+            "polar.polarisation": stats["transport"], "polar.transport_reason": stats["transport_reason"], "polar.scene": os.path.basename(args.scene),
             "polar.render_seconds": float(stats["seconds"]), "polar.nonfinite_samples": int(stats["nonfinite"])}
     if st.spectral == "mono":
         meta["polar.wavelength_nm"] = float(st.wavelength_nm)
@@ -158,7 +159,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--max-depth", type=int, help="maximum path segments (1 = emitters only)")
     r.add_argument("--spectral", choices=("spectral", "mono"), help="4 wavelengths per path or one")
     r.add_argument("--wavelength-nm", type=float, help="wavelength of --spectral mono (nm)")
-    r.add_argument("--polarisation", choices=("full", "off"), help="full Mueller transport or scalar")
+    r.add_argument("--polarisation", choices=("auto", "full", "linear", "off"),
+                   help="auto (default: the cheapest exact transport), full 4×4, linear 3×3 or scalar")
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")
     r.add_argument("--stderr", action="store_true", help="also write per-pixel standard errors")

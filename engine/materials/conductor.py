@@ -38,7 +38,8 @@ class SmoothConductor(BSDF):
         self.n = n
         self.k = k
         self.exterior_n = float(exterior_n)
-        self.creates_circular = True
+        # A real index (κ = 0 at every wavelength) reflects without retardance.
+        self.creates_circular = not (getattr(k, "is_constant", False) and float(k.eval([550.0])[0]) == 0.0)
 
     def relative_eta(self, sp: ShadingPoint) -> np.ndarray:
         return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n

@@ -66,5 +66,6 @@ class CameraModel:
             d = np.broadcast_to(self.forward[:, None], (3, pixel.shape[0])).copy()
             o = self.origin[:, None] + sx * r + sy * up
         x = camera_ray_frame(d, up)
-        n = pixel.shape[0]
-        return o, d, x, np.full(n, self.cam.clip_start), np.full(n, self.cam.clip_end)
+        # Clip planes are depths along the viewing axis (as in Blender), not ray lengths.
+        depth_per_length = d[0] * self.forward[0] + d[1] * self.forward[1] + d[2] * self.forward[2]
+        return o, d, x, self.cam.clip_start / depth_per_length, self.cam.clip_end / depth_per_length

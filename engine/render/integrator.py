@@ -2,7 +2,7 @@
 
 Each path carries, per wavelength, the Mueller product T of everything seen
 so far *from the camera side* (T = M_1 · R · M_2 · R · …), as an array
-(P, P, L, N): P = 4 (full Stokes) or 1 (polarisation off), L wavelengths, N
+(P, P, L, N): P = 4 (full Stokes), 3 (linear Stokes) or 1 (scalar), L wavelengths, N
 paths.  T maps a Stokes vector expressed in the path's current frame
 ``x_T`` (⟂ the current segment) to the camera's per-pixel output frame
 (physics.md §0: x = unit(d × u_cam), k = −d).  At a vertex whose Mueller
@@ -28,6 +28,7 @@ import numpy as np
 from engine.materials.base import MuellerValue, ShadingPoint
 from engine.polarisation.frames import frame_rotation
 from engine.render.accel import offset_origin
+from engine.render.effects import TRANSPORT_SIZES
 from engine.render.sampler import PathSampler, path_keys
 from engine.spectral import rgb_weights, sample_wavelengths
 from engine.vec3 import dot
@@ -127,7 +128,7 @@ class PathTracer:
         self.lights = lights
         self.camera = camera
         self.settings = settings
-        self.P = 4 if settings.polarisation == "full" else 1
+        self.P = TRANSPORT_SIZES[settings.polarisation]
         self.mono = settings.spectral == "mono"
         self.n_lambda = 1 if self.mono else 4
 

@@ -11,6 +11,7 @@ true per-pixel sample count).
 
 from __future__ import annotations
 
+import copy
 import time
 from dataclasses import dataclass, field
 
@@ -18,6 +19,7 @@ import numpy as np
 
 from engine.render.accel import CompiledScene
 from engine.render.camera import CameraModel
+from engine.render.effects import resolve_transport
 from engine.render.film import Film
 from engine.render.integrator import PathTracer
 from engine.render.lights import LightSet
@@ -67,13 +69,16 @@ class Renderer:
         ``progress(done_fraction, stats)`` is called after every work unit;
         ``should_stop()`` is polled between units and ends the render early.
         """
-        st = settings or self.scene.settings
+        st = copy.copy(settings or self.scene.settings)
+        used = {self.compiled.material_names[i] for i in np.unique(self.compiled.tri_material)}
+        st.polarisation, transport_reason = resolve_transport(st.polarisation, self.scene.materials, used)
         cam = self.scene.camera
         W, H = cam.width, cam.height
         film = Film(W, H)
         tracer = PathTracer(self.compiled, self.lights, self.camera, st)
         stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0,
-                 "compile_seconds": self.compile_seconds}
+                 "compile_seconds": self.compile_seconds, "transport": st.polarisation,
+                 "transport_reason": transport_reason}
         units = list(work_units(W, H, st.spp, st.batch_rays))
         total = sum((r1 - r0) * W * (p1 - p0) for r0, r1, p0, p1 in units)
         t0 = time.perf_counter()

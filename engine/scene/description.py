@@ -21,7 +21,8 @@ class Camera:
     ``fov_deg`` is the full angle along ``fov_axis`` ("x": horizontal,
     "y": vertical).  ``ortho_width`` is the full width of an orthographic view.
     ``shift`` is the lens shift in units of the larger image side (Blender).
-    Rays start at ``clip_start`` and end at ``clip_end`` along the ray.
+    Rays start at depth ``clip_start`` and end at depth ``clip_end`` along the
+    viewing axis (planes ⟂ the axis, as Blender's clipping).
     """
 
     origin: np.ndarray
@@ -88,7 +89,9 @@ class EnvironmentLight:
 class RenderSettings:
     """How to render.  ``max_depth`` counts path segments (as Mitsuba 3):
     1 = only directly visible light, 2 = direct lighting, ….
-    ``polarisation``: "full" (4×4 Mueller), "off" (scalar, S1..S3 = 0).
+    ``polarisation``: "full" (4×4 Mueller), "linear" (3×3: S3 = 0), "off"
+    (scalar, S1..S3 = 0) or "auto" (the cheapest of these that is exact for
+    the scene, see engine.render.effects).
     ``spectral``: "spectral" (4 wavelengths per path over 360–830 nm) or
     "mono" (one wavelength ``wavelength_nm``; RGB colours by their luminance).
     """
@@ -99,7 +102,7 @@ class RenderSettings:
     seed: int = 0
     spectral: str = "spectral"
     wavelength_nm: float = 550.0
-    polarisation: str = "full"
+    polarisation: str = "auto"
     batch_rays: int = 1 << 17
 
 

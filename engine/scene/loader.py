@@ -144,7 +144,8 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
     s.seed = integer(d.get("seed", s.seed), f"{field}.seed", 0, 2 ** 63 - 1)
     s.spectral = choice(d.get("spectral", s.spectral), f"{field}.spectral", ("spectral", "mono"))
     s.wavelength_nm = number(d.get("wavelength_nm", s.wavelength_nm), f"{field}.wavelength_nm", 360, 830)
-    s.polarisation = choice(d.get("polarisation", s.polarisation), f"{field}.polarisation", ("full", "off"))
+    s.polarisation = choice(d.get("polarisation", s.polarisation), f"{field}.polarisation",
+                            ("auto", "full", "linear", "off"))
     s.batch_rays = integer(d.get("batch_rays", s.batch_rays), f"{field}.batch_rays", 1024, 1 << 24)
     return s
 

@@ -1,0 +1,48 @@
+"""Simulate only the effects a scene calls for: pick the cheapest exact transport.
+
+Lights are unpolarised, so polarisation can only be created by materials:
+
+- no material changes polarisation (only depolarisers such as Lambert)
+  → scalar transport ("off"): S1 = S2 = S3 = 0 exactly;
+- polarisation, but no material can create a phase difference between s and
+  p (no complex index κ > 0, no reachable total internal reflection, no
+  retarder) → linear Stokes transport ("linear", 3×3 Mueller): S3 = 0 exactly,
+  and S0..S2 are unchanged because a 3×3 block of a matrix with M_i3 = M_3i = 0
+  composes exactly;
+- otherwise full 4×4 Mueller transport.
+
+Each material reports what it can do through its ``polarising`` and
+``creates_circular`` flags (engine.materials.base.BSDF).  The choice comes
+with a human-readable reason for logs and Blender's render stats, and is
+overridden by asking for "full", "linear" or "off" explicitly.
+"""
+
+from __future__ import annotations
+
+TRANSPORT_SIZES = {"full": 4, "linear": 3, "off": 1}
+
+
+def choose_transport(materials: dict, used: set | None = None):
+    """(mode, reason) for the materials ``used`` (names; default all of ``materials``)."""
+    names = sorted(used if used is not None else materials)
+    circular = [n for n in names if getattr(materials[n], "creates_circular", True)]
+    polarising = [n for n in names if getattr(materials[n], "polarising", True)]
+    if circular:
+        return "full", f"full Stokes: {_list(circular)} can create circular polarisation"
+    if polarising:
+        return "linear", (f"linear Stokes (S3 = 0): {_list(polarising)} polarise but nothing retards "
+                          "(real indices, no total internal reflection)")
+    return "off", "scalar transport (S1..S3 = 0): every material depolarises and all lights are unpolarised"
+
+
+def resolve_transport(requested: str, materials: dict, used: set | None = None):
+    """The transport to run for a requested mode ("auto" or explicit) and why."""
+    if requested != "auto":
+        return requested, f"{requested} (requested)"
+    mode, reason = choose_transport(materials, used)
+    return mode, f"auto → {reason}"
+
+
+def _list(names):
+    shown = ", ".join(repr(n) for n in names[:3])
+    return shown + (f" and {len(names) - 3} more" if len(names) > 3 else "")

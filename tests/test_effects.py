@@ -1,0 +1,51 @@
+"""Automatic effect selection: the reduced transports are exact where Auto picks them."""
+
+import copy
+
+import numpy as np
+import pytest
+
+from engine.render.renderer import Renderer
+from engine.scene.loader import load_scene
+from tests.conftest import shared_path
+
+
+def peer(name, res, spp=2):
+    scene = load_scene(shared_path("peers", "scenes", f"{name}.json"))
+    scene.camera.width = scene.camera.height = res
+    scene.settings.spp = spp
+    return scene
+
+
+@pytest.mark.parametrize("name,mode", [("cornell_lambert", "off"), ("plane_brewster", "linear"),
+                                       ("fresnel_sphere", "full"), ("glass_sphere", "full"),
+                                       ("conv_s3_check", "full")])
+def test_auto_picks_the_cheapest_exact_transport(name, mode):
+    result = Renderer(peer(name, 8, 1)).render()
+    assert result.stats["transport"] == mode
+    assert result.stats["transport_reason"].startswith("auto")
+
+
+@pytest.mark.parametrize("name,reduced", [("plane_brewster", "linear"), ("cornell_lambert", "off")])
+def test_reduced_transport_equals_full_transport(name, reduced):
+    scene = peer(name, 24)
+    renderer = Renderer(scene)
+    settings = copy.copy(scene.settings)
+    settings.polarisation = "full"
+    full = renderer.render(settings).stokes()
+    settings.polarisation = reduced
+    fast = renderer.render(settings).stokes()
+    np.testing.assert_allclose(fast, full, rtol=1e-12, atol=1e-15)
+    assert np.all(full[3] == 0)
+
+
+def test_linear_transport_would_be_wrong_where_auto_keeps_full():
+    # Counter-example: the conductor creates circular polarisation; dropping S3 changes the image.
+    scene = peer("conv_s3_check", 8, 16)
+    renderer = Renderer(scene)
+    settings = copy.copy(scene.settings)
+    settings.polarisation = "full"
+    full = renderer.render(settings).stokes()
+    assert np.abs(full[3]).max() > 0.01
+    settings.polarisation = "linear"
+    assert np.all(renderer.render(settings).stokes()[3] == 0)
