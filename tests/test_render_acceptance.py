@@ -127,3 +127,13 @@ def test_cancel_keeps_finished_samples():
     assert result.cancelled
     assert np.all(result.film.spp_image() == 2)
     assert np.all(np.isfinite(result.stokes())) and result.stokes()[0].min() > 0
+
+
+def test_window_render_traces_only_the_window_and_matches_the_full_render():
+    scene = peer_scene("fresnel_sphere", 2, res=32)
+    renderer = Renderer(scene)
+    full = renderer.render()
+    part = renderer.render(window=(8, 4, 20, 30))
+    spp = part.film.spp_image()
+    assert np.all(spp[4:30, 8:20] == 2) and spp.sum() == 2 * 12 * 26
+    np.testing.assert_array_equal(part.stokes()[:, 4:30, 8:20], full.stokes()[:, 4:30, 8:20])

@@ -42,14 +42,27 @@ class RenderResult:
         return np.einsum("shwc,c->shw", self.stokes(), np.array([0.2126, 0.7152, 0.0722]))
 
 
-def work_units(width: int, height: int, spp: int, batch_rays: int, first_pass: int = 0):
-    """Yield (row0, row1, pass0, pass1) covering the image × passes [first_pass, spp)."""
-    rows_per_unit = max(1, min(height, batch_rays // max(width, 1)))
-    passes_per_unit = max(1, batch_rays // (rows_per_unit * width))
+def work_units(width: int, height: int, spp: int, batch_rays: int, first_pass: int = 0, window=None):
+    """Yield (row0, row1, pass0, pass1) covering the window's rows × passes [first_pass, spp).
+
+    ``window`` = (x0, y0, x1, y1) in pixels (row 0 at the top, x1/y1 exclusive)
+    restricts the rows here and the columns in ``unit_pixels``.
+    """
+    x0, y0, x1, y1 = window or (0, 0, width, height)
+    cols = max(x1 - x0, 1)
+    rows_per_unit = max(1, min(y1 - y0, batch_rays // cols))
+    passes_per_unit = max(1, batch_rays // (rows_per_unit * cols))
     for p0 in range(first_pass, spp, passes_per_unit):
         p1 = min(spp, p0 + passes_per_unit)
-        for r0 in range(0, height, rows_per_unit):
-            yield r0, min(height, r0 + rows_per_unit), p0, p1
+        for r0 in range(y0, y1, rows_per_unit):
+            yield r0, min(y1, r0 + rows_per_unit), p0, p1
+
+
+def unit_pixels(width: int, r0: int, r1: int, window=None) -> np.ndarray:
+    """Flat pixel indices of rows [r0, r1) within the window's columns."""
+    x0, _, x1, _ = window or (0, 0, width, 0)
+    rows = np.arange(r0, r1, dtype=np.int64)
+    return (rows[:, None] * width + np.arange(x0, x1, dtype=np.int64)[None, :]).ravel()
 
 
 class Renderer:
@@ -63,11 +76,13 @@ class Renderer:
         self.camera = CameraModel(scene.camera)
         self.compile_seconds = time.perf_counter() - t0
 
-    def render(self, settings=None, progress=None, should_stop=None) -> RenderResult:
+    def render(self, settings=None, progress=None, should_stop=None, window=None) -> RenderResult:
         """Render with ``settings`` (default: the scene's).
 
         ``progress(done_fraction, stats)`` is called after every work unit;
         ``should_stop()`` is polled between units and ends the render early.
+        ``window`` = (x0, y0, x1, y1) renders only that pixel rectangle (row 0 at
+        the top, exclusive ends); other pixels keep 0 samples.
         """
         st = copy.copy(settings or self.scene.settings)
         used = {self.compiled.material_names[i] for i in np.unique(self.compiled.tri_material)}
@@ -79,8 +94,14 @@ class Renderer:
         stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0,
                  "compile_seconds": self.compile_seconds, "transport": st.polarisation,
                  "transport_reason": transport_reason}
-        units = list(work_units(W, H, st.spp, st.batch_rays))
-        total = sum((r1 - r0) * W * (p1 - p0) for r0, r1, p0, p1 in units)
+        if window is not None:
+            x0, y0, x1, y1 = (int(v) for v in window)
+            if not (0 <= x0 < x1 <= W and 0 <= y0 < y1 <= H):
+                raise ValueError(f"window {window} must lie inside the {W}×{H} image and be non-empty")
+            window = (x0, y0, x1, y1)
+        units = list(work_units(W, H, st.spp, st.batch_rays, window=window))
+        cols = (window[2] - window[0]) if window else W
+        total = sum((r1 - r0) * cols * (p1 - p0) for r0, r1, p0, p1 in units)
         t0 = time.perf_counter()
         cancelled = False
         done = 0
@@ -88,7 +109,7 @@ class Renderer:
             if should_stop is not None and should_stop():
                 cancelled = True
                 break
-            pix = np.arange(r0 * W, r1 * W, dtype=np.int64)
+            pix = unit_pixels(W, r0, r1, window)
             pixel = np.tile(pix, p1 - p0)
             sample = np.repeat(np.arange(p0, p1, dtype=np.int64), pix.size)
             values, s = tracer.trace(pixel, sample)
