@@ -15,11 +15,11 @@ __version__ = "0.1.0"
 
 def load_scene(path):
     """Read and validate a scene file (see engine.scene.loader)."""
-    from engine.scene.loader import load_scene as _load
+    from .scene.loader import load_scene as _load
     return _load(path)
 
 
 def render(scene, settings=None, progress=None, should_stop=None):
     """Render a Scene (see engine.render.renderer.render)."""
-    from engine.render.renderer import render as _render
+    from .render.renderer import render as _render
     return _render(scene, settings, progress, should_stop)

@@ -14,7 +14,7 @@ import signal
 import sys
 import time
 
-from engine.scene.errors import SceneError
+from .scene.errors import SceneError
 
 
 class ProgressBar:
@@ -44,10 +44,10 @@ class ProgressBar:
 
 
 def _render(args) -> int:
-    from engine.output.exr import write_stokes_exr
-    from engine.output.previews import write_previews
-    from engine.render.renderer import Renderer
-    from engine.scene.loader import load_scene, parse_settings
+    from .output.exr import write_stokes_exr
+    from .output.previews import write_previews
+    from .render.renderer import Renderer
+    from .scene.loader import load_scene, parse_settings
 
     scene = load_scene(args.scene)
     st = scene.settings
@@ -131,8 +131,8 @@ def _parse_params(pairs):
 
 
 def _mueller(args) -> int:
-    from engine.materials.catalogue import make_model
-    from engine.materials.evaluate import mueller_at
+    from .materials.catalogue import make_model
+    from .materials.evaluate import mueller_at
 
     for name, v, lo, hi in (("--theta-i", args.theta_i, 0, 90), ("--theta-o", args.theta_o, 0, 90),
                             ("--wavelength-nm", args.wavelength_nm, 360, 830)):

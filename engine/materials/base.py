@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from engine.polarisation.mueller import abcs_matrix, depolariser
+from ..polarisation.mueller import abcs_matrix, depolariser
 
 
 @dataclass

@@ -8,8 +8,8 @@ Brewster's angle.  One-sided.
 
 from __future__ import annotations
 
-from engine.materials.conductor import SmoothConductor
-from engine.spectral import ConstantSpectrum
+from .conductor import SmoothConductor
+from ..spectral import ConstantSpectrum
 
 
 class BlackGlass(SmoothConductor):

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import math
 
-from engine.materials.conductor import SmoothConductor
-from engine.materials.lambert import Lambert
-from engine.scene.errors import SceneError
-from engine.spectral import ConstantSpectrum, named_ior
+from .conductor import SmoothConductor
+from .lambert import Lambert
+from ..scene.errors import SceneError
+from ..spectral import ConstantSpectrum, named_ior
 
 #: model name → {parameter: (default, description)}
 MODEL_PARAMETERS = {

@@ -10,10 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.materials.base import BSDF, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
-from engine.polarisation.frames import plane_of_incidence_axis
-from engine.polarisation.fresnel import fresnel_reflection_abcs
-from engine.vec3 import reflect
+from .base import BSDF, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from ..polarisation.frames import plane_of_incidence_axis
+from ..polarisation.fresnel import fresnel_reflection_abcs
+from ..vec3 import reflect
 
 
 def mirror_reflection(sp: ShadingPoint, eta: np.ndarray):

@@ -20,9 +20,9 @@ import math
 
 import numpy as np
 
-from engine.materials.base import ShadingPoint
-from engine.polarisation.frames import rotate_mueller_frames, sp_basis_axis
-from engine.vec3 import cross, dot
+from .base import ShadingPoint
+from ..polarisation.frames import rotate_mueller_frames, sp_basis_axis
+from ..vec3 import cross, dot
 
 BASES = ("sp", "scattering")
 

@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.materials.base import BSDF, BSDFSample, ShadingPoint, depolarising_value
-from engine.materials.sampling import cosine_hemisphere, local_to_world
-from engine.vec3 import dot
+from .base import BSDF, BSDFSample, ShadingPoint, depolarising_value
+from .sampling import cosine_hemisphere, local_to_world
+from ..vec3 import dot
 
 
 class Lambert(BSDF):

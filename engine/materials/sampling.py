@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.vec3 import any_perpendicular, cross
+from ..vec3 import any_perpendicular, cross
 
 
 def cosine_hemisphere(u: np.ndarray) -> np.ndarray:

@@ -26,8 +26,8 @@ import os
 import numpy as np
 import OpenEXR
 
-from engine.output import atomic_output_path, check_stokes_image, luminance_stokes
-from engine.polarisation import stokes as st
+from . import atomic_output_path, check_stokes_image, luminance_stokes
+from ..polarisation import stokes as st
 
 STOKES_EXR_CONVENTIONS = (
     "Polar Stokes EXR. Channels Sk.R/G/B (k=0..3): Stokes vector per linear sRGB "

@@ -13,7 +13,7 @@ import zlib
 
 import numpy as np
 
-from engine.output import atomic_output_path
+from . import atomic_output_path
 
 _SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _COLOUR_TYPES = {2: 3, 0: 1}  # PNG colour type -> samples per pixel (RGB, grey)

@@ -14,10 +14,10 @@ import os
 
 import numpy as np
 
-from engine.output import check_stokes_image, luminance_stokes
-from engine.output.colormaps import diverging, hue_saturation, sequential, tonemap
-from engine.output.png import write_png
-from engine.polarisation import stokes as st
+from . import check_stokes_image, luminance_stokes
+from .colormaps import diverging, hue_saturation, sequential, tonemap
+from .png import write_png
+from ..polarisation import stokes as st
 
 LEGEND_HEIGHT = 8
 _TICK_COLOUR = np.array([0, 0, 0], dtype=np.uint8)

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.vec3 import any_perpendicular, cross, dot, normalize
+from ..vec3 import any_perpendicular, cross, dot, normalize
 
 # |n × k| below this is treated as "axis undefined" (normal incidence etc.).
 _DEGENERATE = 1e-12

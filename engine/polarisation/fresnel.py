@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.polarisation.mueller import abcs_matrix
+from .mueller import abcs_matrix
 
 
 _TINY = 1e-200

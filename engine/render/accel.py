@@ -12,8 +12,8 @@ import numpy as np
 from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
-from engine.scene.description import Scene
-from engine.scene.errors import SceneError
+from ..scene.description import Scene
+from ..scene.errors import SceneError
 
 # Mitsuba 3's float32 ray epsilon: offsets scale with (1 + max|p_i|).
 RAY_EPSILON = 8.9e-5

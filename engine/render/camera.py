@@ -19,9 +19,9 @@ import math
 
 import numpy as np
 
-from engine.polarisation.frames import camera_ray_frame
-from engine.scene.description import Camera
-from engine.vec3 import normalize
+from ..polarisation.frames import camera_ray_frame
+from ..scene.description import Camera
+from ..vec3 import normalize
 
 
 class CameraModel:

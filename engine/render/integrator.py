@@ -25,13 +25,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from engine.materials.base import MuellerValue, ShadingPoint
-from engine.polarisation.frames import frame_rotation
-from engine.render.accel import offset_origin
-from engine.render.effects import TRANSPORT_SIZES
-from engine.render.sampler import PathSampler, path_keys
-from engine.spectral import rgb_weights, sample_wavelengths
-from engine.vec3 import dot
+from ..materials.base import MuellerValue, ShadingPoint
+from ..polarisation.frames import frame_rotation
+from .accel import offset_origin
+from .effects import TRANSPORT_SIZES
+from .sampler import PathSampler, path_keys
+from ..spectral import rgb_weights, sample_wavelengths
+from ..vec3 import dot
 
 
 # ----------------------------------------------------------------------------- Mueller kernels

@@ -16,9 +16,9 @@ import math
 
 import numpy as np
 
-from engine.materials.sampling import uniform_sphere
-from engine.scene.description import DirectionalLight, EnvironmentLight, PointLight, SpotLight
-from engine.vec3 import dot, normalize
+from ..materials.sampling import uniform_sphere
+from ..scene.description import DirectionalLight, EnvironmentLight, PointLight, SpotLight
+from ..vec3 import dot, normalize
 
 
 class _Light:

@@ -17,13 +17,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from engine.render.accel import CompiledScene
-from engine.render.camera import CameraModel
-from engine.render.effects import resolve_transport
-from engine.render.film import Film
-from engine.render.integrator import PathTracer
-from engine.render.lights import LightSet
-from engine.scene.description import Scene
+from .accel import CompiledScene
+from .camera import CameraModel
+from .effects import resolve_transport
+from .film import Film
+from .integrator import PathTracer
+from .lights import LightSet
+from ..scene.description import Scene
 
 
 @dataclass

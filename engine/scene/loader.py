@@ -20,16 +20,16 @@ import os
 
 import numpy as np
 
-from engine.materials.black_glass import BlackGlass
-from engine.materials.conductor import SmoothConductor
-from engine.materials.dielectric import SmoothDielectric
-from engine.materials.lambert import Lambert
-from engine.scene.description import (Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
+from ..materials.black_glass import BlackGlass
+from ..materials.conductor import SmoothConductor
+from ..materials.dielectric import SmoothDielectric
+from ..materials.lambert import Lambert
+from .description import (Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
                                       RenderSettings, Scene, SpotLight)
-from engine.scene.errors import SceneError
-from engine.scene.meshio import read_mesh
-from engine.scene.shapes import icosphere, quad, transform_matrix, transform_mesh
-from engine.spectral import ConstantSpectrum, RGBIlluminantSpectrum, named_ior, parse_spectrum
+from .errors import SceneError
+from .meshio import read_mesh
+from .shapes import icosphere, quad, transform_matrix, transform_mesh
+from ..spectral import ConstantSpectrum, RGBIlluminantSpectrum, named_ior, parse_spectrum
 
 FORMAT = "polar-scene/1"
 
@@ -291,7 +291,7 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
 
 
 def _parse_triangles(d, field):
-    from engine.scene.meshio import MeshData
+    from .meshio import MeshData
     try:
         v = np.asarray(_require(d, "vertices", field), dtype=np.float64)
         f = np.asarray(_require(d, "faces", field), dtype=np.int64)
@@ -374,7 +374,7 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
     """A validated Scene from a parsed engine-format (or peer-format) JSON object."""
     if not isinstance(data, dict):
         raise SceneError("", "a scene file must hold a JSON object")
-    from engine.scene.peer_format import is_peer_scene, peer_to_engine
+    from .peer_format import is_peer_scene, peer_to_engine
     if is_peer_scene(data):
         data = peer_to_engine(data)
     fmt = data.get("format")

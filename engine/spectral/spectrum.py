@@ -23,7 +23,7 @@ import numbers
 
 import numpy as np
 
-from engine.scene.errors import SceneError
+from ..scene.errors import SceneError
 
 from . import cie
 
