@@ -137,3 +137,14 @@ def test_window_render_traces_only_the_window_and_matches_the_full_render():
     spp = part.film.spp_image()
     assert np.all(spp[4:30, 8:20] == 2) and spp.sum() == 2 * 12 * 26
     np.testing.assert_array_equal(part.stokes()[:, 4:30, 8:20], full.stokes()[:, 4:30, 8:20])
+
+
+def test_threads_do_not_change_the_image():
+    scene = peer_scene("fresnel_sphere", 2, res=32)
+    scene.settings.batch_rays = 1024
+    renderer = Renderer(scene)
+    one = copy.copy(scene.settings)
+    one.threads = 1
+    two = copy.copy(scene.settings)
+    two.threads = 2
+    np.testing.assert_array_equal(renderer.render(one).stokes(), renderer.render(two).stokes())

@@ -12,7 +12,10 @@ true per-pixel sample count).
 from __future__ import annotations
 
 import copy
+import os
 import time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -75,6 +78,12 @@ class Renderer:
         self.lights = LightSet(scene, self.compiled)
         self.camera = CameraModel(scene.camera)
         self.compile_seconds = time.perf_counter() - t0
+        self._live_film = None
+
+    def last_film_mean(self):
+        """The Stokes image of the render in progress (for progressive display), or None."""
+        film = self._live_film
+        return None if film is None else film.mean()
 
     def render(self, settings=None, progress=None, should_stop=None, window=None) -> RenderResult:
         """Render with ``settings`` (default: the scene's).
@@ -105,22 +114,44 @@ class Renderer:
         t0 = time.perf_counter()
         cancelled = False
         done = 0
-        for r0, r1, p0, p1 in units:
-            if should_stop is not None and should_stop():
-                cancelled = True
-                break
+        self._live_film = film
+
+        def trace_unit(unit):
+            r0, r1, p0, p1 = unit
             pix = unit_pixels(W, r0, r1, window)
             pixel = np.tile(pix, p1 - p0)
             sample = np.repeat(np.arange(p0, p1, dtype=np.int64), pix.size)
             values, s = tracer.trace(pixel, sample)
-            film.add_samples(pixel, values)
-            for k in ("rays", "shadow_rays", "nonfinite"):
-                stats[k] += s[k]
-            done += pixel.size
-            stats["samples"] = done
-            stats["seconds"] = time.perf_counter() - t0
-            if progress is not None:
-                progress(done / total, stats)
+            return pixel, values, s
+
+        workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
+        workers = max(1, min(workers, len(units)))
+        # Units are traced concurrently (Embree and large NumPy operations release the GIL) but
+        # added to the film strictly in unit order, so the image does not depend on `threads`.
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            pending = deque()
+            next_unit = 0
+            while next_unit < len(units) or pending:
+                while next_unit < len(units) and len(pending) < workers:
+                    if should_stop is not None and should_stop():
+                        cancelled = True
+                        break
+                    pending.append(pool.submit(trace_unit, units[next_unit]))
+                    next_unit += 1
+                if cancelled and not pending:
+                    break
+                if cancelled:
+                    next_unit = len(units)   # finish what is in flight, start nothing new
+                pixel, values, s = pending.popleft().result()
+                film.add_samples(pixel, values)
+                for k in ("rays", "shadow_rays", "nonfinite"):
+                    stats[k] += s[k]
+                done += pixel.size
+                stats["samples"] = done
+                stats["seconds"] = time.perf_counter() - t0
+                if progress is not None:
+                    progress(done / total, stats)
+        self._live_film = None
         stats["seconds"] = time.perf_counter() - t0
         return RenderResult(film=film, settings=st, stats=stats, cancelled=cancelled)
 

@@ -104,6 +104,7 @@ class RenderSettings:
     wavelength_nm: float = 550.0
     polarisation: str = "auto"
     batch_rays: int = 1 << 17
+    threads: int = 0              # worker threads; 0 = one per CPU core
 
 
 @dataclass

@@ -136,7 +136,7 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object")
     _check_keys(d, field, {"spp", "max_depth", "rr_depth", "seed", "spectral", "wavelength_nm",
-                           "polarisation", "batch_rays"})
+                           "polarisation", "batch_rays", "threads"})
     s = RenderSettings()
     s.spp = integer(d.get("spp", s.spp), f"{field}.spp", 1, 1 << 24)
     s.max_depth = integer(d.get("max_depth", s.max_depth), f"{field}.max_depth", 1, 1024)
@@ -147,6 +147,7 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
     s.polarisation = choice(d.get("polarisation", s.polarisation), f"{field}.polarisation",
                             ("auto", "full", "linear", "off"))
     s.batch_rays = integer(d.get("batch_rays", s.batch_rays), f"{field}.batch_rays", 1024, 1 << 24)
+    s.threads = integer(d.get("threads", s.threads), f"{field}.threads", 0, 256)
     return s
 
 
