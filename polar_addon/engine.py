@@ -1,0 +1,192 @@
+"""The Polar render engine as Blender sees it (bl_idname "POLAR").
+
+F12, ``bpy.ops.render.render()`` and ``blender -b … -E POLAR`` all land in ``render()``: export
+the evaluated depsgraph, trace it with the standalone engine, and return the Stokes passes.
+Errors become Blender errors (``report({'ERROR'})``), so a failed render never saves a silently
+black image; cancelling (Esc, ``test_break``) stops between batches and keeps the finished samples.
+"""
+
+import time
+import traceback
+
+import bpy
+import numpy as np
+
+from ..engine.polarisation.stokes import (angle_of_linear_polarisation, degree_of_circular_polarisation,
+                                          degree_of_linear_polarisation, degree_of_polarisation)
+from ..engine.render.renderer import Renderer
+from ..engine.scene.description import RenderSettings
+from ..engine.scene.errors import SceneError
+from .export.camera import border_window
+from .export.scene import export_scene
+from .properties import PASS_NAMES, POLARISATION_TO_ENGINE
+from .viewport import ViewportSession
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+#: Seconds between progressive updates of the image shown while rendering.
+DISPLAY_INTERVAL = 1.0
+#: Extra cancel hook for scripted use and tests (test_break() is always False headless).
+cancel_requested = {"value": False}
+
+
+def engine_settings(scene, preview=False) -> RenderSettings:
+    """Engine RenderSettings from the scene's Polar settings (frame-dependent seed if asked)."""
+    p = scene.polar
+    seed = p.seed + (scene.frame_current if p.use_animated_seed else 0)
+    return RenderSettings(spp=p.preview_samples if preview else p.samples, max_depth=p.max_bounces + 1,
+                          rr_depth=5, seed=seed, spectral="mono" if p.spectral == "MONO" else "spectral",
+                          wavelength_nm=p.wavelength_nm, polarisation=POLARISATION_TO_ENGINE[p.polarisation],
+                          batch_rays=p.batch_rays, threads=p.threads)
+
+
+def pass_images(stokes_rgb):
+    """{pass name: (H, W, C) float32} for every Polar pass from a Stokes image (4, H, W, 3)."""
+    y = np.einsum("shwc,c->shw", stokes_rgb, LUMINANCE)
+    out = {f"S{i}": stokes_rgb[i] for i in range(4)}
+    out["DoP"] = degree_of_polarisation(y)[..., None]
+    out["DoLP"] = degree_of_linear_polarisation(y)[..., None]
+    out["AoLP"] = angle_of_linear_polarisation(y)[..., None]
+    out["DoCP"] = degree_of_circular_polarisation(y)[..., None]
+    combined = np.ones(stokes_rgb.shape[1:3] + (4,))
+    combined[..., :3] = stokes_rgb[0]
+    out["Combined"] = combined
+    return out
+
+
+class PolarRenderEngine(bpy.types.RenderEngine):
+    bl_idname = "POLAR"
+    bl_label = "Polar"
+    bl_use_preview = True
+    bl_use_postprocess = True
+    bl_use_shading_nodes_custom = False
+    bl_use_eevee_viewport = True
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.viewport = None
+
+    # ------------------------------------------------------------------ passes
+
+    def update_render_passes(self, scene=None, renderlayer=None):
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
+        settings = getattr(renderlayer, "polar", None)
+        enabled = settings.enabled_passes() if settings is not None else list(PASS_NAMES)
+        for name in enabled:
+            if name.startswith("S"):
+                self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
+            else:
+                self.register_pass(scene, renderlayer, name, 1, "X", "VALUE")
+
+    # ------------------------------------------------------------------ final render
+
+    def render(self, depsgraph):
+        try:
+            self._render(depsgraph)
+        except SceneError as e:
+            self.report({"ERROR"}, f"Polar: {e}")
+        except Exception as e:  # noqa: BLE001 — never a silently black image
+            traceback.print_exc()
+            self.report({"ERROR"}, f"Polar render failed: {type(e).__name__}: {e}")
+
+    def _render(self, depsgraph):
+        scene = depsgraph.scene
+        W, H = self.resolution_x, self.resolution_y
+        settings = engine_settings(scene, preview=self.is_preview)
+        camera_object = self.camera_override or scene.camera
+        t0 = time.perf_counter()
+        self.update_stats("", "Polar | exporting scene")
+        engine_scene, warnings = export_scene(depsgraph, camera_object, W, H, settings)
+        for w in dict.fromkeys(warnings):
+            self.report({"WARNING"}, f"Polar: {w}")
+        self.update_stats("", "Polar | building BVH")
+        renderer = Renderer(engine_scene)
+        window = None if self.is_preview else border_window(scene.render, W, H)
+        layer_name = depsgraph.view_layer.name
+        result = self.begin_result(0, 0, W, H, layer=layer_name)
+        last_display = [time.perf_counter()]
+        enabled = set(depsgraph.view_layer.polar.enabled_passes()) if hasattr(depsgraph.view_layer, "polar") \
+            else set(PASS_NAMES)
+
+        def progress(fraction, stats):
+            self.update_progress(fraction)
+            rate = stats["samples"] / max(stats.get("seconds", 1e-9), 1e-9) / 1e6
+            self.update_stats("", f"Polar | {stats['transport']} | {100 * fraction:.0f}% | {rate:.2f} Msamples/s")
+            now = time.perf_counter()
+            if now - last_display[0] > DISPLAY_INTERVAL:
+                last_display[0] = now
+                self._write_passes(result, renderer.last_film_mean(), window, enabled)
+                self.update_result(result)
+
+        def should_stop():
+            return self.test_break() or cancel_requested["value"]
+
+        out = renderer.render(settings, progress=progress, should_stop=should_stop, window=window)
+        self._write_passes(result, out.stokes(), window, enabled)
+        self.end_result(result)
+        stats = out.stats
+        message = (f"Polar | {stats['transport_reason']} | {stats['samples']} samples in {stats['seconds']:.1f} s"
+                   f" (export + BVH {time.perf_counter() - t0 - stats['seconds']:.1f} s)")
+        if out.cancelled:
+            message += " | cancelled: partial image"
+        if stats["nonfinite"]:
+            message += f" | dropped {stats['nonfinite']} non-finite samples"
+        self.update_stats("", message)
+        self.report({"INFO"}, message)
+
+    def _write_passes(self, result, stokes_rgb, window, enabled):
+        if stokes_rgb is None:
+            return
+        if window is not None:
+            x0, y0, x1, y1 = window
+            stokes_rgb = stokes_rgb[:, y0:y1, x0:x1]
+        images = pass_images(stokes_rgb)
+        passes = result.layers[0].passes
+        for name, img in images.items():
+            if name != "Combined" and name not in enabled:
+                continue
+            p = passes.find(name) if hasattr(passes, "find") else None
+            target = passes[name] if (p is None or p >= 0) and name in passes else None
+            if target is None:
+                continue
+            # Blender's rows start at the bottom of the image.
+            target.rect.foreach_set(np.ascontiguousarray(img[::-1], dtype=np.float32).ravel())
+
+    # ------------------------------------------------------------------ viewport
+
+    def view_update(self, context, depsgraph):
+        if self.viewport is None:
+            self.viewport = ViewportSession()
+        self.viewport.sync(depsgraph, context)
+        self.tag_redraw()
+
+    def view_draw(self, context, depsgraph):
+        if self.viewport is None:
+            return
+        done = self.viewport.step(context)
+        self.viewport.draw(self, context)
+        if not done:
+            self.tag_redraw()
+
+
+# Panels of other engines that should also show for Polar (as Hydra Storm does).
+COMPAT_PANELS = ("EEVEE_MATERIAL_PT_surface", "EEVEE_MATERIAL_PT_volume", "EEVEE_MATERIAL_PT_settings",
+                 "EEVEE_MATERIAL_PT_context_material", "MATERIAL_PT_preview", "EEVEE_WORLD_PT_surface")
+
+
+def _compat_panels():
+    for panel in bpy.types.Panel.__subclasses__():
+        engines = getattr(panel, "COMPAT_ENGINES", None)
+        if engines is not None and ("BLENDER_RENDER" in engines or panel.__name__ in COMPAT_PANELS):
+            yield panel
+
+
+def register():
+    bpy.utils.register_class(PolarRenderEngine)
+    for panel in _compat_panels():
+        panel.COMPAT_ENGINES.add("POLAR")
+
+
+def unregister():
+    for panel in _compat_panels():
+        panel.COMPAT_ENGINES.discard("POLAR")
+    bpy.utils.unregister_class(PolarRenderEngine)

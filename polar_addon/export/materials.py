@@ -1,0 +1,250 @@
+"""Blender materials → engine BSDFs (and emission).
+
+A material's Surface may be
+- a **Polarising BSDF** node: its model and inputs are used exactly;
+- a standard shader, converted to the closest polarising model (README, "Blender materials"):
+  Diffuse → Lambert; Glossy/Anisotropic → conductor from the colour (Gulbrandsen 2014);
+  Metallic (Physical Conductor) → conductor with its n, k; Glass/Refraction → smooth dielectric;
+  Principled → conductor (Metallic ≥ 0.5), dielectric (Transmission ≥ 0.5), Weidlich–Wilkie coat
+  (Coat Weight > 0) or Torrance–Sparrow dielectric + Lambert (otherwise); Emission → emitter;
+- anything else: grey Lambert with a warning.
+Roughness r maps to the Beckmann slope m = r² (as Cycles' α = r²); below m = 0.02 the smooth model
+is used.  Linked inputs (textures) are not supported yet: their unlinked value is used, with a
+warning.  Every value is validated; a NaN or out-of-range input is an error naming the material
+and the input.
+"""
+
+import math
+
+import numpy as np
+
+from ...engine.materials.black_glass import BlackGlass
+from ...engine.materials.conductor import SmoothConductor
+from ...engine.materials.dielectric import SmoothDielectric
+from ...engine.materials.lambert import Lambert
+from ...engine.scene.errors import SceneError
+from ...engine.spectral import (ConstantSpectrum, RGBIlluminantSpectrum, RGBReflectanceSpectrum,
+                                RGBUnboundedSpectrum, named_ior)
+from ..nodes.models import DIELECTRIC_PRESETS
+
+SMOOTH_LIMIT = 0.02
+DEFAULT_ALBEDO = 0.8
+
+
+def _follow(socket):
+    """The node feeding an input socket (through reroutes), or None."""
+    if not socket.is_linked:
+        return None
+    node = socket.links[0].from_node
+    while node is not None and node.bl_idname == "NodeReroute":
+        node = node.inputs[0].links[0].from_node if node.inputs[0].is_linked else None
+    return node
+
+
+class _Reader:
+    """Reads validated input values of one node, recording warnings once per material."""
+
+    def __init__(self, material_name, node, warnings):
+        self.mat, self.node, self.warnings = material_name, node, warnings
+
+    def _socket(self, name):
+        sock = self.node.inputs.get(name)
+        if sock is None:
+            raise SceneError(f"material {self.mat!r}", f"node {self.node.name!r} has no input {name!r}")
+        if sock.is_linked and sock.type != "SHADER":
+            self.warnings.append(f"material {self.mat!r}: input {name!r} of {self.node.name!r} is linked; "
+                                 "textures are not supported yet, its own value is used")
+        return sock
+
+    def float(self, name, lo=-math.inf, hi=math.inf, lo_open=False):
+        v = float(self._socket(name).default_value)
+        if not math.isfinite(v) or v < lo or v > hi or (lo_open and v == lo):
+            rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}]"
+            raise SceneError(f"material {self.mat!r}.{self.node.name}.{name}", f"must be in {rng}, got {v!r}")
+        return v
+
+    def rgb(self, name, lo=0.0, hi=math.inf):
+        v = [float(c) for c in self._socket(name).default_value[:3]]
+        if not all(math.isfinite(c) and lo <= c <= hi for c in v):
+            raise SceneError(f"material {self.mat!r}.{self.node.name}.{name}",
+                             f"components must be in [{lo:g}, {hi:g}], got {v}")
+        return v
+
+
+def gulbrandsen_nk(reflectivity, edge_tint):
+    """Complex index (n, k) per channel from reflectivity r and edge tint g (Gulbrandsen 2014)."""
+    r = np.clip(np.asarray(reflectivity, float), 0.0, 0.99)
+    g = np.clip(np.asarray(edge_tint, float), 0.0, 1.0)
+    sr = np.sqrt(r)
+    n = g * (1 - r) / (1 + r) + (1 - g) * (1 + sr) / (1 - sr)
+    k = np.sqrt(np.maximum((r * (n + 1) ** 2 - (n - 1) ** 2) / (1 - r), 0.0))
+    return n, k
+
+
+def _rgb_spectrum(rgb, kind="reflectance"):
+    if max(rgb) == min(rgb):
+        return ConstantSpectrum(rgb[0])
+    return RGBReflectanceSpectrum(rgb) if kind == "reflectance" else RGBUnboundedSpectrum(rgb)
+
+
+def _conductor(n_rgb, k_rgb, m, warnings, mat, diffuse=None):
+    n, k = _rgb_spectrum(list(n_rgb), "unbounded"), _rgb_spectrum(list(k_rgb), "unbounded")
+    if m < SMOOTH_LIMIT and diffuse is None:
+        return SmoothConductor(n, k)
+    return _torrance_sparrow(n, k, max(m, 1e-4), mat, diffuse=diffuse)
+
+
+def _torrance_sparrow(n, k, m, mat, shadowing="ts", diffuse=None):
+    try:
+        from ...engine.materials.torrance_sparrow import TorranceSparrow
+    except ImportError:
+        raise SceneError(f"material {mat!r}", "Torrance–Sparrow is not available in this engine build") from None
+    kwargs = {}
+    if diffuse is not None and max(diffuse) > 0:
+        kwargs = {"diffuse_albedo": _rgb_spectrum(diffuse), "diffuse_weight": 1.0}
+    return TorranceSparrow(n, k, m, shadowing=shadowing, **kwargs)
+
+
+def _metal_nk(node, reader):
+    if getattr(node, "metal", "CUSTOM") != "CUSTOM":
+        return named_ior(node.metal)
+    return ConstantSpectrum(reader.float("n", 0, lo_open=True)), ConstantSpectrum(reader.float("k", 0))
+
+
+def _dielectric_ior(node, reader):
+    preset = getattr(node, "dielectric_preset", "CUSTOM")
+    for name, _, _, _, value in DIELECTRIC_PRESETS:
+        if name == preset and value is not None:
+            return value
+    return reader.float("IOR", 0, lo_open=True)
+
+
+def polar_node_bsdf(node, mat, warnings, depth=0):
+    """BSDF of a Polarising BSDF node."""
+    r = _Reader(mat, node, warnings)
+    model = node.model
+    if model == "LAMBERT":
+        return Lambert(_rgb_spectrum(r.rgb("Albedo", 0.0, 1.0)))
+    if model == "CONDUCTOR":
+        n, k = _metal_nk(node, r)
+        return SmoothConductor(n, k)
+    if model == "DIELECTRIC":
+        return SmoothDielectric(_dielectric_ior(node, r))
+    if model == "BLACK_GLASS":
+        return BlackGlass(ConstantSpectrum(_dielectric_ior(node, r)))
+    if model == "TORRANCE_SPARROW":
+        n, k = _metal_nk(node, r)
+        diffuse = r.rgb("Diffuse", 0.0, 1.0)
+        return _torrance_sparrow(n, k, r.float("Roughness", 1e-4, 10.0), mat,
+                                 shadowing="smith" if node.shadowing == "SMITH" else "ts",
+                                 diffuse=diffuse if max(diffuse) > 0 else None)
+    if model == "HTSG":
+        try:
+            from ...engine.materials.htsg import HTSG
+        except ImportError:
+            raise SceneError(f"material {mat!r}", "HTSG is not available in this engine build") from None
+        n, k = _metal_nk(node, r)
+        return HTSG(n, k, r.float("Sigma0", 0.0, 100.0), r.float("Tau", 0.0, 1000.0, lo_open=True),
+                    albedo=_rgb_spectrum(r.rgb("Diffuse", 0.0, 1.0)))
+    if model == "WEIDLICH_WILKIE":
+        try:
+            from ...engine.materials.weidlich_wilkie import Coat, WeidlichWilkie
+        except ImportError:
+            raise SceneError(f"material {mat!r}", "Weidlich–Wilkie is not available in this engine build") from None
+        base_node = _follow(node.inputs["Base"])
+        if depth > 16:
+            raise SceneError(f"material {mat!r}", "layered materials nest more than 16 coats deep")
+        base = Lambert(ConstantSpectrum(DEFAULT_ALBEDO)) if base_node is None else \
+            surface_bsdf(base_node, mat, warnings, depth + 1)[0]
+        rough = r.float("Coat Roughness", 0.0, 10.0)
+        coat = Coat(n=r.float("Coat IOR", 1.0, 10.0), thickness=r.float("Coat Thickness", 0.0),
+                    absorption=_rgb_spectrum(r.rgb("Coat Absorption", 0.0), "unbounded"),
+                    distribution="smooth" if rough < SMOOTH_LIMIT else "beckmann", m=max(rough, 1e-4))
+        return WeidlichWilkie([coat], base, form="published" if node.ww_form == "PUBLISHED" else "energy")
+    raise SceneError(f"material {mat!r}", f"unknown Polarising BSDF model {model!r}")
+
+
+def _principled(node, mat, warnings):
+    r = _Reader(mat, node, warnings)
+    base = r.rgb("Base Color", 0.0, 1.0)
+    rough = r.float("Roughness", 0.0, 1.0)
+    m = rough * rough
+    if r.float("Metallic", 0.0, 1.0) >= 0.5:
+        n, k = gulbrandsen_nk(base, base)
+        return _conductor(n, k, m, warnings, mat)
+    ior = r.float("IOR", 0.0, 100.0, lo_open=True)
+    if r.float("Transmission Weight", 0.0, 1.0) >= 0.5:
+        if m >= SMOOTH_LIMIT:
+            warnings.append(f"material {mat!r}: rough transmission is not supported yet; rendered as smooth glass")
+        return SmoothDielectric(ior)
+    under = _torrance_sparrow(ConstantSpectrum(ior), ConstantSpectrum(0.0), max(m, 1e-4), mat, diffuse=base) \
+        if m >= SMOOTH_LIMIT else Lambert(_rgb_spectrum(base))
+    if r.float("Coat Weight", 0.0, 1.0) > 0:
+        from ...engine.materials.weidlich_wilkie import Coat, WeidlichWilkie
+        coat_m = r.float("Coat Roughness", 0.0, 1.0) ** 2
+        coat = Coat(n=r.float("Coat IOR", 1.0, 10.0), thickness=0.0, absorption=ConstantSpectrum(0.0),
+                    distribution="smooth" if coat_m < SMOOTH_LIMIT else "beckmann", m=max(coat_m, 1e-4))
+        return WeidlichWilkie([coat], under)
+    return under
+
+
+def _emission(node, mat, warnings, colour_name="Color", strength_name="Strength"):
+    r = _Reader(mat, node, warnings)
+    strength = r.float(strength_name, 0.0)
+    colour = r.rgb(colour_name, 0.0)
+    if strength <= 0 or max(colour) <= 0:
+        return None
+    return RGBIlluminantSpectrum(colour, strength)
+
+
+def surface_bsdf(node, mat, warnings, depth=0):
+    """(BSDF, emission spectrum or None) for the shader node plugged into a Surface."""
+    kind = node.bl_idname
+    if kind == "PolarShaderNodeBSDF":
+        return polar_node_bsdf(node, mat, warnings, depth), None
+    r = _Reader(mat, node, warnings)
+    if kind == "ShaderNodeBsdfDiffuse":
+        return Lambert(_rgb_spectrum(r.rgb("Color", 0.0, 1.0))), None
+    if kind in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
+        colour = r.rgb("Color", 0.0, 1.0)
+        n, k = gulbrandsen_nk(colour, colour)
+        return _conductor(n, k, r.float("Roughness", 0.0, 1.0) ** 2, warnings, mat), None
+    if kind == "ShaderNodeBsdfMetallic":
+        rough = r.float("Roughness", 0.0, 1.0) ** 2
+        if getattr(node, "fresnel_type", "") == "PHYSICAL_CONDUCTOR":
+            return _conductor(r.rgb("IOR", 0.0), r.rgb("Extinction", 0.0), rough, warnings, mat), None
+        colour = r.rgb("Base Color", 0.0, 1.0)
+        n, k = gulbrandsen_nk(colour, r.rgb("Edge Tint", 0.0, 1.0))
+        return _conductor(n, k, rough, warnings, mat), None
+    if kind in ("ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction"):
+        if r.float("Roughness", 0.0, 1.0) ** 2 >= SMOOTH_LIMIT:
+            warnings.append(f"material {mat!r}: rough glass is not supported yet; rendered as smooth glass")
+        return SmoothDielectric(r.float("IOR", 0.0, 100.0, lo_open=True)), None
+    if kind == "ShaderNodeBsdfPrincipled":
+        emission = _emission(node, mat, warnings, "Emission Color", "Emission Strength")
+        return _principled(node, mat, warnings), emission
+    if kind == "ShaderNodeEmission":
+        return Lambert(ConstantSpectrum(0.0)), _emission(node, mat, warnings)
+    if kind in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
+        first = next((_follow(s) for s in node.inputs if s.type == "SHADER" and s.is_linked), None)
+        warnings.append(f"material {mat!r}: {node.bl_idname} is not supported; using its first shader input")
+        if first is not None:
+            return surface_bsdf(first, mat, warnings, depth + 1)
+    else:
+        warnings.append(f"material {mat!r}: shader {kind} is not supported; rendered as grey Lambert")
+    return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
+
+
+def export_material(material, warnings):
+    """(BSDF, emission or None) for a Blender material (None → default grey)."""
+    if material is None:
+        return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
+    tree = material.node_tree
+    if tree is None:
+        return Lambert(_rgb_spectrum([float(c) for c in material.diffuse_color[:3]])), None
+    output = tree.get_output_node("ALL") or tree.get_output_node("CYCLES")
+    node = _follow(output.inputs["Surface"]) if output is not None else None
+    if node is None:
+        warnings.append(f"material {material.name!r} has no surface shader; rendered black")
+        return Lambert(ConstantSpectrum(0.0)), None
+    return surface_bsdf(node, material.name, warnings)

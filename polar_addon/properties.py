@@ -1,0 +1,89 @@
+"""Polar's settings stored in .blend files: render settings (Scene), pass toggles (ViewLayer).
+
+Enum items carry explicit numbers: Blender stores enums as integers in files,
+so the numbers are stable forever — add new items with new numbers, never
+renumber or reorder.
+"""
+
+import bpy
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
+
+POLARISATION_ITEMS = [
+    ("AUTO", "Auto", "Choose the cheapest transport that is exact for this scene (reported in the stats)", 0),
+    ("FULL", "Full Stokes", "Full 4×4 Mueller transport: linear and circular polarisation", 1),
+    ("LINEAR", "Linear Only", "3×3 Mueller transport: S3 is 0 (exact only where nothing retards)", 2),
+    ("OFF", "Off", "Scalar transport: S1 = S2 = S3 = 0 (exact only where everything depolarises)", 3),
+]
+POLARISATION_TO_ENGINE = {"AUTO": "auto", "FULL": "full", "LINEAR": "linear", "OFF": "off"}
+
+SPECTRAL_ITEMS = [
+    ("SPECTRAL", "Spectral", "Four wavelengths per path over 360–830 nm, CIE 1931 colour", 0),
+    ("MONO", "Monochrome", "One wavelength (for verification); colours by their luminance", 1),
+]
+
+PASS_NAMES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP")
+
+
+class PolarRenderSettings(bpy.types.PropertyGroup):
+    samples: IntProperty(name="Samples", description="Samples per pixel for final renders",
+                         default=16, min=1, soft_max=4096, max=1 << 20)
+    preview_samples: IntProperty(name="Preview Samples", description="Samples per pixel for material previews "
+                                 "and the viewport", default=4, min=1, max=1 << 16)
+    max_bounces: IntProperty(name="Max Bounces", description="Maximum number of scattering events per path "
+                             "(0 = only directly visible lights)", default=15, min=0, max=1023)
+    seed: IntProperty(name="Seed", description="Random seed; the same seed gives the same image", default=0,
+                      min=0)
+    use_animated_seed: BoolProperty(name="Animated Seed", description="Add the frame number to the seed so "
+                                    "that noise changes from frame to frame", default=False)
+    spectral: EnumProperty(name="Spectral", items=SPECTRAL_ITEMS, default="SPECTRAL")
+    wavelength_nm: FloatProperty(name="Wavelength", description="Wavelength of monochrome renders (nm)",
+                                 default=550.0, min=360.0, max=830.0)
+    polarisation: EnumProperty(name="Polarisation", items=POLARISATION_ITEMS, default="AUTO")
+    threads: IntProperty(name="Threads", description="Worker threads (0 = one per CPU core)", default=0, min=0,
+                         max=256)
+    batch_rays: IntProperty(name="Batch Size", description="Paths traced at once; lower it to save memory",
+                            default=1 << 17, min=1024, max=1 << 24)
+
+
+def _refresh_passes(self, context):
+    # id_data of a ViewLayer property group is the Scene: refresh every layer's sockets.
+    for view_layer in self.id_data.view_layers:
+        view_layer.update_render_passes()
+
+
+class PolarViewLayerSettings(bpy.types.PropertyGroup):
+    use_pass_s0: BoolProperty(name="S0", description="Intensity (colour)", default=True, update=_refresh_passes)
+    use_pass_s1: BoolProperty(name="S1", description="Horizontal − vertical linear polarisation (colour, signed)",
+                              default=True, update=_refresh_passes)
+    use_pass_s2: BoolProperty(name="S2", description="+45° − −45° linear polarisation (colour, signed)",
+                              default=True, update=_refresh_passes)
+    use_pass_s3: BoolProperty(name="S3", description="Right − left circular polarisation (colour, signed)",
+                              default=True, update=_refresh_passes)
+    use_pass_dop: BoolProperty(name="DoP", description="Degree of polarisation", default=True,
+                               update=_refresh_passes)
+    use_pass_dolp: BoolProperty(name="DoLP", description="Degree of linear polarisation", default=True,
+                                update=_refresh_passes)
+    use_pass_aolp: BoolProperty(name="AoLP", description="Angle of linear polarisation (radians, from image "
+                                "right towards image up)", default=True, update=_refresh_passes)
+    use_pass_docp: BoolProperty(name="DoCP", description="Degree of circular polarisation (signed)", default=True,
+                                update=_refresh_passes)
+
+    def enabled_passes(self):
+        return [name for name in PASS_NAMES if getattr(self, f"use_pass_{name.lower()}")]
+
+
+classes = (PolarRenderSettings, PolarViewLayerSettings)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+    bpy.types.Scene.polar = PointerProperty(type=PolarRenderSettings)
+    bpy.types.ViewLayer.polar = PointerProperty(type=PolarViewLayerSettings)
+
+
+def unregister():
+    del bpy.types.ViewLayer.polar
+    del bpy.types.Scene.polar
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

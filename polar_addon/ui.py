@@ -1,0 +1,86 @@
+"""Polar's panels in the Render and View Layer properties."""
+
+import bpy
+
+
+class _PolarPanel:
+    bl_space_type = "PROPERTIES"
+    bl_region_type = "WINDOW"
+    COMPAT_ENGINES = {"POLAR"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES
+
+
+class POLAR_PT_sampling(_PolarPanel, bpy.types.Panel):
+    bl_label = "Sampling"
+    bl_context = "render"
+
+    def draw(self, context):
+        p = context.scene.polar
+        layout = self.layout
+        layout.use_property_split = True
+        col = layout.column(align=True)
+        col.prop(p, "samples", text="Render")
+        col.prop(p, "preview_samples", text="Viewport")
+        layout.prop(p, "max_bounces")
+        row = layout.row(align=True)
+        row.prop(p, "seed")
+        row.prop(p, "use_animated_seed", text="", icon="TIME")
+
+
+class POLAR_PT_light_model(_PolarPanel, bpy.types.Panel):
+    bl_label = "Polarisation & Spectrum"
+    bl_context = "render"
+
+    def draw(self, context):
+        p = context.scene.polar
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(p, "polarisation")
+        layout.prop(p, "spectral")
+        sub = layout.row()
+        sub.enabled = p.spectral == "MONO"
+        sub.prop(p, "wavelength_nm")
+
+
+class POLAR_PT_performance(_PolarPanel, bpy.types.Panel):
+    bl_label = "Performance"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        p = context.scene.polar
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(p, "threads")
+        layout.prop(p, "batch_rays")
+
+
+class POLAR_PT_passes(_PolarPanel, bpy.types.Panel):
+    bl_label = "Polarisation Passes"
+    bl_context = "view_layer"
+
+    def draw(self, context):
+        s = context.view_layer.polar
+        layout = self.layout
+        col = layout.column(heading="Stokes", align=True)
+        for name in ("s0", "s1", "s2", "s3"):
+            col.prop(s, f"use_pass_{name}")
+        col = layout.column(heading="Derived", align=True)
+        for name in ("dop", "dolp", "aolp", "docp"):
+            col.prop(s, f"use_pass_{name}")
+
+
+classes = (POLAR_PT_sampling, POLAR_PT_light_model, POLAR_PT_performance, POLAR_PT_passes)
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,130 @@
+"""Helpers for tests that drive Blender through the bpy module (pip package ``bpy``).
+
+The add-on is loaded the way Blender loads the extension: the repository root as a package
+(``polar_render``) whose ``register()`` forwards to ``polar_addon``.
+"""
+
+import importlib.util
+import math
+import os
+import sys
+
+from tests.conftest import REPO
+
+PACKAGE = "polar_render"
+
+
+def load_addon():
+    """Import the repository as the extension package and register it (once per process)."""
+    import bpy  # noqa: F401
+    if PACKAGE in sys.modules:
+        return sys.modules[PACKAGE]
+    spec = importlib.util.spec_from_file_location(PACKAGE, os.path.join(REPO, "__init__.py"),
+                                                  submodule_search_locations=[REPO])
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[PACKAGE] = module
+    spec.loader.exec_module(module)
+    module.register()
+    return module
+
+
+def empty_scene(width=48, height=36, samples=4):
+    import bpy
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "POLAR"
+    scene.render.resolution_x, scene.render.resolution_y = width, height
+    scene.render.resolution_percentage = 100
+    scene.polar.samples = samples
+    scene.polar.max_bounces = 7
+    ims = scene.render.image_settings
+    ims.media_type = "MULTI_LAYER_IMAGE"
+    ims.color_depth = "32"
+    return scene
+
+
+def add_camera(scene, location, rotation, lens=50.0):
+    import bpy
+    data = bpy.data.cameras.new("Camera")
+    data.lens = lens
+    cam = bpy.data.objects.new("Camera", data)
+    scene.collection.objects.link(cam)
+    cam.location, cam.rotation_euler = location, rotation
+    scene.camera = cam
+    return cam
+
+
+def brewster_camera(scene, distance=10.0, lens=50.0):
+    th = math.atan(1.5)
+    return add_camera(scene, (0.0, -distance * math.sin(th), distance * math.cos(th)), (th, 0.0, 0.0), lens)
+
+
+def white_world(scene, strength=1.0):
+    import bpy
+    world = bpy.data.worlds.new("World")
+    scene.world = world
+    bg = world.node_tree.nodes["Background"]
+    bg.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    bg.inputs["Strength"].default_value = strength
+    return world
+
+
+def polar_material(name, model, **inputs):
+    """A material whose Surface is a Polarising BSDF of ``model`` with the given input values."""
+    import bpy
+    mat = bpy.data.materials.new(name)
+    tree = mat.node_tree
+    out = tree.get_output_node("ALL")
+    node = tree.nodes.new("PolarShaderNodeBSDF")
+    node.model = model
+    for key, value in inputs.items():
+        if key in ("metal", "dielectric_preset", "shadowing", "ww_form"):
+            setattr(node, key, value)
+        else:
+            node.inputs[key].default_value = value
+    tree.links.new(node.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def add_plane(size, material=None, location=(0, 0, 0)):
+    import bpy
+    bpy.ops.mesh.primitive_plane_add(size=size, location=location)
+    obj = bpy.context.object
+    if material is not None:
+        obj.data.materials.append(material)
+    return obj
+
+
+def add_sphere(radius, location, material=None, smooth=True):
+    import bpy
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=radius, location=location, segments=48, ring_count=24)
+    obj = bpy.context.object
+    if smooth:
+        bpy.ops.object.shade_smooth()
+    if material is not None:
+        obj.data.materials.append(material)
+    return obj
+
+
+def read_multilayer(path, layer="ViewLayer"):
+    """{pass: (H, W, C) array} from a Blender multilayer EXR (row 0 = top of the image)."""
+    import numpy as np
+    import OpenEXR
+    with OpenEXR.File(path, separate_channels=True) as f:
+        chans = {n: np.array(c.pixels) for p in f.parts for n, c in p.channels.items()}
+    passes = {}
+    for name, pixels in chans.items():
+        parts = name.split(".")
+        if len(parts) != 3 or parts[0] != layer:
+            continue
+        passes.setdefault(parts[1], {})[parts[2]] = pixels
+    order = {"R": 0, "G": 1, "B": 2, "A": 3, "X": 0}
+    return {p: np.stack([c[k] for k in sorted(c, key=lambda k: order.get(k, 9))], axis=-1)
+            for p, c in passes.items()}
+
+
+def render_to_exr(scene, path):
+    import bpy
+    scene.render.filepath = path
+    bpy.ops.render.render(write_still=True)
+    return path + ".exr" if not path.endswith(".exr") else path
