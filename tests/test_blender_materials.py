@@ -1,0 +1,161 @@
+"""Materials, lights and the viewport logic on the Blender side."""
+
+import math
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from tests.blender_support import add_plane, empty_scene, load_addon, polar_material  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def addon():
+    return load_addon()
+
+
+def exported(material):
+    from polar_render.polar_addon.export.materials import export_material
+    warnings = []
+    bsdf, emission = export_material(material, warnings)
+    return bsdf, emission, warnings
+
+
+def principled(**inputs):
+    mat = bpy.data.materials.new("P")
+    node = mat.node_tree.nodes["Principled BSDF"]
+    for k, v in inputs.items():
+        node.inputs[k].default_value = v
+    return mat
+
+
+def test_node_parameters_survive_save_and_reload(addon, tmp_path):
+    empty_scene()
+    gold = polar_material("Gold", "CONDUCTOR", metal="Au")
+    glass = polar_material("Glass", "DIELECTRIC", dielectric_preset="WATER")
+    custom = polar_material("Custom", "CONDUCTOR", n=0.31, k=3.7)
+    for m in (gold, glass, custom):
+        add_plane(1.0, m)
+    path = str(tmp_path / "materials.blend")
+    bpy.ops.wm.save_as_mainfile(filepath=path)
+    bpy.ops.wm.read_homefile(use_empty=True)
+    bpy.ops.wm.open_mainfile(filepath=path)
+    node = lambda name: bpy.data.materials[name].node_tree.nodes["Polarising BSDF"]  # noqa: E731
+    assert node("Gold").model == "CONDUCTOR" and node("Gold").metal == "Au"
+    assert node("Glass").model == "DIELECTRIC" and node("Glass").dielectric_preset == "WATER"
+    assert node("Custom").inputs["n"].default_value == pytest.approx(0.31)
+    assert node("Custom").inputs["k"].default_value == pytest.approx(3.7)
+    # ... and they are what the exporter uses.
+    bsdf, _, _ = exported(bpy.data.materials["Custom"])
+    assert bsdf.name == "conductor"
+    assert bsdf.n.eval(np.array([550.0]))[0] == pytest.approx(0.31, rel=1e-6)
+    assert exported(bpy.data.materials["Glass"])[0].n_int == pytest.approx(1.333)
+
+
+def test_node_shows_exactly_the_selected_models_inputs(addon):
+    from polar_render.polar_addon.nodes.models import MODEL_ITEMS, MODEL_SOCKETS
+    empty_scene()
+    mat = polar_material("M", "LAMBERT")
+    node = mat.node_tree.nodes["Polarising BSDF"]
+    for model, *_ in MODEL_ITEMS:
+        node.model = model
+        assert [s.name for s in node.inputs] == [s[0] for s in MODEL_SOCKETS[model]]
+        assert node.outputs[0].is_linked                         # switching keeps the Surface link
+
+
+def test_enum_numbers_are_stable(addon):
+    from polar_render.polar_addon.nodes.models import MODEL_ITEMS
+    from polar_render.polar_addon.properties import POLARISATION_ITEMS
+    assert [(i[0], i[3]) for i in MODEL_ITEMS] == [
+        ("LAMBERT", 0), ("CONDUCTOR", 1), ("DIELECTRIC", 2), ("BLACK_GLASS", 3), ("TORRANCE_SPARROW", 4),
+        ("HTSG", 5), ("WEIDLICH_WILKIE", 6)]
+    assert [(i[0], i[3]) for i in POLARISATION_ITEMS] == [("AUTO", 0), ("FULL", 1), ("LINEAR", 2), ("OFF", 3)]
+
+
+def test_principled_conversion_per_input(addon):
+    empty_scene()
+    lam = np.array([[550.0]])
+    # Metallic, smooth → Fresnel conductor whose normal-incidence reflectance is the base colour.
+    bsdf, _, _ = exported(principled(**{"Metallic": 1.0, "Roughness": 0.0, "Base Color": (0.9, 0.9, 0.9, 1)}))
+    assert bsdf.name == "conductor"
+    n, k = bsdf.n.eval(lam)[0, 0], bsdf.k.eval(lam)[0, 0]
+    assert ((n - 1) ** 2 + k ** 2) / ((n + 1) ** 2 + k ** 2) == pytest.approx(0.9, rel=1e-6)
+    # Transmission → smooth dielectric with the IOR.
+    bsdf, _, _ = exported(principled(**{"Transmission Weight": 1.0, "IOR": 1.6, "Roughness": 0.0}))
+    assert bsdf.name == "dielectric" and bsdf.n_int == pytest.approx(1.6)
+    # Rough transmission warns.
+    _, _, warnings = exported(principled(**{"Transmission Weight": 1.0, "Roughness": 0.5}))
+    assert any("rough transmission" in w for w in warnings)
+    # Plain smooth dielectric base → Lambert with the base colour.
+    bsdf, _, _ = exported(principled(**{"Roughness": 0.0, "Base Color": (0.2, 0.4, 0.6, 1)}))
+    assert bsdf.name == "lambert" and bsdf.albedo.linear_srgb() == pytest.approx([0.2, 0.4, 0.6], abs=1e-3)
+    # Emission → emitter spectrum with colour × strength.
+    _, emission, _ = exported(principled(**{"Emission Strength": 3.0, "Emission Color": (1, 0.5, 0.25, 1)}))
+    assert emission is not None and emission.linear_srgb() == pytest.approx([3.0, 1.5, 0.75], rel=2e-3)
+
+
+def test_standard_shaders_convert(addon):
+    empty_scene()
+
+    def with_shader(kind, **inputs):
+        mat = bpy.data.materials.new(kind)
+        tree = mat.node_tree
+        node = tree.nodes.new(kind)
+        for k, v in inputs.items():
+            node.inputs[k].default_value = v
+        tree.links.new(node.outputs[0], tree.get_output_node("ALL").inputs["Surface"])
+        return mat
+
+    assert exported(with_shader("ShaderNodeBsdfDiffuse", Color=(0.5, 0.5, 0.5, 1)))[0].name == "lambert"
+    assert exported(with_shader("ShaderNodeBsdfGlass", IOR=1.45, Roughness=0.0))[0].n_int == pytest.approx(1.45)
+    assert exported(with_shader("ShaderNodeBsdfGlossy", Roughness=0.0))[0].name == "conductor"
+    bsdf, emission, _ = exported(with_shader("ShaderNodeEmission", Strength=2.0))
+    assert emission is not None and bsdf.name == "lambert"
+
+
+def test_light_units_match_cycles(addon):
+    from polar_render.polar_addon.export.lights import export_light
+    empty_scene()
+    lam = np.array([[550.0]])
+    for kind, energy in (("POINT", 100.0), ("SPOT", 100.0), ("SUN", 3.0), ("AREA", 50.0)):
+        bpy.ops.object.light_add(type=kind, location=(0, 0, 2))
+        obj = bpy.context.object
+        obj.data.energy = energy
+        if kind == "AREA":
+            obj.data.size = 0.5
+        warnings = []
+        light = export_light(obj, obj.matrix_world, warnings)
+        if kind in ("POINT", "SPOT"):
+            assert light.intensity.eval(lam, mono=True)[0, 0] == pytest.approx(energy / (4 * math.pi))
+        elif kind == "SUN":
+            assert light.irradiance.eval(lam, mono=True)[0, 0] == pytest.approx(energy)
+            np.testing.assert_allclose(light.direction, [0, 0, -1], atol=1e-12)
+        else:
+            assert light.emission.eval(lam, mono=True)[0, 0] == pytest.approx(energy / (4 * 0.25))
+            v = light.vertices
+            normal = np.cross(v[light.faces[0, 1]] - v[light.faces[0, 0]], v[light.faces[0, 2]] - v[light.faces[0, 0]])
+            assert normal[2] < 0                                   # emits downwards (local −Z)
+
+
+def test_viewport_sync_logic():
+    from polar_render.polar_addon.viewport import ViewportSync, camera_from_view
+    sync = ViewportSync(target_samples=3)
+    assert sync.needs_export
+    sync.needs_export = False
+    view = np.eye(4)
+    proj = np.diag([2.0, 2.0, -1.0, 0.0])
+    assert sync.on_view(view, proj, (100, 80)) is True
+    sync.add_samples(3)
+    assert sync.done()
+    assert sync.on_view(view, proj, (100, 80)) is False and sync.done()
+    assert sync.on_updates([("OBJECT", False, False, False)]) is False     # selection only
+    assert sync.done() and not sync.needs_export
+    assert sync.on_updates([("OBJECT", False, True, False)]) is True       # moved an object
+    assert sync.needs_export and sync.samples == 0
+    sync.needs_export = False
+    assert sync.on_updates([("MATERIAL", False, False, True)]) is True
+    assert sync.on_view(view, proj, (120, 80)) is True                      # resize restarts
+    cam = camera_from_view(view, proj, 100, 80, True)
+    assert cam.fov_deg == pytest.approx(2 * math.degrees(math.atan(0.5)))
+    np.testing.assert_allclose(cam.target - cam.origin, [0, 0, -1])
