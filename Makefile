@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 
-.PHONY: demo test bench clean
+.PHONY: demo test bench clean extension
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -22,3 +22,6 @@ bench: $(VENV)/.installed
 
 clean:
 	rm -rf out build dist *.egg-info
+
+extension: $(VENV)/.installed
+	$(PY) -m polar_addon.packaging --output-dir dist
