@@ -134,7 +134,7 @@ def test_peer_scenes_load(name):
         assert len(scene.lights) == 1
 
 
-def test_peer_rough_conductor_is_reported_as_not_yet_supported():
-    with pytest.raises(SceneError) as err:
-        load_scene(shared_path("peers", "scenes", "rough_sphere_a010.json"))
-    assert "rough_conductor" in str(err.value)
+def test_peer_rough_conductor_becomes_torrance_sparrow_with_mitsubas_smith():
+    scene = load_scene(shared_path("peers", "scenes", "rough_sphere_a010.json"))
+    ts = [m for m in scene.materials.values() if m.name == "torrance_sparrow"]
+    assert len(ts) == 1 and ts[0].m == 0.1 and ts[0].shadowing == "smith_rational"

@@ -11,6 +11,7 @@ import math
 
 from .conductor import SmoothConductor
 from .lambert import Lambert
+from .torrance_sparrow import TorranceSparrow
 from ..scene.errors import SceneError
 from ..spectral import ConstantSpectrum, named_ior
 
@@ -21,6 +22,15 @@ MODEL_PARAMETERS = {
                 "k": (0.0, "imaginary part κ ≥ 0"),
                 "metal": (None, "named measured metal instead of n, k"),
                 "exterior_n": (1.0, "index of the incident medium, > 0")},
+    "torrance_sparrow": {"n": (None, "real part of the complex index, > 0 (or metal=NAME)"),
+                         "k": (0.0, "imaginary part κ ≥ 0"),
+                         "metal": (None, "named measured metal instead of n, k"),
+                         "m": (None, "Beckmann rms slope m ≥ 1e-4 (= Mitsuba α, SCATMECH s)"),
+                         "shadowing": ("ts", "ts (V-cavity) | smith | smith_rational (Mitsuba) | none"),
+                         "diffuse_albedo": (0.0, "albedo of the added Lambertian part, [0, 1]"),
+                         "diffuse_weight": (0.0, "weight d of the Lambertian part, ≥ 0"),
+                         "specular_weight": (1.0, "weight s of the facet part, ≥ 0"),
+                         "exterior_n": (1.0, "index of the incident medium, > 0")},
 }
 
 
@@ -48,13 +58,30 @@ def make_model(name: str, params: dict, field: str = "param"):
         albedo = _float(params, "albedo", field, 0.0, hi=1.0) if "albedo" in params else 0.8
         return Lambert(ConstantSpectrum(albedo))
     ext = _float(params, "exterior_n", field, 0.0, lo_open=True) if "exterior_n" in params else 1.0
+    n, k = _index(params, field)
+    if name == "fresnel":
+        return SmoothConductor(n, k, ext)
+    if "m" not in params:
+        raise SceneError(f"{field}.m", "is required: the Beckmann rms slope, ≥ 1e-4")
+    shadowing = params.get("shadowing", "ts")
+    if shadowing not in ("ts", "smith", "smith_rational", "none"):
+        raise SceneError(f"{field}.shadowing", f"must be one of ts, smith, smith_rational, none, got {shadowing!r}")
+    opt = lambda key, lo, hi, default: _float(params, key, field, lo, hi=hi) if key in params else default  # noqa: E731
+    albedo = opt("diffuse_albedo", 0.0, 1.0, 0.0)
+    return TorranceSparrow(n, k, _float(params, "m", field, 1e-4, hi=100.0), shadowing=shadowing, exterior_n=ext,
+                           diffuse_albedo=ConstantSpectrum(albedo), diffuse_weight=opt("diffuse_weight", 0.0,
+                                                                                         math.inf, 0.0),
+                           specular_weight=opt("specular_weight", 0.0, math.inf, 1.0))
+
+
+def _index(params, field):
+    """(n, k) spectra from n= and k= or from metal=NAME."""
     if "metal" in params:
         if "n" in params or "k" in params:
             raise SceneError(f"{field}.metal", "give either metal or n and k, not both")
-        n, k = named_ior(params["metal"], field=f"{field}.metal")
-        return SmoothConductor(n, k, ext)
+        return named_ior(params["metal"], field=f"{field}.metal")
     if "n" not in params:
         raise SceneError(f"{field}.n", "is required (or give metal=NAME)")
     n = _float(params, "n", field, 0.0, lo_open=True)
     k = _float(params, "k", field, 0.0) if "k" in params else 0.0
-    return SmoothConductor(ConstantSpectrum(n), ConstantSpectrum(k), ext)
+    return ConstantSpectrum(n), ConstantSpectrum(k)

@@ -24,6 +24,7 @@ from ..materials.black_glass import BlackGlass
 from ..materials.conductor import SmoothConductor
 from ..materials.dielectric import SmoothDielectric
 from ..materials.lambert import Lambert
+from ..materials.torrance_sparrow import TorranceSparrow
 from .description import (Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
                                       RenderSettings, Scene, SpotLight)
 from .errors import SceneError
@@ -155,7 +156,7 @@ def parse_material(d: dict, field: str):
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     kind = choice(_require(d, "type", field), f"{field}.type",
-                  ("lambert", "conductor", "dielectric", "black_glass"))
+                  ("lambert", "conductor", "dielectric", "black_glass", "torrance_sparrow"))
     common = {"type", "note", "name"}
     if kind == "lambert":
         _check_keys(d, field, common | {"albedo"})
@@ -163,16 +164,19 @@ def parse_material(d: dict, field: str):
     if kind == "conductor":
         _check_keys(d, field, common | {"n", "k", "metal", "exterior_n"})
         ext = number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True)
-        if "metal" in d:
-            if "n" in d or "k" in d:
-                raise SceneError(f"{field}.metal", "give either 'metal' or 'n' and 'k', not both")
-            n, k = named_ior(d["metal"], field=f"{field}.metal")
-            return SmoothConductor(n, k, ext)
-        n = parse_spectrum(_require(d, "n", field), f"{field}.n", kind="unbounded")
-        k = parse_spectrum(_require(d, "k", field), f"{field}.k", kind="unbounded")
-        _check_positive_spectrum(n, f"{field}.n", strict=True)
-        _check_positive_spectrum(k, f"{field}.k", strict=False)
-        return SmoothConductor(n, k, ext)
+        return SmoothConductor(*_complex_index(d, field), ext)
+    if kind == "torrance_sparrow":
+        _check_keys(d, field, common | {"n", "k", "metal", "exterior_n", "m", "shadowing", "diffuse_albedo",
+                                        "diffuse_weight", "specular_weight"})
+        n, k = _complex_index(d, field)
+        shadowing = choice(d.get("shadowing", "ts"), f"{field}.shadowing", ("ts", "smith", "smith_rational", "none"))
+        return TorranceSparrow(
+            n, k, number(_require(d, "m", field), f"{field}.m", 1e-4, 100.0), shadowing=shadowing,
+            exterior_n=number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True),
+            diffuse_albedo=parse_spectrum(d.get("diffuse_albedo", 0.0), f"{field}.diffuse_albedo", kind="reflectance"),
+            diffuse_weight=number(d.get("diffuse_weight", 1.0 if "diffuse_albedo" in d else 0.0),
+                                  f"{field}.diffuse_weight", 0),
+            specular_weight=number(d.get("specular_weight", 1.0), f"{field}.specular_weight", 0))
     if kind == "dielectric":
         _check_keys(d, field, common | {"n", "exterior_n"})
         return SmoothDielectric(number(_require(d, "n", field), f"{field}.n", 0, math.inf, lo_open=True),
@@ -184,6 +188,19 @@ def parse_material(d: dict, field: str):
     n = parse_spectrum(d.get("n", 1.5), f"{field}.n", kind="unbounded")
     _check_positive_spectrum(n, f"{field}.n", strict=True)
     return BlackGlass(n, number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True))
+
+
+def _complex_index(d: dict, field: str):
+    """(n, k) spectra of a conductor-like material: 'metal' or 'n' and 'k'."""
+    if "metal" in d:
+        if "n" in d or "k" in d:
+            raise SceneError(f"{field}.metal", "give either 'metal' or 'n' and 'k', not both")
+        return named_ior(d["metal"], field=f"{field}.metal")
+    n = parse_spectrum(_require(d, "n", field), f"{field}.n", kind="unbounded")
+    k = parse_spectrum(d.get("k", 0.0), f"{field}.k", kind="unbounded")
+    _check_positive_spectrum(n, f"{field}.n", strict=True)
+    _check_positive_spectrum(k, f"{field}.k", strict=False)
+    return n, k
 
 
 def _check_positive_spectrum(spec, field: str, strict: bool):

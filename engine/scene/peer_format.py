@@ -31,8 +31,11 @@ def _material(m: dict, field: str) -> dict:
     if t == "dielectric":
         return {"type": "dielectric", "n": m.get("n", 1.5), "exterior_n": m.get("exterior_n", 1.0)}
     if t == "rough_conductor":
-        raise SceneError(f"{field}.type", "'rough_conductor' (Torrance–Sparrow) is not available in this "
-                                          "version of the engine yet")
+        if m.get("distribution", "beckmann") != "beckmann":
+            raise SceneError(f"{field}.distribution", "only 'beckmann' is supported")
+        # Mitsuba's roughconductor: Beckmann with α = m and Smith G with Walter's rational G1.
+        return {"type": "torrance_sparrow", "n": m.get("n"), "k": m.get("k", 0.0), "m": m.get("alpha"),
+                "shadowing": "smith_rational"}
     raise SceneError(f"{field}.type", f"unknown peer material type {t!r} (allowed: diffuse, conductor, "
                                       "black_glass, dielectric, rough_conductor)")
 

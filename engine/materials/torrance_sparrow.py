@@ -1,0 +1,253 @@
+"""Torrance–Sparrow polarising microfacet BRDF (physics.md §1.4 and the Chapter 3 errata).
+
+    f(ω_i, ω_o) = s · M_F(cosθ'_i) · D(h) · G(ω_i, ω_o) / (4 cosθ_i cosθ_o)  +  d · (ρ/π) · diag(1, 0, 0, 0)
+
+- h = unit(ω_i + ω_o); the Fresnel Mueller matrix M_F (physics.md §0) is evaluated at
+  the *facet* angle cosθ'_i = ω_i·h = |ω_i + ω_o|/2 with the complex relative index
+  η = (n + iκ)/exterior_n, in the facet frames, which for reflection are the
+  scattering-plane frames: x_in = x_out = s = unit(k_i × k_o), k_i = −ω_i, k_o = ω_o
+  (± the facet's s = unit(h × k_i); the sign is irrelevant).  At exact backscatter
+  (k_o = −k_i, h = ω_i) the plane is undefined and any shared s ⟂ k_i is used: the facet
+  is then at normal incidence, M_F = F·diag(1, 1, −1, −1), which is the same in every
+  such frame.  The value is returned as ``MuellerValue("abcs", s, s, A, B, C, S)``.
+- D: Beckmann (a Gaussian in the facet slope, normalised: physics.md §3 Eq. 3.4 erratum) with
+  the thesis's m (= SCATMECH s = Mitsuba α), or Blinn–Phong (engine.materials.microfacet).
+  No cosθ_o is included (the integrator applies it).
+- G: ``"ts"`` V-cavity (thesis Eq. 3.3, the default, as SCATMECH's
+  Torrance_Sparrow_Shadow_Function), ``"smith"`` (exact Beckmann Smith G1·G1),
+  ``"smith_rational"`` (Mitsuba 3's rational G1), ``"none"`` (G = 1, SCATMECH's
+  Unit_Shadow_Function; not energy conserving at grazing angles).
+- The Lambert term d·ρ/π is a depolariser (frame-independent), added to A only.
+- One-sided: f = 0 where cosθ_i ≤ 0 or cosθ_o ≤ 0 w.r.t. the shading normal (as
+  Mitsuba 3's rough conductor).  Every output is finite, also at θ = 0, 90°, exact
+  specular and exact backscatter.
+
+Roughness range: m ≥ M_MIN = 1e-4 (ValueError below).  The lobe is evaluated as a
+function for every allowed m; there is no switch to a Dirac mirror (use the smooth
+``conductor`` model for m → 0).  At m = 1e-4 the peak D = 1/(π m²) ≈ 3.2e7 is still
+resolved in double precision (tan²θ_h is computed from vector components).
+
+Sampling (``sample``/``pdf``): a two-lobe mixture chosen per shading point with u_lobe:
+- specular lobe with probability P_spec, diffuse (cosine-weighted) with 1 − P_spec;
+  P_spec = w_s/(w_s + w_d) with w_s = s·mean_λ F(cosθ_o) (unpolarised Fresnel
+  reflectance at the *macro* angle, an estimate of the lobe's albedo) and
+  w_d = d·mean_λ ρ, clamped to [0.1, 0.9] when both lobes are present (so neither
+  is starved); P_spec = 1 without a diffuse part and 0 without a specular part;
+- specular directions: Beckmann → visible-normal sampling (Heitz & d'Eon 2014),
+  Blinn → D·cosθ_h sampling; ω_i = reflect(ω_o, h); samples below the horizon are
+  invalid (their probability is simply lost);
+- ``pdf`` is the full mixture density P_spec·pdf_spec + (1 − P_spec)·cosθ_i/π, so
+  the integrator's MIS weights are right, and the weight is f·cosθ_i/pdf (the exact
+  quotient of ``eval`` and ``pdf`` at the returned ω_i).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .base import BSDF, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .microfacet import (SHADOWING, Beckmann, BlinnPhong, half_vector, reflect_local,
+                                         shadowing_term)
+from .sampling import cosine_hemisphere, local_to_world
+from ..polarisation.frames import scattering_plane_axis
+from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
+from ..spectral import ConstantSpectrum, Spectrum
+from ..vec3 import any_perpendicular, cross, dot
+
+#: Smallest accepted Beckmann roughness m.
+M_MIN = 1e-4
+DISTRIBUTIONS = ("beckmann", "blinn")
+#: Lobe-selection probability bounds when both a specular and a diffuse lobe exist.
+P_SPEC_RANGE = (0.1, 0.9)
+
+
+def _spectrum(value, field: str) -> Spectrum:
+    if isinstance(value, Spectrum):
+        return value
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{field} must be a Spectrum or a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{field} must be finite, got {value!r}")
+    return ConstantSpectrum(v)
+
+
+class TorranceSparrow(BSDF):
+    """Polarising Torrance–Sparrow microfacet reflector (see the module docstring).
+
+    Parameters
+    ----------
+    n, k : Spectrum or float — complex index n + iκ of the material (n > 0, κ ≥ 0).
+    m : float — roughness: Beckmann rms slope m ≥ 1e-4 (thesis m, SCATMECH s, Mitsuba α).
+        For ``distribution="blinn"`` the exponent is e = 2/m² − 2 (needs m ≤ √2) unless
+        ``blinn_exponent`` is given.
+    shadowing : "ts" (default) | "smith" | "smith_rational" | "none".
+    exterior_n : float > 0 — index of the incident medium (η = (n + iκ)/exterior_n).
+    diffuse_albedo : Spectrum, float or None — ρ of the Lambert term (None = no diffuse term).
+    specular_weight : float ≥ 0 — s.   diffuse_weight : float ≥ 0 — d.
+    distribution : "beckmann" (default) | "blinn".
+    """
+
+    name = "torrance_sparrow"
+    delta_only = False
+    transmits = False
+
+    def __init__(self, n, k, m, shadowing: str = "ts", exterior_n: float = 1.0, diffuse_albedo=None,
+                 specular_weight: float = 1.0, diffuse_weight: float = 0.0, distribution: str = "beckmann",
+                 blinn_exponent: float | None = None):
+        self.n = _spectrum(n, "n")
+        self.k = _spectrum(k, "k")
+        m = float(m)
+        if not (math.isfinite(m) and m >= M_MIN):
+            raise ValueError(f"roughness m must be a finite number >= {M_MIN:g}, got {m!r}")
+        self.m = m
+        if shadowing not in SHADOWING:
+            raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+        self.shadowing = shadowing
+        self.exterior_n = float(exterior_n)
+        if not (math.isfinite(self.exterior_n) and self.exterior_n > 0):
+            raise ValueError(f"exterior_n must be a finite number > 0, got {exterior_n!r}")
+        self.s = float(specular_weight)
+        self.d = float(diffuse_weight)
+        for name, v in (("specular_weight", self.s), ("diffuse_weight", self.d)):
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+        self.albedo = None if diffuse_albedo is None else _spectrum(diffuse_albedo, "diffuse_albedo")
+        if distribution == "beckmann":
+            if blinn_exponent is not None:
+                raise ValueError("blinn_exponent is only used with distribution='blinn'")
+            self.dist = Beckmann(m)
+        elif distribution == "blinn":
+            self.dist = BlinnPhong(blinn_exponent) if blinn_exponent is not None else BlinnPhong.from_beckmann_m(m)
+        else:
+            raise ValueError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
+        self.distribution = distribution
+        self.has_specular = self.s > 0
+        self.has_diffuse = self.d > 0 and self.albedo is not None
+        self.polarising = self.has_specular
+        self.creates_circular = self.has_specular and self._may_retard()
+
+    def _may_retard(self) -> bool:
+        """False only if κ ≡ 0 and n/exterior_n ≥ 1 (real η above 1: no TIR, no retardance)."""
+        if isinstance(self.k, ConstantSpectrum) and isinstance(self.n, ConstantSpectrum):
+            return not (self.k.value == 0.0 and self.n.value >= self.exterior_n)
+        return True
+
+    # --- helpers ---------------------------------------------------------------------------------
+
+    @staticmethod
+    def _frame(n_s: np.ndarray):
+        t = any_perpendicular(n_s)
+        return t, cross(n_s, t)
+
+    @staticmethod
+    def _to_local(w, t, b, n_s):
+        return np.stack((dot(w, t), dot(w, b), dot(w, n_s)))
+
+    def relative_eta(self, sp: ShadingPoint) -> np.ndarray:
+        return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
+
+    def _p_spec(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray:
+        """Probability of sampling the specular lobe (N,), a function of ω_o only."""
+        if not self.has_diffuse:
+            return np.ones(sp.n) if self.has_specular else np.zeros(sp.n)
+        if not self.has_specular:
+            return np.zeros(sp.n)
+        F = fresnel_reflectance(np.clip(cos_o, 0.0, 1.0)[None, :], self.relative_eta(sp))
+        w_s = self.s * F.mean(axis=0)
+        w_d = self.d * sp.spectrum(self.albedo).mean(axis=0)
+        tot = w_s + w_d
+        p = np.where(tot > 0, w_s / np.where(tot > 0, tot, 1.0), 0.5)
+        return np.clip(p, *P_SPEC_RANGE)
+
+    def _specular_pdf_local(self, wo_l, wi_l) -> np.ndarray:
+        h, _, ok = half_vector(wi_l, wo_l)
+        return np.where(ok, self.dist.pdf_reflected(wo_l, h), 0.0)
+
+    # --- BSDF interface --------------------------------------------------------------------------
+
+    def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
+        n_s = sp.n_s
+        t, b = self._frame(n_s)
+        wo_l = self._to_local(sp.wo, t, b, n_s)
+        wi_l = self._to_local(wi, t, b, n_s)
+        cos_i, cos_o = wi_l[2], wo_l[2]
+        valid = (cos_i > 0) & (cos_o > 0)
+        L = sp.lam.shape[0]
+        A = np.zeros((L, sp.n))
+        B = np.zeros((L, sp.n))
+        C = np.zeros((L, sp.n))
+        S = np.zeros((L, sp.n))
+        if self.has_specular:
+            h, cos_f, ok = half_vector(wi_l, wo_l)
+            ok &= valid
+            D = self.dist.D(h)
+            G = shadowing_term(self.shadowing, self.dist, wi_l, wo_l, h)
+            denom = 4.0 * np.where(ok, cos_i * cos_o, 1.0)
+            fr = np.where(ok, self.s * D * G / denom, 0.0)
+            Af, Bf, Cf, Sf = fresnel_reflection_abcs(np.where(ok, cos_f, 1.0)[None, :], self.relative_eta(sp))
+            A = Af * fr
+            B = Bf * fr
+            C = Cf * fr
+            S = Sf * fr
+        if self.has_diffuse:
+            A = A + sp.spectrum(self.albedo) * (self.d / math.pi) * valid[None, :]
+        if not self.has_specular:  # pure Lambert: a depolariser (frame-independent)
+            return depolarising_value(A, sp.n)
+        x = scattering_plane_axis(-wi, sp.wo)
+        return MuellerValue("abcs", x, x, A, B, C, S)
+
+    def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        n_s = sp.n_s
+        t, b = self._frame(n_s)
+        wo_l = self._to_local(sp.wo, t, b, n_s)
+        wi_l = self._to_local(wi, t, b, n_s)
+        valid = (wi_l[2] > 0) & (wo_l[2] > 0)
+        p_spec = self._p_spec(sp, wo_l[2])
+        out = np.zeros(sp.n)
+        if self.has_specular:
+            out = out + p_spec * self._specular_pdf_local(wo_l, wi_l)
+        if self.has_diffuse:
+            out = out + (1.0 - p_spec) * np.maximum(wi_l[2], 0.0) / math.pi
+        return np.where(valid, out, 0.0)
+
+    def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        n_s = sp.n_s
+        t, b = self._frame(n_s)
+        wo_l = self._to_local(sp.wo, t, b, n_s)
+        cos_o = wo_l[2]
+        p_spec = self._p_spec(sp, cos_o)
+        pick_spec = u_lobe < p_spec
+        wi_l = np.zeros((3, sp.n))
+        if self.has_specular:
+            sel = np.nonzero(pick_spec & (cos_o > 0))[0]
+            if sel.size:
+                h = self.dist.sample(wo_l[:, sel], u_dir[:, sel])
+                wi_l[:, sel] = reflect_local(wo_l[:, sel], h)
+        if self.has_diffuse:
+            sel = np.nonzero(~pick_spec)[0]
+            if sel.size:
+                wi_l[:, sel] = cosine_hemisphere(u_dir[:, sel])
+        wi = local_to_world(wi_l, n_s)
+        pdf = self.pdf(sp, wi)
+        valid = (cos_o > 0) & (wi_l[2] > 0) & (pdf > 0) & np.all(np.isfinite(wi), axis=0)
+        value = self.eval(sp, wi)
+        cos_i = np.maximum(dot(n_s, wi), 0.0)
+        factor = np.where(valid, cos_i / np.where(valid, pdf, 1.0), 0.0)
+        return BSDFSample(wi=wi, weight=value.scaled(factor[None, :]), pdf=np.where(valid, pdf, 0.0),
+                          is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=np.ones(sp.n))
+
+    def delta_reflection(self, sp: ShadingPoint):
+        return None
+
+    def describe(self) -> dict:
+        out = {"type": self.name, "n": repr(self.n), "k": repr(self.k), "m": self.m,
+               "shadowing": self.shadowing, "distribution": self.distribution, "exterior_n": self.exterior_n,
+               "specular_weight": self.s, "diffuse_weight": self.d,
+               "diffuse_albedo": None if self.albedo is None else repr(self.albedo)}
+        if self.distribution == "blinn":
+            out["blinn_exponent"] = self.dist.e
+        return out
