@@ -557,7 +557,7 @@ def test_monte_carlo_albedo_matches_quadrature(case):
     N = 100_000
     rng = np.random.default_rng(99)
     s = model.sample(point(tile(sph(theta, 0.0), N)), rng.random(N), rng.random((2, N)))
-    w = s.weight.A[0]
+    w = s.weight.matrix()[0, 0, 0]   # M00 (the depolarising part included)
     mc, err = w.mean(), w.std() / math.sqrt(N)
     spec = TorranceSparrow(0.96, 6.69, m, shadowing=case[2])
     quad = directional_albedo(spec, theta, m)
@@ -598,3 +598,17 @@ def test_flags_and_validation():
         kw.update(bad)
         with pytest.raises(ValueError):
             TorranceSparrow(**kw)
+
+
+def test_diffuse_part_is_a_pure_depolariser():
+    # A Lambertian part adds ρ/π to M00 only; with the facet part off the matrix is (ρ/π)·diag(1,0,0,0),
+    # and with it on, M − M_facet is that depolariser (not ρ/π on M11 too).
+    diffuse_only = TorranceSparrow(0.47, 2.4, 0.3, diffuse_albedo=0.6, diffuse_weight=1.0, specular_weight=0.0)
+    both = TorranceSparrow(0.47, 2.4, 0.3, diffuse_albedo=0.6, diffuse_weight=1.0)
+    facet = TorranceSparrow(0.47, 2.4, 0.3)
+    for geometry in ((30, 40, 20), (60, 10, 170)):
+        M = np.array(mueller_at(diffuse_only, *geometry, 550.0, "sp")["brdf"])
+        np.testing.assert_allclose(M, np.diag([0.6 / np.pi, 0, 0, 0]), atol=1e-15)
+        diff = np.array(mueller_at(both, *geometry, 550.0, "sp")["brdf"]) - \
+            np.array(mueller_at(facet, *geometry, 550.0, "sp")["brdf"])
+        np.testing.assert_allclose(diff, np.diag([0.6 / np.pi, 0, 0, 0]), atol=1e-12)

@@ -60,7 +60,9 @@ class MuellerValue:
     ``kind`` is one of
     - ``"depolarising"``: only ``A`` (= M00) is set; frame-independent.
     - ``"abcs"``: the block form [[A,B,0,0],[B,A,0,0],[0,0,C,S],[0,0,−S,C]]
-      (Fresnel reflection, diattenuators, single-facet models).
+      (Fresnel reflection, diattenuators, single-facet models), plus an optional
+      depolarising part ``depol``·diag(1, 0, 0, 0) (a Lambertian term added to a
+      polarising lobe: it adds to M00 only, not to M11).
     - ``"general"``: a full matrix ``M`` (4, 4, L, N).
     Arrays A, B, C, S are (L, N).  ``x_in``/``x_out`` are (3, N).
     """
@@ -73,6 +75,7 @@ class MuellerValue:
     C: np.ndarray | None = None
     S: np.ndarray | None = None
     M: np.ndarray | None = None
+    depol: np.ndarray | None = None
 
     def matrix(self) -> np.ndarray:
         """The full (4, 4, L, N) matrix."""
@@ -80,14 +83,18 @@ class MuellerValue:
             return self.M
         if self.kind == "depolarising":
             return depolariser(self.A)
-        return abcs_matrix(self.A, self.B, self.C, self.S)
+        M = abcs_matrix(self.A, self.B, self.C, self.S)
+        if self.depol is not None:
+            M[0, 0] = M[0, 0] + self.depol
+        return M
 
     def scaled(self, factor: np.ndarray) -> "MuellerValue":
         """This value times a scalar factor broadcastable to (L, N)."""
         if self.kind == "general":
             return MuellerValue("general", self.x_in, self.x_out, M=self.M * factor)
         sc = lambda v: None if v is None else v * factor  # noqa: E731
-        return MuellerValue(self.kind, self.x_in, self.x_out, sc(self.A), sc(self.B), sc(self.C), sc(self.S))
+        return MuellerValue(self.kind, self.x_in, self.x_out, sc(self.A), sc(self.B), sc(self.C), sc(self.S),
+                            depol=sc(self.depol))
 
     def masked(self, keep: np.ndarray) -> "MuellerValue":
         """Zero the entries where ``keep`` (N,) is False."""

@@ -11,6 +11,7 @@ import math
 
 from .conductor import SmoothConductor
 from .lambert import Lambert
+from .htsg import HTSG
 from .torrance_sparrow import TorranceSparrow
 from ..scene.errors import SceneError
 from ..spectral import ConstantSpectrum, named_ior
@@ -31,6 +32,13 @@ MODEL_PARAMETERS = {
                          "diffuse_weight": (0.0, "weight d of the Lambertian part, ≥ 0"),
                          "specular_weight": (1.0, "weight s of the facet part, ≥ 0"),
                          "exterior_n": (1.0, "index of the incident medium, > 0")},
+    "htsg": {"n": (None, "real part of the complex index, > 0 (or metal=NAME)"),
+             "k": (0.0, "imaginary part κ ≥ 0"),
+             "metal": (None, "named measured metal instead of n, k"),
+             "sigma0_um": (None, "rms surface height σ₀ in µm, ≥ 0"),
+             "tau_um": (None, "autocorrelation length τ in µm, > 0"),
+             "albedo": (0.0, "albedo of the uniform diffuse (depolarising) term, [0, 1]"),
+             "exterior_n": (1.0, "index of the incident medium, > 0")},
 }
 
 
@@ -61,6 +69,14 @@ def make_model(name: str, params: dict, field: str = "param"):
     n, k = _index(params, field)
     if name == "fresnel":
         return SmoothConductor(n, k, ext)
+    if name == "htsg":
+        for key in ("sigma0_um", "tau_um"):
+            if key not in params:
+                raise SceneError(f"{field}.{key}", "is required")
+        return HTSG(n, k, _float(params, "sigma0_um", field, 0.0, hi=1e4),
+                    _float(params, "tau_um", field, 0.0, lo_open=True, hi=1e6),
+                    albedo=_float(params, "albedo", field, 0.0, hi=1.0) if "albedo" in params else 0.0,
+                    exterior_n=ext)
     if "m" not in params:
         raise SceneError(f"{field}.m", "is required: the Beckmann rms slope, ≥ 1e-4")
     shadowing = params.get("shadowing", "ts")

@@ -193,12 +193,14 @@ class TorranceSparrow(BSDF):
             B = Bf * fr
             C = Cf * fr
             S = Sf * fr
+        depol = None
         if self.has_diffuse:
-            A = A + sp.spectrum(self.albedo) * (self.d / math.pi) * valid[None, :]
+            # A depolariser adds to M00 only (not to the ABCS block's M11).
+            depol = sp.spectrum(self.albedo) * (self.d / math.pi) * valid[None, :]
         if not self.has_specular:  # pure Lambert: a depolariser (frame-independent)
-            return depolarising_value(A, sp.n)
+            return depolarising_value(depol if depol is not None else A, sp.n)
         x = scattering_plane_axis(-wi, sp.wo)
-        return MuellerValue("abcs", x, x, A, B, C, S)
+        return MuellerValue("abcs", x, x, A, B, C, S, depol=depol)
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         n_s = sp.n_s

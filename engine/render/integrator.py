@@ -55,11 +55,12 @@ def multiply_right(T: np.ndarray, m: MuellerValue) -> np.ndarray:
         return out
     if m.kind == "abcs":
         out = np.empty_like(T)
+        a0 = m.A if m.depol is None else m.A + m.depol      # M00 (a depolarising part adds here only)
         if P == 1:
-            out[:, 0] = T[:, 0] * m.A
+            out[:, 0] = T[:, 0] * a0
             return out
         t0, t1 = T[:, 0], T[:, 1]
-        out[:, 0] = m.A * t0 + m.B * t1
+        out[:, 0] = a0 * t0 + m.B * t1
         out[:, 1] = m.B * t0 + m.A * t1
         if P == 4:
             t2, t3 = T[:, 2], T[:, 3]
@@ -79,7 +80,7 @@ def unpolarised_response(m: MuellerValue, P: int) -> np.ndarray:
     if m.kind == "general":
         out[:] = m.M[:P, 0]
         return out
-    out[0] = m.A
+    out[0] = m.A if m.depol is None else m.A + m.depol
     if m.kind == "abcs" and P > 1:
         out[1] = m.B
     return out

@@ -23,6 +23,8 @@ import numpy as np
 from ..materials.black_glass import BlackGlass
 from ..materials.conductor import SmoothConductor
 from ..materials.dielectric import SmoothDielectric
+from ..materials.filter_sheet import FilterSheet
+from ..materials.htsg import HTSG
 from ..materials.lambert import Lambert
 from ..materials.torrance_sparrow import TorranceSparrow
 from .description import (Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
@@ -156,7 +158,8 @@ def parse_material(d: dict, field: str):
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     kind = choice(_require(d, "type", field), f"{field}.type",
-                  ("lambert", "conductor", "dielectric", "black_glass", "torrance_sparrow"))
+                  ("lambert", "conductor", "dielectric", "black_glass", "torrance_sparrow", "htsg",
+                   "polariser", "retarder"))
     common = {"type", "note", "name"}
     if kind == "lambert":
         _check_keys(d, field, common | {"albedo"})
@@ -165,6 +168,19 @@ def parse_material(d: dict, field: str):
         _check_keys(d, field, common | {"n", "k", "metal", "exterior_n"})
         ext = number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True)
         return SmoothConductor(*_complex_index(d, field), ext)
+    if kind in ("polariser", "retarder"):
+        _check_keys(d, field, common | {"axis", "extinction", "retardance_deg", "transmittance"})
+        return FilterSheet(vec3(_require(d, "axis", field), f"{field}.axis", unit=True), kind,
+                           extinction=number(d.get("extinction", 0.0), f"{field}.extinction", 0, 1),
+                           retardance_deg=number(d.get("retardance_deg", 90.0), f"{field}.retardance_deg", -360, 360),
+                           transmittance=number(d.get("transmittance", 1.0), f"{field}.transmittance", 0, 1))
+    if kind == "htsg":
+        _check_keys(d, field, common | {"n", "k", "metal", "exterior_n", "sigma0_um", "tau_um", "albedo"})
+        n, k = _complex_index(d, field)
+        return HTSG(n, k, number(_require(d, "sigma0_um", field), f"{field}.sigma0_um", 0, 1e4),
+                    number(_require(d, "tau_um", field), f"{field}.tau_um", 0, 1e6, lo_open=True),
+                    albedo=parse_spectrum(d.get("albedo", 0.0), f"{field}.albedo", kind="reflectance"),
+                    exterior_n=number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True))
     if kind == "torrance_sparrow":
         _check_keys(d, field, common | {"n", "k", "metal", "exterior_n", "m", "shadowing", "diffuse_albedo",
                                         "diffuse_weight", "specular_weight"})
