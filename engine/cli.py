@@ -147,6 +147,52 @@ def _mueller(args) -> int:
     return 0
 
 
+def _polariser(args) -> int:
+    import numpy as np
+
+    from .output.colormaps import tonemap
+    from .output.exr import read_stokes_exr
+    from .output.png import write_png
+    from .postprocess.filters import apply_filter, filter_row
+    from .postprocess.sheets import contact_sheet
+
+    if not os.path.exists(args.exr):
+        raise SceneError("EXR", f"{args.exr!r} does not exist")
+    try:
+        stokes, _, _ = read_stokes_exr(args.exr)
+    except (ValueError, OSError) as e:
+        raise SceneError("EXR", f"{args.exr!r} is not a Polar Stokes EXR: {e}") from None
+    if not (0.0 <= args.extinction <= 1.0):
+        raise SceneError("--extinction", f"must be in [0, 1], got {args.extinction:g}")
+
+    def filtered(angle):
+        row = filter_row(args.type, angle, args.extinction, args.retarder_angle, args.retardance)
+        return apply_filter(stokes, row)
+
+    out = args.output
+    os.makedirs(os.path.dirname(os.path.abspath(out)) or ".", exist_ok=True)
+    if args.sweep is not None:
+        try:
+            start, stop, step = (float(v) for v in args.sweep.split(":"))
+        except ValueError:
+            raise SceneError("--sweep", f"must look like START:STOP:STEP in degrees, got {args.sweep!r}") from None
+        if step <= 0 or stop < start:
+            raise SceneError("--sweep", "needs STEP > 0 and STOP ≥ START")
+        angles = list(np.arange(start, stop + 1e-9, step))
+        tiles = [tonemap(filtered(a), args.exposure) for a in angles]
+        write_png(out, contact_sheet(tiles, [f"{a:g}" for a in angles]))
+    elif out.lower().endswith(".exr"):
+        from .output.exr import write_stokes_exr
+        img = filtered(args.angle)
+        unpolarised = np.zeros_like(stokes)
+        unpolarised[0] = img
+        write_stokes_exr(out, unpolarised, metadata={"polar.filter": args.type, "polar.filter_angle_deg": args.angle})
+    else:
+        write_png(out, tonemap(filtered(args.angle), args.exposure))
+    print(out)
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m engine", description="Polar: polarised spectral path tracer")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -176,6 +222,19 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument("--wavelength-nm", type=float, default=550.0, help="wavelength (nm)")
     m.add_argument("--basis", choices=("sp", "scattering"), default="sp", help="Stokes basis of the result")
     m.set_defaults(func=_mueller)
+
+    p = sub.add_parser("polariser", help="what a virtual polarising filter would show, from a rendered EXR")
+    p.add_argument("exr", help="a Stokes EXR written by `render`")
+    p.add_argument("-o", "--output", required=True, help="output .png (tonemapped) or .exr (linear)")
+    p.add_argument("--type", choices=("linear", "circular-right", "circular-left", "retarder"), default="linear")
+    p.add_argument("--angle", type=float, default=0.0,
+                   help="transmission axis in degrees, from image right towards image up")
+    p.add_argument("--extinction", type=float, default=0.0, help="t_min/t_max of the polariser (0 = ideal)")
+    p.add_argument("--retarder-angle", type=float, default=45.0, help="fast axis of the retarder (deg)")
+    p.add_argument("--retardance", type=float, default=90.0, help="retardance of the retarder (deg)")
+    p.add_argument("--sweep", metavar="START:STOP:STEP", help="contact sheet of polariser angles, e.g. 0:180:15")
+    p.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops")
+    p.set_defaults(func=_polariser)
     return ap
 
 

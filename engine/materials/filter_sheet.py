@@ -1,0 +1,80 @@
+"""Thin polarising filters placed in the scene: linear polariser and linear retarder sheets.
+
+An ideal thin sheet (index-matched, no reflection) transmits light straight through (ω_i = −ω_o,
+a Dirac lobe) and multiplies its Stokes vector by the filter's Mueller matrix.  The filter axis is
+a world-space vector (the transmission axis of a polariser, the fast axis of a retarder) that
+should lie in the sheet's plane; for each beam it is projected onto the plane ⟂ the propagation
+direction k and used as the Stokes frame x = s, where both matrices have the ABCS form:
+
+- polariser with principal transmittances t_max (along the axis) and t_min = extinction·t_max:
+  A = (t_max + t_min)/2, B = (t_max − t_min)/2, C = √(t_max t_min), S = 0;
+- retarder with retardance δ (Jones diag(1, e^{iδ}) in the fast-axis frame, e^{−iωt}):
+  A = t, B = 0, C = t·cos δ, S = t·sin δ.
+
+Two-sided; works the same from both sides (for a beam along the sheet's normal the projected
+axis is the axis itself).  A polariser in front of the camera gives exactly the post-process
+filter of engine.postprocess.filters (tested).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .base import BSDF, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from ..vec3 import any_perpendicular, dot
+
+
+class FilterSheet(BSDF):
+    name = "filter_sheet"
+    delta_only = True
+    transmits = True
+
+    def __init__(self, axis, kind: str = "polariser", extinction: float = 0.0, retardance_deg: float = 90.0,
+                 transmittance: float = 1.0):
+        if kind not in ("polariser", "retarder"):
+            raise ValueError(f"kind must be 'polariser' or 'retarder', got {kind!r}")
+        axis = np.asarray(axis, dtype=np.float64)
+        norm = np.linalg.norm(axis)
+        if not norm > 0:
+            raise ValueError("axis must be a non-zero vector")
+        self.axis = axis / norm
+        self.kind = kind
+        self.extinction = float(extinction)
+        self.retardance_deg = float(retardance_deg)
+        self.transmittance = float(transmittance)
+        self.creates_circular = kind == "retarder"
+
+    def _abcs(self):
+        t = self.transmittance
+        if self.kind == "polariser":
+            t_min = t * self.extinction
+            return 0.5 * (t + t_min), 0.5 * (t - t_min), math.sqrt(t * t_min), 0.0
+        d = math.radians(self.retardance_deg)
+        return t, 0.0, t * math.cos(d), t * math.sin(d)
+
+    def eval(self, sp, wi):
+        return depolarising_value(np.zeros_like(sp.lam), sp.n)
+
+    def pdf(self, sp, wi):
+        return np.zeros(sp.n)
+
+    def sample(self, sp: ShadingPoint, u_lobe, u_dir) -> BSDFSample:
+        k = sp.wo                                  # light passes straight through towards the viewer
+        a = self.axis[:, None]
+        x = a - dot(np.broadcast_to(a, k.shape), k) * k
+        length = np.sqrt(dot(x, x))
+        ok = length > 1e-9
+        x = np.where(ok, x / np.where(ok, length, 1.0), any_perpendicular(k))
+        A, B, C, S = self._abcs()
+        shape = sp.lam.shape
+        value = MuellerValue("abcs", x, x, np.full(shape, A), np.full(shape, B), np.full(shape, C),
+                             np.full(shape, S))
+        n = sp.n
+        return BSDFSample(wi=-sp.wo, weight=value, pdf=np.zeros(n), is_delta=np.ones(n, bool),
+                          valid=np.ones(n, bool), eta_sq=np.ones(n))
+
+    def describe(self):
+        return {"type": self.name, "kind": self.kind, "axis": self.axis.tolist(), "extinction": self.extinction,
+                "retardance_deg": self.retardance_deg, "transmittance": self.transmittance}

@@ -1,0 +1,1 @@
+"""Post-processing of rendered Stokes images (no re-rendering): virtual filters and false colour."""
