@@ -19,7 +19,10 @@ from ..engine.scene.description import RenderSettings
 from ..engine.scene.errors import SceneError
 from .export.camera import border_window
 from .export.scene import export_scene
-from .properties import PASS_NAMES, POLARISATION_TO_ENGINE
+from ..engine.output.colormaps import diverging, hue_saturation, sequential
+from ..engine.postprocess.filters import apply_filter, filter_row
+from .compositor import polariser_inputs
+from .properties import DEFAULT_PASSES, PASS_NAMES, POLARISATION_TO_ENGINE
 from .viewport import ViewportSession
 
 LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
@@ -39,8 +42,19 @@ def engine_settings(scene, preview=False) -> RenderSettings:
                           batch_rays=p.batch_rays, threads=p.threads)
 
 
-def pass_images(stokes_rgb):
-    """{pass name: (H, W, C) float32} for every Polar pass from a Stokes image (4, H, W, 3)."""
+def _display_colour(uint8_rgb):
+    """Colour-map output (sRGB-encoded uint8) as linear values, so Blender's Standard view shows it as is."""
+    v = uint8_rgb.astype(np.float64) / 255.0
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+def pass_images(stokes_rgb, polariser=None, wanted=None):
+    """{pass name: (H, W, C)} for the Polar passes from a Stokes image (4, H, W, 3).
+
+    ``polariser`` = (angle, extinction, retarder angle, retardance) for the Polariser pass;
+    ``wanted`` limits the (costlier) false-colour passes.
+    """
+    wanted = set(PASS_NAMES) if wanted is None else set(wanted)
     y = np.einsum("shwc,c->shw", stokes_rgb, LUMINANCE)
     out = {f"S{i}": stokes_rgb[i] for i in range(4)}
     out["DoP"] = degree_of_polarisation(y)[..., None]
@@ -50,6 +64,19 @@ def pass_images(stokes_rgb):
     combined = np.ones(stokes_rgb.shape[1:3] + (4,))
     combined[..., :3] = stokes_rgb[0]
     out["Combined"] = combined
+    if "Polariser" in wanted and polariser is not None:
+        angle, extinction, r_angle, retardance = polariser
+        out["Polariser"] = apply_filter(stokes_rgb, filter_row("retarder", angle, extinction, r_angle, retardance))
+    lit = y[0] > 0
+    ratio = lambda k: np.where(lit, y[k] / np.where(lit, y[0], 1.0), np.nan)  # noqa: E731
+    if "VisDoP" in wanted:
+        out["VisDoP"] = _display_colour(sequential(np.where(lit, out["DoP"][..., 0], np.nan)))
+    for k in (1, 2, 3):
+        if f"VisS{k}" in wanted:
+            out[f"VisS{k}"] = _display_colour(diverging(ratio(k)))
+    if "VisAoLP" in wanted:
+        out["VisAoLP"] = _display_colour(hue_saturation(np.where(lit, out["AoLP"][..., 0], np.nan),
+                                                        np.where(lit, out["DoLP"][..., 0], np.nan)))
     return out
 
 
@@ -70,9 +97,9 @@ class PolarRenderEngine(bpy.types.RenderEngine):
     def update_render_passes(self, scene=None, renderlayer=None):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
         settings = getattr(renderlayer, "polar", None)
-        enabled = settings.enabled_passes() if settings is not None else list(PASS_NAMES)
+        enabled = settings.enabled_passes() if settings is not None else list(DEFAULT_PASSES)
         for name in enabled:
-            if name.startswith("S"):
+            if name.startswith("S") or name.startswith("Vis") or name == "Polariser":
                 self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
             else:
                 self.register_pass(scene, renderlayer, name, 1, "X", "VALUE")
@@ -105,7 +132,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         result = self.begin_result(0, 0, W, H, layer=layer_name)
         last_display = [time.perf_counter()]
         enabled = set(depsgraph.view_layer.polar.enabled_passes()) if hasattr(depsgraph.view_layer, "polar") \
-            else set(PASS_NAMES)
+            else set(DEFAULT_PASSES)
+        polariser = polariser_inputs(scene.polar)
 
         def progress(fraction, stats):
             self.update_progress(fraction)
@@ -114,14 +142,14 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             now = time.perf_counter()
             if now - last_display[0] > DISPLAY_INTERVAL:
                 last_display[0] = now
-                self._write_passes(result, renderer.last_film_mean(), window, enabled)
+                self._write_passes(result, renderer.last_film_mean(), window, enabled, polariser)
                 self.update_result(result)
 
         def should_stop():
             return self.test_break() or cancel_requested["value"]
 
         out = renderer.render(settings, progress=progress, should_stop=should_stop, window=window)
-        self._write_passes(result, out.stokes(), window, enabled)
+        self._write_passes(result, out.stokes(), window, enabled, polariser)
         self.end_result(result)
         stats = out.stats
         message = (f"Polar | {stats['transport_reason']} | {stats['samples']} samples in {stats['seconds']:.1f} s"
@@ -133,19 +161,18 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         self.update_stats("", message)
         self.report({"INFO"}, message)
 
-    def _write_passes(self, result, stokes_rgb, window, enabled):
+    def _write_passes(self, result, stokes_rgb, window, enabled, polariser):
         if stokes_rgb is None:
             return
         if window is not None:
             x0, y0, x1, y1 = window
             stokes_rgb = stokes_rgb[:, y0:y1, x0:x1]
-        images = pass_images(stokes_rgb)
+        images = pass_images(stokes_rgb, polariser, enabled)
         passes = result.layers[0].passes
         for name, img in images.items():
             if name != "Combined" and name not in enabled:
                 continue
-            p = passes.find(name) if hasattr(passes, "find") else None
-            target = passes[name] if (p is None or p >= 0) and name in passes else None
+            target = passes.get(name)
             if target is None:
                 continue
             # Blender's rows start at the bottom of the image.

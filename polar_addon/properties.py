@@ -21,7 +21,22 @@ SPECTRAL_ITEMS = [
     ("MONO", "Monochrome", "One wavelength (for verification); colours by their luminance", 1),
 ]
 
-PASS_NAMES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP")
+PASS_NAMES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP", "Polariser",
+              "VisDoP", "VisS1", "VisS2", "VisS3", "VisAoLP")
+#: Passes on by default; the false-colour visualisation passes are opt-in.
+DEFAULT_PASSES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP", "Polariser")
+
+POLARISER_TYPE_ITEMS = [
+    ("LINEAR", "Linear", "Linear polariser at the given angle (Malus's law)", 0),
+    ("CIRCULAR_RIGHT", "Circular (Right)", "Passes right-circular light (quarter-wave plate + polariser)", 1),
+    ("CIRCULAR_LEFT", "Circular (Left)", "Passes left-circular light", 2),
+    ("RETARDER", "Retarder + Linear", "A linear retarder followed by a linear polariser", 3),
+]
+
+
+def _polariser_changed(self, context):
+    from .compositor import sync_group_nodes
+    sync_group_nodes(self.id_data)
 
 
 class PolarRenderSettings(bpy.types.PropertyGroup):
@@ -43,6 +58,18 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                          max=256)
     batch_rays: IntProperty(name="Batch Size", description="Paths traced at once; lower it to save memory",
                             default=1 << 17, min=1024, max=1 << 24)
+    polariser_type: EnumProperty(name="Filter", items=POLARISER_TYPE_ITEMS, default="LINEAR",
+                                 update=_polariser_changed,
+                                 description="Virtual filter for the Polariser pass and the compositor group")
+    polariser_angle: FloatProperty(name="Angle", description="Transmission axis of the polariser, degrees from "
+                                   "image right towards image up", default=0.0, min=-360.0, max=360.0,
+                                   update=_polariser_changed)
+    polariser_extinction: FloatProperty(name="Extinction", description="t_min/t_max of the polariser "
+                                        "(0 = ideal)", default=0.0, min=0.0, max=1.0, update=_polariser_changed)
+    retarder_angle: FloatProperty(name="Retarder Angle", description="Fast axis of the retarder (degrees)",
+                                  default=45.0, min=-360.0, max=360.0, update=_polariser_changed)
+    retardance: FloatProperty(name="Retardance", description="Retardance of the retarder (degrees)",
+                              default=90.0, min=-360.0, max=360.0, update=_polariser_changed)
 
 
 def _refresh_passes(self, context):
@@ -67,6 +94,19 @@ class PolarViewLayerSettings(bpy.types.PropertyGroup):
                                 "right towards image up)", default=True, update=_refresh_passes)
     use_pass_docp: BoolProperty(name="DoCP", description="Degree of circular polarisation (signed)", default=True,
                                 update=_refresh_passes)
+    use_pass_polariser: BoolProperty(name="Polariser", description="The image through the scene's virtual "
+                                     "polariser (Render properties ▸ Virtual Polariser)", default=True,
+                                     update=_refresh_passes)
+    use_pass_visdop: BoolProperty(name="DoP (false colour)", default=False, update=_refresh_passes,
+                                  description="Degree of polarisation, viridis 0 … 1")
+    use_pass_viss1: BoolProperty(name="S1/S0 (false colour)", default=False, update=_refresh_passes,
+                                 description="Blue −1 … white 0 … red +1")
+    use_pass_viss2: BoolProperty(name="S2/S0 (false colour)", default=False, update=_refresh_passes,
+                                 description="Blue −1 … white 0 … red +1")
+    use_pass_viss3: BoolProperty(name="S3/S0 (false colour)", default=False, update=_refresh_passes,
+                                 description="Blue −1 … white 0 … red +1")
+    use_pass_visaolp: BoolProperty(name="AoLP (false colour)", default=False, update=_refresh_passes,
+                                   description="Angle of linear polarisation as hue, DoLP as saturation")
 
     def enabled_passes(self):
         return [name for name in PASS_NAMES if getattr(self, f"use_pass_{name.lower()}")]

@@ -58,6 +58,24 @@ class POLAR_PT_performance(_PolarPanel, bpy.types.Panel):
         layout.prop(p, "batch_rays")
 
 
+class POLAR_PT_polariser(_PolarPanel, bpy.types.Panel):
+    bl_label = "Virtual Polariser"
+    bl_context = "render"
+
+    def draw(self, context):
+        p = context.scene.polar
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(p, "polariser_type")
+        if p.polariser_type in ("LINEAR", "RETARDER"):
+            layout.prop(p, "polariser_angle")
+            layout.prop(p, "polariser_extinction")
+        if p.polariser_type == "RETARDER":
+            layout.prop(p, "retarder_angle")
+            layout.prop(p, "retardance")
+        layout.operator("polar.add_virtual_polariser", icon="NODE_COMPOSITING")
+
+
 class POLAR_PT_passes(_PolarPanel, bpy.types.Panel):
     bl_label = "Polarisation Passes"
     bl_context = "view_layer"
@@ -69,11 +87,14 @@ class POLAR_PT_passes(_PolarPanel, bpy.types.Panel):
         for name in ("s0", "s1", "s2", "s3"):
             col.prop(s, f"use_pass_{name}")
         col = layout.column(heading="Derived", align=True)
-        for name in ("dop", "dolp", "aolp", "docp"):
+        for name in ("dop", "dolp", "aolp", "docp", "polariser"):
+            col.prop(s, f"use_pass_{name}")
+        col = layout.column(heading="False Colour", align=True)
+        for name in ("visdop", "viss1", "viss2", "viss3", "visaolp"):
             col.prop(s, f"use_pass_{name}")
 
 
-classes = (POLAR_PT_sampling, POLAR_PT_light_model, POLAR_PT_performance, POLAR_PT_passes)
+classes = (POLAR_PT_sampling, POLAR_PT_light_model, POLAR_PT_polariser, POLAR_PT_performance, POLAR_PT_passes)
 
 
 def register():
