@@ -310,7 +310,7 @@ def test_previews(tmp_path):
     s[3, 0, 6] = 1.0      # right-circular pixel
     s[:, 4, 6] = 0.0      # no light
     paths = write_previews(str(tmp_path / "p"), s)
-    names = ["S0", "S1", "S2", "S3", "DoLP", "AoLP"]
+    names = ["S0", "S1", "S2", "S3", "DoLP", "DoP", "AoLP"]
     assert paths == [str(tmp_path / f"p_{n}.png") for n in names]
     assert hidden_files(tmp_path) == []
     img = {n: read_png(p) for n, p in zip(names, paths)}

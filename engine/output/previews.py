@@ -54,9 +54,9 @@ def write_previews(stem: str | os.PathLike, stokes_rgb, exposure: float = 0.0) -
         (horizontal), blue = vertical; S2: red = +45° (right-up diagonal),
         blue = −45°; S3: red = right-circular, blue = left-circular (optics
         convention).  Legend: −1 → +1.
-    ``{stem}_DoLP.png``
-        degree of linear polarisation ∈ [0, 1] through :func:`sequential`
-        (viridis: dark purple 0, yellow 1).  Legend: 0 → 1.
+    ``{stem}_DoLP.png``, ``{stem}_DoP.png``
+        degree of linear polarisation / of polarisation ∈ [0, 1] through
+        :func:`sequential` (viridis: dark purple 0, yellow 1).  Legend: 0 → 1.
     ``{stem}_AoLP.png``
         angle of linear polarisation (from image-right towards image-up) as
         hue with period π: red 0° (horizontal), yellow +30°, green +60°,
@@ -81,6 +81,7 @@ def write_previews(stem: str | os.PathLike, stokes_rgb, exposure: float = 0.0) -
         **{f"S{k}": _with_legend(diverging(ratio(y[k])), lambda t: diverging(2.0 * t - 1.0))
            for k in (1, 2, 3)},
         "DoLP": _with_legend(sequential(dolp), sequential),
+        "DoP": _with_legend(sequential(ratio(np.sqrt(y[1] ** 2 + y[2] ** 2 + y[3] ** 2))), sequential),
         "AoLP": _with_legend(hue_saturation(aolp, dolp),
                              lambda t: hue_saturation(np.pi * (t - 0.5), np.ones_like(t))),
     }
