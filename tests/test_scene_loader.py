@@ -89,6 +89,25 @@ CASES = [
     ("objects.0.transform", {"matrix": [[1, 0, 0, 0], [0, 0, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]},
      "objects[0].transform.matrix", "singular"),
     ("objects.1.emission", {"radiance": -3}, "objects[1].emission.radiance", "[0,"),
+    ("materials.gold", {"type": "torrance_sparrow", "metal": "Au"}, "materials.gold.m", "required"),
+    ("materials.gold", {"type": "torrance_sparrow", "metal": "Au", "m": 0}, "materials.gold.m", "[0.0001,"),
+    ("materials.gold", {"type": "torrance_sparrow", "n": 1.5, "m": 0.1, "shadowing": "magic"},
+     "materials.gold.shadowing", "'smith'"),
+    ("materials.gold", {"type": "htsg", "metal": "Al", "sigma0_um": -1, "tau_um": 3}, "materials.gold.sigma0_um",
+     "[0,"),
+    ("materials.gold", {"type": "htsg", "metal": "Al", "sigma0_um": 0.2, "tau_um": 0}, "materials.gold.tau_um",
+     "(0,"),
+    ("materials.gold", {"type": "weidlich_wilkie", "coats": []}, "materials.gold.coats", "non-empty"),
+    ("materials.gold", {"type": "weidlich_wilkie", "coats": [{"n": 1.5, "distribution": "beckmann"}]},
+     "materials.gold.coats[0].m", "required"),
+    ("materials.gold", {"type": "weidlich_wilkie", "coats": [{"n": -1}]}, "materials.gold.coats[0].n", "(0,"),
+    ("materials.gold", {"type": "weidlich_wilkie", "coats": [{"n": 1.5}], "base": "nothing"},
+     "materials.gold.base", "unknown material 'nothing'"),
+    ("materials.gold", {"type": "weidlich_wilkie", "coats": [{"n": 1.5}], "base": "gold"},
+     "materials.gold.base", "refers to itself"),
+    ("materials.gold", {"type": "polariser", "axis": [0, 0, 0]}, "materials.gold.axis", "non-zero"),
+    ("materials.gold", {"type": "polariser", "axis": [1, 0, 0], "extinction": 2}, "materials.gold.extinction",
+     "[0, 1]"),
     ("lights.0.type", "area", "lights[0].type", "'environment'"),
     ("lights.1.intensity", float("inf"), "lights[1].intensity", "finite"),
     ("lights.2.cone_angle_deg", 0, "lights[2].cone_angle_deg", "(0, 180]"),
@@ -102,6 +121,25 @@ def test_validation_errors_name_the_field(path, value, field, words):
         parse_scene(with_change(path, value))
     assert err.value.field == field, str(err.value)
     assert words in str(err.value)
+
+
+def test_layered_material_can_reference_another_material_as_base():
+    d = copy.deepcopy(BASE)
+    d["materials"]["coated"] = {"type": "weidlich_wilkie", "coats": [{"n": 1.5}], "base": "white"}
+    scene = parse_scene(d)
+    assert scene.materials["coated"].name == "weidlich_wilkie"
+
+
+@pytest.mark.parametrize("name", ["demo", "glare_demo", "thesis_fresnel_gold", "thesis_ts_gold",
+                                  "thesis_htsg_aluminium", "thesis_ww_coat_red"])
+def test_examples_load_and_render(name):
+    from engine.render.renderer import Renderer
+    from tests.conftest import REPO
+    scene = load_scene(f"{REPO}/examples/{name}.json")
+    scene.camera.width, scene.camera.height = 24, 16
+    scene.settings.spp = 1
+    result = Renderer(scene).render()
+    assert result.stats["nonfinite"] == 0 and result.stokes()[0].max() > 0
 
 
 def test_mesh_file_errors_name_the_object(tmp_path):

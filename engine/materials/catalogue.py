@@ -13,6 +13,7 @@ from .conductor import SmoothConductor
 from .lambert import Lambert
 from .htsg import HTSG
 from .torrance_sparrow import TorranceSparrow
+from .weidlich_wilkie import Coat, WeidlichWilkie
 from ..scene.errors import SceneError
 from ..spectral import ConstantSpectrum, named_ior
 
@@ -39,6 +40,17 @@ MODEL_PARAMETERS = {
              "tau_um": (None, "autocorrelation length τ in µm, > 0"),
              "albedo": (0.0, "albedo of the uniform diffuse (depolarising) term, [0, 1]"),
              "exterior_n": (1.0, "index of the incident medium, > 0")},
+    "weidlich_wilkie": {"coat_n": (1.5, "index of the coat, > 0"),
+                        "coat_thickness": (0.0, "coat thickness d (only absorption·d matters), ≥ 0"),
+                        "coat_absorption": (0.0, "absorption coefficient per unit thickness, ≥ 0"),
+                        "coat_distribution": ("smooth", "smooth | blinn | beckmann"),
+                        "coat_exponent": (None, "Blinn–Phong exponent e > 0 (coat_distribution=blinn)"),
+                        "coat_m": (None, "Beckmann rms slope ≥ 1e-4 (coat_distribution=beckmann)"),
+                        "base_albedo": (0.8, "albedo of the Lambertian base, [0, 1]"),
+                        "t_term": ("ww", "ww (1 − F21·G) | t21 (1 − F21); published form only"),
+                        "transmission_normal": (None, "facet | macro (default: facet for published, "
+                                                      "macro for energy)"),
+                        "form": ("energy", "energy (default, energy conserving) | published | first_order")},
 }
 
 
@@ -66,6 +78,8 @@ def make_model(name: str, params: dict, field: str = "param"):
         albedo = _float(params, "albedo", field, 0.0, hi=1.0) if "albedo" in params else 0.8
         return Lambert(ConstantSpectrum(albedo))
     ext = _float(params, "exterior_n", field, 0.0, lo_open=True) if "exterior_n" in params else 1.0
+    if name == "weidlich_wilkie":
+        return _weidlich_wilkie(params, field)
     n, k = _index(params, field)
     if name == "fresnel":
         return SmoothConductor(n, k, ext)
@@ -88,6 +102,38 @@ def make_model(name: str, params: dict, field: str = "param"):
                            diffuse_albedo=ConstantSpectrum(albedo), diffuse_weight=opt("diffuse_weight", 0.0,
                                                                                          math.inf, 0.0),
                            specular_weight=opt("specular_weight", 0.0, math.inf, 1.0))
+
+
+def _choice(params, key, field, allowed, default):
+    value = params.get(key, default)
+    if value not in allowed:
+        raise SceneError(f"{field}.{key}", f"must be one of {', '.join(a for a in allowed if a)}, got {value!r}")
+    return value
+
+
+def _weidlich_wilkie(params, field):
+    """One coat over a Lambertian base, with the oracle's options."""
+    dist = _choice(params, "coat_distribution", field, ("smooth", "blinn", "beckmann"), "smooth")
+    coat_kw = {}
+    if dist == "blinn":
+        if "coat_exponent" not in params:
+            raise SceneError(f"{field}.coat_exponent", "is required for coat_distribution=blinn (> 0)")
+        coat_kw["exponent"] = _float(params, "coat_exponent", field, 0.0, lo_open=True, hi=1e7)
+    elif dist == "beckmann":
+        if "coat_m" not in params:
+            raise SceneError(f"{field}.coat_m", "is required for coat_distribution=beckmann (≥ 1e-4)")
+        coat_kw["m"] = _float(params, "coat_m", field, 1e-4, hi=100.0)
+    opt = lambda key, lo, hi, default: _float(params, key, field, lo, hi=hi) if key in params else default  # noqa: E731
+    coat = Coat(n=opt("coat_n", 1e-6, 100.0, 1.5), thickness=opt("coat_thickness", 0.0, math.inf, 0.0),
+                absorption=opt("coat_absorption", 0.0, math.inf, 0.0), distribution=dist, **coat_kw)
+    form = _choice(params, "form", field, ("energy", "published", "first_order"), "energy")
+    normal = _choice(params, "transmission_normal", field, (None, "facet", "macro"), None)
+    if form == "energy" and normal == "facet":
+        raise SceneError(f"{field}.transmission_normal", "the energy-conserving form refracts through the macro "
+                                                         "normal: use macro (or form=published)")
+    base = Lambert(ConstantSpectrum(opt("base_albedo", 0.0, 1.0, 0.8)))
+    return WeidlichWilkie([coat], base, form=form, t_term=_choice(params, "t_term", field, ("ww", "t21"), "ww"),
+                          transmission_normal=normal)
 
 
 def _index(params, field):

@@ -27,6 +27,7 @@ from ..materials.filter_sheet import FilterSheet
 from ..materials.htsg import HTSG
 from ..materials.lambert import Lambert
 from ..materials.torrance_sparrow import TorranceSparrow
+from ..materials.weidlich_wilkie import Coat, WeidlichWilkie
 from .description import (Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
                                       RenderSettings, Scene, SpotLight)
 from .errors import SceneError
@@ -154,12 +155,14 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
     return s
 
 
-def parse_material(d: dict, field: str):
+def parse_material(d: dict, field: str, lookup=None, depth: int = 0):
+    """A BSDF from a material object.  ``lookup(name)`` resolves references to other materials
+    (the base of a layered material may be given inline or by name)."""
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     kind = choice(_require(d, "type", field), f"{field}.type",
                   ("lambert", "conductor", "dielectric", "black_glass", "torrance_sparrow", "htsg",
-                   "polariser", "retarder"))
+                   "weidlich_wilkie", "polariser", "retarder"))
     common = {"type", "note", "name"}
     if kind == "lambert":
         _check_keys(d, field, common | {"albedo"})
@@ -174,6 +177,32 @@ def parse_material(d: dict, field: str):
                            extinction=number(d.get("extinction", 0.0), f"{field}.extinction", 0, 1),
                            retardance_deg=number(d.get("retardance_deg", 90.0), f"{field}.retardance_deg", -360, 360),
                            transmittance=number(d.get("transmittance", 1.0), f"{field}.transmittance", 0, 1))
+    if kind == "weidlich_wilkie":
+        _check_keys(d, field, common | {"coats", "base", "form", "t_term", "transmission_normal"})
+        coats_in = _require(d, "coats", field)
+        if not isinstance(coats_in, list) or not coats_in:
+            raise SceneError(f"{field}.coats", "must be a non-empty list of coats (top coat first)")
+        coats = [_parse_coat(c, f"{field}.coats[{i}]") for i, c in enumerate(coats_in)]
+        base_in = d.get("base", {"type": "lambert", "albedo": 0.8})
+        if depth > 16:
+            raise SceneError(f"{field}.base", "layered materials nest more than 16 levels deep")
+        if isinstance(base_in, str):
+            if lookup is None:
+                raise SceneError(f"{field}.base", "material references are not available here; give it inline")
+            base = lookup(base_in, f"{field}.base")
+        else:
+            base = parse_material(base_in, f"{field}.base", lookup, depth + 1)
+        form = choice(d.get("form", "energy"), f"{field}.form", ("energy", "published", "first_order"))
+        normal = choice(d.get("transmission_normal"), f"{field}.transmission_normal", (None, "facet", "macro"))
+        if form == "energy" and normal == "facet":
+            raise SceneError(f"{field}.transmission_normal", "the energy-conserving form refracts through the macro "
+                                                             "normal: use 'macro' (or form 'published')")
+        try:
+            return WeidlichWilkie(coats, base, form=form, t_term=choice(d.get("t_term", "ww"), f"{field}.t_term",
+                                                                        ("ww", "t21")),
+                                  transmission_normal=normal)
+        except ValueError as e:
+            raise SceneError(field, str(e)) from None
     if kind == "htsg":
         _check_keys(d, field, common | {"n", "k", "metal", "exterior_n", "sigma0_um", "tau_um", "albedo"})
         n, k = _complex_index(d, field)
@@ -204,6 +233,22 @@ def parse_material(d: dict, field: str):
     n = parse_spectrum(d.get("n", 1.5), f"{field}.n", kind="unbounded")
     _check_positive_spectrum(n, f"{field}.n", strict=True)
     return BlackGlass(n, number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True))
+
+
+def _parse_coat(c, field):
+    if not isinstance(c, dict):
+        raise SceneError(field, "must be an object like {\"n\": 1.5, \"distribution\": \"smooth\"}")
+    _check_keys(c, field, {"n", "thickness", "absorption", "distribution", "exponent", "m", "note"})
+    dist = choice(c.get("distribution", "smooth"), f"{field}.distribution", ("smooth", "blinn", "beckmann"))
+    kw = {}
+    if dist == "blinn":
+        kw["exponent"] = number(_require(c, "exponent", field), f"{field}.exponent", 0, 1e7, lo_open=True)
+    elif dist == "beckmann":
+        kw["m"] = number(_require(c, "m", field), f"{field}.m", 1e-4, 100.0)
+    return Coat(n=number(c.get("n", 1.5), f"{field}.n", 0, 100.0, lo_open=True),
+                thickness=number(c.get("thickness", 0.0), f"{field}.thickness", 0),
+                absorption=parse_spectrum(c.get("absorption", 0.0), f"{field}.absorption", kind="unbounded"),
+                distribution=dist, **kw)
 
 
 def _complex_index(d: dict, field: str):
@@ -422,7 +467,23 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
     mats_in = data.get("materials", {})
     if not isinstance(mats_in, dict):
         raise SceneError("materials", "must be an object mapping names to materials")
-    materials = {name: parse_material(m, f"materials.{name}") for name, m in mats_in.items()}
+    materials = {}
+    resolving = []
+
+    def lookup(name, field):
+        if name not in mats_in:
+            raise SceneError(field, f"unknown material {name!r} (defined: {', '.join(sorted(mats_in))})")
+        if name in resolving:
+            raise SceneError(field, f"material {name!r} refers to itself through its bases")
+        if name not in materials:
+            resolving.append(name)
+            materials[name] = parse_material(mats_in[name], f"materials.{name}", lookup)
+            resolving.pop()
+        return materials[name]
+
+    for name in mats_in:
+        lookup(name, f"materials.{name}")
+    materials = {name: materials[name] for name in mats_in}
     objects = data.get("objects", [])
     if not isinstance(objects, list):
         raise SceneError("objects", "must be a list")
