@@ -90,9 +90,35 @@ def test_principled_conversion_per_input(addon):
     # Plain smooth dielectric base → Lambert with the base colour.
     bsdf, _, _ = exported(principled(**{"Roughness": 0.0, "Base Color": (0.2, 0.4, 0.6, 1)}))
     assert bsdf.name == "lambert" and bsdf.albedo.linear_srgb() == pytest.approx([0.2, 0.4, 0.6], abs=1e-3)
+    # Rough, non-metallic → Torrance–Sparrow dielectric (m = roughness²) with the base colour as Lambert part.
+    bsdf, _, _ = exported(principled(**{"Roughness": 0.5, "IOR": 1.45, "Base Color": (0.5, 0.5, 0.5, 1)}))
+    assert bsdf.name == "torrance_sparrow" and bsdf.m == pytest.approx(0.25)
+    assert bsdf.n.eval(lam)[0, 0] == pytest.approx(1.45) and bsdf.has_diffuse
+    # Rough metal → Torrance–Sparrow conductor.
+    bsdf, _, _ = exported(principled(**{"Metallic": 1.0, "Roughness": 0.4}))
+    assert bsdf.name == "torrance_sparrow" and bsdf.m == pytest.approx(0.16) and bsdf.k.eval(lam)[0, 0] > 0
+    # Coat → Weidlich–Wilkie over the converted base.
+    bsdf, _, _ = exported(principled(**{"Coat Weight": 1.0, "Coat IOR": 1.6, "Coat Roughness": 0.0, "Roughness": 0.0}))
+    assert bsdf.name == "weidlich_wilkie"
     # Emission → emitter spectrum with colour × strength.
     _, emission, _ = exported(principled(**{"Emission Strength": 3.0, "Emission Color": (1, 0.5, 0.25, 1)}))
     assert emission is not None and emission.linear_srgb() == pytest.approx([3.0, 1.5, 0.75], rel=2e-3)
+
+
+def test_layered_node_uses_the_linked_base(addon):
+    empty_scene()
+    mat = polar_material("Coated", "WEIDLICH_WILKIE", **{"Coat IOR": 1.5, "Coat Roughness": 0.1})
+    base = mat.node_tree.nodes.new("PolarShaderNodeBSDF")
+    base.model = "TORRANCE_SPARROW"
+    base.metal = "Cu"
+    mat.node_tree.links.new(base.outputs[0], mat.node_tree.nodes["Polarising BSDF"].inputs["Base"])
+    bsdf, _, _ = exported(mat)
+    assert bsdf.name == "weidlich_wilkie" and bsdf.base.name == "torrance_sparrow"
+    # A rough coat over a perfect mirror has no BRDF value in WW: a clear error naming the material.
+    base.model = "CONDUCTOR"
+    from polar_render.engine.scene.errors import SceneError
+    with pytest.raises(SceneError, match="Coated"):
+        exported(mat)
 
 
 def test_standard_shaders_convert(addon):

@@ -144,6 +144,23 @@ def test_bad_input_is_a_clear_blender_error(addon, tmp_path, case):
     assert not os.path.exists(str(tmp_path / case) + ".exr")       # no black image saved
 
 
+def test_degenerate_and_open_meshes_render_with_a_warning(addon, tmp_path):
+    from polar_render.polar_addon.engine import engine_settings
+    from polar_render.polar_addon.export.scene import export_scene
+    scene = brewster_scene()
+    me = bpy.data.meshes.new("Degenerate")
+    me.from_pydata([(0, 0, 1), (0, 0, 1), (1, 0, 1), (2, 0, 1)], [], [(0, 1, 2), (0, 2, 3)])  # zero-area faces
+    scene.collection.objects.link(bpy.data.objects.new("Degenerate", me))
+    squashed = add_sphere(1.0, (0, 0, 1))
+    squashed.scale = (1.0, 1.0, 0.0)                  # a singular transform
+    bpy.ops.mesh.primitive_grid_add(size=2, location=(0, 0, 0.5))   # an open (non-manifold) sheet
+    _, warnings = export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, 48, 36, engine_settings(scene))
+    assert any("zero-area" in w and "Degenerate" in w for w in warnings)
+    assert any("zero scale" in w for w in warnings)
+    passes = read_multilayer(render_to_exr(scene, str(tmp_path / "degenerate")))
+    assert np.all(np.isfinite(passes["S0"])) and passes["S0"].max() > 0
+
+
 def test_unsupported_world_and_shader_warn_but_render(addon, tmp_path):
     scene = brewster_scene()
     world = scene.world

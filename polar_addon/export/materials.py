@@ -105,6 +105,11 @@ def _torrance_sparrow(n, k, m, mat, shadowing="ts", diffuse=None):
     return TorranceSparrow(n, k, m, shadowing=shadowing, **kwargs)
 
 
+def _coat_roughness(m):
+    """Coat keyword arguments: smooth below the smooth limit, Beckmann m otherwise."""
+    return {"distribution": "smooth"} if m < SMOOTH_LIMIT else {"distribution": "beckmann", "m": m}
+
+
 def _metal_nk(node, reader):
     if getattr(node, "metal", "CUSTOM") != "CUSTOM":
         return named_ior(node.metal)
@@ -120,7 +125,16 @@ def _dielectric_ior(node, reader):
 
 
 def polar_node_bsdf(node, mat, warnings, depth=0):
-    """BSDF of a Polarising BSDF node."""
+    """BSDF of a Polarising BSDF node (a model's own parameter checks become errors naming the material)."""
+    try:
+        return _polar_node_bsdf(node, mat, warnings, depth)
+    except ValueError as e:
+        if isinstance(e, SceneError):
+            raise
+        raise SceneError(f"material {mat!r}.{node.name}", str(e)) from None
+
+
+def _polar_node_bsdf(node, mat, warnings, depth):
     r = _Reader(mat, node, warnings)
     model = node.model
     if model == "LAMBERT":
@@ -156,10 +170,9 @@ def polar_node_bsdf(node, mat, warnings, depth=0):
             raise SceneError(f"material {mat!r}", "layered materials nest more than 16 coats deep")
         base = Lambert(ConstantSpectrum(DEFAULT_ALBEDO)) if base_node is None else \
             surface_bsdf(base_node, mat, warnings, depth + 1)[0]
-        rough = r.float("Coat Roughness", 0.0, 10.0)
         coat = Coat(n=r.float("Coat IOR", 1.0, 10.0), thickness=r.float("Coat Thickness", 0.0),
                     absorption=_rgb_spectrum(r.rgb("Coat Absorption", 0.0), "unbounded"),
-                    distribution="smooth" if rough < SMOOTH_LIMIT else "beckmann", m=max(rough, 1e-4))
+                    **_coat_roughness(r.float("Coat Roughness", 0.0, 10.0)))
         return WeidlichWilkie([coat], base, form="published" if node.ww_form == "PUBLISHED" else "energy")
     raise SceneError(f"material {mat!r}", f"unknown Polarising BSDF model {model!r}")
 
@@ -181,9 +194,8 @@ def _principled(node, mat, warnings):
         if m >= SMOOTH_LIMIT else Lambert(_rgb_spectrum(base))
     if r.float("Coat Weight", 0.0, 1.0) > 0:
         from ...engine.materials.weidlich_wilkie import Coat, WeidlichWilkie
-        coat_m = r.float("Coat Roughness", 0.0, 1.0) ** 2
         coat = Coat(n=r.float("Coat IOR", 1.0, 10.0), thickness=0.0, absorption=ConstantSpectrum(0.0),
-                    distribution="smooth" if coat_m < SMOOTH_LIMIT else "beckmann", m=max(coat_m, 1e-4))
+                    **_coat_roughness(r.float("Coat Roughness", 0.0, 1.0) ** 2))
         return WeidlichWilkie([coat], under)
     return under
 

@@ -93,6 +93,14 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
         if normal_matrix is None:
             warnings.append(f"object {obj.name!r} has a singular transform (zero scale); skipped")
             continue
+        tri = Pw[F]
+        area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+        degenerate = ~(area2 > 0)
+        if degenerate.all():
+            warnings.append(f"object {obj.name!r} has only zero-area faces; skipped")
+            continue
+        if degenerate.any():
+            warnings.append(f"object {obj.name!r}: {int(degenerate.sum())} zero-area faces ignored")
         N = SN @ normal_matrix.T
         length = np.linalg.norm(N, axis=1, keepdims=True)
         N = np.where(length > 0, N / np.where(length > 0, length, 1.0), 0.0)
