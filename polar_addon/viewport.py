@@ -13,6 +13,18 @@ RESTART_TYPES_GEOMETRY = {"OBJECT", "MESH", "CURVE", "SURFACE", "FONT", "META", 
 RESTART_TYPES_SHADING = {"MATERIAL", "NODETREE", "WORLD", "TEXTURE", "IMAGE"}
 
 
+#: Samples traced per viewport redraw: the image is rendered at a reduced resolution so that one
+#: refinement pass stays interactive, and drawn scaled up to the region.
+VIEWPORT_PIXELS_PER_PASS = 65536
+
+
+def viewport_resolution(width: int, height: int, budget: int = VIEWPORT_PIXELS_PER_PASS):
+    """(w, h) of the progressive image for a region of width × height pixels (same aspect)."""
+    import math
+    factor = max(1, math.ceil(math.sqrt(width * height / budget)))
+    return max(1, width // factor), max(1, height // factor)
+
+
 class ViewportSync:
     """What to redo after edits and view changes; counts accumulated samples."""
 
@@ -113,8 +125,8 @@ class ViewportSession:
             return True
         import copy
         scene = self.renderer.scene
-        scene.camera = camera_from_view(rv3d.view_matrix, rv3d.window_matrix, region.width, region.height,
-                                        rv3d.is_perspective)
+        w, h = viewport_resolution(region.width, region.height)
+        scene.camera = camera_from_view(rv3d.view_matrix, rv3d.window_matrix, w, h, rv3d.is_perspective)
         from ..engine.render.camera import CameraModel
         self.renderer.camera = CameraModel(scene.camera)
         settings = copy.copy(scene.settings)
