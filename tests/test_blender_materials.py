@@ -166,7 +166,7 @@ def test_light_units_match_cycles(addon):
 
 def test_viewport_sync_logic(addon):
     from polar_render.polar_addon.viewport import ViewportSync, camera_from_view, viewport_resolution
-    assert viewport_resolution(1920, 1080) == (240, 135)        # one pass stays ≤ 65536 samples
+    assert viewport_resolution(1920, 1080) == (320, 180)        # one pass stays ≤ 65536 samples
     assert viewport_resolution(200, 100) == (200, 100)
     sync = ViewportSync(target_samples=3)
     assert sync.needs_export
