@@ -122,7 +122,7 @@ from .sampling import cosine_hemisphere, local_to_world
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs
 from ..polarisation.mueller import abcs_matrix, depolariser
-from ..spectral import ConstantSpectrum, Spectrum
+from ..spectral import ConstantSpectrum, Spectrum, as_spectrum
 from ..vec3 import cross, dot, normalize, reflect
 
 __all__ = ["HTSG", "erfc", "shadowing", "roughness_ratio", "log_series", "ln_factorial"]
@@ -537,17 +537,6 @@ _FLUSH = 1e-280  # values below this are flushed to 0 (subnormal products lose p
 _ALPHA_MIN, _ALPHA_MAX = 1e-4, 4.0
 
 
-def _as_spectrum(v, name):
-    if isinstance(v, Spectrum):
-        return v
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a Spectrum or a number, got {v!r}") from None
-    if not math.isfinite(f):
-        raise ValueError(f"{name} must be finite, got {v!r}")
-    return ConstantSpectrum(f)
-
 
 def _beckmann_sample(u, alpha):
     """Half vectors (3, N) about +z with density D_B(h)·cosθ_h, Beckmann parameter α (N,)."""
@@ -594,8 +583,8 @@ class HTSG(BSDF):
     transmits = False
 
     def __init__(self, n, k, sigma0_um, tau_um, albedo=0.0, exterior_n=1.0, series_tolerance=1e-10):
-        self.n = _as_spectrum(n, "n")
-        self.k = _as_spectrum(k, "k")
+        self.n = as_spectrum(n, "n")
+        self.k = as_spectrum(k, "k")
         s0, tau, ext, tol = (float(sigma0_um), float(tau_um), float(exterior_n), float(series_tolerance))
         if not (math.isfinite(s0) and s0 >= 0.0):
             raise ValueError(f"sigma0_um must be a finite number ≥ 0, got {sigma0_um!r}")

@@ -53,7 +53,7 @@ from .microfacet import (SHADOWING, Beckmann, BlinnPhong, half_vector, reflect_l
 from .sampling import cosine_hemisphere, local_to_world
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
-from ..spectral import ConstantSpectrum, Spectrum
+from ..spectral import ConstantSpectrum, Spectrum, as_spectrum
 from ..vec3 import any_perpendicular, cross, dot
 
 #: Smallest accepted Beckmann roughness m.
@@ -62,17 +62,6 @@ DISTRIBUTIONS = ("beckmann", "blinn")
 #: Lobe-selection probability bounds when both a specular and a diffuse lobe exist.
 P_SPEC_RANGE = (0.1, 0.9)
 
-
-def _spectrum(value, field: str) -> Spectrum:
-    if isinstance(value, Spectrum):
-        return value
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{field} must be a Spectrum or a number, got {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{field} must be finite, got {value!r}")
-    return ConstantSpectrum(v)
 
 
 class TorranceSparrow(BSDF):
@@ -98,8 +87,8 @@ class TorranceSparrow(BSDF):
     def __init__(self, n, k, m, shadowing: str = "ts", exterior_n: float = 1.0, diffuse_albedo=None,
                  specular_weight: float = 1.0, diffuse_weight: float = 0.0, distribution: str = "beckmann",
                  blinn_exponent: float | None = None):
-        self.n = _spectrum(n, "n")
-        self.k = _spectrum(k, "k")
+        self.n = as_spectrum(n, "n")
+        self.k = as_spectrum(k, "k")
         m = float(m)
         if not (math.isfinite(m) and m >= M_MIN):
             raise ValueError(f"roughness m must be a finite number >= {M_MIN:g}, got {m!r}")
@@ -115,7 +104,7 @@ class TorranceSparrow(BSDF):
         for name, v in (("specular_weight", self.s), ("diffuse_weight", self.d)):
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
-        self.albedo = None if diffuse_albedo is None else _spectrum(diffuse_albedo, "diffuse_albedo")
+        self.albedo = None if diffuse_albedo is None else as_spectrum(diffuse_albedo, "diffuse_albedo")
         if distribution == "beckmann":
             if blinn_exponent is not None:
                 raise ValueError("blinn_exponent is only used with distribution='blinn'")

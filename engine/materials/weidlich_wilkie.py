@@ -200,7 +200,7 @@ from ..polarisation.frames import plane_of_incidence_axis, rotate_mueller_frames
     scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_transmission_abcs, refracted_cosine
 from ..polarisation.mueller import abcs_matrix
-from ..spectral import ConstantSpectrum, Spectrum
+from ..spectral import ConstantSpectrum, Spectrum, as_spectrum
 from ..vec3 import any_perpendicular, cross, dot, reflect
 
 __all__ = ["Coat", "WeidlichWilkie", "FORMS", "T_TERMS", "TRANSMISSION_NORMALS", "DISTRIBUTIONS",
@@ -222,17 +222,6 @@ _TABLE_NU, _TABLE_NPHI = 128, 96
 _TABLE_N_ETA = 6            # η nodes for a dispersive coat
 _MU_MIN = 1e-6
 
-
-def _as_spectrum(v, name: str) -> Spectrum:
-    if isinstance(v, Spectrum):
-        return v
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a Spectrum or a number, got {v!r}") from None
-    if not math.isfinite(f):
-        raise ValueError(f"{name} must be finite, got {v!r}")
-    return ConstantSpectrum(f)
 
 
 def _spectrum_range(spec: Spectrum) -> tuple[float, float]:
@@ -271,11 +260,11 @@ class Coat:
     dist: object = field(init=False, repr=False)
 
     def __post_init__(self):
-        self.n_spectrum = _as_spectrum(self.n, "coat n")
+        self.n_spectrum = as_spectrum(self.n, "coat n")
         lo, _ = _spectrum_range(self.n_spectrum)
         if not lo > 0:
             raise ValueError(f"coat n must be > 0, got {self.n!r}")
-        self.absorption_spectrum = _as_spectrum(self.absorption, "coat absorption")
+        self.absorption_spectrum = as_spectrum(self.absorption, "coat absorption")
         if _spectrum_range(self.absorption_spectrum)[0] < 0:
             raise ValueError(f"coat absorption must be >= 0, got {self.absorption!r}")
         d = float(self.thickness)
@@ -560,7 +549,7 @@ class WeidlichWilkie(BSDF):
         self.transmission_normal = transmission_normal
         self.shadowing = shadowing
         self.match_base_exterior = bool(match_base_exterior)
-        self._exterior = _as_spectrum(exterior_n, "exterior_n")
+        self._exterior = as_spectrum(exterior_n, "exterior_n")
         if not _spectrum_range(self._exterior)[0] > 0:
             raise ValueError(f"exterior_n must be > 0, got {exterior_n!r}")
         self._table = None
@@ -609,7 +598,7 @@ class WeidlichWilkie(BSDF):
 
     @exterior_n.setter
     def exterior_n(self, value):
-        self._exterior = _as_spectrum(value, "exterior_n")
+        self._exterior = as_spectrum(value, "exterior_n")
         self._table = None
         self._rbar_nodes = None
 

@@ -29,6 +29,7 @@ from .spectrum import (
     RGBUnboundedSpectrum,
     Spectrum,
     TabulatedSpectrum,
+    as_spectrum,
     basis_rgb,
     parse_spectrum,
 )
@@ -57,6 +58,7 @@ __all__ = [
     "RGBUnboundedSpectrum",
     "Spectrum",
     "TabulatedSpectrum",
+    "as_spectrum",
     "basis_rgb",
     "parse_spectrum",
 ]

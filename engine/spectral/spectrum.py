@@ -342,3 +342,19 @@ def _parse_table(table, field: str, kind: str) -> TabulatedSpectrum:
     if kind == "illuminant":
         v = v / cie.CIE_Y_INTEGRAL
     return TabulatedSpectrum(wl, v, name=field, kind=kind)
+
+
+def as_spectrum(value, name: str = "value") -> "Spectrum":
+    """A Spectrum as is, or a finite number as a ConstantSpectrum (ValueError otherwise).
+
+    For model constructors used from Python; scene files go through ``parse_spectrum``.
+    """
+    if isinstance(value, Spectrum):
+        return value
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a Spectrum or a number, got {value!r}") from None
+    if not math.isfinite(v):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    return ConstantSpectrum(v)
