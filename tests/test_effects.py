@@ -49,3 +49,22 @@ def test_linear_transport_would_be_wrong_where_auto_keeps_full():
     assert np.abs(full[3]).max() > 0.01
     settings.polarisation = "linear"
     assert np.all(renderer.render(settings).stokes()[3] == 0)
+
+
+@pytest.mark.parametrize("name", ["fresnel_sphere", "glass_sphere", "plane_brewster"])
+def test_one_mueller_product_per_path_is_exact_where_nothing_depends_on_wavelength(name):
+    scene = peer(name, 16)
+    renderer = Renderer(scene)
+    settings = copy.copy(scene.settings)
+    settings.polarisation = "full"
+    reduced = renderer.render(settings)
+    settings.reduce_spectral = False
+    per_wavelength = renderer.render(settings)
+    assert "one Mueller product" in reduced.stats["spectral"]
+    np.testing.assert_allclose(reduced.stokes(), per_wavelength.stokes(), rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize("name", ["fresnel_sphere_au", "cornell_lambert"])
+def test_measured_metals_and_coloured_albedos_keep_per_wavelength_transport(name):
+    result = Renderer(peer(name, 8, 1)).render()
+    assert result.stats["spectral"] == "spectral"

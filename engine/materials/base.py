@@ -130,6 +130,8 @@ class BSDF:
     creates_circular: bool = True
     #: Light can pass through the surface (two-sided, refraction).
     transmits: bool = False
+    #: The Mueller matrix is the same at every wavelength (no dispersion, grey parameters).
+    wavelength_independent: bool = False
 
     name: str = "bsdf"
 

@@ -38,6 +38,7 @@ class SmoothConductor(BSDF):
         self.n = n
         self.k = k
         self.exterior_n = float(exterior_n)
+        self.wavelength_independent = bool(getattr(n, "is_constant", False) and getattr(k, "is_constant", False))
         # A real index (κ = 0 at every wavelength) reflects without retardance.
         self.creates_circular = not (getattr(k, "is_constant", False) and float(k.eval([550.0])[0]) == 0.0)
 

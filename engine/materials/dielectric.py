@@ -40,6 +40,7 @@ class SmoothDielectric(BSDF):
     delta_only = True
     transmits = True
     creates_circular = True  # total internal reflection retards
+    wavelength_independent = True  # the index is one number (no dispersion)
 
     def __init__(self, n: float, exterior_n: float = 1.0):
         self.n_int = float(n)

@@ -30,6 +30,7 @@ class FilterSheet(BSDF):
     name = "filter_sheet"
     delta_only = True
     transmits = True
+    wavelength_independent = True
 
     def __init__(self, axis, kind: str = "polariser", extinction: float = 0.0, retardance_deg: float = 90.0,
                  transmittance: float = 1.0):

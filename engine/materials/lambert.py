@@ -21,6 +21,7 @@ class Lambert(BSDF):
 
     def __init__(self, albedo):
         self.albedo = albedo
+        self.wavelength_independent = bool(getattr(albedo, "is_constant", False))
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray):
         ok = (dot(sp.n_s, wi) > 0) & (sp.cos_o > 0)

@@ -118,6 +118,8 @@ class TorranceSparrow(BSDF):
         self.has_diffuse = self.d > 0 and self.albedo is not None
         self.polarising = self.has_specular
         self.creates_circular = self.has_specular and self._may_retard()
+        self.wavelength_independent = all(getattr(v, "is_constant", False) for v in
+                                          (self.n, self.k) + ((self.albedo,) if self.has_diffuse else ()))
 
     def _may_retard(self) -> bool:
         """False only if κ ≡ 0 and n/exterior_n ≥ 1 (real η above 1: no TIR, no retardance)."""

@@ -589,6 +589,9 @@ class WeidlichWilkie(BSDF):
         self.w_c = w_c
         self.delta_only = bool(self.coat.smooth and getattr(base, "delta_only", False))
         self.creates_circular = bool(getattr(base, "creates_circular", True) or self._coat_may_tir())
+        self.wavelength_independent = bool(
+            getattr(base, "wavelength_independent", False) and self._exterior.is_constant and
+            all(c.n_spectrum.is_constant and c.absorption_spectrum.is_constant for c in self.coats))
 
     # --- parameters ----------------------------------------------------------------------------
 

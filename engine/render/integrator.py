@@ -132,6 +132,11 @@ class PathTracer:
         self.P = TRANSPORT_SIZES[settings.polarisation]
         self.mono = settings.spectral == "mono"
         self.n_lambda = 1 if self.mono else 4
+        # Where no material depends on λ, every wavelength of a path has the same Mueller product:
+        # carry T for one wavelength and apply the spectral emission and colour matching at the
+        # lights (exactly the same estimate, a quarter of the Mueller arithmetic).
+        used = {compiled.materials[i] for i in np.unique(compiled.tri_material)}
+        self.uniform = settings.reduce_spectral and all(getattr(m, "wavelength_independent", False) for m in used)
 
     def _wavelengths(self, sampler: PathSampler, n: int):
         if self.mono:
@@ -149,13 +154,15 @@ class PathTracer:
         o, d, x_T, t_min, t_max = self.camera.generate(pixel, sampler.next(2))
         lam, w_rgb = self._wavelengths(sampler, n_total)
         L = lam.shape[0]
+        lam_m = lam[:1] if self.uniform else lam       # wavelengths the materials are evaluated at
+        Lm = lam_m.shape[0]
         if np.any(t_min > 0):
             o = o + d * t_min[None, :]
             t_max = t_max - t_min
 
         radiance = np.zeros((P, L, n_total))
         path = np.arange(n_total)
-        T = np.zeros((P, P, L, n_total))
+        T = np.zeros((P, P, Lm, n_total))
         for i in range(P):
             T[i, i] = 1.0
         prev_delta = np.ones(n_total, bool)
@@ -203,8 +210,8 @@ class PathTracer:
                 break
 
             # --- keep the paths that hit something --------------------------------------
-            path, T, x_T, d, lam, eta_sq, prim, u, v, sampler.keys = keep_paths(
-                hit, path, T, x_T, d, lam, eta_sq, hits.prim, hits.u, hits.v, sampler.keys)
+            path, T, x_T, d, lam, lam_m, eta_sq, prim, u, v, sampler.keys = keep_paths(
+                hit, path, T, x_T, d, lam, lam_m, eta_sq, hits.prim, hits.u, hits.v, sampler.keys)
             n = path.shape[0]
             if n == 0:
                 break
@@ -229,12 +236,12 @@ class PathTracer:
                 # One material covers every path: use whole arrays instead of gathered copies.
                 sel = slice(None) if len(groups) == 1 else np.nonzero(mat == m)[0]
                 bsdf = compiled.materials[m]
-                sp = ShadingPoint(p[:, sel], n_s[:, sel], n_g[:, sel], wo[:, sel], lam[:, sel], self.mono)
+                sp = ShadingPoint(p[:, sel], n_s[:, sel], n_g[:, sel], wo[:, sel], lam_m[:, sel], self.mono)
                 Tm = T[..., sel]
                 xTm = x_T[:, sel]
 
                 if not bsdf.delta_only and len(light_set) and bounce + 2 <= st.max_depth:
-                    contrib = self._next_event(sp, bsdf, Tm, xTm, u_light[:, sel], stats)
+                    contrib = self._next_event(sp, lam[:, sel], bsdf, Tm, xTm, u_light[:, sel], stats)
                     radiance[:, :, path[sel]] += contrib
 
                 bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
@@ -259,8 +266,8 @@ class PathTracer:
                 valid &= survive
             valid &= np.isfinite(newT).all(axis=(0, 1, 2)) & (np.abs(newT[0, 0]).max(axis=0) > 0)
 
-            path, T, x_T, d, lam, eta_sq, prev_delta, prev_pdf, p, n_g, sampler.keys = keep_paths(
-                valid, path, newT, new_xT, new_d, lam, eta_sq, is_delta, pdf_next, p, n_g, sampler.keys)
+            path, T, x_T, d, lam, lam_m, eta_sq, prev_delta, prev_pdf, p, n_g, sampler.keys = keep_paths(
+                valid, path, newT, new_xT, new_d, lam, lam_m, eta_sq, is_delta, pdf_next, p, n_g, sampler.keys)
             o = offset_origin(p, n_g, d)
             t_max = None
 
@@ -272,12 +279,16 @@ class PathTracer:
         out[:, :, ~finite] = 0.0
         return out, stats
 
-    def _next_event(self, sp, bsdf, T, x_T, u, stats):
-        """Direct light at non-delta vertices, MIS-weighted against BSDF sampling; (P, L, n)."""
+    def _next_event(self, sp, lam, bsdf, T, x_T, u, stats):
+        """Direct light at non-delta vertices, MIS-weighted against BSDF sampling; (P, L, n).
+
+        ``lam`` (L, n) are the path's wavelengths (lights are evaluated at all of them); the
+        material sees ``sp.lam`` (one wavelength where nothing depends on λ).
+        """
         light_set = self.lights
         n = sp.n
         P = self.P
-        out = np.zeros((P, sp.lam.shape[0], n))
+        out = np.zeros((P, lam.shape[0], n))
         choice = np.minimum((u[0] * len(light_set)).astype(np.int64), len(light_set) - 1)
         for li in np.unique(choice):
             sel = np.nonzero(choice == li)[0]
@@ -286,7 +297,7 @@ class PathTracer:
             # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
             u_tri = u[0, sel] * len(light_set) - li
             wi, dist, value, pdf_l, ok = light.sample(p, np.stack((u_tri, u[1, sel], u[2, sel])),
-                                                      sp.lam[:, sel], sp.mono)
+                                                      lam[:, sel], sp.mono)
             sub = ShadingPoint(p, sp.n_s[:, sel], sp.n_g[:, sel], sp.wo[:, sel], sp.lam[:, sel], sp.mono)
             cos_i = np.abs(dot(sub.n_s, wi))
             ok &= cos_i > 0
@@ -309,5 +320,5 @@ class PathTracer:
             blocked[test] = self.scene.occluded(origin[:, test], wi[:, test], t_max[test])
             stats["shadow_rays"] += test.size
             weight = weight * (~blocked)[None, :]
-            out[:, :, sel] = apply_T(T[..., sel], S * weight[None])
+            out[:, :, sel] = apply_T(T[..., sel], S) * weight[None]
         return out

@@ -100,9 +100,11 @@ class Renderer:
         W, H = cam.width, cam.height
         film = Film(W, H)
         tracer = PathTracer(self.compiled, self.lights, self.camera, st)
+        stats_spectral = ("spectral, one Mueller product per path (no material depends on λ)" if tracer.uniform
+                          else st.spectral)
         stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0,
                  "compile_seconds": self.compile_seconds, "transport": st.polarisation,
-                 "transport_reason": transport_reason}
+                 "transport_reason": transport_reason, "spectral": stats_spectral}
         if window is not None:
             x0, y0, x1, y1 = (int(v) for v in window)
             if not (0 <= x0 < x1 <= W and 0 <= y0 < y1 <= H):

@@ -105,6 +105,9 @@ class RenderSettings:
     polarisation: str = "auto"
     batch_rays: int = 1 << 17
     threads: int = 0              # worker threads; 0 = one per CPU core
+    #: Carry one wavelength's Mueller product where no material depends on λ (exact; see
+    #: engine.render.integrator).  False forces per-wavelength transport (for the proof tests).
+    reduce_spectral: bool = True
 
 
 @dataclass
