@@ -92,7 +92,7 @@ def _render(args) -> int:
     if result.cancelled:
         print(f"polar: interrupted — writing the {result.stats['samples']} finished samples", file=sys.stderr)
     stats = result.stats
-    print(f"polar: transport: {stats['transport_reason']}", file=sys.stderr)
+    print(f"polar: transport: {stats['transport_reason']}; spectral: {stats['spectral']}", file=sys.stderr)
     film = result.film
     spp_image = film.spp_image()
     meta = {"polar.spp": int(st.spp), "polar.complete": int(not result.cancelled), "polar.spp_min": int(spp_image.min()), "polar.spp_max": int(spp_image.max()),
