@@ -14,6 +14,8 @@ import signal
 import sys
 import time
 
+import numpy as np
+
 from .scene.errors import SceneError
 
 
@@ -68,6 +70,10 @@ def _render(args) -> int:
     except OSError as e:
         raise SceneError("-o", f"cannot create the output folder {out_dir!r}: {e.strerror}") from None
 
+    resume_film = None
+    if args.resume:
+        resume_film, st = _resume_state(args, scene, st)
+        scene.settings = st
     renderer = Renderer(scene)
     cam = scene.camera
     print(f"polar: {os.path.basename(args.scene)}: {cam.width}×{cam.height}, {st.spp} spp, "
@@ -84,7 +90,7 @@ def _render(args) -> int:
     previous = signal.signal(signal.SIGINT, on_interrupt)
     bar = None if args.quiet else ProgressBar("rendering")
     try:
-        result = renderer.render(st, progress=bar, should_stop=lambda: stop["requested"])
+        result = renderer.render(st, progress=bar, should_stop=lambda: stop["requested"], resume=resume_film)
     finally:
         signal.signal(signal.SIGINT, previous)
         if bar is not None:
@@ -118,6 +124,42 @@ def _render(args) -> int:
     for path in written:
         print(path)
     return 130 if result.cancelled else 0
+
+
+def _resume_state(args, scene, st):
+    """(Film of the finished samples, settings) to continue the render stored in ``args.resume``."""
+    import copy
+
+    from .output.exr import read_stokes_exr
+    from .render.film import film_from_stokes
+
+    if not os.path.exists(args.resume):
+        raise SceneError("--resume", f"{args.resume!r} does not exist")
+    try:
+        stokes, channels, header = read_stokes_exr(args.resume)
+    except (ValueError, OSError) as e:
+        raise SceneError("--resume", f"{args.resume!r} is not a Polar Stokes EXR: {e}") from None
+    if "spp" not in channels or "polar.seed" not in header:
+        raise SceneError("--resume", f"{args.resume!r} has no per-pixel sample counts (not written by Polar)")
+    H, W = stokes.shape[1:3]
+    if (W, H) != (scene.camera.width, scene.camera.height):
+        raise SceneError("--resume", f"{args.resume!r} is {W}×{H} but the scene renders "
+                                     f"{scene.camera.width}×{scene.camera.height}")
+    st = copy.copy(st)
+    if args.seed is not None and args.seed != header["polar.seed"]:
+        raise SceneError("--seed", f"must be the resumed render's seed ({header['polar.seed']}) to continue it")
+    st.seed = int(header["polar.seed"])
+    if args.spp is None:
+        st.spp = int(header["polar.spp"])
+    for key in ("polarisation", "spectral"):
+        stored = header.get(f"polar.{key}")
+        if stored is not None and key == "spectral" and stored != st.spectral:
+            raise SceneError("--resume", f"the stored render is {stored!r}, this one {st.spectral!r}")
+    spp = channels["spp"].astype(np.int64)
+    if spp.max() > st.spp:
+        raise SceneError("--spp", f"must be at least the samples already done ({int(spp.max())})")
+    stderr = np.stack([channels[f"S{i}.Y.stderr"] for i in range(4)]) if "S0.Y.stderr" in channels else None
+    return film_from_stokes(stokes, spp, stderr), st
 
 
 def _parse_params(pairs):
@@ -210,6 +252,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")
     r.add_argument("--stderr", action="store_true", help="also write per-pixel standard errors")
+    r.add_argument("--resume", metavar="EXR", help="continue the (interrupted) render stored in this EXR")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=_render)
 

@@ -85,13 +85,16 @@ class Renderer:
         film = self._live_film
         return None if film is None else film.mean()
 
-    def render(self, settings=None, progress=None, should_stop=None, window=None) -> RenderResult:
+    def render(self, settings=None, progress=None, should_stop=None, window=None, resume=None) -> RenderResult:
         """Render with ``settings`` (default: the scene's).
 
         ``progress(done_fraction, stats)`` is called after every work unit;
         ``should_stop()`` is polled between units and ends the render early.
         ``window`` = (x0, y0, x1, y1) renders only that pixel rectangle (row 0 at
         the top, exclusive ends); other pixels keep 0 samples.
+        ``resume`` = a Film with finished samples (e.g. from an interrupted render's EXR): sample
+        passes a pixel already has are not traced again, so the result equals an uninterrupted
+        render of ``settings.spp`` samples (the sampler is stateless) up to float rounding.
         """
         st = copy.copy(settings or self.scene.settings)
         used = {self.compiled.material_names[i] for i in np.unique(self.compiled.tri_material)}
@@ -99,6 +102,12 @@ class Renderer:
         cam = self.scene.camera
         W, H = cam.width, cam.height
         film = Film(W, H)
+        done_before = None
+        if resume is not None:
+            if (resume.width, resume.height) != (W, H):
+                raise ValueError(f"cannot resume a {resume.width}×{resume.height} render at {W}×{H}")
+            film.merge(resume)
+            done_before = resume.count.copy()
         tracer = PathTracer(self.compiled, self.lights, self.camera, st)
         stats_spectral = ("spectral, one Mueller product per path (no material depends on λ)" if tracer.uniform
                           else st.spectral)
@@ -110,9 +119,15 @@ class Renderer:
             if not (0 <= x0 < x1 <= W and 0 <= y0 < y1 <= H):
                 raise ValueError(f"window {window} must lie inside the {W}×{H} image and be non-empty")
             window = (x0, y0, x1, y1)
-        units = list(work_units(W, H, st.spp, st.batch_rays, window=window))
+        first_pass = int(done_before.min()) if done_before is not None else 0
+        units = list(work_units(W, H, st.spp, st.batch_rays, first_pass=first_pass, window=window))
         cols = (window[2] - window[0]) if window else W
         total = sum((r1 - r0) * cols * (p1 - p0) for r0, r1, p0, p1 in units)
+        if done_before is not None:
+            x0, y0, x1, y1 = window or (0, 0, W, H)
+            done = done_before.reshape(H, W)[y0:y1, x0:x1]
+            total = int(np.maximum(st.spp - done, 0).sum())
+        total = max(total, 1)
         t0 = time.perf_counter()
         cancelled = False
         done = 0
@@ -123,6 +138,9 @@ class Renderer:
             pix = unit_pixels(W, r0, r1, window)
             pixel = np.tile(pix, p1 - p0)
             sample = np.repeat(np.arange(p0, p1, dtype=np.int64), pix.size)
+            if done_before is not None:
+                todo = sample >= done_before[pixel]
+                pixel, sample = pixel[todo], sample[todo]
             values, s = tracer.trace(pixel, sample)
             return pixel, values, s
 
