@@ -136,9 +136,23 @@ class PathTracer:
         # carry T for one wavelength and apply the spectral emission and colour matching at the
         # lights (exactly the same estimate, a quarter of the Mueller arithmetic).
         used = {compiled.materials[i] for i in np.unique(compiled.tri_material)}
-        self.uniform = settings.reduce_spectral and all(getattr(m, "wavelength_independent", False) for m in used)
+        independent = all(getattr(m, "wavelength_independent", False) for m in used)
+        reduce = settings.reduce_spectral
+        self.uniform = reduce in ("auto", "exact", True) and independent
+        # "auto": with λ-independent materials the spectral estimator's expectation is T times each
+        # light's spectrum integrated against the CIE observer, so trace in RGB with those exact
+        # light colours: no wavelength sampling and no chromatic noise (same expectation).
+        self.rgb_mode = reduce in ("auto", True) and independent and not self.mono
+
+    def _emitted(self, light, lam):
+        """Emitted radiance (L, n) of ``light`` for paths with wavelengths ``lam`` (RGB (3, n) in RGB mode)."""
+        if self.rgb_mode:
+            return np.repeat(light.rgb()[:, None], lam.shape[1], axis=1)
+        return light.radiance(lam, self.mono)
 
     def _wavelengths(self, sampler: PathSampler, n: int):
+        if self.rgb_mode:
+            return np.full((1, n), 550.0), None
         if self.mono:
             lam = np.full((1, n), self.settings.wavelength_nm)
             return lam, np.ones((3, 1, n))
@@ -153,7 +167,7 @@ class PathTracer:
         sampler = PathSampler(path_keys(st.seed, pixel, sample))
         o, d, x_T, t_min, t_max = self.camera.generate(pixel, sampler.next(2))
         lam, w_rgb = self._wavelengths(sampler, n_total)
-        L = lam.shape[0]
+        L = 3 if self.rgb_mode else lam.shape[0]
         lam_m = lam[:1] if self.uniform else lam       # wavelengths the materials are evaluated at
         Lm = lam_m.shape[0]
         if np.any(t_min > 0):
@@ -184,7 +198,7 @@ class PathTracer:
             # --- light reached by this segment ----------------------------------------
             if env is not None and (~hit).any():
                 miss = ~hit
-                Le = env.radiance(lam[:, miss], self.mono)
+                Le = self._emitted(env, lam[:, miss])
                 w = np.ones(int(miss.sum()))
                 nd = ~prev_delta[miss]
                 if nd.any():
@@ -200,7 +214,7 @@ class PathTracer:
                 for li in np.unique(emitter[idx]):
                     light = light_set.lights[li]
                     sel = idx[emitter[idx] == li]
-                    Le = light.radiance(lam[:, sel], self.mono)
+                    Le = self._emitted(light, lam[:, sel])
                     cos_l = -dot(d[:, sel], compiled.tri_normal[hits.prim[sel]].T)
                     p_light = light.pdf_hit(hits.t[sel], cos_l) * light_set.select_prob
                     wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
@@ -271,7 +285,7 @@ class PathTracer:
             o = offset_origin(p, n_g, d)
             t_max = None
 
-        rgb = np.einsum("pln,cln->pcn", radiance, w_rgb)
+        rgb = radiance if self.rgb_mode else np.einsum("pln,cln->pcn", radiance, w_rgb)
         out = np.zeros((4, 3, n_total))
         out[:P] = rgb
         finite = np.isfinite(out).all(axis=(0, 1))
@@ -288,7 +302,7 @@ class PathTracer:
         light_set = self.lights
         n = sp.n
         P = self.P
-        out = np.zeros((P, lam.shape[0], n))
+        out = np.zeros((P, 3 if self.rgb_mode else lam.shape[0], n))
         choice = np.minimum((u[0] * len(light_set)).astype(np.int64), len(light_set) - 1)
         for li in np.unique(choice):
             sel = np.nonzero(choice == li)[0]
@@ -296,8 +310,8 @@ class PathTracer:
             p = sp.p[:, sel]
             # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
             u_tri = u[0, sel] * len(light_set) - li
-            wi, dist, value, pdf_l, ok = light.sample(p, np.stack((u_tri, u[1, sel], u[2, sel])),
-                                                      lam[:, sel], sp.mono)
+            wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, u[1, sel], u[2, sel])))
+            value = self._emitted(light, lam[:, sel]) * scale[None, :]
             sub = ShadingPoint(p, sp.n_s[:, sel], sp.n_g[:, sel], sp.wo[:, sel], sp.lam[:, sel], sp.mono)
             cos_i = np.abs(dot(sub.n_s, wi))
             ok &= cos_i > 0

@@ -4,9 +4,12 @@ All lights are unpolarised, so only their spectral radiance matters: a light
 contributes the Stokes vector L·(1, 0, 0, 0) in any frame.
 
 ``sample(p, u)`` returns, for receiving points p (3, N), a direction wi
-towards the light, the distance to it (inf for lights at infinity), the
-incident radiance divided by the solid-angle pdf of wi (L, N), that pdf
-(0 for delta lights: point, spot, directional) and a validity mask.
+towards the light, the distance to it (inf for lights at infinity), a factor
+(N,) such that incident radiance / solid-angle pdf = emitted spectrum × factor,
+that pdf (0 for delta lights: point, spot, directional) and a validity mask.
+The emitted spectrum itself comes from ``radiance(lam, mono)`` (or, where the
+integrator works in RGB, from ``rgb()``: the light's spectrum integrated
+against the CIE observer on the 1 nm grid).
 Light selection (uniform over the lights) is handled by ``LightSet``.
 """
 
@@ -17,6 +20,7 @@ import math
 import numpy as np
 
 from ..materials.sampling import uniform_sphere
+from ..spectral import GRID_NM, spectrum_to_linear_srgb
 from ..scene.description import DirectionalLight, EnvironmentLight, PointLight, SpotLight
 from ..vec3 import dot, normalize
 
@@ -31,17 +35,22 @@ class _Light:
     def radiance(self, lam, mono) -> np.ndarray:
         return self.spectrum.eval(lam, mono=mono)
 
+    def rgb(self) -> np.ndarray:
+        """Linear sRGB (3,) of the emitted spectrum: the exact expectation of the spectral estimator."""
+        if not hasattr(self, "_rgb"):
+            self._rgb = spectrum_to_linear_srgb(self.spectrum.eval(GRID_NM))
+        return self._rgb
+
 
 class EnvironmentEmitter(_Light):
     """Constant radiance from every direction; sampled uniformly on the sphere."""
 
     at_infinity = True
 
-    def sample(self, p, u, lam, mono):
+    def sample(self, p, u):
         wi = uniform_sphere(u)
         n = p.shape[1]
-        value = self.radiance(lam, mono) * (4.0 * math.pi)
-        return wi, np.full(n, np.inf), value, np.full(n, 1.0 / (4.0 * math.pi)), np.ones(n, bool)
+        return wi, np.full(n, np.inf), np.full(n, 4.0 * math.pi), np.full(n, 1.0 / (4.0 * math.pi)), np.ones(n, bool)
 
     def pdf(self, d):
         return np.full(d.shape[1], 1.0 / (4.0 * math.pi))
@@ -62,7 +71,7 @@ class AreaEmitter(_Light):
         self.cdf = np.cumsum(areas) / self.total_area
         self.compiled = compiled
 
-    def sample(self, p, u, lam, mono):
+    def sample(self, p, u):
         # u has 3 rows: triangle choice, then the point within it.
         idx = np.minimum(np.searchsorted(self.cdf, u[0], side="right"), len(self.tris) - 1)
         tri = self.tris[idx]
@@ -81,8 +90,7 @@ class AreaEmitter(_Light):
         cos_l = -dot(wi, n_l)
         valid = (cos_l > 0) & (dist > 0)
         pdf = np.where(valid, dist2 / np.where(valid, cos_l, 1.0) / self.total_area, 0.0)
-        value = self.radiance(lam, mono) * np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0)[None, :]
-        return wi, dist, value, pdf, valid
+        return wi, dist, np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0), pdf, valid
 
     def pdf_hit(self, dist, cos_l):
         """Solid-angle pdf of having sampled a point at distance dist whose front faces the ray at cos_l."""
@@ -102,15 +110,14 @@ class PointEmitter(_Light):
     def _falloff(self, wi):
         return 1.0
 
-    def sample(self, p, u, lam, mono):
+    def sample(self, p, u):
         to = self.position[:, None] - p
         dist2 = dot(to, to)
         dist = np.sqrt(dist2)
         valid = dist > 0
         wi = to / np.where(valid, dist, 1.0)
         scale = np.where(valid, self._falloff(wi) / np.where(valid, dist2, 1.0), 0.0)
-        value = self.radiance(lam, mono) * scale[None, :]
-        return wi, dist, value, np.zeros(p.shape[1]), valid
+        return wi, dist, scale, np.zeros(p.shape[1]), valid
 
 
 class SpotEmitter(PointEmitter):
@@ -141,10 +148,10 @@ class DirectionalEmitter(_Light):
         super().__init__(spectrum)
         self.direction = normalize(np.asarray(direction, np.float64))
 
-    def sample(self, p, u, lam, mono):
+    def sample(self, p, u):
         n = p.shape[1]
         wi = np.broadcast_to(-self.direction[:, None], (3, n)).copy()
-        return wi, np.full(n, np.inf), self.radiance(lam, mono) * np.ones((1, n)), np.zeros(n), np.ones(n, bool)
+        return wi, np.full(n, np.inf), np.ones(n), np.zeros(n), np.ones(n, bool)
 
 
 class LightSet:

@@ -109,8 +109,12 @@ class Renderer:
             film.merge(resume)
             done_before = resume.count.copy()
         tracer = PathTracer(self.compiled, self.lights, self.camera, st)
-        stats_spectral = ("spectral, one Mueller product per path (no material depends on λ)" if tracer.uniform
-                          else st.spectral)
+        if tracer.rgb_mode:
+            stats_spectral = "RGB with exactly integrated light spectra (no material depends on λ)"
+        elif tracer.uniform:
+            stats_spectral = "spectral, one Mueller product per path (no material depends on λ)"
+        else:
+            stats_spectral = st.spectral
         stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0,
                  "compile_seconds": self.compile_seconds, "transport": st.polarisation,
                  "transport_reason": transport_reason, "spectral": stats_spectral}

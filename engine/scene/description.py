@@ -105,9 +105,10 @@ class RenderSettings:
     polarisation: str = "auto"
     batch_rays: int = 1 << 17
     threads: int = 0              # worker threads; 0 = one per CPU core
-    #: Carry one wavelength's Mueller product where no material depends on λ (exact; see
-    #: engine.render.integrator).  False forces per-wavelength transport (for the proof tests).
-    reduce_spectral: bool = True
+    #: Where no material depends on λ: "auto" traces in RGB with each light's exactly integrated
+    #: colour (no chromatic noise, same expectation); "exact" keeps the 4 sampled wavelengths but
+    #: one Mueller product per path (bit-for-bit the per-wavelength estimator); "off" never reduces.
+    reduce_spectral: str = "auto"
 
 
 @dataclass
