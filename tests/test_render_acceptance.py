@@ -148,3 +148,12 @@ def test_threads_do_not_change_the_image():
     two = copy.copy(scene.settings)
     two.threads = 2
     np.testing.assert_array_equal(renderer.render(one).stokes(), renderer.render(two).stokes())
+
+
+def test_a_render_too_large_for_memory_is_refused_before_allocating():
+    from engine.scene.errors import SceneError
+    scene = peer_scene("plane_brewster", 1)
+    scene.camera.width = scene.camera.height = 60000
+    with pytest.raises(SceneError) as err:
+        Renderer(scene).render()
+    assert err.value.field == "camera.width" and "GiB" in str(err.value)

@@ -27,6 +27,7 @@ from .film import Film
 from .integrator import PathTracer
 from .lights import LightSet
 from ..scene.description import Scene
+from ..scene.errors import SceneError
 
 
 @dataclass
@@ -43,6 +44,26 @@ class RenderResult:
     def stokes_luminance(self) -> np.ndarray:
         """Luminance Stokes image (4, H, W)."""
         return np.einsum("shwc,c->shw", self.stokes(), np.array([0.2126, 0.7152, 0.0722]))
+
+
+#: Bytes per pixel of the film (Stokes × RGB sums, luminance sums of squares, sample count).
+FILM_BYTES_PER_PIXEL = (4 * 3 + 4 + 1) * 8
+#: Bytes per path of a batch in flight (throughput, frames, rays, random keys, accumulators; measured
+#: peak ≈ 3 kB per path of full spectral transport, with headroom).
+BATCH_BYTES_PER_PATH = 4096
+
+
+def memory_estimate(width: int, height: int, batch_rays: int, workers: int) -> int:
+    """Bytes a render needs besides the scene: the film and the batches in flight."""
+    return width * height * FILM_BYTES_PER_PIXEL + workers * batch_rays * BATCH_BYTES_PER_PATH
+
+
+def available_memory() -> int:
+    """Physical memory of this machine in bytes (0 if unknown)."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):
+        return 0
 
 
 def work_units(width: int, height: int, spp: int, batch_rays: int, first_pass: int = 0, window=None):
@@ -101,6 +122,13 @@ class Renderer:
         st.polarisation, transport_reason = resolve_transport(st.polarisation, self.scene.materials, used)
         cam = self.scene.camera
         W, H = cam.width, cam.height
+        workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
+        need, have = memory_estimate(W, H, st.batch_rays, workers), available_memory()
+        if have and need > 0.8 * have:
+            max_pixels = max(int((0.8 * have - workers * st.batch_rays * BATCH_BYTES_PER_PATH) / FILM_BYTES_PER_PIXEL), 0)
+            raise SceneError("camera.width", f"a {W}×{H} render needs about {need / 2**30:.1f} GiB but this machine "
+                                             f"has {have / 2**30:.1f} GiB: use at most ~{max_pixels:,} pixels "
+                                             "(or a smaller render.batch_rays)")
         film = Film(W, H)
         done_before = None
         if resume is not None:
