@@ -157,3 +157,12 @@ def test_a_render_too_large_for_memory_is_refused_before_allocating():
     with pytest.raises(SceneError) as err:
         Renderer(scene).render()
     assert err.value.field == "camera.width" and "GiB" in str(err.value)
+
+
+def test_torrance_sparrow_with_roughness_zero_renders_exactly_like_the_mirror():
+    from engine.materials.smooth_limit import MirrorWithDiffuse
+    scene = peer_scene("fresnel_sphere", 2, res=24)
+    mirror = Renderer(scene).render().stokes()
+    scene.materials = {k: (MirrorWithDiffuse(m.n, m.k) if m.name == "conductor" else m)
+                       for k, m in scene.materials.items()}
+    np.testing.assert_array_equal(Renderer(scene).render().stokes(), mirror)

@@ -612,3 +612,28 @@ def test_diffuse_part_is_a_pure_depolariser():
         diff = np.array(mueller_at(both, *geometry, 550.0, "sp")["brdf"]) - \
             np.array(mueller_at(facet, *geometry, 550.0, "sp")["brdf"])
         np.testing.assert_allclose(diff, np.diag([0.6 / np.pi, 0, 0, 0]), atol=1e-12)
+
+
+def test_roughness_zero_is_the_smooth_limit():
+    """m = 0 is the Fresnel mirror (plus the Lambertian part), not an error (robustness issue)."""
+    for params in ({"n": 0.47, "k": 2.4}, {"metal": "Au"}):
+        model = make_model("torrance_sparrow", {**params, "m": 0})
+        mirror = make_model("fresnel", params)
+        for ti in (0.0, 30.0, 89.99):
+            a = mueller_at(model, ti, ti, 0.0, 550.0, "sp")
+            b = mueller_at(mirror, ti, ti, 0.0, 550.0, "sp")
+            np.testing.assert_allclose(a["delta"], b["delta"], atol=1e-15)
+            assert np.all(np.array(a["brdf"]) == 0)
+    with_diffuse = make_model("torrance_sparrow", {"n": 1.5, "m": 0, "diffuse_albedo": 0.5, "diffuse_weight": 1})
+    out = mueller_at(with_diffuse, 30, 50, 100, 550.0, "sp")
+    np.testing.assert_allclose(out["brdf"], np.diag([0.5 / np.pi, 0, 0, 0]), atol=1e-15)
+    # Sampling the mixture: weights average to the directional albedo F(θ_o) + ρ (energy bookkeeping).
+    N = 200_000
+    rng = np.random.default_rng(3)
+    s = with_diffuse.sample(point(tile(sph(40.0, 0.0), N)), rng.random(N), rng.random((2, N)))
+    total = s.weight.matrix()[0, 0, 0].mean()
+    from engine.polarisation.fresnel import fresnel_reflectance
+    expected = fresnel_reflectance(np.cos(np.radians(40.0)), 1.5) + 0.5
+    assert abs(total - expected) <= 1e-9 + 5 * s.weight.matrix()[0, 0, 0].std() / np.sqrt(N)
+    with pytest.raises(Exception):
+        make_model("torrance_sparrow", {"n": 1.5, "m": 5e-5})

@@ -12,6 +12,7 @@ import math
 from .conductor import SmoothConductor
 from .lambert import Lambert
 from .htsg import HTSG
+from .smooth_limit import MirrorWithDiffuse
 from .torrance_sparrow import TorranceSparrow
 from .weidlich_wilkie import Coat, WeidlichWilkie
 from ..scene.errors import SceneError
@@ -27,7 +28,7 @@ MODEL_PARAMETERS = {
     "torrance_sparrow": {"n": (None, "real part of the complex index, > 0 (or metal=NAME)"),
                          "k": (0.0, "imaginary part κ ≥ 0"),
                          "metal": (None, "named measured metal instead of n, k"),
-                         "m": (None, "Beckmann rms slope m ≥ 1e-4 (= Mitsuba α, SCATMECH s)"),
+                         "m": (None, "Beckmann rms slope: 0 (smooth limit: Fresnel mirror) or ≥ 1e-4 (= Mitsuba α, SCATMECH s)"),
                          "shadowing": ("ts", "ts (V-cavity) | smith | smith_rational (Mitsuba) | none"),
                          "diffuse_albedo": (0.0, "albedo of the added Lambertian part, [0, 1]"),
                          "diffuse_weight": (0.0, "weight d of the Lambertian part, ≥ 0"),
@@ -98,7 +99,14 @@ def make_model(name: str, params: dict, field: str = "param"):
         raise SceneError(f"{field}.shadowing", f"must be one of ts, smith, smith_rational, none, got {shadowing!r}")
     opt = lambda key, lo, hi, default: _float(params, key, field, lo, hi=hi) if key in params else default  # noqa: E731
     albedo = opt("diffuse_albedo", 0.0, 1.0, 0.0)
-    return TorranceSparrow(n, k, _float(params, "m", field, 1e-4, hi=100.0), shadowing=shadowing, exterior_n=ext,
+    m = _float(params, "m", field, 0.0, hi=100.0)
+    if 0 < m < 1e-4:
+        raise SceneError(f"{field}.m", f"must be 0 (the smooth limit) or in [0.0001, 100], got {m:g}")
+    if m == 0:
+        return MirrorWithDiffuse(n, k, exterior_n=ext, diffuse_albedo=ConstantSpectrum(albedo),
+                                 diffuse_weight=opt("diffuse_weight", 0.0, math.inf, 0.0),
+                                 specular_weight=opt("specular_weight", 0.0, math.inf, 1.0))
+    return TorranceSparrow(n, k, m, shadowing=shadowing, exterior_n=ext,
                            diffuse_albedo=ConstantSpectrum(albedo), diffuse_weight=opt("diffuse_weight", 0.0,
                                                                                          math.inf, 0.0),
                            specular_weight=opt("specular_weight", 0.0, math.inf, 1.0))

@@ -26,6 +26,7 @@ from ..materials.dielectric import SmoothDielectric
 from ..materials.filter_sheet import FilterSheet
 from ..materials.htsg import HTSG
 from ..materials.lambert import Lambert
+from ..materials.smooth_limit import MirrorWithDiffuse
 from ..materials.torrance_sparrow import TorranceSparrow
 from ..materials.weidlich_wilkie import Coat, WeidlichWilkie
 from .description import (Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
@@ -215,8 +216,19 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0):
                                         "diffuse_weight", "specular_weight"})
         n, k = _complex_index(d, field)
         shadowing = choice(d.get("shadowing", "ts"), f"{field}.shadowing", ("ts", "smith", "smith_rational", "none"))
+        m = number(_require(d, "m", field), f"{field}.m", 0, 100.0)
+        if 0 < m < 1e-4:
+            raise SceneError(f"{field}.m", f"must be 0 (the smooth limit) or in [0.0001, 100], got {m:g}")
+        if m == 0:   # the smooth limit: a Fresnel mirror (plus the Lambertian part)
+            return MirrorWithDiffuse(
+                n, k, exterior_n=number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True),
+                diffuse_albedo=parse_spectrum(d.get("diffuse_albedo", 0.0), f"{field}.diffuse_albedo",
+                                              kind="reflectance"),
+                diffuse_weight=number(d.get("diffuse_weight", 1.0 if "diffuse_albedo" in d else 0.0),
+                                      f"{field}.diffuse_weight", 0),
+                specular_weight=number(d.get("specular_weight", 1.0), f"{field}.specular_weight", 0))
         return TorranceSparrow(
-            n, k, number(_require(d, "m", field), f"{field}.m", 1e-4, 100.0), shadowing=shadowing,
+            n, k, m, shadowing=shadowing,
             exterior_n=number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True),
             diffuse_albedo=parse_spectrum(d.get("diffuse_albedo", 0.0), f"{field}.diffuse_albedo", kind="reflectance"),
             diffuse_weight=number(d.get("diffuse_weight", 1.0 if "diffuse_albedo" in d else 0.0),

@@ -95,13 +95,13 @@ def _conductor(n_rgb, k_rgb, m, warnings, mat, diffuse=None):
 
 
 def _torrance_sparrow(n, k, m, mat, shadowing="ts", diffuse=None):
-    try:
-        from ...engine.materials.torrance_sparrow import TorranceSparrow
-    except ImportError:
-        raise SceneError(f"material {mat!r}", "Torrance–Sparrow is not available in this engine build") from None
+    from ...engine.materials.smooth_limit import MirrorWithDiffuse
+    from ...engine.materials.torrance_sparrow import M_MIN, TorranceSparrow
     kwargs = {}
     if diffuse is not None and max(diffuse) > 0:
         kwargs = {"diffuse_albedo": _rgb_spectrum(diffuse), "diffuse_weight": 1.0}
+    if m < M_MIN:   # roughness 0: the smooth limit (Fresnel mirror + Lambertian part)
+        return MirrorWithDiffuse(n, k, **kwargs)
     return TorranceSparrow(n, k, m, shadowing=shadowing, **kwargs)
 
 
@@ -149,7 +149,7 @@ def _polar_node_bsdf(node, mat, warnings, depth):
     if model == "TORRANCE_SPARROW":
         n, k = _metal_nk(node, r)
         diffuse = r.rgb("Diffuse", 0.0, 1.0)
-        return _torrance_sparrow(n, k, r.float("Roughness", 1e-4, 10.0), mat,
+        return _torrance_sparrow(n, k, r.float("Roughness", 0.0, 10.0), mat,
                                  shadowing="smith" if node.shadowing == "SMITH" else "ts",
                                  diffuse=diffuse if max(diffuse) > 0 else None)
     if model == "HTSG":

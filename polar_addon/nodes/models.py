@@ -57,7 +57,7 @@ MODEL_SOCKETS = {
     "DIELECTRIC": [_IOR],
     "BLACK_GLASS": [_IOR],
     "TORRANCE_SPARROW": [_N, _K,
-                         ("Roughness", "FLOAT", 0.1, 1e-4, 5.0, "Beckmann rms slope m (Mitsuba's α)"),
+                         ("Roughness", "FLOAT", 0.1, 0.0, 5.0, "Beckmann rms slope m (Mitsuba's α); 0 = smooth mirror"),
                          ("Diffuse", "COLOR", (0.0, 0.0, 0.0), 0.0, 1.0,
                           "Albedo of an added Lambertian (depolarising) part")],
     "HTSG": [("n", "FLOAT", 0.88, 0.01, 20.0, "Real part of the complex index"),

@@ -1,0 +1,78 @@
+"""The smooth limit (roughness m = 0) of Torrance–Sparrow: a Fresnel mirror plus a Lambertian part.
+
+As m → 0 the facet lobe tends to the Dirac mirror s·M_F(θ_i) (physics.md §3, Chapter 3 "limit"), so
+roughness 0 is not an error but this model: a Dirac lobe with weight s·M_F(cosθ_o) in the
+plane-of-incidence frames and the depolariser d·(ρ/π)·diag(1, 0, 0, 0).  Sampling picks the mirror
+with probability P = s·F̄/(s·F̄ + d·ρ̄) (F̄, ρ̄: means over the path's wavelengths), otherwise a
+cosine-weighted direction; the weights are divided by the chosen probability.  One-sided.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import BSDF, BSDFSample, depolarising_value
+from .conductor import mirror_reflection
+from .sampling import cosine_hemisphere, local_to_world
+from ..spectral import as_spectrum
+from ..vec3 import dot
+
+
+class MirrorWithDiffuse(BSDF):
+    name = "torrance_sparrow"      # the m = 0 member of the Torrance–Sparrow family
+
+    def __init__(self, n, k, exterior_n=1.0, diffuse_albedo=0.0, specular_weight=1.0, diffuse_weight=0.0):
+        self.n, self.k = as_spectrum(n, "n"), as_spectrum(k, "k")
+        self.exterior_n = float(exterior_n)
+        self.albedo = as_spectrum(diffuse_albedo, "diffuse_albedo")
+        self.s, self.d = float(specular_weight), float(diffuse_weight)
+        self.m = 0.0
+        self.has_diffuse = self.d > 0
+        self.delta_only = not self.has_diffuse
+        self.creates_circular = not (self.k.is_constant and float(self.k.eval([550.0])[0]) == 0.0
+                                     and self.n.is_constant and float(self.n.eval([550.0])[0]) >= self.exterior_n)
+        self.wavelength_independent = self.n.is_constant and self.k.is_constant and self.albedo.is_constant
+
+    def _eta(self, sp):
+        return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
+
+    def _diffuse(self, sp):
+        return sp.spectrum(self.albedo) * self.d
+
+    def _p_mirror(self, sp, mirror):
+        spec = self.s * mirror.A.mean(axis=0)
+        diff = self._diffuse(sp).mean(axis=0) if self.has_diffuse else np.zeros(sp.n)
+        total = spec + diff
+        return np.where(total > 0, spec / np.where(total > 0, total, 1.0), 1.0)
+
+    def delta_reflection(self, sp):
+        return mirror_reflection(sp, self._eta(sp))[1].scaled(self.s)
+
+    def eval(self, sp, wi):
+        ok = (dot(sp.n_s, wi) > 0) & (sp.cos_o > 0)
+        return depolarising_value(self._diffuse(sp) * (ok / np.pi)[None, :], sp.n)
+
+    def pdf(self, sp, wi):
+        if not self.has_diffuse:
+            return np.zeros(sp.n)
+        p = self._p_mirror(sp, mirror_reflection(sp, self._eta(sp))[1])
+        c = dot(sp.n_s, wi)
+        return np.where((c > 0) & (sp.cos_o > 0), (1.0 - p) * c / np.pi, 0.0)
+
+    def sample(self, sp, u_lobe, u_dir) -> BSDFSample:
+        wi_m, mirror, valid_m = mirror_reflection(sp, self._eta(sp))
+        p = self._p_mirror(sp, mirror)
+        pick = u_lobe < p
+        local = cosine_hemisphere(u_dir)
+        wi_d = local_to_world(local, sp.n_s)
+        wi = np.where(pick[None, :], wi_m, wi_d)
+        w_m = mirror.scaled((self.s / np.where(p > 0, p, 1.0))[None, :])
+        diff_ok = (~pick) & (sp.cos_o > 0) & (local[2] > 0)
+        w_d = self._diffuse(sp) * (diff_ok / np.where(p < 1, 1.0 - p, 1.0))[None, :]
+        sel = pick[None, :]
+        value = type(mirror)("abcs", w_m.x_in, w_m.x_out, np.where(sel, w_m.A, 0.0), np.where(sel, w_m.B, 0.0),
+                             np.where(sel, w_m.C, 0.0), np.where(sel, w_m.S, 0.0),
+                             depol=np.where(sel, 0.0, w_d))
+        pdf = np.where(pick, 0.0, (1.0 - p) * np.maximum(local[2], 0.0) / np.pi)
+        return BSDFSample(wi=wi, weight=value, pdf=pdf, is_delta=pick, valid=np.where(pick, valid_m, diff_ok),
+                          eta_sq=np.ones(sp.n))
