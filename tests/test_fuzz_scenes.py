@@ -101,3 +101,12 @@ def test_multiple_mutations_fail_cleanly_or_render_finite_pixels(mutations):
 def test_base_scene_renders():
     result = Renderer(parse_scene(BASE)).render()
     assert result.stokes()[0].max() > 0 and math.isfinite(result.stokes().sum())
+
+
+def test_regressions_found_by_fuzzing():
+    from engine.scene.errors import SceneError
+    import pytest
+    for path, value in ((("objects", 3, "faces", 0, 2), 1e300), (("objects", 3, "faces", 0, 2), 2 ** 70),
+                        (("objects", 3, "faces", 0, 2), 1.5), (("objects", 3, "vertices", 1, 0), float("nan"))):
+        with pytest.raises(SceneError):
+            parse_scene(mutate(BASE, path, value))

@@ -37,6 +37,8 @@ from .shapes import icosphere, quad, transform_matrix, transform_mesh
 from ..spectral import ConstantSpectrum, RGBIlluminantSpectrum, named_ior, parse_spectrum
 
 FORMAT = "polar-scene/1"
+#: Largest coordinate accepted: Embree works in float32 (max ~3.4e38) and rays need headroom.
+MAX_COORDINATE = 1e30
 
 
 # --------------------------------------------------------------------------- field readers
@@ -345,6 +347,9 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
         raise SceneError(field, f"object {name!r} has no triangles")
     if not np.all(np.isfinite(data.vertices)):
         raise SceneError(field, f"object {name!r} has non-finite vertex coordinates")
+    if np.abs(data.vertices).max() > MAX_COORDINATE:
+        raise SceneError(field, f"object {name!r} has coordinates beyond ±{MAX_COORDINATE:g} (ray casting is "
+                                "single precision)")
 
     # Materials: one for the whole object, or a list indexed per face.
     if "materials" in d:
@@ -363,7 +368,7 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
         ids = d.get("material_ids") if shape == "triangles" else data.face_groups
         if ids is None:
             ids = np.zeros(n_faces, dtype=np.int64)
-        ids = np.asarray(ids)
+        ids = _index_array(ids, f"{field}.material_ids", "one material index per triangle")
         if ids.shape != (n_faces,) or (ids.size and (ids.min() < 0 or ids.max() >= len(mat_list))):
             raise SceneError(f"{field}.material_ids",
                              f"must hold one index in [0, {len(mat_list) - 1}] per triangle ({n_faces})")
@@ -371,7 +376,7 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
         mat_list = [_require(d, "material", field)]
         ids = np.zeros(n_faces, dtype=np.int64)
     for i, m in enumerate(mat_list):
-        if m not in material_names:
+        if not isinstance(m, str) or m not in material_names:
             f = f"{field}.material" if "materials" not in d else f"{field}.materials[{i}]"
             raise SceneError(f, f"unknown material {m!r} (defined: {', '.join(sorted(material_names)) or 'none'})")
 
@@ -381,13 +386,27 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
                 emission=emission)
 
 
+def _float_array(value, field, what):
+    try:
+        return np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError):
+        raise SceneError(field, f"must be {what}") from None
+
+
+def _index_array(value, field, what):
+    """Whole numbers only (no silent truncation of 2.5 to 2)."""
+    a = _float_array(value, field, what)
+    if a.size and (not np.all(np.isfinite(a)) or np.any(a != np.round(a)) or np.abs(a).max() > 2 ** 31):
+        raise SceneError(field, f"must be {what} (whole numbers)")
+    return a.astype(np.int64)
+
+
 def _parse_triangles(d, field):
     from .meshio import MeshData
-    try:
-        v = np.asarray(_require(d, "vertices", field), dtype=np.float64)
-        f = np.asarray(_require(d, "faces", field), dtype=np.int64)
-    except (TypeError, ValueError):
-        raise SceneError(field, "vertices must be a list of [x, y, z] and faces a list of [i, j, k]") from None
+    v = _float_array(_require(d, "vertices", field), f"{field}.vertices", "a list of [x, y, z] points")
+    f = _index_array(_require(d, "faces", field), f"{field}.faces", "a list of [i, j, k] vertex index triples")
+    if not np.all(np.isfinite(v)):
+        raise SceneError(f"{field}.vertices", "must be finite numbers")
     if v.ndim != 2 or v.shape[1] != 3:
         raise SceneError(f"{field}.vertices", "must be a list of [x, y, z] points")
     if f.ndim != 2 or f.shape[1] != 3:
@@ -396,7 +415,7 @@ def _parse_triangles(d, field):
         raise SceneError(f"{field}.faces", f"vertex indices must be in [0, {len(v) - 1}]")
     normals = None
     if d.get("normals") is not None:
-        normals = np.asarray(d["normals"], dtype=np.float64)
+        normals = _float_array(d["normals"], f"{field}.normals", "one [nx, ny, nz] per vertex")
         if normals.shape != v.shape:
             raise SceneError(f"{field}.normals", "must hold one [nx, ny, nz] per vertex")
         lengths = np.linalg.norm(normals, axis=1)

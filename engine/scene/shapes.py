@@ -208,8 +208,10 @@ def transform_mesh(mesh: MeshData, matrix, field: str = "") -> MeshData:
         raise SceneError(field, "transform matrix must be affine "
                                 f"(last row 0 0 0 1), got last row {m[3].tolist()}")
     a = m[:3, :3]
-    det = float(np.linalg.det(a))
     scale = float(np.abs(a).max())
+    if scale > 1e30:
+        raise SceneError(field, f"transform scales by {scale:g}: at most 1e30 (ray casting is single precision)")
+    det = float(np.linalg.det(a))
     if scale == 0 or abs(det) <= 1e-12 * scale ** 3 or np.linalg.cond(a) > 1e12:
         raise SceneError(field, f"transform matrix is singular (determinant {det:g})")
     verts = mesh.vertices @ a.T + m[:3, 3]
