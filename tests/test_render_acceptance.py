@@ -115,18 +115,35 @@ def test_polarisation_off_gives_the_same_s0_where_paths_bounce_once():
 
 
 def test_cancel_keeps_finished_samples():
-    scene = peer_scene("plane_brewster", 4, res=64)
+    scene = peer_scene("plane_brewster", 16, res=64)
     scene.settings.batch_rays = 64 * 64           # one pass per work unit
+    state = {"progress": 0}
+
+    def stop():
+        return state["progress"] >= 1              # cancel as soon as one unit is finished
+
+    result = Renderer(scene).render(should_stop=stop, progress=lambda f, s: state.__setitem__("progress",
+                                                                                          state["progress"] + 1))
+    assert result.cancelled
+    spp = result.film.spp_image()
+    assert 1 <= spp.min() == spp.max() < 16          # whole passes only, the in-flight ones discarded
+    assert np.all(np.isfinite(result.stokes())) and result.stokes()[0].min() > 0
+
+
+def test_cancel_aborts_the_units_in_flight():
+    # The first poll lets the first unit start, every later one asks to stop: the unit in flight (a
+    # large one, 2 × 65536 paths) is abandoned between two bounces instead of being finished.
+    scene = peer_scene("cornell_lambert", 64, res=64)
+    scene.settings.batch_rays = 1 << 17
+    scene.settings.threads = 1
     calls = {"n": 0}
 
     def stop():
         calls["n"] += 1
-        return calls["n"] > 2                       # allow two units, then cancel
+        return calls["n"] > 1
 
     result = Renderer(scene).render(should_stop=stop)
-    assert result.cancelled
-    assert np.all(result.film.spp_image() == 2)
-    assert np.all(np.isfinite(result.stokes())) and result.stokes()[0].min() > 0
+    assert result.cancelled and result.film.spp_image().max() == 0 and calls["n"] >= 2
 
 
 def test_window_render_traces_only_the_window_and_matches_the_full_render():

@@ -160,8 +160,12 @@ class PathTracer:
         lam, pdf = sample_wavelengths(u, self.n_lambda)
         return lam, rgb_weights(lam, pdf)
 
-    def trace(self, pixel: np.ndarray, sample: np.ndarray):
-        """Trace one path per (pixel, sample) pair; returns (stokes_rgb (4, 3, N), stats dict)."""
+    def trace(self, pixel: np.ndarray, sample: np.ndarray, abort=None):
+        """Trace one path per (pixel, sample) pair; returns (stokes_rgb (4, 3, N), stats dict).
+
+        ``abort`` (a threading.Event) is checked between bounces; if it is set the batch is
+        abandoned and None is returned.
+        """
         st = self.settings
         P, n_total = self.P, pixel.shape[0]
         sampler = PathSampler(path_keys(st.seed, pixel, sample))
@@ -188,6 +192,8 @@ class PathTracer:
         compiled = self.scene
 
         for bounce in range(st.max_depth):
+            if abort is not None and abort.is_set():
+                return None
             n = path.shape[0]
             if n == 0:
                 break

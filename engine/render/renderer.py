@@ -15,7 +15,9 @@ import copy
 import os
 import time
 from collections import deque
+import threading
 from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FuturesTimeout
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -46,6 +48,8 @@ class RenderResult:
         return np.einsum("shwc,c->shw", self.stokes(), np.array([0.2126, 0.7152, 0.0722]))
 
 
+#: How often (seconds) the caller's stop request is polled while units are in flight.
+STOP_POLL_SECONDS = 0.05
 #: Bytes per pixel of the film (Stokes × RGB sums, luminance sums of squares, sample count).
 FILM_BYTES_PER_PIXEL = (4 * 3 + 4 + 1) * 8
 #: Bytes per path of a batch in flight (throughput, frames, rays, random keys, accumulators; measured
@@ -165,6 +169,8 @@ class Renderer:
         done = 0
         self._live_film = film
 
+        abort = threading.Event()
+
         def trace_unit(unit):
             r0, r1, p0, p1 = unit
             pix = unit_pixels(W, r0, r1, window)
@@ -173,28 +179,45 @@ class Renderer:
             if done_before is not None:
                 todo = sample >= done_before[pixel]
                 pixel, sample = pixel[todo], sample[todo]
-            values, s = tracer.trace(pixel, sample)
-            return pixel, values, s
+            traced = tracer.trace(pixel, sample, abort=abort)
+            return None if traced is None else (pixel, *traced)
 
         workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
         workers = max(1, min(workers, len(units)))
+
+        def stop_requested():
+            return should_stop is not None and should_stop()
+
         # Units are traced concurrently (Embree and large NumPy operations release the GIL) but
         # added to the film strictly in unit order, so the image does not depend on `threads`.
+        # The stop request is polled from this (the caller's) thread only — Blender's test_break
+        # must not be called from workers — and aborts units in flight between two bounces, so a
+        # cancel takes effect within a fraction of a second; aborted units are discarded whole.
         with ThreadPoolExecutor(max_workers=workers) as pool:
             pending = deque()
             next_unit = 0
-            while next_unit < len(units) or pending:
-                while next_unit < len(units) and len(pending) < workers:
-                    if should_stop is not None and should_stop():
+            while pending or (next_unit < len(units) and not cancelled):
+                while not cancelled and next_unit < len(units) and len(pending) < workers:
+                    if stop_requested():
                         cancelled = True
+                        abort.set()
                         break
                     pending.append(pool.submit(trace_unit, units[next_unit]))
                     next_unit += 1
-                if cancelled and not pending:
+                if not pending:
                     break
-                if cancelled:
-                    next_unit = len(units)   # finish what is in flight, start nothing new
-                pixel, values, s = pending.popleft().result()
+                while True:
+                    try:
+                        result = pending[0].result(timeout=STOP_POLL_SECONDS)
+                        break
+                    except FuturesTimeout:
+                        if not cancelled and stop_requested():
+                            cancelled = True
+                            abort.set()
+                pending.popleft()
+                if result is None:
+                    continue
+                pixel, values, s = result
                 film.add_samples(pixel, values)
                 for k in ("rays", "shadow_rays", "nonfinite"):
                     stats[k] += s[k]
