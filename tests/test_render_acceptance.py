@@ -183,3 +183,37 @@ def test_torrance_sparrow_with_roughness_zero_renders_exactly_like_the_mirror():
     scene.materials = {k: (MirrorWithDiffuse(m.n, m.k) if m.name == "conductor" else m)
                        for k, m in scene.materials.items()}
     np.testing.assert_array_equal(Renderer(scene).render().stokes(), mirror)
+
+
+def test_grazing_reflections_neither_self_intersect_nor_leak():
+    # A mirror floor seen at 88–89.7° incidence: every camera ray must reflect once into the sky
+    # (no black self-hit pixels) and see exactly the Fresnel reflectance of its angle; a second
+    # plane just below the floor must never be seen through it (no light leaks).
+    from engine.polarisation.fresnel import fresnel_reflectance
+    from engine.scene.loader import parse_scene
+    doc = {"format": "polar-scene/1",
+           "camera": {"origin": [0, -200, 2.0], "target": [0, 0, 0], "up": [0, 0, 1], "fov_deg": 1.0,
+                      "width": 32, "height": 32},
+           "render": {"spp": 4, "spectral": "mono"},
+           "materials": {"mirror": {"type": "conductor", "n": 0.47, "k": 2.4},
+                         "red": {"type": "lambert", "albedo": 1.0}},
+           "objects": [{"name": "floor", "shape": "quad", "material": "mirror",
+                        "vertices": [[-500, -500, 0], [500, -500, 0], [500, 500, 0], [-500, 500, 0]]},
+                       {"name": "under", "shape": "quad", "material": "red",
+                        "vertices": [[-500, -500, -1e-3], [500, -500, -1e-3], [500, 500, -1e-3], [-500, 500, -1e-3]],
+                        "emission": {"radiance": 100.0}}],
+           "lights": [{"type": "environment", "radiance": 1.0}]}
+    scene = parse_scene(doc)
+    result = Renderer(scene).render()
+    S0 = result.stokes_luminance()[0]
+    cam = Renderer(scene).camera
+    rows = np.arange(32)
+    # cosθ of the central column's rays (the incidence angle varies only with the row here)
+    v = (1 - 2 * (rows + 0.5) / 32) * cam.ty
+    d = cam.forward[:, None] + v[None, :] * cam.up[:, None]
+    d /= np.linalg.norm(d, axis=0)
+    expected = fresnel_reflectance(-d[2], 0.47 + 2.4j)
+    hit_floor = d[2] < 0
+    assert hit_floor.sum() > 20
+    np.testing.assert_allclose(S0[hit_floor, 16], expected[hit_floor], rtol=2e-2)
+    assert S0.max() < 1.5                         # the emitter under the floor never shows through
