@@ -217,3 +217,23 @@ def test_grazing_reflections_neither_self_intersect_nor_leak():
     assert hit_floor.sum() > 20
     np.testing.assert_allclose(S0[hit_floor, 16], expected[hit_floor], rtol=2e-2)
     assert S0.max() < 1.5                         # the emitter under the floor never shows through
+
+
+def test_non_finite_samples_are_dropped_counted_and_never_reach_pixels():
+    from engine.materials.lambert import Lambert
+
+    class Poisoned(Lambert):
+        """A Lambertian that returns NaN for a fraction of its samples (a stand-in for any numerical bug)."""
+
+        def sample(self, sp, u_lobe, u_dir):
+            bs = super().sample(sp, u_lobe, u_dir)
+            bad = u_lobe < 0.1
+            bs.weight.A = np.where(bad[None, :], np.nan, bs.weight.A)
+            return bs
+
+    scene = peer_scene("cornell_lambert", 2, res=24)
+    scene.materials["white"] = Poisoned(scene.materials["white"].albedo)
+    result = Renderer(scene).render()
+    assert result.stats["nonfinite"] > 0
+    assert np.all(np.isfinite(result.stokes()))
+    assert np.all(result.film.spp_image() == 2)          # dropped samples still count (as zero)

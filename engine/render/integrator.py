@@ -186,7 +186,7 @@ class PathTracer:
         prev_delta = np.ones(n_total, bool)
         prev_pdf = np.zeros(n_total)
         eta_sq = np.ones(n_total)
-        stats = {"rays": 0, "shadow_rays": 0}
+        stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0}
         light_set = self.lights
         env = light_set.environment
         compiled = self.scene
@@ -284,7 +284,9 @@ class PathTracer:
                 survive = u_rr < q
                 newT = newT / np.where(survive, q, 1.0)
                 valid &= survive
-            valid &= np.isfinite(newT).all(axis=(0, 1, 2)) & (np.abs(newT[0, 0]).max(axis=0) > 0)
+            finite_T = np.isfinite(newT).all(axis=(0, 1, 2))
+            stats["nonfinite"] += int((valid & ~finite_T).sum())   # ended here, their light so far kept
+            valid &= finite_T & (np.abs(newT[0, 0]).max(axis=0) > 0)
 
             path, T, x_T, d, lam, lam_m, eta_sq, prev_delta, prev_pdf, p, n_g, sampler.keys = keep_paths(
                 valid, path, newT, new_xT, new_d, lam, lam_m, eta_sq, is_delta, pdf_next, p, n_g, sampler.keys)
@@ -295,7 +297,7 @@ class PathTracer:
         out = np.zeros((4, 3, n_total))
         out[:P] = rgb
         finite = np.isfinite(out).all(axis=(0, 1))
-        stats["nonfinite"] = int((~finite).sum())
+        stats["nonfinite"] += int((~finite).sum())
         out[:, :, ~finite] = 0.0
         return out, stats
 
