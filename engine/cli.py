@@ -90,7 +90,19 @@ def _render(args) -> int:
     previous = signal.signal(signal.SIGINT, on_interrupt)
     bar = None if args.quiet else ProgressBar("rendering")
     try:
-        result = renderer.render(st, progress=bar, should_stop=lambda: stop["requested"], resume=resume_film)
+        if args.scheduler:
+            if resume_film is not None:
+                raise SceneError("--scheduler", "cannot be combined with --resume yet")
+            from .render.distributed import render_distributed
+            try:
+                result = render_distributed(scene, args.scheduler, st, progress=bar,
+                                            should_stop=lambda: stop["requested"])
+            except OSError as e:
+                raise SceneError("--scheduler", f"cannot reach the Dask scheduler at {args.scheduler}: {e}") from None
+            except RuntimeError as e:
+                raise SceneError("--scheduler", str(e)) from None
+        else:
+            result = renderer.render(st, progress=bar, should_stop=lambda: stop["requested"], resume=resume_film)
     finally:
         signal.signal(signal.SIGINT, previous)
         if bar is not None:
@@ -253,6 +265,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")
     r.add_argument("--stderr", action="store_true", help="also write per-pixel standard errors")
     r.add_argument("--resume", metavar="EXR", help="continue the (interrupted) render stored in this EXR")
+    r.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask cluster, e.g. tcp://host:8786 "
+                                                          "(same image as a local render)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=_render)
 

@@ -1,0 +1,120 @@
+"""Rendering on a Dask cluster: the same work units as a local render, traced on Dask workers.
+
+``render_distributed(scene, address)`` sends the scene to every worker once, submits one task per
+work unit (a band of rows × a range of sample passes, engine.render.renderer.work_units) and adds
+the returned per-unit sums to the film in unit order.  Because random numbers are a stateless
+function of (seed, pixel, sample, dimension) and the sums are added in the same order, the image
+is bit-for-bit the single-machine render of the same settings — however many workers there are,
+and also when a worker dies: Dask re-runs its unfinished tasks elsewhere, and a re-run unit
+returns exactly the same numbers.  Workers keep the compiled scene (BVH) between tasks.
+
+Needs ``pip install "dask[distributed]"`` on the client and the workers, and the engine importable
+on the workers (same version).
+"""
+
+from __future__ import annotations
+
+import copy
+import hashlib
+import os
+import pickle
+import time
+
+import numpy as np
+
+from .film import Film
+from .renderer import RenderResult, Renderer, unit_pixels, work_units
+from .effects import resolve_transport
+
+#: Per-worker cache of compiled scenes (key → Renderer); a worker process renders one scene at a time.
+_COMPILED: dict = {}
+
+
+def _renderer_for(key, scene):
+    renderer = _COMPILED.get(key)
+    if renderer is None:
+        _COMPILED.clear()
+        renderer = _COMPILED[key] = Renderer(scene)
+    return renderer
+
+
+def _render_unit(key, scene, settings, unit, window, width):
+    """Trace one work unit on a worker; returns (first pixel, sums (4, 3, n), sumsq (4, n), counts (n,), stats)."""
+    from .integrator import PathTracer
+    renderer = _renderer_for(key, scene)
+    r0, r1, p0, p1 = unit
+    pix = unit_pixels(width, r0, r1, window)
+    pixel = np.tile(pix, p1 - p0)
+    sample = np.repeat(np.arange(p0, p1, dtype=np.int64), pix.size)
+    tracer = PathTracer(renderer.compiled, renderer.lights, renderer.camera, settings)
+    values, stats = tracer.trace(pixel, sample)
+    lo, hi = int(pix.min()), int(pix.max()) + 1
+    part = Film(hi - lo, 1)
+    part.add_samples(pixel - lo, values)
+    return lo, part.sums, part.sumsq_y, part.count, stats
+
+
+def scene_key(scene) -> str:
+    return hashlib.sha1(pickle.dumps(scene, protocol=pickle.HIGHEST_PROTOCOL)).hexdigest()
+
+
+def render_distributed(scene, address, settings=None, progress=None, should_stop=None, window=None,
+                       client=None) -> RenderResult:
+    """Render ``scene`` on the Dask scheduler at ``address`` (e.g. "tcp://host:8786").
+
+    Same arguments and result as ``Renderer.render``; ``client`` may be an existing
+    ``distributed.Client`` (then ``address`` is ignored).
+    """
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise RuntimeError("distributed rendering needs Dask: pip install \"dask[distributed]\"") from None
+    own_client = client is None
+    if client is None:
+        # How long to try to reach the scheduler (seconds; POLAR_DASK_TIMEOUT overrides).
+        client = Client(address, timeout=float(os.environ.get("POLAR_DASK_TIMEOUT", "20")))
+    try:
+        local = Renderer(scene)          # validates and resolves the settings exactly as a local render
+        st = copy.copy(settings or scene.settings)
+        used = {local.compiled.material_names[i] for i in np.unique(local.compiled.tri_material)}
+        st.polarisation, reason = resolve_transport(st.polarisation, scene.materials, used)
+        W, H = scene.camera.width, scene.camera.height
+        units = list(work_units(W, H, st.spp, st.batch_rays, window=window))
+        key = scene_key(scene)
+        scene_future = client.scatter(scene, broadcast=True)
+        futures = [client.submit(_render_unit, key, scene_future, st, unit, window, W, pure=True,
+                                 key=f"polar-{key[:12]}-{st.seed}-{i}-{unit}") for i, unit in enumerate(units)]
+        film = Film(W, H)
+        stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0, "transport": st.polarisation,
+                 "transport_reason": reason, "spectral": st.spectral, "workers": len(client.scheduler_info()["workers"])}
+        t0 = time.perf_counter()
+        index = {f.key: i for i, f in enumerate(futures)}
+        results = {}
+        next_to_add = 0
+        cancelled = False
+        for future in as_completed(futures):
+            results[index[future.key]] = future.result()
+            # Add in unit order so that the sums (and so the image) do not depend on timing.
+            while next_to_add in results:
+                lo, sums, sumsq, count, s = results.pop(next_to_add)
+                n = count.shape[0]
+                film.sums[:, :, lo:lo + n] += sums
+                film.sumsq_y[:, lo:lo + n] += sumsq
+                film.count[lo:lo + n] += count
+                for k in ("rays", "shadow_rays", "nonfinite"):
+                    stats[k] += s[k]
+                stats["samples"] += int(count.sum())
+                next_to_add += 1
+            stats["seconds"] = time.perf_counter() - t0
+            if progress is not None:
+                progress(next_to_add / len(units), stats)
+            if should_stop is not None and should_stop():
+                cancelled = True
+                for f in futures:
+                    f.cancel()
+                break
+        stats["seconds"] = time.perf_counter() - t0
+        return RenderResult(film=film, settings=st, stats=stats, cancelled=cancelled)
+    finally:
+        if own_client:
+            client.close()
