@@ -2,12 +2,18 @@
 
     python examples/batch_render.py FILE.blend [--frames 1-10 | --frame 3] [--output DIR]
                                     [--samples N] [--seed S] [--polarisation auto|full|linear|off]
+                                    [--scheduler tcp://HOST:8786 [--distribute-frames]]
 
 Uses the ``bpy`` module (pip install bpy==5.0.1) and Polar from this checkout (or, with
 ``--installed``, the extension installed in Blender's user folder).  Writes one multilayer EXR per
 frame (``DIR/<name>_0001.exr`` …) with the view layer's passes: Combined, S0, S1, S2, S3 (colour)
 and DoP, DoLP, AoLP, DoCP (value).  A render error (missing camera, bad material input, …) is
 printed and the exit status is 1; finished frames are kept.
+
+With ``--scheduler`` every frame's samples are traced on the Dask cluster (the image equals a local
+render); with ``--distribute-frames`` as well, whole frames are farmed out instead: each frame runs
+this script on a worker (the workers need bpy, this checkout and the .blend at the same paths, e.g.
+on a shared file system).
 """
 
 import argparse
@@ -34,6 +40,39 @@ def enable_polar(installed: bool):
     module.register()
 
 
+def _render_one_frame(script, blend, frame, output, extra):
+    """Run on a Dask worker: this script for one frame, in its own process (bpy state stays clean)."""
+    import subprocess
+    proc = subprocess.run([sys.executable, script, blend, "--frame", str(frame), "--output", output, *extra],
+                          capture_output=True, text=True)
+    return frame, proc.returncode, proc.stdout.strip().splitlines()[-1:] or proc.stderr.strip().splitlines()[-1:]
+
+
+def distribute_frames(args):
+    """Frame-level distribution: one task per frame on the Dask cluster; returns the exit status."""
+    from distributed import Client, as_completed
+    frames = parse_frames(args.frames) if args.frames else [args.frame or 1]
+    extra = []
+    for name in ("samples", "seed", "polarisation"):
+        if getattr(args, name) is not None:
+            extra += [f"--{name}", str(getattr(args, name))]
+    client = Client(args.scheduler)
+    try:
+        futures = [client.submit(_render_one_frame, os.path.abspath(__file__), os.path.abspath(args.blend), f,
+                                 os.path.abspath(args.output), extra, pure=False) for f in frames]
+        status = 0
+        for future in as_completed(futures):
+            frame, code, last = future.result()
+            if code != 0:
+                print(f"error: frame {frame}: {' '.join(last)}", file=sys.stderr)
+                status = 1
+            else:
+                print(*last)
+        return status
+    finally:
+        client.close()
+
+
 def parse_frames(text):
     if "-" in text:
         a, b = text.split("-", 1)
@@ -51,12 +90,20 @@ def main(argv=None):
     ap.add_argument("--seed", type=int)
     ap.add_argument("--polarisation", choices=("auto", "full", "linear", "off"))
     ap.add_argument("--installed", action="store_true", help="use the installed extension")
+    ap.add_argument("--scheduler", help="Dask scheduler address: trace every frame's samples on the cluster")
+    ap.add_argument("--distribute-frames", action="store_true", help="with --scheduler: one frame per worker task")
     args = ap.parse_args(argv)
     if not os.path.exists(args.blend):
         print(f"error: {args.blend} does not exist", file=sys.stderr)
         return 2
 
+    if args.scheduler and args.distribute_frames:
+        return distribute_frames(args)
     enable_polar(args.installed)     # register before opening the file, so its engine setting resolves
+    if args.scheduler:
+        from importlib import import_module
+        pkg = "bl_ext.user_default.polar_render" if args.installed else "polar_render"
+        import_module(pkg + ".polar_addon.engine").distributed_scheduler["address"] = args.scheduler
     import bpy
     bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
     scene = bpy.context.scene

@@ -30,6 +30,8 @@ LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 DISPLAY_INTERVAL = 1.0
 #: Extra cancel hook for scripted use and tests (test_break() is always False headless).
 cancel_requested = {"value": False}
+#: Dask scheduler address for distributed final renders (set by examples/batch_render.py --scheduler).
+distributed_scheduler = {"address": None}
 
 
 def engine_settings(scene, preview=False) -> RenderSettings:
@@ -148,7 +150,12 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         def should_stop():
             return self.test_break() or cancel_requested["value"]
 
-        out = renderer.render(settings, progress=progress, should_stop=should_stop, window=window)
+        if distributed_scheduler["address"] and not self.is_preview:
+            from ..engine.render.distributed import render_distributed
+            out = render_distributed(engine_scene, distributed_scheduler["address"], settings, progress=progress,
+                                     should_stop=should_stop, window=window)
+        else:
+            out = renderer.render(settings, progress=progress, should_stop=should_stop, window=window)
         self._write_passes(result, out.stokes(), window, enabled, polariser)
         self.end_result(result)
         stats = out.stats

@@ -73,3 +73,31 @@ def test_thesis_demo_blend_builds_and_renders(tmp_path):
     models = {m.name: m.node_tree.nodes["Polarising BSDF"].model for m in bpy.data.materials
               if "Polarising BSDF" in m.node_tree.nodes}
     assert {"CONDUCTOR", "TORRANCE_SPARROW", "HTSG", "WEIDLICH_WILKIE", "BLACK_GLASS"} <= set(models.values())
+
+
+@pytest.fixture(scope="module")
+def dask_cluster():
+    distributed = pytest.importorskip("distributed")
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       silence_logs=40)
+    yield cluster
+    cluster.close()
+
+
+@pytest.mark.parametrize("mode", ["samples", "frames"])
+def test_batch_script_on_a_dask_cluster(tmp_path, dask_cluster, mode):
+    blend = str(tmp_path / "brewster.blend")
+    subprocess.run([sys.executable, "-c", MAKE_BLEND.format(repo=REPO), blend], check=True, cwd=REPO,
+                   capture_output=True)
+    local, remote = tmp_path / "local", tmp_path / "remote"
+    base = [sys.executable, os.path.join(REPO, "examples", "batch_render.py"), blend, "--frames", "1-2",
+            "--samples", "2"]
+    subprocess.run(base + ["--output", str(local)], cwd=REPO, check=True, capture_output=True)
+    extra = ["--scheduler", dask_cluster.scheduler_address] + (["--distribute-frames"] if mode == "frames" else [])
+    proc = subprocess.run(base + ["--output", str(remote)] + extra, cwd=REPO, capture_output=True, text=True)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    for name in ("brewster_0001.exr", "brewster_0002.exr"):
+        a = read_multilayer(str(local / name))
+        b = read_multilayer(str(remote / name))
+        np.testing.assert_array_equal(a["S0"], b["S0"])
+        np.testing.assert_array_equal(a["S1"], b["S1"])

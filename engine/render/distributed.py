@@ -54,6 +54,20 @@ def _render_unit(key, scene, settings, unit, window, width):
     return lo, part.sums, part.sumsq_y, part.count, stats
 
 
+def _share_enclosing_package(client):
+    """If the engine is a subpackage (Blender extension), make that package importable on the workers."""
+    engine_pkg = __name__.rsplit(".render.distributed", 1)[0]          # "engine" or "<pkg>.engine"
+    if "." not in engine_pkg:
+        return
+    import cloudpickle
+    from . import worker_package
+    top = engine_pkg.rsplit(".", 1)[0]
+    path = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    cloudpickle.register_pickle_by_value(worker_package)
+    client.register_plugin(worker_package.SchedulerPackageLoader(top, path), name=f"polar-package-scheduler-{top}")
+    client.register_plugin(worker_package.PackageLoader(top, path), name=f"polar-package-{top}")
+
+
 def scene_key(scene) -> str:
     return hashlib.sha1(pickle.dumps(scene, protocol=pickle.HIGHEST_PROTOCOL)).hexdigest()
 
@@ -74,6 +88,7 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
         # How long to try to reach the scheduler (seconds; POLAR_DASK_TIMEOUT overrides).
         client = Client(address, timeout=float(os.environ.get("POLAR_DASK_TIMEOUT", "20")))
     try:
+        _share_enclosing_package(client)
         local = Renderer(scene)          # validates and resolves the settings exactly as a local render
         st = copy.copy(settings or scene.settings)
         used = {local.compiled.material_names[i] for i in np.unique(local.compiled.tri_material)}
