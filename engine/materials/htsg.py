@@ -91,7 +91,7 @@ depend on λ).
 
 Sampling (λ-independent proposal, one direction for all wavelengths of a path):
 the mirror (Dirac) lobe is chosen with probability
-P_spec = ρ̄_s/(ρ̄_s + ρ̄_dd + ū), bars = means over the path's wavelengths,
+P_spec = min(ρ̄_s/(ρ̄_s + ρ̄_dd + ū), 0.9 if σ₀ > 0), bars = means over the path's wavelengths,
 ρ_s = F(θ_o)·S(θ_o)²·e^{−g_s}, the dd albedo estimated as
 ρ_dd ≈ F(θ_o)·S(θ_o)²·(1 − e^{−g_s}) (the incoherent share of the Kirchhoff
 reflectance; g_s = g(θ_o, θ_o)), ū = mean diffuse albedo.  Otherwise a
@@ -535,6 +535,8 @@ def log_series(ln_g, c, tol: float = 1e-10, stride: bool = True, gamma: float = 
 _LAMBDA_REF_UM = 0.55
 _FLUSH = 1e-280  # values below this are flushed to 0 (subnormal products lose precision)
 _ALPHA_MIN, _ALPHA_MAX = 1e-4, 4.0
+#: Largest probability of sampling the specular Dirac lobe when a directional-diffuse lobe exists.
+P_SPEC_MAX = 0.9
 
 
 
@@ -737,6 +739,11 @@ class HTSG(BSDF):
         ud = np.mean(sp.spectrum(self.albedo), axis=0) * valid if self.albedo is not None else np.zeros(sp.n)
         den = rho_s + rho_dd + ud
         p_spec = np.where(den > 0, rho_s / np.where(den > 0, den, 1.0), 0.0)
+        if self.sigma0 > 0:
+            # The dd estimate F·S²·(1 − e^{−g(θ_o)}) vanishes at grazing views although the lobe does
+            # not (other directions have larger g): keep ≥ 10 % of the samples for it, or the rare dd
+            # samples carry weights of several hundred (fireflies).
+            p_spec = np.minimum(p_spec, P_SPEC_MAX)
         rest = rho_dd + ud
         w_c = 0.1 + 0.9 * np.where(rest > 0, ud / np.where(rest > 0, rest, 1.0), 0.0)
         co = np.maximum(cos_o, 1e-6)
