@@ -39,6 +39,7 @@ class ShadingPoint:
     wo: np.ndarray         # (3, N) unit direction towards the viewer
     lam: np.ndarray        # (L, N) wavelengths in nm
     mono: bool = False     # monochrome mode: spectra return their mono value
+    lookup: object = None  # engine.spectral.WavelengthLookup for ``lam`` (table values computed once)
 
     @property
     def n(self) -> int:
@@ -50,6 +51,8 @@ class ShadingPoint:
 
     def spectrum(self, spec) -> np.ndarray:
         """A material parameter (engine.spectral Spectrum) at this batch's wavelengths, (L, N)."""
+        if self.lookup is not None and not self.mono:
+            return spec.eval_cached(self.lookup)
         return spec.eval(self.lam, mono=self.mono)
 
 

@@ -30,7 +30,7 @@ from ..polarisation.frames import frame_rotation
 from .accel import offset_origin
 from .effects import TRANSPORT_SIZES
 from .sampler import PathSampler, path_keys
-from ..spectral import rgb_weights, sample_wavelengths
+from ..spectral import WavelengthLookup, rgb_weights, sample_wavelengths
 from ..vec3 import dot
 
 
@@ -112,6 +112,14 @@ def keep_paths(mask: np.ndarray, *arrays):
     return tuple(np.compress(mask, a, axis=-1) for a in arrays)
 
 
+def compress_lookups(mask, lk, lk_m):
+    """Both wavelength lookups restricted to the surviving paths (shared when they are the same)."""
+    if mask.all():
+        return lk, lk_m
+    new = lk.compress(mask)
+    return new, (new if lk_m is lk else lk_m.compress(mask))
+
+
 def power_heuristic(a, b):
     a2 = a * a
     b2 = b * b
@@ -144,11 +152,13 @@ class PathTracer:
         # light colours: no wavelength sampling and no chromatic noise (same expectation).
         self.rgb_mode = reduce in ("auto", True) and independent and not self.mono
 
-    def _emitted(self, light, lam):
-        """Emitted radiance (L, n) of ``light`` for paths with wavelengths ``lam`` (RGB (3, n) in RGB mode)."""
+    def _emitted(self, light, lookup):
+        """Emitted radiance (L, n) of ``light`` for paths with these wavelengths (RGB (3, n) in RGB mode)."""
         if self.rgb_mode:
-            return np.repeat(light.rgb()[:, None], lam.shape[1], axis=1)
-        return light.radiance(lam, self.mono)
+            return np.repeat(light.rgb()[:, None], lookup.lam.shape[1], axis=1)
+        if self.mono:
+            return light.radiance(lookup.lam, True)
+        return light.spectrum.eval_cached(lookup)
 
     def _wavelengths(self, sampler: PathSampler, n: int):
         if self.rgb_mode:
@@ -172,8 +182,10 @@ class PathTracer:
         o, d, x_T, t_min, t_max = self.camera.generate(pixel, sampler.next(2))
         lam, w_rgb = self._wavelengths(sampler, n_total)
         L = 3 if self.rgb_mode else lam.shape[0]
-        lam_m = lam[:1] if self.uniform else lam       # wavelengths the materials are evaluated at
-        Lm = lam_m.shape[0]
+        lk = WavelengthLookup(lam)                      # table values at the path's wavelengths, once
+        # wavelengths the materials are evaluated at (one where nothing depends on λ)
+        lk_m = WavelengthLookup(lam[:1], lk.basis[:, :1], lk.d65[:1]) if self.uniform else lk
+        Lm = lk_m.lam.shape[0]
         if np.any(t_min > 0):
             o = o + d * t_min[None, :]
             t_max = t_max - t_min
@@ -204,7 +216,7 @@ class PathTracer:
             # --- light reached by this segment ----------------------------------------
             if env is not None and (~hit).any():
                 miss = ~hit
-                Le = self._emitted(env, lam[:, miss])
+                Le = self._emitted(env, lk.take(miss))
                 w = np.ones(int(miss.sum()))
                 nd = ~prev_delta[miss]
                 if nd.any():
@@ -220,7 +232,7 @@ class PathTracer:
                 for li in np.unique(emitter[idx]):
                     light = light_set.lights[li]
                     sel = idx[emitter[idx] == li]
-                    Le = self._emitted(light, lam[:, sel])
+                    Le = self._emitted(light, lk.take(sel))
                     cos_l = -dot(d[:, sel], compiled.tri_normal[hits.prim[sel]].T)
                     p_light = light.pdf_hit(hits.t[sel], cos_l) * light_set.select_prob
                     wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
@@ -230,8 +242,9 @@ class PathTracer:
                 break
 
             # --- keep the paths that hit something --------------------------------------
-            path, T, x_T, d, lam, lam_m, eta_sq, prim, u, v, sampler.keys = keep_paths(
-                hit, path, T, x_T, d, lam, lam_m, eta_sq, hits.prim, hits.u, hits.v, sampler.keys)
+            path, T, x_T, d, eta_sq, prim, u, v, sampler.keys = keep_paths(
+                hit, path, T, x_T, d, eta_sq, hits.prim, hits.u, hits.v, sampler.keys)
+            lk, lk_m = compress_lookups(hit, lk, lk_m)
             n = path.shape[0]
             if n == 0:
                 break
@@ -256,12 +269,13 @@ class PathTracer:
                 # One material covers every path: use whole arrays instead of gathered copies.
                 sel = slice(None) if len(groups) == 1 else np.nonzero(mat == m)[0]
                 bsdf = compiled.materials[m]
-                sp = ShadingPoint(p[:, sel], n_s[:, sel], n_g[:, sel], wo[:, sel], lam_m[:, sel], self.mono)
+                sp = ShadingPoint(p[:, sel], n_s[:, sel], n_g[:, sel], wo[:, sel], lk_m.lam[:, sel], self.mono,
+                                  lk_m.take(sel))
                 Tm = T[..., sel]
                 xTm = x_T[:, sel]
 
                 if not bsdf.delta_only and len(light_set) and bounce + 2 <= st.max_depth:
-                    contrib = self._next_event(sp, lam[:, sel], bsdf, Tm, xTm, u_light[:, sel], stats)
+                    contrib = self._next_event(sp, lk.take(sel), bsdf, Tm, xTm, u_light[:, sel], stats)
                     radiance[:, :, path[sel]] += contrib
 
                 bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
@@ -288,8 +302,9 @@ class PathTracer:
             stats["nonfinite"] += int((valid & ~finite_T).sum())   # ended here, their light so far kept
             valid &= finite_T & (np.abs(newT[0, 0]).max(axis=0) > 0)
 
-            path, T, x_T, d, lam, lam_m, eta_sq, prev_delta, prev_pdf, p, n_g, sampler.keys = keep_paths(
-                valid, path, newT, new_xT, new_d, lam, lam_m, eta_sq, is_delta, pdf_next, p, n_g, sampler.keys)
+            path, T, x_T, d, eta_sq, prev_delta, prev_pdf, p, n_g, sampler.keys = keep_paths(
+                valid, path, newT, new_xT, new_d, eta_sq, is_delta, pdf_next, p, n_g, sampler.keys)
+            lk, lk_m = compress_lookups(valid, lk, lk_m)
             o = offset_origin(p, n_g, d)
             t_max = None
 
@@ -301,16 +316,16 @@ class PathTracer:
         out[:, :, ~finite] = 0.0
         return out, stats
 
-    def _next_event(self, sp, lam, bsdf, T, x_T, u, stats):
+    def _next_event(self, sp, lookup, bsdf, T, x_T, u, stats):
         """Direct light at non-delta vertices, MIS-weighted against BSDF sampling; (P, L, n).
 
-        ``lam`` (L, n) are the path's wavelengths (lights are evaluated at all of them); the
+        ``lookup`` holds the path's wavelengths (lights are evaluated at all of them); the
         material sees ``sp.lam`` (one wavelength where nothing depends on λ).
         """
         light_set = self.lights
         n = sp.n
         P = self.P
-        out = np.zeros((P, 3 if self.rgb_mode else lam.shape[0], n))
+        out = np.zeros((P, 3 if self.rgb_mode else lookup.lam.shape[0], n))
         choice = np.minimum((u[0] * len(light_set)).astype(np.int64), len(light_set) - 1)
         for li in np.unique(choice):
             sel = np.nonzero(choice == li)[0]
@@ -319,8 +334,9 @@ class PathTracer:
             # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
             u_tri = u[0, sel] * len(light_set) - li
             wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, u[1, sel], u[2, sel])))
-            value = self._emitted(light, lam[:, sel]) * scale[None, :]
-            sub = ShadingPoint(p, sp.n_s[:, sel], sp.n_g[:, sel], sp.wo[:, sel], sp.lam[:, sel], sp.mono)
+            value = self._emitted(light, lookup.take(sel)) * scale[None, :]
+            sub = ShadingPoint(p, sp.n_s[:, sel], sp.n_g[:, sel], sp.wo[:, sel], sp.lam[:, sel], sp.mono,
+                               sp.lookup.take(sel) if sp.lookup is not None else None)
             cos_i = np.abs(dot(sub.n_s, wi))
             ok &= cos_i > 0
             if not ok.any():

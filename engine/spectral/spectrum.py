@@ -52,6 +52,10 @@ class Spectrum:
             return np.full(lam.shape, self.mono_value, dtype=np.float64)
         return self._eval(lam)
 
+    def eval_cached(self, lookup: "WavelengthLookup") -> np.ndarray:
+        """Values at ``lookup.lam`` using its precomputed table values (same result as ``eval``)."""
+        return self._eval(lookup.lam)
+
     @property
     def mono_value(self) -> float:
         """Value used in the monochrome (one-wavelength) mode."""
@@ -63,6 +67,28 @@ class Spectrum:
 
     def _eval(self, lam: np.ndarray) -> np.ndarray:
         raise NotImplementedError
+
+
+class WavelengthLookup:
+    """The table values every RGB spectrum needs at a batch of path wavelengths, computed once.
+
+    ``lam`` (L, N) nm; ``basis`` (3, L, N) the RGB upsampling basis; ``d65`` (L, N) the normalised
+    D65.  ``take(idx)`` / ``compress(mask)`` follow the paths as the integrator drops them.
+    """
+
+    __slots__ = ("lam", "basis", "d65")
+
+    def __init__(self, lam, basis=None, d65=None):
+        self.lam = lam
+        self.basis = basis_rgb(lam) if basis is None else basis
+        self.d65 = cie.d65_normalised(lam) if d65 is None else d65
+
+    def take(self, idx) -> "WavelengthLookup":
+        return WavelengthLookup(self.lam[:, idx], self.basis[:, :, idx], self.d65[:, idx])
+
+    def compress(self, mask) -> "WavelengthLookup":
+        return WavelengthLookup(np.compress(mask, self.lam, axis=-1), np.compress(mask, self.basis, axis=-1),
+                                np.compress(mask, self.d65, axis=-1))
 
 
 class ConstantSpectrum(Spectrum):
@@ -125,6 +151,11 @@ class _RGBBasisSpectrum(Spectrum):
             return np.full(lam.shape, self.rgb[0], dtype=np.float64)
         return np.tensordot(self.rgb, basis_rgb(lam), axes=1)
 
+    def eval_cached(self, lookup):
+        if self.is_constant:
+            return np.full(lookup.lam.shape, self.rgb[0], dtype=np.float64)
+        return np.tensordot(self.rgb, lookup.basis, axes=1)
+
     def __repr__(self):
         return f"{type(self).__name__}({self.rgb.tolist()!r})"
 
@@ -175,6 +206,11 @@ class RGBIlluminantSpectrum(Spectrum):
         if self.is_white:
             return (self.scale * self.rgb[0]) * d65
         return self.scale * d65 * np.tensordot(self.rgb, basis_rgb(lam), axes=1)
+
+    def eval_cached(self, lookup):
+        if self.is_white:
+            return (self.scale * self.rgb[0]) * lookup.d65
+        return self.scale * lookup.d65 * np.tensordot(self.rgb, lookup.basis, axes=1)
 
     def __repr__(self):
         return f"RGBIlluminantSpectrum({self.rgb.tolist()!r}, scale={self.scale!r})"
