@@ -4,19 +4,16 @@ Runs in fresh bpy processes with an isolated BLENDER_USER_RESOURCES, so nothing 
 checkout is importable there except what the zip installs.
 """
 
-import json
 import os
 import subprocess
 import sys
 import textwrap
 
-import numpy as np
 import pytest
 
 pytest.importorskip("bpy")
 
 from tests.blender_support import read_multilayer  # noqa: E402
-from tests.conftest import REPO  # noqa: E402
 
 INSTALL = textwrap.dedent("""
     import sys

@@ -1,7 +1,6 @@
 """The Blender extension rendering through the bpy module: passes, polarisation, export fidelity,
 settings, border, animation, cancellation and errors."""
 
-import math
 import os
 
 import numpy as np

@@ -1,6 +1,5 @@
 """Virtual polarisers (post-process) against Malus's law and against physical filter sheets in the scene."""
 
-import copy
 import math
 
 import numpy as np

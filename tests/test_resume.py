@@ -1,6 +1,5 @@
 """Resuming an interrupted render gives the image of an uninterrupted one."""
 
-import os
 import signal
 import subprocess
 import sys

@@ -53,7 +53,7 @@ from .microfacet import (SHADOWING, Beckmann, BlinnPhong, half_vector, reflect_l
 from .sampling import cosine_hemisphere, local_to_world
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
-from ..spectral import ConstantSpectrum, Spectrum, as_spectrum
+from ..spectral import ConstantSpectrum, as_spectrum
 from ..vec3 import any_perpendicular, cross, dot
 
 #: Smallest accepted Beckmann roughness m.

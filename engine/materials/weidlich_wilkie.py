@@ -918,7 +918,6 @@ class WeidlichWilkie(BSDF):
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         N = sp.n
-        L = sp.lam.shape[0]
         n = sp.n_s
         cos_o = sp.cos_o
         plan = self._plan(sp)
