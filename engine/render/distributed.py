@@ -109,6 +109,7 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
         cancelled = False
         for future in as_completed(futures):
             results[index[future.key]] = future.result()
+            future.release()          # the worker may free the unit's sums now
             # Add in unit order so that the sums (and so the image) do not depend on timing.
             while next_to_add in results:
                 lo, sums, sumsq, count, s = results.pop(next_to_add)
