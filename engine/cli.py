@@ -138,19 +138,24 @@ def _render(args) -> int:
     return 130 if result.cancelled else 0
 
 
+def _read_polar_exr(path, field):
+    """(stokes, channels, header) of a Stokes EXR, or a SceneError naming ``field``."""
+    from .output.exr import read_stokes_exr
+    if not os.path.exists(path):
+        raise SceneError(field, f"{path!r} does not exist")
+    try:
+        return read_stokes_exr(path)
+    except (ValueError, OSError) as e:
+        raise SceneError(field, f"{path!r} is not a Polar Stokes EXR: {e}") from None
+
+
 def _resume_state(args, scene, st):
     """(Film of the finished samples, settings) to continue the render stored in ``args.resume``."""
     import copy
 
-    from .output.exr import read_stokes_exr
     from .render.film import film_from_stokes
 
-    if not os.path.exists(args.resume):
-        raise SceneError("--resume", f"{args.resume!r} does not exist")
-    try:
-        stokes, channels, header = read_stokes_exr(args.resume)
-    except (ValueError, OSError) as e:
-        raise SceneError("--resume", f"{args.resume!r} is not a Polar Stokes EXR: {e}") from None
+    stokes, channels, header = _read_polar_exr(args.resume, "--resume")
     if "spp" not in channels or "polar.seed" not in header:
         raise SceneError("--resume", f"{args.resume!r} has no per-pixel sample counts (not written by Polar)")
     H, W = stokes.shape[1:3]
@@ -205,17 +210,11 @@ def _polariser(args) -> int:
     import numpy as np
 
     from .output.colormaps import tonemap
-    from .output.exr import read_stokes_exr
     from .output.png import write_png
     from .postprocess.filters import apply_filter, filter_row
     from .postprocess.sheets import contact_sheet
 
-    if not os.path.exists(args.exr):
-        raise SceneError("EXR", f"{args.exr!r} does not exist")
-    try:
-        stokes, _, _ = read_stokes_exr(args.exr)
-    except (ValueError, OSError) as e:
-        raise SceneError("EXR", f"{args.exr!r} is not a Polar Stokes EXR: {e}") from None
+    stokes, _, _ = _read_polar_exr(args.exr, "EXR")
     if not (0.0 <= args.extinction <= 1.0):
         raise SceneError("--extinction", f"must be in [0, 1], got {args.extinction:g}")
 
