@@ -70,3 +70,27 @@ def test_ctrl_c_writes_the_finished_samples(tmp_path):
     done = spp > 0
     assert np.all(stokes[0][done] > 0) and np.all(np.isfinite(stokes))
     assert not [f for f in os.listdir(tmp_path) if f.startswith(".")]     # no temporary file left
+
+
+def test_polariser_command_png_exr_sweep_and_errors(tmp_path):
+    from engine.output.png import read_png
+    from engine.postprocess.filters import malus
+    src = str(tmp_path / "s.exr")
+    assert run(["render", shared_path("peers", "scenes", "plane_brewster.json"), "-o", src, "--spp", "1",
+                "--no-previews", "-q"]).returncode == 0
+    stokes, _, _ = read_stokes_exr(src)
+    out = tmp_path / "p90.exr"
+    assert run(["polariser", src, "--angle", "90", "-o", str(out)]).returncode == 0
+    filtered, _, header = read_stokes_exr(str(out))
+    np.testing.assert_allclose(filtered[0], malus(stokes.astype(np.float64), 90.0), rtol=1e-5, atol=1e-7)
+    assert header["polar.filter"] == "linear"
+    png = tmp_path / "rc.png"
+    assert run(["polariser", src, "--type", "circular-right", "-o", str(png)]).returncode == 0
+    assert read_png(str(png)).shape[:2] == (256, 256)
+    sheet = tmp_path / "sweep.png"
+    assert run(["polariser", src, "--sweep", "0:180:45", "-o", str(sheet)]).returncode == 0
+    assert read_png(str(sheet)).shape[1] > 256 * 2
+    bad = run(["polariser", str(tmp_path / "missing.exr"), "-o", str(png)])
+    assert bad.returncode == 2 and "does not exist" in bad.stderr
+    bad = run(["polariser", src, "--sweep", "10:0:5", "-o", str(sheet)])
+    assert bad.returncode == 2 and "--sweep" in bad.stderr
