@@ -50,7 +50,7 @@ def run_measured(cmd):
     return stdout, wall, usage.ru_maxrss / 1024
 
 
-def ours_once(scene_name, spp, polarisation):
+def ours_once(scene_name, spp, polarisation, threads=0):
     """Child mode: render one scene and print a JSON line with timing and peak RSS."""
     sys.path.insert(0, REPO)
     from engine.render.renderer import Renderer
@@ -58,6 +58,7 @@ def ours_once(scene_name, spp, polarisation):
     scene = load_scene(os.path.join(PEERS, "scenes", f"{scene_name}.json"))
     scene.settings.spp = spp
     scene.settings.polarisation = polarisation
+    scene.settings.threads = threads
     renderer = Renderer(scene)
     t0 = time.perf_counter()
     result = renderer.render()
@@ -87,10 +88,10 @@ def main():
     ap.add_argument("--mitsuba-spp", type=int, default=64)
     ap.add_argument("--scalar-spp", type=int, default=4)
     ap.add_argument("--out", default="")
-    ap.add_argument("--child", nargs=3, metavar=("SCENE", "SPP", "POLARISATION"), help=argparse.SUPPRESS)
+    ap.add_argument("--child", nargs=4, metavar=("SCENE", "SPP", "POLARISATION", "THREADS"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
-        ours_once(args.child[0], int(args.child[1]), args.child[2])
+        ours_once(args.child[0], int(args.child[1]), args.child[2], int(args.child[3]))
         return 0
 
     have_mitsuba = bool(args.mitsuba_python) and subprocess.run(
@@ -101,8 +102,9 @@ def main():
         mitsuba_once(args.mitsuba_python, "conv_s3_check", "llvm_ad_spectral_polarized", 16, tmp)
     for scene in args.scenes.split(","):
         res = {}
-        for mode in ("full", "off"):
-            out, _, peak = run_measured([sys.executable, __file__, "--child", scene, str(args.spp), mode])
+        for mode, threads in (("full", 0), ("off", 0), ("full1", 1)):
+            out, _, peak = run_measured([sys.executable, __file__, "--child", scene, str(args.spp),
+                                         mode.rstrip("1"), str(threads)])
             res[mode] = json.loads(out.strip().splitlines()[-1])
             res[mode]["peak_rss_mb"] = peak
         if have_mitsuba:
@@ -119,8 +121,9 @@ def main():
         return r["samples"] / r["seconds"] / 1e6 if r.get("samples") else float("nan")
 
     lines = ["| scene | ours full (Msamples/s) | ours off | full/off time | Mitsuba LLVM | Mitsuba scalar |"
-             " ours ÷ LLVM | ours ÷ scalar | peak RSS ours / LLVM / scalar (MB) | ours: Mrays/s |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+             " ours ÷ LLVM | ours ÷ scalar | peak RSS ours / LLVM / scalar (MB) | ours: Mrays/s |"
+             " 2 threads ÷ 1 |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for scene, res in rows:
         full, off = res["full"], res["off"]
         llvm = res.get("llvm_ad_spectral_polarized", {})
@@ -132,7 +135,8 @@ def main():
             f"{rate(full) / rate(llvm) if llvm else float('nan'):.3f} | "
             f"{rate(full) / rate(scal) if scal else float('nan'):.3f} | "
             f"{full['peak_rss_mb']:.0f} / {llvm.get('peak_rss_mb', float('nan')):.0f} / "
-            f"{scal.get('peak_rss_mb', float('nan')):.0f} | {rays:.2f} |")
+            f"{scal.get('peak_rss_mb', float('nan')):.0f} | {rays:.2f} | "
+            f"{rate(full) / rate(res['full1']):.2f}× |")
     text = "\n".join(lines)
     print(text)
     if args.out:
