@@ -47,12 +47,4 @@ class POLAR_OT_add_virtual_polariser(bpy.types.Operator):
 
 classes = (POLAR_OT_add_polarising_bsdf, POLAR_OT_add_virtual_polariser)
 
-
-def register():
-    for cls in classes:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(classes):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(classes)
