@@ -12,6 +12,7 @@ import numpy as np
 from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
+from ..kernels.geometry import offset_origin as offset_origin_kernel, surface_attributes
 from ..scene.description import Scene
 from ..scene.errors import SceneError
 
@@ -104,21 +105,10 @@ class CompiledScene:
         """(p, n_g, n_s) as (3, N) float64 at the hits ``prim`` with barycentrics (u, v).
 
         n_g is the face normal by winding; n_s the interpolated vertex normal
-        (or n_g for flat faces), flipped if needed so that it lies on n_g's side.
+        (or n_g for flat faces and degenerate interpolations).
         """
-        tri = self.faces[prim]
-        w0 = 1.0 - u - v
-        V = self.vertices
-        p = (V[tri[:, 0]] * w0[:, None] + V[tri[:, 1]] * u[:, None] + V[tri[:, 2]] * v[:, None]).T
-        n_g = self.tri_normal[prim].T
-        if not self.any_vertex_normals:
-            return p, n_g, n_g
-        N = self.vertex_normals
-        n_s = (N[tri[:, 0]] * w0[:, None] + N[tri[:, 1]] * u[:, None] + N[tri[:, 2]] * v[:, None]).T
-        length = np.sqrt((n_s * n_s).sum(0))
-        smooth = self.tri_has_normals[prim] & (length > 0)
-        n_s = np.where(smooth[None, :], n_s / np.where(length > 0, length, 1.0), n_g)
-        return p, n_g, n_s
+        return surface_attributes(self.faces, self.vertices, self.vertex_normals, self.tri_has_normals,
+                                  self.tri_normal, self.any_vertex_normals, prim, u, v)
 
 
 def offset_origin(p: np.ndarray, n_g: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -128,6 +118,4 @@ def offset_origin(p: np.ndarray, n_g: np.ndarray, w: np.ndarray) -> np.ndarray:
     (1 + max|p_i|)·8.9e-5 (Mitsuba 3's rule), which keeps float32 Embree from
     re-hitting the same triangle at grazing angles.
     """
-    side = np.where((n_g * w).sum(0) >= 0, 1.0, -1.0)
-    mag = (1.0 + np.abs(p).max(axis=0)) * RAY_EPSILON
-    return p + (side * mag)[None, :] * n_g
+    return offset_origin_kernel(p, n_g, w, RAY_EPSILON)

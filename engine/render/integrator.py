@@ -28,6 +28,7 @@ import numpy as np
 from ..materials.base import MuellerValue, ShadingPoint
 from ..polarisation.frames import frame_rotation
 from .accel import offset_origin
+from ..kernels.transport import add_light, throughput_times_stokes, update_abcs
 from .effects import TRANSPORT_SIZES
 from .sampler import PathSampler, path_keys
 from ..spectral import WavelengthLookup, rgb_weights, sample_wavelengths
@@ -44,6 +45,24 @@ def rotate_columns(T: np.ndarray, c2: np.ndarray, s2: np.ndarray) -> None:
     t2 = T[:, 2]
     T[:, 1] = t1 * c2 - t2 * s2
     T[:, 2] = t1 * s2 + t2 * c2
+
+
+def scatter_throughput(T: np.ndarray, m: MuellerValue, x_T: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """New throughput T · R(x_out → x_T) · M at a vertex with Mueller value ``m`` (frames x_in, x_out).
+
+    ``x_T`` is the path's current frame (⟂ the arriving segment, i.e. ⟂ wo).  T is left unchanged.
+    """
+    if m.kind == "abcs":
+        if T.shape[0] >= 3:
+            c2, s2 = frame_rotation(m.x_out, x_T, wo)
+        else:  # scalar transport: no frames to rotate
+            c2 = s2 = np.zeros(T.shape[-1])
+        return update_abcs(T, c2, s2, m.A, m.B, m.C, m.S, m.depol)
+    if m.kind == "general":
+        c2, s2 = frame_rotation(m.x_out, x_T, wo)
+        T = T.copy()
+        rotate_columns(T, c2, s2)
+    return multiply_right(T, m)
 
 
 def multiply_right(T: np.ndarray, m: MuellerValue) -> np.ndarray:
@@ -94,11 +113,6 @@ def rotate_stokes(S: np.ndarray, c2, s2) -> np.ndarray:
     out[1] = c2 * S[1] + s2 * S[2]
     out[2] = -s2 * S[1] + c2 * S[2]
     return out
-
-
-def apply_T(T: np.ndarray, S: np.ndarray) -> np.ndarray:
-    """T · S for T (P, P, L, N) and S (P, L, N)."""
-    return np.einsum("ijln,jln->iln", T, S)
 
 
 def keep_paths(mask: np.ndarray, *arrays):
@@ -184,7 +198,7 @@ class PathTracer:
         L = 3 if self.rgb_mode else lam.shape[0]
         lk = WavelengthLookup(lam)                      # table values at the path's wavelengths, once
         # wavelengths the materials are evaluated at (one where nothing depends on λ)
-        lk_m = WavelengthLookup(lam[:1], lk.basis[:, :1], lk.d65[:1]) if self.uniform else lk
+        lk_m = WavelengthLookup(lam[:1]) if self.uniform else lk
         Lm = lk_m.lam.shape[0]
         if np.any(t_min > 0):
             o = o + d * t_min[None, :]
@@ -222,7 +236,7 @@ class PathTracer:
                 if nd.any():
                     p_light = env.pdf(d[:, miss]) * light_set.select_prob
                     w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
-                radiance[:, :, path[miss]] += T[:, 0][:, :, miss] * (Le * w)
+                add_light(radiance, path, T, miss.nonzero()[0], Le, w)
             prim_all = np.where(hit, hits.prim, 0)
             emitter = np.where(hit, compiled.tri_emitter[prim_all], -1)
             front = dot(d, compiled.tri_normal[prim_all].T) < 0
@@ -236,7 +250,7 @@ class PathTracer:
                     cos_l = -dot(d[:, sel], compiled.tri_normal[hits.prim[sel]].T)
                     p_light = light.pdf_hit(hits.t[sel], cos_l) * light_set.select_prob
                     wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
-                    radiance[:, :, path[sel]] += T[:, 0][:, :, sel] * (Le * wsel)
+                    add_light(radiance, path, T, sel, Le, wsel)
 
             if bounce + 1 >= st.max_depth:
                 break
@@ -279,10 +293,7 @@ class PathTracer:
                     radiance[:, :, path[sel]] += contrib
 
                 bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
-                c2, s2 = frame_rotation(bs.weight.x_out, xTm, wo[:, sel])
-                if bs.weight.kind != "depolarising":
-                    rotate_columns(Tm, c2, s2)  # in place: T is replaced by newT below
-                newT[..., sel] = multiply_right(Tm, bs.weight)
+                newT[..., sel] = scatter_throughput(Tm, bs.weight, xTm, wo[:, sel])
                 new_d[:, sel] = bs.wi
                 new_xT[:, sel] = bs.weight.x_in
                 valid[sel] = bs.valid
@@ -358,5 +369,5 @@ class PathTracer:
             blocked[test] = self.scene.occluded(origin[:, test], wi[:, test], t_max[test])
             stats["shadow_rays"] += test.size
             weight = weight * (~blocked)[None, :]
-            out[:, :, sel] = apply_T(T[..., sel], S) * weight[None]
+            out[:, :, sel] = throughput_times_stokes(T[..., sel], S, weight)
         return out

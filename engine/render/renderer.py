@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .accel import CompiledScene
+from ..kernels import BACKEND as KERNEL_BACKEND
 from .camera import CameraModel
 from .effects import resolve_transport
 from .film import Film
@@ -148,7 +149,7 @@ class Renderer:
         else:
             stats_spectral = st.spectral
         stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0,
-                 "compile_seconds": self.compile_seconds, "transport": st.polarisation,
+                 "compile_seconds": self.compile_seconds, "kernels": KERNEL_BACKEND, "transport": st.polarisation,
                  "transport_reason": transport_reason, "spectral": stats_spectral}
         if window is not None:
             x0, y0, x1, y1 = (int(v) for v in window)

@@ -12,19 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kernels.hashing import mix64, uniforms
+
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
-_S30, _S27, _S31, _S11 = (np.uint64(v) for v in (30, 27, 31, 11))
-_TO_UNIT = 1.0 / float(1 << 53)
 _MASK64 = (1 << 64) - 1
-
-
-def mix64(x: np.ndarray) -> np.ndarray:
-    """splitmix64 finaliser on uint64 arrays (wrapping arithmetic)."""
-    x = (x ^ (x >> _S30)) * _M1
-    x = (x ^ (x >> _S27)) * _M2
-    return x ^ (x >> _S31)
 
 
 def path_keys(seed: int, pixel: np.ndarray, sample: np.ndarray) -> np.ndarray:
@@ -46,12 +38,10 @@ class PathSampler:
         self.dimension = 0
 
     def next(self, k: int = 1) -> np.ndarray:
-        out = np.empty((k, self.keys.shape[0]))
-        for j in range(k):
-            self.dimension += 1
-            h = mix64(self.keys + np.uint64((self.dimension * 0x9E3779B97F4A7C15) & _MASK64))
-            out[j] = (h >> _S11).astype(np.float64) * _TO_UNIT
-        return out
+        dims = range(self.dimension + 1, self.dimension + k + 1)
+        self.dimension += k
+        offsets = np.array([(d * 0x9E3779B97F4A7C15) & _MASK64 for d in dims], dtype=np.uint64)
+        return uniforms(self.keys, offsets)
 
     def compact(self, keep: np.ndarray):
         self.keys = self.keys[keep]

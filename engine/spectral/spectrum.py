@@ -73,22 +73,54 @@ class WavelengthLookup:
     """The table values every RGB spectrum needs at a batch of path wavelengths, computed once.
 
     ``lam`` (L, N) nm; ``basis`` (3, L, N) the RGB upsampling basis; ``d65`` (L, N) the normalised
-    D65.  ``take(idx)`` / ``compress(mask)`` follow the paths as the integrator drops them.
+    D65.  ``take(idx)`` / ``compress(mask)`` follow the paths as the integrator drops them.  Tables
+    are evaluated on first use for the whole batch and gathered on first use by a subset (the
+    integrator takes many subsets — material groups, lights — of which most never read a table).
     """
 
-    __slots__ = ("lam", "basis", "d65")
+    __slots__ = ("_root", "_idx", "_lam", "_basis", "_d65")
 
     def __init__(self, lam, basis=None, d65=None):
-        self.lam = lam
-        self.basis = basis_rgb(lam) if basis is None else basis
-        self.d65 = cie.d65_normalised(lam) if d65 is None else d65
+        self._root, self._idx = None, None
+        self._lam, self._basis, self._d65 = lam, basis, d65
+
+    @classmethod
+    def _subset(cls, root: "WavelengthLookup", idx: np.ndarray) -> "WavelengthLookup":
+        sub = cls.__new__(cls)
+        sub._root, sub._idx = root, idx
+        sub._lam = sub._basis = sub._d65 = None
+        return sub
+
+    @property
+    def lam(self) -> np.ndarray:
+        if self._lam is None:
+            self._lam = self._root.lam[:, self._idx]
+        return self._lam
+
+    @property
+    def basis(self) -> np.ndarray:
+        if self._basis is None:
+            self._basis = basis_rgb(self.lam) if self._root is None else self._root.basis[:, :, self._idx]
+        return self._basis
+
+    @property
+    def d65(self) -> np.ndarray:
+        if self._d65 is None:
+            self._d65 = cie.d65_normalised(self.lam) if self._root is None else self._root.d65[:, self._idx]
+        return self._d65
 
     def take(self, idx) -> "WavelengthLookup":
-        return WavelengthLookup(self.lam[:, idx], self.basis[:, :, idx], self.d65[:, idx])
+        """The lookup of the paths ``idx`` (integer indices, a slice or a boolean mask)."""
+        if isinstance(idx, slice) and idx == slice(None):
+            return self
+        idx = np.arange(self.lam.shape[1])[idx] if not isinstance(idx, np.ndarray) or idx.dtype == bool \
+            else idx
+        if self._root is None:
+            return WavelengthLookup._subset(self, idx)
+        return WavelengthLookup._subset(self._root, self._idx[idx])
 
     def compress(self, mask) -> "WavelengthLookup":
-        return WavelengthLookup(np.compress(mask, self.lam, axis=-1), np.compress(mask, self.basis, axis=-1),
-                                np.compress(mask, self.d65, axis=-1))
+        return self.take(np.flatnonzero(mask))
 
 
 class ConstantSpectrum(Spectrum):

@@ -1,0 +1,45 @@
+"""Compiled hot loops with pure-NumPy twins that give the same numbers.
+
+The renderer's inner work — surface reconstruction, the per-vertex Mueller update
+T ← T·R(φ)·M, scatter-adding light into the per-path accumulators, counter-based
+random numbers, Fresnel coefficients — is a chain of small elementwise steps.  In
+NumPy each step allocates and walks a full batch array, so shading costs several
+times the ray casting.  Each kernel here is written twice:
+
+- ``*_numpy``: the reference, vectorised NumPy (always available);
+- ``*_numba``: the same arithmetic in the same order as a Numba loop over paths
+  (``nogil`` so worker threads run in parallel, ``cache`` so a process compiles
+  each kernel once per machine).
+
+The public name dispatches to the Numba version when the optional ``numba``
+package imports and ``POLAR_KERNELS`` is not ``numpy``; otherwise to the NumPy
+one.  Tests run both on the same inputs and require equality (bit-for-bit where
+the operation order is the same, 1e-12 relative where a reduction order differs).
+Numba is optional: a render without it gives the same image, only slower.
+"""
+
+from __future__ import annotations
+
+import os
+
+try:  # optional dependency (pip install polar-render[fast])
+    import numba as _numba
+except ImportError:  # pragma: no cover - exercised on machines without numba
+    _numba = None
+
+#: True when the compiled kernels are in use.
+COMPILED = _numba is not None and os.environ.get("POLAR_KERNELS", "numba").lower() != "numpy"
+#: Human-readable backend name for logs and render stats.
+BACKEND = f"numba {_numba.__version__}" if COMPILED else "numpy"
+
+
+def jit(fn):
+    """Compile ``fn`` with Numba (no fast-math: IEEE results like NumPy), or return None."""
+    if _numba is None:
+        return None
+    return _numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")(fn)
+
+
+def dispatch(compiled, reference):
+    """The function to use: the compiled kernel when enabled, else the NumPy reference."""
+    return compiled if (COMPILED and compiled is not None) else reference

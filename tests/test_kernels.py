@@ -1,0 +1,180 @@
+"""Compiled kernels (Numba) against their NumPy twins, and whole renders with either backend.
+
+The NumPy version of every kernel is the reference; the compiled one must give the same numbers
+(bit-for-bit where the arithmetic order is the same, else to 1e-12 relative), including at the
+edges the renderer meets: degenerate normals, zero rotations, one-wavelength rows broadcast over
+several, empty batches.  Skipped pieces say why when Numba is not installed.
+"""
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from engine import kernels
+from engine.kernels import geometry, hashing, transport
+from engine.render.renderer import Renderer
+from engine.scene.loader import load_scene
+from tests.conftest import shared_path
+
+needs_numba = pytest.mark.skipif(kernels._numba is None, reason="numba is not installed (NumPy kernels only)")
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def unit(rng, n):
+    v = rng.normal(size=(3, n))
+    return v / np.linalg.norm(v, axis=0)
+
+
+@needs_numba
+@pytest.mark.parametrize("n", [0, 1, 1000])
+@pytest.mark.parametrize("with_normals", [False, True])
+def test_surface_attributes_bitwise(n, with_normals):
+    rng = np.random.default_rng(n)
+    V = rng.normal(size=(50, 3)) * 10
+    F = rng.integers(0, 50, size=(40, 3))
+    N = rng.normal(size=(50, 3))
+    N[:5] = 0.0                                   # zero vertex normals → fall back to n_g
+    N[5:8] = [[1, 0, 0], [-1, 0, 0], [0, 0, 0]]   # cancelling normals
+    has = rng.random(40) < 0.7
+    tn = rng.normal(size=(40, 3))
+    prim = rng.integers(0, 40, n)
+    u = rng.random(n) * 0.5
+    v = rng.random(n) * 0.5
+    args = (F, V, N, has, tn, with_normals, prim, u, v)
+    for a, b in zip(geometry.surface_attributes_numpy(*args), geometry.surface_attributes_numba(*args)):
+        assert a.shape == b.shape
+        np.testing.assert_array_equal(a, b)
+
+
+@needs_numba
+def test_offset_origin_bitwise():
+    rng = np.random.default_rng(1)
+    n = 2000
+    p = rng.normal(size=(3, n)) * 10.0 ** rng.integers(-3, 6, n)
+    n_g, w = unit(rng, n), unit(rng, n)
+    w[:, :10] = np.cross(n_g[:, :10].T, rng.normal(size=(10, 3))).T   # grazing: n_g·w ≈ 0
+    np.testing.assert_array_equal(geometry.offset_origin_numpy(p, n_g, w, 8.9e-5),
+                                  geometry.offset_origin_numba(p, n_g, w, 8.9e-5))
+
+
+@needs_numba
+def test_uniforms_bitwise_and_in_unit_interval():
+    keys = np.random.default_rng(2).integers(0, 2**63, 5000, dtype=np.uint64) * np.uint64(2) + np.uint64(1)
+    keys[:3] = [0, 2**64 - 1, 2**63]
+    offsets = np.array([(d * 0x9E3779B97F4A7C15) & (2**64 - 1) for d in range(1, 8)], dtype=np.uint64)
+    a, b = hashing.uniforms_numpy(keys, offsets), hashing.uniforms_numba(keys, offsets)
+    np.testing.assert_array_equal(a, b)
+    assert a.min() >= 0.0 and a.max() < 1.0
+
+
+@needs_numba
+@pytest.mark.parametrize("P", [1, 3, 4])
+@pytest.mark.parametrize("L_T,L_M", [(4, 4), (1, 1), (4, 1)])
+@pytest.mark.parametrize("depol", [False, True])
+def test_update_abcs_bitwise(P, L_T, L_M, depol):
+    rng = np.random.default_rng(P * 10 + L_T)
+    n = 500
+    T = rng.normal(size=(P, P, L_T, n))
+    phi = rng.uniform(0, np.pi, n)
+    c2, s2 = np.cos(2 * phi), np.sin(2 * phi)
+    c2[:5], s2[:5] = 1.0, 0.0
+    A, B, C, S = (rng.normal(size=(L_M, n)) for _ in range(4))
+    D = rng.random((L_M, n)) if depol else None
+    a = transport.update_abcs_numpy(T, c2, s2, A, B, C, S, D)
+    b = transport.update_abcs_numba(T, c2, s2, A, B, C, S, D)
+    np.testing.assert_array_equal(a, b)
+
+
+def test_update_abcs_is_the_matrix_product():
+    """The NumPy reference itself against an explicit T·R(φ)·M with 4×4 matrices."""
+    from engine.polarisation.frames import rotator
+    from engine.polarisation.mueller import abcs_matrix
+    rng = np.random.default_rng(7)
+    n = 50
+    T = rng.normal(size=(4, 4, 1, n))
+    phi = rng.uniform(0, np.pi, n)
+    A, B, C, S = (rng.normal(size=(1, n)) for _ in range(4))
+    D = rng.random((1, n))
+    M = abcs_matrix(A, B, C, S)
+    M[0, 0] += D
+    R = rotator(np.cos(2 * phi), np.sin(2 * phi))
+    want = np.einsum("ijln,jkn,klmn->ilmn", T, R, M[:, :, None] if M.ndim == 3 else M)
+    got = transport.update_abcs(T, np.cos(2 * phi), np.sin(2 * phi), A, B, C, S, D)
+    np.testing.assert_allclose(got, want.reshape(got.shape), rtol=1e-12, atol=1e-12)
+
+
+@needs_numba
+@pytest.mark.parametrize("L_T,L_e", [(4, 4), (1, 3), (1, 4)])
+def test_add_light_bitwise(L_T, L_e):
+    rng = np.random.default_rng(L_T + L_e)
+    P, n_paths, n = 4, 300, 120
+    T = rng.normal(size=(P, P, L_T, n))
+    path = rng.permutation(n_paths)[:n]
+    sel = np.sort(rng.choice(n, 60, replace=False))
+    Le, w = rng.random((L_e, sel.size)), rng.random(sel.size)
+    a = rng.normal(size=(P, L_e, n_paths))
+    b = a.copy()
+    transport.add_light_numpy(a, path, T, sel, Le, w)
+    transport.add_light_numba(b, path, T, sel, Le, w)
+    np.testing.assert_array_equal(a, b)
+
+
+@needs_numba
+@pytest.mark.parametrize("P,L_T,L_w", [(4, 4, 4), (4, 1, 3), (3, 1, 4), (1, 4, 4)])
+def test_throughput_times_stokes(P, L_T, L_w):
+    rng = np.random.default_rng(P + L_T)
+    n = 400
+    T = rng.normal(size=(P, P, L_T, n))
+    S = rng.normal(size=(P, L_T, n))
+    w = rng.random((L_w, n))
+    a = transport.throughput_times_stokes_numpy(T, S, w)
+    b = transport.throughput_times_stokes_numba(T, S, w)
+    assert a.shape == b.shape
+    np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-14)
+
+
+# ----------------------------------------------------------------------------- whole renders
+
+RENDER_SNIPPET = r"""
+import json, sys
+import numpy as np
+sys.path.insert(0, {repo!r})
+from engine import kernels
+from engine.render.renderer import Renderer
+from engine.scene.loader import load_scene
+scene = load_scene({scene!r})
+scene.camera.width = scene.camera.height = 20
+scene.settings.spp = 3
+scene.settings.threads = 1
+np.save({out!r}, Renderer(scene).render().stokes())
+print(json.dumps(kernels.BACKEND))
+"""
+
+
+@needs_numba
+@pytest.mark.parametrize("name", ["fresnel_sphere", "glass_sphere", "cornell_lambert", "rough_sphere_a030"])
+def test_render_with_numpy_kernels_equals_compiled(tmp_path, name):
+    """The same render with POLAR_KERNELS=numpy and with Numba, in fresh processes."""
+    images = {}
+    for backend in ("numpy", "numba"):
+        out = tmp_path / f"{backend}.npy"
+        code = RENDER_SNIPPET.format(repo=REPO, scene=shared_path("peers", "scenes", f"{name}.json"), out=str(out))
+        env = dict(os.environ, POLAR_KERNELS=backend)
+        proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-2000:]
+        assert json.loads(proc.stdout.strip().splitlines()[-1]).startswith(backend)
+        images[backend] = np.load(out)
+    assert np.abs(images["numpy"]).max() > 0
+    np.testing.assert_allclose(images["numba"], images["numpy"], rtol=1e-10, atol=1e-13)
+
+
+def test_backend_is_reported():
+    scene = load_scene(shared_path("peers", "scenes", "plane_brewster.json"))
+    scene.camera.width = scene.camera.height = 4
+    scene.settings.spp = 1
+    stats = Renderer(scene).render().stats
+    assert stats["kernels"] == kernels.BACKEND
