@@ -84,9 +84,18 @@ def test_update_abcs_bitwise(P, L_T, L_M, depol):
     c2[:5], s2[:5] = 1.0, 0.0
     A, B, C, S = (rng.normal(size=(L_M, n)) for _ in range(4))
     D = rng.random((L_M, n)) if depol else None
-    a = transport.update_abcs_numpy(T, c2, s2, A, B, C, S, D)
-    b = transport.update_abcs_numba(T, c2, s2, A, B, C, S, D)
+    # a vertex group: every other path of a bigger batch, in shuffled order
+    Tfull = rng.normal(size=(P, P, L_T, 2 * n))
+    rows = rng.permutation(np.arange(0, 2 * n, 2))
+    Tfull[..., rows] = T
+    a = np.full_like(Tfull, 7.0)
+    b = a.copy()
+    before = Tfull.copy()
+    transport.update_abcs_numpy(a, Tfull, rows, c2, s2, A, B, C, S, D)
+    transport.update_abcs_numba(b, Tfull, rows, c2, s2, A, B, C, S, D)
     np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(Tfull, before)
+    assert np.all(a[..., 1::2] == 7.0)
 
 
 def test_update_abcs_is_the_matrix_product():
@@ -103,7 +112,8 @@ def test_update_abcs_is_the_matrix_product():
     M[0, 0] += D
     R = rotator(np.cos(2 * phi), np.sin(2 * phi))
     want = np.einsum("ijln,jkn,klmn->ilmn", T, R, M[:, :, None] if M.ndim == 3 else M)
-    got = transport.update_abcs(T, np.cos(2 * phi), np.sin(2 * phi), A, B, C, S, D)
+    got = np.empty_like(T)
+    transport.update_abcs(got, T, np.arange(n), np.cos(2 * phi), np.sin(2 * phi), A, B, C, S, D)
     np.testing.assert_allclose(got, want.reshape(got.shape), rtol=1e-12, atol=1e-12)
 
 
@@ -128,11 +138,12 @@ def test_add_light_bitwise(L_T, L_e):
 def test_throughput_times_stokes(P, L_T, L_w):
     rng = np.random.default_rng(P + L_T)
     n = 400
-    T = rng.normal(size=(P, P, L_T, n))
+    T = rng.normal(size=(P, P, L_T, 3 * n))
+    rows = rng.choice(3 * n, n, replace=False)
     S = rng.normal(size=(P, L_T, n))
     w = rng.random((L_w, n))
-    a = transport.throughput_times_stokes_numpy(T, S, w)
-    b = transport.throughput_times_stokes_numba(T, S, w)
+    a = transport.throughput_times_stokes_numpy(T, rows, S, w)
+    b = transport.throughput_times_stokes_numba(T, rows, S, w)
     assert a.shape == b.shape
     np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-14)
 

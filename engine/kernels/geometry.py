@@ -61,7 +61,8 @@ def surface_attributes_numba(faces, vertices, vertex_normals, tri_has_normals, t
     n_g = np.empty((3, n))
     n_s = np.empty((3, n)) if any_vertex_normals else n_g
     _surface_loop(faces, vertices, vertex_normals, tri_has_normals, tri_normal, bool(any_vertex_normals),
-                  prim, u, v, p, n_g, n_s)
+                  np.ascontiguousarray(prim, dtype=np.int64), np.ascontiguousarray(u, dtype=np.float64),
+                  np.ascontiguousarray(v, dtype=np.float64), p, n_g, n_s)
     return p, n_g, n_s
 
 
@@ -87,7 +88,8 @@ def _offset_loop(p, n_g, w, epsilon, out):
 
 def offset_origin_numba(p, n_g, w, epsilon):
     out = np.empty_like(p, dtype=np.float64)
-    _offset_loop(p, n_g, w, float(epsilon), out)
+    _offset_loop(np.ascontiguousarray(p, dtype=np.float64), np.ascontiguousarray(n_g, dtype=np.float64),
+                 np.ascontiguousarray(w, dtype=np.float64), float(epsilon), out)
     return out
 
 

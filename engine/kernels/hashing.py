@@ -41,7 +41,7 @@ def _uniforms_loop(keys, offsets, out):
 
 def uniforms_numba(keys: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     out = np.empty((offsets.shape[0], keys.shape[0]))
-    _uniforms_loop(keys, offsets, out)
+    _uniforms_loop(np.ascontiguousarray(keys, dtype=np.uint64), offsets, out)
     return out
 
 

@@ -15,43 +15,46 @@ from . import dispatch, jit
 
 # ----------------------------------------------------------------------------- T ← T·R(φ)·M_abcs
 
-def update_abcs_numpy(T, c2, s2, A, B, C, S, depol):
-    """T · R(φ) · M for M = [[A+depol,B,0,0],[B,A,0,0],[0,0,C,S],[0,0,−S,C]]; returns a new array.
+def update_abcs_numpy(out, T, rows, c2, s2, A, B, C, S, depol):
+    """out[..., rows] = T[..., rows] · R(φ) · M for M = [[A+depol,B,0,0],[B,A,0,0],[0,0,C,S],[0,0,−S,C]].
 
-    R(φ) re-expresses the vertex's outgoing frame in the path's frame (rotating columns 1, 2).
+    ``rows`` (n,) are the paths (last-axis indices of T and out) the vertex values belong to;
+    c2, s2 (n,) and A..S, depol (L or 1, n) are given per such path.  R(φ) re-expresses the
+    vertex's outgoing frame in the path's frame (rotating columns 1, 2).  T is not modified.
     """
     P = T.shape[0]
-    T = T.copy()
+    T = T[..., rows]
     if P >= 3:
         t1 = T[:, 1].copy()
-        t2 = T[:, 2]
+        t2 = T[:, 2].copy()
         T[:, 1] = t1 * c2 - t2 * s2
         T[:, 2] = t1 * s2 + t2 * c2
-    out = np.empty_like(T)
+    res = np.empty_like(T)
     a0 = A if depol is None else A + depol
     if P == 1:
-        out[:, 0] = T[:, 0] * a0
-        return out
-    t0, t1 = T[:, 0], T[:, 1]
-    out[:, 0] = a0 * t0 + B * t1
-    out[:, 1] = B * t0 + A * t1
-    if P == 4:
-        t2, t3 = T[:, 2], T[:, 3]
-        out[:, 2] = C * t2 - S * t3
-        out[:, 3] = S * t2 + C * t3
+        res[:, 0] = T[:, 0] * a0
     else:
-        out[:, 2] = C * T[:, 2]
-    return out
+        t0, t1 = T[:, 0], T[:, 1]
+        res[:, 0] = a0 * t0 + B * t1
+        res[:, 1] = B * t0 + A * t1
+        if P == 4:
+            t2, t3 = T[:, 2], T[:, 3]
+            res[:, 2] = C * t2 - S * t3
+            res[:, 3] = S * t2 + C * t3
+        else:
+            res[:, 2] = C * T[:, 2]
+    out[..., rows] = res
 
 
 @jit
-def _update_abcs_loop(T, c2, s2, A, B, C, S, D, has_depol, out):
-    P, L, N = T.shape[0], T.shape[2], T.shape[3]
-    for n in range(N):
+def _update_abcs_loop(out, T, rows, c2, s2, A, B, C, S, D, has_depol):
+    P, L = T.shape[0], T.shape[2]
+    for j in range(rows.shape[0]):
+        n = rows[j]
         for k in range(L):
             la = k if A.shape[0] > 1 else 0
-            a, b = A[la, n], B[la, n]
-            a0 = a + D[la, n] if has_depol else a
+            a, b = A[la, j], B[la, j]
+            a0 = a + D[la, j] if has_depol else a
             for i in range(P):
                 t0 = T[i, 0, k, n]
                 if P == 1:
@@ -60,29 +63,30 @@ def _update_abcs_loop(T, c2, s2, A, B, C, S, D, has_depol, out):
                 t1 = T[i, 1, k, n]
                 if P >= 3:
                     t2 = T[i, 2, k, n]
-                    r1 = t1 * c2[n] - t2 * s2[n]
-                    r2 = t1 * s2[n] + t2 * c2[n]
+                    r1 = t1 * c2[j] - t2 * s2[j]
+                    r2 = t1 * s2[j] + t2 * c2[j]
                 else:
                     r1 = t1
                     r2 = 0.0
                 out[i, 0, k, n] = a0 * t0 + b * r1
                 out[i, 1, k, n] = b * t0 + a * r1
                 if P == 4:
-                    c, s = C[la, n], S[la, n]
+                    c, s = C[la, j], S[la, j]
                     t3 = T[i, 3, k, n]
                     out[i, 2, k, n] = c * r2 - s * t3
                     out[i, 3, k, n] = s * r2 + c * t3
                 elif P == 3:
-                    out[i, 2, k, n] = C[la, n] * r2
+                    out[i, 2, k, n] = C[la, j] * r2
 
 
-def update_abcs_numba(T, c2, s2, A, B, C, S, depol):
-    out = np.empty_like(T)
+def update_abcs_numba(out, T, rows, c2, s2, A, B, C, S, depol):
     has_depol = depol is not None
-    D = depol if has_depol else A
-    # Broadcast per-wavelength rows of (1, N) parameters in the loop, not by copying.
-    _update_abcs_loop(T, c2, s2, A, B, C if C is not None else A, S if S is not None else A, D, has_depol, out)
-    return out
+    # One compiled signature: contiguous float64 everywhere (per-wavelength rows of (1, n)
+    # parameters are broadcast in the loop, not by copying).
+    A, B, C, S, D, c2, s2 = (np.ascontiguousarray(x, dtype=np.float64)
+                             for x in (A, B, A if C is None else C, A if S is None else S,
+                                       depol if has_depol else A, c2, s2))
+    _update_abcs_loop(out, T, np.ascontiguousarray(rows, dtype=np.int64), c2, s2, A, B, C, S, D, has_depol)
 
 
 update_abcs = dispatch(_update_abcs_loop and update_abcs_numba, update_abcs_numpy)
@@ -113,7 +117,9 @@ def _add_light_loop(radiance, path, T, sel, Le, w):
 
 
 def add_light_numba(radiance, path, T, sel, Le, w):
-    _add_light_loop(radiance, path, T, np.asarray(sel, dtype=np.int64), Le, np.asarray(w, dtype=np.float64))
+    _add_light_loop(radiance, np.ascontiguousarray(path, dtype=np.int64), T,
+                    np.ascontiguousarray(sel, dtype=np.int64), np.ascontiguousarray(Le, dtype=np.float64),
+                    np.ascontiguousarray(w, dtype=np.float64))
 
 
 add_light = dispatch(_add_light_loop and add_light_numba, add_light_numpy)
@@ -121,34 +127,36 @@ add_light = dispatch(_add_light_loop and add_light_numba, add_light_numpy)
 
 # ----------------------------------------------------------------------------- T · S (next-event estimation)
 
-def throughput_times_stokes_numpy(T, S, weight):
-    """(T · S) · weight: Stokes (P, L, n) reaching the camera from Stokes S (P, Lm, n) at the vertex.
+def throughput_times_stokes_numpy(T, rows, S, weight):
+    """(T[..., rows] · S) · weight: Stokes (P, L, n) reaching the camera from Stokes S (P, Lm, n).
 
     ``weight`` (L, n) scales each wavelength (light spectrum, cosine, MIS); T and S may carry one
     wavelength row (Lm = 1) that is shared by all L.
     """
-    return np.einsum("ijln,jln->iln", T, S) * weight[None]
+    return np.einsum("ijln,jln->iln", T[..., rows], S) * weight[None]
 
 
 @jit
-def _t_times_s_loop(T, S, weight, out):
-    P, LT, N = T.shape[0], T.shape[2], T.shape[3]
+def _t_times_s_loop(T, rows, S, weight, out):
+    P, LT = T.shape[0], T.shape[2]
     L = weight.shape[0]
-    for n in range(N):
+    for j in range(rows.shape[0]):
+        n = rows[j]
         for k in range(L):
             lt = k if LT > 1 else 0
             ls = k if S.shape[1] > 1 else 0
             for i in range(P):
                 acc = 0.0
-                for j in range(P):
-                    acc += T[i, j, lt, n] * S[j, ls, n]
-                out[i, k, n] = acc * weight[k, n]
+                for m in range(P):
+                    acc += T[i, m, lt, n] * S[m, ls, j]
+                out[i, k, j] = acc * weight[k, j]
 
 
-def throughput_times_stokes_numba(T, S, weight):
-    out = np.empty((T.shape[0], max(weight.shape[0], T.shape[2]), T.shape[3]))
+def throughput_times_stokes_numba(T, rows, S, weight):
+    out = np.empty((T.shape[0], max(weight.shape[0], T.shape[2]), S.shape[2]))
     w = weight if weight.shape[0] == out.shape[1] else np.broadcast_to(weight, out.shape[1:])
-    _t_times_s_loop(T, S, w, out)
+    _t_times_s_loop(T, np.ascontiguousarray(rows, dtype=np.int64), np.ascontiguousarray(S, dtype=np.float64),
+                    np.ascontiguousarray(w, dtype=np.float64), out)
     return out
 
 

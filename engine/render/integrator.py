@@ -47,22 +47,24 @@ def rotate_columns(T: np.ndarray, c2: np.ndarray, s2: np.ndarray) -> None:
     T[:, 2] = t1 * s2 + t2 * c2
 
 
-def scatter_throughput(T: np.ndarray, m: MuellerValue, x_T: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    """New throughput T · R(x_out → x_T) · M at a vertex with Mueller value ``m`` (frames x_in, x_out).
+def scatter_throughput(out, T, rows, m: MuellerValue, x_T: np.ndarray, wo: np.ndarray) -> None:
+    """out[..., rows] = T[..., rows] · R(x_out → x_T) · M at vertices with Mueller value ``m``.
 
-    ``x_T`` is the path's current frame (⟂ the arriving segment, i.e. ⟂ wo).  T is left unchanged.
+    ``m`` (frames x_in, x_out), ``x_T`` (the paths' current frames, ⟂ the arriving segment, i.e.
+    ⟂ wo) and ``wo`` are given for the paths ``rows`` only.  T is left unchanged.
     """
     if m.kind == "abcs":
         if T.shape[0] >= 3:
             c2, s2 = frame_rotation(m.x_out, x_T, wo)
         else:  # scalar transport: no frames to rotate
-            c2 = s2 = np.zeros(T.shape[-1])
-        return update_abcs(T, c2, s2, m.A, m.B, m.C, m.S, m.depol)
+            c2 = s2 = np.zeros(rows.shape[0])
+        update_abcs(out, T, rows, c2, s2, m.A, m.B, m.C, m.S, m.depol)
+        return
+    Tm = T[..., rows]
     if m.kind == "general":
         c2, s2 = frame_rotation(m.x_out, x_T, wo)
-        T = T.copy()
-        rotate_columns(T, c2, s2)
-    return multiply_right(T, m)
+        rotate_columns(Tm, c2, s2)
+    out[..., rows] = multiply_right(Tm, m)
 
 
 def multiply_right(T: np.ndarray, m: MuellerValue) -> np.ndarray:
@@ -285,15 +287,15 @@ class PathTracer:
                 bsdf = compiled.materials[m]
                 sp = ShadingPoint(p[:, sel], n_s[:, sel], n_g[:, sel], wo[:, sel], lk_m.lam[:, sel], self.mono,
                                   lk_m.take(sel))
-                Tm = T[..., sel]
+                rows = np.arange(n) if isinstance(sel, slice) else sel
                 xTm = x_T[:, sel]
 
                 if not bsdf.delta_only and len(light_set) and bounce + 2 <= st.max_depth:
-                    contrib = self._next_event(sp, lk.take(sel), bsdf, Tm, xTm, u_light[:, sel], stats)
+                    contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], stats)
                     radiance[:, :, path[sel]] += contrib
 
                 bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
-                newT[..., sel] = scatter_throughput(Tm, bs.weight, xTm, wo[:, sel])
+                scatter_throughput(newT, T, rows, bs.weight, xTm, wo[:, sel])
                 new_d[:, sel] = bs.wi
                 new_xT[:, sel] = bs.weight.x_in
                 valid[sel] = bs.valid
@@ -327,7 +329,7 @@ class PathTracer:
         out[:, :, ~finite] = 0.0
         return out, stats
 
-    def _next_event(self, sp, lookup, bsdf, T, x_T, u, stats):
+    def _next_event(self, sp, lookup, bsdf, T, rows, x_T, u, stats):
         """Direct light at non-delta vertices, MIS-weighted against BSDF sampling; (P, L, n).
 
         ``lookup`` holds the path's wavelengths (lights are evaluated at all of them); the
@@ -369,5 +371,5 @@ class PathTracer:
             blocked[test] = self.scene.occluded(origin[:, test], wi[:, test], t_max[test])
             stats["shadow_rays"] += test.size
             weight = weight * (~blocked)[None, :]
-            out[:, :, sel] = throughput_times_stokes(T[..., sel], S, weight)
+            out[:, :, sel] = throughput_times_stokes(T, rows[sel], S, weight)
         return out
