@@ -55,10 +55,12 @@ def _render(args) -> int:
     st = scene.settings
     overrides = {k: v for k, v in (("spp", args.spp), ("seed", args.seed), ("max_depth", args.max_depth),
                                    ("spectral", args.spectral), ("polarisation", args.polarisation),
-                                   ("wavelength_nm", args.wavelength_nm)) if v is not None}
+                                   ("wavelength_nm", args.wavelength_nm), ("simplify", args.simplify),
+                                   ("reduce_spectral", args.reduce_spectral)) if v is not None}
     if overrides:
         merged = {**{k: getattr(st, k) for k in ("spp", "max_depth", "rr_depth", "seed", "spectral",
-                                                  "wavelength_nm", "polarisation", "batch_rays")}, **overrides}
+                                                  "wavelength_nm", "polarisation", "batch_rays", "threads",
+                                                  "reduce_spectral", "simplify")}, **overrides}
         st = parse_settings(merged, "option")
         scene.settings = st
     out = args.output
@@ -111,12 +113,15 @@ def _render(args) -> int:
         print(f"polar: interrupted — writing the {result.stats['samples']} finished samples", file=sys.stderr)
     stats = result.stats
     print(f"polar: transport: {stats['transport_reason']}; spectral: {stats['spectral']}", file=sys.stderr)
+    for why in stats.get("simplified", []):
+        print(f"polar: simplified: {why}", file=sys.stderr)
     film = result.film
     spp_image = film.spp_image()
     meta = {"polar.spp": int(st.spp), "polar.complete": int(not result.cancelled), "polar.spp_min": int(spp_image.min()), "polar.spp_max": int(spp_image.max()),
             "polar.seed": int(st.seed), "polar.max_depth": int(st.max_depth), "polar.spectral": st.spectral,
             "polar.polarisation": stats["transport"], "polar.transport_reason": stats["transport_reason"], "polar.scene": os.path.basename(args.scene),
-            "polar.render_seconds": float(stats["seconds"]), "polar.nonfinite_samples": int(stats["nonfinite"])}
+            "polar.render_seconds": float(stats["seconds"]), "polar.nonfinite_samples": int(stats["nonfinite"]),
+            "polar.kernels": stats.get("kernels", ""), "polar.simplified": "; ".join(stats.get("simplified", []))}
     if st.spectral == "mono":
         meta["polar.wavelength_nm"] = float(st.wavelength_nm)
     extra = {"spp": spp_image.astype("uint32")}
@@ -260,6 +265,11 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--wavelength-nm", type=float, help="wavelength of --spectral mono (nm)")
     r.add_argument("--polarisation", choices=("auto", "full", "linear", "off"),
                    help="auto (default: the cheapest exact transport), full 4×4, linear 3×3 or scalar")
+    r.add_argument("--reduce-spectral", choices=("auto", "exact", "off"),
+                   help="where no material depends on λ: auto (RGB with exact light colours), exact "
+                        "(sampled λ, one Mueller product per path) or off")
+    r.add_argument("--simplify", choices=("auto", "off"),
+                   help="auto (default): skip layered coats that are index-matched and clear; off: keep all")
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")
     r.add_argument("--stderr", action="store_true", help="also write per-pixel standard errors")

@@ -41,7 +41,8 @@ def engine_settings(scene, preview=False) -> RenderSettings:
     return RenderSettings(spp=p.preview_samples if preview else p.samples, max_depth=p.max_bounces + 1,
                           rr_depth=5, seed=seed, spectral="mono" if p.spectral == "MONO" else "spectral",
                           wavelength_nm=p.wavelength_nm, polarisation=POLARISATION_TO_ENGINE[p.polarisation],
-                          batch_rays=p.batch_rays, threads=p.threads)
+                          batch_rays=p.batch_rays, threads=p.threads,
+                          simplify="auto" if p.skip_clear_layers else "off")
 
 
 def _display_colour(uint8_rgb):
@@ -161,6 +162,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         stats = out.stats
         message = (f"Polar | {stats['transport_reason']} | {stats['samples']} samples in {stats['seconds']:.1f} s"
                    f" (export + BVH {time.perf_counter() - t0 - stats['seconds']:.1f} s)")
+        if stats.get("simplified"):
+            message += f" | skipped {len(stats['simplified'])} clear layer(s): " + "; ".join(stats["simplified"])
         if out.cancelled:
             message += " | cancelled: partial image"
         if stats["nonfinite"]:

@@ -54,6 +54,9 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
     wavelength_nm: FloatProperty(name="Wavelength", description="Wavelength of monochrome renders (nm)",
                                  default=550.0, min=360.0, max=830.0)
     polarisation: EnumProperty(name="Polarisation", items=POLARISATION_ITEMS, default="AUTO")
+    skip_clear_layers: BoolProperty(name="Skip Clear Layers", description="Skip layered-material coats whose "
+                                    "index equals the medium above and that absorb nothing (exact; reported "
+                                    "in the render stats)", default=True)
     threads: IntProperty(name="Threads", description="Worker threads (0 = one per CPU core)", default=0, min=0,
                          max=256)
     batch_rays: IntProperty(name="Batch Size", description="Paths traced at once; lower it to save memory",

@@ -39,6 +39,7 @@ class POLAR_PT_light_model(_PolarPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.prop(p, "polarisation")
+        layout.prop(p, "skip_clear_layers")
         layout.prop(p, "spectral")
         sub = layout.row()
         sub.enabled = p.spectral == "MONO"

@@ -177,3 +177,12 @@ def test_unsupported_world_and_shader_warn_but_render(addon, tmp_path):
     assert any("ShaderNodeBsdfToon" in w for w in warnings)
     passes = read_multilayer(render_to_exr(scene, str(tmp_path / "warn")))
     assert passes["S0"].max() > 0
+
+
+def test_skip_clear_layers_setting_reaches_the_engine(addon):
+    from polar_render.polar_addon.engine import engine_settings
+    scene = empty_scene()
+    assert scene.polar.skip_clear_layers is True
+    assert engine_settings(scene).simplify == "auto"
+    scene.polar.skip_clear_layers = False
+    assert engine_settings(scene).simplify == "off"

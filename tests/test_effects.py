@@ -90,3 +90,69 @@ def test_rgb_light_integration_has_the_same_expectation_and_less_noise(name):
 def test_measured_metals_and_coloured_albedos_keep_per_wavelength_transport(name):
     result = Renderer(peer(name, 8, 1)).render()
     assert result.stats["spectral"] == "spectral"
+
+
+# ----------------------------------------------------------------------------- skipped clear layers
+
+def coated_ball_scene(coat, base=None, spp=64, res=32):
+    """The thesis WW set-up (sphere on black glass under a white sky) with the given coat."""
+    import json
+    with open("examples/thesis_ww_coat_red.json") as fh:
+        d = json.load(fh)
+    d["materials"]["ball"]["coats"] = [coat]
+    if base is not None:
+        d["materials"]["ball"]["base"] = base
+    d["camera"]["width"] = d["camera"]["height"] = res
+    d["render"]["spp"] = spp
+    from engine.scene.loader import parse_scene
+    return parse_scene(d, "examples")
+
+
+def test_index_matched_clear_coat_is_skipped_reported_and_unbiased():
+    """A coat with n = exterior index and no absorption is skipped (a rough one too); the scene then
+    needs no polarisation at the ball (the floor still polarises).  The render equals the render with
+    every layer kept (simplify="off") within Monte Carlo noise: the samplers differ, the BSDF does not."""
+    from tests.test_render_acceptance import block_z
+    scene = coated_ball_scene({"n": 1.0, "distribution": "beckmann", "m": 0.3})
+    renderer = Renderer(scene)
+    settings = copy.copy(scene.settings)
+    settings.threads = 1
+    auto = renderer.render(settings)
+    assert any("index-matched" in why and "'ball'" in why for why in auto.stats["simplified"])
+    settings.simplify = "off"
+    kept = renderer.render(settings)
+    assert kept.stats["simplified"] == []
+    assert not np.array_equal(auto.stokes(), kept.stokes())      # really different samplers
+    Ya, Yk = auto.stokes_luminance(), kept.stokes_luminance()
+    sa, sk = auto.film.stderr_luminance(), kept.film.stderr_luminance()
+    for comp in range(3):
+        with np.errstate(invalid="ignore", divide="ignore"):   # the sky is exact: 0/0 blocks
+            z = block_z(Ya[comp] - Yk[comp], np.sqrt(sa[comp] ** 2 + sk[comp] ** 2), 0.0, block=4)
+        z = z[np.isfinite(z)]
+        assert np.mean(np.abs(z) < 4) >= 0.98, f"S{comp}: {np.mean(np.abs(z) < 4):.3f} of blocks within 4σ"
+
+
+def test_index_matched_clear_coat_over_lambert_makes_the_scene_scalar():
+    """Only the ball, lit by the sky: with its clear matched coat skipped it is Lambertian, so Auto
+    picks scalar transport — and the full-transport render of the unsimplified scene has S1..S3 = 0
+    up to rounding and the same S0 within noise."""
+    scene = coated_ball_scene({"n": 1.0}, spp=32)
+    scene.meshes = [m for m in scene.meshes if m.name == "sphere"]
+    renderer = Renderer(scene)
+    auto = renderer.render()
+    assert auto.stats["transport"] == "off"
+    assert "simplified" in auto.stats and auto.stats["simplified"]
+    settings = copy.copy(scene.settings)
+    settings.simplify = "off"
+    kept = renderer.render(settings)
+    assert kept.stats["transport"] != "off"
+    Y = kept.stokes_luminance()
+    assert np.abs(Y[1:]).max() <= 1e-9 * Y[0].max()
+
+
+@pytest.mark.parametrize("coat", [{"n": 1.0 + 1e-6}, {"n": 1.0, "thickness": 1.0, "absorption": 0.1},
+                                  {"n": 1.5}])
+def test_coats_that_do_something_are_kept(coat):
+    scene = coated_ball_scene(coat, spp=1, res=8)
+    result = Renderer(scene).render()
+    assert result.stats["simplified"] == []

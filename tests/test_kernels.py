@@ -79,9 +79,16 @@ def test_update_abcs_bitwise(P, L_T, L_M, depol):
     rng = np.random.default_rng(P * 10 + L_T)
     n = 500
     T = rng.normal(size=(P, P, L_T, n))
-    phi = rng.uniform(0, np.pi, n)
-    c2, s2 = np.cos(2 * phi), np.sin(2 * phi)
-    c2[:5], s2[:5] = 1.0, 0.0
+    wo = unit(rng, n)
+    x_T = unit(rng, n)
+    x_T -= wo * (x_T * wo).sum(0)
+    x_T /= np.linalg.norm(x_T, axis=0)
+    x_out = unit(rng, n)
+    x_out -= wo * (x_out * wo).sum(0)
+    x_out /= np.linalg.norm(x_out, axis=0)
+    x_out[:, :5] = x_T[:, :5]          # no rotation
+    x_out[:, 5:8] = -x_T[:, 5:8]       # half turn: R = identity too
+    x_out[:, 8:10] = 0.0               # degenerate frame: r² = 0 handled
     A, B, C, S = (rng.normal(size=(L_M, n)) for _ in range(4))
     D = rng.random((L_M, n)) if depol else None
     # a vertex group: every other path of a bigger batch, in shuffled order
@@ -91,8 +98,8 @@ def test_update_abcs_bitwise(P, L_T, L_M, depol):
     a = np.full_like(Tfull, 7.0)
     b = a.copy()
     before = Tfull.copy()
-    transport.update_abcs_numpy(a, Tfull, rows, c2, s2, A, B, C, S, D)
-    transport.update_abcs_numba(b, Tfull, rows, c2, s2, A, B, C, S, D)
+    transport.update_abcs_numpy(a, Tfull, rows, x_out, x_T, wo, A, B, C, S, D)
+    transport.update_abcs_numba(b, Tfull, rows, x_out, x_T, wo, A, B, C, S, D)
     np.testing.assert_array_equal(a, b)
     np.testing.assert_array_equal(Tfull, before)
     assert np.all(a[..., 1::2] == 7.0)
@@ -112,8 +119,12 @@ def test_update_abcs_is_the_matrix_product():
     M[0, 0] += D
     R = rotator(np.cos(2 * phi), np.sin(2 * phi))
     want = np.einsum("ijln,jkn,klmn->ilmn", T, R, M[:, :, None] if M.ndim == 3 else M)
+    # frames with x_out at angle φ from x_T about wo = z, measured towards y_T = wo × x_T
+    wo = np.tile([[0.0], [0.0], [1.0]], n)
+    x_T = np.tile([[1.0], [0.0], [0.0]], n)
+    x_out = np.stack((np.cos(phi), -np.sin(phi), np.zeros(n)))
     got = np.empty_like(T)
-    transport.update_abcs(got, T, np.arange(n), np.cos(2 * phi), np.sin(2 * phi), A, B, C, S, D)
+    transport.update_abcs(got, T, np.arange(n), x_out, x_T, wo, A, B, C, S, D)
     np.testing.assert_allclose(got, want.reshape(got.shape), rtol=1e-12, atol=1e-12)
 
 

@@ -69,6 +69,8 @@ CASES = [
     ("camera.origin", [0, float("nan"), 1], "camera.origin[1]", "finite"),
     ("render.spp", -1, "render.spp", "[1,"),
     ("render.polarisation", "sometimes", "render.polarisation", "'full'"),
+    ("render.simplify", "yes", "render.simplify", "'auto'"),
+    ("render.reduce_spectral", "rgb", "render.reduce_spectral", "'exact'"),
     ("render.wavelength_nm", 200, "render.wavelength_nm", "[360, 830]"),
     ("render.colour", 1, "render.colour", "unknown field"),
     ("materials.gold", {"type": "conductor", "metal": "Unobtainium"}, "materials.gold.metal", "Au"),

@@ -11,20 +11,24 @@ from __future__ import annotations
 import numpy as np
 
 from . import dispatch, jit
+from ..polarisation.frames import frame_rotation
 
 
 # ----------------------------------------------------------------------------- T ← T·R(φ)·M_abcs
 
-def update_abcs_numpy(out, T, rows, c2, s2, A, B, C, S, depol):
+def update_abcs_numpy(out, T, rows, x_out, x_T, wo, A, B, C, S, depol):
     """out[..., rows] = T[..., rows] · R(φ) · M for M = [[A+depol,B,0,0],[B,A,0,0],[0,0,C,S],[0,0,−S,C]].
 
     ``rows`` (n,) are the paths (last-axis indices of T and out) the vertex values belong to;
-    c2, s2 (n,) and A..S, depol (L or 1, n) are given per such path.  R(φ) re-expresses the
-    vertex's outgoing frame in the path's frame (rotating columns 1, 2).  T is not modified.
+    x_out (the vertex value's outgoing frame), x_T (the path's frame), wo (both ⟂ it) are (3, n)
+    and A..S, depol (L or 1, n), all given per such path.  R(φ) = rotation from x_out to x_T
+    about wo (engine.polarisation.frames.frame_rotation), applied to columns 1, 2 of T.
+    T is not modified.
     """
     P = T.shape[0]
     T = T[..., rows]
     if P >= 3:
+        c2, s2 = frame_rotation(x_out, x_T, wo)
         t1 = T[:, 1].copy()
         t2 = T[:, 2].copy()
         T[:, 1] = t1 * c2 - t2 * s2
@@ -47,10 +51,25 @@ def update_abcs_numpy(out, T, rows, c2, s2, A, B, C, S, depol):
 
 
 @jit
-def _update_abcs_loop(out, T, rows, c2, s2, A, B, C, S, D, has_depol):
+def _frame_rotation(x, xt, k, j):
+    """(cos 2φ, sin 2φ) of frame_rotation(x, xt, k) for path j, same operation order."""
+    c = (x[0, j] * xt[0, j] + x[1, j] * xt[1, j]) + x[2, j] * xt[2, j]
+    y0 = k[1, j] * x[2, j] - k[2, j] * x[1, j]
+    y1 = k[2, j] * x[0, j] - k[0, j] * x[2, j]
+    y2 = k[0, j] * x[1, j] - k[1, j] * x[0, j]
+    s = (y0 * xt[0, j] + y1 * xt[1, j]) + y2 * xt[2, j]
+    r2 = c * c + s * s
+    if not r2 > 0:
+        r2 = 1.0
+    return (c * c - s * s) / r2, 2.0 * c * s / r2
+
+
+@jit
+def _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, D, has_depol):
     P, L = T.shape[0], T.shape[2]
     for j in range(rows.shape[0]):
         n = rows[j]
+        c2j, s2j = _frame_rotation(x_out, x_T, wo, j) if P >= 3 else (1.0, 0.0)
         for k in range(L):
             la = k if A.shape[0] > 1 else 0
             a, b = A[la, j], B[la, j]
@@ -63,8 +82,8 @@ def _update_abcs_loop(out, T, rows, c2, s2, A, B, C, S, D, has_depol):
                 t1 = T[i, 1, k, n]
                 if P >= 3:
                     t2 = T[i, 2, k, n]
-                    r1 = t1 * c2[j] - t2 * s2[j]
-                    r2 = t1 * s2[j] + t2 * c2[j]
+                    r1 = t1 * c2j - t2 * s2j
+                    r2 = t1 * s2j + t2 * c2j
                 else:
                     r1 = t1
                     r2 = 0.0
@@ -79,14 +98,14 @@ def _update_abcs_loop(out, T, rows, c2, s2, A, B, C, S, D, has_depol):
                     out[i, 2, k, n] = C[la, j] * r2
 
 
-def update_abcs_numba(out, T, rows, c2, s2, A, B, C, S, depol):
+def update_abcs_numba(out, T, rows, x_out, x_T, wo, A, B, C, S, depol):
     has_depol = depol is not None
     # One compiled signature: contiguous float64 everywhere (per-wavelength rows of (1, n)
     # parameters are broadcast in the loop, not by copying).
-    A, B, C, S, D, c2, s2 = (np.ascontiguousarray(x, dtype=np.float64)
-                             for x in (A, B, A if C is None else C, A if S is None else S,
-                                       depol if has_depol else A, c2, s2))
-    _update_abcs_loop(out, T, np.ascontiguousarray(rows, dtype=np.int64), c2, s2, A, B, C, S, D, has_depol)
+    A, B, C, S, D, x_out, x_T, wo = (np.ascontiguousarray(x, dtype=np.float64)
+                                     for x in (A, B, A if C is None else C, A if S is None else S,
+                                               depol if has_depol else A, x_out, x_T, wo))
+    _update_abcs_loop(out, T, np.ascontiguousarray(rows, dtype=np.int64), x_out, x_T, wo, A, B, C, S, D, has_depol)
 
 
 update_abcs = dispatch(_update_abcs_loop and update_abcs_numba, update_abcs_numpy)

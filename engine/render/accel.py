@@ -76,6 +76,11 @@ class CompiledScene:
         # tri_emitter is filled in by the light set (area lights).
         self.tri_emitter = np.full(len(self.faces), -1, np.int32)
 
+    @property
+    def has_area_lights(self) -> bool:
+        """True if some triangle emits (set by the light set)."""
+        return bool((self.tri_emitter >= 0).any())
+
     # ------------------------------------------------------------------ ray casting
 
     def intersect(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray | None = None) -> Hits:

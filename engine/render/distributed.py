@@ -24,7 +24,7 @@ import numpy as np
 
 from .film import Film
 from .renderer import RenderResult, Renderer, unit_pixels, work_units
-from .effects import resolve_transport
+from .effects import effective_materials, resolve_transport
 
 #: Per-worker cache of compiled scenes (key → Renderer); a worker process renders one scene at a time.
 _COMPILED: dict = {}
@@ -92,7 +92,8 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
         local = Renderer(scene)          # validates and resolves the settings exactly as a local render
         st = copy.copy(settings or scene.settings)
         used = {local.compiled.material_names[i] for i in np.unique(local.compiled.tri_material)}
-        st.polarisation, reason = resolve_transport(st.polarisation, scene.materials, used)
+        materials, simplified = effective_materials(scene.materials, used, st.simplify)
+        st.polarisation, reason = resolve_transport(st.polarisation, materials, used)
         W, H = scene.camera.width, scene.camera.height
         units = list(work_units(W, H, st.spp, st.batch_rays, window=window))
         key = scene_key(scene)
@@ -101,7 +102,8 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
                                  key=f"polar-{key[:12]}-{st.seed}-{i}-{unit}") for i, unit in enumerate(units)]
         film = Film(W, H)
         stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0, "transport": st.polarisation,
-                 "transport_reason": reason, "spectral": st.spectral, "workers": len(client.scheduler_info()["workers"])}
+                 "transport_reason": reason, "spectral": st.spectral, "simplified": simplified,
+                 "workers": len(client.scheduler_info()["workers"])}
         t0 = time.perf_counter()
         index = {f.key: i for i, f in enumerate(futures)}
         results = {}

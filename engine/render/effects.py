@@ -11,6 +11,10 @@ Lights are unpolarised, so polarisation can only be created by materials:
   composes exactly;
 - otherwise full 4×4 Mueller transport.
 
+Before choosing, materials are simplified where that is exact (``simplify="auto"``): layered
+(Weidlich–Wilkie) coats that are index-matched to the medium above and clear are skipped
+(engine.materials.simplify), which can in turn make a scene non-polarising.
+
 Each material reports what it can do through its ``polarising`` and
 ``creates_circular`` flags (engine.materials.base.BSDF).  The choice comes
 with a human-readable reason for logs and Blender's render stats, and is
@@ -19,7 +23,24 @@ overridden by asking for "full", "linear" or "off" explicitly.
 
 from __future__ import annotations
 
+from ..materials.simplify import simplify_material
+
 TRANSPORT_SIZES = {"full": 4, "linear": 3, "off": 1}
+
+
+def effective_materials(materials: dict, used=None, simplify: str = "auto"):
+    """({name: BSDF} with exact simplifications applied, [reasons]) for the ``used`` names.
+
+    ``simplify``: "auto" skips index-matched clear coats; "off" renders the materials as given.
+    """
+    if simplify not in ("auto", "off"):
+        raise ValueError(f"simplify must be 'auto' or 'off', got {simplify!r}")
+    out, reasons = dict(materials), []
+    if simplify == "auto":
+        for name in sorted(used if used is not None else materials):
+            out[name], why = simplify_material(materials[name], name)
+            reasons += why
+    return out, reasons
 
 
 def choose_transport(materials: dict, used: set | None = None):

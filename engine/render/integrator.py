@@ -29,7 +29,7 @@ from ..materials.base import MuellerValue, ShadingPoint
 from ..polarisation.frames import frame_rotation
 from .accel import offset_origin
 from ..kernels.transport import add_light, throughput_times_stokes, update_abcs
-from .effects import TRANSPORT_SIZES
+from .effects import TRANSPORT_SIZES, effective_materials
 from .sampler import PathSampler, path_keys
 from ..spectral import WavelengthLookup, rgb_weights, sample_wavelengths
 from ..vec3 import dot
@@ -54,11 +54,7 @@ def scatter_throughput(out, T, rows, m: MuellerValue, x_T: np.ndarray, wo: np.nd
     ⟂ wo) and ``wo`` are given for the paths ``rows`` only.  T is left unchanged.
     """
     if m.kind == "abcs":
-        if T.shape[0] >= 3:
-            c2, s2 = frame_rotation(m.x_out, x_T, wo)
-        else:  # scalar transport: no frames to rotate
-            c2 = s2 = np.zeros(rows.shape[0])
-        update_abcs(out, T, rows, c2, s2, m.A, m.B, m.C, m.S, m.depol)
+        update_abcs(out, T, rows, m.x_out, x_T, wo, m.A, m.B, m.C, m.S, m.depol)
         return
     Tm = T[..., rows]
     if m.kind == "general":
@@ -153,13 +149,17 @@ class PathTracer:
         self.lights = lights
         self.camera = camera
         self.settings = settings
+        # the materials as rendered: exact simplifications applied (same on every worker)
+        simplified, _ = effective_materials(dict(zip(compiled.material_names, compiled.materials)),
+                                            simplify=getattr(settings, "simplify", "auto"))
+        self.materials = [simplified[name] for name in compiled.material_names]
         self.P = TRANSPORT_SIZES[settings.polarisation]
         self.mono = settings.spectral == "mono"
         self.n_lambda = 1 if self.mono else 4
         # Where no material depends on λ, every wavelength of a path has the same Mueller product:
         # carry T for one wavelength and apply the spectral emission and colour matching at the
         # lights (exactly the same estimate, a quarter of the Mueller arithmetic).
-        used = {compiled.materials[i] for i in np.unique(compiled.tri_material)}
+        used = {self.materials[i] for i in np.unique(compiled.tri_material)}
         independent = all(getattr(m, "wavelength_independent", False) for m in used)
         reduce = settings.reduce_spectral
         self.uniform = reduce in ("auto", "exact", True) and independent
@@ -239,12 +239,12 @@ class PathTracer:
                     p_light = env.pdf(d[:, miss]) * light_set.select_prob
                     w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
                 add_light(radiance, path, T, miss.nonzero()[0], Le, w)
-            prim_all = np.where(hit, hits.prim, 0)
-            emitter = np.where(hit, compiled.tri_emitter[prim_all], -1)
-            front = dot(d, compiled.tri_normal[prim_all].T) < 0
-            lit = (emitter >= 0) & front
-            if lit.any():
+            emitter = compiled.tri_emitter[hits.prim] if compiled.has_area_lights else None
+            lit = (emitter >= 0) & hit if emitter is not None else None
+            if lit is not None and lit.any():
                 idx = lit.nonzero()[0]
+                # emitters are one-sided: only their front faces shine
+                idx = idx[dot(d[:, idx], compiled.tri_normal[hits.prim[idx]].T) < 0]
                 for li in np.unique(emitter[idx]):
                     light = light_set.lights[li]
                     sel = idx[emitter[idx] == li]
@@ -284,7 +284,7 @@ class PathTracer:
             for m in groups:
                 # One material covers every path: use whole arrays instead of gathered copies.
                 sel = slice(None) if len(groups) == 1 else np.nonzero(mat == m)[0]
-                bsdf = compiled.materials[m]
+                bsdf = self.materials[m]
                 sp = ShadingPoint(p[:, sel], n_s[:, sel], n_g[:, sel], wo[:, sel], lk_m.lam[:, sel], self.mono,
                                   lk_m.take(sel))
                 rows = np.arange(n) if isinstance(sel, slice) else sel

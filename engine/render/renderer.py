@@ -25,7 +25,7 @@ import numpy as np
 from .accel import CompiledScene
 from ..kernels import BACKEND as KERNEL_BACKEND
 from .camera import CameraModel
-from .effects import resolve_transport
+from .effects import effective_materials, resolve_transport
 from .film import Film
 from .integrator import PathTracer
 from .lights import LightSet
@@ -124,7 +124,8 @@ class Renderer:
         """
         st = copy.copy(settings or self.scene.settings)
         used = {self.compiled.material_names[i] for i in np.unique(self.compiled.tri_material)}
-        st.polarisation, transport_reason = resolve_transport(st.polarisation, self.scene.materials, used)
+        materials, simplified = effective_materials(self.scene.materials, used, st.simplify)
+        st.polarisation, transport_reason = resolve_transport(st.polarisation, materials, used)
         cam = self.scene.camera
         W, H = cam.width, cam.height
         workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
@@ -150,7 +151,8 @@ class Renderer:
             stats_spectral = st.spectral
         stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0,
                  "compile_seconds": self.compile_seconds, "kernels": KERNEL_BACKEND, "transport": st.polarisation,
-                 "transport_reason": transport_reason, "spectral": stats_spectral}
+                 "transport_reason": transport_reason, "spectral": stats_spectral,
+                 "simplified": simplified}
         if window is not None:
             x0, y0, x1, y1 = (int(v) for v in window)
             if not (0 <= x0 < x1 <= W and 0 <= y0 < y1 <= H):

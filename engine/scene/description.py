@@ -109,6 +109,9 @@ class RenderSettings:
     #: colour (no chromatic noise, same expectation); "exact" keeps the 4 sampled wavelengths but
     #: one Mueller product per path (bit-for-bit the per-wavelength estimator); "off" never reduces.
     reduce_spectral: str = "auto"
+    #: "auto": skip layered coats that are index-matched to the medium above and clear (exact;
+    #: engine.materials.simplify); "off": render every layer as given.
+    simplify: str = "auto"
 
 
 @dataclass

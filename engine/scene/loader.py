@@ -143,7 +143,7 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object")
     _check_keys(d, field, {"spp", "max_depth", "rr_depth", "seed", "spectral", "wavelength_nm",
-                           "polarisation", "batch_rays", "threads"})
+                           "polarisation", "batch_rays", "threads", "reduce_spectral", "simplify"})
     s = RenderSettings()
     s.spp = integer(d.get("spp", s.spp), f"{field}.spp", 1, 1 << 24)
     s.max_depth = integer(d.get("max_depth", s.max_depth), f"{field}.max_depth", 1, 1024)
@@ -155,6 +155,9 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
                             ("auto", "full", "linear", "off"))
     s.batch_rays = integer(d.get("batch_rays", s.batch_rays), f"{field}.batch_rays", 1024, 1 << 24)
     s.threads = integer(d.get("threads", s.threads), f"{field}.threads", 0, 256)
+    s.reduce_spectral = choice(d.get("reduce_spectral", s.reduce_spectral), f"{field}.reduce_spectral",
+                               ("auto", "exact", "off"))
+    s.simplify = choice(d.get("simplify", s.simplify), f"{field}.simplify", ("auto", "off"))
     return s
 
 
