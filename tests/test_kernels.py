@@ -200,3 +200,87 @@ def test_backend_is_reported():
     scene.settings.spp = 1
     stats = Renderer(scene).render().stats
     assert stats["kernels"] == kernels.BACKEND
+
+
+# ----------------------------------------------------------------------------- Fresnel, frames, camera, tables, lights
+
+@needs_numba
+def test_fresnel_abcs_matches_reference_at_hard_cases():
+    from engine.kernels.fresnel import fresnel_reflection_abcs_numba
+    from engine.polarisation.fresnel import fresnel_reflection_abcs_numpy
+    rng = np.random.default_rng(3)
+    n = 20000
+    cos = rng.random((1, n))
+    brewster = np.cos(np.arctan(1.5))
+    cos[0, :12] = [0.0, 1.0, 1e-300, -0.2, 1.3, brewster, np.cos(np.arcsin(1 / 1.5)), 1e-16, 1 - 1e-16, 0.5,
+                   np.nextafter(0.0, 1.0), 1e-200]
+    etas = [np.full((4, n), 1.5 + 0j), np.full((1, n), 1 / 1.5 + 0j),           # outside and inside (TIR)
+            np.ones((1, n)) + 0j,                                                 # index-matched
+            rng.uniform(0.05, 4, (4, n)) + 1j * rng.uniform(0, 8, (4, n)),        # metals
+            np.full((1, n), 0.2 + 3.5j), np.full((1, n), 1e-3 + 1e3j)]           # extreme κ
+    for eta in etas:
+        want = fresnel_reflection_abcs_numpy(cos, eta)
+        got = fresnel_reflection_abcs_numba(cos, eta)
+        for w, g in zip(want, got):
+            assert g.shape == w.shape and np.all(np.isfinite(g))
+            np.testing.assert_allclose(g, w, rtol=0, atol=4e-15)
+
+
+@needs_numba
+def test_plane_axes_bitwise_including_degenerate_frames():
+    from engine.kernels.geometry import unit_cross_numba
+    from engine.polarisation.frames import plane_of_incidence_axis_numpy, scattering_plane_axis_numpy
+    rng = np.random.default_rng(4)
+    n, k = unit(rng, 3000), unit(rng, 3000)
+    k[:, :100] = n[:, :100]                         # normal incidence: fallback axis
+    k[:, 100:200] = -n[:, 100:200]
+    n[:, 200:210] = [[0.0], [0.0], [-1.0]]          # the fallback's own branch cut
+    k[:, 200:210] = [[0.0], [0.0], [1.0]]
+    got = unit_cross_numba(n, k, 1e-12)
+    np.testing.assert_array_equal(got, plane_of_incidence_axis_numpy(n, k))
+    np.testing.assert_array_equal(got, scattering_plane_axis_numpy(n, k))
+
+
+@needs_numba
+@pytest.mark.parametrize("name", ["fresnel_sphere", "cornell_lambert", "conv_s3_check"])
+def test_pinhole_camera_rays_bitwise(name, monkeypatch):
+    from engine.render import camera
+    scene = load_scene(shared_path("peers", "scenes", f"{name}.json"))
+    scene.camera.shift = (0.1, -0.25)
+    model = camera.CameraModel(scene.camera)
+    n = scene.camera.width * scene.camera.height
+    pixel, u = np.arange(n), np.random.default_rng(5).random((2, n))
+    compiled = model.generate(pixel, u)
+    monkeypatch.setattr(camera, "COMPILED", False)
+    reference = model.generate(pixel, u)
+    for a, b in zip(reference, compiled):
+        np.testing.assert_array_equal(a, b)
+
+
+@needs_numba
+def test_spectral_table_interpolation_bitwise():
+    from engine.spectral import cie
+    from engine.spectral.spectrum import _BASIS
+    lam = np.random.default_rng(6).uniform(300, 900, (4, 5000))
+    lam[0, :6] = [np.nan, 360.0, 830.0, np.nextafter(360.0, 0), np.nextafter(830.0, 1e4), 595.5]
+    for table in (cie._CMF, _BASIS, cie._D65N[None]):
+        for outside in ("zero", "clamp"):
+            np.testing.assert_array_equal(cie.interp_grid(table, lam, outside),
+                                          cie.interp_grid_numpy(table, lam, outside))
+
+
+@needs_numba
+def test_area_light_sampling_bitwise():
+    scene = load_scene(shared_path("peers", "scenes", "cornell_lambert.json"))
+    r = Renderer(scene)
+    light = next(lt for lt in r.lights.lights if hasattr(lt, "cdf"))
+    c = r.compiled
+    rng = np.random.default_rng(7)
+    p = rng.uniform(-1, 1, (3, 5000))
+    p[:, :3] = c.vertices[c.faces[light.tris[0]]].T       # on the light itself: dist 0 → invalid
+    u = rng.random((3, 5000))
+    args = (p, u, light.cdf, light.tris, c.faces, c.vertices, c.tri_normal, light.total_area)
+    want, got = geometry.area_light_sample_numpy(*args), geometry.area_light_sample_numba(*args)
+    for w, g in zip(want, got):
+        np.testing.assert_array_equal(w, g)
+    assert not got[4][:3].any() and got[4].any()

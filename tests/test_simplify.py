@@ -388,7 +388,7 @@ def test_sampled_albedo_agrees(base_name, dist):
     model = WeidlichWilkie(_clear_coat(dist), BASES[base_name]())
     simple, reasons = simplify_material(model)
     assert reasons
-    n = 200_000
+    n = 40_000
     for k, theta in enumerate((0.0, 45.0, 80.0)):
         a, sa = _mc_albedo(model, theta, n, 100 + k)
         b, sb = _mc_albedo(simple, theta, n, 200 + k)

@@ -94,3 +94,149 @@ def offset_origin_numba(p, n_g, w, epsilon):
 
 
 offset_origin = dispatch(_offset_loop and offset_origin_numba, offset_origin_numpy)
+
+
+@jit
+def _unit_cross_loop(a, b, out, degenerate):
+    for i in range(a.shape[1]):
+        a0, a1, a2 = a[0, i], a[1, i], a[2, i]
+        s0 = a1 * b[2, i] - a2 * b[1, i]
+        s1 = a2 * b[0, i] - a0 * b[2, i]
+        s2 = a0 * b[1, i] - a1 * b[0, i]
+        length = np.sqrt((s0 * s0 + s1 * s1) + s2 * s2)
+        if length > degenerate:
+            out[0, i] = s0 / length
+            out[1, i] = s1 / length
+            out[2, i] = s2 / length
+        else:  # engine.vec3.any_perpendicular(a), same operation order
+            sign = 1.0 if a2 >= 0 else -1.0
+            f = -1.0 / (sign + a2)
+            g = a0 * a1 * f
+            out[0, i] = 1.0 + sign * a0 * a0 * f
+            out[1, i] = sign * g
+            out[2, i] = -sign * a0
+
+
+def unit_cross_numba(a, b, degenerate):
+    """unit(a × b), or engine.vec3.any_perpendicular(a) where |a × b| ≤ ``degenerate``; (3, ...)."""
+    a, b = np.broadcast_arrays(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
+    shape = a.shape
+    a2 = np.ascontiguousarray(a).reshape(3, -1)
+    b2 = np.ascontiguousarray(b).reshape(3, -1)
+    out = np.empty_like(a2)
+    _unit_cross_loop(a2, b2, out, float(degenerate))
+    return out.reshape(shape)
+
+
+compiled_unit_cross = _unit_cross_loop and unit_cross_numba
+
+
+@jit
+def _pinhole_loop(pixel, u, W, H, shift_x, shift_y, tx, ty, f, r, up, d, x, depth):
+    for i in range(pixel.shape[0]):
+        col = pixel[i] % W
+        row = pixel[i] // W
+        sx = ((2.0 * (col + u[0, i]) / W - 1.0) + 2.0 * shift_x) * tx
+        sy = ((1.0 - 2.0 * (row + u[1, i]) / H) + 2.0 * shift_y) * ty
+        d0 = (f[0] + sx * r[0]) + sy * up[0]
+        d1 = (f[1] + sx * r[1]) + sy * up[1]
+        d2 = (f[2] + sx * r[2]) + sy * up[2]
+        n = np.sqrt((d0 * d0 + d1 * d1) + d2 * d2)
+        if not n > 0:
+            n = 1.0
+        d0, d1, d2 = d0 / n, d1 / n, d2 / n
+        x0 = d1 * up[2] - d2 * up[1]
+        x1 = d2 * up[0] - d0 * up[2]
+        x2 = d0 * up[1] - d1 * up[0]
+        m = np.sqrt((x0 * x0 + x1 * x1) + x2 * x2)
+        if not m > 0:
+            m = 1.0
+        d[0, i], d[1, i], d[2, i] = d0, d1, d2
+        x[0, i], x[1, i], x[2, i] = x0 / m, x1 / m, x2 / m
+        depth[i] = (d0 * f[0] + d1 * f[1]) + d2 * f[2]
+
+
+def pinhole_rays_numba(pixel, u, W, H, shift_x, shift_y, tx, ty, forward, right, up):
+    """Directions d, Stokes frames x = unit(d × up) (both (3, N)) and depth per unit length (N,)
+    of pinhole camera rays through flat pixel indices with jitter u (2, N); see engine.render.camera."""
+    n = pixel.shape[0]
+    d, x, depth = np.empty((3, n)), np.empty((3, n)), np.empty(n)
+    _pinhole_loop(np.ascontiguousarray(pixel, dtype=np.int64), np.ascontiguousarray(u, dtype=np.float64),
+                  int(W), int(H), float(shift_x), float(shift_y), float(tx), float(ty),
+                  np.ascontiguousarray(forward, dtype=np.float64), np.ascontiguousarray(right, dtype=np.float64),
+                  np.ascontiguousarray(up, dtype=np.float64), d, x, depth)
+    return d, x, depth
+
+
+compiled_pinhole_rays = _pinhole_loop and pinhole_rays_numba
+
+
+def area_light_sample_numpy(p, u, cdf, tris, faces, vertices, tri_normal, total_area):
+    """Uniform-by-area points on an emitter's triangles seen from p (3, N), u (3, N) ∈ [0, 1).
+
+    Row 0 of u picks the triangle (inverting ``cdf`` over ``tris``), rows 1–2 the point
+    (b1 = 1 − √u1, b2 = u2·√u1).  Returns (wi (3, N) unit towards the point, dist (N,),
+    scale = 1/pdf (N,), pdf (N,) solid angle = dist²/(cosθ_light·A_total), valid (N,): the
+    point's front face sees p).
+    """
+    idx = np.minimum(np.searchsorted(cdf, u[0], side="right"), len(tris) - 1)
+    tri = tris[idx]
+    f = faces[tri]
+    su = np.sqrt(u[1])
+    b1 = 1.0 - su
+    b2 = u[2] * su
+    V = vertices
+    x = (V[f[:, 0]] * (1.0 - b1 - b2)[:, None] + V[f[:, 1]] * b1[:, None] + V[f[:, 2]] * b2[:, None]).T
+    to = x - p
+    dist2 = (to[0] * to[0] + to[1] * to[1]) + to[2] * to[2]
+    dist = np.sqrt(dist2)
+    wi = to / np.where(dist > 0, dist, 1.0)
+    n_l = tri_normal[tri].T
+    cos_l = -((wi[0] * n_l[0] + wi[1] * n_l[1]) + wi[2] * n_l[2])
+    valid = (cos_l > 0) & (dist > 0)
+    pdf = np.where(valid, dist2 / np.where(valid, cos_l, 1.0) / total_area, 0.0)
+    return wi, dist, np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0), pdf, valid
+
+
+@jit
+def _area_light_loop(p, u, cdf, tris, faces, V, tri_normal, total_area, wi, dist, scale, pdf, valid):
+    last = tris.shape[0] - 1
+    for i in range(p.shape[1]):
+        k = min(np.searchsorted(cdf, u[0, i], side="right"), last)
+        t = tris[k]
+        a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
+        su = np.sqrt(u[1, i])
+        b1 = 1.0 - su
+        b2 = u[2, i] * su
+        w0 = 1.0 - b1 - b2
+        t0 = ((V[a, 0] * w0 + V[b, 0] * b1) + V[c, 0] * b2) - p[0, i]
+        t1 = ((V[a, 1] * w0 + V[b, 1] * b1) + V[c, 1] * b2) - p[1, i]
+        t2 = ((V[a, 2] * w0 + V[b, 2] * b1) + V[c, 2] * b2) - p[2, i]
+        d2 = (t0 * t0 + t1 * t1) + t2 * t2
+        d = np.sqrt(d2)
+        s = d if d > 0 else 1.0
+        x0, x1, x2 = t0 / s, t1 / s, t2 / s
+        cos_l = -((x0 * tri_normal[t, 0] + x1 * tri_normal[t, 1]) + x2 * tri_normal[t, 2])
+        ok = cos_l > 0 and d > 0
+        wi[0, i], wi[1, i], wi[2, i] = x0, x1, x2
+        dist[i] = d
+        valid[i] = ok
+        if ok:
+            q = d2 / cos_l / total_area
+            pdf[i] = q
+            scale[i] = 1.0 / q
+        else:
+            pdf[i] = 0.0
+            scale[i] = 0.0
+
+
+def area_light_sample_numba(p, u, cdf, tris, faces, vertices, tri_normal, total_area):
+    n = p.shape[1]
+    wi, dist, scale, pdf, valid = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
+    _area_light_loop(np.ascontiguousarray(p, dtype=np.float64), np.ascontiguousarray(u, dtype=np.float64), cdf,
+                     np.ascontiguousarray(tris, dtype=np.int64), faces, vertices, tri_normal, float(total_area),
+                     wi, dist, scale, pdf, valid)
+    return wi, dist, scale, pdf, valid
+
+
+area_light_sample = dispatch(_area_light_loop and area_light_sample_numba, area_light_sample_numpy)

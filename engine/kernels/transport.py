@@ -66,36 +66,42 @@ def _frame_rotation(x, xt, k, j):
 
 @jit
 def _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, D, has_depol):
-    P, L = T.shape[0], T.shape[2]
-    for j in range(rows.shape[0]):
-        n = rows[j]
-        c2j, s2j = _frame_rotation(x_out, x_T, wo, j) if P >= 3 else (1.0, 0.0)
-        for k in range(L):
-            la = k if A.shape[0] > 1 else 0
-            a, b = A[la, j], B[la, j]
-            a0 = a + D[la, j] if has_depol else a
-            for i in range(P):
-                t0 = T[i, 0, k, n]
+    P, L, n = T.shape[0], T.shape[2], rows.shape[0]
+    c2 = np.ones(n)
+    s2 = np.zeros(n)
+    if P >= 3:
+        for j in range(n):
+            c2[j], s2[j] = _frame_rotation(x_out, x_T, wo, j)
+    # paths innermost: every (row, wavelength) of T is one contiguous stream
+    for k in range(L):
+        la = k if A.shape[0] > 1 else 0
+        for i in range(P):
+            for j in range(n):
+                m = rows[j]
+                a = A[la, j]
+                a0 = a + D[la, j] if has_depol else a
+                t0 = T[i, 0, k, m]
                 if P == 1:
-                    out[i, 0, k, n] = t0 * a0
+                    out[i, 0, k, m] = t0 * a0
                     continue
-                t1 = T[i, 1, k, n]
+                b = B[la, j]
+                t1 = T[i, 1, k, m]
                 if P >= 3:
-                    t2 = T[i, 2, k, n]
-                    r1 = t1 * c2j - t2 * s2j
-                    r2 = t1 * s2j + t2 * c2j
+                    t2 = T[i, 2, k, m]
+                    r1 = t1 * c2[j] - t2 * s2[j]
+                    r2 = t1 * s2[j] + t2 * c2[j]
                 else:
                     r1 = t1
                     r2 = 0.0
-                out[i, 0, k, n] = a0 * t0 + b * r1
-                out[i, 1, k, n] = b * t0 + a * r1
+                out[i, 0, k, m] = a0 * t0 + b * r1
+                out[i, 1, k, m] = b * t0 + a * r1
                 if P == 4:
                     c, s = C[la, j], S[la, j]
-                    t3 = T[i, 3, k, n]
-                    out[i, 2, k, n] = c * r2 - s * t3
-                    out[i, 3, k, n] = s * r2 + c * t3
+                    t3 = T[i, 3, k, m]
+                    out[i, 2, k, m] = c * r2 - s * t3
+                    out[i, 3, k, m] = s * r2 + c * t3
                 elif P == 3:
-                    out[i, 2, k, n] = C[la, j] * r2
+                    out[i, 2, k, m] = C[la, j] * r2
 
 
 def update_abcs_numba(out, T, rows, x_out, x_T, wo, A, B, C, S, depol):
@@ -125,14 +131,11 @@ def add_light_numpy(radiance, path, T, sel, Le, w):
 def _add_light_loop(radiance, path, T, sel, Le, w):
     P, LT = T.shape[0], T.shape[2]
     L = Le.shape[0]
-    for j in range(sel.shape[0]):
-        q = path[sel[j]]
-        s = sel[j]
+    for i in range(P):
         for k in range(L):
-            e = Le[k, j] * w[j]
             lt = k if LT > 1 else 0
-            for i in range(P):
-                radiance[i, k, q] += T[i, 0, lt, s] * e
+            for j in range(sel.shape[0]):
+                radiance[i, k, path[sel[j]]] += T[i, 0, lt, sel[j]] * (Le[k, j] * w[j])
 
 
 def add_light_numba(radiance, path, T, sel, Le, w):
@@ -159,12 +162,12 @@ def throughput_times_stokes_numpy(T, rows, S, weight):
 def _t_times_s_loop(T, rows, S, weight, out):
     P, LT = T.shape[0], T.shape[2]
     L = weight.shape[0]
-    for j in range(rows.shape[0]):
-        n = rows[j]
+    for i in range(P):
         for k in range(L):
             lt = k if LT > 1 else 0
             ls = k if S.shape[1] > 1 else 0
-            for i in range(P):
+            for j in range(rows.shape[0]):
+                n = rows[j]
                 acc = 0.0
                 for m in range(P):
                     acc += T[i, m, lt, n] * S[m, ls, j]

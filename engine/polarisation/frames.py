@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kernels import dispatch
+from ..kernels.geometry import compiled_unit_cross
 from ..vec3 import any_perpendicular, cross, dot, normalize
 
 # |n × k| below this is treated as "axis undefined" (normal incidence etc.).
@@ -74,7 +76,7 @@ def rotate_mueller_frames(M: np.ndarray, x_in, x_in_new, k_in, x_out, x_out_new,
     return np.einsum("ij...,kj...->ik...", tmp, R_in)
 
 
-def plane_of_incidence_axis(n: np.ndarray, k: np.ndarray) -> np.ndarray:
+def plane_of_incidence_axis_numpy(n: np.ndarray, k: np.ndarray) -> np.ndarray:
     """s = unit(n × k): the axis ⟂ the plane of incidence (shared by both beams).
 
     At normal incidence (n ∥ k) an arbitrary vector ⟂ n is used, the same for
@@ -87,12 +89,24 @@ def plane_of_incidence_axis(n: np.ndarray, k: np.ndarray) -> np.ndarray:
     return np.where(ok, s / np.where(ok, length, 1.0), fallback)
 
 
-def scattering_plane_axis(k_in: np.ndarray, k_out: np.ndarray) -> np.ndarray:
+def scattering_plane_axis_numpy(k_in: np.ndarray, k_out: np.ndarray) -> np.ndarray:
     """s = unit(k_in × k_out), the normal of the scattering plane; any ⟂ k_in if k_out ∥ k_in."""
     s = cross(k_in, k_out)
     length = np.sqrt(dot(s, s))
     ok = length > _DEGENERATE
     return np.where(ok, s / np.where(ok, length, 1.0), any_perpendicular(k_in))
+
+
+if compiled_unit_cross is not None:
+    def _plane_of_incidence_axis_compiled(n, k):
+        return compiled_unit_cross(n, k, _DEGENERATE)
+else:
+    _plane_of_incidence_axis_compiled = None
+
+#: s = unit(n × k) with the any_perpendicular(n) fallback (compiled when available, same numbers).
+plane_of_incidence_axis = dispatch(_plane_of_incidence_axis_compiled, plane_of_incidence_axis_numpy)
+#: s = unit(k_in × k_out) with the any_perpendicular(k_in) fallback (the same computation).
+scattering_plane_axis = dispatch(_plane_of_incidence_axis_compiled, scattering_plane_axis_numpy)
 
 
 def camera_ray_frame(d: np.ndarray, up_cam: np.ndarray) -> np.ndarray:

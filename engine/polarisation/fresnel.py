@@ -20,6 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from .mueller import abcs_matrix
+from ..kernels import dispatch
+from ..kernels.fresnel import compiled_abcs
 
 
 _TINY = 1e-200
@@ -52,13 +54,18 @@ def fresnel_amplitudes(cos_theta, eta):
     return r_s, r_p
 
 
-def fresnel_reflection_abcs(cos_theta, eta):
+def fresnel_reflection_abcs_numpy(cos_theta, eta):
     """(A, B, C, S) of the Fresnel reflection Mueller matrix (see module docstring)."""
     r_s, r_p = fresnel_amplitudes(cos_theta, eta)
     F_s = r_s.real ** 2 + r_s.imag ** 2
     F_p = r_p.real ** 2 + r_p.imag ** 2
     x = r_s * np.conj(r_p)
     return 0.5 * (F_s + F_p), 0.5 * (F_s - F_p), x.real, -x.imag
+
+
+#: (A, B, C, S) of the Fresnel reflection Mueller matrix for cosθ and η broadcast together; the
+#: compiled loop of engine.kernels.fresnel when available (same numbers up to rounding).
+fresnel_reflection_abcs = dispatch(compiled_abcs, fresnel_reflection_abcs_numpy)
 
 
 def fresnel_reflection_mueller(cos_theta, eta) -> np.ndarray:

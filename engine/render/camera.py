@@ -19,6 +19,8 @@ import math
 
 import numpy as np
 
+from ..kernels import COMPILED
+from ..kernels.geometry import compiled_pinhole_rays
 from ..polarisation.frames import camera_ray_frame
 from ..scene.description import Camera
 from ..vec3 import normalize
@@ -53,6 +55,11 @@ class CameraModel:
         t_min (N,), t_max (N,)).
         """
         W, H = self.cam.width, self.cam.height
+        if COMPILED and self.cam.projection == "perspective":
+            d, x, depth_per_length = compiled_pinhole_rays(pixel, u, W, H, self.shift_x, self.shift_y, self.tx,
+                                                           self.ty, self.forward, self.right, self.up)
+            o = np.broadcast_to(self.origin[:, None], d.shape).copy()
+            return o, d, x, self.cam.clip_start / depth_per_length, self.cam.clip_end / depth_per_length
         col = pixel % W
         row = pixel // W
         sx = (2.0 * (col + u[0]) / W - 1.0 + 2.0 * self.shift_x) * self.tx

@@ -113,6 +113,11 @@ def rotate_stokes(S: np.ndarray, c2, s2) -> np.ndarray:
     return out
 
 
+def gather(a: np.ndarray, sel) -> np.ndarray:
+    """a[..., sel] for a slice (a view) or integer indices (np.take: ~2× faster than fancy indexing)."""
+    return a[..., sel] if isinstance(sel, slice) else np.take(a, sel, axis=-1)
+
+
 def keep_paths(mask: np.ndarray, *arrays):
     """The arrays restricted to the paths where ``mask`` is True (paths on the last axis).
 
@@ -274,7 +279,7 @@ class PathTracer:
 
             new_d = np.zeros((3, n))
             new_xT = np.zeros((3, n))
-            newT = np.zeros_like(T)
+            newT = np.empty_like(T)        # every path belongs to one material group, which writes it
             valid = np.zeros(n, bool)
             is_delta = np.ones(n, bool)
             pdf_next = np.zeros(n)
@@ -285,17 +290,17 @@ class PathTracer:
                 # One material covers every path: use whole arrays instead of gathered copies.
                 sel = slice(None) if len(groups) == 1 else np.nonzero(mat == m)[0]
                 bsdf = self.materials[m]
-                sp = ShadingPoint(p[:, sel], n_s[:, sel], n_g[:, sel], wo[:, sel], lk_m.lam[:, sel], self.mono,
-                                  lk_m.take(sel))
+                sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
+                                  gather(lk_m.lam, sel), self.mono, lk_m.take(sel))
                 rows = np.arange(n) if isinstance(sel, slice) else sel
-                xTm = x_T[:, sel]
+                xTm = gather(x_T, sel)
 
                 if not bsdf.delta_only and len(light_set) and bounce + 2 <= st.max_depth:
                     contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], stats)
                     radiance[:, :, path[sel]] += contrib
 
                 bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
-                scatter_throughput(newT, T, rows, bs.weight, xTm, wo[:, sel])
+                scatter_throughput(newT, T, rows, bs.weight, xTm, sp.wo)
                 new_d[:, sel] = bs.wi
                 new_xT[:, sel] = bs.weight.x_in
                 valid[sel] = bs.valid
@@ -340,16 +345,19 @@ class PathTracer:
         P = self.P
         out = np.zeros((P, 3 if self.rgb_mode else lookup.lam.shape[0], n))
         choice = np.minimum((u[0] * len(light_set)).astype(np.int64), len(light_set) - 1)
-        for li in np.unique(choice):
-            sel = np.nonzero(choice == li)[0]
+        lights_chosen = np.unique(choice)
+        for li in lights_chosen:
+            # one light for every path: whole arrays instead of gathered copies
+            sel = slice(None) if len(lights_chosen) == 1 else np.nonzero(choice == li)[0]
             light = light_set.lights[li]
-            p = sp.p[:, sel]
+            p = gather(sp.p, sel)
             # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
-            u_tri = u[0, sel] * len(light_set) - li
-            wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, u[1, sel], u[2, sel])))
+            u_tri = gather(u[0], sel) * len(light_set) - li
+            wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, gather(u[1], sel), gather(u[2], sel))))
             value = self._emitted(light, lookup.take(sel)) * scale[None, :]
-            sub = ShadingPoint(p, sp.n_s[:, sel], sp.n_g[:, sel], sp.wo[:, sel], sp.lam[:, sel], sp.mono,
-                               sp.lookup.take(sel) if sp.lookup is not None else None)
+            sub = ShadingPoint(p, gather(sp.n_s, sel), gather(sp.n_g, sel), gather(sp.wo, sel), gather(sp.lam, sel),
+                               sp.mono, sp.lookup.take(sel) if sp.lookup is not None else None)
+            m = sub.n
             cos_i = np.abs(dot(sub.n_s, wi))
             ok &= cos_i > 0
             if not ok.any():
@@ -357,19 +365,23 @@ class PathTracer:
             f = bsdf.eval(sub, wi)
             S = unpolarised_response(f, P)
             if P > 1 and f.kind != "depolarising":
-                c2, s2 = frame_rotation(f.x_out, x_T[:, sel], sub.wo)
+                c2, s2 = frame_rotation(f.x_out, gather(x_T, sel), sub.wo)
                 S = rotate_stokes(S, c2, s2)
             if light.is_delta:
-                mis = np.ones(sel.size)
+                mis = np.ones(m)
             else:
                 mis = power_heuristic(pdf_l * light_set.select_prob, bsdf.pdf(sub, wi))
             weight = value * (cos_i * mis / light_set.select_prob * ok)[None, :]
-            origin = offset_origin(p, sub.n_g, wi)
             t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
-            blocked = np.zeros(sel.size, bool)
-            test = ok.nonzero()[0]
-            blocked[test] = self.scene.occluded(origin[:, test], wi[:, test], t_max[test])
-            stats["shadow_rays"] += test.size
+            if ok.all():
+                blocked = self.scene.occluded(offset_origin(p, sub.n_g, wi), wi, t_max)
+                stats["shadow_rays"] += m
+            else:
+                test = ok.nonzero()[0]
+                blocked = np.zeros(m, bool)
+                blocked[test] = self.scene.occluded(offset_origin(p[:, test], sub.n_g[:, test], wi[:, test]),
+                                                    wi[:, test], t_max[test])
+                stats["shadow_rays"] += test.size
             weight = weight * (~blocked)[None, :]
-            out[:, :, sel] = throughput_times_stokes(T, rows[sel], S, weight)
+            out[:, :, sel] = throughput_times_stokes(T, gather(rows, sel), S, weight)
         return out

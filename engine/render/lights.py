@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from ..kernels.geometry import area_light_sample
 from ..materials.sampling import uniform_sphere
 from ..spectral import GRID_NM, spectrum_to_linear_srgb
 from ..scene.description import DirectionalLight, EnvironmentLight, PointLight, SpotLight
@@ -73,24 +74,8 @@ class AreaEmitter(_Light):
 
     def sample(self, p, u):
         # u has 3 rows: triangle choice, then the point within it.
-        idx = np.minimum(np.searchsorted(self.cdf, u[0], side="right"), len(self.tris) - 1)
-        tri = self.tris[idx]
         c = self.compiled
-        f = c.faces[tri]
-        su = np.sqrt(u[1])
-        b1 = 1.0 - su
-        b2 = u[2] * su
-        V = c.vertices
-        x = (V[f[:, 0]] * (1.0 - b1 - b2)[:, None] + V[f[:, 1]] * b1[:, None] + V[f[:, 2]] * b2[:, None]).T
-        to = x - p
-        dist2 = dot(to, to)
-        dist = np.sqrt(dist2)
-        wi = to / np.where(dist > 0, dist, 1.0)
-        n_l = c.tri_normal[tri].T
-        cos_l = -dot(wi, n_l)
-        valid = (cos_l > 0) & (dist > 0)
-        pdf = np.where(valid, dist2 / np.where(valid, cos_l, 1.0) / self.total_area, 0.0)
-        return wi, dist, np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0), pdf, valid
+        return area_light_sample(p, u, self.cdf, self.tris, c.faces, c.vertices, c.tri_normal, self.total_area)
 
     def pdf_hit(self, dist, cos_l):
         """Solid-angle pdf of having sampled a point at distance dist whose front faces the ray at cos_l."""

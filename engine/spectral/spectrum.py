@@ -39,6 +39,11 @@ def basis_rgb(lam_nm) -> np.ndarray:
     return cie.interp_grid(_BASIS, lam_nm, outside="clamp")
 
 
+def _rgb_combination(rgb: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """r·B_r + g·B_g + b·B_b for a basis (3, ...) (cheaper than tensordot for three terms)."""
+    return rgb[0] * basis[0] + rgb[1] * basis[1] + rgb[2] * basis[2]
+
+
 class Spectrum:
     """Base class: a real function of wavelength [nm]."""
 
@@ -78,17 +83,34 @@ class WavelengthLookup:
     integrator takes many subsets — material groups, lights — of which most never read a table).
     """
 
-    __slots__ = ("_root", "_idx", "_lam", "_basis", "_d65")
+    __slots__ = ("_root", "_idx", "_lam", "_basis", "_d65", "_memo")
 
     def __init__(self, lam, basis=None, d65=None):
         self._root, self._idx = None, None
         self._lam, self._basis, self._d65 = lam, basis, d65
+        self._memo = None
+
+    def memo(self, spectrum, compute):
+        """``compute()`` for this spectrum once per lookup (read-only array: callers must not modify it).
+
+        A material's parameter is typically needed by both its ``eval`` (next-event estimation) and
+        its ``sample`` at the same vertices.
+        """
+        if self._memo is None:
+            self._memo = {}
+        hit = self._memo.get(id(spectrum))
+        if hit is not None and hit[0] is spectrum:
+            return hit[1]
+        value = compute()
+        value.setflags(write=False)
+        self._memo[id(spectrum)] = (spectrum, value)
+        return value
 
     @classmethod
     def _subset(cls, root: "WavelengthLookup", idx: np.ndarray) -> "WavelengthLookup":
         sub = cls.__new__(cls)
         sub._root, sub._idx = root, idx
-        sub._lam = sub._basis = sub._d65 = None
+        sub._lam = sub._basis = sub._d65 = sub._memo = None
         return sub
 
     @property
@@ -181,12 +203,12 @@ class _RGBBasisSpectrum(Spectrum):
     def _eval(self, lam):
         if self.is_constant:
             return np.full(lam.shape, self.rgb[0], dtype=np.float64)
-        return np.tensordot(self.rgb, basis_rgb(lam), axes=1)
+        return _rgb_combination(self.rgb, basis_rgb(lam))
 
     def eval_cached(self, lookup):
         if self.is_constant:
             return np.full(lookup.lam.shape, self.rgb[0], dtype=np.float64)
-        return np.tensordot(self.rgb, lookup.basis, axes=1)
+        return lookup.memo(self, lambda: _rgb_combination(self.rgb, lookup.basis))
 
     def __repr__(self):
         return f"{type(self).__name__}({self.rgb.tolist()!r})"
