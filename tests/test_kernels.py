@@ -284,3 +284,40 @@ def test_area_light_sampling_bitwise():
     for w, g in zip(want, got):
         np.testing.assert_array_equal(w, g)
     assert not got[4][:3].any() and got[4].any()
+
+
+@needs_numba
+@pytest.mark.parametrize("P,L_T,L_M", [(4, 4, 4), (4, 1, 1), (3, 4, 1), (1, 4, 4)])
+def test_update_depolarising_and_general(P, L_T, L_M):
+    rng = np.random.default_rng(P + 10 * L_T)
+    n = 300
+    T = rng.normal(size=(P, P, L_T, 2 * n))
+    rows = rng.permutation(2 * n)[:n]
+    A = rng.random((L_M, n))
+    a = np.full_like(T, 3.0)
+    b = a.copy()
+    transport.update_depolarising_numpy(a, T, rows, A)
+    transport.update_depolarising_numba(b, T, rows, A)
+    np.testing.assert_array_equal(a, b)
+    wo = unit(rng, n)
+    x_T, x_out = (np.cross(wo.T, rng.normal(size=(n, 3))).T for _ in range(2))
+    x_T /= np.linalg.norm(x_T, axis=0)
+    x_out /= np.linalg.norm(x_out, axis=0)
+    M = rng.normal(size=(4, 4, L_M, n))
+    transport.update_general_numpy(a, T, rows, x_out, x_T, wo, M)
+    transport.update_general_numba(b, T, rows, x_out, x_T, wo, M)
+    np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-12)
+    assert np.all(b[..., np.setdiff1d(np.arange(2 * n), rows)] == 3.0)
+
+
+@needs_numba
+def test_throughput_times_stokes_with_fewer_stokes_components():
+    rng = np.random.default_rng(11)
+    T = rng.normal(size=(4, 4, 4, 100))
+    rows = rng.permutation(100)[:40]
+    S1 = rng.normal(size=(1, 4, 40))
+    w = rng.random((4, 40))
+    S4 = np.concatenate((S1, np.zeros((3, 4, 40))))
+    full = transport.throughput_times_stokes_numpy(T, rows, S4, w)
+    np.testing.assert_allclose(transport.throughput_times_stokes_numpy(T, rows, S1, w), full, rtol=1e-13)
+    np.testing.assert_allclose(transport.throughput_times_stokes_numba(T, rows, S1, w), full, rtol=1e-13)

@@ -117,6 +117,88 @@ def update_abcs_numba(out, T, rows, x_out, x_T, wo, A, B, C, S, depol):
 update_abcs = dispatch(_update_abcs_loop and update_abcs_numba, update_abcs_numpy)
 
 
+# ----------------------------------------------------------------------------- T ← T·M_depolarising, T ← T·R(φ)·M
+
+def update_depolarising_numpy(out, T, rows, A):
+    """out[..., rows] = T[..., rows] · A·diag(1, 0, 0, 0): a depolariser needs no frame (A (L or 1, n))."""
+    res = np.zeros_like(T[..., rows])
+    res[:, 0] = T[:, 0][..., rows] * A
+    out[..., rows] = res
+
+
+@jit
+def _update_depolarising_loop(out, T, rows, A):
+    P, L = T.shape[0], T.shape[2]
+    for k in range(L):
+        la = k if A.shape[0] > 1 else 0
+        for i in range(P):
+            for j in range(rows.shape[0]):
+                out[i, 0, k, rows[j]] = T[i, 0, k, rows[j]] * A[la, j]
+            for c in range(1, P):
+                for j in range(rows.shape[0]):
+                    out[i, c, k, rows[j]] = 0.0
+
+
+def update_depolarising_numba(out, T, rows, A):
+    _update_depolarising_loop(out, T, np.ascontiguousarray(rows, dtype=np.int64),
+                              np.ascontiguousarray(A, dtype=np.float64))
+
+
+update_depolarising = dispatch(_update_depolarising_loop and update_depolarising_numba, update_depolarising_numpy)
+
+
+def update_general_numpy(out, T, rows, x_out, x_T, wo, M):
+    """out[..., rows] = T[..., rows] · R(φ) · M for a general Mueller matrix M (4, 4, L or 1, n).
+
+    Frames as in ``update_abcs_numpy``; only the top-left P×P block of M is used.
+    """
+    P = T.shape[0]
+    T = T[..., rows]
+    if P >= 3:
+        c2, s2 = frame_rotation(x_out, x_T, wo)
+        t1 = T[:, 1].copy()
+        t2 = T[:, 2].copy()
+        T[:, 1] = t1 * c2 - t2 * s2
+        T[:, 2] = t1 * s2 + t2 * c2
+    out[..., rows] = np.einsum("ijln,jkln->ikln", T, M[:P, :P])
+
+
+@jit
+def _update_general_loop(out, T, rows, x_out, x_T, wo, M):
+    P, L, n = T.shape[0], T.shape[2], rows.shape[0]
+    c2 = np.ones(n)
+    s2 = np.zeros(n)
+    if P >= 3:
+        for j in range(n):
+            c2[j], s2[j] = _frame_rotation(x_out, x_T, wo, j)
+    row = np.empty(4)
+    for k in range(L):
+        lm = k if M.shape[2] > 1 else 0
+        for i in range(P):
+            for j in range(n):
+                m = rows[j]
+                for c in range(P):
+                    row[c] = T[i, c, k, m]
+                if P >= 3:
+                    t1, t2 = row[1], row[2]
+                    row[1] = t1 * c2[j] - t2 * s2[j]
+                    row[2] = t1 * s2[j] + t2 * c2[j]
+                for c in range(P):
+                    acc = 0.0
+                    for q in range(P):
+                        acc += row[q] * M[q, c, lm, j]
+                    out[i, c, k, m] = acc
+
+
+def update_general_numba(out, T, rows, x_out, x_T, wo, M):
+    x_out, x_T, wo = (np.ascontiguousarray(x, dtype=np.float64) for x in (x_out, x_T, wo))
+    _update_general_loop(out, T, np.ascontiguousarray(rows, dtype=np.int64), x_out, x_T, wo,
+                         np.ascontiguousarray(M, dtype=np.float64))
+
+
+update_general = dispatch(_update_general_loop and update_general_numba, update_general_numpy)
+
+
 # ----------------------------------------------------------------------------- light into accumulators
 
 def add_light_numpy(radiance, path, T, sel, Le, w):
@@ -153,9 +235,10 @@ def throughput_times_stokes_numpy(T, rows, S, weight):
     """(T[..., rows] · S) · weight: Stokes (P, L, n) reaching the camera from Stokes S (P, Lm, n).
 
     ``weight`` (L, n) scales each wavelength (light spectrum, cosine, MIS); T and S may carry one
-    wavelength row (Lm = 1) that is shared by all L.
+    wavelength row (Lm = 1) that is shared by all L.  S may have fewer than P components (the rest
+    are zero, e.g. 1 for light leaving a depolariser).
     """
-    return np.einsum("ijln,jln->iln", T[..., rows], S) * weight[None]
+    return np.einsum("ijln,jln->iln", T[:, :S.shape[0]][..., rows], S) * weight[None]
 
 
 @jit
@@ -169,7 +252,7 @@ def _t_times_s_loop(T, rows, S, weight, out):
             for j in range(rows.shape[0]):
                 n = rows[j]
                 acc = 0.0
-                for m in range(P):
+                for m in range(S.shape[0]):
                     acc += T[i, m, lt, n] * S[m, ls, j]
                 out[i, k, j] = acc * weight[k, j]
 

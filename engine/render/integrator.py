@@ -28,7 +28,8 @@ import numpy as np
 from ..materials.base import MuellerValue, ShadingPoint
 from ..polarisation.frames import frame_rotation
 from .accel import offset_origin
-from ..kernels.transport import add_light, throughput_times_stokes, update_abcs
+from ..kernels.transport import (add_light, throughput_times_stokes, update_abcs, update_depolarising,
+                                 update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .sampler import PathSampler, path_keys
 from ..spectral import WavelengthLookup, rgb_weights, sample_wavelengths
@@ -36,16 +37,6 @@ from ..vec3 import dot
 
 
 # ----------------------------------------------------------------------------- Mueller kernels
-
-def rotate_columns(T: np.ndarray, c2: np.ndarray, s2: np.ndarray) -> None:
-    """In place: T ← T · R(φ) for a frame rotation with cos2φ, sin2φ of shape (N,)."""
-    if T.shape[1] < 3:
-        return
-    t1 = T[:, 1].copy()
-    t2 = T[:, 2]
-    T[:, 1] = t1 * c2 - t2 * s2
-    T[:, 2] = t1 * s2 + t2 * c2
-
 
 def scatter_throughput(out, T, rows, m: MuellerValue, x_T: np.ndarray, wo: np.ndarray) -> None:
     """out[..., rows] = T[..., rows] · R(x_out → x_T) · M at vertices with Mueller value ``m``.
@@ -55,39 +46,10 @@ def scatter_throughput(out, T, rows, m: MuellerValue, x_T: np.ndarray, wo: np.nd
     """
     if m.kind == "abcs":
         update_abcs(out, T, rows, m.x_out, x_T, wo, m.A, m.B, m.C, m.S, m.depol)
-        return
-    Tm = T[..., rows]
-    if m.kind == "general":
-        c2, s2 = frame_rotation(m.x_out, x_T, wo)
-        rotate_columns(Tm, c2, s2)
-    out[..., rows] = multiply_right(Tm, m)
-
-
-def multiply_right(T: np.ndarray, m: MuellerValue) -> np.ndarray:
-    """T · M for a Mueller value in its own frames (rotation handled by the caller)."""
-    P = T.shape[0]
-    if m.kind == "depolarising":
-        out = np.zeros_like(T)
-        out[:, 0] = T[:, 0] * m.A
-        return out
-    if m.kind == "abcs":
-        out = np.empty_like(T)
-        a0 = m.A if m.depol is None else m.A + m.depol      # M00 (a depolarising part adds here only)
-        if P == 1:
-            out[:, 0] = T[:, 0] * a0
-            return out
-        t0, t1 = T[:, 0], T[:, 1]
-        out[:, 0] = a0 * t0 + m.B * t1
-        out[:, 1] = m.B * t0 + m.A * t1
-        if P == 4:
-            t2, t3 = T[:, 2], T[:, 3]
-            out[:, 2] = m.C * t2 - m.S * t3
-            out[:, 3] = m.S * t2 + m.C * t3
-        else:
-            out[:, 2] = m.C * T[:, 2]
-        return out
-    M = m.M[:P, :P]
-    return np.einsum("ijln,jkln->ikln", T, M)
+    elif m.kind == "depolarising":
+        update_depolarising(out, T, rows, m.A)
+    else:
+        update_general(out, T, rows, m.x_out, x_T, wo, m.M)
 
 
 def unpolarised_response(m: MuellerValue, P: int) -> np.ndarray:
@@ -363,7 +325,8 @@ class PathTracer:
             if not ok.any():
                 continue
             f = bsdf.eval(sub, wi)
-            S = unpolarised_response(f, P)
+            # light leaving a depolariser has only S0
+            S = unpolarised_response(f, 1 if f.kind == "depolarising" else P)
             if P > 1 and f.kind != "depolarising":
                 c2, s2 = frame_rotation(f.x_out, gather(x_T, sel), sub.wo)
                 S = rotate_stokes(S, c2, s2)
