@@ -40,6 +40,7 @@ class ShadingPoint:
     lam: np.ndarray        # (L, N) wavelengths in nm
     mono: bool = False     # monochrome mode: spectra return their mono value
     lookup: object = None  # engine.spectral.WavelengthLookup for ``lam`` (table values computed once)
+    material: np.ndarray | None = None  # (N,) slot of each point in a batched material set (see batching.py)
 
     @property
     def n(self) -> int:

@@ -11,6 +11,7 @@ import numpy as np
 
 from .base import BSDF, BSDFSample, ShadingPoint, depolarising_value
 from .sampling import cosine_hemisphere, local_to_world
+from ..spectral.spectrum import basis_rgb
 from ..vec3 import dot
 
 
@@ -23,9 +24,12 @@ class Lambert(BSDF):
         self.albedo = albedo
         self.wavelength_independent = bool(getattr(albedo, "is_constant", False))
 
+    def _albedo(self, sp: ShadingPoint) -> np.ndarray:
+        return sp.spectrum(self.albedo)
+
     def eval(self, sp: ShadingPoint, wi: np.ndarray):
         ok = (dot(sp.n_s, wi) > 0) & (sp.cos_o > 0)
-        a = sp.spectrum(self.albedo) * (ok / np.pi)[None, :]
+        a = self._albedo(sp) * (ok / np.pi)[None, :]
         return depolarising_value(a, sp.n)
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
@@ -36,9 +40,60 @@ class Lambert(BSDF):
         local = cosine_hemisphere(u_dir)
         wi = local_to_world(local, sp.n_s)
         valid = (sp.cos_o > 0) & (local[2] > 0)
-        a = sp.spectrum(self.albedo) * valid[None, :]
+        a = self._albedo(sp) * valid[None, :]
         return BSDFSample(wi=wi, weight=depolarising_value(a, sp.n), pdf=np.where(valid, local[2] / np.pi, 0.0),
                           is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=np.ones(sp.n))
 
     def describe(self) -> dict:
         return {"type": self.name, "albedo": repr(self.albedo)}
+
+
+class LambertSet(Lambert):
+    """Several Lambert materials shaded as one batch; point i uses member ``sp.material[i]``.
+
+    Scenes have many diffuse materials that differ only in colour; shading them in one call
+    instead of one call each removes most of the per-call overhead.  Members' albedos must be
+    constant or RGB-upsampled spectra (``batchable``); each point gets exactly the value its own
+    material would give (same arithmetic).
+    """
+
+    name = "lambert_set"
+
+    def __init__(self, members: list):
+        if not all(self.batchable(m) for m in members):
+            raise ValueError("LambertSet members must be Lambert materials with constant or RGB albedos")
+        self.members = list(members)
+        self.albedo = None
+        self.wavelength_independent = all(m.wavelength_independent for m in members)
+        self._constant = np.array([m.albedo.is_constant for m in members])
+        self._value = np.array([m.albedo.linear_srgb()[0] if m.albedo.is_constant else 0.0 for m in members])
+        self._rgb = np.array([m.albedo.linear_srgb() for m in members]).T.copy()      # (3, members)
+        self._mono = np.array([m.albedo.mono_value for m in members])
+
+    @staticmethod
+    def batchable(m) -> bool:
+        from ..spectral.spectrum import ConstantSpectrum, _RGBBasisSpectrum
+        return type(m) is Lambert and isinstance(m.albedo, (ConstantSpectrum, _RGBBasisSpectrum))
+
+    def _albedo(self, sp: ShadingPoint) -> np.ndarray:
+        slot = sp.material
+        L, n = sp.lam.shape
+        if sp.mono:
+            return np.broadcast_to(self._mono[slot][None, :], (L, n)).copy()
+        const = np.broadcast_to(self._value[slot][None, :], (L, n))
+        if self._constant.all():
+            return const.copy()
+
+        def combine():
+            basis = sp.lookup.basis if sp.lookup is not None else basis_rgb(sp.lam)
+            rgb = self._rgb[:, slot]
+            return rgb[0][None, :] * basis[0] + rgb[1][None, :] * basis[1] + rgb[2][None, :] * basis[2]
+        # the value depends on the slots too: memo per (set, slot array) — the slot array is the
+        # same object for a vertex's eval and sample, and new at every bounce
+        value = sp.lookup.memo((self, slot), combine) if sp.lookup is not None else combine()
+        if not self._constant.any():
+            return value
+        return np.where(self._constant[slot][None, :], const, value)
+
+    def describe(self) -> dict:
+        return {"type": self.name, "members": [m.describe() for m in self.members]}

@@ -26,6 +26,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..materials.base import MuellerValue, ShadingPoint
+from ..materials.batching import shading_groups
+from ..materials.lambert import LambertSet
 from ..polarisation.frames import frame_rotation
 from .accel import offset_origin
 from ..kernels.transport import (add_light, throughput_times_stokes, update_abcs, update_depolarising,
@@ -120,6 +122,8 @@ class PathTracer:
         simplified, _ = effective_materials(dict(zip(compiled.material_names, compiled.materials)),
                                             simplify=getattr(settings, "simplify", "auto"))
         self.materials = [simplified[name] for name in compiled.material_names]
+        # materials shaded together (e.g. all RGB Lambert materials in one call)
+        self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
         self.P = TRANSPORT_SIZES[settings.polarisation]
         self.mono = settings.spectral == "mono"
         self.n_lambda = 1 if self.mono else 4
@@ -235,6 +239,7 @@ class PathTracer:
             wo = -d
             # Stokes frame of the arriving segment: x_T is already ⟂ d.
             mat = compiled.tri_material[prim]
+            grp = self.group_of[mat]
             u_light = sampler.next(4)
             u_bsdf = sampler.next(3)
             u_rr = sampler.next(1)[0]
@@ -247,13 +252,14 @@ class PathTracer:
             pdf_next = np.zeros(n)
             eta_step = np.ones(n)
 
-            groups = np.unique(mat)
-            for m in groups:
+            groups = np.unique(grp)
+            for g in groups:
                 # One material covers every path: use whole arrays instead of gathered copies.
-                sel = slice(None) if len(groups) == 1 else np.nonzero(mat == m)[0]
-                bsdf = self.materials[m]
+                sel = slice(None) if len(groups) == 1 else np.nonzero(grp == g)[0]
+                bsdf = self.shaders[g]
                 sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
-                                  gather(lk_m.lam, sel), self.mono, lk_m.take(sel))
+                                  gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
+                                  self.slot_of[gather(mat, sel)] if isinstance(bsdf, LambertSet) else None)
                 rows = np.arange(n) if isinstance(sel, slice) else sel
                 xTm = gather(x_T, sel)
 
@@ -318,7 +324,8 @@ class PathTracer:
             wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, gather(u[1], sel), gather(u[2], sel))))
             value = self._emitted(light, lookup.take(sel)) * scale[None, :]
             sub = ShadingPoint(p, gather(sp.n_s, sel), gather(sp.n_g, sel), gather(sp.wo, sel), gather(sp.lam, sel),
-                               sp.mono, sp.lookup.take(sel) if sp.lookup is not None else None)
+                               sp.mono, sp.lookup.take(sel) if sp.lookup is not None else None,
+                               None if sp.material is None else gather(sp.material, sel))
             m = sub.n
             cos_i = np.abs(dot(sub.n_s, wi))
             ok &= cos_i > 0

@@ -90,20 +90,24 @@ class WavelengthLookup:
         self._lam, self._basis, self._d65 = lam, basis, d65
         self._memo = None
 
-    def memo(self, spectrum, compute):
-        """``compute()`` for this spectrum once per lookup (read-only array: callers must not modify it).
+    def memo(self, key, compute):
+        """``compute()`` once per lookup and ``key`` (read-only array: callers must not modify it).
 
-        A material's parameter is typically needed by both its ``eval`` (next-event estimation) and
-        its ``sample`` at the same vertices.
+        ``key`` is an object, or a tuple of objects, that together with the wavelengths determine
+        the value (a spectrum; a material set and its per-path slot array); entries match by
+        identity.  A material's parameter is typically needed by both its ``eval`` (next-event
+        estimation) and its ``sample`` at the same vertices.
         """
+        keys = key if isinstance(key, tuple) else (key,)
+        ident = tuple(id(k) for k in keys)
         if self._memo is None:
             self._memo = {}
-        hit = self._memo.get(id(spectrum))
-        if hit is not None and hit[0] is spectrum:
+        hit = self._memo.get(ident)
+        if hit is not None and all(a is b for a, b in zip(hit[0], keys)):
             return hit[1]
         value = compute()
         value.setflags(write=False)
-        self._memo[id(spectrum)] = (spectrum, value)
+        self._memo[ident] = (keys, value)
         return value
 
     @classmethod
