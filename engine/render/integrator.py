@@ -78,8 +78,11 @@ def rotate_stokes(S: np.ndarray, c2, s2) -> np.ndarray:
 
 
 def gather(a: np.ndarray, sel) -> np.ndarray:
-    """a[..., sel] for a slice (a view) or integer indices (np.take: ~2× faster than fancy indexing)."""
-    return a[..., sel] if isinstance(sel, slice) else np.take(a, sel, axis=-1)
+    """a[..., sel] for integer indices (np.take: ~2× faster than fancy indexing); ``a`` itself for
+    slice(None) (the same object, so per-object memos such as a LambertSet's albedo still match)."""
+    if isinstance(sel, slice):
+        return a if sel == slice(None) else a[..., sel]
+    return np.take(a, sel, axis=-1)
 
 
 def keep_paths(mask: np.ndarray, *arrays):
