@@ -40,7 +40,9 @@ from engine.scene.loader import load_scene  # noqa: E402
 SHARED = os.environ.get("POLAR_SHARED", os.path.join(os.path.dirname(REPO), "shared"))
 PEERS = os.path.join(SHARED, "peers")
 LUM = np.array([0.2126, 0.7152, 0.0722])
-SCENES = ["plane_brewster", "fresnel_sphere", "glass_sphere", "cornell_lambert", "htsg_sphere"]
+#: Every timed render runs this many times (same image); the fastest time is kept (machine noise).
+REPEATS = 2
+SCENES = ["plane_brewster", "fresnel_sphere", "glass_sphere", "rough_sphere_a030", "cornell_lambert", "htsg_sphere"]
 
 
 def load(name, res):
@@ -76,18 +78,25 @@ def render_ours(scene, spp, polarisation="auto", spectral="spectral", tolerance=
                                     series_tolerance=tolerance) if isinstance(m, HTSG) else m)
                            for k, m in scene.materials.items()}
     renderer = Renderer(scene)
-    t0 = time.perf_counter()
-    result = renderer.render()
-    return luminance_stokes(result.stokes()), time.perf_counter() - t0
+    best = None
+    for _ in range(REPEATS):       # the same image each time (fixed seed); keep the fastest run
+        t0 = time.perf_counter()
+        result = renderer.render()
+        seconds = time.perf_counter() - t0
+        best = seconds if best is None else min(best, seconds)
+    return luminance_stokes(result.stokes()), best
 
 
 def render_mitsuba(python, name, variant, spp, res, outdir, seed=0):
     cmd = [python, os.path.join(PEERS, "render_peer.py"), name, "--variant", variant, "--spp", str(spp),
            "--res", str(res), "--seed", str(seed), "--out", outdir]
-    subprocess.run(cmd, check=True, capture_output=True)
     stem = f"{name}__{variant}__{res}x{res}__{spp}spp__seed{seed}"
-    with open(os.path.join(outdir, stem + ".json")) as fh:
-        seconds = json.load(fh)["render_seconds"]
+    seconds = None
+    for _ in range(REPEATS):       # same seed, same image; keep the fastest render call
+        subprocess.run(cmd, check=True, capture_output=True)
+        with open(os.path.join(outdir, stem + ".json")) as fh:
+            t = json.load(fh)["render_seconds"]
+        seconds = t if seconds is None else min(seconds, t)
     return luminance_stokes(np.load(os.path.join(outdir, stem + ".npy")).astype(np.float64)), seconds
 
 
@@ -110,6 +119,9 @@ def main():
     have_mitsuba = bool(args.mitsuba_python) and subprocess.run(
         [args.mitsuba_python, "-c", "import mitsuba"], capture_output=True).returncode == 0
     tmp = tempfile.mkdtemp(prefix="polar_accuracy_")
+    # One-off per process: load the compiled kernels (Numba cache) before any timing, as the
+    # Mitsuba harness times only its render call.
+    render_ours(load(args.scenes.split(",")[0], 16), 1)
     rows = []   # (scene, config, spp, seconds, [rmse S0..S3, DoLP])
     for name in args.scenes.split(","):
         scene = load(name, args.res)
@@ -142,6 +154,9 @@ def main():
              "|---|---|---|---|---|---|---|---|---|"]
     for name, label, spp, sec, e in rows:
         lines.append(f"| {name} | {label} | {spp} | {sec:.2f} | " + " | ".join(f"{v:.2e}" for v in e) + " |")
+    summary = equal_error_summary(rows)
+    lines += ["", "Time to equal error (Monte Carlo efficiency 1/(RMSE²·t) at each configuration's largest "
+              "spp; a ratio > 1 means ours reaches a given error faster):", ""] + summary
     with open(os.path.join(args.out, "table.md"), "w") as fh:
         fh.write("\n".join(lines) + "\n")
     with open(os.path.join(args.out, "rows.json"), "w") as fh:
@@ -149,6 +164,46 @@ def main():
     print("\n".join(lines))
     plot(rows, os.path.join(args.out, "accuracy_time.png"))
     return 0
+
+
+def equal_error_summary(rows, ours="ours auto", peers=("Mitsuba scalar", "Mitsuba LLVM")):
+    """Markdown rows: per scene and quantity (S0, S1), how much faster ours reaches equal error.
+
+    Each configuration's squared error is fitted as RMSE²(spp) = a/spp + c, with c shared by all
+    configurations of a scene (the reference's own noise, which the renders cannot go below) and
+    a the configuration's variance per sample.  The time to reach an error e ≫ √c is then
+    a·(t/spp)/e², so the ratio of two renderers' times to equal error is the ratio of their
+    a·(t/spp) (t at the configuration's largest spp).
+    """
+    out = ["| scene | quantity | ours auto ÷ Mitsuba scalar (speed to equal error) | ours auto ÷ Mitsuba LLVM |"
+           " reference noise floor √c |",
+           "|---|---|---|---|---|"]
+    labels = (ours,) + tuple(peers)
+    for scene in dict.fromkeys(r[0] for r in rows):
+        for q, qname in ((0, "S0"), (1, "S1")):
+            pts = [(labels.index(r[1]), r[2], r[3], r[4][q]) for r in rows if r[0] == scene and r[1] in labels]
+            if not pts or min(p[3] for p in pts) <= 0 or len({p[0] for p in pts}) < 2:
+                continue
+            k = len(labels)
+            A = np.zeros((len(pts), k + 1))
+            y = np.empty(len(pts))
+            for row, (i, spp, _, err) in enumerate(pts):
+                w = 1.0 / (err * err)                     # relative residuals
+                A[row, i] = w / spp
+                A[row, k] = w
+                y[row] = 1.0
+            coef = np.linalg.lstsq(A, y, rcond=None)[0]
+            cost = {}
+            for i in range(k):
+                mine = [p for p in pts if p[0] == i]
+                if mine and coef[i] > 0:
+                    spp, t = max((p[1], p[2]) for p in mine)
+                    cost[i] = coef[i] * t / spp
+            if 0 not in cost:
+                continue
+            cells = [f"{cost[i] / cost[0]:.2f}×" if i in cost else "–" for i in range(1, k)]
+            out.append(f"| {scene} | {qname} | " + " | ".join(cells) + f" | {np.sqrt(max(coef[k], 0.0)):.1e} |")
+    return out
 
 
 def plot(rows, path):

@@ -31,7 +31,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
 SHARED = os.environ.get("POLAR_SHARED", os.path.join(os.path.dirname(REPO), "shared"))
 PEERS = os.path.join(SHARED, "peers")
-DEFAULT_SCENES = ["plane_brewster", "fresnel_sphere", "glass_sphere", "cornell_lambert"]
+DEFAULT_SCENES = ["plane_brewster", "fresnel_sphere", "glass_sphere", "rough_sphere_a030", "cornell_lambert"]
 
 
 def run_measured(cmd):

@@ -31,18 +31,28 @@ def identity(dtype, L, n):
     return T
 
 
+def frames(rng, n, dtype):
+    """Random (x_out, x_T, wo): two unit frame vectors ⟂ a unit direction, (3, n) each."""
+    wo = rng.normal(size=(3, n))
+    wo /= np.linalg.norm(wo, axis=0)
+    xs = []
+    for _ in range(2):
+        x = np.cross(wo.T, rng.normal(size=(n, 3))).T
+        xs.append((x / np.linalg.norm(x, axis=0)).astype(dtype))
+    return xs[0], xs[1], wo.astype(dtype)
+
+
 def time_update(dtype, n, L=4, repeats=20):
     rng = np.random.default_rng(0)
     T, rows = identity(dtype, L, n), np.arange(n)
     out = np.empty_like(T)
     A = rng.random((L, n)).astype(dtype)
     B, C, S = (A * f for f in (0.3, 0.5, 0.2))
-    c2 = np.cos(rng.random(n)).astype(dtype)
-    s2 = np.sqrt(1 - c2 * c2).astype(dtype)
-    _update_abcs_loop(out, T, rows, c2, s2, A, B, C, S, A, False)  # compile
+    x_out, x_T, wo = frames(rng, n, dtype)
+    _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, A, False)  # compile
     t0 = time.perf_counter()
     for _ in range(repeats):
-        _update_abcs_loop(out, T, rows, c2, s2, A, B, C, S, A, False)
+        _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, A, False)
     return (time.perf_counter() - t0) / repeats
 
 
@@ -53,10 +63,9 @@ def chain(dtype, depth, n=20000):
         cos = rng.random((1, n))
         eta = np.full((1, n), 0.2 + 3.5j if b % 2 else 1.5 + 0j)
         A, B, C, S = (np.ascontiguousarray(x, dtype=dtype) for x in fresnel_reflection_abcs(cos, eta))
-        phi = rng.uniform(0, np.pi, n)
+        x_out, x_T, wo = frames(rng, n, dtype)
         out = np.empty_like(T)
-        _update_abcs_loop(out, T, rows, np.cos(2 * phi).astype(dtype), np.sin(2 * phi).astype(dtype),
-                          A, B, C, S, A, False)
+        _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, A, False)
         T = out / np.maximum(out[0, 0], 1e-30)
     return T[:, 0, 0].astype(np.float64)
 
