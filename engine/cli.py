@@ -112,7 +112,8 @@ def _render(args) -> int:
     if result.cancelled:
         print(f"polar: interrupted — writing the {result.stats['samples']} finished samples", file=sys.stderr)
     stats = result.stats
-    print(f"polar: transport: {stats['transport_reason']}; spectral: {stats['spectral']}", file=sys.stderr)
+    print(f"polar: transport: {stats['transport_reason']}; spectral: {stats['spectral']}; "
+          f"kernels: {stats.get('kernels', '?')}", file=sys.stderr)
     for why in stats.get("simplified", []):
         print(f"polar: simplified: {why}", file=sys.stderr)
     film = result.film

@@ -162,6 +162,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         stats = out.stats
         message = (f"Polar | {stats['transport_reason']} | {stats['samples']} samples in {stats['seconds']:.1f} s"
                    f" (export + BVH {time.perf_counter() - t0 - stats['seconds']:.1f} s)")
+        if stats.get("kernels") == "numpy":
+            message += " | NumPy kernels (install numba in Blender's Python for ~2x speed)"
         if stats.get("simplified"):
             message += f" | skipped {len(stats['simplified'])} clear layer(s): " + "; ".join(stats["simplified"])
         if out.cancelled:

@@ -94,3 +94,23 @@ def test_polariser_command_png_exr_sweep_and_errors(tmp_path):
     assert bad.returncode == 2 and "does not exist" in bad.stderr
     bad = run(["polariser", src, "--sweep", "10:0:5", "-o", str(sheet)])
     assert bad.returncode == 2 and "--sweep" in bad.stderr
+
+
+def test_simplified_layers_and_kernels_are_reported_and_overridable(tmp_path):
+    with open(os.path.join(REPO, "examples", "thesis_ww_coat_red.json")) as fh:
+        scene = json.load(fh)
+    scene["materials"]["ball"]["coats"] = [{"n": 1.0}]          # index-matched and clear
+    scene["camera"]["width"] = scene["camera"]["height"] = 16
+    path = tmp_path / "matched.json"
+    path.write_text(json.dumps(scene))
+    out = tmp_path / "matched.exr"
+    proc = run(["render", str(path), "-o", str(out), "--spp", "1", "--no-previews", "-q"])
+    assert proc.returncode == 0, proc.stderr
+    assert "simplified: coat 1 of 'ball' is index-matched" in proc.stderr
+    assert "kernels: " in proc.stderr
+    header = read_stokes_exr(str(out))[2]
+    assert "index-matched" in header["polar.simplified"] and header["polar.kernels"]
+    proc = run(["render", str(path), "-o", str(out), "--spp", "1", "--no-previews", "-q", "--simplify", "off",
+                "--reduce-spectral", "exact"])
+    assert proc.returncode == 0, proc.stderr
+    assert "simplified:" not in proc.stderr and read_stokes_exr(str(out))[2]["polar.simplified"] == ""
