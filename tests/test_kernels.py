@@ -321,3 +321,24 @@ def test_throughput_times_stokes_with_fewer_stokes_components():
     full = transport.throughput_times_stokes_numpy(T, rows, S4, w)
     np.testing.assert_allclose(transport.throughput_times_stokes_numpy(T, rows, S1, w), full, rtol=1e-13)
     np.testing.assert_allclose(transport.throughput_times_stokes_numba(T, rows, S1, w), full, rtol=1e-13)
+
+
+@needs_numba
+def test_same_files_under_two_package_names_do_not_share_compiled_kernels(tmp_path):
+    """A checkout is imported as ``engine`` and, by the Blender tests and by developers, as the
+    extension package; Numba's cache is keyed by file, its entries by module name, so a shared cache
+    made the second name fail with ModuleNotFoundError (found by CI).  Each name gets its own cache."""
+    pkg = tmp_path / "pkgs"
+    pkg.mkdir()
+    (pkg / "polar_render").symlink_to(REPO, target_is_directory=True)
+    env = dict(os.environ, POLAR_KERNEL_CACHE=str(tmp_path / "cache"), POLAR_KERNELS="numba")
+    scene = shared_path("peers", "scenes", "conv_s3_check.json")
+    code = ("import sys; sys.path.insert(0, {pkg!r}); import {mod}.scene.loader as L; "
+            "from {mod}.render.renderer import Renderer; s = L.load_scene({scene!r}); s.settings.spp = 1; "
+            "print(Renderer(s).render().stats['kernels'])")
+    for mod in ("polar_render.engine", "engine", "polar_render.engine"):
+        proc = subprocess.run([sys.executable, "-c", code.format(pkg=str(pkg), mod=mod, scene=scene)], cwd=REPO,
+                              env=env, capture_output=True, text=True, timeout=600)
+        assert proc.returncode == 0, proc.stderr[-1500:]
+        assert proc.stdout.strip().startswith("numba")
+    assert sorted(os.listdir(tmp_path / "cache")) == ["engine", "polar_render.engine"]

@@ -33,11 +33,39 @@ COMPILED = _numba is not None and os.environ.get("POLAR_KERNELS", "numba").lower
 BACKEND = f"numba {_numba.__version__}" if COMPILED else "numpy"
 
 
+#: The package these kernels belong to: "engine", or e.g. "bl_ext.user_default.polar_render.engine"
+#: inside Blender.
+_PACKAGE = __name__.rsplit(".kernels", 1)[0]
+
+
+def cache_dir() -> str:
+    """Where compiled kernels are cached: one folder per package name.
+
+    Numba keys its cache by source file, but a cached kernel refers to its module by name; the same
+    files imported under two names (a checkout used both as ``engine`` and as the Blender extension
+    ``polar_render.engine``) would load each other's entries and fail.  ``POLAR_KERNEL_CACHE``
+    overrides the base folder (default: $XDG_CACHE_HOME or ~/.cache, then polar/numba).
+    """
+    base = os.environ.get("POLAR_KERNEL_CACHE") or os.path.join(
+        os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "polar", "numba")
+    return os.path.join(base, _PACKAGE)
+
+
 def jit(fn):
-    """Compile ``fn`` with Numba (no fast-math: IEEE results like NumPy), or return None."""
+    """Compile ``fn`` with Numba (no fast-math: IEEE results like NumPy), or return None.
+
+    The cache folder is chosen when the function is decorated (Numba picks its cache locator then),
+    so it is set for this decoration only and other Numba users in the process are unaffected.
+    """
     if _numba is None:
         return None
-    return _numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")(fn)
+    from numba.core import config
+    previous = config.CACHE_DIR
+    config.CACHE_DIR = cache_dir()
+    try:
+        return _numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy")(fn)
+    finally:
+        config.CACHE_DIR = previous
 
 
 def dispatch(compiled, reference):
