@@ -342,3 +342,20 @@ def test_same_files_under_two_package_names_do_not_share_compiled_kernels(tmp_pa
         assert proc.returncode == 0, proc.stderr[-1500:]
         assert proc.stdout.strip().startswith("numba")
     assert sorted(os.listdir(tmp_path / "cache")) == ["engine", "polar_render.engine"]
+
+
+@needs_numba
+def test_beckmann_visible_slopes_match_the_numpy_reference():
+    from engine.materials.microfacet import Beckmann
+    rng = np.random.default_rng(12)
+    n = 40000
+    tan = np.concatenate([rng.random(n // 4) * 0.1, rng.random(n // 4) * 3, 10 ** rng.uniform(0, 300, n // 4),
+                          np.zeros(n // 4)])
+    u1, u2 = rng.random(n), rng.random(n)
+    u1[:8] = [0.0, 1 - 1e-17, 1e-300, 0.5, 1e-16, 0.999999, 1e-10, 0.3]
+    with np.errstate(all="ignore"):
+        want = Beckmann._sample_slopes11(tan, u1, u2, use_kernel=False)
+    got = Beckmann._sample_slopes11(tan, u1, u2)
+    assert np.all(np.isfinite(got[0]))
+    np.testing.assert_allclose(got[0], want[0], rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(got[1], want[1])

@@ -55,6 +55,9 @@ import math
 
 import numpy as np
 
+from ..kernels import COMPILED
+from ..kernels.microfacet import compiled_visible_slope_x
+
 SQRT_PI = math.sqrt(math.pi)
 _INV_SQRT_PI = 1.0 / SQRT_PI
 _TWO_OVER_SQRT_PI = 2.0 / SQRT_PI
@@ -347,14 +350,18 @@ class Beckmann(MicrofacetDistribution):
         return np.where(x < 0, e * (r + tp), 2.0 + e * (tp - r))
 
     @classmethod
-    def _sample_slopes11(cls, tan_t: np.ndarray, u1: np.ndarray, u2: np.ndarray):
+    def _sample_slopes11(cls, tan_t: np.ndarray, u1: np.ndarray, u2: np.ndarray, use_kernel: bool = True):
         """Visible slopes (x̃, ỹ) of the unit-roughness Beckmann surface seen from θ with tanθ = tan_t ≥ 0.
 
         x̃ has density ∝ (1 − x̃ tanθ) e^{−x̃²} on x̃ < cotθ, with CDF F(x)/F(cotθ),
         F(x) = erfc(−x) + tanθ e^{−x²}/√π; it is found by Halley's method safeguarded by
         bisection on the bracket [−8, min(cotθ, 8)] (F(−8)/F(cotθ) < 1e-27).  ỹ is independent
-        with density e^{−ỹ²}/√π: ỹ = erfinv(2u₂ − 1).
+        with density e^{−ỹ²}/√π: ỹ = erfinv(2u₂ − 1).  x̃ comes from the compiled loop of
+        engine.kernels.microfacet when available (the same algorithm per path; this NumPy body is
+        its reference, ``use_kernel=False``).
         """
+        if COMPILED and use_kernel:
+            return compiled_visible_slope_x(tan_t, u1, _ERFCX_COEF, _ERFCX_K), _gaussian_quantile_half(u2)
         n = tan_t.shape[0]
         cot = np.where(tan_t > 0, 1.0 / np.where(tan_t > 0, tan_t, 1.0), np.inf)
         lo = np.full(n, -8.0)
