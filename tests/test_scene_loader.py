@@ -62,6 +62,8 @@ CASES = [
     ("camera", DELETE, "camera", "required"),
     ("camera.width", 0, "camera.width", "[1, 65536]"),
     ("camera.width", 2.5, "camera.width", "whole number"),
+    ("camera.width", float("inf"), "camera.width", "whole number"),     # found by the fuzzer
+    ("render.spp", float("nan"), "render.spp", "whole number"),
     ("camera.fov_deg", 180, "camera.fov_deg", "(0, 180)"),
     ("camera.fov_deg", "wide", "camera.fov_deg", "must be a number"),
     ("camera.up", [0, 1, 0], "camera.up", "parallel"),

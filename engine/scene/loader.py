@@ -69,7 +69,8 @@ def number(value, field: str, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=
 
 
 def integer(value, field: str, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or float(value) != int(value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or \
+            (isinstance(value, float) and not math.isfinite(value)) or float(value) != int(value):
         raise SceneError(field, f"must be a whole number in [{lo}, {hi}], got {value!r}")
     v = int(value)
     if v < lo or v > hi:
