@@ -19,10 +19,13 @@ from . import jit
 _SQRT_PI = math.sqrt(math.pi)
 _INV_SQRT_PI = 1.0 / _SQRT_PI
 _TWO_OVER_SQRT_PI = 2.0 / _SQRT_PI
-_GILES_LO = (3.43273939e-07, -3.5233877e-06, -4.39150654e-06, 0.00021858087, -0.00125372503,
+#: M. Giles (2010), erfinv(y) ≈ y·p(w), w = −log(1 − y²): Horner coefficients of p, highest first,
+#: for w < 5 (in w − 2.5) and w ≥ 5 (in √w − 3).  Shared with the NumPy reference
+#: (engine.materials.microfacet._erfcinv_giles).
+GILES_LOW = (2.81022636e-08, 3.43273939e-07, -3.5233877e-06, -4.39150654e-06, 0.00021858087, -0.00125372503,
              -0.00417768164, 0.246640727, 1.50140941)
-_GILES_HI = (0.000100950558, 0.00134934322, -0.00367342844, 0.00573950773, -0.0076224613,
-             0.00943887047, 1.00167406, 2.83297682)
+GILES_HIGH = (-0.000200214257, 0.000100950558, 0.00134934322, -0.00367342844, 0.00573950773, -0.0076224613,
+              0.00943887047, 1.00167406, 2.83297682)
 
 
 @jit
@@ -53,14 +56,14 @@ def _erfcinv_giles(q):
     w = -np.log(q * (2.0 - q))
     if w < 5.0:
         wl = w - 2.5
-        p = 2.81022636e-08
-        for c in _GILES_LO:
-            p = c + p * wl
+        p = GILES_LOW[0]
+        for j in range(1, len(GILES_LOW)):
+            p = GILES_LOW[j] + p * wl
     else:
         wh = np.sqrt(w) - 3.0
-        p = -0.000200214257
-        for c in _GILES_HI:
-            p = c + p * wh
+        p = GILES_HIGH[0]
+        for j in range(1, len(GILES_HIGH)):
+            p = GILES_HIGH[j] + p * wh
     return max(p * y, 0.0)
 
 

@@ -16,6 +16,19 @@ from ..polarisation.frames import frame_rotation
 
 # ----------------------------------------------------------------------------- T ← T·R(φ)·M_abcs
 
+def _rotated_rows_numpy(T, rows, x_out, x_T, wo):
+    """T[..., rows] · R(φ), a new array: columns 1, 2 rotated from frame x_out to x_T about wo
+    (nothing to rotate with fewer than 3 Stokes components)."""
+    T = T[..., rows]
+    if T.shape[0] >= 3:
+        c2, s2 = frame_rotation(x_out, x_T, wo)
+        t1 = T[:, 1].copy()
+        t2 = T[:, 2].copy()
+        T[:, 1] = t1 * c2 - t2 * s2
+        T[:, 2] = t1 * s2 + t2 * c2
+    return T
+
+
 def update_abcs_numpy(out, T, rows, x_out, x_T, wo, A, B, C, S, depol):
     """out[..., rows] = T[..., rows] · R(φ) · M for M = [[A+depol,B,0,0],[B,A,0,0],[0,0,C,S],[0,0,−S,C]].
 
@@ -26,13 +39,7 @@ def update_abcs_numpy(out, T, rows, x_out, x_T, wo, A, B, C, S, depol):
     T is not modified.
     """
     P = T.shape[0]
-    T = T[..., rows]
-    if P >= 3:
-        c2, s2 = frame_rotation(x_out, x_T, wo)
-        t1 = T[:, 1].copy()
-        t2 = T[:, 2].copy()
-        T[:, 1] = t1 * c2 - t2 * s2
-        T[:, 2] = t1 * s2 + t2 * c2
+    T = _rotated_rows_numpy(T, rows, x_out, x_T, wo)
     res = np.empty_like(T)
     a0 = A if depol is None else A + depol
     if P == 1:
@@ -65,13 +72,20 @@ def _frame_rotation(x, xt, k, j):
 
 
 @jit
-def _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, D, has_depol):
-    P, L, n = T.shape[0], T.shape[2], rows.shape[0]
+def _frame_rotations(x_out, x_T, wo, n, P):
+    """(cos 2φ, sin 2φ) arrays (n,) for every path; the identity when P < 3 (nothing rotates)."""
     c2 = np.ones(n)
     s2 = np.zeros(n)
     if P >= 3:
         for j in range(n):
             c2[j], s2[j] = _frame_rotation(x_out, x_T, wo, j)
+    return c2, s2
+
+
+@jit
+def _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, D, has_depol):
+    P, L, n = T.shape[0], T.shape[2], rows.shape[0]
+    c2, s2 = _frame_rotations(x_out, x_T, wo, n, P)
     # paths innermost: every (row, wavelength) of T is one contiguous stream
     for k in range(L):
         la = k if A.shape[0] > 1 else 0
@@ -153,24 +167,14 @@ def update_general_numpy(out, T, rows, x_out, x_T, wo, M):
     Frames as in ``update_abcs_numpy``; only the top-left P×P block of M is used.
     """
     P = T.shape[0]
-    T = T[..., rows]
-    if P >= 3:
-        c2, s2 = frame_rotation(x_out, x_T, wo)
-        t1 = T[:, 1].copy()
-        t2 = T[:, 2].copy()
-        T[:, 1] = t1 * c2 - t2 * s2
-        T[:, 2] = t1 * s2 + t2 * c2
+    T = _rotated_rows_numpy(T, rows, x_out, x_T, wo)
     out[..., rows] = np.einsum("ijln,jkln->ikln", T, M[:P, :P])
 
 
 @jit
 def _update_general_loop(out, T, rows, x_out, x_T, wo, M):
     P, L, n = T.shape[0], T.shape[2], rows.shape[0]
-    c2 = np.ones(n)
-    s2 = np.zeros(n)
-    if P >= 3:
-        for j in range(n):
-            c2[j], s2[j] = _frame_rotation(x_out, x_T, wo, j)
+    c2, s2 = _frame_rotations(x_out, x_T, wo, n, P)
     row = np.empty(4)
     for k in range(L):
         lm = k if M.shape[2] > 1 else 0

@@ -136,6 +136,9 @@ class BSDF:
     transmits: bool = False
     #: The Mueller matrix is the same at every wavelength (no dispersion, grey parameters).
     wavelength_independent: bool = False
+    #: Shades several materials at once and reads each point's member from ``ShadingPoint.material``
+    #: (engine.materials.batching).
+    batched: bool = False
 
     name: str = "bsdf"
 

@@ -58,6 +58,7 @@ class LambertSet(Lambert):
     """
 
     name = "lambert_set"
+    batched = True
 
     def __init__(self, members: list):
         if not all(self.batchable(m) for m in members):

@@ -56,7 +56,7 @@ import math
 import numpy as np
 
 from ..kernels import COMPILED
-from ..kernels.microfacet import compiled_visible_slope_x
+from ..kernels.microfacet import GILES_HIGH, GILES_LOW, compiled_visible_slope_x
 
 SQRT_PI = math.sqrt(math.pi)
 _INV_SQRT_PI = 1.0 / SQRT_PI
@@ -163,14 +163,12 @@ def _erfcinv_giles(q: np.ndarray) -> np.ndarray:
     w = -np.log(q * (2.0 - q))  # −log((1 − y)(1 + y)) without cancellation
     lo = w < 5.0
     wl = w - 2.5
-    p1 = 2.81022636e-08
-    for c in (3.43273939e-07, -3.5233877e-06, -4.39150654e-06, 0.00021858087, -0.00125372503,
-              -0.00417768164, 0.246640727, 1.50140941):
+    p1 = GILES_LOW[0]
+    for c in GILES_LOW[1:]:
         p1 = c + p1 * wl
     wh = np.sqrt(w) - 3.0
-    p2 = -0.000200214257
-    for c in (0.000100950558, 0.00134934322, -0.00367342844, 0.00573950773, -0.0076224613,
-              0.00943887047, 1.00167406, 2.83297682):
+    p2 = GILES_HIGH[0]
+    for c in GILES_HIGH[1:]:
         p2 = c + p2 * wh
     return np.maximum(np.where(lo, p1, p2) * y, 0.0)
 

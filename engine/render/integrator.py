@@ -27,7 +27,6 @@ import numpy as np
 
 from ..materials.base import MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
-from ..materials.lambert import LambertSet
 from ..polarisation.frames import frame_rotation
 from .accel import offset_origin
 from ..kernels.transport import (add_light, throughput_times_stokes, update_abcs, update_depolarising,
@@ -116,15 +115,20 @@ def power_heuristic(a, b):
 class PathTracer:
     """Traces batches of camera paths for one compiled scene."""
 
-    def __init__(self, compiled, lights, camera, settings):
+    def __init__(self, compiled, lights, camera, settings, materials=None):
+        """``materials``: the compiled scene's materials as rendered (by material index), if the
+        caller has already applied the exact simplifications (engine.render.effects); otherwise
+        they are applied here, the same way on every worker."""
         self.scene = compiled
         self.lights = lights
         self.camera = camera
         self.settings = settings
-        # the materials as rendered: exact simplifications applied (same on every worker)
-        simplified, _ = effective_materials(dict(zip(compiled.material_names, compiled.materials)),
-                                            simplify=getattr(settings, "simplify", "auto"))
-        self.materials = [simplified[name] for name in compiled.material_names]
+        if materials is None:
+            simplified, _ = effective_materials(dict(zip(compiled.material_names, compiled.materials)),
+                                                simplify=getattr(settings, "simplify", "auto"))
+            materials = [simplified[name] for name in compiled.material_names]
+        self.materials = list(materials)
+        self.has_area_lights = compiled.has_area_lights     # once, not per bounce (scans every triangle)
         # materials shaded together (e.g. all RGB Lambert materials in one call)
         self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
         self.P = TRANSPORT_SIZES[settings.polarisation]
@@ -213,18 +217,19 @@ class PathTracer:
                     p_light = env.pdf(d[:, miss]) * light_set.select_prob
                     w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
                 add_light(radiance, path, T, miss.nonzero()[0], Le, w)
-            emitter = compiled.tri_emitter[hits.prim] if compiled.has_area_lights else None
+            emitter = compiled.tri_emitter[hits.prim] if self.has_area_lights else None
             lit = (emitter >= 0) & hit if emitter is not None else None
             if lit is not None and lit.any():
                 idx = lit.nonzero()[0]
-                # emitters are one-sided: only their front faces shine
-                idx = idx[dot(d[:, idx], compiled.tri_normal[hits.prim[idx]].T) < 0]
+                cos_hit = -dot(d[:, idx], compiled.tri_normal[hits.prim[idx]].T)
+                front = cos_hit > 0             # emitters are one-sided: only their front faces shine
+                idx, cos_hit = idx[front], cos_hit[front]
                 for li in np.unique(emitter[idx]):
                     light = light_set.lights[li]
-                    sel = idx[emitter[idx] == li]
+                    mine = emitter[idx] == li
+                    sel = idx[mine]
                     Le = self._emitted(light, lk.take(sel))
-                    cos_l = -dot(d[:, sel], compiled.tri_normal[hits.prim[sel]].T)
-                    p_light = light.pdf_hit(hits.t[sel], cos_l) * light_set.select_prob
+                    p_light = light.pdf_hit(hits.t[sel], cos_hit[mine]) * light_set.select_prob
                     wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
                     add_light(radiance, path, T, sel, Le, wsel)
 
@@ -262,7 +267,7 @@ class PathTracer:
                 bsdf = self.shaders[g]
                 sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
                                   gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
-                                  self.slot_of[gather(mat, sel)] if isinstance(bsdf, LambertSet) else None)
+                                  self.slot_of[gather(mat, sel)] if bsdf.batched else None)
                 rows = np.arange(n) if isinstance(sel, slice) else sel
                 xTm = gather(x_T, sel)
 

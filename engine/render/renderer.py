@@ -142,7 +142,8 @@ class Renderer:
                 raise ValueError(f"cannot resume a {resume.width}×{resume.height} render at {W}×{H}")
             film.merge(resume)
             done_before = resume.count.copy()
-        tracer = PathTracer(self.compiled, self.lights, self.camera, st)
+        tracer = PathTracer(self.compiled, self.lights, self.camera, st,
+                            materials=[materials[name] for name in self.compiled.material_names])
         if tracer.rgb_mode:
             stats_spectral = "RGB with exactly integrated light spectra (no material depends on λ)"
         elif tracer.uniform:
