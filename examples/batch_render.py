@@ -25,19 +25,22 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def enable_polar(installed: bool):
+    """Enable Polar (the installed extension, or this checkout) and return its package module."""
     import bpy  # noqa: F401 — sets up Blender's module paths
-    if "polar_render" in sys.modules or "bl_ext.user_default.polar_render" in sys.modules:
-        return
+    for name in ("polar_render", "bl_ext.user_default.polar_render"):
+        if name in sys.modules:
+            return sys.modules[name]
     if installed:
         import addon_utils
         addon_utils.enable("bl_ext.user_default.polar_render", default_set=True)
-        return
+        return sys.modules["bl_ext.user_default.polar_render"]
     spec = importlib.util.spec_from_file_location("polar_render", os.path.join(ROOT, "__init__.py"),
                                                   submodule_search_locations=[ROOT])
     module = importlib.util.module_from_spec(spec)
     sys.modules["polar_render"] = module
     spec.loader.exec_module(module)
     module.register()
+    return module
 
 
 def _render_one_frame(script, blend, frame, output, extra):

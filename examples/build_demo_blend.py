@@ -20,23 +20,10 @@ sys.path.insert(0, HERE)
 from batch_render import enable_polar  # noqa: E402
 
 
-def material(name, model, **settings):
+def build(path, samples, bsdf):
+    """Build and save the demo scene; ``bsdf`` is the extension's polar_addon.nodes.bsdf module."""
     import bpy
-    mat = bpy.data.materials.new(name)
-    tree = mat.node_tree
-    node = tree.nodes.new("PolarShaderNodeBSDF")
-    node.model = model
-    for key, value in settings.items():
-        if key in ("metal", "dielectric_preset", "shadowing", "ww_form"):
-            setattr(node, key, value)
-        else:
-            node.inputs[key].default_value = value
-    tree.links.new(node.outputs[0], tree.get_output_node("ALL").inputs["Surface"])
-    return mat, node
-
-
-def build(path, samples):
-    import bpy
+    material = bsdf.polarising_material
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     scene.render.engine = "POLAR"
@@ -49,9 +36,7 @@ def build(path, samples):
     red, _ = material("Red Lambert", "LAMBERT", Albedo=(0.7, 0.05, 0.04, 1.0))
     coat, coat_node = material("WW glass coat over red", "WEIDLICH_WILKIE", **{"Coat IOR": 1.5,
                                                                              "Coat Roughness": 0.1})
-    base = coat.node_tree.nodes.new("PolarShaderNodeBSDF")
-    base.model = "LAMBERT"
-    base.inputs["Albedo"].default_value = (0.7, 0.05, 0.04, 1.0)
+    base = bsdf.new_polarising_bsdf(coat.node_tree, "LAMBERT", Albedo=(0.7, 0.05, 0.04, 1.0))
     coat.node_tree.links.new(base.outputs[0], coat_node.inputs["Base"])
     spheres = [("Fresnel gold", material("Fresnel gold", "CONDUCTOR", metal="Au")[0]),
                ("TS gold", material("TS gold", "TORRANCE_SPARROW", metal="Au", Roughness=0.15)[0]),
@@ -84,8 +69,8 @@ def main():
     ap.add_argument("--samples", type=int, default=16)
     ap.add_argument("--output", default="out/batch")
     args = ap.parse_args()
-    enable_polar(installed=False)
-    path = build(args.blend, args.samples)
+    polar = enable_polar(installed=False)
+    path = build(args.blend, args.samples, polar.polar_addon.nodes.bsdf)
     print(path)
     if args.render:
         import batch_render

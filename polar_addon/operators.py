@@ -17,13 +17,9 @@ class POLAR_OT_add_polarising_bsdf(bpy.types.Operator):
         return getattr(context, "material", None) is not None
 
     def execute(self, context):
-        mat = context.material
-        tree = mat.node_tree
-        output = tree.get_output_node("ALL") or tree.nodes.new("ShaderNodeOutputMaterial")
-        node = tree.nodes.new("PolarShaderNodeBSDF")
-        node.model = self.model
-        node.location = (output.location.x - 300, output.location.y)
-        tree.links.new(node.outputs[0], output.inputs["Surface"])
+        from .nodes.bsdf import link_to_surface, new_polarising_bsdf
+        tree = context.material.node_tree
+        link_to_surface(tree, new_polarising_bsdf(tree, self.model))
         return {"FINISHED"}
 
 

@@ -71,19 +71,7 @@ def white_world(scene, strength=1.0):
 
 def polar_material(name, model, **inputs):
     """A material whose Surface is a Polarising BSDF of ``model`` with the given input values."""
-    import bpy
-    mat = bpy.data.materials.new(name)
-    tree = mat.node_tree
-    out = tree.get_output_node("ALL")
-    node = tree.nodes.new("PolarShaderNodeBSDF")
-    node.model = model
-    for key, value in inputs.items():
-        if key in ("metal", "dielectric_preset", "shadowing", "ww_form"):
-            setattr(node, key, value)
-        else:
-            node.inputs[key].default_value = value
-    tree.links.new(node.outputs[0], out.inputs["Surface"])
-    return mat
+    return load_addon().polar_addon.nodes.bsdf.polarising_material(name, model, **inputs)[0]
 
 
 def add_plane(size, material=None, location=(0, 0, 0)):

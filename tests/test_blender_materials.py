@@ -187,3 +187,14 @@ def test_viewport_sync_logic(addon):
     cam = camera_from_view(view, proj, 100, 80, True)
     assert cam.fov_deg == pytest.approx(2 * math.degrees(math.atan(0.5)))
     np.testing.assert_allclose(cam.target - cam.origin, [0, 0, -1])
+
+
+def test_use_polarising_bsdf_operator_replaces_the_surface_shader(addon):
+    empty_scene()
+    mat = bpy.data.materials.new("Plain")                     # a default Principled material
+    with bpy.context.temp_override(material=mat):
+        assert bpy.ops.polar.add_polarising_bsdf(model="CONDUCTOR") == {"FINISHED"}
+    surface = mat.node_tree.get_output_node("ALL").inputs["Surface"].links[0].from_node
+    assert surface.bl_idname == "PolarShaderNodeBSDF" and surface.model == "CONDUCTOR"
+    bsdf, _, _ = exported(mat)
+    assert bsdf.name == "conductor"

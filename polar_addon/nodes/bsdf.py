@@ -126,6 +126,41 @@ class PolarShaderNodeBSDF(bpy.types.ShaderNodeCustomGroup):
         return dict((i[0], i[1]) for i in MODEL_ITEMS).get(self.model, "Polarising BSDF")
 
 
+#: Node properties (menus) that ``new_polarising_bsdf`` sets by name; other settings are input sockets.
+NODE_SETTINGS = ("metal", "dielectric_preset", "shadowing", "ww_form")
+
+
+def new_polarising_bsdf(tree, model: str, **settings):
+    """A Polarising BSDF node of ``model`` in the shader node ``tree``.
+
+    ``settings`` are the node's menus (``metal``, ``dielectric_preset``, ``shadowing``, ``ww_form``)
+    or input socket values by socket name, e.g. ``IOR=1.5`` or ``Albedo=(0.7, 0.05, 0.04, 1.0)``.
+    """
+    node = tree.nodes.new(PolarShaderNodeBSDF.bl_idname)
+    node.model = model
+    for key, value in settings.items():
+        if key in NODE_SETTINGS:
+            setattr(node, key, value)
+        else:
+            node.inputs[key].default_value = value
+    return node
+
+
+def link_to_surface(tree, node):
+    """Plug ``node`` into the material output's Surface (creating the output if there is none)."""
+    output = tree.get_output_node("ALL") or tree.nodes.new("ShaderNodeOutputMaterial")
+    node.location = (output.location.x - 300, output.location.y)
+    tree.links.new(node.outputs[0], output.inputs["Surface"])
+
+
+def polarising_material(name: str, model: str, **settings):
+    """(material, node): a new material whose surface is a Polarising BSDF (scripts, tests, demos)."""
+    mat = bpy.data.materials.new(name)
+    node = new_polarising_bsdf(mat.node_tree, model, **settings)
+    link_to_surface(mat.node_tree, node)
+    return mat, node
+
+
 def draw_add_menu(self, context):
     if context.scene.render.engine == "POLAR":
         self.layout.operator("node.add_node", text="Polarising BSDF").type = "PolarShaderNodeBSDF"
