@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-from .scene.errors import SceneError
+from .errors import SceneError
 
 
 class ProgressBar:

@@ -16,7 +16,7 @@ from ..engine.polarisation.stokes import (angle_of_linear_polarisation, degree_o
                                           degree_of_linear_polarisation, degree_of_polarisation)
 from ..engine.render.renderer import Renderer
 from ..engine.scene.description import RenderSettings
-from ..engine.scene.errors import SceneError
+from ..engine.errors import SceneError
 from .export.camera import border_window
 from .export.scene import export_scene
 from ..engine.output.colormaps import diverging, hue_saturation, sequential

@@ -116,7 +116,7 @@ def test_layered_node_uses_the_linked_base(addon):
     assert bsdf.name == "weidlich_wilkie" and bsdf.base.name == "torrance_sparrow"
     # A rough coat over a perfect mirror has no BRDF value in WW: a clear error naming the material.
     base.model = "CONDUCTOR"
-    from polar_render.engine.scene.errors import SceneError
+    from polar_render.engine.errors import SceneError
     with pytest.raises(SceneError, match="Coated"):
         exported(mat)
 

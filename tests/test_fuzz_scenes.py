@@ -8,7 +8,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from engine.render.renderer import Renderer
-from engine.scene.errors import SceneError
+from engine.errors import SceneError
 from engine.scene.loader import parse_scene
 
 BASE = {
@@ -104,7 +104,7 @@ def test_base_scene_renders():
 
 
 def test_regressions_found_by_fuzzing():
-    from engine.scene.errors import SceneError
+    from engine.errors import SceneError
     import pytest
     for path, value in ((("objects", 3, "faces", 0, 2), 1e300), (("objects", 3, "faces", 0, 2), 2 ** 70),
                         (("objects", 3, "faces", 0, 2), 1.5), (("objects", 3, "vertices", 1, 0), float("nan"))):

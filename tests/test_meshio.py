@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from engine.scene.errors import SceneError
+from engine.errors import SceneError
 from engine.scene.meshio import (MeshData, compute_vertex_normals, face_normals,
                                  read_mesh, read_obj, read_ply, triangle_areas)
 from engine.scene.shapes import icosphere, quad, transform_matrix, transform_mesh

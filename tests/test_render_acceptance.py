@@ -168,7 +168,7 @@ def test_threads_do_not_change_the_image():
 
 
 def test_a_render_too_large_for_memory_is_refused_before_allocating():
-    from engine.scene.errors import SceneError
+    from engine.errors import SceneError
     scene = peer_scene("plane_brewster", 1)
     scene.camera.width = scene.camera.height = 60000
     with pytest.raises(SceneError) as err:

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from engine.scene.errors import SceneError
+from engine.errors import SceneError
 from engine.scene.loader import load_scene, parse_scene
 from tests.conftest import shared_path
 

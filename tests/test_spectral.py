@@ -11,7 +11,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as hst
 
 import engine.spectral as sp
-from engine.scene.errors import SceneError
+from engine.errors import SceneError
 from engine.spectral import cie
 
 DATA = os.path.join(os.path.dirname(cie.__file__), "data")

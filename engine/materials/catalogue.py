@@ -15,7 +15,7 @@ from .htsg import HTSG
 from .smooth_limit import MirrorWithDiffuse
 from .torrance_sparrow import TorranceSparrow
 from .weidlich_wilkie import Coat, WeidlichWilkie
-from ..scene.errors import SceneError
+from ..errors import SceneError
 from ..spectral import ConstantSpectrum, named_ior
 
 #: model name → {parameter: (default, description)}

@@ -14,7 +14,7 @@ from embreex.mesh_construction import TriangleMesh
 
 from ..kernels.geometry import offset_origin as offset_origin_kernel, surface_attributes
 from ..scene.description import Scene
-from ..scene.errors import SceneError
+from ..errors import SceneError
 
 # Mitsuba 3's float32 ray epsilon: offsets scale with (1 + max|p_i|).
 RAY_EPSILON = 8.9e-5

@@ -30,7 +30,7 @@ from .film import Film
 from .integrator import PathTracer
 from .lights import LightSet
 from ..scene.description import Scene
-from ..scene.errors import SceneError
+from ..errors import SceneError
 
 
 @dataclass

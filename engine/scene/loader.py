@@ -31,7 +31,7 @@ from ..materials.torrance_sparrow import TorranceSparrow
 from ..materials.weidlich_wilkie import Coat, WeidlichWilkie
 from .description import (Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
                                       RenderSettings, Scene, SpotLight)
-from .errors import SceneError
+from ..errors import SceneError
 from .meshio import read_mesh
 from .shapes import icosphere, quad, transform_matrix, transform_mesh
 from ..spectral import ConstantSpectrum, RGBIlluminantSpectrum, named_ior, parse_spectrum

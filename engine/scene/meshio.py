@@ -52,7 +52,7 @@ from dataclasses import dataclass, field as dc_field
 
 import numpy as np
 
-from .errors import SceneError
+from ..errors import SceneError
 
 __all__ = [
     "MeshData",

@@ -9,7 +9,7 @@ validates the result like any scene file, so errors still name fields.
 
 from __future__ import annotations
 
-from .errors import SceneError
+from ..errors import SceneError
 
 
 def is_peer_scene(data: dict) -> bool:

@@ -16,7 +16,7 @@ import numbers
 
 import numpy as np
 
-from .errors import SceneError
+from ..errors import SceneError
 from .meshio import MeshData
 
 __all__ = ["icosphere", "quad", "transform_matrix", "transform_mesh"]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import functools
 import os
 
-from ..scene.errors import SceneError
+from ..errors import SceneError
 
 from .cie import DATA_DIR, read_csv_table
 from .spectrum import TabulatedSpectrum

@@ -23,7 +23,7 @@ import numbers
 
 import numpy as np
 
-from ..scene.errors import SceneError
+from ..errors import SceneError
 
 from . import cie
 

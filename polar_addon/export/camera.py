@@ -4,7 +4,7 @@ pixel aspect already applied) so that the framing is exactly Blender's."""
 import numpy as np
 
 from ...engine.scene.description import Camera
-from ...engine.scene.errors import SceneError
+from ...engine.errors import SceneError
 
 
 def export_camera(scene, camera_object, width: int, height: int, warnings: list) -> Camera:

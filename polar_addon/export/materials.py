@@ -22,7 +22,7 @@ from ...engine.materials.black_glass import BlackGlass
 from ...engine.materials.conductor import SmoothConductor
 from ...engine.materials.dielectric import SmoothDielectric
 from ...engine.materials.lambert import Lambert
-from ...engine.scene.errors import SceneError
+from ...engine.errors import SceneError
 from ...engine.spectral import (ConstantSpectrum, RGBIlluminantSpectrum, RGBReflectanceSpectrum,
                                 RGBUnboundedSpectrum, named_ior)
 from ..nodes.models import DIELECTRIC_PRESETS

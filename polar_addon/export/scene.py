@@ -6,7 +6,7 @@ import numpy as np
 
 from ...engine.materials.lambert import Lambert
 from ...engine.scene.description import Mesh, RenderSettings, Scene
-from ...engine.scene.errors import SceneError
+from ...engine.errors import SceneError
 from ...engine.spectral import ConstantSpectrum
 from .camera import export_camera
 from .lights import export_light

@@ -1,4 +1,4 @@
-"""Errors raised for bad user input.
+"""Errors raised for bad user input (the lowest layer: every package may raise it).
 
 Every message names the offending field with a JSON-style path
 (``objects[2].transform.scale``) and states the allowed range, so that the
