@@ -165,6 +165,20 @@ def test_elsewhere_cell_catches_lost_mass():
     chi2.assert_accepted(r)
 
 
+def test_whole_sphere_domain():
+    """Uniform directions on the sphere against 1/(4π) over cos θ ∈ [−1, 1]; a sampler that never goes
+    below the horizon is rejected on the same domain."""
+    u = np.random.default_rng(5).random((2, N))
+    c, phi = 1 - 2 * u[0], 2 * math.pi * u[1]
+    s = np.sqrt(1 - c * c)
+    wi = np.stack((s * np.cos(phi), s * np.sin(phi), c))
+    kw = dict(n_cos=24, n_phi=48, cos_range=(-1.0, 1.0))
+    chi2.assert_accepted(chi2.direction_sampler_test(wi, True, lambda w: np.full(w.shape[1], 0.25 / math.pi), **kw))
+    upper = wi.copy()
+    upper[2] = np.abs(wi[2])   # mirrored into the upper hemisphere
+    assert chi2.direction_sampler_test(upper, True, lambda w: np.full(w.shape[1], 0.25 / math.pi), **kw).rejected()
+
+
 def test_samples_outside_the_domain_fail():
     wi = _cosine_directions(1000)
     wi[2, 7] = -0.3
