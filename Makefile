@@ -15,6 +15,7 @@ demo: $(VENV)/.installed
 	$(PY) -m engine render examples/demo.json -o out/demo.exr
 
 test: $(VENV)/.installed
+	$(PY) -m ruff check .
 	$(PY) -m pytest
 
 bench: $(VENV)/.installed

@@ -118,9 +118,11 @@ def _render(args) -> int:
         print(f"polar: simplified: {why}", file=sys.stderr)
     film = result.film
     spp_image = film.spp_image()
-    meta = {"polar.spp": int(st.spp), "polar.complete": int(not result.cancelled), "polar.spp_min": int(spp_image.min()), "polar.spp_max": int(spp_image.max()),
+    meta = {"polar.spp": int(st.spp), "polar.complete": int(not result.cancelled),
+            "polar.spp_min": int(spp_image.min()), "polar.spp_max": int(spp_image.max()),
             "polar.seed": int(st.seed), "polar.max_depth": int(st.max_depth), "polar.spectral": st.spectral,
-            "polar.polarisation": stats["transport"], "polar.transport_reason": stats["transport_reason"], "polar.scene": os.path.basename(args.scene),
+            "polar.polarisation": stats["transport"], "polar.transport_reason": stats["transport_reason"],
+            "polar.scene": os.path.basename(args.scene),
             "polar.render_seconds": float(stats["seconds"]), "polar.nonfinite_samples": int(stats["nonfinite"]),
             "polar.kernels": stats.get("kernels", ""), "polar.simplified": "; ".join(stats.get("simplified", []))}
     if st.spectral == "mono":

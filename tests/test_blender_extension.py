@@ -76,7 +76,8 @@ def test_zip_installs_enables_and_renders(tmp_path):
     out = str(tmp_path / "render")
     proc = run_bpy(RENDER, out, env=env)
     assert proc.returncode == 0, proc.stdout + proc.stderr
-    engine_file = next(l.split("=", 1)[1] for l in proc.stdout.splitlines() if l.startswith("POLAR_ENGINE_FILE="))
+    engine_file = next(line.split("=", 1)[1] for line in proc.stdout.splitlines()
+                       if line.startswith("POLAR_ENGINE_FILE="))
     assert engine_file.startswith(str(installed))                # the installed copy rendered, not this checkout
     passes = read_multilayer(out + ".exr")
     for name in ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP"):

@@ -23,6 +23,7 @@ from engine.polarisation.mueller import is_realisable
 from engine.spectral import ConstantSpectrum
 from engine.vec3 import cross, dot
 from tests.conftest import shared_path
+from tests.support import chi2
 
 with open(shared_path("oracles", "htsg_reference.json")) as _fh:
     CASES = json.load(_fh)["cases"]
@@ -479,25 +480,6 @@ def test_parameter_validation():
 # sampling
 # ------------------------------------------------------------------------------------------------
 
-def _chi2_sf(x, k):
-    """Upper tail of χ²_k (Wilson–Hilferty; accurate to ~1e-3 relative for k ≥ 10)."""
-    z = ((x / k) ** (1.0 / 3.0) - (1.0 - 2.0 / (9.0 * k))) / math.sqrt(2.0 / (9.0 * k))
-    return 0.5 * math.erfc(z / math.sqrt(2.0))
-
-
-def _expected_bin_probabilities(model, wo, lam, n_ct, n_ph, sub=24):
-    """∫_bin pdf dω over bins in (cosθ_i, φ_i) (midpoint rule on a sub×sub grid per bin)."""
-    ct = (np.arange(n_ct * sub) + 0.5) / (n_ct * sub)
-    ph = -np.pi + (np.arange(n_ph * sub) + 0.5) * (2 * np.pi / (n_ph * sub))
-    CT, PH = np.meshgrid(ct, ph, indexing="ij")
-    st_ = np.sqrt(1.0 - CT ** 2)
-    wi = np.stack((st_ * np.cos(PH), st_ * np.sin(PH), CT)).reshape(3, -1)
-    N = wi.shape[1]
-    sp = _point(np.repeat(wo.reshape(3, 1), N, axis=1), np.full((1, N), lam))
-    p = model.pdf(sp, wi).reshape(n_ct * sub, n_ph * sub) * (1.0 / (n_ct * sub)) * (2 * np.pi / (n_ph * sub))
-    return p.reshape(n_ct, sub, n_ph, sub).sum(axis=(1, 3))
-
-
 @pytest.mark.parametrize("params,theta_o", [
     (dict(n=0.88045, k=6.1455, sigma0_um=0.3, tau_um=1.5, albedo=0.2), 40.0),   # geometric lobe + diffuse
     (dict(n=1.5, k=0.0, sigma0_um=0.03, tau_um=0.6), 60.0),                      # diffraction lobe, strong Dirac
@@ -510,29 +492,13 @@ def test_sampling_chi_square(params, theta_o):
     rng = np.random.default_rng(11)
     sp = _point(np.repeat(wo.reshape(3, 1), N, axis=1), np.full((1, N), lam))
     bs = model.sample(sp, rng.random(N), rng.random((2, N)))
-    n_ct, n_ph = 10, 20
-    exp_p = _expected_bin_probabilities(model, wo, lam, n_ct, n_ph)
-    ok = bs.valid & ~bs.is_delta
-    wi = bs.wi[:, ok]
-    ci = np.minimum((wi[2] * n_ct).astype(int), n_ct - 1)
-    pi = np.minimum(((np.arctan2(wi[1], wi[0]) + np.pi) / (2 * np.pi) * n_ph).astype(int), n_ph - 1)
-    obs = np.zeros((n_ct, n_ph))
-    np.add.at(obs, (ci, pi), 1.0)
-    # an extra cell for delta + invalid samples (expected: 1 − ∫ pdf over the hemisphere)
-    obs = np.append(obs.ravel(), N - ok.sum())
-    exp_n = np.append(exp_p.ravel(), max(1.0 - exp_p.sum(), 0.0)) * N
-    # pool cells with fewer than 5 expected counts
-    order = np.argsort(exp_n)
-    e_sorted, o_sorted = exp_n[order], obs[order]
-    small = np.cumsum(e_sorted) < 5.0 * 4
-    pooled_e = np.append(e_sorted[~small], e_sorted[small].sum())
-    pooled_o = np.append(o_sorted[~small], o_sorted[small].sum())
-    keep = pooled_e > 0
-    assert np.all(pooled_o[~keep] == 0)
-    chi2 = float(np.sum((pooled_o[keep] - pooled_e[keep]) ** 2 / pooled_e[keep]))
-    dof = int(keep.sum()) - 1
-    assert dof >= 30
-    assert _chi2_sf(chi2, dof) > 1e-3, (chi2, dof)
+    # Dirac and invalid samples fill the harness's "elsewhere" cell (expected: 1 − ∫ pdf over the hemisphere).
+    result = chi2.direction_sampler_test(
+        bs.wi, bs.valid & ~bs.is_delta,
+        lambda wi: model.pdf(_point(np.repeat(wo.reshape(3, 1), wi.shape[1], axis=1), lam), wi),
+        n_cos=10, n_phi=20, order=2, sub=12)
+    assert result.dof >= 30
+    chi2.assert_accepted(result, test_count=2, what="HTSG samples")
 
 
 def test_sample_weights_pdf_and_lobe_probability():

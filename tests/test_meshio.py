@@ -50,7 +50,7 @@ def write_ply(path, fmt, vprops, vrows, face_spec, faces, extra_face_props=(),
     out = ("\n".join(head) + "\n").encode("ascii")
     if fmt == "ascii":
         lines = [" ".join(repr(x.item() if hasattr(x, "item") else x) for x in r) for r in vrows]
-        for name, props, rows in extra_elements_before_face:
+        for _name, _props, rows in extra_elements_before_face:
             lines += [" ".join(str(x) for x in r) for r in rows]
         for k, f in enumerate(faces):
             lines.append(" ".join([str(len(f))] + [str(i) for i in f]
@@ -62,7 +62,7 @@ def write_ply(path, fmt, vprops, vrows, face_spec, faces, extra_face_props=(),
         vfmt = bo + "".join(codes[t] for t, _ in vprops)
         for r in vrows:
             out += struct.pack(vfmt, *r)
-        for name, props, rows in extra_elements_before_face:
+        for _name, props, rows in extra_elements_before_face:
             efmt = bo + "".join(codes[t] for t, _ in props)
             for r in rows:
                 out += struct.pack(efmt, *r)
@@ -498,9 +498,9 @@ def test_obj_errors(tmp_path, text, pattern):
 def test_obj_large_is_fast(tmp_path):
     m0 = icosphere(6)
     v = m0.vertices
-    lines = ["v %.9f %.9f %.9f" % tuple(r) for r in v.tolist()]
-    lines += ["vn %.9f %.9f %.9f" % tuple(r) for r in v.tolist()]
-    lines += ["f %d//%d %d//%d %d//%d" % (a, a, b, b, c, c)
+    lines = [f"v {x:.9f} {y:.9f} {z:.9f}" for x, y, z in v.tolist()]
+    lines += [f"vn {x:.9f} {y:.9f} {z:.9f}" for x, y, z in v.tolist()]
+    lines += [f"f {a}//{a} {b}//{b} {c}//{c}"
               for a, b, c in (m0.faces + 1).tolist()]
     p = tmp_path / "sphere.obj"
     p.write_text("\n".join(lines))

@@ -60,6 +60,7 @@ def test_resume_rejects_a_mismatching_file(tmp_path):
     out = str(tmp_path / "small.exr")
     subprocess.run([sys.executable, "-m", "engine", "render", shared_path("peers", "scenes", "conv_s3_check.json"),
                     "-o", out, "--spp", "2", "--no-previews", "-q"], cwd=REPO, check=True, capture_output=True)
-    proc = subprocess.run([sys.executable, "-m", "engine", "render", shared_path("peers", "scenes", "plane_brewster.json"),
+    proc = subprocess.run([sys.executable, "-m", "engine", "render",
+                           shared_path("peers", "scenes", "plane_brewster.json"),
                            "-o", str(tmp_path / "x.exr"), "--resume", out], cwd=REPO, capture_output=True, text=True)
     assert proc.returncode == 2 and "--resume" in proc.stderr and "8×8" in proc.stderr

@@ -199,7 +199,9 @@ def test_match_base_exterior_false_returns_the_base_as_evaluated():
 
 def test_dispersive_matched_index_is_skipped():
     """Equal sample values (distinct objects) at every wavelength: skipped; exact per wavelength."""
-    table = lambda: TabulatedSpectrum([360.0, 500.0, 830.0], [1.52, 1.50, 1.48], name="glass")
+    def table():
+        return TabulatedSpectrum([360.0, 500.0, 830.0], [1.52, 1.50, 1.48], name="glass")
+
     base = WeidlichWilkie(Coat(n=2.0, distribution="beckmann", m=0.3), Lambert(ConstantSpectrum(0.6)))
     model = WeidlichWilkie([_clear_coat("smooth", n=table()), Coat(n=1.7, distribution="blinn", exponent=40.0)],
                            base, exterior_n=table(), form="published")

@@ -13,6 +13,7 @@ from hypothesis import strategies as hst
 import engine.spectral as sp
 from engine.errors import SceneError
 from engine.spectral import cie
+from tests.support import chi2
 
 DATA = os.path.join(os.path.dirname(cie.__file__), "data")
 SHARED_IOR = "/work/shared/data/ior"
@@ -132,17 +133,11 @@ def test_sample_histogram_follows_pdf_chi_square():
     assert lam.min() >= 360.0 and lam.max() <= 830.0
     np.testing.assert_allclose(pdf, sp.wavelength_pdf(lam), rtol=1e-12)
     edges = np.linspace(360.0, 830.0, 95)  # 94 bins of 5 nm
-    counts, _ = np.histogram(lam[0], bins=edges)
-    fine = np.linspace(360.0, 830.0, 94 * 200 + 1)
-    pf = sp.wavelength_pdf(fine)
-    probs = (0.5 * (pf[1:] + pf[:-1]) * np.diff(fine)).reshape(94, 200).sum(axis=1)
-    expected = n * probs
-    chi2 = np.sum((counts - expected) ** 2 / expected)
-    dof = edges.size - 2
-    assert chi2 < dof + 5 * math.sqrt(2 * dof), chi2
-    # and a deliberately wrong pdf (uniform) must be rejected by the same statistic
-    wrong = n * np.full(94, 1 / 94)
-    assert np.sum((counts - wrong) ** 2 / wrong) > dof + 5 * math.sqrt(2 * dof)
+    result = chi2.interval_sampler_test(lam[0], sp.wavelength_pdf, edges)
+    chi2.assert_accepted(result, what="sampled wavelengths")
+    # and a deliberately wrong pdf (uniform) must be rejected by the same test
+    wrong = chi2.interval_sampler_test(lam[0], lambda x: np.full(x.shape, 1 / 470.0), edges)
+    assert wrong.rejected(), wrong
 
 
 def test_sample_wavelengths_stratified_inverse_cdf():

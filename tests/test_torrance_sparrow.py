@@ -31,6 +31,7 @@ from engine.polarisation.mueller import depolarisation_index_sq_excess, is_reali
 from engine.spectral import ConstantSpectrum, named_ior
 from engine.vec3 import cross, dot
 from tests.conftest import shared_path
+from tests.support import chi2
 
 # --- helpers ---------------------------------------------------------------------------------------------
 
@@ -71,7 +72,7 @@ def matrix_in_frames(value, x_in, k_in, x_out, k_out):
     return rotate_mueller_frames(M, value.x_in, x_in, k_in, value.x_out, x_out, k_out)
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _gl16():
     return np.polynomial.legendre.leggauss(16)
 
@@ -404,70 +405,6 @@ def test_small_roughness_limit_is_the_fresnel_mirror(nk, shadowing):
 # --- sampling ----------------------------------------------------------------------------------------------
 
 
-def _chi2_sf(x, dof):
-    """Survival function of the chi-square distribution (regularised upper incomplete gamma Q(dof/2, x/2))."""
-    a, y = 0.5 * dof, 0.5 * x
-    if y <= 0:
-        return 1.0
-    if y < a + 1.0:  # series for P
-        term = total = 1.0 / a
-        k = a
-        for _ in range(10000):
-            k += 1.0
-            term *= y / k
-            total += term
-            if term < total * 1e-16:
-                break
-        return max(0.0, 1.0 - total * math.exp(-y + a * math.log(y) - math.lgamma(a)))
-    # continued fraction for Q (Lentz)
-    b = y + 1.0 - a
-    c = 1e300
-    d = 1.0 / b
-    h = d
-    for i in range(1, 10000):
-        an = -i * (i - a)
-        b += 2.0
-        d = an * d + b
-        d = 1e-300 if abs(d) < 1e-300 else d
-        c = b + an / c
-        c = 1e-300 if abs(c) < 1e-300 else c
-        d = 1.0 / d
-        delta = d * c
-        h *= delta
-        if abs(delta - 1.0) < 1e-16:
-            break
-    return math.exp(-y + a * math.log(y) - math.lgamma(a)) * h
-
-
-def test_chi2_survival_function():
-    # dof = 2: Q = e^{−x/2};  dof = 1: Q = erfc(√(x/2)).
-    for x in (0.1, 1.0, 5.0, 40.0):
-        assert _chi2_sf(x, 2) == pytest.approx(math.exp(-x / 2), rel=1e-12)
-        assert _chi2_sf(x, 1) == pytest.approx(math.erfc(math.sqrt(x / 2)), rel=1e-10)
-        y = x / 2  # dof = 6: Q = e^{−y}(1 + y + y²/2)
-        assert _chi2_sf(x, 6) == pytest.approx(math.exp(-y) * (1 + y + y * y / 2), rel=1e-12)
-
-
-def _cell_probabilities(model, sp1, res_c, res_p, order=8):
-    """∫ pdf over each (cosθ, φ) cell of the upper hemisphere (local frame = world, normal +z)."""
-    xg, wg = np.polynomial.legendre.leggauss(order)  # small: cheap
-    ce = np.linspace(0.0, 1.0, res_c + 1)
-    pe = np.linspace(0.0, 2 * math.pi, res_p + 1)
-    c = (0.5 * (ce[1:] - ce[:-1])[:, None] * (xg + 1.0) + ce[:-1, None])  # (res_c, order)
-    p = (0.5 * (pe[1:] - pe[:-1])[:, None] * (xg + 1.0) + pe[:-1, None])  # (res_p, order)
-    C = c[:, None, :, None]
-    P = p[None, :, None, :]
-    C, P = np.broadcast_arrays(C, P)
-    s = np.sqrt(np.maximum(1.0 - C * C, 0.0))
-    wi = np.stack((s * np.cos(P), s * np.sin(P), C)).reshape(3, -1)
-    n = wi.shape[1]
-    sp = point(tile(sp1.wo[:, 0], n), lam=np.full((sp1.lam.shape[0], n), sp1.lam[0, 0]))
-    pdf = model.pdf(sp, wi).reshape(res_c, res_p, order, order)
-    w = np.einsum("a,b->ab", 0.5 * wg, 0.5 * wg)
-    area = (ce[1] - ce[0]) * (pe[1] - pe[0])
-    return np.einsum("ijab,ab->ij", pdf, w) * area
-
-
 SAMPLING_CASES = [
     # (θ_o, m, shadowing, diffuse weight, distribution, blinn exponent)
     (30.0, 0.05, "ts", 0.0, "beckmann", None),
@@ -493,35 +430,14 @@ def test_sampling_chi2(case):
     theta_o = case[0]
     model = _model_for(case)
     N = 100_000
-    res_c, res_p = 24, 48
     rng = np.random.default_rng(12345)
     wo = sph(theta_o, 0.0)
     sp = point(tile(wo, N))
     s = model.sample(sp, rng.random(N), rng.random((2, N)))
-    wi = s.wi[:, s.valid]
-    assert np.all(wi[2] > 0)
-    ic = np.minimum((wi[2] * res_c).astype(int), res_c - 1)
-    ip = np.minimum((np.mod(np.arctan2(wi[1], wi[0]), 2 * math.pi) / (2 * math.pi) * res_p).astype(int), res_p - 1)
-    observed = np.bincount(ic * res_p + ip, minlength=res_c * res_p).astype(float)
-    expected = _cell_probabilities(model, point(wo.reshape(3, 1)), res_c, res_p).ravel() * N
-    total = expected.sum()
-    assert total <= N * (1 + 1e-6)
-    observed = np.append(observed, float(N - s.valid.sum()))
-    expected = np.append(expected, max(N - total, 0.0))
-    # Pool cells with expected counts below 5 (Mitsuba's chi2 test does the same).
-    order = np.argsort(expected)
-    small = expected[order] < 5.0
-    obs_pool, exp_pool = observed[order][small].sum(), expected[order][small].sum()
-    obs = observed[order][~small]
-    exp = expected[order][~small]
-    if exp_pool > 0:
-        obs = np.append(obs, obs_pool)
-        exp = np.append(exp, exp_pool)
-    elif obs_pool > 0:
-        pytest.fail(f"{obs_pool} samples in cells with zero probability")
-    chi2 = float(np.sum((obs - exp) ** 2 / exp))
-    p_value = _chi2_sf(chi2, exp.size - 1)
-    assert p_value > 1e-3, (chi2, exp.size, p_value)
+    assert np.all(s.wi[2, s.valid] > 0)
+    result = chi2.direction_sampler_test(s.wi, s.valid, lambda wi: model.pdf(point(tile(wo, wi.shape[1])), wi),
+                                         n_cos=24, n_phi=48, order=8)
+    chi2.assert_accepted(result, test_count=len(SAMPLING_CASES), what="Torrance–Sparrow samples")
 
 
 @pytest.mark.parametrize("case", SAMPLING_CASES[:: 2] + [SAMPLING_CASES[5]],
@@ -635,5 +551,5 @@ def test_roughness_zero_is_the_smooth_limit():
     from engine.polarisation.fresnel import fresnel_reflectance
     expected = fresnel_reflectance(np.cos(np.radians(40.0)), 1.5) + 0.5
     assert abs(total - expected) <= 1e-9 + 5 * s.weight.matrix()[0, 0, 0].std() / np.sqrt(N)
-    with pytest.raises(Exception):
+    with pytest.raises(Exception):  # noqa: B017 -- any refusal will do: the test pins that m < 1e-4 is refused
         make_model("torrance_sparrow", {"n": 1.5, "m": 5e-5})

@@ -27,6 +27,7 @@ from engine.polarisation.mueller import realisability_report
 from engine.spectral import ConstantSpectrum
 from engine.spectral.spectrum import TabulatedSpectrum
 from tests.conftest import shared_path
+from tests.support import chi2
 
 with open(shared_path("oracles", "ww_reference.json")) as _fh:
     ORACLE = json.load(_fh)["cases"]
@@ -519,12 +520,6 @@ def test_parameter_validation():
 # Sampling
 # ---------------------------------------------------------------------------------------------
 
-def _wilson_hilferty_z(chi2, dof):
-    """Standard-normal equivalent of a chi-square statistic (Wilson–Hilferty)."""
-    k = float(dof)
-    return ((chi2 / k) ** (1.0 / 3.0) - (1.0 - 2.0 / (9.0 * k))) / math.sqrt(2.0 / (9.0 * k))
-
-
 def _chi_square(model, theta_o, phi_o, n=200_000, seed=1, n_cos=20, n_phi=40, q=6):
     wo = _direction(theta_o, phi_o)
     sp = _point(np.tile(_col(wo), (1, n)))
@@ -544,34 +539,17 @@ def _chi_square(model, theta_o, phi_o, n=200_000, seed=1, n_cos=20, n_phi=40, q=
                                expect.x_out[:, None], bs.weight.x_out[:, nd][:, None, :k],
                                np.tile(_col(wo), (1, k))[:, None])
     np.testing.assert_allclose(Mw, Me, rtol=1e-10, atol=1e-12 * np.abs(Me[0, 0]).max())
-    # Histogram of the non-delta directions over (cosθ_i, φ_i).
-    cos_t = np.clip(wi[2], 0.0, 1.0 - 1e-15)
-    phi = np.mod(np.arctan2(wi[1], wi[0]), 2 * math.pi)
-    counts, _, _ = np.histogram2d(cos_t, phi, bins=[n_cos, n_phi], range=[[0, 1], [0, 2 * math.pi]])
-    # Expected: n · ∫_bin pdf dω, dω = dcosθ dφ, Gauss–Legendre q×q per bin.
-    x, w = np.polynomial.legendre.leggauss(q)
-    cu = (np.arange(n_cos)[:, None] + 0.5 * (x[None, :] + 1.0)).ravel() / n_cos
-    pu = (np.arange(n_phi)[:, None] + 0.5 * (x[None, :] + 1.0)).ravel() * (2 * math.pi / n_phi)
-    wc = np.tile(0.5 * w / n_cos, n_cos)
-    wp = np.tile(0.5 * w * (2 * math.pi / n_phi), n_phi)
-    C, PH = np.meshgrid(cu, pu, indexing="ij")
-    s = np.sqrt(1.0 - C * C)
-    dirs = np.stack((s * np.cos(PH), s * np.sin(PH), C)).reshape(3, -1)
-    pdf_nodes = model.pdf(_point(np.tile(_col(wo), (1, dirs.shape[1]))), dirs).reshape(C.shape)
-    mass = (pdf_nodes * np.outer(wc, wp)).reshape(n_cos, q, n_phi, q).sum(axis=(1, 3))
-    expected = n * mass
+    # Non-delta directions against pdf() over (cosθ_i, φ_i) cells, Gauss–Legendre q×q per cell; Dirac and
+    # invalid samples fill the harness's "elsewhere" cell.
+    def pdf_at(d):
+        return model.pdf(_point(np.tile(_col(wo), (1, d.shape[1]))), d)
+
+    mass = chi2.hemisphere_cell_mass(pdf_at, n_cos, n_phi, order=q)
     # Total non-delta mass: the sampler's valid non-delta fraction.
     frac = nd.sum() / n
     assert abs(frac - mass.sum()) < 5 * math.sqrt(max(mass.sum() * (1 - mass.sum()), 1e-12) / n) + 1e-3
-    big = expected >= 5
-    chi2 = np.sum((counts[big] - expected[big]) ** 2 / expected[big])
-    rest_c, rest_e = counts[~big].sum(), expected[~big].sum()
-    dof = int(big.sum())
-    if rest_e > 0:
-        chi2 += (rest_c - rest_e) ** 2 / rest_e
-        dof += 1
-    z = _wilson_hilferty_z(chi2, dof - 1)
-    assert z < 4.0, (chi2, dof, z)
+    result = chi2.direction_sampler_test(bs.wi, nd, pdf_at, n_cos=n_cos, n_phi=n_phi, order=q)
+    chi2.assert_accepted(result, test_count=5, what="Weidlich–Wilkie samples")
     return bs, frac
 
 

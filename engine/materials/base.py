@@ -92,7 +92,7 @@ class MuellerValue:
             M[0, 0] = M[0, 0] + self.depol
         return M
 
-    def scaled(self, factor: np.ndarray) -> "MuellerValue":
+    def scaled(self, factor: np.ndarray) -> MuellerValue:
         """This value times a scalar factor broadcastable to (L, N)."""
         if self.kind == "general":
             return MuellerValue("general", self.x_in, self.x_out, M=self.M * factor)
@@ -100,7 +100,7 @@ class MuellerValue:
         return MuellerValue(self.kind, self.x_in, self.x_out, sc(self.A), sc(self.B), sc(self.C), sc(self.S),
                             depol=sc(self.depol))
 
-    def masked(self, keep: np.ndarray) -> "MuellerValue":
+    def masked(self, keep: np.ndarray) -> MuellerValue:
         """Zero the entries where ``keep`` (N,) is False."""
         return self.scaled(keep.astype(np.float64)[None, :])
 

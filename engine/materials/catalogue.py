@@ -28,7 +28,8 @@ MODEL_PARAMETERS = {
     "torrance_sparrow": {"n": (None, "real part of the complex index, > 0 (or metal=NAME)"),
                          "k": (0.0, "imaginary part κ ≥ 0"),
                          "metal": (None, "named measured metal instead of n, k"),
-                         "m": (None, "Beckmann rms slope: 0 (smooth limit: Fresnel mirror) or ≥ 1e-4 (= Mitsuba α, SCATMECH s)"),
+                         "m": (None, "Beckmann rms slope: 0 (smooth limit: Fresnel mirror) or ≥ 1e-4 "
+                                     "(= Mitsuba α, SCATMECH s)"),
                          "shadowing": ("ts", "ts (V-cavity) | smith | smith_rational (Mitsuba) | none"),
                          "diffuse_albedo": (0.0, "albedo of the added Lambertian part, [0, 1]"),
                          "diffuse_weight": (0.0, "weight d of the Lambertian part, ≥ 0"),

@@ -453,7 +453,7 @@ class BlinnPhong(MicrofacetDistribution):
         self.smith_m = math.sqrt(2.0 / (e + 2.0))
 
     @classmethod
-    def from_beckmann_m(cls, m: float) -> "BlinnPhong":
+    def from_beckmann_m(cls, m: float) -> BlinnPhong:
         """The Blinn lobe matching Beckmann roughness m near the peak: e = 2/m² − 2 (needs m ≤ √2)."""
         m = float(m)
         if not (math.isfinite(m) and 0 < m <= math.sqrt(2.0)):

@@ -152,7 +152,7 @@ def write_stokes_exr(
     for k in range(4):
         for c, cname in enumerate("RGB"):
             channels[f"S{k}.{cname}"] = _float_channel(f"S{k}.{cname}", s[k, :, :, c], half)
-    for c, cname in enumerate("RGB"):
+    for cname in "RGB":
         channels[cname] = channels[f"S0.{cname}"]
     y = luminance_stokes(s)
     derived = {

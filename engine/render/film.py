@@ -32,7 +32,7 @@ class Film:
             self.sumsq_y[s] += np.bincount(pixel, weights=y[s] * y[s], minlength=n)
         self.count += np.bincount(pixel, minlength=n)
 
-    def merge(self, other: "Film") -> None:
+    def merge(self, other: Film) -> None:
         self.sums += other.sums
         self.sumsq_y += other.sumsq_y
         self.count += other.count
@@ -56,7 +56,7 @@ class Film:
         return self.count.reshape(self.height, self.width)
 
 
-def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray | None = None) -> "Film":
+def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray | None = None) -> Film:
     """A Film holding finished samples, rebuilt from pixel means (4, H, W, 3) and counts (H, W).
 
     Sums are mean × count (float32 means lose ~1e-7 relative).  With the per-pixel standard errors

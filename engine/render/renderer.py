@@ -131,7 +131,8 @@ class Renderer:
         workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
         need, have = memory_estimate(W, H, st.batch_rays, workers), available_memory()
         if have and need > 0.8 * have:
-            max_pixels = max(int((0.8 * have - workers * st.batch_rays * BATCH_BYTES_PER_PATH) / FILM_BYTES_PER_PIXEL), 0)
+            max_pixels = max(int((0.8 * have - workers * st.batch_rays * BATCH_BYTES_PER_PATH)
+                                 / FILM_BYTES_PER_PIXEL), 0)
             raise SceneError("camera.width", f"a {W}×{H} render needs about {need / 2**30:.1f} GiB but this machine "
                                              f"has {have / 2**30:.1f} GiB: use at most ~{max_pixels:,} pixels "
                                              "(or a smaller render.batch_rays)")

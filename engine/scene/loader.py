@@ -526,8 +526,8 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
     lights_in = data.get("lights", [])
     if not isinstance(lights_in, list):
         raise SceneError("lights", "must be a list")
-    lights = [parse_light(l, f"lights[{i}]") for i, l in enumerate(lights_in)]
-    if sum(isinstance(l, EnvironmentLight) for l in lights) > 1:
+    lights = [parse_light(light, f"lights[{i}]") for i, light in enumerate(lights_in)]
+    if sum(isinstance(light, EnvironmentLight) for light in lights) > 1:
         raise SceneError("lights", "at most one environment light is allowed")
     scene = Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings,
                   source=source)
@@ -537,7 +537,7 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
 def load_scene(path: str) -> Scene:
     """Read and validate a scene file (engine or peer format)."""
     try:
-        with open(path, "r", encoding="utf-8") as fh:
+        with open(path, encoding="utf-8") as fh:
             data = json.load(fh)
     except FileNotFoundError:
         raise SceneError("", f"scene file {path!r} does not exist") from None

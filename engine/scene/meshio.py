@@ -266,7 +266,7 @@ def _parse_ply_header(data: bytes, field, path):
     if not (data.startswith(b"ply\n") or data.startswith(b"ply\r\n")):
         raise _err(field, path, "not a PLY file (it does not start with 'ply')")
     pos = data.find(b"end_header")
-    while pos >= 0 and not (data[pos - 1:pos] in (b"\n", b"\r")):
+    while pos >= 0 and data[pos - 1:pos] not in (b"\n", b"\r"):
         pos = data.find(b"end_header", pos + 1)
     if pos < 0:
         raise _err(field, path, "PLY header has no 'end_header' line")

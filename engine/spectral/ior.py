@@ -19,7 +19,7 @@ from .spectrum import TabulatedSpectrum
 NAMED_METALS = ("Au", "Ag", "Al", "Cu", "Cr")
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _load(name: str) -> tuple[TabulatedSpectrum, TabulatedSpectrum]:
     cols, rows = read_csv_table(os.path.join(DATA_DIR, "ior", f"{name}.csv"))
     if cols != ["wavelength_nm", "n", "k"]:

@@ -57,7 +57,7 @@ class Spectrum:
             return np.full(lam.shape, self.mono_value, dtype=np.float64)
         return self._eval(lam)
 
-    def eval_cached(self, lookup: "WavelengthLookup") -> np.ndarray:
+    def eval_cached(self, lookup: WavelengthLookup) -> np.ndarray:
         """Values at ``lookup.lam`` using its precomputed table values (same result as ``eval``)."""
         return self._eval(lookup.lam)
 
@@ -111,7 +111,7 @@ class WavelengthLookup:
         return value
 
     @classmethod
-    def _subset(cls, root: "WavelengthLookup", idx: np.ndarray) -> "WavelengthLookup":
+    def _subset(cls, root: WavelengthLookup, idx: np.ndarray) -> WavelengthLookup:
         sub = cls.__new__(cls)
         sub._root, sub._idx = root, idx
         sub._lam = sub._basis = sub._d65 = sub._memo = None
@@ -135,7 +135,7 @@ class WavelengthLookup:
             self._d65 = cie.d65_normalised(self.lam) if self._root is None else self._root.d65[:, self._idx]
         return self._d65
 
-    def take(self, idx) -> "WavelengthLookup":
+    def take(self, idx) -> WavelengthLookup:
         """The lookup of the paths ``idx`` (integer indices, a slice or a boolean mask)."""
         if isinstance(idx, slice) and idx == slice(None):
             return self
@@ -145,7 +145,7 @@ class WavelengthLookup:
             return WavelengthLookup._subset(self, idx)
         return WavelengthLookup._subset(self._root, self._idx[idx])
 
-    def compress(self, mask) -> "WavelengthLookup":
+    def compress(self, mask) -> WavelengthLookup:
         return self.take(np.flatnonzero(mask))
 
 
@@ -177,7 +177,7 @@ def _check_rgb(rgb, field: str, upper: float | None) -> np.ndarray:
     try:
         arr = np.asarray(rgb, dtype=np.float64)
     except (TypeError, ValueError):
-        raise SceneError(field, f"must be an [r, g, b] list with components {rng}, got {_show(rgb)}")
+        raise SceneError(field, f"must be an [r, g, b] list with components {rng}, got {_show(rgb)}") from None
     if arr.shape != (3,):
         raise SceneError(field, f"must be an [r, g, b] list with components {rng}, got {_show(rgb)}")
     for i, c in enumerate(arr):
@@ -438,7 +438,7 @@ def _parse_table(table, field: str, kind: str) -> TabulatedSpectrum:
     return TabulatedSpectrum(wl, v, name=field, kind=kind)
 
 
-def as_spectrum(value, name: str = "value") -> "Spectrum":
+def as_spectrum(value, name: str = "value") -> Spectrum:
     """A Spectrum as is, or a finite number as a ConstantSpectrum (ValueError otherwise).
 
     For model constructors used from Python; scene files go through ``parse_spectrum``.

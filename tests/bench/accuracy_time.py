@@ -74,8 +74,8 @@ def render_ours(scene, spp, polarisation="auto", spectral="spectral", tolerance=
     scene.settings.spp, scene.settings.polarisation, scene.settings.spectral = spp, polarisation, spectral
     scene.settings.seed = 1000 + spp
     if tolerance is not None:
-        scene.materials = {k: (HTSG(m.n, m.k, m.sigma0, m.tau, albedo=m.albedo if m.albedo is not None else 0.0, exterior_n=m.exterior_n,
-                                    series_tolerance=tolerance) if isinstance(m, HTSG) else m)
+        scene.materials = {k: (HTSG(m.n, m.k, m.sigma0, m.tau, albedo=m.albedo if m.albedo is not None else 0.0,
+                                    exterior_n=m.exterior_n, series_tolerance=tolerance) if isinstance(m, HTSG) else m)
                            for k, m in scene.materials.items()}
     renderer = Renderer(scene)
     best = None
@@ -244,8 +244,8 @@ def plot(rows, path):
                 ax.set_ylabel("RMSE", fontsize=7)
     handles, labels = axes[0][0].get_legend_handles_labels()
     for ax in axes.ravel():
-        h, l = ax.get_legend_handles_labels()
-        for hh, ll in zip(h, l):
+        hs, ls = ax.get_legend_handles_labels()
+        for hh, ll in zip(hs, ls):
             if ll not in labels:
                 handles.append(hh)
                 labels.append(ll)

@@ -1,0 +1,1 @@
+"""Code shared by several test modules (imported as tests.support.*; pytest collects nothing here)."""
