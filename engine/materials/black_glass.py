@@ -8,6 +8,7 @@ Brewster's angle.  One-sided.
 
 from __future__ import annotations
 
+from .base import BSDFFlags
 from .conductor import SmoothConductor
 from ..spectral import ConstantSpectrum
 
@@ -18,7 +19,7 @@ class BlackGlass(SmoothConductor):
     def __init__(self, n, exterior_n=1.0):
         super().__init__(n, ConstantSpectrum(0.0), exterior_n)
         # A real index below the critical angle never retards (S = 0).
-        self.creates_circular = False
+        self.flags &= ~BSDFFlags.RETARDING
 
     def describe(self):
         return {"type": self.name, "n": repr(self.n), "exterior_n": self.exterior_n}

@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..materials.base import MuellerValue, ShadingPoint
+from ..materials.base import BSDFFlags, MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation
 from .accel import offset_origin
@@ -138,7 +138,7 @@ class PathTracer:
         # carry T for one wavelength and apply the spectral emission and colour matching at the
         # lights (exactly the same estimate, a quarter of the Mueller arithmetic).
         used = {self.materials[i] for i in np.unique(compiled.tri_material)}
-        independent = all(getattr(m, "wavelength_independent", False) for m in used)
+        independent = not any(m.flags.has(BSDFFlags.WAVELENGTH_DEPENDENT) for m in used)
         reduce = settings.reduce_spectral
         self.uniform = reduce in ("auto", "exact", True) and independent
         # "auto": with λ-independent materials the spectral estimator's expectation is T times each
@@ -267,11 +267,11 @@ class PathTracer:
                 bsdf = self.shaders[g]
                 sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
                                   gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
-                                  self.slot_of[gather(mat, sel)] if bsdf.batched else None)
+                                  self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None)
                 rows = np.arange(n) if isinstance(sel, slice) else sel
                 xTm = gather(x_T, sel)
 
-                if not bsdf.delta_only and len(light_set) and bounce + 2 <= st.max_depth:
+                if not bsdf.flags.is_delta_only and len(light_set) and bounce + 2 <= st.max_depth:
                     contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], stats)
                     radiance[:, :, path[sel]] += contrib
 
