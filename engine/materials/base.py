@@ -17,16 +17,24 @@ Every model provides
 - ``sample(sp, u_lobe, u_dir)`` – a direction wi with weight f·|cosθ_i|/pdf
                        (for Dirac lobes: the lobe's Mueller weight), and
 - ``delta_reflection(sp)`` – the Mueller weight of a mirror (Dirac) reflection
-                       lobe into the mirror direction of wo, or None.
+                       lobe into the mirror direction of wo, or None,
+- ``flags``          – its lobes and capabilities (engine.materials.flags.BSDFFlags).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .flags import UNKNOWN_MODEL_FLAGS, BSDFFlags
 from ..polarisation.mueller import abcs_matrix, depolariser
+
+if TYPE_CHECKING:
+    from ..spectral import Spectrum, WavelengthLookup
+
+__all__ = ["BSDF", "BSDFFlags", "BSDFSample", "MuellerValue", "ShadingPoint", "depolarising_value"]
 
 
 @dataclass
@@ -39,7 +47,7 @@ class ShadingPoint:
     wo: np.ndarray         # (3, N) unit direction towards the viewer
     lam: np.ndarray        # (L, N) wavelengths in nm
     mono: bool = False     # monochrome mode: spectra return their mono value
-    lookup: object = None  # engine.spectral.WavelengthLookup for ``lam`` (table values computed once)
+    lookup: WavelengthLookup | None = None  # table values at ``lam``, computed once
     material: np.ndarray | None = None  # (N,) slot of each point in a batched material set (see batching.py)
 
     @property
@@ -50,7 +58,7 @@ class ShadingPoint:
     def cos_o(self) -> np.ndarray:
         return self.n_s[0] * self.wo[0] + self.n_s[1] * self.wo[1] + self.n_s[2] * self.wo[2]
 
-    def spectrum(self, spec) -> np.ndarray:
+    def spectrum(self, spec: Spectrum) -> np.ndarray:
         """A material parameter (engine.spectral Spectrum) at this batch's wavelengths, (L, N)."""
         if self.lookup is not None and not self.mono:
             return spec.eval_cached(self.lookup)
@@ -92,7 +100,7 @@ class MuellerValue:
             M[0, 0] = M[0, 0] + self.depol
         return M
 
-    def scaled(self, factor: np.ndarray) -> MuellerValue:
+    def scaled(self, factor: np.ndarray | float) -> MuellerValue:
         """This value times a scalar factor broadcastable to (L, N)."""
         if self.kind == "general":
             return MuellerValue("general", self.x_in, self.x_out, M=self.M * factor)
@@ -120,27 +128,40 @@ class BSDFSample:
     pdf: np.ndarray            # (N,) solid-angle pdf of wi (0 for Dirac lobes)
     is_delta: np.ndarray       # (N,) bool: wi was chosen from a Dirac lobe
     valid: np.ndarray          # (N,) bool: False where no direction could be sampled
-    eta_sq: np.ndarray = field(default=None)  # (N,) radiance scale undone for Russian roulette (1 = none)
+    eta_sq: np.ndarray | None = field(default=None)  # (N,) radiance scale undone for Russian roulette (1 = none)
 
 
 class BSDF:
-    """Base class of the material models.  Subclasses set the flags below."""
+    """Base class of the material models.
 
-    #: Every lobe is a Dirac delta (no next-event estimation at such vertices).
-    delta_only: bool = False
-    #: The model can change the polarisation state (False for Lambert).
-    polarising: bool = True
-    #: The model can create circular polarisation (complex index, TIR, retarders).
-    creates_circular: bool = True
-    #: Light can pass through the surface (two-sided, refraction).
-    transmits: bool = False
-    #: The Mueller matrix is the same at every wavelength (no dispersion, grey parameters).
-    wavelength_independent: bool = False
-    #: Shades several materials at once and reads each point's member from ``ShadingPoint.material``
-    #: (engine.materials.batching).
-    batched: bool = False
+    ``flags`` (BSDFFlags) says which lobes the model has and what it can do to polarisation;
+    models set it as a class attribute or, where parameters matter, per instance in
+    ``__init__``.  A model that sets nothing is assumed to do everything (UNKNOWN_MODEL_FLAGS).
+    The boolean properties below are read-only views of ``flags``.
+    """
 
+    flags: BSDFFlags = UNKNOWN_MODEL_FLAGS
     name: str = "bsdf"
+
+    @property
+    def delta_only(self) -> bool:
+        """Every lobe is a Dirac delta (no next-event estimation at such vertices)."""
+        return self.flags.is_delta_only
+
+    @property
+    def transmits(self) -> bool:
+        """Light can pass through the surface (refraction, a filter sheet)."""
+        return self.flags.transmits
+
+    @property
+    def polarising(self) -> bool:
+        """The model can change the polarisation state (False for a depolariser such as Lambert)."""
+        return self.flags.polarising
+
+    @property
+    def creates_circular(self) -> bool:
+        """The model can create circular polarisation (BSDFFlags.RETARDING)."""
+        return self.flags.retarding
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
         raise NotImplementedError
@@ -155,6 +176,6 @@ class BSDF:
         """Mueller weight of the mirror (Dirac) lobe for reflection of wo, or None."""
         return None
 
-    def describe(self) -> dict:
+    def describe(self) -> dict[str, object]:
         """Parameters for logs and file headers."""
         return {"type": self.name}

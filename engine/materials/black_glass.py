@@ -16,9 +16,8 @@ class BlackGlass(SmoothConductor):
     name = "black_glass"
 
     def __init__(self, n, exterior_n=1.0):
+        # Retards only where n < exterior_n (total internal reflection): decided by SmoothConductor.
         super().__init__(n, ConstantSpectrum(0.0), exterior_n)
-        # A real index below the critical angle never retards (S = 0).
-        self.creates_circular = False
 
     def describe(self):
         return {"type": self.name, "n": repr(self.n), "exterior_n": self.exterior_n}

@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import BSDF, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
 from ..polarisation.frames import plane_of_incidence_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs
+from ..spectral import LAMBDA_MAX, LAMBDA_MIN
 from ..vec3 import reflect
 
 
@@ -32,15 +33,19 @@ def mirror_reflection(sp: ShadingPoint, eta: np.ndarray):
 
 class SmoothConductor(BSDF):
     name = "conductor"
-    delta_only = True
 
     def __init__(self, n, k, exterior_n=1.0):
         self.n = n
         self.k = k
         self.exterior_n = float(exterior_n)
-        self.wavelength_independent = bool(getattr(n, "is_constant", False) and getattr(k, "is_constant", False))
-        # A real index (κ = 0 at every wavelength) reflects without retardance.
-        self.creates_circular = not (getattr(k, "is_constant", False) and float(k.eval([550.0])[0]) == 0.0)
+        constant = bool(getattr(n, "is_constant", False) and getattr(k, "is_constant", False))
+        # A real index (κ = 0 at every wavelength) reflects without retardance, unless it is below the
+        # exterior index somewhere: then total internal reflection retards (S ≠ 0).
+        real = getattr(k, "is_constant", False) and float(k.eval([550.0])[0]) == 0.0
+        no_tir = real and float(np.min(n.eval(np.linspace(LAMBDA_MIN, LAMBDA_MAX, 95)))) >= self.exterior_n
+        self.flags = (BSDFFlags.DELTA_REFLECTION | BSDFFlags.POLARISING
+                      | BSDFFlags.when(not no_tir, BSDFFlags.RETARDING)
+                      | BSDFFlags.when(not constant, BSDFFlags.WAVELENGTH_DEPENDENT))
 
     def relative_eta(self, sp: ShadingPoint) -> np.ndarray:
         return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n

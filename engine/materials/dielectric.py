@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import BSDF, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
 from ..polarisation.frames import plane_of_incidence_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_transmission_abcs, refracted_cosine
 from ..vec3 import reflect
@@ -37,10 +37,8 @@ from ..vec3 import reflect
 
 class SmoothDielectric(BSDF):
     name = "dielectric"
-    delta_only = True
-    transmits = True
-    creates_circular = True  # total internal reflection retards
-    wavelength_independent = True  # the index is one number (no dispersion)
+    # total internal reflection retards; the index is one number (no dispersion): λ-independent
+    flags = BSDFFlags.DELTA_REFLECTION | BSDFFlags.DELTA_TRANSMISSION | BSDFFlags.POLARISING | BSDFFlags.RETARDING
 
     def __init__(self, n: float, exterior_n: float = 1.0):
         self.n_int = float(n)

@@ -22,15 +22,12 @@ import math
 
 import numpy as np
 
-from .base import BSDF, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
 from ..vec3 import any_perpendicular, dot
 
 
 class FilterSheet(BSDF):
     name = "filter_sheet"
-    delta_only = True
-    transmits = True
-    wavelength_independent = True
 
     def __init__(self, axis, kind: str = "polariser", extinction: float = 0.0, retardance_deg: float = 90.0,
                  transmittance: float = 1.0):
@@ -45,7 +42,9 @@ class FilterSheet(BSDF):
         self.extinction = float(extinction)
         self.retardance_deg = float(retardance_deg)
         self.transmittance = float(transmittance)
-        self.creates_circular = kind == "retarder"
+        # light passes straight through (a null lobe); only a retarder creates circular polarisation
+        self.flags = (BSDFFlags.NULL | BSDFFlags.POLARISING
+                      | BSDFFlags.when(kind == "retarder", BSDFFlags.RETARDING))
 
     def _abcs(self):
         t = self.transmittance

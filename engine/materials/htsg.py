@@ -116,7 +116,7 @@ import math
 
 import numpy as np
 
-from .base import BSDF, BSDFSample, MuellerValue, ShadingPoint
+from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
 from .conductor import mirror_reflection
 from .sampling import cosine_hemisphere, local_to_world
 from ..polarisation.frames import scattering_plane_axis
@@ -579,10 +579,6 @@ class HTSG(BSDF):
     """
 
     name = "htsg"
-    delta_only = False
-    polarising = True
-    creates_circular = True
-    transmits = False
 
     def __init__(self, n, k, sigma0_um, tau_um, albedo=0.0, exterior_n=1.0, series_tolerance=1e-10):
         self.n = as_spectrum(n, "n")
@@ -611,6 +607,13 @@ class HTSG(BSDF):
             raise ValueError(f"n must be > 0, got {self.n.value!r}")
         if isinstance(self.k, ConstantSpectrum) and not self.k.value >= 0:
             raise ValueError(f"k must be ≥ 0, got {self.k.value!r}")
+        # Directional-diffuse (glossy) and specular (Dirac) lobes at any σ₀ (σ₀ = 0 zeroes the first,
+        # a rough surface the second); the uniform diffuse term, if any, is folded into the "general"
+        # value (not separable).  RETARDING is conservative (not derived from n, κ); the roughness in
+        # wavelengths, σ₀/λ, makes the model λ-dependent.
+        self.flags = (BSDFFlags.GLOSSY_REFLECTION | BSDFFlags.DELTA_REFLECTION
+                      | BSDFFlags.when(self.albedo is not None, BSDFFlags.DIFFUSE_REFLECTION)
+                      | BSDFFlags.POLARISING | BSDFFlags.RETARDING | BSDFFlags.WAVELENGTH_DEPENDENT)
 
     # ---------------------------------------------------------------- helpers
     def relative_eta(self, sp: ShadingPoint) -> np.ndarray:

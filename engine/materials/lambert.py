@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import BSDF, BSDFSample, ShadingPoint, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, ShadingPoint, depolarising_value
 from .sampling import cosine_hemisphere, local_to_world
 from ..spectral.spectrum import basis_rgb
 from ..vec3 import dot
@@ -17,12 +17,12 @@ from ..vec3 import dot
 
 class Lambert(BSDF):
     name = "lambert"
-    polarising = False
-    creates_circular = False
 
     def __init__(self, albedo):
         self.albedo = albedo
-        self.wavelength_independent = bool(getattr(albedo, "is_constant", False))
+        # a pure depolariser: neither polarising nor retarding; λ-independent for a grey albedo
+        self.flags = (BSDFFlags.DIFFUSE_REFLECTION | BSDFFlags.SEPARABLE_DIFFUSE
+                      | BSDFFlags.when(not getattr(albedo, "is_constant", False), BSDFFlags.WAVELENGTH_DEPENDENT))
 
     def _albedo(self, sp: ShadingPoint) -> np.ndarray:
         return sp.spectrum(self.albedo)
@@ -58,14 +58,16 @@ class LambertSet(Lambert):
     """
 
     name = "lambert_set"
-    batched = True
 
     def __init__(self, members: list):
         if not all(self.batchable(m) for m in members):
             raise ValueError("LambertSet members must be Lambert materials with constant or RGB albedos")
         self.members = list(members)
         self.albedo = None
-        self.wavelength_independent = all(m.wavelength_independent for m in members)
+        # the members' flags (all Lambert: they differ at most in λ-dependence), shaded as a batch
+        self.flags = BSDFFlags.BATCHED
+        for m in members:
+            self.flags |= m.flags
         self._constant = np.array([m.albedo.is_constant for m in members])
         self._value = np.array([m.albedo.linear_srgb()[0] if m.albedo.is_constant else 0.0 for m in members])
         self._rgb = np.array([m.albedo.linear_srgb() for m in members]).T.copy()      # (3, members)

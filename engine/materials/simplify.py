@@ -48,12 +48,7 @@ from ..spectral.spectrum import (
     Spectrum,
     TabulatedSpectrum,
 )
-from .base import BSDF
-from .conductor import SmoothConductor
-from .htsg import HTSG
-from .lambert import Lambert
-from .smooth_limit import MirrorWithDiffuse
-from .torrance_sparrow import TorranceSparrow
+from .base import BSDF, BSDFFlags
 from .weidlich_wilkie import Coat, WeidlichWilkie, _spectrum_range
 
 __all__ = ["index_matched_and_clear", "same_spectrum", "simplify_material"]
@@ -126,33 +121,19 @@ def _show(spec: Spectrum) -> str:
 
 
 # ------------------------------------------------------------------------------------------------
-# What a coat's level shows to the level above (see the WeidlichWilkie code)
+# What a coat's level shows to the level above (see the WeidlichWilkie code), read from its flags
+# (a model without its own flags is assumed to have every lobe: conservative, the coat is kept).
+# Stacks are recognised by their class (WeidlichWilkie) only to recurse into their structure.
 # ------------------------------------------------------------------------------------------------
 
 def _has_dirac(b: BSDF) -> bool:
-    """The BSDF may return a Dirac lobe from ``delta_reflection`` (conservative)."""
-    if isinstance(b, WeidlichWilkie):
-        return b.coat.smooth
-    if isinstance(b, (TorranceSparrow, Lambert)):
-        return False
-    return type(b).delta_reflection is not BSDF.delta_reflection
+    """The BSDF has a Dirac reflection lobe (``delta_reflection``); a stack has one iff its top coat is smooth."""
+    return b.flags.has(BSDFFlags.DELTA_REFLECTION)
 
 
 def _diffuse(b: BSDF) -> bool:
-    """``eval`` may return a nonzero depolarising value or ABCS ``depol`` share (c_ms applies; conservative)."""
-    if isinstance(b, (WeidlichWilkie, HTSG, SmoothConductor)):
-        return False       # "general"/ABCS without depol, or an all-zero depolariser
-    if isinstance(b, TorranceSparrow):
-        return bool(b.has_diffuse)
-    if isinstance(b, MirrorWithDiffuse):
-        return bool(b.has_diffuse)
-    return True            # Lambert and anything unknown
-
-
-def _default_w_c(base: BSDF) -> float:
-    if getattr(base, "delta_only", False):
-        return 0.0
-    return 1.0 if isinstance(base, Lambert) else 0.25
+    """``eval`` returns a depolarising value or ABCS ``depol`` share for its diffuse lobes (c_ms applies)."""
+    return b.flags.has(BSDFFlags.SEPARABLE_DIFFUSE)
 
 
 def _levels(w: WeidlichWilkie) -> list[WeidlichWilkie]:
@@ -165,7 +146,7 @@ def _levels(w: WeidlichWilkie) -> list[WeidlichWilkie]:
 
 def _options(w: WeidlichWilkie) -> dict:
     levels = _levels(w)
-    explicit = any(lv.w_c != _default_w_c(lv.base) for lv in levels)
+    explicit = any(lv.w_c != WeidlichWilkie.default_layer_cosine_fraction(lv.base) for lv in levels)
     return {"form": w.form, "t_term": w.t_term, "transmission_normal": w.transmission_normal,
             "shadowing": w.shadowing, "match_base_exterior": w.match_base_exterior,
             "layer_cosine_fraction": w.w_c if explicit else None}
@@ -210,7 +191,7 @@ def _removable(j: int, coats: list[Coat], base: BSDF, form: str, parent: _Parent
     below_dirac = coats[j + 1].smooth if j + 1 < K else _has_dirac(base)
     if not coats[j].smooth and below_dirac:
         return "rough coat hides the Dirac lobe below it"
-    if j == K - 1 and not isinstance(base, WeidlichWilkie) and K >= 2 and form == "energy" and _diffuse(base):
+    if j == K - 1 and K >= 2 and form == "energy" and _diffuse(base):   # never for a stack base
         return "energy form: the coat above would gain the internal-reflection factor"
     if K == 1 and parent is not None and not parent.accepts_bare(base):
         return "the enclosing stack would treat the bare base differently"

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import BSDF, BSDFSample, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, depolarising_value
 from .conductor import mirror_reflection
 from .sampling import cosine_hemisphere, local_to_world
 from ..spectral import as_spectrum
@@ -28,10 +28,14 @@ class MirrorWithDiffuse(BSDF):
         self.s, self.d = float(specular_weight), float(diffuse_weight)
         self.m = 0.0
         self.has_diffuse = self.d > 0
-        self.delta_only = not self.has_diffuse
-        self.creates_circular = not (self.k.is_constant and float(self.k.eval([550.0])[0]) == 0.0
-                                     and self.n.is_constant and float(self.n.eval([550.0])[0]) >= self.exterior_n)
-        self.wavelength_independent = self.n.is_constant and self.k.is_constant and self.albedo.is_constant
+        # real η ≥ 1 at every wavelength: no retardance (no κ, no total internal reflection)
+        real_above_one = (self.k.is_constant and float(self.k.eval([550.0])[0]) == 0.0
+                          and self.n.is_constant and float(self.n.eval([550.0])[0]) >= self.exterior_n)
+        constant = self.n.is_constant and self.k.is_constant and self.albedo.is_constant
+        self.flags = (BSDFFlags.DELTA_REFLECTION | BSDFFlags.POLARISING
+                      | BSDFFlags.when(self.has_diffuse, BSDFFlags.DIFFUSE_REFLECTION | BSDFFlags.SEPARABLE_DIFFUSE)
+                      | BSDFFlags.when(not real_above_one, BSDFFlags.RETARDING)
+                      | BSDFFlags.when(not constant, BSDFFlags.WAVELENGTH_DEPENDENT))
 
     def _eta(self, sp):
         return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n

@@ -47,7 +47,7 @@ import math
 
 import numpy as np
 
-from .base import BSDF, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
 from .microfacet import (SHADOWING, Beckmann, BlinnPhong, half_vector, reflect_local,
                                          shadowing_term)
 from .sampling import cosine_hemisphere, local_to_world
@@ -81,8 +81,6 @@ class TorranceSparrow(BSDF):
     """
 
     name = "torrance_sparrow"
-    delta_only = False
-    transmits = False
 
     def __init__(self, n, k, m, shadowing: str = "ts", exterior_n: float = 1.0, diffuse_albedo=None,
                  specular_weight: float = 1.0, diffuse_weight: float = 0.0, distribution: str = "beckmann",
@@ -116,10 +114,15 @@ class TorranceSparrow(BSDF):
         self.distribution = distribution
         self.has_specular = self.s > 0
         self.has_diffuse = self.d > 0 and self.albedo is not None
-        self.polarising = self.has_specular
-        self.creates_circular = self.has_specular and self._may_retard()
-        self.wavelength_independent = all(getattr(v, "is_constant", False) for v in
-                                          (self.n, self.k) + ((self.albedo,) if self.has_diffuse else ()))
+        constant = all(getattr(v, "is_constant", False) for v in
+                       (self.n, self.k) + ((self.albedo,) if self.has_diffuse else ()))
+        # The facet lobe is reported unless a diffuse term replaces it (s = 0): a TS with neither
+        # weight (black) still has its — zero — glossy lobe, so it is never taken for Dirac-only.
+        self.flags = (BSDFFlags.when(self.has_specular or not self.has_diffuse, BSDFFlags.GLOSSY_REFLECTION)
+                      | BSDFFlags.when(self.has_diffuse, BSDFFlags.DIFFUSE_REFLECTION | BSDFFlags.SEPARABLE_DIFFUSE)
+                      | BSDFFlags.when(self.has_specular, BSDFFlags.POLARISING)
+                      | BSDFFlags.when(self.has_specular and self._may_retard(), BSDFFlags.RETARDING)
+                      | BSDFFlags.when(not constant, BSDFFlags.WAVELENGTH_DEPENDENT))
 
     def _may_retard(self) -> bool:
         """False only if κ ≡ 0 and n/exterior_n ≥ 1 (real η above 1: no TIR, no retardance)."""

@@ -191,7 +191,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .base import BSDF, BSDFSample, MuellerValue, ShadingPoint
+from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
 from .conductor import mirror_reflection
 from .lambert import Lambert
 from .microfacet import Beckmann, BlinnPhong, half_vector, reflect_local, shadowing_term
@@ -516,8 +516,6 @@ class WeidlichWilkie(BSDF):
     """
 
     name = "weidlich_wilkie"
-    transmits = False
-    polarising = True
 
     def __init__(self, coats, base: BSDF, form: str = "energy", t_term: str = "ww",
                  transmission_normal: str | None = None, exterior_n=1.0, shadowing: str = "ts",
@@ -527,7 +525,7 @@ class WeidlichWilkie(BSDF):
             raise ValueError("coats must be a Coat or a non-empty list of Coat")
         if not isinstance(base, BSDF):
             raise ValueError(f"base must be a BSDF, got {base!r}")
-        if getattr(base, "transmits", False):
+        if base.flags.transmits:
             raise ValueError(f"the base must be reflective; {getattr(base, 'name', base)!r} transmits")
         if form not in FORMS:
             raise ValueError(f"form must be one of {FORMS}, got {form!r}")
@@ -571,27 +569,46 @@ class WeidlichWilkie(BSDF):
                                      "(or match_base_exterior=False)")
                 base.exterior_n = float(lo)
         self.base = base
-        if not self.coat.smooth and getattr(base, "delta_only", False):
+        if not self.coat.smooth and base.flags.is_delta_only:
             raise ValueError("a rough coat over a delta-only base is not supported (WW has no function value "
                              "there); use a rough base, e.g. TorranceSparrow with a small m")
 
         if layer_cosine_fraction is None:
-            if getattr(base, "delta_only", False):
-                w_c = 0.0
-            elif isinstance(base, Lambert):
-                w_c = 1.0
-            else:
-                w_c = 0.25
+            w_c = self.default_layer_cosine_fraction(base)
         else:
             w_c = float(layer_cosine_fraction)
             if not (0.0 <= w_c <= 1.0):
                 raise ValueError(f"layer_cosine_fraction must be in [0, 1], got {layer_cosine_fraction!r}")
         self.w_c = w_c
-        self.delta_only = bool(self.coat.smooth and getattr(base, "delta_only", False))
-        self.creates_circular = bool(getattr(base, "creates_circular", True) or self._coat_may_tir())
-        self.wavelength_independent = bool(
-            getattr(base, "wavelength_independent", False) and self._exterior.is_constant and
-            all(c.n_spectrum.is_constant and c.absorption_spectrum.is_constant for c in self.coats))
+        self.flags = self._layered_flags(base.flags)
+
+    @staticmethod
+    def default_layer_cosine_fraction(base: BSDF) -> float:
+        """w_c of the layer-lobe proposal when not given: 0 for a Dirac-only base, 1 for a Lambert base
+        (the cosine proposal is its exact density), 0.25 otherwise."""
+        if base.flags.is_delta_only:
+            return 0.0
+        return 1.0 if isinstance(base, Lambert) else 0.25
+
+    def _layered_flags(self, base: BSDFFlags) -> BSDFFlags:
+        """Lobes and capabilities of this coat over a base with flags ``base`` (fixed at construction).
+
+        Lobes: the top coat's own lobe (Dirac mirror if smooth, glossy if rough) plus the base's lobes
+        seen through the coat — a Dirac base lobe stays a Dirac lobe through a smooth coat and is
+        dropped by a rough one (see "Dirac lobes" above), glossy and diffuse lobes stay what they are.
+        The coat's Fresnel interface always polarises; it retards if the base does or the coat may
+        totally reflect (η < 1 somewhere); λ-dependent unless the base, the exterior index and every
+        coat's n and absorption are.  The layered value is a "general" matrix: no separable diffuse share.
+        """
+        F = BSDFFlags
+        smooth = self.coat.smooth
+        flags = (F.DELTA_REFLECTION if smooth else F.GLOSSY_REFLECTION) | F.POLARISING
+        flags |= base & (F.GLOSSY_REFLECTION | F.DIFFUSE_REFLECTION)
+        flags |= F.when(smooth, base & F.DELTA_REFLECTION)
+        flags |= F.when(base.retarding or self._coat_may_tir(), F.RETARDING)
+        constant = (not base.wavelength_dependent and self._exterior.is_constant and
+                    all(c.n_spectrum.is_constant and c.absorption_spectrum.is_constant for c in self.coats))
+        return flags | F.when(not constant, F.WAVELENGTH_DEPENDENT)
 
     # --- parameters ----------------------------------------------------------------------------
 
@@ -969,7 +986,7 @@ class WeidlichWilkie(BSDF):
                 Wd = self.base.delta_reflection(ShadingPoint(sp_b.p[:, dsel], sp_b.n_s[:, dsel],
                                                              sp_b.n_g[:, dsel], sp_b.wo[:, dsel],
                                                              sp_b.lam[:, dsel], sp.mono))
-                if getattr(self.base, "delta_only", False) or Wd is None:
+                if self.base.flags.is_delta_only or Wd is None:
                     pb = np.ones(dsel.size)
                 else:
                     num = Wd.matrix()[0, 0]

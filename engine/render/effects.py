@@ -15,20 +15,23 @@ Before choosing, materials are simplified where that is exact (``simplify="auto"
 (Weidlich–Wilkie) coats that are index-matched to the medium above and clear are skipped
 (engine.materials.simplify), which can in turn make a scene non-polarising.
 
-Each material reports what it can do through its ``polarising`` and
-``creates_circular`` flags (engine.materials.base.BSDF).  The choice comes
-with a human-readable reason for logs and Blender's render stats, and is
-overridden by asking for "full", "linear" or "off" explicitly.
+Each material reports what it can do through its ``flags`` (engine.materials.flags.BSDFFlags:
+POLARISING, RETARDING).  The choice comes with a human-readable reason for logs and Blender's
+render stats, and is overridden by asking for "full", "linear" or "off" explicitly.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
+from ..materials.base import BSDF, BSDFFlags
 from ..materials.simplify import simplify_material
 
 TRANSPORT_SIZES = {"full": 4, "linear": 3, "off": 1}
 
 
-def effective_materials(materials: dict, used=None, simplify: str = "auto"):
+def effective_materials(materials: Mapping[str, BSDF], used: set[str] | None = None,
+                        simplify: str = "auto") -> tuple[dict[str, BSDF], list[str]]:
     """({name: BSDF} with exact simplifications applied, [reasons]) for the ``used`` names.
 
     ``simplify``: "auto" skips index-matched clear coats; "off" renders the materials as given.
@@ -43,11 +46,11 @@ def effective_materials(materials: dict, used=None, simplify: str = "auto"):
     return out, reasons
 
 
-def choose_transport(materials: dict, used: set | None = None):
+def choose_transport(materials: Mapping[str, BSDF], used: set[str] | None = None) -> tuple[str, str]:
     """(mode, reason) for the materials ``used`` (names; default all of ``materials``)."""
     names = sorted(used if used is not None else materials)
-    circular = [n for n in names if getattr(materials[n], "creates_circular", True)]
-    polarising = [n for n in names if getattr(materials[n], "polarising", True)]
+    circular = [n for n in names if materials[n].flags.has(BSDFFlags.RETARDING)]
+    polarising = [n for n in names if materials[n].flags.has(BSDFFlags.POLARISING)]
     if circular:
         return "full", f"full Stokes: {_list(circular)} can create circular polarisation"
     if polarising:
@@ -56,7 +59,7 @@ def choose_transport(materials: dict, used: set | None = None):
     return "off", "scalar transport (S1..S3 = 0): every material depolarises and all lights are unpolarised"
 
 
-def resolve_transport(requested: str, materials: dict, used: set | None = None):
+def resolve_transport(requested: str, materials: Mapping[str, BSDF], used: set[str] | None = None) -> tuple[str, str]:
     """The transport to run for a requested mode ("auto" or explicit) and why."""
     if requested != "auto":
         return requested, f"{requested} (requested)"
@@ -64,6 +67,6 @@ def resolve_transport(requested: str, materials: dict, used: set | None = None):
     return mode, f"auto → {reason}"
 
 
-def _list(names):
+def _list(names: list[str]) -> str:
     shown = ", ".join(repr(n) for n in names[:3])
     return shown + (f" and {len(names) - 3} more" if len(names) > 3 else "")

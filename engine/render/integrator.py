@@ -23,9 +23,11 @@ q = min(max_λ T00 · η², 0.95), η² undoing the refraction radiance scale.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
-from ..materials.base import MuellerValue, ShadingPoint
+from ..materials.base import BSDF, BSDFFlags, MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation
 from .accel import offset_origin
@@ -36,10 +38,19 @@ from .sampler import PathSampler, path_keys
 from ..spectral import WavelengthLookup, rgb_weights, sample_wavelengths
 from ..vec3 import dot
 
+if TYPE_CHECKING:
+    import threading
+
+    from .accel import CompiledScene
+    from .camera import CameraModel
+    from .lights import LightSet, _Light
+    from ..scene.description import RenderSettings
+
 
 # ----------------------------------------------------------------------------- Mueller kernels
 
-def scatter_throughput(out, T, rows, m: MuellerValue, x_T: np.ndarray, wo: np.ndarray) -> None:
+def scatter_throughput(out: np.ndarray, T: np.ndarray, rows: np.ndarray, m: MuellerValue, x_T: np.ndarray,
+                       wo: np.ndarray) -> None:
     """out[..., rows] = T[..., rows] · R(x_out → x_T) · M at vertices with Mueller value ``m``.
 
     ``m`` (frames x_in, x_out), ``x_T`` (the paths' current frames, ⟂ the arriving segment, i.e.
@@ -66,7 +77,7 @@ def unpolarised_response(m: MuellerValue, P: int) -> np.ndarray:
     return out
 
 
-def rotate_stokes(S: np.ndarray, c2, s2) -> np.ndarray:
+def rotate_stokes(S: np.ndarray, c2: np.ndarray, s2: np.ndarray) -> np.ndarray:
     """Stokes vectors S (P, L, N) re-expressed in a frame rotated by (cos2φ, sin2φ)."""
     if S.shape[0] < 3:
         return S
@@ -76,7 +87,7 @@ def rotate_stokes(S: np.ndarray, c2, s2) -> np.ndarray:
     return out
 
 
-def gather(a: np.ndarray, sel) -> np.ndarray:
+def gather(a: np.ndarray, sel: slice | np.ndarray) -> np.ndarray:
     """a[..., sel] for integer indices (np.take: ~2× faster than fancy indexing); ``a`` itself for
     slice(None) (the same object, so per-object memos such as a LambertSet's albedo still match)."""
     if isinstance(sel, slice):
@@ -84,7 +95,7 @@ def gather(a: np.ndarray, sel) -> np.ndarray:
     return np.take(a, sel, axis=-1)
 
 
-def keep_paths(mask: np.ndarray, *arrays):
+def keep_paths(mask: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
     """The arrays restricted to the paths where ``mask`` is True (paths on the last axis).
 
     np.compress is ~3× faster than boolean fancy indexing on the last axis; a
@@ -95,7 +106,8 @@ def keep_paths(mask: np.ndarray, *arrays):
     return tuple(np.compress(mask, a, axis=-1) for a in arrays)
 
 
-def compress_lookups(mask, lk, lk_m):
+def compress_lookups(mask: np.ndarray, lk: WavelengthLookup,
+                     lk_m: WavelengthLookup) -> tuple[WavelengthLookup, WavelengthLookup]:
     """Both wavelength lookups restricted to the surviving paths (shared when they are the same)."""
     if mask.all():
         return lk, lk_m
@@ -103,7 +115,7 @@ def compress_lookups(mask, lk, lk_m):
     return new, (new if lk_m is lk else lk_m.compress(mask))
 
 
-def power_heuristic(a, b):
+def power_heuristic(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     a2 = a * a
     b2 = b * b
     den = a2 + b2
@@ -115,7 +127,8 @@ def power_heuristic(a, b):
 class PathTracer:
     """Traces batches of camera paths for one compiled scene."""
 
-    def __init__(self, compiled, lights, camera, settings, materials=None):
+    def __init__(self, compiled: CompiledScene, lights: LightSet, camera: CameraModel, settings: RenderSettings,
+                 materials: list[BSDF] | None = None):
         """``materials``: the compiled scene's materials as rendered (by material index), if the
         caller has already applied the exact simplifications (engine.render.effects); otherwise
         they are applied here, the same way on every worker."""
@@ -127,7 +140,7 @@ class PathTracer:
             simplified, _ = effective_materials(dict(zip(compiled.material_names, compiled.materials)),
                                                 simplify=getattr(settings, "simplify", "auto"))
             materials = [simplified[name] for name in compiled.material_names]
-        self.materials = list(materials)
+        self.materials: list[BSDF] = list(materials)
         self.has_area_lights = compiled.has_area_lights     # once, not per bounce (scans every triangle)
         # materials shaded together (e.g. all RGB Lambert materials in one call)
         self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
@@ -138,7 +151,7 @@ class PathTracer:
         # carry T for one wavelength and apply the spectral emission and colour matching at the
         # lights (exactly the same estimate, a quarter of the Mueller arithmetic).
         used = {self.materials[i] for i in np.unique(compiled.tri_material)}
-        independent = all(getattr(m, "wavelength_independent", False) for m in used)
+        independent = not any(m.flags.has(BSDFFlags.WAVELENGTH_DEPENDENT) for m in used)
         reduce = settings.reduce_spectral
         self.uniform = reduce in ("auto", "exact", True) and independent
         # "auto": with λ-independent materials the spectral estimator's expectation is T times each
@@ -146,7 +159,7 @@ class PathTracer:
         # light colours: no wavelength sampling and no chromatic noise (same expectation).
         self.rgb_mode = reduce in ("auto", True) and independent and not self.mono
 
-    def _emitted(self, light, lookup):
+    def _emitted(self, light: _Light, lookup: WavelengthLookup) -> np.ndarray:
         """Emitted radiance (L, n) of ``light`` for paths with these wavelengths (RGB (3, n) in RGB mode)."""
         if self.rgb_mode:
             return np.repeat(light.rgb()[:, None], lookup.lam.shape[1], axis=1)
@@ -154,7 +167,7 @@ class PathTracer:
             return light.radiance(lookup.lam, True)
         return light.spectrum.eval_cached(lookup)
 
-    def _wavelengths(self, sampler: PathSampler, n: int):
+    def _wavelengths(self, sampler: PathSampler, n: int) -> tuple[np.ndarray, np.ndarray | None]:
         if self.rgb_mode:
             return np.full((1, n), 550.0), None
         if self.mono:
@@ -164,7 +177,8 @@ class PathTracer:
         lam, pdf = sample_wavelengths(u, self.n_lambda)
         return lam, rgb_weights(lam, pdf)
 
-    def trace(self, pixel: np.ndarray, sample: np.ndarray, abort=None):
+    def trace(self, pixel: np.ndarray, sample: np.ndarray,
+              abort: threading.Event | None = None) -> tuple[np.ndarray, dict[str, int]] | None:
         """Trace one path per (pixel, sample) pair; returns (stokes_rgb (4, 3, N), stats dict).
 
         ``abort`` (a threading.Event) is checked between bounces; if it is set the batch is
@@ -267,11 +281,11 @@ class PathTracer:
                 bsdf = self.shaders[g]
                 sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
                                   gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
-                                  self.slot_of[gather(mat, sel)] if bsdf.batched else None)
+                                  self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None)
                 rows = np.arange(n) if isinstance(sel, slice) else sel
                 xTm = gather(x_T, sel)
 
-                if not bsdf.delta_only and len(light_set) and bounce + 2 <= st.max_depth:
+                if not bsdf.flags.is_delta_only and len(light_set) and bounce + 2 <= st.max_depth:
                     contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], stats)
                     radiance[:, :, path[sel]] += contrib
 
@@ -310,7 +324,8 @@ class PathTracer:
         out[:, :, ~finite] = 0.0
         return out, stats
 
-    def _next_event(self, sp, lookup, bsdf, T, rows, x_T, u, stats):
+    def _next_event(self, sp: ShadingPoint, lookup: WavelengthLookup, bsdf: BSDF, T: np.ndarray, rows: np.ndarray,
+                    x_T: np.ndarray, u: np.ndarray, stats: dict[str, int]) -> np.ndarray:
         """Direct light at non-delta vertices, MIS-weighted against BSDF sampling; (P, L, n).
 
         ``lookup`` holds the path's wavelengths (lights are evaluated at all of them); the

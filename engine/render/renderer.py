@@ -15,6 +15,7 @@ import copy
 import os
 import time
 from collections import deque
+from collections.abc import Callable, Iterator
 import threading
 from concurrent.futures import ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FuturesTimeout
@@ -29,14 +30,14 @@ from .effects import effective_materials, resolve_transport
 from .film import Film
 from .integrator import PathTracer
 from .lights import LightSet
-from ..scene.description import Scene
+from ..scene.description import RenderSettings, Scene
 from ..errors import SceneError
 
 
 @dataclass
 class RenderResult:
     film: Film
-    settings: object
+    settings: RenderSettings
     stats: dict = field(default_factory=dict)
     cancelled: bool = False
 
@@ -71,7 +72,8 @@ def available_memory() -> int:
         return 0
 
 
-def work_units(width: int, height: int, spp: int, batch_rays: int, first_pass: int = 0, window=None):
+def work_units(width: int, height: int, spp: int, batch_rays: int, first_pass: int = 0,
+               window: tuple[int, int, int, int] | None = None) -> Iterator[tuple[int, int, int, int]]:
     """Yield (row0, row1, pass0, pass1) covering the window's rows × passes [first_pass, spp).
 
     ``window`` = (x0, y0, x1, y1) in pixels (row 0 at the top, x1/y1 exclusive)
@@ -87,7 +89,7 @@ def work_units(width: int, height: int, spp: int, batch_rays: int, first_pass: i
             yield r0, min(y1, r0 + rows_per_unit), p0, p1
 
 
-def unit_pixels(width: int, r0: int, r1: int, window=None) -> np.ndarray:
+def unit_pixels(width: int, r0: int, r1: int, window: tuple[int, int, int, int] | None = None) -> np.ndarray:
     """Flat pixel indices of rows [r0, r1) within the window's columns."""
     x0, _, x1, _ = window or (0, 0, width, 0)
     rows = np.arange(r0, r1, dtype=np.int64)
@@ -97,7 +99,7 @@ def unit_pixels(width: int, r0: int, r1: int, window=None) -> np.ndarray:
 class Renderer:
     """Compiles a scene once; ``render`` may then be called repeatedly."""
 
-    def __init__(self, scene: Scene):
+    def __init__(self, scene: Scene) -> None:
         self.scene = scene
         t0 = time.perf_counter()
         self.compiled = CompiledScene(scene)
@@ -106,12 +108,16 @@ class Renderer:
         self.compile_seconds = time.perf_counter() - t0
         self._live_film = None
 
-    def last_film_mean(self):
+    def last_film_mean(self) -> np.ndarray | None:
         """The Stokes image of the render in progress (for progressive display), or None."""
         film = self._live_film
         return None if film is None else film.mean()
 
-    def render(self, settings=None, progress=None, should_stop=None, window=None, resume=None) -> RenderResult:
+    def render(self, settings: RenderSettings | None = None,
+               progress: Callable[[float, dict], None] | None = None,
+               should_stop: Callable[[], bool] | None = None,
+               window: tuple[int, int, int, int] | None = None,
+               resume: Film | None = None) -> RenderResult:
         """Render with ``settings`` (default: the scene's).
 
         ``progress(done_fraction, stats)`` is called after every work unit;
@@ -236,6 +242,8 @@ class Renderer:
         return RenderResult(film=film, settings=st, stats=stats, cancelled=cancelled)
 
 
-def render(scene: Scene, settings=None, progress=None, should_stop=None) -> RenderResult:
+def render(scene: Scene, settings: RenderSettings | None = None,
+           progress: Callable[[float, dict], None] | None = None,
+           should_stop: Callable[[], bool] | None = None) -> RenderResult:
     """Convenience: compile and render ``scene`` once."""
     return Renderer(scene).render(settings, progress, should_stop)
