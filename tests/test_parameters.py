@@ -195,15 +195,20 @@ def test_mueller_help_lists_every_catalogue_model_and_parameter():
 
 # ------------------------------------------------------------------------------------------ Blender node
 
+#: The repository imported as a package, as Blender imports the extension, but under its own name:
+#: tests.blender_support registers the add-on when it first imports ``polar_render``.
+_PACKAGE = "polar_render_data"
+
+
 def node_models():
-    """polar_addon.nodes.models, imported as Blender does (the repository as package polar_render), no bpy."""
-    if "polar_render" not in sys.modules:
-        spec = importlib.util.spec_from_file_location("polar_render", os.path.join(REPO, "__init__.py"),
+    """polar_addon.nodes.models without bpy."""
+    if _PACKAGE not in sys.modules:
+        spec = importlib.util.spec_from_file_location(_PACKAGE, os.path.join(REPO, "__init__.py"),
                                                       submodule_search_locations=[REPO])
         module = importlib.util.module_from_spec(spec)
-        sys.modules["polar_render"] = module
+        sys.modules[_PACKAGE] = module
         spec.loader.exec_module(module)
-    return importlib.import_module("polar_render.polar_addon.nodes.models")
+    return importlib.import_module(f"{_PACKAGE}.polar_addon.nodes.models")
 
 
 #: Socket names saved .blend files refer to, per model, in order: never renamed, moved or removed
@@ -257,3 +262,26 @@ def test_node_menus_map_to_declared_choices():
     assert [i[0] for i in models.METAL_ITEMS[1:]] == list(NAMED_METALS)
     for *_, value in models.DIELECTRIC_PRESETS[1:]:
         assert MODELS["dielectric"]["n"].contains(value)
+
+
+# ------------------------------------------------------------------------------------------ with bpy
+
+def test_a_saved_node_without_a_newer_input_exports_its_default_and_gains_the_input():
+    pytest.importorskip("bpy")
+    from tests.blender_support import empty_scene, load_addon, polar_material
+    addon = load_addon()
+    from polar_render.polar_addon.export.materials import export_material
+    from polar_render.polar_addon.nodes.bsdf import ensure_group
+    empty_scene()
+    sockets = addon.polar_addon.nodes.models.MODEL_SOCKETS["TORRANCE_SPARROW"]
+    mat = polar_material("Old", "TORRANCE_SPARROW", Roughness=0.2)
+    node = mat.node_tree.nodes["Polarising BSDF"]
+    group = node.node_tree
+    # As if the file had been saved before the last declared input existed.
+    newest = sockets[-1][0]
+    group.interface.remove(next(i for i in group.interface.items_tree if i.name == newest))
+    assert newest not in node.inputs
+    bsdf, _ = export_material(mat, [])
+    assert bsdf.name == "torrance_sparrow" and bsdf.m == pytest.approx(0.2)
+    ensure_group("TORRANCE_SPARROW")
+    assert [s.name for s in node.inputs] == [s[0] for s in sockets]
