@@ -285,3 +285,16 @@ def test_a_saved_node_without_a_newer_input_exports_its_default_and_gains_the_in
     assert bsdf.name == "torrance_sparrow" and bsdf.m == pytest.approx(0.2)
     ensure_group("TORRANCE_SPARROW")
     assert [s.name for s in node.inputs] == [s[0] for s in sockets]
+
+
+def test_torrance_sparrow_node_exports_its_exterior_index():
+    pytest.importorskip("bpy")
+    from tests.blender_support import empty_scene, load_addon, polar_material
+    load_addon()
+    from polar_render.polar_addon.export.materials import export_material
+    empty_scene()
+    for roughness in (0.2, 0.0):    # the rough model and its smooth limit
+        mat = polar_material("Under water", "TORRANCE_SPARROW", metal="Au", Roughness=roughness,
+                             **{"Exterior IOR": 1.33})
+        bsdf, _ = export_material(mat, [])
+        assert bsdf.exterior_n == pytest.approx(1.33) and bsdf.m == pytest.approx(roughness)

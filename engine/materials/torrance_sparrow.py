@@ -272,7 +272,8 @@ DECLARATION = ModelDeclaration(
                lo=0.0, hi=MAX_WEIGHT, default=0.0, texturable=True),
      Parameter("specular_weight", "weight s of the facet part", lo=0.0, hi=MAX_WEIGHT, default=1.0,
                texturable=True),
-     exterior_n_parameter()],
+     exterior_n_parameter(socket=Socket("Exterior IOR", "FLOAT", 1.0, 1.0, 3.0,
+                                        "Index of the medium above the surface (1 = air, 1.33 = water)"))],
     catalogue="torrance_sparrow", node="TORRANCE_SPARROW")
 
 
