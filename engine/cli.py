@@ -282,8 +282,10 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=_render)
 
-    m = sub.add_parser("mueller", help="print one model's Mueller BRDF at one geometry as JSON")
-    m.add_argument("--model", required=True, help="lambert | fresnel")
+    from .materials.catalogue import MODEL_PARAMETERS, parameter_help   # the declared models and parameters
+    m = sub.add_parser("mueller", help="print one model's Mueller BRDF at one geometry as JSON",
+                       epilog=parameter_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
+    m.add_argument("--model", required=True, help=" | ".join(MODEL_PARAMETERS))
     m.add_argument("--param", action="append", metavar="NAME=VALUE", help="model parameter (repeatable)")
     m.add_argument("--theta-i", type=float, required=True, help="incidence angle (deg)")
     m.add_argument("--theta-o", type=float, required=True, help="viewing angle (deg)")

@@ -9,6 +9,8 @@ Brewster's angle.  One-sided.
 from __future__ import annotations
 
 from .conductor import SmoothConductor
+from .dielectric import IOR_SOCKET
+from .parameters import ModelDeclaration, Parameter, exterior_n_parameter
 from ..spectral import ConstantSpectrum
 
 
@@ -21,3 +23,21 @@ class BlackGlass(SmoothConductor):
 
     def describe(self):
         return {"type": self.name, "n": repr(self.n), "exterior_n": self.exterior_n}
+
+
+# --------------------------------------------------------------------------- declaration
+
+DECLARATION = ModelDeclaration(
+    "black_glass", "Black Glass",
+    "Smooth dielectric surface whose transmitted light is absorbed (polarises strongly near Brewster's angle)",
+    [Parameter("n", "real index of the glass", kind="spectrum", lo=0.0, lo_open=True, default=1.5,
+               socket=IOR_SOCKET),
+     Parameter("k", "imaginary part of the index: black glass has a real index, so only 0", lo=0.0, hi=0.0,
+               default=0.0),
+     exterior_n_parameter()], node="BLACK_GLASS")
+
+
+@DECLARATION.builder
+def _black_glass(p):
+    p.get("k")   # validated only: the model has no κ
+    return BlackGlass(p["n"], p["exterior_n"])

@@ -14,6 +14,9 @@ from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depol
 from ..polarisation.frames import plane_of_incidence_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs
 from ..spectral import LAMBDA_MAX, LAMBDA_MIN
+from .parameters import REQUIRED, ModelDeclaration, Parameter, Socket, exterior_n_parameter
+from ..errors import SceneError
+from ..spectral.ior import NAMED_METALS
 from ..vec3 import reflect
 
 
@@ -66,3 +69,36 @@ class SmoothConductor(BSDF):
 
     def describe(self):
         return {"type": self.name, "n": repr(self.n), "k": repr(self.k), "exterior_n": self.exterior_n}
+
+
+# --------------------------------------------------------------------------- declaration
+
+#: The complex index η = n + iκ of a conductor-like surface (shared with Torrance–Sparrow and HTSG,
+#: which give their own node sockets); spectra, or a measured metal by name instead of both.
+N = Parameter("n", "real part of the complex index (or give metal)", kind="spectrum", lo=0.0, lo_open=True,
+              default=REQUIRED, texturable=True,
+              socket=Socket("n", "FLOAT", 0.47, 0.01, 20.0, "Real part of the complex index of refraction"))
+K = Parameter("k", "imaginary part κ of the complex index", kind="spectrum", lo=0.0, default=0.0, texturable=True,
+              socket=Socket("k", "FLOAT", 2.4, 0.0, 50.0,
+                            "Extinction coefficient κ ≥ 0 (imaginary part of the index)"))
+METAL = Parameter("metal", f"measured metal ({' | '.join(NAMED_METALS)}) instead of n and k", kind="metal",
+                  default=None)
+
+
+def complex_index(p):
+    """(n, κ) spectra from ``metal`` or from ``n`` and ``k`` (not both)."""
+    if p.given("metal"):
+        if p.given("n") or p.given("k"):
+            raise SceneError(p.field("metal"), "give either 'metal' or 'n' and 'k', not both")
+        return p["metal"]
+    return p["n"], p["k"]
+
+
+DECLARATION = ModelDeclaration(
+    "conductor", "Fresnel Conductor", "Smooth metal mirror with a complex index n + iκ",
+    [N, K, METAL, exterior_n_parameter()], catalogue="fresnel", node="CONDUCTOR")
+
+
+@DECLARATION.builder
+def _conductor(p):
+    return SmoothConductor(*complex_index(p), p["exterior_n"])

@@ -30,6 +30,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from ..polarisation.frames import plane_of_incidence_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_transmission_abcs, refracted_cosine
 from ..vec3 import reflect
@@ -97,3 +98,20 @@ class SmoothDielectric(BSDF):
 
     def describe(self):
         return {"type": self.name, "n": self.n_int, "exterior_n": self.n_ext}
+
+
+# --------------------------------------------------------------------------- declaration
+
+#: The Polarising BSDF node's index input of the smooth dielectric models (glass and black glass).
+IOR_SOCKET = Socket("IOR", "FLOAT", 1.5, 1.0001, 5.0, "Index of refraction of the material (outside: 1)")
+
+DECLARATION = ModelDeclaration(
+    "dielectric", "Fresnel Dielectric",
+    "Smooth glass-like interface: reflection, refraction, total internal reflection",
+    [Parameter("n", "real index of the material", lo=0.0, lo_open=True, socket=IOR_SOCKET),
+     exterior_n_parameter()], node="DIELECTRIC")
+
+
+@DECLARATION.builder
+def _dielectric(p):
+    return SmoothDielectric(p["n"], p["exterior_n"])

@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .parameters import ModelDeclaration, Parameter
 from ..vec3 import any_perpendicular, dot
 
 
@@ -78,3 +79,29 @@ class FilterSheet(BSDF):
     def describe(self):
         return {"type": self.name, "kind": self.kind, "axis": self.axis.tolist(), "extinction": self.extinction,
                 "retardance_deg": self.retardance_deg, "transmittance": self.transmittance}
+
+
+# --------------------------------------------------------------------------- declarations
+
+_AXIS = Parameter("axis", "filter axis in world space (transmission axis / fast axis), in the sheet's plane",
+                  kind="direction")
+_TRANSMITTANCE = Parameter("transmittance", "transmittance t along the axis", lo=0.0, hi=1.0, default=1.0)
+
+POLARISER = ModelDeclaration(
+    "polariser", "Polariser sheet", "Thin linear polariser: t_max along the axis, t_min = extinction·t_max",
+    [_AXIS, Parameter("extinction", "extinction ratio t_min/t_max (0 = ideal)", lo=0.0, hi=1.0, default=0.0),
+     _TRANSMITTANCE])
+RETARDER = ModelDeclaration(
+    "retarder", "Retarder sheet", "Thin linear retarder (wave plate) with its fast axis along the axis",
+    [_AXIS, Parameter("retardance_deg", "retardance δ", unit="deg", lo=-360.0, hi=360.0, default=90.0),
+     _TRANSMITTANCE])
+
+
+@POLARISER.builder
+def _polariser(p):
+    return FilterSheet(p["axis"], "polariser", extinction=p["extinction"], transmittance=p["transmittance"])
+
+
+@RETARDER.builder
+def _retarder(p):
+    return FilterSheet(p["axis"], "retarder", retardance_deg=p["retardance_deg"], transmittance=p["transmittance"])

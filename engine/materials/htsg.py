@@ -117,7 +117,8 @@ import math
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
-from .conductor import mirror_reflection
+from .conductor import mirror_reflection, K, METAL, N, complex_index
+from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from .sampling import cosine_hemisphere, local_to_world
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs
@@ -866,3 +867,28 @@ class HTSG(BSDF):
         return {"type": self.name, "n": repr(self.n), "k": repr(self.k), "sigma0_um": self.sigma0,
                 "tau_um": self.tau, "albedo": repr(self.albedo) if self.albedo is not None else 0.0,
                 "exterior_n": self.exterior_n, "series_tolerance": self.series_tolerance}
+
+
+# --------------------------------------------------------------------------- declaration
+
+DECLARATION = ModelDeclaration(
+    "htsg", "He–Torrance–Sillion–Greenberg",
+    "Physically based rough surface (σ₀, τ in µm), wavelength dependent",
+    [N.with_(socket=Socket("n", "FLOAT", 0.88, 0.01, 20.0, "Real part of the complex index")),
+     K.with_(socket=Socket("k", "FLOAT", 6.15, 0.0, 50.0, "Extinction coefficient κ ≥ 0")),
+     METAL,
+     Parameter("sigma0_um", "rms surface height σ₀", unit="µm", lo=0.0, hi=1e4, texturable=True,
+               socket=Socket("Sigma0", "FLOAT", 0.18, 0.0, 100.0, "Surface height rms deviation σ₀ in µm")),
+     Parameter("tau_um", "autocorrelation length τ", unit="µm", lo=0.0, lo_open=True, hi=1e6, texturable=True,
+               socket=Socket("Tau", "FLOAT", 3.0, 1e-3, 1000.0, "Autocorrelation length τ in µm")),
+     Parameter("albedo", "albedo of the uniform diffuse (depolarising) term", kind="spectrum",
+               spectrum="reflectance", lo=0.0, hi=1.0, default=0.0, texturable=True,
+               socket=Socket("Diffuse", "COLOR", (0.0, 0.0, 0.0), 0.0, 1.0, "Albedo of the uniform diffuse term")),
+     exterior_n_parameter()],
+    catalogue="htsg", node="HTSG")
+
+
+@DECLARATION.builder
+def _htsg(p):
+    n, k = complex_index(p)
+    return HTSG(n, k, p["sigma0_um"], p["tau_um"], albedo=p["albedo"], exterior_n=p["exterior_n"])

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, ShadingPoint, depolarising_value
+from .parameters import ModelDeclaration, Parameter, Socket
 from .sampling import cosine_hemisphere, local_to_world
 from ..spectral.spectrum import basis_rgb
 from ..vec3 import dot
@@ -100,3 +101,18 @@ class LambertSet(Lambert):
 
     def describe(self) -> dict:
         return {"type": self.name, "members": [m.describe() for m in self.members]}
+
+
+# --------------------------------------------------------------------------- declaration
+
+DECLARATION = ModelDeclaration(
+    "lambert", "Lambert", "Ideal depolariser: diffuse, unpolarised reflection (albedo/π)",
+    [Parameter("albedo", "albedo ρ (BRDF ρ/π)", kind="spectrum", spectrum="reflectance", lo=0.0, hi=1.0,
+               default=0.8, texturable=True,
+               socket=Socket("Albedo", "COLOR", (0.8, 0.8, 0.8), 0.0, 1.0, "Diffuse reflectance (linear sRGB)"))],
+    catalogue="lambert", node="LAMBERT")
+
+
+@DECLARATION.builder
+def _lambert(p):
+    return Lambert(p["albedo"])

@@ -48,9 +48,13 @@ import math
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .conductor import K, METAL, N, complex_index
 from .microfacet import (SHADOWING, Beckmann, BlinnPhong, half_vector, reflect_local,
                                          shadowing_term)
+from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from .sampling import cosine_hemisphere, local_to_world
+from .smooth_limit import MirrorWithDiffuse
+from ..errors import SceneError
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
 from ..spectral import ConstantSpectrum, as_spectrum
@@ -247,3 +251,46 @@ class TorranceSparrow(BSDF):
         if self.distribution == "blinn":
             out["blinn_exponent"] = self.dist.e
         return out
+
+
+# --------------------------------------------------------------------------- declaration
+
+#: Largest weight of either lobe: far beyond any physical use, small enough for finite pixels.
+MAX_WEIGHT = 1e6
+
+DECLARATION = ModelDeclaration(
+    "torrance_sparrow", "Torrance–Sparrow",
+    "Rough microfacet reflection (Beckmann facets, complex index) with an optional Lambertian part",
+    [N, K, METAL,
+     Parameter("m", f"Beckmann rms slope (= Mitsuba α, SCATMECH s): 0 (the smooth limit: a Fresnel mirror) "
+                    f"or ≥ {M_MIN:g}", lo=0.0, hi=100.0, texturable=True,
+               socket=Socket("Roughness", "FLOAT", 0.1, 0.0, 5.0,
+                             "Beckmann rms slope m (Mitsuba's α); 0 = smooth mirror")),
+     Parameter("shadowing", "shadowing-masking", kind="choice", choices=SHADOWING, default="ts"),
+     Parameter("diffuse_albedo", "albedo of the added Lambertian part", kind="spectrum", spectrum="reflectance",
+               lo=0.0, hi=1.0, default=0.0, texturable=True,
+               socket=Socket("Diffuse", "COLOR", (0.0, 0.0, 0.0), 0.0, 1.0,
+                             "Albedo of an added Lambertian (depolarising) part")),
+     Parameter("diffuse_weight", "weight d of the Lambertian part (default 1 where diffuse_albedo is given)",
+               lo=0.0, hi=MAX_WEIGHT, default=0.0, texturable=True),
+     Parameter("specular_weight", "weight s of the facet part", lo=0.0, hi=MAX_WEIGHT, default=1.0,
+               texturable=True),
+     exterior_n_parameter(socket=Socket("Exterior IOR", "FLOAT", 1.0, 1.0, 3.0,
+                                        "Index of the medium above the surface (1 = air, 1.33 = water)"))],
+    catalogue="torrance_sparrow", node="TORRANCE_SPARROW")
+
+
+@DECLARATION.builder
+def _torrance_sparrow(p):
+    n, k = complex_index(p)
+    shadowing = p["shadowing"]
+    m = p["m"]
+    if 0 < m < M_MIN:
+        raise SceneError(p.field("m"), f"must be 0 (the smooth limit) or in [{M_MIN:g}, {p.model['m'].hi:g}], "
+                                       f"got {m:g}")
+    kw = dict(exterior_n=p["exterior_n"], diffuse_albedo=p["diffuse_albedo"],
+              diffuse_weight=p.get("diffuse_weight", 1.0 if p.given("diffuse_albedo") else 0.0),
+              specular_weight=p["specular_weight"])
+    if m == 0:   # the smooth limit: a Fresnel mirror (plus the Lambertian part)
+        return MirrorWithDiffuse(n, k, **kw)
+    return TorranceSparrow(n, k, m, shadowing=shadowing, **kw)

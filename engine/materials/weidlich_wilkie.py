@@ -195,7 +195,9 @@ from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
 from .conductor import mirror_reflection
 from .lambert import Lambert
 from .microfacet import Beckmann, BlinnPhong, half_vector, reflect_local, shadowing_term
+from .parameters import ModelDeclaration, Parameter, Socket
 from .sampling import cosine_hemisphere, local_to_world
+from ..errors import SceneError
 from ..polarisation.frames import plane_of_incidence_axis, rotate_mueller_frames, rotation_mueller, \
     scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_transmission_abcs, refracted_cosine
@@ -1042,3 +1044,67 @@ class WeidlichWilkie(BSDF):
                 "transmission_normal": self.transmission_normal, "shadowing": self.shadowing,
                 "exterior_n": repr(self._exterior), "coat": self.coat.describe(),
                 "base": base.describe() if hasattr(base, "describe") else repr(base)}
+
+
+# --------------------------------------------------------------------------- declarations
+
+COAT = ModelDeclaration(
+    "coat", "Coat", "One dielectric coat of a Weidlich–Wilkie stack",
+    [Parameter("n", "real index of the coat", lo=0.0, lo_open=True, hi=100.0, default=1.5, texturable=True,
+               socket=Socket("Coat IOR", "FLOAT", 1.5, 1.0, 5.0, "Index of the coat")),
+     Parameter("thickness", "coat thickness d (any length unit; only absorption·d matters)", lo=0.0, default=0.0,
+               texturable=True,
+               socket=Socket("Coat Thickness", "FLOAT", 1.0, 0.0, 1e6,
+                             "Coat thickness (any unit; only thickness × absorption matters)")),
+     Parameter("absorption", "absorption coefficient α per unit thickness", kind="spectrum", lo=0.0, default=0.0,
+               texturable=True,
+               socket=Socket("Coat Absorption", "COLOR", (0.0, 0.0, 0.0), 0.0, 1e6,
+                             "Absorption coefficient per unit thickness (linear sRGB)")),
+     Parameter("distribution", "roughness of the coat's top interface", kind="choice", choices=DISTRIBUTIONS,
+               default="smooth"),
+     Parameter("exponent", "Blinn–Phong exponent e", lo=0.0, lo_open=True, hi=1e7, texturable=True,
+               only_with=("distribution", ("blinn",))),
+     Parameter("m", "Beckmann rms slope", lo=M_MIN, hi=100.0, texturable=True,
+               only_with=("distribution", ("beckmann",)),
+               socket=Socket("Coat Roughness", "FLOAT", 0.0, 0.0, 5.0,
+                             "Beckmann rms slope of the coat surface (0 = smooth)"))])
+
+
+@COAT.builder
+def _coat(p):
+    dist = p["distribution"]
+    kw = {"exponent": p["exponent"]} if dist == "blinn" else {"m": p["m"]} if dist == "beckmann" else {}
+    return Coat(n=p["n"], thickness=p["thickness"], absorption=p["absorption"], distribution=dist, **kw)
+
+
+DECLARATION = ModelDeclaration(
+    "weidlich_wilkie", "Weidlich–Wilkie Layered",
+    "A clear or absorbing coat over a base material (plug another Polarising BSDF into Base)",
+    [Parameter("coats", "the coats, top first", kind="coats", members=COAT),
+     Parameter("base", "the material under the coats (a reflective one)", kind="material",
+               default={"type": "lambert", "albedo": 0.8},
+               socket=Socket("Base", "SHADER", None, None, None,
+                             "The material under the coat: another Polarising BSDF (default: white Lambert)")),
+     Parameter("form", "energy (energy conserving), published (as published) or first_order", kind="choice",
+               choices=FORMS, default="energy"),
+     Parameter("t_term", "transmission term: ww (1 − F21·G) or t21 (1 − F21)", kind="choice", choices=T_TERMS,
+               default="ww", only_with=("form", ("published", "first_order"))),
+     Parameter("transmission_normal", "refraction through the facet or the macro normal (default: facet for "
+                                      "the published form, macro for the energy form)", kind="choice",
+               choices=TRANSMISSION_NORMALS, default=None)],
+    catalogue="weidlich_wilkie", node="WEIDLICH_WILKIE")
+
+
+@DECLARATION.builder
+def _weidlich_wilkie(p, coats, base):
+    form, normal = p["form"], p["transmission_normal"]
+    if form == "energy" and normal == "facet":
+        raise SceneError(p.field("transmission_normal"), "the energy-conserving form refracts through the macro "
+                                                         "normal: use 'macro' (or form 'published')")
+    t_term = p["t_term"]
+    try:
+        return WeidlichWilkie(coats, base, form=form, t_term=t_term, transmission_normal=normal)
+    except SceneError:
+        raise
+    except ValueError as e:
+        raise SceneError(p.where, str(e)) from None

@@ -20,21 +20,13 @@ import os
 
 import numpy as np
 
-from ..materials.black_glass import BlackGlass
-from ..materials.conductor import SmoothConductor
-from ..materials.dielectric import SmoothDielectric
-from ..materials.filter_sheet import FilterSheet
-from ..materials.htsg import HTSG
-from ..materials.lambert import Lambert
-from ..materials.smooth_limit import MirrorWithDiffuse
-from ..materials.torrance_sparrow import TorranceSparrow
-from ..materials.weidlich_wilkie import Coat, WeidlichWilkie
+from ..materials.catalogue import MODELS
 from .description import (Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
                                       RenderSettings, Scene, SpotLight)
 from ..errors import SceneError
 from .meshio import read_mesh
 from .shapes import icosphere, quad, transform_matrix, transform_mesh
-from ..spectral import ConstantSpectrum, RGBIlluminantSpectrum, named_ior, parse_spectrum
+from ..spectral import ConstantSpectrum, RGBIlluminantSpectrum
 
 FORMAT = "polar-scene/1"
 #: Largest coordinate accepted: Embree works in float32 (max ~3.4e38) and rays need headroom.
@@ -163,135 +155,41 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
 
 
 def parse_material(d: dict, field: str, lookup=None, depth: int = 0):
-    """A BSDF from a material object.  ``lookup(name)`` resolves references to other materials
-    (the base of a layered material may be given inline or by name)."""
+    """A BSDF from a material object, read through the model's declaration (engine.materials.parameters).
+    ``lookup(name)`` resolves references to other materials (the base of a layered material may be
+    given inline or by name)."""
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
-    kind = choice(_require(d, "type", field), f"{field}.type",
-                  ("lambert", "conductor", "dielectric", "black_glass", "torrance_sparrow", "htsg",
-                   "weidlich_wilkie", "polariser", "retarder"))
-    common = {"type", "note", "name"}
-    if kind == "lambert":
-        _check_keys(d, field, common | {"albedo"})
-        return Lambert(parse_spectrum(d.get("albedo", 0.8), f"{field}.albedo", kind="reflectance"))
-    if kind == "conductor":
-        _check_keys(d, field, common | {"n", "k", "metal", "exterior_n"})
-        ext = number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True)
-        return SmoothConductor(*_complex_index(d, field), ext)
-    if kind in ("polariser", "retarder"):
-        _check_keys(d, field, common | {"axis", "extinction", "retardance_deg", "transmittance"})
-        return FilterSheet(vec3(_require(d, "axis", field), f"{field}.axis", unit=True), kind,
-                           extinction=number(d.get("extinction", 0.0), f"{field}.extinction", 0, 1),
-                           retardance_deg=number(d.get("retardance_deg", 90.0), f"{field}.retardance_deg", -360, 360),
-                           transmittance=number(d.get("transmittance", 1.0), f"{field}.transmittance", 0, 1))
-    if kind == "weidlich_wilkie":
-        _check_keys(d, field, common | {"coats", "base", "form", "t_term", "transmission_normal"})
-        coats_in = _require(d, "coats", field)
-        if not isinstance(coats_in, list) or not coats_in:
-            raise SceneError(f"{field}.coats", "must be a non-empty list of coats (top coat first)")
-        coats = [_parse_coat(c, f"{field}.coats[{i}]") for i, c in enumerate(coats_in)]
-        base_in = d.get("base", {"type": "lambert", "albedo": 0.8})
-        if depth > 16:
-            raise SceneError(f"{field}.base", "layered materials nest more than 16 levels deep")
-        if isinstance(base_in, str):
-            if lookup is None:
-                raise SceneError(f"{field}.base", "material references are not available here; give it inline")
-            base = lookup(base_in, f"{field}.base")
-        else:
-            base = parse_material(base_in, f"{field}.base", lookup, depth + 1)
-        form = choice(d.get("form", "energy"), f"{field}.form", ("energy", "published", "first_order"))
-        normal = choice(d.get("transmission_normal"), f"{field}.transmission_normal", (None, "facet", "macro"))
-        if form == "energy" and normal == "facet":
-            raise SceneError(f"{field}.transmission_normal", "the energy-conserving form refracts through the macro "
-                                                             "normal: use 'macro' (or form 'published')")
-        try:
-            return WeidlichWilkie(coats, base, form=form, t_term=choice(d.get("t_term", "ww"), f"{field}.t_term",
-                                                                        ("ww", "t21")),
-                                  transmission_normal=normal)
-        except ValueError as e:
-            raise SceneError(field, str(e)) from None
-    if kind == "htsg":
-        _check_keys(d, field, common | {"n", "k", "metal", "exterior_n", "sigma0_um", "tau_um", "albedo"})
-        n, k = _complex_index(d, field)
-        return HTSG(n, k, number(_require(d, "sigma0_um", field), f"{field}.sigma0_um", 0, 1e4),
-                    number(_require(d, "tau_um", field), f"{field}.tau_um", 0, 1e6, lo_open=True),
-                    albedo=parse_spectrum(d.get("albedo", 0.0), f"{field}.albedo", kind="reflectance"),
-                    exterior_n=number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True))
-    if kind == "torrance_sparrow":
-        _check_keys(d, field, common | {"n", "k", "metal", "exterior_n", "m", "shadowing", "diffuse_albedo",
-                                        "diffuse_weight", "specular_weight"})
-        n, k = _complex_index(d, field)
-        shadowing = choice(d.get("shadowing", "ts"), f"{field}.shadowing", ("ts", "smith", "smith_rational", "none"))
-        m = number(_require(d, "m", field), f"{field}.m", 0, 100.0)
-        if 0 < m < 1e-4:
-            raise SceneError(f"{field}.m", f"must be 0 (the smooth limit) or in [0.0001, 100], got {m:g}")
-        if m == 0:   # the smooth limit: a Fresnel mirror (plus the Lambertian part)
-            return MirrorWithDiffuse(
-                n, k, exterior_n=number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True),
-                diffuse_albedo=parse_spectrum(d.get("diffuse_albedo", 0.0), f"{field}.diffuse_albedo",
-                                              kind="reflectance"),
-                diffuse_weight=number(d.get("diffuse_weight", 1.0 if "diffuse_albedo" in d else 0.0),
-                                      f"{field}.diffuse_weight", 0),
-                specular_weight=number(d.get("specular_weight", 1.0), f"{field}.specular_weight", 0))
-        return TorranceSparrow(
-            n, k, m, shadowing=shadowing,
-            exterior_n=number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True),
-            diffuse_albedo=parse_spectrum(d.get("diffuse_albedo", 0.0), f"{field}.diffuse_albedo", kind="reflectance"),
-            diffuse_weight=number(d.get("diffuse_weight", 1.0 if "diffuse_albedo" in d else 0.0),
-                                  f"{field}.diffuse_weight", 0),
-            specular_weight=number(d.get("specular_weight", 1.0), f"{field}.specular_weight", 0))
-    if kind == "dielectric":
-        _check_keys(d, field, common | {"n", "exterior_n"})
-        return SmoothDielectric(number(_require(d, "n", field), f"{field}.n", 0, math.inf, lo_open=True),
-                                number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf,
-                                       lo_open=True))
-    _check_keys(d, field, common | {"n", "k", "exterior_n"})
-    if "k" in d:
-        number(d["k"], f"{field}.k", 0, 0)  # black glass has a real index: only k = 0 is allowed
-    n = parse_spectrum(d.get("n", 1.5), f"{field}.n", kind="unbounded")
-    _check_positive_spectrum(n, f"{field}.n", strict=True)
-    return BlackGlass(n, number(d.get("exterior_n", 1.0), f"{field}.exterior_n", 0, math.inf, lo_open=True))
+    decl = MODELS[choice(_require(d, "type", field), f"{field}.type", tuple(MODELS))]
+    _check_keys(d, field, {"type", "note", "name"} | set(decl.names()))
+    parts = {}
+    for p in decl.parameters:
+        if p.kind == "coats":
+            coats_in = _require(d, p.name, field)
+            if not isinstance(coats_in, list) or not coats_in:
+                raise SceneError(f"{field}.{p.name}", "must be a non-empty list of coats (top coat first)")
+            parts[p.name] = [_parse_coat(c, f"{field}.{p.name}[{i}]", p.members) for i, c in enumerate(coats_in)]
+        elif p.kind == "material":
+            parts[p.name] = _parse_part(d.get(p.name, p.default), f"{field}.{p.name}", lookup, depth)
+    return decl.build(decl.values(d, field), **parts)
 
 
-def _parse_coat(c, field):
+def _parse_part(value, field, lookup, depth):
+    """A nested material (e.g. the base under a coat): inline or a reference by name."""
+    if depth > 16:
+        raise SceneError(field, "layered materials nest more than 16 levels deep")
+    if isinstance(value, str):
+        if lookup is None:
+            raise SceneError(field, "material references are not available here; give it inline")
+        return lookup(value, field)
+    return parse_material(value, field, lookup, depth + 1)
+
+
+def _parse_coat(c, field, coat):
     if not isinstance(c, dict):
         raise SceneError(field, "must be an object like {\"n\": 1.5, \"distribution\": \"smooth\"}")
-    _check_keys(c, field, {"n", "thickness", "absorption", "distribution", "exponent", "m", "note"})
-    dist = choice(c.get("distribution", "smooth"), f"{field}.distribution", ("smooth", "blinn", "beckmann"))
-    kw = {}
-    if dist == "blinn":
-        kw["exponent"] = number(_require(c, "exponent", field), f"{field}.exponent", 0, 1e7, lo_open=True)
-    elif dist == "beckmann":
-        kw["m"] = number(_require(c, "m", field), f"{field}.m", 1e-4, 100.0)
-    return Coat(n=number(c.get("n", 1.5), f"{field}.n", 0, 100.0, lo_open=True),
-                thickness=number(c.get("thickness", 0.0), f"{field}.thickness", 0),
-                absorption=parse_spectrum(c.get("absorption", 0.0), f"{field}.absorption", kind="unbounded"),
-                distribution=dist, **kw)
-
-
-def _complex_index(d: dict, field: str):
-    """(n, k) spectra of a conductor-like material: 'metal' or 'n' and 'k'."""
-    if "metal" in d:
-        if "n" in d or "k" in d:
-            raise SceneError(f"{field}.metal", "give either 'metal' or 'n' and 'k', not both")
-        return named_ior(d["metal"], field=f"{field}.metal")
-    n = parse_spectrum(_require(d, "n", field), f"{field}.n", kind="unbounded")
-    k = parse_spectrum(d.get("k", 0.0), f"{field}.k", kind="unbounded")
-    _check_positive_spectrum(n, f"{field}.n", strict=True)
-    _check_positive_spectrum(k, f"{field}.k", strict=False)
-    return n, k
-
-
-def _check_positive_spectrum(spec, field: str, strict: bool):
-    """Constant or tabulated index parts: n > 0, κ ≥ 0 over 360–830 nm."""
-    lam = np.linspace(360.0, 830.0, 95)
-    try:
-        v = spec.eval(lam)
-    except SceneError:
-        raise
-    bad = (v <= 0) if strict else (v < 0)
-    if np.any(bad) or not np.all(np.isfinite(v)):
-        raise SceneError(field, f"must be {'> 0' if strict else '≥ 0'} at every wavelength in 360–830 nm")
+    _check_keys(c, field, {"note"} | set(coat.names()))
+    return coat.build(coat.values(c, field))
 
 
 def _parse_emission(d, field: str):

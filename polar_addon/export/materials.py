@@ -18,14 +18,14 @@ import math
 
 import numpy as np
 
-from ...engine.materials.black_glass import BlackGlass
 from ...engine.materials.conductor import SmoothConductor
 from ...engine.materials.dielectric import SmoothDielectric
 from ...engine.materials.lambert import Lambert
+from ...engine.materials.torrance_sparrow import M_MIN
 from ...engine.errors import SceneError
 from ...engine.spectral import (ConstantSpectrum, RGBIlluminantSpectrum, RGBReflectanceSpectrum,
-                                RGBUnboundedSpectrum, named_ior)
-from ..nodes.models import DIELECTRIC_PRESETS
+                                RGBUnboundedSpectrum)
+from ..nodes.models import DIELECTRIC_PRESETS, NODE_MODELS
 
 SMOOTH_LIMIT = 0.02
 DEFAULT_ALBEDO = 0.8
@@ -96,7 +96,7 @@ def _conductor(n_rgb, k_rgb, m, warnings, mat, diffuse=None):
 
 def _torrance_sparrow(n, k, m, mat, shadowing="ts", diffuse=None):
     from ...engine.materials.smooth_limit import MirrorWithDiffuse
-    from ...engine.materials.torrance_sparrow import M_MIN, TorranceSparrow
+    from ...engine.materials.torrance_sparrow import TorranceSparrow
     kwargs = {}
     if diffuse is not None and max(diffuse) > 0:
         kwargs = {"diffuse_albedo": _rgb_spectrum(diffuse), "diffuse_weight": 1.0}
@@ -110,18 +110,38 @@ def _coat_roughness(m):
     return {"distribution": "smooth"} if m < SMOOTH_LIMIT else {"distribution": "beckmann", "m": m}
 
 
-def _metal_nk(node, reader):
-    if getattr(node, "metal", "CUSTOM") != "CUSTOM":
-        return named_ior(node.metal)
-    return ConstantSpectrum(reader.float("n", 0, lo_open=True)), ConstantSpectrum(reader.float("k", 0))
+def _socket_values(reader, decl) -> dict:
+    """{parameter name: value} of a model's FLOAT and COLOR inputs (a grey colour as one number).
+
+    An input that a node saved by an older version lacks is left out: the parameter keeps its
+    declared default.  The declaration's builder validates every value.
+    """
+    values = {}
+    for p in decl.parameters:
+        s = p.socket
+        if s is None or s.type not in ("FLOAT", "COLOR") or s.name not in reader.node.inputs:
+            continue
+        sock = reader._socket(s.name)
+        if s.type == "FLOAT":
+            values[p.name] = float(sock.default_value)
+        else:
+            rgb = [float(c) for c in sock.default_value[:3]]
+            values[p.name] = rgb[0] if max(rgb) == min(rgb) else rgb
+    return values
 
 
-def _dielectric_ior(node, reader):
-    preset = getattr(node, "dielectric_preset", "CUSTOM")
-    for name, _, _, _, value in DIELECTRIC_PRESETS:
-        if name == preset and value is not None:
-            return value
-    return reader.float("IOR", 0, lo_open=True)
+def _declared(decl, values, where):
+    """Values of ``decl`` whose errors name the node's inputs (socket names)."""
+    def label(name):
+        socket = decl[name].socket if name in decl else None
+        return socket.name if socket is not None else name
+    return decl.values(values, where, label=label)
+
+
+def _slope(values, name, decl, where):
+    """A roughness input (Beckmann m) ≥ 0 within the declared maximum; small values map to the smooth model."""
+    p = decl[name]
+    return p.with_(lo=0.0).number(values.pop(name, p.socket.default), f"{where}.{p.socket.name}")
 
 
 def polar_node_bsdf(node, mat, warnings, depth=0):
@@ -135,46 +155,44 @@ def polar_node_bsdf(node, mat, warnings, depth=0):
 
 
 def _polar_node_bsdf(node, mat, warnings, depth):
-    r = _Reader(mat, node, warnings)
+    """The node's inputs and menus → the model's declared parameters → the model's builder."""
     model = node.model
-    if model == "LAMBERT":
-        return Lambert(_rgb_spectrum(r.rgb("Albedo", 0.0, 1.0)))
-    if model == "CONDUCTOR":
-        n, k = _metal_nk(node, r)
-        return SmoothConductor(n, k)
-    if model == "DIELECTRIC":
-        return SmoothDielectric(_dielectric_ior(node, r))
-    if model == "BLACK_GLASS":
-        return BlackGlass(ConstantSpectrum(_dielectric_ior(node, r)))
+    decl = NODE_MODELS.get(model)
+    if decl is None:
+        raise SceneError(f"material {mat!r}", f"unknown Polarising BSDF model {model!r}")
+    r = _Reader(mat, node, warnings)
+    where = f"material {mat!r}.{node.name}"
+    values = _socket_values(r, decl)
+    parts = {}
+    if "metal" in decl and getattr(node, "metal", "CUSTOM") != "CUSTOM":   # measured n, κ instead of the inputs
+        values.pop("n", None)
+        values.pop("k", None)
+        values["metal"] = node.metal
+    if model in ("DIELECTRIC", "BLACK_GLASS"):
+        preset = getattr(node, "dielectric_preset", "CUSTOM")
+        for name, _, _, _, v in DIELECTRIC_PRESETS:
+            if name == preset and v is not None:   # a named preset replaces the IOR input
+                values["n"] = v
     if model == "TORRANCE_SPARROW":
-        n, k = _metal_nk(node, r)
-        diffuse = r.rgb("Diffuse", 0.0, 1.0)
-        return _torrance_sparrow(n, k, r.float("Roughness", 0.0, 10.0), mat,
-                                 shadowing="smith" if node.shadowing == "SMITH" else "ts",
-                                 diffuse=diffuse if max(diffuse) > 0 else None)
-    if model == "HTSG":
-        try:
-            from ...engine.materials.htsg import HTSG
-        except ImportError:
-            raise SceneError(f"material {mat!r}", "HTSG is not available in this engine build") from None
-        n, k = _metal_nk(node, r)
-        return HTSG(n, k, r.float("Sigma0", 0.0, 100.0), r.float("Tau", 0.0, 1000.0, lo_open=True),
-                    albedo=_rgb_spectrum(r.rgb("Diffuse", 0.0, 1.0)))
+        m = _slope(values, "m", decl, where)
+        values["m"] = m if m >= M_MIN else 0.0    # roughness 0: the smooth limit (Fresnel mirror + Lambertian part)
+        values["shadowing"] = "smith" if node.shadowing == "SMITH" else "ts"
+        if values.get("diffuse_albedo") == 0.0:   # black: no Lambertian part at all
+            del values["diffuse_albedo"]
     if model == "WEIDLICH_WILKIE":
-        try:
-            from ...engine.materials.weidlich_wilkie import Coat, WeidlichWilkie
-        except ImportError:
-            raise SceneError(f"material {mat!r}", "Weidlich–Wilkie is not available in this engine build") from None
+        coat_decl = decl["coats"].members
+        coat_values = _socket_values(r, coat_decl)
+        m = _slope(coat_values, "m", coat_decl, where)
+        if m >= SMOOTH_LIMIT:
+            coat_values.update(distribution="beckmann", m=m)
         base_node = _follow(node.inputs["Base"])
         if depth > 16:
             raise SceneError(f"material {mat!r}", "layered materials nest more than 16 coats deep")
-        base = Lambert(ConstantSpectrum(DEFAULT_ALBEDO)) if base_node is None else \
+        parts["coats"] = [coat_decl.build(_declared(coat_decl, coat_values, where))]
+        parts["base"] = Lambert(ConstantSpectrum(DEFAULT_ALBEDO)) if base_node is None else \
             surface_bsdf(base_node, mat, warnings, depth + 1)[0]
-        coat = Coat(n=r.float("Coat IOR", 1.0, 10.0), thickness=r.float("Coat Thickness", 0.0),
-                    absorption=_rgb_spectrum(r.rgb("Coat Absorption", 0.0), "unbounded"),
-                    **_coat_roughness(r.float("Coat Roughness", 0.0, 10.0)))
-        return WeidlichWilkie([coat], base, form="published" if node.ww_form == "PUBLISHED" else "energy")
-    raise SceneError(f"material {mat!r}", f"unknown Polarising BSDF model {model!r}")
+        values["form"] = "published" if node.ww_form == "PUBLISHED" else "energy"
+    return decl.build(_declared(decl, values, where), **parts)
 
 
 def _principled(node, mat, warnings):

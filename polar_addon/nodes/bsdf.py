@@ -44,19 +44,33 @@ def _preview_look(model, principled, links, group_in):
         links.new(group_in.outputs["Coat IOR"], p["Coat IOR"])
 
 
+def _new_input(group, sname, stype, default, lo, hi, desc):
+    sock = group.interface.new_socket(sname, in_out="INPUT", socket_type=SOCKET_TYPES[stype])
+    sock.description = desc
+    if stype == "FLOAT":
+        sock.default_value, sock.min_value, sock.max_value = default, lo, hi
+    elif stype == "COLOR":
+        sock.default_value = (*default, 1.0)
+
+
+def _add_missing_inputs(group, model: str):
+    """Inputs declared after a saved file's group was made are appended (existing ones never change)."""
+    have = {item.name for item in group.interface.items_tree
+            if item.item_type == "SOCKET" and item.in_out == "INPUT"}
+    for spec in MODEL_SOCKETS[model]:
+        if spec[0] not in have:
+            _new_input(group, *spec)
+
+
 def ensure_group(model: str) -> bpy.types.ShaderNodeTree:
     name = group_name(model)
     group = bpy.data.node_groups.get(name)
     if group is not None:
+        _add_missing_inputs(group, model)
         return group
     group = bpy.data.node_groups.new(name, "ShaderNodeTree")
-    for sname, stype, default, lo, hi, desc in MODEL_SOCKETS[model]:
-        sock = group.interface.new_socket(sname, in_out="INPUT", socket_type=SOCKET_TYPES[stype])
-        sock.description = desc
-        if stype == "FLOAT":
-            sock.default_value, sock.min_value, sock.max_value = default, lo, hi
-        elif stype == "COLOR":
-            sock.default_value = (*default, 1.0)
+    for spec in MODEL_SOCKETS[model]:
+        _new_input(group, *spec)
     group.interface.new_socket("BSDF", in_out="OUTPUT", socket_type="NodeSocketShader")
     nodes, links = group.nodes, group.links
     group_in = nodes.new("NodeGroupInput")

@@ -1,8 +1,11 @@
 """The parameters of each polarising model as node sockets (pure data, no bpy).
 
-Socket tuples: (name, socket type, default, min, max, description).  The names are what the
+Socket tuples: (name, socket type, default, min, max, description), generated from the
+parameter declarations of engine.materials (a parameter's ``socket``).  The names are what the
 exporter reads; keep them stable (saved files refer to them).  Enum numbers are stable too.
 """
+
+from ...engine.materials.catalogue import MODELS
 
 MODEL_ITEMS = [
     ("LAMBERT", "Lambert", "Ideal depolariser: diffuse, unpolarised reflection (albedo/π)", 0),
@@ -47,31 +50,18 @@ WW_FORM_ITEMS = [
     ("PUBLISHED", "Published", "Weidlich–Wilkie as published (gains energy at grazing angles)", 1),
 ]
 
-_N = ("n", "FLOAT", 0.47, 0.01, 20.0, "Real part of the complex index of refraction")
-_K = ("k", "FLOAT", 2.4, 0.0, 50.0, "Extinction coefficient κ ≥ 0 (imaginary part of the index)")
-_IOR = ("IOR", "FLOAT", 1.5, 1.0001, 5.0, "Index of refraction of the material (outside: 1)")
 
-MODEL_SOCKETS = {
-    "LAMBERT": [("Albedo", "COLOR", (0.8, 0.8, 0.8), 0.0, 1.0, "Diffuse reflectance (linear sRGB)")],
-    "CONDUCTOR": [_N, _K],
-    "DIELECTRIC": [_IOR],
-    "BLACK_GLASS": [_IOR],
-    "TORRANCE_SPARROW": [_N, _K,
-                         ("Roughness", "FLOAT", 0.1, 0.0, 5.0, "Beckmann rms slope m (Mitsuba's α); 0 = smooth mirror"),
-                         ("Diffuse", "COLOR", (0.0, 0.0, 0.0), 0.0, 1.0,
-                          "Albedo of an added Lambertian (depolarising) part")],
-    "HTSG": [("n", "FLOAT", 0.88, 0.01, 20.0, "Real part of the complex index"),
-             ("k", "FLOAT", 6.15, 0.0, 50.0, "Extinction coefficient κ ≥ 0"),
-             ("Sigma0", "FLOAT", 0.18, 0.0, 100.0, "Surface height rms deviation σ₀ in µm"),
-             ("Tau", "FLOAT", 3.0, 1e-3, 1000.0, "Autocorrelation length τ in µm"),
-             ("Diffuse", "COLOR", (0.0, 0.0, 0.0), 0.0, 1.0, "Albedo of the uniform diffuse term")],
-    "WEIDLICH_WILKIE": [("Coat IOR", "FLOAT", 1.5, 1.0, 5.0, "Index of the coat"),
-                        ("Coat Thickness", "FLOAT", 1.0, 0.0, 1e6, "Coat thickness (any unit; only "
-                         "thickness × absorption matters)"),
-                        ("Coat Absorption", "COLOR", (0.0, 0.0, 0.0), 0.0, 1e6,
-                         "Absorption coefficient per unit thickness (linear sRGB)"),
-                        ("Coat Roughness", "FLOAT", 0.0, 0.0, 5.0, "Beckmann rms slope of the coat surface "
-                         "(0 = smooth)"),
-                        ("Base", "SHADER", None, None, None, "The material under the coat: another "
-                         "Polarising BSDF (default: white Lambert)")],
-}
+def declared_sockets(decl) -> list:
+    """Socket tuples of one model in declaration order (a coats parameter contributes its coat's sockets)."""
+    out = []
+    for p in decl.parameters:
+        if p.kind == "coats":
+            out += declared_sockets(p.members)
+        elif p.socket is not None:
+            out.append(p.socket.as_tuple())
+    return out
+
+
+#: Polarising BSDF model enum → the declarations of engine.materials (one group of sockets each).
+NODE_MODELS = {decl.node: decl for decl in MODELS.values() if decl.node}
+MODEL_SOCKETS = {model: declared_sockets(decl) for model, decl in NODE_MODELS.items()}
