@@ -84,12 +84,14 @@ LINEAR_SRGB_TO_XYZ = _xyz_to_rgb_from_primaries()
 XYZ_TO_LINEAR_SRGB = np.linalg.inv(LINEAR_SRGB_TO_XYZ)
 LINEAR_SRGB_TO_XYZ.setflags(write=False)
 XYZ_TO_LINEAR_SRGB.setflags(write=False)
-LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)
+#: Rec. 709 / sRGB luminance weights of linear R, G, B (Y of linear sRGB): the engine's one definition.
+LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+LUMINANCE_WEIGHTS.setflags(write=False)
 
 
 def luminance(rgb) -> np.ndarray:
     """Rec. 709 luminance 0.2126 R + 0.7152 G + 0.0722 B of linear sRGB (last axis = RGB)."""
-    return np.asarray(rgb, dtype=np.float64) @ np.asarray(LUMINANCE_WEIGHTS)
+    return np.asarray(rgb, dtype=np.float64) @ LUMINANCE_WEIGHTS
 
 
 # --- wavelength sampling (Mitsuba 3's sample_rgb_spectrum) ----------------------------------
