@@ -2,7 +2,8 @@
 
 - :func:`erfc`: W. J. Cody's rational Chebyshev approximations (Math. Comp. 23, 631–637, 1969;
   Netlib SPECFUN CALERF), vectorised; relative error ~1e-16 against libm, and subnormal results
-  (26.543 ≤ x < 27.3) to a unit of the subnormal grid; NaN propagates, ±∞ gives 0 / 2.  :func:`erf` is built on it.
+  (26.543 ≤ x < 27.3) to a unit of the subnormal grid; NaN propagates, ±∞ gives 0 / 2.
+  :func:`erf` is built on it.
 - :func:`erfcx` = e^{x²} erfc(x), the form that stays accurate far in the tail (Smith Λ, the
   visible-slope CDF of engine.kernels.microfacet): a Chebyshev series in t = (x − K)/(x + K) of
   erfcx(x)·(x + K), fitted at import time (below); relative error ≲ 1e-14 (x ≥ 0).
