@@ -51,6 +51,18 @@ def any_perpendicular(n: np.ndarray) -> np.ndarray:
     return np.stack((1.0 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]))
 
 
+def local_frame(n: np.ndarray):
+    """Tangents (t, b) with (t, b, n) a right-handed orthonormal basis for unit n (3, ...):
+    t = any_perpendicular(n), b = n × t.  Every local shading frame of the engine is this one."""
+    t = any_perpendicular(n)
+    return t, cross(n, t)
+
+
+def to_local(w: np.ndarray, t: np.ndarray, b: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """Components (w·t, w·b, w·n) (3, ...) of w in the basis (t, b, n) of ``local_frame``."""
+    return np.stack((dot(w, t), dot(w, b), dot(w, n)))
+
+
 def reflect(w: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Mirror direction of w about n (both pointing away from the surface)."""
     return 2.0 * dot(w, n) * n - w

@@ -6,8 +6,8 @@ Submodules are imported in ``register()`` so that ``polar_addon.packaging`` work
 
 
 def _modules():
-    from . import engine, nodes, operators, properties, ui
-    return (properties, nodes, engine, operators, ui)
+    from . import nodes, operators, properties, render_engine, ui
+    return (properties, nodes, render_engine, operators, ui)
 
 
 def register():

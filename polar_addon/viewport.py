@@ -88,7 +88,10 @@ def camera_from_view(view_matrix, projection_matrix, width, height, is_perspecti
 class ViewportSession:
     """Blender side of the viewport: export on demand, one small batch per redraw, draw."""
 
-    def __init__(self):
+    def __init__(self, settings_for):
+        #: settings_for(scene, preview=True) → engine RenderSettings (render_engine.engine_settings,
+        #: passed in so that this module does not import the render engine that owns the session)
+        self.settings_for = settings_for
         self.sync_state = ViewportSync()
         self.renderer = None
         self.depsgraph_scene = None
@@ -103,11 +106,10 @@ class ViewportSession:
         if self.sync_state.needs_export:
             from .export.scene import export_scene
             from ..engine.render.renderer import Renderer
-            from .engine import engine_settings
             region = context.region
             try:
                 scene, _ = export_scene(depsgraph, depsgraph.scene.camera, region.width, region.height,
-                                        engine_settings(depsgraph.scene, preview=True))
+                                        self.settings_for(depsgraph.scene, preview=True))
                 self.renderer = Renderer(scene)
                 self.error = None
             except Exception as e:  # noqa: BLE001 — shown in the viewport header instead

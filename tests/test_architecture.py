@@ -1,10 +1,32 @@
 """Layering rules: the engine stands alone (no bpy, no add-on imports, relative imports only so it
-works as a subpackage of the Blender extension)."""
+works as a subpackage of the Blender extension), and nothing imports in a circle.
 
+The import graph is read from the sources with ``ast`` (every ``import``, also those inside
+functions, relative ones resolved against the importing module's package), so a circle hidden in
+a function-local import counts: it still ties the two modules together.  Layers, bottom-up:
+errors; kernels and vec3; polarisation and spectral; materials, output and postprocess; scene;
+render; cli (and the ``engine`` package's own facade).  A module may import its own layer or lower
+ones, never a higher one, and packages may not import each other in a circle.
+"""
+
+import ast
 import os
 import re
 
 from tests.conftest import REPO
+
+#: Units whose imports are checked, bottom layer first.  A unit is a subpackage or a top-level module.
+ENGINE_LAYERS = (
+    ("engine.errors",),
+    ("engine.kernels", "engine.vec3"),
+    ("engine.polarisation", "engine.spectral"),
+    ("engine.materials", "engine.output", "engine.postprocess"),
+    ("engine.scene",),
+    ("engine.render",),
+    ("engine.cli", "engine.__main__", "engine"),
+)
+LAYER_OF = {unit: i for i, units in enumerate(ENGINE_LAYERS) for unit in units}
+SOURCE_ROOTS = ("engine", "polar_addon")
 
 
 def engine_sources():
@@ -12,6 +34,200 @@ def engine_sources():
         for f in files:
             if f.endswith(".py"):
                 yield os.path.join(dirpath, f)
+
+
+def module_files():
+    """{dotted module name: path} of every module under engine/ and polar_addon/ (packages by their
+    own name, e.g. ``engine.kernels`` for engine/kernels/__init__.py)."""
+    modules = {}
+    for root in SOURCE_ROOTS:
+        for dirpath, dirs, files in os.walk(os.path.join(REPO, root)):
+            dirs[:] = [d for d in dirs if d != "__pycache__"]
+            for f in files:
+                if f.endswith(".py"):
+                    rel = os.path.relpath(os.path.join(dirpath, f), REPO)[:-3].split(os.sep)
+                    if rel[-1] == "__init__":
+                        rel = rel[:-1]
+                    modules[".".join(rel)] = os.path.join(dirpath, f)
+    return modules
+
+
+def imported_names(name: str, path: str, modules=()):
+    """Absolute dotted names imported by module ``name``.
+
+    ``from X import a, b`` names X.a and X.b where they are modules of this tree, and X itself when
+    any of a, b is an attribute of X (``from . import cie`` in a package's submodule needs the
+    submodule, not the package's __init__, which Python has started running already).
+    """
+    tree = ast.parse(open(path, encoding="utf-8").read(), filename=path)
+    is_package = os.path.basename(path) == "__init__.py"
+    package = name.split(".") if is_package else name.split(".")[:-1]
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.extend(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                assert node.level - 1 <= len(package), f"{name}: relative import above the source tree"
+                base = package[:len(package) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module
+            subs = [f"{target}.{alias.name}" for alias in node.names]
+            out.extend(s for s in subs if s in modules)
+            if not all(s in modules for s in subs):
+                out.append(target)
+    return out
+
+
+def import_graph():
+    """{module: set of modules of this tree it imports} and {module: raw imported names}."""
+    modules = module_files()
+    graph, raw = {}, {}
+    for name, path in modules.items():
+        raw[name] = imported_names(name, path, modules)
+        graph[name] = {n for n in raw[name] if n in modules and n != name}
+    return graph, raw
+
+
+def unit_of(module: str) -> str:
+    """The subpackage a module belongs to (engine.kernels.transport → engine.kernels), or the
+    module itself at the top of engine/ or polar_addon/."""
+    parts = module.split(".")
+    if len(parts) >= 2:
+        candidate = ".".join(parts[:2])
+        if os.path.isdir(os.path.join(REPO, *parts[:2])):
+            return candidate
+    return module
+
+
+def find_cycles(graph):
+    """The strongly connected components with more than one node (Tarjan), each sorted."""
+    index, low, stack, on_stack, out = {}, {}, [], set(), []
+    counter = [0]
+
+    def visit(v):
+        index[v] = low[v] = counter[0]
+        counter[0] += 1
+        stack.append(v)
+        on_stack.add(v)
+        for w in sorted(graph.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                out.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def _describe(cycles, graph):
+    lines = []
+    for comp in cycles:
+        members = set(comp)
+        edges = sorted(f"{a} -> {b}" for a in comp for b in graph.get(a, ()) if b in members)
+        lines.append("circle: " + ", ".join(comp) + "\n    " + "\n    ".join(edges))
+    return "\n".join(lines)
+
+
+def test_no_import_cycle_between_modules():
+    graph, _ = import_graph()
+    cycles = find_cycles(graph)
+    assert not cycles, _describe(cycles, graph)
+
+
+def test_no_import_cycle_between_packages():
+    graph, _ = import_graph()
+    units = {}
+    for a, targets in graph.items():
+        ua = unit_of(a)
+        units.setdefault(ua, set()).update(unit_of(b) for b in targets if unit_of(b) != ua)
+    cycles = find_cycles(units)
+    assert not cycles, _describe(cycles, units)
+
+
+def test_engine_layers_import_downwards_only():
+    graph, _ = import_graph()
+    bad = []
+    for a, targets in graph.items():
+        if not a.startswith("engine"):
+            continue
+        ua = unit_of(a)
+        assert ua in LAYER_OF, f"{ua} has no layer in ENGINE_LAYERS: add it"
+        for b in targets:
+            ub = unit_of(b)
+            if ub != ua and LAYER_OF[ub] > LAYER_OF[ua]:
+                bad.append(f"{a} (layer {LAYER_OF[ua]}) imports {b} (layer {LAYER_OF[ub]})")
+    assert not bad, "\n".join(sorted(bad))
+
+
+def test_engine_never_imports_bpy_or_the_addon_by_ast():
+    _, raw = import_graph()
+    bad = [f"{m} imports {n}" for m, names in raw.items() if m.startswith("engine")
+           for n in names if n and n.split(".")[0] in ("bpy", "polar_addon", "gpu", "gpu_extras", "mathutils")]
+    assert not bad, "\n".join(sorted(bad))
+
+
+def test_the_import_graph_is_read():
+    """Guards the checks above against reading nothing: known edges, relative and function-local."""
+    graph, _ = import_graph()
+    assert "engine.kernels" in graph["engine.kernels.transport"]                       # from . import jit
+    assert "engine.scene.loader" in graph["engine"]                                    # function-local
+    assert "engine.render.renderer" in graph["polar_addon.render_engine"]             # ..engine.render
+    assert len(graph) > 60
+
+
+def test_kernel_twins_are_dispatched_one_way():
+    """Compiled/NumPy pairs are chosen only by engine.kernels.twin: nobody else reads the backend flag
+    or calls a compiled kernel directly, and every ``*_numba`` kernel has its NumPy twin registered."""
+    import importlib
+
+    from engine import kernels
+    modules = module_files()
+    bad = []
+    for name, path in modules.items():
+        if not name.startswith("engine") or name == "engine.kernels":
+            continue
+        tree = ast.parse(open(path, encoding="utf-8").read(), filename=path)
+        for node in ast.walk(tree):
+            ids = []
+            if isinstance(node, ast.Name):
+                ids = [node.id]
+            elif isinstance(node, ast.Attribute):
+                ids = [node.attr]
+            elif isinstance(node, ast.ImportFrom):
+                ids = [a.name for a in node.names]
+            bad += [f"{name}: {i}" for i in ids if i in ("COMPILED", "dispatch", "_numba")]
+    assert not bad, "\n".join(sorted(set(bad)))
+    for name, path in modules.items():   # every engine module (not scripts such as spectral/data/*.py)
+        in_package = os.path.exists(os.path.join(os.path.dirname(path), "__init__.py"))
+        if name.startswith("engine") and name != "engine.__main__" and in_package:
+            importlib.import_module(name)
+    assert {"kernels.transport.update_abcs", "kernels.geometry.pinhole_rays", "kernels.tables.interp_grid",
+            "kernels.microfacet.visible_slope_x", "polarisation.fresnel.fresnel_reflection_abcs"} <= set(kernels.TWINS)
+    compiled = {t.compiled for t in kernels.TWINS.values()}
+    for key, pair in kernels.TWINS.items():
+        assert pair.reference.__name__.endswith("_numpy"), key
+        assert (pair.compiled is not None) == (kernels._numba is not None), key
+    for name in modules:
+        if name.startswith("engine.kernels."):
+            module = importlib.import_module(name)
+            for attr, fn in vars(module).items():
+                if attr.endswith("_numba") and callable(fn) and fn.__module__ == module.__name__:
+                    assert fn in compiled, f"{name}.{attr} is not declared with kernels.twin"
 
 
 def test_engine_never_imports_bpy_or_the_addon_and_uses_relative_imports():

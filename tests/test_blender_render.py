@@ -55,7 +55,7 @@ def test_lambert_only_scene_is_unpolarised(addon, tmp_path):
 
 def test_blender_render_equals_engine_render_of_the_export(addon, tmp_path):
     from polar_render.engine.render.renderer import Renderer
-    from polar_render.polar_addon.engine import engine_settings
+    from polar_render.polar_addon.render_engine import engine_settings
     from polar_render.polar_addon.export.scene import export_scene
     scene = empty_scene(width=40, height=30, samples=3)
     add_plane(30, polar_material("Floor", "BLACK_GLASS"))
@@ -107,7 +107,7 @@ def test_animation_renders_every_frame_with_animated_seed(addon, tmp_path):
 
 
 def test_cancel_keeps_a_partial_image(addon, tmp_path):
-    from polar_render.polar_addon import engine as polar_engine
+    from polar_render.polar_addon import render_engine as polar_engine
     scene = brewster_scene(samples=64)
     scene.polar.batch_rays = 1024
     scene.polar.threads = 1
@@ -144,7 +144,7 @@ def test_bad_input_is_a_clear_blender_error(addon, tmp_path, case):
 
 
 def test_degenerate_and_open_meshes_render_with_a_warning(addon, tmp_path):
-    from polar_render.polar_addon.engine import engine_settings
+    from polar_render.polar_addon.render_engine import engine_settings
     from polar_render.polar_addon.export.scene import export_scene
     scene = brewster_scene()
     me = bpy.data.meshes.new("Degenerate")
@@ -170,7 +170,7 @@ def test_unsupported_world_and_shader_warn_but_render(addon, tmp_path):
     toon = mat.node_tree.nodes.new("ShaderNodeBsdfToon")
     mat.node_tree.links.new(toon.outputs[0], mat.node_tree.get_output_node("ALL").inputs["Surface"])
     obj.data.materials.append(mat)
-    from polar_render.polar_addon.engine import engine_settings
+    from polar_render.polar_addon.render_engine import engine_settings
     from polar_render.polar_addon.export.scene import export_scene
     _, warnings = export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, 48, 36, engine_settings(scene))
     assert any("ShaderNodeTexSky" in w for w in warnings)
@@ -180,7 +180,7 @@ def test_unsupported_world_and_shader_warn_but_render(addon, tmp_path):
 
 
 def test_skip_clear_layers_setting_reaches_the_engine(addon):
-    from polar_render.polar_addon.engine import engine_settings
+    from polar_render.polar_addon.render_engine import engine_settings
     scene = empty_scene()
     assert scene.polar.skip_clear_layers is True
     assert engine_settings(scene).simplify == "auto"

@@ -11,18 +11,26 @@ times the ray casting.  Each kernel here is written twice:
   (``nogil`` so worker threads run in parallel, ``cache`` so a process compiles
   each kernel once per machine).
 
-The public name dispatches to the Numba version when the optional ``numba``
-package imports and ``POLAR_KERNELS`` is not ``numpy``; otherwise to the NumPy
-one.  Tests run both on the same inputs and require equality (bit-for-bit where
-the operation order is the same, 1e-12 relative where a reduction order differs).
-Numba is optional: a render without it gives the same image, only slower.
+Every pair is declared once with :func:`twin`, which records it in :data:`TWINS` (so tests can
+enumerate them) and returns the function to use: the Numba version when the optional ``numba``
+package imports and ``POLAR_KERNELS`` is not ``numpy``, otherwise the NumPy one.  Tests run both
+on the same inputs and require equality (bit-for-bit where the operation order is the same, 1e-12
+relative where a reduction order differs).  Numba is optional at run time (a dependency of the
+package, but the Blender extension does not bundle it): without it a render gives the same image,
+only slower.
+
+Kernels are the lowest compute layer: they import only ``engine.vec3`` and each other.  A NumPy
+reference that is physics of a higher layer (the Fresnel amplitudes of engine.polarisation.fresnel)
+stays there and is paired with its compiled loop by :func:`twin` where it is defined.
 """
 
 from __future__ import annotations
 
 import os
+from typing import NamedTuple
+from collections.abc import Callable
 
-try:  # optional dependency (pip install polar-render[fast])
+try:  # optional dependency
     import numba as _numba
 except ImportError:  # pragma: no cover - exercised on machines without numba
     _numba = None
@@ -68,6 +76,27 @@ def jit(fn):
         config.CACHE_DIR = previous
 
 
-def dispatch(compiled, reference):
-    """The function to use: the compiled kernel when enabled, else the NumPy reference."""
+class Twin(NamedTuple):
+    """A kernel's two implementations: ``compiled`` (None without Numba) and the NumPy ``reference``."""
+    compiled: Callable | None
+    reference: Callable
+
+
+#: Every declared kernel pair, by the dotted name of its public function (without the package
+#: prefix), e.g. "kernels.transport.update_abcs" or "polarisation.fresnel.fresnel_reflection_abcs".
+TWINS: dict[str, Twin] = {}
+
+
+def twin(compiled, reference):
+    """Declare a kernel pair and return the function to use: ``compiled`` when enabled, else ``reference``.
+
+    ``reference`` is the NumPy function ``<name>_numpy``; ``compiled`` the Numba-backed function with
+    its signature, or None (no Numba: written as ``_loop and wrapper``, ``jit`` returning None then).
+    """
+    public = reference.__name__.removesuffix("_numpy")
+    module = reference.__module__
+    if module.startswith(_PACKAGE + "."):
+        module = module[len(_PACKAGE) + 1:]
+    key = f"{module}.{public}"
+    TWINS[key] = Twin(compiled, reference)
     return compiled if (COMPILED and compiled is not None) else reference

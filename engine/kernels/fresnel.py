@@ -48,7 +48,7 @@ def _abcs_loop(cos_theta, eta, A, B, C, S):
         S[i] = -x.imag
 
 
-def fresnel_reflection_abcs_numba(cos_theta, eta):
+def _abcs_numba(cos_theta, eta):
     c, e = np.broadcast_arrays(np.asarray(cos_theta, dtype=np.float64), np.asarray(eta, dtype=np.complex128))
     shape = c.shape
     c = np.ascontiguousarray(c).reshape(-1)
@@ -58,4 +58,5 @@ def fresnel_reflection_abcs_numba(cos_theta, eta):
     return tuple(o.reshape(shape) for o in out)
 
 
-compiled_abcs = _abcs_loop and fresnel_reflection_abcs_numba
+#: The compiled twin of engine.polarisation.fresnel.fresnel_reflection_abcs_numpy (None without Numba).
+fresnel_reflection_abcs_numba = _abcs_loop and _abcs_numba

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import dispatch, jit
+from . import jit, twin
+from ..vec3 import any_perpendicular, cross, dot, normalize
 
 
 def surface_attributes_numpy(faces, vertices, vertex_normals, tri_has_normals, tri_normal, any_vertex_normals,
@@ -66,7 +67,7 @@ def surface_attributes_numba(faces, vertices, vertex_normals, tri_has_normals, t
     return p, n_g, n_s
 
 
-surface_attributes = dispatch(_surface_loop and surface_attributes_numba, surface_attributes_numpy)
+surface_attributes = twin(_surface_loop and surface_attributes_numba, surface_attributes_numpy)
 
 
 def offset_origin_numpy(p, n_g, w, epsilon):
@@ -93,7 +94,20 @@ def offset_origin_numba(p, n_g, w, epsilon):
     return out
 
 
-offset_origin = dispatch(_offset_loop and offset_origin_numba, offset_origin_numpy)
+offset_origin = twin(_offset_loop and offset_origin_numba, offset_origin_numpy)
+
+
+def unit_cross_numpy(a, b, degenerate):
+    """unit(a × b), or engine.vec3.any_perpendicular(a) where |a × b| ≤ ``degenerate``; (3, ...).
+
+    The axis ⟂ a plane spanned by two directions (plane of incidence, scattering plane), with a
+    deterministic fallback where they are parallel (engine.polarisation.frames).
+    """
+    s = cross(a, b)
+    length = np.sqrt(dot(s, s))
+    ok = length > degenerate
+    fallback = any_perpendicular(a)
+    return np.where(ok, s / np.where(ok, length, 1.0), fallback)
 
 
 @jit
@@ -118,7 +132,6 @@ def _unit_cross_loop(a, b, out, degenerate):
 
 
 def unit_cross_numba(a, b, degenerate):
-    """unit(a × b), or engine.vec3.any_perpendicular(a) where |a × b| ≤ ``degenerate``; (3, ...)."""
     a, b = np.broadcast_arrays(np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64))
     shape = a.shape
     a2 = np.ascontiguousarray(a).reshape(3, -1)
@@ -128,7 +141,27 @@ def unit_cross_numba(a, b, degenerate):
     return out.reshape(shape)
 
 
-compiled_unit_cross = _unit_cross_loop and unit_cross_numba
+unit_cross = twin(_unit_cross_loop and unit_cross_numba, unit_cross_numpy)
+
+
+def film_offsets(pixel, u, W, H, shift_x, shift_y, tx, ty):
+    """(s_x, s_y) (N,): image-plane offsets along right and up of flat pixel indices with jitter u (2, N)
+    (engine.render.camera: (2x/W − 1 + 2·shift_x)·t_x, (1 − 2y/H + 2·shift_y)·t_y, row 0 at the top)."""
+    col = pixel % W
+    row = pixel // W
+    sx = (2.0 * (col + u[0]) / W - 1.0 + 2.0 * shift_x) * tx
+    sy = (1.0 - 2.0 * (row + u[1]) / H + 2.0 * shift_y) * ty
+    return sx, sy
+
+
+def pinhole_rays_numpy(pixel, u, W, H, shift_x, shift_y, tx, ty, forward, right, up):
+    """Directions d, Stokes frames x = unit(d × up) (both (3, N)) and depth per unit length (N,)
+    of pinhole camera rays through flat pixel indices with jitter u (2, N); see engine.render.camera."""
+    sx, sy = film_offsets(pixel, u, W, H, shift_x, shift_y, tx, ty)
+    up = up[:, None]
+    d = normalize(forward[:, None] + sx * right[:, None] + sy * up)
+    x = normalize(cross(d, up))
+    return d, x, d[0] * forward[0] + d[1] * forward[1] + d[2] * forward[2]
 
 
 @jit
@@ -157,8 +190,6 @@ def _pinhole_loop(pixel, u, W, H, shift_x, shift_y, tx, ty, f, r, up, d, x, dept
 
 
 def pinhole_rays_numba(pixel, u, W, H, shift_x, shift_y, tx, ty, forward, right, up):
-    """Directions d, Stokes frames x = unit(d × up) (both (3, N)) and depth per unit length (N,)
-    of pinhole camera rays through flat pixel indices with jitter u (2, N); see engine.render.camera."""
     n = pixel.shape[0]
     d, x, depth = np.empty((3, n)), np.empty((3, n)), np.empty(n)
     _pinhole_loop(np.ascontiguousarray(pixel, dtype=np.int64), np.ascontiguousarray(u, dtype=np.float64),
@@ -168,7 +199,7 @@ def pinhole_rays_numba(pixel, u, W, H, shift_x, shift_y, tx, ty, forward, right,
     return d, x, depth
 
 
-compiled_pinhole_rays = _pinhole_loop and pinhole_rays_numba
+pinhole_rays = twin(_pinhole_loop and pinhole_rays_numba, pinhole_rays_numpy)
 
 
 def area_light_sample_numpy(p, u, cdf, tris, faces, vertices, tri_normal, total_area):
@@ -239,4 +270,4 @@ def area_light_sample_numba(p, u, cdf, tris, faces, vertices, tri_normal, total_
     return wi, dist, scale, pdf, valid
 
 
-area_light_sample = dispatch(_area_light_loop and area_light_sample_numba, area_light_sample_numpy)
+area_light_sample = twin(_area_light_loop and area_light_sample_numba, area_light_sample_numpy)

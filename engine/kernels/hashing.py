@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import dispatch, jit
+from . import jit, twin
 
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
@@ -45,4 +45,4 @@ def uniforms_numba(keys: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     return out
 
 
-uniforms = dispatch(_uniforms_loop and uniforms_numba, uniforms_numpy)
+uniforms = twin(_uniforms_loop and uniforms_numba, uniforms_numpy)

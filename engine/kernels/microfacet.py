@@ -1,70 +1,89 @@
-"""Beckmann visible-slope sampling (Heitz & d'Eon 2014) as one compiled loop per path.
+"""Beckmann visible-slope sampling (Heitz & d'Eon 2014): the NumPy reference and one compiled loop.
 
-The same algorithm and constants as engine.materials.microfacet.Beckmann (the NumPy reference):
-x̃ solves F(x̃) = u·F(cotθ), F(x) = erfc(−x) + tanθ e^{−x²}/√π, by Halley steps safeguarded by
-bisection on [−8, min(cotθ, 8)], started from Giles' erfc⁻¹ (or the left-tail inverse for
-tanθ > 1); erfcx(x) = e^{x²} erfc(x) is the same Chebyshev series (coefficients passed in).
-Each path iterates until its own stopping rule, exactly as the vectorised version does per
-element; results agree to rounding (exp/log of the C library vs NumPy's).
+x̃ (the slope along the stretched viewing direction of the unit-roughness surface seen at θ) has
+density ∝ (1 − x̃ tanθ) e^{−x̃²} on x̃ < cotθ and CDF F(x)/F(cotθ), F(x) = erfc(−x) + tanθ e^{−x²}/√π
+(evaluated through erfcx, tail-accurate).  It solves F(x̃) = u·F(cotθ) by Halley steps safeguarded
+by bisection on the bracket [−8, min(cotθ, 8)] (F(−8)/F(cotθ) < 1e-27), started from Giles'
+erfc⁻¹ (or, for tanθ > 1, the inverse of the left tail ≈ e^{−x²}·(tanθ/√π)/F(cotθ)).  Each path
+iterates until its own stopping rule; the compiled loop is the same algorithm per path and agrees
+to rounding (exp/log of the C library vs NumPy's).  engine.materials.microfacet.Beckmann samples
+with it.
 """
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
-from . import jit
+from . import jit, twin
+from .error_function import (ERFCX_COEF, ERFCX_K, SQRT_PI, erfcinv_giles, erfcinv_giles_scalar, erfcx_nonneg,
+                             erfcx_nonneg_scalar)
 
-_SQRT_PI = math.sqrt(math.pi)
-_INV_SQRT_PI = 1.0 / _SQRT_PI
-_TWO_OVER_SQRT_PI = 2.0 / _SQRT_PI
-#: M. Giles (2010), erfinv(y) ≈ y·p(w), w = −log(1 − y²): Horner coefficients of p, highest first,
-#: for w < 5 (in w − 2.5) and w ≥ 5 (in √w − 3).  Shared with the NumPy reference
-#: (engine.materials.microfacet._erfcinv_giles).
-GILES_LOW = (2.81022636e-08, 3.43273939e-07, -3.5233877e-06, -4.39150654e-06, 0.00021858087, -0.00125372503,
-             -0.00417768164, 0.246640727, 1.50140941)
-GILES_HIGH = (-0.000200214257, 0.000100950558, 0.00134934322, -0.00367342844, 0.00573950773, -0.0076224613,
-              0.00943887047, 1.00167406, 2.83297682)
+_INV_SQRT_PI = 1.0 / SQRT_PI
+_TWO_OVER_SQRT_PI = 2.0 / SQRT_PI
 
 
-@jit
-def _erfcx_nonneg(x, coef, k):
-    xc = min(x, 1e150)
-    t = (xc - k) / (xc + k)
-    t2 = 2.0 * t
-    b1 = 0.0
-    b2 = 0.0
-    for j in range(coef.shape[0] - 1, 0, -1):
-        b0 = (t2 * b1 - b2) + coef[j]
-        b2 = b1
-        b1 = b0
-    return (coef[0] + t * b1 - b2) / (xc + k)
+def _visible_slope_cdf(x: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """F(x) = erfc(−x) + t e^{−x²}/√π (unnormalised CDF of the visible slope x̃), tail-accurate."""
+    e = np.exp(-x * x)
+    r = erfcx_nonneg(np.abs(x))
+    tp = t * _INV_SQRT_PI
+    return np.where(x < 0, e * (r + tp), 2.0 + e * (tp - r))
+
+
+def visible_slope_x_numpy(tan_t: np.ndarray, u1: np.ndarray) -> np.ndarray:
+    """x̃ (N,) for tanθ (N,) ≥ 0 and u1 (N,) ∈ [0, 1) (see the module docstring)."""
+    n = tan_t.shape[0]
+    cot = np.where(tan_t > 0, 1.0 / np.where(tan_t > 0, tan_t, 1.0), np.inf)
+    lo = np.full(n, -8.0)
+    hi = np.minimum(cot, 8.0)
+    z = _visible_slope_cdf(np.minimum(cot, 30.0), tan_t)
+    u = np.clip(u1, 0.0, 1.0)
+    # Start: the Gaussian quantile (exact for θ = 0); for large tanθ the left tail is
+    # ≈ e^{−x²}·(tanθ/√π)/F(cotθ), whose inverse is the better start.
+    uc = np.clip(u, 1e-300, 1.0 - 1e-16)
+    lower = uc < 0.5
+    xg = erfcinv_giles(2.0 * np.where(lower, uc, 1.0 - uc))
+    xg = np.where(lower, -xg, xg)
+    arg = uc * z * SQRT_PI / np.maximum(tan_t, 1e-300)
+    xr = -np.sqrt(np.maximum(-np.log(np.minimum(arg, 1.0)), 0.0))
+    x = np.where(tan_t > 1.0, np.minimum(xr, hi), xg)
+    x = np.where((x > lo) & (x < hi), x, 0.5 * (lo + np.maximum(hi, lo)))
+    target = u * z
+    tol = 1e-14 * z
+    active = np.arange(n)
+    xa, la, ha, ta, tga, tola = x.copy(), lo, hi, tan_t, target, tol
+    for _ in range(100):
+        f = _visible_slope_cdf(xa, ta) - tga
+        hit = np.abs(f) <= tola
+        la = np.where(f < 0, xa, la)
+        ha = np.where(f > 0, xa, ha)
+        # Halley step (F' = (2/√π) e^{−x²}(1 − x t), F'' = −(2/√π) e^{−x²}(2x(1 − x t) + t)).
+        g = _TWO_OVER_SQRT_PI * np.exp(-xa * xa)
+        d1 = g * (1.0 - xa * ta)
+        d2 = -g * (2.0 * xa * (1.0 - xa * ta) + ta)
+        den = 2.0 * d1 * d1 - f * d2
+        ok = (d1 > 0) & (den > 0)
+        newton = xa - 2.0 * f * d1 / np.where(ok, den, 1.0)
+        inside = ok & (newton > la) & (newton < ha)
+        xn = np.where(hit, xa, np.where(inside, newton, 0.5 * (la + ha)))
+        x[active] = xn
+        # Halley converges cubically: after a step below 1e-6 the error is ~1e-18.
+        done = hit | (inside & (np.abs(newton - xa) <= 1e-6 * (1.0 + np.abs(xa)))) | \
+            (ha - la <= 1e-15 * (1.0 + np.abs(xa)))
+        keep = ~done
+        if not keep.any():
+            break
+        active = active[keep]
+        xa, la, ha, ta, tga, tola = xn[keep], la[keep], ha[keep], ta[keep], tga[keep], tola[keep]
+    return x
 
 
 @jit
 def _slope_cdf(x, t, coef, k):
     e = np.exp(-x * x)
-    r = _erfcx_nonneg(abs(x), coef, k)
+    r = erfcx_nonneg_scalar(abs(x), coef, k)
     tp = t * _INV_SQRT_PI
     return e * (r + tp) if x < 0 else 2.0 + e * (tp - r)
-
-
-@jit
-def _erfcinv_giles(q):
-    y = 1.0 - q
-    w = -np.log(q * (2.0 - q))
-    if w < 5.0:
-        wl = w - 2.5
-        p = GILES_LOW[0]
-        for j in range(1, len(GILES_LOW)):
-            p = GILES_LOW[j] + p * wl
-    else:
-        wh = np.sqrt(w) - 3.0
-        p = GILES_HIGH[0]
-        for j in range(1, len(GILES_HIGH)):
-            p = GILES_HIGH[j] + p * wh
-    return max(p * y, 0.0)
 
 
 @jit
@@ -78,10 +97,10 @@ def _visible_slope_x_loop(tan_t, u1, coef, k, out):
         u = min(max(u1[i], 0.0), 1.0)
         uc = min(max(u, 1e-300), 1.0 - 1e-16)
         if uc < 0.5:
-            xg = -_erfcinv_giles(2.0 * uc)
+            xg = -erfcinv_giles_scalar(2.0 * uc)
         else:
-            xg = _erfcinv_giles(2.0 * (1.0 - uc))
-        arg = uc * z * _SQRT_PI / max(t, 1e-300)
+            xg = erfcinv_giles_scalar(2.0 * (1.0 - uc))
+        arg = uc * z * SQRT_PI / max(t, 1e-300)
         xr = -np.sqrt(max(-np.log(min(arg, 1.0)), 0.0))
         x = min(xr, hi) if t > 1.0 else xg
         if not (x > lo and x < hi):
@@ -111,12 +130,11 @@ def _visible_slope_x_loop(tan_t, u1, coef, k, out):
         out[i] = x
 
 
-def visible_slope_x_numba(tan_t, u1, coef, k):
-    """x̃ (N,) for tanθ (N,) ≥ 0 and u1 (N,) ∈ [0, 1); ``coef``, ``k``: the erfcx series."""
+def visible_slope_x_numba(tan_t, u1):
     out = np.empty(np.shape(tan_t))
     _visible_slope_x_loop(np.ascontiguousarray(tan_t, dtype=np.float64), np.ascontiguousarray(u1, dtype=np.float64),
-                          np.ascontiguousarray(coef, dtype=np.float64), float(k), out)
+                          np.ascontiguousarray(ERFCX_COEF, dtype=np.float64), float(ERFCX_K), out)
     return out
 
 
-compiled_visible_slope_x = _visible_slope_x_loop and visible_slope_x_numba
+visible_slope_x = twin(_visible_slope_x_loop and visible_slope_x_numba, visible_slope_x_numpy)

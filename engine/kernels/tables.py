@@ -1,15 +1,27 @@
-"""Linear interpolation in the engine's 1 nm spectral tables (360–830 nm) as one compiled loop.
+"""Linear interpolation in the engine's 1 nm spectral tables (e.g. 360–830 nm, engine.spectral.cie).
 
-Same arithmetic as engine.spectral.cie.interp_grid (the NumPy reference): x = clamp(λ) − 360,
-i = min(⌊x⌋, 469), t = x − i, value = T[k, i]·(1 − t) + T[k, i + 1]·t; NaN wavelengths read
-the first entry; with ``zero_outside`` values outside [360, 830] nm (and NaN) are 0.
+x = clamp(λ, lo, hi) − lo, i = min(⌊x⌋, K − 2) for K table columns, t = x − i,
+value = T[k, i]·(1 − t) + T[k, i + 1]·t; NaN wavelengths read the first entry; with
+``zero_outside`` values outside [lo, hi] nm (and NaN) are 0.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from . import jit
+from . import jit, twin
+
+
+def interp_grid_numpy(table, lam_nm, lo, hi, zero_outside):
+    """Rows of the (K, M) table (1 nm steps from ``lo`` to ``hi`` nm) at lam_nm → (K, *lam.shape)."""
+    lam = np.asarray(lam_nm, dtype=np.float64)
+    x = np.clip(np.nan_to_num(lam, nan=lo), lo, hi) - lo
+    i = np.minimum(np.floor(x).astype(np.intp), table.shape[1] - 2)
+    t = x - i
+    out = table[:, i] * (1.0 - t) + table[:, i + 1] * t
+    if zero_outside:
+        out = np.where((lam >= lo) & (lam <= hi), out, 0.0)
+    return out
 
 
 @jit
@@ -37,4 +49,4 @@ def interp_grid_numba(table, lam_nm, lo, hi, zero_outside):
     return out.reshape((table.shape[0],) + lam.shape)
 
 
-compiled_interp_grid = _interp_loop and interp_grid_numba
+interp_grid = twin(_interp_loop and interp_grid_numba, interp_grid_numpy)

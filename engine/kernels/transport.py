@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import dispatch, jit
-from ..polarisation.frames import frame_rotation
+from . import jit, twin
+from .stokes_rotation import frame_rotation, frame_rotation_at, rotate_stokes
 
 
 # ----------------------------------------------------------------------------- T ← T·R(φ)·M_abcs
@@ -22,10 +22,8 @@ def _rotated_rows_numpy(T, rows, x_out, x_T, wo):
     T = T[..., rows]
     if T.shape[0] >= 3:
         c2, s2 = frame_rotation(x_out, x_T, wo)
-        t1 = T[:, 1].copy()
-        t2 = T[:, 2].copy()
-        T[:, 1] = t1 * c2 - t2 * s2
-        T[:, 2] = t1 * s2 + t2 * c2
+        # T·R(φ): each row of T is a co-vector, i.e. its components 1, 2 turn by −φ
+        rotate_stokes(T.swapaxes(0, 1), c2, -s2, in_place=True)
     return T
 
 
@@ -35,7 +33,7 @@ def update_abcs_numpy(out, T, rows, x_out, x_T, wo, A, B, C, S, depol):
     ``rows`` (n,) are the paths (last-axis indices of T and out) the vertex values belong to;
     x_out (the vertex value's outgoing frame), x_T (the path's frame), wo (both ⟂ it) are (3, n)
     and A..S, depol (L or 1, n), all given per such path.  R(φ) = rotation from x_out to x_T
-    about wo (engine.polarisation.frames.frame_rotation), applied to columns 1, 2 of T.
+    about wo (engine.kernels.stokes_rotation.frame_rotation), applied to columns 1, 2 of T.
     T is not modified.
     """
     P = T.shape[0]
@@ -58,27 +56,13 @@ def update_abcs_numpy(out, T, rows, x_out, x_T, wo, A, B, C, S, depol):
 
 
 @jit
-def _frame_rotation(x, xt, k, j):
-    """(cos 2φ, sin 2φ) of frame_rotation(x, xt, k) for path j, same operation order."""
-    c = (x[0, j] * xt[0, j] + x[1, j] * xt[1, j]) + x[2, j] * xt[2, j]
-    y0 = k[1, j] * x[2, j] - k[2, j] * x[1, j]
-    y1 = k[2, j] * x[0, j] - k[0, j] * x[2, j]
-    y2 = k[0, j] * x[1, j] - k[1, j] * x[0, j]
-    s = (y0 * xt[0, j] + y1 * xt[1, j]) + y2 * xt[2, j]
-    r2 = c * c + s * s
-    if not r2 > 0:
-        r2 = 1.0
-    return (c * c - s * s) / r2, 2.0 * c * s / r2
-
-
-@jit
 def _frame_rotations(x_out, x_T, wo, n, P):
     """(cos 2φ, sin 2φ) arrays (n,) for every path; the identity when P < 3 (nothing rotates)."""
     c2 = np.ones(n)
     s2 = np.zeros(n)
     if P >= 3:
         for j in range(n):
-            c2[j], s2[j] = _frame_rotation(x_out, x_T, wo, j)
+            c2[j], s2[j] = frame_rotation_at(x_out, x_T, wo, j)
     return c2, s2
 
 
@@ -128,7 +112,7 @@ def update_abcs_numba(out, T, rows, x_out, x_T, wo, A, B, C, S, depol):
     _update_abcs_loop(out, T, np.ascontiguousarray(rows, dtype=np.int64), x_out, x_T, wo, A, B, C, S, D, has_depol)
 
 
-update_abcs = dispatch(_update_abcs_loop and update_abcs_numba, update_abcs_numpy)
+update_abcs = twin(_update_abcs_loop and update_abcs_numba, update_abcs_numpy)
 
 
 # ----------------------------------------------------------------------------- T ← T·M_depolarising, T ← T·R(φ)·M
@@ -158,7 +142,7 @@ def update_depolarising_numba(out, T, rows, A):
                               np.ascontiguousarray(A, dtype=np.float64))
 
 
-update_depolarising = dispatch(_update_depolarising_loop and update_depolarising_numba, update_depolarising_numpy)
+update_depolarising = twin(_update_depolarising_loop and update_depolarising_numba, update_depolarising_numpy)
 
 
 def update_general_numpy(out, T, rows, x_out, x_T, wo, M):
@@ -200,7 +184,7 @@ def update_general_numba(out, T, rows, x_out, x_T, wo, M):
                          np.ascontiguousarray(M, dtype=np.float64))
 
 
-update_general = dispatch(_update_general_loop and update_general_numba, update_general_numpy)
+update_general = twin(_update_general_loop and update_general_numba, update_general_numpy)
 
 
 # ----------------------------------------------------------------------------- light into accumulators
@@ -230,7 +214,7 @@ def add_light_numba(radiance, path, T, sel, Le, w):
                     np.ascontiguousarray(w, dtype=np.float64))
 
 
-add_light = dispatch(_add_light_loop and add_light_numba, add_light_numpy)
+add_light = twin(_add_light_loop and add_light_numba, add_light_numpy)
 
 
 # ----------------------------------------------------------------------------- T · S (next-event estimation)
@@ -269,5 +253,5 @@ def throughput_times_stokes_numba(T, rows, S, weight):
     return out
 
 
-throughput_times_stokes = dispatch(_t_times_s_loop and throughput_times_stokes_numba,
+throughput_times_stokes = twin(_t_times_s_loop and throughput_times_stokes_numba,
                                    throughput_times_stokes_numpy)

@@ -84,10 +84,9 @@ expressions are the consistent ones; the oracle cases are unaffected.  Results b
 1e-280 (dd in 1/sr, specular weight) are flushed to 0: their products with the O(1)
 Fresnel terms would be subnormal and too imprecise to stay realisable.
 
-erfc: W. J. Cody's rational Chebyshev approximations (Math. Comp. 23, 631–637,
-1969; Netlib SPECFUN CALERF), vectorised; relative error ~1e-16 against libm
-(tested).  Only 2 erfc values per shading point are needed (μ_i, μ_r do not
-depend on λ).
+erfc: W. J. Cody's rational Chebyshev approximations (engine.kernels.error_function);
+relative error ~1e-16 against libm (tested).  Only 2 erfc values per shading point are
+needed (μ_i, μ_r do not depend on λ).
 
 Sampling (λ-independent proposal, one direction for all wavelengths of a path):
 the mirror (Dirac) lobe is chosen with probability
@@ -120,6 +119,7 @@ from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
 from .conductor import mirror_reflection, K, METAL, N, complex_index
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from .sampling import cosine_hemisphere, local_to_world
+from ..kernels.error_function import erfc
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs
 from ..polarisation.mueller import abcs_matrix, depolariser
@@ -129,87 +129,8 @@ from ..vec3 import cross, dot, normalize, reflect
 __all__ = ["HTSG", "erfc", "shadowing", "roughness_ratio", "log_series", "ln_factorial"]
 
 _SQRT_PI = math.sqrt(math.pi)
-_INV_SQRT_PI = 1.0 / _SQRT_PI
 _LN_2PI = math.log(2.0 * math.pi)
 _SQRT_8PI = math.sqrt(8.0 * math.pi)
-
-# --------------------------------------------------------------------------------------------
-# erfc (Cody 1969, Netlib SPECFUN CALERF coefficients)
-# --------------------------------------------------------------------------------------------
-_A = (3.16112374387056560e00, 1.13864154151050156e02, 3.77485237685302021e02,
-      3.20937758913846947e03, 1.85777706184603153e-1)
-_B = (2.36012909523441209e01, 2.44024637934444173e02, 1.28261652607737228e03,
-      2.84423683343917062e03)
-_C = (5.64188496988670089e-1, 8.88314979438837594e00, 6.61191906371416295e01,
-      2.98635138197400131e02, 8.81952221241769090e02, 1.71204761263407058e03,
-      2.05107837782607147e03, 1.23033935479799725e03, 2.15311535474403846e-8)
-_D = (1.57449261107098347e01, 1.17693950891312499e02, 5.37181101862009858e02,
-      1.62138957456669019e03, 3.29079923573345963e03, 4.36261909014324716e03,
-      3.43936767414372164e03, 1.23033935480374942e03)
-_P = (3.05326634961232344e-1, 3.60344899949804439e-1, 1.25781726111229246e-1,
-      1.60837851487422766e-2, 6.58749161529837803e-4, 1.63153871373020978e-2)
-_Q = (2.56852019228982242e00, 1.87295284992346047e00, 5.27905102951428412e-1,
-      6.05183413124413191e-2, 2.33520497626869185e-3)
-_XBIG = 26.543  # erfc(x) underflows (< 2.2e-308) beyond this
-
-
-def _exp_neg_sq(y):
-    """exp(−y²) with Cody's split y² = ysq² + (y−ysq)(y+ysq), ysq = ⌊16y⌋/16 (no error growth)."""
-    ysq = np.floor(16.0 * y) / 16.0
-    return np.exp(-ysq * ysq) * np.exp(-(y - ysq) * (y + ysq))
-
-
-def erfc(x):
-    """Complementary error function, vectorised (Cody 1969); float64 array of x's shape.
-
-    Relative error ~1e-16 (checked against math.erfc); NaN propagates, ±inf gives 0 / 2.
-    """
-    x = np.asarray(x, dtype=np.float64)
-    y = np.abs(x)
-    out = np.empty_like(y)
-    # |x| ≤ 0.46875: erfc = 1 − x·P(x²)/Q(x²)
-    r1 = y <= 0.46875
-    if r1.any():
-        xx = x[r1]
-        t = np.where(np.abs(xx) > 1.11e-16, xx * xx, 0.0)
-        num = _A[4] * t
-        den = t.copy()
-        for i in range(3):
-            num = (num + _A[i]) * t
-            den = (den + _B[i]) * t
-        out[r1] = 1.0 - xx * (num + _A[3]) / (den + _B[3])
-    # 0.46875 < |x| ≤ 4
-    r2 = (y > 0.46875) & (y <= 4.0)
-    if r2.any():
-        yy = y[r2]
-        num = _C[8] * yy
-        den = yy.copy()
-        for i in range(7):
-            num = (num + _C[i]) * yy
-            den = (den + _D[i]) * yy
-        res = _exp_neg_sq(yy) * (num + _C[7]) / (den + _D[7])
-        out[r2] = np.where(x[r2] < 0, 2.0 - res, res)
-    # |x| > 4
-    r3 = y > 4.0
-    if r3.any():
-        yy = y[r3]
-        big = yy >= _XBIG
-        ys = np.where(big, 5.0, yy)
-        t = 1.0 / (ys * ys)
-        num = _P[5] * t
-        den = t.copy()
-        for i in range(4):
-            num = (num + _P[i]) * t
-            den = (den + _Q[i]) * t
-        res = t * (num + _P[4]) / (den + _Q[4])
-        res = (_INV_SQRT_PI - res) / ys
-        res = np.where(big, 0.0, _exp_neg_sq(ys) * res)
-        out[r3] = np.where(x[r3] < 0, 2.0 - res, res)
-    nan = np.isnan(x)
-    if nan.any():
-        out[nan] = np.nan
-    return out
-
 
 # --------------------------------------------------------------------------------------------
 # Shadowing and effective roughness

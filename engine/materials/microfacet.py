@@ -43,10 +43,9 @@ D is the Beckmann distribution, i.e. a Gaussian in the facet *slope* tanθ_h (as
 Gaussian_Slope_Distribution_Function and Mitsuba 3), not Torrance & Sparrow's 1967 Gaussian in
 the facet angle θ_h itself (physics.md §3, Eq. 3.4).
 
-erf/erfc/erfcx/erfinv are implemented here (numpy only, no scipy): erfc from a Chebyshev
-fit of the scaled function erfcx (see below; relative error of erfc ≲ 1e-14 for x ≥ 0, of
-erf ≲ 2e-15), erfinv from Giles' approximation polished by Newton steps (~1e-15).
-Visible-normal sampling costs ~1.5 µs per sample in numpy (3–4 Halley steps, each one erfcx).
+erf/erfc/erfcx/erfinv come from engine.kernels.error_function (NumPy only, no scipy), the
+visible-slope inversion from engine.kernels.microfacet (compiled when Numba is available; in
+NumPy it costs ~1.5 µs per sample: 3–4 Halley steps, each one erfcx).
 """
 
 from __future__ import annotations
@@ -55,163 +54,13 @@ import math
 
 import numpy as np
 
-from ..kernels import COMPILED
-from ..kernels.microfacet import GILES_HIGH, GILES_LOW, compiled_visible_slope_x
+# erf, erfc, erfcx, erfinv: re-exported, the special functions of this model's formulas
+from ..kernels.error_function import SQRT_PI, erf, erfc, erfcx, erfcx_nonneg, erfinv, erfinv_2u_minus_1  # noqa: F401
+from ..kernels.microfacet import visible_slope_x
 
-SQRT_PI = math.sqrt(math.pi)
 _INV_SQRT_PI = 1.0 / SQRT_PI
-_TWO_OVER_SQRT_PI = 2.0 / SQRT_PI
 #: exp(−x) for x beyond this is exactly 0 in double precision (and D is set to 0 there).
 _EXP_CUTOFF = 800.0
-
-
-# --- special functions ---------------------------------------------------------------------------------
-#
-# erfc is computed from the scaled function erfcx(x) = e^{x²} erfc(x) (x ≥ 0), which is smooth and
-# decays like 1/(x√π): erfcx(x)·(x + K) is a smooth bounded function of t = (x − K)/(x + K) ∈ [−1, 1),
-# approximated by a Chebyshev series of degree _ERFCX_DEGREE in t.  The coefficients are fitted
-# at import time (least squares at 400 Chebyshev nodes, ~1 ms) to references independent of this
-# approximation: the C library's erfc (math.erfc) times e^{x²} for x < 2, and for x ≥ 2 the
-# continued fraction erfc(x) = e^{−x²}/√π · 1/(x + ½/(x + 1/(x + 3/2/(x + …)))) evaluated with
-# 200 levels.  Relative error of erfc ≲ 1e-14 for x ≥ 0 (checked against math.erfc in the tests).
-
-_ERFCX_K = 3.0
-_ERFCX_DEGREE = 22
-
-
-def _erfcx_reference(x: np.ndarray) -> np.ndarray:
-    out = np.empty_like(x)
-    small = x < 2.0
-    out[small] = [math.erfc(v) * math.exp(v * v) for v in x[small]]
-    xb = x[~small]
-    f = xb.copy()
-    for k in range(200, 0, -1):
-        f = xb + (0.5 * k) / f
-    out[~small] = 1.0 / (SQRT_PI * f)
-    return out
-
-
-def _fit_erfcx() -> np.ndarray:
-    n = 400
-    t = np.cos(np.pi * (np.arange(n) + 0.5) / n)
-    x = _ERFCX_K * (1.0 + t) / (1.0 - t)
-    coef = np.polynomial.chebyshev.chebfit(t, _erfcx_reference(x) * (x + _ERFCX_K), _ERFCX_DEGREE)
-    coef.setflags(write=False)
-    return coef
-
-
-_ERFCX_COEF = _fit_erfcx()
-
-
-def _erfcx_nonneg(x: np.ndarray) -> np.ndarray:
-    """e^{x²} erfc(x) for x ≥ 0 (x = +∞ gives 0)."""
-    xc = np.minimum(x, 1e150)
-    t = (xc - _ERFCX_K) / (xc + _ERFCX_K)
-    c = _ERFCX_COEF
-    t2 = 2.0 * t
-    b0 = np.empty_like(t)
-    b1 = np.zeros_like(t)
-    b2 = np.zeros_like(t)
-    for k in range(len(c) - 1, 0, -1):  # Clenshaw recurrence b_k = c_k + 2t b_{k+1} − b_{k+2}, in place
-        np.multiply(t2, b1, out=b0)
-        b0 -= b2
-        b0 += c[k]
-        b0, b1, b2 = b2, b0, b1
-    return (c[0] + t * b1 - b2) / (xc + _ERFCX_K)
-
-
-def erfcx(x) -> np.ndarray:
-    """Scaled complementary error function e^{x²} erfc(x), vectorised (overflows to ∞ for x ≲ −26.6)."""
-    x = np.asarray(x, dtype=np.float64)
-    pos = _erfcx_nonneg(np.abs(x))
-    with np.errstate(over="ignore"):
-        neg = 2.0 * np.exp(x * x) - pos
-    return np.where(x >= 0, pos, neg)
-
-
-def erfc(x) -> np.ndarray:
-    """Complementary error function, vectorised (relative accuracy ~1e-14 for x ≥ 0)."""
-    x = np.asarray(x, dtype=np.float64)
-    ax = np.abs(x)
-    c = np.exp(-ax * ax) * _erfcx_nonneg(ax)
-    return np.where(x >= 0, c, 2.0 - c)
-
-
-def erf(x) -> np.ndarray:
-    """Error function, vectorised (relative accuracy ~1e-15).
-
-    |x| < 0.5: the positive-term series erf(x) = (2/√π) e^{−x²} Σ 2ⁿ x^{2n+1}/(2n+1)!!;
-    otherwise sign(x)(1 − erfc(|x|)).
-    """
-    x = np.asarray(x, dtype=np.float64)
-    ax = np.abs(x)
-    xs = np.where(ax < 0.5, x, 0.0)
-    x2 = xs * xs
-    term = xs.copy()
-    total = xs.copy()
-    for k in range(1, 20):
-        term = term * (2.0 * x2 / (2 * k + 1))
-        total = total + term
-    series = _TWO_OVER_SQRT_PI * np.exp(-x2) * total
-    return np.where(ax < 0.5, series, np.sign(x) * (1.0 - np.exp(-ax * ax) * _erfcx_nonneg(ax)))
-
-
-def _erfcinv_giles(q: np.ndarray) -> np.ndarray:
-    """Approximate x ≥ 0 with erfc(x) = q ∈ (0, 1]: M. Giles (2010), "Approximating the erfinv
-    function" (single-precision fit, relative error ~1e-7 for q ≳ 1e-7, cruder beyond)."""
-    y = 1.0 - q  # erf(x) = y ∈ [0, 1)
-    w = -np.log(q * (2.0 - q))  # −log((1 − y)(1 + y)) without cancellation
-    lo = w < 5.0
-    wl = w - 2.5
-    p1 = GILES_LOW[0]
-    for c in GILES_LOW[1:]:
-        p1 = c + p1 * wl
-    wh = np.sqrt(w) - 3.0
-    p2 = GILES_HIGH[0]
-    for c in GILES_HIGH[1:]:
-        p2 = c + p2 * wh
-    return np.maximum(np.where(lo, p1, p2) * y, 0.0)
-
-
-def _erfcinv_small(q: np.ndarray) -> np.ndarray:
-    """x ≥ 0 with erfc(x) = q for q ∈ [1e-300, 1] (Giles' start, Newton polish to ~1e-15)."""
-    q = np.clip(q, 1e-300, 1.0)
-    x = _erfcinv_giles(q)
-    # Giles' fit is single precision (and poor for q < 1e-7): Newton on ln erfc(x) = ln q, i.e.
-    # x ← x + (ln erfc(x) − ln q)·(√π/2)·erfcx(x), which converges fast in the tail as well.
-    # Only the points that have not converged are iterated.
-    log_q = np.log(q)
-    active = np.arange(x.size)
-    xa, lqa = x.copy(), log_q
-    for _ in range(12):
-        ex = _erfcx_nonneg(xa)
-        step = (np.log(ex) - xa * xa - lqa) * (0.5 * SQRT_PI) * ex
-        xn = np.maximum(xa + step, 0.0)
-        x[active] = xn
-        # Newton converges quadratically (ln erfc has curvature ≲ 2): after a step below 1e-9
-        # the remaining error is ≲ 1e-17.
-        keep = np.abs(step) > 1e-9 * (1.0 + xn)
-        if not keep.any():
-            break
-        active, xa, lqa = active[keep], xn[keep], lqa[keep]
-    return x
-
-
-def erfinv(y) -> np.ndarray:
-    """Inverse error function on (−1, 1) (±∞ at ±1), vectorised; accurate to ~1e-14."""
-    y = np.asarray(y, dtype=np.float64)
-    q = 1.0 - np.abs(y)
-    x = np.sign(y) * _erfcinv_small(np.where(q > 0, q, 1.0))
-    return np.where(q > 0, x, np.where(y > 0, np.inf, -np.inf))
-
-
-def _gaussian_quantile_half(u: np.ndarray) -> np.ndarray:
-    """erfinv(2u − 1) for u ∈ [0, 1], computed from min(u, 1 − u) (accurate in both tails)."""
-    u = np.clip(u, 1e-16, 1.0 - 1e-16)
-    lower = u < 0.5
-    q = 2.0 * np.where(lower, u, 1.0 - u)  # erfc(|x|) = q
-    x = _erfcinv_small(q)
-    return np.where(lower, -x, x)
 
 
 def beckmann_lambda(a) -> np.ndarray:
@@ -224,7 +73,7 @@ def beckmann_lambda(a) -> np.ndarray:
     pos = a > 0
     small = pos & (a <= 6.0)
     safe = np.where(small, a, 1.0)
-    lam = 0.5 * np.exp(-safe * safe) * (_INV_SQRT_PI / safe - _erfcx_nonneg(safe))
+    lam = 0.5 * np.exp(-safe * safe) * (_INV_SQRT_PI / safe - erfcx_nonneg(safe))
     lam = np.maximum(lam, 0.0)
     return np.where(small, lam, np.where(pos, 0.0, np.inf))
 
@@ -340,71 +189,13 @@ class Beckmann(MicrofacetDistribution):
 
     # -- visible normal sampling (Heitz & d'Eon 2014) --
     @staticmethod
-    def _visible_slope_cdf(x: np.ndarray, t: np.ndarray) -> np.ndarray:
-        """F(x) = erfc(−x) + t e^{−x²}/√π (unnormalised CDF of the visible slope x̃), tail-accurate."""
-        e = np.exp(-x * x)
-        r = _erfcx_nonneg(np.abs(x))
-        tp = t * _INV_SQRT_PI
-        return np.where(x < 0, e * (r + tp), 2.0 + e * (tp - r))
-
-    @classmethod
-    def _sample_slopes11(cls, tan_t: np.ndarray, u1: np.ndarray, u2: np.ndarray, use_kernel: bool = True):
+    def _sample_slopes11(tan_t: np.ndarray, u1: np.ndarray, u2: np.ndarray):
         """Visible slopes (x̃, ỹ) of the unit-roughness Beckmann surface seen from θ with tanθ = tan_t ≥ 0.
 
-        x̃ has density ∝ (1 − x̃ tanθ) e^{−x̃²} on x̃ < cotθ, with CDF F(x)/F(cotθ),
-        F(x) = erfc(−x) + tanθ e^{−x²}/√π; it is found by Halley's method safeguarded by
-        bisection on the bracket [−8, min(cotθ, 8)] (F(−8)/F(cotθ) < 1e-27).  ỹ is independent
-        with density e^{−ỹ²}/√π: ỹ = erfinv(2u₂ − 1).  x̃ comes from the compiled loop of
-        engine.kernels.microfacet when available (the same algorithm per path; this NumPy body is
-        its reference, ``use_kernel=False``).
+        x̃ has density ∝ (1 − x̃ tanθ) e^{−x̃²} on x̃ < cotθ (engine.kernels.microfacet); ỹ is
+        independent with density e^{−ỹ²}/√π: ỹ = erfinv(2u₂ − 1).
         """
-        if COMPILED and use_kernel:
-            return compiled_visible_slope_x(tan_t, u1, _ERFCX_COEF, _ERFCX_K), _gaussian_quantile_half(u2)
-        n = tan_t.shape[0]
-        cot = np.where(tan_t > 0, 1.0 / np.where(tan_t > 0, tan_t, 1.0), np.inf)
-        lo = np.full(n, -8.0)
-        hi = np.minimum(cot, 8.0)
-        z = cls._visible_slope_cdf(np.minimum(cot, 30.0), tan_t)
-        u = np.clip(u1, 0.0, 1.0)
-        # Start: the Gaussian quantile (exact for θ = 0); for large tanθ the left tail is
-        # ≈ e^{−x²}·(tanθ/√π)/F(cotθ), whose inverse is the better start.
-        uc = np.clip(u, 1e-300, 1.0 - 1e-16)
-        lower = uc < 0.5
-        xg = _erfcinv_giles(2.0 * np.where(lower, uc, 1.0 - uc))
-        xg = np.where(lower, -xg, xg)
-        arg = uc * z * SQRT_PI / np.maximum(tan_t, 1e-300)
-        xr = -np.sqrt(np.maximum(-np.log(np.minimum(arg, 1.0)), 0.0))
-        x = np.where(tan_t > 1.0, np.minimum(xr, hi), xg)
-        x = np.where((x > lo) & (x < hi), x, 0.5 * (lo + np.maximum(hi, lo)))
-        target = u * z
-        tol = 1e-14 * z
-        active = np.arange(n)
-        xa, la, ha, ta, tga, tola = x.copy(), lo, hi, tan_t, target, tol
-        for _ in range(100):
-            f = cls._visible_slope_cdf(xa, ta) - tga
-            hit = np.abs(f) <= tola
-            la = np.where(f < 0, xa, la)
-            ha = np.where(f > 0, xa, ha)
-            # Halley step (F' = (2/√π) e^{−x²}(1 − x t), F'' = −(2/√π) e^{−x²}(2x(1 − x t) + t)).
-            g = _TWO_OVER_SQRT_PI * np.exp(-xa * xa)
-            d1 = g * (1.0 - xa * ta)
-            d2 = -g * (2.0 * xa * (1.0 - xa * ta) + ta)
-            den = 2.0 * d1 * d1 - f * d2
-            ok = (d1 > 0) & (den > 0)
-            newton = xa - 2.0 * f * d1 / np.where(ok, den, 1.0)
-            inside = ok & (newton > la) & (newton < ha)
-            xn = np.where(hit, xa, np.where(inside, newton, 0.5 * (la + ha)))
-            x[active] = xn
-            # Halley converges cubically: after a step below 1e-6 the error is ~1e-18.
-            done = hit | (inside & (np.abs(newton - xa) <= 1e-6 * (1.0 + np.abs(xa)))) | \
-                (ha - la <= 1e-15 * (1.0 + np.abs(xa)))
-            keep = ~done
-            if not keep.any():
-                break
-            active = active[keep]
-            xa, la, ha, ta, tga, tola = xn[keep], la[keep], ha[keep], ta[keep], tga[keep], tola[keep]
-        y = _gaussian_quantile_half(u2)
-        return x, y
+        return visible_slope_x(tan_t, u1), erfinv_2u_minus_1(u2)
 
     def sample(self, wo: np.ndarray, u: np.ndarray) -> np.ndarray:
         m = self.m

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..vec3 import any_perpendicular, cross
+from ..vec3 import local_frame
 
 
 def cosine_hemisphere(u: np.ndarray) -> np.ndarray:
@@ -32,6 +32,5 @@ def uniform_sphere(u: np.ndarray) -> np.ndarray:
 
 def local_to_world(v: np.ndarray, n: np.ndarray) -> np.ndarray:
     """Map v (3, N) given in a frame with +z = n (3, N) to world space."""
-    t = any_perpendicular(n)
-    b = cross(n, t)
+    t, b = local_frame(n)
     return t * v[0] + b * v[1] + n * v[2]

@@ -58,7 +58,7 @@ from ..errors import SceneError
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
 from ..spectral import ConstantSpectrum, as_spectrum
-from ..vec3 import any_perpendicular, cross, dot
+from ..vec3 import dot, local_frame, to_local
 
 #: Smallest accepted Beckmann roughness m.
 M_MIN = 1e-4
@@ -136,15 +136,6 @@ class TorranceSparrow(BSDF):
 
     # --- helpers ---------------------------------------------------------------------------------
 
-    @staticmethod
-    def _frame(n_s: np.ndarray):
-        t = any_perpendicular(n_s)
-        return t, cross(n_s, t)
-
-    @staticmethod
-    def _to_local(w, t, b, n_s):
-        return np.stack((dot(w, t), dot(w, b), dot(w, n_s)))
-
     def relative_eta(self, sp: ShadingPoint) -> np.ndarray:
         return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
 
@@ -169,9 +160,9 @@ class TorranceSparrow(BSDF):
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
         n_s = sp.n_s
-        t, b = self._frame(n_s)
-        wo_l = self._to_local(sp.wo, t, b, n_s)
-        wi_l = self._to_local(wi, t, b, n_s)
+        t, b = local_frame(n_s)
+        wo_l = to_local(sp.wo, t, b, n_s)
+        wi_l = to_local(wi, t, b, n_s)
         cos_i, cos_o = wi_l[2], wo_l[2]
         valid = (cos_i > 0) & (cos_o > 0)
         L = sp.lam.shape[0]
@@ -202,9 +193,9 @@ class TorranceSparrow(BSDF):
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         n_s = sp.n_s
-        t, b = self._frame(n_s)
-        wo_l = self._to_local(sp.wo, t, b, n_s)
-        wi_l = self._to_local(wi, t, b, n_s)
+        t, b = local_frame(n_s)
+        wo_l = to_local(sp.wo, t, b, n_s)
+        wi_l = to_local(wi, t, b, n_s)
         valid = (wi_l[2] > 0) & (wo_l[2] > 0)
         p_spec = self._p_spec(sp, wo_l[2])
         out = np.zeros(sp.n)
@@ -216,8 +207,8 @@ class TorranceSparrow(BSDF):
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         n_s = sp.n_s
-        t, b = self._frame(n_s)
-        wo_l = self._to_local(sp.wo, t, b, n_s)
+        t, b = local_frame(n_s)
+        wo_l = to_local(sp.wo, t, b, n_s)
         cos_o = wo_l[2]
         p_spec = self._p_spec(sp, cos_o)
         pick_spec = u_lobe < p_spec

@@ -203,7 +203,7 @@ from ..polarisation.frames import plane_of_incidence_axis, rotate_mueller_frames
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_transmission_abcs, refracted_cosine
 from ..polarisation.mueller import abcs_matrix
 from ..spectral import ConstantSpectrum, Spectrum, as_spectrum
-from ..vec3 import any_perpendicular, cross, dot, reflect
+from ..vec3 import dot, local_frame, reflect, to_local
 
 __all__ = ["Coat", "WeidlichWilkie", "FORMS", "T_TERMS", "TRANSMISSION_NORMALS", "DISTRIBUTIONS",
            "top_albedo"]
@@ -355,15 +355,6 @@ def _diattenuator(T, b_hat, c_hat):
     """T·[[1, b, 0, 0], [b, 1, 0, 0], [0, 0, c, 0], [0, 0, 0, c]] as (4, 4, ...)."""
     T, b_hat, c_hat = np.broadcast_arrays(T, b_hat, c_hat)
     return abcs_matrix(T, T * b_hat, T * c_hat, np.zeros_like(T))
-
-
-def _local_frame(n):
-    t = any_perpendicular(n)
-    return t, cross(n, t)
-
-
-def _to_local(w, t, b, n):
-    return np.stack((dot(w, t), dot(w, b), dot(w, n)))
 
 
 # ------------------------------------------------------------------------------------------------
@@ -723,10 +714,10 @@ class WeidlichWilkie(BSDF):
         b12, c12 = _transmission_shape(ci_m[None, :], eta_r)
         b21, c21 = _transmission_shape(co_m[None, :], eta_r)
 
-        t_frame, b_frame = _local_frame(n)
+        t_frame, b_frame = local_frame(n)
         if rough:
-            wi_tl = _to_local(wi_t, t_frame, b_frame, n)
-            wo_tl = _to_local(wo_t, t_frame, b_frame, n)
+            wi_tl = to_local(wi_t, t_frame, b_frame, n)
+            wo_tl = to_local(wo_t, t_frame, b_frame, n)
             hp, _, ok_hp = half_vector(wi_tl, wo_tl)
             G_int = np.where(ok_hp, shadowing_term(self.shadowing, coat.dist, wi_tl, wo_tl, hp), 0.0)[None, :]
         else:
@@ -777,9 +768,9 @@ class WeidlichWilkie(BSDF):
             x = scattering_plane_axis(k_in, woK)
             M = rotate_mueller_frames(M_layer, s1[:, None, :], x[:, None, :], k_in[:, None, :],
                                       s2[:, None, :], x[:, None, :], woK[:, None, :])
-            h_l = _to_local(h, t_frame, b_frame, n)
-            wi_l = _to_local(wiK, t_frame, b_frame, n)
-            wo_l = _to_local(woK, t_frame, b_frame, n)
+            h_l = to_local(h, t_frame, b_frame, n)
+            wi_l = to_local(wiK, t_frame, b_frame, n)
+            wo_l = to_local(woK, t_frame, b_frame, n)
             D = coat.dist.D(h_l)
             G = shadowing_term(self.shadowing, coat.dist, wi_l, wo_l, h_l)
             fr = np.where(ok_h, D * G / (4.0 * np.where(ok_h, cos_i * cos_o, 1.0)), 0.0)
@@ -911,9 +902,9 @@ class WeidlichWilkie(BSDF):
         return np.where(ok, pb * jac, 0.0)
 
     def _top_pdf(self, sp, wi):
-        t, b = _local_frame(sp.n_s)
-        wo_l = _to_local(sp.wo, t, b, sp.n_s)
-        wi_l = _to_local(wi, t, b, sp.n_s)
+        t, b = local_frame(sp.n_s)
+        wo_l = to_local(sp.wo, t, b, sp.n_s)
+        wi_l = to_local(wi, t, b, sp.n_s)
         h, _, ok = half_vector(wi_l, wo_l)
         return np.where(ok, self.coat.dist.pdf_reflected(wo_l, h), 0.0)
 
@@ -962,8 +953,8 @@ class WeidlichWilkie(BSDF):
                 top_delta[sel] = True
                 ok_dir[sel] = True
             else:
-                t, b = _local_frame(n[:, sel])
-                wo_l = _to_local(sp.wo[:, sel], t, b, n[:, sel])
+                t, b = local_frame(n[:, sel])
+                wo_l = to_local(sp.wo[:, sel], t, b, n[:, sel])
                 h = self.coat.dist.sample(wo_l, u_dir[:, sel])
                 wi_l = reflect_local(wo_l, h)
                 wi[:, sel] = t * wi_l[0] + b * wi_l[1] + n[:, sel] * wi_l[2]

@@ -20,8 +20,7 @@ from collections.abc import Iterator
 
 import numpy as np
 
-#: Rec. 709 / sRGB luminance weights for linear R, G, B.
-LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+from ..spectral.cie import LUMINANCE_WEIGHTS  # noqa: F401  (re-exported: Y of the written images)
 
 
 def check_stokes_image(stokes_rgb) -> np.ndarray:

@@ -7,16 +7,22 @@ frame x to a coaxial frame x′ uses cos φ = x·x′, sin φ = y·x′ and
     S1′ = cos2φ S1 + sin2φ S2,   S2′ = −sin2φ S1 + cos2φ S2,   S0′ = S0, S3′ = S3.
 
 A Mueller matrix M given in frames (in, out) becomes R_out · M · R_inᵀ in
-frames (in′, out′).  All vectors are (3, ...) arrays (see engine.vec3).
+frames (in′, out′).  All vectors are (3, ...) arrays (see engine.vec3).  The rotation itself
+(``frame_rotation``, ``rotate_stokes``) is engine.kernels.stokes_rotation, shared with the path
+tracer's compiled loops.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..kernels import dispatch
-from ..kernels.geometry import compiled_unit_cross
-from ..vec3 import any_perpendicular, cross, dot, normalize
+from ..kernels.geometry import unit_cross
+from ..kernels.stokes_rotation import frame_rotation, rotate_stokes
+from ..vec3 import cross, dot, normalize
+
+__all__ = ["camera_ray_frame", "frame_rotation", "frame_y", "plane_of_incidence_axis", "rotate_mueller_frames",
+           "rotate_stokes", "rotate_stokes_frame", "rotation_mueller", "rotator", "scattering_plane_axis",
+           "sp_basis_axis"]
 
 # |n × k| below this is treated as "axis undefined" (normal incidence etc.).
 _DEGENERATE = 1e-12
@@ -25,19 +31,6 @@ _DEGENERATE = 1e-12
 def frame_y(k: np.ndarray, x: np.ndarray) -> np.ndarray:
     """The second frame axis y = k × x."""
     return cross(k, x)
-
-
-def frame_rotation(x_from: np.ndarray, x_to: np.ndarray, k: np.ndarray):
-    """(cos 2φ, sin 2φ) of the passive rotation from frame x_from to x_to about k.
-
-    Computed without trigonometric functions; robust when the frames are not
-    exactly coaxial (the in-plane components are renormalised).
-    """
-    c = dot(x_from, x_to)
-    s = dot(frame_y(k, x_from), x_to)
-    r2 = c * c + s * s
-    r2 = np.where(r2 > 0, r2, 1.0)
-    return (c * c - s * s) / r2, 2.0 * c * s / r2
 
 
 def rotator(cos2phi, sin2phi) -> np.ndarray:
@@ -61,11 +54,7 @@ def rotation_mueller(x_from, x_to, k) -> np.ndarray:
 
 def rotate_stokes_frame(S: np.ndarray, x_from, x_to, k) -> np.ndarray:
     """Stokes vectors S (4, ...) in frame x_from, re-expressed in frame x_to."""
-    c, s = frame_rotation(x_from, x_to, k)
-    out = np.array(S, dtype=np.float64, copy=True)
-    out[1] = c * S[1] + s * S[2]
-    out[2] = -s * S[1] + c * S[2]
-    return out
+    return rotate_stokes(np.asarray(S, dtype=np.float64), *frame_rotation(x_from, x_to, k))
 
 
 def rotate_mueller_frames(M: np.ndarray, x_in, x_in_new, k_in, x_out, x_out_new, k_out) -> np.ndarray:
@@ -76,37 +65,18 @@ def rotate_mueller_frames(M: np.ndarray, x_in, x_in_new, k_in, x_out, x_out_new,
     return np.einsum("ij...,kj...->ik...", tmp, R_in)
 
 
-def plane_of_incidence_axis_numpy(n: np.ndarray, k: np.ndarray) -> np.ndarray:
+def plane_of_incidence_axis(n: np.ndarray, k: np.ndarray) -> np.ndarray:
     """s = unit(n × k): the axis ⟂ the plane of incidence (shared by both beams).
 
-    At normal incidence (n ∥ k) an arbitrary vector ⟂ n is used, the same for
-    the incident, reflected and refracted beams (which are all ∥ n there).
+    At normal incidence (n ∥ k) an arbitrary vector ⟂ n (engine.vec3.any_perpendicular) is used,
+    the same for the incident, reflected and refracted beams (which are all ∥ n there).
     """
-    s = cross(n, k)
-    length = np.sqrt(dot(s, s))
-    ok = length > _DEGENERATE
-    fallback = any_perpendicular(n)
-    return np.where(ok, s / np.where(ok, length, 1.0), fallback)
+    return unit_cross(n, k, _DEGENERATE)
 
 
-def scattering_plane_axis_numpy(k_in: np.ndarray, k_out: np.ndarray) -> np.ndarray:
+def scattering_plane_axis(k_in: np.ndarray, k_out: np.ndarray) -> np.ndarray:
     """s = unit(k_in × k_out), the normal of the scattering plane; any ⟂ k_in if k_out ∥ k_in."""
-    s = cross(k_in, k_out)
-    length = np.sqrt(dot(s, s))
-    ok = length > _DEGENERATE
-    return np.where(ok, s / np.where(ok, length, 1.0), any_perpendicular(k_in))
-
-
-if compiled_unit_cross is not None:
-    def _plane_of_incidence_axis_compiled(n, k):
-        return compiled_unit_cross(n, k, _DEGENERATE)
-else:
-    _plane_of_incidence_axis_compiled = None
-
-#: s = unit(n × k) with the any_perpendicular(n) fallback (compiled when available, same numbers).
-plane_of_incidence_axis = dispatch(_plane_of_incidence_axis_compiled, plane_of_incidence_axis_numpy)
-#: s = unit(k_in × k_out) with the any_perpendicular(k_in) fallback (the same computation).
-scattering_plane_axis = dispatch(_plane_of_incidence_axis_compiled, scattering_plane_axis_numpy)
+    return unit_cross(k_in, k_out, _DEGENERATE)
 
 
 def camera_ray_frame(d: np.ndarray, up_cam: np.ndarray) -> np.ndarray:

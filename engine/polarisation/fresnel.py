@@ -20,8 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 from .mueller import abcs_matrix
-from ..kernels import dispatch
-from ..kernels.fresnel import compiled_abcs
+from ..kernels import twin
+from ..kernels.fresnel import fresnel_reflection_abcs_numba
 
 
 _TINY = 1e-200
@@ -65,7 +65,7 @@ def fresnel_reflection_abcs_numpy(cos_theta, eta):
 
 #: (A, B, C, S) of the Fresnel reflection Mueller matrix for cosθ and η broadcast together; the
 #: compiled loop of engine.kernels.fresnel when available (same numbers up to rounding).
-fresnel_reflection_abcs = dispatch(compiled_abcs, fresnel_reflection_abcs_numpy)
+fresnel_reflection_abcs = twin(fresnel_reflection_abcs_numba, fresnel_reflection_abcs_numpy)
 
 
 def fresnel_reflection_mueller(cos_theta, eta) -> np.ndarray:

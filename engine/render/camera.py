@@ -19,11 +19,9 @@ import math
 
 import numpy as np
 
-from ..kernels import COMPILED
-from ..kernels.geometry import compiled_pinhole_rays
+from ..kernels.geometry import film_offsets, pinhole_rays
 from ..polarisation.frames import camera_ray_frame
 from ..scene.description import Camera
-from ..vec3 import normalize
 
 
 class CameraModel:
@@ -55,24 +53,15 @@ class CameraModel:
         t_min (N,), t_max (N,)).
         """
         W, H = self.cam.width, self.cam.height
-        if COMPILED and self.cam.projection == "perspective":
-            d, x, depth_per_length = compiled_pinhole_rays(pixel, u, W, H, self.shift_x, self.shift_y, self.tx,
-                                                           self.ty, self.forward, self.right, self.up)
-            o = np.broadcast_to(self.origin[:, None], d.shape).copy()
-            return o, d, x, self.cam.clip_start / depth_per_length, self.cam.clip_end / depth_per_length
-        col = pixel % W
-        row = pixel // W
-        sx = (2.0 * (col + u[0]) / W - 1.0 + 2.0 * self.shift_x) * self.tx
-        sy = (1.0 - 2.0 * (row + u[1]) / H + 2.0 * self.shift_y) * self.ty
-        r = self.right[:, None]
-        up = self.up[:, None]
         if self.cam.projection == "perspective":
-            d = normalize(self.forward[:, None] + sx * r + sy * up)
+            d, x, depth_per_length = pinhole_rays(pixel, u, W, H, self.shift_x, self.shift_y, self.tx, self.ty,
+                                                  self.forward, self.right, self.up)
             o = np.broadcast_to(self.origin[:, None], d.shape).copy()
         else:
+            sx, sy = film_offsets(pixel, u, W, H, self.shift_x, self.shift_y, self.tx, self.ty)
             d = np.broadcast_to(self.forward[:, None], (3, pixel.shape[0])).copy()
-            o = self.origin[:, None] + sx * r + sy * up
-        x = camera_ray_frame(d, up)
+            o = self.origin[:, None] + sx * self.right[:, None] + sy * self.up[:, None]
+            x = camera_ray_frame(d, self.up[:, None])
+            depth_per_length = d[0] * self.forward[0] + d[1] * self.forward[1] + d[2] * self.forward[2]
         # Clip planes are depths along the viewing axis (as in Blender), not ray lengths.
-        depth_per_length = d[0] * self.forward[0] + d[1] * self.forward[1] + d[2] * self.forward[2]
         return o, d, x, self.cam.clip_start / depth_per_length, self.cam.clip_end / depth_per_length

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+from ..spectral.cie import LUMINANCE_WEIGHTS
 
 
 class Film:
@@ -27,7 +27,7 @@ class Film:
         for s in range(4):
             for c in range(3):
                 self.sums[s, c] += np.bincount(pixel, weights=stokes_rgb[s, c], minlength=n)
-        y = np.einsum("c,scn->sn", LUMINANCE, stokes_rgb)
+        y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, stokes_rgb)
         for s in range(4):
             self.sumsq_y[s] += np.bincount(pixel, weights=y[s] * y[s], minlength=n)
         self.count += np.bincount(pixel, minlength=n)
@@ -46,7 +46,7 @@ class Film:
     def stderr_luminance(self) -> np.ndarray:
         """Standard error of the luminance Stokes pixel means, (4, H, W) (0 where spp < 2)."""
         c = self.count.astype(np.float64)
-        y_mean = np.einsum("c,scn->sn", LUMINANCE, self.sums) / np.maximum(c, 1)
+        y_mean = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, self.sums) / np.maximum(c, 1)
         var = (self.sumsq_y / np.maximum(c, 1) - y_mean ** 2) * c / np.maximum(c - 1, 1)
         se = np.sqrt(np.maximum(var, 0.0) / np.maximum(c, 1))
         se[:, c < 2] = 0.0
@@ -68,7 +68,7 @@ def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray
     count = spp.reshape(-1).astype(np.int64)
     film.count[:] = count
     film.sums[:] = np.asarray(mean_rgb, np.float64).transpose(0, 3, 1, 2).reshape(4, 3, -1) * count
-    y = np.einsum("c,scn->sn", LUMINANCE, film.sums) / np.maximum(count, 1)
+    y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, film.sums) / np.maximum(count, 1)
     if stderr_y is not None:
         var = np.asarray(stderr_y, np.float64).reshape(4, -1) ** 2 * count
         film.sumsq_y[:] = (var * np.maximum(count - 1, 0) / np.maximum(count, 1) + y * y) * count

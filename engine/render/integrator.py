@@ -29,7 +29,7 @@ import numpy as np
 
 from ..materials.base import BSDF, BSDFFlags, MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
-from ..polarisation.frames import frame_rotation
+from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import offset_origin
 from ..kernels.transport import (add_light, throughput_times_stokes, update_abcs, update_depolarising,
                                  update_general)
@@ -74,16 +74,6 @@ def unpolarised_response(m: MuellerValue, P: int) -> np.ndarray:
     out[0] = m.A if m.depol is None else m.A + m.depol
     if m.kind == "abcs" and P > 1:
         out[1] = m.B
-    return out
-
-
-def rotate_stokes(S: np.ndarray, c2: np.ndarray, s2: np.ndarray) -> np.ndarray:
-    """Stokes vectors S (P, L, N) re-expressed in a frame rotated by (cos2φ, sin2φ)."""
-    if S.shape[0] < 3:
-        return S
-    out = S.copy()
-    out[1] = c2 * S[1] + s2 * S[2]
-    out[2] = -s2 * S[1] + c2 * S[2]
     return out
 
 

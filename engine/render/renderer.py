@@ -31,6 +31,7 @@ from .film import Film
 from .integrator import PathTracer
 from .lights import LightSet
 from ..scene.description import RenderSettings, Scene
+from ..spectral.cie import LUMINANCE_WEIGHTS
 from ..errors import SceneError
 
 
@@ -47,7 +48,7 @@ class RenderResult:
 
     def stokes_luminance(self) -> np.ndarray:
         """Luminance Stokes image (4, H, W)."""
-        return np.einsum("shwc,c->shw", self.stokes(), np.array([0.2126, 0.7152, 0.0722]))
+        return np.einsum("shwc,c->shw", self.stokes(), LUMINANCE_WEIGHTS)
 
 
 #: How often (seconds) the caller's stop request is polled while units are in flight.

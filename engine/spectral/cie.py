@@ -14,8 +14,7 @@ import os
 
 import numpy as np
 
-from ..kernels import COMPILED
-from ..kernels.tables import compiled_interp_grid
+from ..kernels import tables
 
 LAMBDA_MIN = 360.0
 LAMBDA_MAX = 830.0
@@ -53,24 +52,9 @@ _D65N = _D65 / float(np.dot(_D65, _CMF[1]))  # ∫ D65n ȳ dλ = 1 (1 nm steps)
 def interp_grid(table: np.ndarray, lam_nm, outside: str = "zero") -> np.ndarray:
     """Linearly interpolate rows of a (K, 471) 1 nm table at lam_nm -> (K, *lam.shape).
 
-    ``outside``: "zero" (0 outside [360, 830]) or "clamp" (end values held).  Compiled
-    (engine.kernels.tables, the same numbers) when available.
+    ``outside``: "zero" (0 outside [360, 830]) or "clamp" (end values held); engine.kernels.tables.
     """
-    if COMPILED and np.ndim(lam_nm) > 0:
-        return compiled_interp_grid(table, lam_nm, LAMBDA_MIN, LAMBDA_MAX, outside == "zero")
-    return interp_grid_numpy(table, lam_nm, outside)
-
-
-def interp_grid_numpy(table: np.ndarray, lam_nm, outside: str = "zero") -> np.ndarray:
-    """The NumPy reference of ``interp_grid``."""
-    lam = np.asarray(lam_nm, dtype=np.float64)
-    x = np.clip(np.nan_to_num(lam, nan=LAMBDA_MIN), LAMBDA_MIN, LAMBDA_MAX) - LAMBDA_MIN
-    i = np.minimum(np.floor(x).astype(np.intp), GRID_NM.size - 2)
-    t = x - i
-    out = table[:, i] * (1.0 - t) + table[:, i + 1] * t
-    if outside == "zero":
-        out = np.where((lam >= LAMBDA_MIN) & (lam <= LAMBDA_MAX), out, 0.0)
-    return out
+    return tables.interp_grid(table, lam_nm, LAMBDA_MIN, LAMBDA_MAX, outside == "zero")
 
 
 def cmf_xyz(lam_nm) -> np.ndarray:
@@ -100,12 +84,14 @@ LINEAR_SRGB_TO_XYZ = _xyz_to_rgb_from_primaries()
 XYZ_TO_LINEAR_SRGB = np.linalg.inv(LINEAR_SRGB_TO_XYZ)
 LINEAR_SRGB_TO_XYZ.setflags(write=False)
 XYZ_TO_LINEAR_SRGB.setflags(write=False)
-LUMINANCE_WEIGHTS = (0.2126, 0.7152, 0.0722)
+#: Rec. 709 / sRGB luminance weights of linear R, G, B (Y of linear sRGB): the engine's one definition.
+LUMINANCE_WEIGHTS = np.array([0.2126, 0.7152, 0.0722])
+LUMINANCE_WEIGHTS.setflags(write=False)
 
 
 def luminance(rgb) -> np.ndarray:
     """Rec. 709 luminance 0.2126 R + 0.7152 G + 0.0722 B of linear sRGB (last axis = RGB)."""
-    return np.asarray(rgb, dtype=np.float64) @ np.asarray(LUMINANCE_WEIGHTS)
+    return np.asarray(rgb, dtype=np.float64) @ LUMINANCE_WEIGHTS
 
 
 # --- wavelength sampling (Mitsuba 3's sample_rgb_spectrum) ----------------------------------

@@ -36,10 +36,10 @@ sys.path.insert(0, REPO)
 from engine.materials.htsg import HTSG  # noqa: E402
 from engine.render.renderer import Renderer  # noqa: E402
 from engine.scene.loader import load_scene  # noqa: E402
+from engine.spectral.cie import LUMINANCE_WEIGHTS  # noqa: E402
 
 SHARED = os.environ.get("POLAR_SHARED", os.path.join(os.path.dirname(REPO), "shared"))
 PEERS = os.path.join(SHARED, "peers")
-LUM = np.array([0.2126, 0.7152, 0.0722])
 #: Every timed render runs this many times (same image); the fastest time is kept (machine noise).
 REPEATS = 2
 SCENES = ["plane_brewster", "fresnel_sphere", "glass_sphere", "rough_sphere_a030", "cornell_lambert", "htsg_sphere"]
@@ -55,7 +55,7 @@ def load(name, res):
 
 
 def luminance_stokes(stokes_rgb):
-    return np.einsum("shwc,c->shw", stokes_rgb, LUM)
+    return np.einsum("shwc,c->shw", stokes_rgb, LUMINANCE_WEIGHTS)
 
 
 def errors(img, ref):

@@ -21,11 +21,11 @@ from .export.camera import border_window
 from .export.scene import export_scene
 from ..engine.output.colormaps import diverging, hue_saturation, sequential
 from ..engine.postprocess.filters import apply_filter, filter_row
+from ..engine.spectral.cie import LUMINANCE_WEIGHTS
 from .compositor import polariser_inputs
 from .properties import DEFAULT_PASSES, PASS_NAMES, POLARISATION_TO_ENGINE
 from .viewport import ViewportSession
 
-LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
 #: Seconds between progressive updates of the image shown while rendering.
 DISPLAY_INTERVAL = 1.0
 #: Extra cancel hook for scripted use and tests (test_break() is always False headless).
@@ -58,7 +58,7 @@ def pass_images(stokes_rgb, polariser=None, wanted=None):
     ``wanted`` limits the (costlier) false-colour passes.
     """
     wanted = set(PASS_NAMES) if wanted is None else set(wanted)
-    y = np.einsum("shwc,c->shw", stokes_rgb, LUMINANCE)
+    y = np.einsum("shwc,c->shw", stokes_rgb, LUMINANCE_WEIGHTS)
     out = {f"S{i}": stokes_rgb[i] for i in range(4)}
     out["DoP"] = degree_of_polarisation(y)[..., None]
     out["DoLP"] = degree_of_linear_polarisation(y)[..., None]
@@ -194,7 +194,7 @@ class PolarRenderEngine(bpy.types.RenderEngine):
 
     def view_update(self, context, depsgraph):
         if self.viewport is None:
-            self.viewport = ViewportSession()
+            self.viewport = ViewportSession(engine_settings)
         self.viewport.sync(depsgraph, context)
         self.tag_redraw()
 
