@@ -728,7 +728,7 @@ def re_search(pattern, text):
     ("ci.ply", _PLY_HEAD.format(count="int") + _PLY_VERTS + "1000000000000 0 1 2\n",
      r"element 'face' row 0 \(line 13.*fewer values"),
     ("cn.ply", _PLY_HEAD.format(count="int") + _PLY_VERTS + "-1 0 1 2\n",
-     r"element 'face' row 0 \(line 13.*list lengths must be >= 0"),
+     r"element 'face' row 0 \(line 13.*list lengths must be integers >= 0"),
     # ASCII PLY words, booleans and decimals where numbers or integers belong
     ("wv.ply", _PLY_HEAD.format(count="uchar") + "0 0 0\n1 0 true\n0 1 0\n3 0 1 2\n",
      r"non-numeric value 'true' in element 'vertex' row 1 \(line 11"),
@@ -737,7 +737,7 @@ def re_search(pattern, text):
     ("df.ply", _PLY_HEAD.format(count="uchar") + _PLY_VERTS + "3 0 1 2.5\n",
      r"face 0 has a non-integer vertex index 2\.5"),
     ("dc.ply", _PLY_HEAD.format(count="uchar") + _PLY_VERTS + "3.0 0 1 2\n",
-     r"element 'face' row 0 .*integers must be written as integers"),
+     r"element 'face' row 0 .*list lengths must be integers"),
     # values that would wrap in their declared type are range checked, not wrapped
     ("wr.ply", _PLY_HEAD.format(count="uchar") + _PLY_VERTS + "3 0 1 4294967298\n",
      r"face 0 references vertex index 4294967298, out of range for 3 vertices"),

@@ -189,41 +189,52 @@ def _parse(plyfile, fh, header: _Header):
                 raise
 
 
+_ROW_REASONS = {
+    "malformed input": "a value is not a number of the property's type (list lengths must be "
+                       "integers >= 0)",
+    "early end-of-line": "the row has fewer values than the header and its list lengths declare",
+    "expected end-of-line": "the row has more values than the header declares",
+}
+
+
 def _explain(e, header: _Header, text_lines, field, path):
     """A plyfile exception -> SceneError naming the header line or element row."""
-    if hasattr(e, "line") and not hasattr(e, "element"):       # header
-        lineno = header.line_of[min(e.line or 1, len(header.line_of)) - 1]
-        line = header.lines[lineno - 1].strip() if lineno <= len(header.lines) else ""
-        if "field type" in e.message:
-            return mesh_file_error(field, path, f"malformed or unsupported property on header "
-                                                f"line {lineno}: '{line}'")
-        return mesh_file_error(field, path, f"bad PLY header line {lineno} '{line}': {e.message}")
-    if not hasattr(e, "element"):
-        return mesh_file_error(field, path, f"cannot be read as PLY ({type(e).__name__}: {e})")
+    if hasattr(e, "element"):
+        what = _explain_row(e, header, text_lines)
+    elif hasattr(e, "line"):
+        what = _explain_header_line(e, header)
+    else:
+        what = f"cannot be read as PLY ({type(e).__name__}: {e})"
+    return mesh_file_error(field, path, what)
+
+
+def _explain_header_line(e, header: _Header) -> str:
+    lineno = header.line_of[min(e.line or 1, len(header.line_of)) - 1]
+    line = header.lines[lineno - 1].strip() if lineno <= len(header.lines) else "end_header"
+    if "field type" in e.message:
+        return f"malformed or unsupported property on header line {lineno}: '{line}'"
+    return f"bad PLY header line {lineno} '{line}': {e.message}"
+
+
+def _explain_row(e, header: _Header, text_lines) -> str:
     name, row, count = e.element.name, e.row, e.element.count
-    if e.message == "early end-of-file" and header.fmt == "ascii":
-        return mesh_file_error(field, path, f"ASCII data ends early: element '{name}' declares "
-                                            f"{count} rows but only {row} row(s) are present")
+    if e.message == "early end-of-file" and text_lines is not None:
+        return (f"ASCII data ends early: element '{name}' declares {count} rows but only {row} "
+                "row(s) are present")
     if e.message == "early end-of-file":
-        return mesh_file_error(field, path, f"truncated binary data in element '{name}' ({count} "
-                                            f"rows): the data ends inside row {row}")
+        return (f"truncated binary data in element '{name}' ({count} rows): the data ends inside "
+                f"row {row}")
     where = f"element '{name}' row {row}"
     if text_lines is not None:      # ASCII: one row per line after the header
-        first = sum(el[1] for el in header.elements[:[el[0] for el in header.elements]
-                                                    .index(name)])
-        k = first + row
+        names = [el[0] for el in header.elements]
+        k = sum(el[1] for el in header.elements[:names.index(name)]) + row
         line = text_lines[k] if k < len(text_lines) else ""
-        where += f" (line {len(header.lines) + 1 + k + 1}: '{line.strip()[:60]}')"
-        bad = next((t for t in line.split() if not _is_number(t)), None)
-        if e.message == "malformed input" and bad is not None:
-            return mesh_file_error(field, path, f"non-numeric value '{bad}' in {where}")
+        where += f" (line {len(header.lines) + 2 + k}: '{line.strip()[:60]}')"
+        word = next((t for t in line.split() if not _is_number(t)), None)
+        if e.message == "malformed input" and word is not None:
+            return f"non-numeric value '{word}' in {where}"
     prop = f", property '{e.prop.name}'" if e.prop is not None else ""
-    reason = {"malformed input": "a value is not a number of the property's type (integers "
-                                 "must be written as integers; list lengths must be >= 0)",
-              "early end-of-line": "the row has fewer values than the header and its list "
-                                   "lengths declare",
-              "expected end-of-line": "the row has more values than the header declares"}
-    return mesh_file_error(field, path, f"{where}{prop}: {reason.get(e.message, e.message)}")
+    return f"{where}{prop}: {_ROW_REASONS.get(e.message, e.message)}"
 
 
 def _is_number(tok) -> bool:
@@ -244,32 +255,34 @@ def _list_column(col):
 
 
 def _mesh_elements(ply, header, field, path):
-    """Validate the structure; returns (vertex data, face index property name)."""
+    """Check the structure; returns (vertex data, face index property name, has normals)."""
     names = [e.name for e in ply.elements]
-    if "vertex" not in names:
-        raise mesh_file_error(field, path, "PLY file has no 'vertex' element")
-    if "face" not in names:
-        raise mesh_file_error(field, path, "PLY file has no 'face' element (zero faces)")
-    ve, fe = ply["vertex"], ply["face"]
-    vprops = {p.name: p for p in ve.properties}
+    for name, what in (("vertex", "'vertex' element"), ("face", "'face' element (zero faces)")):
+        if name not in names:
+            raise mesh_file_error(field, path, f"PLY file has no {what}")
+    vprops = {p.name: p for p in ply["vertex"].properties}
     for c in ("x", "y", "z"):
         if c not in vprops:
             raise mesh_file_error(field, path, f"vertex element has no '{c}' property")
-        if hasattr(vprops[c], "len_dtype"):
+        if hasattr(vprops[c], "len_dtype"):      # a plyfile list property
             raise mesh_file_error(field, path, f"vertex property '{c}' must not be a list")
+    index = _face_index_property(ply["face"], header, field, path)
+    for name, what in (("face", "faces"), ("vertex", "vertices")):
+        if ply[name].count == 0:
+            raise mesh_file_error(field, path, f"mesh has zero {what}")
+    has_normals = all(c in vprops and not hasattr(vprops[c], "len_dtype")
+                      for c in ("nx", "ny", "nz"))
+    return ply["vertex"].data, index, has_normals
+
+
+def _face_index_property(fe, header, field, path) -> str:
     index = next((p for p in fe.properties if p.name in _INDEX_NAMES), None)
     if index is None or not hasattr(index, "len_dtype"):
         raise mesh_file_error(field, path, "face element has no list property 'vertex_indices' "
                                            "(or 'vertex_index')")
     if header.declared.get(("face", index.name)) in _FLOAT_TYPES:
         raise mesh_file_error(field, path, "face vertex indices must have an integer type")
-    if fe.count == 0:
-        raise mesh_file_error(field, path, "mesh has zero faces")
-    if ve.count == 0:
-        raise mesh_file_error(field, path, "mesh has zero vertices")
-    has_normals = all(c in vprops and not hasattr(vprops[c], "len_dtype")
-                      for c in ("nx", "ny", "nz"))
-    return ve.data, index.name, has_normals
+    return index.name
 
 
 def _vertex_indices(flat, counts, nv, field, path) -> np.ndarray:
