@@ -816,3 +816,37 @@ def test_plyfile_is_needed_only_for_ply(tmp_path):
                          text=True, cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
     assert out.returncode == 0, out.stderr
     assert "objects[0].file: " in out.stdout and "needs the 'plyfile' package" in out.stdout
+
+
+# every PLY type for coordinates, list counts and indices, extra properties and elements,
+# in all three encodings, reads back what was written
+_COORD_TYPES = ["char", "uchar", "short", "ushort", "int", "uint", "float", "double", "int64"]
+_COUNT_TYPES = ["uchar", "char", "ushort", "short", "uint", "int", "int64", "uint64"]
+_INDEX_TYPES = ["int", "uint", "ushort", "short", "int64", "uint64", "int32"]
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.data())
+def test_ply_types_and_layouts_agree(tmp_path_factory, data):
+    coord = data.draw(st.sampled_from(_COORD_TYPES))
+    count_t = data.draw(st.sampled_from(_COUNT_TYPES))
+    index_t = data.draw(st.sampled_from(_INDEX_TYPES))
+    fmt = data.draw(st.sampled_from(["ascii", "binary_little_endian", "binary_big_endian"]))
+    nv = data.draw(st.integers(3, 9))
+    sizes = data.draw(st.lists(st.integers(3, 5), min_size=1, max_size=6))
+    faces = [data.draw(st.lists(st.integers(0, nv - 1), min_size=k, max_size=k)) for k in sizes]
+    rng = np.random.default_rng(nv * 7 + len(faces))
+    verts = rng.integers(0, 100, size=(nv, 3)).astype(float)   # exact in every coord type
+    vprops = [("uchar", "red"), (coord, "x"), (coord, "y"), (coord, "z"), ("float", "w")]
+    rows = [(7, *v, 0.5) for v in verts.tolist()]
+    if coord in ("char", "uchar", "short", "ushort", "int", "uint", "int64"):
+        rows = [(7, *map(int, v), 0.5) for v in verts.tolist()]
+    extra = ("edge", [("int", "a"), ("int", "b")], [(0, 1)])
+    d = tmp_path_factory.mktemp("types")
+    p = write_ply(d / "m.ply", fmt, vprops, rows, (count_t, index_t, "vertex_indices"), faces,
+                  extra_face_props=[("short", "flags", [1] * len(faces))],
+                  extra_elements_before_face=[extra])
+    m = read_ply(p)
+    expect = [(f[0], f[i], f[i + 1]) for f in faces for i in range(1, len(f) - 1)]
+    np.testing.assert_array_equal(m.faces, np.array(expect).reshape(-1, 3))
+    np.testing.assert_array_equal(m.vertices, verts)
