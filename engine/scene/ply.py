@@ -31,6 +31,8 @@ from __future__ import annotations
 
 import io
 import re
+import shutil
+import tempfile
 
 import numpy as np
 
@@ -166,22 +168,27 @@ def _read_header(fh, field, path) -> _Header:
 def _parse(plyfile, fh, header: _Header):
     """plyfile.PlyData of the whole file.
 
-    Binary files with an untouched header are read from the open file, so
-    plyfile can memory-map faces of 3 (or 4) corners; otherwise plyfile
-    reads the normalised header and the data from memory.
+    plyfile memory-maps binary elements only from a real file (from any other
+    stream it reads row by row, property by property), so a binary file whose
+    header had to be normalised is copied with the new header into a
+    temporary file.  ASCII is read from memory.
     """
     fh.seek(0)
     head = fh.read(header.body)
-    if header.fmt != "ascii" and head == header.text.encode("ascii"):
-        stream = fh
-    else:
-        body = fh.read()
-        if header.fmt == "ascii":     # odd bytes become '?', reported as non-numeric
-            body = body.decode("ascii", errors="replace").encode("ascii", errors="replace")
-        stream = io.BytesIO(header.text.encode("ascii") + body)
-    # plyfile memory-maps a list only when told its fixed length; guess the usual ones
-    mappable = stream is fh and any(e[0] == "face" for e in header.elements)
-    guesses = (3, 4, None) if mappable else (None,)
+    text = header.text.encode("ascii")
+    if header.fmt == "ascii":         # odd bytes become '?', reported as non-numeric
+        body = fh.read().decode("ascii", errors="replace").encode("ascii", errors="replace")
+        return _read_guessing(plyfile, io.BytesIO(text + body), guesses=(None,))
+    if head == text:
+        return _read_guessing(plyfile, fh, guesses=(3, 4, None))
+    with tempfile.TemporaryFile() as tmp:
+        tmp.write(text)
+        shutil.copyfileobj(fh, tmp)
+        return _read_guessing(plyfile, tmp, guesses=(3, 4, None))
+
+
+def _read_guessing(plyfile, stream, guesses):
+    """plyfile memory-maps a list only when told its fixed length: try the usual ones."""
     for corners in guesses:
         stream.seek(0)
         known = {"face": {n: corners for n in _INDEX_NAMES}} if corners else {}
