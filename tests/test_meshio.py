@@ -1,5 +1,8 @@
 """Tests for engine.scene.meshio and engine.scene.shapes."""
 import os
+import re
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -9,8 +12,6 @@ from hypothesis import given, settings, strategies as st
 from engine.errors import SceneError
 from engine.scene.meshio import (MeshData, compute_vertex_normals, face_normals,
                                  read_mesh, read_obj, read_ply, triangle_areas)
-import subprocess
-import sys
 from engine.scene.shapes import icosphere, quad, transform_matrix, transform_mesh
 
 SHARED_PLY = "/work/shared/peers/meshes/sphere_ico6.ply"
@@ -699,12 +700,7 @@ def _one_line_scene_error(path, pattern):
     msg = str(ei.value)
     assert ei.value.field == "objects[0].file" and os.path.basename(path) in msg
     assert "\n" not in msg                     # one line, no traceback
-    assert re_search(pattern, msg), msg
-
-
-def re_search(pattern, text):
-    import re
-    return re.search(pattern, text)
+    assert re.search(pattern, msg), msg
 
 
 # One rule: a value that is not what the format says (a word or boolean where a number
