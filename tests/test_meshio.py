@@ -1,6 +1,8 @@
 """Tests for engine.scene.meshio and engine.scene.shapes."""
 import os
-import time
+import re
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -36,7 +38,7 @@ def write_ply(path, fmt, vprops, vrows, face_spec, faces, extra_face_props=(),
     """
     codes = {"char": "b", "uchar": "B", "short": "h", "ushort": "H", "int": "i",
              "uint": "I", "float": "f", "double": "d", "int32": "i", "uint8": "B",
-             "float32": "f", "float64": "d"}
+             "float32": "f", "float64": "d", "int64": "q", "uint64": "Q"}
     head = ["ply", f"format {fmt} 1.0", "comment test fixture",
             f"element vertex {len(vrows)}"]
     head += [f"property {t} {n}" for t, n in vprops]
@@ -141,12 +143,8 @@ def test_icosphere6_matches_shared_ply():
 
 
 @pytest.mark.skipif(not os.path.exists(SHARED_PLY), reason="shared mesh missing")
-def test_read_shared_ply_fast_and_correct():
-    read_ply(SHARED_PLY)  # warm up the file cache
-    t0 = time.perf_counter()
+def test_read_shared_ply_correct():
     m = read_mesh(SHARED_PLY)
-    dt = time.perf_counter() - t0
-    assert dt < 0.5, f"reading took {dt:.3f} s"
     assert m.vertices.shape == (40962, 3) and m.faces.shape == (81920, 3)
     assert m.vertices.dtype == np.float64 and m.faces.dtype == np.int32
     np.testing.assert_allclose(m.vertex_normals, m.vertices, atol=1e-6)
@@ -495,7 +493,8 @@ def test_obj_errors(tmp_path, text, pattern):
         read_obj(p, field="objects[0].file")
 
 
-def test_obj_large_is_fast(tmp_path):
+def test_obj_large_reads_exactly(tmp_path):
+    """A 20k-triangle OBJ with normals reads back the icosphere (speed lives in tests/bench, not here)."""
     m0 = icosphere(6)
     v = m0.vertices
     lines = [f"v {x:.9f} {y:.9f} {z:.9f}" for x, y, z in v.tolist()]
@@ -504,10 +503,7 @@ def test_obj_large_is_fast(tmp_path):
               for a, b, c in (m0.faces + 1).tolist()]
     p = tmp_path / "sphere.obj"
     p.write_text("\n".join(lines))
-    t0 = time.perf_counter()
     m = read_obj(p)
-    dt = time.perf_counter() - t0
-    assert dt < 2.0, f"OBJ reading took {dt:.3f} s"
     np.testing.assert_array_equal(m.faces, m0.faces)   # pairs (i, i) keep order
     np.testing.assert_allclose(m.vertex_normals, m0.vertex_normals, atol=1e-8)
 
@@ -651,3 +647,195 @@ def test_ply_encodings_agree(tmp_path_factory, data):
     for m in results:
         np.testing.assert_array_equal(m.faces, np.array(expect).reshape(-1, 3))
         np.testing.assert_array_equal(m.vertices, verts)
+
+
+# ---------------------------------------------------------------------------
+# issue 13: defects in mesh files
+
+
+@pytest.mark.parametrize("fmt", ["binary_little_endian", "binary_big_endian"])
+@pytest.mark.parametrize("count_type", ["int64", "uint64"])
+@pytest.mark.parametrize("index_type", ["int", "int64"])
+def test_ply_64bit_list_counts_mixed_polygons(tmp_path, fmt, count_type, index_type):
+    # was rejected for big endian ("face 0 has 0 corner(s)": '>l' read 4 of 8 bytes)
+    rows = [tuple(float(c) for c in v) for v in CUBE_V]
+    faces = _cube_faces_tri_and_quad()
+    p = write_ply(tmp_path / "c64.ply", fmt, [("float", c) for c in "xyz"], rows,
+                  (count_type, index_type, "vertex_indices"), faces)
+    m = read_ply(p)
+    _check_cube(m)
+    expect = [(f[0], f[i], f[i + 1]) for f in faces for i in range(1, len(f) - 1)]
+    np.testing.assert_array_equal(m.faces, expect)
+
+
+@pytest.mark.parametrize("corners", [3, 4])
+@pytest.mark.parametrize("fmt", ["binary_little_endian", "binary_big_endian"])
+def test_ply_uniform_polygons_int64_counts(tmp_path, corners, fmt):
+    # the memory-mapped path (all faces of one size) with 8-byte counts
+    faces = (_cube_faces_tri_and_quad()[:2] if corners == 3 else [list(q) for q in CUBE_Q])
+    p = write_ply(tmp_path / "u.ply", fmt, [("double", c) for c in "xyz"],
+                  [tuple(float(c) for c in v) for v in CUBE_V],
+                  ("uint64", "uint", "vertex_indices"), faces)
+    m = read_ply(p)
+    expect = [(f[0], f[i], f[i + 1]) for f in faces for i in range(1, len(f) - 1)]
+    np.testing.assert_array_equal(m.faces, expect)
+
+
+_PLY_HEAD = ("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+             "property float z\nelement face 1\nproperty list {count} int vertex_indices\n"
+             "end_header\n")
+_PLY_VERTS = "0 0 0\n1 0 0\n0 1 0\n"
+
+
+def _one_line_scene_error(path, pattern):
+    with pytest.raises(SceneError) as ei:
+        read_mesh(path, field="objects[0].file")
+    msg = str(ei.value)
+    assert ei.value.field == "objects[0].file" and os.path.basename(path) in msg
+    assert "\n" not in msg                     # one line, no traceback
+    assert re.search(pattern, msg), msg
+
+
+# One rule: a value that is not what the format says (a word or boolean where a number
+# belongs, an index beyond any integer, a list longer than its row) is a one-line
+# SceneError naming the file, the line or row, and the reason.
+@pytest.mark.parametrize("name, text, pattern", [
+    # OBJ index beyond int64 (was StopIteration)
+    ("big.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99999999999999999999999\n",
+     r"line 4: vertex index 99999999999999999999999 is out of range"),
+    ("bign.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//-99999999999999999999999\n",
+     r"line 5: normal index -99999999999999999999999 is out of range"),
+    # OBJ words / booleans / decimals where numbers or indices belong
+    ("wv.obj", "v 0 0 0\nv 1 0 true\nv 0 1 0\nf 1 2 3\n", r"line 2: non-numeric 'v' value"),
+    ("wn.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvn 0 0 yes\nf 1//1 2//1 3//1\n",
+     r"line 4: non-numeric 'vn' value"),
+    ("wf.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 True\n", r"line 4: bad vertex index 'True'"),
+    ("df.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3.0\n", r"line 4: bad vertex index '3.0'"),
+    # ASCII PLY list length of 10^12 (was MemoryError), whatever the declared count type
+    ("cu.ply", _PLY_HEAD.format(count="uchar") + _PLY_VERTS + "1000000000000 0 1 2\n",
+     r"element 'face' row 0 \(line 13: '1000000000000 0 1 2'\).*fewer values"),
+    ("ci.ply", _PLY_HEAD.format(count="int") + _PLY_VERTS + "1000000000000 0 1 2\n",
+     r"element 'face' row 0 \(line 13.*fewer values"),
+    ("cn.ply", _PLY_HEAD.format(count="int") + _PLY_VERTS + "-1 0 1 2\n",
+     r"element 'face' row 0 \(line 13.*list lengths must be integers >= 0"),
+    # ASCII PLY words, booleans and decimals where numbers or integers belong
+    ("wv.ply", _PLY_HEAD.format(count="uchar") + "0 0 0\n1 0 true\n0 1 0\n3 0 1 2\n",
+     r"non-numeric value 'true' in element 'vertex' row 1 \(line 11"),
+    ("wf.ply", _PLY_HEAD.format(count="uchar") + _PLY_VERTS + "3 0 1 False\n",
+     r"non-numeric value 'False' in element 'face' row 0"),
+    ("df.ply", _PLY_HEAD.format(count="uchar") + _PLY_VERTS + "3 0 1 2.5\n",
+     r"face 0 has a non-integer vertex index 2\.5"),
+    ("dc.ply", _PLY_HEAD.format(count="uchar") + _PLY_VERTS + "3.0 0 1 2\n",
+     r"element 'face' row 0 .*list lengths must be integers"),
+    # values that would wrap in their declared type are range checked, not wrapped
+    ("wr.ply", _PLY_HEAD.format(count="uchar") + _PLY_VERTS + "3 0 1 4294967298\n",
+     r"face 0 references vertex index 4294967298, out of range for 3 vertices"),
+    ("xl.ply", _PLY_HEAD.format(count="uchar") + _PLY_VERTS + "3 0 1 2 7\n",
+     r"row 0 \(line 13.*more values than the header declares"),
+])
+def test_mesh_values_of_the_wrong_kind(tmp_path, name, text, pattern):
+    p = tmp_path / name
+    p.write_text(text)
+    _one_line_scene_error(p, pattern)
+
+
+@pytest.mark.parametrize("header_change, pattern", [
+    (("element face 1\n", "element face 1000000000000\n"),
+     r"truncated data in element 'face' \(1000000000000 rows\)"),
+    (("element face 1\n", "element face -1\n"), r"bad element count on header line 7"),
+    (("format ascii 1.0\n", ""), r"no 'format' line"),
+    (("element face", "banana\nelement face"), r"header line 7 'banana'"),
+    (("list uchar int", "list float int"), r"list count type must be an integer type"),
+    (("list uchar int", "list uchar float"), r"vertex indices must have an integer type"),
+])
+def test_ply_header_errors_are_one_line(tmp_path, header_change, pattern):
+    p = tmp_path / "h.ply"
+    p.write_text(_PLY_HEAD.format(count="uchar").replace(*header_change)
+                 + _PLY_VERTS + "3 0 1 2\n")
+    _one_line_scene_error(p, pattern)
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian", "binary_big_endian"])
+def test_ply_tolerated_header_oddities(tmp_path, fmt):
+    # blank lines, a non-ASCII comment and double spaces in the header (plyfile 1.0 alone
+    # rejects the first two); the binary body is then read through the normalised header
+    rows = [tuple(float(c) for c in v) for v in CUBE_V]
+    p = write_ply(tmp_path / "odd.ply", fmt, [("float", c) for c in "xyz"], rows,
+                  ("uchar", "int", "vertex_indices"), _cube_faces_tri_and_quad())
+    data = p.read_bytes()
+    odd = data.replace(b"element face", "\ncomment caf\u00e9 \u00e0 la cr\u00e8me\n\n"
+                                        "element  face".encode("utf-8"), 1)
+    p.write_bytes(odd)
+    _check_cube(read_ply(p))
+
+
+def test_obj_faces_before_first_usemtl_name_their_line(tmp_path):
+    # decision (engine/scene/obj.py docstring): such faces keep group -1 and the mesh
+    # records the line of the first one, for the loader's error message
+    p = tmp_path / "g.obj"
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n# comment\nf 1 2 3\nusemtl glass\nf 1 2 3\n")
+    m = read_obj(p)
+    np.testing.assert_array_equal(m.face_groups, [-1, 0])
+    assert m.ungrouped_line == 5
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nusemtl glass\nf 1 2 3\nf 1 2 3\n")
+    assert read_obj(p).ungrouped_line is None
+    p.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    m = read_obj(p)
+    assert m.ungrouped_line is None and m.face_groups is None
+
+
+def test_plyfile_is_needed_only_for_ply(tmp_path):
+    # The Blender extension ships without plyfile: importing the scene loader must not
+    # import it, OBJ must read without it, and PLY must say what is missing.
+    obj = tmp_path / "t.obj"
+    obj.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    ply = _tri_ply(tmp_path)
+    script = (
+        "import sys\n"
+        "sys.modules['plyfile'] = None\n"   # makes 'import plyfile' fail
+        "import engine.scene.loader\n"
+        "from engine.errors import SceneError\n"
+        "from engine.scene.meshio import read_mesh\n"
+        "assert read_mesh(sys.argv[1]).faces.shape == (1, 3)\n"
+        "try:\n"
+        "    read_mesh(sys.argv[2], field='objects[0].file')\n"
+        "except SceneError as e:\n"
+        "    print(e)\n")
+    out = subprocess.run([sys.executable, "-c", script, str(obj), str(ply)], capture_output=True,
+                         text=True, cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    assert out.returncode == 0, out.stderr
+    assert "objects[0].file: " in out.stdout and "needs the 'plyfile' package" in out.stdout
+
+
+# every PLY type for coordinates, list counts and indices, extra properties and elements,
+# in all three encodings, reads back what was written
+_COORD_TYPES = ["char", "uchar", "short", "ushort", "int", "uint", "float", "double", "int64"]
+_COUNT_TYPES = ["uchar", "char", "ushort", "short", "uint", "int", "int64", "uint64"]
+_INDEX_TYPES = ["int", "uint", "ushort", "short", "int64", "uint64", "int32"]
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.data())
+def test_ply_types_and_layouts_agree(tmp_path_factory, data):
+    coord = data.draw(st.sampled_from(_COORD_TYPES))
+    count_t = data.draw(st.sampled_from(_COUNT_TYPES))
+    index_t = data.draw(st.sampled_from(_INDEX_TYPES))
+    fmt = data.draw(st.sampled_from(["ascii", "binary_little_endian", "binary_big_endian"]))
+    nv = data.draw(st.integers(3, 9))
+    sizes = data.draw(st.lists(st.integers(3, 5), min_size=1, max_size=6))
+    faces = [data.draw(st.lists(st.integers(0, nv - 1), min_size=k, max_size=k)) for k in sizes]
+    rng = np.random.default_rng(nv * 7 + len(faces))
+    verts = rng.integers(0, 100, size=(nv, 3)).astype(float)   # exact in every coord type
+    vprops = [("uchar", "red"), (coord, "x"), (coord, "y"), (coord, "z"), ("float", "w")]
+    rows = [(7, *v, 0.5) for v in verts.tolist()]
+    if coord in ("char", "uchar", "short", "ushort", "int", "uint", "int64"):
+        rows = [(7, *map(int, v), 0.5) for v in verts.tolist()]
+    extra = ("edge", [("int", "a"), ("int", "b")], [(0, 1)])
+    d = tmp_path_factory.mktemp("types")
+    p = write_ply(d / "m.ply", fmt, vprops, rows, (count_t, index_t, "vertex_indices"), faces,
+                  extra_face_props=[("short", "flags", [1] * len(faces))],
+                  extra_elements_before_face=[extra])
+    m = read_ply(p)
+    expect = [(f[0], f[i], f[i + 1]) for f in faces for i in range(1, len(f) - 1)]
+    np.testing.assert_array_equal(m.faces, np.array(expect).reshape(-1, 3))
+    np.testing.assert_array_equal(m.vertices, verts)
