@@ -97,7 +97,8 @@ def _float_channel(name: str, values: np.ndarray, half: bool) -> np.ndarray:
             )
         stored = values.astype(np.float16)
     else:
-        stored = values.astype(np.float32)
+        with np.errstate(over="ignore", invalid="ignore"):   # reported below, as a ValueError
+            stored = values.astype(np.float32)
     # Checked on the stored values: a finite float64 beyond ±3.4e38 becomes inf in float32, and a
     # derived ratio of overflowing luminances is NaN; the file holds only finite numbers.
     bad = ~np.isfinite(stored)

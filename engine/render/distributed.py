@@ -104,7 +104,10 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
         W, H = scene.camera.width, scene.camera.height
         units = list(work_units(W, H, st.spp, st.batch_rays, window=window))
         key = scene_key(scene)
-        scene_future = client.scatter(scene, broadcast=True)
+        try:
+            scene_future = client.scatter(scene, broadcast=True, timeout=timeout)
+        except TimeoutError:
+            raise RuntimeError(f"no Dask worker joined the scheduler within {timeout:g} s") from None
         futures = [client.submit(_render_unit, key, scene_future, st, unit, window, W, pure=True,
                                  key=f"polar-{key[:12]}-{st.seed}-{i}-{unit}") for i, unit in enumerate(units)]
         film = Film(W, H)
