@@ -180,6 +180,11 @@ def test_write_failure_saves_finished_samples_to_a_rescue_file(tmp_path, scene_d
     np.testing.assert_array_equal(stokes, read_stokes_exr(str(reference))[0])
     assert header["polar.rescued_from"] == str(target) and "S0.Y.stderr" in channels
     assert not target.exists() and out == ""
+    # the rescue file is an ordinary Polar EXR: the render continues from it
+    status, _, err = run_cli(capsys, "render", scene_dir / "scene.json", "-o", tmp_path / "more.exr", "-q",
+                             "--no-previews", "--resume", rescue, "--spp", "3")
+    assert status == 0, err
+    assert np.all(read_stokes_exr(str(tmp_path / "more.exr"))[1]["spp"] == 3)
 
 
 def test_values_an_exr_cannot_hold_are_rescued_losslessly(tmp_path, scene_dir, capsys, monkeypatch):

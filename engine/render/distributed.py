@@ -80,14 +80,14 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
     ``distributed.Client`` (then ``address`` is ignored).  If the cluster fails mid-render (every
     worker lost, the scene's data lost with them, a unit failing), the units finished so far are
     returned as a cancelled result with ``stats["error"]`` saying what happened.  A bad address
-    raises RuntimeError, an unreachable scheduler OSError.
+    or a cluster without workers raises RuntimeError, an unreachable scheduler OSError.
     """
     try:
         from distributed import Client, as_completed
     except ImportError:
         raise RuntimeError("distributed rendering needs Dask: pip install \"dask[distributed]\"") from None
     own_client = client is None
-    # How long to try to reach the scheduler, and to wait with no worker at all (seconds).
+    # How long to try to reach the scheduler, and for a worker to receive the scene (seconds).
     timeout = float(os.environ.get("POLAR_DASK_TIMEOUT", "20"))
     if client is None:
         try:
@@ -119,26 +119,15 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
         results = {}
         next_to_add = 0
         cancelled = False
-        no_workers_since = None
         pending = as_completed(futures)
         while not pending.is_empty():
             batch = pending.next_batch(block=False)
             if not batch:
-                # Nothing finished yet: poll the stop request, and notice a cluster left without
-                # any worker (tasks would wait for one forever).
+                # Nothing finished yet: poll the stop request meanwhile (a cluster may stall for
+                # long; Ctrl-C / SIGTERM must still end the render with its finished units).
                 if should_stop is not None and should_stop():
                     cancelled = True
                     break
-                now = time.perf_counter()
-                if not client.scheduler_info().get("workers"):
-                    no_workers_since = no_workers_since or now
-                    if now - no_workers_since > timeout:
-                        cancelled = True
-                        stats["error"] = (f"no Dask worker left for {timeout:g} s after {next_to_add} of "
-                                          f"{len(units)} work units")
-                        break
-                else:
-                    no_workers_since = None
                 time.sleep(STOP_POLL_SECONDS)
                 continue
             for future in batch:
