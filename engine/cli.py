@@ -19,8 +19,6 @@ import signal
 import sys
 import time
 
-import numpy as np
-
 from .errors import SceneError
 
 

@@ -103,7 +103,7 @@ REFUSED = {
 
 @pytest.mark.parametrize("case", list(REFUSED))
 def test_resume_refuses_another_render_naming_the_difference(case, partial, tmp_path, capsys):
-    d, _, part = partial
+    _, _, part = partial
     changes, args, named = REFUSED[case]
     scene = small_demo(tmp_path, **changes)
     status = cli.main(["render", scene, "-o", str(tmp_path / "x.exr"), "--resume", part, "--spp", "4", "-q",
@@ -121,7 +121,7 @@ def test_resume_refuses_another_render_naming_the_difference(case, partial, tmp_
     ({"render.spp": 64}, []),                                            # the scene's own count is not checked
 ])
 def test_resume_accepts_what_does_not_change_the_estimator(changes, args, partial, tmp_path, capsys):
-    d, _, part = partial
+    _, _, part = partial
     scene = small_demo(tmp_path, **changes)
     out = tmp_path / "more.exr"
     status = cli.main(["render", scene, "-o", str(out), "--resume", part, "--spp", "5", "-q", "--no-previews", *args])
@@ -133,7 +133,7 @@ def test_resume_accepts_what_does_not_change_the_estimator(changes, args, partia
 
 def test_resume_refuses_files_without_a_scene_fingerprint(partial, tmp_path, capsys):
     from engine.output.exr import write_stokes_exr
-    d, scene, part = partial
+    _, scene, part = partial
     stokes, channels, header = read_stokes_exr(part)
     meta = {k: v for k, v in header.items() if k.startswith("polar.") and k not in ("polar.scene_hash",
                                                                                     "polar.conventions")}

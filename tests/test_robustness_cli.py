@@ -127,7 +127,7 @@ def test_render_mistakes_are_one_line_errors_before_rendering(case, tmp_path, sc
 
 def test_longest_legal_file_name_renders(tmp_path, scene_dir, capsys):
     out = tmp_path / ("n" * 245 + ".exr")                            # 249 bytes: temp names must not add to it
-    status, stdout, err = run_cli(capsys, "render", scene_dir / "scene.json", "-o", out, "-q")
+    status, _, err = run_cli(capsys, "render", scene_dir / "scene.json", "-o", out, "-q")
     assert status == 0, err
     assert read_stokes_exr(str(out))[2]["polar.complete"] == 1
     assert not [n for n in os.listdir(tmp_path) if n.startswith(".")]
@@ -205,7 +205,7 @@ def test_values_an_exr_cannot_hold_are_rescued_losslessly(tmp_path, scene_dir, c
 
 def test_a_preview_blocked_by_a_folder_is_a_warning_and_keeps_the_exr(tmp_path, scene_dir, capsys):
     (tmp_path / "out_DoLP.png").mkdir()
-    status, out, err = run_cli(capsys, "render", scene_dir / "scene.json", "-o", tmp_path / "out.exr", "-q")
+    status, _, err = run_cli(capsys, "render", scene_dir / "scene.json", "-o", tmp_path / "out.exr", "-q")
     assert status == 0, err
     assert [line for line in err.splitlines() if line.startswith("warning: previews not written")]
     assert "Traceback" not in err and not error_lines(err)
@@ -225,7 +225,7 @@ def test_a_signal_while_writing_does_not_discard_the_render(signum, status, tmp_
     got, _, err = run_cli(capsys, "render", scene_dir / "scene.json", "-o", tmp_path / "out.exr", "-q",
                           "--no-previews")
     assert got == status, err
-    stokes, channels, header = read_stokes_exr(str(tmp_path / "out.exr"))
+    _, channels, header = read_stokes_exr(str(tmp_path / "out.exr"))
     assert header["polar.complete"] == 1 and np.all(channels["spp"] == 2)
     assert signal.getsignal(signum) is not None and "Traceback" not in err
 
@@ -240,7 +240,7 @@ def _render_until_progress(scene, out, *extra):
     return proc
 
 
-def test_sigterm_writes_the_finished_samples_and_exits_143(tmp_path, scene_dir):
+def test_sigterm_writes_the_finished_samples_and_exits_143(tmp_path, scene_dir, capsys):
     out = str(tmp_path / "part.exr")
     proc = _render_until_progress(str(scene_dir / "scene.json"), out, "--spp", "4000", "--seed", "9")
     proc.send_signal(signal.SIGTERM)
@@ -251,10 +251,9 @@ def test_sigterm_writes_the_finished_samples_and_exits_143(tmp_path, scene_dir):
     assert np.all(np.isfinite(stokes)) and "Traceback" not in err
     assert not [n for n in os.listdir(tmp_path) if n.startswith(".")]
     # and it continues like an interrupted render
-    done = subprocess.run([sys.executable, "-m", "engine", "render", str(scene_dir / "scene.json"), "-o",
-                           str(tmp_path / "final.exr"), "--resume", out, "--spp", str(channels["spp"].max() + 8),
-                           "--no-previews", "-q"], cwd=REPO, capture_output=True, text=True)
-    assert done.returncode == 0, done.stderr
+    status, _, err = run_cli(capsys, "render", scene_dir / "scene.json", "-o", tmp_path / "final.exr", "--resume",
+                             out, "--spp", int(channels["spp"].max()) + 8, "--no-previews", "-q")
+    assert status == 0, err
 
 
 # --- mueller and polariser -----------------------------------------------------------------------
@@ -344,7 +343,7 @@ def test_polariser_output_blocked_by_a_folder(small_exr, tmp_path, capsys):
 
 
 def test_polariser_sweep_at_the_frame_limit_is_accepted(small_exr, tmp_path, capsys):
-    status, out, err = run_cli(capsys, "polariser", small_exr, "-o", tmp_path / "sheet.png",
+    status, _, err = run_cli(capsys, "polariser", small_exr, "-o", tmp_path / "sheet.png",
                                "--sweep", f"0:{cli.MAX_SWEEP_FRAMES - 1}:1")
     assert status == 0, err
     status, _, err = run_cli(capsys, "polariser", small_exr, "-o", tmp_path / "sheet.png",
