@@ -349,3 +349,19 @@ def test_polariser_sweep_at_the_frame_limit_is_accepted(small_exr, tmp_path, cap
     status, _, err = run_cli(capsys, "polariser", small_exr, "-o", tmp_path / "sheet.png",
                              "--sweep", f"0:{cli.MAX_SWEEP_FRAMES}:1")
     assert_one_line_error(status, err, "--sweep")
+
+
+def test_a_signal_before_any_sample_keeps_an_existing_output(tmp_path, scene_dir, capsys, monkeypatch):
+    from engine.render.renderer import Renderer
+    out = tmp_path / "out.exr"
+    out.write_bytes(b"an earlier, finished render")
+    real = Renderer.render
+
+    def stopped_at_once(self, *a, **kw):
+        os.kill(os.getpid(), signal.SIGTERM)     # arrives before the first unit is submitted
+        return real(self, *a, **kw)
+
+    monkeypatch.setattr(Renderer, "render", stopped_at_once)
+    status, stdout, err = run_cli(capsys, "render", scene_dir / "scene.json", "-o", out, "-q")
+    assert status == 143 and "nothing written" in err and stdout == ""
+    assert out.read_bytes() == b"an earlier, finished render"
