@@ -1,20 +1,23 @@
 """Command line: ``python -m engine render …`` and ``python -m engine mueller …``.
 
-User mistakes (bad scene files, parameters out of range) end with a one-line
-message naming the field and exit status 2, never a traceback.  Ctrl-C during
-a render stops after the current batch and writes the finished samples.
+User mistakes (bad scene files, parameters out of range, an output path that
+cannot be written — checked before rendering) end with a one-line message
+naming the field and exit status 2, never a traceback.  Ctrl-C or SIGTERM
+during a render stops after the batches in flight and writes the finished
+samples (exit status 130 / 143, see :class:`StopSignals`); if the output then
+cannot be written, they go to a rescue file (engine.output.rescue) and the
+exit status is 1.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import signal
 import sys
 import time
-
-import numpy as np
 
 from .errors import SceneError
 
@@ -45,12 +48,80 @@ class ProgressBar:
             self.stream.flush()
 
 
+#: Bounds of --exposure (stops): 2**±64 already maps any representable radiance to black or white.
+EXPOSURE_LIMIT_STOPS = 64.0
+#: Most frames a polariser --sweep may produce (one per 0.05° over 180°).
+MAX_SWEEP_FRAMES = 3600
+#: When this process started (time.time()): temporary files older than this are not ours.
+_STARTED = time.time()
+
+
+def _finite(field: str, value: float, lo: float = -math.inf, hi: float = math.inf) -> float:
+    """``value`` if it is a finite number in [lo, hi], else a SceneError naming ``field``."""
+    if not (math.isfinite(value) and lo <= value <= hi):
+        rng = "a finite number" if (lo, hi) == (-math.inf, math.inf) else f"a finite number in [{lo:g}, {hi:g}]"
+        raise SceneError(field, f"must be {rng}, got {value!r}")
+    return value
+
+
+class StopSignals:
+    """SIGINT (Ctrl-C) and SIGTERM (farms, ``timeout``) ask a render to stop and keep its samples.
+
+    The first signal stops the render after the batches in flight (they abort between two
+    bounces); the finished samples are then written and the exit status is 128 + the signal
+    number (130 for SIGINT, 143 for SIGTERM).  Later signals never discard the render: while it
+    stops and while its files are written they only print a note (SIGKILL still ends a process).
+    """
+
+    SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+    def __init__(self):
+        self.received = None
+        self._previous = {}
+
+    def _handle(self, signum, frame):
+        if self.received is None:
+            self.received = signum
+        else:
+            # os.write, not print: the progress bar may be inside a write to sys.stderr right now.
+            os.write(2, b"\npolar: already stopping - the finished samples are being saved\n")
+
+    @property
+    def requested(self) -> bool:
+        return self.received is not None
+
+    def exit_status(self, default: int = 0) -> int:
+        return 128 + int(self.received) if self.received is not None else default
+
+    def __enter__(self):
+        try:
+            self._previous = {s: signal.signal(s, self._handle) for s in self.SIGNALS}
+        except ValueError:          # not the main thread: the caller handles signals
+            self._previous = {}
+        return self
+
+    def __exit__(self, *exc):
+        for s, handler in self._previous.items():
+            signal.signal(s, handler)
+        return False
+
+
+def _reason(e: BaseException) -> str:
+    """A one-line reason for an exception (OS errors: 'path: strerror')."""
+    if isinstance(e, OSError) and e.strerror:
+        return f"{e.filename}: {e.strerror}" if e.filename else e.strerror
+    return str(e) or type(e).__name__
+
+
 def _render(args) -> int:
-    from .output.exr import write_stokes_exr
-    from .output.previews import write_previews
+    from .output.destination import check_destination, remove_stale_temporaries
     from .render.renderer import Renderer
+    from .render.resume import resume_state, scene_fingerprint
     from .scene.loader import load_scene, parse_settings
 
+    _finite("--exposure", args.exposure, -EXPOSURE_LIMIT_STOPS, EXPOSURE_LIMIT_STOPS)
+    if args.resume and args.scheduler:
+        raise SceneError("--scheduler", "cannot be combined with --resume yet")
     scene = load_scene(args.scene)
     st = scene.settings
     overrides = {k: v for k, v in (("spp", args.spp), ("seed", args.seed), ("max_depth", args.max_depth),
@@ -66,57 +137,73 @@ def _render(args) -> int:
     out = args.output
     if not out.lower().endswith(".exr"):
         raise SceneError("-o", f"the output must be an .exr file, got {out!r}")
-    out_dir = os.path.dirname(os.path.abspath(out))
+    # Before any rendering: a render must never be finished only to find it cannot be saved.
     try:
-        os.makedirs(out_dir, exist_ok=True)
+        check_destination(out)
     except OSError as e:
-        raise SceneError("-o", f"cannot create the output folder {out_dir!r}: {e.strerror}") from None
+        raise SceneError("-o", e.strerror or str(e)) from None
+    for path in remove_stale_temporaries(os.path.dirname(os.path.abspath(out)), _STARTED):
+        print(f"polar: removed a temporary file left by an interrupted write: {path}", file=sys.stderr)
+    scene_hash = scene_fingerprint(scene)      # before compiling: nothing has filled a cache yet
 
+    renderer = Renderer(scene)
     resume_film = None
     if args.resume:
-        resume_film, st = _resume_state(args, scene, st)
+        resume_film, st = resume_state(args.resume, scene, renderer.compiled, st, scene_hash,
+                                       spp=args.spp, seed=args.seed)
         scene.settings = st
-    renderer = Renderer(scene)
     cam = scene.camera
     print(f"polar: {os.path.basename(args.scene)}: {cam.width}×{cam.height}, {st.spp} spp, "
           f"{len(renderer.compiled.faces)} triangles, {len(renderer.lights)} lights, "
           f"polarisation {st.polarisation}, {st.spectral}"
           f"{'' if st.spectral == 'spectral' else f' at {st.wavelength_nm:g} nm'}", file=sys.stderr)
-    stop = {"requested": False}
+    with StopSignals() as signals:
+        bar = None if args.quiet else ProgressBar("rendering")
+        try:
+            if args.scheduler:
+                from .render.distributed import render_distributed
+                try:
+                    result = render_distributed(scene, args.scheduler, st, progress=bar,
+                                                should_stop=lambda: signals.requested)
+                except OSError as e:
+                    raise SceneError("--scheduler",
+                                     f"cannot reach the Dask scheduler at {args.scheduler}: {e}") from None
+                except RuntimeError as e:
+                    raise SceneError("--scheduler", str(e)) from None
+            else:
+                result = renderer.render(st, progress=bar, should_stop=lambda: signals.requested,
+                                         resume=resume_film)
+        finally:
+            if bar is not None:
+                bar.close()
+        # Still inside: a signal while the files are written must not lose them.
+        status = _write_render(args, out, result, st, scene_hash)
+    return status if status else signals.exit_status(130 if result.cancelled else 0)
 
-    def on_interrupt(signum, frame):
-        # First Ctrl-C: finish the current batch and write what is done; a second one aborts.
-        stop["requested"] = True
-        signal.signal(signal.SIGINT, signal.default_int_handler)
 
-    previous = signal.signal(signal.SIGINT, on_interrupt)
-    bar = None if args.quiet else ProgressBar("rendering")
-    try:
-        if args.scheduler:
-            if resume_film is not None:
-                raise SceneError("--scheduler", "cannot be combined with --resume yet")
-            from .render.distributed import render_distributed
-            try:
-                result = render_distributed(scene, args.scheduler, st, progress=bar,
-                                            should_stop=lambda: stop["requested"])
-            except OSError as e:
-                raise SceneError("--scheduler", f"cannot reach the Dask scheduler at {args.scheduler}: {e}") from None
-            except RuntimeError as e:
-                raise SceneError("--scheduler", str(e)) from None
-        else:
-            result = renderer.render(st, progress=bar, should_stop=lambda: stop["requested"], resume=resume_film)
-    finally:
-        signal.signal(signal.SIGINT, previous)
-        if bar is not None:
-            bar.close()
-    if result.cancelled:
-        print(f"polar: interrupted — writing the {result.stats['samples']} finished samples", file=sys.stderr)
+def _write_render(args, out, result, st, scene_hash) -> int:
+    """Write the EXR (or a rescue file) and the previews; 0, or 1 if the EXR could not be written."""
+    from .output.exr import write_stokes_exr
+    from .output.previews import write_previews
+    from .output.rescue import save_rescue
+    from .render.resume import estimator_identity
+
     stats = result.stats
+    error = stats.get("error")
+    if result.cancelled:
+        print(f"polar: {'stopped' if error else 'interrupted'} — writing the {stats['samples']} finished samples",
+              file=sys.stderr)
     print(f"polar: transport: {stats['transport_reason']}; spectral: {stats['spectral']}; "
           f"kernels: {stats.get('kernels', '?')}", file=sys.stderr)
     for why in stats.get("simplified", []):
         print(f"polar: simplified: {why}", file=sys.stderr)
     film = result.film
+    if result.cancelled and not film.count.any():
+        if error:
+            print(f"error: --scheduler: {error}; no sample had finished, nothing written", file=sys.stderr)
+            return 1
+        print("polar: no sample had finished — nothing written", file=sys.stderr)
+        return 0
     spp_image = film.spp_image()
     meta = {"polar.spp": int(st.spp), "polar.complete": int(not result.cancelled),
             "polar.spp_min": int(spp_image.min()), "polar.spp_max": int(spp_image.max()),
@@ -127,15 +214,31 @@ def _render(args) -> int:
             "polar.kernels": stats.get("kernels", ""), "polar.simplified": "; ".join(stats.get("simplified", []))}
     if st.spectral == "mono":
         meta["polar.wavelength_nm"] = float(st.wavelength_nm)
+    meta.update(estimator_identity(scene_hash, st, stats["transport"], size=(film.width, film.height)))
     extra = {"spp": spp_image.astype("uint32")}
     if args.stderr:
         se = film.stderr_luminance()
         for i in range(4):
             extra[f"S{i}.Y.stderr"] = se[i].astype("float32")
-    write_stokes_exr(out, result.stokes(), metadata=meta, extra=extra)
+    stokes = result.stokes()
+    try:
+        write_stokes_exr(out, stokes, metadata=meta, extra=extra)
+    except Exception as e:              # noqa: BLE001 — whatever failed, the samples must survive
+        reason = _reason(e)
+        try:
+            saved = save_rescue(out, stokes, meta, extra)
+        except OSError as lost:
+            print(f"error: -o: cannot write {out!r}: {reason}; {lost}: the finished samples are lost",
+                  file=sys.stderr)
+            return 1
+        print(f"error: -o: cannot write {out!r}: {reason}; finished samples saved to {saved}", file=sys.stderr)
+        return 1
     written = [out]
     if not args.no_previews:
-        written += write_previews(os.path.splitext(out)[0], result.stokes(), exposure=args.exposure)
+        try:
+            written += write_previews(os.path.splitext(out)[0], stokes, exposure=args.exposure)
+        except Exception as e:          # noqa: BLE001 — the EXR is written; previews are a convenience
+            print(f"warning: previews not written: {_reason(e)}", file=sys.stderr)
     msamples = stats["samples"] / max(stats["seconds"], 1e-9) / 1e6
     print(f"polar: {stats['samples']} samples in {stats['seconds']:.2f} s ({msamples:.3f} Msamples/s), "
           f"{stats['rays']} rays + {stats['shadow_rays']} shadow rays"
@@ -143,7 +246,11 @@ def _render(args) -> int:
           file=sys.stderr)
     for path in written:
         print(path)
-    return 130 if result.cancelled else 0
+    if error:
+        print(f"error: --scheduler: {error}; the finished samples were written to {out} (incomplete: "
+              "continue with --resume, without --scheduler)", file=sys.stderr)
+        return 1
+    return 0
 
 
 def _read_polar_exr(path, field):
@@ -151,40 +258,12 @@ def _read_polar_exr(path, field):
     from .output.exr import read_stokes_exr
     if not os.path.exists(path):
         raise SceneError(field, f"{path!r} does not exist")
+    if os.path.isdir(path):
+        raise SceneError(field, f"{path!r} is a folder, not a Stokes EXR")
     try:
         return read_stokes_exr(path)
-    except (ValueError, OSError) as e:
+    except (ValueError, OSError, RuntimeError) as e:
         raise SceneError(field, f"{path!r} is not a Polar Stokes EXR: {e}") from None
-
-
-def _resume_state(args, scene, st):
-    """(Film of the finished samples, settings) to continue the render stored in ``args.resume``."""
-    import copy
-
-    from .render.film import film_from_stokes
-
-    stokes, channels, header = _read_polar_exr(args.resume, "--resume")
-    if "spp" not in channels or "polar.seed" not in header:
-        raise SceneError("--resume", f"{args.resume!r} has no per-pixel sample counts (not written by Polar)")
-    H, W = stokes.shape[1:3]
-    if (W, H) != (scene.camera.width, scene.camera.height):
-        raise SceneError("--resume", f"{args.resume!r} is {W}×{H} but the scene renders "
-                                     f"{scene.camera.width}×{scene.camera.height}")
-    st = copy.copy(st)
-    if args.seed is not None and args.seed != header["polar.seed"]:
-        raise SceneError("--seed", f"must be the resumed render's seed ({header['polar.seed']}) to continue it")
-    st.seed = int(header["polar.seed"])
-    if args.spp is None:
-        st.spp = int(header["polar.spp"])
-    for key in ("polarisation", "spectral"):
-        stored = header.get(f"polar.{key}")
-        if stored is not None and key == "spectral" and stored != st.spectral:
-            raise SceneError("--resume", f"the stored render is {stored!r}, this one {st.spectral!r}")
-    spp = channels["spp"].astype(np.int64)
-    if spp.max() > st.spp:
-        raise SceneError("--spp", f"must be at least the samples already done ({int(spp.max())})")
-    stderr = np.stack([channels[f"S{i}.Y.stderr"] for i in range(4)]) if "S0.Y.stderr" in channels else None
-    return film_from_stokes(stokes, spp, stderr), st
 
 
 def _parse_params(pairs):
@@ -205,6 +284,7 @@ def _mueller(args) -> int:
                             ("--wavelength-nm", args.wavelength_nm, 360, 830)):
         if not (lo <= v <= hi):
             raise SceneError(name, f"must be in [{lo}, {hi}], got {v:g}")
+    _finite("--phi-o", args.phi_o)
     model = make_model(args.model, _parse_params(args.param))
     result = mueller_at(model, args.theta_i, args.theta_o, args.phi_o, args.wavelength_nm, args.basis)
     result.update(model=args.model, params=_parse_params(args.param),
@@ -225,31 +305,46 @@ def _polariser(args) -> int:
     stokes, _, _ = _read_polar_exr(args.exr, "EXR")
     if not (0.0 <= args.extinction <= 1.0):
         raise SceneError("--extinction", f"must be in [0, 1], got {args.extinction:g}")
+    for field, value in (("--angle", args.angle), ("--retarder-angle", args.retarder_angle),
+                         ("--retardance", args.retardance)):
+        _finite(field, value)
+    _finite("--exposure", args.exposure, -EXPOSURE_LIMIT_STOPS, EXPOSURE_LIMIT_STOPS)
 
     def filtered(angle):
         row = filter_row(args.type, angle, args.extinction, args.retarder_angle, args.retardance)
         return apply_filter(stokes, row)
 
     out = args.output
-    os.makedirs(os.path.dirname(os.path.abspath(out)) or ".", exist_ok=True)
+    angles = None
     if args.sweep is not None:
         try:
             start, stop, step = (float(v) for v in args.sweep.split(":"))
         except ValueError:
             raise SceneError("--sweep", f"must look like START:STOP:STEP in degrees, got {args.sweep!r}") from None
+        if not all(math.isfinite(v) for v in (start, stop, step)):
+            raise SceneError("--sweep", f"START, STOP and STEP must be finite numbers, got {args.sweep!r}")
         if step <= 0 or stop < start:
             raise SceneError("--sweep", "needs STEP > 0 and STOP ≥ START")
+        frames = math.floor((stop - start) / step) + 1
+        if frames > MAX_SWEEP_FRAMES:
+            raise SceneError("--sweep", f"would make {frames} frames; at most {MAX_SWEEP_FRAMES} (use a larger STEP)")
         angles = list(np.arange(start, stop + 1e-9, step))
-        tiles = [tonemap(filtered(a), args.exposure) for a in angles]
-        write_png(out, contact_sheet(tiles, [f"{a:g}" for a in angles]))
-    elif out.lower().endswith(".exr"):
-        from .output.exr import write_stokes_exr
-        img = filtered(args.angle)
-        unpolarised = np.zeros_like(stokes)
-        unpolarised[0] = img
-        write_stokes_exr(out, unpolarised, metadata={"polar.filter": args.type, "polar.filter_angle_deg": args.angle})
-    else:
-        write_png(out, tonemap(filtered(args.angle), args.exposure))
+    try:
+        os.makedirs(os.path.dirname(os.path.abspath(out)) or ".", exist_ok=True)
+        if angles is not None:
+            tiles = [tonemap(filtered(a), args.exposure) for a in angles]
+            write_png(out, contact_sheet(tiles, [f"{a:g}" for a in angles]))
+        elif out.lower().endswith(".exr"):
+            from .output.exr import write_stokes_exr
+            img = filtered(args.angle)
+            unpolarised = np.zeros_like(stokes)
+            unpolarised[0] = img
+            write_stokes_exr(out, unpolarised, metadata={"polar.filter": args.type,
+                                                         "polar.filter_angle_deg": args.angle})
+        else:
+            write_png(out, tonemap(filtered(args.angle), args.exposure))
+    except OSError as e:
+        raise SceneError("-o", f"cannot write {out!r}: {_reason(e)}") from None
     print(out)
     return 0
 

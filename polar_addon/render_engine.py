@@ -168,6 +168,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             message += f" | skipped {len(stats['simplified'])} clear layer(s): " + "; ".join(stats["simplified"])
         if out.cancelled:
             message += " | cancelled: partial image"
+        if stats.get("error"):          # a Dask cluster that failed mid-render: the finished part is shown
+            message += f" | {stats['error']}"
         if stats["nonfinite"]:
             message += f" | dropped {stats['nonfinite']} non-finite samples"
         self.update_stats("", message)

@@ -76,3 +76,93 @@ def test_cli_scheduler_option_gives_the_local_image(cluster, tmp_path):
                           "--scheduler", "tcp://127.0.0.1:9"], cwd=REPO, capture_output=True, text=True, timeout=120,
                          env={**os.environ, "POLAR_DASK_TIMEOUT": "2"})
     assert bad.returncode == 2 and "--scheduler" in bad.stderr and "Traceback" not in bad.stderr
+
+
+# --- a cluster that fails mid-render -------------------------------------------------------------
+
+@pytest.fixture
+def fragile_cluster():
+    """A separate one-worker cluster (its worker gets killed): (client, cluster)."""
+    cluster = distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       silence_logs=50)
+    client = distributed.Client(cluster)
+    yield client, cluster
+    client.close()
+    cluster.close()
+
+
+def _kill_workers(client):
+    for pid in client.run(os.getpid).values():
+        os.kill(pid, signal.SIGKILL)
+
+
+def test_losing_every_worker_returns_the_finished_units_and_an_error(fragile_cluster):
+    client, _ = fragile_cluster
+    sc = scene(res=16, spp=800)
+    sc.settings.batch_rays = 1024                # 4 passes per unit: 200 units
+    killed = {}
+
+    def kill_all(fraction, stats):
+        if stats["samples"] and not killed:
+            killed["samples"] = stats["samples"]
+            _kill_workers(client)
+
+    result = render_distributed(sc, None, client=client, progress=kill_all)
+    assert killed and result.cancelled and "Dask cluster failed" in result.stats["error"]
+    count = result.film.count
+    assert 0 < count.sum() < 16 * 16 * 800 and count.sum() == result.stats["samples"]
+    # the finished units are exactly those of the local render (unit order is kept)
+    done = count > 0
+    np.testing.assert_array_equal(result.film.sums[:, :, done] / count[done],
+                                  _partial_means(sc, count)[:, :, done])
+
+
+def _partial_means(sc, count):
+    """Means of the first count[p] sample passes per pixel, rendered locally (passes are stateless)."""
+    import copy
+    st = copy.copy(sc.settings)
+    st.spp = int(count.max())
+    film = Renderer(sc).render(st).film
+    assert np.all((count == 0) | (count == st.spp))        # whole passes of whole units
+    return film.sums / np.maximum(film.count, 1)
+
+
+def test_a_cluster_without_workers_is_an_error_not_a_hang(monkeypatch):
+    cluster = distributed.LocalCluster(n_workers=0, processes=False, dashboard_address=None, silence_logs=50)
+    client = distributed.Client(cluster)
+    try:
+        monkeypatch.setenv("POLAR_DASK_TIMEOUT", "1")
+        with pytest.raises(RuntimeError, match="no Dask worker joined the scheduler within 1 s"):
+            render_distributed(scene(res=8, spp=1), None, client=client)
+    finally:
+        client.close()
+        cluster.close()
+
+
+def test_cli_writes_the_finished_units_when_the_cluster_dies(fragile_cluster, tmp_path):
+    import re
+    import subprocess
+    import sys
+    import time
+    from engine.output.exr import read_stokes_exr
+    from tests.conftest import REPO
+    from tests.test_robustness_cli import small_demo
+    client, cluster = fragile_cluster
+    out = str(tmp_path / "part.exr")
+    proc = subprocess.Popen([sys.executable, "-m", "engine", "render", small_demo(tmp_path, spp=4000), "-o", out,
+                             "--no-previews", "--scheduler", cluster.scheduler.address], cwd=REPO,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    buf, deadline = "", time.time() + 120
+    while time.time() < deadline and not any(float(p) > 0 for p in re.findall(r"(\d+\.\d)%", buf)):
+        c = proc.stderr.read(1)
+        if not c:
+            break
+        buf += c
+    _kill_workers(client)
+    _, err = proc.communicate(timeout=120)
+    err = buf + err
+    assert proc.returncode == 1, err
+    lines = [line for line in err.splitlines() if line.startswith("error:")]
+    assert len(lines) == 1 and lines[0].startswith("error: --scheduler: the Dask cluster failed") and "Traceback" not in err
+    _, channels, header = read_stokes_exr(out)
+    assert header["polar.complete"] == 0 and 0 < channels["spp"].max() < 4000

@@ -349,3 +349,78 @@ def test_previews_exposure_and_validation(tmp_path):
     np.testing.assert_array_equal(read_png(p)[0, 0], [255, 255, 255])
     with pytest.raises(ValueError, match="shape"):
         write_previews(tmp_path / "bad", np.zeros((4, H, W)))
+
+
+# --- finite-or-refused, temporary names, destinations, rescue ------------------------------------
+
+def _image_with(value, component=0, channel=0):
+    s = np.zeros((4, H, W, 3))
+    s[0] = 1.0
+    s[component, 1, 2, channel] = value
+    return s
+
+
+@pytest.mark.parametrize("stokes, extra, channel", [
+    (_image_with(1e39), None, "S0.R"),                    # finite float64, inf as float32
+    (_image_with(-3.5e38, 1, 2), None, "S1.B"),
+    (_image_with(1e308, 0, 1), None, "S0.G"),             # luminance overflows too: DoP would be NaN
+    (np.ones((4, H, W, 3)), {"S0.Y.stderr": np.full((H, W), 4e38)}, "S0.Y.stderr"),
+])
+def test_exr_refuses_values_that_are_not_finite_as_stored(tmp_path, stokes, extra, channel):
+    with pytest.raises(ValueError, match=f"channel '{channel}'.*not finite as float32"):
+        write_stokes_exr(tmp_path / "x.exr", stokes, extra=extra)
+    assert os.listdir(tmp_path) == []
+
+
+def test_exr_largest_float32_is_written(tmp_path):
+    big = float(np.finfo(np.float32).max)
+    write_stokes_exr(tmp_path / "x.exr", _image_with(big))
+    stokes, channels, _ = read_stokes_exr(tmp_path / "x.exr")
+    assert stokes[0, 1, 2, 0] == np.float32(big)
+    assert all(np.all(np.isfinite(c)) for c in channels.values())
+
+
+def test_temporary_name_is_short_whatever_the_target_name(tmp_path, monkeypatch):
+    from engine.output import destination
+    seen = []
+    real = destination.make_temporary
+    monkeypatch.setattr(destination, "make_temporary", lambda d, ext: seen.append(real(d, ext)) or seen[-1])
+    target = tmp_path / ("n" * 251 + ".exr")                 # 255 bytes: the longest name allowed
+    write_stokes_exr(target, np.ones((4, H, W, 3)))
+    name = os.path.basename(seen[0])
+    assert name.startswith(f".polar-tmp-{os.getpid()}-") and name.endswith(".exr") and len(name) < 40
+    assert sorted(os.listdir(tmp_path)) == [target.name]
+
+
+def test_check_destination(tmp_path):
+    from engine.output.destination import check_destination
+    deep = tmp_path / "a" / "b" / "out.exr"
+    assert check_destination(deep) == str(deep)
+    assert (tmp_path / "a" / "b").is_dir() and os.listdir(tmp_path / "a" / "b") == []
+    existing = tmp_path / "keep.exr"
+    existing.write_bytes(b"old")
+    check_destination(existing)
+    assert existing.read_bytes() == b"old"
+    with pytest.raises(IsADirectoryError, match="is a folder"):
+        check_destination(tmp_path / "a")
+    with pytest.raises(OSError, match="256 bytes"):
+        check_destination(tmp_path / ("n" * 252 + ".exr"))
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(OSError, match="cannot create the folder"):
+        check_destination(tmp_path / "file" / "out.exr")
+
+
+def test_rescue_goes_to_the_next_folder_that_works(tmp_path, monkeypatch):
+    from engine.output import rescue
+    target = tmp_path / "gone" / "out.exr"                   # its folder does not exist any more
+    monkeypatch.setenv("TMPDIR", str(tmp_path / "tmp"))
+    os.makedirs(tmp_path / "tmp")
+    import tempfile
+    monkeypatch.setattr(tempfile, "tempdir", None)           # re-read TMPDIR
+    s = physical_stokes(np.random.default_rng(1))
+    path = rescue.save_rescue(target, s, {"polar.spp": 3}, {"spp": np.full((H, W), 3, np.uint32)})
+    assert os.path.dirname(path) == str(tmp_path / "tmp") and os.path.basename(path).startswith("polar-rescue-")
+    stokes, channels, header = read_stokes_exr(path)
+    np.testing.assert_allclose(stokes, s, rtol=1e-7, atol=1e-7)
+    assert header["polar.spp"] == 3 and header["polar.rescued_from"] == str(target)
+    assert np.all(channels["spp"] == 3)

@@ -64,3 +64,105 @@ def test_resume_rejects_a_mismatching_file(tmp_path):
                            shared_path("peers", "scenes", "plane_brewster.json"),
                            "-o", str(tmp_path / "x.exr"), "--resume", out], cwd=REPO, capture_output=True, text=True)
     assert proc.returncode == 2 and "--resume" in proc.stderr and "8×8" in proc.stderr
+
+
+# --- refusing to mix two renders -----------------------------------------------------------------
+
+import json  # noqa: E402
+import os  # noqa: E402
+
+import pytest  # noqa: E402
+
+from engine import cli  # noqa: E402
+from engine.render.resume import scene_fingerprint  # noqa: E402
+from tests.test_robustness_cli import small_demo  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def partial(tmp_path_factory):
+    """A finished 2-spp render of the small demo (seed 4) and the folder of its scene."""
+    d = tmp_path_factory.mktemp("resume")
+    scene = small_demo(d)
+    out = str(d / "part.exr")
+    assert cli.main(["render", scene, "-o", out, "--seed", "4", "--no-previews", "-q"]) == 0
+    return d, scene, out
+
+
+REFUSED = {
+    "max depth": ({}, ["--max-depth", "3"], "max_depth"),
+    "polarisation": ({}, ["--polarisation", "linear"], "polarisation"),
+    "spectral": ({}, ["--spectral", "mono"], "spectral"),
+    "reduce spectral": ({}, ["--reduce-spectral", "exact"], "reduce_spectral"),
+    "simplify": ({}, ["--simplify", "off"], "simplify"),
+    "rr depth": ({"render.rr_depth": 3}, [], "rr_depth"),
+    "material parameter": ({"materials.glass.n": 1.6}, [], "scene"),
+    "light": ({"lights.0.radiance": 2.0}, [], "scene"),
+    "geometry": ({"objects.0.radius": 0.9}, [], "scene"),
+    "camera": ({"camera.fov_deg": 35}, [], "scene"),
+}
+
+
+@pytest.mark.parametrize("case", list(REFUSED))
+def test_resume_refuses_another_render_naming_the_difference(case, partial, tmp_path, capsys):
+    _, _, part = partial
+    changes, args, named = REFUSED[case]
+    scene = small_demo(tmp_path, **changes)
+    status = cli.main(["render", scene, "-o", str(tmp_path / "x.exr"), "--resume", part, "--spp", "4", "-q",
+                       "--no-previews", *args])
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if line.startswith("error:")]
+    assert status == 2 and len(lines) == 1 and "Traceback" not in err, err
+    assert lines[0].startswith("error: --resume: 'part.exr' is another render: ") and named in lines[0]
+    assert not (tmp_path / "x.exr").exists()
+
+
+@pytest.mark.parametrize("changes, args", [
+    ({}, []),                                                            # the same render, more samples
+    ({"render.batch_rays": 2048, "render.threads": 1}, ["--exposure", "2"]),   # what does not change the estimator
+    ({"render.spp": 64}, []),                                            # the scene's own count is not checked
+])
+def test_resume_accepts_what_does_not_change_the_estimator(changes, args, partial, tmp_path, capsys):
+    _, _, part = partial
+    scene = small_demo(tmp_path, **changes)
+    out = tmp_path / "more.exr"
+    status = cli.main(["render", scene, "-o", str(out), "--resume", part, "--spp", "5", "-q", "--no-previews", *args])
+    assert status == 0, capsys.readouterr().err
+    from engine.output.exr import read_stokes_exr
+    _, channels, header = read_stokes_exr(str(out))
+    assert np.all(channels["spp"] == 5) and header["polar.seed"] == 4 and header["polar.complete"] == 1
+
+
+def test_resume_refuses_files_without_a_scene_fingerprint(partial, tmp_path, capsys):
+    from engine.output.exr import write_stokes_exr
+    _, scene, part = partial
+    stokes, channels, header = read_stokes_exr(part)
+    meta = {k: v for k, v in header.items() if k.startswith("polar.") and k not in ("polar.scene_hash",
+                                                                                    "polar.conventions")}
+    old = str(tmp_path / "old.exr")
+    write_stokes_exr(old, stokes, metadata=meta, extra={"spp": channels["spp"]})
+    status = cli.main(["render", scene, "-o", str(tmp_path / "x.exr"), "--resume", old, "-q"])
+    err = capsys.readouterr().err
+    assert status == 2 and "--resume" in err and "fingerprint" in err
+
+
+def test_scene_fingerprint_is_the_scene_content_not_the_file(tmp_path):
+    a = load_scene(small_demo(tmp_path, "a.json"))
+    os.makedirs(tmp_path / "elsewhere")
+    with open(small_demo(tmp_path, "b.json", spp=99, **{"render.max_depth": 3})) as fh:
+        reformatted = json.dumps(json.load(fh), indent=4, sort_keys=True)
+    (tmp_path / "elsewhere" / "c.json").write_text(reformatted)
+    same = [load_scene(str(tmp_path / "b.json")), load_scene(str(tmp_path / "elsewhere" / "c.json"))]
+    assert all(scene_fingerprint(s) == scene_fingerprint(a) for s in same)
+    hashes = {scene_fingerprint(load_scene(small_demo(tmp_path, f"d{i}.json", **{k: v})))
+              for i, (k, v) in enumerate([("materials.chalk.albedo", [0.8, 0.8, 0.7]), ("materials.floor.n", 1.5001),
+                                           ("objects.1.center", [0.0, 0.0, 1.0001]), ("camera.width", 17)])}
+    assert len(hashes) == 4 and scene_fingerprint(a) not in hashes
+
+
+def test_scene_fingerprint_is_the_same_in_another_process(tmp_path):
+    path = small_demo(tmp_path)
+    code = ("import sys; from engine.scene.loader import load_scene; from engine.render.resume import "
+            "scene_fingerprint; print(scene_fingerprint(load_scene(sys.argv[1])))")
+    other = subprocess.run([sys.executable, "-c", code, path], cwd=REPO, capture_output=True, text=True, check=True,
+                           env={**os.environ, "PYTHONHASHSEED": "123"})
+    assert other.stdout.strip() == scene_fingerprint(load_scene(path))

@@ -7,7 +7,9 @@ cosθ_o); φ_o = 0 is the forward (specular) side.  Bases:
 - ``sp`` (the oracles' ``psps``): per beam s = unit(z × k), p = k × s
   (s = (0, 1, 0) when k ∥ z);
 - ``scattering`` (``plane``): s = unit(k_i × k_o) on both beams; when
-  k_i ∥ k_o, s = unit(k_i × x̂) as SCATMECH does.
+  k_i ∥ k_o, s = unit(k_i × x̂) as SCATMECH does, and when k_i ∥ x̂ too
+  (θ_i = θ_o = 90° in the plane of incidence), s = unit(k_i × ẑ) = −ŷ, the
+  limit of both rules.
 
 ``brdf`` is the non-delta Mueller BRDF per steradian (no cosines); ``delta``
 the Mueller weight of the mirror (Dirac) lobe for the mirror direction of
@@ -47,13 +49,16 @@ def oracle_directions(theta_i_deg: float, theta_o_deg: float, phi_o_deg: float):
 def _basis_axes(basis: str, k_i: np.ndarray, k_o: np.ndarray):
     if basis == "sp":
         return sp_basis_axis(k_i), sp_basis_axis(k_o)
-    s = cross(k_i, k_o)
-    length = math.sqrt(float(dot(s, s)))
-    if length < 1e-12:
-        s = cross(k_i, np.array([1.0, 0.0, 0.0]))
+    # Exact forward/back scatter (k_o ∥ k_i) leaves the plane undefined: SCATMECH's unit(k_i × x̂).
+    # When k_i ∥ x̂ as well (θ_i = θ_o = 90°, φ_o = 0° or 180°), unit(k_i × ẑ): the normal of the
+    # plane of incidence, which is what both rules give in the limit (s = −ŷ for every k_i in the
+    # x–z plane), so the result is continuous there.
+    for other in (k_o, np.array([1.0, 0.0, 0.0]), np.array([0.0, 0.0, 1.0])):
+        s = cross(k_i, other)
         length = math.sqrt(float(dot(s, s)))
-    s = s / length
-    return s, s
+        if length >= 1e-12:
+            return s / length, s / length
+    raise ValueError(f"no scattering plane for k_i = {k_i}")    # k_i = 0: not a direction
 
 
 def _in_basis(value, basis, k_i, k_o) -> np.ndarray:

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import tempfile
 from collections.abc import Iterator
 
 import numpy as np
@@ -51,15 +50,17 @@ def atomic_output_path(path: str | os.PathLike) -> Iterator[str]:
     """Yield a temporary path next to ``path``; on success os.replace() it onto ``path``.
 
     The temporary file lives in the same directory (so the rename is atomic),
-    starts with '.' and keeps the target's extension.  If the body raises,
-    the temporary file is removed and the target is left untouched.  The
-    result keeps an existing target's permission bits, else gets 0644.
+    is hidden, keeps the target's extension and has a short name of its own
+    (:mod:`engine.output.destination`), so any target name the file system
+    accepts works.  If the body raises, the temporary file is removed and the
+    target is left untouched.  The result keeps an existing target's
+    permission bits, else gets 0644.
     """
+    from .destination import make_temporary
+
     path = os.fspath(path)
     directory, name = os.path.split(os.path.abspath(path))
-    ext = os.path.splitext(name)[1]
-    fd, tmp = tempfile.mkstemp(prefix=f".{name}.", suffix=f".tmp{ext}", dir=directory)
-    os.close(fd)
+    tmp = make_temporary(directory, os.path.splitext(name)[1])
     try:
         # mkstemp creates 0600; give the result the target's mode (or rw-r--r--).
         try:

@@ -95,8 +95,19 @@ def _float_channel(name: str, values: np.ndarray, half: bool) -> np.ndarray:
                 f"channel {name!r}: {int(big.sum())} value(s) exceed the half-float maximum "
                 f"{_HALF_MAX:g}; write with half=False"
             )
-        return values.astype(np.float16)
-    return values.astype(np.float32)
+        stored = values.astype(np.float16)
+    else:
+        with np.errstate(over="ignore", invalid="ignore"):   # reported below, as a ValueError
+            stored = values.astype(np.float32)
+    # Checked on the stored values: a finite float64 beyond ±3.4e38 becomes inf in float32, and a
+    # derived ratio of overflowing luminances is NaN; the file holds only finite numbers.
+    bad = ~np.isfinite(stored)
+    if bad.any():
+        raise ValueError(
+            f"channel {name!r}: {int(bad.sum())} value(s) are not finite as {stored.dtype} "
+            f"(NaN, or beyond ±{float(np.finfo(stored.dtype).max):.3g})"
+        )
+    return stored
 
 
 def _extra_channel(name, values, shape, half: bool) -> np.ndarray:
@@ -136,7 +147,8 @@ def write_stokes_exr(
     value exceeds 65504).  The file is written to a hidden temporary file in
     the target directory and renamed into place, so a failure never leaves a
     truncated file and never damages an existing one.  Raises ValueError for
-    bad shapes, non-finite values or unsupported metadata.
+    bad shapes, unsupported metadata or values that are not finite once
+    stored (float32 overflows beyond ±3.4e38); then nothing is written.
     """
     s = check_stokes_image(stokes_rgb)
     _, height, width, _ = s.shape

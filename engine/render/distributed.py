@@ -23,7 +23,7 @@ import time
 import numpy as np
 
 from .film import Film
-from .renderer import RenderResult, Renderer, unit_pixels, work_units
+from .renderer import STOP_POLL_SECONDS, RenderResult, Renderer, unit_pixels, work_units
 from .effects import effective_materials, resolve_transport
 
 #: Per-worker cache of compiled scenes (key → Renderer); a worker process renders one scene at a time.
@@ -77,16 +77,23 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
     """Render ``scene`` on the Dask scheduler at ``address`` (e.g. "tcp://host:8786").
 
     Same arguments and result as ``Renderer.render``; ``client`` may be an existing
-    ``distributed.Client`` (then ``address`` is ignored).
+    ``distributed.Client`` (then ``address`` is ignored).  If the cluster fails mid-render (every
+    worker lost, the scene's data lost with them, a unit failing), the units finished so far are
+    returned as a cancelled result with ``stats["error"]`` saying what happened.  A bad address
+    or a cluster without workers raises RuntimeError, an unreachable scheduler OSError.
     """
     try:
         from distributed import Client, as_completed
     except ImportError:
         raise RuntimeError("distributed rendering needs Dask: pip install \"dask[distributed]\"") from None
     own_client = client is None
+    # How long to try to reach the scheduler, and for a worker to receive the scene (seconds).
+    timeout = float(os.environ.get("POLAR_DASK_TIMEOUT", "20"))
     if client is None:
-        # How long to try to reach the scheduler (seconds; POLAR_DASK_TIMEOUT overrides).
-        client = Client(address, timeout=float(os.environ.get("POLAR_DASK_TIMEOUT", "20")))
+        try:
+            client = Client(address, timeout=timeout)
+        except (ValueError, TypeError) as e:
+            raise RuntimeError(f"{address!r} is not a Dask scheduler address like tcp://host:8786 ({e})") from None
     try:
         _share_enclosing_package(client)
         local = Renderer(scene)          # validates and resolves the settings exactly as a local render
@@ -97,7 +104,10 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
         W, H = scene.camera.width, scene.camera.height
         units = list(work_units(W, H, st.spp, st.batch_rays, window=window))
         key = scene_key(scene)
-        scene_future = client.scatter(scene, broadcast=True)
+        try:
+            scene_future = client.scatter(scene, broadcast=True, timeout=timeout)
+        except TimeoutError:
+            raise RuntimeError(f"no Dask worker joined the scheduler within {timeout:g} s") from None
         futures = [client.submit(_render_unit, key, scene_future, st, unit, window, W, pure=True,
                                  key=f"polar-{key[:12]}-{st.seed}-{i}-{unit}") for i, unit in enumerate(units)]
         film = Film(W, H)
@@ -109,9 +119,26 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
         results = {}
         next_to_add = 0
         cancelled = False
-        for future in as_completed(futures):
-            results[index[future.key]] = future.result()
-            future.release()          # the worker may free the unit's sums now
+        pending = as_completed(futures)
+        while not pending.is_empty():
+            batch = pending.next_batch(block=False)
+            if not batch:
+                # Nothing finished yet: poll the stop request meanwhile (a cluster may stall for
+                # long; Ctrl-C / SIGTERM must still end the render with its finished units).
+                if should_stop is not None and should_stop():
+                    cancelled = True
+                    break
+                time.sleep(STOP_POLL_SECONDS)
+                continue
+            for future in batch:
+                try:
+                    results[index[future.key]] = future.result()
+                except Exception as e:      # noqa: BLE001 — lost workers, lost scene data, a failed unit
+                    cancelled = True
+                    stats["error"] = (f"the Dask cluster failed after {next_to_add} of {len(units)} work units "
+                                      f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''})")
+                    break
+                future.release()          # the worker may free the unit's sums now
             # Add in unit order so that the sums (and so the image) do not depend on timing.
             while next_to_add in results:
                 lo, sums, sumsq, count, s = results.pop(next_to_add)
@@ -124,13 +151,16 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
                 stats["samples"] += int(count.sum())
                 next_to_add += 1
             stats["seconds"] = time.perf_counter() - t0
+            if cancelled:
+                break
             if progress is not None:
                 progress(next_to_add / len(units), stats)
             if should_stop is not None and should_stop():
                 cancelled = True
-                for f in futures:
-                    f.cancel()
                 break
+        if cancelled:
+            for f in futures:
+                f.cancel()
         stats["seconds"] = time.perf_counter() - t0
         return RenderResult(film=film, settings=st, stats=stats, cancelled=cancelled)
     finally:

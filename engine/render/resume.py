@@ -1,0 +1,195 @@
+"""Continuing an interrupted render from its EXR, and refusing to mix two different renders.
+
+Adding new samples to stored ones is only right when both come from the same estimator.  Every
+EXR written by the CLI carries the estimator's identity in its header (:func:`estimator_identity`):
+
+``polar.scene_hash``
+    SHA-256 of the loaded scene description — camera, meshes (vertices, faces, normals, material
+    slots, emission), materials with every parameter, lights — walked canonically
+    (:func:`scene_fingerprint`).  The render settings and the file's path are not part of it: a
+    moved or reformatted scene file still matches, a changed number anywhere in the scene does not;
+``polar.window``
+    the rendered pixel rectangle "x0 y0 x1 y1" (the resolution is the image's own size);
+``polar.max_depth``, ``polar.rr_depth``, ``polar.seed``, ``polar.spectral``, ``polar.wavelength_nm``
+(mono only), ``polar.polarisation_requested`` and ``polar.polarisation`` (as resolved),
+``polar.reduce_spectral``, ``polar.simplify``.
+
+What may differ on resume: the total sample count (raised, never below the samples done), threads,
+batch size, Dask scheduler, previews, exposure.  The seed and the sample count are taken from the
+file unless given.  Anything else that differs is refused with one line naming each difference.
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import hashlib
+import math
+import os
+
+import numpy as np
+
+from ..errors import SceneError
+from .effects import effective_materials, resolve_transport
+from .film import film_from_stokes
+
+#: Header keys that must match between a stored render and its continuation, with the option
+#: that sets each (for the error message).
+MATCHED = {
+    "polar.scene_hash": "the scene file",
+    "polar.window": "the image window",
+    "polar.max_depth": "--max-depth",
+    "polar.rr_depth": "render.rr_depth",
+    "polar.seed": "--seed",
+    "polar.spectral": "--spectral",
+    "polar.wavelength_nm": "--wavelength-nm",
+    "polar.polarisation_requested": "--polarisation",
+    "polar.polarisation": "--polarisation (as resolved)",
+    "polar.reduce_spectral": "--reduce-spectral",
+    "polar.simplify": "--simplify",
+}
+
+
+def _feed(h, obj, seen: set) -> None:
+    """Hash ``obj`` canonically: type names, sorted fields, array dtype/shape/bytes, exact floats."""
+    if obj is None or isinstance(obj, (bool, str)):
+        h.update(repr(obj).encode())
+    elif isinstance(obj, (int, np.integer)):
+        h.update(b"i" + str(int(obj)).encode())
+    elif isinstance(obj, (float, np.floating)):
+        h.update(b"f" + float(obj).hex().encode())
+    elif isinstance(obj, complex):
+        h.update(b"c" + obj.real.hex().encode() + obj.imag.hex().encode())
+    elif isinstance(obj, np.ndarray):
+        a = np.ascontiguousarray(obj)
+        h.update(f"a{a.dtype.str}{a.shape}".encode())
+        h.update(a.tobytes() if a.dtype != object else repr(a.tolist()).encode())
+    elif isinstance(obj, (list, tuple)):
+        h.update(f"l{len(obj)}".encode())
+        for v in obj:
+            _feed(h, v, seen)
+    elif isinstance(obj, (set, frozenset)):
+        h.update(f"s{len(obj)}".encode())
+        for v in sorted(obj, key=repr):
+            _feed(h, v, seen)
+    elif isinstance(obj, dict):
+        h.update(f"d{len(obj)}".encode())
+        for k in sorted(obj, key=str):
+            _feed(h, str(k), seen)
+            _feed(h, obj[k], seen)
+    elif callable(obj) and hasattr(obj, "__qualname__"):       # functions, classes, kernels
+        h.update(f"F{getattr(obj, '__module__', '')}.{obj.__qualname__}".encode())
+    else:
+        if id(obj) in seen:                                     # a shared or cyclic reference
+            h.update(b"<seen>")
+            return
+        seen.add(id(obj))
+        t = type(obj)
+        h.update(f"o{t.__module__}.{t.__qualname__}".encode())
+        fields = dict(vars(obj)) if hasattr(obj, "__dict__") else {}
+        for cls in t.__mro__:
+            for name in getattr(cls, "__slots__", ()):
+                if hasattr(obj, name):
+                    fields[name] = getattr(obj, name)
+        _feed(h, fields, seen)
+
+
+def scene_fingerprint(scene) -> str:
+    """SHA-256 (hex) of what a scene renders: camera, meshes, materials, lights (not settings/source)."""
+    h = hashlib.sha256(b"polar-scene/1")
+    seen: set = set()
+    for part in (scene.camera, scene.meshes, scene.materials, scene.lights):
+        _feed(h, dataclasses.asdict(part) if dataclasses.is_dataclass(part) else part, seen)
+    return h.hexdigest()
+
+
+def resolved_polarisation(scene, compiled, settings) -> str:
+    """The transport ("full", "linear", "off") that ``settings.polarisation`` resolves to for the scene."""
+    used = {compiled.material_names[i] for i in np.unique(compiled.tri_material)}
+    materials, _ = effective_materials(scene.materials, used, settings.simplify)
+    return resolve_transport(settings.polarisation, materials, used)[0]
+
+
+def estimator_identity(scene_hash: str, settings, resolved: str, window=None, size=None) -> dict:
+    """Header entries that identify the estimator of a render (see the module docstring)."""
+    x0, y0, x1, y1 = window or (0, 0, *size)
+    ident = {"polar.scene_hash": scene_hash, "polar.window": f"{x0} {y0} {x1} {y1}",
+             "polar.max_depth": int(settings.max_depth), "polar.rr_depth": int(settings.rr_depth),
+             "polar.seed": int(settings.seed), "polar.spectral": settings.spectral,
+             "polar.polarisation_requested": settings.polarisation, "polar.polarisation": resolved,
+             "polar.reduce_spectral": settings.reduce_spectral, "polar.simplify": settings.simplify}
+    if settings.spectral == "mono":
+        ident["polar.wavelength_nm"] = float(settings.wavelength_nm)
+    return ident
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, float) or isinstance(b, float):
+        try:
+            return math.isclose(float(a), float(b), rel_tol=1e-12, abs_tol=0.0)
+        except (TypeError, ValueError):
+            return False
+    return str(a) == str(b)          # ints beyond int32 are stored as decimal strings
+
+
+def differences(header: dict, identity: dict) -> list[str]:
+    """What differs between a stored render's header and this render's identity (empty: resumable)."""
+    out = []
+    for key, option in MATCHED.items():
+        stored, now = header.get(key), identity.get(key)
+        if stored is None and now is None:
+            continue
+        if not _same(stored, now):
+            what = key.removeprefix("polar.")
+            if key == "polar.scene_hash":
+                out.append(f"the scene differs ({option} or its meshes/materials/lights changed)")
+            else:
+                out.append(f"{what} is {stored!r} in the file but {now!r} now ({option})")
+    return out
+
+
+def read_resumable(path: str):
+    """(stokes, channels, header) of a Polar EXR to resume, or a SceneError naming --resume."""
+    from ..output.exr import read_stokes_exr
+    if not os.path.exists(path):
+        raise SceneError("--resume", f"{path!r} does not exist")
+    if os.path.isdir(path):
+        raise SceneError("--resume", f"{path!r} is a folder, not a Stokes EXR")
+    try:
+        stokes, channels, header = read_stokes_exr(path)
+    except (ValueError, OSError, RuntimeError) as e:
+        raise SceneError("--resume", f"{path!r} is not a Polar Stokes EXR: {e}") from None
+    if "spp" not in channels or "polar.seed" not in header:
+        raise SceneError("--resume", f"{path!r} has no per-pixel sample counts (not written by Polar)")
+    if "polar.scene_hash" not in header:
+        raise SceneError("--resume", f"{path!r} was written without the scene fingerprint (an older Polar), "
+                                     "so it cannot be checked to belong to this render")
+    return stokes, channels, header
+
+
+def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None, seed=None):
+    """(Film of the finished samples, settings to continue with) for the render stored at ``path``.
+
+    ``spp``/``seed`` are the values given on the command line (None: take the stored ones).
+    Raises SceneError naming every setting that differs from the stored render's.
+    """
+    stokes, channels, header = read_resumable(path)
+    H, W = stokes.shape[1:3]
+    if (W, H) != (scene.camera.width, scene.camera.height):
+        raise SceneError("--resume", f"{path!r} is {W}×{H} but the scene renders "
+                                     f"{scene.camera.width}×{scene.camera.height}")
+    st = copy.copy(settings)
+    if seed is not None and str(seed) != str(header["polar.seed"]):
+        raise SceneError("--seed", f"must be the resumed render's seed ({header['polar.seed']}) to continue it")
+    st.seed = int(header["polar.seed"])
+    if spp is None:
+        st.spp = int(header["polar.spp"])
+    ident = estimator_identity(scene_hash, st, resolved_polarisation(scene, compiled, st), size=(W, H))
+    diff = differences(header, ident)
+    if diff:
+        raise SceneError("--resume", f"{os.path.basename(path)!r} is another render: " + "; ".join(diff))
+    counts = channels["spp"].astype(np.int64)
+    if counts.max() > st.spp:
+        raise SceneError("--spp", f"must be at least the samples already done ({int(counts.max())})")
+    stderr = np.stack([channels[f"S{i}.Y.stderr"] for i in range(4)]) if "S0.Y.stderr" in channels else None
+    return film_from_stokes(stokes, counts, stderr), st
