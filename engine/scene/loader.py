@@ -17,6 +17,8 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
+import sys
 
 import numpy as np
 
@@ -31,6 +33,19 @@ from ..spectral import ConstantSpectrum, RGBIlluminantSpectrum
 FORMAT = "polar-scene/1"
 #: Largest coordinate accepted: Embree works in float32 (max ~3.4e38) and rays need headroom.
 MAX_COORDINATE = 1e30
+#: Largest light radiance / intensity / irradiance (also radiance × colour): images are float32
+#: (max ~3.4e38), so a brighter light would develop to inf.
+MAX_LIGHT = 1e30
+#: Deepest nesting of JSON objects and lists (the top-level object is level 1).  Real scenes nest
+#: about 30 levels (16 inline layered bases); the bound keeps parsing and validation off Python's
+#: recursion limit.
+MAX_NESTING = 64
+#: Layered materials: bases nested inline or referenced by name, and coats over one stack in all.
+#: Each coat is one recursion level when the stack is built and evaluated.
+MAX_LAYER_NESTING = 16
+MAX_COATS = 64
+#: Integers beyond double range cannot be any scene value.
+_LARGEST_INTEGER = int(sys.float_info.max)
 
 
 # --------------------------------------------------------------------------- field readers
@@ -51,8 +66,10 @@ def number(value, field: str, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=
     """A finite number within [lo, hi] (open ends where asked)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SceneError(field, f"must be a number, got {value!r}")
-    v = float(value)
     rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+    if isinstance(value, int) and abs(value) > _LARGEST_INTEGER:
+        raise SceneError(field, f"must be a finite number in {rng}, got {_integer_size(value)}")
+    v = float(value)
     if not math.isfinite(v):
         raise SceneError(field, f"must be a finite number in {rng}, got {value!r}")
     if v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi):
@@ -61,6 +78,8 @@ def number(value, field: str, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=
 
 
 def integer(value, field: str, lo: int, hi: int) -> int:
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > _LARGEST_INTEGER:
+        raise SceneError(field, f"must be a whole number in [{lo}, {hi}], got {_integer_size(value)}")
     if isinstance(value, bool) or not isinstance(value, (int, float)) or \
             (isinstance(value, float) and not math.isfinite(value)) or float(value) != int(value):
         raise SceneError(field, f"must be a whole number in [{lo}, {hi}], got {value!r}")
@@ -93,6 +112,140 @@ def _check_keys(d: dict, field: str, allowed: set):
     if unknown:
         raise SceneError(f"{field}.{unknown[0]}" if field else unknown[0],
                          f"unknown field (allowed: {', '.join(sorted(allowed))})")
+
+
+# --------------------------------------------------------------------------- JSON text and tree
+
+def _integer_size(value: int) -> str:
+    """"an integer with N digits", without str() (Python refuses str() beyond 4300 digits)."""
+    value = abs(value)
+    digits = int(math.log10(value)) + 1 if value else 1
+    if digits > 1 and 10 ** (digits - 1) > value:      # log10 rounds up just below a power of 10
+        digits -= 1
+    return f"an integer with {digits} digits"
+
+
+class _OversizedInteger:
+    """A JSON integer literal too long to be any scene value; parsed as this marker (not int(),
+    which is slow and refuses more than 4300 digits) and reported by check_json_values with its field."""
+
+    __slots__ = ("digits",)
+
+    def __init__(self, digits: int):
+        self.digits = digits
+
+    def __repr__(self):
+        return f"an integer with {self.digits} digits"
+
+
+def _json_int(literal: str):
+    # 400 characters hold every integer within double range (309 digits) with room to spare.
+    return int(literal) if len(literal) <= 400 else _OversizedInteger(len(literal.lstrip("-")))
+
+
+_BOMS = ((b"\x00\x00\xfe\xff", "UTF-32 big-endian"), (b"\xff\xfe\x00\x00", "UTF-32 little-endian"),
+         (b"\xfe\xff", "UTF-16 big-endian"), (b"\xff\xfe", "UTF-16 little-endian"))
+
+
+def _decode_scene_text(raw: bytes, path: str) -> str:
+    """The text of a scene file, which must be UTF-8 (RFC 8259 §8.1).
+
+    A UTF-8 byte-order mark is skipped (RFC 8259 lets parsers ignore it).  UTF-16/UTF-32 are
+    rejected even with a byte-order mark: other tools reading scene files (peer renderers, the
+    shared scripts) take UTF-8 only, so accepting them here would make files that work in one
+    place only.  The message says how to fix the file.
+    """
+    fix = "scene files must be UTF-8 (RFC 8259); save the file as UTF-8"
+    for bom, name in _BOMS:
+        if raw.startswith(bom):
+            raise SceneError("", f"{path}: the file is {name} (it starts with a byte-order mark); {fix}")
+    # JSON text starts with two ASCII characters, so a NUL among the first bytes means UTF-16/32.
+    if b"\x00" in raw[:4]:
+        raise SceneError("", f"{path}: the file looks like UTF-16 or UTF-32 (NUL bytes at its start); {fix}")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = raw.count(b"\n", 0, e.start) + 1
+        column = e.start - (raw.rfind(b"\n", 0, e.start) + 1) + 1
+        raise SceneError("", f"{path}: byte 0x{raw[e.start]:02X} at line {line}, column {column} is not "
+                             f"valid UTF-8 (Latin-1 or Windows-1252 text such as 'é' is a common cause); "
+                             f"{fix}") from None
+
+
+_JSON_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
+
+
+def _check_text_nesting(raw: bytes, path: str) -> None:
+    """Reject JSON text nesting deeper than MAX_NESTING, saying on which line.
+
+    Works on the UTF-8 bytes: strings are blanked first (their bytes never contain a bare '"'),
+    then the running count of [{ minus ]} is the depth.  Strings hold no raw newlines in JSON,
+    so line numbers survive the blanking."""
+    if raw.count(b"[") + raw.count(b"{") <= MAX_NESTING:
+        return
+    code = np.frombuffer(_JSON_STRING.sub(b'""', raw), dtype=np.uint8)
+    opens = (code == ord("[")) | (code == ord("{"))
+    where = np.flatnonzero(opens | (code == ord("]")) | (code == ord("}")))
+    depth = np.cumsum(np.where(opens[where], 1, -1))
+    if depth.size and depth.max() > MAX_NESTING:
+        at = int(where[np.argmax(depth > MAX_NESTING)])
+        line = int(np.count_nonzero(code[:at] == ord("\n"))) + 1
+        raise SceneError("", f"{path}: objects and lists nest more than {MAX_NESTING} levels deep "
+                             f"(at line {line})")
+
+
+def _field_path(field: str, keys) -> str:
+    for k in keys:
+        field = f"{field}[{k}]" if isinstance(k, int) else (f"{field}.{k}" if field else str(k))
+    return field
+
+
+def _is_numeric_block(node: list, max_ndim: int) -> bool:
+    """Whether a list is a regular array of numbers within int64/double range, at most
+    ``max_ndim`` deep: vertex and face lists, checked at C speed instead of item by item."""
+    try:
+        a = np.asarray(node)
+    except (ValueError, TypeError, OverflowError, RecursionError):
+        return False
+    return a.dtype.kind in "fiub" and a.ndim <= max_ndim
+
+
+def check_json_values(data, field: str = "") -> None:
+    """Reject, before any field is read, what no field may hold, naming its path: nesting deeper
+    than MAX_NESTING levels, integers beyond double range (±1.8e308; anywhere, notes included)
+    and keys that are not strings.  Iterative, so no document can exhaust Python's stack."""
+    stack = [(data, (), 1)]
+    seen = set()                 # Python callers may share sub-lists (or build cycles)
+    while stack:
+        node, keys, level = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        if level > MAX_NESTING:
+            where = _field_path(field, keys[:8]) + ("…" if len(keys) > 8 else "")
+            raise SceneError(where, f"objects and lists nest more than {MAX_NESTING} levels deep")
+        if isinstance(node, list) and _is_numeric_block(node, MAX_NESTING - level + 1):
+            continue
+        if isinstance(node, dict):
+            bad = next((k for k in node if not isinstance(k, str)), None)
+            if bad is not None:
+                raise SceneError(_field_path(field, keys), f"keys must be strings, got {bad!r}")
+            items = node.items()
+        else:
+            items = enumerate(node)
+        children = []
+        for k, v in items:
+            t = type(v)
+            if t is float or t is str or t is bool or v is None:
+                continue
+            if isinstance(v, (dict, list)):
+                children.append((v, keys + (k,), level + 1))
+            elif isinstance(v, _OversizedInteger) or (isinstance(v, int) and abs(v) > _LARGEST_INTEGER):
+                size = repr(v) if isinstance(v, _OversizedInteger) else _integer_size(v)
+                raise SceneError(_field_path(field, keys + (k,)),
+                                 "must be a number within ±1.8e308 (double precision), "
+                                 f"got {size}")
+        stack.extend(reversed(children))
 
 
 # --------------------------------------------------------------------------- sections
@@ -386,6 +539,7 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
     """A validated Scene from a parsed engine-format (or peer-format) JSON object."""
     if not isinstance(data, dict):
         raise SceneError("", "a scene file must hold a JSON object")
+    check_json_values(data)
     from .peer_format import is_peer_scene, peer_to_engine
     if is_peer_scene(data):
         data = peer_to_engine(data)
@@ -433,16 +587,24 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
 
 
 def load_scene(path: str) -> Scene:
-    """Read and validate a scene file (engine or peer format)."""
+    """Read and validate a scene file (engine or peer format; UTF-8 JSON)."""
     try:
-        with open(path, encoding="utf-8") as fh:
-            data = json.load(fh)
+        with open(path, "rb") as fh:
+            raw = fh.read()
     except FileNotFoundError:
         raise SceneError("", f"scene file {path!r} does not exist") from None
-    except json.JSONDecodeError as e:
-        raise SceneError("", f"{path}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
     except OSError as e:
         raise SceneError("", f"cannot read scene file {path!r}: {e.strerror}") from None
+    text = _decode_scene_text(raw, path)
+    try:
+        data = json.loads(text, parse_int=_json_int)
+    except json.JSONDecodeError as e:
+        raise SceneError("", f"{path}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
+    except RecursionError:
+        # json recurses once per level: text nested ~1000 deep stops here, shallower excess
+        # nesting is reported with its field by check_json_values.
+        _check_text_nesting(raw, path)
+        raise SceneError("", f"{path}: objects and lists nest more than {MAX_NESTING} levels deep") from None
     return parse_scene(data, os.path.dirname(os.path.abspath(path)), source=path)
 
 
