@@ -441,36 +441,66 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
                 emission=emission)
 
 
-def _float_array(value, field, what):
+def _is_json_number(x) -> bool:
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+
+
+def _number_array(value, field: str, what: str, columns: int | None = None) -> np.ndarray:
+    """float64 array from a list of numbers, or (``columns``) from a list of rows of that many.
+
+    Strict where numpy is lenient: strings ("1") and booleans are rejected, not converted, and a
+    ragged row is named (``objects[3].vertices[1]``)."""
+    if isinstance(value, np.ndarray) and value.dtype.kind in "fiu":      # Python callers
+        a = value.astype(np.float64)
+        if (a.ndim != 2 or a.shape[1] != columns) if columns else a.ndim != 1:
+            raise SceneError(field, f"must be {what}")
+        return a
+    if not isinstance(value, (list, tuple)):
+        raise SceneError(field, f"must be {what}, got {_type_name(value)}")
+    if columns:
+        for i, row in enumerate(value):
+            if not isinstance(row, (list, tuple)) or len(row) != columns:
+                raise SceneError(f"{field}[{i}]", f"must be a list of {columns} numbers, got {_show(row)}")
+        flat = [x for row in value for x in row]
+    else:
+        flat = value
+    if not all(t in (int, float) for t in set(map(type, flat))):
+        k = next((k for k, x in enumerate(flat) if not _is_json_number(x)), None)
+        if k is not None:
+            where = f"{field}[{k // columns}][{k % columns}]" if columns else f"{field}[{k}]"
+            raise SceneError(where, f"must be a number, got {_show(flat[k])}")
     try:
-        return np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise SceneError(field, f"must be {what}") from None
+        a = np.array(flat, dtype=np.float64)
+    except OverflowError:
+        raise SceneError(field, f"must be {what} (numbers within ±1.8e308)") from None
+    return a.reshape(-1, columns) if columns else a
 
 
-def _index_array(value, field, what):
+def _index_array(value, field, what, columns: int | None = None):
     """Whole numbers only (no silent truncation of 2.5 to 2)."""
-    a = _float_array(value, field, what)
+    a = _number_array(value, field, what, columns)
     if a.size and (not np.all(np.isfinite(a)) or np.any(a != np.round(a)) or np.abs(a).max() > 2 ** 31):
         raise SceneError(field, f"must be {what} (whole numbers)")
     return a.astype(np.int64)
 
 
+def _show(value, limit: int = 40) -> str:
+    """repr of a value for a message, shortened (a bad row may be a huge list)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
 def _parse_triangles(d, field):
     from .meshio import MeshData
-    v = _float_array(_require(d, "vertices", field), f"{field}.vertices", "a list of [x, y, z] points")
-    f = _index_array(_require(d, "faces", field), f"{field}.faces", "a list of [i, j, k] vertex index triples")
+    v = _number_array(_require(d, "vertices", field), f"{field}.vertices", "a list of [x, y, z] points", 3)
+    f = _index_array(_require(d, "faces", field), f"{field}.faces", "a list of [i, j, k] vertex index triples", 3)
     if not np.all(np.isfinite(v)):
         raise SceneError(f"{field}.vertices", "must be finite numbers")
-    if v.ndim != 2 or v.shape[1] != 3:
-        raise SceneError(f"{field}.vertices", "must be a list of [x, y, z] points")
-    if f.ndim != 2 or f.shape[1] != 3:
-        raise SceneError(f"{field}.faces", "must be a list of [i, j, k] vertex index triples")
     if f.size and (f.min() < 0 or f.max() >= len(v)):
         raise SceneError(f"{field}.faces", f"vertex indices must be in [0, {len(v) - 1}]")
     normals = None
     if d.get("normals") is not None:
-        normals = _float_array(d["normals"], f"{field}.normals", "one [nx, ny, nz] per vertex")
+        normals = _number_array(d["normals"], f"{field}.normals", "one [nx, ny, nz] per vertex", 3)
         if normals.shape != v.shape:
             raise SceneError(f"{field}.normals", "must hold one [nx, ny, nz] per vertex")
         lengths = np.linalg.norm(normals, axis=1)
@@ -487,7 +517,8 @@ def parse_transform(d, field: str) -> np.ndarray:
     if "matrix" in d:
         if len(d) > 1:
             raise SceneError(f"{field}.matrix", "cannot be combined with translate/scale/rotate_deg")
-        m = np.asarray(d["matrix"], dtype=np.float64) if isinstance(d["matrix"], list) else None
+        what = "a 4×4 list of finite numbers (row-major)"
+        m = _number_array(d["matrix"], f"{field}.matrix", what, 4) if isinstance(d["matrix"], list) else None
         if m is None or m.shape != (4, 4) or not np.all(np.isfinite(m)):
             raise SceneError(f"{field}.matrix", "must be a 4×4 list of finite numbers (row-major)")
         if abs(np.linalg.det(m[:3, :3])) < 1e-300:
