@@ -349,15 +349,20 @@ def _parse_emission(d, field: str):
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object like {\"radiance\": 10, \"color\": [1, 1, 1]}")
     _check_keys(d, field, {"radiance", "color", "spectrum", "note"})
-    scale = number(d.get("radiance", 1.0), f"{field}.radiance", 0)
-    return _illuminant(d, field, scale)
+    return _illuminant(d, field, "radiance")
 
 
-def _illuminant(d: dict, field: str, scale: float):
+def _illuminant(d: dict, field: str, key: str):
+    """The spectrum of a light: ``d[key]`` (radiance, intensity or irradiance; default 1) × colour,
+    each and their product at most MAX_LIGHT."""
+    scale = number(d.get(key, 1.0), f"{field}.{key}", 0, MAX_LIGHT)
     color = d.get("color", [1.0, 1.0, 1.0])
     if not isinstance(color, (list, tuple)) or len(color) != 3:
         raise SceneError(f"{field}.color", "must be a list of 3 numbers ≥ 0")
-    rgb = [number(c, f"{field}.color[{i}]", 0) for i, c in enumerate(color)]
+    rgb = [number(c, f"{field}.color[{i}]", 0, MAX_LIGHT) for i, c in enumerate(color)]
+    if scale * max(rgb) > MAX_LIGHT:
+        raise SceneError(f"{field}.color", f"times the {key} must be at most {MAX_LIGHT:g} (images are float32), "
+                                           f"got {scale * max(rgb):g}")
     return RGBIlluminantSpectrum(rgb, scale)
 
 
@@ -541,11 +546,11 @@ def parse_light(d: dict, field: str):
     kind = choice(_require(d, "type", field), f"{field}.type", ("environment", "point", "spot", "directional"))
     if kind == "environment":
         _check_keys(d, field, {"type", "radiance", "color", "note"})
-        return EnvironmentLight(_illuminant(d, field, number(d.get("radiance", 1.0), f"{field}.radiance", 0)))
+        return EnvironmentLight(_illuminant(d, field, "radiance"))
     if kind == "point":
         _check_keys(d, field, {"type", "position", "intensity", "color", "note"})
         return PointLight(vec3(_require(d, "position", field), f"{field}.position"),
-                          _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)))
+                          _illuminant(d, field, "intensity"))
     if kind == "spot":
         _check_keys(d, field, {"type", "position", "direction", "target", "intensity", "color",
                                "cone_angle_deg", "blend", "note"})
@@ -558,12 +563,12 @@ def parse_light(d: dict, field: str):
         else:
             direction = vec3(_require(d, "direction", field), f"{field}.direction", unit=True)
         return SpotLight(pos, direction,
-                         _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)),
+                         _illuminant(d, field, "intensity"),
                          number(d.get("cone_angle_deg", 45.0), f"{field}.cone_angle_deg", 0, 180, lo_open=True),
                          number(d.get("blend", 0.0), f"{field}.blend", 0, 1))
     _check_keys(d, field, {"type", "direction", "irradiance", "color", "note"})
     return DirectionalLight(vec3(_require(d, "direction", field), f"{field}.direction", unit=True),
-                            _illuminant(d, field, number(d.get("irradiance", 1.0), f"{field}.irradiance", 0)))
+                            _illuminant(d, field, "irradiance"))
 
 
 def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
