@@ -307,10 +307,38 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
     return s
 
 
+def _check_layer_stack(d, field: str, materials: dict | None = None) -> None:
+    """Bound a layered material before it is built, since every coat is one recursion level when
+    the stack is built and rendered: at most MAX_LAYER_NESTING layered bases below it, given
+    inline or by name (resolved in ``materials`` when given), and at most MAX_COATS coats in all.
+    Malformed parts are left to parse_material, unknown or circular references to the lookup."""
+    level, coats, seen, top = 0, 0, set(), field
+    while isinstance(d, dict) and d.get("type") == "weidlich_wilkie":
+        if level > MAX_LAYER_NESTING:
+            raise SceneError(f"{field}.base", f"layered materials nest more than {MAX_LAYER_NESTING} levels deep "
+                                              f"below {top} (counting bases given inline and by name)")
+        if isinstance(d.get("coats"), list):
+            coats += len(d["coats"])
+            if coats > MAX_COATS:
+                raise SceneError(f"{field}.coats", f"a layered material has at most {MAX_COATS} coats in all "
+                                                   f"(counting its layered bases' coats), got {coats}")
+        base = d.get("base")
+        if isinstance(base, dict):
+            d, field = base, f"{field}.base"
+        elif isinstance(base, str) and materials is not None and base in materials and base not in seen:
+            seen.add(base)
+            d, field = materials[base], f"materials.{base}"
+        else:
+            return
+        level += 1
+
+
 def parse_material(d: dict, field: str, lookup=None, depth: int = 0):
     """A BSDF from a material object, read through the model's declaration (engine.materials.parameters).
     ``lookup(name)`` resolves references to other materials (the base of a layered material may be
     given inline or by name)."""
+    if depth == 0:
+        _check_layer_stack(d, field)
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     decl = MODELS[choice(_require(d, "type", field), f"{field}.type", tuple(MODELS))]
@@ -604,6 +632,8 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
             resolving.pop()
         return materials[name]
 
+    for name, m in mats_in.items():    # bases by name: bound the whole chain before lookup recurses along it
+        _check_layer_stack(m, f"materials.{name}", mats_in)
     for name in mats_in:
         lookup(name, f"materials.{name}")
     materials = {name: materials[name] for name in mats_in}
