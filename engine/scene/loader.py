@@ -201,13 +201,17 @@ def _field_path(field: str, keys) -> str:
 
 
 def _is_numeric_block(node: list, max_ndim: int) -> bool:
-    """Whether a list is a regular array of numbers within int64/double range, at most
-    ``max_ndim`` deep: vertex and face lists, checked at C speed instead of item by item."""
+    """Whether a list is a regular array of numbers within int64/double range, one or two levels
+    deep (at most ``max_ndim``): vertex and face lists, checked at C speed instead of item by item.
+    Deeper lists are walked (numpy would expand lists that Python callers share exponentially)."""
+    if not node or min(max_ndim, 2) < (2 if isinstance(node[0], list) else 1) or \
+            (isinstance(node[0], list) and node[0] and isinstance(node[0][0], list)):
+        return False
     try:
         a = np.asarray(node)
-    except (ValueError, TypeError, OverflowError, RecursionError):
+    except (ValueError, TypeError, OverflowError, MemoryError):
         return False
-    return a.dtype.kind in "fiub" and a.ndim <= max_ndim
+    return a.dtype.kind in "fiub" and a.ndim <= min(max_ndim, 2)
 
 
 def check_json_values(data, field: str = "") -> None:
