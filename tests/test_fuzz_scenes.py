@@ -1,7 +1,10 @@
 """Fuzzing scene files: any mutation either loads and renders finite pixels or raises SceneError."""
 
 import copy
+import json
 import math
+import os
+import tempfile
 
 import numpy as np
 from hypothesis import HealthCheck, given, settings
@@ -9,7 +12,7 @@ from hypothesis import strategies as st
 
 from engine.render.renderer import Renderer
 from engine.errors import SceneError
-from engine.scene.loader import parse_scene
+from engine.scene.loader import load_scene, parse_scene
 
 BASE = {
     "format": "polar-scene/1",
@@ -116,12 +119,6 @@ def test_regressions_found_by_fuzzing():
 # Loading any of these either succeeds or raises SceneError, never another exception.  Derandomized
 # with bounded examples, so the run time stays modest and a failure reproduces.
 
-import json
-import os
-import tempfile
-
-from engine.scene.loader import load_scene
-
 HOSTILE = settings(max_examples=80, deadline=None, derandomize=True,
                    suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
@@ -139,7 +136,7 @@ PLACEHOLDER = "\u0000PLACEHOLDER\u0000"
 #: Remove an entry once it is fixed, so that the property holds in full again.
 KNOWN_MESHIO_DEFECTS = (
     (StopIteration, ""),     # OBJ face index beyond int64, e.g. "f 1 2 99999999999999999999" (_obj_corners_slow)
-    (ValueError, "dtype size in bytes must fit into a C int"),   # binary PLY list count like 2**30 (_ply_binary_element)
+    (ValueError, "dtype size in bytes must fit into a C int"),  # binary PLY list count 2**30 (_ply_binary_element)
 )
 
 
