@@ -138,9 +138,10 @@ Dirac lobes
   weight a·M_T21·R·W_base(θ'_o)·R·M_T12 in every form (flux fractions: no 1/η², and
   t = T21, τ = T12 for a smooth coat).  ``delta_reflection`` returns the sum; a smooth coat over a delta-only base is
   ``delta_only``.
-- Rough coat: no Dirac lobe.  A rough coat over a *delta-only* base is rejected
+- Rough coat: no Dirac lobe.  A rough coat over a base whose reflection is all Dirac is rejected
   (ValueError: WW gives no function value there — use a rough base, e.g.
-  TorranceSparrow with small m).  The Dirac part of a mixed base (HTSG's specular
+  TorranceSparrow with small m): a *delta-only* base, HTSG with σ₀ = 0 and no albedo (a smooth
+  mirror), or a smooth coat over either.  The Dirac part of a mixed base (HTSG's specular
   term) is ignored under a rough coat (only its eval() lobes are layered).
 
 Dispersion
@@ -193,6 +194,7 @@ import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
 from .conductor import mirror_reflection
+from .htsg import HTSG
 from .lambert import Lambert
 from .microfacet import Beckmann, BlinnPhong, half_vector, reflect_local, shadowing_term
 from .parameters import ModelDeclaration, Parameter, Socket
@@ -237,6 +239,23 @@ def _spectrum_range(spec: Spectrum) -> tuple[float, float]:
 
 def _mm(A: np.ndarray, B: np.ndarray) -> np.ndarray:
     return np.einsum("ij...,jk...->ik...", A, B)
+
+
+def _dirac_only_reflection(base: BSDF) -> str | None:
+    """What makes all of ``base``'s reflection Dirac lobes (nothing a rough coat can layer), or None.
+
+    Besides delta-only bases (SmoothConductor, Torrance–Sparrow at m = 0 without a diffuse part):
+    HTSG with σ₀ = 0 is a smooth Fresnel mirror (its directional-diffuse term vanishes), so
+    without a diffuse albedo only its Dirac lobe is left; and a smooth coat over such a base."""
+    if base.flags.is_delta_only:
+        return f"a delta-only base ({base.name})"
+    if isinstance(base, HTSG) and base.sigma0 == 0.0 and (
+            base.albedo is None or not np.any(np.asarray(base.albedo.eval(np.linspace(360.0, 830.0, 95))))):
+        return "an HTSG base with sigma0_um = 0 and no albedo (a smooth Fresnel mirror: its reflection is all Dirac)"
+    if isinstance(base, WeidlichWilkie) and base.coat.smooth:
+        inner = _dirac_only_reflection(base.base)
+        return None if inner is None else f"a smooth coat over {inner}"
+    return None
 
 
 @dataclass
@@ -562,9 +581,10 @@ class WeidlichWilkie(BSDF):
                                      "(or match_base_exterior=False)")
                 base.exterior_n = float(lo)
         self.base = base
-        if not self.coat.smooth and base.flags.is_delta_only:
-            raise ValueError("a rough coat over a delta-only base is not supported (WW has no function value "
-                             "there); use a rough base, e.g. TorranceSparrow with a small m")
+        dirac_base = None if self.coat.smooth else _dirac_only_reflection(base)
+        if dirac_base:
+            raise ValueError(f"a rough coat over {dirac_base} is not supported (WW has no function value "
+                             "there); use a rough base, e.g. TorranceSparrow with a small m or HTSG with sigma0_um > 0")
 
         if layer_cosine_fraction is None:
             w_c = self.default_layer_cosine_fraction(base)

@@ -17,6 +17,8 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
+import sys
 
 import numpy as np
 
@@ -31,6 +33,19 @@ from ..spectral import ConstantSpectrum, RGBIlluminantSpectrum
 FORMAT = "polar-scene/1"
 #: Largest coordinate accepted: Embree works in float32 (max ~3.4e38) and rays need headroom.
 MAX_COORDINATE = 1e30
+#: Largest light radiance / intensity / irradiance (also radiance × colour): images are float32
+#: (max ~3.4e38), so a brighter light would develop to inf.
+MAX_LIGHT = 1e30
+#: Deepest nesting of JSON objects and lists (the top-level object is level 1).  Real scenes nest
+#: about 30 levels (16 inline layered bases); the bound keeps parsing and validation off Python's
+#: recursion limit.
+MAX_NESTING = 64
+#: Layered materials: bases nested inline or referenced by name, and coats over one stack in all.
+#: Each coat is one recursion level when the stack is built and evaluated.
+MAX_LAYER_NESTING = 16
+MAX_COATS = 64
+#: Integers beyond double range cannot be any scene value.
+_LARGEST_INTEGER = int(sys.float_info.max)
 
 
 # --------------------------------------------------------------------------- field readers
@@ -51,8 +66,10 @@ def number(value, field: str, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=
     """A finite number within [lo, hi] (open ends where asked)."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise SceneError(field, f"must be a number, got {value!r}")
-    v = float(value)
     rng = f"{'(' if lo_open else '['}{lo:g}, {hi:g}{')' if hi_open else ']'}"
+    if isinstance(value, int) and abs(value) > _LARGEST_INTEGER:
+        raise SceneError(field, f"must be a finite number in {rng}, got {_integer_size(value)}")
+    v = float(value)
     if not math.isfinite(v):
         raise SceneError(field, f"must be a finite number in {rng}, got {value!r}")
     if v < lo or v > hi or (lo_open and v == lo) or (hi_open and v == hi):
@@ -61,6 +78,8 @@ def number(value, field: str, lo=-math.inf, hi=math.inf, lo_open=False, hi_open=
 
 
 def integer(value, field: str, lo: int, hi: int) -> int:
+    if isinstance(value, int) and not isinstance(value, bool) and abs(value) > _LARGEST_INTEGER:
+        raise SceneError(field, f"must be a whole number in [{lo}, {hi}], got {_integer_size(value)}")
     if isinstance(value, bool) or not isinstance(value, (int, float)) or \
             (isinstance(value, float) and not math.isfinite(value)) or float(value) != int(value):
         raise SceneError(field, f"must be a whole number in [{lo}, {hi}], got {value!r}")
@@ -93,6 +112,144 @@ def _check_keys(d: dict, field: str, allowed: set):
     if unknown:
         raise SceneError(f"{field}.{unknown[0]}" if field else unknown[0],
                          f"unknown field (allowed: {', '.join(sorted(allowed))})")
+
+
+# --------------------------------------------------------------------------- JSON text and tree
+
+def _integer_size(value: int) -> str:
+    """"an integer with N digits", without str() (Python refuses str() beyond 4300 digits)."""
+    value = abs(value)
+    digits = int(math.log10(value)) + 1 if value else 1
+    if digits > 1 and 10 ** (digits - 1) > value:      # log10 rounds up just below a power of 10
+        digits -= 1
+    return f"an integer with {digits} digits"
+
+
+class _OversizedInteger:
+    """A JSON integer literal too long to be any scene value; parsed as this marker (not int(),
+    which is slow and refuses more than 4300 digits) and reported by check_json_values with its field."""
+
+    __slots__ = ("digits",)
+
+    def __init__(self, digits: int):
+        self.digits = digits
+
+    def __repr__(self):
+        return f"an integer with {self.digits} digits"
+
+
+def _json_int(literal: str):
+    # 400 characters hold every integer within double range (309 digits) with room to spare.
+    return int(literal) if len(literal) <= 400 else _OversizedInteger(len(literal.lstrip("-")))
+
+
+_BOMS = ((b"\x00\x00\xfe\xff", "UTF-32 big-endian"), (b"\xff\xfe\x00\x00", "UTF-32 little-endian"),
+         (b"\xfe\xff", "UTF-16 big-endian"), (b"\xff\xfe", "UTF-16 little-endian"))
+
+
+def _decode_scene_text(raw: bytes, path: str) -> str:
+    """The text of a scene file, which must be UTF-8 (RFC 8259 §8.1).
+
+    A UTF-8 byte-order mark is skipped (RFC 8259 lets parsers ignore it).  UTF-16/UTF-32 are
+    rejected even with a byte-order mark: other tools reading scene files (peer renderers, the
+    shared scripts) take UTF-8 only, so accepting them here would make files that work in one
+    place only.  The message says how to fix the file.
+    """
+    fix = "scene files must be UTF-8 (RFC 8259); save the file as UTF-8"
+    for bom, name in _BOMS:
+        if raw.startswith(bom):
+            raise SceneError("", f"{path}: the file is {name} (it starts with a byte-order mark); {fix}")
+    # JSON text starts with two ASCII characters, so a NUL among the first bytes means UTF-16/32.
+    if b"\x00" in raw[:4]:
+        raise SceneError("", f"{path}: the file looks like UTF-16 or UTF-32 (NUL bytes at its start); {fix}")
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as e:
+        line = raw.count(b"\n", 0, e.start) + 1
+        column = e.start - (raw.rfind(b"\n", 0, e.start) + 1) + 1
+        raise SceneError("", f"{path}: byte 0x{raw[e.start]:02X} at line {line}, column {column} is not "
+                             f"valid UTF-8 (Latin-1 or Windows-1252 text such as 'é' is a common cause); "
+                             f"{fix}") from None
+
+
+_JSON_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
+
+
+def _check_text_nesting(raw: bytes, path: str) -> None:
+    """Reject JSON text nesting deeper than MAX_NESTING, saying on which line.
+
+    Works on the UTF-8 bytes: strings are blanked first (their bytes never contain a bare '"'),
+    then the running count of [{ minus ]} is the depth.  Strings hold no raw newlines in JSON,
+    so line numbers survive the blanking."""
+    if raw.count(b"[") + raw.count(b"{") <= MAX_NESTING:
+        return
+    code = np.frombuffer(_JSON_STRING.sub(b'""', raw), dtype=np.uint8)
+    opens = (code == ord("[")) | (code == ord("{"))
+    where = np.flatnonzero(opens | (code == ord("]")) | (code == ord("}")))
+    depth = np.cumsum(np.where(opens[where], 1, -1))
+    if depth.size and depth.max() > MAX_NESTING:
+        at = int(where[np.argmax(depth > MAX_NESTING)])
+        line = int(np.count_nonzero(code[:at] == ord("\n"))) + 1
+        raise SceneError("", f"{path}: objects and lists nest more than {MAX_NESTING} levels deep "
+                             f"(at line {line})")
+
+
+def _field_path(field: str, keys) -> str:
+    for k in keys:
+        field = f"{field}[{k}]" if isinstance(k, int) else (f"{field}.{k}" if field else str(k))
+    return field
+
+
+def _is_numeric_block(node: list, max_ndim: int) -> bool:
+    """Whether a list is a regular array of numbers within int64/double range, one or two levels
+    deep (at most ``max_ndim``): vertex and face lists, checked at C speed instead of item by item.
+    Deeper lists are walked (numpy would expand lists that Python callers share exponentially)."""
+    if not node or min(max_ndim, 2) < (2 if isinstance(node[0], list) else 1) or \
+            (isinstance(node[0], list) and node[0] and isinstance(node[0][0], list)):
+        return False
+    try:
+        a = np.asarray(node)
+    except (ValueError, TypeError, OverflowError, MemoryError):
+        return False
+    return a.dtype.kind in "fiub" and a.ndim <= min(max_ndim, 2)
+
+
+def check_json_values(data, field: str = "") -> None:
+    """Reject, before any field is read, what no field may hold, naming its path: nesting deeper
+    than MAX_NESTING levels, integers beyond double range (±1.8e308; anywhere, notes included)
+    and keys that are not strings.  Iterative, so no document can exhaust Python's stack."""
+    stack = [(data, (), 1)]
+    seen = set()                 # Python callers may share sub-lists (or build cycles)
+    while stack:
+        node, keys, level = stack.pop()
+        if id(node) in seen:
+            continue
+        seen.add(id(node))
+        if level > MAX_NESTING:
+            where = _field_path(field, keys[:8]) + ("…" if len(keys) > 8 else "")
+            raise SceneError(where, f"objects and lists nest more than {MAX_NESTING} levels deep")
+        if isinstance(node, list) and _is_numeric_block(node, MAX_NESTING - level + 1):
+            continue
+        if isinstance(node, dict):
+            bad = next((k for k in node if not isinstance(k, str)), None)
+            if bad is not None:
+                raise SceneError(_field_path(field, keys), f"keys must be strings, got {bad!r}")
+            items = node.items()
+        else:
+            items = enumerate(node)
+        children = []
+        for k, v in items:
+            t = type(v)
+            if t is float or t is str or t is bool or v is None:
+                continue
+            if isinstance(v, (dict, list)):
+                children.append((v, keys + (k,), level + 1))
+            elif isinstance(v, _OversizedInteger) or (isinstance(v, int) and abs(v) > _LARGEST_INTEGER):
+                size = repr(v) if isinstance(v, _OversizedInteger) else _integer_size(v)
+                raise SceneError(_field_path(field, keys + (k,)),
+                                 "must be a number within ±1.8e308 (double precision), "
+                                 f"got {size}")
+        stack.extend(reversed(children))
 
 
 # --------------------------------------------------------------------------- sections
@@ -154,10 +311,38 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
     return s
 
 
+def _check_layer_stack(d, field: str, materials: dict | None = None) -> None:
+    """Bound a layered material before it is built, since every coat is one recursion level when
+    the stack is built and rendered: at most MAX_LAYER_NESTING layered bases below it, given
+    inline or by name (resolved in ``materials`` when given), and at most MAX_COATS coats in all.
+    Malformed parts are left to parse_material, unknown or circular references to the lookup."""
+    level, coats, seen, top = 0, 0, set(), field
+    while isinstance(d, dict) and d.get("type") == "weidlich_wilkie":
+        if level > MAX_LAYER_NESTING:
+            raise SceneError(f"{field}.base", f"layered materials nest more than {MAX_LAYER_NESTING} levels deep "
+                                              f"below {top} (counting bases given inline and by name)")
+        if isinstance(d.get("coats"), list):
+            coats += len(d["coats"])
+            if coats > MAX_COATS:
+                raise SceneError(f"{field}.coats", f"a layered material has at most {MAX_COATS} coats in all "
+                                                   f"(counting its layered bases' coats), got {coats}")
+        base = d.get("base")
+        if isinstance(base, dict):
+            d, field = base, f"{field}.base"
+        elif isinstance(base, str) and materials is not None and base in materials and base not in seen:
+            seen.add(base)
+            d, field = materials[base], f"materials.{base}"
+        else:
+            return
+        level += 1
+
+
 def parse_material(d: dict, field: str, lookup=None, depth: int = 0):
     """A BSDF from a material object, read through the model's declaration (engine.materials.parameters).
     ``lookup(name)`` resolves references to other materials (the base of a layered material may be
     given inline or by name)."""
+    if depth == 0:
+        _check_layer_stack(d, field)
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     decl = MODELS[choice(_require(d, "type", field), f"{field}.type", tuple(MODELS))]
@@ -196,15 +381,20 @@ def _parse_emission(d, field: str):
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object like {\"radiance\": 10, \"color\": [1, 1, 1]}")
     _check_keys(d, field, {"radiance", "color", "spectrum", "note"})
-    scale = number(d.get("radiance", 1.0), f"{field}.radiance", 0)
-    return _illuminant(d, field, scale)
+    return _illuminant(d, field, "radiance")
 
 
-def _illuminant(d: dict, field: str, scale: float):
+def _illuminant(d: dict, field: str, key: str):
+    """The spectrum of a light: ``d[key]`` (radiance, intensity or irradiance; default 1) × colour,
+    each and their product at most MAX_LIGHT."""
+    scale = number(d.get(key, 1.0), f"{field}.{key}", 0, MAX_LIGHT)
     color = d.get("color", [1.0, 1.0, 1.0])
     if not isinstance(color, (list, tuple)) or len(color) != 3:
         raise SceneError(f"{field}.color", "must be a list of 3 numbers ≥ 0")
-    rgb = [number(c, f"{field}.color[{i}]", 0) for i, c in enumerate(color)]
+    rgb = [number(c, f"{field}.color[{i}]", 0, MAX_LIGHT) for i, c in enumerate(color)]
+    if scale * max(rgb) > MAX_LIGHT:
+        raise SceneError(f"{field}.color", f"times the {key} must be at most {MAX_LIGHT:g} (images are float32), "
+                                           f"got {scale * max(rgb):g}")
     return RGBIlluminantSpectrum(rgb, scale)
 
 
@@ -288,36 +478,66 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
                 emission=emission)
 
 
-def _float_array(value, field, what):
+def _is_json_number(x) -> bool:
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, (bool, np.bool_))
+
+
+def _number_array(value, field: str, what: str, columns: int | None = None) -> np.ndarray:
+    """float64 array from a list of numbers, or (``columns``) from a list of rows of that many.
+
+    Strict where numpy is lenient: strings ("1") and booleans are rejected, not converted, and a
+    ragged row is named (``objects[3].vertices[1]``)."""
+    if isinstance(value, np.ndarray) and value.dtype.kind in "fiu":      # Python callers
+        a = value.astype(np.float64)
+        if (a.ndim != 2 or a.shape[1] != columns) if columns else a.ndim != 1:
+            raise SceneError(field, f"must be {what}")
+        return a
+    if not isinstance(value, (list, tuple)):
+        raise SceneError(field, f"must be {what}, got {_type_name(value)}")
+    if columns:
+        for i, row in enumerate(value):
+            if not isinstance(row, (list, tuple)) or len(row) != columns:
+                raise SceneError(f"{field}[{i}]", f"must be a list of {columns} numbers, got {_show(row)}")
+        flat = [x for row in value for x in row]
+    else:
+        flat = value
+    if not all(t in (int, float) for t in set(map(type, flat))):
+        k = next((k for k, x in enumerate(flat) if not _is_json_number(x)), None)
+        if k is not None:
+            where = f"{field}[{k // columns}][{k % columns}]" if columns else f"{field}[{k}]"
+            raise SceneError(where, f"must be a number, got {_show(flat[k])}")
     try:
-        return np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError):
-        raise SceneError(field, f"must be {what}") from None
+        a = np.array(flat, dtype=np.float64)
+    except OverflowError:
+        raise SceneError(field, f"must be {what} (numbers within ±1.8e308)") from None
+    return a.reshape(-1, columns) if columns else a
 
 
-def _index_array(value, field, what):
+def _index_array(value, field, what, columns: int | None = None):
     """Whole numbers only (no silent truncation of 2.5 to 2)."""
-    a = _float_array(value, field, what)
+    a = _number_array(value, field, what, columns)
     if a.size and (not np.all(np.isfinite(a)) or np.any(a != np.round(a)) or np.abs(a).max() > 2 ** 31):
         raise SceneError(field, f"must be {what} (whole numbers)")
     return a.astype(np.int64)
 
 
+def _show(value, limit: int = 40) -> str:
+    """repr of a value for a message, shortened (a bad row may be a huge list)."""
+    text = repr(value)
+    return text if len(text) <= limit else text[:limit - 1] + "…"
+
+
 def _parse_triangles(d, field):
     from .meshio import MeshData
-    v = _float_array(_require(d, "vertices", field), f"{field}.vertices", "a list of [x, y, z] points")
-    f = _index_array(_require(d, "faces", field), f"{field}.faces", "a list of [i, j, k] vertex index triples")
+    v = _number_array(_require(d, "vertices", field), f"{field}.vertices", "a list of [x, y, z] points", 3)
+    f = _index_array(_require(d, "faces", field), f"{field}.faces", "a list of [i, j, k] vertex index triples", 3)
     if not np.all(np.isfinite(v)):
         raise SceneError(f"{field}.vertices", "must be finite numbers")
-    if v.ndim != 2 or v.shape[1] != 3:
-        raise SceneError(f"{field}.vertices", "must be a list of [x, y, z] points")
-    if f.ndim != 2 or f.shape[1] != 3:
-        raise SceneError(f"{field}.faces", "must be a list of [i, j, k] vertex index triples")
     if f.size and (f.min() < 0 or f.max() >= len(v)):
         raise SceneError(f"{field}.faces", f"vertex indices must be in [0, {len(v) - 1}]")
     normals = None
     if d.get("normals") is not None:
-        normals = _float_array(d["normals"], f"{field}.normals", "one [nx, ny, nz] per vertex")
+        normals = _number_array(d["normals"], f"{field}.normals", "one [nx, ny, nz] per vertex", 3)
         if normals.shape != v.shape:
             raise SceneError(f"{field}.normals", "must hold one [nx, ny, nz] per vertex")
         lengths = np.linalg.norm(normals, axis=1)
@@ -334,7 +554,8 @@ def parse_transform(d, field: str) -> np.ndarray:
     if "matrix" in d:
         if len(d) > 1:
             raise SceneError(f"{field}.matrix", "cannot be combined with translate/scale/rotate_deg")
-        m = np.asarray(d["matrix"], dtype=np.float64) if isinstance(d["matrix"], list) else None
+        what = "a 4×4 list of finite numbers (row-major)"
+        m = _number_array(d["matrix"], f"{field}.matrix", what, 4) if isinstance(d["matrix"], list) else None
         if m is None or m.shape != (4, 4) or not np.all(np.isfinite(m)):
             raise SceneError(f"{field}.matrix", "must be a 4×4 list of finite numbers (row-major)")
         if abs(np.linalg.det(m[:3, :3])) < 1e-300:
@@ -357,11 +578,11 @@ def parse_light(d: dict, field: str):
     kind = choice(_require(d, "type", field), f"{field}.type", ("environment", "point", "spot", "directional"))
     if kind == "environment":
         _check_keys(d, field, {"type", "radiance", "color", "note"})
-        return EnvironmentLight(_illuminant(d, field, number(d.get("radiance", 1.0), f"{field}.radiance", 0)))
+        return EnvironmentLight(_illuminant(d, field, "radiance"))
     if kind == "point":
         _check_keys(d, field, {"type", "position", "intensity", "color", "note"})
         return PointLight(vec3(_require(d, "position", field), f"{field}.position"),
-                          _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)))
+                          _illuminant(d, field, "intensity"))
     if kind == "spot":
         _check_keys(d, field, {"type", "position", "direction", "target", "intensity", "color",
                                "cone_angle_deg", "blend", "note"})
@@ -374,18 +595,19 @@ def parse_light(d: dict, field: str):
         else:
             direction = vec3(_require(d, "direction", field), f"{field}.direction", unit=True)
         return SpotLight(pos, direction,
-                         _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)),
+                         _illuminant(d, field, "intensity"),
                          number(d.get("cone_angle_deg", 45.0), f"{field}.cone_angle_deg", 0, 180, lo_open=True),
                          number(d.get("blend", 0.0), f"{field}.blend", 0, 1))
     _check_keys(d, field, {"type", "direction", "irradiance", "color", "note"})
     return DirectionalLight(vec3(_require(d, "direction", field), f"{field}.direction", unit=True),
-                            _illuminant(d, field, number(d.get("irradiance", 1.0), f"{field}.irradiance", 0)))
+                            _illuminant(d, field, "irradiance"))
 
 
 def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
     """A validated Scene from a parsed engine-format (or peer-format) JSON object."""
     if not isinstance(data, dict):
         raise SceneError("", "a scene file must hold a JSON object")
+    check_json_values(data)
     from .peer_format import is_peer_scene, peer_to_engine
     if is_peer_scene(data):
         data = peer_to_engine(data)
@@ -414,6 +636,8 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
             resolving.pop()
         return materials[name]
 
+    for name, m in mats_in.items():    # bases by name: bound the whole chain before lookup recurses along it
+        _check_layer_stack(m, f"materials.{name}", mats_in)
     for name in mats_in:
         lookup(name, f"materials.{name}")
     materials = {name: materials[name] for name in mats_in}
@@ -433,16 +657,24 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
 
 
 def load_scene(path: str) -> Scene:
-    """Read and validate a scene file (engine or peer format)."""
+    """Read and validate a scene file (engine or peer format; UTF-8 JSON)."""
     try:
-        with open(path, encoding="utf-8") as fh:
-            data = json.load(fh)
+        with open(path, "rb") as fh:
+            raw = fh.read()
     except FileNotFoundError:
         raise SceneError("", f"scene file {path!r} does not exist") from None
-    except json.JSONDecodeError as e:
-        raise SceneError("", f"{path}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
     except OSError as e:
         raise SceneError("", f"cannot read scene file {path!r}: {e.strerror}") from None
+    text = _decode_scene_text(raw, path)
+    try:
+        data = json.loads(text, parse_int=_json_int)
+    except json.JSONDecodeError as e:
+        raise SceneError("", f"{path}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg})") from None
+    except RecursionError:
+        # json recurses once per level: text nested ~1000 deep stops here, shallower excess
+        # nesting is reported with its field by check_json_values.
+        _check_text_nesting(raw, path)
+        raise SceneError("", f"{path}: objects and lists nest more than {MAX_NESTING} levels deep") from None
     return parse_scene(data, os.path.dirname(os.path.abspath(path)), source=path)
 
 

@@ -42,6 +42,9 @@ def _material(m: dict, field: str) -> dict:
 
 def peer_to_engine(data: dict) -> dict:
     """Convert a parsed peer scene into an engine-format scene dict."""
+    for key, kind in (("camera", dict), ("materials", dict), ("integrator", dict), ("objects", list)):
+        if not isinstance(data.get(key, kind()), kind):
+            raise SceneError(key, f"must be {'an object' if kind is dict else 'a list'}")
     cam = dict(data.get("camera", {}))
     for key in ("model", "pixel_filter"):
         allowed = {"model": "pinhole", "pixel_filter": "box"}[key]

@@ -107,7 +107,7 @@ def icosphere(subdivisions: int, field: str = "") -> MeshData:
 def _point(p, field, name):
     try:
         a = np.asarray(p, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         a = None
     if a is None or a.shape != (3,) or not np.isfinite(a).all():
         raise SceneError(f"{field}.{name}" if field else name,
@@ -153,7 +153,7 @@ def _vec3(value, field, name, allow_scalar=False):
     sub = f"{field}.{name}" if field else name
     try:
         a = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise SceneError(sub, f"must be 3 numbers, got {value!r}") from None
     if allow_scalar and a.shape == ():
         a = np.full(3, float(a))
@@ -198,7 +198,7 @@ def transform_mesh(mesh: MeshData, matrix, field: str = "") -> MeshData:
     """
     try:
         m = np.asarray(matrix, dtype=np.float64)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         m = None
     if m is None or m.shape != (4, 4):
         raise SceneError(field, "transform must be a 4x4 matrix")
