@@ -400,3 +400,21 @@ def test_cli_prints_one_error_line_and_exits_2(tmp_path, capsys, data, words):
     err = capsys.readouterr().err
     assert err.startswith("error: ") and err.count("\n") == 1 and words in err, err
     assert not (tmp_path / "out.exr").exists()
+
+
+def test_obj_faces_before_the_first_usemtl_name_the_obj_line(tmp_path):
+    """A scene mapping usemtl names to materials cannot place faces that come before every usemtl:
+    the error names the OBJ line (not ``material_ids``, a field the user never wrote)."""
+    (tmp_path / "m.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\nusemtl glass\nf 1 2 3\n")
+    doc = {"format": "polar-scene/1",
+           "camera": {"origin": [0, -5, 0], "target": [0, 0, 0], "up": [0, 0, 1], "width": 4, "height": 4},
+           "materials": {"g": {"type": "lambert"}},
+           "objects": [{"shape": "mesh", "file": "m.obj", "materials": {"glass": "g"}}],
+           "lights": [{"type": "point", "position": [0, -2, 2], "intensity": 1}]}
+    (tmp_path / "s.json").write_text(json.dumps(doc))
+    with pytest.raises(SceneError) as e:
+        load_scene(str(tmp_path / "s.json"))
+    assert e.value.field == "objects[0].file" and "line 4" in str(e.value) and "usemtl" in str(e.value)
+    doc["objects"][0] = {"shape": "mesh", "file": "m.obj", "material": "g"}   # one material: every face has it
+    (tmp_path / "s.json").write_text(json.dumps(doc))
+    assert len(load_scene(str(tmp_path / "s.json")).meshes) == 1

@@ -408,13 +408,14 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
                  "quad": {"vertices"}, "triangles": {"vertices", "faces", "normals", "material_ids"}}
     _check_keys(d, field, allowed | per_shape[shape])
 
-    group_names = None
+    group_names, ungrouped_line = None, None
     if shape == "mesh":
         path = _require(d, "file", field)
         if not isinstance(path, str):
             raise SceneError(f"{field}.file", "must be a file path (string)")
         data = read_mesh(os.path.join(base_dir, path), field=f"{field}.file")
         group_names = data.group_names
+        ungrouped_line = getattr(data, "ungrouped_line", None)
         if d.get("smooth", True) is False:
             data.vertex_normals = None
     elif shape == "sphere":
@@ -447,6 +448,10 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
     if "materials" in d:
         mats = d["materials"]
         if isinstance(mats, dict) and group_names is not None:
+            if ungrouped_line is not None:   # OBJ faces before the first usemtl: no name to map them by
+                raise SceneError(f"{field}.file", f"line {ungrouped_line}: this face comes before the first "
+                                                  "'usemtl', so no material name applies to it; add a 'usemtl' "
+                                                  "line before it, or give the object one 'material'")
             mat_list = []
             for g in group_names:
                 if g not in mats:
