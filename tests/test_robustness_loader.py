@@ -418,3 +418,18 @@ def test_obj_faces_before_the_first_usemtl_name_the_obj_line(tmp_path):
     doc["objects"][0] = {"shape": "mesh", "file": "m.obj", "material": "g"}   # one material: every face has it
     (tmp_path / "s.json").write_text(json.dumps(doc))
     assert len(load_scene(str(tmp_path / "s.json")).meshes) == 1
+
+
+def test_an_emission_spectrum_table_is_refused_not_dropped():
+    from engine.scene.loader import _parse_emission
+    assert _parse_emission({"radiance": 2, "spectrum": "D65 white"}, "e") is not None   # peer-style description
+    with pytest.raises(SceneError) as e:
+        _parse_emission({"radiance": 2, "spectrum": [[360, 1], [830, 1]]}, "e")
+    assert e.value.field == "e.spectrum" and "color" in str(e.value)
+
+
+@pytest.mark.parametrize("value", [10**400, [10**400, 0, 0], {"spectrum": [[360, 10**400], [830, 1]]}])
+def test_huge_integers_in_spectra_are_scene_errors_when_parse_material_is_called_directly(value):
+    with pytest.raises(SceneError) as e:
+        parse_material({"type": "lambert", "albedo": value}, "m")
+    assert e.value.field.startswith("m.albedo")

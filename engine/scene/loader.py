@@ -381,6 +381,11 @@ def _parse_emission(d, field: str):
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object like {\"radiance\": 10, \"color\": [1, 1, 1]}")
     _check_keys(d, field, {"radiance", "color", "spectrum", "note"})
+    if "spectrum" in d and not isinstance(d["spectrum"], str):
+        # The peer format describes its emitters' spectra in words; an emitted spectrum itself is
+        # always D65 × color here, so a table would be dropped silently: refuse it.
+        raise SceneError(f"{field}.spectrum", "is a description only (text); the emitted spectrum is D65 × color "
+                                              "× radiance — use 'color' and 'radiance'")
     return _illuminant(d, field, "radiance")
 
 

@@ -346,7 +346,16 @@ def _show(value, limit: int = 60) -> str:
 
 
 def _is_number(x) -> bool:
-    return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+    """A real number that converts to a float (an integer beyond ±1.8e308 does not: it is refused
+    with the field's range instead of an OverflowError)."""
+    if not isinstance(x, numbers.Real) or isinstance(x, (bool, np.bool_)):
+        return False
+    if isinstance(x, int):
+        try:
+            float(x)
+        except OverflowError:
+            return False
+    return True
 
 
 def _allowed(kind: str) -> str:
