@@ -365,3 +365,18 @@ def test_a_signal_before_any_sample_keeps_an_existing_output(tmp_path, scene_dir
     status, stdout, err = run_cli(capsys, "render", scene_dir / "scene.json", "-o", out, "-q")
     assert status == 143 and "nothing written" in err and stdout == ""
     assert out.read_bytes() == b"an earlier, finished render"
+
+
+def test_a_closed_stdout_pipe_ends_quietly(monkeypatch, capsys):
+    """`python -m engine mueller ... | head -c 10`: the reader leaving is exit 141 without a traceback."""
+    import io
+
+    from engine.cli import main as cli_main
+
+    class ClosedPipe(io.StringIO):
+        def write(self, text):
+            raise BrokenPipeError(32, "Broken pipe")
+
+    monkeypatch.setattr("sys.stdout", ClosedPipe())
+    assert cli_main(["mueller", "--model", "fresnel", "--param", "n=1.5", "--theta-i", "30", "--theta-o", "30"]) == 141
+    assert "Traceback" not in capsys.readouterr().err
