@@ -154,10 +154,10 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
     return s
 
 
-def parse_material(d: dict, field: str, lookup=None, depth: int = 0):
+def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: str | None = None):
     """A BSDF from a material object, read through the model's declaration (engine.materials.parameters).
     ``lookup(name)`` resolves references to other materials (the base of a layered material may be
-    given inline or by name)."""
+    given inline or by name); texture image paths are relative to ``base_dir`` (the scene file's folder)."""
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     decl = MODELS[choice(_require(d, "type", field), f"{field}.type", tuple(MODELS))]
@@ -168,13 +168,14 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0):
             coats_in = _require(d, p.name, field)
             if not isinstance(coats_in, list) or not coats_in:
                 raise SceneError(f"{field}.{p.name}", "must be a non-empty list of coats (top coat first)")
-            parts[p.name] = [_parse_coat(c, f"{field}.{p.name}[{i}]", p.members) for i, c in enumerate(coats_in)]
+            parts[p.name] = [_parse_coat(c, f"{field}.{p.name}[{i}]", p.members, base_dir)
+                             for i, c in enumerate(coats_in)]
         elif p.kind == "material":
-            parts[p.name] = _parse_part(d.get(p.name, p.default), f"{field}.{p.name}", lookup, depth)
-    return decl.build(decl.values(d, field), **parts)
+            parts[p.name] = _parse_part(d.get(p.name, p.default), f"{field}.{p.name}", lookup, depth, base_dir)
+    return decl.build(decl.values(d, field, base_dir=base_dir), **parts)
 
 
-def _parse_part(value, field, lookup, depth):
+def _parse_part(value, field, lookup, depth, base_dir=None):
     """A nested material (e.g. the base under a coat): inline or a reference by name."""
     if depth > 16:
         raise SceneError(field, "layered materials nest more than 16 levels deep")
@@ -182,14 +183,14 @@ def _parse_part(value, field, lookup, depth):
         if lookup is None:
             raise SceneError(field, "material references are not available here; give it inline")
         return lookup(value, field)
-    return parse_material(value, field, lookup, depth + 1)
+    return parse_material(value, field, lookup, depth + 1, base_dir)
 
 
-def _parse_coat(c, field, coat):
+def _parse_coat(c, field, coat, base_dir=None):
     if not isinstance(c, dict):
         raise SceneError(field, "must be an object like {\"n\": 1.5, \"distribution\": \"smooth\"}")
     _check_keys(c, field, {"note"} | set(coat.names()))
-    return coat.build(coat.values(c, field))
+    return coat.build(coat.values(c, field, base_dir=base_dir))
 
 
 def _parse_emission(d, field: str):
@@ -215,7 +216,8 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
     name = str(d.get("name", field))
     allowed = {"name", "shape", "material", "materials", "emission", "transform", "note", "normal"}
     per_shape = {"mesh": {"file", "smooth"}, "sphere": {"center", "radius", "subdivisions"},
-                 "quad": {"vertices"}, "triangles": {"vertices", "faces", "normals", "material_ids"}}
+                 "quad": {"vertices", "uv"},
+                 "triangles": {"vertices", "faces", "normals", "material_ids", "uv", "colors"}}
     _check_keys(d, field, allowed | per_shape[shape])
 
     group_names = None
@@ -239,6 +241,13 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
         data = quad(*[vec3(v, f"{field}.vertices[{i}]") for i, v in enumerate(verts)])
     else:
         data = _parse_triangles(d, field)
+    # per-vertex attributes (transforms keep the vertex order, so they stay valid)
+    uv = colors = None
+    if shape == "quad":
+        uv = _vertex_uv(d.get("uv", QUAD_UV), f"{field}.uv", 4)
+    elif shape == "triangles":
+        uv = None if d.get("uv") is None else _vertex_uv(d["uv"], f"{field}.uv", len(data.vertices))
+        colors = _vertex_colors(d.get("colors", {}), f"{field}.colors", len(data.vertices))
 
     if "transform" in d:
         data = transform_mesh(data, parse_transform(d["transform"], f"{field}.transform"))
@@ -285,7 +294,33 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
     emission = _parse_emission(d["emission"], f"{field}.emission") if d.get("emission") is not None else None
     return Mesh(name=name, vertices=np.asarray(data.vertices, dtype=np.float64), faces=faces,
                 materials=list(mat_list), material_ids=ids.astype(np.int32), normals=data.vertex_normals,
-                emission=emission)
+                emission=emission, uv=uv, colors=colors or {})
+
+
+#: Texture coordinates of a quad's corners p0..p3 (the unit square, as a Blender plane's UV map).
+QUAD_UV = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]
+
+
+def _vertex_uv(value, field, n_vertices):
+    uv = _float_array(value, field, "one [u, v] per vertex")
+    if uv.shape != (n_vertices, 2) or not np.all(np.isfinite(uv)):
+        raise SceneError(field, f"must hold one finite [u, v] per vertex ({n_vertices})")
+    return uv
+
+
+def _vertex_colors(value, field, n_vertices):
+    if not isinstance(value, dict):
+        raise SceneError(field, "must be an object mapping attribute names to one [r, g, b] (or [r, g, b, a]) "
+                                "per vertex")
+    out = {}
+    for name, col in value.items():
+        c = _float_array(col, f"{field}.{name}", "one [r, g, b] or [r, g, b, a] per vertex")
+        if c.ndim != 2 or c.shape[0] != n_vertices or c.shape[1] not in (3, 4):
+            raise SceneError(f"{field}.{name}", f"must hold one [r, g, b] or [r, g, b, a] per vertex ({n_vertices})")
+        if not np.all(np.isfinite(c)) or c.min() < 0 or c.max() > 1:
+            raise SceneError(f"{field}.{name}", "values must be linear colours in [0, 1]")
+        out[name] = c
+    return out
 
 
 def _float_array(value, field, what):
@@ -410,7 +445,7 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
             raise SceneError(field, f"material {name!r} refers to itself through its bases")
         if name not in materials:
             resolving.append(name)
-            materials[name] = parse_material(mats_in[name], f"materials.{name}", lookup)
+            materials[name] = parse_material(mats_in[name], f"materials.{name}", lookup, base_dir=base_dir)
             resolving.pop()
         return materials[name]
 
