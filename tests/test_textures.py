@@ -14,6 +14,7 @@ from PIL import Image
 
 from engine.errors import SceneError
 from engine.materials.base import ShadingPoint
+from engine.materials.htsg import HTSG
 from engine.materials.torrance_sparrow import TorranceSparrow
 from engine.render.renderer import Renderer
 from engine.scene.loader import parse_material, parse_scene
@@ -228,6 +229,92 @@ def test_textured_torrance_sparrow_m_is_the_constant_model_per_texel(tmp_path):
         np.testing.assert_array_equal(s.pdf[sel], cs.pdf)
 
 
+def test_textured_htsg_sigma0_and_tau_are_the_constant_model_per_texel(tmp_path):
+    s0_values = np.array([[0.0, 0.05, 0.18], [0.4, 1.0, 0.02]])
+    tau_values = np.array([[3.0, 1.5, 0.8], [6.0, 2.0, 0.5]])
+    _texture_file(tmp_path, s0_values, "s0.exr")
+    _texture_file(tmp_path, tau_values, "tau.exr")
+    mat = parse_material({"type": "htsg", "metal": "Al", "albedo": 0.1,
+                          "sigma0_um": {"texture": "s0.exr", "interpolation": "Closest"},
+                          "tau_um": {"texture": "tau.exr", "interpolation": "Closest"}},
+                         "materials.h", base_dir=str(tmp_path))
+    assert mat.varies_over_surface
+    H, W = s0_values.shape
+    jj, ii = np.meshgrid(np.arange(H), np.arange(W), indexing="ij")
+    uv = np.stack((((ii + 0.5) / W).ravel(), ((jj + 0.5) / H).ravel()))
+    texel = np.arange(H * W)
+    reps = 12
+    uv, texel = np.repeat(uv, reps, axis=1), np.repeat(texel, reps)
+    n = uv.shape[1]
+    rng = np.random.default_rng(8)
+    sp = _shading_points(n, rng, _points_at(uv))
+    wi = rng.normal(size=(3, n))
+    wi[2] = np.abs(wi[2])
+    wi /= np.linalg.norm(wi, axis=0)
+    u_lobe, u_dir = rng.uniform(size=n), rng.uniform(size=(2, n))
+    f = mat.eval(sp, wi).matrix()
+    pdf = mat.pdf(sp, wi)
+    d = mat.delta_reflection(sp).matrix()
+    smp = mat.sample(sp, u_lobe, u_dir)
+    as32 = lambda a: a[::-1].astype(np.float32).astype(np.float64).ravel()   # noqa: E731 (row 0 = bottom)
+    for t, (s0, tau) in enumerate(zip(as32(s0_values), as32(tau_values))):
+        sel = np.nonzero(texel == t)[0]
+        const = HTSG(mat.n, mat.k, s0, tau, albedo=mat.albedo)
+        sub = sp.take(sel)
+        sub.surface = None
+        np.testing.assert_array_equal(f[..., sel], const.eval(sub, wi[:, sel]).matrix())
+        np.testing.assert_array_equal(pdf[sel], const.pdf(sub, wi[:, sel]))
+        np.testing.assert_array_equal(d[..., sel], const.delta_reflection(sub).matrix())
+        cs = const.sample(sub, u_lobe[sel], u_dir[:, sel])
+        np.testing.assert_array_equal(smp.wi[:, sel], cs.wi)
+        np.testing.assert_array_equal(smp.weight.matrix()[..., sel], cs.weight.matrix())
+
+
+def test_textured_weidlich_wilkie_coat_and_base_are_the_constant_model_per_texel(tmp_path):
+    """Coat thickness and absorption (RGB) textured, over a base with a textured roughness."""
+    thick = np.array([[0.0, 0.5], [1.0, 2.0]])
+    _texture_file(tmp_path, thick, "d.exr")
+    absorb = np.array([[[0.1, 0.5, 0.9], [0.2, 0.2, 0.2]], [[1.5, 0.0, 0.3], [0.7, 0.4, 0.1]]], np.float32)
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                 {c: absorb[..., i].copy() for i, c in enumerate("RGB")}).write(str(tmp_path / "a.exr"))
+    m_tex = np.array([[0.1, 0.2], [0.3, 0.4]])
+    _texture_file(tmp_path, m_tex, "m.exr")
+    closest = {"interpolation": "Closest"}
+
+    def material(d, a, m):
+        return parse_material({"type": "weidlich_wilkie", "coats": [{"n": 1.5, "thickness": d, "absorption": a}],
+                               "base": {"type": "torrance_sparrow", "n": 0.2, "k": 3.0, "m": m}},
+                              "materials.w", base_dir=str(tmp_path))
+    mat = material({"texture": "d.exr", **closest}, {"texture": "a.exr", **closest},
+                   {"texture": "m.exr", **closest})
+    assert mat.varies_over_surface
+    uv = np.array([[0.25, 0.75, 0.25, 0.75], [0.25, 0.25, 0.75, 0.75]])
+    reps = 10
+    uv = np.repeat(uv, reps, axis=1)
+    n = uv.shape[1]
+    rng = np.random.default_rng(9)
+    sp = _shading_points(n, rng, _points_at(uv))
+    wi = rng.normal(size=(3, n))
+    wi[2] = np.abs(wi[2])
+    wi /= np.linalg.norm(wi, axis=0)
+    u_lobe, u_dir = rng.uniform(size=n), rng.uniform(size=(2, n))
+    f = mat.eval(sp, wi).matrix()
+    pdf = mat.pdf(sp, wi)
+    smp = mat.sample(sp, u_lobe, u_dir)
+    for t, (i, j) in enumerate(((0, 0), (1, 0), (0, 1), (1, 1))):      # texel (column i, row j from the bottom)
+        sel = np.arange(t * reps, (t + 1) * reps)
+        row = thick.shape[0] - 1 - j
+        const = material(float(np.float32(thick[row, i])), absorb[row, i].astype(np.float64).tolist(),
+                         float(np.float32(m_tex[row, i])))
+        sub = sp.take(sel)
+        sub.surface = None
+        np.testing.assert_array_equal(f[..., sel], const.eval(sub, wi[:, sel]).matrix())
+        np.testing.assert_array_equal(pdf[sel], const.pdf(sub, wi[:, sel]))
+        cs = const.sample(sub, u_lobe[sel], u_dir[:, sel])
+        np.testing.assert_array_equal(smp.wi[:, sel], cs.wi)
+        np.testing.assert_array_equal(smp.weight.matrix()[..., sel], cs.weight.matrix())
+
+
 def test_textured_albedo_and_weights_equal_the_constant_values(tmp_path):
     rgb = np.array([[[0.1, 0.5, 0.9], [0.3, 0.3, 0.3]]], np.float32)    # 1 × 2, one grey texel
     OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
@@ -275,9 +362,9 @@ def test_texture_errors_name_the_parameter(tmp_path):
     with pytest.raises(SceneError, match=r"materials\.a\.m: a roughness texture must stay in \[0\.0001"):
         parse_material({"type": "torrance_sparrow", "n": 1.5, "m": {"texture": name, "offset": -0.5}},
                        "materials.a", base_dir=str(tmp_path))
-    with pytest.raises(SceneError, match=r"materials\.a\.sigma0_um: a texture on this parameter of 'htsg' is not "
-                                         r"supported by the engine yet"):
-        parse_material({"type": "htsg", "n": 1.5, "sigma0_um": {"texture": name}, "tau_um": 1.0},
+    with pytest.raises(SceneError, match=r"materials\.a\.coats\[0\]\.n: a texture on this parameter of 'coat' is "
+                                         r"not supported by the engine yet"):
+        parse_material({"type": "weidlich_wilkie", "coats": [{"n": {"texture": name, "offset": 1.0}}]},
                        "materials.a", base_dir=str(tmp_path))
     with pytest.raises(SceneError, match=r"materials\.a\.albedo\.interpolation: must be one of Closest, Linear, Cubic"):
         parse_material({"type": "lambert", "albedo": {"texture": name, "interpolation": "Smart"}}, "materials.a",
