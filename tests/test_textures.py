@@ -402,3 +402,174 @@ def test_checker_plane_renders_each_checker_with_its_albedo(tmp_path):
             rows = slice((1 - j) * 4, (2 - j) * 4)          # image rows run top → bottom
             cols = slice(i * 4, (i + 1) * 4)
             np.testing.assert_array_equal(S[:, rows, cols], const[:, rows, cols])
+
+
+# --------------------------------------------------------------------------- shading normals
+
+def _rgb_exr(path, rgb: np.ndarray):
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                 {c: np.ascontiguousarray(rgb[..., i], np.float32) for i, c in enumerate("RGB")}).write(str(path))
+
+
+def _plane_points(n, uv, tangents=None, flip_v=False):
+    """Points on the quad [-1, 1]² (z = 0, n = +z) with its default UVs, at texture coordinates uv (2, N)."""
+    verts = np.array([[-1.0, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]])
+    quad_uv = np.array([[0.0, 0], [1, 0], [1, 1], [0, 1]])
+    if flip_v:
+        quad_uv[:, 1] = 1.0 - quad_uv[:, 1]
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    # barycentrics of uv on triangle 0 (0,0)-(1,0)-(1,1): p = (1-a-b)·t0 + a·t1 + b·t2
+    v = uv[1] if not flip_v else 1.0 - uv[1]
+    b2 = v
+    b1 = uv[0] - v
+    assert np.all(b1 >= 0)
+    attrs = VertexAttributes(faces, quad_uv, {}, verts, tangents)
+    return SurfacePoints(attrs, np.zeros(n, np.int64), b1, b2)
+
+
+def test_tangent_frame_from_uvs_and_from_vertex_tangents():
+    n = 3
+    uv = np.array([[0.9, 0.8, 0.95], [0.45, 0.5, 0.3]])
+    n_s = np.tile([[0.0], [0.0], [1.0]], (1, n))
+    t, b = _plane_points(n, uv).tangent_frame(n_s)
+    np.testing.assert_allclose(t, np.tile([[1.0], [0], [0]], (1, n)), atol=1e-15)
+    np.testing.assert_allclose(b, np.tile([[0.0], [1], [0]], (1, n)), atol=1e-15)
+    # mirrored v: the bitangent follows +v, i.e. −y
+    t, b = _plane_points(n, uv, flip_v=True).tangent_frame(n_s)
+    np.testing.assert_allclose(b, np.tile([[0.0], [-1], [0]], (1, n)), atol=1e-15)
+    # given tangents (here along +y, handedness −1) win over the UVs
+    tan = np.tile([0.0, 1.0, 0.0, -1.0], (4, 1))
+    t, b = _plane_points(n, uv, tangents=tan).tangent_frame(n_s)
+    np.testing.assert_allclose(t, np.tile([[0.0], [1], [0]], (1, n)), atol=1e-15)
+    np.testing.assert_allclose(b, np.tile([[1.0], [0], [0]], (1, n)), atol=1e-15)    # −(z × y) = +x
+
+
+def test_normal_mapped_plane_has_the_mapped_normal_and_its_frames(tmp_path):
+    """A constant tangent-space normal n_t on the z = 0 plane (T = +x, B = +y): the shading normal
+    is n_t in world space, and a mirror's Mueller matrix and frames are those of a plane tilted to it."""
+    n_t = np.array([0.3, -0.2, 0.9])
+    n_t /= np.linalg.norm(n_t)
+    texel = ((n_t + 1.0) / 2.0).astype(np.float32)
+    _rgb_exr(tmp_path / "n.exr", np.tile(texel, (2, 2, 1)))
+    mat = parse_material({"type": "conductor", "metal": "Au", "normal_map": {"texture": "n.exr"}}, "materials.g",
+                         base_dir=str(tmp_path))
+    n = 50
+    rng = np.random.default_rng(11)
+    uv = np.stack((rng.uniform(0.55, 0.95, n), rng.uniform(0.05, 0.5, n)))
+    sp = _shading_points(n, rng, _plane_points(n, uv))
+    mapped = mat.shading_point(sp)
+    expect = 2.0 * texel.astype(np.float64) - 1.0
+    expect /= np.linalg.norm(expect)
+    np.testing.assert_allclose(mapped.n_s, np.tile(expect[:, None], (1, n)), rtol=1e-14, atol=1e-15)
+    np.testing.assert_array_equal(mapped.n_g, sp.n_g)            # the geometric normal is untouched
+    # the mirror of the mapped plane is the constant conductor at a plane with that normal
+    ok = ShadingNormalTest.front(mapped)
+    tilted = ShadingPoint(sp.p, mapped.n_s, mapped.n_s, sp.wo, sp.lam, False, sp.lookup)
+    got = mat.delta_reflection(mapped)
+    ref = mat.base.delta_reflection(tilted)
+    np.testing.assert_array_equal(got.matrix()[..., ok], ref.matrix()[..., ok])
+    np.testing.assert_array_equal(got.x_in[:, ok], ref.x_in[:, ok])
+    np.testing.assert_array_equal(got.x_out[:, ok], ref.x_out[:, ok])
+    # strength 0 leaves the interpolated normal
+    flat = parse_material({"type": "conductor", "metal": "Au", "normal_map": {"texture": "n.exr", "strength": 0}},
+                          "materials.g", base_dir=str(tmp_path))
+    np.testing.assert_allclose(flat.shading_point(sp).n_s, sp.n_s, atol=1e-15)
+
+
+class ShadingNormalTest:
+    @staticmethod
+    def front(sp):
+        """Points whose mirror direction about n_s stays above the geometric surface."""
+        r = 2.0 * (sp.wo * sp.n_s).sum(0) * sp.n_s - sp.wo
+        return ((r * sp.n_g).sum(0) > 0) & ((sp.wo * sp.n_s).sum(0) > 0)
+
+
+def test_bump_map_ramp_tilts_the_normal_by_its_slope(tmp_path):
+    """Height h = a·u (scene units × distance d) on the 2 × 2 plane: z rises by d·a/2 per unit x,
+    so n ∝ (−d·a/2, 0, 1)."""
+    W, a, d = 16, 0.8, 0.5
+    u_centres = (np.arange(W) + 0.5) / W
+    _texture_file(tmp_path, np.tile(a * u_centres, (4, 1)), "h.exr")
+    mat = parse_material({"type": "lambert", "bump_map": {"texture": "h.exr", "distance": d,
+                                                          "extension": "EXTEND"}},
+                         "materials.b", base_dir=str(tmp_path))
+    n = 20
+    rng = np.random.default_rng(12)
+    uv = np.stack((rng.uniform(0.6, 0.85, n), rng.uniform(0.1, 0.5, n)))
+    sp = _shading_points(n, rng, _plane_points(n, uv))
+    expect = np.array([-d * a / 2.0, 0.0, 1.0])
+    expect /= np.linalg.norm(expect)
+    np.testing.assert_allclose(mat.shading_point(sp).n_s, np.tile(expect[:, None], (1, n)), rtol=1e-6, atol=1e-7)
+
+
+def test_no_light_leaks_through_at_grazing_angles_with_a_tilted_shading_normal(tmp_path):
+    """Shading normal tilted 70° from the plane's normal, viewer at grazing incidence from above:
+    directions that the shading normal calls 'reflected' but that go below the surface carry
+    nothing (eval, samples), and a light below the plane leaves the image black."""
+    n_t = np.array([math_sin(70), 0.0, math_cos(70)])
+    _rgb_exr(tmp_path / "tilt.exr", np.tile(((n_t + 1) / 2).astype(np.float32), (2, 2, 1)))
+    mat = parse_material({"type": "lambert", "albedo": 0.9, "normal_map": {"texture": "tilt.exr"}},
+                         "materials.l", base_dir=str(tmp_path))
+    n = 4000
+    rng = np.random.default_rng(13)
+    uv = np.stack((rng.uniform(0.55, 0.95, n), rng.uniform(0.05, 0.5, n)))
+    sp = _shading_points(n, rng, _plane_points(n, uv))
+    wo = np.array([[0.99], [0.0], [0.14]])               # grazing, above the plane, towards +x
+    sp.wo = np.tile(wo / np.linalg.norm(wo), (1, n))
+    mapped = mat.shading_point(sp)
+    s = mat.sample(mapped, rng.uniform(size=n), rng.uniform(size=(2, n)))
+    below = s.wi[2] < 0
+    assert below.sum() > n // 10                          # the tilted hemisphere reaches below the plane
+    assert not s.valid[below].any() and np.all(s.weight.matrix()[..., below] == 0)
+    assert np.all(mat.eval(mapped, s.wi).matrix()[..., below] == 0)
+    assert np.all(mat.base.eval(mapped, s.wi).matrix()[0, 0][:, below] > 0)   # without the guard: a leak
+    # render: only a light below the plane, camera above at a grazing angle
+    scene = parse_scene({
+        "format": "polar-scene/1",
+        "camera": {"origin": [4, 0, 0.6], "target": [0, 0, 0], "up": [0, 0, 1], "width": 16, "height": 8,
+                   "fov_deg": 30},
+        "render": {"spp": 8, "max_depth": 4},
+        "materials": {"m": {"type": "lambert", "albedo": 0.9, "normal_map": {"texture": "tilt.exr"}}},
+        "objects": [{"shape": "quad", "vertices": [[-3, -3, 0], [3, -3, 0], [3, 3, 0], [-3, 3, 0]], "material": "m"}],
+        "lights": [{"type": "point", "position": [0.5, 0, -1], "intensity": 50}]}, str(tmp_path))
+    S = Renderer(scene).render().stokes()
+    assert np.all(S == 0)
+    # the same light above the plane does light it (the scene is not simply dark)
+    scene.lights[0].position = np.array([0.5, 0.0, 1.0])
+    assert Renderer(scene).render().stokes()[0].max() > 0
+
+
+def math_sin(deg):
+    return np.sin(np.radians(deg))
+
+
+def math_cos(deg):
+    return np.cos(np.radians(deg))
+
+
+def test_textured_conductor_index_and_mono_mode_equal_the_constant_values(tmp_path):
+    rgb = np.array([[[0.2, 0.9, 1.4], [2.5, 2.5, 2.5]]], np.float32)
+    _rgb_exr(tmp_path / "k.exr", rgb)
+    mat = parse_material({"type": "conductor", "n": 0.3, "k": {"texture": "k.exr", "interpolation": "Closest"}},
+                         "materials.c", base_dir=str(tmp_path))
+    uv = np.array([[0.25, 0.75] * 10, [0.5] * 20])
+    for mono in (False, True):
+        rng = np.random.default_rng(14)
+        lam = np.full((1, 20), 550.0) if mono else None
+        sp = _shading_points(20, rng, _points_at(uv), lam)
+        sp.mono = mono
+        got = mat.delta_reflection(sp).matrix()
+        for t in range(2):
+            sel = np.arange(t, 20, 2)
+            sub = sp.take(sel)
+            sub.surface = None
+            const = parse_material({"type": "conductor", "n": 0.3, "k": rgb[0, t].astype(np.float64).tolist()}, "c")
+            np.testing.assert_allclose(got[..., sel], const.delta_reflection(sub).matrix(), rtol=1e-15, atol=0)
+
+
+def test_readme_texture_table_is_generated_from_the_declarations():
+    from engine.materials.catalogue import MODELS
+    from engine.materials.parameters import texture_support_table
+    from tests.conftest import REPO
+    readme = open(f"{REPO}/README.md", encoding="utf-8").read()
+    assert texture_support_table(MODELS.values()) in readme

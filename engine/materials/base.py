@@ -67,7 +67,7 @@ class ShadingPoint:
         """A material parameter (engine.spectral Spectrum) at this batch's wavelengths, (L, N);
         a textured one (engine.textures.TexturedSpectrum) at this batch's surface points."""
         if isinstance(spec, TexturedSpectrum):
-            return spec.at(self._points(), self.lam, self.mono,
+            return spec.at(self.surface_points(), self.lam, self.mono,
                            self.lookup.basis if self.lookup is not None and not self.mono else None)
         if self.lookup is not None and not self.mono:
             return spec.eval_cached(self.lookup)
@@ -76,10 +76,11 @@ class ShadingPoint:
     def number(self, value: float | TexturedNumber) -> float | np.ndarray:
         """A number parameter: itself if constant (the fast path), else its values (N,) at the points."""
         if isinstance(value, TexturedNumber):
-            return value.at(self._points())
+            return value.at(self.surface_points())
         return value
 
-    def _points(self) -> SurfacePoints:
+    def surface_points(self) -> SurfacePoints:
+        """The hits' per-vertex attributes (ValueError if the caller gave none)."""
         if self.surface is None:
             raise ValueError("a textured material parameter needs the surface points of the hits "
                              "(ShadingPoint.surface)")
@@ -208,6 +209,12 @@ class BSDF:
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
         """Mueller weight of the mirror (Dirac) lobe for reflection of wo, or None."""
         return None
+
+    def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
+        """The point at which this material is evaluated: ``sp`` itself, or with the shading normal
+        from a normal or bump map (engine.materials.normal_map).  Callers (the integrator) pass the
+        result to eval/pdf/sample/delta_reflection."""
+        return sp
 
     def describe(self) -> dict[str, object]:
         """Parameters for logs and file headers."""

@@ -334,3 +334,21 @@ def exterior_n_parameter(**changes) -> Parameter:
     """The index of the incident medium, shared by every interface model."""
     return Parameter("exterior_n", "index of the medium on the side of the normal (incident medium)",
                      lo=0.0, lo_open=True, default=1.0, **changes)
+
+
+def texture_support_table(models) -> str:
+    """A Markdown table of every texturable parameter of ``models`` (declarations, coats included):
+    whether the engine evaluates it per surface point today (README "Textures")."""
+    rows = ["| model | parameter | kind | per surface point |", "|---|---|---|---|"]
+
+    def walk(decl: ModelDeclaration, title: str):
+        for p in decl.parameters:
+            if p.kind == "coats" and p.members is not None:
+                walk(p.members, f"{title} coat")
+            elif p.texturable:
+                state = "yes" if p.name in decl.per_point else "not yet (constant only)"
+                kind = "colour/spectrum" if p.kind == "spectrum" else "number"
+                rows.append(f"| {title} | `{p.name}` | {kind} | {state} |")
+    for decl in models:
+        walk(decl, f"`{decl.name}`")
+    return "\n".join(rows)

@@ -120,12 +120,15 @@ class CompiledScene:
 
 
 def _vertex_attributes(meshes, faces: np.ndarray, n_vertices: int) -> VertexAttributes | None:
-    """UVs and colour attributes of all meshes in the merged vertex numbering (None if no mesh has
-    any): a mesh without UVs gets (0, 0), one without a colour attribute 0 (as Blender)."""
+    """UVs, colour attributes and tangents of all meshes in the merged vertex numbering (None if no
+    mesh has any): a mesh without UVs gets (0, 0), one without a colour attribute 0 (as Blender),
+    one without tangents 0 (then derived from its UVs)."""
     names = sorted({name for mesh in meshes for name in mesh.colors})
-    if not names and all(mesh.uv is None for mesh in meshes):
+    has_tangents = any(mesh.tangents is not None for mesh in meshes)
+    if not names and not has_tangents and all(mesh.uv is None for mesh in meshes):
         return None
     uv = np.zeros((n_vertices, 2))
+    tangents = np.zeros((n_vertices, 4)) if has_tangents else None
     layers = {name: np.zeros((n_vertices, max(np.shape(m.colors[name])[1] for m in meshes if name in m.colors)))
               for name in names}
     offset = 0
@@ -133,18 +136,21 @@ def _vertex_attributes(meshes, faces: np.ndarray, n_vertices: int) -> VertexAttr
         nv = len(mesh.vertices)
         if mesh.uv is not None:
             uv[offset:offset + nv] = mesh.uv
+        if mesh.tangents is not None:
+            tangents[offset:offset + nv] = mesh.tangents
         for name, values in mesh.colors.items():
             values = np.asarray(values, np.float64)
             layers[name][offset:offset + nv, :values.shape[1]] = values
         offset += nv
-    return VertexAttributes(faces, uv, layers)
+    return VertexAttributes(faces, uv, layers, np.concatenate([np.asarray(m.vertices, np.float64) for m in meshes]),
+                            tangents)
 
 
 def surface_points(compiled: CompiledScene, prim: np.ndarray, u: np.ndarray, v: np.ndarray) -> SurfacePoints:
     """The hits' handle on per-vertex attributes (UV, colours) for textured materials."""
     attributes = compiled.attributes
     if attributes is None:     # no mesh has attributes: UV (0, 0), colours 0 everywhere
-        attributes = compiled.attributes = VertexAttributes(compiled.faces, None, {})
+        attributes = compiled.attributes = VertexAttributes(compiled.faces, None, {}, compiled.vertices)
     return SurfacePoints(attributes, prim, u, v)
 
 

@@ -286,6 +286,7 @@ class PathTracer:
                                   gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
                                   self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None,
                                   None if hits_at is None else hits_at.take(sel))
+                sp = bsdf.shading_point(sp)        # a normal/bump-mapped shading normal, else sp itself
                 rows = np.arange(n) if isinstance(sel, slice) else sel
                 xTm = gather(x_T, sel)
 

@@ -62,6 +62,9 @@ class Mesh:
     uv: np.ndarray | None = None
     #: per-vertex colour attributes by name: (V, 3) or (V, 4) linear values in [0, 1]
     colors: dict = field(default_factory=dict)
+    #: per-vertex tangents (V, 4): xyz along +u, w = ±1 the handedness (bitangent = w·(n × t)), or
+    #: None (tangents are then derived from the UVs, per triangle)
+    tangents: np.ndarray | None = None
 
 
 @dataclass

@@ -73,6 +73,11 @@ class TextureInput:
         """The parameter (N,) at the points."""
         return points.memo((self, "number"), lambda: self._map(self._scalar_of(self.texture.eval(points))))
 
+    def number_at_uv(self, uv: np.ndarray) -> np.ndarray:
+        """The parameter (N,) at texture coordinates uv (2, N) (image textures: e.g. a bump map's
+        heights at shifted coordinates)."""
+        return self._map(self._scalar_of(self.texture.lookup(uv)))
+
     def rgb(self, points) -> np.ndarray:
         """The parameter as linear RGB (3, N) at the points (grey textures and ``channel``: r = g = b)."""
         def compute():
