@@ -573,3 +573,15 @@ def test_readme_texture_table_is_generated_from_the_declarations():
     from tests.conftest import REPO
     readme = open(f"{REPO}/README.md", encoding="utf-8").read()
     assert texture_support_table(MODELS.values()) in readme
+
+
+def test_textured_materials_survive_pickling_for_distributed_workers(tmp_path):
+    import pickle
+    name = _texture_file(tmp_path, np.array([[0.1, 0.3], [0.2, 0.4]]))
+    mat = parse_material({"type": "torrance_sparrow", "n": 1.5, "m": {"texture": name}}, "m", base_dir=str(tmp_path))
+    copy = pickle.loads(pickle.dumps(mat))
+    uv = np.random.default_rng(15).uniform(size=(2, 30))
+    rng = np.random.default_rng(16)
+    sp = _shading_points(30, rng, _points_at(uv))
+    wi = sp.wo * np.array([[-1], [-1], [1]])
+    np.testing.assert_array_equal(mat.eval(sp, wi).matrix(), copy.eval(sp, wi).matrix())

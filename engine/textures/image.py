@@ -38,7 +38,11 @@ def default_color_space(path: str) -> str:
 
 
 def _read_pil(path: str, field: str) -> np.ndarray:
-    from PIL import Image  # Pillow: the reader for PNG/JPEG (8 and 16 bit)
+    try:
+        from PIL import Image  # Pillow: the reader for PNG/JPEG (8 and 16 bit)
+    except ImportError:
+        raise SceneError(field, f"reading {os.path.basename(path)!r} needs the Pillow package (pip install pillow); "
+                                "EXR textures need only OpenEXR") from None
 
     try:
         with Image.open(path) as im:
