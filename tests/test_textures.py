@@ -315,6 +315,40 @@ def test_textured_weidlich_wilkie_coat_and_base_are_the_constant_model_per_texel
         np.testing.assert_array_equal(smp.weight.matrix()[..., sel], cs.weight.matrix())
 
 
+def test_textured_coat_index_over_a_lambert_base_is_the_constant_model_per_texel(tmp_path):
+    """A textured (smooth) coat index. The coat's internal reflectance sums its quadrature per
+    distinct index, in another order than for a single index: equal to ~1e-15, not bit for bit.
+    (A rough coat's albedo table then spans the texture's index range, as for a dispersive coat,
+    and is interpolated in η: ~1e-3 from the single-index table.)"""
+    n_values = np.array([[1.3, 1.5], [1.8, 2.2]])
+    _texture_file(tmp_path, n_values, "n.exr")
+
+    def material(n):
+        return parse_material({"type": "weidlich_wilkie", "coats": [{"n": n, "thickness": 0.3, "absorption": 0.5}],
+                               "base": {"type": "lambert", "albedo": [0.7, 0.4, 0.2]}}, "materials.w",
+                              base_dir=str(tmp_path))
+    mat = material({"texture": "n.exr", "interpolation": "Closest"})
+    uv = np.repeat(np.array([[0.25, 0.75, 0.25, 0.75], [0.25, 0.25, 0.75, 0.75]]), 10, axis=1)
+    n = uv.shape[1]
+    rng = np.random.default_rng(17)
+    sp = _shading_points(n, rng, _points_at(uv))
+    wi = rng.normal(size=(3, n))
+    wi[2] = np.abs(wi[2])
+    wi /= np.linalg.norm(wi, axis=0)
+    f = mat.eval(sp, wi).matrix()
+    pdf = mat.pdf(sp, wi)
+    for t, (i, j) in enumerate(((0, 0), (1, 0), (0, 1), (1, 1))):
+        sel = np.arange(t * 10, (t + 1) * 10)
+        const = material(float(np.float32(n_values[1 - j, i])))
+        sub = sp.take(sel)
+        sub.surface = None
+        np.testing.assert_allclose(f[..., sel], const.eval(sub, wi[:, sel]).matrix(), rtol=1e-12, atol=1e-300)
+        np.testing.assert_allclose(pdf[sel], const.pdf(sub, wi[:, sel]), rtol=1e-12)
+    with pytest.raises(SceneError, match="a textured coat index needs a base without an exterior index"):
+        parse_material({"type": "weidlich_wilkie", "coats": [{"n": {"texture": "n.exr"}}],
+                        "base": {"type": "conductor", "metal": "Au"}}, "materials.w", base_dir=str(tmp_path))
+
+
 def test_textured_albedo_and_weights_equal_the_constant_values(tmp_path):
     rgb = np.array([[[0.1, 0.5, 0.9], [0.3, 0.3, 0.3]]], np.float32)    # 1 × 2, one grey texel
     OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
@@ -362,9 +396,10 @@ def test_texture_errors_name_the_parameter(tmp_path):
     with pytest.raises(SceneError, match=r"materials\.a\.m: a roughness texture must stay in \[0\.0001"):
         parse_material({"type": "torrance_sparrow", "n": 1.5, "m": {"texture": name, "offset": -0.5}},
                        "materials.a", base_dir=str(tmp_path))
-    with pytest.raises(SceneError, match=r"materials\.a\.coats\[0\]\.n: a texture on this parameter of 'coat' is "
+    with pytest.raises(SceneError, match=r"materials\.a\.coats\[0\]\.m: a texture on this parameter of 'coat' is "
                                          r"not supported by the engine yet"):
-        parse_material({"type": "weidlich_wilkie", "coats": [{"n": {"texture": name, "offset": 1.0}}]},
+        parse_material({"type": "weidlich_wilkie", "coats": [{"distribution": "beckmann",
+                                                              "m": {"texture": name}}]},
                        "materials.a", base_dir=str(tmp_path))
     with pytest.raises(SceneError, match=r"materials\.a\.albedo\.interpolation: must be one of Closest, Linear, Cubic"):
         parse_material({"type": "lambert", "albedo": {"texture": name, "interpolation": "Smart"}}, "materials.a",

@@ -266,7 +266,7 @@ class Coat:
     dist: object = field(init=False, repr=False)
 
     def __post_init__(self):
-        self.n_spectrum = as_spectrum(self.n, "coat n")
+        self.n_spectrum = self.n.as_spectrum() if isinstance(self.n, TexturedNumber) else as_spectrum(self.n, "coat n")
         lo, _ = _spectrum_range(self.n_spectrum)
         if not lo > 0:
             raise ValueError(f"coat n must be > 0, got {self.n!r}")
@@ -577,6 +577,9 @@ class WeidlichWilkie(BSDF):
                 base.exterior_n = self.coat.n_spectrum
             else:
                 lo, hi = _spectrum_range(self.coat.n_spectrum)
+                if isinstance(self.coat.n_spectrum, TexturedSpectrum):
+                    raise ValueError("a textured coat index needs a base without an exterior index (e.g. lambert), "
+                                     "or match_base_exterior=False")
                 if hi - lo > 1e-12 * hi:
                     raise ValueError("a dispersive coat index needs a base without a scalar exterior_n "
                                      "(or match_base_exterior=False)")
@@ -595,7 +598,7 @@ class WeidlichWilkie(BSDF):
         self.w_c = w_c
         self.flags = self._layered_flags(base.flags)
         self.varies_over_surface = base.varies_over_surface or any(
-            textured(c.thickness, c.absorption_spectrum) for c in coats)
+            textured(c.n_spectrum, c.thickness, c.absorption_spectrum) for c in coats)
 
     @staticmethod
     def default_layer_cosine_fraction(base: BSDF) -> float:
@@ -1086,7 +1089,7 @@ COAT = ModelDeclaration(
                              "Beckmann rms slope of the coat surface (0 = smooth)"))])
 
 
-COAT.per_point = frozenset({"thickness", "absorption"})
+COAT.per_point = frozenset({"n", "thickness", "absorption"})
 
 
 @COAT.builder

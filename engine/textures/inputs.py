@@ -113,6 +113,12 @@ class TexturedNumber:
     def __float__(self):
         raise TypeError("a textured parameter has no single value: evaluate it at surface points")
 
+    def as_spectrum(self, kind: str = "unbounded") -> TexturedSpectrum:
+        """The same values as a grey (λ-independent) textured spectrum (e.g. a coat's real index)."""
+        src = self.source
+        channel = src.channel or ("R" if src._grey() else "luminance")
+        return TexturedSpectrum(TextureInput(src.texture, channel, src.scale, src.offset), kind)
+
     def __repr__(self):
         return f"TexturedNumber({self.source!r})"
 
