@@ -477,6 +477,9 @@ def test_tangent_frame_from_uvs_and_from_vertex_tangents():
     t, b = _plane_points(n, uv, tangents=tan).tangent_frame(n_s)
     np.testing.assert_allclose(t, np.tile([[0.0], [1], [0]], (1, n)), atol=1e-15)
     np.testing.assert_allclose(b, np.tile([[1.0], [0], [0]], (1, n)), atol=1e-15)    # −(z × y) = +x
+    # a mesh without tangents in a scene where others have them: derived from its UVs
+    t, b = _plane_points(n, uv, tangents=np.zeros((4, 4))).tangent_frame(n_s)
+    np.testing.assert_allclose(t, np.tile([[1.0], [0], [0]], (1, n)), atol=1e-15)
 
 
 def test_normal_mapped_plane_has_the_mapped_normal_and_its_frames(tmp_path):
@@ -620,3 +623,27 @@ def test_textured_materials_survive_pickling_for_distributed_workers(tmp_path):
     sp = _shading_points(30, rng, _points_at(uv))
     wi = sp.wo * np.array([[-1], [-1], [1]])
     np.testing.assert_array_equal(mat.eval(sp, wi).matrix(), copy.eval(sp, wi).matrix())
+
+
+def test_scene_file_textures_are_relative_to_the_scene_file(tmp_path, monkeypatch):
+    import json
+    from engine.scene.loader import load_scene
+    folder = tmp_path / "scene"
+    (folder / "maps").mkdir(parents=True)
+    Image.fromarray(np.full((2, 2, 3), 200, np.uint8)).save(folder / "maps" / "c.png")
+    doc = {"format": "polar-scene/1",
+           "camera": {"origin": [0, 0, 3], "target": [0, 0, 0], "up": [0, 1, 0], "width": 4, "height": 4},
+           "materials": {"m": {"type": "lambert", "albedo": {"texture": "maps/c.png"}}},
+           "objects": [{"shape": "triangles", "vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0]], "faces": [[0, 1, 2]],
+                        "uv": [[0, 0], [1, 0], [0, 1]], "colors": {"Col": [[1, 0, 0], [0, 1, 0], [0, 0, 1]]},
+                        "material": "m"}],
+           "lights": [{"type": "point", "position": [0, 0, 3], "intensity": 1}]}
+    (folder / "s.json").write_text(json.dumps(doc))
+    monkeypatch.chdir(tmp_path)
+    scene = load_scene(str(folder / "s.json"))
+    assert scene.materials["m"].varies_over_surface
+    np.testing.assert_array_equal(scene.meshes[0].uv, [[0, 0], [1, 0], [0, 1]])
+    assert set(scene.meshes[0].colors) == {"Col"}
+    doc["objects"][0]["uv"] = [[0, 0], [1, 0]]
+    with pytest.raises(SceneError, match=r"objects\[0\]\.uv: must hold one finite \[u, v\] per vertex \(3\)"):
+        parse_scene(doc, str(folder))

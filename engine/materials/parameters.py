@@ -181,7 +181,7 @@ class Parameter:
         if not self.texturable:
             raise SceneError(field, "cannot vary over the surface: give a constant "
                                     f"({self.allowed_text()})")
-        source = parse_texture_input(raw, field, base_dir, self.kind == "spectrum")
+        source = parse_texture_input(raw, field, base_dir)
         value = TexturedSpectrum(source, self.spectrum) if self.kind == "spectrum" else TexturedNumber(source)
         if not (self.contains(value.lo) and self.contains(value.hi)):
             raise SceneError(field, f"texture values (after scale and offset) span [{value.lo:g}, {value.hi:g}]: "

@@ -193,7 +193,7 @@ def _shading_normal(bsdf, d: dict, field: str, base_dir):
         raw = dict(raw)
         values = {name: number(raw.pop(name, default), f"{where}.{name}", 0.0) for name, default in extra.items()}
         raw.setdefault("color_space", "Non-Color")        # normal and height maps are data
-        source = parse_texture_input(raw, where, base_dir, want_spectrum=(key == "normal_map"))
+        source = parse_texture_input(raw, where, base_dir)
         if key == "normal_map":
             kw.update(normal_map=source, normal_strength=values["strength"])
         else:

@@ -164,7 +164,7 @@ def textured(*values) -> bool:
     return any(isinstance(v, (TexturedNumber, TexturedSpectrum)) for v in values)
 
 
-def parse_texture_input(raw: dict, field: str, base_dir: str | None, want_spectrum: bool) -> TextureInput:
+def parse_texture_input(raw: dict, field: str, base_dir: str | None) -> TextureInput:
     """A TextureInput from a scene-file object (see the module docstring); errors name ``field.key``."""
     is_image = "texture" in raw
     if is_image == ("vertex_color" in raw):

@@ -86,13 +86,14 @@ class SurfacePoints:
         per-vertex tangents (xyz, w = handedness) if the meshes have them, else from ∂p/∂u, ∂p/∂v
         (Gram–Schmidt against n_s); any perpendicular pair where neither exists."""
         a = self.attributes
-        if a.tangents is not None:
+        t, dpdv, ok = self.position_derivatives()
+        sign = np.where(_dot(np.cross(n_s.T, t.T).T, dpdv) < 0, -1.0, 1.0)
+        if a.tangents is not None:      # given tangents win where the mesh has them
             t4 = self._interpolate(a.tangents)
-            t, sign = t4[:3], np.where(t4[3] < 0, -1.0, 1.0)
-            ok = np.any(t != 0, axis=0)
-        else:
-            t, dpdv, ok = self.position_derivatives()
-            sign = np.where(_dot(np.cross(n_s.T, t.T).T, dpdv) < 0, -1.0, 1.0)
+            given = np.any(t4[:3] != 0, axis=0)
+            t = np.where(given[None, :], t4[:3], t)
+            sign = np.where(given, np.where(t4[3] < 0, -1.0, 1.0), sign)
+            ok = ok | given
         t = t - n_s * _dot(n_s, t)[None, :]
         length = np.sqrt(_dot(t, t))
         ok = ok & (length > 1e-12)
