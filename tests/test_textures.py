@@ -647,3 +647,28 @@ def test_scene_file_textures_are_relative_to_the_scene_file(tmp_path, monkeypatc
     doc["objects"][0]["uv"] = [[0, 0], [1, 0]]
     with pytest.raises(SceneError, match=r"objects\[0\]\.uv: must hold one finite \[u, v\] per vertex \(3\)"):
         parse_scene(doc, str(folder))
+
+
+def test_textured_scene_built_in_python_renders_each_texel(tmp_path):
+    """The Python API (README): an in-memory image on a Lambert albedo, a mesh with UVs."""
+    from engine.materials.lambert import Lambert
+    from engine.scene.description import Camera, Mesh, PointLight, RenderSettings, Scene
+    from engine.spectral import ConstantSpectrum
+    from engine.textures import TexturedSpectrum, TextureInput
+
+    def scene(albedo):
+        mesh = Mesh("plane", np.array([[-1.0, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]),
+                    np.array([[0, 1, 2], [0, 2, 3]]), ["m"], np.zeros(2, np.int32),
+                    uv=np.array([[0.0, 0], [1, 0], [1, 1], [0, 1]]))
+        cam = Camera(np.array([0.0, 0, 5]), np.zeros(3), np.array([0.0, 1, 0]), 8, 8, projection="orthographic",
+                     ortho_width=2.0)
+        return Scene(cam, [mesh], {"m": Lambert(albedo)}, [PointLight(np.array([0.2, 0.1, 3]), ConstantSpectrum(20))],
+                     RenderSettings(spp=2, max_depth=2, reduce_spectral="off"))
+    pixels = np.array([[[0.2], [0.6]], [[0.9], [0.4]]], np.float32)      # grey, row 0 = bottom
+    tex = TexturedSpectrum(TextureInput(ImageTexture(pixels, "Closest")))
+    S = Renderer(scene(tex)).render().stokes()
+    for j in range(2):
+        for i in range(2):
+            const = Renderer(scene(ConstantSpectrum(float(pixels[j, i, 0])))).render().stokes()
+            rows, cols = slice((1 - j) * 4, (2 - j) * 4), slice(i * 4, (i + 1) * 4)
+            np.testing.assert_array_equal(S[:, rows, cols], const[:, rows, cols])
