@@ -672,3 +672,13 @@ def test_textured_scene_built_in_python_renders_each_texel(tmp_path):
             const = Renderer(scene(ConstantSpectrum(float(pixels[j, i, 0])))).render().stokes()
             rows, cols = slice((1 - j) * 4, (2 - j) * 4), slice(i * 4, (i + 1) * 4)
             np.testing.assert_array_equal(S[:, rows, cols], const[:, rows, cols])
+
+
+def test_a_texture_input_built_in_code_is_a_parameter_value():
+    """What an exporter with images in memory (Blender) passes: no file, the same checks."""
+    from engine.textures import TextureInput
+    tex = TextureInput(ImageTexture(np.array([[[0.1], [0.3]]], np.float32), "Closest"), scale=0.5)
+    mat = parse_material({"type": "torrance_sparrow", "n": 1.5, "m": tex}, "materials.x")
+    assert mat.varies_over_surface and (mat.m.lo, mat.m.hi) == (np.float32(0.1) * 0.5, np.float32(0.3) * 0.5)
+    with pytest.raises(SceneError, match=r"materials\.x\.albedo: texture values .* must be in \[0, 1\]"):
+        parse_material({"type": "lambert", "albedo": TextureInput(tex.texture, scale=5.0)}, "materials.x")

@@ -25,7 +25,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..spectral import ConstantSpectrum, named_ior, parse_spectrum
-from ..textures import TexturedNumber, TexturedSpectrum, parse_texture_input
+from ..textures import TexturedNumber, TexturedSpectrum, TextureInput, parse_texture_input
 
 
 class _Required:
@@ -176,12 +176,13 @@ class Parameter:
             return _direction(raw, field)
         return raw      # materials and coats: assembled by the caller
 
-    def read_texture(self, raw: dict, field: str, base_dir: str | None):
-        """A texture object as this parameter's value (see ``read``)."""
+    def read_texture(self, raw, field: str, base_dir: str | None):
+        """A texture object (or an engine.textures.TextureInput built in code, e.g. by the Blender
+        exporter from an image in memory) as this parameter's value (see ``read``)."""
         if not self.texturable:
             raise SceneError(field, "cannot vary over the surface: give a constant "
                                     f"({self.allowed_text()})")
-        source = parse_texture_input(raw, field, base_dir)
+        source = raw if isinstance(raw, TextureInput) else parse_texture_input(raw, field, base_dir)
         value = TexturedSpectrum(source, self.spectrum) if self.kind == "spectrum" else TexturedNumber(source)
         if not (self.contains(value.lo) and self.contains(value.hi)):
             raise SceneError(field, f"texture values (after scale and offset) span [{value.lo:g}, {value.hi:g}]: "
@@ -205,8 +206,8 @@ class Parameter:
 
 
 def is_texture_object(raw) -> bool:
-    """True for a scene file's texture object ({"texture": …} or {"vertex_color": …})."""
-    return isinstance(raw, dict) and ("texture" in raw or "vertex_color" in raw)
+    """True for a scene file's texture object ({"texture": …} or {"vertex_color": …}) or a TextureInput."""
+    return isinstance(raw, TextureInput) or (isinstance(raw, dict) and ("texture" in raw or "vertex_color" in raw))
 
 
 def _direction(raw, field: str) -> np.ndarray:
