@@ -20,6 +20,7 @@ ENGINE_LAYERS = (
     ("engine.errors",),
     ("engine.kernels", "engine.vec3"),
     ("engine.polarisation", "engine.spectral"),
+    ("engine.textures",),
     ("engine.materials", "engine.output", "engine.postprocess"),
     ("engine.scene",),
     ("engine.render",),

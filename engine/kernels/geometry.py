@@ -271,3 +271,12 @@ def area_light_sample_numba(p, u, cdf, tris, faces, vertices, tri_normal, total_
 
 
 area_light_sample = twin(_area_light_loop and area_light_sample_numba, area_light_sample_numpy)
+
+
+def interpolate_vertex_attribute(faces, values, prim, u, v):
+    """Per-vertex ``values`` (V, C) interpolated at hits on triangles ``prim`` with barycentrics
+    (u, v) (weights 1 − u − v, u, v of the triangle's vertices 0, 1, 2, as Embree's): (C, N) float64."""
+    tri = faces[prim]
+    w0 = 1.0 - u - v
+    A = values
+    return (A[tri[:, 0]] * w0[:, None] + A[tri[:, 1]] * u[:, None] + A[tri[:, 2]] * v[:, None]).T

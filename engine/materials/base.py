@@ -30,9 +30,11 @@ import numpy as np
 
 from .flags import UNKNOWN_MODEL_FLAGS, BSDFFlags
 from ..polarisation.mueller import abcs_matrix, depolariser
+from ..textures import TexturedNumber, TexturedSpectrum
 
 if TYPE_CHECKING:
     from ..spectral import Spectrum, WavelengthLookup
+    from ..textures import SurfacePoints
 
 __all__ = ["BSDF", "BSDFFlags", "BSDFSample", "MuellerValue", "ShadingPoint", "depolarising_value"]
 
@@ -49,6 +51,9 @@ class ShadingPoint:
     mono: bool = False     # monochrome mode: spectra return their mono value
     lookup: WavelengthLookup | None = None  # table values at ``lam``, computed once
     material: np.ndarray | None = None  # (N,) slot of each point in a batched material set (see batching.py)
+    #: the hits' triangles and barycentrics: per-vertex attributes (UV, colours) for textured
+    #: parameters (engine.textures); None where no material of the scene varies over its surface
+    surface: SurfacePoints | None = None
 
     @property
     def n(self) -> int:
@@ -59,10 +64,36 @@ class ShadingPoint:
         return self.n_s[0] * self.wo[0] + self.n_s[1] * self.wo[1] + self.n_s[2] * self.wo[2]
 
     def spectrum(self, spec: Spectrum) -> np.ndarray:
-        """A material parameter (engine.spectral Spectrum) at this batch's wavelengths, (L, N)."""
+        """A material parameter (engine.spectral Spectrum) at this batch's wavelengths, (L, N);
+        a textured one (engine.textures.TexturedSpectrum) at this batch's surface points."""
+        if isinstance(spec, TexturedSpectrum):
+            return spec.at(self.surface_points(), self.lam, self.mono,
+                           self.lookup.basis if self.lookup is not None and not self.mono else None)
         if self.lookup is not None and not self.mono:
             return spec.eval_cached(self.lookup)
         return spec.eval(self.lam, mono=self.mono)
+
+    def number(self, value: float | TexturedNumber) -> float | np.ndarray:
+        """A number parameter: itself if constant (the fast path), else its values (N,) at the points."""
+        if isinstance(value, TexturedNumber):
+            return value.at(self.surface_points())
+        return value
+
+    def surface_points(self) -> SurfacePoints:
+        """The hits' per-vertex attributes (ValueError if the caller gave none)."""
+        if self.surface is None:
+            raise ValueError("a textured material parameter needs the surface points of the hits "
+                             "(ShadingPoint.surface)")
+        return self.surface
+
+    def take(self, sel) -> ShadingPoint:
+        """The points ``sel`` (integer indices) of this batch."""
+        def pick(a):
+            return a[..., sel]
+        return ShadingPoint(pick(self.p), pick(self.n_s), pick(self.n_g), pick(self.wo), pick(self.lam), self.mono,
+                            self.lookup.take(sel) if self.lookup is not None else None,
+                            None if self.material is None else self.material[sel],
+                            None if self.surface is None else self.surface.take(sel))
 
 
 @dataclass
@@ -142,6 +173,9 @@ class BSDF:
 
     flags: BSDFFlags = UNKNOWN_MODEL_FLAGS
     name: str = "bsdf"
+    #: some parameter is a texture (engine.textures): the integrator then gives the shading points
+    #: their surface attributes (ShadingPoint.surface)
+    varies_over_surface: bool = False
 
     @property
     def delta_only(self) -> bool:
@@ -175,6 +209,12 @@ class BSDF:
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
         """Mueller weight of the mirror (Dirac) lobe for reflection of wo, or None."""
         return None
+
+    def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
+        """The point at which this material is evaluated: ``sp`` itself, or with the shading normal
+        from a normal or bump map (engine.materials.normal_map).  Callers (the integrator) pass the
+        result to eval/pdf/sample/delta_reflection."""
+        return sp
 
     def describe(self) -> dict[str, object]:
         """Parameters for logs and file headers."""

@@ -17,6 +17,7 @@ from ..spectral import LAMBDA_MAX, LAMBDA_MIN
 from .parameters import REQUIRED, ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from ..errors import SceneError
 from ..spectral.ior import NAMED_METALS
+from ..textures import textured
 from ..vec3 import reflect
 
 
@@ -41,6 +42,7 @@ class SmoothConductor(BSDF):
         self.n = n
         self.k = k
         self.exterior_n = float(exterior_n)
+        self.varies_over_surface = textured(n, k)
         constant = bool(getattr(n, "is_constant", False) and getattr(k, "is_constant", False))
         # A real index (κ = 0 at every wavelength) reflects without retardance, unless it is below the
         # exterior index somewhere: then total internal reflection retards (S ≠ 0).
@@ -97,6 +99,9 @@ def complex_index(p):
 DECLARATION = ModelDeclaration(
     "conductor", "Fresnel Conductor", "Smooth metal mirror with a complex index n + iκ",
     [N, K, METAL, exterior_n_parameter()], catalogue="fresnel", node="CONDUCTOR")
+
+
+DECLARATION.per_point = frozenset({"n", "k"})
 
 
 @DECLARATION.builder

@@ -124,6 +124,7 @@ from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs
 from ..polarisation.mueller import abcs_matrix, depolariser
 from ..spectral import ConstantSpectrum, Spectrum, as_spectrum
+from ..textures import TexturedNumber, textured
 from ..vec3 import cross, dot, normalize, reflect
 
 __all__ = ["HTSG", "erfc", "shadowing", "roughness_ratio", "log_series", "ln_factorial"]
@@ -505,10 +506,13 @@ class HTSG(BSDF):
     def __init__(self, n, k, sigma0_um, tau_um, albedo=0.0, exterior_n=1.0, series_tolerance=1e-10):
         self.n = as_spectrum(n, "n")
         self.k = as_spectrum(k, "k")
-        s0, tau, ext, tol = (float(sigma0_um), float(tau_um), float(exterior_n), float(series_tolerance))
-        if not (math.isfinite(s0) and s0 >= 0.0):
+        # σ₀ and τ may be TexturedNumbers (values per surface point, through ShadingPoint.number)
+        s0, tau = (v if isinstance(v, TexturedNumber) else float(v) for v in (sigma0_um, tau_um))
+        ext, tol = float(exterior_n), float(series_tolerance)
+        s0_lo, tau_lo = (v.lo if isinstance(v, TexturedNumber) else v for v in (s0, tau))
+        if not (math.isfinite(s0_lo) and s0_lo >= 0.0):
             raise ValueError(f"sigma0_um must be a finite number ≥ 0, got {sigma0_um!r}")
-        if not (math.isfinite(tau) and tau > 0.0):
+        if not (math.isfinite(tau_lo) and tau_lo > 0.0):
             raise ValueError(f"tau_um must be a finite number > 0, got {tau_um!r}")
         if not (math.isfinite(ext) and ext > 0.0):
             raise ValueError(f"exterior_n must be a finite number > 0, got {exterior_n!r}")
@@ -529,6 +533,7 @@ class HTSG(BSDF):
             raise ValueError(f"n must be > 0, got {self.n.value!r}")
         if isinstance(self.k, ConstantSpectrum) and not self.k.value >= 0:
             raise ValueError(f"k must be ≥ 0, got {self.k.value!r}")
+        self.varies_over_surface = textured(self.n, self.k, self.sigma0, self.tau, self.albedo)
         # Directional-diffuse (glossy) and specular (Dirac) lobes at any σ₀ (σ₀ = 0 zeroes the first,
         # a rough surface the second); the uniform diffuse term, if any, is folded into the "general"
         # value (not separable).  RETARDING is conservative (not derived from n, κ); the roughness in
@@ -544,30 +549,36 @@ class HTSG(BSDF):
     def _lambda_um(self, sp: ShadingPoint) -> np.ndarray:
         return sp.lam * (1e-3 / self.exterior_n)
 
-    def _angles(self, n_s, w):
-        """(cosθ, sinθ, μ, erfc μ, S(θ), K′) of direction w about n_s; arrays (N,)."""
+    def _roughness(self, sp: ShadingPoint):
+        """(σ₀, τ) in µm at the points: floats, or arrays (N,) where textured."""
+        return sp.number(self.sigma0), sp.number(self.tau)
+
+    def _angles(self, n_s, w, s0, tau):
+        """(cosθ, sinθ, μ, erfc μ, S(θ), K′) of direction w about n_s for roughness (σ₀, τ); arrays (N,)."""
         cos_t = dot(n_s, w)
         cr = cross(n_s, w)
         sin_t = np.sqrt(dot(cr, cr))
-        mu = _mu(np.maximum(cos_t, 0.0), sin_t, self.sigma0, self.tau)
+        mu = _mu(np.maximum(cos_t, 0.0), sin_t, s0, tau)
         ec = np.where(np.isfinite(mu), erfc(np.where(np.isfinite(mu), mu, 30.0)), 0.0)
         S = shadowing(mu, ec)
         kp = _k_prime(np.maximum(cos_t, 0.0), sin_t, ec)
         return cos_t, sin_t, mu, ec, S, kp
 
-    def _sigma_eff(self, kp_i, kp_r):
+    @staticmethod
+    def _sigma_eff(kp_i, kp_r, s0):
         """Effective roughness σ = σ₀/√(1 + x²), x·e^{x²/2} = (K′_i + K′_r)/√(8π) (Eqs. 4.4–4.6)."""
-        if self.sigma0 == 0.0:
+        if np.isscalar(s0) and s0 == 0.0:
             return np.zeros_like(kp_i)
         x = roughness_ratio((kp_i + kp_r) / _SQRT_8PI)
-        return self.sigma0 / np.sqrt(1.0 + x * x)
+        return s0 / np.sqrt(1.0 + x * x)
 
     def _dd_parts(self, sp: ShadingPoint, wi: np.ndarray, info: bool = False):
         """Scalar factor Q = S·G·D/(π cos_i cos_r) (L, N), cosθ_h (N,), frame s, validity, extras."""
         wo = sp.wo
         n_s = sp.n_s
-        cos_i, _, _, _, S_i, kp_i = self._angles(n_s, wi)
-        cos_r, _, _, _, S_r, kp_r = self._angles(n_s, wo)
+        s0, tau = self._roughness(sp)
+        cos_i, _, _, _, S_i, kp_i = self._angles(n_s, wi, s0, tau)
+        cos_r, _, _, _, S_r, kp_r = self._angles(n_s, wo, s0, tau)
         valid = (cos_i > 0) & (cos_r > 0)
         v = wi + wo
         v_z = cos_i + cos_r
@@ -575,18 +586,18 @@ class HTSG(BSDF):
         vt = v - v_z[None, :] * n_s
         vxy2 = np.maximum(dot(vt, vt), 0.0)
         cos_h = np.clip(0.5 * np.sqrt(v2), 0.0, 1.0)
-        sigma = self._sigma_eff(kp_i, kp_r)
+        sigma = self._sigma_eff(kp_i, kp_r, s0)
         lam = self._lambda_um(sp)                       # (L, N)
         k = 2.0 * np.pi / lam                           # wavenumber in the medium, 1/µm
         vz_safe = np.where(valid, v_z, 1.0)
         with np.errstate(divide="ignore"):
             ln_g = 2.0 * (np.log(k * sigma[None, :]) + np.log(vz_safe)[None, :])
         ln_g = np.where(valid[None, :], ln_g, -np.inf)
-        c = k * k * (vxy2 * (0.25 * self.tau * self.tau))[None, :]
+        c = k * k * (vxy2 * (0.25 * tau * tau))[None, :]
         res = log_series(ln_g, c, self.series_tolerance, return_info=info)
         ln_sum, sinfo = res if info else (res, None)
         # D/π = π τ²/(4λ²)·Σ ; G = (|v|²/v_z)² ; Q = S_i/cos_i · S_r/cos_r · G · D/π
-        ln_q = ln_sum + np.log(np.pi * self.tau * self.tau / 4.0) - 2.0 * np.log(lam) \
+        ln_q = ln_sum + np.log(np.pi * tau * tau / 4.0) - 2.0 * np.log(lam) \
             + 2.0 * (np.log(np.where(valid, v2, 1.0)) - np.log(vz_safe))[None, :]
         with np.errstate(over="ignore", under="ignore"):
             q = np.exp(ln_q)
@@ -602,7 +613,7 @@ class HTSG(BSDF):
             g = np.exp(ln_g)
             extra = dict(sigma_eff_um=sigma, g=g, c=c, S=S_i * S_r, S_i=S_i, S_r=S_r,
                          G_geom=np.where(valid, (v2 / vz_safe) ** 2, 0.0),
-                         D=np.exp(ln_sum + np.log(np.pi ** 2 * self.tau ** 2 / 4.0) - 2.0 * np.log(lam)),
+                         D=np.exp(ln_sum + np.log(np.pi ** 2 * tau ** 2 / 4.0) - 2.0 * np.log(lam)),
                          ln_series=ln_sum, cos_theta_h=cos_h, series=sinfo, valid=valid,
                          v_xy2=vxy2)
         return q, cos_h, s_axis, valid, extra
@@ -610,7 +621,7 @@ class HTSG(BSDF):
     def _specular_scale(self, sp: ShadingPoint, cos_t, S_t, kp_t):
         """e^{−g(θ,θ)}·S(θ)² (L, N) and g(θ,θ) for the mirror geometry of a direction at θ."""
         valid = cos_t > 0
-        sigma = self._sigma_eff(kp_t, kp_t)
+        sigma = self._sigma_eff(kp_t, kp_t, self._roughness(sp)[0])
         lam = self._lambda_um(sp)
         g = (2.0 * np.pi / lam * sigma[None, :] * (2.0 * np.maximum(cos_t, 0.0))[None, :]) ** 2
         scale = np.exp(-g) * np.where(valid, S_t * S_t, 0.0)[None, :]
@@ -630,7 +641,7 @@ class HTSG(BSDF):
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue:
         _, value, _ = mirror_reflection(sp, self.relative_eta(sp))
-        cos_o, _, _, _, S_o, kp_o = self._angles(sp.n_s, sp.wo)
+        cos_o, _, _, _, S_o, kp_o = self._angles(sp.n_s, sp.wo, *self._roughness(sp))
         scale, _, _ = self._specular_scale(sp, cos_o, S_o, kp_o)
         return value.scaled(scale)
 
@@ -644,7 +655,7 @@ class HTSG(BSDF):
         q, cos_h, _, valid, ex = self._dd_parts(sp, wi, info=True)
         eta = self.relative_eta(sp)
         A = fresnel_reflection_abcs(cos_h[None, :], eta)[0]
-        cos_i, _, _, _, S_i, kp_i = self._angles(sp.n_s, wi)
+        cos_i, _, _, _, S_i, kp_i = self._angles(sp.n_s, wi, *self._roughness(sp))
         scale, g_s, sig_s = self._specular_scale(sp, cos_i, S_i, kp_i)
         F_i = fresnel_reflection_abcs(np.maximum(cos_i, 0.0)[None, :], eta)[0]
         ex.update(F_unpol_half=A, rho_dd=A * q, rho_s=F_i * scale, rho_s_S=np.where(cos_i > 0, S_i * S_i, 0.0),
@@ -654,7 +665,8 @@ class HTSG(BSDF):
     # ---------------------------------------------------------------- sampling
     def _lobe_plan(self, sp: ShadingPoint):
         """λ-independent sampling plan per point: P_spec, mixture weights, Beckmann widths."""
-        cos_o, _, _, _, S_o, kp_o = self._angles(sp.n_s, sp.wo)
+        s0, tau = self._roughness(sp)
+        cos_o, _, _, _, S_o, kp_o = self._angles(sp.n_s, sp.wo, s0, tau)
         valid = cos_o > 0
         scale, g_s, _ = self._specular_scale(sp, cos_o, S_o, kp_o)
         F = fresnel_reflection_abcs(np.maximum(cos_o, 0.0)[None, :], self.relative_eta(sp))[0]
@@ -664,7 +676,9 @@ class HTSG(BSDF):
         ud = np.mean(sp.spectrum(self.albedo), axis=0) * valid if self.albedo is not None else np.zeros(sp.n)
         den = rho_s + rho_dd + ud
         p_spec = np.where(den > 0, rho_s / np.where(den > 0, den, 1.0), 0.0)
-        if self.sigma0 > 0:
+        if not np.isscalar(s0):       # textured σ₀: the cap below where σ₀ > 0
+            p_spec = np.where(s0 > 0, np.minimum(p_spec, P_SPEC_MAX), p_spec)
+        elif s0 > 0:
             # The dd estimate F·S²·(1 − e^{−g(θ_o)}) vanishes at grazing views although the lobe does
             # not (other directions have larger g): keep ≥ 10 % of the samples for it, or the rare dd
             # samples carry weights of several hundred (fireflies).
@@ -672,11 +686,11 @@ class HTSG(BSDF):
         rest = rho_dd + ud
         w_c = 0.1 + 0.9 * np.where(rest > 0, ud / np.where(rest > 0, rest, 1.0), 0.0)
         co = np.maximum(cos_o, 1e-6)
-        g_ref = (4.0 * np.pi * self.sigma0 * co / _LAMBDA_REF_UM) ** 2
+        g_ref = (4.0 * np.pi * s0 * co / _LAMBDA_REF_UM) ** 2
         w_b = (1.0 - w_c) * g_ref / (1.0 + g_ref)
         w_d = (1.0 - w_c) - w_b
-        a_b = np.full(sp.n, np.clip(2.0 * self.sigma0 / self.tau, _ALPHA_MIN, _ALPHA_MAX))
-        a_d = np.clip(_LAMBDA_REF_UM / (2.0 * np.pi * self.tau * co), _ALPHA_MIN, _ALPHA_MAX)
+        a_b = np.broadcast_to(np.clip(2.0 * s0 / tau, _ALPHA_MIN, _ALPHA_MAX), (sp.n,)).copy()
+        a_d = np.clip(_LAMBDA_REF_UM / (2.0 * np.pi * tau * co), _ALPHA_MIN, _ALPHA_MAX)
         return dict(p_spec=p_spec, rho_s=rho_s, den=den, w_c=w_c, w_b=w_b, w_d=w_d, a_b=a_b, a_d=a_d,
                     valid=valid)
 
@@ -785,8 +799,10 @@ class HTSG(BSDF):
         return dd, rho_s
 
     def describe(self) -> dict:
-        return {"type": self.name, "n": repr(self.n), "k": repr(self.k), "sigma0_um": self.sigma0,
-                "tau_um": self.tau, "albedo": repr(self.albedo) if self.albedo is not None else 0.0,
+        def shown(v):
+            return repr(v) if isinstance(v, TexturedNumber) else v
+        return {"type": self.name, "n": repr(self.n), "k": repr(self.k), "sigma0_um": shown(self.sigma0),
+                "tau_um": shown(self.tau), "albedo": repr(self.albedo) if self.albedo is not None else 0.0,
                 "exterior_n": self.exterior_n, "series_tolerance": self.series_tolerance}
 
 
@@ -807,6 +823,9 @@ DECLARATION = ModelDeclaration(
                socket=Socket("Diffuse", "COLOR", (0.0, 0.0, 0.0), 0.0, 1.0, "Albedo of the uniform diffuse term")),
      exterior_n_parameter()],
     catalogue="htsg", node="HTSG")
+
+
+DECLARATION.per_point = frozenset({"n", "k", "sigma0_um", "tau_um", "albedo"})
 
 
 @DECLARATION.builder

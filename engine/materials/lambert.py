@@ -13,6 +13,7 @@ from .base import BSDF, BSDFFlags, BSDFSample, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter, Socket
 from .sampling import cosine_hemisphere, local_to_world
 from ..spectral.spectrum import basis_rgb
+from ..textures import textured
 from ..vec3 import dot
 
 
@@ -21,6 +22,7 @@ class Lambert(BSDF):
 
     def __init__(self, albedo):
         self.albedo = albedo
+        self.varies_over_surface = textured(albedo)
         # a pure depolariser: neither polarising nor retarding; λ-independent for a grey albedo
         self.flags = (BSDFFlags.DIFFUSE_REFLECTION | BSDFFlags.SEPARABLE_DIFFUSE
                       | BSDFFlags.when(not getattr(albedo, "is_constant", False), BSDFFlags.WAVELENGTH_DEPENDENT))
@@ -111,6 +113,9 @@ DECLARATION = ModelDeclaration(
                default=0.8, texturable=True,
                socket=Socket("Albedo", "COLOR", (0.8, 0.8, 0.8), 0.0, 1.0, "Diffuse reflectance (linear sRGB)"))],
     catalogue="lambert", node="LAMBERT")
+
+
+DECLARATION.per_point = frozenset({"albedo"})
 
 
 @DECLARATION.builder

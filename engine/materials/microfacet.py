@@ -178,6 +178,17 @@ class Beckmann(MicrofacetDistribution):
         self.m = m
         self.smith_m = m
 
+    @classmethod
+    def per_point(cls, m: np.ndarray) -> Beckmann:
+        """Beckmann distributions with one roughness per point, m (N,) > 0 (a textured m): every
+        method is elementwise in m, so point i gets exactly the values of ``Beckmann(m[i])``."""
+        m = np.asarray(m, dtype=np.float64)
+        if not np.all(np.isfinite(m) & (m > 0)):
+            raise ValueError("Beckmann roughness m must be finite numbers > 0")
+        dist = cls.__new__(cls)
+        dist.m = dist.smith_m = m
+        return dist
+
     def D(self, h: np.ndarray) -> np.ndarray:
         t2 = _tan2(h)
         x = t2 / (self.m * self.m)

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..spectral import ConstantSpectrum, named_ior, parse_spectrum
+from ..textures import TexturedNumber, TexturedSpectrum, TextureInput, parse_texture_input
 
 
 class _Required:
@@ -148,8 +149,15 @@ class Parameter:
             raise SceneError(field, f"must be a finite number in {self.range_text()}, got {raw!r}")
         return v
 
-    def read(self, raw, field: str, text: bool = False):
-        """The validated value of ``raw`` (a JSON value, or a string where ``text``)."""
+    def read(self, raw, field: str, text: bool = False, base_dir: str | None = None):
+        """The validated value of ``raw`` (a JSON value, or a string where ``text``).
+
+        A texturable number or spectrum may be a texture object (engine.textures.inputs, image
+        paths relative to ``base_dir``): the value is then a TexturedNumber / TexturedSpectrum
+        whose every possible value lies in the declared range.
+        """
+        if is_texture_object(raw) and self.kind in ("number", "spectrum"):
+            return self.read_texture(raw, field, base_dir)
         if self.kind == "number":
             return self.number(raw, field, text)
         if self.kind == "spectrum":
@@ -168,6 +176,19 @@ class Parameter:
             return _direction(raw, field)
         return raw      # materials and coats: assembled by the caller
 
+    def read_texture(self, raw, field: str, base_dir: str | None):
+        """A texture object (or an engine.textures.TextureInput built in code, e.g. by the Blender
+        exporter from an image in memory) as this parameter's value (see ``read``)."""
+        if not self.texturable:
+            raise SceneError(field, "cannot vary over the surface: give a constant "
+                                    f"({self.allowed_text()})")
+        source = raw if isinstance(raw, TextureInput) else parse_texture_input(raw, field, base_dir)
+        value = TexturedSpectrum(source, self.spectrum) if self.kind == "spectrum" else TexturedNumber(source)
+        if not (self.contains(value.lo) and self.contains(value.hi)):
+            raise SceneError(field, f"texture values (after scale and offset) span [{value.lo:g}, {value.hi:g}]: "
+                                    f"must be in {self.range_text()}" + (f" {self.unit}" if self.unit else ""))
+        return value
+
     def check_spectrum(self, spec, field: str):
         """Every value of ``spec`` over 360–830 nm within the declared range."""
         v = np.asarray(spec.eval(_CHECK_NM), dtype=np.float64)
@@ -182,6 +203,11 @@ class Parameter:
             else:
                 words = f"in {self.range_text()}"
             raise SceneError(field, f"must be {words} at every wavelength in 360–830 nm")
+
+
+def is_texture_object(raw) -> bool:
+    """True for a scene file's texture object ({"texture": …} or {"vertex_color": …}) or a TextureInput."""
+    return isinstance(raw, TextureInput) or (isinstance(raw, dict) and ("texture" in raw or "vertex_color" in raw))
 
 
 def _direction(raw, field: str) -> np.ndarray:
@@ -211,6 +237,9 @@ class ModelDeclaration:
             raise ValueError(f"{name}: duplicate parameter names")
         self.catalogue, self.node = catalogue, node
         self._build = None
+        #: texturable parameters the engine evaluates per surface point today (a model file sets
+        #: it after its declaration); a texture on any other parameter is refused with a message
+        self.per_point: frozenset[str] = frozenset()
 
     def __repr__(self):
         return f"ModelDeclaration({self.name!r}, {len(self.parameters)} parameters)"
@@ -229,12 +258,14 @@ class ModelDeclaration:
         self._build = function
         return function
 
-    def values(self, data: dict, field: str, text: bool = False, prefix: str = "", label=None) -> Values:
-        return Values(self, data, field, text=text, prefix=prefix, label=label)
+    def values(self, data: dict, field: str, text: bool = False, prefix: str = "", label=None,
+               base_dir: str | None = None) -> Values:
+        return Values(self, data, field, text=text, prefix=prefix, label=label, base_dir=base_dir)
 
     def build(self, values: Values, **parts):
         """The BSDF (``parts``: assembled materials/coats, e.g. ``coats=…, base=…``)."""
         values.check_meaningful()
+        values.check_textures()
         return self._build(values, **parts)
 
 
@@ -247,9 +278,10 @@ class Values:
     """
 
     def __init__(self, model: ModelDeclaration, data: dict, field: str, text: bool = False, prefix: str = "",
-                 label=None):
+                 label=None, base_dir: str | None = None):
         self.model, self.data, self.where, self.text, self.prefix = model, data, field, text, prefix
         self._label = label
+        self.base_dir = base_dir    # texture image paths are relative to it (the scene file's folder)
 
     def field(self, name: str) -> str:
         shown = self._label(name) if self._label is not None else self.prefix + name
@@ -265,7 +297,7 @@ class Values:
         """The validated value; if not given: ``default`` where passed, else the declared default."""
         p = self.model[name]
         if self.given(name):
-            return p.read(self.data[self.prefix + name], self.field(name), self.text)
+            return p.read(self.data[self.prefix + name], self.field(name), self.text, self.base_dir)
         if default is REQUIRED:
             default = p.default
         if default is REQUIRED:
@@ -277,6 +309,16 @@ class Values:
         if default is None:
             return None
         return p.read(default, self.field(name))
+
+    def check_textures(self):
+        """Refuse textures on parameters the engine does not yet evaluate per point (clear message)."""
+        for p in self.model.parameters:
+            if p.texturable and self.given(p.name) and is_texture_object(self.data[self.prefix + p.name]) \
+                    and p.name not in self.model.per_point:
+                supported = ", ".join(sorted(self.model.per_point)) or "none"
+                raise SceneError(self.field(p.name), f"a texture on this parameter of {self.model.name!r} is not "
+                                                     f"supported by the engine yet (per-point today: {supported}); "
+                                                     "give a constant")
 
     def check_meaningful(self):
         """Reject parameters given where the chosen option ignores them (e.g. m on a smooth coat)."""
@@ -293,3 +335,21 @@ def exterior_n_parameter(**changes) -> Parameter:
     """The index of the incident medium, shared by every interface model."""
     return Parameter("exterior_n", "index of the medium on the side of the normal (incident medium)",
                      lo=0.0, lo_open=True, default=1.0, **changes)
+
+
+def texture_support_table(models) -> str:
+    """A Markdown table of every texturable parameter of ``models`` (declarations, coats included):
+    whether the engine evaluates it per surface point today (README "Textures")."""
+    rows = ["| model | parameter | kind | per surface point |", "|---|---|---|---|"]
+
+    def walk(decl: ModelDeclaration, title: str):
+        for p in decl.parameters:
+            if p.kind == "coats" and p.members is not None:
+                walk(p.members, f"{title} coat")
+            elif p.texturable:
+                state = "yes" if p.name in decl.per_point else "not yet (constant only)"
+                kind = "colour/spectrum" if p.kind == "spectrum" else "number"
+                rows.append(f"| {title} | `{p.name}` | {kind} | {state} |")
+    for decl in models:
+        walk(decl, f"`{decl.name}`")
+    return "\n".join(rows)

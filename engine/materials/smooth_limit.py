@@ -15,6 +15,7 @@ from .base import BSDF, BSDFFlags, BSDFSample, depolarising_value
 from .conductor import mirror_reflection
 from .sampling import cosine_hemisphere, local_to_world
 from ..spectral import as_spectrum
+from ..textures import TexturedNumber, textured
 from ..vec3 import dot
 
 
@@ -25,9 +26,11 @@ class MirrorWithDiffuse(BSDF):
         self.n, self.k = as_spectrum(n, "n"), as_spectrum(k, "k")
         self.exterior_n = float(exterior_n)
         self.albedo = as_spectrum(diffuse_albedo, "diffuse_albedo")
-        self.s, self.d = float(specular_weight), float(diffuse_weight)
+        # weights may be TexturedNumbers (per surface point, read through ShadingPoint.number)
+        self.s, self.d = (w if isinstance(w, TexturedNumber) else float(w) for w in (specular_weight, diffuse_weight))
         self.m = 0.0
-        self.has_diffuse = self.d > 0
+        self.has_diffuse = self.d.hi > 0 if isinstance(self.d, TexturedNumber) else self.d > 0
+        self.varies_over_surface = textured(self.n, self.k, self.albedo, self.s, self.d)
         # real η ≥ 1 at every wavelength: no retardance (no κ, no total internal reflection)
         real_above_one = (self.k.is_constant and float(self.k.eval([550.0])[0]) == 0.0
                           and self.n.is_constant and float(self.n.eval([550.0])[0]) >= self.exterior_n)
@@ -41,16 +44,16 @@ class MirrorWithDiffuse(BSDF):
         return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
 
     def _diffuse(self, sp):
-        return sp.spectrum(self.albedo) * self.d
+        return sp.spectrum(self.albedo) * sp.number(self.d)
 
     def _p_mirror(self, sp, mirror):
-        spec = self.s * mirror.A.mean(axis=0)
+        spec = sp.number(self.s) * mirror.A.mean(axis=0)
         diff = self._diffuse(sp).mean(axis=0) if self.has_diffuse else np.zeros(sp.n)
         total = spec + diff
         return np.where(total > 0, spec / np.where(total > 0, total, 1.0), 1.0)
 
     def delta_reflection(self, sp):
-        return mirror_reflection(sp, self._eta(sp))[1].scaled(self.s)
+        return mirror_reflection(sp, self._eta(sp))[1].scaled(sp.number(self.s))
 
     def eval(self, sp, wi):
         ok = (dot(sp.n_s, wi) > 0) & (sp.cos_o > 0)
@@ -70,7 +73,7 @@ class MirrorWithDiffuse(BSDF):
         local = cosine_hemisphere(u_dir)
         wi_d = local_to_world(local, sp.n_s)
         wi = np.where(pick[None, :], wi_m, wi_d)
-        w_m = mirror.scaled((self.s / np.where(p > 0, p, 1.0))[None, :])
+        w_m = mirror.scaled((sp.number(self.s) / np.where(p > 0, p, 1.0))[None, :])
         diff_ok = (~pick) & (sp.cos_o > 0) & (local[2] > 0)
         w_d = self._diffuse(sp) * (diff_ok / np.where(p < 1, 1.0 - p, 1.0))[None, :]
         sel = pick[None, :]

@@ -58,6 +58,7 @@ from ..errors import SceneError
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
 from ..spectral import ConstantSpectrum, as_spectrum
+from ..textures import TexturedNumber, textured
 from ..vec3 import dot, local_frame, to_local
 
 #: Smallest accepted Beckmann roughness m.
@@ -91,9 +92,18 @@ class TorranceSparrow(BSDF):
                  blinn_exponent: float | None = None):
         self.n = as_spectrum(n, "n")
         self.k = as_spectrum(k, "k")
-        m = float(m)
-        if not (math.isfinite(m) and m >= M_MIN):
-            raise ValueError(f"roughness m must be a finite number >= {M_MIN:g}, got {m!r}")
+        # m, specular_weight and diffuse_weight may be TexturedNumbers (values per surface point,
+        # read through ShadingPoint.number); constants keep their float fast path
+        if isinstance(m, TexturedNumber):
+            if not m.lo >= M_MIN:
+                raise ValueError(f"a textured roughness m must be >= {M_MIN:g} everywhere (no per-point smooth "
+                                 f"limit), its values reach {m.lo:g}")
+            if distribution != "beckmann":
+                raise ValueError("a textured roughness m needs distribution='beckmann'")
+        else:
+            m = float(m)
+            if not (math.isfinite(m) and m >= M_MIN):
+                raise ValueError(f"roughness m must be a finite number >= {M_MIN:g}, got {m!r}")
         self.m = m
         if shadowing not in SHADOWING:
             raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
@@ -101,23 +111,27 @@ class TorranceSparrow(BSDF):
         self.exterior_n = float(exterior_n)
         if not (math.isfinite(self.exterior_n) and self.exterior_n > 0):
             raise ValueError(f"exterior_n must be a finite number > 0, got {exterior_n!r}")
-        self.s = float(specular_weight)
-        self.d = float(diffuse_weight)
+        self.s = specular_weight if isinstance(specular_weight, TexturedNumber) else float(specular_weight)
+        self.d = diffuse_weight if isinstance(diffuse_weight, TexturedNumber) else float(diffuse_weight)
         for name, v in (("specular_weight", self.s), ("diffuse_weight", self.d)):
-            if not (math.isfinite(v) and v >= 0):
+            lo = v.lo if isinstance(v, TexturedNumber) else v
+            if not (math.isfinite(lo) and lo >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
         self.albedo = None if diffuse_albedo is None else as_spectrum(diffuse_albedo, "diffuse_albedo")
         if distribution == "beckmann":
             if blinn_exponent is not None:
                 raise ValueError("blinn_exponent is only used with distribution='blinn'")
-            self.dist = Beckmann(m)
+            self.dist = None if isinstance(m, TexturedNumber) else Beckmann(m)
         elif distribution == "blinn":
             self.dist = BlinnPhong(blinn_exponent) if blinn_exponent is not None else BlinnPhong.from_beckmann_m(m)
         else:
             raise ValueError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
         self.distribution = distribution
-        self.has_specular = self.s > 0
-        self.has_diffuse = self.d > 0 and self.albedo is not None
+        def positive(v):
+            return v.hi > 0 if isinstance(v, TexturedNumber) else v > 0
+        self.has_specular = positive(self.s)
+        self.has_diffuse = positive(self.d) and self.albedo is not None
+        self.varies_over_surface = textured(self.n, self.k, self.m, self.s, self.d, self.albedo)
         constant = all(getattr(v, "is_constant", False) for v in
                        (self.n, self.k) + ((self.albedo,) if self.has_diffuse else ()))
         # The facet lobe is reported unless a diffuse term replaces it (s = 0): a TS with neither
@@ -136,6 +150,13 @@ class TorranceSparrow(BSDF):
 
     # --- helpers ---------------------------------------------------------------------------------
 
+    def _dist(self, sp: ShadingPoint, sel: np.ndarray | None = None):
+        """The facet distribution at the points (``sel``: a subset of them)."""
+        if self.dist is not None:
+            return self.dist
+        m = sp.number(self.m)
+        return Beckmann.per_point(m if sel is None else m[sel])
+
     def relative_eta(self, sp: ShadingPoint) -> np.ndarray:
         return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
 
@@ -146,15 +167,16 @@ class TorranceSparrow(BSDF):
         if not self.has_specular:
             return np.zeros(sp.n)
         F = fresnel_reflectance(np.clip(cos_o, 0.0, 1.0)[None, :], self.relative_eta(sp))
-        w_s = self.s * F.mean(axis=0)
-        w_d = self.d * sp.spectrum(self.albedo).mean(axis=0)
+        w_s = sp.number(self.s) * F.mean(axis=0)
+        w_d = sp.number(self.d) * sp.spectrum(self.albedo).mean(axis=0)
         tot = w_s + w_d
         p = np.where(tot > 0, w_s / np.where(tot > 0, tot, 1.0), 0.5)
         return np.clip(p, *P_SPEC_RANGE)
 
-    def _specular_pdf_local(self, wo_l, wi_l) -> np.ndarray:
+    @staticmethod
+    def _specular_pdf_local(dist, wo_l, wi_l) -> np.ndarray:
         h, _, ok = half_vector(wi_l, wo_l)
-        return np.where(ok, self.dist.pdf_reflected(wo_l, h), 0.0)
+        return np.where(ok, dist.pdf_reflected(wo_l, h), 0.0)
 
     # --- BSDF interface --------------------------------------------------------------------------
 
@@ -173,10 +195,11 @@ class TorranceSparrow(BSDF):
         if self.has_specular:
             h, cos_f, ok = half_vector(wi_l, wo_l)
             ok &= valid
-            D = self.dist.D(h)
-            G = shadowing_term(self.shadowing, self.dist, wi_l, wo_l, h)
+            dist = self._dist(sp)
+            D = dist.D(h)
+            G = shadowing_term(self.shadowing, dist, wi_l, wo_l, h)
             denom = 4.0 * np.where(ok, cos_i * cos_o, 1.0)
-            fr = np.where(ok, self.s * D * G / denom, 0.0)
+            fr = np.where(ok, sp.number(self.s) * D * G / denom, 0.0)
             Af, Bf, Cf, Sf = fresnel_reflection_abcs(np.where(ok, cos_f, 1.0)[None, :], self.relative_eta(sp))
             A = Af * fr
             B = Bf * fr
@@ -185,7 +208,7 @@ class TorranceSparrow(BSDF):
         depol = None
         if self.has_diffuse:
             # A depolariser adds to M00 only (not to the ABCS block's M11).
-            depol = sp.spectrum(self.albedo) * (self.d / math.pi) * valid[None, :]
+            depol = sp.spectrum(self.albedo) * (sp.number(self.d) / math.pi) * valid[None, :]
         if not self.has_specular:  # pure Lambert: a depolariser (frame-independent)
             return depolarising_value(depol if depol is not None else A, sp.n)
         x = scattering_plane_axis(-wi, sp.wo)
@@ -200,7 +223,7 @@ class TorranceSparrow(BSDF):
         p_spec = self._p_spec(sp, wo_l[2])
         out = np.zeros(sp.n)
         if self.has_specular:
-            out = out + p_spec * self._specular_pdf_local(wo_l, wi_l)
+            out = out + p_spec * self._specular_pdf_local(self._dist(sp), wo_l, wi_l)
         if self.has_diffuse:
             out = out + (1.0 - p_spec) * np.maximum(wi_l[2], 0.0) / math.pi
         return np.where(valid, out, 0.0)
@@ -216,7 +239,7 @@ class TorranceSparrow(BSDF):
         if self.has_specular:
             sel = np.nonzero(pick_spec & (cos_o > 0))[0]
             if sel.size:
-                h = self.dist.sample(wo_l[:, sel], u_dir[:, sel])
+                h = self._dist(sp, sel).sample(wo_l[:, sel], u_dir[:, sel])
                 wi_l[:, sel] = reflect_local(wo_l[:, sel], h)
         if self.has_diffuse:
             sel = np.nonzero(~pick_spec)[0]
@@ -239,6 +262,9 @@ class TorranceSparrow(BSDF):
                "shadowing": self.shadowing, "distribution": self.distribution, "exterior_n": self.exterior_n,
                "specular_weight": self.s, "diffuse_weight": self.d,
                "diffuse_albedo": None if self.albedo is None else repr(self.albedo)}
+        for key in ("m", "specular_weight", "diffuse_weight"):
+            if isinstance(out[key], TexturedNumber):
+                out[key] = repr(out[key])
         if self.distribution == "blinn":
             out["blinn_exponent"] = self.dist.e
         return out
@@ -271,11 +297,27 @@ DECLARATION = ModelDeclaration(
     catalogue="torrance_sparrow", node="TORRANCE_SPARROW")
 
 
+DECLARATION.per_point = frozenset({"n", "k", "m", "diffuse_albedo", "diffuse_weight", "specular_weight"})
+
+
 @DECLARATION.builder
 def _torrance_sparrow(p):
     n, k = complex_index(p)
     shadowing = p["shadowing"]
     m = p["m"]
+    if isinstance(m, TexturedNumber):
+        if not m.lo >= M_MIN:
+            raise SceneError(p.field("m"), f"a roughness texture must stay in [{M_MIN:g}, {p.model['m'].hi:g}] "
+                                           f"(the smooth limit m = 0 cannot vary per point), its values reach "
+                                           f"{m.lo:g}")
+        m_const = None
+    else:
+        m_const = m
+    kw = dict(exterior_n=p["exterior_n"], diffuse_albedo=p["diffuse_albedo"],
+              diffuse_weight=p.get("diffuse_weight", 1.0 if p.given("diffuse_albedo") else 0.0),
+              specular_weight=p["specular_weight"])
+    if m_const is None:
+        return TorranceSparrow(n, k, m, shadowing=shadowing, **kw)
     if 0 < m < M_MIN:
         raise SceneError(p.field("m"), f"must be 0 (the smooth limit) or in [{M_MIN:g}, {p.model['m'].hi:g}], "
                                        f"got {m:g}")

@@ -205,6 +205,7 @@ from ..polarisation.frames import plane_of_incidence_axis, rotate_mueller_frames
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_transmission_abcs, refracted_cosine
 from ..polarisation.mueller import abcs_matrix
 from ..spectral import ConstantSpectrum, Spectrum, as_spectrum
+from ..textures import TexturedNumber, TexturedSpectrum, textured
 from ..vec3 import dot, local_frame, reflect, to_local
 
 __all__ = ["Coat", "WeidlichWilkie", "FORMS", "T_TERMS", "TRANSMISSION_NORMALS", "DISTRIBUTIONS",
@@ -229,9 +230,12 @@ _MU_MIN = 1e-6
 
 
 def _spectrum_range(spec: Spectrum) -> tuple[float, float]:
-    """(min, max) of a spectrum over the rendered range and its monochrome value."""
+    """(min, max) of a spectrum over the rendered range and its monochrome value (a textured
+    spectrum: the bounds of every value it can take)."""
     if isinstance(spec, ConstantSpectrum):
         return spec.value, spec.value
+    if isinstance(spec, TexturedSpectrum):
+        return spec.lo, spec.hi
     lam = np.linspace(360.0, 830.0, 95)
     v = np.concatenate((np.asarray(spec.eval(lam), dtype=np.float64).ravel(), [spec.mono_value]))
     return float(v.min()), float(v.max())
@@ -281,15 +285,17 @@ class Coat:
     dist: object = field(init=False, repr=False)
 
     def __post_init__(self):
-        self.n_spectrum = as_spectrum(self.n, "coat n")
+        self.n_spectrum = self.n.as_spectrum() if isinstance(self.n, TexturedNumber) else as_spectrum(self.n, "coat n")
         lo, _ = _spectrum_range(self.n_spectrum)
         if not lo > 0:
             raise ValueError(f"coat n must be > 0, got {self.n!r}")
         self.absorption_spectrum = as_spectrum(self.absorption, "coat absorption")
         if _spectrum_range(self.absorption_spectrum)[0] < 0:
             raise ValueError(f"coat absorption must be >= 0, got {self.absorption!r}")
-        d = float(self.thickness)
-        if not (math.isfinite(d) and d >= 0):
+        # thickness may be a TexturedNumber (per surface point, through ShadingPoint.number)
+        d = self.thickness if isinstance(self.thickness, TexturedNumber) else float(self.thickness)
+        lo = d.lo if isinstance(d, TexturedNumber) else d
+        if not (math.isfinite(lo) and lo >= 0):
             raise ValueError(f"coat thickness must be a finite number >= 0, got {self.thickness!r}")
         self.thickness = d
         if self.distribution == "smooth":
@@ -316,10 +322,11 @@ class Coat:
 
     def optical_depth(self, sp: ShadingPoint) -> np.ndarray:
         """α·d at the batch's wavelengths, (L, N)."""
-        return sp.spectrum(self.absorption_spectrum) * self.thickness
+        return sp.spectrum(self.absorption_spectrum) * sp.number(self.thickness)
 
     def describe(self) -> dict:
-        out = {"n": repr(self.n_spectrum), "thickness": self.thickness,
+        out = {"n": repr(self.n_spectrum),
+               "thickness": repr(self.thickness) if isinstance(self.thickness, TexturedNumber) else self.thickness,
                "absorption": repr(self.absorption_spectrum), "distribution": self.distribution}
         if self.exponent is not None:
             out["exponent"] = float(self.exponent)
@@ -503,7 +510,11 @@ class _Lanes:
 
     def point(self, wo_int: np.ndarray) -> ShadingPoint:
         sp = self.sp
-        return ShadingPoint(self.geo(sp.p), self.geo(sp.n_s), self.geo(sp.n_g), wo_int, self.lam, sp.mono)
+        # the base's textures see the same surface points (one per lane)
+        surface = sp.surface if sp.surface is None or not self.spectral else \
+            sp.surface.take(np.tile(np.arange(self.N), self.L))
+        return ShadingPoint(self.geo(sp.p), self.geo(sp.n_s), self.geo(sp.n_g), wo_int, self.lam, sp.mono,
+                            surface=surface)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -576,6 +587,9 @@ class WeidlichWilkie(BSDF):
                 base.exterior_n = self.coat.n_spectrum
             else:
                 lo, hi = _spectrum_range(self.coat.n_spectrum)
+                if isinstance(self.coat.n_spectrum, TexturedSpectrum):
+                    raise ValueError("a textured coat index needs a base without an exterior index (e.g. lambert), "
+                                     "or match_base_exterior=False")
                 if hi - lo > 1e-12 * hi:
                     raise ValueError("a dispersive coat index needs a base without a scalar exterior_n "
                                      "(or match_base_exterior=False)")
@@ -594,6 +608,8 @@ class WeidlichWilkie(BSDF):
                 raise ValueError(f"layer_cosine_fraction must be in [0, 1], got {layer_cosine_fraction!r}")
         self.w_c = w_c
         self.flags = self._layered_flags(base.flags)
+        self.varies_over_surface = base.varies_over_surface or any(
+            textured(c.n_spectrum, c.thickness, c.absorption_spectrum) for c in coats)
 
     @staticmethod
     def default_layer_cosine_fraction(base: BSDF) -> float:
@@ -916,7 +932,7 @@ class WeidlichWilkie(BSDF):
         ok = ok_i & ok_t & (cos_ti > 0)
         if not np.any(ok):
             return np.zeros(sp.n)
-        sp_b = ShadingPoint(sp.p, sp.n_s, sp.n_g, wo_t, sp.lam, sp.mono)
+        sp_b = ShadingPoint(sp.p, sp.n_s, sp.n_g, wo_t, sp.lam, sp.mono, surface=sp.surface)
         pb = self.base.pdf(sp_b, wi_t)
         jac = cos_i / (eta_ref * eta_ref * np.where(ok, cos_ti, 1.0))
         return np.where(ok, pb * jac, 0.0)
@@ -986,7 +1002,8 @@ class WeidlichWilkie(BSDF):
             ok_dir[sel] = local[2] > 0
         if np.any(pick_base & front & ok_t):
             sel = np.nonzero(pick_base & front & ok_t)[0]
-            sp_b = ShadingPoint(sp.p[:, sel], n[:, sel], sp.n_g[:, sel], wo_t[:, sel], sp.lam[:, sel], sp.mono)
+            sp_b = ShadingPoint(sp.p[:, sel], n[:, sel], sp.n_g[:, sel], wo_t[:, sel], sp.lam[:, sel], sp.mono,
+                                surface=None if sp.surface is None else sp.surface.take(sel))
             bs = self.base.sample(sp_b, u3[sel], u_dir[:, sel])
             c_t = dot(n[:, sel], bs.wi)
             w_out, _, ok_out = _refract_out(bs.wi, n[:, sel], c_t, eta_ref[sel])
@@ -998,7 +1015,9 @@ class WeidlichWilkie(BSDF):
                 dsel = np.nonzero(is_d & ok_b)[0]
                 Wd = self.base.delta_reflection(ShadingPoint(sp_b.p[:, dsel], sp_b.n_s[:, dsel],
                                                              sp_b.n_g[:, dsel], sp_b.wo[:, dsel],
-                                                             sp_b.lam[:, dsel], sp.mono))
+                                                             sp_b.lam[:, dsel], sp.mono,
+                                                             surface=None if sp_b.surface is None else
+                                                             sp_b.surface.take(dsel)))
                 if self.base.flags.is_delta_only or Wd is None:
                     pb = np.ones(dsel.size)
                 else:
@@ -1079,6 +1098,9 @@ COAT = ModelDeclaration(
                only_with=("distribution", ("beckmann",)),
                socket=Socket("Coat Roughness", "FLOAT", 0.0, 0.0, 5.0,
                              "Beckmann rms slope of the coat surface (0 = smooth)"))])
+
+
+COAT.per_point = frozenset({"n", "thickness", "absorption"})
 
 
 @COAT.builder

@@ -15,6 +15,7 @@ from embreex.mesh_construction import TriangleMesh
 from ..kernels.geometry import offset_origin as offset_origin_kernel, surface_attributes
 from ..scene.description import Scene
 from ..errors import SceneError
+from ..textures import SurfacePoints, VertexAttributes
 
 # Mitsuba 3's float32 ray epsilon: offsets scale with (1 + max|p_i|).
 RAY_EPSILON = 8.9e-5
@@ -71,6 +72,8 @@ class CompiledScene:
         self.tri_normal = cross / np.where(length > 0, length, 1.0)[:, None]
         self.scene_extent = float(np.abs(self.vertices).max()) if len(self.vertices) else 1.0
 
+        self.attributes = _vertex_attributes(scene.meshes, self.faces, len(self.vertices))
+
         self.embree = rtcs.EmbreeScene()
         TriangleMesh(self.embree, self.vertices.astype(np.float32), self.faces.astype(np.int32))
         # tri_emitter is filled in by the light set (area lights).
@@ -114,6 +117,41 @@ class CompiledScene:
         """
         return surface_attributes(self.faces, self.vertices, self.vertex_normals, self.tri_has_normals,
                                   self.tri_normal, self.any_vertex_normals, prim, u, v)
+
+
+def _vertex_attributes(meshes, faces: np.ndarray, n_vertices: int) -> VertexAttributes | None:
+    """UVs, colour attributes and tangents of all meshes in the merged vertex numbering (None if no
+    mesh has any): a mesh without UVs gets (0, 0), one without a colour attribute 0 (as Blender),
+    one without tangents 0 (then derived from its UVs)."""
+    names = sorted({name for mesh in meshes for name in mesh.colors})
+    has_tangents = any(mesh.tangents is not None for mesh in meshes)
+    if not names and not has_tangents and all(mesh.uv is None for mesh in meshes):
+        return None
+    uv = np.zeros((n_vertices, 2))
+    tangents = np.zeros((n_vertices, 4)) if has_tangents else None
+    layers = {name: np.zeros((n_vertices, max(np.shape(m.colors[name])[1] for m in meshes if name in m.colors)))
+              for name in names}
+    offset = 0
+    for mesh in meshes:
+        nv = len(mesh.vertices)
+        if mesh.uv is not None:
+            uv[offset:offset + nv] = mesh.uv
+        if mesh.tangents is not None:
+            tangents[offset:offset + nv] = mesh.tangents
+        for name, values in mesh.colors.items():
+            values = np.asarray(values, np.float64)
+            layers[name][offset:offset + nv, :values.shape[1]] = values
+        offset += nv
+    return VertexAttributes(faces, uv, layers, np.concatenate([np.asarray(m.vertices, np.float64) for m in meshes]),
+                            tangents)
+
+
+def surface_points(compiled: CompiledScene, prim: np.ndarray, u: np.ndarray, v: np.ndarray) -> SurfacePoints:
+    """The hits' handle on per-vertex attributes (UV, colours) for textured materials."""
+    attributes = compiled.attributes
+    if attributes is None:     # no mesh has attributes: UV (0, 0), colours 0 everywhere
+        attributes = compiled.attributes = VertexAttributes(compiled.faces, None, {}, compiled.vertices)
+    return SurfacePoints(attributes, prim, u, v)
 
 
 def offset_origin(p: np.ndarray, n_g: np.ndarray, w: np.ndarray) -> np.ndarray:

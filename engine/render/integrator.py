@@ -30,7 +30,7 @@ import numpy as np
 from ..materials.base import BSDF, BSDFFlags, MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
-from .accel import offset_origin
+from .accel import offset_origin, surface_points
 from ..kernels.transport import (add_light, throughput_times_stokes, update_abcs, update_depolarising,
                                  update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
@@ -134,6 +134,8 @@ class PathTracer:
         self.has_area_lights = compiled.has_area_lights     # once, not per bounce (scans every triangle)
         # materials shaded together (e.g. all RGB Lambert materials in one call)
         self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
+        # textured parameters need the hits' per-vertex attributes (UV, colours)
+        self.textured = any(m.varies_over_surface for m in self.materials)
         self.P = TRANSPORT_SIZES[settings.polarisation]
         self.mono = settings.spectral == "mono"
         self.n_lambda = 1 if self.mono else 4
@@ -248,6 +250,7 @@ class PathTracer:
             if n == 0:
                 break
             p, n_g, n_s = compiled.surface(prim, u, v)
+            hits_at = surface_points(compiled, prim, u, v) if self.textured else None
             wo = -d
             # Stokes frame of the arriving segment: x_T is already ⟂ d.
             mat = compiled.tri_material[prim]
@@ -271,7 +274,9 @@ class PathTracer:
                 bsdf = self.shaders[g]
                 sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
                                   gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
-                                  self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None)
+                                  self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None,
+                                  None if hits_at is None else hits_at.take(sel))
+                sp = bsdf.shading_point(sp)        # a normal/bump-mapped shading normal, else sp itself
                 rows = np.arange(n) if isinstance(sel, slice) else sel
                 xTm = gather(x_T, sel)
 
@@ -338,7 +343,8 @@ class PathTracer:
             value = self._emitted(light, lookup.take(sel)) * scale[None, :]
             sub = ShadingPoint(p, gather(sp.n_s, sel), gather(sp.n_g, sel), gather(sp.wo, sel), gather(sp.lam, sel),
                                sp.mono, sp.lookup.take(sel) if sp.lookup is not None else None,
-                               None if sp.material is None else gather(sp.material, sel))
+                               None if sp.material is None else gather(sp.material, sel),
+                               None if sp.surface is None else sp.surface.take(sel))
             m = sub.n
             cos_i = np.abs(dot(sub.n_s, wi))
             ok &= cos_i > 0

@@ -48,6 +48,7 @@ class Mesh:
     (flat shading).  ``material_ids`` index ``materials`` (names in
     Scene.materials) per face.  ``emission`` (a spectral radiance, or None)
     makes the mesh a one-sided area light emitting along its front side.
+    ``uv`` and ``colors`` are per-vertex attributes read by textured materials (engine.textures).
     """
 
     name: str
@@ -57,6 +58,13 @@ class Mesh:
     material_ids: np.ndarray
     normals: np.ndarray | None = None
     emission: object | None = None
+    #: per-vertex texture coordinates (V, 2) (u right, v up, as Blender's UV map), or None
+    uv: np.ndarray | None = None
+    #: per-vertex colour attributes by name: (V, 3) or (V, 4) linear values in [0, 1]
+    colors: dict = field(default_factory=dict)
+    #: per-vertex tangents (V, 4): xyz along +u, w = ±1 the handedness (bitangent = w·(n × t)), or
+    #: None (tangents are then derived from the UVs, per triangle)
+    tangents: np.ndarray | None = None
 
 
 @dataclass

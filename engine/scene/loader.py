@@ -23,6 +23,8 @@ import sys
 import numpy as np
 
 from ..materials.catalogue import MODELS
+from ..materials.normal_map import ShadingNormal
+from ..textures import parse_texture_input
 from .description import (Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
                                       RenderSettings, Scene, SpotLight)
 from ..errors import SceneError
@@ -337,44 +339,74 @@ def _check_layer_stack(d, field: str, materials: dict | None = None) -> None:
         level += 1
 
 
-def parse_material(d: dict, field: str, lookup=None, depth: int = 0):
+def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: str | None = None):
     """A BSDF from a material object, read through the model's declaration (engine.materials.parameters).
     ``lookup(name)`` resolves references to other materials (the base of a layered material may be
-    given inline or by name)."""
+    given inline or by name); texture image paths are relative to ``base_dir`` (the scene file's folder)."""
     if depth == 0:
         _check_layer_stack(d, field)
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     decl = MODELS[choice(_require(d, "type", field), f"{field}.type", tuple(MODELS))]
-    _check_keys(d, field, {"type", "note", "name"} | set(decl.names()))
+    _check_keys(d, field, {"type", "note", "name", "normal_map", "bump_map"} | set(decl.names()))
     parts = {}
     for p in decl.parameters:
         if p.kind == "coats":
             coats_in = _require(d, p.name, field)
             if not isinstance(coats_in, list) or not coats_in:
                 raise SceneError(f"{field}.{p.name}", "must be a non-empty list of coats (top coat first)")
-            parts[p.name] = [_parse_coat(c, f"{field}.{p.name}[{i}]", p.members) for i, c in enumerate(coats_in)]
+            parts[p.name] = [_parse_coat(c, f"{field}.{p.name}[{i}]", p.members, base_dir)
+                             for i, c in enumerate(coats_in)]
         elif p.kind == "material":
-            parts[p.name] = _parse_part(d.get(p.name, p.default), f"{field}.{p.name}", lookup, depth)
-    return decl.build(decl.values(d, field), **parts)
+            parts[p.name] = _parse_part(d.get(p.name, p.default), f"{field}.{p.name}", lookup, depth, base_dir)
+    bsdf = decl.build(decl.values(d, field, base_dir=base_dir), **parts)
+    if d.get("normal_map") is not None or d.get("bump_map") is not None:
+        bsdf = _shading_normal(bsdf, d, field, base_dir)
+    return bsdf
 
 
-def _parse_part(value, field, lookup, depth):
+def _shading_normal(bsdf, d: dict, field: str, base_dir):
+    """The material with a normal map and/or bump map (engine.materials.normal_map)."""
+    kw = {}
+    for key, extra in (("normal_map", {"strength": 1.0}), ("bump_map", {"strength": 1.0, "distance": 1.0})):
+        raw = d.get(key)
+        if raw is None:
+            continue
+        where = f"{field}.{key}"
+        if not isinstance(raw, dict) or "texture" not in raw:
+            raise SceneError(where, "must be an image texture object like {\"texture\": \"normal.png\"}")
+        raw = dict(raw)
+        values = {name: number(raw.pop(name, default), f"{where}.{name}", 0.0) for name, default in extra.items()}
+        raw.setdefault("color_space", "Non-Color")        # normal and height maps are data
+        source = parse_texture_input(raw, where, base_dir)
+        if key == "normal_map":
+            kw.update(normal_map=source, normal_strength=values["strength"])
+        else:
+            kw.update(bump_map=source, bump_distance=values["distance"], bump_strength=values["strength"])
+    return ShadingNormal(bsdf, **kw)
+
+
+def _parse_part(value, field, lookup, depth, base_dir=None):
     """A nested material (e.g. the base under a coat): inline or a reference by name."""
     if depth > 16:
         raise SceneError(field, "layered materials nest more than 16 levels deep")
     if isinstance(value, str):
         if lookup is None:
             raise SceneError(field, "material references are not available here; give it inline")
-        return lookup(value, field)
-    return parse_material(value, field, lookup, depth + 1)
+        part = lookup(value, field)
+    else:
+        part = parse_material(value, field, lookup, depth + 1, base_dir)
+    if isinstance(part, ShadingNormal):
+        raise SceneError(field, "a material under a coat cannot have its own normal or bump map: give the map to "
+                                "the layered material")
+    return part
 
 
-def _parse_coat(c, field, coat):
+def _parse_coat(c, field, coat, base_dir=None):
     if not isinstance(c, dict):
         raise SceneError(field, "must be an object like {\"n\": 1.5, \"distribution\": \"smooth\"}")
     _check_keys(c, field, {"note"} | set(coat.names()))
-    return coat.build(coat.values(c, field))
+    return coat.build(coat.values(c, field, base_dir=base_dir))
 
 
 def _parse_emission(d, field: str):
@@ -410,7 +442,8 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
     name = str(d.get("name", field))
     allowed = {"name", "shape", "material", "materials", "emission", "transform", "note", "normal"}
     per_shape = {"mesh": {"file", "smooth"}, "sphere": {"center", "radius", "subdivisions"},
-                 "quad": {"vertices"}, "triangles": {"vertices", "faces", "normals", "material_ids"}}
+                 "quad": {"vertices", "uv"},
+                 "triangles": {"vertices", "faces", "normals", "material_ids", "uv", "colors", "tangents"}}
     _check_keys(d, field, allowed | per_shape[shape])
 
     group_names, ungrouped_line = None, None
@@ -435,9 +468,24 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
         data = quad(*[vec3(v, f"{field}.vertices[{i}]") for i, v in enumerate(verts)])
     else:
         data = _parse_triangles(d, field)
+    # per-vertex attributes (transforms keep the vertex order, so they stay valid)
+    uv = colors = tangents = None
+    if shape == "quad":
+        uv = _vertex_uv(d.get("uv", QUAD_UV), f"{field}.uv", 4)
+    elif shape == "triangles":
+        uv = None if d.get("uv") is None else _vertex_uv(d["uv"], f"{field}.uv", len(data.vertices))
+        colors = _vertex_colors(d.get("colors", {}), f"{field}.colors", len(data.vertices))
+        if d.get("tangents") is not None:
+            tangents = _vertex_tangents(d["tangents"], f"{field}.tangents", len(data.vertices))
 
     if "transform" in d:
-        data = transform_mesh(data, parse_transform(d["transform"], f"{field}.transform"))
+        matrix = parse_transform(d["transform"], f"{field}.transform")
+        data = transform_mesh(data, matrix)
+        if tangents is not None:      # directions: the linear part; a mirror flips the handedness
+            a = np.asarray(matrix, np.float64)[:3, :3]
+            xyz = tangents[:, :3] @ a.T
+            w = tangents[:, 3] * (1.0 if np.linalg.det(a) > 0 else -1.0)
+            tangents = np.column_stack((xyz / np.linalg.norm(xyz, axis=1)[:, None], w))
 
     faces = np.asarray(data.faces, dtype=np.int64)
     n_faces = len(faces)
@@ -485,7 +533,60 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
     emission = _parse_emission(d["emission"], f"{field}.emission") if d.get("emission") is not None else None
     return Mesh(name=name, vertices=np.asarray(data.vertices, dtype=np.float64), faces=faces,
                 materials=list(mat_list), material_ids=ids.astype(np.int32), normals=data.vertex_normals,
-                emission=emission)
+                emission=emission, uv=uv, colors=colors or {}, tangents=tangents)
+
+
+#: Texture coordinates of a quad's corners p0..p3 (the unit square, as a Blender plane's UV map).
+QUAD_UV = [[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]
+
+
+def _float_array(value, field, what, widths=(2, 3, 4)):
+    """A (rows, width) float64 array, numbers only (strings and booleans refused, ragged rows named);
+    the width is the first row's when it is one of ``widths``."""
+    first = value[0] if isinstance(value, (list, tuple)) and value else None
+    if isinstance(value, np.ndarray):
+        columns = value.shape[1] if value.ndim == 2 and value.shape[1] in widths else widths[0]
+    else:
+        columns = len(first) if isinstance(first, (list, tuple)) and len(first) in widths else widths[0]
+    return _number_array(value, field, what, columns=columns)
+
+
+def _vertex_uv(value, field, n_vertices):
+    uv = _float_array(value, field, "one [u, v] per vertex", widths=(2,))
+    if uv.shape != (n_vertices, 2) or not np.all(np.isfinite(uv)):
+        raise SceneError(field, f"must hold one finite [u, v] per vertex ({n_vertices})")
+    return uv
+
+
+def _vertex_tangents(value, field, n_vertices):
+    """(V, 4): [tx, ty, tz] (handedness +1) or [tx, ty, tz, ±1] per vertex, xyz normalised."""
+    t = _float_array(value, field, "one [tx, ty, tz] or [tx, ty, tz, w] per vertex")
+    if t.ndim != 2 or t.shape[0] != n_vertices or t.shape[1] not in (3, 4) or not np.all(np.isfinite(t)):
+        raise SceneError(field, f"must hold one finite [tx, ty, tz] or [tx, ty, tz, w] per vertex ({n_vertices})")
+    if t.shape[1] == 3:
+        t = np.column_stack((t, np.ones(n_vertices)))
+    length = np.linalg.norm(t[:, :3], axis=1)
+    if not np.all(length > 0):
+        raise SceneError(field, "tangents must be non-zero vectors")
+    if not np.all(np.abs(t[:, 3]) == 1):
+        raise SceneError(field, "the handedness w must be +1 or -1")
+    t[:, :3] /= length[:, None]
+    return t
+
+
+def _vertex_colors(value, field, n_vertices):
+    if not isinstance(value, dict):
+        raise SceneError(field, "must be an object mapping attribute names to one [r, g, b] (or [r, g, b, a]) "
+                                "per vertex")
+    out = {}
+    for name, col in value.items():
+        c = _float_array(col, f"{field}.{name}", "one [r, g, b] or [r, g, b, a] per vertex")
+        if c.ndim != 2 or c.shape[0] != n_vertices or c.shape[1] not in (3, 4):
+            raise SceneError(f"{field}.{name}", f"must hold one [r, g, b] or [r, g, b, a] per vertex ({n_vertices})")
+        if not np.all(np.isfinite(c)) or c.min() < 0 or c.max() > 1:
+            raise SceneError(f"{field}.{name}", "values must be linear colours in [0, 1]")
+        out[name] = c
+    return out
 
 
 def _is_json_number(x) -> bool:
@@ -642,7 +743,7 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
             raise SceneError(field, f"material {name!r} refers to itself through its bases")
         if name not in materials:
             resolving.append(name)
-            materials[name] = parse_material(mats_in[name], f"materials.{name}", lookup)
+            materials[name] = parse_material(mats_in[name], f"materials.{name}", lookup, base_dir=base_dir)
             resolving.pop()
         return materials[name]
 

@@ -1,0 +1,130 @@
+"""Shading normals from textures: tangent-space normal maps and bump (height) maps.
+
+:class:`ShadingNormal` wraps any material.  The integrator evaluates every material at
+``bsdf.shading_point(sp)``; for this wrapper that is ``sp`` with the shading normal n_s replaced by
+the mapped one, so the model's frames, its cosines and the integrator's |n_s·ω_i| all use the same
+normal (polarisation frames follow it consistently).  The geometric normal n_g is left alone: it
+offsets ray origins and decides on which side of the actual surface a direction lies.
+
+- Normal map (Blender's Normal Map node, tangent space, OpenGL convention +Y = +v): a Non-Color
+  RGB texel c gives n_t = (2c − 1); n_m = normalise(n_t.x·T + n_t.y·B + n_t.z·n_s) with the tangent
+  frame of engine.textures.surface.SurfacePoints.tangent_frame; ``strength`` s blends
+  n = normalise(n_s + s·(n_m − n_s)) (s = 1: the map's normal).
+- Bump map (height h in scene units × ``distance``): h_u, h_v by central differences one texel
+  apart; ∂p/∂u' = ∂p/∂u + d·h_u·n_s, ∂p/∂v' = ∂p/∂v + d·h_v·n_s (pbrt's bump mapping without the
+  ∂n terms), n_b = normalise(∂p/∂u' × ∂p/∂v') on the side of n_s, blended by ``strength`` as above.
+
+Light leaks: a tilted shading normal accepts directions below the geometric surface (a reflected
+ray that would pass through it) or above it for a transmitted one.  The wrapper keeps a direction
+only where the geometric normal agrees with the shading normal on reflection vs transmission:
+sign((ω_i·n_g)(ω_o·n_g)) = sign((ω_i·n_s)(ω_o·n_s)) (as pbrt's BSDF::f); elsewhere f = 0 and
+samples are invalid.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import BSDF, BSDFSample, MuellerValue, ShadingPoint
+from ..textures import ImageTexture, TextureInput
+from ..vec3 import dot, reflect
+
+
+def _normalise(v: np.ndarray) -> np.ndarray:
+    return v / np.sqrt(dot(v, v))[None, :]
+
+
+class ShadingNormal(BSDF):
+    """``base`` with its shading normal from a normal map and/or a bump map (see the module docstring)."""
+
+    varies_over_surface = True
+
+    def __init__(self, base: BSDF, normal_map: TextureInput | None = None, normal_strength: float = 1.0,
+                 bump_map: TextureInput | None = None, bump_distance: float = 1.0, bump_strength: float = 1.0):
+        if normal_map is None and bump_map is None:
+            raise ValueError("ShadingNormal needs a normal map or a bump map")
+        if bump_map is not None and not isinstance(bump_map.texture, ImageTexture):
+            raise ValueError("a bump map must be an image texture")
+        self.base = base
+        self.normal_map, self.normal_strength = normal_map, float(normal_strength)
+        self.bump_map, self.bump_distance, self.bump_strength = bump_map, float(bump_distance), float(bump_strength)
+        self.flags = base.flags
+        self.name = base.name
+
+    # --- the shading normal ----------------------------------------------------------------------
+
+    def shading_normal(self, sp: ShadingPoint) -> np.ndarray:
+        """The mapped shading normal (3, N) at the points."""
+        points = sp.surface_points()
+        n = sp.n_s
+        if self.bump_map is not None:
+            n = self._bumped(points, n)
+        if self.normal_map is not None:
+            c = self.normal_map.rgb(points)
+            t, b = points.tangent_frame(n)
+            x, y, z = 2.0 * c[0] - 1.0, 2.0 * c[1] - 1.0, 2.0 * c[2] - 1.0
+            mapped = _normalise(t * x[None, :] + b * y[None, :] + n * z[None, :])
+            n = _normalise(n + self.normal_strength * (mapped - n))
+        return n
+
+    def _bumped(self, points, n: np.ndarray) -> np.ndarray:
+        tex = self.bump_map.texture
+        uv = points.uv()
+        du, dv = 1.0 / tex.width, 1.0 / tex.height
+
+        def height(shift_u, shift_v):
+            shifted = uv + np.array([[shift_u], [shift_v]])
+            return self.bump_map.number_at_uv(shifted)
+        h_u = (height(du, 0.0) - height(-du, 0.0)) / (2.0 * du)
+        h_v = (height(0.0, dv) - height(0.0, -dv)) / (2.0 * dv)
+        dpdu, dpdv, ok = points.position_derivatives()
+        d = self.bump_distance
+        pu = dpdu + n * (d * h_u)[None, :]
+        pv = dpdv + n * (d * h_v)[None, :]
+        nb = np.cross(pu.T, pv.T).T
+        length = np.sqrt(dot(nb, nb))
+        ok = ok & (length > 0)
+        nb = np.where(ok[None, :], nb / np.where(ok, length, 1.0)[None, :], n)
+        nb = np.where((dot(nb, n) < 0)[None, :], -nb, nb)
+        return _normalise(n + self.bump_strength * (nb - n))
+
+    def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
+        return ShadingPoint(sp.p, self.shading_normal(sp), sp.n_g, sp.wo, sp.lam, sp.mono, sp.lookup, sp.material,
+                            sp.surface)
+
+    # --- the geometric-side guard ----------------------------------------------------------------
+
+    @staticmethod
+    def geometric_agreement(sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        """(N,) True where n_g and n_s agree on whether (ω_i, ω_o) is a reflection or a transmission."""
+        g = dot(wi, sp.n_g) * dot(sp.wo, sp.n_g)
+        s = dot(wi, sp.n_s) * dot(sp.wo, sp.n_s)
+        return (g != 0) & ((g > 0) == (s > 0))
+
+    # --- BSDF interface (at the mapped shading point) ---------------------------------------------
+
+    def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
+        return self.base.eval(sp, wi).masked(self.geometric_agreement(sp, wi))
+
+    def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        return self.base.pdf(sp, wi)
+
+    def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        bs = self.base.sample(sp, u_lobe, u_dir)
+        keep = self.geometric_agreement(sp, bs.wi)
+        return BSDFSample(wi=bs.wi, weight=bs.weight.masked(keep), pdf=np.where(keep, bs.pdf, 0.0),
+                          is_delta=bs.is_delta, valid=bs.valid & keep, eta_sq=bs.eta_sq)
+
+    def delta_reflection(self, sp: ShadingPoint):
+        value = self.base.delta_reflection(sp)
+        if value is None:
+            return None
+        return value.masked(self.geometric_agreement(sp, reflect(sp.wo, sp.n_s)))
+
+    def describe(self) -> dict:
+        out = dict(self.base.describe())
+        if self.normal_map is not None:
+            out["normal_map"] = f"{self.normal_map!r}, strength {self.normal_strength:g}"
+        if self.bump_map is not None:
+            out["bump_map"] = f"{self.bump_map!r}, distance {self.bump_distance:g}, strength {self.bump_strength:g}"
+        return out

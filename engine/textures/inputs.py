@@ -1,0 +1,210 @@
+"""Material parameters that vary over a surface: a texture plus how its values become the parameter.
+
+Scene files give a texturable parameter either a constant (as before) or an object::
+
+    {"texture": "wood.png", "color_space": "sRGB", "interpolation": "Linear", "extension": "REPEAT",
+     "channel": "R", "scale": 1.0, "offset": 0.0}
+    {"vertex_color": "Col", "scale": 1.0}
+
+(paths relative to the scene file).  The parameter's value at a point is offset + scale·t, where t
+is the texture's value: for a spectrum its RGB (a 1-channel texture is grey), upsampled per point
+exactly as a constant [r, g, b] (engine.spectral, Mallett & Yuksel); for a number one channel
+(``channel``; default: the only channel of a grey image, else the Rec. 709 luminance, which is
+Blender's colour-to-number conversion).
+
+:class:`TexturedSpectrum` is a Spectrum that can only be evaluated at surface points
+(``ShadingPoint.spectrum`` does that); :class:`TexturedNumber` stands for a number
+(``ShadingPoint.number``).  Both keep the bounds of every value they can take, which the scene
+loader checks against the parameter's declared range.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .image import COLOR_SPACES, default_color_space, read_image
+from .texture import EXTENSIONS, INTERPOLATIONS, ImageTexture, Texture, VertexColour
+from ..errors import SceneError
+from ..spectral import Spectrum
+from ..spectral.cie import LUMINANCE_WEIGHTS, luminance
+from ..spectral.spectrum import basis_rgb
+
+CHANNELS = ("R", "G", "B", "A", "luminance")
+_KEYS_IMAGE = {"texture", "color_space", "interpolation", "extension", "channel", "scale", "offset", "note"}
+_KEYS_VERTEX = {"vertex_color", "channel", "scale", "offset", "note"}
+
+
+class TextureInput:
+    """A texture and the map from its values to a parameter: offset + scale·(channel or RGB)."""
+
+    def __init__(self, texture: Texture, channel: str | None = None, scale: float = 1.0, offset: float = 0.0):
+        self.texture, self.channel, self.scale, self.offset = texture, channel, float(scale), float(offset)
+
+    def __repr__(self):
+        extra = "" if self.channel is None else f", channel={self.channel!r}"
+        return f"TextureInput({self.texture!r}{extra}, scale={self.scale:g}, offset={self.offset:g})"
+
+    def _map(self, t):
+        if self.scale == 1.0 and self.offset == 0.0:
+            return t
+        return self.offset + self.scale * t
+
+    def _grey(self) -> bool:
+        return self.texture.channels <= 2
+
+    def _scalar_of(self, values: np.ndarray) -> np.ndarray:
+        """One channel (…) of texture values (C, …) per ``channel``."""
+        ch = self.channel
+        if ch is None:
+            ch = "R" if self._grey() else "luminance"
+        if ch == "luminance":
+            if self._grey():
+                return values[0]
+            w = LUMINANCE_WEIGHTS
+            return w[0] * values[0] + w[1] * values[1] + w[2] * values[2]
+        index = "RGBA".index(ch)
+        if self._grey():      # grey (+ alpha) images: R = G = B = grey
+            index = 0 if index < 3 else 1
+        return values[index]
+
+    def number(self, points) -> np.ndarray:
+        """The parameter (N,) at the points."""
+        return points.memo((self, "number"), lambda: self._map(self._scalar_of(self.texture.eval(points))))
+
+    def number_at_uv(self, uv: np.ndarray) -> np.ndarray:
+        """The parameter (N,) at texture coordinates uv (2, N) (image textures: e.g. a bump map's
+        heights at shifted coordinates)."""
+        return self._map(self._scalar_of(self.texture.lookup(uv)))
+
+    def rgb(self, points) -> np.ndarray:
+        """The parameter as linear RGB (3, N) at the points (grey textures and ``channel``: r = g = b)."""
+        def compute():
+            t = self.texture.eval(points)
+            if self.channel is not None or self._grey():
+                s = self._scalar_of(t)
+                return self._map(np.stack((s, s, s)))
+            return self._map(t[:3])
+        return points.memo((self, "rgb"), compute)
+
+    def bounds(self, rgb: bool) -> tuple[float, float]:
+        """(lo, hi) over every value the parameter can take (from the texture's per-channel bounds;
+        a channel choice and the luminance are monotone in them, the weights being ≥ 0)."""
+        lo, hi = (np.asarray(v, np.float64) for v in self.texture.value_range())
+        if rgb and self.channel is None and not self._grey():
+            lo, hi = float(np.min(lo[:3])), float(np.max(hi[:3]))
+        else:
+            lo, hi = float(self._scalar_of(lo[:, None])[0]), float(self._scalar_of(hi[:, None])[0])
+        a, b = self.offset + self.scale * lo, self.offset + self.scale * hi
+        return min(a, b), max(a, b)
+
+
+class TexturedNumber:
+    """A number parameter that varies over the surface (see ``ShadingPoint.number``)."""
+
+    def __init__(self, source: TextureInput):
+        self.source = source
+        self.lo, self.hi = source.bounds(rgb=False)
+
+    def at(self, points) -> np.ndarray:
+        return self.source.number(points)
+
+    def __float__(self):
+        raise TypeError("a textured parameter has no single value: evaluate it at surface points")
+
+    def as_spectrum(self, kind: str = "unbounded") -> TexturedSpectrum:
+        """The same values as a grey (λ-independent) textured spectrum (e.g. a coat's real index)."""
+        src = self.source
+        channel = src.channel or ("R" if src._grey() else "luminance")
+        return TexturedSpectrum(TextureInput(src.texture, channel, src.scale, src.offset), kind)
+
+    def __repr__(self):
+        return f"TexturedNumber({self.source!r})"
+
+
+class TexturedSpectrum(Spectrum):
+    """A spectrum parameter given by an RGB texture: per point the RGB upsampling of a constant
+    [r, g, b] with the texel's values (r = g = b gives exactly that constant)."""
+
+    is_constant = False
+
+    def __init__(self, source: TextureInput, kind: str = "reflectance"):
+        self.source, self.kind = source, kind
+        self.lo, self.hi = source.bounds(rgb=True)
+
+    def __repr__(self):
+        return f"TexturedSpectrum({self.source!r})"
+
+    def _eval(self, lam):
+        raise TypeError("a textured spectrum varies over the surface: evaluate it with ShadingPoint.spectrum")
+
+    @property
+    def mono_value(self) -> float:
+        raise TypeError("a textured spectrum varies over the surface: it has no single mono value")
+
+    def linear_srgb(self) -> np.ndarray:
+        raise TypeError("a textured spectrum varies over the surface: it has no single colour")
+
+    def at(self, points, lam: np.ndarray, mono: bool, basis: np.ndarray | None = None) -> np.ndarray:
+        """Values (L, N) at the points and their wavelengths ``lam`` (L, N) (mono: the luminance)."""
+        def compute():
+            rgb = self.source.rgb(points)
+            if mono:
+                return np.broadcast_to(luminance(rgb.T)[None, :], lam.shape).copy()
+            b = basis if basis is not None else basis_rgb(lam)
+            value = rgb[0][None, :] * b[0] + rgb[1][None, :] * b[1] + rgb[2][None, :] * b[2]
+            grey = (rgb[0] == rgb[1]) & (rgb[1] == rgb[2])
+            return np.where(grey[None, :], rgb[0][None, :], value)
+        return points.memo((self, mono, lam.shape[0]), compute)
+
+
+def textured(*values) -> bool:
+    """True if any of the values is a texture-driven parameter."""
+    return any(isinstance(v, (TexturedNumber, TexturedSpectrum)) for v in values)
+
+
+def parse_texture_input(raw: dict, field: str, base_dir: str | None) -> TextureInput:
+    """A TextureInput from a scene-file object (see the module docstring); errors name ``field.key``."""
+    is_image = "texture" in raw
+    if is_image == ("vertex_color" in raw):
+        raise SceneError(field, "a texture object needs exactly one of 'texture' (an image file) or "
+                                "'vertex_color' (a colour attribute name)")
+    allowed = _KEYS_IMAGE if is_image else _KEYS_VERTEX
+    extra = sorted(set(raw) - allowed)
+    if extra:
+        raise SceneError(f"{field}.{extra[0]}", f"unknown key (allowed: {', '.join(sorted(allowed))})")
+
+    def num(key, default):
+        v = raw.get(key, default)
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+            raise SceneError(f"{field}.{key}", f"must be a finite number, got {v!r}")
+        return float(v)
+
+    channel = raw.get("channel")
+    if channel is not None and channel not in CHANNELS:
+        raise SceneError(f"{field}.channel", f"must be one of {', '.join(CHANNELS)}, got {channel!r}")
+    if is_image:
+        path = raw["texture"]
+        if not isinstance(path, str) or not path:
+            raise SceneError(f"{field}.texture", "must be an image file path (relative to the scene file)")
+        full = path if os.path.isabs(path) else os.path.join(base_dir or ".", path)
+        space = raw.get("color_space", default_color_space(path))
+        if space not in COLOR_SPACES:
+            raise SceneError(f"{field}.color_space", f"must be one of {', '.join(COLOR_SPACES)}, got {space!r}")
+        interp = raw.get("interpolation", "Linear")
+        if interp not in INTERPOLATIONS:
+            raise SceneError(f"{field}.interpolation", f"must be one of {', '.join(INTERPOLATIONS)}, got {interp!r}")
+        ext = raw.get("extension", "REPEAT")
+        if ext not in EXTENSIONS:
+            raise SceneError(f"{field}.extension", f"must be one of {', '.join(EXTENSIONS)}, got {ext!r}")
+        pixels = read_image(full, space, f"{field}.texture")
+        texture = ImageTexture(pixels, interp, ext, name=path, field=field)
+        if channel == "A" and texture.channels not in (2, 4):
+            raise SceneError(f"{field}.channel", f"image {path!r} has no alpha channel")
+    else:
+        layer = raw["vertex_color"]
+        if not isinstance(layer, str) or not layer:
+            raise SceneError(f"{field}.vertex_color", "must be the name of a colour attribute of the mesh")
+        texture = VertexColour(layer, 4 if channel == "A" else 3)
+    return TextureInput(texture, channel, num("scale", 1.0), num("offset", 0.0))
