@@ -132,7 +132,8 @@ def _render(args) -> int:
         se = film.stderr_luminance()
         for i in range(4):
             extra[f"S{i}.Y.stderr"] = se[i].astype("float32")
-    write_stokes_exr(out, result.stokes(), metadata=meta, extra=extra)
+    write_stokes_exr(out, result.stokes(), metadata=meta, extra=extra,
+                     alpha=film.alpha() if film.has_alpha else None)
     written = [out]
     if not args.no_previews:
         written += write_previews(os.path.splitext(out)[0], result.stokes(), exposure=args.exposure)
