@@ -1,0 +1,230 @@
+"""Camera, visibility, alpha and geometry of Blender scenes: Polar against Cycles (bpy ships it).
+
+Small diffuse scenes rendered by both with a box pixel filter (Cycles' default is Blackman–Harris
+1.5 px); Polar's side goes through the exporter (`export_scene`) and, for alpha, through the
+render engine's Combined pass.
+"""
+
+import math
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from tests.blender_support import (add_camera, add_plane, add_sphere, empty_scene, load_addon,  # noqa: E402
+                                   read_multilayer, render_to_exr, white_world)
+
+LUMINANCE = np.array([0.2126, 0.7152, 0.0722])
+
+
+@pytest.fixture(scope="module")
+def addon():
+    return load_addon()
+
+
+def diffuse(name, albedo):
+    mat = bpy.data.materials.new(name)
+    bsdf = mat.node_tree.nodes["Principled BSDF"]
+    out = mat.node_tree.nodes["Material Output"]
+    node = mat.node_tree.nodes.new("ShaderNodeBsdfDiffuse")
+    node.inputs["Color"].default_value = (albedo, albedo, albedo, 1.0)
+    mat.node_tree.nodes.remove(bsdf)
+    mat.node_tree.links.new(node.outputs["BSDF"], out.inputs["Surface"])
+    return mat
+
+
+def cycles(scene, path, samples):
+    """Combined pass (H, W, 4) of a Cycles render of ``scene`` (box filter, no denoising/clamping)."""
+    engine = scene.render.engine
+    scene.render.engine = "CYCLES"
+    c = scene.cycles
+    c.device, c.samples, c.seed = "CPU", samples, 1
+    c.use_denoising = False
+    c.use_adaptive_sampling = False
+    c.pixel_filter_type = "BOX"
+    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
+    c.max_bounces = c.diffuse_bounces = scene.polar.max_bounces
+    try:
+        return read_multilayer(render_to_exr(scene, path))["Combined"]
+    finally:
+        scene.render.engine = engine
+
+
+def polar(scene, spp):
+    """(luminance S0 (H, W), its standard error (H, W), export warnings) through the exporter."""
+    from polar_render.engine.render.renderer import Renderer
+    from polar_render.polar_addon.engine import engine_settings
+    from polar_render.polar_addon.export.scene import export_scene
+    W, H = scene.render.resolution_x, scene.render.resolution_y
+    settings = engine_settings(scene)
+    settings.spp = spp
+    exported, warnings = export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, W, H, settings)
+    result = Renderer(exported).render(settings)
+    return result.stokes_luminance()[0], result.film.stderr_luminance()[0], warnings
+
+
+def blocks(img, n):
+    """Means over an n × n grid of blocks, (n, n)."""
+    H, W = img.shape
+    return img[:H // n * n, :W // n * n].reshape(n, H // n, n, W // n).mean(axis=(1, 3))
+
+
+def assert_regions_agree(ours, se, theirs, n):
+    """Block means within 4 standard errors (ours, and the same again for Cycles) + 1 %."""
+    bo, bt = blocks(ours, n), blocks(theirs, n)
+    H, W = ours.shape
+    per = (H // n) * (W // n)
+    se_block = np.sqrt(blocks(se ** 2, n) * per) / per
+    tol = 4 * np.sqrt(2) * se_block + 0.01 * np.abs(bt) + 1e-4
+    assert (np.abs(bo - bt) <= tol).all(), (bo, bt, tol)
+
+
+def edge_width(img):
+    """10–90 % width (px) of the dark→bright step along x, from the row-averaged profile."""
+    prof = img.mean(axis=0)
+    lo, hi = prof.min(), prof.max()
+    x = np.arange(prof.size) + 0.5
+
+    def cross(level):
+        v = lo + level * (hi - lo)
+        i = int(np.nonzero(prof >= v)[0][0])
+        return x[i - 1] + (v - prof[i - 1]) / (prof[i] - prof[i - 1])
+    return cross(0.9) - cross(0.1)
+
+
+def dof_scene(fstop):
+    """A black card covering the left half of the view, 8 m away, against a white sky; focus 1 m."""
+    scene = empty_scene(64, 24, 64)
+    white_world(scene)
+    cam = add_camera(scene, (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), lens=100.0)
+    cam.data.dof.use_dof = True
+    cam.data.dof.aperture_fstop = fstop
+    cam.data.dof.focus_distance = 1.0
+    card = add_plane(20.0, diffuse("Black", 0.0), location=(-10.0, 0.0, -8.0))
+    card.name = "Card"
+    return scene
+
+
+def test_depth_of_field_matches_cycles(addon, tmp_path):
+    scene = dof_scene(1.0)
+    theirs = np.einsum("hwc,c->hw", cycles(scene, str(tmp_path / "dof_cycles"), 128)[..., :3], LUMINANCE)
+    ours, se, warnings = polar(scene, 128)
+    assert warnings == []
+    assert_regions_agree(ours, se, theirs, 4)
+    # thin lens: CoC on the focus plane 2R·|z − F|/z, R = 50 mm / 2 = 25 mm·2 (100 mm lens at f/1)
+    w_ours, w_theirs = edge_width(ours), edge_width(theirs)
+    assert w_ours == pytest.approx(w_theirs, rel=0.15)
+    coc_px = 2 * 0.05 * (8 - 1) / 8 / (2 * 1.0 * 18 / 100) * 64
+    assert w_theirs > 0.4 * coc_px                    # really blurred (a sharp edge is < 1 px wide)
+
+
+def test_film_transparent_alpha_matches_cycles(addon, tmp_path):
+    scene = empty_scene(48, 32, 64)
+    white_world(scene)
+    add_camera(scene, (0.0, -6.0, 0.0), (math.pi / 2, 0.0, 0.0))
+    add_sphere(1.0, (0.0, 0.0, 0.0), diffuse("Grey", 0.5))
+    scene.render.film_transparent = True
+    theirs = cycles(scene, str(tmp_path / "alpha_cycles"), 64)
+    ours = read_multilayer(render_to_exr(scene, str(tmp_path / "alpha_polar")))["Combined"]
+    a_ours, a_theirs = ours[..., 3], theirs[..., 3]
+    assert np.allclose(blocks(a_ours, 8), blocks(a_theirs, 8), atol=0.02)
+    sky = a_theirs == 0
+    # (pixels on the silhouette may differ by a few samples: the renderers jitter differently)
+    assert sky.sum() > 0.5 * sky.size and (a_ours[sky] == 0).mean() > 0.97 and a_ours[sky].max() < 0.25
+    assert np.allclose(ours[a_ours == 0][:, :3], 0) and np.allclose(theirs[sky][:, :3], 0)   # background black
+
+
+def visibility_scene():
+    scene = empty_scene(48, 32, 64)
+    add_camera(scene, (0.0, -7.0, 2.5), (math.radians(75), 0.0, 0.0))
+    add_plane(20.0, diffuse("Floor", 0.8))
+    ball = add_sphere(1.0, (0.0, 0.0, 1.0), diffuse("Ball", 0.8))
+    ball.name = "Ball"
+    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+    sun.data.energy = 3.0
+    sun.data.angle = 0.0
+    sun.rotation_euler = (math.radians(30), 0.0, math.radians(40))
+    scene.collection.objects.link(sun)
+    return scene, ball
+
+
+@pytest.mark.parametrize("flag", ["visible_camera", "visible_shadow"])
+def test_ray_visibility_matches_cycles(addon, tmp_path, flag):
+    scene, ball = visibility_scene()
+    setattr(ball, flag, False)
+    theirs = np.einsum("hwc,c->hw", cycles(scene, str(tmp_path / f"{flag}_cycles"), 128)[..., :3], LUMINANCE)
+    ours, se, warnings = polar(scene, 128)
+    assert warnings == []
+    assert_regions_agree(ours, se, theirs, 4)
+
+
+def _gn(obj, build):
+    mod = obj.modifiers.new("GN", "NODES")
+    tree = bpy.data.node_groups.new("GN " + obj.name, "GeometryNodeTree")
+    tree.interface.new_socket("Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    tree.interface.new_socket("Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    mod.node_group = tree
+    out = tree.nodes.new("NodeGroupOutput")
+    tree.links.new(build(tree).outputs[0], out.inputs[0])
+
+
+def test_real_file_geometry_renders_with_exact_warnings(addon, tmp_path):
+    scene = empty_scene(48, 36, 2)
+    white_world(scene)
+    add_camera(scene, (0.0, -12.0, 3.0), (math.radians(80), 0.0, 0.0))
+    white = diffuse("White", 0.8)
+    # geometry-nodes curve (not rendered by Cycles either) and point cloud
+    line = bpy.data.objects.new("GN Curve", bpy.data.meshes.new("empty1"))
+    scene.collection.objects.link(line)
+    _gn(line, lambda t: t.nodes.new("GeometryNodeCurvePrimitiveLine"))
+    cloud = bpy.data.objects.new("GN Points", bpy.data.meshes.new("empty2"))
+    scene.collection.objects.link(cloud)
+
+    def points(t):
+        n = t.nodes.new("GeometryNodePoints")
+        n.inputs["Count"].default_value = 20
+        n.inputs["Radius"].default_value = 0.1
+        return n
+    _gn(cloud, points)
+    # hair curves, a bevelled curve, text, a metaball, modifiers and collection instances
+    hair = bpy.data.hair_curves.new("Hair")
+    hair.add_curves([4, 4])
+    hair.position_data.foreach_set("vector", np.array([[0, 0, 0], [0, 0, 0.5], [0.1, 0, 1], [0.2, 0, 1.5],
+                                                       [1, 0, 0], [1, 0, 0.5], [1.1, 0, 1], [1.2, 0, 1.5]],
+                                                      np.float32).ravel())
+    scene.collection.objects.link(bpy.data.objects.new("Hair", hair))
+    bpy.ops.curve.primitive_bezier_curve_add(location=(2.5, 0.0, 1.0))
+    bpy.context.object.data.bevel_depth = 0.1
+    bpy.ops.object.text_add(location=(-3.0, 0.0, 0.0), rotation=(math.pi / 2, 0, 0))
+    bpy.ops.object.metaball_add(location=(0.0, 0.0, 3.0))
+    bpy.ops.mesh.primitive_cube_add(size=0.5, location=(-1.5, 0.0, 2.0))
+    cube = bpy.context.object
+    cube.data.materials.append(white)
+    cube.modifiers.new("Subdivision", "SUBSURF")
+    cube.modifiers.new("Array", "ARRAY").count = 3
+    coll = bpy.data.collections.new("Props")
+    coll.objects.link(bpy.data.objects.new("Prop", cube.data))
+    for i in range(3):
+        inst = bpy.data.objects.new(f"Instance {i}", None)
+        inst.instance_type = "COLLECTION"
+        inst.instance_collection = coll
+        inst.location = (i - 1.0, 2.0, 0.0)
+        scene.collection.objects.link(inst)
+    add_plane(30.0, white)
+    bpy.context.evaluated_depsgraph_get().update()
+
+    from polar_render.polar_addon.engine import engine_settings
+    from polar_render.polar_addon.export.scene import export_scene
+    exported, warnings = export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, 48, 36,
+                                      engine_settings(scene))
+    assert warnings == ["object 'GN Curve': geometry-nodes curves without a mesh are not rendered (nor by Cycles): "
+                        "convert them with Curve to Mesh",
+                        "object 'Text': 4 zero-area faces ignored"]      # Blender's text triangulation
+    names = sorted({m.name.split(":")[0] for m in exported.meshes})
+    assert names == ["BézierCurve", "Cube", "GN Points", "Hair", "Mball", "Plane", "Prop", "Text"]
+    assert sum(m.name.startswith("Prop") for m in exported.meshes) == 3            # one per instance
+    assert sum(m.name.startswith("Text") for m in exported.meshes) == 1            # not twice
+    assert sum(len(m.faces) for m in exported.meshes if m.name.startswith("GN Points")) == 20 * 80
+    passes = read_multilayer(render_to_exr(scene, str(tmp_path / "geometry")))
+    assert np.isfinite(passes["S0"]).all() and passes["S0"].max() > 0
