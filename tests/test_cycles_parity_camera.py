@@ -228,3 +228,35 @@ def test_real_file_geometry_renders_with_exact_warnings(addon, tmp_path):
     assert sum(len(m.faces) for m in exported.meshes if m.name.startswith("GN Points")) == 20 * 80
     passes = read_multilayer(render_to_exr(scene, str(tmp_path / "geometry")))
     assert np.isfinite(passes["S0"]).all() and passes["S0"].max() > 0
+
+
+def test_hair_and_point_cloud_coverage_matches_cycles(addon, tmp_path):
+    """Hair tubes and point spheres cover as much of the image as Cycles' curves and points (the
+    alpha of a transparent film is the coverage)."""
+    scene = empty_scene(64, 48, 32)
+    white_world(scene)
+    add_camera(scene, (0.0, -4.0, 0.5), (math.radians(90), 0.0, 0.0))
+    hair = bpy.data.hair_curves.new("Hair")
+    hair.add_curves([4, 4])
+    hair.position_data.foreach_set("vector", np.array([[0, 0, 0], [0, 0, 0.5], [0.1, 0, 1], [0.2, 0, 1.5],
+                                                       [1, 0, 0], [1, 0, 0.5], [1.1, 0, 1], [1.2, 0, 1.5]],
+                                                      np.float32).ravel())
+    scene.collection.objects.link(bpy.data.objects.new("Hair", hair))
+    cloud = bpy.data.objects.new("GN Points", bpy.data.meshes.new("empty"))
+    scene.collection.objects.link(cloud)
+
+    def points(t):
+        n = t.nodes.new("GeometryNodePoints")
+        n.inputs["Count"].default_value = 1
+        n.inputs["Radius"].default_value = 0.2
+        n.inputs["Position"].default_value = (-0.8, 0.0, 0.5)
+        return n
+    _gn(cloud, points)
+    scene.render.film_transparent = True
+    for radius in (None, 0.02):                 # Cycles' default hair radius, then a radius attribute
+        if radius is not None:
+            hair.attributes.new("radius", "FLOAT", "POINT").data.foreach_set("value", np.full(8, radius, np.float32))
+        theirs = cycles(scene, str(tmp_path / "cover_cycles"), 32)[..., 3]
+        ours = read_multilayer(render_to_exr(scene, str(tmp_path / "cover_polar")))["Combined"][..., 3]
+        assert ours[:, :24].sum() == pytest.approx(theirs[:, :24].sum(), rel=0.03)      # the sphere
+        assert ours[:, 24:].sum() == pytest.approx(theirs[:, 24:].sum(), rel=0.06)      # the two hairs

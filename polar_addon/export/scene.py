@@ -82,8 +82,12 @@ def _attribute(data, name, n, width=1):
 
 
 def _icosphere_template():
+    """Unit icosphere scaled so its surface area is the sphere's 4π: by Cauchy's formula its mean
+    projected area (the coverage seen from a random direction) is then that of the true sphere."""
     ico = icosphere(POINT_SUBDIVISIONS)
-    return np.asarray(ico.vertices, np.float64), np.asarray(ico.faces, np.int32)
+    v, f = np.asarray(ico.vertices, np.float64), np.asarray(ico.faces, np.int32)
+    area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum()
+    return v * np.sqrt(4 * np.pi / area), f
 
 
 def pointcloud_arrays(obj):
@@ -100,7 +104,7 @@ def pointcloud_arrays(obj):
     nv = unit.shape[0]
     P = (centres[:, None, :] + radius[:, None, None] * unit[None]).reshape(-1, 3)
     F = (faces[None] + (np.arange(n) * nv)[:, None, None]).reshape(-1, 3)
-    SN = np.tile(unit[faces].reshape(-1, 3), (n, 1))          # unit-sphere vertex = its normal
+    SN = np.tile((unit / np.linalg.norm(unit, axis=1, keepdims=True))[faces].reshape(-1, 3), (n, 1))
     keep = np.repeat(radius > 0, faces.shape[0])
     if not keep.any():
         return None
@@ -136,6 +140,9 @@ def hair_arrays(obj):
     e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
     e2 = np.cross(t, e1)
     ang = 2 * np.pi * np.arange(HAIR_SIDES) / HAIR_SIDES
+    # polygon of the tube scaled to the circle's mean width (perimeter / π = 2r): same average coverage
+    widen = np.pi / (HAIR_SIDES * np.sin(np.pi / HAIR_SIDES))
+    radius = radius * widen
     ring = np.cos(ang)[None, :, None] * e1[:, None, :] + np.sin(ang)[None, :, None] * e2[:, None, :]  # (S, K, 3)
     ra, rb = radius[start][:, None, None], radius[start + 1][:, None, None]
     verts = np.concatenate((a[:, None] + ra * ring, b[:, None] + rb * ring), axis=1)          # (S, 2K, 3)
