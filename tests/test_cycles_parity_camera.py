@@ -260,3 +260,80 @@ def test_hair_and_point_cloud_coverage_matches_cycles(addon, tmp_path):
         ours = read_multilayer(render_to_exr(scene, str(tmp_path / "cover_polar")))["Combined"][..., 3]
         assert ours[:, :24].sum() == pytest.approx(theirs[:, :24].sum(), rel=0.03)      # the sphere
         assert ours[:, 24:].sum() == pytest.approx(theirs[:, 24:].sum(), rel=0.06)      # the two hairs
+
+
+def test_equirectangular_panorama_matches_cycles(addon, tmp_path):
+    scene, ball = visibility_scene()
+    scene.render.resolution_x, scene.render.resolution_y = 64, 32
+    cam = scene.camera
+    cam.location, cam.rotation_euler = (0.5, -3.0, 1.2), (math.radians(90), 0.0, math.radians(20))
+    cam.data.type = "PANO"
+    cam.data.panorama_type = "EQUIRECTANGULAR"
+    cam.data.longitude_min, cam.data.longitude_max = math.radians(-150), math.radians(150)
+    cam.data.latitude_min, cam.data.latitude_max = math.radians(-80), math.radians(60)
+    theirs = np.einsum("hwc,c->hw", cycles(scene, str(tmp_path / "pano_cycles"), 64)[..., :3], LUMINANCE)
+    ours, se, warnings = polar(scene, 64)
+    assert warnings == []
+    assert_regions_agree(ours, se, theirs, 4)
+    assert_regions_agree(ours, se, theirs, 8)
+
+
+def test_principled_alpha_and_holdout_coverage_match_cycles(addon, tmp_path):
+    scene = empty_scene(48, 32, 64)
+    white_world(scene)
+    add_camera(scene, (0.0, -6.0, 0.0), (math.pi / 2, 0.0, 0.0))
+    veil = bpy.data.materials.new("Veil")
+    veil.node_tree.nodes["Principled BSDF"].inputs["Alpha"].default_value = 0.3
+    add_sphere(1.0, (-1.2, 0.0, 0.0), veil)
+    held = add_sphere(0.8, (1.2, 0.0, 0.0), diffuse("Held", 0.5))
+    held.is_holdout = True
+    add_plane(30.0, diffuse("Back", 0.5), location=(0.0, 5.0, 0.0)).rotation_euler = (math.pi / 2, 0.0, 0.0)
+    theirs = cycles(scene, str(tmp_path / "veil_cycles"), 64)[..., 3]
+    ours = read_multilayer(render_to_exr(scene, str(tmp_path / "veil_polar")))["Combined"][..., 3]
+    # the veil is alpha 1 (the wall behind it is opaque); the holdout is a hole
+    assert np.allclose(blocks(ours, 8), blocks(theirs, 8), atol=0.03)
+    scene.render.film_transparent = True
+    bpy.data.objects["Plane"].hide_render = True
+    theirs = cycles(scene, str(tmp_path / "veil2_cycles"), 64)[..., 3]
+    ours = read_multilayer(render_to_exr(scene, str(tmp_path / "veil2_polar")))["Combined"][..., 3]
+    # against the transparent sky a ray through the veil crosses two surfaces of alpha 0.3: 1 − 0.7²
+    assert np.allclose(blocks(ours, 8), blocks(theirs, 8), atol=0.03)
+    assert ours[13:19, 8:14].mean() == pytest.approx(1 - 0.7 ** 2, abs=0.05)
+
+
+def test_camera_and_visibility_export(addon):
+    from polar_render.polar_addon.engine import engine_settings
+    from polar_render.polar_addon.export.scene import export_scene
+    scene = dof_scene(2.8)
+    target = bpy.data.objects.new("Focus", None)
+    scene.collection.objects.link(target)
+    target.location = (0.3, 0.2, -4.5)
+    cam = scene.camera.data
+    cam.dof.focus_object = target
+    cam.dof.aperture_blades = 6
+    cam.dof.aperture_rotation = math.radians(10)
+    scene.render.use_motion_blur = True
+    card = bpy.data.objects["Card"]
+    card.visible_glossy = False
+    mat = card.material_slots[0].material
+    bump = mat.node_tree.nodes.new("ShaderNodeBump")
+    diffuse_node = mat.node_tree.nodes["Diffuse BSDF"]
+    mat.node_tree.links.new(bump.outputs["Normal"], diffuse_node.inputs["Normal"])
+    exported, warnings = export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, 64, 24,
+                                      engine_settings(scene))
+    c = exported.camera
+    assert c.aperture_radius == pytest.approx(0.1 / (2 * 2.8), rel=1e-6)       # Cycles: lens·1e-3 / (2 N)
+    assert c.focus_distance == pytest.approx(4.5, rel=1e-6)                   # depth along the view axis
+    assert (c.aperture_blades, round(c.aperture_rotation_deg, 4)) == (6, 10.0)
+    assert warnings == [
+        "motion blur is not simulated: the image shows the scene at the current frame",
+        "object 'Card': visibility to only some of diffuse, glossy and transmission rays is not supported; "
+        "it is visible to all of them",
+        "material 'Black': bump and normal maps (linked Normal input) are not supported; the geometric "
+        "shading normals are used"]
+    card.visible_camera = card.visible_shadow = False
+    card.visible_diffuse = card.visible_transmission = False
+    card.is_holdout = True
+    exported, _ = export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, 64, 24, engine_settings(scene))
+    mesh = next(m for m in exported.meshes if m.name.startswith("Card"))
+    assert (mesh.visible_camera, mesh.visible_shadow, mesh.visible_indirect, mesh.holdout) == (False, False, False, True)
