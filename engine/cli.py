@@ -185,7 +185,7 @@ def _resume_state(args, scene, st):
     if spp.max() > st.spp:
         raise SceneError("--spp", f"must be at least the samples already done ({int(spp.max())})")
     stderr = np.stack([channels[f"S{i}.Y.stderr"] for i in range(4)]) if "S0.Y.stderr" in channels else None
-    return film_from_stokes(stokes, spp, stderr), st
+    return film_from_stokes(stokes, spp, stderr, channels.get("A")), st
 
 
 def _parse_params(pairs):

@@ -221,3 +221,18 @@ def test_exr_alpha_channel(tmp_path):
     assert np.array_equal(channels["A"], film.alpha().astype(np.float32))
     write_stokes_exr(path, film.mean())
     assert "A" not in read_stokes_exr(path)[1]
+
+
+def test_resume_keeps_the_alpha_of_the_finished_samples():
+    import copy
+
+    from engine.render.film import film_from_stokes
+    scene = _scene([BALL], camera_extra={"film_transparent": True}, spp=8)
+    renderer = Renderer(scene)
+    full = renderer.render().film
+    st = copy.copy(scene.settings)
+    st.spp = 3
+    part = renderer.render(st).film
+    resumed = renderer.render(resume=film_from_stokes(part.mean(), part.spp_image(), alpha=part.alpha())).film
+    assert np.allclose(resumed.alpha(), full.alpha(), atol=1e-12)
+    assert np.allclose(resumed.mean(), full.mean(), rtol=1e-6, atol=1e-9)

@@ -82,18 +82,22 @@ class Film:
         return self.count.reshape(self.height, self.width)
 
 
-def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray | None = None) -> Film:
+def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray | None = None,
+                     alpha: np.ndarray | None = None) -> Film:
     """A Film holding finished samples, rebuilt from pixel means (4, H, W, 3) and counts (H, W).
 
     Sums are mean × count (float32 means lose ~1e-7 relative).  With the per-pixel standard errors
     of the luminance components the sums of squares are restored too, otherwise they are set so
-    that the resumed render's error estimate treats the old samples as noise-free.
+    that the resumed render's error estimate treats the old samples as noise-free.  ``alpha``
+    (H, W): the stored alpha (mean coverage), restored as alpha × count.
     """
     H, W = spp.shape
     film = Film(W, H)
     count = spp.reshape(-1).astype(np.int64)
     film.count[:] = count
     film.sums[:] = np.asarray(mean_rgb, np.float64).transpose(0, 3, 1, 2).reshape(4, 3, -1) * count
+    if alpha is not None:
+        film.alpha_sums = np.asarray(alpha, np.float64).reshape(-1) * count
     y = np.einsum("c,scn->sn", LUMINANCE, film.sums) / np.maximum(count, 1)
     if stderr_y is not None:
         var = np.asarray(stderr_y, np.float64).reshape(4, -1) ** 2 * count
