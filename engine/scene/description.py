@@ -15,7 +15,8 @@ import numpy as np
 
 @dataclass
 class Camera:
-    """Pinhole (perspective) or orthographic camera looking from origin to target.
+    """Perspective (pinhole or thin lens), orthographic or equirectangular camera looking from origin
+    to target.
 
     Basis: f = unit(target − origin), r = unit(f × up), u_cam = r × f.
     ``fov_deg`` is the full angle along ``fov_axis`` ("x": horizontal,
