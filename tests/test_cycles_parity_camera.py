@@ -205,6 +205,9 @@ def test_real_file_geometry_renders_with_exact_warnings(addon, tmp_path):
     cube.modifiers.new("Array", "ARRAY").count = 3
     coll = bpy.data.collections.new("Props")
     coll.objects.link(bpy.data.objects.new("Prop", cube.data))
+    label = bpy.data.objects.new("Label", bpy.data.curves.new("Label", "FONT"))
+    label.data.body = "P"
+    coll.objects.link(label)
     for i in range(3):
         inst = bpy.data.objects.new(f"Instance {i}", None)
         inst.instance_type = "COLLECTION"
@@ -222,8 +225,9 @@ def test_real_file_geometry_renders_with_exact_warnings(addon, tmp_path):
                         "convert them with Curve to Mesh",
                         "object 'Text': 4 zero-area faces ignored"]      # Blender's text triangulation
     names = sorted({m.name.split(":")[0] for m in exported.meshes})
-    assert names == ["BézierCurve", "Cube", "GN Points", "Hair", "Mball", "Plane", "Prop", "Text"]
+    assert names == ["BézierCurve", "Cube", "GN Points", "Hair", "Label", "Mball", "Plane", "Prop", "Text"]
     assert sum(m.name.startswith("Prop") for m in exported.meshes) == 3            # one per instance
+    assert sum(m.name.startswith("Label") for m in exported.meshes) == 3           # (text in an instance: once each)
     assert sum(m.name.startswith("Text") for m in exported.meshes) == 1            # not twice
     assert sum(len(m.faces) for m in exported.meshes if m.name.startswith("GN Points")) == 20 * 80
     passes = read_multilayer(render_to_exr(scene, str(tmp_path / "geometry")))

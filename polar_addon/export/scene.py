@@ -236,10 +236,10 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
             mat_keys[name] = key
         return mat_keys[name]
 
-    # Text, metaballs, surfaces and bevelled curves come twice: as themselves and as a mesh
-    # instance of their evaluated mesh (what Cycles renders); export only the latter.
-    meshed = {inst.parent.original.name_full for inst in depsgraph.object_instances
-              if inst.is_instance and inst.parent is not None and inst.object.type == "MESH"}
+    # Text, metaballs, surfaces and bevelled curves come twice (also inside collection instances): as
+    # themselves and as a mesh instance of their evaluated mesh (what Cycles renders); export the latter.
+    meshed = {inst.object.original.name_full for inst in depsgraph.object_instances
+              if inst.object.type == "MESH" and inst.object.original.type in CONVERTED_TYPES}
     view_layer = depsgraph.view_layer
     for inst in depsgraph.object_instances:
         obj = inst.object
@@ -256,7 +256,7 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
             continue
         if obj.type not in GEOMETRY_TYPES:
             continue
-        if obj.type in CONVERTED_TYPES and not inst.is_instance and obj.original.name_full in meshed:
+        if obj.type in CONVERTED_TYPES and obj.original.name_full in meshed:
             continue
         data_key = (obj.original.name_full, obj.type, obj.data.name_full if obj.data is not None else "")
         if data_key not in cache or not inst.is_instance:
