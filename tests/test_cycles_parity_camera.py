@@ -340,4 +340,5 @@ def test_camera_and_visibility_export(addon):
     card.is_holdout = True
     exported, _ = export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, 64, 24, engine_settings(scene))
     mesh = next(m for m in exported.meshes if m.name.startswith("Card"))
-    assert (mesh.visible_camera, mesh.visible_shadow, mesh.visible_indirect, mesh.holdout) == (False, False, False, True)
+    flags = (mesh.visible_camera, mesh.visible_shadow, mesh.visible_indirect, mesh.holdout)
+    assert flags == (False, False, False, True)
