@@ -236,3 +236,17 @@ def test_resume_keeps_the_alpha_of_the_finished_samples():
     resumed = renderer.render(resume=film_from_stokes(part.mean(), part.spp_image(), alpha=part.alpha())).film
     assert np.allclose(resumed.alpha(), full.alpha(), atol=1e-12)
     assert np.allclose(resumed.mean(), full.mean(), rtol=1e-6, atol=1e-9)
+
+
+def test_panorama_lens_focuses_on_a_sphere():
+    R, F = 0.04, 2.5
+    cam = _camera(projection="equirectangular", width=16, height=8, aperture_radius=R, focus_distance=F)
+    pin = _camera(projection="equirectangular", width=16, height=8)
+    for pixel in (3, 2 * 16 + 5, 7 * 16 + 12):
+        o, d, x, _, _ = _rays(cam, pixel, 500)
+        _, d0, _, _, _ = _rays(pin, pixel, 1)
+        assert np.linalg.norm(o, axis=0).max() <= R * (1 + 1e-12)
+        assert np.allclose(np.einsum("in,i->n", o, d0[:, 0]), 0, atol=1e-12)       # lens disk ⟂ the pixel's ray
+        t = np.einsum("in,in->n", F * d0 - o, d)                                    # distance to the focus point
+        assert np.allclose(o + t * d, F * d0, atol=1e-12)
+        assert np.allclose(np.einsum("in,in->n", x, d), 0, atol=1e-12)
