@@ -342,3 +342,43 @@ def test_camera_and_visibility_export(addon):
     mesh = next(m for m in exported.meshes if m.name.startswith("Card"))
     flags = (mesh.visible_camera, mesh.visible_shadow, mesh.visible_indirect, mesh.holdout)
     assert flags == (False, False, False, True)
+
+
+def test_polar_panels_show_the_cycles_settings_it_reads(addon):
+    """Film ▸ Transparent, the panorama ranges and Object ▸ Visibility have Polar panels (Blender shows
+    its own only for Cycles/EEVEE); drawn here into a recording layout."""
+    from types import SimpleNamespace
+
+    class Layout:
+        def __init__(self):
+            self.props = []
+
+        def prop(self, data, name, **kw):
+            assert hasattr(data, name), name
+            self.props.append(name)
+
+        def column(self, **kw):
+            return self
+
+        def separator(self):
+            pass
+
+        def label(self, **kw):
+            pass
+
+    scene, ball = visibility_scene()
+    scene.camera.data.type = "PANO"
+    scene.camera.data.panorama_type = "EQUIRECTANGULAR"
+    ctx = SimpleNamespace(engine="POLAR", scene=scene, camera=scene.camera.data, object=ball)
+    drawn = {}
+    for name in ("POLAR_PT_film", "POLAR_PT_camera_panorama", "POLAR_PT_object_visibility"):
+        panel = getattr(bpy.types, name)
+        assert panel.poll(ctx) and not panel.poll(SimpleNamespace(**{**vars(ctx), "engine": "CYCLES"}))
+        fake = SimpleNamespace(layout=Layout())
+        panel.draw(fake, ctx)
+        drawn[name] = fake.layout.props
+    assert drawn["POLAR_PT_film"] == ["film_transparent"]
+    assert drawn["POLAR_PT_camera_panorama"] == ["panorama_type", "latitude_min", "latitude_max", "longitude_min",
+                                                 "longitude_max"]
+    visibility = drawn["POLAR_PT_object_visibility"]
+    assert "visible_camera" in visibility and "visible_shadow" in visibility and "is_holdout" in visibility
