@@ -256,6 +256,18 @@ def test_hair_and_point_cloud_coverage_matches_cycles(addon, tmp_path):
         n.inputs["Position"].default_value = (-0.8, 0.0, 0.5)
         return n
     _gn(cloud, points)
+    # curves that geometry nodes leave on a mesh object: Cycles does not render them (nor does Polar)
+    line = bpy.data.objects.new("GN Curve", bpy.data.meshes.new("empty line"))
+    scene.collection.objects.link(line)
+
+    def thick_line(t):
+        n = t.nodes.new("GeometryNodeCurvePrimitiveLine")
+        n.inputs["Start"].default_value, n.inputs["End"].default_value = (-1.5, 0.0, -0.3), (1.5, 0.0, -0.3)
+        r = t.nodes.new("GeometryNodeSetCurveRadius")
+        r.inputs["Radius"].default_value = 0.05
+        t.links.new(n.outputs[0], r.inputs[0])
+        return r
+    _gn(line, thick_line)
     scene.render.film_transparent = True
     for radius in (None, 0.02):                 # Cycles' default hair radius, then a radius attribute
         if radius is not None:
@@ -264,6 +276,7 @@ def test_hair_and_point_cloud_coverage_matches_cycles(addon, tmp_path):
         ours = read_multilayer(render_to_exr(scene, str(tmp_path / "cover_polar")))["Combined"][..., 3]
         assert ours[:, :24].sum() == pytest.approx(theirs[:, :24].sum(), rel=0.03)      # the sphere
         assert ours[:, 24:].sum() == pytest.approx(theirs[:, 24:].sum(), rel=0.06)      # the two hairs
+        assert theirs[38:46].sum() == 0 and ours[38:46].sum() == 0                     # no line
 
 
 def test_equirectangular_panorama_matches_cycles(addon, tmp_path):
