@@ -132,8 +132,7 @@ def _render(args) -> int:
         se = film.stderr_luminance()
         for i in range(4):
             extra[f"S{i}.Y.stderr"] = se[i].astype("float32")
-    write_stokes_exr(out, result.stokes(), metadata=meta, extra=extra,
-                     alpha=film.alpha() if film.has_alpha else None)
+    write_stokes_exr(out, result.stokes(), metadata=meta, extra=extra)
     written = [out]
     if not args.no_previews:
         written += write_previews(os.path.splitext(out)[0], result.stokes(), exposure=args.exposure)
@@ -185,7 +184,7 @@ def _resume_state(args, scene, st):
     if spp.max() > st.spp:
         raise SceneError("--spp", f"must be at least the samples already done ({int(spp.max())})")
     stderr = np.stack([channels[f"S{i}.Y.stderr"] for i in range(4)]) if "S0.Y.stderr" in channels else None
-    return film_from_stokes(stokes, spp, stderr, channels.get("A")), st
+    return film_from_stokes(stokes, spp, stderr), st
 
 
 def _parse_params(pairs):

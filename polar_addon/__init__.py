@@ -6,8 +6,8 @@ Submodules are imported in ``register()`` so that ``polar_addon.packaging`` work
 
 
 def _modules():
-    from . import engine, nodes, operators, properties, ui, ui_scene
-    return (properties, nodes, engine, operators, ui, ui_scene)
+    from . import engine, nodes, operators, properties, ui
+    return (properties, nodes, engine, operators, ui)
 
 
 def register():

@@ -232,12 +232,16 @@ def _compat_panels():
 
 
 def register():
+    from . import ui_scene          # panels for the Cycles settings the exporter reads
     bpy.utils.register_class(PolarRenderEngine)
     for panel in _compat_panels():
         panel.COMPAT_ENGINES.add("POLAR")
+    ui_scene.register()
 
 
 def unregister():
+    from . import ui_scene
+    ui_scene.unregister()
     for panel in _compat_panels():
         panel.COMPAT_ENGINES.discard("POLAR")
     bpy.utils.unregister_class(PolarRenderEngine)

@@ -36,8 +36,9 @@ import numpy as np
 from ..kernels import COMPILED
 from ..kernels.geometry import compiled_pinhole_rays
 from ..polarisation.frames import camera_ray_frame
+from .. import vec3
 from ..scene.description import Camera
-from ..vec3 import cross, normalize
+from ..vec3 import normalize
 
 
 class CameraModel:
@@ -74,11 +75,10 @@ class CameraModel:
         Returns (origins (3, N), directions (3, N), stokes frame x (3, N),
         t_min (N,), t_max (N,)).
         """
+        if self.cam.projection == "equirectangular" or self.cam.aperture_radius > 0:
+            return self._panorama_or_thin_lens(pixel, u)
+
         W, H = self.cam.width, self.cam.height
-        if self.cam.projection == "equirectangular":
-            return self._equirectangular(pixel, u)
-        if self.cam.aperture_radius > 0:
-            return self._thin_lens(pixel, u)
         if COMPILED and self.cam.projection == "perspective":
             d, x, depth_per_length = compiled_pinhole_rays(pixel, u, W, H, self.shift_x, self.shift_y, self.tx,
                                                            self.ty, self.forward, self.right, self.up)
@@ -103,6 +103,11 @@ class CameraModel:
 
     # ------------------------------------------------------------------ thin lens and panorama
 
+    def _panorama_or_thin_lens(self, pixel: np.ndarray, u: np.ndarray):
+        if self.cam.projection == "equirectangular":
+            return self._equirectangular(pixel, u)
+        return self._thin_lens(pixel, u)
+
     def _film_offsets(self, pixel: np.ndarray, u: np.ndarray):
         """(sx, sy): the film point in units of r and u_cam (tan for perspective, length for ortho)."""
         W, H = self.cam.width, self.cam.height
@@ -123,11 +128,11 @@ class CameraModel:
         if cam.projection == "perspective":
             # the pinhole ray through this film point meets the focus plane (depth F) at origin + F·(f + s)
             focus = F * (f + sx * r + sy * up)
-            d = normalize(focus - lens)
+            d = vec3.normalize(focus - lens)
             o = self.origin[:, None] + lens
         else:
             film = sx * r + sy * up
-            d = normalize(F * f - lens)
+            d = vec3.normalize(F * f - lens)
             o = self.origin[:, None] + film + lens
         x = camera_ray_frame(d, up)
         # Clip planes are depths along the viewing axis; the lens lies in the depth-0 plane.
@@ -148,11 +153,11 @@ class CameraModel:
         if cam.aperture_radius > 0:
             # Cycles' panorama lens: a disk ⟂ d aimed at the focus SPHERE of radius F.
             bx, by = aperture_sample(u[2], u[3], cam.aperture_blades, math.radians(cam.aperture_rotation_deg))
-            lens = cam.aperture_radius * (bx / cam.aperture_ratio * x + by * cross(x, -d))
-            d_new = normalize(cam.focus_distance * d - lens)
+            lens = cam.aperture_radius * (bx / cam.aperture_ratio * x + by * vec3.cross(x, -d))
+            d_new = vec3.normalize(cam.focus_distance * d - lens)
             o = o + lens
             d = d_new
-            x = normalize(cross(d, cross(x, d)))      # re-orthogonalised ⟂ the new d, still ≈ ∂d/∂ψ
+            x = vec3.normalize(vec3.cross(d, vec3.cross(x, d)))      # re-orthogonalised ⟂ the new d, still ≈ ∂d/∂ψ
         n = pixel.shape[0]
         return o, d, x, np.full(n, cam.clip_start), np.full(n, cam.clip_end)
 

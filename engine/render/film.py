@@ -96,12 +96,12 @@ def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray
     count = spp.reshape(-1).astype(np.int64)
     film.count[:] = count
     film.sums[:] = np.asarray(mean_rgb, np.float64).transpose(0, 3, 1, 2).reshape(4, 3, -1) * count
-    if alpha is not None:
-        film.alpha_sums = np.asarray(alpha, np.float64).reshape(-1) * count
     y = np.einsum("c,scn->sn", LUMINANCE, film.sums) / np.maximum(count, 1)
     if stderr_y is not None:
         var = np.asarray(stderr_y, np.float64).reshape(4, -1) ** 2 * count
         film.sumsq_y[:] = (var * np.maximum(count - 1, 0) / np.maximum(count, 1) + y * y) * count
     else:
         film.sumsq_y[:] = y * y * count
+    if alpha is not None:
+        film.alpha_sums = np.asarray(alpha, np.float64).reshape(-1) * count
     return film
