@@ -23,6 +23,15 @@ def addon():
     return load_addon()
 
 
+def _engine_settings():
+    # the render-engine module is polar_addon/engine.py on this branch, render_engine.py on main
+    try:
+        from polar_render.polar_addon.render_engine import engine_settings
+    except ImportError:
+        from polar_render.polar_addon.engine import engine_settings
+    return engine_settings
+
+
 def diffuse(name, albedo):
     mat = bpy.data.materials.new(name)
     bsdf = mat.node_tree.nodes["Principled BSDF"]
@@ -54,7 +63,7 @@ def cycles(scene, path, samples):
 def polar(scene, spp):
     """(luminance S0 (H, W), its standard error (H, W), export warnings) through the exporter."""
     from polar_render.engine.render.renderer import Renderer
-    from polar_render.polar_addon.engine import engine_settings
+    engine_settings = _engine_settings()
     from polar_render.polar_addon.export.scene import export_scene
     W, H = scene.render.resolution_x, scene.render.resolution_y
     settings = engine_settings(scene)
@@ -217,7 +226,7 @@ def test_real_file_geometry_renders_with_exact_warnings(addon, tmp_path):
     add_plane(30.0, white)
     bpy.context.evaluated_depsgraph_get().update()
 
-    from polar_render.polar_addon.engine import engine_settings
+    engine_settings = _engine_settings()
     from polar_render.polar_addon.export.scene import export_scene
     exported, warnings = export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, 48, 36,
                                       engine_settings(scene))
@@ -319,7 +328,7 @@ def test_principled_alpha_and_holdout_coverage_match_cycles(addon, tmp_path):
 
 
 def test_camera_and_visibility_export(addon):
-    from polar_render.polar_addon.engine import engine_settings
+    engine_settings = _engine_settings()
     from polar_render.polar_addon.export.scene import export_scene
     scene = dof_scene(2.8)
     target = bpy.data.objects.new("Focus", None)
