@@ -221,12 +221,13 @@ def _write_render(args, out, result, st, scene_hash) -> int:
         for i in range(4):
             extra[f"S{i}.Y.stderr"] = se[i].astype("float32")
     stokes = result.stokes()
+    alpha = film.alpha() if film.has_alpha else None   # coverage of camera rays (transparent film, holdout)
     try:
-        write_stokes_exr(out, stokes, metadata=meta, extra=extra)
+        write_stokes_exr(out, stokes, metadata=meta, extra=extra, alpha=alpha)
     except Exception as e:              # noqa: BLE001 — whatever failed, the samples must survive
         reason = _reason(e)
         try:
-            saved = save_rescue(out, stokes, meta, extra)
+            saved = save_rescue(out, stokes, meta, extra if alpha is None else {**extra, "A": alpha})
         except OSError as lost:
             print(f"error: -o: cannot write {out!r}: {reason}; {lost}: the finished samples are lost",
                   file=sys.stderr)

@@ -51,11 +51,12 @@ def _display_colour(uint8_rgb):
     return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
-def pass_images(stokes_rgb, polariser=None, wanted=None):
+def pass_images(stokes_rgb, polariser=None, wanted=None, alpha=None):
     """{pass name: (H, W, C)} for the Polar passes from a Stokes image (4, H, W, 3).
 
     ``polariser`` = (angle, extinction, retarder angle, retardance) for the Polariser pass;
-    ``wanted`` limits the (costlier) false-colour passes.
+    ``wanted`` limits the (costlier) false-colour passes; ``alpha`` (H, W) is the Combined pass's
+    alpha (coverage of the camera rays; 1 if None).
     """
     wanted = set(PASS_NAMES) if wanted is None else set(wanted)
     y = np.einsum("shwc,c->shw", stokes_rgb, LUMINANCE_WEIGHTS)
@@ -66,6 +67,8 @@ def pass_images(stokes_rgb, polariser=None, wanted=None):
     out["DoCP"] = degree_of_circular_polarisation(y)[..., None]
     combined = np.ones(stokes_rgb.shape[1:3] + (4,))
     combined[..., :3] = stokes_rgb[0]
+    if alpha is not None:
+        combined[..., 3] = alpha
     out["Combined"] = combined
     if "Polariser" in wanted and polariser is not None:
         angle, extinction, r_angle, retardance = polariser
@@ -81,6 +84,12 @@ def pass_images(stokes_rgb, polariser=None, wanted=None):
         out["VisAoLP"] = _display_colour(hue_saturation(np.where(lit, out["AoLP"][..., 0], np.nan),
                                                         np.where(lit, out["DoLP"][..., 0], np.nan)))
     return out
+
+
+def _live_alpha(renderer):
+    """Alpha of the render in progress (None while every sample is opaque)."""
+    film = getattr(renderer, "_live_film", None)
+    return film.alpha() if film is not None and film.has_alpha else None
 
 
 class PolarRenderEngine(bpy.types.RenderEngine):
@@ -145,7 +154,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             now = time.perf_counter()
             if now - last_display[0] > DISPLAY_INTERVAL:
                 last_display[0] = now
-                self._write_passes(result, renderer.last_film_mean(), window, enabled, polariser)
+                self._write_passes(result, renderer.last_film_mean(), window, enabled, polariser,
+                                   _live_alpha(renderer))
                 self.update_result(result)
 
         def should_stop():
@@ -157,7 +167,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
                                      should_stop=should_stop, window=window)
         else:
             out = renderer.render(settings, progress=progress, should_stop=should_stop, window=window)
-        self._write_passes(result, out.stokes(), window, enabled, polariser)
+        self._write_passes(result, out.stokes(), window, enabled, polariser,
+                           out.film.alpha() if out.film.has_alpha else None)
         self.end_result(result)
         stats = out.stats
         message = (f"Polar | {stats['transport_reason']} | {stats['samples']} samples in {stats['seconds']:.1f} s"
@@ -175,13 +186,14 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         self.update_stats("", message)
         self.report({"INFO"}, message)
 
-    def _write_passes(self, result, stokes_rgb, window, enabled, polariser):
+    def _write_passes(self, result, stokes_rgb, window, enabled, polariser, alpha=None):
         if stokes_rgb is None:
             return
         if window is not None:
             x0, y0, x1, y1 = window
             stokes_rgb = stokes_rgb[:, y0:y1, x0:x1]
-        images = pass_images(stokes_rgb, polariser, enabled)
+            alpha = None if alpha is None else alpha[y0:y1, x0:x1]
+        images = pass_images(stokes_rgb, polariser, enabled, alpha)
         passes = result.layers[0].passes
         for name, img in images.items():
             if name != "Combined" and name not in enabled:
@@ -222,12 +234,16 @@ def _compat_panels():
 
 
 def register():
+    from . import ui_scene          # panels for the Cycles settings the exporter reads
     bpy.utils.register_class(PolarRenderEngine)
     for panel in _compat_panels():
         panel.COMPAT_ENGINES.add("POLAR")
+    ui_scene.register()
 
 
 def unregister():
+    from . import ui_scene
+    ui_scene.unregister()
     for panel in _compat_panels():
         panel.COMPAT_ENGINES.discard("POLAR")
     bpy.utils.unregister_class(PolarRenderEngine)

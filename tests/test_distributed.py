@@ -42,6 +42,17 @@ def test_merged_image_equals_the_single_process_render(cluster, name):
     np.testing.assert_array_equal(remote.film.count, local.film.count)
 
 
+def test_alpha_of_a_transparent_film_is_merged(cluster):
+    sc = scene("fresnel_sphere")
+    sc.camera.target = np.array([0.0, 0.0, sc.camera.origin[2]])     # level view: half of it is sky
+    sc.camera.film_transparent = True
+    local = Renderer(sc).render()
+    remote = render_distributed(sc, None, client=cluster)
+    assert local.film.alpha().min() < 1
+    np.testing.assert_array_equal(remote.film.alpha(), local.film.alpha())
+    np.testing.assert_array_equal(remote.stokes(), local.stokes())
+
+
 def test_a_worker_dying_mid_render_does_not_change_the_image(cluster):
     sc = scene(spp=12)
     local = Renderer(sc).render()

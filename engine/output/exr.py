@@ -7,6 +7,10 @@ compression, float32 unless ``half=True``):
     the Stokes image, linear sRGB radiance (same units as the renderer's S0);
 ``R G B``
     a copy of S0, so ordinary viewers show the unpolarised image;
+``A``
+    only when ``alpha`` is given (film transparency, holdouts): the coverage of the camera
+    rays per pixel in [0, 1], as Cycles' alpha; colours are not premultiplied further (the
+    transparent samples carry no colour, so R G B are already premultiplied);
 ``DoP DoLP DoCP``
     dimensionless, from the luminance Stokes vector (0 where S0 = 0); DoCP signed;
 ``AoLP``
@@ -136,6 +140,7 @@ def write_stokes_exr(
     metadata: dict | None = None,
     extra: dict[str, np.ndarray] | None = None,
     half: bool = False,
+    alpha: np.ndarray | None = None,
 ) -> None:
     """Write a Stokes image (4, H, W, 3) to a ZIP-compressed multi-channel EXR, atomically.
 
@@ -166,6 +171,8 @@ def write_stokes_exr(
             channels[f"S{k}.{cname}"] = _float_channel(f"S{k}.{cname}", s[k, :, :, c], half)
     for cname in "RGB":
         channels[cname] = channels[f"S0.{cname}"]
+    if alpha is not None:
+        channels["A"] = _extra_channel("A", np.asarray(alpha, np.float32), (height, width), half)
     y = luminance_stokes(s)
     derived = {
         "DoP": st.degree_of_polarisation(y),

@@ -76,6 +76,9 @@ class CompiledScene:
 
         self.embree = rtcs.EmbreeScene()
         TriangleMesh(self.embree, self.vertices.astype(np.float32), self.faces.astype(np.int32))
+        # per-object ray visibility, holdout and alpha (engine.render.visibility reads them via tri_mesh)
+        self.mesh_rays = [(m.visible_camera, m.visible_indirect, m.visible_shadow, m.holdout, m.alpha)
+                          for m in scene.meshes]
         # tri_emitter is filled in by the light set (area lights).
         self.tri_emitter = np.full(len(self.faces), -1, np.int32)
 

@@ -50,7 +50,9 @@ def _render_unit(key, scene, settings, unit, window, width):
     values, stats = tracer.trace(pixel, sample)
     lo, hi = int(pix.min()), int(pix.max()) + 1
     part = Film(hi - lo, 1)
-    part.add_samples(pixel - lo, values)
+    part.add_samples(pixel - lo, values, stats.pop("alpha", None))
+    if part.has_alpha:
+        stats["alpha_sums"] = part.alpha_sums           # coverage (film transparency, holdouts)
     return lo, part.sums, part.sumsq_y, part.count, stats
 
 
@@ -143,6 +145,10 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
             while next_to_add in results:
                 lo, sums, sumsq, count, s = results.pop(next_to_add)
                 n = count.shape[0]
+                if "alpha_sums" in s or film.has_alpha:
+                    if not film.has_alpha:
+                        film.alpha_sums = film.count.astype(np.float64)
+                    film.alpha_sums[lo:lo + n] += s["alpha_sums"] if "alpha_sums" in s else count
                 film.sums[:, :, lo:lo + n] += sums
                 film.sumsq_y[:, lo:lo + n] += sumsq
                 film.count[lo:lo + n] += count

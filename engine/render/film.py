@@ -3,7 +3,10 @@
 Sums are float64 and added in a fixed order, so a render is deterministic.
 Besides the Stokes sums (4 components × linear sRGB) the film keeps the sum
 of squares of the luminance Stokes vector per pixel, from which the standard
-error of each pixel mean follows (used by tests and the peer comparisons).
+error of each pixel mean follows (used by tests and the peer comparisons), and
+the sum of per-sample alpha (coverage of the camera rays: 0 where a sample saw
+the transparent background or a holdout, as Cycles' alpha; 1 for samples added
+without alpha).
 """
 
 from __future__ import annotations
@@ -20,9 +23,16 @@ class Film:
         self.sums = np.zeros((4, 3, n))
         self.sumsq_y = np.zeros((4, n))
         self.count = np.zeros(n, np.int64)
+        self.alpha_sums = None          # None: every sample so far had alpha 1 (no memory spent)
 
-    def add_samples(self, pixel: np.ndarray, stokes_rgb: np.ndarray) -> None:
-        """Add complete samples: ``stokes_rgb`` (4, 3, N) for flat pixel indices (N,)."""
+    def add_samples(self, pixel: np.ndarray, stokes_rgb: np.ndarray, alpha: np.ndarray | None = None) -> None:
+        """Add complete samples: ``stokes_rgb`` (4, 3, N) for flat pixel indices (N,), with their alpha
+        (N,) or None (all 1)."""
+        if alpha is not None or self.alpha_sums is not None:
+            if self.alpha_sums is None:
+                self.alpha_sums = self.count.astype(np.float64)
+            weights = np.ones(pixel.shape[0]) if alpha is None else alpha
+            self.alpha_sums += np.bincount(pixel, weights=weights, minlength=self.count.shape[0])
         n = self.count.shape[0]
         for s in range(4):
             for c in range(3):
@@ -33,6 +43,10 @@ class Film:
         self.count += np.bincount(pixel, minlength=n)
 
     def merge(self, other: Film) -> None:
+        if other.alpha_sums is not None or self.alpha_sums is not None:
+            mine = self.count.astype(np.float64) if self.alpha_sums is None else self.alpha_sums
+            theirs = other.count.astype(np.float64) if other.alpha_sums is None else other.alpha_sums
+            self.alpha_sums = mine + theirs
         self.sums += other.sums
         self.sumsq_y += other.sumsq_y
         self.count += other.count
@@ -42,6 +56,18 @@ class Film:
         c = np.maximum(self.count, 1)
         m = self.sums / c
         return m.reshape(4, 3, self.height, self.width).transpose(0, 2, 3, 1)
+
+    def alpha(self) -> np.ndarray:
+        """Alpha image (H, W): the mean coverage of the pixel's camera rays (1 where no sample yet)."""
+        if self.alpha_sums is None:
+            return np.ones((self.height, self.width))
+        a = np.where(self.count > 0, self.alpha_sums / np.maximum(self.count, 1), 1.0)
+        return a.reshape(self.height, self.width)
+
+    @property
+    def has_alpha(self) -> bool:
+        """True if some sample carried an alpha (the render tracked coverage)."""
+        return self.alpha_sums is not None
 
     def stderr_luminance(self) -> np.ndarray:
         """Standard error of the luminance Stokes pixel means, (4, H, W) (0 where spp < 2)."""
@@ -56,12 +82,14 @@ class Film:
         return self.count.reshape(self.height, self.width)
 
 
-def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray | None = None) -> Film:
+def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray | None = None,
+                     alpha: np.ndarray | None = None) -> Film:
     """A Film holding finished samples, rebuilt from pixel means (4, H, W, 3) and counts (H, W).
 
     Sums are mean × count (float32 means lose ~1e-7 relative).  With the per-pixel standard errors
     of the luminance components the sums of squares are restored too, otherwise they are set so
-    that the resumed render's error estimate treats the old samples as noise-free.
+    that the resumed render's error estimate treats the old samples as noise-free.  ``alpha``
+    (H, W): the stored alpha (mean coverage), restored as alpha × count.
     """
     H, W = spp.shape
     film = Film(W, H)
@@ -74,4 +102,6 @@ def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray
         film.sumsq_y[:] = (var * np.maximum(count - 1, 0) / np.maximum(count, 1) + y * y) * count
     else:
         film.sumsq_y[:] = y * y * count
+    if alpha is not None:
+        film.alpha_sums = np.asarray(alpha, np.float64).reshape(-1) * count
     return film

@@ -35,6 +35,7 @@ from ..kernels.transport import (add_light, throughput_times_stokes, update_abcs
                                  update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .sampler import PathSampler, path_keys
+from .visibility import ray_visibility
 from ..spectral import WavelengthLookup, rgb_weights, sample_wavelengths
 from ..vec3 import dot
 
@@ -150,6 +151,10 @@ class PathTracer:
         # light's spectrum integrated against the CIE observer, so trace in RGB with those exact
         # light colours: no wavelength sampling and no chromatic noise (same expectation).
         self.rgb_mode = reduce in ("auto", True) and independent and not self.mono
+        # Object ray visibility / holdout / alpha (None: none used) and film transparency (Cycles).
+        self.visibility = ray_visibility(compiled)
+        self.film_transparent = bool(getattr(camera.cam, "film_transparent", False))
+        self.track_alpha = self.film_transparent or (self.visibility is not None and self.visibility.any_holdout)
 
     def _emitted(self, light: _Light, lookup: WavelengthLookup) -> np.ndarray:
         """Emitted radiance (L, n) of ``light`` for paths with these wavelengths (RGB (3, n) in RGB mode)."""
@@ -179,7 +184,7 @@ class PathTracer:
         st = self.settings
         P, n_total = self.P, pixel.shape[0]
         sampler = PathSampler(path_keys(st.seed, pixel, sample))
-        o, d, x_T, t_min, t_max = self.camera.generate(pixel, sampler.next(2))
+        o, d, x_T, t_min, t_max = self.camera.generate(pixel, sampler.next(2 + self.camera.lens_dimensions))
         lam, w_rgb = self._wavelengths(sampler, n_total)
         L = 3 if self.rgb_mode else lam.shape[0]
         lk = WavelengthLookup(lam)                      # table values at the path's wavelengths, once
@@ -202,6 +207,10 @@ class PathTracer:
         light_set = self.lights
         env = light_set.environment
         compiled = self.scene
+        vis = self.visibility
+        # Transparency T per sample (alpha = 1 − T): camera rays reaching the background of a
+        # transparent film or a holdout (Cycles' film_write_transparent / holdout).
+        transparency = np.zeros(n_total) if self.track_alpha else None
 
         for bounce in range(st.max_depth):
             if abort is not None and abort.is_set():
@@ -211,11 +220,24 @@ class PathTracer:
                 break
             hits = compiled.intersect(o, d, t_max)
             stats["rays"] += n
+            if vis is not None:
+                hits, extra = vis.pass_through(compiled, o, d, t_max, hits, bounce == 0, sampler.keys, bounce)
+                stats["rays"] += extra
             hit = hits.prim >= 0
+            background = ~hit
+            if bounce == 0 and transparency is not None:
+                # Camera rays have T = identity here: each adds 1 to the transparency it reaches.
+                if self.film_transparent:
+                    transparency[path[background]] += 1.0
+                    background = np.zeros_like(hit)
+                if vis is not None and vis.any_holdout:
+                    held = hit & vis.holdout[vis.tri_mesh[np.where(hit, hits.prim, 0)]]
+                    transparency[path[held]] += 1.0
+                    hit = hit & ~held
 
             # --- light reached by this segment ----------------------------------------
-            if env is not None and (~hit).any():
-                miss = ~hit
+            if env is not None and background.any():
+                miss = background
                 Le = self._emitted(env, lk.take(miss))
                 w = np.ones(int(miss.sum()))
                 nd = ~prev_delta[miss]
@@ -317,7 +339,22 @@ class PathTracer:
         finite = np.isfinite(out).all(axis=(0, 1))
         stats["nonfinite"] += int((~finite).sum())
         out[:, :, ~finite] = 0.0
+        if transparency is not None:
+            stats["alpha"] = 1.0 - transparency
         return out, stats
+
+    def _shadow_transmittance(self, p: np.ndarray, n_g: np.ndarray, wi: np.ndarray, t_max: np.ndarray,
+                              ok: np.ndarray, stats: dict[str, int]) -> np.ndarray:
+        """Fraction (m,) of the light that reaches p along wi through shadow-invisible and pass-through
+        surfaces (0 where blocked, and where ``ok`` is False: no shadow ray is cast there)."""
+        trans = np.zeros(p.shape[1])
+        idx = ok.nonzero()[0]
+        if idx.size:
+            tr, rays = self.visibility.transmittance(self.scene, offset_origin(p[:, idx], n_g[:, idx], wi[:, idx]),
+                                                     wi[:, idx], t_max[idx])
+            trans[idx] = tr
+            stats["shadow_rays"] += rays
+        return trans
 
     def _next_event(self, sp: ShadingPoint, lookup: WavelengthLookup, bsdf: BSDF, T: np.ndarray, rows: np.ndarray,
                     x_T: np.ndarray, u: np.ndarray, stats: dict[str, int]) -> np.ndarray:
@@ -362,15 +399,19 @@ class PathTracer:
                 mis = power_heuristic(pdf_l * light_set.select_prob, bsdf.pdf(sub, wi))
             weight = value * (cos_i * mis / light_set.select_prob * ok)[None, :]
             t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
-            if ok.all():
-                blocked = self.scene.occluded(offset_origin(p, sub.n_g, wi), wi, t_max)
-                stats["shadow_rays"] += m
+            if self.visibility is not None and self.visibility.affects_shadows:
+                # shadow-invisible and pass-through (alpha) surfaces let (part of) the light through
+                weight = weight * self._shadow_transmittance(p, sub.n_g, wi, t_max, ok, stats)[None, :]
             else:
-                test = ok.nonzero()[0]
-                blocked = np.zeros(m, bool)
-                blocked[test] = self.scene.occluded(offset_origin(p[:, test], sub.n_g[:, test], wi[:, test]),
-                                                    wi[:, test], t_max[test])
-                stats["shadow_rays"] += test.size
-            weight = weight * (~blocked)[None, :]
+                if ok.all():
+                    blocked = self.scene.occluded(offset_origin(p, sub.n_g, wi), wi, t_max)
+                    stats["shadow_rays"] += m
+                else:
+                    test = ok.nonzero()[0]
+                    blocked = np.zeros(m, bool)
+                    blocked[test] = self.scene.occluded(offset_origin(p[:, test], sub.n_g[:, test], wi[:, test]),
+                                                        wi[:, test], t_max[test])
+                    stats["shadow_rays"] += test.size
+                weight = weight * (~blocked)[None, :]
             out[:, :, sel] = throughput_times_stokes(T, gather(rows, sel), S, weight)
         return out

@@ -230,7 +230,7 @@ class Renderer:
                 if result is None:
                     continue
                 pixel, values, s = result
-                film.add_samples(pixel, values)
+                film.add_samples(pixel, values, s.get("alpha"))
                 for k in ("rays", "shadow_rays", "nonfinite"):
                     stats[k] += s[k]
                 done += pixel.size

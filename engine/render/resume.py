@@ -192,4 +192,4 @@ def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None
     if counts.max() > st.spp:
         raise SceneError("--spp", f"must be at least the samples already done ({int(counts.max())})")
     stderr = np.stack([channels[f"S{i}.Y.stderr"] for i in range(4)]) if "S0.Y.stderr" in channels else None
-    return film_from_stokes(stokes, counts, stderr), st
+    return film_from_stokes(stokes, counts, stderr, channels.get("A")), st

@@ -15,7 +15,8 @@ import numpy as np
 
 @dataclass
 class Camera:
-    """Pinhole (perspective) or orthographic camera looking from origin to target.
+    """Perspective (pinhole or thin lens), orthographic or equirectangular camera looking from origin
+    to target.
 
     Basis: f = unit(target − origin), r = unit(f × up), u_cam = r × f.
     ``fov_deg`` is the full angle along ``fov_axis`` ("x": horizontal,
@@ -23,6 +24,15 @@ class Camera:
     ``shift`` is the lens shift in units of the larger image side (Blender).
     Rays start at depth ``clip_start`` and end at depth ``clip_end`` along the
     viewing axis (planes ⟂ the axis, as Blender's clipping).
+
+    Thin lens (Cycles' model): ``aperture_radius`` > 0 (scene units) samples the ray origin on a
+    lens disk (or a regular polygon of ``aperture_blades`` ≥ 3 sides inscribed in it, an edge
+    midpoint at ``aperture_rotation_deg`` from the camera's right axis; x divided by
+    ``aperture_ratio``) ⟂ the view axis, aimed at the pinhole ray's point on the focus plane at
+    depth ``focus_distance`` (a sphere of that radius for panoramas).  0 = pinhole.
+    ``projection`` "equirectangular": longitude (positive to the camera's right, 0 = forward)
+    over ``longitude_deg`` left → right and latitude over ``latitude_deg`` bottom → top.
+    ``film_transparent``: camera rays that reach the background write alpha 0 and no colour.
     """
 
     origin: np.ndarray
@@ -37,6 +47,14 @@ class Camera:
     shift: tuple = (0.0, 0.0)
     clip_start: float = 0.0
     clip_end: float = float("inf")
+    aperture_radius: float = 0.0
+    focus_distance: float = 1.0
+    aperture_blades: int = 0
+    aperture_rotation_deg: float = 0.0
+    aperture_ratio: float = 1.0
+    longitude_deg: tuple = (-180.0, 180.0)
+    latitude_deg: tuple = (-90.0, 90.0)
+    film_transparent: bool = False
 
 
 @dataclass
@@ -49,6 +67,13 @@ class Mesh:
     Scene.materials) per face.  ``emission`` (a spectral radiance, or None)
     makes the mesh a one-sided area light emitting along its front side.
     ``uv`` and ``colors`` are per-vertex attributes read by textured materials (engine.textures).
+
+    Ray visibility (Cycles' Object ▸ Visibility): ``visible_camera`` False hides the mesh from
+    camera rays (they pass through), ``visible_shadow`` False lets shadow rays through,
+    ``visible_indirect`` False hides it from rays after a scattering event; ``holdout`` makes what
+    camera rays see of it transparent (alpha 0, no colour).  ``alpha`` < 1: a pass-through
+    surface (Principled Alpha): rays cross it unchanged with probability 1 − alpha, shadow rays
+    are attenuated by 1 − alpha; the Stokes vector is unchanged.
     """
 
     name: str
@@ -65,6 +90,11 @@ class Mesh:
     #: per-vertex tangents (V, 4): xyz along +u, w = ±1 the handedness (bitangent = w·(n × t)), or
     #: None (tangents are then derived from the UVs, per triangle)
     tangents: np.ndarray | None = None
+    visible_camera: bool = True
+    visible_shadow: bool = True
+    visible_indirect: bool = True
+    holdout: bool = False
+    alpha: float = 1.0
 
 
 @dataclass

@@ -260,9 +260,9 @@ def parse_camera(d: dict, field: str = "camera") -> Camera:
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object")
     _check_keys(d, field, {"projection", "origin", "target", "up", "fov_deg", "fov_axis", "width",
-                           "height", "ortho_width", "shift", "clip_start", "clip_end", "note"})
+                           "height", "ortho_width", "shift", "clip_start", "clip_end", "note"} | CAMERA_LENS_KEYS)
     projection = choice(d.get("projection", "perspective"), f"{field}.projection",
-                        ("perspective", "orthographic"))
+                        ("perspective", "orthographic", "equirectangular"))
     origin = vec3(_require(d, "origin", field), f"{field}.origin")
     target = vec3(_require(d, "target", field), f"{field}.target")
     up = vec3(d.get("up", [0, 0, 1]), f"{field}.up", unit=True)
@@ -288,7 +288,47 @@ def parse_camera(d: dict, field: str = "camera") -> Camera:
     cam.shift = tuple(number(s, f"{field}.shift[{i}]", -10, 10) for i, s in enumerate(shift))
     if cam.clip_end <= cam.clip_start:
         raise SceneError(f"{field}.clip_end", f"must be greater than clip_start ({cam.clip_start:g})")
+    _parse_lens_and_film(d, field, cam)
     return cam
+
+
+#: Camera fields of the thin lens, the panorama and the film (all optional; defaults = pinhole, opaque).
+CAMERA_LENS_KEYS = {"aperture_radius", "focus_distance", "aperture_blades", "aperture_rotation_deg",
+                    "aperture_ratio", "longitude_deg", "latitude_deg", "film_transparent"}
+
+
+def _angle_range(value, field, lo, hi, default):
+    if value is None:
+        return default
+    if not isinstance(value, (list, tuple)) or len(value) != 2:
+        raise SceneError(field, f"must be a list [min, max] of 2 angles in [{lo:g}, {hi:g}] degrees")
+    a, b = (number(v, f"{field}[{i}]", lo, hi) for i, v in enumerate(value))
+    if not b > a:
+        raise SceneError(field, f"max ({b:g}) must be greater than min ({a:g})")
+    return (a, b)
+
+
+def _parse_lens_and_film(d: dict, field: str, cam: Camera) -> None:
+    """Thin lens (Cycles' aperture and focus), equirectangular range and film transparency."""
+    cam.aperture_radius = number(d.get("aperture_radius", 0.0), f"{field}.aperture_radius", 0, 1e6)
+    if "focus_distance" in d:
+        cam.focus_distance = number(d["focus_distance"], f"{field}.focus_distance", 0, 1e30, lo_open=True)
+    elif cam.aperture_radius > 0:
+        raise SceneError(f"{field}.focus_distance", "is required with aperture_radius > 0 (a depth > 0 along "
+                                                    "the view axis)")
+    blades = integer(d.get("aperture_blades", 0), f"{field}.aperture_blades", 0, 1000)
+    cam.aperture_blades = blades if blades >= 3 else 0
+    cam.aperture_rotation_deg = number(d.get("aperture_rotation_deg", 0.0), f"{field}.aperture_rotation_deg",
+                                       -1e6, 1e6)
+    cam.aperture_ratio = number(d.get("aperture_ratio", 1.0), f"{field}.aperture_ratio", 0.01, 100)
+    cam.longitude_deg = _angle_range(d.get("longitude_deg"), f"{field}.longitude_deg", -360, 360, (-180.0, 180.0))
+    cam.latitude_deg = _angle_range(d.get("latitude_deg"), f"{field}.latitude_deg", -90, 90, (-90.0, 90.0))
+    if cam.longitude_deg[1] - cam.longitude_deg[0] > 360:
+        raise SceneError(f"{field}.longitude_deg", "must span at most 360 degrees")
+    transparent = d.get("film_transparent", False)
+    if not isinstance(transparent, bool):
+        raise SceneError(f"{field}.film_transparent", "must be true or false")
+    cam.film_transparent = transparent
 
 
 def parse_settings(d: dict, field: str = "render") -> RenderSettings:
@@ -440,7 +480,7 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
         raise SceneError(field, "must be an object")
     shape = choice(_require(d, "shape", field), f"{field}.shape", ("mesh", "sphere", "quad", "triangles"))
     name = str(d.get("name", field))
-    allowed = {"name", "shape", "material", "materials", "emission", "transform", "note", "normal"}
+    allowed = {"name", "shape", "material", "materials", "emission", "transform", "note", "normal"} | OBJECT_RAY_KEYS
     per_shape = {"mesh": {"file", "smooth"}, "sphere": {"center", "radius", "subdivisions"},
                  "quad": {"vertices", "uv"},
                  "triangles": {"vertices", "faces", "normals", "material_ids", "uv", "colors", "tangents"}}
@@ -531,9 +571,24 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
             raise SceneError(f, f"unknown material {m!r} (defined: {', '.join(sorted(material_names)) or 'none'})")
 
     emission = _parse_emission(d["emission"], f"{field}.emission") if d.get("emission") is not None else None
-    return Mesh(name=name, vertices=np.asarray(data.vertices, dtype=np.float64), faces=faces,
+    mesh = Mesh(name=name, vertices=np.asarray(data.vertices, dtype=np.float64), faces=faces,
                 materials=list(mat_list), material_ids=ids.astype(np.int32), normals=data.vertex_normals,
                 emission=emission, uv=uv, colors=colors or {}, tangents=tangents)
+    _parse_ray_visibility(d, field, mesh)
+    return mesh
+
+
+#: Per-object ray visibility, holdout and alpha (optional; defaults: visible to every ray, opaque).
+OBJECT_RAY_KEYS = {"visible_camera", "visible_shadow", "visible_indirect", "holdout", "alpha"}
+
+
+def _parse_ray_visibility(d: dict, field: str, mesh: Mesh) -> None:
+    for key in ("visible_camera", "visible_shadow", "visible_indirect", "holdout"):
+        if key in d:
+            if not isinstance(d[key], bool):
+                raise SceneError(f"{field}.{key}", "must be true or false")
+            setattr(mesh, key, d[key])
+    mesh.alpha = number(d.get("alpha", 1.0), f"{field}.alpha", 0, 1)
 
 
 #: Texture coordinates of a quad's corners p0..p3 (the unit square, as a Blender plane's UV map).

@@ -25,9 +25,11 @@ def export_camera(scene, camera_object, width: int, height: int, warnings: list)
     x_min, x_max = frame[:, 0].min(), frame[:, 0].max()
     y_min, y_max = frame[:, 1].min(), frame[:, 1].max()
     cam = Camera(origin=origin, target=origin + forward, up=y_axis, width=width, height=height)
+    if data.type == "PANO" and getattr(data, "panorama_type", "") == "EQUIRECTANGULAR":
+        return _equirectangular(scene, camera_object, cam, warnings)
     if data.type == "PANO":
-        warnings.append(f"camera {camera_object.name!r}: panoramic cameras are not supported; "
-                        "rendering as perspective")
+        warnings.append(f"camera {camera_object.name!r}: {getattr(data, 'panorama_type', 'panoramic').lower()} "
+                        "panoramic cameras are not supported; rendering as perspective")
     if data.type == "ORTHO":
         cam.projection = "orthographic"
         cam.ortho_width = float(x_max - x_min)
@@ -49,7 +51,64 @@ def export_camera(scene, camera_object, width: int, height: int, warnings: list)
         warnings.append(f"camera {camera_object.name!r} has a skewed or mirrored transform")
     cam.clip_start = float(data.clip_start)
     cam.clip_end = float(data.clip_end)
+    _lens_and_film(scene, camera_object, cam, warnings)
     return cam
+
+
+def _equirectangular(scene, camera_object, cam, warnings):
+    """Cycles' equirectangular panorama: longitude (right positive, 0 = forward) and latitude ranges."""
+    data = camera_object.data
+    cam.projection = "equirectangular"
+    cam.longitude_deg = (float(np.degrees(data.longitude_min)), float(np.degrees(data.longitude_max)))
+    cam.latitude_deg = (float(np.degrees(data.latitude_min)), float(np.degrees(data.latitude_max)))
+    if not (cam.longitude_deg[1] > cam.longitude_deg[0] and cam.latitude_deg[1] > cam.latitude_deg[0]):
+        raise SceneError(f"camera {camera_object.name!r}", "the panorama's longitude and latitude ranges must "
+                                                           "have max > min")
+    if data.shift_x != 0 or data.shift_y != 0:
+        warnings.append(f"camera {camera_object.name!r}: lens shift of a panoramic camera is ignored")
+    cam.clip_start = float(data.clip_start)
+    cam.clip_end = float(data.clip_end)
+    _lens_and_film(scene, camera_object, cam, warnings)
+    return cam
+
+
+def aperture_radius(data) -> float:
+    """Cycles' aperture radius in scene units: lens_mm·1e-3 / (2·f-stop) (perspective and panoramic,
+    whatever the unit scale), 1/(2·f-stop) for orthographic cameras; 0 without depth of field."""
+    if not data.dof.use_dof:
+        return 0.0
+    fstop = max(float(data.dof.aperture_fstop), 1e-5)
+    if data.type == "ORTHO":
+        return 1.0 / (2.0 * fstop)
+    return float(data.lens) * 1e-3 / (2.0 * fstop)
+
+
+def focus_distance(camera_object) -> float:
+    """Depth of the focus plane: the focus object's depth along the view axis, else Focus Distance."""
+    data = camera_object.data
+    target = data.dof.focus_object
+    if target is not None:
+        M = np.array(camera_object.matrix_world, dtype=np.float64)
+        z_axis = M[:3, 2] / np.linalg.norm(M[:3, 2])
+        T = np.array(target.matrix_world, dtype=np.float64)
+        return max(abs(float(np.dot(z_axis, M[:3, 3] - T[:3, 3]))), 1e-5)
+    return max(float(data.dof.focus_distance), 1e-5)
+
+
+def _lens_and_film(scene, camera_object, cam, warnings):
+    data = camera_object.data
+    cam.aperture_radius = aperture_radius(data)
+    if cam.aperture_radius > 0:
+        cam.focus_distance = focus_distance(camera_object)
+        blades = int(data.dof.aperture_blades)
+        cam.aperture_blades = blades if blades >= 3 else 0
+        cam.aperture_rotation_deg = float(np.degrees(data.dof.aperture_rotation))
+        cam.aperture_ratio = float(data.dof.aperture_ratio)
+    cam.film_transparent = bool(scene.render.film_transparent)
+    if scene.render.film_transparent and getattr(scene.render, "film_transparent_glass", False):
+        warnings.append("Film ▸ Transparent Glass is not supported: glass stays opaque in alpha")
+    if scene.render.use_motion_blur:
+        warnings.append("motion blur is not simulated: the image shows the scene at the current frame")
 
 
 def border_window(render, width: int, height: int):

@@ -1,26 +1,51 @@
 """Evaluated depsgraph → engine Scene (geometry with modifiers and instances, materials, lights,
-world, camera), using ``foreach_get`` fast paths.  Warnings for things that are approximated are
-collected and reported once; real mistakes raise SceneError naming the object."""
+world, camera), using ``foreach_get`` fast paths.  Warnings for things that are approximated or
+skipped are collected and reported once each; real mistakes raise SceneError naming the object.
+
+Geometry follows Cycles: meshes (including the evaluated meshes of text, metaballs, surfaces and
+bevelled curves, which the depsgraph delivers as mesh instances), hair curves (``CURVES``, as
+tubes of their ``radius``) and point clouds (spheres of their ``radius``).  Curves that geometry
+nodes leave on a mesh or curve object (a ``CURVE`` instance without a mesh) are not rendered by
+Cycles either: they are skipped with a warning.  Per object: ray visibility (camera, shadow,
+diffuse/glossy/transmission), holdout and each material's Principled Alpha.
+"""
 
 import numpy as np
 
 from ...engine.materials.lambert import Lambert
 from ...engine.scene.description import Mesh, RenderSettings, Scene
+from ...engine.scene.shapes import icosphere
 from ...engine.errors import SceneError
 from ...engine.spectral import ConstantSpectrum
 from .camera import export_camera
 from .lights import export_light
-from .materials import export_material
+from .materials import _follow, export_material
 from .world import export_world
 
-GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META"}
+GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES", "POINTCLOUD"}
+#: Object types whose evaluated mesh the depsgraph also lists as a mesh instance of the object.
+CONVERTED_TYPES = {"CURVE", "SURFACE", "FONT", "META"}
+#: Object types Cycles renders that Polar does not (warned once per object).
+UNSUPPORTED_TYPES = {"VOLUME": "volumes", "GREASEPENCIL": "Grease Pencil strokes"}
+#: Sides of the tube around each hair segment; icosphere level of each point of a point cloud.
+HAIR_SIDES = 6
+POINT_SUBDIVISIONS = 1
+#: Cycles' radius of hair points without a ``radius`` attribute (scene units).
+DEFAULT_HAIR_RADIUS = 0.005
 BLACK = "__polar_black__"
 
 
 def mesh_arrays(obj):
     """World-independent triangle data of an evaluated object: positions (T·3, 3) per corner,
-    split (shading) normals per corner, and the material slot index per triangle; None if empty."""
-    me = obj.to_mesh()
+    split (shading) normals per corner, and the material slot index per triangle; None if empty
+    (also when the object has no mesh, e.g. curves without a surface)."""
+    try:
+        me = obj.to_mesh()
+    except RuntimeError:              # "Object does not have geometry data"
+        return None
+    if me is None:
+        obj.to_mesh_clear()
+        return None
     try:
         me.calc_loop_triangles()
         nv, nt = len(me.vertices), len(me.loop_triangles)
@@ -46,6 +71,148 @@ def mesh_arrays(obj):
         obj.to_mesh_clear()
 
 
+def _attribute(data, name, n, width=1):
+    """Float attribute ``name`` of a point domain as an (n,) or (n, width) array, or None."""
+    attr = data.attributes.get(name)
+    if attr is None or len(attr.data) != n:
+        return None
+    out = np.empty(n * width, np.float32)
+    attr.data.foreach_get("vector" if width == 3 else "value", out)
+    return out.reshape(n, width) if width > 1 else out
+
+
+def _icosphere_template():
+    """Unit icosphere scaled so its surface area is the sphere's 4π: by Cauchy's formula its mean
+    projected area (the coverage seen from a random direction) is then that of the true sphere."""
+    ico = icosphere(POINT_SUBDIVISIONS)
+    v, f = np.asarray(ico.vertices, np.float64), np.asarray(ico.faces, np.int32)
+    area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum()
+    return v * np.sqrt(4 * np.pi / area), f
+
+
+def pointcloud_arrays(obj):
+    """Spheres (icospheres with smooth normals) of each point's ``radius`` (default 0.01), in the
+    ``mesh_arrays`` layout; None for an empty cloud."""
+    data = obj.data
+    n = len(data.points)
+    if n == 0:
+        return None
+    centres = _attribute(data, "position", n, 3).astype(np.float64)
+    radius = _attribute(data, "radius", n)
+    radius = np.full(n, 0.01) if radius is None else np.abs(radius.astype(np.float64))
+    unit, faces = _icosphere_template()
+    nv = unit.shape[0]
+    P = (centres[:, None, :] + radius[:, None, None] * unit[None]).reshape(-1, 3)
+    F = (faces[None] + (np.arange(n) * nv)[:, None, None]).reshape(-1, 3)
+    SN = np.tile((unit / np.linalg.norm(unit, axis=1, keepdims=True))[faces].reshape(-1, 3), (n, 1))
+    keep = np.repeat(radius > 0, faces.shape[0])
+    if not keep.any():
+        return None
+    corner_keep = np.repeat(keep, 3)
+    return P, F[keep], SN[corner_keep], np.zeros(int(keep.sum()), np.int32)
+
+
+def hair_arrays(obj):
+    """Tubes of HAIR_SIDES sides around every segment of a hair-curves object (radius per point,
+    Cycles' default 0.005), in the ``mesh_arrays`` layout; None if there is no segment."""
+    data = obj.data
+    n_curves, n_points = len(data.curves), len(data.points)
+    if n_curves == 0 or n_points < 2:
+        return None
+    pos = _attribute(data, "position", n_points, 3).astype(np.float64)
+    radius = _attribute(data, "radius", n_points)
+    radius = np.full(n_points, DEFAULT_HAIR_RADIUS) if radius is None else np.abs(radius.astype(np.float64))
+    offsets = np.empty(n_curves + 1, np.int32)
+    data.curve_offset_data.foreach_get("value", offsets)
+    last = np.zeros(n_points, bool)
+    last[offsets[1:] - 1] = True                   # a segment starts at every point but a curve's last
+    start = np.nonzero(~last)[0]
+    a, b = pos[start], pos[start + 1]
+    axis = b - a
+    length = np.linalg.norm(axis, axis=1)
+    ok = length > 0
+    start, a, b, axis, length = start[ok], a[ok], b[ok], axis[ok], length[ok]
+    if start.size == 0:
+        return None
+    t = axis / length[:, None]
+    helper = np.where(np.abs(t[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
+    e1 = np.cross(t, helper)
+    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
+    e2 = np.cross(t, e1)
+    ang = 2 * np.pi * np.arange(HAIR_SIDES) / HAIR_SIDES
+    # polygon of the tube scaled to the circle's mean width (perimeter / π = 2r): same average coverage
+    widen = np.pi / (HAIR_SIDES * np.sin(np.pi / HAIR_SIDES))
+    radius = radius * widen
+    ring = np.cos(ang)[None, :, None] * e1[:, None, :] + np.sin(ang)[None, :, None] * e2[:, None, :]  # (S, K, 3)
+    ra, rb = radius[start][:, None, None], radius[start + 1][:, None, None]
+    verts = np.concatenate((a[:, None] + ra * ring, b[:, None] + rb * ring), axis=1)          # (S, 2K, 3)
+    normals = np.concatenate((ring, ring), axis=1)
+    k = np.arange(HAIR_SIDES)
+    k1 = (k + 1) % HAIR_SIDES
+    # quad (a_k, a_k1, b_k1, b_k) as two counter-clockwise triangles seen from outside
+    quad = np.stack((np.stack((k, k1, HAIR_SIDES + k1), 1), np.stack((k, HAIR_SIDES + k1, HAIR_SIDES + k), 1)), 1)
+    quad = quad.reshape(-1, 3)
+    nseg = start.size
+    F = (quad[None] + (np.arange(nseg) * 2 * HAIR_SIDES)[:, None, None]).reshape(-1, 3).astype(np.int32)
+    P = verts.reshape(-1, 3)
+    SN = normals.reshape(-1, 3)[F.ravel()]
+    return P, F, SN, np.zeros(F.shape[0], np.int32)
+
+
+def geometry_arrays(obj):
+    """``mesh_arrays`` for any renderable object type (mesh, hair curves, point cloud)."""
+    if obj.type == "POINTCLOUD":
+        return pointcloud_arrays(obj)
+    if obj.type == "CURVES":
+        return hair_arrays(obj)
+    return mesh_arrays(obj)
+
+
+def material_alpha(material, warnings) -> float:
+    """Principled Alpha of a material's surface shader (1 if none), warning about what is not
+    supported: a linked Alpha (textured cut-outs) and bump or normal maps (linked Normal input)."""
+    if material is None or material.node_tree is None:
+        return 1.0
+    output = material.node_tree.get_output_node("ALL") or material.node_tree.get_output_node("CYCLES")
+    node = _follow(output.inputs["Surface"]) if output is not None else None
+    if node is None:
+        return 1.0
+    normal = node.inputs.get("Normal")
+    if normal is not None and normal.is_linked:
+        warnings.append(f"material {material.name!r}: bump and normal maps (linked Normal input) are not "
+                        "supported; the geometric shading normals are used")
+    alpha = node.inputs.get("Alpha") if node.bl_idname == "ShaderNodeBsdfPrincipled" else None
+    if alpha is None:
+        return 1.0
+    if alpha.is_linked:
+        warnings.append(f"material {material.name!r}: a linked Alpha input (textured transparency) is not "
+                        "supported; its own value is used")
+    value = float(alpha.default_value)
+    if not np.isfinite(value):
+        raise SceneError(f"material {material.name!r}", "input 'Alpha' must be a number in [0, 1]")
+    return min(max(value, 0.0), 1.0)
+
+
+def object_rays(obj, view_layer, warnings) -> dict:
+    """Cycles' Object ▸ Visibility of an (evaluated) object as engine Mesh fields."""
+    diffuse, glossy, transmission = (bool(getattr(obj, f"visible_{k}", True))
+                                     for k in ("diffuse", "glossy", "transmission"))
+    if len({diffuse, glossy, transmission}) > 1:
+        warnings.append(f"object {obj.name!r}: visibility to only some of diffuse, glossy and transmission rays "
+                        "is not supported; it is " + ("visible to all of them" if diffuse or glossy or transmission
+                                                      else "hidden from all of them"))
+    if not getattr(obj, "visible_volume_scatter", True):
+        pass                              # no volumes in Polar: nothing to hide from
+    holdout = bool(getattr(obj, "is_holdout", False))
+    try:
+        holdout = holdout or bool(obj.original.holdout_get(view_layer=view_layer))
+    except (AttributeError, TypeError, RuntimeError):
+        pass
+    return {"visible_camera": bool(getattr(obj, "visible_camera", True)),
+            "visible_shadow": bool(getattr(obj, "visible_shadow", True)),
+            "visible_indirect": diffuse or glossy or transmission, "holdout": holdout}
+
+
 def export_scene(depsgraph, camera_object, width, height, settings: RenderSettings):
     """(engine Scene, list of warnings) for an evaluated depsgraph."""
     scene = depsgraph.scene
@@ -54,6 +221,7 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
     materials = {BLACK: Lambert(ConstantSpectrum(0.0))}
     mat_keys = {}
     emissions = {}
+    alphas = {}
     meshes, lights = [], []
     cache = {}
 
@@ -64,9 +232,15 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
             bsdf, emission = export_material(material, warnings)
             materials[key] = bsdf
             emissions[key] = emission
+            alphas[key] = material_alpha(material, warnings)
             mat_keys[name] = key
         return mat_keys[name]
 
+    # Text, metaballs, surfaces and bevelled curves come twice (also inside collection instances): as
+    # themselves and as a mesh instance of their evaluated mesh (what Cycles renders); export the latter.
+    meshed = {inst.object.original.name_full for inst in depsgraph.object_instances
+              if inst.object.type == "MESH" and inst.object.original.type in CONVERTED_TYPES}
+    view_layer = depsgraph.view_layer
     for inst in depsgraph.object_instances:
         obj = inst.object
         M = np.array(inst.matrix_world, dtype=np.float64)
@@ -77,13 +251,22 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
             elif light is not None:
                 lights.append(light)
             continue
+        if obj.type in UNSUPPORTED_TYPES:
+            warnings.append(f"object {obj.name!r}: {UNSUPPORTED_TYPES[obj.type]} are not supported; skipped")
+            continue
         if obj.type not in GEOMETRY_TYPES:
             continue
-        data_key = (obj.original.name_full, obj.data.name_full if obj.data is not None else "")
+        if obj.type in CONVERTED_TYPES and obj.original.name_full in meshed:
+            continue
+        data_key = (obj.original.name_full, obj.type, obj.data.name_full if obj.data is not None else "")
         if data_key not in cache or not inst.is_instance:
-            cache[data_key] = mesh_arrays(obj)
+            cache[data_key] = geometry_arrays(obj)
         arrays = cache[data_key]
         if arrays is None:
+            if obj.type == "CURVE" and inst.is_instance:
+                owner = inst.parent.name if inst.parent is not None else obj.name
+                warnings.append(f"object {owner!r}: geometry-nodes curves without a mesh are not rendered (nor by "
+                                "Cycles): convert them with Curve to Mesh")
             continue
         P, F, SN, tri_mat = arrays
         if not np.all(np.isfinite(P)):
@@ -105,6 +288,7 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
         length = np.linalg.norm(N, axis=1, keepdims=True)
         N = np.where(length > 0, N / np.where(length > 0, length, 1.0), 0.0)
         mirrored = np.linalg.det(M[:3, :3]) < 0   # keep front faces in front under negative scale
+        rays = object_rays(obj, view_layer, warnings)
         slots = [s.material for s in obj.material_slots] or [None]
         keys = [material_key(slots[i] if i < len(slots) else None) for i in range(len(slots))]
         tri_mat = np.clip(tri_mat, 0, len(keys) - 1)
@@ -118,7 +302,8 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
                 local_faces = local_faces[:, [0, 2, 1]]
             meshes.append(Mesh(name=f"{obj.name}:{slot}", vertices=Pw[F[sel]].reshape(-1, 3),
                                faces=local_faces, materials=[key], material_ids=np.zeros(len(sel), np.int32),
-                               normals=N[corner], emission=emissions.get(key)))
+                               normals=N[corner], emission=emissions.get(key), alpha=alphas.get(key, 1.0),
+                               **rays))
     if not meshes:
         raise SceneError("scene", "nothing to render: the scene has no visible geometry")
     world = export_world(scene.world, warnings)
@@ -127,4 +312,4 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
     if not lights and not any(m.emission is not None for m in meshes):
         warnings.append("the scene has no lights, no emissive materials and a black world: the image is black")
     return Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings,
-                 source=f"blender:{scene.name}"), warnings
+                 source=f"blender:{scene.name}"), list(dict.fromkeys(warnings))

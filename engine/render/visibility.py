@@ -1,0 +1,113 @@
+"""Per-object ray visibility, holdout and pass-through (alpha) surfaces, as Cycles' Object ▸
+Visibility and Principled Alpha.
+
+Rays that meet a surface they must not see, or a pass-through surface (alpha < 1, crossed with
+probability 1 − alpha), continue along the same direction from just behind it: a null
+interaction that changes neither the Stokes vector nor its frame and does not count as a bounce
+(Cycles' transparent bounces; at most ``MAX_PASS_THROUGH`` per segment).  Shadow rays cross
+shadow-invisible surfaces and are attenuated by 1 − alpha at pass-through ones (transparent
+shadows).  Scenes without any of these features never reach this module's loops, so their
+images are unchanged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels.hashing import uniforms
+from .accel import Hits, offset_origin
+
+#: Surfaces a ray may cross before it is treated as blocked (Cycles' default transparent bounces: 8;
+#: more here because invisible objects count too).
+MAX_PASS_THROUGH = 32
+#: Random-number dimensions of the pass-through decisions live far above the path's own dimensions.
+_PASS_DIMENSION = 1 << 40
+_GOLDEN = 0x9E3779B97F4A7C15
+_MASK64 = (1 << 64) - 1
+
+
+class RayVisibility:
+    """Per-mesh flags indexed by the compiled scene's ``tri_mesh``; build with ``ray_visibility``."""
+
+    def __init__(self, mesh_rays, tri_mesh: np.ndarray):
+        flags = np.array([r[:4] for r in mesh_rays], bool).reshape(-1, 4)
+        self.tri_mesh = tri_mesh
+        self.camera_hidden, self.indirect_hidden, self.shadow_hidden = ~flags[:, 0], ~flags[:, 1], ~flags[:, 2]
+        self.holdout = flags[:, 3]
+        self.alpha = np.array([float(r[4]) for r in mesh_rays], np.float64)
+        self.any_alpha = bool((self.alpha < 1).any())
+        self.any_holdout = bool(self.holdout.any())
+        self.affects_shadows = bool(self.shadow_hidden.any() or self.any_alpha)
+
+    # ------------------------------------------------------------------ camera and indirect rays
+
+    def pass_through(self, scene, o: np.ndarray, d: np.ndarray, t_max: np.ndarray | None, hits: Hits,
+                     camera: bool, keys: np.ndarray, bounce: int) -> tuple[Hits, int]:
+        """The first hit each ray really sees (hidden and chosen pass-through surfaces skipped), and
+        the number of extra rays cast.  ``camera``: the segment starts at the camera."""
+        hidden = self.camera_hidden if camera else self.indirect_hidden
+        prim, u, v, t = hits.prim.copy(), hits.u.copy(), hits.v.copy(), hits.t.copy()
+        active = np.arange(prim.shape[0])
+        extra = 0
+        for it in range(MAX_PASS_THROUGH):
+            p_act = prim[active]
+            hit = p_act >= 0
+            mesh = self.tri_mesh[np.where(hit, p_act, 0)]
+            skip = hit & hidden[mesh]
+            if self.any_alpha:
+                a = self.alpha[mesh]
+                partial = hit & ~skip & (a < 1)
+                if partial.any():
+                    dim = (_PASS_DIMENSION + bounce * 4096 + it) * _GOLDEN & _MASK64
+                    xi = uniforms(keys[active], np.array([dim], np.uint64))[0]
+                    skip |= partial & (xi >= a)        # crossed with probability 1 − alpha
+            active = active[skip]
+            if active.size == 0:
+                break
+            p, n_g, _ = scene.surface(prim[active], u[active], v[active])
+            da = d[:, active]
+            o2 = offset_origin(p, n_g, da)
+            tm = None if t_max is None else np.maximum(t_max[active] - t[active], 0.0)
+            h = scene.intersect(o2, da, tm)
+            extra += active.size
+            prim[active], u[active], v[active] = h.prim, h.u, h.v
+            t[active] = np.where(h.prim >= 0, t[active] + h.t, h.t)
+        # (rays still crossing after MAX_PASS_THROUGH layers keep their last hit)
+        return Hits(prim, u, v, t), extra
+
+    # ------------------------------------------------------------------ shadow rays
+
+    def transmittance(self, scene, o: np.ndarray, d: np.ndarray, t_max: np.ndarray) -> tuple[np.ndarray, int]:
+        """Fraction (N,) of light that reaches o from o + t_max·d through shadow-invisible and
+        pass-through surfaces (0 where something opaque blocks), and the number of rays cast."""
+        n = o.shape[1]
+        trans = np.ones(n)
+        active = np.arange(n)
+        o_act, tm = o, t_max.copy()
+        rays = 0
+        for _ in range(MAX_PASS_THROUGH + 1):
+            h = scene.intersect(o_act, d[:, active], tm)
+            rays += active.size
+            hit = h.prim >= 0
+            mesh = self.tri_mesh[np.where(hit, h.prim, 0)]
+            crossable = hit & (self.shadow_hidden[mesh] | (self.alpha[mesh] < 1))
+            opaque = hit & ~crossable
+            trans[active[opaque]] = 0.0
+            factor = np.where(self.shadow_hidden[mesh], 1.0, 1.0 - self.alpha[mesh])
+            trans[active[crossable]] *= factor[crossable]
+            keep = crossable & (trans[active] > 0)
+            if not keep.any():
+                return trans, rays
+            active = active[keep]
+            p, n_g, _ = scene.surface(h.prim[keep], h.u[keep], h.v[keep])
+            o_act = offset_origin(p, n_g, d[:, active])
+            tm = np.maximum(tm[keep] - h.t[keep], 0.0)
+        trans[active] = 0.0                       # more layers than allowed: blocked
+        return trans, rays
+
+
+def ray_visibility(scene) -> RayVisibility | None:
+    """The compiled scene's RayVisibility, or None when every mesh has the defaults (fast path)."""
+    if all(cam and ind and sh and not hold and alpha >= 1 for cam, ind, sh, hold, alpha in scene.mesh_rays):
+        return None
+    return RayVisibility(scene.mesh_rays, scene.tri_mesh)
