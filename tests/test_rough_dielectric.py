@@ -335,7 +335,7 @@ def test_white_furnace_closed_rough_glass_sphere():
                 normals=sphere.vertex_normals)
     scene = Scene(camera=cam, meshes=[mesh], materials={"glass": model},
                   lights=[EnvironmentLight(RGBIlluminantSpectrum([1.0, 1.0, 1.0], 1.0))],
-                  settings=RenderSettings(spp=128, spectral="mono", max_depth=200, polarisation="off"))
+                  settings=RenderSettings(spp=512, spectral="mono", max_depth=200, polarisation="off"))
     result = Renderer(scene).render()
     Y = result.stokes_luminance()[0]
     se = result.film.stderr_luminance()[0]
@@ -353,12 +353,13 @@ def test_white_furnace_closed_rough_glass_sphere():
     b2 = np.sum(np.cross(o.T, d.T) ** 2, axis=1)           # squared impact parameter (unit sphere)
     hit = b2 < 1.0
     value = np.ones(pix.size)
-    value[hit] = V(np.sqrt(1.0 - b2[hit]))
+    grid = np.linspace(0.0, 1.0, 129) ** 2          # V is smooth: tabulate, denser towards grazing
+    value[hit] = np.interp(np.sqrt(1.0 - b2[hit]), grid, V(grid))
     pred = value.reshape(H, W, k * k).mean(axis=2)
     inside = pred < 1.0 - 1e-12
     assert inside.sum() > 60 and pred[inside].min() < 0.9    # the sphere visibly loses energy
-    z = (Y - pred)[inside] / np.maximum(se[inside], 1e-12)
-    # tessellation (icosphere 5, interpolated normals) shifts values by ≲ 2e-3
+    # tessellation (icosphere 5, interpolated normals) shifts values by ~1e-3 (measured with 4096 spp:
+    # mean difference 0.0013, σ of the mean 0.0005)
     ok = np.abs(Y - pred)[inside] <= 4 * se[inside] + 3e-3
-    assert ok.mean() > 0.97, (np.sort(np.abs(z))[-5:], (Y - pred)[inside].mean())
+    assert ok.mean() > 0.97, (Y - pred)[inside].mean()
     assert abs((Y - pred)[inside].mean()) < 3 * math.sqrt((se[inside] ** 2).sum()) / inside.sum() + 2e-3
