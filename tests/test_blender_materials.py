@@ -69,7 +69,7 @@ def test_enum_numbers_are_stable(addon):
     from polar_render.polar_addon.properties import POLARISATION_ITEMS
     assert [(i[0], i[3]) for i in MODEL_ITEMS] == [
         ("LAMBERT", 0), ("CONDUCTOR", 1), ("DIELECTRIC", 2), ("BLACK_GLASS", 3), ("TORRANCE_SPARROW", 4),
-        ("HTSG", 5), ("WEIDLICH_WILKIE", 6)]
+        ("HTSG", 5), ("WEIDLICH_WILKIE", 6), ("ROUGH_DIELECTRIC", 7), ("THIN_DIELECTRIC", 8)]
     assert [(i[0], i[3]) for i in POLARISATION_ITEMS] == [("AUTO", 0), ("FULL", 1), ("LINEAR", 2), ("OFF", 3)]
 
 

@@ -190,7 +190,8 @@ def test_mueller_help_lists_every_catalogue_model_and_parameter():
         assert f"  {name}: " in text
         for key in params:
             assert f"    {key}: " in text
-    assert set(CATALOGUE) == {"lambert", "fresnel", "torrance_sparrow", "htsg", "weidlich_wilkie"}
+    assert set(CATALOGUE) == {"lambert", "fresnel", "torrance_sparrow", "htsg", "weidlich_wilkie", "rough_dielectric",
+                              "thin_dielectric"}
 
 
 # ------------------------------------------------------------------------------------------ Blender node
@@ -222,6 +223,8 @@ SAVED_SOCKETS = {
     "HTSG": [("n", "FLOAT"), ("k", "FLOAT"), ("Sigma0", "FLOAT"), ("Tau", "FLOAT"), ("Diffuse", "COLOR")],
     "WEIDLICH_WILKIE": [("Coat IOR", "FLOAT"), ("Coat Thickness", "FLOAT"), ("Coat Absorption", "COLOR"),
                         ("Coat Roughness", "FLOAT"), ("Base", "SHADER")],
+    "ROUGH_DIELECTRIC": [("IOR", "FLOAT"), ("Roughness", "FLOAT")],
+    "THIN_DIELECTRIC": [("IOR", "FLOAT")],
 }
 
 

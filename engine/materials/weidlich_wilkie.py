@@ -262,6 +262,14 @@ def _dirac_only_reflection(base: BSDF) -> str | None:
     return None
 
 
+def _null_coat(coat, above: Spectrum) -> bool:
+    """The coat has the constant index of the constant medium above it and absorbs nothing (α·d = 0)."""
+    n, ext, absorption = coat.n_spectrum, above, coat.absorption_spectrum
+    if not (isinstance(n, ConstantSpectrum) and isinstance(ext, ConstantSpectrum)) or n.value != ext.value:
+        return False
+    return coat.thickness == 0.0 or (isinstance(absorption, ConstantSpectrum) and absorption.value == 0.0)
+
+
 @dataclass
 class Coat:
     """One dielectric coat of a WeidlichWilkie stack.
@@ -661,6 +669,24 @@ class WeidlichWilkie(BSDF):
         """Relative coat index η = n_coat/n_exterior, (L, N) real."""
         return sp.spectrum(self.coat.n_spectrum) / sp.spectrum(self._exterior)
 
+    def _layer_base(self) -> BSDF:
+        """The base as the layer term sees it: ``self.base`` without the null interfaces on top of it.
+
+        A coat that is index-matched to the medium above it (η ≡ 1: constant, equal indices) and clear
+        (α·d = 0) is no interface at all, so a sub-stack whose top coats are such null coats *is* the
+        base below them (exactly, in the physics; to ~1e-14 numerically).  Evaluating that base
+        directly makes the energy form's internal-reflection factor c_ms — applied to a base's
+        diffuse share — independent of where a null coat is inserted (a sub-stack's "general" value
+        hides the diffuse share).  A rough null coat over a Dirac lobe is kept (a rough coat drops
+        the Dirac lobe below it, see "Dirac lobes").  Found per call: ``exterior_n`` of a stack used
+        as a base is set after construction.
+        """
+        b = self.base
+        while isinstance(b, WeidlichWilkie) and _null_coat(b.coat, b.exterior_n) and \
+                (b.coat.smooth or not b.base.flags.has(BSDFFlags.DELTA_REFLECTION)):
+            b = b.base
+        return b
+
     def albedo_table(self) -> _AlbedoTable:
         """The coat's E_top(θ, η) table (rough coats only), built on first use."""
         if self._table is None:
@@ -780,7 +806,7 @@ class WeidlichWilkie(BSDF):
         M_layer = np.zeros((4, 4, Lk, K))
         ms_factor = np.ones((1, K))
         if np.any(valid):
-            base_val = self.base.eval(lanes.point(wo_t), wi_t)
+            base_val = self._layer_base().eval(lanes.point(wo_t), wi_t)
             Mb = base_val.matrix()
             rank1 = X21[:, 0][:, None] * E12[0][None, :]  # col₀(X21)·row₀(E12)
             if base_val.kind == "depolarising":

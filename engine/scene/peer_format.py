@@ -36,8 +36,16 @@ def _material(m: dict, field: str) -> dict:
         # Mitsuba's roughconductor: Beckmann with α = m and Smith G with Walter's rational G1.
         return {"type": "torrance_sparrow", "n": m.get("n"), "k": m.get("k", 0.0), "m": m.get("alpha"),
                 "shadowing": "smith_rational"}
+    if t == "rough_dielectric":
+        # Mitsuba's roughdielectric (Walter 2007): separable Smith G; Beckmann with Walter's rational G1.
+        dist = m.get("distribution", "beckmann")
+        if dist not in ("beckmann", "ggx"):
+            raise SceneError(f"{field}.distribution", f"must be 'beckmann' or 'ggx', got {dist!r}")
+        return {"type": "rough_dielectric", "n": m.get("n", 1.5), "exterior_n": m.get("exterior_n", 1.0),
+                "alpha": m.get("alpha", 0.1), "distribution": dist,
+                "shadowing": "smith_rational" if dist == "beckmann" else "smith"}
     raise SceneError(f"{field}.type", f"unknown peer material type {t!r} (allowed: diffuse, conductor, "
-                                      "black_glass, dielectric, rough_conductor)")
+                                      "black_glass, dielectric, rough_conductor, rough_dielectric)")
 
 
 def peer_to_engine(data: dict) -> dict:

@@ -4,9 +4,11 @@ A material's Surface may be
 - a **Polarising BSDF** node: its model and inputs are used exactly;
 - a standard shader, converted to the closest polarising model (README, "Blender materials"):
   Diffuse → Lambert; Glossy/Anisotropic → conductor from the colour (Gulbrandsen 2014);
-  Metallic (Physical Conductor) → conductor with its n, k; Glass/Refraction → smooth dielectric;
-  Principled → conductor (Metallic ≥ 0.5), dielectric (Transmission ≥ 0.5), Weidlich–Wilkie coat
-  (Coat Weight > 0) or Torrance–Sparrow dielectric + Lambert (otherwise); Emission → emitter;
+  Metallic (Physical Conductor) → conductor with its n, k; Glass/Refraction → smooth dielectric, or
+  with roughness r the rough dielectric (single-scattering GGX, α = r²; Cycles' Multiscatter GGX
+  adds energy compensation, which is not modelled: one warning); Principled → conductor
+  (Metallic ≥ 0.5), dielectric or rough dielectric as Glass (Transmission ≥ 0.5), Weidlich–Wilkie
+  coat (Coat Weight > 0) or Torrance–Sparrow dielectric + Lambert (otherwise); Emission → emitter;
 - anything else: grey Lambert with a warning.
 Roughness r maps to the Beckmann slope m = r² (as Cycles' α = r²); below m = 0.02 the smooth model
 is used.  Linked inputs (textures) are not supported yet: their unlinked value is used, with a
@@ -168,7 +170,7 @@ def _polar_node_bsdf(node, mat, warnings, depth):
         values.pop("n", None)
         values.pop("k", None)
         values["metal"] = node.metal
-    if model in ("DIELECTRIC", "BLACK_GLASS"):
+    if model in ("DIELECTRIC", "BLACK_GLASS", "ROUGH_DIELECTRIC", "THIN_DIELECTRIC"):
         preset = getattr(node, "dielectric_preset", "CUSTOM")
         for name, _, _, _, v in DIELECTRIC_PRESETS:
             if name == preset and v is not None:   # a named preset replaces the IOR input
@@ -205,9 +207,7 @@ def _principled(node, mat, warnings):
         return _conductor(n, k, m, warnings, mat)
     ior = r.float("IOR", 0.0, 100.0, lo_open=True)
     if r.float("Transmission Weight", 0.0, 1.0) >= 0.5:
-        if m >= SMOOTH_LIMIT:
-            warnings.append(f"material {mat!r}: rough transmission is not supported yet; rendered as smooth glass")
-        return SmoothDielectric(ior)
+        return _glass(ior, rough, getattr(node, "distribution", ""), mat, warnings, "rough transmission")
     under = _torrance_sparrow(ConstantSpectrum(ior), ConstantSpectrum(0.0), max(m, 1e-4), mat, diffuse=base) \
         if m >= SMOOTH_LIMIT else Lambert(_rgb_spectrum(base))
     if r.float("Coat Weight", 0.0, 1.0) > 0:
@@ -216,6 +216,23 @@ def _principled(node, mat, warnings):
                     **_coat_roughness(r.float("Coat Roughness", 0.0, 1.0) ** 2))
         return WeidlichWilkie([coat], under)
     return under
+
+
+def _glass(ior, roughness, distribution, mat, warnings, what):
+    """Smooth dielectric below the smooth limit, else the rough dielectric with GGX α = roughness².
+
+    Cycles' GGX is single scattering and maps exactly; its Multiscatter GGX (Principled's default) adds
+    the energy of multiple scattering between facets, which the polarising model does not have: it is
+    rendered as single-scattering GGX with one warning.  Beckmann → Beckmann with the same α.
+    """
+    from ...engine.materials.rough_dielectric import ALPHA_MIN, RoughDielectric
+    alpha = roughness * roughness
+    if alpha < SMOOTH_LIMIT:
+        return SmoothDielectric(ior)
+    if distribution == "MULTI_GGX":
+        warnings.append(f"material {mat!r}: {what} with Multiscatter GGX is rendered as single-scattering GGX "
+                        "(rough_dielectric, no multiple-scattering energy compensation)")
+    return RoughDielectric(ior, max(alpha, ALPHA_MIN), "beckmann" if distribution == "BECKMANN" else "ggx")
 
 
 def _emission(node, mat, warnings, colour_name="Color", strength_name="Strength"):
@@ -247,9 +264,9 @@ def surface_bsdf(node, mat, warnings, depth=0):
         n, k = gulbrandsen_nk(colour, r.rgb("Edge Tint", 0.0, 1.0))
         return _conductor(n, k, rough, warnings, mat), None
     if kind in ("ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction"):
-        if r.float("Roughness", 0.0, 1.0) ** 2 >= SMOOTH_LIMIT:
-            warnings.append(f"material {mat!r}: rough glass is not supported yet; rendered as smooth glass")
-        return SmoothDielectric(r.float("IOR", 0.0, 100.0, lo_open=True)), None
+        rough = r.float("Roughness", 0.0, 1.0)
+        return _glass(r.float("IOR", 0.0, 100.0, lo_open=True), rough, getattr(node, "distribution", ""), mat,
+                      warnings, "rough glass"), None
     if kind == "ShaderNodeBsdfPrincipled":
         emission = _emission(node, mat, warnings, "Emission Color", "Emission Strength")
         return _principled(node, mat, warnings), emission

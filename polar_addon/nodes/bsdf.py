@@ -31,10 +31,14 @@ def _preview_look(model, principled, links, group_in):
         p["Metallic"].default_value = 1.0
         p["Base Color"].default_value = (0.9, 0.9, 0.9, 1.0)
         p["Roughness"].default_value = 0.05 if model == "CONDUCTOR" else 0.35
-    elif model == "DIELECTRIC":
+    elif model in ("DIELECTRIC", "THIN_DIELECTRIC"):
         p["Transmission Weight"].default_value = 1.0
         p["Roughness"].default_value = 0.0
         links.new(group_in.outputs["IOR"], p["IOR"])
+    elif model == "ROUGH_DIELECTRIC":
+        p["Transmission Weight"].default_value = 1.0
+        links.new(group_in.outputs["IOR"], p["IOR"])
+        links.new(group_in.outputs["Roughness"], p["Roughness"])
     elif model == "BLACK_GLASS":
         p["Base Color"].default_value = (0.0, 0.0, 0.0, 1.0)
         p["Roughness"].default_value = 0.0
@@ -129,7 +133,7 @@ class PolarShaderNodeBSDF(bpy.types.ShaderNodeCustomGroup):
         layout.prop(self, "model", text="")
         if self.model in ("CONDUCTOR", "TORRANCE_SPARROW", "HTSG"):
             layout.prop(self, "metal")
-        if self.model in ("DIELECTRIC", "BLACK_GLASS"):
+        if self.model in ("DIELECTRIC", "BLACK_GLASS", "ROUGH_DIELECTRIC", "THIN_DIELECTRIC"):
             layout.prop(self, "dielectric_preset")
         if self.model == "TORRANCE_SPARROW":
             layout.prop(self, "shadowing")

@@ -20,6 +20,10 @@ MODEL_ITEMS = [
                                               "wavelength dependent", 5),
     ("WEIDLICH_WILKIE", "Weidlich–Wilkie Layered", "A clear or absorbing coat over a base material "
                                                    "(plug another Polarising BSDF into Base)", 6),
+    ("ROUGH_DIELECTRIC", "Rough Dielectric", "Frosted glass: microfacet reflection and refraction, "
+                                             "polarising per facet", 7),
+    ("THIN_DIELECTRIC", "Thin Dielectric", "Thin pane (window, cover glass): two interfaces, no refraction "
+                                           "offset", 8),
 ]
 
 METAL_ITEMS = [

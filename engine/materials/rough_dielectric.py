@@ -1,0 +1,221 @@
+"""Rough dielectric interface: polarising microfacet reflection and refraction (Walter et al. 2007).
+
+Two-sided like engine.materials.dielectric: the interior (index ``n``) lies behind the shading
+normal, the exterior (``exterior_n``) in front.  Everything is computed in a local frame whose +z
+is the normal on the viewer's side, with the real relative index η = n_far / n_viewer (the far
+side is behind that normal), i.e. η = n/exterior_n for a viewer outside and its inverse inside.
+
+Reflection (ω_i on the viewer's side), h = unit(ω_i + ω_o):
+
+    f_r = M_F(ω_i·h; η) · D(h) G(ω_i, ω_o, h) / (4 |cosθ_i| cosθ_o)
+
+M_F is the Fresnel reflection matrix (physics.md §0) at the facet angle; inside the denser medium
+beyond the facet's critical angle it is a pure retarder (total internal reflection: S ≠ 0,
+circular polarisation appears).
+
+Refraction (ω_i on the far side), generalised half vector h = ±unit(η ω_i + ω_o) with h_z > 0:
+
+    f_t = M_T(ω_o·h; η) · |ω_i·h| (ω_o·h) D(h) G / (|cosθ_i| cosθ_o (η ω_i·h + ω_o·h)²)
+
+M_T is the Fresnel diattenuator A = (T_s+T_p)/2, B = (T_s−T_p)/2, C = √(T_s T_p), S = 0 at the
+facet (T_s, T_p are the same seen from either side).  This is Walter's radiance BTDF (his Eq. 21,
+n_o²/(n_i ω_i·h + n_o ω_o·h)² = 1/(η ω_i·h + ω_o·h)²): the radiance scaling of refraction for a
+camera-traced path, (n_o/n_i)² = 1/η² as in the smooth dielectric, is *inside the function value*
+(so next-event estimation through the interface needs nothing else); for α → 0 the lobe integrates
+to T/η², the smooth dielectric's weight.  Reciprocity (Veach's f/n_o² symmetry): with the viewer
+in medium a and the light in b, η = n_b/n_a, η²·f(ω_o = a, ω_i = b) = f(ω_o = b, ω_i = a).
+
+Frames: both lobes are ABCS matrices in the scattering-plane frames x_in = x_out = s = unit(k_i ×
+k_o), k_i = −ω_i, k_o = ω_o; s is ⟂ the plane of ω_i, ω_o and h (the facet's plane of incidence),
+so these are the facet's s-p frames (physics.md §1.2).  Where k_i ∥ k_o the facet is at normal
+incidence (an isotropic diattenuator or F·diag(1,1,−1,−1)), the same in every frame.
+
+D: Beckmann (roughness α = the thesis's m) or GGX (α).  G: **separable** Smith
+G = G1(ω_i, h)·G1(ω_o, h) with the exact G1 of the distribution (χ⁺ per direction: (ω·h)·cosθ_ω >
+0), or Walter's rational Beckmann G1 (``smith_rational``, Mitsuba 3's ``roughdielectric``).
+
+Sampling: a facet normal from the visible normals of ω_o (exact VNDF density for both
+distributions), then reflection with probability F = (F_s+F_p)/2 at ω_o·h (1 under TIR), otherwise
+refraction through h.  pdf: F·D_ωo(h)/(4 ω_o·h) for reflection, (1 − F)·D_ωo(h)·η²|ω_i·h|/(η ω_i·h
++ ω_o·h)² for refraction.  The sample weight is f·|cosθ_i|/pdf; ``eta_sq`` = η² on refraction (for
+Russian roulette).  The index is one number (no dispersion): λ-independent.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
+from .dielectric import IOR_SOCKET, SmoothDielectric
+from .ggx import GGX
+from .microfacet import Beckmann, reflect_local
+from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
+from .sampling import local_to_world
+from ..errors import SceneError
+from ..polarisation.frames import scattering_plane_axis
+from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_transmission_abcs
+from ..vec3 import local_frame, to_local
+
+#: Smallest accepted roughness α (0 is the smooth dielectric).
+ALPHA_MIN = 1e-4
+DISTRIBUTIONS = ("beckmann", "ggx")
+SHADOWING = ("smith", "smith_rational")
+
+
+class RoughDielectric(BSDF):
+    """Polarising rough dielectric (see the module docstring)."""
+
+    name = "rough_dielectric"
+    flags = (BSDFFlags.GLOSSY_REFLECTION | BSDFFlags.GLOSSY_TRANSMISSION | BSDFFlags.POLARISING
+             | BSDFFlags.RETARDING)
+
+    def __init__(self, n: float, alpha: float, distribution: str = "beckmann", shadowing: str = "smith",
+                 exterior_n: float = 1.0):
+        self.n_int = float(n)
+        self.n_ext = float(exterior_n)
+        for name, v in (("n", self.n_int), ("exterior_n", self.n_ext)):
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
+        alpha = float(alpha)
+        if not (math.isfinite(alpha) and alpha >= ALPHA_MIN):
+            raise ValueError(f"roughness alpha must be a finite number >= {ALPHA_MIN:g}, got {alpha!r}")
+        self.alpha = alpha
+        if distribution not in DISTRIBUTIONS:
+            raise ValueError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
+        if shadowing not in SHADOWING:
+            raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+        if shadowing == "smith_rational" and distribution != "beckmann":
+            raise ValueError("shadowing 'smith_rational' exists for the beckmann distribution only")
+        self.distribution, self.shadowing = distribution, shadowing
+        self.dist = Beckmann(alpha) if distribution == "beckmann" else GGX(alpha)
+
+    # --- geometry ---------------------------------------------------------------------------------
+
+    def _local(self, sp: ShadingPoint, wi: np.ndarray | None = None):
+        """(normal on the viewer's side, η, t, b, ω_o local[, ω_i local])."""
+        outside = sp.cos_o >= 0
+        eta = np.where(outside, self.n_int / self.n_ext, self.n_ext / self.n_int)
+        nn = np.where(outside[None, :], sp.n_s, -sp.n_s)
+        t, b = local_frame(nn)
+        wo_l = to_local(sp.wo, t, b, nn)
+        if wi is None:
+            return nn, eta, wo_l
+        return nn, eta, wo_l, to_local(wi, t, b, nn)
+
+    @staticmethod
+    def _half_vector(wi_l, wo_l, eta):
+        """Facet normal h (h_z ≥ 0) of the pair, whether it reflects, and validity (N,)."""
+        refl = wi_l[2] > 0
+        hv = np.where(refl[None, :], wi_l + wo_l, -(eta * wi_l + wo_l))
+        length = np.sqrt(np.sum(hv * hv, axis=0))
+        ok = (length > 1e-12) & (wo_l[2] > 0) & (wi_l[2] != 0)
+        h = hv / np.where(ok, length, 1.0)
+        h = np.where((h[2] < 0)[None, :], -h, h)
+        d_o = np.sum(wo_l * h, axis=0)
+        d_i = np.sum(wi_l * h, axis=0)
+        # reflection: both on the facet's front; refraction: ω_o in front, ω_i behind
+        ok &= (d_o > 0) & np.where(refl, d_i > 0, d_i < 0) & (h[2] > 0)
+        return h, refl, ok, d_i, d_o
+
+    def _shadowing(self, wi_l, wo_l, h):
+        rational = self.shadowing == "smith_rational"
+        return self.dist.G1(wi_l, h, rational) * self.dist.G1(wo_l, h, rational)
+
+    # --- BSDF interface ---------------------------------------------------------------------------
+
+    def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
+        _, eta, wo_l, wi_l = self._local(sp, wi)
+        h, refl, ok, d_i, d_o = self._half_vector(wi_l, wo_l, eta)
+        D = self.dist.D(h)
+        G = self._shadowing(wi_l, wo_l, h)
+        ci = np.abs(wi_l[2])
+        co = wo_l[2]
+        den_cos = np.where(ok, ci * co, 1.0)
+        jac = eta * d_i + d_o
+        jac2 = np.where(ok & ~refl, jac * jac, 1.0)
+        scalar_r = D * G / (4.0 * den_cos)
+        scalar_t = np.abs(d_i) * d_o * D * G / (den_cos * jac2)
+        scalar = np.where(ok, np.where(refl, scalar_r, scalar_t), 0.0)
+        # facet Fresnel: reflection at ω_i·h (= ω_o·h), transmission seen from ω_o (T is symmetric)
+        c_f = np.where(ok, np.where(refl, d_i, d_o), 1.0)
+        Ar, Br, Cr, Sr = fresnel_reflection_abcs(c_f, eta)
+        At, Bt, Ct, St = fresnel_transmission_abcs(c_f, eta)
+        L = sp.lam.shape[0]
+        tile = lambda r, t: np.broadcast_to(np.where(refl, r, t) * scalar, (L, sp.n)).copy()  # noqa: E731
+        x = scattering_plane_axis(-wi, sp.wo)
+        return MuellerValue("abcs", x, x, tile(Ar, At), tile(Br, Bt), tile(Cr, Ct), tile(Sr, St))
+
+    def _pdf_local(self, wi_l, wo_l, eta):
+        h, refl, ok, d_i, d_o = self._half_vector(wi_l, wo_l, eta)
+        vndf = self.dist.pdf(wo_l, h)
+        F = fresnel_reflection_abcs(np.where(ok, d_o, 1.0), eta)[0]
+        jac = eta * d_i + d_o
+        jac2 = np.where(ok & ~refl, jac * jac, 1.0)
+        p_r = F * vndf / (4.0 * np.where(ok, d_o, 1.0))
+        p_t = (1.0 - F) * vndf * eta * eta * np.abs(d_i) / jac2
+        return np.where(ok, np.where(refl, p_r, p_t), 0.0)
+
+    def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        _, eta, wo_l, wi_l = self._local(sp, wi)
+        return self._pdf_local(wi_l, wo_l, eta)
+
+    def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        nn, eta, wo_l = self._local(sp)
+        front = wo_l[2] > 0
+        wo_s = np.where(front[None, :], wo_l, np.array([[0.0], [0.0], [1.0]]))
+        h = self.dist.sample(wo_s, u_dir)
+        c = np.clip(np.sum(wo_s * h, axis=0), 0.0, 1.0)
+        F = fresnel_reflection_abcs(c, eta)[0]          # 1 under total internal reflection
+        reflect = u_lobe < F
+        wi_r = reflect_local(wo_s, h)
+        inv_eta = 1.0 / eta
+        cos_t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) * inv_eta * inv_eta, 0.0))
+        wi_t = -wo_s * inv_eta + (c * inv_eta - cos_t) * h
+        wi_l = np.where(reflect[None, :], wi_r, wi_t)
+        wi_l = wi_l / np.sqrt(np.sum(wi_l * wi_l, axis=0))
+        wi = local_to_world(wi_l, nn)
+        pdf = self._pdf_local(wi_l, wo_s, eta)
+        valid = front & (pdf > 0) & np.where(reflect, wi_l[2] > 0, wi_l[2] < 0) & np.all(np.isfinite(wi), axis=0)
+        value = self.eval(sp, wi)
+        factor = np.where(valid, np.abs(wi_l[2]) / np.where(valid, pdf, 1.0), 0.0)
+        eta_sq = np.where(reflect, 1.0, eta * eta)
+        return BSDFSample(wi=wi, weight=value.scaled(factor[None, :]), pdf=np.where(valid, pdf, 0.0),
+                          is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=eta_sq)
+
+    def describe(self) -> dict:
+        return {"type": self.name, "n": self.n_int, "alpha": self.alpha, "distribution": self.distribution,
+                "shadowing": self.shadowing, "exterior_n": self.n_ext}
+
+
+# --------------------------------------------------------------------------- declaration
+
+DECLARATION = ModelDeclaration(
+    "rough_dielectric", "Rough Dielectric",
+    "Frosted glass: microfacet reflection and refraction (Walter 2007), polarising per facet",
+    [Parameter("n", "real index of the material", lo=0.0, lo_open=True, socket=IOR_SOCKET),
+     Parameter("alpha", f"microfacet roughness α (Beckmann rms slope or GGX α): 0 (the smooth dielectric) or "
+                        f"≥ {ALPHA_MIN:g}", lo=0.0, hi=10.0, default=0.1,
+               socket=Socket("Roughness", "FLOAT", 0.1, 0.0, 2.0,
+                             "Microfacet roughness α (Beckmann rms slope / GGX α); 0 = smooth glass")),
+     Parameter("distribution", "microfacet distribution", kind="choice", choices=DISTRIBUTIONS,
+               default="beckmann"),
+     Parameter("shadowing", "Smith shadowing-masking (separable; rational = Walter's Beckmann approximation)",
+               kind="choice", choices=SHADOWING, default="smith"),
+     exterior_n_parameter()],
+    catalogue="rough_dielectric", node="ROUGH_DIELECTRIC")
+
+
+@DECLARATION.builder
+def _rough_dielectric(p):
+    alpha = p["alpha"]
+    if 0 < alpha < ALPHA_MIN:
+        raise SceneError(p.field("alpha"), f"must be 0 (the smooth dielectric) or in [{ALPHA_MIN:g}, "
+                                           f"{p.model['alpha'].hi:g}], got {alpha:g}")
+    distribution, shadowing = p["distribution"], p["shadowing"]
+    if shadowing == "smith_rational" and distribution != "beckmann":
+        raise SceneError(p.field("shadowing"), "'smith_rational' exists for distribution 'beckmann' only")
+    if alpha == 0:   # the smooth limit
+        return SmoothDielectric(p["n"], p["exterior_n"])
+    return RoughDielectric(p["n"], alpha, distribution, shadowing, p["exterior_n"])
