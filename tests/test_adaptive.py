@@ -308,3 +308,29 @@ def test_estimate_command_prints_a_prediction_per_target(capsys, small_json):
     assert status == 0, out.err
     lines = [line for line in out.out.splitlines() if line.startswith("target ")]
     assert len(lines) == 2 and "dolp ≤ 0.02" in lines[0] and "uniform" in lines[1] and "95th percentile" in lines[0]
+
+
+# ------------------------------------------------------------------------------------ Blender
+
+def test_blender_adaptive_render_has_a_noise_pass_and_reports_the_achieved_error(tmp_path, capfd):
+    bpy = pytest.importorskip("bpy")
+    from tests.blender_support import (add_plane, brewster_camera, empty_scene, load_addon, polar_material,
+                                       read_multilayer, render_to_exr, white_world)
+    load_addon()
+    scene = empty_scene(width=24, height=16, samples=32)
+    add_plane(200, polar_material("Floor", "BLACK_GLASS"))
+    brewster_camera(scene, lens=200.0)
+    white_world(scene)
+    p = scene.polar
+    p.use_adaptive_sampling, p.adaptive_threshold, p.noise_quantity, p.adaptive_min_samples = True, 0.5, "DOLP", 4
+    assert bpy.ops.polar.estimate_cost() == {"FINISHED"}
+    assert p.estimate_report.startswith("Adaptive: median 4,") and "Uniform:" in p.estimate_report
+    capfd.readouterr()
+    passes = read_multilayer(render_to_exr(scene, str(tmp_path / "adaptive")))
+    out = capfd.readouterr().out
+    assert "adaptive: threshold, dolp error p95" in out and "spp 4–4" in out
+    assert "Noise" in passes and passes["Noise"].shape[:2] == (16, 24)
+    assert 0 <= passes["Noise"].min() and passes["Noise"].max() <= 0.5 * 2       # a tile RMS ≤ 0.5
+    p.use_adaptive_sampling = False
+    passes = read_multilayer(render_to_exr(scene, str(tmp_path / "uniform")))
+    assert "Noise" not in passes
