@@ -135,9 +135,6 @@ def _render(args) -> int:
         st = parse_settings(merged, "option")
         scene.settings = st
     adaptive = _adaptive_settings(args, st.spp)
-    if adaptive is not None and args.scheduler:
-        raise SceneError("--scheduler", "cannot be combined with adaptive sampling (--noise-threshold, "
-                                        "--time-limit) yet")
     out = args.output
     if not out.lower().endswith(".exr"):
         raise SceneError("-o", f"the output must be an .exr file, got {out!r}")
@@ -172,7 +169,7 @@ def _render(args) -> int:
                 from .render.distributed import render_distributed
                 try:
                     result = render_distributed(scene, args.scheduler, st, progress=bar,
-                                                should_stop=lambda: signals.requested)
+                                                should_stop=lambda: signals.requested, adaptive=adaptive)
                 except OSError as e:
                     raise SceneError("--scheduler",
                                      f"cannot reach the Dask scheduler at {args.scheduler}: {e}") from None

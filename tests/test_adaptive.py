@@ -167,6 +167,25 @@ def test_resume_after_a_cancel_through_the_exr_gives_the_same_counts_and_image(s
     np.testing.assert_array_equal(resumed.film.sums, reference.film.sums)
 
 
+def test_a_dask_cluster_gives_the_local_counts_and_image(sphere, reference):
+    distributed = pytest.importorskip("distributed")
+    from engine.render.distributed import render_distributed
+    scene, _ = sphere
+    st = copy.copy(scene.settings)
+    st.batch_rays = 2000                                   # several tasks per round
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       silence_logs=40)
+    client = distributed.Client(cluster)
+    try:
+        remote = render_distributed(scene, None, st, client=client, adaptive=AD)
+    finally:
+        client.close()
+        cluster.close()
+    assert remote.stats["stop_reason"] == reference.stats["stop_reason"]
+    np.testing.assert_array_equal(remote.film.count, reference.film.count)
+    np.testing.assert_array_equal(remote.film.sums, reference.film.sums)
+
+
 def test_the_time_limit_stops_sampling_on_an_injected_clock(sphere, reference):
     scene, renderer = sphere
     st = copy.copy(scene.settings)
@@ -235,7 +254,6 @@ def small_json(tmp_path):
     (["--noise-threshold", "120", "--noise-quantity", "aolp"], "--noise-threshold"),
     (["--min-spp", "4"], "--min-spp"),
     (["--noise-quantity", "dolp"], "--noise-quantity"),
-    (["--noise-threshold", "0.1", "--scheduler", "tcp://127.0.0.1:1"], "--scheduler"),
 ])
 def test_bad_adaptive_options_are_one_line_errors(capsys, small_json, tmp_path, args, option):
     status, out = run_cli(capsys, "render", small_json, "-o", str(tmp_path / "x.exr"), "--spp", "16", *args)
