@@ -192,16 +192,17 @@ def _render_adaptive(renderer, st, adaptive, bar, signals, resume_film, resume_h
     """An adaptive render; records in its stats the prediction made after the first pass."""
     from .render.estimate import predict
 
-    first = {}
+    from .render.estimate import cost_map
+    first, unit_times = {}, []
 
     def on_first_pass(film, halves, seconds, samples):
-        if samples > 0 and adaptive.threshold > 0:
+        if samples > 0 and adaptive.threshold > 0 and unit_times:
             first["prediction"] = predict(film, halves, adaptive.quantity, adaptive.threshold, adaptive.min_spp,
-                                          st.spp, seconds / samples)
-            first["seconds"] = seconds
+                                          st.spp, cost_map(unit_times, film.count.size, seconds))
 
     result = renderer.render(st, progress=bar, should_stop=lambda: signals.requested, resume=resume_film,
-                             adaptive=adaptive, adaptive_resume=resume_halves, on_first_pass=on_first_pass)
+                             adaptive=adaptive, adaptive_resume=resume_halves, on_first_pass=on_first_pass,
+                             unit_times=unit_times)
     result.stats.update(first)
     return result
 
@@ -466,7 +467,8 @@ def _estimate(args) -> int:
           f"adaptive {min_spp}…{st.spp} spp ({len(checkpoints(min_spp, st.spp))} checkpoints)", file=sys.stderr)
     pilot, sps = pilot_render(renderer, st, args.pilot_spp)
     print(f"pilot: {pilot.stats['samples']} samples in {pilot.stats['seconds']:.2f} s "
-          f"({sps * 1e6:.2f} µs per sample on this machine)")
+          f"({pilot.stats['seconds'] / max(pilot.stats['samples'], 1) * 1e6:.2f} µs per sample on this machine, "
+          f"{float(sps.min()) * 1e6:.2f}–{float(sps.max()) * 1e6:.2f} by region)")
     for quantity, threshold in targets:
         p = predict(pilot.film, pilot.halves, quantity, threshold, min_spp, st.spp, sps)
         print(f"target {p.describe()}")

@@ -352,3 +352,12 @@ def test_blender_adaptive_render_has_a_noise_pass_and_reports_the_achieved_error
     p.use_adaptive_sampling = False
     passes = read_multilayer(render_to_exr(scene, str(tmp_path / "uniform")))
     assert "Noise" not in passes
+
+
+def test_cost_map_spreads_the_pilot_time_over_pixels_by_their_units_cost():
+    from engine.render.estimate import cost_map
+    units = [(np.array([0, 1]), 4, 2.0), (np.array([2, 3]), 4, 6.0)]     # 0.5 and 1.5 s per path
+    sps = cost_map(units, 5, seconds=1.0)                                 # two threads: wall 1 s
+    np.testing.assert_allclose(sps[:4], [0.0625, 0.0625, 0.1875, 0.1875])
+    assert sps[4] == pytest.approx(0.125)                                 # not in the pilot: the mean
+    assert float(np.sum(sps[:4] * 2)) == pytest.approx(1.0)              # the pilot's samples: its wall time

@@ -49,6 +49,8 @@ UNITS = {"s0": "relative", "dolp": "absolute", "aolp": "degrees", "docp": "absol
 TILE = 4
 #: DoLP below which the AoLP is undefined and its error does not hold a pixel back.
 AOLP_MIN_DOLP = 0.05
+#: Fewest paths per work unit when a round is split for the workers (below, per-batch overhead dominates).
+MIN_UNIT_PATHS = 4096
 #: Stop reasons written to the EXR header ``polar.stop_reason``.
 STOP_REASONS = ("threshold", "max_spp", "time_limit", "cancelled")
 
@@ -216,8 +218,11 @@ def film_noise(film, halves: HalfBuffers, quantity: str, pixels: np.ndarray | No
 
 
 def adaptive_units(pixels: np.ndarray, start: np.ndarray, target: np.ndarray, tiles: np.ndarray,
-                   batch_rays: int):
+                   batch_rays: int, chunk_pixels: int | None = None):
     """Work units (pixel chunk, pass0, pass1) bringing ``pixels`` from ``start`` to ``target``.
+
+    A chunk holds at most ``chunk_pixels`` (default ``batch_rays``) pixels, a unit at most
+    ``batch_rays`` paths.
 
     Chunks hold whole tiles (pixels sorted by tile), so an aborted unit never leaves two pixels
     of a tile at different counts; units are ordered by passes, then chunks.
@@ -226,9 +231,10 @@ def adaptive_units(pixels: np.ndarray, start: np.ndarray, target: np.ndarray, ti
     pixels, start, target = pixels[order], start[order], target[order]
     t = tiles[pixels]
     tile_starts = np.flatnonzero(np.r_[True, t[1:] != t[:-1]])
+    limit = min(batch_rays, chunk_pixels or batch_rays)
     bounds = [0]
     for s in tile_starts[1:]:
-        if s - bounds[-1] + TILE * TILE > batch_rays:        # the next tile might not fit
+        if s - bounds[-1] + TILE * TILE > limit:             # the next tile might not fit
             bounds.append(int(s))
     bounds.append(pixels.size)
     chunks = [(bounds[i], bounds[i + 1]) for i in range(len(bounds) - 1) if bounds[i + 1] > bounds[i]]
@@ -265,13 +271,18 @@ def unit_paths(unit):
 
 def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int, adaptive: AdaptiveSettings,
                     window, run_units: Callable, stats: dict, progress=None, should_stop=None,
-                    clock: Callable[[], float] = time.perf_counter, on_first_pass=None) -> str:
+                    clock: Callable[[], float] = time.perf_counter, on_first_pass=None, workers: int = 1,
+                    unit_times: list | None = None) -> str:
     """Sample ``film`` adaptively; returns the stop reason (one of :data:`STOP_REASONS`).
 
     ``run_units(units, trace_unit, add_result, stop_requested, abort)`` traces units concurrently
     and adds them in order (engine.render.renderer.trace_in_order); returns True if stopped.
     ``clock`` gives seconds (injected by tests).  ``on_first_pass(film, halves, seconds, samples)``
-    is called once every pixel has ``min_spp`` samples (for the prediction check).
+    is called once every pixel has ``min_spp`` samples (for the prediction check).  A round is
+    split into at least ~4 units per worker (late rounds hold few tiles: one unit would leave all
+    but one worker idle); how units are cut never changes the result.  ``unit_times``: a list that
+    receives (pixels, paths, seconds) of every unit of the first pass, cut into small pixel chunks
+    for the purpose (where the samples cost more: engine.render.estimate).
     """
     W, H = film.width, film.height
     x0, y0, x1, y1 = window or (0, 0, W, H)
@@ -296,9 +307,14 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
             return True
         return False
 
+    timing = {"on": False}
+
     def trace_unit(unit):
         pixel, sample = unit_paths(unit)
+        started = time.perf_counter()         # a measurement of this machine, not the time limit's clock
         traced = tracer.trace(pixel, sample, abort=abort)
+        if traced is not None and timing["on"]:
+            unit_times.append((unit[0], pixel.size, time.perf_counter() - started))
         return None if traced is None else (pixel, sample, *traced)
 
     def add_result(result):
@@ -321,6 +337,7 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
         _, _, noise = film_noise(film, halves, adaptive.quantity, pixels)
         if not first_pass_reported and counts.min() >= adaptive.min_spp:
             first_pass_reported = True
+            timing["on"] = False
             if on_first_pass is not None:
                 on_first_pass(film, halves, clock() - t0, done["samples"])
         target = next_targets(counts, noise, marks, adaptive.threshold)
@@ -330,7 +347,11 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
             return "max_spp" if (noise[counts >= spp] > adaptive.threshold).any() else "threshold"
         if stop_requested():
             return reason["value"]
-        units = adaptive_units(pixels[todo], counts[todo], target[todo], tiles, batch_rays)
+        paths = int((target - counts)[todo].sum())
+        per_unit = min(batch_rays, max(MIN_UNIT_PATHS, -(-paths // (4 * max(workers, 1)))))
+        timing["on"] = unit_times is not None and counts.min() < adaptive.min_spp
+        units = adaptive_units(pixels[todo], counts[todo], target[todo], tiles, per_unit,
+                               chunk_pixels=max(256, pixels.size // 128) if timing["on"] else None)
         stopped = run_units(units, trace_unit, add_result, stop_requested, abort)
         stats["seconds"] = clock() - t0
         if stopped:

@@ -237,7 +237,8 @@ def _render_adaptive_on(client, key, scene_future, st, reason, simplified, W, H,
                                    units, add_result, stop_requested, stats)
 
     stats["stop_reason"] = render_adaptive(None, film, halves, st.spp, st.batch_rays, adaptive, window, run_units,
-                                           stats, progress=progress, should_stop=should_stop)
+                                           stats, progress=progress, should_stop=should_stop,
+                                           workers=max(1, stats["workers"]))
     stats.setdefault("seconds", 0.0)
     return RenderResult(film=film, settings=st, stats=stats, cancelled=stats["stop_reason"] == "cancelled",
                         halves=halves)

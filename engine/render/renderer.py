@@ -158,7 +158,8 @@ class Renderer:
                should_stop: Callable[[], bool] | None = None,
                window: tuple[int, int, int, int] | None = None,
                resume: Film | None = None, adaptive=None, adaptive_resume=None,
-               clock: Callable[[], float] | None = None, on_first_pass=None) -> RenderResult:
+               clock: Callable[[], float] | None = None, on_first_pass=None,
+               unit_times: list | None = None) -> RenderResult:
         """Render with ``settings`` (default: the scene's).
 
         ``progress(done_fraction, stats)`` is called after every work unit;
@@ -170,7 +171,7 @@ class Renderer:
         render of ``settings.spp`` samples (the sampler is stateless) up to float rounding.
         ``adaptive`` = engine.render.adaptive.AdaptiveSettings samples adaptively up to
         ``settings.spp`` (``adaptive_resume``: the resumed render's HalfBuffers; ``clock``: seconds
-        for the time limit; ``on_first_pass``: see render_adaptive); ``stats["stop_reason"]`` says why
+        for the time limit; ``on_first_pass``, ``unit_times``: see render_adaptive); ``stats["stop_reason"]`` says why
         it ended and the result's ``halves`` holds the half-buffers.
         """
         st = copy.copy(settings or self.scene.settings)
@@ -262,7 +263,7 @@ class Renderer:
                 tracer, film, halves, st.spp, st.batch_rays, adaptive, window,
                 lambda units, trace, add, stop, ab: trace_in_order(units, trace, add, workers, stop, ab),
                 stats, progress=progress, should_stop=should_stop, clock=clock or time.perf_counter,
-                on_first_pass=on_first_pass)
+                on_first_pass=on_first_pass, workers=workers, unit_times=unit_times)
             cancelled = stats["stop_reason"] == "cancelled"
             stats.setdefault("seconds", 0.0)
             self._live_film = None
