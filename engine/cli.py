@@ -434,7 +434,7 @@ def _adaptive_settings(args, spp: int):
         return None
     min_spp = args.min_spp if args.min_spp is not None else min(16, spp)
     threshold = args.noise_threshold
-    ad = check_adaptive(threshold if threshold is not None else math.inf, args.noise_quantity, min_spp,
+    ad = check_adaptive(threshold if threshold is not None else 1.0, args.noise_quantity, min_spp,
                         args.time_limit if args.time_limit is not None else 0.0, spp)
     if threshold is None:                     # a time limit alone: sample everything until time or --spp
         ad.threshold = 0.0

@@ -282,6 +282,15 @@ def test_cli_writes_counts_noise_stop_reason_and_resumes_to_a_tighter_threshold(
     np.testing.assert_array_equal(cb["noise"], ca["noise"])
 
 
+def test_a_time_limit_alone_samples_every_pixel_up_to_the_maximum(capsys, small_json, tmp_path):
+    path = str(tmp_path / "t.exr")
+    status, out = run_cli(capsys, "render", small_json, "-o", path, "--spp", "6", "--min-spp", "2",
+                          "--time-limit", "3600", "--no-previews", "-q")
+    assert status == 0, out.err
+    _, ch, header = read_stokes_exr(path)
+    assert header["polar.stop_reason"] == "max_spp" and np.all(ch["spp"] == 6)
+
+
 def test_resuming_a_uniform_render_adaptively_is_refused(capsys, small_json, tmp_path):
     uniform = str(tmp_path / "u.exr")
     assert run_cli(capsys, "render", small_json, "-o", uniform, "--spp", "4", "--no-previews", "-q")[0] == 0
