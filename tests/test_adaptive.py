@@ -370,3 +370,42 @@ def test_cost_map_spreads_the_pilot_time_over_pixels_by_their_units_cost():
     np.testing.assert_allclose(sps[:4], [0.0625, 0.0625, 0.1875, 0.1875])
     assert sps[4] == pytest.approx(0.125)                                 # not in the pilot: the mean
     assert float(np.sum(sps[:4] * 2)) == pytest.approx(1.0)              # the pilot's samples: its wall time
+
+
+def test_blender_sampling_panel_shows_the_adaptive_settings_and_the_estimate_button():
+    bpy = pytest.importorskip("bpy")
+    from tests.blender_support import empty_scene, load_addon
+    addon = load_addon()
+    scene = empty_scene()
+    scene.polar.estimate_report = "Adaptive: median 16\nUniform: 64"
+    drawn = {"props": [], "operators": [], "labels": []}
+
+    class Layout:                                   # records what the panel draws
+        use_property_split = False
+
+        def column(self, **kw):
+            return self
+
+        row = column
+
+        def prop(self, data, name, **kw):
+            assert name in data.bl_rna.properties, name
+            drawn["props"].append(name)
+
+        def operator(self, idname, **kw):
+            drawn["operators"].append(idname)
+
+        def label(self, text="", **kw):
+            drawn["labels"].append(text)
+
+    class Context:
+        pass
+
+    panel, context = Context(), Context()
+    panel.layout, context.scene = Layout(), scene
+    addon.polar_addon.ui.POLAR_PT_sampling.draw(panel, context)
+    for name in ("use_adaptive_sampling", "adaptive_threshold", "noise_quantity", "samples", "adaptive_min_samples",
+                 "time_limit"):
+        assert name in drawn["props"], name
+    assert drawn["operators"] == ["polar.estimate_cost"] and drawn["labels"] == ["Adaptive: median 16", "Uniform: 64"]
+    assert hasattr(bpy.ops.polar, "estimate_cost")
