@@ -432,6 +432,8 @@ def _adaptive_settings(args, spp: int):
         if args.noise_quantity != "s0":
             raise SceneError("--noise-quantity", "only applies to adaptive sampling: add --noise-threshold")
         return None
+    if spp < 2:
+        raise SceneError("--spp", f"must be at least 2 with adaptive sampling (even and odd samples), got {spp}")
     min_spp = args.min_spp if args.min_spp is not None else min(16, spp)
     threshold = args.noise_threshold
     ad = check_adaptive(threshold if threshold is not None else 1.0, args.noise_quantity, min_spp,

@@ -48,8 +48,8 @@ def engine_settings(scene, preview=False) -> RenderSettings:
 def adaptive_settings(scene, preview=False):
     """engine AdaptiveSettings from the scene's Polar settings, or None (off, or a preview render)."""
     p = scene.polar
-    if preview or not (p.use_adaptive_sampling or p.time_limit > 0):
-        return None
+    if preview or p.samples < 2 or not (p.use_adaptive_sampling or p.time_limit > 0):
+        return None                          # (the error needs an even and an odd sample)
     from ..engine.render.adaptive import AdaptiveSettings
     threshold = p.adaptive_threshold if p.use_adaptive_sampling else 0.0     # a time limit alone
     return AdaptiveSettings(threshold=threshold, quantity=NOISE_QUANTITY_TO_ENGINE[p.noise_quantity],

@@ -253,6 +253,7 @@ def small_json(tmp_path):
     (["--noise-threshold", "0.1", "--time-limit", "-3"], "--time-limit"),
     (["--noise-threshold", "120", "--noise-quantity", "aolp"], "--noise-threshold"),
     (["--min-spp", "4"], "--min-spp"),
+    (["--noise-threshold", "0.1", "--spp", "1"], "--spp"),
     (["--noise-quantity", "dolp"], "--noise-quantity"),
 ])
 def test_bad_adaptive_options_are_one_line_errors(capsys, small_json, tmp_path, args, option):
