@@ -51,6 +51,9 @@ TILE = 4
 AOLP_MIN_DOLP = 0.05
 #: Fewest paths per work unit when a round is split for the workers (below, per-batch overhead dominates).
 MIN_UNIT_PATHS = 4096
+#: Fewest pixels per unit in a first pass that measures where samples cost more (engine.render.estimate;
+#: smaller units measured their own overhead more than the cost differences, on this 2-core VM).
+COST_CHUNK_PIXELS = 256
 #: Stop reasons written to the EXR header ``polar.stop_reason``.
 STOP_REASONS = ("threshold", "max_spp", "time_limit", "cancelled")
 
@@ -351,7 +354,7 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
         per_unit = min(batch_rays, max(MIN_UNIT_PATHS, -(-paths // (4 * max(workers, 1)))))
         timing["on"] = unit_times is not None and counts.min() < adaptive.min_spp
         units = adaptive_units(pixels[todo], counts[todo], target[todo], tiles, per_unit,
-                               chunk_pixels=max(256, pixels.size // 128) if timing["on"] else None)
+                               chunk_pixels=max(COST_CHUNK_PIXELS, pixels.size // 128) if timing["on"] else None)
         stopped = run_units(units, trace_unit, add_result, stop_requested, abort)
         stats["seconds"] = clock() - t0
         if stopped:
