@@ -134,6 +134,7 @@ def _render(args) -> int:
                                                   "reduce_spectral", "simplify")}, **overrides}
         st = parse_settings(merged, "option")
         scene.settings = st
+    adaptive = _adaptive_settings(args, st.spp)
     out = args.output
     if not out.lower().endswith(".exr"):
         raise SceneError("-o", f"the output must be an .exr file, got {out!r}")
@@ -147,11 +148,15 @@ def _render(args) -> int:
     scene_hash = scene_fingerprint(scene)      # before compiling: nothing has filled a cache yet
 
     renderer = Renderer(scene)
-    resume_film = None
+    resume_film = resume_halves = None
     if args.resume:
-        resume_film, st = resume_state(args.resume, scene, renderer.compiled, st, scene_hash,
-                                       spp=args.spp, seed=args.seed)
+        resume_film, st, resume_halves = resume_state(args.resume, scene, renderer.compiled, st, scene_hash,
+                                                      spp=args.spp, seed=args.seed, with_halves=True) \
+            if adaptive is not None else (*resume_state(args.resume, scene, renderer.compiled, st, scene_hash,
+                                                        spp=args.spp, seed=args.seed), None)
         scene.settings = st
+        if adaptive is not None:
+            adaptive = _adaptive_settings(args, st.spp)      # --spp may come from the file
     cam = scene.camera
     print(f"polar: {os.path.basename(args.scene)}: {cam.width}×{cam.height}, {st.spp} spp, "
           f"{len(renderer.compiled.faces)} triangles, {len(renderer.lights)} lights, "
@@ -164,12 +169,14 @@ def _render(args) -> int:
                 from .render.distributed import render_distributed
                 try:
                     result = render_distributed(scene, args.scheduler, st, progress=bar,
-                                                should_stop=lambda: signals.requested)
+                                                should_stop=lambda: signals.requested, adaptive=adaptive)
                 except OSError as e:
                     raise SceneError("--scheduler",
                                      f"cannot reach the Dask scheduler at {args.scheduler}: {e}") from None
                 except RuntimeError as e:
                     raise SceneError("--scheduler", str(e)) from None
+            elif adaptive is not None:
+                result = _render_adaptive(renderer, st, adaptive, bar, signals, resume_film, resume_halves)
             else:
                 result = renderer.render(st, progress=bar, should_stop=lambda: signals.requested,
                                          resume=resume_film)
@@ -177,11 +184,60 @@ def _render(args) -> int:
             if bar is not None:
                 bar.close()
         # Still inside: a signal while the files are written must not lose them.
-        status = _write_render(args, out, result, st, scene_hash)
+        status = _write_render(args, out, result, st, scene_hash, adaptive)
     return status if status else signals.exit_status(130 if result.cancelled else 0)
 
 
-def _write_render(args, out, result, st, scene_hash) -> int:
+def _render_adaptive(renderer, st, adaptive, bar, signals, resume_film, resume_halves):
+    """An adaptive render; records in its stats the prediction made after the first pass."""
+    from .render.estimate import predict
+
+    from .render.estimate import cost_map
+    first, unit_times = {}, []
+
+    def on_first_pass(film, halves, seconds, samples):
+        if samples > 0 and adaptive.threshold > 0 and unit_times:
+            first["prediction"] = predict(film, halves, adaptive.quantity, adaptive.threshold, adaptive.min_spp,
+                                          st.spp, cost_map(unit_times, film.count.size, seconds))
+
+    result = renderer.render(st, progress=bar, should_stop=lambda: signals.requested, resume=resume_film,
+                             adaptive=adaptive, adaptive_resume=resume_halves, on_first_pass=on_first_pass,
+                             unit_times=unit_times)
+    result.stats.update(first)
+    return result
+
+
+def _adaptive_report(result, adaptive) -> tuple[dict, dict]:
+    """(extra channels, header entries) of an adaptive render, and its summary printed on stderr."""
+    import numpy as np
+
+    from .render.adaptive import UNITS, film_noise, state_channels
+    film, stats = result.film, result.stats
+    err, _, tile_err = film_noise(film, result.halves, adaptive.quantity)
+    noise = np.where(np.isfinite(err), err, -1.0).reshape(film.height, film.width)
+    extra = {"noise": noise.astype("float32"), **state_channels(film, result.halves)}
+    meta = {"polar.stop_reason": stats["stop_reason"], "polar.noise_quantity": adaptive.quantity,
+            "polar.noise_threshold": float(adaptive.threshold), "polar.min_spp": int(adaptive.min_spp),
+            "polar.time_limit": float(adaptive.time_limit), "polar.noise_tile": 4}
+    lit = film.count > 0
+    counts = film.count[lit]
+    finite = tile_err[lit & np.isfinite(err)]
+    achieved = (f"achieved {adaptive.quantity} error (tile RMS): median {np.median(finite):.3g}, "
+                f"95th percentile {np.percentile(finite, 95):.3g}, max {finite.max():.3g} {UNITS[adaptive.quantity]}"
+                if finite.size else "no error estimate (fewer than 2 samples)")
+    print(f"polar: adaptive: stopped by {stats['stop_reason']}; {achieved}; samples per pixel median "
+          f"{np.median(counts):.0f}, 95th percentile {np.percentile(counts, 95):.0f}, max {counts.max()}",
+          file=sys.stderr)
+    p = stats.get("prediction")
+    if p is not None:
+        total = float(stats["seconds"])
+        print(f"polar: predicted after the first pass: median {p.median:.0f} spp, 95th percentile {p.p95:.0f} spp, "
+              f"{p.adaptive_seconds:.1f} s; actual: median {np.median(counts):.0f} spp, "
+              f"95th percentile {np.percentile(counts, 95):.0f} spp, {total:.1f} s", file=sys.stderr)
+    return extra, meta
+
+
+def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
     """Write the EXR (or a rescue file) and the previews; 0, or 1 if the EXR could not be written."""
     from .output.exr import write_stokes_exr
     from .output.previews import write_previews
@@ -216,6 +272,11 @@ def _write_render(args, out, result, st, scene_hash) -> int:
         meta["polar.wavelength_nm"] = float(st.wavelength_nm)
     meta.update(estimator_identity(scene_hash, st, stats["transport"], size=(film.width, film.height)))
     extra = {"spp": spp_image.astype("uint32")}
+    if adaptive is not None and result.halves is not None:
+        more_extra, more_meta = _adaptive_report(result, adaptive)
+        extra.update(more_extra)
+        meta.update(more_meta)
+        meta["polar.complete"] = int(not result.cancelled)
     if args.stderr:
         se = film.stderr_luminance()
         for i in range(4):
@@ -350,6 +411,73 @@ def _polariser(args) -> int:
     return 0
 
 
+def _adaptive_options(r) -> None:
+    g = r.add_argument_group("adaptive sampling (after --min-spp samples, only tiles whose estimated error "
+                             "is above the threshold get more, up to --spp)")
+    g.add_argument("--noise-threshold", type=float, metavar="T",
+                   help="standard error to reach: relative for s0/stokes, absolute for dolp/docp, degrees for aolp")
+    g.add_argument("--noise-quantity", default="s0", metavar="Q",
+                   help="s0 (default) | dolp | aolp | docp | stokes: what the threshold applies to")
+    g.add_argument("--min-spp", type=int, metavar="N", help="samples every pixel gets first (default min(16, --spp))")
+    g.add_argument("--time-limit", type=float, metavar="S", help="stop sampling after S seconds (0 = no limit)")
+
+
+def _adaptive_settings(args, spp: int):
+    """AdaptiveSettings from the render options, or None for a uniform render (SceneError on bad values)."""
+    from .render.adaptive import check_adaptive
+    given = args.noise_threshold is not None or args.time_limit is not None
+    if not given:
+        for option, value in (("--min-spp", args.min_spp),):
+            if value is not None:
+                raise SceneError(option, "only applies to adaptive sampling: add --noise-threshold or --time-limit")
+        if args.noise_quantity != "s0":
+            raise SceneError("--noise-quantity", "only applies to adaptive sampling: add --noise-threshold")
+        return None
+    if spp < 2:
+        raise SceneError("--spp", f"must be at least 2 with adaptive sampling (even and odd samples), got {spp}")
+    min_spp = args.min_spp if args.min_spp is not None else min(16, spp)
+    threshold = args.noise_threshold
+    ad = check_adaptive(threshold if threshold is not None else 1.0, args.noise_quantity, min_spp,
+                        args.time_limit if args.time_limit is not None else 0.0, spp)
+    if threshold is None:                     # a time limit alone: sample everything until time or --spp
+        ad.threshold = 0.0
+    return ad
+
+
+def _estimate(args) -> int:
+    from .render.adaptive import checkpoints
+    from .render.estimate import parse_target, pilot_render, predict
+    from .render.renderer import Renderer
+    from .scene.loader import load_scene
+
+    targets = [parse_target(t) for t in args.target]
+    scene = load_scene(args.scene)
+    st = scene.settings
+    if args.spp is not None:
+        st.spp = args.spp
+    if args.seed is not None:
+        st.seed = args.seed
+    if st.spp < 2:
+        raise SceneError("--spp", f"must be at least 2 for adaptive sampling, got {st.spp}")
+    if not (2 <= args.pilot_spp <= 4096):
+        raise SceneError("--pilot-spp", f"must be an integer in [2, 4096], got {args.pilot_spp}")
+    min_spp = args.min_spp if args.min_spp is not None else min(16, st.spp)
+    if not (2 <= min_spp <= st.spp):
+        raise SceneError("--min-spp", f"must be an integer in [2, --spp = {st.spp}], got {min_spp}")
+    renderer = Renderer(scene)
+    cam = scene.camera
+    print(f"polar: {os.path.basename(args.scene)}: {cam.width}×{cam.height}, pilot {args.pilot_spp} spp, "
+          f"adaptive {min_spp}…{st.spp} spp ({len(checkpoints(min_spp, st.spp))} checkpoints)", file=sys.stderr)
+    pilot, sps = pilot_render(renderer, st, args.pilot_spp)
+    print(f"pilot: {pilot.stats['samples']} samples in {pilot.stats['seconds']:.2f} s "
+          f"({pilot.stats['seconds'] / max(pilot.stats['samples'], 1) * 1e6:.2f} µs per sample on this machine, "
+          f"{float(sps.min()) * 1e6:.2f}–{float(sps.max()) * 1e6:.2f} by region)")
+    for quantity, threshold in targets:
+        p = predict(pilot.film, pilot.halves, quantity, threshold, min_spp, st.spp, sps)
+        print(f"target {p.describe()}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m engine", description="Polar: polarised spectral path tracer")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -376,7 +504,18 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask cluster, e.g. tcp://host:8786 "
                                                           "(same image as a local render)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    _adaptive_options(r)
     r.set_defaults(func=_render)
+
+    e = sub.add_parser("estimate", help="predict the samples and time a target accuracy needs (short pilot render)")
+    e.add_argument("scene", help="scene JSON (engine format or a shared/peers scene)")
+    e.add_argument("--target", action="append", required=True, metavar="QUANTITY:THRESHOLD",
+                   help="e.g. dolp:0.01 or s0:0.02 (repeatable); quantities s0|dolp|aolp|docp|stokes")
+    e.add_argument("--pilot-spp", type=int, default=16, help="samples per pixel of the pilot render (default 16)")
+    e.add_argument("--spp", type=int, help="maximum samples per pixel (default: the scene's)")
+    e.add_argument("--min-spp", type=int, default=None, help="adaptive minimum samples per pixel (default 16)")
+    e.add_argument("--seed", type=int, help="random seed (default: the scene's)")
+    e.set_defaults(func=_estimate)
 
     from .materials.catalogue import MODEL_PARAMETERS, parameter_help   # the declared models and parameters
     m = sub.add_parser("mueller", help="print one model's Mueller BRDF at one geometry as JSON",

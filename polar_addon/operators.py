@@ -41,6 +41,51 @@ class POLAR_OT_add_virtual_polariser(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (POLAR_OT_add_polarising_bsdf, POLAR_OT_add_virtual_polariser)
+class POLAR_OT_estimate_cost(bpy.types.Operator):
+    """Render a short pilot and predict the samples per pixel and the time the current Noise Threshold
+    needs (adaptive and uniform sampling)"""
+
+    bl_idname = "polar.estimate_cost"
+    bl_label = "Estimate"
+    bl_options = {"REGISTER"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None and context.scene.camera is not None
+
+    def execute(self, context):
+        from ..engine.errors import SceneError
+        from ..engine.render.estimate import pilot_render, predict
+        from ..engine.render.renderer import Renderer
+        from .export.scene import export_scene
+        from .properties import NOISE_QUANTITY_TO_ENGINE
+        from .render_engine import engine_settings
+
+        scene = context.scene
+        p = scene.polar
+        r = scene.render
+        W = max(1, int(r.resolution_x * r.resolution_percentage / 100))
+        H = max(1, int(r.resolution_y * r.resolution_percentage / 100))
+        settings = engine_settings(scene)
+        quantity = NOISE_QUANTITY_TO_ENGINE[p.noise_quantity]
+        min_spp = max(2, min(p.adaptive_min_samples, p.samples))
+        try:
+            engine_scene, _ = export_scene(context.evaluated_depsgraph_get(), scene.camera, W, H, settings)
+            pilot, sps = pilot_render(Renderer(engine_scene), settings, max(2, min(16, min_spp)), quantity)
+        except SceneError as e:
+            self.report({"ERROR"}, f"Polar: {e}")
+            return {"CANCELLED"}
+        pred = predict(pilot.film, pilot.halves, quantity, p.adaptive_threshold, min_spp, max(p.samples, min_spp),
+                       sps)
+        p.estimate_report = (f"Adaptive: median {pred.median:.0f}, p95 {pred.p95:.0f} spp, "
+                             f"{pred.adaptive_seconds:.1f} s\n"
+                             f"Uniform: {pred.uniform_spp} spp, {pred.uniform_seconds:.1f} s"
+                             + (f"\n{100 * pred.capped:.0f} % of pixels reach Max Samples first"
+                                if pred.capped else ""))
+        self.report({"INFO"}, f"Polar estimate: {pred.describe()}")
+        return {"FINISHED"}
+
+
+classes = (POLAR_OT_add_polarising_bsdf, POLAR_OT_add_virtual_polariser, POLAR_OT_estimate_cost)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

@@ -6,7 +6,7 @@ renumber or reorder.
 """
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty
+from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
 
 POLARISATION_ITEMS = [
     ("AUTO", "Auto", "Choose the cheapest transport that is exact for this scene (reported in the stats)", 0),
@@ -22,7 +22,7 @@ SPECTRAL_ITEMS = [
 ]
 
 PASS_NAMES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP", "Polariser",
-              "VisDoP", "VisS1", "VisS2", "VisS3", "VisAoLP")
+              "VisDoP", "VisS1", "VisS2", "VisS3", "VisAoLP", "Noise")
 #: Passes on by default; the false-colour visualisation passes are opt-in.
 DEFAULT_PASSES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP", "Polariser")
 
@@ -32,6 +32,23 @@ POLARISER_TYPE_ITEMS = [
     ("CIRCULAR_LEFT", "Circular (Left)", "Passes left-circular light", 2),
     ("RETARDER", "Retarder + Linear", "A linear retarder followed by a linear polariser", 3),
 ]
+
+
+NOISE_QUANTITY_ITEMS = [
+    ("S0", "S0 (relative)", "Relative standard error of the luminance S0, |Y_A − Y_B| / (Y_A + Y_B) from the even "
+     "and odd samples. It plays the role of Cycles' Noise Threshold but is not Cycles' formula", 0),
+    ("DOLP", "DoLP", "Absolute standard error of the degree of linear polarisation, ½|DoLP_A − DoLP_B|", 1),
+    ("AOLP", "AoLP (degrees)", "Standard error of the angle of linear polarisation in degrees, where DoLP > 0.05", 2),
+    ("DOCP", "DoCP", "Absolute standard error of the degree of circular polarisation, ½|DoCP_A − DoCP_B|", 3),
+    ("STOKES", "Stokes", "The largest of the S0 error and the errors of S1/S0, S2/S0, S3/S0", 4),
+]
+NOISE_QUANTITY_TO_ENGINE = {"S0": "s0", "DOLP": "dolp", "AOLP": "aolp", "DOCP": "docp", "STOKES": "stokes"}
+
+
+def _adaptive_changed(self, context):
+    # The Noise pass exists only with adaptive sampling: refresh the compositor sockets.
+    for view_layer in self.id_data.view_layers:
+        view_layer.update_render_passes()
 
 
 def _polariser_changed(self, context):
@@ -61,6 +78,24 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                          max=256)
     batch_rays: IntProperty(name="Batch Size", description="Paths traced at once; lower it to save memory",
                             default=1 << 17, min=1024, max=1 << 24)
+    use_adaptive_sampling: BoolProperty(name="Noise Threshold", description="Adaptive sampling: after Min "
+                                        "Samples, only tiles whose estimated error is above the threshold get more "
+                                        "samples (up to Max Samples or the Time Limit)", default=False,
+                                        update=_adaptive_changed)
+    adaptive_threshold: FloatProperty(name="Noise Threshold", description="Standard error to reach, of the chosen "
+                                      "quantity (relative for S0 and Stokes, absolute for DoLP and DoCP, degrees "
+                                      "for AoLP). Like Cycles' Noise Threshold in role, not in formula",
+                                      default=0.01, min=1e-5, max=90.0, soft_max=1.0, precision=4, step=0.1)
+    noise_quantity: EnumProperty(name="Quantity", items=NOISE_QUANTITY_ITEMS, default="S0",
+                                 description="What the noise threshold applies to")
+    adaptive_min_samples: IntProperty(name="Min Samples", description="Samples every pixel gets before the noise "
+                                      "is tested (at least 2: the error comes from even and odd samples)",
+                                      default=16, min=2, max=1 << 20)
+    time_limit: FloatProperty(name="Time Limit", description="Stop sampling after this many seconds (0 = no "
+                              "limit); the render then shows the samples done", default=0.0, min=0.0,
+                              soft_max=3600.0)
+    estimate_report: StringProperty(name="Estimate", description="The last cost estimate", default="",
+                                    options={"SKIP_SAVE"})
     polariser_type: EnumProperty(name="Filter", items=POLARISER_TYPE_ITEMS, default="LINEAR",
                                  update=_polariser_changed,
                                  description="Virtual filter for the Polariser pass and the compositor group")
@@ -110,6 +145,9 @@ class PolarViewLayerSettings(bpy.types.PropertyGroup):
                                  description="Blue −1 … white 0 … red +1")
     use_pass_visaolp: BoolProperty(name="AoLP (false colour)", default=False, update=_refresh_passes,
                                    description="Angle of linear polarisation as hue, DoLP as saturation")
+    use_pass_noise: BoolProperty(name="Noise", default=True, update=_refresh_passes,
+                                 description="Per-pixel standard error of the noise quantity (with adaptive "
+                                 "sampling only)")
 
     def enabled_passes(self):
         return [name for name in PASS_NAMES if getattr(self, f"use_pass_{name.lower()}")]

@@ -23,7 +23,7 @@ from ..engine.output.colormaps import diverging, hue_saturation, sequential
 from ..engine.postprocess.filters import apply_filter, filter_row
 from ..engine.spectral.cie import LUMINANCE_WEIGHTS
 from .compositor import polariser_inputs
-from .properties import DEFAULT_PASSES, PASS_NAMES, POLARISATION_TO_ENGINE
+from .properties import DEFAULT_PASSES, NOISE_QUANTITY_TO_ENGINE, PASS_NAMES, POLARISATION_TO_ENGINE
 from .viewport import ViewportSession
 
 #: Seconds between progressive updates of the image shown while rendering.
@@ -43,6 +43,30 @@ def engine_settings(scene, preview=False) -> RenderSettings:
                           wavelength_nm=p.wavelength_nm, polarisation=POLARISATION_TO_ENGINE[p.polarisation],
                           batch_rays=p.batch_rays, threads=p.threads,
                           simplify="auto" if p.skip_clear_layers else "off")
+
+
+def adaptive_settings(scene, preview=False):
+    """engine AdaptiveSettings from the scene's Polar settings, or None (off, or a preview render)."""
+    p = scene.polar
+    if preview or p.samples < 2 or not (p.use_adaptive_sampling or p.time_limit > 0):
+        return None                          # (the error needs an even and an odd sample)
+    from ..engine.render.adaptive import AdaptiveSettings
+    threshold = p.adaptive_threshold if p.use_adaptive_sampling else 0.0     # a time limit alone
+    return AdaptiveSettings(threshold=threshold, quantity=NOISE_QUANTITY_TO_ENGINE[p.noise_quantity],
+                            min_spp=max(2, min(p.adaptive_min_samples, p.samples)), time_limit=p.time_limit)
+
+
+def adaptive_summary(out, adaptive) -> str:
+    """' | adaptive: …' for the stats line: why sampling stopped, the achieved error, the samples."""
+    from ..engine.render.adaptive import UNITS, film_noise
+    film = out.film
+    err, _, tile_err = film_noise(film, out.halves, adaptive.quantity)
+    sampled = film.count > 0
+    counts, finite = film.count[sampled], tile_err[sampled & np.isfinite(err)]
+    achieved = (f"{adaptive.quantity} error p95 {np.percentile(finite, 95):.3g} {UNITS[adaptive.quantity]}"
+                + (f" (threshold {adaptive.threshold:g})" if adaptive.threshold > 0 else "")) if finite.size else ""
+    return (f" | adaptive: {out.stats['stop_reason']}, {achieved}, spp {counts.min()}–{counts.max()} "
+            f"(median {np.median(counts):.0f})") if counts.size else ""
 
 
 def _display_colour(uint8_rgb):
@@ -110,7 +134,10 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
         settings = getattr(renderlayer, "polar", None)
         enabled = settings.enabled_passes() if settings is not None else list(DEFAULT_PASSES)
+        adaptive = scene is not None and getattr(getattr(scene, "polar", None), "use_adaptive_sampling", False)
         for name in enabled:
+            if name == "Noise" and not adaptive:
+                continue
             if name.startswith("S") or name.startswith("Vis") or name == "Polariser":
                 self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
             else:
@@ -161,14 +188,18 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         def should_stop():
             return self.test_break() or cancel_requested["value"]
 
+        adaptive = adaptive_settings(scene, self.is_preview)
         if distributed_scheduler["address"] and not self.is_preview:
             from ..engine.render.distributed import render_distributed
             out = render_distributed(engine_scene, distributed_scheduler["address"], settings, progress=progress,
                                      should_stop=should_stop, window=window)
         else:
-            out = renderer.render(settings, progress=progress, should_stop=should_stop, window=window)
+            out = renderer.render(settings, progress=progress, should_stop=should_stop, window=window,
+                                  adaptive=adaptive)
         self._write_passes(result, out.stokes(), window, enabled, polariser,
                            out.film.alpha() if out.film.has_alpha else None)
+        if out.halves is not None and "Noise" in enabled:
+            self._write_noise(result, out, adaptive, window)
         self.end_result(result)
         stats = out.stats
         message = (f"Polar | {stats['transport_reason']} | {stats['samples']} samples in {stats['seconds']:.1f} s"
@@ -183,8 +214,23 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             message += f" | {stats['error']}"
         if stats["nonfinite"]:
             message += f" | dropped {stats['nonfinite']} non-finite samples"
+        if out.halves is not None:
+            message += adaptive_summary(out, adaptive)
         self.update_stats("", message)
         self.report({"INFO"}, message)
+
+    def _write_noise(self, result, out, adaptive, window):
+        """The Noise pass: per-pixel standard error of the adaptive quantity (−1: no estimate)."""
+        from ..engine.render.adaptive import film_noise
+        film = out.film
+        err = film_noise(film, out.halves, adaptive.quantity)[0]
+        noise = np.where(np.isfinite(err), err, -1.0).reshape(film.height, film.width)
+        if window is not None:
+            x0, y0, x1, y1 = window
+            noise = noise[y0:y1, x0:x1]
+        target = result.layers[0].passes.get("Noise")
+        if target is not None:
+            target.rect.foreach_set(np.ascontiguousarray(noise[::-1], dtype=np.float32).ravel())
 
     def _write_passes(self, result, stokes_rgb, window, enabled, polariser, alpha=None):
         if stokes_rgb is None:

@@ -22,8 +22,26 @@ class POLAR_PT_sampling(_PolarPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         col = layout.column(align=True)
-        col.prop(p, "samples", text="Render")
         col.prop(p, "preview_samples", text="Viewport")
+        # Render sampling laid out as Cycles' Sampling ▸ Render panel.
+        col = layout.column(heading="Noise Threshold", align=True)
+        row = col.row(align=True)
+        row.prop(p, "use_adaptive_sampling", text="")
+        sub = row.row()
+        sub.active = p.use_adaptive_sampling
+        sub.prop(p, "adaptive_threshold", text="")
+        col = layout.column(align=True)
+        sub = col.column(align=True)
+        sub.active = p.use_adaptive_sampling
+        sub.prop(p, "noise_quantity")
+        col.prop(p, "samples", text="Max Samples" if p.use_adaptive_sampling else "Render")
+        sub = col.column(align=True)
+        sub.active = p.use_adaptive_sampling
+        sub.prop(p, "adaptive_min_samples", text="Min Samples")
+        col.prop(p, "time_limit")
+        layout.operator("polar.estimate_cost", icon="TIME")
+        for line in p.estimate_report.splitlines():
+            layout.label(text=line)
         layout.prop(p, "max_bounces")
         row = layout.row(align=True)
         row.prop(p, "seed")
@@ -93,6 +111,8 @@ class POLAR_PT_passes(_PolarPanel, bpy.types.Panel):
         col = layout.column(heading="False Colour", align=True)
         for name in ("visdop", "viss1", "viss2", "viss3", "visaolp"):
             col.prop(s, f"use_pass_{name}")
+        col = layout.column(heading="Adaptive Sampling", align=True)
+        col.prop(s, "use_pass_noise")
 
 
 classes = (POLAR_PT_sampling, POLAR_PT_light_model, POLAR_PT_polariser, POLAR_PT_performance, POLAR_PT_passes)

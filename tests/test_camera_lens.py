@@ -275,3 +275,24 @@ def test_cli_writes_alpha_and_resume_continues_it(tmp_path):
     assert cli_main(["render", str(scene), "-o", str(part), "--resume", str(part), "--spp", "4",
                      "--no-previews", "-q"]) == 0
     np.testing.assert_allclose(read_stokes_exr(part)[1]["A"], a, atol=1e-6)
+
+
+def test_adaptive_render_keeps_alpha(tmp_path):
+    """Adaptive sampling adds samples pass by pass; the coverage of camera rays still reaches the A channel."""
+    import json
+
+    from engine.cli import main as cli_main
+    from engine.output.exr import read_stokes_exr
+    doc = {"format": "polar-scene/1",
+           "camera": {"origin": [0, -6, 1.5], "target": [0, 0, 0.5], "up": [0, 0, 1], "fov_deg": 40,
+                      "width": 12, "height": 9, "film_transparent": True},
+           "render": {"spp": 8, "max_depth": 3},
+           "materials": {"white": {"type": "lambert", "albedo": 0.8}},
+           "objects": [BALL], "lights": [{"type": "environment", "radiance": 1.0}]}
+    scene = tmp_path / "s.json"
+    scene.write_text(json.dumps(doc))
+    out = tmp_path / "a.exr"
+    assert cli_main(["render", str(scene), "-o", str(out), "--noise-threshold", "0.5", "--min-spp", "4",
+                     "--no-previews", "-q"]) == 0
+    a = read_stokes_exr(out)[1]["A"]
+    assert a.min() == 0.0 and a.max() == 1.0

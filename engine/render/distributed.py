@@ -56,6 +56,55 @@ def _render_unit(key, scene, settings, unit, window, width):
     return lo, part.sums, part.sumsq_y, part.count, stats
 
 
+def _trace_paths(key, scene, settings, unit):
+    """Trace one adaptive work unit on a worker; returns (pixel, sample, values (4, 3, N), stats)."""
+    from .adaptive import unit_paths
+    from .integrator import PathTracer
+    renderer = _renderer_for(key, scene)
+    pixel, sample = unit_paths(unit)
+    tracer = PathTracer(renderer.compiled, renderer.lights, renderer.camera, settings)
+    values, stats = tracer.trace(pixel, sample)
+    return pixel, sample, values, stats
+
+
+def _ordered_on_cluster(client, submit, units, add_result, stop_requested, stats) -> bool:
+    """Submit ``units`` (``submit(unit)`` → future), pass results to ``add_result`` in unit order.
+
+    Returns True if stopped (a stop request, or a failed cluster: then ``stats["error"]`` says why).
+    """
+    from distributed import as_completed
+    futures = [submit(unit) for unit in units]
+    index = {f.key: i for i, f in enumerate(futures)}
+    results, next_to_add, stopped = {}, 0, False
+    pending = as_completed(futures)
+    while not pending.is_empty() and not stopped:
+        batch = pending.next_batch(block=False)
+        if not batch:
+            if stop_requested():
+                stopped = True
+                break
+            time.sleep(STOP_POLL_SECONDS)
+            continue
+        for future in batch:
+            try:
+                results[index[future.key]] = future.result()
+            except Exception as e:      # noqa: BLE001 — lost workers, lost scene data, a failed unit
+                stopped = True
+                stats["error"] = (f"the Dask cluster failed ({type(e).__name__}: "
+                                  f"{str(e).splitlines()[0] if str(e) else ''})")
+                break
+            future.release()
+        while next_to_add in results:
+            add_result(results.pop(next_to_add))
+            next_to_add += 1
+        if not stopped and stop_requested():
+            stopped = True
+    if stopped:
+        for f in futures:
+            f.cancel()
+    return stopped
+
+
 def _share_enclosing_package(client):
     """If the engine is a subpackage (Blender extension), make that package importable on the workers."""
     engine_pkg = __name__.rsplit(".render.distributed", 1)[0]          # "engine" or "<pkg>.engine"
@@ -75,7 +124,7 @@ def scene_key(scene) -> str:
 
 
 def render_distributed(scene, address, settings=None, progress=None, should_stop=None, window=None,
-                       client=None) -> RenderResult:
+                       client=None, adaptive=None) -> RenderResult:
     """Render ``scene`` on the Dask scheduler at ``address`` (e.g. "tcp://host:8786").
 
     Same arguments and result as ``Renderer.render``; ``client`` may be an existing
@@ -83,6 +132,9 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
     worker lost, the scene's data lost with them, a unit failing), the units finished so far are
     returned as a cancelled result with ``stats["error"]`` saying what happened.  A bad address
     or a cluster without workers raises RuntimeError, an unreachable scheduler OSError.
+    ``adaptive`` (engine.render.adaptive.AdaptiveSettings): sample adaptively; the rounds are decided
+    here and their units traced on the workers, added in the same order as a local render, so the
+    counts and the image equal the local adaptive render's.
     """
     try:
         from distributed import Client, as_completed
@@ -110,6 +162,9 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
             scene_future = client.scatter(scene, broadcast=True, timeout=timeout)
         except TimeoutError:
             raise RuntimeError(f"no Dask worker joined the scheduler within {timeout:g} s") from None
+        if adaptive is not None:
+            return _render_adaptive_on(client, key, scene_future, st, reason, simplified, W, H, window, adaptive,
+                                       progress, should_stop)
         futures = [client.submit(_render_unit, key, scene_future, st, unit, window, W, pure=True,
                                  key=f"polar-{key[:12]}-{st.seed}-{i}-{unit}") for i, unit in enumerate(units)]
         film = Film(W, H)
@@ -172,3 +227,24 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
     finally:
         if own_client:
             client.close()
+
+
+def _render_adaptive_on(client, key, scene_future, st, reason, simplified, W, H, window, adaptive, progress,
+                        should_stop) -> RenderResult:
+    from .adaptive import HalfBuffers, render_adaptive
+    film, halves = Film(W, H), HalfBuffers(W * H)
+    stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0, "transport": st.polarisation,
+             "transport_reason": reason, "spectral": st.spectral, "simplified": simplified,
+             "workers": len(client.scheduler_info()["workers"])}
+
+    def run_units(units, trace_unit, add_result, stop_requested, abort):
+        return _ordered_on_cluster(client, lambda unit: client.submit(_trace_paths, key, scene_future, st, unit,
+                                                                      pure=False),
+                                   units, add_result, stop_requested, stats)
+
+    stats["stop_reason"] = render_adaptive(None, film, halves, st.spp, st.batch_rays, adaptive, window, run_units,
+                                           stats, progress=progress, should_stop=should_stop,
+                                           workers=max(1, stats["workers"]))
+    stats.setdefault("seconds", 0.0)
+    return RenderResult(film=film, settings=st, stats=stats, cancelled=stats["stop_reason"] == "cancelled",
+                        halves=halves)

@@ -41,6 +41,7 @@ class RenderResult:
     settings: RenderSettings
     stats: dict = field(default_factory=dict)
     cancelled: bool = False
+    halves: object = None        # engine.render.adaptive.HalfBuffers of an adaptive render
 
     def stokes(self) -> np.ndarray:
         """Stokes image (4, H, W, 3) in the per-pixel camera frame (linear sRGB)."""
@@ -97,6 +98,44 @@ def unit_pixels(width: int, r0: int, r1: int, window: tuple[int, int, int, int] 
     return (rows[:, None] * width + np.arange(x0, x1, dtype=np.int64)[None, :]).ravel()
 
 
+def trace_in_order(units, trace_unit, add_result, workers: int, stop_requested, abort: threading.Event) -> bool:
+    """Trace ``units`` on ``workers`` threads and pass each result to ``add_result`` in unit order.
+
+    Units are traced concurrently (Embree and large NumPy operations release the GIL) but added
+    strictly in unit order, so the image does not depend on the number of threads.  The stop
+    request is polled from this (the caller's) thread only — Blender's test_break must not be
+    called from workers — and sets ``abort``, which ends units in flight between two bounces
+    (``trace_unit`` then returns None and the unit is discarded whole).  Returns True if stopped.
+    """
+    cancelled = False
+    workers = max(1, min(workers, len(units)))
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        pending = deque()
+        next_unit = 0
+        while pending or (next_unit < len(units) and not cancelled):
+            while not cancelled and next_unit < len(units) and len(pending) < workers:
+                if stop_requested():
+                    cancelled = True
+                    abort.set()
+                    break
+                pending.append(pool.submit(trace_unit, units[next_unit]))
+                next_unit += 1
+            if not pending:
+                break
+            while True:
+                try:
+                    result = pending[0].result(timeout=STOP_POLL_SECONDS)
+                    break
+                except FuturesTimeout:
+                    if not cancelled and stop_requested():
+                        cancelled = True
+                        abort.set()
+            pending.popleft()
+            if result is not None:
+                add_result(result)
+    return cancelled
+
+
 class Renderer:
     """Compiles a scene once; ``render`` may then be called repeatedly."""
 
@@ -118,7 +157,9 @@ class Renderer:
                progress: Callable[[float, dict], None] | None = None,
                should_stop: Callable[[], bool] | None = None,
                window: tuple[int, int, int, int] | None = None,
-               resume: Film | None = None) -> RenderResult:
+               resume: Film | None = None, adaptive=None, adaptive_resume=None,
+               clock: Callable[[], float] | None = None, on_first_pass=None,
+               unit_times: list | None = None) -> RenderResult:
         """Render with ``settings`` (default: the scene's).
 
         ``progress(done_fraction, stats)`` is called after every work unit;
@@ -128,6 +169,10 @@ class Renderer:
         ``resume`` = a Film with finished samples (e.g. from an interrupted render's EXR): sample
         passes a pixel already has are not traced again, so the result equals an uninterrupted
         render of ``settings.spp`` samples (the sampler is stateless) up to float rounding.
+        ``adaptive`` = engine.render.adaptive.AdaptiveSettings samples adaptively up to
+        ``settings.spp`` (``adaptive_resume``: the resumed render's HalfBuffers; ``clock``: seconds
+        for the time limit; ``on_first_pass``, ``unit_times``: see render_adaptive); ``stats["stop_reason"]`` says why
+        it ended and the result's ``halves`` holds the half-buffers.
         """
         st = copy.copy(settings or self.scene.settings)
         used = {self.compiled.material_names[i] for i in np.unique(self.compiled.tri_material)}
@@ -195,49 +240,35 @@ class Renderer:
             return None if traced is None else (pixel, *traced)
 
         workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
-        workers = max(1, min(workers, len(units)))
 
         def stop_requested():
             return should_stop is not None and should_stop()
 
-        # Units are traced concurrently (Embree and large NumPy operations release the GIL) but
-        # added to the film strictly in unit order, so the image does not depend on `threads`.
-        # The stop request is polled from this (the caller's) thread only — Blender's test_break
-        # must not be called from workers — and aborts units in flight between two bounces, so a
-        # cancel takes effect within a fraction of a second; aborted units are discarded whole.
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            pending = deque()
-            next_unit = 0
-            while pending or (next_unit < len(units) and not cancelled):
-                while not cancelled and next_unit < len(units) and len(pending) < workers:
-                    if stop_requested():
-                        cancelled = True
-                        abort.set()
-                        break
-                    pending.append(pool.submit(trace_unit, units[next_unit]))
-                    next_unit += 1
-                if not pending:
-                    break
-                while True:
-                    try:
-                        result = pending[0].result(timeout=STOP_POLL_SECONDS)
-                        break
-                    except FuturesTimeout:
-                        if not cancelled and stop_requested():
-                            cancelled = True
-                            abort.set()
-                pending.popleft()
-                if result is None:
-                    continue
-                pixel, values, s = result
-                film.add_samples(pixel, values, s.get("alpha"))
-                for k in ("rays", "shadow_rays", "nonfinite"):
-                    stats[k] += s[k]
-                done += pixel.size
-                stats["samples"] = done
-                stats["seconds"] = time.perf_counter() - t0
-                if progress is not None:
-                    progress(done / total, stats)
+        def add_result(result):
+            nonlocal done
+            pixel, values, s = result
+            film.add_samples(pixel, values, s.get("alpha"))
+            for k in ("rays", "shadow_rays", "nonfinite"):
+                stats[k] += s[k]
+            done += pixel.size
+            stats["samples"] = done
+            stats["seconds"] = time.perf_counter() - t0
+            if progress is not None:
+                progress(done / total, stats)
+
+        if adaptive is not None:
+            from .adaptive import HalfBuffers, render_adaptive
+            halves = adaptive_resume if adaptive_resume is not None else HalfBuffers(W * H)
+            stats["stop_reason"] = render_adaptive(
+                tracer, film, halves, st.spp, st.batch_rays, adaptive, window,
+                lambda units, trace, add, stop, ab: trace_in_order(units, trace, add, workers, stop, ab),
+                stats, progress=progress, should_stop=should_stop, clock=clock or time.perf_counter,
+                on_first_pass=on_first_pass, workers=workers, unit_times=unit_times)
+            cancelled = stats["stop_reason"] == "cancelled"
+            stats.setdefault("seconds", 0.0)
+            self._live_film = None
+            return RenderResult(film=film, settings=st, stats=stats, cancelled=cancelled, halves=halves)
+        cancelled = trace_in_order(units, trace_unit, add_result, workers, stop_requested, abort)
         self._live_film = None
         stats["seconds"] = time.perf_counter() - t0
         return RenderResult(film=film, settings=st, stats=stats, cancelled=cancelled)

@@ -15,8 +15,12 @@ EXR written by the CLI carries the estimator's identity in its header (:func:`es
 ``polar.reduce_spectral``, ``polar.simplify``.
 
 What may differ on resume: the total sample count (raised, never below the samples done), threads,
-batch size, Dask scheduler, previews, exposure.  The seed and the sample count are taken from the
-file unless given.  Anything else that differs is refused with one line naming each difference.
+batch size, Dask scheduler, previews, exposure, and the adaptive sampling settings (threshold,
+quantity, minimum samples, time limit).  An adaptive render stores its float64 sums and half-buffers
+bit for bit (engine.render.adaptive.state_channels): resuming it continues the exact sums, and
+continuing adaptively needs them (a file rendered without adaptive sampling has no half-buffers).
+The seed and the sample count are taken from the file unless given.  Anything else that differs is
+refused with one line naming each difference.
 """
 
 from __future__ import annotations
@@ -167,8 +171,11 @@ def read_resumable(path: str):
     return stokes, channels, header
 
 
-def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None, seed=None):
+def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None, seed=None, with_halves=False):
     """(Film of the finished samples, settings to continue with) for the render stored at ``path``.
+
+    ``with_halves``: also return the adaptive half-buffers (engine.render.adaptive.HalfBuffers), or
+    raise a SceneError if the file has none.
 
     ``spp``/``seed`` are the values given on the command line (None: take the stored ones).
     Raises SceneError naming every setting that differs from the stored render's.
@@ -191,5 +198,14 @@ def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None
     counts = channels["spp"].astype(np.int64)
     if counts.max() > st.spp:
         raise SceneError("--spp", f"must be at least the samples already done ({int(counts.max())})")
-    stderr = np.stack([channels[f"S{i}.Y.stderr"] for i in range(4)]) if "S0.Y.stderr" in channels else None
-    return film_from_stokes(stokes, counts, stderr, channels.get("A")), st
+    from .adaptive import has_state, state_from_channels
+    if has_state(channels):
+        film, halves = state_from_channels(channels, counts)
+    else:
+        if with_halves:
+            raise SceneError("--noise-threshold", f"{os.path.basename(path)!r} was rendered without adaptive "
+                                                  "sampling, so it has no half-buffers to continue adaptively "
+                                                  "(resume it without --noise-threshold)")
+        stderr = np.stack([channels[f"S{i}.Y.stderr"] for i in range(4)]) if "S0.Y.stderr" in channels else None
+        film, halves = film_from_stokes(stokes, counts, stderr, channels.get("A")), None
+    return (film, st, halves) if with_halves else (film, st)

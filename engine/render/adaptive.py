@@ -1,0 +1,429 @@
+"""Adaptive sampling: sample passes go only where the estimated error is above a threshold.
+
+**Error estimate.** The film keeps, besides its sums, the luminance Stokes sums of the even and the
+odd sample passes of each pixel (half-buffers A and B; sample k goes to A if k is even).  A and B
+are two independent estimates of the pixel, so their difference estimates the standard error of
+the pixel value (the mean of both).  Per pixel, from the luminance Stokes means S_A, S_B:
+
+* ``s0``     |Y_A − Y_B| / (Y_A + Y_B): relative standard error of the luminance S0 (0 where both are 0);
+* ``dolp``   ½|DoLP_A − DoLP_B| (absolute);
+* ``docp``   ½|DoCP_A − DoCP_B| (absolute, DoCP = S3/S0 signed);
+* ``aolp``   ½|AoLP_A − AoLP_B| in degrees, the difference wrapped to ±90°; only where the pixel's
+  DoLP > 0.05 (elsewhere the angle is undefined and the error is 0);
+* ``stokes`` the largest of the s0 error and ½|S_k,A/S0,A − S_k,B/S0,B| for k = 1, 2, 3.
+
+**Tiles.** One pixel's A/B difference is a single draw (one degree of freedom): it is 0.3× the
+true error or less one time in four, so a per-pixel rule would stop many noisy pixels early.  The
+rule therefore works on tiles of ``TILE``×``TILE`` pixels aligned to the image grid: a tile's error
+is the root mean square of its pixels' errors (over the pixels where the quantity is defined), and
+all pixels of a tile always have the same sample count.
+
+**Schedule.** Every pixel first gets ``min_spp`` samples; then tiles whose error is above the
+threshold get more, checkpoint by checkpoint (:func:`checkpoints`: about +25 % per step, even
+steps so both halves stay equal), until every tile is below the threshold, ``spp`` is reached or
+the time limit passes.  A tile's next step depends only on its own samples, so without a time
+limit the counts are a deterministic function of the seed — however the work is split, and also
+across an interrupted render and its resumption.  Samples are added to the film one sample pass at
+a time in ascending sample order (:func:`add_in_sample_order`), so given the counts the sums are
+bit-identical whatever the threads, batch size or resumption.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import SceneError
+from ..spectral.cie import LUMINANCE_WEIGHTS
+
+#: Quantities the threshold can apply to.
+QUANTITIES = ("s0", "dolp", "aolp", "docp", "stokes")
+#: Units of each quantity's error (for messages).
+UNITS = {"s0": "relative", "dolp": "absolute", "aolp": "degrees", "docp": "absolute", "stokes": "relative"}
+#: Side of the square tiles the stopping rule works on (pixels).
+TILE = 4
+#: DoLP below which the AoLP is undefined and its error does not hold a pixel back.
+AOLP_MIN_DOLP = 0.05
+#: Fewest paths per work unit when a round is split for the workers (below, per-batch overhead dominates).
+MIN_UNIT_PATHS = 4096
+#: Fewest pixels per unit in a first pass that measures where samples cost more (engine.render.estimate;
+#: smaller units measured their own overhead more than the cost differences, on this 2-core VM).
+COST_CHUNK_PIXELS = 256
+#: Stop reasons written to the EXR header ``polar.stop_reason``.
+STOP_REASONS = ("threshold", "max_spp", "time_limit", "cancelled")
+
+
+@dataclass
+class AdaptiveSettings:
+    """``threshold`` of the standard error of ``quantity`` (units: :data:`UNITS`), at least
+    ``min_spp`` samples per pixel, at most ``time_limit`` seconds of sampling (0: no limit)."""
+
+    threshold: float = 0.01
+    quantity: str = "s0"
+    min_spp: int = 16
+    time_limit: float = 0.0
+
+
+def check_adaptive(threshold, quantity, min_spp, time_limit, spp) -> AdaptiveSettings:
+    """Validated settings, or a SceneError naming the CLI option and its allowed range."""
+    if threshold is None or not (math.isfinite(threshold) and threshold > 0):
+        raise SceneError("--noise-threshold", f"must be a finite number > 0, got {threshold!r}")
+    if quantity not in QUANTITIES:
+        raise SceneError("--noise-quantity", f"must be one of {', '.join(QUANTITIES)}, got {quantity!r}")
+    if quantity == "aolp" and threshold > 90:
+        raise SceneError("--noise-threshold", f"an AoLP error is at most 90 degrees, got {threshold:g}")
+    if min_spp is None or not (2 <= int(min_spp) <= spp):
+        raise SceneError("--min-spp", f"must be an integer in [2, --spp = {spp}] (both half-buffers need "
+                                      f"a sample), got {min_spp!r}")
+    if time_limit is None or not (math.isfinite(time_limit) and time_limit >= 0):
+        raise SceneError("--time-limit", f"must be a finite number of seconds ≥ 0 (0 = none), got {time_limit!r}")
+    return AdaptiveSettings(float(threshold), quantity, int(min_spp), float(time_limit))
+
+
+def checkpoints(min_spp: int, spp: int) -> np.ndarray:
+    """Sample counts at which a tile's error is tested: min_spp, then steps of 2·⌈c/8⌉ (≈ +25 %,
+    even), the last one clipped to spp.  A step depends only on c, so the sequence for a larger
+    spp extends the one for a smaller spp (up to the clipped last checkpoint)."""
+    out = [int(min_spp)]
+    while out[-1] < spp:
+        c = out[-1]
+        out.append(min(int(spp), c + max(2, 2 * math.ceil(c / 8))))
+    return np.asarray(out, np.int64)
+
+
+# ------------------------------------------------------------------------------------ error formulas
+
+def _ratio(num, den):
+    out = np.zeros(np.broadcast(num, den).shape)
+    np.divide(num, den, out=out, where=den > 0)
+    return out
+
+
+def _dolp(s):
+    return _ratio(np.hypot(s[1], s[2]), s[0])
+
+
+def pixel_noise(quantity: str, mean_a: np.ndarray, mean_b: np.ndarray, mean: np.ndarray | None = None):
+    """Per-pixel standard error of ``quantity`` from the half-buffer means.
+
+    ``mean_a``, ``mean_b``: luminance Stokes means (4, …) of the even and odd sample passes;
+    ``mean``: the pixel's luminance Stokes mean (4, …) (default: the average of both), whose DoLP
+    decides where the AoLP is defined.  Returns (error (…), defined (…) bool).
+    """
+    a, b = np.asarray(mean_a, np.float64), np.asarray(mean_b, np.float64)
+    defined = np.ones(a.shape[1:], bool)
+    if quantity in ("s0", "stokes"):
+        err = _ratio(np.abs(a[0] - b[0]), a[0] + b[0])
+        if quantity == "stokes":
+            for k in (1, 2, 3):
+                err = np.maximum(err, 0.5 * np.abs(_ratio(a[k], a[0]) - _ratio(b[k], b[0])))
+    elif quantity == "dolp":
+        err = 0.5 * np.abs(_dolp(a) - _dolp(b))
+    elif quantity == "docp":
+        err = 0.5 * np.abs(_ratio(a[3], a[0]) - _ratio(b[3], b[0]))
+    elif quantity == "aolp":
+        m = 0.5 * (a + b) if mean is None else np.asarray(mean, np.float64)
+        diff = np.degrees(0.5 * (np.arctan2(a[2], a[1]) - np.arctan2(b[2], b[1])))
+        diff = (diff + 90.0) % 180.0 - 90.0                      # the angle is defined modulo 180°
+        defined = _dolp(m) > AOLP_MIN_DOLP
+        err = np.where(defined, 0.5 * np.abs(diff), 0.0)
+    else:
+        raise ValueError(f"unknown noise quantity {quantity!r}")
+    return err, defined
+
+
+def tile_ids(width: int, height: int) -> np.ndarray:
+    """Tile index of every flat pixel (tiles of TILE×TILE aligned to the image's top-left corner)."""
+    ntx = -(-width // TILE)
+    y, x = np.divmod(np.arange(width * height, dtype=np.int64), width)
+    return (y // TILE) * ntx + x // TILE
+
+
+def tile_noise(err: np.ndarray, defined: np.ndarray, tiles: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """Per-pixel error of the pixel's tile: the RMS of ``err`` over the tile's ``pixels`` where
+    ``defined`` (0 where none is); arrays are flat over the image, the result is over ``pixels``."""
+    t = tiles[pixels]
+    n_tiles = int(tiles.max()) + 1
+    e2 = np.bincount(t, weights=np.where(defined[pixels], err[pixels] ** 2, 0.0), minlength=n_tiles)
+    n = np.bincount(t, weights=defined[pixels].astype(np.float64), minlength=n_tiles)
+    return np.sqrt(_ratio(e2, n))[t]
+
+
+def next_targets(counts: np.ndarray, noise: np.ndarray, marks: np.ndarray, threshold: float) -> np.ndarray:
+    """Sample count each pixel is to reach next (its own count where it is done).
+
+    A count between two checkpoints is completed to the next one (its tile was in the middle of a
+    step); a count on a checkpoint moves on to the next checkpoint if its tile ``noise`` is above
+    ``threshold``, and is done otherwise or at the last checkpoint.
+    """
+    counts = np.asarray(counts, np.int64)
+    i = np.minimum(np.searchsorted(marks, counts, side="left"), len(marks) - 1)
+    on_mark = marks[i] == counts
+    target = np.where(counts < marks[i], marks[i], counts)
+    go_on = on_mark & (noise > threshold) & (i + 1 < len(marks))
+    target[go_on] = marks[np.minimum(i + 1, len(marks) - 1)][go_on]
+    return np.maximum(target, counts)
+
+
+# ------------------------------------------------------------------------------------ accumulation
+
+class HalfBuffers:
+    """Luminance Stokes sums of the even (A) and odd (B) sample passes per pixel: ``sums`` (2, 4, n)."""
+
+    def __init__(self, n: int):
+        self.sums = np.zeros((2, 4, n))
+
+    def means(self, counts: np.ndarray):
+        """(mean_A, mean_B), each (4, n); samples 0…c−1 give A ⌈c/2⌉ and B ⌊c/2⌋ of them."""
+        c = np.asarray(counts, np.int64)
+        return _ratio(self.sums[0], (c + 1) // 2), _ratio(self.sums[1], c // 2)
+
+
+def add_in_sample_order(film, halves: HalfBuffers, pixel: np.ndarray, sample: np.ndarray,
+                        values: np.ndarray, alpha: np.ndarray | None = None) -> None:
+    """Add samples sorted by sample index, one sample pass at a time (each pixel at most once per
+    pass), so every pixel's sums are built in ascending sample order whatever the batching.
+    ``alpha`` (per sample; None = 1) is the camera-ray coverage of a transparent film or holdout."""
+    if alpha is not None and film.alpha_sums is None:
+        film.alpha_sums = film.count.astype(np.float64)   # every earlier sample had alpha 1
+    y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, values)
+    n = film.count.size
+    sums, vals = film.sums.reshape(12, n), values.reshape(12, -1)
+    starts = np.flatnonzero(np.r_[True, sample[1:] != sample[:-1]])
+    ends = np.r_[starts[1:], sample.size]
+    for a, b in zip(starts, ends):
+        pix = pixel[a:b]
+        # One row at a time with take/put: 5× faster than a 2-D fancy-indexed +=, same additions.
+        for r in range(12):
+            row = sums[r]
+            row[pix] = row[pix] + vals[r, a:b]
+        half = halves.sums[int(sample[a]) % 2]
+        for k in range(4):
+            row = film.sumsq_y[k]
+            row[pix] = row[pix] + y[k, a:b] * y[k, a:b]
+            row = half[k]
+            row[pix] = row[pix] + y[k, a:b]
+        if film.alpha_sums is not None:
+            row = film.alpha_sums
+            row[pix] = row[pix] + (1.0 if alpha is None else alpha[a:b])
+        film.count[pix] += 1
+
+
+def film_noise(film, halves: HalfBuffers, quantity: str, pixels: np.ndarray | None = None):
+    """(per-pixel error (n,), defined (n,), tile error over ``pixels``) of the film's current state."""
+    a, b = halves.means(film.count)
+    mean = _ratio(np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, film.sums), film.count)
+    err, defined = pixel_noise(quantity, a, b, mean)
+    err[film.count < 2] = np.inf                      # no estimate yet
+    if pixels is None:
+        pixels = np.arange(film.count.size)
+    return err, defined, tile_noise(np.where(np.isfinite(err), err, 1e30), defined,
+                                    tile_ids(film.width, film.height), pixels)
+
+
+def adaptive_units(pixels: np.ndarray, start: np.ndarray, target: np.ndarray, tiles: np.ndarray,
+                   batch_rays: int, chunk_pixels: int | None = None):
+    """Work units (pixel chunk, pass0, pass1) bringing ``pixels`` from ``start`` to ``target``.
+
+    A chunk holds at most ``chunk_pixels`` (default ``batch_rays``) pixels, a unit at most
+    ``batch_rays`` paths.
+
+    Chunks hold whole tiles (pixels sorted by tile), so an aborted unit never leaves two pixels
+    of a tile at different counts; units are ordered by passes, then chunks.
+    """
+    order = np.lexsort((pixels, tiles[pixels]))
+    pixels, start, target = pixels[order], start[order], target[order]
+    t = tiles[pixels]
+    tile_starts = np.flatnonzero(np.r_[True, t[1:] != t[:-1]])
+    limit = min(batch_rays, chunk_pixels or batch_rays)
+    bounds = [0]
+    for s in tile_starts[1:]:
+        if s - bounds[-1] + TILE * TILE > limit:             # the next tile might not fit
+            bounds.append(int(s))
+    bounds.append(pixels.size)
+    chunks = [(bounds[i], bounds[i + 1]) for i in range(len(bounds) - 1) if bounds[i + 1] > bounds[i]]
+    if not chunks:
+        return []
+    for a, b in chunks:            # within a chunk, ascending pixel order (memory locality when adding)
+        o = np.argsort(pixels[a:b], kind="stable")
+        pixels[a:b], start[a:b], target[a:b] = pixels[a:b][o], start[a:b][o], target[a:b][o]
+    largest = max(b - a for a, b in chunks)
+    per_unit = max(1, batch_rays // max(largest, 1))
+    p_lo, p_hi = int(start.min()), int(target.max())
+    units = []
+    for p0 in range(p_lo, p_hi, per_unit):
+        p1 = min(p_hi, p0 + per_unit)
+        for a, b in chunks:
+            sel = (start[a:b] < p1) & (target[a:b] > p0)
+            if sel.any():
+                units.append((pixels[a:b][sel], start[a:b][sel], target[a:b][sel], p0, p1))
+    return units
+
+
+def unit_paths(unit):
+    """(pixel, sample) of a unit's paths, sorted by sample then by the unit's pixel order."""
+    pix, start, target, p0, p1 = unit
+    pixel, sample = [], []
+    for s in range(p0, p1):
+        m = (start <= s) & (s < target)
+        pixel.append(pix[m])
+        sample.append(np.full(int(m.sum()), s, np.int64))
+    return np.concatenate(pixel), np.concatenate(sample)
+
+
+# ------------------------------------------------------------------------------------ the render loop
+
+def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int, adaptive: AdaptiveSettings,
+                    window, run_units: Callable, stats: dict, progress=None, should_stop=None,
+                    clock: Callable[[], float] = time.perf_counter, on_first_pass=None, workers: int = 1,
+                    unit_times: list | None = None) -> str:
+    """Sample ``film`` adaptively; returns the stop reason (one of :data:`STOP_REASONS`).
+
+    ``run_units(units, trace_unit, add_result, stop_requested, abort)`` traces units concurrently
+    and adds them in order (engine.render.renderer.trace_in_order); returns True if stopped.
+    ``clock`` gives seconds (injected by tests).  ``on_first_pass(film, halves, seconds, samples)``
+    is called once every pixel has ``min_spp`` samples (for the prediction check).  A round is
+    split into at least ~4 units per worker (late rounds hold few tiles: one unit would leave all
+    but one worker idle); how units are cut never changes the result.  ``unit_times``: a list that
+    receives (pixels, paths, seconds) of every unit of the first pass, cut into small pixel chunks
+    for the purpose (where the samples cost more: engine.render.estimate).
+    """
+    W, H = film.width, film.height
+    x0, y0, x1, y1 = window or (0, 0, W, H)
+    ys, xs = np.mgrid[y0:y1, x0:x1]
+    pixels = (ys * W + xs).ravel().astype(np.int64)
+    tiles = tile_ids(W, H)
+    marks = checkpoints(adaptive.min_spp, spp)
+    t0 = clock()
+    time_up = (lambda: clock() - t0 >= adaptive.time_limit) if adaptive.time_limit > 0 else (lambda: False)
+    user_stop = (lambda: False) if should_stop is None else should_stop
+    reason = {"value": None}
+    budget = max(pixels.size * spp - int(film.count[pixels].sum()), 1)
+    done = {"samples": 0}
+    abort = threading.Event()
+
+    def stop_requested():
+        if user_stop():
+            reason["value"] = "cancelled"
+            return True
+        if time_up():
+            reason["value"] = "time_limit"
+            return True
+        return False
+
+    timing = {"on": False}
+
+    def trace_unit(unit):
+        pixel, sample = unit_paths(unit)
+        started = time.perf_counter()         # a measurement of this machine, not the time limit's clock
+        traced = tracer.trace(pixel, sample, abort=abort)
+        if traced is not None and timing["on"]:
+            unit_times.append((unit[0], pixel.size, time.perf_counter() - started))
+        return None if traced is None else (pixel, sample, *traced)
+
+    def add_result(result):
+        pixel, sample, values, s = result
+        add_in_sample_order(film, halves, pixel, sample, values, s.get("alpha"))
+        for k in ("rays", "shadow_rays", "nonfinite"):
+            stats[k] += s[k]
+        done["samples"] += pixel.size
+        stats["samples"] = done["samples"]
+        stats["seconds"] = clock() - t0
+        if progress is not None:
+            frac = done["samples"] / budget
+            if adaptive.time_limit > 0:
+                frac = max(frac, stats["seconds"] / adaptive.time_limit)
+            progress(min(frac, 0.999), stats)
+
+    first_pass_reported = False
+    while True:
+        counts = film.count[pixels]
+        _, _, noise = film_noise(film, halves, adaptive.quantity, pixels)
+        if not first_pass_reported and counts.min() >= adaptive.min_spp:
+            first_pass_reported = True
+            timing["on"] = False
+            if on_first_pass is not None:
+                on_first_pass(film, halves, clock() - t0, done["samples"])
+        target = next_targets(counts, noise, marks, adaptive.threshold)
+        todo = target > counts
+        stats["adaptive_rounds"] = stats.get("adaptive_rounds", 0) + 1
+        if not todo.any():
+            return "max_spp" if (noise[counts >= spp] > adaptive.threshold).any() else "threshold"
+        if stop_requested():
+            return reason["value"]
+        paths = int((target - counts)[todo].sum())
+        per_unit = min(batch_rays, max(MIN_UNIT_PATHS, -(-paths // (4 * max(workers, 1)))))
+        timing["on"] = unit_times is not None and counts.min() < adaptive.min_spp
+        units = adaptive_units(pixels[todo], counts[todo], target[todo], tiles, per_unit,
+                               chunk_pixels=max(COST_CHUNK_PIXELS, pixels.size // 128) if timing["on"] else None)
+        stopped = run_units(units, trace_unit, add_result, stop_requested, abort)
+        stats["seconds"] = clock() - t0
+        if stopped:
+            return reason["value"] or "cancelled"
+
+
+# ------------------------------------------------------------------------------------ storage in the EXR
+
+#: Prefix of the EXR channels that hold an adaptive render's exact state (for --resume).
+STATE_PREFIX = "adaptive"
+
+
+def _float64_to_words(a: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    bits = np.ascontiguousarray(a, np.float64).view(np.uint64)
+    return (bits >> np.uint64(32)).astype(np.uint32), (bits & np.uint64(0xFFFFFFFF)).astype(np.uint32)
+
+
+def _words_to_float64(hi: np.ndarray, lo: np.ndarray) -> np.ndarray:
+    bits = (hi.astype(np.uint64) << np.uint64(32)) | lo.astype(np.uint64)
+    return bits.view(np.float64)
+
+
+def _state_arrays(film, halves: HalfBuffers):
+    """{name: float64 array (n,)} of everything a resumed adaptive render needs besides the counts."""
+    out = {}
+    for k in range(4):
+        for c, cname in enumerate("RGB"):
+            out[f"sum.S{k}.{cname}"] = film.sums[k, c]
+        out[f"sumsq.S{k}.Y"] = film.sumsq_y[k]
+        out[f"A.S{k}.Y"] = halves.sums[0, k]
+        out[f"B.S{k}.Y"] = halves.sums[1, k]
+    return out
+
+
+def state_channels(film, halves: HalfBuffers) -> dict[str, np.ndarray]:
+    """Extra EXR channels (uint32, (H, W)) holding the film's float64 sums and the half-buffers bit
+    for bit (high and low 32-bit words), so that a resumed render continues the exact sums."""
+    out = {}
+    for name, a in _state_arrays(film, halves).items():
+        hi, lo = _float64_to_words(a)
+        out[f"{STATE_PREFIX}.{name}.hi"] = hi.reshape(film.height, film.width)
+        out[f"{STATE_PREFIX}.{name}.lo"] = lo.reshape(film.height, film.width)
+    return out
+
+
+def has_state(channels: dict) -> bool:
+    return f"{STATE_PREFIX}.A.S0.Y.hi" in channels
+
+
+def state_from_channels(channels: dict, counts: np.ndarray):
+    """(Film, HalfBuffers) rebuilt exactly from :func:`state_channels` and the ``spp`` counts (H, W)."""
+    from .film import Film
+    H, W = counts.shape
+    film, halves = Film(W, H), HalfBuffers(W * H)
+    film.count[:] = counts.reshape(-1).astype(np.int64)
+
+    def get(name):
+        return _words_to_float64(channels[f"{STATE_PREFIX}.{name}.hi"].reshape(-1),
+                                 channels[f"{STATE_PREFIX}.{name}.lo"].reshape(-1))
+    for k in range(4):
+        for c, cname in enumerate("RGB"):
+            film.sums[k, c] = get(f"sum.S{k}.{cname}")
+        film.sumsq_y[k] = get(f"sumsq.S{k}.Y")
+        halves.sums[0, k] = get(f"A.S{k}.Y")
+        halves.sums[1, k] = get(f"B.S{k}.Y")
+    return film, halves

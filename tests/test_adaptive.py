@@ -1,0 +1,412 @@
+"""Adaptive sampling: error formulas, stopping rule, determinism, time limit, options, estimate.
+
+Error formulas are checked against half-buffers computed by hand; determinism compares sums bit
+for bit.  No test times anything: the time limit runs on an injected clock.
+"""
+
+import copy
+import math
+import os
+
+import numpy as np
+import pytest
+
+from engine import cli
+from engine.output.exr import read_stokes_exr, write_stokes_exr
+from engine.render.adaptive import (AdaptiveSettings, HalfBuffers, TILE, checkpoints, film_noise, next_targets,
+                                    pixel_noise, state_channels, state_from_channels, tile_ids, tile_noise)
+from engine.render.estimate import parse_target, predict
+from engine.render.film import Film
+from engine.render.renderer import Renderer
+from engine.scene.loader import load_scene
+from engine.errors import SceneError
+from tests.conftest import shared_path
+
+
+def col(*v):
+    return np.asarray(v, np.float64)[:, None]
+
+
+# ------------------------------------------------------------------------------------ error formulas
+
+def test_s0_error_is_the_relative_half_buffer_difference():
+    err, defined = pixel_noise("s0", col(3.0, 0, 0, 0), col(1.0, 0, 0, 0))
+    assert err[0] == pytest.approx(0.5)                  # |3 − 1| / (3 + 1)
+    err, _ = pixel_noise("s0", col(0.0, 0, 0, 0), col(0.0, 0, 0, 0))
+    assert err[0] == 0.0 and defined[0]                  # black in both halves: converged
+
+
+def test_dolp_and_docp_errors_are_half_the_absolute_differences():
+    a, b = col(2.0, 1.2, 0.0, 1.0), col(1.0, 0.0, 0.4, -0.25)     # DoLP 0.6 / 0.4, DoCP 0.5 / −0.25
+    assert pixel_noise("dolp", a, b)[0][0] == pytest.approx(0.1)
+    assert pixel_noise("docp", a, b)[0][0] == pytest.approx(0.375)
+
+
+def test_aolp_error_wraps_at_90_degrees_and_ignores_unpolarised_pixels():
+    t = np.radians(178.0)
+    a = col(1.0, math.cos(t), math.sin(t), 0.0)          # AoLP +89°
+    b = col(1.0, math.cos(t), -math.sin(t), 0.0)         # AoLP −89°: 2° apart, not 178°
+    err, defined = pixel_noise("aolp", a, b)
+    assert defined[0] and err[0] == pytest.approx(1.0)
+    weak_a, weak_b = col(1.0, 0.01, 0.0, 0.0), col(1.0, 0.0, 0.02, 0.0)    # DoLP ≈ 0.01 < 0.05
+    err, defined = pixel_noise("aolp", weak_a, weak_b)
+    assert not defined[0] and err[0] == 0.0
+
+
+def test_stokes_error_is_the_largest_normalised_component_error():
+    a, b = col(2.0, 1.0, 0.0, 0.0), col(2.0, 0.6, 0.0, 0.2)     # S1/S0 0.5 / 0.3, S3/S0 0 / 0.1
+    assert pixel_noise("stokes", a, b)[0][0] == pytest.approx(0.1)
+    a, b = col(3.0, 0.0, 0.0, 0.0), col(1.0, 0.0, 0.0, 0.0)
+    assert pixel_noise("stokes", a, b)[0][0] == pytest.approx(0.5)   # the S0 error dominates
+
+
+def test_half_buffer_means_split_even_and_odd_samples():
+    film, halves = Film(1, 1), HalfBuffers(1)
+    from engine.render.adaptive import add_in_sample_order
+    values = np.zeros((4, 3, 5))
+    values[0] = np.array([1.0, 2.0, 3.0, 4.0, 5.0])[None, :]        # grey: Y = value
+    add_in_sample_order(film, halves, np.zeros(5, np.int64), np.arange(5), values)
+    a, b = halves.means(film.count)
+    assert a[0, 0] == pytest.approx((1 + 3 + 5) / 3) and b[0, 0] == pytest.approx((2 + 4) / 2)
+    err, _, _ = film_noise(film, halves, "s0")
+    assert err[0] == pytest.approx(abs(3 - 3) / 6)
+
+
+def test_tile_error_is_the_rms_over_the_tiles_defined_pixels():
+    W = H = 2 * TILE
+    tiles = tile_ids(W, H)
+    err = np.zeros(W * H)
+    defined = np.ones(W * H, bool)
+    first = np.flatnonzero(tiles == 0)
+    err[first[:2]] = [0.3, 0.4]
+    defined[first[2:]] = False                            # only two pixels of tile 0 count
+    t = tile_noise(err, defined, tiles, np.arange(W * H))
+    assert t[first[0]] == pytest.approx(math.sqrt((0.09 + 0.16) / 2))
+    assert np.all(t[tiles != 0] == 0.0)
+
+
+# ------------------------------------------------------------------------------------ stopping rule
+
+def test_checkpoints_grow_by_a_quarter_in_even_steps_up_to_the_maximum():
+    assert checkpoints(16, 64).tolist() == [16, 20, 26, 34, 44, 56, 64]
+    assert checkpoints(2, 2).tolist() == [2]
+    long, short = checkpoints(16, 1000), checkpoints(16, 64)
+    assert long[:6].tolist() == short[:6].tolist()        # a larger maximum extends the schedule
+
+
+def test_stopping_rule():
+    marks = checkpoints(16, 64)
+    counts = np.array([0, 5, 16, 16, 22, 56, 64, 64])
+    noise = np.array([9, 9, 0.02, 0.005, 0.001, 0.02, 0.02, 0.0])
+    target = next_targets(counts, noise, marks, 0.01)
+    # nothing yet → min; mid-way → next checkpoint whatever the noise; on a checkpoint: on if above,
+    # done if below; at the maximum: done
+    assert target.tolist() == [16, 16, 20, 16, 26, 64, 64, 64]
+
+
+# ------------------------------------------------------------------------------------ renders
+
+def small_scene(name="fresnel_sphere", res=24, spp=48):
+    scene = load_scene(shared_path("peers", "scenes", f"{name}.json"))
+    scene.camera.width = scene.camera.height = res
+    scene.settings.spp = spp
+    return scene
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    scene = small_scene()
+    return scene, Renderer(scene)
+
+
+AD = AdaptiveSettings(threshold=0.05, quantity="s0", min_spp=8)
+
+
+@pytest.fixture(scope="module")
+def reference(sphere):
+    scene, renderer = sphere
+    return renderer.render(adaptive=AD)
+
+
+def test_adaptive_render_spends_samples_unevenly_and_says_why_it_stopped(reference):
+    counts = reference.film.count
+    assert counts.min() == 8 and counts.max() == 48 and len(np.unique(counts)) > 2
+    assert reference.stats["stop_reason"] == "max_spp"
+    for t in np.unique(tile_ids(24, 24)):                 # a tile's pixels always share their count
+        assert len(np.unique(counts[tile_ids(24, 24) == t])) == 1
+
+
+@pytest.mark.parametrize("threads,batch_rays", [(1, 1 << 17), (2, 700), (1, 100)])
+def test_counts_and_image_do_not_depend_on_threads_or_batch_size(sphere, reference, threads, batch_rays):
+    scene, renderer = sphere
+    st = copy.copy(scene.settings)
+    st.threads, st.batch_rays = threads, batch_rays
+    other = renderer.render(st, adaptive=AD)
+    np.testing.assert_array_equal(other.film.count, reference.film.count)
+    np.testing.assert_array_equal(other.film.sums, reference.film.sums)
+    np.testing.assert_array_equal(other.halves.sums, reference.halves.sums)
+
+
+def test_resume_after_a_cancel_through_the_exr_gives_the_same_counts_and_image(sphere, reference, tmp_path):
+    scene, renderer = sphere
+    st = copy.copy(scene.settings)
+    st.batch_rays = 200                                    # many units: stop after a few
+    calls = {"n": 0}
+    partial = renderer.render(st, adaptive=AD,
+                              should_stop=lambda: calls.__setitem__("n", calls["n"] + 1) or calls["n"] > 12)
+    assert partial.cancelled and partial.stats["stop_reason"] == "cancelled"
+    assert partial.film.count.sum() < reference.film.count.sum()
+    path = str(tmp_path / "part.exr")
+    write_stokes_exr(path, partial.stokes(), extra={"spp": partial.film.spp_image().astype("uint32"),
+                                                     **state_channels(partial.film, partial.halves)})
+    _, channels, _ = read_stokes_exr(path)
+    film, halves = state_from_channels(channels, channels["spp"])
+    np.testing.assert_array_equal(film.sums, partial.film.sums)
+    resumed = renderer.render(resume=film, adaptive=AD, adaptive_resume=halves)
+    np.testing.assert_array_equal(resumed.film.count, reference.film.count)
+    np.testing.assert_array_equal(resumed.film.sums, reference.film.sums)
+
+
+def test_a_dask_cluster_gives_the_local_counts_and_image(sphere, reference):
+    distributed = pytest.importorskip("distributed")
+    from engine.render.distributed import render_distributed
+    scene, _ = sphere
+    st = copy.copy(scene.settings)
+    st.batch_rays = 2000                                   # several tasks per round
+    cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       silence_logs=40)
+    client = distributed.Client(cluster)
+    try:
+        remote = render_distributed(scene, None, st, client=client, adaptive=AD)
+    finally:
+        client.close()
+        cluster.close()
+    assert remote.stats["stop_reason"] == reference.stats["stop_reason"]
+    np.testing.assert_array_equal(remote.film.count, reference.film.count)
+    np.testing.assert_array_equal(remote.film.sums, reference.film.sums)
+
+
+def test_the_time_limit_stops_sampling_on_an_injected_clock(sphere, reference):
+    scene, renderer = sphere
+    st = copy.copy(scene.settings)
+    st.batch_rays = 300
+    ticks = {"t": 0.0}
+
+    def clock():                                           # one "second" per look at the clock
+        ticks["t"] += 1.0
+        return ticks["t"]
+
+    limited = renderer.render(st, adaptive=AdaptiveSettings(0.05, "s0", 8, time_limit=40.0), clock=clock)
+    assert limited.stats["stop_reason"] == "time_limit" and not limited.cancelled
+    assert limited.film.count.sum() < reference.film.count.sum()
+    assert limited.film.count.min() >= 0
+    # what was done is the beginning of the unlimited render: continuing it gives the same result
+    resumed = renderer.render(resume=limited.film, adaptive=AD, adaptive_resume=limited.halves)
+    np.testing.assert_array_equal(resumed.film.count, reference.film.count)
+    np.testing.assert_array_equal(resumed.film.sums, reference.film.sums)
+
+
+def test_a_scene_that_converges_at_min_spp_stops_there():
+    scene = small_scene("plane_brewster", res=16, spp=64)
+    result = Renderer(scene).render(adaptive=AdaptiveSettings(0.02, "s0", 4))
+    assert result.stats["stop_reason"] == "threshold"
+    assert np.all(result.film.count == 4)
+
+
+def test_a_threshold_of_zero_samples_every_pixel_to_the_maximum():
+    scene = small_scene("plane_brewster", res=8, spp=12)
+    result = Renderer(scene).render(adaptive=AdaptiveSettings(0.0, "s0", 4))
+    assert result.stats["stop_reason"] == "max_spp" and np.all(result.film.count == 12)
+    uniform = Renderer(scene).render()
+    np.testing.assert_allclose(result.stokes(), uniform.stokes(), rtol=1e-12, atol=1e-15)
+
+
+# ------------------------------------------------------------------------------------ command line
+
+def run_cli(capsys, *argv):
+    status = cli.main(list(argv))
+    return status, capsys.readouterr()
+
+
+@pytest.fixture()
+def small_json(tmp_path):
+    import json
+    with open(shared_path("peers", "scenes", "fresnel_sphere.json")) as fh:
+        scene = json.load(fh)
+    scene["camera"]["width"] = scene["camera"]["height"] = 16
+    peers = os.path.dirname(shared_path("peers", "scenes", "fresnel_sphere.json"))
+    for obj in scene["objects"]:
+        if "file" in obj:
+            obj["file"] = os.path.normpath(os.path.join(peers, obj["file"]))
+    path = str(tmp_path / "scene.json")
+    with open(path, "w") as fh:
+        json.dump(scene, fh)
+    return path
+
+
+@pytest.mark.parametrize("args,option", [
+    (["--noise-threshold", "-1"], "--noise-threshold"),
+    (["--noise-threshold", "nan"], "--noise-threshold"),
+    (["--noise-threshold", "0.1", "--noise-quantity", "dop"], "--noise-quantity"),
+    (["--noise-threshold", "0.1", "--min-spp", "1"], "--min-spp"),
+    (["--noise-threshold", "0.1", "--min-spp", "99"], "--min-spp"),
+    (["--noise-threshold", "0.1", "--time-limit", "-3"], "--time-limit"),
+    (["--noise-threshold", "120", "--noise-quantity", "aolp"], "--noise-threshold"),
+    (["--min-spp", "4"], "--min-spp"),
+    (["--noise-threshold", "0.1", "--spp", "1"], "--spp"),
+    (["--noise-quantity", "dolp"], "--noise-quantity"),
+])
+def test_bad_adaptive_options_are_one_line_errors(capsys, small_json, tmp_path, args, option):
+    status, out = run_cli(capsys, "render", small_json, "-o", str(tmp_path / "x.exr"), "--spp", "16", *args)
+    assert status == 2
+    lines = out.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"error: {option}:"), out.err
+    assert not os.path.exists(tmp_path / "x.exr")
+
+
+def test_cli_writes_counts_noise_stop_reason_and_resumes_to_a_tighter_threshold(capsys, small_json, tmp_path):
+    loose, tight, direct = (str(tmp_path / n) for n in ("loose.exr", "tight.exr", "direct.exr"))
+    common = ["--spp", "32", "--min-spp", "4", "--noise-quantity", "dolp", "--no-previews", "-q"]
+    assert run_cli(capsys, "render", small_json, "-o", loose, "--noise-threshold", "0.05", *common)[0] == 0
+    status, out = run_cli(capsys, "render", small_json, "-o", direct, "--noise-threshold", "0.01", *common)
+    assert status == 0 and "predicted after the first pass" in out.err and "actual" in out.err
+    _, ch, header = read_stokes_exr(direct)
+    assert header["polar.stop_reason"] in ("threshold", "max_spp") and header["polar.noise_quantity"] == "dolp"
+    assert "noise" in ch and ch["noise"].shape == (16, 16) and ch["spp"].min() == 4
+    # A tile's path to the loose threshold is the start of its path to the tight one.
+    assert run_cli(capsys, "render", small_json, "-o", tight, "--resume", loose, "--noise-threshold", "0.01",
+                   *common)[0] == 0
+    a, ca, _ = read_stokes_exr(direct)
+    b, cb, _ = read_stokes_exr(tight)
+    np.testing.assert_array_equal(cb["spp"], ca["spp"])
+    np.testing.assert_array_equal(b, a)
+    np.testing.assert_array_equal(cb["noise"], ca["noise"])
+
+
+def test_a_time_limit_alone_samples_every_pixel_up_to_the_maximum(capsys, small_json, tmp_path):
+    path = str(tmp_path / "t.exr")
+    status, out = run_cli(capsys, "render", small_json, "-o", path, "--spp", "6", "--min-spp", "2",
+                          "--time-limit", "3600", "--no-previews", "-q")
+    assert status == 0, out.err
+    _, ch, header = read_stokes_exr(path)
+    assert header["polar.stop_reason"] == "max_spp" and np.all(ch["spp"] == 6)
+
+
+def test_resuming_a_uniform_render_adaptively_is_refused(capsys, small_json, tmp_path):
+    uniform = str(tmp_path / "u.exr")
+    assert run_cli(capsys, "render", small_json, "-o", uniform, "--spp", "4", "--no-previews", "-q")[0] == 0
+    status, out = run_cli(capsys, "render", small_json, "-o", str(tmp_path / "r.exr"), "--resume", uniform,
+                          "--spp", "8", "--noise-threshold", "0.1", "--min-spp", "2", "-q")
+    assert status == 2 and out.err.startswith("error: --noise-threshold:") and "half-buffers" in out.err
+
+
+def test_uniform_renders_have_no_adaptive_channels(capsys, small_json, tmp_path):
+    path = str(tmp_path / "u.exr")
+    assert run_cli(capsys, "render", small_json, "-o", path, "--spp", "2", "--no-previews", "-q")[0] == 0
+    _, ch, header = read_stokes_exr(path)
+    assert "noise" not in ch and "polar.stop_reason" not in header
+    assert not any(name.startswith("adaptive.") for name in ch)
+
+
+# ------------------------------------------------------------------------------------ estimate
+
+def test_prediction_follows_one_over_root_spp():
+    film, halves = Film(TILE, TILE), HalfBuffers(TILE * TILE)
+    film.count[:] = 16
+    film.sums[0, :] = 16.0                                   # grey Y = 1 in every pixel
+    halves.sums[0, 0] = 8 * 1.2                              # Y_A = 1.2, Y_B = 0.8: s0 error 0.2
+    halves.sums[1, 0] = 8 * 0.8
+    p = predict(film, halves, "s0", 0.05, 16, 4096, seconds_per_sample=1e-6)
+    # 16 · (0.2 / 0.05)² = 256 samples: the first checkpoint ≥ 256
+    marks = checkpoints(16, 4096)
+    expected = int(marks[np.searchsorted(marks, 256)])
+    assert p.median == expected and p.uniform_spp == 256
+    assert p.adaptive_seconds == pytest.approx(TILE * TILE * expected * 1e-6)
+
+
+@pytest.mark.parametrize("text", ["dolp", "dolp:", "dolp:-1", "foo:0.1", "s0:inf"])
+def test_bad_targets_name_the_option(text):
+    with pytest.raises(SceneError, match="--target"):
+        parse_target(text)
+
+
+def test_estimate_command_prints_a_prediction_per_target(capsys, small_json):
+    status, out = run_cli(capsys, "estimate", small_json, "--target", "dolp:0.02", "--target", "s0:0.05",
+                          "--pilot-spp", "4", "--spp", "64", "--min-spp", "4")
+    assert status == 0, out.err
+    lines = [line for line in out.out.splitlines() if line.startswith("target ")]
+    assert len(lines) == 2 and "dolp ≤ 0.02" in lines[0] and "uniform" in lines[1] and "95th percentile" in lines[0]
+
+
+# ------------------------------------------------------------------------------------ Blender
+
+def test_blender_adaptive_render_has_a_noise_pass_and_reports_the_achieved_error(tmp_path, capfd):
+    bpy = pytest.importorskip("bpy")
+    from tests.blender_support import (add_plane, brewster_camera, empty_scene, load_addon, polar_material,
+                                       read_multilayer, render_to_exr, white_world)
+    load_addon()
+    scene = empty_scene(width=24, height=16, samples=32)
+    add_plane(200, polar_material("Floor", "BLACK_GLASS"))
+    brewster_camera(scene, lens=200.0)
+    white_world(scene)
+    p = scene.polar
+    p.use_adaptive_sampling, p.adaptive_threshold, p.noise_quantity, p.adaptive_min_samples = True, 0.5, "DOLP", 4
+    assert bpy.ops.polar.estimate_cost() == {"FINISHED"}
+    assert p.estimate_report.startswith("Adaptive: median 4,") and "Uniform:" in p.estimate_report
+    capfd.readouterr()
+    passes = read_multilayer(render_to_exr(scene, str(tmp_path / "adaptive")))
+    out = capfd.readouterr().out
+    assert "adaptive: threshold, dolp error p95" in out and "spp 4–4" in out
+    assert "Noise" in passes and passes["Noise"].shape[:2] == (16, 24)
+    assert 0 <= passes["Noise"].min() and passes["Noise"].max() <= 0.5 * 2       # a tile RMS ≤ 0.5
+    p.use_adaptive_sampling = False
+    passes = read_multilayer(render_to_exr(scene, str(tmp_path / "uniform")))
+    assert "Noise" not in passes
+
+
+def test_cost_map_spreads_the_pilot_time_over_pixels_by_their_units_cost():
+    from engine.render.estimate import cost_map
+    units = [(np.array([0, 1]), 4, 2.0), (np.array([2, 3]), 4, 6.0)]     # 0.5 and 1.5 s per path
+    sps = cost_map(units, 5, seconds=1.0)                                 # two threads: wall 1 s
+    np.testing.assert_allclose(sps[:4], [0.0625, 0.0625, 0.1875, 0.1875])
+    assert sps[4] == pytest.approx(0.125)                                 # not in the pilot: the mean
+    assert float(np.sum(sps[:4] * 2)) == pytest.approx(1.0)              # the pilot's samples: its wall time
+
+
+def test_blender_sampling_panel_shows_the_adaptive_settings_and_the_estimate_button():
+    bpy = pytest.importorskip("bpy")
+    from tests.blender_support import empty_scene, load_addon
+    addon = load_addon()
+    scene = empty_scene()
+    scene.polar.estimate_report = "Adaptive: median 16\nUniform: 64"
+    drawn = {"props": [], "operators": [], "labels": []}
+
+    class Layout:                                   # records what the panel draws
+        use_property_split = False
+
+        def column(self, **kw):
+            return self
+
+        row = column
+
+        def prop(self, data, name, **kw):
+            assert name in data.bl_rna.properties, name
+            drawn["props"].append(name)
+
+        def operator(self, idname, **kw):
+            drawn["operators"].append(idname)
+
+        def label(self, text="", **kw):
+            drawn["labels"].append(text)
+
+    class Context:
+        pass
+
+    panel, context = Context(), Context()
+    panel.layout, context.scene = Layout(), scene
+    addon.polar_addon.ui.POLAR_PT_sampling.draw(panel, context)
+    for name in ("use_adaptive_sampling", "adaptive_threshold", "noise_quantity", "samples", "adaptive_min_samples",
+                 "time_limit"):
+        assert name in drawn["props"], name
+    assert drawn["operators"] == ["polar.estimate_cost"] and drawn["labels"] == ["Adaptive: median 16", "Uniform: 64"]
+    assert hasattr(bpy.ops.polar, "estimate_cost")
