@@ -357,6 +357,8 @@ def _mueller(args) -> int:
 
 
 def _polariser(args) -> int:
+    if getattr(args, "mosaic", False):
+        return _polariser_mosaic(args)
     import numpy as np
 
     from .output.colormaps import tonemap
@@ -478,6 +480,41 @@ def _estimate(args) -> int:
     return 0
 
 
+def _polariser_mosaic(args) -> int:
+    """--mosaic: the raw image of a polarisation camera (2×2 micro-polarisers, engine.postprocess.mosaic)."""
+    import numpy as np
+
+    from .output.colormaps import tonemap
+    from .output.png import write_png
+    from .postprocess.mosaic import DEFAULT_LAYOUT, mosaic, parse_layout
+
+    stokes, _, _ = _read_polar_exr(args.exr, "EXR")
+    if not (0.0 <= args.extinction <= 1.0):
+        raise SceneError("--extinction", f"must be in [0, 1], got {args.extinction:g}")
+    _finite("--exposure", args.exposure, -EXPOSURE_LIMIT_STOPS, EXPOSURE_LIMIT_STOPS)
+    layout = parse_layout(args.mosaic_layout.split(",") if args.mosaic_layout else DEFAULT_LAYOUT, "--mosaic-layout")
+    raw = mosaic(stokes, layout, args.extinction)
+    out = args.output
+    try:
+        os.makedirs(os.path.dirname(os.path.abspath(out)) or ".", exist_ok=True)
+        if out.lower().endswith(".exr"):
+            from .output.exr import write_stokes_exr
+            unpolarised = np.zeros_like(stokes)
+            unpolarised[0] = raw
+            write_stokes_exr(out, unpolarised, metadata={
+                "polar.filter": "mosaic", "polar.mosaic_layout_deg": ",".join(f"{a:g}" for r in layout for a in r),
+                "polar.filter_extinction": f"{args.extinction:g}"})
+        else:
+            write_png(out, tonemap(raw, args.exposure))
+    except OSError as e:
+        raise SceneError("-o", f"cannot write {out!r}: {_reason(e)}") from None
+    print(out)
+    return 0
+
+
+VERBOSE_HELP = "also show warnings from the libraries the engine uses (Numba, …), hidden by default"
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m engine", description="Polar: polarised spectral path tracer")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -540,12 +577,23 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--retardance", type=float, default=90.0, help="retardance of the retarder (deg)")
     p.add_argument("--sweep", metavar="START:STOP:STEP", help="contact sheet of polariser angles, e.g. 0:180:15")
     p.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops")
+    p.add_argument("--mosaic", action="store_true", help="raw image of a polarisation camera: a 2×2 mosaic of "
+                   "micro-polarisers (with --extinction), instead of one filter")
+    p.add_argument("--mosaic-layout", metavar="A,B,C,D", help="micro-polariser angles in degrees: row 0 (top) "
+                   "left, right, row 1 left, right (default 90,45,135,0)")
     p.set_defaults(func=_polariser)
+
+    ap.add_argument("-v", "--verbose", action="store_true", help=VERBOSE_HELP)
+    for command in sub.choices.values():   # also accepted after the command
+        command.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help=VERBOSE_HELP)
     return ap
 
 
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    if args.verbose:
+        from .kernels import library_warnings
+        library_warnings(True)
     try:
         return args.func(args)
     except SceneError as e:

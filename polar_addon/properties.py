@@ -6,7 +6,8 @@ renumber or reorder.
 """
 
 import bpy
-from bpy.props import BoolProperty, EnumProperty, FloatProperty, IntProperty, PointerProperty, StringProperty
+from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
+                        PointerProperty, StringProperty)
 
 POLARISATION_ITEMS = [
     ("AUTO", "Auto", "Choose the cheapest transport that is exact for this scene (reported in the stats)", 0),
@@ -22,7 +23,7 @@ SPECTRAL_ITEMS = [
 ]
 
 PASS_NAMES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP", "Polariser",
-              "VisDoP", "VisS1", "VisS2", "VisS3", "VisAoLP", "Noise")
+              "VisDoP", "VisS1", "VisS2", "VisS3", "VisAoLP", "Noise", "Polarisation Mosaic")
 #: Passes on by default; the false-colour visualisation passes are opt-in.
 DEFAULT_PASSES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP", "Polariser")
 
@@ -108,6 +109,18 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                                   default=45.0, min=-360.0, max=360.0, update=_polariser_changed)
     retardance: FloatProperty(name="Retardance", description="Retardance of the retarder (degrees)",
                               default=90.0, min=-360.0, max=360.0, update=_polariser_changed)
+    mosaic_angles: FloatVectorProperty(name="Mosaic Angles", size=4, default=(90.0, 45.0, 135.0, 0.0),
+                                       min=-360.0, max=360.0,
+                                       description="Micro-polariser angles of the Polarisation Mosaic pass "
+                                       "(degrees from image right towards image up): top row left, right, "
+                                       "second row left, right")
+    mosaic_extinction: FloatProperty(name="Mosaic Extinction", description="t_min/t_max of the micro-"
+                                     "polarisers (0 = ideal)", default=0.0, min=0.0, max=1.0)
+
+
+def pass_property(name: str) -> str:
+    """ViewLayer property that toggles the pass ``name`` ("Polarisation Mosaic" → use_pass_polarisation_mosaic)."""
+    return "use_pass_" + name.lower().replace(" ", "_")
 
 
 def _refresh_passes(self, context):
@@ -148,9 +161,12 @@ class PolarViewLayerSettings(bpy.types.PropertyGroup):
     use_pass_noise: BoolProperty(name="Noise", default=True, update=_refresh_passes,
                                  description="Per-pixel standard error of the noise quantity (with adaptive "
                                  "sampling only)")
+    use_pass_polarisation_mosaic: BoolProperty(name="Polarisation Mosaic", default=False, update=_refresh_passes,
+                                               description="What a polarisation camera records: a 2×2 mosaic of "
+                                               "micro-polarisers (Render properties ▸ Virtual Polariser)")
 
     def enabled_passes(self):
-        return [name for name in PASS_NAMES if getattr(self, f"use_pass_{name.lower()}")]
+        return [name for name in PASS_NAMES if getattr(self, pass_property(name))]
 
 
 classes = (PolarRenderSettings, PolarViewLayerSettings)

@@ -21,10 +21,12 @@ from .export.camera import border_window
 from .export.scene import export_scene
 from ..engine.output.colormaps import diverging, hue_saturation, sequential
 from ..engine.postprocess.filters import apply_filter, filter_row
+from ..engine.postprocess.mosaic import mosaic as polarisation_mosaic
 from ..engine.spectral.cie import LUMINANCE_WEIGHTS
 from .compositor import polariser_inputs
 from .properties import DEFAULT_PASSES, NOISE_QUANTITY_TO_ENGINE, PASS_NAMES, POLARISATION_TO_ENGINE
-from .viewport import ViewportSession
+from .ui_names import ui_message
+from .viewport import ViewportSession, stop_all_sessions
 
 #: Seconds between progressive updates of the image shown while rendering.
 DISPLAY_INTERVAL = 1.0
@@ -75,12 +77,19 @@ def _display_colour(uint8_rgb):
     return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
-def pass_images(stokes_rgb, polariser=None, wanted=None, alpha=None):
+def mosaic_inputs(settings):
+    """(2×2 layout in degrees, extinction) of the scene's Polarisation Mosaic pass."""
+    a = tuple(settings.mosaic_angles)
+    return ((a[0], a[1]), (a[2], a[3])), settings.mosaic_extinction
+
+
+def pass_images(stokes_rgb, polariser=None, wanted=None, alpha=None, mosaic=None):
     """{pass name: (H, W, C)} for the Polar passes from a Stokes image (4, H, W, 3).
 
     ``polariser`` = (angle, extinction, retarder angle, retardance) for the Polariser pass;
     ``wanted`` limits the (costlier) false-colour passes; ``alpha`` (H, W) is the Combined pass's
-    alpha (coverage of the camera rays; 1 if None).
+    alpha (coverage of the camera rays; 1 if None); ``mosaic`` = (layout, extinction, (row, column)
+    of the image's top-left pixel in the frame) for the Polarisation Mosaic pass.
     """
     wanted = set(PASS_NAMES) if wanted is None else set(wanted)
     y = np.einsum("shwc,c->shw", stokes_rgb, LUMINANCE_WEIGHTS)
@@ -97,6 +106,9 @@ def pass_images(stokes_rgb, polariser=None, wanted=None, alpha=None):
     if "Polariser" in wanted and polariser is not None:
         angle, extinction, r_angle, retardance = polariser
         out["Polariser"] = apply_filter(stokes_rgb, filter_row("retarder", angle, extinction, r_angle, retardance))
+    if "Polarisation Mosaic" in wanted and mosaic is not None:
+        layout, extinction, origin = mosaic
+        out["Polarisation Mosaic"] = polarisation_mosaic(stokes_rgb, layout, extinction, origin)
     lit = y[0] > 0
     ratio = lambda k: np.where(lit, y[k] / np.where(lit, y[0], 1.0), np.nan)  # noqa: E731
     if "VisDoP" in wanted:
@@ -138,7 +150,7 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         for name in enabled:
             if name == "Noise" and not adaptive:
                 continue
-            if name.startswith("S") or name.startswith("Vis") or name == "Polariser":
+            if name.startswith("S") or name.startswith("Vis") or name in ("Polariser", "Polarisation Mosaic"):
                 self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
             else:
                 self.register_pass(scene, renderlayer, name, 1, "X", "VALUE")
@@ -149,7 +161,7 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         try:
             self._render(depsgraph)
         except SceneError as e:
-            self.report({"ERROR"}, f"Polar: {e}")
+            self.report({"ERROR"}, f"Polar: {ui_message(e)}")   # named as in Blender's UI
         except Exception as e:  # noqa: BLE001 — never a silently black image
             traceback.print_exc()
             self.report({"ERROR"}, f"Polar render failed: {type(e).__name__}: {e}")
@@ -173,6 +185,7 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         enabled = set(depsgraph.view_layer.polar.enabled_passes()) if hasattr(depsgraph.view_layer, "polar") \
             else set(DEFAULT_PASSES)
         polariser = polariser_inputs(scene.polar)
+        self._mosaic = mosaic_inputs(scene.polar)
 
         def progress(fraction, stats):
             self.update_progress(fraction)
@@ -235,11 +248,15 @@ class PolarRenderEngine(bpy.types.RenderEngine):
     def _write_passes(self, result, stokes_rgb, window, enabled, polariser, alpha=None):
         if stokes_rgb is None:
             return
+        origin = (0, 0)
         if window is not None:
             x0, y0, x1, y1 = window
             stokes_rgb = stokes_rgb[:, y0:y1, x0:x1]
             alpha = None if alpha is None else alpha[y0:y1, x0:x1]
-        images = pass_images(stokes_rgb, polariser, enabled, alpha)
+            origin = (y0, x0)
+        layout, extinction = getattr(self, "_mosaic", (None, 0.0))
+        images = pass_images(stokes_rgb, polariser, enabled, alpha,
+                             mosaic=(layout, extinction, origin) if layout is not None else None)
         passes = result.layers[0].passes
         for name, img in images.items():
             if name != "Combined" and name not in enabled:
@@ -253,18 +270,28 @@ class PolarRenderEngine(bpy.types.RenderEngine):
     # ------------------------------------------------------------------ viewport
 
     def view_update(self, context, depsgraph):
+        # Export only what the depsgraph's updates invalidate; tracing runs on the session's thread.
         if self.viewport is None:
             self.viewport = ViewportSession(engine_settings)
         self.viewport.sync(depsgraph, context)
         self.tag_redraw()
 
     def view_draw(self, context, depsgraph):
+        # Draw the latest accumulated image; never traces (see polar_addon.viewport).
         if self.viewport is None:
             return
-        done = self.viewport.step(context)
-        self.viewport.draw(self, context)
-        if not done:
+        if self.viewport.draw(self, context):
             self.tag_redraw()
+
+    def __del__(self):
+        # Leaving rendered shading (or Esc) frees the engine: stop the viewport's render thread.
+        # (BlendLuxCore does the same; the Blender struct may already be gone, the Python attribute is not.)
+        try:
+            viewport = getattr(self, "viewport", None)
+        except ReferenceError:
+            return
+        if viewport is not None:
+            viewport.stop()
 
 
 # Panels of other engines that should also show for Polar (as Hydra Storm does).
@@ -281,6 +308,9 @@ def _compat_panels():
 
 def register():
     from . import ui_scene          # panels for the Cycles settings the exporter reads
+    if bpy.app.debug:   # blender --debug: also show the kernel libraries' warnings (or POLAR_LIBRARY_WARNINGS=1)
+        from ..engine.kernels import library_warnings
+        library_warnings(True)
     bpy.utils.register_class(PolarRenderEngine)
     for panel in _compat_panels():
         panel.COMPAT_ENGINES.add("POLAR")
@@ -288,6 +318,7 @@ def register():
 
 
 def unregister():
+    stop_all_sessions()
     from . import ui_scene
     ui_scene.unregister()
     for panel in _compat_panels():

@@ -92,6 +92,9 @@ class POLAR_PT_polariser(_PolarPanel, bpy.types.Panel):
         if p.polariser_type == "RETARDER":
             layout.prop(p, "retarder_angle")
             layout.prop(p, "retardance")
+        col = layout.column(heading="Mosaic")
+        col.prop(p, "mosaic_angles", text="Angles")
+        col.prop(p, "mosaic_extinction", text="Extinction")
         layout.operator("polar.add_virtual_polariser", icon="NODE_COMPOSITING")
 
 
@@ -106,7 +109,7 @@ class POLAR_PT_passes(_PolarPanel, bpy.types.Panel):
         for name in ("s0", "s1", "s2", "s3"):
             col.prop(s, f"use_pass_{name}")
         col = layout.column(heading="Derived", align=True)
-        for name in ("dop", "dolp", "aolp", "docp", "polariser"):
+        for name in ("dop", "dolp", "aolp", "docp", "polariser", "polarisation_mosaic"):
             col.prop(s, f"use_pass_{name}")
         col = layout.column(heading="False Colour", align=True)
         for name in ("visdop", "viss1", "viss2", "viss3", "visaolp"):

@@ -1,32 +1,137 @@
-"""Rendered viewport shading: progressive refinement of the standalone engine's image.
+"""Rendered viewport shading: a background render session, as Cycles and BlendLuxCore do it.
 
-The logic (what an edit invalidates, when to restart accumulation, how many samples are done) is
-in ``ViewportSync``, which has no Blender dependency and is unit-tested.  ``ViewportSession``
-adds the few Blender calls: export, one small batch per redraw, and drawing the texture.  Drawing
-cannot run headless (the gpu module needs a display), so it is kept to a few lines.
+Three parts, only the last touches Blender's drawing API:
+
+* :func:`classify` turns ``depsgraph.updates`` into :class:`Changes` (which objects, meshes,
+  materials, lights, world changed), and :class:`IncrementalExport` keeps per-object exports and
+  redoes only what a change invalidates: a moved object is re-placed from its cached local arrays
+  (no ``to_mesh``), an edited mesh is re-read with ``foreach_get`` for that object only, an edited
+  material is re-converted and swapped into the compiled scene without touching the BVH.
+  The accelerator (``engine.render.accel.CompiledScene``, one Embree BVH over all triangles) has no
+  per-mesh update, so a geometry or transform change rebuilds the BVH — from the cached world-space
+  arrays, not by re-exporting the scene — and that rebuild runs on the render thread.
+* :class:`ViewportSession` owns a render thread that accumulates 1-sample passes at a reduced
+  resolution (:func:`viewport_resolution`) for the current view.  A view change (orbit, zoom,
+  resize) only replaces the camera and restarts accumulation; a scene change restarts it with the
+  new scene.  The thread polls a stop flag between samples and hands the renderer a ``should_stop``
+  that the tracer polls between bounces, so Esc / leaving rendered mode stops within a batch.
+* ``view_draw`` only uploads the latest accumulated image (:meth:`ViewportSession.draw`): it never
+  traces.  Drawing needs a display (the gpu module refuses to run headless), so it stays a few lines.
 """
 
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import threading
+import weakref
+
 import numpy as np
+
+from .ui_names import ui_message
+
+#: Samples traced per viewport pass: the image is rendered at a reduced resolution so that one
+#: refinement pass stays interactive, and drawn scaled up to the region.
+VIEWPORT_PIXELS_PER_PASS = 65536
+#: Seconds ``stop()`` waits for the render thread (the tracer stops between two bounces).
+STOP_TIMEOUT = 5.0
+
+#: ID types whose data an object's evaluated geometry is made of.
+GEOMETRY_DATA_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES", "POINTCLOUD", "VOLUME"}
+#: ID types that can feed any material or the world (shared node groups, textures, images).
+SHARED_SHADING_TYPES = {"NODETREE", "TEXTURE", "IMAGE"}
 
 RESTART_TYPES_GEOMETRY = {"OBJECT", "MESH", "CURVE", "SURFACE", "FONT", "META", "LIGHT", "CAMERA",
                           "COLLECTION", "SCENE"}
 RESTART_TYPES_SHADING = {"MATERIAL", "NODETREE", "WORLD", "TEXTURE", "IMAGE"}
 
-
-#: Samples traced per viewport redraw: the image is rendered at a reduced resolution so that one
-#: refinement pass stays interactive, and drawn scaled up to the region.
-VIEWPORT_PIXELS_PER_PASS = 65536
+_live_sessions = weakref.WeakSet()
 
 
 def viewport_resolution(width: int, height: int, budget: int = VIEWPORT_PIXELS_PER_PASS):
     """(w, h) of the progressive image for a region of width × height pixels (same aspect)."""
-    import math
     factor = max(1, math.ceil(math.sqrt(width * height / budget)))
     return max(1, width // factor), max(1, height // factor)
 
 
+# ---------------------------------------------------------------------------------- what changed
+
+@dataclasses.dataclass
+class Changes:
+    """What a batch of depsgraph updates invalidates (names are original ``name_full``)."""
+    objects_geometry: set = dataclasses.field(default_factory=set)   # evaluated mesh changed
+    objects_transform: set = dataclasses.field(default_factory=set)
+    objects_shading: set = dataclasses.field(default_factory=set)    # e.g. material slots reassigned
+    data_geometry: set = dataclasses.field(default_factory=set)      # mesh / curve data edited
+    lights_data: set = dataclasses.field(default_factory=set)
+    materials: set = dataclasses.field(default_factory=set)
+    all_materials: bool = False      # a shared node group, texture or image changed
+    world: bool = False
+    scene: bool = False              # settings, visibility, objects added or removed (IncrementalExport
+    #                                  compares these itself: this flag alone restarts nothing)
+
+    def any(self) -> bool:
+        return bool(self.objects_geometry or self.objects_transform or self.objects_shading
+                    or self.data_geometry or self.lights_data or self.materials or self.all_materials
+                    or self.world or self.scene)
+
+
+def depsgraph_updates(depsgraph):
+    """``depsgraph.updates`` as (id_type, name, geometry, transform, shading) tuples.
+
+    Embedded data (a material's or world's own node tree) is left out: its owner is reported too
+    (verified in bpy 5.0.1: editing a node gives MATERIAL 'Floor' and NODETREE 'Shader Nodetree')."""
+    out = []
+    for u in depsgraph.updates:
+        id_ = u.id
+        if getattr(id_, "is_embedded_data", False):
+            continue
+        original = getattr(id_, "original", None) or id_
+        out.append((getattr(id_, "id_type", "OBJECT"), getattr(original, "name_full", getattr(id_, "name", "")),
+                    bool(u.is_updated_geometry), bool(u.is_updated_transform), bool(u.is_updated_shading)))
+    return out
+
+
+def classify(updates) -> Changes:
+    """Changes from (id_type, name, is_updated_geometry, is_updated_transform, is_updated_shading).
+
+    An OBJECT update without flags is a selection change and invalidates nothing.  A material's own
+    update re-converts that material only; a NODETREE/TEXTURE/IMAGE update (it may be a group used by
+    several materials) re-converts every material and the world.
+    """
+    c = Changes()
+    for id_type, name, geometry, transform, shading in updates:
+        if id_type == "OBJECT":
+            if geometry:
+                c.objects_geometry.add(name)
+            if transform:
+                c.objects_transform.add(name)
+            if shading:
+                c.objects_shading.add(name)
+        elif id_type in GEOMETRY_DATA_TYPES:
+            if geometry:          # a material edit also flags the mesh data, with shading only
+                c.data_geometry.add(name)
+        elif id_type == "LIGHT":
+            c.lights_data.add(name)
+        elif id_type == "MATERIAL":
+            c.materials.add(name)
+        elif id_type == "WORLD":
+            c.world = True
+        elif id_type in SHARED_SHADING_TYPES:
+            c.all_materials = True
+            c.world = True
+        elif id_type in ("SCENE", "COLLECTION"):
+            c.scene = True
+    return c
+
+
 class ViewportSync:
-    """What to redo after edits and view changes; counts accumulated samples."""
+    """View bookkeeping: restarts accumulation when the view changes; counts samples.
+
+    ``on_updates`` is the coarse rule kept for callers that only need to know whether to restart;
+    the session uses :func:`classify` and :class:`IncrementalExport` to decide what to redo.
+    """
 
     def __init__(self, target_samples: int = 16):
         self.target_samples = target_samples
@@ -37,8 +142,8 @@ class ViewportSync:
     def on_updates(self, updates) -> bool:
         """Depsgraph updates: (id_type, is_updated_geometry, is_updated_transform, is_updated_shading) tuples.
 
-        Returns True if accumulation must restart.  Geometry, transforms, lights, cameras and any
-        shading change require a new export; a pure selection change (no flags set) does not.
+        Returns True if accumulation must restart: geometry, transforms, lights, cameras and any
+        shading change do; a pure selection change (no flags set) does not.
         """
         restart = False
         for id_type, geometry, transform, shading in updates:
@@ -52,8 +157,7 @@ class ViewportSync:
 
     def on_view(self, view_matrix, projection_matrix, size) -> bool:
         """A new view (orbit, zoom, resize) restarts accumulation but keeps the exported scene."""
-        key = (tuple(np.round(np.asarray(view_matrix, float).ravel(), 9)),
-               tuple(np.round(np.asarray(projection_matrix, float).ravel(), 9)), tuple(size))
+        key = view_key(view_matrix, projection_matrix, size)
         if key != self.view_key:
             self.view_key = key
             self.samples = 0
@@ -65,6 +169,12 @@ class ViewportSync:
 
     def add_samples(self, n: int):
         self.samples += n
+
+
+def view_key(view_matrix, projection_matrix, size):
+    """Hashable identity of a viewport view (matrices rounded to 1e-9, region size)."""
+    return (tuple(np.round(np.asarray(view_matrix, float).ravel(), 9)),
+            tuple(np.round(np.asarray(projection_matrix, float).ravel(), 9)), tuple(size))
 
 
 def camera_from_view(view_matrix, projection_matrix, width, height, is_perspective):
@@ -85,71 +195,407 @@ def camera_from_view(view_matrix, projection_matrix, width, height, is_perspecti
     return cam
 
 
-class ViewportSession:
-    """Blender side of the viewport: export on demand, one small batch per redraw, draw."""
+# ---------------------------------------------------------------------------------- incremental export
 
-    def __init__(self, settings_for):
+@dataclasses.dataclass
+class SyncResult:
+    """An assembled engine Scene and what the session must do with it."""
+    scene: object
+    rebuild: bool      # geometry, transforms or emitters changed: rebuild the BVH and light set
+    restart: bool      # anything visible changed: restart accumulation
+    warnings: list
+
+
+def _instance_key(inst):
+    obj = inst.object
+    if not getattr(inst, "is_instance", False):
+        return (obj.original.name_full,)
+    parent = getattr(inst, "parent", None)
+    return (parent.original.name_full if parent is not None else "", obj.original.name_full,
+            tuple(getattr(inst, "persistent_id", ())))
+
+
+class IncrementalExport:
+    """Per-object exports of a depsgraph, redone only where :class:`Changes` says so.
+
+    It walks ``depsgraph.object_instances`` with the same rules as ``export.scene.export_scene``
+    (object types, converted curves/text, unsupported types) and places each instance with the same
+    ``export.scene.object_meshes``, so the viewport shows what F12 renders.
+    Caches: local triangle arrays per (object, data) (``geometry_arrays``: the to_mesh + foreach_get
+    step), placed world-space engine Meshes per instance (keyed by its matrix and material slots),
+    lights per instance, converted materials per name, and the world.  ``counts`` records what the
+    last :meth:`sync` (re)did: "arrays" (meshes read from Blender), "placed" (instances
+    transformed), "materials", "lights", "world".  The export functions are injectable so that
+    the logic is testable without Blender.
+    """
+
+    def __init__(self, geometry_arrays=None, object_meshes=None, export_material=None, export_light=None,
+                 export_world=None, material_alpha=None, object_rays=None):
+        from .export import scene as scene_export
+        from .export.lights import export_light as _light
+        from .export.materials import export_material as _material
+        from .export.world import export_world as _world
+        self._geometry_arrays = geometry_arrays or scene_export.geometry_arrays
+        self._object_meshes = object_meshes or scene_export.object_meshes
+        self._export_material = export_material or _material
+        self._export_light = export_light or _light
+        self._export_world = export_world or _world
+        self._material_alpha = material_alpha or scene_export.material_alpha
+        self._object_rays = object_rays or scene_export.object_rays
+        self.arrays = {}      # (object, data) name → local arrays or None
+        self.placed = {}      # instance key → ((matrix bytes, slot names), [Mesh])
+        self.lights = {}      # instance key → (matrix bytes, light or None)
+        self.materials = {}   # material name (None = default) → (key, bsdf, emission, alpha)
+        self.world = None
+        self.world_name = None
+        self.settings = None
+        self.initialised = False
+        self.counts = {}
+
+    def sync(self, depsgraph, changes: Changes | None, settings) -> SyncResult:
+        """Bring the caches up to date with ``depsgraph`` (``changes`` None: export everything)."""
+        from ..engine.materials.lambert import Lambert
+        from ..engine.scene.description import Camera, Mesh, Scene
+        from ..engine.errors import SceneError
+        from ..engine.spectral import ConstantSpectrum
+        from .export.scene import BLACK, CONVERTED_TYPES, GEOMETRY_TYPES, UNSUPPORTED_TYPES
+
+        full = changes is None or not self.initialised
+        changes = changes or Changes()
+        counts = {"arrays": 0, "placed": 0, "materials": 0, "lights": 0, "world": 0}
+        warnings = []
+        rebuild = restart = False
+
+        # Materials: re-convert the edited ones; an emission that changes re-places its meshes.
+        reconverted = set()
+        for name in list(self.materials):
+            if full or changes.all_materials or name in changes.materials:
+                del self.materials[name]
+                reconverted.add(f"mat:{name}" if name is not None else "mat:<default>")
+                restart = True
+        emissions, alphas = {}, {}
+
+        def material_key(material):
+            name = material.name_full if material is not None else None
+            if name not in self.materials:
+                key = f"mat:{name}" if name is not None else "mat:<default>"
+                bsdf, emission = self._export_material(material, warnings)
+                self.materials[name] = (key, bsdf, emission, self._material_alpha(material, warnings))
+                counts["materials"] += 1
+            key, _, emission, alpha = self.materials[name]
+            emissions[key], alphas[key] = emission, alpha
+            return key
+
+        def material_of(key):
+            for k, _, e, a in self.materials.values():
+                if k == key:
+                    return e, a
+            return None, 1.0
+
+        meshes, lights, seen_placed, seen_lights, seen_arrays = [], [], set(), set(), set()
+        used = {}     # material keys in order of first use: stable under material edits, so that the
+        #               compiled scene's material indices stay valid and a material swap needs no rebuild
+        view_layer = getattr(depsgraph, "view_layer", None)
+        meshed = {inst.object.original.name_full for inst in depsgraph.object_instances
+                  if inst.object.type == "MESH" and inst.object.original.type in CONVERTED_TYPES}
+        for inst in depsgraph.object_instances:
+            obj = inst.object
+            M = np.array(inst.matrix_world, dtype=np.float64)
+            ikey = _instance_key(inst)
+            name = obj.original.name_full
+            if obj.type == "LIGHT":
+                data_name = obj.data.name_full if obj.data is not None else ""
+                entry = self.lights.get(ikey)
+                if (full or entry is None or entry[0] != M.tobytes() or data_name in changes.lights_data
+                        or name in changes.objects_shading or name in changes.objects_geometry):
+                    entry = (M.tobytes(), self._export_light(obj, M, warnings))
+                    self.lights[ikey] = entry
+                    counts["lights"] += 1
+                    rebuild = restart = True
+                seen_lights.add(ikey)
+                light = entry[1]
+                if isinstance(light, Mesh):
+                    meshes.append(light)
+                elif light is not None:
+                    lights.append(light)
+                continue
+            if obj.type in UNSUPPORTED_TYPES:
+                warnings.append(f"object {obj.name!r}: {UNSUPPORTED_TYPES[obj.type]} are not supported; skipped")
+                continue
+            if obj.type not in GEOMETRY_TYPES or (obj.type in CONVERTED_TYPES and name in meshed):
+                continue
+            data_name = obj.data.name_full if obj.data is not None else ""
+            dkey = (name, obj.type, data_name)
+            reread = full or dkey not in self.arrays or (dkey not in seen_arrays and (
+                name in changes.objects_geometry or data_name in changes.data_geometry))
+            if reread:
+                self.arrays[dkey] = self._geometry_arrays(obj)
+                counts["arrays"] += 1
+            seen_arrays.add(dkey)
+            arrays = self.arrays[dkey]
+            if arrays is None:
+                continue
+            slots = [s.material for s in obj.material_slots] or [None]
+            rays = self._object_rays(obj, view_layer, warnings)     # cheap; its flags may change unflagged
+            signature = (M.tobytes(), tuple(m.name_full if m is not None else None for m in slots),
+                         tuple(sorted(rays.items())))
+            entry = self.placed.get(ikey)
+            if reread or entry is None or entry[0] != signature:
+                entry = (signature, self._object_meshes(obj.name, arrays, M, slots, material_key, emissions, alphas,
+                                                        lambda rays=rays: rays, warnings))
+                self.placed[ikey] = entry
+                counts["placed"] += 1
+                rebuild = restart = True
+            else:
+                for m in slots:
+                    material_key(m)
+                if any(mesh.materials[0] in reconverted for mesh in entry[1]):
+                    fresh = [dataclasses.replace(mesh, emission=material_of(mesh.materials[0])[0],
+                                                 alpha=material_of(mesh.materials[0])[1]) for mesh in entry[1]]
+                    if any((a.emission is not None) or (b.emission is not None) or a.alpha != b.alpha
+                           for a, b in zip(entry[1], fresh)):
+                        rebuild = True
+                    entry = (signature, fresh)
+                    self.placed[ikey] = entry
+            seen_placed.add(ikey)
+            used.update(dict.fromkeys(mesh.materials[0] for mesh in entry[1]))
+            meshes.extend(entry[1])
+
+        # Objects that disappeared (deleted, hidden, moved out of the view layer).
+        for cache, seen in ((self.placed, seen_placed), (self.lights, seen_lights), (self.arrays, seen_arrays)):
+            gone = set(cache) - seen
+            if gone and cache is not self.arrays:
+                rebuild = restart = True
+            for k in gone:
+                del cache[k]
+
+        scene_world = depsgraph.scene.world
+        world_name = scene_world.name_full if scene_world is not None else None
+        if full or changes.world or world_name != self.world_name:
+            self.world = self._export_world(scene_world, warnings)
+            self.world_name = world_name
+            counts["world"] += 1
+            restart = True
+        if self.world is not None:
+            lights.append(self.world)
+
+        # The viewport sample count only sets how far accumulation goes: changing it restarts nothing.
+        comparable = dataclasses.replace(settings, spp=0) if dataclasses.is_dataclass(settings) else settings
+        if comparable != self.settings:
+            self.settings = comparable
+            restart = True
+        # A SCENE/COLLECTION update by itself changes nothing the walk above has not compared
+        # (objects added, removed or hidden; world; settings), e.g. editing the viewport sample count.
+        restart = restart or full
+        rebuild = rebuild or full
+        if not meshes:
+            raise SceneError("scene", "nothing to render: the scene has no visible geometry")
+        bsdfs = {key: bsdf for key, bsdf, _, _ in self.materials.values()}
+        materials = {BLACK: Lambert(ConstantSpectrum(0.0))}
+        materials.update((key, bsdfs[key]) for key in used if key != BLACK)
+        # The viewport camera replaces this placeholder (ViewportSession.set_view).
+        placeholder = Camera(origin=np.zeros(3), target=np.array([0.0, 0.0, -1.0]), up=np.array([0.0, 1.0, 0.0]),
+                             width=1, height=1)
+        self.initialised = True
+        self.counts = counts
+        return SyncResult(Scene(camera=placeholder, meshes=meshes, materials=materials, lights=lights,
+                                settings=settings, source=f"blender-viewport:{depsgraph.scene.name}"),
+                          rebuild=rebuild, restart=restart, warnings=list(dict.fromkeys(warnings)))
+
+
+# ---------------------------------------------------------------------------------- render thread
+
+def _default_renderer(scene):
+    from ..engine.render.renderer import Renderer
+    return Renderer(scene)
+
+
+class ViewportSession:
+    """A background render session: one thread accumulating 1-sample passes for the current view.
+
+    The Blender-facing methods (:meth:`sync`, :meth:`draw`) run on Blender's main thread and never
+    trace; the tracer runs only on ``self.thread``.  ``renderer_factory(scene)`` builds the
+    renderer (BVH); it is called on the render thread so that a rebuild does not block the UI.
+    """
+
+    def __init__(self, settings_for=None, exporter: IncrementalExport | None = None,
+                 renderer_factory=_default_renderer):
         #: settings_for(scene, preview=True) → engine RenderSettings (render_engine.engine_settings,
         #: passed in so that this module does not import the render engine that owns the session)
         self.settings_for = settings_for
-        self.sync_state = ViewportSync()
-        self.renderer = None
-        self.depsgraph_scene = None
-        self.accum = None
+        self.exporter = exporter
+        self.renderer_factory = renderer_factory
+        self.view_sync = ViewportSync()
+        self._cond = threading.Condition()
+        self._stop = False
+        self._generation = 0       # bumped whenever accumulation must restart
+        self._pending = None       # (scene, rebuild) waiting for the render thread
+        self._view = None          # engine Camera at the viewport resolution
+        self._settings = None
+        self.target_samples = 16
+        self.samples = 0
+        self.image = None          # (4, h, w, 3) accumulated Stokes image
+        self.version = 0           # bumped with every new image
         self.error = None
+        self._texture = None       # (version, GPUTexture) of the last upload
+        self.thread = threading.Thread(target=self._run, name="polar-viewport", daemon=True)
+        self.thread.start()
+        _live_sessions.add(self)
+
+    # ------------------------------------------------------------------ main thread: state changes
+
+    def update_scene(self, result: SyncResult, target_samples: int | None = None):
+        """A new scene from :class:`IncrementalExport` (a restart only if something visible changed)."""
+        with self._cond:
+            if target_samples is not None:
+                self.target_samples = int(target_samples)
+            if result.restart:
+                rebuild = result.rebuild or (self._pending is not None and self._pending[1])
+                self._pending = (result.scene, rebuild)
+                self._settings = result.scene.settings
+                self.error = None
+                self._restart()
+            self._cond.notify_all()
+
+    def set_view(self, camera) -> None:
+        """The viewport camera (an engine Camera at the progressive resolution): restart sampling."""
+        with self._cond:
+            self._view = camera
+            self._restart()
+            self._cond.notify_all()
+
+    def set_error(self, message):
+        with self._cond:
+            self.error = message
+            self._restart()
+            self._cond.notify_all()
+
+    def _restart(self):
+        self._generation += 1
+        self.samples = 0
+
+    def latest(self):
+        """(image, samples, version): the accumulated image to draw; never traces."""
+        with self._cond:
+            return self.image, self.samples, self.version
+
+    def finished(self) -> bool:
+        with self._cond:
+            return self.error is not None or self.samples >= self.target_samples
+
+    def stop(self, timeout: float = STOP_TIMEOUT) -> bool:
+        """Ask the render thread to stop and wait for it; True if it has ended."""
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+        if self.thread.is_alive() and threading.current_thread() is not self.thread:
+            self.thread.join(timeout)
+        return not self.thread.is_alive()
+
+    # ------------------------------------------------------------------ render thread
+
+    def _has_work(self, renderer):
+        if self._view is None or self._settings is None or self.error is not None:
+            return False
+        if self._pending is not None:
+            return True
+        return renderer is not None and self.samples < self.target_samples
+
+    def _run(self):
+        renderer = None
+        view = None
+        while True:
+            with self._cond:
+                while not self._stop and not self._has_work(renderer):
+                    self._cond.wait()
+                if self._stop:
+                    return
+                generation = self._generation
+                pending, self._pending = self._pending, None
+                camera, settings, n = self._view, self._settings, self.samples
+            try:
+                if pending is not None:
+                    scene, rebuild = pending
+                    if rebuild or renderer is None or list(scene.materials) != renderer.compiled.material_names:
+                        renderer = self.renderer_factory(scene)     # BVH + light set, off the UI thread
+                        view = None
+                    else:
+                        renderer.scene = scene                       # new materials, same geometry
+                        view = None
+                if camera is not view:
+                    from ..engine.render.camera import CameraModel
+                    renderer.scene = dataclasses.replace(renderer.scene, camera=camera)
+                    renderer.camera = CameraModel(camera)
+                    view = camera
+                st = copy.copy(settings)
+                st.spp = 1
+                st.seed = settings.seed + n
+                out = renderer.render(st, should_stop=lambda g=generation: self._stop or self._generation != g)
+            except Exception as e:  # noqa: BLE001 — shown in the viewport header instead
+                with self._cond:
+                    if self._generation == generation:
+                        self.error = ui_message(e) if hasattr(e, "field") else f"{type(e).__name__}: {e}"
+                continue
+            if out.cancelled:
+                continue
+            image = out.stokes()
+            with self._cond:
+                if self._generation != generation or self.samples != n:
+                    continue
+                self.image = image if n == 0 or self.image is None or self.image.shape != image.shape \
+                    else (self.image * n + image) / (n + 1)
+                self.samples = n + 1
+                self.version += 1
+
+    # ------------------------------------------------------------------ Blender side
 
     def sync(self, depsgraph, context):
-        updates = [(u.id.id_type if hasattr(u.id, "id_type") else "OBJECT", u.is_updated_geometry,
-                    u.is_updated_transform, u.is_updated_shading) for u in depsgraph.updates]
-        self.sync_state.on_updates(updates)
-        self.sync_state.target_samples = depsgraph.scene.polar.preview_samples
-        if self.sync_state.needs_export:
-            from .export.scene import export_scene
-            from ..engine.render.renderer import Renderer
-            region = context.region
-            try:
-                scene, _ = export_scene(depsgraph, depsgraph.scene.camera, region.width, region.height,
-                                        self.settings_for(depsgraph.scene, preview=True))
-                self.renderer = Renderer(scene)
-                self.error = None
-            except Exception as e:  # noqa: BLE001 — shown in the viewport header instead
-                self.renderer, self.error = None, str(e)
-            self.sync_state.needs_export = False
-
-    def step(self, context) -> bool:
-        """Render one more sample pass for the current view; True when the target is reached."""
-        if self.renderer is None:
-            return True
-        rv3d, region = context.region_data, context.region
-        if self.sync_state.on_view(rv3d.view_matrix, rv3d.window_matrix, (region.width, region.height)):
-            self.accum = None
-        if self.sync_state.done():
-            return True
-        import copy
-        scene = self.renderer.scene
-        w, h = viewport_resolution(region.width, region.height)
-        scene.camera = camera_from_view(rv3d.view_matrix, rv3d.window_matrix, w, h, rv3d.is_perspective)
-        from ..engine.render.camera import CameraModel
-        self.renderer.camera = CameraModel(scene.camera)
-        settings = copy.copy(scene.settings)
-        settings.spp = 1
-        settings.seed = scene.settings.seed + self.sync_state.samples
-        image = self.renderer.render(settings).stokes()[0]
-        n = self.sync_state.samples
-        self.accum = image if self.accum is None else (self.accum * n + image) / (n + 1)
-        self.sync_state.add_samples(1)
-        return self.sync_state.done()
-
-    def draw(self, engine, context):
-        if self.accum is None:
+        """view_update: classify the depsgraph's updates and re-export only what they invalidate."""
+        if self.exporter is None:
+            self.exporter = IncrementalExport()
+        scene = depsgraph.scene
+        changes = classify(depsgraph_updates(depsgraph)) if self.exporter.initialised else None
+        try:
+            result = self.exporter.sync(depsgraph, changes, self.settings_for(scene, preview=True))
+        except Exception as e:  # noqa: BLE001 — shown in the viewport header instead
+            self.exporter = None     # start from scratch after the user fixes the scene
+            self.set_error(ui_message(e))
             return
+        self.update_scene(result, target_samples=scene.polar.preview_samples)
+
+    def draw(self, engine, context) -> bool:
+        """view_draw: hand the current view to the render thread and draw the latest image.
+
+        Returns True while more samples are coming (the caller then tags a redraw)."""
+        rv3d, region = context.region_data, context.region
+        if self.view_sync.on_view(rv3d.view_matrix, rv3d.window_matrix, (region.width, region.height)):
+            w, h = viewport_resolution(region.width, region.height)
+            self.set_view(camera_from_view(rv3d.view_matrix, rv3d.window_matrix, w, h, rv3d.is_perspective))
+        image, samples, version = self.latest()
+        if self.error is not None:
+            engine.update_stats("", f"Polar | {self.error}")
+        else:
+            engine.update_stats("", f"Polar | sample {samples}/{self.target_samples}")
+        if image is not None:
+            self._draw_image(engine, context, image, version)
+        return not self.finished()
+
+    def _draw_image(self, engine, context, image, version):
         import gpu
         from gpu_extras.presets import draw_texture_2d
-        h, w = self.accum.shape[:2]
-        rgba = np.ones((h, w, 4), np.float32)
-        rgba[..., :3] = self.accum[::-1]
-        buffer = gpu.types.Buffer("FLOAT", w * h * 4, rgba.ravel())
-        texture = gpu.types.GPUTexture((w, h), format="RGBA16F", data=buffer)
+        if self._texture is None or self._texture[0] != version:
+            s0 = image[0]
+            h, w = s0.shape[:2]
+            rgba = np.ones((h, w, 4), np.float32)
+            rgba[..., :3] = s0[::-1]                       # Blender's rows start at the bottom
+            buffer = gpu.types.Buffer("FLOAT", w * h * 4, rgba.ravel())
+            self._texture = (version, gpu.types.GPUTexture((w, h), format="RGBA16F", data=buffer))
         engine.bind_display_space_shader(context.scene)
-        draw_texture_2d(texture, (0, 0), context.region.width, context.region.height)
+        draw_texture_2d(self._texture[1], (0, 0), context.region.width, context.region.height)
         engine.unbind_display_space_shader()
+
+
+def stop_all_sessions():
+    """Stop every live viewport session (add-on unregister, file load)."""
+    for session in list(_live_sessions):
+        session.stop()

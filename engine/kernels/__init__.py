@@ -27,8 +27,28 @@ stays there and is paired with its compiled loop by :func:`twin` where it is def
 from __future__ import annotations
 
 import os
+import warnings
 from typing import NamedTuple
 from collections.abc import Callable
+
+#: Modules whose warnings (e.g. Numba's FutureWarning about broadcast arrays while typing a kernel's
+#: arguments) are implementation noise for a user: hidden unless POLAR_LIBRARY_WARNINGS=1, the CLI's
+#: -v, or Blender started with --debug (library_warnings(True)).
+LIBRARY_WARNING_MODULES = r"(numba|llvmlite)(\.|$)"
+
+
+def library_warnings(show: bool) -> None:
+    """Show (True) or hide (False) warnings raised inside the kernel libraries (process-wide)."""
+    ours = [f for f in warnings.filters
+            if f[0] == "ignore" and getattr(f[3], "pattern", None) == LIBRARY_WARNING_MODULES]
+    for f in ours:
+        warnings.filters.remove(f)
+    getattr(warnings, "_filters_mutated", lambda: None)()   # the same bookkeeping as filterwarnings does
+    if not show:
+        warnings.filterwarnings("ignore", module=LIBRARY_WARNING_MODULES)
+
+
+library_warnings(os.environ.get("POLAR_LIBRARY_WARNINGS", "") not in ("", "0"))
 
 try:  # optional dependency
     import numba as _numba

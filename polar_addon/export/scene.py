@@ -213,6 +213,52 @@ def object_rays(obj, view_layer, warnings) -> dict:
             "visible_indirect": diffuse or glossy or transmission, "holdout": holdout}
 
 
+def object_meshes(name, arrays, M, slots, material_key, emissions, alphas, rays, warnings):
+    """Engine Meshes of one object instance: ``arrays`` from :func:`geometry_arrays` placed by the
+    4×4 world matrix ``M``, one Mesh per material slot used.  ``slots``: the slots' materials;
+    ``material_key(material)``: its name in the scene's materials (exported on first use), whose
+    ``emissions[key]`` and ``alphas[key]`` the Meshes take; ``rays()``: the object's ray visibility
+    (:func:`object_rays`).  [] (with a warning) if nothing is left.  Used per instance by
+    :func:`export_scene` and by the viewport's incremental export."""
+    P, F, SN, tri_mat = arrays
+    if not np.all(np.isfinite(P)):
+        raise SceneError(f"object {name!r}", "has non-finite vertex coordinates")
+    Pw = P @ M[:3, :3].T + M[:3, 3]
+    normal_matrix = np.linalg.inv(M[:3, :3]).T if abs(np.linalg.det(M[:3, :3])) > 1e-300 else None
+    if normal_matrix is None:
+        warnings.append(f"object {name!r} has a singular transform (zero scale); skipped")
+        return []
+    tri = Pw[F]
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    degenerate = ~(area2 > 0)
+    if degenerate.all():
+        warnings.append(f"object {name!r} has only zero-area faces; skipped")
+        return []
+    if degenerate.any():
+        warnings.append(f"object {name!r}: {int(degenerate.sum())} zero-area faces ignored")
+    N = SN @ normal_matrix.T
+    length = np.linalg.norm(N, axis=1, keepdims=True)
+    N = np.where(length > 0, N / np.where(length > 0, length, 1.0), 0.0)
+    mirrored = np.linalg.det(M[:3, :3]) < 0   # keep front faces in front under negative scale
+    ray_fields = rays()
+    keys = [material_key(slots[i] if i < len(slots) else None) for i in range(len(slots))]
+    tri_mat = np.clip(tri_mat, 0, len(keys) - 1)
+    meshes = []
+    # One engine Mesh per (object, emissive material) so that emitters are separate lights.
+    for slot in np.unique(tri_mat):
+        sel = np.nonzero(tri_mat == slot)[0]
+        key = keys[slot]
+        corner = (sel[:, None] * 3 + np.arange(3)[None, :]).ravel()
+        local_faces = np.arange(corner.size, dtype=np.int64).reshape(-1, 3)
+        if mirrored:
+            local_faces = local_faces[:, [0, 2, 1]]
+        meshes.append(Mesh(name=f"{name}:{slot}", vertices=Pw[F[sel]].reshape(-1, 3),
+                           faces=local_faces, materials=[key], material_ids=np.zeros(len(sel), np.int32),
+                           normals=N[corner], emission=emissions.get(key), alpha=alphas.get(key, 1.0),
+                           **ray_fields))
+    return meshes
+
+
 def export_scene(depsgraph, camera_object, width, height, settings: RenderSettings):
     """(engine Scene, list of warnings) for an evaluated depsgraph."""
     scene = depsgraph.scene
@@ -268,42 +314,9 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
                 warnings.append(f"object {owner!r}: geometry-nodes curves without a mesh are not rendered (nor by "
                                 "Cycles): convert them with Curve to Mesh")
             continue
-        P, F, SN, tri_mat = arrays
-        if not np.all(np.isfinite(P)):
-            raise SceneError(f"object {obj.name!r}", "has non-finite vertex coordinates")
-        Pw = P @ M[:3, :3].T + M[:3, 3]
-        normal_matrix = np.linalg.inv(M[:3, :3]).T if abs(np.linalg.det(M[:3, :3])) > 1e-300 else None
-        if normal_matrix is None:
-            warnings.append(f"object {obj.name!r} has a singular transform (zero scale); skipped")
-            continue
-        tri = Pw[F]
-        area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-        degenerate = ~(area2 > 0)
-        if degenerate.all():
-            warnings.append(f"object {obj.name!r} has only zero-area faces; skipped")
-            continue
-        if degenerate.any():
-            warnings.append(f"object {obj.name!r}: {int(degenerate.sum())} zero-area faces ignored")
-        N = SN @ normal_matrix.T
-        length = np.linalg.norm(N, axis=1, keepdims=True)
-        N = np.where(length > 0, N / np.where(length > 0, length, 1.0), 0.0)
-        mirrored = np.linalg.det(M[:3, :3]) < 0   # keep front faces in front under negative scale
-        rays = object_rays(obj, view_layer, warnings)
         slots = [s.material for s in obj.material_slots] or [None]
-        keys = [material_key(slots[i] if i < len(slots) else None) for i in range(len(slots))]
-        tri_mat = np.clip(tri_mat, 0, len(keys) - 1)
-        # One engine Mesh per (object, emissive material) so that emitters are separate lights.
-        for slot in np.unique(tri_mat):
-            sel = np.nonzero(tri_mat == slot)[0]
-            key = keys[slot]
-            corner = (sel[:, None] * 3 + np.arange(3)[None, :]).ravel()
-            local_faces = np.arange(corner.size, dtype=np.int64).reshape(-1, 3)
-            if mirrored:
-                local_faces = local_faces[:, [0, 2, 1]]
-            meshes.append(Mesh(name=f"{obj.name}:{slot}", vertices=Pw[F[sel]].reshape(-1, 3),
-                               faces=local_faces, materials=[key], material_ids=np.zeros(len(sel), np.int32),
-                               normals=N[corner], emission=emissions.get(key), alpha=alphas.get(key, 1.0),
-                               **rays))
+        meshes.extend(object_meshes(obj.name, arrays, M, slots, material_key, emissions, alphas,
+                                    lambda obj=obj: object_rays(obj, view_layer, warnings), warnings))
     if not meshes:
         raise SceneError("scene", "nothing to render: the scene has no visible geometry")
     world = export_world(scene.world, warnings)
