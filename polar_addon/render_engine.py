@@ -22,7 +22,9 @@ from .export.scene import export_scene
 from ..engine.output.colormaps import diverging, hue_saturation, sequential
 from ..engine.postprocess.filters import apply_filter, filter_row
 from ..engine.spectral.cie import LUMINANCE_WEIGHTS
+from ..engine import kernels
 from .compositor import polariser_inputs
+from .kernel_cache import first_compile_pending
 from .properties import DEFAULT_PASSES, PASS_NAMES, POLARISATION_TO_ENGINE
 from .viewport import ViewportSession
 
@@ -146,6 +148,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         enabled = set(depsgraph.view_layer.polar.enabled_passes()) if hasattr(depsgraph.view_layer, "polar") \
             else set(DEFAULT_PASSES)
         polariser = polariser_inputs(scene.polar)
+        if first_compile_pending(kernels):
+            self.update_stats("", "Polar | compiling kernels (first render only)")
 
         def progress(fraction, stats):
             self.update_progress(fraction)
@@ -174,7 +178,7 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         message = (f"Polar | {stats['transport_reason']} | {stats['samples']} samples in {stats['seconds']:.1f} s"
                    f" (export + BVH {time.perf_counter() - t0 - stats['seconds']:.1f} s)")
         if stats.get("kernels") == "numpy":
-            message += " | NumPy kernels (install numba in Blender's Python for ~2x speed)"
+            message += " | NumPy kernels (numba wheels missing: install the zip for this platform for ~1.7x speed)"
         if stats.get("simplified"):
             message += f" | skipped {len(stats['simplified'])} clear layer(s): " + "; ".join(stats["simplified"])
         if out.cancelled:
