@@ -178,7 +178,7 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         message = (f"Polar | {stats['transport_reason']} | {stats['samples']} samples in {stats['seconds']:.1f} s"
                    f" (export + BVH {time.perf_counter() - t0 - stats['seconds']:.1f} s)")
         if stats.get("kernels") == "numpy":
-            message += " | NumPy kernels (numba wheels missing: install the zip for this platform for ~1.7x speed)"
+            message += " | NumPy kernels (numba not loaded: slower)"
         if stats.get("simplified"):
             message += f" | skipped {len(stats['simplified'])} clear layer(s): " + "; ".join(stats["simplified"])
         if out.cancelled:

@@ -8,6 +8,8 @@ import importlib.util
 import os
 import re
 import shutil
+import sys
+import types
 import zipfile
 
 import pytest
@@ -114,3 +116,67 @@ def test_download_that_produces_no_wheel_names_it(tmp_path):
     src = source_copy(tmp_path)
     with pytest.raises(SystemExit, match=r"did not produce \./wheels/embreex-4\.4\.0\.post1-cp311"):
         packaging.download_wheels(str(src), fetch=lambda *args: None)
+
+
+# ------------------------------------------------------------------ the add-on's side of the bundle
+
+def fake_bpy(monkeypatch, user_folder):
+    """A stand-in for bpy whose extension user folder is ``user_folder`` (Blender creates it on request)."""
+    def extension_path_user(package, path="", create=False):
+        if package != "bl_ext.user_default.polar_render":
+            raise ValueError('The "package" does not name an extension')
+        folder = os.path.join(user_folder, path)
+        if create:
+            os.makedirs(folder, exist_ok=True)
+        return folder
+    monkeypatch.setitem(sys.modules, "bpy",
+                        types.SimpleNamespace(utils=types.SimpleNamespace(extension_path_user=extension_path_user)))
+
+
+def test_kernel_cache_goes_to_the_extension_user_folder_per_version(tmp_path, monkeypatch):
+    from polar_addon import kernel_cache
+    fake_bpy(monkeypatch, str(tmp_path / "user"))
+    monkeypatch.delenv("POLAR_KERNEL_CACHE", raising=False)
+    (tmp_path / "user" / "numba" / "0.0.9" / "engine").mkdir(parents=True)       # an earlier version's cache
+    folder = kernel_cache.configure("bl_ext.user_default.polar_render")
+    assert folder == str(tmp_path / "user" / "numba" / "0.1.0")
+    assert os.environ["POLAR_KERNEL_CACHE"] == folder and os.path.isdir(folder)
+    assert os.listdir(tmp_path / "user" / "numba") == ["0.1.0"]
+    assert kernel_cache.configure("bl_ext.user_default.polar_render") == folder     # re-enabling: same folder
+
+
+def test_kernel_cache_set_outside_blender_is_kept(tmp_path, monkeypatch):
+    from polar_addon import kernel_cache
+    fake_bpy(monkeypatch, str(tmp_path / "user"))
+    monkeypatch.setenv("POLAR_KERNEL_CACHE", str(tmp_path / "farm"))
+    assert kernel_cache.configure("bl_ext.user_default.polar_render") == str(tmp_path / "farm")
+    assert os.environ["POLAR_KERNEL_CACHE"] == str(tmp_path / "farm")
+    # a checkout loaded as a package (not an installed extension) has no user folder: unchanged
+    monkeypatch.delenv("POLAR_KERNEL_CACHE")
+    assert kernel_cache.configure("polar_render") is None and "POLAR_KERNEL_CACHE" not in os.environ
+
+
+def test_first_compile_pending_on_an_empty_cache_only(tmp_path):
+    from polar_addon import kernel_cache
+    cache = tmp_path / "cache"
+    kernels = types.SimpleNamespace(COMPILED=True, cache_dir=lambda: str(cache))
+    assert kernel_cache.first_compile_pending(kernels)                  # folder not even created yet
+    (cache / "engine_kernels").mkdir(parents=True)
+    assert kernel_cache.first_compile_pending(kernels)
+    (cache / "engine_kernels" / "transport.update_abcs-40.py311.nbi").write_bytes(b"")
+    assert not kernel_cache.first_compile_pending(kernels)
+    cold_numpy = types.SimpleNamespace(COMPILED=False, cache_dir=lambda: str(tmp_path / "none"))
+    assert not kernel_cache.first_compile_pending(cold_numpy)          # NumPy kernels never compile
+
+
+def test_one_warning_when_numba_is_missing(caplog, monkeypatch):
+    from polar_addon import kernel_cache
+    monkeypatch.delenv("POLAR_KERNELS", raising=False)
+    with caplog.at_level("WARNING"):
+        kernel_cache.warn_if_numpy_fallback(types.SimpleNamespace(COMPILED=True))
+        assert not caplog.records
+        kernel_cache.warn_if_numpy_fallback(types.SimpleNamespace(COMPILED=False))
+        assert len(caplog.records) == 1 and "NumPy kernels" in caplog.records[0].getMessage()
+        monkeypatch.setenv("POLAR_KERNELS", "numpy")                    # asked for: no warning
+        kernel_cache.warn_if_numpy_fallback(types.SimpleNamespace(COMPILED=False))
+        assert len(caplog.records) == 1
