@@ -52,8 +52,8 @@ def warn_if_numpy_fallback(kernels):
     """One warning at register time when the bundled numba wheels did not load (NumPy kernels, ~1.7x slower)."""
     if not kernels.COMPILED and os.environ.get("POLAR_KERNELS", "numba").lower() != "numpy":
         log.warning("Polar: numba could not be imported (bundled wheels missing or not for this platform); "
-                    "rendering with the NumPy kernels (about 1.7x slower on the benchmark scenes). Install the extension zip made "
-                    "for this platform.")
+                    "rendering with the NumPy kernels (about 1.7x slower on the benchmark scenes). "
+                    "Install the extension zip made for this platform.")
 
 
 def first_compile_pending(kernels):
