@@ -22,11 +22,11 @@ from .export.scene import export_scene
 from ..engine.output.colormaps import diverging, hue_saturation, sequential
 from ..engine.postprocess.filters import apply_filter, filter_row
 from ..engine.spectral.cie import LUMINANCE_WEIGHTS
-from ..engine import kernels
 from .compositor import polariser_inputs
-from .kernel_cache import first_compile_pending
 from .properties import DEFAULT_PASSES, PASS_NAMES, POLARISATION_TO_ENGINE
 from .viewport import ViewportSession
+from ..engine import kernels
+from .kernel_cache import first_compile_pending
 
 #: Seconds between progressive updates of the image shown while rendering.
 DISPLAY_INTERVAL = 1.0
