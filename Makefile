@@ -24,5 +24,7 @@ bench: $(VENV)/.installed
 clean:
 	rm -rf out build dist *.egg-info
 
+# One zip per platform, dist/polar_render-<version>-<platform>.zip, each with its numba, llvmlite,
+# embreex and OpenEXR wheels (downloaded into wheels/ with pip: needs network at build time only).
 extension: $(VENV)/.installed
 	$(PY) -m polar_addon.packaging --output-dir dist

@@ -11,8 +11,13 @@ def _modules():
 
 
 def register():
+    from . import kernel_cache
+    # Before any engine module is imported: the engine picks its Numba cache folder on import.
+    kernel_cache.configure(__package__.rpartition(".")[0])
     for module in _modules():
         module.register()
+    from ..engine import kernels
+    kernel_cache.warn_if_numpy_fallback(kernels)
 
 
 def unregister():

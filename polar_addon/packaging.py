@@ -1,49 +1,113 @@
-"""Build the installable extension zip: ``python -m polar_addon.packaging [--output-dir dist]``.
+"""Build the installable extension zips: ``python -m polar_addon.packaging [--output-dir dist]``.
 
-1. Downloads the wheels listed in ``blender_manifest.toml`` (embreex, OpenEXR; numpy comes with
-   Blender) into ``wheels/`` with pip, for Linux x86-64 and CPython 3.11 (Blender 5.0's Python).
-2. Validates and builds the zip with Blender's own extension tool (``blender_ext.py`` from the
-   bpy module — the same code as ``blender --command extension build``).
+1. Downloads the wheels listed in ``blender_manifest.toml`` into ``wheels/`` with pip (binary only,
+   CPython 3.11 = Blender 5.0's Python, each wheel for the platform tags in its file name):
+   embreex, OpenEXR, numba and llvmlite for every platform in the manifest's ``platforms``
+   (numpy comes with Blender).  Network is needed here, at build time only.
+2. Checks that every platform gets one wheel of each bundled package.
+3. Validates and builds one zip per platform with Blender's own extension tool (``blender_ext.py``
+   from the bpy module — the same code as ``blender --command extension build --split-platforms``):
+   ``polar_render-<version>-<platform>.zip``, each holding only its platform's wheels.
 
-Other platforms: add their wheels (win_amd64, macosx_11_0_arm64, …) to the manifest's ``wheels``
-and ``platforms`` lists and run the build with ``--split-platforms`` (see README).
+The download is injectable (``fetch``) so that tests can build with fake wheel files and no network.
 This module needs no Blender session (it only locates bpy's copy of ``blender_ext.py``).
 """
 
 import argparse
 import os
+import platform as _platform
 import re
 import subprocess
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-MANIFEST = os.path.join(ROOT, "blender_manifest.toml")
 WHEEL_NAME = re.compile(r"\./wheels/([A-Za-z0-9_]+)-([^-]+)-(cp\d+)-[^-]+-(.+)\.whl")
+#: Packages every platform's zip must carry (project names as they appear in wheel file names).
+BUNDLED = ("embreex", "openexr", "numba", "llvmlite")
 
 
-def manifest_wheels():
-    with open(MANIFEST, encoding="utf-8") as fh:
-        return re.findall(r'"(\./wheels/[^"]+\.whl)"', fh.read())
+def manifest_text(source_dir=ROOT):
+    with open(os.path.join(source_dir, "blender_manifest.toml"), encoding="utf-8") as fh:
+        return fh.read()
 
 
-def download_wheels(dest=os.path.join(ROOT, "wheels")):
-    """Make sure every wheel of the manifest is in ``dest`` (pip download, binary only)."""
+def manifest_wheels(source_dir=ROOT):
+    """The manifest's ``wheels`` entries, as written (``./wheels/<file>.whl``)."""
+    return re.findall(r'"(\./wheels/[^"]+\.whl)"', manifest_text(source_dir))
+
+
+def manifest_platforms(source_dir=ROOT):
+    m = re.search(r"^platforms\s*=\s*\[([^\]]*)\]", manifest_text(source_dir), re.M)
+    return re.findall(r'"([^"]+)"', m.group(1)) if m else []
+
+
+def wheel_platforms(filename):
+    """Blender platforms (``linux-x64``, ``windows-x64``, ``macos-arm64``, …) a wheel file runs on.
+
+    The same mapping as Blender's ``--split-platforms`` for the tags used here; ``any`` wheels fit all.
+    """
+    tags = os.path.basename(filename)[:-len(".whl")].split("-")[-1].split(".")
+    found = set()
+    for tag in tags:
+        if tag == "any":
+            return {"any"}
+        system = ("linux" if "linux" in tag else "windows" if tag.startswith("win") else
+                  "macos" if tag.startswith("macosx") else None)
+        if system is None:
+            continue
+        if tag.endswith(("x86_64", "amd64")):
+            found.add(f"{system}-x64")
+        elif tag.endswith(("aarch64", "arm64")):
+            found.add(f"{system}-arm64")
+        elif tag.endswith("universal2"):
+            found.update({"macos-x64", "macos-arm64"})
+    return found
+
+
+def check_manifest(source_dir=ROOT):
+    """Every declared platform has exactly one wheel of each package in :data:`BUNDLED`."""
+    platforms = manifest_platforms(source_dir)
+    if not platforms:
+        raise SystemExit("blender_manifest.toml: 'platforms' is empty; list the platforms wheels are bundled for")
+    wheels = manifest_wheels(source_dir)
+    for plat in platforms:
+        names = [WHEEL_NAME.match(w).group(1).lower() for w in wheels
+                 if plat in wheel_platforms(w) or "any" in wheel_platforms(w)]
+        for package in BUNDLED:
+            if names.count(package) != 1:
+                raise SystemExit(f"blender_manifest.toml: platform {plat} needs exactly one {package} wheel in "
+                                 f"'wheels', found {names.count(package)}")
+
+
+def pip_download(name, version, python_version, platform_tags, dest):
+    """Fetch one binary wheel from the package index with pip (the default ``fetch``)."""
+    cmd = [sys.executable, "-m", "pip", "download", f"{name}=={version}", "--no-deps", "--only-binary=:all:",
+           "--python-version", python_version, "--implementation", "cp", "--dest", dest, "--quiet"]
+    for tag in platform_tags:
+        cmd += ["--platform", tag]
+    subprocess.run(cmd, check=True)
+
+
+def download_wheels(source_dir=ROOT, fetch=pip_download):
+    """Make sure every wheel of the manifest is in ``<source_dir>/wheels``.
+
+    ``fetch(name, version, python_version, platform_tags, dest)`` must leave the wheel named in the
+    manifest in ``dest``; wheels already there are not fetched again.
+    """
+    dest = os.path.join(source_dir, "wheels")
     os.makedirs(dest, exist_ok=True)
-    for rel in manifest_wheels():
-        target = os.path.join(ROOT, rel)
+    for rel in manifest_wheels(source_dir):
+        target = os.path.join(source_dir, rel)
         if os.path.exists(target):
             continue
         m = WHEEL_NAME.match(rel)
         if not m:
-            raise SystemExit(f"cannot parse wheel name {rel}")
-        name, version, pytag, platform = m.groups()
-        cmd = [sys.executable, "-m", "pip", "download", f"{name}=={version}", "--no-deps", "--only-binary=:all:",
-               "--python-version", pytag[2:], "--implementation", "cp", "--dest", dest, "--quiet"]
-        for plat in platform.split("."):
-            cmd += ["--platform", plat]
-        subprocess.run(cmd, check=True)
+            raise SystemExit(f"blender_manifest.toml: cannot parse wheel name {rel} "
+                             "(expected ./wheels/<name>-<version>-cp311-<abi>-<platform>.whl)")
+        name, version, pytag, platform_tags = m.groups()
+        fetch(name, version, pytag[2:], platform_tags.split("."), dest)
         if not os.path.exists(target):
-            raise SystemExit(f"pip did not produce {rel}; check the name in blender_manifest.toml")
+            raise SystemExit(f"the download did not produce {rel}; check the name in blender_manifest.toml")
 
 
 def blender_ext_tool():
@@ -59,27 +123,49 @@ def blender_ext_tool():
     raise SystemExit(f"blender_ext.py not found under {base}")
 
 
-def build(output_dir=os.path.join(ROOT, "dist")):
-    """Download wheels, validate the manifest and build the zip; returns the zip's path."""
-    download_wheels()
+def host_platform():
+    """This machine as a Blender platform name, e.g. ``linux-x64``."""
+    system = {"linux": "linux", "win32": "windows", "darwin": "macos"}.get(sys.platform, sys.platform)
+    machine = _platform.machine().lower()
+    arch = "x64" if machine in ("x86_64", "amd64") else "arm64" if machine in ("arm64", "aarch64") else machine
+    return f"{system}-{arch}"
+
+
+def build_all(output_dir=os.path.join(ROOT, "dist"), source_dir=ROOT, fetch=pip_download):
+    """Download wheels, validate and build one zip per platform; returns {platform: zip path}."""
+    check_manifest(source_dir)
+    download_wheels(source_dir, fetch)
     tool = blender_ext_tool()
     os.makedirs(output_dir, exist_ok=True)
-    subprocess.run([sys.executable, tool, "validate", ROOT], check=True)
-    subprocess.run([sys.executable, tool, "build", "--source-dir", ROOT, "--output-dir", output_dir], check=True)
-    with open(MANIFEST, encoding="utf-8") as fh:
-        text = fh.read()
+    subprocess.run([sys.executable, tool, "validate", source_dir], check=True)
+    subprocess.run([sys.executable, tool, "build", "--source-dir", source_dir, "--output-dir", output_dir,
+                    "--split-platforms"], check=True)
+    text = manifest_text(source_dir)
     ext_id = re.search(r'^id\s*=\s*"([^"]+)"', text, re.M).group(1)
     version = re.search(r'^version\s*=\s*"([^"]+)"', text, re.M).group(1)
-    path = os.path.join(output_dir, f"{ext_id}-{version}.zip")
-    if not os.path.exists(path):
-        raise SystemExit(f"the build did not produce {path}")
-    return path
+    zips = {}
+    for plat in manifest_platforms(source_dir):
+        path = os.path.join(output_dir, f"{ext_id}-{version}-{plat.replace('-', '_')}.zip")
+        if not os.path.exists(path):
+            raise SystemExit(f"the build did not produce {path}")
+        zips[plat] = path
+    return zips
+
+
+def build(output_dir=os.path.join(ROOT, "dist"), source_dir=ROOT, fetch=pip_download):
+    """Build every platform's zip (:func:`build_all`); returns the path of this machine's zip."""
+    zips = build_all(output_dir, source_dir, fetch)
+    host = host_platform()
+    if host not in zips:
+        raise SystemExit(f"no zip for this machine ({host}); the manifest's platforms are {sorted(zips)}")
+    return zips[host]
 
 
 def main():
-    ap = argparse.ArgumentParser(description="Build the Polar Blender extension zip")
+    ap = argparse.ArgumentParser(description="Build the Polar Blender extension zips (one per platform)")
     ap.add_argument("--output-dir", default=os.path.join(ROOT, "dist"))
-    print(build(ap.parse_args().output_dir))
+    for plat, path in build_all(ap.parse_args().output_dir).items():
+        print(f"{plat}: {path} ({os.path.getsize(path) / 1e6:.1f} MB)")
 
 
 if __name__ == "__main__":

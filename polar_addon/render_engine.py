@@ -27,6 +27,8 @@ from .compositor import polariser_inputs
 from .properties import DEFAULT_PASSES, NOISE_QUANTITY_TO_ENGINE, PASS_NAMES, POLARISATION_TO_ENGINE
 from .ui_names import ui_message
 from .viewport import ViewportSession, stop_all_sessions
+from ..engine import kernels
+from .kernel_cache import first_compile_pending
 
 #: Seconds between progressive updates of the image shown while rendering.
 DISPLAY_INTERVAL = 1.0
@@ -186,6 +188,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             else set(DEFAULT_PASSES)
         polariser = polariser_inputs(scene.polar)
         self._mosaic = mosaic_inputs(scene.polar)
+        if first_compile_pending(kernels):
+            self.update_stats("", "Polar | compiling kernels (first render only)")
 
         def progress(fraction, stats):
             self.update_progress(fraction)
@@ -218,7 +222,7 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         message = (f"Polar | {stats['transport_reason']} | {stats['samples']} samples in {stats['seconds']:.1f} s"
                    f" (export + BVH {time.perf_counter() - t0 - stats['seconds']:.1f} s)")
         if stats.get("kernels") == "numpy":
-            message += " | NumPy kernels (install numba in Blender's Python for ~2x speed)"
+            message += " | NumPy kernels (numba not loaded: slower)"
         if stats.get("simplified"):
             message += f" | skipped {len(stats['simplified'])} clear layer(s): " + "; ".join(stats["simplified"])
         if out.cancelled:

@@ -23,11 +23,22 @@ INSTALL = textwrap.dedent("""
 """)
 
 RENDER = textwrap.dedent("""
-    import json, math, sys
+    import json, math, os, sys
     import bpy
     import addon_utils
     addon_utils.enable("bl_ext.user_default.polar_render", default_set=True)
     import bl_ext.user_default.polar_render as ext
+    engine_class = sys.modules[ext.__name__ + ".polar_addon.render_engine"].PolarRenderEngine
+    class RecordStats:          # headless Blender shows no status: print what the engine sets
+        def __init__(self, engine):
+            self.engine = engine
+        def __getattr__(self, name):
+            return getattr(self.engine, name)
+        def update_stats(self, stats, info):
+            print("POLAR_STATUS=" + info)
+            self.engine.update_stats(stats, info)
+    render_body = engine_class._render
+    engine_class._render = lambda self, depsgraph: render_body(RecordStats(self), depsgraph)
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     scene.render.engine = "POLAR"
@@ -55,12 +66,20 @@ RENDER = textwrap.dedent("""
     bpy.ops.render.render(write_still=True)
     engine_file = sys.modules[ext.__name__ + ".engine"].__file__
     print("POLAR_ENGINE_FILE=" + engine_file)
+    kernels = sys.modules[ext.__name__ + ".engine.kernels"]
+    print("POLAR_KERNEL_CACHE=" + kernels.cache_dir())
+    print("POLAR_BACKEND=" + kernels.BACKEND)
 """)
 
 
 def run_bpy(script, *args, env):
     return subprocess.run([sys.executable, "-c", script, *args], env=env, capture_output=True, text=True,
                           cwd=env["HOME"], timeout=600)
+
+
+def printed(proc, key):
+    """Values the scripts above print as ``KEY=value`` lines, in order."""
+    return [line.split("=", 1)[1] for line in proc.stdout.splitlines() if line.startswith(key + "=")]
 
 
 def test_zip_installs_enables_and_renders(tmp_path):
@@ -84,3 +103,29 @@ def test_zip_installs_enables_and_renders(tmp_path):
         assert name in passes
     h, w = passes["DoLP"].shape[:2]
     assert passes["DoLP"][h // 2 - 2:h // 2 + 2, w // 2 - 2:w // 2 + 2].min() > 0.9
+
+
+def test_kernel_cache_in_user_folder_and_first_render_status(tmp_path):
+    """Installed from its zip, the add-on caches compiled kernels in Blender's user folder for the
+    extension; the first render (empty cache) says it is compiling, the second does not."""
+    from polar_addon.packaging import build
+    zip_path = build(str(tmp_path / "dist"))
+    user = tmp_path / "user"
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "POLAR_KERNEL_CACHE", "POLAR_KERNELS")}
+    env.update(BLENDER_USER_RESOURCES=str(user), HOME=str(tmp_path))
+    assert run_bpy(INSTALL, zip_path, env=env).returncode == 0
+    user_folder = user / "extensions" / ".user" / "user_default" / "polar_render" / "numba"
+    statuses = []
+    for run in ("cold", "warm"):
+        proc = run_bpy(RENDER, str(tmp_path / run), env=env)
+        assert proc.returncode == 0, proc.stdout + proc.stderr
+        assert printed(proc, "POLAR_BACKEND")[0].startswith("numba")
+        cache = printed(proc, "POLAR_KERNEL_CACHE")[0]
+        assert cache.startswith(str(user_folder / "0.1.0") + os.sep), cache
+        assert any(name.endswith(".nbi") for _, _, files in os.walk(cache) for name in files)
+        statuses.append(printed(proc, "POLAR_STATUS"))
+    cold, warm = statuses
+    assert "Polar | compiling kernels (first render only)" in cold
+    assert warm and "samples in" in warm[-1]                     # the warm render's stats were recorded too
+    assert not any("compiling kernels" in s for s in warm)
+    assert "numba wheels missing" not in cold[-1]
