@@ -39,7 +39,7 @@ class CompiledScene:
         self.materials = [scene.materials[n] for n in self.material_names]
         mat_index = {n: i for i, n in enumerate(self.material_names)}
 
-        verts, faces, tri_mat, tri_mesh, vnormals, has_vn = [], [], [], [], [], []
+        verts, faces, tri_mat, tri_mesh, vnormals, has_vn, occ = [], [], [], [], [], [], []
         offset = 0
         for mi, mesh in enumerate(scene.meshes):
             v = np.asarray(mesh.vertices, np.float64)
@@ -49,6 +49,7 @@ class CompiledScene:
             lut = np.array([mat_index[m] for m in mesh.materials], dtype=np.int32)
             tri_mat.append(lut[mesh.material_ids])
             tri_mesh.append(np.full(len(f), mi, np.int32))
+            occ.append(np.full(len(f), getattr(mesh, "occluder", True) or mesh.emission is None, bool))
             if mesh.normals is not None:
                 vnormals.append(np.asarray(mesh.normals, np.float64))
                 has_vn.append(np.ones(len(f), bool))
@@ -71,8 +72,23 @@ class CompiledScene:
         self.tri_normal = cross / np.where(length > 0, length, 1.0)[:, None]
         self.scene_extent = float(np.abs(self.vertices).max()) if len(self.vertices) else 1.0
 
+        # Non-occluding emitters (Cycles' lamps) are kept out of the main BVH: shadow rays and paths
+        # pass through them; ``passthrough_hits`` finds where a segment crosses them.
+        self.tri_occluder = np.concatenate(occ)
+        self.passthrough_prims = np.nonzero(~self.tri_occluder)[0]
+        self.has_passthrough = self.passthrough_prims.size > 0
+        vf32 = self.vertices.astype(np.float32)
         self.embree = rtcs.EmbreeScene()
-        TriangleMesh(self.embree, self.vertices.astype(np.float32), self.faces.astype(np.int32))
+        if not self.has_passthrough:
+            self._main_prims = None
+            TriangleMesh(self.embree, vf32, self.faces.astype(np.int32))
+        else:
+            self._main_prims = np.nonzero(self.tri_occluder)[0]
+            if self._main_prims.size == 0:
+                raise SceneError("objects", "the scene has only lights (non-occluding emitters): add geometry")
+            TriangleMesh(self.embree, vf32, self.faces[self._main_prims].astype(np.int32))
+            self.embree_passthrough = rtcs.EmbreeScene()
+            TriangleMesh(self.embree_passthrough, vf32, self.faces[self.passthrough_prims].astype(np.int32))
         # tri_emitter is filled in by the light set (area lights).
         self.tri_emitter = np.full(len(self.faces), -1, np.int32)
 
@@ -93,8 +109,43 @@ class CompiledScene:
             dists = np.minimum(t_max, 1e37).astype(np.float32)
             res = self.embree.run(of, df, dists=dists, output=1)
         prim = res["primID"].astype(np.int64)
+        if self._main_prims is not None:
+            prim = np.where(prim >= 0, self._main_prims[np.maximum(prim, 0)], -1)
         return Hits(prim, res["u"].astype(np.float64), res["v"].astype(np.float64),
                     res["tfar"].astype(np.float64))
+
+    def passthrough_hits(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray, max_layers: int = 8):
+        """Every crossing of the segments o → o + t_max·d (t_max may be inf) with non-occluding
+        emitters, as a list of layers (ray index, global triangle, distance from o): layer k holds
+        each ray's k-th crossing (so a ray appears at most once per layer), up to ``max_layers``.
+
+        Each layer restarts just past the previous crossing (Embree has no t_near).
+        """
+        layers = []
+        if not self.has_passthrough or o.shape[1] == 0:
+            return layers
+        idx = np.arange(o.shape[1])
+        start = np.zeros(o.shape[1])
+        o_cur, t_left = o, np.asarray(t_max, np.float64)
+        for _ in range(max_layers):
+            of = np.ascontiguousarray(o_cur.T, dtype=np.float32)
+            df = np.ascontiguousarray(d[:, idx].T, dtype=np.float32)
+            res = self.embree_passthrough.run(of, df, dists=np.minimum(t_left, 1e37).astype(np.float32), output=1)
+            local = res["primID"]
+            got = local >= 0
+            if not got.any():
+                break
+            t = res["tfar"].astype(np.float64)[got]
+            layers.append((idx[got], self.passthrough_prims[local[got]], start[got] + t))
+            # continue just past the crossing
+            step = t + RAY_EPSILON * (1.0 + np.abs(o_cur[:, got]).max(0))
+            idx, start, t_left = idx[got], start[got] + step, t_left[got] - step
+            o_cur = o_cur[:, got] + d[:, idx] * step[None, :]
+            keep = t_left > 0
+            idx, start, t_left, o_cur = idx[keep], start[keep], t_left[keep], o_cur[:, keep]
+            if idx.size == 0:
+                break
+        return layers
 
     def occluded(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray) -> np.ndarray:
         """True where the segment o → o + t_max·d is blocked."""

@@ -214,24 +214,21 @@ class PathTracer:
                 w = np.ones(int(miss.sum()))
                 nd = ~prev_delta[miss]
                 if nd.any():
-                    p_light = env.pdf(d[:, miss]) * light_set.select_prob
+                    p_light = env.pdf(d[:, miss]) * light_set.prob[light_set.environment_index]
                     w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
                 add_light(radiance, path, T, miss.nonzero()[0], Le, w)
-            emitter = compiled.tri_emitter[hits.prim] if self.has_area_lights else None
-            lit = (emitter >= 0) & hit if emitter is not None else None
-            if lit is not None and lit.any():
-                idx = lit.nonzero()[0]
-                cos_hit = -dot(d[:, idx], compiled.tri_normal[hits.prim[idx]].T)
-                front = cos_hit > 0             # emitters are one-sided: only their front faces shine
-                idx, cos_hit = idx[front], cos_hit[front]
-                for li in np.unique(emitter[idx]):
-                    light = light_set.lights[li]
-                    mine = emitter[idx] == li
-                    sel = idx[mine]
-                    Le = self._emitted(light, lk.take(sel))
-                    p_light = light.pdf_hit(hits.t[sel], cos_hit[mine]) * light_set.select_prob
-                    wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
-                    add_light(radiance, path, T, sel, Le, wsel)
+            if self.has_area_lights:
+                lit = (compiled.tri_emitter[hits.prim] >= 0) & hit
+                if lit.any():
+                    idx = lit.nonzero()[0]
+                    self._emitter_hits(radiance, path, T, idx, hits.prim[idx], hits.t[idx], d, lk,
+                                       prev_delta, prev_pdf, bounce == 0)
+            if compiled.has_passthrough:
+                # lamps (non-occluding emitters) crossed before the hit: they add light, the ray goes on
+                seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
+                for rows, prims, dists in compiled.passthrough_hits(o, d, seg):
+                    self._emitter_hits(radiance, path, T, rows, prims, dists, d, lk, prev_delta, prev_pdf,
+                                       bounce == 0)
 
             if bounce + 1 >= st.max_depth:
                 break
@@ -310,6 +307,31 @@ class PathTracer:
         out[:, :, ~finite] = 0.0
         return out, stats
 
+    def _emitter_hits(self, radiance, path, T, idx, prims, dists, d, lk, prev_delta, prev_pdf, camera):
+        """Emission picked up where the rays ``idx`` (each at most once) hit or cross emitting
+        triangles ``prims`` at distances ``dists``, MIS-weighted against next-event estimation.
+        ``camera``: these are camera rays (lights hidden from the camera add nothing)."""
+        light_set = self.lights
+        emitter = self.scene.tri_emitter[prims]
+        cos_hit = -dot(d[:, idx], self.scene.tri_normal[prims].T)
+        for li in np.unique(emitter):
+            if li < 0 or (camera and li in light_set.camera_hidden):
+                continue
+            light = light_set.lights[li]
+            mine = emitter == li
+            cos_l = light.facing(cos_hit[mine])
+            front = cos_l > 0             # one-sided emitters shine only from their front faces
+            sel, cos_l = idx[mine][front], cos_l[front]
+            if sel.size == 0:
+                continue
+            Le = self._emitted(light, lk.take(sel))
+            factor = light.emission_factor(cos_l)
+            if factor is not None:
+                Le = Le * factor[None, :]
+            p_light = light.pdf_hit(dists[mine][front], cos_l) * light_set.prob[li]
+            wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
+            add_light(radiance, path, T, sel, Le, wsel)
+
     def _next_event(self, sp, lookup, bsdf, T, rows, x_T, u, stats):
         """Direct light at non-delta vertices, MIS-weighted against BSDF sampling; (P, L, n).
 
@@ -320,7 +342,7 @@ class PathTracer:
         n = sp.n
         P = self.P
         out = np.zeros((P, 3 if self.rgb_mode else lookup.lam.shape[0], n))
-        choice = np.minimum((u[0] * len(light_set)).astype(np.int64), len(light_set) - 1)
+        choice, u_rest = light_set.choose(u[0])
         lights_chosen = np.unique(choice)
         for li in lights_chosen:
             # one light for every path: whole arrays instead of gathered copies
@@ -328,7 +350,8 @@ class PathTracer:
             light = light_set.lights[li]
             p = gather(sp.p, sel)
             # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
-            u_tri = gather(u[0], sel) * len(light_set) - li
+            u_tri = gather(u_rest, sel)
+            select_prob = light_set.prob[li]
             wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, gather(u[1], sel), gather(u[2], sel))))
             value = self._emitted(light, lookup.take(sel)) * scale[None, :]
             sub = ShadingPoint(p, gather(sp.n_s, sel), gather(sp.n_g, sel), gather(sp.wo, sel), gather(sp.lam, sel),
@@ -345,11 +368,11 @@ class PathTracer:
             if P > 1 and f.kind != "depolarising":
                 c2, s2 = frame_rotation(f.x_out, gather(x_T, sel), sub.wo)
                 S = rotate_stokes(S, c2, s2)
-            if light.is_delta:
+            if light.is_delta or light.nee_only:
                 mis = np.ones(m)
             else:
-                mis = power_heuristic(pdf_l * light_set.select_prob, bsdf.pdf(sub, wi))
-            weight = value * (cos_i * mis / light_set.select_prob * ok)[None, :]
+                mis = power_heuristic(pdf_l * select_prob, bsdf.pdf(sub, wi))
+            weight = value * (cos_i * mis / select_prob * ok)[None, :]
             t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
             if ok.all():
                 blocked = self.scene.occluded(offset_origin(p, sub.n_g, wi), wi, t_max)

@@ -47,7 +47,15 @@ class Mesh:
     (v1 − v0) × (v2 − v0)).  ``normals`` are per-vertex shading normals or None
     (flat shading).  ``material_ids`` index ``materials`` (names in
     Scene.materials) per face.  ``emission`` (a spectral radiance, or None)
-    makes the mesh a one-sided area light emitting along its front side.
+    makes the mesh a Lambertian area light emitting along its front side.
+
+    Emitter options (the defaults are the scene format's and the peer format's meaning):
+    ``two_sided`` — both faces emit the same radiance (Cycles' Emission shader);
+    ``occluder`` — False makes the mesh a lamp in Cycles' sense: rays and shadow rays pass
+    through it, it only adds its emission where a ray crosses it (needs ``emission``);
+    ``camera_visible`` — False hides a non-occluding emitter from camera rays;
+    ``spread_deg`` — Cycles' area-light spread (full angle, 0 < s ≤ 180): radiance
+    L·f(θ), f = N·max(0, tan(s/2) − tan θ) with ∫ f cosθ dω = π (the emitted power is kept).
     """
 
     name: str
@@ -57,12 +65,23 @@ class Mesh:
     material_ids: np.ndarray
     normals: np.ndarray | None = None
     emission: object | None = None
+    two_sided: bool = False
+    occluder: bool = True
+    camera_visible: bool = True
+    spread_deg: float = 180.0
 
 
 @dataclass
 class PointLight:
+    """Isotropic light of radiant intensity I.  ``radius`` > 0 makes it a Cycles sphere light
+    of radiance I/(πr²) (same power, soft shadows): with ``soft_falloff`` a disk of radius r always
+    facing the receiver (Cycles' default: irradiance I/(d² + r²) on axis), without it a sphere
+    (exactly I/d² outside).  Such lights are sampled by next-event estimation only."""
+
     position: np.ndarray
     intensity: object             # spectrum: radiant intensity (radiance × area / sr)
+    radius: float = 0.0
+    soft_falloff: bool = True
 
 
 @dataclass
@@ -71,13 +90,21 @@ class SpotLight:
     direction: np.ndarray         # unit axis of the cone (direction light travels)
     intensity: object
     cone_angle_deg: float = 45.0  # full opening angle
-    blend: float = 0.0            # fraction of the half-angle with a smooth falloff
+    blend: float = 0.0            # size of the smooth edge (see blend_profile)
+    #: "angle": smoothstep over the angles half·(1 − blend) … half; "cycles": smoothstep in cos θ over
+    #: cos(half) … cos(half) + blend·(1 − cos(half)) (Cycles' spot_light_attenuation).
+    blend_profile: str = "angle"
+    radius: float = 0.0           # as PointLight.radius
+    soft_falloff: bool = True
 
 
 @dataclass
 class DirectionalLight:
     direction: np.ndarray         # unit direction in which the light travels
     irradiance: object            # spectrum: irradiance on a surface ⟂ direction
+    #: full angular diameter of the source; > 0: uniform radiance E/(π sin²(angle/2)) in that cone
+    #: (Cycles' sun angle: soft shadows, same irradiance)
+    angle_deg: float = 0.0
 
 
 @dataclass
@@ -122,3 +149,6 @@ class Scene:
     lights: list = field(default_factory=list)
     settings: RenderSettings = field(default_factory=RenderSettings)
     source: str = ""
+    #: how next-event estimation picks a light: "uniform" (as Mitsuba 3) or "power" (probability ∝
+    #: each light's estimated power, for scenes of many lights of different strength)
+    light_selection: str = "uniform"
