@@ -49,6 +49,7 @@ class _Light:
     is_delta = False
     at_infinity = False
     nee_only = False      # never hit by rays: reached by next-event estimation only (MIS weight 1)
+    blocks_own_shadow_rays = False    # an opaque emitter whose geometry can stop its own shadow rays
 
     def __init__(self, spectrum):
         self.spectrum = spectrum
@@ -114,6 +115,7 @@ class AreaEmitter(_Light):
         self.compiled = compiled
         self.two_sided = bool(two_sided)
         self.profile = spread_profile(math.radians(spread_deg))
+        self.blocks_own_shadow_rays = bool(compiled.tri_occluder[tris].all())
 
     def sample(self, p, u):
         # u has 3 rows: triangle choice, then the point within it.

@@ -118,7 +118,8 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
                 local_faces = local_faces[:, [0, 2, 1]]
             meshes.append(Mesh(name=f"{obj.name}:{slot}", vertices=Pw[F[sel]].reshape(-1, 3),
                                faces=local_faces, materials=[key], material_ids=np.zeros(len(sel), np.int32),
-                               normals=N[corner], emission=emissions.get(key)))
+                               normals=N[corner], emission=emissions.get(key),
+                               two_sided=True))   # Cycles' Emission shader emits from both faces
     if not meshes:
         raise SceneError("scene", "nothing to render: the scene has no visible geometry")
     world = export_world(scene.world, warnings)
@@ -126,5 +127,7 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
         lights.append(world)
     if not lights and not any(m.emission is not None for m in meshes):
         warnings.append("the scene has no lights, no emissive materials and a black world: the image is black")
+    # Cycles picks lights by importance (its light tree); selection by power is the closest
+    # convergence for many lights of different strength.
     return Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings,
-                 source=f"blender:{scene.name}"), warnings
+                 source=f"blender:{scene.name}", light_selection="power"), warnings

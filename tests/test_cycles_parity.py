@@ -1,0 +1,210 @@
+"""Cycles parity of lights: where nothing polarises, Polar's S0 must be Cycles' image.
+
+Small diffuse scenes (a white floor, a box casting a shadow, one kind of light each) are built
+once in bpy and rendered with Cycles (bpy ships it) and with Polar (the exporter + engine, as F12
+does).  Per image region the luminance ratio Polar/Cycles must be 1 within 4 standard errors
++ 1 %; the standard error of each renderer's region mean comes from independent seeds.
+Cycles settings: box pixel filter, no denoising, no adaptive sampling, no clamping, no light
+threshold, the same bounce limit.
+"""
+
+import math
+import os
+import tempfile
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from tests.blender_support import load_addon, read_multilayer  # noqa: E402
+
+W, H = 48, 36
+SEEDS = 4
+BLOCK = 12                        # regions of 12×12 pixels
+CYCLES_SPP = 64                   # per seed
+POLAR_SPP = 32
+BOUNCES = 3
+REC709 = np.array([0.2126, 0.7152, 0.0722])
+
+
+def diffuse(name, colour=(0.8, 0.8, 0.8)):
+    mat = bpy.data.materials.new(name)
+    nodes = mat.node_tree.nodes
+    for n in list(nodes):
+        if n.bl_idname != "ShaderNodeOutputMaterial":
+            nodes.remove(n)
+    out = nodes[0]
+    node = nodes.new("ShaderNodeBsdfDiffuse")
+    node.inputs["Color"].default_value = (*colour, 1.0)
+    mat.node_tree.links.new(node.outputs[0], out.inputs["Surface"])
+    return mat
+
+
+def emission(name, strength, colour=(1.0, 1.0, 1.0)):
+    mat = bpy.data.materials.new(name)
+    nodes = mat.node_tree.nodes
+    for n in list(nodes):
+        if n.bl_idname != "ShaderNodeOutputMaterial":
+            nodes.remove(n)
+    node = nodes.new("ShaderNodeEmission")
+    node.inputs["Color"].default_value = (*colour, 1.0)
+    node.inputs["Strength"].default_value = strength
+    mat.node_tree.links.new(node.outputs[0], nodes[0].inputs["Surface"])
+    return mat
+
+
+def base_scene():
+    """Floor (10 m white diffuse), a 1 m box, camera looking down at 45°, black world."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = W, H
+    scene.render.resolution_percentage = 100
+    grey = diffuse("Grey")
+    bpy.ops.mesh.primitive_plane_add(size=10, location=(0, 0, 0))
+    bpy.context.object.data.materials.append(grey)
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.6, 0.4, 0.5))
+    bpy.context.object.data.materials.append(grey)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.data.lens = 30
+    scene.collection.objects.link(cam)
+    cam.location, cam.rotation_euler = (0.0, -5.0, 5.0), (math.radians(45), 0.0, 0.0)
+    scene.camera = cam
+    world = bpy.data.worlds.new("World")
+    world.color = (0.0, 0.0, 0.0)
+    scene.world = world
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+    return scene
+
+
+def add_light(kind, location, rotation=(0.0, 0.0, 0.0), energy=100.0, **options):
+    bpy.ops.object.light_add(type=kind, location=location, rotation=rotation)
+    obj = bpy.context.object
+    obj.data.energy = energy
+    for k, v in options.items():
+        setattr(obj.data, k, v)
+    return obj
+
+
+def area_square():
+    add_light("AREA", (-0.5, -0.5, 2.0), energy=150.0, size=1.0)
+
+
+def area_disk():
+    add_light("AREA", (-0.5, -0.5, 2.0), energy=150.0, shape="DISK", size=1.2)
+
+
+def area_rectangle_tilted():
+    # tilted so the camera sees its back: it must neither hide nor shadow the floor
+    add_light("AREA", (-0.8, -1.0, 1.2), rotation=(math.radians(-50), 0.0, 0.0), energy=120.0,
+              shape="RECTANGLE", size=1.5, size_y=0.5)
+
+
+def spot_blend():
+    add_light("SPOT", (0.0, -1.0, 3.0), rotation=(math.radians(20), 0.0, 0.0), energy=800.0,
+              spot_size=math.radians(50), spot_blend=0.4, shadow_soft_size=0.0)
+
+
+def sun_angle():
+    add_light("SUN", (0, 0, 5), rotation=(math.radians(35), math.radians(20), 0.0), energy=2.0,
+              angle=math.radians(15))
+
+
+def point_radius():
+    add_light("POINT", (-0.6, -0.2, 1.8), energy=300.0, shadow_soft_size=0.4)
+
+
+def emissive_back():
+    # an emissive quad facing away from the camera and the floor (its front looks up): only its
+    # back lights the scene (two-sided emission) and it is seen from the back
+    bpy.ops.mesh.primitive_plane_add(size=0.8, location=(-0.8, -0.3, 1.5))
+    bpy.context.object.data.materials.append(emission("Glow", 8.0))
+
+
+def everything():
+    area_square()
+    spot_blend()
+    sun_angle()
+    point_radius()
+    emissive_back()
+    for i, energy in enumerate((1.0, 30.0, 1000.0)):
+        add_light("POINT", (-2.0 + 2.0 * i, 1.5, 1.0 + 0.5 * i), energy=energy, shadow_soft_size=0.0)
+
+
+SCENES = {"area_square": area_square, "area_disk": area_disk, "area_rectangle_back": area_rectangle_tilted,
+          "spot_blend": spot_blend, "sun_angle": sun_angle, "point_radius": point_radius,
+          "emissive_back": emissive_back, "all_lights": everything}
+
+
+def cycles_renders(scene, tmp):
+    scene.render.engine = "CYCLES"
+    c = scene.cycles
+    c.device = "CPU"
+    c.samples = CYCLES_SPP
+    c.use_adaptive_sampling = False
+    c.use_denoising = False
+    c.pixel_filter_type = "BOX"
+    c.filter_width = 1.0
+    c.sample_clamp_direct = 0.0
+    c.sample_clamp_indirect = 0.0
+    c.light_sampling_threshold = 0.0
+    c.max_bounces = BOUNCES
+    c.diffuse_bounces = BOUNCES
+    c.caustics_reflective = c.caustics_refractive = True
+    scene.render.threads_mode = "FIXED"
+    scene.render.threads = 2
+    ims = scene.render.image_settings
+    ims.media_type = "MULTI_LAYER_IMAGE"
+    ims.color_depth = "32"
+    out = []
+    for seed in range(SEEDS):
+        c.seed = seed
+        scene.render.filepath = os.path.join(tmp, f"cycles_{seed}")
+        bpy.ops.render.render(write_still=True)
+        out.append(read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3] @ REC709)
+    return np.array(out)
+
+
+def polar_renders(scene):
+    from polar_render.engine.render.renderer import Renderer
+    from polar_render.engine.scene.description import RenderSettings
+    from polar_render.polar_addon.export.scene import export_scene
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    out = []
+    for seed in range(SEEDS):
+        settings = RenderSettings(spp=POLAR_SPP, max_depth=BOUNCES + 1, seed=seed, spectral="spectral",
+                                  polarisation="off")
+        engine_scene, _ = export_scene(depsgraph, scene.camera, W, H, settings)
+        out.append(Renderer(engine_scene).render(settings).stokes()[0] @ REC709)
+    return np.array(out)
+
+
+def region_stats(images):
+    """Per-region means (regions, ) and their standard errors from the seed-to-seed spread."""
+    k = images.shape[0]
+    blocks = images.reshape(k, H // BLOCK, BLOCK, W // BLOCK, BLOCK).mean(axis=(2, 4)).reshape(k, -1)
+    return blocks.mean(0), blocks.std(0, ddof=1) / math.sqrt(k)
+
+
+@pytest.fixture(scope="module")
+def renders():
+    load_addon()
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, build in SCENES.items():
+            scene = base_scene()
+            build()
+            results[name] = (region_stats(cycles_renders(scene, tmp)), region_stats(polar_renders(scene)))
+    return results
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_luminance_matches_cycles(renders, name):
+    (mc, sc), (mp, sp) = renders[name]
+    lit = mc > 0.02 * mc.max()
+    assert lit.sum() >= 3, "too few lit regions to compare"
+    ratio = mp[lit] / mc[lit]
+    se = ratio * np.sqrt((sp[lit] / mp[lit]) ** 2 + (sc[lit] / mc[lit]) ** 2)
+    bad = np.abs(ratio - 1.0) > 4.0 * se + 0.01
+    assert not bad.any(), (f"{name}: Polar/Cycles per region {np.round(ratio, 4).tolist()} "
+                           f"± {np.round(se, 4).tolist()}")
