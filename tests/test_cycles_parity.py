@@ -94,15 +94,25 @@ def area_disk():
     add_light("AREA", (-0.5, -0.5, 2.0), energy=150.0, shape="DISK", size=1.2)
 
 
-def area_rectangle_tilted():
-    # tilted so the camera sees its back: it must neither hide nor shadow the floor
+def area_rectangle_back():
+    # tilted so the camera sees its back, under a grey sky: it must neither hide the floor nor
+    # shadow it from the sky (lamps are not occluders in Cycles)
     add_light("AREA", (-0.8, -1.0, 1.2), rotation=(math.radians(-50), 0.0, 0.0), energy=120.0,
               shape="RECTANGLE", size=1.5, size_y=0.5)
+    bpy.context.scene.world.node_tree.nodes["Background"].inputs["Color"].default_value = (1, 1, 1, 1)
+    bpy.context.scene.world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.05
+
+
+def area_spread_ellipse():
+    # a narrow spread (power kept, light concentrated below) and an unnormalised ellipse
+    add_light("AREA", (-0.5, 0.0, 2.2), energy=300.0, size=0.8, spread=math.radians(90))
+    add_light("AREA", (1.2, -1.0, 1.0), rotation=(0.0, math.radians(-30), 0.0), energy=20.0, shape="ELLIPSE",
+              size=0.6, size_y=0.3, normalize=False)
 
 
 def spot_blend():
-    add_light("SPOT", (0.0, -1.0, 3.0), rotation=(math.radians(20), 0.0, 0.0), energy=800.0,
-              spot_size=math.radians(50), spot_blend=0.4, shadow_soft_size=0.0)
+    add_light("SPOT", (0.0, -1.5, 2.5), rotation=(math.radians(25), 0.0, 0.0), energy=800.0,
+              spot_size=math.radians(80), spot_blend=0.6, shadow_soft_size=0.0)
 
 
 def sun_angle():
@@ -111,7 +121,9 @@ def sun_angle():
 
 
 def point_radius():
-    add_light("POINT", (-0.6, -0.2, 1.8), energy=300.0, shadow_soft_size=0.4)
+    # soft falloff (Blender's default): a disk facing the receiver; and a sphere light
+    add_light("POINT", (-0.6, -0.2, 1.2), energy=300.0, shadow_soft_size=0.5)
+    add_light("POINT", (1.2, -0.8, 0.8), energy=100.0, shadow_soft_size=0.3, use_soft_falloff=False)
 
 
 def emissive_back():
@@ -131,8 +143,8 @@ def everything():
         add_light("POINT", (-2.0 + 2.0 * i, 1.5, 1.0 + 0.5 * i), energy=energy, shadow_soft_size=0.0)
 
 
-SCENES = {"area_square": area_square, "area_disk": area_disk, "area_rectangle_back": area_rectangle_tilted,
-          "spot_blend": spot_blend, "sun_angle": sun_angle, "point_radius": point_radius,
+SCENES = {"area_square": area_square, "area_disk": area_disk, "area_rectangle_back": area_rectangle_back,
+          "area_spread_ellipse": area_spread_ellipse, "spot_blend": spot_blend, "sun_angle": sun_angle, "point_radius": point_radius,
           "emissive_back": emissive_back, "all_lights": everything}
 
 

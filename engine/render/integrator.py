@@ -196,6 +196,7 @@ class PathTracer:
         light_set = self.lights
         env = light_set.environment
         compiled = self.scene
+        p_prev = None
 
         for bounce in range(st.max_depth):
             if abort is not None and abort.is_set():
@@ -214,7 +215,8 @@ class PathTracer:
                 w = np.ones(int(miss.sum()))
                 nd = ~prev_delta[miss]
                 if nd.any():
-                    p_light = env.pdf(d[:, miss]) * light_set.prob[light_set.environment_index]
+                    p_light = env.pdf(d[:, miss]) * light_set.prob_at(
+                        light_set.environment_index, None if p_prev is None else p_prev[:, miss])
                     w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
                 add_light(radiance, path, T, miss.nonzero()[0], Le, w)
             if self.has_area_lights:
@@ -222,13 +224,13 @@ class PathTracer:
                 if lit.any():
                     idx = lit.nonzero()[0]
                     self._emitter_hits(radiance, path, T, idx, hits.prim[idx], hits.t[idx], d, lk,
-                                       prev_delta, prev_pdf, bounce == 0)
+                                       prev_delta, prev_pdf, p_prev, bounce == 0)
             if compiled.has_passthrough:
                 # lamps (non-occluding emitters) crossed before the hit: they add light, the ray goes on
                 seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
                 for rows, prims, dists in compiled.passthrough_hits(o, d, seg):
                     self._emitter_hits(radiance, path, T, rows, prims, dists, d, lk, prev_delta, prev_pdf,
-                                       bounce == 0)
+                                       p_prev, bounce == 0)
 
             if bounce + 1 >= st.max_depth:
                 break
@@ -296,6 +298,7 @@ class PathTracer:
             path, T, x_T, d, eta_sq, prev_delta, prev_pdf, p, n_g, sampler.keys = keep_paths(
                 valid, path, newT, new_xT, new_d, eta_sq, is_delta, pdf_next, p, n_g, sampler.keys)
             lk, lk_m = compress_lookups(valid, lk, lk_m)
+            p_prev = p if light_set.spatial else None     # where the next segment starts (light selection)
             o = offset_origin(p, n_g, d)
             t_max = None
 
@@ -307,9 +310,10 @@ class PathTracer:
         out[:, :, ~finite] = 0.0
         return out, stats
 
-    def _emitter_hits(self, radiance, path, T, idx, prims, dists, d, lk, prev_delta, prev_pdf, camera):
+    def _emitter_hits(self, radiance, path, T, idx, prims, dists, d, lk, prev_delta, prev_pdf, p_prev, camera):
         """Emission picked up where the rays ``idx`` (each at most once) hit or cross emitting
-        triangles ``prims`` at distances ``dists``, MIS-weighted against next-event estimation.
+        triangles ``prims`` at distances ``dists``, MIS-weighted against next-event estimation
+        from the vertices ``p_prev`` (3, N) the rays left (None for camera rays).
         ``camera``: these are camera rays (lights hidden from the camera add nothing)."""
         light_set = self.lights
         emitter = self.scene.tri_emitter[prims]
@@ -328,7 +332,8 @@ class PathTracer:
             factor = light.emission_factor(cos_l)
             if factor is not None:
                 Le = Le * factor[None, :]
-            p_light = light.pdf_hit(dists[mine][front], cos_l) * light_set.prob[li]
+            p_light = light.pdf_hit(dists[mine][front], cos_l) * light_set.prob_at(
+                li, None if p_prev is None else p_prev[:, sel])
             wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
             add_light(radiance, path, T, sel, Le, wsel)
 
@@ -361,7 +366,7 @@ class PathTracer:
         n = sp.n
         P = self.P
         out = np.zeros((P, 3 if self.rgb_mode else lookup.lam.shape[0], n))
-        choice, u_rest = light_set.choose(u[0])
+        choice, u_rest, chosen_prob = light_set.choose(u[0], sp.p)
         lights_chosen = np.unique(choice)
         for li in lights_chosen:
             # one light for every path: whole arrays instead of gathered copies
@@ -370,7 +375,7 @@ class PathTracer:
             p = gather(sp.p, sel)
             # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
             u_tri = gather(u_rest, sel)
-            select_prob = light_set.prob[li]
+            select_prob = light_set.prob[li] if chosen_prob is None else gather(chosen_prob, sel)
             wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, gather(u[1], sel), gather(u[2], sel))))
             value = self._emitted(light, lookup.take(sel)) * scale[None, :]
             sub = ShadingPoint(p, gather(sp.n_s, sel), gather(sp.n_g, sel), gather(sp.wo, sel), gather(sp.lam, sel),

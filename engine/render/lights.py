@@ -81,6 +81,9 @@ class EnvironmentEmitter(_Light):
         # a sphere of radius R under uniform radiance L receives π·L·4πR²
         return float(luminance(self.rgb())) * 4.0 * math.pi ** 2 * scene_radius ** 2
 
+    def importance(self, p):
+        return np.full(p.shape[1], math.pi * float(luminance(self.rgb())))
+
 
 def spread_profile(spread_rad: float):
     """Cycles' area-light spread f(cosθ) (kernel/light/area.h: area_light_spread_attenuation),
@@ -165,6 +168,18 @@ class AreaEmitter(_Light):
         """Emitted power (luminance units; Lambertian: π·L·A per emitting side)."""
         return math.pi * float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
 
+    def importance(self, p):
+        """Bound-like estimate of the irradiance at p (3, N): L·A/max(d², r²) about the centroid."""
+        if not hasattr(self, "_centre"):
+            c = self.compiled
+            corners = c.vertices[c.faces[self.tris]].reshape(-1, 3)
+            w = np.repeat(c.tri_area[self.tris], 3)
+            self._centre = (corners * w[:, None]).sum(0) / w.sum()
+            self._r2 = float(((corners - self._centre) ** 2).sum(1).max())
+        to = self._centre[:, None] - p
+        return (float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
+                / np.maximum(dot(to, to), max(self._r2, 1e-12)))
+
 
 class PointEmitter(_Light):
     """Isotropic light of radiant intensity I: irradiance I/d² at normal incidence.
@@ -223,6 +238,13 @@ class PointEmitter(_Light):
 
     def power(self):
         return 4.0 * math.pi * float(luminance(self.rgb()))
+
+    def importance(self, p):
+        """Irradiance at p (3, N) facing the light: I·falloff/max(d², r²)."""
+        to = self.position[:, None] - p
+        d2 = dot(to, to)
+        wi = to / np.sqrt(np.maximum(d2, 1e-300))
+        return float(luminance(self.rgb())) * self._falloff(wi) / np.maximum(d2, max(self.radius ** 2, 1e-12))
 
 
 class SpotEmitter(PointEmitter):
@@ -286,11 +308,22 @@ class DirectionalEmitter(_Light):
     def power(self, scene_radius=1.0):
         return float(luminance(self.rgb())) * math.pi * scene_radius ** 2
 
+    def importance(self, p):
+        return np.full(p.shape[1], float(luminance(self.rgb())))
+
 
 class LightSet:
     """All lights of a compiled scene.  NEE picks one light per vertex: uniformly (probability
-    1/count, ``Scene.light_selection`` "uniform") or with probability ∝ its estimated power
-    ("power"); ``prob[i]`` is light i's selection probability, which every MIS pdf includes."""
+    1/count, ``Scene.light_selection`` "uniform"; ``prob[i]``) or, with "power", by importance:
+    for up to ``SPATIAL_MAX`` lights, per shading point ∝ each light's estimated irradiance
+    there (power/dist², as the importance of Cycles' light tree without the tree), mixed with
+    ``GLOBAL_SHARE`` of the power distribution (so no light that can contribute gets
+    probability 0); for more lights ∝ power alone.  Every MIS pdf includes the probability
+    with which the light would have been chosen at the vertex the ray left (``prob_at``).
+    """
+
+    SPATIAL_MAX = 64
+    GLOBAL_SHARE = 0.1
 
     def __init__(self, scene, compiled):
         self.lights = []
@@ -339,17 +372,45 @@ class LightSet:
                 self.prob = power / power.sum()
                 self.cdf = np.cumsum(self.prob)
                 self.cdf[-1] = 1.0
+        self.spatial = self.cdf is not None and count <= self.SPATIAL_MAX
 
-    def choose(self, u):
-        """(light index (N,), the remainder of u rescaled to [0, 1)) for uniform numbers u (N,)."""
+    def probabilities(self, p):
+        """Selection probabilities (count, N) at shading points p (3, N)."""
+        if not self.spatial:
+            return np.repeat(self.prob[:, None], p.shape[1], axis=1)
+        imp = np.stack([light.importance(p) for light in self.lights])
+        imp = np.where(np.isfinite(imp) & (imp > 0), imp, 0.0)
+        total = imp.sum(0)
+        local = np.where(total > 0, imp / np.where(total > 0, total, 1.0), self.prob[:, None])
+        return (1.0 - self.GLOBAL_SHARE) * local + self.GLOBAL_SHARE * self.prob[:, None]
+
+    def prob_at(self, li, p):
+        """Probability (N,) or scalar that NEE at points p (3, N) picks light ``li``."""
+        if not self.spatial or p is None:
+            return self.prob[li]
+        return self.probabilities(p)[li]
+
+    def choose(self, u, p=None):
+        """(light index (N,), the remainder of u rescaled to [0, 1), the chosen lights'
+        probabilities (N,) or None where they are ``prob[index]``) for uniform numbers u (N,)
+        at shading points p (3, N)."""
         count = len(self.lights)
         if self.cdf is None:
             choice = np.minimum((u * count).astype(np.int64), count - 1)
-            return choice, u * count - choice
+            return choice, u * count - choice, None
+        if self.spatial and p is not None:
+            probs = self.probabilities(p)
+            cdf = np.cumsum(probs, axis=0)
+            choice = np.minimum((cdf <= u[None, :] * cdf[-1][None, :]).sum(0), count - 1)
+            cols = np.arange(u.shape[0])
+            chosen = probs[choice, cols]
+            lo = cdf[choice, cols] - chosen
+            rest = (u * cdf[-1] - lo) / np.where(chosen > 0, chosen, 1.0)
+            return choice, np.clip(rest, 0.0, np.nextafter(1.0, 0.0)), chosen
         choice = np.minimum(np.searchsorted(self.cdf, u, side="right"), count - 1)
         lo = np.where(choice > 0, self.cdf[np.maximum(choice - 1, 0)], 0.0)
         rest = (u - lo) / np.where(self.prob[choice] > 0, self.prob[choice], 1.0)
-        return choice, np.clip(rest, 0.0, np.nextafter(1.0, 0.0))
+        return choice, np.clip(rest, 0.0, np.nextafter(1.0, 0.0)), None
 
     def __len__(self):
         return len(self.lights)
