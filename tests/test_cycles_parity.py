@@ -144,8 +144,8 @@ def everything():
 
 
 SCENES = {"area_square": area_square, "area_disk": area_disk, "area_rectangle_back": area_rectangle_back,
-          "area_spread_ellipse": area_spread_ellipse, "spot_blend": spot_blend, "sun_angle": sun_angle, "point_radius": point_radius,
-          "emissive_back": emissive_back, "all_lights": everything}
+          "area_spread_ellipse": area_spread_ellipse, "spot_blend": spot_blend, "sun_angle": sun_angle,
+          "point_radius": point_radius, "emissive_back": emissive_back, "all_lights": everything}
 
 
 def cycles_renders(scene, tmp):
