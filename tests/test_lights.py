@@ -281,3 +281,29 @@ def test_power_selection_keeps_mis_unbiased_for_area_lights_and_sky():
     scene.light_selection = "power"
     S0, se = luminance_and_stderr(scene)
     assert_matches(S0, se, expected)                               # finite lamp size: ≲ (a/H)² ≈ 0.3 %
+
+
+def test_scene_format_light_options_are_optional_and_validated():
+    from engine.errors import SceneError
+    from engine.scene.loader import parse_light, parse_object
+    quad_obj = {"shape": "quad", "vertices": [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], "material": "a"}
+    plain = parse_object({**quad_obj, "emission": {"radiance": 2}}, "o", ".", {"a": None})
+    assert (plain.two_sided, plain.occluder, plain.camera_visible, plain.spread_deg) == (False, True, True, 180.0)
+    lamp = parse_object({**quad_obj, "emission": {"radiance": 2, "two_sided": True, "occluder": False,
+                                                  "spread_deg": 90}}, "o", ".", {"a": None})
+    assert (lamp.two_sided, lamp.occluder, lamp.spread_deg) == (True, False, 90.0)
+    point = parse_light({"type": "point", "position": [0, 0, 1], "radius": 0.2, "soft_falloff": False}, "l")
+    assert (point.radius, point.soft_falloff) == (0.2, False)
+    assert parse_light({"type": "point", "position": [0, 0, 1]}, "l").radius == 0.0
+    assert parse_light({"type": "directional", "direction": [0, 0, -1], "angle_deg": 5}, "l").angle_deg == 5.0
+    spot = parse_light({"type": "spot", "position": [0, 0, 1], "direction": [0, 0, -1], "blend": 0.2,
+                        "blend_profile": "cycles"}, "l")
+    assert spot.blend_profile == "cycles"
+    for bad, where in (({"type": "point", "position": [0, 0, 1], "radius": -1}, "lights[0].radius"),
+                       ({"type": "point", "position": [0, 0, 1], "soft_falloff": 1}, "lights[0].soft_falloff"),
+                       ({"type": "spot", "position": [0, 0, 1], "direction": [0, 0, -1], "blend_profile": "x"},
+                        "lights[0].blend_profile")):
+        with pytest.raises(SceneError, match=where.replace("[", r"\[").replace("]", r"\]")):
+            parse_light(bad, "lights[0]")
+    with pytest.raises(SceneError, match=r"objects\[0\]\.emission\.spread_deg"):
+        parse_object({**quad_obj, "emission": {"spread_deg": 0}}, "objects[0]", ".", {"a": None})

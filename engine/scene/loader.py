@@ -297,9 +297,33 @@ def _check_positive_spectrum(spec, field: str, strict: bool):
 def _parse_emission(d, field: str):
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object like {\"radiance\": 10, \"color\": [1, 1, 1]}")
-    _check_keys(d, field, {"radiance", "color", "spectrum", "note"})
+    _check_keys(d, field, {"radiance", "color", "spectrum", "note", *EMITTER_OPTIONS})
     scale = number(d.get("radiance", 1.0), f"{field}.radiance", 0)
     return _illuminant(d, field, scale)
+
+
+#: optional emitter options inside "emission" (Mesh fields; defaults: one-sided, opaque, Lambertian)
+EMITTER_OPTIONS = ("two_sided", "occluder", "camera_visible", "spread_deg")
+
+
+def _emitter_options(d, field: str) -> dict:
+    """The Mesh emitter fields given in an "emission" object (validated)."""
+    out = {}
+    for key in ("two_sided", "occluder", "camera_visible"):
+        if key in d:
+            if not isinstance(d[key], bool):
+                raise SceneError(f"{field}.{key}", "must be true or false")
+            out[key] = d[key]
+    if "spread_deg" in d:
+        out["spread_deg"] = number(d["spread_deg"], f"{field}.spread_deg", 0, 180, lo_open=True)
+    return out
+
+
+def _flag(d, key: str, field: str, default: bool) -> bool:
+    value = d.get(key, default)
+    if not isinstance(value, bool):
+        raise SceneError(f"{field}.{key}", "must be true or false")
+    return value
 
 
 def _illuminant(d: dict, field: str, scale: float):
@@ -385,9 +409,10 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
             raise SceneError(f, f"unknown material {m!r} (defined: {', '.join(sorted(material_names)) or 'none'})")
 
     emission = _parse_emission(d["emission"], f"{field}.emission") if d.get("emission") is not None else None
+    options = _emitter_options(d["emission"], f"{field}.emission") if emission is not None else {}
     return Mesh(name=name, vertices=np.asarray(data.vertices, dtype=np.float64), faces=faces,
                 materials=list(mat_list), material_ids=ids.astype(np.int32), normals=data.vertex_normals,
-                emission=emission)
+                emission=emission, **options)
 
 
 def _float_array(value, field, what):
@@ -461,12 +486,14 @@ def parse_light(d: dict, field: str):
         _check_keys(d, field, {"type", "radiance", "color", "note"})
         return EnvironmentLight(_illuminant(d, field, number(d.get("radiance", 1.0), f"{field}.radiance", 0)))
     if kind == "point":
-        _check_keys(d, field, {"type", "position", "intensity", "color", "note"})
+        _check_keys(d, field, {"type", "position", "intensity", "color", "note", "radius", "soft_falloff"})
         return PointLight(vec3(_require(d, "position", field), f"{field}.position"),
-                          _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)))
+                          _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)),
+                          radius=number(d.get("radius", 0.0), f"{field}.radius", 0),
+                          soft_falloff=_flag(d, "soft_falloff", field, True))
     if kind == "spot":
         _check_keys(d, field, {"type", "position", "direction", "target", "intensity", "color",
-                               "cone_angle_deg", "blend", "note"})
+                               "cone_angle_deg", "blend", "note", "blend_profile", "radius", "soft_falloff"})
         pos = vec3(_require(d, "position", field), f"{field}.position")
         if "target" in d:
             direction = vec3(d["target"], f"{field}.target") - pos
@@ -478,10 +505,15 @@ def parse_light(d: dict, field: str):
         return SpotLight(pos, direction,
                          _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)),
                          number(d.get("cone_angle_deg", 45.0), f"{field}.cone_angle_deg", 0, 180, lo_open=True),
-                         number(d.get("blend", 0.0), f"{field}.blend", 0, 1))
-    _check_keys(d, field, {"type", "direction", "irradiance", "color", "note"})
+                         number(d.get("blend", 0.0), f"{field}.blend", 0, 1),
+                         blend_profile=choice(d.get("blend_profile", "angle"), f"{field}.blend_profile",
+                                              ("angle", "cycles")),
+                         radius=number(d.get("radius", 0.0), f"{field}.radius", 0),
+                         soft_falloff=_flag(d, "soft_falloff", field, True))
+    _check_keys(d, field, {"type", "direction", "irradiance", "color", "note", "angle_deg"})
     return DirectionalLight(vec3(_require(d, "direction", field), f"{field}.direction", unit=True),
-                            _illuminant(d, field, number(d.get("irradiance", 1.0), f"{field}.irradiance", 0)))
+                            _illuminant(d, field, number(d.get("irradiance", 1.0), f"{field}.irradiance", 0)),
+                            angle_deg=number(d.get("angle_deg", 0.0), f"{field}.angle_deg", 0, 180, hi_open=True))
 
 
 def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
