@@ -135,7 +135,7 @@ def test_disk_point_light_has_soft_falloff():
     # radius r, soft falloff: a disk of radiance I/(πr²) facing the receiver; irradiance at distance d
     # on a surface tilted by θ (horizon clear of the disk) = I/(d² + r²)·cosθ.
     I, r, res = 5.0, 0.8, 16
-    light = PointLight(np.array([0.0, 0.0, H]), white(I), radius=r, soft_falloff=True)
+    light = PointLight(np.array([0.0, 0.0, H]), white(I), radius=r, soft_falloff=True, camera_visible=False)
     S0, se = luminance_and_stderr(plane_scene([light], res=res, spp=64))
     x, y = pixel_centres(res)
     d2 = x * x + y * y + H * H
@@ -144,11 +144,24 @@ def test_disk_point_light_has_soft_falloff():
 
 def test_sphere_point_light_is_exactly_inverse_square_outside():
     I, r, res = 5.0, 0.8, 16
-    light = PointLight(np.array([0.0, 0.0, H]), white(I), radius=r, soft_falloff=False)
+    light = PointLight(np.array([0.0, 0.0, H]), white(I), radius=r, soft_falloff=False, camera_visible=False)
     S0, se = luminance_and_stderr(plane_scene([light], res=res, spp=64))
     x, y = pixel_centres(res)
     d2 = x * x + y * y + H * H
     assert_matches(S0, se, RHO / math.pi * I / d2 * H / np.sqrt(d2))
+
+
+def test_camera_sees_sphere_and_disk_lights_with_their_radiance():
+    # L = I/(πr²) (Cycles: S/(4π²r²)); the floor behind the light's silhouette is not occluded
+    I, r = 5.0, 0.5
+    for soft in (False, True):
+        scene = plane_scene([PointLight(np.array([0.0, 0.0, H]), white(I), radius=r, soft_falloff=soft)], res=16,
+                            spp=4)
+        scene.settings.max_depth = 1
+        S0 = Renderer(scene).render().stokes_luminance()[0]
+        x, y = pixel_centres(16)
+        np.testing.assert_allclose(S0[np.hypot(x, y) < 0.3], I / (math.pi * r * r), rtol=1e-12)
+        assert np.all(S0[np.hypot(x, y) > 0.75] == 0)
 
 
 def test_sun_with_an_angle_keeps_its_irradiance():
@@ -158,6 +171,17 @@ def test_sun_with_an_angle_keeps_its_irradiance():
     d = np.array([0.6, 0.0, -0.8])
     S0, se = luminance_and_stderr(plane_scene([DirectionalLight(d, white(E), angle_deg=20.0)], res=8, spp=64))
     assert_matches(S0, se, np.full_like(S0, RHO / math.pi * E * 0.8), slack=0.002)
+
+
+def test_sun_disc_is_seen_with_its_radiance():
+    E, angle = 3.0, 2.0
+    scene = plane_scene([DirectionalLight(np.array([0.0, 0.0, 1.0]), white(E), angle_deg=angle)], res=4, spp=2)
+    scene.camera.origin, scene.camera.target = np.array([0.0, 0.0, -5.0]), np.array([0.0, 0.0, -10.0])
+    scene.settings.max_depth = 1
+    S0 = Renderer(scene).render().stokes_luminance()[0]            # every ray looks into the sun
+    np.testing.assert_allclose(S0, E / (math.pi * math.sin(math.radians(angle / 2)) ** 2), rtol=1e-12)
+    scene.lights[0].camera_visible = False
+    assert np.all(Renderer(scene).render().stokes_luminance()[0] == 0)
 
 
 def test_spot_blend_follows_cycles_smoothstep_in_cosine():

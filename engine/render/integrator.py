@@ -225,6 +225,19 @@ class PathTracer:
                     idx = lit.nonzero()[0]
                     self._emitter_hits(radiance, path, T, idx, hits.prim[idx], hits.t[idx], d, lk,
                                        prev_delta, prev_pdf, p_prev, bounce == 0)
+            if light_set.hittable:
+                # analytic lamps (sphere/disk lights, sun discs): seen, never occluding
+                seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
+                for li in light_set.hittable:
+                    light = light_set.lights[li]
+                    if bounce == 0 and li in light_set.camera_hidden:
+                        continue
+                    rows, factor, pdf_l = light.intersect(o, d, seg, hit, p_prev)
+                    if rows.size:
+                        Le = self._emitted(light, lk.take(rows)) * factor[None, :]
+                        p_light = pdf_l * light_set.prob_at(li, None if p_prev is None else p_prev[:, rows])
+                        w = np.where(prev_delta[rows], 1.0, power_heuristic(prev_pdf[rows], p_light))
+                        add_light(radiance, path, T, rows, Le, w)
             if compiled.has_passthrough:
                 # lamps (non-occluding emitters) crossed before the hit: they add light, the ray goes on
                 seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
@@ -298,7 +311,8 @@ class PathTracer:
             path, T, x_T, d, eta_sq, prev_delta, prev_pdf, p, n_g, sampler.keys = keep_paths(
                 valid, path, newT, new_xT, new_d, eta_sq, is_delta, pdf_next, p, n_g, sampler.keys)
             lk, lk_m = compress_lookups(valid, lk, lk_m)
-            p_prev = p if light_set.spatial else None     # where the next segment starts (light selection)
+            # where the next segment starts (light selection, analytic lamps' pdfs)
+            p_prev = p if light_set.spatial or light_set.hittable else None
             o = offset_origin(p, n_g, d)
             t_max = None
 
@@ -392,7 +406,7 @@ class PathTracer:
             if P > 1 and f.kind != "depolarising":
                 c2, s2 = frame_rotation(f.x_out, gather(x_T, sel), sub.wo)
                 S = rotate_stokes(S, c2, s2)
-            if light.is_delta or light.nee_only:
+            if light.is_delta:
                 mis = np.ones(m)
             else:
                 mis = power_heuristic(pdf_l * select_prob, bsdf.pdf(sub, wi))

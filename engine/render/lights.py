@@ -10,9 +10,9 @@ that pdf (0 for delta lights: point, spot, directional) and a validity mask.
 The emitted spectrum itself comes from ``radiance(lam, mono)`` (or, where the
 integrator works in RGB, from ``rgb()``: the light's spectrum integrated
 against the CIE observer on the 1 nm grid).
-Lights that rays cannot hit (``nee_only``: spheres/disks of point and spot lights with a
-radius, suns with an angle) are reached by next-event estimation alone, with MIS weight 1:
-still unbiased, since no other strategy finds them.
+Lights that are not triangles but can be hit (``hittable``: spheres/disks of point and spot
+lights with a radius, suns with an angle) are found by ``intersect`` on every path segment and
+weighted by MIS against next-event estimation like emissive triangles; they never occlude.
 Light selection (uniform, or proportional to estimated power) is handled by ``LightSet``.
 Radiometry of the Cycles options (sphere/disk lights, sun angle, spread, spot blend) follows
 Cycles' intern/cycles/kernel/light/{point,spot,distant,area}.h.
@@ -48,7 +48,7 @@ def uniform_cone(u1, u2, one_minus_cos_max, axis):
 class _Light:
     is_delta = False
     at_infinity = False
-    nee_only = False      # never hit by rays: reached by next-event estimation only (MIS weight 1)
+    hittable = False      # an analytic emitter that rays find through ``intersect`` (not in the BVH)
     blocks_own_shadow_rays = False    # an opaque emitter whose geometry can stop its own shadow rays
 
     def __init__(self, spectrum):
@@ -199,10 +199,49 @@ class PointEmitter(_Light):
         self.radius = float(radius)
         self.soft_falloff = bool(soft_falloff)
         self.is_delta = self.radius <= 0
-        self.nee_only = not self.is_delta
+        self.hittable = not self.is_delta
 
     def _falloff(self, wi):
         return 1.0
+
+    def intersect(self, o, d, seg, hit, p_ref):
+        """Rays o + t·d, 0 < t < seg, that reach the sphere or disk: (rows, radiance factor relative
+        to the intensity spectrum (n,), solid-angle pdf of next-event estimation from p_ref (n,)).
+
+        The disk faces the ray origin (Cycles' point_light_intersect); the spot attenuation is
+        that of the origin's direction, so from outside the cone the light is black."""
+        r = self.radius
+        c = self.position[:, None]
+        to_c = c - o
+        dist2 = dot(to_c, to_c)
+        dist = np.sqrt(dist2)
+        outside = dist > r
+        along = dot(to_c, d)
+        if self.soft_falloff:
+            n = -to_c / np.where(dist > 0, dist, 1.0)           # disk normal, towards the origin
+            cos_l = -dot(d, n)
+            t = dist / np.where(cos_l > 0, cos_l, 1.0)
+            x = o + d * t[None, :] - c
+            ok = (cos_l > 0) & (dist > 0) & (dot(x, x) <= r * r)
+        else:
+            disc = along * along - (dist2 - r * r)
+            t = along - np.sqrt(np.maximum(disc, 0.0))
+            ok = outside & (disc >= 0) & (along > 0)
+            cos_l = np.ones_like(t)
+        ok &= (t > 0) & (t < seg)
+        rows = ok.nonzero()[0]
+        if rows.size == 0:
+            return rows, np.zeros(0), np.zeros(0)
+        wi = to_c[:, rows] / dist[rows]
+        factor = self._falloff(wi) / (math.pi * r * r) * np.ones(rows.size)
+        q = p_ref[:, rows] if p_ref is not None else o[:, rows]
+        if self.soft_falloff:
+            pdf = t[rows] ** 2 / (cos_l[rows] * math.pi * r * r)
+        else:
+            to = c - q
+            sin2 = np.minimum(r * r / np.maximum(dot(to, to), r * r), 1.0)
+            pdf = 1.0 / (2.0 * math.pi * (sin2 / (1.0 + np.sqrt(1.0 - sin2))))
+        return rows, factor, pdf
 
     def sample(self, p, u):
         to = self.position[:, None] - p
@@ -294,10 +333,18 @@ class DirectionalEmitter(_Light):
         self.direction = normalize(np.asarray(direction, np.float64))
         half = 0.5 * math.radians(angle_deg)
         self.is_delta = half <= 0
-        self.nee_only = not self.is_delta
+        self.hittable = not self.is_delta
         self.one_minus_cos = 2.0 * math.sin(0.5 * half) ** 2
         # radiance / E divided by the cone pdf: 2π(1 − cosθh) / (π sin²θh)
         self.factor = 2.0 * self.one_minus_cos / math.sin(half) ** 2 if half > 0 else 1.0
+        self.radiance_factor = 1.0 / (math.pi * math.sin(half) ** 2) if half > 0 else 0.0
+
+    def intersect(self, o, d, seg, hit, p_ref):
+        """Rays that escape (not ``hit``) within the sun's disc: (rows, radiance/E, cone pdf);
+        Cycles' integrate_distant_lights."""
+        rows = (~hit & (1.0 - dot(d, -self.direction[:, None]) <= self.one_minus_cos)).nonzero()[0]
+        return (rows, np.full(rows.size, self.radiance_factor),
+                np.full(rows.size, 1.0 / (2.0 * math.pi * self.one_minus_cos)))
 
     def sample(self, p, u):
         n = p.shape[1]
@@ -345,6 +392,8 @@ class LightSet:
             self.lights.append(AreaEmitter(mesh.emission, tris, compiled, getattr(mesh, "two_sided", False),
                                            getattr(mesh, "spread_deg", 180.0)))
         for light in scene.lights:
+            if not getattr(light, "camera_visible", True):
+                self.camera_hidden.add(len(self.lights))
             if isinstance(light, EnvironmentLight):
                 self.environment = EnvironmentEmitter(light.radiance)
                 self.environment_index = len(self.lights)
@@ -376,6 +425,7 @@ class LightSet:
                 self.cdf = np.cumsum(self.prob)
                 self.cdf[-1] = 1.0
         self.spatial = self.cdf is not None and count <= self.SPATIAL_MAX
+        self.hittable = [i for i, light in enumerate(self.lights) if light.hittable]
 
     def probabilities(self, p):
         """Selection probabilities (count, N) at shading points p (3, N)."""

@@ -54,6 +54,7 @@ class Mesh:
     ``occluder`` — False makes the mesh a lamp in Cycles' sense: rays and shadow rays pass
     through it, it only adds its emission where a ray crosses it (needs ``emission``);
     ``camera_visible`` — False hides a non-occluding emitter from camera rays;
+    (point, spot and directional lights have the same field for their disks, spheres and discs);
     ``spread_deg`` — Cycles' area-light spread (full angle, 0 < s ≤ 180): radiance
     L·f(θ), f = N·max(0, tan(s/2) − tan θ) with ∫ f cosθ dω = π (the emitted power is kept).
     """
@@ -82,6 +83,7 @@ class PointLight:
     intensity: object             # spectrum: radiant intensity (radiance × area / sr)
     radius: float = 0.0
     soft_falloff: bool = True
+    camera_visible: bool = True   # camera rays see the disk/sphere (radius > 0)
 
 
 @dataclass
@@ -96,6 +98,7 @@ class SpotLight:
     blend_profile: str = "angle"
     radius: float = 0.0           # as PointLight.radius
     soft_falloff: bool = True
+    camera_visible: bool = True
 
 
 @dataclass
@@ -105,6 +108,7 @@ class DirectionalLight:
     #: full angular diameter of the source; > 0: uniform radiance E/(π sin²(angle/2)) in that cone
     #: (Cycles' sun angle: soft shadows, same irradiance)
     angle_deg: float = 0.0
+    camera_visible: bool = True   # camera rays see the sun's disc (angle > 0)
 
 
 @dataclass

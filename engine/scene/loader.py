@@ -486,14 +486,17 @@ def parse_light(d: dict, field: str):
         _check_keys(d, field, {"type", "radiance", "color", "note"})
         return EnvironmentLight(_illuminant(d, field, number(d.get("radiance", 1.0), f"{field}.radiance", 0)))
     if kind == "point":
-        _check_keys(d, field, {"type", "position", "intensity", "color", "note", "radius", "soft_falloff"})
+        _check_keys(d, field, {"type", "position", "intensity", "color", "note", "radius", "soft_falloff",
+                               "camera_visible"})
         return PointLight(vec3(_require(d, "position", field), f"{field}.position"),
                           _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)),
                           radius=number(d.get("radius", 0.0), f"{field}.radius", 0),
-                          soft_falloff=_flag(d, "soft_falloff", field, True))
+                          soft_falloff=_flag(d, "soft_falloff", field, True),
+                          camera_visible=_flag(d, "camera_visible", field, True))
     if kind == "spot":
         _check_keys(d, field, {"type", "position", "direction", "target", "intensity", "color",
-                               "cone_angle_deg", "blend", "note", "blend_profile", "radius", "soft_falloff"})
+                               "cone_angle_deg", "blend", "note", "blend_profile", "radius", "soft_falloff",
+                               "camera_visible"})
         pos = vec3(_require(d, "position", field), f"{field}.position")
         if "target" in d:
             direction = vec3(d["target"], f"{field}.target") - pos
@@ -509,11 +512,13 @@ def parse_light(d: dict, field: str):
                          blend_profile=choice(d.get("blend_profile", "angle"), f"{field}.blend_profile",
                                               ("angle", "cycles")),
                          radius=number(d.get("radius", 0.0), f"{field}.radius", 0),
-                         soft_falloff=_flag(d, "soft_falloff", field, True))
-    _check_keys(d, field, {"type", "direction", "irradiance", "color", "note", "angle_deg"})
+                         soft_falloff=_flag(d, "soft_falloff", field, True),
+                         camera_visible=_flag(d, "camera_visible", field, True))
+    _check_keys(d, field, {"type", "direction", "irradiance", "color", "note", "angle_deg", "camera_visible"})
     return DirectionalLight(vec3(_require(d, "direction", field), f"{field}.direction", unit=True),
                             _illuminant(d, field, number(d.get("irradiance", 1.0), f"{field}.irradiance", 0)),
-                            angle_deg=number(d.get("angle_deg", 0.0), f"{field}.angle_deg", 0, 180, hi_open=True))
+                            angle_deg=number(d.get("angle_deg", 0.0), f"{field}.angle_deg", 0, 180, hi_open=True),
+                            camera_visible=_flag(d, "camera_visible", field, True))
 
 
 def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:

@@ -49,6 +49,7 @@ def export_light(obj, matrix_world, warnings: list):
     if scale <= 0 or max(colour) <= 0:
         return None
     normalise = bool(getattr(light, "normalize", True))
+    camera = bool(getattr(obj, "visible_camera", True))
     if not getattr(light, "use_shadow", True):
         warnings.append(f"light {obj.name!r}: shadows cannot be switched off; rendered with shadows")
     if light.type in ("POINT", "SPOT"):
@@ -60,14 +61,15 @@ def export_light(obj, matrix_world, warnings: list):
             i_scale = scale * radius * radius if radius > 0 else scale / math.pi
         intensity = RGBIlluminantSpectrum(colour, i_scale)
         if light.type == "POINT":
-            return PointLight(position, intensity, radius=radius, soft_falloff=soft)
+            return PointLight(position, intensity, radius=radius, soft_falloff=soft, camera_visible=camera)
         return SpotLight(position, direction, intensity, cone_angle_deg=math.degrees(light.spot_size),
-                         blend=float(light.spot_blend), blend_profile="cycles", radius=radius, soft_falloff=soft)
+                         blend=float(light.spot_blend), blend_profile="cycles", radius=radius, soft_falloff=soft,
+                         camera_visible=camera)
     if light.type == "SUN":
         angle = max(float(getattr(light, "angle", 0.0)), 0.0)
         irradiance = scale if normalise or angle <= 0 else scale * math.pi * math.sin(angle / 2) ** 2
         return DirectionalLight(direction, RGBIlluminantSpectrum(colour, irradiance),
-                                angle_deg=math.degrees(angle))
+                                angle_deg=math.degrees(angle), camera_visible=camera)
     if light.type == "AREA":
         cycles = getattr(light, "cycles", None)
         if cycles is not None and getattr(cycles, "is_portal", False):
