@@ -136,6 +136,8 @@ def emissive_back():
 def everything():
     area_square()
     spot_blend()
+    add_light("SPOT", (1.5, -1.5, 2.0), rotation=(math.radians(30), math.radians(20), 0.0), energy=300.0,
+              spot_size=math.radians(60), spot_blend=0.2, shadow_soft_size=0.3)       # a spot with a radius
     sun_angle()
     point_radius()
     emissive_back()
@@ -220,3 +222,37 @@ def test_luminance_matches_cycles(renders, name):
     bad = np.abs(ratio - 1.0) > 4.0 * se + 0.01
     assert not bad.any(), (f"{name}: Polar/Cycles per region {np.round(ratio, 4).tolist()} "
                            f"± {np.round(se, 4).tolist()}")
+
+
+def test_exporter_maps_cycles_light_options():
+    from polar_render.engine.scene.description import DirectionalLight, Mesh, PointLight, SpotLight
+    from polar_render.polar_addon.export.lights import export_light
+    load_addon()
+    base_scene()
+    lam = np.array([[550.0]])
+
+    def export(obj):
+        return export_light(obj, obj.matrix_world, [])
+
+    point = add_light("POINT", (0, 0, 2), energy=100.0, shadow_soft_size=0.2, use_soft_falloff=False)
+    light = export(point)
+    assert isinstance(light, PointLight) and light.radius == pytest.approx(0.2) and not light.soft_falloff
+    point.data.normalize = False                      # eval_fac 1/π: radiance S/π → intensity S·r²
+    assert export(point).intensity.eval(lam, mono=True)[0, 0] == pytest.approx(100.0 * 0.2 ** 2)
+    point.visible_camera = False
+    assert export(point).camera_visible is False
+    spot = export(add_light("SPOT", (0, 0, 2), spot_size=math.radians(40), spot_blend=0.3))
+    assert isinstance(spot, SpotLight) and spot.blend_profile == "cycles" and spot.cone_angle_deg == pytest.approx(40)
+    sun = export(add_light("SUN", (0, 0, 2), energy=2.0, angle=math.radians(10)))
+    assert isinstance(sun, DirectionalLight) and sun.angle_deg == pytest.approx(10)
+    assert sun.irradiance.eval(lam, mono=True)[0, 0] == pytest.approx(2.0)
+    area = add_light("AREA", (0, 0, 2), energy=50.0, shape="DISK", size=0.5, spread=math.radians(90))
+    lamp = export(area)
+    assert isinstance(lamp, Mesh) and not lamp.occluder and not lamp.two_sided
+    assert lamp.spread_deg == pytest.approx(90)
+    # the 64-gon's radiance is scaled so that its power is S: L·π·A_polygon = S
+    tri = lamp.vertices[lamp.faces]
+    a_poly = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1).sum()
+    assert lamp.emission.eval(lam, mono=True)[0, 0] * math.pi * a_poly == pytest.approx(50.0)
+    area.data.cycles.is_portal = True
+    assert export(area) is None                       # portals emit nothing in Cycles
