@@ -155,6 +155,26 @@ class CompiledScene:
         res = self.embree.run(of, df, dists=dists, query="OCCLUDED")
         return res == 0
 
+    def unblock_own_hits(self, emitter: int, p, n_g, wi, dist, cos_l, blocked):
+        """``blocked`` with the shadow rays p → p + dist·wi towards emitter ``emitter`` cleared where
+        they were stopped by that emitter itself.
+
+        A shadow ray starts at p offset along n_g, parallel to p → x, so it meets the emitter's
+        plane earlier than ``dist`` by about offset/cosθ_light (``cos_l``); at grazing angles that
+        exceeds the t_max margin and an opaque emitter shadows itself.  A blocked ray whose first
+        hit is the emitter within that distance of x is visible after all.
+        """
+        idx = blocked.nonzero()[0]
+        o = offset_origin(p[:, idx], n_g[:, idx], wi[:, idx])
+        d = dist[idx]
+        hits = self.intersect(o, wi[:, idx], d * 1.001 + 1e-3)
+        slack = (4.0 * RAY_EPSILON * (1.0 + np.abs(p[:, idx]).max(0)) / np.maximum(cos_l[idx], 1e-3)
+                 + 1e-4 * (1.0 + d))
+        own = (hits.prim >= 0) & (self.tri_emitter[np.maximum(hits.prim, 0)] == emitter) & (hits.t >= d - slack)
+        out = blocked.copy()
+        out[idx[own]] = False
+        return out
+
     # ------------------------------------------------------------------ surface data
 
     def surface(self, prim: np.ndarray, u: np.ndarray, v: np.ndarray):

@@ -28,7 +28,7 @@ import numpy as np
 from ..materials.base import MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation
-from .accel import RAY_EPSILON, offset_origin
+from .accel import offset_origin
 from ..kernels.transport import (add_light, throughput_times_stokes, update_abcs, update_depolarising,
                                  update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
@@ -324,52 +324,6 @@ class PathTracer:
         out[:, :, ~finite] = 0.0
         return out, stats
 
-    def _emitter_hits(self, radiance, path, T, idx, prims, dists, d, lk, prev_delta, prev_pdf, p_prev, camera):
-        """Emission picked up where the rays ``idx`` (each at most once) hit or cross emitting
-        triangles ``prims`` at distances ``dists``, MIS-weighted against next-event estimation
-        from the vertices ``p_prev`` (3, N) the rays left (None for camera rays).
-        ``camera``: these are camera rays (lights hidden from the camera add nothing)."""
-        light_set = self.lights
-        emitter = self.scene.tri_emitter[prims]
-        cos_hit = -dot(d[:, idx], self.scene.tri_normal[prims].T)
-        for li in np.unique(emitter):
-            if li < 0 or (camera and li in light_set.camera_hidden):
-                continue
-            light = light_set.lights[li]
-            mine = emitter == li
-            cos_l = light.facing(cos_hit[mine])
-            front = cos_l > 0             # one-sided emitters shine only from their front faces
-            sel, cos_l = idx[mine][front], cos_l[front]
-            if sel.size == 0:
-                continue
-            Le = self._emitted(light, lk.take(sel))
-            factor = light.emission_factor(cos_l)
-            if factor is not None:
-                Le = Le * factor[None, :]
-            p_light = light.pdf_hit(dists[mine][front], cos_l) * light_set.prob_at(
-                li, None if p_prev is None else p_prev[:, sel])
-            wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
-            add_light(radiance, path, T, sel, Le, wsel)
-
-    def _unblock_self_hits(self, light, li, p, n_g, wi, dist, pdf_l, blocked):
-        """Shadow rays towards an opaque emitter that were stopped by that emitter itself.
-
-        The shadow ray starts at p offset along n_g, parallel to p → x, so it meets the emitter's
-        plane earlier than ``dist`` by about offset/cosθ_light; at grazing angles that exceeds
-        the t_max margin and the emitter shadows itself.  A blocked ray whose first hit is the
-        sampled light within that distance of x is visible after all.
-        """
-        idx = blocked.nonzero()[0]
-        o = offset_origin(p[:, idx], n_g[:, idx], wi[:, idx])
-        hits = self.scene.intersect(o, wi[:, idx], dist[idx] * 1.001 + 1e-3)
-        d = dist[idx]
-        cos_l = np.minimum(d * d / np.maximum(pdf_l[idx] * light.total_area, 1e-300), 1.0)
-        slack = 4.0 * RAY_EPSILON * (1.0 + np.abs(p[:, idx]).max(0)) / np.maximum(cos_l, 1e-3) + 1e-4 * (1.0 + d)
-        own = (hits.prim >= 0) & (self.scene.tri_emitter[np.maximum(hits.prim, 0)] == li) & (hits.t >= d - slack)
-        out = blocked.copy()
-        out[idx[own]] = False
-        return out
-
     def _next_event(self, sp, lookup, bsdf, T, rows, x_T, u, stats):
         """Direct light at non-delta vertices, MIS-weighted against BSDF sampling; (P, L, n).
 
@@ -422,7 +376,36 @@ class PathTracer:
                                                     wi[:, test], t_max[test])
                 stats["shadow_rays"] += test.size
             if blocked.any() and light.blocks_own_shadow_rays:
-                blocked = self._unblock_self_hits(light, li, p, sub.n_g, wi, dist, pdf_l, blocked)
+                # cosθ at the light from the area pdf dist²/(cosθ·A)
+                cos_l = np.minimum(dist * dist / np.maximum(pdf_l * light.total_area, 1e-300), 1.0)
+                blocked = self.scene.unblock_own_hits(li, p, sub.n_g, wi, dist, cos_l, blocked)
             weight = weight * (~blocked)[None, :]
             out[:, :, sel] = throughput_times_stokes(T, gather(rows, sel), S, weight)
         return out
+
+    def _emitter_hits(self, radiance, path, T, idx, prims, dists, d, lk, prev_delta, prev_pdf, p_prev, camera):
+        """Emission picked up where the rays ``idx`` (each at most once) hit or cross emitting
+        triangles ``prims`` at distances ``dists``, MIS-weighted against next-event estimation
+        from the vertices ``p_prev`` (3, N) the rays left (None for camera rays).
+        ``camera``: these are camera rays (lights hidden from the camera add nothing)."""
+        light_set = self.lights
+        emitter = self.scene.tri_emitter[prims]
+        cos_hit = -dot(d[:, idx], self.scene.tri_normal[prims].T)
+        for li in np.unique(emitter):
+            if li < 0 or (camera and li in light_set.camera_hidden):
+                continue
+            light = light_set.lights[li]
+            mine = emitter == li
+            cos_l = light.facing(cos_hit[mine])
+            front = cos_l > 0             # one-sided emitters shine only from their front faces
+            sel, cos_l = idx[mine][front], cos_l[front]
+            if sel.size == 0:
+                continue
+            Le = self._emitted(light, lk.take(sel))
+            factor = light.emission_factor(cos_l)
+            if factor is not None:
+                Le = Le * factor[None, :]
+            p_light = light.pdf_hit(dists[mine][front], cos_l) * light_set.prob_at(
+                li, None if p_prev is None else p_prev[:, sel])
+            wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
+            add_light(radiance, path, T, sel, Le, wsel)

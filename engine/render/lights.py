@@ -118,7 +118,7 @@ class AreaEmitter(_Light):
         self.compiled = compiled
         self.two_sided = bool(two_sided)
         self.profile = spread_profile(math.radians(spread_deg))
-        # Opaque emitters can stop their own grazing shadow rays (see PathTracer._unblock_self_hits).
+        # Opaque emitters can stop their own grazing shadow rays (see CompiledScene.unblock_own_hits).
         # The correction is applied to two-sided (Blender) emitters only: for the scene format's
         # one-sided emitters it would change peer renders (cornell_lambert: 2 of 25,600 pixels at 2 spp).
         self.blocks_own_shadow_rays = self.two_sided and bool(compiled.tri_occluder[tris].all())

@@ -297,33 +297,9 @@ def _check_positive_spectrum(spec, field: str, strict: bool):
 def _parse_emission(d, field: str):
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object like {\"radiance\": 10, \"color\": [1, 1, 1]}")
-    _check_keys(d, field, {"radiance", "color", "spectrum", "note", *EMITTER_OPTIONS})
+    _check_keys(d, field, {"radiance", "color", "spectrum", "note"})
     scale = number(d.get("radiance", 1.0), f"{field}.radiance", 0)
     return _illuminant(d, field, scale)
-
-
-#: optional emitter options inside "emission" (Mesh fields; defaults: one-sided, opaque, Lambertian)
-EMITTER_OPTIONS = ("two_sided", "occluder", "camera_visible", "spread_deg")
-
-
-def _emitter_options(d, field: str) -> dict:
-    """The Mesh emitter fields given in an "emission" object (validated)."""
-    out = {}
-    for key in ("two_sided", "occluder", "camera_visible"):
-        if key in d:
-            if not isinstance(d[key], bool):
-                raise SceneError(f"{field}.{key}", "must be true or false")
-            out[key] = d[key]
-    if "spread_deg" in d:
-        out["spread_deg"] = number(d["spread_deg"], f"{field}.spread_deg", 0, 180, lo_open=True)
-    return out
-
-
-def _flag(d, key: str, field: str, default: bool) -> bool:
-    value = d.get(key, default)
-    if not isinstance(value, bool):
-        raise SceneError(f"{field}.{key}", "must be true or false")
-    return value
 
 
 def _illuminant(d: dict, field: str, scale: float):
@@ -408,7 +384,8 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
             f = f"{field}.material" if "materials" not in d else f"{field}.materials[{i}]"
             raise SceneError(f, f"unknown material {m!r} (defined: {', '.join(sorted(material_names)) or 'none'})")
 
-    emission = _parse_emission(d["emission"], f"{field}.emission") if d.get("emission") is not None else None
+    emission = _parse_emission(_without_emitter_options(d["emission"]), f"{field}.emission") \
+        if d.get("emission") is not None else None
     options = _emitter_options(d["emission"], f"{field}.emission") if emission is not None else {}
     return Mesh(name=name, vertices=np.asarray(data.vertices, dtype=np.float64), faces=faces,
                 materials=list(mat_list), material_ids=ids.astype(np.int32), normals=data.vertex_normals,
@@ -478,7 +455,7 @@ def parse_transform(d, field: str) -> np.ndarray:
                             scale=scale, rotate_deg=vec3(d.get("rotate_deg", [0, 0, 0]), f"{field}.rotate_deg"))
 
 
-def parse_light(d: dict, field: str):
+def _parse_light_base(d: dict, field: str):
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     kind = choice(_require(d, "type", field), f"{field}.type", ("environment", "point", "spot", "directional"))
@@ -486,17 +463,12 @@ def parse_light(d: dict, field: str):
         _check_keys(d, field, {"type", "radiance", "color", "note"})
         return EnvironmentLight(_illuminant(d, field, number(d.get("radiance", 1.0), f"{field}.radiance", 0)))
     if kind == "point":
-        _check_keys(d, field, {"type", "position", "intensity", "color", "note", "radius", "soft_falloff",
-                               "camera_visible"})
+        _check_keys(d, field, {"type", "position", "intensity", "color", "note", *LIGHT_OPTIONS["point"]})
         return PointLight(vec3(_require(d, "position", field), f"{field}.position"),
-                          _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)),
-                          radius=number(d.get("radius", 0.0), f"{field}.radius", 0),
-                          soft_falloff=_flag(d, "soft_falloff", field, True),
-                          camera_visible=_flag(d, "camera_visible", field, True))
+                          _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)))
     if kind == "spot":
         _check_keys(d, field, {"type", "position", "direction", "target", "intensity", "color",
-                               "cone_angle_deg", "blend", "note", "blend_profile", "radius", "soft_falloff",
-                               "camera_visible"})
+                               "cone_angle_deg", "blend", "note", *LIGHT_OPTIONS["spot"]})
         pos = vec3(_require(d, "position", field), f"{field}.position")
         if "target" in d:
             direction = vec3(d["target"], f"{field}.target") - pos
@@ -508,17 +480,56 @@ def parse_light(d: dict, field: str):
         return SpotLight(pos, direction,
                          _illuminant(d, field, number(d.get("intensity", 1.0), f"{field}.intensity", 0)),
                          number(d.get("cone_angle_deg", 45.0), f"{field}.cone_angle_deg", 0, 180, lo_open=True),
-                         number(d.get("blend", 0.0), f"{field}.blend", 0, 1),
-                         blend_profile=choice(d.get("blend_profile", "angle"), f"{field}.blend_profile",
-                                              ("angle", "cycles")),
-                         radius=number(d.get("radius", 0.0), f"{field}.radius", 0),
-                         soft_falloff=_flag(d, "soft_falloff", field, True),
-                         camera_visible=_flag(d, "camera_visible", field, True))
-    _check_keys(d, field, {"type", "direction", "irradiance", "color", "note", "angle_deg", "camera_visible"})
+                         number(d.get("blend", 0.0), f"{field}.blend", 0, 1))
+    _check_keys(d, field, {"type", "direction", "irradiance", "color", "note", *LIGHT_OPTIONS["directional"]})
     return DirectionalLight(vec3(_require(d, "direction", field), f"{field}.direction", unit=True),
-                            _illuminant(d, field, number(d.get("irradiance", 1.0), f"{field}.irradiance", 0)),
-                            angle_deg=number(d.get("angle_deg", 0.0), f"{field}.angle_deg", 0, 180, hi_open=True),
-                            camera_visible=_flag(d, "camera_visible", field, True))
+                            _illuminant(d, field, number(d.get("irradiance", 1.0), f"{field}.irradiance", 0)))
+
+
+# ----------------------------------------------------------------------------- Cycles' light options
+# Optional, with Cycles' meaning (README: the Blender light table); the defaults are the format's
+# original meaning, so existing and peer scenes render exactly as before.
+
+#: optional keys of each light type
+LIGHT_OPTIONS = {"point": ("radius", "soft_falloff", "camera_visible"),
+                 "spot": ("radius", "soft_falloff", "camera_visible", "blend_profile"),
+                 "directional": ("angle_deg", "camera_visible")}
+#: optional emitter options inside "emission" (Mesh fields; defaults: one-sided, opaque, Lambertian)
+EMITTER_OPTIONS = ("two_sided", "occluder", "camera_visible", "spread_deg")
+
+
+def _flag(d, key: str, field: str, default: bool) -> bool:
+    value = d.get(key, default)
+    if not isinstance(value, bool):
+        raise SceneError(f"{field}.{key}", "must be true or false")
+    return value
+
+
+def parse_light(d: dict, field: str):
+    """A light from its JSON object, with the optional Cycles options of LIGHT_OPTIONS."""
+    light = _parse_light_base(d, field)
+    if isinstance(light, (PointLight, SpotLight)):
+        light.radius = number(d.get("radius", 0.0), f"{field}.radius", 0)
+        light.soft_falloff = _flag(d, "soft_falloff", field, True)
+    if isinstance(light, SpotLight):
+        light.blend_profile = choice(d.get("blend_profile", "angle"), f"{field}.blend_profile", ("angle", "cycles"))
+    if isinstance(light, DirectionalLight):
+        light.angle_deg = number(d.get("angle_deg", 0.0), f"{field}.angle_deg", 0, 180, hi_open=True)
+    if not isinstance(light, EnvironmentLight):
+        light.camera_visible = _flag(d, "camera_visible", field, True)
+    return light
+
+
+def _without_emitter_options(d):
+    return {k: v for k, v in d.items() if k not in EMITTER_OPTIONS} if isinstance(d, dict) else d
+
+
+def _emitter_options(d, field: str) -> dict:
+    """The Mesh emitter fields given in an "emission" object (validated)."""
+    out = {key: _flag(d, key, field, True) for key in ("two_sided", "occluder", "camera_visible") if key in d}
+    if "spread_deg" in d:
+        out["spread_deg"] = number(d["spread_deg"], f"{field}.spread_deg", 0, 180, lo_open=True)
+    return out
 
 
 def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
