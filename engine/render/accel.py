@@ -114,7 +114,8 @@ class CompiledScene:
         return Hits(prim, res["u"].astype(np.float64), res["v"].astype(np.float64),
                     res["tfar"].astype(np.float64))
 
-    def passthrough_hits(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray, max_layers: int = 8):
+    def passthrough_hits(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray,
+                         max_layers: int = 8) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
         """Every crossing of the segments o → o + t_max·d (t_max may be inf) with non-occluding
         emitters, as a list of layers (ray index, global triangle, distance from o): layer k holds
         each ray's k-th crossing (so a ray appears at most once per layer), up to ``max_layers``.
@@ -155,7 +156,8 @@ class CompiledScene:
         res = self.embree.run(of, df, dists=dists, query="OCCLUDED")
         return res == 0
 
-    def unblock_own_hits(self, emitter: int, p, n_g, wi, dist, cos_l, blocked):
+    def unblock_own_hits(self, emitter: int, p: np.ndarray, n_g: np.ndarray, wi: np.ndarray, dist: np.ndarray,
+                         cos_l: np.ndarray, blocked: np.ndarray) -> np.ndarray:
         """``blocked`` with the shadow rays p → p + dist·wi towards emitter ``emitter`` cleared where
         they were stopped by that emitter itself.
 

@@ -383,7 +383,9 @@ class PathTracer:
             out[:, :, sel] = throughput_times_stokes(T, gather(rows, sel), S, weight)
         return out
 
-    def _emitter_hits(self, radiance, path, T, idx, prims, dists, d, lk, prev_delta, prev_pdf, p_prev, camera):
+    def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, idx: np.ndarray, prims: np.ndarray,
+                      dists: np.ndarray, d: np.ndarray, lk: WavelengthLookup, prev_delta: np.ndarray,
+                      prev_pdf: np.ndarray, p_prev: np.ndarray | None, camera: bool) -> None:
         """Emission picked up where the rays ``idx`` (each at most once) hit or cross emitting
         triangles ``prims`` at distances ``dists``, MIS-weighted against next-event estimation
         from the vertices ``p_prev`` (3, N) the rays left (None for camera rays).
