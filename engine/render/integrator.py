@@ -196,7 +196,11 @@ class PathTracer:
         light_set = self.lights
         env = light_set.environment
         compiled = self.scene
-        p_prev = None
+        p_prev = n_prev = None
+
+        def at_prev(sel):
+            """(position, side normal) of the vertices that the paths ``sel`` left (light selection)."""
+            return (None, None) if p_prev is None else (p_prev[:, sel], None if n_prev is None else n_prev[:, sel])
 
         for bounce in range(st.max_depth):
             if abort is not None and abort.is_set():
@@ -216,7 +220,7 @@ class PathTracer:
                 nd = ~prev_delta[miss]
                 if nd.any():
                     p_light = env.pdf(d[:, miss]) * light_set.prob_at(
-                        light_set.environment_index, None if p_prev is None else p_prev[:, miss])
+                        light_set.environment_index, *at_prev(miss))
                     w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
                 add_light(radiance, path, T, miss.nonzero()[0], Le, w)
             if self.has_area_lights:
@@ -224,7 +228,7 @@ class PathTracer:
                 if lit.any():
                     idx = lit.nonzero()[0]
                     self._emitter_hits(radiance, path, T, idx, hits.prim[idx], hits.t[idx], d, lk,
-                                       prev_delta, prev_pdf, p_prev, bounce == 0)
+                                       prev_delta, prev_pdf, at_prev, bounce == 0)
             if light_set.hittable:
                 # analytic lamps (sphere/disk lights, sun discs): seen, never occluding
                 seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
@@ -235,7 +239,7 @@ class PathTracer:
                     rows, factor, pdf_l = light.intersect(o, d, seg, hit, p_prev)
                     if rows.size:
                         Le = self._emitted(light, lk.take(rows)) * factor[None, :]
-                        p_light = pdf_l * light_set.prob_at(li, None if p_prev is None else p_prev[:, rows])
+                        p_light = pdf_l * light_set.prob_at(li, *at_prev(rows))
                         w = np.where(prev_delta[rows], 1.0, power_heuristic(prev_pdf[rows], p_light))
                         add_light(radiance, path, T, rows, Le, w)
             if compiled.has_passthrough:
@@ -243,7 +247,7 @@ class PathTracer:
                 seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
                 for rows, prims, dists in compiled.passthrough_hits(o, d, seg):
                     self._emitter_hits(radiance, path, T, rows, prims, dists, d, lk, prev_delta, prev_pdf,
-                                       p_prev, bounce == 0)
+                                       at_prev, bounce == 0)
 
             if bounce + 1 >= st.max_depth:
                 break
@@ -257,6 +261,7 @@ class PathTracer:
                 break
             p, n_g, n_s = compiled.surface(prim, u, v)
             wo = -d
+            n_side = n_g * np.sign(dot(n_g, wo))[None, :] if light_set.spatial else None
             # Stokes frame of the arriving segment: x_T is already ⟂ d.
             mat = compiled.tri_material[prim]
             grp = self.group_of[mat]
@@ -313,6 +318,7 @@ class PathTracer:
             lk, lk_m = compress_lookups(valid, lk, lk_m)
             # where the next segment starts (light selection, analytic lamps' pdfs)
             p_prev = p if light_set.spatial or light_set.hittable else None
+            n_prev = keep_paths(valid, n_side)[0] if n_side is not None else None
             o = offset_origin(p, n_g, d)
             t_max = None
 
@@ -334,7 +340,8 @@ class PathTracer:
         n = sp.n
         P = self.P
         out = np.zeros((P, 3 if self.rgb_mode else lookup.lam.shape[0], n))
-        choice, u_rest, chosen_prob = light_set.choose(u[0], sp.p)
+        n_side = sp.n_g * np.sign(dot(sp.n_g, sp.wo))[None, :] if light_set.spatial else None
+        choice, u_rest, chosen_prob = light_set.choose(u[0], sp.p, n_side)
         lights_chosen = np.unique(choice)
         for li in lights_chosen:
             # one light for every path: whole arrays instead of gathered copies
@@ -385,10 +392,10 @@ class PathTracer:
 
     def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, idx: np.ndarray, prims: np.ndarray,
                       dists: np.ndarray, d: np.ndarray, lk: WavelengthLookup, prev_delta: np.ndarray,
-                      prev_pdf: np.ndarray, p_prev: np.ndarray | None, camera: bool) -> None:
+                      prev_pdf: np.ndarray, at_prev, camera: bool) -> None:
         """Emission picked up where the rays ``idx`` (each at most once) hit or cross emitting
         triangles ``prims`` at distances ``dists``, MIS-weighted against next-event estimation
-        from the vertices ``p_prev`` (3, N) the rays left (None for camera rays).
+        from the vertices the rays left (``at_prev(rows)``: their positions and side normals).
         ``camera``: these are camera rays (lights hidden from the camera add nothing)."""
         light_set = self.lights
         emitter = self.scene.tri_emitter[prims]
@@ -407,7 +414,6 @@ class PathTracer:
             factor = light.emission_factor(cos_l)
             if factor is not None:
                 Le = Le * factor[None, :]
-            p_light = light.pdf_hit(dists[mine][front], cos_l) * light_set.prob_at(
-                li, None if p_prev is None else p_prev[:, sel])
+            p_light = light.pdf_hit(dists[mine][front], cos_l) * light_set.prob_at(li, *at_prev(sel))
             wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
             add_light(radiance, path, T, sel, Le, wsel)

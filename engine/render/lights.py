@@ -45,6 +45,22 @@ def uniform_cone(u1, u2, one_minus_cos_max, axis):
     return local_to_world(local, axis), cos_t
 
 
+#: share of a light's selection importance kept when it lies below the shading point's horizon
+#: (transmitting materials can still use it; a floor keeps every light's probability > 0)
+BELOW_HORIZON = 0.1
+
+
+def facing_factor(to, dist, sin_alpha, n):
+    """Orientation term of the selection importance at points with side normals n (3, N) for
+    light centres in directions to/dist subtending half-angles asin(sin_alpha):
+    BELOW_HORIZON + (1 − BELOW_HORIZON)·cos⁺(max(θ − α, 0)), θ the angle between n and the centre."""
+    if n is None:
+        return 1.0
+    cos_t = np.clip(dot(n, to) / np.maximum(dist, 1e-300), -1.0, 1.0)
+    theta = np.maximum(np.arccos(cos_t) - np.arcsin(np.clip(sin_alpha, 0.0, 1.0)), 0.0)
+    return BELOW_HORIZON + (1.0 - BELOW_HORIZON) * np.maximum(np.cos(theta), 0.0)
+
+
 class _Light:
     is_delta = False
     at_infinity = False
@@ -81,7 +97,7 @@ class EnvironmentEmitter(_Light):
         # a sphere of radius R under uniform radiance L receives π·L·4πR²
         return float(luminance(self.rgb())) * 4.0 * math.pi ** 2 * scene_radius ** 2
 
-    def importance(self, p):
+    def importance(self, p, n=None):
         return np.full(p.shape[1], math.pi * float(luminance(self.rgb())))
 
 
@@ -171,8 +187,9 @@ class AreaEmitter(_Light):
         """Emitted power (luminance units; Lambertian: π·L·A per emitting side)."""
         return math.pi * float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
 
-    def importance(self, p):
-        """Bound-like estimate of the irradiance at p (3, N): L·A/max(d², r²) about the centroid."""
+    def importance(self, p, n=None):
+        """Bound-like estimate of the irradiance at p (3, N) with side normals n: L·A/max(d², r²)
+        about the centroid, times the orientation term."""
         if not hasattr(self, "_centre"):
             c = self.compiled
             corners = c.vertices[c.faces[self.tris]].reshape(-1, 3)
@@ -180,8 +197,11 @@ class AreaEmitter(_Light):
             self._centre = (corners * w[:, None]).sum(0) / w.sum()
             self._r2 = float(((corners - self._centre) ** 2).sum(1).max())
         to = self._centre[:, None] - p
+        d2 = dot(to, to)
+        dist = np.sqrt(d2)
         return (float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
-                / np.maximum(dot(to, to), max(self._r2, 1e-12)))
+                / np.maximum(d2, max(self._r2, 1e-12))
+                * facing_factor(to, dist, math.sqrt(self._r2) / np.maximum(dist, 1e-300), n))
 
 
 class PointEmitter(_Light):
@@ -281,12 +301,14 @@ class PointEmitter(_Light):
     def power(self):
         return 4.0 * math.pi * float(luminance(self.rgb()))
 
-    def importance(self, p):
-        """Irradiance at p (3, N) facing the light: I·falloff/max(d², r²)."""
+    def importance(self, p, n=None):
+        """Irradiance at p (3, N) facing the light, I·falloff/max(d², r²), times the orientation term."""
         to = self.position[:, None] - p
         d2 = dot(to, to)
-        wi = to / np.sqrt(np.maximum(d2, 1e-300))
-        return float(luminance(self.rgb())) * self._falloff(wi) / np.maximum(d2, max(self.radius ** 2, 1e-12))
+        dist = np.sqrt(np.maximum(d2, 1e-300))
+        wi = to / dist
+        return (float(luminance(self.rgb())) * self._falloff(wi) / np.maximum(d2, max(self.radius ** 2, 1e-12))
+                * facing_factor(to, dist, self.radius / dist, n))
 
 
 class SpotEmitter(PointEmitter):
@@ -358,15 +380,18 @@ class DirectionalEmitter(_Light):
     def power(self, scene_radius=1.0):
         return float(luminance(self.rgb())) * math.pi * scene_radius ** 2
 
-    def importance(self, p):
-        return np.full(p.shape[1], float(luminance(self.rgb())))
+    def importance(self, p, n=None):
+        to = np.broadcast_to(-self.direction[:, None], p.shape)
+        sin_half = math.sqrt(self.one_minus_cos * (2.0 - self.one_minus_cos))
+        return float(luminance(self.rgb())) * facing_factor(to, 1.0, sin_half, n) * np.ones(p.shape[1])
 
 
 class LightSet:
     """All lights of a compiled scene.  NEE picks one light per vertex: uniformly (probability
     1/count, ``Scene.light_selection`` "uniform"; ``prob[i]``) or, with "power", by importance:
     for up to ``SPATIAL_MAX`` lights, per shading point ∝ each light's estimated irradiance
-    there (power/dist², as the importance of Cycles' light tree without the tree), mixed with
+    there (power/dist² × ``facing_factor``, as the importance of Cycles' light tree without the
+    tree), mixed with
     ``GLOBAL_SHARE`` of the power distribution (so no light that can contribute gets
     probability 0); for more lights ∝ power alone.  Every MIS pdf includes the probability
     with which the light would have been chosen at the vertex the ray left (``prob_at``).
@@ -427,32 +452,33 @@ class LightSet:
         self.spatial = self.cdf is not None and count <= self.SPATIAL_MAX
         self.hittable = [i for i, light in enumerate(self.lights) if light.hittable]
 
-    def probabilities(self, p):
-        """Selection probabilities (count, N) at shading points p (3, N)."""
+    def probabilities(self, p, n=None):
+        """Selection probabilities (count, N) at shading points p (3, N) with side normals n (the
+        geometric normal on the side the path arrived from) or None."""
         if not self.spatial:
             return np.repeat(self.prob[:, None], p.shape[1], axis=1)
-        imp = np.stack([light.importance(p) for light in self.lights])
+        imp = np.stack([light.importance(p, n) for light in self.lights])
         imp = np.where(np.isfinite(imp) & (imp > 0), imp, 0.0)
         total = imp.sum(0)
         local = np.where(total > 0, imp / np.where(total > 0, total, 1.0), self.prob[:, None])
         return (1.0 - self.GLOBAL_SHARE) * local + self.GLOBAL_SHARE * self.prob[:, None]
 
-    def prob_at(self, li, p):
-        """Probability (N,) or scalar that NEE at points p (3, N) picks light ``li``."""
+    def prob_at(self, li, p, n=None):
+        """Probability (N,) or scalar that NEE at points p (3, N) with side normals n picks light ``li``."""
         if not self.spatial or p is None:
             return self.prob[li]
-        return self.probabilities(p)[li]
+        return self.probabilities(p, n)[li]
 
-    def choose(self, u, p=None):
+    def choose(self, u, p=None, n=None):
         """(light index (N,), the remainder of u rescaled to [0, 1), the chosen lights'
         probabilities (N,) or None where they are ``prob[index]``) for uniform numbers u (N,)
-        at shading points p (3, N)."""
+        at shading points p (3, N) with side normals n."""
         count = len(self.lights)
         if self.cdf is None:
             choice = np.minimum((u * count).astype(np.int64), count - 1)
             return choice, u * count - choice, None
         if self.spatial and p is not None:
-            probs = self.probabilities(p)
+            probs = self.probabilities(p, n)
             cdf = np.cumsum(probs, axis=0)
             choice = np.minimum((cdf <= u[None, :] * cdf[-1][None, :]).sum(0), count - 1)
             cols = np.arange(u.shape[0])
