@@ -13,7 +13,7 @@ against the CIE observer on the 1 nm grid).
 Lights that are not triangles but can be hit (``hittable``: spheres/disks of point and spot
 lights with a radius, suns with an angle) are found by ``intersect`` on every path segment and
 weighted by MIS against next-event estimation like emissive triangles; they never occlude.
-Light selection (uniform, or proportional to estimated power) is handled by ``LightSet``.
+Light selection (uniform, or by estimated importance) is handled by ``LightSet``.
 Radiometry of the Cycles options (sphere/disk lights, sun angle, spread, spot blend) follows
 Cycles' intern/cycles/kernel/light/{point,spot,distant,area}.h.
 """
@@ -24,12 +24,11 @@ import math
 
 import numpy as np
 
+from ..errors import SceneError
 from ..kernels.geometry import area_light_sample
-from ..materials.sampling import uniform_sphere
-from ..spectral import GRID_NM, spectrum_to_linear_srgb
-from ..materials.sampling import local_to_world
+from ..materials.sampling import local_to_world, uniform_sphere
+from ..spectral import GRID_NM, luminance, spectrum_to_linear_srgb
 from ..scene.description import DirectionalLight, EnvironmentLight, PointLight, SpotLight
-from ..spectral import luminance
 from ..vec3 import dot, normalize
 
 
@@ -438,7 +437,7 @@ class LightSet:
         self.select_prob = 1.0 / count if count else 0.0
         self.selection = getattr(scene, "light_selection", "uniform")
         if self.selection not in ("uniform", "power"):
-            raise ValueError(f"light_selection must be 'uniform' or 'power', got {self.selection!r}")
+            raise SceneError("light_selection", f"must be 'uniform' or 'power', got {self.selection!r}")
         self.prob = np.full(count, self.select_prob)
         self.cdf = None
         if self.selection == "power" and count > 1:
