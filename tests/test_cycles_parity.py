@@ -256,7 +256,7 @@ def test_exporter_maps_cycles_light_options():
     point.data.normalize = False                      # eval_fac 1/π: radiance S/π → intensity S·r²
     assert export(point).intensity.eval(lam, mono=True)[0, 0] == pytest.approx(100.0 * 0.2 ** 2)
     point.visible_camera = False
-    assert export(point).camera_visible is False
+    assert export(point).visible_camera is False
     spot = export(add_light("SPOT", (0, 0, 2), spot_size=math.radians(40), spot_blend=0.3))
     assert isinstance(spot, SpotLight) and spot.blend_profile == "cycles" and spot.cone_angle_deg == pytest.approx(40)
     sun = export(add_light("SUN", (0, 0, 2), energy=2.0, angle=math.radians(10)))

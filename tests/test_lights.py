@@ -135,7 +135,7 @@ def test_disk_point_light_has_soft_falloff():
     # radius r, soft falloff: a disk of radiance I/(πr²) facing the receiver; irradiance at distance d
     # on a surface tilted by θ (horizon clear of the disk) = I/(d² + r²)·cosθ.
     I, r, res = 5.0, 0.8, 16
-    light = PointLight(np.array([0.0, 0.0, H]), white(I), radius=r, soft_falloff=True, camera_visible=False)
+    light = PointLight(np.array([0.0, 0.0, H]), white(I), radius=r, soft_falloff=True, visible_camera=False)
     S0, se = luminance_and_stderr(plane_scene([light], res=res, spp=64))
     x, y = pixel_centres(res)
     d2 = x * x + y * y + H * H
@@ -144,7 +144,7 @@ def test_disk_point_light_has_soft_falloff():
 
 def test_sphere_point_light_is_exactly_inverse_square_outside():
     I, r, res = 5.0, 0.8, 16
-    light = PointLight(np.array([0.0, 0.0, H]), white(I), radius=r, soft_falloff=False, camera_visible=False)
+    light = PointLight(np.array([0.0, 0.0, H]), white(I), radius=r, soft_falloff=False, visible_camera=False)
     S0, se = luminance_and_stderr(plane_scene([light], res=res, spp=64))
     x, y = pixel_centres(res)
     d2 = x * x + y * y + H * H
@@ -180,7 +180,7 @@ def test_sun_disc_is_seen_with_its_radiance():
     scene.settings.max_depth = 1
     S0 = Renderer(scene).render().stokes_luminance()[0]            # every ray looks into the sun
     np.testing.assert_allclose(S0, E / (math.pi * math.sin(math.radians(angle / 2)) ** 2), rtol=1e-12)
-    scene.lights[0].camera_visible = False
+    scene.lights[0].visible_camera = False
     assert np.all(Renderer(scene).render().stokes_luminance()[0] == 0)
 
 
@@ -258,7 +258,7 @@ def test_lamps_do_not_occlude_and_add_light_where_rays_cross_them():
     S0, se = luminance_and_stderr(plane_scene([point], [lamp], res=res, spp=16))
     assert_matches(S0[outside], se[outside], lit[outside])
     assert_matches(S0[under], se[under], lit[under] + L)
-    lamp.camera_visible = False
+    lamp.visible_camera = False
     S0, se = luminance_and_stderr(plane_scene([point], [lamp], res=res, spp=16))
     assert_matches(S0, se, lit)
 
@@ -312,7 +312,7 @@ def test_scene_format_light_options_are_optional_and_validated():
     from engine.scene.loader import parse_light, parse_object
     quad_obj = {"shape": "quad", "vertices": [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], "material": "a"}
     plain = parse_object({**quad_obj, "emission": {"radiance": 2}}, "o", ".", {"a": None})
-    assert (plain.two_sided, plain.occluder, plain.camera_visible, plain.spread_deg) == (False, True, True, 180.0)
+    assert (plain.two_sided, plain.occluder, plain.visible_camera, plain.spread_deg) == (False, True, True, 180.0)
     lamp = parse_object({**quad_obj, "emission": {"radiance": 2, "two_sided": True, "occluder": False,
                                                   "spread_deg": 90}}, "o", ".", {"a": None})
     assert (lamp.two_sided, lamp.occluder, lamp.spread_deg) == (True, False, 90.0)

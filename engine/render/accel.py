@@ -39,7 +39,7 @@ class CompiledScene:
         self.materials = [scene.materials[n] for n in self.material_names]
         mat_index = {n: i for i, n in enumerate(self.material_names)}
 
-        verts, faces, tri_mat, tri_mesh, vnormals, has_vn, occ = [], [], [], [], [], [], []
+        verts, faces, tri_mat, tri_mesh, vnormals, has_vn = [], [], [], [], [], []
         offset = 0
         for mi, mesh in enumerate(scene.meshes):
             v = np.asarray(mesh.vertices, np.float64)
@@ -49,7 +49,6 @@ class CompiledScene:
             lut = np.array([mat_index[m] for m in mesh.materials], dtype=np.int32)
             tri_mat.append(lut[mesh.material_ids])
             tri_mesh.append(np.full(len(f), mi, np.int32))
-            occ.append(np.full(len(f), getattr(mesh, "occluder", True) or mesh.emission is None, bool))
             if mesh.normals is not None:
                 vnormals.append(np.asarray(mesh.normals, np.float64))
                 has_vn.append(np.ones(len(f), bool))
@@ -72,25 +71,30 @@ class CompiledScene:
         self.tri_normal = cross / np.where(length > 0, length, 1.0)[:, None]
         self.scene_extent = float(np.abs(self.vertices).max()) if len(self.vertices) else 1.0
 
-        # Non-occluding emitters (Cycles' lamps) are kept out of the main BVH: shadow rays and paths
-        # pass through them; ``passthrough_hits`` finds where a segment crosses them.
-        self.tri_occluder = np.concatenate(occ)
-        self.passthrough_prims = np.nonzero(~self.tri_occluder)[0]
-        self.has_passthrough = self.passthrough_prims.size > 0
-        vf32 = self.vertices.astype(np.float32)
         self.embree = rtcs.EmbreeScene()
-        if not self.has_passthrough:
-            self._main_prims = None
-            TriangleMesh(self.embree, vf32, self.faces.astype(np.int32))
-        else:
-            self._main_prims = np.nonzero(self.tri_occluder)[0]
-            if self._main_prims.size == 0:
-                raise SceneError("objects", "the scene has only lights (non-occluding emitters): add geometry")
-            TriangleMesh(self.embree, vf32, self.faces[self._main_prims].astype(np.int32))
-            self.embree_passthrough = rtcs.EmbreeScene()
-            TriangleMesh(self.embree_passthrough, vf32, self.faces[self.passthrough_prims].astype(np.int32))
+        TriangleMesh(self.embree, self.vertices.astype(np.float32), self.faces.astype(np.int32))
         # tri_emitter is filled in by the light set (area lights).
         self.tri_emitter = np.full(len(self.faces), -1, np.int32)
+        self._separate_passthrough_emitters(scene)
+
+    def _separate_passthrough_emitters(self, scene: Scene) -> None:
+        """Keep non-occluding emitters (Cycles' lamps) out of the main BVH: shadow rays and paths
+        pass through them; ``passthrough_hits`` finds where a segment crosses them (their own BVH)."""
+        occluding = np.array([getattr(m, "occluder", True) or m.emission is None for m in scene.meshes], bool)
+        self.tri_occluder = occluding[self.tri_mesh]
+        self.passthrough_prims = np.nonzero(~self.tri_occluder)[0]
+        self.has_passthrough = self.passthrough_prims.size > 0
+        self._main_prims = None
+        if not self.has_passthrough:
+            return
+        self._main_prims = np.nonzero(self.tri_occluder)[0]
+        if self._main_prims.size == 0:
+            raise SceneError("objects", "the scene has only lights (non-occluding emitters): add geometry")
+        vf32 = self.vertices.astype(np.float32)
+        self.embree = rtcs.EmbreeScene()
+        TriangleMesh(self.embree, vf32, self.faces[self._main_prims].astype(np.int32))
+        self.embree_passthrough = rtcs.EmbreeScene()
+        TriangleMesh(self.embree_passthrough, vf32, self.faces[self.passthrough_prims].astype(np.int32))
 
     @property
     def has_area_lights(self) -> bool:

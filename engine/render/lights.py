@@ -411,12 +411,12 @@ class LightSet:
             if len(tris) == 0:
                 continue
             compiled.tri_emitter[tris] = len(self.lights)
-            if not getattr(mesh, "camera_visible", True) and not getattr(mesh, "occluder", True):
+            if not getattr(mesh, "visible_camera", True) and not getattr(mesh, "occluder", True):
                 self.camera_hidden.add(len(self.lights))
             self.lights.append(AreaEmitter(mesh.emission, tris, compiled, getattr(mesh, "two_sided", False),
                                            getattr(mesh, "spread_deg", 180.0)))
         for light in scene.lights:
-            if not getattr(light, "camera_visible", True):
+            if not getattr(light, "visible_camera", True):
                 self.camera_hidden.add(len(self.lights))
             if isinstance(light, EnvironmentLight):
                 self.environment = EnvironmentEmitter(light.radiance)

@@ -53,8 +53,8 @@ class Mesh:
     ``two_sided`` — both faces emit the same radiance (Cycles' Emission shader);
     ``occluder`` — False makes the mesh a lamp in Cycles' sense: rays and shadow rays pass
     through it, it only adds its emission where a ray crosses it (needs ``emission``);
-    ``camera_visible`` — False hides a non-occluding emitter from camera rays;
-    (point, spot and directional lights have the same field for their disks, spheres and discs);
+    ``visible_camera`` — False hides a non-occluding emitter from camera rays (point, spot and
+    directional lights have the same field for their disks, spheres and discs);
     ``spread_deg`` — Cycles' area-light spread (full angle, 0 < s ≤ 180): radiance
     L·f(θ), f = N·max(0, tan(s/2) − tan θ) with ∫ f cosθ dω = π (the emitted power is kept).
     """
@@ -68,7 +68,7 @@ class Mesh:
     emission: object | None = None
     two_sided: bool = False
     occluder: bool = True
-    camera_visible: bool = True
+    visible_camera: bool = True
     spread_deg: float = 180.0
 
 
@@ -83,7 +83,7 @@ class PointLight:
     intensity: object             # spectrum: radiant intensity (radiance × area / sr)
     radius: float = 0.0
     soft_falloff: bool = True
-    camera_visible: bool = True   # camera rays see the disk/sphere (radius > 0)
+    visible_camera: bool = True   # camera rays see the disk/sphere (radius > 0)
 
 
 @dataclass
@@ -98,7 +98,7 @@ class SpotLight:
     blend_profile: str = "angle"
     radius: float = 0.0           # as PointLight.radius
     soft_falloff: bool = True
-    camera_visible: bool = True
+    visible_camera: bool = True
 
 
 @dataclass
@@ -108,7 +108,7 @@ class DirectionalLight:
     #: full angular diameter of the source; > 0: uniform radiance E/(π sin²(angle/2)) in that cone
     #: (Cycles' sun angle: soft shadows, same irradiance)
     angle_deg: float = 0.0
-    camera_visible: bool = True   # camera rays see the sun's disc (angle > 0)
+    visible_camera: bool = True   # camera rays see the sun's disc (angle > 0)
 
 
 @dataclass

@@ -310,7 +310,7 @@ def _illuminant(d: dict, field: str, scale: float):
     return RGBIlluminantSpectrum(rgb, scale)
 
 
-def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
+def _parse_object_base(d: dict, field: str, base_dir: str, material_names) -> Mesh:
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object")
     shape = choice(_require(d, "shape", field), f"{field}.shape", ("mesh", "sphere", "quad", "triangles"))
@@ -384,12 +384,10 @@ def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
             f = f"{field}.material" if "materials" not in d else f"{field}.materials[{i}]"
             raise SceneError(f, f"unknown material {m!r} (defined: {', '.join(sorted(material_names)) or 'none'})")
 
-    emission = _parse_emission(_without_emitter_options(d["emission"]), f"{field}.emission") \
-        if d.get("emission") is not None else None
-    options = _emitter_options(d["emission"], f"{field}.emission") if emission is not None else {}
+    emission = _parse_emission(d["emission"], f"{field}.emission") if d.get("emission") is not None else None
     return Mesh(name=name, vertices=np.asarray(data.vertices, dtype=np.float64), faces=faces,
                 materials=list(mat_list), material_ids=ids.astype(np.int32), normals=data.vertex_normals,
-                emission=emission, **options)
+                emission=emission)
 
 
 def _float_array(value, field, what):
@@ -491,11 +489,11 @@ def _parse_light_base(d: dict, field: str):
 # original meaning, so existing and peer scenes render exactly as before.
 
 #: optional keys of each light type
-LIGHT_OPTIONS = {"point": ("radius", "soft_falloff", "camera_visible"),
-                 "spot": ("radius", "soft_falloff", "camera_visible", "blend_profile"),
-                 "directional": ("angle_deg", "camera_visible")}
+LIGHT_OPTIONS = {"point": ("radius", "soft_falloff", "visible_camera"),
+                 "spot": ("radius", "soft_falloff", "visible_camera", "blend_profile"),
+                 "directional": ("angle_deg", "visible_camera")}
 #: optional emitter options inside "emission" (Mesh fields; defaults: one-sided, opaque, Lambertian)
-EMITTER_OPTIONS = ("two_sided", "occluder", "camera_visible", "spread_deg")
+EMITTER_OPTIONS = ("two_sided", "occluder", "spread_deg")
 
 
 def _flag(d, key: str, field: str, default: bool) -> bool:
@@ -516,17 +514,26 @@ def parse_light(d: dict, field: str):
     if isinstance(light, DirectionalLight):
         light.angle_deg = number(d.get("angle_deg", 0.0), f"{field}.angle_deg", 0, 180, hi_open=True)
     if not isinstance(light, EnvironmentLight):
-        light.camera_visible = _flag(d, "camera_visible", field, True)
+        light.visible_camera = _flag(d, "visible_camera", field, True)
     return light
 
 
-def _without_emitter_options(d):
-    return {k: v for k, v in d.items() if k not in EMITTER_OPTIONS} if isinstance(d, dict) else d
+def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
+    """An object from its JSON object, with the optional emitter options (EMITTER_OPTIONS) in its
+    "emission"."""
+    emission = d.get("emission") if isinstance(d, dict) else None
+    if not isinstance(emission, dict) or not any(key in emission for key in EMITTER_OPTIONS):
+        return _parse_object_base(d, field, base_dir, material_names)
+    plain = {key: value for key, value in emission.items() if key not in EMITTER_OPTIONS}
+    mesh = _parse_object_base({**d, "emission": plain}, field, base_dir, material_names)
+    for key, value in _emitter_options(emission, f"{field}.emission").items():
+        setattr(mesh, key, value)
+    return mesh
 
 
 def _emitter_options(d, field: str) -> dict:
     """The Mesh emitter fields given in an "emission" object (validated)."""
-    out = {key: _flag(d, key, field, True) for key in ("two_sided", "occluder", "camera_visible") if key in d}
+    out = {key: _flag(d, key, field, True) for key in ("two_sided", "occluder") if key in d}
     if "spread_deg" in d:
         out["spread_deg"] = number(d["spread_deg"], f"{field}.spread_deg", 0, 180, lo_open=True)
     return out

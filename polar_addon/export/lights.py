@@ -61,15 +61,15 @@ def export_light(obj, matrix_world, warnings: list):
             i_scale = scale * radius * radius if radius > 0 else scale / math.pi
         intensity = RGBIlluminantSpectrum(colour, i_scale)
         if light.type == "POINT":
-            return PointLight(position, intensity, radius=radius, soft_falloff=soft, camera_visible=camera)
+            return PointLight(position, intensity, radius=radius, soft_falloff=soft, visible_camera=camera)
         return SpotLight(position, direction, intensity, cone_angle_deg=math.degrees(light.spot_size),
                          blend=float(light.spot_blend), blend_profile="cycles", radius=radius, soft_falloff=soft,
-                         camera_visible=camera)
+                         visible_camera=camera)
     if light.type == "SUN":
         angle = max(float(getattr(light, "angle", 0.0)), 0.0)
         irradiance = scale if normalise or angle <= 0 else scale * math.pi * math.sin(angle / 2) ** 2
         return DirectionalLight(direction, RGBIlluminantSpectrum(colour, irradiance),
-                                angle_deg=math.degrees(angle), camera_visible=camera)
+                                angle_deg=math.degrees(angle), visible_camera=camera)
     if light.type == "AREA":
         cycles = getattr(light, "cycles", None)
         if cycles is not None and getattr(cycles, "is_portal", False):
@@ -109,5 +109,5 @@ def _area_light_mesh(obj, light, M, scale, colour, normalise, warnings):
         return None
     return Mesh(name=f"light:{obj.name}", vertices=world, faces=faces, materials=["__polar_black__"],
                 material_ids=np.zeros(len(faces), np.int32), emission=RGBIlluminantSpectrum(colour, radiance),
-                two_sided=False, occluder=False, camera_visible=bool(getattr(obj, "visible_camera", True)),
+                two_sided=False, occluder=False, visible_camera=bool(getattr(obj, "visible_camera", True)),
                 spread_deg=min(math.degrees(spread), 180.0))
