@@ -192,15 +192,16 @@ class PathTracer:
         prev_delta = np.ones(n_total, bool)
         prev_pdf = np.zeros(n_total)
         eta_sq = np.ones(n_total)
-        stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0}
-        light_set = self.lights
-        env = light_set.environment
-        compiled = self.scene
-        p_prev = n_prev = None
+        p_prev = n_prev = None      # where the paths' last segments started (light selection, lamp pdfs)
 
         def at_prev(sel):
             """(position, side normal) of the vertices that the paths ``sel`` left (light selection)."""
             return (None, None) if p_prev is None else (p_prev[:, sel], None if n_prev is None else n_prev[:, sel])
+
+        stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0}
+        light_set = self.lights
+        env = light_set.environment
+        compiled = self.scene
 
         for bounce in range(st.max_depth):
             if abort is not None and abort.is_set():
