@@ -118,13 +118,15 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
                 local_faces = local_faces[:, [0, 2, 1]]
             meshes.append(Mesh(name=f"{obj.name}:{slot}", vertices=Pw[F[sel]].reshape(-1, 3),
                                faces=local_faces, materials=[key], material_ids=np.zeros(len(sel), np.int32),
-                               normals=N[corner], emission=emissions.get(key),
-                               two_sided=True))   # Cycles' Emission shader emits from both faces
+                               normals=N[corner], emission=emissions.get(key)))
     if not meshes:
         raise SceneError("scene", "nothing to render: the scene has no visible geometry")
     world = export_world(scene.world, warnings)
     if world is not None:
         lights.append(world)
+    for mesh in meshes:
+        if mesh.emission is not None and mesh.occluder:
+            mesh.two_sided = True      # Cycles' Emission shader emits from both faces (lamps stay one-sided)
     if not lights and not any(m.emission is not None for m in meshes):
         warnings.append("the scene has no lights, no emissive materials and a black world: the image is black")
     # Cycles picks lights by importance (its light tree); selection by power is the closest
