@@ -158,7 +158,9 @@ def test_light_units_match_cycles(addon):
             assert light.irradiance.eval(lam, mono=True)[0, 0] == pytest.approx(energy)
             np.testing.assert_allclose(light.direction, [0, 0, -1], atol=1e-12)
         else:
-            assert light.emission.eval(lam, mono=True)[0, 0] == pytest.approx(energy / (4 * 0.25))
+            # Blender ≥ 4.0: L = P/(π·A) (kernel/light/area.h, eval_fac = invarea/π)
+            assert light.emission.eval(lam, mono=True)[0, 0] == pytest.approx(energy / (math.pi * 0.25))
+            assert not light.occluder and not light.two_sided
             v = light.vertices
             normal = np.cross(v[light.faces[0, 1]] - v[light.faces[0, 0]], v[light.faces[0, 2]] - v[light.faces[0, 0]])
             assert normal[2] < 0                                   # emits downwards (local −Z)

@@ -81,6 +81,26 @@ class CompiledScene:
                           for m in scene.meshes]
         # tri_emitter is filled in by the light set (area lights).
         self.tri_emitter = np.full(len(self.faces), -1, np.int32)
+        self._separate_passthrough_emitters(scene)
+
+    def _separate_passthrough_emitters(self, scene: Scene) -> None:
+        """Keep non-occluding emitters (Cycles' lamps) out of the main BVH: shadow rays and paths
+        pass through them; ``passthrough_hits`` finds where a segment crosses them (their own BVH)."""
+        occluding = np.array([getattr(m, "occluder", True) or m.emission is None for m in scene.meshes], bool)
+        self.tri_occluder = occluding[self.tri_mesh]
+        self.passthrough_prims = np.nonzero(~self.tri_occluder)[0]
+        self.has_passthrough = self.passthrough_prims.size > 0
+        self._main_prims = None
+        if not self.has_passthrough:
+            return
+        self._main_prims = np.nonzero(self.tri_occluder)[0]
+        if self._main_prims.size == 0:
+            raise SceneError("objects", "the scene has only lights (non-occluding emitters): add geometry")
+        vf32 = self.vertices.astype(np.float32)
+        self.embree = rtcs.EmbreeScene()
+        TriangleMesh(self.embree, vf32, self.faces[self._main_prims].astype(np.int32))
+        self.embree_passthrough = rtcs.EmbreeScene()
+        TriangleMesh(self.embree_passthrough, vf32, self.faces[self.passthrough_prims].astype(np.int32))
 
     @property
     def has_area_lights(self) -> bool:
@@ -99,8 +119,44 @@ class CompiledScene:
             dists = np.minimum(t_max, 1e37).astype(np.float32)
             res = self.embree.run(of, df, dists=dists, output=1)
         prim = res["primID"].astype(np.int64)
+        if self._main_prims is not None:
+            prim = np.where(prim >= 0, self._main_prims[np.maximum(prim, 0)], -1)
         return Hits(prim, res["u"].astype(np.float64), res["v"].astype(np.float64),
                     res["tfar"].astype(np.float64))
+
+    def passthrough_hits(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray,
+                         max_layers: int = 8) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Every crossing of the segments o → o + t_max·d (t_max may be inf) with non-occluding
+        emitters, as a list of layers (ray index, global triangle, distance from o): layer k holds
+        each ray's k-th crossing (so a ray appears at most once per layer), up to ``max_layers``.
+
+        Each layer restarts just past the previous crossing (Embree has no t_near).
+        """
+        layers = []
+        if not self.has_passthrough or o.shape[1] == 0:
+            return layers
+        idx = np.arange(o.shape[1])
+        start = np.zeros(o.shape[1])
+        o_cur, t_left = o, np.asarray(t_max, np.float64)
+        for _ in range(max_layers):
+            of = np.ascontiguousarray(o_cur.T, dtype=np.float32)
+            df = np.ascontiguousarray(d[:, idx].T, dtype=np.float32)
+            res = self.embree_passthrough.run(of, df, dists=np.minimum(t_left, 1e37).astype(np.float32), output=1)
+            local = res["primID"]
+            got = local >= 0
+            if not got.any():
+                break
+            t = res["tfar"].astype(np.float64)[got]
+            layers.append((idx[got], self.passthrough_prims[local[got]], start[got] + t))
+            # continue just past the crossing
+            step = t + RAY_EPSILON * (1.0 + np.abs(o_cur[:, got]).max(0))
+            idx, start, t_left = idx[got], start[got] + step, t_left[got] - step
+            o_cur = o_cur[:, got] + d[:, idx] * step[None, :]
+            keep = t_left > 0
+            idx, start, t_left, o_cur = idx[keep], start[keep], t_left[keep], o_cur[:, keep]
+            if idx.size == 0:
+                break
+        return layers
 
     def occluded(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray) -> np.ndarray:
         """True where the segment o → o + t_max·d is blocked."""
@@ -109,6 +165,27 @@ class CompiledScene:
         dists = np.minimum(t_max, 1e37).astype(np.float32)
         res = self.embree.run(of, df, dists=dists, query="OCCLUDED")
         return res == 0
+
+    def unblock_own_hits(self, emitter: int, p: np.ndarray, n_g: np.ndarray, wi: np.ndarray, dist: np.ndarray,
+                         cos_l: np.ndarray, blocked: np.ndarray) -> np.ndarray:
+        """``blocked`` with the shadow rays p → p + dist·wi towards emitter ``emitter`` cleared where
+        they were stopped by that emitter itself.
+
+        A shadow ray starts at p offset along n_g, parallel to p → x, so it meets the emitter's
+        plane earlier than ``dist`` by about offset/cosθ_light (``cos_l``); at grazing angles that
+        exceeds the t_max margin and an opaque emitter shadows itself.  A blocked ray whose first
+        hit is the emitter within that distance of x is visible after all.
+        """
+        idx = blocked.nonzero()[0]
+        o = offset_origin(p[:, idx], n_g[:, idx], wi[:, idx])
+        d = dist[idx]
+        hits = self.intersect(o, wi[:, idx], d * 1.001 + 1e-3)
+        slack = (4.0 * RAY_EPSILON * (1.0 + np.abs(p[:, idx]).max(0)) / np.maximum(cos_l[idx], 1e-3)
+                 + 1e-4 * (1.0 + d))
+        own = (hits.prim >= 0) & (self.tri_emitter[np.maximum(hits.prim, 0)] == emitter) & (hits.t >= d - slack)
+        out = blocked.copy()
+        out[idx[own]] = False
+        return out
 
     # ------------------------------------------------------------------ surface data
 

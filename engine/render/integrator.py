@@ -203,6 +203,12 @@ class PathTracer:
         prev_delta = np.ones(n_total, bool)
         prev_pdf = np.zeros(n_total)
         eta_sq = np.ones(n_total)
+        p_prev = n_prev = None      # where the paths' last segments started (light selection, lamp pdfs)
+
+        def at_prev(sel):
+            """(position, side normal) of the vertices that the paths ``sel`` left (light selection)."""
+            return (None, None) if p_prev is None else (p_prev[:, sel], None if n_prev is None else n_prev[:, sel])
+
         stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0}
         light_set = self.lights
         env = light_set.environment
@@ -242,24 +248,35 @@ class PathTracer:
                 w = np.ones(int(miss.sum()))
                 nd = ~prev_delta[miss]
                 if nd.any():
-                    p_light = env.pdf(d[:, miss]) * light_set.select_prob
+                    p_light = env.pdf(d[:, miss]) * light_set.prob_at(
+                        light_set.environment_index, *at_prev(miss))
                     w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
                 add_light(radiance, path, T, miss.nonzero()[0], Le, w)
-            emitter = compiled.tri_emitter[hits.prim] if self.has_area_lights else None
-            lit = (emitter >= 0) & hit if emitter is not None else None
-            if lit is not None and lit.any():
-                idx = lit.nonzero()[0]
-                cos_hit = -dot(d[:, idx], compiled.tri_normal[hits.prim[idx]].T)
-                front = cos_hit > 0             # emitters are one-sided: only their front faces shine
-                idx, cos_hit = idx[front], cos_hit[front]
-                for li in np.unique(emitter[idx]):
+            if self.has_area_lights:
+                lit = (compiled.tri_emitter[hits.prim] >= 0) & hit
+                if lit.any():
+                    idx = lit.nonzero()[0]
+                    self._emitter_hits(radiance, path, T, idx, hits.prim[idx], hits.t[idx], d, lk,
+                                       prev_delta, prev_pdf, at_prev, bounce == 0)
+            if light_set.hittable:
+                # analytic lamps (sphere/disk lights, sun discs): seen, never occluding
+                seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
+                for li in light_set.hittable:
                     light = light_set.lights[li]
-                    mine = emitter[idx] == li
-                    sel = idx[mine]
-                    Le = self._emitted(light, lk.take(sel))
-                    p_light = light.pdf_hit(hits.t[sel], cos_hit[mine]) * light_set.select_prob
-                    wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
-                    add_light(radiance, path, T, sel, Le, wsel)
+                    if bounce == 0 and li in light_set.camera_hidden:
+                        continue
+                    rows, factor, pdf_l = light.intersect(o, d, seg, hit, p_prev)
+                    if rows.size:
+                        Le = self._emitted(light, lk.take(rows)) * factor[None, :]
+                        p_light = pdf_l * light_set.prob_at(li, *at_prev(rows))
+                        w = np.where(prev_delta[rows], 1.0, power_heuristic(prev_pdf[rows], p_light))
+                        add_light(radiance, path, T, rows, Le, w)
+            if compiled.has_passthrough:
+                # lamps (non-occluding emitters) crossed before the hit: they add light, the ray goes on
+                seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
+                for rows, prims, dists in compiled.passthrough_hits(o, d, seg):
+                    self._emitter_hits(radiance, path, T, rows, prims, dists, d, lk, prev_delta, prev_pdf,
+                                       at_prev, bounce == 0)
 
             if bounce + 1 >= st.max_depth:
                 break
@@ -274,6 +291,7 @@ class PathTracer:
             p, n_g, n_s = compiled.surface(prim, u, v)
             hits_at = surface_points(compiled, prim, u, v) if self.textured else None
             wo = -d
+            n_side = n_g * np.sign(dot(n_g, wo))[None, :] if light_set.spatial else None
             # Stokes frame of the arriving segment: x_T is already ⟂ d.
             mat = compiled.tri_material[prim]
             grp = self.group_of[mat]
@@ -330,6 +348,9 @@ class PathTracer:
             path, T, x_T, d, eta_sq, prev_delta, prev_pdf, p, n_g, sampler.keys = keep_paths(
                 valid, path, newT, new_xT, new_d, eta_sq, is_delta, pdf_next, p, n_g, sampler.keys)
             lk, lk_m = compress_lookups(valid, lk, lk_m)
+            # where the next segment starts (light selection, analytic lamps' pdfs)
+            p_prev = p if light_set.spatial or light_set.hittable else None
+            n_prev = keep_paths(valid, n_side)[0] if n_side is not None else None
             o = offset_origin(p, n_g, d)
             t_max = None
 
@@ -367,7 +388,8 @@ class PathTracer:
         n = sp.n
         P = self.P
         out = np.zeros((P, 3 if self.rgb_mode else lookup.lam.shape[0], n))
-        choice = np.minimum((u[0] * len(light_set)).astype(np.int64), len(light_set) - 1)
+        n_side = sp.n_g * np.sign(dot(sp.n_g, sp.wo))[None, :] if light_set.spatial else None
+        choice, u_rest, chosen_prob = light_set.choose(u[0], sp.p, n_side)
         lights_chosen = np.unique(choice)
         for li in lights_chosen:
             # one light for every path: whole arrays instead of gathered copies
@@ -375,7 +397,8 @@ class PathTracer:
             light = light_set.lights[li]
             p = gather(sp.p, sel)
             # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
-            u_tri = gather(u[0], sel) * len(light_set) - li
+            u_tri = gather(u_rest, sel)
+            select_prob = light_set.prob[li] if chosen_prob is None else gather(chosen_prob, sel)
             wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, gather(u[1], sel), gather(u[2], sel))))
             value = self._emitted(light, lookup.take(sel)) * scale[None, :]
             sub = ShadingPoint(p, gather(sp.n_s, sel), gather(sp.n_g, sel), gather(sp.wo, sel), gather(sp.lam, sel),
@@ -396,8 +419,8 @@ class PathTracer:
             if light.is_delta:
                 mis = np.ones(m)
             else:
-                mis = power_heuristic(pdf_l * light_set.select_prob, bsdf.pdf(sub, wi))
-            weight = value * (cos_i * mis / light_set.select_prob * ok)[None, :]
+                mis = power_heuristic(pdf_l * select_prob, bsdf.pdf(sub, wi))
+            weight = value * (cos_i * mis / select_prob * ok)[None, :]
             t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
             if self.visibility is not None and self.visibility.affects_shadows:
                 # shadow-invisible and pass-through (alpha) surfaces let (part of) the light through
@@ -412,6 +435,38 @@ class PathTracer:
                     blocked[test] = self.scene.occluded(offset_origin(p[:, test], sub.n_g[:, test], wi[:, test]),
                                                         wi[:, test], t_max[test])
                     stats["shadow_rays"] += test.size
+                if blocked.any() and light.blocks_own_shadow_rays:
+                    # cosθ at the light from the area pdf dist²/(cosθ·A)
+                    cos_l = np.minimum(dist * dist / np.maximum(pdf_l * light.total_area, 1e-300), 1.0)
+                    blocked = self.scene.unblock_own_hits(li, p, sub.n_g, wi, dist, cos_l, blocked)
                 weight = weight * (~blocked)[None, :]
             out[:, :, sel] = throughput_times_stokes(T, gather(rows, sel), S, weight)
         return out
+
+    def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, idx: np.ndarray, prims: np.ndarray,
+                      dists: np.ndarray, d: np.ndarray, lk: WavelengthLookup, prev_delta: np.ndarray,
+                      prev_pdf: np.ndarray, at_prev, camera: bool) -> None:
+        """Emission picked up where the rays ``idx`` (each at most once) hit or cross emitting
+        triangles ``prims`` at distances ``dists``, MIS-weighted against next-event estimation
+        from the vertices the rays left (``at_prev(rows)``: their positions and side normals).
+        ``camera``: these are camera rays (lights hidden from the camera add nothing)."""
+        light_set = self.lights
+        emitter = self.scene.tri_emitter[prims]
+        cos_hit = -dot(d[:, idx], self.scene.tri_normal[prims].T)
+        for li in np.unique(emitter):
+            if li < 0 or (camera and li in light_set.camera_hidden):
+                continue
+            light = light_set.lights[li]
+            mine = emitter == li
+            cos_l = light.facing(cos_hit[mine])
+            front = cos_l > 0             # one-sided emitters shine only from their front faces
+            sel, cos_l = idx[mine][front], cos_l[front]
+            if sel.size == 0:
+                continue
+            Le = self._emitted(light, lk.take(sel))
+            factor = light.emission_factor(cos_l)
+            if factor is not None:
+                Le = Le * factor[None, :]
+            p_light = light.pdf_hit(dists[mine][front], cos_l) * light_set.prob_at(li, *at_prev(sel))
+            wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
+            add_light(radiance, path, T, sel, Le, wsel)

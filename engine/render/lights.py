@@ -10,7 +10,12 @@ that pdf (0 for delta lights: point, spot, directional) and a validity mask.
 The emitted spectrum itself comes from ``radiance(lam, mono)`` (or, where the
 integrator works in RGB, from ``rgb()``: the light's spectrum integrated
 against the CIE observer on the 1 nm grid).
-Light selection (uniform over the lights) is handled by ``LightSet``.
+Lights that are not triangles but can be hit (``hittable``: spheres/disks of point and spot
+lights with a radius, suns with an angle) are found by ``intersect`` on every path segment and
+weighted by MIS against next-event estimation like emissive triangles; they never occlude.
+Light selection (uniform, or by estimated importance) is handled by ``LightSet``.
+Radiometry of the Cycles options (sphere/disk lights, sun angle, spread, spot blend) follows
+Cycles' intern/cycles/kernel/light/{point,spot,distant,area}.h.
 """
 
 from __future__ import annotations
@@ -19,16 +24,47 @@ import math
 
 import numpy as np
 
+from ..errors import SceneError
 from ..kernels.geometry import area_light_sample
-from ..materials.sampling import uniform_sphere
-from ..spectral import GRID_NM, spectrum_to_linear_srgb
+from ..materials.sampling import local_to_world, uniform_sphere
+from ..spectral import GRID_NM, luminance, spectrum_to_linear_srgb
 from ..scene.description import DirectionalLight, EnvironmentLight, PointLight, SpotLight
 from ..vec3 import dot, normalize
+
+
+def uniform_cone(u1, u2, one_minus_cos_max, axis):
+    """Directions uniform in the cone of 1 − cosθ ≤ ``one_minus_cos_max`` around the unit
+    ``axis`` (3,) or (3, N); pdf = 1/(2π·one_minus_cos_max)."""
+    one_minus_cos = u1 * one_minus_cos_max
+    cos_t = 1.0 - one_minus_cos
+    sin_t = np.sqrt(np.maximum(one_minus_cos * (2.0 - one_minus_cos), 0.0))
+    phi = 2.0 * math.pi * u2
+    local = np.stack((sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t))
+    axis = np.broadcast_to(axis.reshape(3, -1), local.shape)
+    return local_to_world(local, axis), cos_t
+
+
+#: share of a light's selection importance kept when it lies below the shading point's horizon
+#: (transmitting materials can still use it; a floor keeps every light's probability > 0)
+BELOW_HORIZON = 0.1
+
+
+def facing_factor(to, dist, sin_alpha, n):
+    """Orientation term of the selection importance at points with side normals n (3, N) for
+    light centres in directions to/dist subtending half-angles asin(sin_alpha):
+    BELOW_HORIZON + (1 − BELOW_HORIZON)·cos⁺(max(θ − α, 0)), θ the angle between n and the centre."""
+    if n is None:
+        return 1.0
+    cos_t = np.clip(dot(n, to) / np.maximum(dist, 1e-300), -1.0, 1.0)
+    theta = np.maximum(np.arccos(cos_t) - np.arcsin(np.clip(sin_alpha, 0.0, 1.0)), 0.0)
+    return BELOW_HORIZON + (1.0 - BELOW_HORIZON) * np.maximum(np.cos(theta), 0.0)
 
 
 class _Light:
     is_delta = False
     at_infinity = False
+    hittable = False      # an analytic emitter that rays find through ``intersect`` (not in the BVH)
+    blocks_own_shadow_rays = False    # an opaque emitter whose geometry can stop its own shadow rays
 
     def __init__(self, spectrum):
         self.spectrum = spectrum
@@ -56,44 +92,175 @@ class EnvironmentEmitter(_Light):
     def pdf(self, d):
         return np.full(d.shape[1], 1.0 / (4.0 * math.pi))
 
+    def power(self, scene_radius=1.0):
+        # a sphere of radius R under uniform radiance L receives π·L·4πR²
+        return float(luminance(self.rgb())) * 4.0 * math.pi ** 2 * scene_radius ** 2
+
+    def importance(self, p, n=None):
+        return np.full(p.shape[1], math.pi * float(luminance(self.rgb())))
+
+
+def spread_profile(spread_rad: float):
+    """Cycles' area-light spread f(cosθ) (kernel/light/area.h: area_light_spread_attenuation),
+    normalised so that ∫ f cosθ dω = π; None for spread ≥ 180° (f = 1, Lambertian)."""
+    half = 0.5 * spread_rad
+    if half >= 0.5 * math.pi - 1e-9:
+        return None
+    tan_half = math.tan(half)
+    norm = 1.0 / (tan_half - half) if half > 0.05 else 3.0 / half ** 3
+
+    def f(cos_t):
+        c = np.clip(cos_t, 1e-12, 1.0)
+        tan_t = np.sqrt(np.maximum(1.0 - c * c, 0.0)) / c
+        return np.where(cos_t > 0, np.maximum(0.0, (tan_half - tan_t) * norm), 0.0)
+    return f
+
 
 class AreaEmitter(_Light):
-    """A one-sided Lambertian emitter made of mesh triangles (emits along their front normal).
+    """A Lambertian emitter made of mesh triangles: one-sided (emits along their front normal)
+    or two-sided (both faces, same radiance), optionally with Cycles' spread profile.
 
     Points are sampled uniformly by area; the solid-angle pdf is
-    dist² / (cosθ_light · A_total).
+    dist² / (|cosθ_light| · A_total).
     """
 
-    def __init__(self, spectrum, tris: np.ndarray, compiled):
+    def __init__(self, spectrum, tris: np.ndarray, compiled, two_sided=False, spread_deg=180.0):
         super().__init__(spectrum)
         self.tris = tris
         areas = compiled.tri_area[tris]
         self.total_area = float(areas.sum())
         self.cdf = np.cumsum(areas) / self.total_area
         self.compiled = compiled
+        self.two_sided = bool(two_sided)
+        self.profile = spread_profile(math.radians(spread_deg))
+        # Opaque emitters can stop their own grazing shadow rays (see CompiledScene.unblock_own_hits).
+        # The correction is applied to two-sided (Blender) emitters only: for the scene format's
+        # one-sided emitters it would change peer renders (cornell_lambert: 2 of 25,600 pixels at 2 spp).
+        self.blocks_own_shadow_rays = self.two_sided and bool(compiled.tri_occluder[tris].all())
 
     def sample(self, p, u):
         # u has 3 rows: triangle choice, then the point within it.
         c = self.compiled
-        return area_light_sample(p, u, self.cdf, self.tris, c.faces, c.vertices, c.tri_normal, self.total_area)
+        if not self.two_sided and self.profile is None:
+            return area_light_sample(p, u, self.cdf, self.tris, c.faces, c.vertices, c.tri_normal, self.total_area)
+        # the same sampling, with both faces / the spread profile (NumPy: only Blender lamps use it)
+        idx = np.minimum(np.searchsorted(self.cdf, u[0], side="right"), len(self.tris) - 1)
+        tri = self.tris[idx]
+        f = c.faces[tri]
+        su = np.sqrt(u[1])
+        b1 = 1.0 - su
+        b2 = u[2] * su
+        V = c.vertices
+        x = (V[f[:, 0]] * (1.0 - b1 - b2)[:, None] + V[f[:, 1]] * b1[:, None] + V[f[:, 2]] * b2[:, None]).T
+        to = x - p
+        dist2 = dot(to, to)
+        dist = np.sqrt(dist2)
+        wi = to / np.where(dist > 0, dist, 1.0)
+        cos_l = -dot(wi, c.tri_normal[tri].T)
+        if self.two_sided:
+            cos_l = np.abs(cos_l)
+        valid = (cos_l > 0) & (dist > 0)
+        pdf = np.where(valid, dist2 / np.where(valid, cos_l, 1.0) / self.total_area, 0.0)
+        scale = np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0)
+        if self.profile is not None:
+            scale = scale * self.profile(cos_l)
+            valid &= scale > 0
+        return wi, dist, scale, pdf, valid
+
+    def facing(self, cos_l):
+        """cosθ at the emitter of rays arriving with −dot(d, n) = cos_l, as seen by the emitting side
+        (≤ 0: the ray sees a side that does not emit)."""
+        return np.abs(cos_l) if self.two_sided else cos_l
+
+    def emission_factor(self, cos_l):
+        """Directional factor of the radiance (the spread profile), or None (Lambertian)."""
+        return None if self.profile is None else self.profile(cos_l)
 
     def pdf_hit(self, dist, cos_l):
-        """Solid-angle pdf of having sampled a point at distance dist whose front faces the ray at cos_l."""
+        """Solid-angle pdf of having sampled a point at distance dist whose emitting side faces the
+        ray at cos_l (from ``facing``)."""
         ok = cos_l > 0
         return np.where(ok, dist * dist / np.where(ok, cos_l, 1.0) / self.total_area, 0.0)
 
+    def power(self):
+        """Emitted power (luminance units; Lambertian: π·L·A per emitting side)."""
+        return math.pi * float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
+
+    def importance(self, p, n=None):
+        """Bound-like estimate of the irradiance at p (3, N) with side normals n: L·A/max(d², r²)
+        about the centroid, times the orientation term."""
+        if not hasattr(self, "_centre"):
+            c = self.compiled
+            corners = c.vertices[c.faces[self.tris]].reshape(-1, 3)
+            w = np.repeat(c.tri_area[self.tris], 3)
+            self._centre = (corners * w[:, None]).sum(0) / w.sum()
+            self._r2 = float(((corners - self._centre) ** 2).sum(1).max())
+        to = self._centre[:, None] - p
+        d2 = dot(to, to)
+        dist = np.sqrt(d2)
+        return (float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
+                / np.maximum(d2, max(self._r2, 1e-12))
+                * facing_factor(to, dist, math.sqrt(self._r2) / np.maximum(dist, 1e-300), n))
+
 
 class PointEmitter(_Light):
-    """Isotropic point light of radiant intensity I: irradiance I/r² at normal incidence."""
+    """Isotropic light of radiant intensity I: irradiance I/d² at normal incidence.
 
-    is_delta = True
+    With a radius r > 0 (Cycles, kernel/light/point.h) it is a uniform emitter of radiance
+    I/(πr²): a disk of radius r facing the receiver (``soft_falloff``; sampled uniformly by area,
+    on-axis irradiance I/(d² + r²)) or a sphere (sampled uniformly in its cone, exactly I/d²
+    outside; receivers inside it get no direct light from it).
+    """
 
-    def __init__(self, spectrum, position):
+    def __init__(self, spectrum, position, radius=0.0, soft_falloff=True):
         super().__init__(spectrum)
         self.position = np.asarray(position, np.float64)
+        self.radius = float(radius)
+        self.soft_falloff = bool(soft_falloff)
+        self.is_delta = self.radius <= 0
+        self.hittable = not self.is_delta
 
     def _falloff(self, wi):
         return 1.0
+
+    def intersect(self, o, d, seg, hit, p_ref):
+        """Rays o + t·d, 0 < t < seg, that reach the sphere or disk: (rows, radiance factor relative
+        to the intensity spectrum (n,), solid-angle pdf of next-event estimation from p_ref (n,)).
+
+        The disk faces the ray origin (Cycles' point_light_intersect); the spot attenuation is
+        that of the origin's direction, so from outside the cone the light is black."""
+        r = self.radius
+        c = self.position[:, None]
+        to_c = c - o
+        dist2 = dot(to_c, to_c)
+        dist = np.sqrt(dist2)
+        outside = dist > r
+        along = dot(to_c, d)
+        if self.soft_falloff:
+            n = -to_c / np.where(dist > 0, dist, 1.0)           # disk normal, towards the origin
+            cos_l = -dot(d, n)
+            t = dist / np.where(cos_l > 0, cos_l, 1.0)
+            x = o + d * t[None, :] - c
+            ok = (cos_l > 0) & (dist > 0) & (dot(x, x) <= r * r)
+        else:
+            disc = along * along - (dist2 - r * r)
+            t = along - np.sqrt(np.maximum(disc, 0.0))
+            ok = outside & (disc >= 0) & (along > 0)
+            cos_l = np.ones_like(t)
+        ok &= (t > 0) & (t < seg)
+        rows = ok.nonzero()[0]
+        if rows.size == 0:
+            return rows, np.zeros(0), np.zeros(0)
+        wi = to_c[:, rows] / dist[rows]
+        factor = self._falloff(wi) / (math.pi * r * r) * np.ones(rows.size)
+        q = p_ref[:, rows] if p_ref is not None else o[:, rows]
+        if self.soft_falloff:
+            pdf = t[rows] ** 2 / (cos_l[rows] * math.pi * r * r)
+        else:
+            to = c - q
+            sin2 = np.minimum(r * r / np.maximum(dot(to, to), r * r), 1.0)
+            pdf = 1.0 / (2.0 * math.pi * (sin2 / (1.0 + np.sqrt(1.0 - sin2))))
+        return rows, factor, pdf
 
     def sample(self, p, u):
         to = self.position[:, None] - p
@@ -101,19 +268,68 @@ class PointEmitter(_Light):
         dist = np.sqrt(dist2)
         valid = dist > 0
         wi = to / np.where(valid, dist, 1.0)
-        scale = np.where(valid, self._falloff(wi) / np.where(valid, dist2, 1.0), 0.0)
-        return wi, dist, scale, np.zeros(p.shape[1]), valid
+        if self.is_delta:
+            scale = np.where(valid, self._falloff(wi) / np.where(valid, dist2, 1.0), 0.0)
+            return wi, dist, scale, np.zeros(p.shape[1]), valid
+        falloff = self._falloff(wi)          # by the direction to the centre, as Cycles' spot_light_attenuation
+        r = self.radius
+        if self.soft_falloff:
+            # disk ⟂ (p − centre), radius r, uniform by area: pdf = t²/(cos·πr²), radiance I/(πr²)
+            rho = r * np.sqrt(u[1])
+            phi = 2.0 * math.pi * u[2]
+            offset = local_to_world(np.stack((rho * np.cos(phi), rho * np.sin(phi), np.zeros_like(rho))), -wi)
+            to_s = to + offset
+            t2 = dot(to_s, to_s)
+            t = np.sqrt(t2)
+            w = to_s / np.where(t > 0, t, 1.0)
+            cos_l = dot(w, wi)                # the disk's normal is −wi (it faces p)
+            valid &= (cos_l > 0) & (t > 0)
+            pdf = np.where(valid, t2 / np.where(valid, cos_l * math.pi * r * r, 1.0), 0.0)
+            scale = np.where(valid, falloff * cos_l / np.where(valid, t2, 1.0), 0.0)
+            return w, t, scale, pdf, valid
+        # sphere: uniform cone of half-angle asin(r/d), hit distance by the law of cosines
+        valid &= dist > r
+        sin2 = np.minimum(r * r / np.where(valid, dist2, 1.0), 1.0)
+        one_minus_cos_max = sin2 / (1.0 + np.sqrt(1.0 - sin2))
+        w, cos_t = uniform_cone(u[1], u[2], one_minus_cos_max, wi)
+        t = dist * cos_t - np.sqrt(np.maximum(r * r - dist2 * (1.0 - cos_t * cos_t), 0.0))
+        pdf = np.where(valid, 1.0 / (2.0 * math.pi * np.where(valid, one_minus_cos_max, 1.0)), 0.0)
+        scale = np.where(valid, falloff * 2.0 * one_minus_cos_max / (r * r), 0.0)
+        return w, np.maximum(t, 0.0), scale, pdf, valid
+
+    def power(self):
+        return 4.0 * math.pi * float(luminance(self.rgb()))
+
+    def importance(self, p, n=None):
+        """Irradiance at p (3, N) facing the light, I·falloff/max(d², r²), times the orientation term."""
+        to = self.position[:, None] - p
+        d2 = dot(to, to)
+        dist = np.sqrt(np.maximum(d2, 1e-300))
+        wi = to / dist
+        return (float(luminance(self.rgb())) * self._falloff(wi) / np.maximum(d2, max(self.radius ** 2, 1e-12))
+                * facing_factor(to, dist, self.radius / dist, n))
 
 
 class SpotEmitter(PointEmitter):
-    """Point light restricted to a cone; ``blend`` smooths the edge (smoothstep in cos angle)."""
+    """Point light restricted to a cone; ``blend`` smooths the edge (smoothstep in cos angle).
 
-    def __init__(self, spectrum, position, direction, cone_angle_deg, blend):
-        super().__init__(spectrum, position)
+    Profile "angle": the edge runs from cos(half) to cos(half·(1 − blend)); profile "cycles"
+    (kernel/light/spot.h: spot_light_attenuation): from cos(half) to cos(half) + blend·(1 − cos(half)).
+    """
+
+    def __init__(self, spectrum, position, direction, cone_angle_deg, blend, blend_profile="angle",
+                 radius=0.0, soft_falloff=True):
+        super().__init__(spectrum, position, radius, soft_falloff)
         self.axis = normalize(np.asarray(direction, np.float64))
         half = math.radians(cone_angle_deg) / 2
         self.cos_outer = math.cos(half)
-        self.cos_inner = math.cos(half * (1.0 - blend))
+        if blend_profile == "cycles":
+            self.cos_inner = min(1.0, self.cos_outer + blend * (1.0 - self.cos_outer))
+        else:
+            self.cos_inner = math.cos(half * (1.0 - blend))
+
+    def power(self):
+        return 2.0 * math.pi * (1.0 - self.cos_outer) * float(luminance(self.rgb()))
 
     def _falloff(self, wi):
         c = -(self.axis[:, None] * wi).sum(0)
@@ -124,27 +340,70 @@ class SpotEmitter(PointEmitter):
 
 
 class DirectionalEmitter(_Light):
-    """Parallel light (sun) travelling along ``direction`` with irradiance E ⟂ to it."""
+    """Parallel light (sun) travelling along ``direction`` with irradiance E ⟂ to it.
 
-    is_delta = True
+    With an angular diameter > 0 (Cycles' sun angle, kernel/light/distant.h) it is a disc of
+    uniform radiance E/(π sin²θh), θh = angle/2, sampled uniformly in its cone (soft shadows,
+    the same irradiance E on a surface facing it).
+    """
+
     at_infinity = True
 
-    def __init__(self, spectrum, direction):
+    def __init__(self, spectrum, direction, angle_deg=0.0):
         super().__init__(spectrum)
         self.direction = normalize(np.asarray(direction, np.float64))
+        half = 0.5 * math.radians(angle_deg)
+        self.is_delta = half <= 0
+        self.hittable = not self.is_delta
+        self.one_minus_cos = 2.0 * math.sin(0.5 * half) ** 2
+        # radiance / E divided by the cone pdf: 2π(1 − cosθh) / (π sin²θh)
+        self.factor = 2.0 * self.one_minus_cos / math.sin(half) ** 2 if half > 0 else 1.0
+        self.radiance_factor = 1.0 / (math.pi * math.sin(half) ** 2) if half > 0 else 0.0
+
+    def intersect(self, o, d, seg, hit, p_ref):
+        """Rays that escape (not ``hit``) within the sun's disc: (rows, radiance/E, cone pdf);
+        Cycles' integrate_distant_lights."""
+        rows = (~hit & (1.0 - dot(d, -self.direction[:, None]) <= self.one_minus_cos)).nonzero()[0]
+        return (rows, np.full(rows.size, self.radiance_factor),
+                np.full(rows.size, 1.0 / (2.0 * math.pi * self.one_minus_cos)))
 
     def sample(self, p, u):
         n = p.shape[1]
-        wi = np.broadcast_to(-self.direction[:, None], (3, n)).copy()
-        return wi, np.full(n, np.inf), np.ones(n), np.zeros(n), np.ones(n, bool)
+        if self.is_delta:
+            wi = np.broadcast_to(-self.direction[:, None], (3, n)).copy()
+            return wi, np.full(n, np.inf), np.ones(n), np.zeros(n), np.ones(n, bool)
+        wi, _ = uniform_cone(u[1], u[2], self.one_minus_cos, -self.direction)
+        return (wi, np.full(n, np.inf), np.full(n, self.factor),
+                np.full(n, 1.0 / (2.0 * math.pi * self.one_minus_cos)), np.ones(n, bool))
+
+    def power(self, scene_radius=1.0):
+        return float(luminance(self.rgb())) * math.pi * scene_radius ** 2
+
+    def importance(self, p, n=None):
+        to = np.broadcast_to(-self.direction[:, None], p.shape)
+        sin_half = math.sqrt(self.one_minus_cos * (2.0 - self.one_minus_cos))
+        return float(luminance(self.rgb())) * facing_factor(to, 1.0, sin_half, n) * np.ones(p.shape[1])
 
 
 class LightSet:
-    """All lights of a compiled scene; NEE picks one uniformly (probability 1/count)."""
+    """All lights of a compiled scene.  NEE picks one light per vertex: uniformly (probability
+    1/count, ``Scene.light_selection`` "uniform"; ``prob[i]``) or, with "power", by importance:
+    for up to ``SPATIAL_MAX`` lights, per shading point ∝ each light's estimated irradiance
+    there (power/dist² × ``facing_factor``, as the importance of Cycles' light tree without the
+    tree), mixed with
+    ``GLOBAL_SHARE`` of the power distribution (so no light that can contribute gets
+    probability 0); for more lights ∝ power alone.  Every MIS pdf includes the probability
+    with which the light would have been chosen at the vertex the ray left (``prob_at``).
+    """
+
+    SPATIAL_MAX = 64
+    GLOBAL_SHARE = 0.1
 
     def __init__(self, scene, compiled):
         self.lights = []
         self.environment = None
+        self.environment_index = -1
+        self.camera_hidden = set()     # lights (indices) that camera rays do not see
         for mesh_index, mesh in enumerate(scene.meshes):
             if mesh.emission is None:
                 continue
@@ -152,19 +411,84 @@ class LightSet:
             if len(tris) == 0:
                 continue
             compiled.tri_emitter[tris] = len(self.lights)
-            self.lights.append(AreaEmitter(mesh.emission, tris, compiled))
+            if not getattr(mesh, "visible_camera", True) and not getattr(mesh, "occluder", True):
+                self.camera_hidden.add(len(self.lights))
+            self.lights.append(AreaEmitter(mesh.emission, tris, compiled, getattr(mesh, "two_sided", False),
+                                           getattr(mesh, "spread_deg", 180.0)))
         for light in scene.lights:
+            if not getattr(light, "visible_camera", True):
+                self.camera_hidden.add(len(self.lights))
             if isinstance(light, EnvironmentLight):
                 self.environment = EnvironmentEmitter(light.radiance)
+                self.environment_index = len(self.lights)
                 self.lights.append(self.environment)
             elif isinstance(light, SpotLight):
                 self.lights.append(SpotEmitter(light.intensity, light.position, light.direction,
-                                               light.cone_angle_deg, light.blend))
+                                               light.cone_angle_deg, light.blend,
+                                               getattr(light, "blend_profile", "angle"),
+                                               getattr(light, "radius", 0.0), getattr(light, "soft_falloff", True)))
             elif isinstance(light, PointLight):
-                self.lights.append(PointEmitter(light.intensity, light.position))
+                self.lights.append(PointEmitter(light.intensity, light.position, getattr(light, "radius", 0.0),
+                                                getattr(light, "soft_falloff", True)))
             elif isinstance(light, DirectionalLight):
-                self.lights.append(DirectionalEmitter(light.irradiance, light.direction))
-        self.select_prob = 1.0 / len(self.lights) if self.lights else 0.0
+                self.lights.append(DirectionalEmitter(light.irradiance, light.direction,
+                                                      getattr(light, "angle_deg", 0.0)))
+        count = len(self.lights)
+        self.select_prob = 1.0 / count if count else 0.0
+        self.selection = getattr(scene, "light_selection", "uniform")
+        if self.selection not in ("uniform", "power"):
+            raise SceneError("light_selection", f"must be 'uniform' or 'power', got {self.selection!r}")
+        self.prob = np.full(count, self.select_prob)
+        self.cdf = None
+        if self.selection == "power" and count > 1:
+            radius = max(float(np.linalg.norm(compiled.vertices - compiled.vertices.mean(0), axis=1).max()), 1e-9)
+            power = np.array([lt.power(radius) if lt.at_infinity else lt.power() for lt in self.lights])
+            power = np.where(np.isfinite(power) & (power > 0), power, 0.0)
+            if power.sum() > 0:
+                self.prob = power / power.sum()
+                self.cdf = np.cumsum(self.prob)
+                self.cdf[-1] = 1.0
+        self.spatial = self.cdf is not None and count <= self.SPATIAL_MAX
+        self.hittable = [i for i, light in enumerate(self.lights) if light.hittable]
+
+    def probabilities(self, p, n=None):
+        """Selection probabilities (count, N) at shading points p (3, N) with side normals n (the
+        geometric normal on the side the path arrived from) or None."""
+        if not self.spatial:
+            return np.repeat(self.prob[:, None], p.shape[1], axis=1)
+        imp = np.stack([light.importance(p, n) for light in self.lights])
+        imp = np.where(np.isfinite(imp) & (imp > 0), imp, 0.0)
+        total = imp.sum(0)
+        local = np.where(total > 0, imp / np.where(total > 0, total, 1.0), self.prob[:, None])
+        return (1.0 - self.GLOBAL_SHARE) * local + self.GLOBAL_SHARE * self.prob[:, None]
+
+    def prob_at(self, li, p, n=None):
+        """Probability (N,) or scalar that NEE at points p (3, N) with side normals n picks light ``li``."""
+        if not self.spatial or p is None:
+            return self.prob[li]
+        return self.probabilities(p, n)[li]
+
+    def choose(self, u, p=None, n=None):
+        """(light index (N,), the remainder of u rescaled to [0, 1), the chosen lights'
+        probabilities (N,) or None where they are ``prob[index]``) for uniform numbers u (N,)
+        at shading points p (3, N) with side normals n."""
+        count = len(self.lights)
+        if self.cdf is None:
+            choice = np.minimum((u * count).astype(np.int64), count - 1)
+            return choice, u * count - choice, None
+        if self.spatial and p is not None:
+            probs = self.probabilities(p, n)
+            cdf = np.cumsum(probs, axis=0)
+            choice = np.minimum((cdf <= u[None, :] * cdf[-1][None, :]).sum(0), count - 1)
+            cols = np.arange(u.shape[0])
+            chosen = probs[choice, cols]
+            lo = cdf[choice, cols] - chosen
+            rest = (u * cdf[-1] - lo) / np.where(chosen > 0, chosen, 1.0)
+            return choice, np.clip(rest, 0.0, np.nextafter(1.0, 0.0)), chosen
+        choice = np.minimum(np.searchsorted(self.cdf, u, side="right"), count - 1)
+        lo = np.where(choice > 0, self.cdf[np.maximum(choice - 1, 0)], 0.0)
+        rest = (u - lo) / np.where(self.prob[choice] > 0, self.prob[choice], 1.0)
+        return choice, np.clip(rest, 0.0, np.nextafter(1.0, 0.0)), None
 
     def __len__(self):
         return len(self.lights)

@@ -74,6 +74,15 @@ class Mesh:
     camera rays see of it transparent (alpha 0, no colour).  ``alpha`` < 1: a pass-through
     surface (Principled Alpha): rays cross it unchanged with probability 1 − alpha, shadow rays
     are attenuated by 1 − alpha; the Stokes vector is unchanged.
+
+    Emitter options (the defaults are the scene format's and the peer format's meaning):
+    ``two_sided`` — both faces emit the same radiance (Cycles' Emission shader);
+    ``occluder`` — False makes the mesh a lamp in Cycles' sense: rays and shadow rays pass
+    through it, it only adds its emission where a ray crosses it (needs ``emission``);
+    ``visible_camera`` — False hides a non-occluding emitter from camera rays (point, spot and
+    directional lights have the same field for their disks, spheres and discs);
+    ``spread_deg`` — Cycles' area-light spread (full angle, 0 < s ≤ 180): radiance
+    L·f(θ), f = N·max(0, tan(s/2) − tan θ) with ∫ f cosθ dω = π (the emitted power is kept).
     """
 
     name: str
@@ -95,12 +104,23 @@ class Mesh:
     visible_indirect: bool = True
     holdout: bool = False
     alpha: float = 1.0
+    two_sided: bool = False
+    occluder: bool = True
+    spread_deg: float = 180.0
 
 
 @dataclass
 class PointLight:
+    """Isotropic light of radiant intensity I.  ``radius`` > 0 makes it a Cycles sphere light
+    of radiance I/(πr²) (same power, soft shadows): with ``soft_falloff`` a disk of radius r always
+    facing the receiver (Cycles' default: irradiance I/(d² + r²) on axis), without it a sphere
+    (exactly I/d² outside).  Such lights are sampled by next-event estimation only."""
+
     position: np.ndarray
     intensity: object             # spectrum: radiant intensity (radiance × area / sr)
+    radius: float = 0.0
+    soft_falloff: bool = True
+    visible_camera: bool = True   # camera rays see the disk/sphere (radius > 0)
 
 
 @dataclass
@@ -109,13 +129,23 @@ class SpotLight:
     direction: np.ndarray         # unit axis of the cone (direction light travels)
     intensity: object
     cone_angle_deg: float = 45.0  # full opening angle
-    blend: float = 0.0            # fraction of the half-angle with a smooth falloff
+    blend: float = 0.0            # size of the smooth edge (see blend_profile)
+    #: "angle": smoothstep over the angles half·(1 − blend) … half; "cycles": smoothstep in cos θ over
+    #: cos(half) … cos(half) + blend·(1 − cos(half)) (Cycles' spot_light_attenuation).
+    blend_profile: str = "angle"
+    radius: float = 0.0           # as PointLight.radius
+    soft_falloff: bool = True
+    visible_camera: bool = True
 
 
 @dataclass
 class DirectionalLight:
     direction: np.ndarray         # unit direction in which the light travels
     irradiance: object            # spectrum: irradiance on a surface ⟂ direction
+    #: full angular diameter of the source; > 0: uniform radiance E/(π sin²(angle/2)) in that cone
+    #: (Cycles' sun angle: soft shadows, same irradiance)
+    angle_deg: float = 0.0
+    visible_camera: bool = True   # camera rays see the sun's disc (angle > 0)
 
 
 @dataclass
@@ -160,3 +190,6 @@ class Scene:
     lights: list = field(default_factory=list)
     settings: RenderSettings = field(default_factory=RenderSettings)
     source: str = ""
+    #: how next-event estimation picks a light: "uniform" (as Mitsuba 3) or "power" (probability ∝
+    #: each light's estimated power, for scenes of many lights of different strength)
+    light_selection: str = "uniform"

@@ -475,7 +475,7 @@ def _illuminant(d: dict, field: str, key: str):
     return RGBIlluminantSpectrum(rgb, scale)
 
 
-def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
+def _parse_object_base(d: dict, field: str, base_dir: str, material_names) -> Mesh:
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object")
     shape = choice(_require(d, "shape", field), f"{field}.shape", ("mesh", "sphere", "quad", "triangles"))
@@ -738,7 +738,7 @@ def parse_transform(d, field: str) -> np.ndarray:
                             scale=scale, rotate_deg=vec3(d.get("rotate_deg", [0, 0, 0]), f"{field}.rotate_deg"))
 
 
-def parse_light(d: dict, field: str):
+def _parse_light_base(d: dict, field: str):
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     kind = choice(_require(d, "type", field), f"{field}.type", ("environment", "point", "spot", "directional"))
@@ -746,12 +746,12 @@ def parse_light(d: dict, field: str):
         _check_keys(d, field, {"type", "radiance", "color", "note"})
         return EnvironmentLight(_illuminant(d, field, "radiance"))
     if kind == "point":
-        _check_keys(d, field, {"type", "position", "intensity", "color", "note"})
+        _check_keys(d, field, {"type", "position", "intensity", "color", "note", *LIGHT_OPTIONS["point"]})
         return PointLight(vec3(_require(d, "position", field), f"{field}.position"),
                           _illuminant(d, field, "intensity"))
     if kind == "spot":
         _check_keys(d, field, {"type", "position", "direction", "target", "intensity", "color",
-                               "cone_angle_deg", "blend", "note"})
+                               "cone_angle_deg", "blend", "note", *LIGHT_OPTIONS["spot"]})
         pos = vec3(_require(d, "position", field), f"{field}.position")
         if "target" in d:
             direction = vec3(d["target"], f"{field}.target") - pos
@@ -764,9 +764,64 @@ def parse_light(d: dict, field: str):
                          _illuminant(d, field, "intensity"),
                          number(d.get("cone_angle_deg", 45.0), f"{field}.cone_angle_deg", 0, 180, lo_open=True),
                          number(d.get("blend", 0.0), f"{field}.blend", 0, 1))
-    _check_keys(d, field, {"type", "direction", "irradiance", "color", "note"})
+    _check_keys(d, field, {"type", "direction", "irradiance", "color", "note", *LIGHT_OPTIONS["directional"]})
     return DirectionalLight(vec3(_require(d, "direction", field), f"{field}.direction", unit=True),
                             _illuminant(d, field, "irradiance"))
+
+
+# ----------------------------------------------------------------------------- Cycles' light options
+# Optional, with Cycles' meaning (README: the Blender light table); the defaults are the format's
+# original meaning, so existing and peer scenes render exactly as before.
+
+#: optional keys of each light type
+LIGHT_OPTIONS = {"point": ("radius", "soft_falloff", "visible_camera"),
+                 "spot": ("radius", "soft_falloff", "visible_camera", "blend_profile"),
+                 "directional": ("angle_deg", "visible_camera")}
+#: optional emitter options inside "emission" (Mesh fields; defaults: one-sided, opaque, Lambertian)
+EMITTER_OPTIONS = ("two_sided", "occluder", "spread_deg")
+
+
+def _flag(d, key: str, field: str, default: bool) -> bool:
+    value = d.get(key, default)
+    if not isinstance(value, bool):
+        raise SceneError(f"{field}.{key}", "must be true or false")
+    return value
+
+
+def parse_light(d: dict, field: str):
+    """A light from its JSON object, with the optional Cycles options of LIGHT_OPTIONS."""
+    light = _parse_light_base(d, field)
+    if isinstance(light, (PointLight, SpotLight)):
+        light.radius = number(d.get("radius", 0.0), f"{field}.radius", 0)
+        light.soft_falloff = _flag(d, "soft_falloff", field, True)
+    if isinstance(light, SpotLight):
+        light.blend_profile = choice(d.get("blend_profile", "angle"), f"{field}.blend_profile", ("angle", "cycles"))
+    if isinstance(light, DirectionalLight):
+        light.angle_deg = number(d.get("angle_deg", 0.0), f"{field}.angle_deg", 0, 180, hi_open=True)
+    if not isinstance(light, EnvironmentLight):
+        light.visible_camera = _flag(d, "visible_camera", field, True)
+    return light
+
+
+def parse_object(d: dict, field: str, base_dir: str, material_names) -> Mesh:
+    """An object from its JSON object, with the optional emitter options (EMITTER_OPTIONS) in its
+    "emission"."""
+    emission = d.get("emission") if isinstance(d, dict) else None
+    if not isinstance(emission, dict) or not any(key in emission for key in EMITTER_OPTIONS):
+        return _parse_object_base(d, field, base_dir, material_names)
+    plain = {key: value for key, value in emission.items() if key not in EMITTER_OPTIONS}
+    mesh = _parse_object_base({**d, "emission": plain}, field, base_dir, material_names)
+    for key, value in _emitter_options(emission, f"{field}.emission").items():
+        setattr(mesh, key, value)
+    return mesh
+
+
+def _emitter_options(d, field: str) -> dict:
+    """The Mesh emitter fields given in an "emission" object (validated)."""
+    out = {key: _flag(d, key, field, True) for key in ("two_sided", "occluder") if key in d}
+    if "spread_deg" in d:
+        out["spread_deg"] = number(d["spread_deg"], f"{field}.spread_deg", 0, 180, lo_open=True)
+    return out
 
 
 def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:

@@ -1,13 +1,24 @@
-"""Blender lights → engine lights with Cycles-compatible units (so scenes look as bright as in Cycles).
+"""Blender lights → engine lights with Cycles' meaning, so scenes render as in Cycles (F12).
 
-From Cycles (intern/cycles/blender/light.cpp, kernel/light/area.h):
-- power P = colour · energy · 2^exposure (W);
-- point and spot: radiant intensity I = P / (4π) W/sr (the spot cone clips, it does not
-  concentrate power); a radius > 0 (soft sphere light) is rendered as a point;
-- sun: ``energy`` is the irradiance in W/m² perpendicular to the light; the angular diameter is
-  ignored (a delta light);
-- area: radiance L = P / (4·A) (Cycles' convention, not the physical P/(πA)); A = size_x·size_y
-  (·π/4 for disk and ellipse), including the object's scale; one-sided, emitting along local −Z.
+Sources (Blender 4.x/5.0 Cycles): intern/cycles/blender/light.cpp (BlenderSync::sync_light: the
+parameter mapping), intern/cycles/scene/light.cpp (Light::area, device_update_lights: eval_fac),
+intern/cycles/kernel/light/point.h, spot.h, distant.h, area.h (radiometry and sampling),
+kernel/light/light.h (lamps are not in the BVH: rays pass through them, they never cast shadows).
+
+- strength S = colour · energy · 2^exposure (· temperature colour) in W (sun: W/m²);
+- point and spot: radiant intensity I = S/(4π) W/sr (the spot cone only clips power); a radius
+  r > 0 makes a light of radiance S/(4π²r²): a disk facing the receiver with soft falloff
+  (Cycles' default), a sphere without it; soft shadows, sampled by next-event estimation;
+  ``normalize`` off: I = S/π (r = 0) or radiance S/π;
+- spot size is the full cone angle, spot blend is Cycles' smoothstep in cos θ from cos(size/2) to
+  cos(size/2) + blend·(1 − cos(size/2));
+- sun: irradiance S ⟂ the light; an angle > 0 spreads it over a disc of that angular diameter
+  (radiance S/(π sin²(angle/2)), soft shadows); ``normalize`` off: radiance S;
+- area (square, rectangle, disk, ellipse): radiance L = S/(π·A) (Blender ≥ 4.0; before 4.0 it was
+  S/(4A)), A = size_x·size_y (·π/4 for disk and ellipse) including the object's scale; ``normalize``
+  off: L = S/π; one-sided along local −Z, with Cycles' spread profile; a lamp, not an occluder
+  (rays and shadows pass through it, also through its back); hidden from the camera when the
+  object's camera visibility is off; portals are not lights.
 """
 
 import math
@@ -29,7 +40,7 @@ def _power_colour(light):
 
 
 def export_light(obj, matrix_world, warnings: list):
-    """One engine light (or emissive Mesh for area lights), or None for an empty light."""
+    """One engine light (or emissive lamp Mesh for area lights), or None for an empty light."""
     light = obj.data
     M = np.array(matrix_world, dtype=np.float64)
     position = M[:3, 3]
@@ -37,23 +48,38 @@ def export_light(obj, matrix_world, warnings: list):
     scale, colour = _power_colour(light)
     if scale <= 0 or max(colour) <= 0:
         return None
+    normalise = bool(getattr(light, "normalize", True))
+    camera = bool(getattr(obj, "visible_camera", True))
+    if not getattr(light, "use_shadow", True):
+        warnings.append(f"light {obj.name!r}: shadows cannot be switched off; rendered with shadows")
     if light.type in ("POINT", "SPOT"):
-        if getattr(light, "shadow_soft_size", 0.0) > 0:
-            pass  # soft sphere lights render as points (documented)
-        intensity = RGBIlluminantSpectrum(colour, scale / (4 * math.pi))
+        radius = max(float(getattr(light, "shadow_soft_size", 0.0)), 0.0)
+        soft = bool(getattr(light, "use_soft_falloff", True))
+        if normalise:
+            i_scale = scale / (4 * math.pi)
+        else:   # eval_fac 1/π: intensity S/π for a point, radiance S/π (intensity S·r²) with a radius
+            i_scale = scale * radius * radius if radius > 0 else scale / math.pi
+        intensity = RGBIlluminantSpectrum(colour, i_scale)
         if light.type == "POINT":
-            return PointLight(position, intensity)
+            return PointLight(position, intensity, radius=radius, soft_falloff=soft, visible_camera=camera)
         return SpotLight(position, direction, intensity, cone_angle_deg=math.degrees(light.spot_size),
-                         blend=float(light.spot_blend))
+                         blend=float(light.spot_blend), blend_profile="cycles", radius=radius, soft_falloff=soft,
+                         visible_camera=camera)
     if light.type == "SUN":
-        return DirectionalLight(direction, RGBIlluminantSpectrum(colour, scale))
+        angle = max(float(getattr(light, "angle", 0.0)), 0.0)
+        irradiance = scale if normalise or angle <= 0 else scale * math.pi * math.sin(angle / 2) ** 2
+        return DirectionalLight(direction, RGBIlluminantSpectrum(colour, irradiance),
+                                angle_deg=math.degrees(angle), visible_camera=camera)
     if light.type == "AREA":
-        return _area_light_mesh(obj, light, M, scale, colour, warnings)
+        cycles = getattr(light, "cycles", None)
+        if cycles is not None and getattr(cycles, "is_portal", False):
+            return None          # portals only guide Cycles' world sampling; they emit nothing
+        return _area_light_mesh(obj, light, M, scale, colour, normalise, warnings)
     warnings.append(f"light {obj.name!r}: type {light.type} is not supported; ignored")
     return None
 
 
-def _area_light_mesh(obj, light, M, scale, colour, warnings):
+def _area_light_mesh(obj, light, M, scale, colour, normalise, warnings):
     sx = float(light.size)
     sy = float(light.size_y) if light.shape in ("RECTANGLE", "ELLIPSE") else sx
     if light.shape in ("DISK", "ELLIPSE"):
@@ -72,13 +98,16 @@ def _area_light_mesh(obj, light, M, scale, colour, warnings):
         warnings.append(f"area light {obj.name!r} has zero area; ignored")
         return None
     # Cycles uses the analytic shape area (π/4·sx·sy for disks); our polygon is slightly smaller,
-    # so use the exact area for the radiance and keep the emitted power.
+    # so scale the radiance by exact/polygon area: the emitted power stays S.
     exact = sx * sy * (math.pi / 4 if light.shape in ("DISK", "ELLIPSE") else 1.0) * \
         np.linalg.norm(M[:3, 0]) * np.linalg.norm(M[:3, 1])
-    normalise = getattr(light, "normalize", True)
-    radiance = scale / (4 * exact) if normalise else scale / 4
-    radiance *= exact / area if normalise else 1.0
-    if getattr(light, "spread", math.pi) < math.pi - 1e-6:
-        warnings.append(f"area light {obj.name!r}: spread < 180° is not supported; rendered as Lambertian")
+    radiance = scale / (math.pi * exact) if normalise else scale / math.pi
+    radiance *= exact / area
+    spread = float(getattr(light, "spread", math.pi))
+    if spread <= 0:
+        warnings.append(f"area light {obj.name!r}: spread 0 (a collimated beam) is not supported; ignored")
+        return None
     return Mesh(name=f"light:{obj.name}", vertices=world, faces=faces, materials=["__polar_black__"],
-                material_ids=np.zeros(len(faces), np.int32), emission=RGBIlluminantSpectrum(colour, radiance))
+                material_ids=np.zeros(len(faces), np.int32), emission=RGBIlluminantSpectrum(colour, radiance),
+                two_sided=False, occluder=False, visible_camera=bool(getattr(obj, "visible_camera", True)),
+                spread_deg=min(math.degrees(spread), 180.0))

@@ -322,7 +322,12 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
     world = export_world(scene.world, warnings)
     if world is not None:
         lights.append(world)
+    for mesh in meshes:
+        if mesh.emission is not None and mesh.occluder:
+            mesh.two_sided = True      # Cycles' Emission shader emits from both faces (lamps stay one-sided)
     if not lights and not any(m.emission is not None for m in meshes):
         warnings.append("the scene has no lights, no emissive materials and a black world: the image is black")
+    # Cycles picks lights by importance (its light tree); selection by power is the closest
+    # convergence for many lights of different strength.
     return Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings,
-                 source=f"blender:{scene.name}"), list(dict.fromkeys(warnings))
+                 source=f"blender:{scene.name}", light_selection="power"), list(dict.fromkeys(warnings))
