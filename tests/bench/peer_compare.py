@@ -7,9 +7,14 @@ DIR holds Mitsuba renders made by ``shared/peers/render_peer.py --renders 2``
 scene this renders ours ``--renders`` times (seeds 0, 1, …) at ``--spp``,
 saves them in the same layout and runs ``shared/peers/compare.py`` on the
 luminance (Y) and on each of R, G, B (with the variance floor for unequal
-sample counts).  Scenes whose S0 legitimately differs (RGB upsampling of
-coloured walls: ``cornell_lambert``) are judged on S1..S3 only.  Prints a
-table; exit status 1 if a judged component fails the 99 % criterion.
+sample counts).  Ours is rendered at the Mitsuba renders' resolution (from
+their file names).  Scenes whose S0 legitimately differs (RGB upsampling of
+coloured walls: ``cornell_lambert``) are judged on S1..S3 only.  Scenes whose
+Mitsuba reference is an unpolarised variant (``rough_glass_sphere``: Mitsuba's
+``roughdielectric`` is a depolariser in its polarised variants) are rendered
+here with polarisation off and compared on S0 alone (``compare.py`` does that
+when one side has one component).  Prints a table; exit status 1 if a judged
+component fails the 99 % criterion.
 Not part of the test command (it needs Mitsuba renders and minutes of time).
 """
 
@@ -35,17 +40,22 @@ from engine.scene.loader import load_scene  # noqa: E402
 SHARED = os.environ.get("POLAR_SHARED", os.path.join(os.path.dirname(REPO), "shared"))
 PEERS = os.path.join(SHARED, "peers")
 DEFAULT_SCENES = ["conv_s3_check", "plane_brewster", "fresnel_sphere", "fresnel_sphere_au", "glass_sphere",
-                  "cornell_lambert"]
+                  "cornell_lambert", "rough_glass_sphere"]
 S0_DIFFERS = {"cornell_lambert"}   # coloured diffuse walls: RGB→spectrum upsampling methods differ
+# Mitsuba's roughdielectric depolarises in its polarised variants, so the reference is its unpolarised
+# spectral render (S0 only) and ours is the scalar (polarisation off) render of the same scene.
+UNPOLARISED_PEER = {"rough_glass_sphere": "llvm_ad_spectral"}
 
 
 def mitsuba_files(directory, scene):
-    files = sorted(glob.glob(os.path.join(directory, f"{scene}__*_polarized__*spp__seed*.npy")))
+    """(files, spp, (width, height)) of the Mitsuba renders of ``scene`` in ``directory``."""
+    variant = UNPOLARISED_PEER.get(scene, "*_polarized")
+    files = sorted(glob.glob(os.path.join(directory, f"{scene}__{variant}__*spp__seed*.npy")))
     files = [f for f in files if not f.endswith("_lum.npy")]
     if not files:
-        return [], 0
-    spp = int(re.search(r"__(\d+)spp__", files[0]).group(1))
-    return files, spp
+        return [], 0, None
+    m = re.search(r"__(\d+)x(\d+)__(\d+)spp__", files[0])
+    return files, int(m.group(3)), (int(m.group(1)), int(m.group(2)))
 
 
 def parse_compare(text):
@@ -71,13 +81,16 @@ def main():
     failed = False
     rows = []
     for scene_name in args.scenes.split(","):
-        mfiles, m_spp = mitsuba_files(args.mitsuba, scene_name)
+        mfiles, m_spp, m_size = mitsuba_files(args.mitsuba, scene_name)
         if len(mfiles) < 2:
             print(f"{scene_name}: fewer than 2 Mitsuba renders in {args.mitsuba}; skipped")
             continue
         scene = load_scene(os.path.join(PEERS, "scenes", f"{scene_name}.json"))
         spp = args.spp * (16 if scene_name == "conv_s3_check" else 1)
         scene.settings.spp = spp
+        scene.camera.width, scene.camera.height = m_size
+        if scene_name in UNPOLARISED_PEER:
+            scene.settings.polarisation = "off"
         renderer = Renderer(scene)
         ours = []
         t0 = time.perf_counter()
@@ -94,7 +107,8 @@ def main():
                    "--channel", ch, "--a-spp", str(spp * args.renders), "--b-spp", str(m_spp * len(mfiles))]
             proc = subprocess.run(cmd, capture_output=True, text=True)
             res = parse_compare(proc.stdout)
-            judged = ["S1", "S2", "S3"] if scene_name in S0_DIFFERS else ["S0", "S1", "S2", "S3"]
+            judged = (["S1", "S2", "S3"] if scene_name in S0_DIFFERS else
+                      ["S0"] if scene_name in UNPOLARISED_PEER else ["S0", "S1", "S2", "S3"])
             for comp in ["S0", "S1", "S2", "S3"]:
                 if comp not in res:
                     continue
@@ -105,7 +119,8 @@ def main():
                              ("FAIL" if comp in judged else "not judged")))
             if not res:
                 print(proc.stdout, proc.stderr)
-        print(f"{scene_name}: ours {args.renders}×{spp} spp in {seconds:.1f} s; Mitsuba {len(mfiles)}×{m_spp} spp")
+        print(f"{scene_name}: ours {args.renders}×{spp} spp in {seconds:.1f} s; Mitsuba {len(mfiles)}×{m_spp} spp"
+              f" ({os.path.basename(mfiles[0]).split('__')[1]}, {m_size[0]}×{m_size[1]})")
     print("\n| scene | channel | component | mean (ours) | mean (Mitsuba) | rms(z) | max abs(z) | blocks within 4σ |"
           " verdict |")
     print("|---|---|---|---|---|---|---|---|---|")
