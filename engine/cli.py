@@ -157,6 +157,13 @@ def _render(args) -> int:
         scene.settings = st
         if adaptive is not None:
             adaptive = _adaptive_settings(args, st.spp)      # --spp may come from the file
+    if getattr(args, "denoise_data", False):
+        for option, used in (("--resume", args.resume), ("--scheduler", args.scheduler)):
+            if used:
+                raise SceneError("--denoise-data", f"cannot be combined with {option} yet")
+        import dataclasses
+        st = dataclasses.replace(st, denoise_data=True)
+        scene.settings = st
     cam = scene.camera
     print(f"polar: {os.path.basename(args.scene)}: {cam.width}×{cam.height}, {st.spp} spp, "
           f"{len(renderer.compiled.faces)} triangles, {len(renderer.lights)} lights, "
@@ -281,6 +288,13 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
         se = film.stderr_luminance()
         for i in range(4):
             extra[f"S{i}.Y.stderr"] = se[i].astype("float32")
+    if getattr(film, "has_denoise_data", False):
+        # Cycles' denoising guides: albedo (linear sRGB reflectance) and world-space shading normal.
+        albedo, normal = film.denoise_data()
+        for i, c in enumerate("RGB"):
+            extra[f"denoise.albedo.{c}"] = albedo[..., i].astype("float32")
+        for i, c in enumerate("XYZ"):
+            extra[f"denoise.normal.{c}"] = normal[..., i].astype("float32")
     stokes = result.stokes()
     alpha = film.alpha() if film.has_alpha else None   # coverage of camera rays (transparent film, holdout)
     try:
@@ -542,6 +556,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")
     r.add_argument("--stderr", action="store_true", help="also write per-pixel standard errors")
+    r.add_argument("--denoise-data", action="store_true",
+                   help="also write denoising guides (channels denoise.albedo.R/G/B, denoise.normal.X/Y/Z: "
+                        "albedo and shading normal at the first non-mirror hit, as Cycles' denoising data)")
     r.add_argument("--resume", metavar="EXR", help="continue the (interrupted) render stored in this EXR")
     r.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask cluster, e.g. tcp://host:8786 "
                                                           "(same image as a local render)")
