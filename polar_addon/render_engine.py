@@ -212,6 +212,11 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         adaptive = adaptive_settings(scene, self.is_preview)
         if distributed_scheduler["address"] and not self.is_preview:
             from ..engine.render.distributed import render_distributed
+            if getattr(settings, "denoise_data", False):   # not collected from Dask workers yet
+                import dataclasses
+                settings = dataclasses.replace(settings, denoise_data=False)
+                self.report({"WARNING"}, "Polar: the Denoising Albedo / Normal passes are not rendered on a "
+                                         "Dask cluster yet: they stay empty")
             out = render_distributed(engine_scene, distributed_scheduler["address"], settings, progress=progress,
                                      should_stop=should_stop, window=window)
         else:
