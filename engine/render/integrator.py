@@ -124,7 +124,8 @@ class DenoiseGuides:
     BSDF weight (BSDF·cos/pdf from unpolarised light), whose pixel mean converges to the Mueller
     M00 directional albedo; for a cosine-sampled Lambert it is exactly ρ.  Wavelength samples are
     turned into linear sRGB by their colour-matching weights, normalised per channel (a reflectance,
-    not a radiance).  The normal is the world-space shading normal, facing the arriving ray.
+    not a radiance) and kept within the sampled values.  The normal is the world-space shading
+    normal, facing the arriving ray.
     Paths that leave the scene (or end) before a non-delta vertex keep albedo 0 and normal 0.
     """
 
@@ -138,14 +139,14 @@ class DenoiseGuides:
         """Record the vertices of paths ``path`` (original indices) not recorded yet.
 
         ``T00`` (Lm, n): throughput before the vertex; ``weight``: the sampled BSDF weight (counted
-        where ``valid``);
-        ``n_s``, ``wo`` (3, n): shading normal and direction to the previous vertex; ``w_rgb``
+        where ``valid``); ``n_s``, ``wo`` (3, n): shading normal and direction to the previous vertex; ``w_rgb``
         (3, L, N) colour weights of the wavelength samples (None: RGB mode, grey materials).
         """
         new = ~self.done[path]
         if not new.any():
             return
         a = np.where(valid, unpolarised_response(weight, 1)[0], 0.0) * T00     # (Lm, n)
+        a = np.where(np.isfinite(a), a, 0.0)       # as the dropped non-finite samples: no guide
         if w_rgb is None:
             rgb = np.repeat(a.mean(axis=0)[None], 3, axis=0)
         else:
@@ -153,6 +154,9 @@ class DenoiseGuides:
             den = w.sum(axis=1)
             rgb = np.where(den != 0, np.einsum("cln,ln->cn", w, np.broadcast_to(a, w.shape[1:]))
                            / np.where(den != 0, den, 1.0), 0.0)
+            # sRGB colour-matching weights can be negative: keep each channel within the sampled
+            # albedos (a weighted mean of them when the weights are positive)
+            rgb = np.clip(rgb, a.min(axis=0), a.max(axis=0))
         facing = np.where(dot(n_s, wo) < 0, -1.0, 1.0)
         idx = path[new]
         self.albedo[:, idx] = rgb[:, new]
