@@ -86,6 +86,19 @@ def test_guide_passes_and_exact_recombination_with_a_pass_through(addon, tmp_pat
     assert np.linalg.norm(normal, axis=-1).max() <= 1 + 1e-5 and np.abs(normal).max() > 0.5
 
 
+def test_operator_turns_the_passes_on_and_adds_the_group(addon):
+    scene = empty_scene(8, 6, 1)
+    assert not bpy.context.view_layer.polar.use_pass_denoising_albedo
+    assert bpy.ops.polar.add_polar_denoise() == {"FINISHED"}
+    layer = bpy.context.view_layer.polar
+    assert layer.use_pass_denoising_albedo and layer.use_pass_denoising_normal and layer.use_pass_s3
+    tree = scene.compositing_node_group
+    node = next(n for n in tree.nodes if n.name == "Polar Denoise")
+    assert node.node_tree.name == "Polar Denoise v1" and node.inputs["Albedo"].is_linked
+    out = next(n for n in tree.nodes if n.bl_idname == "NodeGroupOutput")
+    assert out.inputs[0].links[0].from_socket == node.outputs["S0"]
+
+
 def test_denoise_node_dop_before_and_after_the_clamp(addon, tmp_path, capsys):
     from polar_render.polar_addon.compositor import add_denoise_to_compositor
     scene = demo_like_scene(64, 40, 4)
