@@ -157,6 +157,13 @@ def _render(args) -> int:
         scene.settings = st
         if adaptive is not None:
             adaptive = _adaptive_settings(args, st.spp)      # --spp may come from the file
+    if getattr(args, "denoise_data", False):
+        for option, used in (("--resume", args.resume), ("--scheduler", args.scheduler)):
+            if used:
+                raise SceneError("--denoise-data", f"cannot be combined with {option} yet")
+        import dataclasses
+        st = dataclasses.replace(st, denoise_data=True)
+        scene.settings = st
     cam = scene.camera
     print(f"polar: {os.path.basename(args.scene)}: {cam.width}×{cam.height}, {st.spp} spp, "
           f"{len(renderer.compiled.faces)} triangles, {len(renderer.lights)} lights, "
@@ -281,6 +288,13 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
         se = film.stderr_luminance()
         for i in range(4):
             extra[f"S{i}.Y.stderr"] = se[i].astype("float32")
+    if getattr(film, "has_denoise_data", False):
+        # Cycles' denoising guides: albedo (linear sRGB reflectance) and world-space shading normal.
+        albedo, normal = film.denoise_data()
+        for i, c in enumerate("RGB"):
+            extra[f"denoise.albedo.{c}"] = albedo[..., i].astype("float32")
+        for i, c in enumerate("XYZ"):
+            extra[f"denoise.normal.{c}"] = normal[..., i].astype("float32")
     stokes = result.stokes()
     alpha = film.alpha() if film.has_alpha else None   # coverage of camera rays (transparent film, holdout)
     try:
@@ -315,16 +329,21 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
     return 0
 
 
-def _read_polar_exr(path, field):
-    """(stokes, channels, header) of a Stokes EXR, or a SceneError naming ``field``."""
+def _read_polar_exr(path, field, layer=None):
+    """(stokes, channels, header) of a Stokes EXR, or a SceneError naming ``field``.
+
+    ``layer``: the view layer to read in a Blender multilayer EXR (``<Layer>.S0.R`` …), None: the
+    only one holding the Stokes passes."""
     from .output.exr import read_stokes_exr
     if not os.path.exists(path):
         raise SceneError(field, f"{path!r} does not exist")
     if os.path.isdir(path):
         raise SceneError(field, f"{path!r} is a folder, not a Stokes EXR")
     try:
-        return read_stokes_exr(path)
+        return read_stokes_exr(path, layer)
     except (ValueError, OSError, RuntimeError) as e:
+        if layer is not None and "view layer" in str(e):
+            raise SceneError("--layer", str(e)) from None
         raise SceneError(field, f"{path!r} is not a Polar Stokes EXR: {e}") from None
 
 
@@ -366,7 +385,7 @@ def _polariser(args) -> int:
     from .postprocess.filters import apply_filter, filter_row
     from .postprocess.sheets import contact_sheet
 
-    stokes, _, _ = _read_polar_exr(args.exr, "EXR")
+    stokes, _, _ = _read_polar_exr(args.exr, "EXR", args.layer)
     if not (0.0 <= args.extinction <= 1.0):
         raise SceneError("--extinction", f"must be in [0, 1], got {args.extinction:g}")
     for field, value in (("--angle", args.angle), ("--retarder-angle", args.retarder_angle),
@@ -488,7 +507,7 @@ def _polariser_mosaic(args) -> int:
     from .output.png import write_png
     from .postprocess.mosaic import DEFAULT_LAYOUT, mosaic, parse_layout
 
-    stokes, _, _ = _read_polar_exr(args.exr, "EXR")
+    stokes, _, _ = _read_polar_exr(args.exr, "EXR", args.layer)
     if not (0.0 <= args.extinction <= 1.0):
         raise SceneError("--extinction", f"must be in [0, 1], got {args.extinction:g}")
     _finite("--exposure", args.exposure, -EXPOSURE_LIMIT_STOPS, EXPOSURE_LIMIT_STOPS)
@@ -537,6 +556,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")
     r.add_argument("--stderr", action="store_true", help="also write per-pixel standard errors")
+    r.add_argument("--denoise-data", action="store_true",
+                   help="also write denoising guides (channels denoise.albedo.R/G/B, denoise.normal.X/Y/Z: "
+                        "albedo and shading normal at the first non-mirror hit, as Cycles' denoising data)")
     r.add_argument("--resume", metavar="EXR", help="continue the (interrupted) render stored in this EXR")
     r.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask cluster, e.g. tcp://host:8786 "
                                                           "(same image as a local render)")
@@ -567,7 +589,10 @@ def build_parser() -> argparse.ArgumentParser:
     m.set_defaults(func=_mueller)
 
     p = sub.add_parser("polariser", help="what a virtual polarising filter would show, from a rendered EXR")
-    p.add_argument("exr", help="a Stokes EXR written by `render`")
+    p.add_argument("exr", help="a Stokes EXR written by `render`, or a multilayer EXR of a Blender render "
+                               "with Polar (its S0…S3 passes)")
+    p.add_argument("--layer", metavar="NAME", help="view layer to read from a Blender multilayer EXR (needed "
+                   "only when several view layers hold the Stokes passes)")
     p.add_argument("-o", "--output", required=True, help="output .png (tonemapped) or .exr (linear)")
     p.add_argument("--type", choices=("linear", "circular-right", "circular-left", "retarder"), default="linear")
     p.add_argument("--angle", type=float, default=0.0,

@@ -172,3 +172,127 @@ def add_to_compositor(scene):
     tree.links.new(node.outputs["Image"], viewer.inputs[0])
     sync_group_nodes(scene)
     return node
+
+
+# ----------------------------------------------------------------------------- denoising
+
+DENOISE_GROUP_NAME = "Polar Denoise"
+DENOISE_GROUP_VERSION = 1
+
+
+def _vector_op(g, operation, a, b=None, scale=None):
+    """A ShaderNodeVectorMath node (per colour channel for colour sockets); constants as 3-tuples."""
+    node = g.nodes.new("ShaderNodeVectorMath")
+    node.operation = operation
+    node.location = (g.x, -300)
+    g.x += 20
+    for value, socket in ((a, node.inputs[0]), (b, node.inputs[1])):
+        if value is None:
+            continue
+        if isinstance(value, tuple):
+            socket.default_value = value
+        else:
+            g.links.new(value, socket)
+    if scale is not None:
+        g._link(scale, node.inputs["Scale"])
+    return node.outputs[0]
+
+
+def ensure_denoise_group(denoiser="CompositorNodeDenoise"):
+    """The "Polar Denoise" group: denoise a Stokes image with Blender's Denoise node (OIDN).
+
+    S1…S3 are signed, the denoiser wants non-negative images: it denoises the six analyser images
+    (S0 ± S_k)/2, k = 1, 2, 3 (what ideal linear polarisers at 0°/90°, 45°/135° and right/left
+    circular analysers transmit), each with the same Albedo and Normal guides, and recombines
+    them: S0 = mean of the three sums, S_k = difference of the pair.  The independent denoising
+    of each pair can leave |S| = √(S1² + S2² + S3²) above S0 (DoP > 1): with "Clamp DoP" = 1 the
+    group scales S1…S3 down to |S| = S0 where that happens (per colour channel); 0 leaves them.
+    ``denoiser``: the node type of the six denoisers (tests use a pass-through to check the
+    arithmetic).
+    """
+    name = f"{DENOISE_GROUP_NAME} v{DENOISE_GROUP_VERSION}"
+    if denoiser != "CompositorNodeDenoise":
+        name += f" ({denoiser})"
+    group = bpy.data.node_groups.get(name)
+    if group is not None:
+        return group
+    group = bpy.data.node_groups.new(name, "CompositorNodeTree")
+    iface = group.interface
+    for s in ("S0", "S1", "S2", "S3"):
+        iface.new_socket(s, in_out="INPUT", socket_type="NodeSocketColor")
+    iface.new_socket("Albedo", in_out="INPUT", socket_type="NodeSocketColor")
+    iface.new_socket("Normal", in_out="INPUT", socket_type="NodeSocketVector")
+    clamp = iface.new_socket("Clamp DoP", in_out="INPUT", socket_type="NodeSocketFloat")
+    clamp.default_value, clamp.min_value, clamp.max_value = 1.0, 0.0, 1.0
+    clamp.description = "1: scale S1…S3 so that DoP ≤ 1 per colour channel after denoising; 0: leave them"
+    for s in ("S0", "S1", "S2", "S3"):
+        iface.new_socket(s, in_out="OUTPUT", socket_type="NodeSocketColor")
+    g = _Graph(group)
+    gin = group.nodes.new("NodeGroupInput")
+    gout = group.nodes.new("NodeGroupOutput")
+    o = gin.outputs
+
+    def denoised(image):
+        if denoiser != "CompositorNodeDenoise":
+            return image                           # pass-through: the recombination alone
+        node = group.nodes.new(denoiser)
+        node.location = (g.x, -600)
+        g.x += 20
+        group.links.new(image, node.inputs["Image"])
+        group.links.new(o["Albedo"], node.inputs["Albedo"])
+        group.links.new(o["Normal"], node.inputs["Normal"])
+        node.inputs["HDR"].default_value = True    # radiance, not display values
+        return node.outputs["Image"]
+
+    pairs = []
+    for k in (1, 2, 3):
+        plus = _vector_op(g, "SCALE", _vector_op(g, "ADD", o["S0"], o[f"S{k}"]), scale=0.5)
+        minus = _vector_op(g, "SCALE", _vector_op(g, "SUBTRACT", o["S0"], o[f"S{k}"]), scale=0.5)
+        pairs.append((denoised(plus), denoised(minus)))
+    sums = [_vector_op(g, "ADD", p, m) for p, m in pairs]
+    s0 = _vector_op(g, "SCALE", _vector_op(g, "ADD", _vector_op(g, "ADD", sums[0], sums[1]), sums[2]),
+                    scale=1.0 / 3.0)
+    sk = [_vector_op(g, "SUBTRACT", p, m) for p, m in pairs]
+    # |S| per colour channel and the factor min(S0/|S|, 1) (safe divide: 0 where |S| = 0, where S_k = 0)
+    sq = [_vector_op(g, "MULTIPLY", s, s) for s in sk]
+    length = _vector_op(g, "POWER", _vector_op(g, "ADD", _vector_op(g, "ADD", sq[0], sq[1]), sq[2]),
+                        (0.5, 0.5, 0.5))
+    limit = _vector_op(g, "MAXIMUM", _vector_op(g, "MINIMUM", _vector_op(g, "DIVIDE", s0, length), (1.0, 1.0, 1.0)),
+                       (0.0, 0.0, 0.0))
+    # factor = 1 + clamp·(limit − 1): 1 without the clamp
+    factor = _vector_op(g, "ADD", _vector_op(g, "SCALE", _vector_op(g, "SUBTRACT", limit, (1.0, 1.0, 1.0)),
+                                             scale=o["Clamp DoP"]), (1.0, 1.0, 1.0))
+    group.links.new(s0, gout.inputs["S0"])
+    for k, s in zip((1, 2, 3), sk):
+        group.links.new(_vector_op(g, "MULTIPLY", s, factor), gout.inputs[f"S{k}"])
+    return group
+
+
+def add_denoise_to_compositor(scene, denoiser="CompositorNodeDenoise"):
+    """Add the Polar Denoise group to the scene's compositor, fed by the Render Layers node's S0…S3 and
+    Denoising Albedo / Normal passes (turn them on in the View Layer properties); its S0 goes to the
+    compositor's output if nothing else does.  Returns the node."""
+    tree = getattr(scene, "compositing_node_group", None)
+    if tree is None:
+        tree = bpy.data.node_groups.new(f"{scene.name} Compositing", "CompositorNodeTree")
+        tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+        scene.compositing_node_group = tree
+    layers = next((n for n in tree.nodes if n.bl_idname == "CompositorNodeRLayers"), None)
+    if layers is None:
+        layers = tree.nodes.new("CompositorNodeRLayers")
+        layers.location = (-400, 0)
+    node = tree.nodes.new("CompositorNodeGroup")
+    node.node_tree = ensure_denoise_group(denoiser)
+    node.name = node.label = DENOISE_GROUP_NAME
+    node.location = (0, -300)
+    for src, dst in (("S0", "S0"), ("S1", "S1"), ("S2", "S2"), ("S3", "S3"),
+                     ("Denoising Albedo", "Albedo"), ("Denoising Normal", "Normal")):
+        if src in layers.outputs:
+            tree.links.new(layers.outputs[src], node.inputs[dst])
+    out = next((n for n in tree.nodes if n.bl_idname == "NodeGroupOutput"), None)
+    if out is None:
+        out = tree.nodes.new("NodeGroupOutput")
+        out.location = (300, -300)
+    if out.inputs and not out.inputs[0].is_linked:
+        tree.links.new(node.outputs["S0"], out.inputs[0])    # the denoised intensity is the image shown
+    return node

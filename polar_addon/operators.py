@@ -41,6 +41,24 @@ class POLAR_OT_add_virtual_polariser(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class POLAR_OT_add_polar_denoise(bpy.types.Operator):
+    """Add the Polar Denoise node group to the compositor: Blender's Denoise node on the six analyser
+    images (S0 ± S_k)/2, guided by the Denoising Albedo / Normal passes (turned on here)"""
+
+    bl_idname = "polar.add_polar_denoise"
+    bl_label = "Add Polar Denoise to Compositor"
+    bl_options = {"REGISTER", "UNDO"}
+
+    def execute(self, context):
+        from .compositor import add_denoise_to_compositor
+        for view_layer in context.scene.view_layers:
+            for name in ("s0", "s1", "s2", "s3", "denoising_albedo", "denoising_normal"):
+                setattr(view_layer.polar, f"use_pass_{name}", True)
+        add_denoise_to_compositor(context.scene)
+        self.report({"INFO"}, "Polar Denoise added to the compositor")
+        return {"FINISHED"}
+
+
 class POLAR_OT_estimate_cost(bpy.types.Operator):
     """Render a short pilot and predict the samples per pixel and the time the current Noise Threshold
     needs (adaptive and uniform sampling)"""
@@ -86,6 +104,7 @@ class POLAR_OT_estimate_cost(bpy.types.Operator):
         return {"FINISHED"}
 
 
-classes = (POLAR_OT_add_polarising_bsdf, POLAR_OT_add_virtual_polariser, POLAR_OT_estimate_cost)
+classes = (POLAR_OT_add_polarising_bsdf, POLAR_OT_add_virtual_polariser, POLAR_OT_add_polar_denoise,
+           POLAR_OT_estimate_cost)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

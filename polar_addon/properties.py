@@ -23,7 +23,10 @@ SPECTRAL_ITEMS = [
 ]
 
 PASS_NAMES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP", "Polariser",
-              "VisDoP", "VisS1", "VisS2", "VisS3", "VisAoLP", "Noise", "Polarisation Mosaic")
+              "VisDoP", "VisS1", "VisS2", "VisS3", "VisAoLP", "Noise", "Polarisation Mosaic",
+              "Denoising Albedo", "Denoising Normal")
+#: Denoising guides for the compositor's Denoise node (as Cycles' Denoising Data); opt-in.
+DENOISE_PASSES = ("Denoising Albedo", "Denoising Normal")
 #: Passes on by default; the false-colour visualisation passes are opt-in.
 DEFAULT_PASSES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP", "Polariser")
 
@@ -164,6 +167,12 @@ class PolarViewLayerSettings(bpy.types.PropertyGroup):
     use_pass_polarisation_mosaic: BoolProperty(name="Polarisation Mosaic", default=False, update=_refresh_passes,
                                                description="What a polarisation camera records: a 2×2 mosaic of "
                                                "micro-polarisers (Render properties ▸ Virtual Polariser)")
+    use_pass_denoising_albedo: BoolProperty(name="Denoising Albedo", default=False, update=_refresh_passes,
+                                            description="Albedo at the first non-mirror hit, a guide for the "
+                                            "compositor's Denoise node (as Cycles' Denoising Data)")
+    use_pass_denoising_normal: BoolProperty(name="Denoising Normal", default=False, update=_refresh_passes,
+                                            description="World-space shading normal at the first non-mirror "
+                                            "hit, a guide for the compositor's Denoise node")
 
     def enabled_passes(self):
         return [name for name in PASS_NAMES if getattr(self, pass_property(name))]

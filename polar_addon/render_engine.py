@@ -24,7 +24,8 @@ from ..engine.postprocess.filters import apply_filter, filter_row
 from ..engine.postprocess.mosaic import mosaic as polarisation_mosaic
 from ..engine.spectral.cie import LUMINANCE_WEIGHTS
 from .compositor import polariser_inputs
-from .properties import DEFAULT_PASSES, NOISE_QUANTITY_TO_ENGINE, PASS_NAMES, POLARISATION_TO_ENGINE
+from .properties import (DEFAULT_PASSES, DENOISE_PASSES, NOISE_QUANTITY_TO_ENGINE, PASS_NAMES,
+                         POLARISATION_TO_ENGINE)
 from .ui_names import ui_message
 from .viewport import ViewportSession, stop_all_sessions
 from ..engine import kernels
@@ -152,7 +153,11 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         for name in enabled:
             if name == "Noise" and not adaptive:
                 continue
-            if name.startswith("S") or name.startswith("Vis") or name in ("Polariser", "Polarisation Mosaic"):
+            if name == "Denoising Normal":
+                self.register_pass(scene, renderlayer, name, 3, "XYZ", "VECTOR")
+                continue
+            if name.startswith("S") or name.startswith("Vis") or name in ("Polariser", "Polarisation Mosaic",
+                                                                          "Denoising Albedo"):
                 self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
             else:
                 self.register_pass(scene, renderlayer, name, 1, "X", "VALUE")
@@ -190,6 +195,9 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         self._mosaic = mosaic_inputs(scene.polar)
         if first_compile_pending(kernels):
             self.update_stats("", "Polar | compiling kernels (first render only)")
+        if enabled & set(DENOISE_PASSES):
+            import dataclasses
+            settings = dataclasses.replace(settings, denoise_data=True)
 
         def progress(fraction, stats):
             self.update_progress(fraction)
@@ -208,6 +216,11 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         adaptive = adaptive_settings(scene, self.is_preview)
         if distributed_scheduler["address"] and not self.is_preview:
             from ..engine.render.distributed import render_distributed
+            if getattr(settings, "denoise_data", False):   # not collected from Dask workers yet
+                import dataclasses
+                settings = dataclasses.replace(settings, denoise_data=False)
+                self.report({"WARNING"}, "Polar: the Denoising Albedo / Normal passes are not rendered on a "
+                                         "Dask cluster yet: they stay empty")
             out = render_distributed(engine_scene, distributed_scheduler["address"], settings, progress=progress,
                                      should_stop=should_stop, window=window)
         else:
@@ -217,6 +230,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
                            out.film.alpha() if out.film.has_alpha else None)
         if out.halves is not None and "Noise" in enabled:
             self._write_noise(result, out, adaptive, window)
+        if getattr(out.film, "has_denoise_data", False):
+            self._write_denoise_data(result, out.film, window, enabled)
         self.end_result(result)
         stats = out.stats
         message = (f"Polar | {stats['transport_reason']} | {stats['samples']} samples in {stats['seconds']:.1f} s"
@@ -248,6 +263,19 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         target = result.layers[0].passes.get("Noise")
         if target is not None:
             target.rect.foreach_set(np.ascontiguousarray(noise[::-1], dtype=np.float32).ravel())
+
+    def _write_denoise_data(self, result, film, window, enabled):
+        """Denoising Albedo / Normal passes from the film's guides (Cycles' denoising data)."""
+        albedo, normal = film.denoise_data()
+        passes = result.layers[0].passes
+        for name, img in (("Denoising Albedo", albedo), ("Denoising Normal", normal)):
+            target = passes.get(name) if name in enabled else None
+            if target is None:
+                continue
+            if window is not None:
+                x0, y0, x1, y1 = window
+                img = img[y0:y1, x0:x1]
+            target.rect.foreach_set(np.ascontiguousarray(img[::-1], dtype=np.float32).ravel())
 
     def _write_passes(self, result, stokes_rgb, window, enabled, polariser, alpha=None):
         if stokes_rgb is None:

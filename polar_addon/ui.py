@@ -116,6 +116,10 @@ class POLAR_PT_passes(_PolarPanel, bpy.types.Panel):
             col.prop(s, f"use_pass_{name}")
         col = layout.column(heading="Adaptive Sampling", align=True)
         col.prop(s, "use_pass_noise")
+        col = layout.column(heading="Denoising Data", align=True)
+        col.prop(s, "use_pass_denoising_albedo")
+        col.prop(s, "use_pass_denoising_normal")
+        layout.operator("polar.add_polar_denoise", icon="NODE_COMPOSITING")
 
 
 classes = (POLAR_PT_sampling, POLAR_PT_light_model, POLAR_PT_polariser, POLAR_PT_performance, POLAR_PT_passes)

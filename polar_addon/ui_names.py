@@ -26,6 +26,7 @@ RENDER_SETTINGS = {
     "threads": ("threads", "Render Properties ▸ Performance ▸ Threads"),
     "reduce_spectral": (None, _FIXED),
     "simplify": ("skip_clear_layers", "Render Properties ▸ Polarisation & Spectrum ▸ Skip Clear Layers"),
+    "denoise_data": (None, "View Layer Properties ▸ Polarisation Passes ▸ Denoising Data"),
 }
 
 #: Engine ``camera.<field>`` → UI path (of the active camera, or the output format).

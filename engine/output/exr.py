@@ -192,26 +192,72 @@ def write_stokes_exr(
         exr.write(tmp)
 
 
-def read_stokes_exr(path: str | os.PathLike) -> tuple[np.ndarray, dict[str, np.ndarray], dict]:
-    """Read a file written by :func:`write_stokes_exr`.
+def _layer_of(name: str) -> str | None:
+    """The view layer of a Blender multilayer channel ``<Layer>.S<k>.<R|G|B>`` (None for other names).
+
+    Blender names render passes ``<Layer>.<Pass>.<Channel>``; the layer name itself may hold dots,
+    so the pass and channel are the last two fields.
+    """
+    parts = name.rsplit(".", 2)
+    if len(parts) == 3 and parts[0] and f"{parts[1]}.{parts[2]}" in STOKES_CHANNELS:
+        return parts[0]
+    return None
+
+
+def stokes_layers(channels) -> list[str]:
+    """View layers (in name order) of a Blender multilayer EXR that hold all twelve Stokes channels."""
+    names = set(channels)
+    found = {layer for layer in map(_layer_of, names) if layer is not None}
+    return sorted(layer for layer in found if all(f"{layer}.{c}" in names for c in STOKES_CHANNELS))
+
+
+def read_stokes_exr(path: str | os.PathLike,
+                    layer: str | None = None) -> tuple[np.ndarray, dict[str, np.ndarray], dict]:
+    """Read a file written by :func:`write_stokes_exr`, or a Blender multilayer EXR of a Polar render.
 
     Returns ``(stokes_rgb, channels, header)``: the Stokes image as float32
     (4, H, W, 3), every stored channel by name (dtype as stored: float32,
     float16 or uint32) and the header dict, with EXR doubles turned back into
-    Python floats.  Raises ValueError if a Stokes channel is missing.
+    Python floats.
+
+    Blender writes its passes as ``<Layer>.<Pass>.<Channel>`` (e.g. ``ViewLayer.S0.R``), one
+    part per pass: then ``layer`` names the view layer to read (needed only when several hold
+    the Stokes passes), ``channels`` holds that layer's channels without the ``<Layer>.``
+    prefix, and ``header`` is the first part's.  A file with top-level ``S0.R`` … is read as
+    before (``layer`` must then be None).  Raises ValueError if a Stokes channel is missing,
+    naming the view layers the file has.
     """
     f = OpenEXR.File(os.fspath(path), separate_channels=True)
-    channels = {name: ch.pixels for name, ch in f.channels().items()}
-    missing = [n for n in STOKES_CHANNELS if n not in channels]
-    if missing:
-        raise ValueError(f"{os.fspath(path)}: not a Stokes EXR, missing channels {missing}")
+    parts = f.parts if len(f.parts) > 1 else None
+    if parts is None:
+        channels = {name: ch.pixels for name, ch in f.channels().items()}
+    else:
+        channels = {name: ch.pixels for part in parts for name, ch in part.channels.items()}
+    plain = all(n in channels for n in STOKES_CHANNELS)
+    if layer is not None or not plain:
+        layers = stokes_layers(channels)
+        available = ", ".join(repr(x) for x in layers) or "none"
+        if layer is None:
+            if len(layers) > 1:
+                raise ValueError(f"{os.fspath(path)}: several view layers hold the Stokes passes "
+                                 f"({available}): choose one with --layer")
+            if not layers:
+                missing = [n for n in STOKES_CHANNELS if n not in channels]
+                raise ValueError(f"{os.fspath(path)}: not a Stokes EXR, missing channels {missing} "
+                                 "(and no view layer <Layer>.S0.R … of a Blender multilayer EXR)")
+            layer = layers[0]
+        elif layer not in layers:
+            raise ValueError(f"{os.fspath(path)}: no view layer {layer!r} with the Stokes passes "
+                             f"S0…S3; layers with them: {available}")
+        prefix = layer + "."
+        channels = {n[len(prefix):]: a for n, a in channels.items() if n.startswith(prefix)}
     height, width = channels["S0.R"].shape
     stokes_rgb = np.empty((4, height, width, 3), dtype=np.float32)
     for k in range(4):
         for c, cname in enumerate("RGB"):
             stokes_rgb[k, :, :, c] = channels[f"S{k}.{cname}"]
     header = {}
-    for key, value in f.header().items():
+    for key, value in (f.header() if parts is None else parts[0].header).items():
         if isinstance(value, np.ndarray) and value.dtype == np.float64 and value.shape == (1,):
             value = float(value[0])
         header[key] = value

@@ -329,6 +329,8 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
     def add_result(result):
         pixel, sample, values, s = result
         add_in_sample_order(film, halves, pixel, sample, values, s.get("alpha"))
+        if "denoise" in s:
+            film.add_denoise_data(pixel, *s["denoise"])
         for k in ("rays", "shadow_rays", "nonfinite"):
             stats[k] += s[k]
         done["samples"] += pixel.size

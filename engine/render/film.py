@@ -6,7 +6,8 @@ of squares of the luminance Stokes vector per pixel, from which the standard
 error of each pixel mean follows (used by tests and the peer comparisons), and
 the sum of per-sample alpha (coverage of the camera rays: 0 where a sample saw
 the transparent background or a holdout, as Cycles' alpha; 1 for samples added
-without alpha).
+without alpha).  With denoising data (``add_denoise_data``) it also sums the per-sample albedo
+and shading normal of the first non-delta vertex (Cycles' Denoising Albedo / Normal).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ class Film:
         self.sumsq_y = np.zeros((4, n))
         self.count = np.zeros(n, np.int64)
         self.alpha_sums = None          # None: every sample so far had alpha 1 (no memory spent)
+        self.denoise_sums = None        # None: no denoising data asked for; else (6, n): albedo RGB, normal XYZ
 
     def add_samples(self, pixel: np.ndarray, stokes_rgb: np.ndarray, alpha: np.ndarray | None = None) -> None:
         """Add complete samples: ``stokes_rgb`` (4, 3, N) for flat pixel indices (N,), with their alpha
@@ -42,7 +44,33 @@ class Film:
             self.sumsq_y[s] += np.bincount(pixel, weights=y[s] * y[s], minlength=n)
         self.count += np.bincount(pixel, minlength=n)
 
+    def add_denoise_data(self, pixel: np.ndarray, albedo: np.ndarray, normal: np.ndarray) -> None:
+        """Add the denoising guides of samples already added with ``add_samples``: albedo (3, N) linear
+        sRGB reflectance and world-space shading normal (3, N), for flat pixel indices (N,)."""
+        n = self.count.shape[0]
+        if self.denoise_sums is None:
+            self.denoise_sums = np.zeros((6, n))
+        for i, values in enumerate((*albedo, *normal)):
+            self.denoise_sums[i] += np.bincount(pixel, weights=values, minlength=n)
+
+    @property
+    def has_denoise_data(self) -> bool:
+        return self.denoise_sums is not None
+
+    def denoise_data(self) -> tuple[np.ndarray, np.ndarray]:
+        """(albedo, normal), each (H, W, 3): pixel means of the guides (0 where no sample yet).
+
+        The normal is the mean of unit normals, not renormalised (as Cycles' Denoising Normal)."""
+        if self.denoise_sums is None:
+            raise ValueError("this film holds no denoising data (render with denoise_data=True)")
+        m = self.denoise_sums / np.maximum(self.count, 1)
+        m = m.reshape(2, 3, self.height, self.width).transpose(0, 2, 3, 1)
+        return m[0], m[1]
+
     def merge(self, other: Film) -> None:
+        if other.denoise_sums is not None:
+            self.denoise_sums = other.denoise_sums.copy() if self.denoise_sums is None \
+                else self.denoise_sums + other.denoise_sums
         if other.alpha_sums is not None or self.alpha_sums is not None:
             mine = self.count.astype(np.float64) if self.alpha_sums is None else self.alpha_sums
             theirs = other.count.astype(np.float64) if other.alpha_sums is None else other.alpha_sums

@@ -113,6 +113,57 @@ def power_heuristic(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.where(den > 0, a2 / np.where(den > 0, den, 1.0), 0.0)
 
 
+# ----------------------------------------------------------------------------- denoising guides
+
+class DenoiseGuides:
+    """Per-path albedo and normal at the first non-delta vertex (Cycles' denoising data).
+
+    Paths continue through delta-only vertices (mirrors, smooth glass) as in Cycles, and the
+    albedo found behind them is scaled by the path's throughput T00 so far (a tinted mirror tints
+    it).  The albedo is the one-sample estimate of the directional albedo M00 of the sampled
+    BSDF weight (BSDF·cos/pdf from unpolarised light), whose pixel mean converges to the Mueller
+    M00 directional albedo; for a cosine-sampled Lambert it is exactly ρ.  Wavelength samples are
+    turned into linear sRGB by their colour-matching weights, normalised per channel (a reflectance,
+    not a radiance) and kept within the sampled values.  The normal is the world-space shading
+    normal, facing the arriving ray.
+    Paths that leave the scene (or end) before a non-delta vertex keep albedo 0 and normal 0.
+    """
+
+    def __init__(self, n: int):
+        self.albedo = np.zeros((3, n))
+        self.normal = np.zeros((3, n))
+        self.done = np.zeros(n, bool)
+
+    def record(self, path: np.ndarray, T00: np.ndarray, weight: MuellerValue, valid: np.ndarray, n_s: np.ndarray,
+               wo: np.ndarray, w_rgb: np.ndarray | None) -> None:
+        """Record the vertices of paths ``path`` (original indices) not recorded yet.
+
+        ``T00`` (Lm, n): throughput before the vertex; ``weight``: the sampled BSDF weight (counted
+        where ``valid``); ``n_s``, ``wo`` (3, n): shading normal and direction to the previous vertex; ``w_rgb``
+        (3, L, N) colour weights of the wavelength samples (None: RGB mode, grey materials).
+        """
+        new = ~self.done[path]
+        if not new.any():
+            return
+        a = np.where(valid, unpolarised_response(weight, 1)[0], 0.0) * T00     # (Lm, n)
+        a = np.where(np.isfinite(a), a, 0.0)       # as the dropped non-finite samples: no guide
+        if w_rgb is None:
+            rgb = np.repeat(a.mean(axis=0)[None], 3, axis=0)
+        else:
+            w = w_rgb[:, :, path]                              # (3, L, n); Lm is L or 1
+            den = w.sum(axis=1)
+            rgb = np.where(den != 0, np.einsum("cln,ln->cn", w, np.broadcast_to(a, w.shape[1:]))
+                           / np.where(den != 0, den, 1.0), 0.0)
+            # sRGB colour-matching weights can be negative: keep each channel within the sampled
+            # albedos (a weighted mean of them when the weights are positive)
+            rgb = np.clip(rgb, a.min(axis=0), a.max(axis=0))
+        facing = np.where(dot(n_s, wo) < 0, -1.0, 1.0)
+        idx = path[new]
+        self.albedo[:, idx] = rgb[:, new]
+        self.normal[:, idx] = (n_s * facing)[:, new]
+        self.done[idx] = True
+
+
 # ----------------------------------------------------------------------------- tracer
 
 class PathTracer:
@@ -155,6 +206,9 @@ class PathTracer:
         self.visibility = ray_visibility(compiled)
         self.film_transparent = bool(getattr(camera.cam, "film_transparent", False))
         self.track_alpha = self.film_transparent or (self.visibility is not None and self.visibility.any_holdout)
+        # Denoising guides (Cycles' Denoising Albedo / Normal), only when asked: renders without
+        # them run exactly the same arithmetic as before.
+        self.denoise_data = bool(getattr(settings, "denoise_data", False))
 
     def _emitted(self, light: _Light, lookup: WavelengthLookup) -> np.ndarray:
         """Emitted radiance (L, n) of ``light`` for paths with these wavelengths (RGB (3, n) in RGB mode)."""
@@ -217,6 +271,7 @@ class PathTracer:
         # Transparency T per sample (alpha = 1 − T): camera rays reaching the background of a
         # transparent film or a holdout (Cycles' film_write_transparent / holdout).
         transparency = np.zeros(n_total) if self.track_alpha else None
+        guides = DenoiseGuides(n_total) if self.denoise_data else None
 
         for bounce in range(st.max_depth):
             if abort is not None and abort.is_set():
@@ -325,6 +380,9 @@ class PathTracer:
                     radiance[:, :, path[sel]] += contrib
 
                 bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
+                if guides is not None and not bsdf.flags.is_delta_only:
+                    guides.record(gather(path, sel), T[0, 0][:, rows], bs.weight, bs.valid, sp.n_s, sp.wo,
+                                  w_rgb)
                 scatter_throughput(newT, T, rows, bs.weight, xTm, sp.wo)
                 new_d[:, sel] = bs.wi
                 new_xT[:, sel] = bs.weight.x_in
@@ -362,6 +420,8 @@ class PathTracer:
         out[:, :, ~finite] = 0.0
         if transparency is not None:
             stats["alpha"] = 1.0 - transparency
+        if guides is not None:
+            stats["denoise"] = (guides.albedo, guides.normal)
         return out, stats
 
     def _shadow_transmittance(self, p: np.ndarray, n_g: np.ndarray, wi: np.ndarray, t_max: np.ndarray,

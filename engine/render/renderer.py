@@ -248,6 +248,8 @@ class Renderer:
             nonlocal done
             pixel, values, s = result
             film.add_samples(pixel, values, s.get("alpha"))
+            if "denoise" in s:
+                film.add_denoise_data(pixel, *s["denoise"])
             for k in ("rays", "shadow_rays", "nonfinite"):
                 stats[k] += s[k]
             done += pixel.size

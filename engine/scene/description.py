@@ -180,6 +180,9 @@ class RenderSettings:
     #: "auto": skip layered coats that are index-matched to the medium above and clear (exact;
     #: engine.materials.simplify); "off": render every layer as given.
     simplify: str = "auto"
+    #: Also record the denoising guides (albedo and normal at the first non-delta vertex, as
+    #: Cycles' Denoising Albedo / Normal passes); False: the renders are unchanged.
+    denoise_data: bool = False
 
 
 @dataclass
