@@ -90,6 +90,17 @@ def test_escaped_rays_see_the_reference_lookup(tmp_path, mono):
         np.testing.assert_allclose(out[0].T, ref, rtol=1e-6)
 
 
+def test_spectral_emission_develops_to_the_lookup():
+    """In spectral mode each direction emits D65n · Σ rgb_c B_c, which develops back to lookup()."""
+    from engine.spectral import GRID_NM, WavelengthLookup, spectrum_to_linear_srgb
+    env = EnvironmentMapEmitter(SKY, grid="mitsuba")
+    d = np.concatenate((random_directions(4, seed=9), ME.sun_direction()[:, None]), axis=1)
+    lam = np.repeat(np.asarray(GRID_NM, float)[:, None], d.shape[1], axis=1)
+    spectra = env.emitted(d, WavelengthLookup(lam), rgb_mode=False, mono=False)
+    developed = np.array([spectrum_to_linear_srgb(spectra[:, k]) for k in range(d.shape[1])])
+    np.testing.assert_allclose(developed, ME.lookup(SKY, d.T), rtol=1e-3, atol=1e-6)
+
+
 def test_cycles_grid_puts_rows_at_texel_centres():
     img = np.random.default_rng(3).uniform(0.1, 2.0, size=(6, 10, 3))
     env = EnvironmentMapEmitter(img, grid="cycles")
