@@ -267,8 +267,10 @@ def test_constant_map_renders_as_the_constant_environment():
     assert ya.mean() == pytest.approx(yb.mean(), rel=0.01)
 
 
-def test_envmap_spheres_loads_and_renders_finite():
-    scene = _spheres(24, 2)
+@pytest.mark.parametrize("settings", [{}, {"reduce_spectral": False}, {"spectral": "mono"}],
+                         ids=["rgb", "spectral", "mono"])
+def test_envmap_spheres_loads_and_renders_finite(settings):
+    scene = _spheres(24, 2, **settings)
     (light,) = scene.lights
     assert light.grid == "mitsuba" and light.image.shape == (256, 512, 3)
     result = Renderer(scene).render()
