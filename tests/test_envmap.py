@@ -201,6 +201,21 @@ def test_pdf_integrates_to_one(grid):
     assert env.pdf(d).sum() * (2 / nc) * (2 * math.pi / nphi) == pytest.approx(1.0, abs=2e-3)
 
 
+@pytest.mark.parametrize("grid", ["mitsuba", "cycles"])
+def test_constant_map_is_the_constant_environment(grid):
+    """A constant map × strength: that radiance everywhere, the uniform-sphere pdf, and the same
+    mean colour and power (light selection) as EnvironmentEmitter of that radiance."""
+    from engine.render.lights import EnvironmentEmitter
+    from engine.spectral import RGBIlluminantSpectrum
+    env = EnvironmentMapEmitter(np.full((5, 9, 3), 2.0, np.float32), strength=1.5, grid=grid)
+    d = random_directions(500)
+    np.testing.assert_allclose(env.lookup_rgb(d), 3.0, rtol=1e-12)
+    np.testing.assert_allclose(env.pdf(d), 1 / (4 * math.pi), rtol=1e-12)
+    np.testing.assert_allclose(env.rgb(), 3.0, rtol=1e-12)
+    const = EnvironmentEmitter(RGBIlluminantSpectrum([1, 1, 1], 3.0))
+    assert env.power(2.0) == pytest.approx(const.power(2.0), rel=1e-3)    # D65 table vs sRGB white: 2.5e-4
+
+
 def test_black_map_samples_uniformly():
     env = EnvironmentMapEmitter(np.zeros((4, 8, 3)))
     np.testing.assert_allclose(env.pdf(random_directions(1000)), 1 / (4 * math.pi), rtol=1e-12)

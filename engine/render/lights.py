@@ -122,10 +122,13 @@ class EnvironmentMapEmitter(_Light):
         super().__init__(None)
         if grid not in ENVMAP_GRIDS:
             raise SceneError("grid", f"must be one of {', '.join(ENVMAP_GRIDS)}, got {grid!r}")
-        img = np.asarray(image, np.float64)
+        img = np.asarray(image)
+        # float32 maps stay float32 (half the memory of large HDRIs; the arithmetic is float64)
+        img = img if img.dtype == np.float32 else img.astype(np.float64)
         if img.ndim != 3 or img.shape[2] != 3 or img.shape[0] < 2 or img.shape[1] < 1:
             raise SceneError("image", f"must be an RGB image of at least 2 rows, got shape {img.shape}")
-        self.texels = img * float(strength)
+        self.texels = img
+        self.strength = float(strength)
         self.grid = grid
         H, W = img.shape[:2]
         self.rotation = math.radians(rotation_deg)
@@ -136,7 +139,7 @@ class EnvironmentMapEmitter(_Light):
         else:
             self.v_knots = np.concatenate(([0.0], (np.arange(H) + 0.5) / H, [1.0]))
             knot_rows = np.concatenate((self.texels[:1], self.texels, self.texels[-1:]))
-        lum = luminance(knot_rows)                                     # (K, W)
+        lum = self.strength * luminance(knot_rows)                     # (K, W)
         right = np.roll(lum, -1, axis=1)
         cell_lum = 0.25 * (lum[:-1] + lum[1:] + right[:-1] + right[1:])   # exact mean of the bilinear piece
         self.cos_knots = np.cos(math.pi * self.v_knots)
@@ -149,10 +152,10 @@ class EnvironmentMapEmitter(_Light):
         self.cdf = np.cumsum(prob.ravel())
         self.cdf[-1] = 1.0
         # mean radiance over the sphere (light selection): ∫ L dω / 4π
-        self._rgb = (np.einsum("kwc,kw->c", 0.25 * (knot_rows[:-1] + knot_rows[1:]
-                                                     + np.roll(knot_rows, -1, axis=1)[:-1]
-                                                     + np.roll(knot_rows, -1, axis=1)[1:]), omega)
-                     / (4.0 * math.pi))
+        rows = knot_rows.astype(np.float64)
+        rows_right = np.roll(rows, -1, axis=1)
+        piece_mean = 0.25 * (rows[:-1] + rows[1:] + rows_right[:-1] + rows_right[1:])
+        self._rgb = self.strength * np.einsum("kwc,kw->c", piece_mean, omega) / (4.0 * math.pi)
 
     def _to_map(self, d):
         """Directions (3, N) turned by −rotation about +Z (world → map frame)."""
@@ -187,7 +190,7 @@ class EnvironmentMapEmitter(_Light):
         img = self.texels
         top = img[j0, i0] * (1 - fx) + img[j0, i1] * fx
         bot = img[j0 + 1, i0] * (1 - fx) + img[j0 + 1, i1] * fx
-        return top * (1 - fy) + bot * fy
+        return (top * (1 - fy) + bot * fy) * self.strength
 
     def emitted(self, d, lookup, rgb_mode: bool, mono: bool):
         """Radiance towards −d for rays travelling along d (3, n): RGB (3, n), mono luminance (1, n)

@@ -807,7 +807,7 @@ def _environment_map(d: dict, field: str, base_dir: str) -> EnvironmentLight:
     if not np.isfinite(rgb).all():
         raise SceneError(f"{field}.image", "texels must be finite")
     # some HDR tools write tiny negative texels; radiance cannot be negative
-    rgb = np.maximum(rgb.astype(np.float64), 0.0)
+    rgb = np.maximum(rgb, np.float32(0.0))
     strength = number(d.get("strength", 1.0), f"{field}.strength", 0, MAX_LIGHT)
     if strength * float(rgb.max(initial=0.0)) > MAX_LIGHT:
         raise SceneError(f"{field}.strength", f"times the brightest texel must be at most {MAX_LIGHT:g}, "
