@@ -292,3 +292,12 @@ def test_envmap_spheres_loads_and_renders_finite(settings):
     y = result.stokes_luminance()
     assert np.isfinite(y).all() and result.stats["nonfinite"] == 0
     assert y[0].mean() > 0.1
+
+
+def test_peer_envmap_light_mapping():
+    from engine.scene.peer_format import peer_to_engine
+    base = {"camera": {}, "materials": {}, "objects": [], "integrator": {}}
+    out = peer_to_engine({**base, "light": {"type": "envmap", "file": "../envmaps/x.exr", "scale": 2.5}})
+    assert out["lights"] == [{"type": "environment", "image": "../envmaps/x.exr", "strength": 2.5, "grid": "mitsuba"}]
+    with pytest.raises(SceneError, match="light.file"):
+        peer_to_engine({**base, "light": {"type": "envmap"}})
