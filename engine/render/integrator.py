@@ -210,8 +210,11 @@ class PathTracer:
         # them run exactly the same arithmetic as before.
         self.denoise_data = bool(getattr(settings, "denoise_data", False))
 
-    def _emitted(self, light: _Light, lookup: WavelengthLookup) -> np.ndarray:
-        """Emitted radiance (L, n) of ``light`` for paths with these wavelengths (RGB (3, n) in RGB mode)."""
+    def _emitted(self, light: _Light, lookup: WavelengthLookup, d: np.ndarray | None = None) -> np.ndarray:
+        """Emitted radiance (L, n) of ``light`` for paths with these wavelengths (RGB (3, n) in RGB mode)
+        arriving along the directions d (3, n) (used by lights whose radiance varies with direction)."""
+        if d is not None and getattr(light, "varies_with_direction", False):
+            return light.emitted(d, lookup, self.rgb_mode, self.mono)
         if self.rgb_mode:
             return np.repeat(light.rgb()[:, None], lookup.lam.shape[1], axis=1)
         if self.mono:
@@ -299,7 +302,7 @@ class PathTracer:
             # --- light reached by this segment ----------------------------------------
             if env is not None and background.any():
                 miss = background
-                Le = self._emitted(env, lk.take(miss))
+                Le = self._emitted(env, lk.take(miss), d[:, miss])
                 w = np.ones(int(miss.sum()))
                 nd = ~prev_delta[miss]
                 if nd.any():
@@ -460,7 +463,7 @@ class PathTracer:
             u_tri = gather(u_rest, sel)
             select_prob = light_set.prob[li] if chosen_prob is None else gather(chosen_prob, sel)
             wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, gather(u[1], sel), gather(u[2], sel))))
-            value = self._emitted(light, lookup.take(sel)) * scale[None, :]
+            value = self._emitted(light, lookup.take(sel), wi) * scale[None, :]
             sub = ShadingPoint(p, gather(sp.n_s, sel), gather(sp.n_g, sel), gather(sp.wo, sel), gather(sp.lam, sel),
                                sp.mono, sp.lookup.take(sel) if sp.lookup is not None else None,
                                None if sp.material is None else gather(sp.material, sel),

@@ -148,9 +148,24 @@ class DirectionalLight:
     visible_camera: bool = True   # camera rays see the sun's disc (angle > 0)
 
 
+#: texel grids of an equirectangular map (column i always at u = (i + ½)/W):
+#: "mitsuba": row j at v = j/(H − 1) (rows 0 and H − 1 on the poles; the peer format);
+#: "cycles": row j at v = (j + ½)/H (texel centres, as Blender and image libraries), clamped to
+#: the first/last row within half a texel of the poles.
+ENVMAP_GRIDS = ("mitsuba", "cycles")
+
+
 @dataclass
 class EnvironmentLight:
+    """Light from every direction: constant ``radiance``, or with ``image`` (float (H, W, 3) linear
+    sRGB, row 0 = zenith) an equirectangular map × ``strength``, turned by ``rotation_deg`` about
+    +Z, its rows on the texel ``grid`` "cycles" or "mitsuba" (engine.render.lights.ENVMAP_GRIDS)."""
+
     radiance: object              # constant spectral radiance from every direction
+    image: object = None
+    strength: float = 1.0
+    rotation_deg: float = 0.0
+    grid: str = "cycles"
 
 
 @dataclass

@@ -25,7 +25,8 @@ import numpy as np
 from ..materials.catalogue import MODELS
 from ..materials.normal_map import ShadingNormal
 from ..textures import parse_texture_input
-from .description import (Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
+from ..textures.image import read_image
+from .description import (ENVMAP_GRIDS, Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
                                       RenderSettings, Scene, SpotLight)
 from ..errors import SceneError
 from .meshio import read_mesh
@@ -738,11 +739,13 @@ def parse_transform(d, field: str) -> np.ndarray:
                             scale=scale, rotate_deg=vec3(d.get("rotate_deg", [0, 0, 0]), f"{field}.rotate_deg"))
 
 
-def _parse_light_base(d: dict, field: str):
+def _parse_light_base(d: dict, field: str, base_dir: str = "."):
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     kind = choice(_require(d, "type", field), f"{field}.type", ("environment", "point", "spot", "directional"))
     if kind == "environment":
+        if "image" in d:
+            return _environment_map(d, field, base_dir)
         _check_keys(d, field, {"type", "radiance", "color", "note"})
         return EnvironmentLight(_illuminant(d, field, "radiance"))
     if kind == "point":
@@ -788,9 +791,37 @@ def _flag(d, key: str, field: str, default: bool) -> bool:
     return value
 
 
-def parse_light(d: dict, field: str):
-    """A light from its JSON object, with the optional Cycles options of LIGHT_OPTIONS."""
-    light = _parse_light_base(d, field)
+def _environment_map(d: dict, field: str, base_dir: str) -> EnvironmentLight:
+    """An equirectangular environment map: ``image`` (path relative to the scene file; EXR read
+    with OpenEXR, PNG/JPEG/TIFF through engine.textures.image), ``strength``, ``rotation_deg``
+    (about +Z, counter-clockwise seen from above) and the texel ``grid`` (default "cycles")."""
+    _check_keys(d, field, {"type", "image", "strength", "rotation_deg", "grid", "note"})
+    path = d["image"]
+    if not isinstance(path, str) or not path:
+        raise SceneError(f"{field}.image", "must be the path of an image file")
+    img = read_image(os.path.join(base_dir, path), field=f"{field}.image")[::-1]     # row 0 = zenith
+    channels = img.shape[2]
+    rgb = np.repeat(img[:, :, :1], 3, axis=2) if channels < 3 else img[:, :, :3]
+    if img.shape[0] < 2:
+        raise SceneError(f"{field}.image", f"needs at least 2 rows, got {img.shape[0]}")
+    if not np.isfinite(rgb).all():
+        raise SceneError(f"{field}.image", "texels must be finite")
+    # some HDR tools write tiny negative texels; radiance cannot be negative
+    rgb = np.maximum(rgb, np.float32(0.0))
+    strength = number(d.get("strength", 1.0), f"{field}.strength", 0, MAX_LIGHT)
+    if strength * float(rgb.max(initial=0.0)) > MAX_LIGHT:
+        raise SceneError(f"{field}.strength", f"times the brightest texel must be at most {MAX_LIGHT:g}, "
+                                              f"got {strength * float(rgb.max()):g}")
+    rotation = number(d.get("rotation_deg", 0.0), f"{field}.rotation_deg", -360.0, 360.0)
+    grid = choice(d.get("grid", "cycles"), f"{field}.grid", ENVMAP_GRIDS)
+    return EnvironmentLight(RGBIlluminantSpectrum([1.0, 1.0, 1.0], strength), image=rgb, strength=strength,
+                            rotation_deg=rotation, grid=grid)
+
+
+def parse_light(d: dict, field: str, base_dir: str = "."):
+    """A light from its JSON object, with the optional Cycles options of LIGHT_OPTIONS; image paths
+    are relative to ``base_dir`` (the scene file's folder)."""
+    light = _parse_light_base(d, field, base_dir)
     if isinstance(light, (PointLight, SpotLight)):
         light.radius = number(d.get("radius", 0.0), f"{field}.radius", 0)
         light.soft_falloff = _flag(d, "soft_falloff", field, True)
@@ -869,7 +900,7 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
     lights_in = data.get("lights", [])
     if not isinstance(lights_in, list):
         raise SceneError("lights", "must be a list")
-    lights = [parse_light(light, f"lights[{i}]") for i, light in enumerate(lights_in)]
+    lights = [parse_light(light, f"lights[{i}]", base_dir) for i, light in enumerate(lights_in)]
     if sum(isinstance(light, EnvironmentLight) for light in lights) > 1:
         raise SceneError("lights", "at most one environment light is allowed")
     scene = Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings,

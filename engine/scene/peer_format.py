@@ -70,8 +70,14 @@ def peer_to_engine(data: dict) -> dict:
         raise SceneError("light", "must be an object")
     if light.get("type") == "constant_environment":
         out["lights"].append({"type": "environment", "radiance": light.get("radiance", 1.0)})
+    elif light.get("type") == "envmap":
+        # the peer format's texel grid is Mitsuba's (rows on the poles), its file relative to the scene
+        if not isinstance(light.get("file"), str):
+            raise SceneError("light.file", "must be the path of the environment map (EXR)")
+        out["lights"].append({"type": "environment", "image": light["file"], "strength": light.get("scale", 1.0),
+                              "grid": "mitsuba"})
     elif light.get("type") != "area_light":
-        raise SceneError("light.type", "must be 'constant_environment' or 'area_light'")
+        raise SceneError("light.type", "must be 'constant_environment', 'envmap' or 'area_light'")
 
     for i, obj in enumerate(data["objects"]):
         field = f"objects[{i}]"

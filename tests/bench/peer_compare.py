@@ -13,7 +13,8 @@ coloured walls: ``cornell_lambert``) are judged on S1..S3 only.  Scenes whose
 Mitsuba reference is an unpolarised variant (``rough_glass_sphere``: Mitsuba's
 ``roughdielectric`` is a depolariser in its polarised variants) are rendered
 here with polarisation off and compared on S0 alone (``compare.py`` does that
-when one side has one component).  Prints a table; exit status 1 if a judged
+when one side has one component).  ``envmap_spheres`` is compared with
+Mitsuba's ``llvm_ad_mono_polarized`` render in luminance only.  Prints a table; exit status 1 if a judged
 component fails the 99 % criterion.
 Not part of the test command (it needs Mitsuba renders and minutes of time).
 """
@@ -40,16 +41,23 @@ from engine.scene.loader import load_scene  # noqa: E402
 SHARED = os.environ.get("POLAR_SHARED", os.path.join(os.path.dirname(REPO), "shared"))
 PEERS = os.path.join(SHARED, "peers")
 DEFAULT_SCENES = ["conv_s3_check", "plane_brewster", "fresnel_sphere", "fresnel_sphere_au", "glass_sphere",
-                  "cornell_lambert", "rough_glass_sphere"]
+                  "cornell_lambert", "rough_glass_sphere", "envmap_spheres"]
 S0_DIFFERS = {"cornell_lambert"}   # coloured diffuse walls: RGB→spectrum upsampling methods differ
 # Mitsuba's roughdielectric depolarises in its polarised variants, so the reference is its unpolarised
 # spectral render (S0 only) and ours is the scalar (polarisation off) render of the same scene.
 UNPOLARISED_PEER = {"rough_glass_sphere": "llvm_ad_spectral"}
+# The environment map enters Mitsuba's mono variant as each texel's luminance, exactly the luminance of
+# our RGB render; its spectral variants upsample coloured texels their own way (peers README, Lights).
+# So the reference is the mono polarised render, compared in luminance (Y) only.
+MONO_PEER = {"envmap_spheres": "llvm_ad_mono_polarized"}
+# Mitsuba's mono luminance weights (peers README): Rec.709's rounded ones differ by up to 5e-5 on the
+# map's coloured patches, which z-scores of noiseless directly seen sky resolve.
+MONO_Y = np.array([0.212671, 0.715160, 0.072169])
 
 
 def mitsuba_files(directory, scene):
     """(files, spp, (width, height)) of the Mitsuba renders of ``scene`` in ``directory``."""
-    variant = UNPOLARISED_PEER.get(scene, "*_polarized")
+    variant = UNPOLARISED_PEER.get(scene) or MONO_PEER.get(scene, "*_polarized")
     files = sorted(glob.glob(os.path.join(directory, f"{scene}__{variant}__*spp__seed*.npy")))
     files = [f for f in files if not f.endswith("_lum.npy")]
     if not files:
@@ -99,10 +107,13 @@ def main():
             result = renderer.render(scene.settings)
             path = os.path.join(args.out, f"{scene_name}__polar__{scene.camera.width}x{scene.camera.height}__"
                                           f"{spp}spp__seed{seed}.npy")
-            np.save(path, result.stokes().astype(np.float32))
+            stokes = result.stokes()
+            if scene_name in MONO_PEER:
+                stokes = np.einsum("shwc,c->shw", stokes, MONO_Y)     # one channel: compare.py takes it as is
+            np.save(path, stokes.astype(np.float32))
             ours.append(path)
         seconds = time.perf_counter() - t0
-        for ch in args.channels.split(","):
+        for ch in (["Y"] if scene_name in MONO_PEER else args.channels.split(",")):
             cmd = [sys.executable, os.path.join(PEERS, "compare.py"), "--a", *ours, "--b", *mfiles,
                    "--channel", ch, "--a-spp", str(spp * args.renders), "--b-spp", str(m_spp * len(mfiles))]
             proc = subprocess.run(cmd, capture_output=True, text=True)
