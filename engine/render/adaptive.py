@@ -55,9 +55,11 @@ MIN_UNIT_PATHS = 16384
 #: per-bounce overhead is paid per unit; on glass_sphere 64² the adaptive render took 30 % less wall
 #: time with 1 unit per worker and ≥ 16384 paths than with 4 and ≥ 4096, at the same counts and image).
 UNITS_PER_WORKER = 1
-#: Fewest pixels per unit in a first pass that measures where samples cost more (engine.render.estimate;
-#: smaller units measured their own overhead more than the cost differences, on this 2-core VM).
-COST_CHUNK_PIXELS = 256
+#: Fewest pixels per unit in a first pass that measures where samples cost more (engine.render.estimate).
+#: Its units should cost per path what the adaptive rounds' units do: at 16 spp, 1024 pixels make
+#: 16384 paths (:data:`MIN_UNIT_PATHS`); with 256-pixel units the pilot's per-unit overhead made the
+#: time estimate 1.4–2.1× too high on glass_sphere and the demo (64²), with 1024 it was 0.57–1.27×.
+COST_CHUNK_PIXELS = 1024
 #: Stop reasons written to the EXR header ``polar.stop_reason``.
 STOP_REASONS = ("threshold", "max_spp", "time_limit", "cancelled")
 
