@@ -15,7 +15,7 @@ from engine import cli
 from engine.output.exr import read_stokes_exr, write_stokes_exr
 from engine.render.adaptive import (AdaptiveSettings, HalfBuffers, TILE, checkpoints, film_noise, next_targets,
                                     pixel_noise, state_channels, state_from_channels, tile_ids, tile_noise)
-from engine.render.estimate import parse_target, predict
+from engine.render.estimate import best_mse_time_gain, mse_time_gain, parse_target, predict
 from engine.render.film import Film
 from engine.render.renderer import Renderer
 from engine.scene.loader import load_scene
@@ -322,6 +322,43 @@ def test_prediction_follows_one_over_root_spp():
     expected = int(marks[np.searchsorted(marks, 256)])
     assert p.median == expected and p.uniform_spp == 256
     assert p.adaptive_seconds == pytest.approx(TILE * TILE * expected * 1e-6)
+
+
+def test_rendering_every_tile_to_the_threshold_gains_nothing_over_uniform_at_equal_cost():
+    # Counts ∝ variance (every tile exactly at the threshold) with equal costs: MSE × time is the
+    # uniform one; counts ∝ σ are optimal then, gaining mean(σ²)/mean(σ)² (Cauchy–Schwarz).
+    sigma = np.array([0.01, 0.1, 1.0, 2.0])
+    v = sigma ** 2
+    assert mse_time_gain(v, 1e-6, 1000 * v) == pytest.approx(1.0)
+    assert mse_time_gain(v, 1e-6, 7 * sigma) == pytest.approx(np.mean(v) / np.mean(sigma) ** 2)
+    assert best_mse_time_gain(v, 1e-6) == pytest.approx(np.mean(v) / np.mean(sigma) ** 2)
+    assert mse_time_gain(v, 1e-6, np.full(4, 64)) == pytest.approx(1.0)
+    # Costs: the optimum is n ∝ √(v/c); a pixel 4× as expensive gets half the samples.
+    c = np.array([1.0, 4.0, 1.0, 4.0])
+    assert mse_time_gain(v, c, np.sqrt(v / c)) == pytest.approx(best_mse_time_gain(v, c))
+    assert best_mse_time_gain(v, c) == pytest.approx(np.sum(v) * np.sum(c) / np.sum(np.sqrt(v * c)) ** 2)
+    rng = np.random.default_rng(1)
+    for _ in range(20):                                      # no allocation beats the bound
+        assert mse_time_gain(v, c, rng.uniform(1, 100, 4)) <= best_mse_time_gain(v, c) + 1e-12
+
+
+def test_prediction_reports_the_gain_of_holding_quiet_tiles_at_min_spp():
+    # Two tiles: a noisy one (s0 error 0.2 at 16 spp) and a quiet one (0.01): the quiet one stays at
+    # min_spp, the noisy one goes to its checkpoint; the gain is the ratio of MSE × time (equal costs).
+    film, halves = Film(2 * TILE, TILE), HalfBuffers(2 * TILE * TILE)
+    film.count[:] = 16
+    film.sums[0, :] = 16.0
+    noisy = (np.arange(2 * TILE * TILE) % (2 * TILE)) < TILE
+    e = np.where(noisy, 0.2, 0.01)
+    halves.sums[0, 0] = 8 * (1 + e)
+    halves.sums[1, 0] = 8 * (1 - e)
+    p = predict(film, halves, "s0", 0.05, 16, 4096, seconds_per_sample=1e-6)
+    n = np.where(noisy, p.counts.max(), 16)
+    assert set(np.unique(p.counts)) == {16, int(p.counts.max())}
+    v = e ** 2 * 16
+    assert p.gain == pytest.approx(np.mean(v) * v.size / (np.mean(v / n) * np.sum(n)))
+    assert p.gain > 1 and p.best_gain >= p.gain
+    assert "better than uniform" in p.describe()
 
 
 @pytest.mark.parametrize("text", ["dolp", "dolp:", "dolp:-1", "foo:0.1", "s0:inf"])

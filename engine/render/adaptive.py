@@ -50,10 +50,16 @@ TILE = 4
 #: DoLP below which the AoLP is undefined and its error does not hold a pixel back.
 AOLP_MIN_DOLP = 0.05
 #: Fewest paths per work unit when a round is split for the workers (below, per-batch overhead dominates).
-MIN_UNIT_PATHS = 4096
-#: Fewest pixels per unit in a first pass that measures where samples cost more (engine.render.estimate;
-#: smaller units measured their own overhead more than the cost differences, on this 2-core VM).
-COST_CHUNK_PIXELS = 256
+MIN_UNIT_PATHS = 16384
+#: Work units a round is split into per worker.  Fewer, larger units trace faster per path (the
+#: per-bounce overhead is paid per unit; on glass_sphere 64² the adaptive render took 30 % less wall
+#: time with 1 unit per worker and ≥ 16384 paths than with 4 and ≥ 4096, at the same counts and image).
+UNITS_PER_WORKER = 1
+#: Fewest pixels per unit in a first pass that measures where samples cost more (engine.render.estimate).
+#: Its units should cost per path what the adaptive rounds' units do: at 16 spp, 1024 pixels make
+#: 16384 paths (:data:`MIN_UNIT_PATHS`); with 256-pixel units the pilot's per-unit overhead made the
+#: time estimate 1.4–2.1× too high on glass_sphere and the demo (64²), with 1024 it was 0.57–1.27×.
+COST_CHUNK_PIXELS = 1024
 #: Stop reasons written to the EXR header ``polar.stop_reason``.
 STOP_REASONS = ("threshold", "max_spp", "time_limit", "cancelled")
 
@@ -288,8 +294,9 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
     and adds them in order (engine.render.renderer.trace_in_order); returns True if stopped.
     ``clock`` gives seconds (injected by tests).  ``on_first_pass(film, halves, seconds, samples)``
     is called once every pixel has ``min_spp`` samples (for the prediction check).  A round is
-    split into at least ~4 units per worker (late rounds hold few tiles: one unit would leave all
-    but one worker idle); how units are cut never changes the result.  ``unit_times``: a list that
+    split into :data:`UNITS_PER_WORKER` units per worker of at least :data:`MIN_UNIT_PATHS` paths
+    (late rounds hold few tiles: one unit would leave all but one worker idle); how units are cut
+    never changes the result.  ``unit_times``: a list that
     receives (pixels, paths, seconds) of every unit of the first pass, cut into small pixel chunks
     for the purpose (where the samples cost more: engine.render.estimate).
     """
@@ -359,7 +366,7 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
         if stop_requested():
             return reason["value"]
         paths = int((target - counts)[todo].sum())
-        per_unit = min(batch_rays, max(MIN_UNIT_PATHS, -(-paths // (4 * max(workers, 1)))))
+        per_unit = min(batch_rays, max(MIN_UNIT_PATHS, -(-paths // (UNITS_PER_WORKER * max(workers, 1)))))
         timing["on"] = unit_times is not None and counts.min() < adaptive.min_spp
         units = adaptive_units(pixels[todo], counts[todo], target[todo], tiles, per_unit,
                                chunk_pixels=max(COST_CHUNK_PIXELS, pixels.size // 128) if timing["on"] else None)

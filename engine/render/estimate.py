@@ -9,6 +9,14 @@ sampling stops it at the first checkpoint ≥ m (engine.render.adaptive.checkpoi
 (:func:`cost_map`: the pilot is cut into small pixel chunks and each chunk's time is kept — the
 pixels that need many samples, glass and edges, are also the expensive ones).  The same prediction is made from the
 first pass (``min_spp`` everywhere) of an adaptive render and printed beside what happened.
+
+**Is adaptive worth it?** With per-sample variance v and cost c per pixel, n samples give the
+quantity an MSE of mean(v/n) in Σ c·n seconds; a uniform render's MSE × time is mean(v)·Σc whatever
+its spp.  :func:`mse_time_gain` is the ratio.  Rendering every tile *to the threshold* gives
+n ∝ v, whose MSE × time is mean(c·v)·N — with equal costs exactly the uniform one (gain 1): the
+gain comes only from the tiles held at ``min_spp`` or ``spp``.  The allocation with the least
+MSE × time is n ∝ √(v/c) (Lagrange), gain Σv·Σc / (Σ√(v·c))² ≥ 1 (:func:`best_mse_time_gain`),
+a bound no allocation exceeds.  v is estimated per tile as e²·n (e: tile error at n samples).
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ class Prediction:
     uniform_p95_spp: int          # … to bring 95 % of the pixels below the threshold
     seconds_per_sample: np.ndarray   # per pixel (or one number for all)
     capped: float                 # fraction of pixels that would stop at the maximum spp, not the threshold
+    variance: np.ndarray | None = None   # per-sample variance of the quantity per pixel (tile e²·n), its units²
 
     @property
     def median(self) -> float:
@@ -49,12 +58,47 @@ class Prediction:
     def uniform_seconds(self) -> float:
         return float(np.sum(np.broadcast_to(self.seconds_per_sample, self.counts.shape))) * self.uniform_spp
 
+    @property
+    def gain(self) -> float:
+        """Predicted MSE × time of the quantity, uniform ÷ adaptive (> 1: adaptive is better)."""
+        return mse_time_gain(self.variance, self.seconds_per_sample, self.counts)
+
+    @property
+    def best_gain(self) -> float:
+        """The largest gain any allocation of samples could reach on this image."""
+        return best_mse_time_gain(self.variance, self.seconds_per_sample)
+
     def describe(self) -> str:
+        gain = self.gain if self.variance is not None else math.nan
         return (f"{self.quantity} ≤ {self.threshold:g} ({UNITS[self.quantity]}): adaptive median "
                 f"{self.median:.0f} spp, 95th percentile {self.p95:.0f} spp, {self.adaptive_seconds:.1f} s; "
                 f"uniform {self.uniform_spp} spp, {self.uniform_seconds:.1f} s "
                 f"(for 95 % of the pixels: {self.uniform_p95_spp} spp)"
-                + (f"; {100 * self.capped:.0f} % of pixels would stop at the maximum spp" if self.capped else ""))
+                + (f"; {100 * self.capped:.0f} % of pixels would stop at the maximum spp" if self.capped else "")
+                + (f"; MSE × time of {self.quantity} {gain:.2f}× better than uniform (best possible "
+                   f"allocation {self.best_gain:.2f}×)" if math.isfinite(gain) else ""))
+
+
+def _broadcast(variance, seconds_per_sample, counts=None):
+    v = np.asarray(variance, np.float64)
+    c = np.broadcast_to(np.asarray(seconds_per_sample, np.float64), v.shape)
+    n = None if counts is None else np.broadcast_to(np.asarray(counts, np.float64), v.shape)
+    return v, c, n
+
+
+def mse_time_gain(variance, seconds_per_sample, counts) -> float:
+    """MSE × time of a uniform render ÷ that of ``counts`` samples per pixel (arrays over pixels;
+    ``variance``: per-sample variance, ``seconds_per_sample``: cost).  NaN where undefined (no noise)."""
+    v, c, n = _broadcast(variance, seconds_per_sample, counts)
+    den = float(np.mean(v / n) * np.sum(c * n))
+    return float(np.mean(v) * np.sum(c)) / den if den > 0 else math.nan
+
+
+def best_mse_time_gain(variance, seconds_per_sample) -> float:
+    """The gain of the optimal allocation n ∝ √(v/c): Σv·Σc / (Σ√(v·c))² (Cauchy–Schwarz: ≥ 1)."""
+    v, c, _ = _broadcast(variance, seconds_per_sample)
+    den = float(np.sum(np.sqrt(v * c)) ** 2)
+    return float(np.sum(v) * np.sum(c)) / den if den > 0 else math.nan
 
 
 def cost_map(unit_times, n_pixels: int, seconds: float) -> np.ndarray:
@@ -91,7 +135,8 @@ def predict(film, halves, quantity: str, threshold: float, min_spp: int, spp: in
         else min_spp
     capped = float(np.mean(need > spp)) if need.size else 0.0
     sps = np.asarray(seconds_per_sample, np.float64)
-    return Prediction(quantity, threshold, counts, uniform, uniform_p95, sps[pixels] if sps.ndim else sps, capped)
+    return Prediction(quantity, threshold, counts, uniform, uniform_p95, sps[pixels] if sps.ndim else sps, capped,
+                      variance=tile_err ** 2 * n)
 
 
 def parse_target(text: str) -> tuple[str, float]:
