@@ -224,17 +224,37 @@ def test_real_file_geometry_renders_with_exact_warnings(addon, tmp_path):
         inst.location = (i - 1.0, 2.0, 0.0)
         scene.collection.objects.link(inst)
     add_plane(30.0, white)
+    # every light type (with the options Polar renders as Cycles does), and one option it does not
+    for kind, loc, opts in (("POINT", (-2, -2, 2), {"shadow_soft_size": 0.3}),
+                            ("SPOT", (2, -2, 3), {"spot_size": math.radians(60), "spot_blend": 0.3}),
+                            ("SUN", (0, 0, 5), {"angle": math.radians(5), "energy": 1.0}),
+                            ("AREA", (0, -2, 3), {"shape": "DISK", "size": 0.5}),
+                            ("POINT", (3, 1, 1), {"use_shadow": False})):
+        bpy.ops.object.light_add(type=kind, location=loc)
+        for k, v in opts.items():
+            setattr(bpy.context.object.data, k, v)
+    no_shadow = bpy.context.object.name
+    bpy.ops.mesh.primitive_plane_add(size=0.5, location=(0.0, -1.0, 2.5))
+    glow = bpy.data.materials.new("Glow")
+    emit = glow.node_tree.nodes.new("ShaderNodeEmission")
+    glow.node_tree.links.new(emit.outputs[0], glow.node_tree.nodes["Material Output"].inputs["Surface"])
+    bpy.context.object.data.materials.append(glow)
     bpy.context.evaluated_depsgraph_get().update()
 
     engine_settings = _engine_settings()
     from polar_render.polar_addon.export.scene import export_scene
     exported, warnings = export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, 48, 36,
                                       engine_settings(scene))
+    shadow_warnings = [w for w in warnings if no_shadow in w]
+    assert len(shadow_warnings) == 1 and "shadow" in shadow_warnings[0].lower()
+    warnings = [w for w in warnings if w not in shadow_warnings]
     assert warnings == ["object 'GN Curve': geometry-nodes curves without a mesh are not rendered (nor by Cycles): "
                         "convert them with Curve to Mesh",
                         "object 'Text': 4 zero-area faces ignored"]      # Blender's text triangulation
+    assert len(exported.lights) >= 5
     names = sorted({m.name.split(":")[0] for m in exported.meshes})
-    assert names == ["BézierCurve", "Cube", "GN Points", "Hair", "Label", "Mball", "Plane", "Prop", "Text"]
+    assert names == ["BézierCurve", "Cube", "GN Points", "Hair", "Label", "Mball", "Plane", "Plane.001", "Prop",
+                     "Text", "light"]      # "light": the disk area light's emitter mesh
     assert sum(m.name.startswith("Prop") for m in exported.meshes) == 3            # one per instance
     assert sum(m.name.startswith("Label") for m in exported.meshes) == 3           # (text in an instance: once each)
     assert sum(m.name.startswith("Text") for m in exported.meshes) == 1            # not twice
