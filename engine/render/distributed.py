@@ -70,7 +70,9 @@ def _trace_paths(key, scene, settings, unit):
 def _ordered_on_cluster(client, submit, units, add_result, stop_requested, stats) -> bool:
     """Submit ``units`` (``submit(unit)`` → future), pass results to ``add_result`` in unit order.
 
-    Returns True if stopped (a stop request, or a failed cluster: then ``stats["error"]`` says why).
+    While nothing finishes, the stop request is polled (a cluster may stall for long; Ctrl-C /
+    SIGTERM must still end the render with its finished units).  Returns True if stopped (a stop
+    request, or a failed cluster: then ``stats["error"]`` says why).
     """
     from distributed import as_completed
     futures = [submit(unit) for unit in units]
@@ -90,10 +92,11 @@ def _ordered_on_cluster(client, submit, units, add_result, stop_requested, stats
                 results[index[future.key]] = future.result()
             except Exception as e:      # noqa: BLE001 — lost workers, lost scene data, a failed unit
                 stopped = True
-                stats["error"] = (f"the Dask cluster failed ({type(e).__name__}: "
-                                  f"{str(e).splitlines()[0] if str(e) else ''})")
+                stats["error"] = (f"the Dask cluster failed after {next_to_add} of {len(units)} work units "
+                                  f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''})")
                 break
-            future.release()
+            future.release()          # the worker may free the unit's result now
+        # Add in unit order so that the sums (and so the image) do not depend on timing.
         while next_to_add in results:
             add_result(results.pop(next_to_add))
             next_to_add += 1
@@ -137,7 +140,7 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
     counts and the image equal the local adaptive render's.
     """
     try:
-        from distributed import Client, as_completed
+        from distributed import Client
     except ImportError:
         raise RuntimeError("distributed rendering needs Dask: pip install \"dask[distributed]\"") from None
     own_client = client is None
@@ -165,63 +168,35 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
         if adaptive is not None:
             return _render_adaptive_on(client, key, scene_future, st, reason, simplified, W, H, window, adaptive,
                                        progress, should_stop)
-        futures = [client.submit(_render_unit, key, scene_future, st, unit, window, W, pure=True,
-                                 key=f"polar-{key[:12]}-{st.seed}-{i}-{unit}") for i, unit in enumerate(units)]
         film = Film(W, H)
         stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0, "transport": st.polarisation,
                  "transport_reason": reason, "spectral": st.spectral, "simplified": simplified,
                  "workers": len(client.scheduler_info()["workers"])}
         t0 = time.perf_counter()
-        index = {f.key: i for i, f in enumerate(futures)}
-        results = {}
-        next_to_add = 0
-        cancelled = False
-        pending = as_completed(futures)
-        while not pending.is_empty():
-            batch = pending.next_batch(block=False)
-            if not batch:
-                # Nothing finished yet: poll the stop request meanwhile (a cluster may stall for
-                # long; Ctrl-C / SIGTERM must still end the render with its finished units).
-                if should_stop is not None and should_stop():
-                    cancelled = True
-                    break
-                time.sleep(STOP_POLL_SECONDS)
-                continue
-            for future in batch:
-                try:
-                    results[index[future.key]] = future.result()
-                except Exception as e:      # noqa: BLE001 — lost workers, lost scene data, a failed unit
-                    cancelled = True
-                    stats["error"] = (f"the Dask cluster failed after {next_to_add} of {len(units)} work units "
-                                      f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''})")
-                    break
-                future.release()          # the worker may free the unit's sums now
-            # Add in unit order so that the sums (and so the image) do not depend on timing.
-            while next_to_add in results:
-                lo, sums, sumsq, count, s = results.pop(next_to_add)
-                n = count.shape[0]
-                if "alpha_sums" in s or film.has_alpha:
-                    if not film.has_alpha:
-                        film.alpha_sums = film.count.astype(np.float64)
-                    film.alpha_sums[lo:lo + n] += s["alpha_sums"] if "alpha_sums" in s else count
-                film.sums[:, :, lo:lo + n] += sums
-                film.sumsq_y[:, lo:lo + n] += sumsq
-                film.count[lo:lo + n] += count
-                for k in ("rays", "shadow_rays", "nonfinite"):
-                    stats[k] += s[k]
-                stats["samples"] += int(count.sum())
-                next_to_add += 1
+        added = [0]
+
+        def add_unit(result):
+            lo, sums, sumsq, count, s = result
+            n = count.shape[0]
+            if "alpha_sums" in s or film.has_alpha:
+                if not film.has_alpha:
+                    film.alpha_sums = film.count.astype(np.float64)
+                film.alpha_sums[lo:lo + n] += s["alpha_sums"] if "alpha_sums" in s else count
+            film.sums[:, :, lo:lo + n] += sums
+            film.sumsq_y[:, lo:lo + n] += sumsq
+            film.count[lo:lo + n] += count
+            for k in ("rays", "shadow_rays", "nonfinite"):
+                stats[k] += s[k]
+            stats["samples"] += int(count.sum())
             stats["seconds"] = time.perf_counter() - t0
-            if cancelled:
-                break
+            added[0] += 1
             if progress is not None:
-                progress(next_to_add / len(units), stats)
-            if should_stop is not None and should_stop():
-                cancelled = True
-                break
-        if cancelled:
-            for f in futures:
-                f.cancel()
+                progress(added[0] / len(units), stats)
+
+        cancelled = _ordered_on_cluster(
+            client, lambda iu: client.submit(_render_unit, key, scene_future, st, iu[1], window, W, pure=True,
+                                             key=f"polar-{key[:12]}-{st.seed}-{iu[0]}-{iu[1]}"),
+            list(enumerate(units)), add_unit, should_stop or (lambda: False), stats)
         stats["seconds"] = time.perf_counter() - t0
         return RenderResult(film=film, settings=st, stats=stats, cancelled=cancelled)
     finally:
