@@ -139,12 +139,8 @@ def sync_group_nodes(scene):
     return count
 
 
-def add_to_compositor(scene):
-    """Make the scene's compositor show the Virtual Polariser output of the active view layer.
-
-    Creates the compositor tree if there is none (Render Layers → Virtual Polariser → Group Output
-    and Viewer), or adds the group node next to an existing tree.  Returns the group node.
-    """
+def _compositor_with_render_layers(scene):
+    """(the scene's compositor node tree, its Render Layers node), creating either if missing."""
     tree = getattr(scene, "compositing_node_group", None)
     if tree is None:
         tree = bpy.data.node_groups.new(f"{scene.name} Compositing", "CompositorNodeTree")
@@ -154,6 +150,16 @@ def add_to_compositor(scene):
     if layers is None:
         layers = tree.nodes.new("CompositorNodeRLayers")
         layers.location = (-400, 0)
+    return tree, layers
+
+
+def add_to_compositor(scene):
+    """Make the scene's compositor show the Virtual Polariser output of the active view layer.
+
+    Creates the compositor tree if there is none (Render Layers → Virtual Polariser → Group Output
+    and Viewer), or adds the group node next to an existing tree.  Returns the group node.
+    """
+    tree, layers = _compositor_with_render_layers(scene)
     node = tree.nodes.new("CompositorNodeGroup")
     node.node_tree = ensure_group()
     node.name = node.label = GROUP_NAME
@@ -272,15 +278,7 @@ def add_denoise_to_compositor(scene, denoiser="CompositorNodeDenoise"):
     """Add the Polar Denoise group to the scene's compositor, fed by the Render Layers node's S0…S3 and
     Denoising Albedo / Normal passes (turn them on in the View Layer properties); its S0 goes to the
     compositor's output if nothing else does.  Returns the node."""
-    tree = getattr(scene, "compositing_node_group", None)
-    if tree is None:
-        tree = bpy.data.node_groups.new(f"{scene.name} Compositing", "CompositorNodeTree")
-        tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
-        scene.compositing_node_group = tree
-    layers = next((n for n in tree.nodes if n.bl_idname == "CompositorNodeRLayers"), None)
-    if layers is None:
-        layers = tree.nodes.new("CompositorNodeRLayers")
-        layers.location = (-400, 0)
+    tree, layers = _compositor_with_render_layers(scene)
     node = tree.nodes.new("CompositorNodeGroup")
     node.node_tree = ensure_denoise_group(denoiser)
     node.name = node.label = DENOISE_GROUP_NAME
