@@ -154,6 +154,7 @@ def test_compiled_decoder_equals_the_numpy_reference(tmp_path):
     (b"#?RADIANCE\n\n-Y 1 +X 8\n\x02\x02\x00\x09", "other than the image width"),
     (b"#?RADIANCE\n\n-Y 1 +X 8\n\x02\x02\x00\x08\x89\x01", "longer than its scanline"),
     (b"#?RADIANCE\n-Y 1 +X 8\n", "no end"),
+    (b"#?RADIANCE\n\n-Y 1 +X 8", "no pixel data"),
 ])
 def test_bad_files_name_the_problem(tmp_path, content, message):
     path = tmp_path / "bad.hdr"

@@ -378,7 +378,9 @@ def _read_hdr(path: str, field: str) -> np.ndarray:
             raise fail(f"unsupported pixel format {line[7:].strip().decode('ascii', 'replace')!r} "
                        "(only 32-bit_rle_rgbe)")
     eol = data.find(b"\n", header_end)
-    m = _RESOLUTION.match(data[header_end:eol if eol >= 0 else len(data)])
+    if eol < 0:
+        raise fail("no pixel data after the resolution line")
+    m = _RESOLUTION.match(data[header_end:eol])
     if m is None or m.group(2) == m.group(5):
         raise fail("bad resolution line (expected e.g. '-Y 512 +X 1024')")
     (s1, a1, n1, s2, a2, n2) = m.groups()
