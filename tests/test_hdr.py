@@ -174,16 +174,20 @@ def test_blender_written_hdr_reads_to_rgbe_precision(tmp_path):
     px = np.ones((h, w, 4), np.float32)
     px[..., :3] = rng.uniform(0, 1, (h, w, 3)) * 10.0 ** rng.uniform(-3, 3, (h, w, 1))
     img = bpy.data.images.new("polar_hdr_test", w, h, float_buffer=True, alpha=False)
+    scene = bpy.data.scenes.new("polar_hdr_test")     # its own settings: other tests' scenes are left alone
     try:
         img.pixels.foreach_set(px.ravel())            # Blender's rows: bottom first, as ours
-        scene = bpy.context.scene
         scene.view_settings.view_transform = "Standard"
         scene.view_settings.look = "None"
         scene.view_settings.exposure, scene.view_settings.gamma = 0.0, 1.0
-        scene.render.image_settings.file_format = "HDR"
+        settings = scene.render.image_settings
+        if hasattr(settings, "media_type"):            # Blender 5: single images, not multilayer
+            settings.media_type = "IMAGE"
+        settings.file_format = "HDR"
         img.save_render(str(tmp_path / "b.hdr"), scene=scene)
     finally:
         bpy.data.images.remove(img)
+        bpy.data.scenes.remove(scene)
     got = read_image(str(tmp_path / "b.hdr")).astype(np.float64)
     ref = px[..., :3].astype(np.float64)
     peak = ref.max(axis=-1, keepdims=True)
