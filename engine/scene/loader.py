@@ -500,7 +500,10 @@ def _parse_object_base(d: dict, field: str, base_dir: str, material_names) -> Me
     elif shape == "sphere":
         center = vec3(d.get("center", [0, 0, 0]), f"{field}.center")
         radius = number(d.get("radius", 1.0), f"{field}.radius", 0, math.inf, lo_open=True)
-        data = icosphere(integer(d.get("subdivisions", 6), f"{field}.subdivisions", 0, 9))
+        # UVs (Blender's UV-sphere map, shapes.sphere_uv_map) need extra seam and pole vertices: only
+        # for textured materials, so untextured spheres keep the peer meshes' exact vertex numbering
+        data = icosphere(integer(d.get("subdivisions", 6), f"{field}.subdivisions", 0, 9),
+                         uv=_any_textured(d, material_names))
         data = transform_mesh(data, transform_matrix(translate=center, scale=radius))
     elif shape == "quad":
         verts = _require(d, "vertices", field)
@@ -513,6 +516,8 @@ def _parse_object_base(d: dict, field: str, base_dir: str, material_names) -> Me
     uv = colors = tangents = None
     if shape == "quad":
         uv = _vertex_uv(d.get("uv", QUAD_UV), f"{field}.uv", 4)
+    elif shape in ("mesh", "sphere"):      # from the file (PLY u, v and colours; OBJ vt) or the sphere map
+        uv, colors = data.uv, dict(data.colors) or None
     elif shape == "triangles":
         uv = None if d.get("uv") is None else _vertex_uv(d["uv"], f"{field}.uv", len(data.vertices))
         colors = _vertex_colors(d.get("colors", {}), f"{field}.colors", len(data.vertices))
@@ -577,6 +582,15 @@ def _parse_object_base(d: dict, field: str, base_dir: str, material_names) -> Me
                 emission=emission, uv=uv, colors=colors or {}, tangents=tangents)
     _parse_ray_visibility(d, field, mesh)
     return mesh
+
+
+def _any_textured(d: dict, materials) -> bool:
+    """Whether a material named by the object (``material`` or ``materials``) varies over the surface."""
+    names = d.get("materials", [d.get("material")])
+    names = list(names.values()) if isinstance(names, dict) else names
+    if not isinstance(names, list) or not isinstance(materials, dict):
+        return False
+    return any(getattr(materials.get(n), "varies_over_surface", False) for n in names if isinstance(n, str))
 
 
 #: Per-object ray visibility, holdout and alpha (optional; defaults: visible to every ray, opaque).

@@ -3,6 +3,9 @@
 The readers are ``ply.read_ply`` (PLY, via plyfile) and ``obj.read_obj``
 (Wavefront OBJ); ``MeshData`` and the geometry helpers live in ``trimesh``
 and are re-exported here for the modules that import them from this one.
+Both readers fill ``MeshData.uv`` when the file has texture coordinates
+(PLY ``u, v`` and its aliases, OBJ ``vt``, split per corner) and PLY fills
+``MeshData.colors["Col"]`` from ``red, green, blue(, alpha)``.
 """
 from __future__ import annotations
 

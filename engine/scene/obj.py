@@ -3,8 +3,17 @@
 * Supported statements: ``v`` (extra components such as ``w`` or vertex
   colours are ignored), ``vn``, ``f`` with corners ``v``, ``v/vt``,
   ``v//vn``, ``v/vt/vn`` (negative = relative to the data defined so far),
-  ``usemtl``.  ``o``, ``g``, ``s``, ``vt``, ``mtllib``, ``l``, ``p`` and
-  unknown statements are ignored.  Text after ``#`` is a comment.
+  ``vt`` (u, v; a third component is ignored), ``usemtl``.  ``o``, ``g``,
+  ``s``, ``mtllib``, ``l``, ``p`` and unknown statements are ignored.  Text
+  after ``#`` is a comment.
+* Texture coordinates (``MeshData.uv``, v up as Blender's UV space) are
+  per corner in OBJ: a vertex whose corners refer to different (u, v)
+  values is split, the value of its first such corner keeping the vertex
+  and each further value appended as a new vertex after all others
+  (``trimesh.split_vertices``), so a file whose vertices each have one UV
+  keeps its vertex numbering.  Corners without ``vt`` do not split a vertex
+  and vertices only they use get (0, 0).  ``uv`` is None when no corner
+  refers to a ``vt``.
 * Numbers must be numbers: ``v 0 0 true`` or ``f 1 2 x`` is an error naming
   the line; an index that does not fit a 64-bit integer is out of range.
 * Without any ``vn`` in the file, ``vertex_normals`` is ``None`` and vertices
@@ -32,13 +41,13 @@ from __future__ import annotations
 import numpy as np
 
 from .trimesh import (MeshData, check_corner_counts, check_finite, compute_vertex_normals,
-                      fan_triangulate, mesh_file_error, open_mesh_file)
+                      fan_triangulate, mesh_file_error, open_mesh_file, split_vertices)
 
 __all__ = ["read_obj"]
 
 _WS = (" ", "\t")
 _INT64_MAX = np.iinfo(np.int64).max
-_PLURAL = {"vertex": "vertices", "normal": "normals"}
+_PLURAL = {"vertex": "vertices", "normal": "normals", "texture coordinate": "texture coordinates"}
 
 
 class _Statements:
@@ -47,9 +56,11 @@ class _Statements:
     def __init__(self):
         self.v, self.v_lines = [], []
         self.vn, self.vn_lines = [], []
+        self.vt, self.vt_lines = [], []
         self.corners: list[str] = []
-        # per face: corner count, file line, #v and #vn defined before it, group
+        # per face: corner count, file line, #v, #vn and #vt defined before it, group
         self.f_counts, self.f_lines, self.f_nv, self.f_nvn, self.f_group = [], [], [], [], []
+        self.f_nvt = []
         self.group_names: list[str] = []
         self._group_of: dict[str, int] = {}
         self._current = -1            # group of the faces that follow; -1 before any usemtl
@@ -60,6 +71,7 @@ class _Statements:
         self.f_lines.append(lineno)
         self.f_nv.append(len(self.v))
         self.f_nvn.append(len(self.vn))
+        self.f_nvt.append(len(self.vt))
         self.f_group.append(self._current)
 
     def use_material(self, name):
@@ -84,31 +96,34 @@ def _scan(text: str) -> _Statements:
         elif c0 == "v" and c1 == "n" and line[2:3] in _WS:
             st.vn.append(line[3:])
             st.vn_lines.append(lineno)
+        elif c0 == "v" and c1 == "t" and line[2:3] in _WS:
+            st.vt.append(line[3:])
+            st.vt_lines.append(lineno)
         elif c0 == "f" and c1 in _WS:
             st.add_face(line[2:].split(), lineno)
         elif c0 == "u" and line.startswith("usemtl") and line[6:7] in _WS:
             st.use_material(line[7:].strip())
-        # everything else (vt, o, g, s, mtllib, l, p, ...) is ignored
+        # everything else (o, g, s, mtllib, l, p, ...) is ignored
     return st
 
 
-def _vectors(strs, lines, what, field, path) -> np.ndarray:
-    """First three numbers of each statement -> (n, 3) float64."""
+def _vectors(strs, lines, what, field, path, width=3) -> np.ndarray:
+    """First ``width`` numbers of each statement -> (n, width) float64."""
     toks = " ".join(strs).split()
-    if len(toks) == 3 * len(strs):
+    if len(toks) == width * len(strs):
         try:
-            return np.array(toks, dtype=np.float64).reshape(-1, 3)
+            return np.array(toks, dtype=np.float64).reshape(-1, width)
         except ValueError:
             pass
-    rows = [s.split()[:3] for s in strs]   # extra components (w, colour) ignored
+    rows = [s.split()[:width] for s in strs]   # extra components (w, colour) ignored
     for row, line in zip(rows, lines):
-        if len(row) != 3:
-            raise mesh_file_error(field, path, f"line {line}: '{what}' needs 3 numbers")
+        if len(row) != width:
+            raise mesh_file_error(field, path, f"line {line}: '{what}' needs {width} numbers")
         bad = next((t for t in row if not _is_float(t)), None)
         if bad is not None:
             raise mesh_file_error(field, path, f"line {line}: non-numeric '{what}' value "
                                                f"{' '.join(row)!r}")
-    return np.array(rows, dtype=np.float64).reshape(-1, 3)
+    return np.array(rows, dtype=np.float64).reshape(-1, width)
 
 
 def _is_float(tok) -> bool:
@@ -197,6 +212,41 @@ def _resolve(raw, base, total, what, corner_line, field, path):
     return out
 
 
+def _texcoord_corners(corners, corner_line, field, path):
+    """(raw vt index per corner, has-vt mask): the second field of ``v/vt`` and ``v/vt/vn``."""
+    n = len(corners)
+    s = " ".join(corners)
+    if "//" not in s and s.count("/") in (n, 2 * n):     # uniform v/vt or v/vt/vn: in bulk
+        width = s.count("/") // n + 1
+        toks = s.replace("/", " ").split()
+        if len(toks) == width * n:
+            try:
+                return np.array(toks, dtype=np.int64).reshape(n, width)[:, 1], np.ones(n, bool)
+            except (ValueError, OverflowError):
+                pass
+    parts = [c.split("/") for c in corners]
+    has = np.fromiter((len(p) >= 2 and p[1] != "" for p in parts), dtype=bool, count=n)
+    raw = np.zeros(n, dtype=np.int64)
+    idx = np.flatnonzero(has)
+    if idx.size:
+        raw[idx] = _indices([parts[k][1] for k in idx], "texture coordinate",
+                            lambda k: corner_line(int(idx[k])), field, path)
+    return raw, has
+
+
+def _uv_split(verts, normals, corner_vertex, vt, ti):
+    """Split vertices by their corners' (u, v) values (see the module docstring)."""
+    _, canon = np.unique(vt, axis=0, return_inverse=True)       # equal values: one key
+    canon = canon.reshape(-1)
+    has = ti >= 0
+    key = np.where(has, canon[np.where(has, ti, 0)], 0)
+    corners, source, first_corner = split_vertices(corner_vertex, key, len(verts), keyed=has)
+    uv = np.zeros((source.size, 2))
+    used = first_corner >= 0
+    uv[used] = vt[ti[first_corner[used]]]
+    return verts[source], None if normals is None else normals[source], corners, uv
+
+
 def _split_by_normal(verts, vnorm, vi, ni, counts):
     """One output vertex per distinct (position, normal) pair; ni = -1: no normal."""
     stride = len(vnorm) + 1
@@ -212,7 +262,7 @@ def _split_by_normal(verts, vnorm, vi, ni, counts):
     normals[~need] /= length[~need, None]
     if need.any():
         normals[need] = compute_vertex_normals(new_v, tris)[need]
-    return new_v, tris, poly, normals
+    return new_v, tris, poly, normals, inv.reshape(-1)
 
 
 def read_obj(path, field: str = "") -> MeshData:
@@ -239,7 +289,7 @@ def read_obj(path, field: str = "") -> MeshData:
                   "vertex", corner_line, field, path)
     if has_vn is False or (has_vn is not True and not has_vn.any()):
         tris, poly = fan_triangulate(vi, counts)
-        verts_out, normals = verts, None
+        verts_out, normals, corner_vertex = verts, None, vi
     else:
         mask = np.ones(len(vi), bool) if has_vn is True else has_vn
         idx = np.flatnonzero(mask)
@@ -247,10 +297,28 @@ def read_obj(path, field: str = "") -> MeshData:
         base_n = np.repeat(np.array(st.f_nvn, dtype=np.int64), counts)
         ni[idx] = _resolve(ni_raw[idx], base_n[idx], len(st.vn), "normal",
                            lambda k: corner_line(int(idx[k])), field, path)
-        verts_out, tris, poly, normals = _split_by_normal(verts, vnorm, vi, ni, counts)
+        verts_out, tris, poly, normals, corner_vertex = _split_by_normal(verts, vnorm, vi, ni, counts)
+    uv = None
+    if st.vt:
+        ti_raw, has_vt = _texcoord_corners(st.corners, corner_line, field, path)
+        if has_vt.any():
+            vt = _vectors([t if len(t.split()) != 1 else t + " 0" for t in st.vt],   # "vt u": v = 0
+                          st.vt_lines, "vt", field, path, width=2)
+            bad = ~np.isfinite(vt).all(axis=1)
+            if bad.any():
+                i = int(np.flatnonzero(bad)[0])
+                raise mesh_file_error(field, path, f"texture coordinate {i} (line {st.vt_lines[i]}) is not "
+                                                   f"finite: {vt[i].tolist()}")
+            idx = np.flatnonzero(has_vt)
+            ti = np.full(len(vi), -1, dtype=np.int64)
+            base_t = np.repeat(np.array(st.f_nvt, dtype=np.int64), counts)
+            ti[idx] = _resolve(ti_raw[idx], base_t[idx], len(st.vt), "texture coordinate",
+                               lambda k: corner_line(int(idx[k])), field, path)
+            verts_out, normals, corner_vertex, uv = _uv_split(verts_out, normals, corner_vertex, vt, ti)
+            tris, _ = fan_triangulate(corner_vertex, counts)
     if not st.group_names:
-        return MeshData(verts_out, tris, normals)
+        return MeshData(verts_out, tris, normals, uv=uv)
     face_group = np.array(st.f_group, dtype=np.int64)
     ungrouped = np.flatnonzero(face_group < 0)
     return MeshData(verts_out, tris, normals, face_group[poly], st.group_names,
-                    st.f_lines[int(ungrouped[0])] if ungrouped.size else None)
+                    st.f_lines[int(ungrouped[0])] if ungrouped.size else None, uv)

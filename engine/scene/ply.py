@@ -3,7 +3,15 @@
 The file is parsed by plyfile; this module adds what the engine needs on top:
 
 * Vertex element: ``x, y, z`` required; ``nx, ny, nz`` optional (all three);
-  any other properties and any numeric types are accepted (others skipped).
+  texture coordinates optional, the first pair present of ``u, v``, ``s, t``,
+  ``texture_u, texture_v``, ``texture_s, texture_t`` (``MeshData.uv``, v up as
+  Blender's UV space); vertex colours optional, ``red, green, blue`` (and
+  ``alpha``) as the colour attribute ``"Col"`` (the name Blender's PLY importer
+  gives it): integer properties are divided by their type's full scale (uchar
+  255, ushort 65535, ...), float ones taken as they are, must then lie in
+  [0, 1], and red/green/blue are decoded from sRGB to linear (the default of
+  Blender's importer), alpha stays linear.  Any other properties and any
+  numeric types are accepted (others skipped).
   Face element: list property ``vertex_indices`` (or ``vertex_index``) with
   an integer type; polygons are fan-triangulated.  Other elements are read
   (they must be well formed) and ignored.
@@ -36,6 +44,7 @@ import tempfile
 
 import numpy as np
 
+from ..textures.image import srgb_to_linear
 from .trimesh import (MeshData, check_corner_counts, check_finite, compute_vertex_normals,
                       fan_triangulate, mesh_file_error, open_mesh_file)
 
@@ -48,6 +57,10 @@ _INT_TYPES = {"char": 1, "int8": 1, "uchar": 1, "uint8": 1, "short": 2, "int16":
 _FLOAT_TYPES = {"float": 4, "float32": 4, "double": 8, "float64": 8}
 _HEADER_END = re.compile(rb"(?:\r\n|\r|\n)end_header[ \t]*(\r\n|\r|\n)")
 _INDEX_NAMES = ("vertex_indices", "vertex_index")
+_UV_NAMES = (("u", "v"), ("s", "t"), ("texture_u", "texture_v"), ("texture_s", "texture_t"))
+_COLOUR_NAMES = ("red", "green", "blue", "alpha")
+#: the colour attribute's name (Blender's PLY importer calls it "Col")
+COLOUR_ATTRIBUTE = "Col"
 
 
 def _plyfile(field, path):
@@ -325,6 +338,49 @@ def _unit_normals(normals, vertices, faces, field, path):
     return out
 
 
+def _scalar(vprops, name) -> bool:
+    return name in vprops and not hasattr(vprops[name], "len_dtype")
+
+
+def _vertex_uv(vd, vprops, field, path):
+    """The first texture-coordinate pair present (see the module docstring), or None."""
+    pair = next((p for p in _UV_NAMES if _scalar(vprops, p[0]) and _scalar(vprops, p[1])), None)
+    if pair is None:
+        return None
+    uv = np.stack([vd[c] for c in pair], axis=1).astype(np.float64)
+    bad = ~np.isfinite(uv).all(axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise mesh_file_error(field, path, f"vertex {i} has non-finite texture coordinates "
+                                           f"({pair[0]}, {pair[1]}) = {uv[i].tolist()}")
+    return uv
+
+
+def _full_scale(declared: str | None) -> float:
+    """An integer colour type's full scale (uchar 255, ushort 65535, ...); 1 for floats."""
+    size = _INT_TYPES.get(declared or "")
+    if size is None:
+        return 1.0
+    signed = declared in ("char", "int8", "short", "int16", "int", "int32", "int64")
+    return float(2 ** (8 * size - (1 if signed else 0)) - 1)
+
+
+def _vertex_colours(vd, vprops, header, field, path) -> dict:
+    """{"Col": linear (V, 3 or 4)} from red/green/blue(/alpha), or {} (see the module docstring)."""
+    if not all(_scalar(vprops, c) for c in _COLOUR_NAMES[:3]):
+        return {}
+    names = _COLOUR_NAMES[:4] if _scalar(vprops, "alpha") else _COLOUR_NAMES[:3]
+    cols = np.stack([vd[c].astype(np.float64) / _full_scale(header.declared.get(("vertex", c)))
+                     for c in names], axis=1)
+    bad = ~(np.isfinite(cols) & (cols >= 0) & (cols <= 1)).all(axis=1)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise mesh_file_error(field, path, f"vertex {i} has a colour outside [0, 1] (after scaling integer "
+                                           f"types by their full scale): {dict(zip(names, cols[i].tolist()))}")
+    cols[:, :3] = srgb_to_linear(cols[:, :3])
+    return {COLOUR_ATTRIBUTE: cols}
+
+
 def read_ply(path, field: str = "") -> MeshData:
     """Read a PLY mesh (see the module docstring for what is accepted)."""
     with open_mesh_file(path, field) as fh:
@@ -351,4 +407,6 @@ def read_ply(path, field: str = "") -> MeshData:
     if has_normals:
         normals = np.stack([vd[c] for c in ("nx", "ny", "nz")], axis=1).astype(np.float64)
         normals = _unit_normals(normals, verts, tris, field, path)
-    return MeshData(verts, tris, normals)
+    vprops = {p.name: p for p in ply["vertex"].properties}
+    return MeshData(verts, tris, normals, uv=_vertex_uv(vd, vprops, field, path),
+                    colors=_vertex_colours(vd, vprops, header, field, path))

@@ -2,7 +2,7 @@
 
 Public API
 ----------
-``icosphere(subdivisions, field="")``            unit icosphere (pole aligned)
+``icosphere(subdivisions, field="", uv=False)``  unit icosphere (pole aligned), optionally UV mapped
 ``quad(p0, p1, p2, p3, field="")``               flat quad, two triangles
 ``transform_matrix(translate, scale, rotate_deg, field="")``  4x4 affine matrix
 ``transform_mesh(mesh, matrix, field="")``       apply a 4x4 affine matrix
@@ -18,8 +18,9 @@ import numpy as np
 
 from ..errors import SceneError
 from .meshio import MeshData
+from .trimesh import split_vertices
 
-__all__ = ["icosphere", "quad", "transform_matrix", "transform_mesh"]
+__all__ = ["icosphere", "sphere_uv_map", "quad", "transform_matrix", "transform_mesh"]
 
 MAX_SUBDIVISIONS = 9
 
@@ -82,12 +83,15 @@ def _subdivide(v: np.ndarray, f: np.ndarray):
     return np.concatenate([v, m]), nf
 
 
-def icosphere(subdivisions: int, field: str = "") -> MeshData:
+def icosphere(subdivisions: int, field: str = "", uv: bool = False) -> MeshData:
     """Unit icosphere centred at the origin, poles on the z axis.
 
     Level L has 10*4**L + 2 vertices and 20*4**L triangles (L=6: 40,962 and
     81,920), faces counter-clockwise seen from outside, vertex normals equal
     to the vertex positions.  Vertex/face order matches make_icosphere.py.
+    ``uv``: add the longitude/latitude map of ``sphere_uv_map`` (extra
+    vertices appended at the seam and the poles; faces and the first
+    10*4**L + 2 vertices unchanged).
     """
     if (isinstance(subdivisions, bool) or not isinstance(subdivisions, numbers.Integral)
             or not 0 <= int(subdivisions) <= MAX_SUBDIVISIONS):
@@ -97,7 +101,44 @@ def icosphere(subdivisions: int, field: str = "") -> MeshData:
     for _ in range(int(subdivisions)):
         v, f = _subdivide(v, f)
     v /= np.sqrt(np.einsum("ij,ij->i", v, v))[:, None]
-    return MeshData(v, f.astype(np.int32), v.copy())
+    mesh = MeshData(v, f.astype(np.int32), v.copy())
+    return sphere_uv_map(mesh) if uv else mesh
+
+
+def sphere_uv_map(mesh: MeshData) -> MeshData:
+    """The unit sphere ``mesh`` with Blender's UV-sphere map (longitude/latitude).
+
+    u = ½ + atan2(y, x)/2π (u = ½ at +X, ¾ at +Y: increasing counter-clockwise
+    seen from +Z, so an image reads left to right seen from outside; the seam
+    u = 0 ≡ 1 at −X), v = 1 − acos(z)/π (0 at the south pole −Z, 1 at the
+    north pole +Z): an equirectangular image wraps upright, as on Blender's UV
+    sphere.  So that no triangle interpolates across the seam, the corners of
+    a triangle spanning it (u range > ½) take u + 1 where u < ½, and a pole
+    corner takes the mean u of its triangle's other two corners (Blender's
+    pinched pole triangles).  Each (vertex, u) pair other than a vertex's
+    first one (in face order) becomes a new vertex appended at the end (same
+    position and normal); faces keep their order, and their corners their
+    positions.
+    """
+    p = mesh.vertices
+    u = 0.5 + np.arctan2(p[:, 1], p[:, 0]) / (2 * np.pi)
+    u[(u <= 1e-12) | (u >= 1 - 1e-12)] = 0.0               # the seam meridian: one value, 0
+    v = 1.0 - np.arccos(np.clip(p[:, 2], -1.0, 1.0)) / np.pi
+    f = mesh.faces.astype(np.int64)
+    cu = u[f]
+    spans = (cu.max(axis=1) - cu.min(axis=1)) > 0.5
+    cu[spans] = np.where(cu[spans] < 0.5, cu[spans] + 1.0, cu[spans])
+    pole = np.abs(p[f, 2]) == 1.0
+    if pole.any():        # at most one pole per triangle: the mean of the two other corners
+        others = (cu.sum(axis=1) - np.where(pole, cu, 0.0).sum(axis=1)) / 2.0
+        cu = np.where(pole, others[:, None], cu)
+    values, key = np.unique(cu.reshape(-1), return_inverse=True)
+    corners, source, first_corner = split_vertices(f.reshape(-1), key.reshape(-1), p.shape[0])
+    uv = np.empty((source.size, 2))
+    uv[:, 0] = np.where(first_corner >= 0, values[key.reshape(-1)[first_corner]], u[source])
+    uv[:, 1] = v[source]
+    normals = None if mesh.vertex_normals is None else mesh.vertex_normals[source]
+    return MeshData(p[source], corners.reshape(-1, 3), normals, uv=uv)
 
 
 # ---------------------------------------------------------------------------
@@ -223,4 +264,6 @@ def transform_mesh(mesh: MeshData, matrix, field: str = "") -> MeshData:
         normals = n / length[:, None]
     faces = mesh.faces[:, [0, 2, 1]] if det < 0 else mesh.faces.copy()
     groups = None if mesh.face_groups is None else mesh.face_groups.copy()
-    return MeshData(verts, faces, normals, groups, list(mesh.group_names))
+    uv = None if mesh.uv is None else mesh.uv.copy()      # per vertex: unchanged by the transform
+    return MeshData(verts, faces, normals, groups, list(mesh.group_names), mesh.ungrouped_line, uv,
+                    {name: c.copy() for name, c in mesh.colors.items()})

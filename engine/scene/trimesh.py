@@ -4,6 +4,7 @@
 ``face_normals(vertices, faces)`` unnormalised geometric normals (p1-p0)x(p2-p0)
 ``triangle_areas(vertices, faces)``
 ``compute_vertex_normals(vertices, faces)`` area-weighted unit vertex normals
+``split_vertices(corner_vertex, corner_key, n_vertices, keyed=None)`` one vertex per (vertex, key)
 
 Conventions
 -----------
@@ -45,6 +46,8 @@ class MeshData:
     ungrouped_line  OBJ only: file line of the first face that comes before
                     every ``usemtl`` when the file has ``usemtl`` statements
                     (such faces have group -1), else None
+    uv              float64 (V, 2) texture coordinates per vertex, or None
+    colors          {attribute name: float64 (V, 3 or 4)} linear colours in [0, 1]
     """
 
     vertices: np.ndarray
@@ -53,6 +56,8 @@ class MeshData:
     face_groups: np.ndarray | None = None
     group_names: list = dc_field(default_factory=list)
     ungrouped_line: int | None = None
+    uv: np.ndarray | None = None
+    colors: dict = dc_field(default_factory=dict)
 
     def __post_init__(self):
         self.vertices = np.ascontiguousarray(self.vertices, dtype=np.float64).reshape(-1, 3)
@@ -67,6 +72,14 @@ class MeshData:
             if self.face_groups.shape[0] != self.faces.shape[0]:
                 raise ValueError("face_groups must have one entry per face")
         self.group_names = list(self.group_names)
+        if self.uv is not None:
+            self.uv = np.ascontiguousarray(self.uv, dtype=np.float64).reshape(-1, 2)
+            if self.uv.shape[0] != self.vertices.shape[0]:
+                raise ValueError("uv must have one row per vertex")
+        self.colors = {name: np.ascontiguousarray(c, dtype=np.float64) for name, c in self.colors.items()}
+        if any(c.ndim != 2 or c.shape[0] != self.vertices.shape[0] or c.shape[1] not in (3, 4)
+               for c in self.colors.values()):
+            raise ValueError("colors must hold one [r, g, b] or [r, g, b, a] row per vertex")
 
     @property
     def n_vertices(self) -> int:
@@ -112,6 +125,41 @@ def compute_vertex_normals(vertices, faces) -> np.ndarray:
     for k in range(3):
         out[:, k] = np.bincount(idx, weights=np.repeat(fn[:, k], 3), minlength=nv)
     return _normalise_or_default(out)
+
+
+def split_vertices(corner_vertex, corner_key, n_vertices: int, keyed=None):
+    """Split vertices whose corners carry different keys (per-corner UVs: OBJ ``vt``, a sphere's seam).
+
+    ``corner_vertex`` (C,) vertex of each face corner, ``corner_key`` (C,) integer key of its
+    attribute, ``keyed`` (C,) bool: corners with a key (default all; the others keep their vertex).
+    A vertex keeps its index for the key of its first keyed corner (in corner order); each further
+    key becomes a new vertex appended after the ``n_vertices`` (in order of first use), so faces
+    and the existing vertex numbering stay as they are.  Returns (new corner vertices (C,),
+    source vertex of every output vertex (V',), first keyed corner of every output vertex (V',),
+    -1 where none).
+    """
+    cv = np.asarray(corner_vertex, dtype=np.int64)
+    key = np.asarray(corner_key, dtype=np.int64)
+    idx = np.arange(cv.size) if keyed is None else np.flatnonzero(keyed)
+    out = cv.copy()
+    if idx.size == 0:
+        return out, np.arange(n_vertices), np.full(n_vertices, -1, np.int64)
+    pair = cv[idx] * (int(key[idx].max()) + 1) + key[idx]
+    _, first, inv = np.unique(pair, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")                     # (vertex, key) pairs by first use
+    pair_corner = idx[first[order]]
+    pair_vertex = cv[pair_corner]
+    primary = np.zeros(order.size, bool)
+    primary[np.unique(pair_vertex, return_index=True)[1]] = True
+    index = np.where(primary, pair_vertex, 0)
+    index[~primary] = n_vertices + np.arange(int((~primary).sum()))
+    pair_out = np.empty_like(index)
+    pair_out[order] = index
+    out[idx] = pair_out[inv.reshape(-1)]
+    source = np.concatenate([np.arange(n_vertices), pair_vertex[~primary]])
+    first_corner = np.full(source.size, -1, np.int64)
+    first_corner[index] = pair_corner
+    return out, source, first_corner
 
 
 def _normalise_or_default(n: np.ndarray) -> np.ndarray:

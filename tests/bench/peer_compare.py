@@ -5,7 +5,7 @@
 DIR holds Mitsuba renders made by ``shared/peers/render_peer.py --renders 2``
 (files ``<scene>__<variant>__<W>x<H>__<spp>spp__seed<S>.npy``).  For each
 scene this renders ours ``--renders`` times (seeds 0, 1, …) at ``--spp``,
-saves them in the same layout and runs ``shared/peers/compare.py`` on the
+saves them in the same layout and compares them with ``shared/peers/compare.py``'s method on the
 luminance (Y) and on each of R, G, B (with the variance floor for unequal
 sample counts).  Ours is rendered at the Mitsuba renders' resolution (from
 their file names).  Scenes whose S0 legitimately differs (RGB upsampling of
@@ -16,6 +16,13 @@ here with polarisation off and compared on S0 alone (``compare.py`` does that
 when one side has one component).  ``envmap_spheres`` is compared with
 Mitsuba's ``llvm_ad_mono_polarized`` render in luminance only.  Prints a table; exit status 1 if a judged
 component fails the 99 % criterion.
+
+Zero-variance guard: the z-scores are computed here with ``compare.py``'s own functions (same blocks,
+same variance floor), except for blocks where both sides' block standard errors are ~0 (≤ ZERO_SE_REL
+× the block's |mean|, or exactly 0): a z-score there divides a float32 rounding difference by ~0 (the
+directly seen constant sky of ``envmap_spheres``: Mitsuba's float32 values differ from ours by
+≤ 6.7e-6 relative with variance 0 on both sides).  Such a block passes when the two block means agree
+to ZERO_VAR_REL_TOL relative; the table's "noiseless" column counts the blocks judged that way.
 Not part of the test command (it needs Mitsuba renders and minutes of time).
 """
 
@@ -23,9 +30,9 @@ from __future__ import annotations
 
 import argparse
 import glob
+import importlib.util
 import os
 import re
-import subprocess
 import sys
 import time
 
@@ -53,6 +60,58 @@ MONO_PEER = {"envmap_spheres": "llvm_ad_mono_polarized"}
 # Mitsuba's mono luminance weights (peers README): Rec.709's rounded ones differ by up to 5e-5 on the
 # map's coloured patches, which z-scores of noiseless directly seen sky resolve.
 MONO_Y = np.array([0.212671, 0.715160, 0.072169])
+# Zero-variance guard (module docstring): a block's standard error counts as ~0 below this fraction of its
+# |mean| (float32 noise of a deterministic pixel is ~1e-7 relative; Monte Carlo noise at these sample
+# counts is ≥ 1e-4), and such blocks must agree to this relative difference instead of |z| < Z_LIMIT.
+ZERO_SE_REL = 1e-6
+ZERO_VAR_REL_TOL = 1e-4
+Z_LIMIT = 4.0
+BLOCK = 8
+
+
+def load_compare():
+    """shared/peers/compare.py as a module (its block statistics and variance floor)."""
+    spec = importlib.util.spec_from_file_location("peer_compare_shared", os.path.join(PEERS, "compare.py"))
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def judge_blocks(a_mean, a_var, b_mean, b_var, a_spp, b_spp, compare, block=BLOCK):
+    """Per component: (mean a, mean b, rms z, max |z|, pass fraction, noiseless blocks).
+
+    compare.py's z-test (variance floor with the total sample counts, 8×8 blocks) except that blocks
+    whose standard errors are ~0 on both sides (before the floor) pass iff |Δmean| ≤ ZERO_VAR_REL_TOL ×
+    max(|mean a|, |mean b|); rms and max |z| are over the other blocks."""
+    ma, va_raw = compare.block_stats(a_mean, a_var, block)
+    mb, vb_raw = compare.block_stats(b_mean, b_var, block)
+    fa, fb = compare.variance_floor(a_var, a_spp, b_var, b_spp)
+    z = compare.block_z(a_mean, fa, b_mean, fb, block)
+    scale = np.maximum(np.abs(ma), np.abs(mb))
+    noiseless = (np.sqrt(va_raw) <= ZERO_SE_REL * np.abs(ma)) & (np.sqrt(vb_raw) <= ZERO_SE_REL * np.abs(mb))
+    agree = np.abs(ma - mb) <= ZERO_VAR_REL_TOL * scale
+    passed = np.where(noiseless, agree, np.abs(z) < Z_LIMIT)
+    out = {}
+    for c in range(z.shape[0]):
+        zc = z[c][~noiseless[c]]
+        finite = zc[np.isfinite(zc)]
+        out[f"S{c}"] = (float(a_mean[c].mean()), float(b_mean[c].mean()),
+                        float(np.sqrt(np.mean(finite ** 2))) if finite.size else 0.0,
+                        float(np.abs(zc).max()) if zc.size else 0.0,
+                        float(passed[c].mean()), int(noiseless[c].sum()))
+    return out
+
+
+def compare_sides(ours, mitsuba, ch, a_spp, b_spp, compare):
+    """judge_blocks on the two sets of renders in channel ``ch`` (compare.py's loading and reduction;
+    one side S0 only → S0 only)."""
+    am, av = compare.side(ours, None, ch)
+    bm, bv = compare.side(mitsuba, None, ch)
+    if am.shape[1:] == bm.shape[1:] and 1 in (am.shape[0], bm.shape[0]) and am.shape[0] != bm.shape[0]:
+        am, av, bm, bv = am[:1], av[:1], bm[:1], bv[:1]
+    if am.shape != bm.shape:
+        raise SystemExit(f"shape mismatch {am.shape} vs {bm.shape}")
+    return judge_blocks(am, av, bm, bv, a_spp, b_spp, compare)
 
 
 def mitsuba_files(directory, scene):
@@ -66,16 +125,6 @@ def mitsuba_files(directory, scene):
     return files, int(m.group(3)), (int(m.group(1)), int(m.group(2)))
 
 
-def parse_compare(text):
-    """{component: (mean_a, mean_b, rms_z, max_z, pass_fraction)} from compare.py's table."""
-    out = {}
-    for line in text.splitlines():
-        parts = line.split()
-        if len(parts) == 6 and re.fullmatch(r"S[0-3]", parts[0]):
-            out[parts[0]] = tuple(float(x) for x in parts[1:])
-    return out
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mitsuba", required=True, help="folder with Mitsuba renders (render_peer.py output)")
@@ -86,6 +135,7 @@ def main():
     ap.add_argument("--channels", default="Y,R,G,B")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
+    compare = load_compare()
     failed = False
     rows = []
     for scene_name in args.scenes.split(","):
@@ -114,30 +164,25 @@ def main():
             ours.append(path)
         seconds = time.perf_counter() - t0
         for ch in (["Y"] if scene_name in MONO_PEER else args.channels.split(",")):
-            cmd = [sys.executable, os.path.join(PEERS, "compare.py"), "--a", *ours, "--b", *mfiles,
-                   "--channel", ch, "--a-spp", str(spp * args.renders), "--b-spp", str(m_spp * len(mfiles))]
-            proc = subprocess.run(cmd, capture_output=True, text=True)
-            res = parse_compare(proc.stdout)
+            res = compare_sides(ours, mfiles, ch, spp * args.renders, m_spp * len(mfiles), compare)
             judged = (["S1", "S2", "S3"] if scene_name in S0_DIFFERS else
                       ["S0"] if scene_name in UNPOLARISED_PEER else ["S0", "S1", "S2", "S3"])
             for comp in ["S0", "S1", "S2", "S3"]:
                 if comp not in res:
                     continue
-                mean_a, mean_b, rms, zmax, frac = res[comp]
+                mean_a, mean_b, rms, zmax, frac, noiseless = res[comp]
                 ok = frac >= 0.99 or comp not in judged
                 failed |= not ok
-                rows.append((scene_name, ch, comp, mean_a, mean_b, rms, zmax, frac, "ok" if ok else
+                rows.append((scene_name, ch, comp, mean_a, mean_b, rms, zmax, frac, noiseless, "ok" if ok else
                              ("FAIL" if comp in judged else "not judged")))
-            if not res:
-                print(proc.stdout, proc.stderr)
         print(f"{scene_name}: ours {args.renders}×{spp} spp in {seconds:.1f} s; Mitsuba {len(mfiles)}×{m_spp} spp"
               f" ({os.path.basename(mfiles[0]).split('__')[1]}, {m_size[0]}×{m_size[1]})")
-    print("\n| scene | channel | component | mean (ours) | mean (Mitsuba) | rms(z) | max abs(z) | blocks within 4σ |"
-          " verdict |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("\n| scene | channel | component | mean (ours) | mean (Mitsuba) | rms(z) | max abs(z) | blocks passed |"
+          " noiseless blocks (by rel. diff) | verdict |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for r in rows:
         print(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]:+.5f} | {r[4]:+.5f} | {r[5]:.2f} | {r[6]:.2f} | "
-              f"{100 * r[7]:.2f} % | {r[8]} |")
+              f"{100 * r[7]:.2f} % | {r[8]} | {r[9]} |")
     return 1 if failed else 0
 
 
