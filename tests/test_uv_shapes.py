@@ -78,7 +78,8 @@ def test_textured_sphere_renders_each_hemisphere_with_its_texel(tmp_path, origin
     cells = np.array([[[200, 30, 30], [20, 180, 40], [30, 40, 220], [230, 200, 20]]], np.uint8)
     Image.fromarray(cells).save(tmp_path / "bands.png")
     texels = read_image(str(tmp_path / "bands.png"))[0]
-    S = Renderer(_sphere_scene({"texture": "bands.png", "interpolation": "Closest"}, tmp_path, origin)).render().stokes()
+    scene = _sphere_scene({"texture": "bands.png", "interpolation": "Closest"}, tmp_path, origin)
+    S = Renderer(scene).render().stokes()
     c = (np.arange(16) + 0.5) / 16 * 2.2 - 1.1                           # pixel centres
     radius = np.hypot(c[None, :], c[:, None])
     inside = radius < 0.75                                               # far from the silhouette
