@@ -75,6 +75,10 @@ INTERPOLATION = {"Closest": "Closest", "Linear": "Linear", "Cubic": "Cubic", "Sm
 #: byte-image colour spaces whose stored values are already linear numbers
 LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Raw", "Linear", "Generic Data")
 
+#: least texel of a roughness texture: the float32 nearest 0.01 whose square is ≥ M_MIN (a textured
+#: Beckmann m must stay ≥ M_MIN: there is no per-point smooth limit)
+ROUGHNESS_MIN = float(np.nextafter(np.float32(0.01), np.float32(1)))
+
 #: image name → (signature, pixel hash, linear float32 (H, W, 4) pixels, {texture key: ImageTexture})
 _IMAGES: dict = {}
 
@@ -227,6 +231,8 @@ def image_texture(tex_node, mat, warnings, alpha=False, min_value=None):
     textures = entry[3]
     if key not in textures:
         data = pixels[..., 3:4] if alpha else pixels[..., :3]
+        if not alpha and np.array_equal(data[..., 0], data[..., 1]) and np.array_equal(data[..., 1], data[..., 2]):
+            data = data[..., :1]      # grey: one channel, read exactly (not through the luminance weights)
         if min_value is not None:
             data = np.maximum(data, np.float32(min_value))
         if mapped:
@@ -248,7 +254,7 @@ def texture_source(socket, mat, warnings, roughness=False, node_name=""):
     power = 2.0 if roughness else 1.0
     if kind == "ShaderNodeTexImage":
         alpha = out.name == "Alpha"
-        texture = image_texture(node, mat, warnings, alpha=alpha, min_value=math.sqrt(M_MIN) if roughness else None)
+        texture = image_texture(node, mat, warnings, alpha=alpha, min_value=ROUGHNESS_MIN if roughness else None)
         return TextureInput(texture, "A" if alpha else None, power=power)
     if kind == "ShaderNodeVertexColor" or (kind == "ShaderNodeAttribute" and node.attribute_type == "GEOMETRY"
                                            and out.name in ("Color", "Alpha")):
@@ -487,7 +493,16 @@ def _textured_model(model, values, mat, node):
     """A model built through its declaration from ``values`` some of which are TextureInputs
     (validated: every value a texture can give must be in the parameter's range)."""
     decl = MODELS[model]
+    values = {k: _grey(v) for k, v in values.items()}
     return decl.build(decl.values(values, f"material {mat!r}.{node.name}"))
+
+
+def _grey(v):
+    """A constant [r, g, b] with r = g = b as one number (the same spectrum as the constant path's
+    ``_rgb_spectrum``); anything else as is."""
+    if isinstance(v, (list, tuple, np.ndarray)) and max(v) == min(v):
+        return float(v[0])
+    return v
 
 
 def _textured(*values) -> bool:

@@ -1,0 +1,386 @@
+"""Blender textures → Polar, against Cycles: image textures (8-bit sRGB and float EXR), Mapping nodes,
+colour attributes, tangent-space normal maps, bump maps and missing image files.
+
+Each scene is a 2 m diffuse plane seen from straight above by an orthographic camera that frames it
+exactly (each texel of a 4×4 texture is one 8×8-pixel region), lit by a sun (angle 0) from the side
+and a black world, so that each region's brightness is albedo × cos(sun, shading normal).  It is
+rendered by Cycles (bpy ships it) and by Polar (the exporter + engine, as F12 does); per region the
+luminance ratio Polar/Cycles must be 1 within 4 standard errors + 2 % (standard errors from
+independent seeds), as tests/test_cycles_parity.py.  Engine-level checks: a roughness texture on
+the converted Torrance–Sparrow gives at each texel the constant model of that roughness, bit for
+bit; an untextured scene exports no UVs, colours or tangents (the engine's untextured path).
+"""
+
+import math
+import os
+import tempfile
+
+import numpy as np
+import pytest
+
+bpy = pytest.importorskip("bpy")
+
+from tests.blender_support import load_addon, read_multilayer  # noqa: E402
+
+W = H = 32
+BLOCK = 8
+SEEDS = 4
+CYCLES_SPP = 32
+POLAR_SPP = 16
+BOUNCES = 2
+REC709 = np.array([0.2126, 0.7152, 0.0722])
+SUN = (0.45, 0.3, 1.0)                       # towards the sun: tilted normals differ in brightness
+
+
+# --------------------------------------------------------------------------- images
+
+def checker_png(path, dark=40, light=220):
+    """A 4×4 8-bit sRGB checker, with a colour in one texel (sRGB decoding and channel order)."""
+    from PIL import Image
+    a = np.full((4, 4, 3), dark, np.uint8)
+    a[(np.add.outer(np.arange(4), np.arange(4)) % 2) == 0] = light
+    a[0, 3] = (230, 120, 30)
+    Image.fromarray(a).save(path)
+    return path
+
+
+def normal_png(path):
+    """A 2×2 Non-Color tangent-space normal map: normals tilted 35° towards +u, −u, +v, −v."""
+    from PIL import Image
+    t = math.radians(35)
+    s, c = math.sin(t), math.cos(t)
+    normals = np.array([[[0, s, c], [0, -s, c]],            # top row of the file = v near 1
+                        [[s, 0, c], [-s, 0, c]]])
+    Image.fromarray(np.round((normals + 1) / 2 * 255).astype(np.uint8)).save(path)
+    return path
+
+
+def height_exr(path):
+    """A float height ramp along u: up over the left half, steeper down over the right half."""
+    import OpenEXR
+    u = (np.arange(256) + 0.5) / 256
+    h = np.where(u < 0.5, u, 0.5 - 2 * (u - 0.5)).astype(np.float32)
+    OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
+                 {"Y": np.tile(h, (4, 1))}).write(path)
+    return path
+
+
+# --------------------------------------------------------------------------- scenes
+
+def _material(name):
+    """A fresh file (empty scene) with a Diffuse BSDF material ``name``: (material, Diffuse node)."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    mat = bpy.data.materials.new(name)
+    nodes = mat.node_tree.nodes
+    for n in list(nodes):
+        if n.bl_idname != "ShaderNodeOutputMaterial":
+            nodes.remove(n)
+    diffuse = nodes.new("ShaderNodeBsdfDiffuse")
+    diffuse.inputs["Color"].default_value = (0.5, 0.5, 0.5, 1.0)
+    mat.node_tree.links.new(diffuse.outputs[0], nodes["Material Output"].inputs["Surface"])
+    return mat, diffuse
+
+
+def _image_node(mat, path, colour_space="sRGB", interpolation="Closest", extension="REPEAT"):
+    node = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    node.image = bpy.data.images.load(path, check_existing=False)
+    node.image.colorspace_settings.name = colour_space
+    node.interpolation, node.extension = interpolation, extension
+    return node
+
+
+def base_scene(material):
+    """The plane with ``material``, the camera framing it, the sun; returns the scene."""
+    scene = bpy.context.scene
+    scene.render.resolution_x, scene.render.resolution_y = W, H
+    scene.render.resolution_percentage = 100
+    bpy.ops.mesh.primitive_plane_add(size=2.0)
+    bpy.context.object.data.materials.append(material)
+    cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    cam.data.type, cam.data.ortho_scale = "ORTHO", 2.0
+    cam.location = (0.0, 0.0, 5.0)
+    scene.collection.objects.link(cam)
+    scene.camera = cam
+    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+    sun.data.energy, sun.data.angle = 3.0, 0.0
+    import mathutils
+    sun.rotation_euler = mathutils.Vector(SUN).to_track_quat("Z", "Y").to_euler()
+    scene.collection.objects.link(sun)
+    world = bpy.data.worlds.new("World")
+    scene.world = world
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.0
+    return scene
+
+
+def checker(tmp):
+    mat, diffuse = _material("Checker")
+    tex = _image_node(mat, checker_png(os.path.join(tmp, "checker.png")))
+    mat.node_tree.links.new(tex.outputs["Color"], diffuse.inputs["Color"])
+    return base_scene(mat)
+
+
+def checker_mapped(tmp):
+    """The checker through UV Map → Mapping (Point: scale 0.5, rotation 90° about Z, location)."""
+    mat, diffuse = _material("Mapped")
+    tex = _image_node(mat, checker_png(os.path.join(tmp, "checker_m.png")))
+    mapping = mat.node_tree.nodes.new("ShaderNodeMapping")
+    mapping.inputs["Scale"].default_value = (0.5, 0.5, 1.0)
+    mapping.inputs["Rotation"].default_value = (0.0, 0.0, math.radians(90))
+    mapping.inputs["Location"].default_value = (0.25, 0.5, 0.0)
+    uvmap = mat.node_tree.nodes.new("ShaderNodeUVMap")
+    links = mat.node_tree.links
+    links.new(uvmap.outputs["UV"], mapping.inputs["Vector"])
+    links.new(mapping.outputs["Vector"], tex.inputs["Vector"])
+    links.new(tex.outputs["Color"], diffuse.inputs["Color"])
+    return base_scene(mat)
+
+
+def vertex_colour(tmp):
+    mat, diffuse = _material("Painted")
+    attr = mat.node_tree.nodes.new("ShaderNodeVertexColor")
+    attr.layer_name = "Paint"
+    mat.node_tree.links.new(attr.outputs["Color"], diffuse.inputs["Color"])
+    scene = base_scene(mat)
+    me = bpy.data.objects["Plane"].data
+    layer = me.color_attributes.new("Paint", "BYTE_COLOR", "CORNER")
+    colours = [(0.9, 0.1, 0.1, 1), (0.1, 0.8, 0.2, 1), (0.2, 0.2, 0.9, 1), (0.9, 0.9, 0.2, 1)]
+    for loop, colour in zip(me.loops, colours):
+        layer.data[loop.index].color = colour
+    return scene
+
+
+def normal_map(tmp):
+    mat, diffuse = _material("Normals")
+    diffuse.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
+    tex = _image_node(mat, normal_png(os.path.join(tmp, "normal.png")), "Non-Color")
+    node = mat.node_tree.nodes.new("ShaderNodeNormalMap")
+    mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Color"])
+    mat.node_tree.links.new(node.outputs["Normal"], diffuse.inputs["Normal"])
+    return base_scene(mat)
+
+
+def bump(tmp):
+    mat, diffuse = _material("Bumped")
+    diffuse.inputs["Color"].default_value = (0.8, 0.8, 0.8, 1.0)
+    tex = _image_node(mat, height_exr(os.path.join(tmp, "height.exr")), "Non-Color", "Linear", "EXTEND")
+    node = mat.node_tree.nodes.new("ShaderNodeBump")
+    node.inputs["Distance"].default_value = 0.4
+    node.inputs["Strength"].default_value = 0.9
+    mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Height"])
+    mat.node_tree.links.new(node.outputs["Normal"], diffuse.inputs["Normal"])
+    return base_scene(mat)
+
+
+MISSING = "/nonexistent/polar_missing_texture.png"
+
+
+def missing(tmp):
+    mat, diffuse = _material("Missing")
+    tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
+    image = bpy.data.images.new("Gone", 4, 4)
+    image.source, image.filepath = "FILE", MISSING
+    tex.image = image
+    mat.node_tree.links.new(tex.outputs["Color"], diffuse.inputs["Color"])
+    return base_scene(mat)
+
+
+SCENES = {"checker": checker, "checker_mapped": checker_mapped, "vertex_colour": vertex_colour,
+          "normal_map": normal_map, "bump": bump, "missing": missing}
+
+
+# --------------------------------------------------------------------------- renders
+
+def cycles_renders(scene, tmp):
+    scene.render.engine = "CYCLES"
+    c = scene.cycles
+    c.device = "CPU"
+    c.samples = CYCLES_SPP
+    c.use_adaptive_sampling = False
+    c.use_denoising = False
+    c.pixel_filter_type = "BOX"
+    c.filter_width = 1.0
+    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
+    c.light_sampling_threshold = 0.0
+    c.max_bounces = c.diffuse_bounces = BOUNCES
+    scene.render.threads_mode = "FIXED"
+    scene.render.threads = 2
+    ims = scene.render.image_settings
+    ims.media_type = "MULTI_LAYER_IMAGE"
+    ims.color_depth = "32"
+    out = []
+    for seed in range(SEEDS):
+        c.seed = seed
+        scene.render.filepath = os.path.join(tmp, f"cycles_{seed}")
+        bpy.ops.render.render(write_still=True)
+        out.append(read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3])
+    return np.array(out)
+
+
+def polar_renders(scene):
+    from polar_render.engine.render.renderer import Renderer
+    from polar_render.engine.scene.description import RenderSettings
+    from polar_render.polar_addon.export.scene import export_scene
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    out, warnings = [], []
+    for seed in range(SEEDS):
+        settings = RenderSettings(spp=POLAR_SPP, max_depth=BOUNCES + 1, seed=seed, spectral="spectral",
+                                  polarisation="off")
+        engine_scene, warnings = export_scene(depsgraph, scene.camera, W, H, settings)
+        out.append(Renderer(engine_scene).render(settings).stokes()[0])
+    return np.array(out), warnings
+
+
+def region_stats(images):
+    """Per-region means (regions, …) and their standard errors from the seed-to-seed spread."""
+    k = images.shape[0]
+    blocks = images.reshape(k, H // BLOCK, BLOCK, W // BLOCK, BLOCK, -1).mean(axis=(2, 4)).reshape(k, -1,
+                                                                                              images.shape[-1])
+    return blocks.mean(0), blocks.std(0, ddof=1) / math.sqrt(k)
+
+
+@pytest.fixture(scope="module")
+def renders():
+    load_addon()
+    results = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, build in SCENES.items():
+            scene = build(tmp)
+            polar, warnings = polar_renders(scene)
+            results[name] = (region_stats(cycles_renders(scene, tmp)), region_stats(polar), warnings)
+    return results
+
+
+@pytest.mark.parametrize("name", list(SCENES))
+def test_luminance_per_region_matches_cycles(renders, name):
+    (mc, sc), (mp, sp), _ = renders[name]
+    lc, lp = mc @ REC709, mp @ REC709
+    se_c, se_p = np.sqrt((sc ** 2) @ REC709 ** 2), np.sqrt((sp ** 2) @ REC709 ** 2)
+    # the texture shows: regions differ by far more than the tolerance (the test is not vacuous)
+    assert lc.max() > 1.3 * lc.min(), f"{name}: Cycles regions {np.round(lc, 3).tolist()}"
+    ratio = lp / lc
+    se = ratio * np.sqrt((se_p / lp) ** 2 + (se_c / lc) ** 2)
+    bad = np.abs(ratio - 1.0) > 4.0 * se + 0.02
+    assert not bad.any(), (f"{name}: Polar/Cycles per region {np.round(ratio, 4).tolist()} "
+                           f"± {np.round(se, 4).tolist()}")
+
+
+def test_textured_scenes_export_without_warnings(renders):
+    for name in ("checker", "checker_mapped", "vertex_colour", "normal_map", "bump"):
+        assert renders[name][2] == [], name
+
+
+def test_missing_image_renders_magenta_as_cycles_and_names_the_file(renders):
+    (mc, _), (mp, _), warnings = renders["missing"]
+    for image in (mc, mp):                          # (regions, RGB): red = blue, no green
+        assert np.all(image[:, 1] < 0.03 * image[:, 0])
+        np.testing.assert_allclose(image[:, 2], image[:, 0], rtol=0.1)
+    assert warnings == [f"material 'Missing': image 'Gone' (file {MISSING!r}) cannot be loaded; it renders "
+                        "magenta (1, 0, 1) as in Cycles"]
+
+
+# --------------------------------------------------------------------------- exported scenes
+
+def _export(scene):
+    from polar_render.engine.scene.description import RenderSettings
+    from polar_render.polar_addon.export.scene import export_scene
+    return export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, W, H, RenderSettings(spp=1))
+
+
+def test_roughness_texture_gives_the_constant_model_at_each_texel(tmp_path):
+    """Principled (dielectric) Roughness from a grey texture → Torrance–Sparrow with m = r² per point:
+    at each texel centre the exported material is, bit for bit, the constant Torrance–Sparrow of
+    m = r² (r = 0 clamps to r ≈ 0.01: m ≥ 1e-4, the least textured slope) and, where m ≥ 0.02, the
+    exporter's own conversion of a constant Roughness with that texel's value."""
+    load_addon()
+    from polar_render.engine.materials.base import ShadingPoint
+    from polar_render.engine.materials.torrance_sparrow import TorranceSparrow
+    from polar_render.engine.spectral import WavelengthLookup
+    from polar_render.engine.textures import SurfacePoints, VertexAttributes
+    from polar_render.polar_addon.export.materials import ROUGHNESS_MIN
+    from PIL import Image
+    r8 = np.array([[0, 60, 120], [180, 230, 255]], np.uint8)
+    Image.fromarray(r8).save(tmp_path / "rough.png")
+    bpy.ops.wm.read_homefile(use_empty=True)
+    mat = bpy.data.materials.new("Rough")
+    principled = mat.node_tree.nodes["Principled BSDF"]
+    principled.inputs["Base Color"].default_value = (0.3, 0.3, 0.3, 1.0)
+    tex = _image_node(mat, str(tmp_path / "rough.png"), "Non-Color")      # Closest: texel values exactly
+    mat.node_tree.links.new(tex.outputs["Color"], principled.inputs["Roughness"])
+    scene = base_scene(mat)
+    exported, warnings = _export(scene)
+    assert warnings == []
+    plane = next(m for m in exported.meshes if m.name.startswith("Plane"))
+    assert plane.uv is not None and plane.tangents is None and plane.colors == {}
+    bsdf = exported.materials[plane.materials[0]]
+    assert bsdf.varies_over_surface and bsdf.m.source.power == 2.0
+
+    Hh, Ww = r8.shape
+    jj, ii = np.meshgrid(np.arange(Hh), np.arange(Ww), indexing="ij")
+    uv = np.stack((((ii + 0.5) / Ww).ravel(), ((jj + 0.5) / Hh).ravel()))
+    pixels = np.empty(Hh * Ww * 4, np.float32)
+    tex.image.pixels.foreach_get(pixels)                   # Blender's own 8-bit → float (row 0 = bottom)
+    texel = pixels.reshape(Hh, Ww, 4)[..., 0][jj, ii].ravel()
+    np.testing.assert_allclose(texel, (r8[::-1] / 255.0)[jj, ii].ravel(), rtol=1e-6)
+    reps = 30
+    uv, texel = np.repeat(uv, reps, axis=1), np.repeat(texel, reps)
+    n = uv.shape[1]
+    rng = np.random.default_rng(7)
+    faces = np.arange(3 * n).reshape(n, 3)
+    points = SurfacePoints(VertexAttributes(faces, np.repeat(uv.T, 3, axis=0), {}), np.arange(n),
+                           np.full(n, 0.25), np.full(n, 0.25))
+    n_s = np.tile([[0.0], [0.0], [1.0]], (1, n))
+    wo, wi = rng.normal(size=(3, n)), rng.normal(size=(3, n))
+    wo[2], wi[2] = np.abs(wo[2]) + 0.05, np.abs(wi[2])
+    wo, wi = wo / np.linalg.norm(wo, axis=0), wi / np.linalg.norm(wi, axis=0)
+    lam = np.tile([[450.0], [520.0], [600.0], [680.0]], (1, n))
+    sp = ShadingPoint(np.zeros((3, n)), n_s, n_s, wo, lam, False, WavelengthLookup(lam), None, points)
+    f = bsdf.eval(sp, wi).matrix()
+    pdf = bsdf.pdf(sp, wi)
+    mat.node_tree.links.remove(principled.inputs["Roughness"].links[0])
+    for r in np.unique(texel):
+        sel = np.nonzero(texel == r)[0]
+        sub = sp.take(sel)
+        sub.surface = None
+        m = max(float(r), ROUGHNESS_MIN) ** 2
+        oracles = [TorranceSparrow(bsdf.n, bsdf.k, m, diffuse_albedo=bsdf.albedo, diffuse_weight=1.0)]
+        if m >= 0.02:    # the exporter's own constant conversion (below m = 0.02 it drops the facets)
+            principled.inputs["Roughness"].default_value = float(r)
+            oracles.append(_export(scene)[0].materials[plane.materials[0]])
+        for i, constant in enumerate(oracles):
+            assert not constant.varies_over_surface
+            np.testing.assert_array_equal(f[..., sel], constant.eval(sub, wi[:, sel]).matrix(), err_msg=f"texel {r}, oracle {i}")
+            np.testing.assert_array_equal(pdf[sel], constant.pdf(sub, wi[:, sel]))
+    assert len(oracles) == 2
+
+
+def test_untextured_scene_exports_no_mesh_attributes():
+    """Without textures the exporter adds nothing to the meshes (so the engine takes its untextured
+    path and renders bit-identically), and the local arrays keep their four fields."""
+    load_addon()
+    from polar_render.polar_addon.export.scene import geometry_arrays
+    mat, _ = _material("Plain")
+    scene = base_scene(mat)
+    bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(0, 0, 0.5))
+    bpy.context.object.data.color_attributes.new("Col", "FLOAT_COLOR", "POINT")
+    exported, _ = _export(scene)
+    for mesh in exported.meshes:
+        assert mesh.uv is None and mesh.colors == {} and mesh.tangents is None, mesh.name
+    assert len(geometry_arrays(bpy.data.objects["Plane"].evaluated_get(bpy.context.evaluated_depsgraph_get()))) == 4
+
+
+def test_normal_map_exports_mikktspace_tangents_placed_and_mirrored():
+    """The plane's tangent is +x with sign +1 (MikkTSpace); rotated objects carry rotated tangents and a
+    mirroring scale flips the sign (the bitangent stays along +v)."""
+    load_addon()
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = normal_map(tmp)
+        plane = bpy.data.objects["Plane"]
+        plane.rotation_euler = (0.0, 0.0, math.radians(90))
+        mesh = next(m for m in _export(scene)[0].meshes if m.name.startswith("Plane"))
+        np.testing.assert_allclose(mesh.tangents, np.tile([0.0, 1.0, 0.0, 1.0], (len(mesh.vertices), 1)), atol=1e-6)
+        plane.rotation_euler = (0.0, 0.0, 0.0)
+        plane.scale = (-1.0, 1.0, 1.0)
+        mesh = next(m for m in _export(scene)[0].meshes if m.name.startswith("Plane"))
+        np.testing.assert_allclose(mesh.tangents, np.tile([-1.0, 0.0, 0.0, -1.0], (len(mesh.vertices), 1)),
+                                   atol=1e-6)
+        assert mesh.uv.shape == (len(mesh.vertices), 2)
