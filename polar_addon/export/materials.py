@@ -79,7 +79,8 @@ LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Raw", "Linear", "Generic Data")
 #: Beckmann m must stay ≥ M_MIN: there is no per-point smooth limit)
 ROUGHNESS_MIN = float(np.nextafter(np.float32(0.01), np.float32(1)))
 
-#: image name → (signature, pixel hash, linear float32 (H, W, 4) pixels, {texture key: ImageTexture})
+#: image name → (signature, pixel hash, linear float32 (H, W, 4) pixels, {texture key: ImageTexture},
+#: warnings about the image (repeated on every export that uses it))
 _IMAGES: dict = {}
 
 
@@ -125,13 +126,19 @@ def image_pixels(image, mat, warnings):
     signature = _image_signature(image)
     entry = _IMAGES.get(image.name_full)
     if entry is not None and entry[0] == signature and not image.is_dirty:
+        warnings.extend(f"material {mat!r}: {note}" for note in entry[4])
         return entry[2], entry
+    notes = []
+    path = image.filepath_from_user() if image.source == "FILE" else ""
+    # a file image whose file is gone and that is not packed: Cycles reads the file, finds nothing and
+    # renders magenta, whatever pixels the image may still hold in memory
+    gone = image.source == "FILE" and image.packed_file is None and not os.path.isfile(path)
     w, h = image.size
-    n = len(image.pixels) if w and h else 0
+    n = len(image.pixels) if w and h and not gone else 0
     if n == 0 or n != w * h * image.channels:
-        path = image.filepath_from_user() if image.source == "FILE" else image.name
-        warnings.append(f"material {mat!r}: image {image.name!r} (file {path!r}) cannot be loaded; "
-                        "it renders magenta (1, 0, 1) as in Cycles")
+        path = path or image.name
+        notes.append(f"image {image.name!r} (file {path!r}) cannot be loaded; it renders magenta (1, 0, 1) as "
+                     "in Cycles")
         pixels = np.array(MISSING_RGBA, np.float32).reshape(1, 1, 4)
         digest = "missing"
     else:
@@ -140,6 +147,7 @@ def image_pixels(image, mat, warnings):
         digest = hashlib.blake2b(raw.tobytes(), digest_size=16).hexdigest()
         if entry is not None and entry[1] == digest:
             _IMAGES[image.name_full] = (signature,) + entry[1:]
+            warnings.extend(f"material {mat!r}: {note}" for note in entry[4])
             return entry[2], _IMAGES[image.name_full]
         pixels = raw.reshape(h, w, image.channels)
         if image.channels != 4:           # grey, grey + alpha, RGB → RGBA
@@ -153,13 +161,14 @@ def image_pixels(image, mat, warnings):
                 pixels = pixels.copy()
                 pixels[..., :3] = srgb_to_linear(pixels[..., :3])
             elif space not in LINEAR_SPACES:
-                warnings.append(f"material {mat!r}: image {image.name!r} has colour space {space!r}, which is not "
-                                "converted; its values are used as linear")
+                notes.append(f"image {image.name!r} has colour space {space!r}, which is not converted; its "
+                             "values are used as linear")
         pixels = np.ascontiguousarray(pixels, np.float32)
         if not np.all(np.isfinite(pixels)):
             pixels = np.nan_to_num(pixels, nan=0.0, posinf=0.0, neginf=0.0)
-    entry = (signature, digest, pixels, {})
+    entry = (signature, digest, pixels, {}, notes)
     _IMAGES[image.name_full] = entry
+    warnings.extend(f"material {mat!r}: {note}" for note in notes)
     return pixels, entry
 
 
@@ -215,7 +224,7 @@ def image_texture(tex_node, mat, warnings, alpha=False, min_value=None):
     raised to at least ``min_value`` if given), cached with the image."""
     image = tex_node.image
     if image is None:       # Cycles: an Image Texture without image gives black
-        pixels, entry = np.zeros((1, 1, 4), np.float32), (None, "none", None, {})
+        pixels, entry = np.zeros((1, 1, 4), np.float32), (None, "none", None, {}, [])
         name = "<no image>"
     else:
         pixels, entry = image_pixels(image, mat, warnings)
