@@ -385,3 +385,45 @@ def test_normal_map_exports_mikktspace_tangents_placed_and_mirrored():
         np.testing.assert_allclose(mesh.tangents, np.tile([-1.0, 0.0, 0.0, -1.0], (len(mesh.vertices), 1)),
                                    atol=1e-6)
         assert mesh.uv.shape == (len(mesh.vertices), 2)
+
+
+def test_viewport_re_reads_a_mesh_when_a_material_gains_a_texture():
+    """Incremental export: linking an Image Texture into a material re-reads the meshes using it (now
+    with UVs); an untouched image is not read again (cached per image)."""
+    load_addon()
+    from polar_render.polar_addon import viewport as vp
+    from polar_render.polar_addon.export import materials
+    from polar_render.polar_addon.render_engine import engine_settings
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = checker(tmp)
+        mat = bpy.data.materials["Checker"]
+        link = mat.node_tree.nodes["Diffuse BSDF"].inputs["Color"].links[0]
+        tex = link.from_node
+        mat.node_tree.links.remove(link)
+        bpy.context.view_layer.update()
+        export = vp.IncrementalExport()
+        results = []
+
+        def on_update(_scene, depsgraph):
+            changes = vp.classify(vp.depsgraph_updates(depsgraph))
+            results.append((export.sync(depsgraph, changes, engine_settings(depsgraph.scene, preview=True)),
+                            dict(export.counts)))
+
+        first = export.sync(bpy.context.evaluated_depsgraph_get(), None, engine_settings(scene, preview=True))
+        assert next(m for m in first.scene.meshes if m.name.startswith("Plane")).uv is None
+        bpy.app.handlers.depsgraph_update_post.append(on_update)
+        try:
+            mat.node_tree.links.new(tex.outputs["Color"], mat.node_tree.nodes["Diffuse BSDF"].inputs["Color"])
+            bpy.context.view_layer.update()
+            synced, counts = results[-1]
+            assert counts["arrays"] == 1 and counts["materials"] == 1 and synced.rebuild
+            plane = next(m for m in synced.scene.meshes if m.name.startswith("Plane"))
+            assert plane.uv is not None and synced.scene.materials[plane.materials[0]].varies_over_surface
+            entry = materials._IMAGES[tex.image.name_full]
+            mat.node_tree.nodes["Diffuse BSDF"].inputs["Roughness"].default_value = 0.5   # another edit
+            bpy.context.view_layer.update()
+            synced, counts = results[-1]
+            assert counts["arrays"] == 0 and counts["materials"] == 1
+            assert materials._IMAGES[tex.image.name_full] is entry        # pixels not read again
+        finally:
+            bpy.app.handlers.depsgraph_update_post.remove(on_update)

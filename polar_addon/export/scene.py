@@ -76,10 +76,22 @@ def mesh_arrays(obj):
         obj.to_mesh_clear()
 
 
+def attributes_outdated(obj, arrays) -> bool:
+    """True if ``arrays`` (from :func:`geometry_arrays`) lack mesh attributes that the object's
+    materials now read, or carry ones they no longer read (the viewport re-reads the mesh after a
+    material edit that adds or removes a texture)."""
+    if arrays is None or obj.type in ("POINTCLOUD", "CURVES"):
+        return False
+    stored = arrays[4]["needs"] if len(arrays) > 4 else None
+    return _attribute_needs(obj) != stored
+
+
 def _attribute_needs(obj):
     """What the materials of ``obj`` read from its mesh (materials.attribute_needs, merged), or None."""
     merged = {"uv": [], "tangents": [], "colors": []}
     for slot in obj.material_slots:
+        if getattr(slot.material, "node_tree", None) is None:
+            continue
         for k, v in attribute_needs(slot.material).items():
             merged[k].extend(v)
     merged = {k: list(dict.fromkeys(v)) for k, v in merged.items()}
@@ -94,7 +106,7 @@ def corner_attributes(me, name, needs) -> dict:
     nt = len(me.loop_triangles)
     loops = np.empty(nt * 3, np.int32)
     me.loop_triangles.foreach_get("loops", loops)
-    out = {"warnings": [], "uv": None, "tangents": None, "colors": {}}
+    out = {"warnings": [], "uv": None, "tangents": None, "colors": {}, "needs": needs}
     active = next((layer.name for layer in me.uv_layers if layer.active_render), None)
     maps = [m or active for m in needs["uv"] + needs["tangents"]]
     maps = list(dict.fromkeys(m for m in maps if m is not None))
