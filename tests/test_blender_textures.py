@@ -20,7 +20,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from tests.blender_support import load_addon, read_multilayer  # noqa: E402
+from tests.blender_support import load_addon, polar_material, read_multilayer  # noqa: E402
 
 W = H = 32
 BLOCK = 8
@@ -171,6 +171,16 @@ def bump(tmp):
     return base_scene(mat)
 
 
+def polarising_lambert(tmp):
+    """The checker on a Polarising BSDF (Lambert) node's Albedo: the node's own texturable inputs."""
+    bpy.ops.wm.read_homefile(use_empty=True)
+    mat = polar_material("PolarChecker", "LAMBERT")
+    node = next(n for n in mat.node_tree.nodes if n.bl_idname == "PolarShaderNodeBSDF")
+    tex = _image_node(mat, checker_png(os.path.join(tmp, "checker_p.png")))
+    mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Albedo"])
+    return base_scene(mat)
+
+
 MISSING = "/nonexistent/polar_missing_texture.png"
 
 
@@ -184,8 +194,8 @@ def missing(tmp):
     return base_scene(mat)
 
 
-SCENES = {"checker": checker, "checker_mapped": checker_mapped, "vertex_colour": vertex_colour,
-          "normal_map": normal_map, "bump": bump, "missing": missing}
+SCENES = {"checker": checker, "checker_mapped": checker_mapped, "polarising_lambert": polarising_lambert,
+          "vertex_colour": vertex_colour, "normal_map": normal_map, "bump": bump, "missing": missing}
 
 
 # --------------------------------------------------------------------------- renders
@@ -266,7 +276,7 @@ def test_luminance_per_region_matches_cycles(renders, name):
 
 
 def test_textured_scenes_export_without_warnings(renders):
-    for name in ("checker", "checker_mapped", "vertex_colour", "normal_map", "bump"):
+    for name in ("checker", "checker_mapped", "polarising_lambert", "vertex_colour", "normal_map", "bump"):
         assert renders[name][2] == [], name
 
 
@@ -427,3 +437,37 @@ def test_viewport_re_reads_a_mesh_when_a_material_gains_a_texture():
             assert materials._IMAGES[tex.image.name_full] is entry        # pixels not read again
         finally:
             bpy.app.handlers.depsgraph_update_post.remove(on_update)
+
+
+def test_other_links_keep_their_own_value_with_one_warning_each():
+    """A procedural texture on an input, an object-space normal map and a bump without an image height
+    are not exported: the input's own value (one warning naming it), the geometric normals."""
+    load_addon()
+    from polar_render.polar_addon.export.materials import export_material
+    from polar_render.polar_addon.export.scene import material_alpha
+    mat, diffuse = _material("Procedural")
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    noise = nodes.new("ShaderNodeTexNoise")
+    links.new(noise.outputs["Color"], diffuse.inputs["Color"])
+    normal = nodes.new("ShaderNodeNormalMap")
+    normal.space = "OBJECT"
+    links.new(_image_node(mat, normal_png(os.path.join(tempfile.gettempdir(), "polar_n.png")), "Non-Color")
+              .outputs["Color"], normal.inputs["Color"])
+    links.new(normal.outputs["Normal"], diffuse.inputs["Normal"])
+    warnings = []
+    bsdf, _ = export_material(mat, warnings)
+    assert material_alpha(mat, warnings) == 1.0
+    assert not bsdf.varies_over_surface and bsdf.albedo.value == pytest.approx(0.5)
+    assert warnings == [
+        "material 'Procedural': input 'Color' of 'Diffuse BSDF' is linked to ShaderNodeTexNoise, which is not "
+        "exported; its own value is used",
+        "material 'Procedural': Normal Map 'Normal Map' in object space is not supported (tangent space only); "
+        "the geometric shading normals are used"]
+    bump = nodes.new("ShaderNodeBump")
+    links.new(noise.outputs["Fac"], bump.inputs["Height"])
+    links.new(bump.outputs["Normal"], diffuse.inputs["Normal"])
+    warnings = []
+    export_material(mat, warnings)
+    material_alpha(mat, warnings)
+    assert warnings[-1] == ("material 'Procedural': bump and normal maps (linked Normal input) are not supported; "
+                            "the geometric shading normals are used")

@@ -254,8 +254,8 @@ def image_texture(tex_node, mat, warnings, alpha=False, min_value=None):
 def texture_source(socket, mat, warnings, roughness=False, node_name=""):
     """A TextureInput for a linked input socket (Image Texture, Color Attribute or Attribute node),
     or None (then :func:`_linked_input_fallback` decides).  ``roughness``: the parameter is m = r²
-    (Beckmann slope from Blender roughness): the texture is squared after interpolation and its
-    values kept ≥ 0.01 (m ≥ 1e-4, the engine's least textured slope)."""
+    (Beckmann slope from Blender roughness): the texture is squared after interpolation, image
+    texels kept ≥ ROUGHNESS_MIN (m ≥ 1e-4, the engine's least textured slope)."""
     node, out = _source(socket)
     if node is None:
         return None
@@ -269,7 +269,9 @@ def texture_source(socket, mat, warnings, roughness=False, node_name=""):
                                            and out.name in ("Color", "Alpha")):
         name = node.layer_name if kind == "ShaderNodeVertexColor" else node.attribute_name
         alpha = out.name == "Alpha"
-        return TextureInput(VertexColour(name, 4 if alpha else 3), "A" if alpha else None, power=power)
+        # colours in [0, 1]: a roughness maps to m = M_MIN + (1 − M_MIN)·r² (≥ M_MIN without clamping)
+        scale, offset = (1.0 - M_MIN, M_MIN) if roughness else (1.0, 0.0)
+        return TextureInput(VertexColour(name, 4 if alpha else 3), "A" if alpha else None, scale, offset, power)
     return None
 
 

@@ -253,7 +253,8 @@ def geometry_arrays(obj):
 
 def material_alpha(material, warnings) -> float:
     """Principled Alpha of a material's surface shader (1 if none), warning about what is not
-    supported: a linked Alpha (textured cut-outs) and bump or normal maps (linked Normal input)."""
+    supported: a linked Alpha (textured cut-outs) and a linked Normal input that is not an exported
+    normal or bump map (materials.normal_input_unsupported)."""
     if material is None or material.node_tree is None:
         return 1.0
     output = material.node_tree.get_output_node("ALL") or material.node_tree.get_output_node("CYCLES")
