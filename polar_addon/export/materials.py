@@ -117,9 +117,9 @@ def image_pixels(image, mat, warnings):
     """(linear float32 (H, W, 4) pixels, row 0 = v 0 (Blender's order), cache entry) of a Blender
     image; a missing file gives one magenta pixel and one warning naming the file.
 
-    ``image.pixels`` holds what the file stores: 8/16-bit values as stored (so sRGB images are
-    decoded here with the sRGB transfer function, as Cycles' OpenColorIO sRGB), float images in
-    scene-linear.  Images are cached per name and signature (file, time, size, colour space); an
+    ``image.pixels`` holds what an 8-bit file stores (so sRGB images are decoded here with the sRGB
+    transfer function, as Cycles' OpenColorIO sRGB); Blender loads 16-bit and float images
+    (``is_float``) into scene-linear floats, used as they are (verified in bpy 5.0.1).  Images are cached per name and signature (file, time, size, colour space); an
     image with unsaved edits (``is_dirty``) is re-read and its cache entry kept while its pixel
     hash is unchanged.
     """
@@ -229,6 +229,9 @@ def image_texture(tex_node, mat, warnings, alpha=False, min_value=None):
     else:
         pixels, entry = image_pixels(image, mat, warnings)
         name = image.name
+    if image is not None and image.source in ("TILED", "SEQUENCE", "MOVIE"):
+        warnings.append(f"material {mat!r}: image {image.name!r} is a {image.source.lower()} image; only the pixels "
+                        "Blender holds (one tile or frame) are used")
     if tex_node.projection != "FLAT":
         warnings.append(f"material {mat!r}: Image Texture {tex_node.name!r} uses {tex_node.projection} projection; "
                         "rendered with flat UV projection")

@@ -7,7 +7,9 @@ bevelled curves, which the depsgraph delivers as mesh instances), hair curves (`
 tubes of their ``radius``) and point clouds (spheres of their ``radius``).  Curves that geometry
 nodes leave on a mesh or curve object (a ``CURVE`` instance without a mesh) are not rendered by
 Cycles either: they are skipped with a warning.  Per object: ray visibility (camera, shadow,
-diffuse/glossy/transmission), holdout and each material's Principled Alpha.
+diffuse/glossy/transmission), holdout and each material's Principled Alpha.  Meshes whose
+materials read textures also carry per-corner UVs (one UV map), colour attributes and MikkTSpace
+tangents (``corner_attributes``); meshes of untextured materials carry none (unchanged export).
 """
 
 import numpy as np
