@@ -359,7 +359,8 @@ def test_roughness_texture_gives_the_constant_model_at_each_texel(tmp_path):
             oracles.append(_export(scene)[0].materials[plane.materials[0]])
         for i, constant in enumerate(oracles):
             assert not constant.varies_over_surface
-            np.testing.assert_array_equal(f[..., sel], constant.eval(sub, wi[:, sel]).matrix(), err_msg=f"texel {r}, oracle {i}")
+            np.testing.assert_array_equal(f[..., sel], constant.eval(sub, wi[:, sel]).matrix(),
+                                          err_msg=f"texel {r}, oracle {i}")
             np.testing.assert_array_equal(pdf[sel], constant.pdf(sub, wi[:, sel]))
     assert len(oracles) == 2
 

@@ -82,6 +82,8 @@ ROUGHNESS_MIN = float(np.nextafter(np.float32(0.01), np.float32(1)))
 #: image name → (signature, pixel hash, linear float32 (H, W, 4) pixels, {texture key: ImageTexture},
 #: warnings about the image (repeated on every export that uses it))
 _IMAGES: dict = {}
+#: images kept converted between exports (their pixels stay in memory)
+IMAGE_CACHE_SIZE = 32
 
 
 class MappedImageTexture(ImageTexture):
@@ -119,7 +121,8 @@ def image_pixels(image, mat, warnings):
 
     ``image.pixels`` holds what an 8-bit file stores (so sRGB images are decoded here with the sRGB
     transfer function, as Cycles' OpenColorIO sRGB); Blender loads 16-bit and float images
-    (``is_float``) into scene-linear floats, used as they are (verified in bpy 5.0.1).  Images are cached per name and signature (file, time, size, colour space); an
+    (``is_float``) into scene-linear floats, used as they are (verified in bpy 5.0.1).  Images are
+    cached per name and signature (file, time, size, colour space); an
     image with unsaved edits (``is_dirty``) is re-read and its cache entry kept while its pixel
     hash is unchanged.
     """
@@ -167,6 +170,9 @@ def image_pixels(image, mat, warnings):
         if not np.all(np.isfinite(pixels)):
             pixels = np.nan_to_num(pixels, nan=0.0, posinf=0.0, neginf=0.0)
     entry = (signature, digest, pixels, {}, notes)
+    _IMAGES.pop(image.name_full, None)
+    while len(_IMAGES) >= IMAGE_CACHE_SIZE:          # the least recently converted image goes first
+        _IMAGES.pop(next(iter(_IMAGES)))
     _IMAGES[image.name_full] = entry
     warnings.extend(f"material {mat!r}: {note}" for note in notes)
     return pixels, entry
@@ -365,7 +371,8 @@ class _Reader:
     def _checked_float(self, name, lo, hi):
         v = float(self._socket(name).default_value)
         if not math.isfinite(v) or v < lo or v > hi:
-            raise SceneError(f"material {self.mat!r}.{self.node.name}.{name}", f"must be in [{lo:g}, {hi:g}], got {v!r}")
+            raise SceneError(f"material {self.mat!r}.{self.node.name}.{name}",
+                             f"must be in [{lo:g}, {hi:g}], got {v!r}")
         return v
 
 
@@ -642,7 +649,7 @@ def _normal_nodes(socket):
     node = _follow(socket)
     if node is None:
         return None, None, True
-    bump = normal = None
+    bump = None
     if node.bl_idname == "ShaderNodeBump":
         bump = node
         height = _follow(node.inputs["Height"])
@@ -705,8 +712,9 @@ def surface_bsdf(node, mat, warnings, depth=0):
 
 
 #: converted shaders whose Normal input is exported
-_NORMAL_SHADERS = ("ShaderNodeBsdfDiffuse", "ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic", "ShaderNodeBsdfMetallic",
-                   "ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction", "ShaderNodeBsdfPrincipled")
+_NORMAL_SHADERS = ("ShaderNodeBsdfDiffuse", "ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic",
+                   "ShaderNodeBsdfMetallic", "ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction",
+                   "ShaderNodeBsdfPrincipled")
 
 
 def _surface_bsdf(node, mat, warnings, depth):
