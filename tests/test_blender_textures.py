@@ -472,3 +472,23 @@ def test_other_links_keep_their_own_value_with_one_warning_each():
     material_alpha(mat, warnings)
     assert warnings[-1] == ("material 'Procedural': bump and normal maps (linked Normal input) are not supported; "
                             "the geometric shading normals are used")
+
+
+def test_textured_export_pickles_for_distributed_workers():
+    """The exported textures are engine objects only (a Mapping node is the image's uv_transform), so
+    the scene reaches Dask workers that have no bpy."""
+    import pickle
+    load_addon()
+    with tempfile.TemporaryDirectory() as tmp:
+        scene = checker_mapped(tmp)
+        exported, _ = _export(scene)
+    plane = next(m for m in exported.meshes if m.name.startswith("Plane"))
+    texture = exported.materials[plane.materials[0]].albedo.source.texture
+    assert type(texture).__module__.endswith("engine.textures.texture") and texture.uv_transform is not None
+    A, b = texture.uv_transform          # Point mapping: R(90°)·diag(0.5, 0.5)·uv + (0.25, 0.5)
+    np.testing.assert_allclose(A, [[0.0, -0.5], [0.5, 0.0]], atol=1e-7)
+    np.testing.assert_allclose(b, [0.25, 0.5], atol=1e-7)
+    copy = pickle.loads(pickle.dumps(exported))
+    uv = np.random.default_rng(3).uniform(size=(2, 50))
+    copy_texture = copy.materials[plane.materials[0]].albedo.source.texture
+    np.testing.assert_array_equal(copy_texture.lookup(uv), texture.lookup(uv))

@@ -86,22 +86,6 @@ _IMAGES: dict = {}
 IMAGE_CACHE_SIZE = 32
 
 
-class MappedImageTexture(ImageTexture):
-    """An image looked up at an affine map of the mesh UVs (Blender Mapping nodes between the UV
-    source and the Image Texture): uv' = A·uv + b, A (2, 2), b (2,).  ``lookup`` takes mesh UVs, so
-    a bump map's differences along the mesh's u and v stay correct (chain rule)."""
-
-    def __init__(self, pixels, interpolation, extension, name, A, b):
-        super().__init__(pixels, interpolation, extension, name=name)
-        self.A, self.b = np.asarray(A, np.float64), np.asarray(b, np.float64)
-
-    def __repr__(self):
-        return super().__repr__()[:-1] + f", UV map {np.round(self.A, 4).tolist()} + {np.round(self.b, 4).tolist()})"
-
-    def lookup(self, uv):
-        return super().lookup(self.A @ uv + self.b[:, None])
-
-
 def _image_signature(image):
     """What identifies an image's pixels without reading them (file images that are not edited)."""
     path = image.filepath_from_user() if image.source == "FILE" else ""
@@ -253,10 +237,7 @@ def image_texture(tex_node, mat, warnings, alpha=False, min_value=None):
             data = data[..., :1]      # grey: one channel, read exactly (not through the luminance weights)
         if min_value is not None:
             data = np.maximum(data, np.float32(min_value))
-        if mapped:
-            textures[key] = MappedImageTexture(data, interpolation, extension, name, A, b)
-        else:
-            textures[key] = ImageTexture(data, interpolation, extension, name=name)
+        textures[key] = ImageTexture(data, interpolation, extension, name=name, uv_transform=(A, b) if mapped else None)
     return textures[key]
 
 
