@@ -365,6 +365,63 @@ def test_roughness_texture_gives_the_constant_model_at_each_texel(tmp_path):
     assert len(oracles) == 2
 
 
+def _texel_points(Hh, Ww, reps=20, seed=7):
+    """Shading points at the texel centres of an Hh×Ww image (``reps`` directions each), their
+    (row, column) texel (row 0 = bottom) and random incident directions."""
+    from polar_render.engine.materials.base import ShadingPoint
+    from polar_render.engine.spectral import WavelengthLookup
+    from polar_render.engine.textures import SurfacePoints, VertexAttributes
+    jj, ii = np.meshgrid(np.arange(Hh), np.arange(Ww), indexing="ij")
+    uv = np.repeat(np.stack((((ii + 0.5) / Ww).ravel(), ((jj + 0.5) / Hh).ravel())), reps, axis=1)
+    n = uv.shape[1]
+    rng = np.random.default_rng(seed)
+    faces = np.arange(3 * n).reshape(n, 3)
+    points = SurfacePoints(VertexAttributes(faces, np.repeat(uv.T, 3, axis=0), {}), np.arange(n),
+                           np.full(n, 0.25), np.full(n, 0.25))
+    n_s = np.tile([[0.0], [0.0], [1.0]], (1, n))
+    wo, wi = rng.normal(size=(3, n)), rng.normal(size=(3, n))
+    wo[2], wi[2] = np.abs(wo[2]) + 0.05, np.abs(wi[2])
+    wo, wi = wo / np.linalg.norm(wo, axis=0), wi / np.linalg.norm(wi, axis=0)
+    lam = np.tile([[450.0], [520.0], [600.0], [680.0]], (1, n))
+    sp = ShadingPoint(np.zeros((3, n)), n_s, n_s, wo, lam, False, WavelengthLookup(lam), None, points)
+    return sp, np.repeat(jj.ravel(), reps), np.repeat(ii.ravel(), reps), wi
+
+
+def test_metal_base_colour_texture_gives_the_constant_conversion_at_each_texel(tmp_path):
+    """Principled Metallic with an sRGB Base Color image: n, κ per texel by Gulbrandsen; at each texel
+    centre the material is, bit for bit, the exporter's conversion of that texel's (linear) colour."""
+    load_addon()
+    from PIL import Image
+    from polar_render.polar_addon.export import materials
+    Image.fromarray(np.array([[[250, 200, 60], [200, 200, 200]], [[180, 90, 40], [240, 240, 250]]],
+                             np.uint8)).save(tmp_path / "metal.png")
+    bpy.ops.wm.read_homefile(use_empty=True)
+    mat = bpy.data.materials.new("Metal")
+    principled = mat.node_tree.nodes["Principled BSDF"]
+    principled.inputs["Metallic"].default_value = 1.0
+    principled.inputs["Roughness"].default_value = 0.5
+    tex = _image_node(mat, str(tmp_path / "metal.png"))
+    mat.node_tree.links.new(tex.outputs["Color"], principled.inputs["Base Color"])
+    scene = base_scene(mat)
+    exported, warnings = _export(scene)
+    assert warnings == []
+    key = next(m for m in exported.meshes if m.name.startswith("Plane")).materials[0]
+    bsdf = exported.materials[key]
+    assert bsdf.varies_over_surface and bsdf.name == "torrance_sparrow"
+    linear = materials._IMAGES[tex.image.name_full][2]            # the image's linear texels (row 0 bottom)
+    sp, jj, ii, wi = _texel_points(2, 2)
+    f = bsdf.eval(sp, wi).matrix()
+    mat.node_tree.links.remove(principled.inputs["Base Color"].links[0])
+    for j, i in {(j, i) for j, i in zip(jj, ii)}:
+        principled.inputs["Base Color"].default_value = (*linear[j, i, :3], 1.0)
+        constant = _export(scene)[0].materials[key]
+        assert not constant.varies_over_surface
+        sel = np.nonzero((jj == j) & (ii == i))[0]
+        sub = sp.take(sel)
+        sub.surface = None
+        np.testing.assert_array_equal(f[..., sel], constant.eval(sub, wi[:, sel]).matrix(), err_msg=f"texel {j, i}")
+
+
 def test_untextured_scene_exports_no_mesh_attributes():
     """Without textures the exporter adds nothing to the meshes (so the engine takes its untextured
     path and renders bit-identically), and the local arrays keep their four fields."""

@@ -518,11 +518,44 @@ def _lambert(albedo, mat, node):
     return Lambert(_rgb_spectrum(albedo))
 
 
+def gulbrandsen_textures(colour: TextureInput, edge):
+    """(n, κ) TextureInputs of a conductor whose reflectivity is an image texture: Gulbrandsen's
+    map applied to every texel (float64 texels, so a texel gives exactly the constant conversion of
+    its colour; between texels the index is interpolated, not the colour), with the edge tint the
+    same texture or a constant [r, g, b]; None for other textures (colour attributes)."""
+    tex = colour.texture
+    if not isinstance(tex, ImageTexture) or colour.channel is not None:
+        return None
+    rgb = tex.pixels.astype(np.float64)
+    g = rgb if edge is colour else np.asarray(edge, np.float64)[None, None, :]
+    if rgb.shape[2] == 1 and g.shape[2] == 3 and max(edge) != min(edge):
+        rgb = np.repeat(rgb, 3, axis=2)
+    elif g.shape[2] == 3 and rgb.shape[2] == 1:
+        g = g[..., :1]
+    n, k = gulbrandsen_nk(rgb, g)
+    return tuple(TextureInput(ImageTexture(a, tex.interpolation, tex.extension, name=f"{tex.name} ({what})",
+                                           uv_transform=tex.uv_transform))
+                 for a, what in ((n, "n"), (k, "κ")))
+
+
 def _conductor_from_colour(r, colour_name, edge_name, m, mat, node, warnings):
-    """Gulbrandsen conductor from a colour (and edge tint) input; the colours stay constant (a
-    textured colour: its own value, warning), the roughness m may be a texture."""
-    colour = r.rgb(colour_name, 0.0, 1.0)
+    """Gulbrandsen conductor from a colour (and edge tint) input: a colour image texture gives n, κ
+    per texel; the edge tint and colour attributes stay constant (own value, warning); the
+    roughness m may be a texture."""
+    colour = r.rgb_or_texture(colour_name, 0.0, 1.0)
     edge = colour if edge_name is None else r.rgb(edge_name, 0.0, 1.0)
+    if isinstance(colour, TextureInput):
+        sources = gulbrandsen_textures(colour, edge)
+        if sources is not None:
+            n, k = sources
+            if isinstance(m, TextureInput) or m >= SMOOTH_LIMIT:
+                m = m if isinstance(m, TextureInput) else max(m, 1e-4)
+                return _textured_model("torrance_sparrow", {"n": n, "k": k, "m": m}, mat, node)
+            return _textured_model("conductor", {"n": n, "k": k}, mat, node)
+        warnings.append(f"material {mat!r}: input {colour_name!r} of {node.name!r}: a colour attribute cannot set a "
+                        "metal's index per point; its own value is used")
+        colour = r._checked_rgb(colour_name, 0.0, 1.0)
+        edge = colour if edge_name is None else edge
     n, k = gulbrandsen_nk(colour, edge)
     if isinstance(m, TextureInput):
         return _textured_model("torrance_sparrow", {"n": list(map(float, n)), "k": list(map(float, k)), "m": m},
