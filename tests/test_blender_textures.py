@@ -409,6 +409,9 @@ def test_metal_base_colour_texture_gives_the_constant_conversion_at_each_texel(t
     bsdf = exported.materials[key]
     assert bsdf.varies_over_surface and bsdf.name == "torrance_sparrow"
     linear = materials._IMAGES[tex.image.name_full][2]            # the image's linear texels (row 0 bottom)
+    from polar_render.engine.textures.image import srgb_to_linear  # image.pixels of 8-bit files are not linear
+    np.testing.assert_allclose(linear[..., :3], srgb_to_linear(np.asarray(Image.open(tmp_path / "metal.png"))[::-1]
+                                                               / 255.0), rtol=1e-6)
     sp, jj, ii, wi = _texel_points(2, 2)
     f = bsdf.eval(sp, wi).matrix()
     mat.node_tree.links.remove(principled.inputs["Base Color"].links[0])
@@ -549,3 +552,21 @@ def test_textured_export_pickles_for_distributed_workers():
     uv = np.random.default_rng(3).uniform(size=(2, 50))
     copy_texture = copy.materials[plane.materials[0]].albedo.source.texture
     np.testing.assert_array_equal(copy_texture.lookup(uv), texture.lookup(uv))
+
+
+def test_alpha_output_is_a_one_channel_texture(tmp_path):
+    """An Image Texture's Alpha output on a number input reads the alpha channel (linear, as stored)."""
+    load_addon()
+    from PIL import Image
+    from polar_render.polar_addon.export.materials import texture_source
+    rgba = np.array([[[255, 0, 0, 51], [0, 255, 0, 204]]], np.uint8)
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "alpha.png")
+    bpy.ops.wm.read_homefile(use_empty=True)
+    mat, diffuse = _material("Alpha")
+    tex = _image_node(mat, str(tmp_path / "alpha.png"))
+    mat.node_tree.links.new(tex.outputs["Alpha"], diffuse.inputs["Roughness"])
+    warnings = []
+    source = texture_source(diffuse.inputs["Roughness"], "Alpha", warnings)
+    assert warnings == [] and source.texture.channels == 1
+    values = source.number_at_uv(np.array([[0.25, 0.75], [0.5, 0.5]]))
+    np.testing.assert_allclose(values, [0.2, 0.8], rtol=1e-6)

@@ -254,7 +254,7 @@ def texture_source(socket, mat, warnings, roughness=False, node_name=""):
     if kind == "ShaderNodeTexImage":
         alpha = out.name == "Alpha"
         texture = image_texture(node, mat, warnings, alpha=alpha, min_value=ROUGHNESS_MIN if roughness else None)
-        return TextureInput(texture, "A" if alpha else None, power=power)
+        return TextureInput(texture, None, power=power)        # the Alpha output: a one-channel texture
     if kind == "ShaderNodeVertexColor" or (kind == "ShaderNodeAttribute" and node.attribute_type == "GEOMETRY"
                                            and out.name in ("Color", "Alpha")):
         name = node.layer_name if kind == "ShaderNodeVertexColor" else node.attribute_name
