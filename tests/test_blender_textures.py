@@ -570,3 +570,48 @@ def test_alpha_output_is_a_one_channel_texture(tmp_path):
     assert warnings == [] and source.texture.channels == 1
     values = source.number_at_uv(np.array([[0.25, 0.75], [0.5, 0.5]]))
     np.testing.assert_allclose(values, [0.2, 0.8], rtol=1e-6)
+
+
+def test_named_uv_map_point_colours_and_bump_with_normal_map_export(tmp_path):
+    """A UV Map node naming the second UV map exports that map; a point-domain colour attribute is
+    spread to the corners; a Bump node over a Normal Map gives one ShadingNormal with both."""
+    load_addon()
+    from polar_render.engine.materials.normal_map import ShadingNormal
+    mat, diffuse = _material("Both")
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    tex = _image_node(mat, normal_png(str(tmp_path / "n.png")), "Non-Color")
+    uvmap = nodes.new("ShaderNodeUVMap")
+    uvmap.uv_map = "Second"
+    links.new(uvmap.outputs["UV"], tex.inputs["Vector"])
+    normal = nodes.new("ShaderNodeNormalMap")
+    normal.uv_map = "Second"
+    links.new(tex.outputs["Color"], normal.inputs["Color"])
+    height = _image_node(mat, height_exr(str(tmp_path / "h.exr")), "Non-Color", "Linear", "EXTEND")
+    links.new(uvmap.outputs["UV"], height.inputs["Vector"])
+    bump = nodes.new("ShaderNodeBump")
+    links.new(height.outputs["Color"], bump.inputs["Height"])
+    links.new(normal.outputs["Normal"], bump.inputs["Normal"])
+    links.new(bump.outputs["Normal"], diffuse.inputs["Normal"])
+    colour = nodes.new("ShaderNodeVertexColor")
+    colour.layer_name = "Dots"
+    links.new(colour.outputs["Color"], diffuse.inputs["Color"])
+    scene = base_scene(mat)
+    me = bpy.data.objects["Plane"].data
+    second = me.uv_layers.new(name="Second")
+    for loop in me.loops:
+        u, v = me.uv_layers["UVMap"].uv[loop.index].vector
+        second.uv[loop.index].vector = (0.5 * u + 0.25, v)
+    dots = me.color_attributes.new("Dots", "FLOAT_COLOR", "POINT")
+    for vertex in me.vertices:
+        dots.data[vertex.index].color = (0.1 * vertex.index, 0.2, 0.3, 1.0)
+    exported, warnings = _export(scene)
+    assert warnings == []
+    plane = next(m for m in exported.meshes if m.name.startswith("Plane"))
+    corners = np.array([(me.loops[t.loops[c]].vertex_index, t.loops[c]) for t in me.loop_triangles for c in range(3)])
+    expected_uv = np.array([tuple(second.uv[loop].vector) for loop in corners[:, 1]])
+    np.testing.assert_allclose(plane.uv, expected_uv, atol=1e-7)
+    np.testing.assert_allclose(plane.colors["Dots"][:, 0], 0.1 * corners[:, 0], atol=1e-6)
+    assert plane.tangents is not None and np.all(plane.tangents[:, 3] == 1.0)
+    bsdf = exported.materials[plane.materials[0]]
+    assert isinstance(bsdf, ShadingNormal) and bsdf.normal_map is not None and bsdf.bump_map is not None
+    assert bsdf.base.varies_over_surface
