@@ -242,6 +242,7 @@ class IncrementalExport:
         self._export_world = export_world or _world
         self._material_alpha = material_alpha or scene_export.material_alpha
         self._object_rays = object_rays or scene_export.object_rays
+        self._attributes_outdated = scene_export.attributes_outdated
         self.arrays = {}      # (object, data) name → local arrays or None
         self.placed = {}      # instance key → ((matrix bytes, slot names), [Mesh])
         self.lights = {}      # instance key → (matrix bytes, light or None)
@@ -328,6 +329,8 @@ class IncrementalExport:
             dkey = (name, obj.type, data_name)
             reread = full or dkey not in self.arrays or (dkey not in seen_arrays and (
                 name in changes.objects_geometry or data_name in changes.data_geometry))
+            if not reread and dkey not in seen_arrays and (changes.materials or changes.all_materials):
+                reread = self._attributes_outdated(obj, self.arrays[dkey])   # a texture added or removed
             if reread:
                 self.arrays[dkey] = self._geometry_arrays(obj)
                 counts["arrays"] += 1

@@ -37,16 +37,27 @@ _KEYS_VERTEX = {"vertex_color", "channel", "scale", "offset", "note"}
 
 
 class TextureInput:
-    """A texture and the map from its values to a parameter: offset + scale·(channel or RGB)."""
+    """A texture and the map from its values to a parameter: offset + scale·t^power, t the channel
+    or RGB.  ``power`` (default 1) is for parameters that are a power of what artists paint, e.g.
+    the Blender exporter's Beckmann m = roughness² (the square of the interpolated value, as
+    Cycles' α = r²); with power ≠ 1 every value the texture can give must be ≥ 0."""
 
-    def __init__(self, texture: Texture, channel: str | None = None, scale: float = 1.0, offset: float = 0.0):
+    def __init__(self, texture: Texture, channel: str | None = None, scale: float = 1.0, offset: float = 0.0,
+                 power: float = 1.0):
         self.texture, self.channel, self.scale, self.offset = texture, channel, float(scale), float(offset)
+        self.power = float(power)
+        if not (np.isfinite(self.power) and self.power > 0):
+            raise ValueError(f"texture power must be a finite number > 0, got {power!r}")
 
     def __repr__(self):
         extra = "" if self.channel is None else f", channel={self.channel!r}"
+        if self.power != 1.0:
+            extra += f", power={self.power:g}"
         return f"TextureInput({self.texture!r}{extra}, scale={self.scale:g}, offset={self.offset:g})"
 
     def _map(self, t):
+        if self.power != 1.0:
+            t = np.maximum(t, 0.0) ** self.power
         if self.scale == 1.0 and self.offset == 0.0:
             return t
         return self.offset + self.scale * t
@@ -96,6 +107,11 @@ class TextureInput:
             lo, hi = float(np.min(lo[:3])), float(np.max(hi[:3]))
         else:
             lo, hi = float(self._scalar_of(lo[:, None])[0]), float(self._scalar_of(hi[:, None])[0])
+        if self.power != 1.0:
+            if lo < 0:
+                raise ValueError(f"a texture raised to the power {self.power:g} must have values >= 0, "
+                                 f"{self.texture!r} reaches {lo:g}")
+            lo, hi = lo ** self.power, hi ** self.power
         a, b = self.offset + self.scale * lo, self.offset + self.scale * hi
         return min(a, b), max(a, b)
 
@@ -117,7 +133,7 @@ class TexturedNumber:
         """The same values as a grey (λ-independent) textured spectrum (e.g. a coat's real index)."""
         src = self.source
         channel = src.channel or ("R" if src._grey() else "luminance")
-        return TexturedSpectrum(TextureInput(src.texture, channel, src.scale, src.offset), kind)
+        return TexturedSpectrum(TextureInput(src.texture, channel, src.scale, src.offset, src.power), kind)
 
     def __repr__(self):
         return f"TexturedNumber({self.source!r})"

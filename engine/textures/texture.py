@@ -65,7 +65,7 @@ class ImageTexture(Texture):
     """An image (float32 (H, W, C), linear values, row 0 at v = 0) looked up by UV; see the module docstring."""
 
     def __init__(self, pixels: np.ndarray, interpolation: str = "Linear", extension: str = "REPEAT",
-                 name: str = "image", field: str = ""):
+                 name: str = "image", field: str = "", uv_transform: tuple | None = None):
         if interpolation not in INTERPOLATIONS:
             raise SceneError(f"{field}.interpolation" if field else "interpolation",
                              f"must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
@@ -82,10 +82,20 @@ class ImageTexture(Texture):
         self.pixels = pixels
         self.height, self.width, self.channels = pixels.shape
         self.interpolation, self.extension, self.name = interpolation, extension, name
+        #: (A (2, 2), b (2,)) or None: the image is looked up at A·uv + b (Blender's Mapping node);
+        #: ``lookup`` takes the mesh's UVs, so differences along them (bump maps) stay correct
+        self.uv_transform = None
+        if uv_transform is not None:
+            A, b = np.asarray(uv_transform[0], np.float64), np.asarray(uv_transform[1], np.float64)
+            if A.shape != (2, 2) or b.shape != (2,) or not (np.all(np.isfinite(A)) and np.all(np.isfinite(b))):
+                raise SceneError(field or "uv_transform", "must be a finite 2×2 matrix and a 2-vector")
+            self.uv_transform = (A, b)
 
     def __repr__(self):
+        extra = "" if self.uv_transform is None else \
+            f", UV {np.round(self.uv_transform[0], 4).tolist()} + {np.round(self.uv_transform[1], 4).tolist()}"
         return (f"ImageTexture({self.name!r}, {self.width}×{self.height}×{self.channels}, "
-                f"{self.interpolation}, {self.extension})")
+                f"{self.interpolation}, {self.extension}{extra})")
 
     def value_range(self):
         flat = self.pixels.reshape(-1, self.channels)
@@ -105,6 +115,8 @@ class ImageTexture(Texture):
 
     def lookup(self, uv: np.ndarray) -> np.ndarray:
         """Values (C, N) at texture coordinates uv (2, N)."""
+        if self.uv_transform is not None:
+            uv = self.uv_transform[0] @ uv + self.uv_transform[1][:, None]
         x = uv[0] * self.width
         y = uv[1] * self.height
         if self.interpolation == "Closest":

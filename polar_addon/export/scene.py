@@ -7,7 +7,9 @@ bevelled curves, which the depsgraph delivers as mesh instances), hair curves (`
 tubes of their ``radius``) and point clouds (spheres of their ``radius``).  Curves that geometry
 nodes leave on a mesh or curve object (a ``CURVE`` instance without a mesh) are not rendered by
 Cycles either: they are skipped with a warning.  Per object: ray visibility (camera, shadow,
-diffuse/glossy/transmission), holdout and each material's Principled Alpha.
+diffuse/glossy/transmission), holdout and each material's Principled Alpha.  Meshes whose
+materials read textures also carry per-corner UVs (one UV map), colour attributes and MikkTSpace
+tangents (``corner_attributes``); meshes of untextured materials carry none (unchanged export).
 """
 
 import numpy as np
@@ -19,7 +21,7 @@ from ...engine.errors import SceneError
 from ...engine.spectral import ConstantSpectrum
 from .camera import export_camera
 from .lights import export_light
-from .materials import _follow, export_material
+from .materials import _follow, attribute_needs, export_material, normal_input_unsupported
 from .world import export_world
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES", "POINTCLOUD"}
@@ -66,9 +68,92 @@ def mesh_arrays(obj):
             tri_mat = poly_mat[tri_poly]
         else:
             tri_mat = np.zeros(nt, np.int32)
-        return P.reshape(nv, 3).astype(np.float64), F.reshape(nt, 3), SN.reshape(nt * 3, 3).astype(np.float64), tri_mat
+        arrays = (P.reshape(nv, 3).astype(np.float64), F.reshape(nt, 3), SN.reshape(nt * 3, 3).astype(np.float64),
+                  tri_mat)
+        needs = _attribute_needs(obj)
+        if needs is None:
+            return arrays
+        return arrays + (corner_attributes(me, obj.name, needs),)
     finally:
         obj.to_mesh_clear()
+
+
+def attributes_outdated(obj, arrays) -> bool:
+    """True if ``arrays`` (from :func:`geometry_arrays`) lack mesh attributes that the object's
+    materials now read, or carry ones they no longer read (the viewport re-reads the mesh after a
+    material edit that adds or removes a texture)."""
+    if arrays is None or obj.type in ("POINTCLOUD", "CURVES"):
+        return False
+    stored = arrays[4]["needs"] if len(arrays) > 4 else None
+    return _attribute_needs(obj) != stored
+
+
+def _attribute_needs(obj):
+    """What the materials of ``obj`` read from its mesh (materials.attribute_needs, merged), or None."""
+    merged = {"uv": [], "tangents": [], "colors": []}
+    for slot in obj.material_slots:
+        if getattr(slot.material, "node_tree", None) is None:
+            continue
+        for k, v in attribute_needs(slot.material).items():
+            merged[k].extend(v)
+    merged = {k: list(dict.fromkeys(v)) for k, v in merged.items()}
+    return merged if any(merged.values()) else None
+
+
+def corner_attributes(me, name, needs) -> dict:
+    """Per loop-triangle corner (nt·3 rows, the order of ``mesh_arrays``' corners) UVs (nt·3, 2),
+    colour attributes {name: (nt·3, 4) linear} and MikkTSpace tangents (nt·3, 4: object-space xyz,
+    bitangent sign), as ``needs`` asks; "warnings" lists what could not be read.  The engine has
+    one UV map per mesh: the first map asked for (the active render map for '') is exported."""
+    nt = len(me.loop_triangles)
+    loops = np.empty(nt * 3, np.int32)
+    me.loop_triangles.foreach_get("loops", loops)
+    out = {"warnings": [], "uv": None, "tangents": None, "colors": {}, "needs": needs}
+    active = next((layer.name for layer in me.uv_layers if layer.active_render), None)
+    maps = [m or active for m in needs["uv"] + needs["tangents"]]
+    maps = list(dict.fromkeys(m for m in maps if m is not None))
+    found = [m for m in maps if m in me.uv_layers]
+    if len(found) < len(maps) or (needs["uv"] and not maps):
+        out["warnings"].append(f"object {name!r}: UV map {next((m for m in maps if m not in found), '')!r} asked for "
+                               "by its materials is missing; textures read (0, 0) there")
+    if len(found) > 1:
+        out["warnings"].append(f"object {name!r}: its materials use UV maps {', '.join(map(repr, found))}; only "
+                               f"{found[0]!r} is exported (one UV map per mesh)")
+    if found:
+        uv = np.empty(len(me.loops) * 2, np.float32)
+        me.uv_layers[found[0]].uv.foreach_get("vector", uv)
+        out["uv"] = uv.reshape(-1, 2)[loops].astype(np.float64)
+        if needs["tangents"]:
+            try:
+                me.calc_tangents(uvmap=found[0])
+            except RuntimeError as e:       # n-gons: MikkTSpace in Blender needs tris/quads
+                out["warnings"].append(f"object {name!r}: no UV tangents ({e}); normal maps use tangents from the "
+                                       "UV gradients")
+            else:
+                t = np.empty(len(me.loops) * 3, np.float32)
+                me.loops.foreach_get("tangent", t)
+                sign = np.empty(len(me.loops), np.float32)
+                me.loops.foreach_get("bitangent_sign", sign)
+                out["tangents"] = np.column_stack((t.reshape(-1, 3)[loops], sign[loops])).astype(np.float64)
+    vertex_of_loop = None
+    for key in needs["colors"]:
+        layer_name = key or me.color_attributes.default_color_name or \
+            (me.color_attributes.active_color.name if me.color_attributes.active_color is not None else "")
+        attr = me.color_attributes.get(layer_name)
+        if attr is None:
+            out["warnings"].append(f"object {name!r}: colour attribute {layer_name!r} asked for by its materials is "
+                                   "missing; it reads 0")
+            continue
+        values = np.empty(len(attr.data) * 4, np.float32)
+        attr.data.foreach_get("color", values)          # linear for byte and float colours alike
+        values = values.reshape(-1, 4)
+        if attr.domain == "POINT":
+            if vertex_of_loop is None:
+                vertex_of_loop = np.empty(len(me.loops), np.int32)
+                me.loops.foreach_get("vertex_index", vertex_of_loop)
+            values = values[vertex_of_loop]
+        out["colors"][key] = values[loops].astype(np.float64)
+    return out
 
 
 def _attribute(data, name, n, width=1):
@@ -170,15 +255,15 @@ def geometry_arrays(obj):
 
 def material_alpha(material, warnings) -> float:
     """Principled Alpha of a material's surface shader (1 if none), warning about what is not
-    supported: a linked Alpha (textured cut-outs) and bump or normal maps (linked Normal input)."""
+    supported: a linked Alpha (textured cut-outs) and a linked Normal input that is not an exported
+    normal or bump map (materials.normal_input_unsupported)."""
     if material is None or material.node_tree is None:
         return 1.0
     output = material.node_tree.get_output_node("ALL") or material.node_tree.get_output_node("CYCLES")
     node = _follow(output.inputs["Surface"]) if output is not None else None
     if node is None:
         return 1.0
-    normal = node.inputs.get("Normal")
-    if normal is not None and normal.is_linked:
+    if normal_input_unsupported(node):
         warnings.append(f"material {material.name!r}: bump and normal maps (linked Normal input) are not "
                         "supported; the geometric shading normals are used")
     alpha = node.inputs.get("Alpha") if node.bl_idname == "ShaderNodeBsdfPrincipled" else None
@@ -220,7 +305,10 @@ def object_meshes(name, arrays, M, slots, material_key, emissions, alphas, rays,
     ``emissions[key]`` and ``alphas[key]`` the Meshes take; ``rays()``: the object's ray visibility
     (:func:`object_rays`).  [] (with a warning) if nothing is left.  Used per instance by
     :func:`export_scene` and by the viewport's incremental export."""
-    P, F, SN, tri_mat = arrays
+    P, F, SN, tri_mat = arrays[:4]
+    attributes = arrays[4] if len(arrays) > 4 else None     # per-corner UVs, colours, tangents (textures)
+    if attributes is not None:
+        warnings.extend(attributes["warnings"])
     if not np.all(np.isfinite(P)):
         raise SceneError(f"object {name!r}", "has non-finite vertex coordinates")
     Pw = P @ M[:3, :3].T + M[:3, 3]
@@ -252,11 +340,31 @@ def object_meshes(name, arrays, M, slots, material_key, emissions, alphas, rays,
         local_faces = np.arange(corner.size, dtype=np.int64).reshape(-1, 3)
         if mirrored:
             local_faces = local_faces[:, [0, 2, 1]]
+        extra = {} if attributes is None else _corner_fields(attributes, corner, M, mirrored)
         meshes.append(Mesh(name=f"{name}:{slot}", vertices=Pw[F[sel]].reshape(-1, 3),
                            faces=local_faces, materials=[key], material_ids=np.zeros(len(sel), np.int32),
                            normals=N[corner], emission=emissions.get(key), alpha=alphas.get(key, 1.0),
-                           **ray_fields))
+                           **ray_fields, **extra))
     return meshes
+
+
+def _corner_fields(attributes, corner, M, mirrored) -> dict:
+    """Mesh fields uv, colors, tangents of the corners ``corner`` (vertices are split per corner, so
+    per-corner data is per-vertex data).  Tangents are directions: placed by the linear part of M;
+    a mirroring transform flips the handedness (bitangent = w·(n × t) must stay the +v direction)."""
+    out = {}
+    if attributes.get("uv") is not None:
+        out["uv"] = attributes["uv"][corner]
+    if attributes.get("colors"):
+        out["colors"] = {k: v[corner] for k, v in attributes["colors"].items()}
+    if attributes.get("tangents") is not None:
+        t = attributes["tangents"][corner]
+        xyz = t[:, :3] @ M[:3, :3].T
+        length = np.linalg.norm(xyz, axis=1, keepdims=True)
+        xyz = np.where(length > 0, xyz / np.where(length > 0, length, 1.0), 0.0)   # 0: derived from the UVs
+        w = np.where(t[:, 3] < 0, -1.0, 1.0) * (-1.0 if mirrored else 1.0)
+        out["tangents"] = np.column_stack((xyz, w))
+    return out
 
 
 def export_scene(depsgraph, camera_object, width, height, settings: RenderSettings):
