@@ -119,6 +119,11 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                                        "second row left, right")
     mosaic_extinction: FloatProperty(name="Mosaic Extinction", description="t_min/t_max of the micro-"
                                      "polarisers (0 = ideal)", default=0.0, min=0.0, max=1.0)
+    world_bake_resolution: IntProperty(name="World Bake Width", description="Width in pixels of the "
+                                       "equirectangular map into which Cycles bakes worlds that Polar cannot map "
+                                       "directly (Sky Texture, gradients, mixes); the height is half of it. The "
+                                       "bake is kept in memory while the world is unchanged",
+                                       default=1024, min=16, soft_max=4096, max=16384)
 
 
 def pass_property(name: str) -> str:
