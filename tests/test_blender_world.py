@@ -136,7 +136,7 @@ def _image(bpy, name, texels, float_buffer=True, colorspace=None):
 
 
 def _hdri_world(bpy, image, rotation_deg=(0.0, 0.0, 0.0), vector_type="POINT", location=(0.0, 0.0, 0.0),
-                strength=1.0):
+                strength=1.0, coordinates="Generated"):
     world = bpy.data.worlds.new("HDRI")
     bpy.context.scene.world = world
     nt = world.node_tree
@@ -150,7 +150,7 @@ def _hdri_world(bpy, image, rotation_deg=(0.0, 0.0, 0.0), vector_type="POINT", l
     mapping.inputs["Rotation"].default_value = [math.radians(a) for a in rotation_deg]
     if vector_type in ("POINT", "TEXTURE"):
         mapping.inputs["Location"].default_value = location
-    nt.links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
+    nt.links.new(coords.outputs[coordinates], mapping.inputs["Vector"])
     nt.links.new(mapping.outputs["Vector"], env.inputs["Vector"])
     nt.links.new(env.outputs["Color"], bg.inputs["Color"])
     return world
@@ -178,12 +178,14 @@ def _away_from_map_poles(rotation_deg, vector_type, w, h):
     return np.abs(z) < math.cos(1.5 * math.pi / MAP_H)
 
 
-@pytest.mark.parametrize("vector_type", ["POINT", "TEXTURE"])
-def test_rotated_environment_texture_maps_directly_as_cycles_sees_it(blender, vector_type):
+@pytest.mark.parametrize("vector_type,coordinates", [("POINT", "Generated"), ("TEXTURE", "Object"),
+                                                     ("NORMAL", "Generated")])
+def test_rotated_environment_texture_maps_directly_as_cycles_sees_it(blender, vector_type, coordinates):
     bpy, export = blender
     bpy.ops.wm.read_homefile(use_empty=True)
     rotation = (20.0, -35.0, 70.0)
-    world = _hdri_world(bpy, _image(bpy, "hdri", _hdri_pixels()), rotation, vector_type, strength=1.5)
+    world = _hdri_world(bpy, _image(bpy, "hdri", _hdri_pixels()), rotation, vector_type, strength=1.5,
+                        coordinates=coordinates)
     warnings = []
     light = export.world.export_world(world, warnings)
     assert warnings == [] and light.image is not None and light.grid == "cycles" and light.strength == 1.5
@@ -211,6 +213,20 @@ def test_8bit_srgb_image_is_decoded_as_cycles_does(blender):
     direct = _emitter(light).lookup_rgb(_texel_directions(w, h))
     keep = _away_from_map_poles((0.0, 0.0, 0.0), "POINT", w, h)
     np.testing.assert_allclose(direct[keep], baked[keep], rtol=2e-3, atol=1e-4)
+
+
+def test_missing_image_warns_with_its_name_and_renders_magenta(blender, tmp_path):
+    bpy, export = blender
+    bpy.ops.wm.read_homefile(use_empty=True)
+    image = bpy.data.images.new("gone", 8, 4, float_buffer=True)
+    image.source = "FILE"
+    image.filepath = str(tmp_path / "no_such_sky.exr")
+    world = _hdri_world(bpy, image, strength=2.0)
+    warnings = []
+    light = export.world.export_world(world, warnings)
+    assert len(warnings) == 1 and "no_such_sky.exr" in warnings[0]
+    assert light.image is None                          # Cycles' missing-texture magenta × strength
+    assert np.allclose(light.radiance.rgb, (1.0, 0.0, 1.0)) and light.radiance.scale == 2.0
 
 
 def test_unsupported_mapping_is_baked_not_flattened(blender):

@@ -107,7 +107,7 @@ def _value(v):
 def _image_key(image):
     if image is None:
         return None
-    key = (image.name_full, image.source, bpy_path(image), tuple(image.size), image.colorspace_settings.name,
+    key = (image.name_full, image.source, _image_path(image), tuple(image.size), image.colorspace_settings.name,
            image.alpha_mode, image.packed_file is not None, image.is_dirty, image.is_float)
     if image.is_dirty or image.source == "GENERATED":
         # unsaved edits: the pixels themselves are the state
@@ -115,7 +115,7 @@ def _image_key(image):
     return key
 
 
-def bpy_path(image):
+def _image_path(image):
     import bpy
     return bpy.path.abspath(image.filepath, library=image.library) if image.filepath else ""
 
@@ -150,7 +150,7 @@ def _struct_key(struct, depth=0, seen=None):
                 out.append((ident, value.name_full, _value(value.matrix_world)))
             elif isinstance(value, bpy.types.ID):
                 out.append((ident, value.name_full))
-            elif value is not None and id(value) not in seen:
+            elif value is not None:
                 out.append((ident, _struct_key(value, depth + 1, seen)))
         elif prop.type == "COLLECTION":
             if ident not in ("inputs", "outputs"):
@@ -177,9 +177,9 @@ def _tree_key(tree, depth=0, seen=None):
     return tree.name_full, tuple(nodes), tuple(links)
 
 
-def world_key(world, resolution) -> str:
-    """Hash of everything in ``world`` that Cycles' rendering of it depends on, and the resolution."""
-    parts = (world.name_full, _value(world.color), _tree_key(world.node_tree), tuple(resolution))
+def world_key(world, settings) -> str:
+    """Hash of everything in ``world`` that Cycles' rendering of it depends on, and the bake ``settings``."""
+    parts = (world.name_full, _value(world.color), _tree_key(world.node_tree), tuple(settings))
     return hashlib.sha1(repr(parts).encode()).hexdigest()
 
 
@@ -220,7 +220,9 @@ def bake_world(world, resolution=(1024, 512), frame=1, samples=BAKE_SAMPLES, fil
     import bpy
     world = getattr(world, "original", world)
     width, height = int(resolution[0]), int(resolution[1])
-    key = world_key(world, (width, height, samples, filter_width))
+    # an animated world (keyframes or drivers on it or its node tree) differs per frame
+    animated = any(getattr(x, "animation_data", None) is not None for x in (world, world.node_tree))
+    key = world_key(world, (width, height, samples, filter_width, frame if animated else None))
     if key in _cache:
         _cache.move_to_end(key)
         return _cache[key]
