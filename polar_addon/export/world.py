@@ -44,7 +44,7 @@ def export_world(world, warnings: list, bake_width=None, frame=None):
         return None   # nothing plugged in: black world
     node = _source(output.inputs["Surface"])
     why = [node.bl_idname if node is not None else "the Surface link"]
-    if node is not None and node.bl_idname in ("ShaderNodeBackground", "ShaderNodeEmission"):
+    if node is not None and node.bl_idname in ("ShaderNodeBackground", "ShaderNodeEmission") and not node.mute:
         c, s = node.inputs["Color"], node.inputs["Strength"]
         if not c.is_linked and not s.is_linked:
             colour, strength = [float(x) for x in c.default_value[:3]], float(s.default_value)
@@ -64,8 +64,7 @@ def export_world(world, warnings: list, bake_width=None, frame=None):
 
 
 def _source(socket):
-    """The node feeding ``socket`` (through reroutes), or None; only its first output socket
-    counts where that matters (see _environment_texture)."""
+    """The node feeding ``socket`` (through reroutes), or None for a muted or invalid link."""
     if not socket.is_linked:
         return None
     link = socket.links[0]
@@ -78,6 +77,7 @@ def _source(socket):
 
 
 def _from_socket(socket):
+    """The output socket feeding the linked ``socket`` (through reroutes)."""
     link = socket.links[0]
     node, out = link.from_node, link.from_socket
     while node.bl_idname == "NodeReroute" and node.inputs[0].is_linked:
