@@ -326,14 +326,21 @@ def test_hdri_world_with_rotated_mapping_agrees_with_cycles(blender, tmp_path):
     assert not bad.any(), f"Polar/Cycles per region {np.round(ratio, 4).tolist()} ± {np.round(se, 4).tolist()}"
 
 
-def test_sky_texture_world_agrees_with_cycles(blender, tmp_path):
+@pytest.mark.parametrize("sky_type", ["HOSEK_WILKIE", "MULTIPLE_SCATTERING"])
+def test_sky_texture_world_agrees_with_cycles(blender, tmp_path, sky_type):
     bpy, export = blender
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = _parity_scene(bpy)
     scene.polar.world_bake_resolution = 512
-    world, sky = _sky_world(bpy, "HOSEK_WILKIE")
-    sky.sun_direction = (0.4, -0.6, 0.7)
-    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 3.0
+    world, sky = _sky_world(bpy, sky_type)
+    if sky_type == "HOSEK_WILKIE":        # a smooth sky (no sun disc)
+        sky.sun_direction = (0.4, -0.6, 0.7)
+        strength = 3.0
+    else:                                 # with its sun disc: enough samples for the disc's power
+        scene.polar.world_bake_samples = 128
+        sky.sun_elevation, sky.sun_rotation = math.radians(35), math.radians(60)
+        strength = 0.05
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = strength
     lit, ratio, se = _compare(bpy, scene, tmp_path)
     assert lit.sum() >= 10
     bad = np.abs(ratio - 1.0) > 4.0 * se + 0.02

@@ -10,8 +10,8 @@
   rotation (Euler XYZ).  Closest/Cubic/Smart interpolation renders as Linear (warning).
 * Anything else (Sky Texture, gradients, mixes, other mappings, a linked Strength): baked by
   Cycles into an equirectangular map (polar_addon.export.world_bake), resolution
-  ``scene.polar.world_bake_resolution`` × half of it, cached while the world is unchanged; a
-  warning names what prevented the direct mapping.
+  ``scene.polar.world_bake_resolution`` × half of it, ``world_bake_samples`` per texel, cached
+  while the world is unchanged; a warning names what prevented the direct mapping.
 """
 
 import math
@@ -22,17 +22,19 @@ from ...engine.scene.description import EnvironmentLight
 from ...engine.spectral import RGBIlluminantSpectrum
 from . import world_bake
 
-#: width of the baked map when no scene setting is found (height = width / 2)
+#: width of the baked map and Cycles samples per texel when no scene setting is found
 DEFAULT_BAKE_WIDTH = 1024
+DEFAULT_BAKE_SAMPLES = world_bake.BAKE_SAMPLES
 #: 8-bit colour spaces whose pixel values Cycles uses as they are (others: decoded, or baked)
 _LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XYZ E", "Linear CIE-XYZ D65")
 #: Cycles' colour for an image that cannot be loaded
 MISSING_IMAGE = (1.0, 0.0, 1.0)
 
 
-def export_world(world, warnings: list, bake_width=None, frame=None):
+def export_world(world, warnings: list, bake_width=None, frame=None, bake_samples=None):
     """The scene's environment light (engine EnvironmentLight) or None for a black world.
-    ``bake_width``: width of a baked map (default: the setting of the scene using this world)."""
+    ``bake_width``, ``bake_samples``: width of a baked map and Cycles samples per texel (default:
+    the settings of the scene using this world)."""
     if world is None:
         return None
     tree = world.node_tree
@@ -60,7 +62,7 @@ def export_world(world, warnings: list, bake_width=None, frame=None):
             direct = _environment_texture(world, source, c, float(s.default_value), warnings, why)
             if direct is not None:
                 return direct
-    return _baked(world, warnings, bake_width, frame, why)
+    return _baked(world, warnings, bake_width, bake_samples, frame, why)
 
 
 def _source(socket):
@@ -194,26 +196,27 @@ def _linear_texels(image):
     return np.ascontiguousarray(np.maximum(rgb, 0.0), dtype=np.float32)
 
 
-def _bake_width(world, bake_width):
-    if bake_width is not None:
-        return int(bake_width)
+def _bake_settings(world):
+    """(width, samples) of the Polar settings of the scene using ``world`` (the context scene first)."""
     import bpy
     original = getattr(world, "original", world)
     scenes = [bpy.context.scene] if getattr(bpy.context, "scene", None) is not None else []
     for scene in scenes + list(bpy.data.scenes):
         if scene.world is not None and scene.world.original == original and hasattr(scene, "polar"):
-            return int(scene.polar.world_bake_resolution)
-    return DEFAULT_BAKE_WIDTH
+            return int(scene.polar.world_bake_resolution), int(scene.polar.world_bake_samples)
+    return DEFAULT_BAKE_WIDTH, DEFAULT_BAKE_SAMPLES
 
 
-def _baked(world, warnings, bake_width, frame, why):
+def _baked(world, warnings, bake_width, bake_samples, frame, why):
     import bpy
-    width = _bake_width(world, bake_width)
+    width, samples = _bake_settings(world)
+    width = width if bake_width is None else int(bake_width)
+    samples = samples if bake_samples is None else int(bake_samples)
     height = max(2, width // 2)
     if frame is None:
         scene = getattr(bpy.context, "scene", None)
         frame = scene.frame_current if scene is not None else 1
-    texels = world_bake.bake_world(world, (width, height), frame=frame)
+    texels = world_bake.bake_world(world, (width, height), frame=frame, samples=samples)
     # an approximation (finite resolution: a sun disc is spread over its texels), so say so
     warnings.append(f"world {world.name!r} ({'; '.join(why)}) is baked by Cycles into a {width}×{height} "
                     "environment map")

@@ -14,7 +14,8 @@ Texel grid and directions are Cycles' Environment Texture's (engine ``grid="cycl
 with u = (½ − atan2(d_y, d_x)/2π) mod 1, v = acos(d_z)/π.  The camera rotation (90°, 0, −90°)
 gives exactly this mapping (verified: a 64×32 Environment Texture bakes to its own pixels).
 With the default box filter of one pixel each texel is the mean over its pixel footprint
-(``BAKE_SAMPLES`` jittered samples), so a small bright sun disc keeps its power.
+(``samples`` jittered samples, the World Bake Samples setting), so a small bright sun disc keeps
+its power: at 1024 × 512 within ~2 % with 16 samples, within noise with 128.
 
 Results are cached in memory for the session, keyed on a hash of every value of the world's
 node tree (nodes, sockets, links, node groups, images) and the resolution: viewport updates and
@@ -33,8 +34,8 @@ from collections import OrderedDict
 
 import numpy as np
 
-#: jittered samples per texel (a world without geometry needs few; the jitter integrates the
-#: texel footprint so that features smaller than a texel, like the sun disc, keep their power)
+#: default jittered samples per texel (a smooth world needs few; features smaller than a texel,
+#: like a sun disc, need more for their power to be right)
 BAKE_SAMPLES = 16
 #: how many baked maps stay in memory (a 2048×1024 map is 25 MB)
 CACHE_SIZE = 4
