@@ -119,6 +119,15 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                                        "second row left, right")
     mosaic_extinction: FloatProperty(name="Mosaic Extinction", description="t_min/t_max of the micro-"
                                      "polarisers (0 = ideal)", default=0.0, min=0.0, max=1.0)
+    world_bake_resolution: IntProperty(name="World Bake Width", description="Width in pixels of the "
+                                       "equirectangular map into which Cycles bakes worlds that Polar cannot map "
+                                       "directly (Sky Texture, gradients, mixes); the height is half of it. The "
+                                       "bake is kept in memory while the world is unchanged",
+                                       default=1024, min=16, soft_max=4096, max=16384)
+    world_bake_samples: IntProperty(name="World Bake Samples", description="Cycles samples per texel of a baked "
+                                    "world: they average each texel's footprint, so that a small bright sun disc "
+                                    "keeps its power (16: within ~2 %; 128: within noise)",
+                                    default=16, min=1, soft_max=256, max=4096)
 
 
 def pass_property(name: str) -> str:

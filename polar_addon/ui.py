@@ -75,6 +75,9 @@ class POLAR_PT_performance(_PolarPanel, bpy.types.Panel):
         layout.use_property_split = True
         layout.prop(p, "threads")
         layout.prop(p, "batch_rays")
+        col = layout.column(align=True)
+        col.prop(p, "world_bake_resolution")
+        col.prop(p, "world_bake_samples", text="Samples")
 
 
 class POLAR_PT_polariser(_PolarPanel, bpy.types.Panel):

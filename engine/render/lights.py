@@ -100,13 +100,39 @@ class EnvironmentEmitter(_Light):
         return np.full(p.shape[1], math.pi * float(luminance(self.rgb())))
 
 
+def euler_xyz_matrix(angles_rad) -> np.ndarray:
+    """Rotation matrix (3, 3) of Euler angles (x, y, z) in radians, order XYZ as Blender's Euler
+    and Mapping node: R = Rz(z)·Ry(y)·Rx(x) (x applied first)."""
+    cx, cy, cz = (math.cos(a) for a in angles_rad)
+    sx, sy, sz = (math.sin(a) for a in angles_rad)
+    rx = np.array([[1.0, 0.0, 0.0], [0.0, cx, -sx], [0.0, sx, cx]])
+    ry = np.array([[cy, 0.0, sy], [0.0, 1.0, 0.0], [-sy, 0.0, cy]])
+    rz = np.array([[cz, -sz, 0.0], [sz, cz, 0.0], [0.0, 0.0, 1.0]])
+    return rz @ ry @ rx
+
+
+def _map_rotation(rotation_deg):
+    """(angle about +Z in radians, None) for a turn about +Z only — a scalar or [0, 0, z], kept on
+    the scalar path so such maps render bit-identically — else (0, R (3, 3)) from Euler XYZ degrees."""
+    angles = np.atleast_1d(np.asarray(rotation_deg, dtype=np.float64))
+    if angles.shape == (1,):
+        return math.radians(float(angles[0])), None
+    if angles.shape != (3,) or not np.isfinite(angles).all():
+        raise SceneError("rotation_deg", f"must be a number or Euler angles [x, y, z] in degrees, got {rotation_deg!r}")
+    if angles[0] == 0.0 and angles[1] == 0.0:
+        return math.radians(float(angles[2])), None
+    return 0.0, euler_xyz_matrix(np.radians(angles))
+
+
 class EnvironmentMapEmitter(_Light):
     """Radiance from an equirectangular image (linear sRGB texels, row 0 = zenith), × strength.
 
     Direction convention (the peer format's, = Cycles' equirectangular mapping): world +Z up; a
     ray escaping along d sees u = (½ − atan2(d_y, d_x)/2π) mod 1, v = acos(d_z)/π, after turning
     d by −``rotation_deg`` about +Z (so the map turns by +rotation_deg, counter-clockwise seen
-    from above). Radiance is the bilinear interpolation on the texel grid ``grid`` (ENVMAP_GRIDS),
+    from above). ``rotation_deg`` may also be Euler angles [x, y, z] in degrees, order XYZ as
+    Blender's (R = Rz·Ry·Rx): the map is turned by R, so d is looked up at Rᵀd; [0, 0, z] is the
+    scalar z. Radiance is the bilinear interpolation on the texel grid ``grid`` (ENVMAP_GRIDS),
     periodic in u; a texel (1, 1, 1) is the unit white (as ``EnvironmentEmitter`` of radiance 1).
 
     Sampling: the bilinear pieces (cells between neighbouring texel columns and rows) are chosen
@@ -131,7 +157,7 @@ class EnvironmentMapEmitter(_Light):
         self.strength = float(strength)
         self.grid = grid
         H, W = img.shape[:2]
-        self.rotation = math.radians(rotation_deg)
+        self.rotation, self.turn = _map_rotation(rotation_deg)
         # v of the rows bounding the bilinear pieces, and the texel row found there
         if grid == "mitsuba":
             self.v_knots = np.arange(H) / (H - 1)
@@ -159,6 +185,8 @@ class EnvironmentMapEmitter(_Light):
 
     def _to_map(self, d):
         """Directions (3, N) turned by −rotation about +Z (world → map frame)."""
+        if self.turn is not None:
+            return self.turn.T @ d
         if self.rotation == 0.0:
             return d
         c, s = math.cos(self.rotation), math.sin(self.rotation)
@@ -220,8 +248,11 @@ class EnvironmentMapEmitter(_Light):
         sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
         phi = math.pi * (1.0 - 2.0 * ((i + 0.5 + u[2]) / W))
         dm = np.stack((sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t))
-        c, s = math.cos(self.rotation), math.sin(self.rotation)
-        wi = np.stack((c * dm[0] - s * dm[1], s * dm[0] + c * dm[1], dm[2])) if self.rotation else dm
+        if self.turn is not None:
+            wi = self.turn @ dm
+        else:
+            c, s = math.cos(self.rotation), math.sin(self.rotation)
+            wi = np.stack((c * dm[0] - s * dm[1], s * dm[0] + c * dm[1], dm[2])) if self.rotation else dm
         pdf = self.cell_pdf[j, i]
         valid = pdf > 0
         n = p.shape[1]

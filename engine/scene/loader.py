@@ -808,7 +808,8 @@ def _flag(d, key: str, field: str, default: bool) -> bool:
 def _environment_map(d: dict, field: str, base_dir: str) -> EnvironmentLight:
     """An equirectangular environment map: ``image`` (path relative to the scene file; EXR read
     with OpenEXR, PNG/JPEG/TIFF through engine.textures.image), ``strength``, ``rotation_deg``
-    (about +Z, counter-clockwise seen from above) and the texel ``grid`` (default "cycles")."""
+    (about +Z, counter-clockwise seen from above; or Euler angles [x, y, z], order XYZ as Blender's)
+    and the texel ``grid`` (default "cycles")."""
     _check_keys(d, field, {"type", "image", "strength", "rotation_deg", "grid", "note"})
     path = d["image"]
     if not isinstance(path, str) or not path:
@@ -826,7 +827,14 @@ def _environment_map(d: dict, field: str, base_dir: str) -> EnvironmentLight:
     if strength * float(rgb.max(initial=0.0)) > MAX_LIGHT:
         raise SceneError(f"{field}.strength", f"times the brightest texel must be at most {MAX_LIGHT:g}, "
                                               f"got {strength * float(rgb.max()):g}")
-    rotation = number(d.get("rotation_deg", 0.0), f"{field}.rotation_deg", -360.0, 360.0)
+    rotation = d.get("rotation_deg", 0.0)
+    if isinstance(rotation, list):
+        if len(rotation) != 3:
+            raise SceneError(f"{field}.rotation_deg", f"must be a number or Euler angles [x, y, z] in degrees, "
+                                                      f"got {len(rotation)} values")
+        rotation = [number(a, f"{field}.rotation_deg[{i}]", -360.0, 360.0) for i, a in enumerate(rotation)]
+    else:
+        rotation = number(rotation, f"{field}.rotation_deg", -360.0, 360.0)
     grid = choice(d.get("grid", "cycles"), f"{field}.grid", ENVMAP_GRIDS)
     return EnvironmentLight(RGBIlluminantSpectrum([1.0, 1.0, 1.0], strength), image=rgb, strength=strength,
                             rotation_deg=rotation, grid=grid)

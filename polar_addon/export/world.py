@@ -1,35 +1,226 @@
-"""World → constant environment light (colour × strength).
+"""World → environment light.
 
-Supported: a Background node (or Emission) plugged into the World Output, with unlinked Color and
-Strength.  Anything else (sky textures, HDRIs, mixes) falls back to the Background node's own
-colour and strength if there is one, otherwise to the world's viewport colour, with a warning.
+* A Background (or Emission) node with unlinked Color and Strength: a constant environment,
+  colour × strength.
+* Background(Color ← Environment Texture, Strength unlinked), the texture equirectangular, its
+  Vector unlinked or fed by Texture Coordinate Generated/Object (no object) through at most one
+  Mapping node whose Location is 0 and whose Scale is uniform and positive: mapped directly to an
+  environment map of the image's own pixels (as Cycles reads them: 8-bit sRGB images decoded to
+  linear, float images as stored) × strength, on Cycles' texel grid, turned by the Mapping
+  rotation (Euler XYZ).  Closest/Cubic/Smart interpolation renders as Linear (warning).
+* Anything else (Sky Texture, gradients, mixes, other mappings, a linked Strength): baked by
+  Cycles into an equirectangular map (polar_addon.export.world_bake), resolution
+  ``scene.polar.world_bake_resolution`` × half of it, ``world_bake_samples`` per texel, cached
+  while the world is unchanged; a warning names what prevented the direct mapping.
 """
+
+import math
+
+import numpy as np
 
 from ...engine.scene.description import EnvironmentLight
 from ...engine.spectral import RGBIlluminantSpectrum
+from . import world_bake
+
+#: width of the baked map and Cycles samples per texel when no scene setting is found
+DEFAULT_BAKE_WIDTH = 1024
+DEFAULT_BAKE_SAMPLES = world_bake.BAKE_SAMPLES
+#: 8-bit colour spaces whose pixel values Cycles uses as they are (others: decoded, or baked)
+_LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Linear", "Raw", "Linear CIE-XYZ E", "Linear CIE-XYZ D65")
+#: Cycles' colour for an image that cannot be loaded
+MISSING_IMAGE = (1.0, 0.0, 1.0)
 
 
-def export_world(world, warnings: list):
+def export_world(world, warnings: list, bake_width=None, frame=None, bake_samples=None):
+    """The scene's environment light (engine EnvironmentLight) or None for a black world.
+    ``bake_width``, ``bake_samples``: width of a baked map and Cycles samples per texel (default:
+    the settings of the scene using this world)."""
     if world is None:
         return None
-    colour, strength = [float(c) for c in world.color], 1.0
     tree = world.node_tree
     output = tree.get_output_node("ALL") if tree is not None else None
-    link = output.inputs["Surface"].links[0] if output is not None and output.inputs["Surface"].is_linked else None
-    node = link.from_node if link is not None else None
-    if node is not None and node.bl_idname in ("ShaderNodeBackground", "ShaderNodeEmission"):
-        c, s = node.inputs["Color"], node.inputs["Strength"]
-        colour = [float(x) for x in c.default_value[:3]]
-        strength = float(s.default_value)
-        if c.is_linked or s.is_linked:
-            what = (c.links[0].from_node if c.is_linked else s.links[0].from_node).bl_idname
-            warnings.append(f"world {world.name!r}: {what} feeding the background is not supported; "
-                            "using the Background node's own colour and strength")
-    elif node is not None:
-        warnings.append(f"world {world.name!r}: {node.bl_idname} is not supported; using the world's "
-                        "viewport colour")
-    elif tree is not None and output is not None:
+    if tree is None or output is None:
+        colour = [float(c) for c in world.color]
+        return EnvironmentLight(RGBIlluminantSpectrum(colour, 1.0)) if max(colour) > 0 else None
+    if not output.inputs["Surface"].is_linked:
         return None   # nothing plugged in: black world
-    if strength <= 0 or max(colour) <= 0:
+    node = _source(output.inputs["Surface"])
+    why = [node.bl_idname if node is not None else "the Surface link"]
+    if node is not None and node.bl_idname in ("ShaderNodeBackground", "ShaderNodeEmission") and not node.mute:
+        c, s = node.inputs["Color"], node.inputs["Strength"]
+        if not c.is_linked and not s.is_linked:
+            colour, strength = [float(x) for x in c.default_value[:3]], float(s.default_value)
+            if strength <= 0 or max(colour) <= 0:
+                return None
+            return EnvironmentLight(RGBIlluminantSpectrum(colour, strength))
+        source = _source(c) if c.is_linked else None
+        why = [f"{source.bl_idname} feeding Color" if source is not None else "the Color link"] if c.is_linked else []
+        if s.is_linked:
+            strength_source = _source(s)
+            why.append(f"{strength_source.bl_idname if strength_source else 'a link'} feeding Strength")
+        else:
+            direct = _environment_texture(world, source, c, float(s.default_value), warnings, why)
+            if direct is not None:
+                return direct
+    return _baked(world, warnings, bake_width, bake_samples, frame, why)
+
+
+def _source(socket):
+    """The node feeding ``socket`` (through reroutes), or None for a muted or invalid link."""
+    if not socket.is_linked:
         return None
-    return EnvironmentLight(RGBIlluminantSpectrum(colour, strength))
+    link = socket.links[0]
+    if not link.is_valid or link.is_muted:
+        return None
+    node = link.from_node
+    while node.bl_idname == "NodeReroute" and node.inputs[0].is_linked:
+        node = node.inputs[0].links[0].from_node
+    return node
+
+
+def _from_socket(socket):
+    """The output socket feeding the linked ``socket`` (through reroutes)."""
+    link = socket.links[0]
+    node, out = link.from_node, link.from_socket
+    while node.bl_idname == "NodeReroute" and node.inputs[0].is_linked:
+        out = node.inputs[0].links[0].from_socket
+        node = out.node
+    return out
+
+
+def _environment_texture(world, env, colour_socket, strength, warnings, why):
+    """The direct mapping of an Environment Texture world, or None where it needs baking (then
+    ``why`` says what prevents the direct mapping)."""
+    if env is None or env.bl_idname != "ShaderNodeTexEnvironment" or env.mute:
+        return None
+    what = f"Environment Texture {env.name!r}"
+    if _from_socket(colour_socket).identifier != "Color" or env.projection != "EQUIRECTANGULAR":
+        why[:] = [f"{what}: {env.projection.lower()} projection or its Alpha output"]
+        return None
+    if not _identity_texture_mapping(env.texture_mapping):
+        why[:] = [f"{what}: its own texture mapping"]
+        return None
+    rotation = _vector_rotation(env.inputs["Vector"])
+    if rotation is None:
+        why[:] = [f"{what}: its Vector input is not the direction turned by a Mapping rotation (Location 0, "
+                  "uniform Scale)"]
+        return None
+    image = env.image
+    if image is None or image.source not in ("FILE", "GENERATED"):
+        why[:] = [f"{what}: " + (f"a {image.source.lower()} image" if image is not None else "no image")]
+        return None
+    if not image.has_data:
+        try:
+            image.reload() if image.source == "FILE" else None
+        except RuntimeError:
+            pass
+    if image.size[0] < 1 or image.size[1] < 2 or not image.has_data:
+        name = image.filepath or image.name
+        warnings.append(f"world {world.name!r}: image {name!r} cannot be loaded; rendering Cycles' magenta")
+        return EnvironmentLight(RGBIlluminantSpectrum(list(MISSING_IMAGE), strength)) if strength > 0 else None
+    texels = _linear_texels(image)
+    if texels is None:
+        why[:] = [f"{what}: image {image.name!r} has alpha or the colour space {image.colorspace_settings.name!r}"]
+        return None
+    if env.interpolation != "Linear":
+        warnings.append(f"world {world.name!r}: Environment Texture interpolation {env.interpolation!r} "
+                        "renders as 'Linear'")
+    if strength <= 0:
+        return None
+    return EnvironmentLight(RGBIlluminantSpectrum([1.0, 1.0, 1.0], strength), image=texels, strength=strength,
+                            rotation_deg=rotation, grid="cycles")
+
+
+def _identity_texture_mapping(tm) -> bool:
+    """The texture node's own (Properties-panel) mapping does nothing."""
+    return (tuple(tm.translation) == (0.0, 0.0, 0.0) and tuple(tm.rotation) == (0.0, 0.0, 0.0)
+            and tuple(tm.scale) == (1.0, 1.0, 1.0) and not tm.use_min and not tm.use_max
+            and (tm.mapping_x, tm.mapping_y, tm.mapping_z) == ("X", "Y", "Z"))
+
+
+def _is_direction(socket) -> bool:
+    """``socket`` carries the world ray direction: unlinked, or Texture Coordinate Generated or
+    Object without an object (both are the direction for world shaders)."""
+    if not socket.is_linked:
+        return True
+    node, out = _source(socket), _from_socket(socket)
+    return (node is not None and node.bl_idname == "ShaderNodeTexCoord" and not node.mute
+            and (out.identifier == "Generated" or (out.identifier == "Object" and node.object is None)))
+
+
+def _vector_rotation(socket):
+    """Euler XYZ angles (degrees, engine convention: the map turned by R) of the Vector input of an
+    Environment Texture; None where the lookup is not the ray direction turned by a rotation."""
+    if _is_direction(socket):
+        return 0.0
+    node = _source(socket)
+    if node is None or node.bl_idname != "ShaderNodeMapping" or node.mute:
+        return None
+    if not _is_direction(node.inputs["Vector"]):
+        return None
+    kind = node.vector_type
+    inputs = {s.identifier: s for s in node.inputs}
+    if any(s.is_linked for k, s in inputs.items() if k != "Vector" and s.enabled):
+        return None
+    if kind in ("POINT", "TEXTURE") and any(x != 0.0 for x in inputs["Location"].default_value):
+        return None
+    # the environment texture normalises the vector, so a uniform positive scale changes nothing
+    scale = tuple(inputs["Scale"].default_value) if inputs["Scale"].enabled else (1.0, 1.0, 1.0)
+    if not (scale[0] > 0 and scale[0] == scale[1] == scale[2]):
+        return None
+    from mathutils import Euler
+    rot = Euler(tuple(inputs["Rotation"].default_value), "XYZ")
+    # POINT/VECTOR/NORMAL look up R·d: the map is turned by Rᵀ; TEXTURE looks up Rᵀ·d: turned by R
+    turn = rot if kind == "TEXTURE" else rot.to_matrix().transposed().to_euler("XYZ")
+    angles = [math.degrees(a) for a in turn]
+    if angles[0] == 0.0 and angles[1] == 0.0:
+        return angles[2]
+    return angles
+
+
+def _linear_texels(image):
+    """Linear radiance texels (H, W, 3) float32, row 0 = zenith, as Cycles reads ``image``;
+    None where the image needs baking (alpha < 1, an 8-bit colour space other than sRGB/linear)."""
+    px = world_bake._pixels(image)[::-1]
+    channels = px.shape[2]
+    if channels == 4 and float(px[..., 3].min()) < 1.0:
+        return None         # Cycles un-premultiplies float images: leave alpha to Cycles
+    rgb = np.repeat(px[..., :1], 3, axis=2) if channels < 3 else px[..., :3]
+    if not image.is_float:
+        space = image.colorspace_settings.name
+        if space == "sRGB":
+            rgb = np.where(rgb <= 0.04045, rgb / 12.92, ((rgb + 0.055) / 1.055) ** 2.4)
+        elif space not in _LINEAR_SPACES:
+            return None
+    rgb = np.nan_to_num(rgb, nan=0.0, posinf=0.0, neginf=0.0)
+    return np.ascontiguousarray(np.maximum(rgb, 0.0), dtype=np.float32)
+
+
+def _bake_settings(world):
+    """(width, samples) of the Polar settings of the scene using ``world`` (the context scene first)."""
+    import bpy
+    original = getattr(world, "original", world)
+    scenes = [bpy.context.scene] if getattr(bpy.context, "scene", None) is not None else []
+    for scene in scenes + list(bpy.data.scenes):
+        if scene.world is not None and scene.world.original == original and hasattr(scene, "polar"):
+            return int(scene.polar.world_bake_resolution), int(scene.polar.world_bake_samples)
+    return DEFAULT_BAKE_WIDTH, DEFAULT_BAKE_SAMPLES
+
+
+def _baked(world, warnings, bake_width, bake_samples, frame, why):
+    import bpy
+    width, samples = _bake_settings(world)
+    width = width if bake_width is None else int(bake_width)
+    samples = samples if bake_samples is None else int(bake_samples)
+    height = max(2, width // 2)
+    if frame is None:
+        scene = getattr(bpy.context, "scene", None)
+        frame = scene.frame_current if scene is not None else 1
+    texels = world_bake.bake_world(world, (width, height), frame=frame, samples=samples)
+    # an approximation (finite resolution: a sun disc is spread over its texels), so say so
+    warnings.append(f"world {world.name!r} ({'; '.join(why)}) is baked by Cycles into a {width}×{height} "
+                    "environment map")
+    if not float(texels.max(initial=0.0)) > 0.0:
+        return None
+    return EnvironmentLight(RGBIlluminantSpectrum([1.0, 1.0, 1.0], 1.0), image=texels, strength=1.0,
+                            rotation_deg=0.0, grid="cycles")
