@@ -159,7 +159,8 @@ ENVMAP_GRIDS = ("mitsuba", "cycles")
 class EnvironmentLight:
     """Light from every direction: constant ``radiance``, or with ``image`` (float (H, W, 3) linear
     sRGB, row 0 = zenith) an equirectangular map × ``strength``, turned by ``rotation_deg`` about
-    +Z (or by Euler angles [x, y, z] in degrees, order XYZ as Blender's), its rows on the texel ``grid`` "cycles" or "mitsuba" (engine.render.lights.ENVMAP_GRIDS)."""
+    +Z (or by Euler angles [x, y, z] in degrees, order XYZ as Blender's), its rows on the texel
+    ``grid`` "cycles" or "mitsuba" (engine.render.lights.ENVMAP_GRIDS)."""
 
     radiance: object              # constant spectral radiance from every direction
     image: object = None
