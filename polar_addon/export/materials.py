@@ -11,9 +11,10 @@ A material's Surface may be
   coat (Coat Weight > 0) or Torrance–Sparrow dielectric + Lambert (otherwise); Emission → emitter;
 - anything else: grey Lambert with a warning.
 Roughness r maps to the Beckmann slope m = r² (as Cycles' α = r²); below m = 0.02 the smooth model
-is used.  Linked inputs (textures) are not supported yet: their unlinked value is used, with a
-warning.  Every value is validated; a NaN or out-of-range input is an error naming the material
-and the input.
+is used.  A linked Diffuse Color or Principled Base Color (dielectric) is baked by Cycles to an
+image on the object's UV map (``texture_bake``) when the material is exported for an object; other
+linked inputs use their unlinked value, with a warning.  Every value is validated; a NaN or
+out-of-range input is an error naming the material and the input.
 """
 
 import math
@@ -27,7 +28,9 @@ from ...engine.materials.torrance_sparrow import M_MIN
 from ...engine.errors import SceneError
 from ...engine.spectral import (ConstantSpectrum, RGBIlluminantSpectrum, RGBReflectanceSpectrum,
                                 RGBUnboundedSpectrum)
+from ...engine.textures import ImageTexture, TexturedSpectrum, TextureInput
 from ..nodes.models import DIELECTRIC_PRESETS, NODE_MODELS
+from .texture_bake import bake_input
 
 SMOOTH_LIMIT = 0.02
 DEFAULT_ALBEDO = 0.8
@@ -43,11 +46,43 @@ def _follow(socket):
     return node
 
 
+class BakeTarget:
+    """What a material is exported for, so that linked inputs can be baked on its UV map
+    (``texture_bake.bake_input``): the (evaluated) object, its 4×4 world matrix, the Blender material,
+    the bake resolution.  ``requested`` becomes True once an input needed a bake (baked or not): the
+    material is then exported per object."""
+
+    def __init__(self, obj, matrix, material, resolution):
+        self.obj, self.matrix, self.material, self.resolution = obj, matrix, material, resolution
+        self.requested = False
+
+
+def _linked_input_fallback(reader, socket, lo, hi):
+    """The value of a linked colour input whose graph Polar does not evaluate itself: a textured
+    spectrum baked by Cycles on the object's UV map (clamped to [lo, hi], the input's range), or
+    None — no object to bake on (one warning), or no UV map (``bake_input`` warns) — when the
+    socket's own value is used."""
+    target = reader.bake
+    if target is None:
+        reader.warnings.append(f"material {reader.mat!r}: input {socket.name!r} of {reader.node.name!r} is linked; "
+                               "textures are not supported yet, its own value is used")
+        return None
+    target.requested = True
+    baked = bake_input(target.obj, target.material, socket, target.resolution, reader.warnings,
+                       matrix=target.matrix)
+    if baked is None:
+        return None
+    tex = baked.texture
+    if tex.pixels.min() < lo or tex.pixels.max() > hi:      # e.g. a Color Ramp beyond [0, 1]: as Cycles' clamp
+        tex = ImageTexture(np.clip(tex.pixels, lo, hi), tex.interpolation, tex.extension, tex.name)
+    return TexturedSpectrum(TextureInput(tex, baked.channel, baked.scale, baked.offset))
+
+
 class _Reader:
     """Reads validated input values of one node, recording warnings once per material."""
 
-    def __init__(self, material_name, node, warnings):
-        self.mat, self.node, self.warnings = material_name, node, warnings
+    def __init__(self, material_name, node, warnings, bake=None):
+        self.mat, self.node, self.warnings, self.bake = material_name, node, warnings, bake
 
     def _socket(self, name):
         sock = self.node.inputs.get(name)
@@ -65,8 +100,16 @@ class _Reader:
             raise SceneError(f"material {self.mat!r}.{self.node.name}.{name}", f"must be in {rng}, got {v!r}")
         return v
 
-    def rgb(self, name, lo=0.0, hi=math.inf):
-        v = [float(c) for c in self._socket(name).default_value[:3]]
+    def rgb(self, name, lo=0.0, hi=math.inf, textured=False):
+        """[r, g, b]; with ``textured`` a linked input may give a baked TexturedSpectrum instead."""
+        sock = self.node.inputs.get(name)
+        if textured and sock is not None and sock.is_linked:
+            value = _linked_input_fallback(self, sock, lo, hi)       # warns when it returns None
+            if value is not None:
+                return value
+        else:
+            sock = self._socket(name)
+        v = [float(c) for c in sock.default_value[:3]]
         if not all(math.isfinite(c) and lo <= c <= hi for c in v):
             raise SceneError(f"material {self.mat!r}.{self.node.name}.{name}",
                              f"components must be in [{lo:g}, {hi:g}], got {v}")
@@ -84,6 +127,8 @@ def gulbrandsen_nk(reflectivity, edge_tint):
 
 
 def _rgb_spectrum(rgb, kind="reflectance"):
+    if isinstance(rgb, TexturedSpectrum):        # a baked input (_linked_input_fallback)
+        return rgb
     if max(rgb) == min(rgb):
         return ConstantSpectrum(rgb[0])
     return RGBReflectanceSpectrum(rgb) if kind == "reflectance" else RGBUnboundedSpectrum(rgb)
@@ -100,7 +145,7 @@ def _torrance_sparrow(n, k, m, mat, shadowing="ts", diffuse=None):
     from ...engine.materials.smooth_limit import MirrorWithDiffuse
     from ...engine.materials.torrance_sparrow import TorranceSparrow
     kwargs = {}
-    if diffuse is not None and max(diffuse) > 0:
+    if diffuse is not None and (isinstance(diffuse, TexturedSpectrum) or max(diffuse) > 0):
         kwargs = {"diffuse_albedo": _rgb_spectrum(diffuse), "diffuse_weight": 1.0}
     if m < M_MIN:   # roughness 0: the smooth limit (Fresnel mirror + Lambertian part)
         return MirrorWithDiffuse(n, k, **kwargs)
@@ -197,16 +242,18 @@ def _polar_node_bsdf(node, mat, warnings, depth):
     return decl.build(_declared(decl, values, where), **parts)
 
 
-def _principled(node, mat, warnings):
-    r = _Reader(mat, node, warnings)
-    base = r.rgb("Base Color", 0.0, 1.0)
+def _principled(node, mat, warnings, bake=None):
+    r = _Reader(mat, node, warnings, bake)
+    metal = r.float("Metallic", 0.0, 1.0) >= 0.5
+    glass = not metal and r.float("Transmission Weight", 0.0, 1.0) >= 0.5
+    base = r.rgb("Base Color", 0.0, 1.0, textured=not (metal or glass))   # a dielectric's albedo may be baked
     rough = r.float("Roughness", 0.0, 1.0)
     m = rough * rough
-    if r.float("Metallic", 0.0, 1.0) >= 0.5:
+    if metal:
         n, k = gulbrandsen_nk(base, base)
         return _conductor(n, k, m, warnings, mat)
     ior = r.float("IOR", 0.0, 100.0, lo_open=True)
-    if r.float("Transmission Weight", 0.0, 1.0) >= 0.5:
+    if glass:
         return _glass(ior, rough, getattr(node, "distribution", ""), mat, warnings, "rough transmission")
     under = _torrance_sparrow(ConstantSpectrum(ior), ConstantSpectrum(0.0), max(m, 1e-4), mat, diffuse=base) \
         if m >= SMOOTH_LIMIT else Lambert(_rgb_spectrum(base))
@@ -244,14 +291,15 @@ def _emission(node, mat, warnings, colour_name="Color", strength_name="Strength"
     return RGBIlluminantSpectrum(colour, strength)
 
 
-def surface_bsdf(node, mat, warnings, depth=0):
-    """(BSDF, emission spectrum or None) for the shader node plugged into a Surface."""
+def surface_bsdf(node, mat, warnings, depth=0, bake=None):
+    """(BSDF, emission spectrum or None) for the shader node plugged into a Surface (``bake``: a
+    BakeTarget, or None when linked inputs are not to be baked)."""
     kind = node.bl_idname
     if kind == "PolarShaderNodeBSDF":
         return polar_node_bsdf(node, mat, warnings, depth), None
-    r = _Reader(mat, node, warnings)
+    r = _Reader(mat, node, warnings, bake)
     if kind == "ShaderNodeBsdfDiffuse":
-        return Lambert(_rgb_spectrum(r.rgb("Color", 0.0, 1.0))), None
+        return Lambert(_rgb_spectrum(r.rgb("Color", 0.0, 1.0, textured=True))), None
     if kind in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
         colour = r.rgb("Color", 0.0, 1.0)
         n, k = gulbrandsen_nk(colour, colour)
@@ -269,21 +317,22 @@ def surface_bsdf(node, mat, warnings, depth=0):
                       warnings, "rough glass"), None
     if kind == "ShaderNodeBsdfPrincipled":
         emission = _emission(node, mat, warnings, "Emission Color", "Emission Strength")
-        return _principled(node, mat, warnings), emission
+        return _principled(node, mat, warnings, bake), emission
     if kind == "ShaderNodeEmission":
         return Lambert(ConstantSpectrum(0.0)), _emission(node, mat, warnings)
     if kind in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
         first = next((_follow(s) for s in node.inputs if s.type == "SHADER" and s.is_linked), None)
         warnings.append(f"material {mat!r}: {node.bl_idname} is not supported; using its first shader input")
         if first is not None:
-            return surface_bsdf(first, mat, warnings, depth + 1)
+            return surface_bsdf(first, mat, warnings, depth + 1, bake)
     else:
         warnings.append(f"material {mat!r}: shader {kind} is not supported; rendered as grey Lambert")
     return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
 
 
-def export_material(material, warnings):
-    """(BSDF, emission or None) for a Blender material (None → default grey)."""
+def export_material(material, warnings, bake=None):
+    """(BSDF, emission or None) for a Blender material (None → default grey).  ``bake``: a
+    BakeTarget (the object the material is exported for) to bake linked inputs on, or None."""
     if material is None:
         return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
     tree = material.node_tree
@@ -294,4 +343,4 @@ def export_material(material, warnings):
     if node is None:
         warnings.append(f"material {material.name!r} has no surface shader; rendered black")
         return Lambert(ConstantSpectrum(0.0)), None
-    return surface_bsdf(node, material.name, warnings)
+    return surface_bsdf(node, material.name, warnings, bake=bake)

@@ -19,7 +19,8 @@ from ...engine.errors import SceneError
 from ...engine.spectral import ConstantSpectrum
 from .camera import export_camera
 from .lights import export_light
-from .materials import _follow, export_material
+from .materials import BakeTarget, _follow, export_material
+from .texture_bake import RESOLUTION_MAX, RESOLUTION_MIN
 from .world import export_world
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES", "POINTCLOUD"}
@@ -193,6 +194,44 @@ def material_alpha(material, warnings) -> float:
     return min(max(value, 0.0), 1.0)
 
 
+def bake_uv_corners(obj):
+    """Per-corner UVs (T·3, 2) of the active render UV map, in ``mesh_arrays``' triangle order, or
+    None (no UV map, or not a mesh).  Minimal UV export for baked textures (texture_bake): only
+    meshes whose material was baked carry them."""
+    try:
+        me = obj.to_mesh()
+    except RuntimeError:
+        return None
+    try:
+        uv = next((layer for layer in me.uv_layers if layer.active_render), None) if me is not None else None
+        if uv is None:
+            return None
+        me.calc_loop_triangles()
+        loops = np.empty(len(me.loop_triangles) * 3, np.int32)
+        me.loop_triangles.foreach_get("loops", loops)
+        coords = np.empty(len(uv.uv) * 2, np.float32)
+        uv.uv.foreach_get("vector", coords)
+        return coords.reshape(-1, 2).astype(np.float64)[loops]
+    finally:
+        obj.to_mesh_clear()
+
+
+def _attach_bake_uvs(meshes, uv_corners, tri_mat, n_slots, baked_keys):
+    """Give the Meshes of one object (from ``object_meshes``, ``n_slots`` material slots) whose
+    material is in ``baked_keys`` their per-vertex UVs: one vertex per triangle corner and the slot
+    as the suffix of the Mesh name, as object_meshes lays them out."""
+    if uv_corners is None:
+        return
+    slot_of_tri = np.clip(tri_mat, 0, n_slots - 1)
+    for mesh in meshes:
+        if mesh.materials[0] not in baked_keys:
+            continue
+        sel = np.nonzero(slot_of_tri == int(mesh.name.rsplit(":", 1)[1]))[0]
+        corner = (sel[:, None] * 3 + np.arange(3)[None, :]).ravel()
+        if corner.size == mesh.vertices.shape[0]:
+            mesh.uv = uv_corners[corner]
+
+
 def object_rays(obj, view_layer, warnings) -> dict:
     """Cycles' Object ▸ Visibility of an (evaluated) object as engine Mesh fields."""
     diffuse, glossy, transmission = (bool(getattr(obj, f"visible_{k}", True))
@@ -266,21 +305,39 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
     camera = export_camera(scene, camera_object, width, height, warnings)
     materials = {BLACK: Lambert(ConstantSpectrum(0.0))}
     mat_keys = {}
+    object_mat_keys = {}          # (material, object) → key of materials exported per object (baked inputs)
+    baked_keys = set()
+    resolution = int(getattr(getattr(scene, "polar", None), "texture_bake_resolution", 512))
+    if not RESOLUTION_MIN <= resolution <= RESOLUTION_MAX:
+        raise SceneError("render settings", f"Texture Bake Resolution must be in [{RESOLUTION_MIN}, {RESOLUTION_MAX}], "
+                                            f"got {resolution}")
     emissions = {}
     alphas = {}
     meshes, lights = [], []
     cache = {}
 
-    def material_key(material):
+    def material_key(material, obj=None, M=None):
+        # A material with inputs to bake is exported once per object (its UV map and coordinates);
+        # any other once for all objects.
         name = material.name_full if material is not None else None
-        if name not in mat_keys:
-            key = f"mat:{name}" if name is not None else "mat:<default>"
-            bsdf, emission = export_material(material, warnings)
-            materials[key] = bsdf
-            emissions[key] = emission
-            alphas[key] = material_alpha(material, warnings)
+        if name in mat_keys:
+            return mat_keys[name]
+        per_object = (name, obj.name_full if obj is not None else None)
+        if per_object in object_mat_keys:
+            return object_mat_keys[per_object]
+        target = BakeTarget(obj, M, material, resolution) if obj is not None and material is not None else None
+        bsdf, emission = export_material(material, warnings, bake=target)
+        key = f"mat:{name}" if name is not None else "mat:<default>"
+        if target is not None and target.requested:
+            key = f"mat:{name}@{obj.name_full}"
+            object_mat_keys[per_object] = key
+            baked_keys.add(key)
+        else:
             mat_keys[name] = key
-        return mat_keys[name]
+        materials[key] = bsdf
+        emissions[key] = emission
+        alphas[key] = material_alpha(material, warnings)
+        return key
 
     # Text, metaballs, surfaces and bevelled curves come twice (also inside collection instances): as
     # themselves and as a mesh instance of their evaluated mesh (what Cycles renders); export the latter.
@@ -315,8 +372,11 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
                                 "Cycles): convert them with Curve to Mesh")
             continue
         slots = [s.material for s in obj.material_slots] or [None]
-        meshes.extend(object_meshes(obj.name, arrays, M, slots, material_key, emissions, alphas,
-                                    lambda obj=obj: object_rays(obj, view_layer, warnings), warnings))
+        added = object_meshes(obj.name, arrays, M, slots, lambda m, obj=obj, M=M: material_key(m, obj, M),
+                              emissions, alphas, lambda obj=obj: object_rays(obj, view_layer, warnings), warnings)
+        if any(m.materials[0] in baked_keys for m in added):
+            _attach_bake_uvs(added, bake_uv_corners(obj), arrays[3], len(slots), baked_keys)
+        meshes.extend(added)
     if not meshes:
         raise SceneError("scene", "nothing to render: the scene has no visible geometry")
     world = export_world(scene.world, warnings)
