@@ -18,6 +18,7 @@ out-of-range input is an error naming the material and the input.
 """
 
 import math
+import weakref
 
 import numpy as np
 
@@ -57,6 +58,10 @@ class BakeTarget:
         self.requested = False
 
 
+#: Spectra of baked textures (clamped to an input's range) by bake, living as long as the bake's cache entry.
+_BAKED_SPECTRA = weakref.WeakKeyDictionary()
+
+
 def _linked_input_fallback(reader, socket, lo, hi):
     """The value of a linked colour input whose graph Polar does not evaluate itself: a textured
     spectrum baked by Cycles on the object's UV map (clamped to [lo, hi], the input's range), or
@@ -72,10 +77,14 @@ def _linked_input_fallback(reader, socket, lo, hi):
                        matrix=target.matrix)
     if baked is None:
         return None
-    tex = baked.texture
-    if tex.pixels.min() < lo or tex.pixels.max() > hi:      # e.g. a Color Ramp beyond [0, 1]: as Cycles' clamp
-        tex = ImageTexture(np.clip(tex.pixels, lo, hi), tex.interpolation, tex.extension, tex.name)
-    return TexturedSpectrum(TextureInput(tex, baked.channel, baked.scale, baked.offset))
+    spectrum = _BAKED_SPECTRA.get(baked, {}).get((lo, hi))
+    if spectrum is None:        # computed once per cached bake: the bounds scan every texel
+        tex = baked.texture
+        if tex.pixels.min() < lo or tex.pixels.max() > hi:      # e.g. a Color Ramp beyond [0, 1]: as Cycles' clamp
+            tex = ImageTexture(np.clip(tex.pixels, lo, hi), tex.interpolation, tex.extension, tex.name)
+        spectrum = TexturedSpectrum(TextureInput(tex, baked.channel, baked.scale, baked.offset))
+        _BAKED_SPECTRA.setdefault(baked, {})[(lo, hi)] = spectrum
+    return spectrum
 
 
 class _Reader:

@@ -72,11 +72,16 @@ class BakeCache:
         self.bakes = self.hits = 0
         self.seconds = 0.0
 
-    def summary(self) -> str:
-        """One line for render stats, '' if nothing was baked or reused."""
-        if not (self.bakes or self.hits):
+    def mark(self) -> tuple:
+        """The counters now, for :meth:`summary` of what happened since."""
+        return self.bakes, self.hits, self.seconds
+
+    def summary(self, since: tuple = (0, 0, 0.0)) -> str:
+        """One line for render stats (bakes and their time, reuses since ``mark()``), '' if none."""
+        bakes, hits, seconds = self.bakes - since[0], self.hits - since[1], self.seconds - since[2]
+        if not (bakes or hits):
             return ""
-        return f"texture bakes: {self.bakes} in {self.seconds:.2f} s, {self.hits} reused"
+        return f"texture bakes: {bakes} in {seconds:.2f} s, {hits} reused"
 
 
 #: The process-wide cache used by the exporter.
