@@ -108,7 +108,9 @@ def test_checker_bake_equals_the_analytic_checker():
     u, v = np.meshgrid(centres, centres)          # row j ↔ v = (j + ½)/res: row 0 at v = 0
     expected = checker_oracle(u, v, scale)
     # away from cell edges (the value at a texel centre; edges of cells fall between texels here)
-    inner = (np.abs(u * scale - np.round(u * scale)) > 1.0 / res) & (np.abs(v * scale - np.round(v * scale)) > 1.0 / res)
+    def off_edges(x):
+        return np.abs(x * scale - np.round(x * scale)) > 1.0 / res
+    inner = off_edges(u) & off_edges(v)
     np.testing.assert_allclose(px[inner], expected[inner], atol=1e-5)
     # ... and the texture lookup at those centres gives the same values
     looked_up = baked.texture.lookup(np.stack((u[inner], v[inner])))
@@ -259,3 +261,33 @@ def test_f12_render_bakes_and_reports_the_bake_time(tmp_path, capfd):
     after = data_snapshot()
     after["images"] = [n for n in after["images"] if n != "Render Result"]
     assert after == before
+
+
+def test_principled_base_color_is_baked_for_dielectrics_only():
+    _bake_module()
+    scene, plane, mat, socket = checker_scene("ShaderNodeBsdfPrincipled")
+    scene.polar.texture_bake_resolution = 16
+    engine_scene, warnings = _export(scene)
+    bsdf = engine_scene.materials[engine_scene.meshes[0].materials[0]]
+    assert type(bsdf).__name__ == "TorranceSparrow" and bsdf.varies_over_surface and warnings == []
+    socket.node.inputs["Metallic"].default_value = 1.0     # a metal's n, k from a colour: not textured
+    engine_scene, warnings = _export(scene)
+    bsdf = engine_scene.materials[engine_scene.meshes[0].materials[0]]
+    assert not bsdf.varies_over_surface
+    assert len([w for w in warnings if "'Base Color'" in w and "its own value is used" in w]) == 1
+
+
+def test_float_input_fallback_gives_a_textured_number():
+    """The hook returns a TexturedNumber for float sockets (for inputs that accept textures)."""
+    _bake_module()
+    from polar_render.engine.textures import TexturedNumber
+    from polar_render.polar_addon.export import materials
+    scene, plane, mat, _ = checker_scene("ShaderNodeBsdfPrincipled")
+    nodes = mat.node_tree.nodes
+    principled = nodes["Principled BSDF"]
+    mat.node_tree.links.new(nodes.new("ShaderNodeTexNoise").outputs["Fac"], principled.inputs["Roughness"])
+    warnings = []
+    reader = materials._Reader(mat.name, nodes["Principled BSDF"], warnings,
+                               materials.BakeTarget(plane, None, mat, 16))
+    value = materials._linked_input_fallback(reader, nodes["Principled BSDF"].inputs["Roughness"], 0.0, 1.0)
+    assert isinstance(value, TexturedNumber) and 0.0 <= value.lo < value.hi <= 1.0 and warnings == []

@@ -29,7 +29,7 @@ from ...engine.materials.torrance_sparrow import M_MIN
 from ...engine.errors import SceneError
 from ...engine.spectral import (ConstantSpectrum, RGBIlluminantSpectrum, RGBReflectanceSpectrum,
                                 RGBUnboundedSpectrum)
-from ...engine.textures import ImageTexture, TexturedSpectrum, TextureInput
+from ...engine.textures import ImageTexture, TexturedNumber, TexturedSpectrum, TextureInput
 from ..nodes.models import DIELECTRIC_PRESETS, NODE_MODELS
 from .texture_bake import bake_input
 
@@ -58,15 +58,15 @@ class BakeTarget:
         self.requested = False
 
 
-#: Spectra of baked textures (clamped to an input's range) by bake, living as long as the bake's cache entry.
-_BAKED_SPECTRA = weakref.WeakKeyDictionary()
+#: Values of baked textures (clamped to an input's range) by bake, living as long as the bake's cache entry.
+_BAKED_VALUES = weakref.WeakKeyDictionary()
 
 
 def _linked_input_fallback(reader, socket, lo, hi):
-    """The value of a linked colour input whose graph Polar does not evaluate itself: a textured
-    spectrum baked by Cycles on the object's UV map (clamped to [lo, hi], the input's range), or
-    None — no object to bake on (one warning), or no UV map (``bake_input`` warns) — when the
-    socket's own value is used."""
+    """The value of a linked input whose graph Polar does not evaluate itself, baked by Cycles on the
+    object's UV map and clamped to [lo, hi] (the input's range): a TexturedSpectrum for a colour
+    input, a TexturedNumber for a float input; or None — no object to bake on (one warning), or no
+    UV map (``bake_input`` warns) — when the socket's own value is used."""
     target = reader.bake
     if target is None:
         reader.warnings.append(f"material {reader.mat!r}: input {socket.name!r} of {reader.node.name!r} is linked; "
@@ -77,14 +77,15 @@ def _linked_input_fallback(reader, socket, lo, hi):
                        matrix=target.matrix)
     if baked is None:
         return None
-    spectrum = _BAKED_SPECTRA.get(baked, {}).get((lo, hi))
-    if spectrum is None:        # computed once per cached bake: the bounds scan every texel
+    value = _BAKED_VALUES.get(baked, {}).get((lo, hi))
+    if value is None:           # computed once per cached bake: the bounds scan every texel
         tex = baked.texture
         if tex.pixels.min() < lo or tex.pixels.max() > hi:      # e.g. a Color Ramp beyond [0, 1]: as Cycles' clamp
             tex = ImageTexture(np.clip(tex.pixels, lo, hi), tex.interpolation, tex.extension, tex.name)
-        spectrum = TexturedSpectrum(TextureInput(tex, baked.channel, baked.scale, baked.offset))
-        _BAKED_SPECTRA.setdefault(baked, {})[(lo, hi)] = spectrum
-    return spectrum
+        source = TextureInput(tex, baked.channel, baked.scale, baked.offset)
+        value = TexturedNumber(source) if tex.channels == 1 else TexturedSpectrum(source)
+        _BAKED_VALUES.setdefault(baked, {})[(lo, hi)] = value
+    return value
 
 
 class _Reader:

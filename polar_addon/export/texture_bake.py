@@ -18,6 +18,11 @@ node.  ``bpy.ops.object.bake(type='EMIT')`` then writes Emission = the socket's 
 One sample per texel: each texel holds the graph's value at its centre ((i + ½)/W, (j + ½)/H) in UV,
 the engine's bilinear lookup interpolates between centres as for any image.
 
+Where: the exporter calls this from the engine's ``render()`` (verified headless: ``blender -b`` and
+the bpy module, where ``render()`` runs on the main thread).  In an interactive Blender, F12 runs
+``render()`` on a job thread; the bake operator called from there is not verified.  Blender's
+bake operator also resets ``G.is_rendering`` when it finishes.
+
 Bakes are cached in memory per (object, object data, material, socket, node-graph values, UV map
 and positions, world matrix, resolution): a re-export with nothing changed does not re-bake.
 Bake times go to the ``polar.bake`` logger and to :data:`BAKE_CACHE`'s counters.
