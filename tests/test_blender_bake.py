@@ -291,3 +291,41 @@ def test_float_input_fallback_gives_a_textured_number():
                                materials.BakeTarget(plane, None, mat, 16))
     value = materials._linked_input_fallback(reader, nodes["Principled BSDF"].inputs["Roughness"], 0.0, 1.0)
     assert isinstance(value, TexturedNumber) and 0.0 <= value.lo < value.hi <= 1.0 and warnings == []
+
+
+def test_multi_material_object_bakes_only_its_faces_with_unchanged_generated_coordinates(monkeypatch):
+    """A cube (off-centre, stretched: Generated coordinates depend on its whole bounding box) with
+    two material slots: the bake of slot 0 writes texels of slot-0 faces only, equal to those of a
+    bake with every face in slot 0 (the removed faces do not move the texture space)."""
+    tb = _bake_module()
+    monkeypatch.setattr(tb, "MARGIN_PER_512", 0)
+    scene, plane, mat, socket = checker_scene()
+    bpy.ops.mesh.primitive_cube_add(size=2, location=(0.3, 0.0, 0.0))
+    cube = bpy.context.object
+    cube.scale = (2.0, 1.0, 1.0)
+    cube.data.materials.append(mat)
+    cube.data.materials.append(bpy.data.materials.new("Other"))
+    full = tb.bake_input(cube, mat, socket, 64, [], cache=None).texture.pixels.copy()
+    slots = np.ones(6, np.int32)
+    slots[0] = 0                                 # one face left: its own bounding box is flat
+    cube.data.polygons.foreach_set("material_index", slots)
+    cube.data.update()
+    part = tb.bake_input(cube, mat, socket, 64, [], cache=None).texture.pixels
+    written = np.any(part != 0, axis=-1)
+    assert 0 < written.sum() < np.any(full != 0, axis=-1).sum()
+    core = written & np.roll(written, 1, 0) & np.roll(written, -1, 0) & np.roll(written, 1, 1) & np.roll(written, -1, 1)
+    assert core.sum() > 50
+    np.testing.assert_allclose(part[core], full[core], atol=1e-6)
+
+
+def test_a_failed_bake_is_a_warning_naming_the_input(monkeypatch):
+    tb = _bake_module()
+
+    def fail(*args):
+        raise RuntimeError("Error: Current render engine does not support baking\n")
+    monkeypatch.setattr(tb, "_bake_pixels", fail)
+    scene, plane, mat, socket = checker_scene()
+    warnings = []
+    assert tb.bake_input(plane, mat, socket, 16, warnings, cache=None) is None
+    assert len(warnings) == 1 and "'Checker'" in warnings[0] and "'Color'" in warnings[0]
+    assert "does not support baking" in warnings[0]

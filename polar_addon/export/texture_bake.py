@@ -148,9 +148,10 @@ def tree_signature(tree, _seen=None) -> str:
                 value = getattr(node, pid)
             except (AttributeError, RuntimeError):
                 continue
-            if prop.type == "POINTER" and value is not None and hasattr(value, "nodes"):
+            kind = value.bl_rna.identifier if prop.type == "POINTER" and value is not None else ""
+            if kind.endswith("NodeTree"):
                 h.update(tree_signature(value, seen).encode())
-            elif prop.type == "POINTER" and value is not None and hasattr(value, "pixels"):
+            elif kind == "Image":              # by name, file and edit state (never its pixels: slow)
                 h.update(repr((value.name_full, value.filepath, value.is_dirty)).encode())
             elif prop.type != "COLLECTION":
                 h.update(repr((pid, _value_repr(value))).encode())
@@ -226,7 +227,11 @@ def bake_input(obj, material, socket, resolution: int, warnings: list, *, matrix
         log.info("%s: reused the %d² bake", where, resolution)
         return hit
     t0 = time.perf_counter()
-    pixels = _bake_pixels(obj_eval, original, socket, source, slot, uv.name, M, resolution, channels)
+    try:
+        pixels = _bake_pixels(obj_eval, original, socket, source, slot, uv.name, M, resolution, channels)
+    except RuntimeError as e:              # the operator's own report, e.g. Cycles disabled
+        warnings.append(f"{where}: the Cycles bake failed ({str(e).strip()}); its own value is used")
+        return None
     seconds = time.perf_counter() - t0
     texture = ImageTexture(pixels, "Linear", "REPEAT", name=f"bake:{original.name}/{socket.node.name}/{socket.name}",
                            field=where)
