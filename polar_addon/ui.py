@@ -75,6 +75,7 @@ class POLAR_PT_performance(_PolarPanel, bpy.types.Panel):
         layout.use_property_split = True
         layout.prop(p, "threads")
         layout.prop(p, "batch_rays")
+        layout.prop(p, "texture_bake_resolution")
 
 
 class POLAR_PT_polariser(_PolarPanel, bpy.types.Panel):
