@@ -330,3 +330,138 @@ def test_a_failed_bake_is_a_warning_naming_the_input(monkeypatch):
     assert tb.bake_input(plane, mat, socket, 16, warnings, cache=None) is None
     assert len(warnings) == 1 and "'Checker'" in warnings[0] and "'Color'" in warnings[0]
     assert "does not support baking" in warnings[0]
+
+
+# ------------------------------------------------------------------ merged with the texture export
+
+def _off_edges(x, scale, margin):
+    """True where x·scale is more than ``margin`` (in x units) from a checker cell edge."""
+    return np.abs(x * scale - np.round(x * scale)) > margin * scale
+
+
+def test_baked_roughness_is_m_squared_with_the_least_textured_slope():
+    """A Checker Fac on a Principled dielectric's Roughness is baked as a one-channel float image and
+    becomes m = r² per point (TextureInput power 2), r clamped at ROUGHNESS_MIN as an image roughness:
+    at texel centres m is (max(Fac, ROUGHNESS_MIN))² of the analytic checker."""
+    tb = _bake_module()
+    from polar_render.polar_addon.export.materials import ROUGHNESS_MIN
+    scale, res = 4.0, 64
+    scene, plane, mat, _ = checker_scene("ShaderNodeBsdfPrincipled", scale=scale, uv_vector=True)
+    nodes = mat.node_tree.nodes
+    principled = nodes["Principled BSDF"]
+    mat.node_tree.links.remove(principled.inputs["Base Color"].links[0])
+    mat.node_tree.links.new(nodes["Checker Texture"].outputs["Fac"], principled.inputs["Roughness"])
+    scene.polar.texture_bake_resolution = res
+    tb.BAKE_CACHE.clear()
+    exported, warnings = _export(scene)
+    assert warnings == [] and tb.BAKE_CACHE.bakes == 1
+    mesh = exported.meshes[0]
+    assert mesh.materials[0] == "mat:Checker@Plane" and mesh.uv is not None
+    bsdf = exported.materials[mesh.materials[0]]
+    assert type(bsdf).__name__ == "TorranceSparrow" and bsdf.varies_over_surface
+    m = bsdf.m.source
+    assert m.power == 2.0 and m.texture.channels == 1
+    assert m.bounds(rgb=False) == pytest.approx((ROUGHNESS_MIN ** 2, 1.0), rel=1e-6)
+    centres = (np.arange(res) + 0.5) / res
+    u, v = (a.ravel() for a in np.meshgrid(centres, centres))
+    inner = _off_edges(u, scale, 1.0 / res) & _off_edges(v, scale, 1.0 / res)
+    fac = (checker_oracle(u[inner], v[inner], scale)[:, 0] == COLOUR1[0]).astype(float)
+    expected = np.maximum(fac, ROUGHNESS_MIN) ** 2
+    np.testing.assert_allclose(m.number_at_uv(np.stack((u[inner], v[inner]))), expected, rtol=1e-6)
+
+
+def test_bake_uses_the_uv_map_the_mesh_exports_for_its_image_textures(tmp_path):
+    """A material whose Roughness is an image on UV map 'Second' and whose Base Color is a Checker on
+    the active map: the mesh exports 'Second' (one UV map per mesh) and the checker is baked on it, so
+    that looking the bake up at a point's 'Second' coordinates gives the checker of its active-map
+    coordinates."""
+    tb = _bake_module()
+    from PIL import Image
+    Image.fromarray(np.full((2, 2), 128, np.uint8)).save(tmp_path / "grey.png")
+    scale, res = 2.5, 128
+    scene, plane, mat, _ = checker_scene("ShaderNodeBsdfPrincipled", scale=scale, uv_vector=True)
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    image = nodes.new("ShaderNodeTexImage")
+    image.image = bpy.data.images.load(str(tmp_path / "grey.png"))
+    image.image.colorspace_settings.name = "Non-Color"
+    uvmap = nodes.new("ShaderNodeUVMap")
+    uvmap.uv_map = "Second"
+    links.new(uvmap.outputs["UV"], image.inputs["Vector"])
+    links.new(image.outputs["Color"], nodes["Principled BSDF"].inputs["Roughness"])
+    me = plane.data
+    second = me.uv_layers.new(name="Second")
+    for loop in me.loops:
+        a, b = me.uv_layers["UVMap"].uv[loop.index].vector
+        second.uv[loop.index].vector = (0.5 * a + 0.25, b)
+    assert me.uv_layers["UVMap"].active_render
+    scene.polar.texture_bake_resolution = res
+    tb.BAKE_CACHE.clear()
+    exported, warnings = _export(scene)
+    assert warnings == [] and tb.BAKE_CACHE.bakes == 1
+    mesh = exported.meshes[0]
+    corners = [t.loops[c] for t in me.loop_triangles for c in range(3)]
+    np.testing.assert_allclose(mesh.uv, [tuple(second.uv[i].vector) for i in corners], atol=1e-7)
+    bsdf = exported.materials[mesh.materials[0]]
+    base = bsdf.albedo.source
+    assert bsdf.m.source.power == 2.0 and base.texture.channels == 3
+    g = np.linspace(0.02, 0.98, 40)
+    u, v = (a.ravel() for a in np.meshgrid(g, g))
+    inner = _off_edges(u, scale, 4.0 / res) & _off_edges(v, scale, 2.0 / res)
+    looked_up = base.texture.lookup(np.stack((0.5 * u[inner] + 0.25, v[inner])))
+    np.testing.assert_allclose(looked_up.T, checker_oracle(u[inner], v[inner], scale), atol=1e-5)
+
+
+def test_only_objects_that_baked_get_their_own_material_key():
+    """The same baked material on an object with a UV map (baked: its own key) and on two without
+    (their own value, one warning each: one shared key)."""
+    tb = _bake_module()
+    scene, plane, mat, _ = checker_scene()
+    scene.polar.texture_bake_resolution = 16
+    bare = []
+    for x in (3.0, 6.0):
+        other = plane.copy()
+        other.data = plane.data.copy()
+        other.data.uv_layers.remove(other.data.uv_layers[0])
+        other.location.x = x
+        scene.collection.objects.link(other)
+        bare.append(other.name)
+    tb.BAKE_CACHE.clear()
+    exported, warnings = _export(scene)
+    keys = {m.name.split(":")[0]: m.materials[0] for m in exported.meshes}
+    assert keys == {"Plane": "mat:Checker@Plane", bare[0]: "mat:Checker", bare[1]: "mat:Checker"}
+    assert exported.materials["mat:Checker@Plane"].varies_over_surface
+    assert not exported.materials["mat:Checker"].varies_over_surface
+    assert tb.BAKE_CACHE.bakes == 1 and len([w for w in warnings if "no UV map" in w]) == 2
+    assert all(m.uv is None for m in exported.meshes if m.name.split(":")[0] in bare)
+
+
+def test_baked_colours_are_clamped_to_the_input_range():
+    """A Checker whose colour exceeds 1 on a Diffuse Color: the baked values are clamped to [0, 1], as
+    Cycles clamps a BSDF's colour (the bake itself keeps them)."""
+    tb = _bake_module()
+    scene, plane, mat, socket = checker_scene()
+    mat.node_tree.nodes["Checker Texture"].inputs["Color1"].default_value = (3.0, 0.5, 2.0, 1.0)
+    scene.polar.texture_bake_resolution = 16
+    tb.BAKE_CACHE.clear()
+    raw = tb.bake_input(plane, mat, socket, 16, [], cache=None).texture.pixels
+    assert raw.max() == pytest.approx(3.0)
+    exported, warnings = _export(scene)
+    bsdf = exported.materials[exported.meshes[0].materials[0]]
+    assert warnings == [] and bsdf.varies_over_surface
+    assert bsdf.albedo.source.bounds(rgb=True) == pytest.approx((min(COLOUR2), 1.0), abs=1e-6)
+
+
+def test_viewport_does_not_bake_and_says_so():
+    """The viewport's incremental export keeps a baked input's own value, with one warning that names
+    the input and says that final renders bake it; nothing is baked."""
+    tb = _bake_module()
+    from polar_render.polar_addon import viewport as vp
+    from polar_render.polar_addon.render_engine import engine_settings
+    scene, plane, mat, _ = checker_scene()
+    tb.BAKE_CACHE.clear()
+    result = vp.IncrementalExport().sync(bpy.context.evaluated_depsgraph_get(), None,
+                                         engine_settings(scene, preview=True))
+    about = [w for w in result.warnings if "'Color'" in w and "'Checker'" in w]
+    assert len(about) == 1 and "final renders (F12) only, not in the viewport" in about[0], result.warnings
+    assert tb.BAKE_CACHE.bakes == 0
+    assert not result.scene.materials[result.scene.meshes[0].materials[0]].varies_over_surface

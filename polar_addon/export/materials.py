@@ -298,6 +298,18 @@ class BakeTarget:
         self.baked = 0
 
 
+class NoBake:
+    """A bake target that bakes nothing: linked inputs keep their own value, with a warning giving
+    ``reason`` (e.g. the viewport, which does not bake)."""
+
+    def __init__(self, reason: str):
+        self.reason = reason
+
+
+#: The viewport's target: baking there would run Cycles' bake operator inside view_update (its
+#: temporary datablocks feed back as depsgraph updates) and re-bake on every drag of an object.
+VIEWPORT_NO_BAKE = NoBake("which Polar bakes for final renders (F12) only, not in the viewport")
+
 #: Baked textures as material inputs (clamped to an input's range, squared for roughness) by bake,
 #: living as long as the bake's cache entry.
 _BAKED_INPUTS = weakref.WeakKeyDictionary()
@@ -319,8 +331,8 @@ def _linked_input_fallback(reader, socket, lo=-math.inf, hi=math.inf, roughness=
     None for the socket's own value — no object to bake for (one warning naming the input), or no
     UV map or a failed bake (``bake_input`` warns)."""
     target = reader.bake
-    if target is None:
-        _own_value_warning(reader, socket)
+    if not isinstance(target, BakeTarget):
+        _own_value_warning(reader, socket, *((target.reason,) if isinstance(target, NoBake) else ()))
         return None
     target.requested = True
     baked = bake_input(target.obj, target.material, socket, target.resolution, reader.warnings,
@@ -854,8 +866,8 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
 
 def export_material(material, warnings, bake=None):
     """(BSDF, emission or None) for a Blender material (None → default grey).  ``bake``: a
-    BakeTarget (the object the material is exported for) to bake linked inputs on, or None (their
-    own values, one warning each)."""
+    BakeTarget (the object the material is exported for) to bake linked inputs on, or None or a
+    NoBake (their own values, one warning each)."""
     if material is None:
         return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
     tree = material.node_tree
