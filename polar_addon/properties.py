@@ -82,6 +82,10 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                          max=256)
     batch_rays: IntProperty(name="Batch Size", description="Paths traced at once; lower it to save memory",
                             default=1 << 17, min=1024, max=1 << 24)
+    texture_bake_resolution: IntProperty(name="Texture Bake Resolution", description="Texels per side of the "
+                                         "images Cycles bakes procedural or unsupported texture graphs of material "
+                                         "inputs to, on the object's UV map", default=512, min=8, max=8192,
+                                         soft_min=64, soft_max=4096)
     use_adaptive_sampling: BoolProperty(name="Noise Threshold", description="Adaptive sampling: after Min "
                                         "Samples, only tiles whose estimated error is above the threshold get more "
                                         "samples (up to Max Samples or the Time Limit)", default=False,

@@ -19,6 +19,7 @@ from ..engine.scene.description import RenderSettings
 from ..engine.errors import SceneError
 from .export.camera import border_window
 from .export.scene import export_scene
+from .export.texture_bake import BAKE_CACHE
 from ..engine.output.colormaps import diverging, hue_saturation, sequential
 from ..engine.postprocess.filters import apply_filter, filter_row
 from ..engine.postprocess.mosaic import mosaic as polarisation_mosaic
@@ -180,7 +181,9 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         camera_object = self.camera_override or scene.camera
         t0 = time.perf_counter()
         self.update_stats("", "Polar | exporting scene")
+        bakes = BAKE_CACHE.mark()
         engine_scene, warnings = export_scene(depsgraph, camera_object, W, H, settings)
+        bake_note = BAKE_CACHE.summary(since=bakes)
         for w in dict.fromkeys(warnings):
             self.report({"WARNING"}, f"Polar: {w}")
         self.update_stats("", "Polar | building BVH")
@@ -236,6 +239,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         stats = out.stats
         message = (f"Polar | {stats['transport_reason']} | {stats['samples']} samples in {stats['seconds']:.1f} s"
                    f" (export + BVH {time.perf_counter() - t0 - stats['seconds']:.1f} s)")
+        if bake_note:
+            message += f" | {bake_note}"
         if stats.get("kernels") == "numpy":
             message += " | NumPy kernels (numba not loaded: slower)"
         if stats.get("simplified"):

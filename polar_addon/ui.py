@@ -78,6 +78,7 @@ class POLAR_PT_performance(_PolarPanel, bpy.types.Panel):
         col = layout.column(align=True)
         col.prop(p, "world_bake_resolution")
         col.prop(p, "world_bake_samples", text="Samples")
+        layout.prop(p, "texture_bake_resolution")
 
 
 class POLAR_PT_polariser(_PolarPanel, bpy.types.Panel):

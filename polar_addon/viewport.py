@@ -233,11 +233,12 @@ class IncrementalExport:
                  export_world=None, material_alpha=None, object_rays=None):
         from .export import scene as scene_export
         from .export.lights import export_light as _light
-        from .export.materials import export_material as _material
+        from .export.materials import VIEWPORT_NO_BAKE, export_material as _export_material
         from .export.world import export_world as _world
         self._geometry_arrays = geometry_arrays or scene_export.geometry_arrays
         self._object_meshes = object_meshes or scene_export.object_meshes
-        self._export_material = export_material or _material
+        # the viewport does not bake linked inputs (materials.VIEWPORT_NO_BAKE says why; F12 does)
+        self._export_material = export_material or (lambda m, w: _export_material(m, w, bake=VIEWPORT_NO_BAKE))
         self._export_light = export_light or _light
         self._export_world = export_world or _world
         self._material_alpha = material_alpha or scene_export.material_alpha

@@ -20,13 +20,16 @@ the UV map through UV Map / Texture Coordinate ▸ UV nodes and Mapping nodes) o
 Attribute / Attribute node (a vertex colour); a roughness texture becomes m = r² per point
 (``TextureInput(power=2)``).  A Normal Map node (tangent space) or a Bump node with an image
 height on a shader's Normal input becomes the engine's normal or bump map (ShadingNormal).  An
-image whose file is missing renders Cycles' magenta (1, 0, 1).  Anything else linked goes through
-:func:`_linked_input_fallback` (its own value, one warning).
+image whose file is missing renders Cycles' magenta (1, 0, 1).  Anything else linked on such an
+input (procedural textures, math nodes, …) goes through :func:`_linked_input_fallback`: when the
+material is exported for an object (a :class:`BakeTarget`), Cycles bakes it to a float image on the
+UV map the object's mesh exports (``texture_bake``), else its own value is used, with one warning.
 """
 
 import hashlib
 import math
 import os
+import weakref
 
 import numpy as np
 
@@ -42,6 +45,7 @@ from ...engine.textures.image import srgb_to_linear
 from ...engine.spectral import (ConstantSpectrum, RGBIlluminantSpectrum, RGBReflectanceSpectrum,
                                 RGBUnboundedSpectrum)
 from ..nodes.models import DIELECTRIC_PRESETS, NODE_MODELS
+from .texture_bake import bake_input
 
 SMOOTH_LIMIT = 0.02
 DEFAULT_ALBEDO = 0.8
@@ -241,13 +245,30 @@ def image_texture(tex_node, mat, warnings, alpha=False, min_value=None):
     return textures[key]
 
 
+def _texture_node(node, out) -> bool:
+    """True if output ``out`` of ``node`` is a texture the exporter reads itself (texture_source):
+    an Image Texture, a Color Attribute, an Attribute (Geometry) node's Color or Alpha."""
+    kind = node.bl_idname
+    return kind in ("ShaderNodeTexImage", "ShaderNodeVertexColor") or (
+        kind == "ShaderNodeAttribute" and node.attribute_type == "GEOMETRY" and out.name in ("Color", "Alpha"))
+
+
+def _baked_link(socket) -> bool:
+    """True if a shader's input is linked to a graph that is not a texture the exporter reads itself
+    (what ``_linked_input_fallback`` may bake; Normal inputs are normal/bump maps, never baked)."""
+    if not socket.is_linked or socket.type == "SHADER" or socket.name == "Normal":
+        return False
+    node, out = _source(socket)
+    return node is not None and not _texture_node(node, out)
+
+
 def texture_source(socket, mat, warnings, roughness=False, node_name=""):
     """A TextureInput for a linked input socket (Image Texture, Color Attribute or Attribute node),
     or None (then :func:`_linked_input_fallback` decides).  ``roughness``: the parameter is m = r²
     (Beckmann slope from Blender roughness): the texture is squared after interpolation, image
     texels kept ≥ ROUGHNESS_MIN (m ≥ 1e-4, the engine's least textured slope)."""
     node, out = _source(socket)
-    if node is None:
+    if node is None or not _texture_node(node, out):
         return None
     kind = node.bl_idname
     power = 2.0 if roughness else 1.0
@@ -255,33 +276,96 @@ def texture_source(socket, mat, warnings, roughness=False, node_name=""):
         alpha = out.name == "Alpha"
         texture = image_texture(node, mat, warnings, alpha=alpha, min_value=ROUGHNESS_MIN if roughness else None)
         return TextureInput(texture, None, power=power)        # the Alpha output: a one-channel texture
-    if kind == "ShaderNodeVertexColor" or (kind == "ShaderNodeAttribute" and node.attribute_type == "GEOMETRY"
-                                           and out.name in ("Color", "Alpha")):
+    if kind in ("ShaderNodeVertexColor", "ShaderNodeAttribute"):
         name = node.layer_name if kind == "ShaderNodeVertexColor" else node.attribute_name
         alpha = out.name == "Alpha"
         # colours in [0, 1]: a roughness maps to m = M_MIN + (1 − M_MIN)·r² (≥ M_MIN without clamping)
         scale, offset = (1.0 - M_MIN, M_MIN) if roughness else (1.0, 0.0)
         return TextureInput(VertexColour(name, 4 if alpha else 3), "A" if alpha else None, scale, offset, power)
-    return None
 
 
-def _linked_input_fallback(mat, node, socket, warnings):
-    """What a linked input that is not an Image Texture or colour attribute becomes: today its own
-    (unlinked) value, with one warning naming the input.  Returns a TextureInput to use instead, or
-    None for the socket's own value — the hook for baking such inputs (procedural textures, math
-    nodes) to an image on the object's UV map."""
+class BakeTarget:
+    """What a material is exported for, so that linked inputs can be baked (``texture_bake.bake_input``):
+    the (evaluated) object, its 4×4 world matrix, the Blender material, the bake resolution and the
+    UV map the object's mesh exports (None: the active render map).  ``requested`` becomes True once
+    an input needed a bake (baked or not), ``baked`` counts the inputs baked: a material that baked
+    something is exported per object."""
+
+    def __init__(self, obj, matrix, material, resolution, uv_map=None):
+        self.obj, self.matrix, self.material, self.resolution = obj, matrix, material, resolution
+        self.uv_map = uv_map
+        self.requested = False
+        self.baked = 0
+
+
+class NoBake:
+    """A bake target that bakes nothing: linked inputs keep their own value, with a warning giving
+    ``reason`` (e.g. the viewport, which does not bake)."""
+
+    def __init__(self, reason: str):
+        self.reason = reason
+
+
+#: The viewport's target: baking there would run Cycles' bake operator inside view_update (its
+#: temporary datablocks feed back as depsgraph updates) and re-bake on every drag of an object.
+VIEWPORT_NO_BAKE = NoBake("which Polar bakes for final renders (F12) only, not in the viewport")
+
+#: Baked textures as material inputs (clamped to an input's range, squared for roughness) by bake,
+#: living as long as the bake's cache entry.
+_BAKED_INPUTS = weakref.WeakKeyDictionary()
+
+
+def _own_value_warning(reader, socket, reason="which is not exported"):
+    """One warning naming a linked input whose own (unlinked) value is used."""
     source = _follow(socket)
     what = source.bl_idname if source is not None else "a node"
-    warnings.append(f"material {mat!r}: input {socket.name!r} of {node.name!r} is linked to {what}, which is not "
-                    "exported; its own value is used")
-    return None
+    reader.warnings.append(f"material {reader.mat!r}: input {socket.name!r} of {reader.node.name!r} is linked to "
+                           f"{what}, {reason}; its own value is used")
+
+
+def _linked_input_fallback(reader, socket, lo=-math.inf, hi=math.inf, roughness=False):
+    """What a linked texturable input that is not an Image Texture or colour attribute becomes: the
+    graph baked by Cycles on the object's UV map (``reader.bake``, a BakeTarget), values clamped to
+    [lo, hi] (as Cycles clamps the input's range), as a TextureInput (one channel for float sockets,
+    RGB for colours; ``roughness``: Beckmann m = r², texels ≥ ROUGHNESS_MIN as image roughness); or
+    None for the socket's own value — no object to bake for (one warning naming the input), or no
+    UV map or a failed bake (``bake_input`` warns)."""
+    target = reader.bake
+    if not isinstance(target, BakeTarget):
+        _own_value_warning(reader, socket, *((target.reason,) if isinstance(target, NoBake) else ()))
+        return None
+    target.requested = True
+    baked = bake_input(target.obj, target.material, socket, target.resolution, reader.warnings,
+                       matrix=target.matrix, uv_map=target.uv_map)
+    if baked is None:
+        return None
+    target.baked += 1
+    if roughness:
+        lo = max(lo, ROUGHNESS_MIN)
+    key = (lo, hi, roughness)
+    value = _BAKED_INPUTS.get(baked, {}).get(key)
+    if value is None:           # computed once per cached bake: the bounds scan every texel
+        tex = baked.texture
+        if tex.pixels.min() < lo or tex.pixels.max() > hi:      # e.g. a Color Ramp beyond [0, 1]: as Cycles' clamp
+            tex = ImageTexture(np.clip(tex.pixels, lo, hi), tex.interpolation, tex.extension, tex.name)
+        value = TextureInput(tex, baked.channel, baked.scale, baked.offset, power=2.0 if roughness else 1.0)
+        _BAKED_INPUTS.setdefault(baked, {})[key] = value
+    return value
+
+
+def _declared_range(p):
+    """(lo, hi) closed bounds of a declared parameter (an open end moved one float inward)."""
+    lo = float(np.nextafter(p.lo, math.inf)) if p.lo_open else p.lo
+    hi = float(np.nextafter(p.hi, -math.inf)) if p.hi_open else p.hi
+    return lo, hi
 
 
 class _Reader:
-    """Reads validated input values of one node, recording warnings once per material."""
+    """Reads validated input values of one node, recording warnings once per material; ``bake``: the
+    BakeTarget linked texturable inputs are baked for (None: not baked)."""
 
-    def __init__(self, material_name, node, warnings):
-        self.mat, self.node, self.warnings = material_name, node, warnings
+    def __init__(self, material_name, node, warnings, bake=None):
+        self.mat, self.node, self.warnings, self.bake = material_name, node, warnings, bake
 
     def _socket(self, name):
         sock = self.node.inputs.get(name)
@@ -290,20 +374,26 @@ class _Reader:
         return sock
 
     def _constant(self, name):
-        """The socket; a linked one (not a shader) warns through the fallback (its own value is used)."""
+        """The socket; a linked one (not a shader) warns that its own value is used (never baked:
+        the parameter cannot vary over the surface)."""
         sock = self._socket(name)
         if sock.is_linked and sock.type != "SHADER":
-            _linked_input_fallback(self.mat, self.node, sock, self.warnings)
+            _own_value_warning(self, sock)
         return sock
 
-    def texture(self, name, roughness=False):
-        """A TextureInput if the input is linked to a texture (or the fallback gives one), else None."""
+    def texture(self, name, roughness=False, lo=-math.inf, hi=math.inf, bake=True):
+        """A TextureInput if the input is linked to a texture, or to another graph that is baked
+        (``bake``; values clamped to [lo, hi]), else None (one warning: its own value is used)."""
         sock = self._socket(name)
         if not sock.is_linked or sock.type == "SHADER":
             return None
         source = texture_source(sock, self.mat, self.warnings, roughness=roughness)
         if source is None:
-            source = _linked_input_fallback(self.mat, self.node, sock, self.warnings)
+            if bake:
+                source = _linked_input_fallback(self, sock, lo, hi, roughness)
+            else:
+                _own_value_warning(self, sock, "which is not baked here (a metal's n, κ vary per point only "
+                                   "with an Image Texture colour)")
         return source
 
     def float(self, name, lo=-math.inf, hi=math.inf, lo_open=False):
@@ -320,11 +410,12 @@ class _Reader:
                              f"components must be in [{lo:g}, {hi:g}], got {v}")
         return v
 
-    def rgb_or_texture(self, name, lo=0.0, hi=math.inf):
-        """A TextureInput where the input is textured, else the validated constant [r, g, b]."""
+    def rgb_or_texture(self, name, lo=0.0, hi=math.inf, bake=True):
+        """A TextureInput where the input is textured (or baked, ``bake``), else the validated
+        constant [r, g, b]."""
         sock = self._socket(name)
         if sock.is_linked:
-            source = self.texture(name)
+            source = self.texture(name, lo=lo, hi=hi, bake=bake)
             if source is not None:
                 return source
             return self._checked_rgb(name, lo, hi)
@@ -334,7 +425,7 @@ class _Reader:
         """(Beckmann m = r² as a TextureInput or a number, the constant r or None where textured)."""
         sock = self._socket(name)
         if sock.is_linked:
-            source = self.texture(name, roughness=True)
+            source = self.texture(name, roughness=True, lo=0.0, hi=1.0)
             if source is not None:
                 return source, None
             r = self._checked_float(name, 0.0, 1.0)
@@ -410,7 +501,8 @@ def _socket_values(reader, decl) -> dict:
         sock = reader._socket(s.name)
         if sock.is_linked:
             if p.texturable and p.name in decl.per_point:
-                source = reader.texture(s.name)      # the node's inputs are the model's own parameters
+                lo, hi = _declared_range(p)          # the node's inputs are the model's own parameters
+                source = reader.texture(s.name, lo=lo, hi=hi)
                 if source is not None:
                     values[p.name] = source
                     continue
@@ -439,23 +531,23 @@ def _slope(values, name, decl, where):
     return p.with_(lo=0.0).number(values.pop(name, p.socket.default), f"{where}.{p.socket.name}")
 
 
-def polar_node_bsdf(node, mat, warnings, depth=0):
+def polar_node_bsdf(node, mat, warnings, depth=0, bake=None):
     """BSDF of a Polarising BSDF node (a model's own parameter checks become errors naming the material)."""
     try:
-        return _polar_node_bsdf(node, mat, warnings, depth)
+        return _polar_node_bsdf(node, mat, warnings, depth, bake)
     except ValueError as e:
         if isinstance(e, SceneError):
             raise
         raise SceneError(f"material {mat!r}.{node.name}", str(e)) from None
 
 
-def _polar_node_bsdf(node, mat, warnings, depth):
+def _polar_node_bsdf(node, mat, warnings, depth, bake=None):
     """The node's inputs and menus → the model's declared parameters → the model's builder."""
     model = node.model
     decl = NODE_MODELS.get(model)
     if decl is None:
         raise SceneError(f"material {mat!r}", f"unknown Polarising BSDF model {model!r}")
-    r = _Reader(mat, node, warnings)
+    r = _Reader(mat, node, warnings, bake)
     where = f"material {mat!r}.{node.name}"
     values = _socket_values(r, decl)
     parts = {}
@@ -486,7 +578,7 @@ def _polar_node_bsdf(node, mat, warnings, depth):
             raise SceneError(f"material {mat!r}", "layered materials nest more than 16 coats deep")
         parts["coats"] = [coat_decl.build(_declared(coat_decl, coat_values, where))]
         parts["base"] = Lambert(ConstantSpectrum(DEFAULT_ALBEDO)) if base_node is None else \
-            surface_bsdf(base_node, mat, warnings, depth + 1)[0]
+            surface_bsdf(base_node, mat, warnings, depth + 1, bake)[0]
         values["form"] = "published" if node.ww_form == "PUBLISHED" else "energy"
     return decl.build(_declared(decl, values, where), **parts)
 
@@ -542,7 +634,7 @@ def _conductor_from_colour(r, colour_name, edge_name, m, mat, node, warnings):
     """Gulbrandsen conductor from a colour (and edge tint) input: a colour image texture gives n, κ
     per texel; the edge tint and colour attributes stay constant (own value, warning); the
     roughness m may be a texture."""
-    colour = r.rgb_or_texture(colour_name, 0.0, 1.0)
+    colour = r.rgb_or_texture(colour_name, 0.0, 1.0, bake=False)      # n, κ per texel of an image only
     edge = colour if edge_name is None else r.rgb(edge_name, 0.0, 1.0)
     if isinstance(colour, TextureInput):
         sources = gulbrandsen_textures(colour, edge)
@@ -563,8 +655,8 @@ def _conductor_from_colour(r, colour_name, edge_name, m, mat, node, warnings):
     return _conductor(n, k, m, warnings, mat)
 
 
-def _principled(node, mat, warnings):
-    r = _Reader(mat, node, warnings)
+def _principled(node, mat, warnings, bake=None):
+    r = _Reader(mat, node, warnings, bake)
     if r.float("Metallic", 0.0, 1.0) >= 0.5:
         m, _ = r.roughness_or_texture("Roughness")
         return _conductor_from_colour(r, "Base Color", None, m, mat, node, warnings)
@@ -623,9 +715,11 @@ def _emission(node, mat, warnings, colour_name="Color", strength_name="Strength"
 
 def attribute_needs(material) -> dict:
     """Mesh attributes that a material's node graph (what its Surface reads) uses:
-    {"uv": [UV map names], "tangents": [UV map names], "colors": [colour attribute names]}, '' for
-    the active render one; empty lists where none (an untextured material needs nothing)."""
-    needs = {"uv": [], "tangents": [], "colors": []}
+    {"uv": [UV map names], "tangents": [UV map names], "colors": [colour attribute names],
+    "bake": [''] where a shader input may be baked (on the UV map the mesh exports: the active
+    render map unless a texture names one)}, '' for the active render one; empty lists where none
+    (an untextured material needs nothing)."""
+    needs = {"uv": [], "tangents": [], "colors": [], "bake": []}
     if material is None or material.node_tree is None:
         return needs
     tree = material.node_tree
@@ -648,6 +742,8 @@ def attribute_needs(material) -> dict:
             needs["colors"].append(node.layer_name)
         elif kind == "ShaderNodeAttribute" and node.attribute_type == "GEOMETRY":
             needs["colors"].append(node.attribute_name)
+        elif kind in _NORMAL_SHADERS + ("PolarShaderNodeBSDF",) and any(map(_baked_link, node.inputs)):
+            needs["bake"].append("")
         for sock in node.inputs:
             for link in sock.links:
                 stack.append(link.from_node)
@@ -716,10 +812,10 @@ def with_shading_normal(bsdf, node, mat, warnings):
     return ShadingNormal(bsdf, **kw)
 
 
-def surface_bsdf(node, mat, warnings, depth=0):
+def surface_bsdf(node, mat, warnings, depth=0, bake=None):
     """(BSDF, emission spectrum or None) for the shader node plugged into a Surface (with its
     normal or bump map, if any)."""
-    bsdf, emission = _surface_bsdf(node, mat, warnings, depth)
+    bsdf, emission = _surface_bsdf(node, mat, warnings, depth, bake)
     if node.bl_idname in _NORMAL_SHADERS:
         bsdf = with_shading_normal(bsdf, node, mat, warnings)
     return bsdf, emission
@@ -731,11 +827,11 @@ _NORMAL_SHADERS = ("ShaderNodeBsdfDiffuse", "ShaderNodeBsdfGlossy", "ShaderNodeB
                    "ShaderNodeBsdfPrincipled")
 
 
-def _surface_bsdf(node, mat, warnings, depth):
+def _surface_bsdf(node, mat, warnings, depth, bake=None):
     kind = node.bl_idname
     if kind == "PolarShaderNodeBSDF":
-        return polar_node_bsdf(node, mat, warnings, depth), None
-    r = _Reader(mat, node, warnings)
+        return polar_node_bsdf(node, mat, warnings, depth, bake), None
+    r = _Reader(mat, node, warnings, bake)
     if kind == "ShaderNodeBsdfDiffuse":
         return _lambert(r.rgb_or_texture("Color", 0.0, 1.0), mat, node), None
     if kind in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
@@ -755,21 +851,23 @@ def _surface_bsdf(node, mat, warnings, depth):
                       warnings, "rough glass"), None
     if kind == "ShaderNodeBsdfPrincipled":
         emission = _emission(node, mat, warnings, "Emission Color", "Emission Strength")
-        return _principled(node, mat, warnings), emission
+        return _principled(node, mat, warnings, bake), emission
     if kind == "ShaderNodeEmission":
         return Lambert(ConstantSpectrum(0.0)), _emission(node, mat, warnings)
     if kind in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
         first = next((_follow(s) for s in node.inputs if s.type == "SHADER" and s.is_linked), None)
         warnings.append(f"material {mat!r}: {node.bl_idname} is not supported; using its first shader input")
         if first is not None:
-            return surface_bsdf(first, mat, warnings, depth + 1)
+            return surface_bsdf(first, mat, warnings, depth + 1, bake)
     else:
         warnings.append(f"material {mat!r}: shader {kind} is not supported; rendered as grey Lambert")
     return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
 
 
-def export_material(material, warnings):
-    """(BSDF, emission or None) for a Blender material (None → default grey)."""
+def export_material(material, warnings, bake=None):
+    """(BSDF, emission or None) for a Blender material (None → default grey).  ``bake``: a
+    BakeTarget (the object the material is exported for) to bake linked inputs on, or None or a
+    NoBake (their own values, one warning each)."""
     if material is None:
         return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
     tree = material.node_tree
@@ -780,4 +878,4 @@ def export_material(material, warnings):
     if node is None:
         warnings.append(f"material {material.name!r} has no surface shader; rendered black")
         return Lambert(ConstantSpectrum(0.0)), None
-    return surface_bsdf(node, material.name, warnings)
+    return surface_bsdf(node, material.name, warnings, bake=bake)

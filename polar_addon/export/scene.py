@@ -21,7 +21,8 @@ from ...engine.errors import SceneError
 from ...engine.spectral import ConstantSpectrum
 from .camera import export_camera
 from .lights import export_light
-from .materials import _follow, attribute_needs, export_material, normal_input_unsupported
+from .materials import BakeTarget, _follow, attribute_needs, export_material, normal_input_unsupported
+from .texture_bake import RESOLUTION_MAX, RESOLUTION_MIN
 from .world import export_world
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES", "POINTCLOUD"}
@@ -90,7 +91,7 @@ def attributes_outdated(obj, arrays) -> bool:
 
 def _attribute_needs(obj):
     """What the materials of ``obj`` read from its mesh (materials.attribute_needs, merged), or None."""
-    merged = {"uv": [], "tangents": [], "colors": []}
+    merged = {"uv": [], "tangents": [], "colors": [], "bake": []}
     for slot in obj.material_slots:
         if getattr(slot.material, "node_tree", None) is None:
             continue
@@ -104,11 +105,13 @@ def corner_attributes(me, name, needs) -> dict:
     """Per loop-triangle corner (nt·3 rows, the order of ``mesh_arrays``' corners) UVs (nt·3, 2),
     colour attributes {name: (nt·3, 4) linear} and MikkTSpace tangents (nt·3, 4: object-space xyz,
     bitangent sign), as ``needs`` asks; "warnings" lists what could not be read.  The engine has
-    one UV map per mesh: the first map asked for (the active render map for '') is exported."""
+    one UV map per mesh: the first map a texture asks for (the active render map for ''), else —
+    when only baked inputs need one — the active render map; "uv_map" names it (baked inputs are
+    baked on it), None if none is exported (a missing map the bake warns about itself)."""
     nt = len(me.loop_triangles)
     loops = np.empty(nt * 3, np.int32)
     me.loop_triangles.foreach_get("loops", loops)
-    out = {"warnings": [], "uv": None, "tangents": None, "colors": {}, "needs": needs}
+    out = {"warnings": [], "uv": None, "uv_map": None, "tangents": None, "colors": {}, "needs": needs}
     active = next((layer.name for layer in me.uv_layers if layer.active_render), None)
     maps = [m or active for m in needs["uv"] + needs["tangents"]]
     maps = list(dict.fromkeys(m for m in maps if m is not None))
@@ -119,7 +122,10 @@ def corner_attributes(me, name, needs) -> dict:
     if len(found) > 1:
         out["warnings"].append(f"object {name!r}: its materials use UV maps {', '.join(map(repr, found))}; only "
                                f"{found[0]!r} is exported (one UV map per mesh)")
+    if not found and needs.get("bake") and active is not None:     # baked inputs only: the active render map
+        found = [active]
     if found:
+        out["uv_map"] = found[0]
         uv = np.empty(len(me.loops) * 2, np.float32)
         me.uv_layers[found[0]].uv.foreach_get("vector", uv)
         out["uv"] = uv.reshape(-1, 2)[loops].astype(np.float64)
@@ -373,22 +379,40 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
     warnings = []
     camera = export_camera(scene, camera_object, width, height, warnings)
     materials = {BLACK: Lambert(ConstantSpectrum(0.0))}
-    mat_keys = {}
+    mat_keys = {}                 # material name → key of materials exported once for all objects
+    object_mat_keys = {}          # (material, object) → key of materials whose export bakes inputs
+    resolution = int(getattr(getattr(scene, "polar", None), "texture_bake_resolution", 512))
+    if not RESOLUTION_MIN <= resolution <= RESOLUTION_MAX:
+        raise SceneError("render settings", f"Texture Bake Resolution must be in [{RESOLUTION_MIN}, {RESOLUTION_MAX}], "
+                                            f"got {resolution}")
     emissions = {}
     alphas = {}
     meshes, lights = [], []
     cache = {}
 
-    def material_key(material):
+    def material_key(material, obj=None, M=None, uv_map=None):
+        # A material that bakes an input is exported once per object (the bake is on the object's UV
+        # map and coordinates; instances share the first instance's); where nothing was baked (no UV
+        # map: its own values) and for any other material, once for all objects.
         name = material.name_full if material is not None else None
-        if name not in mat_keys:
-            key = f"mat:{name}" if name is not None else "mat:<default>"
-            bsdf, emission = export_material(material, warnings)
-            materials[key] = bsdf
-            emissions[key] = emission
-            alphas[key] = material_alpha(material, warnings)
+        if name in mat_keys:
+            return mat_keys[name]
+        per_object = (name, obj.name_full if obj is not None else None)
+        if per_object in object_mat_keys:
+            return object_mat_keys[per_object]
+        target = BakeTarget(obj, M, material, resolution, uv_map) if obj is not None and material is not None else None
+        bsdf, emission = export_material(material, warnings, bake=target)
+        key = f"mat:{name}" if name is not None else "mat:<default>"
+        if target is not None and target.baked:
+            key = f"mat:{name}@{obj.name_full}"
+        if target is not None and target.requested:
+            object_mat_keys[per_object] = key
+        else:
             mat_keys[name] = key
-        return mat_keys[name]
+        materials[key] = bsdf
+        emissions[key] = emission
+        alphas[key] = material_alpha(material, warnings)
+        return key
 
     # Text, metaballs, surfaces and bevelled curves come twice (also inside collection instances): as
     # themselves and as a mesh instance of their evaluated mesh (what Cycles renders); export the latter.
@@ -423,8 +447,11 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
                                 "Cycles): convert them with Curve to Mesh")
             continue
         slots = [s.material for s in obj.material_slots] or [None]
-        meshes.extend(object_meshes(obj.name, arrays, M, slots, material_key, emissions, alphas,
-                                    lambda obj=obj: object_rays(obj, view_layer, warnings), warnings))
+        uv_map = arrays[4]["uv_map"] if len(arrays) > 4 else None       # baked inputs: on the exported UVs
+        meshes.extend(object_meshes(obj.name, arrays, M, slots,
+                                    lambda m, obj=obj, M=M, uv_map=uv_map: material_key(m, obj, M, uv_map),
+                                    emissions, alphas, lambda obj=obj: object_rays(obj, view_layer, warnings),
+                                    warnings))
     if not meshes:
         raise SceneError("scene", "nothing to render: the scene has no visible geometry")
     world = export_world(scene.world, warnings)
