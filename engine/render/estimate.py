@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SceneError
-from .adaptive import QUANTITIES, UNITS, AdaptiveSettings, checkpoints, film_noise
+from .adaptive import QUANTITIES, UNITS, AdaptiveSettings, allocation_from, checkpoints, film_noise, tile_ids
 
 
 @dataclass
@@ -126,9 +126,12 @@ def predict(film, halves, quantity: str, threshold: float, min_spp: int, spp: in
         pixels = np.arange(film.count.size)
     n = film.count[pixels].astype(np.float64)
     _, _, tile_err = film_noise(film, halves, quantity, pixels)
-    need = n * (tile_err / threshold) ** 2
+    need = n * (tile_err / threshold) ** 2                # every tile below the threshold
+    mu, _, sigma = allocation_from(halves.sums, film.count, quantity, threshold,
+                                   tile_ids(film.width, film.height), pixels)
+    share = sigma / mu if mu > 0 else np.full(n.shape, np.inf)   # where the tile's share of the error is met
     marks = checkpoints(min_spp, spp)
-    i = np.minimum(np.searchsorted(marks, np.ceil(need - 1e-9), side="left"), len(marks) - 1)
+    i = np.minimum(np.searchsorted(marks, np.ceil(np.minimum(need, share) - 1e-9), side="left"), len(marks) - 1)
     counts = marks[i]
     uniform = int(min(spp, max(min_spp, math.ceil(float(need.max()) - 1e-9)))) if need.size else min_spp
     uniform_p95 = int(min(spp, max(min_spp, math.ceil(float(np.percentile(need, 95)) - 1e-9)))) if need.size \
@@ -136,7 +139,7 @@ def predict(film, halves, quantity: str, threshold: float, min_spp: int, spp: in
     capped = float(np.mean(need > spp)) if need.size else 0.0
     sps = np.asarray(seconds_per_sample, np.float64)
     return Prediction(quantity, threshold, counts, uniform, uniform_p95, sps[pixels] if sps.ndim else sps, capped,
-                      variance=tile_err ** 2 * n)
+                      variance=sigma ** 2)
 
 
 def parse_target(text: str) -> tuple[str, float]:
