@@ -551,3 +551,28 @@ def test_the_first_pass_that_sets_the_allocation_travels_with_the_state(tmp_path
     np.testing.assert_array_equal(restored.first[0], halves.first[0])
     np.testing.assert_array_equal(restored.first[1], halves.first[1])
     np.testing.assert_array_equal(restored.sums, halves.sums)
+
+
+def test_the_images_error_of_s0_is_the_absolute_luminance_error_over_the_images_mean():
+    from engine.render.adaptive import image_error
+    film, halves = Film(2 * TILE, TILE), HalfBuffers(2 * TILE * TILE)
+    film.count[:] = 16
+    bright = (np.arange(2 * TILE * TILE) % (2 * TILE)) < TILE
+    y = np.where(bright, 3.0, 1.0)                            # image mean luminance 2
+    film.sums[0, :] = 16 * y
+    halves.sums[0, 0] = 8 * y * 1.1                            # Y_A − Y_B = 0.2·Y: ½|A − B| = 0.1·Y
+    halves.sums[1, 0] = 8 * y * 0.9
+    assert image_error(film, halves, "s0") == pytest.approx(math.sqrt((0.3 ** 2 + 0.1 ** 2) / 2) / 2)
+    assert film_noise(film, halves, "s0")[0] == pytest.approx(np.full(2 * TILE * TILE, 0.1))   # relative, per pixel
+
+
+def test_the_predicted_time_counts_one_round_per_checkpoint_up_to_the_largest_count():
+    film, halves = Film(TILE, TILE), HalfBuffers(TILE * TILE)
+    film.count[:] = 16
+    film.sums[0, :] = 16.0
+    halves.sums[0, 0] = 8 * 1.2                              # s0 error 0.2 at 16 spp: 256 samples for 0.05
+    halves.sums[1, 0] = 8 * 0.8
+    p = predict(film, halves, "s0", 0.05, 16, 4096, seconds_per_sample=1e-6, round_seconds=0.5)
+    marks = checkpoints(16, 4096)
+    assert p.rounds == int(np.searchsorted(marks, p.counts.max())) + 1          # the steps, and the last look
+    assert p.adaptive_seconds == pytest.approx(TILE * TILE * p.counts.max() * 1e-6 + 0.5 * p.rounds)

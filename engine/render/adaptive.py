@@ -20,17 +20,19 @@ all pixels of a tile always have the same sample count.
 
 **Allocation (which tiles go on).** Rendering every tile *to* the threshold gives each tile
 n ∝ σ² samples (σ: its per-sample standard deviation), and that gains exactly nothing over uniform
-sampling at equal cost (engine.render.estimate).  The samples that minimise the image's mean squared
-error for a given number of samples are n ∝ σ (Lagrange: d(σ²/n)/dn = −σ²/n² equal for every tile).
-So the threshold T is the **root mean square error of the quantity over the image** (the window's
-pixels where it is defined), and each tile goes on while σ̂/n > μ, i.e. while its own error is above
-its share T_tile = √(μ·σ̂) of the threshold: noisier tiles are left with a larger error, because
-bringing them down costs more than it buys.  μ is set once, from the first pass (``min_spp``
-everywhere): μ = T²/mean(σ), at which counts σ/μ give an image RMS error of T
-(:func:`allocation_level`; tiles held at ``min_spp`` only lower it, tiles capped at ``spp`` raise it).  σ̂ = e·√n, e the tile's error (:func:`allocation_noise`):
-for ``s0`` the RMS of the absolute ½|Y_A − Y_B| over the tile divided by the image's mean luminance
-(its first-pass mean), so that the image's error of luminance S0 is what is minimised — a per-pixel
-relative error would sample dark tiles as much as bright ones; for the others the tile error above.
+sampling at equal cost (engine.render.estimate).  The counts that minimise the image's mean squared
+error for a given number of samples are n ∝ σ (Lagrange: d(σ²/n)/dn = −σ²/n² equal for every
+tile).  So a tile goes on only while (1) its error e is above the threshold T (the issue's rule:
+samples go only where the error is above T) **and** (2) σ̂/n > μ, i.e. e is above its share
+√(μ·σ̂) of the error (σ̂ = e·√n): a tile whose σ is above the image's mean σ̄ stops at the error
+T·√(σ/σ̄) > T, with n = σ·σ̄/T² ∝ σ samples, because bringing it lower costs more than it buys
+elsewhere; tiles below σ̄ stop at T as before (n = σ²/T²).  μ = T²/σ̄ (:func:`allocation_level`:
+the level at which counts σ/μ would give an image RMS error of T), set once, from the first pass
+(``min_spp`` everywhere).  For ``s0`` condition (2) measures the tile in absolute luminance — the
+RMS of ½|Y_A − Y_B| over the tile ÷ the image's first-pass mean luminance
+(:func:`allocation_noise`) — so that the image's luminance error is what is minimised (a relative
+error alone samples dark tiles as much as bright ones); the other quantities use their tile error.
+σ̄ is the mean over the pixels where the quantity is defined (lit pixels; DoLP > 0.05 for ``aolp``).
 
 **Schedule.** Every pixel first gets ``min_spp`` samples; then tiles that go on get more,
 checkpoint by checkpoint (:func:`checkpoints`: about +25 % per step, even steps so both halves stay
@@ -317,6 +319,19 @@ def film_noise(film, halves: HalfBuffers, quantity: str, pixels: np.ndarray | No
         pixels = np.arange(film.count.size)
     return err, defined, tile_noise(np.where(np.isfinite(err), err, 1e30), defined,
                                     tile_ids(film.width, film.height), pixels)
+
+
+def image_error(film, halves: HalfBuffers, quantity: str, pixels: np.ndarray | None = None) -> float:
+    """The image's RMS error of ``quantity`` in the allocation's units (:func:`allocation_noise`:
+    for ``s0`` the luminance error ÷ the image's mean luminance), over the pixels where it is defined."""
+    if pixels is None:
+        pixels = np.arange(film.count.size)
+    sums, counts = halves.first if halves.first is not None else (halves.sums, film.count)
+    mean_y = float(np.mean(_ratio(sums[0, 0] + sums[1, 0], counts)[pixels])) if pixels.size else 0.0
+    e, counted = allocation_noise(quantity, halves.sums, film.count, tile_ids(film.width, film.height), pixels,
+                                  mean_y)
+    e = e[counted & np.isfinite(e)]
+    return float(np.sqrt(np.mean(e ** 2))) if e.size else math.nan
 
 
 def adaptive_units(pixels: np.ndarray, start: np.ndarray, target: np.ndarray, tiles: np.ndarray,
