@@ -78,7 +78,8 @@ class Prediction:
                 f"{self.median:.0f} spp, 95th percentile {self.p95:.0f} spp, {self.adaptive_seconds:.1f} s; "
                 f"uniform {self.uniform_spp} spp, {self.uniform_seconds:.1f} s "
                 f"(for 95 % of the pixels: {self.uniform_p95_spp} spp)"
-                + (f"; {100 * self.capped:.0f} % of pixels would stop at the maximum spp" if self.capped else "")
+                + (f"; {100 * self.capped:.0f} % of pixels would stop at the maximum spp" if self.capped >= 0.005
+                   else "")
                 + (f"; MSE × time of {self.quantity} {gain:.2f}× better than uniform (best possible "
                    f"allocation {self.best_gain:.2f}×)" if math.isfinite(gain) else ""))
 
@@ -141,7 +142,7 @@ def predict(film, halves, quantity: str, threshold: float, min_spp: int, spp: in
     uniform = int(min(spp, max(min_spp, math.ceil(float(need.max()) - 1e-9)))) if need.size else min_spp
     uniform_p95 = int(min(spp, max(min_spp, math.ceil(float(np.percentile(need, 95)) - 1e-9)))) if need.size \
         else min_spp
-    capped = float(np.mean(need > spp)) if need.size else 0.0
+    capped = float(np.mean(np.minimum(need, share) > spp)) if need.size else 0.0
     sps = np.asarray(seconds_per_sample, np.float64)
     rounds = int(np.searchsorted(marks, counts.max())) + 1 if counts.size else 0
     return Prediction(quantity, threshold, counts, uniform, uniform_p95, sps[pixels] if sps.ndim else sps, capped,
