@@ -473,7 +473,8 @@ class GaussianTracer:
             return self._trace(pixel, sample)
 
     def _trace(self, pixel, sample):
-        x = (pixel.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15)) ^ (sample.astype(np.uint64) * np.uint64(0xBF58476D1CE4E5B9))
+        x = ((pixel.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15))
+             ^ (sample.astype(np.uint64) * np.uint64(0xBF58476D1CE4E5B9)))
         u = []
         for k in (1, 2):                                       # splitmix64 finaliser, two streams
             z = x + np.uint64(k) * np.uint64(0x94D049BB133111EB)

@@ -183,8 +183,8 @@ def next_targets(counts: np.ndarray, noise: np.ndarray, marks: np.ndarray, thres
 
     A count between two checkpoints is completed to the next one (its tile was in the middle of a
     step); a count on a checkpoint moves on to the next checkpoint if its tile ``noise`` is above
-    ``threshold``, and is done otherwise or at the last checkpoint.  (The render loop passes σ̂/n
-    as ``noise`` and μ as ``threshold``: :func:`allocation_level`.)
+    ``threshold``, and is done otherwise or at the last checkpoint.  (The render loop passes −∞ as
+    the noise of tiles that have reached their share of the error: :func:`allocation_level`.)
     """
     counts = np.asarray(counts, np.int64)
     i = np.minimum(np.searchsorted(marks, counts, side="left"), len(marks) - 1)
@@ -250,7 +250,7 @@ def allocation_from(sums: np.ndarray, counts: np.ndarray, quantity: str, thresho
     return allocation_level(sigma[counted], threshold), mean_y, sigma
 
 
-def first_pass_level(halves: "HalfBuffers", quantity: str, threshold: float, tiles: np.ndarray,
+def first_pass_level(halves: HalfBuffers, quantity: str, threshold: float, tiles: np.ndarray,
                      pixels: np.ndarray) -> tuple[float, float]:
     """(μ, the image's mean luminance) from the half-buffers' first pass (:attr:`HalfBuffers.first`)."""
     mu, mean_y, _ = allocation_from(*halves.first, quantity, threshold, tiles, pixels)

@@ -328,8 +328,8 @@ def main():
                                                                                       f"{g[j][3]:.2f}×")
             lines.append(f"| {name} | {ref_label} | {label} | {spp:.1f} | {s:.2f} | {r / 1e6:.2f} | {m0:.3e} | "
                          f"{md:.3e} | {gain[0]} | {gain[1]} |")
-    lines += ["", "| scene | adaptive s0 ≤ | seeds | z of the image sum S0 / S1 / S2 / S3 | mean z² over 8×8 blocks "
-              "S0 / S1 / S2 / S3 | image-sum difference ÷ ΣS0, S0 / S1 / S2 / S3 |", "|---|---|---|---|---|---|"]
+    lines += ["", "| scene | adaptive s0 ≤ | seeds | z of the image sum S0 / S1 / S2 / S3 | mean z² over 8×8 "
+              "blocks S0 / S1 / S2 / S3 | image-sum difference ÷ ΣS0, S0 / S1 / S2 / S3 |", "|---|---|---|---|---|---|"]
     for name, t, K, out in biases:
         lines.append(f"| {name} | {t:g} | {K} | " + " / ".join(f"{z:+.2f}" for z, _, _ in out) + " | "
                      + " / ".join(f"{z2:.2f}" for _, z2, _ in out) + " | "
