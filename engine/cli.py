@@ -218,7 +218,7 @@ def _adaptive_report(result, adaptive) -> tuple[dict, dict]:
     """(extra channels, header entries) of an adaptive render, and its summary printed on stderr."""
     import numpy as np
 
-    from .render.adaptive import UNITS, film_noise, state_channels
+    from .render.adaptive import UNITS, film_noise, image_error, state_channels
     film, stats = result.film, result.stats
     err, _, tile_err = film_noise(film, result.halves, adaptive.quantity)
     noise = np.where(np.isfinite(err), err, -1.0).reshape(film.height, film.width)
@@ -232,6 +232,9 @@ def _adaptive_report(result, adaptive) -> tuple[dict, dict]:
     achieved = (f"achieved {adaptive.quantity} error (tile RMS): median {np.median(finite):.3g}, "
                 f"95th percentile {np.percentile(finite, 95):.3g}, max {finite.max():.3g} {UNITS[adaptive.quantity]}"
                 if finite.size else "no error estimate (fewer than 2 samples)")
+    rms = image_error(film, result.halves, adaptive.quantity)
+    achieved += (f"; image RMS {rms:.3g}" + (" (÷ the image's mean luminance)" if adaptive.quantity == "s0" else "")
+                 if np.isfinite(rms) else "")
     print(f"polar: adaptive: stopped by {stats['stop_reason']}; {achieved}; samples per pixel median "
           f"{np.median(counts):.0f}, 95th percentile {np.percentile(counts, 95):.0f}, max {counts.max()}",
           file=sys.stderr)
@@ -434,9 +437,11 @@ def _polariser(args) -> int:
 
 def _adaptive_options(r) -> None:
     g = r.add_argument_group("adaptive sampling (after --min-spp samples, only tiles whose estimated error "
-                             "is above the threshold get more, up to --spp)")
+                             "is above the threshold, and above their share of the image's error, get more, "
+                             "up to --spp)")
     g.add_argument("--noise-threshold", type=float, metavar="T",
-                   help="standard error to reach: relative for s0/stokes, absolute for dolp/docp, degrees for aolp")
+                   help="standard error to reach: relative for s0/stokes, absolute for dolp/docp, degrees for aolp; "
+                        "tiles noisier than the image's mean stop at T·√(σ/σ̄), where more samples buy less")
     g.add_argument("--noise-quantity", default="s0", metavar="Q",
                    help="s0 (default) | dolp | aolp | docp | stokes: what the threshold applies to")
     g.add_argument("--min-spp", type=int, metavar="N", help="samples every pixel gets first (default min(16, --spp))")
@@ -467,7 +472,7 @@ def _adaptive_settings(args, spp: int):
 
 def _estimate(args) -> int:
     from .render.adaptive import checkpoints
-    from .render.estimate import parse_target, pilot_render, predict
+    from .render.estimate import parse_target, pilot_render, predict, round_overhead
     from .render.renderer import Renderer
     from .scene.loader import load_scene
 
@@ -493,8 +498,10 @@ def _estimate(args) -> int:
     print(f"pilot: {pilot.stats['samples']} samples in {pilot.stats['seconds']:.2f} s "
           f"({pilot.stats['seconds'] / max(pilot.stats['samples'], 1) * 1e6:.2f} µs per sample on this machine, "
           f"{float(sps.min()) * 1e6:.2f}–{float(sps.max()) * 1e6:.2f} by region)")
+    per_round = round_overhead(renderer, st, pilot, sps, min_spp)
+    print(f"rounds: {per_round * 1e3:.0f} ms each besides their samples (one tile through every checkpoint)")
     for quantity, threshold in targets:
-        p = predict(pilot.film, pilot.halves, quantity, threshold, min_spp, st.spp, sps)
+        p = predict(pilot.film, pilot.halves, quantity, threshold, min_spp, st.spp, sps, round_seconds=per_round)
         print(f"target {p.describe()}")
     return 0
 

@@ -1,5 +1,7 @@
 """Operators: put a Polarising BSDF into the active material."""
 
+import copy
+
 import bpy
 
 
@@ -73,7 +75,7 @@ class POLAR_OT_estimate_cost(bpy.types.Operator):
 
     def execute(self, context):
         from ..engine.errors import SceneError
-        from ..engine.render.estimate import pilot_render, predict
+        from ..engine.render.estimate import pilot_render, predict, round_overhead
         from ..engine.render.renderer import Renderer
         from .export.scene import export_scene
         from .properties import NOISE_QUANTITY_TO_ENGINE
@@ -89,17 +91,21 @@ class POLAR_OT_estimate_cost(bpy.types.Operator):
         min_spp = max(2, min(p.adaptive_min_samples, p.samples))
         try:
             engine_scene, _ = export_scene(context.evaluated_depsgraph_get(), scene.camera, W, H, settings)
-            pilot, sps = pilot_render(Renderer(engine_scene), settings, max(2, min(16, min_spp)), quantity)
+            renderer = Renderer(engine_scene)
+            pilot, sps = pilot_render(renderer, settings, max(2, min(16, min_spp)), quantity)
+            probe = copy.copy(settings)
+            probe.spp = max(p.samples, min_spp)
+            per_round = round_overhead(renderer, probe, pilot, sps, min_spp)     # the rounds' fixed time
         except SceneError as e:
             self.report({"ERROR"}, f"Polar: {e}")
             return {"CANCELLED"}
         pred = predict(pilot.film, pilot.halves, quantity, p.adaptive_threshold, min_spp, max(p.samples, min_spp),
-                       sps)
+                       sps, round_seconds=per_round)
         p.estimate_report = (f"Adaptive: median {pred.median:.0f}, p95 {pred.p95:.0f} spp, "
                              f"{pred.adaptive_seconds:.1f} s\n"
                              f"Uniform: {pred.uniform_spp} spp, {pred.uniform_seconds:.1f} s"
                              + (f"\n{100 * pred.capped:.0f} % of pixels reach Max Samples first"
-                                if pred.capped else ""))
+                                if pred.capped >= 0.005 else ""))
         self.report({"INFO"}, f"Polar estimate: {pred.describe()}")
         return {"FINISHED"}
 

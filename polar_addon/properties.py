@@ -92,7 +92,9 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                                         update=_adaptive_changed)
     adaptive_threshold: FloatProperty(name="Noise Threshold", description="Standard error to reach, of the chosen "
                                       "quantity (relative for S0 and Stokes, absolute for DoLP and DoCP, degrees "
-                                      "for AoLP). Like Cycles' Noise Threshold in role, not in formula",
+                                      "for AoLP). Tiles far noisier than the image's average stop earlier, at their "
+                                      "share of the error (more samples there buy less accuracy than elsewhere). "
+                                      "Like Cycles' Noise Threshold in role, not in formula",
                                       default=0.01, min=1e-5, max=90.0, soft_max=1.0, precision=4, step=0.1)
     noise_quantity: EnumProperty(name="Quantity", items=NOISE_QUANTITY_ITEMS, default="S0",
                                  description="What the noise threshold applies to")

@@ -447,3 +447,133 @@ def test_blender_sampling_panel_shows_the_adaptive_settings_and_the_estimate_but
         assert name in drawn["props"], name
     assert drawn["operators"] == ["polar.estimate_cost"] and drawn["labels"] == ["Adaptive: median 16", "Uniform: 64"]
     assert hasattr(bpy.ops.polar, "estimate_cost")
+
+
+# ------------------------------------------------------------------------------------ allocation rule
+
+def test_the_allocation_level_gives_the_threshold_as_the_images_rms_error():
+    from engine.render.adaptive import allocation_level
+    sigma = np.array([0.01, 0.1, 0.1, 1.0, 3.0])
+    mu = allocation_level(sigma, 0.02)
+    assert mu == pytest.approx(0.02 ** 2 / np.mean(sigma))
+    n = sigma / mu                                             # the optimal counts n ∝ σ
+    assert math.sqrt(np.mean(sigma ** 2 / n)) == pytest.approx(0.02)
+    assert allocation_level(np.zeros(4), 0.02) == math.inf    # nothing noisy: every tile stops at once
+
+
+class GaussianTracer:
+    """Grey pixels of luminance 1 whose samples are 1 + σ·z, z standard normal from a hash of
+    (pixel, sample): a synthetic noise map with a known per-sample σ per pixel (no geometry)."""
+
+    def __init__(self, sigma):
+        self.sigma = np.asarray(sigma, np.float64)
+
+    def trace(self, pixel, sample, abort=None):
+        with np.errstate(over="ignore"):                       # the hash wraps modulo 2⁶⁴ on purpose
+            return self._trace(pixel, sample)
+
+    def _trace(self, pixel, sample):
+        x = ((pixel.astype(np.uint64) * np.uint64(0x9E3779B97F4A7C15))
+             ^ (sample.astype(np.uint64) * np.uint64(0xBF58476D1CE4E5B9)))
+        u = []
+        for k in (1, 2):                                       # splitmix64 finaliser, two streams
+            z = x + np.uint64(k) * np.uint64(0x94D049BB133111EB)
+            z = (z ^ (z >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
+            z = (z ^ (z >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
+            z = z ^ (z >> np.uint64(31))
+            u.append(((z >> np.uint64(11)).astype(np.float64) + 0.5) / 2.0 ** 53)
+        gauss = np.sqrt(-2 * np.log(u[0])) * np.cos(2 * np.pi * u[1])
+        values = np.zeros((4, 3, pixel.size))
+        values[0] = (1.0 + self.sigma[pixel] * gauss)[None, :]
+        return values, {"rays": pixel.size, "shadow_rays": 0, "nonfinite": 0}
+
+
+def synthetic_render(sigma_tiles, threshold, min_spp=16, spp=4096, side=8):
+    """Adaptive render (s0) of a side×side-tile image whose tiles have per-sample σ ``sigma_tiles``."""
+    from engine.render.adaptive import render_adaptive
+    W = H = side * TILE
+    sigma = np.asarray(sigma_tiles, np.float64)[tile_ids(W, H)]
+    film, halves = Film(W, H), HalfBuffers(W * H)
+
+    def run_units(units, trace_unit, add_result, stop_requested, abort):
+        for u in units:
+            add_result(trace_unit(u))
+        return False
+    stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0}
+    reason = render_adaptive(GaussianTracer(sigma), film, halves, spp, 1 << 16,
+                             AdaptiveSettings(threshold, "s0", min_spp), None, run_units, stats)
+    return film, halves, reason, stats
+
+
+def test_samples_land_in_proportion_to_sigma_where_a_tile_is_noisier_than_the_mean():
+    # 64 tiles, σ log-spaced over two decades: those above the mean σ end at σ/μ (their share of
+    # the error, μ = T²/mean σ), the quieter ones at σ²/T² (the threshold), none below min_spp.
+    sigma = np.geomspace(0.02, 2.0, 64)
+    T = 0.02
+    film, halves, reason, stats = synthetic_render(sigma, T)
+    assert reason == "threshold"
+    n = film.count[np.searchsorted(tile_ids(32, 32), np.arange(64))].astype(np.float64)  # a pixel per tile
+    mu = T ** 2 / np.mean(sigma)
+    expected = np.maximum(16, np.minimum(sigma / mu, sigma ** 2 / T ** 2))
+    ratio = n / expected
+    # a tile's error estimate (16 pixels, one degree of freedom each) scatters by ~18 %, so its count
+    # (∝ σ or σ²) by up to ~40 %, and a checkpoint step is +25 %
+    assert 0.8 < np.median(ratio) < 1.25 and np.mean((ratio > 0.5) & (ratio < 2)) >= 0.9, ratio
+    noisy = sigma > np.mean(sigma)
+    slope = np.polyfit(np.log(sigma[noisy]), np.log(n[noisy]), 1)[0]
+    assert 0.8 < slope < 1.2                                  # ∝ σ, not σ² (the old rule's 2)
+    # MSE × samples against uniform sampling (exact σ): the rule's ideal counts gain 2.08×, every
+    # tile to the threshold 1.53× (only by the min_spp floor), the bound of any allocation 2.38×
+    gain = mse_time_gain(sigma ** 2, 1.0, n)
+    every_tile_to_t = mse_time_gain(sigma ** 2, 1.0, np.clip(sigma ** 2 / T ** 2, 16, 4096))
+    assert gain > 1.2 * every_tile_to_t and gain > 0.75 * best_mse_time_gain(sigma ** 2, 1.0)
+
+
+def test_a_tile_below_the_threshold_at_min_spp_gets_no_more_samples_whatever_its_share():
+    # one tile far noisier than the rest: the quiet tiles' error at 16 spp (σ/4 = 0.0025) is below
+    # T = 0.01 so they stop at min_spp, although μ (set by the noisy tile) would give them more
+    sigma = np.full(4, 0.01)
+    sigma[0] = 1.0
+    film, _, reason, _ = synthetic_render(sigma, 0.01, side=2)
+    quiet = tile_ids(8, 8) != 0
+    assert np.all(film.count[quiet] == 16) and film.count[~quiet].min() > 16 and reason == "threshold"
+
+
+def test_a_noiseless_image_stops_at_min_spp():
+    film, _, reason, stats = synthetic_render(np.zeros(4), 0.01, min_spp=6, side=2)
+    assert reason == "threshold" and np.all(film.count == 6) and stats["allocation_level"] == math.inf
+
+
+def test_the_first_pass_that_sets_the_allocation_travels_with_the_state(tmp_path):
+    film, halves, _, _ = synthetic_render(np.geomspace(0.05, 1.0, 4), 0.05, side=2)
+    assert halves.first is not None and np.all(halves.first[1] == 16)
+    restored_film, restored = state_from_channels(state_channels(film, halves),
+                                                  film.spp_image().astype(np.uint32))
+    np.testing.assert_array_equal(restored.first[0], halves.first[0])
+    np.testing.assert_array_equal(restored.first[1], halves.first[1])
+    np.testing.assert_array_equal(restored.sums, halves.sums)
+
+
+def test_the_images_error_of_s0_is_the_absolute_luminance_error_over_the_images_mean():
+    from engine.render.adaptive import image_error
+    film, halves = Film(2 * TILE, TILE), HalfBuffers(2 * TILE * TILE)
+    film.count[:] = 16
+    bright = (np.arange(2 * TILE * TILE) % (2 * TILE)) < TILE
+    y = np.where(bright, 3.0, 1.0)                            # image mean luminance 2
+    film.sums[0, :] = 16 * y
+    halves.sums[0, 0] = 8 * y * 1.1                            # Y_A − Y_B = 0.2·Y: ½|A − B| = 0.1·Y
+    halves.sums[1, 0] = 8 * y * 0.9
+    assert image_error(film, halves, "s0") == pytest.approx(math.sqrt((0.3 ** 2 + 0.1 ** 2) / 2) / 2)
+    assert film_noise(film, halves, "s0")[0] == pytest.approx(np.full(2 * TILE * TILE, 0.1))   # relative, per pixel
+
+
+def test_the_predicted_time_counts_one_round_per_checkpoint_up_to_the_largest_count():
+    film, halves = Film(TILE, TILE), HalfBuffers(TILE * TILE)
+    film.count[:] = 16
+    film.sums[0, :] = 16.0
+    halves.sums[0, 0] = 8 * 1.2                              # s0 error 0.2 at 16 spp: 256 samples for 0.05
+    halves.sums[1, 0] = 8 * 0.8
+    p = predict(film, halves, "s0", 0.05, 16, 4096, seconds_per_sample=1e-6, round_seconds=0.5)
+    marks = checkpoints(16, 4096)
+    assert p.rounds == int(np.searchsorted(marks, p.counts.max())) + 1          # the steps, and the last look
+    assert p.adaptive_seconds == pytest.approx(TILE * TILE * p.counts.max() * 1e-6 + 0.5 * p.rounds)

@@ -18,14 +18,32 @@ rule therefore works on tiles of ``TILE``×``TILE`` pixels aligned to the image 
 is the root mean square of its pixels' errors (over the pixels where the quantity is defined), and
 all pixels of a tile always have the same sample count.
 
-**Schedule.** Every pixel first gets ``min_spp`` samples; then tiles whose error is above the
-threshold get more, checkpoint by checkpoint (:func:`checkpoints`: about +25 % per step, even
-steps so both halves stay equal), until every tile is below the threshold, ``spp`` is reached or
-the time limit passes.  A tile's next step depends only on its own samples, so without a time
-limit the counts are a deterministic function of the seed — however the work is split, and also
-across an interrupted render and its resumption.  Samples are added to the film one sample pass at
-a time in ascending sample order (:func:`add_in_sample_order`), so given the counts the sums are
-bit-identical whatever the threads, batch size or resumption.
+**Allocation (which tiles go on).** Rendering every tile *to* the threshold gives each tile
+n ∝ σ² samples (σ: its per-sample standard deviation), and that gains exactly nothing over uniform
+sampling at equal cost (engine.render.estimate).  The counts that minimise the image's mean squared
+error for a given number of samples are n ∝ σ (Lagrange: d(σ²/n)/dn = −σ²/n² equal for every
+tile).  So a tile goes on only while (1) its error e is above the threshold T (the issue's rule:
+samples go only where the error is above T) **and** (2) σ̂/n > μ, i.e. e is above its share
+√(μ·σ̂) of the error (σ̂ = e·√n): a tile whose σ is above the image's mean σ̄ stops at the error
+T·√(σ/σ̄) > T, with n = σ·σ̄/T² ∝ σ samples, because bringing it lower costs more than it buys
+elsewhere; tiles below σ̄ stop at T as before (n = σ²/T²).  μ = T²/σ̄ (:func:`allocation_level`:
+the level at which counts σ/μ would give an image RMS error of T), set once, from the first pass
+(``min_spp`` everywhere).  For ``s0`` condition (2) measures the tile in absolute luminance — the
+RMS of ½|Y_A − Y_B| over the tile ÷ the image's first-pass mean luminance
+(:func:`allocation_noise`) — so that the image's luminance error is what is minimised (a relative
+error alone samples dark tiles as much as bright ones); the other quantities use their tile error.
+σ̄ is the mean over the pixels where the quantity is defined (lit pixels; DoLP > 0.05 for ``aolp``).
+
+**Schedule.** Every pixel first gets ``min_spp`` samples; then tiles that go on get more,
+checkpoint by checkpoint (:func:`checkpoints`: about +25 % per step, even steps so both halves stay
+equal), until no tile goes on, ``spp`` is reached or the time limit passes.  A tile's next step
+depends only on its own samples and μ, fixed after the first pass and kept with the half-buffers
+(:class:`HalfBuffers` ``first``, stored in the EXR), so without a time limit the counts are a
+deterministic function of the seed — however the work is split, and also across an interrupted
+render and its resumption, and a tighter threshold on resumption continues the looser one's path
+(μ falls with T).  Samples are added to the film one sample pass at a time in ascending sample order
+(:func:`add_in_sample_order`), so given the counts the sums are bit-identical whatever the threads,
+batch size or resumption.
 """
 
 from __future__ import annotations
@@ -165,7 +183,8 @@ def next_targets(counts: np.ndarray, noise: np.ndarray, marks: np.ndarray, thres
 
     A count between two checkpoints is completed to the next one (its tile was in the middle of a
     step); a count on a checkpoint moves on to the next checkpoint if its tile ``noise`` is above
-    ``threshold``, and is done otherwise or at the last checkpoint.
+    ``threshold``, and is done otherwise or at the last checkpoint.  (The render loop passes −∞ as
+    the noise of tiles that have reached their share of the error: :func:`allocation_level`.)
     """
     counts = np.asarray(counts, np.int64)
     i = np.minimum(np.searchsorted(marks, counts, side="left"), len(marks) - 1)
@@ -176,13 +195,83 @@ def next_targets(counts: np.ndarray, noise: np.ndarray, marks: np.ndarray, thres
     return np.maximum(target, counts)
 
 
+def allocation_noise(quantity: str, sums: np.ndarray, counts: np.ndarray, tiles: np.ndarray, pixels: np.ndarray,
+                     mean_y: float) -> tuple[np.ndarray, np.ndarray]:
+    """(e, counted) over ``pixels``: the error of each pixel's tile in the units the allocation
+    minimises, and whether the pixel counts in the image's RMS error.
+
+    ``sums``: half-buffer sums (2, 4, n), ``counts`` (n,).  ``s0``: RMS over the tile of the absolute
+    ½|Y_A − Y_B| ÷ ``mean_y`` (the image's mean luminance), so that tiles weigh by their share of the
+    image's luminance error; every pixel counts.  The other quantities: the tile error
+    (:func:`tile_noise`) of :func:`pixel_noise` (``stokes`` keeps its relative s0 part); the pixels
+    that count are the lit ones (S0 > 0: DoLP, DoCP and S_k/S0 of a black pixel are not defined),
+    for ``aolp`` those with DoLP > 0.05.  e = ∞ where a pixel has < 2 samples.
+    """
+    c = np.asarray(counts, np.int64)
+    a, b = _ratio(sums[0], (c + 1) // 2), _ratio(sums[1], c // 2)
+    if quantity == "s0":
+        err = 0.5 * np.abs(a[0] - b[0]) / mean_y if mean_y > 0 else np.zeros(c.size)
+        defined = np.ones(c.size, bool)
+        counted = defined
+    else:
+        err, defined = pixel_noise(quantity, a, b)
+        counted = defined & (a[0] + b[0] > 0)
+    err = np.where(c < 2, 1e30, err)
+    out = tile_noise(err, defined, tiles, pixels)
+    return np.where(out >= 1e29, np.inf, out), counted[pixels]
+
+
+def allocation_level(sigma: np.ndarray, threshold: float) -> float:
+    """μ = T² / mean(σ): the level at which counts n = σ/μ give an RMS error √mean(σ²/n) = T.
+
+    ``sigma``: per-sample standard deviation of every counted pixel's tile (σ = e·√n).  Tiles held
+    at ``min_spp`` (σ/μ below it) only lower the image's error, tiles capped at ``spp`` raise it.
+    ∞ (every tile stops at once) where no pixel is noisy.
+    """
+    sigma = np.asarray(sigma, np.float64)
+    sigma = sigma[np.isfinite(sigma)]
+    mean = float(np.mean(sigma)) if sigma.size else 0.0
+    return float(threshold) ** 2 / mean if mean > 0 else math.inf
+
+
+def allocation_from(sums: np.ndarray, counts: np.ndarray, quantity: str, threshold: float, tiles: np.ndarray,
+                    pixels: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """(μ, the image's mean luminance, σ over ``pixels``) from half-buffer ``sums`` (2, 4, n) and
+    ``counts`` (n,) of a first pass; ``threshold`` 0 gives μ = 0 (every noisy tile to ``spp``), ∞
+    gives μ = ∞ (every tile stops at once)."""
+    y = _ratio(sums[0, 0] + sums[1, 0], counts)
+    mean_y = float(np.mean(y[pixels])) if pixels.size else 0.0
+    e, counted = allocation_noise(quantity, sums, counts, tiles, pixels, mean_y)
+    sigma = e * np.sqrt(counts[pixels])
+    if not threshold > 0:
+        return 0.0, mean_y, sigma
+    if math.isinf(threshold):
+        return math.inf, mean_y, sigma
+    return allocation_level(sigma[counted], threshold), mean_y, sigma
+
+
+def first_pass_level(halves: HalfBuffers, quantity: str, threshold: float, tiles: np.ndarray,
+                     pixels: np.ndarray) -> tuple[float, float]:
+    """(μ, the image's mean luminance) from the half-buffers' first pass (:attr:`HalfBuffers.first`)."""
+    mu, mean_y, _ = allocation_from(*halves.first, quantity, threshold, tiles, pixels)
+    return mu, mean_y
+
+
 # ------------------------------------------------------------------------------------ accumulation
 
 class HalfBuffers:
-    """Luminance Stokes sums of the even (A) and odd (B) sample passes per pixel: ``sums`` (2, 4, n)."""
+    """Luminance Stokes sums of the even (A) and odd (B) sample passes per pixel: ``sums`` (2, 4, n).
+
+    ``first``: (sums (2, 4, n), counts (n,)) as they were when every pixel of the window had its
+    ``min_spp`` samples (None before): the allocation level μ is computed from it, so that it is the
+    same after an interruption and for any threshold given on resumption."""
 
     def __init__(self, n: int):
         self.sums = np.zeros((2, 4, n))
+        self.first = None
+
+    def keep_first(self, counts: np.ndarray) -> None:
+        self.first = (self.sums.copy(), np.asarray(counts, np.int64).copy())
 
     def means(self, counts: np.ndarray):
         """(mean_A, mean_B), each (4, n); samples 0…c−1 give A ⌈c/2⌉ and B ⌊c/2⌋ of them."""
@@ -230,6 +319,19 @@ def film_noise(film, halves: HalfBuffers, quantity: str, pixels: np.ndarray | No
         pixels = np.arange(film.count.size)
     return err, defined, tile_noise(np.where(np.isfinite(err), err, 1e30), defined,
                                     tile_ids(film.width, film.height), pixels)
+
+
+def image_error(film, halves: HalfBuffers, quantity: str, pixels: np.ndarray | None = None) -> float:
+    """The image's RMS error of ``quantity`` in the allocation's units (:func:`allocation_noise`:
+    for ``s0`` the luminance error ÷ the image's mean luminance), over the pixels where it is defined."""
+    if pixels is None:
+        pixels = np.arange(film.count.size)
+    sums, counts = halves.first if halves.first is not None else (halves.sums, film.count)
+    mean_y = float(np.mean(_ratio(sums[0, 0] + sums[1, 0], counts)[pixels])) if pixels.size else 0.0
+    e, counted = allocation_noise(quantity, halves.sums, film.count, tile_ids(film.width, film.height), pixels,
+                                  mean_y)
+    e = e[counted & np.isfinite(e)]
+    return float(np.sqrt(np.mean(e ** 2))) if e.size else math.nan
 
 
 def adaptive_units(pixels: np.ndarray, start: np.ndarray, target: np.ndarray, tiles: np.ndarray,
@@ -306,6 +408,7 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
     pixels = (ys * W + xs).ravel().astype(np.int64)
     tiles = tile_ids(W, H)
     marks = checkpoints(adaptive.min_spp, spp)
+    spp_is_a_step = len(marks) == 1 or int(marks[-1]) == int(checkpoints(adaptive.min_spp, spp + 1)[len(marks) - 1])
     t0 = clock()
     time_up = (lambda: clock() - t0 >= adaptive.time_limit) if adaptive.time_limit > 0 else (lambda: False)
     user_stop = (lambda: False) if should_stop is None else should_stop
@@ -350,9 +453,21 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
             progress(min(frac, 0.999), stats)
 
     first_pass_reported = False
+    level = None
     while True:
         counts = film.count[pixels]
-        _, _, noise = film_noise(film, halves, adaptive.quantity, pixels)
+        if counts.min() >= adaptive.min_spp:
+            if halves.first is None:        # every pixel has exactly min_spp samples now (or a resumed state)
+                halves.keep_first(film.count)
+            if level is None:
+                level = first_pass_level(halves, adaptive.quantity, adaptive.threshold, tiles, pixels)
+                stats["allocation_level"] = level[0]
+            e, _ = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level[1])
+            _, _, noise = film_noise(film, halves, adaptive.quantity, pixels)
+            # a tile goes on while its error is above T and its share of the error, σ̂/n > μ (σ̂ = e·√n)
+            noise = np.where(e / np.sqrt(counts) > level[0], noise, -np.inf)
+        else:                                              # first pass: only bring every pixel to min_spp
+            noise = np.full(counts.shape, -np.inf)
         if not first_pass_reported and counts.min() >= adaptive.min_spp:
             first_pass_reported = True
             timing["on"] = False
@@ -362,7 +477,11 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
         todo = target > counts
         stats["adaptive_rounds"] = stats.get("adaptive_rounds", 0) + 1
         if not todo.any():
-            return "max_spp" if (noise[counts >= spp] > adaptive.threshold).any() else "threshold"
+            # max_spp: the cap decided some tile's count — it wanted more, or it stopped at a clipped
+            # last checkpoint that a larger --spp would have stepped over
+            at_cap = counts >= spp
+            return "max_spp" if at_cap.any() and (not spp_is_a_step or (noise[at_cap] > adaptive.threshold).any()) \
+                else "threshold"
         if stop_requested():
             return reason["value"]
         paths = int((target - counts)[todo].sum())
@@ -406,12 +525,25 @@ def _state_arrays(film, halves: HalfBuffers):
 
 def state_channels(film, halves: HalfBuffers) -> dict[str, np.ndarray]:
     """Extra EXR channels (uint32, (H, W)) holding the film's float64 sums and the half-buffers bit
-    for bit (high and low 32-bit words), so that a resumed render continues the exact sums."""
+    for bit (high and low 32-bit words), and the first pass's half-buffers and counts (for μ), so
+    that a resumed render continues the exact sums and the same allocation."""
     out = {}
-    for name, a in _state_arrays(film, halves).items():
+    arrays = _state_arrays(film, halves)
+    if halves.first is not None:
+        arrays.update(_first_arrays(halves))
+    for name, a in arrays.items():
         hi, lo = _float64_to_words(a)
         out[f"{STATE_PREFIX}.{name}.hi"] = hi.reshape(film.height, film.width)
         out[f"{STATE_PREFIX}.{name}.lo"] = lo.reshape(film.height, film.width)
+    return out
+
+
+def _first_arrays(halves: HalfBuffers):
+    sums, counts = halves.first
+    out = {"first.count": counts.astype(np.float64)}
+    for k in range(4):
+        out[f"first.A.S{k}.Y"] = sums[0, k]
+        out[f"first.B.S{k}.Y"] = sums[1, k]
     return out
 
 
@@ -435,4 +567,7 @@ def state_from_channels(channels: dict, counts: np.ndarray):
         film.sumsq_y[k] = get(f"sumsq.S{k}.Y")
         halves.sums[0, k] = get(f"A.S{k}.Y")
         halves.sums[1, k] = get(f"B.S{k}.Y")
+    if f"{STATE_PREFIX}.first.count.hi" in channels:      # files of older versions have no first pass
+        sums = np.stack([np.stack([get(f"first.{h}.S{k}.Y") for k in range(4)]) for h in "AB"])
+        halves.first = (sums, get("first.count").astype(np.int64))
     return film, halves

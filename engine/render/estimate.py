@@ -23,12 +23,14 @@ from __future__ import annotations
 
 import copy
 import math
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import SceneError
-from .adaptive import QUANTITIES, UNITS, AdaptiveSettings, checkpoints, film_noise
+from .adaptive import (QUANTITIES, TILE, UNITS, AdaptiveSettings, allocation_from, checkpoints, film_noise,
+                       tile_ids)
 
 
 @dataclass
@@ -41,6 +43,8 @@ class Prediction:
     seconds_per_sample: np.ndarray   # per pixel (or one number for all)
     capped: float                 # fraction of pixels that would stop at the maximum spp, not the threshold
     variance: np.ndarray | None = None   # per-sample variance of the quantity per pixel (tile e²·n), its units²
+    rounds: int = 0               # adaptive rounds after the first pass (one per checkpoint up to the largest count)
+    round_seconds: float = 0.0    # seconds of one round besides its samples (:func:`round_overhead`)
 
     @property
     def median(self) -> float:
@@ -52,7 +56,7 @@ class Prediction:
 
     @property
     def adaptive_seconds(self) -> float:
-        return float(np.sum(self.counts * self.seconds_per_sample))
+        return float(np.sum(self.counts * self.seconds_per_sample)) + self.rounds * self.round_seconds
 
     @property
     def uniform_seconds(self) -> float:
@@ -74,7 +78,8 @@ class Prediction:
                 f"{self.median:.0f} spp, 95th percentile {self.p95:.0f} spp, {self.adaptive_seconds:.1f} s; "
                 f"uniform {self.uniform_spp} spp, {self.uniform_seconds:.1f} s "
                 f"(for 95 % of the pixels: {self.uniform_p95_spp} spp)"
-                + (f"; {100 * self.capped:.0f} % of pixels would stop at the maximum spp" if self.capped else "")
+                + (f"; {100 * self.capped:.0f} % of pixels would stop at the maximum spp" if self.capped >= 0.005
+                   else "")
                 + (f"; MSE × time of {self.quantity} {gain:.2f}× better than uniform (best possible "
                    f"allocation {self.best_gain:.2f}×)" if math.isfinite(gain) else ""))
 
@@ -118,25 +123,30 @@ def cost_map(unit_times, n_pixels: int, seconds: float) -> np.ndarray:
 
 
 def predict(film, halves, quantity: str, threshold: float, min_spp: int, spp: int, seconds_per_sample,
-            pixels: np.ndarray | None = None) -> Prediction:
+            pixels: np.ndarray | None = None, round_seconds: float = 0.0) -> Prediction:
     """Predicted counts from a film whose pixels all have the same count n (the pilot or first pass).
 
-    ``seconds_per_sample``: one number, or per pixel over the whole image (:func:`cost_map`)."""
+    ``seconds_per_sample``: one number, or per pixel over the whole image (:func:`cost_map`);
+    ``round_seconds``: the fixed time of an adaptive round (:func:`round_overhead`; 0: not counted)."""
     if pixels is None:
         pixels = np.arange(film.count.size)
     n = film.count[pixels].astype(np.float64)
     _, _, tile_err = film_noise(film, halves, quantity, pixels)
-    need = n * (tile_err / threshold) ** 2
+    need = n * (tile_err / threshold) ** 2                # every tile below the threshold
+    mu, _, sigma = allocation_from(halves.sums, film.count, quantity, threshold,
+                                   tile_ids(film.width, film.height), pixels)
+    share = sigma / mu if mu > 0 else np.full(n.shape, np.inf)   # where the tile's share of the error is met
     marks = checkpoints(min_spp, spp)
-    i = np.minimum(np.searchsorted(marks, np.ceil(need - 1e-9), side="left"), len(marks) - 1)
+    i = np.minimum(np.searchsorted(marks, np.ceil(np.minimum(need, share) - 1e-9), side="left"), len(marks) - 1)
     counts = marks[i]
     uniform = int(min(spp, max(min_spp, math.ceil(float(need.max()) - 1e-9)))) if need.size else min_spp
     uniform_p95 = int(min(spp, max(min_spp, math.ceil(float(np.percentile(need, 95)) - 1e-9)))) if need.size \
         else min_spp
-    capped = float(np.mean(need > spp)) if need.size else 0.0
+    capped = float(np.mean(np.minimum(need, share) > spp)) if need.size else 0.0
     sps = np.asarray(seconds_per_sample, np.float64)
+    rounds = int(np.searchsorted(marks, counts.max())) + 1 if counts.size else 0
     return Prediction(quantity, threshold, counts, uniform, uniform_p95, sps[pixels] if sps.ndim else sps, capped,
-                      variance=tile_err ** 2 * n)
+                      variance=sigma ** 2, rounds=rounds, round_seconds=float(round_seconds))
 
 
 def parse_target(text: str) -> tuple[str, float]:
@@ -162,3 +172,25 @@ def pilot_render(renderer, settings, pilot_spp: int, quantity: str = "s0"):
                                                            min_spp=pilot_spp, time_limit=0.0),
                              unit_times=unit_times)
     return result, cost_map(unit_times, result.film.count.size, result.stats["seconds"])
+
+
+def round_overhead(renderer, settings, pilot, seconds_per_sample, min_spp: int) -> float:
+    """Seconds an adaptive round costs besides its samples, on this machine: one tile (the pilot's
+    noisiest) is rendered adaptively to ``settings.spp`` with a threshold of 0, through every
+    checkpoint; its time less its samples' (``seconds_per_sample`` of :func:`cost_map`) is shared
+    among its rounds.  Small renders and late rounds (few tiles, many sample passes each) are
+    dominated by this: per-unit tracing set-up, the error images, adding sample pass by pass."""
+    film = pilot.film
+    _, _, tile_err = film_noise(film, pilot.halves, "s0")
+    p = int(np.argmax(np.where(np.isfinite(tile_err), tile_err, 0.0)))
+    y, x = divmod(p, film.width)
+    x0, y0 = x - x % TILE, y - y % TILE
+    window = (x0, y0, min(x0 + TILE, film.width), min(y0 + TILE, film.height))
+    st = copy.copy(settings)
+    started = time.perf_counter()
+    probe = renderer.render(st, adaptive=AdaptiveSettings(threshold=0.0, quantity="s0", min_spp=min_spp),
+                            window=window)
+    seconds = time.perf_counter() - started
+    sps = np.broadcast_to(np.asarray(seconds_per_sample, np.float64), probe.film.count.shape)
+    samples = float(np.sum(probe.film.count * sps))
+    return max(seconds - samples, 0.0) / max(int(probe.stats.get("adaptive_rounds", 1)), 1)

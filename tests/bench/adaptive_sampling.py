@@ -1,27 +1,42 @@
-"""Adaptive vs uniform sampling: error × time, and whether the estimate predicts the cost.
+"""Adaptive vs uniform sampling: error × cost, bias, and whether the estimate predicts the cost.
 
-    python tests/bench/adaptive_sampling.py [--res 64] [--ref-spp 1024] [--out out/adaptive]
+    python tests/bench/adaptive_sampling.py [--res 64] [--ref-spp 2048] [--mitsuba-python PY]
+                                            [--mitsuba-spp 8192] [--seeds 8] [--out out/adaptive]
 
-Part 1 (efficiency): for glass_sphere, fresnel_sphere_au and the demo scene, uniform renders at
-16, 64, 256 spp and adaptive renders (threshold on s0 and on dolp, min 16, max 512 spp) are
-compared with a high-spp render of ours (another seed; Mitsuba is used by accuracy_time.py but is
-not needed here).  The reference's own noise, estimated from its even/odd half-buffers, is
-subtracted from each MSE.  The DoLP MSE leaves out the pixels whose reference S0 is below 10⁻³ of
-the median (< 1 % of the pixels: rare-path pixels whose DoLP is one or two samples' DoLP, 0 in a
-render that missed them — they held > 95 % of the DoLP MSE and made it flat in spp).  Cost: wall
-seconds (on a shared VM: noisy) and rays traced (camera + shadow rays: deterministic).  Figure of
-merit: MSE × cost (lower is better; for unbiased Monte Carlo it is constant in spp), and the
-equal-cost gain: the MSE of a uniform render of the same number of rays (log-log interpolation
-between the uniform renders) ÷ the adaptive MSE (> 1: adaptive is better).
+References.  glass_sphere and fresnel_sphere_au: two Mitsuba 3 renders (llvm_ad_spectral_polarized,
+``--mitsuba-spp`` each, seeds 100 and 101, ../shared/peers/render_peer.py; cached in --out) when
+``--mitsuba-python`` imports mitsuba, and always two uniform renders of ours (``--ref-spp`` each,
+seeds 4242 and 4243); the demo scene: ours only.  A reference is the mean of its pair; the
+pair's difference gives its own per-pixel noise ((y₁ − y₂)/2)², subtracted from every MSE, and the
+per-sample variance of every pixel (part 0).  The DoLP MSE leaves out the pixels whose reference
+S0 is below 1 % of the median (0 % of glass_sphere, 2.3 % of fresnel_sphere_au): rare-path pixels
+whose DoLP no render of ≤ 512 spp resolves.  With a 10⁻³ cut, 15 pixels of fresnel_sphere_au at
+1–2.5·10⁻³ of the median, DoLP ≈ 1 in Mitsuba's 2 × 8192 spp and 0 in ours at 16…256 spp (no path
+found), held > 90 % of the DoLP MSE and kept it flat from 16 to 256 spp (4.3·10⁻³ → 3.4·10⁻³);
+with the 1 % cut it falls 15× for 16× the samples, as Monte Carlo noise should.
 
-Part 0 (what allocation can gain): from the reference's half-buffers, the per-sample variance v of
-S0 and DoLP per 4×4 tile and the pilot's cost c per pixel give the predicted gain in MSE × time
-of the threshold rule's counts and the bound Σv·Σc/(Σ√(vc))² of any allocation
-(engine.render.estimate.mse_time_gain / best_mse_time_gain), and the spread of σ = √v.
+Part 0 (what allocation can gain): from the reference pair, the per-sample variance v of S0 and of
+DoLP per 4×4 tile and the pilot's cost c per pixel give the predicted MSE × time gain of the counts
+the rule would give from a 16-spp first pass (engine.render.estimate.predict), and the bound
+Σv·Σc/(Σ√(vc))² of any allocation (engine.render.estimate.mse_time_gain / best_mse_time_gain).
 
-Part 2 (prediction): on three scenes, ``estimate`` (16-spp pilot) predicts the median and 95th
-percentile of the samples per pixel and the wall time of an adaptive render to a target; the
-render is then made and the ratios predicted/actual are printed (target: within 1.5×).
+Part 1 (efficiency, side by side in one run): uniform renders at 16, 64, 256 spp and adaptive
+renders (threshold on s0 and on dolp, min 16, max 512 spp; glass_sphere also dolp ≤ 0.03, a
+threshold reachable within 512 spp).  Cost: rays traced (camera + shadow
+rays: deterministic) and wall seconds (a shared VM: noisy).  The equal-cost gain is the MSE of a
+uniform render of the same cost (log-log interpolation between the uniform renders) ÷ the
+adaptive MSE (> 1: adaptive is better), in rays and in seconds.
+
+Part 1b (bias): ``--seeds`` adaptive renders (s0 threshold) with different seeds; for S0…S3 the
+mean over seeds of the image sum against our reference's (z = difference ÷ its standard error from
+the seeds' spread and the reference pair), and the mean z² over 8×8-pixel blocks (≈ (K−1)/(K−3)
+for K seeds without bias: a t-distribution).
+
+Part 2 (prediction; ``--prediction-only`` runs only this part): on three scenes, ``estimate``
+(16-spp pilot, and a one-tile probe for the time of a round: engine.render.estimate.round_overhead)
+predicts the median and 95th percentile of the samples per pixel and the wall time of an adaptive
+render to a target; the render is then made and the ratios predicted/actual are printed (target:
+within 1.5×).
 
 Writes out/adaptive/table.md and the PNGs of the demo scene's noise image and sample map into
 examples/images/ (adaptive_noise.png, adaptive_spp.png).  Not run by the tests (it times things).
@@ -32,8 +47,10 @@ from __future__ import annotations
 import argparse
 import copy
 import os
+import subprocess
 import sys
 import time
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -43,13 +60,18 @@ sys.path.insert(0, REPO)
 from engine.output.colormaps import sequential  # noqa: E402
 from engine.output.png import write_png  # noqa: E402
 from engine.render.adaptive import AdaptiveSettings, film_noise, tile_ids  # noqa: E402
-from engine.render.estimate import best_mse_time_gain, mse_time_gain, pilot_render, predict  # noqa: E402
+from engine.render.estimate import (best_mse_time_gain, mse_time_gain, pilot_render, predict,  # noqa: E402
+                                    round_overhead)
 from engine.render.renderer import Renderer  # noqa: E402
 from engine.scene.loader import load_scene  # noqa: E402
 from engine.spectral.cie import LUMINANCE_WEIGHTS  # noqa: E402
 
 SHARED = os.environ.get("POLAR_SHARED", os.path.join(os.path.dirname(REPO), "shared"))
 PEERS = os.path.join(SHARED, "peers")
+MITSUBA_VARIANT = "llvm_ad_spectral_polarized"
+#: Pixels whose reference S0 is below this fraction of the median are left out of the DoLP MSE.
+DARK = 1e-2
+MAX_SPP, MIN_SPP = 512, 16
 
 
 def load(name, res):
@@ -70,31 +92,50 @@ def dolp(y):
     return np.where(y[0] > 0, np.hypot(y[1], y[2]) / np.where(y[0] > 0, y[0], 1.0), 0.0)
 
 
-#: Pixels whose reference S0 is below this fraction of the median are left out of the DoLP MSE.
-DARK = 1e-3
+@dataclass
+class Reference:
+    label: str
+    y: np.ndarray            # luminance Stokes (4, H, W): mean of the pair
+    var: np.ndarray          # per-pixel variance of that mean, S0…S3 (4, H, W)
+    var_dolp: np.ndarray     # … of its DoLP (H, W)
+    keep: np.ndarray         # pixels in the DoLP MSE (H, W)
+    spp: int                 # samples per pixel of one render of the pair
 
 
-def reference(renderer, scene, spp):
-    """(luminance Stokes (4, H, W), per-pixel noise variance of S0 and of DoLP, pixels kept for the
-    DoLP MSE (H, W), the RenderResult) at ``spp``, seed 4242."""
-    st = copy.copy(scene.settings)
-    st.spp, st.seed = spp, 4242
-    result = renderer.render(st, adaptive=AdaptiveSettings(threshold=0.0, quantity="s0", min_spp=spp))
-    y = lum(result.stokes())
-    a, b = result.halves.means(result.film.count)
-    var_s0 = ((a[0] - b[0]) / 2) ** 2                       # (½|A − B|)² estimates the variance of the mean
-    var_dolp = ((dolp(a) - dolp(b)) / 2) ** 2
-    H, W = y.shape[1:]
+def make_reference(label, y1, y2, spp):
+    y = 0.5 * (y1 + y2)
     lit = y[0] > 0
     keep = y[0] >= DARK * (float(np.median(y[0][lit])) if lit.any() else 0.0)
-    return y, var_s0.reshape(H, W), var_dolp.reshape(H, W), keep, result
+    return Reference(label, y, ((y1 - y2) / 2) ** 2, ((dolp(y1) - dolp(y2)) / 2) ** 2, keep, spp)
 
 
-def mse(y, ref):
-    ry, var_s0, var_dolp, keep, _ = ref
-    m_s0 = float(np.mean((y[0] - ry[0]) ** 2) - np.mean(var_s0))
-    m_dolp = float(np.mean(((dolp(y) - dolp(ry)) ** 2)[keep]) - np.mean(var_dolp[keep]))
-    return max(m_s0, 0.0), max(m_dolp, 0.0)
+def our_reference(renderer, scene, spp):
+    ys = []
+    for seed in (4242, 4243):
+        st = copy.copy(scene.settings)
+        st.spp, st.seed = spp, seed
+        ys.append(lum(renderer.render(st).stokes()))
+    return make_reference(f"ours {spp} spp ×2", ys[0], ys[1], spp)
+
+
+def mitsuba_reference(python, name, spp, res, outdir):
+    ys = []
+    for seed in (100, 101):
+        stem = f"{name}__{MITSUBA_VARIANT}__{res}x{res}__{spp}spp__seed{seed}"
+        path = os.path.join(outdir, stem + ".npy")
+        if not os.path.exists(path):
+            subprocess.run([python, os.path.join(PEERS, "render_peer.py"), name, "--variant", MITSUBA_VARIANT,
+                            "--spp", str(spp), "--res", str(res), "--seed", str(seed), "--out", outdir],
+                           check=True, capture_output=True)
+        ys.append(lum(np.load(path).astype(np.float64)))
+    return make_reference(f"Mitsuba {spp} spp ×2", ys[0], ys[1], spp)
+
+
+def mse(y, ref: Reference):
+    """(MSE of S0, MSE of DoLP) of luminance Stokes ``y`` against ``ref``, less the reference's noise."""
+    m_s0 = float(np.mean((y[0] - ref.y[0]) ** 2) - np.mean(ref.var[0]))
+    m_dolp = float(np.mean(((dolp(y) - dolp(ref.y)) ** 2)[ref.keep]) - np.mean(ref.var_dolp[ref.keep]))
+    return max(m_s0, 1e-300), max(m_dolp, 1e-300)
 
 
 def timed(renderer, st, adaptive=None):
@@ -107,71 +148,96 @@ def rays(result):
     return int(result.stats["rays"] + result.stats["shadow_rays"])
 
 
-def uniform_mse_at(cost, uniform, k):
-    """MSE (column k) of a uniform render costing ``cost`` rays: log-log interpolation between the
-    uniform (rays, mse…) rows, extrapolated with the slope of the nearest segment."""
-    c = np.log([u[0] for u in uniform])
-    m = np.log([max(u[k], 1e-300) for u in uniform])
+def uniform_mse_at(cost, costs, mses):
+    """MSE of a uniform render costing ``cost``: log-log interpolation between the uniform renders'
+    (cost, MSE), extrapolated with the slope of the nearest segment."""
+    c, m = np.log(costs), np.log(mses)
     i = int(np.clip(np.searchsorted(c, np.log(cost)) - 1, 0, len(c) - 2))
     slope = (m[i + 1] - m[i]) / (c[i + 1] - c[i])
     return float(np.exp(m[i] + slope * (np.log(cost) - c[i])))
 
 
-def allocation_gains(name, renderer, scene, ref, thresholds, rows):
-    """Part 0: predicted gains of the threshold rule and the bound of any allocation, per quantity."""
-    result = ref[4]
-    film, n = result.film, result.film.count.astype(np.float64)
-    a, b = result.halves.means(film.count)
-    tiles = tile_ids(film.width, film.height)
+def allocation_gains(name, renderer, scene, ref: Reference, thresholds, rows):
+    """Part 0: predicted gain of the rule's counts (from a 16-spp first pass) and the bound of any
+    allocation, per threshold and MSE, with the reference pair's per-sample variance per tile."""
+    H, W = ref.y.shape[1:]
+    tiles = tile_ids(W, H)
     nt = int(tiles.max()) + 1
 
     def per_tile(v):
         return (np.bincount(tiles, v, nt) / np.bincount(tiles, None, nt))[tiles]
-    keep = ref[3].ravel()
-    v = {"S0": per_tile(n * ((a[0] - b[0]) / 2) ** 2),
-         "DoLP": per_tile(np.where(keep, n * ((dolp(a) - dolp(b)) / 2) ** 2, 0.0))}
+    # the variance of one render's pixel is 2 × that of the pair's mean; × spp: per sample
+    v = {"S0": per_tile(2 * ref.spp * ref.var[0].ravel()),
+         "DoLP": per_tile(np.where(ref.keep, 2 * ref.spp * ref.var_dolp, 0.0).ravel())}
     st = copy.copy(scene.settings)
-    st.spp, st.seed = 512, 9
-    _, cost = pilot_render(renderer, st, 16)
+    st.spp, st.seed = MAX_SPP, 7
+    pilot, cost = pilot_render(renderer, st, MIN_SPP)
     for quantity, threshold in thresholds:
-        counts = predict(film, result.halves, quantity, threshold, 16, 512, cost).counts
+        counts = predict(pilot.film, pilot.halves, quantity, threshold, MIN_SPP, MAX_SPP, cost).counts
         for label, var in v.items():
-            sigma = np.sqrt(var)
-            rows.append((name, quantity, threshold, label,
-                         np.percentile(sigma, [5, 50, 95]), float(np.mean(counts >= 512)),
-                         mse_time_gain(var, cost, counts), best_mse_time_gain(var, cost),
-                         best_mse_time_gain(var, 1.0)))
+            rows.append((name, quantity, threshold, label, np.percentile(np.sqrt(var), [5, 50, 95]),
+                         float(np.mean(counts >= MAX_SPP)), mse_time_gain(var, cost, counts),
+                         best_mse_time_gain(var, cost), mse_time_gain(var, 1.0, counts), best_mse_time_gain(var, 1.0)))
 
 
-def efficiency(names, res, ref_spp, thresholds, rows, gains):
-    for name in names:
-        scene = load(name, res)
-        renderer = Renderer(scene)
-        renderer.render(copy.copy(scene.settings))          # warm-up (kernels)
-        ref = reference(renderer, scene, ref_spp)
-        allocation_gains(name, renderer, scene, ref, thresholds[name], gains)
-        uniform = []
-        for spp in (16, 64, 256):
-            st = copy.copy(scene.settings)
-            st.spp, st.seed = spp, 7
-            result, seconds = timed(renderer, st)
-            m0, md = mse(lum(result.stokes()), ref)
-            uniform.append((rays(result), m0, md))
-            rows.append((name, f"uniform {spp} spp", spp, seconds, rays(result), m0, md, None, None))
-        for quantity, threshold in thresholds[name]:
-            st = copy.copy(scene.settings)
-            st.spp, st.seed = 512, 7
-            ad = AdaptiveSettings(threshold=threshold, quantity=quantity, min_spp=16)
-            result, seconds = timed(renderer, st, ad)
-            m0, md = mse(lum(result.stokes()), ref)
-            mean_spp = float(result.film.count.mean())
-            r = rays(result)
-            rows.append((name, f"adaptive {quantity} ≤ {threshold:g} ({result.stats['stop_reason']})", mean_spp,
-                         seconds, r, m0, md, uniform_mse_at(r, uniform, 1) / max(m0, 1e-300),
-                         uniform_mse_at(r, uniform, 2) / max(md, 1e-300)))
-            print(rows[-1], flush=True)
-            if name == "demo" and quantity == "dolp":
-                save_maps(result, quantity)
+def efficiency(name, renderer, scene, refs, thresholds, rows):
+    uniform = []
+    for spp in (16, 64, 256):
+        st = copy.copy(scene.settings)
+        st.spp, st.seed = spp, 7
+        result, seconds = timed(renderer, st)
+        y = lum(result.stokes())
+        uniform.append((rays(result), seconds, [mse(y, r) for r in refs]))
+        rows.append((name, f"uniform {spp} spp", spp, seconds, rays(result), uniform[-1][2], None))
+    for quantity, threshold in thresholds:
+        st = copy.copy(scene.settings)
+        st.spp, st.seed = MAX_SPP, 7
+        ad = AdaptiveSettings(threshold=threshold, quantity=quantity, min_spp=MIN_SPP)
+        result, seconds = timed(renderer, st, ad)
+        y = lum(result.stokes())
+        errs = [mse(y, r) for r in refs]
+        r_ = rays(result)
+        gains = []
+        for j, (m0, md) in enumerate(errs):
+            g = []
+            for k, m in enumerate((m0, md)):
+                for cost, col in ((r_, 0), (seconds, 1)):
+                    g.append(uniform_mse_at(cost, [u[col] for u in uniform], [u[2][j][k] for u in uniform]) / m)
+            gains.append(g)                   # S0 (rays, s), DoLP (rays, s)
+        rows.append((name, f"adaptive {quantity} ≤ {threshold:g} ({result.stats['stop_reason']})",
+                     float(result.film.count.mean()), seconds, r_, errs, gains))
+        print(rows[-1], flush=True)
+        if name == "demo" and quantity == "dolp":
+            save_maps(result, quantity)
+
+
+def bias(name, renderer, scene, ref: Reference, threshold, seeds, rows):
+    """Part 1b: S0…S3 of ``seeds`` adaptive renders (s0 ≤ threshold) against our reference."""
+    ys = []
+    for seed in range(seeds):
+        st = copy.copy(scene.settings)
+        st.spp, st.seed = MAX_SPP, 1000 + seed
+        ys.append(lum(renderer.render(st, adaptive=AdaptiveSettings(threshold, "s0", MIN_SPP)).stokes()))
+    ys = np.stack(ys)                                              # (K, 4, H, W)
+    K = seeds
+    H, W = ys.shape[2:]
+    out = []
+    for k in range(4):
+        sums = ys[:, k].sum(axis=(1, 2))
+        se2 = sums.var(ddof=1) / K + float(ref.var[k].sum())       # pixels' noise is independent
+        diff = sums.mean() - float(ref.y[k].sum())
+        z_image = diff / np.sqrt(se2) if se2 > 0 else 0.0
+        b = 8
+        blocks = ys[:, k, :H // b * b, :W // b * b].reshape(K, H // b, b, W // b, b).sum(axis=(2, 4))
+        rblock = ref.y[k, :H // b * b, :W // b * b].reshape(H // b, b, W // b, b).sum(axis=(1, 3))
+        rvar = ref.var[k, :H // b * b, :W // b * b].reshape(H // b, b, W // b, b).sum(axis=(1, 3))
+        bse2 = blocks.var(axis=0, ddof=1) / K + rvar
+        ok = bse2 > 0
+        z2 = float(np.mean((blocks.mean(axis=0) - rblock)[ok] ** 2 / bse2[ok])) if ok.any() else 0.0
+        rel = diff / abs(float(ref.y[0].sum()))
+        out.append((z_image, z2, rel))
+    rows.append((name, threshold, K, out))
+    print(rows[-1], flush=True)
 
 
 def save_maps(result, quantity):
@@ -199,9 +265,10 @@ def prediction(cases, res, rows):
         renderer.render(copy.copy(scene.settings))           # warm-up
         st = copy.copy(scene.settings)
         st.spp, st.seed = 1024, 11
-        pilot, sps = pilot_render(renderer, st, 16)
-        p = predict(pilot.film, pilot.halves, quantity, threshold, 16, st.spp, sps)
-        ad = AdaptiveSettings(threshold=threshold, quantity=quantity, min_spp=16)
+        pilot, sps = pilot_render(renderer, st, MIN_SPP)
+        p = predict(pilot.film, pilot.halves, quantity, threshold, MIN_SPP, st.spp, sps,
+                    round_seconds=round_overhead(renderer, st, pilot, sps, MIN_SPP))
+        ad = AdaptiveSettings(threshold=threshold, quantity=quantity, min_spp=MIN_SPP)
         result, seconds = timed(renderer, st, ad)
         counts = result.film.count
         actual = (float(np.median(counts)), float(np.percentile(counts, 95)), seconds, int(counts.sum()))
@@ -210,32 +277,63 @@ def prediction(cases, res, rows):
         print(rows[-1], flush=True)
 
 
+def has_mitsuba(python):
+    return bool(python) and os.path.exists(python) and subprocess.run(
+        [python, "-c", "import mitsuba"], capture_output=True).returncode == 0
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--res", type=int, default=64)
-    ap.add_argument("--ref-spp", type=int, default=2048)
+    ap.add_argument("--ref-spp", type=int, default=2048, help="samples of each of our two reference renders")
+    ap.add_argument("--mitsuba-python", default=os.environ.get("MITSUBA_PYTHON", "/work/peerenv/bin/python"))
+    ap.add_argument("--mitsuba-spp", type=int, default=8192, help="samples of each of the two Mitsuba references")
+    ap.add_argument("--seeds", type=int, default=8, help="adaptive renders per scene for the bias check")
     ap.add_argument("--out", default=os.path.join(REPO, "out", "adaptive"))
+    ap.add_argument("--prediction-only", action="store_true", help="part 2 only")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
-    thresholds = {"glass_sphere": [("s0", 0.02), ("dolp", 0.01)],
+    thresholds = {"glass_sphere": [("s0", 0.02), ("dolp", 0.01), ("dolp", 0.03)],
                   "fresnel_sphere_au": [("s0", 0.01), ("dolp", 0.005)],
                   "demo": [("s0", 0.02), ("dolp", 0.01)]}
-    eff, gains = [], []
-    efficiency(list(thresholds), args.res, args.ref_spp, thresholds, eff, gains)
+    mitsuba = has_mitsuba(args.mitsuba_python)
+    eff, gains, biases, labels = [], [], [], {}
+    for name in [] if args.prediction_only else thresholds:
+        scene = load(name, args.res)
+        renderer = Renderer(scene)
+        renderer.render(copy.copy(scene.settings))          # warm-up (kernels)
+        refs = [our_reference(renderer, scene, args.ref_spp)]
+        if mitsuba and name != "demo":
+            refs.insert(0, mitsuba_reference(args.mitsuba_python, name, args.mitsuba_spp, args.res, args.out))
+        labels[name] = [r.label for r in refs]
+        allocation_gains(name, renderer, scene, refs[-1], thresholds[name], gains)
+        efficiency(name, renderer, scene, refs, thresholds[name], eff)
+        bias(name, renderer, scene, refs[-1], thresholds[name][0][1], args.seeds, biases)
     pred = []
     prediction([("glass_sphere", "dolp", 0.01), ("fresnel_sphere_au", "s0", 0.01), ("demo", "dolp", 0.01)],
                args.res, pred)
-    lines = ["| scene | threshold | σ per tile p5 / p50 / p95 | tiles at max spp | predicted gain of the "
-             "threshold rule | bound, measured cost | bound, equal cost |", "|---|---|---|---|---|---|---|"]
-    for name, q, t, label, pct, capped, g, best, best_eq in gains:
-        lines.append(f"| {name} | {q} ≤ {t:g}, MSE of {label} | {pct[0]:.2g} / {pct[1]:.2g} / {pct[2]:.2g} | "
-                     f"{100 * capped:.0f} % | {g:.2f}× | {best:.2f}× | {best_eq:.2f}× |")
-    lines += ["", "| scene | sampling | mean spp | seconds | Mrays | MSE S0 | MSE × Mrays (S0) | MSE DoLP | "
-              "MSE × Mrays (DoLP) | equal-cost gain S0 / DoLP |", "|---|---|---|---|---|---|---|---|---|---|"]
-    for name, label, spp, s, r, m0, md, g0, gd in eff:
-        gain = "" if g0 is None else f"{g0:.2f}× / {gd:.2f}×"
-        lines.append(f"| {name} | {label} | {spp:.1f} | {s:.2f} | {r / 1e6:.2f} | {m0:.3e} | {m0 * r / 1e6:.3e} | "
-                     f"{md:.3e} | {md * r / 1e6:.3e} | {gain} |")
+    lines = ["| scene | threshold | MSE of | σ per tile p5 / p50 / p95 | tiles at max spp | predicted gain of the "
+             "rule, measured cost / equal cost | bound, measured cost / equal cost |",
+             "|---|---|---|---|---|---|---|"]
+    for name, q, t, label, pct, capped, g, best, g_eq, best_eq in gains:
+        lines.append(f"| {name} | {q} ≤ {t:g} | {label} | {pct[0]:.2g} / {pct[1]:.2g} / {pct[2]:.2g} | "
+                     f"{100 * capped:.0f} % | {g:.2f}× / {g_eq:.2f}× | {best:.2f}× / {best_eq:.2f}× |")
+    lines += ["", "| scene | reference | sampling | mean spp | seconds | Mrays | MSE S0 | MSE DoLP | "
+              "equal-cost gain S0 (rays / seconds) | equal-cost gain DoLP (rays / seconds) |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
+    for name, label, spp, s, r, errs, g in eff:
+        for j, ref_label in enumerate(labels[name]):
+            m0, md = errs[j]
+            gain = ("", "") if g is None else (f"**{g[j][0]:.2f}×** / {g[j][1]:.2f}×", f"**{g[j][2]:.2f}×** / "
+                                                                                      f"{g[j][3]:.2f}×")
+            lines.append(f"| {name} | {ref_label} | {label} | {spp:.1f} | {s:.2f} | {r / 1e6:.2f} | {m0:.3e} | "
+                         f"{md:.3e} | {gain[0]} | {gain[1]} |")
+    lines += ["", "| scene | adaptive s0 ≤ | seeds | z of the image sum S0 / S1 / S2 / S3 | mean z² over 8×8 "
+              "blocks S0 / S1 / S2 / S3 | image-sum difference ÷ ΣS0, S0 / S1 / S2 / S3 |", "|---|---|---|---|---|---|"]
+    for name, t, K, out in biases:
+        lines.append(f"| {name} | {t:g} | {K} | " + " / ".join(f"{z:+.2f}" for z, _, _ in out) + " | "
+                     + " / ".join(f"{z2:.2f}" for _, z2, _ in out) + " | "
+                     + " / ".join(f"{rel:+.1e}" for _, _, rel in out) + " |")
     lines += ["", "| scene | target | median spp predicted / actual | p95 spp predicted / actual | "
               "seconds predicted / actual | samples predicted / actual | uniform (predicted) | stop |",
               "|---|---|---|---|---|---|---|---|"]
