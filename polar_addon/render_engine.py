@@ -36,7 +36,7 @@ DISPLAY_INTERVAL = 1.0
 #: Live display updates may take at most this share of the render's wall time: each update runs on
 #: the thread that feeds the render workers, so while it runs one worker waits (the next interval is
 #: stretched to cost ÷ share when an update is slow, e.g. at 1080p).
-LIVE_DISPLAY_SHARE = 0.03
+LIVE_DISPLAY_SHARE = 0.02
 #: Passes refreshed by live display updates (cheap copies); the derived and false-colour passes
 #: (DoP, AoLP, Polariser, Vis…) are computed once, from the finished image.
 LIVE_PASSES = ("S0", "S1", "S2", "S3")

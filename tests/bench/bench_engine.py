@@ -70,6 +70,8 @@ FULL_OVER_SCALAR_TARGET = 1.3      # full Stokes time ÷ scalar time, at most
 BLENDER_TARGET = 1.10              # Blender time ÷ CLI time, at most
 MEMORY_TARGET_GB = 2.0             # 1080p demo, peak RSS below
 CYCLES_TARGET = 3.0                # variance × time of S0, Polar ÷ Cycles, at most (diffuse scenes)
+#: Cycles scenes of a quick run (tests/bench/cycles_noise.py; --full: all of them)
+CYCLES_QUICK = ["area_square", "point_radius", "all_lights", "eight_points_world"]
 #: Scenes whose S0 differs from Mitsuba's by design (peer_compare.S0_DIFFERS): our error = our noise.
 S0_DIFFERS = {"cornell_lambert"}
 
@@ -314,10 +316,11 @@ def tables(rows, blender, memory, cycles, args, header):
         sp = blender["split"]
         out += ["", f"**6. Blender ÷ CLI** ({blender['width']}×{blender['height']}, {blender['spp']} spp, the "
                 "scene of tests/bench/blender_overhead.py)", "",
-                "| Blender (s) | CLI: render of the export (s) | ratio | target | | Blender's extra, profiled |",
-                "|---|---|---|---|---|---|",
+                "| Blender (s) | CLI: render of the export (s) | ratio | target | | CPU time ratio | "
+                "Blender's extra, profiled |", "|---|---|---|---|---|---|---|",
                 f"| {blender['blender_seconds']:.2f} | {blender['cli_seconds']:.2f} | {blender['ratio']:.3f} | "
-                f"≤ {BLENDER_TARGET} | {verdict(blender['ratio'], BLENDER_TARGET, at_least=False)} | export "
+                f"≤ {BLENDER_TARGET} | {verdict(blender['ratio'], BLENDER_TARGET, at_least=False)} | "
+                f"{blender['cpu_ratio']:.3f} | export "
                 f"{sp['export']:.2f} s, live display {sp['  of which live display']:.2f} s, final passes "
                 f"{sp['pass writing (all calls)']:.2f} s of {sp['Blender operator total']:.2f} s |"]
     if memory:
@@ -399,7 +402,7 @@ def main():
     ap.add_argument("--blender-res", default=None, help="Blender ÷ CLI image size (default 480x270; --full 960x540)")
     ap.add_argument("--cycles-res", default=None, help="Cycles scenes size (default 160x120; --full 320x240)")
     ap.add_argument("--cycles-spp", type=int, default=None, help="default 16; --full 64")
-    ap.add_argument("--cycles-scenes", default=None, help="default area_square,point_radius,all_lights; --full all")
+    ap.add_argument("--cycles-scenes", default=None, help=f"default {','.join(CYCLES_QUICK)}; --full all")
     ap.add_argument("--memory-res", default="960x540", help="proxy size for the 1080p memory figure (quick runs)")
     ap.add_argument("--full", action="store_true", help="README settings; rewrites README.md's tables")
     ap.add_argument("--out", default="")
@@ -447,7 +450,7 @@ def main():
                                   "--res", args.cycles_res or ("320x240" if full else "160x120"),
                                   "--spp", str(args.cycles_spp or (64 if full else 16)),
                                   "--scenes", args.cycles_scenes or ("all" if full else
-                                                                    "area_square,point_radius,all_lights")])
+                                                                    ",".join(CYCLES_QUICK))])
         cycles = json_lines(out)
         print(f"cycles: done ({time.perf_counter() - t_start:.0f} s)", file=sys.stderr)
     header = (f"Run {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC on {platform.node() or '?'} "

@@ -4,7 +4,8 @@
                                        [--json]
 
 Builds each scene of tests/test_cycles_parity.py in bpy (diffuse floor and box, one kind of light
-each; ``all_lights`` has 8 point/spot/area/sun lights of 1–1000 W and an emitter), renders it
+each; ``all_lights`` has 8 point/spot/area/sun lights of 1–1000 W and an emitter; plus
+``eight_points_world``: eight point lights of 1–1000 W and a grey world, issue 16's case), renders it
 twice (seeds 0 and 1) with Cycles (CPU, 2 threads, the test's unbiased settings) and twice with
 Polar (F12 path: ``bpy.ops.render.render``, polarisation auto, which picks scalar transport here),
 both at ``--spp`` samples and written to EXR, and reports per renderer the best wall time and the
@@ -30,7 +31,23 @@ REPO = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, REPO)
 
 REC709 = np.array([0.2126, 0.7152, 0.0722])
-QUICK_SCENES = ["area_square", "point_radius", "all_lights"]
+QUICK_SCENES = ["area_square", "point_radius", "all_lights", "eight_points_world"]
+
+
+def eight_points_world():
+    """Issue 16's many-light case (not a parity test): eight point lights of 1–1000 W and a grey world."""
+    import bpy
+    import tests.test_cycles_parity as parity
+    for i, energy in enumerate(np.geomspace(1.0, 1000.0, 8)):
+        angle = 2 * np.pi * i / 8
+        parity.add_light("POINT", (2.0 * np.cos(angle), 2.0 * np.sin(angle), 0.8 + 0.2 * i), energy=float(energy),
+                         shadow_soft_size=0.1)
+    background = bpy.context.scene.world.node_tree.nodes["Background"]
+    background.inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    background.inputs["Strength"].default_value = 0.1
+
+
+BENCH_SCENES = {"eight_points_world": eight_points_world}
 
 
 def render_luminance(scene, path):
@@ -47,7 +64,7 @@ def render_luminance(scene, path):
 def measure(name, width, height, spp, tmp):
     import tests.test_cycles_parity as parity
     scene = parity.base_scene()
-    parity.SCENES[name]()
+    {**parity.SCENES, **BENCH_SCENES}[name]()
     scene.render.resolution_x, scene.render.resolution_y = width, height
     c = scene.cycles
     scene.render.engine = "CYCLES"
@@ -84,8 +101,8 @@ def measure(name, width, height, spp, tmp):
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenes", default=",".join(QUICK_SCENES), help="names from tests/test_cycles_parity.py, "
-                                                                    "or 'all'")
+    ap.add_argument("--scenes", default=",".join(QUICK_SCENES),
+                    help="names from tests/test_cycles_parity.py, eight_points_world, or 'all'")
     ap.add_argument("--res", default="160x120")
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--json", action="store_true")
@@ -94,7 +111,7 @@ def main():
     import tests.test_cycles_parity as parity
     load_addon()
     width, height = (int(v) for v in args.res.split("x"))
-    names = list(parity.SCENES) if args.scenes == "all" else args.scenes.split(",")
+    names = list(parity.SCENES) + list(BENCH_SCENES) if args.scenes == "all" else args.scenes.split(",")
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
             r = measure(name, width, height, args.spp, tmp)
