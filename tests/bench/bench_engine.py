@@ -122,7 +122,7 @@ def ours_child(cfg):
     if cfg.get("width"):
         scene.camera.width, scene.camera.height = cfg["width"], cfg["height"]
     renderer = Renderer(scene)
-    inside = [0.0]                 # seconds inside Embree, summed over threads
+    inside = [0.0, 0]              # seconds inside Embree (summed over threads), number of queries
     compiled = renderer.compiled
     for name in ("intersect", "occluded"):
         method = getattr(compiled, name)
@@ -133,6 +133,7 @@ def ours_child(cfg):
                 return _method(*a, **k)
             finally:
                 inside[0] += time.perf_counter() - t
+                inside[1] += 1
         setattr(compiled, name, timed)
     base = copy.copy(scene.settings)
     warm = copy.copy(base)
@@ -142,7 +143,7 @@ def ours_child(cfg):
         st = copy.copy(base)
         st.spp, st.seed = job["spp"], job.get("seed", 0)
         st.polarisation, st.threads = job.get("polarisation", "auto"), job.get("threads", 0)
-        inside[0] = 0.0
+        inside[:] = [0.0, 0]
         t0 = time.perf_counter()
         result = renderer.render(st)
         seconds = time.perf_counter() - t0
@@ -150,7 +151,9 @@ def ours_child(cfg):
             np.save(job["save"], np.einsum("shwc,c->shw", result.stokes(), LUMINANCE_WEIGHTS))
         s = result.stats
         print(json.dumps({"job": job["name"], "seconds": seconds, "samples": s["samples"], "rays": s["rays"],
-                          "shadow_rays": s["shadow_rays"], "embree_seconds": inside[0],
+                          "shadow_rays": s["shadow_rays"],
+                          # None if the tracer no longer goes through these two methods (not measured)
+                          "embree_seconds": inside[0] if inside[1] else None,
                           "transport": s.get("transport", ""), "kernels": s.get("kernels", ""),
                           "compile_seconds": renderer.compile_seconds}), flush=True)
 
@@ -304,11 +307,12 @@ def tables(rows, blender, memory, cycles, args, header):
             "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         o = r["ours"]
-        share = o["auto_1thread"]["embree_seconds"] / o["auto_1thread"]["seconds"]
+        embree = o["auto_1thread"]["embree_seconds"]
+        share = None if embree is None else embree / o["auto_1thread"]["seconds"]
         sphere = r["scene"] in SPHERE_SCENES
         scale = rate(r["ours_best"]) / rate(o["auto_1thread"])
         fo = o["full"]["seconds"] / o["off"]["seconds"]
-        out.append(f"| {r['scene']} | {share:.0%} | {'≥ 50 %' if sphere else '(none)'} | "
+        out.append(f"| {r['scene']} | {fmt(share, '.0%')} | {'≥ 50 %' if sphere else '(none)'} | "
                    f"{verdict(share, EMBREE_SHARE_TARGET) if sphere else ''} | {scale:.2f}× | ≥ {THREADS_TARGET}× | "
                    f"{verdict(scale, THREADS_TARGET)} | {fo:.2f}× | ≤ {FULL_OVER_SCALAR_TARGET}× | "
                    f"{verdict(fo, FULL_OVER_SCALAR_TARGET, at_least=False)} |")
