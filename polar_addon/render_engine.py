@@ -32,8 +32,15 @@ from .viewport import ViewportSession, stop_all_sessions
 from ..engine import kernels
 from .kernel_cache import first_compile_pending
 
-#: Seconds between progressive updates of the image shown while rendering.
+#: Seconds between progressive updates of the image shown while rendering (at least).
 DISPLAY_INTERVAL = 1.0
+#: Live display updates may take at most this share of the render's wall time: each update runs on
+#: the thread that feeds the render workers, so while it runs one worker waits (the next interval is
+#: stretched to cost ÷ share when an update is slow, e.g. at 1080p).
+LIVE_DISPLAY_SHARE = 0.02
+#: Passes refreshed by live display updates (cheap copies); the derived and false-colour passes
+#: (DoP, AoLP, Polariser, Vis…) are computed once, from the finished image.
+LIVE_PASSES = ("S0", "S1", "S2", "S3")
 #: Extra cancel hook for scripted use and tests (test_break() is always False headless).
 cancel_requested = {"value": False}
 #: Dask scheduler address for distributed final renders (set by examples/batch_render.py --scheduler).
@@ -81,6 +88,21 @@ def _display_colour(uint8_rgb):
     return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
+def _blender_rows(img):
+    """An (H, W[, C]) image as the flat float32 array a render pass's ``rect.foreach_set`` takes
+    (Blender's rows start at the bottom of the image)."""
+    return np.ascontiguousarray(img[::-1], dtype=np.float32).ravel()
+
+
+def _combined(s0_rgb, alpha, dtype=np.float64):
+    """The Combined pass (H, W, 4): S0 as RGB, alpha = coverage of the camera rays (1 if None)."""
+    combined = np.ones(s0_rgb.shape[:2] + (4,), dtype)
+    combined[..., :3] = s0_rgb
+    if alpha is not None:
+        combined[..., 3] = alpha
+    return combined
+
+
 def mosaic_inputs(settings):
     """(2×2 layout in degrees, extinction) of the scene's Polarisation Mosaic pass."""
     a = tuple(settings.mosaic_angles)
@@ -102,11 +124,7 @@ def pass_images(stokes_rgb, polariser=None, wanted=None, alpha=None, mosaic=None
     out["DoLP"] = degree_of_linear_polarisation(y)[..., None]
     out["AoLP"] = angle_of_linear_polarisation(y)[..., None]
     out["DoCP"] = degree_of_circular_polarisation(y)[..., None]
-    combined = np.ones(stokes_rgb.shape[1:3] + (4,))
-    combined[..., :3] = stokes_rgb[0]
-    if alpha is not None:
-        combined[..., 3] = alpha
-    out["Combined"] = combined
+    out["Combined"] = _combined(stokes_rgb[0], alpha)
     if "Polariser" in wanted and polariser is not None:
         angle, extinction, r_angle, retardance = polariser
         out["Polariser"] = apply_filter(stokes_rgb, filter_row("retarder", angle, extinction, r_angle, retardance))
@@ -191,7 +209,7 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         window = None if self.is_preview else border_window(scene.render, W, H)
         layer_name = depsgraph.view_layer.name
         result = self.begin_result(0, 0, W, H, layer=layer_name)
-        last_display = [time.perf_counter()]
+        live = {"last": time.perf_counter(), "interval": DISPLAY_INTERVAL}
         enabled = set(depsgraph.view_layer.polar.enabled_passes()) if hasattr(depsgraph.view_layer, "polar") \
             else set(DEFAULT_PASSES)
         polariser = polariser_inputs(scene.polar)
@@ -207,11 +225,10 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             rate = stats["samples"] / max(stats.get("seconds", 1e-9), 1e-9) / 1e6
             self.update_stats("", f"Polar | {stats['transport']} | {100 * fraction:.0f}% | {rate:.2f} Msamples/s")
             now = time.perf_counter()
-            if now - last_display[0] > DISPLAY_INTERVAL:
-                last_display[0] = now
-                self._write_passes(result, renderer.last_film_mean(), window, enabled, polariser,
-                                   _live_alpha(renderer))
-                self.update_result(result)
+            if now - live["last"] > live["interval"]:
+                self._live_display(result, renderer, window, enabled)
+                live["last"] = time.perf_counter()
+                live["interval"] = max(DISPLAY_INTERVAL, (live["last"] - now) / LIVE_DISPLAY_SHARE)
 
         def should_stop():
             return self.test_break() or cancel_requested["value"]
@@ -267,7 +284,7 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             noise = noise[y0:y1, x0:x1]
         target = result.layers[0].passes.get("Noise")
         if target is not None:
-            target.rect.foreach_set(np.ascontiguousarray(noise[::-1], dtype=np.float32).ravel())
+            target.rect.foreach_set(_blender_rows(noise))
 
     def _write_denoise_data(self, result, film, window, enabled):
         """Denoising Albedo / Normal passes from the film's guides (Cycles' denoising data)."""
@@ -280,7 +297,25 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             if window is not None:
                 x0, y0, x1, y1 = window
                 img = img[y0:y1, x0:x1]
-            target.rect.foreach_set(np.ascontiguousarray(img[::-1], dtype=np.float32).ravel())
+            target.rect.foreach_set(_blender_rows(img))
+
+    def _live_display(self, result, renderer, window, enabled):
+        """Progressive display: the Combined and Stokes passes of the samples so far (no derived passes)."""
+        stokes_rgb = renderer.last_film_mean()
+        if stokes_rgb is None:
+            return
+        alpha = _live_alpha(renderer)
+        if window is not None:
+            x0, y0, x1, y1 = window
+            stokes_rgb = stokes_rgb[:, y0:y1, x0:x1]
+            alpha = None if alpha is None else alpha[y0:y1, x0:x1]
+        passes = result.layers[0].passes
+        for name in ("Combined",) + LIVE_PASSES:
+            target = passes.get(name) if name == "Combined" or name in enabled else None
+            if target is not None:
+                target.rect.foreach_set(_blender_rows(stokes_rgb[int(name[1])] if name != "Combined"
+                                                      else _combined(stokes_rgb[0], alpha, np.float32)))
+        self.update_result(result)
 
     def _write_passes(self, result, stokes_rgb, window, enabled, polariser, alpha=None):
         if stokes_rgb is None:
@@ -301,8 +336,7 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             target = passes.get(name)
             if target is None:
                 continue
-            # Blender's rows start at the bottom of the image.
-            target.rect.foreach_set(np.ascontiguousarray(img[::-1], dtype=np.float32).ravel())
+            target.rect.foreach_set(_blender_rows(img))
 
     # ------------------------------------------------------------------ viewport
 

@@ -1,45 +1,88 @@
-"""Throughput and memory: our engine (polarised and unpolarised) next to Mitsuba 3, in one run.
+"""Speed benchmark of issue 16: every target measured side by side in one run, with PASS/MISS.
 
-    python tests/bench/bench_engine.py [--scenes a,b] [--spp 8] [--mitsuba-python PY]
-                                       [--mitsuba-spp 64] [--scalar-spp 4] [--out bench.md]
+    python tests/bench/bench_engine.py [--scenes a,b] [--res 128] [--spp 32] [--mitsuba-spp 128]
+                                       [--ref-spp 2048] [--mitsuba-python PY] [--skip blender,cycles,memory]
+                                       [--out bench.md] [--full]
 
-For every scene: wall time, samples per second and peak resident memory of
-  - ours, full Mueller transport (spectral, 4 wavelengths per path),
-  - ours, polarisation off (scalar transport, same paths),
-  - Mitsuba 3 ``llvm_ad_spectral_polarized`` and ``scalar_spectral_polarized``
-    (through shared/peers/render_peer.py with the given Python; skipped if it
-    cannot import mitsuba),
-each in its own process (peak RSS from wait4), all on this machine in this
-run, so the ratios are comparable; every measurement is repeated (--repeats,
-interleaved) and the fastest run kept, because this VM's speed varies.  Mitsuba's time is measured around its
-render call by render_peer.py (scene loading and JIT compilation included
-for LLVM; the first LLVM render of a session also fills Dr.Jit's kernel
-cache, so a warm-up render is made first).  Prints a Markdown table.
-Not part of the test command: benchmarks never run as tests.
+Prints one Markdown table per target (the issue's target next to each measured ratio):
+
+1. **Time to equal error** (peer scenes, ``shared/peers``): ours (polarisation auto, 2 threads) and
+   Mitsuba 3 ``llvm_ad_spectral_polarized`` each render every scene twice (seeds 0 and 1) at the same
+   resolution; the error is the RMSE of the luminance S0 (and S1) against a high-spp reference, with
+   the reference's own noise subtracted (error² − var_ref, var_ref from its two halves).  Monte Carlo
+   error² ∝ 1/time, so time to equal error ours ÷ Mitsuba = (t_M·e_M²)/(t_ours·e_ours²), > 1: we are
+   faster.  References: Mitsuba, 2 × ``--ref-spp`` (``render_peer.py``), cached in
+   ``out/bench_refs/`` (git-ignored); without Mitsuba, our own 2 × ``--ref-spp`` render.  Where our
+   S0 legitimately differs from Mitsuba's (``cornell_lambert``: RGB → spectrum upsampling of the
+   coloured walls) our S0 error is our noise alone (from the two seeds), marked ‡.
+2. **Throughput**: Msamples/s and Mrays/s (camera + bounce + shadow rays) of ours next to Mitsuba
+   LLVM (and ``scalar_spectral_polarized`` at ``--mitsuba-scalar-spp``), peak RSS of each process.
+3. **Embree share**: time inside the Embree closest-hit and shadow queries ÷ wall time of a
+   1-thread render (the ``intersect``/``occluded`` calls incl. their float32 conversions).
+4. **Thread scaling**: throughput with 2 threads ÷ 1 thread.
+5. **Full Stokes ÷ scalar**: render time with ``--polarisation full`` ÷ ``--polarisation off``.
+6. **Blender ÷ CLI**: ``tests/bench/blender_overhead.py`` (F12 render in bpy vs the engine render of
+   the same exported scene, and where Blender's extra time goes).
+7. **Peak memory** of the 1080p demo (``examples/demo.json`` at 1920×1080, 1 spp); quick runs render
+   a proxy at ``--memory-res`` and add the engine's own film + batch estimate
+   (``engine.render.renderer.memory_estimate``: 136 bytes per pixel) for the missing pixels.
+8. **Cycles**: ``tests/bench/cycles_noise.py`` (the Cycles parity scenes: time and noise of S0 at
+   equal samples, variance × time Polar ÷ Cycles).
+
+Our renders run in one child process per scene (kernels loaded by a tiny warm-up render first;
+the times are those of ``Renderer.render``, as Mitsuba's are of its render call), Mitsuba's through
+``render_peer.py`` (its first render of a scene includes its JIT compilation; the fastest of three
+is kept).  ``--full`` uses 256², more samples and every scene, renders the demo at 1080p, and
+rewrites the tables in README.md between the ``bench:begin`` / ``bench:end`` markers.
+Benchmarks never run as tests.
 """
 
 from __future__ import annotations
 
 import argparse
+import datetime
 import json
 import os
+import platform
 import subprocess
 import sys
 import tempfile
 import time
 
+import numpy as np
+
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
-SHARED = os.environ.get("POLAR_SHARED", os.path.join(os.path.dirname(REPO), "shared"))
+SHARED = os.environ.get("POLAR_SHARED") or next(
+    (d for d in (os.path.join(os.path.dirname(REPO), "shared"), "/work/shared") if os.path.isdir(d)), "shared")
 PEERS = os.path.join(SHARED, "peers")
-DEFAULT_SCENES = ["plane_brewster", "fresnel_sphere", "glass_sphere", "rough_sphere_a030", "cornell_lambert"]
+REF_DIR = os.path.join(REPO, "out", "bench_refs")
+DEFAULT_MITSUBA = "/work/peerenv/bin/python"
+DEFAULT_SCENES = ["fresnel_sphere", "fresnel_sphere_au", "glass_sphere", "rough_sphere_a030", "cornell_lambert",
+                  "plane_brewster"]
+#: Issue 16 targets.  Time to equal error (S0), ours ÷ Mitsuba LLVM, at least:
+EQUAL_ERROR_TARGET = {"fresnel_sphere": 1.0, "fresnel_sphere_au": 0.5, "glass_sphere": 0.5,
+                      "rough_sphere_a030": 0.5, "cornell_lambert": 0.5}
+SPHERE_SCENES = {"fresnel_sphere", "fresnel_sphere_au", "glass_sphere", "rough_sphere_a030"}
+EMBREE_SHARE_TARGET = 0.5          # of a 1-thread render, sphere scenes
+THREADS_TARGET = 1.9               # 2 threads ÷ 1
+FULL_OVER_SCALAR_TARGET = 1.3      # full Stokes time ÷ scalar time, at most
+BLENDER_TARGET = 1.10              # Blender time ÷ CLI time, at most
+MEMORY_TARGET_GB = 2.0             # 1080p demo, peak RSS below
+CYCLES_TARGET = 3.0                # variance × time of S0, Polar ÷ Cycles, at most (diffuse scenes)
+#: Cycles scenes of a quick run (tests/bench/cycles_noise.py; --full: all of them)
+CYCLES_QUICK = ["area_square", "point_radius", "all_lights", "eight_points_world"]
+#: Scenes whose S0 differs from Mitsuba's by design (peer_compare.S0_DIFFERS): our error = our noise.
+S0_DIFFERS = {"cornell_lambert"}
 
 
-def run_measured(cmd):
+# ---------------------------------------------------------------------------------------- helpers
+
+def run_measured(cmd, env=None):
     """Run cmd; return (stdout, wall seconds, peak RSS in MB of that very process, from wait4)."""
     with tempfile.TemporaryFile("w+") as out, tempfile.TemporaryFile("w+") as err:
         t0 = time.perf_counter()
-        proc = subprocess.Popen(cmd, stdout=out, stderr=err, text=True)
+        proc = subprocess.Popen(cmd, stdout=out, stderr=err, text=True, env=env)
         _, status, usage = os.wait4(proc.pid, 0)
         wall = time.perf_counter() - t0
         proc.returncode = os.waitstatus_to_exitcode(status)
@@ -51,19 +94,35 @@ def run_measured(cmd):
     return stdout, wall, usage.ru_maxrss / 1024
 
 
-def ours_once(scene_name, spp, polarisation, threads=0):
-    """Child mode: render one scene and print a JSON line with timing and peak RSS."""
+def json_lines(stdout):
+    return [json.loads(line) for line in stdout.splitlines() if line.startswith("{")]
+
+
+def verdict(value, target, at_least=True):
+    if value is None or not np.isfinite(value):
+        return "—"
+    return "PASS" if (value >= target if at_least else value <= target) else "MISS"
+
+
+def fmt(value, spec=".2f", suffix=""):
+    return "—" if value is None or not np.isfinite(value) else f"{value:{spec}}{suffix}"
+
+
+# ------------------------------------------------------------------------------ child: our renders
+
+def ours_child(cfg):
+    """Child mode: our renders of one scene, one JSON line each; images (luminance Stokes) to .npy."""
     sys.path.insert(0, REPO)
+    import copy
     from engine.render.renderer import Renderer
     from engine.scene.loader import load_scene
-    scene = load_scene(os.path.join(PEERS, "scenes", f"{scene_name}.json"))
-    scene.settings.spp = spp
-    scene.settings.polarisation = polarisation
-    scene.settings.threads = threads
+    from engine.spectral.cie import LUMINANCE_WEIGHTS
+    path = cfg["scene"] if cfg["scene"].endswith(".json") else os.path.join(PEERS, "scenes", f"{cfg['scene']}.json")
+    scene = load_scene(path)
+    if cfg.get("width"):
+        scene.camera.width, scene.camera.height = cfg["width"], cfg["height"]
     renderer = Renderer(scene)
-    # Time spent in Embree (closest-hit and shadow queries incl. their float32 conversions),
-    # summed over threads: its share of the wall time is meaningful for the 1-thread run.
-    inside = [0.0]
+    inside = [0.0, 0]              # seconds inside Embree (summed over threads), number of queries
     compiled = renderer.compiled
     for name in ("intersect", "occluded"):
         method = getattr(compiled, name)
@@ -74,100 +133,341 @@ def ours_once(scene_name, spp, polarisation, threads=0):
                 return _method(*a, **k)
             finally:
                 inside[0] += time.perf_counter() - t
+                inside[1] += 1
         setattr(compiled, name, timed)
+    base = copy.copy(scene.settings)
+    warm = copy.copy(base)
+    warm.spp = 1
+    renderer.render(warm, window=(0, 0, min(8, scene.camera.width), min(8, scene.camera.height)))
+    for job in cfg["jobs"]:
+        st = copy.copy(base)
+        st.spp, st.seed = job["spp"], job.get("seed", 0)
+        st.polarisation, st.threads = job.get("polarisation", "auto"), job.get("threads", 0)
+        inside[:] = [0.0, 0]
+        t0 = time.perf_counter()
+        result = renderer.render(st)
+        seconds = time.perf_counter() - t0
+        if job.get("save"):
+            np.save(job["save"], np.einsum("shwc,c->shw", result.stokes(), LUMINANCE_WEIGHTS))
+        s = result.stats
+        print(json.dumps({"job": job["name"], "seconds": seconds, "samples": s["samples"], "rays": s["rays"],
+                          "shadow_rays": s["shadow_rays"],
+                          # None if the tracer no longer goes through these two methods (not measured)
+                          "embree_seconds": inside[0] if inside[1] else None,
+                          "transport": s.get("transport", ""), "kernels": s.get("kernels", ""),
+                          "compile_seconds": renderer.compile_seconds}), flush=True)
+
+
+def memory_child(cfg):
+    """Child mode: one render of the demo scene at the given size (peak RSS measured by the parent)."""
+    sys.path.insert(0, REPO)
+    from engine.render.renderer import Renderer
+    from engine.scene.loader import load_scene
+    scene = load_scene(os.path.join(REPO, "examples", "demo.json"))
+    scene.camera.width, scene.camera.height = cfg["width"], cfg["height"]
+    scene.settings.spp = cfg["spp"]
     t0 = time.perf_counter()
-    result = renderer.render()
-    seconds = time.perf_counter() - t0
-    print(json.dumps({"seconds": seconds, "samples": result.stats["samples"], "rays": result.stats["rays"],
-                      "shadow_rays": result.stats["shadow_rays"], "compile_seconds": renderer.compile_seconds,
-                      "embree_seconds": inside[0], "kernels": result.stats.get("kernels", "")}))
+    Renderer(scene).render()
+    print(json.dumps({"seconds": time.perf_counter() - t0}))
 
 
-def mitsuba_once(python, scene_name, variant, spp, outdir):
-    """One Mitsuba render through render_peer.py; its own render time (render_s) and our wait4 peak RSS."""
-    cmd = [python, os.path.join(PEERS, "render_peer.py"), scene_name, "--variant", variant, "--spp", str(spp),
-           "--out", outdir]
-    _, wall, peak = run_measured(cmd)
-    metas = sorted((os.path.join(outdir, f) for f in os.listdir(outdir)
-                    if f.startswith(f"{scene_name}__{variant}__") and f.endswith(".json")), key=os.path.getmtime)
-    with open(metas[-1]) as fh:
-        meta = json.load(fh)
-    return {"seconds": float(meta["render_seconds"]), "samples": meta["width"] * meta["height"] * spp,
-            "peak_rss_mb": peak, "wall": wall}
+def run_ours(scene, res, jobs):
+    cfg = {"scene": scene, "width": res, "height": res, "jobs": jobs}
+    out, _, peak = run_measured([sys.executable, __file__, "--child", json.dumps(cfg)])
+    return {r["job"]: r for r in json_lines(out)}, peak
+
+
+# ---------------------------------------------------------------------------------------- Mitsuba
+
+def mitsuba_renders(python, scene, variant, spp, res, seed, renders, outdir):
+    """Render with render_peer.py; (list of luminance Stokes images, list of render seconds, peak RSS MB)."""
+    cmd = [python, os.path.join(PEERS, "render_peer.py"), scene, "--variant", variant, "--spp", str(spp),
+           "--res", str(res), "--seed", str(seed), "--renders", str(renders), "--out", outdir]
+    _, _, peak = run_measured(cmd)
+    images, seconds = [], []
+    for k in range(renders):
+        stem = os.path.join(outdir, f"{scene}__{variant}__{res}x{res}__{spp}spp__seed{seed + k}")
+        images.append(np.load(stem + "_lum.npy").astype(np.float64))
+        with open(stem + ".json") as fh:
+            seconds.append(float(json.load(fh)["render_seconds"]))
+    return images, seconds, peak
+
+
+def reference(scene, res, ref_spp, mitsuba):
+    """(mean luminance Stokes image (4, H, W), variance of that mean per component (4,), source)."""
+    os.makedirs(REF_DIR, exist_ok=True)
+    source = "mitsuba" if mitsuba else "ours"
+    path = os.path.join(REF_DIR, f"{scene}__{source}__{res}__{ref_spp}x2.npz")
+    if not os.path.exists(path):
+        if mitsuba:
+            imgs, _, _ = mitsuba_renders(mitsuba, scene, "llvm_ad_spectral_polarized", ref_spp, res, 1000, 2, REF_DIR)
+        else:
+            saves = [os.path.join(REF_DIR, f"{scene}__ours__{res}__{ref_spp}__seed{s}.npy") for s in (1000, 1001)]
+            run_ours(scene, res, [{"name": f"ref{s}", "spp": ref_spp, "seed": s, "save": p}
+                                  for s, p in zip((1000, 1001), saves)])
+            imgs = [np.load(p) for p in saves]
+        np.savez(path, a=imgs[0], b=imgs[1])
+    z = np.load(path)
+    a, b = z["a"], z["b"]
+    return (a + b) / 2, np.mean((a - b) ** 2, axis=(1, 2)) / 4, source
+
+
+def error2(images, ref, ref_var, noise_only=False):
+    """Mean squared error per Stokes component (4,) of the renders, reference noise removed.
+
+    ``noise_only``: the renders' own variance from their seed-to-seed spread (no reference)."""
+    if noise_only:
+        a, b = images[:2]
+        return np.mean((a - b) ** 2, axis=(1, 2)) / 2
+    return np.mean([np.mean((img - ref) ** 2, axis=(1, 2)) for img in images], axis=0) - ref_var
+
+
+# ------------------------------------------------------------------------------------------- main
+
+def measure_scene(scene, args, tmp, mitsuba):
+    saves = [os.path.join(tmp, f"{scene}_ours_seed{s}.npy") for s in (0, 1)]
+    jobs = [{"name": f"auto{s}", "spp": args.spp, "seed": s, "save": p} for s, p in zip((0, 1), saves)]
+    jobs += [{"name": "auto_1thread", "spp": args.spp, "threads": 1},
+             {"name": "full", "spp": args.spp, "polarisation": "full"},
+             {"name": "off", "spp": args.spp, "polarisation": "off"}]
+    ours, peak = run_ours(scene, args.res, jobs)
+    best = min((ours["auto0"], ours["auto1"]), key=lambda r: r["seconds"])
+    row = {"scene": scene, "ours": ours, "ours_best": best, "ours_peak": peak}
+    ref, ref_var, source = reference(scene, args.res, args.ref_spp, mitsuba)
+    row["ref_source"] = source
+    row["ours_e2"] = error2([np.load(p) for p in saves], ref, ref_var)
+    row["ours_noise_only"] = scene in S0_DIFFERS and source == "mitsuba"
+    if row["ours_noise_only"]:
+        row["ours_e2"][0] = error2([np.load(p) for p in saves], None, None, noise_only=True)[0]
+    row["ref_var"] = ref_var
+    if mitsuba:
+        imgs, secs, mpeak = mitsuba_renders(mitsuba, scene, "llvm_ad_spectral_polarized", args.mitsuba_spp, args.res,
+                                            0, 3, tmp)
+        row["llvm"] = {"seconds": min(secs), "samples": args.res ** 2 * args.mitsuba_spp, "peak": mpeak,
+                       "e2": error2(imgs[:2], ref, ref_var)}
+        if args.mitsuba_scalar_spp:
+            _, secs, speak = mitsuba_renders(mitsuba, scene, "scalar_spectral_polarized", args.mitsuba_scalar_spp,
+                                             args.res, 0, 1, tmp)
+            row["scalar"] = {"seconds": min(secs), "samples": args.res ** 2 * args.mitsuba_scalar_spp, "peak": speak}
+    return row
+
+
+def equal_error_ratio(row, k):
+    """Time to equal error in Stokes component k, ours ÷ Mitsuba (> 1: ours faster); None if undefined."""
+    llvm = row.get("llvm")
+    if not llvm:
+        return None
+    e_o, e_m = row["ours_e2"][k], llvm["e2"][k]
+    if e_o <= 0 or e_m <= 0:        # at the reference's noise (or S1 ≡ 0 in both)
+        return None
+    return (llvm["seconds"] * e_m) / (row["ours_best"]["seconds"] * e_o)
+
+
+def rate(r):
+    return r["samples"] / r["seconds"] / 1e6
+
+
+def tables(rows, blender, memory, cycles, args, header):
+    out = [header, ""]
+    out += ["**1. Time to equal error, ours ÷ Mitsuba LLVM** (> 1: ours faster; RMSE of luminance S0 and S1 "
+            f"against a {rows[0]['ref_source'] if rows else '?'} reference of 2 × {args.ref_spp} spp, its noise "
+            "removed)", "",
+            "| scene | ours: s @ spp | RMSE S0 / S1 | Mitsuba: s @ spp | RMSE S0 / S1 | S0 ratio | target | | "
+            "S1 ratio |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        llvm = r.get("llvm", {})
+        s0, s1 = equal_error_ratio(r, 0), equal_error_ratio(r, 1)
+        target = EQUAL_ERROR_TARGET.get(r["scene"])
+        e_o = np.sqrt(np.maximum(r["ours_e2"], 0))
+        e_m = np.sqrt(np.maximum(llvm["e2"], 0)) if llvm else None
+        mark = " ‡" if r["ours_noise_only"] else ""
+        out.append(f"| {r['scene']} | {r['ours_best']['seconds']:.2f} @ {args.spp} | {e_o[0]:.2e}{mark} / "
+                   f"{e_o[1]:.2e} | " + (f"{llvm['seconds']:.2f} @ {args.mitsuba_spp} | {e_m[0]:.2e} / {e_m[1]:.2e}"
+                                         if llvm else "— | —")
+                   + f" | {fmt(s0, '.2f', '×')} | " + (f"≥ {target}×" if target else "(none)")
+                   + f" | {verdict(s0, target) if target else ''} | {fmt(s1, '.2f', '×')} |")
+    if any(r["ours_noise_only"] for r in rows):
+        out.append("\n‡ our S0 error is our noise alone (S0 differs from Mitsuba's by design: RGB upsampling).")
+    out += ["", "**2. Throughput** (2 threads; ours polarisation auto)", "",
+            "| scene | transport | ours Msamples/s | ours Mrays/s | Mitsuba LLVM Msamples/s | ours ÷ LLVM | "
+            "Mitsuba scalar Msamples/s | ours ÷ scalar | peak RSS ours / LLVM (MB) |",
+            "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        b = r["ours_best"]
+        llvm, scal = r.get("llvm"), r.get("scalar")
+        mrays = (b["rays"] + b["shadow_rays"]) / b["seconds"] / 1e6
+        out.append(f"| {r['scene']} | {b['transport']} | {rate(b):.3f} | {mrays:.2f} | "
+                   f"{fmt(rate(llvm) if llvm else None, '.3f')} | "
+                   f"{fmt(rate(b) / rate(llvm) if llvm else None, '.3f')} | "
+                   f"{fmt(rate(scal) if scal else None, '.3f')} | "
+                   f"{fmt(rate(b) / rate(scal) if scal else None, '.3f')} | "
+                   f"{r['ours_peak']:.0f} / {fmt(llvm['peak'] if llvm else None, '.0f')} |")
+    out += ["", "**3–5. Embree share, thread scaling, full Stokes ÷ scalar** (ours)", "",
+            "| scene | Embree share, 1 thread | target | | 2 threads ÷ 1 | target | | full ÷ scalar time | target | |",
+            "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        o = r["ours"]
+        embree = o["auto_1thread"]["embree_seconds"]
+        share = None if embree is None else embree / o["auto_1thread"]["seconds"]
+        sphere = r["scene"] in SPHERE_SCENES
+        scale = rate(r["ours_best"]) / rate(o["auto_1thread"])
+        fo = o["full"]["seconds"] / o["off"]["seconds"]
+        out.append(f"| {r['scene']} | {fmt(share, '.0%')} | {'≥ 50 %' if sphere else '(none)'} | "
+                   f"{verdict(share, EMBREE_SHARE_TARGET) if sphere else ''} | {scale:.2f}× | ≥ {THREADS_TARGET}× | "
+                   f"{verdict(scale, THREADS_TARGET)} | {fo:.2f}× | ≤ {FULL_OVER_SCALAR_TARGET}× | "
+                   f"{verdict(fo, FULL_OVER_SCALAR_TARGET, at_least=False)} |")
+    if blender:
+        sp = blender["split"]
+        out += ["", f"**6. Blender ÷ CLI** ({blender['width']}×{blender['height']}, {blender['spp']} spp, the "
+                "scene of tests/bench/blender_overhead.py)", "",
+                "| Blender (s) | CLI: render of the export (s) | ratio | target | | CPU time ratio | "
+                "Blender's extra, profiled |", "|---|---|---|---|---|---|---|",
+                f"| {blender['blender_seconds']:.2f} | {blender['cli_seconds']:.2f} | {blender['ratio']:.3f} | "
+                f"≤ {BLENDER_TARGET} | {verdict(blender['ratio'], BLENDER_TARGET, at_least=False)} | "
+                f"{blender['cpu_ratio']:.3f} | export "
+                f"{sp['export']:.2f} s, live display {sp['  of which live display']:.2f} s, final passes "
+                f"{sp['pass writing (all calls)']:.2f} s of {sp['Blender operator total']:.2f} s |"]
+    if memory:
+        how = "" if memory["exact"] else f" (extrapolated: {memory['bytes_per_pixel']:.0f} B/pixel)"
+        out += ["", "**7. Peak memory, 1080p demo** (examples/demo.json)", "",
+                "| rendered at | peak RSS (GB) | 1920×1080 (GB) | target | |", "|---|---|---|---|---|",
+                f"| {memory['width']}×{memory['height']}, {memory['spp']} spp | {memory['peak_gb']:.2f} | "
+                f"{memory['full_gb']:.2f}{how} | < {MEMORY_TARGET_GB} | "
+                f"{verdict(memory['full_gb'], MEMORY_TARGET_GB, at_least=False)} |"]
+    if cycles:
+        out += ["", f"**8. Cycles parity scenes** ({cycles[0]['width']}×{cycles[0]['height']}, {cycles[0]['spp']} spp "
+                "each, σ = per-pixel standard deviation of luminance S0 over lit pixels, from 2 seeds)", "",
+                "| scene | Cycles s | Polar s | σ Polar ÷ Cycles | variance × time Polar ÷ Cycles | target | |",
+                "|---|---|---|---|---|---|---|"]
+        for c in cycles:
+            p, cy = c["POLAR"], c["CYCLES"]
+            vt = p["variance"] * p["seconds"] / (cy["variance"] * cy["seconds"]) if cy["variance"] > 0 else None
+            out.append(f"| {c['scene']} | {cy['seconds']:.2f} | {p['seconds']:.2f} | "
+                       f"{fmt((p['variance'] / cy['variance']) ** 0.5 if cy['variance'] > 0 else None)} | "
+                       f"{fmt(vt, '.2f', '×')} | ≤ {CYCLES_TARGET}× | {verdict(vt, CYCLES_TARGET, at_least=False)} |")
+    kernels = rows[0]["ours_best"].get("kernels", "?") if rows else "?"
+    out += ["", f"(our kernels: {kernels})"]
+    return "\n".join(out)
+
+
+def measure_memory(args):
+    """Peak RSS of the demo at 1920×1080, or extrapolated linearly in the pixel count from two proxies.
+
+    The proxies (``--memory-res`` and half its width and height) get enough samples per pixel to fill
+    every worker's batches, whose memory does not shrink with the image; what grows with the image
+    (the film's sums, the finished image) is then linear in the pixel count."""
+    sys.path.insert(0, REPO)
+    from engine.scene.loader import load_scene
+    batch = load_scene(os.path.join(REPO, "examples", "demo.json")).settings.batch_rays
+    sizes = [(1920, 1080)] if args.full else [(w // 2, h // 2) for w, h in [tuple(
+        int(v) for v in args.memory_res.split("x"))]] + [tuple(int(v) for v in args.memory_res.split("x"))]
+    peaks = []
+    for w, h in sizes:
+        spp = max(1, -(-(os.cpu_count() or 1) * batch // (w * h)))
+        _, _, peak = run_measured([sys.executable, __file__, "--memory-child",
+                                   json.dumps({"width": w, "height": h, "spp": spp})])
+        peaks.append(peak / 1024)
+    (w, h) = sizes[-1]
+    full = peaks[-1]
+    per_pixel = None
+    if len(sizes) == 2:
+        (w1, h1), (w2, h2) = sizes
+        per_pixel = (peaks[1] - peaks[0]) / (w2 * h2 - w1 * h1)
+        full = peaks[1] + per_pixel * (1920 * 1080 - w2 * h2)
+    return {"width": w, "height": h, "spp": spp, "peak_gb": peaks[-1], "exact": len(sizes) == 1, "full_gb": full,
+            "bytes_per_pixel": None if per_pixel is None else per_pixel * 2 ** 30}
+
+
+def update_readme(text):
+    path = os.path.join(REPO, "README.md")
+    with open(path) as fh:
+        readme = fh.read()
+    begin, end = "<!-- bench:begin -->", "<!-- bench:end -->"
+    if begin not in readme or end not in readme:
+        raise SystemExit("README.md has no bench:begin / bench:end markers")
+    head, rest = readme.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    with open(path, "w") as fh:
+        fh.write(head + begin + "\n" + text + "\n" + end + tail)
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", default=",".join(DEFAULT_SCENES))
-    ap.add_argument("--spp", type=int, default=8)
-    ap.add_argument("--mitsuba-python", default=os.environ.get("MITSUBA_PYTHON", ""))
-    ap.add_argument("--mitsuba-spp", type=int, default=64)
-    ap.add_argument("--scalar-spp", type=int, default=4)
+    ap.add_argument("--res", type=int, default=None, help="image size (square); default 128, --full 256")
+    ap.add_argument("--spp", type=int, default=None, help="our samples per pixel per render (default 32; --full 128)")
+    ap.add_argument("--mitsuba-spp", type=int, default=None,
+                    help="Mitsuba LLVM spp per render (default 128; --full 512)")
+    ap.add_argument("--mitsuba-scalar-spp", type=int, default=4, help="Mitsuba scalar spp (0: skip)")
+    ap.add_argument("--ref-spp", type=int, default=None, help="spp of each of the 2 reference renders "
+                                                              "(default 2048; --full 8192)")
+    ap.add_argument("--mitsuba-python", default=os.environ.get("MITSUBA_PYTHON", DEFAULT_MITSUBA))
+    ap.add_argument("--skip", default="", help="comma list of: blender, cycles, memory, mitsuba")
+    ap.add_argument("--blender-res", default=None, help="Blender ÷ CLI image size (default 480x270; --full 960x540)")
+    ap.add_argument("--cycles-res", default=None, help="Cycles scenes size (default 160x120; --full 320x240)")
+    ap.add_argument("--cycles-spp", type=int, default=None, help="default 16; --full 64")
+    ap.add_argument("--cycles-scenes", default=None, help=f"default {','.join(CYCLES_QUICK)}; --full all")
+    ap.add_argument("--memory-res", default="960x540", help="proxy size for the 1080p memory figure (quick runs)")
+    ap.add_argument("--full", action="store_true", help="README settings; rewrites README.md's tables")
     ap.add_argument("--out", default="")
-    ap.add_argument("--repeats", type=int, default=3,
-                    help="runs per measurement; the fastest is kept (this VM's speed varies run to run)")
-    ap.add_argument("--child", nargs=4, metavar=("SCENE", "SPP", "POLARISATION", "THREADS"), help=argparse.SUPPRESS)
+    ap.add_argument("--child", help=argparse.SUPPRESS)
+    ap.add_argument("--memory-child", help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
-        ours_once(args.child[0], int(args.child[1]), args.child[2], int(args.child[3]))
+        ours_child(json.loads(args.child))
         return 0
+    if args.memory_child:
+        memory_child(json.loads(args.memory_child))
+        return 0
+    full = args.full
+    args.res = args.res or (256 if full else 128)
+    args.spp = args.spp or (128 if full else 32)
+    args.mitsuba_spp = args.mitsuba_spp or (512 if full else 128)
+    args.ref_spp = args.ref_spp or (8192 if full else 2048)
+    skip = set(filter(None, args.skip.split(",")))
 
-    have_mitsuba = bool(args.mitsuba_python) and subprocess.run(
-        [args.mitsuba_python, "-c", "import mitsuba"], capture_output=True).returncode == 0
+    mitsuba = "" if "mitsuba" in skip else args.mitsuba_python
+    if mitsuba and subprocess.run([mitsuba, "-c", "import mitsuba"], capture_output=True).returncode != 0:
+        print(f"Mitsuba not importable with {mitsuba}: references are our own renders, no Mitsuba columns "
+              "(Debian/Ubuntu: apt-get install -y libllvm19)", file=sys.stderr)
+        mitsuba = ""
+    t_start = time.perf_counter()
     tmp = tempfile.mkdtemp(prefix="polar_bench_")
     rows = []
-    if have_mitsuba:   # warm Dr.Jit's kernel cache once
-        mitsuba_once(args.mitsuba_python, "conv_s3_check", "llvm_ad_spectral_polarized", 16, tmp)
     for scene in args.scenes.split(","):
-        res = {}
-        for _ in range(args.repeats):     # interleaved, so slow phases of the machine hit every renderer
-            for mode, threads in (("full", 0), ("off", 0), ("full1", 1)):
-                out, _, peak = run_measured([sys.executable, __file__, "--child", scene, str(args.spp),
-                                             mode.rstrip("1"), str(threads)])
-                r = json.loads(out.strip().splitlines()[-1])
-                r["peak_rss_mb"] = peak
-                if mode not in res or r["seconds"] < res[mode]["seconds"]:
-                    res[mode] = r
-            if have_mitsuba:
-                for variant, spp in (("llvm_ad_spectral_polarized", args.mitsuba_spp),
-                                     ("scalar_spectral_polarized", args.scalar_spp)):
-                    try:
-                        r = mitsuba_once(args.mitsuba_python, scene, variant, spp, tmp)
-                    except RuntimeError as e:
-                        print(f"{scene} {variant}: {e}", file=sys.stderr)
-                        continue
-                    if variant not in res or r["seconds"] < res[variant]["seconds"]:
-                        res[variant] = r
-        rows.append((scene, res))
-        print(f"{scene}: done", file=sys.stderr)
-
-    def rate(r):
-        return r["samples"] / r["seconds"] / 1e6 if r.get("samples") else float("nan")
-
-    lines = ["| scene | ours full (Msamples/s) | ours off | full/off time | Mitsuba LLVM | Mitsuba scalar |"
-             " ours ÷ LLVM | ours ÷ scalar | peak RSS ours / LLVM / scalar (MB) | ours: Mrays/s |"
-             " 2 threads ÷ 1 | Embree share (1 thread) |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    for scene, res in rows:
-        full, off = res["full"], res["off"]
-        llvm = res.get("llvm_ad_spectral_polarized", {})
-        scal = res.get("scalar_spectral_polarized", {})
-        rays = (full["rays"] + full["shadow_rays"]) / full["seconds"] / 1e6
-        lines.append(
-            f"| {scene} | {rate(full):.3f} | {rate(off):.3f} | {full['seconds'] / off['seconds']:.2f}× | "
-            f"{rate(llvm) if llvm else float('nan'):.3f} | {rate(scal) if scal else float('nan'):.3f} | "
-            f"{rate(full) / rate(llvm) if llvm else float('nan'):.3f} | "
-            f"{rate(full) / rate(scal) if scal else float('nan'):.3f} | "
-            f"{full['peak_rss_mb']:.0f} / {llvm.get('peak_rss_mb', float('nan')):.0f} / "
-            f"{scal.get('peak_rss_mb', float('nan')):.0f} | {rays:.2f} | "
-            f"{rate(full) / rate(res['full1']):.2f}× | "
-            f"{res['full1']['embree_seconds'] / res['full1']['seconds']:.0%} |")
-    kernels = rows[0][1]["full"].get("kernels", "?") if rows else "?"
-    text = "\n".join(lines) + f"\n\n(our kernels: {kernels})"
+        rows.append(measure_scene(scene, args, tmp, mitsuba))
+        print(f"{scene}: done ({time.perf_counter() - t_start:.0f} s)", file=sys.stderr)
+    blender = memory = None
+    cycles = []
+    py = sys.executable
+    if "blender" not in skip:
+        w, h = (args.blender_res or ("960x540" if full else "480x270")).split("x")
+        out, _, _ = run_measured([py, os.path.join(HERE, "blender_overhead.py"), "--width", w, "--height", h,
+                                  "--spp", "8", "--repeats", "3" if full else "2", "--json"])
+        blender = json_lines(out)[-1]
+        print(f"blender: done ({time.perf_counter() - t_start:.0f} s)", file=sys.stderr)
+    if "memory" not in skip:
+        memory = measure_memory(args)
+        print(f"memory: done ({time.perf_counter() - t_start:.0f} s)", file=sys.stderr)
+    if "cycles" not in skip:
+        out, _, _ = run_measured([py, os.path.join(HERE, "cycles_noise.py"), "--json",
+                                  "--res", args.cycles_res or ("320x240" if full else "160x120"),
+                                  "--spp", str(args.cycles_spp or (64 if full else 16)),
+                                  "--scenes", args.cycles_scenes or ("all" if full else
+                                                                    ",".join(CYCLES_QUICK))])
+        cycles = json_lines(out)
+        print(f"cycles: done ({time.perf_counter() - t_start:.0f} s)", file=sys.stderr)
+    header = (f"Run {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC on {platform.node() or '?'} "
+              f"({os.cpu_count()} cores, {platform.processor() or platform.machine()}): "
+              f"`bench_engine.py {' '.join(sys.argv[1:])}`, {args.res}² peer scenes, ours {args.spp} spp, "
+              f"Mitsuba {args.mitsuba_spp} spp, {time.perf_counter() - t_start:.0f} s in all.")
+    text = tables(rows, blender, memory, cycles, args, header)
     print(text)
     if args.out:
         with open(args.out, "w") as fh:
             fh.write(text + "\n")
+    if full:
+        update_readme(text)
     return 0
 
 
