@@ -357,3 +357,30 @@ def test_beckmann_visible_slopes_match_the_numpy_reference():
     got = visible_slope_x_numba(tan, u1)
     assert np.all(np.isfinite(got))
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+
+
+@needs_numba
+@pytest.mark.parametrize("P", [1, 3, 4])
+@pytest.mark.parametrize("L", [1, 4])
+@pytest.mark.parametrize("apply_rr", [False, True])
+def test_roulette_bitwise_including_nonfinite_and_black_paths(P, L, apply_rr):
+    """Russian roulette + validity: same survivors, same divided throughputs, same non-finite count,
+    with NaN/inf entries (in T00 and elsewhere), black paths, huge η² (q clamped) and q = 0."""
+    rng = np.random.default_rng(P * 10 + L)
+    n = 600
+    T = rng.uniform(-0.2, 1.0, size=(P, P, L, n))
+    T[..., 0:20] = np.nan if P == 1 else T[..., 0:20]
+    T[0, 0, :, 20:40] = 0.0                                    # black
+    T[-1, -1, -1, 40:60] = np.inf                              # non-finite off T00 (T00 itself for P = 1)
+    T[0, 0, 0, 60:80] = np.nan                                 # NaN q
+    eta_sq = rng.uniform(0.5, 3.0, n)
+    eta_sq[80:100] = 1e6
+    u = rng.uniform(size=n)
+    valid = rng.uniform(size=n) < 0.9
+    a_T, a_valid = T.copy(), valid.copy()
+    b_T, b_valid = T.copy(), valid.copy()
+    a_T, a_bad = transport.roulette_numpy(a_T, eta_sq, u, a_valid, apply_rr)
+    b_T, b_bad = transport.roulette_numba(b_T, eta_sq, u, b_valid, apply_rr)
+    assert np.array_equal(a_valid, b_valid) and a_bad == b_bad
+    assert np.array_equal(a_T, b_T, equal_nan=True)
+    assert 0 < a_valid.sum() < n and a_bad > 0

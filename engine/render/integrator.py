@@ -32,7 +32,7 @@ from ..materials.base import BSDF, BSDFFlags, MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import Hits, offset_origin, surface_points
-from ..kernels.transport import (add_light, throughput_times_stokes, update_abcs, update_depolarising,
+from ..kernels.transport import (add_light, roulette, throughput_times_stokes, update_abcs, update_depolarising,
                                  update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .path_state import PathState
@@ -462,16 +462,9 @@ class PathTracer:
         paths that go on: sampled validly, survived, finite and not black.  Paths with a non-finite
         throughput end here (counted; their light so far is kept)."""
         state.eta_sq = state.eta_sq * nxt.eta_step
-        valid = nxt.valid
-        if bounce + 1 >= self.settings.rr_depth:
-            q = np.minimum(np.max(nxt.T[0, 0], axis=0) * state.eta_sq, 0.95)
-            survive = nxt.u_rr < q
-            nxt.T = nxt.T / np.where(survive, q, 1.0)
-            valid &= survive
-        finite_T = np.isfinite(nxt.T).all(axis=(0, 1, 2))
-        acc.stats["nonfinite"] += int((valid & ~finite_T).sum())
-        valid &= finite_T & (np.abs(nxt.T[0, 0]).max(axis=0) > 0)
-        return valid
+        nxt.T, nonfinite = roulette(nxt.T, state.eta_sq, nxt.u_rr, nxt.valid, bounce + 1 >= self.settings.rr_depth)
+        acc.stats["nonfinite"] += nonfinite
+        return nxt.valid
 
     def _next_segments(self, state: PathState, surf: _SurfaceHits, nxt: _Scattered, valid: np.ndarray) -> None:
         """The surviving paths' next segments: the sampled directions from the offset hit points."""
