@@ -432,3 +432,27 @@ def test_cosine_sampling_one_pass_matches_the_reference():
     assert np.array_equal(got[1], ref[1])
     np.testing.assert_allclose(got[2], ref[2], rtol=1e-14, atol=0)
     assert 0 < ref[1].sum() < n
+
+
+@needs_numba
+def test_complex_index_from_measured_tables_bitwise():
+    """Tabulated (n, κ) → relative complex index in one pass: NumPy's np.interp arithmetic (knots,
+    ends, between knots) and complex division by the exterior index, bit for bit; ``inside`` False
+    when a wavelength leaves either table."""
+    from engine.kernels import tables
+    from engine.spectral.ior import named_ior
+    n_spec, k_spec = named_ior("Au")
+    rng = np.random.default_rng(3)
+    lam = rng.uniform(360.0, 830.0, (4, 3000))
+    lam[0, :50] = n_spec.wavelengths[:50]                      # exactly on knots
+    lam[1, :2] = [360.0, 830.0]
+    for ext in (1.0, 1.33, 0.7):
+        args = (lam, n_spec.wavelengths, n_spec.values, k_spec.wavelengths, k_spec.values, ext)
+        (a, ia), (b, ib) = tables.complex_index_table_numpy(*args), tables.complex_index_table_numba(*args)
+        assert ia == ib
+        assert np.array_equal(a.real, b.real) and np.array_equal(a.imag, b.imag)
+    outside = lam.copy()
+    outside[2, 7] = 5000.0
+    args = (outside, n_spec.wavelengths, n_spec.values, k_spec.wavelengths, k_spec.values, 1.0)
+    assert tables.complex_index_table_numpy(*args)[1] is False
+    assert tables.complex_index_table_numba(*args)[1] is False
