@@ -456,3 +456,40 @@ def test_complex_index_from_measured_tables_bitwise():
     args = (outside, n_spec.wavelengths, n_spec.values, k_spec.wavelengths, k_spec.values, 1.0)
     assert tables.complex_index_table_numpy(*args)[1] is False
     assert tables.complex_index_table_numba(*args)[1] is False
+
+
+@needs_numba
+@pytest.mark.parametrize("L", [1, 3, 4])
+@pytest.mark.parametrize("scalar_prob", [False, True])
+def test_direct_light_weight_and_add_to_paths_bitwise(L, scalar_prob):
+    """Next-event weights and shadow-ray lengths (incl. lights at infinity and rejected samples),
+    and the scatter-add of per-path values into the batch, bit for bit."""
+    rng = np.random.default_rng(L)
+    n = 800
+    radiance = rng.uniform(0, 5, (L, n))
+    scale, cos_i, mis = rng.uniform(0, 2, n), rng.uniform(0, 1, n), rng.uniform(0, 1, n)
+    prob = 0.37 if scalar_prob else rng.uniform(0.1, 1, n)
+    ok = rng.uniform(size=n) < 0.8
+    dist = rng.uniform(0.1, 50, n)
+    dist[:30] = np.inf
+    p = rng.normal(size=(3, n)) * 10
+    a = transport.direct_light_weight_numpy(radiance, scale, cos_i, mis, prob, ok, dist, p)
+    b = transport.direct_light_weight_numba(radiance, scale, cos_i, mis, prob, ok, dist, p)
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+    acc_a = rng.normal(size=(4, L, 2 * n))
+    acc_b = acc_a.copy()
+    path = rng.permutation(2 * n)[:n]
+    values = rng.normal(size=(4, L, n))
+    transport.add_to_paths_numpy(acc_a, path, values)
+    transport.add_to_paths_numba(acc_b, path, values)
+    assert np.array_equal(acc_a, acc_b)
+
+
+@needs_numba
+def test_rgb_albedo_of_a_lambert_set_bitwise():
+    from engine.materials import lambert
+    rng = np.random.default_rng(11)
+    rgb = rng.uniform(size=(3, 5))
+    slot = rng.integers(0, 5, 700)
+    basis = rng.uniform(size=(3, 4, 700))
+    assert np.array_equal(lambert.rgb_albedo_numpy(rgb, slot, basis), lambert.rgb_albedo_numba(rgb, slot, basis))

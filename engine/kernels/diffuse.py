@@ -59,3 +59,22 @@ def cosine_sample_numba(u, n_s, wo):
 
 #: The compiled twin of engine.materials.lambert.cosine_sample_numpy (None without Numba).
 cosine_sample_numba = _cosine_sample_loop and cosine_sample_numba
+
+
+@jit
+def _rgb_albedo_loop(rgb, slot, basis, out):
+    for k in range(basis.shape[1]):
+        for j in range(slot.shape[0]):
+            m = slot[j]
+            out[k, j] = rgb[0, m] * basis[0, k, j] + rgb[1, m] * basis[1, k, j] + rgb[2, m] * basis[2, k, j]
+
+
+def rgb_albedo_numba(rgb, slot, basis):
+    out = np.empty(basis.shape[1:])
+    _rgb_albedo_loop(np.ascontiguousarray(rgb, dtype=np.float64), np.ascontiguousarray(slot, dtype=np.int64),
+                     np.ascontiguousarray(basis, dtype=np.float64), out)
+    return out
+
+
+#: The compiled twin of engine.materials.lambert.rgb_albedo_numpy (None without Numba).
+rgb_albedo_numba = _rgb_albedo_loop and rgb_albedo_numba

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels import twin
-from ..kernels.diffuse import cosine_sample_numba
+from ..kernels.diffuse import cosine_sample_numba, rgb_albedo_numba
 from .base import BSDF, BSDFFlags, BSDFSample, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter, Socket
 from .sampling import cosine_hemisphere, local_to_world
@@ -31,6 +31,16 @@ def cosine_sample_numpy(u: np.ndarray, n_s: np.ndarray, wo: np.ndarray):
 
 #: One compiled pass over the paths where Numba is available (engine.kernels.diffuse).
 cosine_sample = twin(cosine_sample_numba, cosine_sample_numpy)
+
+
+def rgb_albedo_numpy(rgb: np.ndarray, slot: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """Albedo spectra (L, n) of RGB-upsampled members: r·B_r + g·B_g + b·B_b with each point's
+    member colour rgb[:, slot] ((3, M) table, slot (n,)) and the RGB basis (3, L, n) at its λ."""
+    rgb = rgb[:, slot]
+    return rgb[0][None, :] * basis[0] + rgb[1][None, :] * basis[1] + rgb[2][None, :] * basis[2]
+
+
+rgb_albedo = twin(rgb_albedo_numba, rgb_albedo_numpy)
 
 
 class Lambert(BSDF):
@@ -106,8 +116,7 @@ class LambertSet(Lambert):
 
         def combine():
             basis = sp.lookup.basis if sp.lookup is not None else basis_rgb(sp.lam)
-            rgb = self._rgb[:, slot]
-            return rgb[0][None, :] * basis[0] + rgb[1][None, :] * basis[1] + rgb[2][None, :] * basis[2]
+            return rgb_albedo(self._rgb, slot, basis)
         # the value depends on the slots too: memo per (set, slot array) — the slot array is the
         # same object for a vertex's eval and sample, and new at every bounce
         value = sp.lookup.memo((self, slot), combine) if sp.lookup is not None else combine()

@@ -32,8 +32,8 @@ from ..materials.base import BSDF, BSDFFlags, MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import Hits, offset_origin, surface_points
-from ..kernels.transport import (add_light, roulette, throughput_times_stokes, update_abcs, update_depolarising,
-                                 update_general)
+from ..kernels.transport import (add_light, add_to_paths, direct_light_weight, roulette, throughput_times_stokes,
+                                 update_abcs, update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .path_state import PathState
 from .sampler import PathSampler, path_keys
@@ -422,14 +422,18 @@ class PathTracer:
         grp = self.group_of[mat]
         u_light = sampler.next(4)
         u_bsdf = sampler.next(3)
-        nxt = _Scattered(u_rr=sampler.next(1)[0], n_side=n_side, T=np.empty_like(T), d=np.zeros((3, n)),
-                         x_T=np.zeros((3, n)), valid=np.zeros(n, bool), is_delta=np.ones(n, bool),
-                         pdf=np.zeros(n), eta_step=np.ones(n))
-        # (every path belongs to one material group, which writes its column of nxt.T)
+        u_rr = sampler.next(1)[0]
         groups = np.unique(grp)
+        # One material covers every path: its sample's arrays become the next segments as they are
+        # (no gathered copies in, no scattered copies out).  Otherwise each group writes its columns.
+        whole = len(groups) == 1
+        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty_like(T), d=None if whole else np.zeros((3, n)),
+                         x_T=None if whole else np.zeros((3, n)), valid=None if whole else np.zeros(n, bool),
+                         is_delta=None if whole else np.ones(n, bool), pdf=None if whole else np.zeros(n),
+                         eta_step=np.ones(n))
+        # (every path belongs to one material group, which writes its column of nxt.T)
         for g in groups:
-            # One material covers every path: use whole arrays instead of gathered copies.
-            sel = slice(None) if len(groups) == 1 else np.nonzero(grp == g)[0]
+            sel = slice(None) if whole else np.nonzero(grp == g)[0]
             bsdf = self.shaders[g]
             sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
                               gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
@@ -441,13 +445,19 @@ class PathTracer:
 
             if not bsdf.flags.is_delta_only and len(light_set) and bounce + 2 <= st.max_depth:
                 contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], acc.stats)
-                acc.radiance[:, :, state.path[sel]] += contrib
+                add_to_paths(acc.radiance, gather(state.path, sel), contrib)
 
             bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
             if acc.guides is not None and not bsdf.flags.is_delta_only:
                 acc.guides.record(gather(state.path, sel), T[0, 0][:, rows], bs.weight, bs.valid, sp.n_s, sp.wo,
                                   acc.w_rgb)
             scatter_throughput(nxt.T, T, rows, bs.weight, xTm, sp.wo)
+            if whole:
+                nxt.d, nxt.x_T, nxt.is_delta, nxt.pdf = bs.wi, bs.weight.x_in, bs.is_delta, bs.pdf
+                nxt.valid = np.array(bs.valid, dtype=bool)      # own copy: the roulette updates it in place
+                if bs.eta_sq is not None:
+                    nxt.eta_step[:] = bs.eta_sq
+                continue
             nxt.d[:, sel] = bs.wi
             nxt.x_T[:, sel] = bs.weight.x_in
             nxt.valid[sel] = bs.valid
@@ -529,7 +539,6 @@ class PathTracer:
             u_tri = gather(u_rest, sel)
             select_prob = light_set.prob[li] if chosen_prob is None else gather(chosen_prob, sel)
             wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, gather(u[1], sel), gather(u[2], sel))))
-            value = self._emitted(light, lookup.take(sel), wi) * scale[None, :]
             sub = ShadingPoint(p, gather(sp.n_s, sel), gather(sp.n_g, sel), gather(sp.wo, sel), gather(sp.lam, sel),
                                sp.mono, sp.lookup.take(sel) if sp.lookup is not None else None,
                                None if sp.material is None else gather(sp.material, sel),
@@ -549,8 +558,8 @@ class PathTracer:
                 mis = np.ones(m)
             else:
                 mis = power_heuristic(pdf_l * select_prob, bsdf.pdf(sub, wi))
-            weight = value * (cos_i * mis / select_prob * ok)[None, :]
-            t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
+            weight, t_max = direct_light_weight(self._emitted(light, lookup.take(sel), wi), scale, cos_i, mis,
+                                                select_prob, ok, dist, p)
             if self.visibility is not None and self.visibility.affects_shadows:
                 # shadow-invisible and pass-through (alpha) surfaces let (part of) the light through
                 weight = weight * self._shadow_transmittance(p, sub.n_g, wi, t_max, ok, stats)[None, :]
@@ -569,7 +578,10 @@ class PathTracer:
                     cos_l = np.minimum(dist * dist / np.maximum(pdf_l * light.total_area, 1e-300), 1.0)
                     blocked = self.scene.unblock_own_hits(li, p, sub.n_g, wi, dist, cos_l, blocked)
                 weight = weight * (~blocked)[None, :]
-            out[:, :, sel] = throughput_times_stokes(T, gather(rows, sel), S, weight)
+            light_out = throughput_times_stokes(T, gather(rows, sel), S, weight)
+            if isinstance(sel, slice) and light_out.shape == out.shape:
+                return light_out                    # one light for every path: no copy into ``out``
+            out[:, :, sel] = light_out
         return out
 
     def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, idx: np.ndarray, prims: np.ndarray,
