@@ -387,33 +387,6 @@ def test_roulette_bitwise_including_nonfinite_and_black_paths(P, L, apply_rr):
 
 
 @needs_numba
-@pytest.mark.parametrize("L", [1, 4])
-def test_mirror_reflection_one_pass_matches_the_reference(L):
-    """The conductor's fused mirror kernel against mirror_reflection_numpy: same directions, axes and
-    validity bit for bit; A, B, C, S to rounding — at normal incidence (degenerate plane), grazing and
-    behind the surface, for metals, real indices and indices below the exterior one."""
-    from engine.materials import conductor
-    rng = np.random.default_rng(L)
-    n = 500
-    n_s = unit(rng, n)
-    wo = unit(rng, n)
-    wo[:, :10] = n_s[:, :10]                                   # normal incidence
-    wo[:, 10:20] = -n_s[:, 10:20]                              # behind
-    t = unit(rng, 10)
-    wo[:, 20:30] = t - n_s[:, 20:30] * (t * n_s[:, 20:30]).sum(0)  # grazing
-    wo[:, 20:30] /= np.linalg.norm(wo[:, 20:30], axis=0)
-    eta = rng.uniform(0.1, 3.0, (L, n)) + 1j * rng.uniform(0.0, 5.0, (L, n))
-    eta[:, 30:60] = eta[:, 30:60].real                          # dielectric-like, incl. η < 1
-    got = conductor.mirror_abcs_numba(wo, n_s, eta, conductor.PLANE_DEGENERATE)
-    ref = conductor.mirror_abcs_numpy(wo, n_s, eta, conductor.PLANE_DEGENERATE)
-    for k in (0, 1, 6):                                        # wi, s, valid
-        assert np.array_equal(got[k], ref[k])
-    for k in range(2, 6):                                      # A, B, C, S
-        np.testing.assert_allclose(got[k], ref[k], rtol=1e-12, atol=1e-15)
-    assert not ref[6][10:20].any() and not ref[2][:, 10:20].any()
-
-
-@needs_numba
 def test_cosine_sampling_one_pass_matches_the_reference():
     """Lambert's compiled cosine sampling against cosine_sample_numpy: same directions, validity and
     pdfs (to rounding, sin/cos being the platform's), incl. u on the disk map's axes and diagonals,

@@ -11,12 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
-from ..kernels import twin
-from ..kernels.fresnel import mirror_abcs_numba
-from ..kernels.geometry import unit_cross
 from ..kernels.tables import complex_index_table
-# the threshold of plane_of_incidence_axis (unit(n × k), any ⟂ n below it)
-from ..polarisation.frames import _DEGENERATE as PLANE_DEGENERATE
+from ..polarisation.frames import plane_of_incidence_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs
 from ..spectral import LAMBDA_MAX, LAMBDA_MIN
 from .parameters import REQUIRED, ModelDeclaration, Parameter, Socket, exterior_n_parameter
@@ -27,33 +23,18 @@ from ..textures import textured
 from ..vec3 import reflect
 
 
-def mirror_abcs_numpy(wo: np.ndarray, n_s: np.ndarray, eta: np.ndarray, degenerate: float):
-    """(wi, s, A, B, C, S, valid) of a smooth-interface mirror reflection of wo about n_s (3, n).
-
-    ``eta`` is the relative complex index (L, n) seen from the wo side; s = unit(n_s × k_i) is
-    the plane-of-incidence axis (engine.kernels.geometry.unit_cross with threshold ``degenerate``),
-    the frame of both beams; A..S (L, n) are zero where wo lies behind n_s (valid False).
-    """
-    cos_o = n_s[0] * wo[0] + n_s[1] * wo[1] + n_s[2] * wo[2]
-    valid = cos_o >= 0  # cosθ = 0 is the grazing limit M_F → identity, not "behind"
-    wi = reflect(wo, n_s)
-    s = unit_cross(n_s, -wi, degenerate)
-    A, B, C, S = fresnel_reflection_abcs(np.maximum(cos_o, 0.0)[None, :], eta)
-    m = valid.astype(np.float64)[None, :]
-    return wi, s, A * m, B * m, C * m, S * m, valid
-
-
-#: One compiled pass over the paths (all wavelengths of a path together) where Numba is available.
-mirror_abcs = twin(mirror_abcs_numba, mirror_abcs_numpy)
-
-
 def mirror_reflection(sp: ShadingPoint, eta: np.ndarray):
     """(wi, MuellerValue, valid) of a smooth-interface mirror reflection of wo.
 
     ``eta`` is the relative complex index (L, N) seen from the wo side.
     """
-    wi, s, A, B, C, S, valid = mirror_abcs(sp.wo, sp.n_s, eta, PLANE_DEGENERATE)
-    return wi, MuellerValue("abcs", s, s, A, B, C, S), valid
+    cos_o = sp.cos_o
+    valid = cos_o >= 0  # cosθ = 0 is the grazing limit M_F → identity, not "behind"
+    wi = reflect(sp.wo, sp.n_s)
+    s = plane_of_incidence_axis(sp.n_s, -wi)
+    A, B, C, S = fresnel_reflection_abcs(np.maximum(cos_o, 0.0)[None, :], eta)
+    m = valid.astype(np.float64)[None, :]
+    return wi, MuellerValue("abcs", s, s, A * m, B * m, C * m, S * m), valid
 
 
 class SmoothConductor(BSDF):
