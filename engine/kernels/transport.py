@@ -338,49 +338,6 @@ def roulette_numba(T, eta_sq, u_rr, valid, apply_rr):
 roulette = twin(_roulette_loop and roulette_numba, roulette_numpy)
 
 
-# ----------------------------------------------------------------------------- next-event estimation weights
-
-def direct_light_weight_numpy(radiance, scale, cos_i, mis, select_prob, ok, dist, p):
-    """(weight (L, n), t_max (n,)) of next-event samples before the shadow test.
-
-    weight = radiance·scale · cosθ_i·mis/select_prob · ok: the light's radiance (L, n) towards the
-    vertex, its sampling scale (n,), the cosine at the vertex, the MIS weight, the light-selection
-    probability (scalar or (n,)) and ``ok`` (n,) bool; t_max is the shadow ray's length (stopping
-    short of the light by 1e-4 relative plus 1e-4·(1 + max|p|), inf for lights at infinity).
-    """
-    weight = (radiance * scale[None, :]) * (cos_i * mis / select_prob * ok)[None, :]
-    t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
-    return weight, t_max
-
-
-@jit
-def _direct_light_weight_loop(radiance, scale, cos_i, mis, select_prob, ok, dist, p, weight, t_max):
-    for j in range(cos_i.shape[0]):
-        w = cos_i[j] * mis[j] / select_prob[j] * (1.0 if ok[j] else 0.0)
-        for k in range(radiance.shape[0]):
-            weight[k, j] = (radiance[k, j] * scale[j]) * w
-        d = dist[j]
-        if np.isfinite(d):
-            m = max(max(abs(p[0, j]), abs(p[1, j])), abs(p[2, j]))
-            t_max[j] = d * (1.0 - 1e-4) - 1e-4 * (1.0 + m)
-        else:
-            t_max[j] = np.inf
-
-
-def direct_light_weight_numba(radiance, scale, cos_i, mis, select_prob, ok, dist, p):
-    n = cos_i.shape[0]
-    radiance = np.ascontiguousarray(radiance, dtype=np.float64)
-    weight, t_max = np.empty(radiance.shape), np.empty(n)
-    f = lambda a: np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype=np.float64), (n,)))  # noqa: E731
-    _direct_light_weight_loop(radiance, f(scale), f(cos_i), f(mis), f(select_prob),
-                              np.ascontiguousarray(ok, dtype=np.bool_), f(dist),
-                              np.ascontiguousarray(p, dtype=np.float64), weight, t_max)
-    return weight, t_max
-
-
-direct_light_weight = twin(_direct_light_weight_loop and direct_light_weight_numba, direct_light_weight_numpy)
-
-
 # ----------------------------------------------------------------------------- per-path values into the batch
 
 def add_to_paths_numpy(radiance, path, values):

@@ -32,8 +32,8 @@ from ..materials.base import BSDF, BSDFFlags, MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import Hits, offset_origin, surface_points
-from ..kernels.transport import (add_light, add_to_paths, direct_light_weight, roulette, throughput_times_stokes,
-                                 update_abcs, update_depolarising, update_general)
+from ..kernels.transport import (add_light, add_to_paths, roulette, throughput_times_stokes, update_abcs,
+                                 update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .path_state import PathState
 from .sampler import PathSampler, path_keys
@@ -539,6 +539,7 @@ class PathTracer:
             u_tri = gather(u_rest, sel)
             select_prob = light_set.prob[li] if chosen_prob is None else gather(chosen_prob, sel)
             wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, gather(u[1], sel), gather(u[2], sel))))
+            value = self._emitted(light, lookup.take(sel), wi) * scale[None, :]
             sub = ShadingPoint(p, gather(sp.n_s, sel), gather(sp.n_g, sel), gather(sp.wo, sel), gather(sp.lam, sel),
                                sp.mono, sp.lookup.take(sel) if sp.lookup is not None else None,
                                None if sp.material is None else gather(sp.material, sel),
@@ -558,8 +559,8 @@ class PathTracer:
                 mis = np.ones(m)
             else:
                 mis = power_heuristic(pdf_l * select_prob, bsdf.pdf(sub, wi))
-            weight, t_max = direct_light_weight(self._emitted(light, lookup.take(sel), wi), scale, cos_i, mis,
-                                                select_prob, ok, dist, p)
+            weight = value * (cos_i * mis / select_prob * ok)[None, :]
+            t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
             if self.visibility is not None and self.visibility.affects_shadows:
                 # shadow-invisible and pass-through (alpha) surfaces let (part of) the light through
                 weight = weight * self._shadow_transmittance(p, sub.n_g, wi, t_max, ok, stats)[None, :]
