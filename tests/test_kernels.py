@@ -454,30 +454,3 @@ def test_rgb_albedo_of_a_lambert_set_bitwise():
     slot = rng.integers(0, 5, 700)
     basis = rng.uniform(size=(3, 4, 700))
     assert np.array_equal(lambert.rgb_albedo_numpy(rgb, slot, basis), lambert.rgb_albedo_numba(rgb, slot, basis))
-
-
-@pytest.mark.parametrize("P", [1, 3, 4])
-@pytest.mark.parametrize("backend", ["numpy", "numba"])
-def test_throughput_updates_in_place_equal_out_of_place(P, backend):
-    """The integrator updates T in place (out is T): every T·R·M kernel gives the same bits as
-    into a separate array, on a subset of the paths, for both backends."""
-    if backend == "numba" and kernels._numba is None:
-        pytest.skip("numba is not installed")
-    rng = np.random.default_rng(P)
-    n, L = 300, 4
-    T = rng.normal(size=(P, P, L, n))
-    rows = np.sort(rng.choice(n, 200, replace=False))
-    x_out, x_T, wo = unit(rng, 200), unit(rng, 200), unit(rng, 200)
-    A, B, C, S, D = (rng.uniform(size=(L, 200)) for _ in range(5))
-    M = rng.normal(size=(4, 4, L, 200))
-    calls = {
-        "abcs": lambda out, T: getattr(transport, f"update_abcs_{backend}")(out, T, rows, x_out, x_T, wo, A, B, C, S, D),
-        "depolarising": lambda out, T: getattr(transport, f"update_depolarising_{backend}")(out, T, rows, A),
-        "general": lambda out, T: getattr(transport, f"update_general_{backend}")(out, T, rows, x_out, x_T, wo, M),
-    }
-    for kind, call in calls.items():
-        separate = T.copy()
-        call(separate, T)
-        inplace = T.copy()
-        call(inplace, inplace)
-        assert np.array_equal(inplace[..., rows], separate[..., rows]), kind

@@ -34,8 +34,7 @@ def update_abcs_numpy(out, T, rows, x_out, x_T, wo, A, B, C, S, depol):
     x_out (the vertex value's outgoing frame), x_T (the path's frame), wo (both ⟂ it) are (3, n)
     and A..S, depol (L or 1, n), all given per such path.  R(φ) = rotation from x_out to x_T
     about wo (engine.kernels.stokes_rotation.frame_rotation), applied to columns 1, 2 of T.
-    ``out`` may be T (in place: each path's row is read before it is written), as for
-    update_depolarising and update_general.
+    T is not modified.
     """
     P = T.shape[0]
     T = _rotated_rows_numpy(T, rows, x_out, x_T, wo)

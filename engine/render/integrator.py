@@ -57,8 +57,7 @@ def scatter_throughput(out: np.ndarray, T: np.ndarray, rows: np.ndarray, m: Muel
     """out[..., rows] = T[..., rows] · R(x_out → x_T) · M at vertices with Mueller value ``m``.
 
     ``m`` (frames x_in, x_out), ``x_T`` (the paths' current frames, ⟂ the arriving segment, i.e.
-    ⟂ wo) and ``wo`` are given for the paths ``rows`` only.  ``out`` may be T itself (the update
-    is then in place; every kernel reads a path's row before writing it); otherwise T is unchanged.
+    ⟂ wo) and ``wo`` are given for the paths ``rows`` only.  T is left unchanged.
     """
     if m.kind == "abcs":
         update_abcs(out, T, rows, m.x_out, x_T, wo, m.A, m.B, m.C, m.S, m.depol)
@@ -428,12 +427,11 @@ class PathTracer:
         # One material covers every path: its sample's arrays become the next segments as they are
         # (no gathered copies in, no scattered copies out).  Otherwise each group writes its columns.
         whole = len(groups) == 1
-        # T is updated in place (no fresh (P, P, L, n) array to page in every bounce): each group reads
-        # (next-event estimation, guides, the update itself) and writes only its own paths' columns.
-        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=T, d=None if whole else np.zeros((3, n)),
+        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty_like(T), d=None if whole else np.zeros((3, n)),
                          x_T=None if whole else np.zeros((3, n)), valid=None if whole else np.zeros(n, bool),
                          is_delta=None if whole else np.ones(n, bool), pdf=None if whole else np.zeros(n),
                          eta_step=np.ones(n))
+        # (every path belongs to one material group, which writes its column of nxt.T)
         for g in groups:
             sel = slice(None) if whole else np.nonzero(grp == g)[0]
             bsdf = self.shaders[g]
