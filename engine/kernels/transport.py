@@ -307,8 +307,10 @@ def _roulette_loop(T, eta_sq, u_rr, valid, apply_rr):
         for c in range(P):
             for k in range(L):
                 for j in range(n):
-                    t = T[i, c, k, j] / scale[j] if apply_rr else T[i, c, k, j]
-                    T[i, c, k, j] = t
+                    t = T[i, c, k, j]
+                    if apply_rr:
+                        t = t / scale[j]
+                        T[i, c, k, j] = t
                     if not np.isfinite(t):
                         finite[j] = False
     nonfinite = 0
