@@ -361,11 +361,12 @@ class PathTracer:
 
         if env is not None and background.any():
             miss = background
-            Le = self._emitted(env, lk.take(miss), d[:, miss])
+            d_miss = np.compress(miss, d, axis=1)       # contiguous (3, m), unlike d[:, miss]
+            Le = self._emitted(env, lk.take(miss), d_miss)
             w = np.ones(int(miss.sum()))
             nd = ~prev_delta[miss]
             if nd.any():
-                p_light = env.pdf(d[:, miss]) * light_set.prob_at(
+                p_light = env.pdf(d_miss) * light_set.prob_at(
                     light_set.environment_index, *at_prev(miss))
                 w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
             add_light(radiance, path, T, miss.nonzero()[0], Le, w)
@@ -510,8 +511,9 @@ class PathTracer:
         trans = np.zeros(p.shape[1])
         idx = ok.nonzero()[0]
         if idx.size:
-            tr, rays = self.visibility.transmittance(self.scene, offset_origin(p[:, idx], n_g[:, idx], wi[:, idx]),
-                                                     wi[:, idx], t_max[idx])
+            w = gather(wi, idx)
+            tr, rays = self.visibility.transmittance(self.scene, offset_origin(gather(p, idx), gather(n_g, idx), w),
+                                                     w, t_max[idx])
             trans[idx] = tr
             stats["shadow_rays"] += rays
         return trans
@@ -571,8 +573,10 @@ class PathTracer:
                 else:
                     test = ok.nonzero()[0]
                     blocked = np.zeros(m, bool)
-                    blocked[test] = self.scene.occluded(offset_origin(p[:, test], sub.n_g[:, test], wi[:, test]),
-                                                        wi[:, test], t_max[test])
+                    # np.take: contiguous (3, m) columns (p[:, test] would be a transposed copy)
+                    w = gather(wi, test)
+                    blocked[test] = self.scene.occluded(offset_origin(gather(p, test), gather(sub.n_g, test), w),
+                                                        w, t_max[test])
                     stats["shadow_rays"] += test.size
                 if blocked.any() and light.blocks_own_shadow_rays:
                     # cosθ at the light from the area pdf dist²/(cosθ·A)
