@@ -1,9 +1,10 @@
-"""Cosine-weighted sampling of a diffuse lobe about the shading normal, as one compiled pass.
+"""Lambert's per-vertex work as compiled passes (twins in engine.materials.lambert).
 
-The arithmetic of engine.materials.sampling (concentric disk map, local frame of
-engine.vec3.local_frame) and of Lambert's validity and pdf, per path and in the same operation
-order, so the compiled twin gives the NumPy reference's bits (sin and cos are the platform's libm
-in both on this machine; the twin tests allow rounding where they are not).
+- cosine-weighted sampling about the shading normal: the arithmetic of engine.materials.sampling
+  (concentric disk map, local frame of engine.vec3.local_frame) and of Lambert's validity and pdf,
+  per path and in the same operation order, so the compiled twin gives the NumPy reference's bits
+  (sin and cos are the platform's libm in both here; the twin test allows rounding elsewhere);
+- the albedo spectra of a LambertSet's RGB members, r·B_r + g·B_g + b·B_b, in the same order.
 """
 
 from __future__ import annotations
