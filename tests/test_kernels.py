@@ -357,3 +357,100 @@ def test_beckmann_visible_slopes_match_the_numpy_reference():
     got = visible_slope_x_numba(tan, u1)
     assert np.all(np.isfinite(got))
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+
+
+@needs_numba
+@pytest.mark.parametrize("P", [1, 3, 4])
+@pytest.mark.parametrize("L", [1, 4])
+@pytest.mark.parametrize("apply_rr", [False, True])
+def test_roulette_bitwise_including_nonfinite_and_black_paths(P, L, apply_rr):
+    """Russian roulette + validity: same survivors, same divided throughputs, same non-finite count,
+    with NaN/inf entries (in T00 and elsewhere), black paths, huge η² (q clamped) and q = 0."""
+    rng = np.random.default_rng(P * 10 + L)
+    n = 600
+    T = rng.uniform(-0.2, 1.0, size=(P, P, L, n))
+    T[..., 0:20] = np.nan if P == 1 else T[..., 0:20]
+    T[0, 0, :, 20:40] = 0.0                                    # black
+    T[-1, -1, -1, 40:60] = np.inf                              # non-finite off T00 (T00 itself for P = 1)
+    T[0, 0, 0, 60:80] = np.nan                                 # NaN q
+    eta_sq = rng.uniform(0.5, 3.0, n)
+    eta_sq[80:100] = 1e6
+    u = rng.uniform(size=n)
+    valid = rng.uniform(size=n) < 0.9
+    a_T, a_valid = T.copy(), valid.copy()
+    b_T, b_valid = T.copy(), valid.copy()
+    a_T, a_bad = transport.roulette_numpy(a_T, eta_sq, u, a_valid, apply_rr)
+    b_T, b_bad = transport.roulette_numba(b_T, eta_sq, u, b_valid, apply_rr)
+    assert np.array_equal(a_valid, b_valid) and a_bad == b_bad
+    assert np.array_equal(a_T, b_T, equal_nan=True)
+    assert 0 < a_valid.sum() < n and a_bad > 0
+
+
+@needs_numba
+def test_cosine_sampling_one_pass_matches_the_reference():
+    """Lambert's compiled cosine sampling against cosine_sample_numpy: same directions, validity and
+    pdfs (to rounding, sin/cos being the platform's), incl. u on the disk map's axes and diagonals,
+    normals along ±z (the local frame's branch) and viewers behind the surface."""
+    from engine.materials import lambert
+    rng = np.random.default_rng(7)
+    n = 2000
+    u = rng.uniform(size=(2, n))
+    u[:, :4] = [[0.5, 0.5, 0.0, 0.25], [0.5, 0.9, 0.0, 0.25]]   # centre, an axis, a corner, a diagonal
+    n_s = unit(rng, n)
+    n_s[:, 4:8] = [[0, 0, 0, 0], [0, 0, 0, 0], [1, -1, 1, -1]]
+    wo = unit(rng, n)
+    got = lambert.cosine_sample_numba(u, n_s, wo)
+    ref = lambert.cosine_sample_numpy(u, n_s, wo)
+    np.testing.assert_allclose(got[0], ref[0], rtol=1e-14, atol=1e-15)
+    assert np.array_equal(got[1], ref[1])
+    np.testing.assert_allclose(got[2], ref[2], rtol=1e-14, atol=0)
+    assert 0 < ref[1].sum() < n
+
+
+@needs_numba
+def test_complex_index_from_measured_tables_bitwise():
+    """Tabulated (n, κ) → relative complex index in one pass: NumPy's np.interp arithmetic (knots,
+    ends, between knots) and complex division by the exterior index, bit for bit; ``inside`` False
+    when a wavelength leaves either table."""
+    from engine.kernels import tables
+    from engine.spectral.ior import named_ior
+    n_spec, k_spec = named_ior("Au")
+    rng = np.random.default_rng(3)
+    lam = rng.uniform(360.0, 830.0, (4, 3000))
+    lam[0, :50] = n_spec.wavelengths[:50]                      # exactly on knots
+    lam[1, :2] = [360.0, 830.0]
+    for ext in (1.0, 1.33, 0.7):
+        args = (lam, n_spec.wavelengths, n_spec.values, k_spec.wavelengths, k_spec.values, ext)
+        (a, ia), (b, ib) = tables.complex_index_table_numpy(*args), tables.complex_index_table_numba(*args)
+        assert ia == ib
+        assert np.array_equal(a.real, b.real) and np.array_equal(a.imag, b.imag)
+    outside = lam.copy()
+    outside[2, 7] = 5000.0
+    args = (outside, n_spec.wavelengths, n_spec.values, k_spec.wavelengths, k_spec.values, 1.0)
+    assert tables.complex_index_table_numpy(*args)[1] is False
+    assert tables.complex_index_table_numba(*args)[1] is False
+
+
+@needs_numba
+@pytest.mark.parametrize("L", [1, 3, 4])
+def test_add_to_paths_bitwise(L):
+    """The scatter-add of per-path values (next-event estimation) into the batch radiance, bit for bit."""
+    rng = np.random.default_rng(L)
+    n = 800
+    acc_a = rng.normal(size=(4, L, 2 * n))
+    acc_b = acc_a.copy()
+    path = rng.permutation(2 * n)[:n]
+    values = rng.normal(size=(4, L, n))
+    transport.add_to_paths_numpy(acc_a, path, values)
+    transport.add_to_paths_numba(acc_b, path, values)
+    assert np.array_equal(acc_a, acc_b)
+
+
+@needs_numba
+def test_rgb_albedo_of_a_lambert_set_bitwise():
+    from engine.materials import lambert
+    rng = np.random.default_rng(11)
+    rgb = rng.uniform(size=(3, 5))
+    slot = rng.integers(0, 5, 700)
+    basis = rng.uniform(size=(3, 4, 700))
+    assert np.array_equal(lambert.rgb_albedo_numpy(rgb, slot, basis), lambert.rgb_albedo_numba(rgb, slot, basis))

@@ -50,3 +50,62 @@ def interp_grid_numba(table, lam_nm, lo, hi, zero_outside):
 
 
 interp_grid = twin(_interp_loop and interp_grid_numba, interp_grid_numpy)
+
+
+# ----------------------------------------------------------------------------- measured (n, κ) tables
+
+@jit
+def interp_at(xp, fp, x):
+    """np.interp(x, xp, fp) for one x (strictly increasing xp): the same cases and arithmetic as
+    NumPy's compiled_interp (ends held, exact knots returned, NaN fallback from the right knot)."""
+    m = xp.shape[0]
+    if np.isnan(x):
+        return x
+    if x < xp[0]:
+        return fp[0]
+    if x >= xp[m - 1]:
+        return fp[m - 1]
+    j = np.searchsorted(xp, x, side="right") - 1       # xp[j] <= x < xp[j + 1]
+    if xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    r = slope * (x - xp[j]) + fp[j]
+    if np.isnan(r):
+        r = slope * (x - xp[j + 1]) + fp[j + 1]
+        if np.isnan(r) and fp[j] == fp[j + 1]:
+            r = fp[j]
+    return r
+
+
+def complex_index_table_numpy(lam, wl_n, n, wl_k, k, exterior_n):
+    """((n + iκ)(λ) / exterior_n, inside): the relative complex index (L, N) of tabulated n and κ
+    (engine.spectral TabulatedSpectrum, piecewise linear) at lam (L, N) nm; ``inside`` is False if
+    some λ lies outside either table (the values there are then meaningless: the caller reports it)."""
+    inside = bool(np.all((lam >= wl_n[0]) & (lam <= wl_n[-1]) & (lam >= wl_k[0]) & (lam <= wl_k[-1])))
+    return (np.interp(lam, wl_n, n) + 1j * np.interp(lam, wl_k, k)) / exterior_n, inside
+
+
+@jit
+def _complex_index_loop(lam, wl_n, n, wl_k, k, scale, out):
+    inside = True
+    for i in range(lam.shape[0]):
+        for j in range(lam.shape[1]):
+            x = lam[i, j]
+            if not (x >= wl_n[0] and x <= wl_n[-1] and x >= wl_k[0] and x <= wl_k[-1]):
+                inside = False
+            a = interp_at(wl_n, n, x)
+            b = interp_at(wl_k, k, x)
+            # NumPy's (a + i·b) / e: Smith's division by e + 0i, i.e. times 1/e
+            out[i, j] = complex((a + b * 0.0) * scale, (b - a * 0.0) * scale)
+    return inside
+
+
+def complex_index_table_numba(lam, wl_n, n, wl_k, k, exterior_n):
+    lam = np.ascontiguousarray(lam, dtype=np.float64)
+    out = np.empty(lam.shape, np.complex128)
+    inside = _complex_index_loop(lam, *(np.ascontiguousarray(a, dtype=np.float64) for a in (wl_n, n, wl_k, k)),
+                                 1.0 / float(exterior_n), out)
+    return out, bool(inside)
+
+
+complex_index_table = twin(_complex_index_loop and complex_index_table_numba, complex_index_table_numpy)

@@ -255,3 +255,109 @@ def throughput_times_stokes_numba(T, rows, S, weight):
 
 throughput_times_stokes = twin(_t_times_s_loop and throughput_times_stokes_numba,
                                    throughput_times_stokes_numpy)
+
+
+# ----------------------------------------------------------------------------- Russian roulette, path validity
+
+def roulette_numpy(T, eta_sq, u_rr, valid, apply_rr):
+    """Russian roulette on the new throughputs and the paths' validity; returns (T, nonfinite).
+
+    T (P, P, L, n) is the throughput after this vertex, ``eta_sq`` (n,) the product of refraction
+    scales η² so far, ``u_rr`` (n,) uniform numbers, ``valid`` (n,) bool where the vertex sampled
+    a direction (updated in place).  With ``apply_rr`` a path survives with probability
+    q = min(max_λ T00 · η², 0.95) and T is divided by q; a NaN q ends the path.  Then paths with a
+    non-finite T end (``nonfinite`` counts those that were valid so far) and so do black ones
+    (T00 = 0 at every wavelength).  T may be returned as a new array.
+    """
+    if apply_rr:
+        q = np.minimum(np.max(T[0, 0], axis=0) * eta_sq, 0.95)
+        survive = u_rr < q
+        T = T / np.where(survive, q, 1.0)
+        valid &= survive
+    finite_T = np.isfinite(T).all(axis=(0, 1, 2))
+    nonfinite = int((valid & ~finite_T).sum())
+    valid &= finite_T & (np.abs(T[0, 0]).max(axis=0) > 0)
+    return T, nonfinite
+
+
+@jit
+def _roulette_loop(T, eta_sq, u_rr, valid, apply_rr):
+    P, L, n = T.shape[0], T.shape[2], T.shape[3]
+    scale = np.ones(n)
+    if apply_rr:
+        for j in range(n):
+            # max over λ as np.max: NaN if any entry is NaN
+            m = T[0, 0, 0, j]
+            for k in range(1, L):
+                v = T[0, 0, k, j]
+                if v > m or np.isnan(v):
+                    m = v
+                if np.isnan(m):
+                    break
+            q = m * eta_sq[j]
+            if not np.isnan(q) and q > 0.95:      # np.minimum keeps a NaN
+                q = 0.95
+            if u_rr[j] < q:
+                scale[j] = q
+            else:
+                valid[j] = False
+    finite = np.ones(n, np.bool_)
+    # component rows outermost: every (i, c, λ) row of T is one contiguous stream over paths
+    for i in range(P):
+        for c in range(P):
+            for k in range(L):
+                for j in range(n):
+                    t = T[i, c, k, j]
+                    if apply_rr:
+                        t = t / scale[j]
+                        T[i, c, k, j] = t
+                    if not np.isfinite(t):
+                        finite[j] = False
+    nonfinite = 0
+    for j in range(n):
+        if valid[j] and not finite[j]:
+            nonfinite += 1
+        if not finite[j]:
+            valid[j] = False
+        elif valid[j]:
+            black = True
+            for k in range(L):
+                if T[0, 0, k, j] != 0.0:
+                    black = False
+                    break
+            if black:
+                valid[j] = False
+    return nonfinite
+
+
+def roulette_numba(T, eta_sq, u_rr, valid, apply_rr):
+    # T is divided in place (the caller's freshly scattered throughput)
+    nonfinite = _roulette_loop(T, np.ascontiguousarray(eta_sq, dtype=np.float64),
+                               np.ascontiguousarray(u_rr, dtype=np.float64), valid, bool(apply_rr))
+    return T, int(nonfinite)
+
+
+roulette = twin(_roulette_loop and roulette_numba, roulette_numpy)
+
+
+# ----------------------------------------------------------------------------- per-path values into the batch
+
+def add_to_paths_numpy(radiance, path, values):
+    """radiance[:, :, path] += values for distinct batch indices ``path`` (n,), values (P, L, n)."""
+    radiance[:, :, path] += values
+
+
+@jit
+def _add_to_paths_loop(radiance, path, values):
+    for i in range(values.shape[0]):
+        for k in range(values.shape[1]):
+            for j in range(path.shape[0]):
+                radiance[i, k, path[j]] += values[i, k, j]
+
+
+def add_to_paths_numba(radiance, path, values):
+    _add_to_paths_loop(radiance, np.ascontiguousarray(path, dtype=np.int64),
+                       np.ascontiguousarray(values, dtype=np.float64))
+
+
+add_to_paths = twin(_add_to_paths_loop and add_to_paths_numba, add_to_paths_numpy)

@@ -11,12 +11,14 @@ from __future__ import annotations
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from ..kernels.tables import complex_index_table
 from ..polarisation.frames import plane_of_incidence_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs
 from ..spectral import LAMBDA_MAX, LAMBDA_MIN
 from .parameters import REQUIRED, ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from ..errors import SceneError
 from ..spectral.ior import NAMED_METALS
+from ..spectral.spectrum import TabulatedSpectrum
 from ..textures import textured
 from ..vec3 import reflect
 
@@ -43,6 +45,7 @@ class SmoothConductor(BSDF):
         self.k = k
         self.exterior_n = float(exterior_n)
         self.varies_over_surface = textured(n, k)
+        self._tables = type(n) is TabulatedSpectrum and type(k) is TabulatedSpectrum
         constant = bool(getattr(n, "is_constant", False) and getattr(k, "is_constant", False))
         # A real index (κ = 0 at every wavelength) reflects without retardance, unless it is below the
         # exterior index somewhere: then total internal reflection retards (S ≠ 0).
@@ -53,6 +56,12 @@ class SmoothConductor(BSDF):
                       | BSDFFlags.when(not constant, BSDFFlags.WAVELENGTH_DEPENDENT))
 
     def relative_eta(self, sp: ShadingPoint) -> np.ndarray:
+        if self._tables and not sp.mono:
+            # measured tables: both interpolations and the complex index in one pass (same numbers)
+            eta, inside = complex_index_table(sp.lam, self.n.wavelengths, self.n.values, self.k.wavelengths,
+                                              self.k.values, self.exterior_n)
+            if inside:
+                return eta
         return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
 
     def eval(self, sp, wi):

@@ -9,12 +9,38 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kernels import twin
+from ..kernels.diffuse import cosine_sample_numba, rgb_albedo_numba
 from .base import BSDF, BSDFFlags, BSDFSample, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter, Socket
 from .sampling import cosine_hemisphere, local_to_world
 from ..spectral.spectrum import basis_rgb
 from ..textures import textured
 from ..vec3 import dot
+
+
+def cosine_sample_numpy(u: np.ndarray, n_s: np.ndarray, wo: np.ndarray):
+    """(wi, valid, pdf) of cosine-weighted sampling about n_s (3, n) from u (2, n): wi (3, n) world
+    space, valid where wo (3, n) and wi lie in front of n_s, pdf = cosθ_i/π (1/sr, 0 where not valid)."""
+    local = cosine_hemisphere(u)
+    wi = local_to_world(local, n_s)
+    cos_o = n_s[0] * wo[0] + n_s[1] * wo[1] + n_s[2] * wo[2]
+    valid = (cos_o > 0) & (local[2] > 0)
+    return wi, valid, np.where(valid, local[2] / np.pi, 0.0)
+
+
+#: One compiled pass over the paths where Numba is available (engine.kernels.diffuse).
+cosine_sample = twin(cosine_sample_numba, cosine_sample_numpy)
+
+
+def rgb_albedo_numpy(rgb: np.ndarray, slot: np.ndarray, basis: np.ndarray) -> np.ndarray:
+    """Albedo spectra (L, n) of RGB-upsampled members: r·B_r + g·B_g + b·B_b with each point's
+    member colour rgb[:, slot] ((3, M) table, slot (n,)) and the RGB basis (3, L, n) at its λ."""
+    rgb = rgb[:, slot]
+    return rgb[0][None, :] * basis[0] + rgb[1][None, :] * basis[1] + rgb[2][None, :] * basis[2]
+
+
+rgb_albedo = twin(rgb_albedo_numba, rgb_albedo_numpy)
 
 
 class Lambert(BSDF):
@@ -40,11 +66,9 @@ class Lambert(BSDF):
         return np.where((c > 0) & (sp.cos_o > 0), c / np.pi, 0.0)
 
     def sample(self, sp: ShadingPoint, u_lobe, u_dir) -> BSDFSample:
-        local = cosine_hemisphere(u_dir)
-        wi = local_to_world(local, sp.n_s)
-        valid = (sp.cos_o > 0) & (local[2] > 0)
+        wi, valid, pdf = cosine_sample(u_dir, sp.n_s, sp.wo)
         a = self._albedo(sp) * valid[None, :]
-        return BSDFSample(wi=wi, weight=depolarising_value(a, sp.n), pdf=np.where(valid, local[2] / np.pi, 0.0),
+        return BSDFSample(wi=wi, weight=depolarising_value(a, sp.n), pdf=pdf,
                           is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=np.ones(sp.n))
 
     def describe(self) -> dict:
@@ -92,8 +116,7 @@ class LambertSet(Lambert):
 
         def combine():
             basis = sp.lookup.basis if sp.lookup is not None else basis_rgb(sp.lam)
-            rgb = self._rgb[:, slot]
-            return rgb[0][None, :] * basis[0] + rgb[1][None, :] * basis[1] + rgb[2][None, :] * basis[2]
+            return rgb_albedo(self._rgb, slot, basis)
         # the value depends on the slots too: memo per (set, slot array) — the slot array is the
         # same object for a vertex's eval and sample, and new at every bounce
         value = sp.lookup.memo((self, slot), combine) if sp.lookup is not None else combine()

@@ -23,6 +23,7 @@ q = min(max_λ T00 · η², 0.95), η² undoing the refraction radiance scale.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -30,10 +31,11 @@ import numpy as np
 from ..materials.base import BSDF, BSDFFlags, MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
-from .accel import offset_origin, surface_points
-from ..kernels.transport import (add_light, throughput_times_stokes, update_abcs, update_depolarising,
-                                 update_general)
+from .accel import Hits, offset_origin, surface_points
+from ..kernels.transport import (add_light, add_to_paths, roulette, throughput_times_stokes, update_abcs,
+                                 update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
+from .path_state import PathState
 from .sampler import PathSampler, path_keys
 from .visibility import ray_visibility
 from ..spectral import WavelengthLookup, rgb_weights, sample_wavelengths
@@ -86,31 +88,56 @@ def gather(a: np.ndarray, sel: slice | np.ndarray) -> np.ndarray:
     return np.take(a, sel, axis=-1)
 
 
-def keep_paths(mask: np.ndarray, *arrays: np.ndarray) -> tuple[np.ndarray, ...]:
-    """The arrays restricted to the paths where ``mask`` is True (paths on the last axis).
-
-    np.compress is ~3× faster than boolean fancy indexing on the last axis; a
-    full mask returns the arrays themselves.
-    """
-    if mask.all():
-        return arrays
-    return tuple(np.compress(mask, a, axis=-1) for a in arrays)
-
-
-def compress_lookups(mask: np.ndarray, lk: WavelengthLookup,
-                     lk_m: WavelengthLookup) -> tuple[WavelengthLookup, WavelengthLookup]:
-    """Both wavelength lookups restricted to the surviving paths (shared when they are the same)."""
-    if mask.all():
-        return lk, lk_m
-    new = lk.compress(mask)
-    return new, (new if lk_m is lk else lk_m.compress(mask))
-
-
 def power_heuristic(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     a2 = a * a
     b2 = b * b
     den = a2 + b2
     return np.where(den > 0, a2 / np.where(den > 0, den, 1.0), 0.0)
+
+
+# ----------------------------------------------------------------------------- per-bounce records
+
+@dataclass(eq=False)
+class _Accumulators:
+    """What a batch accumulates per path of the batch (indexed by ``PathState.path``): the
+    radiance (P, L, N) (RGB: L = 3), the transparency (N,) (None: not tracked), the denoising
+    guides (None: not asked) and the ray counts; ``w_rgb`` (3, L, N) colour weights of the
+    wavelength samples (None in RGB mode)."""
+    radiance: np.ndarray
+    w_rgb: np.ndarray | None
+    transparency: np.ndarray | None
+    guides: DenoiseGuides | None
+    stats: dict[str, int]
+
+
+@dataclass(eq=False)
+class _SurfaceHits:
+    """The live paths' hit points: triangle ``prim`` (n,), position ``p``, geometric and shading
+    normals ``n_g``, ``n_s``, direction to the previous vertex ``wo`` (3, n), textured attributes
+    ``at`` (engine.render.accel.surface_points, None when no material is textured)."""
+    prim: np.ndarray
+    p: np.ndarray
+    n_g: np.ndarray
+    n_s: np.ndarray
+    wo: np.ndarray
+    at: object
+
+
+@dataclass(eq=False)
+class _Scattered:
+    """The sampled continuation of every live path: new throughput ``T`` (P, P, Lm, n) in frame
+    ``x_T`` ⟂ direction ``d`` (3, n), ``valid``, ``is_delta``, solid-angle ``pdf``, refraction
+    scale ``eta_step`` (n,), the roulette number ``u_rr`` (n,) and the vertex's side normal
+    ``n_side`` (3, n) (None where no light selection needs it)."""
+    u_rr: np.ndarray
+    n_side: np.ndarray | None
+    T: np.ndarray
+    d: np.ndarray
+    x_T: np.ndarray
+    valid: np.ndarray
+    is_delta: np.ndarray
+    pdf: np.ndarray
+    eta_step: np.ndarray
 
 
 # ----------------------------------------------------------------------------- denoising guides
@@ -237,10 +264,39 @@ class PathTracer:
 
         ``abort`` (a threading.Event) is checked between bounces; if it is set the batch is
         abandoned and None is returned.
+
+        Each bounce runs named stages over one PathState: ``_intersect`` (closest hits, ray
+        visibility), ``_emission`` (light the segment reached), ``_surface`` (drop the paths that
+        left the scene, reconstruct the hit points), ``_scatter`` (per material group: next-event
+        estimation and BSDF sampling into the next segment) and ``_roulette`` (Russian roulette,
+        non-finite and black paths), then one ``PathState.compress``.
         """
         st = self.settings
+        n_total = pixel.shape[0]
+        state, acc = self._camera_paths(pixel, sample)
+        for bounce in range(st.max_depth):
+            if abort is not None and abort.is_set():
+                return None
+            if state.n == 0:
+                break
+            hits, hit, background = self._intersect(state, acc, bounce)
+            self._emission(state, acc, hits, hit, background, bounce)
+            if bounce + 1 >= st.max_depth:
+                break
+            surf = self._surface(state, hits, hit)
+            if surf is None:
+                break
+            nxt = self._scatter(state, acc, surf, bounce)
+            valid = self._roulette(state, acc, nxt, bounce)
+            self._next_segments(state, surf, nxt, valid)
+        return self._finish(acc, n_total)
+
+    # ------------------------------------------------------------------ stages
+
+    def _camera_paths(self, pixel: np.ndarray, sample: np.ndarray) -> tuple[PathState, _Accumulators]:
+        """Camera rays of the batch as a PathState (T = identity) and zeroed accumulators."""
         P, n_total = self.P, pixel.shape[0]
-        sampler = PathSampler(path_keys(st.seed, pixel, sample))
+        sampler = PathSampler(path_keys(self.settings.seed, pixel, sample))
         o, d, x_T, t_min, t_max = self.camera.generate(pixel, sampler.next(2 + self.camera.lens_dimensions))
         lam, w_rgb = self._wavelengths(sampler, n_total)
         L = 3 if self.rgb_mode else lam.shape[0]
@@ -251,180 +307,201 @@ class PathTracer:
         if np.any(t_min > 0):
             o = o + d * t_min[None, :]
             t_max = t_max - t_min
-
-        radiance = np.zeros((P, L, n_total))
-        path = np.arange(n_total)
         T = np.zeros((P, P, Lm, n_total))
         for i in range(P):
             T[i, i] = 1.0
-        prev_delta = np.ones(n_total, bool)
-        prev_pdf = np.zeros(n_total)
-        eta_sq = np.ones(n_total)
-        p_prev = n_prev = None      # where the paths' last segments started (light selection, lamp pdfs)
+        state = PathState(path=np.arange(n_total), T=T, x_T=x_T, o=o, d=d, t_max=t_max, eta_sq=np.ones(n_total),
+                          prev_delta=np.ones(n_total, bool), prev_pdf=np.zeros(n_total), p_prev=None, n_prev=None,
+                          sampler=sampler, lk=lk, lk_m=lk_m)
+        # Transparency T per sample (alpha = 1 − T): camera rays reaching the background of a
+        # transparent film or a holdout (Cycles' film_write_transparent / holdout).
+        acc = _Accumulators(radiance=np.zeros((P, L, n_total)), w_rgb=w_rgb,
+                            transparency=np.zeros(n_total) if self.track_alpha else None,
+                            guides=DenoiseGuides(n_total) if self.denoise_data else None,
+                            stats={"rays": 0, "shadow_rays": 0, "nonfinite": 0})
+        return state, acc
+
+    def _intersect(self, state: PathState, acc: _Accumulators,
+                   bounce: int) -> tuple[Hits, np.ndarray, np.ndarray]:
+        """Closest hits of the paths' segments (hidden and pass-through surfaces skipped); returns
+        (hits, hit mask, background mask: misses that see the environment).  Camera rays reaching a transparent background or a holdout add to the
+        transparency and count as misses without light."""
+        compiled, vis = self.scene, self.visibility
+        o, d, t_max = state.o, state.d, state.t_max
+        hits = compiled.intersect(o, d, t_max)
+        acc.stats["rays"] += state.n
+        if vis is not None:
+            hits, extra = vis.pass_through(compiled, o, d, t_max, hits, bounce == 0, state.sampler.keys, bounce)
+            acc.stats["rays"] += extra
+        hit = hits.prim >= 0
+        background = ~hit
+        if bounce == 0 and acc.transparency is not None:
+            # Camera rays have T = identity here: each adds 1 to the transparency it reaches.
+            if self.film_transparent:
+                acc.transparency[state.path[background]] += 1.0
+                background = np.zeros_like(hit)
+            if vis is not None and vis.any_holdout:
+                held = hit & vis.holdout[vis.tri_mesh[np.where(hit, hits.prim, 0)]]
+                acc.transparency[state.path[held]] += 1.0
+                hit = hit & ~held
+        return hits, hit, background
+
+    def _emission(self, state: PathState, acc: _Accumulators, hits: Hits, hit: np.ndarray, background: np.ndarray,
+                  bounce: int) -> None:
+        """Light reached by the segments, MIS-weighted against next-event estimation from the
+        vertices they left: the environment (misses), emitting triangles, analytic lamps and
+        non-occluding lamps crossed before the hit."""
+        light_set, env, compiled = self.lights, self.lights.environment, self.scene
+        radiance, path, T, o, d, t_max = acc.radiance, state.path, state.T, state.o, state.d, state.t_max
+        prev_delta, prev_pdf, lk, p_prev, n_prev = state.prev_delta, state.prev_pdf, state.lk, state.p_prev, state.n_prev
 
         def at_prev(sel):
             """(position, side normal) of the vertices that the paths ``sel`` left (light selection)."""
             return (None, None) if p_prev is None else (p_prev[:, sel], None if n_prev is None else n_prev[:, sel])
 
-        stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0}
-        light_set = self.lights
-        env = light_set.environment
+        if env is not None and background.any():
+            miss = background
+            d_miss = np.compress(miss, d, axis=1)       # contiguous (3, m), unlike d[:, miss]
+            Le = self._emitted(env, lk.take(miss), d_miss)
+            w = np.ones(int(miss.sum()))
+            nd = ~prev_delta[miss]
+            if nd.any():
+                p_light = env.pdf(d_miss) * light_set.prob_at(
+                    light_set.environment_index, *at_prev(miss))
+                w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
+            add_light(radiance, path, T, miss.nonzero()[0], Le, w)
+        if self.has_area_lights:
+            lit = (compiled.tri_emitter[hits.prim] >= 0) & hit
+            if lit.any():
+                idx = lit.nonzero()[0]
+                self._emitter_hits(radiance, path, T, idx, hits.prim[idx], hits.t[idx], d, lk,
+                                   prev_delta, prev_pdf, at_prev, bounce == 0)
+        if light_set.hittable:
+            # analytic lamps (sphere/disk lights, sun discs): seen, never occluding
+            seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
+            for li in light_set.hittable:
+                light = light_set.lights[li]
+                if bounce == 0 and li in light_set.camera_hidden:
+                    continue
+                rows, factor, pdf_l = light.intersect(o, d, seg, hit, p_prev)
+                if rows.size:
+                    Le = self._emitted(light, lk.take(rows)) * factor[None, :]
+                    p_light = pdf_l * light_set.prob_at(li, *at_prev(rows))
+                    w = np.where(prev_delta[rows], 1.0, power_heuristic(prev_pdf[rows], p_light))
+                    add_light(radiance, path, T, rows, Le, w)
+        if compiled.has_passthrough:
+            # lamps (non-occluding emitters) crossed before the hit: they add light, the ray goes on
+            seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
+            for rows, prims, dists in compiled.passthrough_hits(o, d, seg):
+                self._emitter_hits(radiance, path, T, rows, prims, dists, d, lk, prev_delta, prev_pdf,
+                                   at_prev, bounce == 0)
+
+    def _surface(self, state: PathState, hits: Hits, hit: np.ndarray) -> _SurfaceHits | None:
+        """Keep the paths that hit a surface and reconstruct their hit points (None: none left).
+
+        The previous vertex's fields (segment origin and length, sampling record) are consumed
+        by the emission stage and dropped first, so the compression does not carry them.
+        """
+        state.o = state.t_max = state.prev_delta = state.prev_pdf = state.p_prev = state.n_prev = None
+        prim, u, v = state.compress(hit, hits.prim, hits.u, hits.v)
+        if state.n == 0:
+            return None
         compiled = self.scene
-        vis = self.visibility
-        # Transparency T per sample (alpha = 1 − T): camera rays reaching the background of a
-        # transparent film or a holdout (Cycles' film_write_transparent / holdout).
-        transparency = np.zeros(n_total) if self.track_alpha else None
-        guides = DenoiseGuides(n_total) if self.denoise_data else None
+        p, n_g, n_s = compiled.surface(prim, u, v)
+        at = surface_points(compiled, prim, u, v) if self.textured else None
+        return _SurfaceHits(prim=prim, p=p, n_g=n_g, n_s=n_s, wo=-state.d, at=at)
 
-        for bounce in range(st.max_depth):
-            if abort is not None and abort.is_set():
-                return None
-            n = path.shape[0]
-            if n == 0:
-                break
-            hits = compiled.intersect(o, d, t_max)
-            stats["rays"] += n
-            if vis is not None:
-                hits, extra = vis.pass_through(compiled, o, d, t_max, hits, bounce == 0, sampler.keys, bounce)
-                stats["rays"] += extra
-            hit = hits.prim >= 0
-            background = ~hit
-            if bounce == 0 and transparency is not None:
-                # Camera rays have T = identity here: each adds 1 to the transparency it reaches.
-                if self.film_transparent:
-                    transparency[path[background]] += 1.0
-                    background = np.zeros_like(hit)
-                if vis is not None and vis.any_holdout:
-                    held = hit & vis.holdout[vis.tri_mesh[np.where(hit, hits.prim, 0)]]
-                    transparency[path[held]] += 1.0
-                    hit = hit & ~held
+    def _scatter(self, state: PathState, acc: _Accumulators, surf: _SurfaceHits, bounce: int) -> _Scattered:
+        """Per material group: next-event estimation (into the radiance) and BSDF sampling of the
+        next segment with the Mueller update T ← T·R(x_out → x_T)·M (into a new T)."""
+        st, light_set = self.settings, self.lights
+        n, T, sampler, lk, lk_m = state.n, state.T, state.sampler, state.lk, state.lk_m
+        p, n_g, n_s, wo = surf.p, surf.n_g, surf.n_s, surf.wo
+        n_side = n_g * np.sign(dot(n_g, wo))[None, :] if light_set.spatial else None
+        # Stokes frame of the arriving segment: x_T is already ⟂ d.
+        mat = self.scene.tri_material[surf.prim]
+        grp = self.group_of[mat]
+        u_light = sampler.next(4)
+        u_bsdf = sampler.next(3)
+        u_rr = sampler.next(1)[0]
+        groups = np.unique(grp)
+        # One material covers every path: its sample's arrays become the next segments as they are
+        # (no gathered copies in, no scattered copies out).  Otherwise each group writes its columns.
+        whole = len(groups) == 1
+        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty_like(T), d=None if whole else np.zeros((3, n)),
+                         x_T=None if whole else np.zeros((3, n)), valid=None if whole else np.zeros(n, bool),
+                         is_delta=None if whole else np.ones(n, bool), pdf=None if whole else np.zeros(n),
+                         eta_step=np.ones(n))
+        # (every path belongs to one material group, which writes its column of nxt.T)
+        for g in groups:
+            sel = slice(None) if whole else np.nonzero(grp == g)[0]
+            bsdf = self.shaders[g]
+            sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
+                              gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
+                              self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None,
+                              None if surf.at is None else surf.at.take(sel))
+            sp = bsdf.shading_point(sp)        # a normal/bump-mapped shading normal, else sp itself
+            rows = np.arange(n) if isinstance(sel, slice) else sel
+            xTm = gather(state.x_T, sel)
 
-            # --- light reached by this segment ----------------------------------------
-            if env is not None and background.any():
-                miss = background
-                Le = self._emitted(env, lk.take(miss), d[:, miss])
-                w = np.ones(int(miss.sum()))
-                nd = ~prev_delta[miss]
-                if nd.any():
-                    p_light = env.pdf(d[:, miss]) * light_set.prob_at(
-                        light_set.environment_index, *at_prev(miss))
-                    w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
-                add_light(radiance, path, T, miss.nonzero()[0], Le, w)
-            if self.has_area_lights:
-                lit = (compiled.tri_emitter[hits.prim] >= 0) & hit
-                if lit.any():
-                    idx = lit.nonzero()[0]
-                    self._emitter_hits(radiance, path, T, idx, hits.prim[idx], hits.t[idx], d, lk,
-                                       prev_delta, prev_pdf, at_prev, bounce == 0)
-            if light_set.hittable:
-                # analytic lamps (sphere/disk lights, sun discs): seen, never occluding
-                seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
-                for li in light_set.hittable:
-                    light = light_set.lights[li]
-                    if bounce == 0 and li in light_set.camera_hidden:
-                        continue
-                    rows, factor, pdf_l = light.intersect(o, d, seg, hit, p_prev)
-                    if rows.size:
-                        Le = self._emitted(light, lk.take(rows)) * factor[None, :]
-                        p_light = pdf_l * light_set.prob_at(li, *at_prev(rows))
-                        w = np.where(prev_delta[rows], 1.0, power_heuristic(prev_pdf[rows], p_light))
-                        add_light(radiance, path, T, rows, Le, w)
-            if compiled.has_passthrough:
-                # lamps (non-occluding emitters) crossed before the hit: they add light, the ray goes on
-                seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
-                for rows, prims, dists in compiled.passthrough_hits(o, d, seg):
-                    self._emitter_hits(radiance, path, T, rows, prims, dists, d, lk, prev_delta, prev_pdf,
-                                       at_prev, bounce == 0)
+            if not bsdf.flags.is_delta_only and len(light_set) and bounce + 2 <= st.max_depth:
+                contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], acc.stats)
+                add_to_paths(acc.radiance, gather(state.path, sel), contrib)
 
-            if bounce + 1 >= st.max_depth:
-                break
-
-            # --- keep the paths that hit something --------------------------------------
-            path, T, x_T, d, eta_sq, prim, u, v, sampler.keys = keep_paths(
-                hit, path, T, x_T, d, eta_sq, hits.prim, hits.u, hits.v, sampler.keys)
-            lk, lk_m = compress_lookups(hit, lk, lk_m)
-            n = path.shape[0]
-            if n == 0:
-                break
-            p, n_g, n_s = compiled.surface(prim, u, v)
-            hits_at = surface_points(compiled, prim, u, v) if self.textured else None
-            wo = -d
-            n_side = n_g * np.sign(dot(n_g, wo))[None, :] if light_set.spatial else None
-            # Stokes frame of the arriving segment: x_T is already ⟂ d.
-            mat = compiled.tri_material[prim]
-            grp = self.group_of[mat]
-            u_light = sampler.next(4)
-            u_bsdf = sampler.next(3)
-            u_rr = sampler.next(1)[0]
-
-            new_d = np.zeros((3, n))
-            new_xT = np.zeros((3, n))
-            newT = np.empty_like(T)        # every path belongs to one material group, which writes it
-            valid = np.zeros(n, bool)
-            is_delta = np.ones(n, bool)
-            pdf_next = np.zeros(n)
-            eta_step = np.ones(n)
-
-            groups = np.unique(grp)
-            for g in groups:
-                # One material covers every path: use whole arrays instead of gathered copies.
-                sel = slice(None) if len(groups) == 1 else np.nonzero(grp == g)[0]
-                bsdf = self.shaders[g]
-                sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
-                                  gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
-                                  self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None,
-                                  None if hits_at is None else hits_at.take(sel))
-                sp = bsdf.shading_point(sp)        # a normal/bump-mapped shading normal, else sp itself
-                rows = np.arange(n) if isinstance(sel, slice) else sel
-                xTm = gather(x_T, sel)
-
-                if not bsdf.flags.is_delta_only and len(light_set) and bounce + 2 <= st.max_depth:
-                    contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], stats)
-                    radiance[:, :, path[sel]] += contrib
-
-                bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
-                if guides is not None and not bsdf.flags.is_delta_only:
-                    guides.record(gather(path, sel), T[0, 0][:, rows], bs.weight, bs.valid, sp.n_s, sp.wo,
-                                  w_rgb)
-                scatter_throughput(newT, T, rows, bs.weight, xTm, sp.wo)
-                new_d[:, sel] = bs.wi
-                new_xT[:, sel] = bs.weight.x_in
-                valid[sel] = bs.valid
-                is_delta[sel] = bs.is_delta
-                pdf_next[sel] = bs.pdf
+            bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
+            if acc.guides is not None and not bsdf.flags.is_delta_only:
+                acc.guides.record(gather(state.path, sel), T[0, 0][:, rows], bs.weight, bs.valid, sp.n_s, sp.wo,
+                                  acc.w_rgb)
+            scatter_throughput(nxt.T, T, rows, bs.weight, xTm, sp.wo)
+            if whole:
+                nxt.d, nxt.x_T, nxt.is_delta, nxt.pdf = bs.wi, bs.weight.x_in, bs.is_delta, bs.pdf
+                nxt.valid = np.array(bs.valid, dtype=bool)      # own copy: the roulette updates it in place
                 if bs.eta_sq is not None:
-                    eta_step[sel] = bs.eta_sq
+                    nxt.eta_step[:] = bs.eta_sq
+                continue
+            nxt.d[:, sel] = bs.wi
+            nxt.x_T[:, sel] = bs.weight.x_in
+            nxt.valid[sel] = bs.valid
+            nxt.is_delta[sel] = bs.is_delta
+            nxt.pdf[sel] = bs.pdf
+            if bs.eta_sq is not None:
+                nxt.eta_step[sel] = bs.eta_sq
+        return nxt
 
-            eta_sq = eta_sq * eta_step
-            # --- Russian roulette ------------------------------------------------------
-            if bounce + 1 >= st.rr_depth:
-                q = np.minimum(np.max(newT[0, 0], axis=0) * eta_sq, 0.95)
-                survive = u_rr < q
-                newT = newT / np.where(survive, q, 1.0)
-                valid &= survive
-            finite_T = np.isfinite(newT).all(axis=(0, 1, 2))
-            stats["nonfinite"] += int((valid & ~finite_T).sum())   # ended here, their light so far kept
-            valid &= finite_T & (np.abs(newT[0, 0]).max(axis=0) > 0)
+    def _roulette(self, state: PathState, acc: _Accumulators, nxt: _Scattered, bounce: int) -> np.ndarray:
+        """Russian roulette (from ``rr_depth``) on the new throughputs, in place; returns the mask of
+        paths that go on: sampled validly, survived, finite and not black.  Paths with a non-finite
+        throughput end here (counted; their light so far is kept)."""
+        state.eta_sq = state.eta_sq * nxt.eta_step
+        nxt.T, nonfinite = roulette(nxt.T, state.eta_sq, nxt.u_rr, nxt.valid, bounce + 1 >= self.settings.rr_depth)
+        acc.stats["nonfinite"] += nonfinite
+        return nxt.valid
 
-            path, T, x_T, d, eta_sq, prev_delta, prev_pdf, p, n_g, sampler.keys = keep_paths(
-                valid, path, newT, new_xT, new_d, eta_sq, is_delta, pdf_next, p, n_g, sampler.keys)
-            lk, lk_m = compress_lookups(valid, lk, lk_m)
-            # where the next segment starts (light selection, analytic lamps' pdfs)
-            p_prev = p if light_set.spatial or light_set.hittable else None
-            n_prev = keep_paths(valid, n_side)[0] if n_side is not None else None
-            o = offset_origin(p, n_g, d)
-            t_max = None
+    def _next_segments(self, state: PathState, surf: _SurfaceHits, nxt: _Scattered, valid: np.ndarray) -> None:
+        """The surviving paths' next segments: the sampled directions from the offset hit points."""
+        light_set = self.lights
+        state.T, state.x_T, state.d = nxt.T, nxt.x_T, nxt.d
+        state.prev_delta, state.prev_pdf, state.n_prev = nxt.is_delta, nxt.pdf, nxt.n_side
+        p, n_g = state.compress(valid, surf.p, surf.n_g)
+        # where the next segment starts (light selection, analytic lamps' pdfs)
+        state.p_prev = p if light_set.spatial or light_set.hittable else None
+        state.o = offset_origin(p, n_g, state.d)
+        state.t_max = None
 
-        rgb = radiance if self.rgb_mode else np.einsum("pln,cln->pcn", radiance, w_rgb)
+    def _finish(self, acc: _Accumulators, n_total: int) -> tuple[np.ndarray, dict[str, int]]:
+        """The batch's Stokes × RGB values (4, 3, n_total) (non-finite samples zeroed and counted)."""
+        P, stats = self.P, acc.stats
+        radiance = acc.radiance
+        rgb = radiance if self.rgb_mode else np.einsum("pln,cln->pcn", radiance, acc.w_rgb)
         out = np.zeros((4, 3, n_total))
         out[:P] = rgb
         finite = np.isfinite(out).all(axis=(0, 1))
         stats["nonfinite"] += int((~finite).sum())
         out[:, :, ~finite] = 0.0
-        if transparency is not None:
-            stats["alpha"] = 1.0 - transparency
-        if guides is not None:
-            stats["denoise"] = (guides.albedo, guides.normal)
+        if acc.transparency is not None:
+            stats["alpha"] = 1.0 - acc.transparency
+        if acc.guides is not None:
+            stats["denoise"] = (acc.guides.albedo, acc.guides.normal)
         return out, stats
 
     def _shadow_transmittance(self, p: np.ndarray, n_g: np.ndarray, wi: np.ndarray, t_max: np.ndarray,
@@ -434,8 +511,9 @@ class PathTracer:
         trans = np.zeros(p.shape[1])
         idx = ok.nonzero()[0]
         if idx.size:
-            tr, rays = self.visibility.transmittance(self.scene, offset_origin(p[:, idx], n_g[:, idx], wi[:, idx]),
-                                                     wi[:, idx], t_max[idx])
+            w = gather(wi, idx)
+            tr, rays = self.visibility.transmittance(self.scene, offset_origin(gather(p, idx), gather(n_g, idx), w),
+                                                     w, t_max[idx])
             trans[idx] = tr
             stats["shadow_rays"] += rays
         return trans
@@ -495,15 +573,20 @@ class PathTracer:
                 else:
                     test = ok.nonzero()[0]
                     blocked = np.zeros(m, bool)
-                    blocked[test] = self.scene.occluded(offset_origin(p[:, test], sub.n_g[:, test], wi[:, test]),
-                                                        wi[:, test], t_max[test])
+                    # np.take: contiguous (3, m) columns (p[:, test] would be a transposed copy)
+                    w = gather(wi, test)
+                    blocked[test] = self.scene.occluded(offset_origin(gather(p, test), gather(sub.n_g, test), w),
+                                                        w, t_max[test])
                     stats["shadow_rays"] += test.size
                 if blocked.any() and light.blocks_own_shadow_rays:
                     # cosθ at the light from the area pdf dist²/(cosθ·A)
                     cos_l = np.minimum(dist * dist / np.maximum(pdf_l * light.total_area, 1e-300), 1.0)
                     blocked = self.scene.unblock_own_hits(li, p, sub.n_g, wi, dist, cos_l, blocked)
                 weight = weight * (~blocked)[None, :]
-            out[:, :, sel] = throughput_times_stokes(T, gather(rows, sel), S, weight)
+            light_out = throughput_times_stokes(T, gather(rows, sel), S, weight)
+            if isinstance(sel, slice) and light_out.shape == out.shape:
+                return light_out                    # one light for every path: no copy into ``out``
+            out[:, :, sel] = light_out
         return out
 
     def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, idx: np.ndarray, prims: np.ndarray,

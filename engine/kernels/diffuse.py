@@ -1,0 +1,81 @@
+"""Lambert's per-vertex work as compiled passes (twins in engine.materials.lambert).
+
+- cosine-weighted sampling about the shading normal: the arithmetic of engine.materials.sampling
+  (concentric disk map, local frame of engine.vec3.local_frame) and of Lambert's validity and pdf,
+  per path and in the same operation order, so the compiled twin gives the NumPy reference's bits
+  (sin and cos are the platform's libm in both here; the twin test allows rounding elsewhere);
+- the albedo spectra of a LambertSet's RGB members, r·B_r + g·B_g + b·B_b, in the same order.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import jit
+
+
+@jit
+def _cosine_sample_loop(u, n_s, wo, wi, valid, pdf):
+    for j in range(n_s.shape[1]):
+        # concentric disk map (engine.materials.sampling.cosine_hemisphere)
+        a = 2.0 * u[0, j] - 1.0
+        b = 2.0 * u[1, j] - 1.0
+        use_a = abs(a) > abs(b)
+        if use_a:
+            r = a
+            phi = (np.pi / 4) * (b / (a if a != 0 else 1.0))
+        else:
+            r = b
+            phi = np.pi / 2 - (np.pi / 4) * (a / (b if b != 0 else 1.0))
+        x = r * np.cos(phi)
+        y = r * np.sin(phi)
+        z = np.sqrt(max(1.0 - x * x - y * y, 0.0))
+        # local_to_world with t = any_perpendicular(n), b = n × t
+        n0, n1, n2 = n_s[0, j], n_s[1, j], n_s[2, j]
+        sign = 1.0 if n2 >= 0 else -1.0
+        f = -1.0 / (sign + n2)
+        g = n0 * n1 * f
+        t0 = 1.0 + sign * n0 * n0 * f
+        t1 = sign * g
+        t2 = -sign * n0
+        b0 = n1 * t2 - n2 * t1
+        b1 = n2 * t0 - n0 * t2
+        b2 = n0 * t1 - n1 * t0
+        wi[0, j] = t0 * x + b0 * y + n0 * z
+        wi[1, j] = t1 * x + b1 * y + n1 * z
+        wi[2, j] = t2 * x + b2 * y + n2 * z
+        cos_o = n0 * wo[0, j] + n1 * wo[1, j] + n2 * wo[2, j]
+        ok = cos_o > 0 and z > 0
+        valid[j] = ok
+        pdf[j] = z / np.pi if ok else 0.0
+
+
+def cosine_sample_numba(u, n_s, wo):
+    n = n_s.shape[1]
+    wi, valid, pdf = np.empty((3, n)), np.empty(n, np.bool_), np.empty(n)
+    _cosine_sample_loop(np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(n_s, dtype=np.float64),
+                        np.ascontiguousarray(wo, dtype=np.float64), wi, valid, pdf)
+    return wi, valid, pdf
+
+
+#: The compiled twin of engine.materials.lambert.cosine_sample_numpy (None without Numba).
+cosine_sample_numba = _cosine_sample_loop and cosine_sample_numba
+
+
+@jit
+def _rgb_albedo_loop(rgb, slot, basis, out):
+    for k in range(basis.shape[1]):
+        for j in range(slot.shape[0]):
+            m = slot[j]
+            out[k, j] = rgb[0, m] * basis[0, k, j] + rgb[1, m] * basis[1, k, j] + rgb[2, m] * basis[2, k, j]
+
+
+def rgb_albedo_numba(rgb, slot, basis):
+    out = np.empty(basis.shape[1:])
+    _rgb_albedo_loop(np.ascontiguousarray(rgb, dtype=np.float64), np.ascontiguousarray(slot, dtype=np.int64),
+                     np.ascontiguousarray(basis, dtype=np.float64), out)
+    return out
+
+
+#: The compiled twin of engine.materials.lambert.rgb_albedo_numpy (None without Numba).
+rgb_albedo_numba = _rgb_albedo_loop and rgb_albedo_numba
