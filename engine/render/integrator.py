@@ -324,8 +324,8 @@ class PathTracer:
     def _intersect(self, state: PathState, acc: _Accumulators,
                    bounce: int) -> tuple[Hits, np.ndarray, np.ndarray]:
         """Closest hits of the paths' segments (hidden and pass-through surfaces skipped); returns
-        (hits, hit mask, background mask: misses that see the environment).  Camera rays reaching a transparent background or a holdout add to the
-        transparency and count as misses without light."""
+        (hits, hit mask, background mask: misses that see the environment).  Camera rays reaching a
+        transparent background or a holdout add to the transparency and count as misses without light."""
         compiled, vis = self.scene, self.visibility
         o, d, t_max = state.o, state.d, state.t_max
         hits = compiled.intersect(o, d, t_max)
@@ -353,7 +353,8 @@ class PathTracer:
         non-occluding lamps crossed before the hit."""
         light_set, env, compiled = self.lights, self.lights.environment, self.scene
         radiance, path, T, o, d, t_max = acc.radiance, state.path, state.T, state.o, state.d, state.t_max
-        prev_delta, prev_pdf, lk, p_prev, n_prev = state.prev_delta, state.prev_pdf, state.lk, state.p_prev, state.n_prev
+        prev_delta, prev_pdf, lk = state.prev_delta, state.prev_pdf, state.lk
+        p_prev, n_prev = state.p_prev, state.n_prev
 
         def at_prev(sel):
             """(position, side normal) of the vertices that the paths ``sel`` left (light selection)."""
