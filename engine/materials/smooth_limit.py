@@ -5,6 +5,12 @@ roughness 0 is not an error but this model: a Dirac lobe with weight s·M_F(cos�
 plane-of-incidence frames and the depolariser d·(ρ/π)·diag(1, 0, 0, 0).  Sampling picks the mirror
 with probability P = s·F̄/(s·F̄ + d·ρ̄) (F̄, ρ̄: means over the path's wavelengths), otherwise a
 cosine-weighted direction; the weights are divided by the chosen probability.  One-sided.
+
+``diffuse_layering="albedo_scaling"`` (Cycles' Principled energy sharing, as in Torrance–Sparrow)
+weights the Lambertian part by max(0, 1 − s·F(cosθ_o)), F the unpolarised Fresnel reflectance
+at the view direction (exactly the mirror's albedo, per wavelength): albedo s·F + d·(1 − s·F)·ρ ≤ 1
+for unpolarised light.  Not reciprocal (the weight depends on ω_o only).  The default ``"add"``
+adds the Lambertian part as is.
 """
 
 from __future__ import annotations
@@ -14,6 +20,7 @@ import numpy as np
 from .base import BSDF, BSDFFlags, BSDFSample, depolarising_value
 from .conductor import mirror_reflection
 from .sampling import cosine_hemisphere, local_to_world
+from ..polarisation.fresnel import fresnel_reflectance
 from ..spectral import as_spectrum
 from ..textures import TexturedNumber, textured
 from ..vec3 import dot
@@ -22,7 +29,11 @@ from ..vec3 import dot
 class MirrorWithDiffuse(BSDF):
     name = "torrance_sparrow"      # the m = 0 member of the Torrance–Sparrow family
 
-    def __init__(self, n, k, exterior_n=1.0, diffuse_albedo=0.0, specular_weight=1.0, diffuse_weight=0.0):
+    def __init__(self, n, k, exterior_n=1.0, diffuse_albedo=0.0, specular_weight=1.0, diffuse_weight=0.0,
+                 diffuse_layering="add"):
+        if diffuse_layering not in ("add", "albedo_scaling"):
+            raise ValueError(f"diffuse_layering must be one of ('add', 'albedo_scaling'), got {diffuse_layering!r}")
+        self.diffuse_layering = diffuse_layering
         self.n, self.k = as_spectrum(n, "n"), as_spectrum(k, "k")
         self.exterior_n = float(exterior_n)
         self.albedo = as_spectrum(diffuse_albedo, "diffuse_albedo")
@@ -44,7 +55,15 @@ class MirrorWithDiffuse(BSDF):
         return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
 
     def _diffuse(self, sp):
-        return sp.spectrum(self.albedo) * sp.number(self.d)
+        """d·ρ (L, N), times max(0, 1 − s·F(cosθ_o)) with ``"albedo_scaling"``."""
+        if self.diffuse_layering == "add":
+            return sp.spectrum(self.albedo) * sp.number(self.d)
+        return sp.spectrum(self.albedo) * sp.number(self.d) * self.diffuse_scale(sp)
+
+    def diffuse_scale(self, sp):
+        """max(0, 1 − s·F(cosθ_o)) (L, N): one minus the mirror's albedo at the view direction."""
+        F = fresnel_reflectance(np.clip(sp.cos_o, 0.0, 1.0)[None, :], self._eta(sp))
+        return np.maximum(1.0 - sp.number(self.s) * F, 0.0)
 
     def _p_mirror(self, sp, mirror):
         spec = sp.number(self.s) * mirror.A.mean(axis=0)

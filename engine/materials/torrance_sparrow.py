@@ -22,6 +22,25 @@
   Mitsuba 3's rough conductor).  Every output is finite, also at θ = 0, 90°, exact
   specular and exact backscatter.
 
+Diffuse layering (``diffuse_layering``):
+- ``"add"`` (default): the Lambert term is added as written above (the two lobes do not share
+  energy: s = d = ρ = 1 gives an albedo above 1);
+- ``"albedo_scaling"`` (Cycles' Principled BSDF, ``closure_layering_weight``): the Lambert
+  term is weighted by max(0, 1 − s·E(cosθ_o)), where E(cosθ_o) is the facet lobe's
+  directional albedo (M00, unpolarised light) at the *outgoing* (view) direction:
+      f = s·M_F·D·G/(4 cosθ_i cosθ_o) + d·max(0, 1 − s·E(cosθ_o))·(ρ/π)·diag(1, 0, 0, 0).
+  The albedo at ω_o is then s·E + d·(1 − s·E)·ρ ≤ 1 for unpolarised light (= 1 for
+  s = d = ρ = 1, up to the table error ≲ 5e-3, largest at grazing).  Like Cycles' it is *not reciprocal*
+  (the diffuse weight depends on ω_o only), and for fully polarised incident light the
+  albedo can exceed 1 by the lobe's diattenuation share (the s-polarised reflectance
+  is above the unpolarised one: for the smooth limit by (R_s − R_p)/2, at most 0.15 at
+  n = 1.5, θ_o ≈ 79°).  E is tabulated once per
+  model over √cosθ_o (33 nodes) and log m (nodes M_MIN·1.5^k shared by all models, cached
+  per index and shadowing; only those spanning the model's m, or its texture's range) by a
+  Gaussian slope-space quadrature (``specular_albedo``); interpolated bilinearly.  It needs the Beckmann
+  distribution and a constant index n, κ (one table), so Blinn or a textured or
+  wavelength-dependent n, κ is rejected with it.
+
 Roughness range: m ≥ M_MIN = 1e-4 (ValueError below).  The lobe is evaluated as a
 function for every allowed m; there is no switch to a Dirac mirror (use the smooth
 ``conductor`` model for m → 0).  At m = 1e-4 the peak D = 1/(π m²) ≈ 3.2e7 is still
@@ -39,10 +58,13 @@ Sampling (``sample``/``pdf``): a two-lobe mixture chosen per shading point with 
 - ``pdf`` is the full mixture density P_spec·pdf_spec + (1 − P_spec)·cosθ_i/π, so
   the integrator's MIS weights are right, and the weight is f·cosθ_i/pdf (the exact
   quotient of ``eval`` and ``pdf`` at the returned ω_i).
+  With ``"albedo_scaling"`` the lobe weights are the lobes' albedos at ω_o instead:
+  w_s = s·E(cosθ_o), w_d = d·ρ̄·max(0, 1 − s·E(cosθ_o)) (same clamping).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -66,7 +88,88 @@ M_MIN = 1e-4
 DISTRIBUTIONS = ("beckmann", "blinn")
 #: Lobe-selection probability bounds when both a specular and a diffuse lobe exist.
 P_SPEC_RANGE = (0.1, 0.9)
+#: How the Lambert term combines with the specular lobe (module docstring).
+DIFFUSE_LAYERINGS = ("add", "albedo_scaling")
+#: Specular-albedo table (``"albedo_scaling"``): nodes in √cosθ_o, the ratio of neighbouring m nodes
+#: (nodes at M_MIN·ratio^k, shared by every model: a textured m gives at each point exactly what the
+#: constant m gives), quadrature points per slope axis, slope range in units of m (weight e^{−R²}).
+ALBEDO_TABLE_MU_NODES = 33
+ALBEDO_TABLE_M_RATIO = 1.5
+ALBEDO_QUADRATURE_POINTS = 128
+_SLOPE_RANGE = 5.5
+#: cosθ_o of the table's first node (the grazing limit is evaluated just above 0).
+_MU_FLOOR = 1e-4
 
+
+def specular_albedo(cos_o, m, eta: complex, shadowing: str = "ts",
+                    points: int = ALBEDO_QUADRATURE_POINTS) -> np.ndarray:
+    """Directional albedo E(cosθ_o) = ∫ f_s·cosθ_i dω_i (M00, unpolarised, s = 1) of the Beckmann lobe.
+
+    ``cos_o``, ``m``: arrays of one shape; ``eta``: the constant relative index (n + iκ)/exterior_n.
+    With h = (−x, −y, 1)/‖·‖ and slopes (x, y) = m·(a, b), D dω_h = e^{−a²−b²}/(π cosθ_h) da db, so
+        E = ∫∫ F(ω_o·h)·G·(ω_o·h)/(cosθ_o cosθ_h) · e^{−a²−b²}/π da db
+    over facets whose mirror direction ω_i is above the horizon: a Gaussian-weighted integrand
+    bounded by 2 (V-cavity G), even in b (ω_o in the xz plane), summed by the midpoint rule on
+    ``points`` × ``points``/2 nodes of [−5.5, 5.5] × [0, 5.5].  Accuracy (against a fine
+    (θ_i, φ_i) quadrature, tests/test_principled_layering.py): ≲ 1e-3 for cosθ_o ≥ 0.3, ≲ 5e-3 at grazing.
+    """
+    cos_o, m = np.broadcast_arrays(np.asarray(cos_o, np.float64), np.asarray(m, np.float64))
+    mu = np.maximum(cos_o.ravel(), _MU_FLOOR)
+    mm = m.ravel()
+    step = 2.0 * _SLOPE_RANGE / points
+    ga = (np.arange(points) + 0.5) * step - _SLOPE_RANGE
+    gb = (np.arange(points // 2) + 0.5) * step
+    a, b = (v.ravel() for v in np.meshgrid(ga, gb, indexing="ij"))
+    weight = 2.0 * np.exp(-(a * a + b * b)) / math.pi * step * step       # 2: the mirrored half b < 0
+    eta_arr = np.full((1, a.size), eta, np.complex128)     # full shape: no broadcast views into the kernel
+    out = np.empty(mu.size)
+    for i in range(mu.size):          # one node at a time: bounded memory, results independent of batching
+        x, y = mm[i] * a, mm[i] * b
+        inv = 1.0 / np.sqrt(x * x + y * y + 1.0)
+        h = np.stack((-x * inv, -y * inv, inv))
+        wo = np.array([[math.sqrt(max(1.0 - mu[i] * mu[i], 0.0))], [0.0], [mu[i]]])
+        d = wo[0] * h[0] + wo[2] * h[2]                       # ω_o·h
+        wi = 2.0 * d * h - wo
+        ok = (d > 0) & (wi[2] > 0)
+        G = shadowing_term(shadowing, Beckmann(mm[i]), wi, np.repeat(wo, h.shape[1], axis=1), h)
+        F = fresnel_reflectance(np.where(ok, d, 1.0)[None, :], eta_arr)[0]
+        out[i] = np.sum(weight * np.where(ok, F * G * d / (mu[i] * h[2]), 0.0))
+    return out.reshape(cos_o.shape)
+
+
+@functools.lru_cache(maxsize=1024)
+def _albedo_column(eta: complex, shadowing: str, k: int) -> np.ndarray:
+    """E at the √cosθ_o nodes for m = M_MIN·ratio^k (cached: models sharing an index share it)."""
+    t = np.linspace(0.0, 1.0, ALBEDO_TABLE_MU_NODES)
+    E = specular_albedo(t * t, np.full(t.size, M_MIN * ALBEDO_TABLE_M_RATIO ** k), eta, shadowing)
+    E.setflags(write=False)
+    return E
+
+
+class SpecularAlbedoTable:
+    """E(cosθ_o, m) of one Beckmann facet lobe (constant index) for m in [m_lo, m_hi]: bilinear in
+    (√cosθ_o, log m) between fixed nodes (the same for every model, so the value at a point depends
+    only on (cosθ_o, m), not on whether m is textured)."""
+
+    def __init__(self, eta: complex, m_lo: float, m_hi: float, shadowing: str):
+        r = math.log(ALBEDO_TABLE_M_RATIO)
+        self.k0 = max(int(math.floor(math.log(max(m_lo, M_MIN) / M_MIN) / r)), 0)
+        k1 = max(int(math.floor(math.log(max(m_hi, M_MIN) / M_MIN) / r)), 0) + 1
+        self.E = np.stack([_albedo_column(complex(eta), shadowing, k) for k in range(self.k0, k1 + 1)], axis=1)
+
+    def __call__(self, cos_o: np.ndarray, m) -> np.ndarray:
+        """E at cosθ_o (N,) (clamped to [0, 1]) and m (a number or (N,) within [m_lo, m_hi])."""
+        cos_o = np.asarray(cos_o, np.float64)
+        m = np.broadcast_to(np.asarray(m, np.float64), cos_o.shape)
+        x = np.sqrt(np.clip(cos_o, 0.0, 1.0)) * (ALBEDO_TABLE_MU_NODES - 1)
+        i = np.minimum(x.astype(np.int64), ALBEDO_TABLE_MU_NODES - 2)
+        fx = x - i
+        y = np.log(np.maximum(m, M_MIN) / M_MIN) / math.log(ALBEDO_TABLE_M_RATIO) - self.k0
+        j = np.clip(np.floor(y).astype(np.int64), 0, self.E.shape[1] - 2)
+        fy = np.clip(y - j, 0.0, 1.0)
+        E = self.E
+        return ((E[i, j] * (1.0 - fx) + E[i + 1, j] * fx) * (1.0 - fy)
+                + (E[i, j + 1] * (1.0 - fx) + E[i + 1, j + 1] * fx) * fy)
 
 
 class TorranceSparrow(BSDF):
@@ -83,13 +186,15 @@ class TorranceSparrow(BSDF):
     diffuse_albedo : Spectrum, float or None — ρ of the Lambert term (None = no diffuse term).
     specular_weight : float ≥ 0 — s.   diffuse_weight : float ≥ 0 — d.
     distribution : "beckmann" (default) | "blinn".
+    diffuse_layering : "add" (default) | "albedo_scaling" (Cycles' Principled energy sharing, not
+        reciprocal; module docstring).
     """
 
     name = "torrance_sparrow"
 
     def __init__(self, n, k, m, shadowing: str = "ts", exterior_n: float = 1.0, diffuse_albedo=None,
                  specular_weight: float = 1.0, diffuse_weight: float = 0.0, distribution: str = "beckmann",
-                 blinn_exponent: float | None = None):
+                 blinn_exponent: float | None = None, diffuse_layering: str = "add"):
         self.n = as_spectrum(n, "n")
         self.k = as_spectrum(k, "k")
         # m, specular_weight and diffuse_weight may be TexturedNumbers (values per surface point,
@@ -127,11 +232,17 @@ class TorranceSparrow(BSDF):
         else:
             raise ValueError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
         self.distribution = distribution
+        if diffuse_layering not in DIFFUSE_LAYERINGS:
+            raise ValueError(f"diffuse_layering must be one of {DIFFUSE_LAYERINGS}, got {diffuse_layering!r}")
+        self.diffuse_layering = diffuse_layering
         def positive(v):
             return v.hi > 0 if isinstance(v, TexturedNumber) else v > 0
         self.has_specular = positive(self.s)
         self.has_diffuse = positive(self.d) and self.albedo is not None
         self.varies_over_surface = textured(self.n, self.k, self.m, self.s, self.d, self.albedo)
+        self._albedo = None
+        if diffuse_layering == "albedo_scaling" and self.has_specular and self.has_diffuse:
+            self._albedo = self._albedo_table()
         constant = all(getattr(v, "is_constant", False) for v in
                        (self.n, self.k) + ((self.albedo,) if self.has_diffuse else ()))
         # The facet lobe is reported unless a diffuse term replaces it (s = 0): a TS with neither
@@ -147,6 +258,28 @@ class TorranceSparrow(BSDF):
         if isinstance(self.k, ConstantSpectrum) and isinstance(self.n, ConstantSpectrum):
             return not (self.k.value == 0.0 and self.n.value >= self.exterior_n)
         return True
+
+    def _albedo_table(self) -> SpecularAlbedoTable:
+        """The facet lobe's albedo table (``"albedo_scaling"``): Beckmann, one constant index."""
+        if self.distribution != "beckmann":
+            raise ValueError("diffuse_layering='albedo_scaling' needs distribution='beckmann' (the specular-albedo "
+                             "table is Beckmann's)")
+        if not (isinstance(self.n, ConstantSpectrum) and isinstance(self.k, ConstantSpectrum)):
+            raise ValueError("diffuse_layering='albedo_scaling' needs a constant n and k (one specular-albedo "
+                             f"table), got n={self.n!r}, k={self.k!r}")
+        eta = complex(self.n.value, self.k.value) / self.exterior_n
+        if isinstance(self.m, TexturedNumber):
+            lo, hi = max(self.m.lo, M_MIN), max(self.m.hi, M_MIN)
+        else:
+            lo = hi = self.m
+        return SpecularAlbedoTable(eta, lo, hi, self.shadowing)
+
+    def diffuse_scale(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray | None:
+        """max(0, 1 − s·E(cosθ_o)) (N,) of ``"albedo_scaling"``; None for ``"add"`` (weight 1)."""
+        if self._albedo is None:
+            return None
+        E = self._albedo(cos_o, sp.number(self.m))
+        return np.maximum(1.0 - sp.number(self.s) * E, 0.0)
 
     # --- helpers ---------------------------------------------------------------------------------
 
@@ -166,6 +299,14 @@ class TorranceSparrow(BSDF):
             return np.ones(sp.n) if self.has_specular else np.zeros(sp.n)
         if not self.has_specular:
             return np.zeros(sp.n)
+        if self._albedo is not None:   # the lobes' albedos at ω_o
+            s = sp.number(self.s)
+            E = self._albedo(cos_o, sp.number(self.m))
+            w_s = s * E
+            w_d = sp.number(self.d) * sp.spectrum(self.albedo).mean(axis=0) * np.maximum(1.0 - s * E, 0.0)
+            tot = w_s + w_d
+            p = np.where(tot > 0, w_s / np.where(tot > 0, tot, 1.0), 0.5)
+            return np.clip(p, *P_SPEC_RANGE)
         F = fresnel_reflectance(np.clip(cos_o, 0.0, 1.0)[None, :], self.relative_eta(sp))
         w_s = sp.number(self.s) * F.mean(axis=0)
         w_d = sp.number(self.d) * sp.spectrum(self.albedo).mean(axis=0)
@@ -209,6 +350,9 @@ class TorranceSparrow(BSDF):
         if self.has_diffuse:
             # A depolariser adds to M00 only (not to the ABCS block's M11).
             depol = sp.spectrum(self.albedo) * (sp.number(self.d) / math.pi) * valid[None, :]
+            scale = self.diffuse_scale(sp, cos_o)
+            if scale is not None:
+                depol = depol * scale[None, :]
         if not self.has_specular:  # pure Lambert: a depolariser (frame-independent)
             return depolarising_value(depol if depol is not None else A, sp.n)
         x = scattering_plane_axis(-wi, sp.wo)
@@ -267,6 +411,8 @@ class TorranceSparrow(BSDF):
                 out[key] = repr(out[key])
         if self.distribution == "blinn":
             out["blinn_exponent"] = self.dist.e
+        if self.diffuse_layering != "add":
+            out["diffuse_layering"] = self.diffuse_layering
         return out
 
 
@@ -292,6 +438,10 @@ DECLARATION = ModelDeclaration(
                lo=0.0, hi=MAX_WEIGHT, default=0.0, texturable=True),
      Parameter("specular_weight", "weight s of the facet part", lo=0.0, hi=MAX_WEIGHT, default=1.0,
                texturable=True),
+     Parameter("diffuse_layering", "how the Lambertian part combines with the facet part: added, or weighted "
+                                   "by one minus the facet part's albedo at the view direction (Cycles' "
+                                   "Principled; not reciprocal)", kind="choice", choices=DIFFUSE_LAYERINGS,
+               default="add"),
      exterior_n_parameter(socket=Socket("Exterior IOR", "FLOAT", 1.0, 1.0, 3.0,
                                         "Index of the medium above the surface (1 = air, 1.33 = water)"))],
     catalogue="torrance_sparrow", node="TORRANCE_SPARROW")
@@ -315,7 +465,7 @@ def _torrance_sparrow(p):
         m_const = m
     kw = dict(exterior_n=p["exterior_n"], diffuse_albedo=p["diffuse_albedo"],
               diffuse_weight=p.get("diffuse_weight", 1.0 if p.given("diffuse_albedo") else 0.0),
-              specular_weight=p["specular_weight"])
+              specular_weight=p["specular_weight"], diffuse_layering=p["diffuse_layering"])
     if m_const is None:
         return TorranceSparrow(n, k, m, shadowing=shadowing, **kw)
     if 0 < m < M_MIN:
@@ -323,7 +473,7 @@ def _torrance_sparrow(p):
                                        f"got {m:g}")
     kw = dict(exterior_n=p["exterior_n"], diffuse_albedo=p["diffuse_albedo"],
               diffuse_weight=p.get("diffuse_weight", 1.0 if p.given("diffuse_albedo") else 0.0),
-              specular_weight=p["specular_weight"])
+              specular_weight=p["specular_weight"], diffuse_layering=p["diffuse_layering"])
     if m == 0:   # the smooth limit: a Fresnel mirror (plus the Lambertian part)
         return MirrorWithDiffuse(n, k, **kw)
     return TorranceSparrow(n, k, m, shadowing=shadowing, **kw)

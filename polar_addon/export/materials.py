@@ -471,12 +471,14 @@ def _conductor(n_rgb, k_rgb, m, warnings, mat, diffuse=None):
     return _torrance_sparrow(n, k, max(m, 1e-4), mat, diffuse=diffuse)
 
 
-def _torrance_sparrow(n, k, m, mat, shadowing="ts", diffuse=None):
+def _torrance_sparrow(n, k, m, mat, shadowing="ts", diffuse=None, layering="add"):
+    """Torrance–Sparrow (or its smooth limit below M_MIN) with an optional Lambertian part
+    combined by ``layering`` ("add" or Cycles' "albedo_scaling")."""
     from ...engine.materials.smooth_limit import MirrorWithDiffuse
     from ...engine.materials.torrance_sparrow import TorranceSparrow
     kwargs = {}
     if diffuse is not None and max(diffuse) > 0:
-        kwargs = {"diffuse_albedo": _rgb_spectrum(diffuse), "diffuse_weight": 1.0}
+        kwargs = {"diffuse_albedo": _rgb_spectrum(diffuse), "diffuse_weight": 1.0, "diffuse_layering": layering}
     if m < M_MIN:   # roughness 0: the smooth limit (Fresnel mirror + Lambertian part)
         return MirrorWithDiffuse(n, k, **kwargs)
     return TorranceSparrow(n, k, m, shadowing=shadowing, **kwargs)
@@ -666,23 +668,45 @@ def _principled(node, mat, warnings, bake=None):
         return _glass(ior, rough, getattr(node, "distribution", ""), mat, warnings, "rough transmission")
     base = r.rgb_or_texture("Base Color", 0.0, 1.0)
     m, _ = r.roughness_or_texture("Roughness")
+    if r.float("Coat Weight", 0.0, 1.0) > 0:
+        under = _principled_coated_base(base, m, ior, mat, node)
+        from ...engine.materials.weidlich_wilkie import Coat, WeidlichWilkie
+        coat = Coat(n=r.float("Coat IOR", 1.0, 10.0), thickness=0.0, absorption=ConstantSpectrum(0.0),
+                    **_coat_roughness(r.float("Coat Roughness", 0.0, 1.0) ** 2))
+        return WeidlichWilkie([coat], under)
+    return _principled_dielectric(base, m, ior, mat, node)
+
+
+def _principled_dielectric(base, m, ior, mat, node):
+    """Cycles' Principled dielectric: the specular layer (Torrance–Sparrow n = IOR, m = r², or its
+    smooth limit, a Fresnel mirror, below SMOOTH_LIMIT) over the Lambertian base colour weighted
+    by one minus the specular layer's albedo at the view direction ("albedo_scaling", as Cycles'
+    closure_layering_weight).  Base colour and roughness may be textures."""
+    if _textured(base, m):
+        values = {"n": ior, "k": 0.0, "diffuse_layering": "albedo_scaling"}
+        if isinstance(m, TextureInput):
+            values["m"] = m
+        else:   # m = 0 builds the smooth limit (MirrorWithDiffuse)
+            values["m"] = max(m, M_MIN) if m >= SMOOTH_LIMIT else 0.0
+        if isinstance(base, TextureInput) or max(base) > 0:
+            values["diffuse_albedo"] = base
+        return _textured_model("torrance_sparrow", values, mat, node)
+    return _torrance_sparrow(ConstantSpectrum(ior), ConstantSpectrum(0.0), m if m >= SMOOTH_LIMIT else 0.0, mat,
+                             diffuse=base, layering="albedo_scaling")
+
+
+def _principled_coated_base(base, m, ior, mat, node):
+    """The base under a Principled coat: the earlier mapping (Torrance–Sparrow + Lambert added, or
+    Lambert alone below SMOOTH_LIMIT), kept until the coat's layering is matched to Cycles too."""
     if _textured(base, m):
         if isinstance(m, TextureInput) or m >= SMOOTH_LIMIT:
             values = {"n": ior, "k": 0.0, "m": m if isinstance(m, TextureInput) else max(m, 1e-4)}
             if isinstance(base, TextureInput) or max(base) > 0:
                 values["diffuse_albedo"] = base
-            under = _textured_model("torrance_sparrow", values, mat, node)
-        else:
-            under = _lambert(base, mat, node)
-    else:
-        under = _torrance_sparrow(ConstantSpectrum(ior), ConstantSpectrum(0.0), max(m, 1e-4), mat, diffuse=base) \
-            if m >= SMOOTH_LIMIT else Lambert(_rgb_spectrum(base))
-    if r.float("Coat Weight", 0.0, 1.0) > 0:
-        from ...engine.materials.weidlich_wilkie import Coat, WeidlichWilkie
-        coat = Coat(n=r.float("Coat IOR", 1.0, 10.0), thickness=0.0, absorption=ConstantSpectrum(0.0),
-                    **_coat_roughness(r.float("Coat Roughness", 0.0, 1.0) ** 2))
-        return WeidlichWilkie([coat], under)
-    return under
+            return _textured_model("torrance_sparrow", values, mat, node)
+        return _lambert(base, mat, node)
+    return _torrance_sparrow(ConstantSpectrum(ior), ConstantSpectrum(0.0), max(m, 1e-4), mat, diffuse=base) \
+        if m >= SMOOTH_LIMIT else Lambert(_rgb_spectrum(base))
 
 
 def _glass(ior, roughness, distribution, mat, warnings, what):
