@@ -87,9 +87,10 @@ def test_principled_conversion_per_input(addon):
     # Rough transmission warns.
     _, _, warnings = exported(principled(**{"Transmission Weight": 1.0, "Roughness": 0.5}))
     assert any("rough transmission" in w for w in warnings)
-    # Plain smooth dielectric base → Lambert with the base colour.
+    # Plain smooth dielectric base → Fresnel mirror over the base colour, shared as Cycles (albedo scaling).
     bsdf, _, _ = exported(principled(**{"Roughness": 0.0, "Base Color": (0.2, 0.4, 0.6, 1)}))
-    assert bsdf.name == "lambert" and bsdf.albedo.linear_srgb() == pytest.approx([0.2, 0.4, 0.6], abs=1e-3)
+    assert bsdf.name == "torrance_sparrow" and bsdf.m == 0.0 and bsdf.diffuse_layering == "albedo_scaling"
+    assert bsdf.albedo.linear_srgb() == pytest.approx([0.2, 0.4, 0.6], abs=1e-3)
     # Rough, non-metallic → Torrance–Sparrow dielectric (m = roughness²) with the base colour as Lambert part.
     bsdf, _, _ = exported(principled(**{"Roughness": 0.5, "IOR": 1.45, "Base Color": (0.5, 0.5, 0.5, 1)}))
     assert bsdf.name == "torrance_sparrow" and bsdf.m == pytest.approx(0.25)

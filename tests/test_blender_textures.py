@@ -353,7 +353,8 @@ def test_roughness_texture_gives_the_constant_model_at_each_texel(tmp_path):
         sub = sp.take(sel)
         sub.surface = None
         m = max(float(r), ROUGHNESS_MIN) ** 2
-        oracles = [TorranceSparrow(bsdf.n, bsdf.k, m, diffuse_albedo=bsdf.albedo, diffuse_weight=1.0)]
+        oracles = [TorranceSparrow(bsdf.n, bsdf.k, m, diffuse_albedo=bsdf.albedo, diffuse_weight=1.0,
+                                   diffuse_layering="albedo_scaling")]
         if m >= 0.02:    # the exporter's own constant conversion (below m = 0.02 it drops the facets)
             principled.inputs["Roughness"].default_value = float(r)
             oracles.append(_export(scene)[0].materials[plane.materials[0]])
