@@ -13,6 +13,7 @@ import math
 import numpy as np
 import pytest
 
+from engine.errors import SceneError
 from engine.materials.base import ShadingPoint
 from engine.materials.microfacet import Beckmann
 from engine.materials.weidlich_wilkie import COAT, Coat, WeidlichWilkie, _RoughnessAlbedoTable, top_albedo
@@ -42,6 +43,11 @@ def _material(tmp_path, m, base=LAMBERT, n=1.5, form="energy"):
         m = COAT["m"].read(m, "materials.w.coats[0].m", base_dir=str(tmp_path))
     return WeidlichWilkie(Coat(n=n, thickness=0.5, absorption=0.3, distribution="beckmann", m=m),
                           parse_material(base, "materials.w.base"), form=form)
+
+
+def _scene_material(tmp_path, m):
+    return parse_material({"type": "weidlich_wilkie", "coats": [{"n": 1.5, "distribution": "beckmann", "m": m}]},
+                          "materials.w", base_dir=str(tmp_path))
 
 
 def _textured(tmp_path, **kw):
@@ -177,3 +183,49 @@ def test_sampling_with_a_textured_m_matches_pdf_chi_square(tmp_path, theta_o, ba
     result = chi2.direction_sampler_test(bs.wi, nd, lambda d: mat.pdf(point(d.shape[1]), d), n_cos=20, n_phi=40,
                                          order=6)
     chi2.assert_accepted(result, test_count=2, what="textured-m Weidlich–Wilkie samples")
+
+
+def test_the_loader_checks_a_textured_coat_roughness(tmp_path):
+    _texture_file(tmp_path, np.array([[0.0, 0.3]]), "low.exr")
+    with pytest.raises(SceneError, match=r"materials\.w\.coats\[0\]\.m: .*\[0\.0001"):
+        _scene_material(tmp_path, {"texture": "low.exr"})
+    mat = _scene_material(tmp_path, {"texture": "low.exr", "offset": 0.05})     # m in [0.05, 0.35]
+    assert mat.coat.textured_m and mat.describe()["coat"]["m"].startswith("TexturedNumber")
+    with pytest.raises(SceneError, match=r"materials\.w\.coats\[0\]\.exponent: a texture on this parameter"):
+        parse_material({"type": "weidlich_wilkie", "coats": [{"distribution": "blinn",
+                                                              "exponent": {"texture": "low.exr", "offset": 10.0}}]},
+                       "materials.w", base_dir=str(tmp_path))
+
+
+def test_blender_coat_roughness_socket_takes_a_texture(tmp_path):
+    """A Polarising BSDF (Weidlich–Wilkie) node with an image on Coat Roughness exports a textured
+    Beckmann m; at the texels that are table nodes (the image's least and greatest values) the
+    material equals the exporter's own conversion of that constant Coat Roughness to ~1e-12."""
+    bpy = pytest.importorskip("bpy")
+    from tests.blender_support import polar_material
+    from tests.test_blender_textures import _export, _image_node, _texel_points, base_scene
+    values = np.array([[0.1, 0.4], [0.2, 0.3]])           # file rows top first: row 0 (bottom) = 0.2, 0.3
+    _texture_file(tmp_path, values, "m.exr")
+    bpy.ops.wm.read_homefile(use_empty=True)
+    mat = polar_material("Coated", "WEIDLICH_WILKIE")
+    node = next(nd for nd in mat.node_tree.nodes if getattr(nd, "model", None) == "WEIDLICH_WILKIE")
+    tex = _image_node(mat, str(tmp_path / "m.exr"), "Non-Color")
+    mat.node_tree.links.new(tex.outputs["Color"], node.inputs["Coat Roughness"])
+    scene = base_scene(mat)
+    exported, warnings = _export(scene)
+    assert warnings == []
+    plane = next(m for m in exported.meshes if m.name.startswith("Plane"))
+    bsdf = exported.materials[plane.materials[0]]
+    assert bsdf.varies_over_surface and bsdf.coat.textured_m
+    sp, row, col, wi = _texel_points(2, 2)
+    f = bsdf.eval(sp, wi).matrix()
+    mat.node_tree.links.remove(node.inputs["Coat Roughness"].links[0])
+    for j, i in ((1, 0), (1, 1)):                           # the top row: 0.1 and 0.4, the table's ends
+        sel = np.nonzero((row == j) & (col == i))[0]
+        node.inputs["Coat Roughness"].default_value = float(np.float32(values[1 - j, i]))
+        const = _export(scene)[0].materials[plane.materials[0]]
+        assert not const.varies_over_surface
+        sub = sp.take(sel)
+        sub.surface = None
+        fc = const.eval(sub, wi[:, sel]).matrix()
+        np.testing.assert_allclose(f[..., sel], fc, rtol=1e-12, atol=1e-12 * np.abs(fc).max())
