@@ -396,10 +396,10 @@ def test_texture_errors_name_the_parameter(tmp_path):
     with pytest.raises(SceneError, match=r"materials\.a\.m: a roughness texture must stay in \[0\.0001"):
         parse_material({"type": "torrance_sparrow", "n": 1.5, "m": {"texture": name, "offset": -0.5}},
                        "materials.a", base_dir=str(tmp_path))
-    with pytest.raises(SceneError, match=r"materials\.a\.coats\[0\]\.m: a texture on this parameter of 'coat' is "
-                                         r"not supported by the engine yet"):
-        parse_material({"type": "weidlich_wilkie", "coats": [{"distribution": "beckmann",
-                                                              "m": {"texture": name}}]},
+    with pytest.raises(SceneError, match=r"materials\.a\.coats\[0\]\.exponent: a texture on this parameter of 'coat' "
+                                         r"is not supported by the engine yet"):
+        parse_material({"type": "weidlich_wilkie", "coats": [{"distribution": "blinn",
+                                                              "exponent": {"texture": name}}]},
                        "materials.a", base_dir=str(tmp_path))
     with pytest.raises(SceneError, match=r"materials\.a\.albedo\.interpolation: must be one of Closest, Linear, Cubic"):
         parse_material({"type": "lambert", "albedo": {"texture": name, "interpolation": "Smart"}}, "materials.a",

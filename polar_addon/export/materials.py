@@ -572,9 +572,12 @@ def _polar_node_bsdf(node, mat, warnings, depth, bake=None):
     if model == "WEIDLICH_WILKIE":
         coat_decl = decl["coats"].members
         coat_values = _socket_values(r, coat_decl)
-        m = _slope(coat_values, "m", coat_decl, where)
-        if m >= SMOOTH_LIMIT:
-            coat_values.update(distribution="beckmann", m=m)
+        if isinstance(coat_values.get("m"), TextureInput):     # a textured Beckmann m (≥ M_MIN, checked at build)
+            coat_values["distribution"] = "beckmann"
+        else:
+            m = _slope(coat_values, "m", coat_decl, where)
+            if m >= SMOOTH_LIMIT:
+                coat_values.update(distribution="beckmann", m=m)
         base_node = _follow(node.inputs["Base"])
         if depth > 16:
             raise SceneError(f"material {mat!r}", "layered materials nest more than 16 coats deep")
