@@ -614,6 +614,7 @@ class PathTracer:
             factor = light.emission_factor(cos_l)
             if factor is not None:
                 Le = Le * factor[None, :]
-            p_light = light.pdf_hit(dists[mine][front], cos_l) * light_set.prob_at(li, *at_prev(sel))
+            prev = at_prev(sel)
+            p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0]) * light_set.prob_at(li, *prev)
             wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
             add_light(radiance, path, T, sel, Le, wsel)

@@ -289,12 +289,112 @@ def spread_profile(spread_rad: float):
     return f
 
 
+#: below this solid angle (sr) a rectangle is sampled by area: the spherical-rectangle solid angle
+#: g0 + g1 + g2 + g3 − 2π loses its relative precision (float64 cancellation ~1e-15·2π), and a
+#: rectangle that small is sampled as well by area (dist²/cosθ is then nearly constant over it)
+MIN_RECT_SOLID_ANGLE = 1e-6
+
+
+class SphericalRectangle:
+    """A planar rectangle (corner, unit edge axes x ⟂ y, edge lengths) sampled uniformly in the
+    solid angle it subtends (Ureña, Conty & Kettunen 2013, "An Area-Preserving Parametrization
+    for Spherical Rectangles"; Cycles' kernel/light/area.h samples rectangle lamps this way).
+    Distances in scene units, solid angles in sr."""
+
+    def __init__(self, corner, ex, ey):
+        self.corner = np.asarray(corner, np.float64)
+        self.len_x = float(np.linalg.norm(ex))
+        self.len_y = float(np.linalg.norm(ey))
+        self.x = np.asarray(ex, np.float64) / self.len_x
+        self.y = np.asarray(ey, np.float64) / self.len_y
+        self.z = np.cross(self.x, self.y)
+
+    @classmethod
+    def from_triangles(cls, corners, tol=1e-9):
+        """The rectangle covered exactly by two triangles (2, 3, 3) (world coordinates), or None
+        when they do not form one (e.g. a sheared parallelogram or a disk fan)."""
+        pts = corners.reshape(-1, 3)
+        unique = []
+        for q in pts:
+            if not any(np.allclose(q, v, rtol=0.0, atol=tol * (1.0 + np.abs(q).max())) for v in unique):
+                unique.append(q)
+        if len(corners) != 2 or len(unique) != 4:
+            return None
+        a = unique[0]
+        # the corner opposite a is the farthest one; the other two span the edges from a
+        rest = sorted(unique[1:], key=lambda q: float(np.dot(q - a, q - a)))
+        ex, ey, diag = rest[0] - a, rest[1] - a, rest[2] - a
+        lx, ly = np.linalg.norm(ex), np.linalg.norm(ey)
+        if lx <= 0 or ly <= 0:
+            return None
+        scale = max(lx, ly)
+        tri_area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+        if (abs(np.dot(ex, ey)) > tol * lx * ly or np.abs(diag - ex - ey).max() > tol * scale
+                or abs(tri_area.sum() - lx * ly) > 1e-7 * lx * ly):
+            return None
+        return cls(a, ex, ey)
+
+    def _local(self, p):
+        """Rectangle coordinates relative to points p (3, N): x0, x1, y0, y1, z0 ≤ 0 and the sign
+        s = ±1 with which z points from the plane away from p (z_eff = s·z)."""
+        d = self.corner[:, None] - p
+        z0 = dot(d, self.z[:, None])
+        s = np.where(z0 > 0, -1.0, 1.0)
+        z0 = -np.abs(z0)
+        x0 = dot(d, self.x[:, None])
+        y0 = dot(d, self.y[:, None])
+        return x0, x0 + self.len_x, y0, y0 + self.len_y, z0, s
+
+    @staticmethod
+    def _angles(x0, x1, y0, y1, z0):
+        """z components of the four inner normals of the spherical rectangle's edges and its solid angle."""
+        def unit_z(a, b):       # (cross product of two corner rays).z / its norm, as in the paper
+            return a / np.sqrt(z0 * z0 * b * b + a * a)
+        n0 = unit_z(y0 * (x0 - x1), x0 - x1)
+        n1 = unit_z(x1 * (y1 - y0), y1 - y0)
+        n2 = unit_z(y1 * (x1 - x0), x1 - x0)
+        n3 = unit_z(x0 * (y0 - y1), y0 - y1)
+        acos = lambda c: np.arccos(np.clip(c, -1.0, 1.0))
+        g0, g1, g2, g3 = acos(-n0 * n1), acos(-n1 * n2), acos(-n2 * n3), acos(-n3 * n0)
+        k = 2.0 * math.pi - g2 - g3
+        return n0, n2, k, np.maximum(g0 + g1 - k, 0.0)
+
+    def solid_angle(self, p):
+        """Solid angle (N,) that the rectangle subtends at points p (3, N); 0 in its plane."""
+        x0, x1, y0, y1, z0, _ = self._local(p)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            S = self._angles(x0, x1, y0, y1, z0)[3]
+        return np.where(z0 < 0, np.nan_to_num(S), 0.0)
+
+    def sample(self, p, u1, u2):
+        """Points (3, N) on the rectangle, uniform in solid angle seen from p, and that solid angle (N,)."""
+        x0, x1, y0, y1, z0, s = self._local(p)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            b0, b1, k, S = self._angles(x0, x1, y0, y1, z0)
+            au = u1 * S + k
+            fu = (np.cos(au) * b0 - b1) / np.sin(au)
+            cu = np.clip(np.sign(fu) / np.sqrt(fu * fu + b0 * b0), -1.0, 1.0)
+            xu = np.clip(-(cu * z0) / np.maximum(np.sqrt(1.0 - cu * cu), 1e-300), x0, x1)
+            d2 = xu * xu + z0 * z0
+            h0 = y0 / np.sqrt(d2 + y0 * y0)
+            h1 = y1 / np.sqrt(d2 + y1 * y1)
+            hv = h0 + u2 * (h1 - h0)
+            hv2 = hv * hv
+            yv = np.where(hv2 < 1.0 - 1e-12, hv * np.sqrt(d2) / np.sqrt(np.maximum(1.0 - hv2, 1e-300)), y1)
+        xu, yv = np.nan_to_num(xu), np.clip(np.nan_to_num(yv), y0, y1)
+        q = p + self.x[:, None] * xu + self.y[:, None] * yv + self.z[:, None] * (s * z0)
+        return q, np.where(z0 < 0, np.nan_to_num(S), 0.0)
+
+
 class AreaEmitter(_Light):
     """A Lambertian emitter made of mesh triangles: one-sided (emits along their front normal)
     or two-sided (both faces, same radiance), optionally with Cycles' spread profile.
 
-    Points are sampled uniformly by area; the solid-angle pdf is
-    dist² / (|cosθ_light| · A_total).
+    Points are sampled uniformly by area, solid-angle pdf dist² / (|cosθ_light| · A_total); an
+    emitter that is one rectangle (two triangles: Blender's square/rectangle lamps) is sampled
+    uniformly in the solid angle Ω it subtends, pdf 1/Ω (``SphericalRectangle``), except where
+    Ω ≤ ``MIN_RECT_SOLID_ANGLE`` (then by area). ``pdf_hit`` evaluates the same choice from the
+    ray's origin, so next-event estimation and MIS agree.
     """
 
     def __init__(self, spectrum, tris: np.ndarray, compiled, two_sided=False, spread_deg=180.0):
@@ -310,9 +410,40 @@ class AreaEmitter(_Light):
         # The correction is applied to two-sided (Blender) emitters only: for the scene format's
         # one-sided emitters it would change peer renders (cornell_lambert: 2 of 25,600 pixels at 2 spp).
         self.blocks_own_shadow_rays = self.two_sided and bool(compiled.tri_occluder[tris].all())
+        # Solid-angle sampling needs a rectangle; the integrator's own-shadow correction recovers
+        # cosθ from the area pdf, so emitters that block their own shadow rays keep area sampling.
+        self.rect = None
+        if len(tris) == 2 and not self.blocks_own_shadow_rays:
+            self.rect = SphericalRectangle.from_triangles(compiled.vertices[compiled.faces[tris]])
+            if self.rect is not None:
+                self.normal = compiled.tri_normal[tris[0]].astype(np.float64)
 
     def sample(self, p, u):
         # u has 3 rows: triangle choice, then the point within it.
+        if self.rect is None:
+            return self._sample_area(p, u)
+        q, omega = self.rect.sample(p, u[1], u[2])
+        use = omega > MIN_RECT_SOLID_ANGLE
+        to = q - p
+        dist = np.sqrt(dot(to, to))
+        wi = to / np.where(dist > 0, dist, 1.0)
+        cos_l = -dot(wi, self.normal[:, None])
+        if self.two_sided:
+            cos_l = np.abs(cos_l)
+        valid = use & (cos_l > 0) & (dist > 0)
+        pdf = np.where(valid, 1.0 / np.where(valid, omega, 1.0), 0.0)
+        scale = np.where(valid, omega, 0.0)
+        if self.profile is not None:
+            scale = scale * self.profile(cos_l)
+            valid &= scale > 0
+        if not use.all():       # tiny solid angle: area sampling (see MIN_RECT_SOLID_ANGLE)
+            far = (~use).nonzero()[0]
+            a_wi, a_dist, a_scale, a_pdf, a_valid = self._sample_area(p[:, far], u[:, far])
+            wi[:, far], dist[far], scale[far], pdf[far], valid[far] = a_wi, a_dist, a_scale, a_pdf, a_valid
+        return wi, dist, scale, pdf, valid
+
+    def _sample_area(self, p, u):
+        """Uniform sampling by area (module docstring's ``sample`` contract)."""
         c = self.compiled
         if not self.two_sided and self.profile is None:
             return area_light_sample(p, u, self.cdf, self.tris, c.faces, c.vertices, c.tri_normal, self.total_area)
@@ -349,11 +480,17 @@ class AreaEmitter(_Light):
         """Directional factor of the radiance (the spread profile), or None (Lambertian)."""
         return None if self.profile is None else self.profile(cos_l)
 
-    def pdf_hit(self, dist, cos_l):
-        """Solid-angle pdf of having sampled a point at distance dist whose emitting side faces the
-        ray at cos_l (from ``facing``)."""
+    def pdf_hit(self, dist, cos_l, origin=None):
+        """Solid-angle pdf with which ``sample`` from the points ``origin`` (3, N) picks the point at
+        distance dist whose emitting side faces the ray at cos_l (from ``facing``).  Without
+        ``origin`` (camera rays, never MIS-weighted) the area-sampling pdf."""
         ok = cos_l > 0
-        return np.where(ok, dist * dist / np.where(ok, cos_l, 1.0) / self.total_area, 0.0)
+        area = np.where(ok, dist * dist / np.where(ok, cos_l, 1.0) / self.total_area, 0.0)
+        if self.rect is None or origin is None:
+            return area
+        omega = self.rect.solid_angle(origin)
+        use = omega > MIN_RECT_SOLID_ANGLE
+        return np.where(use, np.where(ok, 1.0 / np.where(use, omega, 1.0), 0.0), area)
 
     def power(self):
         """Emitted power (luminance units; Lambertian: π·L·A per emitting side)."""
