@@ -354,8 +354,7 @@ class SphericalRectangle:
         n1 = unit_z(x1 * (y1 - y0), y1 - y0)
         n2 = unit_z(y1 * (x1 - x0), x1 - x0)
         n3 = unit_z(x0 * (y0 - y1), y0 - y1)
-        acos = lambda c: np.arccos(np.clip(c, -1.0, 1.0))
-        g0, g1, g2, g3 = acos(-n0 * n1), acos(-n1 * n2), acos(-n2 * n3), acos(-n3 * n0)
+        g0, g1, g2, g3 = (np.arccos(np.clip(c, -1.0, 1.0)) for c in (-n0 * n1, -n1 * n2, -n2 * n3, -n3 * n0))
         k = 2.0 * math.pi - g2 - g3
         return n0, n2, k, np.maximum(g0 + g1 - k, 0.0)
 
