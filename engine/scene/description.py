@@ -153,6 +153,7 @@ class DirectionalLight:
 #: "cycles": row j at v = (j + ½)/H (texel centres, as Blender and image libraries), clamped to
 #: the first/last row within half a texel of the poles.
 ENVMAP_GRIDS = ("mitsuba", "cycles")
+ENVMAP_INTERPOLATION_SPACES = ("linear", "srgb")
 
 
 @dataclass
@@ -160,13 +161,16 @@ class EnvironmentLight:
     """Light from every direction: constant ``radiance``, or with ``image`` (float (H, W, 3) linear
     sRGB, row 0 = zenith) an equirectangular map × ``strength``, turned by ``rotation_deg`` about
     +Z (or by Euler angles [x, y, z] in degrees, order XYZ as Blender's), its rows on the texel
-    ``grid`` "cycles" or "mitsuba" (engine.render.lights.ENVMAP_GRIDS)."""
+    ``grid`` "cycles" or "mitsuba" (engine.render.lights.ENVMAP_GRIDS), interpolated in the
+    ``interpolation_space`` "linear" or "srgb" (on sRGB-encoded texels, as Cycles does for sRGB
+    images; see engine.render.lights.EnvironmentMapEmitter)."""
 
     radiance: object              # constant spectral radiance from every direction
     image: object = None
     strength: float = 1.0
     rotation_deg: float = 0.0
     grid: str = "cycles"
+    interpolation_space: str = "linear"
 
 
 @dataclass

@@ -7,7 +7,11 @@
   Mapping node whose Location is 0 and whose Scale is uniform and positive: mapped directly to an
   environment map of the image's own pixels (as Cycles reads them: 8-bit sRGB images decoded to
   linear, float images as stored) × strength, on Cycles' texel grid, turned by the Mapping
-  rotation (Euler XYZ).  Closest/Cubic/Smart interpolation renders as Linear (warning).
+  rotation (Euler XYZ).  Images in the sRGB colour space that Cycles reads as stored (8-bit ones,
+  float files) are interpolated on their sRGB-encoded values as Cycles does (interpolation_space
+  "srgb": at a sharp bright feature such as a sub-texel sun this removes ~20 % of its light
+  against linear interpolation).
+  Closest/Cubic/Smart interpolation renders as Linear (warning).
 * Anything else (Sky Texture, gradients, mixes, other mappings, a linked Strength): baked by
   Cycles into an equirectangular map (polar_addon.export.world_bake), resolution
   ``scene.polar.world_bake_resolution`` × half of it, ``world_bake_samples`` per texel, cached
@@ -127,8 +131,19 @@ def _environment_texture(world, env, colour_socket, strength, warnings, why):
                         "renders as 'Linear'")
     if strength <= 0:
         return None
+    space = "srgb" if _interpolated_encoded(image) else "linear"
     return EnvironmentLight(RGBIlluminantSpectrum([1.0, 1.0, 1.0], strength), image=texels, strength=strength,
-                            rotation_deg=rotation, grid="cycles")
+                            rotation_deg=rotation, grid="cycles", interpolation_space=space)
+
+
+def _interpolated_encoded(image) -> bool:
+    """Cycles interpolates ``image`` on its sRGB-encoded values (and decodes the result): images in
+    the sRGB colour space that it reads as stored (scene/image.cpp ``compress_as_srgb``), i.e.
+    8-bit ones, and float ones read from their file; a packed or generated float image reaches
+    Cycles as Blender's linear float buffer and is interpolated linearly (measured, Blender 5.0)."""
+    if image.colorspace_settings.name != "sRGB":
+        return False
+    return not image.is_float or (image.source == "FILE" and image.packed_file is None)
 
 
 def _identity_texture_mapping(tm) -> bool:
