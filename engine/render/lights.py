@@ -29,7 +29,8 @@ from ..kernels.geometry import area_light_sample
 from ..materials.sampling import local_to_world, uniform_sphere
 from ..spectral import GRID_NM, luminance, spectrum_to_linear_srgb
 from ..textures.image import srgb_to_linear
-from ..scene.description import ENVMAP_GRIDS, ENVMAP_INTERPOLATION_SPACES, DirectionalLight, EnvironmentLight, PointLight, SpotLight
+from ..scene.description import (ENVMAP_GRIDS, ENVMAP_INTERPOLATION_SPACES, DirectionalLight, EnvironmentLight,
+                                 PointLight, SpotLight)
 from ..vec3 import dot, normalize
 
 
