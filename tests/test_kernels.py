@@ -454,3 +454,31 @@ def test_rgb_albedo_of_a_lambert_set_bitwise():
     slot = rng.integers(0, 5, 700)
     basis = rng.uniform(size=(3, 4, 700))
     assert np.array_equal(lambert.rgb_albedo_numpy(rgb, slot, basis), lambert.rgb_albedo_numba(rgb, slot, basis))
+
+
+@needs_numba
+def test_embree_ray_and_hit_conversions_bitwise():
+    # the casts Embree's float32 layout needs: rounding, overflow to inf, NaN, capped lengths,
+    # misses (−1) with and without a map from the BVH's triangles to the scene's
+    from engine.kernels import rays
+    rng = np.random.default_rng(7)
+    n = 3000
+    o = rng.normal(size=(3, n)) * 10.0 ** rng.integers(-40, 40, (3, n))
+    d = unit(rng, n)
+    t = np.abs(rng.normal(size=n)) * 10.0 ** rng.integers(-3, 45, n)
+    t[:3] = (np.inf, np.nan, 1e37)
+    o[0, 0] = np.nan
+    with np.errstate(over="ignore"):                             # |o| > float32's range: inf
+        for t_max in (t, None):
+            for a, b in zip(rays.embree_rays_numpy(o, d, t_max), rays.embree_rays_numba(o, d, t_max)):
+                assert (a is None and b is None) or (a.dtype == b.dtype and a.tobytes() == b.tobytes())
+        view = o[:, ::2], d[:, ::2], t[::2]                      # non-contiguous inputs
+        for a, b in zip(rays.embree_rays_numpy(*view), rays.embree_rays_numba(*view)):
+            assert a.tobytes() == b.tobytes()
+    prim_id = rng.integers(-1, 50, n).astype(np.int32)
+    u, v, tfar = (rng.random(n).astype(np.float32) for _ in range(3))
+    tfar[:5] = np.inf
+    for prims in (None, rng.permutation(200)[:50].astype(np.int64)):
+        for a, b in zip(rays.embree_hits_numpy(prim_id, u, v, tfar, prims),
+                        rays.embree_hits_numba(prim_id, u, v, tfar, prims)):
+            assert a.dtype == b.dtype and a.tobytes() == b.tobytes()

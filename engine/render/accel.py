@@ -13,6 +13,7 @@ from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
 from ..kernels.geometry import offset_origin as offset_origin_kernel, surface_attributes
+from ..kernels.rays import embree_hits, embree_rays
 from ..scene.description import Scene
 from ..errors import SceneError
 from ..textures import SurfacePoints, VertexAttributes
@@ -111,18 +112,12 @@ class CompiledScene:
 
     def intersect(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray | None = None) -> Hits:
         """Closest hits for origins o and unit directions d, both (3, N)."""
-        of = np.ascontiguousarray(o.T, dtype=np.float32)
-        df = np.ascontiguousarray(d.T, dtype=np.float32)
-        if t_max is None:
+        of, df, dists = embree_rays(o, d, t_max)
+        if dists is None:
             res = self.embree.run(of, df, output=1)
         else:
-            dists = np.minimum(t_max, 1e37).astype(np.float32)
             res = self.embree.run(of, df, dists=dists, output=1)
-        prim = res["primID"].astype(np.int64)
-        if self._main_prims is not None:
-            prim = np.where(prim >= 0, self._main_prims[np.maximum(prim, 0)], -1)
-        return Hits(prim, res["u"].astype(np.float64), res["v"].astype(np.float64),
-                    res["tfar"].astype(np.float64))
+        return Hits(*embree_hits(res["primID"], res["u"], res["v"], res["tfar"], self._main_prims))
 
     def passthrough_hits(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray,
                          max_layers: int = 8) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -139,9 +134,8 @@ class CompiledScene:
         start = np.zeros(o.shape[1])
         o_cur, t_left = o, np.asarray(t_max, np.float64)
         for _ in range(max_layers):
-            of = np.ascontiguousarray(o_cur.T, dtype=np.float32)
-            df = np.ascontiguousarray(d[:, idx].T, dtype=np.float32)
-            res = self.embree_passthrough.run(of, df, dists=np.minimum(t_left, 1e37).astype(np.float32), output=1)
+            of, df, dists = embree_rays(o_cur, d[:, idx], t_left)
+            res = self.embree_passthrough.run(of, df, dists=dists, output=1)
             local = res["primID"]
             got = local >= 0
             if not got.any():
@@ -160,9 +154,7 @@ class CompiledScene:
 
     def occluded(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray) -> np.ndarray:
         """True where the segment o → o + t_max·d is blocked."""
-        of = np.ascontiguousarray(o.T, dtype=np.float32)
-        df = np.ascontiguousarray(d.T, dtype=np.float32)
-        dists = np.minimum(t_max, 1e37).astype(np.float32)
+        of, df, dists = embree_rays(o, d, t_max)
         res = self.embree.run(of, df, dists=dists, query="OCCLUDED")
         return res == 0
 

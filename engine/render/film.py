@@ -26,23 +26,36 @@ class Film:
         self.count = np.zeros(n, np.int64)
         self.alpha_sums = None          # None: every sample so far had alpha 1 (no memory spent)
         self.denoise_sums = None        # None: no denoising data asked for; else (6, n): albedo RGB, normal XYZ
+        self._added = False             # samples added yet (see ``add``)
 
     def add_samples(self, pixel: np.ndarray, stokes_rgb: np.ndarray, alpha: np.ndarray | None = None) -> None:
         """Add complete samples: ``stokes_rgb`` (4, 3, N) for flat pixel indices (N,), with their alpha
         (N,) or None (all 1)."""
-        if alpha is not None or self.alpha_sums is not None:
+        self.add(SampleSums.of(pixel, stokes_rgb, alpha))
+
+    def add(self, part: SampleSums) -> None:
+        """Add the sums of a batch of samples (``SampleSums.of``, computed on any thread).
+
+        The same additions as summing the batch over the whole film: pixels outside the part's
+        range would only have had 0 added."""
+        if not self._added:
+            # Adding a whole-film bincount turned any −0.0 (a resumed film) into +0.0: do it once.
+            self._added = True
+            for a in (self.sums, self.sumsq_y, self.alpha_sums, self.denoise_sums):
+                if a is not None:
+                    a += 0.0
+        lo, hi = part.lo, part.hi
+        if part.alpha is not None or self.alpha_sums is not None:
             if self.alpha_sums is None:
                 self.alpha_sums = self.count.astype(np.float64)
-            weights = np.ones(pixel.shape[0]) if alpha is None else alpha
-            self.alpha_sums += np.bincount(pixel, weights=weights, minlength=self.count.shape[0])
-        n = self.count.shape[0]
-        for s in range(4):
-            for c in range(3):
-                self.sums[s, c] += np.bincount(pixel, weights=stokes_rgb[s, c], minlength=n)
-        y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, stokes_rgb)
-        for s in range(4):
-            self.sumsq_y[s] += np.bincount(pixel, weights=y[s] * y[s], minlength=n)
-        self.count += np.bincount(pixel, minlength=n)
+            self.alpha_sums[lo:hi] += part.count if part.alpha is None else part.alpha
+        self.sums[:, :, lo:hi] += part.sums
+        self.sumsq_y[:, lo:hi] += part.sumsq_y
+        self.count[lo:hi] += part.count
+        if part.denoise is not None:
+            if self.denoise_sums is None:
+                self.denoise_sums = np.zeros((6, self.count.shape[0]))
+            self.denoise_sums[:, lo:hi] += part.denoise
 
     def add_denoise_data(self, pixel: np.ndarray, albedo: np.ndarray, normal: np.ndarray) -> None:
         """Add the denoising guides of samples already added with ``add_samples``: albedo (3, N) linear
@@ -108,6 +121,45 @@ class Film:
 
     def spp_image(self) -> np.ndarray:
         return self.count.reshape(self.height, self.width)
+
+
+class SampleSums:
+    """Per-pixel sums of one batch of samples over the flat pixel range [lo, hi) (a work unit's
+    rows): what ``Film.add`` adds.  Computed where the batch was traced (a worker thread), so that
+    the film's thread only adds ranges, in unit order (the image does not depend on threads).
+
+    Each sum runs over the batch's samples in their order, as a bincount over the whole film would.
+    """
+
+    __slots__ = ("lo", "hi", "sums", "sumsq_y", "count", "alpha", "denoise", "n_samples")
+
+    def __init__(self, lo, hi, sums, sumsq_y, count, alpha, denoise, n_samples):
+        self.lo, self.hi, self.sums, self.sumsq_y, self.count = lo, hi, sums, sumsq_y, count
+        self.alpha, self.denoise, self.n_samples = alpha, denoise, n_samples
+
+    @classmethod
+    def of(cls, pixel: np.ndarray, stokes_rgb: np.ndarray, alpha: np.ndarray | None = None,
+           denoise: tuple[np.ndarray, np.ndarray] | None = None) -> SampleSums:
+        """Sums of samples ``stokes_rgb`` (4, 3, N) at flat pixels (N,), their alpha (N,) or None (all
+        1) and denoising guides (albedo (3, N), normal (3, N)) or None."""
+        lo, hi = (int(pixel.min()), int(pixel.max()) + 1) if pixel.size else (0, 0)
+        local, span = pixel - lo, hi - lo
+        sums = np.empty((4, 3, span))
+        for s in range(4):
+            for c in range(3):
+                sums[s, c] = np.bincount(local, weights=stokes_rgb[s, c], minlength=span)
+        y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, stokes_rgb)
+        sumsq_y = np.empty((4, span))
+        for s in range(4):
+            sumsq_y[s] = np.bincount(local, weights=y[s] * y[s], minlength=span)
+        count = np.bincount(local, minlength=span)
+        alpha_sums = None if alpha is None else np.bincount(local, weights=alpha, minlength=span)
+        guides = None
+        if denoise is not None:
+            guides = np.empty((6, span))
+            for i, values in enumerate((*denoise[0], *denoise[1])):
+                guides[i] = np.bincount(local, weights=values, minlength=span)
+        return cls(lo, hi, sums, sumsq_y, count, alpha_sums, guides, pixel.shape[0])
 
 
 def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray | None = None,

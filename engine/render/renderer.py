@@ -17,7 +17,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterator
 import threading
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import CancelledError, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FuturesTimeout
 from dataclasses import dataclass, field
 
@@ -27,7 +27,7 @@ from .accel import CompiledScene
 from ..kernels import BACKEND as KERNEL_BACKEND
 from .camera import CameraModel
 from .effects import effective_materials, resolve_transport
-from .film import Film
+from .film import Film, SampleSums
 from .integrator import PathTracer
 from .lights import LightSet
 from ..scene.description import RenderSettings, Scene
@@ -54,6 +54,9 @@ class RenderResult:
 
 #: How often (seconds) the caller's stop request is polled while units are in flight.
 STOP_POLL_SECONDS = 0.05
+#: Units submitted per worker thread (one traced, the next queued so that the worker never waits
+#: for the thread that adds finished units to the film).
+UNITS_AHEAD = 2
 #: Bytes per pixel of the film (Stokes × RGB sums, luminance sums of squares, sample count).
 FILM_BYTES_PER_PIXEL = (4 * 3 + 4 + 1) * 8
 #: Bytes per path of a batch in flight (throughput, frames, rays, random keys, accumulators; measured
@@ -101,38 +104,59 @@ def unit_pixels(width: int, r0: int, r1: int, window: tuple[int, int, int, int] 
 def trace_in_order(units, trace_unit, add_result, workers: int, stop_requested, abort: threading.Event) -> bool:
     """Trace ``units`` on ``workers`` threads and pass each result to ``add_result`` in unit order.
 
-    Units are traced concurrently (Embree and large NumPy operations release the GIL) but added
-    strictly in unit order, so the image does not depend on the number of threads.  The stop
-    request is polled from this (the caller's) thread only — Blender's test_break must not be
-    called from workers — and sets ``abort``, which ends units in flight between two bounces
-    (``trace_unit`` then returns None and the unit is discarded whole).  Returns True if stopped.
+    Units are traced concurrently (Embree and the compiled kernels release the GIL) but added
+    strictly in unit order, so the image does not depend on the number of threads.  Up to
+    ``UNITS_AHEAD`` units per worker are submitted at once, and the next ones before a finished
+    unit is added: a worker that finishes starts its next unit at once instead of waiting for
+    this thread (finished results are small: the unit's film sums).  The stop request is polled
+    from this (the caller's) thread only — Blender's test_break must not be called from workers —
+    and sets ``abort``, which ends units in flight between two bounces (``trace_unit`` then
+    returns None and the unit is discarded whole); units not started yet are not traced.
+    Returns True if stopped.
     """
     cancelled = False
     workers = max(1, min(workers, len(units)))
+    ahead = UNITS_AHEAD * workers
     with ThreadPoolExecutor(max_workers=workers) as pool:
         pending = deque()
         next_unit = 0
-        while pending or (next_unit < len(units) and not cancelled):
-            while not cancelled and next_unit < len(units) and len(pending) < workers:
+
+        def stop():
+            nonlocal cancelled
+            cancelled = True
+            abort.set()
+            for future in pending:
+                future.cancel()             # not started yet: never traced
+
+        def submit():
+            nonlocal next_unit
+            while not cancelled and next_unit < len(units) and len(pending) < ahead:
                 if stop_requested():
-                    cancelled = True
-                    abort.set()
+                    stop()
                     break
                 pending.append(pool.submit(trace_unit, units[next_unit]))
                 next_unit += 1
-            if not pending:
-                break
-            while True:
-                try:
-                    result = pending[0].result(timeout=STOP_POLL_SECONDS)
-                    break
-                except FuturesTimeout:
-                    if not cancelled and stop_requested():
-                        cancelled = True
-                        abort.set()
-            pending.popleft()
-            if result is not None:
-                add_result(result)
+
+        try:
+            submit()
+            while pending:
+                future = pending[0]
+                while not future.done():
+                    try:
+                        future.result(timeout=STOP_POLL_SECONDS)
+                    except FuturesTimeout:
+                        if not cancelled and stop_requested():
+                            stop()
+                    except CancelledError:
+                        break
+                pending.popleft()
+                result = None if future.cancelled() else future.result()
+                submit()
+                if result is not None:
+                    add_result(result)
+        except BaseException:
+            stop()                          # a failed unit (or Ctrl-C): trace nothing more
+            raise
     return cancelled
 
 
@@ -237,7 +261,11 @@ class Renderer:
                 todo = sample >= done_before[pixel]
                 pixel, sample = pixel[todo], sample[todo]
             traced = tracer.trace(pixel, sample, abort=abort)
-            return None if traced is None else (pixel, *traced)
+            if traced is None:
+                return None
+            values, s = traced
+            # the unit's film sums, here on the worker: the adding thread only adds them in order
+            return SampleSums.of(pixel, values, s.pop("alpha", None), s.pop("denoise", None)), s
 
         workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
 
@@ -246,13 +274,11 @@ class Renderer:
 
         def add_result(result):
             nonlocal done
-            pixel, values, s = result
-            film.add_samples(pixel, values, s.get("alpha"))
-            if "denoise" in s:
-                film.add_denoise_data(pixel, *s["denoise"])
+            part, s = result
+            film.add(part)
             for k in ("rays", "shadow_rays", "nonfinite"):
                 stats[k] += s[k]
-            done += pixel.size
+            done += part.n_samples
             stats["samples"] = done
             stats["seconds"] = time.perf_counter() - t0
             if progress is not None:

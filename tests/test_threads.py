@@ -1,0 +1,105 @@
+"""Work units on worker threads: film sums computed per unit, added in order, and the scheduling.
+
+The film's sums must be the same numbers as adding every unit's samples over the whole film in
+unit order (the image does not depend on the number of threads or on where the sums are made)."""
+
+import threading
+import time
+
+import numpy as np
+
+from engine.render.film import Film, SampleSums
+from engine.render.renderer import trace_in_order
+from engine.spectral.cie import LUMINANCE_WEIGHTS
+
+
+def whole_film_sums(film, pixel, values, alpha=None, denoise=None):
+    """The reference: bincounts over the whole film, added in place (the former Film.add_samples)."""
+    n = film.count.shape[0]
+    if alpha is not None or film.alpha_sums is not None:
+        if film.alpha_sums is None:
+            film.alpha_sums = film.count.astype(np.float64)
+        w = np.ones(pixel.shape[0]) if alpha is None else alpha
+        film.alpha_sums += np.bincount(pixel, weights=w, minlength=n)
+    for s in range(4):
+        for c in range(3):
+            film.sums[s, c] += np.bincount(pixel, weights=values[s, c], minlength=n)
+    y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, values)
+    for s in range(4):
+        film.sumsq_y[s] += np.bincount(pixel, weights=y[s] * y[s], minlength=n)
+    film.count += np.bincount(pixel, minlength=n)
+    if denoise is not None:
+        if film.denoise_sums is None:
+            film.denoise_sums = np.zeros((6, n))
+        for i, v in enumerate((*denoise[0], *denoise[1])):
+            film.denoise_sums[i] += np.bincount(pixel, weights=v, minlength=n)
+
+
+def test_unit_sums_added_in_order_equal_whole_film_sums_bitwise():
+    rng = np.random.default_rng(3)
+    W, H = 13, 11
+    ref, film = Film(W, H), Film(W, H)
+    # a resumed film may hold −0.0 (float32 means that underflowed): adding turns it into +0.0
+    for f in (ref, film):
+        f.sums[1, 0, 5] = -0.0
+    for k in range(6):
+        r0, r1 = sorted(rng.choice(H + 1, 2, replace=False))
+        pix = (np.arange(r0, r1)[:, None] * W + np.arange(2, W)[None, :]).ravel()
+        pixel = np.tile(pix, 3)[rng.random(3 * pix.size) < 0.8]         # some samples already done
+        values = rng.normal(size=(4, 3, pixel.size)) * 10.0 ** rng.integers(-8, 8, pixel.size)
+        alpha = rng.random(pixel.size) if k in (2, 4) else None
+        denoise = (rng.random((3, pixel.size)), rng.normal(size=(3, pixel.size))) if k >= 3 else None
+        whole_film_sums(ref, pixel, values, alpha, denoise)
+        part = SampleSums.of(pixel, values, alpha, denoise)
+        assert part.n_samples == pixel.size and part.sums.shape[-1] == part.hi - part.lo
+        film.add(part)
+    for name in ("sums", "sumsq_y", "count", "alpha_sums", "denoise_sums"):
+        assert getattr(film, name).tobytes() == getattr(ref, name).tobytes(), name
+    empty = SampleSums.of(np.zeros(0, np.int64), np.zeros((4, 3, 0)))
+    film.add(empty)
+    assert film.sums.tobytes() == ref.sums.tobytes()
+
+
+def test_units_are_added_in_order_while_workers_run_ahead():
+    # unit k sleeps longer the earlier it is: they finish out of order, are added in order, and
+    # with one unit queued per worker a finished worker starts the next unit before this thread
+    # has added the previous one (at most 2 units per worker submitted at once)
+    added, running, most = [], [0], [0]
+    lock = threading.Lock()
+
+    def trace(k):
+        with lock:
+            running[0] += 1
+            most[0] = max(most[0], running[0])
+        time.sleep(0.002 * (8 - k))
+        with lock:
+            running[0] -= 1
+        return k
+
+    def add(k):
+        added.append(k)
+
+    stopped = trace_in_order(list(range(8)), trace, add, 2, lambda: False, threading.Event())
+    assert not stopped and added == list(range(8)) and most[0] <= 2
+
+
+def test_a_stop_discards_queued_units_without_tracing_them():
+    traced, polls = [], {"n": 0}
+    release = threading.Event()
+
+    def trace(k):
+        traced.append(k)
+        release.wait(2.0)
+        return k
+
+    def stop():
+        polls["n"] += 1
+        if polls["n"] > 3:              # the first units are submitted, then the stop comes
+            release.set()
+            return True
+        return False
+
+    abort = threading.Event()
+    added = []
+    assert trace_in_order(list(range(10)), trace, added.append, 1, stop, abort)
+    assert abort.is_set() and len(traced) == 1 and added == [0]
