@@ -454,3 +454,40 @@ def test_rgb_albedo_of_a_lambert_set_bitwise():
     slot = rng.integers(0, 5, 700)
     basis = rng.uniform(size=(3, 4, 700))
     assert np.array_equal(lambert.rgb_albedo_numpy(rgb, slot, basis), lambert.rgb_albedo_numba(rgb, slot, basis))
+
+
+@needs_numba
+def test_measured_metal_mirror_in_one_pass():
+    """Tables → complex index → Fresnel (A, B, C, S), zero behind the normal, in one compiled loop:
+    bit for bit the compiled two-step chain the conductor used before, to rounding the NumPy
+    reference; ``inside`` False when a wavelength leaves the tables."""
+    from engine.kernels import fresnel, tables
+    from engine.polarisation.fresnel import tabulated_mirror_abcs_numpy
+    from engine.spectral.ior import named_ior
+    rng = np.random.default_rng(5)
+    n = 4000
+    lam = rng.uniform(360.0, 830.0, (4, n))
+    cos = rng.uniform(-0.3, 1.0, n)
+    cos[:8] = [0.0, -0.0, 1.0, 1e-300, -1e-300, np.nan, 1.2, np.nextafter(0.0, 1.0)]
+    for metal, ext in (("Au", 1.0), ("Cr", 1.33), ("Cu", 0.7)):
+        n_spec, k_spec = named_ior(metal)
+        lam[0, :20] = n_spec.wavelengths[5:25]                 # on knots
+        args = (lam, n_spec.wavelengths, n_spec.values, k_spec.wavelengths, k_spec.values, ext)
+        got, inside = fresnel.tabulated_mirror_abcs_numba(cos, *args)
+        with np.errstate(invalid="ignore"):                     # the NaN cosine
+            want, inside_ref = tabulated_mirror_abcs_numpy(cos, *args)
+        eta, _ = tables.complex_index_table_numba(*args)
+        chain = fresnel.fresnel_reflection_abcs_numba(np.maximum(cos, 0.0)[None, :], eta)
+        m = (cos >= 0).astype(np.float64)[None, :]
+        assert inside and inside_ref
+        for g, w, c in zip(got, want, chain):
+            assert g.shape == (4, n)
+            assert np.array_equal(g, c * m, equal_nan=True)
+            np.testing.assert_allclose(g[:, 8:], w[:, 8:], rtol=0, atol=4e-15)
+            assert np.array_equal(np.isnan(g), np.isnan(w))
+        assert np.all(got[0][:, cos < 0] == 0)
+    outside = lam.copy()
+    outside[3, 11] = 900.0
+    args = (outside, n_spec.wavelengths, n_spec.values, k_spec.wavelengths, k_spec.values, 1.0)
+    assert fresnel.tabulated_mirror_abcs_numba(cos, *args)[1] is False
+    assert tabulated_mirror_abcs_numpy(cos, *args)[1] is False
