@@ -507,12 +507,12 @@ def test_wavelength_sampling_and_rgb_weights_bitwise(count):
     for shape in [(5000,), (50, 100), (0,)]:
         uu = u[:int(np.prod(shape))].reshape(shape)
         want = cie.sample_wavelengths_numpy(uu, count)
-        got = cie._sample_wavelengths_numba(uu, count)
+        got = cie._sample_wavelengths_compiled(uu, count)
         for w, g in zip(want, got):
             assert g.shape == w.shape == (count,) + shape and np.array_equal(g, w)
         lam, pdf = want
         pdf = pdf.copy()
         pdf.reshape(-1)[:3] = 0.0
-        assert np.array_equal(cie._rgb_weights_numba(lam, pdf), cie.rgb_weights_numpy(lam, pdf))
+        assert np.array_equal(cie._rgb_weights_compiled(lam, pdf), cie.rgb_weights_numpy(lam, pdf))
     assert np.all((got[0] >= cie.LAMBDA_MIN) & (got[0] <= cie.LAMBDA_MAX))
-    assert wavelengths.sample_tanh_numba is not None
+    assert wavelengths.sample_tanh is not None

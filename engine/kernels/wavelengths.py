@@ -48,7 +48,7 @@ def _pdf_loop(lam, cosh_y, norm, lo, hi, pdf):
             ch = cosh_y[j, i]
             pdf[j, i] = norm / (ch * ch) if (v >= lo and v <= hi) else 0.0
 
-def sample_tanh_numba(u, count, t0, dt, c, a, lo, hi, norm):
+def sample_tanh(u, count, t0, dt, c, a, lo, hi, norm):
     """(λ, pdf), each (count, *u.shape): λ = clip(c + atanh(t0 + frac(u + j/count)·dt)/a, lo, hi) nm,
     pdf = norm / cosh²(a (λ − c)) inside [lo, hi] nm, else 0 (see engine.spectral.cie)."""
     u = np.asarray(u, dtype=np.float64)
@@ -63,7 +63,7 @@ def sample_tanh_numba(u, count, t0, dt, c, a, lo, hi, norm):
     shape = (count,) + u.shape
     return lam.reshape(shape), pdf.reshape(shape)
 
-sample_tanh_numba = _cdf_argument_loop and sample_tanh_numba
+sample_tanh = _cdf_argument_loop and sample_tanh
 
 @jit
 def _divide_by_pdf_loop(rgb, pdf, count):
@@ -75,7 +75,7 @@ def _divide_by_pdf_loop(rgb, pdf, count):
                 inv = 1.0 / (p * count) if p > 0 else 0.0
                 rgb[r, j, i] = rgb[r, j, i] * inv
 
-def weights_over_pdf_numba(rgb, pdf):
+def weights_over_pdf(rgb, pdf):
     """rgb (3, count, N) × 1/(pdf·count) (0 where pdf ≤ 0), in place; returns rgb."""
     pdf = np.ascontiguousarray(pdf, dtype=np.float64)
     rgb = np.ascontiguousarray(rgb)
@@ -83,4 +83,4 @@ def weights_over_pdf_numba(rgb, pdf):
     _divide_by_pdf_loop(rgb.reshape(rgb.shape[0], count, -1), pdf.reshape(count, -1), count)
     return rgb
 
-weights_over_pdf_numba = _divide_by_pdf_loop and weights_over_pdf_numba
+weights_over_pdf = _divide_by_pdf_loop and weights_over_pdf

@@ -139,21 +139,21 @@ def rgb_weights_numpy(lam_nm, pdf) -> np.ndarray:
     return rgb * inv[None, ...]
 
 
-def _sample_wavelengths_numba(u, count: int = 4) -> tuple[np.ndarray, np.ndarray]:
-    return wavelengths.sample_tanh_numba(u, count, _T0, _T1 - _T0, _C, _A, LAMBDA_MIN, LAMBDA_MAX, _PDF_NORM)
+def _sample_wavelengths_compiled(u, count: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    return wavelengths.sample_tanh(u, count, _T0, _T1 - _T0, _C, _A, LAMBDA_MIN, LAMBDA_MAX, _PDF_NORM)
 
 
-def _rgb_weights_numba(lam_nm, pdf) -> np.ndarray:
+def _rgb_weights_compiled(lam_nm, pdf) -> np.ndarray:
     lam = np.asarray(lam_nm, dtype=np.float64)
     rgb = np.tensordot(XYZ_TO_LINEAR_SRGB, cmf_xyz(lam), axes=1)     # BLAS, as in the reference
-    return wavelengths.weights_over_pdf_numba(rgb, pdf)
+    return wavelengths.weights_over_pdf(rgb, pdf)
 
 
 #: (λ, pdf) of ``count`` stratified wavelengths per path (sample_wavelengths_numpy); the elementwise
 #: steps compiled when available (engine.kernels.wavelengths, same numbers).
-sample_wavelengths = twin(wavelengths.sample_tanh_numba and _sample_wavelengths_numba, sample_wavelengths_numpy)
+sample_wavelengths = twin(wavelengths.sample_tanh and _sample_wavelengths_compiled, sample_wavelengths_numpy)
 #: The per-wavelength sRGB factors of a path (rgb_weights_numpy), compiled when available (same numbers).
-rgb_weights = twin(wavelengths.weights_over_pdf_numba and _rgb_weights_numba, rgb_weights_numpy)
+rgb_weights = twin(wavelengths.weights_over_pdf and _rgb_weights_compiled, rgb_weights_numpy)
 
 
 def spectrum_to_xyz(values_on_grid, illuminant: bool = False) -> np.ndarray:
