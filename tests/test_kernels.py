@@ -482,3 +482,65 @@ def test_embree_ray_and_hit_conversions_bitwise():
         for a, b in zip(rays.embree_hits_numpy(prim_id, u, v, tfar, prims),
                         rays.embree_hits_numba(prim_id, u, v, tfar, prims)):
             assert a.dtype == b.dtype and a.tobytes() == b.tobytes()
+
+
+def test_measured_metal_mirror_in_one_pass():
+    """Tables → complex index → Fresnel (A, B, C, S), zero behind the normal, in one compiled loop:
+    bit for bit the compiled two-step chain the conductor used before, to rounding the NumPy
+    reference; ``inside`` False when a wavelength leaves the tables."""
+    from engine.kernels import fresnel, tables
+    from engine.polarisation.fresnel import tabulated_mirror_abcs_numpy
+    from engine.spectral.ior import named_ior
+    rng = np.random.default_rng(5)
+    n = 4000
+    lam = rng.uniform(360.0, 830.0, (4, n))
+    cos = rng.uniform(-0.3, 1.0, n)
+    cos[:8] = [0.0, -0.0, 1.0, 1e-300, -1e-300, np.nan, 1.2, np.nextafter(0.0, 1.0)]
+    for metal, ext in (("Au", 1.0), ("Cr", 1.33), ("Cu", 0.7)):
+        n_spec, k_spec = named_ior(metal)
+        lam[0, :20] = n_spec.wavelengths[5:25]                 # on knots
+        args = (lam, n_spec.wavelengths, n_spec.values, k_spec.wavelengths, k_spec.values, ext)
+        got, inside = fresnel.tabulated_mirror_abcs_numba(cos, *args)
+        with np.errstate(invalid="ignore"):                     # the NaN cosine
+            want, inside_ref = tabulated_mirror_abcs_numpy(cos, *args)
+        eta, _ = tables.complex_index_table_numba(*args)
+        chain = fresnel.fresnel_reflection_abcs_numba(np.maximum(cos, 0.0)[None, :], eta)
+        m = (cos >= 0).astype(np.float64)[None, :]
+        assert inside and inside_ref
+        for g, w, c in zip(got, want, chain):
+            assert g.shape == (4, n)
+            assert np.array_equal(g, c * m, equal_nan=True)
+            np.testing.assert_allclose(g[:, 8:], w[:, 8:], rtol=0, atol=4e-15)
+            assert np.array_equal(np.isnan(g), np.isnan(w))
+        assert np.all(got[0][:, cos < 0] == 0)
+    outside = lam.copy()
+    outside[3, 11] = 900.0
+    args = (outside, n_spec.wavelengths, n_spec.values, k_spec.wavelengths, k_spec.values, 1.0)
+    assert fresnel.tabulated_mirror_abcs_numba(cos, *args)[1] is False
+    with np.errstate(invalid="ignore"):
+        assert tabulated_mirror_abcs_numpy(cos, *args)[1] is False
+
+
+@needs_numba
+@pytest.mark.parametrize("count", [1, 3, 4])
+def test_wavelength_sampling_and_rgb_weights_bitwise(count):
+    """Hero wavelengths (λ, pdf) and their sRGB weights: the compiled passes around NumPy's own atanh,
+    cosh and 3×3 product give the reference's numbers bit for bit, at u = 0, strata edges, u → 1, for
+    paths in any array shape, and weight 0 where pdf = 0."""
+    from engine.kernels import wavelengths
+    from engine.spectral import cie
+    rng = np.random.default_rng(8)
+    u = rng.random(5000)
+    u[:6] = [0.0, 0.25, 0.5, 0.75, np.nextafter(1.0, 0.0), 1e-300]
+    for shape in [(5000,), (50, 100), (0,)]:
+        uu = u[:int(np.prod(shape))].reshape(shape)
+        want = cie.sample_wavelengths_numpy(uu, count)
+        got = cie._sample_wavelengths_compiled(uu, count)
+        for w, g in zip(want, got):
+            assert g.shape == w.shape == (count,) + shape and np.array_equal(g, w)
+        lam, pdf = want
+        pdf = pdf.copy()
+        pdf.reshape(-1)[:3] = 0.0
+        assert np.array_equal(cie._rgb_weights_compiled(lam, pdf), cie.rgb_weights_numpy(lam, pdf))
+    assert np.all((got[0] >= cie.LAMBDA_MIN) & (got[0] <= cie.LAMBDA_MAX))
+    assert wavelengths.sample_tanh is not None

@@ -13,39 +13,41 @@ from __future__ import annotations
 import numpy as np
 
 from . import jit
+from .tables import interp_at
 
 _TINY = 1e-200
 
 
 @jit
+def abcs_at(c, e):
+    """(A, B, C, S) of the Fresnel reflection for one cosine ``c`` and complex relative index ``e``."""
+    if c < 0.0:
+        c = 0.0
+    elif c > 1.0:
+        c = 1.0
+    if c < _TINY:
+        c = 0.0
+    e2 = e * e
+    z = complex((e2.real - (1.0 - c * c)) + 0.0, (e2.imag - 0.0) + 0.0)
+    u = np.sqrt(z)
+    if u.imag < 0:
+        u = -u
+    if abs(u) < _TINY:
+        u = 0j
+    den_s = c + u
+    den_p = e2 * c + u
+    r_s = (c - u) / den_s if den_s != 0 else 0j
+    r_p = (e2 * c - u) / den_p if den_p != 0 else 0j
+    F_s = r_s.real ** 2 + r_s.imag ** 2
+    F_p = r_p.real ** 2 + r_p.imag ** 2
+    x = r_s * r_p.conjugate()
+    return 0.5 * (F_s + F_p), 0.5 * (F_s - F_p), x.real, -x.imag
+
+
+@jit
 def _abcs_loop(cos_theta, eta, A, B, C, S):
     for i in range(cos_theta.shape[0]):
-        c = cos_theta[i]
-        if c < 0.0:
-            c = 0.0
-        elif c > 1.0:
-            c = 1.0
-        if c < _TINY:
-            c = 0.0
-        e = eta[i]
-        e2 = e * e
-        z = complex((e2.real - (1.0 - c * c)) + 0.0, (e2.imag - 0.0) + 0.0)
-        u = np.sqrt(z)
-        if u.imag < 0:
-            u = -u
-        if abs(u) < _TINY:
-            u = 0j
-        den_s = c + u
-        den_p = e2 * c + u
-        r_s = (c - u) / den_s if den_s != 0 else 0j
-        r_p = (e2 * c - u) / den_p if den_p != 0 else 0j
-        F_s = r_s.real ** 2 + r_s.imag ** 2
-        F_p = r_p.real ** 2 + r_p.imag ** 2
-        x = r_s * r_p.conjugate()
-        A[i] = 0.5 * (F_s + F_p)
-        B[i] = 0.5 * (F_s - F_p)
-        C[i] = x.real
-        S[i] = -x.imag
+        A[i], B[i], C[i], S[i] = abcs_at(cos_theta[i], eta[i])
 
 
 def _abcs_numba(cos_theta, eta):
@@ -60,3 +62,40 @@ def _abcs_numba(cos_theta, eta):
 
 #: The compiled twin of engine.polarisation.fresnel.fresnel_reflection_abcs_numpy (None without Numba).
 fresnel_reflection_abcs_numba = _abcs_loop and _abcs_numba
+
+
+# ----------------------------------------------------------------------------- mirror of a measured metal
+
+@jit
+def _tabulated_mirror_loop(cos_o, lam, wl_n, n, wl_k, k, scale, A, B, C, S):
+    inside = True
+    for i in range(lam.shape[0]):
+        for j in range(lam.shape[1]):
+            x = lam[i, j]
+            if not (x >= wl_n[0] and x <= wl_n[-1] and x >= wl_k[0] and x <= wl_k[-1]):
+                inside = False
+            a = interp_at(wl_n, n, x)
+            b = interp_at(wl_k, k, x)
+            # the same relative index as engine.kernels.tables.complex_index_table, bit for bit
+            e = complex((a + b * 0.0) * scale, (b - a * 0.0) * scale)
+            c = cos_o[j]
+            m = 1.0 if c >= 0 else 0.0          # behind the shading normal (or NaN): no reflection
+            a_, b_, c_, s_ = abcs_at(c, e)
+            A[i, j] = a_ * m
+            B[i, j] = b_ * m
+            C[i, j] = c_ * m
+            S[i, j] = s_ * m
+    return inside
+
+
+def tabulated_mirror_abcs_numba(cos_o, lam, wl_n, n, wl_k, k, exterior_n):
+    lam = np.ascontiguousarray(lam, dtype=np.float64)
+    out = [np.empty(lam.shape) for _ in range(4)]
+    wl_n, n, wl_k, k = (np.ascontiguousarray(a, dtype=np.float64) for a in (wl_n, n, wl_k, k))
+    inside = _tabulated_mirror_loop(np.ascontiguousarray(cos_o, dtype=np.float64), lam, wl_n, n, wl_k, k,
+                                    1.0 / float(exterior_n), *out)
+    return tuple(out), bool(inside)
+
+
+#: The compiled twin of engine.polarisation.fresnel.tabulated_mirror_abcs_numpy (None without Numba).
+tabulated_mirror_abcs_numba = _tabulated_mirror_loop and tabulated_mirror_abcs_numba

@@ -13,7 +13,7 @@ import numpy as np
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
 from ..kernels.tables import complex_index_table
 from ..polarisation.frames import plane_of_incidence_axis
-from ..polarisation.fresnel import fresnel_reflection_abcs
+from ..polarisation.fresnel import fresnel_reflection_abcs, tabulated_mirror_abcs
 from ..spectral import LAMBDA_MAX, LAMBDA_MIN
 from .parameters import REQUIRED, ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from ..errors import SceneError
@@ -64,6 +64,18 @@ class SmoothConductor(BSDF):
                 return eta
         return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
 
+    def mirror(self, sp: ShadingPoint):
+        """(wi, MuellerValue, valid) of the mirror reflection of wo (mirror_reflection's result)."""
+        if self._tables and not sp.mono:
+            # measured tables: interpolation, complex index and Fresnel in one pass (same numbers)
+            abcs, inside = tabulated_mirror_abcs(sp.cos_o, sp.lam, self.n.wavelengths, self.n.values,
+                                                 self.k.wavelengths, self.k.values, self.exterior_n)
+            if inside:
+                wi = reflect(sp.wo, sp.n_s)
+                s = plane_of_incidence_axis(sp.n_s, -wi)
+                return wi, MuellerValue("abcs", s, s, *abcs), sp.cos_o >= 0
+        return mirror_reflection(sp, self.relative_eta(sp))
+
     def eval(self, sp, wi):
         return depolarising_value(np.zeros_like(sp.lam), sp.n)
 
@@ -71,10 +83,10 @@ class SmoothConductor(BSDF):
         return np.zeros(sp.n)
 
     def delta_reflection(self, sp):
-        return mirror_reflection(sp, self.relative_eta(sp))[1]
+        return self.mirror(sp)[1]
 
     def sample(self, sp, u_lobe, u_dir) -> BSDFSample:
-        wi, value, valid = mirror_reflection(sp, self.relative_eta(sp))
+        wi, value, valid = self.mirror(sp)
         return BSDFSample(wi=wi, weight=value, pdf=np.zeros(sp.n), is_delta=np.ones(sp.n, bool),
                           valid=valid, eta_sq=np.ones(sp.n))
 

@@ -21,7 +21,8 @@ import numpy as np
 
 from .mueller import abcs_matrix
 from ..kernels import twin
-from ..kernels.fresnel import fresnel_reflection_abcs_numba
+from ..kernels.fresnel import fresnel_reflection_abcs_numba, tabulated_mirror_abcs_numba
+from ..kernels.tables import complex_index_table_numpy
 
 
 _TINY = 1e-200
@@ -66,6 +67,25 @@ def fresnel_reflection_abcs_numpy(cos_theta, eta):
 #: (A, B, C, S) of the Fresnel reflection Mueller matrix for cosθ and η broadcast together; the
 #: compiled loop of engine.kernels.fresnel when available (same numbers up to rounding).
 fresnel_reflection_abcs = twin(fresnel_reflection_abcs_numba, fresnel_reflection_abcs_numpy)
+
+
+def tabulated_mirror_abcs_numpy(cos_o, lam, wl_n, n, wl_k, k, exterior_n):
+    """((A, B, C, S), inside): the Fresnel mirror of a measured conductor in one step.
+
+    The relative index (n + iκ)(λ)/exterior_n from piecewise-linear tables (wl_n, n), (wl_k, k) [nm]
+    at lam (L, N) nm, then the reflection coefficients at cos_o (N,), zero where cos_o < 0 (behind
+    the shading normal) or NaN; each (L, N).  ``inside`` is False if some λ lies outside a table
+    (the values are then meaningless: the caller falls back to the spectra's own evaluation).
+    """
+    eta, inside = complex_index_table_numpy(lam, wl_n, n, wl_k, k, exterior_n)
+    cos_o = np.asarray(cos_o, dtype=np.float64)
+    m = (cos_o >= 0).astype(np.float64)[None, :]
+    A, B, C, S = fresnel_reflection_abcs_numpy(np.maximum(cos_o, 0.0)[None, :], eta)
+    return (A * m, B * m, C * m, S * m), inside
+
+
+#: The measured-metal mirror (complex index from tables + Fresnel) as one compiled loop when available.
+tabulated_mirror_abcs = twin(tabulated_mirror_abcs_numba, tabulated_mirror_abcs_numpy)
 
 
 def fresnel_reflection_mueller(cos_theta, eta) -> np.ndarray:

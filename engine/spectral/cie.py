@@ -14,7 +14,7 @@ import os
 
 import numpy as np
 
-from ..kernels import tables
+from ..kernels import tables, twin, wavelengths
 
 LAMBDA_MIN = 360.0
 LAMBDA_MAX = 830.0
@@ -109,7 +109,7 @@ def wavelength_pdf(lam_nm) -> np.ndarray:
     return np.where((lam >= LAMBDA_MIN) & (lam <= LAMBDA_MAX), pdf, 0.0)
 
 
-def sample_wavelengths(u, count: int = 4) -> tuple[np.ndarray, np.ndarray]:
+def sample_wavelengths_numpy(u, count: int = 4) -> tuple[np.ndarray, np.ndarray]:
     """Importance-sample ``count`` stratified wavelengths per path from u ∈ [0, 1).
 
     Wavelength j uses u_j = frac(u + j/count) and inverts the CDF of ``wavelength_pdf``:
@@ -124,7 +124,7 @@ def sample_wavelengths(u, count: int = 4) -> tuple[np.ndarray, np.ndarray]:
     return lam, wavelength_pdf(lam)
 
 
-def rgb_weights(lam_nm, pdf) -> np.ndarray:
+def rgb_weights_numpy(lam_nm, pdf) -> np.ndarray:
     """Per-wavelength factors turning radiance samples L(λ_j) of a path into linear sRGB.
 
     weights[:, j] = XYZ_TO_LINEAR_SRGB @ cmf_xyz(λ_j) / pdf_j / count, so
@@ -137,6 +137,23 @@ def rgb_weights(lam_nm, pdf) -> np.ndarray:
     rgb = np.tensordot(XYZ_TO_LINEAR_SRGB, cmf_xyz(lam), axes=1)
     inv = np.divide(1.0, pdf * count, out=np.zeros_like(pdf), where=pdf > 0)
     return rgb * inv[None, ...]
+
+
+def _sample_wavelengths_compiled(u, count: int = 4) -> tuple[np.ndarray, np.ndarray]:
+    return wavelengths.sample_tanh(u, count, _T0, _T1 - _T0, _C, _A, LAMBDA_MIN, LAMBDA_MAX, _PDF_NORM)
+
+
+def _rgb_weights_compiled(lam_nm, pdf) -> np.ndarray:
+    lam = np.asarray(lam_nm, dtype=np.float64)
+    rgb = np.tensordot(XYZ_TO_LINEAR_SRGB, cmf_xyz(lam), axes=1)     # BLAS, as in the reference
+    return wavelengths.weights_over_pdf(rgb, pdf)
+
+
+#: (λ, pdf) of ``count`` stratified wavelengths per path (sample_wavelengths_numpy); the elementwise
+#: steps compiled when available (engine.kernels.wavelengths, same numbers).
+sample_wavelengths = twin(wavelengths.sample_tanh and _sample_wavelengths_compiled, sample_wavelengths_numpy)
+#: The per-wavelength sRGB factors of a path (rgb_weights_numpy), compiled when available (same numbers).
+rgb_weights = twin(wavelengths.weights_over_pdf and _rgb_weights_compiled, rgb_weights_numpy)
 
 
 def spectrum_to_xyz(values_on_grid, illuminant: bool = False) -> np.ndarray:
