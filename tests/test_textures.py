@@ -682,3 +682,115 @@ def test_a_texture_input_built_in_code_is_a_parameter_value():
     assert mat.varies_over_surface and (mat.m.lo, mat.m.hi) == (np.float32(0.1) * 0.5, np.float32(0.3) * 0.5)
     with pytest.raises(SceneError, match=r"materials\.x\.albedo: texture values .* must be in \[0, 1\]"):
         parse_material({"type": "lambert", "albedo": TextureInput(tex.texture, scale=5.0)}, "materials.x")
+
+
+# --------------------------------------------------------------------------- sRGB images filtered encoded (Cycles)
+
+def _cycles_srgb_to_linear(c):
+    """Cycles' util/color.h color_srgb_to_linear, written out per value."""
+    if c < 0.04045:
+        return 0.0 if c < 0.0 else c * (1.0 / 12.92)
+    return ((c + 0.055) * (1.0 / 1.055)) ** 2.4
+
+
+def _cycles_srgb_lookup(codes, u, v, cubic=False):
+    """Cycles' lookup of an 8-bit sRGB image (scene/image.cpp compress_as_srgb), one point at a time:
+    bilinear (or cubic B-spline) filter of the stored bytes / 255 with REPEAT, then colour channels
+    decoded (svm_image_texture), alpha as filtered."""
+    H, W, C = codes.shape
+    x, y = u * W - 0.5, v * H - 0.5
+    i0, j0 = int(np.floor(x)), int(np.floor(y))
+    fx, fy = x - i0, y - j0
+    if cubic:
+        def w(t):
+            return [(1 - t) ** 3 / 6, (3 * t ** 3 - 6 * t ** 2 + 4) / 6, (-3 * t ** 3 + 3 * t ** 2 + 3 * t + 1) / 6,
+                    t ** 3 / 6]
+        offsets, wx, wy = (-1, 0, 1, 2), w(fx), w(fy)
+    else:
+        offsets, wx, wy = (0, 1), [1 - fx, fx], [1 - fy, fy]
+    acc = np.zeros(C)
+    for b, dj in enumerate(offsets):
+        for a, di in enumerate(offsets):
+            acc += wx[a] * wy[b] * codes[(j0 + dj) % H, (i0 + di) % W] / 255.0
+    colour = 1 if C <= 2 else 3
+    return np.array([_cycles_srgb_to_linear(c) if k < colour else c for k, c in enumerate(acc)])
+
+
+@pytest.mark.parametrize("interpolation", ["Linear", "Cubic"])
+@pytest.mark.parametrize("channels", [1, 2, 3, 4])
+def test_srgb_texture_lookup_is_cycles_filter_then_decode(interpolation, channels):
+    rng = np.random.default_rng(3)
+    codes = rng.integers(0, 256, size=(3, 5, channels)).astype(np.uint8)
+    uv = rng.uniform(-0.3, 1.3, size=(2, 200))
+    expected = np.array([_cycles_srgb_lookup(codes, u, v, interpolation == "Cubic") for u, v in uv.T]).T
+    for pixels in (codes, (codes / 255.0).astype(np.float32)):      # integer codes or float encoded values
+        tex = ImageTexture(pixels, interpolation, "REPEAT", interpolation_space="srgb")
+        got = tex.lookup(uv)
+        np.testing.assert_allclose(got, expected, rtol=2e-6, atol=1e-9)     # float32 texels / results
+        lo, hi = tex.value_range()
+        assert np.all(got >= lo[:, None]) and np.all(got <= hi[:, None])
+
+
+def test_srgb_texture_differs_from_linear_interpolation_between_texels_as_cycles():
+    """Half-way between a black and a white texel: dec(½) = 0.214 (Cycles), not ½ (decoded texels lerped)."""
+    codes = np.array([[[0], [255]]], np.uint8)
+    tex = ImageTexture(codes, "Linear", "EXTEND", interpolation_space="srgb")
+    got = tex.lookup(np.array([[0.5, 0.375], [0.5, 0.5]]))[0]
+    np.testing.assert_allclose(got, [_cycles_srgb_to_linear(0.5), _cycles_srgb_to_linear(0.25)], rtol=1e-6)
+    assert got[0] < 0.22
+
+
+def test_srgb_texture_keeps_decoded_texels_at_centres_and_with_closest(tmp_path):
+    """Texel centres, Closest lookups and the bounds are bit for bit those of the texels decoded at
+    load time (read_image's "sRGB" pixels), so such renders do not change."""
+    from engine.textures.image import read_texture
+    rng = np.random.default_rng(5)
+    Image.fromarray(rng.integers(0, 256, size=(4, 6, 4)).astype(np.uint8)).save(tmp_path / "t.png")
+    decoded = read_image(str(tmp_path / "t.png"), "sRGB")
+    encoded, space = read_texture(str(tmp_path / "t.png"), "sRGB")
+    assert space == "srgb" and encoded.dtype == np.uint8
+    jj, ii = np.meshgrid(np.arange(4), np.arange(6), indexing="ij")
+    centres = np.stack((((ii + 0.5) / 6).ravel(), ((jj + 0.5) / 4).ravel()))
+    anywhere = rng.uniform(-1, 2, size=(2, 300))
+    for interpolation, uv in (("Closest", anywhere), ("Linear", centres)):
+        for extension in ("REPEAT", "CLIP"):
+            new = ImageTexture(encoded, interpolation, extension, interpolation_space="srgb")
+            old = ImageTexture(decoded, interpolation, extension)
+            np.testing.assert_array_equal(new.lookup(uv), old.lookup(uv))
+            for a, b in zip(new.value_range(), old.value_range()):
+                np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(ImageTexture(encoded, interpolation_space="srgb").linear_pixels, decoded)
+
+
+def test_srgb_texture_clip_reaches_black_and_negative_encoded_values_decode_to_zero():
+    tex = ImageTexture(np.array([[[200], [200]]], np.uint8), "Linear", "CLIP", interpolation_space="srgb")
+    got = tex.lookup(np.array([[0.5, 1.0, 1.25 - 1e-9], [0.5, 0.5, 0.5]]))[0]
+    np.testing.assert_allclose(got, [_cycles_srgb_to_linear(200 / 255), _cycles_srgb_to_linear(100 / 255),
+                                     _cycles_srgb_to_linear(0.0)], rtol=1e-6, atol=1e-9)
+    assert tex.value_range()[0][0] == 0.0
+    neg = ImageTexture(np.array([[[-0.5], [0.5]]], np.float32), "Linear", "EXTEND", interpolation_space="srgb")
+    assert neg.lookup(np.array([[0.0, 0.5], [0.5, 0.5]]))[0, 0] == 0.0
+    assert neg.value_range()[0][0] == 0.0
+    with pytest.raises(SceneError, match="interpolation_space"):
+        ImageTexture(np.zeros((1, 1, 3), np.float32), interpolation_space="gamma")
+    with pytest.raises(SceneError, match="integer texels"):
+        ImageTexture(np.zeros((1, 1, 3), np.uint8))
+
+
+def test_scene_file_srgb_images_are_filtered_encoded_and_white_stays_in_range(tmp_path):
+    """Scene files follow Cycles: sRGB images (8-bit default, or a float file tagged so) are
+    filtered on their encoded values; Non-Color/Linear ones linearly.  A white 8-bit texel
+    decodes to exactly 1, so an albedo texture reaching it passes the loader's [0, 1] check."""
+    from engine.textures.inputs import parse_texture_input
+    Image.fromarray(np.array([[[0, 0, 0], [255, 255, 255]]], np.uint8)).save(tmp_path / "bw.png")
+    _rgb_exr(tmp_path / "bw.exr", np.array([[[0.0, 0, 0], [1, 1, 1]]], np.float32))
+    half = np.array([[0.5], [0.5]])
+    for raw, expected in (({"texture": "bw.png"}, _cycles_srgb_to_linear(0.5)),
+                          ({"texture": "bw.exr", "color_space": "sRGB"}, _cycles_srgb_to_linear(0.5)),
+                          ({"texture": "bw.png", "color_space": "Non-Color"}, 0.5),
+                          ({"texture": "bw.exr"}, 0.5)):
+        source = parse_texture_input({**raw, "extension": "EXTEND"}, "materials.m.albedo", str(tmp_path))
+        np.testing.assert_allclose(source.texture.lookup(half)[:, 0], expected, rtol=1e-6)
+        assert source.bounds(rgb=True) == (0.0, 1.0)
+    mat = parse_material({"type": "lambert", "albedo": {"texture": "bw.png"}}, "materials.m", base_dir=str(tmp_path))
+    assert (mat.albedo.lo, mat.albedo.hi) == (0.0, 1.0)

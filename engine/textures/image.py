@@ -7,6 +7,7 @@ according to the colour space:
 
 - ``"sRGB"``: the sRGB transfer function is undone on R, G, B (alpha stays linear), as Blender's
   default for 8/16-bit images (IEC 61966-2-1: c ≤ 0.04045 → c/12.92, else ((c+0.055)/1.055)^2.4);
+  textures read them encoded instead (:func:`read_texture`) and decode after filtering, as Cycles;
 - ``"Non-Color"``: values are used as stored (data: roughness, normal and height maps);
 - ``"Linear"``: as Non-Color for the numbers (Blender's "Linear Rec.709": scene-linear colour),
   the default for EXR files.
@@ -45,6 +46,14 @@ def srgb_to_linear(c: np.ndarray) -> np.ndarray:
     """Inverse sRGB transfer function (IEC 61966-2-1), float64, elementwise."""
     c = np.asarray(c, dtype=np.float64)
     return np.where(c <= 0.04045, c / 12.92, ((np.maximum(c, 0.04045) + 0.055) / 1.055) ** 2.4)
+
+
+def linear_to_srgb(c: np.ndarray) -> np.ndarray:
+    """sRGB transfer function (IEC 61966-2-1), its power law continued above 1, negative values → 0
+    (as Cycles' color_linear_to_srgb); float64, elementwise; inverse of srgb_to_linear on c ≥ 0."""
+    c = np.asarray(c, dtype=np.float64)
+    return np.where(c < 0.0031308, 12.92 * np.maximum(c, 0.0),
+                    1.055 * np.maximum(c, 0.0031308) ** (1 / 2.4) - 0.055)
 
 
 _FLOAT_SUFFIXES = (".exr", ".hdr")
@@ -401,8 +410,8 @@ def _read_hdr(path: str, field: str) -> np.ndarray:
     return np.ascontiguousarray(rgb)
 
 
-@functools.lru_cache(maxsize=16)
-def _read_cached(path: str, mtime: float, color_space: str, field: str) -> np.ndarray:
+def _read_raw(path: str, field: str) -> np.ndarray:
+    """The stored values (H, W, C), top row first: integer images as code / full scale (float64)."""
     if path.lower().endswith(".exr"):
         a = _read_exr(path, field)
     elif path.lower().endswith(".hdr"):
@@ -413,6 +422,12 @@ def _read_cached(path: str, mtime: float, color_space: str, field: str) -> np.nd
             a = _read_pil(path, field) if a is None else a
     else:
         raise SceneError(field, f"{path!r}: unsupported image type (use PNG, JPEG, TIFF, EXR or Radiance .hdr)")
+    return a
+
+
+@functools.lru_cache(maxsize=16)
+def _read_cached(path: str, mtime: float, color_space: str, field: str) -> np.ndarray:
+    a = _read_raw(path, field)
     if color_space == "sRGB":
         colour = min(a.shape[2], 3) if a.shape[2] != 2 else 1     # grey+alpha: only grey is colour
         a = a.copy()
@@ -431,3 +446,35 @@ def read_image(path: str, color_space: str | None = None, field: str = "") -> np
     if not os.path.isfile(path):
         raise SceneError(field, f"image file {path!r} not found")
     return _read_cached(os.path.abspath(path), os.path.getmtime(path), color_space, field)
+
+
+def read_texture(path: str, color_space: str | None = None, field: str = "") -> tuple[np.ndarray, str]:
+    """(float32 pixels (H, W, C), row 0 at the bottom; interpolation space) of an image file for an
+    ImageTexture.  Files in the "sRGB" colour space come encoded, with interpolation space "srgb"
+    (filtered encoded, decoded after, as Cycles does for every image file it reads as sRGB, 8-bit
+    or float: scene/image.cpp ``compress_as_srgb``); others linear, as :func:`read_image`."""
+    if color_space is None:
+        color_space = default_color_space(path)
+    if color_space == "sRGB":
+        if not os.path.isfile(path):
+            raise SceneError(field, f"image file {path!r} not found")
+        return _read_encoded(os.path.abspath(path), os.path.getmtime(path), field), "srgb"
+    return read_image(path, color_space, field), "linear"
+
+
+@functools.lru_cache(maxsize=16)
+def _read_encoded(path: str, mtime: float, field: str) -> np.ndarray:
+    """Stored values of an image file, row 0 at the bottom: 8/16-bit images as their integer codes
+    (uint8/uint16, value = code / full scale exactly as read_image computes it, so the decoded
+    texels are bit for bit read_image's "sRGB" ones), float images as float32."""
+    a = _read_raw(path, field)
+    for dtype in (np.uint8, np.uint16):
+        scale = np.iinfo(dtype).max
+        codes = np.rint(a * scale)
+        if codes.min() >= 0 and codes.max() <= scale and np.array_equal(codes / scale, a):
+            out = np.ascontiguousarray(codes[::-1], dtype=dtype)
+            break
+    else:
+        out = np.ascontiguousarray(a[::-1], dtype=np.float32)
+    out.setflags(write=False)
+    return out

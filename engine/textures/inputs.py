@@ -24,7 +24,7 @@ import os
 
 import numpy as np
 
-from .image import COLOR_SPACES, default_color_space, read_image
+from .image import COLOR_SPACES, default_color_space, read_texture
 from .texture import EXTENSIONS, INTERPOLATIONS, ImageTexture, Texture, VertexColour
 from ..errors import SceneError
 from ..spectral import Spectrum
@@ -214,8 +214,8 @@ def parse_texture_input(raw: dict, field: str, base_dir: str | None) -> TextureI
         ext = raw.get("extension", "REPEAT")
         if ext not in EXTENSIONS:
             raise SceneError(f"{field}.extension", f"must be one of {', '.join(EXTENSIONS)}, got {ext!r}")
-        pixels = read_image(full, space, f"{field}.texture")
-        texture = ImageTexture(pixels, interp, ext, name=path, field=field)
+        pixels, interpolation_space = read_texture(full, space, f"{field}.texture")
+        texture = ImageTexture(pixels, interp, ext, name=path, field=field, interpolation_space=interpolation_space)
         if channel == "A" and texture.channels not in (2, 4):
             raise SceneError(f"{field}.channel", f"image {path!r} has no alpha channel")
     else:

@@ -11,6 +11,13 @@ each, ``eval(points) -> (C, N)`` float64:
   Cycles' bicubic; its weights are ≥ 0 and sum to 1, so values stay within the pixels' range).
   Extension (pixels outside the image): ``"REPEAT"`` (tile), ``"EXTEND"`` (the edge pixel),
   ``"CLIP"`` (0: transparent black), ``"MIRROR"`` (tile, every other tile mirrored).
+  Interpolation space: ``"linear"`` (the texels are linear values, filtered as they are) or
+  ``"srgb"`` (the texels are sRGB-encoded values; the colour channels are filtered encoded and the
+  result decoded, value = dec(Σ wᵢ·encᵢ), as Cycles does for every image it keeps in the sRGB colour
+  space: 8-bit ones and float files tagged sRGB, scene/image.cpp ``compress_as_srgb``, decoded in
+  svm_image_texture after the lookup; dec is IEC 61966-2-1's, its power law continued above 1 and
+  negative values → 0, as Cycles' color_srgb_to_linear).  Texel centres and Closest give the
+  decoded texels; between a dark and a bright texel the value follows ~t^2.4 rather than t.
 - :class:`VertexColour`: a per-vertex colour attribute interpolated over each triangle
   (Blender's Color Attribute node), in linear values.
 """
@@ -20,9 +27,22 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import SceneError
+from .image import srgb_to_linear
 
 INTERPOLATIONS = ("Closest", "Linear", "Cubic")
 EXTENSIONS = ("REPEAT", "EXTEND", "CLIP", "MIRROR")
+INTERPOLATION_SPACES = ("linear", "srgb")
+
+
+def colour_channels(channels: int) -> int:
+    """How many leading channels of a 1–4-channel image are colour (the rest, if any, is alpha)."""
+    return 1 if channels <= 2 else 3
+
+
+def srgb_decode(encoded: np.ndarray) -> np.ndarray:
+    """Cycles' sRGB decoding (util/color.h color_srgb_to_linear): IEC 61966-2-1, the power law
+    continued above 1, negative values → 0; float64 in, float64 out."""
+    return np.maximum(srgb_to_linear(encoded), 0.0)
 
 
 def _wrap(i: np.ndarray, n: int, extension: str) -> tuple[np.ndarray, np.ndarray | None]:
@@ -62,26 +82,61 @@ class Texture:
 
 
 class ImageTexture(Texture):
-    """An image (float32 (H, W, C), linear values, row 0 at v = 0) looked up by UV; see the module docstring."""
+    """An image (float32 (H, W, C), row 0 at v = 0) looked up by UV; see the module docstring.
+
+    ``pixels``: linear values (``interpolation_space="linear"``) or, for ``"srgb"``, the sRGB-encoded
+    values of the colour channels (alpha linear), as floats or as the unsigned integer codes of an
+    8/16-bit image (value = code / full scale; 4–8 times less memory, as Cycles' byte images).
+    ``linear_pixels``: the decoded texels (float32) either way."""
 
     def __init__(self, pixels: np.ndarray, interpolation: str = "Linear", extension: str = "REPEAT",
-                 name: str = "image", field: str = "", uv_transform: tuple | None = None):
+                 name: str = "image", field: str = "", uv_transform: tuple | None = None,
+                 interpolation_space: str = "linear"):
         if interpolation not in INTERPOLATIONS:
             raise SceneError(f"{field}.interpolation" if field else "interpolation",
                              f"must be one of {', '.join(INTERPOLATIONS)}, got {interpolation!r}")
         if extension not in EXTENSIONS:
             raise SceneError(f"{field}.extension" if field else "extension",
                              f"must be one of {', '.join(EXTENSIONS)}, got {extension!r}")
+        if interpolation_space not in INTERPOLATION_SPACES:
+            raise SceneError(f"{field}.interpolation_space" if field else "interpolation_space",
+                             f"must be one of {', '.join(INTERPOLATION_SPACES)}, got {interpolation_space!r}")
         pixels = np.asarray(pixels)
         if pixels.ndim == 2:
             pixels = pixels[:, :, None]
         if pixels.ndim != 3 or pixels.shape[0] < 1 or pixels.shape[1] < 1 or not 1 <= pixels.shape[2] <= 4:
             raise SceneError(field, f"an image must be (height, width, 1–4 channels), got shape {pixels.shape}")
+        #: full scale of integer codes (None: float texels)
+        self._code_scale = None
+        if pixels.dtype.kind == "u":
+            if interpolation_space != "srgb":
+                raise SceneError(field or "pixels", "integer texels are only taken as sRGB-encoded codes "
+                                                    "(interpolation_space 'srgb')")
+            self._code_scale = float(np.iinfo(pixels.dtype).max)
+        elif pixels.dtype.kind != "f":
+            raise SceneError(field or "pixels", f"texels must be floats or unsigned integer codes, got {pixels.dtype}")
         if not np.all(np.isfinite(pixels)):
             raise SceneError(field, f"image {name!r} has non-finite pixel values")
         self.pixels = pixels
         self.height, self.width, self.channels = pixels.shape
         self.interpolation, self.extension, self.name = interpolation, extension, name
+        self.interpolation_space = interpolation_space
+        self.linear_pixels = pixels
+        self._colour = colour_channels(self.channels)
+        if interpolation_space == "srgb":
+            # decoded texels rounded to float32, exactly what decoding at load time stored: Closest
+            # lookups and texel centres keep those values, and value_range is theirs
+            encoded = self._values(pixels)
+            decoded = encoded.copy()
+            decoded[..., :self._colour] = srgb_decode(encoded[..., :self._colour])
+            decoded = decoded.astype(np.float32)
+            decoded.setflags(write=False)
+            self.linear_pixels = decoded
+            flat = encoded.reshape(-1, self.channels)[:, :self._colour]
+            # filtered encoded values are kept within the texels' range (convex weights; this only
+            # removes float64 rounding), so every lookup stays within value_range
+            lo, hi = flat.min(axis=0), flat.max(axis=0)
+            self._encoded_range = (np.minimum(lo, 0.0), hi) if extension == "CLIP" else (lo, hi)
         #: (A (2, 2), b (2,)) or None: the image is looked up at A·uv + b (Blender's Mapping node);
         #: ``lookup`` takes the mesh's UVs, so differences along them (bump maps) stay correct
         self.uv_transform = None
@@ -94,21 +149,35 @@ class ImageTexture(Texture):
     def __repr__(self):
         extra = "" if self.uv_transform is None else \
             f", UV {np.round(self.uv_transform[0], 4).tolist()} + {np.round(self.uv_transform[1], 4).tolist()}"
+        if self.interpolation_space != "linear":
+            extra += f", {self.interpolation_space}"
         return (f"ImageTexture({self.name!r}, {self.width}×{self.height}×{self.channels}, "
                 f"{self.interpolation}, {self.extension}{extra})")
 
     def value_range(self):
-        flat = self.pixels.reshape(-1, self.channels)
+        # "srgb": the decoding is monotone, so the bounds are those of the decoded texels
+        flat = self.linear_pixels.reshape(-1, self.channels)
         lo, hi = flat.min(axis=0).astype(np.float64), flat.max(axis=0).astype(np.float64)
         if self.extension == "CLIP":        # outside the image: 0
             lo, hi = np.minimum(lo, 0.0), np.maximum(hi, 0.0)
         return lo, hi
 
-    def _texels(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
-        """Pixel values (N, C) float64 at integer pixel coordinates (wrapped per the extension)."""
+    def _values(self, texels: np.ndarray) -> np.ndarray:
+        """Stored texels as float64 values (integer codes divided by their full scale; alpha then
+        rounded to float32, the values linear_pixels holds, as an image decoded at load time)."""
+        out = texels.astype(np.float64)
+        if self._code_scale is None:
+            return out
+        out /= self._code_scale
+        out[..., self._colour:] = out[..., self._colour:].astype(np.float32)
+        return out
+
+    def _texels(self, i: np.ndarray, j: np.ndarray, pixels: np.ndarray | None = None) -> np.ndarray:
+        """Pixel values (N, C) float64 of ``pixels`` (default: the stored texels) at integer pixel
+        coordinates (wrapped per the extension)."""
         ii, in_x = _wrap(i, self.width, self.extension)
         jj, in_y = _wrap(j, self.height, self.extension)
-        out = self.pixels[jj, ii].astype(np.float64)
+        out = self._values(self.pixels[jj, ii]) if pixels is None else pixels[jj, ii].astype(np.float64)
         if in_x is not None:
             out *= (in_x & in_y)[:, None]
         return out
@@ -120,7 +189,7 @@ class ImageTexture(Texture):
         x = uv[0] * self.width
         y = uv[1] * self.height
         if self.interpolation == "Closest":
-            return self._texels(np.floor(x).astype(np.int64), np.floor(y).astype(np.int64)).T
+            return self._texels(np.floor(x).astype(np.int64), np.floor(y).astype(np.int64), self.linear_pixels).T
         x = x - 0.5
         y = y - 0.5
         x0 = np.floor(x)
@@ -141,6 +210,11 @@ class ImageTexture(Texture):
             for a, di in enumerate(offsets):
                 row += self._texels(i0 + di, j0 + dj) * wx[a][:, None]
             out += row * wy[b][:, None]
+        if self.interpolation_space == "srgb":
+            c = self._colour
+            encoded = np.clip(out[:, :c], *self._encoded_range)
+            # decoded in float64, rounded to float32 as the decoded texels are (texel centres exact)
+            out[:, :c] = srgb_decode(encoded).astype(np.float32)
         return out.T
 
     def eval(self, points) -> np.ndarray:

@@ -15,7 +15,8 @@ is used.  Every value is validated; a NaN or out-of-range input is an error nami
 and the input.
 
 Textures (README, "Blender materials"): an input that a texturable parameter reads may be linked to
-an Image Texture (the image's own pixels, linear; its interpolation, extension and colour space;
+an Image Texture (the image's own pixels; its interpolation, extension and colour space, sRGB images
+filtered on their encoded values where Cycles does so (``image_pixels``);
 the UV map through UV Map / Texture Coordinate ▸ UV nodes and Mapping nodes) or to a Color
 Attribute / Attribute node (a vertex colour); a roughness texture becomes m = r² per point
 (``TextureInput(power=2)``).  A Normal Map node (tangent space) or a Bump node with an image
@@ -41,11 +42,13 @@ from ...engine.materials.normal_map import ShadingNormal
 from ...engine.materials.torrance_sparrow import M_MIN
 from ...engine.errors import SceneError
 from ...engine.textures import ImageTexture, TextureInput, VertexColour
-from ...engine.textures.image import srgb_to_linear
+from ...engine.textures.image import linear_to_srgb, srgb_to_linear
+from ...engine.textures.texture import srgb_decode
 from ...engine.spectral import (ConstantSpectrum, RGBIlluminantSpectrum, RGBReflectanceSpectrum,
                                 RGBUnboundedSpectrum)
 from ..nodes.models import DIELECTRIC_PRESETS, NODE_MODELS
 from .texture_bake import bake_input
+from .world import _interpolated_encoded
 
 SMOOTH_LIMIT = 0.02
 DEFAULT_ALBEDO = 0.8
@@ -84,7 +87,8 @@ LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Raw", "Linear", "Generic Data")
 ROUGHNESS_MIN = float(np.nextafter(np.float32(0.01), np.float32(1)))
 
 #: image name → (signature, pixel hash, linear float32 (H, W, 4) pixels, {texture key: ImageTexture},
-#: warnings about the image (repeated on every export that uses it))
+#: warnings about the image (repeated on every export that uses it), the sRGB-encoded float32
+#: (H, W, 4) pixels Cycles filters, or None (see image_pixels))
 _IMAGES: dict = {}
 #: images kept converted between exports (their pixels stay in memory)
 IMAGE_CACHE_SIZE = 32
@@ -109,7 +113,10 @@ def image_pixels(image, mat, warnings):
 
     ``image.pixels`` holds what an 8-bit file stores (so sRGB images are decoded here with the sRGB
     transfer function, as Cycles' OpenColorIO sRGB); Blender loads 16-bit and float images
-    (``is_float``) into scene-linear floats, used as they are (verified in bpy 5.0.1).  Images are
+    (``is_float``) into scene-linear floats, used as they are (verified in bpy 5.0.1).  The images
+    that Cycles keeps sRGB-encoded and filters so (world._interpolated_encoded: sRGB 8-bit images,
+    sRGB float images read from their file) also keep their encoded pixels, entry[5]: as stored
+    (8-bit), or the float buffer encoded again (what the file holds).  Images are
     cached per name and signature (file, time, size, colour space); an
     image with unsaved edits (``is_dirty``) is re-read and its cache entry kept while its pixel
     hash is unchanged.
@@ -132,6 +139,7 @@ def image_pixels(image, mat, warnings):
                      "in Cycles")
         pixels = np.array(MISSING_RGBA, np.float32).reshape(1, 1, 4)
         digest = "missing"
+        encoded = None
     else:
         raw = np.empty(n, np.float32)
         image.pixels.foreach_get(raw)
@@ -147,6 +155,11 @@ def image_pixels(image, mat, warnings):
             alpha = pixels[..., 1:2] if c == 2 else np.ones((h, w, 1), np.float32)
             pixels = np.concatenate((rgb, alpha), axis=2)
         space = image.colorspace_settings.name
+        encoded = None
+        if _interpolated_encoded(image):
+            encoded = np.array(pixels, np.float32)      # a copy: pixels may be decoded below
+            if image.is_float:          # Cycles reads the file's encoded values, Blender holds them decoded
+                encoded[..., :3] = linear_to_srgb(pixels[..., :3])
         if not image.is_float and not image.colorspace_settings.is_data:
             if space == "sRGB":
                 pixels = pixels.copy()
@@ -157,7 +170,9 @@ def image_pixels(image, mat, warnings):
         pixels = np.ascontiguousarray(pixels, np.float32)
         if not np.all(np.isfinite(pixels)):
             pixels = np.nan_to_num(pixels, nan=0.0, posinf=0.0, neginf=0.0)
-    entry = (signature, digest, pixels, {}, notes)
+        if encoded is not None and not np.all(np.isfinite(encoded)):
+            encoded = np.nan_to_num(encoded, nan=0.0, posinf=0.0, neginf=0.0)
+    entry = (signature, digest, pixels, {}, notes, encoded)
     _IMAGES.pop(image.name_full, None)
     while len(_IMAGES) >= IMAGE_CACHE_SIZE:          # the least recently converted image goes first
         _IMAGES.pop(next(iter(_IMAGES)))
@@ -218,7 +233,7 @@ def image_texture(tex_node, mat, warnings, alpha=False, min_value=None):
     raised to at least ``min_value`` if given), cached with the image."""
     image = tex_node.image
     if image is None:       # Cycles: an Image Texture without image gives black
-        pixels, entry = np.zeros((1, 1, 4), np.float32), (None, "none", None, {}, [])
+        pixels, entry = np.zeros((1, 1, 4), np.float32), (None, "none", None, {}, [], None)
         name = "<no image>"
     else:
         pixels, entry = image_pixels(image, mat, warnings)
@@ -235,14 +250,27 @@ def image_texture(tex_node, mat, warnings, alpha=False, min_value=None):
     mapped = not (np.array_equal(A, np.eye(2)) and not b.any())
     key = (alpha, min_value, interpolation, extension, A.tobytes() if mapped else None, b.tobytes() if mapped else None)
     textures = entry[3]
+    space = "linear" if alpha or entry[5] is None else "srgb"     # alpha is never sRGB-encoded
     if key not in textures:
-        data = pixels[..., 3:4] if alpha else pixels[..., :3]
+        data = pixels[..., 3:4] if alpha else (pixels if space == "linear" else entry[5])[..., :3]
         if not alpha and np.array_equal(data[..., 0], data[..., 1]) and np.array_equal(data[..., 1], data[..., 2]):
             data = data[..., :1]      # grey: one channel, read exactly (not through the luminance weights)
         if min_value is not None:
-            data = np.maximum(data, np.float32(min_value))
-        textures[key] = ImageTexture(data, interpolation, extension, name=name, uv_transform=(A, b) if mapped else None)
+            data = np.maximum(data, _least_texel(min_value, space))
+        textures[key] = ImageTexture(data, interpolation, extension, name=name, uv_transform=(A, b) if mapped else None,
+                                     interpolation_space=space)
     return textures[key]
+
+
+def _least_texel(value: float, space: str) -> np.float32:
+    """The least float32 texel whose value (decoded, for "srgb") is ≥ ``value``: texels raised to it
+    keep every lookup ≥ value (the filter weights are convex and the decoding monotone)."""
+    if space == "linear":
+        return np.float32(value)
+    texel = np.float32(linear_to_srgb(value))
+    while np.float32(srgb_decode(np.float64(texel))) < value:
+        texel = np.nextafter(texel, np.float32(np.inf))
+    return texel
 
 
 def _texture_node(node, out) -> bool:
@@ -623,7 +651,7 @@ def gulbrandsen_textures(colour: TextureInput, edge):
     tex = colour.texture
     if not isinstance(tex, ImageTexture) or colour.channel is not None:
         return None
-    rgb = tex.pixels.astype(np.float64)
+    rgb = tex.linear_pixels.astype(np.float64)
     g = rgb if edge is colour else np.asarray(edge, np.float64)[None, None, :]
     if rgb.shape[2] == 1 and g.shape[2] == 3 and max(edge) != min(edge):
         rgb = np.repeat(rgb, 3, axis=2)
