@@ -375,8 +375,9 @@ def adaptive_units(pixels: np.ndarray, start: np.ndarray, target: np.ndarray, ti
 
 def round_unit_paths(paths: int, n_pixels: int, passes: int, batch_rays: int, workers: int) -> int:
     """Paths per work unit of a round of ``paths`` paths over ``n_pixels`` pixels and at most ``passes``
-    sample passes: at least :data:`MIN_UNIT_PATHS`, at most ``batch_rays``, and a round larger than
-    ``workers`` units is cut into a multiple of ``workers`` units of whole, equal pass ranges.
+    sample passes: at least :data:`MIN_UNIT_PATHS` (a smaller round is one unit), at most ``batch_rays``,
+    and a round of at least ``workers`` units is cut into a multiple of ``workers`` units of whole,
+    equal pass ranges.
 
     Late rounds on few tiles take many passes: capped at ``batch_rays`` alone they were cut into
     e.g. 2 full units and a third of a third the size, which one worker traced while the other
@@ -385,11 +386,12 @@ def round_unit_paths(paths: int, n_pixels: int, passes: int, batch_rays: int, wo
     """
     workers = max(int(workers), 1)
     per_unit = min(batch_rays, max(MIN_UNIT_PATHS, -(-paths // (UNITS_PER_WORKER * workers))))
-    if per_unit < batch_rays or n_pixels <= 0 or passes <= 0:
+    n_units = -(-paths // per_unit)
+    if n_units < workers or n_pixels <= 0 or passes <= 0:
         return per_unit
-    n_units = workers * -(-paths // (workers * batch_rays))          # a multiple of the workers
+    n_units = workers * -(-n_units // workers)                        # a multiple of the workers
     equal = n_pixels * -(-passes // n_units)                          # whole pass ranges per unit
-    return equal if MIN_UNIT_PATHS <= equal <= batch_rays else per_unit
+    return equal if equal <= batch_rays else per_unit
 
 
 def unit_paths(unit):
