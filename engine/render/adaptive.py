@@ -375,14 +375,15 @@ def adaptive_units(pixels: np.ndarray, start: np.ndarray, target: np.ndarray, ti
 
 def round_unit_paths(paths: int, n_pixels: int, passes: int, batch_rays: int, workers: int) -> int:
     """Paths per work unit of a round of ``paths`` paths over ``n_pixels`` pixels and at most ``passes``
-    sample passes: at least :data:`MIN_UNIT_PATHS` (a smaller round is one unit), at most ``batch_rays``,
-    and a round of at least ``workers`` units is cut into a multiple of ``workers`` units of whole,
-    equal pass ranges.
+    sample passes: ``paths`` ÷ the workers, at least :data:`MIN_UNIT_PATHS` and at most ``batch_rays``;
+    a round that this cuts into at least ``workers`` units is then cut into a multiple of ``workers``
+    units of equal, whole pass ranges (which may hold fewer than :data:`MIN_UNIT_PATHS` paths).
 
     Late rounds on few tiles take many passes: capped at ``batch_rays`` alone they were cut into
     full units and a small last one, which one worker traced while the other waited for the round's
     end (glass_sphere 128², 2 threads: 4 such rounds idled a core for ≈ 1 s of 9.4 s of CPU, ≈ 10 %
-    of the wall time); equal pass ranges, a multiple of the workers, keep both busy.  How units are cut never changes the result.
+    of the wall time); equal pass ranges, a multiple of the workers, keep both busy.  How units are
+    cut never changes the result.
     """
     workers = max(int(workers), 1)
     per_unit = min(batch_rays, max(MIN_UNIT_PATHS, -(-paths // (UNITS_PER_WORKER * workers))))
@@ -417,11 +418,10 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
     and adds them in order (engine.render.renderer.trace_in_order); returns True if stopped.
     ``clock`` gives seconds (injected by tests).  ``on_first_pass(film, halves, seconds, samples)``
     is called once every pixel has ``min_spp`` samples (for the prediction check).  A round is
-    split into :data:`UNITS_PER_WORKER` units per worker of at least :data:`MIN_UNIT_PATHS` paths
-    (late rounds hold few tiles: one unit would leave all but one worker idle); how units are cut
-    never changes the result.  ``unit_times``: a list that
-    receives (pixels, paths, seconds) of every unit of the first pass, cut into small pixel chunks
-    for the purpose (where the samples cost more: engine.render.estimate).
+    split into units by :func:`round_unit_paths` (late rounds hold few tiles: one unit, or a small
+    last one, would leave all but one worker idle); how units are cut never changes the result.
+    ``unit_times``: a list that receives (pixels, paths, seconds) of every unit of the first pass,
+    cut into small pixel chunks for the purpose (where the samples cost more: engine.render.estimate).
     """
     W, H = film.width, film.height
     x0, y0, x1, y1 = window or (0, 0, W, H)
