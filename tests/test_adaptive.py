@@ -577,3 +577,21 @@ def test_the_predicted_time_counts_one_round_per_checkpoint_up_to_the_largest_co
     marks = checkpoints(16, 4096)
     assert p.rounds == int(np.searchsorted(marks, p.counts.max())) + 1          # the steps, and the last look
     assert p.adaptive_seconds == pytest.approx(TILE * TILE * p.counts.max() * 1e-6 + 0.5 * p.rounds)
+
+
+def test_a_round_larger_than_a_unit_is_cut_into_equal_units_a_multiple_of_the_workers():
+    from engine.render.adaptive import MIN_UNIT_PATHS, adaptive_units, round_unit_paths, tile_ids
+    W = H = 8 * TILE
+    tiles = tile_ids(W, H)
+    pixels = np.arange(W * H, dtype=np.int64)
+    start, target = np.full(pixels.size, 16), np.full(pixels.size, 16 + 56)      # 56 passes
+    batch = 2 * MIN_UNIT_PATHS // (W * H) * (W * H) + W * H                       # 2 units would need 2.x
+    paths = int((target - start).sum())
+    for workers in (1, 2, 3):
+        per_unit = round_unit_paths(paths, pixels.size, 56, batch, workers)
+        units = adaptive_units(pixels, start, target, tiles, per_unit)
+        sizes = [u[0].size * (u[4] - u[3]) for u in units]
+        assert len(units) % workers == 0 and max(sizes) <= batch
+        assert max(sizes) - min(sizes) <= pixels.size * (len(units) - 1)         # whole, near-equal pass ranges
+        assert sum(sizes) == paths
+    assert round_unit_paths(1000, 100, 10, 1 << 17, 2) == MIN_UNIT_PATHS        # small rounds: one unit
