@@ -48,7 +48,7 @@ from ...engine.spectral import (ConstantSpectrum, RGBIlluminantSpectrum, RGBRefl
                                 RGBUnboundedSpectrum)
 from ..nodes.models import DIELECTRIC_PRESETS, NODE_MODELS
 from .texture_bake import bake_input
-from .world import _interpolated_encoded
+from .world import interpolated_encoded
 
 SMOOTH_LIMIT = 0.02
 DEFAULT_ALBEDO = 0.8
@@ -114,7 +114,7 @@ def image_pixels(image, mat, warnings):
     ``image.pixels`` holds what an 8-bit file stores (so sRGB images are decoded here with the sRGB
     transfer function, as Cycles' OpenColorIO sRGB); Blender loads 16-bit and float images
     (``is_float``) into scene-linear floats, used as they are (verified in bpy 5.0.1).  The images
-    that Cycles keeps sRGB-encoded and filters so (world._interpolated_encoded: sRGB 8-bit images,
+    that Cycles keeps sRGB-encoded and filters so (world.interpolated_encoded: sRGB 8-bit images,
     sRGB float images read from their file) also keep their encoded pixels, entry[5]: as stored
     (8-bit), or the float buffer encoded again (what the file holds).  Images are
     cached per name and signature (file, time, size, colour space); an
@@ -156,7 +156,7 @@ def image_pixels(image, mat, warnings):
             pixels = np.concatenate((rgb, alpha), axis=2)
         space = image.colorspace_settings.name
         encoded = None
-        if _interpolated_encoded(image):
+        if interpolated_encoded(image):
             encoded = np.array(pixels, np.float32)      # a copy: pixels may be decoded below
             if image.is_float:          # Cycles reads the file's encoded values, Blender holds them decoded
                 encoded[..., :3] = linear_to_srgb(pixels[..., :3])

@@ -131,12 +131,12 @@ def _environment_texture(world, env, colour_socket, strength, warnings, why):
                         "renders as 'Linear'")
     if strength <= 0:
         return None
-    space = "srgb" if _interpolated_encoded(image) else "linear"
+    space = "srgb" if interpolated_encoded(image) else "linear"
     return EnvironmentLight(RGBIlluminantSpectrum([1.0, 1.0, 1.0], strength), image=texels, strength=strength,
                             rotation_deg=rotation, grid="cycles", interpolation_space=space)
 
 
-def _interpolated_encoded(image) -> bool:
+def interpolated_encoded(image) -> bool:
     """Cycles interpolates ``image`` on its sRGB-encoded values (and decodes the result): images in
     the sRGB colour space that it reads as stored (scene/image.cpp ``compress_as_srgb``), i.e.
     8-bit ones, and float ones read from their file; a packed or generated float image reaches
