@@ -13,7 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import jit
-from .tables import interp_at
+from .tables import relative_index_at
 
 _TINY = 1e-200
 
@@ -71,13 +71,9 @@ def _tabulated_mirror_loop(cos_o, lam, wl_n, n, wl_k, k, scale, A, B, C, S):
     inside = True
     for i in range(lam.shape[0]):
         for j in range(lam.shape[1]):
-            x = lam[i, j]
-            if not (x >= wl_n[0] and x <= wl_n[-1] and x >= wl_k[0] and x <= wl_k[-1]):
-                inside = False
-            a = interp_at(wl_n, n, x)
-            b = interp_at(wl_k, k, x)
             # the same relative index as engine.kernels.tables.complex_index_table, bit for bit
-            e = complex((a + b * 0.0) * scale, (b - a * 0.0) * scale)
+            e, ok = relative_index_at(wl_n, n, wl_k, k, lam[i, j], scale)
+            inside = inside and ok
             c = cos_o[j]
             m = 1.0 if c >= 0 else 0.0          # behind the shading normal (or NaN): no reflection
             a_, b_, c_, s_ = abcs_at(c, e)

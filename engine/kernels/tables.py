@@ -86,17 +86,22 @@ def complex_index_table_numpy(lam, wl_n, n, wl_k, k, exterior_n):
 
 
 @jit
+def relative_index_at(wl_n, n, wl_k, k, x, scale):
+    """(relative complex index at λ = x, whether x lies inside both tables), as NumPy's
+    (interp(n) + i·interp(κ)) / e: Smith's division by e + 0i, i.e. times scale = 1/e."""
+    inside = x >= wl_n[0] and x <= wl_n[-1] and x >= wl_k[0] and x <= wl_k[-1]
+    a = interp_at(wl_n, n, x)
+    b = interp_at(wl_k, k, x)
+    return complex((a + b * 0.0) * scale, (b - a * 0.0) * scale), inside
+
+
+@jit
 def _complex_index_loop(lam, wl_n, n, wl_k, k, scale, out):
     inside = True
     for i in range(lam.shape[0]):
         for j in range(lam.shape[1]):
-            x = lam[i, j]
-            if not (x >= wl_n[0] and x <= wl_n[-1] and x >= wl_k[0] and x <= wl_k[-1]):
-                inside = False
-            a = interp_at(wl_n, n, x)
-            b = interp_at(wl_k, k, x)
-            # NumPy's (a + i·b) / e: Smith's division by e + 0i, i.e. times 1/e
-            out[i, j] = complex((a + b * 0.0) * scale, (b - a * 0.0) * scale)
+            out[i, j], ok = relative_index_at(wl_n, n, wl_k, k, lam[i, j], scale)
+            inside = inside and ok
     return inside
 
 
