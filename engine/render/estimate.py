@@ -4,10 +4,13 @@ A short pilot render (every pixel ``pilot_spp`` samples, with the half-buffers o
 sampling) gives each tile's error e at n = pilot_spp samples.  The standard error of a Monte Carlo
 mean falls as 1/√spp, so the tile needs m = n·(e/T)² samples to reach the threshold T; adaptive
 sampling stops it at the first checkpoint ≥ m (engine.render.adaptive.checkpoints), within
-[min_spp, spp].  A uniform render needs the largest m of all tiles for every pixel.  Wall time =
-Σ over pixels of samples × that pixel's seconds per sample, measured in the pilot on this machine
-(:func:`cost_map`: the pilot is cut into small pixel chunks and each chunk's time is kept — the
-pixels that need many samples, glass and edges, are also the expensive ones).  The same prediction is made from the
+[min_spp, spp], or earlier at its share of the error at equal cost, n = σ/(μ·w)
+(engine.render.adaptive: w = √(c/c̄) from the tile's rays per sample).  A uniform render needs the
+largest m of all tiles for every pixel.  Wall time = Σ over pixels of samples × that pixel's seconds
+per sample on this machine, a per-tile cost map (:func:`cost_map`): the pilot is cut into units of
+≥ 1024 pixels whose seconds per ray are measured, and each 4×4 tile costs its own rays per sample
+(:func:`tile_rays_per_sample`) × its unit's seconds per ray — the pixels that need many samples,
+glass and edges, are also the expensive ones.  The same prediction is made from the
 first pass (``min_spp`` everywhere) of an adaptive render and printed beside what happened.
 
 **Is adaptive worth it?** With per-sample variance v and cost c per pixel, n samples give the
