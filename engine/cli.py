@@ -202,9 +202,9 @@ def _render_adaptive(renderer, st, adaptive, bar, signals, resume_film, resume_h
 
     def on_first_pass(film, halves, seconds, samples):
         if samples > 0 and adaptive.threshold > 0 and unit_times:
+            costs = cost_map(unit_times, film.count.size, seconds, tile_rays_per_sample(film, halves))
             first["prediction"] = predict(film, halves, adaptive.quantity, adaptive.threshold, adaptive.min_spp,
-                                          st.spp, cost_map(unit_times, film.count.size, seconds,
-                                                                   tile_rays_per_sample(film, halves)))
+                                          st.spp, costs)
 
     result = renderer.render(st, progress=bar, should_stop=lambda: signals.requested, resume=resume_film,
                              adaptive=adaptive, adaptive_resume=resume_halves, on_first_pass=on_first_pass,
