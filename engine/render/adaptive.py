@@ -18,28 +18,35 @@ rule therefore works on tiles of ``TILE``×``TILE`` pixels aligned to the image 
 is the root mean square of its pixels' errors (over the pixels where the quantity is defined), and
 all pixels of a tile always have the same sample count.
 
-**Allocation (which tiles go on).** Rendering every tile *to* the threshold gives each tile
+**Allocation (which tiles go on).**  Rendering every tile *to* the threshold gives each tile
 n ∝ σ² samples (σ: its per-sample standard deviation), and that gains exactly nothing over uniform
-sampling at equal cost (engine.render.estimate).  The counts that minimise the image's mean squared
-error for a given number of samples are n ∝ σ (Lagrange: d(σ²/n)/dn = −σ²/n² equal for every
-tile).  So a tile goes on only while (1) its error e is above the threshold T (the issue's rule:
-samples go only where the error is above T) **and** (2) σ̂/n > μ, i.e. e is above its share
-√(μ·σ̂) of the error (σ̂ = e·√n): a tile whose σ is above the image's mean σ̄ stops at the error
-T·√(σ/σ̄) > T, with n = σ·σ̄/T² ∝ σ samples, because bringing it lower costs more than it buys
-elsewhere; tiles below σ̄ stop at T as before (n = σ²/T²).  μ = T²/σ̄ (:func:`allocation_level`:
-the level at which counts σ/μ would give an image RMS error of T), set once, from the first pass
-(``min_spp`` everywhere).  For ``s0`` condition (2) measures the tile in absolute luminance — the
-RMS of ½|Y_A − Y_B| over the tile ÷ the image's first-pass mean luminance
-(:func:`allocation_noise`) — so that the image's luminance error is what is minimised (a relative
-error alone samples dark tiles as much as bright ones); the other quantities use their tile error.
-σ̄ is the mean over the pixels where the quantity is defined (lit pixels; DoLP > 0.05 for ``aolp``).
+sampling at equal cost (engine.render.estimate).  A sample of tile t costs c_t rays (camera,
+bounce and shadow rays: the integrator counts them per path, a deterministic function of the seed,
+summed per pixel in :attr:`HalfBuffers.rays`); a path through glass traces ~2× the rays of one that
+ends on a diffuse floor.  The counts that minimise the image's mean squared error mean(σ²/n) at a
+given cost Σ c·n are n ∝ σ/√c (Lagrange: σ²/n² = λ·c for every tile).  So a tile goes on only while
+(1) its error e is above the threshold T (the issue's rule: samples go only where the error is
+above T; every tile below T stops) **and** (2) σ̂/(n·w) > μ, with σ̂ = e·√n and the cost weight
+w = √(c/c̄) (c: the tile's rays per sample so far, c̄: the first pass's over the image,
+:func:`cost_weight`), i.e. e is above its share √(μ·w·σ̂) of the error.  A tile stops at
+n = σ/(μ·w) ∝ σ/√c samples, or at the threshold (n = σ²/T²) if that comes first: a dear or noisy
+tile stops above T because bringing it lower costs more than it buys elsewhere.  μ = T²/mean(σ·w)
+(:func:`allocation_level`: the level at which the counts σ/(μ·w) give an image RMS error of T), set
+once, from the first pass (``min_spp`` everywhere).  With equal costs (w = 1) this is n ∝ σ and
+μ = T²/σ̄.  For ``s0`` condition (2) measures the tile in absolute luminance — the RMS of
+½|Y_A − Y_B| over the tile ÷ the image's first-pass mean luminance (:func:`allocation_noise`) — so
+that the image's luminance error is what is minimised (a relative error alone samples dark tiles as
+much as bright ones); the other quantities use their tile error.  The mean of σ·w is over the
+pixels where the quantity is defined (lit pixels; DoLP > 0.05 for ``aolp``).  Ray counts make the
+rule deterministic (seconds would not be) while following the cost: per tile, seconds per sample
+and rays per sample of the 16-spp pilot correlate (engine.render.estimate uses both).
 
 **Schedule.** Every pixel first gets ``min_spp`` samples; then tiles that go on get more,
 checkpoint by checkpoint (:func:`checkpoints`: about +25 % per step, even steps so both halves stay
 equal), until no tile goes on, ``spp`` is reached or the time limit passes.  A tile's next step
-depends only on its own samples and μ, fixed after the first pass and kept with the half-buffers
-(:class:`HalfBuffers` ``first``, stored in the EXR), so without a time limit the counts are a
-deterministic function of the seed — however the work is split, and also across an interrupted
+depends only on its own samples and rays, and on μ and c̄, fixed after the first pass and kept with
+the half-buffers (:class:`HalfBuffers` ``first`` and ``rays``, stored in the EXR), so without a time
+limit the counts are a deterministic function of the seed — however the work is split, and also across an interrupted
 render and its resumption, and a tighter threshold on resumption continues the looser one's path
 (μ falls with T).  Samples are added to the film one sample pass at a time in ascending sample order
 (:func:`add_in_sample_order`), so given the counts the sums are bit-identical whatever the threads,
@@ -221,57 +228,99 @@ def allocation_noise(quantity: str, sums: np.ndarray, counts: np.ndarray, tiles:
     return np.where(out >= 1e29, np.inf, out), counted[pixels]
 
 
-def allocation_level(sigma: np.ndarray, threshold: float) -> float:
-    """μ = T² / mean(σ): the level at which counts n = σ/μ give an RMS error √mean(σ²/n) = T.
+def allocation_level(sigma: np.ndarray, threshold: float, weight: np.ndarray | None = None) -> float:
+    """μ = T² / mean(σ·w): the level at which counts n = σ/(μ·w) give an RMS error √mean(σ²/n) = T.
 
-    ``sigma``: per-sample standard deviation of every counted pixel's tile (σ = e·√n).  Tiles held
-    at ``min_spp`` (σ/μ below it) only lower the image's error, tiles capped at ``spp`` raise it.
+    ``sigma``: per-sample standard deviation of every counted pixel's tile (σ = e·√n); ``weight``:
+    the tiles' cost weights w = √(c/c̄) (:func:`cost_weight`; None: all 1).  Tiles held at
+    ``min_spp`` (σ/(μ·w) below it) only lower the image's error, tiles capped at ``spp`` raise it.
     ∞ (every tile stops at once) where no pixel is noisy.
     """
     sigma = np.asarray(sigma, np.float64)
-    sigma = sigma[np.isfinite(sigma)]
-    mean = float(np.mean(sigma)) if sigma.size else 0.0
+    w = np.ones(sigma.shape) if weight is None else np.broadcast_to(np.asarray(weight, np.float64), sigma.shape)
+    finite = np.isfinite(sigma)
+    mean = float(np.mean(sigma[finite] * w[finite])) if finite.any() else 0.0
     return float(threshold) ** 2 / mean if mean > 0 else math.inf
 
 
+def rays_per_sample(rays: np.ndarray, counts: np.ndarray, pixels: np.ndarray) -> float:
+    """c̄: the rays per sample of ``pixels`` (0 where nothing was counted: files of older versions)."""
+    n = int(np.sum(counts[pixels]))
+    return float(np.sum(rays[pixels])) / n if n > 0 else 0.0
+
+
+def cost_weight(rays: np.ndarray, counts: np.ndarray, tiles: np.ndarray, pixels: np.ndarray,
+                mean_cost: float) -> np.ndarray:
+    """w = √(c/c̄) of each pixel's tile over ``pixels``: c the tile's rays per sample (Σ rays ÷ Σ
+    samples over its pixels among ``pixels``), c̄ = ``mean_cost`` (:func:`rays_per_sample` of the
+    first pass).  1 where c̄ = 0 (no rays counted) or the tile has no sample yet."""
+    if not mean_cost > 0:
+        return np.ones(pixels.size)
+    t = tiles[pixels]
+    n_tiles = int(tiles.max()) + 1
+    r = np.bincount(t, weights=rays[pixels].astype(np.float64), minlength=n_tiles)
+    n = np.bincount(t, weights=counts[pixels].astype(np.float64), minlength=n_tiles)
+    c = _ratio(r, n)[t]
+    return np.where(c > 0, np.sqrt(c / mean_cost), 1.0)
+
+
+@dataclass
+class Allocation:
+    """The allocation of a first pass: level μ, the image's mean luminance ``mean_y`` (units of the
+    ``s0`` error, :func:`allocation_noise`), its rays per sample ``mean_cost`` (c̄), and per pixel
+    the tile's per-sample σ and cost weight w = √(c/c̄)."""
+    level: float
+    mean_y: float
+    mean_cost: float
+    sigma: np.ndarray
+    weight: np.ndarray
+
+
 def allocation_from(sums: np.ndarray, counts: np.ndarray, quantity: str, threshold: float, tiles: np.ndarray,
-                    pixels: np.ndarray) -> tuple[float, float, np.ndarray]:
-    """(μ, the image's mean luminance, σ over ``pixels``) from half-buffer ``sums`` (2, 4, n) and
-    ``counts`` (n,) of a first pass; ``threshold`` 0 gives μ = 0 (every noisy tile to ``spp``), ∞
-    gives μ = ∞ (every tile stops at once)."""
+                    pixels: np.ndarray, rays: np.ndarray | None = None) -> Allocation:
+    """The :class:`Allocation` from half-buffer ``sums`` (2, 4, n), ``counts`` (n,) and ``rays`` (n,)
+    (None: not counted, every weight 1) of a first pass, over ``pixels``; ``threshold`` 0 gives
+    μ = 0 (every noisy tile to ``spp``), ∞ gives μ = ∞ (every tile stops at once)."""
     y = _ratio(sums[0, 0] + sums[1, 0], counts)
     mean_y = float(np.mean(y[pixels])) if pixels.size else 0.0
     e, counted = allocation_noise(quantity, sums, counts, tiles, pixels, mean_y)
     sigma = e * np.sqrt(counts[pixels])
+    mean_cost = 0.0 if rays is None else rays_per_sample(rays, counts, pixels)
+    weight = np.ones(pixels.size) if rays is None else cost_weight(rays, counts, tiles, pixels, mean_cost)
     if not threshold > 0:
-        return 0.0, mean_y, sigma
-    if math.isinf(threshold):
-        return math.inf, mean_y, sigma
-    return allocation_level(sigma[counted], threshold), mean_y, sigma
+        mu = 0.0
+    elif math.isinf(threshold):
+        mu = math.inf
+    else:
+        mu = allocation_level(sigma[counted], threshold, weight[counted])
+    return Allocation(mu, mean_y, mean_cost, sigma, weight)
 
 
-def first_pass_level(halves: HalfBuffers, quantity: str, threshold: float, tiles: np.ndarray,
-                     pixels: np.ndarray) -> tuple[float, float]:
-    """(μ, the image's mean luminance) from the half-buffers' first pass (:attr:`HalfBuffers.first`)."""
-    mu, mean_y, _ = allocation_from(*halves.first, quantity, threshold, tiles, pixels)
-    return mu, mean_y
+def first_pass_allocation(halves: HalfBuffers, quantity: str, threshold: float, tiles: np.ndarray,
+                          pixels: np.ndarray) -> Allocation:
+    """The :class:`Allocation` of the half-buffers' first pass (:attr:`HalfBuffers.first`)."""
+    sums, counts, *rays = halves.first
+    return allocation_from(sums, counts, quantity, threshold, tiles, pixels, rays[0] if rays else None)
 
 
 # ------------------------------------------------------------------------------------ accumulation
 
 class HalfBuffers:
-    """Luminance Stokes sums of the even (A) and odd (B) sample passes per pixel: ``sums`` (2, 4, n).
+    """Luminance Stokes sums of the even (A) and odd (B) sample passes per pixel: ``sums`` (2, 4, n),
+    and the rays the pixel's samples traced: ``rays`` (n,) int64 (engine.render.integrator's per-path
+    count of segments and light samples: the deterministic cost the allocation weighs by).
 
-    ``first``: (sums (2, 4, n), counts (n,)) as they were when every pixel of the window had its
-    ``min_spp`` samples (None before): the allocation level μ is computed from it, so that it is the
-    same after an interruption and for any threshold given on resumption."""
+    ``first``: (sums (2, 4, n), counts (n,), rays (n,)) as they were when every pixel of the window
+    had its ``min_spp`` samples (None before): the allocation level μ is computed from it, so that it
+    is the same after an interruption and for any threshold given on resumption."""
 
     def __init__(self, n: int):
         self.sums = np.zeros((2, 4, n))
+        self.rays = np.zeros(n, np.int64)
         self.first = None
 
     def keep_first(self, counts: np.ndarray) -> None:
-        self.first = (self.sums.copy(), np.asarray(counts, np.int64).copy())
+        self.first = (self.sums.copy(), np.asarray(counts, np.int64).copy(), self.rays.copy())
 
     def means(self, counts: np.ndarray):
         """(mean_A, mean_B), each (4, n); samples 0…c−1 give A ⌈c/2⌉ and B ⌊c/2⌋ of them."""
@@ -280,10 +329,14 @@ class HalfBuffers:
 
 
 def add_in_sample_order(film, halves: HalfBuffers, pixel: np.ndarray, sample: np.ndarray,
-                        values: np.ndarray, alpha: np.ndarray | None = None) -> None:
+                        values: np.ndarray, alpha: np.ndarray | None = None,
+                        path_rays: np.ndarray | None = None) -> None:
     """Add samples sorted by sample index, one sample pass at a time (each pixel at most once per
     pass), so every pixel's sums are built in ascending sample order whatever the batching.
-    ``alpha`` (per sample; None = 1) is the camera-ray coverage of a transparent film or holdout."""
+    ``alpha`` (per sample; None = 1) is the camera-ray coverage of a transparent film or holdout;
+    ``path_rays`` (per sample, integers; None: not counted) the rays each sample traced."""
+    if path_rays is not None:       # integer sums: exact in any order
+        np.add.at(halves.rays, pixel, np.asarray(path_rays, np.int64))
     if alpha is not None and film.alpha_sums is None:
         film.alpha_sums = film.count.astype(np.float64)   # every earlier sample had alpha 1
     y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, values)
@@ -326,7 +379,7 @@ def image_error(film, halves: HalfBuffers, quantity: str, pixels: np.ndarray | N
     for ``s0`` the luminance error ÷ the image's mean luminance), over the pixels where it is defined."""
     if pixels is None:
         pixels = np.arange(film.count.size)
-    sums, counts = halves.first if halves.first is not None else (halves.sums, film.count)
+    sums, counts = halves.first[:2] if halves.first is not None else (halves.sums, film.count)
     mean_y = float(np.mean(_ratio(sums[0, 0] + sums[1, 0], counts)[pixels])) if pixels.size else 0.0
     e, counted = allocation_noise(quantity, halves.sums, film.count, tile_ids(film.width, film.height), pixels,
                                   mean_y)
@@ -420,7 +473,7 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
     is called once every pixel has ``min_spp`` samples (for the prediction check).  A round is
     split into units by :func:`round_unit_paths` (late rounds hold few tiles: one unit, or a small
     last one, would leave all but one worker idle); how units are cut never changes the result.
-    ``unit_times``: a list that receives (pixels, paths, seconds) of every unit of the first pass,
+    ``unit_times``: a list that receives (pixels, paths, seconds, rays) of every unit of the first pass,
     cut into small pixel chunks for the purpose (where the samples cost more: engine.render.estimate).
     """
     W, H = film.width, film.height
@@ -454,12 +507,14 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
         started = time.perf_counter()         # a measurement of this machine, not the time limit's clock
         traced = tracer.trace(pixel, sample, abort=abort)
         if traced is not None and timing["on"]:
-            unit_times.append((unit[0], pixel.size, time.perf_counter() - started))
+            rays = traced[1].get("path_rays")
+            unit_times.append((unit[0], pixel.size, time.perf_counter() - started,
+                               None if rays is None else int(np.sum(rays))))
         return None if traced is None else (pixel, sample, *traced)
 
     def add_result(result):
         pixel, sample, values, s = result
-        add_in_sample_order(film, halves, pixel, sample, values, s.get("alpha"))
+        add_in_sample_order(film, halves, pixel, sample, values, s.get("alpha"), s.get("path_rays"))
         if "denoise" in s:
             film.add_denoise_data(pixel, *s["denoise"])
         for k in ("rays", "shadow_rays", "nonfinite"):
@@ -481,12 +536,15 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
             if halves.first is None:        # every pixel has exactly min_spp samples now (or a resumed state)
                 halves.keep_first(film.count)
             if level is None:
-                level = first_pass_level(halves, adaptive.quantity, adaptive.threshold, tiles, pixels)
-                stats["allocation_level"] = level[0]
-            e, _ = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level[1])
+                level = first_pass_allocation(halves, adaptive.quantity, adaptive.threshold, tiles, pixels)
+                stats["allocation_level"] = level.level
+                stats["rays_per_sample"] = level.mean_cost
+            e, _ = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level.mean_y)
+            w = cost_weight(halves.rays, film.count, tiles, pixels, level.mean_cost)
             _, _, noise = film_noise(film, halves, adaptive.quantity, pixels)
-            # a tile goes on while its error is above T and its share of the error, σ̂/n > μ (σ̂ = e·√n)
-            noise = np.where(e / np.sqrt(counts) > level[0], noise, -np.inf)
+            # a tile goes on while its error is above T and above its share of the error at equal
+            # cost, σ̂/(n·w) > μ (σ̂ = e·√n, w = √(c/c̄))
+            noise = np.where(e / (np.sqrt(counts) * w) > level.level, noise, -np.inf)
         else:                                              # first pass: only bring every pixel to min_spp
             noise = np.full(counts.shape, -np.inf)
         if not first_pass_reported and counts.min() >= adaptive.min_spp:
@@ -541,6 +599,7 @@ def _state_arrays(film, halves: HalfBuffers):
         out[f"sumsq.S{k}.Y"] = film.sumsq_y[k]
         out[f"A.S{k}.Y"] = halves.sums[0, k]
         out[f"B.S{k}.Y"] = halves.sums[1, k]
+    out["rays"] = halves.rays.astype(np.float64)             # integers < 2⁵³: exact
     return out
 
 
@@ -560,8 +619,8 @@ def state_channels(film, halves: HalfBuffers) -> dict[str, np.ndarray]:
 
 
 def _first_arrays(halves: HalfBuffers):
-    sums, counts = halves.first
-    out = {"first.count": counts.astype(np.float64)}
+    sums, counts, rays = halves.first
+    out = {"first.count": counts.astype(np.float64), "first.rays": rays.astype(np.float64)}
     for k in range(4):
         out[f"first.A.S{k}.Y"] = sums[0, k]
         out[f"first.B.S{k}.Y"] = sums[1, k]
@@ -588,7 +647,13 @@ def state_from_channels(channels: dict, counts: np.ndarray):
         film.sumsq_y[k] = get(f"sumsq.S{k}.Y")
         halves.sums[0, k] = get(f"A.S{k}.Y")
         halves.sums[1, k] = get(f"B.S{k}.Y")
-    if f"{STATE_PREFIX}.first.count.hi" in channels:      # files of older versions have no first pass
+
+    def has(name):
+        return f"{STATE_PREFIX}.{name}.hi" in channels
+    if has("rays"):                                       # files of older versions counted no rays
+        halves.rays = get("rays").astype(np.int64)
+    if has("first.count"):                                # … nor kept the first pass
         sums = np.stack([np.stack([get(f"first.{h}.S{k}.Y") for k in range(4)]) for h in "AB"])
-        halves.first = (sums, get("first.count").astype(np.int64))
+        rays = get("first.rays").astype(np.int64) if has("first.rays") else np.zeros(W * H, np.int64)
+        halves.first = (sums, get("first.count").astype(np.int64), rays)
     return film, halves

@@ -23,7 +23,7 @@ q = min(max_λ T00 · η², 0.95), η² undoing the refraction radiance scale.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -102,12 +102,18 @@ class _Accumulators:
     """What a batch accumulates per path of the batch (indexed by ``PathState.path``): the
     radiance (P, L, N) (RGB: L = 3), the transparency (N,) (None: not tracked), the denoising
     guides (None: not asked) and the ray counts; ``w_rgb`` (3, L, N) colour weights of the
-    wavelength samples (None in RGB mode)."""
+    wavelength samples (None in RGB mode).  ``path_rays`` (N,): segments traced plus light samples
+    tried by each path, the deterministic cost of a sample that adaptive sampling weighs its
+    allocation by (engine.render.adaptive; rays skipped by pass-through surfaces are not counted)."""
     radiance: np.ndarray
     w_rgb: np.ndarray | None
     transparency: np.ndarray | None
     guides: DenoiseGuides | None
     stats: dict[str, int]
+    path_rays: np.ndarray = field(init=False)
+
+    def __post_init__(self):
+        self.path_rays = np.zeros(self.radiance.shape[-1], np.int64)
 
 
 @dataclass(eq=False)
@@ -330,6 +336,7 @@ class PathTracer:
         o, d, t_max = state.o, state.d, state.t_max
         hits = compiled.intersect(o, d, t_max)
         acc.stats["rays"] += state.n
+        acc.path_rays[state.path] += 1                  # paths of a batch are distinct: no repeated index
         if vis is not None:
             hits, extra = vis.pass_through(compiled, o, d, t_max, hits, bounce == 0, state.sampler.keys, bounce)
             acc.stats["rays"] += extra
@@ -448,6 +455,7 @@ class PathTracer:
             if not bsdf.flags.is_delta_only and len(light_set) and bounce + 2 <= st.max_depth:
                 contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], acc.stats)
                 add_to_paths(acc.radiance, gather(state.path, sel), contrib)
+                acc.path_rays[gather(state.path, sel)] += 1     # one light sample: a shadow ray (cost)
 
             bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
             if acc.guides is not None and not bsdf.flags.is_delta_only:
@@ -503,6 +511,7 @@ class PathTracer:
             stats["alpha"] = 1.0 - acc.transparency
         if acc.guides is not None:
             stats["denoise"] = (acc.guides.albedo, acc.guides.normal)
+        stats["path_rays"] = acc.path_rays
         return out, stats
 
     def _shadow_transmittance(self, p: np.ndarray, n_g: np.ndarray, wi: np.ndarray, t_max: np.ndarray,

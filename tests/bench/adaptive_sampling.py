@@ -22,10 +22,12 @@ the rule would give from a 16-spp first pass (engine.render.estimate.predict), a
 
 Part 1 (efficiency, side by side in one run): uniform renders at 16, 64, 256 spp and adaptive
 renders (threshold on s0 and on dolp, min 16, max 512 spp; glass_sphere also dolp ≤ 0.03, a
-threshold reachable within 512 spp).  Cost: rays traced (camera + shadow
-rays: deterministic) and wall seconds (a shared VM: noisy).  The equal-cost gain is the MSE of a
-uniform render of the same cost (log-log interpolation between the uniform renders) ÷ the
-adaptive MSE (> 1: adaptive is better), in rays and in seconds.
+threshold reachable within 512 spp).  Cost: rays traced (camera + bounce +
+shadow rays: deterministic), CPU seconds of a 1-thread render (robust when other processes share
+the machine) and wall seconds of a render on every core (what a user waits; noisy on a shared VM).
+The equal-cost gain is the MSE of a uniform render of the same cost (log-log interpolation between
+the uniform renders) ÷ the adaptive MSE (> 1: adaptive is better), in each of the three costs.
+References (Mitsuba's and ours) are cached in --out.  The table ends with the load average.
 
 Part 1b (bias): ``--seeds`` adaptive renders (s0 threshold) with different seeds; for S0…S3 the
 mean over seeds of the image sum against our reference's (z = difference ÷ its standard error from
@@ -109,12 +111,17 @@ def make_reference(label, y1, y2, spp):
     return Reference(label, y, ((y1 - y2) / 2) ** 2, ((dolp(y1) - dolp(y2)) / 2) ** 2, keep, spp)
 
 
-def our_reference(renderer, scene, spp):
+def our_reference(renderer, scene, spp, name, outdir):
+    """Two uniform renders of ours (seeds 4242, 4243), cached in ``outdir`` as luminance Stokes .npy."""
     ys = []
     for seed in (4242, 4243):
-        st = copy.copy(scene.settings)
-        st.spp, st.seed = spp, seed
-        ys.append(lum(renderer.render(st).stokes()))
+        cam = scene.camera
+        path = os.path.join(outdir, f"{name}__polar__{cam.width}x{cam.height}__{spp}spp__seed{seed}_lum.npy")
+        if not os.path.exists(path):
+            st = copy.copy(scene.settings)
+            st.spp, st.seed = spp, seed
+            np.save(path, lum(renderer.render(st).stokes()))
+        ys.append(np.load(path))
     return make_reference(f"ours {spp} spp ×2", ys[0], ys[1], spp)
 
 
@@ -142,6 +149,25 @@ def timed(renderer, st, adaptive=None):
     t0 = time.perf_counter()
     result = renderer.render(st, adaptive=adaptive)
     return result, time.perf_counter() - t0
+
+
+#: 1-thread renders per measurement; the least CPU time counts (other processes on the same cores
+#: inflate a process's CPU time too, through shared caches and execution units).
+CPU_REPEATS = 2
+
+
+def costed(renderer, st, adaptive=None):
+    """(result, CPU seconds of a 1-thread render, wall seconds of a render on every core): CPU time of
+    one thread is robust when other processes share the machine, wall time is what a user waits."""
+    one = copy.copy(st)
+    one.threads = 1
+    cpu = []
+    for _ in range(CPU_REPEATS):
+        c0 = time.process_time()
+        result = renderer.render(one, adaptive=adaptive)
+        cpu.append(time.process_time() - c0)
+    _, wall = timed(renderer, st, adaptive)
+    return result, min(cpu), wall
 
 
 def rays(result):
@@ -185,15 +211,15 @@ def efficiency(name, renderer, scene, refs, thresholds, rows):
     for spp in (16, 64, 256):
         st = copy.copy(scene.settings)
         st.spp, st.seed = spp, 7
-        result, seconds = timed(renderer, st)
+        result, cpu, seconds = costed(renderer, st)
         y = lum(result.stokes())
-        uniform.append((rays(result), seconds, [mse(y, r) for r in refs]))
-        rows.append((name, f"uniform {spp} spp", spp, seconds, rays(result), uniform[-1][2], None))
+        uniform.append((rays(result), cpu, seconds, [mse(y, r) for r in refs]))
+        rows.append((name, f"uniform {spp} spp", spp, cpu, seconds, rays(result), uniform[-1][3], None))
     for quantity, threshold in thresholds:
         st = copy.copy(scene.settings)
         st.spp, st.seed = MAX_SPP, 7
         ad = AdaptiveSettings(threshold=threshold, quantity=quantity, min_spp=MIN_SPP)
-        result, seconds = timed(renderer, st, ad)
+        result, cpu, seconds = costed(renderer, st, ad)
         y = lum(result.stokes())
         errs = [mse(y, r) for r in refs]
         r_ = rays(result)
@@ -201,11 +227,11 @@ def efficiency(name, renderer, scene, refs, thresholds, rows):
         for j, (m0, md) in enumerate(errs):
             g = []
             for k, m in enumerate((m0, md)):
-                for cost, col in ((r_, 0), (seconds, 1)):
-                    g.append(uniform_mse_at(cost, [u[col] for u in uniform], [u[2][j][k] for u in uniform]) / m)
-            gains.append(g)                   # S0 (rays, s), DoLP (rays, s)
+                for cost, col in ((r_, 0), (cpu, 1), (seconds, 2)):
+                    g.append(uniform_mse_at(cost, [u[col] for u in uniform], [u[3][j][k] for u in uniform]) / m)
+            gains.append(g)                   # S0 (rays, CPU s, wall s), DoLP (rays, CPU s, wall s)
         rows.append((name, f"adaptive {quantity} ≤ {threshold:g} ({result.stats['stop_reason']})",
-                     float(result.film.count.mean()), seconds, r_, errs, gains))
+                     float(result.film.count.mean()), cpu, seconds, r_, errs, gains))
         print(rows[-1], flush=True)
         if name == "demo" and quantity == "dolp":
             save_maps(result, quantity)
@@ -291,18 +317,20 @@ def main():
     ap.add_argument("--seeds", type=int, default=8, help="adaptive renders per scene for the bias check")
     ap.add_argument("--out", default=os.path.join(REPO, "out", "adaptive"))
     ap.add_argument("--prediction-only", action="store_true", help="part 2 only")
+    ap.add_argument("--scenes", default="glass_sphere,fresnel_sphere_au,demo", help="scenes of parts 0–1b")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
     thresholds = {"glass_sphere": [("s0", 0.02), ("dolp", 0.01), ("dolp", 0.03)],
                   "fresnel_sphere_au": [("s0", 0.01), ("dolp", 0.005)],
                   "demo": [("s0", 0.02), ("dolp", 0.01)]}
     mitsuba = has_mitsuba(args.mitsuba_python)
+    load_before = os.getloadavg()
     eff, gains, biases, labels = [], [], [], {}
-    for name in [] if args.prediction_only else thresholds:
+    for name in [] if args.prediction_only else [n for n in thresholds if n in args.scenes.split(",")]:
         scene = load(name, args.res)
         renderer = Renderer(scene)
         renderer.render(copy.copy(scene.settings))          # warm-up (kernels)
-        refs = [our_reference(renderer, scene, args.ref_spp)]
+        refs = [our_reference(renderer, scene, args.ref_spp, name, args.out)]
         if mitsuba and name != "demo":
             refs.insert(0, mitsuba_reference(args.mitsuba_python, name, args.mitsuba_spp, args.res, args.out))
         labels[name] = [r.label for r in refs]
@@ -318,16 +346,16 @@ def main():
     for name, q, t, label, pct, capped, g, best, g_eq, best_eq in gains:
         lines.append(f"| {name} | {q} ≤ {t:g} | {label} | {pct[0]:.2g} / {pct[1]:.2g} / {pct[2]:.2g} | "
                      f"{100 * capped:.0f} % | {g:.2f}× / {g_eq:.2f}× | {best:.2f}× / {best_eq:.2f}× |")
-    lines += ["", "| scene | reference | sampling | mean spp | seconds | Mrays | MSE S0 | MSE DoLP | "
-              "equal-cost gain S0 (rays / seconds) | equal-cost gain DoLP (rays / seconds) |",
-              "|---|---|---|---|---|---|---|---|---|---|"]
-    for name, label, spp, s, r, errs, g in eff:
+    lines += ["", "| scene | reference | sampling | mean spp | CPU s (1 thread) | wall s | Mrays | MSE S0 | MSE DoLP | "
+              "equal-cost gain S0 (rays / CPU s / wall s) | equal-cost gain DoLP (rays / CPU s / wall s) |",
+              "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, label, spp, cpu, s, r, errs, g in eff:
         for j, ref_label in enumerate(labels[name]):
             m0, md = errs[j]
-            gain = ("", "") if g is None else (f"**{g[j][0]:.2f}×** / {g[j][1]:.2f}×", f"**{g[j][2]:.2f}×** / "
-                                                                                      f"{g[j][3]:.2f}×")
-            lines.append(f"| {name} | {ref_label} | {label} | {spp:.1f} | {s:.2f} | {r / 1e6:.2f} | {m0:.3e} | "
-                         f"{md:.3e} | {gain[0]} | {gain[1]} |")
+            gain = ("", "") if g is None else tuple(f"{g[j][3 * k]:.2f}× / **{g[j][3 * k + 1]:.2f}×** / "
+                                                    f"{g[j][3 * k + 2]:.2f}×" for k in (0, 1))
+            lines.append(f"| {name} | {ref_label} | {label} | {spp:.1f} | {cpu:.2f} | {s:.2f} | {r / 1e6:.2f} | "
+                         f"{m0:.3e} | {md:.3e} | {gain[0]} | {gain[1]} |")
     lines += ["", "| scene | adaptive s0 ≤ | seeds | z of the image sum S0 / S1 / S2 / S3 | mean z² over 8×8 "
               "blocks S0 / S1 / S2 / S3 | image-sum difference ÷ ΣS0, S0 / S1 / S2 / S3 |", "|---|---|---|---|---|---|"]
     for name, t, K, out in biases:
@@ -341,6 +369,8 @@ def main():
         lines.append(f"| {name} | {q} ≤ {t:g} | {pm:.0f} / {am:.0f} ({pm / am:.2f}×) | {pp:.0f} / {ap95:.0f} "
                      f"({pp / ap95:.2f}×) | {ps:.1f} / {as_:.1f} ({ps / as_:.2f}×) | {pn} / {an} ({pn / an:.2f}×) | "
                      f"{us} spp, {useconds:.1f} s | {stop} |")
+    lines += ["", f"Load average (1 / 5 / 15 min) at the start: {' / '.join(f'{v:.2f}' for v in load_before)}, "
+                  f"at the end: {' / '.join(f'{v:.2f}' for v in os.getloadavg())} ({os.cpu_count()} cores)."]
     table = "\n".join(lines)
     with open(os.path.join(args.out, "table.md"), "w") as fh:
         fh.write(table + "\n")
