@@ -544,3 +544,62 @@ def test_wavelength_sampling_and_rgb_weights_bitwise(count):
         assert np.array_equal(cie._rgb_weights_compiled(lam, pdf), cie.rgb_weights_numpy(lam, pdf))
     assert np.all((got[0] >= cie.LAMBDA_MIN) & (got[0] <= cie.LAMBDA_MAX))
     assert wavelengths.sample_tanh is not None
+
+
+@needs_numba
+@pytest.mark.parametrize("two_sided", [False, True])
+def test_rectangle_lamp_sampling_bitwise(two_sided):
+    """Solid-angle sampling of a rectangle lamp in one pass (engine.kernels.light_sampling) against
+    its NumPy reference, bit for bit: points above and below the lamp, in its plane (Ω = 0), far
+    away (Ω below MIN_RECT_SOLID_ANGLE: ``use`` False), on its corner and edges, u at 0 and near 1."""
+    from engine.kernels import light_sampling as ls
+    rng = np.random.default_rng(5)
+    n = 4000
+    corner, ex, ey = np.array([-0.3, 0.2, 1.1]), np.array([0.7, 0.1, 0.0]), np.array([-0.1, 0.7, 0.05])
+    len_x, len_y = np.linalg.norm(ex), np.linalg.norm(ey)
+    ax, ay = ex / len_x, ey / len_y - (ey / len_y @ (ex / len_x)) * ex / len_x
+    ay /= np.linalg.norm(ay)
+    az = np.cross(ax, ay)
+    normal = -az
+    p = rng.uniform(-2, 2, (3, n))
+    p[:, 0] = corner                                    # on the corner
+    p[:, 1] = corner + 0.5 * len_x * ax                 # on an edge
+    p[:, 2:6] = (corner + 0.3 * ax + 0.2 * ay)[:, None] + np.array([0.0, 1.0, 1e5, -1e-9])[None, :] * az[:, None]
+    p[:, 6] = corner + 0.2 * ax + 0.1 * ay - 0.3 * ax   # in the plane, outside the rectangle
+    u1, u2 = rng.random(n), rng.random(n)
+    u1[:4], u2[:4] = [0.0, 0.0, np.nextafter(1.0, 0.0), 0.5], [0.0, np.nextafter(1.0, 0.0), 0.0, 1.0]
+    args = (p, u1, u2, corner, ax, ay, az, len_x, len_y, normal, two_sided)
+    with np.errstate(all="ignore"):
+        want = ls.rect_light_sample_numpy(*args)
+    got = ls.rect_light_sample_numba(*args)
+    for w, g in zip(want, got):
+        assert np.array_equal(w, g, equal_nan=True)
+    valid, use = want[4], want[5]
+    assert 0 < valid.sum() < n and not use[4] and not use[0] and use.any()
+
+
+@needs_numba
+@pytest.mark.parametrize("L_A,L", [(1, 4), (4, 4), (1, 3), (1, 1)])
+@pytest.mark.parametrize("delta", [False, True])
+def test_lambert_direct_light_bitwise(L_A, L, delta):
+    """Lambert's one-pass next-event value, MIS and light weight (engine.kernels.diffuse) against
+    direct_light_numpy, bit for bit: lights behind the surface, viewers behind it, grazing (cosθ_i = 0)
+    and invalid light samples, zero pdfs, a scalar or per-path selection probability."""
+    from engine.materials import lambert
+    rng = np.random.default_rng(L_A + 10 * L)
+    n = 3000
+    n_s, wo, wi = unit(rng, n), unit(rng, n), unit(rng, n)
+    wi[:, :3] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    n_s[:, :3] = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]     # wi ⟂ n_s: cosθ_i = 0
+    albedo = rng.uniform(size=(L_A, n))
+    emitted = rng.uniform(size=(L, n))
+    scale = rng.uniform(0, 3, n)
+    ok = rng.random(n) < 0.9
+    pdf_light = rng.uniform(0, 5, n)
+    pdf_light[10:20] = 0.0
+    for select in (0.25, rng.uniform(0.1, 1.0, n)):
+        args = (n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, select, delta)
+        want, got = lambert.direct_light_numpy(*args), lambert.direct_light_numba(*args)
+        for w, g in zip(want, got):
+            assert w.shape == g.shape and np.array_equal(w, g)
+        assert 0 < want[2].sum() < n and (want[0] > 0).any() and (want[1] > 0).any()

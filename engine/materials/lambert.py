@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels import twin
-from ..kernels.diffuse import cosine_sample_numba, rgb_albedo_numba
+from ..kernels.diffuse import cosine_sample_numba, direct_light_numba, rgb_albedo_numba
 from .base import BSDF, BSDFFlags, BSDFSample, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter, Socket
 from .sampling import cosine_hemisphere, local_to_world
@@ -43,6 +43,35 @@ def rgb_albedo_numpy(rgb: np.ndarray, slot: np.ndarray, basis: np.ndarray) -> np
 rgb_albedo = twin(rgb_albedo_numba, rgb_albedo_numpy)
 
 
+def direct_light_numpy(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, select_prob, delta):
+    """Next-event estimation through Lambert surfaces (shading normals n_s, viewers wo, light
+    directions wi, all (3, n)) in one pass: (S (1, Lm, n) = (ρ/π)·[wi and wo in front] for the
+    albedo ρ (Lm, n): the unpolarised Stokes vector leaving towards wo per unit incident light,
+    weight (L, n) = emitted·scale·|cosθ_i|·MIS / select_prob where ``ok`` (the light's validity) and
+    cosθ_i ≠ 0, else 0, that validity (n,)).  MIS is the power heuristic of the light's pdf
+    pdf_light·select_prob against Lambert's cosθ_i/π (1 for a ``delta`` light); ``emitted``
+    (L, n) is the light's spectrum, ``scale`` (n,) its radiance/pdf factor from ``sample``, and
+    ``select_prob`` (scalar or (n,)) the probability with which the light was chosen."""
+    c = dot(n_s, wi)
+    cos_i = np.abs(c)
+    ok = ok & (cos_i > 0)
+    front = (c > 0) & (dot(n_s, wo) > 0)
+    A = albedo * (front / np.pi)[None, :]
+    if delta:
+        mis = np.ones(n_s.shape[1])
+    else:
+        a = pdf_light * select_prob
+        a2 = a * a
+        b = np.where(front, c / np.pi, 0.0)
+        den = a2 + b * b
+        mis = np.where(den > 0, a2 / np.where(den > 0, den, 1.0), 0.0)
+    weight = emitted * scale[None, :] * (cos_i * mis / select_prob * ok)[None, :]
+    return A[None], weight, ok
+
+
+direct_light = twin(direct_light_numba, direct_light_numpy)
+
+
 class Lambert(BSDF):
     name = "lambert"
 
@@ -64,6 +93,11 @@ class Lambert(BSDF):
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         c = dot(sp.n_s, wi)
         return np.where((c > 0) & (sp.cos_o > 0), c / np.pi, 0.0)
+
+    def direct_light(self, sp: ShadingPoint, wi, emitted, scale, ok, pdf_light, select_prob, delta):
+        """(S, weight, ok) of next-event estimation towards wi in one pass (``direct_light_numpy``):
+        the same numbers as ``eval``, ``pdf`` and the integrator's power heuristic."""
+        return direct_light(sp.n_s, sp.wo, wi, self._albedo(sp), emitted, scale, ok, pdf_light, select_prob, delta)
 
     def sample(self, sp: ShadingPoint, u_lobe, u_dir) -> BSDFSample:
         wi, valid, pdf = cosine_sample(u_dir, sp.n_s, sp.wo)

@@ -533,6 +533,8 @@ class PathTracer:
         n_side = sp.n_g * np.sign(dot(sp.n_g, sp.wo))[None, :] if light_set.spatial else None
         choice, u_rest, chosen_prob = light_set.choose(u[0], sp.p, n_side)
         lights_chosen = np.unique(choice)
+        # Lambert's fused next-event pass (engine.materials.lambert.direct_light), else eval + pdf
+        direct = getattr(bsdf, "direct_light", None)
         for li in lights_chosen:
             # one light for every path: whole arrays instead of gathered copies
             sel = slice(None) if len(lights_chosen) == 1 else np.nonzero(choice == li)[0]
@@ -542,27 +544,34 @@ class PathTracer:
             u_tri = gather(u_rest, sel)
             select_prob = light_set.prob[li] if chosen_prob is None else gather(chosen_prob, sel)
             wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, gather(u[1], sel), gather(u[2], sel))))
-            value = self._emitted(light, lookup.take(sel), wi) * scale[None, :]
+            emitted = self._emitted(light, lookup.take(sel), wi)
             sub = ShadingPoint(p, gather(sp.n_s, sel), gather(sp.n_g, sel), gather(sp.wo, sel), gather(sp.lam, sel),
                                sp.mono, sp.lookup.take(sel) if sp.lookup is not None else None,
                                None if sp.material is None else gather(sp.material, sel),
                                None if sp.surface is None else sp.surface.take(sel))
             m = sub.n
-            cos_i = np.abs(dot(sub.n_s, wi))
-            ok &= cos_i > 0
-            if not ok.any():
-                continue
-            f = bsdf.eval(sub, wi)
-            # light leaving a depolariser has only S0
-            S = unpolarised_response(f, 1 if f.kind == "depolarising" else P)
-            if P > 1 and f.kind != "depolarising":
-                c2, s2 = frame_rotation(f.x_out, gather(x_T, sel), sub.wo)
-                S = rotate_stokes(S, c2, s2)
-            if light.is_delta:
-                mis = np.ones(m)
+            if direct is not None:
+                # the BSDF's value, pdf, MIS and the light's weight in one pass (the same numbers)
+                S, weight, ok = direct(sub, wi, emitted, scale, ok, pdf_l, select_prob, light.is_delta)
+                if not ok.any():
+                    continue
             else:
-                mis = power_heuristic(pdf_l * select_prob, bsdf.pdf(sub, wi))
-            weight = value * (cos_i * mis / select_prob * ok)[None, :]
+                value = emitted * scale[None, :]
+                cos_i = np.abs(dot(sub.n_s, wi))
+                ok &= cos_i > 0
+                if not ok.any():
+                    continue
+                f = bsdf.eval(sub, wi)
+                # light leaving a depolariser has only S0
+                S = unpolarised_response(f, 1 if f.kind == "depolarising" else P)
+                if P > 1 and f.kind != "depolarising":
+                    c2, s2 = frame_rotation(f.x_out, gather(x_T, sel), sub.wo)
+                    S = rotate_stokes(S, c2, s2)
+                if light.is_delta:
+                    mis = np.ones(m)
+                else:
+                    mis = power_heuristic(pdf_l * select_prob, bsdf.pdf(sub, wi))
+                weight = value * (cos_i * mis / select_prob * ok)[None, :]
             t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
             if self.visibility is not None and self.visibility.affects_shadows:
                 # shadow-invisible and pass-through (alpha) surfaces let (part of) the light through

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..kernels.geometry import area_light_sample
+from ..kernels.light_sampling import MIN_RECT_SOLID_ANGLE, rect_angles, rect_light_sample, rect_local, rect_sample
 from ..materials.sampling import local_to_world, uniform_sphere
 from ..spectral import GRID_NM, luminance, spectrum_to_linear_srgb
 from ..textures.image import srgb_to_linear
@@ -313,17 +314,11 @@ def spread_profile(spread_rad: float):
     return f
 
 
-#: below this solid angle (sr) a rectangle is sampled by area: the spherical-rectangle solid angle
-#: g0 + g1 + g2 + g3 − 2π loses its relative precision (float64 cancellation ~1e-15·2π), and a
-#: rectangle that small is sampled as well by area (dist²/cosθ is then nearly constant over it)
-MIN_RECT_SOLID_ANGLE = 1e-6
-
-
 class SphericalRectangle:
     """A planar rectangle (corner, unit edge axes x ⟂ y, edge lengths) sampled uniformly in the
     solid angle it subtends (Ureña, Conty & Kettunen 2013, "An Area-Preserving Parametrization
     for Spherical Rectangles"; Cycles' kernel/light/area.h samples rectangle lamps this way).
-    Distances in scene units, solid angles in sr."""
+    Distances in scene units, solid angles in sr; the arithmetic is engine.kernels.light_sampling's."""
 
     def __init__(self, corner, ex, ey):
         self.corner = np.asarray(corner, np.float64)
@@ -359,54 +354,19 @@ class SphericalRectangle:
         return cls(a, ex, ey)
 
     def _local(self, p):
-        """Rectangle coordinates relative to points p (3, N): x0, x1, y0, y1, z0 ≤ 0 and the sign
-        s = ±1 with which z points from the plane away from p (z_eff = s·z)."""
-        d = self.corner[:, None] - p
-        z0 = dot(d, self.z[:, None])
-        s = np.where(z0 > 0, -1.0, 1.0)
-        z0 = -np.abs(z0)
-        x0 = dot(d, self.x[:, None])
-        y0 = dot(d, self.y[:, None])
-        return x0, x0 + self.len_x, y0, y0 + self.len_y, z0, s
-
-    @staticmethod
-    def _angles(x0, x1, y0, y1, z0):
-        """z components of the four inner normals of the spherical rectangle's edges and its solid angle."""
-        def unit_z(a, b):       # (cross product of two corner rays).z / its norm, as in the paper
-            return a / np.sqrt(z0 * z0 * b * b + a * a)
-        n0 = unit_z(y0 * (x0 - x1), x0 - x1)
-        n1 = unit_z(x1 * (y1 - y0), y1 - y0)
-        n2 = unit_z(y1 * (x1 - x0), x1 - x0)
-        n3 = unit_z(x0 * (y0 - y1), y0 - y1)
-        g0, g1, g2, g3 = (np.arccos(np.clip(c, -1.0, 1.0)) for c in (-n0 * n1, -n1 * n2, -n2 * n3, -n3 * n0))
-        k = 2.0 * math.pi - g2 - g3
-        return n0, n2, k, np.maximum(g0 + g1 - k, 0.0)
+        """Rectangle coordinates relative to points p (3, N) (engine.kernels.light_sampling.rect_local)."""
+        return rect_local(p, self.corner, self.x, self.y, self.z, self.len_x, self.len_y)
 
     def solid_angle(self, p):
         """Solid angle (N,) that the rectangle subtends at points p (3, N); 0 in its plane."""
         x0, x1, y0, y1, z0, _ = self._local(p)
         with np.errstate(invalid="ignore", divide="ignore"):
-            S = self._angles(x0, x1, y0, y1, z0)[3]
+            S = rect_angles(x0, x1, y0, y1, z0)[3]
         return np.where(z0 < 0, np.nan_to_num(S), 0.0)
 
     def sample(self, p, u1, u2):
         """Points (3, N) on the rectangle, uniform in solid angle seen from p, and that solid angle (N,)."""
-        x0, x1, y0, y1, z0, s = self._local(p)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            b0, b1, k, S = self._angles(x0, x1, y0, y1, z0)
-            au = u1 * S + k
-            fu = (np.cos(au) * b0 - b1) / np.sin(au)
-            cu = np.clip(np.sign(fu) / np.sqrt(fu * fu + b0 * b0), -1.0, 1.0)
-            xu = np.clip(-(cu * z0) / np.maximum(np.sqrt(1.0 - cu * cu), 1e-300), x0, x1)
-            d2 = xu * xu + z0 * z0
-            h0 = y0 / np.sqrt(d2 + y0 * y0)
-            h1 = y1 / np.sqrt(d2 + y1 * y1)
-            hv = h0 + u2 * (h1 - h0)
-            hv2 = hv * hv
-            yv = np.where(hv2 < 1.0 - 1e-12, hv * np.sqrt(d2) / np.sqrt(np.maximum(1.0 - hv2, 1e-300)), y1)
-        xu, yv = np.nan_to_num(xu), np.clip(np.nan_to_num(yv), y0, y1)
-        q = p + self.x[:, None] * xu + self.y[:, None] * yv + self.z[:, None] * (s * z0)
-        return q, np.where(z0 < 0, np.nan_to_num(S), 0.0)
+        return rect_sample(p, u1, u2, self.corner, self.x, self.y, self.z, self.len_x, self.len_y)
 
 
 class AreaEmitter(_Light):
@@ -445,17 +405,9 @@ class AreaEmitter(_Light):
         # u has 3 rows: triangle choice, then the point within it.
         if self.rect is None:
             return self._sample_area(p, u)
-        q, omega = self.rect.sample(p, u[1], u[2])
-        use = omega > MIN_RECT_SOLID_ANGLE
-        to = q - p
-        dist = np.sqrt(dot(to, to))
-        wi = to / np.where(dist > 0, dist, 1.0)
-        cos_l = -dot(wi, self.normal[:, None])
-        if self.two_sided:
-            cos_l = np.abs(cos_l)
-        valid = use & (cos_l > 0) & (dist > 0)
-        pdf = np.where(valid, 1.0 / np.where(valid, omega, 1.0), 0.0)
-        scale = np.where(valid, omega, 0.0)
+        r = self.rect
+        wi, dist, scale, pdf, valid, use, cos_l = rect_light_sample(p, u[1], u[2], r.corner, r.x, r.y, r.z, r.len_x,
+                                                                    r.len_y, self.normal, self.two_sided)
         if self.profile is not None:
             scale = scale * self.profile(cos_l)
             valid &= scale > 0
