@@ -603,3 +603,57 @@ def test_lambert_direct_light_bitwise(L_A, L, delta):
         for w, g in zip(want, got):
             assert w.shape == g.shape and np.array_equal(w, g)
         assert 0 < want[2].sum() < n and (want[0] > 0).any() and (want[1] > 0).any()
+
+
+def selection_table(rng):
+    """(kinds, params) of one light of each selection formula: a constant, a point, a hard-edged and a
+    smooth spot with radii, an area emitter and a sun (engine.kernels.light_sampling SELECT_*)."""
+    from engine.kernels import light_sampling as ls
+    axis = unit(rng, 2).T
+    rows = [(ls.SELECT_CONSTANT, [2.5]),
+            (ls.SELECT_POINT, [0.3, -0.2, 1.5, 40.0, 1e-12, 0.0]),
+            (ls.SELECT_POINT, [1.0, 1.0, 2.0, 10.0, 0.09, 0.3, 1.0, *axis[0], 0.8, 0.8]),
+            (ls.SELECT_POINT, [-1.0, 0.5, 1.0, 25.0, 0.04, 0.2, 2.0, *axis[1], 0.5, 0.9]),
+            (ls.SELECT_AREA, [0.0, 0.0, 1.9, 3.0, 0.18, 0.18 ** 0.5]),
+            (ls.SELECT_DISTANT, [0.2, 0.3, 0.9327379053088815, 2.0, 0.05])]
+    params = np.zeros((len(rows), ls.SELECTION_PARAMS))
+    for i, (_, row) in enumerate(rows):
+        params[i, :len(row)] = row
+    return np.array([k for k, _ in rows]), params
+
+
+@needs_numba
+@pytest.mark.parametrize("with_normals", [False, True])
+def test_light_selection_probabilities_bitwise(with_normals):
+    """Per-point light selection (importance of every light kind, normalised and mixed with the
+    power distribution) in one compiled pass against the NumPy reference, bit for bit, incl. points
+    on a point light (d = 0), behind lights, inside a spot's cone edge, and a batch where every
+    importance is 0 but the constant's; then the choice of a light from those probabilities."""
+    from engine.kernels import light_sampling as ls
+    rng = np.random.default_rng(17)
+    kinds, params = selection_table(rng)
+    n_pts = 3000
+    p = rng.uniform(-2, 2, (3, n_pts))
+    p[:, 0] = params[1, :3]
+    n = unit(rng, n_pts) if with_normals else None
+    prob = np.array([0.05, 0.3, 0.1, 0.2, 0.25, 0.1])
+    want = ls.selection_probabilities_numpy(p, n, kinds, params, prob)
+    got = ls.selection_probabilities_numba(p, n, kinds, params, prob)
+    assert np.array_equal(want, got)
+    np.testing.assert_allclose(want.sum(0), 1.0, rtol=1e-12)
+    u = rng.random(n_pts)
+    u[:3] = [0.0, np.nextafter(1.0, 0.0), 0.5]
+    for w, g in zip(ls.choose_light_numpy(u, want), ls.choose_light_numba(u, want)):
+        assert np.array_equal(w, g)
+    dark = params.copy()
+    dark[1:, 3] = 0.0                                   # only the constant light shines
+    assert np.array_equal(ls.selection_probabilities_numpy(p, n, kinds, dark, prob),
+                          ls.selection_probabilities_numba(p, n, kinds, dark, prob))
+    # one point at a time: NumPy then sums the lights' importances pairwise (from 8 lights on)
+    many = np.tile(np.arange(len(kinds)), 4)[:21]
+    for count in (6, 8, 9, 16, 21):
+        k, rows, pr = kinds[many[:count]], params[many[:count]], np.full(count, 1.0 / count)
+        for j in range(40):
+            q, m = p[:, j:j + 1], None if n is None else n[:, j:j + 1]
+            assert np.array_equal(ls.selection_probabilities_numpy(q, m, k, rows, pr),
+                                  ls.selection_probabilities_numba(q, m, k, rows, pr))

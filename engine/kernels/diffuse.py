@@ -85,17 +85,17 @@ rgb_albedo_numba = _rgb_albedo_loop and rgb_albedo_numba
 
 @jit
 def _direct_light_loop(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, select_prob, delta, A, weight, ok_out):
+    n = n_s.shape[1]
     inv_pi = 1.0 / np.pi
-    LA, L = albedo.shape[0], emitted.shape[0]
-    for j in range(n_s.shape[1]):
+    fa = np.empty(n)        # ρ's factor 1/π·[front]
+    g = np.empty(n)         # |cosθ_i|·MIS/select_prob·[ok]
+    for j in range(n):
         c = n_s[0, j] * wi[0, j] + n_s[1, j] * wi[1, j] + n_s[2, j] * wi[2, j]
         cos_i = abs(c)
         good = ok[j] and cos_i > 0
         cos_o = n_s[0, j] * wo[0, j] + n_s[1, j] * wo[1, j] + n_s[2, j] * wo[2, j]
         front = c > 0 and cos_o > 0
-        fa = inv_pi if front else 0.0
-        for k in range(LA):
-            A[k, j] = albedo[k, j] * fa
+        fa[j] = inv_pi if front else 0.0
         if delta:
             mis = 1.0
         else:
@@ -104,10 +104,15 @@ def _direct_light_loop(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, selec
             a2 = a * a
             den = a2 + pdf_b * pdf_b
             mis = a2 / den if den > 0 else 0.0
-        g = cos_i * mis / select_prob[j] * (1.0 if good else 0.0)
-        for k in range(L):
-            weight[k, j] = emitted[k, j] * scale[j] * g
+        g[j] = cos_i * mis / select_prob[j] * (1.0 if good else 0.0)
         ok_out[j] = good
+    # per wavelength row, contiguous along the paths
+    for k in range(albedo.shape[0]):
+        for j in range(n):
+            A[k, j] = albedo[k, j] * fa[j]
+    for k in range(emitted.shape[0]):
+        for j in range(n):
+            weight[k, j] = emitted[k, j] * scale[j] * g[j]
 
 
 def direct_light_numba(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, select_prob, delta):

@@ -228,3 +228,239 @@ def rect_light_sample_numba(p, u1, u2, corner, ax, ay, az, len_x, len_y, normal,
 #: The compiled twin of rect_light_sample_numpy (None without Numba).
 rect_light_sample_numba = _rect_light_loop and rect_light_sample_numba
 rect_light_sample = twin(rect_light_sample_numba, rect_light_sample_numpy)
+
+
+# ----------------------------------------------------------------------------- light selection by importance
+#
+# Each light's selection importance at shading points p (3, N) with side normals n (3, N) or None is
+# one of four formulas (engine.render.lights: LightSet, the lights' ``importance``), recorded per light
+# as a kind and a row of SELECTION_PARAMS numbers so that one compiled pass evaluates them all:
+#   SELECT_CONSTANT  [value]                                          (environments: π·luminance)
+#   SELECT_POINT     [x, y, z, lum, max(r², 1e-12), r, spot, ax, ay, az, cos_outer, cos_inner]
+#                    (spot 0: none, 1: hard edge, 2: smoothstep edge; a the spot's unit axis)
+#   SELECT_AREA      [cx, cy, cz, lum·A·sides, max(r², 1e-12), r]     (about the centroid, radius r)
+#   SELECT_DISTANT   [tx, ty, tz, lum, sin half-angle]                (t: towards the sun)
+
+SELECT_CONSTANT, SELECT_POINT, SELECT_AREA, SELECT_DISTANT = 0, 1, 2, 3
+SELECTION_PARAMS = 12
+#: share of a light's selection importance kept when it lies below the shading point's horizon
+#: (transmitting materials can still use it; a floor keeps every light's probability > 0)
+BELOW_HORIZON = 0.1
+#: share of the power distribution mixed into the per-point selection probabilities
+GLOBAL_SHARE = 0.1
+
+
+def facing_factor(to, dist, sin_alpha, n):
+    """Orientation term of the selection importance at points with side normals n (3, N) for
+    light centres in directions to/dist subtending half-angles asin(sin_alpha):
+    BELOW_HORIZON + (1 − BELOW_HORIZON)·cos⁺(max(θ − α, 0)), θ the angle between n and the centre."""
+    if n is None:
+        return 1.0
+    cos_t = np.clip(dot(n, to) / np.maximum(dist, 1e-300), -1.0, 1.0)
+    theta = np.maximum(np.arccos(cos_t) - np.arcsin(np.clip(sin_alpha, 0.0, 1.0)), 0.0)
+    return BELOW_HORIZON + (1.0 - BELOW_HORIZON) * np.maximum(np.cos(theta), 0.0)
+
+
+def spot_falloff(wi, axis, cos_outer, cos_inner):
+    """A spot light's attenuation (N,) towards the receivers in directions −wi (3, N) from it:
+    1 inside cos_inner, 0 outside cos_outer, smoothstep in cosθ between."""
+    c = -(axis[:, None] * wi).sum(0)
+    if cos_inner <= cos_outer:
+        return (c >= cos_outer).astype(np.float64)
+    t = np.clip((c - cos_outer) / (cos_inner - cos_outer), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+def point_importance(p, n, position, lum, r2, radius, spot=None):
+    """Irradiance estimate lum·falloff/max(d², r2) times the orientation term for a point or spot
+    light (``spot``: (axis, cos_outer, cos_inner) or None) of radius ``radius``."""
+    to = position[:, None] - p
+    d2 = dot(to, to)
+    dist = np.sqrt(np.maximum(d2, 1e-300))
+    wi = to / dist
+    falloff = 1.0 if spot is None else spot_falloff(wi, *spot)
+    return lum * falloff / np.maximum(d2, r2) * facing_factor(to, dist, radius / dist, n)
+
+
+def area_importance(p, n, centre, power, r2, radius):
+    """power/max(d², r2) about the emitter's centroid times the orientation term (half-angle
+    asin(radius/d))."""
+    to = centre[:, None] - p
+    d2 = dot(to, to)
+    dist = np.sqrt(d2)
+    return power / np.maximum(d2, r2) * facing_factor(to, dist, radius / np.maximum(dist, 1e-300), n)
+
+
+def distant_importance(p, n, towards, lum, sin_half):
+    """lum times the orientation term of a sun in the direction ``towards`` (3,)."""
+    to = np.broadcast_to(towards[:, None], p.shape)
+    return lum * facing_factor(to, 1.0, sin_half, n) * np.ones(p.shape[1])
+
+
+def light_importance_numpy(kind, row, p, n):
+    """The importance (N,) of one light recorded as (kind, params row) (see SELECT_*)."""
+    if kind == SELECT_CONSTANT:
+        return np.full(p.shape[1], row[0])
+    if kind == SELECT_POINT:
+        spot = None if row[6] == 0 else (row[7:10], row[10], row[11])
+        return point_importance(p, n, row[0:3], row[3], row[4], row[5], spot)
+    if kind == SELECT_AREA:
+        return area_importance(p, n, row[0:3], row[3], row[4], row[5])
+    return distant_importance(p, n, row[0:3], row[3], row[4])
+
+
+def selection_probabilities_numpy(p, n, kinds, params, prob):
+    """Per-point light selection probabilities (count, N) at points p (3, N) with side normals n
+    (3, N) or None: (1 − GLOBAL_SHARE)·importance/Σ importance + GLOBAL_SHARE·prob (prob (count,):
+    the power distribution, also used alone where every importance is 0)."""
+    imp = np.stack([light_importance_numpy(k, row, p, n) for k, row in zip(kinds, params)])
+    imp = np.where(np.isfinite(imp) & (imp > 0), imp, 0.0)
+    total = imp.sum(0)
+    local = np.where(total > 0, imp / np.where(total > 0, total, 1.0), prob[:, None])
+    return (1.0 - GLOBAL_SHARE) * local + GLOBAL_SHARE * prob[:, None]
+
+
+def choose_light_numpy(u, probs):
+    """(light index (N,), the remainder of u rescaled to [0, 1), the chosen light's probability
+    (N,)) for uniform numbers u (N,) and per-point probabilities probs (count, N)."""
+    count = probs.shape[0]
+    cdf = np.cumsum(probs, axis=0)
+    choice = np.minimum((cdf <= u[None, :] * cdf[-1][None, :]).sum(0), count - 1)
+    cols = np.arange(u.shape[0])
+    chosen = probs[choice, cols]
+    lo = cdf[choice, cols] - chosen
+    rest = (u * cdf[-1] - lo) / np.where(chosen > 0, chosen, 1.0)
+    return choice, np.clip(rest, 0.0, np.nextafter(1.0, 0.0)), chosen
+
+
+@jit
+def _facing(has_n, n, j, t0, t1, t2, dist, sin_alpha):
+    if not has_n:
+        return 1.0
+    cos_t = _clip((n[0, j] * t0 + n[1, j] * t1 + n[2, j] * t2) / _maximum(dist, 1e-300), -1.0, 1.0)
+    theta = _maximum(np.arccos(cos_t) - np.arcsin(_clip(sin_alpha, 0.0, 1.0)), 0.0)
+    return BELOW_HORIZON + (1.0 - BELOW_HORIZON) * _maximum(np.cos(theta), 0.0)
+
+
+@jit
+def _column_sum(a, j):
+    """Σ_i a[i, j] in NumPy's order for a.sum(0) of a one-column array (its pairwise summation:
+    eight running sums from 8 rows on; ≤ 128 rows)."""
+    n = a.shape[0]
+    if n < 8:
+        res = 0.0
+        for i in range(n):
+            res += a[i, j]
+        return res
+    r = np.empty(8)
+    for k in range(8):
+        r[k] = a[k, j]
+    i = 8
+    while i < n - (n % 8):
+        for k in range(8):
+            r[k] += a[i + k, j]
+        i += 8
+    res = ((r[0] + r[1]) + (r[2] + r[3])) + ((r[4] + r[5]) + (r[6] + r[7]))
+    while i < n:
+        res += a[i, j]
+        i += 1
+    return res
+
+
+@jit
+def _probabilities_loop(p, n, has_n, kinds, params, prob, probs):
+    count = kinds.shape[0]
+    # NumPy sums a (count, N) array over axis 0 row after row, but a single column pairwise
+    pairwise = p.shape[1] == 1
+    for j in range(p.shape[1]):
+        total = 0.0
+        for i in range(count):
+            kind = kinds[i]
+            row = params[i]
+            if kind == SELECT_CONSTANT:
+                imp = row[0]
+            elif kind == SELECT_POINT:
+                t0, t1, t2 = row[0] - p[0, j], row[1] - p[1, j], row[2] - p[2, j]
+                d2 = t0 * t0 + t1 * t1 + t2 * t2
+                dist = np.sqrt(_maximum(d2, 1e-300))
+                falloff = 1.0
+                if row[6] != 0:
+                    w0, w1, w2 = t0 / dist, t1 / dist, t2 / dist
+                    c = -(row[7] * w0 + row[8] * w1 + row[9] * w2)
+                    if row[6] == 1:
+                        falloff = 1.0 if c >= row[10] else 0.0
+                    else:
+                        t = _clip((c - row[10]) / (row[11] - row[10]), 0.0, 1.0)
+                        falloff = t * t * (3.0 - 2.0 * t)
+                imp = row[3] * falloff / _maximum(d2, row[4]) * _facing(has_n, n, j, t0, t1, t2, dist, row[5] / dist)
+            elif kind == SELECT_AREA:
+                t0, t1, t2 = row[0] - p[0, j], row[1] - p[1, j], row[2] - p[2, j]
+                d2 = t0 * t0 + t1 * t1 + t2 * t2
+                dist = np.sqrt(d2)
+                imp = row[3] / _maximum(d2, row[4]) * _facing(has_n, n, j, t0, t1, t2, dist,
+                                                               row[5] / _maximum(dist, 1e-300))
+            else:
+                imp = row[3] * _facing(has_n, n, j, row[0], row[1], row[2], 1.0, row[4]) * 1.0
+            if not (np.isfinite(imp) and imp > 0):
+                imp = 0.0
+            probs[i, j] = imp
+            total += imp
+        if pairwise:
+            total = _column_sum(probs, j)
+        for i in range(count):
+            local = probs[i, j] / total if total > 0 else prob[i]
+            probs[i, j] = (1.0 - GLOBAL_SHARE) * local + GLOBAL_SHARE * prob[i]
+
+
+def selection_probabilities_numba(p, n, kinds, params, prob):
+    if p.shape[1] == 1 and kinds.shape[0] > 128:       # NumPy's pairwise sum recurses there
+        return selection_probabilities_numpy(p, n, kinds, params, prob)
+    probs = np.empty((kinds.shape[0], p.shape[1]))
+    f64 = np.float64
+    has_n = n is not None
+    _probabilities_loop(np.ascontiguousarray(p, dtype=f64), np.ascontiguousarray(n if has_n else p, dtype=f64),
+                        has_n, np.ascontiguousarray(kinds, dtype=np.int64), np.ascontiguousarray(params, dtype=f64),
+                        np.ascontiguousarray(prob, dtype=f64), probs)
+    return probs
+
+
+@jit
+def _choose_loop(u, probs, choice, rest, chosen):
+    count = probs.shape[0]
+    below_one = np.nextafter(1.0, 0.0)
+    for j in range(u.shape[0]):
+        total = 0.0
+        for i in range(count):
+            total += probs[i, j]
+        x = u[j] * total
+        k = 0
+        cdf = 0.0
+        for i in range(count):
+            cdf += probs[i, j]
+            if cdf <= x:
+                k += 1
+        k = min(k, count - 1)
+        cdf = 0.0
+        for i in range(k + 1):
+            cdf += probs[i, j]
+        c = probs[k, j]
+        lo = cdf - c
+        r = (x - lo) / (c if c > 0 else 1.0)
+        choice[j] = k
+        rest[j] = _clip(r, 0.0, below_one)
+        chosen[j] = c
+
+
+def choose_light_numba(u, probs):
+    n = u.shape[0]
+    choice, rest, chosen = np.empty(n, np.int64), np.empty(n), np.empty(n)
+    _choose_loop(np.ascontiguousarray(u, dtype=np.float64), np.ascontiguousarray(probs, dtype=np.float64),
+                 choice, rest, chosen)
+    return choice, rest, chosen
+
+
+#: The compiled twins of selection_probabilities_numpy and choose_light_numpy (None without Numba).
+selection_probabilities_numba = _probabilities_loop and selection_probabilities_numba
+choose_light_numba = _choose_loop and choose_light_numba
+selection_probabilities = twin(selection_probabilities_numba, selection_probabilities_numpy)
+choose_light = twin(choose_light_numba, choose_light_numpy)

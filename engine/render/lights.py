@@ -26,7 +26,10 @@ import numpy as np
 
 from ..errors import SceneError
 from ..kernels.geometry import area_light_sample
-from ..kernels.light_sampling import MIN_RECT_SOLID_ANGLE, rect_angles, rect_light_sample, rect_local, rect_sample
+from ..kernels.light_sampling import (GLOBAL_SHARE, MIN_RECT_SOLID_ANGLE, SELECT_AREA, SELECT_CONSTANT, SELECT_DISTANT,
+                                      SELECT_POINT, SELECTION_PARAMS, area_importance, choose_light,
+                                      distant_importance, point_importance, rect_angles, rect_light_sample, rect_local,
+                                      rect_sample, selection_probabilities, spot_falloff)
 from ..materials.sampling import local_to_world, uniform_sphere
 from ..spectral import GRID_NM, luminance, spectrum_to_linear_srgb
 from ..textures.image import srgb_to_linear
@@ -45,22 +48,6 @@ def uniform_cone(u1, u2, one_minus_cos_max, axis):
     local = np.stack((sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t))
     axis = np.broadcast_to(axis.reshape(3, -1), local.shape)
     return local_to_world(local, axis), cos_t
-
-
-#: share of a light's selection importance kept when it lies below the shading point's horizon
-#: (transmitting materials can still use it; a floor keeps every light's probability > 0)
-BELOW_HORIZON = 0.1
-
-
-def facing_factor(to, dist, sin_alpha, n):
-    """Orientation term of the selection importance at points with side normals n (3, N) for
-    light centres in directions to/dist subtending half-angles asin(sin_alpha):
-    BELOW_HORIZON + (1 − BELOW_HORIZON)·cos⁺(max(θ − α, 0)), θ the angle between n and the centre."""
-    if n is None:
-        return 1.0
-    cos_t = np.clip(dot(n, to) / np.maximum(dist, 1e-300), -1.0, 1.0)
-    theta = np.maximum(np.arccos(cos_t) - np.arcsin(np.clip(sin_alpha, 0.0, 1.0)), 0.0)
-    return BELOW_HORIZON + (1.0 - BELOW_HORIZON) * np.maximum(np.cos(theta), 0.0)
 
 
 class _Light:
@@ -101,6 +88,10 @@ class EnvironmentEmitter(_Light):
 
     def importance(self, p, n=None):
         return np.full(p.shape[1], math.pi * float(luminance(self.rgb())))
+
+    def selection_record(self):
+        """(kind, parameters) of ``importance`` for the compiled light selection (engine.kernels.light_sampling)."""
+        return SELECT_CONSTANT, [math.pi * float(luminance(self.rgb()))]
 
 
 def euler_xyz_matrix(angles_rad) -> np.ndarray:
@@ -291,6 +282,9 @@ class EnvironmentMapEmitter(_Light):
     def importance(self, p, n=None):
         return np.full(p.shape[1], math.pi * float(luminance(self._rgb)))
 
+    def selection_record(self):
+        return SELECT_CONSTANT, [math.pi * float(luminance(self._rgb))]
+
 
 def _srgb_encode(linear):
     """sRGB transfer function (IEC 61966-2-1), the power law continued above 1; float64."""
@@ -471,21 +465,26 @@ class AreaEmitter(_Light):
         """Emitted power (luminance units; Lambertian: π·L·A per emitting side)."""
         return math.pi * float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
 
-    def importance(self, p, n=None):
-        """Bound-like estimate of the irradiance at p (3, N) with side normals n: L·A/max(d², r²)
-        about the centroid, times the orientation term."""
+    def _bound(self):
+        """Centroid (3,) and squared radius about it of the emitter's triangles (light selection)."""
         if not hasattr(self, "_centre"):
             c = self.compiled
             corners = c.vertices[c.faces[self.tris]].reshape(-1, 3)
             w = np.repeat(c.tri_area[self.tris], 3)
             self._centre = (corners * w[:, None]).sum(0) / w.sum()
             self._r2 = float(((corners - self._centre) ** 2).sum(1).max())
-        to = self._centre[:, None] - p
-        d2 = dot(to, to)
-        dist = np.sqrt(d2)
-        return (float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
-                / np.maximum(d2, max(self._r2, 1e-12))
-                * facing_factor(to, dist, math.sqrt(self._r2) / np.maximum(dist, 1e-300), n))
+        return self._centre, self._r2
+
+    def selection_record(self):
+        centre, r2 = self._bound()
+        power = float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
+        return SELECT_AREA, [*centre, power, max(r2, 1e-12), math.sqrt(r2)]
+
+    def importance(self, p, n=None):
+        """Bound-like estimate of the irradiance at p (3, N) with side normals n: L·A/max(d², r²)
+        about the centroid, times the orientation term."""
+        _, row = self.selection_record()
+        return area_importance(p, n, np.array(row[:3]), *row[3:])
 
 
 class PointEmitter(_Light):
@@ -585,14 +584,16 @@ class PointEmitter(_Light):
     def power(self):
         return 4.0 * math.pi * float(luminance(self.rgb()))
 
+    def selection_record(self):
+        spot = getattr(self, "spot_record", [0.0] * 6)
+        return SELECT_POINT, [*self.position, float(luminance(self.rgb())), max(self.radius ** 2, 1e-12), self.radius,
+                              *spot]
+
     def importance(self, p, n=None):
         """Irradiance at p (3, N) facing the light, I·falloff/max(d², r²), times the orientation term."""
-        to = self.position[:, None] - p
-        d2 = dot(to, to)
-        dist = np.sqrt(np.maximum(d2, 1e-300))
-        wi = to / dist
-        return (float(luminance(self.rgb())) * self._falloff(wi) / np.maximum(d2, max(self.radius ** 2, 1e-12))
-                * facing_factor(to, dist, self.radius / dist, n))
+        _, row = self.selection_record()
+        spot = None if row[6] == 0 else (np.array(row[7:10]), row[10], row[11])
+        return point_importance(p, n, self.position, row[3], row[4], row[5], spot)
 
 
 class SpotEmitter(PointEmitter):
@@ -617,11 +618,12 @@ class SpotEmitter(PointEmitter):
         return 2.0 * math.pi * (1.0 - self.cos_outer) * float(luminance(self.rgb()))
 
     def _falloff(self, wi):
-        c = -(self.axis[:, None] * wi).sum(0)
-        if self.cos_inner <= self.cos_outer:
-            return (c >= self.cos_outer).astype(np.float64)
-        t = np.clip((c - self.cos_outer) / (self.cos_inner - self.cos_outer), 0.0, 1.0)
-        return t * t * (3.0 - 2.0 * t)
+        return spot_falloff(wi, self.axis, self.cos_outer, self.cos_inner)
+
+    @property
+    def spot_record(self):
+        """[edge kind (1 hard, 2 smooth), axis, cos_outer, cos_inner] (SELECT_POINT's spot columns)."""
+        return [1.0 if self.cos_inner <= self.cos_outer else 2.0, *self.axis, self.cos_outer, self.cos_inner]
 
 
 class DirectionalEmitter(_Light):
@@ -664,10 +666,13 @@ class DirectionalEmitter(_Light):
     def power(self, scene_radius=1.0):
         return float(luminance(self.rgb())) * math.pi * scene_radius ** 2
 
-    def importance(self, p, n=None):
-        to = np.broadcast_to(-self.direction[:, None], p.shape)
+    def selection_record(self):
         sin_half = math.sqrt(self.one_minus_cos * (2.0 - self.one_minus_cos))
-        return float(luminance(self.rgb())) * facing_factor(to, 1.0, sin_half, n) * np.ones(p.shape[1])
+        return SELECT_DISTANT, [*(-self.direction), float(luminance(self.rgb())), sin_half]
+
+    def importance(self, p, n=None):
+        _, row = self.selection_record()
+        return distant_importance(p, n, -self.direction, row[3], row[4])
 
 
 class LightSet:
@@ -682,7 +687,7 @@ class LightSet:
     """
 
     SPATIAL_MAX = 64
-    GLOBAL_SHARE = 0.1
+    GLOBAL_SHARE = GLOBAL_SHARE
 
     def __init__(self, scene, compiled):
         self.lights = []
@@ -738,6 +743,13 @@ class LightSet:
                 self.cdf = np.cumsum(self.prob)
                 self.cdf[-1] = 1.0
         self.spatial = self.cdf is not None and count <= self.SPATIAL_MAX
+        if self.spatial:
+            # every light's importance formula as (kind, parameters): one compiled pass for all lights
+            records = [light.selection_record() for light in self.lights]
+            self._kinds = np.array([k for k, _ in records], np.int64)
+            self._params = np.zeros((count, SELECTION_PARAMS))
+            for i, (_, row) in enumerate(records):
+                self._params[i, :len(row)] = row
         self.hittable = [i for i, light in enumerate(self.lights) if light.hittable]
 
     def probabilities(self, p, n=None):
@@ -745,11 +757,7 @@ class LightSet:
         geometric normal on the side the path arrived from) or None."""
         if not self.spatial:
             return np.repeat(self.prob[:, None], p.shape[1], axis=1)
-        imp = np.stack([light.importance(p, n) for light in self.lights])
-        imp = np.where(np.isfinite(imp) & (imp > 0), imp, 0.0)
-        total = imp.sum(0)
-        local = np.where(total > 0, imp / np.where(total > 0, total, 1.0), self.prob[:, None])
-        return (1.0 - self.GLOBAL_SHARE) * local + self.GLOBAL_SHARE * self.prob[:, None]
+        return selection_probabilities(p, n, self._kinds, self._params, self.prob)
 
     def prob_at(self, li, p, n=None):
         """Probability (N,) or scalar that NEE at points p (3, N) with side normals n picks light ``li``."""
@@ -766,14 +774,7 @@ class LightSet:
             choice = np.minimum((u * count).astype(np.int64), count - 1)
             return choice, u * count - choice, None
         if self.spatial and p is not None:
-            probs = self.probabilities(p, n)
-            cdf = np.cumsum(probs, axis=0)
-            choice = np.minimum((cdf <= u[None, :] * cdf[-1][None, :]).sum(0), count - 1)
-            cols = np.arange(u.shape[0])
-            chosen = probs[choice, cols]
-            lo = cdf[choice, cols] - chosen
-            rest = (u * cdf[-1] - lo) / np.where(chosen > 0, chosen, 1.0)
-            return choice, np.clip(rest, 0.0, np.nextafter(1.0, 0.0)), chosen
+            return choose_light(u, self.probabilities(p, n))
         choice = np.minimum(np.searchsorted(self.cdf, u, side="right"), count - 1)
         lo = np.where(choice > 0, self.cdf[np.maximum(choice - 1, 0)], 0.0)
         rest = (u - lo) / np.where(self.prob[choice] > 0, self.prob[choice], 1.0)
