@@ -599,6 +599,8 @@ def test_lambert_direct_light_bitwise(L_A, L, delta):
     pdf_light[10:20] = 0.0
     for select in (0.25, rng.uniform(0.1, 1.0, n)):
         args = (n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, select, delta)
+        if isinstance(select, np.ndarray):      # per-path lights: some delta, some not
+            args = args[:-1] + (rng.random(n) < 0.3 if delta else np.zeros(n, bool),)
         want, got = lambert.direct_light_numpy(*args), lambert.direct_light_numba(*args)
         for w, g in zip(want, got):
             assert w.shape == g.shape and np.array_equal(w, g)
@@ -657,3 +659,51 @@ def test_light_selection_probabilities_bitwise(with_normals):
             q, m = p[:, j:j + 1], None if n is None else n[:, j:j + 1]
             assert np.array_equal(ls.selection_probabilities_numpy(q, m, k, rows, pr),
                                   ls.selection_probabilities_numba(q, m, k, rows, pr))
+
+
+@needs_numba
+@pytest.mark.parametrize("radius,soft", [(0.0, True), (0.3, True), (0.3, False)])
+@pytest.mark.parametrize("spot_kind", [0, 1, 2])
+def test_point_and_spot_light_sampling_bitwise(radius, soft, spot_kind):
+    """Point and spot lights' next-event samples (delta, disk facing the receiver, sphere) in one
+    compiled pass against engine.render.lights.point_light_sample_numpy, bit for bit, incl. a
+    receiver on the light's centre and receivers inside the sphere; one point at a time too."""
+    from engine.render import lights
+    rng = np.random.default_rng(3 + spot_kind)
+    n = 2000
+    position = np.array([0.2, -0.4, 1.5])
+    p = rng.uniform(-2, 2, (3, n))
+    p[:, 0] = position
+    p[:, 1] = position + 0.1                            # inside the sphere
+    u = rng.random((3, n))
+    axis = unit(rng, 1)[:, 0]
+    spot = [np.array([0.0] * 6), np.array([1.0, *axis, 0.6, 0.6]), np.array([2.0, *axis, 0.4, 0.9])][spot_kind]
+    for q, v in ((p[:, 5:6], u[:, 5:6]), (p, u)):
+        args = (q, v, position, radius, soft, spot)
+        want, got = lights.point_light_sample_numpy(*args), lights.point_light_sample_numba(*args)
+        for w, g in zip(want, got):
+            assert np.array_equal(w, g)
+    assert 0 < want[4].sum() < n and (want[2] > 0).any()
+
+
+@needs_numba
+@pytest.mark.parametrize("soft", [True, False])
+def test_lamp_disk_and_sphere_hits_bitwise(soft):
+    """Rays against a point light's disk or sphere (emission seen by BSDF-sampled rays) in one
+    compiled pass against lamp_hits_numpy: hit mask, distance and cosθ, bit for bit, incl. rays
+    starting at the centre and inside the sphere, per-ray segment lengths."""
+    from engine.kernels import light_sampling as ls
+    rng = np.random.default_rng(23)
+    n = 5000
+    position = np.array([0.1, 0.2, 1.0])
+    o = rng.uniform(-1.5, 1.5, (3, n))
+    o[:, 0] = position
+    o[:, 1] = position + 0.05
+    to = position[:, None] + rng.normal(scale=0.3, size=(3, n)) - o
+    d = to / np.linalg.norm(to, axis=0)
+    seg = rng.uniform(0.5, 5.0, n)
+    for s in (seg, np.inf):
+        want, got = ls.lamp_hits_numpy(o, d, s, position, 0.35, soft), ls.lamp_hits_numba(o, d, s, position, 0.35, soft)
+        for w, g in zip(want, got):
+            assert np.array_equal(w, g)
+    assert 0 < want[0].sum() < n

@@ -96,7 +96,7 @@ def _direct_light_loop(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, selec
         cos_o = n_s[0, j] * wo[0, j] + n_s[1, j] * wo[1, j] + n_s[2, j] * wo[2, j]
         front = c > 0 and cos_o > 0
         fa[j] = inv_pi if front else 0.0
-        if delta:
+        if delta[j]:
             mis = 1.0
         else:
             pdf_b = c / np.pi if front else 0.0
@@ -123,7 +123,8 @@ def direct_light_numba(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, selec
                        np.ascontiguousarray(wi, dtype=f64), np.ascontiguousarray(albedo, dtype=f64),
                        np.ascontiguousarray(emitted, dtype=f64), np.ascontiguousarray(scale, dtype=f64),
                        np.ascontiguousarray(ok, dtype=np.bool_), np.ascontiguousarray(pdf_light, dtype=f64),
-                       np.ascontiguousarray(np.broadcast_to(select_prob, (n,)), dtype=f64), bool(delta),
+                       np.ascontiguousarray(np.broadcast_to(select_prob, (n,)), dtype=f64),
+                       np.ascontiguousarray(np.broadcast_to(delta, (n,)), dtype=np.bool_),
                        A, weight, ok_out)
     return A[None], weight, ok_out
 

@@ -464,3 +464,178 @@ selection_probabilities_numba = _probabilities_loop and selection_probabilities_
 choose_light_numba = _choose_loop and choose_light_numba
 selection_probabilities = twin(selection_probabilities_numba, selection_probabilities_numpy)
 choose_light = twin(choose_light_numba, choose_light_numpy)
+
+
+# ----------------------------------------------------------------------------- point and spot lights
+
+@jit
+def _minimum(a, b):
+    # np.minimum: NaN in either argument propagates
+    if a != a:
+        return a
+    if b != b:
+        return b
+    return a if a <= b else b
+
+
+@jit
+def _spot(spot, w0, w1, w2):
+    """The spot attenuation of engine.kernels.light_sampling.spot_falloff towards −w (spot: [kind,
+    ax, ay, az, cos_outer, cos_inner], kind 0 none, 1 hard edge, 2 smoothstep)."""
+    if spot[0] == 0:
+        return 1.0
+    c = -(spot[1] * w0 + spot[2] * w1 + spot[3] * w2)
+    if spot[0] == 1:
+        return 1.0 if c >= spot[4] else 0.0
+    t = _clip((c - spot[4]) / (spot[5] - spot[4]), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
+
+
+@jit
+def _to_world(n0, n1, n2, v0, v1, v2):
+    """local_to_world(v, n) of engine.materials.sampling (frame of engine.vec3.local_frame)."""
+    sign = 1.0 if n2 >= 0 else -1.0
+    f = -1.0 / (sign + n2)
+    g = n0 * n1 * f
+    t0 = 1.0 + sign * n0 * n0 * f
+    t1 = sign * g
+    t2 = -sign * n0
+    b0 = n1 * t2 - n2 * t1
+    b1 = n2 * t0 - n0 * t2
+    b2 = n0 * t1 - n1 * t0
+    return t0 * v0 + b0 * v1 + n0 * v2, t1 * v0 + b1 * v1 + n1 * v2, t2 * v0 + b2 * v1 + n2 * v2
+
+
+@jit
+def _point_light_loop(p, u1, u2, position, radius, soft, delta, spot, wi, dist, scale, pdf, valid):
+    r = radius
+    two_pi = 2.0 * math.pi
+    for j in range(p.shape[1]):
+        t0, t1, t2 = position[0] - p[0, j], position[1] - p[1, j], position[2] - p[2, j]
+        d2 = t0 * t0 + t1 * t1 + t2 * t2
+        d = np.sqrt(d2)
+        ok = d > 0
+        s = d if ok else 1.0
+        w0, w1, w2 = t0 / s, t1 / s, t2 / s
+        falloff = _spot(spot, w0, w1, w2)
+        if delta:
+            wi[0, j], wi[1, j], wi[2, j] = w0, w1, w2
+            dist[j] = d
+            scale[j] = falloff / d2 if ok else 0.0
+            pdf[j] = 0.0
+            valid[j] = ok
+            continue
+        if soft:
+            # a disk ⟂ wi facing p, uniform by area
+            rho = r * np.sqrt(u1[j])
+            phi = two_pi * u2[j]
+            o0, o1, o2 = _to_world(-w0, -w1, -w2, rho * np.cos(phi), rho * np.sin(phi), 0.0)
+            s0, s1, s2 = t0 + o0, t1 + o1, t2 + o2
+            e2 = s0 * s0 + s1 * s1 + s2 * s2
+            e = np.sqrt(e2)
+            q = e if e > 0 else 1.0
+            v0, v1, v2 = s0 / q, s1 / q, s2 / q
+            cos_l = v0 * w0 + v1 * w1 + v2 * w2
+            ok = ok and cos_l > 0 and e > 0
+            wi[0, j], wi[1, j], wi[2, j] = v0, v1, v2
+            dist[j] = e
+            pdf[j] = e2 / (cos_l * math.pi * r * r) if ok else 0.0
+            scale[j] = falloff * cos_l / e2 if ok else 0.0
+            valid[j] = ok
+            continue
+        # a sphere: uniform in its cone, the hit distance by the law of cosines
+        ok = ok and d > r
+        sin2 = _minimum(r * r / (d2 if ok else 1.0), 1.0)
+        omc_max = sin2 / (1.0 + np.sqrt(1.0 - sin2))
+        omc = u1[j] * omc_max
+        cos_t = 1.0 - omc
+        sin_t = np.sqrt(_maximum(omc * (2.0 - omc), 0.0))
+        phi = two_pi * u2[j]
+        v0, v1, v2 = _to_world(w0, w1, w2, sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t)
+        t = d * cos_t - np.sqrt(_maximum(r * r - d2 * (1.0 - cos_t * cos_t), 0.0))
+        wi[0, j], wi[1, j], wi[2, j] = v0, v1, v2
+        dist[j] = _maximum(t, 0.0)
+        pdf[j] = 1.0 / (two_pi * omc_max) if ok else 0.0
+        scale[j] = falloff * 2.0 * omc_max / (r * r) if ok else 0.0
+        valid[j] = ok
+
+
+def point_light_sample_numba(p, u, position, radius, soft_falloff, spot):
+    n = p.shape[1]
+    wi, dist, scale, pdf, valid = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
+    f64 = np.float64
+    _point_light_loop(np.ascontiguousarray(p, dtype=f64), np.ascontiguousarray(u[1], dtype=f64),
+                      np.ascontiguousarray(u[2], dtype=f64), np.asarray(position, f64), float(radius),
+                      bool(soft_falloff), radius <= 0, np.asarray(spot, f64), wi, dist, scale, pdf, valid)
+    return wi, dist, scale, pdf, valid
+
+
+#: The compiled twin of engine.render.lights.point_light_sample_numpy (None without Numba).
+point_light_sample_numba = _point_light_loop and point_light_sample_numba
+
+
+def lamp_hits_numpy(o, d, seg, position, radius, soft_falloff):
+    """Rays o + t·d (3, N), 0 < t < seg (N,), that reach a point light's disk (``soft_falloff``: radius
+    ``radius`` about ``position``, facing the ray origin, as Cycles' point_light_intersect) or sphere:
+    (hit mask (N,), t (N,), cosθ at the disk (N,), 1 for the sphere)."""
+    r = radius
+    c = position[:, None]
+    to_c = c - o
+    dist2 = dot(to_c, to_c)
+    dist = np.sqrt(dist2)
+    if soft_falloff:
+        n = -to_c / np.where(dist > 0, dist, 1.0)           # disk normal, towards the origin
+        cos_l = -dot(d, n)
+        t = dist / np.where(cos_l > 0, cos_l, 1.0)
+        x = o + d * t[None, :] - c
+        ok = (cos_l > 0) & (dist > 0) & (dot(x, x) <= r * r)
+    else:
+        along = dot(to_c, d)
+        disc = along * along - (dist2 - r * r)
+        t = along - np.sqrt(np.maximum(disc, 0.0))
+        ok = (dist > r) & (disc >= 0) & (along > 0)
+        cos_l = np.ones_like(t)
+    ok &= (t > 0) & (t < seg)
+    return ok, t, cos_l
+
+
+@jit
+def _lamp_hits_loop(o, d, seg, position, r, soft, ok, t_out, cos_out):
+    for j in range(o.shape[1]):
+        c0, c1, c2 = position[0] - o[0, j], position[1] - o[1, j], position[2] - o[2, j]
+        d0, d1, d2 = d[0, j], d[1, j], d[2, j]
+        dist2 = c0 * c0 + c1 * c1 + c2 * c2
+        dist = np.sqrt(dist2)
+        if soft:
+            s = dist if dist > 0 else 1.0
+            n0, n1, n2 = -c0 / s, -c1 / s, -c2 / s
+            cos_l = -(d0 * n0 + d1 * n1 + d2 * n2)
+            t = dist / (cos_l if cos_l > 0 else 1.0)
+            x0 = o[0, j] + d0 * t - position[0]
+            x1 = o[1, j] + d1 * t - position[1]
+            x2 = o[2, j] + d2 * t - position[2]
+            hit = cos_l > 0 and dist > 0 and x0 * x0 + x1 * x1 + x2 * x2 <= r * r
+        else:
+            along = c0 * d0 + c1 * d1 + c2 * d2
+            disc = along * along - (dist2 - r * r)
+            t = along - np.sqrt(_maximum(disc, 0.0))
+            hit = dist > r and disc >= 0 and along > 0
+            cos_l = 1.0
+        ok[j] = hit and t > 0 and t < seg[j]
+        t_out[j] = t
+        cos_out[j] = cos_l
+
+
+def lamp_hits_numba(o, d, seg, position, radius, soft_falloff):
+    n = o.shape[1]
+    ok, t, cos_l = np.empty(n, np.bool_), np.empty(n), np.empty(n)
+    f64 = np.float64
+    _lamp_hits_loop(np.ascontiguousarray(o, dtype=f64), np.ascontiguousarray(d, dtype=f64),
+                    np.ascontiguousarray(np.broadcast_to(seg, (n,)), dtype=f64), np.asarray(position, f64),
+                    float(radius), bool(soft_falloff), ok, t, cos_l)
+    return ok, t, cos_l
+
+
+#: The compiled twin of lamp_hits_numpy (None without Numba).
+lamp_hits_numba = _lamp_hits_loop and lamp_hits_numba
+lamp_hits = twin(lamp_hits_numba, lamp_hits_numpy)

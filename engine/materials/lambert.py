@@ -49,7 +49,7 @@ def direct_light_numpy(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, selec
     albedo ρ (Lm, n): the unpolarised Stokes vector leaving towards wo per unit incident light,
     weight (L, n) = emitted·scale·|cosθ_i|·MIS / select_prob where ``ok`` (the light's validity) and
     cosθ_i ≠ 0, else 0, that validity (n,)).  MIS is the power heuristic of the light's pdf
-    pdf_light·select_prob against Lambert's cosθ_i/π (1 for a ``delta`` light); ``emitted``
+    pdf_light·select_prob against Lambert's cosθ_i/π (1 for a ``delta`` light: bool or (n,)); ``emitted``
     (L, n) is the light's spectrum, ``scale`` (n,) its radiance/pdf factor from ``sample``, and
     ``select_prob`` (scalar or (n,)) the probability with which the light was chosen."""
     c = dot(n_s, wi)
@@ -57,14 +57,14 @@ def direct_light_numpy(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, selec
     ok = ok & (cos_i > 0)
     front = (c > 0) & (dot(n_s, wo) > 0)
     A = albedo * (front / np.pi)[None, :]
-    if delta:
+    if np.all(delta):
         mis = np.ones(n_s.shape[1])
     else:
         a = pdf_light * select_prob
         a2 = a * a
         b = np.where(front, c / np.pi, 0.0)
         den = a2 + b * b
-        mis = np.where(den > 0, a2 / np.where(den > 0, den, 1.0), 0.0)
+        mis = np.where(delta, 1.0, np.where(den > 0, a2 / np.where(den > 0, den, 1.0), 0.0))
     weight = emitted * scale[None, :] * (cos_i * mis / select_prob * ok)[None, :]
     return A[None], weight, ok
 

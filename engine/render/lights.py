@@ -25,11 +25,13 @@ import math
 import numpy as np
 
 from ..errors import SceneError
+from ..kernels import twin
 from ..kernels.geometry import area_light_sample
 from ..kernels.light_sampling import (GLOBAL_SHARE, MIN_RECT_SOLID_ANGLE, SELECT_AREA, SELECT_CONSTANT, SELECT_DISTANT,
                                       SELECT_POINT, SELECTION_PARAMS, area_importance, choose_light,
-                                      distant_importance, point_importance, rect_angles, rect_light_sample, rect_local,
-                                      rect_sample, selection_probabilities, spot_falloff)
+                                      distant_importance, lamp_hits, point_importance, point_light_sample_numba,
+                                      rect_angles, rect_light_sample, rect_local, rect_sample, selection_probabilities,
+                                      spot_falloff)
 from ..materials.sampling import local_to_world, uniform_sphere
 from ..spectral import GRID_NM, luminance, spectrum_to_linear_srgb
 from ..textures.image import srgb_to_linear
@@ -487,6 +489,51 @@ class AreaEmitter(_Light):
         return area_importance(p, n, np.array(row[:3]), *row[3:])
 
 
+def point_light_sample_numpy(p, u, position, radius, soft_falloff, spot):
+    """Next-event samples of a point or spot light (``PointEmitter``, ``SpotEmitter``) at p (3, N)
+    for u (3, N) (rows 1–2 used): the module docstring's ``sample`` contract.  ``spot`` = [edge kind
+    (0: no spot, 1: hard edge, 2: smoothstep), axis (3), cos_outer, cos_inner].  Radius 0: a delta
+    light; else a disk facing p (``soft_falloff``) or a sphere."""
+    to = position[:, None] - p
+    dist2 = dot(to, to)
+    dist = np.sqrt(dist2)
+    valid = dist > 0
+    wi = to / np.where(valid, dist, 1.0)
+    # by the direction to the centre, as Cycles' spot_light_attenuation
+    falloff = 1.0 if spot[0] == 0 else spot_falloff(wi, spot[1:4], spot[4], spot[5])
+    if radius <= 0:
+        scale = np.where(valid, falloff / np.where(valid, dist2, 1.0), 0.0)
+        return wi, dist, scale, np.zeros(p.shape[1]), valid
+    r = radius
+    if soft_falloff:
+        # disk ⟂ (p − centre), radius r, uniform by area: pdf = t²/(cos·πr²), radiance I/(πr²)
+        rho = r * np.sqrt(u[1])
+        phi = 2.0 * math.pi * u[2]
+        offset = local_to_world(np.stack((rho * np.cos(phi), rho * np.sin(phi), np.zeros_like(rho))), -wi)
+        to_s = to + offset
+        t2 = dot(to_s, to_s)
+        t = np.sqrt(t2)
+        w = to_s / np.where(t > 0, t, 1.0)
+        cos_l = dot(w, wi)                # the disk's normal is −wi (it faces p)
+        valid &= (cos_l > 0) & (t > 0)
+        pdf = np.where(valid, t2 / np.where(valid, cos_l * math.pi * r * r, 1.0), 0.0)
+        scale = np.where(valid, falloff * cos_l / np.where(valid, t2, 1.0), 0.0)
+        return w, t, scale, pdf, valid
+    # sphere: uniform cone of half-angle asin(r/d), hit distance by the law of cosines
+    valid &= dist > r
+    sin2 = np.minimum(r * r / np.where(valid, dist2, 1.0), 1.0)
+    one_minus_cos_max = sin2 / (1.0 + np.sqrt(1.0 - sin2))
+    w, cos_t = uniform_cone(u[1], u[2], one_minus_cos_max, wi)
+    t = dist * cos_t - np.sqrt(np.maximum(r * r - dist2 * (1.0 - cos_t * cos_t), 0.0))
+    pdf = np.where(valid, 1.0 / (2.0 * math.pi * np.where(valid, one_minus_cos_max, 1.0)), 0.0)
+    scale = np.where(valid, falloff * 2.0 * one_minus_cos_max / (r * r), 0.0)
+    return w, np.maximum(t, 0.0), scale, pdf, valid
+
+
+#: One compiled pass per light where Numba is available (engine.kernels.light_sampling).
+point_light_sample = twin(point_light_sample_numba, point_light_sample_numpy)
+
+
 class PointEmitter(_Light):
     """Isotropic light of radiant intensity I: irradiance I/d² at normal incidence.
 
@@ -515,27 +562,12 @@ class PointEmitter(_Light):
         that of the origin's direction, so from outside the cone the light is black."""
         r = self.radius
         c = self.position[:, None]
-        to_c = c - o
-        dist2 = dot(to_c, to_c)
-        dist = np.sqrt(dist2)
-        outside = dist > r
-        along = dot(to_c, d)
-        if self.soft_falloff:
-            n = -to_c / np.where(dist > 0, dist, 1.0)           # disk normal, towards the origin
-            cos_l = -dot(d, n)
-            t = dist / np.where(cos_l > 0, cos_l, 1.0)
-            x = o + d * t[None, :] - c
-            ok = (cos_l > 0) & (dist > 0) & (dot(x, x) <= r * r)
-        else:
-            disc = along * along - (dist2 - r * r)
-            t = along - np.sqrt(np.maximum(disc, 0.0))
-            ok = outside & (disc >= 0) & (along > 0)
-            cos_l = np.ones_like(t)
-        ok &= (t > 0) & (t < seg)
+        ok, t, cos_l = lamp_hits(o, d, seg, self.position, r, self.soft_falloff)
         rows = ok.nonzero()[0]
         if rows.size == 0:
             return rows, np.zeros(0), np.zeros(0)
-        wi = to_c[:, rows] / dist[rows]
+        to_c = c - o[:, rows]
+        wi = to_c / np.sqrt(dot(to_c, to_c))
         factor = self._falloff(wi) / (math.pi * r * r) * np.ones(rows.size)
         q = p_ref[:, rows] if p_ref is not None else o[:, rows]
         if self.soft_falloff:
@@ -547,39 +579,10 @@ class PointEmitter(_Light):
         return rows, factor, pdf
 
     def sample(self, p, u):
-        to = self.position[:, None] - p
-        dist2 = dot(to, to)
-        dist = np.sqrt(dist2)
-        valid = dist > 0
-        wi = to / np.where(valid, dist, 1.0)
-        if self.is_delta:
-            scale = np.where(valid, self._falloff(wi) / np.where(valid, dist2, 1.0), 0.0)
-            return wi, dist, scale, np.zeros(p.shape[1]), valid
-        falloff = self._falloff(wi)          # by the direction to the centre, as Cycles' spot_light_attenuation
-        r = self.radius
-        if self.soft_falloff:
-            # disk ⟂ (p − centre), radius r, uniform by area: pdf = t²/(cos·πr²), radiance I/(πr²)
-            rho = r * np.sqrt(u[1])
-            phi = 2.0 * math.pi * u[2]
-            offset = local_to_world(np.stack((rho * np.cos(phi), rho * np.sin(phi), np.zeros_like(rho))), -wi)
-            to_s = to + offset
-            t2 = dot(to_s, to_s)
-            t = np.sqrt(t2)
-            w = to_s / np.where(t > 0, t, 1.0)
-            cos_l = dot(w, wi)                # the disk's normal is −wi (it faces p)
-            valid &= (cos_l > 0) & (t > 0)
-            pdf = np.where(valid, t2 / np.where(valid, cos_l * math.pi * r * r, 1.0), 0.0)
-            scale = np.where(valid, falloff * cos_l / np.where(valid, t2, 1.0), 0.0)
-            return w, t, scale, pdf, valid
-        # sphere: uniform cone of half-angle asin(r/d), hit distance by the law of cosines
-        valid &= dist > r
-        sin2 = np.minimum(r * r / np.where(valid, dist2, 1.0), 1.0)
-        one_minus_cos_max = sin2 / (1.0 + np.sqrt(1.0 - sin2))
-        w, cos_t = uniform_cone(u[1], u[2], one_minus_cos_max, wi)
-        t = dist * cos_t - np.sqrt(np.maximum(r * r - dist2 * (1.0 - cos_t * cos_t), 0.0))
-        pdf = np.where(valid, 1.0 / (2.0 * math.pi * np.where(valid, one_minus_cos_max, 1.0)), 0.0)
-        scale = np.where(valid, falloff * 2.0 * one_minus_cos_max / (r * r), 0.0)
-        return w, np.maximum(t, 0.0), scale, pdf, valid
+        # u has 3 rows: the first (light choice) is unused, then the point on the disk or in the cone
+        spot = getattr(self, "spot_record", None)
+        return point_light_sample(p, u, self.position, self.radius, self.soft_falloff,
+                                  np.zeros(6) if spot is None else np.array(spot))
 
     def power(self):
         return 4.0 * math.pi * float(luminance(self.rgb()))
