@@ -454,6 +454,12 @@ def test_rgb_albedo_of_a_lambert_set_bitwise():
     slot = rng.integers(0, 5, 700)
     basis = rng.uniform(size=(3, 4, 700))
     assert np.array_equal(lambert.rgb_albedo_numpy(rgb, slot, basis), lambert.rgb_albedo_numba(rgb, slot, basis))
+    # constant members mixed in: their value, the others' colours on the basis
+    constant, value = np.array([True, False, True, False, False]), rng.uniform(size=5)
+    want = lambert.set_albedo_numpy(rgb, value, constant, slot, basis)
+    assert np.array_equal(want, lambert.set_albedo_numba(rgb, value, constant, slot, basis))
+    fixed = constant[slot]
+    assert np.array_equal(want[:, fixed], np.broadcast_to(value[slot][fixed], (4, fixed.sum())))
 
 
 @needs_numba

@@ -131,3 +131,26 @@ def direct_light_numba(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, selec
 
 #: The compiled twin of engine.materials.lambert.direct_light_numpy (None without Numba).
 direct_light_numba = _direct_light_loop and direct_light_numba
+
+
+@jit
+def _set_albedo_loop(rgb, value, constant, slot, basis, out):
+    for k in range(basis.shape[1]):
+        for j in range(slot.shape[0]):
+            m = slot[j]
+            if constant[m]:
+                out[k, j] = value[m]
+            else:
+                out[k, j] = rgb[0, m] * basis[0, k, j] + rgb[1, m] * basis[1, k, j] + rgb[2, m] * basis[2, k, j]
+
+
+def set_albedo_numba(rgb, value, constant, slot, basis):
+    out = np.empty(basis.shape[1:])
+    _set_albedo_loop(np.ascontiguousarray(rgb, dtype=np.float64), np.ascontiguousarray(value, dtype=np.float64),
+                     np.ascontiguousarray(constant, dtype=np.bool_), np.ascontiguousarray(slot, dtype=np.int64),
+                     np.ascontiguousarray(basis, dtype=np.float64), out)
+    return out
+
+
+#: The compiled twin of engine.materials.lambert.set_albedo_numpy (None without Numba).
+set_albedo_numba = _set_albedo_loop and set_albedo_numba

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels import twin
-from ..kernels.diffuse import cosine_sample_numba, direct_light_numba, rgb_albedo_numba
+from ..kernels.diffuse import cosine_sample_numba, direct_light_numba, rgb_albedo_numba, set_albedo_numba
 from .base import BSDF, BSDFFlags, BSDFSample, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter, Socket
 from .sampling import cosine_hemisphere, local_to_world
@@ -41,6 +41,16 @@ def rgb_albedo_numpy(rgb: np.ndarray, slot: np.ndarray, basis: np.ndarray) -> np
 
 
 rgb_albedo = twin(rgb_albedo_numba, rgb_albedo_numpy)
+
+
+def set_albedo_numpy(rgb, value, constant, slot, basis):
+    """Albedo spectra (L, n) of a LambertSet with constant and RGB members: member ``slot`` (n,)'s
+    ``value`` where it is ``constant`` (M,), else its colour rgb (3, M) on the RGB basis (3, L, n)."""
+    const = np.broadcast_to(value[slot][None, :], basis.shape[1:])
+    return np.where(constant[slot][None, :], const, rgb_albedo_numpy(rgb, slot, basis))
+
+
+set_albedo = twin(set_albedo_numba, set_albedo_numpy)
 
 
 def direct_light_numpy(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, select_prob, delta):
@@ -144,19 +154,18 @@ class LambertSet(Lambert):
         L, n = sp.lam.shape
         if sp.mono:
             return np.broadcast_to(self._mono[slot][None, :], (L, n)).copy()
-        const = np.broadcast_to(self._value[slot][None, :], (L, n))
         if self._constant.all():
-            return const.copy()
+            return np.broadcast_to(self._value[slot][None, :], (L, n)).copy()
+        mixed = self._constant.any()
 
         def combine():
             basis = sp.lookup.basis if sp.lookup is not None else basis_rgb(sp.lam)
+            if mixed:
+                return set_albedo(self._rgb, self._value, self._constant, slot, basis)
             return rgb_albedo(self._rgb, slot, basis)
         # the value depends on the slots too: memo per (set, slot array) — the slot array is the
         # same object for a vertex's eval and sample, and new at every bounce
-        value = sp.lookup.memo((self, slot), combine) if sp.lookup is not None else combine()
-        if not self._constant.any():
-            return value
-        return np.where(self._constant[slot][None, :], const, value)
+        return sp.lookup.memo((self, slot), combine) if sp.lookup is not None else combine()
 
     def describe(self) -> dict:
         return {"type": self.name, "members": [m.describe() for m in self.members]}
