@@ -454,6 +454,12 @@ def test_rgb_albedo_of_a_lambert_set_bitwise():
     slot = rng.integers(0, 5, 700)
     basis = rng.uniform(size=(3, 4, 700))
     assert np.array_equal(lambert.rgb_albedo_numpy(rgb, slot, basis), lambert.rgb_albedo_numba(rgb, slot, basis))
+    # constant members mixed in: their value, the others' colours on the basis
+    constant, value = np.array([True, False, True, False, False]), rng.uniform(size=5)
+    want = lambert.set_albedo_numpy(rgb, value, constant, slot, basis)
+    assert np.array_equal(want, lambert.set_albedo_numba(rgb, value, constant, slot, basis))
+    fixed = constant[slot]
+    assert np.array_equal(want[:, fixed], np.broadcast_to(value[slot][fixed], (4, fixed.sum())))
 
 
 @needs_numba
@@ -544,3 +550,166 @@ def test_wavelength_sampling_and_rgb_weights_bitwise(count):
         assert np.array_equal(cie._rgb_weights_compiled(lam, pdf), cie.rgb_weights_numpy(lam, pdf))
     assert np.all((got[0] >= cie.LAMBDA_MIN) & (got[0] <= cie.LAMBDA_MAX))
     assert wavelengths.sample_tanh is not None
+
+
+@needs_numba
+@pytest.mark.parametrize("two_sided", [False, True])
+def test_rectangle_lamp_sampling_bitwise(two_sided):
+    """Solid-angle sampling of a rectangle lamp in one pass (engine.kernels.light_sampling) against
+    its NumPy reference, bit for bit: points above and below the lamp, in its plane (Ω = 0), far
+    away (Ω below MIN_RECT_SOLID_ANGLE: ``use`` False), on its corner and edges, u at 0 and near 1."""
+    from engine.kernels import light_sampling as ls
+    rng = np.random.default_rng(5)
+    n = 4000
+    corner, ex, ey = np.array([-0.3, 0.2, 1.1]), np.array([0.7, 0.1, 0.0]), np.array([-0.1, 0.7, 0.05])
+    len_x, len_y = np.linalg.norm(ex), np.linalg.norm(ey)
+    ax, ay = ex / len_x, ey / len_y - (ey / len_y @ (ex / len_x)) * ex / len_x
+    ay /= np.linalg.norm(ay)
+    az = np.cross(ax, ay)
+    normal = -az
+    p = rng.uniform(-2, 2, (3, n))
+    p[:, 0] = corner                                    # on the corner
+    p[:, 1] = corner + 0.5 * len_x * ax                 # on an edge
+    p[:, 2:6] = (corner + 0.3 * ax + 0.2 * ay)[:, None] + np.array([0.0, 1.0, 1e5, -1e-9])[None, :] * az[:, None]
+    p[:, 6] = corner + 0.2 * ax + 0.1 * ay - 0.3 * ax   # in the plane, outside the rectangle
+    u1, u2 = rng.random(n), rng.random(n)
+    u1[:4], u2[:4] = [0.0, 0.0, np.nextafter(1.0, 0.0), 0.5], [0.0, np.nextafter(1.0, 0.0), 0.0, 1.0]
+    args = (p, u1, u2, corner, ax, ay, az, len_x, len_y, normal, two_sided)
+    with np.errstate(all="ignore"):
+        want = ls.rect_light_sample_numpy(*args)
+    got = ls.rect_light_sample_numba(*args)
+    for w, g in zip(want, got):
+        assert np.array_equal(w, g, equal_nan=True)
+    valid, use = want[4], want[5]
+    assert 0 < valid.sum() < n and not use[4] and not use[0] and use.any()
+
+
+@needs_numba
+@pytest.mark.parametrize("L_A,L", [(1, 4), (4, 4), (1, 3), (1, 1)])
+@pytest.mark.parametrize("delta", [False, True])
+def test_lambert_direct_light_bitwise(L_A, L, delta):
+    """Lambert's one-pass next-event value, MIS and light weight (engine.kernels.diffuse) against
+    direct_light_numpy, bit for bit: lights behind the surface, viewers behind it, grazing (cosθ_i = 0)
+    and invalid light samples, zero pdfs, a scalar or per-path selection probability."""
+    from engine.materials import lambert
+    rng = np.random.default_rng(L_A + 10 * L)
+    n = 3000
+    n_s, wo, wi = unit(rng, n), unit(rng, n), unit(rng, n)
+    wi[:, :3] = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    n_s[:, :3] = [[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]]     # wi ⟂ n_s: cosθ_i = 0
+    albedo = rng.uniform(size=(L_A, n))
+    emitted = rng.uniform(size=(L, n))
+    scale = rng.uniform(0, 3, n)
+    ok = rng.random(n) < 0.9
+    pdf_light = rng.uniform(0, 5, n)
+    pdf_light[10:20] = 0.0
+    for select in (0.25, rng.uniform(0.1, 1.0, n)):
+        args = (n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, select, delta)
+        if isinstance(select, np.ndarray):      # per-path lights: some delta, some not
+            args = args[:-1] + (rng.random(n) < 0.3 if delta else np.zeros(n, bool),)
+        want, got = lambert.direct_light_numpy(*args), lambert.direct_light_numba(*args)
+        for w, g in zip(want, got):
+            assert w.shape == g.shape and np.array_equal(w, g)
+        assert 0 < want[2].sum() < n and (want[0] > 0).any() and (want[1] > 0).any()
+
+
+def selection_table(rng):
+    """(kinds, params) of one light of each selection formula: a constant, a point, a hard-edged and a
+    smooth spot with radii, an area emitter and a sun (engine.kernels.light_sampling SELECT_*)."""
+    from engine.kernels import light_sampling as ls
+    axis = unit(rng, 2).T
+    rows = [(ls.SELECT_CONSTANT, [2.5]),
+            (ls.SELECT_POINT, [0.3, -0.2, 1.5, 40.0, 1e-12, 0.0]),
+            (ls.SELECT_POINT, [1.0, 1.0, 2.0, 10.0, 0.09, 0.3, 1.0, *axis[0], 0.8, 0.8]),
+            (ls.SELECT_POINT, [-1.0, 0.5, 1.0, 25.0, 0.04, 0.2, 2.0, *axis[1], 0.5, 0.9]),
+            (ls.SELECT_AREA, [0.0, 0.0, 1.9, 3.0, 0.18, 0.18 ** 0.5]),
+            (ls.SELECT_DISTANT, [0.2, 0.3, 0.9327379053088815, 2.0, 0.05])]
+    params = np.zeros((len(rows), ls.SELECTION_PARAMS))
+    for i, (_, row) in enumerate(rows):
+        params[i, :len(row)] = row
+    return np.array([k for k, _ in rows]), params
+
+
+@needs_numba
+@pytest.mark.parametrize("with_normals", [False, True])
+def test_light_selection_probabilities_bitwise(with_normals):
+    """Per-point light selection (importance of every light kind, normalised and mixed with the
+    power distribution) in one compiled pass against the NumPy reference, bit for bit, incl. points
+    on a point light (d = 0), behind lights, inside a spot's cone edge, and a batch where every
+    importance is 0 but the constant's; then the choice of a light from those probabilities."""
+    from engine.kernels import light_sampling as ls
+    rng = np.random.default_rng(17)
+    kinds, params = selection_table(rng)
+    n_pts = 3000
+    p = rng.uniform(-2, 2, (3, n_pts))
+    p[:, 0] = params[1, :3]
+    n = unit(rng, n_pts) if with_normals else None
+    prob = np.array([0.05, 0.3, 0.1, 0.2, 0.25, 0.1])
+    want = ls.selection_probabilities_numpy(p, n, kinds, params, prob)
+    got = ls.selection_probabilities_numba(p, n, kinds, params, prob)
+    assert np.array_equal(want, got)
+    np.testing.assert_allclose(want.sum(0), 1.0, rtol=1e-12)
+    u = rng.random(n_pts)
+    u[:3] = [0.0, np.nextafter(1.0, 0.0), 0.5]
+    for w, g in zip(ls.choose_light_numpy(u, want), ls.choose_light_numba(u, want)):
+        assert np.array_equal(w, g)
+    dark = params.copy()
+    dark[1:, 3] = 0.0                                   # only the constant light shines
+    assert np.array_equal(ls.selection_probabilities_numpy(p, n, kinds, dark, prob),
+                          ls.selection_probabilities_numba(p, n, kinds, dark, prob))
+    # one point at a time: NumPy then sums the lights' importances pairwise (from 8 lights on)
+    many = np.tile(np.arange(len(kinds)), 4)[:21]
+    for count in (6, 8, 9, 16, 21):
+        k, rows, pr = kinds[many[:count]], params[many[:count]], np.full(count, 1.0 / count)
+        for j in range(40):
+            q, m = p[:, j:j + 1], None if n is None else n[:, j:j + 1]
+            assert np.array_equal(ls.selection_probabilities_numpy(q, m, k, rows, pr),
+                                  ls.selection_probabilities_numba(q, m, k, rows, pr))
+
+
+@needs_numba
+@pytest.mark.parametrize("radius,soft", [(0.0, True), (0.3, True), (0.3, False)])
+@pytest.mark.parametrize("spot_kind", [0, 1, 2])
+def test_point_and_spot_light_sampling_bitwise(radius, soft, spot_kind):
+    """Point and spot lights' next-event samples (delta, disk facing the receiver, sphere) in one
+    compiled pass against engine.render.lights.point_light_sample_numpy, bit for bit, incl. a
+    receiver on the light's centre and receivers inside the sphere; one point at a time too."""
+    from engine.render import lights
+    rng = np.random.default_rng(3 + spot_kind)
+    n = 2000
+    position = np.array([0.2, -0.4, 1.5])
+    p = rng.uniform(-2, 2, (3, n))
+    p[:, 0] = position
+    p[:, 1] = position + 0.1                            # inside the sphere
+    u = rng.random((3, n))
+    axis = unit(rng, 1)[:, 0]
+    spot = [np.array([0.0] * 6), np.array([1.0, *axis, 0.6, 0.6]), np.array([2.0, *axis, 0.4, 0.9])][spot_kind]
+    for q, v in ((p[:, 5:6], u[:, 5:6]), (p, u)):
+        args = (q, v, position, radius, soft, spot)
+        want, got = lights.point_light_sample_numpy(*args), lights.point_light_sample_numba(*args)
+        for w, g in zip(want, got):
+            assert np.array_equal(w, g)
+    assert 0 < want[4].sum() < n and (want[2] > 0).any()
+
+
+@needs_numba
+@pytest.mark.parametrize("soft", [True, False])
+def test_lamp_disk_and_sphere_hits_bitwise(soft):
+    """Rays against a point light's disk or sphere (emission seen by BSDF-sampled rays) in one
+    compiled pass against lamp_hits_numpy: hit mask, distance and cosθ, bit for bit, incl. rays
+    starting at the centre and inside the sphere, per-ray segment lengths."""
+    from engine.kernels import light_sampling as ls
+    rng = np.random.default_rng(23)
+    n = 5000
+    position = np.array([0.1, 0.2, 1.0])
+    o = rng.uniform(-1.5, 1.5, (3, n))
+    o[:, 0] = position
+    o[:, 1] = position + 0.05
+    to = position[:, None] + rng.normal(scale=0.3, size=(3, n)) - o
+    d = to / np.linalg.norm(to, axis=0)
+    seg = rng.uniform(0.5, 5.0, n)
+    for s in (seg, np.inf):
+        want, got = ls.lamp_hits_numpy(o, d, s, position, 0.35, soft), ls.lamp_hits_numba(o, d, s, position, 0.35, soft)
+        for w, g in zip(want, got):
+            assert np.array_equal(w, g)
+    assert 0 < want[0].sum() < n

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels import twin
-from ..kernels.diffuse import cosine_sample_numba, rgb_albedo_numba
+from ..kernels.diffuse import cosine_sample_numba, direct_light_numba, rgb_albedo_numba, set_albedo_numba
 from .base import BSDF, BSDFFlags, BSDFSample, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter, Socket
 from .sampling import cosine_hemisphere, local_to_world
@@ -43,6 +43,45 @@ def rgb_albedo_numpy(rgb: np.ndarray, slot: np.ndarray, basis: np.ndarray) -> np
 rgb_albedo = twin(rgb_albedo_numba, rgb_albedo_numpy)
 
 
+def set_albedo_numpy(rgb, value, constant, slot, basis):
+    """Albedo spectra (L, n) of a LambertSet with constant and RGB members: member ``slot`` (n,)'s
+    ``value`` where it is ``constant`` (M,), else its colour rgb (3, M) on the RGB basis (3, L, n)."""
+    const = np.broadcast_to(value[slot][None, :], basis.shape[1:])
+    return np.where(constant[slot][None, :], const, rgb_albedo_numpy(rgb, slot, basis))
+
+
+set_albedo = twin(set_albedo_numba, set_albedo_numpy)
+
+
+def direct_light_numpy(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, select_prob, delta):
+    """Next-event estimation through Lambert surfaces (shading normals n_s, viewers wo, light
+    directions wi, all (3, n)) in one pass: (S (1, Lm, n) = (ρ/π)·[wi and wo in front] for the
+    albedo ρ (Lm, n): the unpolarised Stokes vector leaving towards wo per unit incident light,
+    weight (L, n) = emitted·scale·|cosθ_i|·MIS / select_prob where ``ok`` (the light's validity) and
+    cosθ_i ≠ 0, else 0, that validity (n,)).  MIS is the power heuristic of the light's pdf
+    pdf_light·select_prob against Lambert's cosθ_i/π (1 for a ``delta`` light: bool or (n,)); ``emitted``
+    (L, n) is the light's spectrum, ``scale`` (n,) its radiance/pdf factor from ``sample``, and
+    ``select_prob`` (scalar or (n,)) the probability with which the light was chosen."""
+    c = dot(n_s, wi)
+    cos_i = np.abs(c)
+    ok = ok & (cos_i > 0)
+    front = (c > 0) & (dot(n_s, wo) > 0)
+    A = albedo * (front / np.pi)[None, :]
+    if np.all(delta):
+        mis = np.ones(n_s.shape[1])
+    else:
+        a = pdf_light * select_prob
+        a2 = a * a
+        b = np.where(front, c / np.pi, 0.0)
+        den = a2 + b * b
+        mis = np.where(delta, 1.0, np.where(den > 0, a2 / np.where(den > 0, den, 1.0), 0.0))
+    weight = emitted * scale[None, :] * (cos_i * mis / select_prob * ok)[None, :]
+    return A[None], weight, ok
+
+
+direct_light = twin(direct_light_numba, direct_light_numpy)
+
+
 class Lambert(BSDF):
     name = "lambert"
 
@@ -64,6 +103,11 @@ class Lambert(BSDF):
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         c = dot(sp.n_s, wi)
         return np.where((c > 0) & (sp.cos_o > 0), c / np.pi, 0.0)
+
+    def direct_light(self, sp: ShadingPoint, wi, emitted, scale, ok, pdf_light, select_prob, delta):
+        """(S, weight, ok) of next-event estimation towards wi in one pass (``direct_light_numpy``):
+        the same numbers as ``eval``, ``pdf`` and the integrator's power heuristic."""
+        return direct_light(sp.n_s, sp.wo, wi, self._albedo(sp), emitted, scale, ok, pdf_light, select_prob, delta)
 
     def sample(self, sp: ShadingPoint, u_lobe, u_dir) -> BSDFSample:
         wi, valid, pdf = cosine_sample(u_dir, sp.n_s, sp.wo)
@@ -110,19 +154,18 @@ class LambertSet(Lambert):
         L, n = sp.lam.shape
         if sp.mono:
             return np.broadcast_to(self._mono[slot][None, :], (L, n)).copy()
-        const = np.broadcast_to(self._value[slot][None, :], (L, n))
         if self._constant.all():
-            return const.copy()
+            return np.broadcast_to(self._value[slot][None, :], (L, n)).copy()
+        mixed = self._constant.any()
 
         def combine():
             basis = sp.lookup.basis if sp.lookup is not None else basis_rgb(sp.lam)
+            if mixed:
+                return set_albedo(self._rgb, self._value, self._constant, slot, basis)
             return rgb_albedo(self._rgb, slot, basis)
         # the value depends on the slots too: memo per (set, slot array) — the slot array is the
         # same object for a vertex's eval and sample, and new at every bounce
-        value = sp.lookup.memo((self, slot), combine) if sp.lookup is not None else combine()
-        if not self._constant.any():
-            return value
-        return np.where(self._constant[slot][None, :], const, value)
+        return sp.lookup.memo((self, slot), combine) if sp.lookup is not None else combine()
 
     def describe(self) -> dict:
         return {"type": self.name, "members": [m.describe() for m in self.members]}

@@ -533,70 +533,103 @@ class PathTracer:
         """Direct light at non-delta vertices, MIS-weighted against BSDF sampling; (P, L, n).
 
         ``lookup`` holds the path's wavelengths (lights are evaluated at all of them); the
-        material sees ``sp.lam`` (one wavelength where nothing depends on λ).
+        material sees ``sp.lam`` (one wavelength where nothing depends on λ).  Each chosen light
+        samples its own paths; the samples are then put together, so that the BSDF, the shadow
+        rays and the throughput run once over all paths (per path the same arithmetic as one
+        light at a time).
         """
         light_set = self.lights
         n = sp.n
         P = self.P
-        out = np.zeros((P, 3 if self.rgb_mode else lookup.lam.shape[0], n))
+        L = 3 if self.rgb_mode else lookup.lam.shape[0]
         n_side = sp.n_g * np.sign(dot(sp.n_g, sp.wo))[None, :] if light_set.spatial else None
         choice, u_rest, chosen_prob = light_set.choose(u[0], sp.p, n_side)
         lights_chosen = np.unique(choice)
-        for li in lights_chosen:
-            # one light for every path: whole arrays instead of gathered copies
-            sel = slice(None) if len(lights_chosen) == 1 else np.nonzero(choice == li)[0]
+        if len(lights_chosen) == 1:
+            # one light for every path: its arrays as they are, no gathered copies
+            li = int(lights_chosen[0])
             light = light_set.lights[li]
-            p = gather(sp.p, sel)
             # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
-            u_tri = gather(u_rest, sel)
-            select_prob = light_set.prob[li] if chosen_prob is None else gather(chosen_prob, sel)
-            wi, dist, scale, pdf_l, ok = light.sample(p, np.stack((u_tri, gather(u[1], sel), gather(u[2], sel))))
-            value = self._emitted(light, lookup.take(sel), wi) * scale[None, :]
-            sub = ShadingPoint(p, gather(sp.n_s, sel), gather(sp.n_g, sel), gather(sp.wo, sel), gather(sp.lam, sel),
-                               sp.mono, sp.lookup.take(sel) if sp.lookup is not None else None,
-                               None if sp.material is None else gather(sp.material, sel),
-                               None if sp.surface is None else sp.surface.take(sel))
-            m = sub.n
-            cos_i = np.abs(dot(sub.n_s, wi))
+            wi, dist, scale, pdf_l, ok = light.sample(sp.p, np.stack((u_rest, u[1], u[2])))
+            emitted = self._emitted(light, lookup, wi)
+            delta = light.is_delta
+            select_prob = light_set.prob[li] if chosen_prob is None else chosen_prob
+            owners = [(li, slice(None))]
+        else:
+            wi, dist, scale, pdf_l = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n)
+            ok, delta, emitted = np.empty(n, bool), np.empty(n, bool), np.empty((L, n))
+            select_prob = light_set.prob[choice] if chosen_prob is None else chosen_prob
+            owners = []
+            for li in lights_chosen:
+                li = int(li)
+                sel = np.nonzero(choice == li)[0]
+                light = light_set.lights[li]
+                w, d, sc, pdf, valid = light.sample(gather(sp.p, sel), np.stack((gather(u_rest, sel), gather(u[1], sel),
+                                                                                gather(u[2], sel))))
+                wi[:, sel], dist[sel], scale[sel], pdf_l[sel], ok[sel] = w, d, sc, pdf, valid
+                emitted[:, sel] = self._emitted(light, lookup.take(sel), w)
+                delta[sel] = light.is_delta
+                owners.append((li, sel))
+        direct = getattr(bsdf, "direct_light", None)
+        if direct is not None:
+            # Lambert: the BSDF's value, pdf, MIS and the light's weight in one pass (the same numbers)
+            S, weight, ok = direct(sp, wi, emitted, scale, ok, pdf_l, select_prob, delta)
+            if not ok.any():
+                return np.zeros((P, L, n))
+        else:
+            value = emitted * scale[None, :]
+            cos_i = np.abs(dot(sp.n_s, wi))
             ok &= cos_i > 0
             if not ok.any():
-                continue
-            f = bsdf.eval(sub, wi)
+                return np.zeros((P, L, n))
+            f = bsdf.eval(sp, wi)
             # light leaving a depolariser has only S0
             S = unpolarised_response(f, 1 if f.kind == "depolarising" else P)
             if P > 1 and f.kind != "depolarising":
-                c2, s2 = frame_rotation(f.x_out, gather(x_T, sel), sub.wo)
+                c2, s2 = frame_rotation(f.x_out, x_T, sp.wo)
                 S = rotate_stokes(S, c2, s2)
-            if light.is_delta:
-                mis = np.ones(m)
+            if isinstance(delta, np.ndarray):       # several lights: delta ones have no MIS
+                mis = np.where(delta, 1.0, power_heuristic(pdf_l * select_prob, bsdf.pdf(sp, wi)))
+            elif delta:
+                mis = np.ones(n)
             else:
-                mis = power_heuristic(pdf_l * select_prob, bsdf.pdf(sub, wi))
+                mis = power_heuristic(pdf_l * select_prob, bsdf.pdf(sp, wi))
             weight = value * (cos_i * mis / select_prob * ok)[None, :]
-            t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
-            if self.visibility is not None and self.visibility.affects_shadows:
-                # shadow-invisible and pass-through (alpha) surfaces let (part of) the light through
-                weight = weight * self._shadow_transmittance(p, sub.n_g, wi, t_max, ok, stats)[None, :]
+        p = sp.p
+        t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
+        if self.visibility is not None and self.visibility.affects_shadows:
+            # shadow-invisible and pass-through (alpha) surfaces let (part of) the light through
+            weight = weight * self._shadow_transmittance(p, sp.n_g, wi, t_max, ok, stats)[None, :]
+        else:
+            if ok.all():
+                blocked = self.scene.occluded(offset_origin(p, sp.n_g, wi), wi, t_max)
+                stats["shadow_rays"] += n
             else:
-                if ok.all():
-                    blocked = self.scene.occluded(offset_origin(p, sub.n_g, wi), wi, t_max)
-                    stats["shadow_rays"] += m
-                else:
-                    test = ok.nonzero()[0]
-                    blocked = np.zeros(m, bool)
-                    # np.take: contiguous (3, m) columns (p[:, test] would be a transposed copy)
-                    w = gather(wi, test)
-                    blocked[test] = self.scene.occluded(offset_origin(gather(p, test), gather(sub.n_g, test), w),
-                                                        w, t_max[test])
-                    stats["shadow_rays"] += test.size
-                if blocked.any() and light.blocks_own_shadow_rays:
-                    # cosθ at the light from the area pdf dist²/(cosθ·A)
-                    cos_l = np.minimum(dist * dist / np.maximum(pdf_l * light.total_area, 1e-300), 1.0)
-                    blocked = self.scene.unblock_own_hits(li, p, sub.n_g, wi, dist, cos_l, blocked)
-                weight = weight * (~blocked)[None, :]
-            light_out = throughput_times_stokes(T, gather(rows, sel), S, weight)
-            if isinstance(sel, slice) and light_out.shape == out.shape:
-                return light_out                    # one light for every path: no copy into ``out``
-            out[:, :, sel] = light_out
+                test = ok.nonzero()[0]
+                blocked = np.zeros(n, bool)
+                # np.take: contiguous (3, m) columns (p[:, test] would be a transposed copy)
+                w = gather(wi, test)
+                blocked[test] = self.scene.occluded(offset_origin(gather(p, test), gather(sp.n_g, test), w),
+                                                    w, t_max[test])
+                stats["shadow_rays"] += test.size
+            if blocked.any():
+                for li, sel in owners:
+                    light = light_set.lights[li]
+                    if light.blocks_own_shadow_rays and blocked[sel].any():
+                        # cosθ at the light from the area pdf dist²/(cosθ·A)
+                        d, pdf = dist[sel], pdf_l[sel]
+                        cos_l = np.minimum(d * d / np.maximum(pdf * light.total_area, 1e-300), 1.0)
+                        blocked[sel] = self.scene.unblock_own_hits(li, gather(p, sel), gather(sp.n_g, sel),
+                                                                   gather(wi, sel), d, cos_l, blocked[sel])
+            weight = weight * (~blocked)[None, :]
+        light_out = throughput_times_stokes(T, rows, S, weight)
+        for _, sel in owners:
+            if len(owners) > 1 and not ok[sel].any():
+                light_out[:, :, sel] = 0.0          # a light none of whose samples counts adds nothing
+        if light_out.shape == (P, L, n):
+            return light_out
+        out = np.zeros((P, L, n))
+        out[:] = light_out
         return out
 
     def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, idx: np.ndarray, prims: np.ndarray,

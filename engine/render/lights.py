@@ -25,7 +25,13 @@ import math
 import numpy as np
 
 from ..errors import SceneError
+from ..kernels import twin
 from ..kernels.geometry import area_light_sample
+from ..kernels.light_sampling import (GLOBAL_SHARE, MIN_RECT_SOLID_ANGLE, SELECT_AREA, SELECT_CONSTANT, SELECT_DISTANT,
+                                      SELECT_POINT, SELECTION_PARAMS, area_importance, choose_light,
+                                      distant_importance, lamp_hits, point_importance, point_light_sample_numba,
+                                      rect_angles, rect_light_sample, rect_local, rect_sample, selection_probabilities,
+                                      spot_falloff)
 from ..materials.sampling import local_to_world, uniform_sphere
 from ..spectral import GRID_NM, luminance, spectrum_to_linear_srgb
 from ..textures.image import srgb_to_linear
@@ -44,22 +50,6 @@ def uniform_cone(u1, u2, one_minus_cos_max, axis):
     local = np.stack((sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t))
     axis = np.broadcast_to(axis.reshape(3, -1), local.shape)
     return local_to_world(local, axis), cos_t
-
-
-#: share of a light's selection importance kept when it lies below the shading point's horizon
-#: (transmitting materials can still use it; a floor keeps every light's probability > 0)
-BELOW_HORIZON = 0.1
-
-
-def facing_factor(to, dist, sin_alpha, n):
-    """Orientation term of the selection importance at points with side normals n (3, N) for
-    light centres in directions to/dist subtending half-angles asin(sin_alpha):
-    BELOW_HORIZON + (1 − BELOW_HORIZON)·cos⁺(max(θ − α, 0)), θ the angle between n and the centre."""
-    if n is None:
-        return 1.0
-    cos_t = np.clip(dot(n, to) / np.maximum(dist, 1e-300), -1.0, 1.0)
-    theta = np.maximum(np.arccos(cos_t) - np.arcsin(np.clip(sin_alpha, 0.0, 1.0)), 0.0)
-    return BELOW_HORIZON + (1.0 - BELOW_HORIZON) * np.maximum(np.cos(theta), 0.0)
 
 
 class _Light:
@@ -100,6 +90,10 @@ class EnvironmentEmitter(_Light):
 
     def importance(self, p, n=None):
         return np.full(p.shape[1], math.pi * float(luminance(self.rgb())))
+
+    def selection_record(self):
+        """(kind, parameters) of ``importance`` for the compiled light selection (engine.kernels.light_sampling)."""
+        return SELECT_CONSTANT, [math.pi * float(luminance(self.rgb()))]
 
 
 def euler_xyz_matrix(angles_rad) -> np.ndarray:
@@ -290,6 +284,9 @@ class EnvironmentMapEmitter(_Light):
     def importance(self, p, n=None):
         return np.full(p.shape[1], math.pi * float(luminance(self._rgb)))
 
+    def selection_record(self):
+        return SELECT_CONSTANT, [math.pi * float(luminance(self._rgb))]
+
 
 def _srgb_encode(linear):
     """sRGB transfer function (IEC 61966-2-1), the power law continued above 1; float64."""
@@ -313,17 +310,11 @@ def spread_profile(spread_rad: float):
     return f
 
 
-#: below this solid angle (sr) a rectangle is sampled by area: the spherical-rectangle solid angle
-#: g0 + g1 + g2 + g3 − 2π loses its relative precision (float64 cancellation ~1e-15·2π), and a
-#: rectangle that small is sampled as well by area (dist²/cosθ is then nearly constant over it)
-MIN_RECT_SOLID_ANGLE = 1e-6
-
-
 class SphericalRectangle:
     """A planar rectangle (corner, unit edge axes x ⟂ y, edge lengths) sampled uniformly in the
     solid angle it subtends (Ureña, Conty & Kettunen 2013, "An Area-Preserving Parametrization
     for Spherical Rectangles"; Cycles' kernel/light/area.h samples rectangle lamps this way).
-    Distances in scene units, solid angles in sr."""
+    Distances in scene units, solid angles in sr; the arithmetic is engine.kernels.light_sampling's."""
 
     def __init__(self, corner, ex, ey):
         self.corner = np.asarray(corner, np.float64)
@@ -359,54 +350,19 @@ class SphericalRectangle:
         return cls(a, ex, ey)
 
     def _local(self, p):
-        """Rectangle coordinates relative to points p (3, N): x0, x1, y0, y1, z0 ≤ 0 and the sign
-        s = ±1 with which z points from the plane away from p (z_eff = s·z)."""
-        d = self.corner[:, None] - p
-        z0 = dot(d, self.z[:, None])
-        s = np.where(z0 > 0, -1.0, 1.0)
-        z0 = -np.abs(z0)
-        x0 = dot(d, self.x[:, None])
-        y0 = dot(d, self.y[:, None])
-        return x0, x0 + self.len_x, y0, y0 + self.len_y, z0, s
-
-    @staticmethod
-    def _angles(x0, x1, y0, y1, z0):
-        """z components of the four inner normals of the spherical rectangle's edges and its solid angle."""
-        def unit_z(a, b):       # (cross product of two corner rays).z / its norm, as in the paper
-            return a / np.sqrt(z0 * z0 * b * b + a * a)
-        n0 = unit_z(y0 * (x0 - x1), x0 - x1)
-        n1 = unit_z(x1 * (y1 - y0), y1 - y0)
-        n2 = unit_z(y1 * (x1 - x0), x1 - x0)
-        n3 = unit_z(x0 * (y0 - y1), y0 - y1)
-        g0, g1, g2, g3 = (np.arccos(np.clip(c, -1.0, 1.0)) for c in (-n0 * n1, -n1 * n2, -n2 * n3, -n3 * n0))
-        k = 2.0 * math.pi - g2 - g3
-        return n0, n2, k, np.maximum(g0 + g1 - k, 0.0)
+        """Rectangle coordinates relative to points p (3, N) (engine.kernels.light_sampling.rect_local)."""
+        return rect_local(p, self.corner, self.x, self.y, self.z, self.len_x, self.len_y)
 
     def solid_angle(self, p):
         """Solid angle (N,) that the rectangle subtends at points p (3, N); 0 in its plane."""
         x0, x1, y0, y1, z0, _ = self._local(p)
         with np.errstate(invalid="ignore", divide="ignore"):
-            S = self._angles(x0, x1, y0, y1, z0)[3]
+            S = rect_angles(x0, x1, y0, y1, z0)[3]
         return np.where(z0 < 0, np.nan_to_num(S), 0.0)
 
     def sample(self, p, u1, u2):
         """Points (3, N) on the rectangle, uniform in solid angle seen from p, and that solid angle (N,)."""
-        x0, x1, y0, y1, z0, s = self._local(p)
-        with np.errstate(invalid="ignore", divide="ignore"):
-            b0, b1, k, S = self._angles(x0, x1, y0, y1, z0)
-            au = u1 * S + k
-            fu = (np.cos(au) * b0 - b1) / np.sin(au)
-            cu = np.clip(np.sign(fu) / np.sqrt(fu * fu + b0 * b0), -1.0, 1.0)
-            xu = np.clip(-(cu * z0) / np.maximum(np.sqrt(1.0 - cu * cu), 1e-300), x0, x1)
-            d2 = xu * xu + z0 * z0
-            h0 = y0 / np.sqrt(d2 + y0 * y0)
-            h1 = y1 / np.sqrt(d2 + y1 * y1)
-            hv = h0 + u2 * (h1 - h0)
-            hv2 = hv * hv
-            yv = np.where(hv2 < 1.0 - 1e-12, hv * np.sqrt(d2) / np.sqrt(np.maximum(1.0 - hv2, 1e-300)), y1)
-        xu, yv = np.nan_to_num(xu), np.clip(np.nan_to_num(yv), y0, y1)
-        q = p + self.x[:, None] * xu + self.y[:, None] * yv + self.z[:, None] * (s * z0)
-        return q, np.where(z0 < 0, np.nan_to_num(S), 0.0)
+        return rect_sample(p, u1, u2, self.corner, self.x, self.y, self.z, self.len_x, self.len_y)
 
 
 class AreaEmitter(_Light):
@@ -445,17 +401,9 @@ class AreaEmitter(_Light):
         # u has 3 rows: triangle choice, then the point within it.
         if self.rect is None:
             return self._sample_area(p, u)
-        q, omega = self.rect.sample(p, u[1], u[2])
-        use = omega > MIN_RECT_SOLID_ANGLE
-        to = q - p
-        dist = np.sqrt(dot(to, to))
-        wi = to / np.where(dist > 0, dist, 1.0)
-        cos_l = -dot(wi, self.normal[:, None])
-        if self.two_sided:
-            cos_l = np.abs(cos_l)
-        valid = use & (cos_l > 0) & (dist > 0)
-        pdf = np.where(valid, 1.0 / np.where(valid, omega, 1.0), 0.0)
-        scale = np.where(valid, omega, 0.0)
+        r = self.rect
+        wi, dist, scale, pdf, valid, use, cos_l = rect_light_sample(p, u[1], u[2], r.corner, r.x, r.y, r.z, r.len_x,
+                                                                    r.len_y, self.normal, self.two_sided)
         if self.profile is not None:
             scale = scale * self.profile(cos_l)
             valid &= scale > 0
@@ -519,21 +467,71 @@ class AreaEmitter(_Light):
         """Emitted power (luminance units; Lambertian: π·L·A per emitting side)."""
         return math.pi * float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
 
-    def importance(self, p, n=None):
-        """Bound-like estimate of the irradiance at p (3, N) with side normals n: L·A/max(d², r²)
-        about the centroid, times the orientation term."""
+    def _bound(self):
+        """Centroid (3,) and squared radius about it of the emitter's triangles (light selection)."""
         if not hasattr(self, "_centre"):
             c = self.compiled
             corners = c.vertices[c.faces[self.tris]].reshape(-1, 3)
             w = np.repeat(c.tri_area[self.tris], 3)
             self._centre = (corners * w[:, None]).sum(0) / w.sum()
             self._r2 = float(((corners - self._centre) ** 2).sum(1).max())
-        to = self._centre[:, None] - p
-        d2 = dot(to, to)
-        dist = np.sqrt(d2)
-        return (float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
-                / np.maximum(d2, max(self._r2, 1e-12))
-                * facing_factor(to, dist, math.sqrt(self._r2) / np.maximum(dist, 1e-300), n))
+        return self._centre, self._r2
+
+    def selection_record(self):
+        centre, r2 = self._bound()
+        power = float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
+        return SELECT_AREA, [*centre, power, max(r2, 1e-12), math.sqrt(r2)]
+
+    def importance(self, p, n=None):
+        """Bound-like estimate of the irradiance at p (3, N) with side normals n: L·A/max(d², r²)
+        about the centroid, times the orientation term."""
+        _, row = self.selection_record()
+        return area_importance(p, n, np.array(row[:3]), *row[3:])
+
+
+def point_light_sample_numpy(p, u, position, radius, soft_falloff, spot):
+    """Next-event samples of a point or spot light (``PointEmitter``, ``SpotEmitter``) at p (3, N)
+    for u (3, N) (rows 1–2 used): the module docstring's ``sample`` contract.  ``spot`` = [edge kind
+    (0: no spot, 1: hard edge, 2: smoothstep), axis (3), cos_outer, cos_inner].  Radius 0: a delta
+    light; else a disk facing p (``soft_falloff``) or a sphere."""
+    to = position[:, None] - p
+    dist2 = dot(to, to)
+    dist = np.sqrt(dist2)
+    valid = dist > 0
+    wi = to / np.where(valid, dist, 1.0)
+    # by the direction to the centre, as Cycles' spot_light_attenuation
+    falloff = 1.0 if spot[0] == 0 else spot_falloff(wi, spot[1:4], spot[4], spot[5])
+    if radius <= 0:
+        scale = np.where(valid, falloff / np.where(valid, dist2, 1.0), 0.0)
+        return wi, dist, scale, np.zeros(p.shape[1]), valid
+    r = radius
+    if soft_falloff:
+        # disk ⟂ (p − centre), radius r, uniform by area: pdf = t²/(cos·πr²), radiance I/(πr²)
+        rho = r * np.sqrt(u[1])
+        phi = 2.0 * math.pi * u[2]
+        offset = local_to_world(np.stack((rho * np.cos(phi), rho * np.sin(phi), np.zeros_like(rho))), -wi)
+        to_s = to + offset
+        t2 = dot(to_s, to_s)
+        t = np.sqrt(t2)
+        w = to_s / np.where(t > 0, t, 1.0)
+        cos_l = dot(w, wi)                # the disk's normal is −wi (it faces p)
+        valid &= (cos_l > 0) & (t > 0)
+        pdf = np.where(valid, t2 / np.where(valid, cos_l * math.pi * r * r, 1.0), 0.0)
+        scale = np.where(valid, falloff * cos_l / np.where(valid, t2, 1.0), 0.0)
+        return w, t, scale, pdf, valid
+    # sphere: uniform cone of half-angle asin(r/d), hit distance by the law of cosines
+    valid &= dist > r
+    sin2 = np.minimum(r * r / np.where(valid, dist2, 1.0), 1.0)
+    one_minus_cos_max = sin2 / (1.0 + np.sqrt(1.0 - sin2))
+    w, cos_t = uniform_cone(u[1], u[2], one_minus_cos_max, wi)
+    t = dist * cos_t - np.sqrt(np.maximum(r * r - dist2 * (1.0 - cos_t * cos_t), 0.0))
+    pdf = np.where(valid, 1.0 / (2.0 * math.pi * np.where(valid, one_minus_cos_max, 1.0)), 0.0)
+    scale = np.where(valid, falloff * 2.0 * one_minus_cos_max / (r * r), 0.0)
+    return w, np.maximum(t, 0.0), scale, pdf, valid
+
+
+#: One compiled pass per light where Numba is available (engine.kernels.light_sampling).
+point_light_sample = twin(point_light_sample_numba, point_light_sample_numpy)
 
 
 class PointEmitter(_Light):
@@ -564,27 +562,12 @@ class PointEmitter(_Light):
         that of the origin's direction, so from outside the cone the light is black."""
         r = self.radius
         c = self.position[:, None]
-        to_c = c - o
-        dist2 = dot(to_c, to_c)
-        dist = np.sqrt(dist2)
-        outside = dist > r
-        along = dot(to_c, d)
-        if self.soft_falloff:
-            n = -to_c / np.where(dist > 0, dist, 1.0)           # disk normal, towards the origin
-            cos_l = -dot(d, n)
-            t = dist / np.where(cos_l > 0, cos_l, 1.0)
-            x = o + d * t[None, :] - c
-            ok = (cos_l > 0) & (dist > 0) & (dot(x, x) <= r * r)
-        else:
-            disc = along * along - (dist2 - r * r)
-            t = along - np.sqrt(np.maximum(disc, 0.0))
-            ok = outside & (disc >= 0) & (along > 0)
-            cos_l = np.ones_like(t)
-        ok &= (t > 0) & (t < seg)
+        ok, t, cos_l = lamp_hits(o, d, seg, self.position, r, self.soft_falloff)
         rows = ok.nonzero()[0]
         if rows.size == 0:
             return rows, np.zeros(0), np.zeros(0)
-        wi = to_c[:, rows] / dist[rows]
+        to_c = c - o[:, rows]
+        wi = to_c / np.sqrt(dot(to_c, to_c))
         factor = self._falloff(wi) / (math.pi * r * r) * np.ones(rows.size)
         q = p_ref[:, rows] if p_ref is not None else o[:, rows]
         if self.soft_falloff:
@@ -596,51 +579,24 @@ class PointEmitter(_Light):
         return rows, factor, pdf
 
     def sample(self, p, u):
-        to = self.position[:, None] - p
-        dist2 = dot(to, to)
-        dist = np.sqrt(dist2)
-        valid = dist > 0
-        wi = to / np.where(valid, dist, 1.0)
-        if self.is_delta:
-            scale = np.where(valid, self._falloff(wi) / np.where(valid, dist2, 1.0), 0.0)
-            return wi, dist, scale, np.zeros(p.shape[1]), valid
-        falloff = self._falloff(wi)          # by the direction to the centre, as Cycles' spot_light_attenuation
-        r = self.radius
-        if self.soft_falloff:
-            # disk ⟂ (p − centre), radius r, uniform by area: pdf = t²/(cos·πr²), radiance I/(πr²)
-            rho = r * np.sqrt(u[1])
-            phi = 2.0 * math.pi * u[2]
-            offset = local_to_world(np.stack((rho * np.cos(phi), rho * np.sin(phi), np.zeros_like(rho))), -wi)
-            to_s = to + offset
-            t2 = dot(to_s, to_s)
-            t = np.sqrt(t2)
-            w = to_s / np.where(t > 0, t, 1.0)
-            cos_l = dot(w, wi)                # the disk's normal is −wi (it faces p)
-            valid &= (cos_l > 0) & (t > 0)
-            pdf = np.where(valid, t2 / np.where(valid, cos_l * math.pi * r * r, 1.0), 0.0)
-            scale = np.where(valid, falloff * cos_l / np.where(valid, t2, 1.0), 0.0)
-            return w, t, scale, pdf, valid
-        # sphere: uniform cone of half-angle asin(r/d), hit distance by the law of cosines
-        valid &= dist > r
-        sin2 = np.minimum(r * r / np.where(valid, dist2, 1.0), 1.0)
-        one_minus_cos_max = sin2 / (1.0 + np.sqrt(1.0 - sin2))
-        w, cos_t = uniform_cone(u[1], u[2], one_minus_cos_max, wi)
-        t = dist * cos_t - np.sqrt(np.maximum(r * r - dist2 * (1.0 - cos_t * cos_t), 0.0))
-        pdf = np.where(valid, 1.0 / (2.0 * math.pi * np.where(valid, one_minus_cos_max, 1.0)), 0.0)
-        scale = np.where(valid, falloff * 2.0 * one_minus_cos_max / (r * r), 0.0)
-        return w, np.maximum(t, 0.0), scale, pdf, valid
+        # u has 3 rows: the first (light choice) is unused, then the point on the disk or in the cone
+        spot = getattr(self, "spot_record", None)
+        return point_light_sample(p, u, self.position, self.radius, self.soft_falloff,
+                                  np.zeros(6) if spot is None else np.array(spot))
 
     def power(self):
         return 4.0 * math.pi * float(luminance(self.rgb()))
 
+    def selection_record(self):
+        spot = getattr(self, "spot_record", [0.0] * 6)
+        return SELECT_POINT, [*self.position, float(luminance(self.rgb())), max(self.radius ** 2, 1e-12), self.radius,
+                              *spot]
+
     def importance(self, p, n=None):
         """Irradiance at p (3, N) facing the light, I·falloff/max(d², r²), times the orientation term."""
-        to = self.position[:, None] - p
-        d2 = dot(to, to)
-        dist = np.sqrt(np.maximum(d2, 1e-300))
-        wi = to / dist
-        return (float(luminance(self.rgb())) * self._falloff(wi) / np.maximum(d2, max(self.radius ** 2, 1e-12))
-                * facing_factor(to, dist, self.radius / dist, n))
+        _, row = self.selection_record()
+        spot = None if row[6] == 0 else (np.array(row[7:10]), row[10], row[11])
+        return point_importance(p, n, self.position, row[3], row[4], row[5], spot)
 
 
 class SpotEmitter(PointEmitter):
@@ -665,11 +621,12 @@ class SpotEmitter(PointEmitter):
         return 2.0 * math.pi * (1.0 - self.cos_outer) * float(luminance(self.rgb()))
 
     def _falloff(self, wi):
-        c = -(self.axis[:, None] * wi).sum(0)
-        if self.cos_inner <= self.cos_outer:
-            return (c >= self.cos_outer).astype(np.float64)
-        t = np.clip((c - self.cos_outer) / (self.cos_inner - self.cos_outer), 0.0, 1.0)
-        return t * t * (3.0 - 2.0 * t)
+        return spot_falloff(wi, self.axis, self.cos_outer, self.cos_inner)
+
+    @property
+    def spot_record(self):
+        """[edge kind (1 hard, 2 smooth), axis, cos_outer, cos_inner] (SELECT_POINT's spot columns)."""
+        return [1.0 if self.cos_inner <= self.cos_outer else 2.0, *self.axis, self.cos_outer, self.cos_inner]
 
 
 class DirectionalEmitter(_Light):
@@ -712,10 +669,13 @@ class DirectionalEmitter(_Light):
     def power(self, scene_radius=1.0):
         return float(luminance(self.rgb())) * math.pi * scene_radius ** 2
 
-    def importance(self, p, n=None):
-        to = np.broadcast_to(-self.direction[:, None], p.shape)
+    def selection_record(self):
         sin_half = math.sqrt(self.one_minus_cos * (2.0 - self.one_minus_cos))
-        return float(luminance(self.rgb())) * facing_factor(to, 1.0, sin_half, n) * np.ones(p.shape[1])
+        return SELECT_DISTANT, [*(-self.direction), float(luminance(self.rgb())), sin_half]
+
+    def importance(self, p, n=None):
+        _, row = self.selection_record()
+        return distant_importance(p, n, -self.direction, row[3], row[4])
 
 
 class LightSet:
@@ -730,7 +690,7 @@ class LightSet:
     """
 
     SPATIAL_MAX = 64
-    GLOBAL_SHARE = 0.1
+    GLOBAL_SHARE = GLOBAL_SHARE
 
     def __init__(self, scene, compiled):
         self.lights = []
@@ -786,6 +746,13 @@ class LightSet:
                 self.cdf = np.cumsum(self.prob)
                 self.cdf[-1] = 1.0
         self.spatial = self.cdf is not None and count <= self.SPATIAL_MAX
+        if self.spatial:
+            # every light's importance formula as (kind, parameters): one compiled pass for all lights
+            records = [light.selection_record() for light in self.lights]
+            self._kinds = np.array([k for k, _ in records], np.int64)
+            self._params = np.zeros((count, SELECTION_PARAMS))
+            for i, (_, row) in enumerate(records):
+                self._params[i, :len(row)] = row
         self.hittable = [i for i, light in enumerate(self.lights) if light.hittable]
 
     def probabilities(self, p, n=None):
@@ -793,11 +760,7 @@ class LightSet:
         geometric normal on the side the path arrived from) or None."""
         if not self.spatial:
             return np.repeat(self.prob[:, None], p.shape[1], axis=1)
-        imp = np.stack([light.importance(p, n) for light in self.lights])
-        imp = np.where(np.isfinite(imp) & (imp > 0), imp, 0.0)
-        total = imp.sum(0)
-        local = np.where(total > 0, imp / np.where(total > 0, total, 1.0), self.prob[:, None])
-        return (1.0 - self.GLOBAL_SHARE) * local + self.GLOBAL_SHARE * self.prob[:, None]
+        return selection_probabilities(p, n, self._kinds, self._params, self.prob)
 
     def prob_at(self, li, p, n=None):
         """Probability (N,) or scalar that NEE at points p (3, N) with side normals n picks light ``li``."""
@@ -814,14 +777,7 @@ class LightSet:
             choice = np.minimum((u * count).astype(np.int64), count - 1)
             return choice, u * count - choice, None
         if self.spatial and p is not None:
-            probs = self.probabilities(p, n)
-            cdf = np.cumsum(probs, axis=0)
-            choice = np.minimum((cdf <= u[None, :] * cdf[-1][None, :]).sum(0), count - 1)
-            cols = np.arange(u.shape[0])
-            chosen = probs[choice, cols]
-            lo = cdf[choice, cols] - chosen
-            rest = (u * cdf[-1] - lo) / np.where(chosen > 0, chosen, 1.0)
-            return choice, np.clip(rest, 0.0, np.nextafter(1.0, 0.0)), chosen
+            return choose_light(u, self.probabilities(p, n))
         choice = np.minimum(np.searchsorted(self.cdf, u, side="right"), count - 1)
         lo = np.where(choice > 0, self.cdf[np.maximum(choice - 1, 0)], 0.0)
         rest = (u - lo) / np.where(self.prob[choice] > 0, self.prob[choice], 1.0)
