@@ -17,6 +17,7 @@ import time
 from collections import deque
 from collections.abc import Callable, Iterator
 import threading
+import weakref
 from concurrent.futures import CancelledError, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FuturesTimeout
 from dataclasses import dataclass, field
@@ -24,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .accel import CompiledScene
+from .allocator import keep_freed_memory, return_freed_memory
 from ..kernels import BACKEND as KERNEL_BACKEND
 from .camera import CameraModel
 from .effects import effective_materials, resolve_transport
@@ -165,6 +167,10 @@ class Renderer:
 
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
+        # Freed batch memory is kept for the next batch, and the next render of this renderer; handed
+        # back when the renderer goes (engine.render.allocator).  Set before Embree's threads allocate.
+        keep_freed_memory()
+        weakref.finalize(self, return_freed_memory)
         t0 = time.perf_counter()
         self.compiled = CompiledScene(scene)
         self.lights = LightSet(scene, self.compiled)
