@@ -173,7 +173,7 @@ class Renderer:
         # Freed batch memory is kept for the next batch, and the next render of this renderer; handed
         # back when the renderer goes (engine.render.allocator).  Set before Embree's threads allocate.
         keep_freed_memory()
-        weakref.finalize(self, return_freed_memory)
+        weakref.finalize(self, return_freed_memory).atexit = False     # (not when the process ends anyway)
         t0 = time.perf_counter()
         self.compiled = CompiledScene(scene)
         self.lights = LightSet(scene, self.compiled)
