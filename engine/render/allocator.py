@@ -17,6 +17,8 @@ The settings (glibc ``mallopt``; process-wide, they stay set, no-ops without gli
 - arrays up to 1 GiB from the heap (``M_MMAP_THRESHOLD``), no automatic trimming of the heap top
   (``M_TRIM_THRESHOLD``), and a 64 MiB pad that per-thread heaps keep (``M_TOP_PAD``: with
   arenas that already exist, e.g. in Blender, their heaps are then not deleted when they empty).
+
+In a process whose malloc is not glibc's (macOS, Windows, musl, a jemalloc build) nothing changes.
 """
 
 from __future__ import annotations
