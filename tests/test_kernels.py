@@ -72,6 +72,22 @@ def test_uniforms_bitwise_and_in_unit_interval():
 
 
 @needs_numba
+@pytest.mark.parametrize("n,k", [(0, 3), (1, 0), (3000, 2), (3000, 5)])
+def test_path_keys_and_uniforms_bitwise_and_as_keys_then_uniforms(n, k):
+    rng = np.random.default_rng(n + k)
+    pixel = rng.integers(0, 4096 * 4096, n)
+    sample = rng.integers(0, 1 << 20, n)
+    seed_key = hashing.mix64(np.array([0x632BE59BD9B4E019 + 12345], np.uint64))
+    offsets = np.array([(d * 0x9E3779B97F4A7C15) & (2**64 - 1) for d in range(1, k + 1)], dtype=np.uint64)
+    keys_a, u_a = hashing.path_keys_and_uniforms_numpy(seed_key, pixel, sample, offsets)
+    keys_b, u_b = hashing.path_keys_and_uniforms_numba(seed_key, pixel, sample, offsets)
+    np.testing.assert_array_equal(keys_a, keys_b)
+    np.testing.assert_array_equal(u_a, u_b)
+    assert u_a.shape == (k, n) and keys_a.dtype == np.uint64
+    np.testing.assert_array_equal(u_b, hashing.uniforms_numpy(keys_a, offsets))   # the same as two passes
+
+
+@needs_numba
 @pytest.mark.parametrize("P", [1, 3, 4])
 @pytest.mark.parametrize("L_T,L_M", [(4, 4), (1, 1), (4, 1)])
 @pytest.mark.parametrize("depol", [False, True])

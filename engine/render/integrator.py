@@ -36,7 +36,7 @@ from ..kernels.transport import (add_light, add_to_paths, roulette, throughput_t
                                  update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .path_state import PathState
-from .sampler import PathSampler, path_keys
+from .sampler import PathSampler
 from .visibility import ray_visibility
 from ..spectral import WavelengthLookup, rgb_weights, sample_wavelengths
 from ..vec3 import dot
@@ -254,13 +254,19 @@ class PathTracer:
             return light.radiance(lookup.lam, True)
         return light.spectrum.eval_cached(lookup)
 
-    def _wavelengths(self, sampler: PathSampler, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+    @property
+    def samples_wavelengths(self) -> bool:
+        """True when paths sample their wavelengths (one random dimension after the camera's)."""
+        return not (self.rgb_mode or self.mono)
+
+    def _wavelengths(self, u: np.ndarray | None, n: int) -> tuple[np.ndarray, np.ndarray | None]:
+        """(λ (L, n) nm, sRGB weights (3, L, n) or None in RGB mode) of the paths; ``u`` (n,) their
+        wavelength dimension (None where ``samples_wavelengths`` is False)."""
         if self.rgb_mode:
             return np.full((1, n), 550.0), None
         if self.mono:
             lam = np.full((1, n), self.settings.wavelength_nm)
             return lam, np.ones((3, 1, n))
-        u = sampler.next(1)[0]
         lam, pdf = sample_wavelengths(u, self.n_lambda)
         return lam, rgb_weights(lam, pdf)
 
@@ -302,9 +308,13 @@ class PathTracer:
     def _camera_paths(self, pixel: np.ndarray, sample: np.ndarray) -> tuple[PathState, _Accumulators]:
         """Camera rays of the batch as a PathState (T = identity) and zeroed accumulators."""
         P, n_total = self.P, pixel.shape[0]
-        sampler = PathSampler(path_keys(self.settings.seed, pixel, sample))
-        o, d, x_T, t_min, t_max = self.camera.generate(pixel, sampler.next(2 + self.camera.lens_dimensions))
-        lam, w_rgb = self._wavelengths(sampler, n_total)
+        # the paths' keys and every random number of this stage in one pass: the camera's dimensions
+        # (pixel jitter, lens), then the wavelengths'
+        k_camera = 2 + self.camera.lens_dimensions
+        sampler, u = PathSampler.start(self.settings.seed, pixel, sample,
+                                       k_camera + (1 if self.samples_wavelengths else 0))
+        o, d, x_T, t_min, t_max = self.camera.generate(pixel, u[:k_camera])
+        lam, w_rgb = self._wavelengths(u[k_camera] if self.samples_wavelengths else None, n_total)
         L = 3 if self.rgb_mode else lam.shape[0]
         lk = WavelengthLookup(lam)                      # table values at the path's wavelengths, once
         # wavelengths the materials are evaluated at (one where nothing depends on λ)

@@ -12,11 +12,13 @@ true per-pixel sample count).
 from __future__ import annotations
 
 import copy
+import math
 import os
 import time
 from collections import deque
 from collections.abc import Callable, Iterator
 import threading
+import weakref
 from concurrent.futures import CancelledError, ThreadPoolExecutor
 from concurrent.futures import TimeoutError as FuturesTimeout
 from dataclasses import dataclass, field
@@ -24,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .accel import CompiledScene
+from .allocator import keep_freed_memory, return_freed_memory
 from ..kernels import BACKEND as KERNEL_BACKEND
 from .camera import CameraModel
 from .effects import effective_materials, resolve_transport
@@ -57,6 +60,8 @@ STOP_POLL_SECONDS = 0.05
 #: Units submitted per worker thread (one traced, the next queued so that the worker never waits
 #: for the thread that adds finished units to the film).
 UNITS_AHEAD = 2
+#: Paths traced by Renderer.warm_up (a grid over the image: enough to reach every visible material).
+WARM_UP_PATHS = 4096
 #: Bytes per pixel of the film (Stokes × RGB sums, luminance sums of squares, sample count).
 FILM_BYTES_PER_PIXEL = (4 * 3 + 4 + 1) * 8
 #: Bytes per path of a batch in flight (throughput, frames, rays, random keys, accumulators; measured
@@ -165,12 +170,47 @@ class Renderer:
 
     def __init__(self, scene: Scene) -> None:
         self.scene = scene
+        # Freed batch memory is kept for the next batch, and the next render of this renderer; handed
+        # back when the renderer goes (engine.render.allocator).  Set before Embree's threads allocate.
+        keep_freed_memory()
+        weakref.finalize(self, return_freed_memory).atexit = False     # (not when the process ends anyway)
         t0 = time.perf_counter()
         self.compiled = CompiledScene(scene)
         self.lights = LightSet(scene, self.compiled)
         self.camera = CameraModel(scene.camera)
         self.compile_seconds = time.perf_counter() - t0
         self._live_film = None
+
+    def _tracer(self, settings: RenderSettings | None):
+        """(settings as rendered, PathTracer, simplified materials, transport reason) for ``settings``
+        (default: the scene's): the materials' exact simplifications and the transport resolved."""
+        st = copy.copy(settings or self.scene.settings)
+        used = {self.compiled.material_names[i] for i in np.unique(self.compiled.tri_material)}
+        materials, simplified = effective_materials(self.scene.materials, used, st.simplify)
+        st.polarisation, transport_reason = resolve_transport(st.polarisation, materials, used)
+        tracer = PathTracer(self.compiled, self.lights, self.camera, st,
+                            materials=[materials[name] for name in self.compiled.material_names])
+        return st, tracer, simplified, transport_reason
+
+    def warm_up(self, settings: RenderSettings | None = None, paths: int = WARM_UP_PATHS) -> float:
+        """Trace about ``paths`` throw-away paths (one per pixel of a grid spread over the image) as
+        a render with ``settings`` would; returns the seconds taken.
+
+        Every compiled kernel those paths call is compiled, or loaded from Numba's cache, now rather
+        than inside the first render, where it would also hold the GIL and stall the other workers
+        (a corner window of the image misses the objects and so most shading kernels).  Nothing is
+        added to any film; the sampler is stateless, so later renders are unchanged.
+        """
+        t0 = time.perf_counter()
+        _, tracer, _, _ = self._tracer(settings)
+        W, H = self.scene.camera.width, self.scene.camera.height
+        nx = max(1, min(W, round(math.sqrt(paths * W / H))))
+        ny = max(1, min(H, paths // nx))
+        rows = np.linspace(0, H - 1, ny).round().astype(np.int64)
+        cols = np.linspace(0, W - 1, nx).round().astype(np.int64)
+        pixel = (rows[:, None] * W + cols[None, :]).ravel()
+        tracer.trace(pixel, np.zeros_like(pixel))
+        return time.perf_counter() - t0
 
     def last_film_mean(self) -> np.ndarray | None:
         """The Stokes image of the render in progress (for progressive display), or None."""
@@ -198,10 +238,7 @@ class Renderer:
         for the time limit; ``on_first_pass``, ``unit_times``: see render_adaptive); ``stats["stop_reason"]`` says why
         it ended and the result's ``halves`` holds the half-buffers.
         """
-        st = copy.copy(settings or self.scene.settings)
-        used = {self.compiled.material_names[i] for i in np.unique(self.compiled.tri_material)}
-        materials, simplified = effective_materials(self.scene.materials, used, st.simplify)
-        st.polarisation, transport_reason = resolve_transport(st.polarisation, materials, used)
+        st, tracer, simplified, transport_reason = self._tracer(settings)
         cam = self.scene.camera
         W, H = cam.width, cam.height
         workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
@@ -219,8 +256,6 @@ class Renderer:
                 raise ValueError(f"cannot resume a {resume.width}×{resume.height} render at {W}×{H}")
             film.merge(resume)
             done_before = resume.count.copy()
-        tracer = PathTracer(self.compiled, self.lights, self.camera, st,
-                            materials=[materials[name] for name in self.compiled.material_names])
         if tracer.rgb_mode:
             stats_spectral = "RGB with exactly integrated light spectra (no material depends on λ)"
         elif tracer.uniform:

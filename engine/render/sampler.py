@@ -12,18 +12,24 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.hashing import mix64, uniforms
+from ..kernels.hashing import mix64, path_keys_and_uniforms, uniforms
 
-_GOLDEN = np.uint64(0x9E3779B97F4A7C15)
-_M2 = np.uint64(0x94D049BB133111EB)
 _MASK64 = (1 << 64) - 1
+
+
+def _seed_key(seed: int) -> np.ndarray:
+    """The render seed mixed into a 64-bit key (uint64 (1,))."""
+    return mix64(np.asarray([(seed * 0x9E3779B97F4A7C15 + 0x632BE59BD9B4E019) & _MASK64], dtype=np.uint64))
+
+
+def _offsets(first: int, k: int) -> np.ndarray:
+    """Hash offsets of dimensions first+1 … first+k."""
+    return np.array([(d * 0x9E3779B97F4A7C15) & _MASK64 for d in range(first + 1, first + k + 1)], dtype=np.uint64)
 
 
 def path_keys(seed: int, pixel: np.ndarray, sample: np.ndarray) -> np.ndarray:
     """Per-path 64-bit keys from the render seed, pixel index and sample index."""
-    s = mix64(np.asarray([(seed * 0x9E3779B97F4A7C15 + 0x632BE59BD9B4E019) & _MASK64], dtype=np.uint64))
-    k = mix64(s ^ (pixel.astype(np.uint64) * _GOLDEN))
-    return mix64(k + sample.astype(np.uint64) * _M2)
+    return path_keys_and_uniforms(_seed_key(seed), pixel, sample, _offsets(0, 0))[0]
 
 
 class PathSampler:
@@ -37,10 +43,18 @@ class PathSampler:
         self.keys = keys
         self.dimension = 0
 
+    @classmethod
+    def start(cls, seed: int, pixel: np.ndarray, sample: np.ndarray, k: int) -> tuple[PathSampler, np.ndarray]:
+        """The sampler of paths (pixel, sample) (N,) and their first k dimensions (k, N), the same
+        numbers as ``PathSampler(path_keys(seed, pixel, sample)).next(k)``, in one pass."""
+        keys, u = path_keys_and_uniforms(_seed_key(seed), pixel, sample, _offsets(0, k))
+        sampler = cls(keys)
+        sampler.dimension = k
+        return sampler, u
+
     def next(self, k: int = 1) -> np.ndarray:
-        dims = range(self.dimension + 1, self.dimension + k + 1)
+        offsets = _offsets(self.dimension, k)
         self.dimension += k
-        offsets = np.array([(d * 0x9E3779B97F4A7C15) & _MASK64 for d in dims], dtype=np.uint64)
         return uniforms(self.keys, offsets)
 
     def compact(self, keep: np.ndarray):
