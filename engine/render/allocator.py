@@ -18,7 +18,9 @@ The settings (glibc ``mallopt``; process-wide, they stay set, no-ops without gli
   (``M_TRIM_THRESHOLD``), and a 64 MiB pad that per-thread heaps keep (``M_TOP_PAD``: with
   arenas that already exist, e.g. in Blender, their heaps are then not deleted when they empty).
 
-In a process whose malloc is not glibc's (macOS, Windows, musl, a jemalloc build) nothing changes.
+In a process whose malloc is not glibc's (macOS, Windows, musl, a jemalloc build) nothing changes,
+and nothing changes inside Blender either (``bpy`` loaded): the settings are process-wide and would
+also hold Blender's own memory (images, undo steps) on its heap; there a render pays its page faults.
 """
 
 from __future__ import annotations
@@ -45,8 +47,9 @@ _libc = None          # the C library once configured, False where it is not gli
 
 
 def _glibc():
-    """The process's C library if it is glibc (has mallopt and malloc_trim), else None."""
-    if not sys.platform.startswith("linux"):
+    """The process's C library if it is glibc (has mallopt and malloc_trim) and the process is not
+    Blender's (a host application's allocator is not ours to tune), else None."""
+    if not sys.platform.startswith("linux") or "bpy" in sys.modules:
         return None
     try:
         libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
