@@ -87,47 +87,53 @@ def _slope_cdf(x, t, coef, k):
 
 
 @jit
+def visible_slope_x_at(t, u1, coef, k):
+    """x̃ for one tanθ = ``t`` ≥ 0 and u1 ∈ [0, 1) (``coef``, ``k``: ERFCX_COEF, ERFCX_K); the loop body
+    of the compiled twin, also called per path by the Torrance–Sparrow kernels."""
+    cot = 1.0 / t if t > 0 else np.inf
+    lo = -8.0
+    hi = min(cot, 8.0)
+    z = _slope_cdf(min(cot, 30.0), t, coef, k)
+    u = min(max(u1, 0.0), 1.0)
+    uc = min(max(u, 1e-300), 1.0 - 1e-16)
+    if uc < 0.5:
+        xg = -erfcinv_giles_scalar(2.0 * uc)
+    else:
+        xg = erfcinv_giles_scalar(2.0 * (1.0 - uc))
+    arg = uc * z * SQRT_PI / max(t, 1e-300)
+    xr = -np.sqrt(max(-np.log(min(arg, 1.0)), 0.0))
+    x = min(xr, hi) if t > 1.0 else xg
+    if not (x > lo and x < hi):
+        x = 0.5 * (lo + max(hi, lo))
+    target = u * z
+    tol = 1e-14 * z
+    for _ in range(100):
+        f = _slope_cdf(x, t, coef, k) - target
+        hit = abs(f) <= tol
+        if f < 0:
+            lo = x
+        if f > 0:
+            hi = x
+        g = _TWO_OVER_SQRT_PI * np.exp(-x * x)
+        d1 = g * (1.0 - x * t)
+        d2 = -g * (2.0 * x * (1.0 - x * t) + t)
+        den = 2.0 * d1 * d1 - f * d2
+        ok = d1 > 0 and den > 0
+        newton = x - 2.0 * f * d1 / (den if ok else 1.0)
+        inside = ok and newton > lo and newton < hi
+        xn = x if hit else (newton if inside else 0.5 * (lo + hi))
+        done = hit or (inside and abs(newton - x) <= 1e-6 * (1.0 + abs(x))) or \
+            (hi - lo <= 1e-15 * (1.0 + abs(x)))
+        x = xn
+        if done:
+            break
+    return x
+
+
+@jit
 def _visible_slope_x_loop(tan_t, u1, coef, k, out):
     for i in range(tan_t.shape[0]):
-        t = tan_t[i]
-        cot = 1.0 / t if t > 0 else np.inf
-        lo = -8.0
-        hi = min(cot, 8.0)
-        z = _slope_cdf(min(cot, 30.0), t, coef, k)
-        u = min(max(u1[i], 0.0), 1.0)
-        uc = min(max(u, 1e-300), 1.0 - 1e-16)
-        if uc < 0.5:
-            xg = -erfcinv_giles_scalar(2.0 * uc)
-        else:
-            xg = erfcinv_giles_scalar(2.0 * (1.0 - uc))
-        arg = uc * z * SQRT_PI / max(t, 1e-300)
-        xr = -np.sqrt(max(-np.log(min(arg, 1.0)), 0.0))
-        x = min(xr, hi) if t > 1.0 else xg
-        if not (x > lo and x < hi):
-            x = 0.5 * (lo + max(hi, lo))
-        target = u * z
-        tol = 1e-14 * z
-        for _ in range(100):
-            f = _slope_cdf(x, t, coef, k) - target
-            hit = abs(f) <= tol
-            if f < 0:
-                lo = x
-            if f > 0:
-                hi = x
-            g = _TWO_OVER_SQRT_PI * np.exp(-x * x)
-            d1 = g * (1.0 - x * t)
-            d2 = -g * (2.0 * x * (1.0 - x * t) + t)
-            den = 2.0 * d1 * d1 - f * d2
-            ok = d1 > 0 and den > 0
-            newton = x - 2.0 * f * d1 / (den if ok else 1.0)
-            inside = ok and newton > lo and newton < hi
-            xn = x if hit else (newton if inside else 0.5 * (lo + hi))
-            done = hit or (inside and abs(newton - x) <= 1e-6 * (1.0 + abs(x))) or \
-                (hi - lo <= 1e-15 * (1.0 + abs(x)))
-            x = xn
-            if done:
-                break
-        out[i] = x
+        out[i] = visible_slope_x_at(tan_t[i], u1[i], coef, k)
 
 
 def visible_slope_x_numba(tan_t, u1):
