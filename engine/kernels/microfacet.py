@@ -80,7 +80,12 @@ def visible_slope_x_numpy(tan_t: np.ndarray, u1: np.ndarray) -> np.ndarray:
 
 @jit
 def _slope_cdf(x, t, coef, k):
-    e = np.exp(-x * x)
+    return _slope_cdf_e(x, np.exp(-x * x), t, coef, k)
+
+
+@jit
+def _slope_cdf_e(x, e, t, coef, k):
+    """F(x) given e = e^{−x²} (the Halley step needs the same exponential)."""
     r = erfcx_nonneg_scalar(abs(x), coef, k)
     tp = t * _INV_SQRT_PI
     return e * (r + tp) if x < 0 else 2.0 + e * (tp - r)
@@ -108,13 +113,14 @@ def visible_slope_x_at(t, u1, coef, k):
     target = u * z
     tol = 1e-14 * z
     for _ in range(100):
-        f = _slope_cdf(x, t, coef, k) - target
+        e = np.exp(-x * x)
+        f = _slope_cdf_e(x, e, t, coef, k) - target
         hit = abs(f) <= tol
         if f < 0:
             lo = x
         if f > 0:
             hi = x
-        g = _TWO_OVER_SQRT_PI * np.exp(-x * x)
+        g = _TWO_OVER_SQRT_PI * e
         d1 = g * (1.0 - x * t)
         d2 = -g * (2.0 * x * (1.0 - x * t) + t)
         den = 2.0 * d1 * d1 - f * d2

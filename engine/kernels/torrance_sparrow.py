@@ -136,9 +136,14 @@ def p_spec_at(i, cos_o, p_given, use_given, eta, s, w_d):
     if use_given:
         return p_given[i]
     c = min(max(cos_o, 0.0), 1.0)
-    F = abcs_at(c, eta[0, i])[0]
+    e = eta[0, i]
+    F0 = abcs_at(c, e)[0]
+    F = F0
     for lam in range(1, eta.shape[0]):
-        F += abcs_at(c, eta[lam, i])[0]
+        if eta[lam, i] != e:
+            e = eta[lam, i]
+            F0 = abcs_at(c, e)[0]
+        F += F0
     w_s = s[i] * (F / eta.shape[0])
     tot = w_s + w_d[i]
     p = w_s / tot if tot > 0 else 0.5
@@ -187,8 +192,12 @@ def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, kind, coef
         G = shadowing_at(kind, li0, li1, li2, lo0, lo1, lo2, h0, h1, h2, m, coef, k)
         fr = s * D * G / (4.0 * (li2 * lo2))
         c = min(0.5 * length, 1.0)
+    e = eta[0, i]
+    a_, b_, c_, s_ = abcs_at(c, e)
     for lam in range(eta.shape[0]):
-        a_, b_, c_, s_ = abcs_at(c, eta[lam, i])
+        if lam > 0 and eta[lam, i] != e:    # a constant index: one Fresnel evaluation serves every λ
+            e = eta[lam, i]
+            a_, b_, c_, s_ = abcs_at(c, e)
         A[lam, i] = a_ * fr * factor
         B[lam, i] = b_ * fr * factor
         C[lam, i] = c_ * fr * factor
