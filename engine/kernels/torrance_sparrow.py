@@ -20,15 +20,12 @@ import math
 import numpy as np
 
 from . import jit
-from .error_function import ERFCX_COEF, ERFCX_K, SQRT_PI, erfcinv_giles_scalar, erfcx_nonneg_scalar
+from .error_function import ERFCX_COEF, ERFCX_K
 from .fresnel import abcs_at
-from .microfacet import visible_slope_x_at
+from .microfacet import chi_plus_at, beckmann_d_at, beckmann_g1_at, beckmann_lambda_at, beckmann_vndf_at, smith_a_at
 
 #: The shadowing names of engine.materials.microfacet.SHADOWING, by kernel code.
 SHADOWING_CODES = {"ts": 0, "smith": 1, "smith_rational": 2, "none": 3}
-_INV_SQRT_PI = 1.0 / SQRT_PI
-_HALF_SQRT_PI = 0.5 * SQRT_PI
-_EXP_CUTOFF = 800.0           # engine.materials.microfacet._EXP_CUTOFF
 _DEGENERATE = 1e-12           # engine.polarisation.frames._DEGENERATE
 _PI = math.pi
 _ERFCX_COEF = np.ascontiguousarray(ERFCX_COEF, dtype=np.float64)
@@ -50,54 +47,6 @@ def local_frame_at(n0, n1, n2):
 
 
 @jit
-def beckmann_d_at(h0, h1, h2, m):
-    """Beckmann D(h) (engine.materials.microfacet.Beckmann.D)."""
-    xy2 = h0 * h0 + h1 * h1
-    z2 = h2 * h2
-    if z2 > 0:
-        t2 = xy2 / z2
-    else:
-        t2 = np.inf if xy2 > 0 else 0.0
-    x = t2 / (m * m)
-    if not (h2 > 0 and x <= _EXP_CUTOFF):
-        return 0.0
-    one_t = 1.0 + t2
-    return np.exp(-x) * (one_t * one_t) / (_PI * m * m)
-
-
-@jit
-def smith_a_at(w0, w1, w2, m):
-    """a = cosθ/(m sinθ) (∞ at normal incidence)."""
-    sin_t = np.sqrt(w0 * w0 + w1 * w1)
-    return abs(w2) / (m * sin_t) if sin_t > 0 else np.inf
-
-
-@jit
-def beckmann_lambda_at(a, coef, k):
-    """Smith Λ(a) of engine.materials.microfacet.beckmann_lambda."""
-    if a > 0 and a <= 6.0:
-        lam = 0.5 * np.exp(-a * a) * (_INV_SQRT_PI / a - erfcx_nonneg_scalar(a, coef, k))
-        return max(lam, 0.0)
-    return 0.0 if a > 0 else np.inf
-
-
-@jit
-def _chi_plus(w0, w1, w2, h0, h1, h2):
-    return 1.0 if (w0 * h0 + w1 * h1 + w2 * h2) * w2 > 0 else 0.0
-
-
-@jit
-def _g1(w0, w1, w2, h0, h1, h2, m, rational, coef, k):
-    """Smith G1 of engine.materials.microfacet (exact, or Walter's rational form)."""
-    a = smith_a_at(w0, w1, w2, m)
-    if rational:
-        af = min(a, 1.6)
-        g = 1.0 if a >= 1.6 else (3.535 * af + 2.181 * af * af) / (1.0 + 2.276 * af + 2.577 * af * af)
-        return g * _chi_plus(w0, w1, w2, h0, h1, h2)
-    return _chi_plus(w0, w1, w2, h0, h1, h2) / (1.0 + beckmann_lambda_at(a, coef, k))
-
-
-@jit
 def shadowing_at(kind, i0, i1, i2, o0, o1, o2, h0, h1, h2, m, coef, k):
     """G of engine.materials.microfacet.shadowing_term for the kernel code ``kind``."""
     if kind == 0:
@@ -109,9 +58,10 @@ def shadowing_at(kind, i0, i1, i2, o0, o1, o2, h0, h1, h2, m, coef, k):
         g_i = 2.0 * h2 * i2 / di
         return min(1.0, min(g_o, g_i))
     if kind == 3:
-        return _chi_plus(i0, i1, i2, h0, h1, h2) * _chi_plus(o0, o1, o2, h0, h1, h2)
+        return chi_plus_at(i0, i1, i2, h0, h1, h2) * chi_plus_at(o0, o1, o2, h0, h1, h2)
     rational = kind == 2
-    return _g1(i0, i1, i2, h0, h1, h2, m, rational, coef, k) * _g1(o0, o1, o2, h0, h1, h2, m, rational, coef, k)
+    return (beckmann_g1_at(i0, i1, i2, h0, h1, h2, m, rational, coef, k)
+            * beckmann_g1_at(o0, o1, o2, h0, h1, h2, m, rational, coef, k))
 
 
 @jit
@@ -148,25 +98,6 @@ def p_spec_at(i, cos_o, p_given, use_given, eta, s, w_d):
     tot = w_s + w_d[i]
     p = w_s / tot if tot > 0 else 0.5
     return min(max(p, 0.1), 0.9)
-
-
-@jit
-def erfinv_2u_minus_1_at(u, coef, k):
-    """engine.kernels.error_function.erfinv_2u_minus_1 for one u (Giles' start, the same Newton steps)."""
-    u = min(max(u, 1e-16), 1.0 - 1e-16)
-    lower = u < 0.5
-    q = 2.0 * (u if lower else 1.0 - u)
-    q = min(max(q, 1e-300), 1.0)
-    x = erfcinv_giles_scalar(q)
-    log_q = np.log(q)
-    for _ in range(12):
-        ex = erfcx_nonneg_scalar(x, coef, k)
-        step = (np.log(ex) - x * x - log_q) * _HALF_SQRT_PI * ex
-        xn = max(x + step, 0.0)
-        x = xn
-        if not abs(step) > 1e-9 * (1.0 + xn):
-            break
-    return -x if lower else x
 
 
 @jit
@@ -278,19 +209,7 @@ def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, kind, p_given, use_given, w_
         mi = m[i]
         if pick_spec and cos_o > 0:
             # visible-normal sampling (engine.materials.microfacet.Beckmann.sample)
-            sxy = np.sqrt(lo0 * lo0 + lo1 * lo1)
-            cz = max(cos_o, 0.0)
-            tan_t = min(mi * sxy / cz if cz > 0 else 1e300, 1e300)
-            if sxy > 0:
-                cos_p, sin_p = lo0 / sxy, lo1 / sxy
-            else:
-                cos_p, sin_p = 1.0, 0.0
-            sx = visible_slope_x_at(tan_t, u_dir[0, i], coef, k)
-            sy = erfinv_2u_minus_1_at(u_dir[1, i], coef, k)
-            hx = mi * (cos_p * sx - sin_p * sy)
-            hy = mi * (sin_p * sx + cos_p * sy)
-            r = np.sqrt(hx * hx + hy * hy + 1.0)
-            h0, h1, h2 = -hx / r, -hy / r, 1.0 / r
+            h0, h1, h2 = beckmann_vndf_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi, coef, k)
             d = lo0 * h0 + lo1 * h1 + cos_o * h2
             l0 = 2.0 * d * h0 - lo0
             l1 = 2.0 * d * h1 - lo1

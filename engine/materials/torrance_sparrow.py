@@ -430,10 +430,6 @@ class TorranceSparrow(BSDF):
             return np.clip(p, *P_SPEC_RANGE), None
         return None, sp.number(self.d) * sp.spectrum(self.albedo).mean(axis=0)
 
-    @staticmethod
-    def _specular_pdf_local(dist, wo_l, wi_l) -> np.ndarray:
-        return _specular_pdf_local(dist, wo_l, wi_l)
-
     @property
     def _compiled_lobe(self) -> bool:
         """The facet lobe runs as the Beckmann twins (engine.kernels.torrance_sparrow)."""
