@@ -548,10 +548,11 @@ def test_wavelength_sampling_and_rgb_weights_bitwise(count):
 
 # ----------------------------------------------------------------------------- Torrance–Sparrow passes
 
-def _ts_batch(seed, L, constant_eta):
+def _ts_batch(seed, L, eta_kind):
     """Shading points with the frames' edge cases: normals along ±z (the local frame's branch), viewers
     behind the surface, wi = −wo (no half vector), wi = wo (backscatter: the scattering plane's
-    fallback axis), grazing wi; per-point m and s; an index constant over λ or not."""
+    fallback axis), grazing wi; per-point m and s; an index constant over λ and the batch (given once,
+    (1, 1)), or per point and λ (partly constant over λ)."""
     rng = np.random.default_rng(seed)
     n = 3000
     n_s = unit(rng, n)
@@ -564,8 +565,8 @@ def _ts_batch(seed, L, constant_eta):
     wi[:, 60:80] = wo[:, 60:80]
     t = np.cross(n_s[:, 80:100].T, rng.normal(size=(20, 3))).T
     wi[:, 80:100] = t / np.linalg.norm(t, axis=0)                 # grazing
-    if constant_eta:
-        eta = np.broadcast_to(np.array([[0.47 + 2.4j]]), (L, n))
+    if eta_kind == "constant":
+        eta = np.array([[0.47 + 2.4j]])
     else:
         eta = rng.uniform(0.2, 2.5, (L, n)) + 1j * rng.uniform(0, 4, (L, n))
         eta[:, :1000] = eta[:1, :1000]                             # partly constant over λ
@@ -575,6 +576,8 @@ def _ts_batch(seed, L, constant_eta):
     s = rng.uniform(0, 2, n)
     w_d = rng.uniform(0, 1, n)
     w_d[300:320] = 0.0
+    if eta_kind == "constant":
+        m, s = 0.3, 0.8                                            # numbers, as for untextured parameters
     return rng, n_s, wo, wi, eta, m, s, w_d
 
 
@@ -586,12 +589,12 @@ def _bitwise(got, want):
 
 @needs_numba
 @pytest.mark.parametrize("shadowing", ["ts", "smith", "smith_rational", "none"])
-@pytest.mark.parametrize("L,constant_eta", [(4, True), (4, False), (1, False)])
-def test_torrance_sparrow_eval_bitwise(shadowing, L, constant_eta):
+@pytest.mark.parametrize("L,eta_kind", [(4, "constant"), (4, "varying"), (1, "varying"), (1, "constant")])
+def test_torrance_sparrow_eval_bitwise(shadowing, L, eta_kind):
     from engine.materials import torrance_sparrow as ts
-    _, n_s, wo, wi, eta, m, s, _ = _ts_batch(1, L, constant_eta)
-    got = ts.torrance_sparrow_eval_numba(n_s, wo, wi, eta, s, m, shadowing)
-    want = ts.torrance_sparrow_eval_numpy(n_s, wo, wi, eta, s, m, shadowing)
+    _, n_s, wo, wi, eta, m, s, _ = _ts_batch(1, L, eta_kind)
+    got = ts.torrance_sparrow_eval_numba(n_s, wo, wi, eta, L, s, m, shadowing)
+    want = ts.torrance_sparrow_eval_numpy(n_s, wo, wi, eta, L, s, m, shadowing)
     _bitwise(got, want)
     assert 0 < want[5].sum() < n_s.shape[1] and np.count_nonzero(want[1]) > 1000
 
@@ -599,24 +602,24 @@ def test_torrance_sparrow_eval_bitwise(shadowing, L, constant_eta):
 @needs_numba
 @pytest.mark.parametrize("p_kind", ["fresnel", "given", "specular_only"])
 @pytest.mark.parametrize("has_diffuse", [False, True])
-@pytest.mark.parametrize("constant_eta", [True, False])
-def test_torrance_sparrow_pdf_and_sample_bitwise(p_kind, has_diffuse, constant_eta):
+@pytest.mark.parametrize("eta_kind", ["constant", "varying"])
+def test_torrance_sparrow_pdf_and_sample_bitwise(p_kind, has_diffuse, eta_kind):
     """The mixture pdf and the sampled direction, pdf, validity, weight and frame: the same bits as
     the material's NumPy steps (lobe choice by the Fresnel estimate or a given P_spec)."""
     from engine.materials import torrance_sparrow as ts
-    rng, n_s, wo, wi, eta, m, s, w_d = _ts_batch(2, 4, constant_eta)
+    rng, n_s, wo, wi, eta, m, s, w_d = _ts_batch(2, 4, eta_kind)
     n = n_s.shape[1]
     p_given = {"fresnel": None, "given": np.clip(rng.uniform(size=n), 0.1, 0.9), "specular_only": np.ones(n)}[p_kind]
-    got = ts.torrance_sparrow_pdf_numba(n_s, wo, wi, m, p_given, eta, s, w_d, True, has_diffuse)
-    want = ts.torrance_sparrow_pdf_numpy(n_s, wo, wi, m, p_given, eta, s, w_d, True, has_diffuse)
+    got = ts.torrance_sparrow_pdf_numba(n_s, wo, wi, m, p_given, eta, 4, s, w_d, True, has_diffuse)
+    want = ts.torrance_sparrow_pdf_numpy(n_s, wo, wi, m, p_given, eta, 4, s, w_d, True, has_diffuse)
     assert np.array_equal(got, want)
     u_lobe = rng.uniform(size=n)
     u_dir = rng.uniform(size=(2, n))
     u_dir[:, :4] = [[0.5, 0.0, 1 - 1e-16, 0.25], [0.5, 0.0, 1e-300, 0.25]]
     for shadowing in ("ts", "smith_rational"):
-        got = ts.torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, s, m, shadowing, p_given, w_d,
+        got = ts.torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, 4, s, m, shadowing, p_given, w_d,
                                                has_diffuse)
-        want = ts.torrance_sparrow_sample_numpy(n_s, wo, u_lobe, u_dir, eta, s, m, shadowing, p_given, w_d,
+        want = ts.torrance_sparrow_sample_numpy(n_s, wo, u_lobe, u_dir, eta, 4, s, m, shadowing, p_given, w_d,
                                                 has_diffuse)
         _bitwise(got, want)
         assert 0.3 * n < want[2].sum() < n
@@ -638,6 +641,8 @@ def test_torrance_sparrow_material_uses_the_declared_twins():
     for mat in (TorranceSparrow(0.47, 2.4, 0.3, shadowing="smith_rational"),
                 TorranceSparrow(1.5, 0.0, 0.3, distribution="blinn", diffuse_albedo=0.5, diffuse_weight=1.0),
                 TorranceSparrow(1.5, 0.0, 0.3, specular_weight=0.0, diffuse_albedo=0.5, diffuse_weight=1.0)):
+        eta = mat.relative_eta(sp)
+        assert np.array_equal(np.broadcast_to(mat._eta(sp), eta.shape), eta)     # the index given once: same bits
         bs = mat.sample(sp, u[0], u[1:])
         ok = bs.valid
         assert ok.sum() > n // 3

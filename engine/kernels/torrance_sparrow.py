@@ -33,6 +33,20 @@ _ERFCX_K = float(ERFCX_K)
 
 
 # ----------------------------------------------------------------------------- per-path pieces
+# Per-point inputs may be given once for the batch: arrays of length 1 (a number), an index of
+# shape (1, 1), (1, N), (L, 1) or (L, N) (a constant index is not spread over the batch).
+
+@jit
+def at(v, i):
+    """v[i], or v[0] for a number given as a one-element array."""
+    return v[i if v.shape[0] > 1 else 0]
+
+
+@jit
+def eta_at(eta, lam, i):
+    """The relative index at row ``lam`` and path ``i`` of a broadcast (rows, columns) array."""
+    return eta[lam if eta.shape[0] > 1 else 0, i if eta.shape[1] > 1 else 0]
+
 
 @jit
 def local_frame_at(n0, n1, n2):
@@ -80,22 +94,22 @@ def specular_pdf_at(i0, i1, i2, o0, o1, o2, m, coef, k):
 
 
 @jit
-def p_spec_at(i, cos_o, p_given, use_given, eta, s, w_d):
+def p_spec_at(i, cos_o, p_given, use_given, eta, L, s, w_d):
     """Probability of the specular lobe (TorranceSparrow._p_spec): ``p_given[i]``, or from the mean
     unpolarised Fresnel reflectance at the macro angle against the diffuse weight ``w_d[i]``."""
     if use_given:
-        return p_given[i]
+        return at(p_given, i)
     c = min(max(cos_o, 0.0), 1.0)
-    e = eta[0, i]
+    e = eta_at(eta, 0, i)
     F0 = abcs_at(c, e)[0]
     F = F0
-    for lam in range(1, eta.shape[0]):
-        if eta[lam, i] != e:
-            e = eta[lam, i]
+    for lam in range(1, L):      # the mean over the L wavelengths, summed in order as NumPy's mean(axis=0)
+        if eta_at(eta, lam, i) != e:
+            e = eta_at(eta, lam, i)
             F0 = abcs_at(c, e)[0]
         F += F0
-    w_s = s[i] * (F / eta.shape[0])
-    tot = w_s + w_d[i]
+    w_s = at(s, i) * (F / L)
+    tot = w_s + at(w_d, i)
     p = w_s / tot if tot > 0 else 0.5
     return min(max(p, 0.1), 0.9)
 
@@ -123,11 +137,11 @@ def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, kind, coef
         G = shadowing_at(kind, li0, li1, li2, lo0, lo1, lo2, h0, h1, h2, m, coef, k)
         fr = s * D * G / (4.0 * (li2 * lo2))
         c = min(0.5 * length, 1.0)
-    e = eta[0, i]
+    e = eta_at(eta, 0, i)
     a_, b_, c_, s_ = abcs_at(c, e)
-    for lam in range(eta.shape[0]):
-        if lam > 0 and eta[lam, i] != e:    # a constant index: one Fresnel evaluation serves every λ
-            e = eta[lam, i]
+    for lam in range(A.shape[0]):
+        if lam > 0 and eta_at(eta, lam, i) != e:    # a constant index: one Fresnel evaluation serves every λ
+            e = eta_at(eta, lam, i)
             a_, b_, c_, s_ = abcs_at(c, e)
         A[lam, i] = a_ * fr * factor
         B[lam, i] = b_ * fr * factor
@@ -178,18 +192,18 @@ def _eval_loop(n_s, wo, wi, eta, s, m, kind, coef, k, A, B, C, S, x, valid):
     for i in range(n_s.shape[1]):
         n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
         t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
-        valid[i] = eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s[i], m[i], kind, coef, k, 1.0,
+        valid[i] = eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, at(s, i), at(m, i), kind, coef, k, 1.0,
                            A, B, C, S, x)
 
 
 @jit
-def _pdf_loop(n_s, wo, wi, m, p_given, use_given, eta, s, w_d, has_specular, has_diffuse, coef, k, out):
+def _pdf_loop(n_s, wo, wi, m, p_given, use_given, eta, L, s, w_d, has_specular, has_diffuse, coef, k, out):
     for i in range(n_s.shape[1]):
         n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
         t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
         cos_o = (wo[0, i] * n0 + wo[1, i] * n1) + wo[2, i] * n2
-        p = p_spec_at(i, cos_o, p_given, use_given, eta, s, w_d)
-        out[i] = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m[i], p, has_specular, has_diffuse,
+        p = p_spec_at(i, cos_o, p_given, use_given, eta, L, s, w_d)
+        out[i] = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, at(m, i), p, has_specular, has_diffuse,
                         coef, k)
 
 
@@ -203,10 +217,10 @@ def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, kind, p_given, use_given, w_
         lo0 = o0 * t0 + o1 * t1 + o2 * t2
         lo1 = o0 * b0 + o1 * b1 + o2 * b2
         cos_o = o0 * n0 + o1 * n1 + o2 * n2
-        p = p_spec_at(i, cos_o, p_given, use_given, eta, s, w_d)
+        p = p_spec_at(i, cos_o, p_given, use_given, eta, A.shape[0], s, w_d)
         pick_spec = u_lobe[i] < p
         l0 = l1 = l2 = 0.0
-        mi = m[i]
+        mi = at(m, i)
         if pick_spec and cos_o > 0:
             # visible-normal sampling (engine.materials.microfacet.Beckmann.sample)
             h0, h1, h2 = beckmann_vndf_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi, coef, k)
@@ -238,23 +252,23 @@ def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, kind, p_given, use_given, w_
         valid[i] = ok
         pdf[i] = q if ok else 0.0
         factor[i] = f
-        eval_valid[i] = eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s[i], mi, kind, coef, k, f,
+        eval_valid[i] = eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, at(s, i), mi, kind, coef, k, f,
                                 A, B, C, S, x)
 
 
 # ----------------------------------------------------------------------------- wrappers (the compiled twins)
 
 def _per_point(v, n):
-    """A number or (n,) array as a contiguous float64 (n,) array."""
+    """A number as a one-element array, else (n,) contiguous float64 (read with ``at``)."""
+    if np.ndim(v) == 0:
+        return np.array([float(v)])
     return np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)))
 
 
-def _eta_rows(eta, n):
-    """The relative index (L, n) complex128 (a row or column broadcast over the batch)."""
+def _eta_rows(eta):
+    """The relative index as a 2-D complex128 array, not spread over the batch (read with ``eta_at``)."""
     e = np.asarray(eta, dtype=np.complex128)
-    if e.ndim < 2:
-        e = e.reshape(1, -1) if e.ndim == 1 else e.reshape(1, 1)
-    return np.ascontiguousarray(np.broadcast_to(e, (e.shape[0], n)))
+    return np.ascontiguousarray(e.reshape((1,) * (2 - e.ndim) + e.shape))
 
 
 def _p_inputs(p_given, w_d, n):
@@ -263,45 +277,40 @@ def _p_inputs(p_given, w_d, n):
             np.zeros(1) if use_given else _per_point(w_d, n))
 
 
-def _coef():
-    return _ERFCX_COEF, _ERFCX_K
+def _f64(a):
+    return np.ascontiguousarray(a, dtype=np.float64)
 
 
-def torrance_sparrow_eval_numba(n_s, wo, wi, eta, s, m, shadowing):
+def torrance_sparrow_eval_numba(n_s, wo, wi, eta, L, s, m, shadowing):
     n = n_s.shape[1]
-    e = _eta_rows(eta, n)
-    A, B, C, S = (np.empty(e.shape) for _ in range(4))
+    A, B, C, S = (np.empty((L, n)) for _ in range(4))
     x, valid = np.empty((3, n)), np.empty(n, np.bool_)
-    _eval_loop(np.ascontiguousarray(n_s, dtype=np.float64), np.ascontiguousarray(wo, dtype=np.float64),
-               np.ascontiguousarray(wi, dtype=np.float64), e, _per_point(s, n), _per_point(m, n),
-               SHADOWING_CODES[shadowing], *_coef(), A, B, C, S, x, valid)
+    _eval_loop(_f64(n_s), _f64(wo), _f64(wi), _eta_rows(eta), _per_point(s, n), _per_point(m, n),
+               SHADOWING_CODES[shadowing], _ERFCX_COEF, _ERFCX_K, A, B, C, S, x, valid)
     return x, A, B, C, S, valid
 
 
-def torrance_sparrow_pdf_numba(n_s, wo, wi, m, p_given, eta, s, w_d, has_specular, has_diffuse):
+def torrance_sparrow_pdf_numba(n_s, wo, wi, m, p_given, eta, L, s, w_d, has_specular, has_diffuse):
     n = n_s.shape[1]
     p, use_given, wd = _p_inputs(p_given, w_d, n)
     out = np.empty(n)
-    _pdf_loop(np.ascontiguousarray(n_s, dtype=np.float64), np.ascontiguousarray(wo, dtype=np.float64),
-              np.ascontiguousarray(wi, dtype=np.float64), _per_point(m, n), p, use_given,
-              _eta_rows(eta, n) if not use_given else np.zeros((1, 1), np.complex128),
-              _per_point(s, n) if not use_given else np.zeros(1), wd, bool(has_specular), bool(has_diffuse),
-              *_coef(), out)
+    _pdf_loop(_f64(n_s), _f64(wo), _f64(wi), _per_point(m, n), p, use_given,
+              np.zeros((1, 1), np.complex128) if use_given else _eta_rows(eta), int(L),
+              np.zeros(1) if use_given else _per_point(s, n), wd, bool(has_specular), bool(has_diffuse),
+              _ERFCX_COEF, _ERFCX_K, out)
     return out
 
 
-def torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, s, m, shadowing, p_given, w_d, has_diffuse):
+def torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowing, p_given, w_d, has_diffuse):
     n = n_s.shape[1]
-    e = _eta_rows(eta, n)
     p, use_given, wd = _p_inputs(p_given, w_d, n)
-    A, B, C, S = (np.empty(e.shape) for _ in range(4))
+    A, B, C, S = (np.empty((L, n)) for _ in range(4))
     wi, x = np.empty((3, n)), np.empty((3, n))
     pdf, factor = np.empty(n), np.empty(n)
     valid, eval_valid = np.empty(n, np.bool_), np.empty(n, np.bool_)
-    _sample_loop(np.ascontiguousarray(n_s, dtype=np.float64), np.ascontiguousarray(wo, dtype=np.float64),
-                 _per_point(u_lobe, n), np.ascontiguousarray(u_dir, dtype=np.float64), e, _per_point(s, n),
-                 _per_point(m, n), SHADOWING_CODES[shadowing], p, use_given, wd, bool(has_diffuse), *_coef(),
-                 wi, pdf, valid, factor, A, B, C, S, x, eval_valid)
+    _sample_loop(_f64(n_s), _f64(wo), _per_point(u_lobe, n), _f64(u_dir), _eta_rows(eta), _per_point(s, n),
+                 _per_point(m, n), SHADOWING_CODES[shadowing], p, use_given, wd, bool(has_diffuse),
+                 _ERFCX_COEF, _ERFCX_K, wi, pdf, valid, factor, A, B, C, S, x, eval_valid)
     return wi, pdf, valid, factor, x, A, B, C, S, eval_valid
 
 

@@ -260,19 +260,23 @@ def _mixture_sample(dist, n_s, wo, u_lobe, u_dir, p_given, eta, s, w_d, has_spec
     return wi, np.where(valid, pdf, 0.0), valid, factor
 
 
-def torrance_sparrow_eval_numpy(n_s, wo, wi, eta, s, m, shadowing):
-    """(x, A, B, C, S, valid) of the Beckmann facet lobe with roughness m (N,) (``_facet_eval``)."""
+def torrance_sparrow_eval_numpy(n_s, wo, wi, eta, L, s, m, shadowing):
+    """(x, A, B, C, S, valid) of the Beckmann facet lobe with roughness m (``_facet_eval``); eta
+    broadcasts to (L, N)."""
+    eta = np.broadcast_to(eta, (L, n_s.shape[1]))
     return _facet_eval(Beckmann.per_point(m), n_s, wo, wi, eta, s, shadowing)
 
 
-def torrance_sparrow_pdf_numpy(n_s, wo, wi, m, p_given, eta, s, w_d, has_specular, has_diffuse):
-    """The mixture pdf (N,) with Beckmann facets of roughness m (N,) (``_mixture_pdf``)."""
+def torrance_sparrow_pdf_numpy(n_s, wo, wi, m, p_given, eta, L, s, w_d, has_specular, has_diffuse):
+    """The mixture pdf (N,) with Beckmann facets of roughness m (``_mixture_pdf``)."""
+    eta = np.broadcast_to(eta, (L, n_s.shape[1]))
     return _mixture_pdf(Beckmann.per_point(m), n_s, wo, wi, p_given, eta, s, w_d, has_specular, has_diffuse)
 
 
-def torrance_sparrow_sample_numpy(n_s, wo, u_lobe, u_dir, eta, s, m, shadowing, p_given, w_d, has_diffuse):
-    """(wi, pdf, valid, factor, x, A, B, C, S, eval_valid) of a Beckmann facet lobe (roughness m (N,))
+def torrance_sparrow_sample_numpy(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowing, p_given, w_d, has_diffuse):
+    """(wi, pdf, valid, factor, x, A, B, C, S, eval_valid) of a Beckmann facet lobe (roughness m)
     and an optional diffuse lobe: ``_mixture_sample``, then ``_facet_eval`` at wi with A..S times factor."""
+    eta = np.broadcast_to(eta, (L, n_s.shape[1]))
     dist = Beckmann.per_point(m)
     wi, pdf, valid, factor = _mixture_sample(dist, n_s, wo, u_lobe, u_dir, p_given, eta, s, w_d, True, has_diffuse)
     x, A, B, C, S, eval_valid = _facet_eval(dist, n_s, wo, wi, eta, s, shadowing)
@@ -354,6 +358,9 @@ class TorranceSparrow(BSDF):
         self.has_diffuse = positive(self.d) and self.albedo is not None
         self.varies_over_surface = textured(self.n, self.k, self.m, self.s, self.d, self.albedo)
         self._albedo = None
+        self._eta_constant = None
+        if isinstance(self.n, ConstantSpectrum) and isinstance(self.k, ConstantSpectrum):
+            self._eta_constant = (np.full((1, 1), self.n.value) + 1j * np.full((1, 1), self.k.value)) / self.exterior_n
         if diffuse_layering == "albedo_scaling" and self.has_specular and self.has_diffuse:
             self._albedo = self._albedo_table()
         constant = all(getattr(v, "is_constant", False) for v in
@@ -457,7 +464,7 @@ class TorranceSparrow(BSDF):
             depol = self._depol(sp, valid, lambda: cos_o)
             return depolarising_value(depol if depol is not None else np.zeros((sp.lam.shape[0], sp.n)), sp.n)
         if self._compiled_lobe:
-            x, A, B, C, S, valid = torrance_sparrow_eval(sp.n_s, sp.wo, wi, self.relative_eta(sp),
+            x, A, B, C, S, valid = torrance_sparrow_eval(sp.n_s, sp.wo, wi, self._eta(sp), sp.lam.shape[0],
                                                          sp.number(self.s), self._m(sp), self.shadowing)
         else:
             x, A, B, C, S, valid = _facet_eval(self._dist(sp), sp.n_s, sp.wo, wi, self.relative_eta(sp),
@@ -468,24 +475,32 @@ class TorranceSparrow(BSDF):
         """The Beckmann roughness at the points: a number, or (N,) for a textured m."""
         return sp.number(self.m)
 
-    def _mixture_inputs(self, sp: ShadingPoint):
-        """(p_given, eta, s, w_d) for the mixture pdf and sampling."""
-        p_given, w_d = self._p_spec_inputs(sp, sp.cos_o)
-        return p_given, self.relative_eta(sp), sp.number(self.s), w_d
+    def _eta(self, sp: ShadingPoint) -> np.ndarray:
+        """The relative index for the twins: (1, 1) for constant n and κ (the value every entry of
+        ``relative_eta`` has, computed the same way), else ``relative_eta`` (L, N)."""
+        if self._eta_constant is not None:
+            return self._eta_constant
+        return self.relative_eta(sp)
+
+    def _mixture_inputs(self, sp: ShadingPoint, compact: bool = False):
+        """(p_given, eta, s, w_d) for the mixture pdf and sampling (``compact``: eta as ``_eta``)."""
+        p_given, w_d = self._p_spec_inputs(sp, sp.cos_o if self._albedo is not None else None)
+        return p_given, self._eta(sp) if compact else self.relative_eta(sp), sp.number(self.s), w_d
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        p_given, eta, s, w_d = self._mixture_inputs(sp)
+        p_given, eta, s, w_d = self._mixture_inputs(sp, compact=self._compiled_lobe)
         if self._compiled_lobe:
-            return torrance_sparrow_pdf(sp.n_s, sp.wo, wi, self._m(sp), p_given, eta, s, w_d, True,
+            return torrance_sparrow_pdf(sp.n_s, sp.wo, wi, self._m(sp), p_given, eta, sp.lam.shape[0], s, w_d, True,
                                         self.has_diffuse)
         return _mixture_pdf(self._dist(sp) if self.has_specular else None, sp.n_s, sp.wo, wi, p_given, eta, s,
                             w_d, self.has_specular, self.has_diffuse)
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
-        p_given, eta, s, w_d = self._mixture_inputs(sp)
+        p_given, eta, s, w_d = self._mixture_inputs(sp, compact=self._compiled_lobe)
         if self._compiled_lobe:
             wi, pdf, valid, factor, x, A, B, C, S, eval_valid = torrance_sparrow_sample(
-                sp.n_s, sp.wo, u_lobe, u_dir, eta, s, self._m(sp), self.shadowing, p_given, w_d, self.has_diffuse)
+                sp.n_s, sp.wo, u_lobe, u_dir, eta, sp.lam.shape[0], s, self._m(sp), self.shadowing, p_given, w_d,
+                self.has_diffuse)
             depol = self._depol(sp, eval_valid, lambda: sp.cos_o)
             weight = MuellerValue("abcs", x, x, A, B, C, S, depol=None if depol is None else depol * factor[None, :])
         else:
