@@ -98,8 +98,8 @@ def _slope_cdf_e(x, e, t, coef, k):
 
 @jit
 def visible_slope_x_at(t, u1, coef, k):
-    """x̃ for one tanθ = ``t`` ≥ 0 and u1 ∈ [0, 1) (``coef``, ``k``: ERFCX_COEF, ERFCX_K); the loop body
-    of the compiled twin, also called per path by the Torrance–Sparrow kernels."""
+    """x̃ for one tanθ = ``t`` ≥ 0 and u1 ∈ [0, 1) (``coef``, ``k``: ERFCX_COEF, ERFCX_K): the loop body
+    of the compiled twin.  ``beckmann_vndf_at`` runs the same iteration interleaved with ỹ's."""
     cot = 1.0 / t if t > 0 else np.inf
     lo = -8.0
     hi = min(cot, 8.0)
@@ -231,16 +231,76 @@ def erfinv_2u_minus_1_at(u, coef, k):
 
 @jit
 def beckmann_vndf_at(o0, o1, o2, u0, u1, m, coef, k):
-    """A visible facet normal h of ω_o = (o0, o1, o2) (engine.materials.microfacet.Beckmann.sample)."""
+    """A visible facet normal h of ω_o = (o0, o1, o2) (engine.materials.microfacet.Beckmann.sample).
+
+    x̃ (visible_slope_x_at) and ỹ (erfinv_2u_minus_1_at) are independent: their iterations run in
+    one loop, each with its own stopping rule and the same arithmetic, so the two latency-bound
+    chains (erfcx, exp, log) overlap in the processor instead of running one after the other.
+    """
     sxy = np.sqrt(o0 * o0 + o1 * o1)
     cz = max(o2, 0.0)
-    tan_t = min(m * sxy / cz if cz > 0 else 1e300, 1e300)
+    t = min(m * sxy / cz if cz > 0 else 1e300, 1e300)
     if sxy > 0:
         cos_p, sin_p = o0 / sxy, o1 / sxy
     else:
         cos_p, sin_p = 1.0, 0.0
-    sx = visible_slope_x_at(tan_t, u0, coef, k)
-    sy = erfinv_2u_minus_1_at(u1, coef, k)
+    # x̃: the start of visible_slope_x_at
+    cot = 1.0 / t if t > 0 else np.inf
+    lo = -8.0
+    hi = min(cot, 8.0)
+    z = _slope_cdf(min(cot, 30.0), t, coef, k)
+    u = min(max(u0, 0.0), 1.0)
+    uc = min(max(u, 1e-300), 1.0 - 1e-16)
+    if uc < 0.5:
+        xg = -erfcinv_giles_scalar(2.0 * uc)
+    else:
+        xg = erfcinv_giles_scalar(2.0 * (1.0 - uc))
+    arg = uc * z * SQRT_PI / max(t, 1e-300)
+    xr = -np.sqrt(max(-np.log(min(arg, 1.0)), 0.0))
+    x = min(xr, hi) if t > 1.0 else xg
+    if not (x > lo and x < hi):
+        x = 0.5 * (lo + max(hi, lo))
+    target = u * z
+    tol = 1e-14 * z
+    # ỹ: the start of erfinv_2u_minus_1_at
+    v = min(max(u1, 1e-16), 1.0 - 1e-16)
+    lower = v < 0.5
+    q = 2.0 * (v if lower else 1.0 - v)
+    q = min(max(q, 1e-300), 1.0)
+    y = erfcinv_giles_scalar(q)
+    log_q = np.log(q)
+    x_on = True
+    y_on = True
+    for it in range(100):
+        if x_on:
+            e = np.exp(-x * x)
+            f = _slope_cdf_e(x, e, t, coef, k) - target
+            hit = abs(f) <= tol
+            if f < 0:
+                lo = x
+            if f > 0:
+                hi = x
+            g = _TWO_OVER_SQRT_PI * e
+            d1 = g * (1.0 - x * t)
+            d2 = -g * (2.0 * x * (1.0 - x * t) + t)
+            den = 2.0 * d1 * d1 - f * d2
+            ok = d1 > 0 and den > 0
+            newton = x - 2.0 * f * d1 / (den if ok else 1.0)
+            inside = ok and newton > lo and newton < hi
+            xn = x if hit else (newton if inside else 0.5 * (lo + hi))
+            x_on = not (hit or (inside and abs(newton - x) <= 1e-6 * (1.0 + abs(x)))
+                        or (hi - lo <= 1e-15 * (1.0 + abs(x))))
+            x = xn
+        if y_on:
+            ex = erfcx_nonneg_scalar(y, coef, k)
+            step = (np.log(ex) - y * y - log_q) * _HALF_SQRT_PI * ex
+            yn = max(y + step, 0.0)
+            y = yn
+            y_on = it < 11 and abs(step) > 1e-9 * (1.0 + yn)
+        if not (x_on or y_on):
+            break
+    sx = x
+    sy = -y if lower else y
     hx = m * (cos_p * sx - sin_p * sy)
     hy = m * (sin_p * sx + cos_p * sy)
     r = np.sqrt(hx * hx + hy * hy + 1.0)
