@@ -39,6 +39,10 @@ distributions), then reflection with probability F = (F_s+F_p)/2 at ω_o·h (1 u
 refraction through h.  pdf: F·D_ωo(h)/(4 ω_o·h) for reflection, (1 − F)·D_ωo(h)·η²|ω_i·h|/(η ω_i·h
 + ω_o·h)² for refraction.  The sample weight is f·|cosθ_i|/pdf; ``eta_sq`` = η² on refraction (for
 Russian roulette).  The index is one number (no dispersion): λ-independent.
+
+Implementation: eval, pdf and sample are one compiled pass each over the batch
+(engine.kernels.rough_dielectric); the NumPy references are ``_eval``, ``_pdf_local`` and ``_sample``
+of this module, declared with kernels.twin.
 """
 
 from __future__ import annotations

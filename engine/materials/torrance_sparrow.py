@@ -60,6 +60,11 @@ Sampling (``sample``/``pdf``): a two-lobe mixture chosen per shading point with 
   quotient of ``eval`` and ``pdf`` at the returned ω_i).
   With ``"albedo_scaling"`` the lobe weights are the lobes' albedos at ω_o instead:
   w_s = s·E(cosθ_o), w_d = d·ρ̄·max(0, 1 − s·E(cosθ_o)) (same clamping).
+
+Implementation: with Beckmann facets eval, pdf and sample are one compiled pass each over the batch
+(engine.kernels.torrance_sparrow, declared with kernels.twin below); their NumPy references are the
+batched functions ``_facet_eval``, ``_mixture_pdf`` and ``_mixture_sample`` of this module, which the
+Blinn distribution and a TS without a facet lobe use directly.
 """
 
 from __future__ import annotations
@@ -358,9 +363,6 @@ class TorranceSparrow(BSDF):
         self.has_diffuse = positive(self.d) and self.albedo is not None
         self.varies_over_surface = textured(self.n, self.k, self.m, self.s, self.d, self.albedo)
         self._albedo = None
-        self._eta_constant = None
-        if isinstance(self.n, ConstantSpectrum) and isinstance(self.k, ConstantSpectrum):
-            self._eta_constant = (np.full((1, 1), self.n.value) + 1j * np.full((1, 1), self.k.value)) / self.exterior_n
         if diffuse_layering == "albedo_scaling" and self.has_specular and self.has_diffuse:
             self._albedo = self._albedo_table()
         constant = all(getattr(v, "is_constant", False) for v in
@@ -478,8 +480,9 @@ class TorranceSparrow(BSDF):
     def _eta(self, sp: ShadingPoint) -> np.ndarray:
         """The relative index for the twins: (1, 1) for constant n and κ (the value every entry of
         ``relative_eta`` has, computed the same way), else ``relative_eta`` (L, N)."""
-        if self._eta_constant is not None:
-            return self._eta_constant
+        # not cached: a configured copy may change exterior_n (engine.materials.weidlich_wilkie)
+        if isinstance(self.n, ConstantSpectrum) and isinstance(self.k, ConstantSpectrum):
+            return (np.full((1, 1), self.n.value) + 1j * np.full((1, 1), self.k.value)) / self.exterior_n
         return self.relative_eta(sp)
 
     def _mixture_inputs(self, sp: ShadingPoint, compact: bool = False):
