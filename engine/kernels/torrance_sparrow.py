@@ -4,11 +4,12 @@ Per path, in the local shading frame (t, b, n) of engine.vec3.local_frame: the h
 Beckmann D, the shadowing G ("ts" V-cavity, exact or rational Smith, none), the facet Fresnel
 (A, B, C, S) per wavelength (engine.kernels.fresnel.abcs_at), the scattering-plane frame
 x_in = x_out = unit(−ω_i × ω_o) (engine.kernels.geometry.unit_cross), the two-lobe choice and the
-mixture pdf, visible-normal sampling (engine.kernels.microfacet.visible_slope_x_at, ỹ = erfinv(2u − 1)).
+mixture pdf, visible-normal sampling (engine.kernels.microfacet.beckmann_vndf_at).
 The NumPy references are the material's own batched formulas (engine.materials.torrance_sparrow,
 where the twins are declared); each step here is the same arithmetic in the same operation order,
 so the compiled pass gives the reference's bits (the reference's compiled pieces, Fresnel and the
-visible slope, are the same functions; exp, log, sin and cos are the C library's in both).
+visible slope, are the same arithmetic; exp, log, sin and cos are the C library's in both).  A
+constant index is evaluated once per path, not once per wavelength (same inputs, same bits).
 
 Shadowing codes (``SHADOWING_CODES``): 0 "ts", 1 "smith", 2 "smith_rational", 3 "none".
 """
