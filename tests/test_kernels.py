@@ -729,3 +729,159 @@ def test_lamp_disk_and_sphere_hits_bitwise(soft):
         for w, g in zip(want, got):
             assert np.array_equal(w, g)
     assert 0 < want[0].sum() < n
+
+# ----------------------------------------------------------------------------- Torrance–Sparrow passes
+
+def _ts_batch(seed, L, eta_kind):
+    """Shading points with the frames' edge cases: normals along ±z (the local frame's branch), viewers
+    behind the surface, wi = −wo (no half vector), wi = wo (backscatter: the scattering plane's
+    fallback axis), grazing wi; per-point m and s; an index constant over λ and the batch (given once,
+    (1, 1)), or per point and λ (partly constant over λ)."""
+    rng = np.random.default_rng(seed)
+    n = 3000
+    n_s = unit(rng, n)
+    n_s[:, :4] = [[0, 0, 0, 0], [0, 0, 0, 0], [1, -1, 1, -1]]
+    wo = unit(rng, n)
+    wo *= np.where((n_s * wo).sum(0) < 0, -1.0, 1.0)[None, :]
+    wo[:, 4:40] = unit(rng, 36)                                   # some behind the surface
+    wi = unit(rng, n)
+    wi[:, 40:60] = -wo[:, 40:60]
+    wi[:, 60:80] = wo[:, 60:80]
+    t = np.cross(n_s[:, 80:100].T, rng.normal(size=(20, 3))).T
+    wi[:, 80:100] = t / np.linalg.norm(t, axis=0)                 # grazing
+    if eta_kind == "constant":
+        eta = np.array([[0.47 + 2.4j]])
+    else:
+        eta = rng.uniform(0.2, 2.5, (L, n)) + 1j * rng.uniform(0, 4, (L, n))
+        eta[:, :1000] = eta[:1, :1000]                             # partly constant over λ
+        eta[:, 100:200] = 1.5                                      # real, above 1
+    m = rng.uniform(1e-4, 1.5, n)
+    m[200:300] = 0.3
+    s = rng.uniform(0, 2, n)
+    w_d = rng.uniform(0, 1, n)
+    w_d[300:320] = 0.0
+    if eta_kind == "constant":
+        m, s = 0.3, 0.8                                            # numbers, as for untextured parameters
+    return rng, n_s, wo, wi, eta, m, s, w_d
+
+
+def _numpy_math_is_libm():
+    """NumPy's float64 exp, log, sin and cos give the C library's bits here (no SIMD variants of its
+    own, as on CPUs without AVX-512): then the compiled passes must reproduce the NumPy steps exactly."""
+    import math
+    x = np.random.default_rng(0).uniform(-30.0, 30.0, 4000)
+    return all(np.array_equal(f(x if name != "log" else np.abs(x)),
+                              [getattr(math, name)(v if name != "log" else abs(v)) for v in x])
+               for name, f in (("exp", np.exp), ("log", np.log), ("sin", np.sin), ("cos", np.cos)))
+
+
+#: The NumPy references of the material passes call the engine's compiled Fresnel and visible-slope
+#: kernels when those are selected (POLAR_KERNELS is not "numpy"): with the C library's exp, log, sin
+#: and cos in NumPy too, every step is then the same arithmetic and the passes must match bit for bit.
+EXACT_TWINS = _numpy_math_is_libm() and kernels.COMPILED
+
+
+def _bitwise(got, want):
+    """The same bits where EXACT_TWINS, else the same to rounding (complex square roots and divisions
+    are not bit-identical between NumPy and Numba) and the same flags."""
+    assert len(got) == len(want)
+    for g, w in zip(got, want):
+        g, w = np.asarray(g), np.asarray(w)
+        if EXACT_TWINS or g.dtype == bool:
+            assert np.array_equal(g, w, equal_nan=True)
+        else:
+            np.testing.assert_allclose(g, w, rtol=1e-10, atol=1e-12)
+
+
+@needs_numba
+@pytest.mark.parametrize("shadowing", ["ts", "smith", "smith_rational", "none"])
+@pytest.mark.parametrize("L,eta_kind", [(4, "constant"), (4, "varying"), (1, "varying"), (1, "constant")])
+def test_torrance_sparrow_eval_bitwise(shadowing, L, eta_kind):
+    from engine.materials import torrance_sparrow as ts
+    _, n_s, wo, wi, eta, m, s, _ = _ts_batch(1, L, eta_kind)
+    got = ts.torrance_sparrow_eval_numba(n_s, wo, wi, eta, L, s, m, shadowing)
+    want = ts.torrance_sparrow_eval_numpy(n_s, wo, wi, eta, L, s, m, shadowing)
+    _bitwise(got, want)
+    assert 0 < want[5].sum() < n_s.shape[1] and np.count_nonzero(want[1]) > 1000
+
+
+@needs_numba
+@pytest.mark.parametrize("p_kind", ["fresnel", "given", "specular_only"])
+@pytest.mark.parametrize("has_diffuse", [False, True])
+@pytest.mark.parametrize("eta_kind", ["constant", "varying"])
+def test_torrance_sparrow_pdf_and_sample_bitwise(p_kind, has_diffuse, eta_kind):
+    """The mixture pdf and the sampled direction, pdf, validity, weight and frame: the same bits as
+    the material's NumPy steps (lobe choice by the Fresnel estimate or a given P_spec)."""
+    from engine.materials import torrance_sparrow as ts
+    rng, n_s, wo, wi, eta, m, s, w_d = _ts_batch(2, 4, eta_kind)
+    n = n_s.shape[1]
+    p_given = {"fresnel": None, "given": np.clip(rng.uniform(size=n), 0.1, 0.9), "specular_only": np.ones(n)}[p_kind]
+    got = ts.torrance_sparrow_pdf_numba(n_s, wo, wi, m, p_given, eta, 4, s, w_d, True, has_diffuse)
+    want = ts.torrance_sparrow_pdf_numpy(n_s, wo, wi, m, p_given, eta, 4, s, w_d, True, has_diffuse)
+    _bitwise([got], [want])
+    u_lobe = rng.uniform(size=n)
+    u_dir = rng.uniform(size=(2, n))
+    u_dir[:, :4] = [[0.5, 0.0, 1 - 1e-16, 0.25], [0.5, 0.0, 1e-300, 0.25]]
+    for shadowing in ("ts", "smith_rational"):
+        got = ts.torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, 4, s, m, shadowing, p_given, w_d,
+                                               has_diffuse)
+        want = ts.torrance_sparrow_sample_numpy(n_s, wo, u_lobe, u_dir, eta, 4, s, m, shadowing, p_given, w_d,
+                                                has_diffuse)
+        _bitwise(got, want)
+        assert 0.3 * n < want[2].sum() < n
+
+
+def test_torrance_sparrow_material_uses_the_declared_twins():
+    """Beckmann facets go through the twins (the compiled pass where Numba is on); Blinn facets and a
+    pure-Lambert TS keep the NumPy steps, with the same interface."""
+    from engine.materials.base import ShadingPoint
+    from engine.materials.torrance_sparrow import TorranceSparrow
+    for key in ("eval", "pdf", "sample"):
+        assert f"materials.torrance_sparrow.torrance_sparrow_{key}" in kernels.TWINS
+    rng = np.random.default_rng(5)
+    n = 500
+    n_s, wo = unit(rng, n), unit(rng, n)
+    wo *= np.where((n_s * wo).sum(0) < 0, -1.0, 1.0)[None, :]
+    sp = ShadingPoint(np.zeros((3, n)), n_s, n_s, wo, rng.uniform(400, 700, (4, n)))
+    u = rng.uniform(size=(3, n))
+    for mat in (TorranceSparrow(0.47, 2.4, 0.3, shadowing="smith_rational"),
+                TorranceSparrow(1.5, 0.0, 0.3, distribution="blinn", diffuse_albedo=0.5, diffuse_weight=1.0),
+                TorranceSparrow(1.5, 0.0, 0.3, specular_weight=0.0, diffuse_albedo=0.5, diffuse_weight=1.0)):
+        eta = mat.relative_eta(sp)
+        assert np.array_equal(np.broadcast_to(mat._eta(sp), eta.shape), eta)     # the index given once: same bits
+        bs = mat.sample(sp, u[0], u[1:])
+        ok = bs.valid
+        assert ok.sum() > n // 3
+        np.testing.assert_allclose(bs.pdf[ok], mat.pdf(sp, bs.wi)[ok], rtol=1e-15)
+        f = mat.eval(sp, bs.wi)
+        cos_i = (n_s * bs.wi).sum(0)
+        np.testing.assert_allclose(bs.weight.A[:, ok], (f.A * cos_i / np.where(ok, bs.pdf, 1.0))[:, ok], rtol=1e-13)
+
+
+# ----------------------------------------------------------------------------- rough dielectric passes
+
+@needs_numba
+@pytest.mark.parametrize("distribution,rational", [("beckmann", False), ("beckmann", True), ("ggx", False)])
+@pytest.mark.parametrize("n_int,n_ext,alpha", [(1.5, 1.0, 0.2), (1.33, 1.7, 0.9), (1.5, 1.0, 1e-4)])
+def test_rough_dielectric_eval_pdf_sample_bitwise(distribution, rational, n_int, n_ext, alpha):
+    """Viewers on both sides (η and its inverse), total internal reflection, ±z normals, wi = ±wo:
+    the compiled passes give the material's NumPy steps' bits."""
+    from engine.materials import rough_dielectric as rd
+    rng = np.random.default_rng(int(alpha * 1e4) + int(n_int * 100))
+    n = 3000
+    n_s = unit(rng, n)
+    n_s[:, :4] = [[0, 0, 0, 0], [0, 0, 0, 0], [1, -1, 1, -1]]
+    wo, wi = unit(rng, n), unit(rng, n)
+    wi[:, 20:30] = -wo[:, 20:30]
+    wi[:, 30:40] = wo[:, 30:40]
+    args = (n_int, n_ext, distribution)
+    _bitwise(rd.rough_dielectric_eval_numba(n_s, wo, wi, 4, *args, rational, alpha),
+             rd.rough_dielectric_eval_numpy(n_s, wo, wi, 4, *args, rational, alpha))
+    _bitwise([rd.rough_dielectric_pdf_numba(n_s, wo, wi, *args, alpha)],
+             [rd.rough_dielectric_pdf_numpy(n_s, wo, wi, *args, alpha)])
+    u_lobe, u_dir = rng.uniform(size=n), rng.uniform(size=(2, n))
+    got = rd.rough_dielectric_sample_numba(n_s, wo, u_lobe, u_dir, 1, *args, rational, alpha)
+    want = rd.rough_dielectric_sample_numpy(n_s, wo, u_lobe, u_dir, 1, *args, rational, alpha)
+    _bitwise(got, want)
+    refracted = want[3] != 1.0
+    assert 0.5 * n < want[2].sum() <= n and (refracted & want[2]).any() and (~refracted & want[2]).any()

@@ -12,6 +12,8 @@ with it.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from . import jit, twin
@@ -20,6 +22,9 @@ from .error_function import (ERFCX_COEF, ERFCX_K, SQRT_PI, erfcinv_giles, erfcin
 
 _INV_SQRT_PI = 1.0 / SQRT_PI
 _TWO_OVER_SQRT_PI = 2.0 / SQRT_PI
+_HALF_SQRT_PI = 0.5 * SQRT_PI
+_EXP_CUTOFF = 800.0           # engine.materials.microfacet._EXP_CUTOFF
+_PI = math.pi
 
 
 def _visible_slope_cdf(x: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -80,54 +85,66 @@ def visible_slope_x_numpy(tan_t: np.ndarray, u1: np.ndarray) -> np.ndarray:
 
 @jit
 def _slope_cdf(x, t, coef, k):
-    e = np.exp(-x * x)
+    return _slope_cdf_e(x, np.exp(-x * x), t, coef, k)
+
+
+@jit
+def _slope_cdf_e(x, e, t, coef, k):
+    """F(x) given e = e^{−x²} (the Halley step needs the same exponential)."""
     r = erfcx_nonneg_scalar(abs(x), coef, k)
     tp = t * _INV_SQRT_PI
     return e * (r + tp) if x < 0 else 2.0 + e * (tp - r)
 
 
 @jit
+def visible_slope_x_at(t, u1, coef, k):
+    """x̃ for one tanθ = ``t`` ≥ 0 and u1 ∈ [0, 1) (``coef``, ``k``: ERFCX_COEF, ERFCX_K): the loop body
+    of the compiled twin.  ``beckmann_vndf_at`` runs the same iteration interleaved with ỹ's."""
+    cot = 1.0 / t if t > 0 else np.inf
+    lo = -8.0
+    hi = min(cot, 8.0)
+    z = _slope_cdf(min(cot, 30.0), t, coef, k)
+    u = min(max(u1, 0.0), 1.0)
+    uc = min(max(u, 1e-300), 1.0 - 1e-16)
+    if uc < 0.5:
+        xg = -erfcinv_giles_scalar(2.0 * uc)
+    else:
+        xg = erfcinv_giles_scalar(2.0 * (1.0 - uc))
+    arg = uc * z * SQRT_PI / max(t, 1e-300)
+    xr = -np.sqrt(max(-np.log(min(arg, 1.0)), 0.0))
+    x = min(xr, hi) if t > 1.0 else xg
+    if not (x > lo and x < hi):
+        x = 0.5 * (lo + max(hi, lo))
+    target = u * z
+    tol = 1e-14 * z
+    for _ in range(100):
+        e = np.exp(-x * x)
+        f = _slope_cdf_e(x, e, t, coef, k) - target
+        hit = abs(f) <= tol
+        if f < 0:
+            lo = x
+        if f > 0:
+            hi = x
+        g = _TWO_OVER_SQRT_PI * e
+        d1 = g * (1.0 - x * t)
+        d2 = -g * (2.0 * x * (1.0 - x * t) + t)
+        den = 2.0 * d1 * d1 - f * d2
+        ok = d1 > 0 and den > 0
+        newton = x - 2.0 * f * d1 / (den if ok else 1.0)
+        inside = ok and newton > lo and newton < hi
+        xn = x if hit else (newton if inside else 0.5 * (lo + hi))
+        done = hit or (inside and abs(newton - x) <= 1e-6 * (1.0 + abs(x))) or \
+            (hi - lo <= 1e-15 * (1.0 + abs(x)))
+        x = xn
+        if done:
+            break
+    return x
+
+
+@jit
 def _visible_slope_x_loop(tan_t, u1, coef, k, out):
     for i in range(tan_t.shape[0]):
-        t = tan_t[i]
-        cot = 1.0 / t if t > 0 else np.inf
-        lo = -8.0
-        hi = min(cot, 8.0)
-        z = _slope_cdf(min(cot, 30.0), t, coef, k)
-        u = min(max(u1[i], 0.0), 1.0)
-        uc = min(max(u, 1e-300), 1.0 - 1e-16)
-        if uc < 0.5:
-            xg = -erfcinv_giles_scalar(2.0 * uc)
-        else:
-            xg = erfcinv_giles_scalar(2.0 * (1.0 - uc))
-        arg = uc * z * SQRT_PI / max(t, 1e-300)
-        xr = -np.sqrt(max(-np.log(min(arg, 1.0)), 0.0))
-        x = min(xr, hi) if t > 1.0 else xg
-        if not (x > lo and x < hi):
-            x = 0.5 * (lo + max(hi, lo))
-        target = u * z
-        tol = 1e-14 * z
-        for _ in range(100):
-            f = _slope_cdf(x, t, coef, k) - target
-            hit = abs(f) <= tol
-            if f < 0:
-                lo = x
-            if f > 0:
-                hi = x
-            g = _TWO_OVER_SQRT_PI * np.exp(-x * x)
-            d1 = g * (1.0 - x * t)
-            d2 = -g * (2.0 * x * (1.0 - x * t) + t)
-            den = 2.0 * d1 * d1 - f * d2
-            ok = d1 > 0 and den > 0
-            newton = x - 2.0 * f * d1 / (den if ok else 1.0)
-            inside = ok and newton > lo and newton < hi
-            xn = x if hit else (newton if inside else 0.5 * (lo + hi))
-            done = hit or (inside and abs(newton - x) <= 1e-6 * (1.0 + abs(x))) or \
-                (hi - lo <= 1e-15 * (1.0 + abs(x)))
-            x = xn
-            if done:
-                break
-        out[i] = x
+        out[i] = visible_slope_x_at(tan_t[i], u1[i], coef, k)
 
 
 def visible_slope_x_numba(tan_t, u1):
@@ -138,3 +155,219 @@ def visible_slope_x_numba(tan_t, u1):
 
 
 visible_slope_x = twin(_visible_slope_x_loop and visible_slope_x_numba, visible_slope_x_numpy)
+
+
+# ----------------------------------------------------------------------------- per-path Beckmann pieces
+# The formulas of engine.materials.microfacet for one direction at a time, in the same operation
+# order (the compiled material passes, e.g. engine.kernels.torrance_sparrow, call them per path).
+
+@jit
+def beckmann_d_at(h0, h1, h2, m):
+    """Beckmann D(h) (engine.materials.microfacet.Beckmann.D)."""
+    xy2 = h0 * h0 + h1 * h1
+    z2 = h2 * h2
+    if z2 > 0:
+        t2 = xy2 / z2
+    else:
+        t2 = np.inf if xy2 > 0 else 0.0
+    x = t2 / (m * m)
+    if not (h2 > 0 and x <= _EXP_CUTOFF):
+        return 0.0
+    one_t = 1.0 + t2
+    return np.exp(-x) * (one_t * one_t) / (_PI * m * m)
+
+
+@jit
+def smith_a_at(w0, w1, w2, m):
+    """a = cosθ/(m sinθ) (∞ at normal incidence)."""
+    sin_t = np.sqrt(w0 * w0 + w1 * w1)
+    return abs(w2) / (m * sin_t) if sin_t > 0 else np.inf
+
+
+@jit
+def beckmann_lambda_at(a, coef, k):
+    """Smith Λ(a) of engine.materials.microfacet.beckmann_lambda."""
+    if a > 0 and a <= 6.0:
+        lam = 0.5 * np.exp(-a * a) * (_INV_SQRT_PI / a - erfcx_nonneg_scalar(a, coef, k))
+        return max(lam, 0.0)
+    return 0.0 if a > 0 else np.inf
+
+
+@jit
+def chi_plus_at(w0, w1, w2, h0, h1, h2):
+    """1 where (w·h)·cosθ_w > 0, else 0."""
+    return 1.0 if (w0 * h0 + w1 * h1 + w2 * h2) * w2 > 0 else 0.0
+
+
+@jit
+def beckmann_g1_at(w0, w1, w2, h0, h1, h2, m, rational, coef, k):
+    """Smith G1 of engine.materials.microfacet's Beckmann (exact, or Walter's rational form)."""
+    a = smith_a_at(w0, w1, w2, m)
+    if rational:
+        af = min(a, 1.6)
+        g = 1.0 if a >= 1.6 else (3.535 * af + 2.181 * af * af) / (1.0 + 2.276 * af + 2.577 * af * af)
+        return g * chi_plus_at(w0, w1, w2, h0, h1, h2)
+    return chi_plus_at(w0, w1, w2, h0, h1, h2) / (1.0 + beckmann_lambda_at(a, coef, k))
+
+
+@jit
+def erfinv_2u_minus_1_at(u, coef, k):
+    """engine.kernels.error_function.erfinv_2u_minus_1 for one u (Giles' start, the same Newton steps)."""
+    u = min(max(u, 1e-16), 1.0 - 1e-16)
+    lower = u < 0.5
+    q = 2.0 * (u if lower else 1.0 - u)
+    q = min(max(q, 1e-300), 1.0)
+    x = erfcinv_giles_scalar(q)
+    log_q = np.log(q)
+    for _ in range(12):
+        ex = erfcx_nonneg_scalar(x, coef, k)
+        step = (np.log(ex) - x * x - log_q) * _HALF_SQRT_PI * ex
+        xn = max(x + step, 0.0)
+        x = xn
+        if not abs(step) > 1e-9 * (1.0 + xn):
+            break
+    return -x if lower else x
+
+
+@jit
+def beckmann_vndf_at(o0, o1, o2, u0, u1, m, coef, k):
+    """A visible facet normal h of ω_o = (o0, o1, o2) (engine.materials.microfacet.Beckmann.sample).
+
+    x̃ (visible_slope_x_at) and ỹ (erfinv_2u_minus_1_at) are independent: their iterations run in
+    one loop, each with its own stopping rule and the same arithmetic, so the two latency-bound
+    chains (erfcx, exp, log) overlap in the processor instead of running one after the other.
+    """
+    sxy = np.sqrt(o0 * o0 + o1 * o1)
+    cz = max(o2, 0.0)
+    t = min(m * sxy / cz if cz > 0 else 1e300, 1e300)
+    if sxy > 0:
+        cos_p, sin_p = o0 / sxy, o1 / sxy
+    else:
+        cos_p, sin_p = 1.0, 0.0
+    # x̃: the start of visible_slope_x_at
+    cot = 1.0 / t if t > 0 else np.inf
+    lo = -8.0
+    hi = min(cot, 8.0)
+    z = _slope_cdf(min(cot, 30.0), t, coef, k)
+    u = min(max(u0, 0.0), 1.0)
+    uc = min(max(u, 1e-300), 1.0 - 1e-16)
+    if uc < 0.5:
+        xg = -erfcinv_giles_scalar(2.0 * uc)
+    else:
+        xg = erfcinv_giles_scalar(2.0 * (1.0 - uc))
+    arg = uc * z * SQRT_PI / max(t, 1e-300)
+    xr = -np.sqrt(max(-np.log(min(arg, 1.0)), 0.0))
+    x = min(xr, hi) if t > 1.0 else xg
+    if not (x > lo and x < hi):
+        x = 0.5 * (lo + max(hi, lo))
+    target = u * z
+    tol = 1e-14 * z
+    # ỹ: the start of erfinv_2u_minus_1_at
+    v = min(max(u1, 1e-16), 1.0 - 1e-16)
+    lower = v < 0.5
+    q = 2.0 * (v if lower else 1.0 - v)
+    q = min(max(q, 1e-300), 1.0)
+    y = erfcinv_giles_scalar(q)
+    log_q = np.log(q)
+    x_on = True
+    y_on = True
+    for it in range(100):
+        if x_on:
+            e = np.exp(-x * x)
+            f = _slope_cdf_e(x, e, t, coef, k) - target
+            hit = abs(f) <= tol
+            if f < 0:
+                lo = x
+            if f > 0:
+                hi = x
+            g = _TWO_OVER_SQRT_PI * e
+            d1 = g * (1.0 - x * t)
+            d2 = -g * (2.0 * x * (1.0 - x * t) + t)
+            den = 2.0 * d1 * d1 - f * d2
+            ok = d1 > 0 and den > 0
+            newton = x - 2.0 * f * d1 / (den if ok else 1.0)
+            inside = ok and newton > lo and newton < hi
+            xn = x if hit else (newton if inside else 0.5 * (lo + hi))
+            x_on = not (hit or (inside and abs(newton - x) <= 1e-6 * (1.0 + abs(x)))
+                        or (hi - lo <= 1e-15 * (1.0 + abs(x))))
+            x = xn
+        if y_on:
+            ex = erfcx_nonneg_scalar(y, coef, k)
+            step = (np.log(ex) - y * y - log_q) * _HALF_SQRT_PI * ex
+            yn = max(y + step, 0.0)
+            y = yn
+            y_on = it < 11 and abs(step) > 1e-9 * (1.0 + yn)
+        if not (x_on or y_on):
+            break
+    sx = x
+    sy = -y if lower else y
+    hx = m * (cos_p * sx - sin_p * sy)
+    hy = m * (sin_p * sx + cos_p * sy)
+    r = np.sqrt(hx * hx + hy * hy + 1.0)
+    return -hx / r, -hy / r, 1.0 / r
+
+
+# ----------------------------------------------------------------------------- per-path GGX pieces
+# engine.materials.ggx.GGX, one direction at a time in the same operation order.
+
+@jit
+def tan2_at(w0, w1, w2):
+    """tan²θ of w about +z (engine.materials.microfacet._tan2)."""
+    xy2 = w0 * w0 + w1 * w1
+    z2 = w2 * w2
+    if z2 > 0:
+        return xy2 / z2
+    return np.inf if xy2 > 0 else 0.0
+
+
+@jit
+def ggx_d_at(h0, h1, h2, alpha):
+    """GGX D(h)."""
+    t2 = tan2_at(h0, h1, h2)
+    if not (h2 > 0 and np.isfinite(t2)):
+        return 0.0
+    a2 = alpha * alpha
+    q = 1.0 + t2 / a2
+    one_t = 1.0 + t2
+    return one_t * one_t / (_PI * a2 * q * q)
+
+
+@jit
+def ggx_lambda_at(w0, w1, w2, alpha):
+    """Smith Λ(ω) = (√(1 + α² tan²θ) − 1)/2 (∞ at grazing)."""
+    t2 = tan2_at(w0, w1, w2)
+    if not np.isfinite(t2):
+        return np.inf
+    x = alpha * alpha * t2
+    return 0.5 * x / (np.sqrt(1.0 + x) + 1.0)
+
+
+@jit
+def ggx_vndf_at(o0, o1, o2, u0, u1, alpha):
+    """A visible facet normal of ω_o (Heitz 2018; engine.materials.ggx.GGX.sample)."""
+    v0, v1, v2 = alpha * o0, alpha * o1, max(o2, 0.0)
+    nv = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+    v0, v1, v2 = v0 / nv, v1 / nv, v2 / nv
+    lensq = v0 * v0 + v1 * v1
+    if lensq > 0:
+        inv = 1.0 / np.sqrt(lensq)
+        a0, a1 = -v1 * inv, v0 * inv
+    else:
+        a0, a1 = 1.0, 0.0
+    a2 = 0.0
+    c0 = v1 * a2 - v2 * a1
+    c1 = v2 * a0 - v0 * a2
+    c2 = v0 * a1 - v1 * a0
+    r = np.sqrt(u0)
+    phi = 2.0 * math.pi * u1
+    p1 = r * np.cos(phi)
+    p2 = r * np.sin(phi)
+    s = 0.5 * (1.0 + v2)
+    p2 = (1.0 - s) * np.sqrt(max(1.0 - p1 * p1, 0.0)) + s * p2
+    pz = np.sqrt(max(1.0 - p1 * p1 - p2 * p2, 0.0))
+    n0 = p1 * a0 + p2 * c0 + pz * v0
+    n1 = p1 * a1 + p2 * c1 + pz * v1
+    n2 = p1 * a2 + p2 * c2 + pz * v2
+    h0, h1, h2 = alpha * n0, alpha * n1, max(n2, 1e-300)
+    nh = np.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
+    return h0 / nh, h1 / nh, h2 / nh

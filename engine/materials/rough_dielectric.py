@@ -39,6 +39,10 @@ distributions), then reflection with probability F = (F_s+F_p)/2 at ω_o·h (1 u
 refraction through h.  pdf: F·D_ωo(h)/(4 ω_o·h) for reflection, (1 − F)·D_ωo(h)·η²|ω_i·h|/(η ω_i·h
 + ω_o·h)² for refraction.  The sample weight is f·|cosθ_i|/pdf; ``eta_sq`` = η² on refraction (for
 Russian roulette).  The index is one number (no dispersion): λ-independent.
+
+Implementation: eval, pdf and sample are one compiled pass each over the batch
+(engine.kernels.rough_dielectric); the NumPy references are ``_eval``, ``_pdf_local`` and ``_sample``
+of this module, declared with kernels.twin.
 """
 
 from __future__ import annotations
@@ -54,14 +58,134 @@ from .microfacet import Beckmann, reflect_local
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from .sampling import local_to_world
 from ..errors import SceneError
+from ..kernels import twin
+from ..kernels.rough_dielectric import (rough_dielectric_eval_numba, rough_dielectric_pdf_numba,
+                                        rough_dielectric_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_transmission_abcs
-from ..vec3 import local_frame, to_local
+from ..vec3 import dot, local_frame, to_local
 
 #: Smallest accepted roughness α (0 is the smooth dielectric).
 ALPHA_MIN = 1e-4
 DISTRIBUTIONS = ("beckmann", "ggx")
 SHADOWING = ("smith", "smith_rational")
+
+
+# --------------------------------------------------------------------------- the batched steps
+# eval, pdf and sample as functions of the batch (``dist``: the facet distribution, ``rational``:
+# Walter's rational Beckmann G1, ``n_int``/``n_ext``: the indices behind/in front of the shading
+# normal).  The twins below run them as one compiled pass each (engine.kernels.rough_dielectric).
+
+def _local(n_s, wo, n_int, n_ext, wi=None):
+    """(normal on the viewer's side, η, ω_o local[, ω_i local])."""
+    outside = dot(n_s, wo) >= 0
+    eta = np.where(outside, n_int / n_ext, n_ext / n_int)
+    nn = np.where(outside[None, :], n_s, -n_s)
+    t, b = local_frame(nn)
+    wo_l = to_local(wo, t, b, nn)
+    if wi is None:
+        return nn, eta, wo_l
+    return nn, eta, wo_l, to_local(wi, t, b, nn)
+
+
+def _half_vector(wi_l, wo_l, eta):
+    """Facet normal h (h_z ≥ 0) of the pair, whether it reflects, and validity (N,)."""
+    refl = wi_l[2] > 0
+    hv = np.where(refl[None, :], wi_l + wo_l, -(eta * wi_l + wo_l))
+    length = np.sqrt(np.sum(hv * hv, axis=0))
+    ok = (length > 1e-12) & (wo_l[2] > 0) & (wi_l[2] != 0)
+    h = hv / np.where(ok, length, 1.0)
+    h = np.where((h[2] < 0)[None, :], -h, h)
+    d_o = np.sum(wo_l * h, axis=0)
+    d_i = np.sum(wi_l * h, axis=0)
+    # reflection: both on the facet's front; refraction: ω_o in front, ω_i behind
+    ok &= (d_o > 0) & np.where(refl, d_i > 0, d_i < 0) & (h[2] > 0)
+    return h, refl, ok, d_i, d_o
+
+
+def _eval(dist, rational, n_s, wo, wi, L, n_int, n_ext):
+    """(x, A, B, C, S): the facet reflection or refraction in the scattering-plane frame x (3, N), (L, N)."""
+    _, eta, wo_l, wi_l = _local(n_s, wo, n_int, n_ext, wi)
+    h, refl, ok, d_i, d_o = _half_vector(wi_l, wo_l, eta)
+    D = dist.D(h)
+    G = dist.G1(wi_l, h, rational) * dist.G1(wo_l, h, rational)
+    ci = np.abs(wi_l[2])
+    co = wo_l[2]
+    den_cos = np.where(ok, ci * co, 1.0)
+    jac = eta * d_i + d_o
+    jac2 = np.where(ok & ~refl, jac * jac, 1.0)
+    scalar_r = D * G / (4.0 * den_cos)
+    scalar_t = np.abs(d_i) * d_o * D * G / (den_cos * jac2)
+    scalar = np.where(ok, np.where(refl, scalar_r, scalar_t), 0.0)
+    # facet Fresnel: reflection at ω_i·h (= ω_o·h), transmission seen from ω_o (T is symmetric)
+    c_f = np.where(ok, np.where(refl, d_i, d_o), 1.0)
+    Ar, Br, Cr, Sr = fresnel_reflection_abcs(c_f, eta)
+    At, Bt, Ct, St = fresnel_transmission_abcs(c_f, eta)
+    n = n_s.shape[1]
+    tile = lambda r, t: np.broadcast_to(np.where(refl, r, t) * scalar, (L, n)).copy()  # noqa: E731
+    x = scattering_plane_axis(-wi, wo)
+    return x, tile(Ar, At), tile(Br, Bt), tile(Cr, Ct), tile(Sr, St)
+
+
+def _pdf_local(dist, wi_l, wo_l, eta):
+    h, refl, ok, d_i, d_o = _half_vector(wi_l, wo_l, eta)
+    vndf = dist.pdf(wo_l, h)
+    F = fresnel_reflection_abcs(np.where(ok, d_o, 1.0), eta)[0]
+    jac = eta * d_i + d_o
+    jac2 = np.where(ok & ~refl, jac * jac, 1.0)
+    p_r = F * vndf / (4.0 * np.where(ok, d_o, 1.0))
+    p_t = (1.0 - F) * vndf * eta * eta * np.abs(d_i) / jac2
+    return np.where(ok, np.where(refl, p_r, p_t), 0.0)
+
+
+def _sample(dist, rational, n_s, wo, u_lobe, u_dir, L, n_int, n_ext):
+    """(wi, pdf, valid, eta_sq, x, A, B, C, S): the sampled direction, its pdf (0 where invalid), η² on
+    refraction (1 on reflection) and the weight f·|cosθ_i|/pdf."""
+    nn, eta, wo_l = _local(n_s, wo, n_int, n_ext)
+    front = wo_l[2] > 0
+    wo_s = np.where(front[None, :], wo_l, np.array([[0.0], [0.0], [1.0]]))
+    h = dist.sample(wo_s, u_dir)
+    c = np.clip(np.sum(wo_s * h, axis=0), 0.0, 1.0)
+    F = fresnel_reflection_abcs(c, eta)[0]          # 1 under total internal reflection
+    reflect = u_lobe < F
+    wi_r = reflect_local(wo_s, h)
+    inv_eta = 1.0 / eta
+    cos_t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) * inv_eta * inv_eta, 0.0))
+    wi_t = -wo_s * inv_eta + (c * inv_eta - cos_t) * h
+    wi_l = np.where(reflect[None, :], wi_r, wi_t)
+    wi_l = wi_l / np.sqrt(np.sum(wi_l * wi_l, axis=0))
+    wi = local_to_world(wi_l, nn)
+    pdf = _pdf_local(dist, wi_l, wo_s, eta)
+    valid = front & (pdf > 0) & np.where(reflect, wi_l[2] > 0, wi_l[2] < 0) & np.all(np.isfinite(wi), axis=0)
+    x, A, B, C, S = _eval(dist, rational, n_s, wo, wi, L, n_int, n_ext)
+    factor = np.where(valid, np.abs(wi_l[2]) / np.where(valid, pdf, 1.0), 0.0)[None, :]
+    eta_sq = np.where(reflect, 1.0, eta * eta)
+    return wi, np.where(valid, pdf, 0.0), valid, eta_sq, x, A * factor, B * factor, C * factor, S * factor
+
+
+def _distribution(distribution: str, alpha: float):
+    return Beckmann(alpha) if distribution == "beckmann" else GGX(alpha)
+
+
+def rough_dielectric_eval_numpy(n_s, wo, wi, L, n_int, n_ext, distribution, rational, alpha):
+    """(x, A, B, C, S) of ``_eval``."""
+    return _eval(_distribution(distribution, alpha), rational, n_s, wo, wi, L, n_int, n_ext)
+
+
+def rough_dielectric_pdf_numpy(n_s, wo, wi, n_int, n_ext, distribution, alpha):
+    """The pdf (N,) of ω_i under ``_sample``."""
+    _, eta, wo_l, wi_l = _local(n_s, wo, n_int, n_ext, wi)
+    return _pdf_local(_distribution(distribution, alpha), wi_l, wo_l, eta)
+
+
+def rough_dielectric_sample_numpy(n_s, wo, u_lobe, u_dir, L, n_int, n_ext, distribution, rational, alpha):
+    """(wi, pdf, valid, eta_sq, x, A, B, C, S) of ``_sample``."""
+    return _sample(_distribution(distribution, alpha), rational, n_s, wo, u_lobe, u_dir, L, n_int, n_ext)
+
+
+rough_dielectric_eval = twin(rough_dielectric_eval_numba, rough_dielectric_eval_numpy)
+rough_dielectric_pdf = twin(rough_dielectric_pdf_numba, rough_dielectric_pdf_numpy)
+rough_dielectric_sample = twin(rough_dielectric_sample_numba, rough_dielectric_sample_numpy)
 
 
 class RoughDielectric(BSDF):
@@ -89,99 +213,23 @@ class RoughDielectric(BSDF):
         if shadowing == "smith_rational" and distribution != "beckmann":
             raise ValueError("shadowing 'smith_rational' exists for the beckmann distribution only")
         self.distribution, self.shadowing = distribution, shadowing
-        self.dist = Beckmann(alpha) if distribution == "beckmann" else GGX(alpha)
-
-    # --- geometry ---------------------------------------------------------------------------------
-
-    def _local(self, sp: ShadingPoint, wi: np.ndarray | None = None):
-        """(normal on the viewer's side, η, t, b, ω_o local[, ω_i local])."""
-        outside = sp.cos_o >= 0
-        eta = np.where(outside, self.n_int / self.n_ext, self.n_ext / self.n_int)
-        nn = np.where(outside[None, :], sp.n_s, -sp.n_s)
-        t, b = local_frame(nn)
-        wo_l = to_local(sp.wo, t, b, nn)
-        if wi is None:
-            return nn, eta, wo_l
-        return nn, eta, wo_l, to_local(wi, t, b, nn)
-
-    @staticmethod
-    def _half_vector(wi_l, wo_l, eta):
-        """Facet normal h (h_z ≥ 0) of the pair, whether it reflects, and validity (N,)."""
-        refl = wi_l[2] > 0
-        hv = np.where(refl[None, :], wi_l + wo_l, -(eta * wi_l + wo_l))
-        length = np.sqrt(np.sum(hv * hv, axis=0))
-        ok = (length > 1e-12) & (wo_l[2] > 0) & (wi_l[2] != 0)
-        h = hv / np.where(ok, length, 1.0)
-        h = np.where((h[2] < 0)[None, :], -h, h)
-        d_o = np.sum(wo_l * h, axis=0)
-        d_i = np.sum(wi_l * h, axis=0)
-        # reflection: both on the facet's front; refraction: ω_o in front, ω_i behind
-        ok &= (d_o > 0) & np.where(refl, d_i > 0, d_i < 0) & (h[2] > 0)
-        return h, refl, ok, d_i, d_o
-
-    def _shadowing(self, wi_l, wo_l, h):
-        rational = self.shadowing == "smith_rational"
-        return self.dist.G1(wi_l, h, rational) * self.dist.G1(wo_l, h, rational)
+        self.dist = _distribution(distribution, alpha)
 
     # --- BSDF interface ---------------------------------------------------------------------------
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        _, eta, wo_l, wi_l = self._local(sp, wi)
-        h, refl, ok, d_i, d_o = self._half_vector(wi_l, wo_l, eta)
-        D = self.dist.D(h)
-        G = self._shadowing(wi_l, wo_l, h)
-        ci = np.abs(wi_l[2])
-        co = wo_l[2]
-        den_cos = np.where(ok, ci * co, 1.0)
-        jac = eta * d_i + d_o
-        jac2 = np.where(ok & ~refl, jac * jac, 1.0)
-        scalar_r = D * G / (4.0 * den_cos)
-        scalar_t = np.abs(d_i) * d_o * D * G / (den_cos * jac2)
-        scalar = np.where(ok, np.where(refl, scalar_r, scalar_t), 0.0)
-        # facet Fresnel: reflection at ω_i·h (= ω_o·h), transmission seen from ω_o (T is symmetric)
-        c_f = np.where(ok, np.where(refl, d_i, d_o), 1.0)
-        Ar, Br, Cr, Sr = fresnel_reflection_abcs(c_f, eta)
-        At, Bt, Ct, St = fresnel_transmission_abcs(c_f, eta)
-        L = sp.lam.shape[0]
-        tile = lambda r, t: np.broadcast_to(np.where(refl, r, t) * scalar, (L, sp.n)).copy()  # noqa: E731
-        x = scattering_plane_axis(-wi, sp.wo)
-        return MuellerValue("abcs", x, x, tile(Ar, At), tile(Br, Bt), tile(Cr, Ct), tile(Sr, St))
-
-    def _pdf_local(self, wi_l, wo_l, eta):
-        h, refl, ok, d_i, d_o = self._half_vector(wi_l, wo_l, eta)
-        vndf = self.dist.pdf(wo_l, h)
-        F = fresnel_reflection_abcs(np.where(ok, d_o, 1.0), eta)[0]
-        jac = eta * d_i + d_o
-        jac2 = np.where(ok & ~refl, jac * jac, 1.0)
-        p_r = F * vndf / (4.0 * np.where(ok, d_o, 1.0))
-        p_t = (1.0 - F) * vndf * eta * eta * np.abs(d_i) / jac2
-        return np.where(ok, np.where(refl, p_r, p_t), 0.0)
+        x, A, B, C, S = rough_dielectric_eval(sp.n_s, sp.wo, wi, sp.lam.shape[0], self.n_int, self.n_ext,
+                                              self.distribution, self.shadowing == "smith_rational", self.alpha)
+        return MuellerValue("abcs", x, x, A, B, C, S)
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        _, eta, wo_l, wi_l = self._local(sp, wi)
-        return self._pdf_local(wi_l, wo_l, eta)
+        return rough_dielectric_pdf(sp.n_s, sp.wo, wi, self.n_int, self.n_ext, self.distribution, self.alpha)
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
-        nn, eta, wo_l = self._local(sp)
-        front = wo_l[2] > 0
-        wo_s = np.where(front[None, :], wo_l, np.array([[0.0], [0.0], [1.0]]))
-        h = self.dist.sample(wo_s, u_dir)
-        c = np.clip(np.sum(wo_s * h, axis=0), 0.0, 1.0)
-        F = fresnel_reflection_abcs(c, eta)[0]          # 1 under total internal reflection
-        reflect = u_lobe < F
-        wi_r = reflect_local(wo_s, h)
-        inv_eta = 1.0 / eta
-        cos_t = np.sqrt(np.maximum(1.0 - (1.0 - c * c) * inv_eta * inv_eta, 0.0))
-        wi_t = -wo_s * inv_eta + (c * inv_eta - cos_t) * h
-        wi_l = np.where(reflect[None, :], wi_r, wi_t)
-        wi_l = wi_l / np.sqrt(np.sum(wi_l * wi_l, axis=0))
-        wi = local_to_world(wi_l, nn)
-        pdf = self._pdf_local(wi_l, wo_s, eta)
-        valid = front & (pdf > 0) & np.where(reflect, wi_l[2] > 0, wi_l[2] < 0) & np.all(np.isfinite(wi), axis=0)
-        value = self.eval(sp, wi)
-        factor = np.where(valid, np.abs(wi_l[2]) / np.where(valid, pdf, 1.0), 0.0)
-        eta_sq = np.where(reflect, 1.0, eta * eta)
-        return BSDFSample(wi=wi, weight=value.scaled(factor[None, :]), pdf=np.where(valid, pdf, 0.0),
+        wi, pdf, valid, eta_sq, x, A, B, C, S = rough_dielectric_sample(
+            sp.n_s, sp.wo, u_lobe, u_dir, sp.lam.shape[0], self.n_int, self.n_ext, self.distribution,
+            self.shadowing == "smith_rational", self.alpha)
+        return BSDFSample(wi=wi, weight=MuellerValue("abcs", x, x, A, B, C, S), pdf=pdf,
                           is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=eta_sq)
 
     def describe(self) -> dict:

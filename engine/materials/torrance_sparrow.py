@@ -60,6 +60,11 @@ Sampling (``sample``/``pdf``): a two-lobe mixture chosen per shading point with 
   quotient of ``eval`` and ``pdf`` at the returned ω_i).
   With ``"albedo_scaling"`` the lobe weights are the lobes' albedos at ω_o instead:
   w_s = s·E(cosθ_o), w_d = d·ρ̄·max(0, 1 − s·E(cosθ_o)) (same clamping).
+
+Implementation: with Beckmann facets eval, pdf and sample are one compiled pass each over the batch
+(engine.kernels.torrance_sparrow, declared with kernels.twin below); their NumPy references are the
+batched functions ``_facet_eval``, ``_mixture_pdf`` and ``_mixture_sample`` of this module, which the
+Blinn distribution and a TS without a facet lobe use directly.
 """
 
 from __future__ import annotations
@@ -77,6 +82,9 @@ from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_paramete
 from .sampling import cosine_hemisphere, local_to_world
 from .smooth_limit import MirrorWithDiffuse
 from ..errors import SceneError
+from ..kernels import twin
+from ..kernels.torrance_sparrow import (torrance_sparrow_eval_numba, torrance_sparrow_pdf_numba,
+                                        torrance_sparrow_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
 from ..spectral import ConstantSpectrum, as_spectrum
@@ -170,6 +178,120 @@ class SpecularAlbedoTable:
         E = self.E
         return ((E[i, j] * (1.0 - fx) + E[i + 1, j] * fx) * (1.0 - fy)
                 + (E[i, j + 1] * (1.0 - fx) + E[i + 1, j + 1] * fx) * fy)
+
+
+# --------------------------------------------------------------------------- the facet lobe's batched steps
+# eval, pdf and sample of the facet lobe (plus the diffuse lobe's share of pdf and sample) as functions
+# of the batch: ``dist`` is a microfacet distribution (engine.materials.microfacet), ``s`` the specular
+# weight (a number or (N,)), ``eta`` the relative index (L, N); ``p_given`` the specular-lobe
+# probability (N,) or None for the Fresnel estimate against the diffuse weight ``w_d`` (N,)
+# (TorranceSparrow._p_spec).  For Beckmann facets the twins below run them as one compiled pass each
+# (engine.kernels.torrance_sparrow); Blinn facets use these functions directly.
+
+def _facet_eval(dist, n_s, wo, wi, eta, s, shadowing):
+    """(x, A, B, C, S, valid): the facet lobe s·M_F·D·G/(4 cosθ_i cosθ_o) in the scattering-plane frame
+    x (3, N), (A, B, C, S) (L, N), and valid = cosθ_i > 0 and cosθ_o > 0 (N,)."""
+    t, b = local_frame(n_s)
+    wo_l = to_local(wo, t, b, n_s)
+    wi_l = to_local(wi, t, b, n_s)
+    cos_i, cos_o = wi_l[2], wo_l[2]
+    valid = (cos_i > 0) & (cos_o > 0)
+    h, cos_f, ok = half_vector(wi_l, wo_l)
+    ok &= valid
+    D = dist.D(h)
+    G = shadowing_term(shadowing, dist, wi_l, wo_l, h)
+    denom = 4.0 * np.where(ok, cos_i * cos_o, 1.0)
+    fr = np.where(ok, s * D * G / denom, 0.0)
+    Af, Bf, Cf, Sf = fresnel_reflection_abcs(np.where(ok, cos_f, 1.0)[None, :], eta)
+    x = scattering_plane_axis(-wi, wo)
+    return x, Af * fr, Bf * fr, Cf * fr, Sf * fr, valid
+
+
+def _p_spec_estimate(cos_o, p_given, eta, s, w_d):
+    """P_spec (N,): ``p_given``, or s·mean_λ F(cosθ_o) against w_d, clamped to P_SPEC_RANGE."""
+    if p_given is not None:
+        return p_given
+    F = fresnel_reflectance(np.clip(cos_o, 0.0, 1.0)[None, :], eta)
+    w_s = s * F.mean(axis=0)
+    tot = w_s + w_d
+    p = np.where(tot > 0, w_s / np.where(tot > 0, tot, 1.0), 0.5)
+    return np.clip(p, *P_SPEC_RANGE)
+
+
+def _specular_pdf_local(dist, wo_l, wi_l) -> np.ndarray:
+    h, _, ok = half_vector(wi_l, wo_l)
+    return np.where(ok, dist.pdf_reflected(wo_l, h), 0.0)
+
+
+def _mixture_pdf(dist, n_s, wo, wi, p_given, eta, s, w_d, has_specular, has_diffuse):
+    """P_spec·pdf_spec + (1 − P_spec)·cosθ_i/π (N,), 0 unless cosθ_i > 0 and cosθ_o > 0."""
+    t, b = local_frame(n_s)
+    wo_l = to_local(wo, t, b, n_s)
+    wi_l = to_local(wi, t, b, n_s)
+    valid = (wi_l[2] > 0) & (wo_l[2] > 0)
+    p_spec = _p_spec_estimate(wo_l[2], p_given, eta, s, w_d)
+    out = np.zeros(n_s.shape[1])
+    if has_specular:
+        out = out + p_spec * _specular_pdf_local(dist, wo_l, wi_l)
+    if has_diffuse:
+        out = out + (1.0 - p_spec) * np.maximum(wi_l[2], 0.0) / math.pi
+    return np.where(valid, out, 0.0)
+
+
+def _mixture_sample(dist, n_s, wo, u_lobe, u_dir, p_given, eta, s, w_d, has_specular, has_diffuse):
+    """(wi, pdf, valid, factor): a direction from the two-lobe mixture, its full pdf (0 where invalid)
+    and the weight factor cosθ_i/pdf (0 where invalid)."""
+    t, b = local_frame(n_s)
+    wo_l = to_local(wo, t, b, n_s)
+    cos_o = wo_l[2]
+    p_spec = _p_spec_estimate(cos_o, p_given, eta, s, w_d)
+    pick_spec = u_lobe < p_spec
+    wi_l = np.zeros((3, n_s.shape[1]))
+    if has_specular:
+        sel = np.nonzero(pick_spec & (cos_o > 0))[0]
+        if sel.size:
+            d = dist if np.ndim(getattr(dist, "m", 0.0)) == 0 else Beckmann.per_point(dist.m[sel])
+            h = d.sample(wo_l[:, sel], u_dir[:, sel])
+            wi_l[:, sel] = reflect_local(wo_l[:, sel], h)
+    if has_diffuse:
+        sel = np.nonzero(~pick_spec)[0]
+        if sel.size:
+            wi_l[:, sel] = cosine_hemisphere(u_dir[:, sel])
+    wi = local_to_world(wi_l, n_s)
+    pdf = _mixture_pdf(dist, n_s, wo, wi, p_given, eta, s, w_d, has_specular, has_diffuse)
+    valid = (cos_o > 0) & (wi_l[2] > 0) & (pdf > 0) & np.all(np.isfinite(wi), axis=0)
+    cos_i = np.maximum(dot(n_s, wi), 0.0)
+    factor = np.where(valid, cos_i / np.where(valid, pdf, 1.0), 0.0)
+    return wi, np.where(valid, pdf, 0.0), valid, factor
+
+
+def torrance_sparrow_eval_numpy(n_s, wo, wi, eta, L, s, m, shadowing):
+    """(x, A, B, C, S, valid) of the Beckmann facet lobe with roughness m (``_facet_eval``); eta
+    broadcasts to (L, N)."""
+    eta = np.broadcast_to(eta, (L, n_s.shape[1]))
+    return _facet_eval(Beckmann.per_point(m), n_s, wo, wi, eta, s, shadowing)
+
+
+def torrance_sparrow_pdf_numpy(n_s, wo, wi, m, p_given, eta, L, s, w_d, has_specular, has_diffuse):
+    """The mixture pdf (N,) with Beckmann facets of roughness m (``_mixture_pdf``)."""
+    eta = np.broadcast_to(eta, (L, n_s.shape[1]))
+    return _mixture_pdf(Beckmann.per_point(m), n_s, wo, wi, p_given, eta, s, w_d, has_specular, has_diffuse)
+
+
+def torrance_sparrow_sample_numpy(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowing, p_given, w_d, has_diffuse):
+    """(wi, pdf, valid, factor, x, A, B, C, S, eval_valid) of a Beckmann facet lobe (roughness m)
+    and an optional diffuse lobe: ``_mixture_sample``, then ``_facet_eval`` at wi with A..S times factor."""
+    eta = np.broadcast_to(eta, (L, n_s.shape[1]))
+    dist = Beckmann.per_point(m)
+    wi, pdf, valid, factor = _mixture_sample(dist, n_s, wo, u_lobe, u_dir, p_given, eta, s, w_d, True, has_diffuse)
+    x, A, B, C, S, eval_valid = _facet_eval(dist, n_s, wo, wi, eta, s, shadowing)
+    f = factor[None, :]
+    return wi, pdf, valid, factor, x, A * f, B * f, C * f, S * f, eval_valid
+
+
+torrance_sparrow_eval = twin(torrance_sparrow_eval_numba, torrance_sparrow_eval_numpy)
+torrance_sparrow_pdf = twin(torrance_sparrow_pdf_numba, torrance_sparrow_pdf_numpy)
+torrance_sparrow_sample = twin(torrance_sparrow_sample_numba, torrance_sparrow_sample_numpy)
 
 
 class TorranceSparrow(BSDF):
@@ -295,10 +417,18 @@ class TorranceSparrow(BSDF):
 
     def _p_spec(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray:
         """Probability of sampling the specular lobe (N,), a function of ω_o only."""
+        p_given, w_d = self._p_spec_inputs(sp, cos_o)
+        if p_given is not None:
+            return p_given
+        return _p_spec_estimate(cos_o, None, self.relative_eta(sp), sp.number(self.s), w_d)
+
+    def _p_spec_inputs(self, sp: ShadingPoint, cos_o: np.ndarray):
+        """(p_given, w_d) of ``_p_spec_estimate``: P_spec itself where it is not the Fresnel estimate
+        (one lobe only: 1 or 0; ``"albedo_scaling"``: the lobes' albedos at ω_o), else the diffuse weight."""
         if not self.has_diffuse:
-            return np.ones(sp.n) if self.has_specular else np.zeros(sp.n)
+            return (np.ones(sp.n) if self.has_specular else np.zeros(sp.n)), None
         if not self.has_specular:
-            return np.zeros(sp.n)
+            return np.zeros(sp.n), None
         if self._albedo is not None:   # the lobes' albedos at ω_o
             s = sp.number(self.s)
             E = self._albedo(cos_o, sp.number(self.m))
@@ -306,97 +436,83 @@ class TorranceSparrow(BSDF):
             w_d = sp.number(self.d) * sp.spectrum(self.albedo).mean(axis=0) * np.maximum(1.0 - s * E, 0.0)
             tot = w_s + w_d
             p = np.where(tot > 0, w_s / np.where(tot > 0, tot, 1.0), 0.5)
-            return np.clip(p, *P_SPEC_RANGE)
-        F = fresnel_reflectance(np.clip(cos_o, 0.0, 1.0)[None, :], self.relative_eta(sp))
-        w_s = sp.number(self.s) * F.mean(axis=0)
-        w_d = sp.number(self.d) * sp.spectrum(self.albedo).mean(axis=0)
-        tot = w_s + w_d
-        p = np.where(tot > 0, w_s / np.where(tot > 0, tot, 1.0), 0.5)
-        return np.clip(p, *P_SPEC_RANGE)
+            return np.clip(p, *P_SPEC_RANGE), None
+        return None, sp.number(self.d) * sp.spectrum(self.albedo).mean(axis=0)
 
-    @staticmethod
-    def _specular_pdf_local(dist, wo_l, wi_l) -> np.ndarray:
-        h, _, ok = half_vector(wi_l, wo_l)
-        return np.where(ok, dist.pdf_reflected(wo_l, h), 0.0)
+    @property
+    def _compiled_lobe(self) -> bool:
+        """The facet lobe runs as the Beckmann twins (engine.kernels.torrance_sparrow)."""
+        return self.has_specular and self.distribution == "beckmann"
+
+    def _depol(self, sp: ShadingPoint, valid: np.ndarray, cos_o) -> np.ndarray | None:
+        """The Lambert term d·ρ/π (L, N) (times the ``"albedo_scaling"`` weight), 0 where not valid."""
+        if not self.has_diffuse:
+            return None
+        # A depolariser adds to M00 only (not to the ABCS block's M11).
+        depol = sp.spectrum(self.albedo) * (sp.number(self.d) / math.pi) * valid[None, :]
+        scale = self.diffuse_scale(sp, cos_o() if self._albedo is not None else None)
+        if scale is not None:
+            depol = depol * scale[None, :]
+        return depol
 
     # --- BSDF interface --------------------------------------------------------------------------
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        n_s = sp.n_s
-        t, b = local_frame(n_s)
-        wo_l = to_local(sp.wo, t, b, n_s)
-        wi_l = to_local(wi, t, b, n_s)
-        cos_i, cos_o = wi_l[2], wo_l[2]
-        valid = (cos_i > 0) & (cos_o > 0)
-        L = sp.lam.shape[0]
-        A = np.zeros((L, sp.n))
-        B = np.zeros((L, sp.n))
-        C = np.zeros((L, sp.n))
-        S = np.zeros((L, sp.n))
-        if self.has_specular:
-            h, cos_f, ok = half_vector(wi_l, wo_l)
-            ok &= valid
-            dist = self._dist(sp)
-            D = dist.D(h)
-            G = shadowing_term(self.shadowing, dist, wi_l, wo_l, h)
-            denom = 4.0 * np.where(ok, cos_i * cos_o, 1.0)
-            fr = np.where(ok, sp.number(self.s) * D * G / denom, 0.0)
-            Af, Bf, Cf, Sf = fresnel_reflection_abcs(np.where(ok, cos_f, 1.0)[None, :], self.relative_eta(sp))
-            A = Af * fr
-            B = Bf * fr
-            C = Cf * fr
-            S = Sf * fr
-        depol = None
-        if self.has_diffuse:
-            # A depolariser adds to M00 only (not to the ABCS block's M11).
-            depol = sp.spectrum(self.albedo) * (sp.number(self.d) / math.pi) * valid[None, :]
-            scale = self.diffuse_scale(sp, cos_o)
-            if scale is not None:
-                depol = depol * scale[None, :]
-        if not self.has_specular:  # pure Lambert: a depolariser (frame-independent)
-            return depolarising_value(depol if depol is not None else A, sp.n)
-        x = scattering_plane_axis(-wi, sp.wo)
-        return MuellerValue("abcs", x, x, A, B, C, S, depol=depol)
+        if not self.has_specular:   # pure Lambert: a depolariser (frame-independent)
+            n_s = sp.n_s
+            t, b = local_frame(n_s)
+            cos_o = to_local(sp.wo, t, b, n_s)[2]
+            valid = (to_local(wi, t, b, n_s)[2] > 0) & (cos_o > 0)
+            depol = self._depol(sp, valid, lambda: cos_o)
+            return depolarising_value(depol if depol is not None else np.zeros((sp.lam.shape[0], sp.n)), sp.n)
+        if self._compiled_lobe:
+            x, A, B, C, S, valid = torrance_sparrow_eval(sp.n_s, sp.wo, wi, self._eta(sp), sp.lam.shape[0],
+                                                         sp.number(self.s), self._m(sp), self.shadowing)
+        else:
+            x, A, B, C, S, valid = _facet_eval(self._dist(sp), sp.n_s, sp.wo, wi, self.relative_eta(sp),
+                                               sp.number(self.s), self.shadowing)
+        return MuellerValue("abcs", x, x, A, B, C, S, depol=self._depol(sp, valid, lambda: sp.cos_o))
+
+    def _m(self, sp: ShadingPoint):
+        """The Beckmann roughness at the points: a number, or (N,) for a textured m."""
+        return sp.number(self.m)
+
+    def _eta(self, sp: ShadingPoint) -> np.ndarray:
+        """The relative index for the twins: (1, 1) for constant n and κ (the value every entry of
+        ``relative_eta`` has, computed the same way), else ``relative_eta`` (L, N)."""
+        # not cached: a configured copy may change exterior_n (engine.materials.weidlich_wilkie)
+        if isinstance(self.n, ConstantSpectrum) and isinstance(self.k, ConstantSpectrum):
+            return (np.full((1, 1), self.n.value) + 1j * np.full((1, 1), self.k.value)) / self.exterior_n
+        return self.relative_eta(sp)
+
+    def _mixture_inputs(self, sp: ShadingPoint, compact: bool = False):
+        """(p_given, eta, s, w_d) for the mixture pdf and sampling (``compact``: eta as ``_eta``)."""
+        p_given, w_d = self._p_spec_inputs(sp, sp.cos_o if self._albedo is not None else None)
+        return p_given, self._eta(sp) if compact else self.relative_eta(sp), sp.number(self.s), w_d
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        n_s = sp.n_s
-        t, b = local_frame(n_s)
-        wo_l = to_local(sp.wo, t, b, n_s)
-        wi_l = to_local(wi, t, b, n_s)
-        valid = (wi_l[2] > 0) & (wo_l[2] > 0)
-        p_spec = self._p_spec(sp, wo_l[2])
-        out = np.zeros(sp.n)
-        if self.has_specular:
-            out = out + p_spec * self._specular_pdf_local(self._dist(sp), wo_l, wi_l)
-        if self.has_diffuse:
-            out = out + (1.0 - p_spec) * np.maximum(wi_l[2], 0.0) / math.pi
-        return np.where(valid, out, 0.0)
+        p_given, eta, s, w_d = self._mixture_inputs(sp, compact=self._compiled_lobe)
+        if self._compiled_lobe:
+            return torrance_sparrow_pdf(sp.n_s, sp.wo, wi, self._m(sp), p_given, eta, sp.lam.shape[0], s, w_d, True,
+                                        self.has_diffuse)
+        return _mixture_pdf(self._dist(sp) if self.has_specular else None, sp.n_s, sp.wo, wi, p_given, eta, s,
+                            w_d, self.has_specular, self.has_diffuse)
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
-        n_s = sp.n_s
-        t, b = local_frame(n_s)
-        wo_l = to_local(sp.wo, t, b, n_s)
-        cos_o = wo_l[2]
-        p_spec = self._p_spec(sp, cos_o)
-        pick_spec = u_lobe < p_spec
-        wi_l = np.zeros((3, sp.n))
-        if self.has_specular:
-            sel = np.nonzero(pick_spec & (cos_o > 0))[0]
-            if sel.size:
-                h = self._dist(sp, sel).sample(wo_l[:, sel], u_dir[:, sel])
-                wi_l[:, sel] = reflect_local(wo_l[:, sel], h)
-        if self.has_diffuse:
-            sel = np.nonzero(~pick_spec)[0]
-            if sel.size:
-                wi_l[:, sel] = cosine_hemisphere(u_dir[:, sel])
-        wi = local_to_world(wi_l, n_s)
-        pdf = self.pdf(sp, wi)
-        valid = (cos_o > 0) & (wi_l[2] > 0) & (pdf > 0) & np.all(np.isfinite(wi), axis=0)
-        value = self.eval(sp, wi)
-        cos_i = np.maximum(dot(n_s, wi), 0.0)
-        factor = np.where(valid, cos_i / np.where(valid, pdf, 1.0), 0.0)
-        return BSDFSample(wi=wi, weight=value.scaled(factor[None, :]), pdf=np.where(valid, pdf, 0.0),
-                          is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=np.ones(sp.n))
+        p_given, eta, s, w_d = self._mixture_inputs(sp, compact=self._compiled_lobe)
+        if self._compiled_lobe:
+            wi, pdf, valid, factor, x, A, B, C, S, eval_valid = torrance_sparrow_sample(
+                sp.n_s, sp.wo, u_lobe, u_dir, eta, sp.lam.shape[0], s, self._m(sp), self.shadowing, p_given, w_d,
+                self.has_diffuse)
+            depol = self._depol(sp, eval_valid, lambda: sp.cos_o)
+            weight = MuellerValue("abcs", x, x, A, B, C, S, depol=None if depol is None else depol * factor[None, :])
+        else:
+            wi, pdf, valid, factor = _mixture_sample(self._dist(sp) if self.has_specular else None, sp.n_s, sp.wo,
+                                                     u_lobe, u_dir, p_given, eta, s, w_d, self.has_specular,
+                                                     self.has_diffuse)
+            weight = self.eval(sp, wi).scaled(factor[None, :])
+        return BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=np.zeros(sp.n, bool), valid=valid,
+                          eta_sq=np.ones(sp.n))
 
     def delta_reflection(self, sp: ShadingPoint):
         return None

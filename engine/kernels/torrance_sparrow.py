@@ -1,0 +1,321 @@
+"""Torrance–Sparrow (Beckmann facets) eval, pdf and sample as one compiled pass each.
+
+Per path, in the local shading frame (t, b, n) of engine.vec3.local_frame: the half vector, the
+Beckmann D, the shadowing G ("ts" V-cavity, exact or rational Smith, none), the facet Fresnel
+(A, B, C, S) per wavelength (engine.kernels.fresnel.abcs_at), the scattering-plane frame
+x_in = x_out = unit(−ω_i × ω_o) (engine.kernels.geometry.unit_cross), the two-lobe choice and the
+mixture pdf, visible-normal sampling (engine.kernels.microfacet.beckmann_vndf_at).
+The NumPy references are the material's own batched formulas (engine.materials.torrance_sparrow,
+where the twins are declared); each step here is the same arithmetic in the same operation order,
+so the compiled pass gives the reference's bits (the reference's compiled pieces, Fresnel and the
+visible slope, are the same arithmetic; exp, log, sin and cos are the C library's in both).  A
+constant index is evaluated once per path, not once per wavelength (same inputs, same bits).
+
+Shadowing codes (``SHADOWING_CODES``): 0 "ts", 1 "smith", 2 "smith_rational", 3 "none".
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import jit
+from .error_function import ERFCX_COEF, ERFCX_K
+from .fresnel import abcs_at
+from .microfacet import chi_plus_at, beckmann_d_at, beckmann_g1_at, beckmann_lambda_at, beckmann_vndf_at, smith_a_at
+
+#: The shadowing names of engine.materials.microfacet.SHADOWING, by kernel code.
+SHADOWING_CODES = {"ts": 0, "smith": 1, "smith_rational": 2, "none": 3}
+_DEGENERATE = 1e-12           # engine.polarisation.frames._DEGENERATE
+_PI = math.pi
+_ERFCX_COEF = np.ascontiguousarray(ERFCX_COEF, dtype=np.float64)
+_ERFCX_K = float(ERFCX_K)
+
+
+# ----------------------------------------------------------------------------- per-path pieces
+# Per-point inputs may be given once for the batch: arrays of length 1 (a number), an index of
+# shape (1, 1), (1, N), (L, 1) or (L, N) (a constant index is not spread over the batch).
+
+@jit
+def at(v, i):
+    """v[i], or v[0] for a number given as a one-element array."""
+    return v[i if v.shape[0] > 1 else 0]
+
+
+@jit
+def eta_at(eta, lam, i):
+    """The relative index at row ``lam`` and path ``i`` of a broadcast (rows, columns) array."""
+    return eta[lam if eta.shape[0] > 1 else 0, i if eta.shape[1] > 1 else 0]
+
+
+@jit
+def local_frame_at(n0, n1, n2):
+    """(t, b) of engine.vec3.local_frame for one unit normal, same operation order."""
+    sign = 1.0 if n2 >= 0 else -1.0
+    f = -1.0 / (sign + n2)
+    g = n0 * n1 * f
+    t0 = 1.0 + sign * n0 * n0 * f
+    t1 = sign * g
+    t2 = -sign * n0
+    return t0, t1, t2, n1 * t2 - n2 * t1, n2 * t0 - n0 * t2, n0 * t1 - n1 * t0
+
+
+@jit
+def shadowing_at(kind, i0, i1, i2, o0, o1, o2, h0, h1, h2, m, coef, k):
+    """G of engine.materials.microfacet.shadowing_term for the kernel code ``kind``."""
+    if kind == 0:
+        di = i0 * h0 + i1 * h1 + i2 * h2
+        do = o0 * h0 + o1 * h1 + o2 * h2
+        if not (di > 0 and do > 0 and h2 > 0 and i2 > 0 and o2 > 0):
+            return 0.0
+        g_o = 2.0 * h2 * o2 / do
+        g_i = 2.0 * h2 * i2 / di
+        return min(1.0, min(g_o, g_i))
+    if kind == 3:
+        return chi_plus_at(i0, i1, i2, h0, h1, h2) * chi_plus_at(o0, o1, o2, h0, h1, h2)
+    rational = kind == 2
+    return (beckmann_g1_at(i0, i1, i2, h0, h1, h2, m, rational, coef, k)
+            * beckmann_g1_at(o0, o1, o2, h0, h1, h2, m, rational, coef, k))
+
+
+@jit
+def specular_pdf_at(i0, i1, i2, o0, o1, o2, m, coef, k):
+    """Density of ω_i under visible-normal sampling and reflection (TorranceSparrow._specular_pdf_local)."""
+    hv0, hv1, hv2 = i0 + o0, i1 + o1, i2 + o2
+    length = np.sqrt(hv0 * hv0 + hv1 * hv1 + hv2 * hv2)
+    if not length > 0:
+        return 0.0
+    h0, h1, h2 = hv0 / length, hv1 / length, hv2 / length
+    d = o0 * h0 + o1 * h1 + o2 * h2
+    if not (o2 > 0 and d > 0):
+        return 0.0
+    g1 = 1.0 / (1.0 + beckmann_lambda_at(smith_a_at(o0, o1, o2, m), coef, k))
+    return g1 * beckmann_d_at(h0, h1, h2, m) / (4.0 * o2)
+
+
+@jit
+def p_spec_at(i, cos_o, p_given, use_given, eta, L, s, w_d):
+    """Probability of the specular lobe (TorranceSparrow._p_spec): ``p_given[i]``, or from the mean
+    unpolarised Fresnel reflectance at the macro angle against the diffuse weight ``w_d[i]``."""
+    if use_given:
+        return at(p_given, i)
+    c = min(max(cos_o, 0.0), 1.0)
+    e = eta_at(eta, 0, i)
+    F0 = abcs_at(c, e)[0]
+    F = F0
+    for lam in range(1, L):      # the mean over the L wavelengths, summed in order as NumPy's mean(axis=0)
+        if eta_at(eta, lam, i) != e:
+            e = eta_at(eta, lam, i)
+            F0 = abcs_at(c, e)[0]
+        F += F0
+    w_s = at(s, i) * (F / L)
+    tot = w_s + at(w_d, i)
+    p = w_s / tot if tot > 0 else 0.5
+    return min(max(p, 0.1), 0.9)
+
+
+@jit
+def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, kind, coef, k, factor, A, B, C, S, x):
+    """Facet lobe at path i into A..S[:, i] (times ``factor``) and x[:, i]; returns cosθ_i > 0 and cosθ_o > 0."""
+    o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
+    w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
+    lo0 = o0 * t0 + o1 * t1 + o2 * t2
+    lo1 = o0 * b0 + o1 * b1 + o2 * b2
+    lo2 = o0 * n0 + o1 * n1 + o2 * n2
+    li0 = w0 * t0 + w1 * t1 + w2 * t2
+    li1 = w0 * b0 + w1 * b1 + w2 * b2
+    li2 = w0 * n0 + w1 * n1 + w2 * n2
+    valid = li2 > 0 and lo2 > 0
+    hv0, hv1, hv2 = li0 + lo0, li1 + lo1, li2 + lo2
+    length = np.sqrt(hv0 * hv0 + hv1 * hv1 + hv2 * hv2)
+    ok = length > 0 and valid
+    fr = 0.0
+    c = 1.0
+    if ok:
+        h0, h1, h2 = hv0 / length, hv1 / length, hv2 / length
+        D = beckmann_d_at(h0, h1, h2, m)
+        G = shadowing_at(kind, li0, li1, li2, lo0, lo1, lo2, h0, h1, h2, m, coef, k)
+        fr = s * D * G / (4.0 * (li2 * lo2))
+        c = min(0.5 * length, 1.0)
+    e = eta_at(eta, 0, i)
+    a_, b_, c_, s_ = abcs_at(c, e)
+    for lam in range(A.shape[0]):
+        if lam > 0 and eta_at(eta, lam, i) != e:    # a constant index: one Fresnel evaluation serves every λ
+            e = eta_at(eta, lam, i)
+            a_, b_, c_, s_ = abcs_at(c, e)
+        A[lam, i] = a_ * fr * factor
+        B[lam, i] = b_ * fr * factor
+        C[lam, i] = c_ * fr * factor
+        S[lam, i] = s_ * fr * factor
+    # x = unit(k_i × k_o), k_i = −ω_i (engine.kernels.geometry.unit_cross, same order)
+    a0, a1, a2 = -w0, -w1, -w2
+    s0 = a1 * o2 - a2 * o1
+    s1 = a2 * o0 - a0 * o2
+    s2 = a0 * o1 - a1 * o0
+    ln = np.sqrt((s0 * s0 + s1 * s1) + s2 * s2)
+    if ln > _DEGENERATE:
+        x[0, i], x[1, i], x[2, i] = s0 / ln, s1 / ln, s2 / ln
+    else:
+        sign = 1.0 if a2 >= 0 else -1.0
+        f = -1.0 / (sign + a2)
+        x[0, i] = 1.0 + sign * a0 * a0 * f
+        x[1, i] = sign * (a0 * a1 * f)
+        x[2, i] = -sign * a0
+    return valid
+
+
+@jit
+def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, p_spec, has_specular, has_diffuse, coef, k):
+    """The two-lobe mixture density of ω_i = wi[:, i] (TorranceSparrow.pdf)."""
+    o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
+    w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
+    lo0 = o0 * t0 + o1 * t1 + o2 * t2
+    lo1 = o0 * b0 + o1 * b1 + o2 * b2
+    lo2 = o0 * n0 + o1 * n1 + o2 * n2
+    li0 = w0 * t0 + w1 * t1 + w2 * t2
+    li1 = w0 * b0 + w1 * b1 + w2 * b2
+    li2 = w0 * n0 + w1 * n1 + w2 * n2
+    if not (li2 > 0 and lo2 > 0):
+        return 0.0
+    out = 0.0
+    if has_specular:
+        out = out + p_spec * specular_pdf_at(li0, li1, li2, lo0, lo1, lo2, m, coef, k)
+    if has_diffuse:
+        out = out + (1.0 - p_spec) * max(li2, 0.0) / _PI
+    return out
+
+
+# ----------------------------------------------------------------------------- batch loops
+
+@jit
+def _eval_loop(n_s, wo, wi, eta, s, m, kind, coef, k, A, B, C, S, x, valid):
+    for i in range(n_s.shape[1]):
+        n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
+        t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
+        valid[i] = eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, at(s, i), at(m, i), kind, coef, k, 1.0,
+                           A, B, C, S, x)
+
+
+@jit
+def _pdf_loop(n_s, wo, wi, m, p_given, use_given, eta, L, s, w_d, has_specular, has_diffuse, coef, k, out):
+    for i in range(n_s.shape[1]):
+        n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
+        t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
+        cos_o = (wo[0, i] * n0 + wo[1, i] * n1) + wo[2, i] * n2
+        p = p_spec_at(i, cos_o, p_given, use_given, eta, L, s, w_d)
+        out[i] = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, at(m, i), p, has_specular, has_diffuse,
+                        coef, k)
+
+
+@jit
+def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, kind, p_given, use_given, w_d, has_diffuse, coef, k,
+                 wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
+    for i in range(n_s.shape[1]):
+        n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
+        t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
+        o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
+        lo0 = o0 * t0 + o1 * t1 + o2 * t2
+        lo1 = o0 * b0 + o1 * b1 + o2 * b2
+        cos_o = o0 * n0 + o1 * n1 + o2 * n2
+        p = p_spec_at(i, cos_o, p_given, use_given, eta, A.shape[0], s, w_d)
+        pick_spec = u_lobe[i] < p
+        l0 = l1 = l2 = 0.0
+        mi = at(m, i)
+        if pick_spec and cos_o > 0:
+            # visible-normal sampling (engine.materials.microfacet.Beckmann.sample)
+            h0, h1, h2 = beckmann_vndf_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi, coef, k)
+            d = lo0 * h0 + lo1 * h1 + cos_o * h2
+            l0 = 2.0 * d * h0 - lo0
+            l1 = 2.0 * d * h1 - lo1
+            l2 = 2.0 * d * h2 - cos_o
+        elif has_diffuse and not pick_spec:
+            # cosine-weighted (engine.materials.sampling.cosine_hemisphere)
+            a = 2.0 * u_dir[0, i] - 1.0
+            bb = 2.0 * u_dir[1, i] - 1.0
+            if abs(a) > abs(bb):
+                r = a
+                phi = (np.pi / 4) * (bb / (a if a != 0 else 1.0))
+            else:
+                r = bb
+                phi = np.pi / 2 - (np.pi / 4) * (a / (bb if bb != 0 else 1.0))
+            l0 = r * np.cos(phi)
+            l1 = r * np.sin(phi)
+            l2 = np.sqrt(max(1.0 - l0 * l0 - l1 * l1, 0.0))
+        w0 = t0 * l0 + b0 * l1 + n0 * l2
+        w1 = t1 * l0 + b1 * l1 + n1 * l2
+        w2 = t2 * l0 + b2 * l1 + n2 * l2
+        wi[0, i], wi[1, i], wi[2, i] = w0, w1, w2
+        q = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, mi, p, True, has_diffuse, coef, k)
+        ok = cos_o > 0 and l2 > 0 and q > 0 and np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)
+        cos_i = max(n0 * w0 + n1 * w1 + n2 * w2, 0.0)
+        f = cos_i / q if ok else 0.0
+        valid[i] = ok
+        pdf[i] = q if ok else 0.0
+        factor[i] = f
+        eval_valid[i] = eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, at(s, i), mi, kind, coef, k, f,
+                                A, B, C, S, x)
+
+
+# ----------------------------------------------------------------------------- wrappers (the compiled twins)
+
+def _per_point(v, n):
+    """A number as a one-element array, else (n,) contiguous float64 (read with ``at``)."""
+    if np.ndim(v) == 0:
+        return np.array([float(v)])
+    return np.ascontiguousarray(np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)))
+
+
+def _eta_rows(eta):
+    """The relative index as a 2-D complex128 array, not spread over the batch (read with ``eta_at``)."""
+    e = np.asarray(eta, dtype=np.complex128)
+    return np.ascontiguousarray(e.reshape((1,) * (2 - e.ndim) + e.shape))
+
+
+def _p_inputs(p_given, w_d, n):
+    use_given = p_given is not None
+    return (_per_point(p_given, n) if use_given else np.zeros(1), use_given,
+            np.zeros(1) if use_given else _per_point(w_d, n))
+
+
+def _f64(a):
+    return np.ascontiguousarray(a, dtype=np.float64)
+
+
+def torrance_sparrow_eval_numba(n_s, wo, wi, eta, L, s, m, shadowing):
+    n = n_s.shape[1]
+    A, B, C, S = (np.empty((L, n)) for _ in range(4))
+    x, valid = np.empty((3, n)), np.empty(n, np.bool_)
+    _eval_loop(_f64(n_s), _f64(wo), _f64(wi), _eta_rows(eta), _per_point(s, n), _per_point(m, n),
+               SHADOWING_CODES[shadowing], _ERFCX_COEF, _ERFCX_K, A, B, C, S, x, valid)
+    return x, A, B, C, S, valid
+
+
+def torrance_sparrow_pdf_numba(n_s, wo, wi, m, p_given, eta, L, s, w_d, has_specular, has_diffuse):
+    n = n_s.shape[1]
+    p, use_given, wd = _p_inputs(p_given, w_d, n)
+    out = np.empty(n)
+    _pdf_loop(_f64(n_s), _f64(wo), _f64(wi), _per_point(m, n), p, use_given,
+              np.zeros((1, 1), np.complex128) if use_given else _eta_rows(eta), int(L),
+              np.zeros(1) if use_given else _per_point(s, n), wd, bool(has_specular), bool(has_diffuse),
+              _ERFCX_COEF, _ERFCX_K, out)
+    return out
+
+
+def torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowing, p_given, w_d, has_diffuse):
+    n = n_s.shape[1]
+    p, use_given, wd = _p_inputs(p_given, w_d, n)
+    A, B, C, S = (np.empty((L, n)) for _ in range(4))
+    wi, x = np.empty((3, n)), np.empty((3, n))
+    pdf, factor = np.empty(n), np.empty(n)
+    valid, eval_valid = np.empty(n, np.bool_), np.empty(n, np.bool_)
+    _sample_loop(_f64(n_s), _f64(wo), _per_point(u_lobe, n), _f64(u_dir), _eta_rows(eta), _per_point(s, n),
+                 _per_point(m, n), SHADOWING_CODES[shadowing], p, use_given, wd, bool(has_diffuse),
+                 _ERFCX_COEF, _ERFCX_K, wi, pdf, valid, factor, A, B, C, S, x, eval_valid)
+    return wi, pdf, valid, factor, x, A, B, C, S, eval_valid
+
+
+#: None without Numba (engine.kernels.twin then keeps the NumPy references).
+torrance_sparrow_eval_numba = _eval_loop and torrance_sparrow_eval_numba
+torrance_sparrow_pdf_numba = _pdf_loop and torrance_sparrow_pdf_numba
+torrance_sparrow_sample_numba = _sample_loop and torrance_sparrow_sample_numba
