@@ -149,3 +149,48 @@ def test_compiled_steps_match_their_numpy_twins(P, L):
         # the geometry (directions, frames) involves no complex arithmetic
         assert np.array_equal(got[2], want[2], equal_nan=True), key
 
+
+# ----------------------------------------------------------------------------- dropping finished paths
+
+@needs_numba
+def test_keep_columns_bitwise_for_every_field_shape_and_dtype():
+    """The compiled gather of PathState.compress copies exactly np.compress's values (NaN payloads,
+    signed zeros, bools, 64-bit keys) for (n,), (3, n) and (P, P, L, n) fields, also a non-contiguous
+    one, keeping none, some or all paths."""
+    from engine.kernels import transport
+    rng = np.random.default_rng(14)
+    n = 1000
+    fields = [rng.normal(size=(4, 4, 4, n)), rng.normal(size=(3, n)), rng.normal(size=n),
+              rng.integers(0, 2**63, n, dtype=np.int64), rng.integers(0, 2**64 - 1, n, dtype=np.uint64),
+              rng.random(n) < 0.5, rng.normal(size=(n, 3)).T, np.array([np.nan, -0.0, np.inf] * (n // 3) + [1.0])]
+    for mask in (np.zeros(n, bool), rng.random(n) < 0.7, np.ones(n, bool)):
+        idx = np.flatnonzero(mask)
+        for a in fields:
+            got = transport.keep_columns_numba(a, idx)
+            want = np.compress(mask, a, axis=-1)
+            assert got.dtype == want.dtype and got.shape == want.shape and got.tobytes() == want.tobytes()
+            assert transport.keep_columns_numpy(a, idx).tobytes() == want.tobytes()
+
+
+def test_path_state_compress_keeps_the_masked_paths_in_every_field():
+    from engine.render.path_state import ARRAY_FIELDS, PathState
+    from engine.render.sampler import PathSampler
+    from engine.spectral import WavelengthLookup
+    rng = np.random.default_rng(15)
+    n = 500
+    lk = WavelengthLookup(rng.uniform(380, 780, (4, n)))
+    state = PathState(path=np.arange(n), T=rng.normal(size=(4, 4, 4, n)), x_T=unit(rng, n), o=rng.normal(size=(3, n)),
+                      d=unit(rng, n), t_max=None, eta_sq=rng.random(n), prev_delta=rng.random(n) < 0.5,
+                      prev_pdf=rng.random(n), p_prev=None, n_prev=rng.normal(size=(3, n)),
+                      sampler=PathSampler(rng.integers(0, 2**63, n).astype(np.uint64)), lk=lk, lk_m=lk)
+    before = {name: getattr(state, name) for name in ARRAY_FIELDS}
+    keys, lam = state.sampler.keys, lk.lam
+    mask = rng.random(n) < 0.6
+    extra = rng.normal(size=(3, n))
+    kept, none = state.compress(mask, extra, None)
+    for name, a in before.items():
+        assert (a is None and getattr(state, name) is None) or np.array_equal(getattr(state, name), a[..., mask])
+    assert np.array_equal(kept, extra[:, mask]) and none is None
+    assert np.array_equal(state.sampler.keys, keys[mask]) and np.array_equal(state.lk.lam, lam[:, mask])
+    assert state.lk_m is state.lk and state.n == mask.sum()
+    assert state.compress(np.ones(state.n, bool), kept) == (kept,)       # a full mask copies nothing
