@@ -18,7 +18,7 @@ from engine.materials.conductor import SmoothConductor, constant_mirror_scatter_
 from engine.materials.dielectric import SmoothDielectric, dielectric_scatter_numpy
 from engine.materials.filter_sheet import FilterSheet, filter_sheet_scatter_numpy
 from engine.render.integrator import scatter_throughput
-from engine.spectral import ConstantSpectrum
+from engine.spectral import ConstantSpectrum, TabulatedSpectrum
 from engine.spectral.ior import named_ior
 
 needs_numba = pytest.mark.skipif(kernels._numba is None, reason="numba is not installed (NumPy kernels only)")
@@ -41,6 +41,9 @@ def batch(rng, n, P, L):
     x_T /= np.linalg.norm(x_T, axis=0)
     T = rng.normal(size=(P, P, L, n))
     lam = rng.uniform(380.0, 780.0, (L, n))
+    lam[0, 20:40] = np.repeat([380.0, 500.0, 501.0, 640.0, 780.0], 4)   # on knots of the tables
+    gold_knots = named_ior("Au")[0].wavelengths
+    lam[-1, 40:60] = gold_knots[(gold_knots >= 380.0) & (gold_knots <= 780.0)][:20]
     u = rng.random(n)
     u[:20] = [0.0, 1.0 - 1e-16] * 10
     return n_s, wo, x_T, T, lam, u
@@ -71,6 +74,9 @@ MATERIALS = {
     "black_glass_tir": lambda: BlackGlass(ConstantSpectrum(1.2), 1.5),
     "gold": lambda: SmoothConductor(*named_ior("Au")),
     "gold_in_oil": lambda: SmoothConductor(*named_ior("Au"), 1.5),
+    "metal_on_two_grids": lambda: SmoothConductor(      # n and κ tabulated at different wavelengths, knots hit
+        TabulatedSpectrum([350.0, 380.0, 500.0, 501.0, 640.0, 800.0], [0.2, 0.3, 1.1, 1.1, 0.9, 0.4]),
+        TabulatedSpectrum(np.linspace(300.0, 850.0, 12), np.linspace(1.0, 6.0, 12) ** 1.5)),
     "glass": lambda: SmoothDielectric(1.5),
     "glass_in_water": lambda: SmoothDielectric(1.2, 1.33),
     "polariser": lambda: FilterSheet([0.3, -0.2, 1.0], "polariser", extinction=0.01, transmittance=0.9),

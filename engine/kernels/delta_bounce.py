@@ -142,6 +142,41 @@ def constant_mirror_loop(rows, n_s, wo, x_T, T, eta, T_out, d, x_out, valid, eta
 
 
 @jit
+def _interp_from(xp, fp, x, j):
+    """engine.kernels.tables.interp_at(xp, fp, x) for xp[0] ≤ x (not NaN) with j = the last knot ≤ x,
+    found by the caller (shared by the n and κ tables on one grid): the same cases and arithmetic."""
+    m = xp.shape[0]
+    if x >= xp[m - 1]:
+        return fp[m - 1]
+    if xp[j] == x:
+        return fp[j]
+    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
+    r = slope * (x - xp[j]) + fp[j]
+    if np.isnan(r):
+        r = slope * (x - xp[j + 1]) + fp[j + 1]
+        if np.isnan(r) and fp[j] == fp[j + 1]:
+            r = fp[j]
+    return r
+
+
+@jit
+def _index_on_grid(wl, n, k, x, scale):
+    """relative_index_at(wl, n, wl, k, x, scale) for tables on one wavelength grid and wl[0] ≤ x ≤ wl[-1]:
+    one bisection finds the knot for both (np.searchsorted's answer for increasing knots)."""
+    lo = 0
+    hi = wl.shape[0] - 1
+    while hi - lo > 1:                 # wl[lo] ≤ x < wl[hi] (or x at the last knot: held there)
+        mid = (lo + hi) // 2
+        if wl[mid] <= x:
+            lo = mid
+        else:
+            hi = mid
+    a = _interp_from(wl, n, x, lo)
+    b = _interp_from(wl, k, x, lo)
+    return complex((a + b * 0.0) * scale, (b - a * 0.0) * scale)
+
+
+@jit
 def tabulated_mirror_loop(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, scale, T_out, d, x_out, valid, eta_sq):
     """Fresnel mirror of a measured metal: the relative index (n + iκ)(λ)·scale from piecewise-linear
     tables at each path's wavelengths (engine.kernels.fresnel._tabulated_mirror_loop's arithmetic).
@@ -154,6 +189,7 @@ def tabulated_mirror_loop(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, scale, T
             x = lam[q, rows[j]]
             if not (x >= lo and x <= hi):
                 return False
+    shared_grid = wl_n.shape[0] == wl_k.shape[0] and np.all(wl_n == wl_k)
     abcs, rot = _chunk_buffers(L)
     for j0 in range(0, rows.shape[0], _CHUNK):
         j1 = min(j0 + _CHUNK, rows.shape[0])
@@ -162,7 +198,10 @@ def tabulated_mirror_loop(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, scale, T
             cos_o, s = _mirror_geometry(n_s, wo, d, m)
             w = 1.0 if cos_o >= 0 else 0.0
             for q in range(L):
-                e, _ = relative_index_at(wl_n, n, wl_k, k, lam[q, m], scale)
+                if shared_grid:
+                    e = _index_on_grid(wl_n, n, k, lam[q, m], scale)
+                else:
+                    e, _ = relative_index_at(wl_n, n, wl_k, k, lam[q, m], scale)
                 a, b, cc, ss = abcs_at(cos_o, e)
                 _set_abcs(abcs, q, jj, a * w, b * w, cc * w, ss * w)
             _new_frame(x_out, x_T, wo, m, s[0], s[1], s[2], P, rot, jj)
