@@ -160,19 +160,49 @@ def _interp_from(xp, fp, x, j):
 
 
 @jit
-def _index_on_grid(wl, n, k, x, scale):
-    """relative_index_at(wl, n, wl, k, x, scale) for tables on one wavelength grid and wl[0] ≤ x ≤ wl[-1]:
-    one bisection finds the knot for both (np.searchsorted's answer for increasing knots)."""
+def _knot_hints(wl):
+    """(first whole nm, hints): hints[i] = the last knot ≤ first + i nm, for the whole nm across the
+    grid wl; an empty table where that would be long (a bisection serves then)."""
+    first = np.floor(wl[0])
+    size = int(np.ceil(wl[wl.shape[0] - 1]) - first) + 1
+    if size > 4096:
+        return first, np.empty(0, np.int64)
+    hints = np.empty(size, np.int64)
+    j = 0
+    for i in range(size):
+        while j + 1 < wl.shape[0] and wl[j + 1] <= first + i:
+            j += 1
+        hints[i] = j
+    return first, hints
+
+
+@jit
+def _last_knot(wl, x, first, hints):
+    """The last knot ≤ x for wl[0] ≤ x ≤ wl[-1] (np.searchsorted(wl, x, "right") − 1 for increasing
+    knots): from the hint at ⌊x⌋ (a step or two for knots about a nm apart or more), else by bisection."""
+    m = wl.shape[0]
+    if hints.shape[0] > 0:
+        j = hints[int(np.floor(x) - first)]
+        while j + 1 < m and wl[j + 1] <= x:
+            j += 1
+        return j
     lo = 0
-    hi = wl.shape[0] - 1
+    hi = m - 1
     while hi - lo > 1:                 # wl[lo] ≤ x < wl[hi] (or x at the last knot: held there)
         mid = (lo + hi) // 2
         if wl[mid] <= x:
             lo = mid
         else:
             hi = mid
-    a = _interp_from(wl, n, x, lo)
-    b = _interp_from(wl, k, x, lo)
+    return lo
+
+
+@jit
+def _index_on_grid(wl, n, k, x, j, scale):
+    """relative_index_at(wl, n, wl, k, x, scale) for tables on one wavelength grid, wl[0] ≤ x ≤ wl[-1]
+    and j = the last knot ≤ x: one search serves n and κ."""
+    a = _interp_from(wl, n, x, j)
+    b = _interp_from(wl, k, x, j)
     return complex((a + b * 0.0) * scale, (b - a * 0.0) * scale)
 
 
@@ -190,6 +220,7 @@ def tabulated_mirror_loop(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, scale, T
             if not (x >= lo and x <= hi):
                 return False
     shared_grid = wl_n.shape[0] == wl_k.shape[0] and np.all(wl_n == wl_k)
+    first, hints = _knot_hints(wl_n)
     abcs, rot = _chunk_buffers(L)
     for j0 in range(0, rows.shape[0], _CHUNK):
         j1 = min(j0 + _CHUNK, rows.shape[0])
@@ -199,7 +230,8 @@ def tabulated_mirror_loop(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, scale, T
             w = 1.0 if cos_o >= 0 else 0.0
             for q in range(L):
                 if shared_grid:
-                    e = _index_on_grid(wl_n, n, k, lam[q, m], scale)
+                    x = lam[q, m]
+                    e = _index_on_grid(wl_n, n, k, x, _last_knot(wl_n, x, first, hints), scale)
                 else:
                     e, _ = relative_index_at(wl_n, n, wl_k, k, lam[q, m], scale)
                 a, b, cc, ss = abcs_at(cos_o, e)
