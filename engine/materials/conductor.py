@@ -45,7 +45,7 @@ def mirror_reflection(sp: ShadingPoint, eta: np.ndarray):
 # ----------------------------------------------------------------------------- one step per delta vertex
 
 def _mirror_numpy(rows, n_s, wo):
-    """(wo, n_s, cosθ_o, mirror direction, plane-of-incidence axis s) of the paths ``rows`` (NumPy)."""
+    """(wo, cosθ_o, mirror direction, plane-of-incidence axis s) of the paths ``rows`` (NumPy)."""
     n_s, wo = n_s[:, rows], wo[:, rows]
     cos_o = n_s[0] * wo[0] + n_s[1] * wo[1] + n_s[2] * wo[2]
     wi = reflect(wo, n_s)
