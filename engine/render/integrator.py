@@ -425,7 +425,8 @@ class PathTracer:
         u_light = sampler.next(4)
         u_bsdf = sampler.next(3)
         u_rr = sampler.next(1)[0]
-        groups = np.unique(grp)
+        # the groups present, ascending (np.unique's answer without sorting n numbers)
+        groups = np.flatnonzero(np.bincount(grp, minlength=len(self.shaders)))
         # One material covers every path: its sample's arrays become the next segments as they are
         # (no gathered copies in, no scattered copies out).  Otherwise each group writes its columns.
         # Delta-only materials with a one-step scatter_delta write their columns in place in any case.
