@@ -111,24 +111,26 @@ def unit_cross_numpy(a, b, degenerate):
 
 
 @jit
+def unit_cross_at(a0, a1, a2, b0, b1, b2, degenerate):
+    """unit_cross_numpy for one pair of vectors (a, b), as a tuple, same operation order."""
+    s0 = a1 * b2 - a2 * b1
+    s1 = a2 * b0 - a0 * b2
+    s2 = a0 * b1 - a1 * b0
+    length = np.sqrt((s0 * s0 + s1 * s1) + s2 * s2)
+    if length > degenerate:
+        return s0 / length, s1 / length, s2 / length
+    # engine.vec3.any_perpendicular(a), same operation order
+    sign = 1.0 if a2 >= 0 else -1.0
+    f = -1.0 / (sign + a2)
+    g = a0 * a1 * f
+    return 1.0 + sign * a0 * a0 * f, sign * g, -sign * a0
+
+
+@jit
 def _unit_cross_loop(a, b, out, degenerate):
     for i in range(a.shape[1]):
-        a0, a1, a2 = a[0, i], a[1, i], a[2, i]
-        s0 = a1 * b[2, i] - a2 * b[1, i]
-        s1 = a2 * b[0, i] - a0 * b[2, i]
-        s2 = a0 * b[1, i] - a1 * b[0, i]
-        length = np.sqrt((s0 * s0 + s1 * s1) + s2 * s2)
-        if length > degenerate:
-            out[0, i] = s0 / length
-            out[1, i] = s1 / length
-            out[2, i] = s2 / length
-        else:  # engine.vec3.any_perpendicular(a), same operation order
-            sign = 1.0 if a2 >= 0 else -1.0
-            f = -1.0 / (sign + a2)
-            g = a0 * a1 * f
-            out[0, i] = 1.0 + sign * a0 * a0 * f
-            out[1, i] = sign * g
-            out[2, i] = -sign * a0
+        out[0, i], out[1, i], out[2, i] = unit_cross_at(a[0, i], a[1, i], a[2, i], b[0, i], b[1, i], b[2, i],
+                                                        degenerate)
 
 
 def unit_cross_numba(a, b, degenerate):

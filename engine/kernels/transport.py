@@ -8,6 +8,8 @@ one product); per-wavelength values (L, N); rotations as (cos 2φ, sin 2φ) of s
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from . import jit, twin
@@ -361,3 +363,29 @@ def add_to_paths_numba(radiance, path, values):
 
 
 add_to_paths = twin(_add_to_paths_loop and add_to_paths_numba, add_to_paths_numpy)
+
+
+# ----------------------------------------------------------------------------- dropping finished paths
+
+def keep_columns_numpy(a, idx):
+    """a[..., idx]: the paths ``idx`` (sorted int64 indices of the last axis) of a per-path array, as a new
+    C-contiguous array of the same dtype."""
+    return np.take(a, idx, axis=-1)
+
+
+@jit
+def _keep_columns_loop(a, idx, out):
+    for r in range(a.shape[0]):
+        for j in range(idx.shape[0]):
+            out[r, j] = a[r, idx[j]]
+
+
+def keep_columns_numba(a, idx):
+    # every leading index is one row of a 2-D view: one loop serves vectors, Mueller products and keys
+    rows = math.prod(a.shape[:-1])
+    out = np.empty(a.shape[:-1] + (idx.shape[0],), a.dtype)
+    _keep_columns_loop(a.reshape(rows, a.shape[-1]), idx, out.reshape(rows, idx.shape[0]))
+    return out
+
+
+keep_columns = twin(_keep_columns_loop and keep_columns_numba, keep_columns_numpy)

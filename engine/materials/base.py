@@ -18,6 +18,14 @@ Every model provides
                        (for Dirac lobes: the lobe's Mueller weight), and
 - ``delta_reflection(sp)`` – the Mueller weight of a mirror (Dirac) reflection
                        lobe into the mirror direction of wo, or None,
+- ``scatter_delta(v)`` – optional, for delta-only models: ``sample`` and the path
+                       tracer's throughput update T ← T·R(x_out → x_T)·M in one
+                       compiled step over the vertices ``v`` (DeltaVertices), writing
+                       the new T, direction, frame, validity and η² in place; returns
+                       False (the default) where it does not apply, and the path
+                       tracer then calls ``sample`` and updates T itself.  Adding a
+                       family to the fast path is this one method, with the same
+                       numbers as its ``sample`` (pdf 0, is_delta True),
 - ``flags``          – its lobes and capabilities (engine.materials.flags.BSDFFlags).
 """
 
@@ -36,7 +44,7 @@ if TYPE_CHECKING:
     from ..spectral import Spectrum, WavelengthLookup
     from ..textures import SurfacePoints
 
-__all__ = ["BSDF", "BSDFFlags", "BSDFSample", "MuellerValue", "ShadingPoint", "depolarising_value"]
+__all__ = ["BSDF", "BSDFFlags", "BSDFSample", "DeltaVertices", "MuellerValue", "ShadingPoint", "depolarising_value"]
 
 
 @dataclass
@@ -162,6 +170,32 @@ class BSDFSample:
     eta_sq: np.ndarray | None = field(default=None)  # (N,) radiance scale undone for Russian roulette (1 = none)
 
 
+@dataclass(eq=False)
+class DeltaVertices:
+    """The vertices of one delta-only material in a path tracer's batch, for ``BSDF.scatter_delta``.
+
+    Every array is the batch's own (paths on the last axis, n of them), read and written only at the
+    columns ``rows`` (m,) int64 — no gathered copies.  Inputs: shading normal ``n_s`` and direction to
+    the previous vertex ``wo`` (3, n), the materials' wavelengths ``lam`` (Lm, n) nm (``mono``: one
+    wavelength), the lobe-choice numbers ``u_lobe`` (n,), the throughput ``T`` (P, P, Lm, n) in frame
+    ``x_T`` (3, n) ⟂ wo.  Outputs: ``T_out`` = T·R(x_out → x_T)·M, the sampled direction ``d`` (= wi)
+    and its frame ``x_out`` (3, n), ``valid`` (n,) bool and the radiance scale ``eta_sq`` (n,).
+    """
+    rows: np.ndarray
+    n_s: np.ndarray
+    wo: np.ndarray
+    lam: np.ndarray
+    mono: bool
+    u_lobe: np.ndarray
+    T: np.ndarray
+    x_T: np.ndarray
+    T_out: np.ndarray
+    d: np.ndarray
+    x_out: np.ndarray
+    valid: np.ndarray
+    eta_sq: np.ndarray
+
+
 class BSDF:
     """Base class of the material models.
 
@@ -209,6 +243,11 @@ class BSDF:
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
         """Mueller weight of the mirror (Dirac) lobe for reflection of wo, or None."""
         return None
+
+    def scatter_delta(self, v: DeltaVertices) -> bool:
+        """Sample the vertices ``v`` and update their throughputs in one step (see the module
+        docstring); False: not available here (the caller uses ``sample``)."""
+        return False
 
     def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
         """The point at which this material is evaluated: ``sp`` itself, or with the shading normal

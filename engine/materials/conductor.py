@@ -10,11 +10,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, DeltaVertices, MuellerValue, ShadingPoint, depolarising_value
+from ..kernels import twin
+from ..kernels.delta_bounce import constant_mirror_loop, tabulated_mirror_loop
+from ..kernels.geometry import unit_cross_numpy
 from ..kernels.tables import complex_index_table
+from ..kernels.transport import update_abcs_numpy
 from ..polarisation.frames import plane_of_incidence_axis
-from ..polarisation.fresnel import fresnel_reflection_abcs, tabulated_mirror_abcs
-from ..spectral import LAMBDA_MAX, LAMBDA_MIN
+from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflection_abcs_numpy, tabulated_mirror_abcs, \
+    tabulated_mirror_abcs_numpy
+from ..spectral import LAMBDA_MAX, LAMBDA_MIN, ConstantSpectrum
 from .parameters import REQUIRED, ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from ..errors import SceneError
 from ..spectral.ior import NAMED_METALS
@@ -37,6 +42,59 @@ def mirror_reflection(sp: ShadingPoint, eta: np.ndarray):
     return wi, MuellerValue("abcs", s, s, A * m, B * m, C * m, S * m), valid
 
 
+# ----------------------------------------------------------------------------- one step per delta vertex
+
+def _mirror_numpy(rows, n_s, wo):
+    """(wo, cosθ_o, mirror direction, plane-of-incidence axis s) of the paths ``rows`` (NumPy)."""
+    n_s, wo = n_s[:, rows], wo[:, rows]
+    cos_o = n_s[0] * wo[0] + n_s[1] * wo[1] + n_s[2] * wo[2]
+    wi = reflect(wo, n_s)
+    return wo, cos_o, wi, unit_cross_numpy(n_s, -wi, 1e-12)
+
+
+def _store_mirror(rows, x_T, T, wo, wi, s, abcs, cos_o, T_out, d, x_out, valid, eta_sq):
+    update_abcs_numpy(T_out, T, rows, s, x_T[:, rows], wo, *abcs, None)
+    d[:, rows] = wi
+    x_out[:, rows] = s
+    valid[rows] = cos_o >= 0
+    eta_sq[rows] = 1.0
+
+
+def constant_mirror_scatter_numpy(rows, n_s, wo, x_T, T, eta, T_out, d, x_out, valid, eta_sq):
+    """The Fresnel mirror of one complex relative index ``eta`` at the paths ``rows`` (engine.kernels.
+    delta_bounce: T_out, d, x_out, valid, eta_sq written there): mirror_reflection + update_abcs."""
+    wo, cos_o, wi, s = _mirror_numpy(rows, n_s, wo)
+    m = (cos_o >= 0).astype(np.float64)[None, :]
+    abcs = fresnel_reflection_abcs_numpy(np.maximum(cos_o, 0.0)[None, :], np.full((1, 1), eta, np.complex128))
+    _store_mirror(rows, x_T, T, wo, wi, s, [v * m for v in abcs], cos_o, T_out, d, x_out, valid, eta_sq)
+
+
+constant_mirror_scatter = twin(constant_mirror_loop, constant_mirror_scatter_numpy)
+
+
+def tabulated_mirror_scatter_numpy(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, exterior_n, T_out, d, x_out, valid,
+                                   eta_sq):
+    """The Fresnel mirror of a measured metal at the paths ``rows`` (index from the tables at ``lam``);
+    False, writing nothing, where some wavelength lies outside a table."""
+    wo_r, cos_o, wi, s = _mirror_numpy(rows, n_s, wo)
+    abcs, inside = tabulated_mirror_abcs_numpy(cos_o, lam[:, rows], wl_n, n, wl_k, k, exterior_n)
+    if not inside:
+        return False
+    _store_mirror(rows, x_T, T, wo_r, wi, s, abcs, cos_o, T_out, d, x_out, valid, eta_sq)
+    return True
+
+
+def tabulated_mirror_scatter_numba(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, exterior_n, T_out, d, x_out, valid,
+                                   eta_sq):
+    # times 1/e: NumPy's complex division by e + 0i (engine.kernels.tables.relative_index_at)
+    return bool(tabulated_mirror_loop(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, 1.0 / float(exterior_n), T_out,
+                                      d, x_out, valid, eta_sq))
+
+
+tabulated_mirror_scatter = twin(tabulated_mirror_loop and tabulated_mirror_scatter_numba,
+                                tabulated_mirror_scatter_numpy)
+
+
 class SmoothConductor(BSDF):
     name = "conductor"
 
@@ -46,6 +104,14 @@ class SmoothConductor(BSDF):
         self.exterior_n = float(exterior_n)
         self.varies_over_surface = textured(n, k)
         self._tables = type(n) is TabulatedSpectrum and type(k) is TabulatedSpectrum
+        if self._tables:
+            self._table_arrays = tuple(np.ascontiguousarray(a, dtype=np.float64)
+                                       for a in (n.wavelengths, n.values, k.wavelengths, k.values))
+        # one index at every wavelength and point: computed once, as relative_eta does per point
+        self._eta = None
+        if type(n) is ConstantSpectrum and type(k) is ConstantSpectrum:
+            one = np.ones((1, 1))
+            self._eta = complex(((n.value * one + 1j * (k.value * one)) / self.exterior_n)[0, 0])
         constant = bool(getattr(n, "is_constant", False) and getattr(k, "is_constant", False))
         # A real index (κ = 0 at every wavelength) reflects without retardance, unless it is below the
         # exterior index somewhere: then total internal reflection retards (S ≠ 0).
@@ -89,6 +155,17 @@ class SmoothConductor(BSDF):
         wi, value, valid = self.mirror(sp)
         return BSDFSample(wi=wi, weight=value, pdf=np.zeros(sp.n), is_delta=np.ones(sp.n, bool),
                           valid=valid, eta_sq=np.ones(sp.n))
+
+    def scatter_delta(self, v: DeltaVertices) -> bool:
+        """``sample`` + the throughput update in one step (constant or measured index; see BSDF)."""
+        out = (v.T_out, v.d, v.x_out, v.valid, v.eta_sq)
+        if self._eta is not None:
+            constant_mirror_scatter(v.rows, v.n_s, v.wo, v.x_T, v.T, self._eta, *out)
+            return True
+        if self._tables and not v.mono:
+            return tabulated_mirror_scatter(v.rows, v.n_s, v.wo, v.x_T, v.T, v.lam, *self._table_arrays,
+                                            self.exterior_n, *out)
+        return False
 
     def describe(self):
         return {"type": self.name, "n": repr(self.n), "k": repr(self.k), "exterior_n": self.exterior_n}

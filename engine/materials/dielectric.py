@@ -29,11 +29,47 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, DeltaVertices, MuellerValue, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
+from ..kernels import twin
+from ..kernels.delta_bounce import dielectric_loop
+from ..kernels.geometry import unit_cross_numpy
+from ..kernels.transport import update_abcs_numpy
 from ..polarisation.frames import plane_of_incidence_axis
-from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_transmission_abcs, refracted_cosine
+from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflection_abcs_numpy, \
+    fresnel_transmission_abcs, refracted_cosine
 from ..vec3 import reflect
+
+
+def dielectric_scatter_numpy(rows, n_s, wo, x_T, T, u_lobe, eta_front, eta_back, T_out, d, x_out, valid, eta_sq):
+    """SmoothDielectric.sample and the throughput update at the paths ``rows`` (engine.kernels.delta_bounce:
+    T_out, d, x_out, valid, eta_sq written there); relative index ``eta_front`` seen from the front
+    (wo·n_s ≥ 0), ``eta_back`` from behind.  The same NumPy steps as ``sample``."""
+    n_s, wo, u = n_s[:, rows], wo[:, rows], u_lobe[rows]
+    cos_o = n_s[0] * wo[0] + n_s[1] * wo[1] + n_s[2] * wo[2]
+    front = cos_o >= 0
+    c, eta, nn = np.abs(cos_o), np.where(front, eta_front, eta_back), np.where(front[None, :], n_s, -n_s)
+    A, B, C, S = fresnel_reflection_abcs_numpy(c, eta)
+    reflect_lobe = u < A
+    cos_t, tir = refracted_cosine(c, eta)
+    inv_eta = 1.0 / eta
+    wi = np.where(reflect_lobe[None, :], reflect(wo, nn), -wo * inv_eta + (c * inv_eta - cos_t) * nn)
+    s = unit_cross_numpy(nn, -wi, 1e-12)
+    # fresnel_transmission_abcs from the same reflection coefficients
+    T_s = np.where(tir, 0.0, np.clip(1.0 - (A + B), 0.0, 1.0))
+    T_p = np.where(tir, 0.0, np.clip(1.0 - (A - B), 0.0, 1.0))
+    trans = 0.5 * (T_s + T_p), 0.5 * (T_s - T_p), np.sqrt(T_s * T_p), np.zeros_like(T_s)
+    p_r = np.where(A > 0, A, 1.0)
+    scale_t = inv_eta * inv_eta / np.where(A < 1, 1.0 - A, 1.0)
+    value = [np.where(reflect_lobe, r / p_r, t * scale_t)[None, :] for r, t in zip((A, B, C, S), trans)]
+    update_abcs_numpy(T_out, T, rows, s, x_T[:, rows], wo, *value, None)
+    d[:, rows] = wi
+    x_out[:, rows] = s
+    valid[rows] = reflect_lobe | ~tir
+    eta_sq[rows] = np.where(reflect_lobe, 1.0, eta * eta)
+
+
+dielectric_scatter = twin(dielectric_loop, dielectric_scatter_numpy)
 
 
 class SmoothDielectric(BSDF):
@@ -95,6 +131,12 @@ class SmoothDielectric(BSDF):
         eta_sq = np.where(reflect_lobe, 1.0, eta * eta)
         return BSDFSample(wi=wi, weight=value, pdf=np.zeros(sp.n), is_delta=np.ones(sp.n, bool),
                           valid=valid, eta_sq=eta_sq)
+
+    def scatter_delta(self, v: DeltaVertices) -> bool:
+        """``sample`` + the throughput update in one step (see BSDF)."""
+        dielectric_scatter(v.rows, v.n_s, v.wo, v.x_T, v.T, v.u_lobe, self.n_int / self.n_ext, self.n_ext / self.n_int,
+                           v.T_out, v.d, v.x_out, v.valid, v.eta_sq)
+        return True
 
     def describe(self):
         return {"type": self.name, "n": self.n_int, "exterior_n": self.n_ext}

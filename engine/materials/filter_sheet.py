@@ -22,9 +22,37 @@ import math
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, DeltaVertices, MuellerValue, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter
+from ..kernels import twin
+from ..kernels.delta_bounce import filter_sheet_loop
+from ..kernels.transport import update_abcs_numpy
 from ..vec3 import any_perpendicular, dot
+
+
+def filter_axis_frame(axis, k):
+    """The filter axis (3,) projected ⟂ the beams k (3, N), normalised; any_perpendicular(k) where ∥ k."""
+    a = axis[:, None]
+    x = a - dot(np.broadcast_to(a, k.shape), k) * k
+    length = np.sqrt(dot(x, x))
+    ok = length > 1e-9
+    return np.where(ok, x / np.where(ok, length, 1.0), any_perpendicular(k))
+
+
+def filter_sheet_scatter_numpy(rows, wo, x_T, T, axis, A, B, C, S, T_out, d, x_out, valid, eta_sq):
+    """FilterSheet.sample and the throughput update at the paths ``rows`` (engine.kernels.delta_bounce:
+    T_out, d, x_out, valid, eta_sq written there) for the sheet's constant (A, B, C, S)."""
+    wo = wo[:, rows]
+    x = filter_axis_frame(axis, wo)
+    one = np.ones((1, rows.shape[0]))
+    update_abcs_numpy(T_out, T, rows, x, x_T[:, rows], wo, A * one, B * one, C * one, S * one, None)
+    d[:, rows] = -wo
+    x_out[:, rows] = x
+    valid[rows] = True
+    eta_sq[rows] = 1.0
+
+
+filter_sheet_scatter = twin(filter_sheet_loop, filter_sheet_scatter_numpy)
 
 
 class FilterSheet(BSDF):
@@ -62,12 +90,7 @@ class FilterSheet(BSDF):
         return np.zeros(sp.n)
 
     def sample(self, sp: ShadingPoint, u_lobe, u_dir) -> BSDFSample:
-        k = sp.wo                                  # light passes straight through towards the viewer
-        a = self.axis[:, None]
-        x = a - dot(np.broadcast_to(a, k.shape), k) * k
-        length = np.sqrt(dot(x, x))
-        ok = length > 1e-9
-        x = np.where(ok, x / np.where(ok, length, 1.0), any_perpendicular(k))
+        x = filter_axis_frame(self.axis, sp.wo)    # light passes straight through towards the viewer
         A, B, C, S = self._abcs()
         shape = sp.lam.shape
         value = MuellerValue("abcs", x, x, np.full(shape, A), np.full(shape, B), np.full(shape, C),
@@ -75,6 +98,12 @@ class FilterSheet(BSDF):
         n = sp.n
         return BSDFSample(wi=-sp.wo, weight=value, pdf=np.zeros(n), is_delta=np.ones(n, bool),
                           valid=np.ones(n, bool), eta_sq=np.ones(n))
+
+    def scatter_delta(self, v: DeltaVertices) -> bool:
+        """``sample`` + the throughput update in one step (see BSDF)."""
+        filter_sheet_scatter(v.rows, v.wo, v.x_T, v.T, self.axis, *(float(c) for c in self._abcs()), v.T_out, v.d,
+                             v.x_out, v.valid, v.eta_sq)
+        return True
 
     def describe(self):
         return {"type": self.name, "kind": self.kind, "axis": self.axis.tolist(), "extinction": self.extinction,

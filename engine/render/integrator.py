@@ -28,7 +28,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..materials.base import BSDF, BSDFFlags, MuellerValue, ShadingPoint
+from ..materials.base import BSDF, BSDFFlags, DeltaVertices, MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import Hits, offset_origin, surface_points
@@ -442,24 +442,33 @@ class PathTracer:
         u_light = sampler.next(4)
         u_bsdf = sampler.next(3)
         u_rr = sampler.next(1)[0]
-        groups = np.unique(grp)
+        # the groups present, ascending (np.unique's answer without sorting n numbers)
+        groups = np.flatnonzero(np.bincount(grp, minlength=len(self.shaders)))
         # One material covers every path: its sample's arrays become the next segments as they are
         # (no gathered copies in, no scattered copies out).  Otherwise each group writes its columns.
+        # Delta-only materials with a one-step scatter_delta write their columns in place in any case.
         whole = len(groups) == 1
-        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty_like(T), d=None if whole else np.zeros((3, n)),
-                         x_T=None if whole else np.zeros((3, n)), valid=None if whole else np.zeros(n, bool),
-                         is_delta=None if whole else np.ones(n, bool), pdf=None if whole else np.zeros(n),
+        fused = [self.shaders[g].flags.is_delta_only and type(self.shaders[g]).scatter_delta is not BSDF.scatter_delta
+                 for g in groups]
+        columns = not whole or fused[0]
+        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty_like(T), d=np.zeros((3, n)) if columns else None,
+                         x_T=np.zeros((3, n)) if columns else None, valid=np.zeros(n, bool) if columns else None,
+                         is_delta=np.ones(n, bool) if columns else None, pdf=np.zeros(n) if columns else None,
                          eta_step=np.ones(n))
         # (every path belongs to one material group, which writes its column of nxt.T)
-        for g in groups:
+        for g, one_step in zip(groups, fused):
             sel = slice(None) if whole else np.nonzero(grp == g)[0]
             bsdf = self.shaders[g]
+            rows = np.arange(n) if isinstance(sel, slice) else sel
+            if one_step and bsdf.scatter_delta(DeltaVertices(rows, n_s, wo, lk_m.lam, self.mono, u_bsdf[0], T,
+                                                             state.x_T, nxt.T, nxt.d, nxt.x_T, nxt.valid,
+                                                             nxt.eta_step)):
+                continue            # pdf 0 and is_delta True: as preset
             sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
                               gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
                               self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None,
                               None if surf.at is None else surf.at.take(sel))
             sp = bsdf.shading_point(sp)        # a normal/bump-mapped shading normal, else sp itself
-            rows = np.arange(n) if isinstance(sel, slice) else sel
             xTm = gather(state.x_T, sel)
 
             if not bsdf.flags.is_delta_only and len(light_set) and bounce + 2 <= st.max_depth:
@@ -472,7 +481,7 @@ class PathTracer:
                 acc.guides.record(gather(state.path, sel), T[0, 0][:, rows], bs.weight, bs.valid, sp.n_s, sp.wo,
                                   acc.w_rgb)
             scatter_throughput(nxt.T, T, rows, bs.weight, xTm, sp.wo)
-            if whole:
+            if not columns:
                 nxt.d, nxt.x_T, nxt.is_delta, nxt.pdf = bs.wi, bs.weight.x_in, bs.is_delta, bs.pdf
                 nxt.valid = np.array(bs.valid, dtype=bool)      # own copy: the roulette updates it in place
                 if bs.eta_sq is not None:

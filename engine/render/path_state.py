@@ -26,6 +26,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..kernels.transport import keep_columns
 from ..spectral import WavelengthLookup
 from .sampler import PathSampler
 
@@ -60,17 +61,19 @@ class PathState:
         """Keep the paths where ``mask`` (n,) is True, in every field; returns ``extra`` per-path
         arrays (paths on the last axis, e.g. the hits of this bounce) restricted the same way.
 
-        np.compress is ~3× faster than boolean fancy indexing on the last axis; a full mask keeps
-        the arrays themselves (no copy).
+        The kept indices are found once and every array is copied by one compiled gather
+        (engine.kernels.transport.keep_columns: np.compress on the last axis walks a (4, 4, L, n)
+        throughput element by element); a full mask keeps the arrays themselves (no copy).
         """
         if mask.all():
             return extra
+        idx = np.flatnonzero(mask)
         for name in ARRAY_FIELDS:
             a = getattr(self, name)
             if a is not None:
-                setattr(self, name, np.compress(mask, a, axis=-1))
-        self.sampler.keys = np.compress(mask, self.sampler.keys, axis=-1)
-        new = self.lk.compress(mask)
-        self.lk_m = new if self.lk_m is self.lk else self.lk_m.compress(mask)
+                setattr(self, name, keep_columns(a, idx))
+        self.sampler.keys = keep_columns(self.sampler.keys, idx)
+        new = self.lk.take(idx)
+        self.lk_m = new if self.lk_m is self.lk else self.lk_m.take(idx)
         self.lk = new
-        return tuple(None if a is None else np.compress(mask, a, axis=-1) for a in extra)
+        return tuple(None if a is None else keep_columns(a, idx) for a in extra)
