@@ -26,7 +26,7 @@ from . import jit
 from .fresnel import abcs_at
 from .geometry import unit_cross_at
 from .stokes_rotation import frame_rotation_at
-from .tables import relative_index_at
+from .tables import interp_from_knot, relative_index_at
 
 #: |n × k| below which the plane of incidence is undefined (engine.polarisation.frames._DEGENERATE).
 _DEGENERATE = 1e-12
@@ -142,24 +142,6 @@ def constant_mirror_loop(rows, n_s, wo, x_T, T, eta, T_out, d, x_out, valid, eta
 
 
 @jit
-def _interp_from(xp, fp, x, j):
-    """engine.kernels.tables.interp_at(xp, fp, x) for xp[0] ≤ x (not NaN) with j = the last knot ≤ x,
-    found by the caller (shared by the n and κ tables on one grid): the same cases and arithmetic."""
-    m = xp.shape[0]
-    if x >= xp[m - 1]:
-        return fp[m - 1]
-    if xp[j] == x:
-        return fp[j]
-    slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])
-    r = slope * (x - xp[j]) + fp[j]
-    if np.isnan(r):
-        r = slope * (x - xp[j + 1]) + fp[j + 1]
-        if np.isnan(r) and fp[j] == fp[j + 1]:
-            r = fp[j]
-    return r
-
-
-@jit
 def _knot_hints(wl):
     """(first whole nm, hints): hints[i] = the last knot ≤ first + i nm, for the whole nm across the
     grid wl; an empty table where that would be long (a bisection serves then)."""
@@ -201,8 +183,8 @@ def _last_knot(wl, x, first, hints):
 def _index_on_grid(wl, n, k, x, j, scale):
     """relative_index_at(wl, n, wl, k, x, scale) for tables on one wavelength grid, wl[0] ≤ x ≤ wl[-1]
     and j = the last knot ≤ x: one search serves n and κ."""
-    a = _interp_from(wl, n, x, j)
-    b = _interp_from(wl, k, x, j)
+    a = interp_from_knot(wl, n, x, j)
+    b = interp_from_knot(wl, k, x, j)
     return complex((a + b * 0.0) * scale, (b - a * 0.0) * scale)
 
 

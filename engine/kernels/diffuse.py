@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import jit
+from .geometry import to_world_at
 
 
 @jit
@@ -32,20 +33,8 @@ def _cosine_sample_loop(u, n_s, wo, wi, valid, pdf):
         x = r * np.cos(phi)
         y = r * np.sin(phi)
         z = np.sqrt(max(1.0 - x * x - y * y, 0.0))
-        # local_to_world with t = any_perpendicular(n), b = n × t
         n0, n1, n2 = n_s[0, j], n_s[1, j], n_s[2, j]
-        sign = 1.0 if n2 >= 0 else -1.0
-        f = -1.0 / (sign + n2)
-        g = n0 * n1 * f
-        t0 = 1.0 + sign * n0 * n0 * f
-        t1 = sign * g
-        t2 = -sign * n0
-        b0 = n1 * t2 - n2 * t1
-        b1 = n2 * t0 - n0 * t2
-        b2 = n0 * t1 - n1 * t0
-        wi[0, j] = t0 * x + b0 * y + n0 * z
-        wi[1, j] = t1 * x + b1 * y + n1 * z
-        wi[2, j] = t2 * x + b2 * y + n2 * z
+        wi[0, j], wi[1, j], wi[2, j] = to_world_at(n0, n1, n2, x, y, z)
         cos_o = n0 * wo[0, j] + n1 * wo[1, j] + n2 * wo[2, j]
         ok = cos_o > 0 and z > 0
         valid[j] = ok

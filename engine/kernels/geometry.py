@@ -8,6 +8,35 @@ from . import jit, twin
 from ..vec3 import any_perpendicular, cross, dot, normalize
 
 
+
+# ----------------------------------------------------------------------------- one point's local frame
+
+@jit
+def local_frame_at(n0, n1, n2):
+    """(t, b) of engine.vec3.local_frame for one unit normal n, same operation order: the frame of
+    every compiled sampler (local z = n)."""
+    sign = 1.0 if n2 >= 0 else -1.0
+    f = -1.0 / (sign + n2)
+    g = n0 * n1 * f
+    t0 = 1.0 + sign * n0 * n0 * f
+    t1 = sign * g
+    t2 = -sign * n0
+    return t0, t1, t2, n1 * t2 - n2 * t1, n2 * t0 - n0 * t2, n0 * t1 - n1 * t0
+
+
+@jit
+def to_local_at(v0, v1, v2, t0, t1, t2, b0, b1, b2, n0, n1, n2):
+    """World vector v in the local frame (t, b, n): (v·t, v·b, v·n)."""
+    return (v0 * t0 + v1 * t1 + v2 * t2, v0 * b0 + v1 * b1 + v2 * b2, v0 * n0 + v1 * n1 + v2 * n2)
+
+
+@jit
+def to_world_at(n0, n1, n2, v0, v1, v2):
+    """Local vector v (z along the unit normal n, frame local_frame_at) in world space
+    (engine.materials.sampling.local_to_world)."""
+    t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
+    return t0 * v0 + b0 * v1 + n0 * v2, t1 * v0 + b1 * v1 + n1 * v2, t2 * v0 + b2 * v1 + n2 * v2
+
 def surface_attributes_numpy(faces, vertices, vertex_normals, tri_has_normals, tri_normal, any_vertex_normals,
                              prim, u, v):
     """(p, n_g, n_s), each (3, N) float64, at hits on triangles ``prim`` with barycentrics (u, v).

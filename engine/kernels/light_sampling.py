@@ -18,6 +18,7 @@ import math
 import numpy as np
 
 from . import jit, twin
+from .geometry import to_world_at
 from ..vec3 import dot
 
 #: below this solid angle (sr) a rectangle is sampled by area: the spherical-rectangle solid angle
@@ -492,21 +493,6 @@ def _spot(spot, w0, w1, w2):
 
 
 @jit
-def _to_world(n0, n1, n2, v0, v1, v2):
-    """local_to_world(v, n) of engine.materials.sampling (frame of engine.vec3.local_frame)."""
-    sign = 1.0 if n2 >= 0 else -1.0
-    f = -1.0 / (sign + n2)
-    g = n0 * n1 * f
-    t0 = 1.0 + sign * n0 * n0 * f
-    t1 = sign * g
-    t2 = -sign * n0
-    b0 = n1 * t2 - n2 * t1
-    b1 = n2 * t0 - n0 * t2
-    b2 = n0 * t1 - n1 * t0
-    return t0 * v0 + b0 * v1 + n0 * v2, t1 * v0 + b1 * v1 + n1 * v2, t2 * v0 + b2 * v1 + n2 * v2
-
-
-@jit
 def _point_light_loop(p, u1, u2, position, radius, soft, delta, spot, wi, dist, scale, pdf, valid):
     r = radius
     two_pi = 2.0 * math.pi
@@ -529,7 +515,7 @@ def _point_light_loop(p, u1, u2, position, radius, soft, delta, spot, wi, dist, 
             # a disk ⟂ wi facing p, uniform by area
             rho = r * np.sqrt(u1[j])
             phi = two_pi * u2[j]
-            o0, o1, o2 = _to_world(-w0, -w1, -w2, rho * np.cos(phi), rho * np.sin(phi), 0.0)
+            o0, o1, o2 = to_world_at(-w0, -w1, -w2, rho * np.cos(phi), rho * np.sin(phi), 0.0)
             s0, s1, s2 = t0 + o0, t1 + o1, t2 + o2
             e2 = s0 * s0 + s1 * s1 + s2 * s2
             e = np.sqrt(e2)
@@ -551,7 +537,7 @@ def _point_light_loop(p, u1, u2, position, radius, soft, delta, spot, wi, dist, 
         cos_t = 1.0 - omc
         sin_t = np.sqrt(_maximum(omc * (2.0 - omc), 0.0))
         phi = two_pi * u2[j]
-        v0, v1, v2 = _to_world(w0, w1, w2, sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t)
+        v0, v1, v2 = to_world_at(w0, w1, w2, sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t)
         t = d * cos_t - np.sqrt(_maximum(r * r - d2 * (1.0 - cos_t * cos_t), 0.0))
         wi[0, j], wi[1, j], wi[2, j] = v0, v1, v2
         dist[j] = _maximum(t, 0.0)

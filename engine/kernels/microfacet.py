@@ -97,9 +97,8 @@ def _slope_cdf_e(x, e, t, coef, k):
 
 
 @jit
-def visible_slope_x_at(t, u1, coef, k):
-    """x̃ for one tanθ = ``t`` ≥ 0 and u1 ∈ [0, 1) (``coef``, ``k``: ERFCX_COEF, ERFCX_K): the loop body
-    of the compiled twin.  ``beckmann_vndf_at`` runs the same iteration interleaved with ỹ's."""
+def _slope_x_start(t, u1, coef, k):
+    """x̃'s first guess and bracket for tanθ = ``t`` and u1: (x, lo, hi, target CDF value, tolerance)."""
     cot = 1.0 / t if t > 0 else np.inf
     lo = -8.0
     hi = min(cot, 8.0)
@@ -117,25 +116,39 @@ def visible_slope_x_at(t, u1, coef, k):
         x = 0.5 * (lo + max(hi, lo))
     target = u * z
     tol = 1e-14 * z
+    return x, lo, hi, target, tol
+
+
+@jit
+def _slope_x_step(x, lo, hi, t, target, tol, coef, k):
+    """One safeguarded Halley step of x̃ (CDF(x) = target within tol): (new x, lo, hi, converged)."""
+    e = np.exp(-x * x)
+    f = _slope_cdf_e(x, e, t, coef, k) - target
+    hit = abs(f) <= tol
+    if f < 0:
+        lo = x
+    if f > 0:
+        hi = x
+    g = _TWO_OVER_SQRT_PI * e
+    d1 = g * (1.0 - x * t)
+    d2 = -g * (2.0 * x * (1.0 - x * t) + t)
+    den = 2.0 * d1 * d1 - f * d2
+    ok = d1 > 0 and den > 0
+    newton = x - 2.0 * f * d1 / (den if ok else 1.0)
+    inside = ok and newton > lo and newton < hi
+    xn = x if hit else (newton if inside else 0.5 * (lo + hi))
+    done = hit or (inside and abs(newton - x) <= 1e-6 * (1.0 + abs(x))) or \
+        (hi - lo <= 1e-15 * (1.0 + abs(x)))
+    return xn, lo, hi, done
+
+
+@jit
+def visible_slope_x_at(t, u1, coef, k):
+    """x̃ for one tanθ = ``t`` ≥ 0 and u1 ∈ [0, 1) (``coef``, ``k``: ERFCX_COEF, ERFCX_K): the loop body
+    of the compiled twin.  ``beckmann_vndf_at`` runs the same iteration interleaved with ỹ's."""
+    x, lo, hi, target, tol = _slope_x_start(t, u1, coef, k)
     for _ in range(100):
-        e = np.exp(-x * x)
-        f = _slope_cdf_e(x, e, t, coef, k) - target
-        hit = abs(f) <= tol
-        if f < 0:
-            lo = x
-        if f > 0:
-            hi = x
-        g = _TWO_OVER_SQRT_PI * e
-        d1 = g * (1.0 - x * t)
-        d2 = -g * (2.0 * x * (1.0 - x * t) + t)
-        den = 2.0 * d1 * d1 - f * d2
-        ok = d1 > 0 and den > 0
-        newton = x - 2.0 * f * d1 / (den if ok else 1.0)
-        inside = ok and newton > lo and newton < hi
-        xn = x if hit else (newton if inside else 0.5 * (lo + hi))
-        done = hit or (inside and abs(newton - x) <= 1e-6 * (1.0 + abs(x))) or \
-            (hi - lo <= 1e-15 * (1.0 + abs(x)))
-        x = xn
+        x, lo, hi, done = _slope_x_step(x, lo, hi, t, target, tol, coef, k)
         if done:
             break
     return x
@@ -245,23 +258,7 @@ def beckmann_vndf_at(o0, o1, o2, u0, u1, m, coef, k):
     else:
         cos_p, sin_p = 1.0, 0.0
     # x̃: the start of visible_slope_x_at
-    cot = 1.0 / t if t > 0 else np.inf
-    lo = -8.0
-    hi = min(cot, 8.0)
-    z = _slope_cdf(min(cot, 30.0), t, coef, k)
-    u = min(max(u0, 0.0), 1.0)
-    uc = min(max(u, 1e-300), 1.0 - 1e-16)
-    if uc < 0.5:
-        xg = -erfcinv_giles_scalar(2.0 * uc)
-    else:
-        xg = erfcinv_giles_scalar(2.0 * (1.0 - uc))
-    arg = uc * z * SQRT_PI / max(t, 1e-300)
-    xr = -np.sqrt(max(-np.log(min(arg, 1.0)), 0.0))
-    x = min(xr, hi) if t > 1.0 else xg
-    if not (x > lo and x < hi):
-        x = 0.5 * (lo + max(hi, lo))
-    target = u * z
-    tol = 1e-14 * z
+    x, lo, hi, target, tol = _slope_x_start(t, u0, coef, k)
     # ỹ: the start of erfinv_2u_minus_1_at
     v = min(max(u1, 1e-16), 1.0 - 1e-16)
     lower = v < 0.5
@@ -273,24 +270,8 @@ def beckmann_vndf_at(o0, o1, o2, u0, u1, m, coef, k):
     y_on = True
     for it in range(100):
         if x_on:
-            e = np.exp(-x * x)
-            f = _slope_cdf_e(x, e, t, coef, k) - target
-            hit = abs(f) <= tol
-            if f < 0:
-                lo = x
-            if f > 0:
-                hi = x
-            g = _TWO_OVER_SQRT_PI * e
-            d1 = g * (1.0 - x * t)
-            d2 = -g * (2.0 * x * (1.0 - x * t) + t)
-            den = 2.0 * d1 * d1 - f * d2
-            ok = d1 > 0 and den > 0
-            newton = x - 2.0 * f * d1 / (den if ok else 1.0)
-            inside = ok and newton > lo and newton < hi
-            xn = x if hit else (newton if inside else 0.5 * (lo + hi))
-            x_on = not (hit or (inside and abs(newton - x) <= 1e-6 * (1.0 + abs(x)))
-                        or (hi - lo <= 1e-15 * (1.0 + abs(x))))
-            x = xn
+            x, lo, hi, done = _slope_x_step(x, lo, hi, t, target, tol, coef, k)
+            x_on = not done
         if y_on:
             ex = erfcx_nonneg_scalar(y, coef, k)
             step = (np.log(ex) - y * y - log_q) * _HALF_SQRT_PI * ex

@@ -20,7 +20,7 @@ from .error_function import ERFCX_COEF, ERFCX_K
 from .fresnel import abcs_at
 from .microfacet import (beckmann_d_at, beckmann_g1_at, beckmann_lambda_at, beckmann_vndf_at, chi_plus_at,
                          ggx_d_at, ggx_lambda_at, ggx_vndf_at, smith_a_at)
-from .torrance_sparrow import local_frame_at
+from .geometry import local_frame_at, to_local_at
 
 DISTRIBUTION_CODES = {"beckmann": 0, "ggx": 1}
 _ERFCX_COEF = np.ascontiguousarray(ERFCX_COEF, dtype=np.float64)
@@ -106,12 +106,8 @@ def _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational,
     """RoughDielectric.eval at path i (times ``factor``) into A..S[:, i] and x[:, i]."""
     o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
     w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
-    lo0 = o0 * t0 + o1 * t1 + o2 * t2
-    lo1 = o0 * b0 + o1 * b1 + o2 * b2
-    lo2 = o0 * n0 + o1 * n1 + o2 * n2
-    li0 = w0 * t0 + w1 * t1 + w2 * t2
-    li1 = w0 * b0 + w1 * b1 + w2 * b2
-    li2 = w0 * n0 + w1 * n1 + w2 * n2
+    lo0, lo1, lo2 = to_local_at(o0, o1, o2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
+    li0, li1, li2 = to_local_at(w0, w1, w2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
     h0, h1, h2, refl, ok, d_i, d_o = _half_vector_at(li0, li1, li2, lo0, lo1, lo2, eta)
     scalar = 0.0
     c_f = 1.0

@@ -58,14 +58,19 @@ interp_grid = twin(_interp_loop and interp_grid_numba, interp_grid_numpy)
 def interp_at(xp, fp, x):
     """np.interp(x, xp, fp) for one x (strictly increasing xp): the same cases and arithmetic as
     NumPy's compiled_interp (ends held, exact knots returned, NaN fallback from the right knot)."""
-    m = xp.shape[0]
     if np.isnan(x):
         return x
     if x < xp[0]:
         return fp[0]
-    if x >= xp[m - 1]:
-        return fp[m - 1]
-    j = np.searchsorted(xp, x, side="right") - 1       # xp[j] <= x < xp[j + 1]
+    return interp_from_knot(xp, fp, x, np.searchsorted(xp, x, side="right") - 1)
+
+
+@jit
+def interp_from_knot(xp, fp, x, j):
+    """interp_at(xp, fp, x) for xp[0] ≤ x (not NaN) with j the last knot ≤ x, found by the caller
+    (several tables on one grid share the search): the same cases and arithmetic."""
+    if x >= xp[xp.shape[0] - 1]:
+        return fp[xp.shape[0] - 1]
     if xp[j] == x:
         return fp[j]
     slope = (fp[j + 1] - fp[j]) / (xp[j + 1] - xp[j])

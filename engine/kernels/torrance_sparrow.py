@@ -23,6 +23,7 @@ import numpy as np
 from . import jit
 from .error_function import ERFCX_COEF, ERFCX_K
 from .fresnel import abcs_at
+from .geometry import local_frame_at, to_local_at
 from .microfacet import chi_plus_at, beckmann_d_at, beckmann_g1_at, beckmann_lambda_at, beckmann_vndf_at, smith_a_at
 
 #: The shadowing names of engine.materials.microfacet.SHADOWING, by kernel code.
@@ -47,18 +48,6 @@ def at(v, i):
 def eta_at(eta, lam, i):
     """The relative index at row ``lam`` and path ``i`` of a broadcast (rows, columns) array."""
     return eta[lam if eta.shape[0] > 1 else 0, i if eta.shape[1] > 1 else 0]
-
-
-@jit
-def local_frame_at(n0, n1, n2):
-    """(t, b) of engine.vec3.local_frame for one unit normal, same operation order."""
-    sign = 1.0 if n2 >= 0 else -1.0
-    f = -1.0 / (sign + n2)
-    g = n0 * n1 * f
-    t0 = 1.0 + sign * n0 * n0 * f
-    t1 = sign * g
-    t2 = -sign * n0
-    return t0, t1, t2, n1 * t2 - n2 * t1, n2 * t0 - n0 * t2, n0 * t1 - n1 * t0
 
 
 @jit
@@ -120,12 +109,8 @@ def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, kind, coef
     """Facet lobe at path i into A..S[:, i] (times ``factor``) and x[:, i]; returns cosθ_i > 0 and cosθ_o > 0."""
     o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
     w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
-    lo0 = o0 * t0 + o1 * t1 + o2 * t2
-    lo1 = o0 * b0 + o1 * b1 + o2 * b2
-    lo2 = o0 * n0 + o1 * n1 + o2 * n2
-    li0 = w0 * t0 + w1 * t1 + w2 * t2
-    li1 = w0 * b0 + w1 * b1 + w2 * b2
-    li2 = w0 * n0 + w1 * n1 + w2 * n2
+    lo0, lo1, lo2 = to_local_at(o0, o1, o2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
+    li0, li1, li2 = to_local_at(w0, w1, w2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
     valid = li2 > 0 and lo2 > 0
     hv0, hv1, hv2 = li0 + lo0, li1 + lo1, li2 + lo2
     length = np.sqrt(hv0 * hv0 + hv1 * hv1 + hv2 * hv2)
@@ -170,12 +155,8 @@ def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, p_spec, has_specula
     """The two-lobe mixture density of ω_i = wi[:, i] (TorranceSparrow.pdf)."""
     o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
     w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
-    lo0 = o0 * t0 + o1 * t1 + o2 * t2
-    lo1 = o0 * b0 + o1 * b1 + o2 * b2
-    lo2 = o0 * n0 + o1 * n1 + o2 * n2
-    li0 = w0 * t0 + w1 * t1 + w2 * t2
-    li1 = w0 * b0 + w1 * b1 + w2 * b2
-    li2 = w0 * n0 + w1 * n1 + w2 * n2
+    lo0, lo1, lo2 = to_local_at(o0, o1, o2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
+    li0, li1, li2 = to_local_at(w0, w1, w2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
     if not (li2 > 0 and lo2 > 0):
         return 0.0
     out = 0.0
