@@ -94,3 +94,23 @@ def test_mesh_emitter_keeps_other_meshes():
     assert type(mesh_emitter(spectrum, np.arange(64), compiled_of(V, faces), two_sided=True)) is AreaEmitter
     V[5] += 0.01                                        # not on the ellipse any more
     assert type(mesh_emitter(spectrum, np.arange(64), compiled_of(V, faces))) is AreaEmitter
+
+
+def test_ellipse_lamp_sample_twins_agree():
+    """The compiled ellipse-lamp sampler gives the NumPy twin's bits (registered in kernels.TWINS)."""
+    from engine import kernels
+    from engine.kernels import lamp_sampling as ls
+    pair = kernels.TWINS["kernels.lamp_sampling.ellipse_lamp_sample"]
+    if pair.compiled is None:
+        pytest.skip("Numba is not available")
+    V, faces = disk_lamp(sx=0.6, sy=0.3)
+    lamp = mesh_emitter(RGBIlluminantSpectrum([1, 1, 1], 1.0), np.arange(64), compiled_of(V, faces))
+    rng = np.random.default_rng(3)
+    n = 5000
+    p = rng.random((3, n)) * 6 - 3
+    p[:, :10] = lamp.centre[:, None]               # on the lamp: invalid, no NaN
+    u1, u2 = rng.random((2, n))
+    u1[:4], u2[:4] = [0.0, 1.0, 0.5, 0.0], [0.0, 1.0, 0.5, 1.0]
+    args = (p, u1, u2, lamp.centre, lamp.axis_a, lamp.axis_b, lamp.normal, lamp.sides, lamp.phase)
+    for a, b in zip(pair.compiled(*args), ls.ellipse_lamp_sample_numpy(*args)):
+        assert np.array_equal(a, b, equal_nan=True)
