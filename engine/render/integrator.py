@@ -217,6 +217,9 @@ class PathTracer:
             materials = [simplified[name] for name in compiled.material_names]
         self.materials: list[BSDF] = list(materials)
         self.has_area_lights = compiled.has_area_lights     # once, not per bounce (scans every triangle)
+        # where segments start is kept for light selection, analytic lamps and warp-sampled lamps' pdfs
+        self.keep_origins = (lights.spatial or bool(lights.hittable)
+                             or any(getattr(light, "hit_pdf_needs_direction", False) for light in lights.lights))
         # materials shaded together (e.g. all RGB Lambert materials in one call)
         self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
         # textured parameters need the hits' per-vertex attributes (UV, colours)
@@ -507,12 +510,11 @@ class PathTracer:
 
     def _next_segments(self, state: PathState, surf: _SurfaceHits, nxt: _Scattered, valid: np.ndarray) -> None:
         """The surviving paths' next segments: the sampled directions from the offset hit points."""
-        light_set = self.lights
         state.T, state.x_T, state.d = nxt.T, nxt.x_T, nxt.d
         state.prev_delta, state.prev_pdf, state.n_prev = nxt.is_delta, nxt.pdf, nxt.n_side
         p, n_g = state.compress(valid, surf.p, surf.n_g)
         # where the next segment starts (light selection, analytic lamps' pdfs)
-        state.p_prev = p if light_set.spatial or light_set.hittable else None
+        state.p_prev = p if self.keep_origins else None
         state.o = offset_origin(p, n_g, state.d)
         state.t_max = None
 
@@ -676,6 +678,8 @@ class PathTracer:
             if factor is not None:
                 Le = Le * factor[None, :]
             prev = at_prev(sel)
-            p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0]) * light_set.prob_at(li, *prev)
+            # lamps sampled by a warp need the arrival point, hence the direction (EllipseEmitter)
+            where = (d[:, sel],) if getattr(light, "hit_pdf_needs_direction", False) else ()
+            p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], *where) * light_set.prob_at(li, *prev)
             wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
             add_light(radiance, path, T, sel, Le, wsel)
