@@ -631,7 +631,8 @@ def test_lambert_direct_light_bitwise(L_A, L, delta):
 
 def selection_table(rng):
     """(kinds, params) of one light of each selection formula: a constant, a point, a hard-edged and a
-    smooth spot with radii, an area emitter and a sun (engine.kernels.light_sampling SELECT_*)."""
+    smooth spot with radii, an area emitter, a sun and a one-sided planar area emitter
+    (engine.kernels.light_sampling SELECT_*)."""
     from engine.kernels import light_sampling as ls
     axis = unit(rng, 2).T
     rows = [(ls.SELECT_CONSTANT, [2.5]),
@@ -639,11 +640,26 @@ def selection_table(rng):
             (ls.SELECT_POINT, [1.0, 1.0, 2.0, 10.0, 0.09, 0.3, 1.0, *axis[0], 0.8, 0.8]),
             (ls.SELECT_POINT, [-1.0, 0.5, 1.0, 25.0, 0.04, 0.2, 2.0, *axis[1], 0.5, 0.9]),
             (ls.SELECT_AREA, [0.0, 0.0, 1.9, 3.0, 0.18, 0.18 ** 0.5]),
-            (ls.SELECT_DISTANT, [0.2, 0.3, 0.9327379053088815, 2.0, 0.05])]
+            (ls.SELECT_DISTANT, [0.2, 0.3, 0.9327379053088815, 2.0, 0.05]),
+            (ls.SELECT_AREA, [0.5, -0.5, 1.2, 5.0, 0.1, 0.1 ** 0.5, 1.0, *axis[0]])]     # one-sided, planar
     params = np.zeros((len(rows), ls.SELECTION_PARAMS))
     for i, (_, row) in enumerate(rows):
         params[i, :len(row)] = row
     return np.array([k for k, _ in rows]), params
+
+
+def test_one_sided_area_importance_is_zero_only_behind_its_plane():
+    """A planar one-sided emitter (normal +z, centre at z = 1, radius 0.5) sends nothing behind its
+    plane: importance 0 there (z < 1 − ε beyond the bounding sphere's silhouette), unchanged on its
+    axis in front, and > 0 everywhere in front (also grazing, beside the emitter)."""
+    from engine.kernels import light_sampling as ls
+    centre, normal = np.array([0.0, 0.0, 1.0]), np.array([0.0, 0.0, 1.0])
+    p = np.array([[0.0, 0.0, 3.0], [0.0, 0.0, -1.0], [3.0, 0.0, 1.01], [3.0, 0.0, 0.0], [0.3, 0.0, 0.99]]).T
+    two = ls.area_importance(p, None, centre, 2.0, 0.25, 0.5)
+    one = ls.area_importance(p, None, centre, 2.0, 0.25, 0.5, 1.0, normal)
+    assert one[0] == two[0] and one[1] == 0.0 and one[2] > 0
+    assert one[3] == 0.0                   # behind the plane by more than the silhouette's angle
+    assert one[4] > 0                      # just behind, inside the bounding sphere: kept (conservative)
 
 
 @needs_numba
@@ -660,7 +676,7 @@ def test_light_selection_probabilities_bitwise(with_normals):
     p = rng.uniform(-2, 2, (3, n_pts))
     p[:, 0] = params[1, :3]
     n = unit(rng, n_pts) if with_normals else None
-    prob = np.array([0.05, 0.3, 0.1, 0.2, 0.25, 0.1])
+    prob = np.array([0.05, 0.3, 0.1, 0.15, 0.25, 0.1, 0.05])
     want = ls.selection_probabilities_numpy(p, n, kinds, params, prob)
     got = ls.selection_probabilities_numba(p, n, kinds, params, prob)
     assert np.array_equal(want, got)
@@ -675,7 +691,7 @@ def test_light_selection_probabilities_bitwise(with_normals):
                           ls.selection_probabilities_numba(p, n, kinds, dark, prob))
     # one point at a time: NumPy then sums the lights' importances pairwise (from 8 lights on)
     many = np.tile(np.arange(len(kinds)), 4)[:21]
-    for count in (6, 8, 9, 16, 21):
+    for count in (7, 8, 9, 16, 21):
         k, rows, pr = kinds[many[:count]], params[many[:count]], np.full(count, 1.0 / count)
         for j in range(40):
             q, m = p[:, j:j + 1], None if n is None else n[:, j:j + 1]

@@ -239,7 +239,9 @@ rect_light_sample = twin(rect_light_sample_numba, rect_light_sample_numpy)
 #   SELECT_CONSTANT  [value]                                          (environments: π·luminance)
 #   SELECT_POINT     [x, y, z, lum, max(r², 1e-12), r, spot, ax, ay, az, cos_outer, cos_inner]
 #                    (spot 0: none, 1: hard edge, 2: smoothstep edge; a the spot's unit axis)
-#   SELECT_AREA      [cx, cy, cz, lum·A·sides, max(r², 1e-12), r]     (about the centroid, radius r)
+#   SELECT_AREA      [cx, cy, cz, lum·A·sides, max(r², 1e-12), r, one_sided, nx, ny, nz]
+#                    (about the centroid, radius r; one_sided 1: a planar emitter emitting along its unit
+#                    normal n only, so points behind its plane get importance 0: ``emitter_side``)
 #   SELECT_DISTANT   [tx, ty, tz, lum, sin half-angle]                (t: towards the sun)
 
 SELECT_CONSTANT, SELECT_POINT, SELECT_AREA, SELECT_DISTANT = 0, 1, 2, 3
@@ -283,13 +285,29 @@ def point_importance(p, n, position, lum, r2, radius, spot=None):
     return lum * falloff / np.maximum(d2, r2) * facing_factor(to, dist, radius / dist, n)
 
 
-def area_importance(p, n, centre, power, r2, radius):
+def emitter_side(to, dist, sin_alpha, normal):
+    """Emitter-side orientation term of a planar one-sided emitter with unit normal ``normal`` (3,)
+    whose centre lies at to/dist (3, N) from the receivers, half-angle asin(sin_alpha):
+    cos⁺(max(θ_e − α, 0)), θ_e the angle between the normal and the direction centre → receiver.
+    It is 0 only where θ_e ≥ π/2 + α, i.e. behind the emitter's plane, where the emitter sends no light
+    (a lamp seen from its back would otherwise take most samples and give nothing)."""
+    cos_e = np.clip(-dot(normal[:, None], to) / np.maximum(dist, 1e-300), -1.0, 1.0)
+    theta = np.maximum(np.arccos(cos_e) - np.arcsin(np.clip(sin_alpha, 0.0, 1.0)), 0.0)
+    return np.maximum(np.cos(theta), 0.0)
+
+
+def area_importance(p, n, centre, power, r2, radius, one_sided=0.0, normal=None):
     """power/max(d², r2) about the emitter's centroid times the orientation term (half-angle
-    asin(radius/d))."""
+    asin(radius/d)), and for a planar one-sided emitter (``one_sided`` ≠ 0, unit ``normal`` (3,))
+    times ``emitter_side``."""
     to = centre[:, None] - p
     d2 = dot(to, to)
     dist = np.sqrt(d2)
-    return power / np.maximum(d2, r2) * facing_factor(to, dist, radius / np.maximum(dist, 1e-300), n)
+    sin_alpha = radius / np.maximum(dist, 1e-300)
+    imp = power / np.maximum(d2, r2) * facing_factor(to, dist, sin_alpha, n)
+    if one_sided != 0:
+        imp = imp * emitter_side(to, dist, sin_alpha, normal)
+    return imp
 
 
 def distant_importance(p, n, towards, lum, sin_half):
@@ -306,7 +324,7 @@ def light_importance_numpy(kind, row, p, n):
         spot = None if row[6] == 0 else (row[7:10], row[10], row[11])
         return point_importance(p, n, row[0:3], row[3], row[4], row[5], spot)
     if kind == SELECT_AREA:
-        return area_importance(p, n, row[0:3], row[3], row[4], row[5])
+        return area_importance(p, n, row[0:3], row[3], row[4], row[5], row[6], row[7:10])
     return distant_importance(p, n, row[0:3], row[3], row[4])
 
 
@@ -341,6 +359,14 @@ def _facing(has_n, n, j, t0, t1, t2, dist, sin_alpha):
     cos_t = _clip((n[0, j] * t0 + n[1, j] * t1 + n[2, j] * t2) / _maximum(dist, 1e-300), -1.0, 1.0)
     theta = _maximum(np.arccos(cos_t) - np.arcsin(_clip(sin_alpha, 0.0, 1.0)), 0.0)
     return BELOW_HORIZON + (1.0 - BELOW_HORIZON) * _maximum(np.cos(theta), 0.0)
+
+
+@jit
+def _emitter_side(t0, t1, t2, dist, sin_alpha, n0, n1, n2):
+    """``emitter_side`` for one receiver (t: centre − receiver)."""
+    cos_e = _clip(-(n0 * t0 + n1 * t1 + n2 * t2) / _maximum(dist, 1e-300), -1.0, 1.0)
+    theta = _maximum(np.arccos(cos_e) - np.arcsin(_clip(sin_alpha, 0.0, 1.0)), 0.0)
+    return _maximum(np.cos(theta), 0.0)
 
 
 @jit
@@ -398,8 +424,10 @@ def _probabilities_loop(p, n, has_n, kinds, params, prob, probs):
                 t0, t1, t2 = row[0] - p[0, j], row[1] - p[1, j], row[2] - p[2, j]
                 d2 = t0 * t0 + t1 * t1 + t2 * t2
                 dist = np.sqrt(d2)
-                imp = row[3] / _maximum(d2, row[4]) * _facing(has_n, n, j, t0, t1, t2, dist,
-                                                               row[5] / _maximum(dist, 1e-300))
+                sin_alpha = row[5] / _maximum(dist, 1e-300)
+                imp = row[3] / _maximum(d2, row[4]) * _facing(has_n, n, j, t0, t1, t2, dist, sin_alpha)
+                if row[6] != 0:
+                    imp = imp * _emitter_side(t0, t1, t2, dist, sin_alpha, row[7], row[8], row[9])
             else:
                 imp = row[3] * _facing(has_n, n, j, row[0], row[1], row[2], 1.0, row[4]) * 1.0
             if not (np.isfinite(imp) and imp > 0):

@@ -478,16 +478,33 @@ class AreaEmitter(_Light):
             self._r2 = float(((corners - self._centre) ** 2).sum(1).max())
         return self._centre, self._r2
 
+    def _plane_normal(self):
+        """The unit normal (3,) shared by all the emitter's triangles if they lie in one plane, else None."""
+        c = self.compiled
+        normals = c.tri_normal[self.tris].astype(np.float64)
+        normal = normals[0] / np.linalg.norm(normals[0])
+        corners = c.vertices[c.faces[self.tris]].reshape(-1, 3)
+        extent = max(float(np.ptp(corners, axis=0).max()), 1e-300)
+        offsets = (corners - corners[0]) @ normal
+        if np.abs(normals @ normal - 1.0).max() > 1e-9 or np.abs(offsets).max() > 1e-9 * extent:
+            return None
+        return normal
+
     def selection_record(self):
         centre, r2 = self._bound()
         power = float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
-        return SELECT_AREA, [*centre, power, max(r2, 1e-12), math.sqrt(r2)]
+        row = [*centre, power, max(r2, 1e-12), math.sqrt(r2)]
+        normal = None if self.two_sided else self._plane_normal()
+        if normal is not None:      # a one-sided planar emitter (Blender's area lamps): dark behind its plane
+            row += [1.0, *normal]
+        return SELECT_AREA, row
 
     def importance(self, p, n=None):
         """Bound-like estimate of the irradiance at p (3, N) with side normals n: L·A/max(d², r²)
-        about the centroid, times the orientation term."""
+        about the centroid, times the orientation terms (receiver; emitter if one-sided and planar)."""
         _, row = self.selection_record()
-        return area_importance(p, n, np.array(row[:3]), *row[3:])
+        row = row + [0.0] * (10 - len(row))
+        return area_importance(p, n, np.array(row[:3]), row[3], row[4], row[5], row[6], np.array(row[7:10]))
 
 
 class EllipseEmitter(AreaEmitter):
