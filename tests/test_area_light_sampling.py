@@ -176,3 +176,29 @@ def test_pdf_hit_is_the_pdf_of_next_event_estimation(two_sided):
     # and without an origin (camera rays) the area pdf
     np.testing.assert_allclose(light.pdf_hit(dist[valid], cos_l[valid]),
                                dist[valid] ** 2 / (cos_l[valid] * 0.6), rtol=1e-12)
+
+
+def test_rays_that_reach_a_lone_rectangle_lamp_are_weighted_with_the_solid_angle_pdf(monkeypatch):
+    """With one rectangle lamp (no light selection, no analytic lamps) the tracer still keeps where
+    each segment started, so a BSDF-sampled ray that reaches the lamp is MIS-weighted with 1/Ω, the
+    pdf next-event estimation used; without its origin pdf_hit falls back to the area pdf and the two
+    weights no longer sum to 1."""
+    import copy
+
+    from engine.render.renderer import Renderer
+    from engine.scene.loader import load_scene
+    from tests.conftest import shared_path
+    scene = load_scene(shared_path("peers", "scenes", "cornell_lambert.json"))
+    scene.camera.width = scene.camera.height = 16
+    origins = []
+    original = AreaEmitter.pdf_hit
+
+    def pdf_hit(self, dist, cos_l, origin=None, *rest):
+        origins.append(origin is not None)
+        return original(self, dist, cos_l, origin, *rest)
+
+    monkeypatch.setattr(AreaEmitter, "pdf_hit", pdf_hit)
+    st = copy.copy(scene.settings)
+    st.spp, st.threads = 2, 1
+    Renderer(scene).render(st)
+    assert len(origins) > 1 and all(origins[1:])        # the first call: camera rays (not MIS-weighted)

@@ -219,7 +219,8 @@ class PathTracer:
         self.has_area_lights = compiled.has_area_lights     # once, not per bounce (scans every triangle)
         # where segments start is kept for light selection, analytic lamps and warp-sampled lamps' pdfs
         self.keep_origins = (lights.spatial or bool(lights.hittable)
-                             or any(getattr(light, "hit_pdf_needs_direction", False) for light in lights.lights))
+                             or any(getattr(light, "hit_pdf_needs_origin", False)
+                                    or getattr(light, "hit_pdf_needs_direction", False) for light in lights.lights))
         # materials shaded together (e.g. all RGB Lambert materials in one call)
         self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
         # textured parameters need the hits' per-vertex attributes (UV, colours)

@@ -452,6 +452,13 @@ class AreaEmitter(_Light):
         """Directional factor of the radiance (the spread profile), or None (Lambertian)."""
         return None if self.profile is None else self.profile(cos_l)
 
+    @property
+    def hit_pdf_needs_origin(self) -> bool:
+        """Whether ``pdf_hit`` needs the segment's origin: a rectangle is sampled by solid angle, so a
+        BSDF-sampled ray that reaches it is MIS-weighted with 1/Ω from where the ray started (the area
+        pdf there would not be the pdf next-event estimation used, and the weights would not sum to 1)."""
+        return self.rect is not None
+
     def pdf_hit(self, dist, cos_l, origin=None):
         """Solid-angle pdf with which ``sample`` from the points ``origin`` (3, N) picks the point at
         distance dist whose emitting side faces the ray at cos_l (from ``facing``).  Without
