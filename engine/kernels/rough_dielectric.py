@@ -20,7 +20,7 @@ from .error_function import ERFCX_COEF, ERFCX_K
 from .fresnel import abcs_at
 from .microfacet import (beckmann_d_at, beckmann_g1_at, beckmann_lambda_at, beckmann_vndf_at, chi_plus_at,
                          ggx_d_at, ggx_lambda_at, ggx_vndf_at, smith_a_at)
-from .geometry import local_frame_at, to_local_at
+from .geometry import local_frame_at, to_local_at, unit_cross_at
 
 DISTRIBUTION_CODES = {"beckmann": 0, "ggx": 1}
 _ERFCX_COEF = np.ascontiguousarray(ERFCX_COEF, dtype=np.float64)
@@ -139,19 +139,7 @@ def _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational,
     for lam in range(A.shape[0]):
         A[lam, i], B[lam, i], C[lam, i], S[lam, i] = a_, b_, c_, s_
     # x = unit(k_i × k_o), k_i = −ω_i (engine.kernels.geometry.unit_cross, same order)
-    a0, a1, a2 = -w0, -w1, -w2
-    s0 = a1 * o2 - a2 * o1
-    s1 = a2 * o0 - a0 * o2
-    s2 = a0 * o1 - a1 * o0
-    ln = np.sqrt((s0 * s0 + s1 * s1) + s2 * s2)
-    if ln > 1e-12:
-        x[0, i], x[1, i], x[2, i] = s0 / ln, s1 / ln, s2 / ln
-    else:
-        sign = 1.0 if a2 >= 0 else -1.0
-        f = -1.0 / (sign + a2)
-        x[0, i] = 1.0 + sign * a0 * a0 * f
-        x[1, i] = sign * (a0 * a1 * f)
-        x[2, i] = -sign * a0
+    x[0, i], x[1, i], x[2, i] = unit_cross_at(-w0, -w1, -w2, o0, o1, o2, 1e-12)
 
 
 @jit

@@ -23,7 +23,7 @@ import numpy as np
 from . import jit
 from .error_function import ERFCX_COEF, ERFCX_K
 from .fresnel import abcs_at
-from .geometry import local_frame_at, to_local_at
+from .geometry import local_frame_at, to_local_at, unit_cross_at
 from .microfacet import chi_plus_at, beckmann_d_at, beckmann_g1_at, beckmann_lambda_at, beckmann_vndf_at, smith_a_at
 
 #: The shadowing names of engine.materials.microfacet.SHADOWING, by kernel code.
@@ -134,19 +134,7 @@ def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, kind, coef
         C[lam, i] = c_ * fr * factor
         S[lam, i] = s_ * fr * factor
     # x = unit(k_i × k_o), k_i = −ω_i (engine.kernels.geometry.unit_cross, same order)
-    a0, a1, a2 = -w0, -w1, -w2
-    s0 = a1 * o2 - a2 * o1
-    s1 = a2 * o0 - a0 * o2
-    s2 = a0 * o1 - a1 * o0
-    ln = np.sqrt((s0 * s0 + s1 * s1) + s2 * s2)
-    if ln > _DEGENERATE:
-        x[0, i], x[1, i], x[2, i] = s0 / ln, s1 / ln, s2 / ln
-    else:
-        sign = 1.0 if a2 >= 0 else -1.0
-        f = -1.0 / (sign + a2)
-        x[0, i] = 1.0 + sign * a0 * a0 * f
-        x[1, i] = sign * (a0 * a1 * f)
-        x[2, i] = -sign * a0
+    x[0, i], x[1, i], x[2, i] = unit_cross_at(-w0, -w1, -w2, o0, o1, o2, _DEGENERATE)
     return valid
 
 
