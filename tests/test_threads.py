@@ -103,3 +103,21 @@ def test_a_stop_discards_queued_units_without_tracing_them():
     added = []
     assert trace_in_order(list(range(10)), trace, added.append, 1, stop, abort)
     assert abort.is_set() and len(traced) == 1 and added == [0]
+
+
+def test_workers_run_with_one_blas_thread_and_the_limit_is_restored_after():
+    threadpoolctl = __import__("pytest").importorskip("threadpoolctl")
+
+    def blas_threads():
+        return [p["num_threads"] for p in threadpoolctl.threadpool_info() if p["user_api"] == "blas"]
+
+    before = blas_threads()
+    if not before:
+        __import__("pytest").skip("NumPy has no BLAS library threadpoolctl can see")
+    with threadpoolctl.threadpool_limits(limits=2, user_api="blas"):
+        seen = []
+        trace_in_order(list(range(4)), lambda u: blas_threads(), seen.append, 2, lambda: False,
+                       threading.Event())
+        assert seen and all(n == [1] * len(before) for n in seen)
+        assert blas_threads() == [2] * len(before)          # the caller's own setting comes back
+    assert blas_threads() == before

@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from .blas_threads import one_blas_thread
 from .film import Film
 from .renderer import STOP_POLL_SECONDS, RenderResult, Renderer, unit_pixels, work_units
 from .effects import effective_materials, resolve_transport
@@ -47,7 +48,8 @@ def _render_unit(key, scene, settings, unit, window, width):
     pixel = np.tile(pix, p1 - p0)
     sample = np.repeat(np.arange(p0, p1, dtype=np.int64), pix.size)
     tracer = PathTracer(renderer.compiled, renderer.lights, renderer.camera, settings)
-    values, stats = tracer.trace(pixel, sample)
+    with one_blas_thread():             # the worker's threads are its parallelism (engine.render.blas_threads)
+        values, stats = tracer.trace(pixel, sample)
     stats.pop("path_rays", None)                        # per-path ray counts: adaptive sampling's cost only
     lo, hi = int(pix.min()), int(pix.max()) + 1
     part = Film(hi - lo, 1)
@@ -64,7 +66,8 @@ def _trace_paths(key, scene, settings, unit):
     renderer = _renderer_for(key, scene)
     pixel, sample = unit_paths(unit)
     tracer = PathTracer(renderer.compiled, renderer.lights, renderer.camera, settings)
-    values, stats = tracer.trace(pixel, sample)
+    with one_blas_thread():
+        values, stats = tracer.trace(pixel, sample)
     return pixel, sample, values, stats
 
 

@@ -27,6 +27,7 @@ import numpy as np
 
 from .accel import CompiledScene
 from .allocator import keep_freed_memory, return_freed_memory
+from .blas_threads import one_blas_thread
 from ..kernels import BACKEND as KERNEL_BACKEND
 from .camera import CameraModel
 from .effects import effective_materials, resolve_transport
@@ -122,7 +123,8 @@ def trace_in_order(units, trace_unit, add_result, workers: int, stop_requested, 
     cancelled = False
     workers = max(1, min(workers, len(units)))
     ahead = UNITS_AHEAD * workers
-    with ThreadPoolExecutor(max_workers=workers) as pool:
+    # BLAS's own threads would compete with the workers for the same cores (engine.render.blas_threads)
+    with one_blas_thread(), ThreadPoolExecutor(max_workers=workers) as pool:
         pending = deque()
         next_unit = 0
 
@@ -209,7 +211,8 @@ class Renderer:
         rows = np.linspace(0, H - 1, ny).round().astype(np.int64)
         cols = np.linspace(0, W - 1, nx).round().astype(np.int64)
         pixel = (rows[:, None] * W + cols[None, :]).ravel()
-        tracer.trace(pixel, np.zeros_like(pixel))
+        with one_blas_thread():
+            tracer.trace(pixel, np.zeros_like(pixel))
         return time.perf_counter() - t0
 
     def last_film_mean(self) -> np.ndarray | None:
