@@ -21,9 +21,14 @@ import subprocess
 import sys
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-WHEEL_NAME = re.compile(r"\./wheels/([A-Za-z0-9_]+)-([^-]+)-(cp\d+)-[^-]+-(.+)\.whl")
+WHEEL_NAME = re.compile(r"\./wheels/([A-Za-z0-9_]+)-([^-]+)-(cp\d+|py3)-[^-]+-(.+)\.whl")
 #: Packages every platform's zip must carry (project names as they appear in wheel file names).
-BUNDLED = ("embreex", "openexr", "numba", "llvmlite")
+#: threadpoolctl (pure Python, one ``any`` wheel for all) keeps NumPy's BLAS to one thread while the
+#: render's workers run (engine.render.blas_threads).
+BUNDLED = ("embreex", "openexr", "numba", "llvmlite", "threadpoolctl")
+#: Every platform Blender builds extensions for (what a pure-Python ``any`` wheel runs on).
+BLENDER_PLATFORMS = frozenset({"linux-x64", "linux-arm64", "windows-x64", "windows-arm64", "macos-x64",
+                               "macos-arm64"})
 
 
 def manifest_text(source_dir=ROOT):
@@ -44,13 +49,14 @@ def manifest_platforms(source_dir=ROOT):
 def wheel_platforms(filename):
     """Blender platforms (``linux-x64``, ``windows-x64``, ``macos-arm64``, …) a wheel file runs on.
 
-    The same mapping as Blender's ``--split-platforms`` for the tags used here; ``any`` wheels fit all.
+    The same mapping as Blender's ``--split-platforms`` for the tags used here; ``any`` wheels fit all
+    (:data:`BLENDER_PLATFORMS`).
     """
     tags = os.path.basename(filename)[:-len(".whl")].split("-")[-1].split(".")
     found = set()
     for tag in tags:
         if tag == "any":
-            return {"any"}
+            return set(BLENDER_PLATFORMS)
         system = ("linux" if "linux" in tag else "windows" if tag.startswith("win") else
                   "macos" if tag.startswith("macosx") else None)
         if system is None:
@@ -71,8 +77,7 @@ def check_manifest(source_dir=ROOT):
         raise SystemExit("blender_manifest.toml: 'platforms' is empty; list the platforms wheels are bundled for")
     wheels = manifest_wheels(source_dir)
     for plat in platforms:
-        names = [WHEEL_NAME.match(w).group(1).lower() for w in wheels
-                 if plat in wheel_platforms(w) or "any" in wheel_platforms(w)]
+        names = [WHEEL_NAME.match(w).group(1).lower() for w in wheels if plat in wheel_platforms(w)]
         for package in BUNDLED:
             if names.count(package) != 1:
                 raise SystemExit(f"blender_manifest.toml: platform {plat} needs exactly one {package} wheel in "
@@ -103,9 +108,11 @@ def download_wheels(source_dir=ROOT, fetch=pip_download):
         m = WHEEL_NAME.match(rel)
         if not m:
             raise SystemExit(f"blender_manifest.toml: cannot parse wheel name {rel} "
-                             "(expected ./wheels/<name>-<version>-cp311-<abi>-<platform>.whl)")
+                             "(expected ./wheels/<name>-<version>-cp311-<abi>-<platform>.whl "
+                             "or ./wheels/<name>-<version>-py3-none-any.whl)")
         name, version, pytag, platform_tags = m.groups()
-        fetch(name, version, pytag[2:], platform_tags.split("."), dest)
+        # a pure-Python wheel (py3-none-any) is fetched for Blender's Python as well
+        fetch(name, version, pytag[2:] if pytag.startswith("cp") else "311", platform_tags.split("."), dest)
         if not os.path.exists(target):
             raise SystemExit(f"the download did not produce {rel}; check the name in blender_manifest.toml")
 

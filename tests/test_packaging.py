@@ -48,19 +48,21 @@ class FakeIndex:
 
     def __call__(self, name, version, python_version, platform_tags, dest):
         self.calls.append((name, version, python_version, tuple(platform_tags)))
-        filename = f"{name}-{version}-cp{python_version}-cp{python_version}-{'.'.join(platform_tags)}.whl"
+        tags = ("py3-none" if platform_tags == ["any"] else f"cp{python_version}-cp{python_version}")
+        filename = f"{name}-{version}-{tags}-{'.'.join(platform_tags)}.whl"
         with zipfile.ZipFile(os.path.join(dest, filename), "w") as zf:
             zf.writestr(f"{name}/__init__.py", f"# placeholder {filename}\n")
 
 
-def test_manifest_bundles_numba_llvmlite_embreex_openexr_for_each_platform():
+def test_manifest_bundles_numba_llvmlite_embreex_openexr_threadpoolctl_for_each_platform():
     assert set(packaging.manifest_platforms()) == PLATFORMS
     wheels = packaging.manifest_wheels()
     for plat in PLATFORMS:
         mine = [os.path.basename(w) for w in wheels if plat in packaging.wheel_platforms(w)]
         names = sorted(w.split("-")[0] for w in mine)
         assert names == sorted(packaging.BUNDLED), (plat, mine)
-        assert all(w.split("-")[2] == "cp311" for w in mine)            # Blender 5.0's Python 3.11
+        # Blender 5.0's Python 3.11, or pure Python
+        assert all(w.split("-")[2] == "cp311" or w.endswith("-py3-none-any.whl") for w in mine)
         versions = {w.split("-")[0]: w.split("-")[1] for w in mine}
         # numba 0.N pins llvmlite 0.(N-18) (numba 0.68 requires llvmlite >=0.50,<0.51)
         assert int(versions["numba"].split(".")[1]) - 18 == int(versions["llvmlite"].split(".")[1])
@@ -82,8 +84,9 @@ def test_build_one_zip_per_platform_with_its_wheels(tmp_path):
     fetch = FakeIndex()
     zips = packaging.build_all(str(tmp_path / "dist"), source_dir=str(src), fetch=fetch)
     wheels = packaging.manifest_wheels(str(src))
-    assert len(fetch.calls) == len(wheels) == 12
+    assert len(fetch.calls) == len(wheels) == 13
     assert ("numba", "0.68.1", "311", ("win_amd64",)) in fetch.calls
+    assert ("threadpoolctl", "3.7.0", "311", ("any",)) in fetch.calls
     assert set(zips) == PLATFORMS
     for plat, path in zips.items():
         assert os.path.basename(path) == f"polar_render-0.1.0-{plat.replace('-', '_')}.zip"
@@ -92,7 +95,7 @@ def test_build_one_zip_per_platform_with_its_wheels(tmp_path):
             manifest = zf.read("blender_manifest.toml").decode()
         expected = sorted(w[2:] for w in wheels if plat in packaging.wheel_platforms(w))
         assert sorted(n for n in names if n.startswith("wheels/")) == expected
-        assert {n.split("/")[0] for n in expected} == {"wheels"} and len(expected) == 4
+        assert {n.split("/")[0] for n in expected} == {"wheels"} and len(expected) == 5
         assert "engine/kernels/__init__.py" in names and "polar_addon/kernel_cache.py" in names
         assert not any(n.startswith(("tests/", "examples/")) for n in names)
         generated = manifest.split("[build.generated]", 1)[1]        # what Blender installs on this platform
@@ -100,7 +103,7 @@ def test_build_one_zip_per_platform_with_its_wheels(tmp_path):
         assert sorted(re.findall(r'"\./(wheels/[^"]+)"', generated)) == expected
     # wheels already downloaded are not fetched again
     packaging.build_all(str(tmp_path / "dist2"), source_dir=str(src), fetch=fetch)
-    assert len(fetch.calls) == 12
+    assert len(fetch.calls) == 13
 
 
 def test_manifest_missing_a_platform_wheel_is_refused(tmp_path):
