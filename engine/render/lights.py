@@ -408,7 +408,12 @@ class AreaEmitter(_Light):
         if self.profile is not None:
             scale = scale * self.profile(cos_l)
             valid &= scale > 0
-        if not use.all():       # tiny solid angle: area sampling (see MIN_RECT_SOLID_ANGLE)
+        return self._area_where_tiny(p, u, use, wi, dist, scale, pdf, valid)
+
+    def _area_where_tiny(self, p, u, use, wi, dist, scale, pdf, valid):
+        """The solid-angle sample (wi, dist, scale, pdf, valid), with area samples where ``use`` is
+        False: the rectangle's solid angle is too small for its parametrisation (MIN_RECT_SOLID_ANGLE)."""
+        if not use.all():
             far = (~use).nonzero()[0]
             a_wi, a_dist, a_scale, a_pdf, a_valid = self._sample_area(p[:, far], u[:, far])
             wi[:, far], dist[far], scale[far], pdf[far], valid[far] = a_wi, a_dist, a_scale, a_pdf, a_valid
@@ -640,11 +645,7 @@ class SpreadRectangleEmitter(AreaEmitter):
         scale = scale / pdf_uv * self.profile(cos_l)
         pdf = pdf * pdf_uv
         valid &= scale > 0
-        if not use.all():       # tiny solid angle: area sampling (see MIN_RECT_SOLID_ANGLE)
-            far = (~use).nonzero()[0]
-            a_wi, a_dist, a_scale, a_pdf, a_valid = self._sample_area(p[:, far], u[:, far])
-            wi[:, far], dist[far], scale[far], pdf[far], valid[far] = a_wi, a_dist, a_scale, a_pdf, a_valid
-        return wi, dist, scale, pdf, valid
+        return self._area_where_tiny(p, u, use, wi, dist, scale, pdf, valid)
 
     def warp_coordinates(self, origin, x):
         """(u, v) ∈ [0, 1]² of the spherical-rectangle parametrisation seen from origin (3, N) at which
