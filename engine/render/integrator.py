@@ -443,9 +443,6 @@ class PathTracer:
         # Stokes frame of the arriving segment: x_T is already ⟂ d.
         mat = self.scene.tri_material[surf.prim]
         grp = self.group_of[mat]
-        u_light = sampler.next(4)
-        u_bsdf = sampler.next(3)
-        u_rr = sampler.next(1)[0]
         # the groups present, ascending (np.unique's answer without sorting n numbers)
         groups = np.flatnonzero(np.bincount(grp, minlength=len(self.shaders)))
         # One material covers every path: its sample's arrays become the next segments as they are
@@ -455,6 +452,25 @@ class PathTracer:
         fused = [self.shaders[g].flags.is_delta_only and type(self.shaders[g]).scatter_delta is not BSDF.scatter_delta
                  for g in groups]
         columns = not whole or fused[0]
+        # Dimensions 1–4 light sampling, 5–7 the BSDF (lobe, direction), 8 roulette; only those this
+        # bounce reads are hashed (at delta vertices, before rr_depth, most are not): the numbers are
+        # stateless in the dimension, so skipping leaves every other one as it was.
+        nee = (bool(len(light_set)) and bounce + 2 <= st.max_depth
+               and not all(self.shaders[g].flags.is_delta_only for g in groups))
+        u_light = sampler.next(4) if nee else sampler.skip(4)
+        direction_dims = None
+        if all(fused):
+            u_bsdf = sampler.next(1)                # the lobe choice (smooth dielectric) only
+            direction_dims = PathSampler(sampler.keys)
+            direction_dims.dimension = sampler.dimension
+            sampler.skip(2)
+        else:
+            u_bsdf = sampler.next(3)
+        if bounce + 1 >= st.rr_depth:
+            u_rr = sampler.next(1)[0]
+        else:
+            sampler.skip(1)
+            u_rr = np.empty(0)                      # not read without roulette
         nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty_like(T), d=np.zeros((3, n)) if columns else None,
                          x_T=np.zeros((3, n)) if columns else None, valid=np.zeros(n, bool) if columns else None,
                          is_delta=np.ones(n, bool) if columns else None, pdf=np.zeros(n) if columns else None,
@@ -468,6 +484,10 @@ class PathTracer:
                                                              state.x_T, nxt.T, nxt.d, nxt.x_T, nxt.valid,
                                                              nxt.eta_step)):
                 continue            # pdf 0 and is_delta True: as preset
+            if direction_dims is not None:
+                # a one-step material fell back to ``sample``: its direction numbers after all
+                u_bsdf = np.concatenate((u_bsdf, direction_dims.next(2)))
+                direction_dims = None
             sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
                               gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
                               self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None,
