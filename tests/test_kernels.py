@@ -901,3 +901,35 @@ def test_rough_dielectric_eval_pdf_sample_bitwise(distribution, rational, n_int,
     _bitwise(got, want)
     refracted = want[3] != 1.0
     assert 0.5 * n < want[2].sum() <= n and (refracted & want[2]).any() and (~refracted & want[2]).any()
+
+
+@needs_numba
+@pytest.mark.parametrize("P", [1, 3, 4])
+@pytest.mark.parametrize("L", [1, 4])
+@pytest.mark.parametrize("n", [0, 1, 700])
+def test_identity_throughput_bitwise(P, L, n):
+    """The camera paths' T = identity (P, P, L, n), written in one compiled pass over reused memory."""
+    a = transport.identity_throughput_numpy(P, L, n)
+    b = transport.identity_throughput_numba(P, L, n)
+    assert a.shape == b.shape == (P, P, L, n) and np.array_equal(a, b)
+    assert np.array_equal(b.reshape(P * P, L * n).sum(axis=1).reshape(P, P), np.eye(P) * L * n)
+
+
+@needs_numba
+def test_roulette_before_rr_depth_does_not_read_its_numbers():
+    """Before rr_depth the integrator skips the roulette dimension and passes no numbers: both twins
+    give what they give with numbers."""
+    rng = np.random.default_rng(3)
+    T = rng.uniform(-0.2, 1.0, size=(4, 4, 4, 300))
+    T[0, 0, :, :10] = 0.0
+    T[1, 2, 3, 10:20] = np.nan
+    valid = rng.uniform(size=300) < 0.9
+    results = []
+    for f in (transport.roulette_numpy, transport.roulette_numba):
+        for u in (rng.uniform(size=300), np.empty(0)):
+            v = valid.copy()
+            out, bad = f(T.copy(), np.ones(300), u, v, False)
+            results.append((out, bad, v))
+    for out, bad, v in results[1:]:
+        assert np.array_equal(out, results[0][0], equal_nan=True) and bad == results[0][1]
+        assert np.array_equal(v, results[0][2])

@@ -16,6 +16,38 @@ from . import jit, twin
 from .stokes_rotation import frame_rotation, frame_rotation_at, rotate_stokes
 
 
+# ----------------------------------------------------------------------------- T = 1 at the camera
+
+def identity_throughput_numpy(P, L, n):
+    """The camera paths' Mueller product before any vertex: the identity (P, P, L, n) for n paths."""
+    T = np.zeros((P, P, L, n))
+    for i in range(P):
+        T[i, i] = 1.0
+    return T
+
+
+@jit
+def _identity_loop(T):
+    P, L, n = T.shape[0], T.shape[2], T.shape[3]
+    for i in range(P):
+        for c in range(P):
+            v = 1.0 if i == c else 0.0
+            for k in range(L):
+                for j in range(n):
+                    T[i, c, k, j] = v
+
+
+def identity_throughput_numba(P, L, n):
+    # written in one nogil pass: np.zeros over reused batch memory (engine.render.allocator) is a
+    # memset with the GIL held, then the diagonal is written in a second pass
+    T = np.empty((P, P, L, n))
+    _identity_loop(T)
+    return T
+
+
+identity_throughput = twin(_identity_loop and identity_throughput_numba, identity_throughput_numpy)
+
+
 # ----------------------------------------------------------------------------- T ← T·R(φ)·M_abcs
 
 def _rotated_rows_numpy(T, rows, x_out, x_T, wo):

@@ -32,8 +32,8 @@ from ..materials.base import BSDF, BSDFFlags, DeltaVertices, MuellerValue, Shadi
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import Hits, offset_origin, surface_points
-from ..kernels.transport import (add_light, add_to_paths, roulette, throughput_times_stokes, update_abcs,
-                                 update_depolarising, update_general)
+from ..kernels.transport import (add_light, add_to_paths, identity_throughput, roulette, throughput_times_stokes,
+                                 update_abcs, update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .path_state import PathState
 from .sampler import PathSampler
@@ -327,9 +327,7 @@ class PathTracer:
         if np.any(t_min > 0):
             o = o + d * t_min[None, :]
             t_max = t_max - t_min
-        T = np.zeros((P, P, Lm, n_total))
-        for i in range(P):
-            T[i, i] = 1.0
+        T = identity_throughput(P, Lm, n_total)
         state = PathState(path=np.arange(n_total), T=T, x_T=x_T, o=o, d=d, t_max=t_max, eta_sq=np.ones(n_total),
                           prev_delta=np.ones(n_total, bool), prev_pdf=np.zeros(n_total), p_prev=None, n_prev=None,
                           sampler=sampler, lk=lk, lk_m=lk_m)
@@ -471,11 +469,13 @@ class PathTracer:
         else:
             sampler.skip(1)
             u_rr = np.empty(0)                      # not read without roulette
-        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty_like(T), d=np.zeros((3, n)) if columns else None,
-                         x_T=np.zeros((3, n)) if columns else None, valid=np.zeros(n, bool) if columns else None,
+        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty_like(T), d=np.empty((3, n)) if columns else None,
+                         x_T=np.empty((3, n)) if columns else None, valid=np.empty(n, bool) if columns else None,
                          is_delta=np.ones(n, bool) if columns else None, pdf=np.zeros(n) if columns else None,
                          eta_step=np.ones(n))
-        # (every path belongs to one material group, which writes its column of nxt.T)
+        # (every path belongs to one material group, which writes its columns of nxt.T, d, x_T and valid:
+        # scatter_delta at its rows, else from its sample; is_delta, pdf and eta_step keep their presets
+        # where a one-step delta material leaves them)
         for g, one_step in zip(groups, fused):
             sel = slice(None) if whole else np.nonzero(grp == g)[0]
             bsdf = self.shaders[g]
