@@ -933,3 +933,45 @@ def test_roulette_before_rr_depth_does_not_read_its_numbers():
     for out, bad, v in results[1:]:
         assert np.array_equal(out, results[0][0], equal_nan=True) and bad == results[0][1]
         assert np.array_equal(v, results[0][2])
+
+
+@needs_numba
+@pytest.mark.parametrize("P", [1, 4])
+@pytest.mark.parametrize("L", [1, 4])
+@pytest.mark.parametrize("apply_rr", [False, True])
+@pytest.mark.parametrize("everyone", [False, True])
+def test_next_segments_bitwise(P, L, apply_rr, everyone):
+    """The end of a bounce in one step (η², roulette, survivors' columns, next origins) against its
+    NumPy twin, and against the separate steps it replaces (roulette, np.take, offset_origin)."""
+    rng = np.random.default_rng(P + 2 * L + 4 * apply_rr + 8 * everyone)
+    n = 500
+    T = rng.uniform(0.01, 1.0, size=(P, P, L, n))
+    valid = np.ones(n, bool)
+    if not everyone:
+        T[0, 0, :, :20] = 0.0
+        T[-1, -1, -1, 20:30] = np.nan
+        valid = rng.uniform(size=n) < 0.8
+    eta_sq, eta_step = rng.uniform(0.5, 2.0, n), rng.uniform(0.5, 2.0, n)
+    u = rng.uniform(size=n) * (0.0 if everyone else 1.0)
+    x_T, d, p, n_g = unit(rng, n), unit(rng, n), rng.normal(size=(3, n)) * 10, unit(rng, n)
+    path = rng.permutation(n).astype(np.int64)
+    keys = rng.integers(0, 2**63, n, dtype=np.uint64)
+    is_delta, pdf = rng.uniform(size=n) < 0.5, rng.uniform(size=n)
+    args = (eta_sq, eta_step, u, None, apply_rr, x_T, d, path, keys, is_delta, pdf, p, n_g, 1e-4)
+    out = []
+    for f in (transport.next_segments_numpy, transport.next_segments_numba):
+        v = valid.copy()
+        a = list(args)
+        a[3] = v
+        out.append(f(T.copy(), *a))
+    for x, y in zip(*out):
+        assert np.array_equal(x, y, equal_nan=True)
+    # the separate steps
+    v = valid.copy()
+    e = eta_sq * eta_step
+    T_r, bad = transport.roulette_numpy(T.copy(), e, u, v, apply_rr)
+    idx = np.flatnonzero(v)
+    assert np.array_equal(out[0][0], idx) and out[0][1] == bad and (idx.size == n) == everyone
+    assert np.array_equal(out[1][2], T_r[..., idx])
+    assert np.array_equal(out[1][5], e[idx]) and np.array_equal(out[1][7], keys[idx])
+    assert np.array_equal(out[1][11], geometry.offset_origin_numpy(p[:, idx], n_g[:, idx], d[:, idx], 1e-4))

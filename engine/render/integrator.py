@@ -31,8 +31,8 @@ import numpy as np
 from ..materials.base import BSDF, BSDFFlags, DeltaVertices, MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
-from .accel import Hits, offset_origin, surface_points
-from ..kernels.transport import (add_light, add_to_paths, identity_throughput, roulette, throughput_times_stokes,
+from .accel import RAY_EPSILON, Hits, offset_origin, surface_points
+from ..kernels.transport import (add_light, add_to_paths, identity_throughput, next_segments, throughput_times_stokes,
                                  update_abcs, update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .path_state import PathState
@@ -284,8 +284,8 @@ class PathTracer:
         Each bounce runs named stages over one PathState: ``_intersect`` (closest hits, ray
         visibility), ``_emission`` (light the segment reached), ``_surface`` (drop the paths that
         left the scene, reconstruct the hit points), ``_scatter`` (per material group: next-event
-        estimation and BSDF sampling into the next segment) and ``_roulette`` (Russian roulette,
-        non-finite and black paths), then one ``PathState.compress``.
+        estimation and BSDF sampling into the next segment) and ``_next_segments`` (Russian roulette,
+        non-finite and black paths, the survivors kept and their next origins, in one compiled step).
         """
         st = self.settings
         n_total = pixel.shape[0]
@@ -303,8 +303,7 @@ class PathTracer:
             if surf is None:
                 break
             nxt = self._scatter(state, acc, surf, bounce)
-            valid = self._roulette(state, acc, nxt, bounce)
-            self._next_segments(state, surf, nxt, valid)
+            self._next_segments(state, acc, surf, nxt, bounce)
         return self._finish(acc, n_total)
 
     # ------------------------------------------------------------------ stages
@@ -520,23 +519,21 @@ class PathTracer:
                 nxt.eta_step[sel] = bs.eta_sq
         return nxt
 
-    def _roulette(self, state: PathState, acc: _Accumulators, nxt: _Scattered, bounce: int) -> np.ndarray:
-        """Russian roulette (from ``rr_depth``) on the new throughputs, in place; returns the mask of
-        paths that go on: sampled validly, survived, finite and not black.  Paths with a non-finite
-        throughput end here (counted; their light so far is kept)."""
-        state.eta_sq = state.eta_sq * nxt.eta_step
-        nxt.T, nonfinite = roulette(nxt.T, state.eta_sq, nxt.u_rr, nxt.valid, bounce + 1 >= self.settings.rr_depth)
+    def _next_segments(self, state: PathState, acc: _Accumulators, surf: _SurfaceHits, nxt: _Scattered,
+                       bounce: int) -> None:
+        """Russian roulette (from ``rr_depth``) on the new throughputs, then the paths that go on
+        (sampled validly, survived, finite and not black) keep their sampled segments, starting from
+        the offset hit points: one compiled step (kernels.transport.next_segments) for the roulette,
+        the survivors' columns and their origins.  Paths with a non-finite throughput end here
+        (counted; their light so far is kept)."""
+        (idx, nonfinite, T, x_T, d, eta_sq, path, keys, is_delta, pdf, p, o) = next_segments(
+            nxt.T, state.eta_sq, nxt.eta_step, nxt.u_rr, nxt.valid, bounce + 1 >= self.settings.rr_depth,
+            nxt.x_T, nxt.d, state.path, state.sampler.keys, nxt.is_delta, nxt.pdf, surf.p, surf.n_g, RAY_EPSILON)
         acc.stats["nonfinite"] += nonfinite
-        return nxt.valid
-
-    def _next_segments(self, state: PathState, surf: _SurfaceHits, nxt: _Scattered, valid: np.ndarray) -> None:
-        """The surviving paths' next segments: the sampled directions from the offset hit points."""
-        state.T, state.x_T, state.d = nxt.T, nxt.x_T, nxt.d
-        state.prev_delta, state.prev_pdf, state.n_prev = nxt.is_delta, nxt.pdf, nxt.n_side
-        p, n_g = state.compress(valid, surf.p, surf.n_g)
+        state.n_prev = nxt.n_side
         # where the next segment starts (light selection, analytic lamps' pdfs)
-        state.p_prev = p if self.keep_origins else None
-        state.o = offset_origin(p, n_g, state.d)
+        state.keep(idx, path=path, T=T, x_T=x_T, d=d, eta_sq=eta_sq, prev_delta=is_delta, prev_pdf=pdf,
+                   p_prev=p if self.keep_origins else None, o=o, keys=keys)
         state.t_max = None
 
     def _finish(self, acc: _Accumulators, n_total: int) -> tuple[np.ndarray, dict[str, int]]:
