@@ -326,7 +326,11 @@ class PathTracer:
         if np.any(t_min > 0):
             o = o + d * t_min[None, :]
             t_max = t_max - t_min
-        T = identity_throughput(P, Lm, n_total)
+        # T = identity for every camera path: one path's, broadcast (stride 0 over paths, read-only).
+        # The camera-side emission reads it as it is and the hit paths' compress makes their own
+        # copy, so the batch's (P, P, Lm, n) identity is never written (for 4 wavelengths, 512 bytes
+        # a path: as long as a bounce's Fresnel step).
+        T = np.broadcast_to(identity_throughput(P, Lm, 1), (P, P, Lm, n_total))
         state = PathState(path=np.arange(n_total), T=T, x_T=x_T, o=o, d=d, t_max=t_max, eta_sq=np.ones(n_total),
                           prev_delta=np.ones(n_total, bool), prev_pdf=np.zeros(n_total), p_prev=None, n_prev=None,
                           sampler=sampler, lk=lk, lk_m=lk_m)
@@ -425,6 +429,10 @@ class PathTracer:
         prim, u, v = state.compress(hit, hits.prim, hits.u, hits.v)
         if state.n == 0:
             return None
+        if not state.T.flags.writeable:
+            # every camera path hit: the broadcast identity was kept as it is; the scatter stage
+            # needs a throughput of its own per path
+            state.T = identity_throughput(*state.T.shape[:3], state.n)
         compiled = self.scene
         p, n_g, n_s = compiled.surface(prim, u, v)
         at = surface_points(compiled, prim, u, v) if self.textured else None
