@@ -432,7 +432,7 @@ class PathTracer:
         if not state.T.flags.writeable:
             # every camera path hit: the broadcast identity was kept as it is; the scatter stage
             # needs a throughput of its own per path
-            state.T = identity_throughput(*state.T.shape[:3], state.n)
+            state.T = identity_throughput(state.T.shape[0], state.T.shape[2], state.n)
         compiled = self.scene
         p, n_g, n_s = compiled.surface(prim, u, v)
         at = surface_points(compiled, prim, u, v) if self.textured else None
