@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from engine import kernels
-from engine.kernels import geometry, hashing, transport
+from engine.kernels import geometry, hashing, material_groups, transport
 from engine.render.renderer import Renderer
 from engine.scene.loader import load_scene
 from tests.conftest import shared_path
@@ -975,3 +975,40 @@ def test_next_segments_bitwise(P, L, apply_rr, everyone):
     assert np.array_equal(out[1][2], T_r[..., idx])
     assert np.array_equal(out[1][5], e[idx]) and np.array_equal(out[1][7], keys[idx])
     assert np.array_equal(out[1][11], geometry.offset_origin_numpy(p[:, idx], n_g[:, idx], d[:, idx], 1e-4))
+
+
+@needs_numba
+@pytest.mark.parametrize("P", [1, 3, 4])
+def test_stokes_rgb_samples_bitwise(P):
+    """The batch's film samples: components beyond P zero, samples with a NaN or ±inf anywhere zeroed
+    and counted, −0.0 kept."""
+    rng = np.random.default_rng(P)
+    rgb = rng.normal(size=(P, 3, 300))
+    rgb[-1, 2, :10] = np.nan
+    rgb[0, 0, 10:15] = -np.inf
+    rgb[:, :, 15:20] = -0.0
+    a, bad_a = transport.stokes_rgb_samples_numpy(rgb)
+    b, bad_b = transport.stokes_rgb_samples_numba(rgb)
+    assert a.tobytes() == b.tobytes() and bad_a == bad_b == 15
+    assert not a[P:].any() and not a[:, :, :15].any() and np.array_equal(a[:P, :, 15:], rgb[:, :, 15:])
+
+
+@needs_numba
+@pytest.mark.parametrize("n", [0, 1, 2000])
+def test_material_groups_bitwise_and_as_nonzero_per_group(n):
+    """Each hit path's material, the paths per group and the paths sorted by group: as the gathers,
+    bincount and np.nonzero(grp == g) they replace (groups absent from the batch included)."""
+    rng = np.random.default_rng(n)
+    tri_material = rng.integers(0, 6, 500).astype(np.int32)
+    group_of = np.array([0, 3, 0, 1, 3, 0], np.int64)          # group 2 has no material
+    prim = rng.integers(0, 500, n)
+    a = material_groups.material_groups_numpy(prim, tri_material, group_of, 4)
+    b = material_groups.material_groups_numba(prim, tri_material, group_of, 4)
+    for x, y in zip(a, b):
+        assert x.dtype == y.dtype and np.array_equal(x, y)
+    mat, counts, order = b
+    grp = group_of[tri_material[prim]]
+    assert np.array_equal(mat, tri_material[prim]) and counts[2] == 0
+    ends = np.cumsum(counts)
+    for g in range(4):
+        assert np.array_equal(order[ends[g] - counts[g]:ends[g]], np.nonzero(grp == g)[0])

@@ -517,3 +517,42 @@ def next_segments_numba(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path
 
 
 next_segments = twin(_next_segments_loop and next_segments_numba, next_segments_numpy)
+
+
+# ----------------------------------------------------------------------------- the batch's film values
+
+def stokes_rgb_samples_numpy(rgb):
+    """(out, nonfinite): the batch's Stokes × RGB samples (4, 3, n) from rgb (P, 3, n) (components
+    beyond P zero), samples with a non-finite component zeroed and counted."""
+    out = np.zeros((4, 3, rgb.shape[2]))
+    out[:rgb.shape[0]] = rgb
+    finite = np.isfinite(out).all(axis=(0, 1))
+    out[:, :, ~finite] = 0.0
+    return out, int((~finite).sum())
+
+
+@jit
+def _stokes_rgb_loop(rgb, out):
+    P, n = rgb.shape[0], rgb.shape[2]
+    nonfinite = 0
+    for j in range(n):
+        ok = True
+        for p in range(P):
+            for c in range(3):
+                if not np.isfinite(rgb[p, c, j]):
+                    ok = False
+        for p in range(4):
+            for c in range(3):
+                out[p, c, j] = rgb[p, c, j] if (ok and p < P) else 0.0
+        if not ok:
+            nonfinite += 1
+    return nonfinite
+
+
+def stokes_rgb_samples_numba(rgb):
+    out = np.empty((4, 3, rgb.shape[2]))
+    nonfinite = _stokes_rgb_loop(np.ascontiguousarray(rgb, dtype=np.float64), out)
+    return out, int(nonfinite)
+
+
+stokes_rgb_samples = twin(_stokes_rgb_loop and stokes_rgb_samples_numba, stokes_rgb_samples_numpy)

@@ -32,8 +32,9 @@ from ..materials.base import BSDF, BSDFFlags, DeltaVertices, MuellerValue, Shadi
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import RAY_EPSILON, Hits, offset_origin, surface_points
-from ..kernels.transport import (add_light, add_to_paths, identity_throughput, next_segments, throughput_times_stokes,
-                                 update_abcs, update_depolarising, update_general)
+from ..kernels.material_groups import material_groups
+from ..kernels.transport import (add_light, add_to_paths, identity_throughput, next_segments, stokes_rgb_samples,
+                                 throughput_times_stokes, update_abcs, update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .path_state import PathState
 from .sampler import PathSampler
@@ -446,10 +447,11 @@ class PathTracer:
         p, n_g, n_s, wo = surf.p, surf.n_g, surf.n_s, surf.wo
         n_side = n_g * np.sign(dot(n_g, wo))[None, :] if light_set.spatial else None
         # Stokes frame of the arriving segment: x_T is already ⟂ d.
-        mat = self.scene.tri_material[surf.prim]
-        grp = self.group_of[mat]
-        # the groups present, ascending (np.unique's answer without sorting n numbers)
-        groups = np.flatnonzero(np.bincount(grp, minlength=len(self.shaders)))
+        # each path's material, and the paths sorted by material group (ascending within a group)
+        mat, counts, order = material_groups(surf.prim, self.scene.tri_material, self.group_of, len(self.shaders))
+        ends = np.cumsum(counts)
+        # the groups present, ascending
+        groups = np.flatnonzero(counts)
         # One material covers every path: its sample's arrays become the next segments as they are
         # (no gathered copies in, no scattered copies out).  Otherwise each group writes its columns.
         # Delta-only materials with a one-step scatter_delta write their columns in place in any case.
@@ -484,7 +486,7 @@ class PathTracer:
         # scatter_delta at its rows, else from its sample; is_delta, pdf and eta_step keep their presets
         # where a one-step delta material leaves them)
         for g, one_step in zip(groups, fused):
-            sel = slice(None) if whole else np.nonzero(grp == g)[0]
+            sel = slice(None) if whole else order[ends[g] - counts[g]:ends[g]]
             bsdf = self.shaders[g]
             rows = np.arange(n) if isinstance(sel, slice) else sel
             if one_step and bsdf.scatter_delta(DeltaVertices(rows, n_s, wo, lk_m.lam, self.mono, u_bsdf[0], T,
@@ -546,14 +548,11 @@ class PathTracer:
 
     def _finish(self, acc: _Accumulators, n_total: int) -> tuple[np.ndarray, dict[str, int]]:
         """The batch's Stokes × RGB values (4, 3, n_total) (non-finite samples zeroed and counted)."""
-        P, stats = self.P, acc.stats
+        stats = acc.stats
         radiance = acc.radiance
         rgb = radiance if self.rgb_mode else np.einsum("pln,cln->pcn", radiance, acc.w_rgb)
-        out = np.zeros((4, 3, n_total))
-        out[:P] = rgb
-        finite = np.isfinite(out).all(axis=(0, 1))
-        stats["nonfinite"] += int((~finite).sum())
-        out[:, :, ~finite] = 0.0
+        out, nonfinite = stokes_rgb_samples(rgb)
+        stats["nonfinite"] += nonfinite
         if acc.transparency is not None:
             stats["alpha"] = 1.0 - acc.transparency
         if acc.guides is not None:
