@@ -329,8 +329,8 @@ class PathTracer:
             t_max = t_max - t_min
         # T = identity for every camera path: one path's, broadcast (stride 0 over paths, read-only).
         # The camera-side emission reads it as it is and the hit paths' compress makes their own
-        # copy, so the batch's (P, P, Lm, n) identity is never written (for 4 wavelengths, 512 bytes
-        # a path: as long as a bounce's Fresnel step).
+        # copy, so the batch's (P, P, Lm, n) identity is never written (512 bytes a path at 4
+        # wavelengths: writing it was ~4 % of a fresnel_sphere_au render).
         T = np.broadcast_to(identity_throughput(P, Lm, 1), (P, P, Lm, n_total))
         state = PathState(path=np.arange(n_total), T=T, x_T=x_T, o=o, d=d, t_max=t_max, eta_sq=np.ones(n_total),
                           prev_delta=np.ones(n_total, bool), prev_pdf=np.zeros(n_total), p_prev=None, n_prev=None,

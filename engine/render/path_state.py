@@ -3,7 +3,9 @@
 The wavefront integrator (engine.render.integrator) keeps everything a path carries from one
 bounce to the next in one ``PathState`` and drops finished paths with one ``compress(mask)``
 (as pbrt-v4's wavefront queues or Mitsuba 3's ``path.cpp`` loop state), instead of passing
-positional tuples between the stages.  Frames and units as in the integrator's docstring:
+positional tuples between the stages; ``keep(idx, ...)`` does the same for a compiled step that
+already restricted some fields itself (the end of a bounce: engine.kernels.transport.next_segments).
+Frames and units as in the integrator's docstring:
 
 - ``path`` (n,) int64: index of each path in the batch (where its radiance is accumulated);
 - ``T`` (P, P, Lm, n): Mueller product seen from the camera, in frame ``x_T`` (3, n) ⟂ ``d``;
