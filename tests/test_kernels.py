@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from engine import kernels
-from engine.kernels import geometry, hashing, material_groups, transport
+from engine.kernels import geometry, hashing, material_groups, shadow_rays, transport
 from engine.render.renderer import Renderer
 from engine.scene.loader import load_scene
 from tests.conftest import shared_path
@@ -1012,3 +1012,22 @@ def test_material_groups_bitwise_and_as_nonzero_per_group(n):
     ends = np.cumsum(counts)
     for g in range(4):
         assert np.array_equal(order[ends[g] - counts[g]:ends[g]], np.nonzero(grp == g)[0])
+
+
+@needs_numba
+@pytest.mark.parametrize("n", [0, 1, 900])
+def test_shadow_rays_bitwise_and_as_offset_origin_and_the_length_rule(n):
+    """Shadow-ray origins and lengths in one pass: as offset_origin and the length rule they replace,
+    with lights at infinity (inf, nan distances) and far-away points."""
+    rng = np.random.default_rng(n + 5)
+    p = rng.normal(size=(3, n)) * rng.choice([1.0, 1e3], n)
+    n_g, wi = unit(rng, n), unit(rng, n)
+    dist = rng.uniform(0.0, 20.0, n)
+    dist[: n // 10] = np.inf
+    dist[n // 10: n // 5] = np.nan
+    a = shadow_rays.shadow_rays_numpy(p, n_g, wi, dist, 8.9e-5)
+    b = shadow_rays.shadow_rays_numba(p, n_g, wi, dist, 8.9e-5)
+    assert all(x.tobytes() == y.tobytes() for x, y in zip(a, b))
+    assert a[0].tobytes() == geometry.offset_origin_numba(p, n_g, wi, 8.9e-5).tobytes()
+    want = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
+    assert a[1].tobytes() == want.tobytes()

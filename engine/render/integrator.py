@@ -33,6 +33,7 @@ from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import RAY_EPSILON, Hits, offset_origin, surface_points
 from ..kernels.material_groups import material_groups
+from ..kernels.shadow_rays import shadow_rays
 from ..kernels.transport import (add_light, add_to_paths, identity_throughput, next_segments, stokes_rgb_samples,
                                  throughput_times_stokes, update_abcs, update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
@@ -642,21 +643,20 @@ class PathTracer:
                 mis = power_heuristic(pdf_l * select_prob, bsdf.pdf(sp, wi))
             weight = value * (cos_i * mis / select_prob * ok)[None, :]
         p = sp.p
-        t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
+        # every path's shadow ray (origin off the surface, length short of the light) in one pass
+        o, t_max = shadow_rays(p, sp.n_g, wi, dist, RAY_EPSILON)
         if self.visibility is not None and self.visibility.affects_shadows:
             # shadow-invisible and pass-through (alpha) surfaces let (part of) the light through
             weight = weight * self._shadow_transmittance(p, sp.n_g, wi, t_max, ok, stats)[None, :]
         else:
             if ok.all():
-                blocked = self.scene.occluded(offset_origin(p, sp.n_g, wi), wi, t_max)
+                blocked = self.scene.occluded(o, wi, t_max)
                 stats["shadow_rays"] += n
             else:
                 test = ok.nonzero()[0]
                 blocked = np.zeros(n, bool)
-                # np.take: contiguous (3, m) columns (p[:, test] would be a transposed copy)
-                w = gather(wi, test)
-                blocked[test] = self.scene.occluded(offset_origin(gather(p, test), gather(sp.n_g, test), w),
-                                                    w, t_max[test])
+                # np.take: contiguous (3, m) columns (o[:, test] would be a transposed copy)
+                blocked[test] = self.scene.occluded(gather(o, test), gather(wi, test), t_max[test])
                 stats["shadow_rays"] += test.size
             if blocked.any():
                 for li, sel in owners:
