@@ -534,17 +534,20 @@ def stokes_rgb_samples_numpy(rgb):
 @jit
 def _stokes_rgb_loop(rgb, out):
     P, n = rgb.shape[0], rgb.shape[2]
+    # component rows outermost: each (p, c) row is one contiguous stream over the samples
+    finite = np.ones(n, np.bool_)
+    for p in range(P):
+        for c in range(3):
+            for j in range(n):
+                if not np.isfinite(rgb[p, c, j]):
+                    finite[j] = False
+    for p in range(4):
+        for c in range(3):
+            for j in range(n):
+                out[p, c, j] = rgb[p, c, j] if (p < P and finite[j]) else 0.0
     nonfinite = 0
     for j in range(n):
-        ok = True
-        for p in range(P):
-            for c in range(3):
-                if not np.isfinite(rgb[p, c, j]):
-                    ok = False
-        for p in range(4):
-            for c in range(3):
-                out[p, c, j] = rgb[p, c, j] if (ok and p < P) else 0.0
-        if not ok:
+        if not finite[j]:
             nonfinite += 1
     return nonfinite
 
