@@ -200,3 +200,35 @@ def test_path_state_compress_keeps_the_masked_paths_in_every_field():
     assert np.array_equal(state.sampler.keys, keys[mask]) and np.array_equal(state.lk.lam, lam[:, mask])
     assert state.lk_m is state.lk and state.n == mask.sum()
     assert state.compress(np.ones(state.n, bool), kept) == (kept,)       # a full mask copies nothing
+
+
+def test_path_state_keep_gathers_only_the_fields_not_given():
+    """PathState.keep: the fields a compiled step already restricted are set as given, the others
+    (and the sampler keys, the wavelength lookups) are those of compress with the same paths."""
+    from engine.render.path_state import ARRAY_FIELDS, PathState
+    from engine.render.sampler import PathSampler
+    from engine.spectral import WavelengthLookup
+    rng = np.random.default_rng(16)
+    n = 400
+
+    def state():
+        r = np.random.default_rng(17)
+        lk = WavelengthLookup(r.uniform(380, 780, (4, n)))
+        return PathState(path=np.arange(n), T=r.normal(size=(4, 4, 4, n)), x_T=r.normal(size=(3, n)),
+                         o=None, d=r.normal(size=(3, n)), t_max=None, eta_sq=r.random(n), prev_delta=r.random(n) < 0.5,
+                         prev_pdf=r.random(n), p_prev=None, n_prev=r.normal(size=(3, n)),
+                         sampler=PathSampler(r.integers(0, 2**63, n).astype(np.uint64)), lk=lk, lk_m=lk)
+    for mask in (rng.random(n) < 0.6, np.ones(n, bool)):
+        a, b = state(), state()
+        a.compress(mask)
+        idx = np.flatnonzero(mask)
+        given = {"T": b.T[..., idx] * 1.0, "d": b.d[:, idx] * 1.0, "o": np.full((3, idx.size), 7.0)}
+        b.keep(idx, b.sampler.keys[idx], **given)
+        for name in ARRAY_FIELDS:
+            if name in given:
+                assert getattr(b, name) is given[name]
+            else:
+                x, y = getattr(a, name), getattr(b, name)
+                assert (x is None and y is None) or np.array_equal(x, y)
+        assert np.array_equal(a.sampler.keys, b.sampler.keys) and np.array_equal(a.lk.lam, b.lk.lam)
+        assert b.lk_m is b.lk and b.n == mask.sum()

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from engine import kernels
-from engine.kernels import geometry, hashing, transport
+from engine.kernels import geometry, hashing, material_groups, shadow_rays, transport
 from engine.render.renderer import Renderer
 from engine.scene.loader import load_scene
 from tests.conftest import shared_path
@@ -901,3 +901,133 @@ def test_rough_dielectric_eval_pdf_sample_bitwise(distribution, rational, n_int,
     _bitwise(got, want)
     refracted = want[3] != 1.0
     assert 0.5 * n < want[2].sum() <= n and (refracted & want[2]).any() and (~refracted & want[2]).any()
+
+
+@needs_numba
+@pytest.mark.parametrize("P", [1, 3, 4])
+@pytest.mark.parametrize("L", [1, 4])
+@pytest.mark.parametrize("n", [0, 1, 700])
+def test_identity_throughput_bitwise(P, L, n):
+    """The camera paths' T = identity (P, P, L, n), written in one compiled pass over reused memory."""
+    a = transport.identity_throughput_numpy(P, L, n)
+    b = transport.identity_throughput_numba(P, L, n)
+    assert a.shape == b.shape == (P, P, L, n) and np.array_equal(a, b)
+    assert np.array_equal(b.reshape(P * P, L * n).sum(axis=1).reshape(P, P), np.eye(P) * L * n)
+
+
+@needs_numba
+def test_roulette_before_rr_depth_does_not_read_its_numbers():
+    """Before rr_depth the integrator skips the roulette dimension and passes no numbers: both twins
+    give what they give with numbers."""
+    rng = np.random.default_rng(3)
+    T = rng.uniform(-0.2, 1.0, size=(4, 4, 4, 300))
+    T[0, 0, :, :10] = 0.0
+    T[1, 2, 3, 10:20] = np.nan
+    valid = rng.uniform(size=300) < 0.9
+    results = []
+    for f in (transport.roulette_numpy, transport.roulette_numba):
+        for u in (rng.uniform(size=300), np.empty(0)):
+            v = valid.copy()
+            out, bad = f(T.copy(), np.ones(300), u, v, False)
+            results.append((out, bad, v))
+    for out, bad, v in results[1:]:
+        assert np.array_equal(out, results[0][0], equal_nan=True) and bad == results[0][1]
+        assert np.array_equal(v, results[0][2])
+
+
+@needs_numba
+@pytest.mark.parametrize("P", [1, 4])
+@pytest.mark.parametrize("L", [1, 4])
+@pytest.mark.parametrize("apply_rr", [False, True])
+@pytest.mark.parametrize("everyone", [False, True])
+def test_next_segments_bitwise(P, L, apply_rr, everyone):
+    """The end of a bounce in one step (η², roulette, survivors' columns, next origins) against its
+    NumPy twin, and against the separate steps it replaces (roulette, np.take, offset_origin)."""
+    rng = np.random.default_rng(P + 2 * L + 4 * apply_rr + 8 * everyone)
+    n = 500
+    T = rng.uniform(0.01, 1.0, size=(P, P, L, n))
+    valid = np.ones(n, bool)
+    if not everyone:
+        T[0, 0, :, :20] = 0.0
+        T[-1, -1, -1, 20:30] = np.nan
+        valid = rng.uniform(size=n) < 0.8
+    eta_sq, eta_step = rng.uniform(0.5, 2.0, n), rng.uniform(0.5, 2.0, n)
+    u = rng.uniform(size=n) * (0.0 if everyone else 1.0)
+    x_T, d, p, n_g = unit(rng, n), unit(rng, n), rng.normal(size=(3, n)) * 10, unit(rng, n)
+    path = rng.permutation(n).astype(np.int64)
+    keys = rng.integers(0, 2**63, n, dtype=np.uint64)
+    is_delta, pdf = rng.uniform(size=n) < 0.5, rng.uniform(size=n)
+    args = (eta_sq, eta_step, u, None, apply_rr, x_T, d, path, keys, is_delta, pdf, p, n_g, 1e-4)
+    out = []
+    for f in (transport.next_segments_numpy, transport.next_segments_numba):
+        v = valid.copy()
+        a = list(args)
+        a[3] = v
+        out.append(f(T.copy(), *a))
+    for x, y in zip(*out):
+        assert np.array_equal(x, y, equal_nan=True)
+    # the separate steps
+    v = valid.copy()
+    e = eta_sq * eta_step
+    T_r, bad = transport.roulette_numpy(T.copy(), e, u, v, apply_rr)
+    idx = np.flatnonzero(v)
+    assert np.array_equal(out[0][0], idx) and out[0][1] == bad and (idx.size == n) == everyone
+    assert np.array_equal(out[1][2], T_r[..., idx])
+    assert np.array_equal(out[1][5], e[idx]) and np.array_equal(out[1][7], keys[idx])
+    assert np.array_equal(out[1][11], geometry.offset_origin_numpy(p[:, idx], n_g[:, idx], d[:, idx], 1e-4))
+
+
+@needs_numba
+@pytest.mark.parametrize("P", [1, 3, 4])
+def test_stokes_rgb_samples_bitwise(P):
+    """The batch's film samples: components beyond P zero, samples with a NaN or ±inf anywhere zeroed
+    and counted, −0.0 kept."""
+    rng = np.random.default_rng(P)
+    rgb = rng.normal(size=(P, 3, 300))
+    rgb[-1, 2, :10] = np.nan
+    rgb[0, 0, 10:15] = -np.inf
+    rgb[:, :, 15:20] = -0.0
+    a, bad_a = transport.stokes_rgb_samples_numpy(rgb)
+    b, bad_b = transport.stokes_rgb_samples_numba(rgb)
+    assert a.tobytes() == b.tobytes() and bad_a == bad_b == 15
+    assert not a[P:].any() and not a[:, :, :15].any() and np.array_equal(a[:P, :, 15:], rgb[:, :, 15:])
+
+
+@needs_numba
+@pytest.mark.parametrize("n", [0, 1, 2000])
+def test_material_groups_bitwise_and_as_nonzero_per_group(n):
+    """Each hit path's material, the paths per group and the paths sorted by group: as the gathers,
+    bincount and np.nonzero(grp == g) they replace (groups absent from the batch included)."""
+    rng = np.random.default_rng(n)
+    tri_material = rng.integers(0, 6, 500).astype(np.int32)
+    group_of = np.array([0, 3, 0, 1, 3, 0], np.int64)          # group 2 has no material
+    prim = rng.integers(0, 500, n)
+    a = material_groups.material_groups_numpy(prim, tri_material, group_of, 4)
+    b = material_groups.material_groups_numba(prim, tri_material, group_of, 4)
+    for x, y in zip(a, b):
+        assert x.dtype == y.dtype and np.array_equal(x, y)
+    mat, counts, order = b
+    grp = group_of[tri_material[prim]]
+    assert np.array_equal(mat, tri_material[prim]) and counts[2] == 0
+    ends = np.cumsum(counts)
+    for g in range(4):
+        assert np.array_equal(order[ends[g] - counts[g]:ends[g]], np.nonzero(grp == g)[0])
+
+
+@needs_numba
+@pytest.mark.parametrize("n", [0, 1, 900])
+def test_shadow_rays_bitwise_and_as_offset_origin_and_the_length_rule(n):
+    """Shadow-ray origins and lengths in one pass: as offset_origin and the length rule they replace,
+    with lights at infinity (inf, nan distances) and far-away points."""
+    rng = np.random.default_rng(n + 5)
+    p = rng.normal(size=(3, n)) * rng.choice([1.0, 1e3], n)
+    n_g, wi = unit(rng, n), unit(rng, n)
+    dist = rng.uniform(0.0, 20.0, n)
+    dist[: n // 10] = np.inf
+    dist[n // 10: n // 5] = np.nan
+    a = shadow_rays.shadow_rays_numpy(p, n_g, wi, dist, 8.9e-5)
+    b = shadow_rays.shadow_rays_numba(p, n_g, wi, dist, 8.9e-5)
+    assert all(x.tobytes() == y.tobytes() for x, y in zip(a, b))
+    assert a[0].tobytes() == geometry.offset_origin_numba(p, n_g, wi, 8.9e-5).tobytes()
+    want = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
+    assert a[1].tobytes() == want.tobytes()

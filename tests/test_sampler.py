@@ -27,3 +27,20 @@ def test_keys_differ_between_seeds_pixels_and_samples():
     assert np.unique(keys).size == 1000
     assert not np.array_equal(keys, path_keys(1, pixel, np.zeros(1000, np.int64)))
     assert not np.array_equal(keys, path_keys(0, pixel, np.ones(1000, np.int64)))
+
+
+@pytest.mark.parametrize("skipped", [1, 4, 7])
+def test_skip_leaves_the_same_following_dimensions_as_next(skipped):
+    """The integrator skips the dimensions a bounce does not read (light and direction numbers at
+    delta vertices): what follows must be the numbers ``next`` would have left, bit for bit."""
+    pixel, sample = np.arange(500), np.full(500, 3)
+    drawn = PathSampler(path_keys(5, pixel, sample))
+    drawn.next(2)
+    every = drawn.next(skipped + 3)
+    skipping = PathSampler(path_keys(5, pixel, sample))
+    skipping.next(2)
+    skipping.skip(skipped)
+    np.testing.assert_array_equal(skipping.next(3), every[skipped:])
+    assert skipping.dimension == drawn.dimension
+    # the cached dimension offsets are shared, never changed by a draw
+    np.testing.assert_array_equal(skipping.next(3), drawn.next(3))

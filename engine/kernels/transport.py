@@ -13,7 +13,40 @@ import math
 import numpy as np
 
 from . import jit, twin
+from .geometry import offset_origin_numpy
 from .stokes_rotation import frame_rotation, frame_rotation_at, rotate_stokes
+
+
+# ----------------------------------------------------------------------------- T = 1 at the camera
+
+def identity_throughput_numpy(P, L, n):
+    """The camera paths' Mueller product before any vertex: the identity (P, P, L, n) for n paths."""
+    T = np.zeros((P, P, L, n))
+    for i in range(P):
+        T[i, i] = 1.0
+    return T
+
+
+@jit
+def _identity_loop(T):
+    P, L, n = T.shape[0], T.shape[2], T.shape[3]
+    for i in range(P):
+        for c in range(P):
+            v = 1.0 if i == c else 0.0
+            for k in range(L):
+                for j in range(n):
+                    T[i, c, k, j] = v
+
+
+def identity_throughput_numba(P, L, n):
+    # written in one nogil pass: np.zeros over reused batch memory (engine.render.allocator) is a
+    # memset with the GIL held, then the diagonal is written in a second pass
+    T = np.empty((P, P, L, n))
+    _identity_loop(T)
+    return T
+
+
+identity_throughput = twin(_identity_loop and identity_throughput_numba, identity_throughput_numpy)
 
 
 # ----------------------------------------------------------------------------- T ← T·R(φ)·M_abcs
@@ -389,3 +422,140 @@ def keep_columns_numba(a, idx):
 
 
 keep_columns = twin(_keep_columns_loop and keep_columns_numba, keep_columns_numpy)
+
+
+# ----------------------------------------------------------------------------- roulette, survivors, next origins
+
+def next_segments_numpy(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path, keys, is_delta, pdf, p, n_g,
+                        epsilon):
+    """The end of a bounce in one step: η² ← η²·eta_step, Russian roulette and validity
+    (roulette_numpy, ``valid`` updated in place), then the surviving paths' columns of every per-path
+    array and the origins of their next segments, p moved off the surface along ±n_g
+    (engine.kernels.geometry.offset_origin_numpy with ``epsilon``).
+
+    T (P, P, L, n) is the bounce's new throughput (may be divided in place); x_T, d, p, n_g (3, n);
+    eta_sq, eta_step, u_rr (n,) float (u_rr read only with ``apply_rr``); path (n,) int64, keys (n,)
+    uint64, is_delta (n,) bool, pdf (n,) float.  Returns (idx: the kept paths (m,) int64, nonfinite,
+    T, x_T, d, eta_sq, path, keys, is_delta, pdf, p, o), each restricted to idx (the arrays themselves,
+    not copies, where every path goes on).
+    """
+    eta_sq = eta_sq * eta_step
+    T, nonfinite = roulette_numpy(T, eta_sq, u_rr, valid, apply_rr)
+    idx = np.flatnonzero(valid)
+    kept = [T, x_T, d, eta_sq, path, keys, is_delta, pdf, p, n_g]
+    if idx.shape[0] < valid.shape[0]:
+        kept = [np.take(a, idx, axis=-1) for a in kept]
+    T, x_T, d, eta_sq, path, keys, is_delta, pdf, p, n_g = kept
+    return idx, nonfinite, T, x_T, d, eta_sq, path, keys, is_delta, pdf, p, offset_origin_numpy(p, n_g, d, epsilon)
+
+
+@jit
+def _next_segments_loop(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path, keys, is_delta, pdf, p, n_g,
+                        epsilon):
+    n = valid.shape[0]
+    eta_new = np.empty(n)
+    for j in range(n):
+        eta_new[j] = eta_sq[j] * eta_step[j]
+    # roulette and validity: _roulette_loop's arithmetic (T divided in place)
+    nonfinite = _roulette_loop(T, eta_new, u_rr, valid, apply_rr)
+    m = 0
+    for j in range(n):
+        if valid[j]:
+            m += 1
+    idx = np.empty(m, np.int64)
+    m = 0
+    for j in range(n):
+        if valid[j]:
+            idx[m] = j
+            m += 1
+    if m < n:
+        P, L = T.shape[0], T.shape[2]
+        T_k = np.empty((P, P, L, m))
+        for i in range(P):
+            for c in range(P):
+                for k in range(L):
+                    for jj in range(m):
+                        T_k[i, c, k, jj] = T[i, c, k, idx[jj]]
+        x_k, d_k, p_k, n_k = np.empty((3, m)), np.empty((3, m)), np.empty((3, m)), np.empty((3, m))
+        eta_k, pdf_k = np.empty(m), np.empty(m)
+        path_k, keys_k, delta_k = np.empty(m, np.int64), np.empty(m, np.uint64), np.empty(m, np.bool_)
+        for jj in range(m):
+            j = idx[jj]
+            for r in range(3):
+                x_k[r, jj] = x_T[r, j]
+                d_k[r, jj] = d[r, j]
+                p_k[r, jj] = p[r, j]
+                n_k[r, jj] = n_g[r, j]
+            eta_k[jj] = eta_new[j]
+            pdf_k[jj] = pdf[j]
+            path_k[jj] = path[j]
+            keys_k[jj] = keys[j]
+            delta_k[jj] = is_delta[j]
+    else:
+        T_k, x_k, d_k, p_k, n_k = T, x_T, d, p, n_g
+        eta_k, pdf_k, path_k, keys_k, delta_k = eta_new, pdf, path, keys, is_delta
+    # next origins: engine.kernels.geometry._offset_loop's arithmetic
+    o = np.empty((3, m))
+    for jj in range(m):
+        side = 1.0 if (n_k[0, jj] * d_k[0, jj] + n_k[1, jj] * d_k[1, jj]) + n_k[2, jj] * d_k[2, jj] >= 0 else -1.0
+        a = max(max(abs(p_k[0, jj]), abs(p_k[1, jj])), abs(p_k[2, jj]))
+        s = side * ((1.0 + a) * epsilon)
+        for r in range(3):
+            o[r, jj] = p_k[r, jj] + s * n_k[r, jj]
+    return idx, nonfinite, T_k, x_k, d_k, eta_k, path_k, keys_k, delta_k, pdf_k, p_k, o
+
+
+def next_segments_numba(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path, keys, is_delta, pdf, p, n_g,
+                        epsilon):
+    c = np.ascontiguousarray
+    res = _next_segments_loop(T, c(eta_sq, dtype=np.float64), c(eta_step, dtype=np.float64),
+                              c(u_rr, dtype=np.float64), valid, bool(apply_rr), c(x_T, dtype=np.float64),
+                              c(d, dtype=np.float64), c(path, dtype=np.int64), c(keys, dtype=np.uint64),
+                              c(is_delta, dtype=np.bool_), c(pdf, dtype=np.float64), c(p, dtype=np.float64),
+                              c(n_g, dtype=np.float64), float(epsilon))
+    return (res[0], int(res[1])) + tuple(res[2:])
+
+
+next_segments = twin(_next_segments_loop and next_segments_numba, next_segments_numpy)
+
+
+# ----------------------------------------------------------------------------- the batch's film values
+
+def stokes_rgb_samples_numpy(rgb):
+    """(out, nonfinite): the batch's Stokes × RGB samples (4, 3, n) from rgb (P, 3, n) (components
+    beyond P zero), samples with a non-finite component zeroed and counted."""
+    out = np.zeros((4, 3, rgb.shape[2]))
+    out[:rgb.shape[0]] = rgb
+    finite = np.isfinite(out).all(axis=(0, 1))
+    out[:, :, ~finite] = 0.0
+    return out, int((~finite).sum())
+
+
+@jit
+def _stokes_rgb_loop(rgb, out):
+    P, n = rgb.shape[0], rgb.shape[2]
+    # component rows outermost: each (p, c) row is one contiguous stream over the samples
+    finite = np.ones(n, np.bool_)
+    for p in range(P):
+        for c in range(3):
+            for j in range(n):
+                if not np.isfinite(rgb[p, c, j]):
+                    finite[j] = False
+    for p in range(4):
+        for c in range(3):
+            for j in range(n):
+                out[p, c, j] = rgb[p, c, j] if (p < P and finite[j]) else 0.0
+    nonfinite = 0
+    for j in range(n):
+        if not finite[j]:
+            nonfinite += 1
+    return nonfinite
+
+
+def stokes_rgb_samples_numba(rgb):
+    out = np.empty((4, 3, rgb.shape[2]))
+    nonfinite = _stokes_rgb_loop(np.ascontiguousarray(rgb, dtype=np.float64), out)
+    return out, int(nonfinite)
+
+
+stokes_rgb_samples = twin(_stokes_rgb_loop and stokes_rgb_samples_numba, stokes_rgb_samples_numpy)

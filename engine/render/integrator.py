@@ -31,9 +31,11 @@ import numpy as np
 from ..materials.base import BSDF, BSDFFlags, DeltaVertices, MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
-from .accel import Hits, offset_origin, surface_points
-from ..kernels.transport import (add_light, add_to_paths, roulette, throughput_times_stokes, update_abcs,
-                                 update_depolarising, update_general)
+from .accel import RAY_EPSILON, Hits, offset_origin, surface_points
+from ..kernels.material_groups import material_groups
+from ..kernels.shadow_rays import shadow_rays
+from ..kernels.transport import (add_light, add_to_paths, identity_throughput, next_segments, stokes_rgb_samples,
+                                 throughput_times_stokes, update_abcs, update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .path_state import PathState
 from .sampler import PathSampler
@@ -284,8 +286,8 @@ class PathTracer:
         Each bounce runs named stages over one PathState: ``_intersect`` (closest hits, ray
         visibility), ``_emission`` (light the segment reached), ``_surface`` (drop the paths that
         left the scene, reconstruct the hit points), ``_scatter`` (per material group: next-event
-        estimation and BSDF sampling into the next segment) and ``_roulette`` (Russian roulette,
-        non-finite and black paths), then one ``PathState.compress``.
+        estimation and BSDF sampling into the next segment) and ``_next_segments`` (Russian roulette,
+        non-finite and black paths, the survivors kept and their next origins, in one compiled step).
         """
         st = self.settings
         n_total = pixel.shape[0]
@@ -303,8 +305,7 @@ class PathTracer:
             if surf is None:
                 break
             nxt = self._scatter(state, acc, surf, bounce)
-            valid = self._roulette(state, acc, nxt, bounce)
-            self._next_segments(state, surf, nxt, valid)
+            self._next_segments(state, acc, surf, nxt, bounce)
         return self._finish(acc, n_total)
 
     # ------------------------------------------------------------------ stages
@@ -327,9 +328,11 @@ class PathTracer:
         if np.any(t_min > 0):
             o = o + d * t_min[None, :]
             t_max = t_max - t_min
-        T = np.zeros((P, P, Lm, n_total))
-        for i in range(P):
-            T[i, i] = 1.0
+        # T = identity for every camera path: one path's, broadcast (stride 0 over paths, read-only).
+        # The camera-side emission reads it as it is and the hit paths' compress makes their own
+        # copy, so the batch's (P, P, Lm, n) identity is never written (512 bytes a path at 4
+        # wavelengths: writing it was ~4 % of a fresnel_sphere_au render).
+        T = np.broadcast_to(identity_throughput(P, Lm, 1), (P, P, Lm, n_total))
         state = PathState(path=np.arange(n_total), T=T, x_T=x_T, o=o, d=d, t_max=t_max, eta_sq=np.ones(n_total),
                           prev_delta=np.ones(n_total, bool), prev_pdf=np.zeros(n_total), p_prev=None, n_prev=None,
                           sampler=sampler, lk=lk, lk_m=lk_m)
@@ -428,6 +431,10 @@ class PathTracer:
         prim, u, v = state.compress(hit, hits.prim, hits.u, hits.v)
         if state.n == 0:
             return None
+        if not state.T.flags.writeable:
+            # every camera path hit: the broadcast identity was kept as it is; the scatter stage
+            # needs a throughput of its own per path
+            state.T = identity_throughput(state.T.shape[0], state.T.shape[2], state.n)
         compiled = self.scene
         p, n_g, n_s = compiled.surface(prim, u, v)
         at = surface_points(compiled, prim, u, v) if self.textured else None
@@ -441,13 +448,11 @@ class PathTracer:
         p, n_g, n_s, wo = surf.p, surf.n_g, surf.n_s, surf.wo
         n_side = n_g * np.sign(dot(n_g, wo))[None, :] if light_set.spatial else None
         # Stokes frame of the arriving segment: x_T is already ⟂ d.
-        mat = self.scene.tri_material[surf.prim]
-        grp = self.group_of[mat]
-        u_light = sampler.next(4)
-        u_bsdf = sampler.next(3)
-        u_rr = sampler.next(1)[0]
-        # the groups present, ascending (np.unique's answer without sorting n numbers)
-        groups = np.flatnonzero(np.bincount(grp, minlength=len(self.shaders)))
+        # each path's material, and the paths sorted by material group (ascending within a group)
+        mat, counts, order = material_groups(surf.prim, self.scene.tri_material, self.group_of, len(self.shaders))
+        ends = np.cumsum(counts)
+        # the groups present, ascending
+        groups = np.flatnonzero(counts)
         # One material covers every path: its sample's arrays become the next segments as they are
         # (no gathered copies in, no scattered copies out).  Otherwise each group writes its columns.
         # Delta-only materials with a one-step scatter_delta write their columns in place in any case.
@@ -455,19 +460,44 @@ class PathTracer:
         fused = [self.shaders[g].flags.is_delta_only and type(self.shaders[g]).scatter_delta is not BSDF.scatter_delta
                  for g in groups]
         columns = not whole or fused[0]
-        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty_like(T), d=np.zeros((3, n)) if columns else None,
-                         x_T=np.zeros((3, n)) if columns else None, valid=np.zeros(n, bool) if columns else None,
+        # Dimensions 1–4 light sampling, 5–7 the BSDF (lobe, direction), 8 roulette; only those this
+        # bounce reads are hashed (at delta vertices, before rr_depth, most are not): the numbers are
+        # stateless in the dimension, so skipping leaves every other one as it was.
+        nee = (bool(len(light_set)) and bounce + 2 <= st.max_depth
+               and not all(self.shaders[g].flags.is_delta_only for g in groups))
+        u_light = sampler.next(4) if nee else sampler.skip(4)
+        direction_dims = None
+        if all(fused):
+            u_bsdf = sampler.next(1)                # the lobe choice (smooth dielectric) only
+            direction_dims = PathSampler(sampler.keys)
+            direction_dims.dimension = sampler.dimension
+            sampler.skip(2)
+        else:
+            u_bsdf = sampler.next(3)
+        if bounce + 1 >= st.rr_depth:
+            u_rr = sampler.next(1)[0]
+        else:
+            sampler.skip(1)
+            u_rr = np.empty(0)                      # not read without roulette
+        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty_like(T), d=np.empty((3, n)) if columns else None,
+                         x_T=np.empty((3, n)) if columns else None, valid=np.empty(n, bool) if columns else None,
                          is_delta=np.ones(n, bool) if columns else None, pdf=np.zeros(n) if columns else None,
                          eta_step=np.ones(n))
-        # (every path belongs to one material group, which writes its column of nxt.T)
+        # (every path belongs to one material group, which writes its columns of nxt.T, d, x_T and valid:
+        # scatter_delta at its rows, else from its sample; is_delta, pdf and eta_step keep their presets
+        # where a one-step delta material leaves them)
         for g, one_step in zip(groups, fused):
-            sel = slice(None) if whole else np.nonzero(grp == g)[0]
+            sel = slice(None) if whole else order[ends[g] - counts[g]:ends[g]]
             bsdf = self.shaders[g]
             rows = np.arange(n) if isinstance(sel, slice) else sel
             if one_step and bsdf.scatter_delta(DeltaVertices(rows, n_s, wo, lk_m.lam, self.mono, u_bsdf[0], T,
                                                              state.x_T, nxt.T, nxt.d, nxt.x_T, nxt.valid,
                                                              nxt.eta_step)):
                 continue            # pdf 0 and is_delta True: as preset
+            if direction_dims is not None:
+                # a one-step material fell back to ``sample``: its direction numbers after all
+                u_bsdf = np.concatenate((u_bsdf, direction_dims.next(2)))
+                direction_dims = None
             sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
                               gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
                               self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None,
@@ -500,35 +530,30 @@ class PathTracer:
                 nxt.eta_step[sel] = bs.eta_sq
         return nxt
 
-    def _roulette(self, state: PathState, acc: _Accumulators, nxt: _Scattered, bounce: int) -> np.ndarray:
-        """Russian roulette (from ``rr_depth``) on the new throughputs, in place; returns the mask of
-        paths that go on: sampled validly, survived, finite and not black.  Paths with a non-finite
-        throughput end here (counted; their light so far is kept)."""
-        state.eta_sq = state.eta_sq * nxt.eta_step
-        nxt.T, nonfinite = roulette(nxt.T, state.eta_sq, nxt.u_rr, nxt.valid, bounce + 1 >= self.settings.rr_depth)
+    def _next_segments(self, state: PathState, acc: _Accumulators, surf: _SurfaceHits, nxt: _Scattered,
+                       bounce: int) -> None:
+        """Russian roulette (from ``rr_depth``) on the new throughputs, then the paths that go on
+        (sampled validly, survived, finite and not black) keep their sampled segments, starting from
+        the offset hit points: one compiled step (kernels.transport.next_segments) for the roulette,
+        the survivors' columns and their origins.  Paths with a non-finite throughput end here
+        (counted; their light so far is kept)."""
+        (idx, nonfinite, T, x_T, d, eta_sq, path, keys, is_delta, pdf, p, o) = next_segments(
+            nxt.T, state.eta_sq, nxt.eta_step, nxt.u_rr, nxt.valid, bounce + 1 >= self.settings.rr_depth,
+            nxt.x_T, nxt.d, state.path, state.sampler.keys, nxt.is_delta, nxt.pdf, surf.p, surf.n_g, RAY_EPSILON)
         acc.stats["nonfinite"] += nonfinite
-        return nxt.valid
-
-    def _next_segments(self, state: PathState, surf: _SurfaceHits, nxt: _Scattered, valid: np.ndarray) -> None:
-        """The surviving paths' next segments: the sampled directions from the offset hit points."""
-        state.T, state.x_T, state.d = nxt.T, nxt.x_T, nxt.d
-        state.prev_delta, state.prev_pdf, state.n_prev = nxt.is_delta, nxt.pdf, nxt.n_side
-        p, n_g = state.compress(valid, surf.p, surf.n_g)
+        state.n_prev = nxt.n_side
         # where the next segment starts (light selection, analytic lamps' pdfs)
-        state.p_prev = p if self.keep_origins else None
-        state.o = offset_origin(p, n_g, state.d)
+        state.keep(idx, path=path, T=T, x_T=x_T, d=d, eta_sq=eta_sq, prev_delta=is_delta, prev_pdf=pdf,
+                   p_prev=p if self.keep_origins else None, o=o, keys=keys)
         state.t_max = None
 
     def _finish(self, acc: _Accumulators, n_total: int) -> tuple[np.ndarray, dict[str, int]]:
         """The batch's Stokes × RGB values (4, 3, n_total) (non-finite samples zeroed and counted)."""
-        P, stats = self.P, acc.stats
+        stats = acc.stats
         radiance = acc.radiance
         rgb = radiance if self.rgb_mode else np.einsum("pln,cln->pcn", radiance, acc.w_rgb)
-        out = np.zeros((4, 3, n_total))
-        out[:P] = rgb
-        finite = np.isfinite(out).all(axis=(0, 1))
-        stats["nonfinite"] += int((~finite).sum())
-        out[:, :, ~finite] = 0.0
+        out, nonfinite = stokes_rgb_samples(rgb)
+        stats["nonfinite"] += nonfinite
         if acc.transparency is not None:
             stats["alpha"] = 1.0 - acc.transparency
         if acc.guides is not None:
@@ -618,21 +643,20 @@ class PathTracer:
                 mis = power_heuristic(pdf_l * select_prob, bsdf.pdf(sp, wi))
             weight = value * (cos_i * mis / select_prob * ok)[None, :]
         p = sp.p
-        t_max = np.where(np.isfinite(dist), dist * (1.0 - 1e-4) - 1e-4 * (1.0 + np.abs(p).max(0)), np.inf)
+        # every path's shadow ray (origin off the surface, length short of the light) in one pass
+        o, t_max = shadow_rays(p, sp.n_g, wi, dist, RAY_EPSILON)
         if self.visibility is not None and self.visibility.affects_shadows:
             # shadow-invisible and pass-through (alpha) surfaces let (part of) the light through
             weight = weight * self._shadow_transmittance(p, sp.n_g, wi, t_max, ok, stats)[None, :]
         else:
             if ok.all():
-                blocked = self.scene.occluded(offset_origin(p, sp.n_g, wi), wi, t_max)
+                blocked = self.scene.occluded(o, wi, t_max)
                 stats["shadow_rays"] += n
             else:
                 test = ok.nonzero()[0]
                 blocked = np.zeros(n, bool)
-                # np.take: contiguous (3, m) columns (p[:, test] would be a transposed copy)
-                w = gather(wi, test)
-                blocked[test] = self.scene.occluded(offset_origin(gather(p, test), gather(sp.n_g, test), w),
-                                                    w, t_max[test])
+                # np.take: contiguous (3, m) columns (o[:, test] would be a transposed copy)
+                blocked[test] = self.scene.occluded(gather(o, test), gather(wi, test), t_max[test])
                 stats["shadow_rays"] += test.size
             if blocked.any():
                 for li, sel in owners:

@@ -3,7 +3,9 @@
 The wavefront integrator (engine.render.integrator) keeps everything a path carries from one
 bounce to the next in one ``PathState`` and drops finished paths with one ``compress(mask)``
 (as pbrt-v4's wavefront queues or Mitsuba 3's ``path.cpp`` loop state), instead of passing
-positional tuples between the stages.  Frames and units as in the integrator's docstring:
+positional tuples between the stages; ``keep(idx, ...)`` does the same for a compiled step that
+already restricted some fields itself (the end of a bounce: engine.kernels.transport.next_segments).
+Frames and units as in the integrator's docstring:
 
 - ``path`` (n,) int64: index of each path in the batch (where its radiance is accumulated);
 - ``T`` (P, P, Lm, n): Mueller product seen from the camera, in frame ``x_T`` (3, n) ⟂ ``d``;
@@ -77,3 +79,20 @@ class PathState:
         self.lk_m = new if self.lk_m is self.lk else self.lk_m.take(idx)
         self.lk = new
         return tuple(None if a is None else keep_columns(a, idx) for a in extra)
+
+    def keep(self, idx: np.ndarray, keys: np.ndarray, **kept: np.ndarray | None) -> None:
+        """Keep the paths ``idx`` (sorted int64 indices), given the fields ``kept`` (by name) and the
+        sampler's ``keys`` already restricted to them (a compiled step that made them in one pass, e.g.
+        engine.kernels.transport.next_segments); every other field is gathered here as by ``compress``.
+        Where idx keeps every path, the given arrays are set and nothing is gathered."""
+        every = idx.shape[0] == self.n
+        for name in ARRAY_FIELDS:
+            if name in kept:
+                setattr(self, name, kept[name])
+            elif not every and getattr(self, name) is not None:
+                setattr(self, name, keep_columns(getattr(self, name), idx))
+        self.sampler.keys = keys
+        if not every:
+            new = self.lk.take(idx)
+            self.lk_m = new if self.lk_m is self.lk else self.lk_m.take(idx)
+            self.lk = new

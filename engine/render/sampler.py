@@ -10,6 +10,8 @@ float64 in [0, 1).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from ..kernels.hashing import mix64, path_keys_and_uniforms, uniforms
@@ -22,8 +24,11 @@ def _seed_key(seed: int) -> np.ndarray:
     return mix64(np.asarray([(seed * 0x9E3779B97F4A7C15 + 0x632BE59BD9B4E019) & _MASK64], dtype=np.uint64))
 
 
+@functools.lru_cache(maxsize=256)
 def _offsets(first: int, k: int) -> np.ndarray:
-    """Hash offsets of dimensions first+1 … first+k."""
+    """Hash offsets of dimensions first+1 … first+k (shared: callers only read them).  Cached: every
+    batch asks for the same few at each bounce, and building them from Python integers cost about
+    as much as hashing them (a read-only flag would make Numba compile the kernels again for it)."""
     return np.array([(d * 0x9E3779B97F4A7C15) & _MASK64 for d in range(first + 1, first + k + 1)], dtype=np.uint64)
 
 
@@ -35,8 +40,9 @@ def path_keys(seed: int, pixel: np.ndarray, sample: np.ndarray) -> np.ndarray:
 class PathSampler:
     """Random numbers for a batch of paths that all sit at the same bounce.
 
-    ``next(k)`` returns k fresh dimensions, shape (k, N), for the current keys;
-    ``compact(mask)`` keeps the surviving paths' keys.
+    ``next(k)`` returns k fresh dimensions, shape (k, N), for the current keys; ``skip(k)`` passes
+    over k dimensions nobody reads (the numbers are stateless in the dimension, so the following
+    ones are those ``next(k)`` would have left); ``compact(mask)`` keeps the surviving paths' keys.
     """
 
     def __init__(self, keys: np.ndarray):
@@ -56,6 +62,10 @@ class PathSampler:
         offsets = _offsets(self.dimension, k)
         self.dimension += k
         return uniforms(self.keys, offsets)
+
+    def skip(self, k: int) -> None:
+        """Advance past k dimensions without computing them."""
+        self.dimension += k
 
     def compact(self, keep: np.ndarray):
         self.keys = self.keys[keep]
