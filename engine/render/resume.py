@@ -12,7 +12,8 @@ EXR written by the CLI carries the estimator's identity in its header (:func:`es
     the rendered pixel rectangle "x0 y0 x1 y1" (the resolution is the image's own size);
 ``polar.max_depth``, ``polar.rr_depth``, ``polar.seed``, ``polar.spectral``, ``polar.wavelength_nm``
 (mono only), ``polar.polarisation_requested`` and ``polar.polarisation`` (as resolved),
-``polar.reduce_spectral``, ``polar.simplify``.
+``polar.reduce_spectral``, ``polar.simplify``, and ``polar.sampler`` (written only for the
+"stratified" sampler: a file without it was rendered with the "independent" one).
 
 What may differ on resume: the total sample count (raised, never below the samples done), threads,
 batch size, Dask scheduler, previews, exposure, and the adaptive sampling settings (threshold,
@@ -51,6 +52,7 @@ MATCHED = {
     "polar.polarisation": "--polarisation (as resolved)",
     "polar.reduce_spectral": "--reduce-spectral",
     "polar.simplify": "--simplify",
+    "polar.sampler": "--sampler",
 }
 
 
@@ -122,6 +124,9 @@ def estimator_identity(scene_hash: str, settings, resolved: str, window=None, si
              "polar.seed": int(settings.seed), "polar.spectral": settings.spectral,
              "polar.polarisation_requested": settings.polarisation, "polar.polarisation": resolved,
              "polar.reduce_spectral": settings.reduce_spectral, "polar.simplify": settings.simplify}
+    if getattr(settings, "sampler", "independent") != "independent":
+        # only then: the headers of independent renders stay as they were (and older files match)
+        ident["polar.sampler"] = settings.sampler
     if settings.spectral == "mono":
         ident["polar.wavelength_nm"] = float(settings.wavelength_nm)
     return ident
@@ -201,6 +206,8 @@ def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None
     from .adaptive import has_state, state_from_channels
     if has_state(channels):
         film, halves = state_from_channels(channels, counts)
+        if getattr(st, "sampler", "independent") == "stratified":
+            film.half_y = halves.sums.copy()        # even/odd luminance sums: the stratified standard error
     else:
         if with_halves:
             raise SceneError("--noise-threshold", f"{os.path.basename(path)!r} was rendered without adaptive "

@@ -5,7 +5,10 @@ render is bit-for-bit reproducible whatever the batching, tiling, number of
 workers or resumption order: sample s of pixel p always sees the same
 numbers.  The hash is splitmix64's finaliser (Steele et al. 2014), which
 passes BigCrush as a counter-based generator; 53 bits are turned into a
-float64 in [0, 1).
+float64 in [0, 1).  With ``RenderSettings.sampler`` "stratified" the pixel jitter and the first
+vertex's light and BSDF numbers are replaced by ``stratified_pair`` (per-pixel XOR-scrambled
+Sobol' points, two independent sequences for the even and the odd samples), still functions of
+(seed, pixel, sample index) only.
 """
 
 from __future__ import annotations
@@ -59,3 +62,58 @@ class PathSampler:
 
     def compact(self, keep: np.ndarray):
         self.keys = self.keys[keep]
+
+
+#: Sobol' dimensions 2–8 as (degree s, coefficients a, initial m) of their primitive polynomials
+#: (Joe & Kuo 2008, new-joe-kuo-6.21201); dimension 1 is the bit reversal
+_SOBOL_POLYNOMIALS = [(1, 0, [1]), (2, 1, [1, 3]), (3, 1, [1, 3, 1]), (3, 2, [1, 1, 1]), (4, 1, [1, 1, 3, 3]),
+                      (4, 4, [1, 3, 5, 13]), (5, 2, [1, 1, 5, 5, 17])]
+
+
+def _sobol_direction_numbers() -> np.ndarray:
+    """Direction numbers (8, 32) (uint64 holding 32 bits) of Sobol' dimensions 1–8."""
+    v = np.zeros((8, 32), dtype=np.uint64)
+    v[0] = [1 << (31 - k) for k in range(32)]
+    for d, (deg, a, m) in enumerate(_SOBOL_POLYNOMIALS, start=1):
+        w = [m[k] << (31 - k) for k in range(deg)]
+        for k in range(deg, 32):
+            x = w[k - deg] ^ (w[k - deg] >> deg)
+            for j in range(1, deg):
+                if (a >> (deg - 1 - j)) & 1:
+                    x ^= w[k - j]
+            w.append(x)
+        v[d] = w
+    return v
+
+
+_SOBOL_V = _sobol_direction_numbers()
+#: per-pair constants of the scramble hash
+_PAIR_KEYS = (0xD1B54A32D192ED03, 0x8CB92BA72F3D8DD7, 0xABC98388FB8FAC03, 0xE7037ED1A0B428DB)
+
+
+def stratified_pair(seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.ndarray, u1: np.ndarray, pair: int = 0):
+    """Two numbers (2 × (N,)) in [0, 1) for sample ``sample`` of pixel ``pixel``: Sobol' dimensions
+    2·pair + 1, 2·pair + 2 of the index sample // 2, digit-scrambled by a random XOR per pixel, pair
+    and parity of ``sample`` (so each point is uniform and independent of every other dimension,
+    hence unbiased), the hashed uniforms u0, u1 filling the bits below 2^-32.  Pair 0 (the pixel
+    jitter) is a (0, 2)-sequence: a pixel's first 2^m even (or odd) samples fill the 2^m elementary
+    intervals of each shape; pairs 1–3 with it make an 8-D Sobol' point set (each dimension
+    stratified too)."""
+    # the even and the odd samples are two independently scrambled sequences (index sample // 2):
+    # adaptive sampling's half-buffers A (even) and B (odd) must be independent estimates
+    i = (sample.astype(np.uint64) >> np.uint64(1)) & np.uint64(0xFFFFFFFF)
+    x = np.zeros_like(i)
+    y = np.zeros_like(i)
+    vx, vy = _SOBOL_V[2 * pair], _SOBOL_V[2 * pair + 1]
+    for j in range(int(i.max()).bit_length() if i.size else 0):
+        on = ((i >> np.uint64(j)) & np.uint64(1)).astype(bool)
+        x[on] ^= vx[j]
+        y[on] ^= vy[j]
+    half = (sample.astype(np.uint64) & np.uint64(1)) * np.uint64(0x9E3779B97F4A7C15)
+    keys = mix64(_seed_key(seed) ^ (pixel.astype(np.uint64) * np.uint64(_PAIR_KEYS[pair])) ^ half)
+    mx = keys & np.uint64(0xFFFFFFFF)
+    my = keys >> np.uint64(32)
+    scale = 1.0 / 4294967296.0
+    below_one = np.nextafter(1.0, 0.0)      # (2^32 − 1 + u) · 2^-32 can round up to 1
+    return (np.minimum(((x ^ mx).astype(np.float64) + u0) * scale, below_one),
+            np.minimum(((y ^ my).astype(np.float64) + u1) * scale, below_one))
