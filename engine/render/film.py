@@ -150,11 +150,11 @@ RATIO_RADIUS = 2
 
 def _box_mean(a: np.ndarray, ok: np.ndarray, width: int, height: int, r: int) -> np.ndarray:
     """Mean of a (4, n) over the pixels where ok (4, n) within (2r+1)² windows clipped to the image."""
-    def box(v):            # window sums over the last two axes, by cumulative sums
-        p = np.pad(v, [(0, 0)] * (v.ndim - 2) + [(r + 1, r), (r + 1, r)])
-        s = p.cumsum(-1).cumsum(-2)
-        return s[..., 2 * r + 1:, 2 * r + 1:] - s[..., :-2 * r - 1, 2 * r + 1:] \
-            - s[..., 2 * r + 1:, :-2 * r - 1] + s[..., :-2 * r - 1, :-2 * r - 1]
+    def box(v):            # window sums over the last two axes: shifted slices (no cancellation, ≥ 0 stays ≥ 0)
+        p = np.pad(v, [(0, 0), (r, r), (0, 0)])
+        rows = sum(p[:, i:i + height] for i in range(2 * r + 1))
+        p = np.pad(rows, [(0, 0), (0, 0), (r, r)])
+        return sum(p[:, :, j:j + width] for j in range(2 * r + 1))
     k = box(ok.reshape(-1, height, width).astype(np.float64))
     total = box(np.where(ok, a, 0.0).reshape(-1, height, width))
     return (total / np.maximum(k, 1.0)).reshape(a.shape)
