@@ -80,3 +80,23 @@ def test_stratified_pairs_are_stratified_and_uniform(pair):
             assert abs(v.mean() - 0.5) < 0.004 and abs((v * v).mean() - 1 / 3) < 0.004
             for j in (jx, jy):
                 assert abs(np.corrcoef(v, j)[0, 1]) < 0.01
+
+
+@pytest.mark.parametrize("n", [0, 1, 1000])
+def test_scrambled_sobol_pair_twins_bitwise(n):
+    """The compiled stratified numbers are the NumPy twin's, bit for bit (sample indices up to 2^33:
+    index sample // 2 keeps its low 32 bits)."""
+    from engine import kernels
+    from engine.kernels import hashing
+    from engine.render.sampler import _PAIR_KEYS, _SOBOL_V, _seed_key
+    if not kernels.COMPILED:
+        pytest.skip("Numba kernels disabled")
+    rng = np.random.default_rng(n)
+    pixel = rng.integers(0, 1 << 20, n)
+    sample = np.where(rng.random(n) < 0.5, rng.integers(0, 64, n), rng.integers(0, 1 << 33, n))
+    u0, u1 = rng.random(n), rng.random(n)
+    u0[:3] = np.nextafter(1.0, 0.0)             # the clamp below 1
+    for pair in range(4):
+        args = (_seed_key(5), pixel, sample, _PAIR_KEYS[pair], _SOBOL_V[2 * pair], _SOBOL_V[2 * pair + 1], u0, u1)
+        a, b = hashing.scrambled_sobol_pair_numpy(*args), hashing.scrambled_sobol_pair_numba(*args)
+        assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.hashing import mix64, path_keys_and_uniforms, uniforms
+from ..kernels.hashing import mix64, path_keys_and_uniforms, scrambled_sobol_pair, uniforms
 
 _MASK64 = (1 << 64) - 1
 
@@ -88,7 +88,8 @@ def _sobol_direction_numbers() -> np.ndarray:
 
 _SOBOL_V = _sobol_direction_numbers()
 #: per-pair constants of the scramble hash
-_PAIR_KEYS = (0xD1B54A32D192ED03, 0x8CB92BA72F3D8DD7, 0xABC98388FB8FAC03, 0xE7037ED1A0B428DB)
+_PAIR_KEYS = tuple(np.array([k], np.uint64) for k in (0xD1B54A32D192ED03, 0x8CB92BA72F3D8DD7, 0xABC98388FB8FAC03,
+                                                       0xE7037ED1A0B428DB))
 
 
 def stratified_pair(seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.ndarray, u1: np.ndarray, pair: int = 0):
@@ -101,19 +102,5 @@ def stratified_pair(seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.nda
     stratified too)."""
     # the even and the odd samples are two independently scrambled sequences (index sample // 2):
     # adaptive sampling's half-buffers A (even) and B (odd) must be independent estimates
-    i = (sample.astype(np.uint64) >> np.uint64(1)) & np.uint64(0xFFFFFFFF)
-    x = np.zeros_like(i)
-    y = np.zeros_like(i)
-    vx, vy = _SOBOL_V[2 * pair], _SOBOL_V[2 * pair + 1]
-    for j in range(int(i.max()).bit_length() if i.size else 0):
-        on = ((i >> np.uint64(j)) & np.uint64(1)).astype(bool)
-        x[on] ^= vx[j]
-        y[on] ^= vy[j]
-    half = (sample.astype(np.uint64) & np.uint64(1)) * np.uint64(0x9E3779B97F4A7C15)
-    keys = mix64(_seed_key(seed) ^ (pixel.astype(np.uint64) * np.uint64(_PAIR_KEYS[pair])) ^ half)
-    mx = keys & np.uint64(0xFFFFFFFF)
-    my = keys >> np.uint64(32)
-    scale = 1.0 / 4294967296.0
-    below_one = np.nextafter(1.0, 0.0)      # (2^32 − 1 + u) · 2^-32 can round up to 1
-    return (np.minimum(((x ^ mx).astype(np.float64) + u0) * scale, below_one),
-            np.minimum(((y ^ my).astype(np.float64) + u1) * scale, below_one))
+    return scrambled_sobol_pair(_seed_key(seed), pixel, sample, _PAIR_KEYS[pair], _SOBOL_V[2 * pair],
+                                _SOBOL_V[2 * pair + 1], u0, u1)
