@@ -291,6 +291,14 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
         se = film.stderr_luminance()
         for i in range(4):
             extra[f"S{i}.Y.stderr"] = se[i].astype("float32")
+        meta["polar.stderr"] = film.stderr_method
+        if film.half_y is not None:
+            # the even samples' means and the i.i.d. error (the sums of squares): a resumed render keeps
+            # the stratified estimate
+            iid = film.stderr_luminance(iid=True)
+            for i, even in enumerate(film.even_means_luminance()):
+                extra[f"S{i}.Y.even"] = even.astype("float32")
+                extra[f"S{i}.Y.stderr_iid"] = iid[i].astype("float32")
     if getattr(film, "has_denoise_data", False):
         # Cycles' denoising guides: albedo (linear sRGB reflectance) and world-space shading normal.
         albedo, normal = film.denoise_data()

@@ -243,15 +243,34 @@ def test_cli_writes_the_sampler_and_resume_refuses_another(tmp_path, capsys):
     from tests.test_robustness_cli import small_demo
     scene = small_demo(tmp_path, spp=4)
     out = tmp_path / "a.exr"
-    assert cli.main(["render", scene, "-o", str(out), "--sampler", "stratified", "--stderr", "--no-previews"]) == 0
+    assert cli.main(["render", scene, "-o", str(out), "--sampler", "stratified", "--stderr", "--no-previews",
+                     "--quiet"]) == 0
     stokes, channels, header = read_stokes_exr(str(out))
     assert header["polar.sampler"] == "stratified" and "S0.Y.stderr" in channels
     plain = tmp_path / "b.exr"
-    assert cli.main(["render", scene, "-o", str(plain), "--no-previews"]) == 0
+    assert cli.main(["render", scene, "-o", str(plain), "--no-previews", "--quiet"]) == 0
     assert "polar.sampler" not in read_stokes_exr(str(plain))[2]
     capsys.readouterr()
     status = cli.main(["render", scene, "-o", str(tmp_path / "c.exr"), "--resume", str(out), "--spp", "6",
-                       "--no-previews"])
+                       "--no-previews", "--quiet"])
     assert status == 2 and "sampler" in capsys.readouterr().err
     assert cli.main(["render", scene, "-o", str(tmp_path / "d.exr"), "--resume", str(out), "--spp", "6",
-                     "--sampler", "stratified", "--no-previews"]) == 0
+                     "--sampler", "stratified", "--no-previews", "--quiet"]) == 0
+
+
+def test_a_resumed_stratified_exr_keeps_the_stratified_standard_error(tmp_path, capsys):
+    """--stderr of a stratified render writes the even samples' means (S*.Y.even) and names the
+    estimate (polar.stderr); resuming from that file gives the uninterrupted render's error."""
+    from engine import cli
+    from tests.test_robustness_cli import small_demo
+    scene = small_demo(tmp_path, spp=4)
+    opts = ["--sampler", "stratified", "--stderr", "--no-previews", "--quiet"]
+    part, whole, resumed = (str(tmp_path / f"{n}.exr") for n in ("part", "whole", "resumed"))
+    assert cli.main(["render", scene, "-o", part, *opts]) == 0
+    assert cli.main(["render", scene, "-o", whole, "--spp", "8", *opts]) == 0
+    assert cli.main(["render", scene, "-o", resumed, "--spp", "8", "--resume", part, *opts]) == 0
+    _, a, header = read_stokes_exr(whole)
+    _, b, _ = read_stokes_exr(resumed)
+    assert header["polar.stderr"].startswith("stratified") and "S3.Y.even" in a
+    for i in range(4):
+        np.testing.assert_allclose(b[f"S{i}.Y.stderr"], a[f"S{i}.Y.stderr"], rtol=1e-3, atol=1e-7)

@@ -123,22 +123,35 @@ class Film:
         """True if some sample carried an alpha (the render tracked coverage)."""
         return self.alpha_sums is not None
 
-    def stderr_luminance(self) -> np.ndarray:
+    def stderr_luminance(self, iid: bool = False) -> np.ndarray:
         """Standard error of the luminance Stokes pixel means, (4, H, W) (0 where spp < 2).
 
-        Independent samples: the i.i.d. formula s/√n.  With even/odd half sums (``half_y``, the
-        stratified sampler): the i.i.d. variance of the mean times the local ratio of the half-split
-        estimate to it (``stratified_variance_ratio``)."""
+        Independent samples (or ``iid``): the i.i.d. formula s/√n.  With even/odd half sums
+        (``half_y``, the stratified sampler): the i.i.d. variance of the mean times the local ratio of
+        the half-split estimate to it (``stratified_variance_ratio``)."""
         c = self.count.astype(np.float64)
         y_mean = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, self.sums) / np.maximum(c, 1)
         var = (self.sumsq_y / np.maximum(c, 1) - y_mean ** 2) * c / np.maximum(c - 1, 1)
         var_mean = np.maximum(var, 0.0) / np.maximum(c, 1)
-        if self.half_y is not None:
+        if self.half_y is not None and not iid:
             var_mean = var_mean * stratified_variance_ratio(self.half_y, self.count, var_mean, self.width,
                                                             self.height)
         se = np.sqrt(var_mean)
         se[:, c < 2] = 0.0
         return se.reshape(4, self.height, self.width)
+
+    @property
+    def stderr_method(self) -> str:
+        """What ``stderr_luminance`` is (the EXR header's ``polar.stderr``)."""
+        if self.half_y is None:
+            return "iid: sample standard deviation / sqrt(spp)"
+        return ("stratified: iid variance of the mean x the 5x5-pixel mean of (A - B)^2 nA nB / spp^2 / iid variance "
+                "(A, B: means of the even and the odd samples, independently scrambled)")
+
+    def even_means_luminance(self) -> np.ndarray:
+        """Means of the even samples' luminance Stokes components (4, H, W) (0 where none)."""
+        n_a = (self.count + 1) // 2
+        return (self.half_y[0] / np.maximum(n_a, 1)).reshape(4, self.height, self.width)
 
     def spp_image(self) -> np.ndarray:
         return self.count.reshape(self.height, self.width)
@@ -229,13 +242,15 @@ class SampleSums:
 
 
 def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray | None = None,
-                     alpha: np.ndarray | None = None) -> Film:
+                     alpha: np.ndarray | None = None, even_y: np.ndarray | None = None) -> Film:
     """A Film holding finished samples, rebuilt from pixel means (4, H, W, 3) and counts (H, W).
 
     Sums are mean × count (float32 means lose ~1e-7 relative).  With the per-pixel standard errors
     of the luminance components the sums of squares are restored too, otherwise they are set so
     that the resumed render's error estimate treats the old samples as noise-free.  ``alpha``
-    (H, W): the stored alpha (mean coverage), restored as alpha × count.
+    (H, W): the stored alpha (mean coverage), restored as alpha × count.  ``even_y`` (4, H, W): the
+    even samples' luminance means of a stratified render (``Film.even_means_luminance``), restored
+    as the even/odd half sums (float32-rounded: they only serve the error estimate).
     """
     H, W = spp.shape
     film = Film(W, H)
@@ -250,4 +265,8 @@ def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray
         film.sumsq_y[:] = y * y * count
     if alpha is not None:
         film.alpha_sums = np.asarray(alpha, np.float64).reshape(-1) * count
+    if even_y is not None:
+        film.half_y = np.empty((2, 4, count.shape[0]))
+        film.half_y[0] = np.asarray(even_y, np.float64).reshape(4, -1) * ((count + 1) // 2)
+        film.half_y[1] = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, film.sums) - film.half_y[0]
     return film

@@ -214,5 +214,10 @@ def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None
                                                   "sampling, so it has no half-buffers to continue adaptively "
                                                   "(resume it without --noise-threshold)")
         stderr = np.stack([channels[f"S{i}.Y.stderr"] for i in range(4)]) if "S0.Y.stderr" in channels else None
-        film, halves = film_from_stokes(stokes, counts, stderr, channels.get("A")), None
+        even = None
+        if getattr(st, "sampler", "independent") == "stratified" and "S0.Y.even" in channels:
+            # the i.i.d. error restores the sums of squares; the even means the half sums
+            even = np.stack([channels[f"S{i}.Y.even"] for i in range(4)])
+            stderr = np.stack([channels[f"S{i}.Y.stderr_iid"] for i in range(4)])
+        film, halves = film_from_stokes(stokes, counts, stderr, channels.get("A"), even), None
     return (film, st, halves) if with_halves else (film, st)
