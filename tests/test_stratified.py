@@ -274,3 +274,29 @@ def test_a_resumed_stratified_exr_keeps_the_stratified_standard_error(tmp_path, 
     assert header["polar.stderr"].startswith("stratified") and "S3.Y.even" in a
     for i in range(4):
         np.testing.assert_allclose(b[f"S{i}.Y.stderr"], a[f"S{i}.Y.stderr"], rtol=1e-3, atol=1e-7)
+
+
+def test_stratified_adaptive_sampling_is_deterministic_and_reports_the_stratified_error():
+    """Adaptive sampling with stratified numbers: its even/odd half-buffers are the film's half sums
+    (so the reported standard error is the stratified one), and the counts and image do not depend
+    on threads or batch size."""
+    from engine.render.adaptive import AdaptiveSettings
+    from engine.scene.loader import load_scene
+    from tests.conftest import shared_path
+    scene = load_scene(shared_path("peers", "scenes", "fresnel_sphere.json"))
+    scene.camera.width = scene.camera.height = 24
+    scene.settings.spp, scene.settings.sampler = 32, "stratified"
+    ad = AdaptiveSettings(threshold=0.015, quantity="s0", min_spp=8)
+    renderer = Renderer(scene)
+    runs = []
+    for threads, batch in ((1, 1 << 17), (2, 700)):
+        st = copy.copy(scene.settings)
+        st.threads, st.batch_rays = threads, batch
+        runs.append(renderer.render(st, adaptive=ad))
+    a, b = runs
+    assert np.array_equal(a.film.count, b.film.count) and len(np.unique(a.film.count)) > 1
+    assert np.array_equal(a.film.sums, b.film.sums)
+    assert a.film.half_y is a.halves.sums
+    iid = copy.copy(a.film)
+    iid.half_y = None
+    assert np.mean(a.film.stderr_luminance()[0]) < np.mean(iid.stderr_luminance()[0])
