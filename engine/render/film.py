@@ -234,10 +234,9 @@ class SampleSums:
         half_y = None
         if sample is not None:
             half_y = np.empty((2, 4, span))
-            odd = (sample % 2).astype(bool)
-            for h, take in enumerate((~odd, odd)):
-                for s in range(4):
-                    half_y[h, s] = np.bincount(local[take], weights=y[s][take], minlength=span)
+            slot = local + span * (sample & 1)            # even samples' pixels, then odd samples'
+            for s in range(4):
+                half_y[:, s] = np.bincount(slot, weights=y[s], minlength=2 * span).reshape(2, span)
         return cls(lo, hi, sums, sumsq_y, count, alpha_sums, guides, pixel.shape[0], half_y)
 
 
