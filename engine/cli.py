@@ -127,11 +127,12 @@ def _render(args) -> int:
     overrides = {k: v for k, v in (("spp", args.spp), ("seed", args.seed), ("max_depth", args.max_depth),
                                    ("spectral", args.spectral), ("polarisation", args.polarisation),
                                    ("wavelength_nm", args.wavelength_nm), ("simplify", args.simplify),
-                                   ("reduce_spectral", args.reduce_spectral)) if v is not None}
+                                   ("reduce_spectral", args.reduce_spectral), ("sampler", args.sampler))
+                 if v is not None}
     if overrides:
         merged = {**{k: getattr(st, k) for k in ("spp", "max_depth", "rr_depth", "seed", "spectral",
                                                   "wavelength_nm", "polarisation", "batch_rays", "threads",
-                                                  "reduce_spectral", "simplify")}, **overrides}
+                                                  "reduce_spectral", "simplify", "sampler")}, **overrides}
         st = parse_settings(merged, "option")
         scene.settings = st
     adaptive = _adaptive_settings(args, st.spp)
@@ -290,6 +291,14 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
         se = film.stderr_luminance()
         for i in range(4):
             extra[f"S{i}.Y.stderr"] = se[i].astype("float32")
+        meta["polar.stderr"] = film.stderr_method
+        if film.half_y is not None:
+            # the even samples' means and the i.i.d. error (the sums of squares): a resumed render keeps
+            # the stratified estimate
+            iid = film.stderr_luminance(iid=True)
+            for i, even in enumerate(film.even_means_luminance()):
+                extra[f"S{i}.Y.even"] = even.astype("float32")
+                extra[f"S{i}.Y.stderr_iid"] = iid[i].astype("float32")
     if getattr(film, "has_denoise_data", False):
         # Cycles' denoising guides: albedo (linear sRGB reflectance) and world-space shading normal.
         albedo, normal = film.denoise_data()
@@ -559,6 +568,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "(sampled λ, one Mueller product per path) or off")
     r.add_argument("--simplify", choices=("auto", "off"),
                    help="auto (default): skip layered coats that are index-matched and clear; off: keep all")
+    r.add_argument("--sampler", choices=("independent", "stratified"),
+                   help="independent (default: hashed numbers) or stratified (per-pixel scrambled Sobol' pixel "
+                        "jitter and first-vertex light/BSDF numbers: less noise, same expectation; --stderr then "
+                        "comes from the even/odd halves)")
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")
     r.add_argument("--stderr", action="store_true", help="also write per-pixel standard errors")

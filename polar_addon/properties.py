@@ -22,6 +22,14 @@ SPECTRAL_ITEMS = [
     ("MONO", "Monochrome", "One wavelength (for verification); colours by their luminance", 1),
 ]
 
+SAMPLER_ITEMS = [
+    ("INDEPENDENT", "Independent", "Every random number an independent hash of (seed, pixel, sample, dimension)", 0),
+    ("STRATIFIED", "Stratified", "Pixel jitter and the first bounce's light and BSDF numbers from per-pixel "
+     "scrambled Sobol' points (as Cycles' Sobol' patterns): same expectation, less noise, most at the edges of "
+     "bright lights seen by the camera and on lamp-lit surfaces", 1),
+]
+SAMPLER_TO_ENGINE = {"INDEPENDENT": "independent", "STRATIFIED": "stratified"}
+
 PASS_NAMES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP", "Polariser",
               "VisDoP", "VisS1", "VisS2", "VisS3", "VisAoLP", "Noise", "Polarisation Mosaic",
               "Denoising Albedo", "Denoising Normal")
@@ -69,6 +77,8 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                              "(0 = only directly visible lights)", default=15, min=0, max=1023)
     seed: IntProperty(name="Seed", description="Random seed; the same seed gives the same image", default=0,
                       min=0)
+    sampler: EnumProperty(name="Pattern", items=SAMPLER_ITEMS, default="STRATIFIED",
+                          description="Random number pattern (Cycles' Sampling Pattern)")
     use_animated_seed: BoolProperty(name="Animated Seed", description="Add the frame number to the seed so "
                                     "that noise changes from frame to frame", default=False)
     spectral: EnumProperty(name="Spectral", items=SPECTRAL_ITEMS, default="SPECTRAL")

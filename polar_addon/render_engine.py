@@ -26,7 +26,7 @@ from ..engine.postprocess.mosaic import mosaic as polarisation_mosaic
 from ..engine.spectral.cie import LUMINANCE_WEIGHTS
 from .compositor import polariser_inputs
 from .properties import (DEFAULT_PASSES, DENOISE_PASSES, NOISE_QUANTITY_TO_ENGINE, PASS_NAMES,
-                         POLARISATION_TO_ENGINE)
+                         POLARISATION_TO_ENGINE, SAMPLER_TO_ENGINE)
 from .ui_names import ui_message
 from .viewport import ViewportSession, stop_all_sessions
 from ..engine import kernels
@@ -55,7 +55,8 @@ def engine_settings(scene, preview=False) -> RenderSettings:
                           rr_depth=5, seed=seed, spectral="mono" if p.spectral == "MONO" else "spectral",
                           wavelength_nm=p.wavelength_nm, polarisation=POLARISATION_TO_ENGINE[p.polarisation],
                           batch_rays=p.batch_rays, threads=p.threads,
-                          simplify="auto" if p.skip_clear_layers else "off")
+                          simplify="auto" if p.skip_clear_layers else "off",
+                          sampler=SAMPLER_TO_ENGINE[p.sampler])
 
 
 def adaptive_settings(scene, preview=False):

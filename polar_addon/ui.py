@@ -46,6 +46,7 @@ class POLAR_PT_sampling(_PolarPanel, bpy.types.Panel):
         row = layout.row(align=True)
         row.prop(p, "seed")
         row.prop(p, "use_animated_seed", text="", icon="TIME")
+        layout.prop(p, "sampler")
 
 
 class POLAR_PT_light_model(_PolarPanel, bpy.types.Panel):

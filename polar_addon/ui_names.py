@@ -26,6 +26,7 @@ RENDER_SETTINGS = {
     "threads": ("threads", "Render Properties ▸ Performance ▸ Threads"),
     "reduce_spectral": (None, _FIXED),
     "simplify": ("skip_clear_layers", "Render Properties ▸ Polarisation & Spectrum ▸ Skip Clear Layers"),
+    "sampler": ("sampler", "Render Properties ▸ Sampling ▸ Pattern"),
     "denoise_data": (None, "View Layer Properties ▸ Polarisation Passes ▸ Denoising Data"),
 }
 

@@ -94,3 +94,62 @@ def path_keys_and_uniforms_numba(seed_key: np.ndarray, pixel: np.ndarray, sample
 
 path_keys_and_uniforms = twin(_keys_and_uniforms_loop and path_keys_and_uniforms_numba,
                               path_keys_and_uniforms_numpy)
+
+
+def scrambled_sobol_pair_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray, pair_key: np.ndarray,
+                               vx: np.ndarray, vy: np.ndarray, u0: np.ndarray, u1: np.ndarray):
+    """Two numbers (2 × (N,)) in [0, 1) per path: the 32-bit Sobol' points of index sample // 2 with
+    direction numbers vx, vy (32,) (uint64), XOR-scrambled by mix64(seed_key ^ pixel·pair_key ^
+    (sample & 1)·φ) (low and high 32 bits), plus u0, u1 (N,) below 2^-32 (engine.render.sampler.stratified_pair)."""
+    i = (sample.astype(np.uint64) >> np.uint64(1)) & np.uint64(0xFFFFFFFF)
+    x, y = np.zeros_like(i), np.zeros_like(i)
+    for j in range(int(i.max()).bit_length() if i.size else 0):
+        on = ((i >> np.uint64(j)) & np.uint64(1)).astype(bool)
+        x[on] ^= vx[j]
+        y[on] ^= vy[j]
+    half = (sample.astype(np.uint64) & np.uint64(1)) * _GOLDEN
+    keys = mix64(seed_key[0] ^ (pixel.astype(np.uint64) * pair_key[0]) ^ half)
+    mx = keys & np.uint64(0xFFFFFFFF)
+    my = keys >> np.uint64(32)
+    scale = 1.0 / 4294967296.0
+    below_one = np.nextafter(1.0, 0.0)      # (2^32 − 1 + u) · 2^-32 can round up to 1
+    return (np.minimum(((x ^ mx).astype(np.float64) + u0) * scale, below_one),
+            np.minimum(((y ^ my).astype(np.float64) + u1) * scale, below_one))
+
+
+@jit
+def _sobol_pair_loop(seed_key, pixel, sample, pair_key, vx, vy, u0, u1, out):
+    s, pk = seed_key[0], pair_key[0]
+    low = np.uint64(0xFFFFFFFF)
+    scale = 1.0 / 4294967296.0
+    below_one = np.nextafter(1.0, 0.0)
+    for n in range(pixel.shape[0]):
+        smp = np.uint64(sample[n])
+        i = (smp >> np.uint64(1)) & low
+        x = np.uint64(0)
+        y = np.uint64(0)
+        j = 0
+        while i != np.uint64(0):
+            if i & np.uint64(1):
+                x ^= vx[j]
+                y ^= vy[j]
+            i >>= np.uint64(1)
+            j += 1
+        h = s ^ (np.uint64(pixel[n]) * pk) ^ ((smp & np.uint64(1)) * _GOLDEN)
+        h = (h ^ (h >> _S30)) * _M1
+        h = (h ^ (h >> _S27)) * _M2
+        h = h ^ (h >> _S31)
+        out[0, n] = min((np.float64(x ^ (h & low)) + u0[n]) * scale, below_one)
+        out[1, n] = min((np.float64(y ^ (h >> np.uint64(32))) + u1[n]) * scale, below_one)
+
+
+def scrambled_sobol_pair_numba(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray, pair_key: np.ndarray,
+                               vx: np.ndarray, vy: np.ndarray, u0: np.ndarray, u1: np.ndarray):
+    out = np.empty((2, pixel.shape[0]))
+    _sobol_pair_loop(np.asarray(seed_key, np.uint64), np.ascontiguousarray(pixel, np.int64),
+                     np.ascontiguousarray(sample, np.int64), np.asarray(pair_key, np.uint64), vx, vy,
+                     np.ascontiguousarray(u0, np.float64), np.ascontiguousarray(u1, np.float64), out)
+    return out[0], out[1]
+
+
+scrambled_sobol_pair = twin(_sobol_pair_loop and scrambled_sobol_pair_numba, scrambled_sobol_pair_numpy)

@@ -23,7 +23,7 @@ import time
 import numpy as np
 
 from .blas_threads import one_blas_thread
-from .film import Film
+from .film import Film, SampleSums
 from .renderer import STOP_POLL_SECONDS, RenderResult, Renderer, unit_pixels, work_units
 from .effects import effective_materials, resolve_transport
 
@@ -53,7 +53,10 @@ def _render_unit(key, scene, settings, unit, window, width):
     stats.pop("path_rays", None)                        # per-path ray counts: adaptive sampling's cost only
     lo, hi = int(pix.min()), int(pix.max()) + 1
     part = Film(hi - lo, 1)
-    part.add_samples(pixel - lo, values, stats.pop("alpha", None))
+    stratified = getattr(settings, "sampler", "independent") == "stratified"
+    part.add(SampleSums.of(pixel - lo, values, stats.pop("alpha", None), sample=sample if stratified else None))
+    if part.half_y is not None:
+        stats["half_y"] = part.half_y                   # even/odd luminance sums (the standard error)
     if part.has_alpha:
         stats["alpha_sums"] = part.alpha_sums           # coverage (film transparency, holdouts)
     return lo, part.sums, part.sumsq_y, part.count, stats
@@ -189,6 +192,10 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
             film.sums[:, :, lo:lo + n] += sums
             film.sumsq_y[:, lo:lo + n] += sumsq
             film.count[lo:lo + n] += count
+            if "half_y" in s:
+                if film.half_y is None:
+                    film.half_y = np.zeros((2, 4, film.count.shape[0]))
+                film.half_y[:, :, lo:lo + n] += s["half_y"]
             for k in ("rays", "shadow_rays", "nonfinite"):
                 stats[k] += s[k]
             stats["samples"] += int(count.sum())
@@ -224,6 +231,8 @@ def _render_adaptive_on(client, key, scene_future, st, reason, simplified, W, H,
     stats["stop_reason"] = render_adaptive(None, film, halves, st.spp, st.batch_rays, adaptive, window, run_units,
                                            stats, progress=progress, should_stop=should_stop,
                                            workers=max(1, stats["workers"]))
+    if getattr(st, "sampler", "independent") == "stratified":
+        film.half_y = halves.sums           # the half-buffers are the even/odd luminance sums
     stats.setdefault("seconds", 0.0)
     return RenderResult(film=film, settings=st, stats=stats, cancelled=stats["stop_reason"] == "cancelled",
                         halves=halves)

@@ -8,6 +8,12 @@ the sum of per-sample alpha (coverage of the camera rays: 0 where a sample saw
 the transparent background or a holdout, as Cycles' alpha; 1 for samples added
 without alpha).  With denoising data (``add_denoise_data``) it also sums the per-sample albedo
 and shading normal of the first non-delta vertex (Cycles' Denoising Albedo / Normal).
+
+With the "stratified" sampler a pixel's samples are not independent, and the i.i.d. standard error
+(from the sums of squares) overestimates the error of its mean; the film then also keeps the
+luminance Stokes sums of the even and of the odd samples (``half_y``: two independently scrambled
+sequences, engine.render.sampler.stratified_pair), whose difference is an unbiased, if one-degree-
+of-freedom, estimate of the mean's variance (``stderr_luminance``).
 """
 
 from __future__ import annotations
@@ -26,6 +32,7 @@ class Film:
         self.count = np.zeros(n, np.int64)
         self.alpha_sums = None          # None: every sample so far had alpha 1 (no memory spent)
         self.denoise_sums = None        # None: no denoising data asked for; else (6, n): albedo RGB, normal XYZ
+        self.half_y = None              # None: independent samples; else (2, 4, n): even/odd luminance Stokes sums
         self._added = False             # samples added yet (see ``add``)
 
     def add_samples(self, pixel: np.ndarray, stokes_rgb: np.ndarray, alpha: np.ndarray | None = None) -> None:
@@ -52,6 +59,10 @@ class Film:
         self.sums[:, :, lo:hi] += part.sums
         self.sumsq_y[:, lo:hi] += part.sumsq_y
         self.count[lo:hi] += part.count
+        if part.half_y is not None:
+            if self.half_y is None:
+                self.half_y = np.zeros((2, 4, self.count.shape[0]))
+            self.half_y[:, :, lo:hi] += part.half_y
         if part.denoise is not None:
             if self.denoise_sums is None:
                 self.denoise_sums = np.zeros((6, self.count.shape[0]))
@@ -81,6 +92,8 @@ class Film:
         return m[0], m[1]
 
     def merge(self, other: Film) -> None:
+        if other.half_y is not None:
+            self.half_y = other.half_y.copy() if self.half_y is None else self.half_y + other.half_y
         if other.denoise_sums is not None:
             self.denoise_sums = other.denoise_sums.copy() if self.denoise_sums is None \
                 else self.denoise_sums + other.denoise_sums
@@ -110,17 +123,75 @@ class Film:
         """True if some sample carried an alpha (the render tracked coverage)."""
         return self.alpha_sums is not None
 
-    def stderr_luminance(self) -> np.ndarray:
-        """Standard error of the luminance Stokes pixel means, (4, H, W) (0 where spp < 2)."""
+    def stderr_luminance(self, iid: bool = False) -> np.ndarray:
+        """Standard error of the luminance Stokes pixel means, (4, H, W) (0 where spp < 2).
+
+        Independent samples (or ``iid``): the i.i.d. formula s/√n.  With even/odd half sums
+        (``half_y``, the stratified sampler): the i.i.d. variance of the mean times the local ratio of
+        the half-split estimate to it (``stratified_variance_ratio``)."""
         c = self.count.astype(np.float64)
         y_mean = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, self.sums) / np.maximum(c, 1)
         var = (self.sumsq_y / np.maximum(c, 1) - y_mean ** 2) * c / np.maximum(c - 1, 1)
-        se = np.sqrt(np.maximum(var, 0.0) / np.maximum(c, 1))
+        var_mean = np.maximum(var, 0.0) / np.maximum(c, 1)
+        if self.half_y is not None and not iid:
+            var_mean = var_mean * stratified_variance_ratio(self.half_y, self.count, var_mean, self.width,
+                                                            self.height)
+        se = np.sqrt(var_mean)
         se[:, c < 2] = 0.0
         return se.reshape(4, self.height, self.width)
 
+    @property
+    def stderr_method(self) -> str:
+        """What ``stderr_luminance`` is (the EXR header's ``polar.stderr``)."""
+        if self.half_y is None:
+            return "iid: sample standard deviation / sqrt(spp)"
+        return ("stratified: iid variance of the mean x the 5x5-pixel mean of (A - B)^2 nA nB / spp^2 / iid variance "
+                "(A, B: means of the even and the odd samples, independently scrambled)")
+
+    def even_means_luminance(self) -> np.ndarray:
+        """Means of the even samples' luminance Stokes components (4, H, W) (0 where none)."""
+        n_a = (self.count + 1) // 2
+        return (self.half_y[0] / np.maximum(n_a, 1)).reshape(4, self.height, self.width)
+
     def spp_image(self) -> np.ndarray:
         return self.count.reshape(self.height, self.width)
+
+
+#: half-width of the pixel window over which ``stratified_variance_ratio`` averages (5 × 5 pixels)
+RATIO_RADIUS = 2
+
+
+def _box_mean(a: np.ndarray, ok: np.ndarray, width: int, height: int, r: int) -> np.ndarray:
+    """Mean of a (4, n) over the pixels where ok (4, n) within (2r+1)² windows clipped to the image."""
+    def box(v):            # window sums over the last two axes: shifted slices (no cancellation, ≥ 0 stays ≥ 0)
+        p = np.pad(v, [(0, 0), (r, r), (0, 0)])
+        rows = sum(p[:, i:i + height] for i in range(2 * r + 1))
+        p = np.pad(rows, [(0, 0), (0, 0), (r, r)])
+        return sum(p[:, :, j:j + width] for j in range(2 * r + 1))
+    k = box(ok.reshape(-1, height, width).astype(np.float64))
+    total = box(np.where(ok, a, 0.0).reshape(-1, height, width))
+    return (total / np.maximum(k, 1.0)).reshape(a.shape)
+
+
+def stratified_variance_ratio(half_y: np.ndarray, count: np.ndarray, var_iid: np.ndarray, width: int,
+                              height: int) -> np.ndarray:
+    """Per pixel (4, n): how much smaller the variance of the pixel mean is with stratified samples
+    than the i.i.d. estimate ``var_iid`` (4, n) says.
+
+    The even and the odd samples (n_A = ⌈c/2⌉, n_B = ⌊c/2⌋ of a pixel's c) are independently
+    scrambled sequences, so their means A, B are independent unbiased estimates, and
+    (A − B)²·n_A·n_B/c² is an unbiased estimate of the variance of the pixel mean (exactly when
+    n_A = n_B), but with one degree of freedom (its z-scores would be Cauchy-tailed).  So the
+    per-pixel ratio of it to ``var_iid`` (in [0, c − 1]: the between-halves part of the sum of
+    squares) is averaged over the 5 × 5 pixels around (pixels with c ≥ 2 and var_iid > 0): ~25
+    degrees of freedom, at the price of a ratio that is local, not per pixel."""
+    c = count.astype(np.float64)
+    n_a, n_b = np.ceil(c / 2), np.floor(c / 2)
+    d = half_y[0] / np.maximum(n_a, 1) - half_y[1] / np.maximum(n_b, 1)
+    var_split = d * d * n_a * n_b / np.maximum(c * c, 1)
+    ok = (c >= 2) & (var_iid > 0)
+    ratio = np.where(ok, var_split / np.where(ok, var_iid, 1.0), 0.0)
+    return _box_mean(ratio, ok, width, height, RATIO_RADIUS)
 
 
 class SampleSums:
@@ -131,17 +202,18 @@ class SampleSums:
     Each sum runs over the batch's samples in their order, as a bincount over the whole film would.
     """
 
-    __slots__ = ("lo", "hi", "sums", "sumsq_y", "count", "alpha", "denoise", "n_samples")
+    __slots__ = ("lo", "hi", "sums", "sumsq_y", "count", "alpha", "denoise", "n_samples", "half_y")
 
-    def __init__(self, lo, hi, sums, sumsq_y, count, alpha, denoise, n_samples):
+    def __init__(self, lo, hi, sums, sumsq_y, count, alpha, denoise, n_samples, half_y=None):
         self.lo, self.hi, self.sums, self.sumsq_y, self.count = lo, hi, sums, sumsq_y, count
-        self.alpha, self.denoise, self.n_samples = alpha, denoise, n_samples
+        self.alpha, self.denoise, self.n_samples, self.half_y = alpha, denoise, n_samples, half_y
 
     @classmethod
     def of(cls, pixel: np.ndarray, stokes_rgb: np.ndarray, alpha: np.ndarray | None = None,
-           denoise: tuple[np.ndarray, np.ndarray] | None = None) -> SampleSums:
+           denoise: tuple[np.ndarray, np.ndarray] | None = None, sample: np.ndarray | None = None) -> SampleSums:
         """Sums of samples ``stokes_rgb`` (4, 3, N) at flat pixels (N,), their alpha (N,) or None (all
-        1) and denoising guides (albedo (3, N), normal (3, N)) or None."""
+        1) and denoising guides (albedo (3, N), normal (3, N)) or None; with the samples' indices
+        ``sample`` (N,) (the stratified sampler) also the even and odd samples' luminance sums."""
         lo, hi = (int(pixel.min()), int(pixel.max()) + 1) if pixel.size else (0, 0)
         local, span = pixel - lo, hi - lo
         sums = np.empty((4, 3, span))
@@ -159,17 +231,25 @@ class SampleSums:
             guides = np.empty((6, span))
             for i, values in enumerate((*denoise[0], *denoise[1])):
                 guides[i] = np.bincount(local, weights=values, minlength=span)
-        return cls(lo, hi, sums, sumsq_y, count, alpha_sums, guides, pixel.shape[0])
+        half_y = None
+        if sample is not None:
+            half_y = np.empty((2, 4, span))
+            slot = local + span * (sample & 1)            # even samples' pixels, then odd samples'
+            for s in range(4):
+                half_y[:, s] = np.bincount(slot, weights=y[s], minlength=2 * span).reshape(2, span)
+        return cls(lo, hi, sums, sumsq_y, count, alpha_sums, guides, pixel.shape[0], half_y)
 
 
 def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray | None = None,
-                     alpha: np.ndarray | None = None) -> Film:
+                     alpha: np.ndarray | None = None, even_y: np.ndarray | None = None) -> Film:
     """A Film holding finished samples, rebuilt from pixel means (4, H, W, 3) and counts (H, W).
 
     Sums are mean × count (float32 means lose ~1e-7 relative).  With the per-pixel standard errors
     of the luminance components the sums of squares are restored too, otherwise they are set so
     that the resumed render's error estimate treats the old samples as noise-free.  ``alpha``
-    (H, W): the stored alpha (mean coverage), restored as alpha × count.
+    (H, W): the stored alpha (mean coverage), restored as alpha × count.  ``even_y`` (4, H, W): the
+    even samples' luminance means of a stratified render (``Film.even_means_luminance``), restored
+    as the even/odd half sums (float32-rounded: they only serve the error estimate).
     """
     H, W = spp.shape
     film = Film(W, H)
@@ -184,4 +264,8 @@ def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray
         film.sumsq_y[:] = y * y * count
     if alpha is not None:
         film.alpha_sums = np.asarray(alpha, np.float64).reshape(-1) * count
+    if even_y is not None:
+        film.half_y = np.empty((2, 4, count.shape[0]))
+        film.half_y[0] = np.asarray(even_y, np.float64).reshape(4, -1) * ((count + 1) // 2)
+        film.half_y[1] = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, film.sums) - film.half_y[0]
     return film

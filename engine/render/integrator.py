@@ -38,7 +38,7 @@ from ..kernels.transport import (add_light, add_to_paths, identity_throughput, n
                                  throughput_times_stokes, update_abcs, update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .path_state import PathState
-from .sampler import PathSampler
+from .sampler import PathSampler, stratified_pair
 from .visibility import ray_visibility
 from ..spectral import WavelengthLookup, rgb_weights, sample_wavelengths
 from ..vec3 import dot
@@ -112,6 +112,10 @@ class _Accumulators:
     transparency: np.ndarray | None
     guides: DenoiseGuides | None
     stats: dict[str, int]
+    #: (N,) the batch's pixels and sample indices with the "stratified" sampler (its first vertex's
+    #: numbers depend on them), else None
+    pixel: np.ndarray | None = None
+    sample: np.ndarray | None = None
     path_rays: np.ndarray = field(init=False)
 
     def __post_init__(self):
@@ -318,6 +322,11 @@ class PathTracer:
         k_camera = 2 + self.camera.lens_dimensions
         sampler, u = PathSampler.start(self.settings.seed, pixel, sample,
                                        k_camera + (1 if self.samples_wavelengths else 0))
+        stratified = getattr(self.settings, "sampler", "independent") == "stratified"
+        if stratified:
+            # pixel jitter stratified over each pixel's samples: edges of bright camera-visible emitters
+            # (a lamp, a sun disc) are otherwise most of the image's noise (see stratified_pair)
+            u[0], u[1] = stratified_pair(self.settings.seed, pixel, sample, u[0], u[1])
         o, d, x_T, t_min, t_max = self.camera.generate(pixel, u[:k_camera])
         lam, w_rgb = self._wavelengths(u[k_camera] if self.samples_wavelengths else None, n_total)
         L = 3 if self.rgb_mode else lam.shape[0]
@@ -341,7 +350,8 @@ class PathTracer:
         acc = _Accumulators(radiance=np.zeros((P, L, n_total)), w_rgb=w_rgb,
                             transparency=np.zeros(n_total) if self.track_alpha else None,
                             guides=DenoiseGuides(n_total) if self.denoise_data else None,
-                            stats={"rays": 0, "shadow_rays": 0, "nonfinite": 0})
+                            stats={"rays": 0, "shadow_rays": 0, "nonfinite": 0},
+                            pixel=pixel if stratified else None, sample=sample if stratified else None)
         return state, acc
 
     def _intersect(self, state: PathState, acc: _Accumulators,
@@ -465,15 +475,27 @@ class PathTracer:
         # stateless in the dimension, so skipping leaves every other one as it was.
         nee = (bool(len(light_set)) and bounce + 2 <= st.max_depth
                and not all(self.shaders[g].flags.is_delta_only for g in groups))
-        u_light = sampler.next(4) if nee else sampler.skip(4)
+        # The "stratified" sampler stratifies the first vertex's light and BSDF numbers over the pixel's
+        # samples (below), from all of them: none is skipped there.
+        stratified_vertex = bounce == 0 and acc.pixel is not None
+        u_light = sampler.next(4) if nee or stratified_vertex else sampler.skip(4)
         direction_dims = None
-        if all(fused):
+        if all(fused) and not stratified_vertex:
             u_bsdf = sampler.next(1)                # the lobe choice (smooth dielectric) only
             direction_dims = PathSampler(sampler.keys)
             direction_dims.dimension = sampler.dimension
             sampler.skip(2)
         else:
             u_bsdf = sampler.next(3)
+        if stratified_vertex:
+            # The first vertex's light sample (choice, point) and BSDF sample (lobe, direction) are
+            # stratified over the pixel's samples like the jitter (Sobol' dimensions 3–8, each pair with
+            # its own per-pixel scramble: still uniform and independent per sample, so unbiased): a
+            # lamp's direct light is most of a lit floor's noise.
+            pixel, sample = acc.pixel[state.path], acc.sample[state.path]
+            u_light[1], u_light[2] = stratified_pair(st.seed, pixel, sample, u_light[1], u_light[2], pair=1)
+            u_bsdf[1], u_bsdf[2] = stratified_pair(st.seed, pixel, sample, u_bsdf[1], u_bsdf[2], pair=2)
+            u_light[0], u_bsdf[0] = stratified_pair(st.seed, pixel, sample, u_light[0], u_bsdf[0], pair=3)
         if bounce + 1 >= st.rr_depth:
             u_rr = sampler.next(1)[0]
         else:

@@ -289,6 +289,10 @@ class Renderer:
         self._live_film = film
 
         abort = threading.Event()
+        # stratified samples: the film keeps even/odd half sums for an honest standard error (not when
+        # resuming a film without them: its error is then the i.i.d. one, an overestimate)
+        stratified = getattr(st, "sampler", "independent") == "stratified" and (resume is None
+                                                                                or resume.half_y is not None)
 
         def trace_unit(unit):
             r0, r1, p0, p1 = unit
@@ -304,7 +308,8 @@ class Renderer:
             values, s = traced
             s.pop("path_rays", None)                # per-path ray counts: adaptive sampling's cost only
             # the unit's film sums, here on the worker: the adding thread only adds them in order
-            return SampleSums.of(pixel, values, s.pop("alpha", None), s.pop("denoise", None)), s
+            return SampleSums.of(pixel, values, s.pop("alpha", None), s.pop("denoise", None),
+                                 sample if stratified else None), s
 
         workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
 
@@ -332,6 +337,8 @@ class Renderer:
                 stats, progress=progress, should_stop=should_stop, clock=clock or time.perf_counter,
                 on_first_pass=on_first_pass, workers=workers, unit_times=unit_times)
             cancelled = stats["stop_reason"] == "cancelled"
+            if getattr(st, "sampler", "independent") == "stratified":
+                film.half_y = halves.sums       # the half-buffers are the even/odd luminance sums
             stats.setdefault("seconds", 0.0)
             self._live_film = None
             return RenderResult(film=film, settings=st, stats=stats, cancelled=cancelled, halves=halves)

@@ -12,7 +12,8 @@ EXR written by the CLI carries the estimator's identity in its header (:func:`es
     the rendered pixel rectangle "x0 y0 x1 y1" (the resolution is the image's own size);
 ``polar.max_depth``, ``polar.rr_depth``, ``polar.seed``, ``polar.spectral``, ``polar.wavelength_nm``
 (mono only), ``polar.polarisation_requested`` and ``polar.polarisation`` (as resolved),
-``polar.reduce_spectral``, ``polar.simplify``.
+``polar.reduce_spectral``, ``polar.simplify``, and ``polar.sampler`` (written only for the
+"stratified" sampler: a file without it was rendered with the "independent" one).
 
 What may differ on resume: the total sample count (raised, never below the samples done), threads,
 batch size, Dask scheduler, previews, exposure, and the adaptive sampling settings (threshold,
@@ -51,6 +52,7 @@ MATCHED = {
     "polar.polarisation": "--polarisation (as resolved)",
     "polar.reduce_spectral": "--reduce-spectral",
     "polar.simplify": "--simplify",
+    "polar.sampler": "--sampler",
 }
 
 
@@ -122,6 +124,9 @@ def estimator_identity(scene_hash: str, settings, resolved: str, window=None, si
              "polar.seed": int(settings.seed), "polar.spectral": settings.spectral,
              "polar.polarisation_requested": settings.polarisation, "polar.polarisation": resolved,
              "polar.reduce_spectral": settings.reduce_spectral, "polar.simplify": settings.simplify}
+    if getattr(settings, "sampler", "independent") != "independent":
+        # only then: the headers of independent renders stay as they were (and older files match)
+        ident["polar.sampler"] = settings.sampler
     if settings.spectral == "mono":
         ident["polar.wavelength_nm"] = float(settings.wavelength_nm)
     return ident
@@ -201,11 +206,18 @@ def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None
     from .adaptive import has_state, state_from_channels
     if has_state(channels):
         film, halves = state_from_channels(channels, counts)
+        if getattr(st, "sampler", "independent") == "stratified":
+            film.half_y = halves.sums.copy()        # even/odd luminance sums: the stratified standard error
     else:
         if with_halves:
             raise SceneError("--noise-threshold", f"{os.path.basename(path)!r} was rendered without adaptive "
                                                   "sampling, so it has no half-buffers to continue adaptively "
                                                   "(resume it without --noise-threshold)")
         stderr = np.stack([channels[f"S{i}.Y.stderr"] for i in range(4)]) if "S0.Y.stderr" in channels else None
-        film, halves = film_from_stokes(stokes, counts, stderr, channels.get("A")), None
+        even = None
+        if getattr(st, "sampler", "independent") == "stratified" and "S0.Y.even" in channels:
+            # the i.i.d. error restores the sums of squares; the even means the half sums
+            even = np.stack([channels[f"S{i}.Y.even"] for i in range(4)])
+            stderr = np.stack([channels[f"S{i}.Y.stderr_iid"] for i in range(4)])
+        film, halves = film_from_stokes(stokes, counts, stderr, channels.get("A"), even), None
     return (film, st, halves) if with_halves else (film, st)

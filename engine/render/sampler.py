@@ -5,7 +5,10 @@ render is bit-for-bit reproducible whatever the batching, tiling, number of
 workers or resumption order: sample s of pixel p always sees the same
 numbers.  The hash is splitmix64's finaliser (Steele et al. 2014), which
 passes BigCrush as a counter-based generator; 53 bits are turned into a
-float64 in [0, 1).
+float64 in [0, 1).  With ``RenderSettings.sampler`` "stratified" the pixel jitter and the first
+vertex's light and BSDF numbers are replaced by ``stratified_pair`` (per-pixel XOR-scrambled
+Sobol' points, two independent sequences for the even and the odd samples), still functions of
+(seed, pixel, sample index) only.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import functools
 
 import numpy as np
 
-from ..kernels.hashing import mix64, path_keys_and_uniforms, uniforms
+from ..kernels.hashing import mix64, path_keys_and_uniforms, scrambled_sobol_pair, uniforms
 
 _MASK64 = (1 << 64) - 1
 
@@ -69,3 +72,45 @@ class PathSampler:
 
     def compact(self, keep: np.ndarray):
         self.keys = self.keys[keep]
+
+
+#: Sobol' dimensions 2–8 as (degree s, coefficients a, initial m) of their primitive polynomials
+#: (Joe & Kuo 2008, new-joe-kuo-6.21201); dimension 1 is the bit reversal
+_SOBOL_POLYNOMIALS = [(1, 0, [1]), (2, 1, [1, 3]), (3, 1, [1, 3, 1]), (3, 2, [1, 1, 1]), (4, 1, [1, 1, 3, 3]),
+                      (4, 4, [1, 3, 5, 13]), (5, 2, [1, 1, 5, 5, 17])]
+
+
+def _sobol_direction_numbers() -> np.ndarray:
+    """Direction numbers (8, 32) (uint64 holding 32 bits) of Sobol' dimensions 1–8."""
+    v = np.zeros((8, 32), dtype=np.uint64)
+    v[0] = [1 << (31 - k) for k in range(32)]
+    for d, (deg, a, m) in enumerate(_SOBOL_POLYNOMIALS, start=1):
+        w = [m[k] << (31 - k) for k in range(deg)]
+        for k in range(deg, 32):
+            x = w[k - deg] ^ (w[k - deg] >> deg)
+            for j in range(1, deg):
+                if (a >> (deg - 1 - j)) & 1:
+                    x ^= w[k - j]
+            w.append(x)
+        v[d] = w
+    return v
+
+
+_SOBOL_V = _sobol_direction_numbers()
+#: per-pair constants of the scramble hash
+_PAIR_KEYS = tuple(np.array([k], np.uint64) for k in (0xD1B54A32D192ED03, 0x8CB92BA72F3D8DD7, 0xABC98388FB8FAC03,
+                                                       0xE7037ED1A0B428DB))
+
+
+def stratified_pair(seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.ndarray, u1: np.ndarray, pair: int = 0):
+    """Two numbers (2 × (N,)) in [0, 1) for sample ``sample`` of pixel ``pixel``: Sobol' dimensions
+    2·pair + 1, 2·pair + 2 of the index sample // 2, digit-scrambled by a random XOR per pixel, pair
+    and parity of ``sample`` (so each point is uniform and independent of every other dimension,
+    hence unbiased), the hashed uniforms u0, u1 filling the bits below 2^-32.  Pair 0 (the pixel
+    jitter) is a (0, 2)-sequence: a pixel's first 2^m even (or odd) samples fill the 2^m elementary
+    intervals of each shape; pairs 1–3 with it make an 8-D Sobol' point set (each dimension
+    stratified too)."""
+    # the even and the odd samples are two independently scrambled sequences (index sample // 2):
+    # adaptive sampling's half-buffers A (even) and B (odd) must be independent estimates
+    return scrambled_sobol_pair(_seed_key(seed), pixel, sample, _PAIR_KEYS[pair], _SOBOL_V[2 * pair],
+                                _SOBOL_V[2 * pair + 1], u0, u1)

@@ -26,7 +26,7 @@ from ..materials.catalogue import MODELS
 from ..materials.normal_map import ShadingNormal
 from ..textures import parse_texture_input
 from ..textures.image import read_image
-from .description import (ENVMAP_GRIDS, Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
+from .description import (ENVMAP_GRIDS, SAMPLERS, Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
                                       RenderSettings, Scene, SpotLight)
 from ..errors import SceneError
 from .meshio import read_mesh
@@ -336,7 +336,8 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object")
     _check_keys(d, field, {"spp", "max_depth", "rr_depth", "seed", "spectral", "wavelength_nm",
-                           "polarisation", "batch_rays", "threads", "reduce_spectral", "simplify"})
+                           "polarisation", "batch_rays", "threads", "reduce_spectral", "simplify",
+                           "sampler"})
     s = RenderSettings()
     s.spp = integer(d.get("spp", s.spp), f"{field}.spp", 1, 1 << 24)
     s.max_depth = integer(d.get("max_depth", s.max_depth), f"{field}.max_depth", 1, 1024)
@@ -351,6 +352,7 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
     s.reduce_spectral = choice(d.get("reduce_spectral", s.reduce_spectral), f"{field}.reduce_spectral",
                                ("auto", "exact", "off"))
     s.simplify = choice(d.get("simplify", s.simplify), f"{field}.simplify", ("auto", "off"))
+    s.sampler = choice(d.get("sampler", s.sampler), f"{field}.sampler", SAMPLERS)
     return s
 
 

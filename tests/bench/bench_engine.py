@@ -2,7 +2,7 @@
 
     python tests/bench/bench_engine.py [--scenes a,b] [--res 128] [--spp 32] [--mitsuba-spp 128]
                                        [--ref-spp 2048] [--mitsuba-python PY] [--skip blender,cycles,memory]
-                                       [--out bench.md] [--full]
+                                       [--out bench.md] [--sampler independent|stratified] [--full]
 
 Prints one Markdown table per target (the issue's target next to each measured ratio):
 
@@ -146,6 +146,7 @@ def ours_child(cfg):
         st = copy.copy(base)
         st.spp, st.seed = job["spp"], job.get("seed", 0)
         st.polarisation, st.threads = job.get("polarisation", "auto"), job.get("threads", 0)
+        st.sampler = job.get("sampler", st.sampler)
         return st
 
     # every kernel of every job's transport compiled or loaded before the timed renders
@@ -246,6 +247,8 @@ def measure_scene(scene, args, tmp, mitsuba):
                      **({"save": saves[k]} if k < 2 else {})})
     jobs += [{"name": "full", "spp": args.spp, "polarisation": "full"},
              {"name": "off", "spp": args.spp, "polarisation": "off"}]
+    for job in jobs:            # (the references keep the scene's sampler: any unbiased one will do)
+        job["sampler"] = args.sampler
     ours, peak = run_ours(scene, args.res, jobs)
     runs = range(max(args.scaling_repeats, 2))
     best = min((ours["auto0"], ours["auto1"]), key=lambda r: r["seconds"])
@@ -435,6 +438,8 @@ def main():
     ap.add_argument("--memory-res", default="960x540", help="proxy size for the 1080p memory figure (quick runs)")
     ap.add_argument("--scaling-repeats", type=int, default=3,
                     help="1- and 2-thread renders per scene for the thread scaling, alternated (at least 2)")
+    ap.add_argument("--sampler", choices=("independent", "stratified"), default="independent",
+                    help="our renders' RenderSettings.sampler (peer scenes and the Cycles scenes' Pattern)")
     ap.add_argument("--full", action="store_true", help="README settings; rewrites README.md's tables")
     ap.add_argument("--out", default="")
     ap.add_argument("--child", help=argparse.SUPPRESS)
@@ -479,14 +484,15 @@ def main():
     if "cycles" not in skip:
         out, _, _ = run_measured([py, os.path.join(HERE, "cycles_noise.py"), "--json",
                                   "--res", args.cycles_res or ("320x240" if full else "160x120"),
-                                  "--spp", str(args.cycles_spp or (64 if full else 16)),
+                                  "--spp", str(args.cycles_spp or (64 if full else 16)), "--sampler", args.sampler,
                                   "--scenes", args.cycles_scenes or ("all" if full else
                                                                     ",".join(CYCLES_QUICK))])
         cycles = json_lines(out)
         print(f"cycles: done ({time.perf_counter() - t_start:.0f} s)", file=sys.stderr)
     header = (f"Run {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC on {platform.node() or '?'} "
               f"({os.cpu_count()} cores, {platform.processor() or platform.machine()}): "
-              f"`bench_engine.py {' '.join(sys.argv[1:])}`, {args.res}² peer scenes, ours {args.spp} spp, "
+              f"`bench_engine.py {' '.join(sys.argv[1:])}`, {args.res}² peer scenes, ours {args.spp} spp "
+              f"({args.sampler} sampler), "
               f"Mitsuba {args.mitsuba_spp} spp, {time.perf_counter() - t_start:.0f} s in all.")
     text = tables(rows, blender, memory, cycles, args, header)
     print(text)

@@ -1,7 +1,7 @@
 """Polar against Cycles on the Cycles parity scenes: time and noise at equal samples.
 
     python tests/bench/cycles_noise.py [--scenes all_lights,point_radius] [--res 160x120] [--spp 16]
-                                       [--json]
+                                       [--sampler independent|stratified] [--json]
 
 Builds each scene of tests/test_cycles_parity.py in bpy (diffuse floor and box, one kind of light
 each; ``all_lights`` has 8 point/spot/area/sun lights of 1–1000 W and an emitter; plus
@@ -61,7 +61,7 @@ def render_luminance(scene, path):
     return seconds, read_multilayer(path + ".exr")["Combined"][..., :3] @ REC709
 
 
-def measure(name, width, height, spp, tmp):
+def measure(name, width, height, spp, tmp, sampler="independent"):
     import tests.test_cycles_parity as parity
     scene = parity.base_scene()
     {**parity.SCENES, **BENCH_SCENES}[name]()
@@ -81,6 +81,7 @@ def measure(name, width, height, spp, tmp):
     for engine in ("CYCLES", "POLAR"):
         scene.render.engine = engine
         scene.polar.samples, scene.polar.max_bounces, scene.polar.threads = spp, parity.BOUNCES, 0
+        scene.polar.sampler = sampler.upper()
         render_luminance(scene, os.path.join(tmp, f"{name}_{engine}_warm"))   # kernels, caches
         times, images = [], []
         for seed in (0, 1):
@@ -92,7 +93,7 @@ def measure(name, width, height, spp, tmp):
         out[engine] = (min(times), images)
     lit = (out["CYCLES"][1][0] + out["CYCLES"][1][1]) / 2
     lit = lit > 0.02 * lit.max()
-    res = {"scene": name, "spp": spp, "width": width, "height": height}
+    res = {"scene": name, "spp": spp, "width": width, "height": height, "sampler": sampler}
     for engine, (t, (a, b)) in out.items():
         res[engine] = {"seconds": t, "variance": float(np.mean(((a - b)[lit]) ** 2) / 2),
                        "mean": float(np.mean(((a + b) / 2)[lit]))}
@@ -105,6 +106,8 @@ def main():
                     help="names from tests/test_cycles_parity.py, eight_points_world, or 'all'")
     ap.add_argument("--res", default="160x120")
     ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--sampler", choices=("independent", "stratified"), default="independent",
+                    help="Polar's sampling pattern (Render Properties ▸ Sampling ▸ Pattern)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
     from tests.blender_support import load_addon
@@ -114,7 +117,7 @@ def main():
     names = list(parity.SCENES) + list(BENCH_SCENES) if args.scenes == "all" else args.scenes.split(",")
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
-            r = measure(name, width, height, args.spp, tmp)
+            r = measure(name, width, height, args.spp, tmp, args.sampler)
             if args.json:
                 print(json.dumps(r), flush=True)
             else:

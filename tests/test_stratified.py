@@ -1,0 +1,302 @@
+"""RenderSettings.sampler "stratified": same expectation as the independent sampler, an honest
+standard error, and the determinism of every other render (threads, batches, resumption)."""
+
+import copy
+import math
+
+import numpy as np
+import pytest
+
+from engine.errors import SceneError
+from engine.materials.lambert import Lambert
+from engine.output.exr import read_stokes_exr
+from engine.render.film import Film
+from engine.render.renderer import Renderer
+from engine.scene.description import Camera, Mesh, RenderSettings, Scene
+from engine.scene.loader import parse_settings
+from engine.scene.shapes import quad
+from engine.spectral import ConstantSpectrum, RGBIlluminantSpectrum
+
+RHO = 0.6
+H = 2.0
+WIDTH = 4.0                 # the orthographic camera sees x, y ∈ [−2, 2]
+SEEDS = 4
+
+
+def white(scale):
+    return RGBIlluminantSpectrum([1.0, 1.0, 1.0], scale)
+
+
+def plane_scene(meshes, res, spp, max_depth=2):
+    """A Lambertian floor (albedo RHO) at z = 0 seen straight from above by an orthographic camera."""
+    floor = quad(*[np.array(p, float) for p in ([-10, -10, 0], [10, -10, 0], [10, 10, 0], [-10, 10, 0])])
+    cam = Camera(origin=np.array([0.0, 0.0, 5.0]), target=np.zeros(3), up=np.array([0.0, 1.0, 0.0]),
+                 width=res, height=res, projection="orthographic", ortho_width=WIDTH)
+    return Scene(camera=cam, meshes=[Mesh("floor", floor.vertices, floor.faces, ["grey"], np.zeros(2, np.int32)),
+                                     *meshes],
+                 materials={"grey": Lambert(ConstantSpectrum(RHO)), "black": Lambert(ConstantSpectrum(0.0))},
+                 lights=[], settings=RenderSettings(spp=spp, spectral="mono", max_depth=max_depth))
+
+
+#: a tilted square (corners counter-clockwise seen from +z) at z = 1 facing the camera: its edges
+#: cross pixels at every angle and offset
+DIAMOND = [(0.13, -1.23), (1.21, 0.05), (-0.03, 1.19), (-1.17, -0.11)]
+
+
+def emitter_scene(L, res, spp):
+    up = quad(*[np.array([x, y, 1.0]) for x, y in DIAMOND])
+    return plane_scene([Mesh("lamp", up.vertices, up.faces, ["black"], np.zeros(2, np.int32), emission=white(L))],
+                       res, spp, max_depth=1)
+
+
+def lamp_scene(L, a, res, spp):
+    """A square lamp of side a at height H facing down onto the floor."""
+    q = quad(*[np.array(p, float) for p in ([-a / 2, a / 2, H], [a / 2, a / 2, H], [a / 2, -a / 2, H],
+                                             [-a / 2, -a / 2, H])])
+    return plane_scene([Mesh("lamp", q.vertices, q.faces, ["black"], np.zeros(2, np.int32), emission=white(L))],
+                       res, spp)
+
+
+def coverage(res, polygon, n=200):
+    """Fraction of each pixel (res, res) (row 0 at the top) inside the convex polygon, by an n × n
+    grid of points per pixel (error ≲ 1/n per edge crossing)."""
+    c = (np.arange(res * n) + 0.5) / (res * n) * WIDTH - WIDTH / 2
+    x, y = c[None, :], -c[:, None]
+    inside = np.ones((res * n, res * n), bool)
+    P = np.array(polygon)
+    for (x0, y0), (x1, y1) in zip(P, np.roll(P, -1, axis=0)):
+        inside &= (x1 - x0) * (y - y0) - (y1 - y0) * (x - x0) >= 0
+    return inside.reshape(res, n, res, n).mean(axis=(1, 3))
+
+
+def seed_renders(scene, sampler, seeds=SEEDS, spp=None):
+    """(S0 images (seeds, H, W), their standard errors) of renders with seeds 0…seeds−1."""
+    renderer, out, errors = Renderer(scene), [], []
+    for seed in range(seeds):
+        st = copy.copy(scene.settings)
+        st.seed, st.sampler = seed, sampler
+        if spp is not None:
+            st.spp = spp
+        r = renderer.render(st)
+        out.append(r.stokes_luminance()[0])
+        errors.append(r.film.stderr_luminance()[0])
+    return np.array(out), np.array(errors)
+
+
+# ------------------------------------------------------------------------------------------ settings
+
+def test_the_sampler_setting_is_validated_naming_the_field_and_the_choices():
+    assert RenderSettings().sampler == "independent"
+    assert parse_settings({"sampler": "stratified"}).sampler == "stratified"
+    with pytest.raises(SceneError) as e:
+        parse_settings({"sampler": "sobol"})
+    assert "render.sampler" in str(e.value) and "'independent', 'stratified'" in str(e.value)
+
+
+# ---------------------------------------------------------------------------------------- unbiasedness
+
+def test_a_camera_visible_emitter_keeps_its_exact_pixel_coverage():
+    """Emitters only (max_depth 1): a pixel's value is L × the share of it the tilted square covers.
+    Mean over 8 seeds of stratified renders = that over the edge pixels within 4 standard errors (+ the
+    coverage grid's error), and per pixel for ≥ 90 % of them (a corner's sliver is a rare event that
+    16 samples × 8 seeds do not see fairly); the stratified jitter leaves ≥ 3× less variance there."""
+    L, res, seeds = 2.0, 16, 8
+    scene = emitter_scene(L, res, 16)
+    expected = L * coverage(res, DIAMOND)
+    strat, se = seed_renders(scene, "stratified", seeds)
+    indep, _ = seed_renders(scene, "independent", seeds)
+    mean, se_mean = strat.mean(0), np.sqrt((se ** 2).sum(0)) / seeds
+    edge = (expected > 0.02 * L) & (expected < 0.98 * L)
+    assert edge.sum() > 20
+    assert np.mean(np.abs(mean - expected)[edge] <= 4 * se_mean[edge] + 0.01 * L) >= 0.9
+    assert abs((mean - expected)[edge].sum()) < 4 * np.sqrt((se_mean[edge] ** 2).sum()) + 0.005 * L * edge.sum()
+    # interior pixels are exact; the edges' variance falls
+    assert np.all(strat[:, expected == L] == L) and np.all(strat[:, expected == 0] == 0)
+    assert indep.var(0, ddof=1)[edge].mean() > 3 * strat.var(0, ddof=1)[edge].mean()
+
+
+def test_an_area_lamp_on_a_floor_keeps_the_closed_form_and_the_independent_mean():
+    """A small square lamp over a Lambertian floor: stratified mean over seeds = the closed form
+    (ρ/π · L·a² · cos²/r², finite-size error ~ (a/H)²) per pixel within 4σ + 0.5 % and over the image,
+    and = the independent sampler's mean within noise."""
+    L, a, res = 500.0, 0.1, 12
+    scene = lamp_scene(L, a, res, 16)
+    c = (np.arange(res) + 0.5) / res * WIDTH - WIDTH / 2
+    r2 = c[None, :] ** 2 + c[:, None] ** 2 + H * H
+    expected = RHO / math.pi * L * a * a * (H * H / r2) / r2
+    strat, se = seed_renders(scene, "stratified")
+    indep, se_i = seed_renders(scene, "independent")
+    mean, se_mean = strat.mean(0), np.sqrt((se ** 2).sum(0)) / SEEDS
+    assert np.mean(np.abs(mean - expected) < 4 * se_mean + 0.005 * expected) > 0.99
+    total_se = np.sqrt((se_mean ** 2).sum())
+    assert abs((mean - expected).sum()) < 4 * total_se + 0.005 * expected.sum()
+    diff_se = np.sqrt(total_se ** 2 + ((se_i ** 2).sum(0) / SEEDS ** 2).sum())
+    assert abs((mean - indep.mean(0)).sum()) < 4 * diff_se
+
+
+# ----------------------------------------------------------------------------------- standard error
+
+def test_the_stratified_standard_error_is_honest_against_a_reference():
+    """A lamp-lit floor with a camera-visible emitter in front: z = (pixel − reference) / √(se² + se_ref²)
+    over the pixels of 4 stratified 16-spp renders has rms ≈ 1 (the error it reports is the error it
+    has), where the i.i.d. formula on the same samples overestimates it (rms(z) < 0.85)."""
+    res = 16
+    lamp = lamp_scene(40.0, 1.0, res, 16).meshes[1]
+    up = quad(*[np.array([x * 0.6, y * 0.6, 1.0]) for x, y in DIAMOND])
+    glow = Mesh("glow", up.vertices, up.faces, ["black"], np.zeros(2, np.int32), emission=white(1.5))
+    scene = plane_scene([lamp, glow], res, 16)
+    ref_st = copy.copy(scene.settings)
+    ref_st.spp, ref_st.seed = 1024, 99
+    ref = Renderer(scene).render(ref_st)
+    y_ref, se_ref = ref.stokes_luminance()[0], ref.film.stderr_luminance()[0]
+    renderer, z, z_iid = Renderer(scene), [], []
+    for seed in range(SEEDS):
+        st = copy.copy(scene.settings)
+        st.seed, st.sampler = seed, "stratified"
+        r = renderer.render(st)
+        y, se = r.stokes_luminance()[0], r.film.stderr_luminance()[0]
+        iid = copy.copy(r.film)
+        iid.half_y = None
+        se_iid = iid.stderr_luminance()[0]
+        ok = se_iid > 0
+        z.append((y - y_ref)[ok] / np.sqrt(se ** 2 + se_ref ** 2)[ok])
+        z_iid.append((y - y_ref)[ok] / np.sqrt(se_iid ** 2 + se_ref ** 2)[ok])
+    rms, rms_iid = np.sqrt(np.mean(np.concatenate(z) ** 2)), np.sqrt(np.mean(np.concatenate(z_iid) ** 2))
+    print(f"rms(z) {rms:.3f}, i.i.d. formula {rms_iid:.3f}")
+    assert 0.85 < rms < 1.2, rms
+    assert rms_iid < 0.85, rms_iid
+
+
+def test_the_variance_ratio_is_one_for_independent_halves_and_local():
+    """stratified_variance_ratio of i.i.d. samples is ≈ 1 (the half-split and the i.i.d. estimates
+    agree in expectation), and it follows a pixel region whose halves agree exactly (ratio 0)."""
+    rng = np.random.default_rng(3)
+    W, Hh, n = 20, 10, 16
+    film = Film(W, Hh)
+    pixel = np.tile(np.arange(W * Hh), n)
+    sample = np.repeat(np.arange(n), W * Hh)
+    values = np.zeros((4, 3, pixel.size))
+    values[0] = rng.exponential(1.0, pixel.size)[None, :]
+    from engine.render.film import SampleSums
+    film.add(SampleSums.of(pixel, values, sample=sample))
+    iid = copy.copy(film)
+    iid.half_y = None
+    ratio = (film.stderr_luminance()[0] / iid.stderr_luminance()[0]) ** 2
+    assert abs(ratio.mean() - 1) < 0.1
+    # the right half's pixels repeat each even sample in the next odd one: A = B there
+    right = (np.arange(W * Hh) % W) >= W // 2
+    v = values.copy()
+    twin = right[pixel] & (sample % 2 == 1)
+    v[:, :, twin] = values[:, :, np.flatnonzero(twin) - W * Hh]
+    film = Film(W, Hh)
+    film.add(SampleSums.of(pixel, v, sample=sample))
+    se = film.stderr_luminance()[0]
+    assert np.all(se[:, W // 2 + 2:] == 0) and np.all(se[:, :W // 2 - 2] > 0)
+
+
+# -------------------------------------------------------------------------------------- determinism
+
+@pytest.fixture(scope="module")
+def lamp_reference():
+    scene = lamp_scene(40.0, 1.0, 16, 8)
+    scene.settings.sampler = "stratified"
+    return scene, Renderer(scene).render()
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_stratified_images_do_not_depend_on_threads(lamp_reference, threads):
+    scene, ref = lamp_reference
+    st = copy.copy(scene.settings)
+    st.threads = threads
+    r = Renderer(scene).render(st)
+    assert np.array_equal(r.film.sums, ref.film.sums) and np.array_equal(r.film.half_y, ref.film.half_y)
+    assert np.array_equal(r.film.stderr_luminance(), ref.film.stderr_luminance())
+
+
+def test_stratified_images_do_not_depend_on_the_batch_size(lamp_reference):
+    """Smaller batches split the sample passes into more work units: the same numbers per sample,
+    sums added in another grouping (equal within float rounding)."""
+    scene, ref = lamp_reference
+    st = copy.copy(scene.settings)
+    st.batch_rays = 1024
+    r = Renderer(scene).render(st)
+    np.testing.assert_allclose(r.film.sums, ref.film.sums, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(r.film.half_y, ref.film.half_y, rtol=1e-12, atol=1e-12)
+
+
+def test_a_resumed_stratified_render_equals_the_uninterrupted_one(lamp_reference):
+    """4 samples, then resumed to 8 from the film: the same sums (up to the addition order of a
+    batch split, which is none here: passes 0–3 then 4–7) and half sums as one 8-sample render."""
+    scene, ref = lamp_reference
+    st = copy.copy(scene.settings)
+    st.spp = 4
+    renderer = Renderer(scene)
+    first = renderer.render(st).film
+    st.spp = 8
+    r = renderer.render(st, resume=first)
+    np.testing.assert_allclose(r.film.sums, ref.film.sums, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(r.film.half_y, ref.film.half_y, rtol=1e-12, atol=1e-12)
+
+
+def test_cli_writes_the_sampler_and_resume_refuses_another(tmp_path, capsys):
+    from engine import cli
+    from tests.test_robustness_cli import small_demo
+    scene = small_demo(tmp_path, spp=4)
+    out = tmp_path / "a.exr"
+    assert cli.main(["render", scene, "-o", str(out), "--sampler", "stratified", "--stderr", "--no-previews",
+                     "--quiet"]) == 0
+    stokes, channels, header = read_stokes_exr(str(out))
+    assert header["polar.sampler"] == "stratified" and "S0.Y.stderr" in channels
+    plain = tmp_path / "b.exr"
+    assert cli.main(["render", scene, "-o", str(plain), "--no-previews", "--quiet"]) == 0
+    assert "polar.sampler" not in read_stokes_exr(str(plain))[2]
+    capsys.readouterr()
+    status = cli.main(["render", scene, "-o", str(tmp_path / "c.exr"), "--resume", str(out), "--spp", "6",
+                       "--no-previews", "--quiet"])
+    assert status == 2 and "sampler" in capsys.readouterr().err
+    assert cli.main(["render", scene, "-o", str(tmp_path / "d.exr"), "--resume", str(out), "--spp", "6",
+                     "--sampler", "stratified", "--no-previews", "--quiet"]) == 0
+
+
+def test_a_resumed_stratified_exr_keeps_the_stratified_standard_error(tmp_path, capsys):
+    """--stderr of a stratified render writes the even samples' means (S*.Y.even) and names the
+    estimate (polar.stderr); resuming from that file gives the uninterrupted render's error."""
+    from engine import cli
+    from tests.test_robustness_cli import small_demo
+    scene = small_demo(tmp_path, spp=4)
+    opts = ["--sampler", "stratified", "--stderr", "--no-previews", "--quiet"]
+    part, whole, resumed = (str(tmp_path / f"{n}.exr") for n in ("part", "whole", "resumed"))
+    assert cli.main(["render", scene, "-o", part, *opts]) == 0
+    assert cli.main(["render", scene, "-o", whole, "--spp", "8", *opts]) == 0
+    assert cli.main(["render", scene, "-o", resumed, "--spp", "8", "--resume", part, *opts]) == 0
+    _, a, header = read_stokes_exr(whole)
+    _, b, _ = read_stokes_exr(resumed)
+    assert header["polar.stderr"].startswith("stratified") and "S3.Y.even" in a
+    for i in range(4):
+        np.testing.assert_allclose(b[f"S{i}.Y.stderr"], a[f"S{i}.Y.stderr"], rtol=1e-3, atol=1e-7)
+
+
+def test_stratified_adaptive_sampling_is_deterministic_and_reports_the_stratified_error():
+    """Adaptive sampling with stratified numbers: its even/odd half-buffers are the film's half sums
+    (so the reported standard error is the stratified one), and the counts and image do not depend
+    on threads or batch size."""
+    from engine.render.adaptive import AdaptiveSettings
+    from engine.scene.loader import load_scene
+    from tests.conftest import shared_path
+    scene = load_scene(shared_path("peers", "scenes", "fresnel_sphere.json"))
+    scene.camera.width = scene.camera.height = 24
+    scene.settings.spp, scene.settings.sampler = 32, "stratified"
+    ad = AdaptiveSettings(threshold=0.015, quantity="s0", min_spp=8)
+    renderer = Renderer(scene)
+    runs = []
+    for threads, batch in ((1, 1 << 17), (2, 700)):
+        st = copy.copy(scene.settings)
+        st.threads, st.batch_rays = threads, batch
+        runs.append(renderer.render(st, adaptive=ad))
+    a, b = runs
+    assert np.array_equal(a.film.count, b.film.count) and len(np.unique(a.film.count)) > 1
+    assert np.array_equal(a.film.sums, b.film.sums)
+    assert a.film.half_y is a.halves.sums
+    iid = copy.copy(a.film)
+    iid.half_y = None
+    assert np.mean(a.film.stderr_luminance()[0]) < np.mean(iid.stderr_luminance()[0])
