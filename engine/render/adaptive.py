@@ -20,14 +20,15 @@ all pixels of a tile always have the same sample count.
 
 **Allocation (which tiles go on).**  Rendering every tile *to* the threshold gives each tile
 n ∝ σ² samples (σ: its per-sample standard deviation), and that gains exactly nothing over uniform
-sampling at equal cost (engine.render.estimate).  A sample of tile t costs c_t rays (camera,
-bounce and shadow rays: the integrator counts them per path, a deterministic function of the seed,
-summed per pixel in :attr:`HalfBuffers.rays`); a path through glass traces ~2× the rays of one that
-ends on a diffuse floor.  The counts that minimise the image's mean squared error mean(σ²/n) at a
+sampling at equal cost (engine.render.estimate).  A sample of tile t costs c_t (the integrator counts
+1 per path and 4 per surface hit and per light sample, :data:`engine.render.integrator.PATH_COST`:
+the shaded vertices are what 1-thread CPU time follows; a deterministic function of the seed,
+summed per pixel in :attr:`HalfBuffers.cost`); a path through glass costs ~2.5× one that ends on a
+diffuse floor.  The counts that minimise the image's mean squared error mean(σ²/n) at a
 given cost Σ c·n are n ∝ σ/√c (Lagrange: σ²/n² = λ·c for every tile).  So a tile goes on only while
 (1) its error e is above the threshold T (the issue's rule: samples go only where the error is
 above T; every tile below T stops) **and** (2) σ̂/(n·w) > μ, with σ̂ = e·√n and the cost weight
-w = √(c/c̄) (c: the tile's rays per sample so far, c̄: the first pass's over the image,
+w = √(c/c̄) (c: the tile's cost per sample so far, c̄: the first pass's over the image,
 :func:`cost_weight`), i.e. e is above its share √(μ·w·σ̂) of the error.  A tile stops at
 n = σ/(μ·w) ∝ σ/√c samples, or at the threshold (n = σ²/T²) if that comes first: a dear or noisy
 tile stops above T because bringing it lower costs more than it buys elsewhere.  μ = T²/mean(σ·w)
@@ -37,15 +38,22 @@ once, from the first pass (``min_spp`` everywhere).  With equal costs (w = 1) th
 ½|Y_A − Y_B| over the tile ÷ the image's first-pass mean luminance (:func:`allocation_noise`) — so
 that the image's luminance error is what is minimised (a relative error alone samples dark tiles as
 much as bright ones); the other quantities use their tile error.  The mean of σ·w is over the
-pixels where the quantity is defined (lit pixels; DoLP > 0.05 for ``aolp``).  Ray counts make the
-rule deterministic (seconds would not be) while following the cost: per tile, seconds per sample
-and rays per sample of the 16-spp pilot correlate (engine.render.estimate uses both).
+pixels where the quantity is defined (lit pixels; DoLP > 0.05 for ``aolp``).  Counts make the
+rule deterministic (seconds would not be) while following the cost.
+
+**Rare paths.** For ``dolp``, ``aolp``, ``docp`` and ``stokes`` a tile's σ is at least a floor from
+its neighbourhood: σ_floor = ½ × the RMS first-pass σ of its 3×3 tiles (:func:`neighbourhood_floor`),
+and its error at n samples at least σ_floor/√n, in both conditions and in μ.  A rare bright path
+(glass seen in a mirror floor) can be missing from a tile's first pass, which would stop it at
+``min_spp`` for good, while the neighbouring tiles see such paths.  The floor never holds back a
+tile whose whole neighbourhood is below 2T at ``min_spp`` (σ_floor/√n ≤ ½ max e of the
+neighbours), so an image that converges at ``min_spp`` still stops there.
 
 **Schedule.** Every pixel first gets ``min_spp`` samples; then tiles that go on get more,
 checkpoint by checkpoint (:func:`checkpoints`: about +25 % per step, even steps so both halves stay
 equal), until no tile goes on, ``spp`` is reached or the time limit passes.  A tile's next step
-depends only on its own samples and rays, and on μ and c̄, fixed after the first pass and kept with
-the half-buffers (:class:`HalfBuffers` ``first`` and ``rays``, stored in the EXR), so without a time
+depends only on its own samples and cost, and on μ, c̄ and its σ floor, fixed after the first pass and kept
+with the half-buffers (:class:`HalfBuffers` ``first`` and ``cost``, stored in the EXR), so without a time
 limit the counts are a deterministic function of the seed — however the work is split, and also across an interrupted
 render and its resumption, and a tighter threshold on resumption continues the looser one's path
 (μ falls with T).  Samples are added to the film one sample pass at a time in ascending sample order
@@ -74,6 +82,18 @@ UNITS = {"s0": "relative", "dolp": "absolute", "aolp": "degrees", "docp": "absol
 TILE = 4
 #: DoLP below which the AoLP is undefined and its error does not hold a pixel back.
 AOLP_MIN_DOLP = 0.05
+#: A tile's σ is taken as at least this fraction of the RMS first-pass σ of its 3×3 tile neighbourhood
+#: (:func:`neighbourhood_floor`), for the quantities in :data:`FLOORED`.  Rare bright paths (glass
+#: seen in a mirror-like floor) can be missing from a tile's 16-spp first pass while its neighbours
+#: see them: on glass_sphere 64² (dolp ≤ 0.01) two such tiles had σ̂ = 0.01 against 0.7 in Mitsuba's
+#: 2 × 8192 spp, stopped at 16 spp and held 53 % of the adaptive render's DoLP MSE.  Replaying the rule
+#: on the measured σ (16-spp σ̂, reference σ, cost per tile): the MSE × cost gain over uniform went
+#: 0.96 → 1.67 on glass_sphere, 2.34 → 2.50 on fresnel_sphere_au (dolp ≤ 0.005), 2.52 → 2.49 on
+#: the demo (dolp ≤ 0.01); 0.25 × the neighbourhood's max: 1.71 / 2.28 / 2.44, 8×8 pooling 1.54 / 2.13 / 2.02.
+NEIGHBOURHOOD_FLOOR = 0.5
+#: Quantities whose σ is floored by the neighbourhood (ratios of Stokes components, which a rare
+#: bright path moves most; ``s0`` is measured in absolute luminance, where a rare path shows).
+FLOORED = ("dolp", "aolp", "docp", "stokes")
 #: Fewest paths per work unit when a round is split for the workers (below, per-batch overhead dominates).
 MIN_UNIT_PATHS = 16384
 #: Work units a round is split into per worker.  Fewer, larger units trace faster per path (the
@@ -243,84 +263,114 @@ def allocation_level(sigma: np.ndarray, threshold: float, weight: np.ndarray | N
     return float(threshold) ** 2 / mean if mean > 0 else math.inf
 
 
-def rays_per_sample(rays: np.ndarray, counts: np.ndarray, pixels: np.ndarray) -> float:
-    """c̄: the rays per sample of ``pixels`` (0 where nothing was counted: files of older versions)."""
+def cost_per_sample(cost: np.ndarray, counts: np.ndarray, pixels: np.ndarray) -> float:
+    """c̄: the cost per sample of ``pixels`` (0 where nothing was counted: files of older versions)."""
     n = int(np.sum(counts[pixels]))
-    return float(np.sum(rays[pixels])) / n if n > 0 else 0.0
+    return float(np.sum(cost[pixels])) / n if n > 0 else 0.0
 
 
-def cost_weight(rays: np.ndarray, counts: np.ndarray, tiles: np.ndarray, pixels: np.ndarray,
+def cost_weight(cost: np.ndarray, counts: np.ndarray, tiles: np.ndarray, pixels: np.ndarray,
                 mean_cost: float) -> np.ndarray:
-    """w = √(c/c̄) of each pixel's tile over ``pixels``: c the tile's rays per sample (Σ rays ÷ Σ
-    samples over its pixels among ``pixels``), c̄ = ``mean_cost`` (:func:`rays_per_sample` of the
-    first pass).  1 where c̄ = 0 (no rays counted) or the tile has no sample yet."""
+    """w = √(c/c̄) of each pixel's tile over ``pixels``: c the tile's cost per sample (Σ cost ÷ Σ
+    samples over its pixels among ``pixels``), c̄ = ``mean_cost`` (:func:`cost_per_sample` of the
+    first pass).  1 where c̄ = 0 (no cost counted) or the tile has no sample yet."""
     if not mean_cost > 0:
         return np.ones(pixels.size)
     t = tiles[pixels]
     n_tiles = int(tiles.max()) + 1
-    r = np.bincount(t, weights=rays[pixels].astype(np.float64), minlength=n_tiles)
+    r = np.bincount(t, weights=cost[pixels].astype(np.float64), minlength=n_tiles)
     n = np.bincount(t, weights=counts[pixels].astype(np.float64), minlength=n_tiles)
     c = _ratio(r, n)[t]
     return np.where(c > 0, np.sqrt(c / mean_cost), 1.0)
 
 
+def neighbourhood_floor(sigma: np.ndarray, tiles: np.ndarray, pixels: np.ndarray, width: int) -> np.ndarray:
+    """σ floor of each pixel's tile over ``pixels``: :data:`NEIGHBOURHOOD_FLOOR` × the RMS of the
+    first-pass σ over the tile's 3×3 neighbourhood of tiles (itself included; tiles outside the
+    image or the window left out).  ``sigma`` (over ``pixels``): the σ of each pixel's tile."""
+    ntx = -(-width // TILE)
+    t = tiles[pixels]
+    n_tiles = int(tiles.max()) + 1
+    nty = -(-n_tiles // ntx)
+    s2 = np.zeros(n_tiles)
+    s2[t] = np.where(np.isfinite(sigma), sigma, 0.0) ** 2
+    present = np.zeros(n_tiles, bool)
+    present[t] = True
+    s2, present = s2.reshape(nty, ntx), present.reshape(nty, ntx)
+    total, count = np.zeros((nty + 2, ntx + 2)), np.zeros((nty + 2, ntx + 2))
+    for dy in range(3):
+        for dx in range(3):
+            total[dy:dy + nty, dx:dx + ntx] += s2
+            count[dy:dy + nty, dx:dx + ntx] += present
+    rms = np.sqrt(_ratio(total[1:-1, 1:-1], count[1:-1, 1:-1])).ravel()
+    return NEIGHBOURHOOD_FLOOR * rms[t]
+
+
 @dataclass
 class Allocation:
     """The allocation of a first pass: level μ, the image's mean luminance ``mean_y`` (units of the
-    ``s0`` error, :func:`allocation_noise`), its rays per sample ``mean_cost`` (c̄), and per pixel
-    the tile's per-sample σ and cost weight w = √(c/c̄)."""
+    ``s0`` error, :func:`allocation_noise`), its cost per sample ``mean_cost`` (c̄), and per pixel
+    the tile's per-sample σ (at least ``floor``), cost weight w = √(c/c̄) and σ floor from its
+    neighbourhood (:func:`neighbourhood_floor`; 0 for ``s0``)."""
     level: float
     mean_y: float
     mean_cost: float
     sigma: np.ndarray
     weight: np.ndarray
+    floor: np.ndarray
 
 
 def allocation_from(sums: np.ndarray, counts: np.ndarray, quantity: str, threshold: float, tiles: np.ndarray,
-                    pixels: np.ndarray, rays: np.ndarray | None = None) -> Allocation:
-    """The :class:`Allocation` from half-buffer ``sums`` (2, 4, n), ``counts`` (n,) and ``rays`` (n,)
-    (None: not counted, every weight 1) of a first pass, over ``pixels``; ``threshold`` 0 gives
-    μ = 0 (every noisy tile to ``spp``), ∞ gives μ = ∞ (every tile stops at once)."""
+                    pixels: np.ndarray, cost: np.ndarray | None = None, width: int | None = None) -> Allocation:
+    """The :class:`Allocation` from half-buffer ``sums`` (2, 4, n), ``counts`` (n,) and ``cost`` (n,)
+    (None: not counted, every weight 1) of a first pass, over ``pixels`` of an image ``width`` pixels
+    wide (default: tiles in one row); ``threshold`` 0 gives μ = 0 (every noisy tile to ``spp``), ∞
+    gives μ = ∞ (every tile stops at once)."""
     y = _ratio(sums[0, 0] + sums[1, 0], counts)
     mean_y = float(np.mean(y[pixels])) if pixels.size else 0.0
     e, counted = allocation_noise(quantity, sums, counts, tiles, pixels, mean_y)
     sigma = e * np.sqrt(counts[pixels])
-    mean_cost = 0.0 if rays is None else rays_per_sample(rays, counts, pixels)
-    weight = np.ones(pixels.size) if rays is None else cost_weight(rays, counts, tiles, pixels, mean_cost)
+    if quantity in FLOORED and pixels.size:
+        floor = neighbourhood_floor(sigma, tiles, pixels, TILE * (int(tiles.max()) + 1) if width is None else width)
+        sigma = np.maximum(sigma, floor)
+    else:
+        floor = np.zeros(pixels.size)
+    mean_cost = 0.0 if cost is None else cost_per_sample(cost, counts, pixels)
+    weight = np.ones(pixels.size) if cost is None else cost_weight(cost, counts, tiles, pixels, mean_cost)
     if not threshold > 0:
         mu = 0.0
     elif math.isinf(threshold):
         mu = math.inf
     else:
         mu = allocation_level(sigma[counted], threshold, weight[counted])
-    return Allocation(mu, mean_y, mean_cost, sigma, weight)
+    return Allocation(mu, mean_y, mean_cost, sigma, weight, floor)
 
 
 def first_pass_allocation(halves: HalfBuffers, quantity: str, threshold: float, tiles: np.ndarray,
-                          pixels: np.ndarray) -> Allocation:
+                          pixels: np.ndarray, width: int | None = None) -> Allocation:
     """The :class:`Allocation` of the half-buffers' first pass (:attr:`HalfBuffers.first`)."""
-    sums, counts, *rays = halves.first
-    return allocation_from(sums, counts, quantity, threshold, tiles, pixels, rays[0] if rays else None)
+    sums, counts, *cost = halves.first
+    return allocation_from(sums, counts, quantity, threshold, tiles, pixels, cost[0] if cost else None, width)
 
 
 # ------------------------------------------------------------------------------------ accumulation
 
 class HalfBuffers:
     """Luminance Stokes sums of the even (A) and odd (B) sample passes per pixel: ``sums`` (2, 4, n),
-    and the rays the pixel's samples traced: ``rays`` (n,) int64 (engine.render.integrator's per-path
-    count of segments and light samples: the deterministic cost the allocation weighs by).
+    and the cost of the pixel's samples: ``cost`` (n,) int64 (engine.render.integrator's per-path
+    count, :data:`~engine.render.integrator.PATH_COST`: the deterministic cost the allocation weighs by).
 
-    ``first``: (sums (2, 4, n), counts (n,), rays (n,)) as they were when every pixel of the window
+    ``first``: (sums (2, 4, n), counts (n,), cost (n,)) as they were when every pixel of the window
     had its ``min_spp`` samples (None before): the allocation level μ is computed from it, so that it
     is the same after an interruption and for any threshold given on resumption."""
 
     def __init__(self, n: int):
         self.sums = np.zeros((2, 4, n))
-        self.rays = np.zeros(n, np.int64)
+        self.cost = np.zeros(n, np.int64)
         self.first = None
 
     def keep_first(self, counts: np.ndarray) -> None:
-        self.first = (self.sums.copy(), np.asarray(counts, np.int64).copy(), self.rays.copy())
+        self.first = (self.sums.copy(), np.asarray(counts, np.int64).copy(), self.cost.copy())
 
     def means(self, counts: np.ndarray):
         """(mean_A, mean_B), each (4, n); samples 0…c−1 give A ⌈c/2⌉ and B ⌊c/2⌋ of them."""
@@ -330,13 +380,13 @@ class HalfBuffers:
 
 def add_in_sample_order(film, halves: HalfBuffers, pixel: np.ndarray, sample: np.ndarray,
                         values: np.ndarray, alpha: np.ndarray | None = None,
-                        path_rays: np.ndarray | None = None) -> None:
+                        path_cost: np.ndarray | None = None) -> None:
     """Add samples sorted by sample index, one sample pass at a time (each pixel at most once per
     pass), so every pixel's sums are built in ascending sample order whatever the batching.
     ``alpha`` (per sample; None = 1) is the camera-ray coverage of a transparent film or holdout;
-    ``path_rays`` (per sample, integers; None: not counted) the rays each sample traced."""
-    if path_rays is not None:       # integer sums: exact in any order
-        np.add.at(halves.rays, pixel, np.asarray(path_rays, np.int64))
+    ``path_cost`` (per sample, integers; None: not counted) each sample's cost."""
+    if path_cost is not None:       # integer sums: exact in any order
+        np.add.at(halves.cost, pixel, np.asarray(path_cost, np.int64))
     if alpha is not None and film.alpha_sums is None:
         film.alpha_sums = film.count.astype(np.float64)   # every earlier sample had alpha 1
     y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, values)
@@ -473,7 +523,7 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
     is called once every pixel has ``min_spp`` samples (for the prediction check).  A round is
     split into units by :func:`round_unit_paths` (late rounds hold few tiles: one unit, or a small
     last one, would leave all but one worker idle); how units are cut never changes the result.
-    ``unit_times``: a list that receives (pixels, paths, seconds, rays) of every unit of the first pass,
+    ``unit_times``: a list that receives (pixels, paths, seconds, cost) of every unit of the first pass,
     cut into small pixel chunks for the purpose (where the samples cost more: engine.render.estimate).
     """
     W, H = film.width, film.height
@@ -507,14 +557,14 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
         started = time.perf_counter()         # a measurement of this machine, not the time limit's clock
         traced = tracer.trace(pixel, sample, abort=abort)
         if traced is not None and timing["on"]:
-            rays = traced[1].get("path_rays")
+            cost = traced[1].get("path_cost")
             unit_times.append((unit[0], pixel.size, time.perf_counter() - started,
-                               None if rays is None else int(np.sum(rays))))
+                               None if cost is None else int(np.sum(cost))))
         return None if traced is None else (pixel, sample, *traced)
 
     def add_result(result):
         pixel, sample, values, s = result
-        add_in_sample_order(film, halves, pixel, sample, values, s.get("alpha"), s.get("path_rays"))
+        add_in_sample_order(film, halves, pixel, sample, values, s.get("alpha"), s.get("path_cost"))
         if "denoise" in s:
             film.add_denoise_data(pixel, *s["denoise"])
         for k in ("rays", "shadow_rays", "nonfinite"):
@@ -536,15 +586,19 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
             if halves.first is None:        # every pixel has exactly min_spp samples now (or a resumed state)
                 halves.keep_first(film.count)
             if level is None:
-                level = first_pass_allocation(halves, adaptive.quantity, adaptive.threshold, tiles, pixels)
+                level = first_pass_allocation(halves, adaptive.quantity, adaptive.threshold, tiles, pixels, W)
                 stats["allocation_level"] = level.level
-                stats["rays_per_sample"] = level.mean_cost
+                stats["cost_per_sample"] = level.mean_cost
             e, _ = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level.mean_y)
-            w = cost_weight(halves.rays, film.count, tiles, pixels, level.mean_cost)
+            w = cost_weight(halves.cost, film.count, tiles, pixels, level.mean_cost)
             _, _, noise = film_noise(film, halves, adaptive.quantity, pixels)
-            # a tile goes on while its error is above T and above its share of the error at equal
-            # cost, σ̂/(n·w) > μ (σ̂ = e·√n, w = √(c/c̄))
-            noise = np.where(e / (np.sqrt(counts) * w) > level.level, noise, -np.inf)
+            # the tile's error is at least its neighbourhood's floor (σ_floor/√n: rare paths its
+            # first pass missed); a tile goes on while that error is above T and above its share of
+            # the error at equal cost, σ̂/(n·w) > μ (σ̂ = max(e·√n, σ_floor), w = √(c/c̄))
+            root_n = np.sqrt(counts)
+            noise = np.maximum(noise, level.floor / root_n)
+            e = np.maximum(e, level.floor / root_n)
+            noise = np.where(e / (root_n * w) > level.level, noise, -np.inf)
         else:                                              # first pass: only bring every pixel to min_spp
             noise = np.full(counts.shape, -np.inf)
         if not first_pass_reported and counts.min() >= adaptive.min_spp:
@@ -599,7 +653,7 @@ def _state_arrays(film, halves: HalfBuffers):
         out[f"sumsq.S{k}.Y"] = film.sumsq_y[k]
         out[f"A.S{k}.Y"] = halves.sums[0, k]
         out[f"B.S{k}.Y"] = halves.sums[1, k]
-    out["rays"] = halves.rays.astype(np.float64)             # integers < 2⁵³: exact
+    out["cost"] = halves.cost.astype(np.float64)             # integers < 2⁵³: exact
     return out
 
 
@@ -619,8 +673,8 @@ def state_channels(film, halves: HalfBuffers) -> dict[str, np.ndarray]:
 
 
 def _first_arrays(halves: HalfBuffers):
-    sums, counts, rays = halves.first
-    out = {"first.count": counts.astype(np.float64), "first.rays": rays.astype(np.float64)}
+    sums, counts, cost = halves.first
+    out = {"first.count": counts.astype(np.float64), "first.cost": cost.astype(np.float64)}
     for k in range(4):
         out[f"first.A.S{k}.Y"] = sums[0, k]
         out[f"first.B.S{k}.Y"] = sums[1, k]
@@ -650,10 +704,12 @@ def state_from_channels(channels: dict, counts: np.ndarray):
 
     def has(name):
         return f"{STATE_PREFIX}.{name}.hi" in channels
-    if has("rays"):                                       # files of older versions counted no rays
-        halves.rays = get("rays").astype(np.int64)
+    # Files of older versions counted no cost, or rays (``rays``, ``first.rays``: segments and light
+    # samples, another unit than PATH_COST's): they resume with equal costs (c̄ = 0, every weight 1).
+    if has("cost"):
+        halves.cost = get("cost").astype(np.int64)
     if has("first.count"):                                # … nor kept the first pass
         sums = np.stack([np.stack([get(f"first.{h}.S{k}.Y") for k in range(4)]) for h in "AB"])
-        rays = get("first.rays").astype(np.int64) if has("first.rays") else np.zeros(W * H, np.int64)
-        halves.first = (sums, get("first.count").astype(np.int64), rays)
+        cost = get("first.cost").astype(np.int64) if has("first.cost") else np.zeros(W * H, np.int64)
+        halves.first = (sums, get("first.count").astype(np.int64), cost)
     return film, halves

@@ -48,7 +48,7 @@ def _render_unit(key, scene, settings, unit, window, width):
     sample = np.repeat(np.arange(p0, p1, dtype=np.int64), pix.size)
     tracer = PathTracer(renderer.compiled, renderer.lights, renderer.camera, settings)
     values, stats = tracer.trace(pixel, sample)
-    stats.pop("path_rays", None)                        # per-path ray counts: adaptive sampling's cost only
+    stats.pop("path_cost", None)                        # per-path costs: adaptive sampling's only
     lo, hi = int(pix.min()), int(pix.max()) + 1
     part = Film(hi - lo, 1)
     part.add_samples(pixel - lo, values, stats.pop("alpha", None))
