@@ -1,8 +1,8 @@
 """Adaptive sampling robust to rare paths, and the per-path cost of shaded vertices.
 
 A tile whose first pass missed a rare bright path would stop at min_spp for good; for the
-polarisation quantities its σ is at least a floor from its 3×3 tile neighbourhood
-(engine.render.adaptive.neighbourhood_floor).  Synthetic images with a known σ per tile check
+polarisation quantities its σ is pooled with its 3×3 tile neighbourhood's
+(engine.render.adaptive.pooled_error).  Synthetic images with a known σ per tile check
 the rule; a real render checks the integrator's cost count.  No test times anything.
 """
 
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import engine.render.adaptive as adaptive
-from engine.render.adaptive import (TILE, AdaptiveSettings, HalfBuffers, neighbourhood_floor, render_adaptive,
-                                    state_channels, state_from_channels, tile_ids)
+from engine.render.adaptive import (TILE, AdaptiveSettings, HalfBuffers, neighbourhood_sigma, pooled_error,
+                                    render_adaptive, state_channels, state_from_channels, tile_ids)
 from engine.render.estimate import predict
 from engine.render.film import Film
 from engine.render.integrator import PATH_COST, VERTEX_COST
@@ -75,31 +75,53 @@ def rare_path_image():
     return sigma, hidden
 
 
-# ------------------------------------------------------------------------------------ the floor
+# ------------------------------------------------------------------------------------ the pooling
 
-def test_the_floor_is_half_the_rms_sigma_of_the_3x3_tiles_present():
+def test_the_neighbourhood_sigma_is_the_rms_over_the_3x3_tiles_present():
     W = H = 3 * TILE
     tiles = tile_ids(W, H)
     pixels = np.arange(W * H)
     sigma = np.where(tiles == 4, 1.0, 0.0)                   # only the centre tile is noisy
-    floor = neighbourhood_floor(sigma, tiles, pixels, W)
-    expected = 0.5 * np.sqrt(1.0 / np.array([4, 6, 4, 6, 9, 6, 4, 6, 4]))   # corners see 4 tiles, edges 6
-    np.testing.assert_allclose(floor, expected[tiles])
+    expected = np.sqrt(1.0 / np.array([4, 6, 4, 6, 9, 6, 4, 6, 4]))   # corners see 4 tiles, edges 6
+    np.testing.assert_allclose(neighbourhood_sigma(sigma, tiles, pixels, W), expected[tiles])
     # a window: tiles outside it do not count (the centre tile now has 4 neighbours present)
     window = pixels[(pixels % W < 2 * TILE) & (pixels // W < 2 * TILE)]
-    np.testing.assert_allclose(neighbourhood_floor(sigma[window], tiles, window, W), 0.25)
+    np.testing.assert_allclose(neighbourhood_sigma(sigma[window], tiles, window, W), 0.5)
     # an infinite σ (no estimate) counts as 0, not as ∞
-    assert np.all(np.isfinite(neighbourhood_floor(np.where(tiles == 0, np.inf, sigma), tiles, pixels, W)))
+    assert np.all(np.isfinite(neighbourhood_sigma(np.where(tiles == 0, np.inf, sigma), tiles, pixels, W)))
+
+
+def test_the_pooled_error_weighs_the_neighbourhood_as_n_nb_samples():
+    # σ² = (n·σ̂² + n_nb·σ_nb²)/(n + n_nb), e = σ/√n
+    e, n, s_nb, n_nb = 0.05, 16.0, 0.8, 16.0
+    assert pooled_error(e, n, s_nb, n_nb) == pytest.approx(np.sqrt((16 * 0.2 ** 2 + 16 * 0.64) / 32 / 16))
+    assert pooled_error(e, n, s_nb, 0.0) == pytest.approx(e)                  # no weight: the own error
+    # at n = n_nb: the quadratic mean of the own error and the neighbourhood's (σ_nb/√n)
+    assert pooled_error(e, n, s_nb, n) == pytest.approx(np.sqrt((e ** 2 + s_nb ** 2 / n) / 2))
+    # a quiet tile: the neighbourhood's share falls as 1/n, the own error as 1/√n
+    m = np.array([16.0, 64.0, 256.0])
+    quiet = pooled_error(0.0, m, s_nb, n_nb)
+    np.testing.assert_allclose(quiet, s_nb * np.sqrt(n_nb / (m * (m + n_nb))))
 
 
 def test_a_tile_whose_first_pass_missed_its_noise_goes_on_when_its_neighbours_are_noisy(monkeypatch):
     sigma, hidden = rare_path_image()
     film, _, reason, _ = polarised_render(sigma, 0.01, hidden)
     n = tile_count(film, HIDDEN)
-    assert n >= 64, n                  # past the samples that found its noise, then on by its own error
-    monkeypatch.setattr(adaptive, "NEIGHBOURHOOD_FLOOR", 0.0)
+    assert n >= 256, n                 # past the samples that found its noise, then on by its own error
+    monkeypatch.setattr(adaptive, "NEIGHBOURHOOD_WEIGHT", 0.0)
     without = polarised_render(sigma, 0.01, hidden)[0]
-    assert tile_count(without, HIDDEN) == 16                 # without the floor it stops at min_spp for good
+    assert tile_count(without, HIDDEN) == 16                 # without the pooling it stops at min_spp for good
+
+
+def test_a_quiet_tile_beside_noisy_ones_stops_after_a_few_steps():
+    # the centre tile is truly quiet: its own samples soon outweigh the neighbourhood
+    sigma = np.full(SIDE * SIDE, 0.5)
+    sigma[HIDDEN] = 0.0
+    film, _, _, _ = polarised_render(sigma, 0.01)
+    n = tile_count(film, HIDDEN)
+    # e(n) = σ_nb·√(16/(n(n + 16))) with σ_nb = √(8/9)·0.5 reaches T = 0.01 at n ≈ 180 (a checkpoint above)
+    assert 16 < n <= 256 and n < 0.5 * tile_count(film, 0), (n, tile_count(film, 0))
 
 
 def test_s0_is_not_floored():
@@ -110,15 +132,15 @@ def test_s0_is_not_floored():
 
 @pytest.mark.parametrize("quantity", ["dolp", "stokes", "docp", "aolp"])
 def test_an_image_below_the_threshold_at_min_spp_still_stops_there(quantity):
-    # tiles of σ up to 2T: every tile's error at 16 spp (≈ σ/4) is below T, and so is the floor
-    # (½ the neighbourhood's RMS): nothing goes on
+    # tiles of σ up to 2T: every tile's error at 16 spp (≈ σ/4) is below T, and so is its pooled
+    # error (the quadratic mean of its own and its neighbourhood's): nothing goes on
     T = 0.01
     sigma = np.geomspace(1e-4, 2 * T, SIDE * SIDE)[np.random.default_rng(1).permutation(SIDE * SIDE)]
     film, _, reason, _ = polarised_render(sigma, T, quantity=quantity)
     assert reason == "threshold" and np.all(film.count == 16)
 
 
-def test_resuming_continues_the_floored_counts_exactly():
+def test_resuming_continues_the_pooled_counts_exactly():
     sigma, hidden = rare_path_image()
     whole, whole_halves, _, _ = polarised_render(sigma, 0.01, hidden)
     part, part_halves, _, _ = polarised_render(sigma, 0.05, hidden)          # a looser threshold first
@@ -128,14 +150,20 @@ def test_resuming_continues_the_floored_counts_exactly():
     np.testing.assert_array_equal(resumed.sums, whole.sums)
 
 
-def test_the_prediction_applies_the_floor(monkeypatch):
+def test_the_prediction_pools_as_the_render_does(monkeypatch):
     sigma, hidden = rare_path_image()
     film, halves, _, _ = polarised_render(sigma, np.inf, hidden)              # the first pass alone
     assert np.all(film.count == 16)
     centre = tile_ids(SIDE * TILE, SIDE * TILE) == HIDDEN
     p = predict(film, halves, "dolp", 0.01, 16, 1024, seconds_per_sample=1e-6)
     assert p.counts[centre].min() > 16
-    monkeypatch.setattr(adaptive, "NEIGHBOURHOOD_FLOOR", 0.0)
+    # a quiet tile beside noisy ones: predicted where the render stops it
+    sigma[HIDDEN], hidden[HIDDEN] = 0.0, 0
+    quiet = polarised_render(sigma, 0.01)[0]
+    first = polarised_render(sigma, np.inf)
+    q = predict(first[0], first[1], "dolp", 0.01, 16, 1024, seconds_per_sample=1e-6)
+    assert q.counts[centre].max() == quiet.count[centre].max()
+    monkeypatch.setattr(adaptive, "NEIGHBOURHOOD_WEIGHT", 0.0)
     assert np.all(predict(film, halves, "dolp", 0.01, 16, 1024, seconds_per_sample=1e-6).counts[centre] == 16)
 
 

@@ -41,18 +41,21 @@ much as bright ones); the other quantities use their tile error.  The mean of σ
 pixels where the quantity is defined (lit pixels; DoLP > 0.05 for ``aolp``).  Counts make the
 rule deterministic (seconds would not be) while following the cost.
 
-**Rare paths.** For ``dolp``, ``aolp``, ``docp`` and ``stokes`` a tile's σ is at least a floor from
-its neighbourhood: σ_floor = ½ × the RMS first-pass σ of its 3×3 tiles (:func:`neighbourhood_floor`),
-and its error at n samples at least σ_floor/√n, in both conditions and in μ.  A rare bright path
-(glass seen in a mirror floor) can be missing from a tile's first pass, which would stop it at
-``min_spp`` for good, while the neighbouring tiles see such paths.  The floor never holds back a
-tile whose whole neighbourhood is below 2T at ``min_spp`` (σ_floor/√n ≤ ½ max e of the
-neighbours), so an image that converges at ``min_spp`` still stops there.
+**Rare paths.** A rare bright path (glass seen in a mirror floor) can be missing from a tile's
+first pass, which would stop it at ``min_spp`` for good, while the neighbouring tiles see such
+paths.  For ``dolp``, ``aolp``, ``docp`` and ``stokes`` a tile's σ is therefore pooled with its
+neighbourhood's: σ² = (n·σ̂² + n_nb·σ_nb²)/(n + n_nb), σ_nb the RMS first-pass σ̂ of its 3×3
+tiles (:func:`neighbourhood_sigma`), worth n_nb = the first pass's samples
+(:data:`NEIGHBOURHOOD_WEIGHT`), and its error is σ/√n (:func:`pooled_error`), in both conditions
+and in μ.  Its own samples outweigh the neighbourhood as they come: a quiet tile beside noisy ones
+stops after a few steps (its error falls as 1/n, not 1/√n), a tile that finds the rare paths goes
+on by its own σ̂.  At ``min_spp`` the error is the quadratic mean of the tile's own and its
+neighbourhood's RMS error, so an image whose every tile is below T there still stops there.
 
 **Schedule.** Every pixel first gets ``min_spp`` samples; then tiles that go on get more,
 checkpoint by checkpoint (:func:`checkpoints`: about +25 % per step, even steps so both halves stay
 equal), until no tile goes on, ``spp`` is reached or the time limit passes.  A tile's next step
-depends only on its own samples and cost, and on μ, c̄ and its σ floor, fixed after the first pass and kept
+depends only on its own samples and cost, and on μ, c̄ and its σ_nb, fixed after the first pass and kept
 with the half-buffers (:class:`HalfBuffers` ``first`` and ``cost``, stored in the EXR), so without a time
 limit the counts are a deterministic function of the seed — however the work is split, and also across an interrupted
 render and its resumption, and a tighter threshold on resumption continues the looser one's path
@@ -82,18 +85,18 @@ UNITS = {"s0": "relative", "dolp": "absolute", "aolp": "degrees", "docp": "absol
 TILE = 4
 #: DoLP below which the AoLP is undefined and its error does not hold a pixel back.
 AOLP_MIN_DOLP = 0.05
-#: A tile's σ is taken as at least this fraction of the RMS first-pass σ of its 3×3 tile neighbourhood
-#: (:func:`neighbourhood_floor`), for the quantities in :data:`FLOORED`.  Rare bright paths (glass
-#: seen in a mirror-like floor) can be missing from a tile's 16-spp first pass while its neighbours
-#: see them: on glass_sphere 64² (dolp ≤ 0.01) two such tiles had σ̂ = 0.01 against 0.7 in Mitsuba's
-#: 2 × 8192 spp, stopped at 16 spp and held 53 % of the adaptive render's DoLP MSE.  Replaying the rule
-#: on the measured σ (16-spp σ̂, reference σ, cost per tile): the MSE × cost gain over uniform went
-#: 0.96 → 1.67 on glass_sphere, 2.34 → 2.50 on fresnel_sphere_au (dolp ≤ 0.005), 2.52 → 2.49 on
-#: the demo (dolp ≤ 0.01); 0.25 × the neighbourhood's max: 1.71 / 2.28 / 2.44, 8×8 pooling 1.54 / 2.13 / 2.02.
-NEIGHBOURHOOD_FLOOR = 0.5
-#: Quantities whose σ is floored by the neighbourhood (ratios of Stokes components, which a rare
+#: Weight of a tile's neighbourhood in its σ estimate, in samples per first-pass sample
+#: (:func:`pooled_error`).  Rare bright paths (glass seen in a mirror-like floor) can be missing from a
+#: tile's 16-spp first pass while its neighbours see them: on glass_sphere 64² (dolp ≤ 0.01) two such
+#: tiles had σ̂ = 0.01 against 0.7 in Mitsuba's 2 × 8192 spp, stopped at 16 spp and held 53 % of the
+#: adaptive render's DoLP MSE.  DoLP MSE × rays gain over uniform, one render each (64², none / a
+#: floor max(σ̂, ½ σ_nb) / this pooling at weight 1): glass_sphere dolp ≤ 0.01 0.95 / 1.58 / 1.96,
+#: dolp ≤ 0.03 1.92 / 1.90 / 2.08, fresnel_sphere_au dolp ≤ 0.005 2.36 / 2.24 / 2.24, demo dolp ≤ 0.01
+#: 6.44 / 4.84 / 4.82 (weight 0.7: 1.60, 1.96, 2.11, 5.58; 4: 1.84, 2.01, 2.12, 4.38).
+NEIGHBOURHOOD_WEIGHT = 1.0
+#: Quantities whose σ is pooled with the neighbourhood's (ratios of Stokes components, which a rare
 #: bright path moves most; ``s0`` is measured in absolute luminance, where a rare path shows).
-FLOORED = ("dolp", "aolp", "docp", "stokes")
+POOLED = ("dolp", "aolp", "docp", "stokes")
 #: Fewest paths per work unit when a round is split for the workers (below, per-batch overhead dominates).
 MIN_UNIT_PATHS = 16384
 #: Work units a round is split into per worker.  Fewer, larger units trace faster per path (the
@@ -284,10 +287,10 @@ def cost_weight(cost: np.ndarray, counts: np.ndarray, tiles: np.ndarray, pixels:
     return np.where(c > 0, np.sqrt(c / mean_cost), 1.0)
 
 
-def neighbourhood_floor(sigma: np.ndarray, tiles: np.ndarray, pixels: np.ndarray, width: int) -> np.ndarray:
-    """σ floor of each pixel's tile over ``pixels``: :data:`NEIGHBOURHOOD_FLOOR` × the RMS of the
-    first-pass σ over the tile's 3×3 neighbourhood of tiles (itself included; tiles outside the
-    image or the window left out).  ``sigma`` (over ``pixels``): the σ of each pixel's tile."""
+def neighbourhood_sigma(sigma: np.ndarray, tiles: np.ndarray, pixels: np.ndarray, width: int) -> np.ndarray:
+    """σ_nb of each pixel's tile over ``pixels``: the RMS of the first-pass σ over the tile's 3×3
+    neighbourhood of tiles (itself included; tiles outside the image or the window left out).
+    ``sigma`` (over ``pixels``): the σ of each pixel's tile (∞ counts as 0)."""
     ntx = -(-width // TILE)
     t = tiles[pixels]
     n_tiles = int(tiles.max()) + 1
@@ -302,22 +305,29 @@ def neighbourhood_floor(sigma: np.ndarray, tiles: np.ndarray, pixels: np.ndarray
         for dx in range(3):
             total[dy:dy + nty, dx:dx + ntx] += s2
             count[dy:dy + nty, dx:dx + ntx] += present
-    rms = np.sqrt(_ratio(total[1:-1, 1:-1], count[1:-1, 1:-1])).ravel()
-    return NEIGHBOURHOOD_FLOOR * rms[t]
+    return np.sqrt(_ratio(total[1:-1, 1:-1], count[1:-1, 1:-1])).ravel()[t]
+
+
+def pooled_error(e, n, sigma_nb, n_nb):
+    """A tile's error at ``n`` samples from its own error ``e`` and its neighbourhood's σ_nb, worth
+    ``n_nb`` samples: √((n·σ̂² + n_nb·σ_nb²) / (n + n_nb)) / √n with σ̂ = e·√n (``n_nb`` = 0: e)."""
+    n = np.asarray(n, np.float64)
+    return np.sqrt(_ratio(n * n * np.asarray(e, np.float64) ** 2 + n_nb * np.asarray(sigma_nb) ** 2, n * (n + n_nb)))
 
 
 @dataclass
 class Allocation:
     """The allocation of a first pass: level μ, the image's mean luminance ``mean_y`` (units of the
     ``s0`` error, :func:`allocation_noise`), its cost per sample ``mean_cost`` (c̄), and per pixel
-    the tile's per-sample σ (at least ``floor``), cost weight w = √(c/c̄) and σ floor from its
-    neighbourhood (:func:`neighbourhood_floor`; 0 for ``s0``)."""
+    the tile's per-sample σ (pooled with its neighbourhood's), cost weight w = √(c/c̄), and its
+    neighbourhood's σ_nb and weight in samples ``n_nb`` (:func:`pooled_error`; 0 for ``s0``)."""
     level: float
     mean_y: float
     mean_cost: float
     sigma: np.ndarray
     weight: np.ndarray
-    floor: np.ndarray
+    sigma_nb: np.ndarray
+    n_nb: np.ndarray
 
 
 def allocation_from(sums: np.ndarray, counts: np.ndarray, quantity: str, threshold: float, tiles: np.ndarray,
@@ -329,12 +339,14 @@ def allocation_from(sums: np.ndarray, counts: np.ndarray, quantity: str, thresho
     y = _ratio(sums[0, 0] + sums[1, 0], counts)
     mean_y = float(np.mean(y[pixels])) if pixels.size else 0.0
     e, counted = allocation_noise(quantity, sums, counts, tiles, pixels, mean_y)
-    sigma = e * np.sqrt(counts[pixels])
-    if quantity in FLOORED and pixels.size:
-        floor = neighbourhood_floor(sigma, tiles, pixels, TILE * (int(tiles.max()) + 1) if width is None else width)
-        sigma = np.maximum(sigma, floor)
-    else:
-        floor = np.zeros(pixels.size)
+    n = counts[pixels]
+    sigma_nb, n_nb = np.zeros(pixels.size), np.zeros(pixels.size)
+    if quantity in POOLED and pixels.size and NEIGHBOURHOOD_WEIGHT > 0:
+        sigma_nb = neighbourhood_sigma(e * np.sqrt(n), tiles, pixels,
+                                       TILE * (int(tiles.max()) + 1) if width is None else width)
+        n_nb = NEIGHBOURHOOD_WEIGHT * n
+        e = pooled_error(e, n, sigma_nb, n_nb)
+    sigma = e * np.sqrt(n)
     mean_cost = 0.0 if cost is None else cost_per_sample(cost, counts, pixels)
     weight = np.ones(pixels.size) if cost is None else cost_weight(cost, counts, tiles, pixels, mean_cost)
     if not threshold > 0:
@@ -343,7 +355,7 @@ def allocation_from(sums: np.ndarray, counts: np.ndarray, quantity: str, thresho
         mu = math.inf
     else:
         mu = allocation_level(sigma[counted], threshold, weight[counted])
-    return Allocation(mu, mean_y, mean_cost, sigma, weight, floor)
+    return Allocation(mu, mean_y, mean_cost, sigma, weight, sigma_nb, n_nb)
 
 
 def first_pass_allocation(halves: HalfBuffers, quantity: str, threshold: float, tiles: np.ndarray,
@@ -592,12 +604,12 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
             e, _ = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level.mean_y)
             w = cost_weight(halves.cost, film.count, tiles, pixels, level.mean_cost)
             _, _, noise = film_noise(film, halves, adaptive.quantity, pixels)
-            # the tile's error is at least its neighbourhood's floor (σ_floor/√n: rare paths its
-            # first pass missed); a tile goes on while that error is above T and above its share of
-            # the error at equal cost, σ̂/(n·w) > μ (σ̂ = max(e·√n, σ_floor), w = √(c/c̄))
+            # the tile's error pooled with its neighbourhood's (rare paths its first pass missed); a
+            # tile goes on while that error is above T and above its share of the error at equal
+            # cost, σ̂/(n·w) > μ (σ̂ = e·√n, w = √(c/c̄))
             root_n = np.sqrt(counts)
-            noise = np.maximum(noise, level.floor / root_n)
-            e = np.maximum(e, level.floor / root_n)
+            noise = pooled_error(noise, counts, level.sigma_nb, level.n_nb)
+            e = pooled_error(e, counts, level.sigma_nb, level.n_nb)
             noise = np.where(e / (root_n * w) > level.level, noise, -np.inf)
         else:                                              # first pass: only bring every pixel to min_spp
             noise = np.full(counts.shape, -np.inf)

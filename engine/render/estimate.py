@@ -6,7 +6,7 @@ mean falls as 1/√spp, so the tile needs m = n·(e/T)² samples to reach the th
 sampling stops it at the first checkpoint ≥ m (engine.render.adaptive.checkpoints), within
 [min_spp, spp], or earlier at its share of the error at equal cost, n = σ/(μ·w)
 (engine.render.adaptive: w = √(c/c̄) from the tile's cost per sample; for the polarisation
-quantities e and σ are at least the neighbourhood's floor, as in the render).  A uniform render needs the
+quantities e and σ are pooled with the tile's neighbourhood, as in the render).  A uniform render needs the
 largest m of all tiles for every pixel.  Wall time = Σ over pixels of samples × that pixel's seconds
 per sample on this machine, a per-tile cost map (:func:`cost_map`): the pilot is cut into units of
 ≥ 1024 pixels whose seconds per unit of cost are measured, and each 4×4 tile costs its own cost per
@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import SceneError
 from .adaptive import (QUANTITIES, TILE, UNITS, AdaptiveSettings, allocation_from, checkpoints, film_noise,
-                       tile_ids)
+                       pooled_error, tile_ids)
 
 
 @dataclass
@@ -162,18 +162,29 @@ def predict(film, halves, quantity: str, threshold: float, min_spp: int, spp: in
     _, _, tile_err = film_noise(film, halves, quantity, pixels)
     alloc = allocation_from(halves.sums, film.count, quantity, threshold, tile_ids(film.width, film.height), pixels,
                             halves.cost, film.width)
-    tile_err = np.maximum(tile_err, alloc.floor / np.sqrt(n))   # the neighbourhood's floor, as in the render
-    need = n * (tile_err / threshold) ** 2                # every tile below the threshold
+    need = n * (tile_err / threshold) ** 2                # every tile below the threshold (uniform: its own error)
     sigma, mu = alloc.sigma, alloc.level
-    # where the tile's share of the error at equal cost is met: n = σ/(μ·w)
-    share = sigma / (mu * alloc.weight) if mu > 0 else np.full(n.shape, np.inf)
     marks = checkpoints(min_spp, spp)
-    i = np.minimum(np.searchsorted(marks, np.ceil(np.minimum(need, share) - 1e-9), side="left"), len(marks) - 1)
+    if np.any(alloc.n_nb > 0):
+        # the error pooled with the neighbourhood (engine.render.adaptive.pooled_error) at every
+        # checkpoint m, the tile's own σ̂ staying what it is: the first m where e(m) ≤ T or σ(m)/(μ·w) ≤ m
+        m = marks[:, None].astype(np.float64)
+        # (the pooled quantities' allocation error is their tile error)
+        e_m = pooled_error(tile_err * np.sqrt(n) / np.sqrt(m), m, alloc.sigma_nb, alloc.n_nb)
+        stop = (e_m <= threshold) | ((e_m * np.sqrt(m) / (mu * alloc.weight) <= m) if mu > 0 else False)
+        wanted = np.where(stop.any(axis=0), 0.0, np.inf)        # capped: would go on past spp
+        stop[-1] = True
+        i = np.argmax(stop, axis=0)
+    else:
+        # where the tile's share of the error at equal cost is met: n = σ/(μ·w)
+        share = sigma / (mu * alloc.weight) if mu > 0 else np.full(n.shape, np.inf)
+        wanted = np.minimum(need, share)
+        i = np.minimum(np.searchsorted(marks, np.ceil(wanted - 1e-9), side="left"), len(marks) - 1)
     counts = marks[i]
     uniform = int(min(spp, max(min_spp, math.ceil(float(need.max()) - 1e-9)))) if need.size else min_spp
     uniform_p95 = int(min(spp, max(min_spp, math.ceil(float(np.percentile(need, 95)) - 1e-9)))) if need.size \
         else min_spp
-    capped = float(np.mean(np.minimum(need, share) > spp)) if need.size else 0.0
+    capped = float(np.mean(wanted > spp)) if need.size else 0.0
     sps = np.asarray(seconds_per_sample, np.float64)
     rounds = int(np.searchsorted(marks, counts.max())) + 1 if counts.size else 0
     return Prediction(quantity, threshold, counts, uniform, uniform_p95, sps[pixels] if sps.ndim else sps, capped,
