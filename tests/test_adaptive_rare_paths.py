@@ -215,3 +215,44 @@ def test_non_adaptive_renders_do_not_carry_the_cost():
     scene = small_scene("glass_sphere", res=8, spp=2)
     result = Renderer(scene).render(copy.copy(scene.settings))
     assert "path_cost" not in result.stats and "path_rays" not in result.stats
+
+
+# ------------------------------------------------------------------------------------ accumulation
+
+def test_adding_a_unit_at_once_gives_the_sums_of_one_sample_pass_at_a_time():
+    # many passes of few pixels (a late round): every pixel's sums in ascending sample order,
+    # bit for bit what adding pass by pass gives (the reference loop below)
+    from engine.render.adaptive import add_in_sample_order
+    rng = np.random.default_rng(5)
+    W = H = 8
+    pix = rng.choice(W * H, 20, replace=False)
+    pixel, sample = np.tile(pix, 37), np.repeat(np.arange(3, 40), 20)
+    values = rng.lognormal(0.0, 2.0, (4, 3, pixel.size)) * rng.choice([-1.0, 1.0], (4, 3, pixel.size))
+    alpha = rng.random(pixel.size)
+    film, halves = Film(W, H), HalfBuffers(W * H)
+    add_in_sample_order(film, halves, pixel, sample, values, alpha)
+    ref, ref_halves = Film(W, H), HalfBuffers(W * H)
+    ref.alpha_sums = np.zeros(W * H)
+    y = np.einsum("c,scn->sn", adaptive.LUMINANCE_WEIGHTS, values)
+    for s in np.unique(sample):
+        m = sample == s
+        p = pixel[m]
+        for k in range(4):
+            for c in range(3):
+                ref.sums[k, c, p] = ref.sums[k, c, p] + values[k, c, m]
+            ref.sumsq_y[k, p] = ref.sumsq_y[k, p] + y[k, m] * y[k, m]
+            ref_halves.sums[s % 2, k, p] = ref_halves.sums[s % 2, k, p] + y[k, m]
+        ref.alpha_sums[p] = ref.alpha_sums[p] + alpha[m]
+        ref.count[p] += 1
+    np.testing.assert_array_equal(film.sums, ref.sums)
+    np.testing.assert_array_equal(film.sumsq_y, ref.sumsq_y)
+    np.testing.assert_array_equal(halves.sums, ref_halves.sums)
+    np.testing.assert_array_equal(film.alpha_sums, ref.alpha_sums)
+    np.testing.assert_array_equal(film.count, ref.count)
+    # the same samples in another order (a pixel's samples shuffled): the same film sums (the
+    # luminance, an einsum, may round differently at another column position, so not compared here)
+    shuffled = rng.permutation(pixel.size)
+    film2, halves2 = Film(W, H), HalfBuffers(W * H)
+    add_in_sample_order(film2, halves2, pixel[shuffled], sample[shuffled], values[:, :, shuffled], alpha[shuffled])
+    np.testing.assert_array_equal(film2.sums, ref.sums)
+    np.testing.assert_array_equal(film2.count, ref.count)

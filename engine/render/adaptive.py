@@ -393,8 +393,8 @@ class HalfBuffers:
 def add_in_sample_order(film, halves: HalfBuffers, pixel: np.ndarray, sample: np.ndarray,
                         values: np.ndarray, alpha: np.ndarray | None = None,
                         path_cost: np.ndarray | None = None) -> None:
-    """Add samples sorted by sample index, one sample pass at a time (each pixel at most once per
-    pass), so every pixel's sums are built in ascending sample order whatever the batching.
+    """Add samples in ascending sample index (each pixel at most once per sample index), so every
+    pixel's sums are built in ascending sample order whatever the batching.
     ``alpha`` (per sample; None = 1) is the camera-ray coverage of a transparent film or holdout;
     ``path_cost`` (per sample, integers; None: not counted) each sample's cost."""
     if path_cost is not None:       # integer sums: exact in any order
@@ -404,24 +404,25 @@ def add_in_sample_order(film, halves: HalfBuffers, pixel: np.ndarray, sample: np
     y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, values)
     n = film.count.size
     sums, vals = film.sums.reshape(12, n), values.reshape(12, -1)
-    starts = np.flatnonzero(np.r_[True, sample[1:] != sample[:-1]])
-    ends = np.r_[starts[1:], sample.size]
-    for a, b in zip(starts, ends):
-        pix = pixel[a:b]
-        # One row at a time with take/put: 5× faster than a 2-D fancy-indexed +=, same additions.
-        for r in range(12):
-            row = sums[r]
-            row[pix] = row[pix] + vals[r, a:b]
-        half = halves.sums[int(sample[a]) % 2]
+    # np.add.at adds element by element in index order: with the samples sorted by sample index,
+    # every pixel's sums are built in ascending sample order, the same additions as one sample pass
+    # at a time (30× faster than a Python loop over passes where a unit holds many passes of few pixels)
+    order = np.argsort(sample, kind="stable")
+    if np.any(order != np.arange(order.size)):
+        pixel, sample, vals, y = pixel[order], sample[order], vals[:, order], y[:, order]
+        alpha = None if alpha is None else np.asarray(alpha)[order]
+    for r in range(12):
+        np.add.at(sums[r], pixel, vals[r])
+    for k in range(4):
+        np.add.at(film.sumsq_y[k], pixel, y[k] * y[k])
+    for h in (0, 1):
+        m = sample % 2 == h
+        pix_h = pixel[m]
         for k in range(4):
-            row = film.sumsq_y[k]
-            row[pix] = row[pix] + y[k, a:b] * y[k, a:b]
-            row = half[k]
-            row[pix] = row[pix] + y[k, a:b]
-        if film.alpha_sums is not None:
-            row = film.alpha_sums
-            row[pix] = row[pix] + (1.0 if alpha is None else alpha[a:b])
-        film.count[pix] += 1
+            np.add.at(halves.sums[h, k], pix_h, y[k, m])
+    if film.alpha_sums is not None:
+        np.add.at(film.alpha_sums, pixel, 1.0 if alpha is None else alpha)
+    np.add.at(film.count, pixel, 1)
 
 
 def film_noise(film, halves: HalfBuffers, quantity: str, pixels: np.ndarray | None = None):
