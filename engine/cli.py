@@ -198,12 +198,12 @@ def _render(args) -> int:
 
 def _render_adaptive(renderer, st, adaptive, bar, signals, resume_film, resume_halves):
     """An adaptive render; records in its stats the prediction made after the first pass."""
-    from .render.estimate import cost_map, predict, tile_rays_per_sample
+    from .render.estimate import cost_map, predict, tile_cost_per_sample
     first, unit_times = {}, []
 
     def on_first_pass(film, halves, seconds, samples):
         if samples > 0 and adaptive.threshold > 0 and unit_times:
-            costs = cost_map(unit_times, film.count.size, seconds, tile_rays_per_sample(film, halves))
+            costs = cost_map(unit_times, film.count.size, seconds, tile_cost_per_sample(film, halves))
             first["prediction"] = predict(film, halves, adaptive.quantity, adaptive.threshold, adaptive.min_spp,
                                           st.spp, costs)
 

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from engine.render.adaptive import (AdaptiveSettings, HalfBuffers, TILE, allocation_level, cost_weight,
-                                    rays_per_sample, render_adaptive, state_channels, state_from_channels, tile_ids)
-from engine.render.estimate import cost_map, mse_time_gain, predict, tile_rays_per_sample
+                                    cost_per_sample, render_adaptive, state_channels, state_from_channels, tile_ids)
+from engine.render.estimate import cost_map, mse_time_gain, predict, tile_cost_per_sample
 from engine.render.film import Film
 from engine.render.integrator import PathTracer
 from engine.render.renderer import Renderer
@@ -29,7 +29,7 @@ class CostlyGaussianTracer(GaussianTracer):
 
     def trace(self, pixel, sample, abort=None):
         values, stats = super().trace(pixel, sample, abort)
-        stats["path_rays"] = self.rays[pixel]
+        stats["path_cost"] = self.rays[pixel]
         return values, stats
 
 
@@ -72,13 +72,13 @@ def test_a_dear_tile_gets_fewer_samples_than_a_cheap_one_of_equal_sigma():
     ratio = np.median(dear) / np.median(cheap)
     assert 0.38 < ratio < 0.65, (cheap, dear)                  # 1/√4 = 0.5 (± a checkpoint step and noise)
     # and as predicted: μ = T²/mean(σ·w), w = √(c/c̄), c̄ = 2.75 rays per sample
-    assert stats["rays_per_sample"] == pytest.approx(2.75)
+    assert stats["cost_per_sample"] == pytest.approx(2.75)
     w = np.sqrt(rays / 2.75)
     mu = T ** 2 / np.mean(sigma * w)
     assert stats["allocation_level"] == pytest.approx(mu, rel=0.3)
     np.testing.assert_allclose(np.median(cheap), 1.0 / (mu * w[0]), rtol=0.35)
     # the rays the half-buffers count are the tracer's, sample by sample
-    np.testing.assert_array_equal(halves.rays, film.count * rays[tile_ids(32, 32)])
+    np.testing.assert_array_equal(halves.cost, film.count * rays[tile_ids(32, 32)])
 
 
 def test_equal_costs_give_the_rule_without_costs():
@@ -128,12 +128,12 @@ def test_cost_weight_is_the_root_of_the_tiles_rays_per_sample_over_the_images():
     counts = np.full(W * H, 4, np.int64)
     rays = (counts * np.array([2, 8, 4, 2])[tiles]).astype(np.int64)
     pixels = np.arange(W * H)
-    c_bar = rays_per_sample(rays, counts, pixels)
+    c_bar = cost_per_sample(rays, counts, pixels)
     assert c_bar == pytest.approx(4.0)
     w = cost_weight(rays, counts, tiles, pixels, c_bar)
     np.testing.assert_allclose(w, np.sqrt(np.array([2, 8, 4, 2]) / 4.0)[tiles])
     # no rays counted (an EXR of an older version), or a tile without samples: weight 1
-    assert rays_per_sample(np.zeros(W * H, np.int64), counts, pixels) == 0.0
+    assert cost_per_sample(np.zeros(W * H, np.int64), counts, pixels) == 0.0
     np.testing.assert_array_equal(cost_weight(rays, counts, tiles, pixels, 0.0), 1.0)
     none = counts.copy()
     none[tiles == 1] = 0
@@ -145,7 +145,7 @@ def test_cost_weight_is_the_root_of_the_tiles_rays_per_sample_over_the_images():
 def test_rays_and_the_first_pass_rays_travel_with_the_state():
     film, halves, _, _ = costly_render(np.geomspace(0.05, 1.0, 4), [1, 2, 3, 4], 0.01, side=2)
     restored_film, restored = state_from_channels(state_channels(film, halves), film.spp_image().astype(np.uint32))
-    np.testing.assert_array_equal(restored.rays, halves.rays)
+    np.testing.assert_array_equal(restored.cost, halves.cost)
     for a, b in zip(restored.first, halves.first):
         np.testing.assert_array_equal(a, b)
     assert np.all(halves.first[2] == 16 * np.array([1, 2, 3, 4])[tile_ids(8, 8)])
@@ -154,11 +154,11 @@ def test_rays_and_the_first_pass_rays_travel_with_the_state():
 def test_a_state_without_ray_counts_resumes_with_equal_costs():
     sigma, rays = np.geomspace(0.05, 1.0, 4), [1, 2, 3, 4]
     film, halves, _, _ = costly_render(sigma, rays, 0.2, side=2)
-    channels = {k: v for k, v in state_channels(film, halves).items() if ".rays." not in k}
+    channels = {k: v for k, v in state_channels(film, halves).items() if ".cost." not in k}
     old_film, old = state_from_channels(channels, film.spp_image().astype(np.uint32))
-    assert old.rays.sum() == 0 and old.first[2].sum() == 0
+    assert old.cost.sum() == 0 and old.first[2].sum() == 0
     resumed, resumed_halves, reason, stats = costly_render(sigma, rays, 0.01, side=2, halves=old, film=old_film)
-    assert stats["rays_per_sample"] == 0.0 and reason == "threshold"
+    assert stats["cost_per_sample"] == 0.0 and reason == "threshold"
     equal = costly_render(sigma, [1, 1, 1, 1], 0.01, side=2)[0]           # the rule without costs
     np.testing.assert_array_equal(resumed.count, equal.count)
 
@@ -171,7 +171,7 @@ def test_resuming_continues_the_cost_weighted_counts_exactly():
     resumed, resumed_halves, _, _ = costly_render(sigma, rays, 0.01, side=4, halves=halves, film=film)
     np.testing.assert_array_equal(resumed.count, whole.count)
     np.testing.assert_array_equal(resumed.sums, whole.sums)
-    np.testing.assert_array_equal(resumed_halves.rays, whole_halves.rays)
+    np.testing.assert_array_equal(resumed_halves.cost, whole_halves.cost)
 
 
 # ------------------------------------------------------------------------------------ the integrator's counts
@@ -194,11 +194,11 @@ def test_per_path_ray_counts_do_not_depend_on_the_batch(sphere):
     pixel = np.tile(np.arange(256), 4)
     sample = np.repeat(np.arange(4), 256)
     _, whole = tracer.trace(pixel, sample)
-    rays = whole["path_rays"]
+    rays = whole["path_cost"]
     order = np.random.default_rng(0).permutation(pixel.size)
     parts = np.empty_like(rays)
     for chunk in np.array_split(order, 5):                    # other batches, other orders
-        parts[chunk] = tracer.trace(pixel[chunk], sample[chunk])[1]["path_rays"]
+        parts[chunk] = tracer.trace(pixel[chunk], sample[chunk])[1]["path_cost"]
     np.testing.assert_array_equal(parts, rays)
     # every path traces its camera ray; the counts hold the segments and a light sample per NEE vertex
     assert rays.min() >= 1 and rays.sum() >= whole["rays"] and len(np.unique(rays)) > 2
@@ -213,11 +213,11 @@ def test_rays_of_an_adaptive_render_do_not_depend_on_threads_or_batches_and_weig
     st2 = copy.copy(st)
     st2.threads, st2.batch_rays = 2, 300
     other = renderer.render(st2, adaptive=ad)
-    np.testing.assert_array_equal(other.halves.rays, ref.halves.rays)
+    np.testing.assert_array_equal(other.halves.cost, ref.halves.cost)
     np.testing.assert_array_equal(other.film.count, ref.film.count)
     np.testing.assert_array_equal(other.film.sums, ref.film.sums)
-    c = tile_rays_per_sample(ref.film, ref.halves)
-    assert ref.stats["rays_per_sample"] > 1 and c.max() > 1.5 * c.min()       # glass is dearer than the floor
+    c = tile_cost_per_sample(ref.film, ref.halves)
+    assert ref.stats["cost_per_sample"] > 1 and c.max() > 1.5 * c.min()       # glass is dearer than the floor
 
 
 # ------------------------------------------------------------------------------------ the estimate
@@ -225,7 +225,7 @@ def test_rays_of_an_adaptive_render_do_not_depend_on_threads_or_batches_and_weig
 def test_cost_map_spreads_a_units_time_over_its_tiles_by_their_rays():
     units = [(np.array([0, 1]), 4, 2.0, 12), (np.array([2, 3]), 4, 6.0, 12)]   # 1/6 and 1/2 s per ray
     rays_per_sample = np.array([1.0, 5.0, 3.0, 3.0, 2.0])
-    sps = cost_map(units, 5, seconds=1.0, rays_per_sample=rays_per_sample)  # wall 1 s (two threads)
+    sps = cost_map(units, 5, seconds=1.0, cost_per_sample=rays_per_sample)  # wall 1 s (two threads)
     raw = np.array([1 / 6, 5 / 6, 1.5, 1.5])
     np.testing.assert_allclose(sps[:4], raw / 8.0)                         # the units took 8 s in all
     assert float(np.sum(sps[:4] * 2)) == pytest.approx(1.0)               # the pilot's samples: its wall time

@@ -50,7 +50,7 @@ def _render_unit(key, scene, settings, unit, window, width):
     tracer = PathTracer(renderer.compiled, renderer.lights, renderer.camera, settings)
     with one_blas_thread():             # the worker's threads are its parallelism (engine.render.blas_threads)
         values, stats = tracer.trace(pixel, sample)
-    stats.pop("path_rays", None)                        # per-path ray counts: adaptive sampling's cost only
+    stats.pop("path_cost", None)                        # per-path costs: adaptive sampling's only
     lo, hi = int(pix.min()), int(pix.max()) + 1
     part = Film(hi - lo, 1)
     stratified = getattr(settings, "sampler", "independent") == "stratified"

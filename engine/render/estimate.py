@@ -5,11 +5,12 @@ sampling) gives each tile's error e at n = pilot_spp samples.  The standard erro
 mean falls as 1/√spp, so the tile needs m = n·(e/T)² samples to reach the threshold T; adaptive
 sampling stops it at the first checkpoint ≥ m (engine.render.adaptive.checkpoints), within
 [min_spp, spp], or earlier at its share of the error at equal cost, n = σ/(μ·w)
-(engine.render.adaptive: w = √(c/c̄) from the tile's rays per sample).  A uniform render needs the
+(engine.render.adaptive: w = √(c/c̄) from the tile's cost per sample; for the polarisation
+quantities e and σ are pooled with the tile's neighbourhood, as in the render).  A uniform render needs the
 largest m of all tiles for every pixel.  Wall time = Σ over pixels of samples × that pixel's seconds
 per sample on this machine, a per-tile cost map (:func:`cost_map`): the pilot is cut into units of
-≥ 1024 pixels whose seconds per ray are measured, and each 4×4 tile costs its own rays per sample
-(:func:`tile_rays_per_sample`) × its unit's seconds per ray — the pixels that need many samples,
+≥ 1024 pixels whose seconds per unit of cost are measured, and each 4×4 tile costs its own cost per
+sample (:func:`tile_cost_per_sample`) × its unit's seconds per unit of cost — the pixels that need many samples,
 glass and edges, are also the expensive ones.  The same prediction is made from the
 first pass (``min_spp`` everywhere) of an adaptive render and printed beside what happened.
 
@@ -33,7 +34,7 @@ import numpy as np
 
 from ..errors import SceneError
 from .adaptive import (QUANTITIES, TILE, UNITS, AdaptiveSettings, allocation_from, checkpoints, film_noise,
-                       tile_ids)
+                       pooled_error, tile_ids)
 
 
 @dataclass
@@ -109,42 +110,42 @@ def best_mse_time_gain(variance, seconds_per_sample) -> float:
     return float(np.sum(v) * np.sum(c)) / den if den > 0 else math.nan
 
 
-def tile_rays_per_sample(film, halves) -> np.ndarray:
-    """Rays per sample of every pixel's tile (H·W,) (:attr:`~engine.render.adaptive.HalfBuffers.rays`
-    ÷ samples, summed over the tile; 0 where the tile has no sample or no rays were counted)."""
+def tile_cost_per_sample(film, halves) -> np.ndarray:
+    """Cost per sample of every pixel's tile (H·W,) (:attr:`~engine.render.adaptive.HalfBuffers.cost`
+    ÷ samples, summed over the tile; 0 where the tile has no sample or no cost was counted)."""
     tiles = tile_ids(film.width, film.height)
     n_tiles = int(tiles.max()) + 1
-    r = np.bincount(tiles, weights=halves.rays.astype(np.float64), minlength=n_tiles)
+    r = np.bincount(tiles, weights=halves.cost.astype(np.float64), minlength=n_tiles)
     n = np.bincount(tiles, weights=film.count.astype(np.float64), minlength=n_tiles)
     return np.divide(r, n, out=np.zeros(n_tiles), where=n > 0)[tiles]
 
 
-def cost_map(unit_times, n_pixels: int, seconds: float, rays_per_sample: np.ndarray | None = None) -> np.ndarray:
-    """Seconds per sample of every pixel (n_pixels,) from the pilot's (pixels, paths, seconds[, rays])
+def cost_map(unit_times, n_pixels: int, seconds: float, cost_per_sample: np.ndarray | None = None) -> np.ndarray:
+    """Seconds per sample of every pixel (n_pixels,) from the pilot's (pixels, paths, seconds[, cost])
     per unit, scaled so that the pilot's own samples add up to its wall time ``seconds`` (threads overlap).
 
-    With ``rays_per_sample`` (per pixel: its tile's, :func:`tile_rays_per_sample`) and the units' rays,
-    a pixel costs its tile's rays per sample × the seconds per ray of the units it was traced in: the
-    units (≥ :data:`~engine.render.adaptive.COST_CHUNK_PIXELS` pixels, so that per-unit overhead
-    does not dominate) give the time, the deterministic ray counts how it spreads over the unit's
-    tiles (the pixels seen through glass trace ~2× the rays of those on a floor, at 16 spp a 4×4
-    tile's count is within a few % of its mean).  Without them, every pixel of a unit costs the same.
+    With ``cost_per_sample`` (per pixel: its tile's, :func:`tile_cost_per_sample`) and the units' cost,
+    a pixel costs its tile's cost per sample × the seconds per unit of cost of the units it was traced
+    in: the units (≥ :data:`~engine.render.adaptive.COST_CHUNK_PIXELS` pixels, so that per-unit
+    overhead does not dominate) give the time, the deterministic cost counts how it spreads over the
+    unit's tiles (the pixels seen through glass shade ~3× the vertices of those on a floor, at 16 spp a
+    4×4 tile's count is within a few % of its mean).  Without them, every pixel of a unit costs the same.
     """
-    spent, samples, rays = np.zeros(n_pixels), np.zeros(n_pixels), np.zeros(n_pixels)
-    per_ray = rays_per_sample is not None and all(len(u) > 3 and u[3] for u in unit_times)
+    spent, samples, work_cost = np.zeros(n_pixels), np.zeros(n_pixels), np.zeros(n_pixels)
+    per_cost = cost_per_sample is not None and all(len(u) > 3 and u[3] for u in unit_times)
     for u in unit_times:
         pix, paths, sec = u[:3]
         spent[pix] += sec / len(pix)
         samples[pix] += paths / len(pix)
-        if per_ray:
-            rays[pix] += u[3] / len(pix)
+        if per_cost:
+            work_cost[pix] += u[3] / len(pix)
     seen = samples > 0
     if not seen.any():
         return np.zeros(n_pixels)
-    work = rays if per_ray else samples
-    unit_cost = np.where(seen, spent / np.where(seen, work, 1.0), 0.0)     # seconds per ray (or per sample)
+    work = work_cost if per_cost else samples
+    unit_cost = np.where(seen, spent / np.where(seen, work, 1.0), 0.0)     # seconds per cost (or per sample)
     unit_cost[~seen] = unit_cost[seen].mean()
-    per_sample = unit_cost * (np.asarray(rays_per_sample, np.float64) if per_ray else 1.0)
+    per_sample = unit_cost * (np.asarray(cost_per_sample, np.float64) if per_cost else 1.0)
     total = float(np.sum(per_sample[seen] * samples[seen]))
     return per_sample * (seconds / total if total > 0 else 0.0)
 
@@ -159,19 +160,31 @@ def predict(film, halves, quantity: str, threshold: float, min_spp: int, spp: in
         pixels = np.arange(film.count.size)
     n = film.count[pixels].astype(np.float64)
     _, _, tile_err = film_noise(film, halves, quantity, pixels)
-    need = n * (tile_err / threshold) ** 2                # every tile below the threshold
     alloc = allocation_from(halves.sums, film.count, quantity, threshold, tile_ids(film.width, film.height), pixels,
-                            halves.rays)
+                            halves.cost, film.width)
+    need = n * (tile_err / threshold) ** 2                # every tile below the threshold (uniform: its own error)
     sigma, mu = alloc.sigma, alloc.level
-    # where the tile's share of the error at equal cost is met: n = σ/(μ·w)
-    share = sigma / (mu * alloc.weight) if mu > 0 else np.full(n.shape, np.inf)
     marks = checkpoints(min_spp, spp)
-    i = np.minimum(np.searchsorted(marks, np.ceil(np.minimum(need, share) - 1e-9), side="left"), len(marks) - 1)
+    if np.any(alloc.n_nb > 0):
+        # the error pooled with the neighbourhood (engine.render.adaptive.pooled_error) at every
+        # checkpoint m, the tile's own σ̂ staying what it is: the first m where e(m) ≤ T or σ(m)/(μ·w) ≤ m
+        m = marks[:, None].astype(np.float64)
+        # (the pooled quantities' allocation error is their tile error)
+        e_m = pooled_error(tile_err * np.sqrt(n) / np.sqrt(m), m, alloc.sigma_nb, alloc.n_nb)
+        stop = (e_m <= threshold) | ((e_m * np.sqrt(m) / (mu * alloc.weight) <= m) if mu > 0 else False)
+        wanted = np.where(stop.any(axis=0), 0.0, np.inf)        # capped: would go on past spp
+        stop[-1] = True
+        i = np.argmax(stop, axis=0)
+    else:
+        # where the tile's share of the error at equal cost is met: n = σ/(μ·w)
+        share = sigma / (mu * alloc.weight) if mu > 0 else np.full(n.shape, np.inf)
+        wanted = np.minimum(need, share)
+        i = np.minimum(np.searchsorted(marks, np.ceil(wanted - 1e-9), side="left"), len(marks) - 1)
     counts = marks[i]
     uniform = int(min(spp, max(min_spp, math.ceil(float(need.max()) - 1e-9)))) if need.size else min_spp
     uniform_p95 = int(min(spp, max(min_spp, math.ceil(float(np.percentile(need, 95)) - 1e-9)))) if need.size \
         else min_spp
-    capped = float(np.mean(np.minimum(need, share) > spp)) if need.size else 0.0
+    capped = float(np.mean(wanted > spp)) if need.size else 0.0
     sps = np.asarray(seconds_per_sample, np.float64)
     rounds = int(np.searchsorted(marks, counts.max())) + 1 if counts.size else 0
     return Prediction(quantity, threshold, counts, uniform, uniform_p95, sps[pixels] if sps.ndim else sps, capped,
@@ -201,7 +214,7 @@ def pilot_render(renderer, settings, pilot_spp: int, quantity: str = "s0"):
                                                            min_spp=pilot_spp, time_limit=0.0),
                              unit_times=unit_times)
     return result, cost_map(unit_times, result.film.count.size, result.stats["seconds"],
-                            tile_rays_per_sample(result.film, result.halves))
+                            tile_cost_per_sample(result.film, result.halves))
 
 
 def round_overhead(renderer, settings, pilot, seconds_per_sample, min_spp: int) -> float:

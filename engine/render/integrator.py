@@ -99,14 +99,24 @@ def power_heuristic(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- per-bounce records
 
+#: A path's cost (adaptive sampling's allocation weighs by it): PATH_COST, plus VERTEX_COST per
+#: surface hit (a shaded vertex) and per light sample.  1-thread CPU time of 16×16-pixel windows
+#: (256 spp, glass_sphere, fresnel_sphere_au 64², demo 128×64) fitted per scene: ≈ 0.3 µs per path,
+#: 1.3–1.5 µs per surface hit, 1.1–1.2 µs per light sample (+ 2.3 ms per bounce of a batch, shared by
+#: its paths): a vertex costs ≈ 4 paths.  The earlier count (segments + light samples) made a glass
+#: path 2× a floor path's; its shaded vertices make it ≈ 2.5× (CPU time: 3–4×).
+PATH_COST = 1
+VERTEX_COST = 4
+
+
 @dataclass(eq=False)
 class _Accumulators:
     """What a batch accumulates per path of the batch (indexed by ``PathState.path``): the
     radiance (P, L, N) (RGB: L = 3), the transparency (N,) (None: not tracked), the denoising
     guides (None: not asked) and the ray counts; ``w_rgb`` (3, L, N) colour weights of the
-    wavelength samples (None in RGB mode).  ``path_rays`` (N,): segments traced plus light samples
-    tried by each path, the deterministic cost of a sample that adaptive sampling weighs its
-    allocation by (engine.render.adaptive; rays skipped by pass-through surfaces are not counted)."""
+    wavelength samples (None in RGB mode).  ``path_cost`` (N,): each path's cost in units of
+    :data:`PATH_COST`, the deterministic cost of a sample that adaptive sampling weighs its
+    allocation by (engine.render.adaptive)."""
     radiance: np.ndarray
     w_rgb: np.ndarray | None
     transparency: np.ndarray | None
@@ -116,10 +126,10 @@ class _Accumulators:
     #: numbers depend on them), else None
     pixel: np.ndarray | None = None
     sample: np.ndarray | None = None
-    path_rays: np.ndarray = field(init=False)
+    path_cost: np.ndarray = field(init=False)
 
     def __post_init__(self):
-        self.path_rays = np.zeros(self.radiance.shape[-1], np.int64)
+        self.path_cost = np.full(self.radiance.shape[-1], PATH_COST, np.int64)
 
 
 @dataclass(eq=False)
@@ -363,7 +373,6 @@ class PathTracer:
         o, d, t_max = state.o, state.d, state.t_max
         hits = compiled.intersect(o, d, t_max)
         acc.stats["rays"] += state.n
-        acc.path_rays[state.path] += 1                  # paths of a batch are distinct: no repeated index
         if vis is not None:
             hits, extra = vis.pass_through(compiled, o, d, t_max, hits, bounce == 0, state.sampler.keys, bounce)
             acc.stats["rays"] += extra
@@ -378,6 +387,7 @@ class PathTracer:
                 held = hit & vis.holdout[vis.tri_mesh[np.where(hit, hits.prim, 0)]]
                 acc.transparency[state.path[held]] += 1.0
                 hit = hit & ~held
+        acc.path_cost[state.path[hit]] += VERTEX_COST   # shaded vertices (paths of a batch are distinct)
         return hits, hit, background
 
     def _emission(self, state: PathState, acc: _Accumulators, hits: Hits, hit: np.ndarray, background: np.ndarray,
@@ -530,7 +540,7 @@ class PathTracer:
             if not bsdf.flags.is_delta_only and len(light_set) and bounce + 2 <= st.max_depth:
                 contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], acc.stats)
                 add_to_paths(acc.radiance, gather(state.path, sel), contrib)
-                acc.path_rays[gather(state.path, sel)] += 1     # one light sample: a shadow ray (cost)
+                acc.path_cost[gather(state.path, sel)] += VERTEX_COST     # a light sample (cost)
 
             bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
             if acc.guides is not None and not bsdf.flags.is_delta_only:
@@ -580,7 +590,7 @@ class PathTracer:
             stats["alpha"] = 1.0 - acc.transparency
         if acc.guides is not None:
             stats["denoise"] = (acc.guides.albedo, acc.guides.normal)
-        stats["path_rays"] = acc.path_rays
+        stats["path_cost"] = acc.path_cost
         return out, stats
 
     def _shadow_transmittance(self, p: np.ndarray, n_g: np.ndarray, wi: np.ndarray, t_max: np.ndarray,

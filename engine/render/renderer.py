@@ -306,7 +306,7 @@ class Renderer:
             if traced is None:
                 return None
             values, s = traced
-            s.pop("path_rays", None)                # per-path ray counts: adaptive sampling's cost only
+            s.pop("path_cost", None)                # per-path costs: adaptive sampling's only
             # the unit's film sums, here on the worker: the adding thread only adds them in order
             return SampleSums.of(pixel, values, s.pop("alpha", None), s.pop("denoise", None),
                                  sample if stratified else None), s
