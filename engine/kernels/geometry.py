@@ -107,13 +107,21 @@ def offset_origin_numpy(p, n_g, w, epsilon):
 
 
 @jit
+def offset_origin_at(p, n_g, w, epsilon, i, out):
+    """out[:, i] = point p[:, i] moved off its surface along ±n_g[:, i], to the side of direction
+    w[:, i] (offset_origin_numpy's rule and operation order, one path); returns max|p[:, i]|."""
+    side = 1.0 if (n_g[0, i] * w[0, i] + n_g[1, i] * w[1, i]) + n_g[2, i] * w[2, i] >= 0 else -1.0
+    m = max(max(abs(p[0, i]), abs(p[1, i])), abs(p[2, i]))
+    s = side * ((1.0 + m) * epsilon)
+    for k in range(3):
+        out[k, i] = p[k, i] + s * n_g[k, i]
+    return m
+
+
+@jit
 def _offset_loop(p, n_g, w, epsilon, out):
     for i in range(p.shape[1]):
-        side = 1.0 if (n_g[0, i] * w[0, i] + n_g[1, i] * w[1, i]) + n_g[2, i] * w[2, i] >= 0 else -1.0
-        m = max(max(abs(p[0, i]), abs(p[1, i])), abs(p[2, i]))
-        s = side * ((1.0 + m) * epsilon)
-        for k in range(3):
-            out[k, i] = p[k, i] + s * n_g[k, i]
+        offset_origin_at(p, n_g, w, epsilon, i, out)
 
 
 def offset_origin_numba(p, n_g, w, epsilon):

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import jit, twin
-from .geometry import offset_origin_numpy
+from .geometry import offset_origin_at, offset_origin_numpy
 
 
 def shadow_rays_numpy(p, n_g, wi, dist, epsilon):
@@ -24,12 +24,7 @@ def shadow_rays_numpy(p, n_g, wi, dist, epsilon):
 @jit
 def _shadow_rays_loop(p, n_g, wi, dist, epsilon, o, t_max):
     for i in range(p.shape[1]):
-        # engine.kernels.geometry._offset_loop's arithmetic
-        side = 1.0 if (n_g[0, i] * wi[0, i] + n_g[1, i] * wi[1, i]) + n_g[2, i] * wi[2, i] >= 0 else -1.0
-        m = max(max(abs(p[0, i]), abs(p[1, i])), abs(p[2, i]))
-        s = side * ((1.0 + m) * epsilon)
-        for k in range(3):
-            o[k, i] = p[k, i] + s * n_g[k, i]
+        m = offset_origin_at(p, n_g, wi, epsilon, i, o)
         d = dist[i]
         t_max[i] = d * (1.0 - 1e-4) - 1e-4 * (1.0 + m) if np.isfinite(d) else np.inf
 

@@ -13,7 +13,7 @@ import math
 import numpy as np
 
 from . import jit, twin
-from .geometry import offset_origin_numpy
+from .geometry import offset_origin_at, offset_origin_numpy
 from .stokes_rotation import frame_rotation, frame_rotation_at, rotate_stokes
 
 
@@ -494,14 +494,10 @@ def _next_segments_loop(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path
     else:
         T_k, x_k, d_k, p_k, n_k = T, x_T, d, p, n_g
         eta_k, pdf_k, path_k, keys_k, delta_k = eta_new, pdf, path, keys, is_delta
-    # next origins: engine.kernels.geometry._offset_loop's arithmetic
+    # next origins, off the surface to the side of the new direction
     o = np.empty((3, m))
     for jj in range(m):
-        side = 1.0 if (n_k[0, jj] * d_k[0, jj] + n_k[1, jj] * d_k[1, jj]) + n_k[2, jj] * d_k[2, jj] >= 0 else -1.0
-        a = max(max(abs(p_k[0, jj]), abs(p_k[1, jj])), abs(p_k[2, jj]))
-        s = side * ((1.0 + a) * epsilon)
-        for r in range(3):
-            o[r, jj] = p_k[r, jj] + s * n_k[r, jj]
+        offset_origin_at(p_k, n_k, d_k, epsilon, jj, o)
     return idx, nonfinite, T_k, x_k, d_k, eta_k, path_k, keys_k, delta_k, pdf_k, p_k, o
 
 
