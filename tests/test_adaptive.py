@@ -21,6 +21,7 @@ from engine.render.renderer import Renderer
 from engine.scene.loader import load_scene
 from engine.errors import SceneError
 from tests.conftest import shared_path
+from tests.support.adaptive import empty_stats, run_units_in_order
 
 
 def col(*v):
@@ -498,13 +499,9 @@ def synthetic_render(sigma_tiles, threshold, min_spp=16, spp=4096, side=8):
     sigma = np.asarray(sigma_tiles, np.float64)[tile_ids(W, H)]
     film, halves = Film(W, H), HalfBuffers(W * H)
 
-    def run_units(units, trace_unit, add_result, stop_requested, abort):
-        for u in units:
-            add_result(trace_unit(u))
-        return False
-    stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0}
+    stats = empty_stats()
     reason = render_adaptive(GaussianTracer(sigma), film, halves, spp, 1 << 16,
-                             AdaptiveSettings(threshold, "s0", min_spp), None, run_units, stats)
+                             AdaptiveSettings(threshold, "s0", min_spp), None, run_units_in_order, stats)
     return film, halves, reason, stats
 
 

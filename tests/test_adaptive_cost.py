@@ -18,6 +18,7 @@ from engine.render.film import Film
 from engine.render.integrator import PathTracer
 from engine.render.renderer import Renderer
 from tests.test_adaptive import GaussianTracer, small_scene
+from tests.support.adaptive import empty_stats, run_units_in_order
 
 
 class CostlyGaussianTracer(GaussianTracer):
@@ -40,13 +41,9 @@ def costly_render(sigma_tiles, rays_tiles, threshold, side, min_spp=16, spp=4096
     film = Film(W, H) if film is None else film
     halves = HalfBuffers(W * H) if halves is None else halves
 
-    def run_units(units, trace_unit, add_result, stop_requested, abort):
-        for u in units:
-            add_result(trace_unit(u))
-        return False
-    stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0}
+    stats = empty_stats()
     reason = render_adaptive(tracer, film, halves, spp, 1 << 16, AdaptiveSettings(threshold, "s0", min_spp), None,
-                             run_units, stats)
+                             run_units_in_order, stats)
     return film, halves, reason, stats
 
 

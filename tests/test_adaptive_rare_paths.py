@@ -20,6 +20,7 @@ from engine.render.integrator import PATH_COST, VERTEX_COST
 from engine.render.renderer import Renderer
 from tests.test_adaptive import GaussianTracer, small_scene
 from tests.test_adaptive_cost import costly_render, tracer_of
+from tests.support.adaptive import empty_stats, run_units_in_order
 
 SIDE = 5                                     # tiles per side of the synthetic images
 HIDDEN = 2 * SIDE + 2                        # the centre tile
@@ -51,13 +52,9 @@ def polarised_render(sigma_tiles, threshold, hidden_tiles=None, quantity="dolp",
     film = Film(W, H) if film is None else film
     halves = HalfBuffers(W * H) if halves is None else halves
 
-    def run_units(units, trace_unit, add_result, stop_requested, abort):
-        for u in units:
-            add_result(trace_unit(u))
-        return False
-    stats = {"rays": 0, "shadow_rays": 0, "nonfinite": 0}
+    stats = empty_stats()
     reason = render_adaptive(tracer, film, halves, spp, 1 << 16, AdaptiveSettings(threshold, quantity, min_spp),
-                             None, run_units, stats)
+                             None, run_units_in_order, stats)
     return film, halves, reason, stats
 
 
