@@ -53,7 +53,7 @@ def _render_unit(key, scene, settings, unit, window, width):
     stats.pop("path_cost", None)                        # per-path costs: adaptive sampling's only
     lo, hi = int(pix.min()), int(pix.max()) + 1
     part = Film(hi - lo, 1)
-    stratified = getattr(settings, "sampler", "independent") == "stratified"
+    stratified = settings.stratified
     part.add(SampleSums.of(pixel - lo, values, stats.pop("alpha", None), sample=sample if stratified else None))
     if part.half_y is not None:
         stats["half_y"] = part.half_y                   # even/odd luminance sums (the standard error)
@@ -231,7 +231,7 @@ def _render_adaptive_on(client, key, scene_future, st, reason, simplified, W, H,
     stats["stop_reason"] = render_adaptive(None, film, halves, st.spp, st.batch_rays, adaptive, window, run_units,
                                            stats, progress=progress, should_stop=should_stop,
                                            workers=max(1, stats["workers"]))
-    if getattr(st, "sampler", "independent") == "stratified":
+    if st.stratified:
         film.half_y = halves.sums           # the half-buffers are the even/odd luminance sums
     stats.setdefault("seconds", 0.0)
     return RenderResult(film=film, settings=st, stats=stats, cancelled=stats["stop_reason"] == "cancelled",

@@ -332,7 +332,7 @@ class PathTracer:
         k_camera = 2 + self.camera.lens_dimensions
         sampler, u = PathSampler.start(self.settings.seed, pixel, sample,
                                        k_camera + (1 if self.samples_wavelengths else 0))
-        stratified = getattr(self.settings, "sampler", "independent") == "stratified"
+        stratified = self.settings.stratified
         if stratified:
             # pixel jitter stratified over each pixel's samples: edges of bright camera-visible emitters
             # (a lamp, a sun disc) are otherwise most of the image's noise (see stratified_pair)

@@ -291,8 +291,7 @@ class Renderer:
         abort = threading.Event()
         # stratified samples: the film keeps even/odd half sums for an honest standard error (not when
         # resuming a film without them: its error is then the i.i.d. one, an overestimate)
-        stratified = getattr(st, "sampler", "independent") == "stratified" and (resume is None
-                                                                                or resume.half_y is not None)
+        stratified = st.stratified and (resume is None or resume.half_y is not None)
 
         def trace_unit(unit):
             r0, r1, p0, p1 = unit
@@ -337,7 +336,7 @@ class Renderer:
                 stats, progress=progress, should_stop=should_stop, clock=clock or time.perf_counter,
                 on_first_pass=on_first_pass, workers=workers, unit_times=unit_times)
             cancelled = stats["stop_reason"] == "cancelled"
-            if getattr(st, "sampler", "independent") == "stratified":
+            if st.stratified:
                 film.half_y = halves.sums       # the half-buffers are the even/odd luminance sums
             stats.setdefault("seconds", 0.0)
             self._live_film = None

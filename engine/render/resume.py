@@ -124,7 +124,7 @@ def estimator_identity(scene_hash: str, settings, resolved: str, window=None, si
              "polar.seed": int(settings.seed), "polar.spectral": settings.spectral,
              "polar.polarisation_requested": settings.polarisation, "polar.polarisation": resolved,
              "polar.reduce_spectral": settings.reduce_spectral, "polar.simplify": settings.simplify}
-    if getattr(settings, "sampler", "independent") != "independent":
+    if settings.stratified:
         # only then: the headers of independent renders stay as they were (and older files match)
         ident["polar.sampler"] = settings.sampler
     if settings.spectral == "mono":
@@ -206,7 +206,7 @@ def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None
     from .adaptive import has_state, state_from_channels
     if has_state(channels):
         film, halves = state_from_channels(channels, counts)
-        if getattr(st, "sampler", "independent") == "stratified":
+        if st.stratified:
             film.half_y = halves.sums.copy()        # even/odd luminance sums: the stratified standard error
     else:
         if with_halves:
@@ -215,7 +215,7 @@ def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None
                                                   "(resume it without --noise-threshold)")
         stderr = np.stack([channels[f"S{i}.Y.stderr"] for i in range(4)]) if "S0.Y.stderr" in channels else None
         even = None
-        if getattr(st, "sampler", "independent") == "stratified" and "S0.Y.even" in channels:
+        if st.stratified and "S0.Y.even" in channels:
             # the i.i.d. error restores the sums of squares; the even means the half sums
             even = np.stack([channels[f"S{i}.Y.even"] for i in range(4)])
             stderr = np.stack([channels[f"S{i}.Y.stderr_iid"] for i in range(4)])

@@ -209,6 +209,11 @@ class RenderSettings:
     #: same expectation, less noise; the standard error then comes from the even/odd halves).
     sampler: str = "independent"
 
+    @property
+    def stratified(self) -> bool:
+        """True with the "stratified" sampler (the film then keeps even/odd half sums)."""
+        return self.sampler == "stratified"
+
 
 #: RenderSettings.sampler's values
 SAMPLERS = ("independent", "stratified")
