@@ -70,14 +70,7 @@ class PathState:
         if mask.all():
             return extra
         idx = np.flatnonzero(mask)
-        for name in ARRAY_FIELDS:
-            a = getattr(self, name)
-            if a is not None:
-                setattr(self, name, keep_columns(a, idx))
-        self.sampler.keys = keep_columns(self.sampler.keys, idx)
-        new = self.lk.take(idx)
-        self.lk_m = new if self.lk_m is self.lk else self.lk_m.take(idx)
-        self.lk = new
+        self.keep(idx, keep_columns(self.sampler.keys, idx))
         return tuple(None if a is None else keep_columns(a, idx) for a in extra)
 
     def keep(self, idx: np.ndarray, keys: np.ndarray, **kept: np.ndarray | None) -> None:
