@@ -469,28 +469,20 @@ def _next_segments_loop(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path
             idx[m] = j
             m += 1
     if m < n:
+        # the survivors' columns, each array as rows of a 2-D view (keep_columns' loop)
         P, L = T.shape[0], T.shape[2]
         T_k = np.empty((P, P, L, m))
-        for i in range(P):
-            for c in range(P):
-                for k in range(L):
-                    for jj in range(m):
-                        T_k[i, c, k, jj] = T[i, c, k, idx[jj]]
+        _keep_columns_loop(T.reshape(P * P * L, n), idx, T_k.reshape(P * P * L, m))
         x_k, d_k, p_k, n_k = np.empty((3, m)), np.empty((3, m)), np.empty((3, m)), np.empty((3, m))
+        for a, out in ((x_T, x_k), (d, d_k), (p, p_k), (n_g, n_k)):
+            _keep_columns_loop(a, idx, out)
         eta_k, pdf_k = np.empty(m), np.empty(m)
         path_k, keys_k, delta_k = np.empty(m, np.int64), np.empty(m, np.uint64), np.empty(m, np.bool_)
-        for jj in range(m):
-            j = idx[jj]
-            for r in range(3):
-                x_k[r, jj] = x_T[r, j]
-                d_k[r, jj] = d[r, j]
-                p_k[r, jj] = p[r, j]
-                n_k[r, jj] = n_g[r, j]
-            eta_k[jj] = eta_new[j]
-            pdf_k[jj] = pdf[j]
-            path_k[jj] = path[j]
-            keys_k[jj] = keys[j]
-            delta_k[jj] = is_delta[j]
+        _keep_columns_loop(eta_new.reshape(1, n), idx, eta_k.reshape(1, m))
+        _keep_columns_loop(pdf.reshape(1, n), idx, pdf_k.reshape(1, m))
+        _keep_columns_loop(path.reshape(1, n), idx, path_k.reshape(1, m))
+        _keep_columns_loop(keys.reshape(1, n), idx, keys_k.reshape(1, m))
+        _keep_columns_loop(is_delta.reshape(1, n), idx, delta_k.reshape(1, m))
     else:
         T_k, x_k, d_k, p_k, n_k = T, x_T, d, p, n_g
         eta_k, pdf_k, path_k, keys_k, delta_k = eta_new, pdf, path, keys, is_delta
