@@ -235,8 +235,8 @@ class PathTracer:
         self.has_area_lights = compiled.has_area_lights     # once, not per bounce (scans every triangle)
         # where segments start is kept for light selection, analytic lamps and warp-sampled lamps' pdfs
         self.keep_origins = (lights.spatial or bool(lights.hittable)
-                             or any(getattr(light, "hit_pdf_needs_origin", False)
-                                    or getattr(light, "hit_pdf_needs_direction", False) for light in lights.lights))
+                             or any(light.hit_pdf_needs_origin or light.hit_pdf_needs_direction
+                                    for light in lights.lights))
         # materials shaded together (e.g. all RGB Lambert materials in one call)
         self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
         # textured parameters need the hits' per-vertex attributes (UV, colours)
@@ -736,7 +736,7 @@ class PathTracer:
                 Le = Le * factor[None, :]
             prev = at_prev(sel)
             # lamps sampled by a warp need the arrival point, hence the direction (EllipseEmitter)
-            where = (d[:, sel],) if getattr(light, "hit_pdf_needs_direction", False) else ()
+            where = (d[:, sel],) if light.hit_pdf_needs_direction else ()
             p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], *where) * light_set.prob_at(li, *prev)
             wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
             add_light(radiance, path, T, sel, Le, wsel)

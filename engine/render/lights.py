@@ -58,6 +58,8 @@ class _Light:
     at_infinity = False
     hittable = False      # an analytic emitter that rays find through ``intersect`` (not in the BVH)
     blocks_own_shadow_rays = False    # an opaque emitter whose geometry can stop its own shadow rays
+    hit_pdf_needs_origin = False      # ``pdf_hit`` needs the segment's origin (solid-angle sampled lamps)
+    hit_pdf_needs_direction = False   # ... and where on the lamp the ray arrives (warp-sampled lamps)
 
     def __init__(self, spectrum):
         self.spectrum = spectrum
