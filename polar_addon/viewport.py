@@ -21,6 +21,7 @@ Three parts, only the last touches Blender's drawing API:
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import dataclasses
 import math
@@ -29,6 +30,7 @@ import weakref
 
 import numpy as np
 
+from ..engine.render.allocator import render_heap
 from .ui_names import ui_message
 
 #: Samples traced per viewport pass: the image is rendered at a reduced resolution so that one
@@ -506,9 +508,26 @@ class ViewportSession:
         return renderer is not None and self.samples < self.target_samples
 
     def _run(self):
+        # The allocator settings of a render (engine.render.allocator.render_heap) are held while
+        # samples follow each other: per 1-spp render they would hand the memory back and fault it in
+        # again every sample.  Released when the session idles (converged, waiting) or stops.
+        heap = contextlib.ExitStack()
+        try:
+            self._loop(heap)
+        finally:
+            heap.close()
+
+    def _loop(self, heap):
         renderer = None
         view = None
+        held = False
         while True:
+            if held:
+                with self._cond:
+                    idle = not self._stop and not self._has_work(renderer)
+                if idle:
+                    heap.close()
+                    held = False
             with self._cond:
                 while not self._stop and not self._has_work(renderer):
                     self._cond.wait()
@@ -517,6 +536,9 @@ class ViewportSession:
                 generation = self._generation
                 pending, self._pending = self._pending, None
                 camera, settings, n = self._view, self._settings, self.samples
+            if not held:
+                heap.enter_context(render_heap())
+                held = True
             try:
                 if pending is not None:
                     scene, rebuild = pending

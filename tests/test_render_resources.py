@@ -81,3 +81,60 @@ def test_freed_batch_sized_arrays_are_not_faulted_in_again():
 def test_the_allocator_is_left_alone_inside_blender(monkeypatch):
     monkeypatch.setitem(sys.modules, "bpy", object())
     assert allocator._glibc() is None
+
+
+#: Child process posing as Blender (a ``bpy`` module loaded): the settings hold during render_heap only;
+#: prints the page faults of re-allocating a freed 200 MiB array inside it, and after it.
+_HOST_FAULTS_CHILD = """
+import resource, sys, types
+import numpy as np
+sys.modules["bpy"] = types.ModuleType("bpy")
+from engine.render import allocator
+assert not allocator.keep_freed_memory()                # nothing kept for the process inside Blender
+if allocator._glibc_library() is None:
+    print("skip"); raise SystemExit
+np.core.multiarray._set_madvise_hugepage(False)
+
+def refault():
+    a = np.ones(200 << 17)
+    del a
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+    b = np.ones(200 << 17)
+    del b
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before
+
+with allocator.render_heap():
+    with allocator.render_heap():                       # nested (viewport session + its renders)
+        pass
+    inside = refault()                                  # still held after the inner one ended
+print(inside, refault())
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc malloc settings")
+def test_inside_blender_the_heap_settings_hold_for_a_render_only():
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    out = subprocess.run([sys.executable, "-c", _HOST_FAULTS_CHILD], capture_output=True, text=True, check=True,
+                         cwd=root, env={**os.environ, "PYTHONPATH": root}).stdout.split()
+    if out[-1] == "skip":
+        pytest.skip("not glibc")
+    inside, after = int(out[-2]), int(out[-1])
+    assert inside < 1000                  # the render's freed arrays are reused
+    assert after > 25000                  # given back: 200 MiB is above the restored 32 MiB threshold
+
+
+def test_renders_hold_the_heap_settings(monkeypatch):
+    from engine.render import renderer as renderer_module
+    held = []
+
+    class Probe:
+        def __enter__(self):
+            held.append(True)
+
+        def __exit__(self, *exc):
+            held.append(False)
+
+    monkeypatch.setattr(renderer_module, "render_heap", Probe)
+    scene = small_scene("plane_brewster", res=4, spp=1)
+    Renderer(scene).render(scene.settings)
+    assert held == [True, False]

@@ -26,7 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .accel import CompiledScene
-from .allocator import keep_freed_memory, return_freed_memory
+from .allocator import keep_freed_memory, render_heap, return_freed_memory
 from .blas_threads import one_blas_thread
 from ..kernels import BACKEND as KERNEL_BACKEND
 from .camera import CameraModel
@@ -241,6 +241,12 @@ class Renderer:
         for the time limit; ``on_first_pass``, ``unit_times``: see render_adaptive); ``stats["stop_reason"]`` says why
         it ended and the result's ``halves`` holds the half-buffers.
         """
+        with render_heap():      # inside Blender: the allocator settings for this render only
+            return self._render(settings, progress, should_stop, window, resume, adaptive, adaptive_resume,
+                                clock, on_first_pass, unit_times)
+
+    def _render(self, settings, progress, should_stop, window, resume, adaptive, adaptive_resume, clock,
+                on_first_pass, unit_times) -> RenderResult:
         st, tracer, simplified, transport_reason = self._tracer(settings)
         cam = self.scene.camera
         W, H = cam.width, cam.height
