@@ -367,3 +367,17 @@ def test_a_constant_sky_beside_a_lamp_takes_few_light_samples():
     alone = plane_scene([sky])
     alone.light_selection = "power"
     assert LightSet(alone, CompiledScene(alone)).probabilities(np.zeros((3, 1)))[0, 0] == 1.0
+
+
+def test_a_light_of_an_unknown_type_is_an_error_not_left_out():
+    # (a scene built with another copy of the package, e.g. the Blender extension's, fails isinstance)
+    from engine.errors import SceneError
+    from engine.render.accel import CompiledScene
+    from engine.render.lights import LightSet
+
+    class StrangeLight:
+        intensity = 1.0
+
+    scene = plane_scene([PointLight(np.array([0.0, 0.0, 1.0]), white(1.0)), StrangeLight()])
+    with pytest.raises(SceneError, match=r"lights\[1\].*StrangeLight"):
+        LightSet(scene, CompiledScene(scene))

@@ -923,7 +923,7 @@ class LightSet:
                 self.camera_hidden.add(len(self.lights))
             self.lights.append(mesh_emitter(mesh.emission, tris, compiled, getattr(mesh, "two_sided", False),
                                             getattr(mesh, "spread_deg", 180.0)))
-        for light in scene.lights:
+        for index, light in enumerate(scene.lights):
             if not getattr(light, "visible_camera", True):
                 self.camera_hidden.add(len(self.lights))
             if isinstance(light, EnvironmentLight):
@@ -945,6 +945,9 @@ class LightSet:
             elif isinstance(light, DirectionalLight):
                 self.lights.append(DirectionalEmitter(light.irradiance, light.direction,
                                                       getattr(light, "angle_deg", 0.0)))
+            else:       # e.g. a light of another copy of this package: never leave a light out silently
+                raise SceneError(f"lights[{index}]", f"is a {type(light).__module__}.{type(light).__name__}, not "
+                                                     "one of engine.scene.description's light types")
         count = len(self.lights)
         self.select_prob = 1.0 / count if count else 0.0
         self.selection = getattr(scene, "light_selection", "uniform")
