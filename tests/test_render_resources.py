@@ -68,14 +68,19 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
 """
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc malloc settings")
-def test_freed_batch_sized_arrays_are_not_faulted_in_again():
+def fault_counts(child: str) -> list[int]:
+    """The numbers a child interpreter running ``child`` prints (pytest.skip where it prints "skip")."""
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    out = subprocess.run([sys.executable, "-c", _FAULTS_CHILD], capture_output=True, text=True, check=True,
+    out = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True, check=True,
                          cwd=root, env={**os.environ, "PYTHONPATH": root}).stdout.split()
     if out[-1] == "skip":
         pytest.skip("not glibc")
-    assert int(out[-1]) < 1000            # default glibc: a fresh mmap, 51 200 page faults
+    return [int(v) for v in out]
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc malloc settings")
+def test_freed_batch_sized_arrays_are_not_faulted_in_again():
+    assert fault_counts(_FAULTS_CHILD)[-1] < 1000            # default glibc: a fresh mmap, 51 200 page faults
 
 
 def test_the_allocator_is_left_alone_inside_blender(monkeypatch):
@@ -113,12 +118,7 @@ print(inside, refault())
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc malloc settings")
 def test_inside_blender_the_heap_settings_hold_for_a_render_only():
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-    out = subprocess.run([sys.executable, "-c", _HOST_FAULTS_CHILD], capture_output=True, text=True, check=True,
-                         cwd=root, env={**os.environ, "PYTHONPATH": root}).stdout.split()
-    if out[-1] == "skip":
-        pytest.skip("not glibc")
-    inside, after = int(out[-2]), int(out[-1])
+    inside, after = fault_counts(_HOST_FAULTS_CHILD)[-2:]
     assert inside < 1000                  # the render's freed arrays are reused
     assert after > 25000                  # given back: 200 MiB is above the restored 32 MiB threshold
 
