@@ -397,3 +397,32 @@ def test_view_draw_path_hands_the_view_to_the_thread_and_only_draws(vp):
         assert len(log) == n
     finally:
         assert session.stop()
+
+
+def test_session_holds_the_heap_settings_while_sampling_and_releases_them_when_idle(vp, monkeypatch):
+    # per 1-spp render, engine.render.allocator.render_heap would hand the memory back and fault it in
+    # again every sample: the session holds it over a run of samples instead
+    events = []
+
+    class Probe:
+        def __enter__(self):
+            events.append("hold")
+
+        def __exit__(self, *exc):
+            events.append("release")
+
+    monkeypatch.setattr(vp, "render_heap", Probe)
+    log = []
+    session = vp.ViewportSession(renderer_factory=lambda s: FakeRenderer(s, log))
+    try:
+        session.update_scene(_scene_result(vp), target_samples=4)
+        session.set_view(_view())
+        assert wait_for(session.finished)
+        assert wait_for(lambda: events == ["hold", "release"])           # 4 passes, one hold; idle: released
+        assert [k for k, _ in log].count("render") == 4
+        session.update_scene(_scene_result(vp, restart=False, rebuild=False), target_samples=6)
+        assert wait_for(lambda: session.finished() and session.latest()[1] == 6)
+        assert wait_for(lambda: events == ["hold", "release"] * 2)
+    finally:
+        assert session.stop()
+    assert events[-1] == "release"
