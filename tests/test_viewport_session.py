@@ -260,13 +260,22 @@ def wait_for(predicate, timeout=10.0):
     return False
 
 
+def converged_session(vp, log, target_samples):
+    """A session over FakeRenderer (logging to ``log``) that has traced ``target_samples`` passes of
+    the default view; stop it when done."""
+    session = vp.ViewportSession(renderer_factory=lambda s: FakeRenderer(s, log))
+    session.update_scene(_scene_result(vp), target_samples=target_samples)
+    session.set_view(_view())
+    if not wait_for(session.finished):
+        session.stop()
+        pytest.fail(f"the session did not finish {target_samples} passes")
+    return session
+
+
 def test_session_accumulates_on_its_thread_and_draw_never_traces(vp):
     log = []
-    session = vp.ViewportSession(renderer_factory=lambda s: FakeRenderer(s, log))
+    session = converged_session(vp, log, 4)
     try:
-        session.update_scene(_scene_result(vp), target_samples=4)
-        session.set_view(_view())
-        assert wait_for(session.finished)
         image, samples, version = session.latest()
         assert samples == 4 and image.shape == (4, 6, 8, 3)
         np.testing.assert_allclose(image, np.mean([10, 11, 12, 13]))     # running mean of the 4 passes
@@ -281,11 +290,8 @@ def test_session_accumulates_on_its_thread_and_draw_never_traces(vp):
 
 def test_view_change_restarts_without_rebuild_and_material_change_keeps_the_bvh(vp):
     log = []
-    session = vp.ViewportSession(renderer_factory=lambda s: FakeRenderer(s, log))
+    session = converged_session(vp, log, 2)
     try:
-        session.update_scene(_scene_result(vp), target_samples=2)
-        session.set_view(_view())
-        assert wait_for(session.finished)
         session.set_view(_view(4, 3, x=1.0))                              # orbit + resize
         assert wait_for(lambda: session.finished() and session.latest()[0].shape == (4, 3, 4, 3))
         session.update_scene(_scene_result(vp, rebuild=False))            # a material edit
@@ -413,11 +419,8 @@ def test_session_holds_the_heap_settings_while_sampling_and_releases_them_when_i
 
     monkeypatch.setattr(vp, "render_heap", Probe)
     log = []
-    session = vp.ViewportSession(renderer_factory=lambda s: FakeRenderer(s, log))
+    session = converged_session(vp, log, 4)
     try:
-        session.update_scene(_scene_result(vp), target_samples=4)
-        session.set_view(_view())
-        assert wait_for(session.finished)
         assert wait_for(lambda: events == ["hold", "release"])           # 4 passes, one hold; idle: released
         assert [k for k, _ in log].count("render") == 4
         session.update_scene(_scene_result(vp, restart=False, rebuild=False), target_samples=6)
