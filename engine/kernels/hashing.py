@@ -21,6 +21,14 @@ def mix64(x: np.ndarray) -> np.ndarray:
     return x ^ (x >> _S31)
 
 
+@jit
+def _mix64_one(x):
+    """mix64 of one uint64 (the compiled loops' copy of the finaliser)."""
+    x = (x ^ (x >> _S30)) * _M1
+    x = (x ^ (x >> _S27)) * _M2
+    return x ^ (x >> _S31)
+
+
 def uniforms_numpy(keys: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     """(k, N) floats in [0, 1): the top 53 bits of mix64(key + offset_j) for each dimension offset."""
     out = np.empty((offsets.shape[0], keys.shape[0]))
@@ -34,10 +42,7 @@ def uniforms_numpy(keys: np.ndarray, offsets: np.ndarray) -> np.ndarray:
 def _uniforms_loop(keys, offsets, out):
     for i in range(keys.shape[0]):
         for j in range(offsets.shape[0]):
-            x = keys[i] + offsets[j]
-            x = (x ^ (x >> _S30)) * _M1
-            x = (x ^ (x >> _S27)) * _M2
-            x = x ^ (x >> _S31)
+            x = _mix64_one(keys[i] + offsets[j])
             out[j, i] = np.float64(x >> _S11) * _TO_UNIT
 
 
@@ -65,20 +70,10 @@ def path_keys_and_uniforms_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample
 def _keys_and_uniforms_loop(seed_key, pixel, sample, offsets, keys, out):
     s = seed_key[0]
     for i in range(pixel.shape[0]):
-        x = s ^ (np.uint64(pixel[i]) * _GOLDEN)
-        x = (x ^ (x >> _S30)) * _M1
-        x = (x ^ (x >> _S27)) * _M2
-        x = x ^ (x >> _S31)
-        x = x + np.uint64(sample[i]) * _M2
-        x = (x ^ (x >> _S30)) * _M1
-        x = (x ^ (x >> _S27)) * _M2
-        key = x ^ (x >> _S31)
+        key = _mix64_one(_mix64_one(s ^ (np.uint64(pixel[i]) * _GOLDEN)) + np.uint64(sample[i]) * _M2)
         keys[i] = key
         for j in range(offsets.shape[0]):
-            x = key + offsets[j]
-            x = (x ^ (x >> _S30)) * _M1
-            x = (x ^ (x >> _S27)) * _M2
-            x = x ^ (x >> _S31)
+            x = _mix64_one(key + offsets[j])
             out[j, i] = np.float64(x >> _S11) * _TO_UNIT
 
 
@@ -135,10 +130,7 @@ def _sobol_pair_loop(seed_key, pixel, sample, pair_key, vx, vy, u0, u1, out):
                 y ^= vy[j]
             i >>= np.uint64(1)
             j += 1
-        h = s ^ (np.uint64(pixel[n]) * pk) ^ ((smp & np.uint64(1)) * _GOLDEN)
-        h = (h ^ (h >> _S30)) * _M1
-        h = (h ^ (h >> _S27)) * _M2
-        h = h ^ (h >> _S31)
+        h = _mix64_one(s ^ (np.uint64(pixel[n]) * pk) ^ ((smp & np.uint64(1)) * _GOLDEN))
         out[0, n] = min((np.float64(x ^ (h & low)) + u0[n]) * scale, below_one)
         out[1, n] = min((np.float64(y ^ (h >> np.uint64(32))) + u1[n]) * scale, below_one)
 
