@@ -272,18 +272,24 @@ def cost_per_sample(cost: np.ndarray, counts: np.ndarray, pixels: np.ndarray) ->
     return float(np.sum(cost[pixels])) / n if n > 0 else 0.0
 
 
-def cost_weight(cost: np.ndarray, counts: np.ndarray, tiles: np.ndarray, pixels: np.ndarray,
-                mean_cost: float) -> np.ndarray:
-    """w = √(c/c̄) of each pixel's tile over ``pixels``: c the tile's cost per sample (Σ cost ÷ Σ
-    samples over its pixels among ``pixels``), c̄ = ``mean_cost`` (:func:`cost_per_sample` of the
-    first pass).  1 where c̄ = 0 (no cost counted) or the tile has no sample yet."""
-    if not mean_cost > 0:
-        return np.ones(pixels.size)
+def tile_cost(cost: np.ndarray, counts: np.ndarray, tiles: np.ndarray, pixels: np.ndarray) -> np.ndarray:
+    """c of each pixel's tile over ``pixels``: the tile's cost per sample (Σ cost ÷ Σ samples over its
+    pixels among ``pixels``; 0 where the tile has no sample or no cost was counted)."""
     t = tiles[pixels]
     n_tiles = int(tiles.max()) + 1
     r = np.bincount(t, weights=cost[pixels].astype(np.float64), minlength=n_tiles)
     n = np.bincount(t, weights=counts[pixels].astype(np.float64), minlength=n_tiles)
-    c = _ratio(r, n)[t]
+    return _ratio(r, n)[t]
+
+
+def cost_weight(cost: np.ndarray, counts: np.ndarray, tiles: np.ndarray, pixels: np.ndarray,
+                mean_cost: float) -> np.ndarray:
+    """w = √(c/c̄) of each pixel's tile over ``pixels``: c its :func:`tile_cost`, c̄ = ``mean_cost``
+    (:func:`cost_per_sample` of the first pass).  1 where c̄ = 0 (no cost counted) or the tile has
+    no sample yet."""
+    if not mean_cost > 0:
+        return np.ones(pixels.size)
+    c = tile_cost(cost, counts, tiles, pixels)
     return np.where(c > 0, np.sqrt(c / mean_cost), 1.0)
 
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..errors import SceneError
 from .adaptive import (QUANTITIES, TILE, UNITS, AdaptiveSettings, allocation_from, checkpoints, film_noise,
-                       pooled_error, tile_ids)
+                       pooled_error, tile_cost, tile_ids)
 
 
 @dataclass
@@ -113,11 +113,7 @@ def best_mse_time_gain(variance, seconds_per_sample) -> float:
 def tile_cost_per_sample(film, halves) -> np.ndarray:
     """Cost per sample of every pixel's tile (H·W,) (:attr:`~engine.render.adaptive.HalfBuffers.cost`
     ÷ samples, summed over the tile; 0 where the tile has no sample or no cost was counted)."""
-    tiles = tile_ids(film.width, film.height)
-    n_tiles = int(tiles.max()) + 1
-    r = np.bincount(tiles, weights=halves.cost.astype(np.float64), minlength=n_tiles)
-    n = np.bincount(tiles, weights=film.count.astype(np.float64), minlength=n_tiles)
-    return np.divide(r, n, out=np.zeros(n_tiles), where=n > 0)[tiles]
+    return tile_cost(halves.cost, film.count, tile_ids(film.width, film.height), np.arange(film.count.size))
 
 
 def cost_map(unit_times, n_pixels: int, seconds: float, cost_per_sample: np.ndarray | None = None) -> np.ndarray:
