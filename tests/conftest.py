@@ -1,6 +1,15 @@
 """Shared test fixtures: where the project's shared/ folder (oracles, peer scenes) lives."""
 
 import os
+import sys
+
+# On AVX-512 CPUs NumPy runs its float64 arccos, sin, cos, … loops through SVML, whose results differ
+# in the last bit from the C library's functions that the compiled kernels call; the kernel tests
+# compare the two twins bit for bit.  The tests therefore keep NumPy on its AVX2 loops (set before
+# NumPy is first imported; names NumPy does not know are ignored with a message).
+if "numpy" not in sys.modules:
+    os.environ.setdefault("NPY_DISABLE_CPU_FEATURES", "AVX512F AVX512CD AVX512_KNL AVX512_KNM AVX512_SKX "
+                                                      "AVX512_CLX AVX512_CNL AVX512_ICL")
 
 import pytest
 
