@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import jit
+from . import jit, jit_inner
 from .fresnel import abcs_at
 from .geometry import unit_cross_at
 from .stokes_rotation import frame_rotation_at
@@ -44,7 +44,7 @@ def _chunk_buffers(L):
     return np.empty((L, 4, _CHUNK)), np.empty((2, _CHUNK))
 
 
-@jit
+@jit_inner
 def _update_chunk(T, out, rows, j0, j1, abcs, rot):
     """out[..., m] = T[..., m]·R(φ)·M for the paths m = rows[j0:j1], M = [[a,b,0,0],[b,a,0,0],[0,0,c,s],
     [0,0,−s,c]] from ``abcs`` (one row per wavelength or one for all), R(φ) = (cos 2φ, sin 2φ) from ``rot``:
@@ -81,7 +81,7 @@ def _update_chunk(T, out, rows, j0, j1, abcs, rot):
                     out[i, 2, k, m] = abcs[la, 2, jj] * r2
 
 
-@jit
+@jit_inner
 def _set_abcs(abcs, k, jj, a, b, c, s):
     abcs[k, 0, jj] = a
     abcs[k, 1, jj] = b
@@ -89,7 +89,7 @@ def _set_abcs(abcs, k, jj, a, b, c, s):
     abcs[k, 3, jj] = s
 
 
-@jit
+@jit_inner
 def _new_frame(x_out, x_T, wo, m, s0, s1, s2, P, rot, jj):
     """Store s as the path's new frame x_out[:, m] and R(s → x_T) as (cos 2φ, sin 2φ) in rot[:, jj] (the
     identity when P < 3: nothing rotates)."""
@@ -102,7 +102,7 @@ def _new_frame(x_out, x_T, wo, m, s0, s1, s2, P, rot, jj):
         rot[0, jj], rot[1, jj] = 1.0, 0.0
 
 
-@jit
+@jit_inner
 def _mirror_geometry(n_s, wo, d, m):
     """cosθ_o = n_s·wo and the mirror direction d[:, m] = reflect(wo, n_s) (engine.vec3 order); returns
     (cosθ_o, s) with s = unit(n_s × −d) the plane-of-incidence axis."""
@@ -158,7 +158,7 @@ def _knot_hints(wl):
     return first, hints
 
 
-@jit
+@jit_inner
 def _last_knot(wl, x, first, hints):
     """The last knot ≤ x for wl[0] ≤ x ≤ wl[-1] (np.searchsorted(wl, x, "right") − 1 for increasing
     knots): from the hint at ⌊x⌋ (a step or two for knots about a nm apart or more), else by bisection."""
@@ -179,7 +179,7 @@ def _last_knot(wl, x, first, hints):
     return lo
 
 
-@jit
+@jit_inner
 def _index_on_grid(wl, n, k, x, j, scale):
     """relative_index_at(wl, n, wl, k, x, scale) for tables on one wavelength grid, wl[0] ≤ x ≤ wl[-1]
     and j = the last knot ≤ x: one search serves n and κ."""
@@ -225,7 +225,7 @@ def tabulated_mirror_loop(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, scale, T
     return True
 
 
-@jit
+@jit_inner
 def _clip01(x):
     """np.clip(x, 0, 1) (a NaN stays NaN)."""
     if x < 0.0:

@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from . import jit
+from . import jit_inner
 
 SQRT_PI = math.sqrt(math.pi)
 _INV_SQRT_PI = 1.0 / SQRT_PI
@@ -269,7 +269,7 @@ def erfinv_2u_minus_1(u: np.ndarray) -> np.ndarray:
 # scalar forms for compiled loops (same operation order)
 # ------------------------------------------------------------------------------------------------
 
-@jit
+@jit_inner
 def erfcx_nonneg_scalar(x, coef, k):
     """erfcx_nonneg for one x ≥ 0 with the series ``coef`` (ERFCX_COEF) and ``k`` (ERFCX_K)."""
     xc = min(x, 1e150)
@@ -284,7 +284,7 @@ def erfcx_nonneg_scalar(x, coef, k):
     return (coef[0] + t * b1 - b2) / (xc + k)
 
 
-@jit
+@jit_inner
 def erfcinv_giles_scalar(q):
     """erfcinv_giles for one q ∈ (0, 1]."""
     y = 1.0 - q

@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import jit
+from . import jit, jit_inner
 from .tables import relative_index_at
 
 _TINY = 1e-200
 
 
-@jit
+@jit_inner
 def abcs_at(c, e):
     """(A, B, C, S) of the Fresnel reflection for one cosine ``c`` and complex relative index ``e``."""
     if c < 0.0:

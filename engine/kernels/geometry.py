@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import jit, twin
+from . import jit, jit_inner, twin
 from ..vec3 import any_perpendicular, cross, dot, normalize
 
 
 
 # ----------------------------------------------------------------------------- one point's local frame
 
-@jit
+@jit_inner
 def local_frame_at(n0, n1, n2):
     """(t, b) of engine.vec3.local_frame for one unit normal n, same operation order: the frame of
     every compiled sampler (local z = n)."""
@@ -24,13 +24,13 @@ def local_frame_at(n0, n1, n2):
     return t0, t1, t2, n1 * t2 - n2 * t1, n2 * t0 - n0 * t2, n0 * t1 - n1 * t0
 
 
-@jit
+@jit_inner
 def to_local_at(v0, v1, v2, t0, t1, t2, b0, b1, b2, n0, n1, n2):
     """World vector v in the local frame (t, b, n): (v·t, v·b, v·n)."""
     return (v0 * t0 + v1 * t1 + v2 * t2, v0 * b0 + v1 * b1 + v2 * b2, v0 * n0 + v1 * n1 + v2 * n2)
 
 
-@jit
+@jit_inner
 def to_world_at(n0, n1, n2, v0, v1, v2):
     """Local vector v (z along the unit normal n, frame local_frame_at) in world space
     (engine.materials.sampling.local_to_world)."""
@@ -106,7 +106,7 @@ def offset_origin_numpy(p, n_g, w, epsilon):
     return p + (side * mag)[None, :] * n_g
 
 
-@jit
+@jit_inner
 def offset_origin_at(p, n_g, w, epsilon, i, out):
     """out[:, i] = point p[:, i] moved off its surface along ±n_g[:, i], to the side of direction
     w[:, i] (offset_origin_numpy's rule and operation order, one path); returns max|p[:, i]|."""
@@ -147,7 +147,7 @@ def unit_cross_numpy(a, b, degenerate):
     return np.where(ok, s / np.where(ok, length, 1.0), fallback)
 
 
-@jit
+@jit_inner
 def unit_cross_at(a0, a1, a2, b0, b1, b2, degenerate):
     """unit_cross_numpy for one pair of vectors (a, b), as a tuple, same operation order."""
     s0 = a1 * b2 - a2 * b1

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import jit, twin
+from . import jit, jit_inner, twin
 
 _M1 = np.uint64(0xBF58476D1CE4E5B9)
 _M2 = np.uint64(0x94D049BB133111EB)
@@ -21,7 +21,7 @@ def mix64(x: np.ndarray) -> np.ndarray:
     return x ^ (x >> _S31)
 
 
-@jit
+@jit_inner
 def _mix64_one(x):
     """mix64 of one uint64 (the compiled loops' copy of the finaliser)."""
     x = (x ^ (x >> _S30)) * _M1

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from . import jit, twin
+from . import jit, jit_inner, twin
 
 #: corners of the unit square, (u, v) rows: 00, 10, 01, 11
 WARP_CORNERS = np.array([[0.0, 1.0, 0.0, 1.0], [0.0, 0.0, 1.0, 1.0]])
@@ -138,7 +138,7 @@ def ellipse_area(axis_a, axis_b):
     return math.pi * float(np.linalg.norm(np.cross(axis_a, axis_b)))
 
 
-@jit
+@jit_inner
 def _concentric(u, v):
     a = 2.0 * u - 1.0
     b = 2.0 * v - 1.0
@@ -153,7 +153,7 @@ def _concentric(u, v):
     return r * math.cos(phi), r * math.sin(phi)
 
 
-@jit
+@jit_inner
 def _invert_linear_at(x, p0, p1):
     if abs(p0 - p1) <= 1e-9 * (p0 + p1):
         t = x

@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 
-from . import jit, twin
+from . import jit, jit_inner, twin
 from .geometry import to_world_at
 from ..vec3 import dot
 
@@ -102,7 +102,7 @@ def rect_light_sample_numpy(p, u1, u2, corner, ax, ay, az, len_x, len_y, normal,
 
 # ----------------------------------------------------------------------------- compiled loop
 
-@jit
+@jit_inner
 def _clip(x, lo, hi):
     # np.clip's NaN rule: a NaN x (or bound) comes out as NaN
     if x != x:
@@ -113,7 +113,7 @@ def _clip(x, lo, hi):
     return t if t < hi else hi
 
 
-@jit
+@jit_inner
 def _maximum(a, b):
     # np.maximum: NaN in either argument propagates
     if a != a:
@@ -123,7 +123,7 @@ def _maximum(a, b):
     return a if a >= b else b
 
 
-@jit
+@jit_inner
 def _nan_to_num(x):
     if x != x:
         return 0.0
@@ -134,7 +134,7 @@ def _nan_to_num(x):
     return x
 
 
-@jit
+@jit_inner
 def _sign(x):
     if x != x:
         return x
@@ -145,7 +145,7 @@ def _sign(x):
     return 0.0
 
 
-@jit
+@jit_inner
 def _unit_z(a, b, z0):
     return a / np.sqrt(z0 * z0 * b * b + a * a)
 
@@ -355,7 +355,7 @@ def choose_light_numpy(u, probs):
     return choice, np.clip(rest, 0.0, np.nextafter(1.0, 0.0)), chosen
 
 
-@jit
+@jit_inner
 def _facing(has_n, n, j, t0, t1, t2, dist, sin_alpha):
     if not has_n:
         return 1.0
@@ -364,7 +364,7 @@ def _facing(has_n, n, j, t0, t1, t2, dist, sin_alpha):
     return BELOW_HORIZON + (1.0 - BELOW_HORIZON) * _maximum(np.cos(theta), 0.0)
 
 
-@jit
+@jit_inner
 def _emitter_side(t0, t1, t2, dist, sin_alpha, n0, n1, n2):
     """``emitter_side`` for one receiver (t: centre − receiver)."""
     cos_e = _clip(-(n0 * t0 + n1 * t1 + n2 * t2) / _maximum(dist, 1e-300), -1.0, 1.0)
@@ -500,7 +500,7 @@ choose_light = twin(choose_light_numba, choose_light_numpy)
 
 # ----------------------------------------------------------------------------- point and spot lights
 
-@jit
+@jit_inner
 def _minimum(a, b):
     # np.minimum: NaN in either argument propagates
     if a != a:
@@ -510,7 +510,7 @@ def _minimum(a, b):
     return a if a <= b else b
 
 
-@jit
+@jit_inner
 def _spot(spot, w0, w1, w2):
     """The spot attenuation of engine.kernels.light_sampling.spot_falloff towards −w (spot: [kind,
     ax, ay, az, cos_outer, cos_inner], kind 0 none, 1 hard edge, 2 smoothstep)."""

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from . import jit, twin
+from . import jit, jit_inner, twin
 from .error_function import (ERFCX_COEF, ERFCX_K, SQRT_PI, erfcinv_giles, erfcinv_giles_scalar, erfcx_nonneg,
                              erfcx_nonneg_scalar)
 
@@ -83,12 +83,12 @@ def visible_slope_x_numpy(tan_t: np.ndarray, u1: np.ndarray) -> np.ndarray:
     return x
 
 
-@jit
+@jit_inner
 def _slope_cdf(x, t, coef, k):
     return _slope_cdf_e(x, np.exp(-x * x), t, coef, k)
 
 
-@jit
+@jit_inner
 def _slope_cdf_e(x, e, t, coef, k):
     """F(x) given e = e^{−x²} (the Halley step needs the same exponential)."""
     r = erfcx_nonneg_scalar(abs(x), coef, k)
@@ -96,7 +96,7 @@ def _slope_cdf_e(x, e, t, coef, k):
     return e * (r + tp) if x < 0 else 2.0 + e * (tp - r)
 
 
-@jit
+@jit_inner
 def _slope_x_start(t, u1, coef, k):
     """x̃'s first guess and bracket for tanθ = ``t`` and u1: (x, lo, hi, target CDF value, tolerance)."""
     cot = 1.0 / t if t > 0 else np.inf
@@ -119,7 +119,7 @@ def _slope_x_start(t, u1, coef, k):
     return x, lo, hi, target, tol
 
 
-@jit
+@jit_inner
 def _slope_x_step(x, lo, hi, t, target, tol, coef, k):
     """One safeguarded Halley step of x̃ (CDF(x) = target within tol): (new x, lo, hi, converged)."""
     e = np.exp(-x * x)
@@ -142,7 +142,7 @@ def _slope_x_step(x, lo, hi, t, target, tol, coef, k):
     return xn, lo, hi, done
 
 
-@jit
+@jit_inner
 def visible_slope_x_at(t, u1, coef, k):
     """x̃ for one tanθ = ``t`` ≥ 0 and u1 ∈ [0, 1) (``coef``, ``k``: ERFCX_COEF, ERFCX_K): the loop body
     of the compiled twin.  ``beckmann_vndf_at`` runs the same iteration interleaved with ỹ's."""
@@ -174,7 +174,7 @@ visible_slope_x = twin(_visible_slope_x_loop and visible_slope_x_numba, visible_
 # The formulas of engine.materials.microfacet for one direction at a time, in the same operation
 # order (the compiled material passes, e.g. engine.kernels.torrance_sparrow, call them per path).
 
-@jit
+@jit_inner
 def beckmann_d_at(h0, h1, h2, m):
     """Beckmann D(h) (engine.materials.microfacet.Beckmann.D)."""
     xy2 = h0 * h0 + h1 * h1
@@ -190,14 +190,14 @@ def beckmann_d_at(h0, h1, h2, m):
     return np.exp(-x) * (one_t * one_t) / (_PI * m * m)
 
 
-@jit
+@jit_inner
 def smith_a_at(w0, w1, w2, m):
     """a = cosθ/(m sinθ) (∞ at normal incidence)."""
     sin_t = np.sqrt(w0 * w0 + w1 * w1)
     return abs(w2) / (m * sin_t) if sin_t > 0 else np.inf
 
 
-@jit
+@jit_inner
 def beckmann_lambda_at(a, coef, k):
     """Smith Λ(a) of engine.materials.microfacet.beckmann_lambda."""
     if a > 0 and a <= 6.0:
@@ -206,13 +206,13 @@ def beckmann_lambda_at(a, coef, k):
     return 0.0 if a > 0 else np.inf
 
 
-@jit
+@jit_inner
 def chi_plus_at(w0, w1, w2, h0, h1, h2):
     """1 where (w·h)·cosθ_w > 0, else 0."""
     return 1.0 if (w0 * h0 + w1 * h1 + w2 * h2) * w2 > 0 else 0.0
 
 
-@jit
+@jit_inner
 def beckmann_g1_at(w0, w1, w2, h0, h1, h2, m, rational, coef, k):
     """Smith G1 of engine.materials.microfacet's Beckmann (exact, or Walter's rational form)."""
     a = smith_a_at(w0, w1, w2, m)
@@ -242,7 +242,7 @@ def erfinv_2u_minus_1_at(u, coef, k):
     return -x if lower else x
 
 
-@jit
+@jit_inner
 def beckmann_vndf_at(o0, o1, o2, u0, u1, m, coef, k):
     """A visible facet normal h of ω_o = (o0, o1, o2) (engine.materials.microfacet.Beckmann.sample).
 
@@ -291,7 +291,7 @@ def beckmann_vndf_at(o0, o1, o2, u0, u1, m, coef, k):
 # ----------------------------------------------------------------------------- per-path GGX pieces
 # engine.materials.ggx.GGX, one direction at a time in the same operation order.
 
-@jit
+@jit_inner
 def tan2_at(w0, w1, w2):
     """tan²θ of w about +z (engine.materials.microfacet._tan2)."""
     xy2 = w0 * w0 + w1 * w1
@@ -301,7 +301,7 @@ def tan2_at(w0, w1, w2):
     return np.inf if xy2 > 0 else 0.0
 
 
-@jit
+@jit_inner
 def ggx_d_at(h0, h1, h2, alpha):
     """GGX D(h)."""
     t2 = tan2_at(h0, h1, h2)
@@ -313,7 +313,7 @@ def ggx_d_at(h0, h1, h2, alpha):
     return one_t * one_t / (_PI * a2 * q * q)
 
 
-@jit
+@jit_inner
 def ggx_lambda_at(w0, w1, w2, alpha):
     """Smith Λ(ω) = (√(1 + α² tan²θ) − 1)/2 (∞ at grazing)."""
     t2 = tan2_at(w0, w1, w2)

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import jit
+from . import jit, jit_inner
 from .error_function import ERFCX_COEF, ERFCX_K
 from .fresnel import abcs_at
 from .microfacet import (beckmann_d_at, beckmann_g1_at, beckmann_lambda_at, beckmann_vndf_at, chi_plus_at,
@@ -27,19 +27,19 @@ _ERFCX_COEF = np.ascontiguousarray(ERFCX_COEF, dtype=np.float64)
 _ERFCX_K = float(ERFCX_K)
 
 
-@jit
+@jit_inner
 def _d_at(dist, h0, h1, h2, alpha):
     return beckmann_d_at(h0, h1, h2, alpha) if dist == 0 else ggx_d_at(h0, h1, h2, alpha)
 
 
-@jit
+@jit_inner
 def _g1_at(dist, rational, w0, w1, w2, h0, h1, h2, alpha, coef, k):
     if dist == 0:
         return beckmann_g1_at(w0, w1, w2, h0, h1, h2, alpha, rational, coef, k)
     return chi_plus_at(w0, w1, w2, h0, h1, h2) / (1.0 + ggx_lambda_at(w0, w1, w2, alpha))
 
 
-@jit
+@jit_inner
 def _vndf_pdf_at(dist, o0, o1, o2, h0, h1, h2, alpha, coef, k):
     """G1(ω_o) max(0, ω_o·h) D(h)/cosθ_o (Beckmann.pdf / GGX.pdf)."""
     d = o0 * h0 + o1 * h1 + o2 * h2
@@ -66,7 +66,7 @@ def _viewer_side(n_s, wo, i, eta_out, eta_in):
     return n0, n1, n2, eta, t0, t1, t2, b0, b1, b2
 
 
-@jit
+@jit_inner
 def _half_vector_at(i0, i1, i2, o0, o1, o2, eta):
     """(h, reflects, ok, ω_i·h, ω_o·h) of RoughDielectric._half_vector."""
     refl = i2 > 0

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import jit
+from . import jit_inner
 from ..vec3 import cross, dot
 
 
@@ -47,7 +47,7 @@ def rotate_stokes(S: np.ndarray, c2, s2, in_place: bool = False) -> np.ndarray:
     return out
 
 
-@jit
+@jit_inner
 def frame_rotation_at(x, xt, k, j):
     """(cos 2φ, sin 2φ) of frame_rotation(x, xt, k) for column j of (3, N) arrays, same operation order."""
     c = (x[0, j] * xt[0, j] + x[1, j] * xt[1, j]) + x[2, j] * xt[2, j]

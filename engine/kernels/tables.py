@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import jit, twin
+from . import jit, jit_inner, twin
 
 
 def interp_grid_numpy(table, lam_nm, lo, hi, zero_outside):
@@ -54,7 +54,7 @@ interp_grid = twin(_interp_loop and interp_grid_numba, interp_grid_numpy)
 
 # ----------------------------------------------------------------------------- measured (n, κ) tables
 
-@jit
+@jit_inner
 def interp_at(xp, fp, x):
     """np.interp(x, xp, fp) for one x (strictly increasing xp): the same cases and arithmetic as
     NumPy's compiled_interp (ends held, exact knots returned, NaN fallback from the right knot)."""
@@ -65,7 +65,7 @@ def interp_at(xp, fp, x):
     return interp_from_knot(xp, fp, x, np.searchsorted(xp, x, side="right") - 1)
 
 
-@jit
+@jit_inner
 def interp_from_knot(xp, fp, x, j):
     """interp_at(xp, fp, x) for xp[0] ≤ x (not NaN) with j the last knot ≤ x, found by the caller
     (several tables on one grid share the search): the same cases and arithmetic."""
@@ -90,7 +90,7 @@ def complex_index_table_numpy(lam, wl_n, n, wl_k, k, exterior_n):
     return (np.interp(lam, wl_n, n) + 1j * np.interp(lam, wl_k, k)) / exterior_n, inside
 
 
-@jit
+@jit_inner
 def relative_index_at(wl_n, n, wl_k, k, x, scale):
     """(relative complex index at λ = x, whether x lies inside both tables), as NumPy's
     (interp(n) + i·interp(κ)) / e: Smith's division by e + 0i, i.e. times scale = 1/e."""

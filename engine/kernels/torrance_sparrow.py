@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from . import jit
+from . import jit, jit_inner
 from .error_function import ERFCX_COEF, ERFCX_K
 from .fresnel import abcs_at
 from .geometry import local_frame_at, to_local_at, unit_cross_at
@@ -38,19 +38,19 @@ _ERFCX_K = float(ERFCX_K)
 # Per-point inputs may be given once for the batch: arrays of length 1 (a number), an index of
 # shape (1, 1), (1, N), (L, 1) or (L, N) (a constant index is not spread over the batch).
 
-@jit
+@jit_inner
 def at(v, i):
     """v[i], or v[0] for a number given as a one-element array."""
     return v[i if v.shape[0] > 1 else 0]
 
 
-@jit
+@jit_inner
 def eta_at(eta, lam, i):
     """The relative index at row ``lam`` and path ``i`` of a broadcast (rows, columns) array."""
     return eta[lam if eta.shape[0] > 1 else 0, i if eta.shape[1] > 1 else 0]
 
 
-@jit
+@jit_inner
 def shadowing_at(kind, i0, i1, i2, o0, o1, o2, h0, h1, h2, m, coef, k):
     """G of engine.materials.microfacet.shadowing_term for the kernel code ``kind``."""
     if kind == 0:
@@ -68,7 +68,7 @@ def shadowing_at(kind, i0, i1, i2, o0, o1, o2, h0, h1, h2, m, coef, k):
             * beckmann_g1_at(o0, o1, o2, h0, h1, h2, m, rational, coef, k))
 
 
-@jit
+@jit_inner
 def specular_pdf_at(i0, i1, i2, o0, o1, o2, m, coef, k):
     """Density of ω_i under visible-normal sampling and reflection (TorranceSparrow._specular_pdf_local)."""
     hv0, hv1, hv2 = i0 + o0, i1 + o1, i2 + o2
@@ -83,7 +83,7 @@ def specular_pdf_at(i0, i1, i2, o0, o1, o2, m, coef, k):
     return g1 * beckmann_d_at(h0, h1, h2, m) / (4.0 * o2)
 
 
-@jit
+@jit_inner
 def p_spec_at(i, cos_o, p_given, use_given, eta, L, s, w_d):
     """Probability of the specular lobe (TorranceSparrow._p_spec): ``p_given[i]``, or from the mean
     unpolarised Fresnel reflectance at the macro angle against the diffuse weight ``w_d[i]``."""
@@ -104,7 +104,7 @@ def p_spec_at(i, cos_o, p_given, use_given, eta, L, s, w_d):
     return min(max(p, 0.1), 0.9)
 
 
-@jit
+@jit_inner
 def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, kind, coef, k, factor, A, B, C, S, x):
     """Facet lobe at path i into A..S[:, i] (times ``factor``) and x[:, i]; returns cosθ_i > 0 and cosθ_o > 0."""
     o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
@@ -138,7 +138,7 @@ def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, kind, coef
     return valid
 
 
-@jit
+@jit_inner
 def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, p_spec, has_specular, has_diffuse, coef, k):
     """The two-lobe mixture density of ω_i = wi[:, i] (TorranceSparrow.pdf)."""
     o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]

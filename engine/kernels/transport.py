@@ -12,7 +12,7 @@ import math
 
 import numpy as np
 
-from . import jit, twin
+from . import jit, jit_inner, twin
 from .geometry import offset_origin_at, offset_origin_numpy
 from .stokes_rotation import frame_rotation, frame_rotation_at, rotate_stokes
 
@@ -406,7 +406,7 @@ def keep_columns_numpy(a, idx):
     return np.take(a, idx, axis=-1)
 
 
-@jit
+@jit_inner
 def _keep_columns_loop(a, idx, out):
     for r in range(a.shape[0]):
         for j in range(idx.shape[0]):
