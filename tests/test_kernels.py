@@ -359,6 +359,26 @@ def test_same_files_under_two_package_names_do_not_share_compiled_kernels(tmp_pa
     assert sorted(os.listdir(tmp_path / "cache")) == ["engine", "polar_render.engine"]
 
 
+def test_a_changed_helper_gets_a_fresh_kernel_cache(tmp_path):
+    """Numba checks a cached kernel against its own file only, so after an edit of abcs_at (in
+    kernels/fresnel.py) the cached Torrance–Sparrow step kept the old Fresnel arithmetic inlined (found
+    when the twin test failed bit-wise on a warm cache).  The cache folder is keyed by every compiled
+    source: an edit of one moves it, an edit of a module without compiled code does not."""
+    import shutil
+    root = tmp_path / "engine"
+    shutil.copytree(os.path.join(REPO, "engine"), root, ignore=shutil.ignore_patterns("__pycache__"))
+    first = kernels.compiled_sources_digest(str(root))
+    assert first == kernels.compiled_sources_digest(os.path.join(REPO, "engine"))
+    fresnel = root / "kernels" / "fresnel.py"
+    fresnel.write_text(fresnel.read_text().replace("zr = e2r - (1.0 - c * c)", "zr = e2r - 1.0 + c * c"))
+    edited = kernels.compiled_sources_digest(str(root))
+    assert edited != first
+    errors = root / "errors.py"
+    errors.write_text(errors.read_text() + "\n# a comment\n")
+    assert kernels.compiled_sources_digest(str(root)) == edited
+    assert kernels.cache_dir().endswith(os.sep + first)
+
+
 @needs_numba
 def test_beckmann_visible_slopes_match_the_numpy_reference():
     from engine.kernels.microfacet import visible_slope_x_numba, visible_slope_x_numpy

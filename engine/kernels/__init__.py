@@ -26,6 +26,7 @@ stays there and is paired with its compiled loop by :func:`twin` where it is def
 
 from __future__ import annotations
 
+import hashlib
 import os
 import warnings
 from typing import NamedTuple
@@ -66,17 +67,47 @@ BACKEND = f"numba {_numba.__version__}" if COMPILED else "numpy"
 _PACKAGE = __name__.rsplit(".kernels", 1)[0]
 
 
+#: The engine package's folder (the sources whose compiled code is cached).
+_ENGINE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def compiled_sources_digest(root: str = _ENGINE_DIR) -> str:
+    """16 hex digits identifying the source of every module under ``root`` that holds compiled code.
+
+    Numba checks a cached kernel against its own file's time stamp only, but a kernel has the
+    helpers it calls from other files compiled into it (``abcs_at`` inside every Fresnel step): after
+    an edit to engine/kernels/fresnel.py the cached Torrance–Sparrow step would go on running the old
+    Fresnel arithmetic.  Keying the cache folder by all compiled sources makes any such edit (or an
+    upgrade) start a fresh folder.  Reading them costs a few milliseconds per import.
+    """
+    digest = hashlib.sha1()
+    for folder, dirs, files in os.walk(root):
+        dirs[:] = sorted(d for d in dirs if not d.startswith((".", "__")))
+        for name in sorted(f for f in files if f.endswith(".py")):
+            path = os.path.join(folder, name)
+            with open(path, "rb") as fh:
+                data = fh.read()
+            if b"jit" in data:
+                digest.update(os.path.relpath(path, root).encode() + b"\0" + data + b"\0")
+    return digest.hexdigest()[:16]
+
+
 def cache_dir() -> str:
-    """Where compiled kernels are cached: one folder per package name.
+    """Where compiled kernels are cached: one folder per package name and compiled sources.
 
     Numba keys its cache by source file, but a cached kernel refers to its module by name; the same
     files imported under two names (a checkout used both as ``engine`` and as the Blender extension
-    ``polar_render.engine``) would load each other's entries and fail.  ``POLAR_KERNEL_CACHE``
-    overrides the base folder (default: $XDG_CACHE_HOME or ~/.cache, then polar/numba).
+    ``polar_render.engine``) would load each other's entries and fail.  Below the package name, one
+    folder per :func:`compiled_sources_digest`, so a changed helper is never run from a stale kernel.
+    ``POLAR_KERNEL_CACHE`` overrides the base folder (default: $XDG_CACHE_HOME or ~/.cache, then
+    polar/numba).
     """
     base = os.environ.get("POLAR_KERNEL_CACHE") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "polar", "numba")
-    return os.path.join(base, _PACKAGE)
+    return os.path.join(base, _PACKAGE, _SOURCES_DIGEST)
+
+
+_SOURCES_DIGEST = compiled_sources_digest()
 
 
 def jit(fn, *, refcounts=True):
