@@ -61,6 +61,8 @@ class CompiledScene:
         self.vertices = np.concatenate(verts)
         self.faces = np.concatenate(faces)
         self.tri_material = np.concatenate(tri_mat)
+        #: indices of the materials some triangle uses (sorted; every render asks, so found once here)
+        self.used_materials = np.unique(self.tri_material)
         self.tri_mesh = np.concatenate(tri_mesh)
         self.vertex_normals = np.concatenate(vnormals)
         self.tri_has_normals = np.concatenate(has_vn)
