@@ -1014,6 +1014,27 @@ def test_stokes_rgb_samples_bitwise(P):
 
 
 @needs_numba
+@pytest.mark.parametrize("P,L", [(1, 4), (3, 4), (4, 4), (4, 1)])
+def test_spectral_stokes_rgb_samples_bitwise(P, L):
+    """Spectral radiance to the film's Stokes × RGB samples: einsum's sums (each λ added in order from
+    0) bit for bit, non-finite samples (an inf times a zero weight included) zeroed and counted."""
+    rng = np.random.default_rng(10 * P + L)
+    n = 3000
+    radiance = rng.lognormal(size=(P, L, n)) * rng.choice([-1.0, 1.0], size=(P, L, n))
+    w_rgb = rng.normal(size=(3, L, n))
+    radiance[-1, -1, :10] = np.nan
+    radiance[0, 0, 10:15] = np.inf
+    w_rgb[:, 0, 10:15] = 0.0                                   # inf · 0: NaN
+    radiance[:, :, 15:20] = -0.0
+    a, bad_a = transport.spectral_stokes_rgb_samples_numpy(radiance, w_rgb)
+    b, bad_b = transport.spectral_stokes_rgb_samples_numba(radiance, w_rgb)
+    assert a.tobytes() == b.tobytes() and bad_a == bad_b == 15
+    assert not a[P:].any() and not a[:, :, :15].any()
+    want = sum(radiance[:, q, None, 20:] * w_rgb[None, :, q, 20:] for q in range(L))
+    np.testing.assert_allclose(a[:P, :, 20:], want, rtol=1e-12, atol=1e-12)
+
+
+@needs_numba
 @pytest.mark.parametrize("n", [0, 1, 2000])
 def test_material_groups_bitwise_and_as_nonzero_per_group(n):
     """Each hit path's material, the paths per group and the paths sorted by group: as the gathers,

@@ -547,3 +547,47 @@ def stokes_rgb_samples_numba(rgb):
 
 
 stokes_rgb_samples = twin(_stokes_rgb_loop and stokes_rgb_samples_numba, stokes_rgb_samples_numpy)
+
+
+def spectral_stokes_rgb_samples_numpy(radiance, w_rgb):
+    """stokes_rgb_samples of the spectral radiance (P, L, n) weighted by the paths' colour-matching
+    weights w_rgb (3, L, n): rgb[p, c] = Σ_λ radiance[p, λ]·w_rgb[c, λ], summed in λ order."""
+    return stokes_rgb_samples_numpy(np.einsum("pln,cln->pcn", radiance, w_rgb))
+
+
+@jit
+def _spectral_stokes_rgb_loop(radiance, w_rgb, out):
+    P, L, n = radiance.shape
+    nonfinite = 0
+    # one pass over the samples (each reads its P·L radiances and 3·L weights once); each sum is
+    # einsum's: from 0, adding one wavelength's product at a time
+    for j in range(n):
+        finite = True
+        for p in range(P):
+            for c in range(3):
+                acc = 0.0
+                for q in range(L):
+                    acc += radiance[p, q, j] * w_rgb[c, q, j]
+                out[p, c, j] = acc
+                if not np.isfinite(acc):
+                    finite = False
+        for p in range(P, 4):
+            for c in range(3):
+                out[p, c, j] = 0.0
+        if not finite:
+            nonfinite += 1
+            for p in range(P):
+                for c in range(3):
+                    out[p, c, j] = 0.0
+    return nonfinite
+
+
+def spectral_stokes_rgb_samples_numba(radiance, w_rgb):
+    out = np.empty((4, 3, radiance.shape[2]))
+    nonfinite = _spectral_stokes_rgb_loop(np.ascontiguousarray(radiance, dtype=np.float64),
+                                          np.ascontiguousarray(w_rgb, dtype=np.float64), out)
+    return out, int(nonfinite)
+
+
+spectral_stokes_rgb_samples = twin(_spectral_stokes_rgb_loop and spectral_stokes_rgb_samples_numba,
+                                   spectral_stokes_rgb_samples_numpy)

@@ -34,8 +34,9 @@ from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import RAY_EPSILON, Hits, offset_origin, surface_points
 from ..kernels.material_groups import material_groups
 from ..kernels.shadow_rays import shadow_rays
-from ..kernels.transport import (add_light, add_to_paths, identity_throughput, next_segments, stokes_rgb_samples,
-                                 throughput_times_stokes, update_abcs, update_depolarising, update_general)
+from ..kernels.transport import (add_light, add_to_paths, identity_throughput, next_segments,
+                                 spectral_stokes_rgb_samples, stokes_rgb_samples, throughput_times_stokes, update_abcs,
+                                 update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .path_state import PathState
 from .sampler import PathSampler, stratified_pair
@@ -247,7 +248,7 @@ class PathTracer:
         # Where no material depends on λ, every wavelength of a path has the same Mueller product:
         # carry T for one wavelength and apply the spectral emission and colour matching at the
         # lights (exactly the same estimate, a quarter of the Mueller arithmetic).
-        used = {self.materials[i] for i in np.unique(compiled.tri_material)}
+        used = {self.materials[i] for i in compiled.used_materials}
         independent = not any(m.flags.has(BSDFFlags.WAVELENGTH_DEPENDENT) for m in used)
         reduce = settings.reduce_spectral
         self.uniform = reduce in ("auto", "exact", True) and independent
@@ -583,8 +584,10 @@ class PathTracer:
         """The batch's Stokes × RGB values (4, 3, n_total) (non-finite samples zeroed and counted)."""
         stats = acc.stats
         radiance = acc.radiance
-        rgb = radiance if self.rgb_mode else np.einsum("pln,cln->pcn", radiance, acc.w_rgb)
-        out, nonfinite = stokes_rgb_samples(rgb)
+        if self.rgb_mode:
+            out, nonfinite = stokes_rgb_samples(radiance)
+        else:
+            out, nonfinite = spectral_stokes_rgb_samples(radiance, acc.w_rgb)
         stats["nonfinite"] += nonfinite
         if acc.transparency is not None:
             stats["alpha"] = 1.0 - acc.transparency
