@@ -22,7 +22,8 @@ Prints one Markdown table per target (the issue's target next to each measured r
    is not inflated by other processes' load as wall time is; the wall-time share in brackets).
 4. **Thread scaling**: throughput with 2 threads ÷ 1 thread, the fastest of ``--scaling-repeats``
    alternated 1- and 2-thread renders each, with the CPU seconds of both (extra CPU with 2 threads
-   is time lost to contention).
+   is time lost to contention) and the hypervisor's steal during each (/proc/stat: CPU time given to
+   other guests, as a share of both cores' wall time; a 2-thread render waits for the slower core).
 5. **Full Stokes ÷ scalar**: render time with ``--polarisation full`` ÷ ``--polarisation off``.
 6. **Blender ÷ CLI**: ``tests/bench/blender_overhead.py`` (F12 render in bpy vs the engine render of
    the same exported scene, and where Blender's extra time goes).
@@ -113,6 +114,16 @@ def fmt(value, spec=".2f", suffix=""):
 
 # ------------------------------------------------------------------------------ child: our renders
 
+def steal_seconds():
+    """Seconds of CPU time stolen from this virtual machine so far (all cores; /proc/stat), or None."""
+    try:
+        with open("/proc/stat") as fh:
+            fields = fh.readline().split()
+        return int(fields[8]) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return None
+
+
 def ours_child(cfg):
     """Child mode: our renders of one scene, one JSON line each; images (luminance Stokes) to .npy."""
     sys.path.insert(0, REPO)
@@ -155,9 +166,11 @@ def ours_child(cfg):
     for job in cfg["jobs"]:
         st = settings(job)
         inside[:] = [0.0, 0, 0.0]
+        steal0 = steal_seconds()
         t0, c0 = time.perf_counter(), time.process_time()
         result = renderer.render(st)
         seconds, cpu = time.perf_counter() - t0, time.process_time() - c0
+        steal1 = steal_seconds()
         if job.get("save"):
             np.save(job["save"], np.einsum("shwc,c->shw", result.stokes(), LUMINANCE_WEIGHTS))
         s = result.stats
@@ -167,7 +180,11 @@ def ours_child(cfg):
                           "embree_seconds": inside[0] if inside[1] else None,
                           "embree_cpu_seconds": inside[2] if inside[1] else None,
                           "transport": s.get("transport", ""), "kernels": s.get("kernels", ""),
-                          "compile_seconds": renderer.compile_seconds}), flush=True)
+                          "compile_seconds": renderer.compile_seconds,
+                          # CPU time the hypervisor gave other guests while this render ran, as a share of
+                          # the machine's (all cores) wall time: a 2-thread render waits for the slower core
+                          "steal": None if steal0 is None else (steal1 - steal0) / (seconds * (os.cpu_count() or 1))}),
+              flush=True)
 
 
 def memory_child(cfg):
@@ -328,8 +345,8 @@ def tables(rows, blender, memory, cycles, args, header):
             f"alternated, fastest of {max(args.scaling_repeats, 2)} each; the Embree share is of the CPU time of "
             "the fastest 1-thread render, wall-time share in brackets)", "",
             "| scene | Embree share, 1 thread | target | | 2 threads ÷ 1 | target | | CPU s 1 → 2 threads | "
-            "full ÷ scalar time | target | |",
-            "|---|---|---|---|---|---|---|---|---|---|---|"]
+            "steal 1 → 2 threads | full ÷ scalar time | target | |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         o, one, two = r["ours"], r["one_thread"], r["two_threads"]
         embree, embree_cpu = one["embree_seconds"], one.get("embree_cpu_seconds")
@@ -342,6 +359,7 @@ def tables(rows, blender, memory, cycles, args, header):
                    f"{'≥ 50 %' if sphere else '(none)'} | "
                    f"{verdict(share, EMBREE_SHARE_TARGET) if sphere else ''} | {scale:.2f}× | ≥ {THREADS_TARGET}× | "
                    f"{verdict(scale, THREADS_TARGET)} | {one['cpu_seconds']:.2f} → {two['cpu_seconds']:.2f} | "
+                   f"{fmt(one.get('steal'), '.0%')} → {fmt(two.get('steal'), '.0%')} | "
                    f"{fo:.2f}× | ≤ {FULL_OVER_SCALAR_TARGET}× | "
                    f"{verdict(fo, FULL_OVER_SCALAR_TARGET, at_least=False)} |")
     if blender:
