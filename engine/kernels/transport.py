@@ -555,30 +555,40 @@ def spectral_stokes_rgb_samples_numpy(radiance, w_rgb):
     return stokes_rgb_samples_numpy(np.einsum("pln,cln->pcn", radiance, w_rgb))
 
 
+#: Samples per block of _spectral_stokes_rgb_loop: a block's sums stay in the L1 cache while every
+#: wavelength's products are added to them (one pass over the batch; the machine is bandwidth-bound).
+_RGB_BLOCK = 1024
+
+
 @jit
 def _spectral_stokes_rgb_loop(radiance, w_rgb, out):
     P, L, n = radiance.shape
     nonfinite = 0
-    # one pass over the samples (each reads its P·L radiances and 3·L weights once); each sum is
-    # einsum's: from 0, adding one wavelength's product at a time
-    for j in range(n):
-        finite = True
-        for p in range(P):
+    for j0 in range(0, n, _RGB_BLOCK):
+        j1 = min(n, j0 + _RGB_BLOCK)
+        for p in range(4):
             for c in range(3):
-                acc = 0.0
+                o = out[p, c, j0:j1]
+                o[:] = 0.0
+                if p >= P:
+                    continue
+                # einsum's sum: from 0, one wavelength's products at a time
                 for q in range(L):
-                    acc += radiance[p, q, j] * w_rgb[c, q, j]
-                out[p, c, j] = acc
-                if not np.isfinite(acc):
-                    finite = False
-        for p in range(P, 4):
-            for c in range(3):
-                out[p, c, j] = 0.0
-        if not finite:
-            nonfinite += 1
+                    r = radiance[p, q, j0:j1]
+                    w = w_rgb[c, q, j0:j1]
+                    for j in range(j1 - j0):
+                        o[j] += r[j] * w[j]
+        for j in range(j0, j1):
+            finite = True
             for p in range(P):
                 for c in range(3):
-                    out[p, c, j] = 0.0
+                    if not np.isfinite(out[p, c, j]):
+                        finite = False
+            if not finite:
+                nonfinite += 1
+                for p in range(P):
+                    for c in range(3):
+                        out[p, c, j] = 0.0
     return nonfinite
 
 
