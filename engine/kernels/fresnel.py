@@ -19,15 +19,22 @@ _TINY = 1e-200
 
 
 @jit_inner
-def _abcs_complex(c, e):
-    """abcs_at in complex arithmetic (Numba's csqrt and Smith division, which scale their operands):
-    the fallback for magnitudes where squaring them would underflow or overflow."""
+def _incidence_cosine(c):
+    """cosθ clipped to [0, 1], below 1e-200 flushed to 0 (grazing), as fresnel_amplitudes does."""
     if c < 0.0:
         c = 0.0
     elif c > 1.0:
         c = 1.0
     if c < _TINY:
         c = 0.0
+    return c
+
+
+@jit_inner
+def _abcs_complex(c, e):
+    """abcs_at in complex arithmetic (Numba's csqrt and Smith division, which scale their operands):
+    the fallback for magnitudes where squaring them would underflow or overflow."""
+    c = _incidence_cosine(c)
     e2 = e * e
     z = complex((e2.real - (1.0 - c * c)) + 0.0, (e2.imag - 0.0) + 0.0)
     u = np.sqrt(z)
@@ -53,14 +60,9 @@ def abcs_at(c, e):
     r = N·conj(D)/|D|², about 2.6× cheaper than complex sqrt (libm hypot) and Smith's division.
     Where a square could underflow or overflow (|z| outside 1e±150, |D|² < 1e-250: near-grazing
     index-matched interfaces) the complex form _abcs_complex is used instead.  A real index (a
-    dielectric) gives the complex form's numbers bit for bit (S = +0): near the critical angle the dielectric
-    divides by 1 − F, which would magnify the extra roundings of N·conj(D)/|D|²."""
-    if c < 0.0:
-        c = 0.0
-    elif c > 1.0:
-        c = 1.0
-    if c < _TINY:
-        c = 0.0
+    dielectric) gives the complex form's numbers bit for bit (S = +0): near the critical angle the
+    dielectric divides by 1 − F, which would magnify the extra roundings of N·conj(D)/|D|²."""
+    c = _incidence_cosine(c)
     er, ei = e.real, e.imag
     e2r = er * er - ei * ei
     e2i = er * ei + ei * er
