@@ -519,25 +519,34 @@ def stokes_rgb_samples_numpy(rgb):
     return out, int((~finite).sum())
 
 
+@jit_inner
+def _zero_nonfinite_samples(out, P, j0, j1):
+    """Zero the P Stokes rows (× RGB) of every sample j in [j0, j1) of ``out`` (4, 3, n) that has a NaN
+    or ±inf among them; returns how many samples that was."""
+    nonfinite = 0
+    for j in range(j0, j1):
+        finite = True
+        for p in range(P):
+            for c in range(3):
+                if not np.isfinite(out[p, c, j]):
+                    finite = False
+        if not finite:
+            nonfinite += 1
+            for p in range(P):
+                for c in range(3):
+                    out[p, c, j] = 0.0
+    return nonfinite
+
+
 @jit
 def _stokes_rgb_loop(rgb, out):
     P, n = rgb.shape[0], rgb.shape[2]
     # component rows outermost: each (p, c) row is one contiguous stream over the samples
-    finite = np.ones(n, np.bool_)
-    for p in range(P):
-        for c in range(3):
-            for j in range(n):
-                if not np.isfinite(rgb[p, c, j]):
-                    finite[j] = False
     for p in range(4):
         for c in range(3):
             for j in range(n):
-                out[p, c, j] = rgb[p, c, j] if (p < P and finite[j]) else 0.0
-    nonfinite = 0
-    for j in range(n):
-        if not finite[j]:
-            nonfinite += 1
-    return nonfinite
+                out[p, c, j] = rgb[p, c, j] if p < P else 0.0
+    return _zero_nonfinite_samples(out, P, 0, n)
 
 
 def stokes_rgb_samples_numba(rgb):
@@ -578,17 +587,7 @@ def _spectral_stokes_rgb_loop(radiance, w_rgb, out):
                     w = w_rgb[c, q, j0:j1]
                     for j in range(j1 - j0):
                         o[j] += r[j] * w[j]
-        for j in range(j0, j1):
-            finite = True
-            for p in range(P):
-                for c in range(3):
-                    if not np.isfinite(out[p, c, j]):
-                        finite = False
-            if not finite:
-                nonfinite += 1
-                for p in range(P):
-                    for c in range(3):
-                        out[p, c, j] = 0.0
+        nonfinite += _zero_nonfinite_samples(out, P, j0, j1)
     return nonfinite
 
 
