@@ -106,6 +106,11 @@ class CompiledScene:
         TriangleMesh(self.embree_passthrough, vf32, self.faces[self.passthrough_prims].astype(np.int32))
 
     @property
+    def used_material_names(self) -> set[str]:
+        """Names of the materials some triangle uses."""
+        return {self.material_names[i] for i in self.used_materials}
+
+    @property
     def has_area_lights(self) -> bool:
         """True if some triangle emits (set by the light set)."""
         return bool((self.tri_emitter >= 0).any())

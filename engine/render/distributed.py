@@ -162,7 +162,7 @@ def render_distributed(scene, address, settings=None, progress=None, should_stop
         _share_enclosing_package(client)
         local = Renderer(scene)          # validates and resolves the settings exactly as a local render
         st = copy.copy(settings or scene.settings)
-        used = {local.compiled.material_names[i] for i in local.compiled.used_materials}
+        used = local.compiled.used_material_names
         materials, simplified = effective_materials(scene.materials, used, st.simplify)
         st.polarisation, reason = resolve_transport(st.polarisation, materials, used)
         W, H = scene.camera.width, scene.camera.height

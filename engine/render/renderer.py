@@ -187,7 +187,7 @@ class Renderer:
         """(settings as rendered, PathTracer, simplified materials, transport reason) for ``settings``
         (default: the scene's): the materials' exact simplifications and the transport resolved."""
         st = copy.copy(settings or self.scene.settings)
-        used = {self.compiled.material_names[i] for i in self.compiled.used_materials}
+        used = self.compiled.used_material_names
         materials, simplified = effective_materials(self.scene.materials, used, st.simplify)
         st.polarisation, transport_reason = resolve_transport(st.polarisation, materials, used)
         tracer = PathTracer(self.compiled, self.lights, self.camera, st,

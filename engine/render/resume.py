@@ -111,7 +111,7 @@ def scene_fingerprint(scene) -> str:
 
 def resolved_polarisation(scene, compiled, settings) -> str:
     """The transport ("full", "linear", "off") that ``settings.polarisation`` resolves to for the scene."""
-    used = {compiled.material_names[i] for i in compiled.used_materials}
+    used = compiled.used_material_names
     materials, _ = effective_materials(scene.materials, used, settings.simplify)
     return resolve_transport(settings.polarisation, materials, used)[0]
 
