@@ -115,6 +115,73 @@ def abcs_at(c, e):
     return 0.5 * (F_s + F_p), 0.5 * (F_s - F_p), xr, -xi
 
 
+@jit_inner
+def abcs_row(cos, w, e, q, n, abcs, fast):
+    """abcs_at for a chunk of paths at once: abcs[q, :, i] = abcs_at(cos[i], e[q, 0, i] + i·e[q, 1, i])·w[i]
+    for i < n (cosines (n,), weights (n,), relative indices (L, 2, n) as real and imaginary parts).
+
+    abcs_at's usual case (a complex index, moderate magnitudes) written without branches, so that the
+    compiler runs it over several paths per instruction (AVX2: 4): ≈ 10 ns instead of ≈ 35 ns per
+    evaluation.  ``fast[i]`` is False where abcs_at takes another path (a real index, |z| outside 1e±150,
+    a tiny denominator, a NaN); abcs_fixups redoes those lanes with abcs_at itself, so every lane has
+    abcs_at's numbers bit for bit (the same operations in the same order)."""
+    for i in range(n):
+        c = cos[i]
+        c = 0.0 if c < 0.0 else c               # _incidence_cosine, as selects
+        c = 1.0 if c > 1.0 else c
+        c = 0.0 if c < _TINY else c
+        er = e[q, 0, i]
+        ei = e[q, 1, i]
+        e2r = er * er - ei * ei
+        e2i = er * ei + ei * er
+        zr = e2r - (1.0 - c * c)
+        zi = e2i
+        big = max(abs(zr), abs(zi))
+        m = np.sqrt(zr * zr + zi * zi)
+        # abcs_at's two half-angle branches: m + |zr| is m + zr for zr ≥ 0 and m − zr otherwise, exactly
+        t = np.sqrt(0.5 * (m + abs(zr)))
+        h = zi / (2.0 * t)
+        pos = zr >= 0.0
+        ur = t if pos else h
+        ui = h if pos else t
+        flip = pos & (ui < 0.0)
+        ur = -ur if flip else ur
+        ui = -ui if flip else ui
+        dsr, dsi, nsr, nsi = c + ur, ui, c - ur, -ui
+        pr, pi = e2r * c, e2i * c
+        dpr, dpi, npr, npi = pr + ur, pi + ui, pr - ur, pi - ui
+        qs = dsr * dsr + dsi * dsi
+        qp = dpr * dpr + dpi * dpi
+        rsr = (nsr * dsr + nsi * dsi) / qs
+        rsi = (nsi * dsr - nsr * dsi) / qs
+        rpr = (npr * dpr + npi * dpi) / qp
+        rpi = (npi * dpr - npr * dpi) / qp
+        F_s = rsr * rsr + rsi * rsi
+        F_p = rpr * rpr + rpi * rpi
+        xr = rsr * rpr + rsi * rpi
+        xi = rsi * rpr - rsr * rpi
+        wi = w[i]
+        abcs[q, 0, i] = 0.5 * (F_s + F_p) * wi
+        abcs[q, 1, i] = 0.5 * (F_s - F_p) * wi
+        abcs[q, 2, i] = xr * wi
+        abcs[q, 3, i] = -xi * wi
+        # every comparison False for a NaN: such lanes are redone too (harmless: abcs_at's own numbers)
+        fast[i] = (zi != 0.0) & (big > 1e-150) & (big < 1e150) & (qs >= 1e-250) & (qp >= 1e-250)
+
+
+@jit_inner
+def abcs_fixups(cos, w, e, q, n, abcs, fast):
+    """The lanes abcs_row left to abcs_at (``fast`` False), as abcs_at gives them."""
+    for i in range(n):
+        if not fast[i]:
+            a, b, c, s = abcs_at(cos[i], complex(e[q, 0, i], e[q, 1, i]))
+            wi = w[i]
+            abcs[q, 0, i] = a * wi
+            abcs[q, 1, i] = b * wi
+            abcs[q, 2, i] = c * wi
+            abcs[q, 3, i] = s * wi
+
+
 @jit
 def _abcs_loop(cos_theta, eta, A, B, C, S):
     for i in range(cos_theta.shape[0]):
