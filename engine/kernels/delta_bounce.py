@@ -13,7 +13,9 @@ wavelength at a time over the chunk's paths, in a branch-free form the compiler 
 
 Arrays are the batch's full per-path arrays (paths on the last axis) indexed by ``rows``: n_s, wo,
 x_T (3, n) (the shading normal, the direction to the previous vertex, the path's frame ⟂ wo),
-T (P, P, Lm, n), lam (Lm, n); outputs T_out, d, x_out, valid, eta_sq are written at ``rows`` only.
+lam (Lm, n); outputs T_out, d, x_out, valid, eta_sq are written at ``rows`` only.  The throughputs
+are read from the columns ``T_cols`` of T (P, P, Lm, ·) (engine.render.path_state.PathState.T_col:
+the batch does not copy T when it drops finished paths).
 Every step repeats the arithmetic of the NumPy chain it replaces in the same order (the materials'
 ``sample`` and engine.kernels.transport.update_abcs), so the numbers are those of the compiled chain
 bit for bit.  The NumPy references live with the materials (engine.materials.conductor, dielectric,
@@ -69,8 +71,9 @@ def _chunk_fresnel(cos, w, e, n, abcs, fast, complex_index):
 
 
 @jit_inner
-def _update_chunk(T, out, rows, j0, j1, abcs, rot):
-    """out[..., m] = T[..., m]·R(φ)·M for the paths m = rows[j0:j1], M = [[a,b,0,0],[b,a,0,0],[0,0,c,s],
+def _update_chunk(T, cols, out, rows, j0, j1, abcs, rot):
+    """out[..., m] = T[..., c]·R(φ)·M for the paths m = rows[j0:j1] whose throughputs are the columns
+    c = cols[j0:j1] of T (engine.render.path_state.PathState.T_col), M = [[a,b,0,0],[b,a,0,0],[0,0,c,s],
     [0,0,−s,c]] from ``abcs`` (one row per wavelength or one for all), R(φ) = (cos 2φ, sin 2φ) from ``rot``:
     _update_abcs_loop's arithmetic and order (no depolarising part)."""
     P, L = T.shape[0], T.shape[2]
@@ -79,16 +82,17 @@ def _update_chunk(T, out, rows, j0, j1, abcs, rot):
         for i in range(P):
             for jj in range(j1 - j0):
                 m = rows[j0 + jj]
+                mc = cols[j0 + jj]
                 a = abcs[la, 0, jj]
-                t0 = T[i, 0, k, m]
+                t0 = T[i, 0, k, mc]
                 if P == 1:
                     out[i, 0, k, m] = t0 * a
                     continue
                 b = abcs[la, 1, jj]
-                t1 = T[i, 1, k, m]
+                t1 = T[i, 1, k, mc]
                 if P >= 3:
                     c2, s2 = rot[0, jj], rot[1, jj]
-                    t2 = T[i, 2, k, m]
+                    t2 = T[i, 2, k, mc]
                     r1 = t1 * c2 - t2 * s2
                     r2 = t1 * s2 + t2 * c2
                 else:
@@ -98,7 +102,7 @@ def _update_chunk(T, out, rows, j0, j1, abcs, rot):
                 out[i, 1, k, m] = b * t0 + a * r1
                 if P == 4:
                     c, s = abcs[la, 2, jj], abcs[la, 3, jj]
-                    t3 = T[i, 3, k, m]
+                    t3 = T[i, 3, k, mc]
                     out[i, 2, k, m] = c * r2 - s * t3
                     out[i, 3, k, m] = s * r2 + c * t3
                 elif P == 3:
@@ -144,7 +148,7 @@ def _mirror_geometry(n_s, wo, d, m):
 
 
 @jit
-def constant_mirror_loop(rows, n_s, wo, x_T, T, eta, T_out, d, x_out, valid, eta_sq):
+def constant_mirror_loop(rows, n_s, wo, x_T, T, eta, T_out, d, x_out, valid, eta_sq, T_cols):
     """Fresnel mirror of one complex relative index ``eta`` (every wavelength and path): the smooth
     conductor's (and black glass's) ``sample``; valid where cosθ_o ≥ 0, the value zero elsewhere."""
     P = T.shape[0]
@@ -164,7 +168,7 @@ def constant_mirror_loop(rows, n_s, wo, x_T, T, eta, T_out, d, x_out, valid, eta
             valid[m] = ok
             eta_sq[m] = 1.0
         _chunk_fresnel(cos, w, e, j1 - j0, abcs, fast, eta.imag != 0.0)
-        _update_chunk(T, T_out, rows, j0, j1, abcs, rot)
+        _update_chunk(T, T_cols, T_out, rows, j0, j1, abcs, rot)
 
 
 @jit
@@ -215,7 +219,7 @@ def _index_on_grid(wl, n, k, x, j, scale):
 
 
 @jit
-def tabulated_mirror_loop(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, scale, T_out, d, x_out, valid, eta_sq):
+def tabulated_mirror_loop(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, scale, T_out, d, x_out, valid, eta_sq, T_cols):
     """Fresnel mirror of a measured metal: the relative index (n + iκ)(λ)·scale from piecewise-linear
     tables at each path's wavelengths (engine.kernels.fresnel._tabulated_mirror_loop's arithmetic).
     Returns False, writing nothing, if some wavelength lies outside a table (the caller falls back)."""
@@ -251,7 +255,7 @@ def tabulated_mirror_loop(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, scale, T
             eta_sq[m] = 1.0
         # the Fresnel values a wavelength at a time over the chunk's paths (SIMD: fresnel.abcs_row)
         _chunk_fresnel(cos, w, e, j1 - j0, abcs, fast, True)
-        _update_chunk(T, T_out, rows, j0, j1, abcs, rot)
+        _update_chunk(T, T_cols, T_out, rows, j0, j1, abcs, rot)
     return True
 
 
@@ -266,7 +270,7 @@ def _clip01(x):
 
 
 @jit
-def dielectric_loop(rows, n_s, wo, x_T, T, u_lobe, eta_front, eta_back, T_out, d, x_out, valid, eta_sq):
+def dielectric_loop(rows, n_s, wo, x_T, T, u_lobe, eta_front, eta_back, T_out, d, x_out, valid, eta_sq, T_cols):
     """Smooth dielectric (engine.materials.dielectric.SmoothDielectric.sample): reflection with
     probability A (the unpolarised reflectance), else refraction (invalid under total internal
     reflection); weights divided by the lobe's probability, refraction scaled by 1/η²."""
@@ -322,11 +326,11 @@ def dielectric_loop(rows, n_s, wo, x_T, T, u_lobe, eta_front, eta_back, T_out, d
         valid[m] = reflect_lobe or not tir
         eta_sq[m] = 1.0 if reflect_lobe else eta * eta
         if jj == _CHUNK - 1 or j == rows.shape[0] - 1:
-            _update_chunk(T, T_out, rows, j - jj, j + 1, abcs, rot)
+            _update_chunk(T, T_cols, T_out, rows, j - jj, j + 1, abcs, rot)
 
 
 @jit
-def filter_sheet_loop(rows, wo, x_T, T, axis, a, b, c, s, T_out, d, x_out, valid, eta_sq):
+def filter_sheet_loop(rows, wo, x_T, T, axis, a, b, c, s, T_out, d, x_out, valid, eta_sq, T_cols):
     """Thin filter sheet (engine.materials.filter_sheet.FilterSheet.sample): straight through, d = −wo,
     in the frame of the filter axis projected ⟂ wo (any_perpendicular(wo) where the axis ∥ wo)."""
     P = T.shape[0]
@@ -354,4 +358,4 @@ def filter_sheet_loop(rows, wo, x_T, T, axis, a, b, c, s, T_out, d, x_out, valid
         valid[m] = True
         eta_sq[m] = 1.0
         if jj == _CHUNK - 1 or j == rows.shape[0] - 1:
-            _update_chunk(T, T_out, rows, j - jj, j + 1, abcs, rot)
+            _update_chunk(T, T_cols, T_out, rows, j - jj, j + 1, abcs, rot)

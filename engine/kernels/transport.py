@@ -51,10 +51,10 @@ identity_throughput = twin(_identity_loop and identity_throughput_numba, identit
 
 # ----------------------------------------------------------------------------- T ← T·R(φ)·M_abcs
 
-def _rotated_rows_numpy(T, rows, x_out, x_T, wo):
-    """T[..., rows] · R(φ), a new array: columns 1, 2 rotated from frame x_out to x_T about wo
+def _rotated_rows_numpy(T, cols, x_out, x_T, wo):
+    """T[..., cols] · R(φ), a new array: columns 1, 2 rotated from frame x_out to x_T about wo
     (nothing to rotate with fewer than 3 Stokes components)."""
-    T = T[..., rows]
+    T = T[..., cols]
     if T.shape[0] >= 3:
         c2, s2 = frame_rotation(x_out, x_T, wo)
         # T·R(φ): each row of T is a co-vector, i.e. its components 1, 2 turn by −φ
@@ -62,17 +62,19 @@ def _rotated_rows_numpy(T, rows, x_out, x_T, wo):
     return T
 
 
-def update_abcs_numpy(out, T, rows, x_out, x_T, wo, A, B, C, S, depol):
-    """out[..., rows] = T[..., rows] · R(φ) · M for M = [[A+depol,B,0,0],[B,A,0,0],[0,0,C,S],[0,0,−S,C]].
+def update_abcs_numpy(out, T, rows, x_out, x_T, wo, A, B, C, S, depol, T_cols=None):
+    """out[..., rows] = T[..., T_cols] · R(φ) · M for M = [[A+depol,B,0,0],[B,A,0,0],[0,0,C,S],[0,0,−S,C]].
 
-    ``rows`` (n,) are the paths (last-axis indices of T and out) the vertex values belong to;
+    ``rows`` (n,) are the paths (last-axis indices of out) the vertex values belong to, ``T_cols``
+    (n,) the columns of T that hold their throughputs (None: ``rows``; see
+    engine.render.path_state.PathState.T_col);
     x_out (the vertex value's outgoing frame), x_T (the path's frame), wo (both ⟂ it) are (3, n)
     and A..S, depol (L or 1, n), all given per such path.  R(φ) = rotation from x_out to x_T
     about wo (engine.kernels.stokes_rotation.frame_rotation), applied to columns 1, 2 of T.
     T is not modified.
     """
     P = T.shape[0]
-    T = _rotated_rows_numpy(T, rows, x_out, x_T, wo)
+    T = _rotated_rows_numpy(T, rows if T_cols is None else T_cols, x_out, x_T, wo)
     res = np.empty_like(T)
     a0 = A if depol is None else A + depol
     if P == 1:
@@ -102,7 +104,7 @@ def _frame_rotations(x_out, x_T, wo, n, P):
 
 
 @jit
-def _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, D, has_depol):
+def _update_abcs_loop(out, T, rows, cols, x_out, x_T, wo, A, B, C, S, D, has_depol):
     P, L, n = T.shape[0], T.shape[2], rows.shape[0]
     c2, s2 = _frame_rotations(x_out, x_T, wo, n, P)
     # paths innermost: every (row, wavelength) of T is one contiguous stream
@@ -111,16 +113,17 @@ def _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, D, has_depol):
         for i in range(P):
             for j in range(n):
                 m = rows[j]
+                mc = cols[j]
                 a = A[la, j]
                 a0 = a + D[la, j] if has_depol else a
-                t0 = T[i, 0, k, m]
+                t0 = T[i, 0, k, mc]
                 if P == 1:
                     out[i, 0, k, m] = t0 * a0
                     continue
                 b = B[la, j]
-                t1 = T[i, 1, k, m]
+                t1 = T[i, 1, k, mc]
                 if P >= 3:
-                    t2 = T[i, 2, k, m]
+                    t2 = T[i, 2, k, mc]
                     r1 = t1 * c2[j] - t2 * s2[j]
                     r2 = t1 * s2[j] + t2 * c2[j]
                 else:
@@ -130,21 +133,23 @@ def _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, D, has_depol):
                 out[i, 1, k, m] = b * t0 + a * r1
                 if P == 4:
                     c, s = C[la, j], S[la, j]
-                    t3 = T[i, 3, k, m]
+                    t3 = T[i, 3, k, mc]
                     out[i, 2, k, m] = c * r2 - s * t3
                     out[i, 3, k, m] = s * r2 + c * t3
                 elif P == 3:
                     out[i, 2, k, m] = C[la, j] * r2
 
 
-def update_abcs_numba(out, T, rows, x_out, x_T, wo, A, B, C, S, depol):
+def update_abcs_numba(out, T, rows, x_out, x_T, wo, A, B, C, S, depol, T_cols=None):
     has_depol = depol is not None
     # One compiled signature: contiguous float64 everywhere (per-wavelength rows of (1, n)
     # parameters are broadcast in the loop, not by copying).
     A, B, C, S, D, x_out, x_T, wo = (np.ascontiguousarray(x, dtype=np.float64)
                                      for x in (A, B, A if C is None else C, A if S is None else S,
                                                depol if has_depol else A, x_out, x_T, wo))
-    _update_abcs_loop(out, T, np.ascontiguousarray(rows, dtype=np.int64), x_out, x_T, wo, A, B, C, S, D, has_depol)
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    cols = rows if T_cols is None else np.ascontiguousarray(T_cols, dtype=np.int64)
+    _update_abcs_loop(out, T, rows, cols, x_out, x_T, wo, A, B, C, S, D, has_depol)
 
 
 update_abcs = twin(_update_abcs_loop and update_abcs_numba, update_abcs_numpy)
@@ -152,46 +157,49 @@ update_abcs = twin(_update_abcs_loop and update_abcs_numba, update_abcs_numpy)
 
 # ----------------------------------------------------------------------------- T ← T·M_depolarising, T ← T·R(φ)·M
 
-def update_depolarising_numpy(out, T, rows, A):
-    """out[..., rows] = T[..., rows] · A·diag(1, 0, 0, 0): a depolariser needs no frame (A (L or 1, n))."""
-    res = np.zeros_like(T[..., rows])
-    res[:, 0] = T[:, 0][..., rows] * A
+def update_depolarising_numpy(out, T, rows, A, T_cols=None):
+    """out[..., rows] = T[..., T_cols] · A·diag(1, 0, 0, 0): a depolariser needs no frame (A (L or 1, n));
+    ``T_cols`` as in update_abcs_numpy (None: ``rows``)."""
+    cols = rows if T_cols is None else T_cols
+    res = np.zeros_like(T[..., cols])
+    res[:, 0] = T[:, 0][..., cols] * A
     out[..., rows] = res
 
 
 @jit
-def _update_depolarising_loop(out, T, rows, A):
+def _update_depolarising_loop(out, T, rows, cols, A):
     P, L = T.shape[0], T.shape[2]
     for k in range(L):
         la = k if A.shape[0] > 1 else 0
         for i in range(P):
             for j in range(rows.shape[0]):
-                out[i, 0, k, rows[j]] = T[i, 0, k, rows[j]] * A[la, j]
+                out[i, 0, k, rows[j]] = T[i, 0, k, cols[j]] * A[la, j]
             for c in range(1, P):
                 for j in range(rows.shape[0]):
                     out[i, c, k, rows[j]] = 0.0
 
 
-def update_depolarising_numba(out, T, rows, A):
-    _update_depolarising_loop(out, T, np.ascontiguousarray(rows, dtype=np.int64),
-                              np.ascontiguousarray(A, dtype=np.float64))
+def update_depolarising_numba(out, T, rows, A, T_cols=None):
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    cols = rows if T_cols is None else np.ascontiguousarray(T_cols, dtype=np.int64)
+    _update_depolarising_loop(out, T, rows, cols, np.ascontiguousarray(A, dtype=np.float64))
 
 
 update_depolarising = twin(_update_depolarising_loop and update_depolarising_numba, update_depolarising_numpy)
 
 
-def update_general_numpy(out, T, rows, x_out, x_T, wo, M):
-    """out[..., rows] = T[..., rows] · R(φ) · M for a general Mueller matrix M (4, 4, L or 1, n).
+def update_general_numpy(out, T, rows, x_out, x_T, wo, M, T_cols=None):
+    """out[..., rows] = T[..., T_cols] · R(φ) · M for a general Mueller matrix M (4, 4, L or 1, n).
 
-    Frames as in ``update_abcs_numpy``; only the top-left P×P block of M is used.
+    Frames and ``T_cols`` as in ``update_abcs_numpy``; only the top-left P×P block of M is used.
     """
     P = T.shape[0]
-    T = _rotated_rows_numpy(T, rows, x_out, x_T, wo)
+    T = _rotated_rows_numpy(T, rows if T_cols is None else T_cols, x_out, x_T, wo)
     out[..., rows] = np.einsum("ijln,jkln->ikln", T, M[:P, :P])
 
 
 @jit
-def _update_general_loop(out, T, rows, x_out, x_T, wo, M):
+def _update_general_loop(out, T, rows, cols, x_out, x_T, wo, M):
     P, L, n = T.shape[0], T.shape[2], rows.shape[0]
     c2, s2 = _frame_rotations(x_out, x_T, wo, n, P)
     row = np.empty(4)
@@ -201,7 +209,7 @@ def _update_general_loop(out, T, rows, x_out, x_T, wo, M):
             for j in range(n):
                 m = rows[j]
                 for c in range(P):
-                    row[c] = T[i, c, k, m]
+                    row[c] = T[i, c, k, cols[j]]
                 if P >= 3:
                     t1, t2 = row[1], row[2]
                     row[1] = t1 * c2[j] - t2 * s2[j]
@@ -213,10 +221,11 @@ def _update_general_loop(out, T, rows, x_out, x_T, wo, M):
                     out[i, c, k, m] = acc
 
 
-def update_general_numba(out, T, rows, x_out, x_T, wo, M):
+def update_general_numba(out, T, rows, x_out, x_T, wo, M, T_cols=None):
     x_out, x_T, wo = (np.ascontiguousarray(x, dtype=np.float64) for x in (x_out, x_T, wo))
-    _update_general_loop(out, T, np.ascontiguousarray(rows, dtype=np.int64), x_out, x_T, wo,
-                         np.ascontiguousarray(M, dtype=np.float64))
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    cols = rows if T_cols is None else np.ascontiguousarray(T_cols, dtype=np.int64)
+    _update_general_loop(out, T, rows, cols, x_out, x_T, wo, np.ascontiguousarray(M, dtype=np.float64))
 
 
 update_general = twin(_update_general_loop and update_general_numba, update_general_numpy)
@@ -224,29 +233,31 @@ update_general = twin(_update_general_loop and update_general_numba, update_gene
 
 # ----------------------------------------------------------------------------- light into accumulators
 
-def add_light_numpy(radiance, path, T, sel, Le, w):
-    """radiance[:, :, path[sel]] += T[:, 0, :, sel] · Le · w  (unpolarised light of radiance Le (L, n)).
+def add_light_numpy(radiance, path, T, sel, Le, w, T_cols=None):
+    """radiance[:, :, path[sel]] += T[:, 0, :, T_cols] · Le · w  (unpolarised light of radiance Le (L, n)).
 
-    ``sel`` indexes the batch's paths (n of them), ``w`` (n,) is the MIS weight.
+    ``sel`` indexes the batch's paths (n of them), ``T_cols`` the columns of T holding their
+    throughputs (None: ``sel``), ``w`` (n,) is the MIS weight.
     """
-    radiance[:, :, path[sel]] += T[:, 0][:, :, sel] * (Le * w)
+    radiance[:, :, path[sel]] += T[:, 0][:, :, sel if T_cols is None else T_cols] * (Le * w)
 
 
 @jit
-def _add_light_loop(radiance, path, T, sel, Le, w):
+def _add_light_loop(radiance, path, T, sel, cols, Le, w):
     P, LT = T.shape[0], T.shape[2]
     L = Le.shape[0]
     for i in range(P):
         for k in range(L):
             lt = k if LT > 1 else 0
             for j in range(sel.shape[0]):
-                radiance[i, k, path[sel[j]]] += T[i, 0, lt, sel[j]] * (Le[k, j] * w[j])
+                radiance[i, k, path[sel[j]]] += T[i, 0, lt, cols[j]] * (Le[k, j] * w[j])
 
 
-def add_light_numba(radiance, path, T, sel, Le, w):
-    _add_light_loop(radiance, np.ascontiguousarray(path, dtype=np.int64), T,
-                    np.ascontiguousarray(sel, dtype=np.int64), np.ascontiguousarray(Le, dtype=np.float64),
-                    np.ascontiguousarray(w, dtype=np.float64))
+def add_light_numba(radiance, path, T, sel, Le, w, T_cols=None):
+    sel = np.ascontiguousarray(sel, dtype=np.int64)
+    cols = sel if T_cols is None else np.ascontiguousarray(T_cols, dtype=np.int64)
+    _add_light_loop(radiance, np.ascontiguousarray(path, dtype=np.int64), T, sel, cols,
+                    np.ascontiguousarray(Le, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64))
 
 
 add_light = twin(_add_light_loop and add_light_numba, add_light_numpy)
@@ -427,7 +438,7 @@ keep_columns = twin(_keep_columns_loop and keep_columns_numba, keep_columns_nump
 # ----------------------------------------------------------------------------- roulette, survivors, next origins
 
 def next_segments_numpy(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path, keys, is_delta, pdf, p, n_g,
-                        epsilon):
+                        epsilon, compact_T=True):
     """The end of a bounce in one step: η² ← η²·eta_step, Russian roulette and validity
     (roulette_numpy, ``valid`` updated in place), then the surviving paths' columns of every per-path
     array and the origins of their next segments, p moved off the surface along ±n_g
@@ -437,21 +448,24 @@ def next_segments_numpy(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path
     eta_sq, eta_step, u_rr (n,) float (u_rr read only with ``apply_rr``); path (n,) int64, keys (n,)
     uint64, is_delta (n,) bool, pdf (n,) float.  Returns (idx: the kept paths (m,) int64, nonfinite,
     T, x_T, d, eta_sq, path, keys, is_delta, pdf, p, o), each restricted to idx (the arrays themselves,
-    not copies, where every path goes on).
+    not copies, where every path goes on).  With ``compact_T`` False, T is returned whole (its columns
+    idx are the survivors': engine.render.path_state.PathState.T_col).
     """
     eta_sq = eta_sq * eta_step
     T, nonfinite = roulette_numpy(T, eta_sq, u_rr, valid, apply_rr)
     idx = np.flatnonzero(valid)
-    kept = [T, x_T, d, eta_sq, path, keys, is_delta, pdf, p, n_g]
+    kept = [x_T, d, eta_sq, path, keys, is_delta, pdf, p, n_g]
     if idx.shape[0] < valid.shape[0]:
         kept = [np.take(a, idx, axis=-1) for a in kept]
-    T, x_T, d, eta_sq, path, keys, is_delta, pdf, p, n_g = kept
+        if compact_T:
+            T = np.take(T, idx, axis=-1)
+    x_T, d, eta_sq, path, keys, is_delta, pdf, p, n_g = kept
     return idx, nonfinite, T, x_T, d, eta_sq, path, keys, is_delta, pdf, p, offset_origin_numpy(p, n_g, d, epsilon)
 
 
 @jit
 def _next_segments_loop(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path, keys, is_delta, pdf, p, n_g,
-                        epsilon):
+                        epsilon, compact_T):
     n = valid.shape[0]
     eta_new = np.empty(n)
     for j in range(n):
@@ -471,8 +485,11 @@ def _next_segments_loop(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path
     if m < n:
         # the survivors' columns, each array as rows of a 2-D view (keep_columns' loop)
         P, L = T.shape[0], T.shape[2]
-        T_k = np.empty((P, P, L, m))
-        _keep_columns_loop(T.reshape(P * P * L, n), idx, T_k.reshape(P * P * L, m))
+        if compact_T:
+            T_k = np.empty((P, P, L, m))
+            _keep_columns_loop(T.reshape(P * P * L, n), idx, T_k.reshape(P * P * L, m))
+        else:
+            T_k = T
         x_k, d_k, p_k, n_k = np.empty((3, m)), np.empty((3, m)), np.empty((3, m)), np.empty((3, m))
         for a, out in ((x_T, x_k), (d, d_k), (p, p_k), (n_g, n_k)):
             _keep_columns_loop(a, idx, out)
@@ -494,13 +511,13 @@ def _next_segments_loop(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path
 
 
 def next_segments_numba(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path, keys, is_delta, pdf, p, n_g,
-                        epsilon):
+                        epsilon, compact_T=True):
     c = np.ascontiguousarray
     res = _next_segments_loop(T, c(eta_sq, dtype=np.float64), c(eta_step, dtype=np.float64),
                               c(u_rr, dtype=np.float64), valid, bool(apply_rr), c(x_T, dtype=np.float64),
                               c(d, dtype=np.float64), c(path, dtype=np.int64), c(keys, dtype=np.uint64),
                               c(is_delta, dtype=np.bool_), c(pdf, dtype=np.float64), c(p, dtype=np.float64),
-                              c(n_g, dtype=np.float64), float(epsilon))
+                              c(n_g, dtype=np.float64), float(epsilon), bool(compact_T))
     return (res[0], int(res[1])) + tuple(res[2:])
 
 

@@ -178,8 +178,10 @@ class DeltaVertices:
     columns ``rows`` (m,) int64 — no gathered copies.  Inputs: shading normal ``n_s`` and direction to
     the previous vertex ``wo`` (3, n), the materials' wavelengths ``lam`` (Lm, n) nm (``mono``: one
     wavelength), the lobe-choice numbers ``u_lobe`` (n,), the throughput ``T`` (P, P, Lm, n) in frame
-    ``x_T`` (3, n) ⟂ wo.  Outputs: ``T_out`` = T·R(x_out → x_T)·M, the sampled direction ``d`` (= wi)
-    and its frame ``x_out`` (3, n), ``valid`` (n,) bool and the radiance scale ``eta_sq`` (n,).
+    ``x_T`` (3, n) ⟂ wo, read at the columns ``T_cols`` (m,) (None: ``rows``; the batch does not copy T
+    when it drops finished paths: engine.render.path_state.PathState.T_col).  Outputs: ``T_out`` =
+    T·R(x_out → x_T)·M, the sampled direction ``d`` (= wi) and its frame ``x_out`` (3, n), ``valid`` (n,)
+    bool and the radiance scale ``eta_sq`` (n,).
     """
     rows: np.ndarray
     n_s: np.ndarray
@@ -194,6 +196,7 @@ class DeltaVertices:
     x_out: np.ndarray
     valid: np.ndarray
     eta_sq: np.ndarray
+    T_cols: np.ndarray | None = None
 
 
 class BSDF:

@@ -52,43 +52,48 @@ def _mirror_numpy(rows, n_s, wo):
     return wo, cos_o, wi, unit_cross_numpy(n_s, -wi, 1e-12)
 
 
-def _store_mirror(rows, x_T, T, wo, wi, s, abcs, cos_o, T_out, d, x_out, valid, eta_sq):
-    update_abcs_numpy(T_out, T, rows, s, x_T[:, rows], wo, *abcs, None)
+def _store_mirror(rows, x_T, T, wo, wi, s, abcs, cos_o, T_out, d, x_out, valid, eta_sq, T_cols):
+    update_abcs_numpy(T_out, T, rows, s, x_T[:, rows], wo, *abcs, None, T_cols)
     d[:, rows] = wi
     x_out[:, rows] = s
     valid[rows] = cos_o >= 0
     eta_sq[rows] = 1.0
 
 
-def constant_mirror_scatter_numpy(rows, n_s, wo, x_T, T, eta, T_out, d, x_out, valid, eta_sq):
+def constant_mirror_scatter_numpy(rows, n_s, wo, x_T, T, eta, T_out, d, x_out, valid, eta_sq, T_cols=None):
     """The Fresnel mirror of one complex relative index ``eta`` at the paths ``rows`` (engine.kernels.
-    delta_bounce: T_out, d, x_out, valid, eta_sq written there): mirror_reflection + update_abcs."""
+    delta_bounce: T_out, d, x_out, valid, eta_sq written there; their throughputs in the columns
+    ``T_cols`` of T, None: ``rows``): mirror_reflection + update_abcs."""
     wo, cos_o, wi, s = _mirror_numpy(rows, n_s, wo)
     m = (cos_o >= 0).astype(np.float64)[None, :]
     abcs = fresnel_reflection_abcs_numpy(np.maximum(cos_o, 0.0)[None, :], np.full((1, 1), eta, np.complex128))
-    _store_mirror(rows, x_T, T, wo, wi, s, [v * m for v in abcs], cos_o, T_out, d, x_out, valid, eta_sq)
+    _store_mirror(rows, x_T, T, wo, wi, s, [v * m for v in abcs], cos_o, T_out, d, x_out, valid, eta_sq, T_cols)
 
 
-constant_mirror_scatter = twin(constant_mirror_loop, constant_mirror_scatter_numpy)
+def constant_mirror_scatter_numba(rows, n_s, wo, x_T, T, eta, T_out, d, x_out, valid, eta_sq, T_cols=None):
+    constant_mirror_loop(rows, n_s, wo, x_T, T, eta, T_out, d, x_out, valid, eta_sq, rows if T_cols is None else T_cols)
+
+
+constant_mirror_scatter = twin(constant_mirror_loop and constant_mirror_scatter_numba, constant_mirror_scatter_numpy)
 
 
 def tabulated_mirror_scatter_numpy(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, exterior_n, T_out, d, x_out, valid,
-                                   eta_sq):
+                                   eta_sq, T_cols=None):
     """The Fresnel mirror of a measured metal at the paths ``rows`` (index from the tables at ``lam``);
     False, writing nothing, where some wavelength lies outside a table."""
     wo_r, cos_o, wi, s = _mirror_numpy(rows, n_s, wo)
     abcs, inside = tabulated_mirror_abcs_numpy(cos_o, lam[:, rows], wl_n, n, wl_k, k, exterior_n)
     if not inside:
         return False
-    _store_mirror(rows, x_T, T, wo_r, wi, s, abcs, cos_o, T_out, d, x_out, valid, eta_sq)
+    _store_mirror(rows, x_T, T, wo_r, wi, s, abcs, cos_o, T_out, d, x_out, valid, eta_sq, T_cols)
     return True
 
 
 def tabulated_mirror_scatter_numba(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, exterior_n, T_out, d, x_out, valid,
-                                   eta_sq):
+                                   eta_sq, T_cols=None):
     # times 1/e: NumPy's complex division by e + 0i (engine.kernels.tables.relative_index_at)
     return bool(tabulated_mirror_loop(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, 1.0 / float(exterior_n), T_out,
-                                      d, x_out, valid, eta_sq))
+                                      d, x_out, valid, eta_sq, rows if T_cols is None else T_cols))
 
 
 tabulated_mirror_scatter = twin(tabulated_mirror_loop and tabulated_mirror_scatter_numba,
@@ -160,11 +165,11 @@ class SmoothConductor(BSDF):
         """``sample`` + the throughput update in one step (constant or measured index; see BSDF)."""
         out = (v.T_out, v.d, v.x_out, v.valid, v.eta_sq)
         if self._eta is not None:
-            constant_mirror_scatter(v.rows, v.n_s, v.wo, v.x_T, v.T, self._eta, *out)
+            constant_mirror_scatter(v.rows, v.n_s, v.wo, v.x_T, v.T, self._eta, *out, T_cols=v.T_cols)
             return True
         if self._tables and not v.mono:
             return tabulated_mirror_scatter(v.rows, v.n_s, v.wo, v.x_T, v.T, v.lam, *self._table_arrays,
-                                            self.exterior_n, *out)
+                                            self.exterior_n, *out, T_cols=v.T_cols)
         return False
 
     def describe(self):

@@ -41,10 +41,12 @@ from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflection_a
 from ..vec3 import reflect
 
 
-def dielectric_scatter_numpy(rows, n_s, wo, x_T, T, u_lobe, eta_front, eta_back, T_out, d, x_out, valid, eta_sq):
+def dielectric_scatter_numpy(rows, n_s, wo, x_T, T, u_lobe, eta_front, eta_back, T_out, d, x_out, valid, eta_sq,
+                             T_cols=None):
     """SmoothDielectric.sample and the throughput update at the paths ``rows`` (engine.kernels.delta_bounce:
     T_out, d, x_out, valid, eta_sq written there); relative index ``eta_front`` seen from the front
-    (wo·n_s ≥ 0), ``eta_back`` from behind.  The same NumPy steps as ``sample``."""
+    (wo·n_s ≥ 0), ``eta_back`` from behind; the throughputs in the columns ``T_cols`` of T (None:
+    ``rows``).  The same NumPy steps as ``sample``."""
     n_s, wo, u = n_s[:, rows], wo[:, rows], u_lobe[rows]
     cos_o = n_s[0] * wo[0] + n_s[1] * wo[1] + n_s[2] * wo[2]
     front = cos_o >= 0
@@ -62,14 +64,20 @@ def dielectric_scatter_numpy(rows, n_s, wo, x_T, T, u_lobe, eta_front, eta_back,
     p_r = np.where(A > 0, A, 1.0)
     scale_t = inv_eta * inv_eta / np.where(A < 1, 1.0 - A, 1.0)
     value = [np.where(reflect_lobe, r / p_r, t * scale_t)[None, :] for r, t in zip((A, B, C, S), trans)]
-    update_abcs_numpy(T_out, T, rows, s, x_T[:, rows], wo, *value, None)
+    update_abcs_numpy(T_out, T, rows, s, x_T[:, rows], wo, *value, None, T_cols)
     d[:, rows] = wi
     x_out[:, rows] = s
     valid[rows] = reflect_lobe | ~tir
     eta_sq[rows] = np.where(reflect_lobe, 1.0, eta * eta)
 
 
-dielectric_scatter = twin(dielectric_loop, dielectric_scatter_numpy)
+def dielectric_scatter_numba(rows, n_s, wo, x_T, T, u_lobe, eta_front, eta_back, T_out, d, x_out, valid, eta_sq,
+                             T_cols=None):
+    dielectric_loop(rows, n_s, wo, x_T, T, u_lobe, eta_front, eta_back, T_out, d, x_out, valid, eta_sq,
+                    rows if T_cols is None else T_cols)
+
+
+dielectric_scatter = twin(dielectric_loop and dielectric_scatter_numba, dielectric_scatter_numpy)
 
 
 class SmoothDielectric(BSDF):
@@ -135,7 +143,7 @@ class SmoothDielectric(BSDF):
     def scatter_delta(self, v: DeltaVertices) -> bool:
         """``sample`` + the throughput update in one step (see BSDF)."""
         dielectric_scatter(v.rows, v.n_s, v.wo, v.x_T, v.T, v.u_lobe, self.n_int / self.n_ext, self.n_ext / self.n_int,
-                           v.T_out, v.d, v.x_out, v.valid, v.eta_sq)
+                           v.T_out, v.d, v.x_out, v.valid, v.eta_sq, T_cols=v.T_cols)
         return True
 
     def describe(self):

@@ -39,20 +39,26 @@ def filter_axis_frame(axis, k):
     return np.where(ok, x / np.where(ok, length, 1.0), any_perpendicular(k))
 
 
-def filter_sheet_scatter_numpy(rows, wo, x_T, T, axis, A, B, C, S, T_out, d, x_out, valid, eta_sq):
+def filter_sheet_scatter_numpy(rows, wo, x_T, T, axis, A, B, C, S, T_out, d, x_out, valid, eta_sq, T_cols=None):
     """FilterSheet.sample and the throughput update at the paths ``rows`` (engine.kernels.delta_bounce:
-    T_out, d, x_out, valid, eta_sq written there) for the sheet's constant (A, B, C, S)."""
+    T_out, d, x_out, valid, eta_sq written there; throughputs in the columns ``T_cols`` of T, None:
+    ``rows``) for the sheet's constant (A, B, C, S)."""
     wo = wo[:, rows]
     x = filter_axis_frame(axis, wo)
     one = np.ones((1, rows.shape[0]))
-    update_abcs_numpy(T_out, T, rows, x, x_T[:, rows], wo, A * one, B * one, C * one, S * one, None)
+    update_abcs_numpy(T_out, T, rows, x, x_T[:, rows], wo, A * one, B * one, C * one, S * one, None, T_cols)
     d[:, rows] = -wo
     x_out[:, rows] = x
     valid[rows] = True
     eta_sq[rows] = 1.0
 
 
-filter_sheet_scatter = twin(filter_sheet_loop, filter_sheet_scatter_numpy)
+def filter_sheet_scatter_numba(rows, wo, x_T, T, axis, A, B, C, S, T_out, d, x_out, valid, eta_sq, T_cols=None):
+    filter_sheet_loop(rows, wo, x_T, T, axis, A, B, C, S, T_out, d, x_out, valid, eta_sq,
+                      rows if T_cols is None else T_cols)
+
+
+filter_sheet_scatter = twin(filter_sheet_loop and filter_sheet_scatter_numba, filter_sheet_scatter_numpy)
 
 
 class FilterSheet(BSDF):
@@ -102,7 +108,7 @@ class FilterSheet(BSDF):
     def scatter_delta(self, v: DeltaVertices) -> bool:
         """``sample`` + the throughput update in one step (see BSDF)."""
         filter_sheet_scatter(v.rows, v.wo, v.x_T, v.T, self.axis, *(float(c) for c in self._abcs()), v.T_out, v.d,
-                             v.x_out, v.valid, v.eta_sq)
+                             v.x_out, v.valid, v.eta_sq, T_cols=v.T_cols)
         return True
 
     def describe(self):

@@ -56,18 +56,19 @@ if TYPE_CHECKING:
 # ----------------------------------------------------------------------------- Mueller kernels
 
 def scatter_throughput(out: np.ndarray, T: np.ndarray, rows: np.ndarray, m: MuellerValue, x_T: np.ndarray,
-                       wo: np.ndarray) -> None:
-    """out[..., rows] = T[..., rows] · R(x_out → x_T) · M at vertices with Mueller value ``m``.
+                       wo: np.ndarray, T_cols: np.ndarray | None = None) -> None:
+    """out[..., rows] = T[..., T_cols] · R(x_out → x_T) · M at vertices with Mueller value ``m``.
 
     ``m`` (frames x_in, x_out), ``x_T`` (the paths' current frames, ⟂ the arriving segment, i.e.
-    ⟂ wo) and ``wo`` are given for the paths ``rows`` only.  T is left unchanged.
+    ⟂ wo) and ``wo`` are given for the paths ``rows`` only; ``T_cols``: the columns of T holding
+    their throughputs (None: ``rows``).  T is left unchanged.
     """
     if m.kind == "abcs":
-        update_abcs(out, T, rows, m.x_out, x_T, wo, m.A, m.B, m.C, m.S, m.depol)
+        update_abcs(out, T, rows, m.x_out, x_T, wo, m.A, m.B, m.C, m.S, m.depol, T_cols)
     elif m.kind == "depolarising":
-        update_depolarising(out, T, rows, m.A)
+        update_depolarising(out, T, rows, m.A, T_cols)
     else:
-        update_general(out, T, rows, m.x_out, x_T, wo, m.M)
+        update_general(out, T, rows, m.x_out, x_T, wo, m.M, T_cols)
 
 
 def unpolarised_response(m: MuellerValue, P: int) -> np.ndarray:
@@ -348,14 +349,13 @@ class PathTracer:
         if np.any(t_min > 0):
             o = o + d * t_min[None, :]
             t_max = t_max - t_min
-        # T = identity for every camera path: one path's, broadcast (stride 0 over paths, read-only).
-        # The camera-side emission reads it as it is and the hit paths' compress makes their own
-        # copy, so the batch's (P, P, Lm, n) identity is never written (512 bytes a path at 4
-        # wavelengths: writing it was ~4 % of a fresnel_sphere_au render).
-        T = np.broadcast_to(identity_throughput(P, Lm, 1), (P, P, Lm, n_total))
-        state = PathState(path=np.arange(n_total), T=T, x_T=x_T, o=o, d=d, t_max=t_max, eta_sq=np.ones(n_total),
-                          prev_delta=np.ones(n_total, bool), prev_pdf=np.zeros(n_total), p_prev=None, n_prev=None,
-                          sampler=sampler, lk=lk, lk_m=lk_m)
+        # T = identity for every camera path: one column that all of them read (PathState.T_col), so
+        # the batch's (P, P, Lm, n) identity is never written (512 bytes a path at 4 wavelengths:
+        # writing it was ~4 % of a fresnel_sphere_au render); the first scatter writes a dense T.
+        state = PathState(path=np.arange(n_total), T=identity_throughput(P, Lm, 1), x_T=x_T, o=o, d=d, t_max=t_max,
+                          eta_sq=np.ones(n_total), prev_delta=np.ones(n_total, bool), prev_pdf=np.zeros(n_total),
+                          p_prev=None, n_prev=None, sampler=sampler, lk=lk, lk_m=lk_m,
+                          T_col=np.zeros(n_total, np.int64))
         # Transparency T per sample (alpha = 1 − T): camera rays reaching the background of a
         # transparent film or a holdout (Cycles' film_write_transparent / holdout).
         acc = _Accumulators(radiance=np.zeros((P, L, n_total)), w_rgb=w_rgb,
@@ -397,7 +397,8 @@ class PathTracer:
         vertices they left: the environment (misses), emitting triangles, analytic lamps and
         non-occluding lamps crossed before the hit."""
         light_set, env, compiled = self.lights, self.lights.environment, self.scene
-        radiance, path, T, o, d, t_max = acc.radiance, state.path, state.T, state.o, state.d, state.t_max
+        radiance, path, T, o, d, t_max = acc.radiance, state.path, state.T_store, state.o, state.d, state.t_max
+        cols = state.T_columns
         prev_delta, prev_pdf, lk = state.prev_delta, state.prev_pdf, state.lk
         p_prev, n_prev = state.p_prev, state.n_prev
 
@@ -415,12 +416,13 @@ class PathTracer:
                 p_light = env.pdf(d_miss) * light_set.prob_at(
                     light_set.environment_index, *at_prev(miss))
                 w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
-            add_light(radiance, path, T, miss.nonzero()[0], Le, w)
+            rows = miss.nonzero()[0]
+            add_light(radiance, path, T, rows, Le, w, cols(rows))
         if self.has_area_lights:
             lit = (compiled.tri_emitter[hits.prim] >= 0) & hit
             if lit.any():
                 idx = lit.nonzero()[0]
-                self._emitter_hits(radiance, path, T, idx, hits.prim[idx], hits.t[idx], d, lk,
+                self._emitter_hits(radiance, path, T, cols, idx, hits.prim[idx], hits.t[idx], d, lk,
                                    prev_delta, prev_pdf, at_prev, bounce == 0)
         if light_set.hittable:
             # analytic lamps (sphere/disk lights, sun discs): seen, never occluding
@@ -434,12 +436,12 @@ class PathTracer:
                     Le = self._emitted(light, lk.take(rows)) * factor[None, :]
                     p_light = pdf_l * light_set.prob_at(li, *at_prev(rows))
                     w = np.where(prev_delta[rows], 1.0, power_heuristic(prev_pdf[rows], p_light))
-                    add_light(radiance, path, T, rows, Le, w)
+                    add_light(radiance, path, T, rows, Le, w, cols(rows))
         if compiled.has_passthrough:
             # lamps (non-occluding emitters) crossed before the hit: they add light, the ray goes on
             seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
             for rows, prims, dists in compiled.passthrough_hits(o, d, seg):
-                self._emitter_hits(radiance, path, T, rows, prims, dists, d, lk, prev_delta, prev_pdf,
+                self._emitter_hits(radiance, path, T, cols, rows, prims, dists, d, lk, prev_delta, prev_pdf,
                                    at_prev, bounce == 0)
 
     def _surface(self, state: PathState, hits: Hits, hit: np.ndarray) -> _SurfaceHits | None:
@@ -452,10 +454,6 @@ class PathTracer:
         prim, u, v = state.compress(hit, hits.prim, hits.u, hits.v)
         if state.n == 0:
             return None
-        if not state.T.flags.writeable:
-            # every camera path hit: the broadcast identity was kept as it is; the scatter stage
-            # needs a throughput of its own per path
-            state.T = identity_throughput(state.T.shape[0], state.T.shape[2], state.n)
         compiled = self.scene
         p, n_g, n_s = compiled.surface(prim, u, v)
         at = surface_points(compiled, prim, u, v) if self.textured else None
@@ -465,7 +463,8 @@ class PathTracer:
         """Per material group: next-event estimation (into the radiance) and BSDF sampling of the
         next segment with the Mueller update T ← T·R(x_out → x_T)·M (into a new T)."""
         st, light_set = self.settings, self.lights
-        n, T, sampler, lk, lk_m = state.n, state.T, state.sampler, state.lk, state.lk_m
+        # T is read through its column map (PathState.T_col); the scatter writes a new, dense one
+        n, T, sampler, lk, lk_m = state.n, state.T_store, state.sampler, state.lk, state.lk_m
         p, n_g, n_s, wo = surf.p, surf.n_g, surf.n_s, surf.wo
         n_side = n_g * np.sign(dot(n_g, wo))[None, :] if light_set.spatial else None
         # Stokes frame of the arriving segment: x_T is already ⟂ d.
@@ -512,8 +511,9 @@ class PathTracer:
         else:
             sampler.skip(1)
             u_rr = np.empty(0)                      # not read without roulette
-        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty_like(T), d=np.empty((3, n)) if columns else None,
-                         x_T=np.empty((3, n)) if columns else None, valid=np.empty(n, bool) if columns else None,
+        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty(T.shape[:3] + (n,)),
+                         d=np.empty((3, n)) if columns else None, x_T=np.empty((3, n)) if columns else None,
+                         valid=np.empty(n, bool) if columns else None,
                          is_delta=np.ones(n, bool) if columns else None, pdf=np.zeros(n) if columns else None,
                          eta_step=np.ones(n))
         # (every path belongs to one material group, which writes its columns of nxt.T, d, x_T and valid:
@@ -523,9 +523,10 @@ class PathTracer:
             sel = slice(None) if whole else order[ends[g] - counts[g]:ends[g]]
             bsdf = self.shaders[g]
             rows = np.arange(n) if isinstance(sel, slice) else sel
+            t_cols = state.T_columns(sel)           # T's columns of these paths (None: rows)
             if one_step and bsdf.scatter_delta(DeltaVertices(rows, n_s, wo, lk_m.lam, self.mono, u_bsdf[0], T,
                                                              state.x_T, nxt.T, nxt.d, nxt.x_T, nxt.valid,
-                                                             nxt.eta_step)):
+                                                             nxt.eta_step, t_cols)):
                 continue            # pdf 0 and is_delta True: as preset
             if direction_dims is not None:
                 # a one-step material fell back to ``sample``: its direction numbers after all
@@ -539,15 +540,15 @@ class PathTracer:
             xTm = gather(state.x_T, sel)
 
             if not bsdf.flags.is_delta_only and len(light_set) and bounce + 2 <= st.max_depth:
-                contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], acc.stats)
+                contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], acc.stats, t_cols)
                 add_to_paths(acc.radiance, gather(state.path, sel), contrib)
                 acc.path_cost[gather(state.path, sel)] += VERTEX_COST     # a light sample (cost)
 
             bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
             if acc.guides is not None and not bsdf.flags.is_delta_only:
-                acc.guides.record(gather(state.path, sel), T[0, 0][:, rows], bs.weight, bs.valid, sp.n_s, sp.wo,
-                                  acc.w_rgb)
-            scatter_throughput(nxt.T, T, rows, bs.weight, xTm, sp.wo)
+                acc.guides.record(gather(state.path, sel), T[0, 0][:, rows if t_cols is None else t_cols], bs.weight,
+                                  bs.valid, sp.n_s, sp.wo, acc.w_rgb)
+            scatter_throughput(nxt.T, T, rows, bs.weight, xTm, sp.wo, t_cols)
             if not columns:
                 nxt.d, nxt.x_T, nxt.is_delta, nxt.pdf = bs.wi, bs.weight.x_in, bs.is_delta, bs.pdf
                 nxt.valid = np.array(bs.valid, dtype=bool)      # own copy: the roulette updates it in place
@@ -572,12 +573,15 @@ class PathTracer:
         (counted; their light so far is kept)."""
         (idx, nonfinite, T, x_T, d, eta_sq, path, keys, is_delta, pdf, p, o) = next_segments(
             nxt.T, state.eta_sq, nxt.eta_step, nxt.u_rr, nxt.valid, bounce + 1 >= self.settings.rr_depth,
-            nxt.x_T, nxt.d, state.path, state.sampler.keys, nxt.is_delta, nxt.pdf, surf.p, surf.n_g, RAY_EPSILON)
+            nxt.x_T, nxt.d, state.path, state.sampler.keys, nxt.is_delta, nxt.pdf, surf.p, surf.n_g, RAY_EPSILON,
+            compact_T=False)
         acc.stats["nonfinite"] += nonfinite
         state.n_prev = nxt.n_side
-        # where the next segment starts (light selection, analytic lamps' pdfs)
-        state.keep(idx, path=path, T=T, x_T=x_T, d=d, eta_sq=eta_sq, prev_delta=is_delta, prev_pdf=pdf,
-                   p_prev=p if self.keep_origins else None, o=o, keys=keys)
+        # where the next segment starts (light selection, analytic lamps' pdfs); the survivors'
+        # throughputs stay where the scatter wrote them (columns idx of T, PathState.T_col)
+        state.keep(idx, path=path, T=T, T_col=idx if idx.shape[0] < T.shape[3] else None, x_T=x_T, d=d,
+                   eta_sq=eta_sq, prev_delta=is_delta, prev_pdf=pdf, p_prev=p if self.keep_origins else None, o=o,
+                   keys=keys)
         state.t_max = None
 
     def _finish(self, acc: _Accumulators, n_total: int) -> tuple[np.ndarray, dict[str, int]]:
@@ -611,14 +615,16 @@ class PathTracer:
         return trans
 
     def _next_event(self, sp: ShadingPoint, lookup: WavelengthLookup, bsdf: BSDF, T: np.ndarray, rows: np.ndarray,
-                    x_T: np.ndarray, u: np.ndarray, stats: dict[str, int]) -> np.ndarray:
+                    x_T: np.ndarray, u: np.ndarray, stats: dict[str, int],
+                    T_cols: np.ndarray | None = None) -> np.ndarray:
         """Direct light at non-delta vertices, MIS-weighted against BSDF sampling; (P, L, n).
 
         ``lookup`` holds the path's wavelengths (lights are evaluated at all of them); the
         material sees ``sp.lam`` (one wavelength where nothing depends on λ).  Each chosen light
         samples its own paths; the samples are then put together, so that the BSDF, the shadow
         rays and the throughput run once over all paths (per path the same arithmetic as one
-        light at a time).
+        light at a time).  ``rows``: the vertices' paths in the batch's state, ``T_cols``: the
+        columns of T holding their throughputs (None: ``rows``; PathState.T_col).
         """
         light_set = self.lights
         n = sp.n
@@ -703,7 +709,7 @@ class PathTracer:
                         blocked[sel] = self.scene.unblock_own_hits(li, gather(p, sel), gather(sp.n_g, sel),
                                                                    gather(wi, sel), d, cos_l, blocked[sel])
             weight = weight * (~blocked)[None, :]
-        light_out = throughput_times_stokes(T, rows, S, weight)
+        light_out = throughput_times_stokes(T, rows if T_cols is None else T_cols, S, weight)
         for _, sel in owners:
             if len(owners) > 1 and not ok[sel].any():
                 light_out[:, :, sel] = 0.0          # a light none of whose samples counts adds nothing
@@ -713,13 +719,14 @@ class PathTracer:
         out[:] = light_out
         return out
 
-    def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, idx: np.ndarray, prims: np.ndarray,
-                      dists: np.ndarray, d: np.ndarray, lk: WavelengthLookup, prev_delta: np.ndarray,
+    def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, cols, idx: np.ndarray,
+                      prims: np.ndarray, dists: np.ndarray, d: np.ndarray, lk: WavelengthLookup, prev_delta: np.ndarray,
                       prev_pdf: np.ndarray, at_prev, camera: bool) -> None:
         """Emission picked up where the rays ``idx`` (each at most once) hit or cross emitting
         triangles ``prims`` at distances ``dists``, MIS-weighted against next-event estimation
         from the vertices the rays left (``at_prev(rows)``: their positions and side normals).
-        ``camera``: these are camera rays (lights hidden from the camera add nothing)."""
+        ``camera``: these are camera rays (lights hidden from the camera add nothing); ``cols(rows)``:
+        the columns of T holding the throughputs of the paths ``rows`` (PathState.T_columns)."""
         light_set = self.lights
         emitter = self.scene.tri_emitter[prims]
         cos_hit = -dot(d[:, idx], self.scene.tri_normal[prims].T)
@@ -742,4 +749,4 @@ class PathTracer:
             where = (d[:, sel],) if light.hit_pdf_needs_direction else ()
             p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], *where) * light_set.prob_at(li, *prev)
             wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
-            add_light(radiance, path, T, sel, Le, wsel)
+            add_light(radiance, path, T, sel, Le, wsel, cols(sel))

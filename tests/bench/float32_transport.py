@@ -49,10 +49,10 @@ def time_update(dtype, n, L=4, repeats=20):
     A = rng.random((L, n)).astype(dtype)
     B, C, S = (A * f for f in (0.3, 0.5, 0.2))
     x_out, x_T, wo = frames(rng, n, dtype)
-    _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, A, False)  # compile
+    _update_abcs_loop(out, T, rows, rows, x_out, x_T, wo, A, B, C, S, A, False)  # compile
     t0 = time.perf_counter()
     for _ in range(repeats):
-        _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, A, False)
+        _update_abcs_loop(out, T, rows, rows, x_out, x_T, wo, A, B, C, S, A, False)
     return (time.perf_counter() - t0) / repeats
 
 
@@ -65,7 +65,7 @@ def chain(dtype, depth, n=20000):
         A, B, C, S = (np.ascontiguousarray(x, dtype=dtype) for x in fresnel_reflection_abcs(cos, eta))
         x_out, x_T, wo = frames(rng, n, dtype)
         out = np.empty_like(T)
-        _update_abcs_loop(out, T, rows, x_out, x_T, wo, A, B, C, S, A, False)
+        _update_abcs_loop(out, T, rows, rows, x_out, x_T, wo, A, B, C, S, A, False)
         T = out / np.maximum(out[0, 0], 1e-30)
     return T[:, 0, 0].astype(np.float64)
 
