@@ -53,6 +53,28 @@ def _abcs_complex(c, e):
 
 
 @jit_inner
+def _abcs_from_root(c, e2r, e2i, ur, ui):
+    """(A, B, C, S, |c + u|², |η²c + u|²) from cosθ = c, η² = e2r + i·e2i and u = ur + i·ui: r_s =
+    (c − u)/(c + u), r_p = (η²c − u)/(η²c + u) as N·conj(D)/|D|² (real arithmetic; the caller checks
+    the two squared denominators)."""
+    dsr, dsi, nsr, nsi = c + ur, ui, c - ur, -ui
+    pr, pi = e2r * c, e2i * c
+    dpr, dpi, npr, npi = pr + ur, pi + ui, pr - ur, pi - ui
+    qs = dsr * dsr + dsi * dsi
+    qp = dpr * dpr + dpi * dpi
+    rsr = (nsr * dsr + nsi * dsi) / qs
+    rsi = (nsi * dsr - nsr * dsi) / qs
+    rpr = (npr * dpr + npi * dpi) / qp
+    rpi = (npi * dpr - npr * dpi) / qp
+    F_s = rsr * rsr + rsi * rsi
+    F_p = rpr * rpr + rpi * rpi
+    # r_s·conj(r_p)
+    xr = rsr * rpr + rsi * rpi
+    xi = rsi * rpr - rsr * rpi
+    return 0.5 * (F_s + F_p), 0.5 * (F_s - F_p), xr, -xi, qs, qp
+
+
+@jit_inner
 def abcs_at(c, e):
     """(A, B, C, S) of the Fresnel reflection for one cosine ``c`` and complex relative index ``e``.
 
@@ -95,24 +117,10 @@ def abcs_at(c, e):
     else:
         t = np.sqrt(0.5 * (m - zr))
         ur, ui = zi / (2.0 * t), t
-    # r_s = (c − u)/(c + u), r_p = (η²c − u)/(η²c + u)
-    dsr, dsi, nsr, nsi = c + ur, ui, c - ur, -ui
-    pr, pi = e2r * c, e2i * c
-    dpr, dpi, npr, npi = pr + ur, pi + ui, pr - ur, pi - ui
-    qs = dsr * dsr + dsi * dsi
-    qp = dpr * dpr + dpi * dpi
+    a, b, cc, s, qs, qp = _abcs_from_root(c, e2r, e2i, ur, ui)
     if qs < 1e-250 or qp < 1e-250:
         return _abcs_complex(c, e)
-    rsr = (nsr * dsr + nsi * dsi) / qs
-    rsi = (nsi * dsr - nsr * dsi) / qs
-    rpr = (npr * dpr + npi * dpi) / qp
-    rpi = (npi * dpr - npr * dpi) / qp
-    F_s = rsr * rsr + rsi * rsi
-    F_p = rpr * rpr + rpi * rpi
-    # r_s·conj(r_p)
-    xr = rsr * rpr + rsi * rpi
-    xi = rsi * rpr - rsr * rpi
-    return 0.5 * (F_s + F_p), 0.5 * (F_s - F_p), xr, -xi
+    return a, b, cc, s
 
 
 @jit_inner
@@ -147,24 +155,12 @@ def abcs_row(cos, w, e, q, n, abcs, fast):
         flip = pos & (ui < 0.0)
         ur = -ur if flip else ur
         ui = -ui if flip else ui
-        dsr, dsi, nsr, nsi = c + ur, ui, c - ur, -ui
-        pr, pi = e2r * c, e2i * c
-        dpr, dpi, npr, npi = pr + ur, pi + ui, pr - ur, pi - ui
-        qs = dsr * dsr + dsi * dsi
-        qp = dpr * dpr + dpi * dpi
-        rsr = (nsr * dsr + nsi * dsi) / qs
-        rsi = (nsi * dsr - nsr * dsi) / qs
-        rpr = (npr * dpr + npi * dpi) / qp
-        rpi = (npi * dpr - npr * dpi) / qp
-        F_s = rsr * rsr + rsi * rsi
-        F_p = rpr * rpr + rpi * rpi
-        xr = rsr * rpr + rsi * rpi
-        xi = rsi * rpr - rsr * rpi
+        a, b, cc, s, qs, qp = _abcs_from_root(c, e2r, e2i, ur, ui)
         wi = w[i]
-        abcs[q, 0, i] = 0.5 * (F_s + F_p) * wi
-        abcs[q, 1, i] = 0.5 * (F_s - F_p) * wi
-        abcs[q, 2, i] = xr * wi
-        abcs[q, 3, i] = -xi * wi
+        abcs[q, 0, i] = a * wi
+        abcs[q, 1, i] = b * wi
+        abcs[q, 2, i] = cc * wi
+        abcs[q, 3, i] = s * wi
         # every comparison False for a NaN: such lanes are redone too (harmless: abcs_at's own numbers)
         fast[i] = (zi != 0.0) & (big > 1e-150) & (big < 1e150) & (qs >= 1e-250) & (qp >= 1e-250)
 
