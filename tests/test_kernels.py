@@ -1035,6 +1035,29 @@ def test_spectral_stokes_rgb_samples_bitwise(P, L):
 
 
 @needs_numba
+@pytest.mark.parametrize("n,span", [(0, 0), (1, 1), (5000, 37), (3000, 4096)])
+def test_pixel_sums_bitwise(n, span):
+    """A batch's per-pixel Stokes sums, luminance squares and counts in one pass: the 17 bincounts'
+    bits (each pixel's samples added in order from +0.0; −0.0 samples, unsorted and repeated pixels,
+    pixels without samples), and the sums themselves."""
+    rng = np.random.default_rng(n + span)
+    local = rng.integers(0, max(span, 1), n) if span else np.zeros(0, np.int64)
+    x = rng.lognormal(size=(4, 3, n)) * rng.choice([-1.0, 1.0], size=(4, 3, n))
+    x[:, :, :7] = -0.0
+    y = rng.normal(size=(4, n))
+    a = transport.pixel_sums_numpy(local, span, x, y)
+    b = transport.pixel_sums_numba(local, span, x, y)
+    for u, v in zip(a, b):
+        assert u.dtype == v.dtype and u.shape == v.shape and u.tobytes() == v.tobytes()
+    if n:
+        p = local[0]
+        mine = local == p
+        np.testing.assert_allclose(a[0][:, :, p], x[:, :, mine].sum(-1), rtol=1e-12)
+        np.testing.assert_allclose(a[1][:, p], (y[:, mine] ** 2).sum(-1), rtol=1e-12)
+        assert a[2][p] == mine.sum() and a[2].sum() == n
+
+
+@needs_numba
 @pytest.mark.parametrize("n", [0, 1, 2000])
 def test_material_groups_bitwise_and_as_nonzero_per_group(n):
     """Each hit path's material, the paths per group and the paths sorted by group: as the gathers,

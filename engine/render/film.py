@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..kernels.transport import pixel_sums
 from ..spectral.cie import LUMINANCE_WEIGHTS
 
 
@@ -216,15 +217,9 @@ class SampleSums:
         ``sample`` (N,) (the stratified sampler) also the even and odd samples' luminance sums."""
         lo, hi = (int(pixel.min()), int(pixel.max()) + 1) if pixel.size else (0, 0)
         local, span = pixel - lo, hi - lo
-        sums = np.empty((4, 3, span))
-        for s in range(4):
-            for c in range(3):
-                sums[s, c] = np.bincount(local, weights=stokes_rgb[s, c], minlength=span)
         y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, stokes_rgb)
-        sumsq_y = np.empty((4, span))
-        for s in range(4):
-            sumsq_y[s] = np.bincount(local, weights=y[s] * y[s], minlength=span)
-        count = np.bincount(local, minlength=span)
+        # the Stokes sums, the luminance squares and the counts in one compiled pass (same bits)
+        sums, sumsq_y, count = pixel_sums(local, span, stokes_rgb, y)
         alpha_sums = None if alpha is None else np.bincount(local, weights=alpha, minlength=span)
         guides = None
         if denoise is not None:
