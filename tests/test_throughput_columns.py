@@ -148,3 +148,44 @@ def test_camera_paths_share_one_identity_column():
     L = st.T_store.shape[2]
     assert L == 4 and st.T_store.shape[-1] == 1 and np.array_equal(st.T_col, np.zeros(64))
     assert np.array_equal(st.T[..., 17], np.eye(4)[:, :, None].repeat(L, 2))
+
+
+@pytest.mark.parametrize("backend", ["reference", "compiled"])
+def test_delta_steps_through_columns_equal_steps_on_the_gathered_throughput(backend):
+    """The four delta-material steps (both twins) read T at ``T_cols`` exactly as at ``rows`` of a
+    gathered copy, and write only the rows."""
+    from engine.kernels import TWINS
+    from engine.spectral.ior import named_ior
+    if backend == "compiled" and not kernels.COMPILED:
+        pytest.skip("numba is not installed")
+    rng = np.random.default_rng(53)
+    n, stored, P, L = 600, 900, 4, 4
+    n_s, wo = unit(rng, n), unit(rng, n)
+    x_T = perpendicular(rng, wo)
+    lam = rng.uniform(380.0, 780.0, (L, n))
+    u = rng.random(n)
+    T_store = rng.normal(size=(P, P, L, stored))
+    cols = np.sort(rng.integers(0, stored, n))
+    cols[:50] = 3                                            # shared columns, as the camera's identity
+    rows = np.sort(rng.permutation(n)[:400])
+    T_dense = T_store[..., cols]
+    n_au, k_au = named_ior("Au")
+    steps = {
+        "materials.conductor.constant_mirror_scatter": lambda T: (rows, n_s, wo, x_T, T, 0.3 + 2.9j),
+        "materials.conductor.tabulated_mirror_scatter": lambda T: (rows, n_s, wo, x_T, T, lam, n_au.wavelengths,
+                                                                   n_au.values, k_au.wavelengths, k_au.values, 1.0),
+        "materials.dielectric.dielectric_scatter": lambda T: (rows, n_s, wo, x_T, T, u, 1.5, 1 / 1.5),
+        "materials.filter_sheet.filter_sheet_scatter": lambda T: (rows, wo, x_T, T, np.array([0.6, 0.0, 0.8]),
+                                                                  0.45, 0.44, 0.1, 0.0),
+    }
+    for key, args in steps.items():
+        f = getattr(TWINS[key], backend)
+        outs = []
+        for T, extra in ((T_dense, {}), (T_store, {"T_cols": cols[rows]})):
+            out = [np.full((P, P, L, n), np.nan), np.full((3, n), np.nan), np.full((3, n), np.nan),
+                   np.zeros(n, bool), np.full(n, np.nan)]
+            f(*args(T), *out, **extra)
+            outs.append(out)
+        for a, b in zip(*outs):
+            assert a.tobytes() == b.tobytes(), key
+        assert np.isnan(outs[1][0][..., np.setdiff1d(np.arange(n), rows)]).all()
