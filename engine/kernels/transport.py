@@ -51,6 +51,13 @@ identity_throughput = twin(_identity_loop and identity_throughput_numba, identit
 
 # ----------------------------------------------------------------------------- T ← T·R(φ)·M_abcs
 
+def _rows_and_columns(rows, T_cols):
+    """(rows, the columns of T holding their throughputs) as contiguous int64 for the compiled loops
+    (``T_cols`` None: the rows themselves; engine.render.path_state.PathState.T_col)."""
+    rows = np.ascontiguousarray(rows, dtype=np.int64)
+    return rows, rows if T_cols is None else np.ascontiguousarray(T_cols, dtype=np.int64)
+
+
 def _rotated_rows_numpy(T, cols, x_out, x_T, wo):
     """T[..., cols] · R(φ), a new array: columns 1, 2 rotated from frame x_out to x_T about wo
     (nothing to rotate with fewer than 3 Stokes components)."""
@@ -147,8 +154,7 @@ def update_abcs_numba(out, T, rows, x_out, x_T, wo, A, B, C, S, depol, T_cols=No
     A, B, C, S, D, x_out, x_T, wo = (np.ascontiguousarray(x, dtype=np.float64)
                                      for x in (A, B, A if C is None else C, A if S is None else S,
                                                depol if has_depol else A, x_out, x_T, wo))
-    rows = np.ascontiguousarray(rows, dtype=np.int64)
-    cols = rows if T_cols is None else np.ascontiguousarray(T_cols, dtype=np.int64)
+    rows, cols = _rows_and_columns(rows, T_cols)
     _update_abcs_loop(out, T, rows, cols, x_out, x_T, wo, A, B, C, S, D, has_depol)
 
 
@@ -180,8 +186,7 @@ def _update_depolarising_loop(out, T, rows, cols, A):
 
 
 def update_depolarising_numba(out, T, rows, A, T_cols=None):
-    rows = np.ascontiguousarray(rows, dtype=np.int64)
-    cols = rows if T_cols is None else np.ascontiguousarray(T_cols, dtype=np.int64)
+    rows, cols = _rows_and_columns(rows, T_cols)
     _update_depolarising_loop(out, T, rows, cols, np.ascontiguousarray(A, dtype=np.float64))
 
 
@@ -223,8 +228,7 @@ def _update_general_loop(out, T, rows, cols, x_out, x_T, wo, M):
 
 def update_general_numba(out, T, rows, x_out, x_T, wo, M, T_cols=None):
     x_out, x_T, wo = (np.ascontiguousarray(x, dtype=np.float64) for x in (x_out, x_T, wo))
-    rows = np.ascontiguousarray(rows, dtype=np.int64)
-    cols = rows if T_cols is None else np.ascontiguousarray(T_cols, dtype=np.int64)
+    rows, cols = _rows_and_columns(rows, T_cols)
     _update_general_loop(out, T, rows, cols, x_out, x_T, wo, np.ascontiguousarray(M, dtype=np.float64))
 
 
@@ -254,8 +258,7 @@ def _add_light_loop(radiance, path, T, sel, cols, Le, w):
 
 
 def add_light_numba(radiance, path, T, sel, Le, w, T_cols=None):
-    sel = np.ascontiguousarray(sel, dtype=np.int64)
-    cols = sel if T_cols is None else np.ascontiguousarray(T_cols, dtype=np.int64)
+    sel, cols = _rows_and_columns(sel, T_cols)
     _add_light_loop(radiance, np.ascontiguousarray(path, dtype=np.int64), T, sel, cols,
                     np.ascontiguousarray(Le, dtype=np.float64), np.ascontiguousarray(w, dtype=np.float64))
 
