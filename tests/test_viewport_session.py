@@ -251,6 +251,13 @@ def _view(w=8, h=6, x=0.0):
                   width=w, height=h)
 
 
+def builds_and_renders_since(log):
+    """(number of builds, number of renders after the last build) in a FakeRenderer log."""
+    kinds = [k for k, _ in list(log)]
+    last = max((i for i, k in enumerate(kinds) if k == "build"), default=-1)
+    return kinds.count("build"), kinds[last + 1:].count("render")
+
+
 def wait_for(predicate, timeout=10.0):
     end = time.monotonic() + timeout
     while time.monotonic() < end:
@@ -298,7 +305,8 @@ def test_view_change_restarts_without_rebuild_and_material_change_keeps_the_bvh(
         assert wait_for(lambda: session.finished() and session.latest()[2] >= 6)
         assert [k for k, _ in log].count("build") == 1
         session.update_scene(_scene_result(vp, rebuild=True))             # an object moved
-        assert wait_for(lambda: [k for k, _ in log].count("build") == 2)
+        # the rebuilt scene's two passes must be done before "nothing more happens" can be checked
+        assert wait_for(lambda: builds_and_renders_since(log) == (2, 2) and session.finished())
         before = len(log)
         session.update_scene(_scene_result(vp, restart=False, rebuild=False))   # selection only
         time.sleep(0.1)
