@@ -159,6 +159,31 @@ def test_scene_fingerprint_is_the_scene_content_not_the_file(tmp_path):
     assert len(hashes) == 4 and scene_fingerprint(a) not in hashes
 
 
+COATED_CHALK = {"materials.chalk": {"type": "weidlich_wilkie", "base": {"type": "lambert", "albedo": 0.6},
+                                    "coats": [{"n": 1.5, "distribution": "beckmann", "m": 0.1}]}}
+
+
+@pytest.mark.parametrize("spectral", ["spectral", "mono"])
+def test_scene_fingerprint_does_not_change_when_the_scene_is_rendered(tmp_path, spectral):
+    """Lazily filled caches (a measured metal's sRGB triple, a rough coat's albedo table) are not part
+    of what a scene renders: found when the fingerprint of the demo differed in a pytest worker that
+    had run an RGB-mode test first, so a resume there would have refused its own file."""
+    from engine.render.renderer import Renderer
+    from engine.spectral.ior import NAMED_METALS, named_ior
+    scene = load_scene(small_demo(tmp_path, **COATED_CHALK))
+    before = scene_fingerprint(scene)
+    scene.settings.spectral = spectral
+    Renderer(scene).render()
+    for name in NAMED_METALS:                          # the shared, cached (n, κ) tables of every metal
+        for spectrum in named_ior(name):
+            spectrum.linear_srgb()
+    for material in scene.materials.values():
+        if hasattr(material, "albedo_table") and not material.coat.smooth:
+            material.albedo_table()
+    assert scene_fingerprint(scene) == before
+    assert scene_fingerprint(load_scene(small_demo(tmp_path, **COATED_CHALK))) == before
+
+
 def test_scene_fingerprint_is_the_same_in_another_process(tmp_path):
     path = small_demo(tmp_path)
     code = ("import sys; from engine.scene.loader import load_scene; from engine.render.resume import "

@@ -628,6 +628,8 @@ class WeidlichWilkie(BSDF):
     """
 
     name = "weidlich_wilkie"
+    #: Built on first use from the parameters (not part of the material: engine.render.resume.scene_fingerprint).
+    _cached_fields = ("_table", "_rbar_nodes")
 
     def __init__(self, coats, base: BSDF, form: str = "energy", t_term: str = "ww",
                  transmission_normal: str | None = None, exterior_n=1.0, shadowing: str = "ts",

@@ -97,6 +97,12 @@ def _feed(h, obj, seen: set) -> None:
             for name in getattr(cls, "__slots__", ()):
                 if hasattr(obj, name):
                     fields[name] = getattr(obj, name)
+        # caches a class fills on first use (from its other fields): a render, or a lookup anywhere in
+        # the process, must not change the fingerprint of the scene that holds the object.  Hashed as
+        # not filled yet (None), so fingerprints of files written before stay valid.
+        for name in getattr(t, "_cached_fields", ()):
+            if name in fields:
+                fields[name] = None
         _feed(h, fields, seen)
 
 

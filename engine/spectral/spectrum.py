@@ -284,6 +284,9 @@ class TabulatedSpectrum(Spectrum):
     flat table of v gives v; the last two clamp RGB at 0.
     """
 
+    #: Filled on first use (linear_srgb); not part of the spectrum (engine.render.resume.scene_fingerprint).
+    _cached_fields = ("_rgb",)
+
     def __init__(self, wavelengths_nm, values, name: str = "", kind: str = "unbounded"):
         if kind not in KINDS:
             raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
