@@ -121,3 +121,23 @@ def test_workers_run_with_one_blas_thread_and_the_limit_is_restored_after():
         assert seen and all(n == [1] * len(before) for n in seen)
         assert blas_threads() == [2] * len(before)          # the caller's own setting comes back
     assert blas_threads() == before
+
+
+def test_a_unit_finished_after_an_ended_one_is_not_added():
+    """Only a prefix of the units reaches the film: unit 2 finishes while unit 1 (on the other worker)
+    is ended by the stop, so 2 must go too, or the film would hold passes 0 and 2 of a pixel and count
+    them as 0 and 1 (a resume then traced pass 2 twice and pass 1 never: found in CI under load)."""
+    done2 = threading.Event()
+
+    def trace(k, abort):
+        if k == 1:
+            abort.wait(10.0)
+            return None                 # ended between two bounces, as PathTracer.trace does
+        if k == 2:
+            done2.set()
+        return k
+
+    abort = threading.Event()
+    added = []
+    assert trace_in_order(list(range(4)), lambda k: trace(k, abort), added.append, 2, done2.is_set, abort)
+    assert added == [0]

@@ -117,7 +117,9 @@ def trace_in_order(units, trace_unit, add_result, workers: int, stop_requested, 
     this thread (finished results are small: the unit's film sums).  The stop request is polled
     from this (the caller's) thread only — Blender's test_break must not be called from workers —
     and sets ``abort``, which ends units in flight between two bounces (``trace_unit`` then
-    returns None and the unit is discarded whole); units not started yet are not traced.
+    returns None and the unit is discarded whole); units not started yet are not traced.  Only a
+    prefix of ``units`` is ever added: a later unit that finished while an earlier one was ended is
+    discarded too, since a film (and so a resume) counts each pixel's samples as passes 0 … k−1.
     Returns True if stopped.
     """
     cancelled = False
@@ -127,6 +129,7 @@ def trace_in_order(units, trace_unit, add_result, workers: int, stop_requested, 
     with one_blas_thread(), ThreadPoolExecutor(max_workers=workers) as pool:
         pending = deque()
         next_unit = 0
+        gap = False
 
         def stop():
             nonlocal cancelled
@@ -159,7 +162,9 @@ def trace_in_order(units, trace_unit, add_result, workers: int, stop_requested, 
                 pending.popleft()
                 result = None if future.cancelled() else future.result()
                 submit()
-                if result is not None:
+                if result is None:
+                    gap = True              # ended or never traced: nothing after it may be added
+                elif not gap:
                     add_result(result)
         except BaseException:
             stop()                          # a failed unit (or Ctrl-C): trace nothing more
