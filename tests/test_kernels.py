@@ -1137,3 +1137,22 @@ def test_helpers_called_from_compiled_loops_are_compiled_without_reference_count
     wrong = sorted(name for name in called if (fns[name][0] == "jit_inner") == (name in allocating))
     assert not wrong, f"helpers with the wrong decorator (jit_inner iff called and not allocating): {wrong}"
     assert sum(kind == "jit_inner" for kind, _ in fns.values()) >= 50
+
+
+@needs_numba
+def test_vcavity_shadowing_bitwise():
+    """The V-cavity G (the coat albedo tables' and the NumPy Torrance–Sparrow's) on random directions,
+    back sides, grazing zeros, ±0, infinities and NaN, in the (3, B, K) shapes the tables use."""
+    from engine.kernels.microfacet import g_vcavity_numba, g_vcavity_numpy
+    rng = np.random.default_rng(5)
+    n = 30000
+    wi, wo, h = (rng.normal(size=(3, n)) for _ in range(3))
+    specials = np.array([0.0, -0.0, 1e-300, -1e-300, 1.0, np.inf, -np.inf, np.nan, 1e300])
+    for a in (wi, wo, h):
+        a[:, :3000] = rng.choice(specials, size=(3, 3000))
+    for args in ((wi, wo, h), (wi.reshape(3, 30, 1000), wo.reshape(3, 30, 1000), h.reshape(3, 30, 1000)),
+                 (wi[:, :1], wo, h)):                                   # broadcast ω_i
+        with np.errstate(all="ignore"):
+            want = g_vcavity_numpy(*args)
+        got = g_vcavity_numba(*args)
+        assert got.shape == want.shape and got.tobytes() == want.tobytes()

@@ -352,3 +352,49 @@ def ggx_vndf_at(o0, o1, o2, u0, u1, alpha):
     h0, h1, h2 = alpha * n0, alpha * n1, max(n2, 1e-300)
     nh = np.sqrt(h0 * h0 + h1 * h1 + h2 * h2)
     return h0 / nh, h1 / nh, h2 / nh
+
+
+# ----------------------------------------------------------------------------- V-cavity shadowing
+
+def g_vcavity_numpy(wi: np.ndarray, wo: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Torrance–Sparrow V-cavity G = min(1, 2 h_z ω_o,z/(ω_o·h), 2 h_z ω_i,z/(ω_i·h)); 0 on back sides.
+    Directions (3, ...) in the local frame (z = macro normal), broadcast against each other."""
+    di = wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2]
+    do = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2]
+    ok = (di > 0) & (do > 0) & (h[2] > 0) & (wi[2] > 0) & (wo[2] > 0)
+    g_o = 2.0 * h[2] * wo[2] / np.where(ok, do, 1.0)
+    g_i = 2.0 * h[2] * wi[2] / np.where(ok, di, 1.0)
+    return np.where(ok, np.minimum(1.0, np.minimum(g_o, g_i)), 0.0)
+
+
+@jit_inner
+def _nan_minimum(a, b):
+    """np.minimum of two floats (a NaN in either gives NaN)."""
+    return a if (a < b or a != a) else b
+
+
+@jit
+def _g_vcavity_loop(wi, wo, h, out):
+    for j in range(out.shape[0]):
+        h0, h1, h2 = h[0, j], h[1, j], h[2, j]
+        wi2, wo2 = wi[2, j], wo[2, j]
+        di = wi[0, j] * h0 + wi[1, j] * h1 + wi2 * h2
+        do = wo[0, j] * h0 + wo[1, j] * h1 + wo2 * h2
+        if di > 0 and do > 0 and h2 > 0 and wi2 > 0 and wo2 > 0:
+            g_o = 2.0 * h2 * wo2 / do
+            g_i = 2.0 * h2 * wi2 / di
+            out[j] = _nan_minimum(1.0, _nan_minimum(g_o, g_i))
+        else:
+            out[j] = 0.0
+
+
+def g_vcavity_numba(wi: np.ndarray, wo: np.ndarray, h: np.ndarray) -> np.ndarray:
+    wi, wo, h = np.broadcast_arrays(wi, wo, h)
+    shape = wi.shape[1:]
+    flat = [np.ascontiguousarray(a, dtype=np.float64).reshape(3, -1) for a in (wi, wo, h)]
+    out = np.empty(flat[0].shape[1])
+    _g_vcavity_loop(*flat, out)
+    return out.reshape(shape)
+
+
+g_vcavity = twin(_g_vcavity_loop and g_vcavity_numba, g_vcavity_numpy)

@@ -56,7 +56,7 @@ import numpy as np
 
 # erf, erfc, erfcx, erfinv: re-exported, the special functions of this model's formulas
 from ..kernels.error_function import SQRT_PI, erf, erfc, erfcx, erfcx_nonneg, erfinv, erfinv_2u_minus_1  # noqa: F401
-from ..kernels.microfacet import visible_slope_x
+from ..kernels.microfacet import g_vcavity, visible_slope_x
 
 _INV_SQRT_PI = 1.0 / SQRT_PI
 #: exp(−x) for x beyond this is exactly 0 in double precision (and D is set to 0 there).
@@ -285,16 +285,6 @@ class BlinnPhong(MicrofacetDistribution):
 
 
 # --- shadowing -----------------------------------------------------------------------------------------
-
-
-def g_vcavity(wi: np.ndarray, wo: np.ndarray, h: np.ndarray) -> np.ndarray:
-    """Torrance–Sparrow V-cavity G = min(1, 2 h_z ω_o,z/(ω_o·h), 2 h_z ω_i,z/(ω_i·h)); 0 on back sides."""
-    di = wi[0] * h[0] + wi[1] * h[1] + wi[2] * h[2]
-    do = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2]
-    ok = (di > 0) & (do > 0) & (h[2] > 0) & (wi[2] > 0) & (wo[2] > 0)
-    g_o = 2.0 * h[2] * wo[2] / np.where(ok, do, 1.0)
-    g_i = 2.0 * h[2] * wi[2] / np.where(ok, di, 1.0)
-    return np.where(ok, np.minimum(1.0, np.minimum(g_o, g_i)), 0.0)
 
 
 def g_smith(dist: MicrofacetDistribution, wi: np.ndarray, wo: np.ndarray, h: np.ndarray,
