@@ -19,6 +19,7 @@ import numpy as np
 
 from . import jit, jit_inner, twin
 from .geometry import to_world_at
+from .nan_rules import maximum_at, minimum_at
 from ..vec3 import dot
 
 #: below this solid angle (sr) a rectangle is sampled by area: the spherical-rectangle solid angle
@@ -113,14 +114,6 @@ def _clip(x, lo, hi):
     return t if t < hi else hi
 
 
-@jit_inner
-def _maximum(a, b):
-    # np.maximum: NaN in either argument propagates
-    if a != a:
-        return a
-    if b != b:
-        return b
-    return a if a >= b else b
 
 
 @jit_inner
@@ -175,19 +168,19 @@ def _rect_light_loop(p, u1, u2, corner, ax, ay, az, len_x, len_y, normal, two_si
         g2 = np.arccos(_clip(-n2 * n3, -1.0, 1.0))
         g3 = np.arccos(_clip(-n3 * n0, -1.0, 1.0))
         k = two_pi - g2 - g3
-        S = _maximum(g0 + g1 - k, 0.0)
+        S = maximum_at(g0 + g1 - k, 0.0)
         b0, b1 = n0, n2
         # rect_sample
         au = u1[j] * S + k
         fu = (np.cos(au) * b0 - b1) / np.sin(au)
         cu = _clip(_sign(fu) / np.sqrt(fu * fu + b0 * b0), -1.0, 1.0)
-        xu = _clip(-(cu * z0) / _maximum(np.sqrt(1.0 - cu * cu), 1e-300), x0, x1)
+        xu = _clip(-(cu * z0) / maximum_at(np.sqrt(1.0 - cu * cu), 1e-300), x0, x1)
         e2 = xu * xu + z0 * z0
         h0 = y0 / np.sqrt(e2 + y0 * y0)
         h1 = y1 / np.sqrt(e2 + y1 * y1)
         hv = h0 + u2[j] * (h1 - h0)
         hv2 = hv * hv
-        yv = hv * np.sqrt(e2) / np.sqrt(_maximum(1.0 - hv2, 1e-300)) if hv2 < 1.0 - 1e-12 else y1
+        yv = hv * np.sqrt(e2) / np.sqrt(maximum_at(1.0 - hv2, 1e-300)) if hv2 < 1.0 - 1e-12 else y1
         xu = _nan_to_num(xu)
         yv = _clip(_nan_to_num(yv), y0, y1)
         sz = s * z0
@@ -359,17 +352,17 @@ def choose_light_numpy(u, probs):
 def _facing(has_n, n, j, t0, t1, t2, dist, sin_alpha):
     if not has_n:
         return 1.0
-    cos_t = _clip((n[0, j] * t0 + n[1, j] * t1 + n[2, j] * t2) / _maximum(dist, 1e-300), -1.0, 1.0)
-    theta = _maximum(np.arccos(cos_t) - np.arcsin(_clip(sin_alpha, 0.0, 1.0)), 0.0)
-    return BELOW_HORIZON + (1.0 - BELOW_HORIZON) * _maximum(np.cos(theta), 0.0)
+    cos_t = _clip((n[0, j] * t0 + n[1, j] * t1 + n[2, j] * t2) / maximum_at(dist, 1e-300), -1.0, 1.0)
+    theta = maximum_at(np.arccos(cos_t) - np.arcsin(_clip(sin_alpha, 0.0, 1.0)), 0.0)
+    return BELOW_HORIZON + (1.0 - BELOW_HORIZON) * maximum_at(np.cos(theta), 0.0)
 
 
 @jit_inner
 def _emitter_side(t0, t1, t2, dist, sin_alpha, n0, n1, n2):
     """``emitter_side`` for one receiver (t: centre − receiver)."""
-    cos_e = _clip(-(n0 * t0 + n1 * t1 + n2 * t2) / _maximum(dist, 1e-300), -1.0, 1.0)
-    theta = _maximum(np.arccos(cos_e) - np.arcsin(_clip(sin_alpha, 0.0, 1.0)), 0.0)
-    return _maximum(np.cos(theta), 0.0)
+    cos_e = _clip(-(n0 * t0 + n1 * t1 + n2 * t2) / maximum_at(dist, 1e-300), -1.0, 1.0)
+    theta = maximum_at(np.arccos(cos_e) - np.arcsin(_clip(sin_alpha, 0.0, 1.0)), 0.0)
+    return maximum_at(np.cos(theta), 0.0)
 
 
 @jit
@@ -412,7 +405,7 @@ def _probabilities_loop(p, n, has_n, kinds, params, prob, probs):
             elif kind == SELECT_POINT:
                 t0, t1, t2 = row[0] - p[0, j], row[1] - p[1, j], row[2] - p[2, j]
                 d2 = t0 * t0 + t1 * t1 + t2 * t2
-                dist = np.sqrt(_maximum(d2, 1e-300))
+                dist = np.sqrt(maximum_at(d2, 1e-300))
                 falloff = 1.0
                 if row[6] != 0:
                     w0, w1, w2 = t0 / dist, t1 / dist, t2 / dist
@@ -422,13 +415,13 @@ def _probabilities_loop(p, n, has_n, kinds, params, prob, probs):
                     else:
                         t = _clip((c - row[10]) / (row[11] - row[10]), 0.0, 1.0)
                         falloff = t * t * (3.0 - 2.0 * t)
-                imp = row[3] * falloff / _maximum(d2, row[4]) * _facing(has_n, n, j, t0, t1, t2, dist, row[5] / dist)
+                imp = row[3] * falloff / maximum_at(d2, row[4]) * _facing(has_n, n, j, t0, t1, t2, dist, row[5] / dist)
             elif kind == SELECT_AREA:
                 t0, t1, t2 = row[0] - p[0, j], row[1] - p[1, j], row[2] - p[2, j]
                 d2 = t0 * t0 + t1 * t1 + t2 * t2
                 dist = np.sqrt(d2)
-                sin_alpha = row[5] / _maximum(dist, 1e-300)
-                imp = row[3] / _maximum(d2, row[4]) * _facing(has_n, n, j, t0, t1, t2, dist, sin_alpha)
+                sin_alpha = row[5] / maximum_at(dist, 1e-300)
+                imp = row[3] / maximum_at(d2, row[4]) * _facing(has_n, n, j, t0, t1, t2, dist, sin_alpha)
                 if row[6] != 0:
                     imp = imp * _emitter_side(t0, t1, t2, dist, sin_alpha, row[7], row[8], row[9])
             else:
@@ -500,14 +493,6 @@ choose_light = twin(choose_light_numba, choose_light_numpy)
 
 # ----------------------------------------------------------------------------- point and spot lights
 
-@jit_inner
-def _minimum(a, b):
-    # np.minimum: NaN in either argument propagates
-    if a != a:
-        return a
-    if b != b:
-        return b
-    return a if a <= b else b
 
 
 @jit_inner
@@ -562,16 +547,16 @@ def _point_light_loop(p, u1, u2, position, radius, soft, delta, spot, wi, dist, 
             continue
         # a sphere: uniform in its cone, the hit distance by the law of cosines
         ok = ok and d > r
-        sin2 = _minimum(r * r / (d2 if ok else 1.0), 1.0)
+        sin2 = minimum_at(r * r / (d2 if ok else 1.0), 1.0)
         omc_max = sin2 / (1.0 + np.sqrt(1.0 - sin2))
         omc = u1[j] * omc_max
         cos_t = 1.0 - omc
-        sin_t = np.sqrt(_maximum(omc * (2.0 - omc), 0.0))
+        sin_t = np.sqrt(maximum_at(omc * (2.0 - omc), 0.0))
         phi = two_pi * u2[j]
         v0, v1, v2 = to_world_at(w0, w1, w2, sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t)
-        t = d * cos_t - np.sqrt(_maximum(r * r - d2 * (1.0 - cos_t * cos_t), 0.0))
+        t = d * cos_t - np.sqrt(maximum_at(r * r - d2 * (1.0 - cos_t * cos_t), 0.0))
         wi[0, j], wi[1, j], wi[2, j] = v0, v1, v2
-        dist[j] = _maximum(t, 0.0)
+        dist[j] = maximum_at(t, 0.0)
         pdf[j] = 1.0 / (two_pi * omc_max) if ok else 0.0
         scale[j] = falloff * 2.0 * omc_max / (r * r) if ok else 0.0
         valid[j] = ok
@@ -635,7 +620,7 @@ def _lamp_hits_loop(o, d, seg, position, r, soft, ok, t_out, cos_out):
         else:
             along = c0 * d0 + c1 * d1 + c2 * d2
             disc = along * along - (dist2 - r * r)
-            t = along - np.sqrt(_maximum(disc, 0.0))
+            t = along - np.sqrt(maximum_at(disc, 0.0))
             hit = dist > r and disc >= 0 and along > 0
             cos_l = 1.0
         ok[j] = hit and t > 0 and t < seg[j]

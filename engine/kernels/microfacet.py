@@ -19,6 +19,7 @@ import numpy as np
 from . import jit, jit_inner, twin
 from .error_function import (ERFCX_COEF, ERFCX_K, SQRT_PI, erfcinv_giles, erfcinv_giles_scalar, erfcx_nonneg,
                              erfcx_nonneg_scalar)
+from .nan_rules import minimum_at
 
 _INV_SQRT_PI = 1.0 / SQRT_PI
 _TWO_OVER_SQRT_PI = 2.0 / SQRT_PI
@@ -367,12 +368,6 @@ def g_vcavity_numpy(wi: np.ndarray, wo: np.ndarray, h: np.ndarray) -> np.ndarray
     return np.where(ok, np.minimum(1.0, np.minimum(g_o, g_i)), 0.0)
 
 
-@jit_inner
-def _nan_minimum(a, b):
-    """np.minimum of two floats (a NaN in either gives NaN)."""
-    return a if (a < b or a != a) else b
-
-
 @jit
 def _g_vcavity_loop(wi, wo, h, out):
     for j in range(out.shape[0]):
@@ -383,7 +378,7 @@ def _g_vcavity_loop(wi, wo, h, out):
         if di > 0 and do > 0 and h2 > 0 and wi2 > 0 and wo2 > 0:
             g_o = 2.0 * h2 * wo2 / do
             g_i = 2.0 * h2 * wi2 / di
-            out[j] = _nan_minimum(1.0, _nan_minimum(g_o, g_i))
+            out[j] = minimum_at(1.0, minimum_at(g_o, g_i))
         else:
             out[j] = 0.0
 
