@@ -570,8 +570,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="auto (default): skip layered coats that are index-matched and clear; off: keep all")
     r.add_argument("--sampler", choices=("independent", "stratified"),
                    help="independent (default: hashed numbers) or stratified (per-pixel scrambled Sobol' pixel "
-                        "jitter and first-vertex light/BSDF numbers: less noise, same expectation; --stderr then "
-                        "comes from the even/odd halves)")
+                        "jitter, lens, wavelengths and first-vertex light/BSDF numbers: less noise, same "
+                        "expectation; --stderr then comes from the even/odd halves)")
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")
     r.add_argument("--stderr", action="store_true", help="also write per-pixel standard errors")

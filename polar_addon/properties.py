@@ -24,9 +24,9 @@ SPECTRAL_ITEMS = [
 
 SAMPLER_ITEMS = [
     ("INDEPENDENT", "Independent", "Every random number an independent hash of (seed, pixel, sample, dimension)", 0),
-    ("STRATIFIED", "Stratified", "Pixel jitter and the first bounce's light and BSDF numbers from per-pixel "
-     "scrambled Sobol' points (as Cycles' Sobol' patterns): same expectation, less noise, most at the edges of "
-     "bright lights seen by the camera and on lamp-lit surfaces", 1),
+    ("STRATIFIED", "Stratified", "Pixel jitter, lens, wavelengths and the first bounce's light and BSDF numbers "
+     "from per-pixel scrambled Sobol' points (as Cycles' Sobol' patterns): same expectation, less noise, most at "
+     "the edges of bright lights seen by the camera, on lamp-lit surfaces, in depth of field and in colour", 1),
 ]
 SAMPLER_TO_ENGINE = {"INDEPENDENT": "independent", "STRATIFIED": "stratified"}
 

@@ -75,11 +75,12 @@ def test_stratified_pair_is_a_net_and_uniform():
         assert abs(np.corrcoef(x, y)[0, 1]) < 0.01
 
 
-@pytest.mark.parametrize("pair", [1, 2, 3])
+@pytest.mark.parametrize("pair", [1, 2, 3, 4, 5])
 def test_stratified_pairs_are_stratified_and_uniform(pair):
-    """Sobol' dimensions 3–8 (the first vertex's light and BSDF numbers): each coordinate of a pixel's
-    first 16 even samples falls once in each sixteenth of [0, 1); over pixels each sample's pair is
-    uniform and uncorrelated with the pixel jitter (pair 0) of the same sample."""
+    """Sobol' dimensions 3–12 (the first vertex's light and BSDF numbers, the lens, the wavelengths):
+    each coordinate of a pixel's first 16 even samples falls once in each sixteenth of [0, 1); over
+    pixels each sample's pair is uniform and uncorrelated with the pixel jitter (pair 0) of the same
+    sample."""
     from engine.render.sampler import stratified_pair
     rng = np.random.default_rng(pair)
     pixels = np.repeat(np.arange(40), 16)
@@ -113,7 +114,7 @@ def test_scrambled_sobol_pair_twins_bitwise(n):
     sample = np.where(rng.random(n) < 0.5, rng.integers(0, 64, n), rng.integers(0, 1 << 33, n))
     u0, u1 = rng.random(n), rng.random(n)
     u0[:3] = np.nextafter(1.0, 0.0)             # the clamp below 1
-    for pair in range(4):
+    for pair in range(len(_PAIR_KEYS)):
         args = (_seed_key(5), pixel, sample, _PAIR_KEYS[pair], _SOBOL_V[2 * pair], _SOBOL_V[2 * pair + 1], u0, u1)
         a, b = hashing.scrambled_sobol_pair_numpy(*args), hashing.scrambled_sobol_pair_numba(*args)
         assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])

@@ -39,7 +39,8 @@ from ..kernels.transport import (add_light, add_to_paths, identity_throughput, n
                                  update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
 from .path_state import PathState
-from .sampler import PathSampler, stratified_pair
+from .sampler import (PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_JITTER, PAIR_LENS, PAIR_LIGHT_POINT, PAIR_WAVELENGTH,
+                      PathSampler, stratified_pair)
 from .visibility import ray_visibility
 from ..spectral import WavelengthLookup, rgb_weights, sample_wavelengths
 from ..vec3 import dot
@@ -337,8 +338,20 @@ class PathTracer:
         stratified = self.settings.stratified
         if stratified:
             # pixel jitter stratified over each pixel's samples: edges of bright camera-visible emitters
-            # (a lamp, a sun disc) are otherwise most of the image's noise (see stratified_pair)
-            u[0], u[1] = stratified_pair(self.settings.seed, pixel, sample, u[0], u[1])
+            # (a lamp, a sun disc) are otherwise most of the image's noise (see stratified_pair); the
+            # lens point (a defocused edge's noise) and the wavelengths (a coloured metal's or a light's
+            # spectrum: the spectral noise) likewise
+            seed = self.settings.seed
+            u[0], u[1] = stratified_pair(seed, pixel, sample, u[0], u[1], pair=PAIR_JITTER)
+            if k_camera == 4:
+                u[2], u[3] = stratified_pair(seed, pixel, sample, u[2], u[3], pair=PAIR_LENS)
+            if self.samples_wavelengths:
+                # a path's wavelengths are frac(u + j/count), j < count: periodic in u with period 1/count, so
+                # the stratified x sets u within a period (the pixel's samples stratify that period, not
+                # [0, 1) count times over) and y which period (the hero's quarter, also stratified)
+                count = self.n_lambda
+                x, y = stratified_pair(seed, pixel, sample, u[k_camera], u[k_camera], pair=PAIR_WAVELENGTH)
+                u[k_camera] = (x + np.floor(y * count)) / count
         o, d, x_T, t_min, t_max = self.camera.generate(pixel, u[:k_camera])
         lam, w_rgb = self._wavelengths(u[k_camera] if self.samples_wavelengths else None, n_total)
         L = 3 if self.rgb_mode else lam.shape[0]
@@ -503,9 +516,11 @@ class PathTracer:
             # its own per-pixel scramble: still uniform and independent per sample, so unbiased): a
             # lamp's direct light is most of a lit floor's noise.
             pixel, sample = acc.pixel[state.path], acc.sample[state.path]
-            u_light[1], u_light[2] = stratified_pair(st.seed, pixel, sample, u_light[1], u_light[2], pair=1)
-            u_bsdf[1], u_bsdf[2] = stratified_pair(st.seed, pixel, sample, u_bsdf[1], u_bsdf[2], pair=2)
-            u_light[0], u_bsdf[0] = stratified_pair(st.seed, pixel, sample, u_light[0], u_bsdf[0], pair=3)
+            u_light[1], u_light[2] = stratified_pair(st.seed, pixel, sample, u_light[1], u_light[2],
+                                                     pair=PAIR_LIGHT_POINT)
+            u_bsdf[1], u_bsdf[2] = stratified_pair(st.seed, pixel, sample, u_bsdf[1], u_bsdf[2],
+                                                   pair=PAIR_BSDF_DIRECTION)
+            u_light[0], u_bsdf[0] = stratified_pair(st.seed, pixel, sample, u_light[0], u_bsdf[0], pair=PAIR_CHOICES)
         if bounce + 1 >= st.rr_depth:
             u_rr = sampler.next(1)[0]
         else:

@@ -5,10 +5,10 @@ render is bit-for-bit reproducible whatever the batching, tiling, number of
 workers or resumption order: sample s of pixel p always sees the same
 numbers.  The hash is splitmix64's finaliser (Steele et al. 2014), which
 passes BigCrush as a counter-based generator; 53 bits are turned into a
-float64 in [0, 1).  With ``RenderSettings.sampler`` "stratified" the pixel jitter and the first
-vertex's light and BSDF numbers are replaced by ``stratified_pair`` (per-pixel XOR-scrambled
-Sobol' points, two independent sequences for the even and the odd samples), still functions of
-(seed, pixel, sample index) only.
+float64 in [0, 1).  With ``RenderSettings.sampler`` "stratified" the camera's numbers (pixel
+jitter, lens, wavelengths) and the first vertex's light and BSDF numbers are replaced by
+``stratified_pair`` (per-pixel XOR-scrambled Sobol' points, two independent sequences for the even
+and the odd samples), still functions of (seed, pixel, sample index) only.
 """
 
 from __future__ import annotations
@@ -74,15 +74,24 @@ class PathSampler:
         self.keys = self.keys[keep]
 
 
-#: Sobol' dimensions 2–8 as (degree s, coefficients a, initial m) of their primitive polynomials
+#: Sobol' dimensions 2–12 as (degree s, coefficients a, initial m) of their primitive polynomials
 #: (Joe & Kuo 2008, new-joe-kuo-6.21201); dimension 1 is the bit reversal
 _SOBOL_POLYNOMIALS = [(1, 0, [1]), (2, 1, [1, 3]), (3, 1, [1, 3, 1]), (3, 2, [1, 1, 1]), (4, 1, [1, 1, 3, 3]),
-                      (4, 4, [1, 3, 5, 13]), (5, 2, [1, 1, 5, 5, 17])]
+                      (4, 4, [1, 3, 5, 13]), (5, 2, [1, 1, 5, 5, 17]), (5, 4, [1, 1, 5, 5, 5]),
+                      (5, 7, [1, 1, 7, 11, 19]), (5, 11, [1, 1, 5, 1, 1]), (5, 13, [1, 1, 1, 3, 11])]
+
+#: What each pair of Sobol' dimensions (2·pair + 1, 2·pair + 2) stratifies (``stratified_pair``'s pair)
+PAIR_JITTER = 0             # the pixel jitter (x, y)
+PAIR_LIGHT_POINT = 1        # first vertex: the point on the chosen light (next-event estimation)
+PAIR_BSDF_DIRECTION = 2     # first vertex: the BSDF's direction numbers
+PAIR_CHOICES = 3            # first vertex: (light choice, BSDF lobe)
+PAIR_LENS = 4               # the thin lens's point (depth of field)
+PAIR_WAVELENGTH = 5         # the wavelengths' number: its place within a period 1/count, and which period
 
 
 def _sobol_direction_numbers() -> np.ndarray:
-    """Direction numbers (8, 32) (uint64 holding 32 bits) of Sobol' dimensions 1–8."""
-    v = np.zeros((8, 32), dtype=np.uint64)
+    """Direction numbers (12, 32) (uint64 holding 32 bits) of Sobol' dimensions 1–12."""
+    v = np.zeros((len(_SOBOL_POLYNOMIALS) + 1, 32), dtype=np.uint64)
     v[0] = [1 << (31 - k) for k in range(32)]
     for d, (deg, a, m) in enumerate(_SOBOL_POLYNOMIALS, start=1):
         w = [m[k] << (31 - k) for k in range(deg)]
@@ -99,7 +108,7 @@ def _sobol_direction_numbers() -> np.ndarray:
 _SOBOL_V = _sobol_direction_numbers()
 #: per-pair constants of the scramble hash
 _PAIR_KEYS = tuple(np.array([k], np.uint64) for k in (0xD1B54A32D192ED03, 0x8CB92BA72F3D8DD7, 0xABC98388FB8FAC03,
-                                                       0xE7037ED1A0B428DB))
+                                                       0xE7037ED1A0B428DB, 0x94D049BB133111EB, 0xBF58476D1CE4E5B9))
 
 
 def stratified_pair(seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.ndarray, u1: np.ndarray, pair: int = 0):
@@ -108,8 +117,8 @@ def stratified_pair(seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.nda
     and parity of ``sample`` (so each point is uniform and independent of every other dimension,
     hence unbiased), the hashed uniforms u0, u1 filling the bits below 2^-32.  Pair 0 (the pixel
     jitter) is a (0, 2)-sequence: a pixel's first 2^m even (or odd) samples fill the 2^m elementary
-    intervals of each shape; pairs 1–3 with it make an 8-D Sobol' point set (each dimension
-    stratified too)."""
+    intervals of each shape; the pairs with it make a 12-D Sobol' point set (each dimension
+    stratified too; what each pair stratifies: PAIR_JITTER … PAIR_WAVELENGTH)."""
     # the even and the odd samples are two independently scrambled sequences (index sample // 2):
     # adaptive sampling's half-buffers A (even) and B (odd) must be independent estimates
     return scrambled_sobol_pair(_seed_key(seed), pixel, sample, _PAIR_KEYS[pair], _SOBOL_V[2 * pair],

@@ -204,8 +204,9 @@ class RenderSettings:
     #: Cycles' Denoising Albedo / Normal passes); False: the renders are unchanged.
     denoise_data: bool = False
     #: Random numbers of the paths (Cycles' sampling pattern): "independent" (every number a hash of
-    #: (seed, pixel, sample, dimension)) or "stratified" (the pixel jitter and the first vertex's light
-    #: and BSDF numbers are per-pixel scrambled Sobol' points, engine.render.sampler.stratified_pair:
+    #: (seed, pixel, sample, dimension)) or "stratified" (the camera's numbers — pixel jitter, lens,
+    #: wavelengths — and the first vertex's light and BSDF numbers are per-pixel scrambled Sobol' points,
+    #: engine.render.sampler.stratified_pair:
     #: same expectation, less noise; the standard error then comes from the even/odd halves).
     sampler: str = "independent"
 
