@@ -52,6 +52,44 @@ def test_a_render_after_the_warm_up_is_the_same_image():
     assert np.array_equal(warm.render(st).stokes(), cold)
 
 
+#: Child process: warm-up then render each scene; prints the compiled kernels that gained a signature
+#: in a render (each loaded or compiled there, holding the GIL, instead of before it)
+_WARM_CHILD = """
+import copy, sys, numba
+from engine.render.renderer import Renderer
+from engine.scene.loader import load_scene
+from tests.conftest import shared_path
+import engine.kernels, pkgutil, importlib
+mods = [importlib.import_module('engine.kernels.' + m.name) for m in pkgutil.iter_modules(engine.kernels.__path__)]
+import engine.materials.conductor
+mods.append(engine.materials.conductor)
+kernels = {f'{m.__name__}.{k}': v for m in mods for k, v in vars(m).items()
+           if isinstance(v, numba.core.registry.CPUDispatcher)}
+for name, sampler in (('fresnel_sphere_au', 'stratified'), ('cornell_lambert', 'independent')):
+    scene = load_scene(shared_path('peers', 'scenes', name + '.json'))
+    scene.camera.width = scene.camera.height = 32
+    st = copy.copy(scene.settings)
+    st.spp, st.sampler, st.threads = 2, sampler, 1
+    r = Renderer(scene)
+    r.warm_up(st)
+    before = {k: len(v.signatures) for k, v in kernels.items()}
+    r.render(st)
+    print(name, sorted(k for k, v in kernels.items() if len(v.signatures) > before[k]))
+"""
+
+
+def test_the_warm_up_loads_every_kernel_a_render_calls():
+    """After ``warm_up`` a render of the same scene and settings loads or compiles no kernel (one
+    would hold the GIL inside the render and stall the other workers): a spectral stratified scene and
+    a Lambertian one with next-event estimation, in a fresh interpreter."""
+    from engine import kernels
+    if not kernels.COMPILED:
+        pytest.skip("Numba kernels disabled")
+    out = subprocess.run([sys.executable, "-c", _WARM_CHILD], capture_output=True, text=True, check=True,
+                         cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__)))).stdout
+    assert out.splitlines() == ["fresnel_sphere_au []", "cornell_lambert []"], out
+
+
 #: Child process: the settings applied in a fresh interpreter (pytest's may have loaded bpy, and then
 #: the allocator is left alone); prints the page faults of re-allocating a freed 200 MiB array.
 _FAULTS_CHILD = """

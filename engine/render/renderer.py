@@ -205,8 +205,9 @@ class Renderer:
 
         Every compiled kernel those paths call is compiled, or loaded from Numba's cache, now rather
         than inside the first render, where it would also hold the GIL and stall the other workers
-        (a corner window of the image misses the objects and so most shading kernels).  Nothing is
-        added to any film; the sampler is stateless, so later renders are unchanged.
+        (a corner window of the image misses the objects and so most shading kernels); likewise the
+        film's per-unit sums.  Nothing is added to any film; the sampler is stateless, so later renders
+        are unchanged.
         """
         t0 = time.perf_counter()
         _, tracer, _, _ = self._tracer(settings)
@@ -217,7 +218,10 @@ class Renderer:
         cols = np.linspace(0, W - 1, nx).round().astype(np.int64)
         pixel = (rows[:, None] * W + cols[None, :]).ravel()
         with one_blas_thread():
-            tracer.trace(pixel, np.zeros_like(pixel))
+            values, stats = tracer.trace(pixel, np.zeros_like(pixel))
+            # and the film's per-unit sums (their kernel loaded in a render stalled the other worker)
+            SampleSums.of(pixel, values, stats.get("alpha"), stats.get("denoise"),
+                          np.zeros_like(pixel) if (settings or self.scene.settings).stratified else None)
         return time.perf_counter() - t0
 
     def last_film_mean(self) -> np.ndarray | None:
