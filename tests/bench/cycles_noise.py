@@ -5,7 +5,8 @@
 
 Builds each scene of tests/test_cycles_parity.py in bpy (diffuse floor and box, one kind of light
 each; ``all_lights`` has 8 point/spot/area/sun lights of 1–1000 W and an emitter; plus
-``eight_points_world``: eight point lights of 1–1000 W and a grey world, issue 16's case), renders it
+``eight_points_world``: eight point lights of 1–1000 W and a grey world, issue 16's case, and
+``defocused_lamp``: ``area_square`` through a thin lens at f/1.4 focused at 1.5 m), renders it
 twice (seeds 0 and 1) with Cycles (CPU, 2 threads, the test's unbiased settings) and twice with
 Polar (F12 path: ``bpy.ops.render.render``, polarisation auto, which picks scalar transport here),
 both at ``--spp`` samples and written to EXR, and reports per renderer the best wall time and the
@@ -47,7 +48,19 @@ def eight_points_world():
     background.inputs["Strength"].default_value = 0.1
 
 
-BENCH_SCENES = {"eight_points_world": eight_points_world}
+def defocused_lamp():
+    """Depth of field (not a parity test): ``area_square`` seen at f/1.4 focused 1.5 m in front of the
+    camera, so the cube, the lit floor and the shadow edges are blurred over many pixels."""
+    import bpy
+    import tests.test_cycles_parity as parity
+    parity.area_square()
+    cam = bpy.context.scene.camera.data
+    cam.dof.use_dof = True
+    cam.dof.aperture_fstop = 1.4
+    cam.dof.focus_distance = 1.5
+
+
+BENCH_SCENES = {"eight_points_world": eight_points_world, "defocused_lamp": defocused_lamp}
 
 
 def render_luminance(scene, path):
