@@ -498,12 +498,10 @@ class PathTracer:
         # stateless in the dimension, so skipping leaves every other one as it was.
         nee = (bool(len(light_set)) and bounce + 2 <= st.max_depth
                and not all(self.shaders[g].flags.is_delta_only for g in groups))
-        # The "stratified" sampler stratifies the first vertex's light and BSDF numbers over the pixel's
-        # samples (below), from all of them: none is skipped there.
         stratified_vertex = bounce == 0 and acc.pixel is not None
-        u_light = sampler.next(4) if nee or stratified_vertex else sampler.skip(4)
+        u_light = sampler.next(4) if nee else sampler.skip(4)
         direction_dims = None
-        if all(fused) and not stratified_vertex:
+        if all(fused):
             u_bsdf = sampler.next(1)                # the lobe choice (smooth dielectric) only
             direction_dims = PathSampler(sampler.keys)
             direction_dims.dimension = sampler.dimension
@@ -514,13 +512,19 @@ class PathTracer:
             # The first vertex's light sample (choice, point) and BSDF sample (lobe, direction) are
             # stratified over the pixel's samples like the jitter (Sobol' dimensions 3–8, each pair with
             # its own per-pixel scramble: still uniform and independent per sample, so unbiased): a
-            # lamp's direct light is most of a lit floor's noise.
+            # lamp's direct light is most of a lit floor's noise.  Only the numbers read are computed
+            # (each stratified number depends on its own hashed one and the pair's scramble alone).
             pixel, sample = acc.pixel[state.path], acc.sample[state.path]
-            u_light[1], u_light[2] = stratified_pair(st.seed, pixel, sample, u_light[1], u_light[2],
-                                                     pair=PAIR_LIGHT_POINT)
-            u_bsdf[1], u_bsdf[2] = stratified_pair(st.seed, pixel, sample, u_bsdf[1], u_bsdf[2],
-                                                   pair=PAIR_BSDF_DIRECTION)
-            u_light[0], u_bsdf[0] = stratified_pair(st.seed, pixel, sample, u_light[0], u_bsdf[0], pair=PAIR_CHOICES)
+            if nee:
+                u_light[1], u_light[2] = stratified_pair(st.seed, pixel, sample, u_light[1], u_light[2],
+                                                         pair=PAIR_LIGHT_POINT)
+            if direction_dims is None:
+                u_bsdf[1], u_bsdf[2] = stratified_pair(st.seed, pixel, sample, u_bsdf[1], u_bsdf[2],
+                                                       pair=PAIR_BSDF_DIRECTION)
+            choice, u_bsdf[0] = stratified_pair(st.seed, pixel, sample, u_light[0] if nee else u_bsdf[0], u_bsdf[0],
+                                                pair=PAIR_CHOICES)
+            if nee:
+                u_light[0] = choice
         if bounce + 1 >= st.rr_depth:
             u_rr = sampler.next(1)[0]
         else:
@@ -545,7 +549,11 @@ class PathTracer:
                 continue            # pdf 0 and is_delta True: as preset
             if direction_dims is not None:
                 # a one-step material fell back to ``sample``: its direction numbers after all
-                u_bsdf = np.concatenate((u_bsdf, direction_dims.next(2)))
+                extra = direction_dims.next(2)
+                if stratified_vertex:
+                    extra[0], extra[1] = stratified_pair(st.seed, pixel, sample, extra[0], extra[1],
+                                                         pair=PAIR_BSDF_DIRECTION)
+                u_bsdf = np.concatenate((u_bsdf, extra))
                 direction_dims = None
             sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
                               gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
