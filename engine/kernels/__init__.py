@@ -71,7 +71,7 @@ _PACKAGE = __name__.rsplit(".kernels", 1)[0]
 _ENGINE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
-def compiled_sources_digest(root: str = _ENGINE_DIR) -> str:
+def compiled_sources_digest(root: str = _ENGINE_DIR, every_module: bool = False) -> str:
     """16 hex digits identifying the source of every module under ``root`` that holds compiled code.
 
     Numba checks a cached kernel against its own file's time stamp only, but a kernel has the
@@ -79,6 +79,7 @@ def compiled_sources_digest(root: str = _ENGINE_DIR) -> str:
     an edit to engine/kernels/fresnel.py the cached Torrance–Sparrow step would go on running the old
     Fresnel arithmetic.  Keying the cache folder by all compiled sources makes any such edit (or an
     upgrade) start a fresh folder.  Reading them costs a few milliseconds per import.
+    ``every_module``: the digest of every module's source (what a cached precomputed table depends on).
     """
     digest = hashlib.sha1()
     for folder, dirs, files in os.walk(root):
@@ -87,7 +88,7 @@ def compiled_sources_digest(root: str = _ENGINE_DIR) -> str:
             path = os.path.join(folder, name)
             with open(path, "rb") as fh:
                 data = fh.read()
-            if b"jit" in data:
+            if every_module or b"jit" in data:
                 digest.update(os.path.relpath(path, root).encode() + b"\0" + data + b"\0")
     return digest.hexdigest()[:16]
 
@@ -102,9 +103,14 @@ def cache_dir() -> str:
     ``POLAR_KERNEL_CACHE`` overrides the base folder (default: $XDG_CACHE_HOME or ~/.cache, then
     polar/numba).
     """
-    base = os.environ.get("POLAR_KERNEL_CACHE") or os.path.join(
+    return os.path.join(cache_base(), _PACKAGE, _SOURCES_DIGEST)
+
+
+def cache_base() -> str:
+    """The base folder of the kernel cache (and of engine.materials.table_cache's tables):
+    ``POLAR_KERNEL_CACHE``, else $XDG_CACHE_HOME or ~/.cache, then polar/numba."""
+    return os.environ.get("POLAR_KERNEL_CACHE") or os.path.join(
         os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache"), "polar", "numba")
-    return os.path.join(base, _PACKAGE, _SOURCES_DIGEST)
 
 
 _SOURCES_DIGEST = compiled_sources_digest()

@@ -204,6 +204,7 @@ from .lambert import Lambert
 from .microfacet import Beckmann, BlinnPhong, half_vector, reflect_local, shadowing_term
 from .parameters import ModelDeclaration, Parameter, Socket
 from .sampling import cosine_hemisphere, local_to_world
+from .table_cache import cached_table
 from ..errors import SceneError
 from ..polarisation.frames import plane_of_incidence_axis, rotate_mueller_frames, rotation_mueller, \
     scattering_plane_axis
@@ -475,14 +476,23 @@ def top_albedo(cos_theta, eta, dist, shadowing: str = "ts", n_u: int = _TABLE_NU
 class _AlbedoTable:
     """E_top(θ, η) on a 1° θ grid (and an η grid for dispersive coats), bilinear lookup."""
 
-    def __init__(self, dist, shadowing: str, eta_lo: float, eta_hi: float):
+    def __init__(self, dist, shadowing: str, eta_lo: float, eta_hi: float, key: tuple | None = None):
+        """``key``: the parameters that define ``dist`` (the table is then kept on disk between
+        processes, engine.materials.table_cache); None: always built."""
         self.theta = np.linspace(0.0, 0.5 * math.pi, _TABLE_THETA_STEPS + 1)
         mu = np.cos(self.theta)
         if eta_hi - eta_lo <= 1e-12 * eta_hi:
             self.eta = np.array([eta_lo])
         else:
             self.eta = np.linspace(eta_lo, eta_hi, _TABLE_N_ETA)
-        self.E = np.stack([np.clip(top_albedo(mu, e, dist, shadowing), 0.0, 1.0) for e in self.eta])
+
+        def build():
+            return np.stack([np.clip(top_albedo(mu, e, dist, shadowing), 0.0, 1.0) for e in self.eta])
+        if key is None:
+            self.E = build()
+        else:
+            self.E = cached_table("ww_top_albedo", (*key, shadowing, eta_lo, eta_hi, _TABLE_THETA_STEPS,
+                                                    _TABLE_N_ETA), (self.eta.size, mu.size), build)
 
     def __call__(self, cos_theta, eta) -> np.ndarray:
         th = np.arccos(np.clip(cos_theta, 0.0, 1.0))
@@ -505,7 +515,7 @@ class _AlbedoTable:
 def _albedo_table(dist_name: str, e: float, m: float, shadowing: str, eta_lo: float, eta_hi: float) -> _AlbedoTable:
     """Shared E_top tables (they depend only on the distribution, the shadowing term and η)."""
     dist = BlinnPhong(e) if dist_name == "blinn" else Beckmann(m)
-    return _AlbedoTable(dist, shadowing, eta_lo, eta_hi)
+    return _AlbedoTable(dist, shadowing, eta_lo, eta_hi, key=(dist_name, e, m))
 
 
 #: Node spacing in ln m of the E_top table of a coat with a textured Beckmann m.  Measured against
