@@ -23,7 +23,7 @@ INSTALL = textwrap.dedent("""
 """)
 
 RENDER = textwrap.dedent("""
-    import json, math, os, sys
+    import importlib, json, math, os, sys
     import bpy
     import addon_utils
     addon_utils.enable("bl_ext.user_default.polar_render", default_set=True)
@@ -68,6 +68,7 @@ RENDER = textwrap.dedent("""
     print("POLAR_ENGINE_FILE=" + engine_file)
     kernels = sys.modules[ext.__name__ + ".engine.kernels"]
     print("POLAR_KERNEL_CACHE=" + kernels.cache_dir())
+    print("POLAR_TABLE_DIR=" + importlib.import_module(ext.__name__ + ".engine.materials.table_cache").table_dir())
     print("POLAR_BACKEND=" + kernels.BACKEND)
 """)
 
@@ -107,6 +108,8 @@ def test_zip_installs_enables_renders_and_caches_kernels_in_the_user_folder(tmp_
         cache = printed(proc, "POLAR_KERNEL_CACHE")[0]
         assert cache.startswith(str(user_folder / "0.1.0") + os.sep), cache
         assert any(name.endswith(".nbi") for _, _, files in os.walk(cache) for name in files)
+        # precomputed material tables (engine.materials.table_cache) go to the same user folder
+        assert printed(proc, "POLAR_TABLE_DIR")[0].startswith(str(user_folder / "0.1.0" / "tables") + os.sep)
         statuses.append(printed(proc, "POLAR_STATUS"))
         passes = read_multilayer(out + ".exr")
         for name in ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP"):
