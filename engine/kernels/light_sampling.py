@@ -114,8 +114,6 @@ def _clip(x, lo, hi):
     return t if t < hi else hi
 
 
-
-
 @jit_inner
 def _nan_to_num(x):
     if x != x:
@@ -492,8 +490,6 @@ choose_light = twin(choose_light_numba, choose_light_numpy)
 
 
 # ----------------------------------------------------------------------------- point and spot lights
-
-
 
 @jit_inner
 def _spot(spot, w0, w1, w2):

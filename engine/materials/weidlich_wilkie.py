@@ -476,9 +476,9 @@ def top_albedo(cos_theta, eta, dist, shadowing: str = "ts", n_u: int = _TABLE_NU
 class _AlbedoTable:
     """E_top(θ, η) on a 1° θ grid (and an η grid for dispersive coats), bilinear lookup."""
 
-    def __init__(self, dist, shadowing: str, eta_lo: float, eta_hi: float, key: tuple | None = None):
-        """``key``: the parameters that define ``dist`` (the table is then kept on disk between
-        processes, engine.materials.table_cache); None: always built."""
+    def __init__(self, dist, shadowing: str, eta_lo: float, eta_hi: float, key: tuple):
+        """``key``: the parameters that define ``dist`` (the table is kept on disk between processes
+        under them, engine.materials.table_cache)."""
         self.theta = np.linspace(0.0, 0.5 * math.pi, _TABLE_THETA_STEPS + 1)
         mu = np.cos(self.theta)
         if eta_hi - eta_lo <= 1e-12 * eta_hi:
@@ -488,11 +488,8 @@ class _AlbedoTable:
 
         def build():
             return np.stack([np.clip(top_albedo(mu, e, dist, shadowing), 0.0, 1.0) for e in self.eta])
-        if key is None:
-            self.E = build()
-        else:
-            self.E = cached_table("ww_top_albedo", (*key, shadowing, eta_lo, eta_hi, _TABLE_THETA_STEPS,
-                                                    _TABLE_N_ETA), (self.eta.size, mu.size), build)
+        self.E = cached_table("ww_top_albedo", (*key, shadowing, eta_lo, eta_hi, _TABLE_THETA_STEPS, _TABLE_N_ETA),
+                              (self.eta.size, mu.size), build)
 
     def __call__(self, cos_theta, eta) -> np.ndarray:
         th = np.arccos(np.clip(cos_theta, 0.0, 1.0))
