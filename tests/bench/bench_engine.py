@@ -2,7 +2,7 @@
 
     python tests/bench/bench_engine.py [--scenes a,b] [--res 128] [--spp 32] [--mitsuba-spp 128]
                                        [--ref-spp 2048] [--mitsuba-python PY] [--skip blender,cycles,memory]
-                                       [--out bench.md] [--sampler independent|stratified] [--full]
+                                       [--out bench.md] [--sampler independent,stratified] [--full]
 
 Prints one Markdown table per target (the issue's target next to each measured ratio):
 
@@ -38,6 +38,11 @@ each transport the jobs use; the times are those of ``Renderer.render``, as Mits
 render call), Mitsuba's through ``render_peer.py`` (its first render of a scene includes its JIT
 compilation; the fastest of three is kept).  ``--full`` uses 256², more samples and every scene,
 renders the demo at 1080p, and rewrites the tables in README.md between the ``bench:begin`` / ``bench:end`` markers.
+
+``--sampler`` takes a comma list (``--full``: ``independent,stratified``): every sampler's renders
+are measured in the same run against the same references and Mitsuba renders (and, for Cycles, the
+same Cycles renders).  The first sampler gets tables 1–8; each further one the tables that depend on
+our sampler (1–5 and 8), numbered with its initial (1s, 2s, 3s–5s, 8s).
 Benchmarks never run as tests.
 """
 
@@ -253,8 +258,11 @@ def error2(images, ref, ref_var, noise_only=False):
 
 # ------------------------------------------------------------------------------------------- main
 
-def measure_scene(scene, args, tmp, mitsuba):
-    saves = [os.path.join(tmp, f"{scene}_ours_seed{s}.npy") for s in (0, 1)]
+def measure_scene(scene, args, tmp, mitsuba, sampler, peer):
+    """Our renders of ``scene`` with ``sampler`` beside the reference and Mitsuba's renders, which
+    ``peer`` (a dict kept per scene) holds after the first sampler: every sampler of a run is compared
+    with the same Mitsuba renders."""
+    saves = [os.path.join(tmp, f"{scene}_{sampler}_ours_seed{s}.npy") for s in (0, 1)]
     # 1- and 2-thread renders alternate (a change in the machine's load hits both alike); the fastest
     # of each is kept.  The 2-thread renders of seeds 0 and 1 are also the error measurement's.
     jobs = []
@@ -265,29 +273,33 @@ def measure_scene(scene, args, tmp, mitsuba):
     jobs += [{"name": "full", "spp": args.spp, "polarisation": "full"},
              {"name": "off", "spp": args.spp, "polarisation": "off"}]
     for job in jobs:            # (the references keep the scene's sampler: any unbiased one will do)
-        job["sampler"] = args.sampler
+        job["sampler"] = sampler
     ours, peak = run_ours(scene, args.res, jobs)
     runs = range(max(args.scaling_repeats, 2))
     best = min((ours["auto0"], ours["auto1"]), key=lambda r: r["seconds"])
-    row = {"scene": scene, "ours": ours, "ours_best": best, "ours_peak": peak,
+    row = {"scene": scene, "sampler": sampler, "ours": ours, "ours_best": best, "ours_peak": peak,
            "two_threads": min((ours[f"auto{k}"] for k in runs), key=lambda r: r["seconds"]),
            "one_thread": min((ours[f"auto_1thread{k}"] for k in runs), key=lambda r: r["seconds"])}
-    ref, ref_var, source = reference(scene, args.res, args.ref_spp, mitsuba)
+    if "ref" not in peer:
+        peer["ref"] = reference(scene, args.res, args.ref_spp, mitsuba)
+    ref, ref_var, source = peer["ref"]
     row["ref_source"] = source
     row["ours_e2"] = error2([np.load(p) for p in saves], ref, ref_var)
     row["ours_noise_only"] = scene in S0_DIFFERS and source == "mitsuba"
     if row["ours_noise_only"]:
         row["ours_e2"][0] = error2([np.load(p) for p in saves], None, None, noise_only=True)[0]
     row["ref_var"] = ref_var
-    if mitsuba:
+    if mitsuba and "llvm" not in peer:
         imgs, secs, mpeak = mitsuba_renders(mitsuba, scene, "llvm_ad_spectral_polarized", args.mitsuba_spp, args.res,
                                             0, 3, tmp)
-        row["llvm"] = {"seconds": min(secs), "samples": args.res ** 2 * args.mitsuba_spp, "peak": mpeak,
-                       "e2": error2(imgs[:2], ref, ref_var)}
+        peer["llvm"] = {"seconds": min(secs), "samples": args.res ** 2 * args.mitsuba_spp, "peak": mpeak,
+                        "e2": error2(imgs[:2], ref, ref_var)}
         if args.mitsuba_scalar_spp:
             _, secs, speak = mitsuba_renders(mitsuba, scene, "scalar_spectral_polarized", args.mitsuba_scalar_spp,
                                              args.res, 0, 1, tmp)
-            row["scalar"] = {"seconds": min(secs), "samples": args.res ** 2 * args.mitsuba_scalar_spp, "peak": speak}
+            peer["scalar"] = {"seconds": min(secs), "samples": args.res ** 2 * args.mitsuba_scalar_spp,
+                              "peak": speak}
+    row.update({k: peer[k] for k in ("llvm", "scalar") if k in peer})
     return row
 
 
@@ -306,11 +318,15 @@ def rate(r):
     return r["samples"] / r["seconds"] / 1e6
 
 
-def tables(rows, blender, memory, cycles, args, header):
-    out = [header, ""]
-    out += ["**1. Time to equal error, ours ÷ Mitsuba LLVM** (> 1: ours faster; RMSE of luminance S0 and S1 "
-            f"against a {rows[0]['ref_source'] if rows else '?'} reference of 2 × {args.ref_spp} spp, its noise "
-            "removed)", "",
+def tables(rows, blender, memory, cycles, args, header, sampler, suffix=""):
+    """The Markdown tables of one sampler's rows: numbered 1–8, or with ``suffix`` appended to each number
+    (a second sampler of the same run: the tables that depend on our sampler; Mitsuba's columns are the
+    same renders as the first sampler's, Blender ÷ CLI and memory are not repeated)."""
+    out = [header, ""] if header else []
+    label = f" — {sampler} sampler"
+    out += [f"**1{suffix}. Time to equal error, ours ÷ Mitsuba LLVM{label}** (> 1: ours faster; RMSE of luminance "
+            f"S0 and S1 against a {rows[0]['ref_source'] if rows else '?'} reference of 2 × {args.ref_spp} spp, its "
+            "noise removed; Mitsuba's independent sampler)", "",
             "| scene | ours: s @ spp | RMSE S0 / S1 | Mitsuba: s @ spp | RMSE S0 / S1 | S0 ratio | target | | "
             "S1 ratio |", "|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
@@ -327,7 +343,7 @@ def tables(rows, blender, memory, cycles, args, header):
                    + f" | {verdict(s0, target) if target else ''} | {fmt(s1, '.2f', '×')} |")
     if any(r["ours_noise_only"] for r in rows):
         out.append("\n‡ our S0 error is our noise alone (S0 differs from Mitsuba's by design: RGB upsampling).")
-    out += ["", "**2. Throughput** (2 threads; ours polarisation auto)", "",
+    out += ["", f"**2{suffix}. Throughput{label}** (2 threads; ours polarisation auto)", "",
             "| scene | transport | ours Msamples/s | ours Mrays/s | Mitsuba LLVM Msamples/s | ours ÷ LLVM | "
             "Mitsuba scalar Msamples/s | ours ÷ scalar | peak RSS ours / LLVM (MB) |",
             "|---|---|---|---|---|---|---|---|---|"]
@@ -341,7 +357,8 @@ def tables(rows, blender, memory, cycles, args, header):
                    f"{fmt(rate(scal) if scal else None, '.3f')} | "
                    f"{fmt(rate(b) / rate(scal) if scal else None, '.3f')} | "
                    f"{r['ours_peak']:.0f} / {fmt(llvm['peak'] if llvm else None, '.0f')} |")
-    out += ["", "**3–5. Embree share, thread scaling, full Stokes ÷ scalar** (ours; 1- and 2-thread renders "
+    out += ["", f"**3{suffix}–5{suffix}. Embree share, thread scaling, full Stokes ÷ scalar{label}** (ours; 1- and "
+            "2-thread renders "
             f"alternated, fastest of {max(args.scaling_repeats, 2)} each; the Embree share is of the CPU time of "
             "the fastest 1-thread render, wall-time share in brackets)", "",
             "| scene | Embree share, 1 thread | target | | 2 threads ÷ 1 | target | | CPU s 1 → 2 threads | "
@@ -381,8 +398,9 @@ def tables(rows, blender, memory, cycles, args, header):
                 f"{memory['full_gb']:.2f}{how} | < {MEMORY_TARGET_GB} | "
                 f"{verdict(memory['full_gb'], MEMORY_TARGET_GB, at_least=False)} |"]
     if cycles:
-        out += ["", f"**8. Cycles parity scenes** ({cycles[0]['width']}×{cycles[0]['height']}, {cycles[0]['spp']} spp "
-                "each, σ = per-pixel standard deviation of luminance S0 over lit pixels, from 2 seeds)", "",
+        out += ["", f"**8{suffix}. Cycles parity scenes{label}** ({cycles[0]['width']}×{cycles[0]['height']}, "
+                f"{cycles[0]['spp']} spp each, σ = per-pixel standard deviation of luminance S0 over lit pixels, "
+                "from 2 seeds; Cycles' default Sobol'–Burley pattern)", "",
                 "| scene | Cycles s | Polar s | σ Polar ÷ Cycles | variance × time Polar ÷ Cycles | target | |",
                 "|---|---|---|---|---|---|---|"]
         for c in cycles:
@@ -391,8 +409,6 @@ def tables(rows, blender, memory, cycles, args, header):
             out.append(f"| {c['scene']} | {cy['seconds']:.2f} | {p['seconds']:.2f} | "
                        f"{fmt((p['variance'] / cy['variance']) ** 0.5 if cy['variance'] > 0 else None)} | "
                        f"{fmt(vt, '.2f', '×')} | ≤ {CYCLES_TARGET}× | {verdict(vt, CYCLES_TARGET, at_least=False)} |")
-    kernels = rows[0]["ours_best"].get("kernels", "?") if rows else "?"
-    out += ["", f"(our kernels: {kernels})"]
     return "\n".join(out)
 
 
@@ -456,8 +472,10 @@ def main():
     ap.add_argument("--memory-res", default="960x540", help="proxy size for the 1080p memory figure (quick runs)")
     ap.add_argument("--scaling-repeats", type=int, default=3,
                     help="1- and 2-thread renders per scene for the thread scaling, alternated (at least 2)")
-    ap.add_argument("--sampler", choices=("independent", "stratified"), default="independent",
-                    help="our renders' RenderSettings.sampler (peer scenes and the Cycles scenes' Pattern)")
+    ap.add_argument("--sampler", default=None,
+                    help="our renders' RenderSettings.sampler (peer scenes and the Cycles scenes' Pattern): "
+                         "independent, stratified, or a comma list measured in the same run (default: "
+                         "independent; --full: independent,stratified)")
     ap.add_argument("--full", action="store_true", help="README settings; rewrites README.md's tables")
     ap.add_argument("--out", default="")
     ap.add_argument("--child", help=argparse.SUPPRESS)
@@ -475,6 +493,10 @@ def main():
     args.mitsuba_spp = args.mitsuba_spp or (512 if full else 128)
     args.ref_spp = args.ref_spp or (8192 if full else 2048)
     skip = set(filter(None, args.skip.split(",")))
+    samplers = (args.sampler or ("independent,stratified" if full else "independent")).split(",")
+    for sampler in samplers:
+        if sampler not in ("independent", "stratified"):
+            ap.error(f"--sampler: {sampler!r} is not one of independent, stratified")
 
     mitsuba = "" if "mitsuba" in skip else args.mitsuba_python
     if mitsuba and subprocess.run([mitsuba, "-c", "import mitsuba"], capture_output=True).returncode != 0:
@@ -483,10 +505,12 @@ def main():
         mitsuba = ""
     t_start = time.perf_counter()
     tmp = tempfile.mkdtemp(prefix="polar_bench_")
-    rows = []
+    rows = {s: [] for s in samplers}
     for scene in args.scenes.split(","):
-        rows.append(measure_scene(scene, args, tmp, mitsuba))
-        print(f"{scene}: done ({time.perf_counter() - t_start:.0f} s)", file=sys.stderr)
+        peer = {}
+        for sampler in samplers:
+            rows[sampler].append(measure_scene(scene, args, tmp, mitsuba, sampler, peer))
+            print(f"{scene} ({sampler}): done ({time.perf_counter() - t_start:.0f} s)", file=sys.stderr)
     blender = memory = None
     cycles = []
     py = sys.executable
@@ -502,7 +526,8 @@ def main():
     if "cycles" not in skip:
         out, _, _ = run_measured([py, os.path.join(HERE, "cycles_noise.py"), "--json",
                                   "--res", args.cycles_res or ("320x240" if full else "160x120"),
-                                  "--spp", str(args.cycles_spp or (64 if full else 16)), "--sampler", args.sampler,
+                                  "--spp", str(args.cycles_spp or (64 if full else 16)),
+                                  "--sampler", ",".join(samplers),
                                   "--scenes", args.cycles_scenes or ("all" if full else
                                                                     ",".join(CYCLES_QUICK))])
         cycles = json_lines(out)
@@ -510,9 +535,15 @@ def main():
     header = (f"Run {datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC on {platform.node() or '?'} "
               f"({os.cpu_count()} cores, {platform.processor() or platform.machine()}): "
               f"`bench_engine.py {' '.join(sys.argv[1:])}`, {args.res}² peer scenes, ours {args.spp} spp "
-              f"({args.sampler} sampler), "
+              f"({' and '.join(samplers)} sampler{'s' if len(samplers) > 1 else ''}), "
               f"Mitsuba {args.mitsuba_spp} spp, {time.perf_counter() - t_start:.0f} s in all.")
-    text = tables(rows, blender, memory, cycles, args, header)
+    parts = []
+    for k, sampler in enumerate(samplers):
+        parts.append(tables(rows[sampler], blender if k == 0 else None, memory if k == 0 else None,
+                            [c for c in cycles if c.get("sampler", sampler) == sampler], args,
+                            header if k == 0 else "", sampler, "" if k == 0 else sampler[0]))
+    kernels = next((r[0]["ours_best"].get("kernels", "?") for r in rows.values() if r), "?")
+    text = "\n\n".join(parts) + f"\n\n(our kernels: {kernels})"
     print(text)
     if args.out:
         with open(args.out, "w") as fh:

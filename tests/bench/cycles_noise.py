@@ -1,7 +1,7 @@
 """Polar against Cycles on the Cycles parity scenes: time and noise at equal samples.
 
     python tests/bench/cycles_noise.py [--scenes all_lights,point_radius] [--res 160x120] [--spp 16]
-                                       [--sampler independent|stratified] [--json]
+                                       [--sampler independent|stratified|independent,stratified] [--json]
 
 Builds each scene of tests/test_cycles_parity.py in bpy (diffuse floor and box, one kind of light
 each; ``all_lights`` has 8 point/spot/area/sun lights of 1–1000 W and an emitter; plus
@@ -13,7 +13,8 @@ both at ``--spp`` samples and written to EXR, and reports per renderer the best 
 noise of the luminance S0: σ² = mean over lit pixels of (A − B)² / 2, the per-render pixel
 variance from the two seeds (lit: Cycles' mean above 2 % of its brightest pixel).  Variance × time
 of Polar ÷ Cycles is the issue-16 target (≤ 3); noise ratio = σ_Polar / σ_Cycles at equal spp.
-Runs in the bpy module; not part of the test command.
+``--sampler independent,stratified`` renders Polar with both patterns beside one set of Cycles renders
+(one result line per pattern).  Runs in the bpy module; not part of the test command.
 """
 
 from __future__ import annotations
@@ -74,7 +75,9 @@ def render_luminance(scene, path):
     return seconds, read_multilayer(path + ".exr")["Combined"][..., :3] @ REC709
 
 
-def measure(name, width, height, spp, tmp, sampler="independent"):
+def measure(name, width, height, spp, tmp, samplers=("independent",)):
+    """One result per Polar sampling pattern in ``samplers``, each beside the same Cycles renders
+    (Cycles renders once: its time and noise do not depend on Polar's pattern)."""
     import tests.test_cycles_parity as parity
     scene = parity.base_scene()
     {**parity.SCENES, **BENCH_SCENES}[name]()
@@ -91,10 +94,12 @@ def measure(name, width, height, spp, tmp, sampler="independent"):
     ims = scene.render.image_settings
     ims.media_type, ims.color_depth = "MULTI_LAYER_IMAGE", "32"
     out = {}
-    for engine in ("CYCLES", "POLAR"):
+    for engine, sampler in [("CYCLES", None)] + [("POLAR", s) for s in samplers]:
+        key = engine if sampler is None else (engine, sampler)
         scene.render.engine = engine
         scene.polar.samples, scene.polar.max_bounces, scene.polar.threads = spp, parity.BOUNCES, 0
-        scene.polar.sampler = sampler.upper()
+        if sampler is not None:
+            scene.polar.sampler = sampler.upper()
         render_luminance(scene, os.path.join(tmp, f"{name}_{engine}_warm"))   # kernels, caches
         times, images = [], []
         for seed in (0, 1):
@@ -103,14 +108,17 @@ def measure(name, width, height, spp, tmp, sampler="independent"):
             t, img = render_luminance(scene, os.path.join(tmp, f"{name}_{engine}_{seed}"))
             times.append(t)
             images.append(img)
-        out[engine] = (min(times), images)
+        out[key] = (min(times), images)
     lit = (out["CYCLES"][1][0] + out["CYCLES"][1][1]) / 2
     lit = lit > 0.02 * lit.max()
-    res = {"scene": name, "spp": spp, "width": width, "height": height, "sampler": sampler}
-    for engine, (t, (a, b)) in out.items():
-        res[engine] = {"seconds": t, "variance": float(np.mean(((a - b)[lit]) ** 2) / 2),
-                       "mean": float(np.mean(((a + b) / 2)[lit]))}
-    return res
+
+    def stats(t, a, b):
+        return {"seconds": t, "variance": float(np.mean(((a - b)[lit]) ** 2) / 2),
+                "mean": float(np.mean(((a + b) / 2)[lit]))}
+
+    cycles = stats(out["CYCLES"][0], *out["CYCLES"][1])
+    return [{"scene": name, "spp": spp, "width": width, "height": height, "sampler": s, "CYCLES": cycles,
+             "POLAR": stats(out[("POLAR", s)][0], *out[("POLAR", s)][1])} for s in samplers]
 
 
 def main():
@@ -119,10 +127,15 @@ def main():
                     help="names from tests/test_cycles_parity.py, eight_points_world, or 'all'")
     ap.add_argument("--res", default="160x120")
     ap.add_argument("--spp", type=int, default=16)
-    ap.add_argument("--sampler", choices=("independent", "stratified"), default="independent",
-                    help="Polar's sampling pattern (Render Properties ▸ Sampling ▸ Pattern)")
+    ap.add_argument("--sampler", default="independent",
+                    help="Polar's sampling pattern (Render Properties ▸ Sampling ▸ Pattern): independent, "
+                         "stratified, or both as 'independent,stratified' (Cycles then renders once per scene)")
     ap.add_argument("--json", action="store_true")
     args = ap.parse_args()
+    samplers = args.sampler.split(",")
+    for s in samplers:
+        if s not in ("independent", "stratified"):
+            ap.error(f"--sampler: {s!r} is not one of independent, stratified")
     from tests.blender_support import load_addon
     import tests.test_cycles_parity as parity
     load_addon()
@@ -130,13 +143,13 @@ def main():
     names = list(parity.SCENES) + list(BENCH_SCENES) if args.scenes == "all" else args.scenes.split(",")
     with tempfile.TemporaryDirectory() as tmp:
         for name in names:
-            r = measure(name, width, height, args.spp, tmp, args.sampler)
-            if args.json:
-                print(json.dumps(r), flush=True)
-            else:
+            for r in measure(name, width, height, args.spp, tmp, samplers):
+                if args.json:
+                    print(json.dumps(r), flush=True)
+                    continue
                 p, c = r["POLAR"], r["CYCLES"]
-                print(f"{name}: Cycles {c['seconds']:.2f} s σ {c['variance'] ** 0.5:.4g}, Polar {p['seconds']:.2f} s "
-                      f"σ {p['variance'] ** 0.5:.4g}; var×time Polar ÷ Cycles "
+                print(f"{name} ({r['sampler']}): Cycles {c['seconds']:.2f} s σ {c['variance'] ** 0.5:.4g}, "
+                      f"Polar {p['seconds']:.2f} s σ {p['variance'] ** 0.5:.4g}; var×time Polar ÷ Cycles "
                       f"{p['variance'] * p['seconds'] / (c['variance'] * c['seconds']):.2f}")
     return 0
 
