@@ -77,7 +77,9 @@ class CompiledScene:
 
         self.attributes = _vertex_attributes(scene.meshes, self.faces, len(self.vertices))
 
-        self.embree = rtcs.EmbreeScene()
+        # Robust (watertight) traversal, as embreex's default: without it queries are ≈ 20 % faster (Mitsuba
+        # 3's setting) but rays aimed at a closed mesh's shared edges slip through it (tests/test_accel.py)
+        self.embree = rtcs.EmbreeScene(robust=True)
         TriangleMesh(self.embree, self.vertices.astype(np.float32), self.faces.astype(np.int32))
         # per-object ray visibility, holdout and alpha (engine.render.visibility reads them via tri_mesh)
         self.mesh_rays = [(m.visible_camera, m.visible_indirect, m.visible_shadow, m.holdout, m.alpha)
@@ -100,9 +102,9 @@ class CompiledScene:
         if self._main_prims.size == 0:
             raise SceneError("objects", "the scene has only lights (non-occluding emitters): add geometry")
         vf32 = self.vertices.astype(np.float32)
-        self.embree = rtcs.EmbreeScene()
+        self.embree = rtcs.EmbreeScene(robust=True)
         TriangleMesh(self.embree, vf32, self.faces[self._main_prims].astype(np.int32))
-        self.embree_passthrough = rtcs.EmbreeScene()
+        self.embree_passthrough = rtcs.EmbreeScene(robust=True)
         TriangleMesh(self.embree_passthrough, vf32, self.faces[self.passthrough_prims].astype(np.int32))
 
     @property
