@@ -10,6 +10,7 @@ measured here, not asserted.
 """
 
 import numpy as np
+import pytest
 
 from engine.materials.lambert import Lambert
 from engine.render.accel import CompiledScene
@@ -50,3 +51,47 @@ def test_rays_aimed_at_shared_edges_never_slip_through_a_closed_mesh():
     hits = compiled.intersect(o, unit(p - o))
     through = np.abs(hits.t - np.linalg.norm(p - o, axis=0)) > 1e-3
     assert not through.any(), f"{through.sum()} of {n} rays from inside slipped through an edge"
+
+
+def test_the_compiled_queries_give_embreex_hits_bit_for_bit():
+    """engine.render.embree_direct (Embree's C API called from compiled loops, the renderer's scene when
+    the kernels are compiled) against embreex's ``run``: the same triangle, distance and barycentrics for
+    every hit ray, the same misses, the same shadow-ray answers; bounded and unbounded rays, a triangle-id
+    map, and rays from inside the mesh."""
+    from engine import kernels
+    from engine.render.accel import EmbreexScene
+    from engine.render.embree_direct import DirectScene, library
+    lib = library()
+    if lib is None or not kernels.COMPILED:
+        pytest.skip("no compiled kernels, or Embree's library not found next to embreex")
+    _, m = closed_sphere(4)
+    rng = np.random.default_rng(11)
+    V, F = np.asarray(m.vertices), np.asarray(m.faces)
+    reference, direct = EmbreexScene(V, F), DirectScene(lib, V, F)
+    n = 20000
+    o = 2.5 * unit(rng.normal(size=(3, n))) * rng.random(n)           # outside and inside the sphere
+    d = unit(rng.normal(size=(3, n)))
+    t_max = rng.uniform(0.5, 6.0, n)
+    t_max[::7] = np.inf
+    prims = rng.permutation(len(F)).astype(np.int64)
+    for bound in (None, t_max):
+        for mapping in (None, prims):
+            a = reference.closest(o, d, bound, mapping)
+            b = direct.closest(o, d, bound, mapping)
+            hit = a[0] >= 0
+            assert 0.2 < hit.mean() < 0.95
+            np.testing.assert_array_equal(b[0], a[0])
+            for x, y in zip(a[1:], b[1:]):
+                assert x[hit].tobytes() == y[hit].tobytes()
+            np.testing.assert_array_equal(b[3][~hit], a[3][~hit])      # a miss keeps its length
+    blocked = reference.occluded(o, d, t_max)
+    assert 0.1 < blocked.mean() < 0.9
+    np.testing.assert_array_equal(direct.occluded(o, d, t_max), blocked)
+
+
+def test_a_render_queries_the_compiled_scene_when_the_kernels_are_compiled():
+    from engine import kernels
+    from engine.render.embree_direct import library
+    compiled, _ = closed_sphere(2)
+    expected = "DirectScene" if kernels.COMPILED and library() is not None else "EmbreexScene"
+    assert type(compiled.rays).__name__ == expected

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import jit, twin
+from . import jit, jit_inner, twin
 
 #: Largest ray length handed to Embree (float32; "unbounded" rays get this).
 MAX_DISTANCE = 1e37
@@ -81,3 +81,59 @@ def embree_hits_numba(prim_id: np.ndarray, u: np.ndarray, v: np.ndarray, tfar: n
 
 
 embree_hits = twin(_hits_loop and embree_hits_numba, embree_hits_numpy)
+
+
+# ----------------------------------------------------------------------------- Embree called per ray
+
+#: Float32 word offsets in Embree 4's RTCRayHit (RTCRay: org, tnear, dir, time, tfar, mask, id, flags;
+#: RTCHit: Ng, u, v, primID, geomID, instID[0]); RTCRay is its first 12 words.
+_TFAR, _MASK, _U, _V, _PRIM_ID, _GEOM_ID, _INST_ID = 8, 9, 15, 16, 17, 18, 19
+_INVALID = 0xFFFFFFFF
+
+
+@jit_inner
+def _ray_setup(rh, ri, o, d, t_max, has_t, i):
+    """Ray i of the (3, N) float64 batch into the RTCRayHit ``rh`` as embreex's ``run`` sets it up (the
+    casts of _rays_loop; tnear 0, every mask bit, time 0, no flags, no hit).  u and v are left as the
+    previous query wrote them, as embreex leaves them (a miss keeps them)."""
+    rh[0], rh[1], rh[2], rh[3] = np.float32(o[0, i]), np.float32(o[1, i]), np.float32(o[2, i]), 0.0
+    rh[4], rh[5], rh[6], rh[7] = np.float32(d[0, i]), np.float32(d[1, i]), np.float32(d[2, i]), 0.0
+    if has_t:
+        t = t_max[i]
+        rh[_TFAR] = np.float32(MAX_DISTANCE if t > MAX_DISTANCE else t)
+    else:
+        rh[_TFAR] = np.float32(MAX_DISTANCE)
+    ri[_MASK], ri[_MASK + 1], ri[_MASK + 2] = _INVALID, 0, 0
+    ri[_PRIM_ID], ri[_GEOM_ID], ri[_INST_ID] = _INVALID, _INVALID, _INVALID
+
+
+@jit
+def closest_hits_loop(intersect1, scene, rh, o, d, t_max, has_t, prims, mapped, prim, u, v, t):
+    """Closest hits of the rays o, d (3, N) float64 (lengths t_max, or unbounded) by Embree's
+    ``rtcIntersect1(scene, rayhit, NULL)`` (``intersect1``: its ctypes function pointer, ``scene``: the
+    RTCScene handle, ``rh``: a 16-byte aligned float32 RTCRayHit buffer): the numbers of
+    embree_rays → embreex's ``run(output=1)`` → embree_hits, without their arrays."""
+    ri = rh.view(np.uint32)
+    addr = rh.ctypes.data
+    for i in range(o.shape[1]):
+        _ray_setup(rh, ri, o, d, t_max, has_t, i)
+        intersect1(scene, addr, 0)
+        p = np.int64(-1) if ri[_PRIM_ID] == _INVALID else np.int64(ri[_PRIM_ID])
+        if mapped:
+            p = prims[p] if p >= 0 else -1
+        prim[i] = p
+        u[i] = np.float64(rh[_U])
+        v[i] = np.float64(rh[_V])
+        t[i] = np.float64(rh[_TFAR])
+
+
+@jit
+def occluded_loop(occluded1, scene, rh, o, d, t_max, blocked):
+    """Shadow queries by Embree's ``rtcOccluded1(scene, ray, NULL)`` as embreex's ``run(query=
+    "OCCLUDED")`` makes them: blocked where Embree set tfar to −inf."""
+    ri = rh.view(np.uint32)
+    addr = rh.ctypes.data
+    for i in range(o.shape[1]):
+        _ray_setup(rh, ri, o, d, t_max, True, i)
+        occluded1(scene, addr, 0)
+        blocked[i] = rh[_TFAR] < 0

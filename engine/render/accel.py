@@ -1,6 +1,7 @@
 """The compiled scene: all meshes merged into one Embree BVH plus per-triangle data.
 
-Embree (through embreex) works in float32 and has no t_near, so secondary
+The BVH is queried from compiled loops through Embree's C API (engine.render.embree_direct), or through
+embreex without Numba (``ray_scene``: the same hits).  Embree works in float32 and has no t_near, so secondary
 rays start at a point offset along the geometric normal (see
 ``offset_origin``).  Positions on surfaces are reconstructed in float64 from
 the barycentric coordinates rather than from o + t·d.
@@ -12,14 +13,54 @@ import numpy as np
 from embreex import rtcore_scene as rtcs
 from embreex.mesh_construction import TriangleMesh
 
+from ..kernels import twin
 from ..kernels.geometry import offset_origin as offset_origin_kernel, surface_attributes
-from ..kernels.rays import embree_hits, embree_rays
+from ..kernels.rays import closest_hits_loop, embree_hits, embree_rays
 from ..scene.description import Scene
 from ..errors import SceneError
 from ..textures import SurfacePoints, VertexAttributes
 
 # Mitsuba 3's float32 ray epsilon: offsets scale with (1 + max|p_i|).
 RAY_EPSILON = 8.9e-5
+
+
+class EmbreexScene:
+    """One triangle mesh (vertices (V, 3), triangles (F, 3)) as an embreex scene: the reference queries.
+
+    Robust (watertight) traversal, as embreex's default: without it queries are ≈ 20 % faster (Mitsuba 3's
+    setting) but rays aimed at a closed mesh's shared edges slip through it (tests/test_accel.py)."""
+
+    def __init__(self, vertices: np.ndarray, faces: np.ndarray):
+        self.embree = rtcs.EmbreeScene(robust=True)
+        TriangleMesh(self.embree, np.asarray(vertices, np.float32), np.asarray(faces, np.int32))
+
+    def closest(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray | None, prims: np.ndarray | None):
+        """(prim (N,) int64, −1 = miss, mapped through ``prims`` unless None; u, v, t (N,) float64)."""
+        of, df, dists = embree_rays(o, d, t_max)
+        res = self.embree.run(of, df, output=1) if dists is None else self.embree.run(of, df, dists=dists, output=1)
+        return embree_hits(res["primID"], res["u"], res["v"], res["tfar"], prims)
+
+    def occluded(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray) -> np.ndarray:
+        """True where the segment o → o + t_max·d is blocked."""
+        of, df, dists = embree_rays(o, d, t_max)
+        return self.embree.run(of, df, dists=dists, query="OCCLUDED") == 0
+
+
+def ray_scene_numpy(vertices: np.ndarray, faces: np.ndarray) -> EmbreexScene:
+    """The scene the queries run on: embreex's."""
+    return EmbreexScene(vertices, faces)
+
+
+def ray_scene_numba(vertices: np.ndarray, faces: np.ndarray):
+    """The same scene built through Embree's C API and queried from compiled loops (the same hits,
+    without embreex's per-call arrays: engine.render.embree_direct), embreex's where its library is not found."""
+    from .embree_direct import DirectScene, library
+    lib = library()
+    return EmbreexScene(vertices, faces) if lib is None else DirectScene(lib, vertices, faces)
+
+
+#: The Embree scene of a mesh, with ``closest`` and ``occluded`` queries.
+ray_scene = twin(closest_hits_loop and ray_scene_numba, ray_scene_numpy)
 
 
 class Hits:
@@ -77,10 +118,6 @@ class CompiledScene:
 
         self.attributes = _vertex_attributes(scene.meshes, self.faces, len(self.vertices))
 
-        # Robust (watertight) traversal, as embreex's default: without it queries are ≈ 20 % faster (Mitsuba
-        # 3's setting) but rays aimed at a closed mesh's shared edges slip through it (tests/test_accel.py)
-        self.embree = rtcs.EmbreeScene(robust=True)
-        TriangleMesh(self.embree, self.vertices.astype(np.float32), self.faces.astype(np.int32))
         # per-object ray visibility, holdout and alpha (engine.render.visibility reads them via tri_mesh)
         self.mesh_rays = [(m.visible_camera, m.visible_indirect, m.visible_shadow, m.holdout, m.alpha)
                           for m in scene.meshes]
@@ -97,15 +134,13 @@ class CompiledScene:
         self.has_passthrough = self.passthrough_prims.size > 0
         self._main_prims = None
         if not self.has_passthrough:
+            self.rays = ray_scene(self.vertices, self.faces)
             return
         self._main_prims = np.nonzero(self.tri_occluder)[0]
         if self._main_prims.size == 0:
             raise SceneError("objects", "the scene has only lights (non-occluding emitters): add geometry")
-        vf32 = self.vertices.astype(np.float32)
-        self.embree = rtcs.EmbreeScene(robust=True)
-        TriangleMesh(self.embree, vf32, self.faces[self._main_prims].astype(np.int32))
-        self.embree_passthrough = rtcs.EmbreeScene(robust=True)
-        TriangleMesh(self.embree_passthrough, vf32, self.faces[self.passthrough_prims].astype(np.int32))
+        self.rays = ray_scene(self.vertices, self.faces[self._main_prims])
+        self.rays_passthrough = ray_scene(self.vertices, self.faces[self.passthrough_prims])
 
     @property
     def used_material_names(self) -> set[str]:
@@ -121,12 +156,7 @@ class CompiledScene:
 
     def intersect(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray | None = None) -> Hits:
         """Closest hits for origins o and unit directions d, both (3, N)."""
-        of, df, dists = embree_rays(o, d, t_max)
-        if dists is None:
-            res = self.embree.run(of, df, output=1)
-        else:
-            res = self.embree.run(of, df, dists=dists, output=1)
-        return Hits(*embree_hits(res["primID"], res["u"], res["v"], res["tfar"], self._main_prims))
+        return Hits(*self.rays.closest(o, d, t_max, self._main_prims))
 
     def passthrough_hits(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray,
                          max_layers: int = 8) -> list[tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -143,13 +173,11 @@ class CompiledScene:
         start = np.zeros(o.shape[1])
         o_cur, t_left = o, np.asarray(t_max, np.float64)
         for _ in range(max_layers):
-            of, df, dists = embree_rays(o_cur, d[:, idx], t_left)
-            res = self.embree_passthrough.run(of, df, dists=dists, output=1)
-            local = res["primID"]
+            local, _, _, t = self.rays_passthrough.closest(o_cur, d[:, idx], t_left, None)
             got = local >= 0
             if not got.any():
                 break
-            t = res["tfar"].astype(np.float64)[got]
+            t = t[got]
             layers.append((idx[got], self.passthrough_prims[local[got]], start[got] + t))
             # continue just past the crossing
             step = t + RAY_EPSILON * (1.0 + np.abs(o_cur[:, got]).max(0))
@@ -163,9 +191,7 @@ class CompiledScene:
 
     def occluded(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray) -> np.ndarray:
         """True where the segment o → o + t_max·d is blocked."""
-        of, df, dists = embree_rays(o, d, t_max)
-        res = self.embree.run(of, df, dists=dists, query="OCCLUDED")
-        return res == 0
+        return self.rays.occluded(o, d, t_max)
 
     def unblock_own_hits(self, emitter: int, p: np.ndarray, n_g: np.ndarray, wi: np.ndarray, dist: np.ndarray,
                          cos_l: np.ndarray, blocked: np.ndarray) -> np.ndarray:

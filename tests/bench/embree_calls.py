@@ -1,20 +1,21 @@
-"""Would calling Embree from compiled code pay?  ns per closest-hit query by three call paths.
+"""Embree closest-hit queries by three call paths, ns per ray: embreex, rtcIntersect1 and 16-ray packets.
 
     python tests/bench/embree_calls.py [--scene glass_sphere] [--res 128] [--spp 16] [--repeats 5]
 
 Side by side in one run, on one scene's Embree scene built the way engine.render.accel builds it
 (robust traversal, Embree's default build quality):
 
-- ``embreex``: ``EmbreeScene.run(o, d, output=1)``, what the engine calls today (a Cython loop of
-  ``rtcIntersect1`` that allocates six result arrays per call, Ng included);
+- ``embreex``: ``EmbreeScene.run(o, d, output=1)`` (a Cython loop of ``rtcIntersect1`` that allocates
+  six result arrays per call, Ng included): what the engine calls without Numba
+  (engine.render.accel.EmbreexScene);
 - ``rtcIntersect1``: the same Embree library (the one inside the embreex wheel) called per ray from a
-  Numba loop through a ctypes function pointer, writing only prim, u, v and t;
+  Numba loop through a ctypes function pointer, writing only prim, u, v and t (what the engine does
+  with Numba, engine.render.embree_direct, which also reads the float64 rays directly);
 - ``rtcIntersect16``: the same from Numba, rays in packets of 16 (Embree's SoA ``RTCRayHit16``).
 
 Rays: the scene's camera rays (pixel-major: each pixel's ``--spp`` samples in a row, as the engine's
 batches hold them; and sample-major), and random rays aimed at the scene's first mesh.  Prints ns per
-ray, and whether prim and u equal the ``rtcIntersect1`` ones bit for bit.  A measurement for the
-next step (Embree inside the compiled bounce), not a feature: the engine does not use it.  Needs
+ray, and whether prim and u of the packets equal the ``rtcIntersect1`` ones bit for bit.  Needs
 Numba and a Linux embreex wheel (``embreex.libs/libembree4-*.so.4``).  Benchmarks never run as tests.
 """
 
@@ -135,6 +136,7 @@ def main():
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
+    from engine.render.accel import EmbreexScene
     from engine.render.renderer import Renderer
     from engine.scene.loader import load_scene
     shared = os.environ.get("POLAR_SHARED") or os.path.join(os.path.dirname(REPO), "shared")
@@ -144,6 +146,7 @@ def main():
     compiled, camera = renderer.compiled, renderer.camera
     lib = embree_library()
     handle, _keep = direct_scene(lib, compiled.vertices, compiled.faces)
+    reference = EmbreexScene(compiled.vertices, compiled.faces).embree
     trace1, trace16 = compiled_loops(lib)
     rng = np.random.default_rng(0)
     n_pix = args.res * args.res
@@ -182,7 +185,7 @@ def main():
         out16 = [np.empty_like(a) for a in out1]
         trace1(handle, o32, d32, rh, *out1)
         trace16(handle, o32, d32, pk, valid, *out16)
-        t_x = best(n, compiled.embree.run, oT, dT, output=1)
+        t_x = best(n, reference.run, oT, dT, output=1)
         t_1 = best(n, trace1, handle, o32, d32, rh, *out1)
         t_16 = best(n, trace16, handle, o32, d32, pk, valid, *out16)
         same = np.array_equal(out1[0], out16[0]) and np.array_equal(out1[1], out16[1])
