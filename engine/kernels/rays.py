@@ -59,16 +59,21 @@ def embree_hits_numpy(prim_id: np.ndarray, u: np.ndarray, v: np.ndarray, tfar: n
     return prim, u.astype(np.float64), v.astype(np.float64), tfar.astype(np.float64)
 
 
+@jit_inner
+def _store_hit(i, p, u32, v32, t32, prims, mapped, prim, u, v, t):
+    """Hit i as the renderer keeps it: triangle p (−1: miss) mapped through ``prims``, float64 u, v, t."""
+    if mapped:
+        p = prims[p] if p >= 0 else -1
+    prim[i] = p
+    u[i] = np.float64(u32)
+    v[i] = np.float64(v32)
+    t[i] = np.float64(t32)
+
+
 @jit
 def _hits_loop(prim_id, u, v, tfar, prims, mapped, prim, u64, v64, t64):
     for i in range(prim_id.shape[0]):
-        p = np.int64(prim_id[i])
-        if mapped:
-            p = prims[p] if p >= 0 else -1
-        prim[i] = p
-        u64[i] = np.float64(u[i])
-        v64[i] = np.float64(v[i])
-        t64[i] = np.float64(tfar[i])
+        _store_hit(i, np.int64(prim_id[i]), u[i], v[i], tfar[i], prims, mapped, prim, u64, v64, t64)
 
 
 def embree_hits_numba(prim_id: np.ndarray, u: np.ndarray, v: np.ndarray, tfar: np.ndarray,
@@ -119,12 +124,7 @@ def closest_hits_loop(intersect1, scene, rh, o, d, t_max, has_t, prims, mapped, 
         _ray_setup(rh, ri, o, d, t_max, has_t, i)
         intersect1(scene, addr, 0)
         p = np.int64(-1) if ri[_PRIM_ID] == _INVALID else np.int64(ri[_PRIM_ID])
-        if mapped:
-            p = prims[p] if p >= 0 else -1
-        prim[i] = p
-        u[i] = np.float64(rh[_U])
-        v[i] = np.float64(rh[_V])
-        t[i] = np.float64(rh[_TFAR])
+        _store_hit(i, p, rh[_U], rh[_V], rh[_TFAR], prims, mapped, prim, u, v, t)
 
 
 @jit
