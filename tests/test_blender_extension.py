@@ -70,6 +70,8 @@ RENDER = textwrap.dedent("""
     print("POLAR_KERNEL_CACHE=" + kernels.cache_dir())
     print("POLAR_TABLE_DIR=" + importlib.import_module(ext.__name__ + ".engine.materials.table_cache").table_dir())
     print("POLAR_BACKEND=" + kernels.BACKEND)
+    lib = importlib.import_module(ext.__name__ + ".engine.render.embree_direct").library()
+    print("POLAR_EMBREE_LIBRARY=" + ("" if lib is None else lib._name))
 """)
 
 
@@ -105,6 +107,8 @@ def test_zip_installs_enables_renders_and_caches_kernels_in_the_user_folder(tmp_
         assert proc.returncode == 0, proc.stdout + proc.stderr
         assert printed(proc, "POLAR_ENGINE_FILE")[0].startswith(str(installed))   # the installed copy
         assert printed(proc, "POLAR_BACKEND")[0].startswith("numba")
+        # Embree is queried from compiled code (engine.render.embree_direct) with the bundled wheel's library
+        assert printed(proc, "POLAR_EMBREE_LIBRARY")[0].startswith(str(user) + os.sep), proc.stdout
         cache = printed(proc, "POLAR_KERNEL_CACHE")[0]
         assert cache.startswith(str(user_folder / "0.1.0") + os.sep), cache
         assert any(name.endswith(".nbi") for _, _, files in os.walk(cache) for name in files)
