@@ -1,29 +1,28 @@
-"""Embree closest-hit queries by three call paths, ns per ray: embreex, rtcIntersect1 and 16-ray packets.
+"""Embree closest-hit queries by three call paths, ns per ray: embreex, the engine's compiled loop, 16-ray packets.
 
     python tests/bench/embree_calls.py [--scene glass_sphere] [--res 128] [--spp 16] [--repeats 5]
 
-Side by side in one run, on one scene's Embree scene built the way engine.render.accel builds it
-(robust traversal, Embree's default build quality):
+Side by side in one run, on one scene's geometry (robust traversal, Embree's default build quality),
+each from the renderer's (3, N) float64 rays to its (prim, u, v, t) float64 hits:
 
-- ``embreex``: ``EmbreeScene.run(o, d, output=1)`` (a Cython loop of ``rtcIntersect1`` that allocates
-  six result arrays per call, Ng included): what the engine calls without Numba
-  (engine.render.accel.EmbreexScene);
-- ``rtcIntersect1``: the same Embree library (the one inside the embreex wheel) called per ray from a
-  Numba loop through a ctypes function pointer, writing only prim, u, v and t (what the engine does
-  with Numba, engine.render.embree_direct, which also reads the float64 rays directly);
-- ``rtcIntersect16``: the same from Numba, rays in packets of 16 (Embree's SoA ``RTCRayHit16``).
+- ``embreex``: engine.render.accel.EmbreexScene.closest, what the engine calls without Numba (float32
+  (N, 3) copies of the rays, embreex's ``run`` — a Cython loop of ``rtcIntersect1`` that allocates six
+  result arrays per call, Ng included — and the conversion of its results);
+- ``rtcIntersect1``: engine.render.embree_direct.DirectScene.closest, what the engine calls with Numba (the
+  embreex wheel's own ``libembree4`` called per ray from a compiled loop through a ctypes function pointer);
+- ``rtcIntersect16``: the same scene from a compiled loop here, rays in packets of 16 (Embree's SoA
+  ``RTCRayHit16``); not used by the engine.
 
 Rays: the scene's camera rays (pixel-major: each pixel's ``--spp`` samples in a row, as the engine's
 batches hold them; and sample-major), and random rays aimed at the scene's first mesh.  Prints ns per
-ray, and whether prim and u of the packets equal the ``rtcIntersect1`` ones bit for bit.  Needs
-Numba and a Linux embreex wheel (``embreex.libs/libembree4-*.so.4``).  Benchmarks never run as tests.
+ray, and whether the packets' prim and u equal the one-ray query's bit for bit.  Needs Numba and the
+Embree library next to embreex (engine.render.embree_direct.library).  Benchmarks never run as tests.
 """
 
 from __future__ import annotations
 
 import argparse
 import ctypes
-import glob
 import os
 import sys
 import time
@@ -33,49 +32,7 @@ import numpy as np
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 sys.path.insert(0, REPO)
 
-RTC_SCENE_FLAG_ROBUST = 1 << 2
-RTC_BUILD_QUALITY_MEDIUM = 1
-RTC_GEOMETRY_TYPE_TRIANGLE = 0
-RTC_BUFFER_TYPE_INDEX, RTC_BUFFER_TYPE_VERTEX = 0, 1
-RTC_FORMAT_UINT3, RTC_FORMAT_FLOAT3 = 0x5003, 0x9003
 INVALID = 0xFFFFFFFF
-
-
-def embree_library():
-    import embreex
-    here = os.path.dirname(os.path.dirname(embreex.__file__))
-    found = glob.glob(os.path.join(here, "embreex.libs", "libembree4*.so*"))
-    if not found:
-        raise SystemExit("no libembree4 in the embreex wheel's embreex.libs/ (this bench needs a Linux wheel)")
-    vp, sz, c_int = ctypes.c_void_p, ctypes.c_size_t, ctypes.c_int
-    lib = ctypes.CDLL(found[0])
-    for name, res, args in [("rtcNewDevice", vp, [ctypes.c_char_p]), ("rtcNewScene", vp, [vp]),
-                            ("rtcSetSceneFlags", None, [vp, c_int]), ("rtcSetSceneBuildQuality", None, [vp, c_int]),
-                            ("rtcNewGeometry", vp, [vp, c_int]),
-                            ("rtcSetSharedGeometryBuffer", None, [vp, c_int, ctypes.c_uint, c_int, vp, sz, sz, sz]),
-                            ("rtcCommitGeometry", None, [vp]), ("rtcAttachGeometry", ctypes.c_uint, [vp, vp]),
-                            ("rtcCommitScene", None, [vp])]:
-        f = getattr(lib, name)
-        f.restype, f.argtypes = res, args
-    return lib
-
-
-def direct_scene(lib, vertices, faces):
-    """(RTCScene handle, the arrays Embree shares): robust, default build quality, as accel builds it."""
-    dev = lib.rtcNewDevice(None)
-    scene = lib.rtcNewScene(dev)
-    lib.rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST)
-    lib.rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM)
-    V = np.zeros((len(vertices), 4), np.float32)         # 16-byte stride, as embreex's TriangleMesh
-    V[:, :3] = vertices
-    F = np.ascontiguousarray(faces, dtype=np.uint32)
-    geom = lib.rtcNewGeometry(dev, RTC_GEOMETRY_TYPE_TRIANGLE)
-    lib.rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, V.ctypes.data, 0, 16, len(V))
-    lib.rtcSetSharedGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT3, F.ctypes.data, 0, 12, len(F))
-    lib.rtcCommitGeometry(geom)
-    lib.rtcAttachGeometry(scene, geom)
-    lib.rtcCommitScene(scene)
-    return scene, (V, F)
 
 
 def aligned(n, dtype, alignment):
@@ -84,30 +41,15 @@ def aligned(n, dtype, alignment):
     return buf[off:off + n]
 
 
-def compiled_loops(lib):
+def packet_loop(lib):
+    """A compiled loop querying ``rtcIntersect16`` (the same ray set-up and casts as the engine's one-ray loop)."""
     import numba
     sz = ctypes.c_size_t
-    one = ctypes.CFUNCTYPE(None, sz, sz, sz)(ctypes.cast(lib.rtcIntersect1, ctypes.c_void_p).value)
     sixteen = ctypes.CFUNCTYPE(None, sz, sz, sz, sz)(ctypes.cast(lib.rtcIntersect16, ctypes.c_void_p).value)
 
     @numba.njit(nogil=True)
-    def trace1(scene, o, d, rh, prim, u, v, t):
-        # RTCRayHit: org, tnear, dir, time, tfar, mask, id, flags | Ng, u, v, primID, geomID, instID
-        addr = rh.ctypes.data
-        ri = rh.view(np.uint32)
-        for i in range(o.shape[1]):
-            rh[0], rh[1], rh[2], rh[3] = o[0, i], o[1, i], o[2, i], 0.0
-            rh[4], rh[5], rh[6], rh[7] = d[0, i], d[1, i], d[2, i], 0.0
-            rh[8] = np.float32(1e37)
-            ri[9], ri[10], ri[11] = INVALID, 0, 0
-            ri[17], ri[18], ri[19] = INVALID, INVALID, INVALID
-            one(scene, addr, 0)
-            prim[i] = -1 if ri[18] == INVALID else np.int64(ri[17])
-            u[i], v[i], t[i] = rh[15], rh[16], rh[8]
-
-    @numba.njit(nogil=True)
     def trace16(scene, o, d, pk, valid, prim, u, v, t):
-        # RTCRayHit16: the same fields, each as 16 lanes
+        # RTCRayHit16: org, tnear, dir, time, tfar, mask, id, flags | Ng, u, v, primID, geomID, instID; 16 lanes each
         addr, vaddr = pk.ctypes.data, valid.ctypes.data
         pi = pk.view(np.uint32)
         n = o.shape[1]
@@ -116,9 +58,9 @@ def compiled_loops(lib):
             for k in range(16):
                 j = i0 + (k if k < m else 0)
                 valid[k] = -1 if k < m else 0
-                pk[k], pk[16 + k], pk[32 + k], pk[48 + k] = o[0, j], o[1, j], o[2, j], 0.0
-                pk[64 + k], pk[80 + k], pk[96 + k], pk[112 + k] = d[0, j], d[1, j], d[2, j], 0.0
-                pk[128 + k] = np.float32(1e37)
+                pk[k], pk[16 + k], pk[32 + k] = np.float32(o[0, j]), np.float32(o[1, j]), np.float32(o[2, j])
+                pk[64 + k], pk[80 + k], pk[96 + k] = np.float32(d[0, j]), np.float32(d[1, j]), np.float32(d[2, j])
+                pk[48 + k], pk[112 + k], pk[128 + k] = 0.0, 0.0, np.float32(1e37)
                 pi[144 + k], pi[160 + k], pi[176 + k] = INVALID, 0, 0
                 pi[272 + k], pi[288 + k], pi[304 + k] = INVALID, INVALID, INVALID
             sixteen(vaddr, scene, addr, 0)
@@ -126,7 +68,7 @@ def compiled_loops(lib):
                 prim[i0 + k] = -1 if pi[288 + k] == INVALID else np.int64(pi[272 + k])
                 u[i0 + k], v[i0 + k], t[i0 + k] = pk[240 + k], pk[256 + k], pk[128 + k]
 
-    return trace1, trace16
+    return sixteen, trace16
 
 
 def main():
@@ -137,6 +79,7 @@ def main():
     ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
     from engine.render.accel import EmbreexScene
+    from engine.render.embree_direct import DirectScene, library
     from engine.render.renderer import Renderer
     from engine.scene.loader import load_scene
     shared = os.environ.get("POLAR_SHARED") or os.path.join(os.path.dirname(REPO), "shared")
@@ -144,10 +87,12 @@ def main():
     scene.camera.width = scene.camera.height = args.res
     renderer = Renderer(scene)
     compiled, camera = renderer.compiled, renderer.camera
-    lib = embree_library()
-    handle, _keep = direct_scene(lib, compiled.vertices, compiled.faces)
-    reference = EmbreexScene(compiled.vertices, compiled.faces).embree
-    trace1, trace16 = compiled_loops(lib)
+    lib = library()
+    if lib is None:
+        raise SystemExit("Embree's library was not found next to embreex")
+    reference = EmbreexScene(compiled.vertices, compiled.faces)
+    direct = DirectScene(lib, compiled.vertices, compiled.faces)
+    _, trace16 = packet_loop(lib)
     rng = np.random.default_rng(0)
     n_pix = args.res * args.res
     mesh = scene.meshes[0]
@@ -161,7 +106,6 @@ def main():
         oc, dc, *_ = camera.generate(pixels, rng.random((2, pixels.size)))
         ray_sets[name] = (oc, dc)
     ray_sets["random, at the first mesh"] = (o, d / np.linalg.norm(d, axis=0))
-    rh = aligned(20, np.float32, 16)
     pk, valid = aligned(320, np.float32, 64), aligned(16, np.int32, 64)
 
     def best(n, f, *call_args, **kw):
@@ -174,22 +118,20 @@ def main():
 
     print(f"{args.scene}, {len(compiled.faces)} triangles, {args.res}² × {args.spp} rays per set; ns per ray "
           f"(fastest of {args.repeats}):\n")
-    print("| rays | embreex run | rtcIntersect1 from Numba | rtcIntersect16 from Numba | 16 ÷ embreex | "
-          "prim, u as rtcIntersect1 |")
-    print("|---|---|---|---|---|---|")
+    print("| rays | embreex | rtcIntersect1 (the engine) | rtcIntersect16 | 1 ÷ embreex | 16 ÷ embreex | "
+          "packets' prim, u as one ray's |")
+    print("|---|---|---|---|---|---|---|")
     for name, (o, d) in ray_sets.items():
         n = o.shape[1]
-        o32, d32 = o.astype(np.float32), d.astype(np.float32)
-        oT, dT = np.ascontiguousarray(o32.T), np.ascontiguousarray(d32.T)
-        out1 = [np.empty(n, np.int64), np.empty(n, np.float32), np.empty(n, np.float32), np.empty(n, np.float32)]
-        out16 = [np.empty_like(a) for a in out1]
-        trace1(handle, o32, d32, rh, *out1)
-        trace16(handle, o32, d32, pk, valid, *out16)
-        t_x = best(n, reference.run, oT, dT, output=1)
-        t_1 = best(n, trace1, handle, o32, d32, rh, *out1)
-        t_16 = best(n, trace16, handle, o32, d32, pk, valid, *out16)
+        out1 = direct.closest(o, d, None, None)
+        out16 = [np.empty(n, np.int64), np.empty(n), np.empty(n), np.empty(n)]
+        trace16(direct.handle, o, d, pk, valid, *out16)
+        t_x = best(n, reference.closest, o, d, None, None)
+        t_1 = best(n, direct.closest, o, d, None, None)
+        t_16 = best(n, trace16, direct.handle, o, d, pk, valid, *out16)
         same = np.array_equal(out1[0], out16[0]) and np.array_equal(out1[1], out16[1])
-        print(f"| {name} | {t_x:.0f} | {t_1:.0f} | {t_16:.0f} | {t_16 / t_x:.2f} | {'yes' if same else 'no'} |")
+        print(f"| {name} | {t_x:.0f} | {t_1:.0f} | {t_16:.0f} | {t_1 / t_x:.2f} | {t_16 / t_x:.2f} | "
+              f"{'yes' if same else 'no'} |")
     return 0
 
 
