@@ -11,8 +11,10 @@ Prints one Markdown table per target (the issue's target next to each measured r
    resolution; the error is the RMSE of the luminance S0 (and S1) against a high-spp reference, with
    the reference's own noise subtracted (error² − var_ref, var_ref from its two halves).  Monte Carlo
    error² ∝ 1/time, so time to equal error ours ÷ Mitsuba = (t_M·e_M²)/(t_ours·e_ours²), > 1: we are
-   faster.  References: Mitsuba, 2 × ``--ref-spp`` (``render_peer.py``), cached in
-   ``out/bench_refs/`` (git-ignored); without Mitsuba, our own 2 × ``--ref-spp`` render.  Where our
+   faster.  Next to it, that ratio ÷ the Embree share of table 3: what our sampling would reach if
+   only the ray queries took time (a target above it needs cheaper queries).  References: Mitsuba,
+   2 × ``--ref-spp`` (``render_peer.py``), cached in ``out/bench_refs/`` (git-ignored); without
+   Mitsuba, our own 2 × ``--ref-spp`` render.  Where our
    S0 legitimately differs from Mitsuba's (``cornell_lambert``: RGB → spectrum upsampling of the
    coloured walls) our S0 error is our noise alone (from the two seeds), marked ‡.
 2. **Throughput**: Msamples/s and Mrays/s (camera + bounce + shadow rays) of ours next to Mitsuba
@@ -23,7 +25,10 @@ Prints one Markdown table per target (the issue's target next to each measured r
 4. **Thread scaling**: throughput with 2 threads ÷ 1 thread, the fastest of ``--scaling-repeats``
    alternated 1- and 2-thread renders each, with the CPU seconds of both (extra CPU with 2 threads
    is time lost to contention) and the hypervisor's steal during each (/proc/stat: CPU time given to
-   other guests, as a share of both cores' wall time; a 2-thread render waits for the slower core).
+   other guests, as a share of both cores' wall time; a 2-thread render waits for the slower core),
+   and the same ratio for the Embree queries alone (``embree_alone_scaling``: the render's own rays
+   re-queried in two halves, one thread after the other or two at once; no code of ours, no GIL
+   between them): the ceiling the machine sets for that part of a render.
 5. **Full Stokes ÷ scalar**: render time with ``--polarisation full`` ÷ ``--polarisation off``.
 6. **Blender ÷ CLI**: ``tests/bench/blender_overhead.py`` (F12 render in bpy vs the engine render of
    the same exported scene, and where Blender's extra time goes).
@@ -75,6 +80,7 @@ EQUAL_ERROR_TARGET = {"fresnel_sphere": 1.0, "fresnel_sphere_au": 0.5, "glass_sp
 SPHERE_SCENES = {"fresnel_sphere", "fresnel_sphere_au", "glass_sphere", "rough_sphere_a030"}
 EMBREE_SHARE_TARGET = 0.5          # of a 1-thread render, sphere scenes
 THREADS_TARGET = 1.9               # 2 threads ÷ 1
+CAPTURED_RAYS = 1 << 19            # rays of a render re-queried alone for the Embree-alone thread scaling
 FULL_OVER_SCALAR_TARGET = 1.3      # full Stokes time ÷ scalar time, at most
 BLENDER_TARGET = 1.10              # Blender time ÷ CLI time, at most
 MEMORY_TARGET_GB = 2.0             # 1080p demo, peak RSS below
@@ -144,10 +150,15 @@ def ours_child(cfg):
     # seconds inside Embree (wall, summed over threads), number of queries, CPU seconds of the calling threads
     inside = [0.0, 0, 0.0]
     compiled = renderer.compiled
+    queries = {}            # the untimed methods, for embree_alone_scaling
+    captured = {"intersect": [], "occluded": []}
+    capturing = [False]     # only in a job that asks for it: the copies would add to a timed render
     for name in ("intersect", "occluded"):
-        method = getattr(compiled, name)
+        method = queries[name] = getattr(compiled, name)
 
-        def timed(*a, _method=method, **k):
+        def timed(*a, _method=method, _name=name, **k):
+            if capturing[0] and sum(q[0].shape[1] for q in captured[_name]) < CAPTURED_RAYS:
+                captured[_name].append(tuple(None if x is None else np.array(x) for x in a))
             t, c = time.perf_counter(), time.thread_time()
             try:
                 return _method(*a, **k)
@@ -170,6 +181,7 @@ def ours_child(cfg):
         renderer.warm_up(settings({"spp": 1, "polarisation": polarisation}))
     for job in cfg["jobs"]:
         st = settings(job)
+        capturing[0] = bool(job.get("capture"))
         inside[:] = [0.0, 0, 0.0]
         steal0 = steal_seconds()
         t0, c0 = time.perf_counter(), time.process_time()
@@ -190,6 +202,50 @@ def ours_child(cfg):
                           # the machine's (all cores) wall time: a 2-thread render waits for the slower core
                           "steal": None if steal0 is None else (steal1 - steal0) / (seconds * (os.cpu_count() or 1))}),
               flush=True)
+    if cfg.get("embree_alone") and captured["intersect"]:
+        print(json.dumps({"job": "embree_alone", **embree_alone_scaling(queries, captured, cfg["embree_alone"])}),
+              flush=True)
+
+
+def embree_alone_scaling(queries, captured, repeats):
+    """The thread scaling of the Embree queries alone: the render's own rays (the first CAPTURED_RAYS
+    closest-hit and shadow rays it queried), split into two halves that one thread queries one after
+    the other or two threads at once (compiled loops or embreex: no GIL held), alternated, fastest of
+    ``repeats`` each.  Nothing of ours runs in between, so this is the ceiling this machine sets for the
+    Embree part of a 2-thread render (shared caches, memory, the hypervisor)."""
+    import threading
+    halves = ([], [])
+    for name, calls in captured.items():
+        for args in calls:
+            n = args[0].shape[1]
+            for k, sl in enumerate((slice(0, n // 2), slice(n // 2, n))):
+                halves[k].append((queries[name], tuple(None if x is None else np.ascontiguousarray(x[..., sl])
+                                                       for x in args)))
+
+    def query(k):
+        for method, args in halves[k]:
+            method(*args)
+
+    def timed(threads):
+        t = time.perf_counter()
+        if threads == 1:
+            query(0)
+            query(1)
+        else:
+            workers = [threading.Thread(target=query, args=(k,)) for k in range(2)]
+            for w in workers:
+                w.start()
+            for w in workers:
+                w.join()
+        return time.perf_counter() - t
+
+    timed(1)
+    best = {1: float("inf"), 2: float("inf")}
+    for _ in range(repeats):
+        for threads in (1, 2):
+            best[threads] = min(best[threads], timed(threads))
+    rays = sum(a[0].shape[1] for calls in captured.values() for a in calls)
+    return {"rays": rays, "one_thread_seconds": best[1], "two_thread_seconds": best[2], "scaling": best[1] / best[2]}
 
 
 def memory_child(cfg):
@@ -205,8 +261,8 @@ def memory_child(cfg):
     print(json.dumps({"seconds": time.perf_counter() - t0}))
 
 
-def run_ours(scene, res, jobs):
-    cfg = {"scene": scene, "width": res, "height": res, "jobs": jobs}
+def run_ours(scene, res, jobs, embree_alone=0):
+    cfg = {"scene": scene, "width": res, "height": res, "jobs": jobs, "embree_alone": embree_alone}
     out, _, peak = run_measured([sys.executable, __file__, "--child", json.dumps(cfg)])
     return {r["job"]: r for r in json_lines(out)}, peak
 
@@ -271,15 +327,18 @@ def measure_scene(scene, args, tmp, mitsuba, sampler, peer):
         jobs.append({"name": f"auto{k}", "spp": args.spp, "seed": k, "threads": 2,
                      **({"save": saves[k]} if k < 2 else {})})
     jobs += [{"name": "full", "spp": args.spp, "polarisation": "full"},
-             {"name": "off", "spp": args.spp, "polarisation": "off"}]
+             {"name": "off", "spp": args.spp, "polarisation": "off"},
+             # the rays of the Embree-alone scaling (a short render of its own, in no table)
+             {"name": "capture", "spp": max(8, args.spp // 8), "seed": 7, "capture": True}]
     for job in jobs:            # (the references keep the scene's sampler: any unbiased one will do)
         job["sampler"] = sampler
-    ours, peak = run_ours(scene, args.res, jobs)
+    ours, peak = run_ours(scene, args.res, jobs, embree_alone=max(args.scaling_repeats, 2) + 2)
     runs = range(max(args.scaling_repeats, 2))
     best = min((ours["auto0"], ours["auto1"]), key=lambda r: r["seconds"])
     row = {"scene": scene, "sampler": sampler, "ours": ours, "ours_best": best, "ours_peak": peak,
            "two_threads": min((ours[f"auto{k}"] for k in runs), key=lambda r: r["seconds"]),
-           "one_thread": min((ours[f"auto_1thread{k}"] for k in runs), key=lambda r: r["seconds"])}
+           "one_thread": min((ours[f"auto_1thread{k}"] for k in runs), key=lambda r: r["seconds"]),
+           "embree_alone": ours.get("embree_alone")}
     if "ref" not in peer:
         peer["ref"] = reference(scene, args.res, args.ref_spp, mitsuba)
     ref, ref_var, source = peer["ref"]
@@ -318,6 +377,14 @@ def rate(r):
     return r["samples"] / r["seconds"] / 1e6
 
 
+def embree_share(row):
+    """(CPU-time share, wall-time share) of the Embree queries in the fastest 1-thread render, or Nones."""
+    one = row["one_thread"]
+    embree, embree_cpu = one["embree_seconds"], one.get("embree_cpu_seconds")
+    share_wall = None if embree is None else embree / one["seconds"]
+    return (share_wall if embree_cpu is None else embree_cpu / one["cpu_seconds"]), share_wall
+
+
 def tables(rows, blender, memory, cycles, args, header, sampler, suffix=""):
     """The Markdown tables of one sampler's rows: numbered 1–8, or with ``suffix`` appended to each number
     (a second sampler of the same run: the tables that depend on our sampler; Mitsuba's columns are the
@@ -328,7 +395,7 @@ def tables(rows, blender, memory, cycles, args, header, sampler, suffix=""):
             f"S0 and S1 against a {rows[0]['ref_source'] if rows else '?'} reference of 2 × {args.ref_spp} spp, its "
             "noise removed; Mitsuba's independent sampler)", "",
             "| scene | ours: s @ spp | RMSE S0 / S1 | Mitsuba: s @ spp | RMSE S0 / S1 | S0 ratio | target | | "
-            "S1 ratio |", "|---|---|---|---|---|---|---|---|---|"]
+            "S1 ratio | S0 ratio if only Embree took time ⁂ |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         llvm = r.get("llvm", {})
         s0, s1 = equal_error_ratio(r, 0), equal_error_ratio(r, 1)
@@ -340,9 +407,13 @@ def tables(rows, blender, memory, cycles, args, header, sampler, suffix=""):
                    f"{e_o[1]:.2e} | " + (f"{llvm['seconds']:.2f} @ {args.mitsuba_spp} | {e_m[0]:.2e} / {e_m[1]:.2e}"
                                          if llvm else "— | —")
                    + f" | {fmt(s0, '.2f', '×')} | " + (f"≥ {target}×" if target else "(none)")
-                   + f" | {verdict(s0, target) if target else ''} | {fmt(s1, '.2f', '×')} |")
+                   + f" | {verdict(s0, target) if target else ''} | {fmt(s1, '.2f', '×')} | "
+                   f"{fmt(s0 / embree_share(r)[0] if s0 and embree_share(r)[0] else None, '.2f', '×')} |")
     if any(r["ours_noise_only"] for r in rows):
         out.append("\n‡ our S0 error is our noise alone (S0 differs from Mitsuba's by design: RGB upsampling).")
+    out.append("\n⁂ the S0 ratio ÷ the Embree share of table 3: the ratio our sampling would reach if everything but "
+               "the ray queries (shading, sampling, transport, Python) took no time; a target above it needs "
+               "cheaper ray queries, not cheaper shading.")
     out += ["", f"**2{suffix}. Throughput{label}** (2 threads; ours polarisation auto)", "",
             "| scene | transport | ours Msamples/s | ours Mrays/s | Mitsuba LLVM Msamples/s | ours ÷ LLVM | "
             "Mitsuba scalar Msamples/s | ours ÷ scalar | peak RSS ours / LLVM (MB) |",
@@ -361,21 +432,21 @@ def tables(rows, blender, memory, cycles, args, header, sampler, suffix=""):
             "2-thread renders "
             f"alternated, fastest of {max(args.scaling_repeats, 2)} each; the Embree share is of the CPU time of "
             "the fastest 1-thread render, wall-time share in brackets)", "",
-            "| scene | Embree share, 1 thread | target | | 2 threads ÷ 1 | target | | CPU s 1 → 2 threads | "
-            "steal 1 → 2 threads | full ÷ scalar time | target | |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+            "| scene | Embree share, 1 thread | target | | 2 threads ÷ 1 | target | | Embree alone 2 ÷ 1 | "
+            "CPU s 1 → 2 threads | steal 1 → 2 threads | full ÷ scalar time | target | |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         o, one, two = r["ours"], r["one_thread"], r["two_threads"]
-        embree, embree_cpu = one["embree_seconds"], one.get("embree_cpu_seconds")
-        share_wall = None if embree is None else embree / one["seconds"]
-        share = share_wall if embree_cpu is None else embree_cpu / one["cpu_seconds"]
+        share, share_wall = embree_share(r)
         sphere = r["scene"] in SPHERE_SCENES
         scale = rate(two) / rate(one)
         fo = o["full"]["seconds"] / o["off"]["seconds"]
         out.append(f"| {r['scene']} | {fmt(share, '.0%')} ({fmt(share_wall, '.0%')}) | "
                    f"{'≥ 50 %' if sphere else '(none)'} | "
                    f"{verdict(share, EMBREE_SHARE_TARGET) if sphere else ''} | {scale:.2f}× | ≥ {THREADS_TARGET}× | "
-                   f"{verdict(scale, THREADS_TARGET)} | {one['cpu_seconds']:.2f} → {two['cpu_seconds']:.2f} | "
+                   f"{verdict(scale, THREADS_TARGET)} | "
+                   f"{fmt(r['embree_alone']['scaling'] if r.get('embree_alone') else None, '.2f', '×')} | "
+                   f"{one['cpu_seconds']:.2f} → {two['cpu_seconds']:.2f} | "
                    f"{fmt(one.get('steal'), '.0%')} → {fmt(two.get('steal'), '.0%')} | "
                    f"{fo:.2f}× | ≤ {FULL_OVER_SCALAR_TARGET}× | "
                    f"{verdict(fo, FULL_OVER_SCALAR_TARGET, at_least=False)} |")
