@@ -201,6 +201,26 @@ def test_per_path_ray_counts_do_not_depend_on_the_batch(sphere):
     assert rays.min() >= 1 and rays.sum() >= whole["rays"] and len(np.unique(rays)) > 2
 
 
+def test_a_tracer_that_does_not_count_costs_traces_the_same_paths(sphere):
+    """Uniform renders skip the per-path cost counting (only adaptive sampling reads it): same values,
+    same ray counts, no path_cost; the renderer counts only for adaptive renders."""
+    scene, renderer = sphere
+    st = copy.copy(scene.settings)
+    st.polarisation = "full"
+    counting = PathTracer(renderer.compiled, renderer.lights, renderer.camera, st, count_cost=True)
+    silent = PathTracer(renderer.compiled, renderer.lights, renderer.camera, st, count_cost=False)
+    pixel = np.tile(np.arange(256), 4)
+    sample = np.repeat(np.arange(4), 256)
+    values, stats = counting.trace(pixel, sample)
+    values_silent, stats_silent = silent.trace(pixel, sample)
+    np.testing.assert_array_equal(values_silent, values)
+    assert "path_cost" in stats and "path_cost" not in stats_silent
+    assert {k: stats[k] for k in ("rays", "shadow_rays", "nonfinite")} == \
+        {k: stats_silent[k] for k in ("rays", "shadow_rays", "nonfinite")}
+    assert not renderer._tracer(st)[1].count_cost
+    assert renderer._tracer(st, count_cost=True)[1].count_cost
+
+
 def test_rays_of_an_adaptive_render_do_not_depend_on_threads_or_batches_and_weigh_the_counts(sphere):
     scene, renderer = sphere
     ad = AdaptiveSettings(threshold=0.02, quantity="s0", min_spp=8)

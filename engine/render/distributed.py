@@ -47,10 +47,10 @@ def _render_unit(key, scene, settings, unit, window, width):
     pix = unit_pixels(width, r0, r1, window)
     pixel = np.tile(pix, p1 - p0)
     sample = np.repeat(np.arange(p0, p1, dtype=np.int64), pix.size)
-    tracer = PathTracer(renderer.compiled, renderer.lights, renderer.camera, settings)
+    # per-path costs are adaptive sampling's only (_trace_paths)
+    tracer = PathTracer(renderer.compiled, renderer.lights, renderer.camera, settings, count_cost=False)
     with one_blas_thread():             # the worker's threads are its parallelism (engine.render.blas_threads)
         values, stats = tracer.trace(pixel, sample)
-    stats.pop("path_cost", None)                        # per-path costs: adaptive sampling's only
     lo, hi = int(pix.min()), int(pix.max()) + 1
     part = Film(hi - lo, 1)
     stratified = settings.stratified

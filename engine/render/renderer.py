@@ -188,15 +188,16 @@ class Renderer:
         self.compile_seconds = time.perf_counter() - t0
         self._live_film = None
 
-    def _tracer(self, settings: RenderSettings | None):
+    def _tracer(self, settings: RenderSettings | None, count_cost: bool = False):
         """(settings as rendered, PathTracer, simplified materials, transport reason) for ``settings``
-        (default: the scene's): the materials' exact simplifications and the transport resolved."""
+        (default: the scene's): the materials' exact simplifications and the transport resolved;
+        ``count_cost``: the tracer reports per-path costs (adaptive sampling's)."""
         st = copy.copy(settings or self.scene.settings)
         used = self.compiled.used_material_names
         materials, simplified = effective_materials(self.scene.materials, used, st.simplify)
         st.polarisation, transport_reason = resolve_transport(st.polarisation, materials, used)
         tracer = PathTracer(self.compiled, self.lights, self.camera, st,
-                            materials=[materials[name] for name in self.compiled.material_names])
+                            materials=[materials[name] for name in self.compiled.material_names], count_cost=count_cost)
         return st, tracer, simplified, transport_reason
 
     def warm_up(self, settings: RenderSettings | None = None, paths: int = WARM_UP_PATHS) -> float:
@@ -256,7 +257,7 @@ class Renderer:
 
     def _render(self, settings, progress, should_stop, window, resume, adaptive, adaptive_resume, clock,
                 on_first_pass, unit_times) -> RenderResult:
-        st, tracer, simplified, transport_reason = self._tracer(settings)
+        st, tracer, simplified, transport_reason = self._tracer(settings, count_cost=adaptive is not None)
         cam = self.scene.camera
         W, H = cam.width, cam.height
         workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
@@ -320,7 +321,6 @@ class Renderer:
             if traced is None:
                 return None
             values, s = traced
-            s.pop("path_cost", None)                # per-path costs: adaptive sampling's only
             # the unit's film sums, here on the worker: the adding thread only adds them in order
             return SampleSums.of(pixel, values, s.pop("alpha", None), s.pop("denoise", None),
                                  sample if stratified else None), s
