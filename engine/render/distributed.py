@@ -68,7 +68,7 @@ def _trace_paths(key, scene, settings, unit):
     from .integrator import PathTracer
     renderer = _renderer_for(key, scene)
     pixel, sample = unit_paths(unit)
-    tracer = PathTracer(renderer.compiled, renderer.lights, renderer.camera, settings)
+    tracer = PathTracer(renderer.compiled, renderer.lights, renderer.camera, settings, count_cost=True)
     with one_blas_thread():
         values, stats = tracer.trace(pixel, sample)
     return pixel, sample, values, stats

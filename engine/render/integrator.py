@@ -228,7 +228,7 @@ class PathTracer:
         caller has already applied the exact simplifications (engine.render.effects); otherwise
         they are applied here, the same way on every worker.  ``count_cost``: report each path's
         cost (``stats["path_cost"]``), which only adaptive sampling reads; without it the per-vertex
-        counting is skipped (a masked scatter-add per bounce, 2–3 % of a mirror scene's render)."""
+        counting is skipped (a masked scatter-add per bounce and per next-event vertex)."""
         self.scene = compiled
         self.count_cost = count_cost
         self.lights = lights

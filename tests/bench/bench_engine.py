@@ -12,7 +12,8 @@ Prints one Markdown table per target (the issue's target next to each measured r
    the reference's own noise subtracted (error² − var_ref, var_ref from its two halves).  Monte Carlo
    error² ∝ 1/time, so time to equal error ours ÷ Mitsuba = (t_M·e_M²)/(t_ours·e_ours²), > 1: we are
    faster.  Next to it, that ratio ÷ the Embree share of table 3: what our sampling would reach if
-   only the ray queries took time (a target above it needs cheaper queries).  References: Mitsuba,
+   only the ray queries took time (a target above it needs cheaper queries, not cheaper shading
+   alone; a 2-thread ratio ÷ a 1-thread share, so an estimate).  References: Mitsuba,
    2 × ``--ref-spp`` (``render_peer.py``), cached in ``out/bench_refs/`` (git-ignored); without
    Mitsuba, our own 2 × ``--ref-spp`` render.  Where our
    S0 legitimately differs from Mitsuba's (``cornell_lambert``: RGB → spectrum upsampling of the
@@ -26,9 +27,9 @@ Prints one Markdown table per target (the issue's target next to each measured r
    alternated 1- and 2-thread renders each, with the CPU seconds of both (extra CPU with 2 threads
    is time lost to contention) and the hypervisor's steal during each (/proc/stat: CPU time given to
    other guests, as a share of both cores' wall time; a 2-thread render waits for the slower core),
-   and the same ratio for the Embree queries alone (``embree_alone_scaling``: the render's own rays
-   re-queried in two halves, one thread after the other or two at once; no code of ours, no GIL
-   between them): the ceiling the machine sets for that part of a render.
+   and the same ratio for the Embree queries alone (``embree_alone_scaling``: the rays of a short
+   render re-queried in two halves, one thread after the other or two at once; no code of ours, no
+   GIL between them): a reference for what the machine gives a GIL-free workload of that scene.
 5. **Full Stokes ÷ scalar**: render time with ``--polarisation full`` ÷ ``--polarisation off``.
 6. **Blender ÷ CLI**: ``tests/bench/blender_overhead.py`` (F12 render in bpy vs the engine render of
    the same exported scene, and where Blender's extra time goes).
@@ -151,14 +152,18 @@ def ours_child(cfg):
     inside = [0.0, 0, 0.0]
     compiled = renderer.compiled
     queries = {}            # the untimed methods, for embree_alone_scaling
-    captured = {"intersect": [], "occluded": []}
+    captured = []           # (method, first half's (args, kwargs), second half's), copies
+    counted = {"intersect": 0, "occluded": 0}
     capturing = [False]     # only in a job that asks for it: the copies would add to a timed render
     for name in ("intersect", "occluded"):
         method = queries[name] = getattr(compiled, name)
 
         def timed(*a, _method=method, _name=name, **k):
-            if capturing[0] and sum(q[0].shape[1] for q in captured[_name]) < CAPTURED_RAYS:
-                captured[_name].append(tuple(None if x is None else np.array(x) for x in a))
+            if capturing[0] and counted[_name] < CAPTURED_RAYS:
+                n = a[0].shape[-1]
+                counted[_name] += n
+                halves = (slice(0, n // 2), slice(n // 2, n))
+                captured.append((queries[_name], *(split_call(a, k, sl) for sl in halves)))
             t, c = time.perf_counter(), time.thread_time()
             try:
                 return _method(*a, **k)
@@ -202,41 +207,51 @@ def ours_child(cfg):
                           # the machine's (all cores) wall time: a 2-thread render waits for the slower core
                           "steal": None if steal0 is None else (steal1 - steal0) / (seconds * (os.cpu_count() or 1))}),
               flush=True)
-    if cfg.get("embree_alone") and captured["intersect"]:
-        print(json.dumps({"job": "embree_alone", **embree_alone_scaling(queries, captured, cfg["embree_alone"])}),
+    if cfg.get("embree_alone") and captured:
+        print(json.dumps({"job": "embree_alone", **embree_alone_scaling(captured, cfg["embree_alone"])}),
               flush=True)
 
 
-def embree_alone_scaling(queries, captured, repeats):
-    """The thread scaling of the Embree queries alone: the render's own rays (the first CAPTURED_RAYS
-    closest-hit and shadow rays it queried), split into two halves that one thread queries one after
-    the other or two threads at once (compiled loops or embreex: no GIL held), alternated, fastest of
-    ``repeats`` each.  Nothing of ours runs in between, so this is the ceiling this machine sets for the
-    Embree part of a 2-thread render (shared caches, memory, the hypervisor)."""
+def split_call(args, kwargs, sl):
+    """Copies of a ray query's arguments restricted to the rays ``sl`` (arrays sliced on their last,
+    per-ray axis; anything else as it is)."""
+    def part(x):
+        return np.ascontiguousarray(x[..., sl]) if isinstance(x, np.ndarray) and x.ndim else x
+    return tuple(part(x) for x in args), {key: part(x) for key, x in kwargs.items()}
+
+
+def embree_alone_scaling(captured, repeats):
+    """The thread scaling of the Embree queries alone: the render's own rays (its first calls of each
+    kind, up to CAPTURED_RAYS rays of each), each call split into two halves that one thread queries one
+    after the other or two threads at once (compiled loops or embreex: no GIL held; the threads are
+    started before the clock, behind a barrier), alternated, fastest of ``repeats`` each.  Nothing of ours
+    runs in between: a reference for what this machine gives a GIL-free compiled workload of the scene
+    (shared caches, memory, the hypervisor), to read the render's own scaling against."""
     import threading
-    halves = ([], [])
-    for name, calls in captured.items():
-        for args in calls:
-            n = args[0].shape[1]
-            for k, sl in enumerate((slice(0, n // 2), slice(n // 2, n))):
-                halves[k].append((queries[name], tuple(None if x is None else np.ascontiguousarray(x[..., sl])
-                                                       for x in args)))
 
     def query(k):
-        for method, args in halves[k]:
-            method(*args)
+        for method, *halves in captured:
+            args, kwargs = halves[k]
+            method(*args, **kwargs)
 
     def timed(threads):
-        t = time.perf_counter()
         if threads == 1:
+            t = time.perf_counter()
             query(0)
             query(1)
-        else:
-            workers = [threading.Thread(target=query, args=(k,)) for k in range(2)]
-            for w in workers:
-                w.start()
-            for w in workers:
-                w.join()
+            return time.perf_counter() - t
+        start = threading.Barrier(3)
+
+        def work(k):
+            start.wait()
+            query(k)
+        workers = [threading.Thread(target=work, args=(k,)) for k in range(2)]
+        for w in workers:
+            w.start()
+        start.wait()
+        t = time.perf_counter()
+        for w in workers:
+            w.join()
         return time.perf_counter() - t
 
     timed(1)
@@ -244,7 +259,7 @@ def embree_alone_scaling(queries, captured, repeats):
     for _ in range(repeats):
         for threads in (1, 2):
             best[threads] = min(best[threads], timed(threads))
-    rays = sum(a[0].shape[1] for calls in captured.values() for a in calls)
+    rays = sum(first[0][0].shape[-1] + second[0][0].shape[-1] for _, first, second in captured)
     return {"rays": rays, "one_thread_seconds": best[1], "two_thread_seconds": best[2], "scaling": best[1] / best[2]}
 
 
@@ -327,18 +342,21 @@ def measure_scene(scene, args, tmp, mitsuba, sampler, peer):
         jobs.append({"name": f"auto{k}", "spp": args.spp, "seed": k, "threads": 2,
                      **({"save": saves[k]} if k < 2 else {})})
     jobs += [{"name": "full", "spp": args.spp, "polarisation": "full"},
-             {"name": "off", "spp": args.spp, "polarisation": "off"},
-             # the rays of the Embree-alone scaling (a short render of its own, in no table)
-             {"name": "capture", "spp": max(8, args.spp // 8), "seed": 7, "capture": True}]
+             {"name": "off", "spp": args.spp, "polarisation": "off"}]
     for job in jobs:            # (the references keep the scene's sampler: any unbiased one will do)
         job["sampler"] = sampler
-    ours, peak = run_ours(scene, args.res, jobs, embree_alone=max(args.scaling_repeats, 2) + 2)
+    ours, peak = run_ours(scene, args.res, jobs)
+    # the Embree-alone scaling in a child of its own (its copies of the rays stay out of the peak RSS
+    # above): the rays of a short render, in no table
+    alone, _ = run_ours(scene, args.res, [{"name": "capture", "spp": max(8, args.spp // 8), "seed": 7,
+                                           "capture": True, "sampler": sampler}],
+                        embree_alone=max(args.scaling_repeats, 2) + 2)
     runs = range(max(args.scaling_repeats, 2))
     best = min((ours["auto0"], ours["auto1"]), key=lambda r: r["seconds"])
     row = {"scene": scene, "sampler": sampler, "ours": ours, "ours_best": best, "ours_peak": peak,
            "two_threads": min((ours[f"auto{k}"] for k in runs), key=lambda r: r["seconds"]),
            "one_thread": min((ours[f"auto_1thread{k}"] for k in runs), key=lambda r: r["seconds"]),
-           "embree_alone": ours.get("embree_alone")}
+           "embree_alone": alone.get("embree_alone")}
     if "ref" not in peer:
         peer["ref"] = reference(scene, args.res, args.ref_spp, mitsuba)
     ref, ref_var, source = peer["ref"]
@@ -412,8 +430,9 @@ def tables(rows, blender, memory, cycles, args, header, sampler, suffix=""):
     if any(r["ours_noise_only"] for r in rows):
         out.append("\n‡ our S0 error is our noise alone (S0 differs from Mitsuba's by design: RGB upsampling).")
     out.append("\n⁂ the S0 ratio ÷ the Embree share of table 3: the ratio our sampling would reach if everything but "
-               "the ray queries (shading, sampling, transport, Python) took no time; a target above it needs "
-               "cheaper ray queries, not cheaper shading.")
+               "the ray queries (shading, sampling, transport, Python) took no time (a 2-thread ratio ÷ a "
+               "1-thread share: an estimate); a target above it needs cheaper ray queries, not cheaper shading "
+               "alone.")
     out += ["", f"**2{suffix}. Throughput{label}** (2 threads; ours polarisation auto)", "",
             "| scene | transport | ours Msamples/s | ours Mrays/s | Mitsuba LLVM Msamples/s | ours ÷ LLVM | "
             "Mitsuba scalar Msamples/s | ours ÷ scalar | peak RSS ours / LLVM (MB) |",
