@@ -421,12 +421,13 @@ def tables(rows, blender, memory, cycles, args, header, sampler, suffix=""):
         e_o = np.sqrt(np.maximum(r["ours_e2"], 0))
         e_m = np.sqrt(np.maximum(llvm["e2"], 0)) if llvm else None
         mark = " ‡" if r["ours_noise_only"] else ""
+        share = embree_share(r)[0]
         out.append(f"| {r['scene']} | {r['ours_best']['seconds']:.2f} @ {args.spp} | {e_o[0]:.2e}{mark} / "
                    f"{e_o[1]:.2e} | " + (f"{llvm['seconds']:.2f} @ {args.mitsuba_spp} | {e_m[0]:.2e} / {e_m[1]:.2e}"
                                          if llvm else "— | —")
                    + f" | {fmt(s0, '.2f', '×')} | " + (f"≥ {target}×" if target else "(none)")
                    + f" | {verdict(s0, target) if target else ''} | {fmt(s1, '.2f', '×')} | "
-                   f"{fmt(s0 / embree_share(r)[0] if s0 and embree_share(r)[0] else None, '.2f', '×')} |")
+                   f"{fmt(s0 / share if s0 and share else None, '.2f', '×')} |")
     if any(r["ours_noise_only"] for r in rows):
         out.append("\n‡ our S0 error is our noise alone (S0 differs from Mitsuba's by design: RGB upsampling).")
     out.append("\n⁂ the S0 ratio ÷ the Embree share of table 3: the ratio our sampling would reach if everything but "
