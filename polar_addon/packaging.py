@@ -1,13 +1,15 @@
 """Build the installable extension zips: ``python -m polar_addon.packaging [--output-dir dist]``.
 
-1. Downloads the wheels listed in ``blender_manifest.toml`` into ``wheels/`` with pip (binary only,
-   CPython 3.11 = Blender 5.0's Python, each wheel for the platform tags in its file name):
-   embreex, OpenEXR, numba and llvmlite for every platform in the manifest's ``platforms``
-   (numpy comes with Blender).  Network is needed here, at build time only.
-2. Checks that every platform gets one wheel of each bundled package.
+1. Downloads the wheels listed in ``blender_manifest.toml`` into ``wheels/`` with pip (binary only):
+   embreex, OpenEXR, numba and llvmlite for every platform in the manifest's ``platforms`` and every
+   Python of :data:`BLENDER_PYTHONS` (3.11 for Blender 4.5-5.0, 3.13 for 5.1 on); numpy comes with
+   Blender.  Network is needed here, at build time only.
+2. Checks that every platform gets one wheel of each bundled package for each of those Pythons.
 3. Validates and builds one zip per platform with Blender's own extension tool (``blender_ext.py``
    from the bpy module — the same code as ``blender --command extension build --split-platforms``):
-   ``polar_render-<version>-<platform>.zip``, each holding only its platform's wheels.
+   ``polar_render-<version>-<platform>.zip``, each holding only its platform's wheels, for both
+   Pythons: Blender installs the ones of its own Python when the extension is installed or Blender
+   starts, so one zip serves every supported Blender (README, "Blender extension").
 
 The download is injectable (``fetch``) so that tests can build with fake wheel files and no network.
 This module needs no Blender session (it only locates bpy's copy of ``blender_ext.py``).
@@ -29,6 +31,9 @@ BUNDLED = ("embreex", "openexr", "numba", "llvmlite", "threadpoolctl")
 #: Every platform Blender builds extensions for (what a pure-Python ``any`` wheel runs on).
 BLENDER_PLATFORMS = frozenset({"linux-x64", "linux-arm64", "windows-x64", "windows-arm64", "macos-x64",
                                "macos-arm64"})
+#: The Blender series the extension supports and the CPython each embeds (the wheel tag it needs).
+#: ``blender_version_min`` in the manifest is the first of these.
+BLENDER_PYTHONS = {"4.5": "cp311", "5.0": "cp311", "5.1": "cp313", "5.2": "cp313", "5.3": "cp313"}
 
 
 def manifest_text(source_dir=ROOT):
@@ -71,17 +76,26 @@ def wheel_platforms(filename):
 
 
 def check_manifest(source_dir=ROOT):
-    """Every declared platform has exactly one wheel of each package in :data:`BUNDLED`."""
+    """Every declared platform has exactly one wheel of each package in :data:`BUNDLED` for each Python
+    of :data:`BLENDER_PYTHONS` (a pure-Python ``py3`` wheel serves them all), and the manifest's
+    ``blender_version_min`` is the oldest supported Blender."""
     platforms = manifest_platforms(source_dir)
     if not platforms:
         raise SystemExit("blender_manifest.toml: 'platforms' is empty; list the platforms wheels are bundled for")
-    wheels = manifest_wheels(source_dir)
+    oldest = min(BLENDER_PYTHONS, key=lambda v: tuple(map(int, v.split("."))))
+    m = re.search(r'^blender_version_min\s*=\s*"([^"]+)"', manifest_text(source_dir), re.M)
+    if not m or m.group(1) != f"{oldest}.0":
+        raise SystemExit(f"blender_manifest.toml: blender_version_min must be \"{oldest}.0\", the oldest supported "
+                         f"Blender (polar_addon.packaging.BLENDER_PYTHONS), found {m.group(1) if m else 'none'}")
+    wheels = [WHEEL_NAME.match(w) for w in manifest_wheels(source_dir)]
     for plat in platforms:
-        names = [WHEEL_NAME.match(w).group(1).lower() for w in wheels if plat in wheel_platforms(w)]
-        for package in BUNDLED:
-            if names.count(package) != 1:
-                raise SystemExit(f"blender_manifest.toml: platform {plat} needs exactly one {package} wheel in "
-                                 f"'wheels', found {names.count(package)}")
+        for python in sorted(set(BLENDER_PYTHONS.values())):
+            names = [w.group(1).lower() for w in wheels
+                     if w.group(3) in (python, "py3") and plat in wheel_platforms(w.group(0))]
+            for package in BUNDLED:
+                if names.count(package) != 1:
+                    raise SystemExit(f"blender_manifest.toml: platform {plat} needs exactly one {package} wheel for "
+                                     f"{python} in 'wheels', found {names.count(package)}")
 
 
 def pip_download(name, version, python_version, platform_tags, dest):
@@ -108,7 +122,7 @@ def download_wheels(source_dir=ROOT, fetch=pip_download):
         m = WHEEL_NAME.match(rel)
         if not m:
             raise SystemExit(f"blender_manifest.toml: cannot parse wheel name {rel} "
-                             "(expected ./wheels/<name>-<version>-cp311-<abi>-<platform>.whl "
+                             "(expected ./wheels/<name>-<version>-cp3NN-<abi>-<platform>.whl "
                              "or ./wheels/<name>-<version>-py3-none-any.whl)")
         name, version, pytag, platform_tags = m.groups()
         # a pure-Python wheel (py3-none-any) is fetched for Blender's Python as well

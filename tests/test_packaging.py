@@ -1,4 +1,5 @@
-"""The extension packaging: every platform's zip carries numba, llvmlite, embreex and OpenEXR wheels.
+"""The extension packaging: every platform's zip carries numba, llvmlite, embreex and OpenEXR wheels
+for each Python of the supported Blenders (3.11: 4.5 and 5.0; 3.13: 5.1 on).
 
 No network: the download step is replaced by a fake that writes placeholder wheel files, and the
 zips are built with Blender's own extension tool (from the bpy module) in a copy of the sources.
@@ -18,6 +19,7 @@ from polar_addon import packaging
 from tests.conftest import REPO
 
 PLATFORMS = {"linux-x64", "windows-x64", "macos-arm64"}
+PYTHONS = ("cp311", "cp313")
 
 
 def blender_ext():
@@ -54,18 +56,26 @@ class FakeIndex:
             zf.writestr(f"{name}/__init__.py", f"# placeholder {filename}\n")
 
 
-def test_manifest_bundles_numba_llvmlite_embreex_openexr_threadpoolctl_for_each_platform():
+def test_manifest_bundles_numba_llvmlite_embreex_openexr_threadpoolctl_for_each_platform_and_python():
     assert set(packaging.manifest_platforms()) == PLATFORMS
+    assert sorted(set(packaging.BLENDER_PYTHONS.values())) == list(PYTHONS)
     wheels = packaging.manifest_wheels()
     for plat in PLATFORMS:
-        mine = [os.path.basename(w) for w in wheels if plat in packaging.wheel_platforms(w)]
-        names = sorted(w.split("-")[0] for w in mine)
-        assert names == sorted(packaging.BUNDLED), (plat, mine)
-        # Blender 5.0's Python 3.11, or pure Python
-        assert all(w.split("-")[2] == "cp311" or w.endswith("-py3-none-any.whl") for w in mine)
-        versions = {w.split("-")[0]: w.split("-")[1] for w in mine}
-        # numba 0.N pins llvmlite 0.(N-18) (numba 0.68 requires llvmlite >=0.50,<0.51)
-        assert int(versions["numba"].split(".")[1]) - 18 == int(versions["llvmlite"].split(".")[1])
+        for python in PYTHONS:
+            mine = [os.path.basename(w) for w in wheels if plat in packaging.wheel_platforms(w)
+                    and (w.split("-")[2] == python or w.endswith("-py3-none-any.whl"))]
+            names = sorted(w.split("-")[0] for w in mine)
+            assert names == sorted(packaging.BUNDLED), (plat, python, mine)
+            versions = {w.split("-")[0]: w.split("-")[1] for w in mine}
+            # numba 0.N pins llvmlite 0.(N-18) (numba 0.68 requires llvmlite >=0.50,<0.51)
+            assert int(versions["numba"].split(".")[1]) - 18 == int(versions["llvmlite"].split(".")[1])
+        # one version of each package for both Pythons: the same engine code runs on every Blender
+        versions = {}
+        for w in wheels:
+            if plat in packaging.wheel_platforms(w):
+                versions.setdefault(os.path.basename(w).split("-")[0], set()).add(os.path.basename(w).split("-")[1])
+        assert all(len(v) == 1 for v in versions.values()), versions
+    assert re.search(r'^blender_version_min = "4\.5\.0"$', packaging.manifest_text(), re.M)
     packaging.check_manifest()
 
 
@@ -84,8 +94,9 @@ def test_build_one_zip_per_platform_with_its_wheels(tmp_path):
     fetch = FakeIndex()
     zips = packaging.build_all(str(tmp_path / "dist"), source_dir=str(src), fetch=fetch)
     wheels = packaging.manifest_wheels(str(src))
-    assert len(fetch.calls) == len(wheels) == 13
+    assert len(fetch.calls) == len(wheels) == 25
     assert ("numba", "0.68.1", "311", ("win_amd64",)) in fetch.calls
+    assert ("numba", "0.68.1", "313", ("win_amd64",)) in fetch.calls
     assert ("threadpoolctl", "3.7.0", "311", ("any",)) in fetch.calls
     assert set(zips) == PLATFORMS
     for plat, path in zips.items():
@@ -95,7 +106,7 @@ def test_build_one_zip_per_platform_with_its_wheels(tmp_path):
             manifest = zf.read("blender_manifest.toml").decode()
         expected = sorted(w[2:] for w in wheels if plat in packaging.wheel_platforms(w))
         assert sorted(n for n in names if n.startswith("wheels/")) == expected
-        assert {n.split("/")[0] for n in expected} == {"wheels"} and len(expected) == 5
+        assert {n.split("/")[0] for n in expected} == {"wheels"} and len(expected) == 9   # 4 per Python + 1
         assert "engine/kernels/__init__.py" in names and "polar_addon/kernel_cache.py" in names
         assert not any(n.startswith(("tests/", "examples/")) for n in names)
         generated = manifest.split("[build.generated]", 1)[1]        # what Blender installs on this platform
@@ -103,15 +114,28 @@ def test_build_one_zip_per_platform_with_its_wheels(tmp_path):
         assert sorted(re.findall(r'"\./(wheels/[^"]+)"', generated)) == expected
     # wheels already downloaded are not fetched again
     packaging.build_all(str(tmp_path / "dist2"), source_dir=str(src), fetch=fetch)
-    assert len(fetch.calls) == 13
+    assert len(fetch.calls) == 25
 
 
 def test_manifest_missing_a_platform_wheel_is_refused(tmp_path):
     src = source_copy(tmp_path)
     manifest = src / "blender_manifest.toml"
     text = manifest.read_text()
-    manifest.write_text(re.sub(r'\s*"\./wheels/numba-[^"]+win_amd64\.whl",', "", text))
-    with pytest.raises(SystemExit, match="windows-x64 needs exactly one numba wheel"):
+    manifest.write_text(re.sub(r'\s*"\./wheels/numba-[^"]+cp313-[^"]+win_amd64\.whl",', "", text))
+    with pytest.raises(SystemExit, match="windows-x64 needs exactly one numba wheel for cp313"):
+        packaging.check_manifest(str(src))
+    manifest.write_text(text.replace('"./wheels/llvmlite-0.50.0-cp311-cp311-macosx_12_0_arm64.whl",',
+                                     '"./wheels/llvmlite-0.50.0-cp311-cp311-macosx_12_0_arm64.whl",\n'
+                                     '  "./wheels/llvmlite-0.49.0-cp311-cp311-macosx_12_0_arm64.whl",'))
+    with pytest.raises(SystemExit, match="macos-arm64 needs exactly one llvmlite wheel for cp311 .* found 2"):
+        packaging.check_manifest(str(src))
+
+
+def test_manifest_minimum_is_the_oldest_supported_blender(tmp_path):
+    src = source_copy(tmp_path)
+    manifest = src / "blender_manifest.toml"
+    manifest.write_text(manifest.read_text().replace('blender_version_min = "4.5.0"', 'blender_version_min = "5.0.0"'))
+    with pytest.raises(SystemExit, match=r'blender_version_min must be "4\.5\.0".*found 5\.0\.0'):
         packaging.check_manifest(str(src))
 
 
@@ -183,3 +207,26 @@ def test_one_warning_when_numba_is_missing(caplog, monkeypatch):
         monkeypatch.setenv("POLAR_KERNELS", "numpy")                    # asked for: no warning
         kernel_cache.warn_if_numpy_fallback(types.SimpleNamespace(COMPILED=False))
         assert len(caplog.records) == 1
+
+
+def test_tested_blender_releases_are_the_supported_series():
+    """tests/support/blender_envs.py tests one bpy release of each supported series, on its Python."""
+    from tests.support import blender_envs
+    assert set(blender_envs.RELEASES) == set(packaging.BLENDER_PYTHONS)
+    for series, (release, python) in blender_envs.RELEASES.items():
+        assert release.startswith(series + ".")
+        assert packaging.BLENDER_PYTHONS[series] == "cp" + python.replace(".", "")
+    def version(series):
+        return tuple(map(int, series.split(".")))
+    assert set(blender_envs.CI_SERIES) == {min(packaging.BLENDER_PYTHONS, key=version),
+                                           max(packaging.BLENDER_PYTHONS, key=version)}
+
+
+def test_blender_environment_setup_names_what_is_missing(monkeypatch):
+    from tests.support import blender_envs
+    monkeypatch.setenv("PATH", "")
+    monkeypatch.setenv("PYENV_ROOT", "/nonexistent")
+    with pytest.raises(blender_envs.SetupError, match=r"no Python 3\.13 found .*pyenv install 3\.13"):
+        blender_envs.find_python("3.13")
+    with pytest.raises(blender_envs.SetupError, match="series '6.9' unknown"):
+        blender_envs.ensure("6.9")
