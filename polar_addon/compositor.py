@@ -12,6 +12,8 @@ import math
 
 import bpy
 
+from . import compat
+
 GROUP_NAME = "Virtual Polariser"
 GROUP_VERSION = 1
 TYPE_PRESETS = {   # type → (fixed polariser angle or None, retarder angle, retardance)
@@ -125,7 +127,7 @@ def polariser_inputs(settings):
 
 def sync_group_nodes(scene):
     """Copy the scene's polariser settings into every Virtual Polariser node of its compositor."""
-    tree = getattr(scene, "compositing_node_group", None)
+    tree = compat.compositor_tree(scene)
     if tree is None:
         return 0
     values = polariser_inputs(scene.polar)
@@ -141,11 +143,7 @@ def sync_group_nodes(scene):
 
 def _compositor_with_render_layers(scene):
     """(the scene's compositor node tree, its Render Layers node), creating either if missing."""
-    tree = getattr(scene, "compositing_node_group", None)
-    if tree is None:
-        tree = bpy.data.node_groups.new(f"{scene.name} Compositing", "CompositorNodeTree")
-        tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
-        scene.compositing_node_group = tree
+    tree = compat.compositor_tree(scene, create=True)
     layers = next((n for n in tree.nodes if n.bl_idname == "CompositorNodeRLayers"), None)
     if layers is None:
         layers = tree.nodes.new("CompositorNodeRLayers")
@@ -153,11 +151,26 @@ def _compositor_with_render_layers(scene):
     return tree, layers
 
 
+def _show(tree, socket):
+    """Make ``socket`` the compositor's final image unless the user already shows something there:
+    the output is free, or fed by Render Layers' Image through reroutes only (the tree Blender makes
+    before 5.0)."""
+    out = compat.compositor_output(tree)
+    if not out.inputs:
+        return
+    links = out.inputs[0].links
+    while links and links[0].from_node.bl_idname == "NodeReroute":
+        links = links[0].from_node.inputs[0].links
+    if not links or (links[0].from_node.bl_idname == "CompositorNodeRLayers"
+                     and links[0].from_socket.identifier == "Image"):
+        tree.links.new(socket, out.inputs[0])
+
+
 def add_to_compositor(scene):
     """Make the scene's compositor show the Virtual Polariser output of the active view layer.
 
-    Creates the compositor tree if there is none (Render Layers → Virtual Polariser → Group Output
-    and Viewer), or adds the group node next to an existing tree.  Returns the group node.
+    Creates the compositor tree if there is none (Render Layers → Virtual Polariser → the final
+    output and a Viewer), or adds the group node next to an existing tree.  Returns the group node.
     """
     tree, layers = _compositor_with_render_layers(scene)
     node = tree.nodes.new("CompositorNodeGroup")
@@ -167,12 +180,7 @@ def add_to_compositor(scene):
     for s in ("S0", "S1", "S2", "S3"):
         if s in layers.outputs:
             tree.links.new(layers.outputs[s], node.inputs[s])
-    out = next((n for n in tree.nodes if n.bl_idname == "NodeGroupOutput"), None)
-    if out is None:
-        out = tree.nodes.new("NodeGroupOutput")
-        out.location = (300, 0)
-    if out.inputs and not out.inputs[0].is_linked:
-        tree.links.new(node.outputs["Image"], out.inputs[0])
+    _show(tree, node.outputs["Image"])
     viewer = tree.nodes.new("CompositorNodeViewer")
     viewer.location = (300, -200)
     tree.links.new(node.outputs["Image"], viewer.inputs[0])
@@ -287,10 +295,5 @@ def add_denoise_to_compositor(scene, denoiser="CompositorNodeDenoise"):
                      ("Denoising Albedo", "Albedo"), ("Denoising Normal", "Normal")):
         if src in layers.outputs:
             tree.links.new(layers.outputs[src], node.inputs[dst])
-    out = next((n for n in tree.nodes if n.bl_idname == "NodeGroupOutput"), None)
-    if out is None:
-        out = tree.nodes.new("NodeGroupOutput")
-        out.location = (300, -300)
-    if out.inputs and not out.inputs[0].is_linked:
-        tree.links.new(node.outputs["S0"], out.inputs[0])    # the denoised intensity is the image shown
+    _show(tree, node.outputs["S0"])            # the denoised intensity is the image shown
     return node

@@ -4,6 +4,8 @@ import copy
 
 import bpy
 
+from . import compat
+
 
 class POLAR_OT_add_polarising_bsdf(bpy.types.Operator):
     """Replace the active material's surface shader with a Polarising BSDF node"""
@@ -20,7 +22,7 @@ class POLAR_OT_add_polarising_bsdf(bpy.types.Operator):
 
     def execute(self, context):
         from .nodes.bsdf import link_to_surface, new_polarising_bsdf
-        tree = context.material.node_tree
+        tree = compat.ensure_node_tree(context.material)
         link_to_surface(tree, new_polarising_bsdf(tree, self.model))
         return {"FINISHED"}
 

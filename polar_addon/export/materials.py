@@ -46,6 +46,7 @@ from ...engine.textures.image import linear_to_srgb, srgb_to_linear
 from ...engine.textures.texture import srgb_decode
 from ...engine.spectral import (ConstantSpectrum, RGBIlluminantSpectrum, RGBReflectanceSpectrum,
                                 RGBUnboundedSpectrum)
+from .. import compat
 from ..nodes.models import DIELECTRIC_PRESETS, NODE_MODELS
 from .texture_bake import bake_input
 from .world import interpolated_encoded
@@ -775,9 +776,9 @@ def attribute_needs(material) -> dict:
     render map unless a texture names one)}, '' for the active render one; empty lists where none
     (an untextured material needs nothing)."""
     needs = {"uv": [], "tangents": [], "colors": [], "bake": []}
-    if material is None or material.node_tree is None:
+    tree = compat.node_tree_in_use(material) if material is not None else None
+    if tree is None:
         return needs
-    tree = material.node_tree
     output = tree.get_output_node("ALL") or tree.get_output_node("CYCLES")
     if output is None:
         return needs
@@ -925,7 +926,7 @@ def export_material(material, warnings, bake=None):
     NoBake (their own values, one warning each)."""
     if material is None:
         return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
-    tree = material.node_tree
+    tree = compat.node_tree_in_use(material)
     if tree is None:
         return Lambert(_rgb_spectrum([float(c) for c in material.diffuse_color[:3]])), None
     output = tree.get_output_node("ALL") or tree.get_output_node("CYCLES")

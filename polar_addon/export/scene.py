@@ -19,6 +19,7 @@ from ...engine.scene.description import Mesh, RenderSettings, Scene
 from ...engine.scene.shapes import icosphere
 from ...engine.errors import SceneError
 from ...engine.spectral import ConstantSpectrum
+from .. import compat
 from .camera import export_camera
 from .lights import export_light
 from .materials import BakeTarget, _follow, attribute_needs, export_material, normal_input_unsupported
@@ -93,7 +94,7 @@ def _attribute_needs(obj):
     """What the materials of ``obj`` read from its mesh (materials.attribute_needs, merged), or None."""
     merged = {"uv": [], "tangents": [], "colors": [], "bake": []}
     for slot in obj.material_slots:
-        if getattr(slot.material, "node_tree", None) is None:
+        if slot.material is None or compat.node_tree_in_use(slot.material) is None:
             continue
         for k, v in attribute_needs(slot.material).items():
             merged[k].extend(v)
@@ -263,9 +264,10 @@ def material_alpha(material, warnings) -> float:
     """Principled Alpha of a material's surface shader (1 if none), warning about what is not
     supported: a linked Alpha (textured cut-outs) and a linked Normal input that is not an exported
     normal or bump map (materials.normal_input_unsupported)."""
-    if material is None or material.node_tree is None:
+    tree = compat.node_tree_in_use(material) if material is not None else None
+    if tree is None:
         return 1.0
-    output = material.node_tree.get_output_node("ALL") or material.node_tree.get_output_node("CYCLES")
+    output = tree.get_output_node("ALL") or tree.get_output_node("CYCLES")
     node = _follow(output.inputs["Surface"]) if output is not None else None
     if node is None:
         return 1.0

@@ -24,6 +24,7 @@ import numpy as np
 
 from ...engine.scene.description import EnvironmentLight
 from ...engine.spectral import RGBIlluminantSpectrum
+from .. import compat
 from . import world_bake
 
 #: width of the baked map and Cycles samples per texel when no scene setting is found
@@ -41,7 +42,7 @@ def export_world(world, warnings: list, bake_width=None, frame=None, bake_sample
     the settings of the scene using this world)."""
     if world is None:
         return None
-    tree = world.node_tree
+    tree = compat.node_tree_in_use(world)
     output = tree.get_output_node("ALL") if tree is not None else None
     if tree is None or output is None:
         colour = [float(c) for c in world.color]

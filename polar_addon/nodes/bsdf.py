@@ -10,6 +10,7 @@ as enum properties with stable numbers.  Inside the group a Principled BSDF give
 import bpy
 from bpy.props import EnumProperty
 
+from .. import compat
 from .models import DIELECTRIC_PRESETS, METAL_ITEMS, MODEL_ITEMS, MODEL_SOCKETS, SHADOWING_ITEMS, WW_FORM_ITEMS
 
 GROUP_VERSION = 1
@@ -174,8 +175,9 @@ def link_to_surface(tree, node):
 def polarising_material(name: str, model: str, **settings):
     """(material, node): a new material whose surface is a Polarising BSDF (scripts, tests, demos)."""
     mat = bpy.data.materials.new(name)
-    node = new_polarising_bsdf(mat.node_tree, model, **settings)
-    link_to_surface(mat.node_tree, node)
+    tree = compat.ensure_node_tree(mat)
+    node = new_polarising_bsdf(tree, model, **settings)
+    link_to_surface(tree, node)
     return mat, node
 
 

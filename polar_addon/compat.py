@@ -1,0 +1,108 @@
+"""Blender-version differences, in one place: every other module of the add-on calls these helpers
+instead of testing ``bpy.app.version`` itself.
+
+Supported: Blender 4.5 LTS (Python 3.11) to 5.3 (Python 3.13), ``polar_addon.packaging.BLENDER_PYTHONS``.
+Differences are detected by presence (an RNA property, a node type) rather than by version number,
+so a later release that keeps an API keeps working.  What differs:
+
+* Node trees of materials and worlds: before 5.0 a new material or world has none until
+  ``use_nodes`` is set, and one with ``use_nodes`` off renders its plain colour (Cycles' rule);
+  from 5.0 every material and world has its tree and ``use_nodes`` is deprecated.
+* The compositor: 5.0 made it a node group assigned to ``Scene.compositing_node_group`` whose Group
+  Output is the final image; before, ``Scene.node_tree`` (after ``Scene.use_nodes``) with a
+  Composite node.
+* Multilayer EXR output: 5.0 sets ``ImageFormatSettings.media_type``; before, a file format of its own.
+* Features newer Blenders add (Principled inputs, sky and volume types) are looked up with
+  :func:`node_input` / :func:`has_node_type`; callers warn once where one is missing.
+"""
+
+import bpy
+
+#: (major, minor, patch) of the running Blender.
+VERSION = tuple(bpy.app.version)
+
+
+def _has_property(rna_type, name: str) -> bool:
+    return name in rna_type.bl_rna.properties
+
+
+#: Blender 5.0 on: the compositor is a node group on the scene.
+COMPOSITOR_IS_GROUP = _has_property(bpy.types.Scene, "compositing_node_group")
+#: Blender 5.0 on: image output settings choose between image, multilayer image and video.
+HAS_MEDIA_TYPE = _has_property(bpy.types.ImageFormatSettings, "media_type")
+#: Blender 5.0 on: every material and world renders its node tree (``use_nodes`` is deprecated, and
+#: reading it warns; 5.0 converts older files' node-less materials on load).  A version test, as the
+#: property is still present.
+TREES_ALWAYS_USED = VERSION >= (5, 0, 0)
+
+
+# ----------------------------------------------------------------------------- shader node trees
+
+def node_tree_in_use(block):
+    """The node tree a material or world renders with, or None where it renders its plain colour
+    (no tree, or ``use_nodes`` off before Blender 5.0)."""
+    tree = getattr(block, "node_tree", None)
+    if tree is None or TREES_ALWAYS_USED:
+        return tree
+    return tree if block.use_nodes else None
+
+
+def ensure_node_tree(block):
+    """The node tree of a material or world, switching nodes on first where Blender needs it (before
+    5.0 a new material or world has none: Blender then adds Principled BSDF / Background and output)."""
+    if node_tree_in_use(block) is None and hasattr(block, "use_nodes"):
+        block.use_nodes = True
+    return block.node_tree
+
+
+# ----------------------------------------------------------------------------- compositor
+
+def compositor_tree(scene, create: bool = False):
+    """The scene's compositor node tree, or None (``create``: make and assign one if missing).
+
+    A new tree comes with what its Blender needs to show a result: an ``Image`` output socket
+    (5.0 on) or a Composite node (before 5.0, which Blender adds with Render Layers)."""
+    if COMPOSITOR_IS_GROUP:
+        tree = scene.compositing_node_group
+        if tree is None and create:
+            tree = bpy.data.node_groups.new(f"{scene.name} Compositing", "CompositorNodeTree")
+            tree.interface.new_socket("Image", in_out="OUTPUT", socket_type="NodeSocketColor")
+            scene.compositing_node_group = tree
+        return tree
+    if not scene.use_nodes:
+        if not create:
+            return None
+        scene.use_nodes = True
+    return scene.node_tree
+
+
+def compositor_output(tree):
+    """The node whose first input is the compositor's final image: Group Output (5.0 on) or
+    Composite (before), created if missing."""
+    kind = "NodeGroupOutput" if COMPOSITOR_IS_GROUP else "CompositorNodeComposite"
+    node = next((n for n in tree.nodes if n.bl_idname == kind), None)
+    return node if node is not None else tree.nodes.new(kind)
+
+
+# ----------------------------------------------------------------------------- output files
+
+def set_multilayer_exr(image_settings, depth: str = "32"):
+    """Write every pass into one multilayer OpenEXR file (float ``depth`` "16" or "32")."""
+    if HAS_MEDIA_TYPE:
+        image_settings.media_type = "MULTI_LAYER_IMAGE"
+    else:
+        image_settings.file_format = "OPEN_EXR_MULTILAYER"
+    image_settings.color_depth = depth
+
+
+# ----------------------------------------------------------------------------- features by presence
+
+def has_node_type(idname: str) -> bool:
+    """True if this Blender defines the node type ``idname`` (e.g. a sky or volume node added later)."""
+    return hasattr(bpy.types, idname)
+
+
+def node_input(node, name: str):
+    """The input socket ``name`` of ``node``, or None where this Blender's node has no such input
+    (e.g. Principled BSDF inputs added in later releases)."""
+    return node.inputs.get(name)
