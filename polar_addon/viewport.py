@@ -63,6 +63,9 @@ def viewport_resolution(width: int, height: int, budget: int = VIEWPORT_PIXELS_P
 class Changes:
     """What a batch of depsgraph updates invalidates (names are original ``name_full``)."""
     objects_geometry: set = dataclasses.field(default_factory=set)   # evaluated mesh changed
+    #: objects flagged as changed geometry in a batch that edits materials: Blender 5.3 flags the
+    #: objects using an edited material so; the sync re-reads them only if their geometry differs
+    objects_geometry_unconfirmed: set = dataclasses.field(default_factory=set)
     objects_transform: set = dataclasses.field(default_factory=set)
     objects_shading: set = dataclasses.field(default_factory=set)    # e.g. material slots reassigned
     data_geometry: set = dataclasses.field(default_factory=set)      # mesh / curve data edited
@@ -74,7 +77,8 @@ class Changes:
     #                                  compares these itself: this flag alone restarts nothing)
 
     def any(self) -> bool:
-        return bool(self.objects_geometry or self.objects_transform or self.objects_shading
+        return bool(self.objects_geometry or self.objects_geometry_unconfirmed or self.objects_transform
+                    or self.objects_shading
                     or self.data_geometry or self.lights_data or self.materials or self.all_materials
                     or self.world or self.scene)
 
@@ -100,7 +104,10 @@ def classify(updates) -> Changes:
 
     An OBJECT update without flags is a selection change and invalidates nothing.  A material's own
     update re-converts that material only; a NODETREE/TEXTURE/IMAGE update (it may be a group used by
-    several materials) re-converts every material and the world.
+    several materials) re-converts every material and the world.  In a batch that edits a material
+    (or a shared node tree) and no geometry data, OBJECT geometry flags are unconfirmed: Blender 5.3
+    flags every object using the edited material so (4.5-5.2 do not), while a mesh edit flags the
+    mesh data too, and a modifier edit comes without a material update.
     """
     c = Changes()
     for id_type, name, geometry, transform, shading in updates:
@@ -125,6 +132,9 @@ def classify(updates) -> Changes:
             c.world = True
         elif id_type in ("SCENE", "COLLECTION"):
             c.scene = True
+    if (c.materials or c.all_materials) and not c.data_geometry:
+        c.objects_geometry_unconfirmed = c.objects_geometry
+        c.objects_geometry = set()
     return c
 
 
@@ -232,7 +242,7 @@ class IncrementalExport:
     """
 
     def __init__(self, geometry_arrays=None, object_meshes=None, export_material=None, export_light=None,
-                 export_world=None, material_alpha=None, object_rays=None):
+                 export_world=None, material_alpha=None, object_rays=None, geometry_unchanged=None):
         from .export import scene as scene_export
         from .export.lights import export_light as _light
         from .export.materials import VIEWPORT_NO_BAKE, export_material as _export_material
@@ -246,6 +256,7 @@ class IncrementalExport:
         self._material_alpha = material_alpha or scene_export.material_alpha
         self._object_rays = object_rays or scene_export.object_rays
         self._attributes_outdated = scene_export.attributes_outdated
+        self._geometry_unchanged = geometry_unchanged or scene_export.geometry_unchanged
         self.arrays = {}      # (object, data) name → local arrays or None
         self.placed = {}      # instance key → ((matrix bytes, slot names), [Mesh])
         self.lights = {}      # instance key → (matrix bytes, light or None)
@@ -331,7 +342,9 @@ class IncrementalExport:
             data_name = obj.data.name_full if obj.data is not None else ""
             dkey = (name, obj.type, data_name)
             reread = full or dkey not in self.arrays or (dkey not in seen_arrays and (
-                name in changes.objects_geometry or data_name in changes.data_geometry))
+                name in changes.objects_geometry or data_name in changes.data_geometry
+                or (name in changes.objects_geometry_unconfirmed
+                    and not self._geometry_unchanged(obj, self.arrays[dkey]))))
             if not reread and dkey not in seen_arrays and (changes.materials or changes.all_materials):
                 reread = self._attributes_outdated(obj, self.arrays[dkey])   # a texture added or removed
             if reread:

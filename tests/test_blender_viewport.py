@@ -113,3 +113,27 @@ def test_engine_field_names_become_ui_labels_in_messages(addon):
     brewster_camera(scene)                                     # nothing to render
     with pytest.raises(RuntimeError, match=r"view layer \(Outliner\): nothing to render"):
         bpy.ops.render.render(write_still=False)
+
+
+def test_geometry_unchanged_compares_the_evaluated_mesh(addon):
+    """The check behind the viewport's unconfirmed geometry flags (Blender 5.3's material edits): true
+    for the geometry that was read, with or without modifiers; false once positions or triangles differ."""
+    from polar_render.polar_addon.export.scene import geometry_arrays, geometry_unchanged
+    empty_scene()
+    sphere = add_sphere(0.5, (0, 0, 0.5))
+    sphere.modifiers.new("Subdivision", "SUBSURF").levels = 1
+
+    def evaluated():
+        return sphere.evaluated_get(bpy.context.evaluated_depsgraph_get())
+
+    arrays = geometry_arrays(evaluated())
+    assert len(arrays[0]) > len(sphere.data.vertices)                  # the subdivided mesh was read
+    assert geometry_unchanged(evaluated(), arrays)
+    sphere.modifiers["Subdivision"].levels = 2                         # a modifier edit
+    assert not geometry_unchanged(evaluated(), arrays)
+    sphere.modifiers["Subdivision"].levels = 1
+    assert geometry_unchanged(evaluated(), arrays)
+    sphere.data.vertices[0].co.z += 0.01                               # same counts, moved vertex
+    sphere.data.update()
+    assert not geometry_unchanged(evaluated(), arrays)
+    assert not geometry_unchanged(evaluated(), None)

@@ -74,10 +74,16 @@ class Exporter:
         self.calls = []
         self.lambert = lambda v: Lambert(ConstantSpectrum(v))
         self.emissive = set()
+        self.reshaped = set()      # objects whose evaluated geometry differs from what was read
         from polar_render.polar_addon.export.scene import object_meshes
         self.export = vp.IncrementalExport(geometry_arrays=self.mesh_arrays, object_meshes=object_meshes,
                                            export_material=self.material, export_light=self.light,
-                                           export_world=self.world, material_alpha=lambda m, w: 1.0)
+                                           export_world=self.world, material_alpha=lambda m, w: 1.0,
+                                           geometry_unchanged=self.geometry_unchanged)
+
+    def geometry_unchanged(self, obj, arrays):
+        self.calls.append(("compare", obj.name))
+        return obj.name not in self.reshaped
 
     def mesh_arrays(self, obj):
         self.calls.append(("mesh", obj.name))
@@ -130,6 +136,26 @@ def test_classify_names_what_each_update_invalidates(vp):
     assert c.materials == {"Red"} and not c.all_materials and not c.world
     assert vp.classify([("NODETREE", "Group", False, False, True)]).all_materials
     assert not vp.classify([("OBJECT", "C", False, False, False)]).any()       # selection only
+
+
+def test_material_edit_that_also_flags_object_geometry_re_reads_only_changed_geometry(vp, scene):
+    """Blender 5.3 flags the geometry of every object using an edited material (its mesh data only
+    with shading); 4.5-5.2 do not.  The viewport compares the geometry instead of re-reading it."""
+    ex, instances, (a, b, lamp, red, blue) = scene
+    updates = [Update(a, geometry=True, shading=True), Update(a.data, shading=True), Update(red, shading=True)]
+    changes = vp.classify(vp.depsgraph_updates(Depsgraph(instances, updates=updates)))
+    assert changes.objects_geometry_unconfirmed == {"A"} and not changes.objects_geometry
+    r = ex.sync(Depsgraph(instances, updates=updates))
+    assert sorted(ex.calls) == [("compare", "A"), ("material", "Red")]
+    assert r.restart and not r.rebuild
+    ex.reshaped.add("A")                                  # e.g. a driver moved its vertices too
+    r = ex.sync(Depsgraph(instances, updates=updates))
+    assert sorted(ex.calls) == [("compare", "A"), ("material", "Red"), ("mesh", "A")] and r.rebuild
+    # a modifier edit (no material update) and a mesh edit in the same batch as a material edit stay confirmed
+    assert vp.classify([("OBJECT", "A", True, False, False)]).objects_geometry == {"A"}
+    mixed = vp.classify([("OBJECT", "A", True, False, True), ("MESH", "B-data", True, False, True),
+                         ("MATERIAL", "Red", False, False, True)])
+    assert mixed.objects_geometry == {"A"} and not mixed.objects_geometry_unconfirmed
 
 
 def test_selection_change_re_exports_nothing(scene):

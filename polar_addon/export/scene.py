@@ -90,6 +90,26 @@ def attributes_outdated(obj, arrays) -> bool:
     return _attribute_needs(obj) != stored
 
 
+def geometry_unchanged(obj, arrays) -> bool:
+    """True if the evaluated mesh object ``obj`` still has the vertex positions and triangles of
+    ``arrays`` (from :func:`geometry_arrays`), compared exactly; False for other object types
+    (which the caller then re-reads).  Reads positions and triangle indices only: a fraction of
+    :func:`mesh_arrays`' cost (no normals, attributes or to_mesh copy)."""
+    if arrays is None or obj.type != "MESH":
+        return False
+    me = obj.data
+    P, F = arrays[0], arrays[1]
+    if len(me.vertices) != len(P) or len(me.loop_triangles) != len(F):
+        return False
+    positions = np.empty(P.size, np.float32)
+    me.attributes["position"].data.foreach_get("vector", positions)
+    if not np.array_equal(positions.reshape(P.shape), P):
+        return False
+    triangles = np.empty(F.size, np.int32)
+    me.loop_triangles.foreach_get("vertices", triangles)
+    return np.array_equal(triangles.reshape(F.shape), F)
+
+
 def _attribute_needs(obj):
     """What the materials of ``obj`` read from its mesh (materials.attribute_needs, merged), or None."""
     merged = {"uv": [], "tangents": [], "colors": [], "bake": []}
