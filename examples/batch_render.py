@@ -4,7 +4,7 @@
                                     [--samples N] [--seed S] [--polarisation auto|full|linear|off]
                                     [--scheduler tcp://HOST:8786 [--distribute-frames]]
 
-Uses the ``bpy`` module (pip install bpy==5.0.1) and Polar from this checkout (or, with
+Uses the ``bpy`` module (pip install bpy==5.0.1, or any Blender the README lists) and Polar from this checkout (or, with
 ``--installed``, the extension installed in Blender's user folder).  Writes one multilayer EXR per
 frame (``DIR/<name>_0001.exr`` …) with the view layer's passes: Combined, S0, S1, S2, S3 (colour)
 and DoP, DoLP, AoLP, DoCP (value).  A render error (missing camera, bad material input, …) is
@@ -17,6 +17,7 @@ on a shared file system).
 """
 
 import argparse
+import atexit
 import importlib.util
 import os
 import sys
@@ -25,7 +26,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def enable_polar(installed: bool):
-    """Enable Polar (the installed extension, or this checkout) and return its package module."""
+    """Enable Polar (the installed extension, or this checkout) and return its package module.
+
+    It is disabled again when the process exits: Blender 4.5 hangs at exit with an add-on still
+    registered that its add-on manager did not load."""
     import bpy  # noqa: F401 — sets up Blender's module paths
     for name in ("polar_render", "bl_ext.user_default.polar_render"):
         if name in sys.modules:
@@ -33,6 +37,7 @@ def enable_polar(installed: bool):
     if installed:
         import addon_utils
         addon_utils.enable("bl_ext.user_default.polar_render", default_set=True)
+        atexit.register(addon_utils.disable, "bl_ext.user_default.polar_render", default_set=False)
         return sys.modules["bl_ext.user_default.polar_render"]
     spec = importlib.util.spec_from_file_location("polar_render", os.path.join(ROOT, "__init__.py"),
                                                   submodule_search_locations=[ROOT])
@@ -40,6 +45,7 @@ def enable_polar(installed: bool):
     sys.modules["polar_render"] = module
     spec.loader.exec_module(module)
     module.register()
+    atexit.register(module.unregister)
     return module
 
 
@@ -102,7 +108,7 @@ def main(argv=None):
 
     if args.scheduler and args.distribute_frames:
         return distribute_frames(args)
-    enable_polar(args.installed)     # register before opening the file, so its engine setting resolves
+    polar = enable_polar(args.installed)     # register before opening the file, so its engine setting resolves
     if args.scheduler:
         from importlib import import_module
         pkg = "bl_ext.user_default.polar_render" if args.installed else "polar_render"
@@ -117,9 +123,7 @@ def main(argv=None):
         scene.polar.seed = args.seed
     if args.polarisation:
         scene.polar.polarisation = args.polarisation.upper()
-    ims = scene.render.image_settings
-    ims.media_type = "MULTI_LAYER_IMAGE"
-    ims.color_depth = "32"
+    polar.polar_addon.compat.set_multilayer_exr(scene.render.image_settings)
     frames = parse_frames(args.frames) if args.frames else [args.frame or scene.frame_current]
     os.makedirs(args.output, exist_ok=True)
     stem = os.path.splitext(os.path.basename(args.blend))[0]

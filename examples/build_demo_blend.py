@@ -20,9 +20,10 @@ sys.path.insert(0, HERE)
 from batch_render import enable_polar  # noqa: E402
 
 
-def build(path, samples, bsdf):
-    """Build and save the demo scene; ``bsdf`` is the extension's polar_addon.nodes.bsdf module."""
+def build(path, samples, addon):
+    """Build and save the demo scene; ``addon`` is the extension's polar_addon package."""
     import bpy
+    bsdf, compat = addon.nodes.bsdf, addon.compat
     material = bsdf.polarising_material
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
@@ -55,7 +56,7 @@ def build(path, samples, bsdf):
     cam.data.lens = 40
     scene.camera = cam
     world = bpy.data.worlds.new("Sky")
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
+    compat.ensure_node_tree(world).nodes["Background"].inputs["Color"].default_value = (1.0, 1.0, 1.0, 1.0)
     scene.world = world
     os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     bpy.ops.wm.save_as_mainfile(filepath=os.path.abspath(path))
@@ -70,7 +71,7 @@ def main():
     ap.add_argument("--output", default="out/batch")
     args = ap.parse_args()
     polar = enable_polar(installed=False)
-    path = build(args.blend, args.samples, polar.polar_addon.nodes.bsdf)
+    path = build(args.blend, args.samples, polar.polar_addon)
     print(path)
     if args.render:
         import batch_render

@@ -28,9 +28,15 @@ REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, REPO)
 
 
+def _compat():
+    """The add-on's Blender-version helpers (polar_addon.compat)."""
+    from tests.blender_support import load_addon
+    return load_addon().polar_addon.compat
+
+
 def principled(bpy, name, colour, roughness=0.5, metallic=0.0):
     mat = bpy.data.materials.new(name)
-    node = mat.node_tree.nodes["Principled BSDF"]
+    node = _compat().ensure_node_tree(mat).nodes["Principled BSDF"]
     node.inputs["Base Color"].default_value = (*colour, 1.0)
     node.inputs["Roughness"].default_value = roughness
     node.inputs["Metallic"].default_value = metallic
@@ -66,7 +72,7 @@ def build(bpy, width, height):
     scene.camera = cam
     world = bpy.data.worlds.new("World")
     scene.world = world
-    bg = world.node_tree.nodes["Background"]
+    bg = _compat().ensure_node_tree(world).nodes["Background"]
     bg.inputs["Color"].default_value = (0.55, 0.7, 1.0, 1.0)
     bg.inputs["Strength"].default_value = 0.3
     return scene
@@ -80,8 +86,7 @@ def render_cycles(bpy, scene, samples, tmp):
     c.pixel_filter_type, c.filter_width = "BOX", 1.0
     c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
     c.max_bounces = c.diffuse_bounces = c.glossy_bounces = 6
-    scene.render.image_settings.media_type = "MULTI_LAYER_IMAGE"
-    scene.render.image_settings.color_depth = "32"
+    _compat().set_multilayer_exr(scene.render.image_settings)
     scene.render.filepath = os.path.join(tmp, "cycles")
     bpy.ops.render.render(write_still=True)
     return read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3]

@@ -4,6 +4,7 @@ The add-on is loaded the way Blender loads the extension: the repository root as
 (``polar_render``) whose ``register()`` forwards to ``polar_addon``.
 """
 
+import atexit
 import importlib.util
 import math
 import os
@@ -15,7 +16,8 @@ PACKAGE = "polar_render"
 
 
 def load_addon():
-    """Import the repository as the extension package and register it (once per process)."""
+    """Import the repository as the extension package and register it (once per process; it is
+    unregistered at exit, without which a Blender 4.5 process hangs there)."""
     import bpy  # noqa: F401
     if PACKAGE in sys.modules:
         return sys.modules[PACKAGE]
@@ -25,6 +27,7 @@ def load_addon():
     sys.modules[PACKAGE] = module
     spec.loader.exec_module(module)
     module.register()
+    atexit.register(module.unregister)
     return module
 
 
@@ -37,9 +40,7 @@ def empty_scene(width=48, height=36, samples=4):
     scene.render.resolution_percentage = 100
     scene.polar.samples = samples
     scene.polar.max_bounces = 7
-    ims = scene.render.image_settings
-    ims.media_type = "MULTI_LAYER_IMAGE"
-    ims.color_depth = "32"
+    load_addon().polar_addon.compat.set_multilayer_exr(scene.render.image_settings)
     return scene
 
 
