@@ -18,8 +18,13 @@ demo: $(VENV)/.installed
 # TEST_WORKERS=0 runs everything in this process.
 TEST_WORKERS ?= 2
 
+# The extension's smoke set also runs on the oldest and newest supported Blender (4.5 LTS on
+# Python 3.11, 5.3 on Python 3.13), each in .venv-blender/bpy-<release> (created once, ~400 MB each).
+BLENDER_SERIES ?= 4.5 5.3
+
 test: $(VENV)/.installed
 	$(PY) -m ruff check .
+	$(PY) tests/support/blender_envs.py $(BLENDER_SERIES)
 	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadfile
 
 bench: $(VENV)/.installed
