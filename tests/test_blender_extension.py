@@ -7,32 +7,21 @@ Runs in fresh bpy processes with an isolated BLENDER_USER_RESOURCES, so nothing 
 checkout is importable there except what the zip installs.
 """
 
-import json
 import os
-import subprocess
 import sys
 import textwrap
 
-import numpy as np
 import pytest
 
 pytest.importorskip("bpy")
 
 from tests.blender_support import read_multilayer  # noqa: E402
 from tests.support import blender_envs  # noqa: E402
-from tests.support import extension_smoke  # noqa: E402  (constants only: it runs inside each Blender)
+from tests.support.extension_run import (clean_env, install, judge, pass_difference, printed,  # noqa: E402
+                                         run_smoke)
 
-SMOKE_SCRIPT = extension_smoke.__file__
 #: The series the smoke set runs on here: the pinned one, the oldest and the newest supported.
 SERIES = ("5.0",) + blender_envs.CI_SERIES
-PASSES = ("Combined", "S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP", "Polariser")
-
-INSTALL = textwrap.dedent("""
-    import sys
-    import bpy
-    from bl_pkg import cli_extension
-    sys.exit(cli_extension(["install-file", "-r", "user_default", "-e", sys.argv[1]]) or 0)
-""")
 
 RENDER = textwrap.dedent("""
     import importlib, json, math, os, sys
@@ -87,28 +76,10 @@ RENDER = textwrap.dedent("""
 """)
 
 
-def run_bpy(script, *args, env, python=sys.executable):
-    return subprocess.run([python, "-c", script, *args], env=env, capture_output=True, text=True,
+def run_bpy(script, *args, env):
+    import subprocess
+    return subprocess.run([sys.executable, "-c", script, *args], env=env, capture_output=True, text=True,
                           cwd=env["HOME"], timeout=600)
-
-
-def clean_env(home, user):
-    """This process's environment without Polar's overrides, with Blender's user folder at ``user``."""
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "POLAR_KERNEL_CACHE", "POLAR_KERNELS")}
-    env.update(BLENDER_USER_RESOURCES=str(user), HOME=str(home))
-    return env
-
-
-def install(python, zip_path, env):
-    """Install the zip with Blender's extension command; fails the test if it did not install, even
-    where the command exits 0 (Blender 4.5 refuses a too-new minimum version so)."""
-    proc = run_bpy(INSTALL, zip_path, env=env, python=python)
-    log = proc.stdout + proc.stderr
-    installed = os.path.join(env["BLENDER_USER_RESOURCES"], "extensions", "user_default", "polar_render")
-    assert proc.returncode == 0, log
-    assert os.path.exists(os.path.join(installed, "blender_manifest.toml")), log
-    assert not [line for line in log.splitlines() if line.startswith("ERROR") or "incompatible" in line], log
-    return installed
 
 
 @pytest.fixture(scope="module")
@@ -120,29 +91,14 @@ def zip_path(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def smoke(zip_path, tmp_path_factory):
-    """series → (report, output folder): the zip installed into a clean user folder of that Blender and
-    tests/support/extension_smoke.py run there (once per series for the module)."""
+    """series → tests.support.extension_run.run_smoke's result (once per series for the module)."""
     done = {}
 
     def run(series):
         if series not in done:
-            python = blender_envs.interpreter(series)
-            home = tmp_path_factory.mktemp(f"blender{series}")
-            env = clean_env(home, home / "user")
-            install(python, zip_path, env)
-            out = home / "out"
-            proc = subprocess.run([python, SMOKE_SCRIPT, str(out)], env=env, capture_output=True, text=True,
-                                  cwd=str(home), timeout=600)
-            reports = printed(proc, "POLAR_SMOKE")
-            assert proc.returncode == 0 and reports, proc.stdout[-3000:] + proc.stderr[-3000:]
-            done[series] = (json.loads(reports[-1]), out)
+            done[series] = run_smoke(series, zip_path, str(tmp_path_factory.mktemp(f"blender{series}")))
         return done[series]
     return run
-
-
-def printed(proc, key):
-    """Values the scripts above print as ``KEY=value`` lines, in order."""
-    return [line.split("=", 1)[1] for line in proc.stdout.splitlines() if line.startswith(key + "=")]
 
 
 def test_zip_installs_enables_renders_and_caches_kernels_in_the_user_folder(tmp_path, zip_path):
@@ -153,7 +109,8 @@ def test_zip_installs_enables_renders_and_caches_kernels_in_the_user_folder(tmp_
     user = tmp_path / "user"
     env = clean_env(tmp_path, user)
     installed = user / "extensions" / "user_default" / "polar_render"
-    assert install(sys.executable, zip_path, env) == str(installed)
+    folder, log = install(sys.executable, zip_path, env)
+    assert folder == str(installed), log
     assert (installed / "engine").is_dir()
     user_folder = user / "extensions" / ".user" / "user_default" / "polar_render" / "numba"
     statuses = []
@@ -185,42 +142,24 @@ def test_zip_installs_enables_renders_and_caches_kernels_in_the_user_folder(tmp_
 
 @pytest.mark.parametrize("series", SERIES)
 def test_smoke_set_installs_enables_renders_and_runs_the_operators(smoke, series):
-    """On each Blender: the zip installs and enables, a Principled + Polarising BSDF scene renders every
-    pass, the Virtual Polariser's composite is Malus' law on the passes, the Polar Denoise group
-    denoises, and a material edit re-exports the material alone in the viewport (Blender 5.3 also
-    flags the geometry of the objects using it)."""
-    report, out = smoke(series)
-    assert report["blender"].startswith(blender_envs.RELEASES[series][0]), report
-    assert report["python"] == blender_envs.RELEASES[series][1]
+    """On each Blender: the zip installs (a refusal fails even where Blender's command exits 0) and
+    enables, a Principled + Polarising BSDF scene renders every pass, the Virtual Polariser's
+    composite is Malus' law on the passes, the Polar Denoise group denoises, and a material edit
+    re-exports the material alone in the viewport (Blender 5.3 also flags the geometry of the
+    objects using it)."""
+    result = smoke(series)
+    assert result["install"] == "ok", result["log"]
+    release, python = blender_envs.RELEASES[series]
+    assert result["blender"].startswith(release) and result["python"] == python, result
     for stage in ("enable", "render", "polariser", "denoise", "viewport"):
-        assert report.get(stage) == "ok", (stage, report)
-    assert report["backend"].startswith("numba")          # the bundled wheels of this Python loaded
-    passes = read_multilayer(str(out / "render.exr"))
-    assert set(PASSES) <= set(passes)
-    assert passes["DoLP"][-2:, :].min() > 0.5               # the floor near Brewster's angle
-    assert all(np.isfinite(p).all() for p in passes.values())
-
-    composite = read_multilayer(str(out / "polariser.exr"), layer="Composite")["Combined"][..., :3]
-    S = read_multilayer(str(out / "polariser.exr"))
-    theta = np.radians(extension_smoke.POLARISER_ANGLE)
-    malus = 0.5 * (S["S0"] + np.cos(2 * theta) * S["S1"] + np.sin(2 * theta) * S["S2"])
-    np.testing.assert_allclose(composite, malus, rtol=0, atol=1e-6 * S["S0"].max())
-
-    denoised = read_multilayer(str(out / "denoise.exr"), layer="Composite")["Combined"][..., :3]
-    noisy = read_multilayer(str(out / "denoise.exr"))["S0"]
-    assert np.isfinite(denoised).all() and np.abs(denoised - noisy).max() > 1e-3 * noisy.max()
-
-    counts = report["viewport_counts"]
-    assert counts["material"] == {"arrays": 0, "materials": 1}, counts
-    assert counts["mesh"]["arrays"] == 1 and counts["modifier"]["arrays"] == 1, counts
+        assert result.get(stage) == "ok", (stage, result.get(stage), result["log"])
+    assert result["backend"].startswith("numba")          # the bundled wheels of this Python loaded
+    assert judge(result) == {"passes": "ok", "polariser": "ok", "denoise": "ok", "viewport": "ok"}
 
 
 @pytest.mark.parametrize("series", blender_envs.CI_SERIES)
 def test_every_pass_equals_the_pinned_blenders(smoke, series):
     """The same scene and seed on 4.5 and 5.3 as on 5.0.1: every pass within 1e-6 of max S0
     (measured: identical, as the engine and its compiled kernels are the same code)."""
-    reference = read_multilayer(str(smoke("5.0")[1] / "render.exr"))
-    other = read_multilayer(str(smoke(series)[1] / "render.exr"))
-    scale = reference["S0"].max()
-    for name in PASSES:
-        assert np.abs(other[name] - reference[name]).max() <= 1e-6 * scale, name
+    difference = pass_difference(smoke(series), smoke("5.0"))
+    assert difference and max(difference.values()) <= 1e-6, difference

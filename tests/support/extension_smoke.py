@@ -1,14 +1,14 @@
 """The extension smoke set, run by one Blender's Python (``bpy``) after the zip is installed:
 
-    BLENDER_USER_RESOURCES=<user folder> <python with bpy> tests/support/extension_smoke.py OUT_DIR
+    BLENDER_USER_RESOURCES=<user folder> <python with bpy> tests/support/extension_smoke.py OUT_DIR ANGLE
 
 Enables the installed extension, renders a small Principled + Polarising BSDF scene (every pass
-into ``OUT_DIR/render.exr``), adds the Virtual Polariser (``polariser.exr``) and the Polar Denoise
-group (``denoise.exr``) with their operators and renders each, and feeds a material edit, a mesh
-edit and a modifier edit through the viewport's incremental export.  Prints one line
+into ``OUT_DIR/render.exr``), adds the Virtual Polariser at ANGLE degrees (``polariser.exr``) and the
+Polar Denoise group (``denoise.exr``) with their operators and renders each, and feeds a material
+edit, a mesh edit and a modifier edit through the viewport's incremental export.  Prints one line
 ``POLAR_SMOKE=<json>``: {stage: "ok" or the error}, what the viewport re-exported per edit, the
-Blender and Python versions.  The caller (tests/test_blender_extension.py, tests/bench/blender_versions.py)
-reads the EXR files and judges; this script only reports, so a failing stage never hides the next.
+Blender and Python versions.  tests/support/extension_run.py starts it and judges the EXR files; this
+script only reports, so a failing stage never hides the next.
 """
 
 import json
@@ -21,7 +21,6 @@ import bpy
 
 EXTENSION = "bl_ext.user_default.polar_render"
 WIDTH, HEIGHT, SAMPLES = 16, 12, 2
-POLARISER_ANGLE = 30.0
 
 
 def stage(report, name):
@@ -112,7 +111,7 @@ def viewport_edits(ext, scene):
     return result
 
 
-def main(out_dir):
+def main(out_dir, angle):
     import addon_utils
     os.makedirs(out_dir, exist_ok=True)
     report = {"blender": bpy.app.version_string, "python": "{}.{}".format(*sys.version_info[:2])}
@@ -144,7 +143,7 @@ def main(out_dir):
     @stage(report, "polariser")
     def _polariser():
         scene.polar.polariser_type = "LINEAR"
-        scene.polar.polariser_angle = POLARISER_ANGLE
+        scene.polar.polariser_angle = angle
         if bpy.ops.polar.add_virtual_polariser() != {"FINISHED"}:
             raise RuntimeError("the Virtual Polariser operator did not finish")
         render(scene, out_dir, "polariser")
@@ -167,5 +166,5 @@ def main(out_dir):
 
 
 if __name__ == "__main__":
-    result = main(sys.argv[-1])
+    result = main(sys.argv[-2], float(sys.argv[-1]))
     print("POLAR_SMOKE=" + json.dumps(result), flush=True)
