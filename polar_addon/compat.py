@@ -13,7 +13,8 @@ so a later release that keeps an API keeps working.  What differs:
   Composite node.
 * Multilayer EXR output: 5.0 sets ``ImageFormatSettings.media_type``; before, a file format of its own.
 * Features newer Blenders add (Principled inputs, sky and volume types) are looked up with
-  :func:`node_input` / :func:`has_node_type`; callers warn once where one is missing.
+  :func:`node_input` / :func:`has_node_type`; callers warn once where one is missing.  5.3's Normal
+  Map convention (OpenGL or DirectX): :func:`normal_map_convention`.
 """
 
 import bpy
@@ -100,6 +101,12 @@ def set_multilayer_exr(image_settings, depth: str = "32"):
 def has_node_type(idname: str) -> bool:
     """True if this Blender defines the node type ``idname`` (e.g. a sky or volume node added later)."""
     return hasattr(bpy.types, idname)
+
+
+def normal_map_convention(node) -> str:
+    """A Normal Map node's tangent-space convention, "opengl" or "directx" (Blender 5.3 added the
+    choice; before, every normal map is OpenGL's)."""
+    return "directx" if getattr(node, "convention", "OPENGL") == "DIRECTX" else "opengl"
 
 
 def node_input(node, name: str):

@@ -512,6 +512,17 @@ def test_normal_mapped_plane_has_the_mapped_normal_and_its_frames(tmp_path):
     flat = parse_material({"type": "conductor", "metal": "Au", "normal_map": {"texture": "n.exr", "strength": 0}},
                           "materials.g", base_dir=str(tmp_path))
     np.testing.assert_allclose(flat.shading_point(sp).n_s, sp.n_s, atol=1e-15)
+    # the DirectX convention (Blender 5.3) reads green pointing down: the same normal, y mirrored
+    directx = parse_material({"type": "conductor", "metal": "Au",
+                              "normal_map": {"texture": "n.exr", "convention": "directx"}},
+                             "materials.g", base_dir=str(tmp_path))
+    expect[1] = -expect[1]
+    np.testing.assert_allclose(directx.shading_point(sp).n_s, np.tile(expect[:, None], (1, n)), rtol=1e-14,
+                               atol=1e-15)
+    with pytest.raises(SceneError, match=r"materials\.g\.normal_map\.convention: must be one of 'opengl', "
+                                         r"'directx'.*got 'vulkan'"):
+        parse_material({"type": "conductor", "metal": "Au", "normal_map": {"texture": "n.exr", "convention": "vulkan"}},
+                       "materials.g", base_dir=str(tmp_path))
 
 
 class ShadingNormalTest:

@@ -6,9 +6,11 @@ the mapped one, so the model's frames, its cosines and the integrator's |n_s·ω
 normal (polarisation frames follow it consistently).  The geometric normal n_g is left alone: it
 offsets ray origins and decides on which side of the actual surface a direction lies.
 
-- Normal map (Blender's Normal Map node, tangent space, OpenGL convention +Y = +v): a Non-Color
-  RGB texel c gives n_t = (2c − 1); n_m = normalise(n_t.x·T + n_t.y·B + n_t.z·n_s) with the tangent
-  frame of engine.textures.surface.SurfacePoints.tangent_frame; ``strength`` s blends
+- Normal map (Blender's Normal Map node, tangent space): a Non-Color RGB texel c gives
+  n_t = (2c − 1) in the OpenGL convention (green +Y = +v), n_t = (2c_r − 1, 1 − 2c_g, 2c_b − 1) in
+  DirectX's (green pointing down, Blender 5.3's Normal Map ▸ Convention);
+  n_m = normalise(n_t.x·T + n_t.y·B + n_t.z·n_s) with the tangent frame of
+  engine.textures.surface.SurfacePoints.tangent_frame; ``strength`` s blends
   n = normalise(n_s + s·(n_m − n_s)) (s = 1: the map's normal).
 - Bump map (height h in scene units × ``distance``): h_u, h_v by central differences one texel
   apart; ∂p/∂u' = ∂p/∂u + d·h_u·n_s, ∂p/∂v' = ∂p/∂v + d·h_v·n_s (pbrt's bump mapping without the
@@ -39,14 +41,21 @@ class ShadingNormal(BSDF):
 
     varies_over_surface = True
 
+    #: tangent-space conventions of a normal map's green channel: +v up (OpenGL) or down (DirectX)
+    CONVENTIONS = ("opengl", "directx")
+
     def __init__(self, base: BSDF, normal_map: TextureInput | None = None, normal_strength: float = 1.0,
-                 bump_map: TextureInput | None = None, bump_distance: float = 1.0, bump_strength: float = 1.0):
+                 bump_map: TextureInput | None = None, bump_distance: float = 1.0, bump_strength: float = 1.0,
+                 normal_convention: str = "opengl"):
         if normal_map is None and bump_map is None:
             raise ValueError("ShadingNormal needs a normal map or a bump map")
+        if normal_convention not in self.CONVENTIONS:
+            raise ValueError(f"normal_convention must be one of {', '.join(self.CONVENTIONS)}")
         if bump_map is not None and not isinstance(bump_map.texture, ImageTexture):
             raise ValueError("a bump map must be an image texture")
         self.base = base
         self.normal_map, self.normal_strength = normal_map, float(normal_strength)
+        self.normal_green_down = normal_convention == "directx"
         self.bump_map, self.bump_distance, self.bump_strength = bump_map, float(bump_distance), float(bump_strength)
         self.flags = base.flags
         self.name = base.name
@@ -63,6 +72,8 @@ class ShadingNormal(BSDF):
             c = self.normal_map.rgb(points)
             t, b = points.tangent_frame(n)
             x, y, z = 2.0 * c[0] - 1.0, 2.0 * c[1] - 1.0, 2.0 * c[2] - 1.0
+            if self.normal_green_down:
+                y = -y
             mapped = _normalise(t * x[None, :] + b * y[None, :] + n * z[None, :])
             n = _normalise(n + self.normal_strength * (mapped - n))
         return n
@@ -124,7 +135,8 @@ class ShadingNormal(BSDF):
     def describe(self) -> dict:
         out = dict(self.base.describe())
         if self.normal_map is not None:
-            out["normal_map"] = f"{self.normal_map!r}, strength {self.normal_strength:g}"
+            out["normal_map"] = (f"{self.normal_map!r}, strength {self.normal_strength:g}"
+                                 + (", DirectX convention" if self.normal_green_down else ""))
         if self.bump_map is not None:
             out["bump_map"] = f"{self.bump_map!r}, distance {self.bump_distance:g}, strength {self.bump_strength:g}"
         return out

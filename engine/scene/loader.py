@@ -420,10 +420,14 @@ def _shading_normal(bsdf, d: dict, field: str, base_dir):
             raise SceneError(where, "must be an image texture object like {\"texture\": \"normal.png\"}")
         raw = dict(raw)
         values = {name: number(raw.pop(name, default), f"{where}.{name}", 0.0) for name, default in extra.items()}
+        convention = raw.pop("convention", "opengl") if key == "normal_map" else "opengl"
+        if convention not in ShadingNormal.CONVENTIONS:
+            raise SceneError(f"{where}.convention", f"must be one of {', '.join(map(repr, ShadingNormal.CONVENTIONS))} "
+                             f"(the green channel's direction), got {convention!r}")
         raw.setdefault("color_space", "Non-Color")        # normal and height maps are data
         source = parse_texture_input(raw, where, base_dir)
         if key == "normal_map":
-            kw.update(normal_map=source, normal_strength=values["strength"])
+            kw.update(normal_map=source, normal_strength=values["strength"], normal_convention=convention)
         else:
             kw.update(bump_map=source, bump_distance=values["distance"], bump_strength=values["strength"])
     return ShadingNormal(bsdf, **kw)

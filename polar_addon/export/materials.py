@@ -856,7 +856,8 @@ def with_shading_normal(bsdf, node, mat, warnings):
                             "supported (tangent space only); the geometric shading normals are used")
         else:
             r = _Reader(mat, normal, warnings)
-            kw.update(normal_map=r.texture("Color"), normal_strength=max(r.float("Strength"), 0.0))
+            kw.update(normal_map=r.texture("Color"), normal_strength=max(r.float("Strength"), 0.0),
+                      normal_convention=compat.normal_map_convention(normal))
     if bump is not None:
         r = _Reader(mat, bump, warnings)
         distance = r.float("Distance")

@@ -63,8 +63,8 @@ def main(argv=None):
             print(f"Blender {series} …", file=sys.stderr, flush=True)
             results[series] = run_smoke(series, zip_path, home)
         rows = ["| Blender (bpy) | Python | install | enable | render + passes | Virtual Polariser | Polar Denoise "
-                "| viewport edits | max pass Δ vs 5.0.1 | seconds |",
-                "|---|---|---|---|---|---|---|---|---|---|"]
+                "| viewport edits | DirectX normal map | max pass Δ vs 5.0.1 | seconds |",
+                "|---|---|---|---|---|---|---|---|---|---|---|"]
         for series in args.series:
             r = results[series]
             checks = judge(r)
@@ -73,6 +73,7 @@ def main(argv=None):
             rows.append(" | ".join([
                 f"| {series} ({release})", python, cell(r["install"]), cell(r.get("enable", "-")),
                 cell(checks["passes"]), cell(checks["polariser"]), cell(checks["denoise"]), cell(checks["viewport"]),
+                cell(checks["normal_map"]),
                 "-" if not diff else f"{max(diff.values()):.1e}", f"{r['seconds']:.0f} |"]))
         print("\n".join(rows))
         failed = [s for s in args.series if results[s]["install"] != "ok" or set(judge(results[s]).values()) != {"ok"}]

@@ -129,10 +129,17 @@ def judge(result):
             return f"mesh/modifier edits re-read {counts['mesh']['arrays']}/{counts['modifier']['arrays']} meshes"
         return None
 
+    def normal_map():
+        release = tuple(map(int, blender_envs.RELEASES[result["series"]][0].split(".")))
+        expected = "directx" if release >= (5, 3) else "absent"      # the Convention setting came with 5.3
+        found = result["normal_map_convention"]
+        return None if found == expected else f"a DirectX Normal Map is read as {found} (expected {expected})"
+
     check("passes", "render", passes)
     check("polariser", "polariser", polariser)
     check("denoise", "denoise", denoise)
     check("viewport", "viewport", viewport)
+    check("normal_map", "normal_map", normal_map)
     return checks
 
 

@@ -111,6 +111,28 @@ def viewport_edits(ext, scene):
     return result
 
 
+def normal_map_convention(ext):
+    """How the exporter reads a Normal Map set to DirectX (Blender 5.3 on; "absent" before): the engine
+    material's green-channel direction, "directx" or "opengl"."""
+    compat = sys.modules[ext.__name__ + ".polar_addon.compat"]
+    materials = sys.modules[ext.__name__ + ".polar_addon.export.materials"]
+    mat = bpy.data.materials.new("Normal mapped")
+    tree = compat.ensure_node_tree(mat)
+    image = bpy.data.images.new("flat normal", 4, 4, float_buffer=True)
+    image.pixels.foreach_set([0.5, 0.5, 1.0, 1.0] * 16)
+    image.colorspace_settings.name = "Non-Color"
+    texture = tree.nodes.new("ShaderNodeTexImage")
+    texture.image = image
+    normal = tree.nodes.new("ShaderNodeNormalMap")
+    if not hasattr(normal, "convention"):
+        return "absent"
+    normal.convention = "DIRECTX"
+    tree.links.new(texture.outputs["Color"], normal.inputs["Color"])
+    tree.links.new(normal.outputs["Normal"], tree.nodes["Principled BSDF"].inputs["Normal"])
+    bsdf, _ = materials.export_material(mat, [])
+    return "directx" if getattr(bsdf, "normal_green_down", False) else "opengl"
+
+
 def main(out_dir, angle):
     import addon_utils
     os.makedirs(out_dir, exist_ok=True)
@@ -160,6 +182,10 @@ def main(out_dir, angle):
     @stage(report, "viewport")
     def _viewport():
         report["viewport_counts"] = viewport_edits(state["ext"], scene)
+
+    @stage(report, "normal_map")
+    def _normal_map():
+        report["normal_map_convention"] = normal_map_convention(state["ext"])
 
     addon_utils.disable(EXTENSION, default_set=False)
     return report
