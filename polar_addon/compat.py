@@ -13,7 +13,7 @@ so a later release that keeps an API keeps working.  What differs:
   Composite node.
 * Multilayer EXR output: 5.0 sets ``ImageFormatSettings.media_type``; before, a file format of its own.
 * Features newer Blenders add (Principled inputs, sky and volume types) are looked up with
-  :func:`node_input` / :func:`has_node_type`; callers warn once where one is missing.  5.3's Normal
+  :func:`node_input` / :func:`has_node_type`; callers warn once where one is missing.  5.1's Normal
   Map convention (OpenGL or DirectX): :func:`normal_map_convention`.
 """
 
@@ -104,7 +104,7 @@ def has_node_type(idname: str) -> bool:
 
 
 def normal_map_convention(node) -> str:
-    """A Normal Map node's tangent-space convention, "opengl" or "directx" (Blender 5.3 added the
+    """A Normal Map node's tangent-space convention, "opengl" or "directx" (Blender 5.1 added the
     choice; before, every normal map is OpenGL's)."""
     return "directx" if getattr(node, "convention", "OPENGL") == "DIRECTX" else "opengl"
 

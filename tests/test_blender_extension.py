@@ -146,7 +146,7 @@ def test_smoke_set_installs_enables_renders_and_runs_the_operators(smoke, series
     enables, a Principled + Polarising BSDF scene renders every pass, the Virtual Polariser's
     composite is Malus' law on the passes, the Polar Denoise group denoises, and a material edit
     re-exports the material alone in the viewport (Blender 5.3 also flags the geometry of the
-    objects using it), and a Normal Map set to 5.3's DirectX convention is exported as such."""
+    objects using it), and a Normal Map set to the DirectX convention (5.1 on) is exported as such."""
     result = smoke(series)
     assert result["install"] == "ok", result["log"]
     release, python = blender_envs.RELEASES[series]

@@ -8,7 +8,7 @@ offsets ray origins and decides on which side of the actual surface a direction 
 
 - Normal map (Blender's Normal Map node, tangent space): a Non-Color RGB texel c gives
   n_t = (2c − 1) in the OpenGL convention (green +Y = +v), n_t = (2c_r − 1, 1 − 2c_g, 2c_b − 1) in
-  DirectX's (green pointing down, Blender 5.3's Normal Map ▸ Convention);
+  DirectX's (green pointing down, Blender 5.1's Normal Map ▸ Convention);
   n_m = normalise(n_t.x·T + n_t.y·B + n_t.z·n_s) with the tangent frame of
   engine.textures.surface.SurfacePoints.tangent_frame; ``strength`` s blends
   n = normalise(n_s + s·(n_m − n_s)) (s = 1: the map's normal).

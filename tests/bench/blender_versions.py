@@ -70,11 +70,14 @@ def main(argv=None):
             checks = judge(r)
             diff = pass_difference(r, results["5.0"])
             release, python = blender_envs.RELEASES[series]
+            lts = " LTS" if "LTS" in r.get("blender", "") else ""
+            absent = r.get("normal_map_convention") == "absent"
+            normal_map = cell(checks["normal_map"]) + (" (no such setting)" if absent else "")
+            worst = None if not diff else max(diff.values())
             rows.append(" | ".join([
-                f"| {series} ({release})", python, cell(r["install"]), cell(r.get("enable", "-")),
+                f"| {series}{lts} ({release})", python, cell(r["install"]), cell(r.get("enable", "-")),
                 cell(checks["passes"]), cell(checks["polariser"]), cell(checks["denoise"]), cell(checks["viewport"]),
-                cell(checks["normal_map"]),
-                "-" if not diff else f"{max(diff.values()):.1e}", f"{r['seconds']:.0f} |"]))
+                normal_map, "-" if worst is None else "0" if worst == 0 else f"{worst:.1e}", f"{r['seconds']:.0f} |"]))
         print("\n".join(rows))
         failed = [s for s in args.series if results[s]["install"] != "ok" or set(judge(results[s]).values()) != {"ok"}]
         return 1 if failed else 0

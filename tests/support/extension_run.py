@@ -131,7 +131,7 @@ def judge(result):
 
     def normal_map():
         release = tuple(map(int, blender_envs.RELEASES[result["series"]][0].split(".")))
-        expected = "directx" if release >= (5, 3) else "absent"      # the Convention setting came with 5.3
+        expected = "directx" if release >= (5, 1) else "absent"      # the Convention setting came with 5.1
         found = result["normal_map_convention"]
         return None if found == expected else f"a DirectX Normal Map is read as {found} (expected {expected})"
 

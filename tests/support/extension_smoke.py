@@ -112,7 +112,7 @@ def viewport_edits(ext, scene):
 
 
 def normal_map_convention(ext):
-    """How the exporter reads a Normal Map set to DirectX (Blender 5.3 on; "absent" before): the engine
+    """How the exporter reads a Normal Map set to DirectX (Blender 5.1 on; "absent" before): the engine
     material's green-channel direction, "directx" or "opengl"."""
     compat = sys.modules[ext.__name__ + ".polar_addon.compat"]
     materials = sys.modules[ext.__name__ + ".polar_addon.export.materials"]
