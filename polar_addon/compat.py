@@ -12,9 +12,9 @@ so a later release that keeps an API keeps working.  What differs:
   Output is the final image; before, ``Scene.node_tree`` (after ``Scene.use_nodes``) with a
   Composite node.
 * Multilayer EXR output: 5.0 sets ``ImageFormatSettings.media_type``; before, a file format of its own.
-* Features newer Blenders add (Principled inputs, sky and volume types) are looked up with
-  :func:`node_input` / :func:`has_node_type`; callers warn once where one is missing.  5.1's Normal
-  Map convention (OpenGL or DirectX): :func:`normal_map_convention`.
+* Features newer Blenders add are read by presence here (``getattr`` with the older behaviour as the
+  default, ``node.inputs.get``), and callers warn once where one a scene uses is not simulated: so
+  far 5.1's Normal Map convention (OpenGL or DirectX), :func:`normal_map_convention`.
 """
 
 import bpy
@@ -98,18 +98,8 @@ def set_multilayer_exr(image_settings, depth: str = "32"):
 
 # ----------------------------------------------------------------------------- features by presence
 
-def has_node_type(idname: str) -> bool:
-    """True if this Blender defines the node type ``idname`` (e.g. a sky or volume node added later)."""
-    return hasattr(bpy.types, idname)
-
-
 def normal_map_convention(node) -> str:
     """A Normal Map node's tangent-space convention, "opengl" or "directx" (Blender 5.1 added the
     choice; before, every normal map is OpenGL's)."""
     return "directx" if getattr(node, "convention", "OPENGL") == "DIRECTX" else "opengl"
 
-
-def node_input(node, name: str):
-    """The input socket ``name`` of ``node``, or None where this Blender's node has no such input
-    (e.g. Principled BSDF inputs added in later releases)."""
-    return node.inputs.get(name)
