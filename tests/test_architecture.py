@@ -10,6 +10,7 @@ ones, never a higher one, and packages may not import each other in a circle.
 """
 
 import ast
+import glob
 import os
 import re
 
@@ -245,3 +246,15 @@ def test_engine_never_imports_bpy_or_the_addon_and_uses_relative_imports():
 def test_root_init_does_not_import_bpy():
     src = open(os.path.join(REPO, "__init__.py"), encoding="utf-8").read()
     assert not re.search(r"^(import|from) ", src, re.M)
+
+
+def test_blender_version_differences_live_in_compat():
+    """Only polar_addon/compat.py reads Blender's version or the per-version APIs it wraps."""
+    pattern = re.compile(r"bpy\.app\.version|compositing_node_group|\.use_nodes\b|media_type")
+    bad = []
+    for path in glob.glob(os.path.join(REPO, "polar_addon", "**", "*.py"), recursive=True):
+        if os.path.basename(path) == "compat.py":
+            continue
+        for m in pattern.finditer(open(path, encoding="utf-8").read()):
+            bad.append(f"{os.path.relpath(path, REPO)}: {m.group(0)}")
+    assert not bad, "\n".join(bad)
