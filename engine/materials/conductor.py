@@ -119,9 +119,11 @@ class SmoothConductor(BSDF):
             self._eta = complex(((n.value * one + 1j * (k.value * one)) / self.exterior_n)[0, 0])
         constant = bool(getattr(n, "is_constant", False) and getattr(k, "is_constant", False))
         # A real index (κ = 0 at every wavelength) reflects without retardance, unless it is below the
-        # exterior index somewhere: then total internal reflection retards (S ≠ 0).
+        # exterior index somewhere: then total internal reflection retards (S ≠ 0).  A textured n may
+        # (its spectral upsampling is not bounded by the texels' range), so it counts as retarding.
         real = getattr(k, "is_constant", False) and float(k.eval([550.0])[0]) == 0.0
-        no_tir = real and float(np.min(n.eval(np.linspace(LAMBDA_MIN, LAMBDA_MAX, 95)))) >= self.exterior_n
+        no_tir = real and not textured(n) and \
+            float(np.min(n.eval(np.linspace(LAMBDA_MIN, LAMBDA_MAX, 95)))) >= self.exterior_n
         self.flags = (BSDFFlags.DELTA_REFLECTION | BSDFFlags.POLARISING
                       | BSDFFlags.when(not no_tir, BSDFFlags.RETARDING)
                       | BSDFFlags.when(not constant, BSDFFlags.WAVELENGTH_DEPENDENT))

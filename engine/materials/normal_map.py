@@ -11,7 +11,9 @@ offsets ray origins and decides on which side of the actual surface a direction 
   DirectX's (green pointing down, Blender 5.1's Normal Map ▸ Convention);
   n_m = normalise(n_t.x·T + n_t.y·B + n_t.z·n_s) with the tangent frame of
   engine.textures.surface.SurfacePoints.tangent_frame; ``strength`` s blends
-  n = normalise(n_s + s·(n_m − n_s)) (s = 1: the map's normal).
+  n = normalise(n_s + s·(n_m − n_s)) (s = 1: the map's normal).  Where n_m or n is the zero vector
+  (a (0.5, 0.5, 0.5) texel; s = ½ on a texel pointing against n_s) or not finite, n_s is kept, as
+  Cycles' Normal Map node does.
 - Bump map (height h in scene units × ``distance``): h_u, h_v by central differences one texel
   apart; ∂p/∂u' = ∂p/∂u + d·h_u·n_s, ∂p/∂v' = ∂p/∂v + d·h_v·n_s (pbrt's bump mapping without the
   ∂n terms), n_b = normalise(∂p/∂u' × ∂p/∂v') on the side of n_s, blended by ``strength`` as above.
@@ -32,8 +34,15 @@ from ..textures import ImageTexture, TextureInput
 from ..vec3 import dot, reflect
 
 
-def _normalise(v: np.ndarray) -> np.ndarray:
-    return v / np.sqrt(dot(v, v))[None, :]
+def _normalise(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
+    """``v`` (3, N) normalised; ``fallback`` (unit, 3 × N) where ``v`` is zero or not finite (as Cycles'
+    normal map node keeps the unperturbed normal there: a (0.5, 0.5, 0.5) texel, or a strength that
+    blends a normal with its opposite)."""
+    length = np.sqrt(dot(v, v))
+    ok = np.isfinite(length) & (length > 0)
+    unit = v / np.where(ok, length, 1.0)[None, :]
+    ok &= np.isfinite(unit).all(axis=0)
+    return np.where(ok[None, :], unit, fallback)
 
 
 class ShadingNormal(BSDF):
@@ -74,8 +83,8 @@ class ShadingNormal(BSDF):
             x, y, z = 2.0 * c[0] - 1.0, 2.0 * c[1] - 1.0, 2.0 * c[2] - 1.0
             if self.normal_green_down:
                 y = -y
-            mapped = _normalise(t * x[None, :] + b * y[None, :] + n * z[None, :])
-            n = _normalise(n + self.normal_strength * (mapped - n))
+            mapped = _normalise(t * x[None, :] + b * y[None, :] + n * z[None, :], n)
+            n = _normalise(n + self.normal_strength * (mapped - n), n)
         return n
 
     def _bumped(self, points, n: np.ndarray) -> np.ndarray:
@@ -97,7 +106,7 @@ class ShadingNormal(BSDF):
         ok = ok & (length > 0)
         nb = np.where(ok[None, :], nb / np.where(ok, length, 1.0)[None, :], n)
         nb = np.where((dot(nb, n) < 0)[None, :], -nb, nb)
-        return _normalise(n + self.bump_strength * (nb - n))
+        return _normalise(n + self.bump_strength * (nb - n), n)
 
     def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
         return ShadingPoint(sp.p, self.shading_normal(sp), sp.n_g, sp.wo, sp.lam, sp.mono, sp.lookup, sp.material,

@@ -184,6 +184,7 @@ class Parameter:
                                     f"({self.allowed_text()})")
         source = raw if isinstance(raw, TextureInput) else parse_texture_input(raw, field, base_dir)
         value = TexturedSpectrum(source, self.spectrum) if self.kind == "spectrum" else TexturedNumber(source)
+        value = value.clamped_to(-math.inf if self.lo_open else self.lo, math.inf if self.hi_open else self.hi)
         if not (self.contains(value.lo) and self.contains(value.hi)):
             raise SceneError(field, f"texture values (after scale and offset) span [{value.lo:g}, {value.hi:g}]: "
                                     f"must be in {self.range_text()}" + (f" {self.unit}" if self.unit else ""))

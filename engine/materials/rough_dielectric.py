@@ -188,6 +188,13 @@ rough_dielectric_pdf = twin(rough_dielectric_pdf_numba, rough_dielectric_pdf_num
 rough_dielectric_sample = twin(rough_dielectric_sample_numba, rough_dielectric_sample_numpy)
 
 
+def index_matched(n: float, exterior_n: float) -> bool:
+    """True for an interface between equal indices: it scatters nothing at any roughness (light passes
+    straight through: the BTDF's η → 1 limit is a delta), which the smooth dielectric renders exactly;
+    the microfacet formulas degenerate there (the half vector η ω_i + ω_o of the one direction is 0)."""
+    return float(n) == float(exterior_n)
+
+
 class RoughDielectric(BSDF):
     """Polarising rough dielectric (see the module docstring)."""
 
@@ -264,6 +271,6 @@ def _rough_dielectric(p):
     distribution, shadowing = p["distribution"], p["shadowing"]
     if shadowing == "smith_rational" and distribution != "beckmann":
         raise SceneError(p.field("shadowing"), "'smith_rational' exists for distribution 'beckmann' only")
-    if alpha == 0:   # the smooth limit
+    if alpha == 0 or index_matched(p["n"], p["exterior_n"]):   # the smooth limit, or no interface at all
         return SmoothDielectric(p["n"], p["exterior_n"])
     return RoughDielectric(p["n"], alpha, distribution, shadowing, p["exterior_n"])

@@ -572,6 +572,7 @@ def _torrance_sparrow(p):
     shadowing = p["shadowing"]
     m = p["m"]
     if isinstance(m, TexturedNumber):
+        m = m.clamped_to(M_MIN)          # a texel stored as float32 just below the limit counts as the limit
         if not m.lo >= M_MIN:
             raise SceneError(p.field("m"), f"a roughness texture must stay in [{M_MIN:g}, {p.model['m'].hi:g}] "
                                            f"(the smooth limit m = 0 cannot vary per point), its values reach "

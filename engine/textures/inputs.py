@@ -15,11 +15,14 @@ Blender's colour-to-number conversion).
 :class:`TexturedSpectrum` is a Spectrum that can only be evaluated at surface points
 (``ShadingPoint.spectrum`` does that); :class:`TexturedNumber` stands for a number
 (``ShadingPoint.number``).  Both keep the bounds of every value they can take, which the scene
-loader checks against the parameter's declared range.
+loader checks against the parameter's declared range.  Texels are float32: a texel meant as a range
+limit (roughness 1e-4) may be stored one rounding below it (9.99999975e-05), so values that equal a
+closed limit in float32 are accepted and clipped to the limit (:meth:`TexturedNumber.clamped_to`).
 """
 
 from __future__ import annotations
 
+import math
 import os
 
 import numpy as np
@@ -116,15 +119,38 @@ class TextureInput:
         return min(a, b), max(a, b)
 
 
-class TexturedNumber:
-    """A number parameter that varies over the surface (see ``ShadingPoint.number``)."""
+def _float32_clip(lo: float, hi: float, limit_lo: float, limit_hi: float, clip):
+    """The clip interval of a textured value with bounds [lo, hi] against closed limits: a limit it
+    crosses by no more than float32 rounding (equal to it in float32) is added to ``clip`` (None: no
+    clip yet); a bound further out is left for the caller's range check to refuse."""
+    new_lo, new_hi = clip if clip is not None else (-math.inf, math.inf)
+    if lo < limit_lo and np.float32(lo) >= np.float32(limit_lo):
+        new_lo = max(new_lo, limit_lo)
+    if hi > limit_hi and np.float32(hi) <= np.float32(limit_hi):
+        new_hi = min(new_hi, limit_hi)
+    return clip if (new_lo, new_hi) == (-math.inf, math.inf) else (new_lo, new_hi)
 
-    def __init__(self, source: TextureInput):
-        self.source = source
-        self.lo, self.hi = source.bounds(rgb=False)
+
+class TexturedNumber:
+    """A number parameter that varies over the surface (see ``ShadingPoint.number``); ``clip``:
+    (lo, hi) its values are clipped to (see :meth:`clamped_to`), None for none."""
+
+    def __init__(self, source: TextureInput, clip: tuple[float, float] | None = None):
+        self.source, self.clip = source, clip
+        lo, hi = source.bounds(rgb=False)
+        self.lo, self.hi = (lo, hi) if clip is None else (min(max(lo, clip[0]), clip[1]), max(min(hi, clip[1]),
+                                                                                            clip[0]))
+
+    def clamped_to(self, lo: float = -math.inf, hi: float = math.inf) -> TexturedNumber:
+        """This parameter clipped to the closed limits [lo, hi] it reaches beyond only by float32
+        rounding (a texel stored as float32 9.99999975e-05 for the limit 1e-4); itself otherwise, so
+        a value really out of range stays for the range check to refuse."""
+        clip = _float32_clip(self.lo, self.hi, lo, hi, self.clip)
+        return self if clip == self.clip else TexturedNumber(self.source, clip)
 
     def at(self, points) -> np.ndarray:
-        return self.source.number(points)
+        values = self.source.number(points)
+        return values if self.clip is None else np.clip(values, *self.clip)
 
     def __float__(self):
         raise TypeError("a textured parameter has no single value: evaluate it at surface points")
@@ -133,7 +159,8 @@ class TexturedNumber:
         """The same values as a grey (λ-independent) textured spectrum (e.g. a coat's real index)."""
         src = self.source
         channel = src.channel or ("R" if src._grey() else "luminance")
-        return TexturedSpectrum(TextureInput(src.texture, channel, src.scale, src.offset, src.power), kind)
+        return TexturedSpectrum(TextureInput(src.texture, channel, src.scale, src.offset, src.power), kind,
+                                self.clip)
 
     def __repr__(self):
         return f"TexturedNumber({self.source!r})"
@@ -145,9 +172,16 @@ class TexturedSpectrum(Spectrum):
 
     is_constant = False
 
-    def __init__(self, source: TextureInput, kind: str = "reflectance"):
-        self.source, self.kind = source, kind
-        self.lo, self.hi = source.bounds(rgb=True)
+    def __init__(self, source: TextureInput, kind: str = "reflectance", clip: tuple[float, float] | None = None):
+        self.source, self.kind, self.clip = source, kind, clip
+        lo, hi = source.bounds(rgb=True)
+        self.lo, self.hi = (lo, hi) if clip is None else (min(max(lo, clip[0]), clip[1]), max(min(hi, clip[1]),
+                                                                                            clip[0]))
+
+    def clamped_to(self, lo: float = -math.inf, hi: float = math.inf) -> TexturedSpectrum:
+        """As :meth:`TexturedNumber.clamped_to`, on the texels' RGB values."""
+        clip = _float32_clip(self.lo, self.hi, lo, hi, self.clip)
+        return self if clip == self.clip else TexturedSpectrum(self.source, self.kind, clip)
 
     def __repr__(self):
         return f"TexturedSpectrum({self.source!r})"
@@ -166,6 +200,8 @@ class TexturedSpectrum(Spectrum):
         """Values (L, N) at the points and their wavelengths ``lam`` (L, N) (mono: the luminance)."""
         def compute():
             rgb = self.source.rgb(points)
+            if self.clip is not None:
+                rgb = np.clip(rgb, *self.clip)
             if mono:
                 return np.broadcast_to(luminance(rgb.T)[None, :], lam.shape).copy()
             b = basis if basis is not None else basis_rgb(lam)

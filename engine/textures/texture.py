@@ -10,7 +10,9 @@ each, ``eval(points) -> (C, N)`` float64:
   four nearest pixel centres), ``"Cubic"`` (uniform cubic B-spline over 4×4 pixel centres, as
   Cycles' bicubic; its weights are ≥ 0 and sum to 1, so values stay within the pixels' range).
   Extension (pixels outside the image): ``"REPEAT"`` (tile), ``"EXTEND"`` (the edge pixel),
-  ``"CLIP"`` (0: transparent black), ``"MIRROR"`` (tile, every other tile mirrored).
+  ``"CLIP"`` (0: transparent black), ``"MIRROR"`` (tile, every other tile mirrored).  Coordinates
+  beyond 2⁵² (where every float is whole) are first reduced to what the extension makes of them, so
+  any finite UV gives a finite value; a UV that overflowed to inf or NaN reads (0, 0).
   Interpolation space: ``"linear"`` (the texels are linear values, filtered as they are) or
   ``"srgb"`` (the texels are sRGB-encoded values; the colour channels are filtered encoded and the
   result decoded, value = dec(Σ wᵢ·encᵢ), as Cycles does for every image it keeps in the sRGB colour
@@ -43,6 +45,24 @@ def srgb_decode(encoded: np.ndarray) -> np.ndarray:
     """Cycles' sRGB decoding (util/color.h color_srgb_to_linear): IEC 61966-2-1, the power law
     continued above 1, negative values → 0; float64 in, float64 out."""
     return np.maximum(srgb_to_linear(encoded), 0.0)
+
+
+#: |u| from which every float64 is a whole number: there the image repeats (mirrors) with period 1 (2), and
+#: EXTEND/CLIP give what they give at u = 2 or -1, so coordinates are reduced first (no overflow below).
+_WHOLE = 2.0 ** 52
+
+
+def _reduce_coordinates(uv: np.ndarray, extension: str) -> np.ndarray:
+    """``uv`` (2, N) with huge coordinates (|u| ≥ 2⁵²) replaced by equivalent small ones for the
+    extension, and non-finite ones (an overflow of extreme vertex UVs) by 0; others unchanged."""
+    big = ~(np.abs(uv) < _WHOLE)
+    if not big.any():
+        return uv
+    period = {"REPEAT": 1.0, "MIRROR": 2.0}.get(extension)
+    with np.errstate(invalid="ignore"):
+        reduced = np.mod(uv, period) if period is not None else np.clip(uv, -1.0, 2.0)
+    reduced = np.where(np.isfinite(uv), reduced, 0.0)
+    return np.where(big, reduced, uv)
 
 
 def _wrap(i: np.ndarray, n: int, extension: str) -> tuple[np.ndarray, np.ndarray | None]:
@@ -186,6 +206,7 @@ class ImageTexture(Texture):
         """Values (C, N) at texture coordinates uv (2, N)."""
         if self.uv_transform is not None:
             uv = self.uv_transform[0] @ uv + self.uv_transform[1][:, None]
+        uv = _reduce_coordinates(uv, self.extension)
         x = uv[0] * self.width
         y = uv[1] * self.height
         if self.interpolation == "Closest":

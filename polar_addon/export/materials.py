@@ -748,9 +748,9 @@ def _glass(ior, roughness, distribution, mat, warnings, what):
     the energy of multiple scattering between facets, which the polarising model does not have: it is
     rendered as single-scattering GGX with one warning.  Beckmann → Beckmann with the same α.
     """
-    from ...engine.materials.rough_dielectric import ALPHA_MIN, RoughDielectric
+    from ...engine.materials.rough_dielectric import ALPHA_MIN, RoughDielectric, index_matched
     alpha = roughness * roughness
-    if alpha < SMOOTH_LIMIT:
+    if alpha < SMOOTH_LIMIT or index_matched(ior, 1.0):
         return SmoothDielectric(ior)
     if distribution == "MULTI_GGX":
         warnings.append(f"material {mat!r}: {what} with Multiscatter GGX is rendered as single-scattering GGX "
