@@ -1,5 +1,5 @@
-"""Reading image files for textures: PNG, JPEG (8/16-bit, through Pillow), OpenEXR (float) and
-Radiance .hdr (RGBE, decoded here).
+"""Reading image files for textures and environment maps: PNG (8-bit through Pillow, 16-bit decoded
+here), JPEG, BMP and TGA (Pillow), TIFF (OpenImageIO), OpenEXR (OpenEXR) and Radiance .hdr (decoded here).
 
 Pixels are returned as float32 (H, W, C), C = 1–4 channels, with row 0 at the *bottom* of the
 image (v = 0, as Blender's UV space: v grows upwards), colour channels decoded to linear values
@@ -12,7 +12,22 @@ according to the colour space:
 - ``"Linear"``: as Non-Color for the numbers (Blender's "Linear Rec.709": scene-linear colour),
   the default for EXR files.
 
-Integer images are normalised by their full scale (255, 65535); EXR channels are read as float.
+Values follow OpenImageIO, the library Blender and Cycles read images with: unsigned integer samples
+are normalised by their type's full range (255, 65535, 4294967295), signed ones by their largest
+value (127, 32767, 2147483647: the most negative code maps slightly below −1), float samples (half,
+float, double) are taken as they are; as Cycles (scene/image.cpp), a pixel with a non-finite
+channel (NaN, ±inf, or a double beyond float32's range) becomes 0 in every channel.
+
+Every file goes through one guarded path (:func:`_read_raw`): the reader of its type parses the
+header, the size is checked against MAX_IMAGE_SIDE and MAX_IMAGE_PIXELS *before* any pixel is
+decoded, and whatever a decoder raises on a broken, truncated or unsupported file becomes one
+SceneError naming the file and what is wrong.
+
+TIFF goes through OpenImageIO, because the format's legal sample types (uint8/16/32, int8/16/32,
+float16/32/64; 1–4 channels, chunky or planar, strips or tiles, LZW/Deflate/PackBits, predictors)
+are beyond Pillow, which decodes few of them and misreads some (16-bit RGB reduced to 8 bits, planar
+16-bit RGB as zeros, uint32 wrapped negative, int8 as uint8); OpenImageIO reads them all as Blender
+does.  It is imported only for TIFF files (and interlaced 16-bit PNGs).
 
 Radiance .hdr (RGBE): decoded here, because no library at hand fits: Pillow cannot read it, imageio
 reads it only through FreeImage (a binary it downloads at run time) or OpenCV, and OpenCV (a ~50 MB
@@ -29,9 +44,13 @@ rounding to the middle of the mantissa step).  .hdr files are "Linear" by defaul
 
 from __future__ import annotations
 
+import contextlib
 import functools
+import io
 import os
 import re
+import struct
+import zlib
 
 import numpy as np
 
@@ -39,7 +58,15 @@ from ..errors import SceneError
 from ..kernels import jit, twin
 
 COLOR_SPACES = ("sRGB", "Non-Color", "Linear")
-_PIL_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".tga")
+
+#: Largest width or height of an image file, checked from the header before decoding.  32768 is
+#: twice the largest sizes in common use (16k × 8k HDRIs, 16k textures), so that any real texture or
+#: environment map passes; a header beyond it is a mistake or a decompression bomb.
+MAX_IMAGE_SIDE = 32768
+#: Largest number of pixels of an image file (checked likewise): 2^28 = 16384 × 16384 or 32768 × 8192,
+#: twice a 16k × 8k HDRI.  At 4 float32 channels that is 4 GiB per copy of the pixels, plus the float64
+#: values decoding passes through: more would exhaust the memory of the machines this runs on.
+MAX_IMAGE_PIXELS = 1 << 28
 
 
 def srgb_to_linear(c: np.ndarray) -> np.ndarray:
@@ -60,41 +87,79 @@ _FLOAT_SUFFIXES = (".exr", ".hdr")
 
 
 def default_color_space(path: str) -> str:
-    """Blender's default: "Linear" for float (EXR, .hdr) images, "sRGB" for 8/16-bit ones."""
+    """Blender's default: "Linear" for float (EXR, .hdr) images, "sRGB" for 8/16-bit ones and for
+    every TIFF (Blender's TIFF reader puts all TIFFs, float ones too, in the default byte space)."""
     return "Linear" if path.lower().endswith(_FLOAT_SUFFIXES) else "sRGB"
 
 
+def _fail(path: str, field: str, what: str) -> SceneError:
+    return SceneError(field, f"cannot read image {path!r}: {what}")
+
+
+def _check_size(path: str, field: str, width: int, height: int) -> None:
+    """Refuse a header's size before any pixel is decoded (see MAX_IMAGE_SIDE, MAX_IMAGE_PIXELS)."""
+    if width < 1 or height < 1:
+        raise _fail(path, field, f"its header gives an empty size, {width}×{height} pixels")
+    if width > MAX_IMAGE_SIDE or height > MAX_IMAGE_SIDE:
+        raise _fail(path, field, f"its header gives {width}×{height} pixels, over the limit of "
+                                 f"{MAX_IMAGE_SIDE} pixels per side (engine.textures.image.MAX_IMAGE_SIDE)")
+    if width * height > MAX_IMAGE_PIXELS:
+        raise _fail(path, field, f"its header gives {width}×{height} pixels, over the limit of "
+                                 f"{MAX_IMAGE_PIXELS} pixels in all (engine.textures.image.MAX_IMAGE_PIXELS)")
+
+
+def _zero_non_finite(a: np.ndarray) -> np.ndarray:
+    """Pixels (H, W, C) with every channel of a pixel that has a non-finite one set to 0, as Cycles
+    does for float images ("so that a changed hue does not show"); ``a`` itself if all are finite."""
+    bad = ~np.isfinite(a)
+    if not bad.any():
+        return a
+    a = a.copy()
+    a[bad.any(axis=2)] = 0
+    return a
+
+
 def _read_pil(path: str, field: str) -> np.ndarray:
+    """8-bit PNG, JPEG, BMP, TGA through Pillow: (H, W, C) codes / 255 (float64), top row first."""
     try:
-        from PIL import Image  # Pillow: the reader for PNG/JPEG (8 and 16 bit)
+        from PIL import Image  # Pillow: the reader for 8-bit PNG, JPEG, BMP, TGA
     except ImportError:
         raise SceneError(field, f"reading {os.path.basename(path)!r} needs the Pillow package (pip install pillow); "
                                 "EXR textures need only OpenEXR") from None
 
+    # Image.open parses only the header; our own size limit, checked next, replaces Pillow's bomb
+    # guard (which warns from 89 M pixels and refuses from 179 M, below MAX_IMAGE_PIXELS); the guard
+    # is off only while the header is parsed
+    saved, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
     try:
-        with Image.open(path) as im:
-            mode = im.mode
-            if mode in ("I;16", "I;16B", "I;16L", "I"):
-                # 16-bit greyscale (Pillow has no 16-bit RGB mode: such PNGs come as 8-bit RGB(A),
-                # see _read_png16 below)
-                a = np.asarray(im, dtype=np.float64)[:, :, None] / 65535.0
-            else:
-                if mode not in ("L", "LA", "RGB", "RGBA"):
-                    im = im.convert("RGBA" if "A" in mode or "transparency" in im.info else "RGB")
-                a = np.asarray(im, dtype=np.float64)
-                if a.ndim == 2:
-                    a = a[:, :, None]
-                a = a / 255.0
-    except (OSError, ValueError) as e:
-        raise SceneError(field, f"cannot read image {path!r}: {e}") from None
-    return a
+        im = Image.open(path)
+    finally:
+        Image.MAX_IMAGE_PIXELS = saved
+    with im:
+        _check_size(path, field, *im.size)
+        im.load()
+        mode = im.mode
+        if mode in ("I;16", "I;16B", "I;16L"):
+            return np.asarray(im, dtype=np.float64)[:, :, None] / 65535.0
+        if mode in ("I", "F") or mode.startswith("I;"):
+            # 32-bit integer or float pixels: a conversion to 8 bits would clip them
+            raise _fail(path, field, f"unsupported pixel format {mode!r} (save it as EXR or 16-bit PNG)")
+        if mode not in ("L", "LA", "RGB", "RGBA"):
+            im = im.convert("RGBA" if "A" in mode or "transparency" in im.info else "RGB")
+        a = np.asarray(im, dtype=np.float64)
+    if a.ndim == 2:
+        a = a[:, :, None]
+    return a / 255.0
+
+
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def _png_bit_depth(path: str) -> int:
     """Bit depth from the PNG IHDR chunk (byte 24), 0 if not a PNG."""
     with open(path, "rb") as f:
         head = f.read(29)
-    if head[:8] != b"\x89PNG\r\n\x1a\n" or len(head) < 29:
+    if head[:8] != _PNG_SIGNATURE or len(head) < 29:
         return 0
     return head[24]
 
@@ -169,45 +234,93 @@ png_unfilter = twin(_unfilter_loop and _png_unfilter_compiled, png_unfilter_nump
 
 
 def _read_png16(path: str, field: str) -> np.ndarray:
-    """A 16-bit RGB(A) PNG at full precision (Pillow would reduce it to 8 bits): decoded with the
-    standard library's zlib, with the PNG row filters undone (ISO/IEC 15948 §9)."""
-    import struct
-    import zlib
-
+    """A 16-bit PNG at full precision (Pillow would reduce RGB to 8 bits): chunks checked (order, CRC
+    of the critical ones, length), decompressed with the standard library's zlib up to the size the
+    header gives, row filters undone (ISO/IEC 15948 §9); (H, W, C) codes / 65535, top row first.
+    Interlaced (Adam7) files go to OpenImageIO (libpng, as Blender)."""
     with open(path, "rb") as f:
         data = f.read()
-    pos, idat, width = 8, [], None
+    if not data.startswith(_PNG_SIGNATURE):
+        raise _fail(path, field, "not a PNG file")
+    pos, idat, header, ended = 8, [], None, False
     while pos < len(data):
+        if pos + 8 > len(data):
+            if idat:     # cut after the image data (IEND): the pixels are complete, as Pillow reads them
+                break
+            raise _fail(path, field, "the file ends early (truncated)")
         length, kind = struct.unpack(">I4s", data[pos:pos + 8])
-        chunk = data[pos + 8:pos + 8 + length]
+        body = data[pos + 8:pos + 8 + length]
+        crc = data[pos + 8 + length:pos + 12 + length]
+        if len(body) < length or len(crc) < 4:
+            if idat and kind != b"IDAT":
+                break
+            raise _fail(path, field, "the file ends early (truncated)")
+        if header is None and kind != b"IHDR":
+            raise _fail(path, field, "corrupt 16-bit PNG: the first chunk is not IHDR")
+        # critical chunks (upper-case first letter) must be intact, as libpng requires
+        if kind[:1].isupper() and struct.unpack(">I", crc)[0] != zlib.crc32(kind + body) & 0xFFFFFFFF:
+            raise _fail(path, field, f"corrupt 16-bit PNG: CRC error in its {kind.decode('latin-1')!r} chunk")
         if kind == b"IHDR":
-            width, height, depth, ctype, _, _, interlace = struct.unpack(">IIBBBBB", chunk)
-            if interlace:
-                raise SceneError(field, f"{path!r}: interlaced 16-bit PNGs are not supported")
+            if length != 13:
+                raise _fail(path, field, "corrupt 16-bit PNG: bad IHDR chunk")
+            header = struct.unpack(">IIBBBBB", body)
         elif kind == b"IDAT":
-            idat.append(chunk)
+            idat.append(body)
+        elif kind == b"IEND":
+            ended = True
+            break
         pos += 12 + length
+    if header is None:
+        raise _fail(path, field, "corrupt 16-bit PNG: no IHDR chunk" if ended else "the file ends early (truncated)")
+    width, height, depth, ctype, compression, filtering, interlace = header
     channels = {0: 1, 2: 3, 4: 2, 6: 4}.get(ctype)
-    if width is None or channels is None:
-        raise SceneError(field, f"cannot read image {path!r}: unsupported PNG colour type")
+    if depth != 16 or channels is None or compression != 0 or filtering != 0 or interlace > 1:
+        raise _fail(path, field, f"unsupported PNG colour type {ctype} at bit depth {depth} "
+                                 f"(compression {compression}, filter {filtering}, interlace {interlace})")
+    _check_size(path, field, width, height)
+    if interlace:
+        return _read_oiio(path, field, "interlaced 16-bit PNG")
+    if not idat:
+        raise _fail(path, field, "corrupt 16-bit PNG: no image data (IDAT)" if ended
+                    else "the file ends early (truncated)")
     bpp = 2 * channels
     stride = width * bpp
-    raw = np.frombuffer(zlib.decompress(b"".join(idat)), dtype=np.uint8)
-    if raw.size != height * (stride + 1) or (raw.reshape(height, stride + 1)[:, 0] > 4).any():
-        raise SceneError(field, f"cannot read image {path!r}: corrupt 16-bit PNG data")
-    out = png_unfilter(raw.reshape(height, stride + 1), bpp).astype(np.int64)
+    expected = height * (stride + 1)
+    try:
+        # at most the bytes the header calls for: a zlib bomb stops there
+        raw = zlib.decompressobj().decompress(b"".join(idat), expected)
+    except zlib.error as e:
+        raise _fail(path, field, f"corrupt 16-bit PNG data ({e})") from None
+    if len(raw) != expected:
+        raise _fail(path, field, "the 16-bit PNG pixel data ends early (truncated or corrupt)")
+    raw = np.frombuffer(raw, dtype=np.uint8).reshape(height, stride + 1)
+    if (raw[:, 0] > 4).any():
+        raise _fail(path, field, "corrupt 16-bit PNG data (a row filter type other than 0–4)")
+    out = png_unfilter(raw, bpp).astype(np.int64)
     words = (out[:, 0::2] << 8) | out[:, 1::2]
     return words.reshape(height, width, channels).astype(np.float64) / 65535.0
 
 
 def _read_exr(path: str, field: str) -> np.ndarray:
+    """An OpenEXR file (part 0) as float64 (H, W, C): R, G, B, A, or Y, or its single channel."""
     import OpenEXR
 
+    # the binding prints its reading problems on stdout: captured, they become the error's reason
+    said = io.StringIO()
     try:
-        f = OpenEXR.File(path, separate_channels=True)
-    except Exception as e:  # OpenEXR raises plain Exceptions for unreadable files
-        raise SceneError(field, f"cannot read image {path!r}: {e}") from None
-    channels = {name: np.asarray(ch.pixels, dtype=np.float64) for name, ch in f.channels().items()}
+        with contextlib.redirect_stdout(said):
+            head = OpenEXR.File(path, header_only=True).header()
+    except Exception as e:  # OpenEXR raises plain Exceptions for unreadable headers
+        raise _fail(path, field, f"not a readable EXR file ({_reason(e, said)})") from None
+    (x0, y0), (x1, y1) = head["dataWindow"]
+    width, height = int(x1) - int(x0) + 1, int(y1) - int(y0) + 1
+    _check_size(path, field, width, height)
+    try:
+        with contextlib.redirect_stdout(said):
+            channels = {name: ch.pixels for name, ch in OpenEXR.File(path, separate_channels=True).channels().items()}
+    except Exception as e:  # a broken or truncated pixel table or chunk: the file has no readable part
+        raise _fail(path, field, f"its EXR pixel data cannot be decoded, truncated or corrupt ({_reason(e, said)})") \
+            from None
     order = [c for c in ("R", "G", "B", "A") if c in channels]
     if not order:
         if "Y" in channels:
@@ -215,8 +328,64 @@ def _read_exr(path: str, field: str) -> np.ndarray:
         elif len(channels) == 1:
             order = list(channels)
         else:
-            raise SceneError(field, f"{path!r}: no R, G, B, A or Y channels (has {', '.join(sorted(channels))})")
-    return np.stack([channels[c] for c in order], axis=-1)
+            raise SceneError(field, f"{path!r}: no R, G, B, A or Y channels "
+                                    f"(has {', '.join(sorted(channels)) or 'no channels'})")
+    for name in order:
+        if getattr(channels[name], "shape", None) != (height, width):
+            raise _fail(path, field, f"EXR channel {name!r} is subsampled or not a pixel plane (not supported)")
+    return np.stack([np.asarray(channels[c], dtype=np.float64) for c in order], axis=-1)
+
+
+def _reason(e: Exception, said: io.StringIO) -> str:
+    """The most telling line of a library's failure: its printed warning, else its exception."""
+    printed = [line.strip() for line in said.getvalue().splitlines() if line.strip()]
+    if printed:     # "Warning: Exception raised reading pixel data for part 0 - <reason>"
+        return printed[-1].rsplit(" - ", 1)[-1]
+    return str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+
+
+def _read_oiio(path: str, field: str, kind: str) -> np.ndarray:
+    """A file through OpenImageIO (subimage 0): (H, W, min(C, 4)) float64, top row first; uint8 and
+    uint16 samples as codes / full scale (exactly, as the other readers), every other sample type as
+    OpenImageIO converts it to float (see the module docstring).  Alpha as stored (straight where
+    the file says so: "oiio:UnassociatedAlpha", as Cycles and Blender open files)."""
+    try:
+        import OpenImageIO as oiio
+    except ImportError:
+        raise SceneError(field, f"reading the {kind} image {os.path.basename(path)!r} needs the OpenImageIO "
+                                "package (pip install openimageio)") from None
+    config = oiio.ImageSpec()
+    config.attribute("oiio:UnassociatedAlpha", 1)
+    inp = oiio.ImageInput.open(path, config)
+    if inp is None:
+        problem = oiio.geterror()
+        if "limits:imagesize_MB" in problem:    # OpenImageIO's own guard, from the header: the machine's memory
+            raise _fail(path, field, f"its header claims an image larger than this machine's memory, over the limit "
+                                     f"of {oiio.get_int_attribute('limits:imagesize_MB')} MB that OpenImageIO reads")
+        raise _fail(path, field, f"not a readable {kind} file ({_oiio_reason(problem)})")
+    try:
+        spec = inp.spec()
+        _check_size(path, field, spec.width, spec.height)
+        if spec.deep or spec.depth != 1 or spec.nchannels < 1:
+            raise _fail(path, field, f"a deep, volume or channel-less {kind} image (not supported)")
+        n = min(spec.nchannels, 4)      # as Cycles: channels after the fourth are left out
+        types = {str(spec.channelformat(c)) for c in range(n)}
+        native = types.pop() if len(types) == 1 else "float"
+        scale = {"uint8": 255.0, "uint16": 65535.0}.get(native)
+        pixels = inp.read_image(0, 0, 0, n, native if scale else "float")
+        problem = inp.geterror()
+        if pixels is None or problem:
+            raise _fail(path, field, f"its {kind} pixel data cannot be decoded, truncated or corrupt "
+                                     f"({_oiio_reason(problem)})")
+    finally:
+        inp.close()
+    a = np.asarray(pixels).reshape(spec.height, spec.width, n).astype(np.float64)
+    return a / scale if scale else a
+
+
+def _oiio_reason(message: str) -> str:
+    lines = [line.strip() for line in (message or "").splitlines() if line.strip()]
+    return lines[-1] if lines else "no reason given"
 
 
 # --------------------------------------------------------------------------- Radiance .hdr (RGBE)
@@ -394,8 +563,10 @@ def _read_hdr(path: str, field: str) -> np.ndarray:
         raise fail("bad resolution line (expected e.g. '-Y 512 +X 1024')")
     (s1, a1, n1, s2, a2, n2) = m.groups()
     n_scan, length = int(n1), int(n2)
-    if n_scan < 1 or length < 1 or n_scan * length > 1 << 28:
-        raise fail(f"image size {n_scan}×{length} is empty or too large")
+    if a1 == b"Y":
+        _check_size(path, field, length, n_scan)
+    else:
+        _check_size(path, field, n_scan, length)
     status, rgbe = decode_rgbe_runs(np.frombuffer(data, np.uint8, offset=eol + 1), n_scan, length)
     if status:
         raise fail(_RGBE_ERRORS[status])
@@ -410,60 +581,98 @@ def _read_hdr(path: str, field: str) -> np.ndarray:
     return np.ascontiguousarray(rgb)
 
 
+def _read_png(path: str, field: str) -> np.ndarray:
+    return _read_png16(path, field) if _png_bit_depth(path) == 16 else _read_pil(path, field)
+
+
+def _read_tiff(path: str, field: str) -> np.ndarray:
+    return _read_oiio(path, field, "TIFF")
+
+
+#: suffix → (what the file is called in messages, its reader)
+_READERS = {".exr": ("EXR", _read_exr), ".hdr": ("Radiance .hdr", _read_hdr), ".png": ("PNG", _read_png),
+            ".jpg": ("JPEG", _read_pil), ".jpeg": ("JPEG", _read_pil), ".tif": ("TIFF", _read_tiff),
+            ".tiff": ("TIFF", _read_tiff), ".bmp": ("BMP", _read_pil), ".tga": ("TGA", _read_pil)}
+
+
 def _read_raw(path: str, field: str) -> np.ndarray:
-    """The stored values (H, W, C), top row first: integer images as code / full scale (float64)."""
-    if path.lower().endswith(".exr"):
-        a = _read_exr(path, field)
-    elif path.lower().endswith(".hdr"):
-        a = _read_hdr(path, field)
-    elif path.lower().endswith(_PIL_SUFFIXES):
-        a = _read_png16(path, field) if path.lower().endswith(".png") and _png_bit_depth(path) == 16 else None
-        if a is None or a.shape[2] == 1:
-            a = _read_pil(path, field) if a is None else a
-    else:
+    """The stored values (H, W, C) of an image file, top row first, as float64 (integer samples
+    normalised, non-finite pixels 0): the one guarded path every file is read through.  Each reader
+    checks the header's size (_check_size) before decoding; anything else a decoder raises on a
+    broken file becomes one SceneError naming the file."""
+    kind, reader = _READERS.get(os.path.splitext(path)[1].lower(), (None, None))
+    if reader is None:
         raise SceneError(field, f"{path!r}: unsupported image type (use PNG, JPEG, TIFF, EXR or Radiance .hdr)")
-    return a
+    try:
+        with np.errstate(all="ignore"):     # junk values (signalling NaNs, > float32) are dealt with below
+            a = reader(path, field)
+    except SceneError:
+        raise
+    except MemoryError:
+        raise _fail(path, field, "not enough memory to decode it") from None
+    except Exception as e:
+        # third-party decoders raise many types for malformed input (Pillow alone: OSError,
+        # SyntaxError, EOFError, ValueError, struct.error, IndexError, ...): all are the file's fault
+        detail = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        raise _fail(path, field, f"broken, truncated or unsupported {kind} file ({detail})") from None
+    a = np.asarray(a)
+    if a.ndim == 2:
+        a = a[:, :, None]
+    if a.ndim != 3 or a.shape[0] < 1 or a.shape[1] < 1 or not 1 <= a.shape[2] <= 4:
+        raise _fail(path, field, f"unsupported pixel layout {a.shape} (expected height × width × 1–4 channels)")
+    with np.errstate(all="ignore"):
+        return _zero_non_finite(a.astype(np.float64, copy=False))
+
+
+def _stamp(path: str) -> tuple[int, int]:
+    """What the caches key a file's contents by: modification time (ns) and size."""
+    st = os.stat(path)
+    return st.st_mtime_ns, st.st_size
 
 
 @functools.lru_cache(maxsize=16)
-def _read_cached(path: str, mtime: float, color_space: str, field: str) -> np.ndarray:
+def _read_cached(path: str, stamp: tuple, color_space: str, field: str) -> np.ndarray:
     a = _read_raw(path, field)
-    if color_space == "sRGB":
-        colour = min(a.shape[2], 3) if a.shape[2] != 2 else 1     # grey+alpha: only grey is colour
-        a = a.copy()
-        a[:, :, :colour] = srgb_to_linear(a[:, :, :colour])
-    out = np.ascontiguousarray(a[::-1], dtype=np.float32)   # row 0 = bottom (v = 0)
+    with np.errstate(over="ignore"):     # a decoded value beyond float32's range becomes inf: 0, as Cycles
+        if color_space == "sRGB":
+            colour = min(a.shape[2], 3) if a.shape[2] != 2 else 1     # grey+alpha: only grey is colour
+            a = a.copy()
+            a[:, :, :colour] = srgb_to_linear(a[:, :, :colour])
+        out = _zero_non_finite(np.ascontiguousarray(a[::-1], dtype=np.float32))    # row 0 = bottom (v = 0)
     out.setflags(write=False)
     return out
 
 
 def read_image(path: str, color_space: str | None = None, field: str = "") -> np.ndarray:
-    """Linear float32 pixels (H, W, C) of an image file, row 0 at the bottom (see module docstring)."""
+    """Linear float32 pixels (H, W, C), C = 1–4, all finite, row 0 at the bottom (see the module
+    docstring).  Any problem with the file (missing, unsupported, oversized, broken) is a
+    SceneError naming ``field`` and the file."""
     if color_space is None:
         color_space = default_color_space(path)
     if color_space not in COLOR_SPACES:
         raise SceneError(field, f"colour space must be one of {', '.join(COLOR_SPACES)}, got {color_space!r}")
     if not os.path.isfile(path):
         raise SceneError(field, f"image file {path!r} not found")
-    return _read_cached(os.path.abspath(path), os.path.getmtime(path), color_space, field)
+    return _read_cached(os.path.abspath(path), _stamp(path), color_space, field)
 
 
 def read_texture(path: str, color_space: str | None = None, field: str = "") -> tuple[np.ndarray, str]:
     """(float32 pixels (H, W, C), row 0 at the bottom; interpolation space) of an image file for an
     ImageTexture.  Files in the "sRGB" colour space come encoded, with interpolation space "srgb"
     (filtered encoded, decoded after, as Cycles does for every image file it reads as sRGB, 8-bit
-    or float: scene/image.cpp ``compress_as_srgb``); others linear, as :func:`read_image`."""
+    or float: scene/image.cpp ``compress_as_srgb``); others linear, as :func:`read_image`.  Errors
+    as :func:`read_image`."""
     if color_space is None:
         color_space = default_color_space(path)
     if color_space == "sRGB":
         if not os.path.isfile(path):
             raise SceneError(field, f"image file {path!r} not found")
-        return _read_encoded(os.path.abspath(path), os.path.getmtime(path), field), "srgb"
+        return _read_encoded(os.path.abspath(path), _stamp(path), field), "srgb"
     return read_image(path, color_space, field), "linear"
 
 
 @functools.lru_cache(maxsize=16)
-def _read_encoded(path: str, mtime: float, field: str) -> np.ndarray:
+def _read_encoded(path: str, stamp: tuple, field: str) -> np.ndarray:
     """Stored values of an image file, row 0 at the bottom: 8/16-bit images as their integer codes
     (uint8/uint16, value = code / full scale exactly as read_image computes it, so the decoded
     texels are bit for bit read_image's "sRGB" ones), float images as float32."""
@@ -475,6 +684,7 @@ def _read_encoded(path: str, mtime: float, field: str) -> np.ndarray:
             out = np.ascontiguousarray(codes[::-1], dtype=dtype)
             break
     else:
-        out = np.ascontiguousarray(a[::-1], dtype=np.float32)
+        with np.errstate(over="ignore"):
+            out = _zero_non_finite(np.ascontiguousarray(a[::-1], dtype=np.float32))
     out.setflags(write=False)
     return out
