@@ -50,6 +50,8 @@ class ProgressBar:
 
 #: Bounds of --exposure (stops): 2**±64 already maps any representable radiance to black or white.
 EXPOSURE_LIMIT_STOPS = 64.0
+#: Most samples per pixel of `estimate`'s pilot render.
+MAX_PILOT_SPP = 4096
 #: Most frames a polariser --sweep may produce (one per 0.05° over 180°).
 MAX_SWEEP_FRAMES = 3600
 #: When this process started (time.time()): temporary files older than this are not ours.
@@ -113,28 +115,52 @@ def _reason(e: BaseException) -> str:
     return str(e) or type(e).__name__
 
 
+def _load_scene(path):
+    """engine.scene.loader.load_scene, refusing first a FIFO, device or socket (opening one could wait forever)."""
+    from .render.resume import refuse_special_file
+    from .scene.loader import load_scene
+    refuse_special_file(path, "", "scene file ")
+    return load_scene(path)
+
+
+#: Options of `render` (and `estimate`, which has some of them) that override the scene's render block.
+SETTING_OPTIONS = ("spp", "seed", "max_depth", "spectral", "polarisation", "wavelength_nm", "simplify",
+                   "reduce_spectral", "sampler")
+
+
+def _settings_from_options(scene, args):
+    """The scene's RenderSettings with the options given applied (and set on ``scene``), validated by the
+    scene loader's own rules (engine.scene.loader.parse_settings: ``--spp`` in [1, 2²⁴], ``--seed`` in
+    [0, 2⁶³ − 1], …) — the same for every command; an error names the option (``--spp``)."""
+    from .scene.loader import parse_settings
+    st = scene.settings
+    overrides = {k: v for k in SETTING_OPTIONS if (v := getattr(args, k, None)) is not None}
+    if not overrides:
+        return st
+    merged = {**{k: getattr(st, k) for k in ("spp", "max_depth", "rr_depth", "seed", "spectral",
+                                              "wavelength_nm", "polarisation", "batch_rays", "threads",
+                                              "reduce_spectral", "simplify", "sampler")}, **overrides}
+    try:
+        st = parse_settings(merged, "option")
+    except SceneError as e:
+        key = e.field.removeprefix("option.")
+        if key not in overrides:
+            raise
+        raise SceneError("--" + key.replace("_", "-"), e.reason) from None
+    scene.settings = st
+    return st
+
+
 def _render(args) -> int:
     from .output.destination import check_destination, remove_stale_temporaries
     from .render.renderer import Renderer
     from .render.resume import resume_state, scene_fingerprint
-    from .scene.loader import load_scene, parse_settings
 
     _finite("--exposure", args.exposure, -EXPOSURE_LIMIT_STOPS, EXPOSURE_LIMIT_STOPS)
     if args.resume and args.scheduler:
         raise SceneError("--scheduler", "cannot be combined with --resume yet")
-    scene = load_scene(args.scene)
-    st = scene.settings
-    overrides = {k: v for k, v in (("spp", args.spp), ("seed", args.seed), ("max_depth", args.max_depth),
-                                   ("spectral", args.spectral), ("polarisation", args.polarisation),
-                                   ("wavelength_nm", args.wavelength_nm), ("simplify", args.simplify),
-                                   ("reduce_spectral", args.reduce_spectral), ("sampler", args.sampler))
-                 if v is not None}
-    if overrides:
-        merged = {**{k: getattr(st, k) for k in ("spp", "max_depth", "rr_depth", "seed", "spectral",
-                                                  "wavelength_nm", "polarisation", "batch_rays", "threads",
-                                                  "reduce_spectral", "simplify", "sampler")}, **overrides}
-        st = parse_settings(merged, "option")
-        scene.settings = st
+    scene = _load_scene(args.scene)
+    st = _settings_from_options(scene, args)
     adaptive = _adaptive_settings(args, st.spp)
     out = args.output
     if not out.lower().endswith(".exr"):
@@ -217,6 +243,12 @@ def _render_adaptive(renderer, st, adaptive, bar, signals, resume_film, resume_h
 def _adaptive_report(result, adaptive) -> tuple[dict, dict]:
     """(extra channels, header entries) of an adaptive render, and its summary printed on stderr."""
     import numpy as np
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):    # ∞: no estimate (handled)
+        return _adaptive_summary(result, adaptive)
+
+
+def _adaptive_summary(result, adaptive) -> tuple[dict, dict]:
+    import numpy as np
 
     from .render.adaptive import UNITS, film_noise, image_error, state_channels
     film, stats = result.film, result.stats
@@ -228,7 +260,7 @@ def _adaptive_report(result, adaptive) -> tuple[dict, dict]:
             "polar.time_limit": float(adaptive.time_limit), "polar.noise_tile": 4}
     lit = film.count > 0
     counts = film.count[lit]
-    finite = tile_err[lit & np.isfinite(err)]
+    finite = tile_err[lit & np.isfinite(err) & np.isfinite(tile_err)]
     achieved = (f"achieved {adaptive.quantity} error (tile RMS): median {np.median(finite):.3g}, "
                 f"95th percentile {np.percentile(finite, 95):.3g}, max {finite.max():.3g} {UNITS[adaptive.quantity]}"
                 if finite.size else "no error estimate (fewer than 2 samples)")
@@ -270,6 +302,12 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
             return 1
         print("polar: no sample had finished — nothing written", file=sys.stderr)
         return 0
+    if not film.count.any():                       # the time limit passed before the first sample finished
+        limit = f" of {adaptive.time_limit:g} s" if adaptive is not None else ""
+        print(f"error: --time-limit: the time limit{limit} passed before any sample had finished; nothing written"
+              f"{' (the existing file is unchanged)' if os.path.exists(out) else ''}: allow more time",
+              file=sys.stderr)
+        return 2
     spp_image = film.spp_image()
     meta = {"polar.spp": int(st.spp), "polar.complete": int(not result.cancelled),
             "polar.spp_min": int(spp_image.min()), "polar.spp_max": int(spp_image.max()),
@@ -341,21 +379,19 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
 
 
 def _read_polar_exr(path, field, layer=None):
-    """(stokes, channels, header) of a Stokes EXR, or a SceneError naming ``field``.
+    """(stokes, channels, header) of a Stokes EXR whose Stokes values are all finite, or a SceneError
+    naming ``field`` (engine.render.resume.read_polar_exr: missing, a folder, not a regular file, not a
+    Stokes EXR; here also: how many pixels hold NaN or ±inf — a Polar render never writes them).
 
     ``layer``: the view layer to read in a Blender multilayer EXR (``<Layer>.S0.R`` …), None: the
     only one holding the Stokes passes."""
-    from .output.exr import read_stokes_exr
-    if not os.path.exists(path):
-        raise SceneError(field, f"{path!r} does not exist")
-    if os.path.isdir(path):
-        raise SceneError(field, f"{path!r} is a folder, not a Stokes EXR")
-    try:
-        return read_stokes_exr(path, layer)
-    except (ValueError, OSError, RuntimeError) as e:
-        if layer is not None and "view layer" in str(e):
-            raise SceneError("--layer", str(e)) from None
-        raise SceneError(field, f"{path!r} is not a Polar Stokes EXR: {e}") from None
+    from .render.resume import nonfinite_pixels, read_polar_exr
+    stokes, channels, header = read_polar_exr(path, field, layer)
+    bad = nonfinite_pixels(stokes)
+    if bad:
+        raise SceneError(field, f"{path!r} has non-finite Stokes values (NaN or ±inf) in {bad} of its "
+                                f"{stokes.shape[1] * stokes.shape[2]} pixels; the polariser needs finite values")
+    return stokes, channels, header
 
 
 def _parse_params(pairs):
@@ -386,28 +422,96 @@ def _mueller(args) -> int:
     return 0
 
 
-def _polariser(args) -> int:
-    if getattr(args, "mosaic", False):
-        return _polariser_mosaic(args)
+#: Output extensions of `polariser`: tonemapped PNG or linear EXR (a --sweep contact sheet: PNG only).
+POLARISER_OUTPUTS = (".png", ".exr")
+#: Defaults of the polariser options (None in the parser, so that an option given where it does nothing is seen).
+POLARISER_DEFAULTS = {"type": "linear", "angle": 0.0, "extinction": 0.0, "retarder_angle": 45.0,
+                      "retardance": 90.0, "exposure": 0.0}
+
+
+def _polariser_options(args) -> str:
+    """Refuse options that would do nothing in this mode, and outputs the writer does not produce; then
+    set the defaults of the options not given.  Returns the output's extension (".png" or ".exr")."""
+    given = {k for k in POLARISER_DEFAULTS if getattr(args, k) is not None} | \
+        {k for k in ("sweep", "mosaic_layout") if getattr(args, k) is not None}
+
+    def flag(k):
+        return "--" + k.replace("_", "-")
+
+    def refuse(keys, why):
+        for k in keys:
+            if k in given:
+                raise SceneError(flag(k), why)
+    ext = os.path.splitext(args.output)[1].lower()
+    allowed = (".png",) if args.sweep is not None and not args.mosaic else POLARISER_OUTPUTS
+    if ext not in allowed:
+        what = ("--sweep writes a PNG contact sheet: the output must end in .png" if len(allowed) == 1 else
+                "the output must end in .png (tonemapped) or .exr (linear)")
+        raise SceneError("-o", f"{what}, got {args.output!r}")
+    if args.mosaic:
+        refuse(("sweep", "type", "angle", "retarder_angle", "retardance"),
+               "does not combine with --mosaic (the micro-polarisers' angles are --mosaic-layout)")
+    else:
+        refuse(("mosaic_layout",), "only applies with --mosaic")
+        kind = args.type or POLARISER_DEFAULTS["type"]
+        if kind != "retarder":
+            refuse(("retarder_angle", "retardance"), f"only applies with --type retarder (not {kind})")
+        if kind.startswith("circular"):
+            refuse(("angle", "extinction", "sweep"), f"does not apply to --type {kind} (a circular analyser has "
+                                                      "no transmission axis)")
+        if args.sweep is not None:
+            refuse(("angle",), "does not combine with --sweep (the sweep gives the angles)")
+    if ext == ".exr":
+        refuse(("exposure",), "only applies to a PNG output (an EXR is written linear, without exposure)")
+    for k, v in POLARISER_DEFAULTS.items():
+        if getattr(args, k) is None:
+            setattr(args, k, v)
+    return ext
+
+
+def _write_filtered_exr(out, image, stokes_shape, metadata):
+    """Write a filtered (unpolarised) image as a Stokes EXR; values beyond float32 are a SceneError (-o)."""
     import numpy as np
 
+    from .output.exr import write_stokes_exr
+    over = int(np.count_nonzero(np.abs(image) > np.finfo(np.float32).max))
+    if over:
+        raise SceneError("-o", f"{over} filtered values exceed the float32 range of an EXR (±3.4e38); write a .png")
+    unpolarised = np.zeros(stokes_shape, np.float32)        # as the Stokes EXR stores it
+    unpolarised[0] = image
+    write_stokes_exr(out, unpolarised, metadata=metadata)
+
+
+def _sweep_angles(start: float, stop: float, step: float, frames: int) -> list:
+    """The angles of ``np.arange(start, stop + 1e-9, step)`` (what --sweep always gave: STOP included
+    despite rounding), computed as numpy does, without building that range where the 1e-9 would make it
+    vast (a STEP of 1e-20) or empty (START of 1e300): then the ``frames`` = ⌊(STOP − START)/STEP⌋ + 1."""
+    import numpy as np
+    n = math.ceil(((stop + 1e-9) - start) / step)
+    n = n if frames <= n <= frames + 1 else frames
+    angles = start + np.arange(n, dtype=np.float64) * ((start + step) - start)
+    if n > 1:
+        angles[1] = start + step
+    return list(angles)
+
+
+def _polariser(args) -> int:
+    """`polariser`: one filter (PNG or EXR), a --sweep contact sheet (PNG) or a --mosaic.  Options that do
+    nothing in the chosen mode, other output extensions, non-regular or non-finite inputs: one error line."""
+    ext = _polariser_options(args)
+    if getattr(args, "mosaic", False):
+        return _polariser_mosaic(args, ext)
     from .output.colormaps import tonemap
     from .output.png import write_png
     from .postprocess.filters import apply_filter, filter_row
     from .postprocess.sheets import contact_sheet
 
-    stokes, _, _ = _read_polar_exr(args.exr, "EXR", args.layer)
     if not (0.0 <= args.extinction <= 1.0):
         raise SceneError("--extinction", f"must be in [0, 1], got {args.extinction:g}")
     for field, value in (("--angle", args.angle), ("--retarder-angle", args.retarder_angle),
                          ("--retardance", args.retardance)):
         _finite(field, value)
     _finite("--exposure", args.exposure, -EXPOSURE_LIMIT_STOPS, EXPOSURE_LIMIT_STOPS)
-
-    def filtered(angle):
-        row = filter_row(args.type, angle, args.extinction, args.retarder_angle, args.retardance)
-        return apply_filter(stokes, row)
-
     out = args.output
     angles = None
     if args.sweep is not None:
@@ -419,22 +523,25 @@ def _polariser(args) -> int:
             raise SceneError("--sweep", f"START, STOP and STEP must be finite numbers, got {args.sweep!r}")
         if step <= 0 or stop < start:
             raise SceneError("--sweep", "needs STEP > 0 and STOP ≥ START")
-        frames = math.floor((stop - start) / step) + 1
-        if frames > MAX_SWEEP_FRAMES:
+        span = (stop - start) / step
+        if not span < MAX_SWEEP_FRAMES:                    # also ∞ (STOP − START overflows, a subnormal STEP)
+            frames = f"{math.floor(span) + 1}" if math.isfinite(span) else "more than"
             raise SceneError("--sweep", f"would make {frames} frames; at most {MAX_SWEEP_FRAMES} (use a larger STEP)")
-        angles = list(np.arange(start, stop + 1e-9, step))
+        angles = _sweep_angles(start, stop, step, math.floor(span) + 1)
+    stokes, _, _ = _read_polar_exr(args.exr, "EXR", args.layer)
+
+    def filtered(angle):
+        row = filter_row(args.type, angle, args.extinction, args.retarder_angle, args.retardance)
+        return apply_filter(stokes, row)
+
     try:
         os.makedirs(os.path.dirname(os.path.abspath(out)) or ".", exist_ok=True)
         if angles is not None:
             tiles = [tonemap(filtered(a), args.exposure) for a in angles]
             write_png(out, contact_sheet(tiles, [f"{a:g}" for a in angles]))
-        elif out.lower().endswith(".exr"):
-            from .output.exr import write_stokes_exr
-            img = filtered(args.angle)
-            unpolarised = np.zeros_like(stokes)
-            unpolarised[0] = img
-            write_stokes_exr(out, unpolarised, metadata={"polar.filter": args.type,
-                                                         "polar.filter_angle_deg": args.angle})
+        elif ext == ".exr":
+            _write_filtered_exr(out, filtered(args.angle), stokes.shape, {"polar.filter": args.type,
+                                                                         "polar.filter_angle_deg": args.angle})
         else:
             write_png(out, tonemap(filtered(args.angle), args.exposure))
     except OSError as e:
@@ -456,6 +563,12 @@ def _adaptive_options(r) -> None:
     g.add_argument("--time-limit", type=float, metavar="S", help="stop sampling after S seconds (0 = no limit)")
 
 
+def _adaptive_spp(spp: int) -> None:
+    """A SceneError naming --spp if adaptive sampling cannot use ``spp`` (both half-buffers need a sample)."""
+    if spp < 2:
+        raise SceneError("--spp", f"must be at least 2 with adaptive sampling (even and odd samples), got {spp}")
+
+
 def _adaptive_settings(args, spp: int):
     """AdaptiveSettings from the render options, or None for a uniform render (SceneError on bad values)."""
     from .render.adaptive import check_adaptive
@@ -467,8 +580,7 @@ def _adaptive_settings(args, spp: int):
         if args.noise_quantity != "s0":
             raise SceneError("--noise-quantity", "only applies to adaptive sampling: add --noise-threshold")
         return None
-    if spp < 2:
-        raise SceneError("--spp", f"must be at least 2 with adaptive sampling (even and odd samples), got {spp}")
+    _adaptive_spp(spp)
     min_spp = args.min_spp if args.min_spp is not None else min(16, spp)
     threshold = args.noise_threshold
     ad = check_adaptive(threshold if threshold is not None else 1.0, args.noise_quantity, min_spp,
@@ -479,25 +591,22 @@ def _adaptive_settings(args, spp: int):
 
 
 def _estimate(args) -> int:
-    from .render.adaptive import checkpoints
-    from .render.estimate import parse_target, pilot_render, predict, round_overhead
+    """`estimate`: its options --spp, --seed, --min-spp and the thresholds follow render's rules (the same
+    validators); its work is bounded whatever --spp: a pilot of --pilot-spp (≤ 4096) samples per pixel, one
+    tile probed to at most 1024 spp (engine.render.estimate.round_overhead), the predictions arithmetic."""
+    from .render.adaptive import check_adaptive, checkpoints
+    from .render.estimate import ROUND_PROBE_MAX_SPP, parse_target, pilot_render, predict, round_overhead
     from .render.renderer import Renderer
-    from .scene.loader import load_scene
 
     targets = [parse_target(t) for t in args.target]
-    scene = load_scene(args.scene)
-    st = scene.settings
-    if args.spp is not None:
-        st.spp = args.spp
-    if args.seed is not None:
-        st.seed = args.seed
-    if st.spp < 2:
-        raise SceneError("--spp", f"must be at least 2 for adaptive sampling, got {st.spp}")
-    if not (2 <= args.pilot_spp <= 4096):
-        raise SceneError("--pilot-spp", f"must be an integer in [2, 4096], got {args.pilot_spp}")
+    if not (2 <= args.pilot_spp <= MAX_PILOT_SPP):
+        raise SceneError("--pilot-spp", f"must be an integer in [2, {MAX_PILOT_SPP}], got {args.pilot_spp}")
+    scene = _load_scene(args.scene)
+    st = _settings_from_options(scene, args)
+    _adaptive_spp(st.spp)
     min_spp = args.min_spp if args.min_spp is not None else min(16, st.spp)
-    if not (2 <= min_spp <= st.spp):
-        raise SceneError("--min-spp", f"must be an integer in [2, --spp = {st.spp}], got {min_spp}")
+    for quantity, threshold in targets:
+        check_adaptive(threshold, quantity, min_spp, 0.0, st.spp, threshold_field="--target", quantity_field="--target")
     renderer = Renderer(scene)
     cam = scene.camera
     print(f"polar: {os.path.basename(args.scene)}: {cam.width}×{cam.height}, pilot {args.pilot_spp} spp, "
@@ -507,35 +616,32 @@ def _estimate(args) -> int:
           f"({pilot.stats['seconds'] / max(pilot.stats['samples'], 1) * 1e6:.2f} µs per sample on this machine, "
           f"{float(sps.min()) * 1e6:.2f}–{float(sps.max()) * 1e6:.2f} by region)")
     per_round = round_overhead(renderer, st, pilot, sps, min_spp)
-    print(f"rounds: {per_round * 1e3:.0f} ms each besides their samples (one tile through every checkpoint)")
+    print(f"rounds: {per_round * 1e3:.0f} ms each besides their samples (one tile through the checkpoints up to "
+          f"{min(st.spp, ROUND_PROBE_MAX_SPP)} spp)")
     for quantity, threshold in targets:
         p = predict(pilot.film, pilot.halves, quantity, threshold, min_spp, st.spp, sps, round_seconds=per_round)
         print(f"target {p.describe()}")
     return 0
 
 
-def _polariser_mosaic(args) -> int:
+def _polariser_mosaic(args, ext: str) -> int:
     """--mosaic: the raw image of a polarisation camera (2×2 micro-polarisers, engine.postprocess.mosaic)."""
-    import numpy as np
-
     from .output.colormaps import tonemap
     from .output.png import write_png
     from .postprocess.mosaic import DEFAULT_LAYOUT, mosaic, parse_layout
 
-    stokes, _, _ = _read_polar_exr(args.exr, "EXR", args.layer)
     if not (0.0 <= args.extinction <= 1.0):
         raise SceneError("--extinction", f"must be in [0, 1], got {args.extinction:g}")
     _finite("--exposure", args.exposure, -EXPOSURE_LIMIT_STOPS, EXPOSURE_LIMIT_STOPS)
-    layout = parse_layout(args.mosaic_layout.split(",") if args.mosaic_layout else DEFAULT_LAYOUT, "--mosaic-layout")
+    layout = parse_layout(args.mosaic_layout.split(",") if args.mosaic_layout is not None else DEFAULT_LAYOUT,
+                          "--mosaic-layout")
+    stokes, _, _ = _read_polar_exr(args.exr, "EXR", args.layer)
     raw = mosaic(stokes, layout, args.extinction)
     out = args.output
     try:
         os.makedirs(os.path.dirname(os.path.abspath(out)) or ".", exist_ok=True)
-        if out.lower().endswith(".exr"):
-            from .output.exr import write_stokes_exr
-            unpolarised = np.zeros_like(stokes)
-            unpolarised[0] = raw
-            write_stokes_exr(out, unpolarised, metadata={
+        if ext == ".exr":
+            _write_filtered_exr(out, raw, stokes.shape, {
                 "polar.filter": "mosaic", "polar.mosaic_layout_deg": ",".join(f"{a:g}" for r in layout for a in r),
                 "polar.filter_extinction": f"{args.extinction:g}"})
         else:
@@ -612,15 +718,19 @@ def build_parser() -> argparse.ArgumentParser:
                                "with Polar (its S0…S3 passes)")
     p.add_argument("--layer", metavar="NAME", help="view layer to read from a Blender multilayer EXR (needed "
                    "only when several view layers hold the Stokes passes)")
-    p.add_argument("-o", "--output", required=True, help="output .png (tonemapped) or .exr (linear)")
-    p.add_argument("--type", choices=("linear", "circular-right", "circular-left", "retarder"), default="linear")
-    p.add_argument("--angle", type=float, default=0.0,
-                   help="transmission axis in degrees, from image right towards image up")
-    p.add_argument("--extinction", type=float, default=0.0, help="t_min/t_max of the polariser (0 = ideal)")
-    p.add_argument("--retarder-angle", type=float, default=45.0, help="fast axis of the retarder (deg)")
-    p.add_argument("--retardance", type=float, default=90.0, help="retardance of the retarder (deg)")
+    p.add_argument("-o", "--output", required=True, help="output .png (tonemapped) or .exr (linear); "
+                   "a --sweep writes a .png")
+    p.add_argument("--type", choices=("linear", "circular-right", "circular-left", "retarder"),
+                   help="the filter (default linear)")
+    p.add_argument("--angle", type=float,
+                   help="transmission axis in degrees, from image right towards image up (default 0)")
+    p.add_argument("--extinction", type=float, help="t_min/t_max of the polariser (0 = ideal, the default)")
+    p.add_argument("--retarder-angle", type=float, help="fast axis of the retarder (deg, default 45; "
+                   "with --type retarder)")
+    p.add_argument("--retardance", type=float, help="retardance of the retarder (deg, default 90; "
+                   "with --type retarder)")
     p.add_argument("--sweep", metavar="START:STOP:STEP", help="contact sheet of polariser angles, e.g. 0:180:15")
-    p.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops")
+    p.add_argument("--exposure", type=float, help="PNG exposure in stops (default 0)")
     p.add_argument("--mosaic", action="store_true", help="raw image of a polarisation camera: a 2×2 mosaic of "
                    "micro-polarisers (with --extinction), instead of one filter")
     p.add_argument("--mosaic-layout", metavar="A,B,C,D", help="micro-polariser angles in degrees: row 0 (top) "

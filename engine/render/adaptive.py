@@ -123,14 +123,19 @@ class AdaptiveSettings:
     time_limit: float = 0.0
 
 
-def check_adaptive(threshold, quantity, min_spp, time_limit, spp) -> AdaptiveSettings:
-    """Validated settings, or a SceneError naming the CLI option and its allowed range."""
+def check_adaptive(threshold, quantity, min_spp, time_limit, spp, threshold_field: str = "--noise-threshold",
+                   quantity_field: str = "--noise-quantity") -> AdaptiveSettings:
+    """Validated settings, or a SceneError naming the CLI option and its allowed range.
+
+    Any finite threshold > 0 is legal: a huge one stops every tile after ``min_spp`` samples, a
+    tiny one (down to the smallest subnormal) samples every noisy tile to ``spp``.  ``threshold_field``,
+    ``quantity_field``: the option names in messages (``estimate`` gives both as ``--target``)."""
     if threshold is None or not (math.isfinite(threshold) and threshold > 0):
-        raise SceneError("--noise-threshold", f"must be a finite number > 0, got {threshold!r}")
+        raise SceneError(threshold_field, f"must be a finite number > 0, got {threshold!r}")
     if quantity not in QUANTITIES:
-        raise SceneError("--noise-quantity", f"must be one of {', '.join(QUANTITIES)}, got {quantity!r}")
+        raise SceneError(quantity_field, f"must be one of {', '.join(QUANTITIES)}, got {quantity!r}")
     if quantity == "aolp" and threshold > 90:
-        raise SceneError("--noise-threshold", f"an AoLP error is at most 90 degrees, got {threshold:g}")
+        raise SceneError(threshold_field, f"an AoLP error is at most 90 degrees, got {threshold:g}")
     if min_spp is None or not (2 <= int(min_spp) <= spp):
         raise SceneError("--min-spp", f"must be an integer in [2, --spp = {spp}] (both half-buffers need "
                                       f"a sample), got {min_spp!r}")
@@ -262,8 +267,13 @@ def allocation_level(sigma: np.ndarray, threshold: float, weight: np.ndarray | N
     sigma = np.asarray(sigma, np.float64)
     w = np.ones(sigma.shape) if weight is None else np.broadcast_to(np.asarray(weight, np.float64), sigma.shape)
     finite = np.isfinite(sigma)
-    mean = float(np.mean(sigma[finite] * w[finite])) if finite.any() else 0.0
-    return float(threshold) ** 2 / mean if mean > 0 else math.inf
+    with np.errstate(over="ignore"):
+        mean = float(np.mean(sigma[finite] * w[finite])) if finite.any() else 0.0
+    try:
+        t2 = float(threshold) ** 2
+    except OverflowError:           # T beyond 1.3e154: μ = ∞, every tile stops at the first pass
+        t2 = math.inf
+    return t2 / mean if mean > 0 else math.inf
 
 
 def cost_per_sample(cost: np.ndarray, counts: np.ndarray, pixels: np.ndarray) -> float:
@@ -597,54 +607,56 @@ def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int
                 frac = max(frac, stats["seconds"] / adaptive.time_limit)
             progress(min(frac, 0.999), stats)
 
-    first_pass_reported = False
-    level = None
-    while True:
-        counts = film.count[pixels]
-        if counts.min() >= adaptive.min_spp:
-            if halves.first is None:        # every pixel has exactly min_spp samples now (or a resumed state)
-                halves.keep_first(film.count)
-            if level is None:
-                level = first_pass_allocation(halves, adaptive.quantity, adaptive.threshold, tiles, pixels, W)
-                stats["allocation_level"] = level.level
-                stats["cost_per_sample"] = level.mean_cost
-            e, _ = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level.mean_y)
-            w = cost_weight(halves.cost, film.count, tiles, pixels, level.mean_cost)
-            _, _, noise = film_noise(film, halves, adaptive.quantity, pixels)
-            # the tile's error pooled with its neighbourhood's (rare paths its first pass missed); a
-            # tile goes on while that error is above T and above its share of the error at equal
-            # cost, σ̂/(n·w) > μ (σ̂ = e·√n, w = √(c/c̄))
-            root_n = np.sqrt(counts)
-            noise = pooled_error(noise, counts, level.sigma_nb, level.n_nb)
-            e = pooled_error(e, counts, level.sigma_nb, level.n_nb)
-            noise = np.where(e / (root_n * w) > level.level, noise, -np.inf)
-        else:                                              # first pass: only bring every pixel to min_spp
-            noise = np.full(counts.shape, -np.inf)
-        if not first_pass_reported and counts.min() >= adaptive.min_spp:
-            first_pass_reported = True
-            timing["on"] = False
-            if on_first_pass is not None:
-                on_first_pass(film, halves, clock() - t0, done["samples"])
-        target = next_targets(counts, noise, marks, adaptive.threshold)
-        todo = target > counts
-        stats["adaptive_rounds"] = stats.get("adaptive_rounds", 0) + 1
-        if not todo.any():
-            # max_spp: the cap decided some tile's count — it wanted more, or it stopped at a clipped
-            # last checkpoint that a larger --spp would have stepped over
-            at_cap = counts >= spp
-            return "max_spp" if at_cap.any() and (not spp_is_a_step or (noise[at_cap] > adaptive.threshold).any()) \
-                else "threshold"
-        if stop_requested():
-            return reason["value"]
-        paths = int((target - counts)[todo].sum())
-        per_unit = round_unit_paths(paths, int(todo.sum()), int((target - counts).max()), batch_rays, workers)
-        timing["on"] = unit_times is not None and counts.min() < adaptive.min_spp
-        units = adaptive_units(pixels[todo], counts[todo], target[todo], tiles, per_unit,
-                               chunk_pixels=max(COST_CHUNK_PIXELS, pixels.size // 128) if timing["on"] else None)
-        stopped = run_units(units, trace_unit, add_result, stop_requested, abort)
-        stats["seconds"] = clock() - t0
-        if stopped:
-            return reason["value"] or "cancelled"
+    # the error formulas treat ∞ and NaN explicitly (no estimate yet, a tile that stops): no warnings
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        first_pass_reported = False
+        level = None
+        while True:
+            counts = film.count[pixels]
+            if counts.min() >= adaptive.min_spp:
+                if halves.first is None:        # every pixel has exactly min_spp samples now (or a resumed state)
+                    halves.keep_first(film.count)
+                if level is None:
+                    level = first_pass_allocation(halves, adaptive.quantity, adaptive.threshold, tiles, pixels, W)
+                    stats["allocation_level"] = level.level
+                    stats["cost_per_sample"] = level.mean_cost
+                e, _ = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level.mean_y)
+                w = cost_weight(halves.cost, film.count, tiles, pixels, level.mean_cost)
+                _, _, noise = film_noise(film, halves, adaptive.quantity, pixels)
+                # the tile's error pooled with its neighbourhood's (rare paths its first pass missed); a
+                # tile goes on while that error is above T and above its share of the error at equal
+                # cost, σ̂/(n·w) > μ (σ̂ = e·√n, w = √(c/c̄))
+                root_n = np.sqrt(counts)
+                noise = pooled_error(noise, counts, level.sigma_nb, level.n_nb)
+                e = pooled_error(e, counts, level.sigma_nb, level.n_nb)
+                noise = np.where(e / (root_n * w) > level.level, noise, -np.inf)
+            else:                                              # first pass: only bring every pixel to min_spp
+                noise = np.full(counts.shape, -np.inf)
+            if not first_pass_reported and counts.min() >= adaptive.min_spp:
+                first_pass_reported = True
+                timing["on"] = False
+                if on_first_pass is not None:
+                    on_first_pass(film, halves, clock() - t0, done["samples"])
+            target = next_targets(counts, noise, marks, adaptive.threshold)
+            todo = target > counts
+            stats["adaptive_rounds"] = stats.get("adaptive_rounds", 0) + 1
+            if not todo.any():
+                # max_spp: the cap decided some tile's count — it wanted more, or it stopped at a clipped
+                # last checkpoint that a larger --spp would have stepped over
+                at_cap = counts >= spp
+                return "max_spp" if at_cap.any() and (not spp_is_a_step or (noise[at_cap] > adaptive.threshold).any()) \
+                    else "threshold"
+            if stop_requested():
+                return reason["value"]
+            paths = int((target - counts)[todo].sum())
+            per_unit = round_unit_paths(paths, int(todo.sum()), int((target - counts).max()), batch_rays, workers)
+            timing["on"] = unit_times is not None and counts.min() < adaptive.min_spp
+            units = adaptive_units(pixels[todo], counts[todo], target[todo], tiles, per_unit,
+                                   chunk_pixels=max(COST_CHUNK_PIXELS, pixels.size // 128) if timing["on"] else None)
+            stopped = run_units(units, trace_unit, add_result, stop_requested, abort)
+            stats["seconds"] = clock() - t0
+            if stopped:
+                return reason["value"] or "cancelled"
 
 
 # ------------------------------------------------------------------------------------ storage in the EXR
@@ -701,19 +713,139 @@ def _first_arrays(halves: HalfBuffers):
 
 
 def has_state(channels: dict) -> bool:
-    return f"{STATE_PREFIX}.A.S0.Y.hi" in channels
+    """Whether the channels hold (some of) an adaptive render's state (any ``adaptive.…`` channel)."""
+    return any(name.startswith(STATE_PREFIX + ".") for name in channels)
 
 
-def state_from_channels(channels: dict, counts: np.ndarray):
-    """(Film, HalfBuffers) rebuilt exactly from :func:`state_channels` and the ``spp`` counts (H, W)."""
+#: Integers up to this are exact in the float64 words of the state (costs and counts).
+_EXACT_INTEGER = float(2 ** 53)
+
+
+def _state_names(channels: dict) -> tuple[list[str], list[str]]:
+    """(names every state must have, names of its integer arrays), as :func:`state_channels` writes them.
+
+    ``cost`` and the ``first.…`` pass are absent in files of older versions; a file holding any
+    channel of one of these groups must hold all of it (``first.cost`` is optional too)."""
+    def present(name):
+        return any(f"{STATE_PREFIX}.{name}.{w}" in channels for w in ("hi", "lo"))
+    names = [f"sum.S{k}.{c}" for k in range(4) for c in "RGB"] + [f"{q}.S{k}.Y" for q in ("sumsq", "A", "B")
+                                                                  for k in range(4)]
+    integers = []
+    if present("cost"):
+        names.append("cost")
+        integers.append("cost")
+    if any(name.startswith(f"{STATE_PREFIX}.first.") and not name.startswith(f"{STATE_PREFIX}.first.rays.")
+           for name in channels):
+        names += ["first.count"] + [f"first.{h}.S{k}.Y" for h in "AB" for k in range(4)]
+        integers.append("first.count")
+        if present("first.cost"):
+            names.append("first.cost")
+            integers.append("first.cost")
+    return names, integers
+
+
+def check_state(channels: dict, counts: np.ndarray, source: str = "the file",
+                means: np.ndarray | None = None) -> dict[str, np.ndarray]:
+    """The state's float64 arrays {name: (n,)} decoded from :func:`state_channels`, or a SceneError
+    naming --resume, ``source`` and the damaged channel: one missing or not stored as uint32 words,
+    a value that is not finite, a cost or count that is not a whole number ≥ 0 (a first-pass count
+    above the pixel's count), a negative sum of squares, a sum that is not 0 where the pixel has
+    no sample of its half (A: none, B: fewer than 2), sums that do not give the stored Stokes ``means``
+    (4, H, W, 3) (float32-rounded; None: not checked), or half-buffers that do not add up to the sums
+    (:func:`_check_consistency`)."""
+    names, integers = _state_names(channels)
+    missing = [f"{STATE_PREFIX}.{n}.{w}" for n in names for w in ("hi", "lo")
+               if f"{STATE_PREFIX}.{n}.{w}" not in channels]
+    if missing:
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        raise SceneError("--resume", f"{source} is damaged: its adaptive state lacks the channel"
+                                     f"{'s' if len(missing) > 1 else ''} {', '.join(missing[:3])}{more}")
+    c = np.asarray(counts).reshape(-1).astype(np.int64)
+    out = {}
+    for n in names:
+        words = []
+        for w in ("hi", "lo"):
+            a = np.asarray(channels[f"{STATE_PREFIX}.{n}.{w}"])
+            if a.dtype != np.uint32 or a.size != c.size:
+                raise SceneError("--resume", f"{source} is damaged: channel {STATE_PREFIX}.{n}.{w} holds {a.dtype} "
+                                             f"values of {a.size} pixels, not the uint32 words of {c.size} pixels")
+            words.append(a.reshape(-1))
+        v = _words_to_float64(*words)
+        bad = int(np.count_nonzero(~np.isfinite(v)))
+        if bad:
+            raise SceneError("--resume", f"{source} is damaged: the stored value {STATE_PREFIX}.{n} is not finite "
+                                         f"(NaN or ±inf) at {bad} pixel{'s' if bad > 1 else ''}")
+        if n in integers:
+            wrong = (v < 0) | (v > _EXACT_INTEGER) | (v != np.floor(v))
+            if n == "first.count":
+                wrong |= v > c
+            if wrong.any():
+                raise SceneError("--resume", f"{source} is damaged: {STATE_PREFIX}.{n} must hold whole numbers in "
+                                             f"[0, {'the spp channel' if n == 'first.count' else '2^53'}], not at "
+                                             f"{int(wrong.sum())} pixels")
+        elif n.startswith("sumsq.") and (v < 0).any():
+            raise SceneError("--resume", f"{source} is damaged: the sum of squares {STATE_PREFIX}.{n} is negative at "
+                                         f"{int((v < 0).sum())} pixels")
+        if not n.startswith("first."):
+            empty = c < (2 if n.startswith("B.") else 1)
+            if (v[empty] != 0).any():
+                raise SceneError("--resume", f"{source} is damaged: {STATE_PREFIX}.{n} is not 0 at "
+                                             f"{int((v[empty] != 0).sum())} pixels whose samples it cannot hold")
+        out[n] = v
+    if means is not None:           # the exact sums must give the means stored beside them (float32-rounded)
+        stored = np.asarray(means, np.float64).transpose(0, 3, 1, 2).reshape(4, 3, -1)
+        for k in range(4):
+            for i, cname in enumerate("RGB"):
+                m = out[f"sum.S{k}.{cname}"] / np.maximum(c, 1)
+                off = ~(np.abs(m - stored[k, i]) <= 1e-6 * np.abs(stored[k, i]) + 1e-44)
+                if off.any():
+                    raise SceneError("--resume", f"{source} is damaged: {STATE_PREFIX}.sum.S{k}.{cname} does not give "
+                                                 f"the stored means S{k}.{cname} at {int(off.sum())} pixels")
+    _check_consistency(out, source)
+    return out
+
+
+#: Relative tolerance of :func:`_check_consistency`: float64 sums of ≤ 2²⁴ samples added in two ways differ
+#: by at most ~2²⁴·2⁻⁵³ ≈ 2e-9 of the samples' magnitude; this allows 500× that.
+STATE_TOLERANCE = 1e-6
+
+
+def _check_consistency(state: dict[str, np.ndarray], source: str) -> None:
+    """The half-buffers hold the same samples as the film: A + B = the luminance of the RGB sums for every
+    Stokes component, within :data:`STATE_TOLERANCE` of the pixel's largest sum (rounding: the same samples
+    added in two ways); and a sum of squares' root fits float32 (its standard error is written as float32).
+    Finite damage to A, B or a sum of squares shows here (the sums themselves are checked against the stored
+    means by :func:`check_state`).  The pixel's largest sum bounds |S1…S3| only for physical samples
+    (|S_k| ≤ S0); a render whose samples were 500× beyond that could be refused."""
+    lum = [np.einsum("c,cn->n", LUMINANCE_WEIGHTS, np.stack([state[f"sum.S{k}.{c}"] for c in "RGB"]))
+           for k in range(4)]
+    with np.errstate(over="ignore", invalid="ignore"):
+        scale = np.max([np.abs(state[f"A.S{k}.Y"]) + np.abs(state[f"B.S{k}.Y"]) + np.abs(lum[k])
+                        for k in range(4)], axis=0)
+        for k in range(4):
+            off = ~(np.abs(state[f"A.S{k}.Y"] + state[f"B.S{k}.Y"] - lum[k]) <= STATE_TOLERANCE * scale)
+            if off.any():
+                raise SceneError("--resume", f"{source} is damaged: {STATE_PREFIX}.A.S{k}.Y + {STATE_PREFIX}.B.S{k}.Y "
+                                             f"is not the luminance of {STATE_PREFIX}.sum.S{k}.R/G/B (the same "
+                                             f"samples) at {int(off.sum())} pixels")
+            big = ~(np.sqrt(state[f"sumsq.S{k}.Y"]) <= float(np.finfo(np.float32).max))
+            if big.any():
+                raise SceneError("--resume", f"{source} is damaged: {STATE_PREFIX}.sumsq.S{k}.Y is beyond (3.4e38)² "
+                                             f"at {int(big.sum())} pixels")
+
+
+def state_from_channels(channels: dict, counts: np.ndarray, source: str = "the file", means: np.ndarray | None = None):
+    """(Film, HalfBuffers) rebuilt exactly from :func:`state_channels` and the ``spp`` counts (H, W);
+    a damaged state is a SceneError naming --resume, ``source`` and the channel (:func:`check_state`,
+    ``means``: the Stokes image stored beside the state)."""
     from .film import Film
     H, W = counts.shape
+    state = check_state(channels, counts, source, means)
     film, halves = Film(W, H), HalfBuffers(W * H)
     film.count[:] = counts.reshape(-1).astype(np.int64)
 
     def get(name):
-        return _words_to_float64(channels[f"{STATE_PREFIX}.{name}.hi"].reshape(-1),
-                                 channels[f"{STATE_PREFIX}.{name}.lo"].reshape(-1))
+        return state[name]
     for k in range(4):
         for c, cname in enumerate("RGB"):
             film.sums[k, c] = get(f"sum.S{k}.{cname}")
@@ -722,7 +854,7 @@ def state_from_channels(channels: dict, counts: np.ndarray):
         halves.sums[1, k] = get(f"B.S{k}.Y")
 
     def has(name):
-        return f"{STATE_PREFIX}.{name}.hi" in channels
+        return name in state
     # Files of older versions counted no cost, or rays (``rays``, ``first.rays``: segments and light
     # samples, another unit than PATH_COST's): they resume with equal costs (c̄ = 0, every weight 1).
     if has("cost"):

@@ -154,6 +154,17 @@ def predict(film, halves, quantity: str, threshold: float, min_spp: int, spp: in
     ``round_seconds``: the fixed time of an adaptive round (:func:`round_overhead`; 0: not counted)."""
     if pixels is None:
         pixels = np.arange(film.count.size)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # extreme thresholds: need = ∞ or 0
+        return _predict(film, halves, quantity, threshold, min_spp, spp, seconds_per_sample, pixels, round_seconds)
+
+
+def _count(x: float, min_spp: int, spp: int) -> int:
+    """⌈x⌉ within [min_spp, spp] (x = ∞ or NaN: spp), without converting ∞ to an integer."""
+    x = float(x)
+    return int(min(spp, max(min_spp, math.ceil(x - 1e-9)))) if x <= spp else int(spp)
+
+
+def _predict(film, halves, quantity, threshold, min_spp, spp, seconds_per_sample, pixels, round_seconds):
     n = film.count[pixels].astype(np.float64)
     _, _, tile_err = film_noise(film, halves, quantity, pixels)
     alloc = allocation_from(halves.sums, film.count, quantity, threshold, tile_ids(film.width, film.height), pixels,
@@ -177,9 +188,8 @@ def predict(film, halves, quantity: str, threshold: float, min_spp: int, spp: in
         wanted = np.minimum(need, share)
         i = np.minimum(np.searchsorted(marks, np.ceil(wanted - 1e-9), side="left"), len(marks) - 1)
     counts = marks[i]
-    uniform = int(min(spp, max(min_spp, math.ceil(float(need.max()) - 1e-9)))) if need.size else min_spp
-    uniform_p95 = int(min(spp, max(min_spp, math.ceil(float(np.percentile(need, 95)) - 1e-9)))) if need.size \
-        else min_spp
+    uniform = _count(need.max(), min_spp, spp) if need.size else min_spp
+    uniform_p95 = _count(np.percentile(need, 95), min_spp, spp) if need.size else min_spp
     capped = float(np.mean(wanted > spp)) if need.size else 0.0
     sps = np.asarray(seconds_per_sample, np.float64)
     rounds = int(np.searchsorted(marks, counts.max())) + 1 if counts.size else 0
@@ -188,7 +198,8 @@ def predict(film, halves, quantity: str, threshold: float, min_spp: int, spp: in
 
 
 def parse_target(text: str) -> tuple[str, float]:
-    """'dolp:0.01' → ("dolp", 0.01), or a SceneError naming --target."""
+    """'dolp:0.01' → ("dolp", 0.01), or a SceneError naming --target (any finite threshold > 0; the
+    CLI then applies render's rules, engine.render.adaptive.check_adaptive, e.g. an AoLP error ≤ 90°)."""
     q, sep, v = text.partition(":")
     try:
         value = float(v)
@@ -213,12 +224,18 @@ def pilot_render(renderer, settings, pilot_spp: int, quantity: str = "s0"):
                             tile_cost_per_sample(result.film, result.halves))
 
 
+#: Most samples per pixel the round-overhead probe (:func:`round_overhead`) takes: its cost must not
+#: grow with ``--spp`` (16 pixels × 2²⁴ spp would take days); at most one tile × 1024 samples.
+ROUND_PROBE_MAX_SPP = 1024
+
+
 def round_overhead(renderer, settings, pilot, seconds_per_sample, min_spp: int) -> float:
     """Seconds an adaptive round costs besides its samples, on this machine: one tile (the pilot's
-    noisiest) is rendered adaptively to ``settings.spp`` with a threshold of 0, through every
-    checkpoint; its time less its samples' (``seconds_per_sample`` of :func:`cost_map`) is shared
-    among its rounds.  Small renders and late rounds (few tiles, many sample passes each) are
-    dominated by this: per-unit tracing set-up, the error images, adding sample pass by pass."""
+    noisiest) is rendered adaptively to min(``settings.spp``, :data:`ROUND_PROBE_MAX_SPP`) with a
+    threshold of 0, through every checkpoint up to there (from min(``min_spp``, that)); its time less
+    its samples' (``seconds_per_sample`` of :func:`cost_map`) is shared among its rounds.  Small renders
+    and late rounds (few tiles, many sample passes each) are dominated by this: per-unit tracing set-up,
+    the error images, adding sample pass by pass.  Bounded work whatever ``settings.spp``."""
     film = pilot.film
     _, _, tile_err = film_noise(film, pilot.halves, "s0")
     p = int(np.argmax(np.where(np.isfinite(tile_err), tile_err, 0.0)))
@@ -226,9 +243,10 @@ def round_overhead(renderer, settings, pilot, seconds_per_sample, min_spp: int) 
     x0, y0 = x - x % TILE, y - y % TILE
     window = (x0, y0, min(x0 + TILE, film.width), min(y0 + TILE, film.height))
     st = copy.copy(settings)
+    st.spp = min(int(settings.spp), ROUND_PROBE_MAX_SPP)
     started = time.perf_counter()
-    probe = renderer.render(st, adaptive=AdaptiveSettings(threshold=0.0, quantity="s0", min_spp=min_spp),
-                            window=window)
+    probe = renderer.render(st, adaptive=AdaptiveSettings(threshold=0.0, quantity="s0",
+                                                          min_spp=min(int(min_spp), st.spp)), window=window)
     seconds = time.perf_counter() - started
     sps = np.broadcast_to(np.asarray(seconds_per_sample, np.float64), probe.film.count.shape)
     samples = float(np.sum(probe.film.count * sps))

@@ -31,6 +31,8 @@ import dataclasses
 import hashlib
 import math
 import os
+import re
+import stat
 
 import numpy as np
 
@@ -163,22 +165,100 @@ def differences(header: dict, identity: dict) -> list[str]:
     return out
 
 
-def read_resumable(path: str):
-    """(stokes, channels, header) of a Polar EXR to resume, or a SceneError naming --resume."""
-    from ..output.exr import read_stokes_exr
-    if not os.path.exists(path):
-        raise SceneError("--resume", f"{path!r} does not exist")
-    if os.path.isdir(path):
-        raise SceneError("--resume", f"{path!r} is a folder, not a Stokes EXR")
+#: Most samples per pixel a render takes (engine.scene.loader.parse_settings: ``spp`` ≤ 2²⁴).
+MAX_SPP = 1 << 24
+#: Bounds of a seed (engine.scene.loader.parse_settings).
+MAX_SEED = 2 ** 63 - 1
+
+
+def refuse_special_file(path: str, field: str, prefix: str = "") -> None:
+    """A SceneError naming ``field`` (message: ``prefix`` + the path) if ``path`` exists and is neither a
+    regular file nor a folder (a FIFO, a device, a socket): reading one could wait forever for a writer.
+    Checked before opening."""
     try:
-        stokes, channels, header = read_stokes_exr(path)
+        mode = os.stat(path).st_mode
+    except (OSError, ValueError):
+        return                                   # missing or unreadable: the reader says so
+    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
+        raise SceneError(field, f"{prefix}{path!r} is not a regular file (a FIFO, device or socket)")
+
+
+def read_polar_exr(path: str, field: str, layer: str | None = None):
+    """(stokes, channels, header) of a Stokes EXR, or a SceneError naming ``field``: a path that does
+    not exist, a folder, anything but a regular file (a FIFO or device is refused before it is opened:
+    reading it could wait forever), or a file that is not a Stokes EXR.  The one reader of the CLI's
+    input EXRs (``--resume``, ``polariser``).  ``layer``: the view layer of a Blender multilayer EXR;
+    a ValueError about it is re-raised as a SceneError naming --layer."""
+    from ..output.exr import read_stokes_exr
+    try:
+        mode = os.stat(path).st_mode
+    except FileNotFoundError:
+        raise SceneError(field, f"{path!r} does not exist") from None
+    except (OSError, ValueError) as e:           # ValueError: a NUL in the path
+        raise SceneError(field, f"cannot read {path!r}: {getattr(e, 'strerror', None) or e}") from None
+    if stat.S_ISDIR(mode):
+        raise SceneError(field, f"{path!r} is a folder, not a Stokes EXR")
+    refuse_special_file(path, field)
+    try:
+        return read_stokes_exr(path, layer)
+    except MemoryError:
+        raise SceneError(field, f"{path!r} claims an image too large to read into memory") from None
     except (ValueError, OSError, RuntimeError) as e:
-        raise SceneError("--resume", f"{path!r} is not a Polar Stokes EXR: {e}") from None
+        if layer is not None and "view layer" in str(e):
+            raise SceneError("--layer", str(e)) from None
+        raise SceneError(field, f"{path!r} is not a Polar Stokes EXR: {e}") from None
+
+
+def nonfinite_pixels(stokes: np.ndarray) -> int:
+    """How many pixels of a Stokes image (4, H, W[, C]) hold a NaN or ±inf in any component."""
+    bad = ~np.isfinite(np.asarray(stokes))
+    return int(np.count_nonzero(bad.reshape(bad.shape[0], bad.shape[1], bad.shape[2], -1).any(axis=(0, 3))))
+
+
+def _header_integer(header: dict, key: str, lo: int, hi: int, path: str) -> int:
+    """A whole-number header entry within [lo, hi] (ints beyond int32 are stored as strings), or a SceneError."""
+    value = header.get(key)
+    number = None
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        number = int(value)
+    elif isinstance(value, str) and re.fullmatch(r"\s*[+-]?[0-9]{1,40}\s*", value):
+        number = int(value)
+    if number is None or not lo <= number <= hi:
+        raise SceneError("--resume", f"{path!r} is damaged: its header {key} must be a whole number in "
+                                     f"[{lo}, {hi}], got {value!r}")
+    return number
+
+
+def read_resumable(path: str):
+    """(stokes, channels, header) of a Polar EXR to resume, or a SceneError naming --resume: besides
+    :func:`read_polar_exr`'s refusals, a file without per-pixel counts, seed or scene fingerprint, one
+    whose header ``polar.seed``/``polar.spp`` or ``spp`` channel is not whole numbers in range, and one
+    with a float channel (Stokes means, errors, alpha…) that is not finite (which channel, how many pixels)."""
+    stokes, channels, header = read_polar_exr(path, "--resume")
     if "spp" not in channels or "polar.seed" not in header:
         raise SceneError("--resume", f"{path!r} has no per-pixel sample counts (not written by Polar)")
     if "polar.scene_hash" not in header:
         raise SceneError("--resume", f"{path!r} was written without the scene fingerprint (an older Polar), "
                                      "so it cannot be checked to belong to this render")
+    _header_integer(header, "polar.seed", 0, MAX_SEED, path)
+    _header_integer(header, "polar.spp", 1, MAX_SPP, path)
+    counts = np.asarray(channels["spp"])
+    if counts.dtype.kind == "f":
+        whole = np.isfinite(counts) & (counts == np.floor(np.where(np.isfinite(counts), counts, 0)))
+    else:
+        whole = np.ones(counts.shape, bool)
+    if counts.dtype.kind not in "uif" or not (whole & (counts >= 0) & (counts <= MAX_SPP)).all():
+        raise SceneError("--resume", f"{path!r} is damaged: its spp channel must hold whole numbers in "
+                                     f"[0, {MAX_SPP}] (samples per pixel)")
+    for name in ("stokes", *sorted(channels)):
+        values = stokes if name == "stokes" else np.asarray(channels[name])
+        if values.dtype.kind != "f":
+            continue
+        bad = int(np.count_nonzero(~np.isfinite(values)))
+        if bad:
+            what = "the Stokes channels S0…S3" if name == "stokes" else f"channel {name}"
+            raise SceneError("--resume", f"{path!r} is damaged: {what} hold{'' if name == 'stokes' else 's'} "
+                                         f"{bad} non-finite value{'s' if bad > 1 else ''} (NaN or ±inf)")
     return stokes, channels, header
 
 
@@ -211,7 +291,7 @@ def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None
         raise SceneError("--spp", f"must be at least the samples already done ({int(counts.max())})")
     from .adaptive import has_state, state_from_channels
     if has_state(channels):
-        film, halves = state_from_channels(channels, counts)
+        film, halves = state_from_channels(channels, counts, repr(path), means=stokes)
         if st.stratified:
             film.half_y = halves.sums.copy()        # even/odd luminance sums: the stratified standard error
     else:
