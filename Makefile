@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 
-.PHONY: demo test bench clean extension
+.PHONY: demo test test-fast bench clean extension
 
 $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -26,6 +26,11 @@ test: $(VENV)/.installed
 	$(PY) -m ruff check .
 	$(PY) tests/support/blender_envs.py $(BLENDER_SERIES)
 	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadfile
+
+# The pure-engine tests while developing (under two minutes on 2 cores): no Blender, no other
+# processes, no Dask cluster, no fuzzers.  Test folders: tests/{materials,kernels,render,scene,cli,blender}.
+test-fast: $(VENV)/.installed
+	$(PY) -m pytest -n $(TEST_WORKERS) --dist loadfile -q -m "not blender and not subprocess and not cluster and not fuzz"
 
 bench: $(VENV)/.installed
 	$(PY) tests/bench/bench_engine.py

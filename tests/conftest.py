@@ -44,3 +44,16 @@ if os.environ.get("CI"):
     from hypothesis import settings as _hsettings
     _hsettings.register_profile("ci", derandomize=True, deadline=None)
     _hsettings.load_profile("ci")
+
+
+# Markers (declared in pyproject.toml): by folder here, by module or test in the files themselves.
+# `make test-fast` leaves out blender, subprocess, cluster and fuzz.
+_FOLDER_MARKS = {"blender": ("blender",), "cli": ("subprocess",)}
+
+
+def pytest_collection_modifyitems(config, items):
+    tests = os.path.dirname(os.path.abspath(__file__))
+    for item in items:
+        folder = os.path.relpath(str(item.path), tests).split(os.sep)[0]
+        for name in _FOLDER_MARKS.get(folder, ()):
+            item.add_marker(name)

@@ -258,3 +258,28 @@ def test_blender_version_differences_live_in_compat():
         for m in pattern.finditer(open(path, encoding="utf-8").read()):
             bad.append(f"{os.path.relpath(path, REPO)}: {m.group(0)}")
     assert not bad, "\n".join(bad)
+
+
+def test_tests_live_by_package_and_blender_tests_are_marked():
+    """Test modules sit in tests/<package>/ (the root keeps this file alone), and a test that drives
+    Blender outside tests/blender/ carries the blender marker (so `make test-fast` leaves it out)."""
+    tests = os.path.join(REPO, "tests")
+    loose = [f for f in os.listdir(tests) if f.startswith("test_") and f.endswith(".py")]
+    assert loose == ["test_architecture.py"], loose
+    packages = {"materials", "kernels", "render", "scene", "cli", "blender"}
+    found = {os.path.basename(os.path.dirname(p)) for p in glob.glob(os.path.join(tests, "*", "test_*.py"))}
+    assert found == packages, found
+    unmarked = []
+    for path in glob.glob(os.path.join(tests, "*", "test_*.py")):
+        if os.sep + "blender" + os.sep in path:
+            continue
+        src = open(path, encoding="utf-8").read()
+        for node in ast.parse(src).body:
+            if not (isinstance(node, ast.FunctionDef) and node.name.startswith("test_")):
+                continue
+            body = ast.get_source_segment(src, node)
+            marks = {ast.unparse(d) for d in node.decorator_list}
+            if any(s in body for s in ('importorskip("bpy")', "import bpy", "load_addon(")) \
+                    and "pytest.mark.blender" not in marks:
+                unmarked.append(f"{os.path.relpath(path, REPO)}::{node.name}")
+    assert not unmarked, unmarked

@@ -243,7 +243,7 @@ BELOW_HORIZON = 0.1
 #: share of the power distribution mixed into the per-point selection probabilities (defensive: every
 #: light keeps a probability > 0). 0.01 halved a lamp-lit floor's variance under a grey world (whose
 #: power rivals a lamp's), but then a constant sky under strong lamps was picked so rarely that its
-#: weights made outliers (tests/test_lights.py, power selection with area lights and sky)
+#: weights made outliers (tests/render/test_lights.py, power selection with area lights and sky)
 GLOBAL_SHARE = 0.1
 
 

@@ -70,7 +70,7 @@ ends are in the provably negligible tails, which the trapezoid rule needs (a win
 clipped at m = 1 is summed with unit stride: there the series' start is a hard edge,
 and striding across it would cost ~1e-3).  This is not an asymptotic expansion: it
 is checked against the brute-force full series for random g ∈ [1e-6, 5e5] and c in
-tests/test_htsg.py (agreement ≤ 1e-11 relative; stride=False sums every term of the
+tests/materials/test_htsg.py (agreement ≤ 1e-11 relative; stride=False sums every term of the
 window and agrees with brute force too).  Cost per point and wavelength: ≤ ~110
 terms (g ≈ 60, unit stride), ~25–30 strided nodes for any larger g (the full series
 needs ~1.7e5 terms at the thesis's g ≈ 1.6e5).

@@ -119,7 +119,7 @@ def specular_albedo(cos_o, m, eta: complex, shadowing: str = "ts",
     over facets whose mirror direction ω_i is above the horizon: a Gaussian-weighted integrand
     bounded by 2 (V-cavity G), even in b (ω_o in the xz plane), summed by the midpoint rule on
     ``points`` × ``points``/2 nodes of [−5.5, 5.5] × [0, 5.5].  Accuracy (against a fine
-    (θ_i, φ_i) quadrature, tests/test_principled_layering.py): ≲ 1e-3 for cosθ_o ≥ 0.3, ≲ 5e-3 at grazing.
+    (θ_i, φ_i) quadrature, tests/materials/test_principled_layering.py): ≲ 1e-3 for cosθ_o ≥ 0.3, ≲ 5e-3 at grazing.
     """
     cos_o, m = np.broadcast_arrays(np.asarray(cos_o, np.float64), np.asarray(m, np.float64))
     mu = np.maximum(cos_o.ravel(), _MU_FLOOR)

@@ -28,7 +28,7 @@ class EmbreexScene:
     """One triangle mesh (vertices (V, 3), triangles (F, 3)) as an embreex scene: the reference queries.
 
     Robust (watertight) traversal, as embreex's default: without it queries are ≈ 20 % faster (Mitsuba 3's
-    setting) but rays aimed at a closed mesh's shared edges slip through it (tests/test_accel.py)."""
+    setting) but rays aimed at a closed mesh's shared edges slip through it (tests/render/test_accel.py)."""
 
     def __init__(self, vertices: np.ndarray, faces: np.ndarray):
         self.embree = rtcs.EmbreeScene(robust=True)

@@ -6,7 +6,7 @@ call (the geometric normal included).  :class:`DirectScene` builds the same scen
 own buffers with embreex's strides — and queries it from the compiled loops of engine.kernels.rays,
 which read the renderer's (3, N) float64 rays directly and call ``rtcIntersect1`` / ``rtcOccluded1`` per
 ray with the ray set up as embreex sets it up.  The hits are embreex's bit for bit (triangle, distance
-and barycentrics of every hit ray; tests/test_accel.py); a miss's barycentrics mean nothing in either.
+and barycentrics of every hit ray; tests/render/test_accel.py); a miss's barycentrics mean nothing in either.
 
 The library is the one embreex itself loaded: ``embreex.libs/`` (Linux and Windows wheels) or
 ``embreex/.dylibs/`` (macOS).  :func:`library` returns None where it is not found; the scene is then

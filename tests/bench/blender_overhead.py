@@ -4,7 +4,7 @@
                                            [--threads 0] [--profile N] [--json]
 
 Builds a small polarising scene in bpy (black-glass floor, gold and glass spheres, a sun and a grey
-world: the scene of tests/test_blender_render.py's export-fidelity test), renders it once to load
+world: the scene of tests/blender/test_render.py's export-fidelity test), renders it once to load
 the kernels, then alternately (``--repeats`` times, the fastest kept, because this VM's speed
 varies):
 

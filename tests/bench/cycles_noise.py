@@ -3,7 +3,7 @@
     python tests/bench/cycles_noise.py [--scenes all_lights,point_radius] [--res 160x120] [--spp 16]
                                        [--sampler independent|stratified|independent,stratified] [--json]
 
-Builds each scene of tests/test_cycles_parity.py in bpy (diffuse floor and box, one kind of light
+Builds each scene of tests/blender/test_cycles_parity_lights.py in bpy (diffuse floor and box, one kind of light
 each; ``all_lights`` has 8 point/spot/area/sun lights of 1–1000 W and an emitter; plus
 ``eight_points_world``: eight point lights of 1–1000 W and a grey world, issue 16's case, and
 ``defocused_lamp``: ``area_square`` through a thin lens at f/1.4 focused at 1.5 m), renders it
@@ -39,7 +39,7 @@ QUICK_SCENES = ["area_square", "point_radius", "all_lights", "eight_points_world
 def eight_points_world():
     """Issue 16's many-light case (not a parity test): eight point lights of 1–1000 W and a grey world."""
     import bpy
-    import tests.test_cycles_parity as parity
+    import tests.blender.test_cycles_parity_lights as parity
     for i, energy in enumerate(np.geomspace(1.0, 1000.0, 8)):
         angle = 2 * np.pi * i / 8
         parity.add_light("POINT", (2.0 * np.cos(angle), 2.0 * np.sin(angle), 0.8 + 0.2 * i), energy=float(energy),
@@ -53,7 +53,7 @@ def defocused_lamp():
     """Depth of field (not a parity test): ``area_square`` seen at f/1.4 focused 1.5 m in front of the
     camera, so the cube, the lit floor and the shadow edges are blurred over many pixels."""
     import bpy
-    import tests.test_cycles_parity as parity
+    import tests.blender.test_cycles_parity_lights as parity
     parity.area_square()
     cam = bpy.context.scene.camera.data
     cam.dof.use_dof = True
@@ -78,7 +78,7 @@ def render_luminance(scene, path):
 def measure(name, width, height, spp, tmp, samplers=("independent",)):
     """One result per Polar sampling pattern in ``samplers``, each beside the same Cycles renders
     (Cycles renders once: its time and noise do not depend on Polar's pattern)."""
-    import tests.test_cycles_parity as parity
+    import tests.blender.test_cycles_parity_lights as parity
     scene = parity.base_scene()
     {**parity.SCENES, **BENCH_SCENES}[name]()
     scene.render.resolution_x, scene.render.resolution_y = width, height
@@ -124,7 +124,7 @@ def measure(name, width, height, spp, tmp, samplers=("independent",)):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", default=",".join(QUICK_SCENES),
-                    help="names from tests/test_cycles_parity.py, eight_points_world, or 'all'")
+                    help="names from tests/blender/test_cycles_parity_lights.py, eight_points_world, or 'all'")
     ap.add_argument("--res", default="160x120")
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--sampler", default="independent",
@@ -137,7 +137,7 @@ def main():
         if s not in ("independent", "stratified"):
             ap.error(f"--sampler: {s!r} is not one of independent, stratified")
     from tests.blender_support import load_addon
-    import tests.test_cycles_parity as parity
+    import tests.blender.test_cycles_parity_lights as parity
     load_addon()
     width, height = (int(v) for v in args.res.split("x"))
     names = list(parity.SCENES) + list(BENCH_SCENES) if args.scenes == "all" else args.scenes.split(",")

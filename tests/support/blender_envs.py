@@ -1,5 +1,5 @@
 """Virtual environments holding one ``bpy`` release each, for the extension's smoke set on every
-supported Blender (tests/test_blender_extension.py) and the version table (tests/bench/blender_versions.py).
+supported Blender (tests/blender/test_extension.py) and the version table (tests/bench/blender_versions.py).
 
     python tests/support/blender_envs.py 4.5 5.3        # create what is missing (make test does this)
 

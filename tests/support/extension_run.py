@@ -1,5 +1,5 @@
 """Install the extension zip into one Blender and run the smoke set there, then judge what it wrote:
-shared by tests/test_blender_extension.py (which asserts) and tests/bench/blender_versions.py (which
+shared by tests/blender/test_extension.py (which asserts) and tests/bench/blender_versions.py (which
 tabulates every supported Blender).  Needs numpy and OpenEXR in this process, not bpy.
 """
 

@@ -280,7 +280,7 @@ def test_a_resumed_stratified_render_equals_the_uninterrupted_one(lamp_reference
 
 def test_cli_writes_the_sampler_and_resume_refuses_another(tmp_path, capsys):
     from engine import cli
-    from tests.test_robustness_cli import small_demo
+    from tests.cli.test_robustness_cli import small_demo
     scene = small_demo(tmp_path, spp=4)
     out = tmp_path / "a.exr"
     assert cli.main(["render", scene, "-o", str(out), "--sampler", "stratified", "--stderr", "--no-previews",
@@ -302,7 +302,7 @@ def test_a_resumed_stratified_exr_keeps_the_stratified_standard_error(tmp_path, 
     """--stderr of a stratified render writes the even samples' means (S*.Y.even) and names the
     estimate (polar.stderr); resuming from that file gives the uninterrupted render's error."""
     from engine import cli
-    from tests.test_robustness_cli import small_demo
+    from tests.cli.test_robustness_cli import small_demo
     scene = small_demo(tmp_path, spp=4)
     opts = ["--sampler", "stratified", "--stderr", "--no-previews", "--quiet"]
     part, whole, resumed = (str(tmp_path / f"{n}.exr") for n in ("part", "whole", "resumed"))

@@ -488,6 +488,7 @@ def fuzz_dir(tmp_path_factory):
     return tmp_path_factory.mktemp("fuzz")
 
 
+@pytest.mark.fuzz
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(seed=st.sampled_from(sorted(SEEDS)),
        cut=st.one_of(st.none(), st.integers(0, 1 << 16)),
@@ -544,6 +545,7 @@ def _demo_scene(directory, **changes):
     return path
 
 
+@pytest.mark.subprocess
 def test_cli_render_with_a_broken_png_texture_is_one_error_line(tmp_path):
     """``python -m engine render scene.json -o out.exr`` with a texture whose PNG is cut short:
     exit status 2, one ``error:`` line naming the field and the file, no traceback, no output file."""

@@ -75,7 +75,9 @@ import pytest  # noqa: E402
 
 from engine import cli  # noqa: E402
 from engine.render.resume import scene_fingerprint  # noqa: E402
-from tests.test_robustness_cli import small_demo  # noqa: E402
+from tests.cli.test_robustness_cli import small_demo  # noqa: E402
+
+pytestmark = pytest.mark.subprocess
 
 
 @pytest.fixture(scope="module")

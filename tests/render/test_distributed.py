@@ -13,6 +13,8 @@ from engine.render.renderer import Renderer  # noqa: E402
 from engine.scene.loader import load_scene  # noqa: E402
 from tests.conftest import shared_path  # noqa: E402
 
+pytestmark = [pytest.mark.cluster, pytest.mark.subprocess]
+
 
 @pytest.fixture(scope="module")
 def cluster():
@@ -157,7 +159,7 @@ def test_cli_writes_the_finished_units_when_the_cluster_dies(fragile_cluster, tm
     import time
     from engine.output.exr import read_stokes_exr
     from tests.conftest import REPO
-    from tests.test_robustness_cli import small_demo
+    from tests.cli.test_robustness_cli import small_demo
     client, cluster = fragile_cluster
     out = str(tmp_path / "part.exr")
     proc = subprocess.Popen([sys.executable, "-m", "engine", "render", small_demo(tmp_path, spp=4000), "-o", out,

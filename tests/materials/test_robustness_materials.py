@@ -122,7 +122,7 @@ def test_zero_mapped_normal_is_the_shading_normal_per_point(tmp_path):
                                                                                 "interpolation": "Closest"}},
                               "materials.m", base_dir=str(tmp_path))
     assert isinstance(material, ShadingNormal)
-    from tests.test_textures import _plane_points, _shading_points
+    from tests.scene.test_textures import _plane_points, _shading_points
     rng = np.random.default_rng(5)
     u = rng.uniform(0.01, 0.99, 64)
     uv = np.stack((u, u * rng.uniform(0.0, 1.0, 64)))          # on the quad's first triangle (u ≥ v)
@@ -269,6 +269,7 @@ def _edge_values(p):
     return values
 
 
+@pytest.mark.fuzz
 @settings(max_examples=120, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(st.sampled_from(TEXTURABLE), st.data())

@@ -18,10 +18,10 @@ from engine import kernels
 from engine.kernels import geometry, hashing, material_groups, shadow_rays, transport
 from engine.render.renderer import Renderer
 from engine.scene.loader import load_scene
-from tests.conftest import shared_path
+from tests.conftest import REPO as _REPO, shared_path
 
 needs_numba = pytest.mark.skipif(kernels._numba is None, reason="numba is not installed (NumPy kernels only)")
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+REPO = _REPO
 
 
 def unit(rng, n):
@@ -193,6 +193,7 @@ print(json.dumps(kernels.BACKEND))
 """
 
 
+@pytest.mark.subprocess
 @needs_numba
 @pytest.mark.parametrize("name", ["fresnel_sphere", "glass_sphere", "cornell_lambert", "rough_sphere_a030"])
 def test_render_with_numpy_kernels_equals_compiled(tmp_path, name):
@@ -338,6 +339,7 @@ def test_throughput_times_stokes_with_fewer_stokes_components():
     np.testing.assert_allclose(transport.throughput_times_stokes_numba(T, rows, S1, w), full, rtol=1e-13)
 
 
+@pytest.mark.subprocess
 @needs_numba
 def test_same_files_under_two_package_names_do_not_share_compiled_kernels(tmp_path):
     """A checkout is imported as ``engine`` and, by the Blender tests and by developers, as the

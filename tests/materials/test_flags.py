@@ -9,8 +9,8 @@ Two kinds of checks:
   every lobe and direction, one without POLARISING returns only M00, one without
   WAVELENGTH_DEPENDENT the same matrix at every λ, a Dirac-only one a zero ``eval``, a NULL lobe
   wi = −wo; a SEPARABLE_DIFFUSE model returns its diffuse part as a depolarising value or share.
-The readers (choose_transport, simplify) keep their answers: tests/test_effects.py and
-tests/test_simplify.py run unchanged.
+The readers (choose_transport, simplify) keep their answers: tests/render/test_effects.py and
+tests/materials/test_simplify.py run unchanged.
 """
 
 import numpy as np

@@ -170,6 +170,8 @@ def test_resume_after_a_cancel_through_the_exr_gives_the_same_counts_and_image(s
     np.testing.assert_array_equal(resumed.halves.cost, reference.halves.cost)
 
 
+@pytest.mark.cluster
+@pytest.mark.subprocess
 def test_a_dask_cluster_gives_the_local_counts_and_image(sphere, reference):
     distributed = pytest.importorskip("distributed")
     from engine.render.distributed import render_distributed
@@ -381,6 +383,7 @@ def test_estimate_command_prints_a_prediction_per_target(capsys, small_json):
 
 # ------------------------------------------------------------------------------------ Blender
 
+@pytest.mark.blender
 def test_blender_adaptive_render_has_a_noise_pass_and_reports_the_achieved_error(tmp_path, capfd):
     bpy = pytest.importorskip("bpy")
     from tests.blender_support import (add_plane, brewster_camera, empty_scene, load_addon, polar_material,
@@ -414,6 +417,7 @@ def test_cost_map_spreads_the_pilot_time_over_pixels_by_their_units_cost():
     assert float(np.sum(sps[:4] * 2)) == pytest.approx(1.0)              # the pilot's samples: its wall time
 
 
+@pytest.mark.blender
 def test_blender_sampling_panel_shows_the_adaptive_settings_and_the_estimate_button():
     bpy = pytest.importorskip("bpy")
     from tests.blender_support import empty_scene, load_addon

@@ -244,6 +244,7 @@ def _ring_stats(img):
     return np.array(out)
 
 
+@pytest.mark.blender
 @pytest.mark.parametrize("roughness,colour", [(0.05, (0.8, 0.8, 0.8)), (0.3, (0.8, 0.8, 0.8)),
                                               (0.6, (0.8, 0.8, 0.8)), (0.3, (0.8, 0.35, 0.1))])
 def test_principled_dielectric_white_furnace_matches_cycles(roughness, colour):

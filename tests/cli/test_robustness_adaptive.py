@@ -7,7 +7,7 @@ table of cases, then hypothesis fuzzers over the adaptive/estimate options, over
 and over polariser inputs and options.
 
 Renders are 8×8 pixels of examples/demo.json with coarse spheres and a few samples (≈ 20 ms each):
-runs call ``engine.cli.main`` in this process (as tests/test_robustness_cli.py does) under an alarm
+runs call ``engine.cli.main`` in this process (as tests/cli/test_robustness_cli.py does) under an alarm
 that fails a run taking longer than :data:`DEADLINE` seconds; the cases that could block in a system
 call (a FIFO) run the CLI as a subprocess with a timeout.
 """
@@ -633,6 +633,7 @@ def adaptive_options(draw, command):
     return args
 
 
+@pytest.mark.fuzz
 @FUZZ
 @given(adaptive_options("render"))
 def test_fuzz_adaptive_render_options(work, scene, args):
@@ -645,6 +646,7 @@ def test_fuzz_adaptive_render_options(work, scene, args):
         assert not out.exists()                        # refused before rendering
 
 
+@pytest.mark.fuzz
 @FUZZ
 @given(adaptive_options("estimate"))
 def test_fuzz_estimate_options(scene, args):
@@ -704,6 +706,7 @@ def base_state(adaptive_exr):
     return channels, header
 
 
+@pytest.mark.fuzz
 @settings(max_examples=120, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
 def test_fuzz_damaged_resume_files(base_state, scene, work, data):
@@ -777,6 +780,7 @@ def polariser_case(draw):
     return stokes, args, ext
 
 
+@pytest.mark.fuzz
 @FUZZ
 @given(polariser_case())
 def test_fuzz_polariser_inputs_and_options(work, case):

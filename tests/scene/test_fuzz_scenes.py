@@ -7,12 +7,15 @@ import os
 import tempfile
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from engine.render.renderer import Renderer
 from engine.errors import SceneError
 from engine.scene.loader import load_scene, parse_scene
+
+pytestmark = pytest.mark.fuzz
 
 BASE = {
     "format": "polar-scene/1",

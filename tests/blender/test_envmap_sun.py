@@ -199,7 +199,7 @@ def _sun_world(bpy, path, float_file=True, colorspace=None, rotation_z=60.0):
     """World: Environment Texture of _sun_map() behind a Mapping rotation about Z.  float_file: an
     EXR written and loaded back (Blender tags it sRGB, stores it encoded); else a generated float
     image in ``colorspace``."""
-    from tests.test_blender_world import _hdri_world, _image
+    from tests.blender.test_world import _hdri_world, _image
     img = _sun_map()
     if float_file:
         image = _image(bpy, "sun_src", img)
@@ -227,7 +227,7 @@ def test_exported_interpolation_space_is_the_one_cycles_uses(blender, tmp_path, 
     np.testing.assert_allclose(light.image, _sun_map(), rtol=1e-4)
     w, h = 4 * W, 4 * H
     baked = export.world_bake.bake_world(world, (w, h), samples=1, filter_width=0.01)
-    from tests.test_blender_world import _texel_directions
+    from tests.blender.test_world import _texel_directions
     env = EnvironmentMapEmitter(light.image, light.strength, light.rotation_deg, light.grid,
                                 interpolation_space=light.interpolation_space)
     direct = env.lookup_rgb(_texel_directions(w, h))
@@ -244,7 +244,7 @@ def test_plane_under_an_srgb_exr_sun_agrees_with_cycles(blender, tmp_path):
     """The reported bias (Polar ~9 % brighter on sunlit diffuse surfaces): an upward diffuse plane
     under the sun of an sRGB-tagged EXR, Cycles vs Polar, means within noise."""
     bpy, export = blender
-    from tests.test_cycles_parity import diffuse
+    from tests.blender.test_cycles_parity_lights import diffuse
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     scene.render.resolution_x = scene.render.resolution_y = 8

@@ -163,6 +163,7 @@ def test_bad_files_name_the_problem(tmp_path, content, message):
         read_image(str(path), field="materials.m.albedo")
 
 
+@pytest.mark.blender
 def test_blender_written_hdr_reads_to_rgbe_precision(tmp_path):
     """An image written by Blender's own Radiance writer (bpy, view transform Standard so the
     floats are written as they are) reads back within RGBE's shared-exponent precision: each channel

@@ -112,7 +112,7 @@ def test_index_matched_clear_coat_is_skipped_reported_and_unbiased():
     """A coat with n = exterior index and no absorption is skipped (a rough one too); the scene then
     needs no polarisation at the ball (the floor still polarises).  The render equals the render with
     every layer kept (simplify="off") within Monte Carlo noise: the samplers differ, the BSDF does not."""
-    from tests.test_render_acceptance import block_z
+    from tests.render.test_render_acceptance import block_z
     scene = coated_ball_scene({"n": 1.0, "distribution": "beckmann", "m": 0.3})
     renderer = Renderer(scene)
     settings = copy.copy(scene.settings)

@@ -46,6 +46,7 @@ def test_lambert_matches_scatmech(rec):
     np.testing.assert_allclose(np.array(out["brdf"]), np.array(rec["M"]), rtol=0, atol=1e-12)
 
 
+@pytest.mark.subprocess
 def test_mueller_cli_prints_json_matching_the_oracle():
     rec = next(r for r in FRESNEL if r["material"] == "gold_like" and r["theta_i_deg"] == 45.0)
     proc = subprocess.run([sys.executable, "-m", "engine", "mueller", "--model", "fresnel", "--param", "n=0.47",
@@ -58,6 +59,7 @@ def test_mueller_cli_prints_json_matching_the_oracle():
     assert np.array(out["brdf"]).shape == (4, 4)
 
 
+@pytest.mark.subprocess
 def test_mueller_cli_rejects_bad_parameter_with_field_name():
     proc = subprocess.run([sys.executable, "-m", "engine", "mueller", "--model", "fresnel", "--param", "n=0.47",
                            "--param", "k=-2", "--theta-i", "45", "--theta-o", "45"],

@@ -43,6 +43,7 @@ def test_a_table_is_built_once_and_read_back_bit_for_bit(cache, monkeypatch):
     assert np.array_equal(ww._albedo_table(*ARGS).E, built)
 
 
+@pytest.mark.subprocess
 def test_a_later_process_reads_the_table_instead_of_building_it(cache):
     """Two interpreters: the first builds and stores, the second has no quadrature and still gets it."""
     child = ("import sys, numpy as np\n"
@@ -50,7 +51,7 @@ def test_a_later_process_reads_the_table_instead_of_building_it(cache):
              "if sys.argv[1] == 'read':\n"
              "    ww.top_albedo = None\n"
              f"np.save(sys.argv[2], ww._albedo_table(*{ARGS!r}).E)\n")
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    from tests.conftest import REPO as root
     env = {**os.environ, "PYTHONPATH": root}
     for mode in ("build", "read"):
         subprocess.run([sys.executable, "-c", child, mode, str(cache / f"{mode}.npy")], check=True, env=env, cwd=root)

@@ -6,7 +6,7 @@ exactly (each texel of a 4×4 texture is one 8×8-pixel region), lit by a sun (a
 and a black world, so that each region's brightness is albedo × cos(sun, shading normal).  It is
 rendered by Cycles (bpy ships it) and by Polar (the exporter + engine, as F12 does); per region the
 luminance ratio Polar/Cycles must be 1 within 4 standard errors + 2 % (standard errors from
-independent seeds), as tests/test_cycles_parity.py.  Engine-level checks: a roughness texture on
+independent seeds), as tests/blender/test_cycles_parity_lights.py.  Engine-level checks: a roughness texture on
 the converted Torrance–Sparrow gives at each texel the constant model of that roughness, bit for
 bit; an untextured scene exports no UVs, colours or tangents (the engine's untextured path).
 """

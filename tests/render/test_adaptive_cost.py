@@ -17,7 +17,7 @@ from engine.render.estimate import cost_map, mse_time_gain, predict, tile_cost_p
 from engine.render.film import Film
 from engine.render.integrator import PathTracer
 from engine.render.renderer import Renderer
-from tests.test_adaptive import GaussianTracer, small_scene
+from tests.render.test_adaptive import GaussianTracer, small_scene
 from tests.support.adaptive import empty_stats, run_units_in_order
 
 

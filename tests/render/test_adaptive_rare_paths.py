@@ -18,8 +18,8 @@ from engine.render.estimate import predict
 from engine.render.film import Film
 from engine.render.integrator import PATH_COST, VERTEX_COST
 from engine.render.renderer import Renderer
-from tests.test_adaptive import GaussianTracer, small_scene
-from tests.test_adaptive_cost import costly_render, tracer_of
+from tests.render.test_adaptive import GaussianTracer, small_scene
+from tests.render.test_adaptive_cost import costly_render, tracer_of
 from tests.support.adaptive import empty_stats, run_units_in_order
 
 SIDE = 5                                     # tiles per side of the synthetic images

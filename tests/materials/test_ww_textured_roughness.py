@@ -22,7 +22,7 @@ from engine.scene.loader import parse_material
 from engine.spectral import WavelengthLookup
 from engine.spectral.spectrum import TabulatedSpectrum
 from tests.support import chi2
-from tests.test_textures import _points_at, _shading_points, _texture_file
+from tests.scene.test_textures import _points_at, _shading_points, _texture_file
 
 M_TEXELS = np.array([[0.1, 0.4], [0.17, 0.25]])     # bottom row 0.17, 0.25 (between nodes); top row the ends
 #: texel (column i, row j from the bottom) of each block of points in _uv()
@@ -200,13 +200,14 @@ def test_the_loader_checks_a_textured_coat_roughness(tmp_path):
                        "materials.w", base_dir=str(tmp_path))
 
 
+@pytest.mark.blender
 def test_blender_coat_roughness_socket_takes_a_texture(tmp_path):
     """A Polarising BSDF (Weidlich–Wilkie) node with an image on Coat Roughness exports a textured
     Beckmann m; at the texels that are table nodes (the image's least and greatest values) the
     material equals the exporter's own conversion of that constant Coat Roughness to ~1e-12."""
     bpy = pytest.importorskip("bpy")
     from tests.blender_support import polar_material
-    from tests.test_blender_textures import _export, _image_node, _texel_points, base_scene
+    from tests.blender.test_texture_export import _export, _image_node, _texel_points, base_scene
     values = np.array([[0.1, 0.4], [0.2, 0.3]])           # file rows top first: row 0 (bottom) = 0.2, 0.3
     _texture_file(tmp_path, values, "m.exr")
     bpy.ops.wm.read_homefile(use_empty=True)

@@ -5,7 +5,7 @@ Oracles: Cycles itself.  A world baked with point samples at the texel centres (
 filter of 0.01 px) is Cycles' radiance in those directions, so the direct mapping's lookup must
 reproduce it to float precision (except within one texel of the map's poles, where Cycles wraps
 rows periodically and the engine holds the first/last row).  Renders of diffuse scenes must
-agree with Cycles per region within 4 standard errors + 2 % (tests/test_cycles_parity.py's
+agree with Cycles per region within 4 standard errors + 2 % (tests/blender/test_cycles_parity_lights.py's
 method).  The engine's Euler rotation is checked against its own scalar form and against a
 rotation matrix built here.
 """
@@ -287,7 +287,7 @@ def test_baking_leaves_nothing_behind(blender):
 def _parity_scene(bpy):
     """A white diffuse floor and sphere, the camera looking slightly down so that the upper third of
     the frame is sky."""
-    from tests.test_cycles_parity import diffuse
+    from tests.blender.test_cycles_parity_lights import diffuse
     scene = bpy.context.scene
     scene.render.resolution_x, scene.render.resolution_y = 48, 36
     scene.render.resolution_percentage = 100
@@ -306,7 +306,7 @@ def _parity_scene(bpy):
 
 
 def _compare(bpy, scene, tmp_path):
-    from tests.test_cycles_parity import cycles_renders, polar_renders, region_stats
+    from tests.blender.test_cycles_parity_lights import cycles_renders, polar_renders, region_stats
     mp, sp = region_stats(polar_renders(scene))
     mc, sc = region_stats(cycles_renders(scene, str(tmp_path)))
     lit = mc > 0.02 * mc.max()

@@ -269,6 +269,7 @@ def test_node_menus_map_to_declared_choices():
 
 # ------------------------------------------------------------------------------------------ with bpy
 
+@pytest.mark.blender
 def test_a_saved_node_without_a_newer_input_exports_its_default_and_gains_the_input():
     pytest.importorskip("bpy")
     from tests.blender_support import empty_scene, load_addon, polar_material
@@ -290,6 +291,7 @@ def test_a_saved_node_without_a_newer_input_exports_its_default_and_gains_the_in
     assert [s.name for s in node.inputs] == [s[0] for s in sockets]
 
 
+@pytest.mark.blender
 def test_torrance_sparrow_node_exports_its_exterior_index():
     pytest.importorskip("bpy")
     from tests.blender_support import empty_scene, load_addon, polar_material

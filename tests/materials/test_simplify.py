@@ -26,8 +26,8 @@ from engine.polarisation.frames import plane_of_incidence_axis, scattering_plane
 from engine.spectral import ConstantSpectrum
 from engine.spectral.spectrum import RGBUnboundedSpectrum, TabulatedSpectrum
 from engine.vec3 import reflect
-from tests.test_torrance_sparrow import matrix_in_frames
-from tests.test_weidlich_wilkie import _col, _direction, _point, _random_pairs
+from tests.materials.test_torrance_sparrow import matrix_in_frames
+from tests.materials.test_weidlich_wilkie import _col, _direction, _point, _random_pairs
 
 Z = np.array([0.0, 0.0, 1.0])
 LAMS = np.array([450.0, 520.0, 600.0, 680.0])   # 4 wavelengths per path: spectral bases (gold) are exercised

@@ -11,7 +11,7 @@ import pytest
 from engine.render import allocator, integrator
 from engine.render.renderer import Renderer
 from engine.scene.loader import load_scene
-from tests.conftest import shared_path
+from tests.conftest import REPO, shared_path
 
 
 def small_scene(name="cornell_lambert", res=24, spp=2):
@@ -78,6 +78,7 @@ for name, sampler in (('fresnel_sphere_au', 'stratified'), ('cornell_lambert', '
 """
 
 
+@pytest.mark.subprocess
 def test_the_warm_up_loads_every_kernel_a_render_calls():
     """After ``warm_up`` a render of the same scene and settings loads or compiles no kernel (one
     would hold the GIL inside the render and stall the other workers): a spectral stratified scene and
@@ -86,7 +87,7 @@ def test_the_warm_up_loads_every_kernel_a_render_calls():
     if not kernels.COMPILED:
         pytest.skip("Numba kernels disabled")
     out = subprocess.run([sys.executable, "-c", _WARM_CHILD], capture_output=True, text=True, check=True,
-                         cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__)))).stdout
+                         cwd=REPO).stdout
     assert out.splitlines() == ["fresnel_sphere_au []", "cornell_lambert []"], out
 
 
@@ -108,7 +109,7 @@ print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
 
 def fault_counts(child: str) -> list[int]:
     """The numbers a child interpreter running ``child`` prints (pytest.skip where it prints "skip")."""
-    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    root = REPO
     out = subprocess.run([sys.executable, "-c", child], capture_output=True, text=True, check=True,
                          cwd=root, env={**os.environ, "PYTHONPATH": root}).stdout.split()
     if out[-1] == "skip":

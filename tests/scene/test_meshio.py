@@ -12,6 +12,7 @@ from engine.errors import SceneError
 from engine.scene.meshio import (MeshData, compute_vertex_normals, face_normals,
                                  read_mesh, read_obj, read_ply, triangle_areas)
 from engine.scene.shapes import icosphere, quad, transform_matrix, transform_mesh
+from tests.conftest import REPO
 
 SHARED_PLY = "/work/shared/peers/meshes/sphere_ico6.ply"
 
@@ -784,6 +785,7 @@ def test_obj_faces_before_first_usemtl_name_their_line(tmp_path):
     assert m.ungrouped_line is None and m.face_groups is None
 
 
+@pytest.mark.subprocess
 def test_plyfile_is_needed_only_for_ply(tmp_path):
     # The Blender extension ships without plyfile: importing the scene loader must not
     # import it, OBJ must read without it, and PLY must say what is missing.
@@ -802,7 +804,7 @@ def test_plyfile_is_needed_only_for_ply(tmp_path):
         "except SceneError as e:\n"
         "    print(e)\n")
     out = subprocess.run([sys.executable, "-c", script, str(obj), str(ply)], capture_output=True,
-                         text=True, cwd=os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+                         text=True, cwd=REPO)
     assert out.returncode == 0, out.stderr
     assert "objects[0].file: " in out.stdout and "needs the 'plyfile' package" in out.stdout
 
