@@ -7,7 +7,7 @@ Usable without Blender::
     result = render(scene)          # RenderResult: result.stokes() is (4, H, W, 3)
 
 Conventions (Stokes frames, signs, Fresnel) are those of the project's
-physics reference; see README.md, section "Conventions".
+physics reference; see docs/physics.md, "Conventions".
 """
 
 __version__ = "0.1.0"

@@ -4,11 +4,11 @@
                                     [--samples N] [--seed S] [--polarisation auto|full|linear|off]
                                     [--scheduler tcp://HOST:8786 [--distribute-frames]]
 
-Uses the ``bpy`` module (pip install bpy==5.0.1, or any Blender the README lists) and Polar from this checkout (or, with
-``--installed``, the extension installed in Blender's user folder).  Writes one multilayer EXR per
-frame (``DIR/<name>_0001.exr`` …) with the view layer's passes: Combined, S0, S1, S2, S3 (colour)
-and DoP, DoLP, AoLP, DoCP (value).  A render error (missing camera, bad material input, …) is
-printed and the exit status is 1; finished frames are kept.
+Uses the ``bpy`` module (pip install bpy==5.0.1, or any Blender the README's table lists) and
+Polar from this checkout (or, with ``--installed``, the extension installed in Blender's user
+folder).  Writes one multilayer EXR per frame (``DIR/<name>_0001.exr`` …) with the view layer's
+passes: Combined, S0, S1, S2, S3 (colour) and DoP, DoLP, AoLP, DoCP (value).  A render error
+(missing camera, bad material input, …) is printed and the exit status is 1; finished frames are kept.
 
 With ``--scheduler`` every frame's samples are traced on the Dask cluster (the image equals a local
 render); with ``--distribute-frames`` as well, whole frames are farmed out instead: each frame runs

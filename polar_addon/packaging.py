@@ -9,7 +9,7 @@
    from the bpy module — the same code as ``blender --command extension build --split-platforms``):
    ``polar_render-<version>-<platform>.zip``, each holding only its platform's wheels, for both
    Pythons: Blender installs the ones of its own Python when the extension is installed or Blender
-   starts, so one zip serves every supported Blender (README, "Blender extension").
+   starts, so one zip serves every supported Blender (docs/guide/blender.md, "Build and install").
 
 The download is injectable (``fetch``) so that tests can build with fake wheel files and no network.
 This module needs no Blender session (it only locates bpy's copy of ``blender_ext.py``).

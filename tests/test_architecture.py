@@ -283,3 +283,10 @@ def test_tests_live_by_package_and_blender_tests_are_marked():
                     and "pytest.mark.blender" not in marks:
                 unmarked.append(f"{os.path.relpath(path, REPO)}::{node.name}")
     assert not unmarked, unmarked
+
+
+def test_readme_is_a_short_guide():
+    """The README is a newcomer's guide (at most 300 lines); the rest lives in docs/."""
+    with open(os.path.join(REPO, "README.md"), encoding="utf-8") as fh:
+        lines = fh.read().count("\n")
+    assert lines <= 300, f"README.md has {lines} lines: move detail to docs/"

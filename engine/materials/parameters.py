@@ -340,7 +340,7 @@ def exterior_n_parameter(**changes) -> Parameter:
 
 def texture_support_table(models) -> str:
     """A Markdown table of every texturable parameter of ``models`` (declarations, coats included):
-    whether the engine evaluates it per surface point today (README "Textures")."""
+    whether the engine evaluates it per surface point today (docs/guide/scene-format.md, "Textures")."""
     rows = ["| model | parameter | kind | per surface point |", "|---|---|---|---|"]
 
     def walk(decl: ModelDeclaration, title: str):

@@ -6,7 +6,7 @@ mod 2).  The default layout is that of common polarisation sensors (e.g. Sony IM
     row 0 (top of the image):  90°   45°
     row 1:                    135°    0°
 
-Angles are measured like the AoLP: from image right towards image up (README Conventions), so a
+Angles are measured like the AoLP: from image right towards image up (docs/physics.md, Conventions), so a
 0° pixel passes horizontal light, I(θ) = ½[(t_max + t_min)S0 + (t_max − t_min)(S1 cos2θ + S2 sin2θ)]
 with t_max = 1, t_min = the extinction ratio (engine.postprocess.filters).
 

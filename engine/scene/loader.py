@@ -3,7 +3,7 @@
 Two formats are read:
 
 - the engine's own format (``"format": "polar-scene/1"``, documented in the
-  README, section "Scene files"), and
+  docs/guide/scene-format.md), and
 - the renderer-neutral peer format of ``shared/peers/scenes/*.json``
   (recognised by its top-level ``light`` and ``integrator``), converted by
   engine.scene.peer_format.
@@ -793,7 +793,7 @@ def _parse_light_base(d: dict, field: str, base_dir: str = "."):
 
 
 # ----------------------------------------------------------------------------- Cycles' light options
-# Optional, with Cycles' meaning (README: the Blender light table); the defaults are the format's
+# Optional, with Cycles' meaning (docs/guide/blender.md: the light table); the defaults are the format's
 # original meaning, so existing and peer scenes render exactly as before.
 
 #: optional keys of each light type

@@ -2,7 +2,7 @@
 
 A material's Surface may be
 - a **Polarising BSDF** node: its model and inputs are used exactly;
-- a standard shader, converted to the closest polarising model (README, "Blender materials"):
+- a standard shader, converted to the closest polarising model (docs/guide/blender.md, "Using it": existing scenes):
   Diffuse → Lambert; Glossy/Anisotropic → conductor from the colour (Gulbrandsen 2014);
   Metallic (Physical Conductor) → conductor with its n, k; Glass/Refraction → smooth dielectric, or
   with roughness r the rough dielectric (single-scattering GGX, α = r²; Cycles' Multiscatter GGX
@@ -14,9 +14,9 @@ Roughness r maps to the Beckmann slope m = r² (as Cycles' α = r²); below m = 
 is used.  Every value is validated; a NaN or out-of-range input is an error naming the material
 and the input.
 
-Textures (README, "Blender materials"): an input that a texturable parameter reads may be linked to
-an Image Texture (the image's own pixels; its interpolation, extension and colour space, sRGB images
-filtered on their encoded values where Cycles does so (``image_pixels``);
+Textures (docs/guide/blender.md, "Using it": existing scenes): an input that a texturable parameter
+reads may be linked to an Image Texture (the image's own pixels; its interpolation, extension and
+colour space, sRGB images filtered on their encoded values where Cycles does so (``image_pixels``);
 the UV map through UV Map / Texture Coordinate ▸ UV nodes and Mapping nodes) or to a Color
 Attribute / Attribute node (a vertex colour); a roughness texture becomes m = r² per point
 (``TextureInput(power=2)``).  A Normal Map node (tangent space) or a Bump node with an image

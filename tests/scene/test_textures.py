@@ -616,12 +616,12 @@ def test_textured_conductor_index_and_mono_mode_equal_the_constant_values(tmp_pa
             np.testing.assert_allclose(got[..., sel], const.delta_reflection(sub).matrix(), rtol=1e-15, atol=0)
 
 
-def test_readme_texture_table_is_generated_from_the_declarations():
+def test_scene_format_guide_texture_table_is_generated_from_the_declarations():
     from engine.materials.catalogue import MODELS
     from engine.materials.parameters import texture_support_table
     from tests.conftest import REPO
-    readme = open(f"{REPO}/README.md", encoding="utf-8").read()
-    assert texture_support_table(MODELS.values()) in readme
+    guide = open(f"{REPO}/docs/guide/scene-format.md", encoding="utf-8").read()
+    assert texture_support_table(MODELS.values()) in guide
 
 
 def test_textured_materials_survive_pickling_for_distributed_workers(tmp_path):
@@ -661,7 +661,7 @@ def test_scene_file_textures_are_relative_to_the_scene_file(tmp_path, monkeypatc
 
 
 def test_textured_scene_built_in_python_renders_each_texel(tmp_path):
-    """The Python API (README): an in-memory image on a Lambert albedo, a mesh with UVs."""
+    """The Python API (docs/guide/command-line.md): an in-memory image on a Lambert albedo, a mesh with UVs."""
     from engine.materials.lambert import Lambert
     from engine.scene.description import Camera, Mesh, PointLight, RenderSettings, Scene
     from engine.spectral import ConstantSpectrum
