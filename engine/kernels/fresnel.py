@@ -1,7 +1,7 @@
 """Fresnel reflection Mueller coefficients (A, B, C, S) as one compiled loop.
 
 Same formulas, branch cuts and edge handling as engine.polarisation.fresnel (the NumPy
-reference, physics.md §0): u = √(η² − sin²θ) with Im u ≥ 0, r_s = (cosθ − u)/(cosθ + u),
+reference, docs/physics.md §0): u = √(η² − sin²θ) with Im u ≥ 0, r_s = (cosθ − u)/(cosθ + u),
 r_p = (η² cosθ − u)/(η² cosθ + u), amplitudes 0 where a denominator vanishes (index-matched
 grazing), cosines below 1e-200 flushed to 0; A = ½(|r_s|² + |r_p|²), B = ½(|r_s|² − |r_p|²),
 C = Re(r_s r_p*), S = −Im(r_s r_p*).  Results agree with the reference to rounding: the compiled

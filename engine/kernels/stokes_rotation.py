@@ -1,4 +1,4 @@
-"""The Stokes-frame rotation (physics.md §0): the one implementation, NumPy and per path for loops.
+"""The Stokes-frame rotation (docs/physics.md §0): the one implementation, NumPy and per path for loops.
 
 A frame for a beam along unit k is a unit x ⟂ k with y = k × x.  Re-expressing a Stokes vector
 from frame x to a coaxial frame x′ uses cos φ = x·x′, sin φ = y·x′ and

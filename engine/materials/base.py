@@ -1,6 +1,6 @@
 """The interface every material model implements (like Mitsuba 3's BSDF / pbrt-v4's BxDF).
 
-Directions (physics.md §0): ``wi`` points from the surface towards the light,
+Directions (docs/physics.md §0): ``wi`` points from the surface towards the light,
 ``wo`` towards the viewer (the previous path vertex).  A Mueller value always
 describes the *physical* light flow: light travelling along k_i = −wi is
 scattered into k_o = wo, and the matrix maps Stokes vectors given in the frame

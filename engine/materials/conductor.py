@@ -1,7 +1,7 @@
 """Smooth conductor: a perfect Fresnel mirror with complex index η = n + iκ.
 
 The relative index is η/n_exterior.  The Dirac lobe reflects wo about the
-shading normal with the Fresnel Mueller matrix M_F(cosθ) of physics.md §0 in
+shading normal with the Fresnel Mueller matrix M_F(cosθ) of docs/physics.md §0 in
 the plane-of-incidence frames x = s = unit(n × k) (shared by both beams).
 One-sided: zero when wo lies behind the shading normal.
 """

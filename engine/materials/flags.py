@@ -16,7 +16,7 @@ happens to be 0 for some directions or wavelengths):
 - NULL: light passes straight through, ω_i = −ω_o (thin filter sheets); counts as transmission
   and as a Dirac lobe (as Mitsuba 3's ``Null``).
 
-Capabilities (physics.md §0 conventions; lights are unpolarised):
+Capabilities (docs/physics.md §0 conventions; lights are unpolarised):
 
 - POLARISING: the Mueller matrix can change the state of polarisation (not a pure depolariser),
 - RETARDING: it can create a phase difference between s and p, i.e. circular polarisation

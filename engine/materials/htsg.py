@@ -1,11 +1,11 @@
 """He–Torrance–Sillion–Greenberg (1991) polarising BRDF ("htsg").
 
-Physics as fixed by shared/docs/physics.md (§2.1 numerics, §3 Chapter 4 errata,
+Physics as fixed by docs/physics.md (§2 numerics, §3 Chapter 4 errata,
 §5 decisions); symbols follow He et al. 1991.  Lengths σ₀, τ, λ in µm inside
 this module (the engine's wavelengths are nm: λ_µm = λ_nm / 1000, divided by
 the exterior index, i.e. the wavelength *in the incident medium*).
 
-Geometry (physics.md §0): ω_i = ``wi`` points to the light, ω_o = ``sp.wo`` to
+Geometry (docs/physics.md §0): ω_i = ``wi`` points to the light, ω_o = ``sp.wo`` to
 the viewer, k_i = −ω_i, k_r = ω_o, n = shading normal.  One-sided: zero unless
 cosθ_i > 0 and cosθ_r > 0.  With v = k_r − k_i = ω_o + ω_i (unitless; the
 physical vector is (2π/λ)·v):
@@ -14,7 +14,7 @@ physical vector is (2π/λ)·v):
         M_F(θ_h)  Fresnel Mueller matrix (amplitudes r_s, r_p) at cosθ_h = |v|/2,
                   in the scattering-plane frames s = unit(k_i × k_r) (shared by
                   both beams; any ⟂ vector when k_i ∥ k_r), p = k × s
-                  (physics.md 4.40 with the 4.14 sign fix: diag(r_s, r_p)·|k_i×k_r|²);
+                  (docs/physics.md 4.40 with the 4.14 sign fix: diag(r_s, r_p)·|k_i×k_r|²);
         G = (|v|²/v_z)²                 (He's Eq. 76 with |k_i×k_r|⁴ cancelled analytically)
         D = π²τ²/(4λ²) · Σ_{m≥1} gᵐe^{−g}/(m!·m) · exp(−(2π/λ)²|v_xy|²τ²/(4m))
         g = [(2πσ/λ)(cosθ_i + cosθ_r)]²,  σ = σ₀/√(1+x²) the effective roughness
@@ -29,7 +29,7 @@ ABCS form: M11 ≠ M00).
 
 Effective roughness: x = z₀/σ₀ solves x·e^{x²/2} = f₀ with
 f₀ = (K′_i + K′_r)/√(8π), K′ = tanθ·erfc(μ) (= 4K of Eq. 4.6); K′ = 0 for
-tanθ < 1e-6 and tanθ is capped at 1e12 (physics.md §2.1).  Equivalently
+tanθ < 1e-6 and tanθ is capped at 1e12 (docs/physics.md §2).  Equivalently
 x² = W₀(f₀²) (Lambert W); it is solved by Newton's method on
 h(t) = e^t + t − 2 ln f₀ with t = ln x², which is convex and increasing, so
 Newton converges monotonically after at most one overshoot (no safeguard can
@@ -75,7 +75,7 @@ window and agrees with brute force too).  Cost per point and wavelength: ≤ ~11
 terms (g ≈ 60, unit stride), ~25–30 strided nodes for any larger g (the full series
 needs ~1.7e5 terms at the thesis's g ≈ 1.6e5).
 
-Deviations from Westin's guards (physics.md §2.1): none of the switches "S = 1 if
+Deviations from Westin's guards (docs/physics.md §2): none of the switches "S = 1 if
 sinθ < 1e-5 or σ₀ < 1e-4 µm" and "σ = 0 if σ₀ < 1e-8 or cosθ < 1e-8" are applied; the
 exact expressions are evaluated instead.  They are continuous and agree with the guarded
 values except in corners (within 1e-8 of grazing, where S ≈ 0 makes the dd term vanish
@@ -186,7 +186,7 @@ def roughness_ratio(f0, max_iter: int = 60):
 
 
 def _k_prime(cos_t, sin_t, erfc_mu):
-    """K′ = tanθ·erfc(μ) with the guards of physics.md §2.1 (0 for tanθ < 1e-6, tanθ ≤ 1e12)."""
+    """K′ = tanθ·erfc(μ) with the guards of docs/physics.md §2 (0 for tanθ < 1e-6, tanθ ≤ 1e12)."""
     with np.errstate(divide="ignore", invalid="ignore"):
         tan = np.where(cos_t > 0, sin_t / np.where(cos_t > 0, cos_t, 1.0), 1e12)
     tan = np.minimum(tan, 1e12)

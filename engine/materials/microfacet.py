@@ -8,7 +8,7 @@ local once (see engine.materials.torrance_sparrow).
 Distributions (both normalised, ∫ D(h) cosθ_h dω_h = 1 over the upper hemisphere):
 
 - :class:`Beckmann` with the thesis's roughness ``m`` (= Mitsuba's α = SCATMECH's
-  2-D rms slope s, physics.md §5):
+  2-D rms slope s, docs/physics.md §5):
   D(h) = exp(−tan²θ_h/m²) / (π m² cos⁴θ_h), evaluated as exp(−x)·(1 + tan²θ_h)²/(π m²),
   x = tan²θ_h/m², with tan²θ_h = (h_x² + h_y²)/h_z² taken from the vector components
   (no 1 − cos² cancellation near the specular peak).  D is *exactly* 0 where x > 800
@@ -32,7 +32,7 @@ Shadowing/masking (symmetric in ω_i ↔ ω_o, all return (N,)):
 
 - :func:`g_vcavity`: Torrance–Sparrow/Cook–Torrance V-cavity
   G = min(1, 2(n·h)(n·ω_o)/(ω_o·h), 2(n·h)(n·ω_i)/(ω_i·h)), and 0 when either direction
-  is on the back side of the facet or of the macro surface (physics.md §1.4, §3 Eq. 3.3).
+  is on the back side of the facet or of the macro surface (docs/physics.md §1, §3 Eq. 3.3).
 - :func:`g_smith` : separable Smith G1(ω_i)G1(ω_o) with the exact Beckmann
   G1 = χ⁺ / (1 + Λ(a)), Λ(a) = (erf(a) − 1)/2 + e^{−a²}/(2a√π), a = 1/(m tanθ);
   ``rational=True`` uses Walter's rational approximation as in Mitsuba 3:
@@ -41,7 +41,7 @@ Shadowing/masking (symmetric in ω_i ↔ ω_o, all return (N,)):
 
 D is the Beckmann distribution, i.e. a Gaussian in the facet *slope* tanθ_h (as SCATMECH's
 Gaussian_Slope_Distribution_Function and Mitsuba 3), not Torrance & Sparrow's 1967 Gaussian in
-the facet angle θ_h itself (physics.md §3, Eq. 3.4).
+the facet angle θ_h itself (docs/physics.md §3, Eq. 3.4).
 
 erf/erfc/erfcx/erfinv come from engine.kernels.error_function (NumPy only, no scipy), the
 visible-slope inversion from engine.kernels.microfacet (compiled when Numba is available; in

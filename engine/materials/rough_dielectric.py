@@ -9,7 +9,7 @@ Reflection (ω_i on the viewer's side), h = unit(ω_i + ω_o):
 
     f_r = M_F(ω_i·h; η) · D(h) G(ω_i, ω_o, h) / (4 |cosθ_i| cosθ_o)
 
-M_F is the Fresnel reflection matrix (physics.md §0) at the facet angle; inside the denser medium
+M_F is the Fresnel reflection matrix (docs/physics.md §0) at the facet angle; inside the denser medium
 beyond the facet's critical angle it is a pure retarder (total internal reflection: S ≠ 0,
 circular polarisation appears).
 
@@ -27,7 +27,7 @@ in medium a and the light in b, η = n_b/n_a, η²·f(ω_o = a, ω_i = b) = f(ω
 
 Frames: both lobes are ABCS matrices in the scattering-plane frames x_in = x_out = s = unit(k_i ×
 k_o), k_i = −ω_i, k_o = ω_o; s is ⟂ the plane of ω_i, ω_o and h (the facet's plane of incidence),
-so these are the facet's s-p frames (physics.md §1.2).  Where k_i ∥ k_o the facet is at normal
+so these are the facet's s-p frames (docs/physics.md §1).  Where k_i ∥ k_o the facet is at normal
 incidence (an isotropic diattenuator or F·diag(1,1,−1,−1)), the same in every frame.
 
 D: Beckmann (roughness α = the thesis's m) or GGX (α).  G: **separable** Smith

@@ -5,7 +5,7 @@ the index of the medium directly above it (``exterior_n`` for the top coat, the 
 otherwise) at every wavelength — relative index η = n/n_above ≡ 1 (dimensionless) — and whose
 optical depth α·d (absorption per unit length × thickness, dimensionless) is 0 at every
 wavelength has no interface and no absorption; the stack without it is the same BSDF (Mueller
-values in the physics.md §0 frames and conventions; the sampled estimator f·cosθ_i/pdf has the
+values in the docs/physics.md §0 frames and conventions; the sampled estimator f·cosθ_i/pdf has the
 same expectation, though the proposal density ``pdf`` may differ: the reduced material uses its
 own sampler).  If every coat goes, the result is the base as it was configured inside the stack,
 i.e. seeing the same exterior index as before (``match_base_exterior``).

@@ -1,6 +1,6 @@
 """The smooth limit (roughness m = 0) of Torrance–Sparrow: a Fresnel mirror plus a Lambertian part.
 
-As m → 0 the facet lobe tends to the Dirac mirror s·M_F(θ_i) (physics.md §3, Chapter 3 "limit"), so
+As m → 0 the facet lobe tends to the Dirac mirror s·M_F(θ_i) (docs/physics.md §3, Chapter 3 "limit"), so
 roughness 0 is not an error but this model: a Dirac lobe with weight s·M_F(cosθ_o) in the
 plane-of-incidence frames and the depolariser d·(ρ/π)·diag(1, 0, 0, 0).  Sampling picks the mirror
 with probability P = s·F̄/(s·F̄ + d·ρ̄) (F̄, ρ̄: means over the path's wavelengths), otherwise a

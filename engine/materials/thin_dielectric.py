@@ -4,7 +4,7 @@ For windows and cover glasses modelled as one surface: the pane (index ``n``) si
 index ``exterior_n`` on both sides, its thickness is negligible (no refraction offset: transmitted
 light continues along −ω_o) and the internal bounces add incoherently (thickness ≫ coherence length).
 
-Per interface the Fresnel amplitudes r_s, r_p at the incidence cosine (η = n/exterior_n, physics.md §0)
+Per interface the Fresnel amplitudes r_s, r_p at the incidence cosine (η = n/exterior_n, docs/physics.md §0)
 give R = |r|², T = 1 − R per channel; inside the pane the reflection amplitude is −r (Stokes relations)
 and t·t′ = 1 − r² = T.  Every path through the pane is a Jones matrix diag(a_s, a_p); summing their
 Mueller matrices (the ABCS block form: the s and p channels separate) gives geometric series:

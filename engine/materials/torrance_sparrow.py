@@ -1,8 +1,8 @@
-"""Torrance–Sparrow polarising microfacet BRDF (physics.md §1.4 and the Chapter 3 errata).
+"""Torrance–Sparrow polarising microfacet BRDF (docs/physics.md §1 and the Chapter 3 errata).
 
     f(ω_i, ω_o) = s · M_F(cosθ'_i) · D(h) · G(ω_i, ω_o) / (4 cosθ_i cosθ_o)  +  d · (ρ/π) · diag(1, 0, 0, 0)
 
-- h = unit(ω_i + ω_o); the Fresnel Mueller matrix M_F (physics.md §0) is evaluated at
+- h = unit(ω_i + ω_o); the Fresnel Mueller matrix M_F (docs/physics.md §0) is evaluated at
   the *facet* angle cosθ'_i = ω_i·h = |ω_i + ω_o|/2 with the complex relative index
   η = (n + iκ)/exterior_n, in the facet frames, which for reflection are the
   scattering-plane frames: x_in = x_out = s = unit(k_i × k_o), k_i = −ω_i, k_o = ω_o
@@ -10,7 +10,7 @@
   (k_o = −k_i, h = ω_i) the plane is undefined and any shared s ⟂ k_i is used: the facet
   is then at normal incidence, M_F = F·diag(1, 1, −1, −1), which is the same in every
   such frame.  The value is returned as ``MuellerValue("abcs", s, s, A, B, C, S)``.
-- D: Beckmann (a Gaussian in the facet slope, normalised: physics.md §3 Eq. 3.4 erratum) with
+- D: Beckmann (a Gaussian in the facet slope, normalised: docs/physics.md §3 Eq. 3.4 erratum) with
   the thesis's m (= SCATMECH s = Mitsuba α), or Blinn–Phong (engine.materials.microfacet).
   No cosθ_o is included (the integrator applies it).
 - G: ``"ts"`` V-cavity (thesis Eq. 3.3, the default, as SCATMECH's

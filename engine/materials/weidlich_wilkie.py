@@ -3,9 +3,9 @@
 A stack of dielectric coats (real index, optional absorption, smooth or rough
 top interface) over *any* other engine BSDF (Lambert, SmoothConductor,
 TorranceSparrow, HTSG, another WeidlichWilkie).  Physics as fixed by
-shared/docs/physics.md §3 (Chapter 5 errata) and §5; symbols as there.
+docs/physics.md §3 (Chapter 5 errata) and §5; symbols as there.
 
-Geometry (physics.md §0): ω_i = ``wi`` to the light, ω_o = ``sp.wo`` to the
+Geometry (docs/physics.md §0): ω_i = ``wi`` to the light, ω_o = ``sp.wo`` to the
 viewer, n = shading normal, η = n_coat / n_exterior (real).  One-sided: zero
 unless cosθ_i > 0 and cosθ_o > 0.
 
@@ -47,10 +47,10 @@ Polarisation of the layer term (erratum 5.7/5.8)
   scattering-plane base — Lambert, TS — it is block-diagonal in the scattering-plane
   frames, though not in the s-p frames of the macro normal.)  For a depolarising base it
   is rank 1: (ρ/π)·a·col₀(X21)·row₀(E12), p-polarised (B < 0, T_p > T_s).
-- **Magnitudes.**  WW's t *replaces* T21 (physics.md "missing"), so the exit is
+- **Magnitudes.**  WW's t *replaces* T21 (docs/physics.md "missing"), so the exit is
   X21 = t · M̂_T21 with M̂_T21 = M_T21/T21 the unit-throughput diattenuator of the exit
   facet (same diattenuation and C/A as the Fresnel transmission, M00 = 1).  Taking
-  physics.md's M_layer = a·t·M_T21·R·M_base·R·M_T12 literally would give
+  docs/physics.md's M_layer = a·t·M_T21·R·M_base·R·M_T12 literally would give
   M00 = T12·T21·t·a·f_base, i.e. T21 twice, and would not reproduce the published
   scalar (the oracle).  The entry is E12 = M_T12 (M00 = T12) in the published form.
   Per form: published E12 = M_T12, X21 = t·M̂_T21; energy E12 = τ(θ_i)·M̂_T12,
@@ -74,7 +74,7 @@ As published, WW is not energy conserving.  Two independent defects:
 
 "T12 at the macro angle" or "T12 = 1 − E_top(θ_i)" cure only defect 1 (both measured:
 the latter still gives 2.1 for the glossy base).  The fix used here is the physically
-derived single-internal-bounce chain (physics.md "missing") with the rough coat's own
+derived single-internal-bounce chain (docs/physics.md "missing") with the rough coat's own
 transmittances, plus the closed-form sum of the internal reflections for a diffuse base:
 
     M_layer = a · X21 · R2 · M_base(ω'_i→ω'_o) · R1 · E12
@@ -115,7 +115,7 @@ per distinct (η, αd, m).  A Blinn exponent cannot vary over the surface.
 First-order form (``form="first_order"``, an extra)
 ---------------------------------------------------
 M_layer = a · M_T21 · R2 · M_base · R1 · M_T12 / η² with T12, T21 at the transmission
-normal (default the facet normal, like WW): the physics.md "missing" term literally.  It
+normal (default the facet normal, like WW): the docs/physics.md "missing" term literally.  It
 equals the oracle column ``f_layer_first_order_with_inv_eta2_and_T21``.
 
 Multiple coats
@@ -183,9 +183,9 @@ Reciprocity
 In the scattering-plane frames (s = unit(k_i × k_o), reversed path s' = −s) the full
 Mueller matrix satisfies M(ω_o→ω_i) = P·M(ω_i→ω_o)ᵀ·P with P = diag(1, 1, −1, 1) in the
 published form with transmission through h, the energy form and the first-order form
-(for ABCS matrices this coincides with physics.md's Q·Mᵀ·Q, Q = diag(1, 1, 1, −1); for
+(for ABCS matrices this coincides with docs/physics.md's Q·Mᵀ·Q, Q = diag(1, 1, 1, −1); for
 general matrices only P is right).  The published form through the macro normal breaks
-M00 reciprocity by (1 − G_int)(T12(θ_i) − T12(θ_o))·f_base·a (physics.md "energy" row).
+M00 reciprocity by (1 − G_int)(T12(θ_i) − T12(θ_o))·f_base·a (docs/physics.md "energy" row).
 """
 
 from __future__ import annotations

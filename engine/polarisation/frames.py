@@ -1,4 +1,4 @@
-"""Stokes reference frames and their rotation (physics.md §0).
+"""Stokes reference frames and their rotation (docs/physics.md §0).
 
 A frame for a beam propagating along unit k is a unit vector x ⟂ k with
 y = k × x, so (x, y, k) is right-handed.  Re-expressing a Stokes vector from

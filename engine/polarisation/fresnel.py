@@ -1,4 +1,4 @@
-"""Fresnel amplitudes and Mueller matrices of a smooth interface (physics.md §0).
+"""Fresnel amplitudes and Mueller matrices of a smooth interface (docs/physics.md §0).
 
 Time dependence e^{−iωt}; complex relative index η = η_t / n_i = n + iκ with
 κ ≥ 0 (so internal reflection has |η| < 1).  Amplitudes:

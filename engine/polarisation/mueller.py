@@ -2,7 +2,7 @@
 
 Layout: a Mueller matrix batch is (4, 4, ...) (row, column, batch...), Stokes
 vectors are (4, ...), matching the structure-of-arrays layout of the engine.
-S_out = M · S_in.  Conventions of physics.md §0 (S3 = 2 Im(E_x E_y*)).
+S_out = M · S_in.  Conventions of docs/physics.md §0 (S3 = 2 Im(E_x E_y*)).
 """
 
 from __future__ import annotations
@@ -86,7 +86,7 @@ def coherency_matrix(M: np.ndarray) -> np.ndarray:
 
 
 def realisability_report(M: np.ndarray, tol: float = 1e-9) -> dict:
-    """Checks of physics.md §4 on a batch (4, 4, ...); returns {check: bool array}.
+    """Checks of docs/physics.md §4 on a batch (4, 4, ...); returns {check: bool array}.
 
     - ``m00_nonnegative``: M00 ≥ −tol
     - ``row_col_bounded``: |M0j|, |Mj0| ≤ M00 (1 + tol) + tol

@@ -1,6 +1,6 @@
 """Derived polarisation quantities of Stokes vectors.
 
-Convention (physics.md §0): S = (S0, S1, S2, S3) with S1 > 0 along the frame's
+Convention (docs/physics.md §0): S = (S0, S1, S2, S3) with S1 > 0 along the frame's
 x axis, S2 > 0 along (x + y)/√2 and S3 = 2 Im(E_x E_y*) (> 0: right-circular,
 optics convention).  Stokes vectors are arrays whose *first* axis has length 4
 (``S[0]`` is S0), so images of shape (4, H, W) and batches of shape (4, N)

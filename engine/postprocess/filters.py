@@ -1,7 +1,7 @@
 """Virtual polarisation filters applied to a rendered Stokes image.
 
 A filter is a Mueller matrix F in the image's Stokes frame (x = image right, y = image up, light
-travelling towards the camera, physics.md §0); the camera behind it measures intensity only, so
+travelling towards the camera, docs/physics.md §0); the camera behind it measures intensity only, so
 the filtered image is row 0 of F applied to S:  I = F₀₀S0 + F₀₁S1 + F₀₂S2 + F₀₃S3.
 Angles are measured like the AoLP: from image right towards image up, in degrees.
 

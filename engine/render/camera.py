@@ -10,7 +10,7 @@ and t = tan(fov/2) along the fov axis:
 (t_x = t, t_y = t·H/W for fov_axis "x"; the reverse for "y"), the formula of
 shared/peers/README.md.  The Stokes frame of each ray is x = unit(d × u_cam)
 (image right), y = (−d) × x (image up), light travelling along k = −d
-(physics.md §0).
+(docs/physics.md §0).
 
 Thin lens (Cycles' ``camera_sample_perspective``): the pinhole ray's point on the focus plane
 (depth ``focus_distance``) stays fixed and the origin moves to a point of the aperture (radius R,

@@ -5,7 +5,7 @@ so far *from the camera side* (T = M_1 · R · M_2 · R · …), as an array
 (P, P, L, N): P = 4 (full Stokes), 3 (linear Stokes) or 1 (scalar), L wavelengths, N
 paths.  T maps a Stokes vector expressed in the path's current frame
 ``x_T`` (⟂ the current segment) to the camera's per-pixel output frame
-(physics.md §0: x = unit(d × u_cam), k = −d).  At a vertex whose Mueller
+(docs/physics.md §0: x = unit(d × u_cam), k = −d).  At a vertex whose Mueller
 value M is given in frames (x_in, x_out):
 
     T ← T · R(x_out → x_T) · M,   x_T ← x_in.

@@ -1,8 +1,8 @@
-"""HTSG polarising BRDF (engine.materials.htsg) against shared/oracles/htsg_reference.json and physics.md.
+"""HTSG polarising BRDF (engine.materials.htsg) against shared/oracles/htsg_reference.json and docs/physics.md.
 
 Every numerical claim of the module docstring is checked here: the oracle (ρ_dd, ρ_s, Mueller
 matrices in both frames, intermediates), the series window and stride against a brute-force
-sum, erfc against libm, energy and limits of physics.md §4, realisability, reciprocity and the
+sum, erfc against libm, energy and limits of docs/physics.md §4, realisability, reciprocity and the
 sampler (χ² goodness of fit, weights, lobe probability).
 """
 
@@ -283,7 +283,7 @@ def test_series_zero_and_tiny_g():
 
 
 # ------------------------------------------------------------------------------------------------
-# energy and limits (physics.md §4.5, §4.6)
+# energy and limits (docs/physics.md §4, §4.6)
 # ------------------------------------------------------------------------------------------------
 
 def test_energy_reference_values():
@@ -316,7 +316,7 @@ def test_energy_with_diffuse_albedo_adds_albedo():
 
 @pytest.mark.parametrize("sigma0", [0.0, 1e-9, 1e-6])
 def test_smooth_limit(sigma0):
-    """σ₀ → 0: ρ_dd → 0 and ρ_s → F(θ_i) (physics.md 4.10)."""
+    """σ₀ → 0: ρ_dd → 0 and ρ_s → F(θ_i) (docs/physics.md 4.10)."""
     model = HTSG(0.88045, 6.1455, sigma0, 3.0)
     for ti in (0.0, 30.0, 60.0, 85.0):
         F = float(fresnel_reflectance(math.cos(math.radians(ti)), 0.88045 + 6.1455j))

@@ -1,4 +1,4 @@
-"""Properties of the polarisation algebra: Fresnel, Jones→Mueller, frames, realisability (physics.md §0, §4)."""
+"""Properties of the polarisation algebra: Fresnel, Jones→Mueller, frames, realisability (docs/physics.md §0, §4)."""
 
 import math
 
@@ -93,7 +93,7 @@ def test_jones_to_mueller_matches_the_stokes_definition():
 
 def test_right_circular_has_positive_s3():
     # E = (1, −i)/√2 with e^{−iωt}: E_x(t) = cos ωt, E_y(t) = −sin ωt = cos(ωt + π/2), so E_y leads E_x by 90°:
-    # right-circular in the optics convention, S3 = 2 Im(E_x E_y*) = +1 (physics.md §0).
+    # right-circular in the optics convention, S3 = 2 Im(E_x E_y*) = +1 (docs/physics.md §0).
     S = stokes_from_jones_vector(np.array([1.0, -1j]) / np.sqrt(2))
     np.testing.assert_allclose(S, [1, 0, 0, 1], atol=1e-12)
 

@@ -79,7 +79,7 @@ def lobe_axes(wo):
 
 def integrated_lobes(model, wo, **quad):
     """(∫ M_r |cosθ_i| dω, ∫ M_t |cosθ_i| dω) (4, 4) with every node's matrix re-expressed in the
-    plane-of-incidence frames x = unit(n × k) (physics.md §0) before summing."""
+    plane-of-incidence frames x = unit(n × k) (docs/physics.md §0) before summing."""
     refl_axis, refr_axis, _ = lobe_axes(wo)
     n = np.array([0.0, 0.0, 1.0])
     out = []

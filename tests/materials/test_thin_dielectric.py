@@ -32,7 +32,7 @@ def explicit_pane(cos_theta, eta, bounces=400):
 
     r12, t12 = coeffs(n1, n2, c1, c2)
     r21, t21 = coeffs(n2, n1, c2, c1)
-    # these r_p equal physics.md §0's (η²c − u)/(η²c + u) (r_p → −r_s at normal incidence), and the
+    # these r_p equal docs/physics.md §0's (η²c − u)/(η²c + u) (r_p → −r_s at normal incidence), and the
     # products t₁₂t₂₁ are power fractions already (the n c factors cancel on the way in and out)
     M_R = mueller_from_jones(np.diag(r12).astype(complex))
     M_T = np.zeros((4, 4))

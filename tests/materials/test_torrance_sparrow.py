@@ -2,7 +2,7 @@
 
 - NIST SCATMECH oracle: every record of shared/oracles/scatmech_facet_torrance_sparrow.json in
   both of its bases, through engine.materials.evaluate.mueller_at.
-- physics.md §4: realisability and purity, reciprocity, energy, the m → 0 Fresnel-mirror limit,
+- docs/physics.md §4: realisability and purity, reciprocity, energy, the m → 0 Fresnel-mirror limit,
   finite values at the degenerate geometries.
 - Microfacet building blocks: erf family, D normalisation, Smith G1 against its defining
   integral, Walter's rational G1.
@@ -253,7 +253,7 @@ def test_distribution_underflow_is_exact_zero():
         assert np.all(np.isfinite(BlinnPhong(1e6).D(h)))
 
 
-# --- physics checks (physics.md §4) ---------------------------------------------------------------------
+# --- physics checks (docs/physics.md §4) ---------------------------------------------------------------------
 
 HARD_ANGLES = [0.0, 1e-7, 30.0, 89.99, 90.0]
 
@@ -324,7 +324,7 @@ def test_realisable_and_pure(nk, m, ti, to, po, kind, shadowing, exterior_n, d):
 @settings(max_examples=200, deadline=None)
 @given(indices, roughness, angles, angles, phis, shadowings, st.sampled_from([0.0, 0.4]))
 def test_reciprocity(nk, m, ti, to, po, shadowing, d):
-    """M00(ω_i, ω_o) = M00(ω_o, ω_i); in scattering-plane frames M_rev = Q Mᵀ Q (physics.md §4.4)."""
+    """M00(ω_i, ω_o) = M00(ω_o, ω_i); in scattering-plane frames M_rev = Q Mᵀ Q (docs/physics.md §4)."""
     wi, wo = oracle_directions(ti, to, po)
     model = TorranceSparrow(nk[0], nk[1], m, shadowing=shadowing, diffuse_albedo=0.7, diffuse_weight=d)
     fwd = model.eval(point(wo), wi.reshape(3, 1))

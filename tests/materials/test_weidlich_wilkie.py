@@ -1,7 +1,7 @@
 """Weidlich–Wilkie layered BRDF (engine.materials.weidlich_wilkie).
 
 Oracle: shared/oracles/ww_reference.json (published form, Lambert base), plus the physics
-checks of shared/docs/physics.md §4 (index matching, absorption, rank 1, p-polarisation,
+checks of docs/physics.md §4 (index matching, absorption, rank 1, p-polarisation,
 realisability, energy, reciprocity) and the sampling contract (chi-square against pdf()).
 """
 
@@ -143,7 +143,7 @@ def test_top_albedo_quadrature_converged():
 
 
 # ---------------------------------------------------------------------------------------------
-# Limits: index matching and absorption (physics.md §4.6)
+# Limits: index matching and absorption (docs/physics.md §4)
 # ---------------------------------------------------------------------------------------------
 
 BASES = {
@@ -381,7 +381,7 @@ def _random_pairs(n, seed):
 def test_reciprocity(form, normal, base_name):
     """M_rev = P·Mᵀ·P, P = diag(1, 1, −1, 1), in the scattering-plane frames (M00 symmetric).
 
-    (For ABCD matrices this equals physics.md's Q·Mᵀ·Q with Q = diag(1, 1, 1, −1).)
+    (For ABCD matrices this equals docs/physics.md's Q·Mᵀ·Q with Q = diag(1, 1, 1, −1).)
     """
     model = WeidlichWilkie(Coat(n=1.5, thickness=1.0, absorption=0.2, distribution="beckmann", m=0.3),
                            BASES[base_name](), form=form, transmission_normal=normal)
