@@ -103,6 +103,13 @@ class ShadingPoint:
                             None if self.material is None else self.material[sel],
                             None if self.surface is None else self.surface.take(sel))
 
+    def flipped(self, where: np.ndarray) -> ShadingPoint:
+        """This batch with n_s and n_g negated at the points ``where`` (N,) bool: the back faces of a
+        two-sided material (BSDF.two_sided), shaded as if they were the front."""
+        sign = np.where(where, -1.0, 1.0)[None, :]
+        return ShadingPoint(self.p, self.n_s * sign, self.n_g * sign, self.wo, self.lam, self.mono, self.lookup,
+                            self.material, self.surface)
+
 
 @dataclass
 class MuellerValue:
@@ -213,6 +220,12 @@ class BSDF:
     #: some parameter is a texture (engine.textures): the integrator then gives the shading points
     #: their surface attributes (ShadingPoint.surface)
     varies_over_surface: bool = False
+    #: Seen from the back (the geometric normal facing away from the viewer), an opaque two-sided
+    #: material shades with both normals flipped, as Blender's materials do in Cycles; a material with
+    #: a transmission lobe keeps its inside and outside.  The models are one-sided by default (scene
+    #: files: ``"two_sided": true``); the Blender exporter sets it on every material it converts.
+    #: Set on an instance only when true, so a one-sided material's scene fingerprint is unchanged.
+    two_sided: bool = False
 
     @property
     def delta_only(self) -> bool:

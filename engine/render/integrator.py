@@ -246,6 +246,9 @@ class PathTracer:
                                     for light in lights.lights))
         # materials shaded together (e.g. all RGB Lambert materials in one call)
         self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
+        # by material index: opaque two-sided materials, whose back faces shade with flipped normals
+        # (BSDF.two_sided; read from the scene's materials, which simplification may have replaced)
+        self.two_sided = np.array([bool(m.two_sided) and not m.flags.transmits for m in compiled.materials], bool)
         # textured parameters need the hits' per-vertex attributes (UV, colours)
         self.textured = any(m.varies_over_surface for m in self.materials)
         self.P = TRANSPORT_SIZES[settings.polarisation]
@@ -490,6 +493,9 @@ class PathTracer:
         # each path's material, and the paths sorted by material group (ascending within a group)
         mat, counts, order = material_groups(surf.prim, self.scene.tri_material, self.group_of, len(self.shaders))
         ends = np.cumsum(counts)
+        # back faces of two-sided materials: flipped after any normal map (as Cycles maps, then flips)
+        flip = self._back_faces(mat, n_g, wo)
+        n_s_delta = n_s if flip is None else np.where(flip[None, :], -n_s, n_s)
         # the groups present, ascending
         groups = np.flatnonzero(counts)
         # One material covers every path: its sample's arrays become the next segments as they are
@@ -549,7 +555,7 @@ class PathTracer:
             bsdf = self.shaders[g]
             rows = np.arange(n) if isinstance(sel, slice) else sel
             t_cols = state.T_columns(sel)           # T's columns of these paths (None: rows)
-            if one_step and bsdf.scatter_delta(DeltaVertices(rows, n_s, wo, lk_m.lam, self.mono, u_bsdf[0], T,
+            if one_step and bsdf.scatter_delta(DeltaVertices(rows, n_s_delta, wo, lk_m.lam, self.mono, u_bsdf[0], T,
                                                              state.x_T, nxt.T, nxt.d, nxt.x_T, nxt.valid,
                                                              nxt.eta_step, t_cols)):
                 continue            # pdf 0 and is_delta True: as preset
@@ -566,6 +572,8 @@ class PathTracer:
                               self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None,
                               None if surf.at is None else surf.at.take(sel))
             sp = bsdf.shading_point(sp)        # a normal/bump-mapped shading normal, else sp itself
+            if flip is not None:
+                sp = sp.flipped(gather(flip, sel))
             xTm = gather(state.x_T, sel)
 
             if not bsdf.flags.is_delta_only and len(light_set) and bounce + 2 <= st.max_depth:
@@ -593,6 +601,13 @@ class PathTracer:
             if bs.eta_sq is not None:
                 nxt.eta_step[sel] = bs.eta_sq
         return nxt
+
+    def _back_faces(self, mat: np.ndarray, n_g: np.ndarray, wo: np.ndarray) -> np.ndarray | None:
+        """(n,) True where a path sees the back of a two-sided material (n_g·wo < 0), or None for none."""
+        if not self.two_sided.any():
+            return None
+        flip = self.two_sided[mat] & (dot(n_g, wo) < 0)
+        return flip if flip.any() else None
 
     def _next_segments(self, state: PathState, acc: _Accumulators, surf: _SurfaceHits, nxt: _Scattered,
                        bounce: int) -> None:

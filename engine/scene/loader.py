@@ -391,7 +391,7 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: s
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     decl = MODELS[choice(_require(d, "type", field), f"{field}.type", tuple(MODELS))]
-    _check_keys(d, field, {"type", "note", "name", "normal_map", "bump_map"} | set(decl.names()))
+    _check_keys(d, field, {"type", "note", "name", "normal_map", "bump_map", "two_sided"} | set(decl.names()))
     parts = {}
     for p in decl.parameters:
         if p.kind == "coats":
@@ -405,6 +405,11 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: s
     bsdf = decl.build(decl.values(d, field, base_dir=base_dir), **parts)
     if d.get("normal_map") is not None or d.get("bump_map") is not None:
         bsdf = _shading_normal(bsdf, d, field, base_dir)
+    two_sided = d.get("two_sided", False)
+    if not isinstance(two_sided, bool):
+        raise SceneError(f"{field}.two_sided", f"must be true or false, got {two_sided!r}")
+    if two_sided:
+        bsdf.two_sided = True
     return bsdf
 
 

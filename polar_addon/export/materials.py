@@ -924,7 +924,14 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
 def export_material(material, warnings, bake=None):
     """(BSDF, emission or None) for a Blender material (None → default grey).  ``bake``: a
     BakeTarget (the object the material is exported for) to bake linked inputs on, or None or a
-    NoBake (their own values, one warning each)."""
+    NoBake (their own values, one warning each).  Every Blender material is two-sided, as in Cycles
+    (BSDF.two_sided: an opaque one seen from the back shades with flipped normals)."""
+    bsdf, emission = _material_bsdf(material, warnings, bake)
+    bsdf.two_sided = True
+    return bsdf, emission
+
+
+def _material_bsdf(material, warnings, bake):
     if material is None:
         return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
     tree = compat.node_tree_in_use(material)

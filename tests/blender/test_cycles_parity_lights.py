@@ -133,6 +133,21 @@ def emissive_back():
     bpy.context.object.data.materials.append(emission("Glow", 8.0))
 
 
+def inward_normals():
+    # every face of the floor and the box turned inside out, as imported assets often are: Cycles
+    # shades an opaque material from both sides, so the image is the ordinary one
+    import bmesh
+    for obj in bpy.context.scene.objects:
+        if obj.type == "MESH":
+            bm = bmesh.new()
+            bm.from_mesh(obj.data)
+            bmesh.ops.reverse_faces(bm, faces=bm.faces[:])
+            bm.to_mesh(obj.data)
+            bm.free()
+    area_square()
+    sun_angle()
+
+
 def lights_seen():
     # the camera looks at the horizon: a sun disc (angle 10°) and a point light's disk, both with
     # Object ▸ Visibility ▸ Camera on (off by default for new lights in Blender 5.0)
@@ -157,7 +172,8 @@ def everything():
 
 SCENES = {"area_square": area_square, "area_disk": area_disk, "area_rectangle_back": area_rectangle_back,
           "area_spread_ellipse": area_spread_ellipse, "spot_blend": spot_blend, "sun_angle": sun_angle,
-          "point_radius": point_radius, "emissive_back": emissive_back, "lights_seen": lights_seen,
+          "point_radius": point_radius, "emissive_back": emissive_back, "inward_normals": inward_normals,
+          "lights_seen": lights_seen,
           "all_lights": everything}
 
 
