@@ -290,3 +290,32 @@ def test_readme_is_a_short_guide():
     with open(os.path.join(REPO, "README.md"), encoding="utf-8") as fh:
         lines = fh.read().count("\n")
     assert lines <= 300, f"README.md has {lines} lines: move detail to docs/"
+
+
+def test_every_documentation_link_resolves():
+    """Relative links and #anchors of README.md, CHANGELOG.md and docs/ point at existing files and
+    headings (GitHub's heading slugs), so moving a section cannot leave a dangling link."""
+    def slug(heading):
+        return re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+    pages = [os.path.join(REPO, "README.md"), os.path.join(REPO, "CHANGELOG.md")] + \
+        glob.glob(os.path.join(REPO, "docs", "**", "*.md"), recursive=True)
+    anchors = {}
+    for page in pages:
+        fence = False
+        for line in open(page, encoding="utf-8"):
+            if line.startswith("```"):
+                fence = not fence
+            elif not fence and re.match(r"^#{1,6} ", line):
+                anchors.setdefault(os.path.normpath(page), set()).add(slug(line.lstrip("#")))
+    bad = []
+    for page in pages:
+        for m in re.finditer(r"\]\(([^)\s]+)\)", open(page, encoding="utf-8").read()):
+            link = m.group(1)
+            if re.match(r"^[a-z]+:", link):
+                continue
+            path, _, fragment = link.partition("#")
+            target = os.path.normpath(os.path.join(os.path.dirname(page), path)) if path else os.path.normpath(page)
+            if not os.path.exists(target) or (fragment and target.endswith(".md")
+                                              and fragment not in anchors.get(target, ())):
+                bad.append(f"{os.path.relpath(page, REPO)}: {link}")
+    assert not bad, bad
