@@ -249,6 +249,7 @@ class PathTracer:
         # by material index: opaque two-sided materials, whose back faces shade with flipped normals
         # (BSDF.two_sided; read from the scene's materials, which simplification may have replaced)
         self.two_sided = np.array([bool(m.two_sided) and not m.flags.transmits for m in compiled.materials], bool)
+        self.any_two_sided = bool(self.two_sided.any())
         # textured parameters need the hits' per-vertex attributes (UV, colours)
         self.textured = any(m.varies_over_surface for m in self.materials)
         self.P = TRANSPORT_SIZES[settings.polarisation]
@@ -604,7 +605,7 @@ class PathTracer:
 
     def _back_faces(self, mat: np.ndarray, n_g: np.ndarray, wo: np.ndarray) -> np.ndarray | None:
         """(n,) True where a path sees the back of a two-sided material (n_g·wo < 0), or None for none."""
-        if not self.two_sided.any():
+        if not self.any_two_sided:
             return None
         flip = self.two_sided[mat] & (dot(n_g, wo) < 0)
         return flip if flip.any() else None
