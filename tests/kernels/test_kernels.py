@@ -734,9 +734,10 @@ def test_light_selection_probabilities_bitwise(with_normals):
 @pytest.mark.parametrize("spot_kind", [0, 1, 2])
 def test_point_and_spot_light_sampling_bitwise(radius, soft, spot_kind):
     """Point and spot lights' next-event samples (delta, disk facing the receiver, sphere) in one
-    compiled pass against engine.render.lights.point_light_sample_numpy, bit for bit, incl. a
+    compiled pass against engine.render.lights.lamps.point_light_sample_numpy, bit for bit, incl. a
     receiver on the light's centre and receivers inside the sphere; one point at a time too."""
-    from engine.render import lights
+    from engine.kernels.light_sampling import point_light_sample_numba
+    from engine.render.lights import point_light_sample_numpy
     rng = np.random.default_rng(3 + spot_kind)
     n = 2000
     position = np.array([0.2, -0.4, 1.5])
@@ -748,7 +749,7 @@ def test_point_and_spot_light_sampling_bitwise(radius, soft, spot_kind):
     spot = [np.array([0.0] * 6), np.array([1.0, *axis, 0.6, 0.6]), np.array([2.0, *axis, 0.4, 0.9])][spot_kind]
     for q, v in ((p[:, 5:6], u[:, 5:6]), (p, u)):
         args = (q, v, position, radius, soft, spot)
-        want, got = lights.point_light_sample_numpy(*args), lights.point_light_sample_numba(*args)
+        want, got = point_light_sample_numpy(*args), point_light_sample_numba(*args)
         for w, g in zip(want, got):
             assert np.array_equal(w, g)
     assert 0 < want[4].sum() < n and (want[2] > 0).any()

@@ -1,4 +1,4 @@
-"""Solid-angle sampling of rectangular area lights (engine/render/lights.py: SphericalRectangle,
+"""Solid-angle sampling of rectangular area lights (engine/render/lights/area.py: SphericalRectangle,
 AreaEmitter) against analytic oracles: the solid angle of a rectangle seen from above a corner,
 Lambert's polygon formula for the irradiance, a chi-square test of the sampled points against
 the claimed pdf, and the pdf that MIS evaluates for rays that hit the light."""

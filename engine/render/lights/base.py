@@ -1,0 +1,45 @@
+"""Light base class and a cone sampler shared by the emitters.
+
+Part of engine.render.lights (its package docstring states the light interface)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from ...materials.sampling import local_to_world
+from ...spectral import GRID_NM, spectrum_to_linear_srgb
+
+
+def uniform_cone(u1, u2, one_minus_cos_max, axis):
+    """Directions uniform in the cone of 1 − cosθ ≤ ``one_minus_cos_max`` around the unit
+    ``axis`` (3,) or (3, N); pdf = 1/(2π·one_minus_cos_max)."""
+    one_minus_cos = u1 * one_minus_cos_max
+    cos_t = 1.0 - one_minus_cos
+    sin_t = np.sqrt(np.maximum(one_minus_cos * (2.0 - one_minus_cos), 0.0))
+    phi = 2.0 * math.pi * u2
+    local = np.stack((sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t))
+    axis = np.broadcast_to(axis.reshape(3, -1), local.shape)
+    return local_to_world(local, axis), cos_t
+
+
+class _Light:
+    is_delta = False
+    at_infinity = False
+    hittable = False      # an analytic emitter that rays find through ``intersect`` (not in the BVH)
+    blocks_own_shadow_rays = False    # an opaque emitter whose geometry can stop its own shadow rays
+    hit_pdf_needs_origin = False      # ``pdf_hit`` needs the segment's origin (solid-angle sampled lamps)
+    hit_pdf_needs_direction = False   # ... and where on the lamp the ray arrives (warp-sampled lamps)
+
+    def __init__(self, spectrum):
+        self.spectrum = spectrum
+
+    def radiance(self, lam, mono) -> np.ndarray:
+        return self.spectrum.eval(lam, mono=mono)
+
+    def rgb(self) -> np.ndarray:
+        """Linear sRGB (3,) of the emitted spectrum: the exact expectation of the spectral estimator."""
+        if not hasattr(self, "_rgb"):
+            self._rgb = spectrum_to_linear_srgb(self.spectrum.eval(GRID_NM))
+        return self._rgb

@@ -1,0 +1,132 @@
+"""Light selection: which light a next-event sample goes to (uniform or by estimated importance).
+
+Part of engine.render.lights (its package docstring states the light interface)."""
+
+from __future__ import annotations
+
+
+import numpy as np
+
+from ...errors import SceneError
+from ...kernels.light_sampling import GLOBAL_SHARE, SELECTION_PARAMS, choose_light, selection_probabilities
+from ...scene.description import DirectionalLight, EnvironmentLight, PointLight, SpotLight
+from .area import mesh_emitter
+from .environment import EnvironmentEmitter, EnvironmentMapEmitter
+from .lamps import DirectionalEmitter, PointEmitter, SpotEmitter
+
+
+class LightSet:
+    """All lights of a compiled scene.  NEE picks one light per vertex: uniformly (probability
+    1/count, ``Scene.light_selection`` "uniform"; ``prob[i]``) or, with "power", by importance:
+    for up to ``SPATIAL_MAX`` lights, per shading point ∝ each light's estimated irradiance
+    there (power/dist² × ``facing_factor``, as the importance of Cycles' light tree without the
+    tree), mixed with
+    ``GLOBAL_SHARE`` of the power distribution (so no light that can contribute gets
+    probability 0); for more lights ∝ power alone.  Every MIS pdf includes the probability
+    with which the light would have been chosen at the vertex the ray left (``prob_at``).
+    """
+
+    SPATIAL_MAX = 64
+    GLOBAL_SHARE = GLOBAL_SHARE
+
+    def __init__(self, scene, compiled):
+        self.lights = []
+        self.environment = None
+        self.environment_index = -1
+        self.camera_hidden = set()     # lights (indices) that camera rays do not see
+        for mesh_index, mesh in enumerate(scene.meshes):
+            if mesh.emission is None:
+                continue
+            tris = np.nonzero((compiled.tri_mesh == mesh_index) & (compiled.tri_area > 0))[0]
+            if len(tris) == 0:
+                continue
+            compiled.tri_emitter[tris] = len(self.lights)
+            if not getattr(mesh, "visible_camera", True) and not getattr(mesh, "occluder", True):
+                self.camera_hidden.add(len(self.lights))
+            self.lights.append(mesh_emitter(mesh.emission, tris, compiled, getattr(mesh, "two_sided", False),
+                                            getattr(mesh, "spread_deg", 180.0)))
+        for index, light in enumerate(scene.lights):
+            if not getattr(light, "visible_camera", True):
+                self.camera_hidden.add(len(self.lights))
+            if isinstance(light, EnvironmentLight):
+                image = getattr(light, "image", None)
+                self.environment = (EnvironmentEmitter(light.radiance) if image is None else
+                                    EnvironmentMapEmitter(image, light.strength, light.rotation_deg, light.grid,
+                                                          interpolation_space=getattr(light, "interpolation_space",
+                                                                                      "linear")))
+                self.environment_index = len(self.lights)
+                self.lights.append(self.environment)
+            elif isinstance(light, SpotLight):
+                self.lights.append(SpotEmitter(light.intensity, light.position, light.direction,
+                                               light.cone_angle_deg, light.blend,
+                                               getattr(light, "blend_profile", "angle"),
+                                               getattr(light, "radius", 0.0), getattr(light, "soft_falloff", True)))
+            elif isinstance(light, PointLight):
+                self.lights.append(PointEmitter(light.intensity, light.position, getattr(light, "radius", 0.0),
+                                                getattr(light, "soft_falloff", True)))
+            elif isinstance(light, DirectionalLight):
+                self.lights.append(DirectionalEmitter(light.irradiance, light.direction,
+                                                      getattr(light, "angle_deg", 0.0)))
+            else:       # e.g. a light of another copy of this package: never leave a light out silently
+                raise SceneError(f"lights[{index}]", f"is a {type(light).__module__}.{type(light).__name__}, not "
+                                                     "one of engine.scene.description's light types")
+        count = len(self.lights)
+        self.select_prob = 1.0 / count if count else 0.0
+        self.selection = getattr(scene, "light_selection", "uniform")
+        if self.selection not in ("uniform", "power"):
+            raise SceneError("light_selection", f"must be 'uniform' or 'power', got {self.selection!r}")
+        self.prob = np.full(count, self.select_prob)
+        self.mix_prob = self.prob
+        self.cdf = None
+        if self.selection == "power" and count > 1:
+            radius = max(float(np.linalg.norm(compiled.vertices - compiled.vertices.mean(0), axis=1).max()), 1e-9)
+            power = np.array([lt.power(radius) if lt.at_infinity else lt.power() for lt in self.lights])
+            power = np.where(np.isfinite(power) & (power > 0), power, 0.0)
+            if power.sum() > 0:
+                self.prob = power / power.sum()
+                self.cdf = np.cumsum(self.prob)
+                self.cdf[-1] = 1.0
+                # the global share mixed into the per-point probabilities leaves a constant sky out
+                # beside other lights (EnvironmentEmitter.SELECTION_SHARE)
+                local = np.where([type(lt) is EnvironmentEmitter for lt in self.lights], 0.0, power)
+                self.mix_prob = local / local.sum() if local.sum() > 0 else self.prob
+        self.spatial = self.cdf is not None and count <= self.SPATIAL_MAX
+        if self.spatial:
+            # every light's importance formula as (kind, parameters): one compiled pass for all lights
+            records = [light.selection_record() for light in self.lights]
+            self._kinds = np.array([k for k, _ in records], np.int64)
+            self._params = np.zeros((count, SELECTION_PARAMS))
+            for i, (_, row) in enumerate(records):
+                self._params[i, :len(row)] = row
+        self.hittable = [i for i, light in enumerate(self.lights) if light.hittable]
+
+    def probabilities(self, p, n=None):
+        """Selection probabilities (count, N) at shading points p (3, N) with side normals n (the
+        geometric normal on the side the path arrived from) or None."""
+        if not self.spatial:
+            return np.repeat(self.prob[:, None], p.shape[1], axis=1)
+        return selection_probabilities(p, n, self._kinds, self._params, self.mix_prob)
+
+    def prob_at(self, li, p, n=None):
+        """Probability (N,) or scalar that NEE at points p (3, N) with side normals n picks light ``li``."""
+        if not self.spatial or p is None:
+            return self.prob[li]
+        return self.probabilities(p, n)[li]
+
+    def choose(self, u, p=None, n=None):
+        """(light index (N,), the remainder of u rescaled to [0, 1), the chosen lights'
+        probabilities (N,) or None where they are ``prob[index]``) for uniform numbers u (N,)
+        at shading points p (3, N) with side normals n."""
+        count = len(self.lights)
+        if self.cdf is None:
+            choice = np.minimum((u * count).astype(np.int64), count - 1)
+            return choice, u * count - choice, None
+        if self.spatial and p is not None:
+            return choose_light(u, self.probabilities(p, n))
+        choice = np.minimum(np.searchsorted(self.cdf, u, side="right"), count - 1)
+        lo = np.where(choice > 0, self.cdf[np.maximum(choice - 1, 0)], 0.0)
+        rest = (u - lo) / np.where(self.prob[choice] > 0, self.prob[choice], 1.0)
+        return choice, np.clip(rest, 0.0, np.nextafter(1.0, 0.0)), None
+
+    def __len__(self):
+        return len(self.lights)
