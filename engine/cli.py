@@ -178,9 +178,10 @@ def _render(args) -> int:
     resume_film = resume_halves = None
     if args.resume:
         resume_film, st, resume_halves = resume_state(args.resume, scene, renderer.compiled, st, scene_hash,
-                                                      spp=args.spp, seed=args.seed, with_halves=True) \
+                                                      spp=args.spp, seed=args.seed, with_halves=True,
+                                                      sampler=args.sampler) \
             if adaptive is not None else (*resume_state(args.resume, scene, renderer.compiled, st, scene_hash,
-                                                        spp=args.spp, seed=args.seed), None)
+                                                        spp=args.spp, seed=args.seed, sampler=args.sampler), None)
         scene.settings = st
         if adaptive is not None:
             adaptive = _adaptive_settings(args, st.spp)      # --spp may come from the file
@@ -675,9 +676,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--simplify", choices=("auto", "off"),
                    help="auto (default): skip layered coats that are index-matched and clear; off: keep all")
     r.add_argument("--sampler", choices=("independent", "stratified"),
-                   help="independent (default: hashed numbers) or stratified (per-pixel scrambled Sobol' pixel "
-                        "jitter, lens, wavelengths and first-vertex light/BSDF numbers: less noise, same "
-                        "expectation; --stderr then comes from the even/odd halves)")
+                   help="stratified (the default, as in Blender: per-pixel scrambled Sobol' pixel jitter, lens, "
+                        "wavelengths and first-vertex light/BSDF numbers: less noise, same expectation; --stderr "
+                        "then comes from the even/odd halves) or independent (hashed numbers)")
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")
     r.add_argument("--stderr", action="store_true", help="also write per-pixel standard errors")

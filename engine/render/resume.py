@@ -262,13 +262,16 @@ def read_resumable(path: str):
     return stokes, channels, header
 
 
-def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None, seed=None, with_halves=False):
+def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None, seed=None, with_halves=False,
+                 sampler=None):
     """(Film of the finished samples, settings to continue with) for the render stored at ``path``.
 
     ``with_halves``: also return the adaptive half-buffers (engine.render.adaptive.HalfBuffers), or
     raise a SceneError if the file has none.
 
-    ``spp``/``seed`` are the values given on the command line (None: take the stored ones).
+    ``spp``/``seed``/``sampler`` are the values given on the command line (None: take the stored ones;
+    a file without ``polar.sampler`` was rendered with the "independent" sampler, the default until
+    the stratified one became it).
     Raises SceneError naming every setting that differs from the stored render's.
     """
     stokes, channels, header = read_resumable(path)
@@ -280,6 +283,8 @@ def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None
     if seed is not None and str(seed) != str(header["polar.seed"]):
         raise SceneError("--seed", f"must be the resumed render's seed ({header['polar.seed']}) to continue it")
     st.seed = int(header["polar.seed"])
+    if sampler is None:
+        st.sampler = header.get("polar.sampler", "independent")
     if spp is None:
         st.spp = int(header["polar.spp"])
     ident = estimator_identity(scene_hash, st, resolved_polarisation(scene, compiled, st), size=(W, H))

@@ -203,12 +203,13 @@ class RenderSettings:
     #: Also record the denoising guides (albedo and normal at the first non-delta vertex, as
     #: Cycles' Denoising Albedo / Normal passes); False: the renders are unchanged.
     denoise_data: bool = False
-    #: Random numbers of the paths (Cycles' sampling pattern): "independent" (every number a hash of
-    #: (seed, pixel, sample, dimension)) or "stratified" (the camera's numbers — pixel jitter, lens,
+    #: Random numbers of the paths (Cycles' sampling pattern): "stratified", the one default of the scene
+    #: format, the command line, the Python API and Blender (the camera's numbers — pixel jitter, lens,
     #: wavelengths — and the first vertex's light and BSDF numbers are per-pixel scrambled Sobol' points,
-    #: engine.render.sampler.stratified_pair:
-    #: same expectation, less noise; the standard error then comes from the even/odd halves).
-    sampler: str = "independent"
+    #: engine.render.sampler.stratified_pair: same expectation, less noise; the standard error then
+    #: comes from the even/odd halves) or "independent" (every number a hash of (seed, pixel, sample,
+    #: dimension)).
+    sampler: str = "stratified"
 
     @property
     def stratified(self) -> bool:

@@ -111,6 +111,7 @@ def small_scene(name="fresnel_sphere", res=24, spp=48):
     scene = load_scene(shared_path("peers", "scenes", f"{name}.json"))
     scene.camera.width = scene.camera.height = res
     scene.settings.spp = spp
+    scene.settings.sampler = "independent"          # the counts asserted below are the independent sampler's
     return scene
 
 
@@ -272,7 +273,8 @@ def test_bad_adaptive_options_are_one_line_errors(capsys, small_json, tmp_path, 
 
 def test_cli_writes_counts_noise_stop_reason_and_resumes_to_a_tighter_threshold(capsys, small_json, tmp_path):
     loose, tight, direct = (str(tmp_path / n) for n in ("loose.exr", "tight.exr", "direct.exr"))
-    common = ["--spp", "32", "--min-spp", "4", "--noise-quantity", "dolp", "--no-previews", "-q"]
+    common = ["--spp", "32", "--min-spp", "4", "--noise-quantity", "dolp", "--no-previews", "-q",
+              "--sampler", "independent"]
     assert run_cli(capsys, "render", small_json, "-o", loose, "--noise-threshold", "0.05", *common)[0] == 0
     status, out = run_cli(capsys, "render", small_json, "-o", direct, "--noise-threshold", "0.01", *common)
     assert status == 0 and "predicted after the first pass" in out.err and "actual" in out.err

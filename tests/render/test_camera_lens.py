@@ -125,7 +125,7 @@ def _scene(objects, camera_extra=None, lights=None, spp=16, max_depth=3):
     d = {"format": "polar-scene/1",
          "camera": {"origin": [0, -6, 1.5], "target": [0, 0, 0.5], "up": [0, 0, 1], "fov_deg": 40,
                     "width": 40, "height": 30, **(camera_extra or {})},
-         "render": {"spp": spp, "max_depth": max_depth},
+         "render": {"spp": spp, "max_depth": max_depth, "sampler": "independent"},
          "materials": {"white": {"type": "lambert", "albedo": 0.8}, "black": {"type": "lambert", "albedo": 0.0},
                        "glass": {"type": "black_glass", "n": 1.5}},
          "objects": objects,

@@ -14,6 +14,7 @@ def peer(name, res, spp=2):
     scene = load_scene(shared_path("peers", "scenes", f"{name}.json"))
     scene.camera.width = scene.camera.height = res
     scene.settings.spp = spp
+    scene.settings.sampler = "independent"          # the statistics below assume independent samples
     return scene
 
 

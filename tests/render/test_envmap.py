@@ -62,7 +62,7 @@ def _escaped_scene(tmp_path, mono):
             "objects": [{"shape": "quad", "material": "grey",
                          "vertices": [[-50, -1, -1], [-50, 1, -1], [-50, 1, 1], [-50, -1, 1]]}],
             "lights": [{"type": "environment", "image": "sky.exr", "grid": "mitsuba"}],
-            "render": {"spp": 1, "max_depth": 1, "spectral": "mono" if mono else "spectral"}}
+            "render": {"spp": 1, "max_depth": 1, "spectral": "mono" if mono else "spectral", "sampler": "independent"}}
     ME.write_exr(str(tmp_path / "sky.exr"), SKY.astype(np.float32))
     (tmp_path / "scene.json").write_text(json.dumps(data))
     return load_scene(str(tmp_path / "scene.json"))

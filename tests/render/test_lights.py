@@ -26,7 +26,8 @@ def plane_scene(lights, extra_meshes=(), res=32, spp=16):
                  width=res, height=res, projection="orthographic", ortho_width=WIDTH)
     return Scene(camera=cam, meshes=meshes,
                  materials={"grey": Lambert(ConstantSpectrum(RHO)), "black": Lambert(ConstantSpectrum(0.0))},
-                 lights=list(lights), settings=RenderSettings(spp=spp, spectral="mono", max_depth=2))
+                 lights=list(lights), settings=RenderSettings(spp=spp, spectral="mono", max_depth=2,
+                                                                                 sampler="independent"))
 
 
 def pixel_centres(res):

@@ -19,6 +19,7 @@ def test_resume_from_stored_means_equals_the_uninterrupted_render():
     scene.camera.width = scene.camera.height = 24
     scene.settings.spp = 6
     scene.settings.batch_rays = 24 * 24              # one pass per unit
+    scene.settings.sampler = "independent"           # the stored standard error is the i.i.d. one
     renderer = Renderer(scene)
     full = renderer.render()
     calls = {"n": 0}

@@ -86,8 +86,9 @@ def seed_renders(scene, sampler, seeds=SEEDS, spp=None):
 # ------------------------------------------------------------------------------------------ settings
 
 def test_the_sampler_setting_is_validated_naming_the_field_and_the_choices():
-    assert RenderSettings().sampler == "independent"
-    assert parse_settings({"sampler": "stratified"}).sampler == "stratified"
+    # one default everywhere: the scene format, the command line, the Python API and Blender
+    assert RenderSettings().sampler == "stratified" and parse_settings({}).sampler == "stratified"
+    assert parse_settings({"sampler": "independent"}).sampler == "independent"
     with pytest.raises(SceneError) as e:
         parse_settings({"sampler": "sobol"})
     assert "render.sampler" in str(e.value) and "'independent', 'stratified'" in str(e.value)
@@ -279,23 +280,30 @@ def test_a_resumed_stratified_render_equals_the_uninterrupted_one(lamp_reference
 
 
 def test_cli_writes_the_sampler_and_resume_refuses_another(tmp_path, capsys):
+    """The default render is stratified (header polar.sampler); an independent one writes no sampler
+    header, as every file before stratified became the default did, and resumes without naming it
+    (the sampler is read from the file, as the seed is); naming another one is refused."""
     from engine import cli
     from tests.cli.test_robustness_cli import small_demo
     scene = small_demo(tmp_path, spp=4)
     out = tmp_path / "a.exr"
-    assert cli.main(["render", scene, "-o", str(out), "--sampler", "stratified", "--stderr", "--no-previews",
-                     "--quiet"]) == 0
+    assert cli.main(["render", scene, "-o", str(out), "--stderr", "--no-previews", "--quiet"]) == 0
     stokes, channels, header = read_stokes_exr(str(out))
     assert header["polar.sampler"] == "stratified" and "S0.Y.stderr" in channels
     plain = tmp_path / "b.exr"
-    assert cli.main(["render", scene, "-o", str(plain), "--no-previews", "--quiet"]) == 0
+    assert cli.main(["render", scene, "-o", str(plain), "--sampler", "independent", "--no-previews",
+                     "--quiet"]) == 0
     assert "polar.sampler" not in read_stokes_exr(str(plain))[2]
     capsys.readouterr()
     status = cli.main(["render", scene, "-o", str(tmp_path / "c.exr"), "--resume", str(out), "--spp", "6",
-                       "--no-previews", "--quiet"])
+                       "--sampler", "independent", "--no-previews", "--quiet"])
     assert status == 2 and "sampler" in capsys.readouterr().err
     assert cli.main(["render", scene, "-o", str(tmp_path / "d.exr"), "--resume", str(out), "--spp", "6",
-                     "--sampler", "stratified", "--no-previews", "--quiet"]) == 0
+                     "--no-previews", "--quiet"]) == 0
+    assert read_stokes_exr(str(tmp_path / "d.exr"))[2]["polar.sampler"] == "stratified"
+    assert cli.main(["render", scene, "-o", str(tmp_path / "e.exr"), "--resume", str(plain), "--spp", "6",
+                     "--no-previews", "--quiet"]) == 0                  # an older (independent) file
+    assert "polar.sampler" not in read_stokes_exr(str(tmp_path / "e.exr"))[2]
 
 
 def test_a_resumed_stratified_exr_keeps_the_stratified_standard_error(tmp_path, capsys):
