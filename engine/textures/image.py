@@ -38,8 +38,10 @@ ignored, as Blender and most readers do), a resolution line in any of the eight 
 (``-Y H +X W`` rows top to bottom, ``+Y`` bottom to top, ``-X`` right to left, ``+X W -Y H`` column
 by column), then per scanline flat pixels, old-style runs (1, 1, 1, n) or new-style RLE (each
 channel run-length coded).  Run decoding is a Numba kernel (a NumPy/Python twin as reference); a
-texel (r, g, b, e) is (c + ½)·2^(e − 136) per channel and 0 for e = 0 (Radiance's and Blender's
-rounding to the middle of the mantissa step).  .hdr files are "Linear" by default, as EXR.
+texel (r, g, b, e) is c·2^(e − 136) per channel and 0 for e = 0, as Blender and OpenImageIO (the
+reader Cycles' image loader uses) decode it, so an HDRI lights a Polar render as it lights Cycles';
+Radiance's own colr_color takes the middle of the mantissa step, (c + ½)·2^(e − 136).  .hdr files
+are "Linear" by default, as EXR.
 """
 
 from __future__ import annotations
@@ -527,10 +529,10 @@ decode_rgbe_runs = twin(_rgbe_loop and _decode_rgbe_runs_compiled, decode_rgbe_r
 
 
 def rgbe_to_float(rgbe: np.ndarray) -> np.ndarray:
-    """RGBE bytes (..., 4) → float64 (..., 3): (c + ½)·2^(e − 136), 0 where e = 0 (Radiance's colr_color)."""
+    """RGBE bytes (..., 4) → float64 (..., 3): c·2^(e − 136), 0 where e = 0 (as Blender and OpenImageIO)."""
     e = rgbe[..., 3].astype(np.int64)
     scale = np.where(e > 0, np.ldexp(1.0, e - 136), 0.0)
-    return (rgbe[..., :3].astype(np.float64) + 0.5) * scale[..., None]
+    return rgbe[..., :3].astype(np.float64) * scale[..., None]
 
 
 _RESOLUTION = re.compile(rb"^([-+])([XY]) +(\d+) +([-+])([XY]) +(\d+)[ \t]*\r?$")
