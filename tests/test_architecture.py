@@ -4,7 +4,7 @@ works as a subpackage of the Blender extension), and nothing imports in a circle
 The import graph is read from the sources with ``ast`` (every ``import``, also those inside
 functions, relative ones resolved against the importing module's package), so a circle hidden in
 a function-local import counts: it still ties the two modules together.  Layers, bottom-up:
-errors; kernels and vec3; polarisation and spectral; materials, output and postprocess; scene;
+errors and files; kernels and vec3; polarisation and spectral; materials, output and postprocess; scene;
 render; cli (and the ``engine`` package's own facade).  A module may import its own layer or lower
 ones, never a higher one, and packages may not import each other in a circle.
 """
@@ -18,7 +18,7 @@ from tests.conftest import REPO
 
 #: Units whose imports are checked, bottom layer first.  A unit is a subpackage or a top-level module.
 ENGINE_LAYERS = (
-    ("engine.errors",),
+    ("engine.errors", "engine.files"),
     ("engine.kernels", "engine.vec3"),
     ("engine.polarisation", "engine.spectral"),
     ("engine.textures",),

@@ -37,6 +37,7 @@ import stat
 import numpy as np
 
 from ..errors import SceneError
+from ..files import refuse_special_file
 from .effects import effective_materials, resolve_transport
 from .film import film_from_stokes
 
@@ -169,18 +170,6 @@ def differences(header: dict, identity: dict) -> list[str]:
 MAX_SPP = 1 << 24
 #: Bounds of a seed (engine.scene.loader.parse_settings).
 MAX_SEED = 2 ** 63 - 1
-
-
-def refuse_special_file(path: str, field: str, prefix: str = "") -> None:
-    """A SceneError naming ``field`` (message: ``prefix`` + the path) if ``path`` exists and is neither a
-    regular file nor a folder (a FIFO, a device, a socket): reading one could wait forever for a writer.
-    Checked before opening."""
-    try:
-        mode = os.stat(path).st_mode
-    except (OSError, ValueError):
-        return                                   # missing or unreadable: the reader says so
-    if not (stat.S_ISREG(mode) or stat.S_ISDIR(mode)):
-        raise SceneError(field, f"{prefix}{path!r} is not a regular file (a FIFO, device or socket)")
 
 
 def read_polar_exr(path: str, field: str, layer: str | None = None):

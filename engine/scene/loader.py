@@ -22,6 +22,7 @@ import sys
 
 import numpy as np
 
+from ..files import refuse_special_file
 from ..materials.catalogue import MODELS
 from ..materials.normal_map import ShadingNormal
 from ..textures import parse_texture_input
@@ -943,6 +944,7 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
 
 def load_scene(path: str) -> Scene:
     """Read and validate a scene file (engine or peer format; UTF-8 JSON)."""
+    refuse_special_file(path, "", "scene file ")
     try:
         with open(path, "rb") as fh:
             raw = fh.read()

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import os
 
+from ..files import refuse_special_file
 from .obj import read_obj
 from .ply import read_ply
 from .trimesh import (MeshData, compute_vertex_normals, face_normals, mesh_file_error,
@@ -31,6 +32,7 @@ _READERS = {".ply": read_ply, ".obj": read_obj}
 
 def read_mesh(path, field: str = "") -> MeshData:
     """Read a mesh file, choosing the reader from the extension (.ply, .obj)."""
+    refuse_special_file(path, field, "mesh file ")
     ext = os.path.splitext(os.fspath(path))[1].lower()
     reader = _READERS.get(ext)
     if reader is None:

@@ -57,6 +57,7 @@ import zlib
 import numpy as np
 
 from ..errors import SceneError
+from ..files import refuse_special_file
 from ..kernels import jit, twin
 
 COLOR_SPACES = ("sRGB", "Non-Color", "Linear")
@@ -645,6 +646,14 @@ def _read_cached(path: str, stamp: tuple, color_space: str, field: str) -> np.nd
     return out
 
 
+def _check_exists(path: str, field: str) -> None:
+    """A SceneError naming ``field`` unless ``path`` is a regular file (a FIFO or device is refused
+    before it is opened: reading it could wait forever)."""
+    refuse_special_file(path, field, "image ")
+    if not os.path.isfile(path):
+        raise SceneError(field, f"image file {path!r} not found")
+
+
 def read_image(path: str, color_space: str | None = None, field: str = "") -> np.ndarray:
     """Linear float32 pixels (H, W, C), C = 1–4, all finite, row 0 at the bottom (see the module
     docstring).  Any problem with the file (missing, unsupported, oversized, broken) is a
@@ -653,8 +662,7 @@ def read_image(path: str, color_space: str | None = None, field: str = "") -> np
         color_space = default_color_space(path)
     if color_space not in COLOR_SPACES:
         raise SceneError(field, f"colour space must be one of {', '.join(COLOR_SPACES)}, got {color_space!r}")
-    if not os.path.isfile(path):
-        raise SceneError(field, f"image file {path!r} not found")
+    _check_exists(path, field)
     return _read_cached(os.path.abspath(path), _stamp(path), color_space, field)
 
 
@@ -667,8 +675,7 @@ def read_texture(path: str, color_space: str | None = None, field: str = "") -> 
     if color_space is None:
         color_space = default_color_space(path)
     if color_space == "sRGB":
-        if not os.path.isfile(path):
-            raise SceneError(field, f"image file {path!r} not found")
+        _check_exists(path, field)
         return _read_encoded(os.path.abspath(path), _stamp(path), field), "srgb"
     return read_image(path, color_space, field), "linear"
 

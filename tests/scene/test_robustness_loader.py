@@ -3,6 +3,7 @@ allowed range (the CLI prints it as one `error: ...` line and exits 2), never an
 
 import copy
 import json
+import os
 
 import numpy as np
 import pytest
@@ -433,3 +434,40 @@ def test_huge_integers_in_spectra_are_scene_errors_when_parse_material_is_called
     with pytest.raises(SceneError) as e:
         parse_material({"type": "lambert", "albedo": value}, "m")
     assert e.value.field.startswith("m.albedo")
+
+
+def test_fifos_and_devices_are_refused_before_they_are_opened(tmp_path):
+    """A scene, mesh or image path that names a FIFO (or a device) is one SceneError naming the field,
+    raised before opening it: opening a FIFO with no writer would wait forever (an alarm turns a hang
+    into a failure here)."""
+    import signal
+    from engine.scene.loader import load_scene, parse_scene
+    from engine.scene.meshio import read_mesh
+    from engine.textures.image import read_image
+    fifo = tmp_path / "pipe.json"
+    os.mkfifo(fifo)
+    for ext in ("ply", "png", "exr", "hdr", "tif"):
+        os.mkfifo(tmp_path / f"pipe.{ext}")
+    previous = signal.signal(signal.SIGALRM, lambda *_: (_ for _ in ()).throw(TimeoutError("hung on a FIFO")))
+    signal.alarm(20)
+    try:
+        with pytest.raises(SceneError, match=r"scene file '.*pipe\.json' is not a regular file"):
+            load_scene(str(fifo))
+        with pytest.raises(SceneError, match=r"^objects\[0\]\.file: mesh file '.*pipe\.ply' is not a regular"):
+            read_mesh(str(tmp_path / "pipe.ply"), "objects[0].file")
+        for ext in ("png", "exr", "hdr", "tif"):
+            with pytest.raises(SceneError, match=r"^materials\.m\.albedo: image '.*' is not a regular file"):
+                read_image(str(tmp_path / f"pipe.{ext}"), field="materials.m.albedo")
+        with pytest.raises(SceneError, match=r"materials\.m\.albedo.*is not a regular file"):
+            parse_scene({"format": "polar-scene/1",
+                         "camera": {"origin": [0, -3, 1], "target": [0, 0, 0], "up": [0, 0, 1], "fov_deg": 30,
+                                    "width": 4, "height": 4},
+                         "materials": {"m": {"type": "lambert", "albedo": {"texture": "pipe.png"}}},
+                         "objects": [{"shape": "quad", "vertices": [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]],
+                                      "material": "m"}],
+                         "lights": [{"type": "environment", "radiance": 1.0}]}, base_dir=str(tmp_path))
+        with pytest.raises(SceneError, match="is not a regular file"):
+            load_scene("/dev/zero")
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
