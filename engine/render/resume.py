@@ -37,7 +37,6 @@ import stat
 import numpy as np
 
 from ..errors import SceneError
-from ..files import refuse_special_file
 from .effects import effective_materials, resolve_transport
 from .film import film_from_stokes
 
@@ -187,7 +186,8 @@ def read_polar_exr(path: str, field: str, layer: str | None = None):
         raise SceneError(field, f"cannot read {path!r}: {getattr(e, 'strerror', None) or e}") from None
     if stat.S_ISDIR(mode):
         raise SceneError(field, f"{path!r} is a folder, not a Stokes EXR")
-    refuse_special_file(path, field)
+    if not stat.S_ISREG(mode):                   # as engine.files.refuse_special_file, from the mode at hand
+        raise SceneError(field, f"{path!r} is not a regular file (a FIFO, device or socket)")
     try:
         return read_stokes_exr(path, layer)
     except MemoryError:

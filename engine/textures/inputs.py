@@ -119,6 +119,13 @@ class TextureInput:
         return min(a, b), max(a, b)
 
 
+def _clipped_bounds(lo: float, hi: float, clip) -> tuple[float, float]:
+    """The bounds [lo, hi] of a textured value after clipping to ``clip`` (None: unchanged)."""
+    if clip is None:
+        return lo, hi
+    return min(max(lo, clip[0]), clip[1]), max(min(hi, clip[1]), clip[0])
+
+
 def _float32_clip(lo: float, hi: float, limit_lo: float, limit_hi: float, clip):
     """The clip interval of a textured value with bounds [lo, hi] against closed limits: a limit it
     crosses by no more than float32 rounding (equal to it in float32) is added to ``clip`` (None: no
@@ -137,9 +144,7 @@ class TexturedNumber:
 
     def __init__(self, source: TextureInput, clip: tuple[float, float] | None = None):
         self.source, self.clip = source, clip
-        lo, hi = source.bounds(rgb=False)
-        self.lo, self.hi = (lo, hi) if clip is None else (min(max(lo, clip[0]), clip[1]), max(min(hi, clip[1]),
-                                                                                            clip[0]))
+        self.lo, self.hi = _clipped_bounds(*source.bounds(rgb=False), clip)
 
     def clamped_to(self, lo: float = -math.inf, hi: float = math.inf) -> TexturedNumber:
         """This parameter clipped to the closed limits [lo, hi] it reaches beyond only by float32
@@ -174,9 +179,7 @@ class TexturedSpectrum(Spectrum):
 
     def __init__(self, source: TextureInput, kind: str = "reflectance", clip: tuple[float, float] | None = None):
         self.source, self.kind, self.clip = source, kind, clip
-        lo, hi = source.bounds(rgb=True)
-        self.lo, self.hi = (lo, hi) if clip is None else (min(max(lo, clip[0]), clip[1]), max(min(hi, clip[1]),
-                                                                                            clip[0]))
+        self.lo, self.hi = _clipped_bounds(*source.bounds(rgb=True), clip)
 
     def clamped_to(self, lo: float = -math.inf, hi: float = math.inf) -> TexturedSpectrum:
         """As :meth:`TexturedNumber.clamped_to`, on the texels' RGB values."""
