@@ -10,7 +10,9 @@ Visible normals (Heitz 2018, "Sampling the GGX distribution of visible normals")
 stretch ω_o to (α ω_x, α ω_y, ω_z), sample a point on the projected hemisphere (a disk whose half
 is squeezed by (1 + cosθ)/2), lift it to the hemisphere and unstretch.  The density of the sampled
 h is D_ωo(h) = G1(ω_o) max(0, ω_o·h) D(h)/cosθ_o, as for engine.materials.microfacet.Beckmann.
-No iteration, so no compiled kernel is needed.
+No iteration, so no compiled kernel is needed.  ``GGX.per_point`` holds one α per point (a textured
+roughness of engine.materials.torrance_sparrow); the directional albedos that multiple-scattering
+compensation needs are in engine.materials.ggx_energy.
 """
 
 from __future__ import annotations
@@ -20,6 +22,10 @@ import math
 import numpy as np
 
 from .microfacet import MicrofacetDistribution, _chi_plus, _tan2
+
+
+#: tan²θ_h above which D takes its horizontal-facet limit α²/π (the formula's (1 + t)² would overflow).
+_FLAT_TAN2 = 1e150
 
 
 class GGX(MicrofacetDistribution):
@@ -34,13 +40,29 @@ class GGX(MicrofacetDistribution):
         self.alpha = alpha
         self.smith_m = alpha
 
+    @classmethod
+    def per_point(cls, alpha: np.ndarray) -> GGX:
+        """GGX distributions with one roughness per point, α (N,) > 0 (a textured roughness): every
+        method is elementwise in α, so point i gets exactly the values of ``GGX(alpha[i])``."""
+        alpha = np.asarray(alpha, dtype=np.float64)
+        if not np.all(np.isfinite(alpha) & (alpha > 0)):
+            raise ValueError("GGX roughness alpha must be finite numbers > 0")
+        dist = cls.__new__(cls)
+        dist.alpha = dist.smith_m = alpha
+        return dist
+
+    def take(self, sel: np.ndarray) -> GGX:
+        return self if np.ndim(self.alpha) == 0 else GGX.per_point(self.alpha[sel])
+
     def D(self, h: np.ndarray) -> np.ndarray:
         t2 = _tan2(h)
         ok = (h[2] > 0) & np.isfinite(t2)
-        t = np.where(ok, t2, 0.0)
+        # beyond tan²θ_h = 1e150 (cosθ_h < 1e-75) (1 + t)² overflows: D is its limit α²/π there
+        flat = ok & (t2 > _FLAT_TAN2)
+        t = np.where(ok & ~flat, t2, 0.0)
         a2 = self.alpha * self.alpha
         q = 1.0 + t / a2
-        return np.where(ok, (1.0 + t) ** 2 / (math.pi * a2 * q * q), 0.0)
+        return np.where(ok, np.where(flat, a2 / math.pi, (1.0 + t) ** 2 / (math.pi * a2 * q * q)), 0.0)
 
     def smith_lambda(self, w: np.ndarray) -> np.ndarray:
         """Λ(ω) = (√(1 + α² tan²θ) − 1)/2 (∞ at grazing)."""

@@ -33,6 +33,8 @@ Shadowing/masking (symmetric in ω_i ↔ ω_o, all return (N,)):
 - :func:`g_vcavity`: Torrance–Sparrow/Cook–Torrance V-cavity
   G = min(1, 2(n·h)(n·ω_o)/(ω_o·h), 2(n·h)(n·ω_i)/(ω_i·h)), and 0 when either direction
   is on the back side of the facet or of the macro surface (docs/physics.md §1, §3 Eq. 3.3).
+- :func:`g_smith_correlated`: height-correlated Smith 1/(1 + Λ(ω_i) + Λ(ω_o)) (Heitz 2014; Cycles' G),
+  with the distribution's own Λ (``smith_lambda``).
 - :func:`g_smith` : separable Smith G1(ω_i)G1(ω_o) with the exact Beckmann
   G1 = χ⁺ / (1 + Λ(a)), Λ(a) = (erf(a) − 1)/2 + e^{−a²}/(2a√π), a = 1/(m tanθ);
   ``rational=True`` uses Walter's rational approximation as in Mitsuba 3:
@@ -151,6 +153,10 @@ class MicrofacetDistribution:
             return g1_beckmann_rational(w, h, self.smith_m)
         return g1_beckmann_exact(w, h, self.smith_m)
 
+    def smith_lambda(self, w: np.ndarray) -> np.ndarray:
+        """Smith Λ(ω) (N,) of the exact G1 = 1/(1 + Λ) (Beckmann form with ``smith_m``; ∞ at grazing)."""
+        return beckmann_lambda(_smith_a(w, self.smith_m))
+
     def sample(self, wo: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Facet normals h (3, N) for viewer directions wo (3, N) from uniforms u (2, N)."""
         raise NotImplementedError
@@ -164,6 +170,11 @@ class MicrofacetDistribution:
         d = wo[0] * h[0] + wo[1] * h[1] + wo[2] * h[2]
         ok = d > 0
         return np.where(ok, self.pdf(wo, h) / (4.0 * np.where(ok, d, 1.0)), 0.0)
+
+    def take(self, sel: np.ndarray) -> MicrofacetDistribution:
+        """The distribution at the points ``sel`` of a batch: itself for one roughness, the selected
+        points' roughnesses for a per-point distribution (``per_point``)."""
+        return self
 
 
 class Beckmann(MicrofacetDistribution):
@@ -188,6 +199,9 @@ class Beckmann(MicrofacetDistribution):
         dist = cls.__new__(cls)
         dist.m = dist.smith_m = m
         return dist
+
+    def take(self, sel: np.ndarray) -> Beckmann:
+        return self if np.ndim(self.m) == 0 else Beckmann.per_point(self.m[sel])
 
     def D(self, h: np.ndarray) -> np.ndarray:
         t2 = _tan2(h)
@@ -293,15 +307,25 @@ def g_smith(dist: MicrofacetDistribution, wi: np.ndarray, wo: np.ndarray, h: np.
     return dist.G1(wi, h, rational) * dist.G1(wo, h, rational)
 
 
-SHADOWING = ("ts", "smith", "smith_rational", "none")
+def g_smith_correlated(dist: MicrofacetDistribution, wi: np.ndarray, wo: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """Height-correlated Smith shadowing-masking χ⁺(ω_i, h)·χ⁺(ω_o, h)/(1 + Λ(ω_i) + Λ(ω_o)) of ``dist``
+    (Heitz 2014, Eq. 99; Cycles' G): a facet masked from one direction is likelier shadowed from the other,
+    so G ≥ G1·G1, with equality where either direction is normal."""
+    return _chi_plus(wi, h) * _chi_plus(wo, h) / (1.0 + dist.smith_lambda(wi) + dist.smith_lambda(wo))
+
+
+SHADOWING = ("ts", "smith", "smith_rational", "none", "smith_correlated")
 
 
 def shadowing_term(kind: str, dist: MicrofacetDistribution, wi, wo, h) -> np.ndarray:
-    """G of the named kind: "ts" (V-cavity), "smith", "smith_rational" or "none" (G = 1 on the front side)."""
+    """G of the named kind: "ts" (V-cavity), "smith" (separable), "smith_rational", "none" (G = 1 on the
+    front side) or "smith_correlated" (height-correlated Smith)."""
     if kind == "ts":
         return g_vcavity(wi, wo, h)
     if kind == "smith":
         return g_smith(dist, wi, wo, h)
+    if kind == "smith_correlated":
+        return g_smith_correlated(dist, wi, wo, h)
     if kind == "smith_rational":
         return g_smith(dist, wi, wo, h, rational=True)
     if kind == "none":

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import SceneError
-from ..spectral import ConstantSpectrum, named_ior, parse_spectrum
+from ..spectral import ConstantSpectrum, Spectrum, named_ior, parse_spectrum
 from ..textures import TexturedNumber, TexturedSpectrum, TextureInput, parse_texture_input
 
 
@@ -38,9 +38,15 @@ REQUIRED = _Required()
 
 #: Kinds of parameters: a real number, a spectrum (number, [r, g, b] or a table), one of a few
 #: words, a named measured metal (spectral n, κ), a direction (3-vector), another material, a list
-#: of coats.  The last two are assembled by the callers (scene files nest them, the catalogue
+#: of coats, a list of materials, a list of numbers (each read as the parameter's ``element``).
+#: Materials and coats are assembled by the callers (scene files nest them, the catalogue
 #: flattens them).
-KINDS = ("number", "spectrum", "choice", "metal", "direction", "material", "coats")
+KINDS = ("number", "spectrum", "choice", "metal", "direction", "material", "coats", "materials", "numbers",
+         "bool")
+#: A switch (kind "bool"): JSON true/false; where values are text (``python -m engine mueller --param``)
+#: also these words.
+_BOOL_WORDS = {"true": True, "1": True, "yes": True, "on": True, "false": False, "0": False, "no": False,
+               "off": False}
 SOCKET_TYPES = ("FLOAT", "COLOR", "SHADER")
 #: Wavelengths over which a spectrum's values are checked against the declared range (nm).
 _CHECK_NM = np.linspace(360.0, 830.0, 95)
@@ -87,10 +93,18 @@ class Parameter:
     only_with: tuple | None = None
     socket: Socket | None = None
     members: ModelDeclaration | None = None    # kind "coats": the declaration of one element
+    #: kind "numbers": one element of the list (its range, unit and whether it may be a texture); the
+    #: list itself is never a texture object, so the list parameter is not ``texturable``
+    element: Parameter | None = None
 
     def __post_init__(self):
         if self.kind not in KINDS:
             raise ValueError(f"parameter {self.name}: kind must be one of {KINDS}, got {self.kind!r}")
+        if (self.kind == "numbers") != (self.element is not None):
+            raise ValueError(f"parameter {self.name}: a list of numbers (and only it) needs an element declaration")
+        if self.kind == "numbers" and (self.element.kind != "number" or self.texturable):
+            raise ValueError(f"parameter {self.name}: the elements of a list of numbers are numbers (mark the "
+                             "element texturable, not the list)")
         if self.socket is not None and self.socket.type not in SOCKET_TYPES:
             raise ValueError(f"parameter {self.name}: socket type must be one of {SOCKET_TYPES}")
 
@@ -117,8 +131,11 @@ class Parameter:
             return f"{what} in {self.range_text()}" + (f" {self.unit}" if self.unit else "")
         if self.kind == "choice":
             return "one of " + ", ".join(map(repr, self.choices))
-        return {"metal": "a measured metal name", "direction": "a list of 3 numbers",
-                "material": "a material", "coats": "a list of coats"}[self.kind]
+        if self.kind == "numbers":
+            return f"a list, each {self.element.allowed_text()}" + (" or a texture" if self.element.texturable else "")
+        return {"bool": "true or false", "metal": "a measured metal name", "direction": "a list of 3 numbers",
+                "material": "a material", "coats": "a list of coats",
+                "materials": "a list of materials (inline or by name)"}[self.kind]
 
     def help_text(self, prefix: str = "") -> str:
         """One line for help listings: doc, allowed values, default (``prefix``: of flat names)."""
@@ -161,15 +178,35 @@ class Parameter:
         if self.kind == "number":
             return self.number(raw, field, text)
         if self.kind == "spectrum":
+            if isinstance(raw, TexturedSpectrum):       # built in code (the Blender exporter)
+                if not self.texturable:
+                    raise SceneError(field, f"cannot vary over the surface: give a constant ({self.allowed_text()})")
+                if not (self.contains(raw.lo) and self.contains(raw.hi)):
+                    raise SceneError(field, f"texture values span [{raw.lo:g}, {raw.hi:g}]: must be in "
+                                            f"{self.range_text()}")
+                return raw
+            if isinstance(raw, Spectrum):               # built in code (the Blender exporter)
+                self.check_spectrum(raw, field)
+                return raw
             if text:
                 return ConstantSpectrum(self.number(raw, field, text))
             spec = parse_spectrum(raw, field, kind=self.spectrum)
             self.check_spectrum(spec, field)
             return spec
+        if self.kind == "numbers":
+            if not isinstance(raw, (list, tuple)):
+                raise SceneError(field, f"must be a list, each {self.element.allowed_text()}, got {raw!r}")
+            return [self.element.read(x, f"{field}[{i}]", text, base_dir) for i, x in enumerate(raw)]
         if self.kind == "choice":
             if raw not in self.choices:
                 raise SceneError(field, f"must be one of {', '.join(map(repr, self.choices))}, got {raw!r}")
             return raw
+        if self.kind == "bool":
+            if text and isinstance(raw, str) and raw.strip().lower() in _BOOL_WORDS:
+                return _BOOL_WORDS[raw.strip().lower()]
+            if not isinstance(raw, (bool, np.bool_)):
+                raise SceneError(field, f"must be true or false, got {raw!r}")
+            return bool(raw)
         if self.kind == "metal":
             return named_ior(raw, field=field)
         if self.kind == "direction":
@@ -314,6 +351,12 @@ class Values:
     def check_textures(self):
         """Refuse textures on parameters the engine does not yet evaluate per point (clear message)."""
         for p in self.model.parameters:
+            raw = self.data.get(self.prefix + p.name)
+            textures = [i for i, x in enumerate(raw) if is_texture_object(x)] \
+                if p.kind == "numbers" and isinstance(raw, (list, tuple)) and p.element.texturable else []
+            if textures and p.name not in self.model.per_point:
+                raise SceneError(f"{self.field(p.name)}[{textures[0]}]",
+                                 "a texture here is not supported by the engine yet; give a constant")
             if p.texturable and self.given(p.name) and is_texture_object(self.data[self.prefix + p.name]) \
                     and p.name not in self.model.per_point:
                 supported = ", ".join(sorted(self.model.per_point)) or "none"
@@ -347,6 +390,9 @@ def texture_support_table(models) -> str:
         for p in decl.parameters:
             if p.kind == "coats" and p.members is not None:
                 walk(p.members, f"{title} coat")
+            elif p.kind == "numbers" and p.element.texturable:
+                state = "yes" if p.name in decl.per_point else "not yet (constant only)"
+                rows.append(f"| {title} | `{p.name}` (each) | number | {state} |")
             elif p.texturable:
                 state = "yes" if p.name in decl.per_point else "not yet (constant only)"
                 kind = "colour/spectrum" if p.kind == "spectrum" else "number"

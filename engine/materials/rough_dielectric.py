@@ -40,6 +40,18 @@ refraction through h.  pdf: F·D_ωo(h)/(4 ω_o·h) for reflection, (1 − F)·D
 + ω_o·h)² for refraction.  The sample weight is f·|cosθ_i|/pdf; ``eta_sq`` = η² on refraction (for
 Russian roulette).  The index is one number (no dispersion): λ-independent.
 
+Multiple scattering (``multiscatter``, GGX only; default off): Cycles' "Multiscatter GGX" glass
+(albedo scaling, Kulla & Conty 2017; engine.materials.ggx_energy) divides the single-scattering lobes by
+E(cosθ_o), their total directional albedo (reflection plus refraction with this interface's own
+unpolarised Fresnel, as energy: without the 1/η² of radiance) seen from the viewer's side, so that a
+clear interface returns all the light it receives.  Here the added (1/E − 1)·M00 is a **depolarised**
+term (MuellerValue.depol): light scattered between facets more than once is taken as unpolarised, the
+single-scattering Mueller matrices are untouched and the sum stays realisable; S0 for unpolarised light
+is Cycles'.  E is tabulated once per (index, α) over √cosθ_o for both sides (exact in both, where Cycles
+interpolates a 16³ table).  Not reciprocal (the scale depends on ω_o only), as in Cycles.  Beckmann
+facets are refused with it: Cycles has no multiple-scattering Beckmann and its tables are GGX's.
+Sampling is unchanged; the weight is the compensated f·|cosθ_i|/pdf.
+
 Implementation: eval, pdf and sample are one compiled pass each over the batch
 (engine.kernels.rough_dielectric); the NumPy references are ``_eval``, ``_pdf_local`` and ``_sample``
 of this module, declared with kernels.twin.
@@ -54,6 +66,7 @@ import numpy as np
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
 from .dielectric import IOR_SOCKET, SmoothDielectric
 from .ggx import GGX
+from .ggx_energy import ALPHA_MAX, DielectricAlbedo
 from .microfacet import Beckmann, reflect_local
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from .sampling import local_to_world
@@ -203,7 +216,7 @@ class RoughDielectric(BSDF):
              | BSDFFlags.RETARDING)
 
     def __init__(self, n: float, alpha: float, distribution: str = "beckmann", shadowing: str = "smith",
-                 exterior_n: float = 1.0):
+                 exterior_n: float = 1.0, multiscatter: bool = False):
         self.n_int = float(n)
         self.n_ext = float(exterior_n)
         for name, v in (("n", self.n_int), ("exterior_n", self.n_ext)):
@@ -221,13 +234,29 @@ class RoughDielectric(BSDF):
             raise ValueError("shadowing 'smith_rational' exists for the beckmann distribution only")
         self.distribution, self.shadowing = distribution, shadowing
         self.dist = _distribution(distribution, alpha)
+        self.multiscatter = bool(multiscatter)
+        self._energy = None
+        if self.multiscatter:
+            if distribution != "ggx":
+                raise ValueError("multiscatter (Cycles' Multiscatter GGX) needs distribution='ggx'")
+            if not alpha <= ALPHA_MAX:
+                raise ValueError(f"multiscatter needs alpha <= {ALPHA_MAX:g} (Cycles clamps GGX alpha to 1), "
+                                 f"got {alpha!r}")
+            self._energy = DielectricAlbedo(self.n_int / self.n_ext, alpha)
+
+    def _multiscatter_depol(self, sp: ShadingPoint, A: np.ndarray) -> np.ndarray | None:
+        """(1/E(cosθ_o) − 1)·A (L, N), the depolarised multiple-scattering term; None without it."""
+        if self._energy is None:
+            return None
+        cos_o = dot(sp.n_s, sp.wo)
+        return A * self._energy.extra(np.abs(cos_o), cos_o >= 0)[None, :]
 
     # --- BSDF interface ---------------------------------------------------------------------------
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
         x, A, B, C, S = rough_dielectric_eval(sp.n_s, sp.wo, wi, sp.lam.shape[0], self.n_int, self.n_ext,
                                               self.distribution, self.shadowing == "smith_rational", self.alpha)
-        return MuellerValue("abcs", x, x, A, B, C, S)
+        return MuellerValue("abcs", x, x, A, B, C, S, depol=self._multiscatter_depol(sp, A))
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         return rough_dielectric_pdf(sp.n_s, sp.wo, wi, self.n_int, self.n_ext, self.distribution, self.alpha)
@@ -236,12 +265,15 @@ class RoughDielectric(BSDF):
         wi, pdf, valid, eta_sq, x, A, B, C, S = rough_dielectric_sample(
             sp.n_s, sp.wo, u_lobe, u_dir, sp.lam.shape[0], self.n_int, self.n_ext, self.distribution,
             self.shadowing == "smith_rational", self.alpha)
-        return BSDFSample(wi=wi, weight=MuellerValue("abcs", x, x, A, B, C, S), pdf=pdf,
-                          is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=eta_sq)
+        weight = MuellerValue("abcs", x, x, A, B, C, S, depol=self._multiscatter_depol(sp, A))
+        return BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=eta_sq)
 
     def describe(self) -> dict:
-        return {"type": self.name, "n": self.n_int, "alpha": self.alpha, "distribution": self.distribution,
-                "shadowing": self.shadowing, "exterior_n": self.n_ext}
+        out = {"type": self.name, "n": self.n_int, "alpha": self.alpha, "distribution": self.distribution,
+               "shadowing": self.shadowing, "exterior_n": self.n_ext}
+        if self.multiscatter:
+            out["multiscatter"] = True
+        return out
 
 
 # --------------------------------------------------------------------------- declaration
@@ -258,6 +290,9 @@ DECLARATION = ModelDeclaration(
                default="beckmann"),
      Parameter("shadowing", "Smith shadowing-masking (separable; rational = Walter's Beckmann approximation)",
                kind="choice", choices=SHADOWING, default="smith"),
+     Parameter("multiscatter", "add the energy of multiple scattering between facets as a depolarised term, as "
+                               "Cycles' Multiscatter GGX glass (needs distribution 'ggx' and alpha ≤ 1)",
+               kind="bool", default=False),
      exterior_n_parameter()],
     catalogue="rough_dielectric", node="ROUGH_DIELECTRIC")
 
@@ -271,6 +306,13 @@ def _rough_dielectric(p):
     distribution, shadowing = p["distribution"], p["shadowing"]
     if shadowing == "smith_rational" and distribution != "beckmann":
         raise SceneError(p.field("shadowing"), "'smith_rational' exists for distribution 'beckmann' only")
+    multiscatter = p["multiscatter"]
+    if multiscatter and distribution != "ggx":
+        raise SceneError(p.field("multiscatter"), "needs distribution 'ggx' (Cycles' Multiscatter GGX; Cycles has "
+                                                  f"no multiple-scattering Beckmann), got {distribution!r}")
+    if multiscatter and alpha > ALPHA_MAX:
+        raise SceneError(p.field("alpha"), f"must be at most {ALPHA_MAX:g} with multiscatter (Cycles clamps GGX α "
+                                           f"to 1; the albedo tables span [0, 1]), got {alpha:g}")
     if alpha == 0 or index_matched(p["n"], p["exterior_n"]):   # the smooth limit, or no interface at all
         return SmoothDielectric(p["n"], p["exterior_n"])
-    return RoughDielectric(p["n"], alpha, distribution, shadowing, p["exterior_n"])
+    return RoughDielectric(p["n"], alpha, distribution, shadowing, p["exterior_n"], multiscatter=multiscatter)

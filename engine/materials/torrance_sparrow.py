@@ -11,12 +11,14 @@
   is then at normal incidence, M_F = F·diag(1, 1, −1, −1), which is the same in every
   such frame.  The value is returned as ``MuellerValue("abcs", s, s, A, B, C, S)``.
 - D: Beckmann (a Gaussian in the facet slope, normalised: docs/physics.md §3 Eq. 3.4 erratum) with
-  the thesis's m (= SCATMECH s = Mitsuba α), or Blinn–Phong (engine.materials.microfacet).
+  the thesis's m (= SCATMECH s = Mitsuba α), GGX (Trowbridge–Reitz, α = m: Cycles' and Blender's
+  microfacet distribution, engine.materials.ggx) or Blinn–Phong (engine.materials.microfacet).
   No cosθ_o is included (the integrator applies it).
 - G: ``"ts"`` V-cavity (thesis Eq. 3.3, the default, as SCATMECH's
-  Torrance_Sparrow_Shadow_Function), ``"smith"`` (exact Beckmann Smith G1·G1),
-  ``"smith_rational"`` (Mitsuba 3's rational G1), ``"none"`` (G = 1, SCATMECH's
-  Unit_Shadow_Function; not energy conserving at grazing angles).
+  Torrance_Sparrow_Shadow_Function), ``"smith"`` (exact separable Smith G1·G1 of the distribution),
+  ``"smith_correlated"`` (height-correlated Smith 1/(1 + Λ_i + Λ_o), Heitz 2014: Cycles' G and the
+  default for GGX), ``"smith_rational"`` (Mitsuba 3's rational Beckmann G1), ``"none"`` (G = 1,
+  SCATMECH's Unit_Shadow_Function; not energy conserving at grazing angles).
 - The Lambert term d·ρ/π is a depolariser (frame-independent), added to A only.
 - One-sided: f = 0 where cosθ_i ≤ 0 or cosθ_o ≤ 0 w.r.t. the shading normal (as
   Mitsuba 3's rough conductor).  Every output is finite, also at θ = 0, 90°, exact
@@ -37,11 +39,36 @@ Diffuse layering (``diffuse_layering``):
   n = 1.5, θ_o ≈ 79°).  E is tabulated once per
   model over √cosθ_o (33 nodes) and log m (nodes M_MIN·1.5^k shared by all models, cached
   per index and shadowing; only those spanning the model's m, or its texture's range) by a
-  Gaussian slope-space quadrature (``specular_albedo``); interpolated bilinearly.  It needs the Beckmann
-  distribution and a constant index n, κ (one table), so Blinn or a textured or
+  Gaussian slope-space quadrature (``specular_albedo``) for Beckmann facets, for GGX by the
+  visible-normal quadrature of engine.materials.ggx_energy (``ggx_reflection_albedo``; α ≤ 1);
+  interpolated bilinearly.  With ``multiscatter`` E is the compensated lobe's albedo (1 + k)·E, which is
+  also what Cycles subtracts (its layering albedo: the closure weight's darkening times the Fresnel
+  average over the lobe).  It needs a constant index n, κ (one table), so Blinn or a textured or
   wavelength-dependent n, κ is rejected with it.
 
-Roughness range: m ≥ M_MIN = 1e-4 (ValueError below).  The lobe is evaluated as a
+Multiple scattering (``multiscatter``, GGX with Smith G — correlated or separable — only; default off):
+the energy that a single-scattering facet lobe loses (light bouncing between facets) is put back as
+Cycles' "Multiscatter GGX" does (albedo scaling, Kulla & Conty 2017; engine.materials.ggx_energy):
+the lobe's S0 is multiplied by 1 + k with
+
+    k = F_ms·(1 − E(cosθ_o))/E(cosθ_o),   F_ms = F_ss·E_avg/(1 − F_ss·(1 − E_avg)),
+
+E the F = 1 lobe's directional albedo at the *view* direction and E_avg its cosine-weighted mean
+(tables of this lobe and its shadowing form, bilinear in √cosθ_o and √α, α ≤ 1; with the default
+height-correlated G they are Cycles' ggx_E and ggx_Eavg to 3·10⁻⁴), F_ss the conductor's mean Fresnel
+reflectance as Cycles estimates it (an F82-tint fit to the exact Fresnel at 0° and ≈ 82°, per
+wavelength).  The added k·M00 is a **depolarised** term (MuellerValue.depol, added to M00 only):
+light scattered two or more times by randomly oriented facets is taken as unpolarised, the single-
+scattering Mueller matrix — and so every polarisation the model predicts for first-order
+scattering — is untouched, the sum stays realisable (a realisable matrix plus a non-negative
+depolariser), and S0 for unpolarised light is Cycles' (scaling the whole matrix by 1 + k would
+instead claim that multiply scattered light keeps the single bounce's diattenuation and
+retardance).  Like Cycles' it is not reciprocal (k depends on ω_o only).  Sampling is unchanged
+(the compensated lobe has the single-scattering lobe's shape); the sample weight is the compensated
+f·cosθ_i/pdf.
+
+Roughness range: m ≥ M_MIN = 1e-4 (ValueError below); with ``multiscatter`` m ≤ 1 (Cycles clamps
+GGX α to 1; the albedo tables span [0, 1]).  The lobe is evaluated as a
 function for every allowed m; there is no switch to a Dirac mirror (use the smooth
 ``conductor`` model for m → 0).  At m = 1e-4 the peak D = 1/(π m²) ≈ 3.2e7 is still
 resolved in double precision (tan²θ_h is computed from vector components).
@@ -52,9 +79,9 @@ Sampling (``sample``/``pdf``): a two-lobe mixture chosen per shading point with 
   reflectance at the *macro* angle, an estimate of the lobe's albedo) and
   w_d = d·mean_λ ρ, clamped to [0.1, 0.9] when both lobes are present (so neither
   is starved); P_spec = 1 without a diffuse part and 0 without a specular part;
-- specular directions: Beckmann → visible-normal sampling (Heitz & d'Eon 2014),
-  Blinn → D·cosθ_h sampling; ω_i = reflect(ω_o, h); samples below the horizon are
-  invalid (their probability is simply lost);
+- specular directions: Beckmann → visible-normal sampling (Heitz & d'Eon 2014), GGX → visible
+  normals in closed form (Heitz 2018, engine.materials.ggx), Blinn → D·cosθ_h sampling;
+  ω_i = reflect(ω_o, h); samples below the horizon are invalid (their probability is simply lost);
 - ``pdf`` is the full mixture density P_spec·pdf_spec + (1 − P_spec)·cosθ_i/π, so
   the integrator's MIS weights are right, and the weight is f·cosθ_i/pdf (the exact
   quotient of ``eval`` and ``pdf`` at the returned ω_i).
@@ -64,7 +91,8 @@ Sampling (``sample``/``pdf``): a two-lobe mixture chosen per shading point with 
 Implementation: with Beckmann facets eval, pdf and sample are one compiled pass each over the batch
 (engine.kernels.torrance_sparrow, declared with kernels.twin below); their NumPy references are the
 batched functions ``_facet_eval``, ``_mixture_pdf`` and ``_mixture_sample`` of this module, which the
-Blinn distribution and a TS without a facet lobe use directly.
+GGX and Blinn distributions, the height-correlated shadowing and a TS without a facet lobe use directly
+(``_facet_eval`` returns 0 where cosθ_i·cosθ_o underflows, where the compiled pass divides 0 by 0).
 """
 
 from __future__ import annotations
@@ -76,6 +104,8 @@ import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
 from .conductor import K, METAL, N, complex_index
+from .ggx import GGX
+from .ggx_energy import ALPHA_MAX, conductor_extra, ggx_reflection_albedo
 from .microfacet import (SHADOWING, Beckmann, BlinnPhong, half_vector, reflect_local,
                                          shadowing_term)
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
@@ -83,7 +113,7 @@ from .sampling import cosine_hemisphere, local_to_world
 from .smooth_limit import MirrorWithDiffuse
 from ..errors import SceneError
 from ..kernels import twin
-from ..kernels.torrance_sparrow import (torrance_sparrow_eval_numba, torrance_sparrow_pdf_numba,
+from ..kernels.torrance_sparrow import (SHADOWING_CODES, torrance_sparrow_eval_numba, torrance_sparrow_pdf_numba,
                                         torrance_sparrow_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
@@ -93,7 +123,11 @@ from ..vec3 import dot, local_frame, to_local
 
 #: Smallest accepted Beckmann roughness m.
 M_MIN = 1e-4
-DISTRIBUTIONS = ("beckmann", "blinn")
+DISTRIBUTIONS = ("beckmann", "blinn", "ggx")
+#: The shadowing forms whose albedo tables the multiple-scattering compensation has.
+MULTISCATTER_SHADOWING = ("smith_correlated", "smith")
+#: The distributions a scene file may name (Blinn needs an exponent: Python callers only).
+SCENE_DISTRIBUTIONS = ("beckmann", "ggx")
 #: Lobe-selection probability bounds when both a specular and a diffuse lobe exist.
 P_SPEC_RANGE = (0.1, 0.9)
 #: How the Lambert term combines with the specular lobe (module docstring).
@@ -146,10 +180,16 @@ def specular_albedo(cos_o, m, eta: complex, shadowing: str = "ts",
 
 
 @functools.lru_cache(maxsize=1024)
-def _albedo_column(eta: complex, shadowing: str, k: int) -> np.ndarray:
-    """E at the √cosθ_o nodes for m = M_MIN·ratio^k (cached: models sharing an index share it)."""
+def _albedo_column(eta: complex, shadowing: str, k: int, distribution: str = "beckmann") -> np.ndarray:
+    """E at the √cosθ_o nodes for m = M_MIN·ratio^k (cached: models sharing an index share it); GGX:
+    the single-scattering reflection albedo by the visible-normal quadrature of engine.materials.ggx_energy
+    (α capped at 1, the largest Cycles renders)."""
     t = np.linspace(0.0, 1.0, ALBEDO_TABLE_MU_NODES)
-    E = specular_albedo(t * t, np.full(t.size, M_MIN * ALBEDO_TABLE_M_RATIO ** k), eta, shadowing)
+    m = M_MIN * ALBEDO_TABLE_M_RATIO ** k
+    if distribution == "ggx":
+        E = ggx_reflection_albedo(t * t, min(m, ALPHA_MAX), eta, correlated=shadowing == "smith_correlated")
+    else:
+        E = specular_albedo(t * t, np.full(t.size, m), eta, shadowing)
     E.setflags(write=False)
     return E
 
@@ -159,11 +199,12 @@ class SpecularAlbedoTable:
     (√cosθ_o, log m) between fixed nodes (the same for every model, so the value at a point depends
     only on (cosθ_o, m), not on whether m is textured)."""
 
-    def __init__(self, eta: complex, m_lo: float, m_hi: float, shadowing: str):
+    def __init__(self, eta: complex, m_lo: float, m_hi: float, shadowing: str, distribution: str = "beckmann"):
         r = math.log(ALBEDO_TABLE_M_RATIO)
         self.k0 = max(int(math.floor(math.log(max(m_lo, M_MIN) / M_MIN) / r)), 0)
         k1 = max(int(math.floor(math.log(max(m_hi, M_MIN) / M_MIN) / r)), 0) + 1
-        self.E = np.stack([_albedo_column(complex(eta), shadowing, k) for k in range(self.k0, k1 + 1)], axis=1)
+        self.E = np.stack([_albedo_column(complex(eta), shadowing, k, distribution) for k in range(self.k0, k1 + 1)],
+                          axis=1)
 
     def __call__(self, cos_o: np.ndarray, m) -> np.ndarray:
         """E at cosθ_o (N,) (clamped to [0, 1]) and m (a number or (N,) within [m_lo, m_hi])."""
@@ -197,7 +238,7 @@ def _facet_eval(dist, n_s, wo, wi, eta, s, shadowing):
     cos_i, cos_o = wi_l[2], wo_l[2]
     valid = (cos_i > 0) & (cos_o > 0)
     h, cos_f, ok = half_vector(wi_l, wo_l)
-    ok &= valid
+    ok &= valid & (cos_i * cos_o > 0)       # a product underflowing to 0 (cosines ~1e-160): f = 0, not 0/0
     D = dist.D(h)
     G = shadowing_term(shadowing, dist, wi_l, wo_l, h)
     denom = 4.0 * np.where(ok, cos_i * cos_o, 1.0)
@@ -250,7 +291,7 @@ def _mixture_sample(dist, n_s, wo, u_lobe, u_dir, p_given, eta, s, w_d, has_spec
     if has_specular:
         sel = np.nonzero(pick_spec & (cos_o > 0))[0]
         if sel.size:
-            d = dist if np.ndim(getattr(dist, "m", 0.0)) == 0 else Beckmann.per_point(dist.m[sel])
+            d = dist.take(sel)
             h = d.sample(wo_l[:, sel], u_dir[:, sel])
             wi_l[:, sel] = reflect_local(wo_l[:, sel], h)
     if has_diffuse:
@@ -307,16 +348,20 @@ class TorranceSparrow(BSDF):
     exterior_n : float > 0 — index of the incident medium (η = (n + iκ)/exterior_n).
     diffuse_albedo : Spectrum, float or None — ρ of the Lambert term (None = no diffuse term).
     specular_weight : float ≥ 0 — s.   diffuse_weight : float ≥ 0 — d.
-    distribution : "beckmann" (default) | "blinn".
+    distribution : "beckmann" (default) | "blinn" | "ggx" (m is then the GGX α).
     diffuse_layering : "add" (default) | "albedo_scaling" (Cycles' Principled energy sharing, not
         reciprocal; module docstring).
+    shadowing : None (the default) is "smith_correlated" for GGX (Cycles' G) and "ts" otherwise.
+    multiscatter : bool — Cycles' multiple-scattering energy compensation, added as a depolarised
+        term (module docstring); needs distribution "ggx", a Smith shadowing ("smith_correlated" or
+        "smith") and m ≤ 1.
     """
 
     name = "torrance_sparrow"
 
-    def __init__(self, n, k, m, shadowing: str = "ts", exterior_n: float = 1.0, diffuse_albedo=None,
+    def __init__(self, n, k, m, shadowing: str | None = None, exterior_n: float = 1.0, diffuse_albedo=None,
                  specular_weight: float = 1.0, diffuse_weight: float = 0.0, distribution: str = "beckmann",
-                 blinn_exponent: float | None = None, diffuse_layering: str = "add"):
+                 blinn_exponent: float | None = None, diffuse_layering: str = "add", multiscatter: bool = False):
         self.n = as_spectrum(n, "n")
         self.k = as_spectrum(k, "k")
         # m, specular_weight and diffuse_weight may be TexturedNumbers (values per surface point,
@@ -325,15 +370,19 @@ class TorranceSparrow(BSDF):
             if not m.lo >= M_MIN:
                 raise ValueError(f"a textured roughness m must be >= {M_MIN:g} everywhere (no per-point smooth "
                                  f"limit), its values reach {m.lo:g}")
-            if distribution != "beckmann":
-                raise ValueError("a textured roughness m needs distribution='beckmann'")
+            if distribution not in ("beckmann", "ggx"):
+                raise ValueError("a textured roughness m needs distribution='beckmann' or 'ggx'")
         else:
             m = float(m)
             if not (math.isfinite(m) and m >= M_MIN):
                 raise ValueError(f"roughness m must be a finite number >= {M_MIN:g}, got {m!r}")
         self.m = m
+        if shadowing is None:
+            shadowing = "smith_correlated" if distribution == "ggx" else "ts"
         if shadowing not in SHADOWING:
             raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+        if shadowing == "smith_rational" and distribution == "ggx":
+            raise ValueError("shadowing 'smith_rational' (Walter's rational Beckmann G1) needs distribution 'beckmann'")
         self.shadowing = shadowing
         self.exterior_n = float(exterior_n)
         if not (math.isfinite(self.exterior_n) and self.exterior_n > 0):
@@ -351,12 +400,26 @@ class TorranceSparrow(BSDF):
             self.dist = None if isinstance(m, TexturedNumber) else Beckmann(m)
         elif distribution == "blinn":
             self.dist = BlinnPhong(blinn_exponent) if blinn_exponent is not None else BlinnPhong.from_beckmann_m(m)
+        elif distribution == "ggx":
+            if blinn_exponent is not None:
+                raise ValueError("blinn_exponent is only used with distribution='blinn'")
+            self.dist = None if isinstance(m, TexturedNumber) else GGX(m)
         else:
             raise ValueError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
         self.distribution = distribution
         if diffuse_layering not in DIFFUSE_LAYERINGS:
             raise ValueError(f"diffuse_layering must be one of {DIFFUSE_LAYERINGS}, got {diffuse_layering!r}")
         self.diffuse_layering = diffuse_layering
+        self.multiscatter = bool(multiscatter)
+        if self.multiscatter:
+            if distribution != "ggx" or shadowing not in MULTISCATTER_SHADOWING:
+                raise ValueError("multiscatter (Cycles' Multiscatter GGX) needs distribution='ggx' and a Smith "
+                                 f"shadowing {MULTISCATTER_SHADOWING} (its albedo tables are those lobes'), got "
+                                 f"{distribution!r}, {shadowing!r}")
+            hi = m.hi if isinstance(m, TexturedNumber) else m
+            if not hi <= ALPHA_MAX:
+                raise ValueError(f"multiscatter needs roughness m <= {ALPHA_MAX:g} (Cycles clamps GGX alpha to 1), "
+                                 f"got {hi!r}")
         def positive(v):
             return v.hi > 0 if isinstance(v, TexturedNumber) else v > 0
         self.has_specular = positive(self.s)
@@ -382,10 +445,10 @@ class TorranceSparrow(BSDF):
         return True
 
     def _albedo_table(self) -> SpecularAlbedoTable:
-        """The facet lobe's albedo table (``"albedo_scaling"``): Beckmann, one constant index."""
-        if self.distribution != "beckmann":
-            raise ValueError("diffuse_layering='albedo_scaling' needs distribution='beckmann' (the specular-albedo "
-                             "table is Beckmann's)")
+        """The facet lobe's albedo table (``"albedo_scaling"``): Beckmann or GGX, one constant index."""
+        if self.distribution not in ("beckmann", "ggx"):
+            raise ValueError("diffuse_layering='albedo_scaling' needs distribution 'beckmann' or 'ggx' (the "
+                             "specular-albedo tables)")
         if not (isinstance(self.n, ConstantSpectrum) and isinstance(self.k, ConstantSpectrum)):
             raise ValueError("diffuse_layering='albedo_scaling' needs a constant n and k (one specular-albedo "
                              f"table), got n={self.n!r}, k={self.k!r}")
@@ -394,13 +457,15 @@ class TorranceSparrow(BSDF):
             lo, hi = max(self.m.lo, M_MIN), max(self.m.hi, M_MIN)
         else:
             lo = hi = self.m
-        return SpecularAlbedoTable(eta, lo, hi, self.shadowing)
+        return SpecularAlbedoTable(eta, lo, hi, self.shadowing, self.distribution)
 
     def diffuse_scale(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray | None:
         """max(0, 1 − s·E(cosθ_o)) (N,) of ``"albedo_scaling"``; None for ``"add"`` (weight 1)."""
         if self._albedo is None:
             return None
         E = self._albedo(cos_o, sp.number(self.m))
+        if self.multiscatter:       # the compensated lobe's albedo: (1 + k)·E_F (Cycles' layering estimate)
+            E = E * (1.0 + self.multiscatter_extra(sp)[0])
         return np.maximum(1.0 - sp.number(self.s) * E, 0.0)
 
     # --- helpers ---------------------------------------------------------------------------------
@@ -410,7 +475,8 @@ class TorranceSparrow(BSDF):
         if self.dist is not None:
             return self.dist
         m = sp.number(self.m)
-        return Beckmann.per_point(m if sel is None else m[sel])
+        per_point = GGX.per_point if self.distribution == "ggx" else Beckmann.per_point
+        return per_point(m if sel is None else m[sel])
 
     def relative_eta(self, sp: ShadingPoint) -> np.ndarray:
         return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
@@ -441,8 +507,15 @@ class TorranceSparrow(BSDF):
 
     @property
     def _compiled_lobe(self) -> bool:
-        """The facet lobe runs as the Beckmann twins (engine.kernels.torrance_sparrow)."""
-        return self.has_specular and self.distribution == "beckmann"
+        """The facet lobe runs as the Beckmann twins (engine.kernels.torrance_sparrow), which have the
+        shadowing forms of SHADOWING_CODES (the height-correlated one runs the NumPy functions)."""
+        return self.has_specular and self.distribution == "beckmann" and self.shadowing in SHADOWING_CODES
+
+    def multiscatter_extra(self, sp: ShadingPoint) -> np.ndarray:
+        """k (L, N) or (1, N) of the multiple-scattering compensation (module docstring): the facet
+        lobe's S0 is (1 + k) times its single-scattering value."""
+        return conductor_extra(np.clip(sp.cos_o, 0.0, 1.0), sp.number(self.m), self._eta(sp),
+                               correlated=self.shadowing == "smith_correlated")
 
     def _depol(self, sp: ShadingPoint, valid: np.ndarray, cos_o) -> np.ndarray | None:
         """The Lambert term d·ρ/π (L, N) (times the ``"albedo_scaling"`` weight), 0 where not valid."""
@@ -471,10 +544,14 @@ class TorranceSparrow(BSDF):
         else:
             x, A, B, C, S, valid = _facet_eval(self._dist(sp), sp.n_s, sp.wo, wi, self.relative_eta(sp),
                                                sp.number(self.s), self.shadowing)
-        return MuellerValue("abcs", x, x, A, B, C, S, depol=self._depol(sp, valid, lambda: sp.cos_o))
+        depol = self._depol(sp, valid, lambda: sp.cos_o)
+        if self.multiscatter:   # the multiply scattered energy, depolarised: k·M00 of the facet lobe
+            extra = self.multiscatter_extra(sp) * A
+            depol = extra if depol is None else depol + extra
+        return MuellerValue("abcs", x, x, A, B, C, S, depol=depol)
 
     def _m(self, sp: ShadingPoint):
-        """The Beckmann roughness at the points: a number, or (N,) for a textured m."""
+        """The roughness at the points: a number, or (N,) for a textured m."""
         return sp.number(self.m)
 
     def _eta(self, sp: ShadingPoint) -> np.ndarray:
@@ -529,6 +606,8 @@ class TorranceSparrow(BSDF):
             out["blinn_exponent"] = self.dist.e
         if self.diffuse_layering != "add":
             out["diffuse_layering"] = self.diffuse_layering
+        if self.multiscatter:
+            out["multiscatter"] = True
         return out
 
 
@@ -539,13 +618,19 @@ MAX_WEIGHT = 1e6
 
 DECLARATION = ModelDeclaration(
     "torrance_sparrow", "Torrance–Sparrow",
-    "Rough microfacet reflection (Beckmann facets, complex index) with an optional Lambertian part",
+    "Rough microfacet reflection (Beckmann or GGX facets, complex index) with an optional Lambertian part",
     [N, K, METAL,
-     Parameter("m", f"Beckmann rms slope (= Mitsuba α, SCATMECH s): 0 (the smooth limit: a Fresnel mirror) "
-                    f"or ≥ {M_MIN:g}", lo=0.0, hi=100.0, texturable=True,
+     Parameter("m", f"roughness: the Beckmann rms slope (= Mitsuba α, SCATMECH s) or the GGX α; 0 (the smooth "
+                    f"limit: a Fresnel mirror) or ≥ {M_MIN:g}", lo=0.0, hi=100.0, texturable=True,
                socket=Socket("Roughness", "FLOAT", 0.1, 0.0, 5.0,
                              "Beckmann rms slope m (Mitsuba's α); 0 = smooth mirror")),
-     Parameter("shadowing", "shadowing-masking", kind="choice", choices=SHADOWING, default="ts"),
+     Parameter("distribution", "microfacet distribution (GGX: Cycles' and Blender's)", kind="choice",
+               choices=SCENE_DISTRIBUTIONS, default="beckmann"),
+     Parameter("shadowing", "shadowing-masking (default: 'ts' for Beckmann, 'smith_correlated' — Cycles' — for "
+                            "GGX)", kind="choice", choices=SHADOWING, default=None),
+     Parameter("multiscatter", "add the energy of multiple scattering between facets as a depolarised term, as "
+                               "Cycles' Multiscatter GGX (needs distribution 'ggx', a Smith shadowing, m ≤ 1)",
+               kind="bool", default=False),
      Parameter("diffuse_albedo", "albedo of the added Lambertian part", kind="spectrum", spectrum="reflectance",
                lo=0.0, hi=1.0, default=0.0, texturable=True,
                socket=Socket("Diffuse", "COLOR", (0.0, 0.0, 0.0), 0.0, 1.0,
@@ -569,7 +654,16 @@ DECLARATION.per_point = frozenset({"n", "k", "m", "diffuse_albedo", "diffuse_wei
 @DECLARATION.builder
 def _torrance_sparrow(p):
     n, k = complex_index(p)
-    shadowing = p["shadowing"]
+    shadowing, distribution, multiscatter = p["shadowing"], p["distribution"], p["multiscatter"]
+    if shadowing == "smith_rational" and distribution == "ggx":
+        raise SceneError(p.field("shadowing"), "'smith_rational' (Walter's rational Beckmann G1) exists for "
+                                               "distribution 'beckmann' only")
+    if multiscatter and distribution != "ggx":
+        raise SceneError(p.field("multiscatter"), "needs distribution 'ggx' (Cycles' Multiscatter GGX; the albedo "
+                                                  f"tables are GGX's), got {distribution!r}")
+    if multiscatter and shadowing not in (None,) + MULTISCATTER_SHADOWING:
+        raise SceneError(p.field("multiscatter"), f"needs shadowing {' or '.join(map(repr, MULTISCATTER_SHADOWING))} "
+                                                  f"(the albedo tables are of the Smith lobes), got {shadowing!r}")
     m = p["m"]
     if isinstance(m, TexturedNumber):
         m = m.clamped_to(M_MIN)          # a texel stored as float32 just below the limit counts as the limit
@@ -577,20 +671,18 @@ def _torrance_sparrow(p):
             raise SceneError(p.field("m"), f"a roughness texture must stay in [{M_MIN:g}, {p.model['m'].hi:g}] "
                                            f"(the smooth limit m = 0 cannot vary per point), its values reach "
                                            f"{m.lo:g}")
-        m_const = None
+        m_const, m_hi = None, m.hi
     else:
-        m_const = m
+        m_const = m_hi = m
+    if multiscatter and not m_hi <= ALPHA_MAX:
+        raise SceneError(p.field("m"), f"must be at most {ALPHA_MAX:g} with multiscatter (Cycles clamps GGX α to 1; "
+                                       f"the albedo tables span [0, 1]), got {m_hi:g}")
     kw = dict(exterior_n=p["exterior_n"], diffuse_albedo=p["diffuse_albedo"],
               diffuse_weight=p.get("diffuse_weight", 1.0 if p.given("diffuse_albedo") else 0.0),
               specular_weight=p["specular_weight"], diffuse_layering=p["diffuse_layering"])
-    if m_const is None:
-        return TorranceSparrow(n, k, m, shadowing=shadowing, **kw)
-    if 0 < m < M_MIN:
+    if m_const is not None and 0 < m < M_MIN:
         raise SceneError(p.field("m"), f"must be 0 (the smooth limit) or in [{M_MIN:g}, {p.model['m'].hi:g}], "
                                        f"got {m:g}")
-    kw = dict(exterior_n=p["exterior_n"], diffuse_albedo=p["diffuse_albedo"],
-              diffuse_weight=p.get("diffuse_weight", 1.0 if p.given("diffuse_albedo") else 0.0),
-              specular_weight=p["specular_weight"], diffuse_layering=p["diffuse_layering"])
-    if m == 0:   # the smooth limit: a Fresnel mirror (plus the Lambertian part)
+    if m_const == 0:   # the smooth limit: a Fresnel mirror (plus the Lambertian part); E = 1, nothing to add
         return MirrorWithDiffuse(n, k, **kw)
-    return TorranceSparrow(n, k, m, shadowing=shadowing, **kw)
+    return TorranceSparrow(n, k, m, shadowing=shadowing, distribution=distribution, multiscatter=multiscatter, **kw)

@@ -508,8 +508,10 @@ def test_flags_and_validation():
     assert model.delta_reflection(point(sph(10.0, 0.0))) is None
     assert model.describe()["m"] == 0.1
     for bad in (dict(m=0.0), dict(m=M_MIN / 2), dict(m=float("nan")), dict(shadowing="cook"),
-                dict(distribution="ggx"), dict(exterior_n=0.0), dict(specular_weight=-1.0),
-                dict(distribution="blinn", m=2.0)):
+                dict(distribution="phong"), dict(exterior_n=0.0), dict(specular_weight=-1.0),
+                dict(distribution="blinn", m=2.0), dict(distribution="ggx", shadowing="smith_rational"),
+                dict(multiscatter=True), dict(distribution="ggx", shadowing="ts", multiscatter=True),
+                dict(distribution="ggx", m=1.5, multiscatter=True)):
         kw = dict(n=1.5, k=0.0, m=0.1)
         kw.update(bad)
         with pytest.raises(ValueError):

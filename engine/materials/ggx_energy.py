@@ -1,0 +1,320 @@
+"""Directional albedos of single-scattering GGX lobes, for multiple-scattering energy compensation.
+
+A microfacet lobe that scatters once loses the light that bounces between facets more than once:
+at GGX α = 1 a white (F = 1) conductor reflects only 0.31 of normally incident light, a clear glass
+interface (n = 1.5) 0.89.
+Cycles' "Multiscatter GGX" (the Principled BSDF's default; also the Glossy, Glass and Metallic BSDFs)
+puts it back by *albedo scaling* (Kulla & Conty 2017, "Revisiting Physically Based Shading at
+Imageworks", as Cycles implements it in kernel/closure/bsdf_microfacet.h,
+``microfacet_ggx_preserve_energy``): the single-scattering lobe f_ss is multiplied by
+
+    1 + F_ms·(1 − E(μ_o))/E(μ_o),        F_ms = F_ss·E_avg / (1 − F_ss·(1 − E_avg)),
+
+where μ_o is the cosine of the *viewing* direction, E(μ_o) the lobe's directional albedo with F = 1
+(or, for glass, with the dielectric's own Fresnel over reflection and refraction, and then
+F_ss = 1), E_avg = ∫ 2μ E(μ) dμ its hemispherical average, and F_ss the conductor's average
+Fresnel reflectance (engine.materials.torrance_sparrow: Cycles' F82-tint fit).  The scale is a
+function of ω_o only (not reciprocal, as in Cycles).
+
+This module computes those E by deterministic quadrature of *this engine's* single-scattering lobes
+(GGX D; Smith shadowing separable, G1(ω_i)·G1(ω_o), as the rough dielectric's, or height-correlated,
+1/(1 + Λ(ω_i) + Λ(ω_o)), Cycles' form and Torrance–Sparrow's default for GGX), so that the
+compensated lobes integrate to what they should here (a white conductor or a clear glass to 1).
+
+The integral is taken over the visible normals of ω_o (Heitz 2018): with a facet h drawn from
+D_ωo(h) = G1(ω_o) max(0, ω_o·h) D(h)/cosθ_o, the single-scattering estimator f·cosθ_i/pdf is
+F·W(ω_i) for reflection and (1 − F)·W(ω_t) for refraction (the energy, i.e. without the 1/η² of
+radiance), W = G/G1(ω_o) = G1(ω_i) (separable) or (1 + Λ_o)/(1 + Λ_o + Λ_i) (height-correlated), so
+
+    E(μ_o) = ∫_disk [ F(ω_o·h)·W(ω_r) + (1 − F(ω_o·h))·W(ω_t) ] dA/π,
+
+where the unit disk is Heitz's projected-hemisphere parametrisation of the visible normals (uniform
+on the disk = distributed as D_ωo), ω_r and ω_t are ω_o reflected and refracted at h, and each term
+is 0 where that direction lies on the wrong side of the surface (F = 1 under total internal
+reflection; F = 1 and no refraction for the conductor's table).  The integrand is continuous (W → 0
+at the horizon), so a product rule converges: Gauss–Legendre in the disk radius (weight 2ρ), the
+midpoint rule in its angle (periodic; the half disk, the integrand being even).  No peak needs
+resolving at any α: the visible-normal map absorbs it.  With 96 × 96 nodes E is within 2·10⁻³ of a
+384 × 384 rule everywhere (1.5·10⁻⁴ rms; the worst case: the kink of W at the horizon for small α
+and the square-root onset of total internal reflection), and the height-correlated tables reproduce
+Cycles' own ggx_E, ggx_Eavg and ggx_glass_E (ior > 1) at their nodes to 3·10⁻⁴ (its ggx_glass_inv_E,
+for light inside the glass, is not the albedo of its kernel's BSDF below the critical angle:
+docs/physics.md).
+
+Tables (built once, stored by engine.materials.table_cache):
+
+- ``conductor_tables()``: E(μ, α) of the reflection lobe with F = 1, on ``MU_NODES`` nodes in
+  t = √μ and ``ROUGH_NODES`` nodes in r = √α ∈ [0, 1] (Cycles' roughness axis; r = 0 is the smooth
+  limit E = 1), plus E_avg(α) by Gauss–Legendre in μ; interpolated bilinearly in (t, r)
+  (``conductor_albedo``, ``conductor_average``).
+- ``DielectricAlbedo(n_ratio, alpha)``: E(μ) of one rough dielectric interface (reflection +
+  refraction, the unpolarised Fresnel of the material's own real index) seen from either side, on
+  ``DIELECTRIC_MU_NODES`` nodes in √μ, linear in between.  A rough dielectric has one index and one
+  roughness, so its table is 1-D and exact in both (Cycles interpolates a 16³ table over roughness,
+  μ and the index).
+
+E is clamped to [``E_FLOOR``, 1] where it is used, so every compensation factor is finite and the
+added energy never negative.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+
+from .table_cache import cached_table
+from ..polarisation.fresnel import fresnel_reflectance
+
+#: Nodes of the conductor table in t = √μ and in r = √α ∈ [0, 1].
+MU_NODES = 33
+ROUGH_NODES = 33
+#: Gauss–Legendre nodes in μ for E_avg.
+AVG_NODES = 32
+#: Nodes of a dielectric's table in t = √μ (per side).
+DIELECTRIC_MU_NODES = 65
+#: Quadrature over the visible-normal disk: Gauss–Legendre nodes in the radius, midpoint nodes in the
+#: angle over the half disk (the integrand is even).
+QUAD_RADIUS = 96
+QUAD_ANGLE = 96
+#: cosθ_o of the μ = 0 node (the grazing limit, taken just above the horizon).
+MU_FLOOR = 1e-6
+#: Smallest albedo a compensation divides by.
+E_FLOOR = 0.05
+#: Largest roughness α the tables cover (Cycles clamps GGX α to 1).
+ALPHA_MAX = 1.0
+
+_TABLE_VERSION = 1
+
+
+@functools.lru_cache(maxsize=1)
+def _disk_rule():
+    """(p1, p2, w) (K,): nodes on the unit disk and weights summing to 1 (uniform measure)."""
+    x, wx = np.polynomial.legendre.leggauss(QUAD_RADIUS)
+    rho = 0.5 * (x + 1.0)
+    w_rho = wx * rho                     # ∫₀¹ 2ρ g dρ: ½·2ρ·w
+    # the integrand is even in p1 (the viewer lies in the xz plane): the half disk p1 > 0, weights doubled
+    phi = math.pi * ((np.arange(QUAD_ANGLE) + 0.5) / QUAD_ANGLE - 0.5)
+    R, P = np.meshgrid(rho, phi, indexing="ij")
+    w = np.repeat(w_rho, QUAD_ANGLE) / QUAD_ANGLE
+    return (R * np.cos(P)).ravel(), (R * np.sin(P)).ravel(), w
+
+
+def _ggx_lambda(w, alpha):
+    """Smith Λ = (√(1 + α² tan²θ) − 1)/2 of GGX for directions w (3, ...) of either hemisphere (|tanθ|),
+    ∞ at the horizon."""
+    xy2 = w[0] * w[0] + w[1] * w[1]
+    z2 = w[2] * w[2]
+    ok = z2 > 0
+    x = alpha * alpha * np.where(ok, xy2 / np.where(ok, z2, 1.0), 0.0)
+    return np.where(ok, 0.5 * x / (np.sqrt(1.0 + x) + 1.0), np.inf)
+
+
+def _weight(w, lam_o, alpha, correlated: bool):
+    """The single-scattering estimator's shadowing factor G/G1(ω_o) for the scattered direction w:
+    G1(w) = 1/(1 + Λ(w)) (separable Smith), or (1 + Λ(ω_o))/(1 + Λ(ω_o) + Λ(w)) (height-correlated)."""
+    lam = _ggx_lambda(w, alpha)
+    return (1.0 + lam_o) / (1.0 + lam_o + lam) if correlated else 1.0 / (1.0 + lam)
+
+
+def _visible_normals(mu, alpha):
+    """(ω_o (3, M, 1), h (3, M, K), w (K,)): the disk rule's facet normals for viewers at cosines mu (M,) in
+    the xz plane, roughness ``alpha`` (a number or (M,)); Heitz 2018's map from the disk to D_ωo."""
+    p1, p2, w = _disk_rule()
+    mu = np.clip(np.asarray(mu, np.float64), MU_FLOOR, 1.0)[:, None]
+    a = np.broadcast_to(np.asarray(alpha, np.float64), mu.shape[:1])[:, None]
+    sin_o = np.sqrt(np.maximum(1.0 - mu * mu, 0.0))
+    vx, vz = a * sin_o, mu                                   # stretched ω_o, then normalised
+    norm = np.sqrt(vx * vx + vz * vz)
+    vx, vz = vx / norm, vz / norm
+    s = 0.5 * (1.0 + vz)
+    q2 = (1.0 - s) * np.sqrt(np.maximum(1.0 - p1 * p1, 0.0)) + s * p2
+    pz = np.sqrt(np.maximum(1.0 - p1 * p1 - q2 * q2, 0.0))
+    # basis (T1, T2, v) = ((0, 1, 0), (−v_z, 0, v_x), v)
+    nx = -q2 * vz + pz * vx
+    ny = np.broadcast_to(p1, nx.shape)
+    nz = q2 * vx + pz * vz
+    hx, hy, hz = a * nx, a * ny, np.maximum(nz, 0.0)
+    inv = 1.0 / np.sqrt(hx * hx + hy * hy + hz * hz)
+    h = np.stack((hx * inv, hy * inv, hz * inv))
+    wo = np.stack((sin_o, np.zeros_like(mu), mu))
+    return wo, h, w
+
+
+def ggx_albedo(mu, alpha, eta: float | None = None, correlated: bool = False) -> np.ndarray:
+    """E(μ) (M,) of the single-scattering GGX lobe at viewing cosines ``mu`` (M,), roughness ``alpha`` > 0
+    (a number or (M,)): the reflection lobe with F = 1 (``eta`` None), or a dielectric interface of real
+    relative index ``eta`` = n_far/n_viewer, reflection plus refraction with the unpolarised Fresnel
+    reflectance (energy: no 1/η²).  Shadowing: separable Smith G1(ω_i)·G1(ω_o), or with ``correlated``
+    the height-correlated 1/(1 + Λ(ω_i) + Λ(ω_o)) (Heitz 2014; Cycles' form)."""
+    mu = np.atleast_1d(np.asarray(mu, np.float64))
+    out = np.empty(mu.size)
+    step = max(1, 4096 // QUAD_RADIUS // QUAD_ANGLE)        # rows per batch: bounded memory
+    alpha = np.broadcast_to(np.asarray(alpha, np.float64), mu.shape)
+    for i in range(0, mu.size, step):
+        sl = slice(i, i + step)
+        wo, h, w = _visible_normals(mu[sl], alpha[sl])
+        a = alpha[sl][:, None]
+        lam_o = _ggx_lambda(wo, a)
+        d = np.maximum(np.sum(wo * h, axis=0), 0.0)              # ω_o·h ≥ 0 for visible normals
+        wr = 2.0 * d * h - wo
+        refl = np.where(wr[2] > 0, _weight(wr, lam_o, a, correlated), 0.0)
+        if eta is None:
+            out[sl] = refl @ w
+            continue
+        F = fresnel_reflectance(d, complex(eta))
+        inv = 1.0 / eta
+        cos_t2 = 1.0 - (1.0 - d * d) * inv * inv
+        tir = cos_t2 <= 0.0
+        cos_t = np.sqrt(np.maximum(cos_t2, 0.0))
+        wt = -wo * inv + (d * inv - cos_t) * h
+        refr = np.where(~tir & (wt[2] < 0), _weight(wt, lam_o, a, correlated), 0.0)
+        F = np.where(tir, 1.0, F)
+        out[sl] = (F * refl + (1.0 - F) * refr) @ w
+    return out
+
+
+def ggx_reflection_albedo(mu, alpha, eta: complex, correlated: bool = True) -> np.ndarray:
+    """E_F(μ) (M,) of the single-scattering GGX *reflection* lobe with the unpolarised Fresnel reflectance
+    of the relative index ``eta`` (complex: a conductor; real: a dielectric's specular layer) at viewing
+    cosines ``mu`` (M,), roughness ``alpha`` (a number or (M,)): the directional albedo that Cycles'
+    Principled layering subtracts from the layers below (its ggx_gen_schlick_ior_s table is this over
+    the F = 1 albedo E).  The same disk rule as :func:`ggx_albedo`."""
+    mu = np.atleast_1d(np.asarray(mu, np.float64))
+    out = np.empty(mu.size)
+    step = max(1, 4096 // QUAD_RADIUS // QUAD_ANGLE)
+    alpha = np.broadcast_to(np.asarray(alpha, np.float64), mu.shape)
+    for i in range(0, mu.size, step):
+        sl = slice(i, i + step)
+        wo, h, w = _visible_normals(mu[sl], alpha[sl])
+        a = alpha[sl][:, None]
+        lam_o = _ggx_lambda(wo, a)
+        d = np.maximum(np.sum(wo * h, axis=0), 0.0)
+        wr = 2.0 * d * h - wo
+        refl = np.where(wr[2] > 0, _weight(wr, lam_o, a, correlated), 0.0)
+        F = fresnel_reflectance(d, complex(eta))
+        out[sl] = (F * refl) @ w
+    return out
+
+
+# --------------------------------------------------------------------------- the conductor's table
+
+def _t_nodes(n: int) -> np.ndarray:
+    return np.linspace(0.0, 1.0, n)
+
+
+def _build_conductor(correlated: bool) -> np.ndarray:
+    """(MU_NODES + 1, ROUGH_NODES): E at (t_i², r_j²), and E_avg(r_j²) in the last row."""
+    t = _t_nodes(MU_NODES)
+    r = np.linspace(0.0, 1.0, ROUGH_NODES)
+    x, wx = np.polynomial.legendre.leggauss(AVG_NODES)
+    mu_avg, w_avg = 0.5 * (x + 1.0), 0.5 * wx
+    out = np.ones((MU_NODES + 1, ROUGH_NODES))
+    for j in range(1, ROUGH_NODES):              # r = 0: the smooth limit, E = 1
+        alpha = r[j] * r[j]
+        out[:MU_NODES, j] = ggx_albedo(t * t, alpha, correlated=correlated)
+        out[MU_NODES, j] = np.sum(w_avg * 2.0 * mu_avg * ggx_albedo(mu_avg, alpha, correlated=correlated))
+    return np.clip(out, 0.0, 1.0)
+
+
+@functools.lru_cache(maxsize=2)
+def conductor_tables(correlated: bool = False) -> np.ndarray:
+    """The conductor's E(μ, α) and E_avg(α) table (``_build_conductor``) for separable or height-correlated
+    Smith shadowing, from the disk cache."""
+    correlated = bool(correlated)
+    table = cached_table("ggx_conductor_albedo",
+                         (_TABLE_VERSION, correlated, MU_NODES, ROUGH_NODES, AVG_NODES, QUAD_RADIUS, QUAD_ANGLE,
+                          MU_FLOOR),
+                         (MU_NODES + 1, ROUGH_NODES), lambda: _build_conductor(correlated))
+    table.setflags(write=False)
+    return table
+
+
+def _rough_coordinate(alpha):
+    """(j, f): the r = √α cell and the fraction within it, α clipped to [0, ALPHA_MAX]."""
+    x = np.sqrt(np.clip(np.asarray(alpha, np.float64), 0.0, ALPHA_MAX)) * (ROUGH_NODES - 1)
+    j = np.minimum(x.astype(np.int64), ROUGH_NODES - 2)
+    return j, x - j
+
+
+def conductor_albedo(mu, alpha, correlated: bool = False) -> np.ndarray:
+    """E(μ, α) of the F = 1 GGX reflection lobe, bilinear in (√μ, √α); μ (N,), α a number or (N,)."""
+    E = conductor_tables(correlated)
+    mu = np.asarray(mu, np.float64)
+    x = np.sqrt(np.clip(mu, 0.0, 1.0)) * (MU_NODES - 1)
+    i = np.minimum(x.astype(np.int64), MU_NODES - 2)
+    fx = x - i
+    j, fy = _rough_coordinate(np.broadcast_to(np.asarray(alpha, np.float64), mu.shape))
+    return ((E[i, j] * (1.0 - fx) + E[i + 1, j] * fx) * (1.0 - fy)
+            + (E[i, j + 1] * (1.0 - fx) + E[i + 1, j + 1] * fx) * fy)
+
+
+def conductor_average(alpha, correlated: bool = False) -> np.ndarray:
+    """E_avg(α) = ∫ 2μ E(μ, α) dμ, linear in √α."""
+    row = conductor_tables(correlated)[MU_NODES]
+    j, f = _rough_coordinate(alpha)
+    return row[j] * (1.0 - f) + row[j + 1] * f
+
+
+def f82_average_fresnel(eta: np.ndarray) -> np.ndarray:
+    """F_ss: Cycles' estimate of a conductor's average Fresnel reflectance ∫ 2μ F(μ) dμ
+    (``fresnel_conductor_Fss``): the F82-tint model fitted to the exact unpolarised reflectance at
+    normal incidence (F0) and at cosθ = 1/7 (≈ 82°, F82), whose average is analytic:
+        b = 7·(F0 + (1 − F0)(6/7)⁵ − F82) / (6/7)⁶,   F_ss = F0 + (1 − F0)/21 − b/126,
+    clipped to [0, 1].  ``eta``: the complex relative index (any shape)."""
+    eta = np.asarray(eta, np.complex128)
+    F0 = fresnel_reflectance(np.ones(eta.shape), eta)
+    F82 = fresnel_reflectance(np.full(eta.shape, 1.0 / 7.0), eta)
+    f = 6.0 / 7.0
+    f5 = f ** 5
+    b = (7.0 / (f5 * f)) * (F0 + (1.0 - F0) * f5 - F82)
+    return np.clip(F0 + (1.0 - F0) / 21.0 - b / 126.0, 0.0, 1.0)
+
+
+def conductor_extra(mu, alpha, eta, correlated: bool = False) -> np.ndarray:
+    """The compensation's share k (L, N) ≥ 0 for a conductor: f = f_ss·(1 + k), so the added
+    (depolarised) term is k·M00(f_ss):  k = F_ms·(1 − E)/E, F_ms = F_ss·E_avg/(1 − F_ss·(1 − E_avg)).
+    ``mu`` (N,) viewing cosines, ``alpha`` a number or (N,), ``eta`` (L, N) or (L, 1) complex;
+    ``correlated``: the lobe's Smith shadowing is height-correlated (else separable)."""
+    E = np.clip(conductor_albedo(mu, alpha, correlated), E_FLOOR, 1.0)
+    E_avg = np.clip(conductor_average(alpha, correlated), E_FLOOR, 1.0)
+    Fss = f82_average_fresnel(eta)
+    Fms = Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
+    return Fms * ((1.0 - E) / E)
+
+
+# --------------------------------------------------------------------------- a dielectric's table
+
+class DielectricAlbedo:
+    """E(μ) of one rough GGX dielectric interface (index ratio ``n_ratio`` = n/exterior_n, roughness α):
+    row 0 seen from outside (η = n_ratio), row 1 from inside (η = 1/n_ratio); the compensation
+    factor is 1/E (Cycles' glass: F_ss = 1, so F_ms = 1)."""
+
+    def __init__(self, n_ratio: float, alpha: float):
+        self.n_ratio, self.alpha = float(n_ratio), float(alpha)
+        self.E = _dielectric_table(self.n_ratio, self.alpha)
+
+    def __call__(self, mu: np.ndarray, outside: np.ndarray) -> np.ndarray:
+        """E (N,) at viewing cosines |μ| (N,) from outside (True) or inside (False)."""
+        x = np.sqrt(np.clip(np.abs(np.asarray(mu, np.float64)), 0.0, 1.0)) * (DIELECTRIC_MU_NODES - 1)
+        i = np.minimum(x.astype(np.int64), DIELECTRIC_MU_NODES - 2)
+        f = x - i
+        row = np.where(outside, 0, 1)
+        return self.E[row, i] * (1.0 - f) + self.E[row, i + 1] * f
+
+    def extra(self, mu: np.ndarray, outside: np.ndarray) -> np.ndarray:
+        """k = 1/E − 1 ≥ 0 (N,): f = f_ss·(1 + k)."""
+        return 1.0 / np.clip(self(mu, outside), E_FLOOR, 1.0) - 1.0
+
+
+@functools.lru_cache(maxsize=64)
+def _dielectric_table(n_ratio: float, alpha: float) -> np.ndarray:
+    def build():
+        t = _t_nodes(DIELECTRIC_MU_NODES)
+        return np.clip(np.stack([ggx_albedo(t * t, alpha, eta) for eta in (n_ratio, 1.0 / n_ratio)]), 0.0, 1.0)
+    table = cached_table("ggx_dielectric_albedo",
+                         (_TABLE_VERSION, n_ratio, alpha, DIELECTRIC_MU_NODES, QUAD_RADIUS, QUAD_ANGLE, MU_FLOOR),
+                         (2, DIELECTRIC_MU_NODES), build)
+    table.setflags(write=False)
+    return table

@@ -1,0 +1,578 @@
+"""An incoherent mixture of materials: f = Σ_k w_k·f_k (Blender's Mix Shader and Add Shader).
+
+:class:`Mix` sums the Mueller BSDFs of its ``components`` with weights w_k ≥ 0, each a number or a
+texture (per surface point, engine.textures).  Blender's Mix Shader with factor t is the weights
+(1 − t, t), its Add Shader (1, 1); the weights are not normalised (a sum above 1 adds energy, as
+Add Shader does).  Light scattered by different components adds incoherently, so the Mueller
+matrices add.  Nested mixes are flattened (their weights multiplied), one material object listed
+more than once with constant weights is listed once with their sum, and a component whose weight is
+0 everywhere is dropped.
+
+**Frames.**  Each component reports its value in its own frames (x_in ⟂ k_i = −ω_i, x_out ⟂
+k_o = ω_o).  Depolarising values (A·diag(1, 0, 0, 0)) are frame-independent and add to M00 (an ABCS
+value's ``depol`` share, a general value's M00).  With one polarising value the sum keeps that
+value's kind and frames.  With several, the frames of the first polarising component are the common
+pair (where a frame vector is degenerate, the plane-of-incidence axis unit(n_s × k) instead); ABCS
+values whose frames already agree (|sin 2φ| ≤ 1e-12 on both beams) add as ABCS, otherwise every value
+is rotated into the common pair (R_out·M·R_inᵀ, engine.kernels.stokes_rotation) and the sum is a
+general matrix.
+
+**Sampling.**  Component k is chosen with probability p_k = w_k·a_k / Σ_j w_j·a_j, a_k a cheap
+albedo estimate: the wavelength-mean albedo of a Lambert component, a component's own
+``albedo_estimate(sp)`` if it has one, else 1; a_k is clipped to [ALBEDO_FLOOR, 1], so p_k > 0
+wherever w_k > 0.  The component samples with the rest of u_lobe rescaled to [0, 1) as its own
+lobe number.  A direction from a non-Dirac lobe gets the mixture's weight
+Σ_j w_j·f_j·|cosθ_i| / Σ_j p_j·pdf_j (so MIS and next-event estimation see the mixture's true
+density, ``pdf``); a Dirac one (w_k/p_k)·M_k with pdf 0.  η² (the radiance scale for Russian
+roulette) is the chosen component's.  With one component the sample is that component's, its
+weight times w.
+
+**Shading normals.**  A component may carry its own normal or bump map (a ShadingNormal wrapper):
+each component is evaluated at its own shading point.  ``shading_point`` computes those points from
+the unflipped hit (a MixShadingPoint); when the integrator then flips the point for the back of a
+two-sided mix, each component's point is flipped with it (its mapped normal negated), as a single
+normal-mapped material is mapped first and flipped after (Cycles' order).  Called with a plain
+ShadingPoint (a coat above, a test), the mix maps the components from the normal it is given.  The
+integrator multiplies f by |n_s·ω_i| with the mix's own normal, so a component with its own normal
+n_k enters ``eval`` as w_k·f_k·|n_k·ω_i| / |n_s·ω_i| (0 where n_s·ω_i = 0); ``delta_reflection``
+(into the mirror direction about n_s) includes such a component only where n_k = ±n_s.
+
+**Two-sided.**  The mix is two-sided if its own ``two_sided`` is set (scene files: the mix's
+``"two_sided"`` key) or if all its components are; the components' own settings are not read.  The
+integrator flips the back faces of an opaque two-sided mix as a whole (each component's point with
+it, above).  It does not flip a material that transmits, so a two-sided mix with a transmitting
+component (Principled's Transmission) flips its opaque components itself where the viewer sees the
+back (n_g·ω_o < 0), and leaves the transmitting ones their inside and outside, as Cycles does per
+closure.
+
+**Under a coat.**  A mix as the base of a Weidlich–Wilkie coat passes the coat index on to those of
+its components with an ``exterior_n`` (the ``exterior_n`` property).
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .lambert import Lambert
+from .normal_map import ShadingNormal
+from .parameters import ModelDeclaration, Parameter
+from ..errors import SceneError
+from ..kernels.stokes_rotation import frame_rotation
+from ..polarisation.frames import plane_of_incidence_axis
+from ..textures import TexturedNumber
+from ..vec3 import dot, reflect
+
+__all__ = ["ALBEDO_FLOOR", "MAX_COMPONENTS", "Mix", "MixShadingPoint", "WeightProduct", "add_values",
+           "rotate_mueller_batch"]
+
+#: Most components of one mix after nested mixes are flattened (named mixes of mixes could otherwise
+#: multiply to thousands of components).
+MAX_COMPONENTS = 64
+#: Smallest albedo estimate in the lobe-selection probabilities (keeps p_k > 0 where w_k > 0).
+ALBEDO_FLOOR = 0.02
+#: ABCS values whose frames differ by less than this in sin 2φ add without rotation.
+_SAME_FRAME = 1e-12
+_BELOW_ONE = math.nextafter(1.0, 0.0)
+
+
+# --------------------------------------------------------------------------- weights
+
+class WeightProduct:
+    """A weight c·t₁·t₂·… (a constant times textured numbers): a nested mix's weight times its
+    parent's.  Every factor is ≥ 0."""
+
+    def __init__(self, constant: float, factors: tuple):
+        self.constant, self.factors = float(constant), tuple(factors)
+        self.lo = self.constant * math.prod(f.lo for f in self.factors)
+        self.hi = self.constant * math.prod(f.hi for f in self.factors)
+
+    def at(self, points) -> np.ndarray:
+        value = self.constant
+        for f in self.factors:
+            value = value * f.at(points)
+        return value
+
+    def __repr__(self):
+        return " × ".join([f"{self.constant:g}"] * (self.constant != 1.0) + [repr(f) for f in self.factors])
+
+
+def _check_weight(w, where: str):
+    """``w`` as a float, TexturedNumber or WeightProduct, ≥ 0 everywhere (ValueError otherwise)."""
+    if isinstance(w, (TexturedNumber, WeightProduct)):
+        if not (w.lo >= 0.0 and math.isfinite(w.hi)):
+            raise ValueError(f"{where} must be ≥ 0 and finite everywhere, its texture spans [{w.lo:g}, {w.hi:g}]")
+        return w
+    if isinstance(w, (bool, np.bool_)) or not isinstance(w, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{where} must be a number or a TexturedNumber, got {w!r}")
+    v = float(w)
+    if not (math.isfinite(v) and v >= 0.0):
+        raise ValueError(f"{where} must be a finite number ≥ 0, got {w!r}")
+    return v
+
+
+def _times(a, b):
+    """The product of two weights (floats, TexturedNumbers, WeightProducts)."""
+    if isinstance(a, float) and isinstance(b, float):
+        return a * b
+
+    def parts(w):
+        if isinstance(w, float):
+            return w, ()
+        if isinstance(w, WeightProduct):
+            return w.constant, w.factors
+        return 1.0, (w,)
+    (ca, fa), (cb, fb) = parts(a), parts(b)
+    return WeightProduct(ca * cb, fa + fb)
+
+
+def _merged(components: list, weights: list) -> tuple[list, list]:
+    """The same material object listed more than once with constant weights (a material named twice,
+    or reached through several nested mixes) once, with the sum of those weights."""
+    out_c, out_w, at = [], [], {}
+    for c, w in zip(components, weights):
+        j = at.get(id(c)) if isinstance(w, float) else None
+        if j is not None:
+            out_w[j] += w
+            continue
+        if isinstance(w, float):
+            at[id(c)] = len(out_c)
+        out_c.append(c)
+        out_w.append(w)
+    return out_c, out_w
+
+
+def _is_zero(w) -> bool:
+    return w == 0.0 if isinstance(w, float) else w.hi == 0.0
+
+
+def _weight_at(sp: ShadingPoint, w) -> np.ndarray:
+    """The weight's values (N,) at the points."""
+    if isinstance(w, float):
+        return np.full(sp.n, w)
+    if isinstance(w, WeightProduct):
+        return np.broadcast_to(w.at(sp.surface_points()), (sp.n,))
+    return np.broadcast_to(sp.number(w), (sp.n,))
+
+
+# --------------------------------------------------------------------------- Mueller sums
+
+def rotate_mueller_batch(M: np.ndarray, c_in, s_in, c_out, s_out) -> np.ndarray:
+    """R_out·M·R_inᵀ for M (4, 4, L, N) with the frame rotations (cos 2φ, sin 2φ) of each beam (N,)
+    (engine.kernels.stokes_rotation.frame_rotation): rows 1–2 by the output's, columns 1–2 by the
+    input's, per lane, without 4×4 products (the same numbers as
+    engine.polarisation.frames.rotate_mueller_frames)."""
+    out = M.copy()
+    co, so = c_out[None, None, :], s_out[None, None, :]
+    r1, r2 = M[1], M[2]
+    out[1] = co * r1 + so * r2
+    out[2] = -so * r1 + co * r2
+    ci, si = c_in[None, None, :], s_in[None, None, :]
+    k1, k2 = out[:, 1].copy(), out[:, 2].copy()
+    out[:, 1] = ci * k1 + si * k2
+    out[:, 2] = -si * k1 + ci * k2
+    return out
+
+
+def _usable_frame(x: np.ndarray, n_s: np.ndarray, k: np.ndarray) -> tuple[np.ndarray, bool]:
+    """``x`` where it is a unit vector, the plane-of-incidence axis unit(n_s × k) elsewhere; and
+    whether anything was replaced."""
+    ok = dot(x, x) > 0.25
+    if ok.all():
+        return x, False
+    return np.where(ok[None, :], x, plane_of_incidence_axis(n_s, k)), True
+
+
+def add_values(terms, n: int, L: int, k_in: np.ndarray, k_out: np.ndarray, n_s: np.ndarray) -> MuellerValue:
+    """Σ scale·value over ``terms`` [(scale (N,) or float, MuellerValue)], all for the same beams
+    k_in = −ω_i, k_out = ω_o (3, N) (see the module docstring, "Frames"); the cheapest kind that holds
+    the sum."""
+    dep = None
+    pol = []
+    for scale, v in terms:
+        s = scale[None, :] if isinstance(scale, np.ndarray) else scale
+        if v.kind == "depolarising":
+            a = v.A * s
+            dep = a if dep is None else dep + a
+        else:
+            pol.append(v.scaled(s))
+    if not pol:
+        return depolarising_value(np.zeros((L, n)) if dep is None else np.broadcast_to(dep, (L, n)).copy(), n)
+    if len(pol) == 1:
+        v = pol[0]
+        if dep is None:
+            return v
+        if v.kind == "abcs":
+            depol = dep if v.depol is None else v.depol + dep
+            return MuellerValue("abcs", v.x_in, v.x_out, v.A, v.B, v.C, v.S, depol=depol)
+        M = v.M.copy()
+        M[0, 0] = M[0, 0] + dep
+        return MuellerValue("general", v.x_in, v.x_out, M=M)
+    ref = pol[0]
+    x_in, moved_in = _usable_frame(ref.x_in, n_s, k_in)
+    x_out, moved_out = _usable_frame(ref.x_out, n_s, k_out)
+    rotations = [None if (i == 0 and not (moved_in or moved_out)) else
+                 frame_rotation(v.x_in, x_in, k_in) + frame_rotation(v.x_out, x_out, k_out)
+                 for i, v in enumerate(pol)]
+    if all(v.kind == "abcs" for v in pol) and all(
+            r is None or (np.all(np.abs(r[1]) <= _SAME_FRAME) and np.all(np.abs(r[3]) <= _SAME_FRAME)
+                          and np.all(r[0] > 0) and np.all(r[2] > 0)) for r in rotations):
+        A, B, C, S = (sum(getattr(v, f) for v in pol) for f in "ABCS")
+        shares = [v.depol for v in pol if v.depol is not None] + ([dep] if dep is not None else [])
+        return MuellerValue("abcs", x_in, x_out, A, B, C, S, depol=sum(shares) if shares else None)
+    M = np.zeros((4, 4, L, n))
+    for v, r in zip(pol, rotations):
+        M += v.matrix() if r is None else rotate_mueller_batch(v.matrix(), r[0], r[1], r[2], r[3])
+    if dep is not None:
+        M[0, 0] += dep
+    return MuellerValue("general", x_in, x_out, M=M)
+
+
+def _take_value(v: MuellerValue, idx: np.ndarray) -> MuellerValue:
+    """The lanes ``idx`` of a value."""
+    def t(a):
+        return None if a is None else a[..., idx]
+    if v.kind == "general":
+        return MuellerValue("general", t(v.x_in), t(v.x_out), M=t(v.M))
+    return MuellerValue(v.kind, t(v.x_in), t(v.x_out), t(v.A), t(v.B), t(v.C), t(v.S), depol=t(v.depol))
+
+
+def _assemble(parts, n: int, L: int, frames) -> MuellerValue:
+    """One value over n lanes from [(lanes idx, value over those lanes)] (zero elsewhere), of the
+    cheapest kind that holds them all; ``frames()`` gives (x_in, x_out) for the lanes whose value
+    is depolarising (any frame holds a depolariser)."""
+    kinds = {v.kind for _, v in parts}
+    if kinds <= {"depolarising"}:
+        A = np.zeros((L, n))
+        for idx, v in parts:
+            A[:, idx] = v.A
+        return depolarising_value(A, n)
+    x_in, x_out = frames()
+    for idx, v in parts:
+        if v.kind != "depolarising":
+            x_in[:, idx], x_out[:, idx] = v.x_in, v.x_out
+    if kinds <= {"depolarising", "abcs"}:
+        A, B, C, S, D = (np.zeros((L, n)) for _ in range(5))
+        shared = False
+        for idx, v in parts:
+            if v.kind == "depolarising":
+                D[:, idx], shared = v.A, True
+                continue
+            A[:, idx], B[:, idx], C[:, idx], S[:, idx] = v.A, v.B, v.C, v.S
+            if v.depol is not None:
+                D[:, idx], shared = v.depol, True
+        return MuellerValue("abcs", x_in, x_out, A, B, C, S, depol=D if shared else None)
+    M = np.zeros((4, 4, L, n))
+    for idx, v in parts:
+        M[..., idx] = v.matrix()
+    return MuellerValue("general", x_in, x_out, M=M)
+
+
+# --------------------------------------------------------------------------- shading points
+
+@dataclass
+class MixShadingPoint(ShadingPoint):
+    """A mix's shading point with each component's own (``parts[k]``; None: the point itself), made
+    by ``Mix.shading_point`` before the integrator flips two-sided back faces, and flipped and taken
+    along with it."""
+
+    owner: object = None
+    parts: tuple = ()
+
+    def _with(self, base: ShadingPoint, parts) -> MixShadingPoint:
+        return MixShadingPoint(base.p, base.n_s, base.n_g, base.wo, base.lam, base.mono, base.lookup, base.material,
+                               base.surface, self.owner, tuple(parts))
+
+    def take(self, sel) -> MixShadingPoint:
+        return self._with(super().take(sel), (None if q is None else q.take(sel) for q in self.parts))
+
+    def flipped(self, where: np.ndarray) -> MixShadingPoint:
+        return self._with(super().flipped(where), (None if q is None else q.flipped(where) for q in self.parts))
+
+
+def _albedo_estimate(component: BSDF, sp: ShadingPoint):
+    """A cheap estimate in [ALBEDO_FLOOR, 1] of how much light the component reflects at the points
+    ((N,) or 1.0): its own ``albedo_estimate(sp)`` if it has one, a Lambert's wavelength-mean albedo,
+    else 1."""
+    own = getattr(component, "albedo_estimate", None)
+    if callable(own):
+        return np.clip(own(sp), ALBEDO_FLOOR, 1.0)
+    base = component.base if isinstance(component, ShadingNormal) else component
+    if isinstance(base, Lambert) and base.albedo is not None:
+        return np.clip(sp.spectrum(base.albedo).mean(axis=0), ALBEDO_FLOOR, 1.0)
+    return 1.0
+
+
+# --------------------------------------------------------------------------- the model
+
+class Mix(BSDF):
+    """f = Σ_k w_k·f_k (see the module docstring).
+
+    ``components``: BSDFs (nested Mix components are flattened); ``weights``: one per component, a
+    number ≥ 0 or a TexturedNumber (engine.textures) whose values are ≥ 0.
+    """
+
+    name = "mix"
+
+    def __init__(self, components, weights):
+        components, weights = list(components), list(weights)
+        if not components:
+            raise ValueError("a mix needs at least one material")
+        if len(weights) != len(components):
+            raise ValueError(f"a mix needs one weight per material: {len(components)} materials, "
+                             f"{len(weights)} weights")
+        flat_c, flat_w = [], []
+        for i, (c, w) in enumerate(zip(components, weights)):
+            if not isinstance(c, BSDF):
+                raise ValueError(f"material {i} of a mix must be a BSDF, got {c!r}")
+            w = _check_weight(w, f"weight {i} of a mix")
+            if isinstance(c, Mix):
+                flat_c += c.components
+                flat_w += [_times(w, inner) for inner in c.weights]
+            else:
+                flat_c.append(c)
+                flat_w.append(w)
+        flat_c, flat_w = _merged(flat_c, flat_w)
+        if len(flat_c) > MAX_COMPONENTS:
+            raise ValueError(f"a mix has at most {MAX_COMPONENTS} materials in all (counting nested mixes' "
+                             f"materials), got {len(flat_c)}")
+        keep = [i for i, w in enumerate(flat_w) if not _is_zero(w)]
+        self.components = [flat_c[i] for i in keep]
+        self.weights = [flat_w[i] for i in keep]
+        if self.components and all(c.two_sided for c in self.components):
+            self.two_sided = True
+        self.varies_over_surface = any(c.varies_over_surface for c in self.components) or \
+            any(not isinstance(w, float) for w in self.weights)
+        self.flags = self._mixed_flags()
+
+    # --- flags -----------------------------------------------------------------------------------
+
+    def _mixed_flags(self) -> BSDFFlags:
+        """The union of the components' lobes and capabilities (never BATCHED); SEPARABLE_DIFFUSE when
+        the sum keeps the diffuse lobes apart: no component with a non-Dirac polarising lobe, or one
+        that keeps its own diffuse lobes apart (``add_values`` then adds the rest to its depol)."""
+        F = BSDFFlags
+        flags = F.NONE
+        for c in self.components:
+            flags |= c.flags & (F.LOBES | F.POLARISING | F.RETARDING | F.WAVELENGTH_DEPENDENT)
+        smooth = [c for c in self.components if c.flags.has(F.SMOOTH)]
+        polarising = [c for c in smooth if c.flags.polarising]
+        if smooth and (not polarising or (len(polarising) == 1 and polarising[0].flags.has(F.SEPARABLE_DIFFUSE))):
+            flags |= F.SEPARABLE_DIFFUSE
+        return flags
+
+    # --- under a coat ----------------------------------------------------------------------------
+
+    @property
+    def exterior_n(self):
+        """The exterior index of the first component that has one (AttributeError if none has)."""
+        for c in self.components:
+            if hasattr(c, "exterior_n"):
+                return c.exterior_n
+        raise AttributeError("no material of this mix has an exterior index")
+
+    @exterior_n.setter
+    def exterior_n(self, value):
+        """Set the exterior index of every component that has one (on copies: a coat configures its
+        own copy of the base, engine.materials.weidlich_wilkie)."""
+        parts = []
+        for c in self.components:
+            if hasattr(c, "exterior_n"):
+                c = copy.copy(c)
+                c.exterior_n = value
+            parts.append(c)
+        self.components = parts
+
+    # --- points, weights, probabilities ----------------------------------------------------------
+
+    def _component_points(self, sp: ShadingPoint) -> list[ShadingPoint]:
+        """Each component's shading point: ``sp`` itself, or the component's own (a normal or bump map);
+        for an opaque component of a two-sided mix that transmits (which the integrator does not flip),
+        flipped where the viewer sees the back (n_g·ω_o < 0), as the integrator flips an opaque material."""
+        flip = None
+        if self.two_sided and self.flags.transmits:
+            back = dot(sp.n_g, sp.wo) < 0
+            flip = back if back.any() else None
+        out = []
+        for c in self.components:
+            q = c.shading_point(sp) if type(c).shading_point is not BSDF.shading_point else sp
+            if flip is not None and not c.flags.transmits:
+                q = q.flipped(flip)
+            out.append(q)
+        return out
+
+    def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
+        parts = self._component_points(sp)
+        if all(q is sp for q in parts):
+            return sp
+        return MixShadingPoint(sp.p, sp.n_s, sp.n_g, sp.wo, sp.lam, sp.mono, sp.lookup, sp.material, sp.surface,
+                               self, tuple(None if q is sp else q for q in parts))
+
+    def _points(self, sp: ShadingPoint) -> list[ShadingPoint]:
+        """Each component's shading point (``sp`` itself where the component has none of its own)."""
+        if isinstance(sp, MixShadingPoint) and sp.owner is self:
+            return [sp if q is None else q for q in sp.parts]
+        return self._component_points(sp)
+
+    def _weights(self, sp: ShadingPoint) -> list[np.ndarray]:
+        return [_weight_at(sp, w) for w in self.weights]
+
+    def _probabilities(self, points, weights) -> np.ndarray:
+        """(K, N) lobe-selection probabilities p_k ∝ w_k·a_k (0 where every weight is 0)."""
+        if not self.components:
+            return np.zeros((0, 0))
+        raw = np.array([w * _albedo_estimate(c, q) for c, q, w in zip(self.components, points, weights)])
+        total = raw.sum(axis=0)
+        return raw / np.where(total > 0, total, 1.0)[None, :]
+
+    # --- BSDF interface --------------------------------------------------------------------------
+
+    def _sum(self, sp, points, weights, wi, cosine: bool) -> MuellerValue:
+        """Σ w_k·f_k (``cosine``: Σ w_k·f_k·|n_k·ω_i|), each f_k at its own point; with own normals and
+        not ``cosine``, w_k·f_k·|n_k·ω_i|/|n_s·ω_i| (see the module docstring)."""
+        cos_s = np.abs(dot(sp.n_s, wi))
+        terms = []
+        for c, q, w in zip(self.components, points, weights):
+            if not w.any():
+                continue
+            if cosine:
+                scale = w * np.abs(dot(q.n_s, wi))
+            elif q is sp:
+                scale = w
+            else:
+                scale = w * np.where(cos_s > 0, np.abs(dot(q.n_s, wi)) / np.where(cos_s > 0, cos_s, 1.0), 0.0)
+            terms.append((scale, c.eval(q, wi)))
+        return add_values(terms, sp.n, sp.lam.shape[0], -wi, sp.wo, sp.n_s)
+
+    def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
+        return self._sum(sp, self._points(sp), self._weights(sp), wi, cosine=False)
+
+    def _pdf(self, points, p, wi) -> np.ndarray:
+        out = np.zeros(wi.shape[1])
+        for c, q, pk in zip(self.components, points, p):
+            if pk.any() and not c.flags.is_delta_only:
+                out += pk * c.pdf(q, wi)
+        return out
+
+    def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        points = self._points(sp)
+        return self._pdf(points, self._probabilities(points, self._weights(sp)), wi)
+
+    def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        n, L = sp.n, sp.lam.shape[0]
+        if not self.components:     # every weight was 0: black
+            return BSDFSample(wi=sp.n_s.copy(), weight=depolarising_value(np.zeros((L, n)), n), pdf=np.zeros(n),
+                              is_delta=np.zeros(n, bool), valid=np.zeros(n, bool), eta_sq=np.ones(n))
+        points, weights = self._points(sp), self._weights(sp)
+        if len(self.components) == 1:
+            bs = self.components[0].sample(points[0], u_lobe, u_dir)
+            w = weights[0]
+            return BSDFSample(wi=bs.wi, weight=bs.weight.scaled(w[None, :]), pdf=bs.pdf, is_delta=bs.is_delta,
+                              valid=bs.valid & (w > 0), eta_sq=bs.eta_sq)
+        p = self._probabilities(points, weights)
+        cols = np.arange(n)
+        some = p.sum(axis=0) > 0
+        cdf = np.cumsum(p, axis=0)
+        k = (u_lobe[None, :] >= cdf[:-1]).sum(axis=0)
+        # rounding at the top of the cdf must not pick a component of probability 0
+        zero = some & (p[k, cols] == 0)
+        if zero.any():
+            last = len(p) - 1 - np.argmax((p > 0)[::-1], axis=0)
+            k = np.where(zero, last, k)
+        lower = np.where(k > 0, cdf[np.maximum(k - 1, 0), cols], 0.0)
+        p_k = p[k, cols]
+        u_rest = np.clip((u_lobe - lower) / np.where(p_k > 0, p_k, 1.0), 0.0, _BELOW_ONE)
+
+        wi = sp.n_s.copy()
+        is_delta, valid = np.zeros(n, bool), np.zeros(n, bool)
+        eta_sq, pdf = np.ones(n), np.zeros(n)
+        parts = []
+        for j, c in enumerate(self.components):
+            sel = np.flatnonzero(some & (k == j))
+            if not sel.size:
+                continue
+            bs = c.sample(points[j].take(sel), u_rest[sel], u_dir[:, sel])
+            wi[:, sel] = bs.wi
+            is_delta[sel], valid[sel] = bs.is_delta, bs.valid
+            if bs.eta_sq is not None:
+                eta_sq[sel] = bs.eta_sq
+            d = np.flatnonzero(bs.is_delta & bs.valid)
+            if d.size:
+                ratio = weights[j][sel[d]] / p[j, sel[d]]
+                parts.append((sel[d], _take_value(bs.weight, d).scaled(ratio[None, :])))
+        smooth = np.flatnonzero(valid & ~is_delta)
+        if smooth.size:
+            sub = sp.take(smooth)
+            sub_points = [sub if q is sp else q.take(smooth) for q in points]
+            w_sub = [w[smooth] for w in weights]
+            d_sub = wi[:, smooth]
+            density = self._pdf(sub_points, p[:, smooth], d_sub)
+            good = density > 0
+            value = self._sum(sub, sub_points, w_sub, d_sub, cosine=True)
+            value = value.scaled(np.where(good, 1.0 / np.where(good, density, 1.0), 0.0)[None, :])
+            valid[smooth] = good
+            pdf[smooth] = density
+            parts.append((smooth, value))
+
+        def frames():
+            return plane_of_incidence_axis(sp.n_s, -wi), plane_of_incidence_axis(sp.n_s, sp.wo)
+        return BSDFSample(wi=wi, weight=_assemble(parts, n, L, frames), pdf=pdf, is_delta=is_delta & valid,
+                          valid=valid, eta_sq=eta_sq)
+
+    def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
+        points, weights = self._points(sp), self._weights(sp)
+        terms = []
+        for c, q, w in zip(self.components, points, weights):
+            if not c.flags.has(BSDFFlags.DELTA_REFLECTION) or not w.any():
+                continue
+            value = c.delta_reflection(q)
+            if value is None:
+                continue
+            if q is not sp:         # its own normal: its mirror direction is another one, except where n_k = ±n_s
+                same = np.minimum(np.max(np.abs(q.n_s - sp.n_s), axis=0), np.max(np.abs(q.n_s + sp.n_s), axis=0))
+                w = w * (same <= 1e-12)
+            terms.append((w, value))
+        if not terms:
+            return None
+        wi = reflect(sp.wo, sp.n_s)
+        return add_values(terms, sp.n, sp.lam.shape[0], -wi, sp.wo, sp.n_s)
+
+    def describe(self) -> dict:
+        return {"type": self.name, "materials": [c.describe() for c in self.components],
+                "weights": [w if isinstance(w, float) else repr(w) for w in self.weights]}
+
+
+# --------------------------------------------------------------------------- declaration
+
+#: One weight of a mix (the declaration of each element of ``weights``).
+WEIGHT = Parameter("weight", "one material's weight w_k", lo=0.0, texturable=True)
+
+DECLARATION = ModelDeclaration(
+    "mix", "Mix",
+    "An incoherent mixture f = Σ w_k·f_k of materials (Blender's Mix Shader: weights 1 − fac, fac; "
+    "Add Shader: 1, 1)",
+    [Parameter("materials", "the mixed materials, inline or by name (nested mixes are flattened)",
+               kind="materials"),
+     Parameter("weights", "one weight w_k ≥ 0 per material, in the same order; not normalised (a sum above 1 "
+                          "adds light, as Add Shader)", kind="numbers", element=WEIGHT)],
+    catalogue=None, node=None)      # not a Polarising BSDF model: Blender's own Mix/Add Shader nodes make it
+
+
+DECLARATION.per_point = frozenset({"weights"})
+
+
+@DECLARATION.builder
+def _mix(p, materials):
+    weights = p["weights"]
+    if len(weights) != len(materials):
+        raise SceneError(p.field("weights"), f"must hold one weight per material: {len(materials)} "
+                                             f"material{'s' * (len(materials) != 1)}, got {len(weights)} "
+                                             f"weight{'s' * (len(weights) != 1)}")
+    try:
+        return Mix(materials, weights)
+    except ValueError as e:
+        raise SceneError(p.field("materials"), str(e)) from None
