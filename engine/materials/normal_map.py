@@ -10,10 +10,11 @@ offsets ray origins and decides on which side of the actual surface a direction 
   n_t = (2c − 1) in the OpenGL convention (green +Y = +v), n_t = (2c_r − 1, 1 − 2c_g, 2c_b − 1) in
   DirectX's (green pointing down, Blender 5.1's Normal Map ▸ Convention);
   n_m = normalise(n_t.x·T + n_t.y·B + n_t.z·n_s) with the tangent frame of
-  engine.textures.surface.SurfacePoints.tangent_frame; ``strength`` s blends
-  n = normalise(n_s + s·(n_m − n_s)) (s = 1: the map's normal).  Where n_m or n is the zero vector
-  (a (0.5, 0.5, 0.5) texel; s = ½ on a texel pointing against n_s) or not finite, n_s is kept, as
-  Cycles' Normal Map node does.
+  engine.textures.surface.SurfacePoints.tangent_frame; ``strength`` s ≥ 0 scales the tangent-space
+  vector before it is mapped, as Cycles' Normal Map node does in tangent space (Blender 4.x/5.x,
+  kernel/svm/tex_coord.h): n_t.x, n_t.y ×= s, n_t.z ← 1 + min(s, 1)·(n_t.z − 1) (s = 1: the map's
+  normal; s = 0: n_s).  Where the mapped vector is the zero vector (a (0.5, 0.5, 0.5) texel) or not
+  finite, n_s is kept, as Cycles does.
 - Bump map (height h in scene units × ``distance``): h_u, h_v by central differences one texel
   apart; ∂p/∂u' = ∂p/∂u + d·h_u·n_s, ∂p/∂v' = ∂p/∂v + d·h_v·n_s (pbrt's bump mapping without the
   ∂n terms), n_b = normalise(∂p/∂u' × ∂p/∂v') on the side of n_s, blended by ``strength`` as above.
@@ -29,9 +30,43 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import BSDF, BSDFSample, MuellerValue, ShadingPoint
+from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
 from ..textures import ImageTexture, TextureInput
 from ..vec3 import dot, reflect
+
+
+#: lobes whose mapped normal is corrected so that the mirror direction of the view stays above the surface
+_SPECULAR = BSDFFlags.GLOSSY_REFLECTION | BSDFFlags.DELTA_REFLECTION | BSDFFlags.GLOSSY_TRANSMISSION | \
+    BSDFFlags.DELTA_TRANSMISSION
+
+
+def valid_specular_normal(n: np.ndarray, n_g: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """Cycles' correction of a mapped shading normal (kernel/closure/bsdf_util.h,
+    ensure_valid_specular_reflection): where the mirror direction R = 2(n·ω_o)n − ω_o of the view would
+    lie below t = min(0.9·(ω_o·n_g), 0.01) above the geometric surface, n is turned towards n_g in the
+    plane of n_g and n just far enough that R·n_g = t (the root of 4a z⁴ − 2b z² + c = 0 for z = n'·n_g,
+    a = I_x² + I_z², b = 2(a + I_z t), c = (I_z + t)²).  Without it a steep normal map darkens glossy
+    surfaces (their reflections go into the surface and are lost).  Applied where the viewer is on the
+    front (ω_o·n_g > 0), for materials with glossy or mirror lobes and no diffuse one (Cycles corrects the
+    normal of its specular closures only: a material whose diffuse and specular lobes share one normal keeps
+    the mapped normal; a mix maps each of its materials itself); n, n_g, ω_o are (3, N) unit vectors."""
+    iz = dot(wo, n_g)
+    refl = 2.0 * dot(n, wo)[None, :] * n - wo
+    t = np.minimum(0.9 * iz, 0.01)
+    fix = (iz > 0) & (dot(n_g, refl) < t)
+    if not fix.any():
+        return n
+    x = _normalise(n - dot(n, n_g)[None, :] * n_g, n)
+    ix = dot(wo, x)
+    a = ix * ix + iz * iz
+    b = 2.0 * (a + iz * t)
+    c = (t + iz) ** 2
+    root = np.sqrt(np.maximum(b * b - 4.0 * a * c, 0.0))
+    safe_a = np.where(a > 0, a, 1.0)
+    nz2 = np.where(ix < 0, 0.25 * (b + root) / safe_a, 0.25 * (b - root) / safe_a)
+    nz2 = np.clip(nz2, 0.0, 1.0)
+    fixed = np.sqrt(1.0 - nz2)[None, :] * x + np.sqrt(nz2)[None, :] * n_g
+    return np.where(fix[None, :], _normalise(fixed, n_g), n)
 
 
 def _normalise(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
@@ -83,8 +118,10 @@ class ShadingNormal(BSDF):
             x, y, z = 2.0 * c[0] - 1.0, 2.0 * c[1] - 1.0, 2.0 * c[2] - 1.0
             if self.normal_green_down:
                 y = -y
-            mapped = _normalise(t * x[None, :] + b * y[None, :] + n * z[None, :], n)
-            n = _normalise(n + self.normal_strength * (mapped - n), n)
+            s = self.normal_strength
+            if s != 1.0:                # Cycles' tangent-space strength
+                x, y, z = s * x, s * y, 1.0 + min(s, 1.0) * (z - 1.0)
+            n = _normalise(t * x[None, :] + b * y[None, :] + n * z[None, :], n)
         return n
 
     def _bumped(self, points, n: np.ndarray) -> np.ndarray:
@@ -109,8 +146,10 @@ class ShadingNormal(BSDF):
         return _normalise(n + self.bump_strength * (nb - n), n)
 
     def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
-        return ShadingPoint(sp.p, self.shading_normal(sp), sp.n_g, sp.wo, sp.lam, sp.mono, sp.lookup, sp.material,
-                            sp.surface)
+        n = self.shading_normal(sp)
+        if self.base.flags.has(_SPECULAR) and not self.base.flags.has(BSDFFlags.DIFFUSE):
+            n = valid_specular_normal(n, sp.n_g, sp.wo)
+        return ShadingPoint(sp.p, n, sp.n_g, sp.wo, sp.lam, sp.mono, sp.lookup, sp.material, sp.surface)
 
     # --- the geometric-side guard ----------------------------------------------------------------
 

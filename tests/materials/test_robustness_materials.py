@@ -295,3 +295,35 @@ def test_texture_values_at_and_beyond_every_declared_range(tmp_path, target, dat
         return
     stokes, dropped = render(quad_scene(material, spp=1, size=4, lights=[SUN]), tmp_path)
     assert dropped == 0
+
+
+# ----------------------------------------------------------------------------- Cycles' specular-normal correction
+
+def test_valid_specular_normal_lifts_the_mirror_direction_just_to_the_threshold():
+    """engine.materials.normal_map.valid_specular_normal, against its defining property (not its formula):
+    where the view's mirror direction about n lies below t = min(0.9·ω_o·n_g, 0.01), the corrected normal is
+    a unit vector in the plane of n and n_g, turned towards n_g, whose mirror direction is exactly at t;
+    elsewhere n is kept."""
+    from engine.materials.normal_map import valid_specular_normal
+    rng = np.random.default_rng(1)
+    N = 20000
+    n = rng.normal(size=(3, N))
+    n /= np.linalg.norm(n, axis=0)
+    n[2] = np.abs(n[2])
+    wo = rng.normal(size=(3, N))
+    wo /= np.linalg.norm(wo, axis=0)
+    wo[2] = np.abs(wo[2])
+    ng = np.zeros((3, N))
+    ng[2] = 1.0
+    m = valid_specular_normal(n, ng, wo)
+    t = np.minimum(0.9 * wo[2], 0.01)
+    before = 2.0 * (n * wo).sum(0) * n[2] - wo[2]
+    after = 2.0 * (m * wo).sum(0) * m[2] - wo[2]
+    fix = before < t
+    assert 0.3 < fix.mean() < 0.9
+    np.testing.assert_array_equal(m[:, ~fix], n[:, ~fix])
+    np.testing.assert_allclose(after[fix], t[fix], atol=1e-10)
+    np.testing.assert_allclose(np.linalg.norm(m, axis=0), 1.0, atol=1e-14)
+    np.testing.assert_allclose(np.einsum("in,in->n", np.cross(n.T, ng.T).T, m)[fix], 0.0, atol=1e-12)
+    assert np.all(m[2][fix] >= n[2][fix] - 1e-12)
+    assert np.all(np.isfinite(valid_specular_normal(ng, ng, ng)))          # normal incidence, n = n_g

@@ -1,0 +1,85 @@
+"""A material whose reflected and transmitted light are tinted: Cycles' Glass BSDF Color and the
+Principled BSDF's transmission tint.
+
+Cycles tints a glass closure's light by a colour at every scattering event — the Glass BSDF's Color
+multiplies reflection and refraction alike, the Principled BSDF's Transmission multiplies each
+refraction by √(Base Color) (reflections untinted): a tint at each crossing of the surface, not an
+absorption along the path (that is a volume: engine.scene interiors).  :class:`Tinted` wraps any
+model and multiplies its Mueller value by the reflection tint ρ_r(λ) where ω_i and ω_o lie on the
+same side of the geometric surface and by the transmission tint ρ_t(λ) where they lie on opposite
+sides.  A scalar per wavelength scales the whole Mueller matrix, so the polarisation the model
+predicts is unchanged and realisability is kept (ρ ≥ 0).  Sampling is the wrapped model's; the
+sample weight and ``eval`` carry the tint, ``pdf`` does not.  The tints are spectra (reflectances in
+[0, 1], constant or varying over the surface: engine.textures); None is 1.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
+from ..spectral import Spectrum
+from ..textures import TexturedSpectrum
+from ..vec3 import dot
+
+__all__ = ["Tinted"]
+
+
+def _grey(spec) -> bool:
+    return spec is None or (not isinstance(spec, TexturedSpectrum) and spec.is_grey)
+
+
+class Tinted(BSDF):
+    """``base`` with its reflected light × ``reflection`` and its transmitted light × ``transmission``."""
+
+    def __init__(self, base: BSDF, reflection: Spectrum | None = None, transmission: Spectrum | None = None):
+        self.base, self.reflection, self.transmission = base, reflection, transmission
+        self.name = base.name
+        flags = base.flags
+        if not (_grey(reflection) and _grey(transmission)):
+            flags = flags | BSDFFlags.WAVELENGTH_DEPENDENT
+        self.flags = flags
+        self.varies_over_surface = base.varies_over_surface or any(
+            isinstance(s, TexturedSpectrum) for s in (reflection, transmission))
+
+    @property
+    def exterior_n(self):
+        return getattr(self.base, "exterior_n", None)
+
+    def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
+        return self.base.shading_point(sp)
+
+    def _tint(self, sp: ShadingPoint, spec) -> np.ndarray | float:
+        return 1.0 if spec is None else sp.spectrum(spec)
+
+    def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray | float:
+        """(L, N) tint of the pairs (ω_i, ω_o): transmission where they lie on opposite sides of n_g."""
+        if self.reflection is None and self.transmission is None:
+            return 1.0
+        through = dot(wi, sp.n_g) * dot(sp.wo, sp.n_g) < 0
+        r, t = self._tint(sp, self.reflection), self._tint(sp, self.transmission)
+        return np.where(through[None, :], t, r) * np.ones(sp.lam.shape)
+
+    def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
+        return self.base.eval(sp, wi).scaled(self._factor(sp, wi))
+
+    def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        return self.base.pdf(sp, wi)
+
+    def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        bs = self.base.sample(sp, u_lobe, u_dir)
+        return BSDFSample(bs.wi, bs.weight.scaled(self._factor(sp, bs.wi)), bs.pdf, bs.is_delta, bs.valid, bs.eta_sq)
+
+    def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
+        value = self.base.delta_reflection(sp)
+        if value is None or self.reflection is None:
+            return value
+        return value.scaled(self._tint(sp, self.reflection))
+
+    def describe(self) -> dict[str, object]:
+        out = dict(self.base.describe())
+        if self.reflection is not None:
+            out["reflection_tint"] = repr(self.reflection)
+        if self.transmission is not None:
+            out["transmission_tint"] = repr(self.transmission)
+        return out

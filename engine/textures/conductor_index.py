@@ -1,0 +1,64 @@
+"""A metal's complex index from a textured colour, per point and per wavelength.
+
+The textured twin of engine.spectral.gulbrandsen.GulbrandsenIndex: the reflectivity (and edge tint)
+are textured reflectance spectra (or constant spectra), upsampled per point as every textured colour
+is, and Gulbrandsen's map is applied to their values at each point and wavelength, so that the
+metal's normal-incidence reflectance is the texel's colour (engine.spectral.gulbrandsen explains
+why the map is not applied per RGB channel)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .inputs import TexturedSpectrum
+from ..spectral import Spectrum
+from ..spectral.gulbrandsen import EDGE_MODES, R_MAX, gulbrandsen_nk, index_of
+
+__all__ = ["TexturedGulbrandsenIndex"]
+
+
+def _values(spec, points, lam, mono, basis):
+    if isinstance(spec, TexturedSpectrum):
+        return spec.at(points, lam, mono, basis)
+    return spec.eval(lam, mono=mono)
+
+
+class TexturedGulbrandsenIndex(TexturedSpectrum):
+    """n (``part`` "n") or κ ("k") at surface points of a reflectivity and an edge tint, either or both
+    textured (the others constant spectra); both reflectances in [0, 1]."""
+
+    def __init__(self, reflectivity: Spectrum, edge_tint: Spectrum, part: str, mode: str = "tint"):
+        if part not in ("n", "k"):
+            raise ValueError(f"part must be 'n' or 'k', got {part!r}")
+        if mode not in EDGE_MODES:
+            raise ValueError(f"mode must be one of {EDGE_MODES}, got {mode!r}")
+        self.mode = mode
+        textured = [s for s in (reflectivity, edge_tint) if isinstance(s, TexturedSpectrum)]
+        if not textured:
+            raise ValueError("a textured index needs a textured reflectivity or edge tint "
+                             "(engine.spectral.gulbrandsen.GulbrandsenIndex otherwise)")
+        self.reflectivity, self.edge_tint, self.part = reflectivity, edge_tint, part
+        self.source, self.kind, self.clip = textured[0].source, "unbounded", None
+        r_hi = float(reflectivity.hi) if isinstance(reflectivity, TexturedSpectrum) else \
+            float(np.max(reflectivity.eval(np.linspace(360.0, 830.0, 95))))
+        r_hi = min(max(r_hi, 0.0), R_MAX)
+        if part == "n":     # n lies between (1 − r)/(1 + r) (g = 1) and (1 + √r)/(1 − √r) (g = 0)
+            self.lo = (1.0 - R_MAX) / (1.0 + R_MAX)
+            self.hi = float((1.0 + np.sqrt(r_hi)) / (1.0 - np.sqrt(r_hi)))
+        else:
+            self.lo = 0.0
+            self.hi = float(np.max(gulbrandsen_nk(r_hi, np.linspace(0.0, 1.0, 101))[1]))
+
+    def clamped_to(self, lo: float = -np.inf, hi: float = np.inf) -> TexturedGulbrandsenIndex:
+        return self            # every value lies within [lo, hi] by construction
+
+    def __repr__(self):
+        return f"TexturedGulbrandsenIndex({self.reflectivity!r}, {self.edge_tint!r}, {self.part!r})"
+
+    def at(self, points, lam: np.ndarray, mono: bool, basis: np.ndarray | None = None) -> np.ndarray:
+        def compute():
+            r = _values(self.reflectivity, points, lam, mono, basis)
+            g = _values(self.edge_tint, points, lam, mono, basis)
+            n, k = index_of(r, g, self.mode)
+            return n if self.part == "n" else k
+        return points.memo((self, mono, lam.shape[0]), compute)
