@@ -16,7 +16,7 @@ from embreex.mesh_construction import TriangleMesh
 from ..kernels import twin
 from ..kernels.geometry import offset_origin as offset_origin_kernel, surface_attributes
 from ..kernels.rays import closest_hits_loop, embree_hits, embree_rays
-from ..scene.description import Scene
+from ..scene.description import Scene, interior_of
 from ..errors import SceneError
 from ..textures import SurfacePoints, VertexAttributes
 
@@ -105,6 +105,7 @@ class CompiledScene:
         #: indices of the materials some triangle uses (sorted; every render asks, so found once here)
         self.used_materials = np.unique(self.tri_material)
         self.tri_mesh = np.concatenate(tri_mesh)
+        self._volumes()
         self.vertex_normals = np.concatenate(vnormals)
         self.tri_has_normals = np.concatenate(has_vn)
         self.any_vertex_normals = bool(self.tri_has_normals.any())
@@ -124,6 +125,29 @@ class CompiledScene:
         # tri_emitter is filled in by the light set (area lights).
         self.tri_emitter = np.full(len(self.faces), -1, np.int32)
         self._separate_passthrough_emitters(scene)
+
+    def _volumes(self) -> None:
+        """Absorbing interiors (engine.scene.description.Interior, on the materials): every (mesh,
+        material) pair whose material absorbs is one volume; ``tri_volume`` (F,) int32 its index per
+        triangle (−1: none; None when the scene has no volume) and ``volumes`` [(mesh, material, Interior)]."""
+        interiors = [interior_of(m) for m in self.materials]
+        self.volumes = []
+        self.tri_volume = None
+        absorbing = np.array([i is not None for i in interiors], bool)
+        if not absorbing.any():
+            return
+        inside = absorbing[self.tri_material]
+        count = len(self.materials)
+        keys = self.tri_mesh[inside].astype(np.int64) * count + self.tri_material[inside]
+        unique, index = np.unique(keys, return_inverse=True)
+        self.tri_volume = np.full(len(self.tri_material), -1, np.int32)
+        self.tri_volume[inside] = index.astype(np.int32)
+        self.volumes = [(int(k // count), int(k % count), interiors[int(k % count)]) for k in unique]
+
+    @property
+    def has_volumes(self) -> bool:
+        """Some mesh bounds an absorbing interior."""
+        return self.tri_volume is not None
 
     def _separate_passthrough_emitters(self, scene: Scene) -> None:
         """Keep non-occluding emitters (Cycles' lamps) out of the main BVH: shadow rays and paths

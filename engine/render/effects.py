@@ -18,14 +18,19 @@ Before choosing, materials are simplified where that is exact (``simplify="auto"
 Each material reports what it can do through its ``flags`` (engine.materials.flags.BSDFFlags:
 POLARISING, RETARDING).  The choice comes with a human-readable reason for logs and Blender's
 render stats, and is overridden by asking for "full", "linear" or "off" explicitly.
+
+Absorbing interiors (``material.interior``, engine.scene.description.Interior) scale the Stokes
+vector by exp(−σ_a d) per wavelength and so never change the choice; the reason lists them.
 """
 
 from __future__ import annotations
 
+import copy
 from collections.abc import Mapping
 
 from ..materials.base import BSDF, BSDFFlags
 from ..materials.simplify import simplify_material
+from ..scene.description import interior_of
 
 TRANSPORT_SIZES = {"full": 4, "linear": 3, "off": 1}
 
@@ -43,6 +48,10 @@ def effective_materials(materials: Mapping[str, BSDF], used: set[str] | None = N
         for name in sorted(used if used is not None else materials):
             out[name], why = simplify_material(materials[name], name)
             reasons += why
+            if out[name] is not materials[name] and interior_of(materials[name]) is not None:
+                # the simplified surface keeps the material's interior (on a copy: it may be shared)
+                out[name] = copy.copy(out[name])
+                out[name].interior = materials[name].interior
     return out, reasons
 
 
@@ -60,11 +69,21 @@ def choose_transport(materials: Mapping[str, BSDF], used: set[str] | None = None
 
 
 def resolve_transport(requested: str, materials: Mapping[str, BSDF], used: set[str] | None = None) -> tuple[str, str]:
-    """The transport to run for a requested mode ("auto" or explicit) and why."""
+    """The transport to run for a requested mode ("auto" or explicit) and why (absorbing interiors
+    listed after it: they never change the choice)."""
     if requested != "auto":
-        return requested, f"{requested} (requested)"
+        return requested, f"{requested} (requested)" + absorption_note(materials, used)
     mode, reason = choose_transport(materials, used)
-    return mode, f"auto → {reason}"
+    return mode, f"auto → {reason}" + absorption_note(materials, used)
+
+
+def absorption_note(materials: Mapping[str, BSDF], used: set[str] | None = None) -> str:
+    """"; absorbing interiors: 'glass' (…)" for the ``used`` materials with an interior, else ""."""
+    names = [n for n in sorted(used if used is not None else materials) if interior_of(materials[n]) is not None]
+    if not names:
+        return ""
+    return (f"; absorbing interiors: {_list(names)} (Beer–Lambert exp(−σ_a·d) per wavelength inside closed meshes, "
+            "polarisation unchanged)")
 
 
 def _list(names: list[str]) -> str:

@@ -19,6 +19,12 @@ Next-event estimation at non-delta vertices is combined with BSDF sampling
 by the power heuristic (as Mitsuba 3's ``path``).  ``max_depth`` counts
 path segments; Russian roulette from ``rr_depth`` on uses
 q = min(max_λ T00 · η², 0.95), η² undoing the refraction radiance scale.
+
+Absorbing interiors (engine.render.media): paths carry a stack of the volumes they are inside and
+their Beer–Lambert transmittance τ (L, n) per wavelength apart from T (a scalar per wavelength: the
+polarisation is unchanged); light picked up is multiplied by τ up to where it is found, shadow rays
+by the absorption along them, and the roulette sees T00·η²·max_λ τ.  Scenes without any interior
+never allocate or read either, so their images are unchanged.
 """
 
 from __future__ import annotations
@@ -32,12 +38,15 @@ from ..materials.base import BSDF, BSDFFlags, DeltaVertices, MuellerValue, Shadi
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import RAY_EPSILON, Hits, offset_origin, surface_points
+from ..kernels.light_sampling import lamp_hits
 from ..kernels.material_groups import material_groups
 from ..kernels.shadow_rays import shadow_rays
 from ..kernels.transport import (add_light, add_to_paths, identity_throughput, next_segments,
                                  spectral_stokes_rgb_samples, stokes_rgb_samples, throughput_times_stokes, update_abcs,
                                  update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES, effective_materials
+from .lights.lamps import PointEmitter
+from .media import Media, cross
 from .path_state import PathState
 from .sampler import (PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_JITTER, PAIR_LENS, PAIR_LIGHT_POINT, PAIR_WAVELENGTH,
                       PathSampler, stratified_pair)
@@ -240,6 +249,8 @@ class PathTracer:
             materials = [simplified[name] for name in compiled.material_names]
         self.materials: list[BSDF] = list(materials)
         self.has_area_lights = compiled.has_area_lights     # once, not per bounce (scans every triangle)
+        # emitters whose radiance varies over the surface read it at the hits' barycentrics
+        self.textured_lights = any(light.varies_over_surface for light in lights.lights)
         # where segments start is kept for light selection, analytic lamps and warp-sampled lamps' pdfs
         self.keep_origins = (lights.spatial or bool(lights.hittable)
                              or any(light.hit_pdf_needs_origin or light.hit_pdf_needs_direction
@@ -266,6 +277,8 @@ class PathTracer:
         # light's spectrum integrated against the CIE observer, so trace in RGB with those exact
         # light colours: no wavelength sampling and no chromatic noise (same expectation).
         self.rgb_mode = reduce in ("auto", True) and independent and not self.mono
+        # absorbing interiors (None: the scene has none, and nothing below reads a medium)
+        self.media = Media(compiled, self.rgb_mode, self.mono) if compiled.has_volumes else None
         # Object ray visibility / holdout / alpha (None: none used) and film transparency (Cycles).
         self.visibility = ray_visibility(compiled)
         self.film_transparent = bool(getattr(camera.cam, "film_transparent", False))
@@ -377,6 +390,8 @@ class PathTracer:
                           eta_sq=np.ones(n_total), prev_delta=np.ones(n_total, bool), prev_pdf=np.zeros(n_total),
                           p_prev=None, n_prev=None, sampler=sampler, lk=lk, lk_m=lk_m,
                           T_col=np.zeros(n_total, np.int64))
+        if self.media is not None:
+            state.media = self.media.camera_stacks(o)        # camera rays starting inside volumes
         # Transparency T per sample (alpha = 1 − T): camera rays reaching the background of a
         # transparent film or a holdout (Cycles' film_write_transparent / holdout).
         acc = _Accumulators(radiance=np.zeros((P, L, n_total)), w_rgb=w_rgb,
@@ -397,8 +412,11 @@ class PathTracer:
         hits = compiled.intersect(o, d, t_max)
         acc.stats["rays"] += state.n
         if vis is not None:
-            hits, extra = vis.pass_through(compiled, o, d, t_max, hits, bounce == 0, state.sampler.keys, bounce)
+            record = [] if self.media is not None else None
+            hits, extra = vis.pass_through(compiled, o, d, t_max, hits, bounce == 0, state.sampler.keys, bounce,
+                                           record=record)
             acc.stats["rays"] += extra
+            state.crossings = record
         hit = hits.prim >= 0
         background = ~hit
         if bounce == 0 and acc.transparency is not None:
@@ -429,6 +447,15 @@ class PathTracer:
             """(position, side normal) of the vertices that the paths ``sel`` left (light selection)."""
             return (None, None) if p_prev is None else (p_prev[:, sel], None if n_prev is None else n_prev[:, sel])
 
+        # absorbing interiors: the transmittance (L, m) of the paths ``rows`` up to distance s along their
+        # segments (att(rows, s)), None where nothing absorbs
+        segment = att = None
+        if self.media is not None:
+            segment = self.media.march(state.media, d, state.crossings or [], lk, state.gap)   # → segment ends
+            state.crossings = None
+            if segment.absorbs or state.tau is not None:
+                att = self._attenuation(state, segment)
+
         if env is not None and background.any():
             miss = background
             d_miss = np.compress(miss, d, axis=1)       # contiguous (3, m), unlike d[:, miss]
@@ -440,13 +467,16 @@ class PathTracer:
                     light_set.environment_index, *at_prev(miss))
                 w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
             rows = miss.nonzero()[0]
+            if att is not None:
+                Le = Le * att(rows, np.full(rows.size, np.inf))
             add_light(radiance, path, T, rows, Le, w, cols(rows))
         if self.has_area_lights:
             lit = (compiled.tri_emitter[hits.prim] >= 0) & hit
             if lit.any():
                 idx = lit.nonzero()[0]
                 self._emitter_hits(radiance, path, T, cols, idx, hits.prim[idx], hits.t[idx], d, lk,
-                                   prev_delta, prev_pdf, at_prev, bounce == 0)
+                                   prev_delta, prev_pdf, at_prev, bounce == 0,
+                                   bary=(hits.u[idx], hits.v[idx]) if self.textured_lights else None, att=att)
         if light_set.hittable:
             # analytic lamps (sphere/disk lights, sun discs): seen, never occluding
             seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
@@ -457,6 +487,8 @@ class PathTracer:
                 rows, factor, pdf_l = light.intersect(o, d, seg, hit, p_prev)
                 if rows.size:
                     Le = self._emitted(light, lk.take(rows)) * factor[None, :]
+                    if att is not None:
+                        Le = Le * att(rows, self._lamp_distances(light, o, d, seg, rows))
                     p_light = pdf_l * light_set.prob_at(li, *at_prev(rows))
                     w = np.where(prev_delta[rows], 1.0, power_heuristic(prev_pdf[rows], p_light))
                     add_light(radiance, path, T, rows, Le, w, cols(rows))
@@ -465,7 +497,34 @@ class PathTracer:
             seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
             for rows, prims, dists in compiled.passthrough_hits(o, d, seg):
                 self._emitter_hits(radiance, path, T, cols, rows, prims, dists, d, lk, prev_delta, prev_pdf,
-                                   at_prev, bounce == 0)
+                                   at_prev, bounce == 0, o=o, att=att)
+        if segment is not None and segment.absorbs:
+            # the paths' transmittance up to their hits (the paths that missed end here)
+            every = np.arange(state.n)
+            seg_tau = segment.transmittance(every, np.where(hit, hits.t, 0.0))
+            state.tau = seg_tau if state.tau is None else state.tau * seg_tau
+
+    @staticmethod
+    def _attenuation(state: PathState, segment):
+        """att(rows, s): the transmittance (L, m) of the paths ``rows`` from the camera to distance s
+        (m,) along their current segments: τ so far × exp(−∫σ_a) over [0, s] (None: 1)."""
+        tau = state.tau
+
+        def att(rows: np.ndarray, s: np.ndarray) -> np.ndarray | None:
+            f = segment.transmittance(rows, s) if segment.absorbs else None
+            if tau is not None:
+                f = tau[:, rows] if f is None else f * tau[:, rows]
+            return f
+        return att
+
+    @staticmethod
+    def _lamp_distances(light, o: np.ndarray, d: np.ndarray, seg: np.ndarray, rows: np.ndarray) -> np.ndarray:
+        """Distances (m,) at which the rays ``rows`` reach a hittable lamp (``light.intersect``'s rows):
+        a sphere or disk lamp's hit, infinity for a sun's disc."""
+        if not isinstance(light, PointEmitter):
+            return np.full(rows.size, np.inf)
+        _, t, _ = lamp_hits(o[:, rows], d[:, rows], seg[rows], light.position, light.radius, light.soft_falloff)
+        return t
 
     def _surface(self, state: PathState, hits: Hits, hit: np.ndarray) -> _SurfaceHits | None:
         """Keep the paths that hit a surface and reconstruct their hit points (None: none left).
@@ -578,7 +637,12 @@ class PathTracer:
             xTm = gather(state.x_T, sel)
 
             if not bsdf.flags.is_delta_only and len(light_set) and bounce + 2 <= st.max_depth:
-                contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], acc.stats, t_cols)
+                medium = None
+                if self.media is not None:      # the vertices' volumes and transmittance (shadow rays)
+                    medium = (gather(state.media, sel), None if state.tau is None else gather(state.tau, sel),
+                              gather(surf.prim, sel), gather(n_g, sel), gather(wo, sel))
+                contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], acc.stats, t_cols,
+                                           medium)
                 add_to_paths(acc.radiance, gather(state.path, sel), contrib)
                 if acc.path_cost is not None:
                     acc.path_cost[gather(state.path, sel)] += VERTEX_COST     # a light sample (cost)
@@ -616,18 +680,34 @@ class PathTracer:
         (sampled validly, survived, finite and not black) keep their sampled segments, starting from
         the offset hit points: one compiled step (kernels.transport.next_segments) for the roulette,
         the survivors' columns and their origins.  Paths with a non-finite throughput end here
-        (counted; their light so far is kept)."""
+        (counted; their light so far is kept).  With absorbing interiors the paths that cross a
+        volume's face enter or leave it (engine.render.media) and the roulette weighs T00·η² by the
+        largest transmittance max_λ τ (paths absorbed entirely end here)."""
+        eta_in, tau_max = state.eta_sq, None
+        if state.media is not None:
+            vol, entering = self.media.crossing_sides(surf.prim, surf.wo, nxt.d, surf.n_g)
+            if (vol >= 0).any():
+                cross(state.media, np.arange(state.n), vol, entering)
+            if state.tau is not None:
+                tau_max = state.tau.max(axis=0)
+                nxt.valid &= tau_max > 0
+                tau_max = np.where(tau_max > 0, tau_max, 1.0)
+                eta_in = state.eta_sq * tau_max
         (idx, nonfinite, T, x_T, d, eta_sq, path, keys, is_delta, pdf, p, o) = next_segments(
-            nxt.T, state.eta_sq, nxt.eta_step, nxt.u_rr, nxt.valid, bounce + 1 >= self.settings.rr_depth,
+            nxt.T, eta_in, nxt.eta_step, nxt.u_rr, nxt.valid, bounce + 1 >= self.settings.rr_depth,
             nxt.x_T, nxt.d, state.path, state.sampler.keys, nxt.is_delta, nxt.pdf, surf.p, surf.n_g, RAY_EPSILON,
             compact_T=False)
+        if tau_max is not None:
+            eta_sq = eta_sq / tau_max[idx]          # η² alone again (τ stays apart from it)
+        # with volumes: the new origins lie off the surface, and distances in volumes count from the vertex
+        gap = ((o - p) * d).sum(axis=0) if state.media is not None else None
         acc.stats["nonfinite"] += nonfinite
         state.n_prev = nxt.n_side
         # where the next segment starts (light selection, analytic lamps' pdfs); the survivors'
         # throughputs stay where the scatter wrote them (columns idx of T, PathState.T_col)
         state.keep(idx, path=path, T=T, T_col=idx if idx.shape[0] < T.shape[3] else None, x_T=x_T, d=d,
                    eta_sq=eta_sq, prev_delta=is_delta, prev_pdf=pdf, p_prev=p if self.keep_origins else None, o=o,
-                   keys=keys)
+                   keys=keys, gap=gap)
         state.t_max = None
 
     def _finish(self, acc: _Accumulators, n_total: int) -> tuple[np.ndarray, dict[str, int]]:
@@ -648,22 +728,47 @@ class PathTracer:
         return out, stats
 
     def _shadow_transmittance(self, p: np.ndarray, n_g: np.ndarray, wi: np.ndarray, t_max: np.ndarray,
-                              ok: np.ndarray, stats: dict[str, int]) -> np.ndarray:
+                              ok: np.ndarray, stats: dict[str, int], record: list | None = None) -> np.ndarray:
         """Fraction (m,) of the light that reaches p along wi through shadow-invisible and pass-through
-        surfaces (0 where blocked, and where ``ok`` is False: no shadow ray is cast there)."""
+        surfaces (0 where blocked, and where ``ok`` is False: no shadow ray is cast there).  ``record``:
+        a list to which the pass-through surfaces crossed are appended (engine.render.visibility)."""
         trans = np.zeros(p.shape[1])
         idx = ok.nonzero()[0]
         if idx.size:
             w = gather(wi, idx)
-            tr, rays = self.visibility.transmittance(self.scene, offset_origin(gather(p, idx), gather(n_g, idx), w),
-                                                     w, t_max[idx])
+            layers = [] if record is not None else None
+            p_idx = gather(p, idx)
+            o = offset_origin(p_idx, gather(n_g, idx), w)
+            tr, rays = self.visibility.transmittance(self.scene, o, w, t_max[idx], record=layers)
             trans[idx] = tr
             stats["shadow_rays"] += rays
+            if layers:          # distances from the vertex (the shadow rays start off the surface)
+                gap = ((o - p_idx) * w).sum(axis=0)
+                record.extend((idx[r], prims, t + gap[r]) for r, prims, t in layers)
         return trans
+
+    def _shadow_media(self, medium: tuple, wi: np.ndarray, dist: np.ndarray, lookup: WavelengthLookup,
+                      crossings: list) -> np.ndarray | None:
+        """Absorption (L, n) of the light arriving along the shadow rays wi over their lengths ``dist``
+        (inf: from outside the scene) times the paths' transmittance so far, or None for none.
+        ``medium`` = (stacks (K, n), τ (L, n) or None, triangles, geometric normals, wo) of the vertices:
+        a shadow ray that leaves through the vertex's own face into (out of) its volume starts inside
+        (outside) it; ``crossings``: the pass-through surfaces the shadow rays cross."""
+        stack, tau, prim, n_g, wo = medium
+        n = stack.shape[1]
+        stack = stack.copy()
+        vol, entering = self.media.crossing_sides(prim, wo, wi, n_g)
+        if (vol >= 0).any():
+            cross(stack, np.arange(n), vol, entering)
+        segment = self.media.march(stack, wi, crossings, lookup)
+        f = segment.transmittance(np.arange(n), dist) if segment.absorbs else None
+        if tau is not None:
+            f = tau if f is None else f * tau
+        return f
 
     def _next_event(self, sp: ShadingPoint, lookup: WavelengthLookup, bsdf: BSDF, T: np.ndarray, rows: np.ndarray,
                     x_T: np.ndarray, u: np.ndarray, stats: dict[str, int],
-                    T_cols: np.ndarray | None = None) -> np.ndarray:
+                    T_cols: np.ndarray | None = None, medium: tuple | None = None) -> np.ndarray:
         """Direct light at non-delta vertices, MIS-weighted against BSDF sampling; (P, L, n).
 
         ``lookup`` holds the path's wavelengths (lights are evaluated at all of them); the
@@ -671,7 +776,8 @@ class PathTracer:
         samples its own paths; the samples are then put together, so that the BSDF, the shadow
         rays and the throughput run once over all paths (per path the same arithmetic as one
         light at a time).  ``rows``: the vertices' paths in the batch's state, ``T_cols``: the
-        columns of T holding their throughputs (None: ``rows``; PathState.T_col).
+        columns of T holding their throughputs (None: ``rows``; PathState.T_col).  ``medium``: the
+        vertices' absorbing volumes and transmittance (see ``_shadow_media``; None: no interiors).
         """
         light_set = self.lights
         n = sp.n
@@ -680,13 +786,18 @@ class PathTracer:
         n_side = sp.n_g * np.sign(dot(sp.n_g, sp.wo))[None, :] if light_set.spatial else None
         choice, u_rest, chosen_prob = light_set.choose(u[0], sp.p, n_side)
         lights_chosen = np.unique(choice)
+        points = {}         # the sampled points (triangle, b1, b2) of lights whose radiance varies over them
         if len(lights_chosen) == 1:
             # one light for every path: its arrays as they are, no gathered copies
             li = int(lights_chosen[0])
             light = light_set.lights[li]
             # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
-            wi, dist, scale, pdf_l, ok = light.sample(sp.p, np.stack((u_rest, u[1], u[2])))
-            emitted = self._emitted(light, lookup, wi)
+            if light.varies_over_surface:
+                wi, dist, scale, pdf_l, ok, points[li] = light.sample_points(sp.p, np.stack((u_rest, u[1], u[2])))
+                emitted = light.emitted_at(points[li], lookup, self.rgb_mode, self.mono)
+            else:
+                wi, dist, scale, pdf_l, ok = light.sample(sp.p, np.stack((u_rest, u[1], u[2])))
+                emitted = self._emitted(light, lookup, wi)
             delta = light.is_delta
             select_prob = light_set.prob[li] if chosen_prob is None else chosen_prob
             owners = [(li, slice(None))]
@@ -699,10 +810,14 @@ class PathTracer:
                 li = int(li)
                 sel = np.nonzero(choice == li)[0]
                 light = light_set.lights[li]
-                w, d, sc, pdf, valid = light.sample(gather(sp.p, sel), np.stack((gather(u_rest, sel), gather(u[1], sel),
-                                                                                gather(u[2], sel))))
+                u_sel = np.stack((gather(u_rest, sel), gather(u[1], sel), gather(u[2], sel)))
+                if light.varies_over_surface:
+                    w, d, sc, pdf, valid, points[li] = light.sample_points(gather(sp.p, sel), u_sel)
+                    emitted[:, sel] = light.emitted_at(points[li], lookup.take(sel), self.rgb_mode, self.mono)
+                else:
+                    w, d, sc, pdf, valid = light.sample(gather(sp.p, sel), u_sel)
+                    emitted[:, sel] = self._emitted(light, lookup.take(sel), w)
                 wi[:, sel], dist[sel], scale[sel], pdf_l[sel], ok[sel] = w, d, sc, pdf, valid
-                emitted[:, sel] = self._emitted(light, lookup.take(sel), w)
                 delta[sel] = light.is_delta
                 owners.append((li, sel))
         direct = getattr(bsdf, "direct_light", None)
@@ -733,9 +848,10 @@ class PathTracer:
         p = sp.p
         # every path's shadow ray (origin off the surface, length short of the light) in one pass
         o, t_max = shadow_rays(p, sp.n_g, wi, dist, RAY_EPSILON)
+        crossings = [] if medium is not None else None
         if self.visibility is not None and self.visibility.affects_shadows:
             # shadow-invisible and pass-through (alpha) surfaces let (part of) the light through
-            weight = weight * self._shadow_transmittance(p, sp.n_g, wi, t_max, ok, stats)[None, :]
+            weight = weight * self._shadow_transmittance(p, sp.n_g, wi, t_max, ok, stats, crossings)[None, :]
         else:
             if ok.all():
                 blocked = self.scene.occluded(o, wi, t_max)
@@ -750,12 +866,18 @@ class PathTracer:
                 for li, sel in owners:
                     light = light_set.lights[li]
                     if light.blocks_own_shadow_rays and blocked[sel].any():
-                        # cosθ at the light from the area pdf dist²/(cosθ·A)
                         d, pdf = dist[sel], pdf_l[sel]
-                        cos_l = np.minimum(d * d / np.maximum(pdf * light.total_area, 1e-300), 1.0)
+                        if li in points:        # at the sampled points (their pdf need not be by area)
+                            cos_l = light.cos_at(points[li], gather(wi, sel))
+                        else:                   # cosθ at the light from the area pdf dist²/(cosθ·A)
+                            cos_l = np.minimum(d * d / np.maximum(pdf * light.total_area, 1e-300), 1.0)
                         blocked[sel] = self.scene.unblock_own_hits(li, gather(p, sel), gather(sp.n_g, sel),
                                                                    gather(wi, sel), d, cos_l, blocked[sel])
             weight = weight * (~blocked)[None, :]
+        if medium is not None:
+            absorbed = self._shadow_media(medium, wi, dist, lookup, crossings)
+            if absorbed is not None:
+                weight = weight * absorbed
         light_out = throughput_times_stokes(T, rows if T_cols is None else T_cols, S, weight)
         for _, sel in owners:
             if len(owners) > 1 and not ok[sel].any():
@@ -768,12 +890,17 @@ class PathTracer:
 
     def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, cols, idx: np.ndarray,
                       prims: np.ndarray, dists: np.ndarray, d: np.ndarray, lk: WavelengthLookup, prev_delta: np.ndarray,
-                      prev_pdf: np.ndarray, at_prev, camera: bool) -> None:
+                      prev_pdf: np.ndarray, at_prev, camera: bool, bary=None, o: np.ndarray | None = None,
+                      att=None) -> None:
         """Emission picked up where the rays ``idx`` (each at most once) hit or cross emitting
         triangles ``prims`` at distances ``dists``, MIS-weighted against next-event estimation
         from the vertices the rays left (``at_prev(rows)``: their positions and side normals).
         ``camera``: these are camera rays (lights hidden from the camera add nothing); ``cols(rows)``:
-        the columns of T holding the throughputs of the paths ``rows`` (PathState.T_columns)."""
+        the columns of T holding the throughputs of the paths ``rows`` (PathState.T_columns).
+        Lights whose radiance varies over the surface read it at the hits: their barycentrics
+        ``bary`` = (u, v) (n,) each, or where None, at the points o + dists·d of the rays' origins
+        ``o`` (3, N) (crossings of non-occluding emitters).  ``att(rows, s)``: the paths' absorption up
+        to distance s (PathTracer._attenuation; None: none)."""
         light_set = self.lights
         emitter = self.scene.tri_emitter[prims]
         cos_hit = -dot(d[:, idx], self.scene.tri_normal[prims].T)
@@ -787,13 +914,31 @@ class PathTracer:
             sel, cos_l = idx[mine][front], cos_l[front]
             if sel.size == 0:
                 continue
-            Le = self._emitted(light, lk.take(sel))
+            hit_prim = None
+            if light.varies_over_surface:
+                rows = np.flatnonzero(mine)[front]
+                hit_prim = prims[rows]
+                if bary is not None:
+                    b1, b2 = bary[0][rows], bary[1][rows]
+                else:
+                    b1, b2 = light.barycentrics(hit_prim, o[:, sel] + d[:, sel] * dists[rows][None, :])
+                Le = light.emitted_at((hit_prim, b1, b2), lk.take(sel), self.rgb_mode, self.mono)
+            else:
+                Le = self._emitted(light, lk.take(sel))
             factor = light.emission_factor(cos_l)
             if factor is not None:
                 Le = Le * factor[None, :]
+            if att is not None:
+                a = att(sel, dists[mine][front])
+                if a is not None:
+                    Le = Le * a
             prev = at_prev(sel)
             # lamps sampled by a warp need the arrival point, hence the direction (EllipseEmitter)
             where = (d[:, sel],) if light.hit_pdf_needs_direction else ()
-            p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], *where) * light_set.prob_at(li, *prev)
+            if hit_prim is not None:
+                p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], prim=hit_prim)
+            else:
+                p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], *where)
+            p_light = p_light * light_set.prob_at(li, *prev)
             wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
             add_light(radiance, path, T, sel, Le, wsel, cols(sel))

@@ -18,7 +18,14 @@ Frames and units as in the integrator's docstring:
   (light selection and analytic lamps' pdfs; None where no light needs them);
 - ``sampler``: the paths' random-number keys (engine.render.sampler.PathSampler);
 - ``lk``, ``lk_m``: wavelength lookups of the paths (lights) and of the materials (one wavelength
-  where nothing depends on λ; the same object as ``lk`` otherwise).
+  where nothing depends on λ; the same object as ``lk`` otherwise);
+- ``media`` (MAX_MEDIA, n) int32 or None: the absorbing volumes each path is inside (engine.render.media;
+  None in scenes without any), ``tau`` (L, n) or None (all 1): the Beer–Lambert transmittance of the
+  path so far per wavelength (RGB channel in RGB mode), a scalar kept apart from T; ``gap`` (n,) or
+  None (0): how far along ``d`` the segment's origin ``o`` lies from the vertex it leaves (the offset
+  off the surface), so that distances inside volumes are measured from the vertex; ``crossings``:
+  the pass-through surfaces the current segments cross (recorded by the intersection, consumed by
+  the emission stage; not a per-path array).
 
 Fields a stage has consumed are set to None, so that ``compress`` does not carry them.
 """
@@ -32,7 +39,8 @@ from ..spectral import WavelengthLookup
 from .sampler import PathSampler
 
 #: Per-path array fields, compressed together (None fields are skipped).
-ARRAY_FIELDS = ("path", "T", "x_T", "o", "d", "t_max", "eta_sq", "prev_delta", "prev_pdf", "p_prev", "n_prev")
+ARRAY_FIELDS = ("path", "T", "x_T", "o", "d", "t_max", "eta_sq", "prev_delta", "prev_pdf", "p_prev", "n_prev",
+                "tau", "media", "gap")
 
 
 class PathState:
@@ -50,11 +58,14 @@ class PathState:
     def __init__(self, path: np.ndarray, T: np.ndarray, x_T: np.ndarray, o: np.ndarray | None, d: np.ndarray,
                  t_max: np.ndarray | None, eta_sq: np.ndarray, prev_delta: np.ndarray | None,
                  prev_pdf: np.ndarray | None, p_prev: np.ndarray | None, n_prev: np.ndarray | None,
-                 sampler: PathSampler, lk: WavelengthLookup, lk_m: WavelengthLookup, T_col: np.ndarray | None = None):
+                 sampler: PathSampler, lk: WavelengthLookup, lk_m: WavelengthLookup, T_col: np.ndarray | None = None,
+                 tau: np.ndarray | None = None, media: np.ndarray | None = None, gap: np.ndarray | None = None):
         self.path, self.x_T, self.o, self.d, self.t_max, self.eta_sq = path, x_T, o, d, t_max, eta_sq
         self.prev_delta, self.prev_pdf, self.p_prev, self.n_prev = prev_delta, prev_pdf, p_prev, n_prev
         self.sampler, self.lk, self.lk_m = sampler, lk, lk_m
         self.T_store, self.T_col = T, T_col
+        self.tau, self.media, self.gap = tau, media, gap
+        self.crossings: list | None = None
 
     @property
     def T(self) -> np.ndarray:

@@ -8,6 +8,12 @@ interaction that changes neither the Stokes vector nor its frame and does not co
 shadow-invisible surfaces and are attenuated by 1 − alpha at pass-through ones (transparent
 shadows).  Scenes without any of these features never reach this module's loops, so their
 images are unchanged.
+
+Pass-through crossings are where a path enters or leaves an absorbing interior without a bounce
+(a Blender material with only a Volume output, a hidden glass's alpha): both loops can ``record``
+them — (rays, triangles, distances from the segment's origin), one layer per crossing — for the
+integrator's medium stacks (engine.render.media).  Hidden surfaces are not recorded: as in Cycles,
+rays that do not see an object do not enter its volume.
 """
 
 from __future__ import annotations
@@ -42,9 +48,14 @@ class RayVisibility:
     # ------------------------------------------------------------------ camera and indirect rays
 
     def pass_through(self, scene, o: np.ndarray, d: np.ndarray, t_max: np.ndarray | None, hits: Hits,
-                     camera: bool, keys: np.ndarray, bounce: int) -> tuple[Hits, int]:
+                     camera: bool, keys: np.ndarray, bounce: int, record: list | None = None) -> tuple[Hits, int]:
         """The first hit each ray really sees (hidden and chosen pass-through surfaces skipped), and
-        the number of extra rays cast.  ``camera``: the segment starts at the camera."""
+        the number of extra rays cast.  ``camera``: the segment starts at the camera.  ``record``: a
+        list to which the crossed pass-through (alpha) surfaces are appended, one layer per crossing:
+        (rays (m,) int64, triangles (m,), distances from o (m,)) (hidden surfaces are not crossings).
+        With ``record`` the distances, and the returned hits' t, also count the offsets by which each
+        continued ray starts past the surface it crossed (the distances along d from o, as the medium
+        attenuation needs them); without it they are the sum of the rays' own t (as before)."""
         hidden = self.camera_hidden if camera else self.indirect_hidden
         prim, u, v, t = hits.prim.copy(), hits.u.copy(), hits.v.copy(), hits.t.copy()
         active = np.arange(prim.shape[0])
@@ -60,7 +71,11 @@ class RayVisibility:
                 if partial.any():
                     dim = (_PASS_DIMENSION + bounce * 4096 + it) * _GOLDEN & _MASK64
                     xi = uniforms(keys[active], np.array([dim], np.uint64))[0]
-                    skip |= partial & (xi >= a)        # crossed with probability 1 − alpha
+                    crossed = partial & (xi >= a)      # crossed with probability 1 − alpha
+                    skip |= crossed
+                    if record is not None and crossed.any():
+                        rays = active[crossed]
+                        record.append((rays, prim[rays].copy(), t[rays].copy()))
             active = active[skip]
             if active.size == 0:
                 break
@@ -71,19 +86,25 @@ class RayVisibility:
             h = scene.intersect(o2, da, tm)
             extra += active.size
             prim[active], u[active], v[active] = h.prim, h.u, h.v
+            if record is not None:
+                t[active] += ((o2 - p) * da).sum(axis=0)       # the continued ray starts past the surface
             t[active] = np.where(h.prim >= 0, t[active] + h.t, h.t)
         # (rays still crossing after MAX_PASS_THROUGH layers keep their last hit)
         return Hits(prim, u, v, t), extra
 
     # ------------------------------------------------------------------ shadow rays
 
-    def transmittance(self, scene, o: np.ndarray, d: np.ndarray, t_max: np.ndarray) -> tuple[np.ndarray, int]:
+    def transmittance(self, scene, o: np.ndarray, d: np.ndarray, t_max: np.ndarray,
+                      record: list | None = None) -> tuple[np.ndarray, int]:
         """Fraction (N,) of light that reaches o from o + t_max·d through shadow-invisible and
-        pass-through surfaces (0 where something opaque blocks), and the number of rays cast."""
+        pass-through surfaces (0 where something opaque blocks), and the number of rays cast.
+        ``record``: a list to which the pass-through (alpha) surfaces crossed are appended as in
+        ``pass_through`` (rays, triangles, distances from o)."""
         n = o.shape[1]
         trans = np.ones(n)
         active = np.arange(n)
         o_act, tm = o, t_max.copy()
+        start = np.zeros(n) if record is not None else None     # distance of each ray's origin from o
         rays = 0
         for _ in range(MAX_PASS_THROUGH + 1):
             h = scene.intersect(o_act, d[:, active], tm)
@@ -96,11 +117,19 @@ class RayVisibility:
             factor = np.where(self.shadow_hidden[mesh], 1.0, 1.0 - self.alpha[mesh])
             trans[active[crossable]] *= factor[crossable]
             keep = crossable & (trans[active] > 0)
+            if record is not None:
+                at = start[active] + h.t
+                alpha_crossed = keep & ~self.shadow_hidden[mesh]
+                if alpha_crossed.any():
+                    record.append((active[alpha_crossed], h.prim[alpha_crossed].copy(), at[alpha_crossed]))
+                start[active[keep]] = at[keep]
             if not keep.any():
                 return trans, rays
             active = active[keep]
             p, n_g, _ = scene.surface(h.prim[keep], h.u[keep], h.v[keep])
             o_act = offset_origin(p, n_g, d[:, active])
+            if record is not None:
+                start[active] += ((o_act - p) * d[:, active]).sum(axis=0)
             tm = np.maximum(tm[keep] - h.t[keep], 0.0)
         trans[active] = 0.0                       # more layers than allowed: blocked
         return trans, rays

@@ -57,6 +57,76 @@ class Camera:
     film_transparent: bool = False
 
 
+#: ``Mesh.emission_sampling``: how a textured emission's points are sampled (see Mesh)
+EMISSION_SAMPLING = ("luminance", "area")
+
+
+@dataclass
+class Interior:
+    """An absorbing interior (Beer–Lambert), attached to a material as ``bsdf.interior``.
+
+    A mesh face whose material carries an interior bounds a closed volume of absorption
+    coefficient ``absorption`` σ_a(λ) ≥ 0 per scene unit of length (a Spectrum: ConstantSpectrum,
+    RGBUnboundedSpectrum — upsampled by the engine's basis; in RGB mode its linear sRGB triple is
+    used per channel, as Cycles — or TabulatedSpectrum).  A path segment of length d inside it is
+    attenuated by exp(−σ_a(λ)·d); the Stokes vector's polarisation is unchanged (an isotropic
+    absorber scales the Mueller matrix by a scalar per wavelength).  Blender's Volume Absorption
+    (Color c, Density ρ) is ``Interior.from_color_density(c, ρ)``: σ_a = ρ·(1 − c).  Media entered
+    through faces of several such materials add up (Cycles' volume stack): see docs/physics.md
+    "Absorbing interiors".  Set it on an instance only (``bsdf.interior = Interior(...)``), so the
+    scene fingerprints of materials without one are unchanged; an interior that absorbs nothing
+    (σ_a = 0 at every wavelength) is the same as none.
+    """
+
+    absorption: object
+
+    def __post_init__(self):
+        from ..errors import SceneError
+        from ..spectral import Spectrum, as_spectrum
+        if isinstance(self.absorption, (list, tuple, np.ndarray)) and np.shape(self.absorption) == (3,):
+            from ..spectral import RGBUnboundedSpectrum
+            self.absorption = RGBUnboundedSpectrum(self.absorption, field="interior.absorption")
+        elif not isinstance(self.absorption, Spectrum):
+            try:
+                self.absorption = as_spectrum(self.absorption, "interior.absorption")
+            except ValueError as e:
+                raise SceneError("interior.absorption", str(e)) from None
+        rgb = np.asarray(self.absorption.linear_srgb(), np.float64)
+        if not np.all(np.isfinite(rgb)) or np.any(rgb < 0):
+            raise SceneError("interior.absorption", f"must be ≥ 0 and finite (per unit length), got {rgb.tolist()}")
+        values = getattr(self.absorption, "values", None)      # a table: every value, not only its colour
+        if values is not None and (not np.all(np.isfinite(values)) or np.any(np.asarray(values) < 0)):
+            raise SceneError("interior.absorption", "table values must be ≥ 0 and finite (per unit length)")
+
+    @classmethod
+    def from_color_density(cls, color, density: float) -> Interior:
+        """Blender's Volume Absorption: σ_a = density·(1 − color) per channel (Cycles'
+        svm_node_closure_volume); color in [0, 1]³, density ≥ 0 (world units⁻¹)."""
+        from ..errors import SceneError
+        c = np.asarray(color, np.float64)
+        if c.shape != (3,) or not np.all(np.isfinite(c)) or np.any(c < 0) or np.any(c > 1):
+            raise SceneError("interior.color", f"must be an [r, g, b] list with components in [0, 1], got {color!r}")
+        rho = float(density)
+        if not np.isfinite(rho) or rho < 0:
+            raise SceneError("interior.density", f"must be a finite number ≥ 0, got {density!r}")
+        return cls(list(rho * (1.0 - c)))
+
+    @property
+    def absorbs(self) -> bool:
+        """σ_a > 0 at some wavelength (an interior that absorbs nothing is treated as none)."""
+        values = getattr(self.absorption, "values", None)
+        if values is not None:
+            return bool(np.any(np.asarray(values) > 0))
+        return bool(np.any(np.asarray(self.absorption.linear_srgb()) > 0))
+
+
+def interior_of(material) -> Interior | None:
+    """The material's absorbing interior (``material.interior``), or None when it has none or it
+    absorbs nothing."""
+    interior = getattr(material, "interior", None)
+    return interior if isinstance(interior, Interior) and interior.absorbs else None
+
+
 @dataclass
 class Mesh:
     """A triangle mesh in world space.
@@ -65,7 +135,12 @@ class Mesh:
     (v1 − v0) × (v2 − v0)).  ``normals`` are per-vertex shading normals or None
     (flat shading).  ``material_ids`` index ``materials`` (names in
     Scene.materials) per face.  ``emission`` (a spectral radiance, or None)
-    makes the mesh a one-sided area light emitting along its front side.
+    makes the mesh a one-sided area light emitting along its front side; a radiance that varies
+    over the surface is a ``TexturedSpectrum`` of kind "illuminant" (strength × a texture's RGB at
+    each point: ``engine.textures.textured_emission``, read through the mesh's ``uv`` or ``colors``),
+    sampled per ``emission_sampling``: "luminance" (the default: triangles ∝ area × mean emitted
+    luminance) or "area" (as a constant emitter: by area, a rectangle by solid angle); constant
+    emitters ignore it.
     ``uv`` and ``colors`` are per-vertex attributes read by textured materials (engine.textures).
 
     Ray visibility (Cycles' Object ▸ Visibility): ``visible_camera`` False hides the mesh from
@@ -107,6 +182,10 @@ class Mesh:
     two_sided: bool = False
     occluder: bool = True
     spread_deg: float = 180.0
+    #: how a textured emission is sampled (see above); a class attribute, not a field: set it on the
+    #: instance (``mesh.emission_sampling = "area"``), so the fingerprints of existing scenes
+    #: (engine.render.resume) stay what they were
+    emission_sampling = "luminance"
 
 
 @dataclass

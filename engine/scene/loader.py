@@ -24,15 +24,16 @@ import numpy as np
 
 from ..files import refuse_special_file
 from ..materials.catalogue import MODELS
+from ..materials.mix import MAX_COMPONENTS, Mix
 from ..materials.normal_map import ShadingNormal
-from ..textures import parse_texture_input
+from ..textures import parse_texture_input, textured_emission
 from ..textures.image import read_image
-from .description import (ENVMAP_GRIDS, SAMPLERS, Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight,
-                                      RenderSettings, Scene, SpotLight)
+from .description import (EMISSION_SAMPLING, ENVMAP_GRIDS, SAMPLERS, Camera, DirectionalLight, EnvironmentLight,
+                          Interior, Mesh, PointLight, RenderSettings, Scene, SpotLight)
 from ..errors import SceneError
 from .meshio import read_mesh
 from .shapes import icosphere, quad, transform_matrix, transform_mesh
-from ..spectral import ConstantSpectrum, RGBIlluminantSpectrum
+from ..spectral import ConstantSpectrum, RGBIlluminantSpectrum, parse_spectrum
 
 FORMAT = "polar-scene/1"
 #: Largest coordinate accepted: Embree works in float32 (max ~3.4e38) and rays need headroom.
@@ -358,29 +359,47 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
 
 
 def _check_layer_stack(d, field: str, materials: dict | None = None) -> None:
-    """Bound a layered material before it is built, since every coat is one recursion level when
-    the stack is built and rendered: at most MAX_LAYER_NESTING layered bases below it, given
-    inline or by name (resolved in ``materials`` when given), and at most MAX_COATS coats in all.
-    Malformed parts are left to parse_material, unknown or circular references to the lookup."""
-    level, coats, seen, top = 0, 0, set(), field
-    while isinstance(d, dict) and d.get("type") == "weidlich_wilkie":
-        if level > MAX_LAYER_NESTING:
-            raise SceneError(f"{field}.base", f"layered materials nest more than {MAX_LAYER_NESTING} levels deep "
-                                              f"below {top} (counting bases given inline and by name)")
-        if isinstance(d.get("coats"), list):
-            coats += len(d["coats"])
-            if coats > MAX_COATS:
-                raise SceneError(f"{field}.coats", f"a layered material has at most {MAX_COATS} coats in all "
-                                                   f"(counting its layered bases' coats), got {coats}")
-        base = d.get("base")
-        if isinstance(base, dict):
-            d, field = base, f"{field}.base"
-        elif isinstance(base, str) and materials is not None and base in materials and base not in seen:
-            seen.add(base)
-            d, field = materials[base], f"materials.{base}"
+    """Bound a layered material or a mix before it is built, since every coat and every nested mix
+    is one recursion level when the material is built and rendered: at most MAX_LAYER_NESTING layered
+    bases and mixes below it along any branch, given inline or by name (resolved in ``materials``
+    when given), and at most MAX_COATS coats along any branch in all.  Malformed parts are left to
+    parse_material, unknown or circular references to the lookup."""
+    top = field
+    walked: dict[str, list[tuple[int, int]]] = {}   # name → (level, coats) already walked from it
+
+    def walk(d, field, level, coats, names):
+        kind = d.get("type") if isinstance(d, dict) else None
+        if kind == "weidlich_wilkie":
+            if level > MAX_LAYER_NESTING:
+                raise SceneError(f"{field}.base", f"layered materials nest more than {MAX_LAYER_NESTING} levels "
+                                                  f"deep below {top} (counting bases given inline and by name)")
+            if isinstance(d.get("coats"), list):
+                coats += len(d["coats"])
+                if coats > MAX_COATS:
+                    raise SceneError(f"{field}.coats", f"a layered material has at most {MAX_COATS} coats in all "
+                                                       f"(counting its layered bases' coats), got {coats}")
+            children = [(d.get("base"), f"{field}.base")]
+        elif kind == "mix":
+            if level > MAX_LAYER_NESTING:
+                raise SceneError(f"{field}.materials", f"mixes and layered materials nest more than "
+                                                       f"{MAX_LAYER_NESTING} levels deep below {top} (counting "
+                                                       "materials given inline and by name)")
+            items = d.get("materials")
+            children = [(m, f"{field}.materials[{i}]") for i, m in enumerate(items[:MAX_COMPONENTS + 1])] \
+                if isinstance(items, list) else []
         else:
             return
-        level += 1
+        for child, where in children:
+            if isinstance(child, dict):
+                walk(child, where, level + 1, coats, names)
+            elif isinstance(child, str) and materials is not None and child in materials and child not in names:
+                # a name already walked at a level and coat count at least as deep cannot fail now
+                if any(lv >= level + 1 and c >= coats for lv, c in walked.get(child, ())):
+                    continue
+                walked.setdefault(child, []).append((level + 1, coats))
+                walk(materials[child], f"materials.{child}", level + 1, coats, names | {child})
+
+    walk(d, field, 0, 0, frozenset())
 
 
 def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: str | None = None):
@@ -392,7 +411,12 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: s
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     decl = MODELS[choice(_require(d, "type", field), f"{field}.type", tuple(MODELS))]
-    _check_keys(d, field, {"type", "note", "name", "normal_map", "bump_map", "two_sided"} | set(decl.names()))
+    _check_keys(d, field, {"type", "note", "name", "normal_map", "bump_map", "two_sided", "interior"}
+                | set(decl.names()))
+    if depth > 0 and "interior" in d:
+        raise SceneError(f"{field}.interior", "belongs to a material of the scene's \"materials\" (the one the faces "
+                                              "use), not to a base or a mixed material")
+    interior = _parse_interior(d["interior"], f"{field}.interior") if d.get("interior") is not None else None
     parts = {}
     for p in decl.parameters:
         if p.kind == "coats":
@@ -403,15 +427,57 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: s
                              for i, c in enumerate(coats_in)]
         elif p.kind == "material":
             parts[p.name] = _parse_part(d.get(p.name, p.default), f"{field}.{p.name}", lookup, depth, base_dir)
+        elif p.kind == "materials":
+            items = _require(d, p.name, field)
+            if not isinstance(items, list) or not items or len(items) > MAX_COMPONENTS:
+                raise SceneError(f"{field}.{p.name}", f"must be a list of 1 to {MAX_COMPONENTS} materials (objects "
+                                                      "inline or names of materials)")
+            parts[p.name] = [_parse_part(v, f"{field}.{p.name}[{i}]", lookup, depth, base_dir, mixed=True)
+                             for i, v in enumerate(items)]
     bsdf = decl.build(decl.values(d, field, base_dir=base_dir), **parts)
     if d.get("normal_map") is not None or d.get("bump_map") is not None:
+        if isinstance(bsdf, Mix) and any(_own_maps(c) for c in bsdf.components):
+            key = "normal_map" if d.get("normal_map") is not None else "bump_map"
+            raise SceneError(f"{field}.{key}", "a mix whose materials have their own normal or bump maps cannot "
+                                               "have one too: give the map to each of its materials")
         bsdf = _shading_normal(bsdf, d, field, base_dir)
     two_sided = d.get("two_sided", False)
     if not isinstance(two_sided, bool):
         raise SceneError(f"{field}.two_sided", f"must be true or false, got {two_sided!r}")
     if two_sided:
         bsdf.two_sided = True
+        if isinstance(bsdf, ShadingNormal) and isinstance(bsdf.base, Mix):
+            bsdf.base.two_sided = True      # a transmitting mix flips its opaque materials itself
+    if interior is not None and interior.absorbs:
+        bsdf.interior = interior            # (none when it absorbs nothing: the scene renders as without)
     return bsdf
+
+
+#: Blender's Volume Absorption defaults (Color 0.8 grey, Density 1)
+_INTERIOR_DEFAULT_COLOR = [0.8, 0.8, 0.8]
+
+
+def _parse_interior(d, field: str) -> Interior:
+    """A material's absorbing interior (engine.scene.description.Interior): ``absorption`` σ_a per
+    scene unit (a number, [r, g, b] or a spectrum table, ≥ 0), or Blender's Volume Absorption
+    ``color`` (in [0, 1]) and ``density`` (≥ 0): σ_a = density·(1 − color)."""
+    if not isinstance(d, dict):
+        raise SceneError(field, "must be an object like {\"absorption\": [0.1, 0.2, 0.3]} (per scene unit) or "
+                                "{\"color\": [0.2, 0.8, 0.3], \"density\": 1.0} (Blender's Volume Absorption)")
+    _check_keys(d, field, {"absorption", "color", "density", "note"})
+    if "absorption" in d:
+        if "color" in d or "density" in d:
+            raise SceneError(f"{field}.absorption", "give either absorption or color and density, not both")
+        return Interior(parse_spectrum(d["absorption"], f"{field}.absorption", kind="unbounded"))
+    density = number(_require(d, "density", field), f"{field}.density", 0)
+    color = d.get("color", _INTERIOR_DEFAULT_COLOR)
+    if isinstance(color, (list, tuple)) and len(color) == 3:
+        rgb = [number(c, f"{field}.color[{i}]", 0, 1) for i, c in enumerate(color)]
+    elif isinstance(color, (int, float)) and not isinstance(color, bool):
+        rgb = [number(color, f"{field}.color", 0, 1)] * 3
+    else:
+        raise SceneError(f"{field}.color", f"must be a number or an [r, g, b] list in [0, 1], got {color!r}")
+    return Interior.from_color_density(rgb, density)
 
 
 def _shading_normal(bsdf, d: dict, field: str, base_dir):
@@ -439,20 +505,28 @@ def _shading_normal(bsdf, d: dict, field: str, base_dir):
     return ShadingNormal(bsdf, **kw)
 
 
-def _parse_part(value, field, lookup, depth, base_dir=None):
-    """A nested material (e.g. the base under a coat): inline or a reference by name."""
-    if depth > 16:
-        raise SceneError(field, "layered materials nest more than 16 levels deep")
+def _parse_part(value, field, lookup, depth, base_dir=None, mixed=False):
+    """A nested material (the base under a coat; ``mixed``: one material of a mix): inline or a
+    reference by name.  A mix's materials may have their own normal and bump maps, a base may not
+    (nor may the materials of a mix under a coat)."""
+    if depth > MAX_LAYER_NESTING:
+        raise SceneError(field, f"{'mixes and ' if mixed else ''}layered materials nest more than "
+                                f"{MAX_LAYER_NESTING} levels deep")
     if isinstance(value, str):
         if lookup is None:
             raise SceneError(field, "material references are not available here; give it inline")
         part = lookup(value, field)
     else:
         part = parse_material(value, field, lookup, depth + 1, base_dir)
-    if isinstance(part, ShadingNormal):
+    if not mixed and _own_maps(part):
         raise SceneError(field, "a material under a coat cannot have its own normal or bump map: give the map to "
                                 "the layered material")
     return part
+
+
+def _own_maps(bsdf) -> bool:
+    """The material, or a material of it as a mix, has its own normal or bump map."""
+    return isinstance(bsdf, ShadingNormal) or (isinstance(bsdf, Mix) and any(map(_own_maps, bsdf.components)))
 
 
 def _parse_coat(c, field, coat, base_dir=None):
@@ -462,7 +536,7 @@ def _parse_coat(c, field, coat, base_dir=None):
     return coat.build(coat.values(c, field, base_dir=base_dir))
 
 
-def _parse_emission(d, field: str):
+def _parse_emission(d, field: str, base_dir: str = "."):
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object like {\"radiance\": 10, \"color\": [1, 1, 1]}")
     _check_keys(d, field, {"radiance", "color", "spectrum", "note"})
@@ -471,6 +545,14 @@ def _parse_emission(d, field: str):
         # always D65 × color here, so a table would be dropped silently: refuse it.
         raise SceneError(f"{field}.spectrum", "is a description only (text); the emitted spectrum is D65 × color "
                                               "× radiance — use 'color' and 'radiance'")
+    if isinstance(d.get("color"), dict):
+        # a texture object (or colour attribute): radiance × its RGB at each point, as a constant colour emits
+        scale = number(d.get("radiance", 1.0), f"{field}.radiance", 0, MAX_LIGHT)
+        emission = textured_emission(parse_texture_input(d["color"], f"{field}.color", base_dir), scale, field)
+        if emission.hi > MAX_LIGHT:
+            raise SceneError(f"{field}.color", f"times the radiance must be at most {MAX_LIGHT:g} (images are "
+                                               f"float32), got {emission.hi:g}")
+        return emission
     return _illuminant(d, field, "radiance")
 
 
@@ -588,7 +670,8 @@ def _parse_object_base(d: dict, field: str, base_dir: str, material_names) -> Me
             f = f"{field}.material" if "materials" not in d else f"{field}.materials[{i}]"
             raise SceneError(f, f"unknown material {m!r} (defined: {', '.join(sorted(material_names)) or 'none'})")
 
-    emission = _parse_emission(d["emission"], f"{field}.emission") if d.get("emission") is not None else None
+    emission = _parse_emission(d["emission"], f"{field}.emission", base_dir) if d.get("emission") is not None \
+        else None
     mesh = Mesh(name=name, vertices=np.asarray(data.vertices, dtype=np.float64), faces=faces,
                 materials=list(mat_list), material_ids=ids.astype(np.int32), normals=data.vertex_normals,
                 emission=emission, uv=uv, colors=colors or {}, tangents=tangents)
@@ -597,7 +680,11 @@ def _parse_object_base(d: dict, field: str, base_dir: str, material_names) -> Me
 
 
 def _any_textured(d: dict, materials) -> bool:
-    """Whether a material named by the object (``material`` or ``materials``) varies over the surface."""
+    """Whether a material named by the object (``material`` or ``materials``), or its emission, varies over
+    the surface."""
+    emission = d.get("emission")
+    if isinstance(emission, dict) and isinstance(emission.get("color"), dict):
+        return True
     names = d.get("materials", [d.get("material")])
     names = list(names.values()) if isinstance(names, dict) else names
     if not isinstance(names, list) or not isinstance(materials, dict):
@@ -807,7 +894,7 @@ LIGHT_OPTIONS = {"point": ("radius", "soft_falloff", "visible_camera"),
                  "spot": ("radius", "soft_falloff", "visible_camera", "blend_profile"),
                  "directional": ("angle_deg", "visible_camera")}
 #: optional emitter options inside "emission" (Mesh fields; defaults: one-sided, opaque, Lambertian)
-EMITTER_OPTIONS = ("two_sided", "occluder", "spread_deg")
+EMITTER_OPTIONS = ("two_sided", "occluder", "spread_deg", "sampling")
 
 
 def _flag(d, key: str, field: str, default: bool) -> bool:
@@ -886,6 +973,8 @@ def _emitter_options(d, field: str) -> dict:
     out = {key: _flag(d, key, field, True) for key in ("two_sided", "occluder") if key in d}
     if "spread_deg" in d:
         out["spread_deg"] = number(d["spread_deg"], f"{field}.spread_deg", 0, 180, lo_open=True)
+    if "sampling" in d:
+        out["emission_sampling"] = choice(d["sampling"], f"{field}.sampling", EMISSION_SAMPLING)
     return out
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from .image import COLOR_SPACES, default_color_space, read_texture
 from .texture import EXTENSIONS, INTERPOLATIONS, ImageTexture, Texture, VertexColour
 from ..errors import SceneError
-from ..spectral import Spectrum
+from ..spectral import GRID_NM, Spectrum, d65_normalised, spectrum_to_linear_srgb
 from ..spectral.cie import LUMINANCE_WEIGHTS, luminance
 from ..spectral.spectrum import basis_rgb
 
@@ -82,6 +82,25 @@ class TextureInput:
         if self._grey():      # grey (+ alpha) images: R = G = B = grey
             index = 0 if index < 3 else 1
         return values[index]
+
+    def channels_read(self) -> tuple:
+        """The texture channels the parameter's values depend on."""
+        grey = self._grey()
+        ch = self.channel
+        if ch is None or ch == "luminance":
+            return (0,) if grey else (0, 1, 2)
+        index = "RGBA".index(ch)
+        return ((0 if index < 3 else 1),) if grey else (index,)
+
+    def may_be_positive(self, attributes, prim: np.ndarray) -> np.ndarray:
+        """(T,) bool, conservative: False only where the parameter is ≤ 0 in every channel all over
+        triangle ``prim`` (so an emitter's radiance, clipped at 0, is 0 there)."""
+        if self.offset > 0 or self.scale < 0:
+            return np.ones(len(prim), bool)
+        if self.scale == 0:
+            return np.zeros(len(prim), bool)
+        # offset ≤ 0 < scale: values of texels ≤ 0 (weights ≥ 0: every filter's) map to ≤ 0
+        return self.texture.may_be_positive(attributes, prim, self.channels_read())
 
     def number(self, points) -> np.ndarray:
         """The parameter (N,) at the points."""
@@ -171,9 +190,32 @@ class TexturedNumber:
         return f"TexturedNumber({self.source!r})"
 
 
+def _illuminant_rgb_matrix() -> tuple[np.ndarray, np.ndarray]:
+    """(M (3, 3), white (3,)): the linear sRGB that D65n(λ)·B_i(λ) develops to (column i; the exact
+    integral on the 1 nm grid, as a constant light's ``rgb()``), and that D65n itself develops to."""
+    global _ILLUMINANT_RGB
+    if _ILLUMINANT_RGB is None:
+        d65 = d65_normalised(GRID_NM)
+        basis = basis_rgb(GRID_NM)
+        M = np.stack([spectrum_to_linear_srgb(d65 * basis[i]) for i in range(3)], axis=1)
+        white = spectrum_to_linear_srgb(d65)
+        M.setflags(write=False)
+        white.setflags(write=False)
+        _ILLUMINANT_RGB = (M, white)
+    return _ILLUMINANT_RGB
+
+
+_ILLUMINANT_RGB = None
+
+
 class TexturedSpectrum(Spectrum):
     """A spectrum parameter given by an RGB texture: per point the RGB upsampling of a constant
-    [r, g, b] with the texel's values (r = g = b gives exactly that constant)."""
+    [r, g, b] with the texel's values (r = g = b gives exactly that constant).
+
+    Kind ``"illuminant"`` (an emitter's radiance, :func:`textured_emission`): per point exactly what
+    a constant ``RGBIlluminantSpectrum`` of the texel's colour is, D65n(λ)·(r B_r + g B_g + b B_b)(λ)
+    (r = g = b: r·D65n); in RGB :meth:`linear_srgb_at` (that spectrum integrated against the CIE
+    observer, as a constant light's ``rgb()``); mono the luminance."""
 
     is_constant = False
 
@@ -199,19 +241,58 @@ class TexturedSpectrum(Spectrum):
     def linear_srgb(self) -> np.ndarray:
         raise TypeError("a textured spectrum varies over the surface: it has no single colour")
 
-    def at(self, points, lam: np.ndarray, mono: bool, basis: np.ndarray | None = None) -> np.ndarray:
-        """Values (L, N) at the points and their wavelengths ``lam`` (L, N) (mono: the luminance)."""
+    def rgb_at(self, points) -> np.ndarray:
+        """The texels' RGB (3, N) at the points, mapped (scale, offset) and clipped."""
+        rgb = self.source.rgb(points)
+        return rgb if self.clip is None else np.clip(rgb, *self.clip)
+
+    def at(self, points, lam: np.ndarray, mono: bool, basis: np.ndarray | None = None,
+           d65: np.ndarray | None = None) -> np.ndarray:
+        """Values (L, N) at the points and their wavelengths ``lam`` (L, N) (mono: the luminance);
+        ``basis``, ``d65``: the RGB basis and (illuminants) D65n at ``lam``, if already looked up."""
         def compute():
-            rgb = self.source.rgb(points)
-            if self.clip is not None:
-                rgb = np.clip(rgb, *self.clip)
+            rgb = self.rgb_at(points)
             if mono:
                 return np.broadcast_to(luminance(rgb.T)[None, :], lam.shape).copy()
             b = basis if basis is not None else basis_rgb(lam)
             value = rgb[0][None, :] * b[0] + rgb[1][None, :] * b[1] + rgb[2][None, :] * b[2]
             grey = (rgb[0] == rgb[1]) & (rgb[1] == rgb[2])
-            return np.where(grey[None, :], rgb[0][None, :], value)
+            value = np.where(grey[None, :], rgb[0][None, :], value)
+            if self.kind == "illuminant":
+                value = value * (d65 if d65 is not None else d65_normalised(lam))
+            return value
         return points.memo((self, mono, lam.shape[0]), compute)
+
+    def linear_srgb_at(self, points) -> np.ndarray:
+        """Linear sRGB (3, N) the values at the points develop to: for an illuminant the exact
+        integral of its spectrum against the CIE observer (the expectation of the spectral estimator,
+        as a constant light's ``rgb()``), else the texels' RGB."""
+        def compute():
+            rgb = self.rgb_at(points)
+            if self.kind != "illuminant":
+                return rgb
+            M, white = _illuminant_rgb_matrix()
+            grey = (rgb[0] == rgb[1]) & (rgb[1] == rgb[2])
+            return np.where(grey[None, :], white[:, None] * rgb[0][None, :], M @ rgb)
+        return points.memo((self, "linear_srgb"), compute)
+
+    def luminance_at(self, points) -> np.ndarray:
+        """Luminance (N,) of :meth:`linear_srgb_at` (an emitter's importance)."""
+        return luminance(self.linear_srgb_at(points).T)
+
+
+def textured_emission(source: TextureInput, strength: float = 1.0, field: str = "emission") -> TexturedSpectrum:
+    """An emitter's radiance that varies over its surface: strength × the texture's RGB at each point,
+    as a spectrum exactly as a constant ``RGBIlluminantSpectrum(rgb, strength)`` (Blender: an Image
+    Texture into Emission Color, × Emission Strength).  Give it as a Mesh's ``emission``.  Negative
+    values (HDR tools write some) emit nothing."""
+    strength = float(strength)
+    if not (math.isfinite(strength) and strength >= 0):
+        raise SceneError(f"{field}.radiance", f"must be a finite number ≥ 0, got {strength!r}")
+    scaled = TextureInput(source.texture, source.channel, source.scale * strength, source.offset * strength,
+                          source.power)
+    lo, _ = scaled.bounds(rgb=True)
+    return TexturedSpectrum(scaled, "illuminant", (0.0, math.inf) if lo < 0 else None)
 
 
 def textured(*values) -> bool:

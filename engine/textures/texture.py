@@ -100,6 +100,16 @@ class Texture:
         """Per-channel (lo, hi) bounds of every value ``eval`` can return (C,) each."""
         raise NotImplementedError
 
+    def texels_per_triangle(self, attributes, prim: np.ndarray) -> np.ndarray:
+        """How many texels (T,) each triangle ``prim`` covers (the resolution at which its mean is to
+        be estimated; 0 where the texture is smooth over it)."""
+        return np.zeros(len(prim))
+
+    def may_be_positive(self, attributes, prim: np.ndarray, channels: tuple) -> np.ndarray:
+        """(T,) bool, conservative: False only where every value ``eval`` can return on triangle
+        ``prim`` (vertex attributes ``attributes``) is ≤ 0 in each of the ``channels``."""
+        return np.ones(len(prim), bool)
+
 
 class ImageTexture(Texture):
     """An image (float32 (H, W, C), row 0 at v = 0) looked up by UV; see the module docstring.
@@ -241,6 +251,89 @@ class ImageTexture(Texture):
     def eval(self, points) -> np.ndarray:
         return self.lookup(points.uv())
 
+    #: the texel footprint test pools the image to at most this many blocks a side
+    FOOTPRINT_BLOCKS = 1024
+
+    def _triangle_uv(self, attributes, prim: np.ndarray) -> np.ndarray:
+        """The corners' lookup coordinates (T, 3, 2) of triangles ``prim`` (after the UV transform)."""
+        if attributes.uv is None:
+            uv = np.zeros((len(prim), 3, 2))
+        else:
+            uv = attributes.uv[attributes.faces[prim]].astype(np.float64)
+        if self.uv_transform is not None:
+            A, b = self.uv_transform
+            uv = uv @ A.T + b
+        return uv
+
+    def texels_per_triangle(self, attributes, prim):
+        uv = self._triangle_uv(attributes, prim)
+        e1, e2 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+        area = 0.5 * np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]) * (self.width * self.height)
+        return np.where(np.isfinite(area), area, 0.0)
+
+    def may_be_positive(self, attributes, prim, channels):
+        """The texels that lookups inside a triangle read with a weight > 0 lie in a range about its UV
+        bounding box (Closest: the texels it overlaps; Linear: ± 1½ texels; Cubic: ± 2½), wrapped per
+        the extension; a triangle may be positive if any of them is (checked in the image pooled to
+        blocks of texels, so a superset).  Lookups exactly on the triangle's edges (a set of zero
+        area) may read a texel beyond."""
+        uv = self._triangle_uv(attributes, prim)
+        lo, hi = uv.min(axis=1), uv.max(axis=1)
+        known = np.all(np.isfinite(lo) & np.isfinite(hi) & (np.abs(lo) < 2.0 ** 30) & (np.abs(hi) < 2.0 ** 30), axis=1)
+        lo, hi = np.where(known[:, None], lo, 0.0), np.where(known[:, None], hi, 0.0)
+        # texel k is read with weight > 0 at x = u·size ∈ (k − r, k + 1 + r): it meets (a, b) if
+        # a − 1 − r < k < b + r (a point a: closed, widened to whole texels)
+        r = {"Closest": 0.0, "Linear": 0.5, "Cubic": 1.5}[self.interpolation]
+
+        def texel_range(a, b):
+            flat = b <= a
+            return (np.where(flat, np.floor(a - 1.0 - r), np.floor(a - 1.0 - r) + 1).astype(np.int64),
+                    np.where(flat, np.ceil(b + r), np.ceil(b + r) - 1).astype(np.int64))
+
+        ax = _axis_interval(*texel_range(lo[:, 0] * self.width, hi[:, 0] * self.width), self.width, self.extension)
+        ay = _axis_interval(*texel_range(lo[:, 1] * self.height, hi[:, 1] * self.height), self.height,
+                            self.extension)
+        positive = np.zeros(self.pixels.shape[:2], bool)
+        for c in channels:
+            positive |= self.pixels[:, :, c] > 0
+        block = max(1, -(-max(self.width, self.height) // self.FOOTPRINT_BLOCKS))
+        hb, wb = -(-self.height // block), -(-self.width // block)
+        padded = np.zeros((hb * block, wb * block), bool)
+        padded[:self.height, :self.width] = positive
+        pooled = padded.reshape(hb, block, wb, block).any(axis=(1, 3))
+        table = np.zeros((hb + 1, wb + 1), np.int64)
+        table[1:, 1:] = pooled.cumsum(0).cumsum(1)
+        x0, x1, y0, y1 = ax[0] // block, ax[1] // block + 1, ay[0] // block, ay[1] // block + 1
+        count = table[y1, x1] - table[y0, x1] - table[y1, x0] + table[y0, x0]
+        return ~known | (~(ax[2] | ay[2]) & (count > 0))
+
+
+def _axis_interval(lo: np.ndarray, hi: np.ndarray, n: int, extension: str):
+    """(a, b, empty): one interval [a, b] ⊂ [0, n) holding every pixel index the integer range
+    [lo, hi] wraps to under the extension (a superset where it wraps into two pieces), and where
+    it holds none (CLIP beyond the image)."""
+    empty = np.zeros(lo.shape, bool)
+    if extension == "EXTEND":
+        return np.clip(lo, 0, n - 1), np.clip(hi, 0, n - 1), empty
+    if extension == "CLIP":
+        a, b = np.maximum(lo, 0), np.minimum(hi, n - 1)
+        return np.minimum(a, n - 1), np.maximum(b, 0), a > b
+    full = hi - lo + 1 >= n
+    if extension == "REPEAT":
+        a, b = np.mod(lo, n), np.mod(hi, n)
+        full |= a > b
+    else:       # MIRROR: period 2n, pixel m < n → m, else 2n − 1 − m; a range shorter than n crosses ≤ 1 fold
+        m_lo = np.mod(lo, 2 * n)
+        m_hi = m_lo + (hi - lo)
+        f_lo = np.where(m_lo < n, m_lo, 2 * n - 1 - m_lo)
+        m_hi_w = np.mod(m_hi, 2 * n)
+        f_hi = np.where(m_hi_w < n, m_hi_w, 2 * n - 1 - m_hi_w)
+        same = m_lo // n == m_hi // n
+        top = m_lo < n          # crossing from the rising piece into the falling one: the fold at n − 1
+        a = np.where(same | top, np.minimum(f_lo, f_hi), 0)
+        b = np.where(same, np.maximum(f_lo, f_hi), np.where(top, n - 1, np.maximum(f_lo, f_hi)))
+    return np.where(full, 0, a), np.where(full, n - 1, b), empty
+
 
 class VertexColour(Texture):
     """A colour attribute (per-vertex values, linear) of the meshes, by name; 0 where a mesh lacks it."""
@@ -258,3 +351,12 @@ class VertexColour(Texture):
 
     def eval(self, points) -> np.ndarray:
         return points.attribute(self.layer, self.channels)
+
+    def may_be_positive(self, attributes, prim, channels):
+        """Interpolation within a triangle is convex: positive somewhere only if at a corner."""
+        layer = attributes.layers.get(self.layer)
+        if layer is None:
+            return np.zeros(len(prim), bool)
+        corners = layer[attributes.faces[prim]]           # (T, 3, C)
+        cols = [c for c in channels if c < layer.shape[1]]
+        return np.any(corners[:, :, cols] > 0, axis=(1, 2)) if cols else np.zeros(len(prim), bool)

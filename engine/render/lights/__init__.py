@@ -17,8 +17,13 @@ Light selection (uniform, or by estimated importance) is handled by ``LightSet``
 Radiometry of the Cycles options (sphere/disk lights, sun angle, spread, spot blend) follows
 Cycles' intern/cycles/kernel/light/{point,spot,distant,area}.h.
 
+Emitters whose radiance varies over the surface (a texture × strength: ``textured``) have
+``varies_over_surface``: ``sample_points`` returns the sampled points (triangle, barycentrics) with
+``sample``'s tuple, ``emitted_at`` the radiance there, and ``pdf_hit`` takes the hit's triangle.
+
 Split by kind: ``base`` (the interface), ``environment``, ``area`` (emissive meshes and lamps),
-``lamps`` (point, spot, sun) and ``selection`` (LightSet).
+``textured`` (emissive meshes with textured radiance), ``lamps`` (point, spot, sun) and
+``selection`` (LightSet).
 """
 
 from .area import (MIN_RECT_SOLID_ANGLE, AreaEmitter, EllipseEmitter, SphericalRectangle, SpreadRectangleEmitter,
@@ -27,8 +32,9 @@ from .base import _Light, uniform_cone
 from .environment import EnvironmentEmitter, EnvironmentMapEmitter, euler_xyz_matrix
 from .lamps import DirectionalEmitter, PointEmitter, SpotEmitter, point_light_sample_numpy
 from .selection import LightSet
+from .textured import EMISSION_SAMPLING, TexturedAreaEmitter
 
-__all__ = ["AreaEmitter", "DirectionalEmitter", "EllipseEmitter", "EnvironmentEmitter", "EnvironmentMapEmitter",
-           "LightSet", "MIN_RECT_SOLID_ANGLE", "PointEmitter", "SphericalRectangle", "SpotEmitter",
-           "SpreadRectangleEmitter", "euler_xyz_matrix", "mesh_emitter", "point_light_sample_numpy",
-           "spread_profile", "uniform_cone", "_Light"]
+__all__ = ["AreaEmitter", "DirectionalEmitter", "EMISSION_SAMPLING", "EllipseEmitter", "EnvironmentEmitter",
+           "EnvironmentMapEmitter", "LightSet", "MIN_RECT_SOLID_ANGLE", "PointEmitter", "SphericalRectangle",
+           "SpotEmitter", "SpreadRectangleEmitter", "TexturedAreaEmitter", "euler_xyz_matrix", "mesh_emitter",
+           "point_light_sample_numpy", "spread_profile", "uniform_cone", "_Light"]

@@ -198,9 +198,13 @@ class AreaEmitter(_Light):
         use = omega > MIN_RECT_SOLID_ANGLE
         return np.where(use, np.where(ok, 1.0 / np.where(use, omega, 1.0), 0.0), area)
 
+    def mean_luminance(self) -> float:
+        """The emitted luminance averaged over the emitter's area (a constant emitter's own)."""
+        return float(luminance(self.rgb()))
+
     def power(self):
         """Emitted power (luminance units; Lambertian: π·L·A per emitting side)."""
-        return math.pi * float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
+        return math.pi * self.mean_luminance() * self.total_area * (2 if self.two_sided else 1)
 
     def _bound(self):
         """Centroid (3,) and squared radius about it of the emitter's triangles (light selection)."""
@@ -226,7 +230,7 @@ class AreaEmitter(_Light):
 
     def selection_record(self):
         centre, r2 = self._bound()
-        power = float(luminance(self.rgb())) * self.total_area * (2 if self.two_sided else 1)
+        power = self.mean_luminance() * self.total_area * (2 if self.two_sided else 1)
         row = [*centre, power, max(r2, 1e-12), math.sqrt(r2)]
         normal = None if self.two_sided else self._plane_normal()
         if normal is not None:      # a one-sided planar emitter (Blender's area lamps): dark behind its plane

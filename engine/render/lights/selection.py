@@ -10,9 +10,11 @@ import numpy as np
 from ...errors import SceneError
 from ...kernels.light_sampling import GLOBAL_SHARE, SELECTION_PARAMS, choose_light, selection_probabilities
 from ...scene.description import DirectionalLight, EnvironmentLight, PointLight, SpotLight
+from ...textures import TexturedSpectrum
 from .area import mesh_emitter
 from .environment import EnvironmentEmitter, EnvironmentMapEmitter
 from .lamps import DirectionalEmitter, PointEmitter, SpotEmitter
+from .textured import TexturedAreaEmitter
 
 
 class LightSet:
@@ -43,8 +45,13 @@ class LightSet:
             compiled.tri_emitter[tris] = len(self.lights)
             if not getattr(mesh, "visible_camera", True) and not getattr(mesh, "occluder", True):
                 self.camera_hidden.add(len(self.lights))
-            self.lights.append(mesh_emitter(mesh.emission, tris, compiled, getattr(mesh, "two_sided", False),
-                                            getattr(mesh, "spread_deg", 180.0)))
+            two_sided, spread = getattr(mesh, "two_sided", False), getattr(mesh, "spread_deg", 180.0)
+            if isinstance(mesh.emission, TexturedSpectrum):     # radiance that varies over the surface
+                self.lights.append(TexturedAreaEmitter(mesh.emission, tris, compiled, two_sided, spread,
+                                                       getattr(mesh, "emission_sampling", "luminance"),
+                                                       f"meshes[{mesh_index}] ({mesh.name!r}).emission"))
+            else:
+                self.lights.append(mesh_emitter(mesh.emission, tris, compiled, two_sided, spread))
         for index, light in enumerate(scene.lights):
             if not getattr(light, "visible_camera", True):
                 self.camera_hidden.add(len(self.lights))
