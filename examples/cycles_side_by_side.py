@@ -97,7 +97,7 @@ def render_polar(bpy, scene, samples, width, height):
     from polar_render.engine.scene.description import RenderSettings
     from polar_render.polar_addon.export.scene import export_scene
     depsgraph = bpy.context.evaluated_depsgraph_get()
-    settings = RenderSettings(spp=samples, max_depth=7, seed=1)
+    settings = RenderSettings(spp=samples, max_depth=8, seed=1)         # Cycles bounces + 2 segments
     engine_scene, warnings = export_scene(depsgraph, scene.camera, width, height, settings)
     for w in warnings:
         print("polar warning:", w)

@@ -73,8 +73,9 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                          default=16, min=1, soft_max=4096, max=1 << 20)
     preview_samples: IntProperty(name="Preview Samples", description="Samples per pixel for material previews "
                                  "and the viewport", default=4, min=1, max=1 << 16)
-    max_bounces: IntProperty(name="Max Bounces", description="Maximum number of scattering events per path "
-                             "(0 = only directly visible lights)", default=15, min=0, max=1023)
+    max_bounces: IntProperty(name="Max Bounces", description="Maximum number of bounces, as Cycles counts them "
+                             "(0 = direct lighting only: one scattering event per path)",
+                             default=15, min=0, max=1023)
     seed: IntProperty(name="Seed", description="Random seed; the same seed gives the same image", default=0,
                       min=0)
     sampler: EnumProperty(name="Pattern", items=SAMPLER_ITEMS, default="STRATIFIED",

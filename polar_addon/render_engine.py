@@ -51,7 +51,7 @@ def engine_settings(scene, preview=False) -> RenderSettings:
     """Engine RenderSettings from the scene's Polar settings (frame-dependent seed if asked)."""
     p = scene.polar
     seed = p.seed + (scene.frame_current if p.use_animated_seed else 0)
-    return RenderSettings(spp=p.preview_samples if preview else p.samples, max_depth=p.max_bounces + 1,
+    return RenderSettings(spp=p.preview_samples if preview else p.samples, max_depth=p.max_bounces + 2,
                           rr_depth=5, seed=seed, spectral="mono" if p.spectral == "MONO" else "spectral",
                           wavelength_nm=p.wavelength_nm, polarisation=POLARISATION_TO_ENGINE[p.polarisation],
                           batch_rays=p.batch_rays, threads=p.threads,

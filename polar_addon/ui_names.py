@@ -16,7 +16,7 @@ _FIXED = "fixed by the Polar add-on (not a Blender setting)"
 #: Engine ``render.<field>`` → (property of Scene.polar or None, UI path).
 RENDER_SETTINGS = {
     "spp": ("samples", "Render Properties ▸ Sampling ▸ Samples: Render (Viewport for the viewport and previews)"),
-    "max_depth": ("max_bounces", "Render Properties ▸ Sampling ▸ Max Bounces (+1 segment)"),
+    "max_depth": ("max_bounces", "Render Properties ▸ Sampling ▸ Max Bounces (+2 segments, as Cycles counts bounces)"),
     "rr_depth": (None, _FIXED),
     "seed": ("seed", "Render Properties ▸ Sampling ▸ Seed"),
     "spectral": ("spectral", "Render Properties ▸ Polarisation & Spectrum ▸ Spectral"),

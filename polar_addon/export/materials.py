@@ -34,7 +34,6 @@ import weakref
 
 import numpy as np
 
-from ...engine.materials.conductor import SmoothConductor
 from ...engine.materials.dielectric import SmoothDielectric
 from ...engine.materials.lambert import Lambert
 from ...engine.materials.catalogue import MODELS
@@ -103,7 +102,9 @@ def _image_signature(image):
     except OSError:
         mtime = -1.0
     packed = image.packed_file.size if image.packed_file is not None else 0
-    return (image.name_full, image.source, path, mtime, packed, image.colorspace_settings.name,
+    # session_uid: a datablock of the same name in another file (or made anew) is another image
+    return (image.name_full, getattr(image, "session_uid", 0), image.source, path, mtime, packed,
+            image.colorspace_settings.name,
             bool(image.is_float), getattr(image, "generated_type", ""), tuple(getattr(image, "generated_color", ())),
             tuple(image.size))
 
@@ -274,12 +275,32 @@ def _least_texel(value: float, space: str) -> np.float32:
     return texel
 
 
+#: Separate Color / Separate RGB outputs → the image channel they read
+_SEPARATED_CHANNELS = {"Red": "R", "Green": "G", "Blue": "B", "R": "R", "G": "G", "B": "B"}
+
+
+def _separated_image(node, out):
+    """(Image Texture node, channel) where ``out`` of ``node`` is one channel of an Image Texture's
+    Color through a Separate Color (RGB mode) or legacy Separate RGB node — how glTF imports its
+    occlusion-roughness-metallic maps — else None."""
+    if node.bl_idname not in ("ShaderNodeSeparateColor", "ShaderNodeSeparateRGB"):
+        return None
+    if getattr(node, "mode", "RGB") != "RGB" or out.name not in _SEPARATED_CHANNELS:
+        return None
+    source, source_out = _source(node.inputs[0])
+    if source is None or source.bl_idname != "ShaderNodeTexImage" or source_out.name != "Color":
+        return None
+    return source, _SEPARATED_CHANNELS[out.name]
+
+
 def _texture_node(node, out) -> bool:
     """True if output ``out`` of ``node`` is a texture the exporter reads itself (texture_source):
-    an Image Texture, a Color Attribute, an Attribute (Geometry) node's Color or Alpha."""
+    an Image Texture, a Color Attribute, an Attribute (Geometry) node's Color or Alpha, one channel
+    of an Image Texture through Separate Color."""
     kind = node.bl_idname
     return kind in ("ShaderNodeTexImage", "ShaderNodeVertexColor") or (
-        kind == "ShaderNodeAttribute" and node.attribute_type == "GEOMETRY" and out.name in ("Color", "Alpha"))
+        kind == "ShaderNodeAttribute" and node.attribute_type == "GEOMETRY" and out.name in ("Color", "Alpha")) or (
+        _separated_image(node, out) is not None)
 
 
 def _baked_link(socket) -> bool:
@@ -301,6 +322,10 @@ def texture_source(socket, mat, warnings, roughness=False, node_name=""):
         return None
     kind = node.bl_idname
     power = 2.0 if roughness else 1.0
+    separated = _separated_image(node, out)
+    if separated is not None:          # one channel of an image, read natively (not baked)
+        texture = image_texture(separated[0], mat, warnings, min_value=ROUGHNESS_MIN if roughness else None)
+        return TextureInput(texture, separated[1], power=power)
     if kind == "ShaderNodeTexImage":
         alpha = out.name == "Alpha"
         texture = image_texture(node, mat, warnings, alpha=alpha, min_value=ROUGHNESS_MIN if roughness else None)
@@ -477,27 +502,10 @@ class _Reader:
         return v
 
 
-def gulbrandsen_nk(reflectivity, edge_tint):
-    """Complex index (n, k) per channel from reflectivity r and edge tint g (Gulbrandsen 2014)."""
-    r = np.clip(np.asarray(reflectivity, float), 0.0, 0.99)
-    g = np.clip(np.asarray(edge_tint, float), 0.0, 1.0)
-    sr = np.sqrt(r)
-    n = g * (1 - r) / (1 + r) + (1 - g) * (1 + sr) / (1 - sr)
-    k = np.sqrt(np.maximum((r * (n + 1) ** 2 - (n - 1) ** 2) / (1 - r), 0.0))
-    return n, k
-
-
 def _rgb_spectrum(rgb, kind="reflectance"):
     if max(rgb) == min(rgb):
         return ConstantSpectrum(rgb[0])
     return RGBReflectanceSpectrum(rgb) if kind == "reflectance" else RGBUnboundedSpectrum(rgb)
-
-
-def _conductor(n_rgb, k_rgb, m, warnings, mat, diffuse=None):
-    n, k = _rgb_spectrum(list(n_rgb), "unbounded"), _rgb_spectrum(list(k_rgb), "unbounded")
-    if m < SMOOTH_LIMIT and diffuse is None:
-        return SmoothConductor(n, k)
-    return _torrance_sparrow(n, k, max(m, 1e-4), mat, diffuse=diffuse)
 
 
 def _torrance_sparrow(n, k, m, mat, shadowing="ts", diffuse=None, layering="add"):
@@ -644,87 +652,208 @@ def _lambert(albedo, mat, node):
     return Lambert(_rgb_spectrum(albedo))
 
 
-def gulbrandsen_textures(colour: TextureInput, edge):
-    """(n, κ) TextureInputs of a conductor whose reflectivity is an image texture: Gulbrandsen's
-    map applied to every texel (float64 texels, so a texel gives exactly the constant conversion of
-    its colour; between texels the index is interpolated, not the colour), with the edge tint the
-    same texture or a constant [r, g, b]; None for other textures (colour attributes)."""
-    tex = colour.texture
-    if not isinstance(tex, ImageTexture) or colour.channel is not None:
-        return None
-    rgb = tex.linear_pixels.astype(np.float64)
-    g = rgb if edge is colour else np.asarray(edge, np.float64)[None, None, :]
-    if rgb.shape[2] == 1 and g.shape[2] == 3 and max(edge) != min(edge):
-        rgb = np.repeat(rgb, 3, axis=2)
-    elif g.shape[2] == 3 and rgb.shape[2] == 1:
-        g = g[..., :1]
-    n, k = gulbrandsen_nk(rgb, g)
-    return tuple(TextureInput(ImageTexture(a, tex.interpolation, tex.extension, name=f"{tex.name} ({what})",
-                                           uv_transform=tex.uv_transform))
-                 for a, what in ((n, "n"), (k, "κ")))
+def _reflectance(value):
+    """A reflectance spectrum of a constant [r, g, b] or a colour TextureInput (per point)."""
+    if isinstance(value, TextureInput):
+        from ...engine.textures.inputs import TexturedSpectrum
+        return TexturedSpectrum(value, "reflectance").clamped_to(0.0, 1.0)
+    return _rgb_spectrum(value)
 
 
-def _conductor_from_colour(r, colour_name, edge_name, m, mat, node, warnings):
-    """Gulbrandsen conductor from a colour (and edge tint) input: a colour image texture gives n, κ
-    per texel; the edge tint and colour attributes stay constant (own value, warning); the
-    roughness m may be a texture."""
-    colour = r.rgb_or_texture(colour_name, 0.0, 1.0, bake=False)      # n, κ per texel of an image only
-    edge = colour if edge_name is None else r.rgb(edge_name, 0.0, 1.0)
-    if isinstance(colour, TextureInput):
-        sources = gulbrandsen_textures(colour, edge)
-        if sources is not None:
-            n, k = sources
-            if isinstance(m, TextureInput) or m >= SMOOTH_LIMIT:
-                m = m if isinstance(m, TextureInput) else max(m, 1e-4)
-                return _textured_model("torrance_sparrow", {"n": n, "k": k, "m": m}, mat, node)
-            return _textured_model("conductor", {"n": n, "k": k}, mat, node)
-        warnings.append(f"material {mat!r}: input {colour_name!r} of {node.name!r}: a colour attribute cannot set a "
-                        "metal's index per point; its own value is used")
-        colour = r._checked_rgb(colour_name, 0.0, 1.0)
-        edge = colour if edge_name is None else edge
-    n, k = gulbrandsen_nk(colour, edge)
-    if isinstance(m, TextureInput):
-        return _textured_model("torrance_sparrow", {"n": list(map(float, n)), "k": list(map(float, k)), "m": m},
-                               mat, node)
-    return _conductor(n, k, m, warnings, mat)
+def conductor_index(colour, edge, mode):
+    """(n, κ) spectra of a metal whose normal-incidence reflectance is ``colour`` (a constant [r, g, b]
+    or a colour TextureInput), by Gulbrandsen's map per wavelength (and per point), so that the mirror
+    shows the colour (engine.spectral.gulbrandsen); the second parameter by ``mode``: "schlick" (the
+    reflectance at θ₈₂ of Schlick's curve through the colour: Cycles' Principled metal, ``edge`` unused),
+    "f82" (``edge`` is that reflectance) or "tint" (``edge`` is Gulbrandsen's edge tint)."""
+    from ...engine.spectral.gulbrandsen import GulbrandsenIndex
+    from ...engine.textures.conductor_index import TexturedGulbrandsenIndex
+    r = _reflectance(colour)
+    g = r if edge is None or edge is colour else _reflectance(edge)
+    kind = TexturedGulbrandsenIndex if _textured(colour, edge) else GulbrandsenIndex
+    return kind(r, g, "n", mode), kind(r, g, "k", mode)
+
+
+def facets(node, mat, warnings):
+    """Torrance–Sparrow facet keywords of a Blender microfacet shader's Distribution, as Cycles renders
+    it: GGX (height-correlated Smith G), Multiscatter GGX (GGX with Cycles' energy compensation, a
+    depolarised term), Beckmann (the thesis' Beckmann with V-cavity shadowing, as before);
+    Ashikhmin–Shirley is rendered as GGX (one warning)."""
+    distribution = getattr(node, "distribution", "GGX")
+    if distribution == "BECKMANN":
+        return {"distribution": "beckmann"}
+    if distribution == "ASHIKHMIN_SHIRLEY":
+        warnings.append(f"material {mat!r}: {node.name!r} uses the Ashikhmin-Shirley distribution; rendered as GGX")
+    return {"distribution": "ggx", "multiscatter": distribution == "MULTI_GGX"}
+
+
+def _smooth(m, kw) -> bool:
+    """A constant roughness m rendered by the smooth (mirror) model: below SMOOTH_LIMIT for Beckmann
+    facets, below the engine's least slope for GGX (whose lobe is exact down to it, as Cycles')."""
+    from ...engine.materials.torrance_sparrow import M_MIN as TS_MIN
+    return not isinstance(m, TextureInput) and m < (TS_MIN if kw.get("distribution") == "ggx" else SMOOTH_LIMIT)
+
+
+def _facet_conductor(n, k, m, mat, node, warnings):
+    """A conductor of index n + iκ (spectra, [r, g, b] or textured) with facets as the node's Distribution
+    and roughness m (α = r², constant or a TextureInput), or its smooth limit."""
+    kw = facets(node, mat, warnings)
+    if _smooth(m, kw):
+        return _textured_model("conductor", {"n": n, "k": k}, mat, node)
+    if not isinstance(m, TextureInput):
+        m = max(m, 1e-4)
+    return _textured_model("torrance_sparrow", {"n": n, "k": k, "m": m, **kw}, mat, node)
+
+
+def _conductor_from_colour(r, colour_name, edge_name, m, mat, node, warnings, mode="schlick"):
+    """Conductor whose normal-incidence reflectance is a colour input, matched to Cycles' Fresnel curve
+    at θ₈₂ as well (``mode``: "schlick", Cycles' F82 curve with a white tint — the Principled metal; "f82"
+    with ``edge_name`` an F82-Tint input — the Metallic BSDF; "constant": the colour at every angle —
+    Cycles' Glossy BSDF, matched at 0° and θ₈₂, as a conductor must rise to 1 at grazing).  Colours and
+    the roughness m may vary per point (image, colour attribute, a baked graph)."""
+    colour = r.rgb_or_texture(colour_name, 0.0, 1.0)
+    if mode == "constant":
+        n, k = conductor_index(colour, colour, "f82")
+    elif mode == "f82":
+        tint = r.rgb_or_texture(edge_name, 0.0, 1.0)
+        if isinstance(colour, TextureInput) or isinstance(tint, TextureInput):
+            if tint != [1.0, 1.0, 1.0]:
+                warnings.append(f"material {mat!r}: {edge_name!r} of {node.name!r} with a textured colour is not "
+                                "simulated per point; the curve of a white tint is used")
+            n, k = conductor_index(colour, None, "schlick")
+        else:
+            from ...engine.spectral.gulbrandsen import schlick_f82
+            f82 = [float(schlick_f82(c)) * t for c, t in zip(colour, tint)]     # Cycles' F82-Tint
+            n, k = conductor_index(colour, f82, "f82")
+    else:
+        n, k = conductor_index(colour, None, "schlick")
+    return _facet_conductor(n, k, m, mat, node, warnings)
+
+
+#: Cycles' least index (svm closure: ior = max(IOR, 1e-5)); Blender's IOR sockets hold any float
+IOR_MIN = 1e-5
+#: Cycles drops closures whose weight is below this (CLOSURE_WEIGHT_CUTOFF)
+WEIGHT_CUTOFF = 1e-5
+
+
+def _ior(r, name):
+    """An IOR input as Cycles reads it: any finite value Blender holds, raised to IOR_MIN (an error
+    only for NaN and ±inf)."""
+    return max(r.float(name), IOR_MIN)
+
+
+def _fraction(r, name):
+    """A [0, 1] weight input (Metallic, Transmission Weight, a Mix Shader's Factor) as Cycles reads
+    it: the constant clamped to [0, 1], or a TextureInput (image, colour attribute, Separate Color of
+    an image, or a baked graph) whose values are clamped to [0, 1] where used (``_weight``)."""
+    sock = r._socket(name)
+    if sock.is_linked:
+        source = r.texture(name, lo=0.0, hi=1.0)
+        if source is not None:
+            return source
+    v = float(sock.default_value)
+    if not math.isfinite(v):
+        raise SceneError(f"material {r.mat!r}.{r.node.name}.{name}", f"must be a finite number, got {v!r}")
+    return min(max(v, 0.0), 1.0)
+
+
+def _weight(x, complement=False):
+    """A mixture weight from a fraction: x or 1 − x, a float or a TexturedNumber clamped to [0, 1]."""
+    from ...engine.textures.inputs import TexturedNumber
+    if not isinstance(x, TextureInput):
+        return 1.0 - x if complement else x
+    if complement:
+        if x.power != 1.0:
+            raise ValueError("a weight texture has power 1")
+        x = TextureInput(x.texture, x.channel, -x.scale, 1.0 - x.offset)
+    return TexturedNumber(x, clip=(0.0, 1.0))
+
+
+def _never(x) -> bool:
+    """The fraction is 0 everywhere (a constant below Cycles' closure cutoff)."""
+    return not isinstance(x, TextureInput) and x < WEIGHT_CUTOFF
+
+
+def _always(x) -> bool:
+    """The fraction is 1 everywhere."""
+    return not isinstance(x, TextureInput) and x > 1.0 - WEIGHT_CUTOFF
+
+
+def _mixture(under, over, fraction):
+    """``under`` weighted 1 − fraction plus ``over`` weighted fraction (either may be None where its
+    weight is 0 everywhere): an engine Mix, or the one part that has weight 1."""
+    from ...engine.materials.mix import Mix
+    if over is None or _never(fraction):
+        return under
+    if under is None or _always(fraction):
+        return over
+    return Mix([under, over], [_weight(fraction, complement=True), _weight(fraction)])
+
+
+def _specular_ior(ior, level):
+    """Cycles' Specular IOR Level: F0 = F0(IOR)·2·level, the index of that F0 (reciprocal below 1)."""
+    if level == 0.5:
+        return ior
+    f0 = min(((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * level, 0.99)
+    root = math.sqrt(f0)
+    eta = (1.0 + root) / (1.0 - root)
+    return 1.0 / eta if ior < 1.0 else eta
 
 
 def _principled(node, mat, warnings, bake=None):
+    """Cycles' Principled BSDF layer order (svm closure): metal weighted Metallic, over what remains
+    transmission weighted Transmission Weight, then the dielectric (specular over diffuse, or the
+    coat over them); Metallic and Transmission Weight are per-point mixture weights (engine Mix)."""
     r = _Reader(mat, node, warnings, bake)
-    if r.float("Metallic", 0.0, 1.0) >= 0.5:
+    metallic = _fraction(r, "Metallic")
+    transmission = _fraction(r, "Transmission Weight")
+    ior = _ior(r, "IOR")
+    metal = glass = dielectric = None
+    if not _never(metallic):
         m, _ = r.roughness_or_texture("Roughness")
-        return _conductor_from_colour(r, "Base Color", None, m, mat, node, warnings)
-    ior = r.float("IOR", 0.0, 100.0, lo_open=True)
-    if r.float("Transmission Weight", 0.0, 1.0) >= 0.5:
+        metal = _conductor_from_colour(r, "Base Color", None, m, mat, node, warnings)
+    if not _always(metallic) and not _never(transmission):
         rough = r.float("Roughness", 0.0, 1.0)
-        return _glass(ior, rough, getattr(node, "distribution", ""), mat, warnings, "rough transmission")
+        glass = _tinted(_glass(ior, rough, getattr(node, "distribution", "")), None,
+                        _colour_root(r.rgb_or_texture("Base Color", 0.0, 1.0)))
+    if not _always(metallic) and not _always(transmission):
+        dielectric = _principled_opaque_dielectric(r, node, mat, ior)
+    coat = r.float("Coat Weight", 0.0, 1.0)
+    if coat > 0 and (metal is not None or glass is not None):
+        warnings.append(f"material {mat!r}: the Coat of {node.name!r} is rendered over its dielectric part only, "
+                        "not over its metallic or transmissive parts")
+    return _mixture(_mixture(dielectric, glass, transmission), metal, metallic)
+
+
+def _principled_opaque_dielectric(r, node, mat, ior):
+    """The dielectric part of a Principled BSDF: specular (IOR through Specular IOR Level) over the
+    base colour, or a coat over them."""
     base = r.rgb_or_texture("Base Color", 0.0, 1.0)
     m, _ = r.roughness_or_texture("Roughness")
+    ior = _specular_ior(ior, r.float("Specular IOR Level", 0.0, 1.0))
     if r.float("Coat Weight", 0.0, 1.0) > 0:
         under = _principled_coated_base(base, m, ior, mat, node)
         from ...engine.materials.weidlich_wilkie import Coat, WeidlichWilkie
-        coat = Coat(n=r.float("Coat IOR", 1.0, 10.0), thickness=0.0, absorption=ConstantSpectrum(0.0),
+        coat = Coat(n=min(max(r.float("Coat IOR"), 1.0), 100.0), thickness=0.0, absorption=ConstantSpectrum(0.0),
                     **_coat_roughness(r.float("Coat Roughness", 0.0, 1.0) ** 2))
         return WeidlichWilkie([coat], under)
-    return _principled_dielectric(base, m, ior, mat, node)
+    return _principled_dielectric(base, m, ior, mat, node, r.warnings)
 
 
-def _principled_dielectric(base, m, ior, mat, node):
-    """Cycles' Principled dielectric: the specular layer (Torrance–Sparrow n = IOR, m = r², or its
-    smooth limit, a Fresnel mirror, below SMOOTH_LIMIT) over the Lambertian base colour weighted
-    by one minus the specular layer's albedo at the view direction ("albedo_scaling", as Cycles'
-    closure_layering_weight).  Base colour and roughness may be textures."""
-    if _textured(base, m):
-        values = {"n": ior, "k": 0.0, "diffuse_layering": "albedo_scaling"}
-        if isinstance(m, TextureInput):
-            values["m"] = m
-        else:   # m = 0 builds the smooth limit (MirrorWithDiffuse)
-            values["m"] = max(m, M_MIN) if m >= SMOOTH_LIMIT else 0.0
-        if isinstance(base, TextureInput) or max(base) > 0:
-            values["diffuse_albedo"] = base
-        return _textured_model("torrance_sparrow", values, mat, node)
-    return _torrance_sparrow(ConstantSpectrum(ior), ConstantSpectrum(0.0), m if m >= SMOOTH_LIMIT else 0.0, mat,
-                             diffuse=base, layering="albedo_scaling")
+def _principled_dielectric(base, m, ior, mat, node, warnings):
+    """Cycles' Principled dielectric: the specular layer (a GGX Torrance–Sparrow dielectric, n = IOR,
+    α = r², Multiscatter GGX compensated as the node's Distribution says; roughness 0: its smooth
+    limit, a Fresnel mirror) over the Lambertian base colour weighted by one minus the specular layer's
+    albedo at the view direction ("albedo_scaling", as Cycles' closure_layering_weight).  Base colour
+    and roughness may vary per point."""
+    kw = facets(node, mat, warnings)
+    values = {"n": ior, "k": 0.0, "diffuse_layering": "albedo_scaling"}
+    values["m"] = 0.0 if _smooth(m, kw) else (m if isinstance(m, TextureInput) else max(m, M_MIN))
+    if values["m"] != 0.0:
+        values.update(kw)
+    if isinstance(base, TextureInput) or max(base) > 0:
+        values["diffuse_albedo"] = _grey(base)
+    return _textured_model("torrance_sparrow", values, mat, node)
 
 
 def _principled_coated_base(base, m, ior, mat, node):
@@ -741,30 +870,85 @@ def _principled_coated_base(base, m, ior, mat, node):
         if m >= SMOOTH_LIMIT else Lambert(_rgb_spectrum(base))
 
 
-def _glass(ior, roughness, distribution, mat, warnings, what):
-    """Smooth dielectric below the smooth limit, else the rough dielectric with GGX α = roughness².
+def _tint_spectrum(colour):
+    """A tint spectrum (≥ 0, any magnitude) of a constant [r, g, b] or a colour TextureInput; None for white."""
+    from ...engine.textures.inputs import TexturedSpectrum
+    if isinstance(colour, TextureInput):
+        return TexturedSpectrum(colour, "unbounded")
+    return None if min(colour) == max(colour) == 1.0 else _rgb_spectrum(list(colour), "unbounded")
 
-    Cycles' GGX is single scattering and maps exactly; its Multiscatter GGX (Principled's default) adds
-    the energy of multiple scattering between facets, which the polarising model does not have: it is
-    rendered as single-scattering GGX with one warning.  Beckmann → Beckmann with the same α.
-    """
+
+def _colour_root(colour):
+    """√colour per channel (Cycles' Principled transmission tint √(Base Color), the colour clamped to
+    [0, 1]), constant or per point (the texture's values raised to ½ after interpolation)."""
+    if isinstance(colour, TextureInput):
+        if colour.scale != 1.0 or colour.offset != 0.0 or colour.power != 1.0:
+            raise ValueError("a colour texture maps its texels as they are")
+        return TextureInput(colour.texture, colour.channel, power=0.5)
+    return [math.sqrt(min(max(c, 0.0), 1.0)) for c in colour]
+
+
+def _tinted(bsdf, reflection, transmission):
+    """``bsdf`` with its reflected and transmitted light tinted (engine.materials.tinted: Cycles' glass
+    colour, the Principled transmission tint); colours as constant [r, g, b] or TextureInputs, None or
+    white for none."""
+    from ...engine.materials.tinted import Tinted
+    r = None if reflection is None else _tint_spectrum(reflection)
+    t = None if transmission is None else _tint_spectrum(transmission)
+    return bsdf if r is None and t is None else Tinted(bsdf, r, t)
+
+
+def _glass(ior, roughness, distribution):
+    """Smooth dielectric at roughness 0 (below the engine's least α), else the rough dielectric with
+    α = roughness²: GGX as Cycles' GGX, Multiscatter GGX (Principled's and Glass' default) with Cycles'
+    energy compensation (``multiscatter``), Beckmann as Beckmann."""
     from ...engine.materials.rough_dielectric import ALPHA_MIN, RoughDielectric, index_matched
     alpha = roughness * roughness
-    if alpha < SMOOTH_LIMIT or index_matched(ior, 1.0):
+    if distribution == "BECKMANN":
+        if alpha < SMOOTH_LIMIT or index_matched(ior, 1.0):
+            return SmoothDielectric(ior)
+        return RoughDielectric(ior, max(alpha, ALPHA_MIN), "beckmann")
+    if alpha < ALPHA_MIN or index_matched(ior, 1.0):
         return SmoothDielectric(ior)
-    if distribution == "MULTI_GGX":
-        warnings.append(f"material {mat!r}: {what} with Multiscatter GGX is rendered as single-scattering GGX "
-                        "(rough_dielectric, no multiple-scattering energy compensation)")
-    return RoughDielectric(ior, max(alpha, ALPHA_MIN), "beckmann" if distribution == "BECKMANN" else "ggx")
+    return RoughDielectric(ior, alpha, "ggx", multiscatter=distribution == "MULTI_GGX")
 
 
-def _emission(node, mat, warnings, colour_name="Color", strength_name="Strength"):
-    r = _Reader(mat, node, warnings)
-    strength = r.float(strength_name, 0.0)
-    colour = r.rgb(colour_name, 0.0)
-    if strength <= 0 or max(colour) <= 0:
+def _emission(node, mat, warnings, colour_name="Color", strength_name="Strength", bake=None):
+    """The emitted spectrum of an Emission shader or a Principled BSDF: Color × Strength, the colour
+    constant or varying over the surface (an image, a colour attribute, a baked graph: Cycles'
+    Emission Color from a texture); None where nothing is emitted.  Cycles clamps neither; a negative
+    strength or colour emits nothing, as a zero one."""
+    from ...engine.textures.inputs import textured_emission
+    r = _Reader(mat, node, warnings, bake)
+    strength = r.float(strength_name)
+    colour = r.rgb_or_texture(colour_name, -math.inf)
+    if strength <= 0:
+        return None
+    if isinstance(colour, TextureInput):
+        emission = textured_emission(colour, strength, f"material {mat!r}.{node.name}.{colour_name}")
+        return emission if emission.hi > 0 else None
+    colour = [max(c, 0.0) for c in colour]
+    if max(colour) <= 0:
         return None
     return RGBIlluminantSpectrum(colour, strength)
+
+
+def _weighted_emission(parts, mat, node, warnings):
+    """One emission from (weight, emission) pairs of a shader mix: constant ones add up; a textured one
+    is kept, scaled by its weight (with others beside it, only it: one warning)."""
+    from ...engine.textures.inputs import TexturedSpectrum
+    parts = [(w, e) for w, e in parts if e is not None and w > 0]
+    textured = [(w, e) for w, e in parts if isinstance(e, TexturedSpectrum)]
+    if textured:
+        if len(parts) > 1:
+            warnings.append(f"material {mat!r}: {node.name!r} mixes a textured emission with other emission; only "
+                            "the textured one is rendered")
+        w, e = textured[0]
+        src = e.source
+        scaled = TextureInput(src.texture, src.channel, src.scale * w, src.offset * w, src.power)
+        return TexturedSpectrum(scaled, "illuminant", e.clip)
+    rgb = sum((w * e.linear_srgb() for w, e in parts), np.zeros(3))
+    return RGBIlluminantSpectrum(list(rgb), 1.0) if rgb.max() > 0 else None
 
 
 # --------------------------------------------------------------------------- mesh attributes
@@ -798,7 +982,8 @@ def attribute_needs(material) -> dict:
             needs["colors"].append(node.layer_name)
         elif kind == "ShaderNodeAttribute" and node.attribute_type == "GEOMETRY":
             needs["colors"].append(node.attribute_name)
-        elif kind in _NORMAL_SHADERS + ("PolarShaderNodeBSDF",) and any(map(_baked_link, node.inputs)):
+        elif kind in _NORMAL_SHADERS + ("PolarShaderNodeBSDF", "ShaderNodeEmission") and any(map(_baked_link,
+                                                                                                  node.inputs)):
             needs["bake"].append("")
         for sock in node.inputs:
             for link in sock.links:
@@ -842,7 +1027,8 @@ def normal_input_unsupported(node) -> bool:
 def with_shading_normal(bsdf, node, mat, warnings):
     """``bsdf`` wrapped in the engine's ShadingNormal when the shader's Normal input is a tangent-space
     Normal Map and/or a Bump node on image textures (Cycles: n = normalise(x·T + y·B + z·n), B = sign·(n × T)
-    with MikkTSpace tangents; bump n' = normalise(n − distance·∇h), blended by Strength)."""
+    with MikkTSpace tangents, Strength as Cycles' tangent space; bump n' = normalise(n − distance·∇h), blended by
+    Strength)."""
     sock = node.inputs.get("Normal")
     if sock is None or not sock.is_linked:
         return bsdf
@@ -866,6 +1052,11 @@ def with_shading_normal(bsdf, node, mat, warnings):
     kw = {k: v for k, v in kw.items() if v is not None}
     if "normal_map" not in kw and "bump_map" not in kw:
         return bsdf
+    from ...engine.materials.mix import Mix
+    if isinstance(bsdf, Mix):       # each part mapped on its own (a metal's normal is corrected, a diffuse one not)
+        mixed = Mix([ShadingNormal(c, **kw) for c in bsdf.components], list(bsdf.weights))
+        mixed.two_sided = bsdf.two_sided
+        return mixed
     return ShadingNormal(bsdf, **kw)
 
 
@@ -893,32 +1084,77 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
         return _lambert(r.rgb_or_texture("Color", 0.0, 1.0), mat, node), None
     if kind in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
         m, _ = r.roughness_or_texture("Roughness")
-        return _conductor_from_colour(r, "Color", None, m, mat, node, warnings), None
+        return _conductor_from_colour(r, "Color", None, m, mat, node, warnings, mode="constant"), None
     if kind == "ShaderNodeBsdfMetallic":
         m, _ = r.roughness_or_texture("Roughness")
         if getattr(node, "fresnel_type", "") == "PHYSICAL_CONDUCTOR":
             n, k = r.rgb("IOR", 0.0), r.rgb("Extinction", 0.0)
-            if isinstance(m, TextureInput):
-                return _textured_model("torrance_sparrow", {"n": n, "k": k, "m": m}, mat, node), None
-            return _conductor(n, k, m, warnings, mat), None
-        return _conductor_from_colour(r, "Base Color", "Edge Tint", m, mat, node, warnings), None
+            n = [max(c, IOR_MIN) for c in n]                 # Cycles' least index
+            return _facet_conductor(n, k, m, mat, node, warnings), None
+        return _conductor_from_colour(r, "Base Color", "Edge Tint", m, mat, node, warnings, mode="f82"), None
     if kind in ("ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction"):
         rough = r.float("Roughness", 0.0, 1.0)
-        return _glass(r.float("IOR", 0.0, 100.0, lo_open=True), rough, getattr(node, "distribution", ""), mat,
-                      warnings, "rough glass"), None
+        colour = r.rgb_or_texture("Color", 0.0)          # Cycles tints reflection and refraction by Color
+        return _tinted(_glass(_ior(r, "IOR"), rough, getattr(node, "distribution", "")), colour, colour), None
     if kind == "ShaderNodeBsdfPrincipled":
-        emission = _emission(node, mat, warnings, "Emission Color", "Emission Strength")
+        emission = _emission(node, mat, warnings, "Emission Color", "Emission Strength", bake)
         return _principled(node, mat, warnings, bake), emission
     if kind == "ShaderNodeEmission":
-        return Lambert(ConstantSpectrum(0.0)), _emission(node, mat, warnings)
+        return Lambert(ConstantSpectrum(0.0)), _emission(node, mat, warnings, bake=bake)
     if kind in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
-        first = next((_follow(s) for s in node.inputs if s.type == "SHADER" and s.is_linked), None)
-        warnings.append(f"material {mat!r}: {node.bl_idname} is not supported; using its first shader input")
-        if first is not None:
-            return surface_bsdf(first, mat, warnings, depth + 1, bake)
+        return _shader_mix(node, mat, warnings, depth, bake)
     else:
         warnings.append(f"material {mat!r}: shader {kind} is not supported; rendered as grey Lambert")
     return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
+
+
+def _black(bsdf) -> bool:
+    """A material that scatters nothing (the black Lambert standing for an Emission shader's BSDF)."""
+    albedo = getattr(bsdf, "albedo", None)
+    return isinstance(bsdf, Lambert) and isinstance(albedo, ConstantSpectrum) and albedo.value == 0.0
+
+
+def _shader_mix(node, mat, warnings, depth, bake):
+    """(BSDF, emission) of a Mix Shader (weights 1 − Factor and Factor, Factor clamped to [0, 1] as
+    Cycles, constant or per point) or an Add Shader (weights 1 and 1): an engine Mix of the two
+    shaders' BSDFs, nested mixes nesting.  An unlinked shader input adds nothing (as in Cycles).
+    Emission adds up with the same weights; a per-point Factor weighs emission by its own value
+    (one warning: emission does not vary over a surface yet)."""
+    from ...engine.materials.mix import Mix
+    if depth > 32:
+        raise SceneError(f"material {mat!r}", "shader mixes nest more than 32 deep")
+    shaders = [s for s in node.inputs if s.type == "SHADER"]
+    if node.bl_idname == "ShaderNodeMixShader":
+        r = _Reader(mat, node, warnings, bake)
+        fac = _fraction(r, node.inputs[0].name)
+        weights = [_weight(fac, complement=True), _weight(fac)]
+        own = [1.0 - fac, fac] if not isinstance(fac, TextureInput) else None
+    else:
+        weights = own = [1.0, 1.0]
+    parts, part_weights, emitted = [], [], []
+    for i, (sock, w) in enumerate(zip(shaders, weights)):
+        child = _follow(sock)
+        if child is None or (isinstance(w, float) and w < WEIGHT_CUTOFF):
+            continue
+        bsdf, emission = surface_bsdf(child, mat, warnings, depth + 1, bake)
+        if not _black(bsdf):            # an Emission shader scatters nothing
+            parts.append(bsdf)
+            part_weights.append(w)
+        if emission is not None:
+            if own is None:
+                r._constant(node.inputs[0].name)       # warns: emission weighed by the Factor's own value
+                value = float(node.inputs[0].default_value)
+                wk = min(max(value, 0.0), 1.0)
+                wk = 1.0 - wk if i == 0 else wk
+            else:
+                wk = own[i]
+            emitted.append((wk, emission))
+    emission = _weighted_emission(emitted, mat, node, warnings)
+    if not parts:
+        return Lambert(ConstantSpectrum(0.0)), emission
+    if len(parts) == 1 and isinstance(part_weights[0], float) and part_weights[0] == 1.0:
+        return parts[0], emission
+    return Mix(parts, part_weights), emission
 
 
 def export_material(material, warnings, bake=None):
@@ -939,7 +1175,83 @@ def _material_bsdf(material, warnings, bake):
         return Lambert(_rgb_spectrum([float(c) for c in material.diffuse_color[:3]])), None
     output = tree.get_output_node("ALL") or tree.get_output_node("CYCLES")
     node = _follow(output.inputs["Surface"]) if output is not None else None
+    sock = output.inputs.get("Displacement") if output is not None else None
+    if sock is not None and _follow(sock) is not None:
+        warnings.append(f"material {material.name!r}: Material Output ▸ Displacement is not simulated; the surface "
+                        "is rendered without it")
+    volume = _follow(output.inputs["Volume"]) if output is not None and "Volume" in output.inputs else None
+    if node is None and volume is not None:
+        # Cycles: a material with only a volume has a transparent surface (the object's alpha: scene.py)
+        return _with_interior(Lambert(ConstantSpectrum(0.0)), volume, material.name, warnings), None
     if node is None:
         warnings.append(f"material {material.name!r} has no surface shader; rendered black")
         return Lambert(ConstantSpectrum(0.0)), None
-    return surface_bsdf(node, material.name, warnings, bake=bake)
+    bsdf, emission = surface_bsdf(node, material.name, warnings, bake=bake)
+    if volume is not None:
+        bsdf = _with_interior(bsdf, volume, material.name, warnings)
+    return bsdf, emission
+
+
+# --------------------------------------------------------------------------- volumes
+
+def _absorption(node, mat, warnings, weight=1.0, depth=0) -> np.ndarray:
+    """σ_a (3,) per unit length of the volume shader graph at ``node`` (Cycles' svm volume closures):
+    Volume Absorption ρ·(1 − Color); Principled Volume ρ·max(1 − Color, 0)·max(1 − √Absorption Color, 0)
+    (its scattering, emission and blackbody are not simulated: one warning); Volume Coefficients'
+    Absorption; Mix / Add Shader weighted; anything else (Volume Scatter, …) one warning, no absorption."""
+    kind = node.bl_idname
+    r = _Reader(mat, node, warnings)
+    if kind in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
+        if depth > 32:
+            raise SceneError(f"material {mat!r}", "volume shader mixes nest more than 32 deep")
+        shaders = [sk for sk in node.inputs if sk.type == "SHADER"]
+        if kind == "ShaderNodeMixShader":
+            fac = min(max(float(r._constant(node.inputs[0].name).default_value), 0.0), 1.0)
+            weights = (1.0 - fac, fac)
+        else:
+            weights = (1.0, 1.0)
+        total = np.zeros(3)
+        for sk, w in zip(shaders, weights):
+            child = _follow(sk)
+            if child is not None and w > 0:
+                total += _absorption(child, mat, warnings, weight * w, depth + 1)
+        return total
+    if kind == "ShaderNodeVolumeAbsorption":
+        density = max(r.float("Density"), 0.0)
+        colour = np.array(r.rgb("Color", -math.inf))
+        return weight * density * (1.0 - colour)
+    if kind == "ShaderNodeVolumePrincipled":
+        density = max(r.float("Density"), 0.0)
+        colour = np.array(r.rgb("Color", -math.inf))
+        absorption_colour = np.array(r.rgb("Absorption Color", 0.0))
+        scattered = density * np.maximum(colour, 0.0)
+        emitted = max(r.float("Emission Strength"), 0.0) * max(r.rgb("Emission Color", 0.0)) + \
+            max(r.float("Blackbody Intensity"), 0.0)
+        if scattered.max() > 0 or emitted > 0:
+            warnings.append(f"material {mat!r}: the scattering and emission of Principled Volume {node.name!r} are not "
+                            "simulated; only its absorption is rendered")
+        return weight * density * np.maximum(1.0 - colour, 0.0) * np.maximum(1.0 - np.sqrt(absorption_colour), 0.0)
+    if kind == "ShaderNodeVolumeCoefficients":
+        sock = node.inputs.get("Absorption Coefficients")
+        if sock is None:
+            warnings.append(f"material {mat!r}: volume node {node.name!r} is not simulated")
+            return np.zeros(3)
+        value = np.array(sock.default_value[:3] if hasattr(sock.default_value, "__len__") else [sock.default_value] * 3)
+        warnings.append(f"material {mat!r}: only the absorption of Volume Coefficients {node.name!r} is simulated")
+        return weight * np.maximum(value, 0.0)
+    warnings.append(f"material {mat!r}: volume shader {kind} is not simulated (scattering volumes are not yet "
+                    "rendered); its object's interior is left clear")
+    return np.zeros(3)
+
+
+def _with_interior(bsdf, volume, mat, warnings):
+    """``bsdf`` carrying the absorbing interior of the material's Volume graph (engine Interior), if it
+    absorbs anything."""
+    from ...engine.scene.description import Interior
+    sigma = _absorption(volume, mat, warnings)
+    if not np.all(np.isfinite(sigma)):
+        raise SceneError(f"material {mat!r}", f"the volume's absorption must be finite, got {sigma.tolist()}")
+    sigma = np.maximum(sigma, 0.0)        # a Color above 1 would absorb negatively: Cycles' too, none here
+    if sigma.max() > 0:
+        bsdf.interior = Interior([float(x) for x in sigma])
+    return bsdf

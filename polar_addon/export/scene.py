@@ -290,7 +290,9 @@ def material_alpha(material, warnings) -> float:
     output = tree.get_output_node("ALL") or tree.get_output_node("CYCLES")
     node = _follow(output.inputs["Surface"]) if output is not None else None
     if node is None:
-        return 1.0
+        # a volume alone: Cycles' surface is transparent (the interior is the material's: materials.py)
+        volume = output.inputs.get("Volume") if output is not None else None
+        return 0.0 if volume is not None and _follow(volume) is not None else 1.0
     if normal_input_unsupported(node):
         warnings.append(f"material {material.name!r}: bump and normal maps (linked Normal input) are not "
                         "supported; the geometric shading normals are used")

@@ -218,7 +218,7 @@ def polar_renders(scene):
     depsgraph = bpy.context.evaluated_depsgraph_get()
     out = []
     for seed in range(SEEDS):
-        settings = RenderSettings(spp=POLAR_SPP, max_depth=BOUNCES + 1, seed=seed, spectral="spectral",
+        settings = RenderSettings(spp=POLAR_SPP, max_depth=BOUNCES + 2, seed=seed, spectral="spectral",
                                   polarisation="off")
         engine_scene, _ = export_scene(depsgraph, scene.camera, W, H, settings)
         out.append(Renderer(engine_scene).render(settings).stokes()[0] @ REC709)

@@ -82,11 +82,14 @@ def test_principled_conversion_per_input(addon):
     n, k = bsdf.n.eval(lam)[0, 0], bsdf.k.eval(lam)[0, 0]
     assert ((n - 1) ** 2 + k ** 2) / ((n + 1) ** 2 + k ** 2) == pytest.approx(0.9, rel=1e-6)
     # Transmission → smooth dielectric with the IOR.
-    bsdf, _, _ = exported(principled(**{"Transmission Weight": 1.0, "IOR": 1.6, "Roughness": 0.0}))
+    bsdf, _, _ = exported(principled(**{"Transmission Weight": 1.0, "IOR": 1.6, "Roughness": 0.0,
+                                        "Base Color": (1, 1, 1, 1)}))
     assert bsdf.name == "dielectric" and bsdf.n_int == pytest.approx(1.6)
-    # Rough transmission warns.
-    _, _, warnings = exported(principled(**{"Transmission Weight": 1.0, "Roughness": 0.5}))
-    assert any("rough transmission" in w for w in warnings)
+    # Rough transmission: GGX α = r², with Cycles' multiple-scattering compensation (Multiscatter GGX, the default).
+    bsdf, _, warnings = exported(principled(**{"Transmission Weight": 1.0, "Roughness": 0.5,
+                                               "Base Color": (1, 1, 1, 1)}))
+    assert bsdf.name == "rough_dielectric" and bsdf.alpha == pytest.approx(0.25) and bsdf.multiscatter
+    assert not warnings
     # Plain smooth dielectric base → Fresnel mirror over the base colour, shared as Cycles (albedo scaling).
     bsdf, _, _ = exported(principled(**{"Roughness": 0.0, "Base Color": (0.2, 0.4, 0.6, 1)}))
     assert bsdf.name == "torrance_sparrow" and bsdf.m == 0.0 and bsdf.diffuse_layering == "albedo_scaling"
@@ -95,15 +98,152 @@ def test_principled_conversion_per_input(addon):
     bsdf, _, _ = exported(principled(**{"Roughness": 0.5, "IOR": 1.45, "Base Color": (0.5, 0.5, 0.5, 1)}))
     assert bsdf.name == "torrance_sparrow" and bsdf.m == pytest.approx(0.25)
     assert bsdf.n.eval(lam)[0, 0] == pytest.approx(1.45) and bsdf.has_diffuse
-    # Rough metal → Torrance–Sparrow conductor.
+    # Rough metal → GGX Torrance–Sparrow conductor (α = r²), multiscatter as Cycles' default.
     bsdf, _, _ = exported(principled(**{"Metallic": 1.0, "Roughness": 0.4}))
     assert bsdf.name == "torrance_sparrow" and bsdf.m == pytest.approx(0.16) and bsdf.k.eval(lam)[0, 0] > 0
+    assert bsdf.distribution == "ggx" and bsdf.multiscatter
+    # Metallic and Transmission are per-point mixture weights (Cycles' layer order), not switches.
+    bsdf, _, _ = exported(principled(**{"Metallic": 0.25, "Roughness": 0.0, "Transmission Weight": 0.4}))
+    assert bsdf.name == "mix" and [c.name for c in bsdf.components][-1] == "conductor"
+    weights = dict(zip((c.name for c in bsdf.components), bsdf.weights))
+    assert weights["conductor"] == pytest.approx(0.25)
+    inner = [c for c in bsdf.components if c.name != "conductor"]
+    if len(inner) == 1 and inner[0].name == "mix":         # nested: (dielectric, glass) under the metal
+        inner = inner[0]
+        assert inner.weights == pytest.approx([0.6, 0.4]) and weights["mix"] == pytest.approx(0.75)
+    else:                                                  # flattened: weights multiplied out
+        assert sorted(bsdf.weights) == pytest.approx(sorted([0.75 * 0.6, 0.75 * 0.4, 0.25]))
+    # Blender's IOR range: 1000 (glTF specular-glossiness imports) and ≤ 0 (Cycles raises it to 1e-5) render.
+    bsdf, _, _ = exported(principled(**{"Transmission Weight": 1.0, "IOR": 1000.0, "Roughness": 0.0,
+                                        "Base Color": (1, 1, 1, 1)}))
+    assert bsdf.n_int == pytest.approx(1000.0)
+    bsdf, _, _ = exported(principled(**{"Transmission Weight": 1.0, "IOR": -2.0, "Roughness": 0.0,
+                                        "Base Color": (1, 1, 1, 1)}))
+    assert bsdf.n_int == pytest.approx(1e-5)
+    from polar_render.engine.errors import SceneError
+    with pytest.raises(SceneError, match="IOR"):
+        exported(principled(**{"IOR": float("nan")}))
+    # Specular IOR Level: F0 scaled by 2·level (level 0: no specular reflection at all).
+    bsdf, _, _ = exported(principled(**{"Roughness": 0.0, "IOR": 1.5, "Specular IOR Level": 0.25}))
+    n = bsdf.n.eval(lam)[0, 0]
+    assert ((n - 1) / (n + 1)) ** 2 == pytest.approx(0.04 * 0.5, rel=1e-9)
     # Coat → Weidlich–Wilkie over the converted base.
     bsdf, _, _ = exported(principled(**{"Coat Weight": 1.0, "Coat IOR": 1.6, "Coat Roughness": 0.0, "Roughness": 0.0}))
     assert bsdf.name == "weidlich_wilkie"
     # Emission → emitter spectrum with colour × strength.
     _, emission, _ = exported(principled(**{"Emission Strength": 3.0, "Emission Color": (1, 0.5, 0.25, 1)}))
     assert emission is not None and emission.linear_srgb() == pytest.approx([3.0, 1.5, 0.75], rel=2e-3)
+
+
+def _shader(tree, kind, **inputs):
+    node = tree.nodes.new(kind)
+    for k, v in inputs.items():
+        node.inputs[k].default_value = v
+    return node
+
+
+def test_mix_and_add_shaders_become_an_engine_mixture(addon):
+    empty_scene()
+    mat = bpy.data.materials.new("Mixed")
+    tree = mat.node_tree
+    out = tree.get_output_node("ALL")
+    diffuse = _shader(tree, "ShaderNodeBsdfDiffuse", Color=(0.5, 0.5, 0.5, 1))
+    glossy = _shader(tree, "ShaderNodeBsdfGlossy", Roughness=0.0)
+    emit = _shader(tree, "ShaderNodeEmission", Strength=4.0, Color=(1, 0.5, 0.25, 1))
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    mix.inputs[0].default_value = 0.3
+    tree.links.new(diffuse.outputs[0], mix.inputs[1])
+    tree.links.new(glossy.outputs[0], mix.inputs[2])
+    add = tree.nodes.new("ShaderNodeAddShader")
+    tree.links.new(mix.outputs[0], add.inputs[0])
+    tree.links.new(emit.outputs[0], add.inputs[1])
+    tree.links.new(add.outputs[0], out.inputs["Surface"])
+    bsdf, emission, warnings = exported(mat)
+    assert not warnings
+    assert bsdf.name == "mix"
+    # the emission adds with weight 1; the mixed BSDFs keep 0.7 and 0.3 (nested or flattened)
+    assert emission.linear_srgb() == pytest.approx([4.0, 2.0, 1.0], rel=2e-3)
+
+    def leaves(b, w=1.0):
+        if b.name != "mix":
+            return [(b.name, w)]
+        return [x for c, cw in zip(b.components, b.weights) for x in leaves(c, w * float(cw))]
+    found = dict(leaves(bsdf))
+    assert found["lambert"] == pytest.approx(0.7) and found["conductor"] == pytest.approx(0.3)
+    # Factor 1 keeps the second shader only; an unlinked shader input adds nothing.
+    mix.inputs[0].default_value = 1.0
+    assert exported(mat)[0].name in ("conductor", "mix")
+    tree.links.remove(add.inputs[1].links[0])
+    mix.inputs[0].default_value = 0.0
+    assert exported(mat)[0].name == "lambert"
+
+
+def test_separate_color_of_an_image_is_read_natively(addon, tmp_path):
+    """glTF's occlusion-roughness-metallic map: Metallic from the image's blue channel, per point."""
+    empty_scene()
+    img = bpy.data.images.new("orm", 2, 1, alpha=False)
+    img.pixels = [1.0, 0.5, 0.0, 1.0, 1.0, 0.5, 1.0, 1.0]        # metallic 0 left, 1 right
+    img.colorspace_settings.name = "Non-Color"
+    mat = principled(**{"Roughness": 0.0})
+    tree = mat.node_tree
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    sep = tree.nodes.new("ShaderNodeSeparateColor")
+    tree.links.new(tex.outputs["Color"], sep.inputs[0])
+    tree.links.new(sep.outputs["Blue"], tree.nodes["Principled BSDF"].inputs["Metallic"])
+    bsdf, _, warnings = exported(mat)
+    assert not warnings
+    assert bsdf.name == "mix" and bsdf.varies_over_surface
+
+
+def test_emission_colour_from_an_image_varies_over_the_surface(addon):
+    """glTF's emissive texture: Principled Emission Color from an Image Texture × Emission Strength."""
+    from polar_render.engine.textures.inputs import TexturedSpectrum
+    empty_scene()
+    img = bpy.data.images.new("glow", 2, 1, alpha=False, float_buffer=True)
+    img.pixels = [2.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]
+    mat = principled(**{"Emission Strength": 3.0})
+    tree = mat.node_tree
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Emission Color"])
+    _, emission, warnings = exported(mat)
+    assert not warnings
+    assert isinstance(emission, TexturedSpectrum) and emission.kind == "illuminant"
+    assert (emission.lo, emission.hi) == pytest.approx((0.0, 6.0))
+    # through a Mix Shader with factor 0.25 on the emitting side: scaled by the weight
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    mix.inputs[0].default_value = 0.25
+    tree.links.new(tree.nodes["Principled BSDF"].outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], tree.get_output_node("ALL").inputs["Surface"])
+    _, emission, _ = exported(mat)
+    assert emission.hi == pytest.approx(1.5)
+
+
+def test_volume_absorption_becomes_the_absorbing_interior(addon):
+    """Material Output ▸ Volume: Volume Absorption σ = ρ(1 − Color) (what glTF's KHR_materials_volume
+    becomes), Principled Volume's absorption, a mix of them; scattering is warned about."""
+    empty_scene()
+    mat = principled(**{"Transmission Weight": 1.0, "Roughness": 0.0})
+    tree = mat.node_tree
+    vol = tree.nodes.new("ShaderNodeVolumeAbsorption")
+    vol.inputs["Color"].default_value = (0.2, 0.5, 1.0, 1.0)
+    vol.inputs["Density"].default_value = 2.0
+    tree.links.new(vol.outputs[0], tree.get_output_node("ALL").inputs["Volume"])
+    bsdf, _, warnings = exported(mat)
+    assert not warnings
+    assert bsdf.interior.absorption.linear_srgb() == pytest.approx([1.6, 1.0, 0.0])
+    pv = tree.nodes.new("ShaderNodeVolumePrincipled")
+    pv.inputs["Density"].default_value = 1.0
+    pv.inputs["Color"].default_value = (0.5, 0.5, 0.5, 1.0)
+    pv.inputs["Absorption Color"].default_value = (0.25, 0.25, 0.25, 1.0)
+    add = tree.nodes.new("ShaderNodeAddShader")
+    tree.links.new(vol.outputs[0], add.inputs[0])
+    tree.links.new(pv.outputs[0], add.inputs[1])
+    tree.links.new(add.outputs[0], tree.get_output_node("ALL").inputs["Volume"])
+    bsdf, _, warnings = exported(mat)
+    assert bsdf.interior.absorption.linear_srgb() == pytest.approx([1.6 + 0.25, 1.0 + 0.25, 0.25])
+    assert any("scattering" in w for w in warnings)
 
 
 def test_layered_node_uses_the_linked_base(addon):

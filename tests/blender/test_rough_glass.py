@@ -1,5 +1,6 @@
 """Blender: Principled (Transmission, Roughness) and Glass/Refraction with roughness → rough_dielectric
-(single-scattering GGX, α = roughness²); the Rough/Thin Dielectric node models."""
+(GGX, α = roughness², Cycles' multiple-scattering compensation for Multiscatter GGX), tinted as Cycles
+tints glass; the Rough/Thin Dielectric node models."""
 
 import pytest
 
@@ -20,6 +21,12 @@ def exported(material):
     return bsdf, warnings
 
 
+def untinted(bsdf):
+    """The glass model under a colour tint (engine.materials.tinted)."""
+    from polar_render.engine.materials.tinted import Tinted
+    return bsdf.base if isinstance(bsdf, Tinted) else bsdf
+
+
 def shader_material(kind, distribution=None, **inputs):
     mat = bpy.data.materials.new("G")
     tree = mat.node_tree
@@ -38,18 +45,23 @@ def shader_material(kind, distribution=None, **inputs):
     return mat
 
 
-def test_principled_rough_transmission_is_single_scatter_ggx_with_one_warning(addon):
+def test_principled_rough_transmission_is_ggx_tinted_by_the_root_of_the_base_colour(addon):
     empty_scene()
-    mat = shader_material("ShaderNodeBsdfPrincipled", **{"Transmission Weight": 1.0, "Roughness": 0.5, "IOR": 1.45})
+    mat = shader_material("ShaderNodeBsdfPrincipled", **{"Transmission Weight": 1.0, "Roughness": 0.5, "IOR": 1.45,
+                                                         "Base Color": (0.64, 0.25, 0.04, 1.0)})
     bsdf, warnings = exported(mat)
-    assert bsdf.name == "rough_dielectric" and bsdf.distribution == "ggx"
-    assert bsdf.alpha == pytest.approx(0.25) and bsdf.n_int == pytest.approx(1.45)
-    assert len([w for w in warnings if "Multiscatter" in w]) == 1
+    glass = untinted(bsdf)
+    assert glass.name == "rough_dielectric" and glass.distribution == "ggx" and glass.multiscatter
+    assert glass.alpha == pytest.approx(0.25) and glass.n_int == pytest.approx(1.45)
+    assert not warnings
+    # Cycles' transmission tint: √(Base Color) at each refraction, reflections untinted
+    assert bsdf.reflection is None and bsdf.transmission.linear_srgb() == pytest.approx([0.8, 0.5, 0.2])
     bsdf, warnings = exported(shader_material("ShaderNodeBsdfPrincipled", "GGX",
                                               **{"Transmission Weight": 1.0, "Roughness": 0.5}))
-    assert bsdf.name == "rough_dielectric" and not warnings
-    bsdf, _ = exported(shader_material("ShaderNodeBsdfPrincipled", **{"Transmission Weight": 1.0, "Roughness": 0.1}))
-    assert bsdf.name == "dielectric"       # α = 0.01 < the smooth limit
+    assert untinted(bsdf).name == "rough_dielectric" and not untinted(bsdf).multiscatter and not warnings
+    bsdf, _ = exported(shader_material("ShaderNodeBsdfPrincipled", **{"Transmission Weight": 1.0, "Roughness": 0.0,
+                                                                      "Base Color": (1, 1, 1, 1)}))
+    assert bsdf.name == "dielectric"       # roughness 0: the smooth dielectric; a white base: no tint
 
 
 @pytest.mark.parametrize("kind,distribution,want", [("ShaderNodeBsdfGlass", "GGX", "ggx"),
@@ -59,9 +71,10 @@ def test_principled_rough_transmission_is_single_scatter_ggx_with_one_warning(ad
 def test_glass_and_refraction_with_roughness(addon, kind, distribution, want):
     empty_scene()
     bsdf, warnings = exported(shader_material(kind, distribution, Roughness=0.4, IOR=1.6))
+    bsdf = untinted(bsdf)
     assert bsdf.name == "rough_dielectric" and bsdf.distribution == want
     assert bsdf.alpha == pytest.approx(0.16) and bsdf.n_int == pytest.approx(1.6)
-    assert bool(warnings) == (distribution == "MULTI_GGX")
+    assert bsdf.multiscatter == (distribution == "MULTI_GGX") and not warnings
 
 
 def test_rough_and_thin_dielectric_node_models(addon):

@@ -233,7 +233,7 @@ def polar_renders(scene):
     depsgraph = bpy.context.evaluated_depsgraph_get()
     out, warnings = [], []
     for seed in range(SEEDS):
-        settings = RenderSettings(spp=POLAR_SPP, max_depth=BOUNCES + 1, seed=seed, spectral="spectral",
+        settings = RenderSettings(spp=POLAR_SPP, max_depth=BOUNCES + 2, seed=seed, spectral="spectral",
                                   polarisation="off")
         engine_scene, warnings = export_scene(depsgraph, scene.camera, W, H, settings)
         out.append(Renderer(engine_scene).render(settings).stokes()[0])
@@ -298,10 +298,11 @@ def _export(scene):
 
 
 def test_roughness_texture_gives_the_constant_model_at_each_texel(tmp_path):
-    """Principled (dielectric) Roughness from a grey texture → Torrance–Sparrow with m = r² per point:
-    at each texel centre the exported material is, bit for bit, the constant Torrance–Sparrow of
-    m = r² (r = 0 clamps to r ≈ 0.01: m ≥ 1e-4, the least textured slope) and, where m ≥ 0.02, the
-    exporter's own conversion of a constant Roughness with that texel's value."""
+    """Principled (dielectric) Roughness from a grey texture → GGX Torrance–Sparrow (Multiscatter GGX, the
+    Principled default) with α = r² per point: at each texel centre the exported material is, bit for bit,
+    the constant Torrance–Sparrow of α = r² (r = 0 clamps to r ≈ 0.01: α ≥ 1e-4, the least textured
+    roughness) and, where r > 0, the exporter's own conversion of a constant Roughness with that texel's
+    value."""
     load_addon()
     from polar_render.engine.materials.base import ShadingPoint
     from polar_render.engine.materials.torrance_sparrow import TorranceSparrow
@@ -354,8 +355,8 @@ def test_roughness_texture_gives_the_constant_model_at_each_texel(tmp_path):
         sub.surface = None
         m = max(float(r), ROUGHNESS_MIN) ** 2
         oracles = [TorranceSparrow(bsdf.n, bsdf.k, m, diffuse_albedo=bsdf.albedo, diffuse_weight=1.0,
-                                   diffuse_layering="albedo_scaling")]
-        if m >= 0.02:    # the exporter's own constant conversion (below m = 0.02 it drops the facets)
+                                   diffuse_layering="albedo_scaling", distribution="ggx", multiscatter=True)]
+        if r > 0:        # the exporter's own constant conversion (roughness 0: the smooth limit, no facets)
             principled.inputs["Roughness"].default_value = float(r)
             oracles.append(_export(scene)[0].materials[plane.materials[0]])
         for i, constant in enumerate(oracles):
