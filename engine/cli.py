@@ -664,7 +664,8 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--spp", type=int, help="samples per pixel (default: the scene's)")
     r.add_argument("--seed", type=int, help="random seed (default: the scene's)")
     r.add_argument("--max-depth", type=int, help="maximum path segments (1 = emitters only)")
-    r.add_argument("--spectral", choices=("spectral", "mono"), help="4 wavelengths per path or one")
+    r.add_argument("--spectral", choices=("spectral", "rgb", "mono"),
+                   help="4 wavelengths per path, RGB channels (Cycles' colour arithmetic) or one wavelength")
     r.add_argument("--wavelength-nm", type=float, help="wavelength of --spectral mono (nm)")
     r.add_argument("--polarisation", choices=("auto", "full", "linear", "off"),
                    help="auto (default: the cheapest exact transport), full 4×4, linear 3×3 or scalar")

@@ -20,6 +20,8 @@ POLARISATION_TO_ENGINE = {"AUTO": "auto", "FULL": "full", "LINEAR": "linear", "O
 SPECTRAL_ITEMS = [
     ("SPECTRAL", "Spectral", "Four wavelengths per path over 360–830 nm, CIE 1931 colour", 0),
     ("MONO", "Monochrome", "One wavelength (for verification); colours by their luminance", 1),
+    ("RGB", "RGB (as Cycles)", "Red, green and blue channels multiplied as Cycles multiplies colours (a look-match "
+     "with Cycles renders); models that need a wavelength use one per channel", 2),
 ]
 
 SAMPLER_ITEMS = [

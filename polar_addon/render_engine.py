@@ -47,12 +47,16 @@ cancel_requested = {"value": False}
 distributed_scheduler = {"address": None}
 
 
+#: Render properties ▸ Spectral → the engine's RenderSettings.spectral
+SPECTRAL_TO_ENGINE = {"SPECTRAL": "spectral", "MONO": "mono", "RGB": "rgb"}
+
+
 def engine_settings(scene, preview=False) -> RenderSettings:
     """Engine RenderSettings from the scene's Polar settings (frame-dependent seed if asked)."""
     p = scene.polar
     seed = p.seed + (scene.frame_current if p.use_animated_seed else 0)
     return RenderSettings(spp=p.preview_samples if preview else p.samples, max_depth=p.max_bounces + 2,
-                          rr_depth=5, seed=seed, spectral="mono" if p.spectral == "MONO" else "spectral",
+                          rr_depth=5, seed=seed, spectral=SPECTRAL_TO_ENGINE[p.spectral],
                           wavelength_nm=p.wavelength_nm, polarisation=POLARISATION_TO_ENGINE[p.polarisation],
                           batch_rays=p.batch_rays, threads=p.threads,
                           simplify="auto" if p.skip_clear_layers else "off",

@@ -51,7 +51,7 @@ from .path_state import PathState
 from .sampler import (PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_JITTER, PAIR_LENS, PAIR_LIGHT_POINT, PAIR_WAVELENGTH,
                       PathSampler, stratified_pair)
 from .visibility import ray_visibility
-from ..spectral import WavelengthLookup, rgb_weights, sample_wavelengths
+from ..spectral import RGB_WAVELENGTHS_NM, WavelengthLookup, rgb_channel_tables, rgb_weights, sample_wavelengths
 from ..vec3 import dot
 
 if TYPE_CHECKING:
@@ -265,18 +265,20 @@ class PathTracer:
         self.textured = any(m.varies_over_surface for m in self.materials)
         self.P = TRANSPORT_SIZES[settings.polarisation]
         self.mono = settings.spectral == "mono"
-        self.n_lambda = 1 if self.mono else 4
+        #: "rgb" transport: the path's wavelength axis carries the R, G, B channels (Cycles' arithmetic)
+        self.channels = settings.spectral == "rgb"
+        self.n_lambda = 1 if self.mono else 3 if self.channels else 4
         # Where no material depends on λ, every wavelength of a path has the same Mueller product:
         # carry T for one wavelength and apply the spectral emission and colour matching at the
         # lights (exactly the same estimate, a quarter of the Mueller arithmetic).
         used = {self.materials[i] for i in compiled.used_materials}
         independent = not any(m.flags.has(BSDFFlags.WAVELENGTH_DEPENDENT) for m in used)
         reduce = settings.reduce_spectral
-        self.uniform = reduce in ("auto", "exact", True) and independent
+        self.uniform = reduce in ("auto", "exact", True) and independent and not self.channels
         # "auto": with λ-independent materials the spectral estimator's expectation is T times each
         # light's spectrum integrated against the CIE observer, so trace in RGB with those exact
         # light colours: no wavelength sampling and no chromatic noise (same expectation).
-        self.rgb_mode = reduce in ("auto", True) and independent and not self.mono
+        self.rgb_mode = self.channels or (reduce in ("auto", True) and independent and not self.mono)
         # absorbing interiors (None: the scene has none, and nothing below reads a medium)
         self.media = Media(compiled, self.rgb_mode, self.mono) if compiled.has_volumes else None
         # Object ray visibility / holdout / alpha (None: none used) and film transparency (Cycles).
@@ -293,7 +295,8 @@ class PathTracer:
         if d is not None and getattr(light, "varies_with_direction", False):
             return light.emitted(d, lookup, self.rgb_mode, self.mono)
         if self.rgb_mode:
-            return np.repeat(light.rgb()[:, None], lookup.lam.shape[1], axis=1)
+            rgb = light.channel_rgb() if self.channels else light.rgb()
+            return np.repeat(rgb[:, None], lookup.lam.shape[1], axis=1)
         if self.mono:
             return light.radiance(lookup.lam, True)
         return light.spectrum.eval_cached(lookup)
@@ -306,6 +309,8 @@ class PathTracer:
     def _wavelengths(self, u: np.ndarray | None, n: int) -> tuple[np.ndarray, np.ndarray | None]:
         """(λ (L, n) nm, sRGB weights (3, L, n) or None in RGB mode) of the paths; ``u`` (n,) their
         wavelength dimension (None where ``samples_wavelengths`` is False)."""
+        if self.channels:
+            return np.repeat(np.array(RGB_WAVELENGTHS_NM)[:, None], n, axis=1), None
         if self.rgb_mode:
             return np.full((1, n), 550.0), None
         if self.mono:
@@ -376,7 +381,9 @@ class PathTracer:
         o, d, x_T, t_min, t_max = self.camera.generate(pixel, u[:k_camera])
         lam, w_rgb = self._wavelengths(u[k_camera] if self.samples_wavelengths else None, n_total)
         L = 3 if self.rgb_mode else lam.shape[0]
-        lk = WavelengthLookup(lam)                      # table values at the path's wavelengths, once
+        # table values at the path's wavelengths, once; "rgb" transport: the identity basis and a white
+        # D65, so every RGB colour evaluates to its own channel values
+        lk = WavelengthLookup(lam, *rgb_channel_tables(n_total)) if self.channels else WavelengthLookup(lam)
         # wavelengths the materials are evaluated at (one where nothing depends on λ)
         lk_m = WavelengthLookup(lam[:1]) if self.uniform else lk
         Lm = lk_m.lam.shape[0]

@@ -275,7 +275,9 @@ class Renderer:
                 raise ValueError(f"cannot resume a {resume.width}×{resume.height} render at {W}×{H}")
             film.merge(resume)
             done_before = resume.count.copy()
-        if tracer.rgb_mode:
+        if tracer.channels:
+            stats_spectral = "RGB channels (Cycles' colour arithmetic)"
+        elif tracer.rgb_mode:
             stats_spectral = "RGB with exactly integrated light spectra (no material depends on λ)"
         elif tracer.uniform:
             stats_spectral = "spectral, one Mueller product per path (no material depends on λ)"

@@ -252,6 +252,10 @@ class EnvironmentLight:
     interpolation_space: str = "linear"
 
 
+#: The spectral modes of RenderSettings.spectral.
+SPECTRAL_MODES = ("spectral", "rgb", "mono")
+
+
 @dataclass
 class RenderSettings:
     """How to render.  ``max_depth`` counts path segments (as Mitsuba 3):
@@ -259,8 +263,11 @@ class RenderSettings:
     ``polarisation``: "full" (4×4 Mueller), "linear" (3×3: S3 = 0), "off"
     (scalar, S1..S3 = 0) or "auto" (the cheapest of these that is exact for
     the scene, see engine.render.effects).
-    ``spectral``: "spectral" (4 wavelengths per path over 360–830 nm) or
-    "mono" (one wavelength ``wavelength_nm``; RGB colours by their luminance).
+    ``spectral``: "spectral" (4 wavelengths per path over 360–830 nm), "rgb" (Cycles' colour arithmetic:
+    every path carries linear-sRGB R, G, B as three channels; RGB colours, lights and textures are used
+    as they are, colours multiply channel by channel; models that need a wavelength — measured metals,
+    thin layers, HTSG — are evaluated at engine.spectral.RGB_WAVELENGTHS_NM) or "mono" (one wavelength
+    ``wavelength_nm``; RGB colours by their luminance).
     """
 
     spp: int = 16

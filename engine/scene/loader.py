@@ -28,8 +28,8 @@ from ..materials.mix import MAX_COMPONENTS, Mix
 from ..materials.normal_map import ShadingNormal
 from ..textures import parse_texture_input, textured_emission
 from ..textures.image import read_image
-from .description import (EMISSION_SAMPLING, ENVMAP_GRIDS, SAMPLERS, Camera, DirectionalLight, EnvironmentLight,
-                          Interior, Mesh, PointLight, RenderSettings, Scene, SpotLight)
+from .description import (EMISSION_SAMPLING, ENVMAP_GRIDS, SAMPLERS, SPECTRAL_MODES, Camera, DirectionalLight,
+                          EnvironmentLight, Interior, Mesh, PointLight, RenderSettings, Scene, SpotLight)
 from ..errors import SceneError
 from .meshio import read_mesh
 from .shapes import icosphere, quad, transform_matrix, transform_mesh
@@ -345,7 +345,7 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
     s.max_depth = integer(d.get("max_depth", s.max_depth), f"{field}.max_depth", 1, 1024)
     s.rr_depth = integer(d.get("rr_depth", s.rr_depth), f"{field}.rr_depth", 1, 1024)
     s.seed = integer(d.get("seed", s.seed), f"{field}.seed", 0, 2 ** 63 - 1)
-    s.spectral = choice(d.get("spectral", s.spectral), f"{field}.spectral", ("spectral", "mono"))
+    s.spectral = choice(d.get("spectral", s.spectral), f"{field}.spectral", SPECTRAL_MODES)
     s.wavelength_nm = number(d.get("wavelength_nm", s.wavelength_nm), f"{field}.wavelength_nm", 360, 830)
     s.polarisation = choice(d.get("polarisation", s.polarisation), f"{field}.polarisation",
                             ("auto", "full", "linear", "off"))

@@ -74,6 +74,18 @@ class Spectrum:
         raise NotImplementedError
 
 
+#: Where models that need a wavelength evaluate the R, G and B channels of "rgb" transport (nm): the
+#: dominant wavelengths of the linear-sRGB primaries (≈ 611, 549, 464 nm, rounded).
+RGB_WAVELENGTHS_NM = (610.0, 550.0, 465.0)
+
+
+def rgb_channel_tables(n: int):
+    """(basis (3, 3, n), d65 (3, n)) of a WavelengthLookup whose three "wavelengths" are the R, G, B
+    channels ("rgb" transport): the identity basis and a D65 of 1, so that every RGB-defined spectrum
+    (reflectance, unbounded, illuminant, textured) evaluates to its own channel values."""
+    return np.broadcast_to(np.eye(3)[:, :, None], (3, 3, n)), np.ones((3, n))
+
+
 class WavelengthLookup:
     """The table values every RGB spectrum needs at a batch of path wavelengths, computed once.
 

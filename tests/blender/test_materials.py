@@ -66,11 +66,12 @@ def test_node_shows_exactly_the_selected_models_inputs(addon):
 
 def test_enum_numbers_are_stable(addon):
     from polar_render.polar_addon.nodes.models import MODEL_ITEMS
-    from polar_render.polar_addon.properties import POLARISATION_ITEMS
+    from polar_render.polar_addon.properties import POLARISATION_ITEMS, SPECTRAL_ITEMS
     assert [(i[0], i[3]) for i in MODEL_ITEMS] == [
         ("LAMBERT", 0), ("CONDUCTOR", 1), ("DIELECTRIC", 2), ("BLACK_GLASS", 3), ("TORRANCE_SPARROW", 4),
         ("HTSG", 5), ("WEIDLICH_WILKIE", 6), ("ROUGH_DIELECTRIC", 7), ("THIN_DIELECTRIC", 8)]
     assert [(i[0], i[3]) for i in POLARISATION_ITEMS] == [("AUTO", 0), ("FULL", 1), ("LINEAR", 2), ("OFF", 3)]
+    assert [(i[0], i[3]) for i in SPECTRAL_ITEMS] == [("SPECTRAL", 0), ("MONO", 1), ("RGB", 2)]
 
 
 def test_principled_conversion_per_input(addon):

@@ -39,6 +39,16 @@ class _Light:
     def radiance(self, lam, mono) -> np.ndarray:
         return self.spectrum.eval(lam, mono=mono)
 
+    def channel_rgb(self) -> np.ndarray:
+        """Linear sRGB (3,) as an RGB renderer uses this light ("rgb" transport): an RGB-defined
+        spectrum's own colour (Cycles' light colour × strength), else :meth:`rgb`."""
+        if not hasattr(self, "_channel_rgb"):
+            try:
+                self._channel_rgb = np.asarray(self.spectrum.linear_srgb(), np.float64).reshape(3)
+            except (NotImplementedError, TypeError, AttributeError, ValueError):
+                self._channel_rgb = self.rgb()
+        return self._channel_rgb
+
     def rgb(self) -> np.ndarray:
         """Linear sRGB (3,) of the emitted spectrum: the exact expectation of the spectral estimator."""
         if not hasattr(self, "_rgb"):
