@@ -1,0 +1,83 @@
+"""Polar against Cycles on the real-asset suite: noise × time of S0 at equal samples, per asset.
+
+    python tests/bench/asset_speed.py [--assets BoomBox,UnlitTest] [--lighting lamps,hdri] [--spp 16]
+                                      [--seeds 4] [--res 96] [--json]
+                                      [--figure docs/images/assets.png [--figure-lighting hdri]]
+
+Runs each case of tests/blender/test_real_assets.py (tests/support/asset_parity.run_case: the glTF
+imported by Blender, framed, lit, rendered by Cycles with the parity settings and by Polar through the
+extension's exporter, both at ``--spp`` samples with ``--seeds`` seeds) and prints one line per case,
+the two renderers side by side:
+
+* seconds per render (Cycles: its render call for one seed, scene sync, EXR write and read included;
+  Polar: ``Renderer.render`` for one seed, the export and BVH once per case not included but printed);
+* σ² = mean over the asset's pixels of the per-pixel variance of the S0 luminance between the seeds;
+* **var × time ratio** = (σ²_Polar · t_Polar) ÷ (σ²_Cycles · t_Cycles): how much longer Polar needs for
+  Cycles' noise (< 1: Polar is more efficient);
+* the parity numbers of the case (blocks passing the rule, luminance ratio Polar ÷ Cycles).
+
+A case whose scene Polar refuses prints the reason.  ``--figure PATH`` also writes, per asset, a PNG of
+Cycles | Polar S0 | Polar DoLP under ``--figure-lighting`` into a folder beside PATH and stacks them
+into PATH (the documentation figure docs/images/assets.png).  Runs in the bpy module; not part of the
+test command.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(os.path.dirname(HERE))
+sys.path.insert(0, REPO)
+
+
+def main(argv=None):
+    from tests.support import asset_parity as ap
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--assets", default=",".join(ap.CATALOGUE))
+    p.add_argument("--lighting", default=",".join(ap.LIGHTINGS))
+    p.add_argument("--spp", type=int, default=16)
+    p.add_argument("--seeds", type=int, default=4)
+    p.add_argument("--res", type=int, default=0, help="square resolution (0: each asset's own, 96 × 96 mostly)")
+    p.add_argument("--json", action="store_true", help="also print the reports as JSON lines")
+    p.add_argument("--figure", default="", help="write the Cycles | Polar S0 | Polar DoLP figure to this PNG")
+    p.add_argument("--figure-lighting", default="hdri", choices=ap.LIGHTINGS)
+    a = p.parse_args(argv)
+
+    import bpy  # noqa: F401  (the bpy module must be importable)
+    from tests.blender_support import load_addon
+    load_addon()
+    names = [n for n in a.assets.split(",") if n]
+    lightings = [x for x in a.lighting.split(",") if x]
+    panels = tempfile.mkdtemp(prefix="asset_panels_") if a.figure else None
+    print(f"{'asset':20s} {'light':5s} | {'Cycles s':>8s} {'σ²':>9s} | {'Polar s':>8s} {'σ²':>9s} "
+          f"{'export s':>8s} | {'var×time P÷C':>12s} | parity")
+    for name in names:
+        for lighting in lightings:
+            out = panels if (panels and lighting == a.figure_lighting) else None
+            res = (a.res, a.res) if a.res else (None, None)
+            r = ap.run_case(name, lighting, spp=a.spp, seeds=a.seeds, width=res[0], height=res[1], out_dir=out)
+            if r.error:
+                print(f"{name:20s} {lighting:5s} | Polar refused the scene: {r.error}")
+                continue
+            tc, tp = r.seconds["cycles"] / r.seeds, r.seconds["polar"] / r.seeds
+            vc, vp = r.noise["cycles"], r.noise["polar"]
+            ratio = (vp * tp) / (vc * tc) if vc * tc > 0 else float("inf")
+            print(f"{name:20s} {lighting:5s} | {tc:8.2f} {vc:9.2e} | {tp:8.2f} {vp:9.2e} {r.seconds['export']:8.2f} "
+                  f"| {ratio:12.2f} | {r.passed}/{r.blocks} blocks, Y {r.luminance_ratio:.3f}", flush=True)
+            if a.json:
+                print(json.dumps({"asset": name, "lighting": lighting, "spp": r.spp, "seeds": r.seeds,
+                                  "cycles_s": tc, "polar_s": tp, "cycles_var": vc, "polar_var": vp,
+                                  "var_time_ratio": ratio, "blocks": r.blocks, "passed": r.passed,
+                                  "luminance_ratio": r.luminance_ratio, "warnings": r.warnings}))
+    if a.figure:
+        done = [n for n in names if os.path.exists(os.path.join(panels, f"{n}_{a.figure_lighting}.png"))]
+        print(ap.figure(panels, a.figure, done, a.figure_lighting))
+
+
+if __name__ == "__main__":
+    main()
