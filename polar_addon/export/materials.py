@@ -818,11 +818,59 @@ def _principled(node, mat, warnings, bake=None):
                         _colour_root(r.rgb_or_texture("Base Color", 0.0, 1.0)))
     if not _always(metallic) and not _always(transmission):
         dielectric = _principled_opaque_dielectric(r, node, mat, ior)
+    _unsimulated_principled_inputs(node, mat, warnings)
     coat = r.float("Coat Weight", 0.0, 1.0)
     if coat > 0 and (metal is not None or glass is not None):
         warnings.append(f"material {mat!r}: the Coat of {node.name!r} is rendered over its dielectric part only, "
                         "not over its metallic or transmissive parts")
     return _mixture(_mixture(dielectric, glass, transmission), metal, metallic)
+
+
+#: Principled inputs not simulated yet, and the value at which they change nothing (a colour: white)
+_PRINCIPLED_NOT_SIMULATED = (("Subsurface Weight", 0.0, "rendered as the diffuse base"),
+                             ("Sheen Weight", 0.0, "no sheen layer"),
+                             ("Thin Film Thickness", 0.0, "no thin-film interference"),
+                             ("Anisotropic", 0.0, "isotropic facets"),
+                             ("Diffuse Roughness", 0.0, "a Lambertian base"),
+                             ("Specular Tint", 1.0, "an untinted specular layer"),
+                             ("Coat Tint", 1.0, "an untinted coat"))
+
+
+def _unsimulated_principled_inputs(node, mat, warnings):
+    """One warning per Principled input that is set (or linked) to something Polar does not simulate yet
+    (docs/guide/blender.md, "Principled BSDF, input by input"); inputs newer Blenders add are named too."""
+    for name, neutral, instead in _PRINCIPLED_NOT_SIMULATED:
+        sock = node.inputs.get(name)
+        if sock is None:
+            continue
+        value = sock.default_value
+        values = [float(v) for v in value[:3]] if hasattr(value, "__len__") else [float(value)]
+        if sock.is_linked or any(v != neutral for v in values):
+            warnings.append(f"material {mat!r}: Principled input {name!r} of {node.name!r} is not simulated yet "
+                            f"({instead})")
+    known = {"Base Color", "Metallic", "Roughness", "IOR", "Alpha", "Normal", "Weight", "Diffuse Roughness",
+             "Subsurface Weight", "Subsurface Radius", "Subsurface Scale", "Subsurface IOR", "Subsurface Anisotropy",
+             "Specular IOR Level", "Specular Tint", "Anisotropic", "Anisotropic Rotation", "Tangent",
+             "Transmission Weight", "Coat Weight", "Coat Roughness", "Coat IOR", "Coat Tint", "Coat Normal",
+             "Sheen Weight", "Sheen Roughness", "Sheen Tint", "Emission Color", "Emission Strength",
+             "Thin Film Thickness", "Thin Film IOR"}
+    for sock in node.inputs:
+        if sock.name not in known and sock.enabled and (sock.is_linked or _non_default(sock)):
+            warnings.append(f"material {mat!r}: Principled input {sock.name!r} of {node.name!r} (a newer Blender's) "
+                            "is not simulated")
+
+
+def _non_default(sock) -> bool:
+    """A newer input set away from its default (booleans and numbers; other kinds count as set)."""
+    rna = sock.bl_rna.properties.get("default_value")
+    if rna is None:
+        return False
+    default = getattr(rna, "default_array", None) if getattr(rna, "is_array", False) else getattr(rna, "default", None)
+    value = sock.default_value
+    try:
+        return tuple(value) != tuple(default) if hasattr(value, "__len__") else value != default
+    except TypeError:
+        return True
 
 
 def _principled_opaque_dielectric(r, node, mat, ior):

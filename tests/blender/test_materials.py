@@ -128,6 +128,10 @@ def test_principled_conversion_per_input(addon):
     bsdf, _, _ = exported(principled(**{"Roughness": 0.0, "IOR": 1.5, "Specular IOR Level": 0.25}))
     n = bsdf.n.eval(lam)[0, 0]
     assert ((n - 1) / (n + 1)) ** 2 == pytest.approx(0.04 * 0.5, rel=1e-9)
+    # Inputs not simulated yet: one warning each, naming the input (never dropped silently).
+    _, _, warnings = exported(principled(**{"Sheen Weight": 0.5, "Specular Tint": (1, 0.5, 0.5, 1)}))
+    assert len(warnings) == 2 and "'Sheen Weight'" in warnings[0] + warnings[1]
+    assert any("'Specular Tint'" in w for w in warnings)
     # Coat → Weidlich–Wilkie over the converted base.
     bsdf, _, _ = exported(principled(**{"Coat Weight": 1.0, "Coat IOR": 1.6, "Coat Roughness": 0.0, "Roughness": 0.0}))
     assert bsdf.name == "weidlich_wilkie"
