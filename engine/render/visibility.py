@@ -6,8 +6,9 @@ probability 1 − alpha), continue along the same direction from just behind it:
 interaction that changes neither the Stokes vector nor its frame and does not count as a bounce
 (Cycles' transparent bounces; at most ``MAX_PASS_THROUGH`` per segment).  Shadow rays cross
 shadow-invisible surfaces and are attenuated by 1 − alpha at pass-through ones (transparent
-shadows).  Scenes without any of these features never reach this module's loops, so their
-images are unchanged.
+shadows).  Alpha may vary over a surface (a TexturedNumber: Principled Alpha from an image's alpha, a
+glTF cut-out or blend): it is read at each crossing's triangle and barycentrics.  Scenes without any of
+these features never reach this module's loops, so their images are unchanged.
 
 Pass-through crossings are where a path enters or leaves an absorbing interior without a bounce
 (a Blender material with only a Volume output, a hidden glass's alpha): both loops can ``record``
@@ -21,7 +22,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..kernels.hashing import uniforms
-from .accel import Hits, offset_origin
+from ..textures import TexturedNumber
+from .accel import Hits, offset_origin, surface_points
 
 #: Surfaces a ray may cross before it is treated as blocked (Cycles' default transparent bounces: 8;
 #: more here because invisible objects count too).
@@ -35,15 +37,34 @@ _MASK64 = (1 << 64) - 1
 class RayVisibility:
     """Per-mesh flags indexed by the compiled scene's ``tri_mesh``; build with ``ray_visibility``."""
 
-    def __init__(self, mesh_rays, tri_mesh: np.ndarray):
+    def __init__(self, mesh_rays, tri_mesh: np.ndarray, compiled=None):
         flags = np.array([r[:4] for r in mesh_rays], bool).reshape(-1, 4)
         self.tri_mesh = tri_mesh
         self.camera_hidden, self.indirect_hidden, self.shadow_hidden = ~flags[:, 0], ~flags[:, 1], ~flags[:, 2]
         self.holdout = flags[:, 3]
-        self.alpha = np.array([float(r[4]) for r in mesh_rays], np.float64)
+        #: meshes whose alpha varies over the surface (a TexturedNumber: Principled Alpha from a texture),
+        #: read at the hit's triangle and barycentrics; their entry in ``alpha`` is its least value
+        self.textured_alpha = {i: r[4] for i, r in enumerate(mesh_rays) if isinstance(r[4], TexturedNumber)}
+        self.compiled = compiled
+        self.alpha = np.array([float(r[4].lo) if i in self.textured_alpha else float(r[4])
+                               for i, r in enumerate(mesh_rays)], np.float64)
         self.any_alpha = bool((self.alpha < 1).any())
         self.any_holdout = bool(self.holdout.any())
         self.affects_shadows = bool(self.shadow_hidden.any() or self.any_alpha)
+
+    def alpha_at(self, mesh: np.ndarray, prim: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Alpha (N,) at hits on triangles ``prim`` (of meshes ``mesh``) at barycentrics u, v: the mesh's
+        constant, or its texture's value there (clipped to [0, 1])."""
+        a = self.alpha[mesh]
+        if not self.textured_alpha:
+            return a
+        a = a.copy()
+        for i, value in self.textured_alpha.items():
+            sel = np.nonzero(mesh == i)[0]
+            if sel.size:
+                points = surface_points(self.compiled, prim[sel], u[sel], v[sel])
+                a[sel] = np.clip(value.at(points), 0.0, 1.0)
+        return a
 
     # ------------------------------------------------------------------ camera and indirect rays
 
@@ -66,7 +87,7 @@ class RayVisibility:
             mesh = self.tri_mesh[np.where(hit, p_act, 0)]
             skip = hit & hidden[mesh]
             if self.any_alpha:
-                a = self.alpha[mesh]
+                a = self.alpha_at(mesh, np.where(hit, p_act, 0), u[active], v[active])
                 partial = hit & ~skip & (a < 1)
                 if partial.any():
                     dim = (_PASS_DIMENSION + bounce * 4096 + it) * _GOLDEN & _MASK64
@@ -111,10 +132,11 @@ class RayVisibility:
             rays += active.size
             hit = h.prim >= 0
             mesh = self.tri_mesh[np.where(hit, h.prim, 0)]
-            crossable = hit & (self.shadow_hidden[mesh] | (self.alpha[mesh] < 1))
+            alpha = self.alpha_at(mesh, np.where(hit, h.prim, 0), h.u, h.v) if self.any_alpha else self.alpha[mesh]
+            crossable = hit & (self.shadow_hidden[mesh] | (alpha < 1))
             opaque = hit & ~crossable
             trans[active[opaque]] = 0.0
-            factor = np.where(self.shadow_hidden[mesh], 1.0, 1.0 - self.alpha[mesh])
+            factor = np.where(self.shadow_hidden[mesh], 1.0, 1.0 - alpha)
             trans[active[crossable]] *= factor[crossable]
             keep = crossable & (trans[active] > 0)
             if record is not None:
@@ -137,6 +159,7 @@ class RayVisibility:
 
 def ray_visibility(scene) -> RayVisibility | None:
     """The compiled scene's RayVisibility, or None when every mesh has the defaults (fast path)."""
-    if all(cam and ind and sh and not hold and alpha >= 1 for cam, ind, sh, hold, alpha in scene.mesh_rays):
+    if all(cam and ind and sh and not hold and not isinstance(alpha, TexturedNumber) and alpha >= 1
+           for cam, ind, sh, hold, alpha in scene.mesh_rays):
         return None
-    return RayVisibility(scene.mesh_rays, scene.tri_mesh)
+    return RayVisibility(scene.mesh_rays, scene.tri_mesh, scene)

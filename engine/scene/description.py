@@ -148,7 +148,8 @@ class Mesh:
     ``visible_indirect`` False hides it from rays after a scattering event; ``holdout`` makes what
     camera rays see of it transparent (alpha 0, no colour).  ``alpha`` < 1: a pass-through
     surface (Principled Alpha): rays cross it unchanged with probability 1 − alpha, shadow rays
-    are attenuated by 1 − alpha; the Stokes vector is unchanged.
+    are attenuated by 1 − alpha; the Stokes vector is unchanged; a TexturedNumber alpha varies over the
+    surface (read at each crossing).
 
     Emitter options (the defaults are the scene format's and the peer format's meaning):
     ``two_sided`` — both faces emit the same radiance (Cycles' Emission shader);

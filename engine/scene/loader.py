@@ -26,7 +26,7 @@ from ..files import refuse_special_file
 from ..materials.catalogue import MODELS
 from ..materials.mix import MAX_COMPONENTS, Mix
 from ..materials.normal_map import ShadingNormal
-from ..textures import parse_texture_input, textured_emission
+from ..textures import TexturedNumber, parse_texture_input, textured_emission
 from ..textures.image import read_image
 from .description import (EMISSION_SAMPLING, ENVMAP_GRIDS, SAMPLERS, SPECTRAL_MODES, Camera, DirectionalLight,
                           EnvironmentLight, Interior, Mesh, PointLight, RenderSettings, Scene, SpotLight)
@@ -675,7 +675,7 @@ def _parse_object_base(d: dict, field: str, base_dir: str, material_names) -> Me
     mesh = Mesh(name=name, vertices=np.asarray(data.vertices, dtype=np.float64), faces=faces,
                 materials=list(mat_list), material_ids=ids.astype(np.int32), normals=data.vertex_normals,
                 emission=emission, uv=uv, colors=colors or {}, tangents=tangents)
-    _parse_ray_visibility(d, field, mesh)
+    _parse_ray_visibility(d, field, mesh, base_dir)
     return mesh
 
 
@@ -684,6 +684,8 @@ def _any_textured(d: dict, materials) -> bool:
     the surface."""
     emission = d.get("emission")
     if isinstance(emission, dict) and isinstance(emission.get("color"), dict):
+        return True
+    if isinstance(d.get("alpha"), dict):
         return True
     names = d.get("materials", [d.get("material")])
     names = list(names.values()) if isinstance(names, dict) else names
@@ -696,13 +698,21 @@ def _any_textured(d: dict, materials) -> bool:
 OBJECT_RAY_KEYS = {"visible_camera", "visible_shadow", "visible_indirect", "holdout", "alpha"}
 
 
-def _parse_ray_visibility(d: dict, field: str, mesh: Mesh) -> None:
+def _parse_ray_visibility(d: dict, field: str, mesh: Mesh, base_dir: str = ".") -> None:
     for key in ("visible_camera", "visible_shadow", "visible_indirect", "holdout"):
         if key in d:
             if not isinstance(d[key], bool):
                 raise SceneError(f"{field}.{key}", "must be true or false")
             setattr(mesh, key, d[key])
-    mesh.alpha = number(d.get("alpha", 1.0), f"{field}.alpha", 0, 1)
+    raw = d.get("alpha", 1.0)
+    if isinstance(raw, dict):       # a texture object: alpha per point (an image's alpha channel, a cut-out)
+        source = parse_texture_input(raw, f"{field}.alpha", base_dir)
+        value = TexturedNumber(source).clamped_to(0.0, 1.0)
+        if not (0.0 <= value.lo and value.hi <= 1.0):
+            raise SceneError(f"{field}.alpha", f"texture values span [{value.lo:g}, {value.hi:g}]: must be in [0, 1]")
+        mesh.alpha = value
+    else:
+        mesh.alpha = number(raw, f"{field}.alpha", 0, 1)
 
 
 #: Texture coordinates of a quad's corners p0..p3 (the unit square, as a Blender plane's UV map).

@@ -22,7 +22,8 @@ from ...engine.spectral import ConstantSpectrum
 from .. import compat
 from .camera import export_camera
 from .lights import export_light
-from .materials import BakeTarget, _follow, attribute_needs, export_material, normal_input_unsupported
+from .materials import (BakeTarget, _follow, attribute_needs, export_material, normal_input_unsupported,
+                        texture_source)
 from .texture_bake import RESOLUTION_MAX, RESOLUTION_MIN
 from .world import export_world
 
@@ -280,10 +281,11 @@ def geometry_arrays(obj):
     return mesh_arrays(obj)
 
 
-def material_alpha(material, warnings) -> float:
-    """Principled Alpha of a material's surface shader (1 if none), warning about what is not
-    supported: a linked Alpha (textured cut-outs) and a linked Normal input that is not an exported
-    normal or bump map (materials.normal_input_unsupported)."""
+def material_alpha(material, warnings):
+    """Principled Alpha of a material's surface shader (1 if none): a number, or a TexturedNumber where
+    Alpha comes from an image (its alpha or a channel), a Separate Color of one or a colour attribute —
+    anything else linked keeps its own value with one warning; also warns about a linked Normal input
+    that is not an exported normal or bump map (materials.normal_input_unsupported)."""
     tree = compat.node_tree_in_use(material) if material is not None else None
     if tree is None:
         return 1.0
@@ -300,8 +302,13 @@ def material_alpha(material, warnings) -> float:
     if alpha is None:
         return 1.0
     if alpha.is_linked:
-        warnings.append(f"material {material.name!r}: a linked Alpha input (textured transparency) is not "
-                        "supported; its own value is used")
+        # an image's alpha (glTF cut-outs and blends), a channel of one, a colour attribute: per point
+        source = texture_source(alpha, material.name, warnings)
+        if source is not None:
+            from ...engine.textures import TexturedNumber
+            return TexturedNumber(source).clamped_to(0.0, 1.0)
+        warnings.append(f"material {material.name!r}: Alpha is linked to a graph that is not an image or colour "
+                        "attribute (not baked for alpha); its own value is used")
     value = float(alpha.default_value)
     if not np.isfinite(value):
         raise SceneError(f"material {material.name!r}", "input 'Alpha' must be a number in [0, 1]")
