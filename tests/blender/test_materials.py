@@ -147,6 +147,32 @@ def _shader(tree, kind, **inputs):
     return node
 
 
+@pytest.mark.parametrize("ior", [1.33, 1.5, 2.4])
+def test_smooth_principled_is_the_polarising_fresnel_interface(addon, ior):
+    """Metallic 0, Transmission 0, Roughness 0, a black base: the Mueller matrix (mirror lobe, every angle
+    and basis) is black glass's to 1e-12; Transmission 1 (white base): the dielectric model's; so the DoLP of
+    a smooth Principled dielectric is the Fresnel one (full s-polarisation at Brewster's angle)."""
+    from polar_render.engine.materials.black_glass import BlackGlass
+    from polar_render.engine.materials.dielectric import SmoothDielectric
+    from polar_render.engine.materials.evaluate import mueller_at
+    from polar_render.engine.spectral import ConstantSpectrum
+    empty_scene()
+    opaque, _, w1 = exported(principled(**{"Roughness": 0.0, "IOR": ior, "Base Color": (0, 0, 0, 1)}))
+    clear, _, w2 = exported(principled(**{"Roughness": 0.0, "IOR": ior, "Transmission Weight": 1.0,
+                                          "Base Color": (1, 1, 1, 1)}))
+    assert not w1 and not w2
+    ior = float(np.float32(ior))          # what the socket holds
+    brewster = math.degrees(math.atan(ior))
+    for theta in (0.0, 30.0, brewster, 75.0, 89.0):
+        for basis in ("sp", "scattering"):
+            for got, model in ((opaque, BlackGlass(ConstantSpectrum(ior))), (clear, SmoothDielectric(ior))):
+                a = np.array(mueller_at(got, theta, theta, 0.0, basis=basis)["delta"])
+                b = np.array(mueller_at(model, theta, theta, 0.0, basis=basis)["delta"])
+                np.testing.assert_allclose(a, b, rtol=0, atol=1e-12)
+    M = np.array(mueller_at(opaque, brewster, brewster, 0.0, basis="sp")["delta"])
+    assert abs(M[1, 0] / M[0, 0]) == pytest.approx(1.0, abs=1e-9)       # DoLP 1 for unpolarised light
+
+
 def test_mix_and_add_shaders_become_an_engine_mixture(addon):
     empty_scene()
     mat = bpy.data.materials.new("Mixed")
