@@ -1151,6 +1151,15 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
         return Lambert(ConstantSpectrum(0.0)), _emission(node, mat, warnings, bake=bake)
     if kind in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
         return _shader_mix(node, mat, warnings, depth, bake)
+    if kind == "ShaderNodeBsdfTransparent":
+        black = Lambert(ConstantSpectrum(0.0))
+        if depth == 0:          # the whole surface transparent: the object passes every ray
+            _white_transparent(node, mat, warnings)
+            black.alpha_factor = 0.0
+        else:
+            warnings.append(f"material {mat!r}: Transparent BSDF {node.name!r} inside a mix other than Mix "
+                            "Shader(Transparent, X) at the surface output scatters nothing here")
+        return black, None
     else:
         warnings.append(f"material {mat!r}: shader {kind} is not supported; rendered as grey Lambert")
     return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
@@ -1160,6 +1169,60 @@ def _black(bsdf) -> bool:
     """A material that scatters nothing (the black Lambert standing for an Emission shader's BSDF)."""
     albedo = getattr(bsdf, "albedo", None)
     return isinstance(bsdf, Lambert) and isinstance(albedo, ConstantSpectrum) and albedo.value == 0.0
+
+
+def _transparent(node) -> bool:
+    return node is not None and node.bl_idname == "ShaderNodeBsdfTransparent"
+
+
+def _transparent_mix(node, shaders, mat, warnings, depth, bake):
+    """(BSDF, emission) of the Mix Shader patterns that make a surface see-through, or None:
+
+    - Mix(Transparent, X) by Light Path ▸ Is Camera Ray (glTF's KHR_materials_unlit): the camera sees X,
+      every other ray passes through — X with ``camera_only`` (the exporter hides the object from shadow and
+      indirect rays; its emission still lights the scene by next-event estimation: one warning if it emits);
+    - Mix(Transparent, X) or Mix(X, Transparent) by a constant or per-point Factor (an alpha mix): X with
+      ``alpha_factor`` the weight of X (the object's pass-through alpha, engine.render.visibility; the
+      Transparent BSDF's colour must be white, else one warning and its luminance).
+    A Transparent BSDF anywhere else scatters nothing (one warning).  X is read at the same depth: its
+    own see-through pattern (an alpha mix of an unlit mix) still applies to the material."""
+    if node.bl_idname != "ShaderNodeMixShader" or len(shaders) != 2:
+        return None
+    first, second = (_follow(s) for s in shaders)
+    if not (_transparent(first) or _transparent(second)) or (_transparent(first) and _transparent(second)):
+        return None
+    other = second if _transparent(first) else first
+    clear = first if _transparent(first) else second
+    if depth > 0:           # nested: the Transparent BSDF scatters nothing (it warns as a shader)
+        return None
+    fac_node, fac_out = _source(node.inputs[0])
+    if fac_node is not None and fac_node.bl_idname == "ShaderNodeLightPath":
+        if fac_out.name != "Is Camera Ray" or not _transparent(first):
+            warnings.append(f"material {mat!r}: Light Path ▸ {fac_out.name} drives {node.name!r}; rendered as "
+                            "the camera sees it")
+        bsdf, emission = (surface_bsdf(other, mat, warnings, depth, bake) if other is not None
+                          else (Lambert(ConstantSpectrum(0.0)), None))
+        bsdf.camera_only = True
+        if emission is not None:
+            warnings.append(f"material {mat!r}: its emission, shown to the camera only in Cycles, also lights the "
+                            "scene in Polar")
+        return bsdf, emission
+    _white_transparent(clear, mat, warnings)
+    r = _Reader(mat, node, warnings, bake)
+    fac = _fraction(r, node.inputs[0].name)
+    weight = _weight(fac, complement=not _transparent(first))       # the weight of X
+    bsdf, emission = (surface_bsdf(other, mat, warnings, depth, bake) if other is not None
+                      else (Lambert(ConstantSpectrum(0.0)), None))
+    bsdf.alpha_factor = weight
+    return bsdf, emission
+
+
+def _white_transparent(node, mat, warnings):
+    """One warning where a Transparent BSDF's colour is not white (its tint is not simulated)."""
+    colour = [float(c) for c in node.inputs["Color"].default_value[:3]]
+    if node.inputs["Color"].is_linked or colour != [1.0, 1.0, 1.0]:
+        warnings.append(f"material {mat!r}: the colour of Transparent BSDF {node.name!r} is not simulated; light "
+                        "passes untinted")
 
 
 def _shader_mix(node, mat, warnings, depth, bake):
@@ -1172,6 +1235,9 @@ def _shader_mix(node, mat, warnings, depth, bake):
     if depth > 32:
         raise SceneError(f"material {mat!r}", "shader mixes nest more than 32 deep")
     shaders = [s for s in node.inputs if s.type == "SHADER"]
+    special = _transparent_mix(node, shaders, mat, warnings, depth, bake)
+    if special is not None:
+        return special
     if node.bl_idname == "ShaderNodeMixShader":
         r = _Reader(mat, node, warnings, bake)
         fac = _fraction(r, node.inputs[0].name)

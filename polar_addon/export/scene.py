@@ -281,6 +281,24 @@ def geometry_arrays(obj):
     return mesh_arrays(obj)
 
 
+def _times_alpha(a, b, material, warnings):
+    """The product of two alphas (numbers or TexturedNumbers): a Principled Alpha and a Mix Shader's
+    transparency; two textured ones: the first, one warning."""
+    from ...engine.textures import TextureInput, TexturedNumber
+    if not isinstance(a, TexturedNumber) and not isinstance(b, TexturedNumber):
+        return float(a) * float(b)
+    if isinstance(a, TexturedNumber) and isinstance(b, TexturedNumber):
+        warnings.append(f"material {material.name!r}: two textured transparencies (Alpha and a Transparent mix); "
+                        "only the Alpha is rendered")
+        return a
+    tex, c = (a, float(b)) if isinstance(a, TexturedNumber) else (b, float(a))
+    if c == 1.0:
+        return tex
+    src = tex.source
+    scaled = TextureInput(src.texture, src.channel, src.scale * c, src.offset * c, src.power)
+    return TexturedNumber(scaled).clamped_to(0.0, 1.0)
+
+
 def material_alpha(material, warnings):
     """Principled Alpha of a material's surface shader (1 if none): a number, or a TexturedNumber where
     Alpha comes from an image (its alpha or a channel), a Separate Color of one or a colour attribute —
@@ -442,7 +460,8 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
             mat_keys[name] = key
         materials[key] = bsdf
         emissions[key] = emission
-        alphas[key] = material_alpha(material, warnings)
+        alphas[key] = _times_alpha(material_alpha(material, warnings), getattr(bsdf, "alpha_factor", 1.0),
+                                   material, warnings)
         return key
 
     # Text, metaballs, surfaces and bevelled curves come twice (also inside collection instances): as
@@ -491,6 +510,8 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
     for mesh in meshes:
         if mesh.emission is not None and mesh.occluder:
             mesh.two_sided = True      # Cycles' Emission shader emits from both faces (lamps stay one-sided)
+        if getattr(materials.get(mesh.materials[0]), "camera_only", False):
+            mesh.visible_shadow = mesh.visible_indirect = False     # Light Path ▸ Is Camera Ray: transparent to others
     if not lights and not any(m.emission is not None for m in meshes):
         warnings.append("the scene has no lights, no emissive materials and a black world: the image is black")
     # Cycles picks lights by importance (its light tree); selection by power is the closest

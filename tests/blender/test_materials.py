@@ -209,6 +209,33 @@ def test_mix_and_add_shaders_become_an_engine_mixture(addon):
     assert exported(mat)[0].name == "lambert"
 
 
+def test_transparent_mixes_become_pass_through_alpha(addon):
+    """Mix Shader(Transparent, X, Factor f): X with alpha f (the object's pass-through); a Transparent BSDF
+    alone: alpha 0; Mix(Transparent, X) by Light Path ▸ Is Camera Ray (glTF unlit): X seen by the camera
+    only (the exporter hides the object from shadow and indirect rays)."""
+    empty_scene()
+    mat = bpy.data.materials.new("Veil")
+    tree = mat.node_tree
+    out = tree.get_output_node("ALL")
+    clear = _shader(tree, "ShaderNodeBsdfTransparent")
+    diffuse = _shader(tree, "ShaderNodeBsdfDiffuse", Color=(0.5, 0.5, 0.5, 1))
+    mix = tree.nodes.new("ShaderNodeMixShader")
+    mix.inputs[0].default_value = 0.3
+    tree.links.new(clear.outputs[0], mix.inputs[1])
+    tree.links.new(diffuse.outputs[0], mix.inputs[2])
+    tree.links.new(mix.outputs[0], out.inputs["Surface"])
+    bsdf, _, warnings = exported(mat)
+    assert bsdf.name == "lambert" and bsdf.alpha_factor == pytest.approx(0.3) and not warnings
+    tree.links.new(clear.outputs[0], out.inputs["Surface"])
+    bsdf, _, _ = exported(mat)
+    assert bsdf.alpha_factor == 0.0
+    path = tree.nodes.new("ShaderNodeLightPath")
+    tree.links.new(path.outputs["Is Camera Ray"], mix.inputs[0])
+    tree.links.new(mix.outputs[0], out.inputs["Surface"])
+    bsdf, _, warnings = exported(mat)
+    assert bsdf.name == "lambert" and bsdf.camera_only and not hasattr(bsdf, "alpha_factor") and not warnings
+
+
 def test_separate_color_of_an_image_is_read_natively(addon, tmp_path):
     """glTF's occlusion-roughness-metallic map: Metallic from the image's blue channel, per point."""
     empty_scene()

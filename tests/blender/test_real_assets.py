@@ -23,11 +23,6 @@ SEEDS = 4
 
 #: Why each currently failing case fails, as isolated by editing the material in both renderers.
 KNOWN = {
-    ("UnlitTest", "lamps"): "KHR_materials_unlit: a Mix Shader whose Factor is Light Path ▸ Is Camera Ray, between a "
-                            "Transparent BSDF and an Emission: Polar has neither the Light Path node (ray-type "
-                            "dependent shading) nor the Transparent BSDF (one warning each; grey Lambert): Y 2.0; "
-                            "the Emission alone in both renderers: 14/14 blocks, Y 1.000",
-    ("UnlitTest", "hdri"): "Light Path ▸ Is Camera Ray and Transparent BSDF not simulated, as under lamps: Y 1.2",
     ("TextureTransform", "lamps"): "the 8×8 grid image used as a tangent-space normal map gives very steep normals: "
                                    "Cycles corrects the normal of its specular closures only "
                                    "(ensure_valid_specular_reflection), Polar's Principled dielectric shares one "
