@@ -814,11 +814,15 @@ def _principled(node, mat, warnings, bake=None):
         metal = _conductor_from_colour(r, "Base Color", None, m, mat, node, warnings)
     if not _always(metallic) and not _never(transmission):
         rough = r.float("Roughness", 0.0, 1.0)
-        glass = _tinted(_glass(ior, rough, getattr(node, "distribution", "")), None,
-                        _colour_root(r.rgb_or_texture("Base Color", 0.0, 1.0)))
+        glass = _tinted(_glass(ior, rough, getattr(node, "distribution", ""), _film(r),
+                               lambda text: warnings.append(f"material {mat!r}: {node.name!r}: {text}")),
+                        None, _colour_root(r.rgb_or_texture("Base Color", 0.0, 1.0)))
     if not _always(metallic) and not _always(transmission):
         dielectric = _principled_opaque_dielectric(r, node, mat, ior)
     _unsimulated_principled_inputs(node, mat, warnings)
+    if _film(r) is not None and (metal is not None or dielectric is not None):
+        warnings.append(f"material {mat!r}: the Thin Film of {node.name!r} is simulated on its smooth transmission "
+                        "only, not on its metallic or opaque dielectric parts")
     coat = r.float("Coat Weight", 0.0, 1.0)
     if coat > 0 and (metal is not None or glass is not None):
         warnings.append(f"material {mat!r}: the Coat of {node.name!r} is rendered over its dielectric part only, "
@@ -829,7 +833,6 @@ def _principled(node, mat, warnings, bake=None):
 #: Principled inputs not simulated yet, and the value at which they change nothing (a colour: white)
 _PRINCIPLED_NOT_SIMULATED = (("Subsurface Weight", 0.0, "rendered as the diffuse base"),
                              ("Sheen Weight", 0.0, "no sheen layer"),
-                             ("Thin Film Thickness", 0.0, "no thin-film interference"),
                              ("Anisotropic", 0.0, "isotropic facets"),
                              ("Diffuse Roughness", 0.0, "a Lambertian base"),
                              ("Specular Tint", 1.0, "an untinted specular layer"),
@@ -946,12 +949,29 @@ def _tinted(bsdf, reflection, transmission):
     return bsdf if r is None and t is None else Tinted(bsdf, r, t)
 
 
-def _glass(ior, roughness, distribution):
+def _film(r):
+    """(IOR, thickness nm) of a node's Thin Film inputs, or None (no film: thickness ≤ Cycles' 0.1 nm
+    cutoff, or the inputs absent: Blender before 4.2)."""
+    if r.node.inputs.get("Thin Film Thickness") is None:
+        return None
+    thickness = r.float("Thin Film Thickness")
+    if thickness <= 0.1:
+        return None
+    return max(r.float("Thin Film IOR"), IOR_MIN), thickness
+
+
+def _glass(ior, roughness, distribution, film=None, warn=None):
     """Smooth dielectric at roughness 0 (below the engine's least α), else the rough dielectric with
     α = roughness²: GGX as Cycles' GGX, Multiscatter GGX (Principled's and Glass' default) with Cycles'
     energy compensation (``multiscatter``), Beckmann as Beckmann."""
     from ...engine.materials.rough_dielectric import ALPHA_MIN, RoughDielectric, index_matched
     alpha = roughness * roughness
+    if film is not None:
+        if alpha < ALPHA_MIN:         # a smooth coated interface: interference and its elliptical polarisation
+            from ...engine.materials.thin_film import ThinFilmDielectric
+            return ThinFilmDielectric(ior, film[0], film[1])
+        if warn is not None:
+            warn("its Thin Film on a rough surface is not simulated (smooth surfaces only)")
     if distribution == "BECKMANN":
         if alpha < SMOOTH_LIMIT or index_matched(ior, 1.0):
             return SmoothDielectric(ior)
@@ -1143,7 +1163,9 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
     if kind in ("ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction"):
         rough = r.float("Roughness", 0.0, 1.0)
         colour = r.rgb_or_texture("Color", 0.0)          # Cycles tints reflection and refraction by Color
-        return _tinted(_glass(_ior(r, "IOR"), rough, getattr(node, "distribution", "")), colour, colour), None
+        glass = _glass(_ior(r, "IOR"), rough, getattr(node, "distribution", ""), _film(r),
+                       lambda text: warnings.append(f"material {mat!r}: {node.name!r}: {text}"))
+        return _tinted(glass, colour, colour), None
     if kind == "ShaderNodeBsdfPrincipled":
         emission = _emission(node, mat, warnings, "Emission Color", "Emission Strength", bake)
         return _principled(node, mat, warnings, bake), emission

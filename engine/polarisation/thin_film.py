@@ -1,0 +1,78 @@
+"""A thin non-absorbing film on an interface: Airy's coherent sum of the film's multiple reflections.
+
+Incident medium (index n₁), a film of index n_f and thickness d, a substrate n₃ (all real, > 0).  With
+the interface amplitudes of engine.polarisation.fresnel (same time dependence e^{−iωt}, same r_p sign)
+r₁₂ at the incidence cosine cosθ for η = n_f/n₁ and r₂₃ at the film's cosine cosθ_f = u/η for η = n₃/n_f,
+the film's phase thickness δ = 2π n_f d cosθ_f / λ (complex beyond the film's critical angle: the
+frustrated, evanescent case) gives, per polarisation,
+
+    r = (r₁₂ + r₂₃ e^{2iδ}) / (1 + r₁₂ r₂₃ e^{2iδ}).
+
+The reflection Mueller matrix is the ABCS form of (r_s, r_p) as for a bare interface (docs/physics.md
+§0): A = (|r_s|² + |r_p|²)/2, B = (|r_s|² − |r_p|²)/2, C = Re(r_s r_p*), S = −Im(r_s r_p*) — the film's
+s–p phase difference is what makes circular polarisation (S ≠ 0) off soap films and coated lenses.
+Transmission through the lossless film: T = 1 − R per polarisation, as the diattenuator A, B of T and
+C = √(T_s T_p), S = 0 (the film's small transmission retardance is neglected).  d = 0 is the bare
+interface exactly.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .fresnel import fresnel_amplitudes
+
+__all__ = ["film_amplitudes", "film_reflection_abcs", "film_transmission_abcs"]
+
+
+def film_amplitudes(cos_theta, n1, n_film, d_nm, n3, lam_nm):
+    """(r_s, r_p) complex reflection amplitudes of the coated interface (arrays broadcast together:
+    cosθ ∈ [0, 1] in the incident medium, indices, thickness and wavelength in nm)."""
+    c = np.clip(np.asarray(cos_theta, np.float64), 0.0, 1.0)
+    eta_f = np.asarray(n_film, np.float64) / np.asarray(n1, np.float64)
+    r12_s, r12_p = fresnel_amplitudes(c, eta_f + 0j)
+    u = np.sqrt(eta_f * eta_f - (1.0 - c * c) + 0j)
+    u = np.where(u.imag < 0, -u, u)
+    cos_f = u / eta_f                                 # complex beyond the film's critical angle
+    # the second interface, seen from inside the film: its amplitudes at cosθ_f (complex cosines are
+    # handled by the same formula with sin² = 1 − cos²)
+    eta_3 = np.asarray(n3, np.float64) / np.asarray(n_film, np.float64)
+    u3 = np.sqrt(eta_3 * eta_3 - (1.0 - cos_f * cos_f) + 0j)
+    u3 = np.where(u3.imag < 0, -u3, u3)
+    e2 = eta_3 * eta_3
+    r23_s = _ratio(cos_f - u3, cos_f + u3)          # 0/0 (index-matched at grazing): 0, as a bare interface
+    r23_p = _ratio(e2 * cos_f - u3, e2 * cos_f + u3)
+    delta = 2.0 * np.pi * np.asarray(n_film, np.float64) * np.asarray(d_nm, np.float64) * cos_f / \
+        np.asarray(lam_nm, np.float64)
+    phase = np.exp(2j * delta)
+    r_s = _airy(r12_s, r23_s, phase)
+    r_p = _airy(r12_p, r23_p, phase)
+    return r_s, r_p
+
+
+def _ratio(num, den):
+    ok = den != 0
+    return np.where(ok, num / np.where(ok, den, 1.0), 0.0)
+
+
+def _airy(r12, r23, phase):
+    """(r₁₂ + r₂₃ e^{2iδ}) / (1 + r₁₂ r₂₃ e^{2iδ}); r₁₂ where the denominator vanishes (both interfaces
+    totally reflecting at grazing)."""
+    num, den = r12 + r23 * phase, 1.0 + r12 * r23 * phase
+    ok = np.abs(den) > 1e-300
+    return np.where(ok, num / np.where(ok, den, 1.0), r12)
+
+
+def film_reflection_abcs(cos_theta, n1, n_film, d_nm, n3, lam_nm):
+    """(A, B, C, S) of the coated interface's reflection Mueller matrix (module docstring)."""
+    r_s, r_p = film_amplitudes(cos_theta, n1, n_film, d_nm, n3, lam_nm)
+    R_s = np.minimum(r_s.real ** 2 + r_s.imag ** 2, 1.0)
+    R_p = np.minimum(r_p.real ** 2 + r_p.imag ** 2, 1.0)
+    x = r_s * np.conj(r_p)
+    return 0.5 * (R_s + R_p), 0.5 * (R_s - R_p), x.real, -x.imag
+
+
+def film_transmission_abcs(R_s, R_p):
+    """(A, B, C, S) of the lossless film's transmission from its reflectances (module docstring)."""
+    T_s, T_p = np.maximum(1.0 - R_s, 0.0), np.maximum(1.0 - R_p, 0.0)
+    return 0.5 * (T_s + T_p), 0.5 * (T_s - T_p), np.sqrt(T_s * T_p), np.zeros_like(T_s)
