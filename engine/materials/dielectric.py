@@ -111,20 +111,24 @@ class SmoothDielectric(BSDF):
         tile = lambda v: np.broadcast_to(v, (L, sp.n)).copy()  # noqa: E731
         return MuellerValue("abcs", s, s, tile(A), tile(B), tile(C), tile(S))
 
+    @staticmethod
+    def _directions(sp, c, eta, nn, reflect_lobe):
+        """(ω_i (3, N), its s axis, TIR (N,), 1/η (N,)) of the chosen lobes: the mirror direction, or the
+        refraction of the camera ray d = −ω_o, t = d/η + (c/η − cosθ_t) n."""
+        wi_r = reflect(sp.wo, nn)
+        cos_t, tir = refracted_cosine(c, eta)
+        inv_eta = 1.0 / eta
+        wi_t = -sp.wo * inv_eta + (c * inv_eta - cos_t) * nn
+        wi = np.where(reflect_lobe[None, :], wi_r, wi_t)
+        return wi, plane_of_incidence_axis(nn, -wi), tir, inv_eta
+
     def sample(self, sp, u_lobe, u_dir) -> BSDFSample:
         c, eta, nn = self._sides(sp)
         L = sp.lam.shape[0]
         A, B, C, S = fresnel_reflection_abcs(c, eta)
         p_reflect = A  # the index is wavelength-independent, so A is the same for every λ
         reflect_lobe = u_lobe < p_reflect
-
-        wi_r = reflect(sp.wo, nn)
-        cos_t, tir = refracted_cosine(c, eta)
-        inv_eta = 1.0 / eta
-        # Refraction of the camera ray d = −wo: t = d/η + (c/η − cosθ_t) n.
-        wi_t = -sp.wo * inv_eta + (c * inv_eta - cos_t) * nn
-        wi = np.where(reflect_lobe[None, :], wi_r, wi_t)
-        s = plane_of_incidence_axis(nn, -wi)
+        wi, s, tir, inv_eta = self._directions(sp, c, eta, nn, reflect_lobe)
 
         At, Bt, Ct, St = fresnel_transmission_abcs(c, eta)
         p_r = np.where(p_reflect > 0, p_reflect, 1.0)

@@ -142,15 +142,10 @@ def _visible_normals(mu, alpha):
     return wo, h, w
 
 
-def ggx_albedo(mu, alpha, eta: float | None = None, correlated: bool = False) -> np.ndarray:
-    """E(μ) (M,) of the single-scattering GGX lobe at viewing cosines ``mu`` (M,), roughness ``alpha`` > 0
-    (a number or (M,)): the reflection lobe with F = 1 (``eta`` None), or a dielectric interface of real
-    relative index ``eta`` = n_far/n_viewer, reflection plus refraction with the unpolarised Fresnel
-    reflectance (energy: no 1/η²).  Shadowing: separable Smith G1(ω_i)·G1(ω_o), or with ``correlated``
-    the height-correlated 1/(1 + Λ(ω_i) + Λ(ω_o)) (Heitz 2014; Cycles' form)."""
-    mu = np.atleast_1d(np.asarray(mu, np.float64))
-    out = np.empty(mu.size)
-    step = max(1, 4096 // QUAD_RADIUS // QUAD_ANGLE)        # rows per batch: bounded memory
+def _reflection_batches(mu, alpha, correlated: bool):
+    """Per batch of viewing cosines (rows ``sl`` of ``mu``, bounded memory): the disk rule's ω_o, facets h,
+    weights w, α (M, 1), Λ(ω_o), ω_o·h and the reflection lobe's shadowing factor (0 below the horizon)."""
+    step = max(1, 4096 // QUAD_RADIUS // QUAD_ANGLE)
     alpha = np.broadcast_to(np.asarray(alpha, np.float64), mu.shape)
     for i in range(0, mu.size, step):
         sl = slice(i, i + step)
@@ -159,7 +154,18 @@ def ggx_albedo(mu, alpha, eta: float | None = None, correlated: bool = False) ->
         lam_o = _ggx_lambda(wo, a)
         d = np.maximum(np.sum(wo * h, axis=0), 0.0)              # ω_o·h ≥ 0 for visible normals
         wr = 2.0 * d * h - wo
-        refl = np.where(wr[2] > 0, _weight(wr, lam_o, a, correlated), 0.0)
+        yield sl, wo, h, w, a, lam_o, d, np.where(wr[2] > 0, _weight(wr, lam_o, a, correlated), 0.0)
+
+
+def ggx_albedo(mu, alpha, eta: float | None = None, correlated: bool = False) -> np.ndarray:
+    """E(μ) (M,) of the single-scattering GGX lobe at viewing cosines ``mu`` (M,), roughness ``alpha`` > 0
+    (a number or (M,)): the reflection lobe with F = 1 (``eta`` None), or a dielectric interface of real
+    relative index ``eta`` = n_far/n_viewer, reflection plus refraction with the unpolarised Fresnel
+    reflectance (energy: no 1/η²).  Shadowing: separable Smith G1(ω_i)·G1(ω_o), or with ``correlated``
+    the height-correlated 1/(1 + Λ(ω_i) + Λ(ω_o)) (Heitz 2014; Cycles' form)."""
+    mu = np.atleast_1d(np.asarray(mu, np.float64))
+    out = np.empty(mu.size)
+    for sl, wo, h, w, a, lam_o, d, refl in _reflection_batches(mu, alpha, correlated):
         if eta is None:
             out[sl] = refl @ w
             continue
@@ -183,18 +189,8 @@ def ggx_reflection_albedo(mu, alpha, eta: complex, correlated: bool = True) -> n
     the F = 1 albedo E).  The same disk rule as :func:`ggx_albedo`."""
     mu = np.atleast_1d(np.asarray(mu, np.float64))
     out = np.empty(mu.size)
-    step = max(1, 4096 // QUAD_RADIUS // QUAD_ANGLE)
-    alpha = np.broadcast_to(np.asarray(alpha, np.float64), mu.shape)
-    for i in range(0, mu.size, step):
-        sl = slice(i, i + step)
-        wo, h, w = _visible_normals(mu[sl], alpha[sl])
-        a = alpha[sl][:, None]
-        lam_o = _ggx_lambda(wo, a)
-        d = np.maximum(np.sum(wo * h, axis=0), 0.0)
-        wr = 2.0 * d * h - wo
-        refl = np.where(wr[2] > 0, _weight(wr, lam_o, a, correlated), 0.0)
-        F = fresnel_reflectance(d, complex(eta))
-        out[sl] = (F * refl) @ w
+    for sl, _, _, w, _, _, d, refl in _reflection_batches(mu, alpha, correlated):
+        out[sl] = (fresnel_reflectance(d, complex(eta)) * refl) @ w
     return out
 
 

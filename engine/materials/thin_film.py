@@ -19,7 +19,6 @@ import numpy as np
 from .base import BSDFFlags, BSDFSample, DeltaVertices, MuellerValue
 from .dielectric import IOR_SOCKET, SmoothDielectric
 from .parameters import ModelDeclaration, Parameter, exterior_n_parameter
-from ..polarisation.fresnel import refracted_cosine
 from ..polarisation.frames import plane_of_incidence_axis
 from ..polarisation.thin_film import film_reflection_abcs, film_transmission_abcs
 from ..vec3 import reflect
@@ -58,12 +57,7 @@ class ThinFilmDielectric(SmoothDielectric):
         R_s, R_p = A + B, A - B
         p_reflect = A.mean(axis=0)
         reflect_lobe = u_lobe < p_reflect
-        wi_r = reflect(sp.wo, nn)
-        cos_t, tir = refracted_cosine(c, eta)
-        inv_eta = 1.0 / eta
-        wi_t = -sp.wo * inv_eta + (c * inv_eta - cos_t) * nn
-        wi = np.where(reflect_lobe[None, :], wi_r, wi_t)
-        s = plane_of_incidence_axis(nn, -wi)
+        wi, s, tir, inv_eta = self._directions(sp, c, eta, nn, reflect_lobe)
         At, Bt, Ct, St = film_transmission_abcs(R_s, R_p)
         p_r = np.where(p_reflect > 0, p_reflect, 1.0)[None, :]
         p_t = np.where(p_reflect < 1, 1.0 - p_reflect, 1.0)[None, :]

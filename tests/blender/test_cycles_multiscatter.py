@@ -25,7 +25,6 @@ it compensates too little; the glass tolerance allows for that.
 """
 
 import math
-import os
 import tempfile
 
 import numpy as np
@@ -33,7 +32,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from tests.blender_support import add_sphere, load_addon, read_multilayer, white_world  # noqa: E402
+from tests.blender_support import add_sphere, load_addon, white_world  # noqa: E402
 
 W = H = 32
 SEEDS = 4
@@ -116,30 +115,9 @@ def build_scene(make_material):
 
 
 def cycles_renders(scene, tmp):
-    scene.render.engine = "CYCLES"
-    c = scene.cycles
-    c.device = "CPU"
-    c.samples = SPP
-    c.use_adaptive_sampling = False
-    c.use_denoising = False
-    c.pixel_filter_type = "BOX"
-    c.filter_width = 1.0
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-    c.max_bounces = c.glossy_bounces = c.transmission_bounces = c.transparent_max_bounces = BOUNCES
-    c.caustics_reflective = c.caustics_refractive = True
-    c.blur_glossy = 0.0
-    scene.render.threads_mode = "FIXED"
-    scene.render.threads = 2
-    ims = scene.render.image_settings
-    ims.media_type = "MULTI_LAYER_IMAGE"
-    ims.color_depth = "32"
-    out = []
-    for seed in range(SEEDS):
-        c.seed = seed
-        scene.render.filepath = os.path.join(tmp, f"cycles_{seed}")
-        bpy.ops.render.render(write_still=True)
-        out.append(read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3] @ REC709)
-    return np.array(out)
+    """(SEEDS, H, W) luminance of Cycles' Combined pass, the parity settings of the asset suite."""
+    from tests.support import asset_parity as ap
+    return ap.render_cycles(scene, SPP, SEEDS, BOUNCES, tmp) @ REC709
 
 
 def polar_renders(scene, material, model, polarisation="off", seeds=SEEDS):
