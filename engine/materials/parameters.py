@@ -175,6 +175,12 @@ class Parameter:
         """
         if is_texture_object(raw) and self.kind in ("number", "spectrum"):
             return self.read_texture(raw, field, base_dir)
+        if self.kind == "number" and isinstance(raw, TexturedNumber):     # built in code (a composite model)
+            if not self.texturable:
+                raise SceneError(field, f"cannot vary over the surface: give a constant ({self.allowed_text()})")
+            if not (self.contains(raw.lo) and self.contains(raw.hi)):
+                raise SceneError(field, f"texture values span [{raw.lo:g}, {raw.hi:g}]: must be in {self.range_text()}")
+            return raw
         if self.kind == "number":
             return self.number(raw, field, text)
         if self.kind == "spectrum":

@@ -38,6 +38,7 @@ from ...engine.materials.dielectric import SmoothDielectric
 from ...engine.materials.lambert import Lambert
 from ...engine.materials.catalogue import MODELS
 from ...engine.materials.normal_map import ShadingNormal
+from ...engine.materials.principled import IOR_MIN, WEIGHT_CUTOFF
 from ...engine.materials.torrance_sparrow import M_MIN
 from ...engine.errors import SceneError
 from ...engine.textures import ImageTexture, TextureInput, VertexColour
@@ -487,6 +488,17 @@ class _Reader:
         r = self.float(name, 0.0, 1.0)
         return r * r, r
 
+    def roughness_texture_or_float(self, name):
+        """A roughness r itself (not squared): a TextureInput of r in [0, 1] where textured or baked, else
+        the validated constant."""
+        sock = self._socket(name)
+        if sock.is_linked:
+            source = self.texture(name, lo=0.0, hi=1.0)
+            if source is not None:
+                return source
+            return self._checked_float(name, 0.0, 1.0)
+        return self.float(name, 0.0, 1.0)
+
     def _checked_rgb(self, name, lo, hi):
         v = [float(c) for c in self._socket(name).default_value[:3]]
         if not all(math.isfinite(c) and lo <= c <= hi for c in v):
@@ -506,24 +518,6 @@ def _rgb_spectrum(rgb, kind="reflectance"):
     if max(rgb) == min(rgb):
         return ConstantSpectrum(rgb[0])
     return RGBReflectanceSpectrum(rgb) if kind == "reflectance" else RGBUnboundedSpectrum(rgb)
-
-
-def _torrance_sparrow(n, k, m, mat, shadowing="ts", diffuse=None, layering="add"):
-    """Torrance–Sparrow (or its smooth limit below M_MIN) with an optional Lambertian part
-    combined by ``layering`` ("add" or Cycles' "albedo_scaling")."""
-    from ...engine.materials.smooth_limit import MirrorWithDiffuse
-    from ...engine.materials.torrance_sparrow import TorranceSparrow
-    kwargs = {}
-    if diffuse is not None and max(diffuse) > 0:
-        kwargs = {"diffuse_albedo": _rgb_spectrum(diffuse), "diffuse_weight": 1.0, "diffuse_layering": layering}
-    if m < M_MIN:   # roughness 0: the smooth limit (Fresnel mirror + Lambertian part)
-        return MirrorWithDiffuse(n, k, **kwargs)
-    return TorranceSparrow(n, k, m, shadowing=shadowing, **kwargs)
-
-
-def _coat_roughness(m):
-    """Coat keyword arguments: smooth below the smooth limit, Beckmann m otherwise."""
-    return {"distribution": "smooth"} if m < SMOOTH_LIMIT else {"distribution": "beckmann", "m": m}
 
 
 def _socket_values(reader, decl) -> dict:
@@ -730,10 +724,6 @@ def _conductor_from_colour(r, colour_name, edge_name, m, mat, node, warnings, mo
     return _facet_conductor(n, k, m, mat, node, warnings)
 
 
-#: Cycles' least index (svm closure: ior = max(IOR, 1e-5)); Blender's IOR sockets hold any float
-IOR_MIN = 1e-5
-#: Cycles drops closures whose weight is below this (CLOSURE_WEIGHT_CUTOFF)
-WEIGHT_CUTOFF = 1e-5
 
 
 def _ior(r, name):
@@ -779,55 +769,37 @@ def _always(x) -> bool:
     return not isinstance(x, TextureInput) and x > 1.0 - WEIGHT_CUTOFF
 
 
-def _mixture(under, over, fraction):
-    """``under`` weighted 1 − fraction plus ``over`` weighted fraction (either may be None where its
-    weight is 0 everywhere): an engine Mix, or the one part that has weight 1."""
-    from ...engine.materials.mix import Mix
-    if over is None or _never(fraction):
-        return under
-    if under is None or _always(fraction):
-        return over
-    return Mix([under, over], [_weight(fraction, complement=True), _weight(fraction)])
-
-
-def _specular_ior(ior, level):
-    """Cycles' Specular IOR Level: F0 = F0(IOR)·2·level, the index of that F0 (reciprocal below 1)."""
-    if level == 0.5:
-        return ior
-    f0 = min(((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * level, 0.99)
-    root = math.sqrt(f0)
-    eta = (1.0 + root) / (1.0 - root)
-    return 1.0 / eta if ior < 1.0 else eta
-
-
 def _principled(node, mat, warnings, bake=None):
-    """Cycles' Principled BSDF layer order (svm closure): metal weighted Metallic, over what remains
-    transmission weighted Transmission Weight, then the dielectric (specular over diffuse, or the
-    coat over them); Metallic and Transmission Weight are per-point mixture weights (engine Mix)."""
+    """The engine's ``principled`` model (engine/materials/principled.py: Cycles' layer order from
+    polarising parts) filled from the node's sockets, each input constant or per point where the engine
+    takes it per point (an image, a channel of one, a colour attribute, a baked graph)."""
     r = _Reader(mat, node, warnings, bake)
     metallic = _fraction(r, "Metallic")
     transmission = _fraction(r, "Transmission Weight")
-    ior = _ior(r, "IOR")
-    metal = glass = dielectric = None
-    if not _never(metallic):
-        m, _ = r.roughness_or_texture("Roughness")
-        metal = _conductor_from_colour(r, "Base Color", None, m, mat, node, warnings)
-    if not _always(metallic) and not _never(transmission):
-        rough = r.float("Roughness", 0.0, 1.0)
-        glass = _tinted(_glass(ior, rough, getattr(node, "distribution", ""), _film(r),
-                               lambda text: warnings.append(f"material {mat!r}: {node.name!r}: {text}")),
-                        None, _colour_root(r.rgb_or_texture("Base Color", 0.0, 1.0)))
-    if not _always(metallic) and not _always(transmission):
-        dielectric = _principled_opaque_dielectric(r, node, mat, ior)
+    roughness = r.roughness_texture_or_float("Roughness")
+    values = {"base_color": _grey(r.rgb_or_texture("Base Color", 0.0, 1.0)), "metallic": metallic,
+              "roughness": roughness, "transmission": transmission, "ior": _ior(r, "IOR"),
+              "specular_ior_level": r.float("Specular IOR Level", 0.0, 1.0),
+              "coat_weight": r.float("Coat Weight", 0.0, 1.0), "coat_roughness": r.float("Coat Roughness", 0.0, 1.0),
+              "coat_ior": min(max(r.float("Coat IOR"), 1.0), 100.0),
+              "distribution": "ggx" if getattr(node, "distribution", "MULTI_GGX") == "GGX" else "multi_ggx"}
+    if isinstance(roughness, TextureInput) and transmission != 0.0:
+        warnings.append(f"material {mat!r}: the Roughness texture of {node.name!r} does not reach its transmission "
+                        "(a constant roughness there: the socket's own value)")
+        values["transmission_roughness"] = min(max(float(node.inputs["Roughness"].default_value), 0.0), 1.0)
+    film = _film(r)
+    if film is not None:
+        values["thin_film_ior"], values["thin_film_thickness"] = film
     _unsimulated_principled_inputs(node, mat, warnings)
-    if _film(r) is not None and (metal is not None or dielectric is not None):
+    opaque_parts = not _never(metallic) or not _always(transmission)
+    if film is not None and opaque_parts:
         warnings.append(f"material {mat!r}: the Thin Film of {node.name!r} is simulated on its smooth transmission "
                         "only, not on its metallic or opaque dielectric parts")
-    coat = r.float("Coat Weight", 0.0, 1.0)
-    if coat > 0 and (metal is not None or glass is not None):
+    if values["coat_weight"] > 0 and (not _never(metallic) or not _never(transmission)):
         warnings.append(f"material {mat!r}: the Coat of {node.name!r} is rendered over its dielectric part only, "
                         "not over its metallic or transmissive parts")
-    return _mixture(_mixture(dielectric, glass, transmission), metal, metallic)
+    decl = MODELS["principled"]
+    return decl.build(decl.values(values, f"material {mat!r}.{node.name}"))
 
 
 #: Principled inputs not simulated yet, and the value at which they change nothing (a colour: white)
@@ -876,67 +848,12 @@ def _non_default(sock) -> bool:
         return True
 
 
-def _principled_opaque_dielectric(r, node, mat, ior):
-    """The dielectric part of a Principled BSDF: specular (IOR through Specular IOR Level) over the
-    base colour, or a coat over them."""
-    base = r.rgb_or_texture("Base Color", 0.0, 1.0)
-    m, _ = r.roughness_or_texture("Roughness")
-    ior = _specular_ior(ior, r.float("Specular IOR Level", 0.0, 1.0))
-    if r.float("Coat Weight", 0.0, 1.0) > 0:
-        under = _principled_coated_base(base, m, ior, mat, node)
-        from ...engine.materials.weidlich_wilkie import Coat, WeidlichWilkie
-        coat = Coat(n=min(max(r.float("Coat IOR"), 1.0), 100.0), thickness=0.0, absorption=ConstantSpectrum(0.0),
-                    **_coat_roughness(r.float("Coat Roughness", 0.0, 1.0) ** 2))
-        return WeidlichWilkie([coat], under)
-    return _principled_dielectric(base, m, ior, mat, node, r.warnings)
-
-
-def _principled_dielectric(base, m, ior, mat, node, warnings):
-    """Cycles' Principled dielectric: the specular layer (a GGX Torrance–Sparrow dielectric, n = IOR,
-    α = r², Multiscatter GGX compensated as the node's Distribution says; roughness 0: its smooth
-    limit, a Fresnel mirror) over the Lambertian base colour weighted by one minus the specular layer's
-    albedo at the view direction ("albedo_scaling", as Cycles' closure_layering_weight).  Base colour
-    and roughness may vary per point."""
-    kw = facets(node, mat, warnings)
-    values = {"n": ior, "k": 0.0, "diffuse_layering": "albedo_scaling"}
-    values["m"] = 0.0 if _smooth(m, kw) else (m if isinstance(m, TextureInput) else max(m, M_MIN))
-    if values["m"] != 0.0:
-        values.update(kw)
-    if isinstance(base, TextureInput) or max(base) > 0:
-        values["diffuse_albedo"] = _grey(base)
-    return _textured_model("torrance_sparrow", values, mat, node)
-
-
-def _principled_coated_base(base, m, ior, mat, node):
-    """The base under a Principled coat: the earlier mapping (Torrance–Sparrow + Lambert added, or
-    Lambert alone below SMOOTH_LIMIT), kept until the coat's layering is matched to Cycles too."""
-    if _textured(base, m):
-        if isinstance(m, TextureInput) or m >= SMOOTH_LIMIT:
-            values = {"n": ior, "k": 0.0, "m": m if isinstance(m, TextureInput) else max(m, 1e-4)}
-            if isinstance(base, TextureInput) or max(base) > 0:
-                values["diffuse_albedo"] = base
-            return _textured_model("torrance_sparrow", values, mat, node)
-        return _lambert(base, mat, node)
-    return _torrance_sparrow(ConstantSpectrum(ior), ConstantSpectrum(0.0), max(m, 1e-4), mat, diffuse=base) \
-        if m >= SMOOTH_LIMIT else Lambert(_rgb_spectrum(base))
-
-
 def _tint_spectrum(colour):
     """A tint spectrum (≥ 0, any magnitude) of a constant [r, g, b] or a colour TextureInput; None for white."""
     from ...engine.textures.inputs import TexturedSpectrum
     if isinstance(colour, TextureInput):
         return TexturedSpectrum(colour, "unbounded")
     return None if min(colour) == max(colour) == 1.0 else _rgb_spectrum(list(colour), "unbounded")
-
-
-def _colour_root(colour):
-    """√colour per channel (Cycles' Principled transmission tint √(Base Color), the colour clamped to
-    [0, 1]), constant or per point (the texture's values raised to ½ after interpolation)."""
-    if isinstance(colour, TextureInput):
-        if colour.scale != 1.0 or colour.offset != 0.0 or colour.power != 1.0:
-            raise ValueError("a colour texture maps its texels as they are")
-        return TextureInput(colour.texture, colour.channel, power=0.5)
-    return [math.sqrt(min(max(c, 0.0), 1.0)) for c in colour]
 
 
 def _tinted(bsdf, reflection, transmission):

@@ -360,13 +360,15 @@ def test_baked_roughness_is_m_squared_with_the_least_textured_slope():
     assert type(bsdf).__name__ == "TorranceSparrow" and bsdf.varies_over_surface
     m = bsdf.m.source
     assert m.power == 2.0 and m.texture.channels == 1
-    assert m.bounds(rgb=False) == pytest.approx((ROUGHNESS_MIN ** 2, 1.0), rel=1e-6)
+    # α = r² per point, kept ≥ the least textured slope 1e-4 (= ROUGHNESS_MIN², the clip of the squared value)
+    assert (bsdf.m.lo, bsdf.m.hi) == pytest.approx((ROUGHNESS_MIN ** 2, 1.0), rel=1e-6)
     centres = (np.arange(res) + 0.5) / res
     u, v = (a.ravel() for a in np.meshgrid(centres, centres))
     inner = _off_edges(u, scale, 1.0 / res) & _off_edges(v, scale, 1.0 / res)
     fac = (checker_oracle(u[inner], v[inner], scale)[:, 0] == COLOUR1[0]).astype(float)
     expected = np.maximum(fac, ROUGHNESS_MIN) ** 2
-    np.testing.assert_allclose(m.number_at_uv(np.stack((u[inner], v[inner]))), expected, rtol=1e-6)
+    got = np.clip(m.number_at_uv(np.stack((u[inner], v[inner]))), *bsdf.m.clip)
+    np.testing.assert_allclose(got, expected, rtol=1e-6)
 
 
 def test_bake_uses_the_uv_map_the_mesh_exports_for_its_image_textures(tmp_path):

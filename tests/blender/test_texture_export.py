@@ -308,7 +308,7 @@ def test_roughness_texture_gives_the_constant_model_at_each_texel(tmp_path):
     from polar_render.engine.materials.torrance_sparrow import TorranceSparrow
     from polar_render.engine.spectral import WavelengthLookup
     from polar_render.engine.textures import SurfacePoints, VertexAttributes
-    from polar_render.polar_addon.export.materials import ROUGHNESS_MIN
+    from polar_render.engine.materials.torrance_sparrow import M_MIN
     from PIL import Image
     r8 = np.array([[0, 60, 120], [180, 230, 255]], np.uint8)
     Image.fromarray(r8).save(tmp_path / "rough.png")
@@ -353,7 +353,7 @@ def test_roughness_texture_gives_the_constant_model_at_each_texel(tmp_path):
         sel = np.nonzero(texel == r)[0]
         sub = sp.take(sel)
         sub.surface = None
-        m = max(float(r), ROUGHNESS_MIN) ** 2
+        m = max(float(r) ** 2, M_MIN)        # α = r², clipped to the least textured slope after squaring
         oracles = [TorranceSparrow(bsdf.n, bsdf.k, m, diffuse_albedo=bsdf.albedo, diffuse_weight=1.0,
                                    diffuse_layering="albedo_scaling", distribution="ggx", multiscatter=True)]
         if r > 0:        # the exporter's own constant conversion (roughness 0: the smooth limit, no facets)

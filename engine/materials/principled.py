@@ -1,0 +1,223 @@
+"""Blender's Principled BSDF as Cycles composes it, from polarising parts (one declaration, the scene
+format's ``"type": "principled"``; the Blender exporter fills it from the node's sockets).
+
+Cycles' layer order (kernel/svm/closure.h as shipped in bpy): the metal weighted ``metallic``; of the rest,
+the transmission weighted ``transmission``; the rest the opaque dielectric — its specular layer over the
+diffuse base, the base weighted by one minus the specular layer's albedo at the view direction
+(``closure_layering_weight``), or a coat over them.  Here:
+
+- weights: an engine Mix (engine.materials.mix) of metal, transmission and dielectric with the per-point
+  weights metallic, (1 − metallic)·transmission, (1 − metallic)(1 − transmission) (nested mixes);
+- metal: a GGX Torrance–Sparrow conductor (α = roughness², Cycles' height-correlated G, ``multiscatter``
+  for ``distribution`` "multi_ggx") whose complex index per wavelength and point makes its reflectance the
+  base colour at 0° and Schlick's value at θ₈₂ — Cycles' F82 curve for a white Specular Tint
+  (engine.spectral.gulbrandsen);
+- transmission: the smooth dielectric at roughness 0 (with ``thin_film_thickness`` > 0 the thin-film
+  dielectric), else the GGX rough dielectric (compensated for "multi_ggx"), each refraction tinted by
+  √(base colour) (engine.materials.tinted);
+- dielectric: a GGX Torrance–Sparrow dielectric (index from ``ior`` and ``specular_ior_level``: F0 =
+  F0(ior)·2·level) with the albedo-scaled Lambertian base, its smooth limit at roughness 0; a coat (Cycles'
+  ``coat_weight`` > 0) is a Weidlich–Wilkie coat of ``coat_ior`` and α = coat_roughness² over that
+  dielectric (the earlier base: Beckmann facets with the Lambertian part added).
+``base_color``, ``metallic``, ``roughness`` and ``transmission`` may vary per point.  Inputs of Blender's
+node that are not parameters here (sheen, subsurface, anisotropy, tints, …) are the exporter's to warn about.
+"""
+
+from __future__ import annotations
+
+import math
+
+from .lambert import Lambert
+from .mix import Mix
+from .parameters import ModelDeclaration, Parameter
+from ..errors import SceneError
+from ..spectral import ConstantSpectrum, RGBUnboundedSpectrum
+from ..spectral.gulbrandsen import GulbrandsenIndex
+from ..textures import TexturedNumber, TexturedSpectrum, TextureInput
+
+__all__ = ["DECLARATION", "IOR_MIN", "WEIGHT_CUTOFF", "specular_ior"]
+
+#: Cycles' least index (svm closure: ior = max(IOR, 1e-5))
+IOR_MIN = 1e-5
+#: Cycles drops closures whose weight is below this (CLOSURE_WEIGHT_CUTOFF)
+WEIGHT_CUTOFF = 1e-5
+DISTRIBUTIONS = ("multi_ggx", "ggx")
+#: Below this Beckmann slope the coat and the Beckmann base under it are smooth (the earlier mapping)
+COAT_SMOOTH_LIMIT = 0.02
+
+
+def specular_ior(ior: float, level: float) -> float:
+    """Cycles' Specular IOR Level: F0 = F0(IOR)·2·level, the index of that F0 (F0 ≤ 0.99; reciprocal
+    below 1)."""
+    if level == 0.5:
+        return ior
+    f0 = min(((ior - 1.0) / (ior + 1.0)) ** 2 * 2.0 * level, 0.99)
+    root = math.sqrt(f0)
+    eta = (1.0 + root) / (1.0 - root)
+    return 1.0 / eta if ior < 1.0 else eta
+
+
+def _textured(v) -> bool:
+    return isinstance(v, (TexturedNumber, TexturedSpectrum))
+
+
+def _never(x) -> bool:
+    return not _textured(x) and x < WEIGHT_CUTOFF
+
+
+def _always(x) -> bool:
+    return not _textured(x) and x > 1.0 - WEIGHT_CUTOFF
+
+
+def _complement(x):
+    """1 − x of a weight (a number or a TexturedNumber in [0, 1])."""
+    if not _textured(x):
+        return 1.0 - x
+    src = x.source
+    if src.power != 1.0:
+        raise SceneError("principled", "a textured weight must map its texels linearly (power 1)")
+    return TexturedNumber(TextureInput(src.texture, src.channel, -src.scale, 1.0 - src.offset), clip=(0.0, 1.0))
+
+
+def _mixture(under, over, fraction):
+    """``under`` weighted 1 − fraction plus ``over`` weighted fraction (None where weightless)."""
+    if over is None or _never(fraction):
+        return under
+    if under is None or _always(fraction):
+        return over
+    return Mix([under, over], [_complement(fraction), fraction])
+
+
+def _alpha_of(roughness):
+    """α = r² of a roughness (a number, or a TexturedNumber whose texture is squared after interpolation,
+    kept ≥ the engine's least slope)."""
+    from .torrance_sparrow import M_MIN
+    if not _textured(roughness):
+        return roughness * roughness
+    src = roughness.source
+    if src.scale != 1.0 or src.offset != 0.0 or src.power != 1.0:
+        raise SceneError("principled.roughness", "a roughness texture must map its texels as they are")
+    return TexturedNumber(TextureInput(src.texture, src.channel, power=2.0), clip=(M_MIN, 1.0))
+
+
+def _root(colour):
+    """√colour (the transmission tint), constant or per point."""
+    if isinstance(colour, TexturedSpectrum):
+        src = colour.source
+        return TexturedSpectrum(TextureInput(src.texture, src.channel, src.scale, src.offset, 0.5 * src.power),
+                                "unbounded")
+    rgb = [math.sqrt(min(max(c, 0.0), 1.0)) for c in colour.linear_srgb()]
+    if rgb == [1.0, 1.0, 1.0]:
+        return None
+    return ConstantSpectrum(rgb[0]) if min(rgb) == max(rgb) else RGBUnboundedSpectrum(rgb)
+
+
+def _metal(p, alpha):
+    from .catalogue import MODELS
+    from ..textures.conductor_index import TexturedGulbrandsenIndex
+    base = p["base_color"]
+    kind = TexturedGulbrandsenIndex if _textured(base) else GulbrandsenIndex
+    n, k = kind(base, base, "n", "schlick"), kind(base, base, "k", "schlick")
+    values = {"n": n, "k": k}
+    from .torrance_sparrow import M_MIN
+    if not _textured(alpha) and alpha < M_MIN:
+        return MODELS["conductor"].build(MODELS["conductor"].values(values, p.where))
+    values.update(m=alpha if _textured(alpha) else max(alpha, M_MIN), distribution="ggx",
+                  multiscatter=p["distribution"] == "multi_ggx")
+    return MODELS["torrance_sparrow"].build(MODELS["torrance_sparrow"].values(values, p.where))
+
+
+def _transmission(p, alpha, ior):
+    from .dielectric import SmoothDielectric
+    from .rough_dielectric import ALPHA_MIN, RoughDielectric, index_matched
+    from .tinted import Tinted
+    from .thin_film import ThinFilmDielectric
+    rough = p["transmission_roughness"] if p.given("transmission_roughness") else p["roughness"]
+    if _textured(rough):
+        raise SceneError(p.field("transmission_roughness"), "the transmission's roughness cannot vary per point yet: "
+                                                            "give a constant transmission_roughness")
+    a = float(rough) ** 2
+    film = p["thin_film_thickness"] > 0.1
+    if a < ALPHA_MIN and film:
+        glass = ThinFilmDielectric(ior, p["thin_film_ior"], p["thin_film_thickness"])
+    elif a < ALPHA_MIN or index_matched(ior, 1.0):
+        glass = SmoothDielectric(ior)
+    else:
+        glass = RoughDielectric(ior, a, "ggx", multiscatter=p["distribution"] == "multi_ggx")
+    tint = _root(p["base_color"])
+    return glass if tint is None else Tinted(glass, None, tint)
+
+
+def _dielectric(p, alpha, ior):
+    from .catalogue import MODELS
+    from .torrance_sparrow import M_MIN
+    base = p["base_color"]
+    eta = specular_ior(ior, p["specular_ior_level"])
+    smooth = not _textured(alpha) and alpha < M_MIN
+    if p["coat_weight"] > 0:
+        return _coated(p, base, alpha, eta)
+    values = {"n": eta, "k": 0.0, "diffuse_layering": "albedo_scaling", "m": 0.0 if smooth else alpha}
+    if not smooth:
+        values.update(distribution="ggx", multiscatter=p["distribution"] == "multi_ggx")
+    if _textured(base) or max(base.linear_srgb()) > 0:
+        values["diffuse_albedo"] = base
+    return MODELS["torrance_sparrow"].build(MODELS["torrance_sparrow"].values(values, p.where))
+
+
+def _coated(p, base, alpha, eta):
+    """A Weidlich–Wilkie coat over the dielectric (Beckmann facets with the Lambertian part added; Lambert
+    alone if smooth) — the earlier mapping, kept until the coat is layered as Cycles layers it."""
+    from .catalogue import MODELS
+    from .weidlich_wilkie import Coat, WeidlichWilkie
+    if _textured(alpha) or alpha >= COAT_SMOOTH_LIMIT:
+        values = {"n": eta, "k": 0.0, "m": alpha if _textured(alpha) else max(alpha, 1e-4)}
+        if _textured(base) or max(base.linear_srgb()) > 0:
+            values["diffuse_albedo"] = base
+        under = MODELS["torrance_sparrow"].build(MODELS["torrance_sparrow"].values(values, p.where))
+    else:
+        under = Lambert(base)
+    m = p["coat_roughness"] ** 2
+    kw = {"distribution": "smooth"} if m < COAT_SMOOTH_LIMIT else {"distribution": "beckmann", "m": m}
+    coat = Coat(n=p["coat_ior"], thickness=0.0, absorption=ConstantSpectrum(0.0), **kw)
+    return WeidlichWilkie([coat], under)
+
+
+DECLARATION = ModelDeclaration(
+    "principled", "Principled BSDF",
+    "Blender's Principled BSDF as Cycles composes it: metal, transmission and a dielectric over a diffuse "
+    "base, from polarising parts",
+    [Parameter("base_color", "base colour: diffuse albedo, metal reflectance at 0°, transmission tint²",
+               kind="spectrum", spectrum="reflectance", lo=0.0, hi=1.0, default=0.8, texturable=True),
+     Parameter("metallic", "metal's weight", lo=0.0, hi=1.0, default=0.0, texturable=True),
+     Parameter("roughness", "Blender roughness r (α = r² for every lobe)", lo=0.0, hi=1.0, default=0.5,
+               texturable=True),
+     Parameter("ior", "index of the dielectric and the transmission", lo=0.0, lo_open=True, default=1.5),
+     Parameter("transmission", "transmission's weight (of what the metal leaves)", lo=0.0, hi=1.0, default=0.0,
+               texturable=True),
+     Parameter("transmission_roughness", "the transmission's roughness where it differs (default: roughness; "
+                                         "constant)", lo=0.0, hi=1.0, default=0.5),
+     Parameter("specular_ior_level", "Cycles' Specular IOR Level: F0 × 2·level", lo=0.0, hi=1.0, default=0.5),
+     Parameter("coat_weight", "coat (> 0: a coat over the dielectric)", lo=0.0, hi=1.0, default=0.0),
+     Parameter("coat_roughness", "coat roughness r", lo=0.0, hi=1.0, default=0.03),
+     Parameter("coat_ior", "coat index", lo=1.0, hi=100.0, default=1.5),
+     Parameter("thin_film_thickness", "thin film on a smooth transmission", unit="nm", lo=0.0, hi=1e6, default=0.0),
+     Parameter("thin_film_ior", "thin film's index", lo=0.0, lo_open=True, default=1.33),
+     Parameter("distribution", "microfacet distribution: Multiscatter GGX (Cycles' default) or GGX",
+               kind="choice", choices=DISTRIBUTIONS, default="multi_ggx")])
+
+DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission"})
+
+
+@DECLARATION.builder
+def _principled(p):
+    metallic, transmission = p["metallic"], p["transmission"]
+    alpha = _alpha_of(p["roughness"])
+    ior = max(p["ior"], IOR_MIN)
+    metal = glass = dielectric = None
+    if not _never(metallic):
+        metal = _metal(p, alpha)
+    if not _always(metallic) and not _never(transmission):
+        glass = _transmission(p, alpha, ior)
+    if not _always(metallic) and not _always(transmission):
+        dielectric = _dielectric(p, alpha, ior)
+    return _mixture(_mixture(dielectric, glass, transmission), metal, metallic)

@@ -1,0 +1,52 @@
+"""The `principled` model (engine/materials/principled.py): Cycles' Principled layer order from polarising
+parts, declared once (scene format, the Blender exporter)."""
+
+import numpy as np
+import pytest
+
+from engine.errors import SceneError
+from engine.materials.evaluate import mueller_at
+from engine.materials.principled import specular_ior
+from engine.scene.loader import parse_material
+
+
+def build(**values):
+    return parse_material({"type": "principled", **values}, "materials.p")
+
+
+def leaves(b, w=1.0):
+    if b.name != "mix":
+        return [(b, w)]
+    return [x for c, cw in zip(b.components, b.weights) for x in leaves(c, w * float(cw))]
+
+
+def test_layer_weights_are_cycles():
+    """metal: Metallic; transmission: (1 − Metallic)·Transmission; dielectric: the rest."""
+    names = sorted(b.name for b, _ in leaves(build(metallic=0.25, transmission=0.4, roughness=0.3)))
+    assert names == ["rough_dielectric", "torrance_sparrow", "torrance_sparrow"]
+    weights = sorted(w for _, w in leaves(build(metallic=0.25, transmission=0.4, roughness=0.3)))
+    assert weights == pytest.approx(sorted([0.75 * 0.6, 0.75 * 0.4, 0.25]))
+    assert build(metallic=1.0).name == "torrance_sparrow" and build(metallic=1.0).k.eval(np.array([550.0]))[0] > 0
+
+
+def test_smooth_black_principled_is_black_glass_and_the_specular_level_scales_f0():
+    for level in (0.5, 0.25, 1.0):
+        model = build(roughness=0.0, base_color=0.0, ior=1.5, specular_ior_level=level)
+        M = np.array(mueller_at(model, 0.0, 0.0, 0.0)["delta"])
+        assert M[0, 0] == pytest.approx(min(0.04 * 2 * level, 0.99), rel=1e-9)
+    assert specular_ior(1.5, 0.0) == pytest.approx(1.0)
+    assert specular_ior(0.8, 0.25) < 1.0                # below 1: the reciprocal index
+
+
+def test_transmission_is_tinted_by_the_root_of_the_base_colour():
+    glass = build(transmission=1.0, roughness=0.0, base_color=[0.64, 0.25, 0.04])
+    assert glass.name == "dielectric" and glass.transmission.linear_srgb() == pytest.approx([0.8, 0.5, 0.2])
+    film = build(transmission=1.0, roughness=0.0, base_color=1.0, thin_film_thickness=300.0)
+    assert film.name == "thin_film"
+
+
+def test_bad_values_name_the_field():
+    with pytest.raises(SceneError, match=r"materials\.p\.metallic: must be a finite number in \[0, 1\]"):
+        build(metallic=1.5)
+    with pytest.raises(SceneError, match=r"materials\.p\.distribution: must be one of 'multi_ggx', 'ggx'"):
+        build(distribution="beckmann")
