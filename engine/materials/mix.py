@@ -67,7 +67,7 @@ from ..polarisation.frames import plane_of_incidence_axis
 from ..textures import TexturedNumber
 from ..vec3 import dot, reflect
 
-__all__ = ["ALBEDO_FLOOR", "MAX_COMPONENTS", "Mix", "MixShadingPoint", "WeightProduct", "add_values",
+__all__ = ["ALBEDO_FLOOR", "MAX_COMPONENTS", "Layered", "Mix", "MixShadingPoint", "WeightProduct", "add_values",
            "rotate_mueller_batch"]
 
 #: Most components of one mix after nested mixes are flattened (named mixes of mixes could otherwise
@@ -330,7 +330,7 @@ class Mix(BSDF):
             if not isinstance(c, BSDF):
                 raise ValueError(f"material {i} of a mix must be a BSDF, got {c!r}")
             w = _check_weight(w, f"weight {i} of a mix")
-            if isinstance(c, Mix):
+            if type(c) is Mix:            # a plain mix flattens (a Layered keeps its view-dependent weights)
                 flat_c += c.components
                 flat_w += [_times(w, inner) for inner in c.weights]
             else:
@@ -576,3 +576,27 @@ def _mix(p, materials):
         return Mix(materials, weights)
     except ValueError as e:
         raise SceneError(p.field("materials"), str(e)) from None
+
+
+class Layered(Mix):
+    """A top layer over a base, as Cycles layers its closures (``closure_layering_weight``): the top
+    weighted ``weight``, everything below weighted max(0, 1 − weight·E_top(ω_o)) on top of its own weights,
+    E_top the top layer's directional albedo at the view direction (``albedo(sp)`` → (N,)).  Not
+    reciprocal, as Cycles' is; the top's polarisation is its own, the base's light is scaled by a scalar."""
+
+    def __init__(self, top: BSDF, base: BSDF, weight: float, albedo):
+        if type(base) is Mix:
+            parts, weights = list(base.components), list(base.weights)
+        else:
+            parts, weights = [base], [1.0]
+        super().__init__([top] + parts, [float(weight)] + weights)
+        if self.components[0] is not top:
+            raise ValueError("a layered material's top layer must have a weight > 0")
+        self.top_weight, self.albedo = float(weight), albedo
+        self.name = "layered"
+
+    def _weights(self, sp: ShadingPoint) -> list[np.ndarray]:
+        weights = super()._weights(sp)
+        scale = np.maximum(1.0 - self.top_weight * self.albedo(sp), 0.0)
+        return weights[:1] + [w * scale for w in weights[1:]]
+

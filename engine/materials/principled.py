@@ -17,8 +17,10 @@ diffuse base, the base weighted by one minus the specular layer's albedo at the 
   √(base colour) (engine.materials.tinted);
 - dielectric: a GGX Torrance–Sparrow dielectric (index from ``ior`` and ``specular_ior_level``: F0 =
   F0(ior)·2·level) with the albedo-scaled Lambertian base, its smooth limit at roughness 0; a coat (Cycles'
-  ``coat_weight`` > 0) is a Weidlich–Wilkie coat of ``coat_ior`` and α = coat_roughness² over that
-  dielectric (the earlier base: Beckmann facets with the Lambertian part added).
+  ``coat_weight`` > 0);
+- coat: a GGX dielectric reflection of ``coat_ior`` and α = coat_roughness² (compensated, as Cycles
+  always compensates its coat) over everything below — metal, transmission and dielectric — which is
+  weighted by 1 − coat_weight·E_coat(ω_o) (engine.materials.mix.Layered: Cycles' layering).
 ``base_color``, ``metallic``, ``roughness`` and ``transmission`` may vary per point.  Inputs of Blender's
 node that are not parameters here (sheen, subsurface, anisotropy, tints, …) are the exporter's to warn about.
 """
@@ -27,7 +29,9 @@ from __future__ import annotations
 
 import math
 
-from .lambert import Lambert
+import numpy as np
+
+from . import conductor, torrance_sparrow
 from .mix import Mix
 from .parameters import ModelDeclaration, Parameter
 from ..errors import SceneError
@@ -42,8 +46,6 @@ IOR_MIN = 1e-5
 #: Cycles drops closures whose weight is below this (CLOSURE_WEIGHT_CUTOFF)
 WEIGHT_CUTOFF = 1e-5
 DISTRIBUTIONS = ("multi_ggx", "ggx")
-#: Below this Beckmann slope the coat and the Beckmann base under it are smooth (the earlier mapping)
-COAT_SMOOTH_LIMIT = 0.02
 
 
 def specular_ior(ior: float, level: float) -> float:
@@ -113,7 +115,6 @@ def _root(colour):
 
 
 def _metal(p, alpha):
-    from .catalogue import MODELS
     from ..textures.conductor_index import TexturedGulbrandsenIndex
     base = p["base_color"]
     kind = TexturedGulbrandsenIndex if _textured(base) else GulbrandsenIndex
@@ -121,10 +122,10 @@ def _metal(p, alpha):
     values = {"n": n, "k": k}
     from .torrance_sparrow import M_MIN
     if not _textured(alpha) and alpha < M_MIN:
-        return MODELS["conductor"].build(MODELS["conductor"].values(values, p.where))
+        return conductor.DECLARATION.build(conductor.DECLARATION.values(values, p.where))
     values.update(m=alpha if _textured(alpha) else max(alpha, M_MIN), distribution="ggx",
                   multiscatter=p["distribution"] == "multi_ggx")
-    return MODELS["torrance_sparrow"].build(MODELS["torrance_sparrow"].values(values, p.where))
+    return torrance_sparrow.DECLARATION.build(torrance_sparrow.DECLARATION.values(values, p.where))
 
 
 def _transmission(p, alpha, ior):
@@ -149,37 +150,44 @@ def _transmission(p, alpha, ior):
 
 
 def _dielectric(p, alpha, ior):
-    from .catalogue import MODELS
     from .torrance_sparrow import M_MIN
     base = p["base_color"]
     eta = specular_ior(ior, p["specular_ior_level"])
     smooth = not _textured(alpha) and alpha < M_MIN
-    if p["coat_weight"] > 0:
-        return _coated(p, base, alpha, eta)
     values = {"n": eta, "k": 0.0, "diffuse_layering": "albedo_scaling", "m": 0.0 if smooth else alpha}
     if not smooth:
         values.update(distribution="ggx", multiscatter=p["distribution"] == "multi_ggx")
     if _textured(base) or max(base.linear_srgb()) > 0:
         values["diffuse_albedo"] = base
-    return MODELS["torrance_sparrow"].build(MODELS["torrance_sparrow"].values(values, p.where))
+    return torrance_sparrow.DECLARATION.build(torrance_sparrow.DECLARATION.values(values, p.where))
 
 
-def _coated(p, base, alpha, eta):
-    """A Weidlich–Wilkie coat over the dielectric (Beckmann facets with the Lambertian part added; Lambert
-    alone if smooth) — the earlier mapping, kept until the coat is layered as Cycles layers it."""
-    from .catalogue import MODELS
-    from .weidlich_wilkie import Coat, WeidlichWilkie
-    if _textured(alpha) or alpha >= COAT_SMOOTH_LIMIT:
-        values = {"n": eta, "k": 0.0, "m": alpha if _textured(alpha) else max(alpha, 1e-4)}
-        if _textured(base) or max(base.linear_srgb()) > 0:
-            values["diffuse_albedo"] = base
-        under = MODELS["torrance_sparrow"].build(MODELS["torrance_sparrow"].values(values, p.where))
+def _coat(p, below):
+    """Cycles' coat: a GGX dielectric reflection (index coat_ior ≥ 1, α = coat_roughness², energy-compensated
+    as Cycles always compensates it; smooth: a Fresnel mirror) over everything below, which is weighted by
+    1 − coat_weight·E_coat(ω_o) (engine.materials.mix.Layered)."""
+    from .mix import Layered
+    from .torrance_sparrow import M_MIN
+    from ..polarisation.fresnel import fresnel_reflectance
+    n = max(p["coat_ior"], 1.0)
+    if n == 1.0:                # an index-matched coat reflects nothing
+        return below
+    alpha = p["coat_roughness"] ** 2
+    decl = torrance_sparrow.DECLARATION
+    if alpha < M_MIN:
+        top = decl.build(decl.values({"n": n, "k": 0.0, "m": 0.0}, p.where))
+
+        def albedo(sp):
+            return fresnel_reflectance(np.clip(sp.cos_o, 0.0, 1.0), complex(n))
     else:
-        under = Lambert(base)
-    m = p["coat_roughness"] ** 2
-    kw = {"distribution": "smooth"} if m < COAT_SMOOTH_LIMIT else {"distribution": "beckmann", "m": m}
-    coat = Coat(n=p["coat_ior"], thickness=0.0, absorption=ConstantSpectrum(0.0), **kw)
-    return WeidlichWilkie([coat], under)
+        top = decl.build(decl.values({"n": n, "k": 0.0, "m": alpha, "distribution": "ggx", "multiscatter": True},
+                                     p.where))
+        table = top._albedo_table()
+
+        def albedo(sp):
+            cos_o = np.clip(sp.cos_o, 0.0, 1.0)
+            return table(cos_o, alpha) * (1.0 + top.multiscatter_extra(sp)[0])
+    return Layered(top, below, p["coat_weight"], albedo)
 
 
 DECLARATION = ModelDeclaration(
@@ -220,4 +228,5 @@ def _principled(p):
         glass = _transmission(p, alpha, ior)
     if not _always(metallic) and not _always(transmission):
         dielectric = _dielectric(p, alpha, ior)
-    return _mixture(_mixture(dielectric, glass, transmission), metal, metallic)
+    below = _mixture(_mixture(dielectric, glass, transmission), metal, metallic)
+    return _coat(p, below) if p["coat_weight"] >= WEIGHT_CUTOFF else below

@@ -795,9 +795,6 @@ def _principled(node, mat, warnings, bake=None):
     if film is not None and opaque_parts:
         warnings.append(f"material {mat!r}: the Thin Film of {node.name!r} is simulated on its smooth transmission "
                         "only, not on its metallic or opaque dielectric parts")
-    if values["coat_weight"] > 0 and (not _never(metallic) or not _never(transmission)):
-        warnings.append(f"material {mat!r}: the Coat of {node.name!r} is rendered over its dielectric part only, "
-                        "not over its metallic or transmissive parts")
     decl = MODELS["principled"]
     return decl.build(decl.values(values, f"material {mat!r}.{node.name}"))
 

@@ -29,6 +29,8 @@ CASES = {
     "Transmission Weight": ((0.0, 1.0), {"Roughness": 0.3, "Base Color": (0.9, 0.9, 0.9)}),
     "Emission Color": (((2.0, 0.5, 0.1), (0.0, 0.0, 0.0)), {"Emission Strength": 1.5}),
     "Alpha": ((0.0, 1.0), {"Base Color": (0.8, 0.2, 0.1), "Roughness": 0.5}),        # a cut-out
+    "Metallic ": ((0.0, 1.0), {"Base Color": (0.8, 0.2, 0.1), "Roughness": 0.4,     # under a clear coat
+                               "Coat Weight": 1.0, "Coat Roughness": 0.1}),
 }
 
 

@@ -132,9 +132,9 @@ def test_principled_conversion_per_input(addon):
     _, _, warnings = exported(principled(**{"Sheen Weight": 0.5, "Specular Tint": (1, 0.5, 0.5, 1)}))
     assert len(warnings) == 2 and "'Sheen Weight'" in warnings[0] + warnings[1]
     assert any("'Specular Tint'" in w for w in warnings)
-    # Coat → Weidlich–Wilkie over the converted base.
+    # Coat → a GGX dielectric layer over everything below, Cycles' layering.
     bsdf, _, _ = exported(principled(**{"Coat Weight": 1.0, "Coat IOR": 1.6, "Coat Roughness": 0.0, "Roughness": 0.0}))
-    assert bsdf.name == "weidlich_wilkie"
+    assert bsdf.name == "layered" and bsdf.top_weight == 1.0     # Cycles' coat over everything below
     # Emission → emitter spectrum with colour × strength.
     _, emission, _ = exported(principled(**{"Emission Strength": 3.0, "Emission Color": (1, 0.5, 0.25, 1)}))
     assert emission is not None and emission.linear_srgb() == pytest.approx([3.0, 1.5, 0.75], rel=2e-3)

@@ -114,7 +114,9 @@ def test_texturable_parameters_are_the_surface_varying_ones():
         ("torrance_sparrow", "diffuse_albedo"), ("torrance_sparrow", "diffuse_weight"),
         ("torrance_sparrow", "specular_weight"),
         ("htsg", "n"), ("htsg", "k"), ("htsg", "sigma0_um"), ("htsg", "tau_um"), ("htsg", "albedo"),
-        ("coat", "n"), ("coat", "thickness"), ("coat", "absorption"), ("coat", "exponent"), ("coat", "m")}
+        ("coat", "n"), ("coat", "thickness"), ("coat", "absorption"), ("coat", "exponent"), ("coat", "m"),
+        ("principled", "base_color"), ("principled", "metallic"), ("principled", "roughness"),
+        ("principled", "transmission")}
 
 
 @pytest.mark.parametrize("coat,field", [
