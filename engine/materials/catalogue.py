@@ -9,14 +9,14 @@ coat) and ``base_…`` (a Lambertian base).
 
 from __future__ import annotations
 
-from . import (black_glass, conductor, dielectric, filter_sheet, htsg, lambert, mix, principled,
+from . import (black_glass, conductor, dielectric, filter_sheet, htsg, lambert, mix, oren_nayar, principled,
                rough_dielectric, thin_dielectric, thin_film, torrance_sparrow, weidlich_wilkie)
 from .parameters import ModelDeclaration, Parameter
 from ..errors import SceneError
 
 #: All declarations, keyed by the scene file's material type.
 MODELS: dict[str, ModelDeclaration] = {d.name: d for d in (
-    lambert.DECLARATION, conductor.DECLARATION, dielectric.DECLARATION, black_glass.DECLARATION,
+    lambert.DECLARATION, oren_nayar.DECLARATION, conductor.DECLARATION, dielectric.DECLARATION, black_glass.DECLARATION,
     torrance_sparrow.DECLARATION, htsg.DECLARATION, weidlich_wilkie.DECLARATION,
     filter_sheet.POLARISER, filter_sheet.RETARDER, rough_dielectric.DECLARATION,
     thin_dielectric.DECLARATION, thin_film.DECLARATION, mix.DECLARATION, principled.DECLARATION)}

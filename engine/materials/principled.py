@@ -157,9 +157,29 @@ def _dielectric(p, alpha, ior):
     values = {"n": eta, "k": 0.0, "diffuse_layering": "albedo_scaling", "m": 0.0 if smooth else alpha}
     if not smooth:
         values.update(distribution="ggx", multiscatter=p["distribution"] == "multi_ggx")
+    decl = torrance_sparrow.DECLARATION
+    if p["diffuse_roughness"] > 0:      # Cycles' Oren–Nayar base under the specular layer (mix.Layered)
+        from .mix import Layered
+        from .oren_nayar import OrenNayar
+        top = decl.build(decl.values({k: v for k, v in values.items() if k != "diffuse_layering"}, p.where))
+        return Layered(top, OrenNayar(base, p["diffuse_roughness"]), 1.0, _reflection_albedo(top, eta, alpha, smooth))
     if _textured(base) or max(base.linear_srgb()) > 0:
         values["diffuse_albedo"] = base
-    return torrance_sparrow.DECLARATION.build(torrance_sparrow.DECLARATION.values(values, p.where))
+    return decl.build(decl.values(values, p.where))
+
+
+def _reflection_albedo(top, n, alpha, smooth):
+    """E(ω_o) (N,) of a dielectric reflection layer of index n: its Fresnel reflectance when smooth, else the
+    GGX reflection albedo table × (1 + k) of its compensation (Cycles' layering estimate)."""
+    from ..polarisation.fresnel import fresnel_reflectance
+    if smooth:
+        return lambda sp: fresnel_reflectance(np.clip(sp.cos_o, 0.0, 1.0), complex(n))
+    table = top._albedo_table()
+
+    def albedo(sp):
+        E = table(np.clip(sp.cos_o, 0.0, 1.0), sp.number(alpha))
+        return E * (1.0 + top.multiscatter_extra(sp)[0]) if top.multiscatter else E
+    return albedo
 
 
 def _coat(p, below):
@@ -168,26 +188,16 @@ def _coat(p, below):
     1 − coat_weight·E_coat(ω_o) (engine.materials.mix.Layered)."""
     from .mix import Layered
     from .torrance_sparrow import M_MIN
-    from ..polarisation.fresnel import fresnel_reflectance
     n = max(p["coat_ior"], 1.0)
     if n == 1.0:                # an index-matched coat reflects nothing
         return below
     alpha = p["coat_roughness"] ** 2
     decl = torrance_sparrow.DECLARATION
-    if alpha < M_MIN:
-        top = decl.build(decl.values({"n": n, "k": 0.0, "m": 0.0}, p.where))
-
-        def albedo(sp):
-            return fresnel_reflectance(np.clip(sp.cos_o, 0.0, 1.0), complex(n))
-    else:
-        top = decl.build(decl.values({"n": n, "k": 0.0, "m": alpha, "distribution": "ggx", "multiscatter": True},
-                                     p.where))
-        table = top._albedo_table()
-
-        def albedo(sp):
-            cos_o = np.clip(sp.cos_o, 0.0, 1.0)
-            return table(cos_o, alpha) * (1.0 + top.multiscatter_extra(sp)[0])
-    return Layered(top, below, p["coat_weight"], albedo)
+    smooth = alpha < M_MIN
+    values = {"n": n, "k": 0.0, "m": 0.0} if smooth else \
+        {"n": n, "k": 0.0, "m": alpha, "distribution": "ggx", "multiscatter": True}
+    top = decl.build(decl.values(values, p.where))
+    return Layered(top, below, p["coat_weight"], _reflection_albedo(top, n, alpha, smooth))
 
 
 DECLARATION = ModelDeclaration(
@@ -205,6 +215,7 @@ DECLARATION = ModelDeclaration(
      Parameter("transmission_roughness", "the transmission's roughness where it differs (default: roughness; "
                                          "constant)", lo=0.0, hi=1.0, default=0.5),
      Parameter("specular_ior_level", "Cycles' Specular IOR Level: F0 × 2·level", lo=0.0, hi=1.0, default=0.5),
+     Parameter("diffuse_roughness", "the base's Oren–Nayar roughness σ (0: Lambert)", lo=0.0, hi=1.0, default=0.0),
      Parameter("coat_weight", "coat (> 0: a coat over the dielectric)", lo=0.0, hi=1.0, default=0.0),
      Parameter("coat_roughness", "coat roughness r", lo=0.0, hi=1.0, default=0.03),
      Parameter("coat_ior", "coat index", lo=1.0, hi=100.0, default=1.5),

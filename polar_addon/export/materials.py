@@ -782,6 +782,8 @@ def _principled(node, mat, warnings, bake=None):
               "specular_ior_level": r.float("Specular IOR Level", 0.0, 1.0),
               "coat_weight": r.float("Coat Weight", 0.0, 1.0), "coat_roughness": r.float("Coat Roughness", 0.0, 1.0),
               "coat_ior": min(max(r.float("Coat IOR"), 1.0), 100.0),
+              "diffuse_roughness": (r.float("Diffuse Roughness", 0.0, 1.0)
+                                    if node.inputs.get("Diffuse Roughness") is not None else 0.0),
               "distribution": "ggx" if getattr(node, "distribution", "MULTI_GGX") == "GGX" else "multi_ggx"}
     if isinstance(roughness, TextureInput) and transmission != 0.0:
         warnings.append(f"material {mat!r}: the Roughness texture of {node.name!r} does not reach its transmission "
@@ -803,7 +805,6 @@ def _principled(node, mat, warnings, bake=None):
 _PRINCIPLED_NOT_SIMULATED = (("Subsurface Weight", 0.0, "rendered as the diffuse base"),
                              ("Sheen Weight", 0.0, "no sheen layer"),
                              ("Anisotropic", 0.0, "isotropic facets"),
-                             ("Diffuse Roughness", 0.0, "a Lambertian base"),
                              ("Specular Tint", 1.0, "an untinted specular layer"),
                              ("Coat Tint", 1.0, "an untinted coat"))
 
@@ -1063,7 +1064,11 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
         return polar_node_bsdf(node, mat, warnings, depth, bake), None
     r = _Reader(mat, node, warnings, bake)
     if kind == "ShaderNodeBsdfDiffuse":
-        return _lambert(r.rgb_or_texture("Color", 0.0, 1.0), mat, node), None
+        colour = r.rgb_or_texture("Color", 0.0, 1.0)
+        sigma = r.float("Roughness", 0.0, 1.0)
+        if sigma > 0:       # Cycles' Oren–Nayar (Fujii/EON) above roughness 0
+            return _textured_model("oren_nayar", {"albedo": colour, "roughness": sigma}, mat, node), None
+        return _lambert(colour, mat, node), None
     if kind in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):
         m, _ = r.roughness_or_texture("Roughness")
         return _conductor_from_colour(r, "Color", None, m, mat, node, warnings, mode="constant"), None

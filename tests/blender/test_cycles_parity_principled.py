@@ -23,6 +23,7 @@ SEEDS = 4
 #: input → (its two checker values, the other inputs' values)
 CASES = {
     "Base Color": (((0.8, 0.1, 0.05), (0.1, 0.3, 0.8)), {"Roughness": 0.4}),
+    "Base Color ": (((0.8, 0.1, 0.05), (0.9, 0.9, 0.9)), {"Roughness": 0.4, "Diffuse Roughness": 1.0}),  # Oren–Nayar
     "Metallic": ((0.0, 1.0), {"Base Color": (0.9, 0.6, 0.3), "Roughness": 0.35}),
     "Roughness": ((0.15, 0.9), {"Metallic": 1.0, "Base Color": (0.8, 0.8, 0.8)}),
     "Roughness ": ((0.05, 0.7), {"Base Color": (0.3, 0.5, 0.2)}),          # the dielectric's

@@ -333,6 +333,8 @@ def test_standard_shaders_convert(addon):
         return mat
 
     assert exported(with_shader("ShaderNodeBsdfDiffuse", Color=(0.5, 0.5, 0.5, 1)))[0].name == "lambert"
+    rough = exported(with_shader("ShaderNodeBsdfDiffuse", Color=(0.5, 0.5, 0.5, 1), Roughness=0.6))[0]
+    assert rough.name == "oren_nayar" and rough.roughness == pytest.approx(0.6)        # Cycles' Oren–Nayar
     assert exported(with_shader("ShaderNodeBsdfGlass", IOR=1.45, Roughness=0.0))[0].n_int == pytest.approx(1.45)
     assert exported(with_shader("ShaderNodeBsdfGlossy", Roughness=0.0))[0].name == "conductor"
     bsdf, emission, _ = exported(with_shader("ShaderNodeEmission", Strength=2.0))
