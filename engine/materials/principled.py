@@ -97,8 +97,9 @@ def _alpha_of(roughness):
     if not _textured(roughness):
         return roughness * roughness
     src = roughness.source
-    if src.scale != 1.0 or src.offset != 0.0 or src.power != 1.0:
-        raise SceneError("principled.roughness", "a roughness texture must map its texels as they are")
+    if src.scale != 1.0 or src.offset != 0.0 or src.power != 1.0:       # (offset + scale·t)² per point
+        from ..textures.inputs import SquaredNumber
+        return SquaredNumber(roughness, clip=(M_MIN, 1.0))
     return TexturedNumber(TextureInput(src.texture, src.channel, power=2.0), clip=(M_MIN, 1.0))
 
 
@@ -106,6 +107,9 @@ def _root(colour):
     """√colour (the transmission tint), constant or per point."""
     if isinstance(colour, TexturedSpectrum):
         src = colour.source
+        if src.scale != 1.0 or src.offset != 0.0:      # √(offset + scale·t): per point and wavelength
+            from ..textures.inputs import RootSpectrum
+            return RootSpectrum(colour)
         return TexturedSpectrum(TextureInput(src.texture, src.channel, src.scale, src.offset, 0.5 * src.power),
                                 "unbounded")
     rgb = [math.sqrt(min(max(c, 0.0), 1.0)) for c in colour.linear_srgb()]

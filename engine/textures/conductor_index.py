@@ -55,7 +55,8 @@ class TexturedGulbrandsenIndex(TexturedSpectrum):
     def __repr__(self):
         return f"TexturedGulbrandsenIndex({self.reflectivity!r}, {self.edge_tint!r}, {self.part!r})"
 
-    def at(self, points, lam: np.ndarray, mono: bool, basis: np.ndarray | None = None) -> np.ndarray:
+    def at(self, points, lam: np.ndarray, mono: bool, basis: np.ndarray | None = None,
+           d65: np.ndarray | None = None) -> np.ndarray:
         def compute():
             r = _values(self.reflectivity, points, lam, mono, basis)
             g = _values(self.edge_tint, points, lam, mono, basis)

@@ -208,6 +208,29 @@ def _illuminant_rgb_matrix() -> tuple[np.ndarray, np.ndarray]:
 _ILLUMINANT_RGB = None
 
 
+class SquaredNumber(TexturedNumber):
+    """The square of a textured number x (any affine map of its texels): x² per point, clipped to ``clip``;
+    e.g. α = r² of a roughness texture whose values are offset + scale·t."""
+
+    def __init__(self, of: TexturedNumber, clip: tuple[float, float] | None = None):
+        self.of, self.source, self.clip = of, of.source, clip
+        lo, hi = of.lo, of.hi
+        sq_lo = 0.0 if lo <= 0.0 <= hi else min(lo * lo, hi * hi)
+        self.lo, self.hi = _clipped_bounds(sq_lo, max(lo * lo, hi * hi), clip)
+
+    def clamped_to(self, lo: float = -math.inf, hi: float = math.inf) -> SquaredNumber:
+        clip = _float32_clip(self.lo, self.hi, lo, hi, self.clip)
+        return self if clip == self.clip else SquaredNumber(self.of, clip)
+
+    def at(self, points) -> np.ndarray:
+        x = self.of.at(points)
+        values = x * x
+        return values if self.clip is None else np.clip(values, *self.clip)
+
+    def __repr__(self):
+        return f"SquaredNumber({self.of!r})"
+
+
 class TexturedSpectrum(Spectrum):
     """A spectrum parameter given by an RGB texture: per point the RGB upsampling of a constant
     [r, g, b] with the texel's values (r = g = b gives exactly that constant).
@@ -344,3 +367,24 @@ def parse_texture_input(raw: dict, field: str, base_dir: str | None) -> TextureI
             raise SceneError(f"{field}.vertex_color", "must be the name of a colour attribute of the mesh")
         texture = VertexColour(layer, 4 if channel == "A" else 3)
     return TextureInput(texture, channel, num("scale", 1.0), num("offset", 0.0))
+
+
+class RootSpectrum(TexturedSpectrum):
+    """√ of a textured spectrum per point and wavelength (negative values: 0), e.g. the Principled
+    transmission tint √(base colour) of a colour texture mapped by scale and offset."""
+
+    def __init__(self, of: TexturedSpectrum):
+        self.of, self.source, self.kind, self.clip = of, of.source, "unbounded", None
+        self.lo, self.hi = math.sqrt(max(of.lo, 0.0)), math.sqrt(max(of.hi, 0.0))
+
+    def clamped_to(self, lo: float = -math.inf, hi: float = math.inf) -> RootSpectrum:
+        return self
+
+    def __repr__(self):
+        return f"RootSpectrum({self.of!r})"
+
+    def at(self, points, lam: np.ndarray, mono: bool, basis: np.ndarray | None = None,
+           d65: np.ndarray | None = None) -> np.ndarray:
+        return points.memo((self, mono, lam.shape[0]),
+                           lambda: np.sqrt(np.maximum(self.of.at(points, lam, mono, basis), 0.0)))
+

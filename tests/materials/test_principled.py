@@ -1,6 +1,8 @@
 """The `principled` model (engine/materials/principled.py): Cycles' Principled layer order from polarising
 parts, declared once (scene format, the Blender exporter)."""
 
+import math
+
 import numpy as np
 import pytest
 
@@ -50,3 +52,21 @@ def test_bad_values_name_the_field():
         build(metallic=1.5)
     with pytest.raises(SceneError, match=r"materials\.p\.distribution: must be one of 'multi_ggx', 'ggx'"):
         build(distribution="beckmann")
+
+
+def test_textures_mapped_by_scale_and_offset_square_and_root_per_point(tmp_path):
+    """A roughness texture offset + scale·t gives α = (offset + scale·t)² per point; a base colour so mapped
+    tints the transmission by its root per point and wavelength (not the root of the texels then mapped)."""
+    import OpenEXR
+    from engine.textures.inputs import RootSpectrum, SquaredNumber
+    OpenEXR.File({"type": OpenEXR.scanlineimage},
+                 {"R": np.array([[0.2, 0.6]], np.float32)}).write(str(tmp_path / "t.exr"))
+    tex = {"texture": "t.exr", "color_space": "Non-Color", "scale": 0.5, "offset": 0.25}
+    model = parse_material({"type": "principled", "roughness": tex, "metallic": 1.0}, "materials.p",
+                           base_dir=str(tmp_path))
+    assert isinstance(model.m, SquaredNumber)
+    assert (model.m.lo, model.m.hi) == pytest.approx(((0.25 + 0.5 * 0.2) ** 2, (0.25 + 0.5 * 0.6) ** 2))
+    glass = parse_material({"type": "principled", "base_color": tex, "transmission": 1.0, "roughness": 0.0},
+                           "materials.p", base_dir=str(tmp_path))
+    assert isinstance(glass.transmission, RootSpectrum)
+    assert glass.transmission.hi == pytest.approx(math.sqrt(0.25 + 0.5 * 0.6))
