@@ -24,12 +24,11 @@ SEEDS = 4
 #: Why each currently failing case fails, as isolated by editing the material in both renderers.
 KNOWN = {
     ("TextureTransform", "lamps"): "the 8×8 grid image used as a tangent-space normal map gives very steep normals: "
-                                   "Cycles corrects the normal of its specular closures only "
-                                   "(ensure_valid_specular_reflection), Polar's Principled dielectric shares one "
-                                   "normal between its specular layer and its diffuse base (15/30 blocks, Y 0.965); "
-                                   "with Normal unlinked in both renderers: 30/30 blocks",
-    ("TextureTransform", "hdri"): "steep normal map shared by the dielectric's specular and diffuse lobes, as under "
-                                  "lamps (8/30 blocks, Y 1.007)",
+                                   "with Normal unlinked in both renderers 30/30 blocks, with it 8/30 (Y 0.976). "
+                                   "Correcting only the dielectric's specular normal (Cycles' "
+                                   "ensure_valid_specular_reflection; the metal's already is) made it worse (3/30), "
+                                   "so the difference in mapped-normal shading is not isolated yet",
+    ("TextureTransform", "hdri"): "steep normal map, as under lamps (5/30 blocks, Y 1.03)",
     ("Sunglasses", "lamps"): "2 of 11 blocks, the lenses (Polar ÷ Cycles 2.0 and 1.5): the transmissive lens "
                              "material (Transmission 1, tinted) — Transmission 0 in both renderers: 11/11 blocks; "
                              "not the volume (unlinked: the same), not the roughness; the cause inside the thin lens "
