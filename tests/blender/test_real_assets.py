@@ -29,10 +29,11 @@ KNOWN = {
                                    "ensure_valid_specular_reflection; the metal's already is) made it worse (3/30), "
                                    "so the difference in mapped-normal shading is not isolated yet",
     ("TextureTransform", "hdri"): "steep normal map, as under lamps (5/30 blocks, Y 1.03)",
-    ("Sunglasses", "lamps"): "2 of 11 blocks, the lenses (Polar ÷ Cycles 2.0 and 1.5): the transmissive lens "
-                             "material (Transmission 1, tinted) — Transmission 0 in both renderers: 11/11 blocks; "
-                             "not the volume (unlinked: the same), not the roughness; the cause inside the thin lens "
-                             "geometry is not isolated yet",
+    ("Sunglasses", "lamps"): "2 of 11 blocks, the lenses (Polar ÷ Cycles 2.0 and 1.5 of a nearly black region): "
+                             "Transmission 0 on either lens material alone (the IOR-1.0 outer shell, tint "
+                             "√0.009 per refraction, or the IOR-1.5 inner lens, √0.016) gives 11/11 blocks, so "
+                             "the excess needs light through both layers; not the volume, not the roughness; "
+                             "not isolated further",
     ("Sunglasses", "hdri"): "the two lens blocks, as under lamps (9/11 blocks, Y 1.07)",
 }
 
