@@ -120,9 +120,19 @@ def _root(colour):
 
 def _metal(p, alpha):
     from ..textures.conductor_index import TexturedGulbrandsenIndex
-    base = p["base_color"]
+    base, tint = p["base_color"], p["specular_tint"]
+    if not _textured(base) and not (tint.is_constant and tint.linear_srgb()[0] == 1.0):
+        # Cycles' F82-Tint: the reflectance at θ₈₂ is Schlick's × the tint (≤ 1), per channel
+        from ..spectral.gulbrandsen import schlick_f82
+        f82 = [float(schlick_f82(c)) * min(t, 1.0) for c, t in zip(base.linear_srgb(), tint.linear_srgb())]
+        edge = ConstantSpectrum(f82[0]) if min(f82) == max(f82) else RGBUnboundedSpectrum(f82)
+        return _metal_of(GulbrandsenIndex(base, edge, "n", "f82"), GulbrandsenIndex(base, edge, "k", "f82"), p, alpha)
     kind = TexturedGulbrandsenIndex if _textured(base) else GulbrandsenIndex
     n, k = kind(base, base, "n", "schlick"), kind(base, base, "k", "schlick")
+    return _metal_of(n, k, p, alpha)
+
+
+def _metal_of(n, k, p, alpha):
     values = {"n": n, "k": k}
     from .torrance_sparrow import M_MIN
     if not _textured(alpha) and alpha < M_MIN:
@@ -162,14 +172,44 @@ def _dielectric(p, alpha, ior):
     if not smooth:
         values.update(distribution="ggx", multiscatter=p["distribution"] == "multi_ggx")
     decl = torrance_sparrow.DECLARATION
-    if p["diffuse_roughness"] > 0:      # Cycles' Oren–Nayar base under the specular layer (mix.Layered)
+    tint = p["specular_tint"]
+    tinted = not (tint.is_constant and tint.linear_srgb()[0] == 1.0)
+    if p["diffuse_roughness"] > 0 or tinted:
+        # the specular layer over Cycles' diffuse base as two parts (mix.Layered): an Oren–Nayar base, a tint
+        from .lambert import DECLARATION as LAMBERT
         from .mix import Layered
         from .oren_nayar import OrenNayar
         top = decl.build(decl.values({k: v for k, v in values.items() if k != "diffuse_layering"}, p.where))
-        return Layered(top, OrenNayar(base, p["diffuse_roughness"]), 1.0, _reflection_albedo(top, eta, alpha, smooth))
+        albedo = _reflection_albedo(top, eta, alpha, smooth)
+        if tinted:
+            from .tinted import FresnelTinted
+            albedo = _tinted_albedo(albedo, top, eta, alpha, smooth, float(max(tint.linear_srgb())))
+            top = FresnelTinted(top, eta, tint)
+        under = OrenNayar(base, p["diffuse_roughness"]) if p["diffuse_roughness"] > 0 else \
+            LAMBERT.build(LAMBERT.values({"albedo": base}, p.where))
+        return Layered(top, under, 1.0, albedo)
     if _textured(base) or max(base.linear_srgb()) > 0:
         values["diffuse_albedo"] = base
     return decl.build(decl.values(values, p.where))
+
+
+def _tinted_albedo(albedo, top, n, alpha, smooth, t):
+    """The layering albedo of a specular layer with Specular Tint t (its largest channel, as Cycles' layering
+    takes the largest): E_t = E_F + F0(t − 1)(E_1 − E_F)/(1 − F0), E_F the untinted albedo, E_1 the F = 1
+    albedo (1 where compensated or smooth)."""
+    from .ggx_energy import conductor_albedo
+    f0 = ((n - 1.0) / (n + 1.0)) ** 2
+    if f0 >= 1.0:
+        return albedo
+
+    def tinted(sp):
+        E = albedo(sp)
+        if smooth or top.multiscatter:
+            E1 = 1.0
+        else:
+            E1 = conductor_albedo(np.clip(sp.cos_o, 0.0, 1.0), sp.number(alpha), correlated=True)
+        return np.maximum(E + f0 * (t - 1.0) * (E1 - E) / (1.0 - f0), 0.0)
+    return tinted
 
 
 def _reflection_albedo(top, n, alpha, smooth):
@@ -220,6 +260,8 @@ DECLARATION = ModelDeclaration(
                                          "constant)", lo=0.0, hi=1.0, default=0.5),
      Parameter("specular_ior_level", "Cycles' Specular IOR Level: F0 × 2·level", lo=0.0, hi=1.0, default=0.5),
      Parameter("diffuse_roughness", "the base's Oren–Nayar roughness σ (0: Lambert)", lo=0.0, hi=1.0, default=0.0),
+     Parameter("specular_tint", "Cycles' Specular Tint: the dielectric's F0 × tint (its F82 tint for the metal)",
+               kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6, default=1.0),
      Parameter("coat_weight", "coat (> 0: a coat over the dielectric)", lo=0.0, hi=1.0, default=0.0),
      Parameter("coat_roughness", "coat roughness r", lo=0.0, hi=1.0, default=0.03),
      Parameter("coat_ior", "coat index", lo=1.0, hi=100.0, default=1.5),

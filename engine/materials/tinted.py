@@ -22,7 +22,7 @@ from ..spectral import Spectrum
 from ..textures import TexturedSpectrum
 from ..vec3 import dot
 
-__all__ = ["Tinted"]
+__all__ = ["FresnelTinted", "Tinted"]
 
 
 def _grey(spec) -> bool:
@@ -83,3 +83,58 @@ class Tinted(BSDF):
         if self.transmission is not None:
             out["transmission_tint"] = repr(self.transmission)
         return out
+
+
+class FresnelTinted(BSDF):
+    """A dielectric reflection layer with Cycles' Specular Tint: Cycles' generalized Schlick Fresnel with
+    F0 × tint, F(θ) = F_real(θ) + F0(tint − 1)(1 − F_real(θ))/(1 − F0) (F_real the dielectric's own
+    reflectance at the facet angle, F0 = F_real(0°)), rendered as the polarising layer ``base`` (a
+    dielectric Torrance–Sparrow or mirror of real index ``n``) times F/F_real per wavelength — the tint
+    changes how much is reflected, not the polarisation of what is (a scalar per wavelength: realisable
+    wherever F ≥ 0).  Reflection only; the facet angle is that of the half vector of (ω_i, ω_o)."""
+
+    def __init__(self, base: BSDF, n: float, tint: Spectrum):
+        self.base, self.n, self.tint = base, float(n), tint
+        self.name = base.name
+        self.f0 = ((self.n - 1.0) / (self.n + 1.0)) ** 2
+        self.flags = base.flags | (BSDFFlags.NONE if _grey(tint) else BSDFFlags.WAVELENGTH_DEPENDENT)
+        self.varies_over_surface = base.varies_over_surface or isinstance(tint, TexturedSpectrum)
+
+    @property
+    def multiscatter(self):
+        return getattr(self.base, "multiscatter", False)
+
+    def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
+        return self.base.shading_point(sp)
+
+    def _factor(self, sp: ShadingPoint, cos_facet: np.ndarray) -> np.ndarray:
+        from ..polarisation.fresnel import fresnel_reflectance
+        F = fresnel_reflectance(np.clip(cos_facet, 0.0, 1.0), complex(self.n))
+        t = sp.spectrum(self.tint)
+        if self.f0 >= 1.0:
+            return np.ones(sp.lam.shape)
+        tinted = F[None, :] + self.f0 * (t - 1.0) * (1.0 - F[None, :]) / (1.0 - self.f0)
+        return np.where(F[None, :] > 0, np.maximum(tinted, 0.0) / np.where(F > 0, F, 1.0)[None, :], 1.0)
+
+    def _half_cos(self, sp, wi):
+        h = wi + sp.wo
+        return 0.5 * np.sqrt(dot(h, h))
+
+    def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
+        return self.base.eval(sp, wi).scaled(self._factor(sp, self._half_cos(sp, wi)))
+
+    def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        return self.base.pdf(sp, wi)
+
+    def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        bs = self.base.sample(sp, u_lobe, u_dir)
+        factor = self._factor(sp, self._half_cos(sp, bs.wi))
+        return BSDFSample(bs.wi, bs.weight.scaled(factor), bs.pdf, bs.is_delta, bs.valid, bs.eta_sq)
+
+    def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
+        value = self.base.delta_reflection(sp)
+        return None if value is None else value.scaled(self._factor(sp, np.abs(sp.cos_o)))
+
+    def describe(self) -> dict[str, object]:
+        return {**self.base.describe(), "specular_tint": repr(self.tint)}
+

@@ -780,6 +780,7 @@ def _principled(node, mat, warnings, bake=None):
     values = {"base_color": _grey(r.rgb_or_texture("Base Color", 0.0, 1.0)), "metallic": metallic,
               "roughness": roughness, "transmission": transmission, "ior": _ior(r, "IOR"),
               "specular_ior_level": r.float("Specular IOR Level", 0.0, 1.0),
+              "specular_tint": _grey(r.rgb("Specular Tint", 0.0)),
               "coat_weight": r.float("Coat Weight", 0.0, 1.0), "coat_roughness": r.float("Coat Roughness", 0.0, 1.0),
               "coat_ior": min(max(r.float("Coat IOR"), 1.0), 100.0),
               "diffuse_roughness": (r.float("Diffuse Roughness", 0.0, 1.0)
@@ -805,7 +806,6 @@ def _principled(node, mat, warnings, bake=None):
 _PRINCIPLED_NOT_SIMULATED = (("Subsurface Weight", 0.0, "rendered as the diffuse base"),
                              ("Sheen Weight", 0.0, "no sheen layer"),
                              ("Anisotropic", 0.0, "isotropic facets"),
-                             ("Specular Tint", 1.0, "an untinted specular layer"),
                              ("Coat Tint", 1.0, "an untinted coat"))
 
 

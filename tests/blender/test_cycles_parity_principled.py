@@ -32,6 +32,8 @@ CASES = {
     "Alpha": ((0.0, 1.0), {"Base Color": (0.8, 0.2, 0.1), "Roughness": 0.5}),        # a cut-out
     "Metallic ": ((0.0, 1.0), {"Base Color": (0.8, 0.2, 0.1), "Roughness": 0.4,     # under a clear coat
                                "Coat Weight": 1.0, "Coat Roughness": 0.1}),
+    "Base Color  ": (((0.8, 0.1, 0.05), (0.1, 0.3, 0.8)), {"Roughness": 0.2,          # a Specular Tint
+                                                            "Specular Tint": (1.0, 0.5, 0.2)}),
 }
 
 

@@ -139,9 +139,9 @@ def test_principled_conversion_per_input(addon):
                                       mueller_at(plain, theta, 30.0, 180.0)["brdf"])
     assert len(warnings) == 1 and "'Subsurface Weight'" in warnings[0]
     # Inputs not simulated yet: one warning each, naming the input (never dropped silently).
-    _, _, warnings = exported(principled(**{"Sheen Weight": 0.5, "Specular Tint": (1, 0.5, 0.5, 1)}))
+    _, _, warnings = exported(principled(**{"Sheen Weight": 0.5, "Anisotropic": 0.3}))
     assert len(warnings) == 2 and "'Sheen Weight'" in warnings[0] + warnings[1]
-    assert any("'Specular Tint'" in w for w in warnings)
+    assert any("'Anisotropic'" in w for w in warnings)
     # Coat → a GGX dielectric layer over everything below, Cycles' layering.
     bsdf, _, _ = exported(principled(**{"Coat Weight": 1.0, "Coat IOR": 1.6, "Coat Roughness": 0.0, "Roughness": 0.0}))
     assert bsdf.name == "layered" and bsdf.top_weight == 1.0     # Cycles' coat over everything below

@@ -56,3 +56,23 @@ def test_smooth_glass_tints_each_lobe_and_its_mirror():
     np.testing.assert_array_equal(tinted.delta_reflection(sp).matrix(), glass.delta_reflection(sp).matrix())
     both = Tinted(glass, ConstantSpectrum(0.25), None)
     np.testing.assert_allclose(both.delta_reflection(sp).matrix(), 0.25 * glass.delta_reflection(sp).matrix())
+
+
+def test_specular_tint_is_cycles_generalized_schlick():
+    """FresnelTinted: the mirror's reflectance is F0·tint at normal incidence and the real Fresnel curve's
+    remap F_real + F0(t − 1)(1 − F_real)/(1 − F0) elsewhere (→ 1 at grazing); polarisation shape kept."""
+    from engine.materials.conductor import SmoothConductor
+    from engine.materials.tinted import FresnelTinted
+    from engine.polarisation.fresnel import fresnel_reflectance
+    mirror = SmoothConductor(ConstantSpectrum(1.5), ConstantSpectrum(0.0))
+    tinted = FresnelTinted(mirror, 1.5, ConstantSpectrum(0.25))
+    for mu in (1.0, 0.5, 0.05):
+        sp = points(1, np.random.default_rng(0))
+        sp.wo[:] = [[np.sqrt(1 - mu * mu)], [0.0], [mu]]
+        got = tinted.delta_reflection(sp)
+        want = mirror.delta_reflection(sp)
+        F = fresnel_reflectance(mu, 1.5 + 0j)
+        expect = F + 0.04 * (0.25 - 1.0) * (1.0 - F) / 0.96
+        np.testing.assert_allclose(got.A, expect, rtol=1e-12)
+        np.testing.assert_allclose(got.matrix() / got.A, want.matrix() / want.A, rtol=1e-12)   # same shape
+    assert tinted.delta_reflection(sp).A[0, 0] < 1.0
