@@ -806,6 +806,8 @@ class PathTracer:
                 wi, dist, scale, pdf_l, ok = light.sample(sp.p, np.stack((u_rest, u[1], u[2])))
                 emitted = self._emitted(light, lookup, wi)
             delta = light.is_delta
+            if light.shades_nothing:         # hidden from indirect rays: lights nothing (Cycles)
+                ok = np.zeros_like(ok)
             select_prob = light_set.prob[li] if chosen_prob is None else chosen_prob
             owners = [(li, slice(None))]
         else:
@@ -825,6 +827,8 @@ class PathTracer:
                     w, d, sc, pdf, valid = light.sample(gather(sp.p, sel), u_sel)
                     emitted[:, sel] = self._emitted(light, lookup.take(sel), w)
                 wi[:, sel], dist[sel], scale[sel], pdf_l[sel], ok[sel] = w, d, sc, pdf, valid
+                if light.shades_nothing:
+                    ok[sel] = False
                 delta[sel] = light.is_delta
                 owners.append((li, sel))
         direct = getattr(bsdf, "direct_light", None)

@@ -1121,7 +1121,7 @@ def _transparent_mix(node, shaders, mat, warnings, depth, bake):
 
     - Mix(Transparent, X) by Light Path ▸ Is Camera Ray (glTF's KHR_materials_unlit): the camera sees X,
       every other ray passes through — X with ``camera_only`` (the exporter hides the object from shadow and
-      indirect rays; its emission still lights the scene by next-event estimation: one warning if it emits);
+      indirect rays, so that its emission lights nothing, as in Cycles);
     - Mix(Transparent, X) or Mix(X, Transparent) by a constant or per-point Factor (an alpha mix): X with
       ``alpha_factor`` the weight of X (the object's pass-through alpha, engine.render.visibility; the
       Transparent BSDF's colour must be white, else one warning and its luminance).
@@ -1143,10 +1143,7 @@ def _transparent_mix(node, shaders, mat, warnings, depth, bake):
                             "the camera sees it")
         bsdf, emission = (surface_bsdf(other, mat, warnings, depth, bake) if other is not None
                           else (Lambert(ConstantSpectrum(0.0)), None))
-        bsdf.camera_only = True
-        if emission is not None:
-            warnings.append(f"material {mat!r}: its emission, shown to the camera only in Cycles, also lights the "
-                            "scene in Polar")
+        bsdf.camera_only = True         # (hidden from indirect rays, its emission lights nothing: as Cycles)
         return bsdf, emission
     _white_transparent(clear, mat, warnings)
     r = _Reader(mat, node, warnings, bake)

@@ -31,6 +31,9 @@ class _Light:
     blocks_own_shadow_rays = False    # an opaque emitter whose geometry can stop its own shadow rays
     hit_pdf_needs_origin = False      # ``pdf_hit`` needs the segment's origin (solid-angle sampled lamps)
     hit_pdf_needs_direction = False   # ... and where on the lamp the ray arrives (warp-sampled lamps)
+    #: an emitter hidden from indirect rays lights nothing by next-event estimation either (Cycles excludes
+    #: a mesh light from the ray types its object is invisible to); camera rays still see it
+    shades_nothing = False
     varies_over_surface = False       # radiance per point (TexturedAreaEmitter: sample_points, emitted_at)
 
     def __init__(self, spectrum):

@@ -8,7 +8,8 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import SceneError
-from ...kernels.light_sampling import GLOBAL_SHARE, SELECTION_PARAMS, choose_light, selection_probabilities
+from ...kernels.light_sampling import (GLOBAL_SHARE, SELECT_CONSTANT, SELECTION_PARAMS, choose_light,
+                                       selection_probabilities)
 from ...scene.description import DirectionalLight, EnvironmentLight, PointLight, SpotLight
 from ...textures import TexturedSpectrum
 from .area import mesh_emitter
@@ -52,6 +53,8 @@ class LightSet:
                                                        f"meshes[{mesh_index}] ({mesh.name!r}).emission"))
             else:
                 self.lights.append(mesh_emitter(mesh.emission, tris, compiled, two_sided, spread))
+            if not getattr(mesh, "visible_indirect", True):
+                self.lights[-1].shades_nothing = True
         for index, light in enumerate(scene.lights):
             if not getattr(light, "visible_camera", True):
                 self.camera_hidden.add(len(self.lights))
@@ -87,7 +90,8 @@ class LightSet:
         self.cdf = None
         if self.selection == "power" and count > 1:
             radius = max(float(np.linalg.norm(compiled.vertices - compiled.vertices.mean(0), axis=1).max()), 1e-9)
-            power = np.array([lt.power(radius) if lt.at_infinity else lt.power() for lt in self.lights])
+            power = np.array([0.0 if lt.shades_nothing else lt.power(radius) if lt.at_infinity else lt.power()
+                              for lt in self.lights])
             power = np.where(np.isfinite(power) & (power > 0), power, 0.0)
             if power.sum() > 0:
                 self.prob = power / power.sum()
@@ -105,6 +109,8 @@ class LightSet:
             self._params = np.zeros((count, SELECTION_PARAMS))
             for i, (_, row) in enumerate(records):
                 self._params[i, :len(row)] = row
+                if self.lights[i].shades_nothing:       # its importance: none (a constant 0)
+                    self._kinds[i], self._params[i, :] = SELECT_CONSTANT, 0.0
         self.hittable = [i for i, light in enumerate(self.lights) if light.hittable]
 
     def probabilities(self, p, n=None):
