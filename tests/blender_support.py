@@ -117,3 +117,31 @@ def render_to_exr(scene, path):
     scene.render.filepath = path
     bpy.ops.render.render(write_still=True)
     return path + ".exr" if not path.endswith(".exr") else path
+
+
+def cycles_seed_renders(scene, tmp, spp, seeds, bounces, light_threshold=None):
+    """(seeds, H, W, 3) linear RGB of Cycles' Combined pass, one render per seed 0, 1, …, with the parity
+    settings the Cycles comparisons share: CPU, no adaptive sampling, no denoising, box filter 1 px, no
+    clamping, ``bounces`` as Max and Diffuse Bounces, 2 threads, a 32-bit multilayer EXR per seed in
+    ``tmp``; ``light_threshold``: Cycles' Light Threshold, if given (0: every light sampled)."""
+    import bpy
+    import numpy as np
+    scene.render.engine = "CYCLES"
+    c = scene.cycles
+    c.device, c.samples, c.use_adaptive_sampling, c.use_denoising = "CPU", spp, False, False
+    c.pixel_filter_type, c.filter_width = "BOX", 1.0
+    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
+    if light_threshold is not None:
+        c.light_sampling_threshold = light_threshold
+    c.max_bounces = c.diffuse_bounces = bounces
+    scene.render.threads_mode, scene.render.threads = "FIXED", 2
+    load_addon().polar_addon.compat.set_multilayer_exr(scene.render.image_settings)
+    scene.render.image_settings.color_depth = "32"
+    out = []
+    for seed in range(seeds):
+        c.seed = seed
+        scene.render.filepath = os.path.join(tmp, f"cycles_{seed}")
+        bpy.ops.render.render(write_still=True)
+        out.append(read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3])
+    return np.array(out)
+

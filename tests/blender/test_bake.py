@@ -6,7 +6,6 @@ bpy.data's contents before and after (nothing may be left behind).
 """
 
 import math
-import os
 import tempfile
 
 import numpy as np
@@ -14,7 +13,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from tests.blender_support import load_addon, read_multilayer  # noqa: E402
+from tests.blender_support import cycles_seed_renders, load_addon  # noqa: E402
 
 W, H = 48, 36
 BLOCK = 12
@@ -190,22 +189,7 @@ def test_bake_resolution_setting_is_range_checked():
 
 
 def _cycles_renders(scene, tmp):
-    scene.render.engine = "CYCLES"
-    c = scene.cycles
-    c.device, c.samples, c.use_adaptive_sampling, c.use_denoising = "CPU", CYCLES_SPP, False, False
-    c.pixel_filter_type, c.filter_width = "BOX", 1.0
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-    c.max_bounces = c.diffuse_bounces = 3
-    scene.render.threads_mode, scene.render.threads = "FIXED", 2
-    ims = scene.render.image_settings
-    ims.media_type, ims.color_depth = "MULTI_LAYER_IMAGE", "32"
-    out = []
-    for seed in range(SEEDS):
-        c.seed = seed
-        scene.render.filepath = os.path.join(tmp, f"cycles_{seed}")
-        bpy.ops.render.render(write_still=True)
-        out.append(read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3] @ REC709)
-    return np.array(out)
+    return cycles_seed_renders(scene, tmp, CYCLES_SPP, SEEDS, 3) @ REC709
 
 
 def _polar_renders(scene):

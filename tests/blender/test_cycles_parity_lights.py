@@ -9,7 +9,6 @@ threshold, the same bounce limit.
 """
 
 import math
-import os
 import tempfile
 
 import numpy as np
@@ -17,7 +16,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from tests.blender_support import load_addon, read_multilayer  # noqa: E402
+from tests.blender_support import cycles_seed_renders, load_addon  # noqa: E402
 
 W, H = 48, 36
 SEEDS = 4
@@ -183,32 +182,7 @@ LIT_FRACTION = {"lights_seen": 0.0005}
 
 
 def cycles_renders(scene, tmp):
-    scene.render.engine = "CYCLES"
-    c = scene.cycles
-    c.device = "CPU"
-    c.samples = CYCLES_SPP
-    c.use_adaptive_sampling = False
-    c.use_denoising = False
-    c.pixel_filter_type = "BOX"
-    c.filter_width = 1.0
-    c.sample_clamp_direct = 0.0
-    c.sample_clamp_indirect = 0.0
-    c.light_sampling_threshold = 0.0
-    c.max_bounces = BOUNCES
-    c.diffuse_bounces = BOUNCES
-    c.caustics_reflective = c.caustics_refractive = True
-    scene.render.threads_mode = "FIXED"
-    scene.render.threads = 2
-    ims = scene.render.image_settings
-    ims.media_type = "MULTI_LAYER_IMAGE"
-    ims.color_depth = "32"
-    out = []
-    for seed in range(SEEDS):
-        c.seed = seed
-        scene.render.filepath = os.path.join(tmp, f"cycles_{seed}")
-        bpy.ops.render.render(write_still=True)
-        out.append(read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3] @ REC709)
-    return np.array(out)
+    return cycles_seed_renders(scene, tmp, CYCLES_SPP, SEEDS, BOUNCES, light_threshold=0.0) @ REC709
 
 
 def polar_renders(scene):

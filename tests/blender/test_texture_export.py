@@ -20,7 +20,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from tests.blender_support import load_addon, polar_material, read_multilayer  # noqa: E402
+from tests.blender_support import cycles_seed_renders, load_addon, polar_material  # noqa: E402
 
 W = H = 32
 BLOCK = 8
@@ -201,29 +201,7 @@ SCENES = {"checker": checker, "checker_mapped": checker_mapped, "polarising_lamb
 # --------------------------------------------------------------------------- renders
 
 def cycles_renders(scene, tmp):
-    scene.render.engine = "CYCLES"
-    c = scene.cycles
-    c.device = "CPU"
-    c.samples = CYCLES_SPP
-    c.use_adaptive_sampling = False
-    c.use_denoising = False
-    c.pixel_filter_type = "BOX"
-    c.filter_width = 1.0
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-    c.light_sampling_threshold = 0.0
-    c.max_bounces = c.diffuse_bounces = BOUNCES
-    scene.render.threads_mode = "FIXED"
-    scene.render.threads = 2
-    ims = scene.render.image_settings
-    ims.media_type = "MULTI_LAYER_IMAGE"
-    ims.color_depth = "32"
-    out = []
-    for seed in range(SEEDS):
-        c.seed = seed
-        scene.render.filepath = os.path.join(tmp, f"cycles_{seed}")
-        bpy.ops.render.render(write_still=True)
-        out.append(read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3])
-    return np.array(out)
+    return cycles_seed_renders(scene, tmp, CYCLES_SPP, SEEDS, BOUNCES, light_threshold=0.0)
 
 
 def polar_renders(scene):
