@@ -1167,8 +1167,8 @@ def _shader_mix(node, mat, warnings, depth, bake):
     """(BSDF, emission) of a Mix Shader (weights 1 − Factor and Factor, Factor clamped to [0, 1] as
     Cycles, constant or per point) or an Add Shader (weights 1 and 1): an engine Mix of the two
     shaders' BSDFs, nested mixes nesting.  An unlinked shader input adds nothing (as in Cycles).
-    Emission adds up with the same weights; a per-point Factor weighs emission by its own value
-    (one warning: emission does not vary over a surface yet)."""
+    Emission adds up with the same weights; under a per-point Factor the emission is weighed by the
+    Factor's own value (one warning: an emitter's strength does not follow a texture Factor)."""
     from ...engine.materials.mix import Mix
     if depth > 32:
         raise SceneError(f"material {mat!r}", "shader mixes nest more than 32 deep")
