@@ -387,6 +387,18 @@ class Mix(BSDF):
             parts.append(c)
         self.components = parts
 
+    def with_components(self, components) -> Mix:
+        """This mix (its kind, weights, layering and two-sidedness) over ``components``, one per component,
+        in order, e.g. each with its own normal map (engine.materials.normal_map.map_normals)."""
+        components = list(components)
+        if len(components) != len(self.components):
+            raise ValueError(f"with_components needs {len(self.components)} materials, got {len(components)}")
+        out = copy.copy(self)
+        out.components = components
+        out.varies_over_surface = self.varies_over_surface or any(c.varies_over_surface for c in components)
+        out.flags = out._mixed_flags()
+        return out
+
     # --- points, weights, probabilities ----------------------------------------------------------
 
     def _component_points(self, sp: ShadingPoint) -> list[ShadingPoint]:
@@ -565,6 +577,21 @@ DECLARATION = ModelDeclaration(
 DECLARATION.per_point = frozenset({"weights"})
 
 
+def map_normals(bsdf: BSDF, **kw) -> BSDF:
+    """``bsdf`` with a normal and/or bump map (ShadingNormal's keywords), mapped lobe by lobe as Cycles maps
+    each closure of a shader: a mix (a layered one included) maps each of its components and keeps its
+    weights and layering; a model with a diffuse base under a specular layer that it can split into those
+    two (``as_layers()``, Torrance–Sparrow's "albedo_scaling") is split first, so that the specular layer gets
+    the corrected normal and the diffuse base its own rules (engine.materials.normal_map)."""
+    if isinstance(bsdf, Mix):
+        return bsdf.with_components([map_normals(c, **kw) for c in bsdf.components])
+    split = getattr(bsdf, "as_layers", None)
+    layered = split() if split is not None else None
+    if layered is not None:
+        return map_normals(layered, **kw)
+    return ShadingNormal(bsdf, **kw)
+
+
 @DECLARATION.builder
 def _mix(p, materials):
     weights = p["weights"]
@@ -597,6 +624,7 @@ class Layered(Mix):
 
     def _weights(self, sp: ShadingPoint) -> list[np.ndarray]:
         weights = super()._weights(sp)
-        scale = np.maximum(1.0 - self.top_weight * self.albedo(sp), 0.0)
+        top = self._points(sp)[0]       # the top's albedo at its own normal (a corrected mapped one: Cycles')
+        scale = np.maximum(1.0 - self.top_weight * self.albedo(top), 0.0)
         return weights[:1] + [w * scale for w in weights[1:]]
 

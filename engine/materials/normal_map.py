@@ -19,14 +19,28 @@ offsets ray origins and decides on which side of the actual surface a direction 
   apart; ∂p/∂u' = ∂p/∂u + d·h_u·n_s, ∂p/∂v' = ∂p/∂v + d·h_v·n_s (pbrt's bump mapping without the
   ∂n terms), n_b = normalise(∂p/∂u' × ∂p/∂v') on the side of n_s, blended by ``strength`` as above.
 
-Light leaks: a tilted shading normal accepts directions below the geometric surface (a reflected
-ray that would pass through it) or above it for a transmitted one.  The wrapper keeps a direction
-only where the geometric normal agrees with the shading normal on reflection vs transmission:
-sign((ω_i·n_g)(ω_o·n_g)) = sign((ω_i·n_s)(ω_o·n_s)) (as pbrt's BSDF::f); elsewhere f = 0 and
-samples are invalid.
+Light leaks, as Cycles (kernel/closure/bsdf.h, bump_shadowing_term; Blender's Material ▸ Settings ▸
+Bump Map Correction, on by default, ``bump_correction``).  N is the lobe's normal after mapping, N_s the
+interpolated normal before it (a MappedShadingPoint's ``n_smooth``), ω_i the direction towards the
+light:
+- a direction with (N_s·ω_i)(N_s·N)(N·ω_i) < 0 lies on one side of the mapped normal and on the other
+  of the smooth surface: f = 0, and such a sample is invalid (Cycles rejects it when evaluating, and
+  when sampling a diffuse lobe; Polar rejects it for every lobe, so sampling and evaluation agree);
+- a diffuse lobe is softened towards its terminator by a GGX masking term G1(α², |N_s·ω_i|) with
+  α² = min(1, tan²θ_d / 8), cosθ_d = |N_s·N| (Conty Estevez et al. 2019, "A microfacet-based shadowing
+  function to solve the bump terminator problem");
+- a specular lobe (glossy or Dirac, no diffuse one) gets Cycles' valid normal (valid_specular_normal)
+  so that the mirror direction of the view stays above the surface;
+- a diffuse lobe shades by N·ω_i even where the viewer is behind N (Cycles' diffuse closures never look
+  at the view direction): such a lobe is evaluated with the view mirrored in N's tangent plane, which
+  changes nothing for a depolarising lobe's Mueller matrix (Lambert) and little for Oren–Nayar.
+Without Bump Map Correction only the first rule applies.  A composite material is mapped lobe by lobe
+(engine.materials.mix.map_normals), as Cycles maps each closure of a shader.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -47,9 +61,8 @@ def valid_specular_normal(n: np.ndarray, n_g: np.ndarray, wo: np.ndarray) -> np.
     plane of n_g and n just far enough that R·n_g = t (the root of 4a z⁴ − 2b z² + c = 0 for z = n'·n_g,
     a = I_x² + I_z², b = 2(a + I_z t), c = (I_z + t)²).  Without it a steep normal map darkens glossy
     surfaces (their reflections go into the surface and are lost).  Applied where the viewer is on the
-    front (ω_o·n_g > 0), for materials with glossy or mirror lobes and no diffuse one (Cycles corrects the
-    normal of its specular closures only: a material whose diffuse and specular lobes share one normal keeps
-    the mapped normal; a mix maps each of its materials itself); n, n_g, ω_o are (3, N) unit vectors."""
+    front (ω_o·n_g > 0), to a lobe with glossy or mirror parts and no diffuse one (a composite material is
+    mapped lobe by lobe: engine.materials.mix.map_normals); n, n_g, ω_o are (3, N) unit vectors."""
     iz = dot(wo, n_g)
     refl = 2.0 * dot(n, wo)[None, :] * n - wo
     t = np.minimum(0.9 * iz, 0.01)
@@ -80,8 +93,46 @@ def _normalise(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     return np.where(ok[None, :], unit, fallback)
 
 
+@dataclass
+class MappedShadingPoint(ShadingPoint):
+    """A shading point whose ``n_s`` is a mapped normal, with the interpolated normal it was mapped from
+    (``n_smooth``, (3, N), Cycles' sd->N), flipped and taken along with it."""
+
+    n_smooth: np.ndarray | None = None
+
+    def _with(self, base: ShadingPoint, n_smooth) -> MappedShadingPoint:
+        return MappedShadingPoint(base.p, base.n_s, base.n_g, base.wo, base.lam, base.mono, base.lookup,
+                                  base.material, base.surface, n_smooth)
+
+    def take(self, sel) -> MappedShadingPoint:
+        return self._with(super().take(sel), self.n_smooth[:, sel])
+
+    def flipped(self, where: np.ndarray) -> MappedShadingPoint:
+        return self._with(super().flipped(where), self.n_smooth * np.where(where, -1.0, 1.0)[None, :])
+
+
+def _smooth_normal(sp: ShadingPoint) -> np.ndarray:
+    return sp.n_smooth if isinstance(sp, MappedShadingPoint) else sp.n_g
+
+
+def terminator_softening(n_smooth: np.ndarray, n: np.ndarray, wi: np.ndarray) -> np.ndarray:
+    """Cycles' bump shadowing of a diffuse lobe (N,): the GGX masking G1 = 2 / (1 + √(1 + α² tan²θ_i)) at
+    cosθ_i = |N_s·ω_i| with α² = min(1, tan²θ_d / 8), cosθ_d = |N_s·N|; 1 where N = N_s or cosθ_i = 1, 0 where
+    cosθ_i < 1e-6.  All inputs (3, N) unit vectors."""
+    cos_i = np.abs(dot(n_smooth, wi))
+    cos_d = np.abs(dot(n_smooth, n))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tan2_d = 1.0 / np.square(cos_d) - 1.0
+        alpha2 = np.clip(0.125 * tan2_d, 0.0, 1.0)
+        tan2_i = (1.0 - np.square(cos_i)) / np.square(cos_i)
+        g = 2.0 / (1.0 + np.sqrt(1.0 + alpha2 * tan2_i))
+    g = np.where(cos_i < 1e-6, 0.0, g)
+    return np.where((cos_d >= 1.0) | (cos_i >= 1.0), 1.0, g)
+
+
 class ShadingNormal(BSDF):
-    """``base`` with its shading normal from a normal map and/or a bump map (see the module docstring)."""
+    """``base`` with its shading normal from a normal map and/or a bump map (see the module docstring).
+    ``base`` is one lobe's material (a composite is mapped lobe by lobe: mix.map_normals)."""
 
     varies_over_surface = True
 
@@ -90,7 +141,7 @@ class ShadingNormal(BSDF):
 
     def __init__(self, base: BSDF, normal_map: TextureInput | None = None, normal_strength: float = 1.0,
                  bump_map: TextureInput | None = None, bump_distance: float = 1.0, bump_strength: float = 1.0,
-                 normal_convention: str = "opengl"):
+                 normal_convention: str = "opengl", bump_correction: bool = True):
         if normal_map is None and bump_map is None:
             raise ValueError("ShadingNormal needs a normal map or a bump map")
         if normal_convention not in self.CONVENTIONS:
@@ -101,8 +152,12 @@ class ShadingNormal(BSDF):
         self.normal_map, self.normal_strength = normal_map, float(normal_strength)
         self.normal_green_down = normal_convention == "directx"
         self.bump_map, self.bump_distance, self.bump_strength = bump_map, float(bump_distance), float(bump_strength)
+        self.bump_correction = bool(bump_correction)
         self.flags = base.flags
         self.name = base.name
+        F = BSDFFlags
+        self._specular = base.flags.has(_SPECULAR) and not base.flags.has(F.DIFFUSE)
+        self._diffuse = base.flags.has(F.DIFFUSE) and not base.flags.has(_SPECULAR | F.POLARISING)
 
     # --- the shading normal ----------------------------------------------------------------------
 
@@ -147,31 +202,52 @@ class ShadingNormal(BSDF):
 
     def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
         n = self.shading_normal(sp)
-        if self.base.flags.has(_SPECULAR) and not self.base.flags.has(BSDFFlags.DIFFUSE):
+        if self._specular and self.bump_correction:
             n = valid_specular_normal(n, sp.n_g, sp.wo)
-        return ShadingPoint(sp.p, n, sp.n_g, sp.wo, sp.lam, sp.mono, sp.lookup, sp.material, sp.surface)
+        return MappedShadingPoint(sp.p, n, sp.n_g, sp.wo, sp.lam, sp.mono, sp.lookup, sp.material, sp.surface,
+                                  sp.n_s)
 
-    # --- the geometric-side guard ----------------------------------------------------------------
+    # --- Cycles' rules for light leaks -------------------------------------------------------------
 
     @staticmethod
     def geometric_agreement(sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        """(N,) True where n_g and n_s agree on whether (ω_i, ω_o) is a reflection or a transmission."""
-        g = dot(wi, sp.n_g) * dot(sp.wo, sp.n_g)
-        s = dot(wi, sp.n_s) * dot(sp.wo, sp.n_s)
-        return (g != 0) & ((g > 0) == (s > 0))
+        """(N,) False where ω_i is on one side of the mapped normal and on the other of the smooth surface:
+        (N_s·ω_i)(N_s·N)(N·ω_i) < 0 (Cycles' bump_shadowing_term; N_s = n_g without a MappedShadingPoint)."""
+        ns = _smooth_normal(sp)
+        return dot(ns, wi) * dot(ns, sp.n_s) * dot(sp.n_s, wi) >= 0
+
+    def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        """(N,) the leak rule times, for a diffuse lobe with correction, the terminator softening."""
+        keep = self.geometric_agreement(sp, wi).astype(np.float64)
+        if self._diffuse and self.bump_correction:
+            keep = keep * terminator_softening(_smooth_normal(sp), sp.n_s, wi)
+        return keep
+
+    def _base_point(self, sp: ShadingPoint) -> ShadingPoint:
+        """The point the base lobe sees: a diffuse lobe's view mirrored into the front of its mapped
+        normal where the viewer is behind it but in front of the smooth surface (see the module docstring)."""
+        if not self._diffuse:
+            return sp
+        c = dot(sp.n_s, sp.wo)
+        behind = (c < 0) & (dot(_smooth_normal(sp), sp.wo) > 0)
+        if not behind.any():
+            return sp
+        wo = np.where(behind[None, :], sp.wo - 2.0 * c[None, :] * sp.n_s, sp.wo)
+        return ShadingPoint(sp.p, sp.n_s, sp.n_g, wo, sp.lam, sp.mono, sp.lookup, sp.material, sp.surface)
 
     # --- BSDF interface (at the mapped shading point) ---------------------------------------------
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        return self.base.eval(sp, wi).masked(self.geometric_agreement(sp, wi))
+        return self.base.eval(self._base_point(sp), wi).scaled(self._factor(sp, wi)[None, :])
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        return self.base.pdf(sp, wi)
+        return self.base.pdf(self._base_point(sp), wi)
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
-        bs = self.base.sample(sp, u_lobe, u_dir)
-        keep = self.geometric_agreement(sp, bs.wi)
-        return BSDFSample(wi=bs.wi, weight=bs.weight.masked(keep), pdf=np.where(keep, bs.pdf, 0.0),
+        bs = self.base.sample(self._base_point(sp), u_lobe, u_dir)
+        factor = self._factor(sp, bs.wi)
+        keep = factor > 0
+        return BSDFSample(wi=bs.wi, weight=bs.weight.scaled(factor[None, :]), pdf=np.where(keep, bs.pdf, 0.0),
                           is_delta=bs.is_delta, valid=bs.valid & keep, eta_sq=bs.eta_sq)
 
     def delta_reflection(self, sp: ShadingPoint):
@@ -188,3 +264,15 @@ class ShadingNormal(BSDF):
         if self.bump_map is not None:
             out["bump_map"] = f"{self.bump_map!r}, distance {self.bump_distance:g}, strength {self.bump_strength:g}"
         return out
+
+
+def set_bump_correction(bsdf: BSDF, on: bool) -> None:
+    """Turn Cycles' bump map correction (the specular normal and the diffuse terminator softening; the side
+    rule stays) on or off on every ShadingNormal of ``bsdf`` (through mixes and wrappers)."""
+    if isinstance(bsdf, ShadingNormal):
+        bsdf.bump_correction = bool(on)
+    for part in getattr(bsdf, "components", ()):
+        set_bump_correction(part, on)
+    base = getattr(bsdf, "base", None)
+    if isinstance(base, BSDF):
+        set_bump_correction(base, on)

@@ -468,6 +468,21 @@ class TorranceSparrow(BSDF):
             E = E * (1.0 + self.multiscatter_extra(sp)[0])
         return np.maximum(1.0 - sp.number(self.s) * E, 0.0)
 
+    def as_layers(self):
+        """With ``"albedo_scaling"``, the same material as Cycles' two closures: this specular lobe alone over
+        a Lambert base of weight d, the base scaled by max(0, 1 − s·E(ω_o)) (mix.Layered); else None.  Used to
+        give the two lobes their own mapped normals (mix.map_normals)."""
+        if self._albedo is None:
+            return None
+        from .lambert import Lambert
+        from .mix import Layered, Mix
+        top = TorranceSparrow(self.n, self.k, self.m, self.shadowing, self.exterior_n, None, self.s, 0.0,
+                              self.distribution, None, "add", self.multiscatter)
+        layered = Layered(top, Mix([Lambert(self.albedo)], [self.d]), 1.0,
+                          lambda sp: 1.0 - self.diffuse_scale(sp, np.clip(sp.cos_o, 0.0, 1.0)))
+        layered.two_sided = self.two_sided
+        return layered
+
     # --- helpers ---------------------------------------------------------------------------------
 
     def _dist(self, sp: ShadingPoint, sel: np.ndarray | None = None):

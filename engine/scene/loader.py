@@ -24,7 +24,7 @@ import numpy as np
 
 from ..files import refuse_special_file
 from ..materials.catalogue import MODELS
-from ..materials.mix import MAX_COMPONENTS, Mix
+from ..materials.mix import MAX_COMPONENTS, Mix, map_normals
 from ..materials.normal_map import ShadingNormal
 from ..textures import TexturedNumber, parse_texture_input, textured_emission
 from ..textures.image import read_image
@@ -446,8 +446,6 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: s
         raise SceneError(f"{field}.two_sided", f"must be true or false, got {two_sided!r}")
     if two_sided:
         bsdf.two_sided = True
-        if isinstance(bsdf, ShadingNormal) and isinstance(bsdf.base, Mix):
-            bsdf.base.two_sided = True      # a transmitting mix flips its opaque materials itself
     if interior is not None and interior.absorbs:
         bsdf.interior = interior            # (none when it absorbs nothing: the scene renders as without)
     return bsdf
@@ -502,7 +500,7 @@ def _shading_normal(bsdf, d: dict, field: str, base_dir):
             kw.update(normal_map=source, normal_strength=values["strength"], normal_convention=convention)
         else:
             kw.update(bump_map=source, bump_distance=values["distance"], bump_strength=values["strength"])
-    return ShadingNormal(bsdf, **kw)
+    return map_normals(bsdf, **kw)
 
 
 def _parse_part(value, field, lookup, depth, base_dir=None, mixed=False):

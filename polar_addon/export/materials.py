@@ -37,7 +37,8 @@ import numpy as np
 from ...engine.materials.dielectric import SmoothDielectric
 from ...engine.materials.lambert import Lambert
 from ...engine.materials.catalogue import MODELS
-from ...engine.materials.normal_map import ShadingNormal
+from ...engine.materials.mix import map_normals
+from ...engine.materials.normal_map import set_bump_correction
 from ...engine.materials.principled import IOR_MIN, WEIGHT_CUTOFF
 from ...engine.materials.torrance_sparrow import M_MIN
 from ...engine.errors import SceneError
@@ -1035,12 +1036,7 @@ def with_shading_normal(bsdf, node, mat, warnings):
     kw = {k: v for k, v in kw.items() if v is not None}
     if "normal_map" not in kw and "bump_map" not in kw:
         return bsdf
-    from ...engine.materials.mix import Mix
-    if isinstance(bsdf, Mix):       # each part mapped on its own (a metal's normal is corrected, a diffuse one not)
-        mixed = Mix([ShadingNormal(c, **kw) for c in bsdf.components], list(bsdf.weights))
-        mixed.two_sided = bsdf.two_sided
-        return mixed
-    return ShadingNormal(bsdf, **kw)
+    return map_normals(bsdf, **kw)
 
 
 def surface_bsdf(node, mat, warnings, depth=0, bake=None):
@@ -1239,6 +1235,9 @@ def _material_bsdf(material, warnings, bake):
         warnings.append(f"material {material.name!r} has no surface shader; rendered black")
         return Lambert(ConstantSpectrum(0.0)), None
     bsdf, emission = surface_bsdf(node, material.name, warnings, bake=bake)
+    cycles = getattr(material, "cycles", None)      # Material ▸ Settings ▸ Bump Map Correction (Cycles' property)
+    if not getattr(cycles, "use_bump_map_correction", True):
+        set_bump_correction(bsdf, False)
     if volume is not None:
         bsdf = _with_interior(bsdf, volume, material.name, warnings)
     return bsdf, emission

@@ -23,12 +23,6 @@ SEEDS = 4
 
 #: Why each currently failing case fails, as isolated by editing the material in both renderers.
 KNOWN = {
-    ("TextureTransform", "lamps"): "the 8×8 grid image used as a tangent-space normal map gives very steep normals: "
-                                   "with Normal unlinked in both renderers 30/30 blocks, with it 8/30 (Y 0.976). "
-                                   "Correcting only the dielectric's specular normal (Cycles' "
-                                   "ensure_valid_specular_reflection; the metal's already is) made it worse (3/30), "
-                                   "so the difference in mapped-normal shading is not isolated yet",
-    ("TextureTransform", "hdri"): "steep normal map, as under lamps (5/30 blocks, Y 1.03)",
     ("Sunglasses", "lamps"): "2 of 11 blocks, the lenses (Polar ÷ Cycles 2.0 and 1.5 of a nearly black region): "
                              "Transmission 0 on either lens material alone (the IOR-1.0 outer shell, tint "
                              "√0.009 per refraction, or the IOR-1.5 inner lens, √0.016) gives 11/11 blocks, so "

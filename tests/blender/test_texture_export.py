@@ -595,6 +595,11 @@ def test_named_uv_map_point_colours_and_bump_with_normal_map_export(tmp_path):
     bsdf = exported.materials[plane.materials[0]]
     assert isinstance(bsdf, ShadingNormal) and bsdf.normal_map is not None and bsdf.bump_map is not None
     assert bsdf.base.varies_over_surface
+    assert bsdf.bump_correction                     # Cycles' Material ▸ Settings ▸ Bump Map Correction, default on
+    mat.cycles.use_bump_map_correction = False
+    mat.update_tag()                                # (the UI tags the material; a script must)
+    exported, _ = _export(scene)
+    assert not exported.materials[plane.materials[0]].bump_correction
 
 
 # --------------------------------------------------------------------------- sRGB images between texels

@@ -12,6 +12,7 @@ from engine.errors import SceneError
 from engine.materials.base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
 from engine.materials.dielectric import SmoothDielectric
 from engine.materials.evaluate import mueller_at
+from engine.materials.normal_map import ShadingNormal
 from engine.materials.lambert import Lambert
 from engine.materials.mix import Mix, MixShadingPoint, rotate_mueller_batch
 from engine.materials.sampling import cosine_hemisphere, local_to_world
@@ -407,8 +408,16 @@ def test_each_material_at_its_own_shading_normal_and_flipped_with_the_mix(tmp_pa
     np.testing.assert_allclose(n1, np.tile([[math.sin(a)], [0.0], [math.cos(a)]], (1, n)), rtol=0, atol=1e-7)
     np.testing.assert_array_equal(at.parts[0].n_s, n1)
     # value × |n_s·ω_i| (what the integrator forms) = Σ w_k f_k |n_k·ω_i|, each at its own normal
-    c1, c0, g = dot(n1, wi), dot(sp.n_s, wi), dot(sp.n_g, wi) * dot(sp.n_g, sp.wo)
-    front1 = (c1 > 0) & (dot(n1, sp.wo) > 0) & (g > 0)
+    # Cycles' rules for the mapped diffuse lobe (engine.materials.normal_map): lit where N·ω_i > 0 and ω_i is
+    # on the same side of the smooth normal N_s as of N, seen wherever the viewer is in front of N or of N_s,
+    # softened by the GGX masking Λ-form G1 = 1 / (1 + Λ), Λ = (√(1 + α² tan²θ_i) − 1) / 2, α² = tan²θ_d / 8
+    c1, c0 = dot(n1, wi), dot(sp.n_s, wi)
+    seen = (dot(n1, sp.wo) > 0) | (sp.cos_o > 0)
+    front1 = (c1 > 0) & seen & (c0 * dot(sp.n_s, n1) * c1 >= 0)
+    cos_i = np.abs(c0)
+    tan2_d = 1.0 / dot(sp.n_s, n1) ** 2 - 1.0           # tan² 30° up to the half-float texel
+    lam = 0.5 * (np.sqrt(1.0 + tan2_d / 8.0 * (1.0 - cos_i ** 2) / cos_i ** 2) - 1.0)
+    front1 = front1 / (1.0 + lam)
     front0 = (c0 > 0) & (sp.cos_o > 0)
     want = 0.6 * 0.5 / np.pi * front1 * np.abs(c1) + 0.4 * 0.3 / np.pi * front0 * np.abs(c0)
     np.testing.assert_allclose(mix.eval(at, wi).A[0] * np.abs(c0), want, rtol=1e-12, atol=1e-16)
@@ -481,7 +490,9 @@ def test_loader_bounds_nesting_and_refuses_maps_that_cannot_apply(tmp_path):
     # a map on a mix of unmapped materials, and maps on the materials, are fine
     mapped_mix = parse_material({"type": "mix", "materials": [{"type": "lambert"}], "weights": [1.0],
                                  "normal_map": {"texture": "n.exr"}, "two_sided": True}, "m", base_dir=str(tmp_path))
-    assert mapped_mix.two_sided and isinstance(mapped_mix.base, Mix) and mapped_mix.base.two_sided
+    # (mapped material by material, as Cycles maps each closure: engine.materials.mix.map_normals)
+    assert isinstance(mapped_mix, Mix) and mapped_mix.two_sided
+    assert isinstance(mapped_mix.components[0], ShadingNormal)
 
 
 def test_mix_under_a_coat_passes_the_coat_index_on():

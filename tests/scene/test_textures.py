@@ -15,11 +15,13 @@ from PIL import Image
 from engine.errors import SceneError
 from engine.materials.base import ShadingPoint
 from engine.materials.htsg import HTSG
+from engine.materials.lambert import Lambert
+from engine.materials.mix import map_normals
 from engine.materials.torrance_sparrow import TorranceSparrow
 from engine.render.renderer import Renderer
 from engine.scene.loader import parse_material, parse_scene
-from engine.spectral import WavelengthLookup
-from engine.textures import ImageTexture, SurfacePoints, VertexAttributes
+from engine.spectral import WavelengthLookup, as_spectrum
+from engine.textures import ImageTexture, SurfacePoints, VertexAttributes, parse_texture_input
 from engine.textures.image import read_image, srgb_to_linear
 
 
@@ -597,6 +599,70 @@ def test_no_light_leaks_through_at_grazing_angles_with_a_tilted_shading_normal(t
     # the same light above the plane does light it (the scene is not simply dark)
     scene.lights[0].position = np.array([0.5, 0.0, 1.0])
     assert Renderer(scene).render().stokes()[0].max() > 0
+
+
+def _cycles_g1(cos_d, cos_i):
+    """Cycles' bump shadowing (kernel/closure/bsdf.h) in its Λ form: 1 / (1 + Λ), Λ = (√(1 + α² tan²θ_i) − 1) / 2,
+    α² = min(1, tan²θ_d / 8)."""
+    alpha2 = min(1.0, (1.0 / cos_d ** 2 - 1.0) / 8.0)
+    return 1.0 / (1.0 + 0.5 * (np.sqrt(1.0 + alpha2 * (1.0 / cos_i ** 2 - 1.0)) - 1.0))
+
+
+@pytest.mark.parametrize("correction", [True, False])
+def test_mapped_diffuse_lobe_follows_cycles_bump_rules(tmp_path, correction):
+    """A Lambert whose mapped normal N is tilted 45° towards +x on the z = 0 plane (N_s = +z), as Cycles shades
+    it: lit by N·ω_i even where the viewer is behind N (but in front of the plane), nothing from a light below
+    the plane or behind N, and softened by the GGX bump shadowing term when Bump Map Correction is on."""
+    n_t = np.array([math_sin(45), 0.0, math_cos(45)])
+    _rgb_exr(tmp_path / "tilt.exr", np.tile(((n_t + 1) / 2).astype(np.float32), (2, 2, 1)))
+    mat = map_normals(Lambert(as_spectrum(0.6, "albedo")), normal_map=parse_texture_input({"texture": "tilt.exr", "color_space": "Non-Color"},
+                                                                     "m", str(tmp_path)), bump_correction=correction)
+    n = 4
+    rng = np.random.default_rng(3)
+    uv = np.stack((rng.uniform(0.6, 0.9, n), rng.uniform(0.1, 0.5, n)))
+    sp = _shading_points(n, rng, _plane_points(n, uv))
+    wo = np.array([-1.0, 0.0, 0.3]) / np.hypot(1.0, 0.3)      # behind N (N·ω_o < 0), in front of the plane
+    sp.wo = np.tile(wo[:, None], (1, n))
+    at = mat.shading_point(sp)
+    big_n = at.n_s[:, 0]
+    assert big_n @ wo < 0 < wo[2] and abs(big_n @ n_t - 1.0) < 1e-6
+    lights = np.array([[0.5, 0.0, 1.0], [-1.0, 0.0, 0.5], [1.0, 0.0, -0.3], [0.0, 1.0, 0.05]]).T
+    lights /= np.linalg.norm(lights, axis=0)
+    f = mat.eval(at, lights).A[0]                    # (one wavelength row is enough: a grey Lambert)
+    cos_n = big_n @ lights
+    cos_s = lights[2]
+    for k in range(4):
+        if cos_n[k] > 0 and cos_s[k] > 0:
+            want = 0.6 / np.pi * (_cycles_g1(big_n[2], cos_s[k]) if correction else 1.0)
+        else:
+            want = 0.0                               # behind N (k = 1), or below the plane although N sees it (k = 2)
+        assert f[k] == pytest.approx(want, rel=1e-6, abs=1e-15), k
+    assert f[0] > 0 and f[1] == 0 and f[2] == 0 and f[3] > 0
+    if correction:                                   # near the plane's horizon the softening bites
+        assert f[3] < 0.5 * 0.6 / np.pi
+
+
+def test_normal_mapped_principled_is_split_into_cycles_closures_and_equals_it_where_flat(tmp_path):
+    """map_normals splits a Principled dielectric (Torrance–Sparrow with "albedo_scaling") into its specular layer
+    over a Lambert base, each mapped on its own; with a flat map (n_t = +z) the split material's Mueller matrices
+    equal the unmapped single model's."""
+    _rgb_exr(tmp_path / "flat.exr", np.tile(np.array([0.5, 0.5, 1.0], np.float32), (2, 2, 1)))
+    plain = parse_material({"type": "principled", "base_color": [0.6, 0.4, 0.2], "roughness": 0.5}, "m")
+    mapped = parse_material({"type": "principled", "base_color": [0.6, 0.4, 0.2], "roughness": 0.5,
+                             "normal_map": {"texture": "flat.exr"}}, "m", base_dir=str(tmp_path))
+    assert isinstance(plain, TorranceSparrow) and plain.has_diffuse
+    assert mapped.name == "layered" and [type(c.base).__name__ for c in mapped.components] == \
+        ["TorranceSparrow", "Lambert"]
+    n = 300
+    rng = np.random.default_rng(5)
+    uv = np.stack((rng.uniform(0.6, 0.9, n), rng.uniform(0.05, 0.5, n)))
+    sp = _shading_points(n, rng, _plane_points(n, uv))
+    wi = rng.normal(size=(3, n))
+    wi[2] = np.abs(wi[2]) + 0.05
+    wi /= np.linalg.norm(wi, axis=0)
+    got = mapped.eval(mapped.shading_point(sp), wi).matrix()
+    want = plain.eval(sp, wi).matrix()
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-14)
 
 
 def math_sin(deg):
