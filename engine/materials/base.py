@@ -226,6 +226,14 @@ class BSDF:
     #: files: ``"two_sided": true``); the Blender exporter sets it on every material it converts.
     #: Set on an instance only when true, so a one-sided material's scene fingerprint is unchanged.
     two_sided: bool = False
+    #: Refraction scales radiance by (n_o/n_i)² = 1/η² (the physics, as Mitsuba 3 and pbrt; a path that
+    #: enters and leaves a closed object gets both factors, which cancel).  False: Cycles' convention, no
+    #: such factor (the integrator multiplies it back: each sampled refraction's weight by its η²,
+    #: BSDFSample.eta_sq, and next-event estimation through a rough interface by ``refraction_eta_sq``), so
+    #: a surface crossed only once — an open glass sheet, inverted normals — renders as in Cycles.  The
+    #: Blender exporter sets it on every material it converts; scene files: ``"radiance_scaling": false``.
+    #: Set on an instance only when false, so existing scenes' fingerprints are unchanged.
+    radiance_scaling: bool = True
 
     @property
     def delta_only(self) -> bool:
@@ -264,6 +272,12 @@ class BSDF:
         """Sample the vertices ``v`` and update their throughputs in one step (see the module
         docstring); False: not available here (the caller uses ``sample``)."""
         return False
+
+    def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
+        """η² (N,) of a refraction from the viewer's side (η = n beyond / n on the viewer's side): the
+        factor by which ``eval`` of a transmitted direction is below Cycles' (see ``radiance_scaling``);
+        None for a material without non-Dirac transmission."""
+        return None
 
     def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
         """The point at which this material is evaluated: ``sp`` itself, or with the shading normal

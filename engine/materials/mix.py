@@ -460,6 +460,15 @@ class Mix(BSDF):
             terms.append((scale, c.eval(q, wi)))
         return add_values(terms, sp.n, sp.lam.shape[0], -wi, sp.wo, sp.n_s)
 
+    def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
+        """The first transmitting component's (a mix's transmitting materials are taken to share one index,
+        as Principled's one glass does)."""
+        for c, q in zip(self.components, self._points(sp)):
+            k = c.refraction_eta_sq(q)
+            if k is not None:
+                return k
+        return None
+
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
         return self._sum(sp, self._points(sp), self._weights(sp), wi, cosine=False)
 

@@ -240,6 +240,9 @@ class ShadingNormal(BSDF):
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
         return self.base.eval(self._base_point(sp), wi).scaled(self._factor(sp, wi)[None, :])
 
+    def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
+        return self.base.refraction_eta_sq(sp)
+
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         return self.base.pdf(self._base_point(sp), wi)
 

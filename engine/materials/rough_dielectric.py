@@ -258,6 +258,10 @@ class RoughDielectric(BSDF):
                                               self.distribution, self.shadowing == "smith_rational", self.alpha)
         return MuellerValue("abcs", x, x, A, B, C, S, depol=self._multiscatter_depol(sp, A))
 
+    def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray:
+        eta = self.n_int / self.n_ext
+        return np.where(sp.cos_o >= 0, eta * eta, 1.0 / (eta * eta))
+
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         return rough_dielectric_pdf(sp.n_s, sp.wo, wi, self.n_int, self.n_ext, self.distribution, self.alpha)
 

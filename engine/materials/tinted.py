@@ -63,6 +63,9 @@ class Tinted(BSDF):
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
         return self.base.eval(sp, wi).scaled(self._factor(sp, wi))
 
+    def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
+        return self.base.refraction_eta_sq(sp)
+
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         return self.base.pdf(sp, wi)
 
@@ -122,6 +125,9 @@ class FresnelTinted(BSDF):
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
         return self.base.eval(sp, wi).scaled(self._factor(sp, self._half_cos(sp, wi)))
+
+    def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
+        return self.base.refraction_eta_sq(sp)
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         return self.base.pdf(sp, wi)

@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..materials.base import BSDF, BSDFFlags, DeltaVertices, MuellerValue, ShadingPoint
+from ..materials.base import BSDF, BSDFFlags, BSDFSample, DeltaVertices, MuellerValue, ShadingPoint
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import RAY_EPSILON, Hits, offset_origin, surface_points
@@ -625,6 +625,9 @@ class PathTracer:
             if one_step and bsdf.scatter_delta(DeltaVertices(rows, n_s_delta, wo, lk_m.lam, self.mono, u_bsdf[0], T,
                                                              state.x_T, nxt.T, nxt.d, nxt.x_T, nxt.valid,
                                                              nxt.eta_step, t_cols)):
+                if not bsdf.radiance_scaling:       # Cycles' convention: the refraction's 1/η² taken back
+                    nxt.T[..., rows] *= nxt.eta_step[rows]
+                    nxt.eta_step[rows] = 1.0
                 continue            # pdf 0 and is_delta True: as preset
             if direction_dims is not None:
                 # a one-step material fell back to ``sample``: its direction numbers after all
@@ -655,6 +658,8 @@ class PathTracer:
                     acc.path_cost[gather(state.path, sel)] += VERTEX_COST     # a light sample (cost)
 
             bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
+            if not bsdf.radiance_scaling and bs.eta_sq is not None:     # Cycles' convention (BSDF.radiance_scaling)
+                bs = BSDFSample(bs.wi, bs.weight.scaled(bs.eta_sq[None, :]), bs.pdf, bs.is_delta, bs.valid, None)
             if acc.guides is not None and not bsdf.flags.is_delta_only:
                 acc.guides.record(gather(state.path, sel), T[0, 0][:, rows if t_cols is None else t_cols], bs.weight,
                                   bs.valid, sp.n_s, sp.wo, acc.w_rgb)
@@ -844,6 +849,11 @@ class PathTracer:
             if not ok.any():
                 return np.zeros((P, L, n))
             f = bsdf.eval(sp, wi)
+            if not bsdf.radiance_scaling:          # Cycles' convention (BSDF.radiance_scaling)
+                k = bsdf.refraction_eta_sq(sp)
+                if k is not None:
+                    through = dot(wi, sp.n_g) * dot(sp.wo, sp.n_g) < 0
+                    f = f.scaled(np.where(through, k, 1.0)[None, :])
             # light leaving a depolariser has only S0
             S = unpolarised_response(f, 1 if f.kind == "depolarising" else P)
             if P > 1 and f.kind != "depolarising":

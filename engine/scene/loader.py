@@ -411,7 +411,7 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: s
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     decl = MODELS[choice(_require(d, "type", field), f"{field}.type", tuple(MODELS))]
-    _check_keys(d, field, {"type", "note", "name", "normal_map", "bump_map", "two_sided", "interior"}
+    _check_keys(d, field, {"type", "note", "name", "normal_map", "bump_map", "two_sided", "radiance_scaling", "interior"}
                 | set(decl.names()))
     if depth > 0 and "interior" in d:
         raise SceneError(f"{field}.interior", "belongs to a material of the scene's \"materials\" (the one the faces "
@@ -446,6 +446,11 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: s
         raise SceneError(f"{field}.two_sided", f"must be true or false, got {two_sided!r}")
     if two_sided:
         bsdf.two_sided = True
+    radiance_scaling = d.get("radiance_scaling", True)
+    if not isinstance(radiance_scaling, bool):
+        raise SceneError(f"{field}.radiance_scaling", f"must be true or false, got {radiance_scaling!r}")
+    if not radiance_scaling:
+        bsdf.radiance_scaling = False
     if interior is not None and interior.absorbs:
         bsdf.interior = interior            # (none when it absorbs nothing: the scene renders as without)
     return bsdf

@@ -21,15 +21,10 @@ from tests.support import asset_parity as ap  # noqa: E402
 SPP = 16
 SEEDS = 4
 
-#: Why each currently failing case fails, as isolated by editing the material in both renderers.
-KNOWN = {
-    ("Sunglasses", "lamps"): "2 of 11 blocks, the lenses (Polar ÷ Cycles 2.0 and 1.5 of a nearly black region): "
-                             "Transmission 0 on either lens material alone (the IOR-1.0 outer shell, tint "
-                             "√0.009 per refraction, or the IOR-1.5 inner lens, √0.016) gives 11/11 blocks, so "
-                             "the excess needs light through both layers; not the volume, not the roughness; "
-                             "not isolated further",
-    ("Sunglasses", "hdri"): "the two lens blocks, as under lamps (9/11 blocks, Y 1.07)",
-}
+#: Why each currently failing case fails, as isolated by editing the material in both renderers (none now:
+#: the last two — a steep normal map, and sunglass lenses crossed once — were fixed by following Cycles'
+#: mapped-normal rules and its refraction without radiance scaling).
+KNOWN: dict[tuple[str, str], str] = {}
 
 
 def _cases():

@@ -130,7 +130,16 @@ def normal_map_convention(ext):
     tree.links.new(texture.outputs["Color"], normal.inputs["Color"])
     tree.links.new(normal.outputs["Normal"], tree.nodes["Principled BSDF"].inputs["Normal"])
     bsdf, _ = materials.export_material(mat, [])
-    return "directx" if getattr(bsdf, "normal_green_down", False) else "opengl"
+
+    def mapped(m):          # the ShadingNormal wrappers (a Principled is mapped closure by closure)
+        if hasattr(m, "normal_green_down"):
+            yield m
+        for part in getattr(m, "components", ()):
+            yield from mapped(part)
+    maps = list(mapped(bsdf))
+    if not maps:
+        return "unmapped"
+    return "directx" if all(m.normal_green_down for m in maps) else "opengl"
 
 
 def main(out_dir, angle):
