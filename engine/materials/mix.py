@@ -594,6 +594,8 @@ def map_normals(bsdf: BSDF, **kw) -> BSDF:
     the corrected normal and the diffuse base its own rules (engine.materials.normal_map)."""
     if isinstance(bsdf, Mix):
         return bsdf.with_components([map_normals(c, **kw) for c in bsdf.components])
+    if hasattr(bsdf, "with_base"):     # a wrapper over a composite (a coat's tint): map what it wraps
+        return bsdf.with_base(map_normals(bsdf.base, **kw))
     split = getattr(bsdf, "as_layers", None)
     layered = split() if split is not None else None
     if layered is not None:

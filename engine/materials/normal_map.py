@@ -23,9 +23,13 @@ Light leaks, as Cycles (kernel/closure/bsdf.h, bump_shadowing_term; Blender's Ma
 Bump Map Correction, on by default, ``bump_correction``).  N is the lobe's normal after mapping, N_s the
 interpolated normal before it (a MappedShadingPoint's ``n_smooth``), ω_i the direction towards the
 light:
-- a direction with (N_s·ω_i)(N_s·N)(N·ω_i) < 0 lies on one side of the mapped normal and on the other
-  of the smooth surface: f = 0, and such a sample is invalid (Cycles rejects it when evaluating, and
-  when sampling a diffuse lobe; Polar rejects it for every lobe, so sampling and evaluation agree);
+- a direction with (n_g·ω_i)(n_g·N)(N·ω_i) < 0 lies on one side of the mapped normal and on the other
+  of the surface: f = 0, and such a sample is invalid (Cycles rejects it when evaluating, and when
+  sampling a diffuse lobe; Polar rejects it for every lobe, so sampling and evaluation agree).  Cycles
+  writes the interpolated normal N_s where Polar takes the geometric one n_g: with N_s, a glossy metal
+  with a tilted normal map on a smooth UV sphere rendered face-by-face stripes and 8 of 12 blocks against
+  Cycles (the directions between a face's plane and the smooth normal's horizon are lit in Cycles); with
+  n_g, 12 of 12 (tests/blender/test_cycles_parity_principled.py, "Normal" on a metal);
 - a diffuse lobe is softened towards its terminator by a GGX masking term G1(α², |N_s·ω_i|) with
   α² = min(1, tan²θ_d / 8), cosθ_d = |N_s·N| (Conty Estevez et al. 2019, "A microfacet-based shadowing
   function to solve the bump terminator problem");
@@ -211,10 +215,10 @@ class ShadingNormal(BSDF):
 
     @staticmethod
     def geometric_agreement(sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        """(N,) False where ω_i is on one side of the mapped normal and on the other of the smooth surface:
-        (N_s·ω_i)(N_s·N)(N·ω_i) < 0 (Cycles' bump_shadowing_term; N_s = n_g without a MappedShadingPoint)."""
-        ns = _smooth_normal(sp)
-        return dot(ns, wi) * dot(ns, sp.n_s) * dot(sp.n_s, wi) >= 0
+        """(N,) False where ω_i is on one side of the mapped normal N and on the other of the actual surface:
+        (n_g·ω_i)(n_g·N)(N·ω_i) < 0 (the form of Cycles' bump_shadowing_term, with the geometric normal where
+        Cycles takes the interpolated one: see the module docstring)."""
+        return dot(sp.n_g, wi) * dot(sp.n_g, sp.n_s) * dot(sp.n_s, wi) >= 0
 
     def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         """(N,) the leak rule times, for a diffuse lobe with correction, the terminator softening."""

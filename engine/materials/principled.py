@@ -32,6 +32,7 @@ import math
 import numpy as np
 
 from . import conductor, torrance_sparrow
+from .base import BSDF
 from .mix import Mix
 from .parameters import ModelDeclaration, Parameter
 from ..errors import SceneError
@@ -229,10 +230,19 @@ def _reflection_albedo(top, n, alpha, smooth):
 def _coat(p, below):
     """Cycles' coat: a GGX dielectric reflection (index coat_ior ≥ 1, α = coat_roughness², energy-compensated
     as Cycles always compensates it; smooth: a Fresnel mirror) over everything below, which is weighted by
-    1 − coat_weight·E_coat(ω_o) (engine.materials.mix.Layered)."""
+    1 − coat_weight·E_coat(ω_o) (engine.materials.mix.Layered) and seen through the coat's tint
+    (engine.materials.tinted.CoatTinted; an index-matched coat still tints)."""
     from .mix import Layered
     from .torrance_sparrow import M_MIN
     n = max(p["coat_ior"], 1.0)
+    tint = p["coat_tint"]
+    if not (getattr(tint, "is_constant", False) and tint.linear_srgb()[0] == 1.0):
+        from .mix import Mix
+        from .tinted import CoatTinted
+        w = p["coat_weight"]
+        # each part of a mixture tinted on its own, so the mixture stays flat under the coat (mix.Layered)
+        below = below.with_components([CoatTinted(c, tint, n, w) for c in below.components]) \
+            if type(below) is Mix else CoatTinted(below, tint, n, w)
     if n == 1.0:                # an index-matched coat reflects nothing
         return below
     alpha = p["coat_roughness"] ** 2
@@ -241,7 +251,21 @@ def _coat(p, below):
     values = {"n": n, "k": 0.0, "m": 0.0} if smooth else \
         {"n": n, "k": 0.0, "m": alpha, "distribution": "ggx", "multiscatter": True}
     top = decl.build(decl.values(values, p.where))
-    return Layered(top, below, p["coat_weight"], _reflection_albedo(top, n, alpha, smooth))
+    layered = Layered(top, below, p["coat_weight"], _reflection_albedo(top, n, alpha, smooth))
+    layered.role = "coat"           # its top is the coat (with_normal_maps: Coat Normal)
+    return layered
+
+
+def with_normal_maps(bsdf: BSDF, normal: dict | None, coat: dict | None = None) -> BSDF:
+    """A principled material (or any material) with Blender's Normal and Coat Normal maps (ShadingNormal keywords,
+    None for none), mapped closure by closure (mix.map_normals): the coat layer by ``coat`` where given, else by
+    ``normal`` (Cycles' coat follows the Normal input where Coat Normal is unlinked), everything else by
+    ``normal``."""
+    from .mix import map_normals
+    if coat is not None and getattr(bsdf, "role", None) == "coat":
+        rest = [map_normals(c, **normal) if normal else c for c in bsdf.components[1:]]
+        return bsdf.with_components([map_normals(bsdf.components[0], **coat)] + rest)
+    return map_normals(bsdf, **normal) if normal else bsdf
 
 
 DECLARATION = ModelDeclaration(
@@ -265,12 +289,15 @@ DECLARATION = ModelDeclaration(
      Parameter("coat_weight", "coat (> 0: a coat over the dielectric)", lo=0.0, hi=1.0, default=0.0),
      Parameter("coat_roughness", "coat roughness r", lo=0.0, hi=1.0, default=0.03),
      Parameter("coat_ior", "coat index", lo=1.0, hi=100.0, default=1.5),
+     Parameter("coat_tint", "coat colour: its transmittance at normal incidence (Cycles' Coat Tint: everything "
+                            "below × tint^(1/cosθ_t), blended by coat_weight)", kind="spectrum", spectrum="reflectance",
+               lo=0.0, hi=1.0, default=1.0, texturable=True),
      Parameter("thin_film_thickness", "thin film on a smooth transmission", unit="nm", lo=0.0, hi=1e6, default=0.0),
      Parameter("thin_film_ior", "thin film's index", lo=0.0, lo_open=True, default=1.33),
      Parameter("distribution", "microfacet distribution: Multiscatter GGX (Cycles' default) or GGX",
                kind="choice", choices=DISTRIBUTIONS, default="multi_ggx")])
 
-DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission"})
+DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission", "coat_tint"})
 
 
 @DECLARATION.builder

@@ -22,7 +22,7 @@ from ..spectral import Spectrum
 from ..textures import TexturedSpectrum
 from ..vec3 import dot
 
-__all__ = ["FresnelTinted", "Tinted"]
+__all__ = ["CoatTinted", "FresnelTinted", "Tinted"]
 
 
 def _grey(spec) -> bool:
@@ -144,3 +144,57 @@ class FresnelTinted(BSDF):
     def describe(self) -> dict[str, object]:
         return {**self.base.describe(), "specular_tint": repr(self.tint)}
 
+
+class CoatTinted(BSDF):
+    """Everything below a Principled coat seen through the coat's tint, as Cycles approximates it (kernel/svm/
+    closure.h, Coat Tint): the tint t is the coat's transmittance at normal incidence for a coat of thickness
+    1, so along the view direction refracted into the coat (index n, cosθ_t = √(1 − (1 − cos²θ_o)/n²)) the light
+    is × t^(1/cosθ_t), blended by the coat weight w: factor = 1 + w·(t^(1/cosθ_t) − 1) per wavelength, (L, N).
+    Cycles' approximation: the path length of the view direction only, once (not the light's way in), on every
+    lobe below (reflection and transmission alike).  A scalar per wavelength ≥ 0: polarisation unchanged,
+    realisability kept.  θ_o is taken from the lobe's own shading normal (the coat's where no map differs)."""
+
+    def __init__(self, base: BSDF, tint: Spectrum, n: float, weight: float):
+        self.base, self.tint, self.n, self.weight = base, tint, float(n), float(weight)
+        self.name = base.name
+        self.flags = base.flags | (BSDFFlags.NONE if _grey(tint) else BSDFFlags.WAVELENGTH_DEPENDENT)
+        self.varies_over_surface = base.varies_over_surface or isinstance(tint, TexturedSpectrum)
+        self.two_sided = base.two_sided
+
+    def with_base(self, base: BSDF) -> CoatTinted:
+        """The same tint over another base (engine.materials.mix.map_normals maps the base lobe by lobe)."""
+        return CoatTinted(base, self.tint, self.n, self.weight)
+
+    @property
+    def exterior_n(self):
+        return getattr(self.base, "exterior_n", None)
+
+    def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
+        return self.base.shading_point(sp)
+
+    def factor(self, sp: ShadingPoint) -> np.ndarray:
+        """(L, N) the tint factor at the points' view directions."""
+        cos_o = np.clip(np.abs(sp.cos_o), 0.0, 1.0)
+        cos_t = np.sqrt(1.0 - (1.0 - cos_o * cos_o) / (self.n * self.n))
+        t = np.maximum(sp.spectrum(self.tint), 0.0) * np.ones(sp.lam.shape)
+        return 1.0 + self.weight * (np.power(t, (1.0 / cos_t)[None, :]) - 1.0)
+
+    def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
+        return self.base.eval(sp, wi).scaled(self.factor(sp))
+
+    def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
+        return self.base.refraction_eta_sq(sp)
+
+    def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        return self.base.pdf(sp, wi)
+
+    def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        bs = self.base.sample(sp, u_lobe, u_dir)
+        return BSDFSample(bs.wi, bs.weight.scaled(self.factor(sp)), bs.pdf, bs.is_delta, bs.valid, bs.eta_sq)
+
+    def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
+        value = self.base.delta_reflection(sp)
+        return None if value is None else value.scaled(self.factor(sp))
+
+    def describe(self) -> dict[str, object]:
+        return {**self.base.describe(), "coat_tint": f"{self.tint!r} (coat n {self.n:g}, weight {self.weight:g})"}

@@ -37,7 +37,6 @@ import numpy as np
 from ...engine.materials.dielectric import SmoothDielectric
 from ...engine.materials.lambert import Lambert
 from ...engine.materials.catalogue import MODELS
-from ...engine.materials.mix import map_normals
 from ...engine.materials.normal_map import set_bump_correction
 from ...engine.materials.principled import IOR_MIN, WEIGHT_CUTOFF
 from ...engine.materials.torrance_sparrow import M_MIN
@@ -784,6 +783,7 @@ def _principled(node, mat, warnings, bake=None):
               "specular_tint": _grey(r.rgb("Specular Tint", 0.0)),
               "coat_weight": r.float("Coat Weight", 0.0, 1.0), "coat_roughness": r.float("Coat Roughness", 0.0, 1.0),
               "coat_ior": min(max(r.float("Coat IOR"), 1.0), 100.0),
+              "coat_tint": _grey(r.rgb_or_texture("Coat Tint", 0.0, 1.0)),
               "diffuse_roughness": (r.float("Diffuse Roughness", 0.0, 1.0)
                                     if node.inputs.get("Diffuse Roughness") is not None else 0.0),
               "distribution": "ggx" if getattr(node, "distribution", "MULTI_GGX") == "GGX" else "multi_ggx"}
@@ -806,8 +806,7 @@ def _principled(node, mat, warnings, bake=None):
 #: Principled inputs not simulated yet, and the value at which they change nothing (a colour: white)
 _PRINCIPLED_NOT_SIMULATED = (("Subsurface Weight", 0.0, "rendered as the diffuse base"),
                              ("Sheen Weight", 0.0, "no sheen layer"),
-                             ("Anisotropic", 0.0, "isotropic facets"),
-                             ("Coat Tint", 1.0, "an untinted coat"))
+                             ("Anisotropic", 0.0, "isotropic facets"))
 
 
 def _unsimulated_principled_inputs(node, mat, warnings):
@@ -1009,16 +1008,33 @@ def normal_input_unsupported(node) -> bool:
 
 
 def with_shading_normal(bsdf, node, mat, warnings):
-    """``bsdf`` wrapped in the engine's ShadingNormal when the shader's Normal input is a tangent-space
-    Normal Map and/or a Bump node on image textures (Cycles: n = normalise(x·T + y·B + z·n), B = sign·(n × T)
-    with MikkTSpace tangents, Strength as Cycles' tangent space; bump n' = normalise(n − distance·∇h), blended by
-    Strength)."""
-    sock = node.inputs.get("Normal")
-    if sock is None or not sock.is_linked:
+    """``bsdf`` with the engine's normal and bump maps where the shader's Normal input (and a Principled's Coat
+    Normal) is a tangent-space Normal Map and/or a Bump node on image textures (Cycles: n = normalise(x·T + y·B +
+    z·n), B = sign·(n × T) with MikkTSpace tangents, Strength as Cycles' tangent space; bump n' = normalise(n −
+    distance·∇h), blended by Strength); the engine maps it closure by closure (principled.with_normal_maps)."""
+    normal = _normal_keywords(node.inputs.get("Normal"), mat, warnings)
+    coat = None
+    sock = node.inputs.get("Coat Normal") if node.bl_idname == "ShaderNodeBsdfPrincipled" else None
+    if sock is not None and sock.is_linked:
+        if not _normal_nodes(sock)[2]:
+            warnings.append(f"material {mat!r}: the Coat Normal of {node.name!r} is linked to something other than a "
+                            "Normal Map or Bump node on an image texture; the coat uses the Normal input's normal")
+        else:
+            coat = _normal_keywords(sock, mat, warnings)
+    if normal is None and coat is None:
         return bsdf
+    from ...engine.materials.principled import with_normal_maps
+    return with_normal_maps(bsdf, normal, coat)
+
+
+def _normal_keywords(sock, mat, warnings):
+    """The engine's normal/bump-map keywords (ShadingNormal) of a Normal input, or None where it is unlinked or
+    not exported (the scene exporter warns for the Normal input: normal_input_unsupported)."""
+    if sock is None or not sock.is_linked:
+        return None
     normal, bump, ok = _normal_nodes(sock)
     if not ok:
-        return bsdf
+        return None
     kw = {}
     if normal is not None:
         if normal.space != "TANGENT":
@@ -1034,9 +1050,7 @@ def with_shading_normal(bsdf, node, mat, warnings):
         kw.update(bump_map=r.texture("Height"), bump_distance=-distance if bump.invert else distance,
                   bump_strength=min(max(r.float("Strength"), 0.0), 1.0))
     kw = {k: v for k, v in kw.items() if v is not None}
-    if "normal_map" not in kw and "bump_map" not in kw:
-        return bsdf
-    return map_normals(bsdf, **kw)
+    return kw if "normal_map" in kw or "bump_map" in kw else None
 
 
 def surface_bsdf(node, mat, warnings, depth=0, bake=None):

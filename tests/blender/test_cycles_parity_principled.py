@@ -34,13 +34,22 @@ CASES = {
                                "Coat Weight": 1.0, "Coat Roughness": 0.1}),
     "Base Color  ": (((0.8, 0.1, 0.05), (0.1, 0.3, 0.8)), {"Roughness": 0.2,          # a Specular Tint
                                                             "Specular Tint": (1.0, 0.5, 0.2)}),
+    "Normal": (((0.5, 0.5, 1.0), (0.85, 0.6, 0.75)), {"Base Color": (0.6, 0.3, 0.2), "Roughness": 0.3}),
+    "Normal ": (((0.5, 0.5, 1.0), (0.85, 0.6, 0.75)), {"Base Color": (0.9, 0.9, 0.9), "Roughness": 0.1,  # metal
+                                                       "Metallic": 1.0}),
+    "Coat Normal": (((0.5, 0.5, 1.0), (0.85, 0.6, 0.75)), {"Base Color": (0.2, 0.2, 0.2), "Roughness": 0.6,
+                                                          "Coat Weight": 1.0, "Coat Roughness": 0.1}),
+    "Coat Tint": (((1.0, 0.4, 0.1), (0.2, 0.5, 1.0)), {"Base Color": (0.8, 0.8, 0.8), "Roughness": 0.4,
+                                                       "Coat Weight": 0.8, "Coat Roughness": 0.05, "Metallic": 0.0}),
+    "Coat Tint ": (((1.0, 0.4, 0.1), (0.6, 0.6, 0.6)), {"Base Color": (0.9, 0.7, 0.5), "Roughness": 0.3,  # metal
+                                                        "Metallic": 1.0, "Coat Weight": 1.0, "Coat IOR": 1.8}),
 }
 
 
-def checker(name, a, b, colour):
-    """A 4 × 4 checker image of values a and b (colours or numbers), Non-Color for numbers."""
+def checker(name, a, b, colour, data=False):
+    """A 4 × 4 checker image of values a and b (colours or numbers), Non-Color for numbers and ``data``."""
     img = bpy.data.images.new(name, 4, 4, alpha=False, float_buffer=True)
-    if not colour:          # before the pixels: changing it regenerates a generated image's buffer
+    if not colour or data:  # before the pixels: changing it regenerates a generated image's buffer
         img.colorspace_settings.name = "Non-Color"
     a, b = (tuple(v) if colour else (v, v, v) for v in (a, b))
     px = []
@@ -65,10 +74,16 @@ def sphere_scene(socket, values, others, lighting):
         p.inputs[k].default_value = (*v, 1.0) if isinstance(v, tuple) else v
     name = socket.strip()
     colour = p.inputs[name].type == "RGBA"
+    normal = p.inputs[name].type == "VECTOR"        # a normal: the checker through a tangent-space Normal Map
     tex = mat.node_tree.nodes.new("ShaderNodeTexImage")
-    tex.image = checker("checker", *values, colour)
+    tex.image = checker("checker", *values, colour or normal, data=normal)
     tex.interpolation = "Closest"
-    mat.node_tree.links.new(tex.outputs["Color"], p.inputs[name])
+    if normal:
+        nmap = mat.node_tree.nodes.new("ShaderNodeNormalMap")
+        mat.node_tree.links.new(tex.outputs["Color"], nmap.inputs["Color"])
+        mat.node_tree.links.new(nmap.outputs["Normal"], p.inputs[name])
+    else:
+        mat.node_tree.links.new(tex.outputs["Color"], p.inputs[name])
     obj.data.materials.append(mat)
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     scene.collection.objects.link(cam)

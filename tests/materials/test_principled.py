@@ -70,3 +70,35 @@ def test_textures_mapped_by_scale_and_offset_square_and_root_per_point(tmp_path)
                            "materials.p", base_dir=str(tmp_path))
     assert isinstance(glass.transmission, RootSpectrum)
     assert glass.transmission.hi == pytest.approx(math.sqrt(0.25 + 0.5 * 0.6))
+
+
+def test_coat_tint_is_cycles_path_length_approximation_on_every_lobe_below():
+    """Cycles' Coat Tint: everything below the coat × 1 + w·(t^(1/cosθ_t) − 1), θ_t the view direction refracted
+    into the coat (n), the same factor on reflection and transmission; an index-matched coat still tints, a
+    white tint adds nothing."""
+    from engine.materials.base import ShadingPoint
+    from engine.materials.tinted import CoatTinted
+    from engine.spectral import WavelengthLookup
+    w, t, n = 0.7, 0.5, 1.6
+    model = build(base_color=0.6, metallic=0.3, transmission=0.5, roughness=0.4, coat_weight=w, coat_tint=t,
+                  coat_ior=n)
+    below = [c for c in model.components[1:]]
+    assert len(below) == 3 and all(isinstance(c, CoatTinted) for c in below)
+    N = 5
+    cos_o = np.linspace(1.0, 0.05, N)
+    wo = np.stack([np.sqrt(1 - cos_o ** 2), np.zeros(N), cos_o])
+    n_s = np.tile([[0.0], [0.0], [1.0]], (1, N))
+    lam = np.tile([[450.0], [550.0], [650.0]], (1, N))
+    sp = ShadingPoint(np.zeros((3, N)), n_s, n_s, wo, lam, False, WavelengthLookup(lam))
+    cos_t = np.sqrt(1 - (1 - cos_o ** 2) / n ** 2)
+    want = 1 + w * (t ** (1 / cos_t) - 1)
+    for c in below:
+        np.testing.assert_allclose(c.factor(sp), np.tile(want, (3, 1)), rtol=1e-12)
+        wi = np.tile([[0.3], [0.1], [-0.95]], (1, N))
+        wi /= np.linalg.norm(wi, axis=0)
+        np.testing.assert_allclose(c.eval(sp, wi).matrix(), c.base.eval(sp, wi).matrix() * want, rtol=1e-12,
+                                   atol=1e-300)
+    matched = build(base_color=0.6, roughness=0.4, coat_weight=1.0, coat_tint=t, coat_ior=1.0)
+    assert isinstance(matched, CoatTinted)
+    np.testing.assert_allclose(matched.factor(sp)[0], t ** (1 / cos_o), rtol=1e-12)
+    assert not any(isinstance(c, CoatTinted) for c in build(coat_weight=1.0, coat_tint=1.0).components)
