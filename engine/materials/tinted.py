@@ -29,7 +29,33 @@ def _grey(spec) -> bool:
     return spec is None or (not isinstance(spec, TexturedSpectrum) and spec.is_grey)
 
 
-class Tinted(BSDF):
+class _ScaledLobes(BSDF):
+    """A wrapper whose Mueller values are ``base``'s times a scalar per wavelength, ``_factor(sp, wi)`` (L, N) or
+    a number: sampling, pdf, shading point and refraction are the base's; only the value is scaled."""
+
+    base: BSDF
+
+    def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
+        return self.base.shading_point(sp)
+
+    def _factor(self, sp: ShadingPoint, wi: np.ndarray):
+        raise NotImplementedError
+
+    def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
+        return self.base.eval(sp, wi).scaled(self._factor(sp, wi))
+
+    def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
+        return self.base.refraction_eta_sq(sp)
+
+    def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        return self.base.pdf(sp, wi)
+
+    def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        bs = self.base.sample(sp, u_lobe, u_dir)
+        return BSDFSample(bs.wi, bs.weight.scaled(self._factor(sp, bs.wi)), bs.pdf, bs.is_delta, bs.valid, bs.eta_sq)
+
+
+class Tinted(_ScaledLobes):
     """``base`` with its reflected light × ``reflection`` and its transmitted light × ``transmission``."""
 
     def __init__(self, base: BSDF, reflection: Spectrum | None = None, transmission: Spectrum | None = None):
@@ -46,9 +72,6 @@ class Tinted(BSDF):
     def exterior_n(self):
         return getattr(self.base, "exterior_n", None)
 
-    def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
-        return self.base.shading_point(sp)
-
     def _tint(self, sp: ShadingPoint, spec) -> np.ndarray | float:
         return 1.0 if spec is None else sp.spectrum(spec)
 
@@ -59,19 +82,6 @@ class Tinted(BSDF):
         through = dot(wi, sp.n_g) * dot(sp.wo, sp.n_g) < 0
         r, t = self._tint(sp, self.reflection), self._tint(sp, self.transmission)
         return np.where(through[None, :], t, r) * np.ones(sp.lam.shape)
-
-    def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        return self.base.eval(sp, wi).scaled(self._factor(sp, wi))
-
-    def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
-        return self.base.refraction_eta_sq(sp)
-
-    def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        return self.base.pdf(sp, wi)
-
-    def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
-        bs = self.base.sample(sp, u_lobe, u_dir)
-        return BSDFSample(bs.wi, bs.weight.scaled(self._factor(sp, bs.wi)), bs.pdf, bs.is_delta, bs.valid, bs.eta_sq)
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
         value = self.base.delta_reflection(sp)
@@ -88,7 +98,7 @@ class Tinted(BSDF):
         return out
 
 
-class FresnelTinted(BSDF):
+class FresnelTinted(_ScaledLobes):
     """A dielectric reflection layer with Cycles' Specular Tint: Cycles' generalized Schlick Fresnel with
     F0 × tint, F(θ) = F_real(θ) + F0(tint − 1)(1 − F_real(θ))/(1 − F0) (F_real the dielectric's own
     reflectance at the facet angle, F0 = F_real(0°)), rendered as the polarising layer ``base`` (a
@@ -107,10 +117,7 @@ class FresnelTinted(BSDF):
     def multiscatter(self):
         return getattr(self.base, "multiscatter", False)
 
-    def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
-        return self.base.shading_point(sp)
-
-    def _factor(self, sp: ShadingPoint, cos_facet: np.ndarray) -> np.ndarray:
+    def _fresnel_factor(self, sp: ShadingPoint, cos_facet: np.ndarray) -> np.ndarray:
         from ..polarisation.fresnel import fresnel_reflectance
         F = fresnel_reflectance(np.clip(cos_facet, 0.0, 1.0), complex(self.n))
         t = sp.spectrum(self.tint)
@@ -119,33 +126,19 @@ class FresnelTinted(BSDF):
         tinted = F[None, :] + self.f0 * (t - 1.0) * (1.0 - F[None, :]) / (1.0 - self.f0)
         return np.where(F[None, :] > 0, np.maximum(tinted, 0.0) / np.where(F > 0, F, 1.0)[None, :], 1.0)
 
-    def _half_cos(self, sp, wi):
-        h = wi + sp.wo
-        return 0.5 * np.sqrt(dot(h, h))
-
-    def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        return self.base.eval(sp, wi).scaled(self._factor(sp, self._half_cos(sp, wi)))
-
-    def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
-        return self.base.refraction_eta_sq(sp)
-
-    def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        return self.base.pdf(sp, wi)
-
-    def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
-        bs = self.base.sample(sp, u_lobe, u_dir)
-        factor = self._factor(sp, self._half_cos(sp, bs.wi))
-        return BSDFSample(bs.wi, bs.weight.scaled(factor), bs.pdf, bs.is_delta, bs.valid, bs.eta_sq)
+    def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        h = wi + sp.wo          # the facet angle: cosθ_h = |ω_i + ω_o| / 2
+        return self._fresnel_factor(sp, 0.5 * np.sqrt(dot(h, h)))
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
         value = self.base.delta_reflection(sp)
-        return None if value is None else value.scaled(self._factor(sp, np.abs(sp.cos_o)))
+        return None if value is None else value.scaled(self._fresnel_factor(sp, np.abs(sp.cos_o)))
 
     def describe(self) -> dict[str, object]:
         return {**self.base.describe(), "specular_tint": repr(self.tint)}
 
 
-class CoatTinted(BSDF):
+class CoatTinted(_ScaledLobes):
     """Everything below a Principled coat seen through the coat's tint, as Cycles approximates it (kernel/svm/
     closure.h, Coat Tint): the tint t is the coat's transmittance at normal incidence for a coat of thickness
     1, so along the view direction refracted into the coat (index n, cosθ_t = √(1 − (1 − cos²θ_o)/n²)) the light
@@ -169,9 +162,6 @@ class CoatTinted(BSDF):
     def exterior_n(self):
         return getattr(self.base, "exterior_n", None)
 
-    def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
-        return self.base.shading_point(sp)
-
     def factor(self, sp: ShadingPoint) -> np.ndarray:
         """(L, N) the tint factor at the points' view directions."""
         cos_o = np.clip(np.abs(sp.cos_o), 0.0, 1.0)
@@ -179,18 +169,8 @@ class CoatTinted(BSDF):
         t = np.maximum(sp.spectrum(self.tint), 0.0) * np.ones(sp.lam.shape)
         return 1.0 + self.weight * (np.power(t, (1.0 / cos_t)[None, :]) - 1.0)
 
-    def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        return self.base.eval(sp, wi).scaled(self.factor(sp))
-
-    def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
-        return self.base.refraction_eta_sq(sp)
-
-    def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        return self.base.pdf(sp, wi)
-
-    def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
-        bs = self.base.sample(sp, u_lobe, u_dir)
-        return BSDFSample(bs.wi, bs.weight.scaled(self.factor(sp)), bs.pdf, bs.is_delta, bs.valid, bs.eta_sq)
+    def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        return self.factor(sp)
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
         value = self.base.delta_reflection(sp)
