@@ -11,13 +11,15 @@ diffuse base, the base weighted by one minus the specular layer's albedo at the 
 - metal: a GGX Torrance–Sparrow conductor (α = roughness², Cycles' height-correlated G, ``multiscatter``
   for ``distribution`` "multi_ggx") whose complex index per wavelength and point makes its reflectance the
   base colour at 0° and Schlick's value at θ₈₂ — Cycles' F82 curve for a white Specular Tint
-  (engine.spectral.gulbrandsen);
+  (engine.spectral.gulbrandsen); a thin film on its facets where ``thin_film_thickness`` > 0 (Airy's sum on
+  that complex index, as Cycles' iridescence on its Gulbrandsen estimate);
 - transmission: the smooth dielectric at roughness 0 (with ``thin_film_thickness`` > 0 the thin-film
   dielectric), else the GGX rough dielectric (compensated for "multi_ggx"), each refraction tinted by
   √(base colour) (engine.materials.tinted);
 - dielectric: a GGX Torrance–Sparrow dielectric (index from ``ior`` and ``specular_ior_level``: F0 =
-  F0(ior)·2·level) with the albedo-scaled Lambertian base, its smooth limit at roughness 0; a coat (Cycles'
-  ``coat_weight`` > 0);
+  F0(ior)·2·level; a thin film on its facets as the metal's, on the substrate of that index — Cycles films
+  the IOR's own interface and rescales by F0, the same at level 0.5) with the albedo-scaled Lambertian base,
+  its smooth limit at roughness 0; a coat (Cycles' ``coat_weight`` > 0) with Cycles' ``coat_tint``;
 - coat: a GGX dielectric reflection of ``coat_ior`` and α = coat_roughness² (compensated, as Cycles
   always compensates its coat) over everything below — metal, transmission and dielectric — which is
   weighted by 1 − coat_weight·E_coat(ω_o) (engine.materials.mix.Layered: Cycles' layering).
@@ -139,8 +141,34 @@ def _metal_of(n, k, p, alpha):
     if not _textured(alpha) and alpha < M_MIN:
         return conductor.DECLARATION.build(conductor.DECLARATION.values(values, p.where))
     values.update(m=alpha if _textured(alpha) else max(alpha, M_MIN), distribution="ggx",
-                  multiscatter=p["distribution"] == "multi_ggx")
+                  multiscatter=p["distribution"] == "multi_ggx", **_film_values(p))
     return torrance_sparrow.DECLARATION.build(torrance_sparrow.DECLARATION.values(values, p.where))
+
+
+def _film_values(p) -> dict:
+    """The thin film's keys for a rough Torrance–Sparrow layer (metal, dielectric specular), as Cycles puts its
+    Thin Film on every Fresnel of the Principled BSDF; empty without a film."""
+    if p["thin_film_thickness"] <= 0.1:
+        return {}
+    return {"thin_film_thickness": p["thin_film_thickness"], "thin_film_ior": p["thin_film_ior"]}
+
+
+def film_gaps(metallic, transmission, roughness, transmission_roughness=None) -> list[str]:
+    """The parts of a principled material on which its Thin Film is not simulated (Cycles puts it on every
+    Fresnel): a smooth metal, a smooth dielectric's specular layer, a rough transmission.  The inputs as the
+    declaration takes them (numbers or textures; a textured roughness counts as rough)."""
+    from .rough_dielectric import ALPHA_MIN
+    from .torrance_sparrow import M_MIN
+    smooth = not _textured(roughness) and roughness * roughness < M_MIN
+    trans = roughness if transmission_roughness is None else transmission_roughness
+    gaps = []
+    if smooth and not _never(metallic):
+        gaps.append("smooth metal")
+    if smooth and not _always(metallic) and not _always(transmission):
+        gaps.append("smooth dielectric specular")
+    if not _always(metallic) and not _never(transmission) and (_textured(trans) or trans * trans >= ALPHA_MIN):
+        gaps.append("rough transmission")
+    return gaps
 
 
 def _transmission(p, alpha, ior):
@@ -171,7 +199,7 @@ def _dielectric(p, alpha, ior):
     smooth = not _textured(alpha) and alpha < M_MIN
     values = {"n": eta, "k": 0.0, "diffuse_layering": "albedo_scaling", "m": 0.0 if smooth else alpha}
     if not smooth:
-        values.update(distribution="ggx", multiscatter=p["distribution"] == "multi_ggx")
+        values.update(distribution="ggx", multiscatter=p["distribution"] == "multi_ggx", **_film_values(p))
     decl = torrance_sparrow.DECLARATION
     tint = p["specular_tint"]
     tinted = not (tint.is_constant and tint.linear_srgb()[0] == 1.0)
@@ -217,6 +245,8 @@ def _reflection_albedo(top, n, alpha, smooth):
     """E(ω_o) (N,) of a dielectric reflection layer of index n: its Fresnel reflectance when smooth, else the
     GGX reflection albedo table × (1 + k) of its compensation (Cycles' layering estimate)."""
     from ..polarisation.fresnel import fresnel_reflectance
+    if getattr(top, "film", None) is not None:       # a filmed layer: Cycles' estimate, its film's reflectance
+        return lambda sp: top.film_albedo(sp, sp.cos_o)
     if smooth:
         return lambda sp: fresnel_reflectance(np.clip(sp.cos_o, 0.0, 1.0), complex(n))
     table = top._albedo_table()
@@ -292,7 +322,9 @@ DECLARATION = ModelDeclaration(
      Parameter("coat_tint", "coat colour: its transmittance at normal incidence (Cycles' Coat Tint: everything "
                             "below × tint^(1/cosθ_t), blended by coat_weight)", kind="spectrum", spectrum="reflectance",
                lo=0.0, hi=1.0, default=1.0, texturable=True),
-     Parameter("thin_film_thickness", "thin film on a smooth transmission", unit="nm", lo=0.0, hi=1e6, default=0.0),
+     Parameter("thin_film_thickness", "thin film on the smooth transmission and on the rough metal and dielectric "
+                                      "specular layers (Airy's sum, per facet)", unit="nm", lo=0.0, hi=1e6,
+               default=0.0),
      Parameter("thin_film_ior", "thin film's index", lo=0.0, lo_open=True, default=1.33),
      Parameter("distribution", "microfacet distribution: Multiscatter GGX (Cycles' default) or GGX",
                kind="choice", choices=DISTRIBUTIONS, default="multi_ggx")])
@@ -302,6 +334,7 @@ DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "trans
 
 @DECLARATION.builder
 def _principled(p):
+    p["thin_film_ior"]          # validated even where no film uses it (a NaN is refused, not ignored)
     metallic, transmission = p["metallic"], p["transmission"]
     alpha = _alpha_of(p["roughness"])
     ior = max(p["ior"], IOR_MIN)

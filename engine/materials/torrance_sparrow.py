@@ -117,6 +117,7 @@ from ..kernels.torrance_sparrow import (SHADOWING_CODES, torrance_sparrow_eval_n
                                         torrance_sparrow_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
+from ..polarisation.thin_film import film_reflection_abcs
 from ..spectral import ConstantSpectrum, as_spectrum
 from ..textures import TexturedNumber, textured
 from ..vec3 import dot, local_frame, to_local
@@ -229,9 +230,10 @@ class SpecularAlbedoTable:
 # (TorranceSparrow._p_spec).  For Beckmann facets the twins below run them as one compiled pass each
 # (engine.kernels.torrance_sparrow); Blinn facets use these functions directly.
 
-def _facet_eval(dist, n_s, wo, wi, eta, s, shadowing):
+def _facet_eval(dist, n_s, wo, wi, eta, s, shadowing, fresnel=None):
     """(x, A, B, C, S, valid): the facet lobe s·M_F·D·G/(4 cosθ_i cosθ_o) in the scattering-plane frame
-    x (3, N), (A, B, C, S) (L, N), and valid = cosθ_i > 0 and cosθ_o > 0 (N,)."""
+    x (3, N), (A, B, C, S) (L, N), and valid = cosθ_i > 0 and cosθ_o > 0 (N,).  ``fresnel(cos_f, eta)`` →
+    (A, B, C, S) of the facet's reflection (default: the bare interface; a coated facet: TorranceSparrow's film)."""
     t, b = local_frame(n_s)
     wo_l = to_local(wo, t, b, n_s)
     wi_l = to_local(wi, t, b, n_s)
@@ -243,7 +245,7 @@ def _facet_eval(dist, n_s, wo, wi, eta, s, shadowing):
     G = shadowing_term(shadowing, dist, wi_l, wo_l, h)
     denom = 4.0 * np.where(ok, cos_i * cos_o, 1.0)
     fr = np.where(ok, s * D * G / denom, 0.0)
-    Af, Bf, Cf, Sf = fresnel_reflection_abcs(np.where(ok, cos_f, 1.0)[None, :], eta)
+    Af, Bf, Cf, Sf = (fresnel or fresnel_reflection_abcs)(np.where(ok, cos_f, 1.0)[None, :], eta)
     x = scattering_plane_axis(-wi, wo)
     return x, Af * fr, Bf * fr, Cf * fr, Sf * fr, valid
 
@@ -361,8 +363,18 @@ class TorranceSparrow(BSDF):
 
     def __init__(self, n, k, m, shadowing: str | None = None, exterior_n: float = 1.0, diffuse_albedo=None,
                  specular_weight: float = 1.0, diffuse_weight: float = 0.0, distribution: str = "beckmann",
-                 blinn_exponent: float | None = None, diffuse_layering: str = "add", multiscatter: bool = False):
+                 blinn_exponent: float | None = None, diffuse_layering: str = "add", multiscatter: bool = False,
+                 film_n: float | None = None, film_thickness: float = 0.0):
         self.n = as_spectrum(n, "n")
+        # a thin film on every facet (Cycles' Principled Thin Film on its metal and specular layers): Airy's sum
+        # over the film on the substrate n + iκ replaces the facet's bare Fresnel matrix (engine.polarisation.
+        # thin_film); thickness in nm, none below 0.1 nm (Cycles' cutoff)
+        self.film = None
+        if film_n is not None and film_thickness > 0.1:
+            if not (math.isfinite(film_n) and film_n > 0 and math.isfinite(film_thickness)):
+                raise ValueError(f"a thin film needs a finite index > 0 and thickness, got {film_n!r}, "
+                                 f"{film_thickness!r}")
+            self.film = (float(film_n), float(film_thickness))
         self.k = as_spectrum(k, "k")
         # m, specular_weight and diffuse_weight may be TexturedNumbers (values per surface point,
         # read through ShadingPoint.number); constants keep their float fast path
@@ -436,7 +448,9 @@ class TorranceSparrow(BSDF):
                       | BSDFFlags.when(self.has_diffuse, BSDFFlags.DIFFUSE_REFLECTION | BSDFFlags.SEPARABLE_DIFFUSE)
                       | BSDFFlags.when(self.has_specular, BSDFFlags.POLARISING)
                       | BSDFFlags.when(self.has_specular and self._may_retard(), BSDFFlags.RETARDING)
-                      | BSDFFlags.when(not constant, BSDFFlags.WAVELENGTH_DEPENDENT))
+                      | BSDFFlags.when(not constant or self.film is not None, BSDFFlags.WAVELENGTH_DEPENDENT))
+        if self.film is not None and self.has_specular:
+            self.flags |= BSDFFlags.RETARDING       # the film's s–p phase difference
 
     def _may_retard(self) -> bool:
         """False only if κ ≡ 0 and n/exterior_n ≥ 1 (real η above 1: no TIR, no retardance)."""
@@ -463,10 +477,25 @@ class TorranceSparrow(BSDF):
         """max(0, 1 − s·E(cosθ_o)) (N,) of ``"albedo_scaling"``; None for ``"add"`` (weight 1)."""
         if self._albedo is None:
             return None
-        E = self._albedo(cos_o, sp.number(self.m))
-        if self.multiscatter:       # the compensated lobe's albedo: (1 + k)·E_F (Cycles' layering estimate)
-            E = E * (1.0 + self.multiscatter_extra(sp)[0])
+        if self.film is not None:
+            E = self.film_albedo(sp, cos_o)
+        else:
+            E = self._albedo(cos_o, sp.number(self.m))
+            if self.multiscatter:   # the compensated lobe's albedo: (1 + k)·E_F (Cycles' layering estimate)
+                E = E * (1.0 + self.multiscatter_extra(sp)[0])
         return np.maximum(1.0 - sp.number(self.s) * E, 0.0)
+
+    def film_albedo(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray:
+        """(N,) Cycles' layering estimate of a filmed facet lobe (bsdf_microfacet_estimate_albedo: no table for
+        iridescence, the film's reflectance at the view angle): the largest over the RGB channels' wavelengths
+        (engine.spectral.RGB_WAVELENGTHS_NM, whatever the path's own), as Cycles layers by the largest channel."""
+        from ..spectral import RGB_WAVELENGTHS_NM
+        film_n, d = self.film
+        c = np.clip(cos_o, 0.0, 1.0)[None, :]
+        lam = np.asarray(RGB_WAVELENGTHS_NM, np.float64)[:, None]
+        # (a constant index: "albedo_scaling" needs one, _albedo_table)
+        A = film_reflection_abcs(c, self.exterior_n, film_n, d, self.n.value + 1j * self.k.value, lam)[0]
+        return A.max(axis=0)
 
     def as_layers(self):
         """With ``"albedo_scaling"``, the same material as Cycles' two closures: this specular lobe alone over
@@ -476,8 +505,9 @@ class TorranceSparrow(BSDF):
             return None
         from .lambert import Lambert
         from .mix import Layered, Mix
+        film_n, film_d = self.film if self.film is not None else (None, 0.0)
         top = TorranceSparrow(self.n, self.k, self.m, self.shadowing, self.exterior_n, None, self.s, 0.0,
-                              self.distribution, None, "add", self.multiscatter)
+                              self.distribution, None, "add", self.multiscatter, film_n, film_d)
         layered = Layered(top, Mix([Lambert(self.albedo)], [self.d]), 1.0,
                           lambda sp: 1.0 - self.diffuse_scale(sp, np.clip(sp.cos_o, 0.0, 1.0)))
         layered.two_sided = self.two_sided
@@ -524,7 +554,20 @@ class TorranceSparrow(BSDF):
     def _compiled_lobe(self) -> bool:
         """The facet lobe runs as the Beckmann twins (engine.kernels.torrance_sparrow), which have the
         shadowing forms of SHADOWING_CODES (the height-correlated one runs the NumPy functions)."""
-        return self.has_specular and self.distribution == "beckmann" and self.shadowing in SHADOWING_CODES
+        return self.has_specular and self.distribution == "beckmann" and self.shadowing in SHADOWING_CODES and \
+            self.film is None
+
+    def _facet_fresnel(self, sp: ShadingPoint):
+        """The facet's reflection (A, B, C, S) as a function of (cos_f, η) for _facet_eval: None (the bare
+        interface), or the film's at the batch's wavelengths (η (L, N) relative to exterior_n)."""
+        if self.film is None:
+            return None
+        film_n, d = self.film
+        ext = self.exterior_n
+
+        def coated(cos_f, eta):
+            return film_reflection_abcs(cos_f, ext, film_n, d, eta * ext, sp.lam)
+        return coated
 
     def multiscatter_extra(self, sp: ShadingPoint) -> np.ndarray:
         """k (L, N) or (1, N) of the multiple-scattering compensation (module docstring): the facet
@@ -558,7 +601,7 @@ class TorranceSparrow(BSDF):
                                                          sp.number(self.s), self._m(sp), self.shadowing)
         else:
             x, A, B, C, S, valid = _facet_eval(self._dist(sp), sp.n_s, sp.wo, wi, self.relative_eta(sp),
-                                               sp.number(self.s), self.shadowing)
+                                               sp.number(self.s), self.shadowing, self._facet_fresnel(sp))
         depol = self._depol(sp, valid, lambda: sp.cos_o)
         if self.multiscatter:   # the multiply scattered energy, depolarised: k·M00 of the facet lobe
             extra = self.multiscatter_extra(sp) * A
@@ -623,6 +666,8 @@ class TorranceSparrow(BSDF):
             out["diffuse_layering"] = self.diffuse_layering
         if self.multiscatter:
             out["multiscatter"] = True
+        if self.film is not None:
+            out["thin_film"] = f"n {self.film[0]:g}, {self.film[1]:g} nm"
         return out
 
 
@@ -658,6 +703,10 @@ DECLARATION = ModelDeclaration(
                                    "by one minus the facet part's albedo at the view direction (Cycles' "
                                    "Principled; not reciprocal)", kind="choice", choices=DIFFUSE_LAYERINGS,
                default="add"),
+     Parameter("thin_film_thickness", "a thin film on every facet (0: none; Airy's sum over the film on the "
+                                      "substrate replaces the facet's Fresnel matrix; needs m > 0)", unit="nm",
+               lo=0.0, hi=1e6, default=0.0),
+     Parameter("thin_film_ior", "the thin film's index", lo=0.0, lo_open=True, default=1.33),
      exterior_n_parameter(socket=Socket("Exterior IOR", "FLOAT", 1.0, 1.0, 3.0,
                                         "Index of the medium above the surface (1 = air, 1.33 = water)"))],
     catalogue="torrance_sparrow", node="TORRANCE_SPARROW")
@@ -698,6 +747,13 @@ def _torrance_sparrow(p):
     if m_const is not None and 0 < m < M_MIN:
         raise SceneError(p.field("m"), f"must be 0 (the smooth limit) or in [{M_MIN:g}, {p.model['m'].hi:g}], "
                                        f"got {m:g}")
+    film = p["thin_film_thickness"] > 0.1
+    film_n = p["thin_film_ior"]          # read (validated) whether or not a film is there
     if m_const == 0:   # the smooth limit: a Fresnel mirror (plus the Lambertian part); E = 1, nothing to add
+        if film:
+            raise SceneError(p.field("thin_film_thickness"), "a thin film needs a rough surface here (m > 0); "
+                                                             "a smooth coated interface is the 'thin_film' model")
         return MirrorWithDiffuse(n, k, **kw)
+    if film:
+        kw.update(film_n=film_n, film_thickness=p["thin_film_thickness"])
     return TorranceSparrow(n, k, m, shadowing=shadowing, distribution=distribution, multiscatter=multiscatter, **kw)

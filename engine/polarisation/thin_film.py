@@ -1,6 +1,7 @@
 """A thin non-absorbing film on an interface: Airy's coherent sum of the film's multiple reflections.
 
-Incident medium (index n₁), a film of index n_f and thickness d, a substrate n₃ (all real, > 0).  With
+Incident medium (index n₁), a film of index n_f and thickness d (real, > 0), a substrate n₃ (real, or
+complex n + iκ for a metal: the same formulas with the substrate's root u₃ taken with Im ≥ 0).  With
 the interface amplitudes of engine.polarisation.fresnel (same time dependence e^{−iωt}, same r_p sign)
 r₁₂ at the incidence cosine cosθ for η = n_f/n₁ and r₂₃ at the film's cosine cosθ_f = u/η for η = n₃/n_f,
 the film's phase thickness δ = 2π n_f d cosθ_f / λ (complex beyond the film's critical angle: the
@@ -36,7 +37,8 @@ def film_amplitudes(cos_theta, n1, n_film, d_nm, n3, lam_nm):
     cos_f = u / eta_f                                 # complex beyond the film's critical angle
     # the second interface, seen from inside the film: its amplitudes at cosθ_f (complex cosines are
     # handled by the same formula with sin² = 1 − cos²)
-    eta_3 = np.asarray(n3, np.float64) / np.asarray(n_film, np.float64)
+    n3 = np.asarray(n3)
+    eta_3 = (n3 if np.iscomplexobj(n3) else n3.astype(np.float64)) / np.asarray(n_film, np.float64)
     u3 = np.sqrt(eta_3 * eta_3 - (1.0 - cos_f * cos_f) + 0j)
     u3 = np.where(u3.imag < 0, -u3, u3)
     e2 = eta_3 * eta_3

@@ -38,7 +38,7 @@ from ...engine.materials.dielectric import SmoothDielectric
 from ...engine.materials.lambert import Lambert
 from ...engine.materials.catalogue import MODELS
 from ...engine.materials.normal_map import set_bump_correction
-from ...engine.materials.principled import IOR_MIN, WEIGHT_CUTOFF
+from ...engine.materials.principled import IOR_MIN, WEIGHT_CUTOFF, film_gaps
 from ...engine.materials.torrance_sparrow import M_MIN
 from ...engine.errors import SceneError
 from ...engine.textures import ImageTexture, TextureInput, VertexColour
@@ -795,10 +795,10 @@ def _principled(node, mat, warnings, bake=None):
     if film is not None:
         values["thin_film_ior"], values["thin_film_thickness"] = film
     _unsimulated_principled_inputs(node, mat, warnings)
-    opaque_parts = not _never(metallic) or not _always(transmission)
-    if film is not None and opaque_parts:
-        warnings.append(f"material {mat!r}: the Thin Film of {node.name!r} is simulated on its smooth transmission "
-                        "only, not on its metallic or opaque dielectric parts")
+    gaps = film_gaps(metallic, transmission, roughness, values.get("transmission_roughness")) if film else []
+    if gaps:
+        warnings.append(f"material {mat!r}: the Thin Film of {node.name!r} is not simulated on its "
+                        f"{' and '.join(gaps)} (there: no film)")
     decl = MODELS["principled"]
     return decl.build(decl.values(values, f"material {mat!r}.{node.name}"))
 

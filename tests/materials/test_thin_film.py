@@ -102,3 +102,45 @@ def test_model_samples_the_coated_interface():
     assert through.any() and (~through).any()
     assert np.all(np.isfinite(bs.weight.matrix()))
     assert not model.scatter_delta(None)
+
+
+@pytest.mark.parametrize("n3", [0.27 + 2.8j, 1.2 + 7.0j, 2.5 + 0.3j])
+@pytest.mark.parametrize("theta", [0.0, 30.0, 60.0, 85.0])
+@pytest.mark.parametrize("nf,d,lam", [(1.5, 400.0, 550.0), (2.0, 120.0, 450.0)])
+def test_a_film_on_a_metal_matches_the_characteristic_matrix(n3, theta, nf, d, lam):
+    """The absorbing substrate (Cycles' Thin Film on its metal): both reflectances as the oracle's."""
+    c = math.cos(math.radians(theta))
+    r_s, r_p = film_amplitudes(c, 1.0, nf, d, n3, lam)
+    assert abs(r_s) ** 2 == pytest.approx(characteristic_matrix_reflectance(c, 1.0, nf, d, n3, lam, "s"), abs=1e-12)
+    assert abs(r_p) ** 2 == pytest.approx(characteristic_matrix_reflectance(c, 1.0, nf, d, n3, lam, "p"), abs=1e-12)
+    assert abs(r_s) <= 1 and abs(r_p) <= 1
+
+
+def test_a_filmed_rough_facet_lobe_is_the_bare_lobe_times_the_films_fresnel_per_facet():
+    """Torrance–Sparrow with a thin film: the facet's Fresnel matrix is the film's at the half-vector angle, so
+    M_film = M_bare · A_film/A_bare per wavelength (A the matrices' M00), both realisable; thickness ≤ 0.1 nm is
+    no film (Cycles' cutoff)."""
+    from engine.materials.torrance_sparrow import TorranceSparrow
+    from engine.spectral import WavelengthLookup
+    rng = np.random.default_rng(4)
+    N = 400
+    n_s = np.tile([[0.0], [0.0], [1.0]], (1, N))
+    wo, wi = rng.normal(size=(3, N)), rng.normal(size=(3, N))
+    wo[2], wi[2] = np.abs(wo[2]) + 0.05, np.abs(wi[2]) + 0.05
+    wo /= np.linalg.norm(wo, axis=0)
+    wi /= np.linalg.norm(wi, axis=0)
+    lam = np.tile([[420.0], [530.0], [640.0]], (1, N))
+    sp = ShadingPoint(np.zeros((3, N)), n_s, n_s, wo, lam, False, WavelengthLookup(lam))
+    for n, k in ((0.2, 3.4), (1.6, 0.0)):
+        bare = TorranceSparrow(n, k, 0.3, distribution="ggx")
+        filmed = TorranceSparrow(n, k, 0.3, distribution="ggx", film_n=1.4, film_thickness=350.0)
+        same = TorranceSparrow(n, k, 0.3, distribution="ggx", film_n=1.4, film_thickness=0.1)
+        h = wi + wo
+        cos_h = np.linalg.norm(h, axis=0) / 2.0
+        A_film = film_reflection_abcs(cos_h[None, :], 1.0, 1.4, 350.0, n + 1j * k, lam)[0]
+        A_bare = fresnel_reflection_abcs(cos_h[None, :], np.full((1, 1), n + 1j * k))[0]
+        Mb, Mf = bare.eval(sp, wi).matrix(), filmed.eval(sp, wi).matrix()
+        np.testing.assert_allclose(Mf[0, 0], Mb[0, 0] * A_film / A_bare, rtol=1e-10, atol=1e-300)
+        np.testing.assert_array_equal(same.eval(sp, wi).matrix(), Mb)
+        assert all(is_realisable(Mf[:, :, j, :]).all() for j in range(3))
+        assert filmed.flags.retarding and filmed.flags.wavelength_dependent
