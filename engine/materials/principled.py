@@ -140,9 +140,27 @@ def _metal_of(n, k, p, alpha):
     from .torrance_sparrow import M_MIN
     if not _textured(alpha) and alpha < M_MIN:
         return conductor.DECLARATION.build(conductor.DECLARATION.values(values, p.where))
+    aniso = _anisotropic_lobe(p, n, k, alpha)
+    if aniso is not None:
+        return aniso
     values.update(m=alpha if _textured(alpha) else max(alpha, M_MIN), distribution="ggx",
                   multiscatter=p["distribution"] == "multi_ggx", **_film_values(p))
     return torrance_sparrow.DECLARATION.build(torrance_sparrow.DECLARATION.values(values, p.where))
+
+
+def _anisotropic_lobe(p, n, k, alpha):
+    """Cycles' anisotropic GGX reflection (engine.materials.anisotropic_ggx) of index n + iκ for Anisotropic > 0
+    and a constant roughness (a textured one stays isotropic: the exporter warns), else None: α_x = r²/aspect,
+    α_y = r²·aspect, aspect = √(1 − 0.9·a), along the surface tangent rotated by Anisotropic Rotation."""
+    if p["anisotropic"] <= 0.0 or _textured(alpha):
+        return None
+    from .anisotropic_ggx import AnisotropicGGX, cycles_alphas
+    from .torrance_sparrow import M_MIN
+    ax, ay = cycles_alphas(math.sqrt(alpha), p["anisotropic"])
+    film = _film_values(p)
+    return AnisotropicGGX(n, k, max(ax, M_MIN), max(ay, M_MIN), rotation=p["anisotropic_rotation"],
+                          multiscatter=p["distribution"] == "multi_ggx",
+                          film_n=film.get("thin_film_ior"), film_thickness=film.get("thin_film_thickness", 0.0))
 
 
 def _film_values(p) -> dict:
@@ -203,13 +221,18 @@ def _dielectric(p, alpha, ior):
     decl = torrance_sparrow.DECLARATION
     tint = p["specular_tint"]
     tinted = not (tint.is_constant and tint.linear_srgb()[0] == 1.0)
-    if p["diffuse_roughness"] > 0 or tinted:
-        # the specular layer over Cycles' diffuse base as two parts (mix.Layered): an Oren–Nayar base, a tint
+    aniso = None if smooth else _anisotropic_lobe(p, eta, 0.0, alpha)
+    if p["diffuse_roughness"] > 0 or tinted or aniso is not None:
+        # the specular layer over Cycles' diffuse base as two parts (mix.Layered): an Oren–Nayar base, a tint,
+        # an anisotropic specular layer
         from .lambert import DECLARATION as LAMBERT
         from .mix import Layered
         from .oren_nayar import OrenNayar
-        top = decl.build(decl.values({k: v for k, v in values.items() if k != "diffuse_layering"}, p.where))
-        albedo = _reflection_albedo(top, eta, alpha, smooth)
+        if aniso is not None:
+            top, albedo = aniso, aniso.reflection_albedo
+        else:
+            top = decl.build(decl.values({k: v for k, v in values.items() if k != "diffuse_layering"}, p.where))
+            albedo = _reflection_albedo(top, eta, alpha, smooth)
         if tinted:
             from .tinted import FresnelTinted
             albedo = _tinted_albedo(albedo, top, eta, alpha, smooth, float(max(tint.linear_srgb())))
@@ -316,6 +339,11 @@ DECLARATION = ModelDeclaration(
      Parameter("diffuse_roughness", "the base's Oren–Nayar roughness σ (0: Lambert)", lo=0.0, hi=1.0, default=0.0),
      Parameter("specular_tint", "Cycles' Specular Tint: the dielectric's F0 × tint (its F82 tint for the metal)",
                kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6, default=1.0),
+     Parameter("anisotropic", "Cycles' Anisotropic: the metal's and the specular layer's GGX stretched along the "
+                              "surface tangent, α = r²/aspect and r²·aspect, aspect = √(1 − 0.9·a) (a constant "
+                              "roughness)", lo=0.0, hi=1.0, default=0.0),
+     Parameter("anisotropic_rotation", "the tangent's rotation about the normal, in turns", lo=-1e6, hi=1e6,
+               default=0.0),
      Parameter("coat_weight", "coat (> 0: a coat over the dielectric)", lo=0.0, hi=1.0, default=0.0),
      Parameter("coat_roughness", "coat roughness r", lo=0.0, hi=1.0, default=0.03),
      Parameter("coat_ior", "coat index", lo=1.0, hi=100.0, default=1.5),

@@ -784,6 +784,8 @@ def _principled(node, mat, warnings, bake=None):
               "coat_weight": r.float("Coat Weight", 0.0, 1.0), "coat_roughness": r.float("Coat Roughness", 0.0, 1.0),
               "coat_ior": min(max(r.float("Coat IOR"), 1.0), 100.0),
               "coat_tint": _grey(r.rgb_or_texture("Coat Tint", 0.0, 1.0)),
+              "anisotropic": r.float("Anisotropic", 0.0, 1.0) if _anisotropic(node) else 0.0,
+              "anisotropic_rotation": r.float("Anisotropic Rotation", -1e6, 1e6),
               "diffuse_roughness": (r.float("Diffuse Roughness", 0.0, 1.0)
                                     if node.inputs.get("Diffuse Roughness") is not None else 0.0),
               "distribution": "ggx" if getattr(node, "distribution", "MULTI_GGX") == "GGX" else "multi_ggx"}
@@ -794,6 +796,8 @@ def _principled(node, mat, warnings, bake=None):
     film = _film(r)
     if film is not None:
         values["thin_film_ior"], values["thin_film_thickness"] = film
+    if values["anisotropic"] > 0.0:
+        _tangent_note(node, mat, warnings, isinstance(roughness, TextureInput))
     _unsimulated_principled_inputs(node, mat, warnings)
     gaps = film_gaps(metallic, transmission, roughness, values.get("transmission_roughness")) if film else []
     if gaps:
@@ -805,8 +809,31 @@ def _principled(node, mat, warnings, bake=None):
 
 #: Principled inputs not simulated yet, and the value at which they change nothing (a colour: white)
 _PRINCIPLED_NOT_SIMULATED = (("Subsurface Weight", 0.0, "rendered as the diffuse base"),
-                             ("Sheen Weight", 0.0, "no sheen layer"),
-                             ("Anisotropic", 0.0, "isotropic facets"))
+                             ("Sheen Weight", 0.0, "no sheen layer"))
+
+
+def _anisotropic(node) -> bool:
+    """A Principled BSDF whose Anisotropic is set (a constant > 0, or linked: its own value is then used, with
+    the reader's warning)."""
+    sock = node.inputs.get("Anisotropic")
+    return sock is not None and (sock.is_linked or float(sock.default_value) > 0.0)
+
+
+def _tangent_note(node, mat, warnings, textured_roughness):
+    """The warnings of an anisotropic Principled BSDF: Cycles stretches its GGX along the Tangent input — a
+    Tangent node on a UV map is that map's MikkTSpace tangent, as Polar's; unlinked, Cycles' default is the
+    radial tangent about the object's Z (generated coordinates), for which Polar takes the active UV map's
+    tangent (the same on a UV sphere or cylinder, not in general)."""
+    sock = node.inputs.get("Tangent")
+    source = _follow(sock) if sock is not None and sock.is_linked else None
+    if source is None or source.bl_idname != "ShaderNodeTangent" or source.direction_type != "UV_MAP":
+        what = "unlinked (Cycles: the radial tangent about the object's Z)" if source is None else \
+            f"from {source.bl_idname} {source.name!r}"
+        warnings.append(f"material {mat!r}: the Tangent of {node.name!r} is {what}; its anisotropy is rendered along "
+                        "the active UV map's tangent")
+    if textured_roughness:
+        warnings.append(f"material {mat!r}: the anisotropy of {node.name!r} needs a constant Roughness; rendered "
+                        "isotropic")
 
 
 def _unsimulated_principled_inputs(node, mat, warnings):
@@ -961,6 +988,12 @@ def attribute_needs(material) -> dict:
         elif kind == "ShaderNodeNormalMap" and node.space == "TANGENT":
             needs["uv"].append(node.uv_map)
             needs["tangents"].append(node.uv_map)
+        elif kind == "ShaderNodeTangent" and node.direction_type == "UV_MAP":
+            needs["uv"].append(node.uv_map)
+            needs["tangents"].append(node.uv_map)
+        elif kind == "ShaderNodeBsdfPrincipled" and _anisotropic(node):
+            needs["uv"].append("")              # the surface tangent of the anisotropy (see _tangent_note)
+            needs["tangents"].append("")
         elif kind == "ShaderNodeVertexColor":
             needs["colors"].append(node.layer_name)
         elif kind == "ShaderNodeAttribute" and node.attribute_type == "GEOMETRY":
