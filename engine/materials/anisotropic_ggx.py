@@ -87,7 +87,7 @@ from .table_cache import cached_table
 from .torrance_sparrow import M_MIN, SpecularAlbedoTable
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflectance, fresnel_reflection_abcs
-from ..polarisation.thin_film import film_reflection_abcs
+from ..polarisation.thin_film import facet_film, film_reflection_abcs
 from ..spectral import RGB_WAVELENGTHS_NM, ConstantSpectrum, as_spectrum
 from ..textures import textured
 from ..vec3 import cross, dot, local_frame, to_local
@@ -363,12 +363,7 @@ class AnisotropicGGX(BSDF):
         if self.multiscatter and not max(ax, ay) <= ALPHA_MAX:
             raise ValueError(f"multiscatter needs alpha_x, alpha_y <= {ALPHA_MAX:g} (Cycles clamps GGX alpha to 1), "
                              f"got {ax!r}, {ay!r}")
-        self.film = None
-        if film_n is not None and film_thickness > 0.1:
-            if not (math.isfinite(film_n) and film_n > 0 and math.isfinite(film_thickness)):
-                raise ValueError(f"a thin film needs a finite index > 0 and thickness, got {film_n!r}, "
-                                 f"{film_thickness!r}")
-            self.film = (float(film_n), float(film_thickness))
+        self.film = facet_film(film_n, film_thickness)
         self.isotropic = ax == ay
         #: the single α of Cycles' energy tables for this lobe (rough = √√(α_x α_y) in its kernel)
         self.alpha_cycles = ax if self.isotropic else math.sqrt(ax * ay)

@@ -117,7 +117,7 @@ from ..kernels.torrance_sparrow import (SHADOWING_CODES, torrance_sparrow_eval_n
                                         torrance_sparrow_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
-from ..polarisation.thin_film import film_reflection_abcs
+from ..polarisation.thin_film import facet_film, film_reflection_abcs
 from ..spectral import ConstantSpectrum, as_spectrum
 from ..textures import TexturedNumber, textured
 from ..vec3 import dot, local_frame, to_local
@@ -369,12 +369,7 @@ class TorranceSparrow(BSDF):
         # a thin film on every facet (Cycles' Principled Thin Film on its metal and specular layers): Airy's sum
         # over the film on the substrate n + iκ replaces the facet's bare Fresnel matrix (engine.polarisation.
         # thin_film); thickness in nm, none below 0.1 nm (Cycles' cutoff)
-        self.film = None
-        if film_n is not None and film_thickness > 0.1:
-            if not (math.isfinite(film_n) and film_n > 0 and math.isfinite(film_thickness)):
-                raise ValueError(f"a thin film needs a finite index > 0 and thickness, got {film_n!r}, "
-                                 f"{film_thickness!r}")
-            self.film = (float(film_n), float(film_thickness))
+        self.film = facet_film(film_n, film_thickness)
         self.k = as_spectrum(k, "k")
         # m, specular_weight and diffuse_weight may be TexturedNumbers (values per surface point,
         # read through ShadingPoint.number); constants keep their float fast path

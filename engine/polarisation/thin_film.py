@@ -23,7 +23,20 @@ import numpy as np
 
 from .fresnel import fresnel_amplitudes
 
-__all__ = ["film_amplitudes", "film_reflection_abcs", "film_transmission_abcs"]
+__all__ = ["FILM_CUTOFF_NM", "facet_film", "film_amplitudes", "film_reflection_abcs", "film_transmission_abcs"]
+
+#: Thinner films are none (Cycles' THINFILM_THICKNESS_CUTOFF, nm).
+FILM_CUTOFF_NM = 0.1
+
+
+def facet_film(film_n, thickness_nm) -> tuple[float, float] | None:
+    """(index, thickness nm) of a film on a model's facets, or None (no index, or thinner than FILM_CUTOFF_NM);
+    ValueError for a non-finite or non-positive index or a non-finite thickness."""
+    if film_n is None or not thickness_nm > FILM_CUTOFF_NM:
+        return None
+    if not (np.isfinite(film_n) and film_n > 0 and np.isfinite(thickness_nm)):
+        raise ValueError(f"a thin film needs a finite index > 0 and thickness, got {film_n!r}, {thickness_nm!r}")
+    return float(film_n), float(thickness_nm)
 
 
 def film_amplitudes(cos_theta, n1, n_film, d_nm, n3, lam_nm):

@@ -98,6 +98,23 @@ def sphere_scene(socket, values, others, lighting):
     return scene
 
 
+def compare_with_cycles(scene, name, lighting, spectral="RGB"):
+    """Render ``scene`` with Cycles and Polar at SPP × SEEDS and assert the asset rule with no warnings."""
+    import tempfile
+    report = ap.CaseReport(name, lighting, SPP, SEEDS, SIZE, SIZE)
+    hit = ap.coverage(scene, SIZE, SIZE)
+    with tempfile.TemporaryDirectory() as tmp:
+        cyc = ap.render_cycles(scene, SPP, SEEDS, 8, tmp)
+    renderer, settings, report.warnings = ap.export_polar(scene, SPP, 8, spectral=spectral)
+    stokes = ap.render_polar(renderer, settings, SEEDS)
+    ap.compare(cyc, stokes[:, 0], hit, report)
+    print(report.line())
+    assert not report.warnings, report.warnings
+    assert report.blocks >= 8
+    assert report.ok, (f"{report.line()}\nfailing blocks (row, column, Polar ÷ Cycles, tolerance): "
+                       f"{[(i, j, round(r, 3), round(t, 3)) for i, j, r, t in report.failing]}")
+
+
 @pytest.fixture(scope="module")
 def addon():
     return load_addon()
@@ -106,21 +123,8 @@ def addon():
 @pytest.mark.parametrize("lighting", ap.LIGHTINGS)
 @pytest.mark.parametrize("socket", list(CASES))
 def test_principled_input_per_point_matches_cycles(addon, socket, lighting):
-    import tempfile
     values, others = CASES[socket]
-    scene = sphere_scene(socket, values, others, lighting)
-    report = ap.CaseReport(f"Principled {socket.strip()}", lighting, SPP, SEEDS, SIZE, SIZE)
-    hit = ap.coverage(scene, SIZE, SIZE)
-    with tempfile.TemporaryDirectory() as tmp:
-        cyc = ap.render_cycles(scene, SPP, SEEDS, 8, tmp)
-    renderer, settings, report.warnings = ap.export_polar(scene, SPP, 8)
-    stokes = ap.render_polar(renderer, settings, SEEDS)
-    ap.compare(cyc, stokes[:, 0], hit, report)
-    print(report.line())
-    assert not report.warnings, report.warnings
-    assert report.blocks >= 8
-    assert report.ok, (f"{report.line()}\nfailing blocks (row, column, Polar ÷ Cycles, tolerance): "
-                       f"{[(i, j, round(r, 3), round(t, 3)) for i, j, r, t in report.failing]}")
+    compare_with_cycles(sphere_scene(socket, values, others, lighting), f"Principled {socket.strip()}", lighting)
 
 
 #: a constant Thin Film over a Base Color checker: rough metal and rough dielectric (Cycles' iridescence on
@@ -135,20 +139,9 @@ FILMS = {
 @pytest.mark.parametrize("lighting", ap.LIGHTINGS)
 @pytest.mark.parametrize("part", list(FILMS))
 def test_thin_film_on_rough_layers_matches_cycles(addon, part, lighting):
-    import tempfile
     colours = ((0.9, 0.6, 0.3), (0.8, 0.8, 0.8)) if part == "metal" else ((0.2, 0.2, 0.2), (0.05, 0.05, 0.05))
-    scene = sphere_scene("Base Color", colours, FILMS[part], lighting)
-    report = ap.CaseReport(f"Thin film on {part}", lighting, SPP, SEEDS, SIZE, SIZE)
-    hit = ap.coverage(scene, SIZE, SIZE)
-    with tempfile.TemporaryDirectory() as tmp:
-        cyc = ap.render_cycles(scene, SPP, SEEDS, 8, tmp)
-    renderer, settings, report.warnings = ap.export_polar(scene, SPP, 8, spectral="SPECTRAL")
-    stokes = ap.render_polar(renderer, settings, SEEDS)
-    ap.compare(cyc, stokes[:, 0], hit, report)
-    print(report.line())
-    assert not report.warnings, report.warnings
-    assert report.ok, (f"{report.line()}\nfailing blocks (row, column, Polar ÷ Cycles, tolerance): "
-                       f"{[(i, j, round(r, 3), round(t, 3)) for i, j, r, t in report.failing]}")
+    compare_with_cycles(sphere_scene("Base Color", colours, FILMS[part], lighting), f"Thin film on {part}", lighting,
+                        spectral="SPECTRAL")
 
 
 #: Anisotropic GGX (constant Anisotropic, a Base Color checker) along a Tangent node's UV tangent
@@ -162,24 +155,13 @@ ANISOTROPIC = {
 @pytest.mark.parametrize("lighting", ap.LIGHTINGS)
 @pytest.mark.parametrize("part", list(ANISOTROPIC))
 def test_anisotropic_ggx_matches_cycles(addon, part, lighting):
-    import tempfile
     colours = ((0.9, 0.6, 0.3), (0.8, 0.8, 0.8)) if "metal" in part else ((0.6, 0.2, 0.1), (0.1, 0.3, 0.6))
     scene = sphere_scene("Base Color", colours, ANISOTROPIC[part], lighting)
     mat = bpy.data.materials["P"]
     tangent = mat.node_tree.nodes.new("ShaderNodeTangent")
     tangent.direction_type = "UV_MAP"
     mat.node_tree.links.new(tangent.outputs["Tangent"], mat.node_tree.nodes["Principled BSDF"].inputs["Tangent"])
-    report = ap.CaseReport(f"Anisotropic {part}", lighting, SPP, SEEDS, SIZE, SIZE)
-    hit = ap.coverage(scene, SIZE, SIZE)
-    with tempfile.TemporaryDirectory() as tmp:
-        cyc = ap.render_cycles(scene, SPP, SEEDS, 8, tmp)
-    renderer, settings, report.warnings = ap.export_polar(scene, SPP, 8)
-    stokes = ap.render_polar(renderer, settings, SEEDS)
-    ap.compare(cyc, stokes[:, 0], hit, report)
-    print(report.line())
-    assert not report.warnings, report.warnings
-    assert report.ok, (f"{report.line()}\nfailing blocks (row, column, Polar ÷ Cycles, tolerance): "
-                       f"{[(i, j, round(r, 3), round(t, 3)) for i, j, r, t in report.failing]}")
+    compare_with_cycles(scene, f"Anisotropic {part}", lighting)
 
 
 def test_anisotropy_without_a_tangent_node_says_which_tangent_it_takes(addon):
