@@ -206,6 +206,10 @@ def _transmission(p, alpha, ior):
         glass = SmoothDielectric(ior)
     else:
         glass = RoughDielectric(ior, a, "ggx", multiscatter=p["distribution"] == "multi_ggx")
+    spec_tint = p["specular_tint"]
+    if not (getattr(spec_tint, "is_constant", False) and spec_tint.linear_srgb()[0] == 1.0):
+        from .tinted import FresnelTinted           # Cycles: the glass's F0 × Specular Tint, transmittance 1 − F
+        glass = FresnelTinted(glass, ior, spec_tint)
     tint = _root(p["base_color"])
     return glass if tint is None else Tinted(glass, None, tint)
 

@@ -104,7 +104,9 @@ class FresnelTinted(_ScaledLobes):
     reflectance at the facet angle, F0 = F_real(0°)), rendered as the polarising layer ``base`` (a
     dielectric Torrance–Sparrow or mirror of real index ``n``) times F/F_real per wavelength — the tint
     changes how much is reflected, not the polarisation of what is (a scalar per wavelength: realisable
-    wherever F ≥ 0).  Reflection only; the facet angle is that of the half vector of (ω_i, ω_o)."""
+    wherever F ≥ 0).  The facet angle is that of the half vector of (ω_i, ω_o).  On a glass (a base that
+    transmits: Principled's transmission) the refraction carries Cycles' transmittance 1 − F too,
+    × (1 − F_t)/(1 − F_real) (``_glass_factor``)."""
 
     def __init__(self, base: BSDF, n: float, tint: Spectrum):
         self.base, self.n, self.tint = base, float(n), tint
@@ -127,12 +129,41 @@ class FresnelTinted(_ScaledLobes):
         return np.where(F[None, :] > 0, np.maximum(tinted, 0.0) / np.where(F > 0, F, 1.0)[None, :], 1.0)
 
     def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        h = wi + sp.wo          # the facet angle: cosθ_h = |ω_i + ω_o| / 2
-        return self._fresnel_factor(sp, 0.5 * np.sqrt(dot(h, h)))
+        if not self.flags.transmits:
+            h = wi + sp.wo      # the facet angle: cosθ_h = |ω_i + ω_o| / 2
+            return self._fresnel_factor(sp, 0.5 * np.sqrt(dot(h, h)))
+        return self._glass_factor(sp, wi)
+
+    def _glass_factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        """A glass (base transmits): reflection × F_t/F and refraction × (1 − F_t)/(1 − F), Cycles' generalized
+        Schlick for its Principled transmission (transmittance 1 − F_t), F the glass's own reflectance seen from
+        the viewer's side at the facet angle — of the half vector (reflection) or of Walter's refraction half
+        vector −(n_i ω_i + n_o ω_o) (refraction); F = 1 (total internal reflection) changes nothing."""
+        from ..polarisation.fresnel import fresnel_reflectance
+        outside = sp.cos_o >= 0
+        n_o = np.where(outside, 1.0, self.n)            # the viewer's medium, the other one
+        n_i = np.where(outside, self.n, 1.0)
+        through = dot(wi, sp.n_g) * dot(sp.wo, sp.n_g) < 0
+        h = np.where(through[None, :], -(n_i[None, :] * wi + n_o[None, :] * sp.wo), wi + sp.wo)
+        length = np.sqrt(dot(h, h))
+        cos_f = np.abs(dot(sp.wo, h)) / np.where(length > 0, length, 1.0)
+        F = np.stack([fresnel_reflectance(np.clip(cos_f, 0.0, 1.0)[None, :], complex(e))[0]
+                      for e in (self.n, 1.0 / self.n)])[np.where(outside, 0, 1), np.arange(sp.n)]
+        t = sp.spectrum(self.tint) * np.ones(sp.lam.shape)
+        if self.f0 >= 1.0:
+            return np.ones(sp.lam.shape)
+        F_t = np.clip(F[None, :] + self.f0 * (t - 1.0) * (1.0 - F[None, :]) / (1.0 - self.f0), 0.0, 1.0)
+        refl = np.where(F[None, :] > 0, F_t / np.where(F > 0, F, 1.0)[None, :], 1.0)
+        trans = np.where(F[None, :] < 1, (1.0 - F_t) / np.where(F < 1, 1.0 - F, 1.0)[None, :], 1.0)
+        return np.where(through[None, :], trans, refl)
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
         value = self.base.delta_reflection(sp)
-        return None if value is None else value.scaled(self._fresnel_factor(sp, np.abs(sp.cos_o)))
+        if value is None:
+            return None
+        if self.flags.transmits:
+            return value.scaled(self._glass_factor(sp, 2.0 * sp.cos_o[None, :] * sp.n_s - sp.wo))
+        return value.scaled(self._fresnel_factor(sp, np.abs(sp.cos_o)))
 
     def describe(self) -> dict[str, object]:
         return {**self.base.describe(), "specular_tint": repr(self.tint)}

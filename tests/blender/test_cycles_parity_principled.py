@@ -34,6 +34,10 @@ CASES = {
                                "Coat Weight": 1.0, "Coat Roughness": 0.1}),
     "Base Color  ": (((0.8, 0.1, 0.05), (0.1, 0.3, 0.8)), {"Roughness": 0.2,          # a Specular Tint
                                                             "Specular Tint": (1.0, 0.5, 0.2)}),
+    "Base Color   ": (((0.95, 0.95, 0.95), (0.9, 0.7, 0.5)), {"Transmission Weight": 1.0, "Roughness": 0.15,
+                                                              "Specular Tint": (1.0, 0.4, 0.1)}),  # a tinted glass
+    "Base Color    ": (((0.95, 0.95, 0.95), (0.6, 0.8, 0.9)), {"Transmission Weight": 1.0, "Roughness": 0.0,
+                                                               "IOR": 1.8, "Specular Tint": (0.2, 0.5, 1.0)}),
     "Normal": (((0.5, 0.5, 1.0), (0.85, 0.6, 0.75)), {"Base Color": (0.6, 0.3, 0.2), "Roughness": 0.3}),
     "Normal ": (((0.5, 0.5, 1.0), (0.85, 0.6, 0.75)), {"Base Color": (0.9, 0.9, 0.9), "Roughness": 0.1,  # metal
                                                        "Metallic": 1.0}),

@@ -102,3 +102,28 @@ def test_coat_tint_is_cycles_path_length_approximation_on_every_lobe_below():
     assert isinstance(matched, CoatTinted)
     np.testing.assert_allclose(matched.factor(sp)[0], t ** (1 / cos_o), rtol=1e-12)
     assert not any(isinstance(c, CoatTinted) for c in build(coat_weight=1.0, coat_tint=1.0).components)
+
+
+def test_specular_tint_on_a_glass_keeps_reflection_plus_transmission_one():
+    """Cycles' Specular Tint on the Principled transmission: reflection × F_t/F, refraction × (1 − F_t)/(1 − F), so
+    F·r + (1 − F)·t = 1 per wavelength from either side (energy kept, only redistributed), and a white tint is 1."""
+    from engine.materials.base import ShadingPoint
+    from engine.materials.dielectric import SmoothDielectric
+    from engine.materials.tinted import FresnelTinted
+    from engine.polarisation.fresnel import fresnel_reflectance
+    from engine.spectral import RGBUnboundedSpectrum, WavelengthLookup
+    glass = FresnelTinted(SmoothDielectric(1.6), 1.6, RGBUnboundedSpectrum([1.0, 0.4, 0.1]))
+    N = 6
+    cos_o = np.array([1.0, 0.7, 0.3, -0.9, -0.5, -0.2])        # negative: the viewer inside the glass
+    wo = np.stack([np.sqrt(1 - cos_o ** 2), np.zeros(N), cos_o])
+    n_s = np.tile([[0.0], [0.0], [1.0]], (1, N))
+    lam = np.tile([[450.0], [550.0], [650.0]], (1, N))
+    sp = ShadingPoint(np.zeros((3, N)), n_s, n_s, wo, lam, False, WavelengthLookup(lam))
+    refl = glass.base.sample(sp, np.zeros(N), np.zeros((2, N)))            # u_lobe 0: reflect
+    refr = glass.base.sample(sp, np.full(N, 0.999999), np.zeros((2, N)))   # u_lobe → 1: refract (where it can)
+    r, t = glass._factor(sp, refl.wi), glass._factor(sp, refr.wi)
+    eta = np.where(cos_o >= 0, 1.6, 1 / 1.6)
+    F = np.array([fresnel_reflectance(np.array([abs(c)]), complex(e))[0] for c, e in zip(cos_o, eta)])
+    total = F[None, :] * r + (1 - F[None, :]) * t
+    np.testing.assert_allclose(total, 1.0, rtol=1e-12)
+    assert not np.allclose(r, 1.0)                                   # the tint does change the split
