@@ -354,6 +354,11 @@ DECLARATION = ModelDeclaration(
      Parameter("coat_tint", "coat colour: its transmittance at normal incidence (Cycles' Coat Tint: everything "
                             "below × tint^(1/cosθ_t), blended by coat_weight)", kind="spectrum", spectrum="reflectance",
                lo=0.0, hi=1.0, default=1.0, texturable=True),
+     Parameter("sheen_weight", "Cycles' sheen layer over everything (microfiber, engine.materials.sheen)", lo=0.0,
+               hi=1e6, default=0.0),
+     Parameter("sheen_roughness", "the sheen's roughness", lo=0.0, hi=1.0, default=0.5),
+     Parameter("sheen_tint", "the sheen's colour", kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6,
+               default=1.0),
      Parameter("thin_film_thickness", "thin film on the smooth transmission and on the rough metal and dielectric "
                                       "specular layers (Airy's sum, per facet)", unit="nm", lo=0.0, hi=1e6,
                default=0.0),
@@ -378,4 +383,25 @@ def _principled(p):
     if not _always(metallic) and not _always(transmission):
         dielectric = _dielectric(p, alpha, ior)
     below = _mixture(_mixture(dielectric, glass, transmission), metal, metallic)
-    return _coat(p, below) if p["coat_weight"] >= WEIGHT_CUTOFF else below
+    if p["coat_weight"] >= WEIGHT_CUTOFF:
+        below = _coat(p, below)
+    return _sheen(p, below) if p["sheen_weight"] >= WEIGHT_CUTOFF else below
+
+
+def _sheen(p, below):
+    """Cycles' first layer: the microfiber sheen (engine.materials.sheen) weighted sheen_weight, tinted, over
+    everything else, which is weighted by 1 − sheen_weight·max(tint)·E_sheen(ω_o) (closure_layering_weight
+    takes the largest channel)."""
+    from .mix import Layered
+    from .sheen import Sheen
+    tint = p["sheen_tint"]
+    top = Sheen(tint, p["sheen_roughness"])
+    if getattr(tint, "is_constant", True) and not _textured(tint):
+        peak = float(max(tint.linear_srgb()))
+
+        def albedo(sp):
+            return peak * top.albedo(sp)
+    else:
+        def albedo(sp):
+            return np.max(np.maximum(sp.spectrum(tint), 0.0), axis=0) * top.albedo(sp)
+    return Layered(top, below, p["sheen_weight"], albedo)

@@ -784,6 +784,8 @@ def _principled(node, mat, warnings, bake=None):
               "coat_weight": r.float("Coat Weight", 0.0, 1.0), "coat_roughness": r.float("Coat Roughness", 0.0, 1.0),
               "coat_ior": min(max(r.float("Coat IOR"), 1.0), 100.0),
               "coat_tint": _grey(r.rgb_or_texture("Coat Tint", 0.0, 1.0)),
+              "sheen_weight": max(r.float("Sheen Weight"), 0.0), "sheen_roughness": r.float("Sheen Roughness", 0.0, 1.0),
+              "sheen_tint": _grey(r.rgb("Sheen Tint", 0.0)),
               "anisotropic": r.float("Anisotropic", 0.0, 1.0) if _anisotropic(node) else 0.0,
               "anisotropic_rotation": r.float("Anisotropic Rotation", -1e6, 1e6),
               "diffuse_roughness": (r.float("Diffuse Roughness", 0.0, 1.0)
@@ -808,8 +810,7 @@ def _principled(node, mat, warnings, bake=None):
 
 
 #: Principled inputs not simulated yet, and the value at which they change nothing (a colour: white)
-_PRINCIPLED_NOT_SIMULATED = (("Subsurface Weight", 0.0, "rendered as the diffuse base"),
-                             ("Sheen Weight", 0.0, "no sheen layer"))
+_PRINCIPLED_NOT_SIMULATED = (("Subsurface Weight", 0.0, "rendered as the diffuse base"),)
 
 
 def _anisotropic(node) -> bool:
@@ -1098,7 +1099,7 @@ def surface_bsdf(node, mat, warnings, depth=0, bake=None):
 #: converted shaders whose Normal input is exported
 _NORMAL_SHADERS = ("ShaderNodeBsdfDiffuse", "ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic",
                    "ShaderNodeBsdfMetallic", "ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction",
-                   "ShaderNodeBsdfPrincipled")
+                   "ShaderNodeBsdfPrincipled", "ShaderNodeBsdfSheen")
 
 
 def _surface_bsdf(node, mat, warnings, depth, bake=None):
@@ -1128,6 +1129,13 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
         glass = _glass(_ior(r, "IOR"), rough, getattr(node, "distribution", ""), _film(r),
                        lambda text: warnings.append(f"material {mat!r}: {node.name!r}: {text}"))
         return _tinted(glass, colour, colour), None
+    if kind == "ShaderNodeBsdfSheen":
+        if getattr(node, "distribution", "MICROFIBER") != "MICROFIBER":
+            warnings.append(f"material {mat!r}: Sheen BSDF {node.name!r} with the {node.distribution.title()} "
+                            "distribution is rendered as Microfiber (Cycles' default)")
+        tint = r.rgb_or_texture("Color", 0.0)
+        return _textured_model("sheen", {"tint": _grey(tint), "roughness": r.float("Roughness", 0.0, 1.0)},
+                               mat, node), None
     if kind == "ShaderNodeBsdfPrincipled":
         emission = _emission(node, mat, warnings, "Emission Color", "Emission Strength", bake)
         return _principled(node, mat, warnings, bake), emission

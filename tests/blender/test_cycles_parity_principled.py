@@ -38,6 +38,11 @@ CASES = {
                                                               "Specular Tint": (1.0, 0.4, 0.1)}),  # a tinted glass
     "Base Color    ": (((0.95, 0.95, 0.95), (0.6, 0.8, 0.9)), {"Transmission Weight": 1.0, "Roughness": 0.0,
                                                                "IOR": 1.8, "Specular Tint": (0.2, 0.5, 1.0)}),
+    "Base Color     ": (((0.6, 0.2, 0.1), (0.1, 0.2, 0.5)), {"Roughness": 0.5, "Sheen Weight": 1.0,  # a sheen
+                                                             "Sheen Roughness": 0.4, "Sheen Tint": (1.0, 0.7, 0.5)}),
+    "Base Color      ": (((0.9, 0.6, 0.3), (0.7, 0.7, 0.7)), {"Roughness": 0.3, "Metallic": 1.0,  # sheen, coat
+                                                              "Sheen Weight": 0.7, "Sheen Roughness": 0.2,
+                                                              "Coat Weight": 0.5}),
     "Normal": (((0.5, 0.5, 1.0), (0.85, 0.6, 0.75)), {"Base Color": (0.6, 0.3, 0.2), "Roughness": 0.3}),
     "Normal ": (((0.5, 0.5, 1.0), (0.85, 0.6, 0.75)), {"Base Color": (0.9, 0.9, 0.9), "Roughness": 0.1,  # metal
                                                        "Metallic": 1.0}),
@@ -178,3 +183,24 @@ def test_anisotropy_without_a_tangent_node_says_which_tangent_it_takes(addon):
     scene = sphere_scene("Roughness", (0.2, 0.6), {"Metallic": 1.0, "Anisotropic": 0.8}, "lamps")
     _, _, warnings = ap.export_polar(scene, 1, 8)
     assert any("needs a constant Roughness; rendered isotropic" in w for w in warnings)
+
+
+def test_sheen_bsdf_node_exports_the_sheen_model_and_names_ashikhmin(addon):
+    """The Sheen BSDF node becomes the engine's ``sheen`` (Microfiber, Cycles' default) with its Color and
+    Roughness; the older Ashikhmin distribution is rendered as Microfiber with one warning."""
+    from polar_render.polar_addon.export.materials import export_material
+    mat = bpy.data.materials.new("Velvet")
+    addon.polar_addon.compat.ensure_node_tree(mat)
+    tree = mat.node_tree
+    tree.nodes.remove(tree.nodes["Principled BSDF"])
+    sheen = tree.nodes.new("ShaderNodeBsdfSheen")
+    sheen.inputs["Color"].default_value = (0.9, 0.3, 0.2, 1.0)
+    sheen.inputs["Roughness"].default_value = 0.3
+    tree.links.new(sheen.outputs["BSDF"], tree.nodes["Material Output"].inputs["Surface"])
+    warnings = []
+    bsdf, _ = export_material(mat, warnings)
+    assert warnings == [] and bsdf.name == "sheen" and bsdf.roughness == pytest.approx(0.3)
+    assert list(bsdf.tint.linear_srgb()) == pytest.approx([0.9, 0.3, 0.2])
+    sheen.distribution = "ASHIKHMIN"
+    export_material(mat, warnings)
+    assert len(warnings) == 1 and "Ashikhmin" in warnings[0] and "Microfiber" in warnings[0]
