@@ -411,7 +411,8 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: s
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
     decl = MODELS[choice(_require(d, "type", field), f"{field}.type", tuple(MODELS))]
-    _check_keys(d, field, {"type", "note", "name", "normal_map", "bump_map", "two_sided", "radiance_scaling", "interior"}
+    _check_keys(d, field, {"type", "note", "name", "normal_map", "bump_map", "two_sided", "radiance_scaling",
+                           "interior"}
                 | set(decl.names()))
     if depth > 0 and "interior" in d:
         raise SceneError(f"{field}.interior", "belongs to a material of the scene's \"materials\" (the one the faces "

@@ -138,10 +138,12 @@ def test_principled_conversion_per_input(addon):
         np.testing.assert_array_equal(mueller_at(sss, theta, 30.0, 180.0)["brdf"],
                                       mueller_at(plain, theta, 30.0, 180.0)["brdf"])
     assert len(warnings) == 1 and "'Subsurface Weight'" in warnings[0]
-    # Inputs not simulated yet: one warning each, naming the input (never dropped silently).
-    _, _, warnings = exported(principled(**{"Sheen Weight": 0.5, "Anisotropic": 0.3}))
-    assert len(warnings) == 2 and "'Sheen Weight'" in warnings[0] + warnings[1]
-    assert any("'Anisotropic'" in w for w in warnings)
+    # Sheen: a layer over everything; Anisotropic: the anisotropic GGX, with one warning naming the tangent it
+    # takes where Tangent is unlinked (Cycles: the radial tangent about the object's Z).
+    bsdf, _, warnings = exported(principled(**{"Sheen Weight": 0.5, "Anisotropic": 0.3, "Roughness": 0.5}))
+    assert bsdf.name == "layered" and bsdf.components[0].name == "sheen" and bsdf.top_weight == 0.5
+    assert type(bsdf.components[1].components[0]).__name__ == "AnisotropicGGX"     # the specular layer below
+    assert len(warnings) == 1 and "Tangent" in warnings[0] and "radial tangent" in warnings[0]
     # Coat → a GGX dielectric layer over everything below, Cycles' layering.
     bsdf, _, _ = exported(principled(**{"Coat Weight": 1.0, "Coat IOR": 1.6, "Coat Roughness": 0.0, "Roughness": 0.0}))
     assert bsdf.name == "layered" and bsdf.top_weight == 1.0     # Cycles' coat over everything below

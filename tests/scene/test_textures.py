@@ -615,8 +615,8 @@ def test_mapped_diffuse_lobe_follows_cycles_bump_rules(tmp_path, correction):
     the plane or behind N, and softened by the GGX bump shadowing term when Bump Map Correction is on."""
     n_t = np.array([math_sin(45), 0.0, math_cos(45)])
     _rgb_exr(tmp_path / "tilt.exr", np.tile(((n_t + 1) / 2).astype(np.float32), (2, 2, 1)))
-    mat = map_normals(Lambert(as_spectrum(0.6, "albedo")), normal_map=parse_texture_input({"texture": "tilt.exr", "color_space": "Non-Color"},
-                                                                     "m", str(tmp_path)), bump_correction=correction)
+    tilt = parse_texture_input({"texture": "tilt.exr", "color_space": "Non-Color"}, "m", str(tmp_path))
+    mat = map_normals(Lambert(as_spectrum(0.6, "albedo")), normal_map=tilt, bump_correction=correction)
     n = 4
     rng = np.random.default_rng(3)
     uv = np.stack((rng.uniform(0.6, 0.9, n), rng.uniform(0.1, 0.5, n)))
