@@ -627,15 +627,16 @@ class Layered(Mix):
             parts, weights = list(base.components), list(base.weights)
         else:
             parts, weights = [base], [1.0]
-        super().__init__([top] + parts, [float(weight)] + weights)
+        weight = weight if isinstance(weight, TexturedNumber) else float(weight)
+        super().__init__([top] + parts, [weight] + weights)
         if self.components[0] is not top:
             raise ValueError("a layered material's top layer must have a weight > 0")
-        self.top_weight, self.albedo = float(weight), albedo
+        self.top_weight, self.albedo = weight, albedo      # a number or a TexturedNumber (per point)
         self.name = "layered"
 
     def _weights(self, sp: ShadingPoint) -> list[np.ndarray]:
         weights = super()._weights(sp)
         top = self._points(sp)[0]       # the top's albedo at its own normal (a corrected mapped one: Cycles')
-        scale = np.maximum(1.0 - self.top_weight * self.albedo(top), 0.0)
+        scale = np.maximum(1.0 - weights[0] * self.albedo(top), 0.0)     # the top's weight at each point
         return weights[:1] + [w * scale for w in weights[1:]]
 

@@ -348,17 +348,17 @@ DECLARATION = ModelDeclaration(
                               "roughness)", lo=0.0, hi=1.0, default=0.0),
      Parameter("anisotropic_rotation", "the tangent's rotation about the normal, in turns", lo=-1e6, hi=1e6,
                default=0.0),
-     Parameter("coat_weight", "coat (> 0: a coat over the dielectric)", lo=0.0, hi=1.0, default=0.0),
+     Parameter("coat_weight", "coat (> 0: a coat over the dielectric)", lo=0.0, hi=1.0, default=0.0, texturable=True),
      Parameter("coat_roughness", "coat roughness r", lo=0.0, hi=1.0, default=0.03),
      Parameter("coat_ior", "coat index", lo=1.0, hi=100.0, default=1.5),
      Parameter("coat_tint", "coat colour: its transmittance at normal incidence (Cycles' Coat Tint: everything "
                             "below × tint^(1/cosθ_t), blended by coat_weight)", kind="spectrum", spectrum="reflectance",
                lo=0.0, hi=1.0, default=1.0, texturable=True),
      Parameter("sheen_weight", "Cycles' sheen layer over everything (microfiber, engine.materials.sheen)", lo=0.0,
-               hi=1e6, default=0.0),
+               hi=1e6, default=0.0, texturable=True),
      Parameter("sheen_roughness", "the sheen's roughness", lo=0.0, hi=1.0, default=0.5),
      Parameter("sheen_tint", "the sheen's colour", kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6,
-               default=1.0),
+               default=1.0, texturable=True),
      Parameter("thin_film_thickness", "thin film on the smooth transmission and on the rough metal and dielectric "
                                       "specular layers (Airy's sum, per facet)", unit="nm", lo=0.0, hi=1e6,
                default=0.0),
@@ -366,7 +366,8 @@ DECLARATION = ModelDeclaration(
      Parameter("distribution", "microfacet distribution: Multiscatter GGX (Cycles' default) or GGX",
                kind="choice", choices=DISTRIBUTIONS, default="multi_ggx")])
 
-DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission", "coat_tint"})
+DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission", "coat_tint", "coat_weight",
+                                   "sheen_weight", "sheen_tint"})
 
 
 @DECLARATION.builder
@@ -383,9 +384,9 @@ def _principled(p):
     if not _always(metallic) and not _always(transmission):
         dielectric = _dielectric(p, alpha, ior)
     below = _mixture(_mixture(dielectric, glass, transmission), metal, metallic)
-    if p["coat_weight"] >= WEIGHT_CUTOFF:
+    if not _never(p["coat_weight"]):
         below = _coat(p, below)
-    return _sheen(p, below) if p["sheen_weight"] >= WEIGHT_CUTOFF else below
+    return below if _never(p["sheen_weight"]) else _sheen(p, below)
 
 
 def _sheen(p, below):
@@ -396,7 +397,7 @@ def _sheen(p, below):
     from .sheen import Sheen
     tint = p["sheen_tint"]
     top = Sheen(tint, p["sheen_roughness"])
-    if getattr(tint, "is_constant", True) and not _textured(tint):
+    if not _textured(tint):
         peak = float(max(tint.linear_srgb()))
 
         def albedo(sp):

@@ -19,7 +19,7 @@ import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
 from ..spectral import Spectrum
-from ..textures import TexturedSpectrum
+from ..textures import TexturedNumber, TexturedSpectrum
 from ..vec3 import dot
 
 __all__ = ["CoatTinted", "FresnelTinted", "Tinted"]
@@ -179,10 +179,12 @@ class CoatTinted(_ScaledLobes):
     realisability kept.  θ_o is taken from the lobe's own shading normal (the coat's where no map differs)."""
 
     def __init__(self, base: BSDF, tint: Spectrum, n: float, weight: float):
-        self.base, self.tint, self.n, self.weight = base, tint, float(n), float(weight)
+        self.base, self.tint, self.n = base, tint, float(n)
+        self.weight = weight if isinstance(weight, TexturedNumber) else float(weight)     # per point or constant
         self.name = base.name
         self.flags = base.flags | (BSDFFlags.NONE if _grey(tint) else BSDFFlags.WAVELENGTH_DEPENDENT)
-        self.varies_over_surface = base.varies_over_surface or isinstance(tint, TexturedSpectrum)
+        self.varies_over_surface = base.varies_over_surface or isinstance(tint, TexturedSpectrum) or \
+            isinstance(weight, TexturedNumber)
         self.two_sided = base.two_sided
 
     def with_base(self, base: BSDF) -> CoatTinted:
@@ -198,7 +200,7 @@ class CoatTinted(_ScaledLobes):
         cos_o = np.clip(np.abs(sp.cos_o), 0.0, 1.0)
         cos_t = np.sqrt(1.0 - (1.0 - cos_o * cos_o) / (self.n * self.n))
         t = np.maximum(sp.spectrum(self.tint), 0.0) * np.ones(sp.lam.shape)
-        return 1.0 + self.weight * (np.power(t, (1.0 / cos_t)[None, :]) - 1.0)
+        return 1.0 + sp.number(self.weight) * (np.power(t, (1.0 / cos_t)[None, :]) - 1.0)
 
     def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         return self.factor(sp)
@@ -208,4 +210,4 @@ class CoatTinted(_ScaledLobes):
         return None if value is None else value.scaled(self.factor(sp))
 
     def describe(self) -> dict[str, object]:
-        return {**self.base.describe(), "coat_tint": f"{self.tint!r} (coat n {self.n:g}, weight {self.weight:g})"}
+        return {**self.base.describe(), "coat_tint": f"{self.tint!r} (coat n {self.n:g}, weight {self.weight!r})"}

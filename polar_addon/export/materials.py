@@ -732,6 +732,14 @@ def _ior(r, name):
     return max(r.float(name), IOR_MIN)
 
 
+def _sheen_weight(r):
+    """Sheen Weight as Cycles reads it (≥ 0, no upper clamp): a TextureInput in [0, 1] where linked, else the
+    constant."""
+    if r._socket("Sheen Weight").is_linked:
+        return _fraction(r, "Sheen Weight")
+    return max(r.float("Sheen Weight"), 0.0)
+
+
 def _fraction(r, name):
     """A [0, 1] weight input (Metallic, Transmission Weight, a Mix Shader's Factor) as Cycles reads
     it: the constant clamped to [0, 1], or a TextureInput (image, colour attribute, Separate Color of
@@ -781,12 +789,12 @@ def _principled(node, mat, warnings, bake=None):
               "roughness": roughness, "transmission": transmission, "ior": _ior(r, "IOR"),
               "specular_ior_level": r.float("Specular IOR Level", 0.0, 1.0),
               "specular_tint": _grey(r.rgb("Specular Tint", 0.0)),
-              "coat_weight": r.float("Coat Weight", 0.0, 1.0), "coat_roughness": r.float("Coat Roughness", 0.0, 1.0),
+              "coat_weight": _fraction(r, "Coat Weight"), "coat_roughness": r.float("Coat Roughness", 0.0, 1.0),
               "coat_ior": min(max(r.float("Coat IOR"), 1.0), 100.0),
               "coat_tint": _grey(r.rgb_or_texture("Coat Tint", 0.0, 1.0)),
-              "sheen_weight": max(r.float("Sheen Weight"), 0.0),
+              "sheen_weight": _sheen_weight(r),
               "sheen_roughness": r.float("Sheen Roughness", 0.0, 1.0),
-              "sheen_tint": _grey(r.rgb("Sheen Tint", 0.0)),
+              "sheen_tint": _grey(r.rgb_or_texture("Sheen Tint", 0.0)),
               "anisotropic": r.float("Anisotropic", 0.0, 1.0) if _anisotropic(node) else 0.0,
               "anisotropic_rotation": r.float("Anisotropic Rotation", -1e6, 1e6),
               "diffuse_roughness": (r.float("Diffuse Roughness", 0.0, 1.0)

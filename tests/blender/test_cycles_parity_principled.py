@@ -43,6 +43,10 @@ CASES = {
     "Base Color      ": (((0.9, 0.6, 0.3), (0.7, 0.7, 0.7)), {"Roughness": 0.3, "Metallic": 1.0,  # sheen, coat
                                                               "Sheen Weight": 0.7, "Sheen Roughness": 0.2,
                                                               "Coat Weight": 0.5}),
+    "Coat Weight": ((0.0, 1.0), {"Base Color": (0.6, 0.2, 0.1), "Roughness": 0.5, "Coat Roughness": 0.05}),
+    "Sheen Weight": ((0.0, 1.0), {"Base Color": (0.1, 0.2, 0.5), "Roughness": 0.5, "Sheen Roughness": 0.3}),
+    "Sheen Tint": (((1.0, 0.5, 0.2), (0.2, 0.6, 1.0)), {"Base Color": (0.3, 0.3, 0.3), "Roughness": 0.5,
+                                                      "Sheen Weight": 1.0, "Sheen Roughness": 0.5}),
     "Normal": (((0.5, 0.5, 1.0), (0.85, 0.6, 0.75)), {"Base Color": (0.6, 0.3, 0.2), "Roughness": 0.3}),
     "Normal ": (((0.5, 0.5, 1.0), (0.85, 0.6, 0.75)), {"Base Color": (0.9, 0.9, 0.9), "Roughness": 0.1,  # metal
                                                        "Metallic": 1.0}),

@@ -116,7 +116,8 @@ def test_texturable_parameters_are_the_surface_varying_ones():
         ("htsg", "n"), ("htsg", "k"), ("htsg", "sigma0_um"), ("htsg", "tau_um"), ("htsg", "albedo"),
         ("coat", "n"), ("coat", "thickness"), ("coat", "absorption"), ("coat", "exponent"), ("coat", "m"),
         ("principled", "base_color"), ("principled", "metallic"), ("principled", "roughness"),
-        ("principled", "transmission"), ("principled", "coat_tint"), ("oren_nayar", "albedo"),
+        ("principled", "transmission"), ("principled", "coat_tint"), ("principled", "coat_weight"),
+        ("principled", "sheen_weight"), ("principled", "sheen_tint"), ("oren_nayar", "albedo"),
         ("sheen", "tint")}
 
 
