@@ -67,11 +67,13 @@ def _textured(v) -> bool:
 
 
 def _never(x) -> bool:
-    return not _textured(x) and x < WEIGHT_CUTOFF
+    """A weight that is 0 everywhere (a texture whose largest value is below the cutoff included)."""
+    return (x.hi if _textured(x) else x) < WEIGHT_CUTOFF
 
 
 def _always(x) -> bool:
-    return not _textured(x) and x > 1.0 - WEIGHT_CUTOFF
+    """A weight that is 1 everywhere (a texture whose least value is above 1 − the cutoff included)."""
+    return (x.lo if _textured(x) else x) > 1.0 - WEIGHT_CUTOFF
 
 
 def _complement(x):
