@@ -252,8 +252,8 @@ def test_separate_color_of_an_image_is_read_natively(addon, tmp_path):
     """glTF's occlusion-roughness-metallic map: Metallic from the image's blue channel, per point."""
     empty_scene()
     img = bpy.data.images.new("orm", 2, 1, alpha=False)
+    img.colorspace_settings.name = "Non-Color"      # first: changing it regenerates a generated image's pixels
     img.pixels = [1.0, 0.5, 0.0, 1.0, 1.0, 0.5, 1.0, 1.0]        # metallic 0 left, 1 right
-    img.colorspace_settings.name = "Non-Color"
     mat = principled(**{"Roughness": 0.0})
     tree = mat.node_tree
     tex = tree.nodes.new("ShaderNodeTexImage")
@@ -264,6 +264,8 @@ def test_separate_color_of_an_image_is_read_natively(addon, tmp_path):
     bsdf, _, warnings = exported(mat)
     assert not warnings
     assert bsdf.name == "mix" and bsdf.varies_over_surface
+    metallic = bsdf.weights[-1]                     # the metal's weight: the blue channel, 0 and 1
+    assert (metallic.lo, metallic.hi) == (0.0, 1.0)
 
 
 def test_emission_colour_from_an_image_varies_over_the_surface(addon):

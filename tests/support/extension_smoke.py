@@ -119,8 +119,8 @@ def normal_map_convention(ext):
     mat = bpy.data.materials.new("Normal mapped")
     tree = compat.ensure_node_tree(mat)
     image = bpy.data.images.new("flat normal", 4, 4, float_buffer=True)
+    image.colorspace_settings.name = "Non-Color"     # first: changing it regenerates a generated image's pixels
     image.pixels.foreach_set([0.5, 0.5, 1.0, 1.0] * 16)
-    image.colorspace_settings.name = "Non-Color"
     texture = tree.nodes.new("ShaderNodeTexImage")
     texture.image = image
     normal = tree.nodes.new("ShaderNodeNormalMap")
