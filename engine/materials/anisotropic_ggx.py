@@ -81,6 +81,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
+from .ggx import visible_normals
 from .ggx_energy import ALPHA_MAX, E_FLOOR, MU_FLOOR, conductor_extra, f82_average_fresnel
 from .microfacet import _chi_plus, half_vector, reflect_local
 from .table_cache import cached_table
@@ -153,25 +154,9 @@ def ggx_aniso_lambda(w: np.ndarray, ax, ay) -> np.ndarray:
 
 
 def ggx_aniso_sample(wo: np.ndarray, u: np.ndarray, ax, ay) -> np.ndarray:
-    """Visible normals h (3, N) for views wo (3, N) from uniforms u (2, N) (Heitz 2018): stretch ω_o by
-    (α_x, α_y, 1), sample the projected hemisphere, unstretch.  Density G1(ω_o) max(0, ω_o·h) D(h)/cosθ_o."""
-    v = np.stack((ax * wo[0], ay * wo[1], np.maximum(wo[2], 0.0)))
-    v = v / np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-    lensq = v[0] * v[0] + v[1] * v[1]
-    has = lensq > 0
-    inv = np.where(has, 1.0 / np.sqrt(np.where(has, lensq, 1.0)), 0.0)
-    t1 = np.stack((np.where(has, -v[1] * inv, 1.0), np.where(has, v[0] * inv, 0.0), np.zeros_like(lensq)))
-    t2 = np.stack((v[1] * t1[2] - v[2] * t1[1], v[2] * t1[0] - v[0] * t1[2], v[0] * t1[1] - v[1] * t1[0]))
-    r = np.sqrt(u[0])
-    phi = 2.0 * math.pi * u[1]
-    p1 = r * np.cos(phi)
-    p2 = r * np.sin(phi)
-    s = 0.5 * (1.0 + v[2])
-    p2 = (1.0 - s) * np.sqrt(np.maximum(1.0 - p1 * p1, 0.0)) + s * p2
-    pz = np.sqrt(np.maximum(1.0 - p1 * p1 - p2 * p2, 0.0))
-    nh = p1 * t1 + p2 * t2 + pz * v
-    h = np.stack((ax * nh[0], ay * nh[1], np.maximum(nh[2], 1e-300)))
-    return h / np.sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2])
+    """Visible normals h (3, N) for views wo (3, N) from uniforms u (2, N) (Heitz 2018; engine.materials.ggx.
+    visible_normals).  Density G1(ω_o) max(0, ω_o·h) D(h)/cosθ_o."""
+    return visible_normals(wo, u, ax, ay)
 
 
 def _pdf_reflected(wo_l: np.ndarray, wi_l: np.ndarray, ax, ay) -> np.ndarray:

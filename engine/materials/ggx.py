@@ -79,24 +79,7 @@ class GGX(MicrofacetDistribution):
         return _chi_plus(w, h) / (1.0 + self.smith_lambda(w))
 
     def sample(self, wo: np.ndarray, u: np.ndarray) -> np.ndarray:
-        a = self.alpha
-        v = np.stack((a * wo[0], a * wo[1], np.maximum(wo[2], 0.0)))
-        v = v / np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
-        lensq = v[0] * v[0] + v[1] * v[1]
-        has = lensq > 0
-        inv = np.where(has, 1.0 / np.sqrt(np.where(has, lensq, 1.0)), 0.0)
-        t1 = np.stack((np.where(has, -v[1] * inv, 1.0), np.where(has, v[0] * inv, 0.0), np.zeros_like(lensq)))
-        t2 = np.stack((v[1] * t1[2] - v[2] * t1[1], v[2] * t1[0] - v[0] * t1[2], v[0] * t1[1] - v[1] * t1[0]))
-        r = np.sqrt(u[0])
-        phi = 2.0 * math.pi * u[1]
-        p1 = r * np.cos(phi)
-        p2 = r * np.sin(phi)
-        s = 0.5 * (1.0 + v[2])
-        p2 = (1.0 - s) * np.sqrt(np.maximum(1.0 - p1 * p1, 0.0)) + s * p2
-        pz = np.sqrt(np.maximum(1.0 - p1 * p1 - p2 * p2, 0.0))
-        nh = p1 * t1 + p2 * t2 + pz * v
-        h = np.stack((a * nh[0], a * nh[1], np.maximum(nh[2], 1e-300)))
-        return h / np.sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2])
+        return visible_normals(wo, u, self.alpha, self.alpha)
 
     def pdf(self, wo: np.ndarray, h: np.ndarray) -> np.ndarray:
         """G1(ω_o) max(0, ω_o·h) D(h)/cosθ_o: the visible-normal density."""
@@ -107,3 +90,26 @@ class GGX(MicrofacetDistribution):
 
     def __repr__(self):
         return f"GGX(alpha={self.alpha!r})"
+
+
+def visible_normals(wo: np.ndarray, u: np.ndarray, ax, ay) -> np.ndarray:
+    """GGX visible normals h (3, N), local frame (+z the normal), for views wo (3, N) from uniforms u (2, N)
+    (Heitz 2018): stretch ω_o by (α_x, α_y, 1), sample the projected hemisphere, unstretch.  Density
+    G1(ω_o) max(0, ω_o·h) D(h)/cosθ_o; α_x = α_y is the isotropic GGX (GGX.sample)."""
+    v = np.stack((ax * wo[0], ay * wo[1], np.maximum(wo[2], 0.0)))
+    v = v / np.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+    lensq = v[0] * v[0] + v[1] * v[1]
+    has = lensq > 0
+    inv = np.where(has, 1.0 / np.sqrt(np.where(has, lensq, 1.0)), 0.0)
+    t1 = np.stack((np.where(has, -v[1] * inv, 1.0), np.where(has, v[0] * inv, 0.0), np.zeros_like(lensq)))
+    t2 = np.stack((v[1] * t1[2] - v[2] * t1[1], v[2] * t1[0] - v[0] * t1[2], v[0] * t1[1] - v[1] * t1[0]))
+    r = np.sqrt(u[0])
+    phi = 2.0 * math.pi * u[1]
+    p1 = r * np.cos(phi)
+    p2 = r * np.sin(phi)
+    s = 0.5 * (1.0 + v[2])
+    p2 = (1.0 - s) * np.sqrt(np.maximum(1.0 - p1 * p1, 0.0)) + s * p2
+    pz = np.sqrt(np.maximum(1.0 - p1 * p1 - p2 * p2, 0.0))
+    nh = p1 * t1 + p2 * t2 + pz * v
+    h = np.stack((ax * nh[0], ay * nh[1], np.maximum(nh[2], 1e-300)))
+    return h / np.sqrt(h[0] * h[0] + h[1] * h[1] + h[2] * h[2])
