@@ -88,8 +88,8 @@ from .table_cache import cached_table
 from .torrance_sparrow import M_MIN, SpecularAlbedoTable
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflectance, fresnel_reflection_abcs
-from ..polarisation.thin_film import facet_film, film_reflection_abcs
-from ..spectral import RGB_WAVELENGTHS_NM, ConstantSpectrum, as_spectrum
+from ..polarisation.thin_film import facet_film, film_layering_albedo, film_reflection_abcs
+from ..spectral import ConstantSpectrum, as_spectrum
 from ..textures import textured
 from ..vec3 import cross, dot, local_frame, to_local
 
@@ -455,10 +455,7 @@ class AnisotropicGGX(BSDF):
         (wo_l,) = self._local(sp, sp.wo)
         cos_o = np.clip(wo_l[2], 0.0, 1.0)
         if self.film is not None:
-            film_n, d = self.film
-            lam = np.asarray(RGB_WAVELENGTHS_NM, np.float64)[:, None]
-            return film_reflection_abcs(cos_o[None, :], self.exterior_n, film_n, d, eta * self.exterior_n,
-                                        lam)[0].max(axis=0)
+            return film_layering_albedo(cos_o, self.exterior_n, self.film, eta * self.exterior_n)
         if self.multiscatter_albedo == "cycles":
             if self._reflection_table is None:
                 a = self.alpha_cycles

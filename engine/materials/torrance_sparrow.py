@@ -117,7 +117,7 @@ from ..kernels.torrance_sparrow import (SHADOWING_CODES, torrance_sparrow_eval_n
                                         torrance_sparrow_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
-from ..polarisation.thin_film import facet_film, film_reflection_abcs
+from ..polarisation.thin_film import facet_film, film_layering_albedo, film_reflection_abcs
 from ..spectral import ConstantSpectrum, as_spectrum
 from ..textures import TexturedNumber, textured
 from ..vec3 import dot, local_frame, to_local
@@ -484,13 +484,8 @@ class TorranceSparrow(BSDF):
         """(N,) Cycles' layering estimate of a filmed facet lobe (bsdf_microfacet_estimate_albedo: no table for
         iridescence, the film's reflectance at the view angle): the largest over the RGB channels' wavelengths
         (engine.spectral.RGB_WAVELENGTHS_NM, whatever the path's own), as Cycles layers by the largest channel."""
-        from ..spectral import RGB_WAVELENGTHS_NM
-        film_n, d = self.film
-        c = np.clip(cos_o, 0.0, 1.0)[None, :]
-        lam = np.asarray(RGB_WAVELENGTHS_NM, np.float64)[:, None]
         # (a constant index: "albedo_scaling" needs one, _albedo_table)
-        A = film_reflection_abcs(c, self.exterior_n, film_n, d, self.n.value + 1j * self.k.value, lam)[0]
-        return A.max(axis=0)
+        return film_layering_albedo(cos_o, self.exterior_n, self.film, self.n.value + 1j * self.k.value)
 
     def as_layers(self):
         """With ``"albedo_scaling"``, the same material as Cycles' two closures: this specular lobe alone over

@@ -23,7 +23,8 @@ import numpy as np
 
 from .fresnel import fresnel_amplitudes
 
-__all__ = ["FILM_CUTOFF_NM", "facet_film", "film_amplitudes", "film_reflection_abcs", "film_transmission_abcs"]
+__all__ = ["FILM_CUTOFF_NM", "facet_film", "film_layering_albedo", "film_amplitudes", "film_reflection_abcs",
+           "film_transmission_abcs"]
 
 #: Thinner films are none (Cycles' THINFILM_THICKNESS_CUTOFF, nm).
 FILM_CUTOFF_NM = 0.1
@@ -91,3 +92,14 @@ def film_transmission_abcs(R_s, R_p):
     """(A, B, C, S) of the lossless film's transmission from its reflectances (module docstring)."""
     T_s, T_p = np.maximum(1.0 - R_s, 0.0), np.maximum(1.0 - R_p, 0.0)
     return 0.5 * (T_s + T_p), 0.5 * (T_s - T_p), np.sqrt(T_s * T_p), np.zeros_like(T_s)
+
+
+def film_layering_albedo(cos_o, n1, film, n3) -> np.ndarray:
+    """(N,) Cycles' estimate of a filmed layer's albedo for layering what lies below (it has no table for
+    iridescence): the film's reflectance at the view angle cos_o (N,), the largest over the RGB channels'
+    wavelengths (engine.spectral.RGB_WAVELENGTHS_NM), as Cycles layers by the largest channel.  ``film`` =
+    (index, thickness nm) (facet_film); n1 the medium above, n3 the substrate (complex for a metal)."""
+    from ..spectral import RGB_WAVELENGTHS_NM
+    lam = np.asarray(RGB_WAVELENGTHS_NM, np.float64)[:, None]
+    c = np.clip(np.asarray(cos_o, np.float64), 0.0, 1.0)[None, :]
+    return film_reflection_abcs(c, n1, film[0], film[1], n3, lam)[0].max(axis=0)
