@@ -89,7 +89,7 @@ from .torrance_sparrow import M_MIN, SpecularAlbedoTable
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflectance, fresnel_reflection_abcs
 from ..polarisation.thin_film import facet_film, film_layering_albedo, film_reflection_abcs
-from ..spectral import ConstantSpectrum, as_spectrum
+from ..spectral import RGB_WAVELENGTHS_NM, ConstantSpectrum, as_spectrum
 from ..textures import textured
 from ..vec3 import cross, dot, local_frame, to_local
 
@@ -455,7 +455,7 @@ class AnisotropicGGX(BSDF):
         (wo_l,) = self._local(sp, sp.wo)
         cos_o = np.clip(wo_l[2], 0.0, 1.0)
         if self.film is not None:
-            return film_layering_albedo(cos_o, self.exterior_n, self.film, eta * self.exterior_n)
+            return film_layering_albedo(cos_o, self.exterior_n, self.film, eta * self.exterior_n, RGB_WAVELENGTHS_NM)
         if self.multiscatter_albedo == "cycles":
             if self._reflection_table is None:
                 a = self.alpha_cycles

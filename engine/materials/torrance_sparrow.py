@@ -118,7 +118,7 @@ from ..kernels.torrance_sparrow import (SHADOWING_CODES, torrance_sparrow_eval_n
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
 from ..polarisation.thin_film import facet_film, film_layering_albedo, film_reflection_abcs
-from ..spectral import ConstantSpectrum, as_spectrum
+from ..spectral import RGB_WAVELENGTHS_NM, ConstantSpectrum, as_spectrum
 from ..textures import TexturedNumber, textured
 from ..vec3 import dot, local_frame, to_local
 
@@ -485,7 +485,8 @@ class TorranceSparrow(BSDF):
         iridescence, the film's reflectance at the view angle): the largest over the RGB channels' wavelengths
         (engine.spectral.RGB_WAVELENGTHS_NM, whatever the path's own), as Cycles layers by the largest channel."""
         # (a constant index: "albedo_scaling" needs one, _albedo_table)
-        return film_layering_albedo(cos_o, self.exterior_n, self.film, self.n.value + 1j * self.k.value)
+        return film_layering_albedo(cos_o, self.exterior_n, self.film, self.n.value + 1j * self.k.value,
+                                    RGB_WAVELENGTHS_NM)
 
     def as_layers(self):
         """With ``"albedo_scaling"``, the same material as Cycles' two closures: this specular lobe alone over

@@ -94,12 +94,12 @@ def film_transmission_abcs(R_s, R_p):
     return 0.5 * (T_s + T_p), 0.5 * (T_s - T_p), np.sqrt(T_s * T_p), np.zeros_like(T_s)
 
 
-def film_layering_albedo(cos_o, n1, film, n3) -> np.ndarray:
+def film_layering_albedo(cos_o, n1, film, n3, lam_nm) -> np.ndarray:
     """(N,) Cycles' estimate of a filmed layer's albedo for layering what lies below (it has no table for
-    iridescence): the film's reflectance at the view angle cos_o (N,), the largest over the RGB channels'
-    wavelengths (engine.spectral.RGB_WAVELENGTHS_NM), as Cycles layers by the largest channel.  ``film`` =
-    (index, thickness nm) (facet_film); n1 the medium above, n3 the substrate (complex for a metal)."""
-    from ..spectral import RGB_WAVELENGTHS_NM
-    lam = np.asarray(RGB_WAVELENGTHS_NM, np.float64)[:, None]
+    iridescence): the film's reflectance at the view angle cos_o (N,), the largest over the wavelengths
+    ``lam_nm`` (K,) — the RGB channels' (engine.spectral.RGB_WAVELENGTHS_NM), as Cycles layers by the largest
+    channel.  ``film`` = (index, thickness nm) (facet_film); n1 the medium above, n3 the substrate (complex for
+    a metal)."""
+    lam = np.asarray(lam_nm, np.float64)[:, None]
     c = np.clip(np.asarray(cos_o, np.float64), 0.0, 1.0)[None, :]
     return film_reflection_abcs(c, n1, film[0], film[1], n3, lam)[0].max(axis=0)
