@@ -124,17 +124,26 @@ def _root(colour):
 
 
 def _metal(p, alpha):
+    """Cycles' Principled metal: a conductor of Gulbrandsen's index through the base colour at 0° and Cycles'
+    F82-Tint value at θ₈₂ (its polarisation), its reflectance Cycles' F82-Tint curve at every angle
+    (tinted.F82Reflectance); with a thin film the filmed index alone, as Cycles films that index."""
     from ..textures.conductor_index import TexturedGulbrandsenIndex
+    from .tinted import F82Reflectance
     base, tint = p["base_color"], p["specular_tint"]
-    if not _textured(base) and not (tint.is_constant and tint.linear_srgb()[0] == 1.0):
+    white = _white(tint)
+    if not _textured(base) and not _textured(tint) and not white:
         # Cycles' F82-Tint: the reflectance at θ₈₂ is Schlick's × the tint (≤ 1), per channel
         from ..spectral.gulbrandsen import schlick_f82
         f82 = [float(schlick_f82(c)) * min(t, 1.0) for c, t in zip(base.linear_srgb(), tint.linear_srgb())]
         edge = ConstantSpectrum(f82[0]) if min(f82) == max(f82) else RGBUnboundedSpectrum(f82)
-        return _metal_of(GulbrandsenIndex(base, edge, "n", "f82"), GulbrandsenIndex(base, edge, "k", "f82"), p, alpha)
-    kind = TexturedGulbrandsenIndex if _textured(base) else GulbrandsenIndex
-    n, k = kind(base, base, "n", "schlick"), kind(base, base, "k", "schlick")
-    return _metal_of(n, k, p, alpha)
+        n, k = GulbrandsenIndex(base, edge, "n", "f82"), GulbrandsenIndex(base, edge, "k", "f82")
+    elif not white:         # a textured base or tint: the same curve per point and wavelength
+        n, k = (TexturedGulbrandsenIndex(base, tint, part, "schlick_tint") for part in ("n", "k"))
+    else:
+        kind = TexturedGulbrandsenIndex if _textured(base) else GulbrandsenIndex
+        n, k = kind(base, base, "n", "schlick"), kind(base, base, "k", "schlick")
+    metal = _metal_of(n, k, p, alpha)
+    return metal if _film_values(p) else F82Reflectance(metal, base, None if white else tint)
 
 
 def _metal_of(n, k, p, alpha):
@@ -209,7 +218,7 @@ def _transmission(p, alpha, ior):
     else:
         glass = RoughDielectric(ior, a, "ggx", multiscatter=p["distribution"] == "multi_ggx")
     spec_tint = p["specular_tint"]
-    if not (getattr(spec_tint, "is_constant", False) and spec_tint.linear_srgb()[0] == 1.0):
+    if not _white(spec_tint):
         from .tinted import FresnelTinted           # Cycles: the glass's F0 × Specular Tint, transmittance 1 − F
         glass = FresnelTinted(glass, ior, spec_tint)
     tint = _root(p["base_color"])
@@ -226,7 +235,7 @@ def _dielectric(p, alpha, ior):
         values.update(distribution="ggx", multiscatter=p["distribution"] == "multi_ggx", **_film_values(p))
     decl = torrance_sparrow.DECLARATION
     tint = p["specular_tint"]
-    tinted = not (tint.is_constant and tint.linear_srgb()[0] == 1.0)
+    tinted = not _white(tint)
     aniso = None if smooth else _anisotropic_lobe(p, eta, 0.0, alpha)
     if p["diffuse_roughness"] > 0 or tinted or aniso is not None:
         # the specular layer over Cycles' diffuse base as two parts (mix.Layered): an Oren–Nayar base, a tint,
@@ -241,7 +250,7 @@ def _dielectric(p, alpha, ior):
             albedo = _reflection_albedo(top, eta, alpha, smooth)
         if tinted:
             from .tinted import FresnelTinted
-            albedo = _tinted_albedo(albedo, top, eta, alpha, smooth, float(max(tint.linear_srgb())))
+            albedo = _tinted_albedo(albedo, top, eta, alpha, smooth, _peak(tint))
             top = FresnelTinted(top, eta, tint)
         under = OrenNayar(base, p["diffuse_roughness"]) if p["diffuse_roughness"] > 0 else \
             LAMBERT.build(LAMBERT.values({"albedo": base}, p.where))
@@ -251,10 +260,22 @@ def _dielectric(p, alpha, ior):
     return decl.build(decl.values(values, p.where))
 
 
+def _white(tint) -> bool:
+    """A tint that changes nothing (a constant white)."""
+    return not _textured(tint) and tint.is_constant and tint.linear_srgb()[0] == 1.0
+
+
+def _peak(tint):
+    """The largest RGB channel of a tint: a number, or a function of the shading point for a textured tint (N,)."""
+    if not _textured(tint):
+        return float(max(tint.linear_srgb()))
+    return lambda sp: np.max(tint.rgb_at(sp.surface_points()), axis=0)
+
+
 def _tinted_albedo(albedo, top, n, alpha, smooth, t):
     """The layering albedo of a specular layer with Specular Tint t (its largest channel, as Cycles' layering
-    takes the largest): E_t = E_F + F0(t − 1)(E_1 − E_F)/(1 − F0), E_F the untinted albedo, E_1 the F = 1
-    albedo (1 where compensated or smooth)."""
+    takes the largest; a number or a function of the shading point): E_t = E_F + F0(t − 1)(E_1 − E_F)/(1 − F0),
+    E_F the untinted albedo, E_1 the F = 1 albedo (1 where compensated or smooth)."""
     from .ggx_energy import conductor_albedo
     f0 = ((n - 1.0) / (n + 1.0)) ** 2
     if f0 >= 1.0:
@@ -266,7 +287,8 @@ def _tinted_albedo(albedo, top, n, alpha, smooth, t):
             E1 = 1.0
         else:
             E1 = conductor_albedo(np.clip(sp.cos_o, 0.0, 1.0), sp.number(alpha), correlated=True)
-        return np.maximum(E + f0 * (t - 1.0) * (E1 - E) / (1.0 - f0), 0.0)
+        peak = t(sp) if callable(t) else t
+        return np.maximum(E + f0 * (peak - 1.0) * (E1 - E) / (1.0 - f0), 0.0)
     return tinted
 
 
@@ -304,9 +326,9 @@ def _coat(p, below):
             if type(below) is Mix else CoatTinted(below, tint, n, w)
     if n == 1.0:                # an index-matched coat reflects nothing
         return below
-    alpha = p["coat_roughness"] ** 2
+    alpha = _alpha_of(p["coat_roughness"])
     decl = torrance_sparrow.DECLARATION
-    smooth = alpha < M_MIN
+    smooth = not _textured(alpha) and alpha < M_MIN
     values = {"n": n, "k": 0.0, "m": 0.0} if smooth else \
         {"n": n, "k": 0.0, "m": alpha, "distribution": "ggx", "multiscatter": True}
     top = decl.build(decl.values(values, p.where))
@@ -344,21 +366,21 @@ DECLARATION = ModelDeclaration(
      Parameter("specular_ior_level", "Cycles' Specular IOR Level: F0 × 2·level", lo=0.0, hi=1.0, default=0.5),
      Parameter("diffuse_roughness", "the base's Oren–Nayar roughness σ (0: Lambert)", lo=0.0, hi=1.0, default=0.0),
      Parameter("specular_tint", "Cycles' Specular Tint: the dielectric's F0 × tint (its F82 tint for the metal)",
-               kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6, default=1.0),
+               kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6, default=1.0, texturable=True),
      Parameter("anisotropic", "Cycles' Anisotropic: the metal's and the specular layer's GGX stretched along the "
                               "surface tangent, α = r²/aspect and r²·aspect, aspect = √(1 − 0.9·a) (a constant "
                               "roughness)", lo=0.0, hi=1.0, default=0.0),
      Parameter("anisotropic_rotation", "the tangent's rotation about the normal, in turns", lo=-1e6, hi=1e6,
                default=0.0),
      Parameter("coat_weight", "coat (> 0: a coat over the dielectric)", lo=0.0, hi=1.0, default=0.0, texturable=True),
-     Parameter("coat_roughness", "coat roughness r", lo=0.0, hi=1.0, default=0.03),
+     Parameter("coat_roughness", "coat roughness r", lo=0.0, hi=1.0, default=0.03, texturable=True),
      Parameter("coat_ior", "coat index", lo=1.0, hi=100.0, default=1.5),
      Parameter("coat_tint", "coat colour: its transmittance at normal incidence (Cycles' Coat Tint: everything "
                             "below × tint^(1/cosθ_t), blended by coat_weight)", kind="spectrum", spectrum="reflectance",
                lo=0.0, hi=1.0, default=1.0, texturable=True),
      Parameter("sheen_weight", "Cycles' sheen layer over everything (microfiber, engine.materials.sheen)", lo=0.0,
                hi=1e6, default=0.0, texturable=True),
-     Parameter("sheen_roughness", "the sheen's roughness", lo=0.0, hi=1.0, default=0.5),
+     Parameter("sheen_roughness", "the sheen's roughness", lo=0.0, hi=1.0, default=0.5, texturable=True),
      Parameter("sheen_tint", "the sheen's colour", kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6,
                default=1.0, texturable=True),
      Parameter("thin_film_thickness", "thin film on the smooth transmission and on the rough metal and dielectric "
@@ -369,7 +391,7 @@ DECLARATION = ModelDeclaration(
                kind="choice", choices=DISTRIBUTIONS, default="multi_ggx")])
 
 DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission", "coat_tint", "coat_weight",
-                                   "sheen_weight", "sheen_tint"})
+                                   "coat_roughness", "specular_tint", "sheen_weight", "sheen_roughness", "sheen_tint"})
 
 
 @DECLARATION.builder

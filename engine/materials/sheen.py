@@ -38,7 +38,7 @@ import numpy as np
 from .base import BSDF, BSDFFlags, BSDFSample, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter
 from .sampling import cosine_hemisphere
-from ..textures import textured
+from ..textures import TexturedNumber, textured
 from ..vec3 import cross, dot, local_frame
 
 TABLE = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "sheen_ltc.npz")
@@ -82,6 +82,19 @@ def lookup(mu: np.ndarray, row: np.ndarray):
     return v[0], v[1], v[2]
 
 
+def lookup_per_point(mu: np.ndarray, roughness: np.ndarray):
+    """(a, b, E) (each (N,)) at cosθ_o = mu (N,) and a roughness per point (N,): the same bilinear
+    interpolation as ``roughness_row`` then ``lookup`` (Cycles' lookup_table_read_2D)."""
+    r = np.clip(roughness, MIN_ROUGHNESS, 1.0)
+    i0, i1, t = _axis(mu)
+    j0, j1, s = _axis(r)
+    table = ltc_table()
+    low = (1.0 - s) * table[:, i0, j0] + s * table[:, i0, j1]
+    high = (1.0 - s) * table[:, i1, j0] + s * table[:, i1, j1]
+    v = (1.0 - t) * low + t * high
+    return v[0], v[1], v[2]
+
+
 def ltc_density(x, y, z, a, b):
     """D (1/sr) of the direction (x, y, z) in the sheen frame (0 below the horizon)."""
     u = a * x + b * z
@@ -102,18 +115,23 @@ def sheen_frame(n: np.ndarray, wo: np.ndarray):
 
 
 class Sheen(BSDF):
-    """Cycles' microfiber sheen of roughness r ∈ [0, 1] with a ``tint`` spectrum (constant or textured)."""
+    """Cycles' microfiber sheen of roughness r ∈ [0, 1] (a number or a TexturedNumber: per point) with a ``tint``
+    spectrum (constant or textured)."""
 
     name = "sheen"
 
-    def __init__(self, tint, roughness: float):
-        r = float(roughness)
-        if not (math.isfinite(r) and 0.0 <= r <= 1.0):
-            raise ValueError(f"roughness must be in [0, 1], got {roughness!r}")
+    def __init__(self, tint, roughness):
+        if isinstance(roughness, TexturedNumber):
+            if not (0.0 <= roughness.lo and roughness.hi <= 1.0):
+                raise ValueError(f"roughness must be in [0, 1], got values in [{roughness.lo:g}, {roughness.hi:g}]")
+            self.roughness, self._row = roughness, None
+        else:
+            r = float(roughness)
+            if not (math.isfinite(r) and 0.0 <= r <= 1.0):
+                raise ValueError(f"roughness must be in [0, 1], got {roughness!r}")
+            self.roughness, self._row = r, roughness_row(r)
         self.tint = tint
-        self.roughness = r
-        self._row = roughness_row(r)
-        self.varies_over_surface = textured(tint)
+        self.varies_over_surface = textured(tint, roughness)
         self.flags = (BSDFFlags.DIFFUSE_REFLECTION | BSDFFlags.SEPARABLE_DIFFUSE
                       | BSDFFlags.when(not getattr(tint, "is_constant", False), BSDFFlags.WAVELENGTH_DEPENDENT))
 
@@ -122,10 +140,16 @@ class Sheen(BSDF):
     def _tint(self, sp: ShadingPoint) -> np.ndarray:
         return np.maximum(sp.spectrum(self.tint), 0.0)
 
+    def _table(self, sp: ShadingPoint):
+        """(a, b, E) (each (N,)) at cosθ_o and the points' roughness."""
+        if self._row is not None:
+            return lookup(sp.cos_o, self._row)
+        return lookup_per_point(sp.cos_o, sp.number(self.roughness))
+
     def _closure(self, sp: ShadingPoint):
         """(a, b, E, on): the table at cosθ_o and where the closure exists (wo in front, not dropped)."""
         cos_o = sp.cos_o
-        a, b, e = lookup(cos_o, self._row)
+        a, b, e = self._table(sp)
         on = (cos_o > 0) & (np.abs(a) >= CUTOFF) & (e >= CUTOFF)
         return a, b, e, on
 
@@ -146,7 +170,7 @@ class Sheen(BSDF):
         """E(cosθ_o, r) (N,): the directional albedo Cycles' Principled BSDF takes off the layers below the
         sheen (weight·(1 − sheen weight·E·max(tint))); 0 where Cycles drops the closure.  Read at cosθ_o
         clamped to [0, 1] as Cycles reads it (so not 0 where wo is behind the shading normal)."""
-        a, _, e = lookup(sp.cos_o, self._row)
+        a, _, e = self._table(sp)
         return np.where((np.abs(a) >= CUTOFF) & (e >= CUTOFF), e, 0.0)
 
     def albedo_estimate(self, sp: ShadingPoint) -> np.ndarray:
@@ -177,7 +201,8 @@ class Sheen(BSDF):
                           is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=np.ones(sp.n))
 
     def describe(self) -> dict:
-        return {"type": self.name, "tint": repr(self.tint), "roughness": self.roughness}
+        rough = self.roughness if self._row is not None else repr(self.roughness)
+        return {"type": self.name, "tint": repr(self.tint), "roughness": rough}
 
 
 # --------------------------------------------------------------------------- declaration
@@ -188,8 +213,8 @@ DECLARATION = ModelDeclaration(
     "fitted table; depolarising",
     [Parameter("tint", "sheen colour (Cycles: Sheen Weight × Sheen Tint, or the Sheen BSDF's Color)",
                kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6, default=1.0, texturable=True),
-     Parameter("roughness", "sheen roughness r", lo=0.0, hi=1.0, default=0.5)])
-DECLARATION.per_point = frozenset({"tint"})
+     Parameter("roughness", "sheen roughness r", lo=0.0, hi=1.0, default=0.5, texturable=True)])
+DECLARATION.per_point = frozenset({"tint", "roughness"})
 
 
 @DECLARATION.builder

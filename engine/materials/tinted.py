@@ -22,7 +22,7 @@ from ..spectral import Spectrum
 from ..textures import TexturedNumber, TexturedSpectrum
 from ..vec3 import dot
 
-__all__ = ["CoatTinted", "FresnelTinted", "Tinted"]
+__all__ = ["CoatTinted", "F82Reflectance", "FresnelTinted", "Tinted"]
 
 
 def _grey(spec) -> bool:
@@ -211,3 +211,74 @@ class CoatTinted(_ScaledLobes):
 
     def describe(self) -> dict[str, object]:
         return {**self.base.describe(), "coat_tint": f"{self.tint!r} (coat n {self.n:g}, weight {self.weight!r})"}
+
+
+#: cosθ of the F82 model's second point (θ₈₂ = acos(1/7)) and Schlick's weight (1 − cosθ)⁵ there
+_F82_SIX = 6.0 / 7.0
+
+
+def f82_curve(cos_theta: np.ndarray, f0: np.ndarray, tint: np.ndarray | None) -> np.ndarray:
+    """Cycles' F82-Tint reflectance (Kutz et al., "Novel aspects of the Adobe Standard Material"; Cycles'
+    fresnel_f82 with fresnel_f82tint_B): F = F_Schlick(θ) − b·cosθ·(1 − cosθ)⁶, clipped to [0, 1], with b chosen
+    so that F(θ₈₂) = F_Schlick(θ₈₂)·tint (b = 0 for no tint).  Arrays broadcast ((L, N) per wavelength and point)."""
+    c = np.clip(cos_theta, 0.0, 1.0)
+    s = 1.0 - c
+    s5 = s ** 5
+    schlick = f0 + (1.0 - f0) * s5
+    if tint is None:
+        return np.clip(schlick, 0.0, 1.0)
+    f5 = _F82_SIX ** 5
+    b = (f0 + (1.0 - f0) * f5) * (7.0 / (f5 * _F82_SIX)) * (1.0 - tint)
+    return np.clip(schlick - b * c * s5 * s, 0.0, 1.0)
+
+
+class F82Reflectance(_ScaledLobes):
+    """A metal lobe (a conductor Torrance–Sparrow, anisotropic GGX or mirror of complex index n + iκ) whose
+    unpolarised reflectance follows Cycles' F82-Tint curve (:func:`f82_curve`; the Principled BSDF's metal): the
+    Mueller value × F_F82(θ)/F(θ) per wavelength and point, F the index's own unpolarised reflectance, θ the facet
+    angle (half vector of ω_i, ω_o).  The index (Gulbrandsen's, engine.spectral.gulbrandsen, through F0 and F82)
+    keeps the polarisation physical — the s–p split and the retardance of a metal — while S0 is Cycles'
+    (no metal reflects exactly the F82 curve, most visibly at a strong tint or a dark colour).  A scalar ≥ 0 per
+    wavelength: realisable.  The energy compensation stays the lobe's own (its F_ss is the F82 model's already:
+    engine.materials.ggx_energy.f82_average_fresnel)."""
+
+    def __init__(self, base: BSDF, f0: Spectrum, tint: Spectrum | None, index: BSDF | None = None):
+        self.base, self.f0, self.tint = base, f0, tint
+        self.index = base if index is None else index       # the metal whose relative_eta(sp) gives n + iκ
+        self.name = base.name
+        self.flags = base.flags
+        self.varies_over_surface = base.varies_over_surface or isinstance(f0, TexturedSpectrum) or \
+            isinstance(tint, TexturedSpectrum)
+        self.two_sided = base.two_sided
+
+    def with_base(self, base: BSDF) -> F82Reflectance:
+        """The same curve on another base (engine.materials.mix.map_normals)."""
+        return F82Reflectance(base, self.f0, self.tint, self.index)
+
+    @property
+    def exterior_n(self):
+        return getattr(self.base, "exterior_n", None)
+
+    @property
+    def multiscatter(self):
+        return getattr(self.base, "multiscatter", False)
+
+    def _ratio(self, sp: ShadingPoint, cos_facet: np.ndarray) -> np.ndarray:
+        from ..polarisation.fresnel import fresnel_reflectance
+        cos_f = np.clip(cos_facet, 0.0, 1.0)[None, :]
+        F = fresnel_reflectance(cos_f, self.index.relative_eta(sp)) * np.ones(sp.lam.shape)
+        f0 = np.clip(sp.spectrum(self.f0), 0.0, 1.0)
+        tint = None if self.tint is None else np.clip(sp.spectrum(self.tint), 0.0, 1.0)
+        target = f82_curve(cos_f, f0, tint) * np.ones(sp.lam.shape)
+        return np.where(F > 0, target / np.where(F > 0, F, 1.0), 1.0)
+
+    def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        h = wi + sp.wo      # the facet angle: cosθ_h = |ω_i + ω_o| / 2
+        return self._ratio(sp, 0.5 * np.sqrt(dot(h, h)))
+
+    def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
+        value = self.base.delta_reflection(sp)
+        return None if value is None else value.scaled(self._ratio(sp, np.abs(sp.cos_o)))
+
+    def describe(self) -> dict[str, object]:
+        return {**self.base.describe(), "reflectance": f"Cycles' F82-Tint curve (F0 {self.f0!r}, tint {self.tint!r})"}

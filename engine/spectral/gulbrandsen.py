@@ -101,15 +101,19 @@ def edge_tint_for_f82(r, f82):
 
 def index_of(r, edge, mode: str):
     """(n, κ) of reflectivity values r and ``edge`` values by ``mode``: "tint" (edge = Gulbrandsen's g),
-    "f82" (edge = the reflectance at θ₈₂) or "schlick" (the reflectance at θ₈₂ of Schlick's curve through
-    r; ``edge`` unused)."""
+    "f82" (edge = the reflectance at θ₈₂), "schlick" (the reflectance at θ₈₂ of Schlick's curve through
+    r; ``edge`` unused) or "schlick_tint" (Schlick's × min(edge, 1): Cycles' F82-Tint of the Principled metal,
+    edge its Specular Tint)."""
     if mode == "tint":
         return gulbrandsen_nk(r, edge)
-    f82 = schlick_f82(r) if mode == "schlick" else edge
+    if mode == "schlick_tint":
+        f82 = schlick_f82(r) * np.minimum(np.maximum(edge, 0.0), 1.0)
+    else:
+        f82 = schlick_f82(r) if mode == "schlick" else edge
     return gulbrandsen_nk(r, edge_tint_for_f82(r, f82))
 
 
-EDGE_MODES = ("tint", "f82", "schlick")
+EDGE_MODES = ("tint", "f82", "schlick", "schlick_tint")
 
 
 class GulbrandsenIndex(Spectrum):

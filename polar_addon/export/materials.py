@@ -788,12 +788,13 @@ def _principled(node, mat, warnings, bake=None):
     values = {"base_color": _grey(r.rgb_or_texture("Base Color", 0.0, 1.0)), "metallic": metallic,
               "roughness": roughness, "transmission": transmission, "ior": _ior(r, "IOR"),
               "specular_ior_level": r.float("Specular IOR Level", 0.0, 1.0),
-              "specular_tint": _grey(r.rgb("Specular Tint", 0.0)),
-              "coat_weight": _fraction(r, "Coat Weight"), "coat_roughness": r.float("Coat Roughness", 0.0, 1.0),
+              "specular_tint": _grey(r.rgb_or_texture("Specular Tint", 0.0)),
+              "coat_weight": _fraction(r, "Coat Weight"),
+              "coat_roughness": r.roughness_texture_or_float("Coat Roughness"),
               "coat_ior": min(max(r.float("Coat IOR"), 1.0), 100.0),
               "coat_tint": _grey(r.rgb_or_texture("Coat Tint", 0.0, 1.0)),
               "sheen_weight": _sheen_weight(r),
-              "sheen_roughness": r.float("Sheen Roughness", 0.0, 1.0),
+              "sheen_roughness": r.roughness_texture_or_float("Sheen Roughness"),
               "sheen_tint": _grey(r.rgb_or_texture("Sheen Tint", 0.0)),
               "anisotropic": r.float("Anisotropic", 0.0, 1.0) if _anisotropic(node) else 0.0,
               "anisotropic_rotation": r.float("Anisotropic Rotation", -1e6, 1e6),
@@ -1143,7 +1144,7 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
             warnings.append(f"material {mat!r}: Sheen BSDF {node.name!r} with the {node.distribution.title()} "
                             "distribution is rendered as Microfiber (Cycles' default)")
         tint = r.rgb_or_texture("Color", 0.0)
-        return _textured_model("sheen", {"tint": _grey(tint), "roughness": r.float("Roughness", 0.0, 1.0)},
+        return _textured_model("sheen", {"tint": _grey(tint), "roughness": r.roughness_texture_or_float("Roughness")},
                                mat, node), None
     if kind == "ShaderNodeBsdfPrincipled":
         emission = _emission(node, mat, warnings, "Emission Color", "Emission Strength", bake)

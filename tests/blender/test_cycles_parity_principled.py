@@ -52,6 +52,16 @@ CASES = {
                                                        "Metallic": 1.0}),
     "Coat Normal": (((0.5, 0.5, 1.0), (0.85, 0.6, 0.75)), {"Base Color": (0.2, 0.2, 0.2), "Roughness": 0.6,
                                                           "Coat Weight": 1.0, "Coat Roughness": 0.1}),
+    "Specular Tint": (((1.0, 0.4, 0.1), (0.2, 0.5, 1.0)), {"Base Color": (0.1, 0.1, 0.1), "Roughness": 0.25}),
+    "Specular Tint ": (((1.0, 0.5, 0.2), (0.9, 0.9, 0.9)), {"Base Color": (0.9, 0.8, 0.7), "Roughness": 0.3,  # metal
+                                                           "Metallic": 1.0}),
+    "Specular Tint  ": (((1.0, 0.4, 0.1), (0.3, 0.6, 1.0)), {"Base Color": (0.9, 0.9, 0.9), "Roughness": 0.15,
+                                                            "Transmission Weight": 1.0}),         # a glass
+    "Coat Roughness": ((0.02, 0.6), {"Base Color": (0.5, 0.1, 0.1), "Roughness": 0.4, "Coat Weight": 1.0}),
+    "Coat Roughness ": ((0.0, 0.35), {"Base Color": (0.9, 0.8, 0.6), "Roughness": 0.2, "Metallic": 1.0,  # metal
+                                      "Coat Weight": 0.7, "Coat IOR": 1.6}),
+    "Sheen Roughness": ((0.15, 0.8), {"Base Color": (0.1, 0.2, 0.5), "Roughness": 0.5, "Sheen Weight": 1.0,
+                                      "Sheen Tint": (1.0, 0.8, 0.6)}),
     "Coat Tint": (((1.0, 0.4, 0.1), (0.2, 0.5, 1.0)), {"Base Color": (0.8, 0.8, 0.8), "Roughness": 0.4,
                                                        "Coat Weight": 0.8, "Coat Roughness": 0.05, "Metallic": 0.0}),
     "Coat Tint ": (((1.0, 0.4, 0.1), (0.6, 0.6, 0.6)), {"Base Color": (0.9, 0.7, 0.5), "Roughness": 0.3,  # metal

@@ -117,8 +117,9 @@ def test_texturable_parameters_are_the_surface_varying_ones():
         ("coat", "n"), ("coat", "thickness"), ("coat", "absorption"), ("coat", "exponent"), ("coat", "m"),
         ("principled", "base_color"), ("principled", "metallic"), ("principled", "roughness"),
         ("principled", "transmission"), ("principled", "coat_tint"), ("principled", "coat_weight"),
-        ("principled", "sheen_weight"), ("principled", "sheen_tint"), ("oren_nayar", "albedo"),
-        ("sheen", "tint")}
+        ("principled", "sheen_weight"), ("principled", "sheen_tint"), ("principled", "coat_roughness"),
+        ("principled", "sheen_roughness"), ("principled", "specular_tint"), ("oren_nayar", "albedo"),
+        ("sheen", "tint"), ("sheen", "roughness")}
 
 
 @pytest.mark.parametrize("coat,field", [

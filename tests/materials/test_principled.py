@@ -28,7 +28,9 @@ def test_layer_weights_are_cycles():
     assert names == ["rough_dielectric", "torrance_sparrow", "torrance_sparrow"]
     weights = sorted(w for _, w in leaves(build(metallic=0.25, transmission=0.4, roughness=0.3)))
     assert weights == pytest.approx(sorted([0.75 * 0.6, 0.75 * 0.4, 0.25]))
-    assert build(metallic=1.0).name == "torrance_sparrow" and build(metallic=1.0).k.eval(np.array([550.0]))[0] > 0
+    metal = build(metallic=1.0)          # Gulbrandsen's index, reflecting Cycles' F82-Tint curve
+    assert metal.name == "torrance_sparrow" and type(metal).__name__ == "F82Reflectance"
+    assert metal.base.k.eval(np.array([550.0]))[0] > 0
 
 
 def test_smooth_black_principled_is_black_glass_and_the_specular_level_scales_f0():
@@ -64,8 +66,8 @@ def test_textures_mapped_by_scale_and_offset_square_and_root_per_point(tmp_path)
     tex = {"texture": "t.exr", "color_space": "Non-Color", "scale": 0.5, "offset": 0.25}
     model = parse_material({"type": "principled", "roughness": tex, "metallic": 1.0}, "materials.p",
                            base_dir=str(tmp_path))
-    assert isinstance(model.m, SquaredNumber)
-    assert (model.m.lo, model.m.hi) == pytest.approx(((0.25 + 0.5 * 0.2) ** 2, (0.25 + 0.5 * 0.6) ** 2))
+    assert isinstance(model.base.m, SquaredNumber)
+    assert (model.base.m.lo, model.base.m.hi) == pytest.approx(((0.25 + 0.5 * 0.2) ** 2, (0.25 + 0.5 * 0.6) ** 2))
     glass = parse_material({"type": "principled", "base_color": tex, "transmission": 1.0, "roughness": 0.0},
                            "materials.p", base_dir=str(tmp_path))
     assert isinstance(glass.transmission, RootSpectrum)

@@ -260,3 +260,38 @@ def test_declaration_builds_the_model_and_checks_roughness():
         decl.build(decl.values({"roughness": "1.5"}, "param", text=True))
     with pytest.raises(ValueError):
         Sheen(ConstantSpectrum(1.0), -0.1)
+
+
+def test_textured_roughness_is_the_constant_model_per_texel(tmp_path):
+    """Sheen Roughness per point (a texture): at each texel the constant-roughness model, to rounding (the bilinear
+    table read is the same two interpolations in another order)."""
+    from engine.scene.loader import parse_material
+    from tests.scene.test_textures import _points_at, _shading_points, _texture_file
+    r_values = np.array([[0.05, 0.3], [0.62, 1.0]])
+    name = _texture_file(tmp_path, r_values)
+    mat = parse_material({"type": "sheen", "tint": [0.9, 0.6, 0.3],
+                          "roughness": {"texture": name, "interpolation": "Closest"}}, "materials.s",
+                         base_dir=str(tmp_path))
+    assert mat.varies_over_surface
+    jj, ii = np.meshgrid(np.arange(2), np.arange(2), indexing="ij")
+    uv = np.repeat(np.stack((((ii + 0.5) / 2).ravel(), ((jj + 0.5) / 2).ravel())), 50, axis=1)
+    texel = np.repeat(r_values[::-1].astype(np.float32).astype(np.float64)[jj, ii].ravel(), 50)
+    rng = np.random.default_rng(11)
+    sp = _shading_points(uv.shape[1], rng, _points_at(uv))
+    wi = random_upper(uv.shape[1], rng)
+    u_lobe, u_dir = rng.uniform(size=uv.shape[1]), rng.uniform(size=(2, uv.shape[1]))
+    f, pdf, s = mat.eval(sp, wi).matrix(), mat.pdf(sp, wi), mat.sample(sp, u_lobe, u_dir)
+    albedo = mat.albedo(sp)
+    for r in np.unique(texel):
+        sel = np.nonzero(texel == r)[0]
+        const = Sheen(mat.tint, float(r))
+        sub = sp.take(sel)
+        sub.surface = None
+        np.testing.assert_allclose(f[..., sel], const.eval(sub, wi[:, sel]).matrix(), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(pdf[sel], const.pdf(sub, wi[:, sel]), rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(albedo[sel], const.albedo(sub), rtol=1e-12, atol=1e-15)
+        cs = const.sample(sub, u_lobe[sel], u_dir[:, sel])
+        np.testing.assert_allclose(s.wi[:, sel], cs.wi, rtol=1e-12, atol=1e-14)
+    with pytest.raises(Exception, match="roughness"):
+        parse_material({"type": "sheen", "roughness": {"texture": name, "scale": 2.0}}, "materials.s",
+                       base_dir=str(tmp_path))
