@@ -213,6 +213,8 @@ class CoatTinted(_ScaledLobes):
         return {**self.base.describe(), "coat_tint": f"{self.tint!r} (coat n {self.n:g}, weight {self.weight!r})"}
 
 
+#: the reflectance curves F82Reflectance follows
+CURVES = ("f82_tint", "constant")
 #: cosθ of the F82 model's second point (θ₈₂ = acos(1/7)) and Schlick's weight (1 − cosθ)⁵ there
 _F82_SIX = 6.0 / 7.0
 
@@ -240,10 +242,14 @@ class F82Reflectance(_ScaledLobes):
     keeps the polarisation physical — the s–p split and the retardance of a metal — while S0 is Cycles'
     (no metal reflects exactly the F82 curve, most visibly at a strong tint or a dark colour).  A scalar ≥ 0 per
     wavelength: realisable.  The energy compensation stays the lobe's own (its F_ss is the F82 model's already:
-    engine.materials.ggx_energy.f82_average_fresnel)."""
+    engine.materials.ggx_energy.f82_average_fresnel).  ``curve`` "constant": F = F0 at every angle instead
+    (Cycles' Glossy BSDF, whose colour is its reflectance at every angle)."""
 
-    def __init__(self, base: BSDF, f0: Spectrum, tint: Spectrum | None, index: BSDF | None = None):
-        self.base, self.f0, self.tint = base, f0, tint
+    def __init__(self, base: BSDF, f0: Spectrum, tint: Spectrum | None, curve: str = "f82_tint",
+                 index: BSDF | None = None):
+        if curve not in CURVES:
+            raise ValueError(f"curve must be one of {CURVES}, got {curve!r}")
+        self.base, self.f0, self.tint, self.curve = base, f0, tint, curve
         self.index = base if index is None else index       # the metal whose relative_eta(sp) gives n + iκ
         self.name = base.name
         self.flags = base.flags
@@ -253,7 +259,7 @@ class F82Reflectance(_ScaledLobes):
 
     def with_base(self, base: BSDF) -> F82Reflectance:
         """The same curve on another base (engine.materials.mix.map_normals)."""
-        return F82Reflectance(base, self.f0, self.tint, self.index)
+        return F82Reflectance(base, self.f0, self.tint, self.curve, self.index)
 
     @property
     def exterior_n(self):
@@ -269,7 +275,7 @@ class F82Reflectance(_ScaledLobes):
         F = fresnel_reflectance(cos_f, self.index.relative_eta(sp)) * np.ones(sp.lam.shape)
         f0 = np.clip(sp.spectrum(self.f0), 0.0, 1.0)
         tint = None if self.tint is None else np.clip(sp.spectrum(self.tint), 0.0, 1.0)
-        target = f82_curve(cos_f, f0, tint) * np.ones(sp.lam.shape)
+        target = (f82_curve(cos_f, f0, tint) if self.curve == "f82_tint" else f0) * np.ones(sp.lam.shape)
         return np.where(F > 0, target / np.where(F > 0, F, 1.0), 1.0)
 
     def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
@@ -281,4 +287,5 @@ class F82Reflectance(_ScaledLobes):
         return None if value is None else value.scaled(self._ratio(sp, np.abs(sp.cos_o)))
 
     def describe(self) -> dict[str, object]:
-        return {**self.base.describe(), "reflectance": f"Cycles' F82-Tint curve (F0 {self.f0!r}, tint {self.tint!r})"}
+        return {**self.base.describe(),
+                "reflectance": f"Cycles' {self.curve} curve (F0 {self.f0!r}, tint {self.tint!r})"}

@@ -688,42 +688,101 @@ def _smooth(m, kw) -> bool:
     return not isinstance(m, TextureInput) and m < (TS_MIN if kw.get("distribution") == "ggx" else SMOOTH_LIMIT)
 
 
-def _facet_conductor(n, k, m, mat, node, warnings):
+def _facet_conductor(n, k, m, mat, node, warnings, film=None, aniso=None):
     """A conductor of index n + iκ (spectra, [r, g, b] or textured) with facets as the node's Distribution
-    and roughness m (α = r², constant or a TextureInput), or its smooth limit."""
+    and roughness m (α = r², constant or a TextureInput), or its smooth limit; ``film``: (IOR, thickness nm)
+    of a Thin Film on its facets (Cycles films the conductor's index; not on the mirror: one warning);
+    ``aniso``: (α_x, α_y, rotation in turns) of Cycles' anisotropic GGX (a constant roughness; None: isotropic)."""
     kw = facets(node, mat, warnings)
-    if _smooth(m, kw):
+    smooth = _smooth(m, kw) and (aniso is None or max(aniso[:2]) < _ts_min())
+    if film is not None and smooth:
+        warnings.append(f"material {mat!r}: the Thin Film of {node.name!r} is not simulated on a smooth metal "
+                        "(there: no film)")
+        film = None
+    if smooth:
         return _textured_model("conductor", {"n": n, "k": k}, mat, node)
+    if aniso is not None and aniso[0] != aniso[1]:
+        if kw["distribution"] == "ggx":
+            from ...engine.materials.anisotropic_ggx import AnisotropicGGX
+            n_s, k_s = (_rgb_spectrum(list(v), "unbounded") if isinstance(v, (list, tuple)) else v for v in (n, k))
+            return AnisotropicGGX(n_s, k_s, max(aniso[0], _ts_min()), max(aniso[1], _ts_min()), rotation=aniso[2],
+                                  multiscatter=kw["multiscatter"], film_n=None if film is None else film[0],
+                                  film_thickness=0.0 if film is None else film[1])
+        warnings.append(f"material {mat!r}: the anisotropy of {node.name!r} is simulated with GGX only; rendered "
+                        "isotropic (Beckmann)")
     if not isinstance(m, TextureInput):
         m = max(m, 1e-4)
+    if film is not None:
+        kw = {**kw, "thin_film_ior": film[0], "thin_film_thickness": film[1]}
     return _textured_model("torrance_sparrow", {"n": n, "k": k, "m": m, **kw}, mat, node)
 
 
+def _ts_min():
+    from ...engine.materials.torrance_sparrow import M_MIN
+    return M_MIN
+
+
+def _node_anisotropy(r, node, mat, warnings, m, kind):
+    """(α_x, α_y, rotation) of a Glossy or Metallic BSDF's Anisotropy as Cycles sets it up, or None (isotropic):
+    Metallic as the Principled BSDF (α = r²/aspect, r²·aspect, aspect = √(1 − 0.9·a), a ∈ [0, 1]); Glossy
+    α = r²(1 − a), r²/(1 − a) for a ∈ (0, 0.99], r²/(1 + a), r²(1 + a) below 0; each α ≤ 1.  Needs a constant
+    Roughness and Anisotropy (linked: its own value, one warning)."""
+    sock = node.inputs.get("Anisotropy")
+    if sock is None or (not sock.is_linked and float(sock.default_value) == 0.0):
+        return None
+    a = r.float("Anisotropy", -1.0, 1.0)
+    textured = isinstance(m, TextureInput)
+    _tangent_note(node, mat, warnings, textured)
+    if textured:
+        return None
+    rough = math.sqrt(m)
+    if kind == "ShaderNodeBsdfMetallic":
+        if a <= 0.0:
+            return None
+        from ...engine.materials.anisotropic_ggx import cycles_alphas
+        ax, ay = cycles_alphas(rough, a)
+    else:
+        a = min(max(a, -0.99), 0.99)
+        if abs(a) <= 1e-4:
+            return None
+        r2 = rough * rough
+        ax, ay = (r2 / (1.0 + a), r2 * (1.0 + a)) if a < 0 else (r2 * (1.0 - a), r2 / (1.0 - a))
+        ax, ay = min(ax, 1.0), min(ay, 1.0)
+    return ax, ay, r.float("Rotation", -1e6, 1e6)
+
+
 def _conductor_from_colour(r, colour_name, edge_name, m, mat, node, warnings, mode="schlick"):
-    """Conductor whose normal-incidence reflectance is a colour input, matched to Cycles' Fresnel curve
-    at θ₈₂ as well (``mode``: "schlick", Cycles' F82 curve with a white tint — the Principled metal; "f82"
-    with ``edge_name`` an F82-Tint input — the Metallic BSDF; "constant": the colour at every angle —
-    Cycles' Glossy BSDF, matched at 0° and θ₈₂, as a conductor must rise to 1 at grazing).  Colours and
-    the roughness m may vary per point (image, colour attribute, a baked graph)."""
+    """Conductor whose normal-incidence reflectance is a colour input, its unpolarised reflectance Cycles'
+    Fresnel curve at every facet angle (engine.materials.tinted.F82Reflectance over Gulbrandsen's index through
+    the curve at 0° and θ₈₂; ``mode``: "schlick", Cycles' F82 curve with a white tint — the Principled metal;
+    "f82" with ``edge_name`` an F82-Tint input — the Metallic BSDF; "constant": the colour at every angle —
+    Cycles' Glossy BSDF, its polarisation that of a conductor matched at 0° and θ₈₂).  Colours and the roughness
+    m may vary per point (image, colour attribute, a baked graph).  The node's Anisotropy and Thin Film (Metallic)
+    as Cycles (``_facet_conductor``)."""
+    from ...engine.materials.tinted import F82Reflectance
     colour = r.rgb_or_texture(colour_name, 0.0, 1.0)
+    tint = None
     if mode == "constant":
         n, k = conductor_index(colour, colour, "f82")
     elif mode == "f82":
         tint = r.rgb_or_texture(edge_name, 0.0, 1.0)
         if isinstance(colour, TextureInput) or isinstance(tint, TextureInput):
-            if tint != [1.0, 1.0, 1.0]:
-                warnings.append(f"material {mat!r}: {edge_name!r} of {node.name!r} with a textured colour is not "
-                                "simulated per point; the curve of a white tint is used")
-            n, k = conductor_index(colour, None, "schlick")
+            n, k = conductor_index(colour, tint, "schlick_tint")
         else:
             from ...engine.spectral.gulbrandsen import schlick_f82
             f82 = [float(schlick_f82(c)) * t for c, t in zip(colour, tint)]     # Cycles' F82-Tint
             n, k = conductor_index(colour, f82, "f82")
+        if not isinstance(tint, TextureInput) and min(tint) == 1.0:
+            tint = None
     else:
         n, k = conductor_index(colour, None, "schlick")
-    return _facet_conductor(n, k, m, mat, node, warnings)
-
-
+    film = _film(r) if mode == "f82" else None
+    metal = _facet_conductor(n, k, m, mat, node, warnings, film,
+                             _node_anisotropy(r, node, mat, warnings, m, node.bl_idname))
+    if film is not None and metal.name != "conductor":
+        return metal                                     # Cycles films Gulbrandsen's index itself
+    return F82Reflectance(metal, _reflectance(colour), None if tint is None else _reflectance(tint),
+                          "constant" if mode == "constant" else "f82_tint")
 
 
 def _ior(r, name):
@@ -823,18 +882,18 @@ def _principled(node, mat, warnings, bake=None):
 _PRINCIPLED_NOT_SIMULATED = (("Subsurface Weight", 0.0, "rendered as the diffuse base"),)
 
 
-def _anisotropic(node) -> bool:
-    """A Principled BSDF whose Anisotropic is set (a constant > 0, or linked: its own value is then used, with
-    the reader's warning)."""
-    sock = node.inputs.get("Anisotropic")
-    return sock is not None and (sock.is_linked or float(sock.default_value) > 0.0)
+def _anisotropic(node, name="Anisotropic") -> bool:
+    """A Principled BSDF whose Anisotropic (a Glossy or Metallic BSDF whose Anisotropy) is set (a constant ≠ 0,
+    or linked: its own value is then used, with the reader's warning)."""
+    sock = node.inputs.get(name)
+    return sock is not None and (sock.is_linked or float(sock.default_value) != 0.0)
 
 
 def _tangent_note(node, mat, warnings, textured_roughness):
-    """The warnings of an anisotropic Principled BSDF: Cycles stretches its GGX along the Tangent input — a
-    Tangent node on a UV map is that map's MikkTSpace tangent, as Polar's; unlinked, Cycles' default is the
-    radial tangent about the object's Z (generated coordinates), for which Polar takes the active UV map's
-    tangent (the same on a UV sphere or cylinder, not in general)."""
+    """The warnings of an anisotropic Principled, Glossy or Metallic BSDF: Cycles stretches its GGX along the
+    Tangent input — a Tangent node on a UV map is that map's MikkTSpace tangent, as Polar's; unlinked, Cycles'
+    default is the radial tangent about the object's Z (generated coordinates), for which Polar takes the active UV
+    map's tangent (the same on a UV sphere or cylinder, not in general)."""
     sock = node.inputs.get("Tangent")
     source = _follow(sock) if sock is not None and sock.is_linked else None
     if source is None or source.bl_idname != "ShaderNodeTangent" or source.direction_type != "UV_MAP":
@@ -1002,7 +1061,9 @@ def attribute_needs(material) -> dict:
         elif kind == "ShaderNodeTangent" and node.direction_type == "UV_MAP":
             needs["uv"].append(node.uv_map)
             needs["tangents"].append(node.uv_map)
-        elif kind == "ShaderNodeBsdfPrincipled" and _anisotropic(node):
+        elif (kind == "ShaderNodeBsdfPrincipled" and _anisotropic(node)) or \
+                (kind in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic", "ShaderNodeBsdfMetallic")
+                 and _anisotropic(node, "Anisotropy")):
             needs["uv"].append("")              # the surface tangent of the anisotropy (see _tangent_note)
             needs["tangents"].append("")
         elif kind == "ShaderNodeVertexColor":
@@ -1131,7 +1192,8 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
         if getattr(node, "fresnel_type", "") == "PHYSICAL_CONDUCTOR":
             n, k = r.rgb("IOR", 0.0), r.rgb("Extinction", 0.0)
             n = [max(c, IOR_MIN) for c in n]                 # Cycles' least index
-            return _facet_conductor(n, k, m, mat, node, warnings), None
+            return _facet_conductor(n, k, m, mat, node, warnings, _film(r),
+                                    _node_anisotropy(r, node, mat, warnings, m, kind)), None
         return _conductor_from_colour(r, "Base Color", "Edge Tint", m, mat, node, warnings, mode="f82"), None
     if kind in ("ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction"):
         rough = r.float("Roughness", 0.0, 1.0)

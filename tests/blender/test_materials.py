@@ -80,8 +80,8 @@ def test_principled_conversion_per_input(addon):
     lam = np.array([[550.0]])
     # Metallic, smooth → Fresnel conductor whose normal-incidence reflectance is the base colour.
     bsdf, _, _ = exported(principled(**{"Metallic": 1.0, "Roughness": 0.0, "Base Color": (0.9, 0.9, 0.9, 1)}))
-    assert bsdf.name == "conductor"
-    n, k = bsdf.n.eval(lam)[0, 0], bsdf.k.eval(lam)[0, 0]
+    assert bsdf.name == "conductor" and type(bsdf).__name__ == "F82Reflectance"   # S0 on Cycles' curve
+    n, k = bsdf.base.n.eval(lam)[0, 0], bsdf.base.k.eval(lam)[0, 0]
     assert ((n - 1) ** 2 + k ** 2) / ((n + 1) ** 2 + k ** 2) == pytest.approx(0.9, rel=1e-6)
     # Transmission → smooth dielectric with the IOR.
     bsdf, _, _ = exported(principled(**{"Transmission Weight": 1.0, "IOR": 1.6, "Roughness": 0.0,
@@ -102,6 +102,7 @@ def test_principled_conversion_per_input(addon):
     assert bsdf.n.eval(lam)[0, 0] == pytest.approx(1.45) and bsdf.has_diffuse
     # Rough metal → GGX Torrance–Sparrow conductor (α = r²), multiscatter as Cycles' default.
     bsdf, _, _ = exported(principled(**{"Metallic": 1.0, "Roughness": 0.4}))
+    bsdf = bsdf.base
     assert bsdf.name == "torrance_sparrow" and bsdf.m == pytest.approx(0.16) and bsdf.k.eval(lam)[0, 0] > 0
     assert bsdf.distribution == "ggx" and bsdf.multiscatter
     # Metallic and Transmission are per-point mixture weights (Cycles' layer order), not switches.
