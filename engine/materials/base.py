@@ -236,6 +236,13 @@ class BSDF:
     radiance_scaling: bool = True
 
     @property
+    def scatters_nothing(self) -> bool:
+        """The model reflects and transmits nothing anywhere (a black surface: an emitter's material in Blender,
+        a glTF unlit surface); models that can prove it say so (engine.render.visibility crosses such a surface's
+        alpha without a random choice)."""
+        return False
+
+    @property
     def delta_only(self) -> bool:
         """Every lobe is a Dirac delta (no next-event estimation at such vertices)."""
         return self.flags.is_delta_only

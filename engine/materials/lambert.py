@@ -14,6 +14,7 @@ from ..kernels.diffuse import cosine_sample_numba, direct_light_numba, rgb_albed
 from .base import BSDF, BSDFFlags, BSDFSample, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter, Socket
 from .sampling import cosine_hemisphere, local_to_world
+from ..spectral import ConstantSpectrum
 from ..spectral.spectrum import basis_rgb
 from ..textures import textured
 from ..vec3 import dot
@@ -94,6 +95,10 @@ class Lambert(BSDF):
 
     def _albedo(self, sp: ShadingPoint) -> np.ndarray:
         return sp.spectrum(self.albedo)
+
+    @property
+    def scatters_nothing(self) -> bool:
+        return isinstance(self.albedo, ConstantSpectrum) and self.albedo.value == 0.0
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray):
         ok = (dot(sp.n_s, wi) > 0) & (sp.cos_o > 0)

@@ -418,26 +418,56 @@ class PathTracer:
         o, d, t_max = state.o, state.d, state.t_max
         hits = compiled.intersect(o, d, t_max)
         acc.stats["rays"] += state.n
+        through = None          # camera rays: the weight left after surfaces crossed without a random choice
         if vis is not None:
             record = [] if self.media is not None else None
+            null = [] if bounce == 0 and vis.tri_null is not None and self.media is None else None
             hits, extra = vis.pass_through(compiled, o, d, t_max, hits, bounce == 0, state.sampler.keys, bounce,
-                                           record=record)
+                                           record=record, null_crossings=null)
             acc.stats["rays"] += extra
             state.crossings = record
+            if null:
+                through = self._null_crossings(state, acc, null)
         hit = hits.prim >= 0
         background = ~hit
         if bounce == 0 and acc.transparency is not None:
-            # Camera rays have T = identity here: each adds 1 to the transparency it reaches.
+            # Camera rays have T = identity here (× ``through``): each adds that to the transparency it reaches.
             if self.film_transparent:
-                acc.transparency[state.path[background]] += 1.0
+                acc.transparency[state.path[background]] += 1.0 if through is None else through[background]
                 background = np.zeros_like(hit)
             if vis is not None and vis.any_holdout:
                 held = hit & vis.holdout[vis.tri_mesh[np.where(hit, hits.prim, 0)]]
-                acc.transparency[state.path[held]] += 1.0
+                acc.transparency[state.path[held]] += 1.0 if through is None else through[held]
                 hit = hit & ~held
         if acc.path_cost is not None:
             acc.path_cost[state.path[hit]] += VERTEX_COST   # shaded vertices (paths of a batch are distinct)
         return hits, hit, background
+
+    def _null_crossings(self, state: PathState, acc: _Accumulators, layers: list) -> np.ndarray:
+        """Camera rays that crossed see-through surfaces which scatter nothing (RayVisibility.pass_through's
+        ``null_crossings``, in the order crossed): each crossing adds alpha × the surface's emission (weighted by
+        what the earlier crossings left; camera rays: T = identity, MIS weight 1) and leaves 1 − alpha of the ray;
+        T of the paths is scaled by what is left, which is returned (n,)."""
+        through = np.ones(state.n)
+        if self.has_area_lights:
+            at_prev = lambda sel: (None, None)       # noqa: E731  (camera rays: no previous vertex)
+            for rays, prims, u, v, dists, alpha in layers:
+                lit = self.scene.tri_emitter[prims] >= 0
+                if lit.any():
+                    sel = lit.nonzero()[0]
+                    self._emitter_hits(acc.radiance, state.path, state.T_store, state.T_columns, rays[sel], prims[sel],
+                                       dists[sel], state.d, state.lk, state.prev_delta, state.prev_pdf, at_prev, True,
+                                       bary=(u[sel], v[sel]) if self.textured_lights else None,
+                                       scale=alpha[sel] * through[rays[sel]])
+                through[rays] *= 1.0 - alpha
+        else:
+            for rays, _, _, _, _, alpha in layers:
+                through[rays] *= 1.0 - alpha
+        rows = np.flatnonzero(through < 1.0)
+        T = state.T                                  # dense (the camera's shared identity column gathered)
+        T[..., rows] *= through[rows]
+        state.T = T
+        return through
 
     def _emission(self, state: PathState, acc: _Accumulators, hits: Hits, hit: np.ndarray, background: np.ndarray,
                   bounce: int) -> None:
@@ -912,7 +942,7 @@ class PathTracer:
     def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, cols, idx: np.ndarray,
                       prims: np.ndarray, dists: np.ndarray, d: np.ndarray, lk: WavelengthLookup, prev_delta: np.ndarray,
                       prev_pdf: np.ndarray, at_prev, camera: bool, bary=None, o: np.ndarray | None = None,
-                      att=None) -> None:
+                      att=None, scale: np.ndarray | None = None) -> None:
         """Emission picked up where the rays ``idx`` (each at most once) hit or cross emitting
         triangles ``prims`` at distances ``dists``, MIS-weighted against next-event estimation
         from the vertices the rays left (``at_prev(rows)``: their positions and side normals).
@@ -921,7 +951,7 @@ class PathTracer:
         Lights whose radiance varies over the surface read it at the hits: their barycentrics
         ``bary`` = (u, v) (n,) each, or where None, at the points o + dists·d of the rays' origins
         ``o`` (3, N) (crossings of non-occluding emitters).  ``att(rows, s)``: the paths' absorption up
-        to distance s (PathTracer._attenuation; None: none)."""
+        to distance s (PathTracer._attenuation; None: none).  ``scale`` (n,): a weight per ray ``idx`` (None: 1)."""
         light_set = self.lights
         emitter = self.scene.tri_emitter[prims]
         cos_hit = -dot(d[:, idx], self.scene.tri_normal[prims].T)
@@ -949,6 +979,8 @@ class PathTracer:
             factor = light.emission_factor(cos_l)
             if factor is not None:
                 Le = Le * factor[None, :]
+            if scale is not None:
+                Le = Le * scale[mine][front][None, :]
             if att is not None:
                 a = att(sel, dists[mine][front])
                 if a is not None:

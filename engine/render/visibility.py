@@ -49,6 +49,13 @@ class RayVisibility:
         self.alpha = np.array([float(r[4].lo) if i in self.textured_alpha else float(r[4])
                                for i, r in enumerate(mesh_rays)], np.float64)
         self.any_alpha = bool((self.alpha < 1).any())
+        #: triangles whose material scatters nothing (BSDF.scatters_nothing: an emitter's or unlit material):
+        #: camera rays cross their alpha deterministically (``pass_through``'s ``null_crossings``)
+        self.tri_null = None
+        if compiled is not None and self.any_alpha:
+            null = np.array([getattr(m, "scatters_nothing", False) for m in compiled.materials], bool)
+            tri_null = null[compiled.tri_material] & (self.alpha[tri_mesh] < 1)
+            self.tri_null = null[compiled.tri_material] if tri_null.any() else None
         self.any_holdout = bool(self.holdout.any())
         self.affects_shadows = bool(self.shadow_hidden.any() or self.any_alpha)
 
@@ -69,14 +76,19 @@ class RayVisibility:
     # ------------------------------------------------------------------ camera and indirect rays
 
     def pass_through(self, scene, o: np.ndarray, d: np.ndarray, t_max: np.ndarray | None, hits: Hits,
-                     camera: bool, keys: np.ndarray, bounce: int, record: list | None = None) -> tuple[Hits, int]:
+                     camera: bool, keys: np.ndarray, bounce: int, record: list | None = None,
+                     null_crossings: list | None = None) -> tuple[Hits, int]:
         """The first hit each ray really sees (hidden and chosen pass-through surfaces skipped), and
         the number of extra rays cast.  ``camera``: the segment starts at the camera.  ``record``: a
         list to which the crossed pass-through (alpha) surfaces are appended, one layer per crossing:
         (rays (m,) int64, triangles (m,), distances from o (m,)) (hidden surfaces are not crossings).
         With ``record`` the distances, and the returned hits' t, also count the offsets by which each
         continued ray starts past the surface it crossed (the distances along d from o, as the medium
-        attenuation needs them); without it they are the sum of the rays' own t (as before)."""
+        attenuation needs them); without it they are the sum of the rays' own t (as before).
+        ``null_crossings``: a list, for camera rays (``tri_null`` set): a surface that scatters nothing is crossed
+        always instead of with probability 1 − alpha, and the crossing appended as (rays, triangles, u, v,
+        distances, alpha) — the caller adds alpha × its emission and weights the ray by 1 − alpha, as Cycles
+        handles a Transparent BSDF mixed with an emission (no random choice: far less noise, same mean)."""
         hidden = self.camera_hidden if camera else self.indirect_hidden
         prim, u, v, t = hits.prim.copy(), hits.u.copy(), hits.v.copy(), hits.t.copy()
         active = np.arange(prim.shape[0])
@@ -93,6 +105,13 @@ class RayVisibility:
                     dim = (_PASS_DIMENSION + bounce * 4096 + it) * _GOLDEN & _MASK64
                     xi = uniforms(keys[active], np.array([dim], np.uint64))[0]
                     crossed = partial & (xi >= a)      # crossed with probability 1 − alpha
+                    if null_crossings is not None and self.tri_null is not None:
+                        null = partial & self.tri_null[np.where(hit, p_act, 0)]
+                        if null.any():
+                            rays = active[null]
+                            null_crossings.append((rays, prim[rays].copy(), u[rays].copy(), v[rays].copy(),
+                                                   t[rays].copy(), a[null]))
+                            crossed |= null
                     skip |= crossed
                     if record is not None and crossed.any():
                         rays = active[crossed]

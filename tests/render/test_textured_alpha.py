@@ -58,3 +58,41 @@ def test_alpha_texture_values_must_be_in_the_unit_range(tmp_path):
     data["objects"][0]["alpha"]["scale"] = 2.0
     with pytest.raises(SceneError, match=r"objects\[0\]\.alpha: texture values span \[0, 2\]: must be in \[0, 1\]"):
         parse_scene(data, base_dir=str(tmp_path))
+
+
+# --------------------------------------------------------------------------- surfaces that scatter nothing
+
+def test_a_black_sheet_is_crossed_without_a_random_choice(tmp_path):
+    """A sheet that scatters nothing (black: an emitter's or a glTF unlit material) is crossed by camera rays
+    always, weighted by 1 − alpha, as Cycles weighs a Transparent BSDF mixed with an emission: no noise."""
+    img = render(sheet_scene(tmp_path, [[0.5, 0.25]], spp=4), tmp_path)
+    clear = render(sheet_scene(tmp_path, [[0.0, 0.0]], spp=4), tmp_path)     # the emitter (2 up to its colour)
+    np.testing.assert_allclose(img[:, :4], 0.5 * clear[:, :4], rtol=1e-12)
+    np.testing.assert_allclose(img[:, 4:], 0.75 * clear[:, 4:], rtol=1e-12)
+
+
+def test_an_emitting_half_alpha_sheet_adds_alpha_times_its_emission(tmp_path):
+    """An unlit emitter of radiance 3 with alpha 0.3 in front of an emitter of 2: 0.3·3 + 0.7·2 = 2.3 in every
+    pixel, deterministically — the mean of the stochastic crossing a nearly black sheet still takes (albedo
+    1e-9: it scatters something, so it keeps the random choice) within its noise."""
+    data = sheet_scene(tmp_path, [[0.3, 0.3]], spp=4)
+    data["objects"][0]["emission"] = {"radiance": 3.0}
+    img = render(data, tmp_path)
+    np.testing.assert_allclose(img, 0.3 * 3.0 + 0.7 * 2.0, rtol=1e-4)    # (the colour conversion's rounding)
+    assert img.std() < 1e-6
+    data["materials"]["almost_black"] = {"type": "lambert", "albedo": 1e-9}
+    data["objects"][0]["material"] = "almost_black"
+    data["render"]["spp"] = 256
+    stochastic = render(data, tmp_path)
+    assert stochastic.std() > 0.01                                  # the random choice is noisy
+    assert stochastic.mean() == pytest.approx(2.3, abs=0.03)
+
+
+def test_a_transparent_film_counts_what_black_sheets_let_through(tmp_path):
+    """Film transparency behind a black half-alpha sheet (nothing behind it) is exactly 1 − alpha."""
+    data = sheet_scene(tmp_path, [[0.5, 0.2]], spp=4)
+    data["objects"] = data["objects"][:1]
+    data["camera"]["film_transparent"] = True
+    alpha = Renderer(parse_scene(copy.deepcopy(data), base_dir=str(tmp_path))).render().film.alpha()
+    np.testing.assert_allclose(alpha[:, :4], 0.5, rtol=1e-7)        # (float32 film)
+    np.testing.assert_allclose(alpha[:, 4:], 0.2, rtol=1e-7)
