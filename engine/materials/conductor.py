@@ -4,6 +4,11 @@ The relative index is η/n_exterior.  The Dirac lobe reflects wo about the
 shading normal with the Fresnel Mueller matrix M_F(cosθ) of docs/physics.md §0 in
 the plane-of-incidence frames x = s = unit(n × k) (shared by both beams).
 One-sided: zero when wo lies behind the shading normal.
+
+A thin film on the mirror (``film_n``, ``film_thickness`` in nm; none at ≤ 0.1 nm, Cycles' cutoff — Blender's
+Metallic BSDF and Principled Thin Film): Airy's sum over the film on the complex index n + iκ replaces M_F
+(engine.polarisation.thin_film.film_reflection_abcs, per wavelength): interference colours and an s–p phase
+difference of the film's own (RETARDING, WAVELENGTH_DEPENDENT).
 """
 
 from __future__ import annotations
@@ -19,6 +24,7 @@ from ..kernels.transport import update_abcs_numpy
 from ..polarisation.frames import plane_of_incidence_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflection_abcs_numpy, tabulated_mirror_abcs, \
     tabulated_mirror_abcs_numpy
+from ..polarisation.thin_film import facet_film, film_reflection_abcs
 from ..spectral import LAMBDA_MAX, LAMBDA_MIN, ConstantSpectrum
 from .parameters import REQUIRED, ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from ..errors import SceneError
@@ -28,16 +34,23 @@ from ..textures import textured
 from ..vec3 import reflect
 
 
-def mirror_reflection(sp: ShadingPoint, eta: np.ndarray):
+def mirror_reflection(sp: ShadingPoint, eta: np.ndarray, film: tuple[float, float] | None = None,
+                      exterior_n: float = 1.0):
     """(wi, MuellerValue, valid) of a smooth-interface mirror reflection of wo.
 
-    ``eta`` is the relative complex index (L, N) seen from the wo side.
+    ``eta`` is the relative complex index (L, N) seen from the wo side.  ``film`` = (index, thickness nm)
+    (engine.polarisation.thin_film.facet_film) or None: a thin film on the interface, between the medium
+    ``exterior_n`` and the substrate eta·exterior_n (Airy's sum at the path's wavelengths replaces M_F).
     """
     cos_o = sp.cos_o
     valid = cos_o >= 0  # cosθ = 0 is the grazing limit M_F → identity, not "behind"
     wi = reflect(sp.wo, sp.n_s)
     s = plane_of_incidence_axis(sp.n_s, -wi)
-    A, B, C, S = fresnel_reflection_abcs(np.maximum(cos_o, 0.0)[None, :], eta)
+    c = np.maximum(cos_o, 0.0)[None, :]
+    if film is None:
+        A, B, C, S = fresnel_reflection_abcs(c, eta)
+    else:
+        A, B, C, S = film_reflection_abcs(c, exterior_n, film[0], film[1], eta * exterior_n, sp.lam)
     m = valid.astype(np.float64)[None, :]
     return wi, MuellerValue("abcs", s, s, A * m, B * m, C * m, S * m), valid
 
@@ -103,10 +116,12 @@ tabulated_mirror_scatter = twin(tabulated_mirror_loop and tabulated_mirror_scatt
 class SmoothConductor(BSDF):
     name = "conductor"
 
-    def __init__(self, n, k, exterior_n=1.0):
+    def __init__(self, n, k, exterior_n=1.0, film_n: float | None = None, film_thickness: float = 0.0):
         self.n = n
         self.k = k
         self.exterior_n = float(exterior_n)
+        # a thin film on the mirror (module docstring): (index, thickness nm) or None (none, or ≤ 0.1 nm)
+        self.film = facet_film(film_n, film_thickness)
         self.varies_over_surface = textured(n, k)
         self._tables = type(n) is TabulatedSpectrum and type(k) is TabulatedSpectrum
         if self._tables:
@@ -124,9 +139,10 @@ class SmoothConductor(BSDF):
         real = getattr(k, "is_constant", False) and float(k.eval([550.0])[0]) == 0.0
         no_tir = real and not textured(n) and \
             float(np.min(n.eval(np.linspace(LAMBDA_MIN, LAMBDA_MAX, 95)))) >= self.exterior_n
+        filmed = self.film is not None           # the film's s–p phase difference and interference colours
         self.flags = (BSDFFlags.DELTA_REFLECTION | BSDFFlags.POLARISING
-                      | BSDFFlags.when(not no_tir, BSDFFlags.RETARDING)
-                      | BSDFFlags.when(not constant, BSDFFlags.WAVELENGTH_DEPENDENT))
+                      | BSDFFlags.when(filmed or not no_tir, BSDFFlags.RETARDING)
+                      | BSDFFlags.when(filmed or not constant, BSDFFlags.WAVELENGTH_DEPENDENT))
 
     def relative_eta(self, sp: ShadingPoint) -> np.ndarray:
         if self._tables and not sp.mono:
@@ -139,6 +155,8 @@ class SmoothConductor(BSDF):
 
     def mirror(self, sp: ShadingPoint):
         """(wi, MuellerValue, valid) of the mirror reflection of wo (mirror_reflection's result)."""
+        if self.film is not None:
+            return mirror_reflection(sp, self.relative_eta(sp), self.film, self.exterior_n)
         if self._tables and not sp.mono:
             # measured tables: interpolation, complex index and Fresnel in one pass (same numbers)
             abcs, inside = tabulated_mirror_abcs(sp.cos_o, sp.lam, self.n.wavelengths, self.n.values,
@@ -165,6 +183,8 @@ class SmoothConductor(BSDF):
 
     def scatter_delta(self, v: DeltaVertices) -> bool:
         """``sample`` + the throughput update in one step (constant or measured index; see BSDF)."""
+        if self.film is not None:
+            return False        # no fused step: the film's reflectance depends on the wavelength
         out = (v.T_out, v.d, v.x_out, v.valid, v.eta_sq)
         if self._eta is not None:
             constant_mirror_scatter(v.rows, v.n_s, v.wo, v.x_T, v.T, self._eta, *out, T_cols=v.T_cols)
@@ -175,7 +195,10 @@ class SmoothConductor(BSDF):
         return False
 
     def describe(self):
-        return {"type": self.name, "n": repr(self.n), "k": repr(self.k), "exterior_n": self.exterior_n}
+        out = {"type": self.name, "n": repr(self.n), "k": repr(self.k), "exterior_n": self.exterior_n}
+        if self.film is not None:
+            out["thin_film"] = f"n {self.film[0]:g}, {self.film[1]:g} nm"
+        return out
 
 
 # --------------------------------------------------------------------------- declaration
@@ -190,6 +213,12 @@ K = Parameter("k", "imaginary part κ of the complex index", kind="spectrum", lo
                             "Extinction coefficient κ ≥ 0 (imaginary part of the index)"))
 METAL = Parameter("metal", f"measured metal ({' | '.join(NAMED_METALS)}) instead of n and k", kind="metal",
                   default=None)
+#: A thin film on a conductor-like surface (shared with Torrance–Sparrow, which words its own doc): thickness in
+#: nm (none at ≤ 0.1 nm, engine.polarisation.thin_film.FILM_CUTOFF_NM) and the film's real index.
+THIN_FILM_THICKNESS = Parameter("thin_film_thickness", "a thin film on the mirror (0: none; Airy's sum over the "
+                                                       "film on the metal replaces its Fresnel matrix)", unit="nm",
+                                lo=0.0, hi=1e6, default=0.0)
+THIN_FILM_IOR = Parameter("thin_film_ior", "the thin film's index", lo=0.0, lo_open=True, default=1.33)
 
 
 def complex_index(p):
@@ -203,7 +232,8 @@ def complex_index(p):
 
 DECLARATION = ModelDeclaration(
     "conductor", "Fresnel Conductor", "Smooth metal mirror with a complex index n + iκ",
-    [N, K, METAL, exterior_n_parameter()], catalogue="fresnel", node="CONDUCTOR")
+    [N, K, METAL, THIN_FILM_THICKNESS, THIN_FILM_IOR, exterior_n_parameter()], catalogue="fresnel",
+    node="CONDUCTOR")
 
 
 DECLARATION.per_point = frozenset({"n", "k"})
@@ -211,4 +241,6 @@ DECLARATION.per_point = frozenset({"n", "k"})
 
 @DECLARATION.builder
 def _conductor(p):
-    return SmoothConductor(*complex_index(p), p["exterior_n"])
+    film_n = p["thin_film_ior"]          # read (validated) whether or not a film is there
+    return SmoothConductor(*complex_index(p), p["exterior_n"], film_n=film_n,
+                           film_thickness=p["thin_film_thickness"])

@@ -150,6 +150,7 @@ def _metal_of(n, k, p, alpha):
     values = {"n": n, "k": k}
     from .torrance_sparrow import M_MIN
     if not _textured(alpha) and alpha < M_MIN:
+        values.update(_film_values(p))
         return conductor.DECLARATION.build(conductor.DECLARATION.values(values, p.where))
     aniso = _anisotropic_lobe(p, n, k, alpha)
     if aniso is not None:
@@ -175,8 +176,8 @@ def _anisotropic_lobe(p, n, k, alpha):
 
 
 def _film_values(p) -> dict:
-    """The thin film's keys for a rough Torrance–Sparrow layer (metal, dielectric specular), as Cycles puts its
-    Thin Film on every Fresnel of the Principled BSDF; empty without a film."""
+    """The thin film's keys for the metal and the dielectric specular layer, rough (on every facet) or smooth (on
+    the mirror), as Cycles puts its Thin Film on every Fresnel of the Principled BSDF; empty without a film."""
     if p["thin_film_thickness"] <= 0.1:
         return {}
     return {"thin_film_thickness": p["thin_film_thickness"], "thin_film_ior": p["thin_film_ior"]}
@@ -184,17 +185,11 @@ def _film_values(p) -> dict:
 
 def film_gaps(metallic, transmission, roughness, transmission_roughness=None) -> list[str]:
     """The parts of a principled material on which its Thin Film is not simulated (Cycles puts it on every
-    Fresnel): a smooth metal, a smooth dielectric's specular layer, a rough transmission.  The inputs as the
-    declaration takes them (numbers or textures; a textured roughness counts as rough)."""
+    Fresnel): a rough transmission.  The inputs as the declaration takes them (numbers or textures; a textured
+    roughness counts as rough)."""
     from .rough_dielectric import ALPHA_MIN
-    from .torrance_sparrow import M_MIN
-    smooth = not _textured(roughness) and roughness * roughness < M_MIN
     trans = roughness if transmission_roughness is None else transmission_roughness
     gaps = []
-    if smooth and not _never(metallic):
-        gaps.append("smooth metal")
-    if smooth and not _always(metallic) and not _always(transmission):
-        gaps.append("smooth dielectric specular")
     if not _always(metallic) and not _never(transmission) and (_textured(trans) or trans * trans >= ALPHA_MIN):
         gaps.append("rough transmission")
     return gaps
@@ -230,9 +225,10 @@ def _dielectric(p, alpha, ior):
     base = p["base_color"]
     eta = specular_ior(ior, p["specular_ior_level"])
     smooth = not _textured(alpha) and alpha < M_MIN
-    values = {"n": eta, "k": 0.0, "diffuse_layering": "albedo_scaling", "m": 0.0 if smooth else alpha}
+    values = {"n": eta, "k": 0.0, "diffuse_layering": "albedo_scaling", "m": 0.0 if smooth else alpha,
+              **_film_values(p)}
     if not smooth:
-        values.update(distribution="ggx", multiscatter=p["distribution"] == "multi_ggx", **_film_values(p))
+        values.update(distribution="ggx", multiscatter=p["distribution"] == "multi_ggx")
     decl = torrance_sparrow.DECLARATION
     tint = p["specular_tint"]
     tinted = not _white(tint)
@@ -383,8 +379,8 @@ DECLARATION = ModelDeclaration(
      Parameter("sheen_roughness", "the sheen's roughness", lo=0.0, hi=1.0, default=0.5, texturable=True),
      Parameter("sheen_tint", "the sheen's colour", kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6,
                default=1.0, texturable=True),
-     Parameter("thin_film_thickness", "thin film on the smooth transmission and on the rough metal and dielectric "
-                                      "specular layers (Airy's sum, per facet)", unit="nm", lo=0.0, hi=1e6,
+     Parameter("thin_film_thickness", "thin film on the smooth transmission, the metal and the dielectric specular "
+                                      "layer (Airy's sum, per facet where rough)", unit="nm", lo=0.0, hi=1e6,
                default=0.0),
      Parameter("thin_film_ior", "thin film's index", lo=0.0, lo_open=True, default=1.33),
      Parameter("distribution", "microfacet distribution: Multiscatter GGX (Cycles' default) or GGX",

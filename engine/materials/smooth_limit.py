@@ -71,8 +71,12 @@ class MirrorWithDiffuse(BSDF):
         total = spec + diff
         return np.where(total > 0, spec / np.where(total > 0, total, 1.0), 1.0)
 
+    def _mirror(self, sp):
+        """(wi, MuellerValue, valid) of the mirror, weight 1 (engine.materials.conductor.mirror_reflection)."""
+        return mirror_reflection(sp, self._eta(sp))
+
     def delta_reflection(self, sp):
-        return mirror_reflection(sp, self._eta(sp))[1].scaled(sp.number(self.s))
+        return self._mirror(sp)[1].scaled(sp.number(self.s))
 
     def eval(self, sp, wi):
         ok = (dot(sp.n_s, wi) > 0) & (sp.cos_o > 0)
@@ -81,12 +85,12 @@ class MirrorWithDiffuse(BSDF):
     def pdf(self, sp, wi):
         if not self.has_diffuse:
             return np.zeros(sp.n)
-        p = self._p_mirror(sp, mirror_reflection(sp, self._eta(sp))[1])
+        p = self._p_mirror(sp, self._mirror(sp)[1])
         c = dot(sp.n_s, wi)
         return np.where((c > 0) & (sp.cos_o > 0), (1.0 - p) * c / np.pi, 0.0)
 
     def sample(self, sp, u_lobe, u_dir) -> BSDFSample:
-        wi_m, mirror, valid_m = mirror_reflection(sp, self._eta(sp))
+        wi_m, mirror, valid_m = self._mirror(sp)
         p = self._p_mirror(sp, mirror)
         pick = u_lobe < p
         local = cosine_hemisphere(u_dir)

@@ -103,7 +103,7 @@ import math
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
-from .conductor import K, METAL, N, complex_index
+from .conductor import K, METAL, N, THIN_FILM_IOR, THIN_FILM_THICKNESS, complex_index, mirror_reflection
 from .ggx import GGX
 from .ggx_energy import ALPHA_MAX, conductor_extra, ggx_reflection_albedo
 from .microfacet import (SHADOWING, Beckmann, BlinnPhong, half_vector, reflect_local,
@@ -662,6 +662,51 @@ class TorranceSparrow(BSDF):
         return out
 
 
+# --------------------------------------------------------------------------- the smooth limit under a film
+
+class FilmedMirrorWithDiffuse(MirrorWithDiffuse):
+    """The smooth limit (m = 0) of a Torrance–Sparrow under a thin film (Cycles' Principled Thin Film on a smooth
+    specular layer): engine.materials.smooth_limit's mirror plus Lambertian part, the mirror's Mueller matrix
+    Airy's sum over the film (index, thickness nm; none at ≤ 0.1 nm) on the substrate n + iκ instead of M_F, at
+    the path's wavelengths.  With ``"albedo_scaling"`` the Lambertian part is weighted by max(0, 1 − s·E(cosθ_o)),
+    E the rough filmed lobe's layering estimate (TorranceSparrow.film_albedo, Cycles' for iridescence: the film's
+    reflectance at the view angle, the largest over the RGB channels' wavelengths)."""
+
+    def __init__(self, n, k, exterior_n=1.0, diffuse_albedo=0.0, specular_weight=1.0, diffuse_weight=0.0,
+                 diffuse_layering="add", film_n: float | None = None, film_thickness: float = 0.0):
+        super().__init__(n, k, exterior_n, diffuse_albedo, specular_weight, diffuse_weight, diffuse_layering)
+        self.film = facet_film(film_n, film_thickness)
+        if self.film is not None:
+            if diffuse_layering == "albedo_scaling" and textured(self.n, self.k):
+                raise ValueError("diffuse_layering='albedo_scaling' under a thin film needs an n and k that do not "
+                                 "vary over the surface (the film's layering albedo is estimated per model)")
+            self.flags |= BSDFFlags.RETARDING | BSDFFlags.WAVELENGTH_DEPENDENT
+
+    def _mirror(self, sp: ShadingPoint):
+        """(wi, MuellerValue, valid) of the (filmed) mirror, weight 1 (engine.materials.conductor.mirror_reflection)."""
+        return mirror_reflection(sp, self._eta(sp), self.film, self.exterior_n)
+
+    def film_albedo(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray:
+        """(N,) the film's layering albedo at cosθ_o (engine.polarisation.thin_film.film_layering_albedo at the RGB
+        channels' wavelengths, as TorranceSparrow.film_albedo — the same signature; n, κ evaluated there)."""
+        lam = np.asarray(RGB_WAVELENGTHS_NM, np.float64)
+        n3 = (self.n.eval(lam) + 1j * self.k.eval(lam))[:, None]
+        return film_layering_albedo(cos_o, self.exterior_n, self.film, n3, lam)
+
+    def diffuse_scale(self, sp):
+        """max(0, 1 − s·E(cosθ_o)) (1, N) under the film (E: ``film_albedo``), else the bare mirror's (L, N)."""
+        if self.film is None:
+            return super().diffuse_scale(sp)
+        E = self.film_albedo(sp, np.clip(sp.cos_o, 0.0, 1.0))
+        return np.maximum(1.0 - sp.number(self.s) * E, 0.0)[None, :]
+
+    def describe(self) -> dict:
+        out = super().describe()
+        if self.film is not None:
+            out["thin_film"] = f"n {self.film[0]:g}, {self.film[1]:g} nm"
+        return out
+
+
 # --------------------------------------------------------------------------- declaration
 
 #: Largest weight of either lobe: far beyond any physical use, small enough for finite pixels.
@@ -694,10 +739,9 @@ DECLARATION = ModelDeclaration(
                                    "by one minus the facet part's albedo at the view direction (Cycles' "
                                    "Principled; not reciprocal)", kind="choice", choices=DIFFUSE_LAYERINGS,
                default="add"),
-     Parameter("thin_film_thickness", "a thin film on every facet (0: none; Airy's sum over the film on the "
-                                      "substrate replaces the facet's Fresnel matrix; needs m > 0)", unit="nm",
-               lo=0.0, hi=1e6, default=0.0),
-     Parameter("thin_film_ior", "the thin film's index", lo=0.0, lo_open=True, default=1.33),
+     THIN_FILM_THICKNESS.with_(doc="a thin film on every facet, or on the mirror at m = 0 (0: none; Airy's sum "
+                                   "over the film on the substrate replaces the Fresnel matrix)"),
+     THIN_FILM_IOR,
      exterior_n_parameter(socket=Socket("Exterior IOR", "FLOAT", 1.0, 1.0, 3.0,
                                         "Index of the medium above the surface (1 = air, 1.33 = water)"))],
     catalogue="torrance_sparrow", node="TORRANCE_SPARROW")
@@ -740,11 +784,8 @@ def _torrance_sparrow(p):
                                        f"got {m:g}")
     film = p["thin_film_thickness"] > 0.1
     film_n = p["thin_film_ior"]          # read (validated) whether or not a film is there
-    if m_const == 0:   # the smooth limit: a Fresnel mirror (plus the Lambertian part); E = 1, nothing to add
-        if film:
-            raise SceneError(p.field("thin_film_thickness"), "a thin film needs a rough surface here (m > 0); "
-                                                             "a smooth coated interface is the 'thin_film' model")
-        return MirrorWithDiffuse(n, k, **kw)
     if film:
         kw.update(film_n=film_n, film_thickness=p["thin_film_thickness"])
+    if m_const == 0:   # the smooth limit: a Fresnel mirror (plus the Lambertian part); E = 1, nothing to add
+        return (FilmedMirrorWithDiffuse if film else MirrorWithDiffuse)(n, k, **kw)
     return TorranceSparrow(n, k, m, shadowing=shadowing, distribution=distribution, multiscatter=multiscatter, **kw)

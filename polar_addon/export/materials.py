@@ -691,16 +691,13 @@ def _smooth(m, kw) -> bool:
 def _facet_conductor(n, k, m, mat, node, warnings, film=None, aniso=None):
     """A conductor of index n + iκ (spectra, [r, g, b] or textured) with facets as the node's Distribution
     and roughness m (α = r², constant or a TextureInput), or its smooth limit; ``film``: (IOR, thickness nm)
-    of a Thin Film on its facets (Cycles films the conductor's index; not on the mirror: one warning);
+    of a Thin Film on its facets or its mirror (Cycles films the conductor's index);
     ``aniso``: (α_x, α_y, rotation in turns) of Cycles' anisotropic GGX (a constant roughness; None: isotropic)."""
     kw = facets(node, mat, warnings)
     smooth = _smooth(m, kw) and (aniso is None or max(aniso[:2]) < _ts_min())
-    if film is not None and smooth:
-        warnings.append(f"material {mat!r}: the Thin Film of {node.name!r} is not simulated on a smooth metal "
-                        "(there: no film)")
-        film = None
+    films = {} if film is None else {"thin_film_ior": film[0], "thin_film_thickness": film[1]}
     if smooth:
-        return _textured_model("conductor", {"n": n, "k": k}, mat, node)
+        return _textured_model("conductor", {"n": n, "k": k, **films}, mat, node)
     if aniso is not None and aniso[0] != aniso[1]:
         if kw["distribution"] == "ggx":
             from ...engine.materials.anisotropic_ggx import AnisotropicGGX
@@ -712,9 +709,7 @@ def _facet_conductor(n, k, m, mat, node, warnings, film=None, aniso=None):
                         "isotropic (Beckmann)")
     if not isinstance(m, TextureInput):
         m = max(m, 1e-4)
-    if film is not None:
-        kw = {**kw, "thin_film_ior": film[0], "thin_film_thickness": film[1]}
-    return _textured_model("torrance_sparrow", {"n": n, "k": k, "m": m, **kw}, mat, node)
+    return _textured_model("torrance_sparrow", {"n": n, "k": k, "m": m, **kw, **films}, mat, node)
 
 
 def _ts_min():
@@ -779,7 +774,7 @@ def _conductor_from_colour(r, colour_name, edge_name, m, mat, node, warnings, mo
     film = _film(r) if mode == "f82" else None
     metal = _facet_conductor(n, k, m, mat, node, warnings, film,
                              _node_anisotropy(r, node, mat, warnings, m, node.bl_idname))
-    if film is not None and metal.name != "conductor":
+    if film is not None:
         return metal                                     # Cycles films Gulbrandsen's index itself
     return F82Reflectance(metal, _reflectance(colour), None if tint is None else _reflectance(tint),
                           "constant" if mode == "constant" else "f82_tint")
