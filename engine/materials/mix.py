@@ -68,7 +68,7 @@ from ..textures import TexturedNumber
 from ..vec3 import dot, reflect
 
 __all__ = ["ALBEDO_FLOOR", "MAX_COMPONENTS", "Layered", "Mix", "MixShadingPoint", "WeightProduct", "add_values",
-           "rotate_mueller_batch"]
+           "emission_weight", "rotate_mueller_batch"]
 
 #: Most components of one mix after nested mixes are flattened (named mixes of mixes could otherwise
 #: multiply to thousands of components).
@@ -640,3 +640,34 @@ class Layered(Mix):
         scale = np.maximum(1.0 - weights[0] * self.albedo(top), 0.0)     # the top's weight at each point
         return weights[:1] + [w * scale for w in weights[1:]]
 
+
+
+def emission_weight(bsdf: BSDF):
+    """Cycles' attenuation of a Principled BSDF's own emission by the layers over it (kernel/svm/closure.h:
+    "Emission (attenuated by sheen and coat)"): f(cosθ) (N,) = Π over the sheen and coat layers (``Layered`` with
+    ``role`` "sheen" or "coat", outermost first) of max(0, 1 − weight·E_layer(θ)), θ the viewing angle from the
+    surface normal, E the layer's albedo as it weights what lies below; None where no layer covers the emission.
+    Needs constant layer weights (a per-point weight: None, and the caller warns); the coat's tint is not applied
+    to the emission (its layering is).  The layers' normal maps are not seen (the geometric frame)."""
+    layers = []
+    b = bsdf
+    while isinstance(b, Layered) and getattr(b, "role", None) in ("sheen", "coat"):
+        if isinstance(b.top_weight, TexturedNumber):
+            return None
+        layers.append(b)
+        nxt = b.components[1] if len(b.components) == 2 else None
+        b = nxt if getattr(nxt, "role", None) in ("sheen", "coat") else None
+    if not layers:
+        return None
+
+    def weight(cos_theta: np.ndarray) -> np.ndarray:
+        c = np.clip(np.asarray(cos_theta, np.float64), 0.0, 1.0)
+        n = c.shape[0]
+        wo = np.stack((np.sqrt(np.maximum(1.0 - c * c, 0.0)), np.zeros(n), c))
+        up = np.tile(np.array([[0.0], [0.0], [1.0]]), (1, n))
+        sp = ShadingPoint(np.zeros((3, n)), up, up, wo, np.full((1, n), 550.0))
+        f = np.ones(n)
+        for layer in layers:
+            f = f * np.maximum(1.0 - layer.top_weight * layer.albedo(sp), 0.0)
+        return f
+    return weight

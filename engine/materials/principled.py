@@ -425,4 +425,6 @@ def _sheen(p, below):
     else:
         def albedo(sp):
             return np.max(np.maximum(sp.spectrum(tint), 0.0), axis=0) * top.albedo(sp)
-    return Layered(top, below, p["sheen_weight"], albedo)
+    layered = Layered(top, below, p["sheen_weight"], albedo)
+    layered.role = "sheen"          # a layer over the emission (mix.emission_weight)
+    return layered

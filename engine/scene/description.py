@@ -187,6 +187,10 @@ class Mesh:
     #: instance (``mesh.emission_sampling = "area"``), so the fingerprints of existing scenes
     #: (engine.render.resume) stay what they were
     emission_sampling = "luminance"
+    #: the emission lies under its material's sheen and coat layers (Cycles' Principled BSDF: its own emission is
+    #: attenuated by them, engine.materials.mix.emission_weight); scene files: ``"under_layers": true`` in the
+    #: object's "emission".  A class attribute for the same reason as ``emission_sampling``
+    emission_under_layers = False
 
 
 @dataclass

@@ -908,7 +908,7 @@ LIGHT_OPTIONS = {"point": ("radius", "soft_falloff", "visible_camera"),
                  "spot": ("radius", "soft_falloff", "visible_camera", "blend_profile"),
                  "directional": ("angle_deg", "visible_camera")}
 #: optional emitter options inside "emission" (Mesh fields; defaults: one-sided, opaque, Lambertian)
-EMITTER_OPTIONS = ("two_sided", "occluder", "spread_deg", "sampling")
+EMITTER_OPTIONS = ("two_sided", "occluder", "spread_deg", "sampling", "under_layers")
 
 
 def _flag(d, key: str, field: str, default: bool) -> bool:
@@ -989,6 +989,8 @@ def _emitter_options(d, field: str) -> dict:
         out["spread_deg"] = number(d["spread_deg"], f"{field}.spread_deg", 0, 180, lo_open=True)
     if "sampling" in d:
         out["emission_sampling"] = choice(d["sampling"], f"{field}.sampling", EMISSION_SAMPLING)
+    if _flag(d, "under_layers", field, False):
+        out["emission_under_layers"] = True
     return out
 
 

@@ -1205,7 +1205,16 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
                                mat, node), None
     if kind == "ShaderNodeBsdfPrincipled":
         emission = _emission(node, mat, warnings, "Emission Color", "Emission Strength", bake)
-        return _principled(node, mat, warnings, bake), emission
+        bsdf = _principled(node, mat, warnings, bake)
+        if emission is not None and getattr(bsdf, "role", None) in ("sheen", "coat"):
+            # Cycles attenuates the Principled emission by its sheen and coat (engine.materials.mix.emission_weight)
+            from ...engine.materials.mix import emission_weight
+            if emission_weight(bsdf) is None:
+                warnings.append(f"material {mat!r}: the emission of {node.name!r} under a coat or sheen whose weight "
+                                "varies over the surface is not attenuated by them")
+            else:
+                bsdf.emission_under_layers = True
+        return bsdf, emission
     if kind == "ShaderNodeEmission":
         return Lambert(ConstantSpectrum(0.0)), _emission(node, mat, warnings, bake=bake)
     if kind in ("ShaderNodeMixShader", "ShaderNodeAddShader"):

@@ -510,6 +510,8 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
     for mesh in meshes:
         if mesh.emission is not None and mesh.occluder:
             mesh.two_sided = True      # Cycles' Emission shader emits from both faces (lamps stay one-sided)
+        if mesh.emission is not None and getattr(materials.get(mesh.materials[0]), "emission_under_layers", False):
+            mesh.emission_under_layers = True   # a Principled emission under its coat and sheen (as Cycles)
         if getattr(materials.get(mesh.materials[0]), "camera_only", False):
             mesh.visible_shadow = mesh.visible_indirect = False     # Light Path ▸ Is Camera Ray: transparent to others
     if not lights and not any(m.emission is not None for m in meshes):

@@ -287,3 +287,22 @@ def test_beckmann_anisotropy_is_named(addon):
     bpy.data.materials["P"].node_tree.nodes["Glossy BSDF"].distribution = "BECKMANN"
     _, _, warnings = ap.export_polar(scene, 1, 8)
     assert len(warnings) == 1 and "GGX only" in warnings[0]
+
+
+#: an emitting Principled BSDF under its coat and sheen: Cycles attenuates the emission by both layers' albedo at the
+#: view angle (engine.materials.mix.emission_weight); an Emission Color checker
+EMISSIVE_LAYERS = {
+    "coat": {"Base Color": (0.1, 0.1, 0.1), "Roughness": 0.5, "Coat Weight": 1.0, "Coat Roughness": 0.05,
+             "Coat IOR": 1.9, "Emission Strength": 2.0},
+    "sheen": {"Base Color": (0.1, 0.1, 0.1), "Roughness": 0.5, "Sheen Weight": 1.0, "Sheen Roughness": 0.3,
+              "Emission Strength": 2.0},
+    "sheen and coat": {"Base Color": (0.1, 0.1, 0.1), "Roughness": 0.5, "Sheen Weight": 0.8, "Sheen Roughness": 0.5,
+                       "Coat Weight": 0.7, "Coat Roughness": 0.2, "Emission Strength": 2.0},
+}
+
+
+@pytest.mark.parametrize("lighting", ap.LIGHTINGS)
+@pytest.mark.parametrize("layers", list(EMISSIVE_LAYERS))
+def test_emission_under_coat_and_sheen_matches_cycles(addon, layers, lighting):
+    scene = sphere_scene("Emission Color", ((1.0, 0.5, 0.2), (0.2, 0.6, 1.0)), EMISSIVE_LAYERS[layers], lighting)
+    compare_with_cycles(scene, f"Emission under {layers}", lighting)

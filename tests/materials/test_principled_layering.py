@@ -291,3 +291,41 @@ def test_principled_dielectric_white_furnace_matches_cycles(roughness, colour):
         cyc, pol = _ring_stats(cyc_img), _ring_stats(pol_img)
         se = np.hypot(cyc[:, 1], pol[:, 1])
         assert np.all(np.abs(pol[:, 0] - cyc[:, 0]) <= 4.0 * se + 0.02 * cyc[:, 0]), (pol[:, 0] / cyc[:, 0], se)
+
+
+# --------------------------------------------------------------------------- the emission under coat and sheen
+
+def _fresnel_unpolarised(c, n):
+    """The unpolarised Fresnel reflectance of a real index n at cosθ = c (air side), written out."""
+    s2 = 1.0 - c * c
+    ct = np.sqrt(1.0 - s2 / (n * n))
+    rs = (c - n * ct) / (c + n * ct)
+    rp = (n * c - ct) / (n * c + ct)
+    return 0.5 * (rs * rs + rp * rp)
+
+
+def test_emission_under_a_smooth_coat_is_weighted_by_one_minus_weight_times_fresnel():
+    """Cycles: the Principled emission × (1 − coat_weight·E_coat(θ)); a smooth coat's E is its Fresnel reflectance."""
+    from engine.materials.mix import emission_weight
+    coat = parse_material({"type": "principled", "coat_weight": 0.6, "coat_roughness": 0.0, "coat_ior": 1.7,
+                           "base_color": 0.2}, "materials.p")
+    c = np.linspace(0.05, 1.0, 9)
+    np.testing.assert_allclose(emission_weight(coat)(c), 1.0 - 0.6 * _fresnel_unpolarised(c, 1.7), rtol=1e-12)
+    assert emission_weight(parse_material({"type": "principled"}, "materials.p")) is None     # nothing over it
+    sheen = parse_material({"type": "principled", "sheen_weight": 1.0, "sheen_roughness": 0.5}, "materials.p")
+    w = emission_weight(sheen)(c)
+    assert np.all((w > 0.0) & (w < 1.0))                       # the sheen reflects a part, more at grazing
+    assert w[0] < w[-1]
+
+
+def test_emission_under_layers_is_a_scene_file_emitter_option():
+    from engine.scene.loader import parse_scene
+    base = {"format": "polar-scene/1",
+            "camera": {"origin": [0, -5, 0], "target": [0, 0, 0], "width": 4, "height": 4},
+            "materials": {"p": {"type": "principled", "coat_weight": 1.0}},
+            "objects": [{"shape": "sphere", "material": "p", "emission": {"radiance": 1.0, "under_layers": True}}]}
+    scene = parse_scene(base)
+    assert scene.meshes[0].emission_under_layers
+    base["objects"][0]["emission"]["under_layers"] = 1
+    with pytest.raises(SceneError, match=r"objects\[0\]\.emission\.under_layers"):
+        parse_scene(base)

@@ -53,6 +53,8 @@ class LightSet:
                                                        f"meshes[{mesh_index}] ({mesh.name!r}).emission"))
             else:
                 self.lights.append(mesh_emitter(mesh.emission, tris, compiled, two_sided, spread))
+            if getattr(mesh, "emission_under_layers", False):
+                _under_layers(self.lights[-1], compiled, tris)
             if not getattr(mesh, "visible_indirect", True):
                 self.lights[-1].shades_nothing = True
         for index, light in enumerate(scene.lights):
@@ -143,3 +145,15 @@ class LightSet:
 
     def __len__(self):
         return len(self.lights)
+
+
+def _under_layers(light, compiled, tris) -> None:
+    """An emissive mesh's radiance × its material's layer attenuation (engine.materials.mix.emission_weight), as a
+    directional factor of the light (its ``profile``, after any spread); nothing where no layer covers it."""
+    from ...materials.mix import emission_weight
+    materials = np.unique(compiled.tri_material[tris])
+    weight = emission_weight(compiled.materials[int(materials[0])]) if materials.size == 1 else None
+    if weight is None:
+        return
+    spread = light.profile
+    light.profile = weight if spread is None else (lambda c: spread(c) * weight(c))
