@@ -61,6 +61,8 @@ STOP_POLL_SECONDS = 0.05
 #: Units submitted per worker thread (one traced, the next queued so that the worker never waits
 #: for the thread that adds finished units to the film).
 UNITS_AHEAD = 2
+#: Fewer work units per worker than this (few passes on a small image): work_units cuts the rows into bands.
+UNITS_PER_WORKER = 4
 #: Paths traced by Renderer.warm_up (a grid over the image: enough to reach every visible material).
 WARM_UP_PATHS = 4096
 #: Bytes per pixel of the film (Stokes × RGB sums, luminance sums of squares, sample count).
@@ -84,20 +86,36 @@ def available_memory() -> int:
 
 
 def work_units(width: int, height: int, spp: int, batch_rays: int, first_pass: int = 0,
-               window: tuple[int, int, int, int] | None = None) -> Iterator[tuple[int, int, int, int]]:
+               window: tuple[int, int, int, int] | None = None,
+               workers: int = 1) -> Iterator[tuple[int, int, int, int]]:
     """Yield (row0, row1, pass0, pass1) covering the window's rows × passes [first_pass, spp).
 
     ``window`` = (x0, y0, x1, y1) in pixels (row 0 at the top, x1/y1 exclusive)
     restricts the rows here and the columns in ``unit_pixels``.
+
+    The passes are grouped by ``batch_rays`` alone: a pixel's sums are added group by group, so the
+    grouping fixes the image's bits.  When that gives fewer than ``UNITS_PER_WORKER`` units per
+    worker and fewer bands of rows than ``workers`` (a small image, whose passes fit one batch), the
+    rows are cut into ``workers`` bands, so that every worker gets a unit of each group (the asset
+    suite's 96 × 96 × 16 spp: passes 0–13 and 14–15, each in two bands, not one unit of 14 passes
+    traced alone).  Bands change no pixel's additions: the image is the same for any ``workers``
+    (and a Dask render, engine.render.distributed, is the local one bit for bit).
     """
     x0, y0, x1, y1 = window or (0, 0, width, height)
     cols = max(x1 - x0, 1)
-    rows_per_unit = max(1, min(y1 - y0, batch_rays // cols))
+    rows = y1 - y0
+    rows_per_unit = max(1, min(rows, batch_rays // cols))
     passes_per_unit = max(1, batch_rays // (rows_per_unit * cols))
+    bands, groups = -(-rows // rows_per_unit), -(-max(spp - first_pass, 0) // passes_per_unit)
+    if bands < workers and groups * bands < UNITS_PER_WORKER * workers:
+        bands = min(workers, rows)      # (nearly) equal bands, one per worker
+        cuts = [y0 + i * rows // bands for i in range(bands + 1)]
+    else:
+        cuts = list(range(y0, y1, rows_per_unit)) + [y1]
     for p0 in range(first_pass, spp, passes_per_unit):
         p1 = min(spp, p0 + passes_per_unit)
-        for r0 in range(y0, y1, rows_per_unit):
-            yield r0, min(y1, r0 + rows_per_unit), p0, p1
+        for r0, r1 in zip(cuts[:-1], cuts[1:]):
+            yield r0, r1, p0, p1
 
 
 def unit_pixels(width: int, r0: int, r1: int, window: tuple[int, int, int, int] | None = None) -> np.ndarray:
@@ -293,7 +311,7 @@ class Renderer:
                 raise ValueError(f"window {window} must lie inside the {W}×{H} image and be non-empty")
             window = (x0, y0, x1, y1)
         first_pass = int(done_before.min()) if done_before is not None else 0
-        units = list(work_units(W, H, st.spp, st.batch_rays, first_pass=first_pass, window=window))
+        units = list(work_units(W, H, st.spp, st.batch_rays, first_pass=first_pass, window=window, workers=workers))
         cols = (window[2] - window[0]) if window else W
         total = sum((r1 - r0) * cols * (p1 - p0) for r0, r1, p0, p1 in units)
         if done_before is not None:

@@ -60,6 +60,7 @@ class TexturedGulbrandsenIndex(TexturedSpectrum):
         def compute():
             r = _values(self.reflectivity, points, lam, mono, basis)
             g = _values(self.edge_tint, points, lam, mono, basis)
-            n, k = index_of(r, g, self.mode)
-            return n if self.part == "n" else k
-        return points.memo((self, mono, lam.shape[0]), compute)
+            return index_of(r, g, self.mode)
+        # (n, κ) once per batch: the n and the κ of the same metal share one Gulbrandsen map
+        key = ("gulbrandsen_nk", self.reflectivity, self.edge_tint, self.mode, mono, lam.shape[0])
+        return points.memo(key, compute)[0 if self.part == "n" else 1]

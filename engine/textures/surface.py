@@ -24,30 +24,59 @@ class VertexAttributes:
 
 
 class SurfacePoints:
-    """N hits on triangles ``prim`` with Embree barycentrics (u, v) (vertex weights 1 − u − v, u, v)."""
+    """N hits on triangles ``prim`` with Embree barycentrics (u, v) (vertex weights 1 − u − v, u, v).
 
-    __slots__ = ("attributes", "prim", "b1", "b2", "_memo")
+    A subset made by :meth:`take` remembers its parent batch and its points there: a value it has not
+    memoised yet but the parent (or the parent's parent …) has is the parent's value at those points
+    (every memoised value is per point, the points along its last axis), not a second lookup.
+    """
+
+    __slots__ = ("attributes", "prim", "b1", "b2", "_memo", "_parent", "_sel")
 
     def __init__(self, attributes: VertexAttributes, prim: np.ndarray, b1: np.ndarray, b2: np.ndarray):
         self.attributes, self.prim, self.b1, self.b2 = attributes, prim, b1, b2
         self._memo = {}
+        self._parent = self._sel = None
 
     @property
     def n(self) -> int:
         return self.prim.shape[0]
 
     def take(self, sel) -> SurfacePoints:
-        """The points ``sel`` (indices; ``slice(None)`` gives this batch itself, memo included)."""
+        """The points ``sel`` (indices; ``slice(None)`` gives this batch itself, memo included).
+
+        A subset of this batch's points (a boolean mask, a slice, or increasing indices) shares this
+        batch's memoised values (``memo``); other selections (repeated or reordered points, e.g. one
+        point per wavelength lane, whose lookups may see other wavelengths) start with an empty memo."""
         if isinstance(sel, slice) and sel == slice(None):
             return self
-        return SurfacePoints(self.attributes, self.prim[sel], self.b1[sel], self.b2[sel])
+        sub = SurfacePoints(self.attributes, self.prim[sel], self.b1[sel], self.b2[sel])
+        if _is_subset(sel):
+            sub._parent, sub._sel = self, sel
+        return sub
 
     def memo(self, key, compute):
-        """compute() once per batch and key (keys: textures, parameters)."""
+        """compute() once per batch and key (keys: textures, parameters); a subset (``take``) first
+        looks for the key among its parents' values."""
         value = self._memo.get(key)
         if value is None:
-            value = self._memo[key] = compute()
+            value = self._inherited(key)
+            if value is None:
+                value = compute()
+            self._memo[key] = value
         return value
+
+    def _inherited(self, key):
+        """The value of ``key`` at these points from the nearest parent that memoised it, or None."""
+        parent = self._parent
+        if parent is None:
+            return None
+        value = parent._memo.get(key)
+        if value is None:
+            value = parent._inherited(key)
+            if value is None:
+                return None
+        return _points_of(value, self._sel, parent.n)
 
     def _interpolate(self, values: np.ndarray) -> np.ndarray:
         return interpolate_vertex_attribute(self.attributes.faces, values, self.prim, self.b1, self.b2)
@@ -119,3 +148,26 @@ class SurfacePoints:
 
 def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def _is_subset(sel) -> bool:
+    """``sel`` picks distinct points in their order (a mask, a slice with a positive step, increasing indices)."""
+    if isinstance(sel, slice):
+        return sel.step is None or sel.step > 0
+    sel = np.asarray(sel)
+    if sel.dtype == np.bool_:
+        return sel.ndim == 1
+    return sel.ndim == 1 and sel.dtype.kind in "iu" and bool(np.all(sel[1:] > sel[:-1]))
+
+
+def _points_of(value, sel, n: int):
+    """A memoised value (an array with the points along its last axis, or a tuple of such) at the points
+    ``sel`` of its n; None if it is not per point (then it is looked up again)."""
+    if isinstance(value, tuple):
+        parts = tuple(_points_of(v, sel, n) for v in value)
+        return None if any(p is None for p in parts) else parts
+    if not isinstance(value, np.ndarray) or value.ndim == 0 or value.shape[-1] != n:
+        return None
+    if isinstance(sel, slice) or np.asarray(sel).dtype == np.bool_:
+        return value[..., sel].copy()
+    return np.take(value, sel, axis=-1)

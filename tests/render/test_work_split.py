@@ -1,0 +1,88 @@
+"""The work split: a small image gives every worker a unit, and the image does not depend on it.
+
+engine.render.renderer.work_units groups the passes by ``batch_rays`` alone (the grouping fixes the
+bits of each pixel's sums) and cuts the rows into at least ``workers`` bands (which changes no
+pixel's additions)."""
+
+import copy
+
+import numpy as np
+import pytest
+
+from engine.render import renderer as renderer_module
+from engine.render.renderer import Renderer, work_units
+from tests.render.test_render_acceptance import peer_scene
+
+
+def _coverage(units, width, window, spp, first_pass=0):
+    """How often each (row, pass) of the window is covered by ``units`` (rows, passes) int array."""
+    x0, y0, x1, y1 = window or (0, 0, width, None)
+    seen = np.zeros((y1 - y0, spp), np.int64)
+    for r0, r1, p0, p1 in units:
+        assert y0 <= r0 < r1 <= y1 and first_pass <= p0 < p1 <= spp
+        seen[r0 - y0:r1 - y0, p0:p1] += 1
+    return seen
+
+
+@pytest.mark.parametrize("W,H,spp,batch,window,first_pass", [
+    (96, 96, 16, 1 << 17, None, 0),           # the asset suite's render: passes 14 + 2 before, one unit each
+    (96, 96, 16, 73728, None, 0),
+    (32, 32, 2, 1024, None, 0),
+    (33, 7, 5, 1 << 17, None, 0),             # rows not divisible by the workers
+    (40, 1, 3, 1 << 17, None, 0),             # one row: nothing to cut
+    (640, 480, 4, 1 << 17, None, 0),          # a large image: already many bands
+    (64, 64, 16, 64 * 64, None, 0),           # one pass per unit: enough units, whole passes kept
+    (96, 96, 16, 1 << 17, (10, 20, 50, 61), 0),
+    (96, 96, 16, 1 << 17, None, 5),           # a resumed render
+])
+@pytest.mark.parametrize("workers", [1, 2, 3, 8])
+def test_units_cover_every_row_and_pass_once_and_keep_the_pass_grouping(W, H, spp, batch, window, first_pass,
+                                                                        workers):
+    units = list(work_units(W, H, spp, batch, first_pass=first_pass, window=window, workers=workers))
+    y0, y1 = (window[1], window[3]) if window else (0, H)
+    cols = (window[2] - window[0]) if window else W
+    seen = _coverage(units, W, (0, y0, W, y1), spp, first_pass)
+    assert np.all(seen[:, first_pass:] == 1) and np.all(seen[:, :first_pass] == 0)
+    assert all((r1 - r0) * cols * (p1 - p0) <= max(batch, cols) for r0, r1, p0, p1 in units)
+    # the pass groups (what fixes each pixel's sums) are those of a single worker's split
+    single = list(work_units(W, H, spp, batch, first_pass=first_pass, window=window))
+    assert sorted({(p0, p1) for *_, p0, p1 in units}) == sorted({(p0, p1) for *_, p0, p1 in single})
+    groups = len({(p0, p1) for *_, p0, p1 in single})
+    if len(single) < 4 * workers:       # too few units for the workers: every worker gets a band of each group
+        assert len(units) >= min(workers, y1 - y0) * groups
+    else:                               # enough: the single worker's split
+        assert units == single
+
+
+def test_a_small_image_gives_both_workers_a_unit_of_every_pass_group():
+    units = list(work_units(96, 96, 16, 1 << 17, workers=2))
+    assert units == [(0, 48, 0, 14), (48, 96, 0, 14), (0, 48, 14, 16), (48, 96, 14, 16)]
+    assert list(work_units(96, 96, 16, 1 << 17)) == [(0, 96, 0, 14), (0, 96, 14, 16)]
+
+
+def test_two_threads_trace_at_least_two_units_and_give_the_same_bits(monkeypatch):
+    scene = peer_scene("fresnel_sphere", 6, res=24)
+    scene.settings.batch_rays = 1 << 17           # every pass fits one batch: one unit per worker count before
+    renderer = Renderer(scene)
+    traced = []
+    real = renderer_module.trace_in_order
+
+    def spy(units, trace_unit, add_result, workers, stop_requested, abort):
+        traced.append((workers, list(units)))
+        return real(units, trace_unit, add_result, workers, stop_requested, abort)
+
+    monkeypatch.setattr(renderer_module, "trace_in_order", spy)
+    results = {}
+    for threads in (1, 2):
+        st = copy.copy(scene.settings)
+        st.threads = threads
+        results[threads] = renderer.render(st)
+    (w1, u1), (w2, u2) = traced
+    assert (w1, len(u1)) == (1, 1) and w2 == 2 and len(u2) >= 2
+    a, b = results[1].film, results[2].film
+    assert np.all(a.count == 6) and np.array_equal(a.count, b.count)
+    for name in ("sums", "sumsq_y", "half_y"):
+        x, y = getattr(a, name), getattr(b, name)
+        assert (x is None) == (y is None)
+        if x is not None:
+            assert np.array_equal(x, y), name
