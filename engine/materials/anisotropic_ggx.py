@@ -88,7 +88,7 @@ from .table_cache import cached_table
 from .torrance_sparrow import M_MIN, SpecularAlbedoTable
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflectance, fresnel_reflection_abcs
-from ..polarisation.thin_film import facet_film, film_layering_albedo, film_reflection_abcs
+from ..polarisation.thin_film import facet_film, film_at, film_label, film_layering_albedo, film_reflection_abcs
 from ..spectral import RGB_WAVELENGTHS_NM, ConstantSpectrum, as_spectrum
 from ..textures import textured
 from ..vec3 import cross, dot, local_frame, to_local
@@ -355,7 +355,8 @@ class AnisotropicGGX(BSDF):
         self._lobe_table = None
         self._reflection_table = None
         # the tangent frame needs the surface's attributes (an explicit callable may read them too)
-        self.varies_over_surface = (not self.isotropic) or textured(self.n, self.k)
+        self.varies_over_surface = (not self.isotropic) or textured(self.n, self.k,
+                                                                    *(self.film[1:] if self.film is not None else ()))
         constant = all(getattr(v, "is_constant", False) for v in (self.n, self.k))
         filmed = self.film is not None          # the film's s–p phase difference and its colours
         self.flags = (BSDFFlags.GLOSSY_REFLECTION | BSDFFlags.POLARISING
@@ -455,7 +456,8 @@ class AnisotropicGGX(BSDF):
         (wo_l,) = self._local(sp, sp.wo)
         cos_o = np.clip(wo_l[2], 0.0, 1.0)
         if self.film is not None:
-            return film_layering_albedo(cos_o, self.exterior_n, self.film, eta * self.exterior_n, RGB_WAVELENGTHS_NM)
+            return film_layering_albedo(cos_o, self.exterior_n, film_at(self.film, sp), eta * self.exterior_n,
+                                        RGB_WAVELENGTHS_NM)
         if self.multiscatter_albedo == "cycles":
             if self._reflection_table is None:
                 a = self.alpha_cycles
@@ -489,7 +491,7 @@ class AnisotropicGGX(BSDF):
         if self.film is None:
             Af, Bf, Cf, Sf = fresnel_reflection_abcs(c, eta)
         else:                                   # the coated facet (Torrance–Sparrow's _facet_fresnel)
-            film_n, d = self.film
+            film_n, d = film_at(self.film, sp)
             Af, Bf, Cf, Sf = film_reflection_abcs(c, self.exterior_n, film_n, d, eta * self.exterior_n, sp.lam)
         x = scattering_plane_axis(-wi, sp.wo)
         return x, Af * fr, Bf * fr, Cf * fr, Sf * fr, valid, wo_l
@@ -538,5 +540,5 @@ class AnisotropicGGX(BSDF):
             out["multiscatter"] = True
             out["multiscatter_albedo"] = self.multiscatter_albedo
         if self.film is not None:
-            out["thin_film"] = f"n {self.film[0]:g}, {self.film[1]:g} nm"
+            out["thin_film"] = film_label(self.film)
         return out

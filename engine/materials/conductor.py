@@ -24,7 +24,7 @@ from ..kernels.transport import update_abcs_numpy
 from ..polarisation.frames import plane_of_incidence_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflection_abcs_numpy, tabulated_mirror_abcs, \
     tabulated_mirror_abcs_numpy
-from ..polarisation.thin_film import facet_film, film_reflection_abcs
+from ..polarisation.thin_film import facet_film, film_at, film_label, film_reflection_abcs
 from ..spectral import LAMBDA_MAX, LAMBDA_MIN, ConstantSpectrum
 from .parameters import REQUIRED, ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from ..errors import SceneError
@@ -122,7 +122,7 @@ class SmoothConductor(BSDF):
         self.exterior_n = float(exterior_n)
         # a thin film on the mirror (module docstring): (index, thickness nm) or None (none, or ≤ 0.1 nm)
         self.film = facet_film(film_n, film_thickness)
-        self.varies_over_surface = textured(n, k)
+        self.varies_over_surface = textured(n, k, *(self.film[1:] if self.film is not None else ()))
         self._tables = type(n) is TabulatedSpectrum and type(k) is TabulatedSpectrum
         if self._tables:
             self._table_arrays = tuple(np.ascontiguousarray(a, dtype=np.float64)
@@ -156,7 +156,7 @@ class SmoothConductor(BSDF):
     def mirror(self, sp: ShadingPoint):
         """(wi, MuellerValue, valid) of the mirror reflection of wo (mirror_reflection's result)."""
         if self.film is not None:
-            return mirror_reflection(sp, self.relative_eta(sp), self.film, self.exterior_n)
+            return mirror_reflection(sp, self.relative_eta(sp), film_at(self.film, sp), self.exterior_n)
         if self._tables and not sp.mono:
             # measured tables: interpolation, complex index and Fresnel in one pass (same numbers)
             abcs, inside = tabulated_mirror_abcs(sp.cos_o, sp.lam, self.n.wavelengths, self.n.values,
@@ -197,7 +197,7 @@ class SmoothConductor(BSDF):
     def describe(self):
         out = {"type": self.name, "n": repr(self.n), "k": repr(self.k), "exterior_n": self.exterior_n}
         if self.film is not None:
-            out["thin_film"] = f"n {self.film[0]:g}, {self.film[1]:g} nm"
+            out["thin_film"] = film_label(self.film)
         return out
 
 
@@ -217,7 +217,7 @@ METAL = Parameter("metal", f"measured metal ({' | '.join(NAMED_METALS)}) instead
 #: nm (none at ≤ 0.1 nm, engine.polarisation.thin_film.FILM_CUTOFF_NM) and the film's real index.
 THIN_FILM_THICKNESS = Parameter("thin_film_thickness", "a thin film on the mirror (0: none; Airy's sum over the "
                                                        "film on the metal replaces its Fresnel matrix)", unit="nm",
-                                lo=0.0, hi=1e6, default=0.0)
+                                lo=0.0, hi=1e6, default=0.0, texturable=True)
 THIN_FILM_IOR = Parameter("thin_film_ior", "the thin film's index", lo=0.0, lo_open=True, default=1.33)
 
 
@@ -236,7 +236,7 @@ DECLARATION = ModelDeclaration(
     node="CONDUCTOR")
 
 
-DECLARATION.per_point = frozenset({"n", "k"})
+DECLARATION.per_point = frozenset({"n", "k", "thin_film_thickness"})
 
 
 @DECLARATION.builder

@@ -126,11 +126,20 @@ def _root(colour):
 def _metal(p, alpha):
     """Cycles' Principled metal: a conductor of Gulbrandsen's index through the base colour at 0° and Cycles'
     F82-Tint value at θ₈₂ (its polarisation), its reflectance Cycles' F82-Tint curve at every angle
-    (tinted.F82Reflectance); with a thin film the filmed index alone, as Cycles films that index."""
+    (tinted.F82Reflectance); with a thin film the filmed index alone, as Cycles films its estimate of the index
+    (the F82-Tint value taken as Gulbrandsen's edge tint: gulbrandsen mode "cycles_film")."""
     from ..textures.conductor_index import TexturedGulbrandsenIndex
     from .tinted import F82Reflectance
     base, tint = p["base_color"], p["specular_tint"]
     white = _white(tint)
+    if _film_values(p):     # under a film Cycles takes (F0, F82-Tint value) as Gulbrandsen's (r, g) themselves
+        kind = TexturedGulbrandsenIndex if _textured(base) or _textured(tint) else GulbrandsenIndex
+        metal = _metal_of(*(kind(base, tint, part, "cycles_film") for part in ("n", "k")), p, alpha)
+        thickness = p["thin_film_thickness"]
+        if not _textured(thickness):
+            return metal
+        # a thickness per point: where it is below Cycles' cutoff the metal is unfilmed, on the F82-Tint curve
+        return F82Reflectance(metal, base, None if white else tint, unless_film=thickness)
     if not _textured(base) and not _textured(tint) and not white:
         # Cycles' F82-Tint: the reflectance at θ₈₂ is Schlick's × the tint (≤ 1), per channel
         from ..spectral.gulbrandsen import schlick_f82
@@ -142,8 +151,7 @@ def _metal(p, alpha):
     else:
         kind = TexturedGulbrandsenIndex if _textured(base) else GulbrandsenIndex
         n, k = kind(base, base, "n", "schlick"), kind(base, base, "k", "schlick")
-    metal = _metal_of(n, k, p, alpha)
-    return metal if _film_values(p) else F82Reflectance(metal, base, None if white else tint)
+    return F82Reflectance(_metal_of(n, k, p, alpha), base, None if white else tint)
 
 
 def _metal_of(n, k, p, alpha):
@@ -177,8 +185,11 @@ def _anisotropic_lobe(p, n, k, alpha):
 
 def _film_values(p) -> dict:
     """The thin film's keys for the metal and the dielectric specular layer, rough (on every facet) or smooth (on
-    the mirror), as Cycles puts its Thin Film on every Fresnel of the Principled BSDF; empty without a film."""
-    if p["thin_film_thickness"] <= 0.1:
+    the mirror), as Cycles puts its Thin Film on every Fresnel of the Principled BSDF; empty without a film (a
+    thickness — constant or per point — nowhere above Cycles' 0.1 nm cutoff)."""
+    from ..polarisation.thin_film import FILM_CUTOFF_NM
+    thickness = p["thin_film_thickness"]
+    if (thickness.hi if _textured(thickness) else thickness) <= FILM_CUTOFF_NM:
         return {}
     return {"thin_film_thickness": p["thin_film_thickness"], "thin_film_ior": p["thin_film_ior"]}
 
@@ -205,7 +216,7 @@ def _transmission(p, alpha, ior):
         raise SceneError(p.field("transmission_roughness"), "the transmission's roughness cannot vary per point yet: "
                                                             "give a constant transmission_roughness")
     a = float(rough) ** 2
-    film = p["thin_film_thickness"] > 0.1
+    film = bool(_film_values(p))
     if a < ALPHA_MIN and film:
         glass = ThinFilmDielectric(ior, p["thin_film_ior"], p["thin_film_thickness"])
     elif a < ALPHA_MIN or index_matched(ior, 1.0):
@@ -381,13 +392,14 @@ DECLARATION = ModelDeclaration(
                default=1.0, texturable=True),
      Parameter("thin_film_thickness", "thin film on the smooth transmission, the metal and the dielectric specular "
                                       "layer (Airy's sum, per facet where rough)", unit="nm", lo=0.0, hi=1e6,
-               default=0.0),
+               default=0.0, texturable=True),
      Parameter("thin_film_ior", "thin film's index", lo=0.0, lo_open=True, default=1.33),
      Parameter("distribution", "microfacet distribution: Multiscatter GGX (Cycles' default) or GGX",
                kind="choice", choices=DISTRIBUTIONS, default="multi_ggx")])
 
 DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission", "coat_tint", "coat_weight",
-                                   "coat_roughness", "specular_tint", "sheen_weight", "sheen_roughness", "sheen_tint"})
+                                   "coat_roughness", "specular_tint", "thin_film_thickness", "sheen_weight",
+                                   "sheen_roughness", "sheen_tint"})
 
 
 @DECLARATION.builder

@@ -21,6 +21,7 @@ from .dielectric import IOR_SOCKET, SmoothDielectric
 from .parameters import ModelDeclaration, Parameter, exterior_n_parameter
 from ..polarisation.frames import plane_of_incidence_axis
 from ..polarisation.thin_film import film_reflection_abcs, film_transmission_abcs
+from ..textures import TexturedNumber
 from ..vec3 import reflect
 
 
@@ -30,19 +31,25 @@ class ThinFilmDielectric(SmoothDielectric):
     name = "thin_film"
     flags = SmoothDielectric.flags | BSDFFlags.WAVELENGTH_DEPENDENT
 
-    def __init__(self, n: float, film_n: float, thickness: float, exterior_n: float = 1.0):
+    def __init__(self, n: float, film_n: float, thickness, exterior_n: float = 1.0):
         super().__init__(n, exterior_n)
-        self.film_n, self.thickness = float(film_n), float(thickness)
-        for name, v, lo in (("film_n", self.film_n, 0.0), ("thickness", self.thickness, -1.0)):
+        per_point = isinstance(thickness, TexturedNumber)         # a thickness that varies over the surface
+        self.film_n, self.thickness = float(film_n), thickness if per_point else float(thickness)
+        for name, v, lo in (("film_n", self.film_n, 0.0),) + ((("thickness", self.thickness, -1.0),)
+                                                                if not per_point else ()):
             if not (np.isfinite(v) and v > lo and (name != "thickness" or v >= 0)):
                 raise ValueError(f"{name} must be a finite number {'> 0' if lo == 0 else '>= 0'}, got {v!r}")
+        if per_point:
+            if not (np.isfinite(thickness.lo) and np.isfinite(thickness.hi) and thickness.lo >= 0):
+                raise ValueError(f"thickness must be finite and >= 0, got values in [{thickness.lo}, {thickness.hi}]")
+            self.varies_over_surface = True
 
     def _film(self, sp, c):
         """(A, B, C, S) (L, N) of the coated interface's reflection at incidence cosines c (N,)."""
         outside = sp.cos_o >= 0
         n1 = np.where(outside, self.n_ext, self.n_int)[None, :]
         n3 = np.where(outside, self.n_int, self.n_ext)[None, :]
-        return film_reflection_abcs(c[None, :], n1, self.film_n, self.thickness, n3, sp.lam)
+        return film_reflection_abcs(c[None, :], n1, self.film_n, sp.number(self.thickness), n3, sp.lam)
 
     def delta_reflection(self, sp):
         c, _, nn = self._sides(sp)
@@ -73,7 +80,8 @@ class ThinFilmDielectric(SmoothDielectric):
         return False            # no fused step: the film's reflectance depends on the wavelength
 
     def describe(self):
-        return {"type": self.name, "n": self.n_int, "film_n": self.film_n, "thickness_nm": self.thickness,
+        thickness = repr(self.thickness) if isinstance(self.thickness, TexturedNumber) else self.thickness
+        return {"type": self.name, "n": self.n_int, "film_n": self.film_n, "thickness_nm": thickness,
                 "exterior_n": self.n_ext}
 
 

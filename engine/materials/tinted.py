@@ -246,20 +246,23 @@ class F82Reflectance(_ScaledLobes):
     (Cycles' Glossy BSDF, whose colour is its reflectance at every angle)."""
 
     def __init__(self, base: BSDF, f0: Spectrum, tint: Spectrum | None, curve: str = "f82_tint",
-                 index: BSDF | None = None):
+                 index: BSDF | None = None, unless_film=None):
         if curve not in CURVES:
             raise ValueError(f"curve must be one of {CURVES}, got {curve!r}")
         self.base, self.f0, self.tint, self.curve = base, f0, tint, curve
+        #: a per-point film thickness (TexturedNumber): where thicker than Cycles' cutoff the metal is filmed and
+        #: reflects what its film gives (Cycles' iridescence), so the curve applies only where it is thinner
+        self.unless_film = unless_film
         self.index = base if index is None else index       # the metal whose relative_eta(sp) gives n + iκ
         self.name = base.name
         self.flags = base.flags
         self.varies_over_surface = base.varies_over_surface or isinstance(f0, TexturedSpectrum) or \
-            isinstance(tint, TexturedSpectrum)
+            isinstance(tint, TexturedSpectrum) or unless_film is not None
         self.two_sided = base.two_sided
 
     def with_base(self, base: BSDF) -> F82Reflectance:
         """The same curve on another base (engine.materials.mix.map_normals)."""
-        return F82Reflectance(base, self.f0, self.tint, self.curve, self.index)
+        return F82Reflectance(base, self.f0, self.tint, self.curve, self.index, self.unless_film)
 
     @property
     def exterior_n(self):
@@ -276,7 +279,11 @@ class F82Reflectance(_ScaledLobes):
         f0 = np.clip(sp.spectrum(self.f0), 0.0, 1.0)
         tint = None if self.tint is None else np.clip(sp.spectrum(self.tint), 0.0, 1.0)
         target = (f82_curve(cos_f, f0, tint) if self.curve == "f82_tint" else f0) * np.ones(sp.lam.shape)
-        return np.where(F > 0, target / np.where(F > 0, F, 1.0), 1.0)
+        ratio = np.where(F > 0, target / np.where(F > 0, F, 1.0), 1.0)
+        if self.unless_film is not None:
+            from ..polarisation.thin_film import FILM_CUTOFF_NM
+            ratio = np.where((sp.number(self.unless_film) > FILM_CUTOFF_NM)[None, :], 1.0, ratio)
+        return ratio
 
     def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         h = wi + sp.wo      # the facet angle: cosθ_h = |ω_i + ω_o| / 2

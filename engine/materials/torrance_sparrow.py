@@ -117,7 +117,7 @@ from ..kernels.torrance_sparrow import (SHADOWING_CODES, torrance_sparrow_eval_n
                                         torrance_sparrow_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
-from ..polarisation.thin_film import facet_film, film_layering_albedo, film_reflection_abcs
+from ..polarisation.thin_film import facet_film, film_at, film_label, film_layering_albedo, film_reflection_abcs
 from ..spectral import RGB_WAVELENGTHS_NM, ConstantSpectrum, as_spectrum
 from ..textures import TexturedNumber, textured
 from ..vec3 import dot, local_frame, to_local
@@ -431,7 +431,8 @@ class TorranceSparrow(BSDF):
             return v.hi > 0 if isinstance(v, TexturedNumber) else v > 0
         self.has_specular = positive(self.s)
         self.has_diffuse = positive(self.d) and self.albedo is not None
-        self.varies_over_surface = textured(self.n, self.k, self.m, self.s, self.d, self.albedo)
+        self.varies_over_surface = textured(self.n, self.k, self.m, self.s, self.d, self.albedo,
+                                            *(self.film[1:] if self.film is not None else ()))
         self._albedo = None
         if diffuse_layering == "albedo_scaling" and self.has_specular and self.has_diffuse:
             self._albedo = self._albedo_table()
@@ -485,7 +486,7 @@ class TorranceSparrow(BSDF):
         iridescence, the film's reflectance at the view angle): the largest over the RGB channels' wavelengths
         (engine.spectral.RGB_WAVELENGTHS_NM, whatever the path's own), as Cycles layers by the largest channel."""
         # (a constant index: "albedo_scaling" needs one, _albedo_table)
-        return film_layering_albedo(cos_o, self.exterior_n, self.film, self.n.value + 1j * self.k.value,
+        return film_layering_albedo(cos_o, self.exterior_n, film_at(self.film, sp), self.n.value + 1j * self.k.value,
                                     RGB_WAVELENGTHS_NM)
 
     def as_layers(self):
@@ -553,7 +554,7 @@ class TorranceSparrow(BSDF):
         interface), or the film's at the batch's wavelengths (η (L, N) relative to exterior_n)."""
         if self.film is None:
             return None
-        film_n, d = self.film
+        film_n, d = film_at(self.film, sp)
         ext = self.exterior_n
 
         def coated(cos_f, eta):
@@ -658,7 +659,7 @@ class TorranceSparrow(BSDF):
         if self.multiscatter:
             out["multiscatter"] = True
         if self.film is not None:
-            out["thin_film"] = f"n {self.film[0]:g}, {self.film[1]:g} nm"
+            out["thin_film"] = film_label(self.film)
         return out
 
 
@@ -677,6 +678,7 @@ class FilmedMirrorWithDiffuse(MirrorWithDiffuse):
         super().__init__(n, k, exterior_n, diffuse_albedo, specular_weight, diffuse_weight, diffuse_layering)
         self.film = facet_film(film_n, film_thickness)
         if self.film is not None:
+            self.varies_over_surface = self.varies_over_surface or textured(self.film[1])
             if diffuse_layering == "albedo_scaling" and textured(self.n, self.k):
                 raise ValueError("diffuse_layering='albedo_scaling' under a thin film needs an n and k that do not "
                                  "vary over the surface (the film's layering albedo is estimated per model)")
@@ -684,14 +686,14 @@ class FilmedMirrorWithDiffuse(MirrorWithDiffuse):
 
     def _mirror(self, sp: ShadingPoint):
         """(wi, MuellerValue, valid) of the (filmed) mirror, weight 1 (engine.materials.conductor.mirror_reflection)."""
-        return mirror_reflection(sp, self._eta(sp), self.film, self.exterior_n)
+        return mirror_reflection(sp, self._eta(sp), film_at(self.film, sp), self.exterior_n)
 
     def film_albedo(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray:
         """(N,) the film's layering albedo at cosθ_o (engine.polarisation.thin_film.film_layering_albedo at the RGB
         channels' wavelengths, as TorranceSparrow.film_albedo — the same signature; n, κ evaluated there)."""
         lam = np.asarray(RGB_WAVELENGTHS_NM, np.float64)
         n3 = (self.n.eval(lam) + 1j * self.k.eval(lam))[:, None]
-        return film_layering_albedo(cos_o, self.exterior_n, self.film, n3, lam)
+        return film_layering_albedo(cos_o, self.exterior_n, film_at(self.film, sp), n3, lam)
 
     def diffuse_scale(self, sp):
         """max(0, 1 − s·E(cosθ_o)) (1, N) under the film (E: ``film_albedo``), else the bare mirror's (L, N)."""
@@ -703,7 +705,7 @@ class FilmedMirrorWithDiffuse(MirrorWithDiffuse):
     def describe(self) -> dict:
         out = super().describe()
         if self.film is not None:
-            out["thin_film"] = f"n {self.film[0]:g}, {self.film[1]:g} nm"
+            out["thin_film"] = film_label(self.film)
         return out
 
 
@@ -747,7 +749,8 @@ DECLARATION = ModelDeclaration(
     catalogue="torrance_sparrow", node="TORRANCE_SPARROW")
 
 
-DECLARATION.per_point = frozenset({"n", "k", "m", "diffuse_albedo", "diffuse_weight", "specular_weight"})
+DECLARATION.per_point = frozenset({"n", "k", "m", "diffuse_albedo", "diffuse_weight", "specular_weight",
+                                   "thin_film_thickness"})
 
 
 @DECLARATION.builder
@@ -782,8 +785,8 @@ def _torrance_sparrow(p):
     if m_const is not None and 0 < m < M_MIN:
         raise SceneError(p.field("m"), f"must be 0 (the smooth limit) or in [{M_MIN:g}, {p.model['m'].hi:g}], "
                                        f"got {m:g}")
-    film = p["thin_film_thickness"] > 0.1
-    film_n = p["thin_film_ior"]          # read (validated) whether or not a film is there
+    film = facet_film(p["thin_film_ior"], p["thin_film_thickness"]) is not None     # (the ior validated always)
+    film_n = p["thin_film_ior"]
     if film:
         kw.update(film_n=film_n, film_thickness=p["thin_film_thickness"])
     if m_const == 0:   # the smooth limit: a Fresnel mirror (plus the Lambertian part); E = 1, nothing to add

@@ -102,10 +102,14 @@ def edge_tint_for_f82(r, f82):
 def index_of(r, edge, mode: str):
     """(n, κ) of reflectivity values r and ``edge`` values by ``mode``: "tint" (edge = Gulbrandsen's g),
     "f82" (edge = the reflectance at θ₈₂), "schlick" (the reflectance at θ₈₂ of Schlick's curve through
-    r; ``edge`` unused) or "schlick_tint" (Schlick's × min(edge, 1): Cycles' F82-Tint of the Principled metal,
-    edge its Specular Tint)."""
+    r; ``edge`` unused), "schlick_tint" (Schlick's × min(edge, 1): Cycles' F82-Tint of the Principled metal,
+    edge its Specular Tint) or "cycles_film" (Cycles' estimate under a thin film: that F82-Tint value taken as
+    Gulbrandsen's edge tint g itself, r ≤ 0.999)."""
     if mode == "tint":
         return gulbrandsen_nk(r, edge)
+    if mode == "cycles_film":       # Cycles' index under a thin film: r and its F82-Tint value taken as Gulbrandsen's
+        f82 = schlick_f82(r) * np.minimum(np.maximum(edge, 0.0), 1.0)      # (r, g) (fresnel_iridescence's estimate)
+        return gulbrandsen_nk(np.minimum(r, 0.999), f82)
     if mode == "schlick_tint":
         f82 = schlick_f82(r) * np.minimum(np.maximum(edge, 0.0), 1.0)
     else:
@@ -113,7 +117,7 @@ def index_of(r, edge, mode: str):
     return gulbrandsen_nk(r, edge_tint_for_f82(r, f82))
 
 
-EDGE_MODES = ("tint", "f82", "schlick", "schlick_tint")
+EDGE_MODES = ("tint", "f82", "schlick", "schlick_tint", "cycles_film")
 
 
 class GulbrandsenIndex(Spectrum):

@@ -704,7 +704,7 @@ def _facet_conductor(n, k, m, mat, node, warnings, film=None, aniso=None):
             n_s, k_s = (_rgb_spectrum(list(v), "unbounded") if isinstance(v, (list, tuple)) else v for v in (n, k))
             return AnisotropicGGX(n_s, k_s, max(aniso[0], _ts_min()), max(aniso[1], _ts_min()), rotation=aniso[2],
                                   multiscatter=kw["multiscatter"], film_n=None if film is None else film[0],
-                                  film_thickness=0.0 if film is None else film[1])
+                                  film_thickness=0.0 if film is None else _film_number(film[1]))
         warnings.append(f"material {mat!r}: the anisotropy of {node.name!r} is simulated with GGX only; rendered "
                         "isotropic (Beckmann)")
     if not isinstance(m, TextureInput):
@@ -772,10 +772,12 @@ def _conductor_from_colour(r, colour_name, edge_name, m, mat, node, warnings, mo
     else:
         n, k = conductor_index(colour, None, "schlick")
     film = _film(r) if mode == "f82" else None
+    if film is not None:            # Cycles films its own estimate: (F0, F82-Tint value) as Gulbrandsen's (r, g)
+        n, k = conductor_index(colour, [1.0, 1.0, 1.0] if tint is None else tint, "cycles_film")
     metal = _facet_conductor(n, k, m, mat, node, warnings, film,
                              _node_anisotropy(r, node, mat, warnings, m, node.bl_idname))
     if film is not None:
-        return metal                                     # Cycles films Gulbrandsen's index itself
+        return metal                                     # (its reflectance is the filmed index's, as Cycles')
     return F82Reflectance(metal, _reflectance(colour), None if tint is None else _reflectance(tint),
                           "constant" if mode == "constant" else "f82_tint")
 
@@ -958,13 +960,26 @@ def _tinted(bsdf, reflection, transmission):
 
 def _film(r):
     """(IOR, thickness nm) of a node's Thin Film inputs, or None (no film: thickness ≤ Cycles' 0.1 nm
-    cutoff, or the inputs absent: Blender before 4.2)."""
+    cutoff everywhere, or the inputs absent: Blender before 4.2).  The thickness a number or a TextureInput
+    (linked: an image, a colour attribute, a baked graph — glTF's iridescence thickness map; values ≥ 0)."""
+    from ...engine.textures.inputs import TexturedNumber
     if r.node.inputs.get("Thin Film Thickness") is None:
         return None
-    thickness = r.float("Thin Film Thickness")
-    if thickness <= 0.1:
+    if r._socket("Thin Film Thickness").is_linked:
+        thickness = r.texture("Thin Film Thickness", lo=0.0, hi=1e6)       # (not mapped: its own value, warned)
+        if thickness is None:
+            thickness = r._checked_float("Thin Film Thickness", -math.inf, math.inf)
+    else:
+        thickness = r.float("Thin Film Thickness")
+    if (TexturedNumber(thickness).hi if isinstance(thickness, TextureInput) else thickness) <= 0.1:
         return None
     return max(r.float("Thin Film IOR"), IOR_MIN), thickness
+
+
+def _film_number(thickness):
+    """A film thickness for a model built here directly: a number, or a TexturedNumber of a TextureInput."""
+    from ...engine.textures.inputs import TexturedNumber
+    return TexturedNumber(thickness, clip=(0.0, 1e6)) if isinstance(thickness, TextureInput) else thickness
 
 
 def _glass(ior, roughness, distribution, film=None, warn=None):
@@ -976,7 +991,7 @@ def _glass(ior, roughness, distribution, film=None, warn=None):
     if film is not None:
         if alpha < ALPHA_MIN:         # a smooth coated interface: interference and its elliptical polarisation
             from ...engine.materials.thin_film import ThinFilmDielectric
-            return ThinFilmDielectric(ior, film[0], film[1])
+            return ThinFilmDielectric(ior, film[0], _film_number(film[1]))
         if warn is not None:
             warn("its Thin Film on a rough surface is not simulated (smooth surfaces only)")
     if distribution == "BECKMANN":

@@ -239,3 +239,53 @@ def test_bad_film_values_fail_with_one_line_naming_the_field(model, key, value):
         parse_material(d, "materials.m")
     assert err.value.field == f"materials.m.{key}"
     assert "\n" not in str(err.value) and str(err.value).startswith(f"materials.m.{key}: ")
+
+
+# --------------------------------------------------------------------------- a thickness that varies over the surface
+
+@pytest.mark.parametrize("material", [
+    {"type": "conductor", "n": 0.3, "k": 2.5, "thin_film_ior": 1.5},
+    {"type": "torrance_sparrow", "n": 0.3, "k": 2.5, "m": 0.2, "distribution": "ggx", "thin_film_ior": 1.5},
+    {"type": "torrance_sparrow", "n": 1.5, "k": 0.0, "m": 0.0, "diffuse_albedo": 0.3, "diffuse_weight": 1.0,
+     "diffuse_layering": "albedo_scaling", "thin_film_ior": 2.0},
+    {"type": "principled", "metallic": 1.0, "roughness": 0.4, "base_color": [0.9, 0.6, 0.3], "thin_film_ior": 1.5},
+    {"type": "principled", "transmission": 1.0, "roughness": 0.0, "thin_film_ior": 1.4}])
+def test_textured_film_thickness_is_the_constant_film_per_texel(tmp_path, material):
+    """thin_film_thickness from a texture (glTF's iridescence thickness map): at each texel the model with that
+    constant thickness, to rounding (texels 0 — no film —, 180 and 420 nm).  The Principled metal's index under a
+    film is Cycles' film estimate; where the texture gives no film its S0 is rescaled to the F82-Tint curve as the
+    unfilmed metal's, so there S0 agrees (to the energy compensation's F_ss of the two indices, 0.3 %) and the
+    polarisation is the film estimate's."""
+    from engine.scene.loader import parse_material
+    from tests.scene.test_textures import _points_at, _shading_points, _texture_file
+    texels = np.array([[0.0, 180.0, 420.0]])
+    name = _texture_file(tmp_path, texels)
+    textured = parse_material({**material, "thin_film_thickness": {"texture": name, "interpolation": "Closest"}},
+                              "materials.m", base_dir=str(tmp_path))
+    assert textured.varies_over_surface
+    reps = 40
+    uv = np.repeat(np.array([[1 / 6, 3 / 6, 5 / 6], [0.5, 0.5, 0.5]]), reps, axis=1)
+    rng = np.random.default_rng(21)
+    n = uv.shape[1]
+    sp = _shading_points(n, rng, _points_at(uv))
+    wi = rng.normal(size=(3, n))
+    wi[2] = np.abs(wi[2])
+    wi /= np.linalg.norm(wi, axis=0)
+    u_lobe, u_dir = rng.uniform(size=n), rng.uniform(size=(2, n))
+    got_eval, got_delta = textured.eval(sp, wi).matrix(), textured.delta_reflection(sp)
+    got_sample = textured.sample(sp, u_lobe, u_dir)
+    for i, d in enumerate(texels[0]):
+        sel = np.arange(i * reps, (i + 1) * reps)
+        const = parse_material({**material, "thin_film_thickness": float(d)}, "materials.m")
+        sub = sp.take(sel)
+        sub.surface = None
+        if d == 0 and material.get("metallic") == 1.0:
+            np.testing.assert_allclose(got_eval[0, 0][..., sel], const.eval(sub, wi[:, sel]).matrix()[0, 0],
+                                       rtol=1e-2, atol=1e-12)
+            continue
+        np.testing.assert_allclose(got_eval[..., sel], const.eval(sub, wi[:, sel]).matrix(), rtol=1e-10, atol=1e-14)
+        if got_delta is not None:
+            np.testing.assert_allclose(got_delta.matrix()[..., sel], const.delta_reflection(sub).matrix(),
+                                       rtol=1e-10, atol=1e-14)
+        cs = const.sample(sub, u_lobe[sel], u_dir[:, sel])
+        np.testing.assert_allclose(got_sample.weight.matrix()[..., sel], cs.weight.matrix(), rtol=1e-10, atol=1e-14)
