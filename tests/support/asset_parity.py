@@ -108,7 +108,7 @@ class CaseReport:
     channel_ratios: tuple = (float("nan"),) * 3    # R, G, B, same blocks
     warnings: list = field(default_factory=list)
     failing: list = field(default_factory=list)    # (row, column, Polar ÷ Cycles, tolerance) per failing block
-    seconds: dict = field(default_factory=dict)    # cycles, polar (render time, all seeds), export
+    seconds: dict = field(default_factory=dict)    # cycles, polar (render time, all seeds), export; *_each per seed
     noise: dict = field(default_factory=dict)      # per renderer: mean per-pixel S0 variance over asset pixels
     error: str = ""                                # the export or render error, if Polar refused the scene
 
@@ -300,8 +300,9 @@ def cycles_settings(scene, spp, bounces):
     scene.render.image_settings.color_depth = "32"
 
 
-def render_cycles(scene, spp, seeds, bounces, tmp):
-    """(seeds, H, W, 3) linear RGB of Cycles' Combined pass, one render per seed."""
+def render_cycles(scene, spp, seeds, bounces, tmp, times=None):
+    """(seeds, H, W, 3) linear RGB of Cycles' Combined pass, one render per seed; ``times``: a list to which each
+    render call's seconds are appended (the first one syncs the scene, the later ones reuse it)."""
     import bpy
     from tests.blender_support import read_multilayer
     cycles_settings(scene, spp, bounces)
@@ -309,7 +310,10 @@ def render_cycles(scene, spp, seeds, bounces, tmp):
     for seed in range(seeds):
         scene.cycles.seed = seed
         scene.render.filepath = os.path.join(tmp, f"cycles_{seed}")
+        t = time.perf_counter()
         bpy.ops.render.render(write_still=True)
+        if times is not None:
+            times.append(time.perf_counter() - t)
         out.append(read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3])
     return np.array(out)
 
@@ -332,10 +336,17 @@ def export_polar(scene, spp, bounces, polarisation="AUTO", spectral="RGB"):
     return Renderer(engine_scene), settings, list(warnings)
 
 
-def render_polar(renderer, settings, seeds):
-    """(seeds, 4, H, W, 3) Stokes images, one render per seed (seeds 0, 1, …)."""
+def render_polar(renderer, settings, seeds, times=None):
+    """(seeds, 4, H, W, 3) Stokes images, one render per seed (seeds 0, 1, …); ``times``: a list to which each
+    render's seconds are appended."""
     import dataclasses
-    return np.array([renderer.render(dataclasses.replace(settings, seed=seed)).stokes() for seed in range(seeds)])
+    out = []
+    for seed in range(seeds):
+        t = time.perf_counter()
+        out.append(renderer.render(dataclasses.replace(settings, seed=seed)).stokes())
+        if times is not None:
+            times.append(time.perf_counter() - t)
+    return np.array(out)
 
 
 # --------------------------------------------------------------------------- the rule
@@ -393,14 +404,14 @@ def run_case(asset: Asset | str, lighting: str, spp=16, seeds=4, width=None, hei
     hit = coverage(scene, width, height)
     with tempfile.TemporaryDirectory() as tmp:
         t = time.perf_counter()
-        cyc = render_cycles(scene, spp, seeds, bounces, tmp)
+        cyc = render_cycles(scene, spp, seeds, bounces, tmp, report.seconds.setdefault("cycles_each", []))
         report.seconds["cycles"] = time.perf_counter() - t
     t = time.perf_counter()
     try:
         renderer, settings, report.warnings = export_polar(scene, spp, bounces, polarisation, spectral)
         report.seconds["export"] = time.perf_counter() - t
         t = time.perf_counter()
-        stokes = render_polar(renderer, settings, seeds)
+        stokes = render_polar(renderer, settings, seeds, report.seconds.setdefault("polar_each", []))
     except Exception as e:          # a refused scene is a result of the case, reported, not a crash of the suite
         report.error = f"{type(e).__name__}: {e}"
         return report
