@@ -257,7 +257,8 @@ def test_principled_base_color_is_baked_for_dielectrics_and_metals():
     socket.node.inputs["Metallic"].default_value = 1.0     # a metal's n, κ from the baked colour, per point
     engine_scene, warnings = _export(scene)
     bsdf = engine_scene.materials[engine_scene.meshes[0].materials[0]]
-    assert type(bsdf).__name__ == "TorranceSparrow" and bsdf.varies_over_surface and warnings == []
+    assert type(bsdf).__name__ == "F82Reflectance" and bsdf.varies_over_surface and warnings == []   # Cycles' curve
+    assert type(bsdf.base).__name__ == "TorranceSparrow" and bsdf.base.varies_over_surface
 
 
 def test_float_input_fallback_gives_a_textured_number():
