@@ -241,19 +241,21 @@ class IncrementalExport:
     the logic is testable without Blender.
     """
 
-    def __init__(self, geometry_arrays=None, object_meshes=None, export_material=None, export_light=None,
-                 export_world=None, material_alpha=None, object_rays=None, geometry_unchanged=None):
+    def __init__(self, geometry_arrays=None, object_meshes=None, material_entry=None, export_light=None,
+                 export_world=None, object_rays=None, geometry_unchanged=None):
         from .export import scene as scene_export
         from .export.lights import export_light as _light
-        from .export.materials import VIEWPORT_NO_BAKE, export_material as _export_material
+        from .export.materials import VIEWPORT_NO_BAKE
         from .export.world import export_world as _world
         self._geometry_arrays = geometry_arrays or scene_export.geometry_arrays
         self._object_meshes = object_meshes or scene_export.object_meshes
-        # the viewport does not bake linked inputs (materials.VIEWPORT_NO_BAKE says why; F12 does)
-        self._export_material = export_material or (lambda m, w: _export_material(m, w, bake=VIEWPORT_NO_BAKE))
+        # (BSDF, emission, alpha) as F12 takes them (export.scene.material_entry), except that the viewport
+        # does not bake linked inputs (materials.VIEWPORT_NO_BAKE says why; F12 does)
+        self._material_entry = material_entry or (
+            lambda m, w: scene_export.material_entry(m, w, bake=VIEWPORT_NO_BAKE))
+        self._finish_scene = scene_export.finish_scene
         self._export_light = export_light or _light
         self._export_world = export_world or _world
-        self._material_alpha = material_alpha or scene_export.material_alpha
         self._object_rays = object_rays or scene_export.object_rays
         self._attributes_outdated = scene_export.attributes_outdated
         self._geometry_unchanged = geometry_unchanged or scene_export.geometry_unchanged
@@ -270,7 +272,7 @@ class IncrementalExport:
     def sync(self, depsgraph, changes: Changes | None, settings) -> SyncResult:
         """Bring the caches up to date with ``depsgraph`` (``changes`` None: export everything)."""
         from ..engine.materials.lambert import Lambert
-        from ..engine.scene.description import Camera, Mesh, Scene
+        from ..engine.scene.description import Camera, Mesh
         from ..engine.errors import SceneError
         from ..engine.spectral import ConstantSpectrum
         from .export.scene import BLACK, CONVERTED_TYPES, GEOMETRY_TYPES, UNSUPPORTED_TYPES
@@ -294,8 +296,8 @@ class IncrementalExport:
             name = material.name_full if material is not None else None
             if name not in self.materials:
                 key = f"mat:{name}" if name is not None else "mat:<default>"
-                bsdf, emission = self._export_material(material, warnings)
-                self.materials[name] = (key, bsdf, emission, self._material_alpha(material, warnings))
+                bsdf, emission, alpha = self._material_entry(material, warnings)
+                self.materials[name] = (key, bsdf, emission, alpha)
                 counts["materials"] += 1
             key, _, emission, alpha = self.materials[name]
             emissions[key], alphas[key] = emission, alpha
@@ -417,9 +419,9 @@ class IncrementalExport:
                              width=1, height=1)
         self.initialised = True
         self.counts = counts
-        return SyncResult(Scene(camera=placeholder, meshes=meshes, materials=materials, lights=lights,
-                                settings=settings, source=f"blender-viewport:{depsgraph.scene.name}"),
-                          rebuild=rebuild, restart=restart, warnings=list(dict.fromkeys(warnings)))
+        scene = self._finish_scene(placeholder, meshes, materials, lights, settings,
+                                   f"blender-viewport:{depsgraph.scene.name}", warnings)
+        return SyncResult(scene, rebuild=rebuild, restart=restart, warnings=list(dict.fromkeys(warnings)))
 
 
 # ---------------------------------------------------------------------------------- render thread

@@ -450,7 +450,7 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
         if per_object in object_mat_keys:
             return object_mat_keys[per_object]
         target = BakeTarget(obj, M, material, resolution, uv_map) if obj is not None and material is not None else None
-        bsdf, emission = export_material(material, warnings, bake=target)
+        bsdf, emission, alpha = material_entry(material, warnings, bake=target)
         key = f"mat:{name}" if name is not None else "mat:<default>"
         if target is not None and target.baked:
             key = f"mat:{name}@{obj.name_full}"
@@ -460,8 +460,7 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
             mat_keys[name] = key
         materials[key] = bsdf
         emissions[key] = emission
-        alphas[key] = _times_alpha(material_alpha(material, warnings), getattr(bsdf, "alpha_factor", 1.0),
-                                   material, warnings)
+        alphas[key] = alpha
         return key
 
     # Text, metaballs, surfaces and bevelled curves come twice (also inside collection instances): as
@@ -502,21 +501,41 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
                                     lambda m, obj=obj, M=M, uv_map=uv_map: material_key(m, obj, M, uv_map),
                                     emissions, alphas, lambda obj=obj: object_rays(obj, view_layer, warnings),
                                     warnings))
-    if not meshes:
-        raise SceneError("scene", "nothing to render: the scene has no visible geometry")
-    world = export_world(scene.world, warnings)
+    world = export_world(scene.world, warnings) if meshes else None
     if world is not None:
         lights.append(world)
+    return finish_scene(camera, meshes, materials, lights, settings, f"blender:{scene.name}", warnings), \
+        list(dict.fromkeys(warnings))
+
+
+def material_entry(material, warnings, bake=None):
+    """(BSDF, emission, alpha) of a Blender material as every walk over the scene takes it (F12, the viewport):
+    ``export_material``'s BSDF and emission, and the object alpha — Principled Alpha × a Mix Shader's
+    transparency (``alpha_factor``)."""
+    bsdf, emission = export_material(material, warnings, bake=bake)
+    alpha = _times_alpha(material_alpha(material, warnings), getattr(bsdf, "alpha_factor", 1.0), material, warnings)
+    return bsdf, emission, alpha
+
+
+def finish_scene(camera, meshes, materials, lights, settings, source, warnings) -> Scene:
+    """The engine Scene of a walk over a Blender scene (F12's ``export_scene`` and the viewport's
+    ``IncrementalExport.sync`` both end here, so that the viewport shows what F12 renders): the rules that
+    hold for the whole scene — emissive meshes emit from both faces (Cycles' Emission shader; lamps stay
+    one-sided), a Principled emission lies under its sheen and coat, a material seen by camera rays only
+    (Light Path ▸ Is Camera Ray) is transparent to every other ray, lights are picked by power (the closest
+    to Cycles' light tree for many lights of different strength) — and the warning for a black scene.
+    Meshes are updated in place (the viewport's cached ones too: the rules are idempotent)."""
+    if not meshes:
+        raise SceneError("scene", "nothing to render: the scene has no visible geometry")
     for mesh in meshes:
+        material = materials.get(mesh.materials[0])
         if mesh.emission is not None and mesh.occluder:
-            mesh.two_sided = True      # Cycles' Emission shader emits from both faces (lamps stay one-sided)
-        if mesh.emission is not None and getattr(materials.get(mesh.materials[0]), "emission_under_layers", False):
-            mesh.emission_under_layers = True   # a Principled emission under its coat and sheen (as Cycles)
-        if getattr(materials.get(mesh.materials[0]), "camera_only", False):
-            mesh.visible_shadow = mesh.visible_indirect = False     # Light Path ▸ Is Camera Ray: transparent to others
+            mesh.two_sided = True
+        if mesh.emission is not None and getattr(material, "emission_under_layers", False):
+            mesh.emission_under_layers = True
+        if getattr(material, "camera_only", False):
+            mesh.visible_shadow = mesh.visible_indirect = False
     if not lights and not any(m.emission is not None for m in meshes):
         warnings.append("the scene has no lights, no emissive materials and a black world: the image is black")
-    # Cycles picks lights by importance (its light tree); selection by power is the closest
-    # convergence for many lights of different strength.
-    return Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings,
-                 source=f"blender:{scene.name}", light_selection="power"), list(dict.fromkeys(warnings))
+    return Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings, source=source,
+                 light_selection="power")

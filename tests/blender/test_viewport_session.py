@@ -77,8 +77,8 @@ class Exporter:
         self.reshaped = set()      # objects whose evaluated geometry differs from what was read
         from polar_render.polar_addon.export.scene import object_meshes
         self.export = vp.IncrementalExport(geometry_arrays=self.mesh_arrays, object_meshes=object_meshes,
-                                           export_material=self.material, export_light=self.light,
-                                           export_world=self.world, material_alpha=lambda m, w: 1.0,
+                                           material_entry=self.material, export_light=self.light,
+                                           export_world=self.world,
                                            geometry_unchanged=self.geometry_unchanged)
 
     def geometry_unchanged(self, obj, arrays):
@@ -94,7 +94,7 @@ class Exporter:
         from polar_render.engine.spectral import ConstantSpectrum
         name = material.name_full if material is not None else None
         self.calls.append(("material", name))
-        return self.lambert(0.5), (ConstantSpectrum(1.0) if name in self.emissive else None)
+        return self.lambert(0.5), (ConstantSpectrum(1.0) if name in self.emissive else None), 1.0
 
     def light(self, obj, M, warnings):
         from polar_render.engine.scene.description import PointLight
