@@ -62,6 +62,20 @@ def specular_ior(ior: float, level: float) -> float:
     return 1.0 / eta if ior < 1.0 else eta
 
 
+def _specular_index(ior: float, level):
+    """The dielectric's index for a Specular IOR Level that varies over the surface (a TexturedNumber): per point
+    the index of F0 = F0(IOR)·2·level (``specular_ior``'s rule), a NumberSpectrum; bounds from the level's."""
+    from ..textures.inputs import NumberSpectrum
+    f0_ior = ((ior - 1.0) / (ior + 1.0)) ** 2
+
+    def index(x):
+        root = np.sqrt(np.minimum(f0_ior * 2.0 * np.clip(x, 0.0, 1.0), 0.99))
+        eta = (1.0 + root) / (1.0 - root)
+        return 1.0 / eta if ior < 1.0 else eta
+    ends = sorted(float(index(np.array(v))) for v in (level.lo, level.hi))
+    return NumberSpectrum(level, index, ends[0], ends[1])
+
+
 def _textured(v) -> bool:
     return isinstance(v, (TexturedNumber, TexturedSpectrum))
 
@@ -234,7 +248,8 @@ def _transmission(p, alpha, ior):
 def _dielectric(p, alpha, ior):
     from .torrance_sparrow import M_MIN
     base = p["base_color"]
-    eta = specular_ior(ior, p["specular_ior_level"])
+    level = p["specular_ior_level"]
+    eta = _specular_index(ior, level) if _textured(level) else specular_ior(ior, level)
     smooth = not _textured(alpha) and alpha < M_MIN
     values = {"n": eta, "k": 0.0, "diffuse_layering": "albedo_scaling", "m": 0.0 if smooth else alpha,
               **_film_values(p)}
@@ -244,6 +259,9 @@ def _dielectric(p, alpha, ior):
     tint = p["specular_tint"]
     tinted = not _white(tint)
     aniso = None if smooth else _anisotropic_lobe(p, eta, 0.0, alpha)
+    if _textured(level) and (tinted or aniso is not None):
+        raise SceneError(p.field("specular_ior_level"), "cannot vary per point with a Specular Tint or an "
+                                                        "anisotropy (give a constant level)")
     if p["diffuse_roughness"] > 0 or tinted or aniso is not None:
         # the specular layer over Cycles' diffuse base as two parts (mix.Layered): an Oren–Nayar base, a tint,
         # an anisotropic specular layer
@@ -303,8 +321,18 @@ def _reflection_albedo(top, n, alpha, smooth):
     """E(ω_o) (N,) of a dielectric reflection layer of index n: its Fresnel reflectance when smooth, else the
     GGX reflection albedo table × (1 + k) of its compensation (Cycles' layering estimate)."""
     from ..polarisation.fresnel import fresnel_reflectance
+    from ..textures.inputs import NumberSpectrum
     if getattr(top, "film", None) is not None:       # a filmed layer: Cycles' estimate, its film's reflectance
         return lambda sp: top.film_albedo(sp, sp.cos_o)
+    if isinstance(n, NumberSpectrum):                 # an index per point (a per-point Specular IOR Level)
+        if smooth:
+            return lambda sp: fresnel_reflectance(np.clip(sp.cos_o, 0.0, 1.0), n.numbers(sp.surface_points()))
+        tables = top._albedo_table()
+
+        def per_point(sp):
+            E = tables(np.clip(sp.cos_o, 0.0, 1.0), sp.number(alpha), n.numbers(sp.surface_points()))
+            return E * (1.0 + top.multiscatter_extra(sp)[0]) if top.multiscatter else E
+        return per_point
     if smooth:
         return lambda sp: fresnel_reflectance(np.clip(sp.cos_o, 0.0, 1.0), complex(n))
     table = top._albedo_table()
@@ -370,7 +398,8 @@ DECLARATION = ModelDeclaration(
                texturable=True),
      Parameter("transmission_roughness", "the transmission's roughness where it differs (default: roughness; "
                                          "constant)", lo=0.0, hi=1.0, default=0.5),
-     Parameter("specular_ior_level", "Cycles' Specular IOR Level: F0 × 2·level", lo=0.0, hi=1.0, default=0.5),
+     Parameter("specular_ior_level", "Cycles' Specular IOR Level: F0 × 2·level", lo=0.0, hi=1.0, default=0.5,
+               texturable=True),
      Parameter("diffuse_roughness", "the base's Oren–Nayar roughness σ (0: Lambert)", lo=0.0, hi=1.0, default=0.0),
      Parameter("specular_tint", "Cycles' Specular Tint: the dielectric's F0 × tint (its F82 tint for the metal)",
                kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6, default=1.0, texturable=True),
@@ -398,8 +427,8 @@ DECLARATION = ModelDeclaration(
                kind="choice", choices=DISTRIBUTIONS, default="multi_ggx")])
 
 DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission", "coat_tint", "coat_weight",
-                                   "coat_roughness", "specular_tint", "thin_film_thickness", "sheen_weight",
-                                   "sheen_roughness", "sheen_tint"})
+                                   "coat_roughness", "specular_tint", "specular_ior_level", "thin_film_thickness",
+                                   "sheen_weight", "sheen_roughness", "sheen_tint"})
 
 
 @DECLARATION.builder

@@ -388,3 +388,31 @@ class RootSpectrum(TexturedSpectrum):
         return points.memo((self, mono, lam.shape[0]),
                            lambda: np.sqrt(np.maximum(self.of.at(points, lam, mono, basis), 0.0)))
 
+
+
+class NumberSpectrum(TexturedSpectrum):
+    """A λ-independent spectrum whose value at each point is ``fn`` of a textured number there (e.g. the
+    Principled dielectric's index from a per-point Specular IOR Level); ``lo``, ``hi`` bound every value fn
+    gives on the number's range (the caller states them: fn monotone on it, or wider)."""
+
+    def __init__(self, of: TexturedNumber, fn, lo: float, hi: float):
+        self.of, self.fn, self.source, self.kind, self.clip = of, fn, of.source, "unbounded", None
+        self.lo, self.hi = float(lo), float(hi)
+
+    def clamped_to(self, lo: float = -math.inf, hi: float = math.inf) -> NumberSpectrum:
+        return self
+
+    def __repr__(self):
+        return f"NumberSpectrum({self.of!r}, {getattr(self.fn, '__name__', 'fn')})"
+
+    def numbers(self, points) -> np.ndarray:
+        """The values (N,) at the points."""
+        return points.memo((self, "numbers"), lambda: np.asarray(self.fn(self.of.at(points)), np.float64))
+
+    def at(self, points, lam: np.ndarray, mono: bool, basis: np.ndarray | None = None,
+           d65: np.ndarray | None = None) -> np.ndarray:
+        return np.broadcast_to(self.numbers(points)[None, :], lam.shape).copy()
+
+    def rgb_at(self, points) -> np.ndarray:
+        v = self.numbers(points)
+        return np.stack((v, v, v))

@@ -788,6 +788,21 @@ def _ior(r, name):
     return max(r.float(name), IOR_MIN)
 
 
+def _specular_level(r, node):
+    """Specular IOR Level: a TextureInput in [0, 1] where linked (glTF's KHR_materials_specular map), else the
+    constant; with a non-white Specular Tint or an anisotropy its own value (per point there: not yet, one
+    warning)."""
+    if r._socket("Specular IOR Level").is_linked:
+        tint = node.inputs["Specular Tint"]
+        tinted = tint.is_linked or [float(c) for c in tint.default_value[:3]] != [1.0, 1.0, 1.0]
+        if tinted or _anisotropic(node):
+            r.warnings.append(f"material {r.mat!r}: Specular IOR Level of {node.name!r} cannot vary over the surface "
+                              "with a Specular Tint or an anisotropy yet; its own value is used")
+            return r._checked_float("Specular IOR Level", 0.0, 1.0)
+        return r.roughness_texture_or_float("Specular IOR Level")
+    return r.float("Specular IOR Level", 0.0, 1.0)
+
+
 def _sheen_weight(r):
     """Sheen Weight as Cycles reads it (≥ 0, no upper clamp): a TextureInput in [0, 1] where linked, else the
     constant."""
@@ -843,7 +858,7 @@ def _principled(node, mat, warnings, bake=None):
     roughness = r.roughness_texture_or_float("Roughness")
     values = {"base_color": _grey(r.rgb_or_texture("Base Color", 0.0, 1.0)), "metallic": metallic,
               "roughness": roughness, "transmission": transmission, "ior": _ior(r, "IOR"),
-              "specular_ior_level": r.float("Specular IOR Level", 0.0, 1.0),
+              "specular_ior_level": _specular_level(r, node),
               "specular_tint": _grey(r.rgb_or_texture("Specular Tint", 0.0)),
               "coat_weight": _fraction(r, "Coat Weight"),
               "coat_roughness": r.roughness_texture_or_float("Coat Roughness"),

@@ -57,6 +57,10 @@ CASES = {
                                                            "Metallic": 1.0}),
     "Specular Tint  ": (((1.0, 0.4, 0.1), (0.3, 0.6, 1.0)), {"Base Color": (0.9, 0.9, 0.9), "Roughness": 0.15,
                                                             "Transmission Weight": 1.0}),         # a glass
+    "Specular IOR Level": ((0.1, 1.0), {"Base Color": (0.05, 0.05, 0.05), "Roughness": 0.3}),
+    "Specular IOR Level ": ((0.0, 0.8), {"Base Color": (0.3, 0.1, 0.05), "Roughness": 0.0}),        # smooth
+    "Specular IOR Level  ": ((0.2, 0.9), {"Base Color": (0.3, 0.3, 0.6), "Roughness": 0.4,           # Oren–Nayar
+                                          "Diffuse Roughness": 0.8}),
     "Coat Roughness": ((0.02, 0.6), {"Base Color": (0.5, 0.1, 0.1), "Roughness": 0.4, "Coat Weight": 1.0}),
     "Coat Roughness ": ((0.0, 0.35), {"Base Color": (0.9, 0.8, 0.6), "Roughness": 0.2, "Metallic": 1.0,  # metal
                                       "Coat Weight": 0.7, "Coat IOR": 1.6}),
@@ -316,3 +320,10 @@ def test_thin_film_thickness_per_point_matches_cycles(addon, part, lighting):
     others["Base Color"] = (0.9, 0.6, 0.3) if part == "metal" else (0.1, 0.1, 0.1)
     scene = sphere_scene("Thin Film Thickness", (250.0, 600.0), others, lighting)
     compare_with_cycles(scene, f"Thin Film Thickness on {part}", lighting, spectral="SPECTRAL")
+
+
+def test_a_per_point_specular_level_with_a_tint_says_it_takes_its_own_value(addon):
+    scene = sphere_scene("Specular IOR Level", (0.1, 1.0), {"Specular Tint": (1.0, 0.5, 0.2), "Roughness": 0.3},
+                         "lamps")
+    _, _, warnings = ap.export_polar(scene, 1, 8)
+    assert len(warnings) == 1 and "Specular IOR Level" in warnings[0] and "own value" in warnings[0]

@@ -555,3 +555,28 @@ def test_roughness_zero_is_the_smooth_limit():
     assert abs(total - expected) <= 1e-9 + 5 * s.weight.matrix()[0, 0, 0].std() / np.sqrt(N)
     with pytest.raises(Exception):  # noqa: B017 -- any refusal will do: the test pins that m < 1e-4 is refused
         make_model("torrance_sparrow", {"n": 1.5, "m": 5e-5})
+
+
+@pytest.mark.parametrize("distribution, shadowing", [("ggx", "smith_correlated"), ("beckmann", "ts")])
+def test_index_albedo_tables_interpolate_the_exact_table_within_2e_3(distribution, shadowing):
+    """A real index per point (the Principled dielectric under a per-point Specular IOR Level): the lobe's
+    albedo from tables at 17 indices evenly spaced in F0^¼, linear in it, against the table at each exact index
+    (near η = 1 too: a Specular IOR Level near 0)."""
+    from engine.materials.torrance_sparrow import IndexAlbedoTables, SpecularAlbedoTable
+    family = IndexAlbedoTables(1.0001, 2.4, 0.05, 0.6, shadowing, distribution)
+    rng = np.random.default_rng(17)
+    for eta in np.concatenate([rng.uniform(1.0001, 1.1, 5), rng.uniform(1.0001, 2.4, 7)]):
+        cos_o = rng.uniform(0.02, 1.0, 64)
+        m = rng.uniform(0.05, 0.6, 64)
+        exact = SpecularAlbedoTable(complex(eta), 0.05, 0.6, shadowing, distribution)(cos_o, m)
+        got = family(cos_o, m, np.full(64, eta))
+        assert np.max(np.abs(got - exact)) < 2e-3, eta
+    # at a node it is that node's table exactly; below 1 the reciprocal side
+    node = family.tables[3]
+    eta3 = family._eta_of(family.root_f0[3])
+    np.testing.assert_allclose(family(np.linspace(0, 1, 9), 0.2, np.full(9, eta3)), node(np.linspace(0, 1, 9), 0.2),
+                               rtol=1e-9, atol=1e-12)
+    inside = IndexAlbedoTables(0.5, 0.9, 0.1, 0.1, shadowing, distribution)
+    assert all(inside._eta_of(f) < 1 for f in inside.root_f0)
+    with pytest.raises(ValueError, match="one side of 1"):
+        IndexAlbedoTables(0.8, 1.2, 0.1, 0.1, shadowing, distribution)
