@@ -4,7 +4,6 @@ same engine scene except the camera — every mesh with its emission, emitter si
 visibility and alpha, every material, every light, the light selection.  The fixture has no baked inputs (the
 viewport does not bake: materials.VIEWPORT_NO_BAKE)."""
 
-import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
