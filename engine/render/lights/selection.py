@@ -37,6 +37,14 @@ class LightSet:
         self.environment = None
         self.environment_index = -1
         self.camera_hidden = set()     # lights (indices) that camera rays do not see
+        self._mesh_emitters(scene, compiled)
+        self._lamps(scene)
+        self._selection(scene, compiled)
+        self._spatial_records()
+        self.hittable = [i for i, light in enumerate(self.lights) if light.hittable]
+
+    def _mesh_emitters(self, scene, compiled) -> None:
+        """The emissive meshes' lights (tri_emitter filled in)."""
         for mesh_index, mesh in enumerate(scene.meshes):
             if mesh.emission is None:
                 continue
@@ -57,6 +65,9 @@ class LightSet:
                 _under_layers(self.lights[-1], compiled, tris)
             if not getattr(mesh, "visible_indirect", True):
                 self.lights[-1].shades_nothing = True
+
+    def _lamps(self, scene) -> None:
+        """The scene's lights: environment, spot, point, directional."""
         for index, light in enumerate(scene.lights):
             if not getattr(light, "visible_camera", True):
                 self.camera_hidden.add(len(self.lights))
@@ -82,6 +93,9 @@ class LightSet:
             else:       # e.g. a light of another copy of this package: never leave a light out silently
                 raise SceneError(f"lights[{index}]", f"is a {type(light).__module__}.{type(light).__name__}, not "
                                                      "one of engine.scene.description's light types")
+
+    def _selection(self, scene, compiled) -> None:
+        """Selection probabilities: uniform, or by power (``light_selection``)."""
         count = len(self.lights)
         self.select_prob = 1.0 / count if count else 0.0
         self.selection = getattr(scene, "light_selection", "uniform")
@@ -103,9 +117,12 @@ class LightSet:
                 # beside other lights (EnvironmentEmitter.SELECTION_SHARE)
                 local = np.where([type(lt) is EnvironmentEmitter for lt in self.lights], 0.0, power)
                 self.mix_prob = local / local.sum() if local.sum() > 0 else self.prob
+
+    def _spatial_records(self) -> None:
+        """Every light's importance formula as (kind, parameters) for the per-point selection (≤ SPATIAL_MAX)."""
+        count = len(self.lights)
         self.spatial = self.cdf is not None and count <= self.SPATIAL_MAX
         if self.spatial:
-            # every light's importance formula as (kind, parameters): one compiled pass for all lights
             records = [light.selection_record() for light in self.lights]
             self._kinds = np.array([k for k, _ in records], np.int64)
             self._params = np.zeros((count, SELECTION_PARAMS))
@@ -113,7 +130,6 @@ class LightSet:
                 self._params[i, :len(row)] = row
                 if self.lights[i].shades_nothing:       # its importance: none (a constant 0)
                     self._kinds[i], self._params[i, :] = SELECT_CONSTANT, 0.0
-        self.hittable = [i for i, light in enumerate(self.lights) if light.hittable]
 
     def probabilities(self, p, n=None):
         """Selection probabilities (count, N) at shading points p (3, N) with side normals n (the
