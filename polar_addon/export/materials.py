@@ -127,9 +127,37 @@ def image_pixels(image, mat, warnings):
     signature = _image_signature(image)
     entry = _IMAGES.get(image.name_full)
     if entry is not None and entry[0] == signature and not image.is_dirty:
-        warnings.extend(f"material {mat!r}: {note}" for note in entry[4])
-        return entry[2], entry
+        return _cached_image(entry, mat, warnings)
     notes = []
+    raw, path = _read_image_pixels(image)
+    if raw is None:
+        notes.append(f"image {image.name!r} (file {path!r}) cannot be loaded; it renders magenta (1, 0, 1) as "
+                     "in Cycles")
+        pixels = np.array(MISSING_RGBA, np.float32).reshape(1, 1, 4)
+        digest = "missing"
+        encoded = None
+    else:
+        digest = hashlib.blake2b(raw.tobytes(), digest_size=16).hexdigest()
+        if entry is not None and entry[1] == digest:
+            _IMAGES[image.name_full] = (signature,) + entry[1:]
+            return _cached_image(_IMAGES[image.name_full], mat, warnings)
+        pixels, encoded = _colour_managed(image, _rgba(raw, image), notes)
+    entry = (signature, digest, pixels, {}, notes, encoded)
+    _cache_image(image.name_full, entry)
+    warnings.extend(f"material {mat!r}: {note}" for note in notes)
+    return pixels, entry
+
+
+def _cached_image(entry, mat, warnings):
+    """(pixels, entry) of a cache entry still valid, its notes repeated as warnings of material ``mat``."""
+    warnings.extend(f"material {mat!r}: {note}" for note in entry[4])
+    return entry[2], entry
+
+
+def _read_image_pixels(image):
+    """(flat float32 copy of ``image.pixels``, file path) of an image, or (None, its file path or,
+    without one, its name) when Cycles cannot load it: a file image whose file is gone and that
+    is not packed, an image without pixels or whose pixel count does not match its size."""
     path = image.filepath_from_user() if image.source == "FILE" else ""
     # a file image whose file is gone and that is not packed: Cycles reads the file, finds nothing and
     # renders magenta, whatever pixels the image may still hold in memory
@@ -137,51 +165,62 @@ def image_pixels(image, mat, warnings):
     w, h = image.size
     n = len(image.pixels) if w and h and not gone else 0
     if n == 0 or n != w * h * image.channels:
-        path = path or image.name
-        notes.append(f"image {image.name!r} (file {path!r}) cannot be loaded; it renders magenta (1, 0, 1) as "
-                     "in Cycles")
-        pixels = np.array(MISSING_RGBA, np.float32).reshape(1, 1, 4)
-        digest = "missing"
-        encoded = None
-    else:
-        raw = np.empty(n, np.float32)
-        image.pixels.foreach_get(raw)
-        digest = hashlib.blake2b(raw.tobytes(), digest_size=16).hexdigest()
-        if entry is not None and entry[1] == digest:
-            _IMAGES[image.name_full] = (signature,) + entry[1:]
-            warnings.extend(f"material {mat!r}: {note}" for note in entry[4])
-            return entry[2], _IMAGES[image.name_full]
-        pixels = raw.reshape(h, w, image.channels)
-        if image.channels != 4:           # grey, grey + alpha, RGB → RGBA
-            c = image.channels
-            rgb = pixels[..., :1].repeat(3, axis=2) if c <= 2 else pixels[..., :3]
-            alpha = pixels[..., 1:2] if c == 2 else np.ones((h, w, 1), np.float32)
-            pixels = np.concatenate((rgb, alpha), axis=2)
-        space = image.colorspace_settings.name
-        encoded = None
-        if interpolated_encoded(image):
-            encoded = np.array(pixels, np.float32)      # a copy: pixels may be decoded below
-            if image.is_float:          # Cycles reads the file's encoded values, Blender holds them decoded
-                encoded[..., :3] = linear_to_srgb(pixels[..., :3])
-        if not image.is_float and not image.colorspace_settings.is_data:
-            if space == "sRGB":
-                pixels = pixels.copy()
-                pixels[..., :3] = srgb_to_linear(pixels[..., :3])
-            elif space not in LINEAR_SPACES:
-                notes.append(f"image {image.name!r} has colour space {space!r}, which is not converted; its "
-                             "values are used as linear")
-        pixels = np.ascontiguousarray(pixels, np.float32)
-        if not np.all(np.isfinite(pixels)):
-            pixels = np.nan_to_num(pixels, nan=0.0, posinf=0.0, neginf=0.0)
-        if encoded is not None and not np.all(np.isfinite(encoded)):
-            encoded = np.nan_to_num(encoded, nan=0.0, posinf=0.0, neginf=0.0)
-    entry = (signature, digest, pixels, {}, notes, encoded)
-    _IMAGES.pop(image.name_full, None)
+        return None, path or image.name
+    raw = np.empty(n, np.float32)
+    image.pixels.foreach_get(raw)
+    return raw, path
+
+
+def _rgba(raw, image):
+    """The (H, W, 4) view or copy of an image's flat pixels ``raw``: grey, grey + alpha and RGB
+    images widened to RGBA (grey repeated, alpha 1 where the image has none)."""
+    w, h = image.size
+    pixels = raw.reshape(h, w, image.channels)
+    if image.channels != 4:           # grey, grey + alpha, RGB → RGBA
+        c = image.channels
+        rgb = pixels[..., :1].repeat(3, axis=2) if c <= 2 else pixels[..., :3]
+        alpha = pixels[..., 1:2] if c == 2 else np.ones((h, w, 1), np.float32)
+        pixels = np.concatenate((rgb, alpha), axis=2)
+    return pixels
+
+
+def _colour_managed(image, pixels, notes):
+    """(linear contiguous float32 pixels, sRGB-encoded pixels Cycles filters or None) of an image's
+    RGBA ``pixels`` (see image_pixels); a colour space left unconverted adds a note, non-finite
+    values become 0."""
+    space = image.colorspace_settings.name
+    encoded = None
+    if interpolated_encoded(image):
+        encoded = np.array(pixels, np.float32)      # a copy: pixels may be decoded below
+        if image.is_float:          # Cycles reads the file's encoded values, Blender holds them decoded
+            encoded[..., :3] = linear_to_srgb(pixels[..., :3])
+    if not image.is_float and not image.colorspace_settings.is_data:
+        if space == "sRGB":
+            pixels = pixels.copy()
+            pixels[..., :3] = srgb_to_linear(pixels[..., :3])
+        elif space not in LINEAR_SPACES:
+            notes.append(f"image {image.name!r} has colour space {space!r}, which is not converted; its "
+                         "values are used as linear")
+    pixels = _finite(np.ascontiguousarray(pixels, np.float32))
+    if encoded is not None:
+        encoded = _finite(encoded)
+    return pixels, encoded
+
+
+def _finite(array):
+    """``array`` itself if all its values are finite, else a copy with NaN and ±inf replaced by 0."""
+    if np.all(np.isfinite(array)):
+        return array
+    return np.nan_to_num(array, nan=0.0, posinf=0.0, neginf=0.0)
+
+
+def _cache_image(name, entry):
+    """Stores ``entry`` as the most recently converted image ``name``, the least recently converted
+    ones dropped to keep at most IMAGE_CACHE_SIZE entries."""
+    _IMAGES.pop(name, None)
     while len(_IMAGES) >= IMAGE_CACHE_SIZE:          # the least recently converted image goes first
         _IMAGES.pop(next(iter(_IMAGES)))
-    _IMAGES[image.name_full] = entry
-    warnings.extend(f"material {mat!r}: {note}" for note in notes)
-    return pixels, entry
+    _IMAGES[name] = entry
 
 
 def _mapping_affine(node, mat, warnings):
