@@ -42,22 +42,36 @@ class OrenNayar(BSDF):
     name = "oren_nayar"
     flags = BSDFFlags.DIFFUSE_REFLECTION | BSDFFlags.SEPARABLE_DIFFUSE
 
-    def __init__(self, albedo, roughness: float):
-        from ..textures import TexturedSpectrum
+    def __init__(self, albedo, roughness):
+        from ..textures import TexturedNumber, TexturedSpectrum
         self.albedo = albedo
-        sigma = float(roughness)
-        if not (math.isfinite(sigma) and 0.0 <= sigma <= 1.0):
-            raise ValueError(f"roughness must be in [0, 1], got {roughness!r}")
-        self.roughness = sigma
-        self.a = 1.0 / (math.pi + sigma * (math.pi / 2 - 2.0 / 3.0))
-        self.b = sigma * self.a
-        self.e_avg = self.a * math.pi + (2.0 * math.pi - 5.6) / 3.0 * self.b
-        self.varies_over_surface = isinstance(albedo, TexturedSpectrum)
+        if isinstance(roughness, TexturedNumber):        # σ per point (Cycles' Diffuse Roughness from a texture)
+            if not (0.0 <= roughness.lo and roughness.hi <= 1.0):
+                raise ValueError(f"roughness must be in [0, 1], got values in [{roughness.lo:g}, {roughness.hi:g}]")
+            self.roughness = roughness
+        else:
+            sigma = float(roughness)
+            if not (math.isfinite(sigma) and 0.0 <= sigma <= 1.0):
+                raise ValueError(f"roughness must be in [0, 1], got {roughness!r}")
+            self.roughness = sigma
+            self.a, self.b, self.e_avg = _coefficients(sigma)
+        self.varies_over_surface = isinstance(albedo, TexturedSpectrum) or isinstance(roughness, TexturedNumber)
         if not getattr(albedo, "is_grey", False):
             self.flags = type(self).flags | BSDFFlags.WAVELENGTH_DEPENDENT
 
+    def _coefficients(self, sp):
+        """(a, b, E_avg): numbers, or (N,) at the points for a σ per point."""
+        if isinstance(self.roughness, float):
+            return self.a, self.b, self.e_avg
+        return _coefficients(sp.number(self.roughness))
+
+    @staticmethod
+    def _albedo_of(mu, a, b):
+        return a * math.pi + b * _g(mu)
+
     def _albedo(self, mu):
-        return self.a * math.pi + self.b * _g(mu)
+        """E(μ) of the single-scattering lobe (a constant σ)."""
+        return self._albedo_of(mu, self.a, self.b)
 
     def _value(self, sp, wi):
         rho = np.clip(sp.spectrum(self.albedo), 0.0, 1.0)
@@ -65,11 +79,15 @@ class OrenNayar(BSDF):
         ok = (cos_i > 0) & (cos_o > 0)
         s = dot(wi, sp.wo) - cos_i * cos_o
         t = np.where(s > 0, s / np.maximum(np.maximum(cos_i, cos_o), 1e-300), s)
-        single = self.a + self.b * t
-        if self.b <= 0.0:           # σ = 0: Lambert (Cycles returns before the multiple-scattering term)
+        a, b, e_avg = self._coefficients(sp)
+        single = a + b * t
+        if np.ndim(b) == 0 and b <= 0.0:    # σ = 0: Lambert (Cycles returns before the multiple-scattering term)
             return np.where(ok[None, :], rho * single[None, :], 0.0)
-        e_ms = rho * rho * (self.e_avg / (1.0 - self.e_avg)) / (math.pi * (1.0 - rho * (1.0 - self.e_avg)))
-        multi = e_ms * ((1.0 - self._albedo(cos_o)) * (1.0 - self._albedo(cos_i)))[None, :]
+        lambert = np.asarray(b) <= 0.0          # (a σ per point: Lambert where it is 0)
+        e = np.where(lambert, 0.5, e_avg)
+        e_ms = rho * rho * (e / (1.0 - e)) / (math.pi * (1.0 - rho * (1.0 - e)))
+        multi = e_ms * ((1.0 - self._albedo_of(cos_o, a, b)) * (1.0 - self._albedo_of(cos_i, a, b)))[None, :]
+        multi = np.where(lambert, 0.0, multi)
         return np.where(ok[None, :], rho * (single[None, :] + multi), 0.0)
 
     def eval(self, sp, wi):
@@ -88,10 +106,19 @@ class OrenNayar(BSDF):
 
     def albedo_estimate(self, sp):
         """The view direction's albedo (N,) for mixtures' lobe choice: ρ's wavelength mean × E(cosθ_o)."""
-        return np.clip(sp.spectrum(self.albedo), 0.0, 1.0).mean(axis=0) * self._albedo(np.clip(sp.cos_o, 0, 1))
+        a, b, _ = self._coefficients(sp)
+        return np.clip(sp.spectrum(self.albedo), 0.0, 1.0).mean(axis=0) * self._albedo_of(np.clip(sp.cos_o, 0, 1), a, b)
 
     def describe(self):
-        return {"type": self.name, "albedo": repr(self.albedo), "roughness": self.roughness}
+        rough = self.roughness if isinstance(self.roughness, float) else repr(self.roughness)
+        return {"type": self.name, "albedo": repr(self.albedo), "roughness": rough}
+
+
+def _coefficients(sigma):
+    """(a, b, E_avg) of Fujii's Oren–Nayar for σ (a number or an array)."""
+    a = 1.0 / (math.pi + sigma * (math.pi / 2 - 2.0 / 3.0))
+    b = sigma * a
+    return a, b, a * math.pi + (2.0 * math.pi - 5.6) / 3.0 * b
 
 
 DECLARATION = ModelDeclaration(
@@ -100,8 +127,8 @@ DECLARATION = ModelDeclaration(
     "multiple-scattering term); depolarising",
     [Parameter("albedo", "diffuse colour", kind="spectrum", spectrum="reflectance", lo=0.0, hi=1.0, default=0.8,
                texturable=True),
-     Parameter("roughness", "σ (0: Lambert)", lo=0.0, hi=1.0, default=0.5)])
-DECLARATION.per_point = frozenset({"albedo"})
+     Parameter("roughness", "σ (0: Lambert)", lo=0.0, hi=1.0, default=0.5, texturable=True)])
+DECLARATION.per_point = frozenset({"albedo", "roughness"})
 
 
 @DECLARATION.builder

@@ -262,7 +262,8 @@ def _dielectric(p, alpha, ior):
     if _textured(level) and (tinted or aniso is not None):
         raise SceneError(p.field("specular_ior_level"), "cannot vary per point with a Specular Tint or an "
                                                         "anisotropy (give a constant level)")
-    if p["diffuse_roughness"] > 0 or tinted or aniso is not None:
+    rough_base = not _never(p["diffuse_roughness"])          # an Oren–Nayar base somewhere (a σ per point too)
+    if rough_base or tinted or aniso is not None:
         # the specular layer over Cycles' diffuse base as two parts (mix.Layered): an Oren–Nayar base, a tint,
         # an anisotropic specular layer
         from .lambert import DECLARATION as LAMBERT
@@ -277,7 +278,7 @@ def _dielectric(p, alpha, ior):
             from .tinted import FresnelTinted
             albedo = _tinted_albedo(albedo, top, eta, alpha, smooth, _peak(tint))
             top = FresnelTinted(top, eta, tint)
-        under = OrenNayar(base, p["diffuse_roughness"]) if p["diffuse_roughness"] > 0 else \
+        under = OrenNayar(base, p["diffuse_roughness"]) if rough_base else \
             LAMBERT.build(LAMBERT.values({"albedo": base}, p.where))
         return Layered(top, under, 1.0, albedo)
     if _textured(base) or max(base.linear_srgb()) > 0:
@@ -400,7 +401,8 @@ DECLARATION = ModelDeclaration(
                                          "constant)", lo=0.0, hi=1.0, default=0.5),
      Parameter("specular_ior_level", "Cycles' Specular IOR Level: F0 × 2·level", lo=0.0, hi=1.0, default=0.5,
                texturable=True),
-     Parameter("diffuse_roughness", "the base's Oren–Nayar roughness σ (0: Lambert)", lo=0.0, hi=1.0, default=0.0),
+     Parameter("diffuse_roughness", "the base's Oren–Nayar roughness σ (0: Lambert)", lo=0.0, hi=1.0, default=0.0,
+               texturable=True),
      Parameter("specular_tint", "Cycles' Specular Tint: the dielectric's F0 × tint (its F82 tint for the metal)",
                kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6, default=1.0, texturable=True),
      Parameter("anisotropic", "Cycles' Anisotropic: the metal's and the specular layer's GGX stretched along the "
@@ -428,7 +430,7 @@ DECLARATION = ModelDeclaration(
 
 DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission", "coat_tint", "coat_weight",
                                    "coat_roughness", "specular_tint", "specular_ior_level", "thin_film_thickness",
-                                   "sheen_weight", "sheen_roughness", "sheen_tint"})
+                                   "diffuse_roughness", "sheen_weight", "sheen_roughness", "sheen_tint"})
 
 
 @DECLARATION.builder

@@ -908,7 +908,7 @@ def _principled(node, mat, warnings, bake=None):
               "sheen_tint": _grey(r.rgb_or_texture("Sheen Tint", 0.0)),
               "anisotropic": r.float("Anisotropic", 0.0, 1.0) if _anisotropic(node) else 0.0,
               "anisotropic_rotation": r.float("Anisotropic Rotation", -1e6, 1e6),
-              "diffuse_roughness": (r.float("Diffuse Roughness", 0.0, 1.0)
+              "diffuse_roughness": (r.roughness_texture_or_float("Diffuse Roughness")
                                     if node.inputs.get("Diffuse Roughness") is not None else 0.0),
               "distribution": "ggx" if getattr(node, "distribution", "MULTI_GGX") == "GGX" else "multi_ggx"}
     if isinstance(roughness, TextureInput) and transmission != 0.0:
@@ -1244,8 +1244,8 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
     r = _Reader(mat, node, warnings, bake)
     if kind == "ShaderNodeBsdfDiffuse":
         colour = r.rgb_or_texture("Color", 0.0, 1.0)
-        sigma = r.float("Roughness", 0.0, 1.0)
-        if sigma > 0:       # Cycles' Oren–Nayar (Fujii/EON) above roughness 0
+        sigma = r.roughness_texture_or_float("Roughness")          # (a σ per point: Oren–Nayar, Lambert where 0)
+        if isinstance(sigma, TextureInput) or sigma > 0:       # Cycles' Oren–Nayar (Fujii/EON) above roughness 0
             return _textured_model("oren_nayar", {"albedo": colour, "roughness": sigma}, mat, node), None
         return _lambert(colour, mat, node), None
     if kind in ("ShaderNodeBsdfGlossy", "ShaderNodeBsdfAnisotropic"):

@@ -61,6 +61,7 @@ CASES = {
     "Specular IOR Level ": ((0.0, 0.8), {"Base Color": (0.3, 0.1, 0.05), "Roughness": 0.0}),        # smooth
     "Specular IOR Level  ": ((0.2, 0.9), {"Base Color": (0.3, 0.3, 0.6), "Roughness": 0.4,           # Oren–Nayar
                                           "Diffuse Roughness": 0.8}),
+    "Diffuse Roughness": ((0.0, 1.0), {"Base Color": (0.8, 0.5, 0.3), "Roughness": 0.5}),
     "Coat Roughness": ((0.02, 0.6), {"Base Color": (0.5, 0.1, 0.1), "Roughness": 0.4, "Coat Weight": 1.0}),
     "Coat Roughness ": ((0.0, 0.35), {"Base Color": (0.9, 0.8, 0.6), "Roughness": 0.2, "Metallic": 1.0,  # metal
                                       "Coat Weight": 0.7, "Coat IOR": 1.6}),
@@ -327,3 +328,17 @@ def test_a_per_point_specular_level_with_a_tint_says_it_takes_its_own_value(addo
                          "lamps")
     _, _, warnings = ap.export_polar(scene, 1, 8)
     assert len(warnings) == 1 and "Specular IOR Level" in warnings[0] and "own value" in warnings[0]
+
+
+@pytest.mark.parametrize("lighting", ap.LIGHTINGS)
+def test_diffuse_bsdf_roughness_per_point_matches_cycles(addon, lighting):
+    """The Diffuse BSDF's Roughness from a texture: Cycles' Oren–Nayar per point, Lambert where it is 0."""
+    scene = sphere_scene("Base Color", ((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)), {}, lighting)
+    tree = bpy.data.materials["P"].node_tree
+    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+    diffuse.inputs["Color"].default_value = (0.8, 0.5, 0.3, 1.0)
+    tex = tree.nodes["Image Texture"]
+    tex.image.colorspace_settings.name = "Non-Color"
+    tree.links.new(tex.outputs["Color"], diffuse.inputs["Roughness"])
+    tree.links.new(diffuse.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    compare_with_cycles(scene, "Diffuse BSDF Roughness", lighting)
