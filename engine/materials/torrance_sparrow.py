@@ -383,6 +383,85 @@ torrance_sparrow_pdf = twin(torrance_sparrow_pdf_numba, torrance_sparrow_pdf_num
 torrance_sparrow_sample = twin(torrance_sparrow_sample_numba, torrance_sparrow_sample_numpy)
 
 
+# --------------------------------------------------------------------------- TorranceSparrow's parameter checks
+
+def _checked_roughness(m, distribution: str):
+    """m as given if a TexturedNumber (≥ M_MIN everywhere, Beckmann or GGX facets only), else float(m), finite and
+    ≥ M_MIN; ValueError otherwise."""
+    if isinstance(m, TexturedNumber):
+        if not m.lo >= M_MIN:
+            raise ValueError(f"a textured roughness m must be >= {M_MIN:g} everywhere (no per-point smooth "
+                             f"limit), its values reach {m.lo:g}")
+        if distribution not in ("beckmann", "ggx"):
+            raise ValueError("a textured roughness m needs distribution='beckmann' or 'ggx'")
+        return m
+    m = float(m)
+    if not (math.isfinite(m) and m >= M_MIN):
+        raise ValueError(f"roughness m must be a finite number >= {M_MIN:g}, got {m!r}")
+    return m
+
+
+def _checked_shadowing(shadowing: str | None, distribution: str) -> str:
+    """The shadowing form: None gives the distribution's default ("smith_correlated" for GGX, else "ts"); it must
+    be one of SHADOWING, and "smith_rational" needs Beckmann facets; ValueError otherwise."""
+    if shadowing is None:
+        shadowing = "smith_correlated" if distribution == "ggx" else "ts"
+    if shadowing not in SHADOWING:
+        raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
+    if shadowing == "smith_rational" and distribution == "ggx":
+        raise ValueError("shadowing 'smith_rational' (Walter's rational Beckmann G1) needs distribution 'beckmann'")
+    return shadowing
+
+
+def _checked_exterior_n(exterior_n) -> float:
+    """float(exterior_n), which must be finite and > 0 (ValueError otherwise)."""
+    value = float(exterior_n)
+    if not (math.isfinite(value) and value > 0):
+        raise ValueError(f"exterior_n must be a finite number > 0, got {exterior_n!r}")
+    return value
+
+
+def _checked_lobe_weights(specular_weight, diffuse_weight) -> tuple:
+    """(s, d): each weight as given if a TexturedNumber, else as a float; both converted first, then each checked
+    (specular first) to be finite and ≥ 0 (its lowest value if textured), ValueError otherwise."""
+    s = specular_weight if isinstance(specular_weight, TexturedNumber) else float(specular_weight)
+    d = diffuse_weight if isinstance(diffuse_weight, TexturedNumber) else float(diffuse_weight)
+    for name, v in (("specular_weight", s), ("diffuse_weight", d)):
+        lo = v.lo if isinstance(v, TexturedNumber) else v
+        if not (math.isfinite(lo) and lo >= 0):
+            raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+    return s, d
+
+
+def _facet_distribution(distribution: str, m, blinn_exponent: float | None):
+    """The facet distribution object: Beckmann(m) or GGX(m) (None for a textured m: built per point), BlinnPhong
+    from blinn_exponent or else from m; ValueError for an unknown distribution or a blinn_exponent without Blinn."""
+    if distribution == "beckmann":
+        if blinn_exponent is not None:
+            raise ValueError("blinn_exponent is only used with distribution='blinn'")
+        return None if isinstance(m, TexturedNumber) else Beckmann(m)
+    if distribution == "blinn":
+        return BlinnPhong(blinn_exponent) if blinn_exponent is not None else BlinnPhong.from_beckmann_m(m)
+    if distribution == "ggx":
+        if blinn_exponent is not None:
+            raise ValueError("blinn_exponent is only used with distribution='blinn'")
+        return None if isinstance(m, TexturedNumber) else GGX(m)
+    raise ValueError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
+
+
+def _check_multiscatter(distribution: str, shadowing: str, m) -> None:
+    """ValueError unless ``multiscatter`` is possible: GGX facets, a shadowing of MULTISCATTER_SHADOWING and
+    m ≤ ALPHA_MAX (its highest value if textured)."""
+    if distribution != "ggx" or shadowing not in MULTISCATTER_SHADOWING:
+        raise ValueError("multiscatter (Cycles' Multiscatter GGX) needs distribution='ggx' and a Smith "
+                         f"shadowing {MULTISCATTER_SHADOWING} (its albedo tables are those lobes'), got "
+                         f"{distribution!r}, {shadowing!r}")
+    hi = m.hi if isinstance(m, TexturedNumber) else m
+    if not hi <= ALPHA_MAX:
+        raise ValueError(f"multiscatter needs roughness m <= {ALPHA_MAX:g} (Cycles clamps GGX alpha to 1), "
+                         f"got {hi!r}")
+
+
 class TorranceSparrow(BSDF):
     """Polarising Torrance–Sparrow microfacet reflector (see the module docstring).
 
@@ -419,60 +498,28 @@ class TorranceSparrow(BSDF):
         self.k = as_spectrum(k, "k")
         # m, specular_weight and diffuse_weight may be TexturedNumbers (values per surface point,
         # read through ShadingPoint.number); constants keep their float fast path
-        if isinstance(m, TexturedNumber):
-            if not m.lo >= M_MIN:
-                raise ValueError(f"a textured roughness m must be >= {M_MIN:g} everywhere (no per-point smooth "
-                                 f"limit), its values reach {m.lo:g}")
-            if distribution not in ("beckmann", "ggx"):
-                raise ValueError("a textured roughness m needs distribution='beckmann' or 'ggx'")
-        else:
-            m = float(m)
-            if not (math.isfinite(m) and m >= M_MIN):
-                raise ValueError(f"roughness m must be a finite number >= {M_MIN:g}, got {m!r}")
+        m = _checked_roughness(m, distribution)
         self.m = m
-        if shadowing is None:
-            shadowing = "smith_correlated" if distribution == "ggx" else "ts"
-        if shadowing not in SHADOWING:
-            raise ValueError(f"shadowing must be one of {SHADOWING}, got {shadowing!r}")
-        if shadowing == "smith_rational" and distribution == "ggx":
-            raise ValueError("shadowing 'smith_rational' (Walter's rational Beckmann G1) needs distribution 'beckmann'")
+        shadowing = _checked_shadowing(shadowing, distribution)
         self.shadowing = shadowing
-        self.exterior_n = float(exterior_n)
-        if not (math.isfinite(self.exterior_n) and self.exterior_n > 0):
-            raise ValueError(f"exterior_n must be a finite number > 0, got {exterior_n!r}")
-        self.s = specular_weight if isinstance(specular_weight, TexturedNumber) else float(specular_weight)
-        self.d = diffuse_weight if isinstance(diffuse_weight, TexturedNumber) else float(diffuse_weight)
-        for name, v in (("specular_weight", self.s), ("diffuse_weight", self.d)):
-            lo = v.lo if isinstance(v, TexturedNumber) else v
-            if not (math.isfinite(lo) and lo >= 0):
-                raise ValueError(f"{name} must be a finite number >= 0, got {v!r}")
+        self.exterior_n = _checked_exterior_n(exterior_n)
+        self.s, self.d = _checked_lobe_weights(specular_weight, diffuse_weight)
         self.albedo = None if diffuse_albedo is None else as_spectrum(diffuse_albedo, "diffuse_albedo")
-        if distribution == "beckmann":
-            if blinn_exponent is not None:
-                raise ValueError("blinn_exponent is only used with distribution='blinn'")
-            self.dist = None if isinstance(m, TexturedNumber) else Beckmann(m)
-        elif distribution == "blinn":
-            self.dist = BlinnPhong(blinn_exponent) if blinn_exponent is not None else BlinnPhong.from_beckmann_m(m)
-        elif distribution == "ggx":
-            if blinn_exponent is not None:
-                raise ValueError("blinn_exponent is only used with distribution='blinn'")
-            self.dist = None if isinstance(m, TexturedNumber) else GGX(m)
-        else:
-            raise ValueError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
+        self.dist = _facet_distribution(distribution, m, blinn_exponent)
         self.distribution = distribution
         if diffuse_layering not in DIFFUSE_LAYERINGS:
             raise ValueError(f"diffuse_layering must be one of {DIFFUSE_LAYERINGS}, got {diffuse_layering!r}")
         self.diffuse_layering = diffuse_layering
         self.multiscatter = bool(multiscatter)
         if self.multiscatter:
-            if distribution != "ggx" or shadowing not in MULTISCATTER_SHADOWING:
-                raise ValueError("multiscatter (Cycles' Multiscatter GGX) needs distribution='ggx' and a Smith "
-                                 f"shadowing {MULTISCATTER_SHADOWING} (its albedo tables are those lobes'), got "
-                                 f"{distribution!r}, {shadowing!r}")
-            hi = m.hi if isinstance(m, TexturedNumber) else m
-            if not hi <= ALPHA_MAX:
-                raise ValueError(f"multiscatter needs roughness m <= {ALPHA_MAX:g} (Cycles clamps GGX alpha to 1), "
-                                 f"got {hi!r}")
+            _check_multiscatter(distribution, shadowing, m)
+        self._init_lobes()
+        self.flags = self._lobe_flags()
+
+    def _init_lobes(self) -> None:
+        """Set ``has_specular`` (s > 0 somewhere), ``has_diffuse`` (d > 0 somewhere and an albedo),
+        ``varies_over_surface`` and ``_albedo`` (the facet lobe's albedo table with ``"albedo_scaling"`` and both
+        lobes, else None); needs every parameter attribute set."""
         def positive(v):
             return v.hi > 0 if isinstance(v, TexturedNumber) else v > 0
         self.has_specular = positive(self.s)
@@ -480,19 +527,23 @@ class TorranceSparrow(BSDF):
         self.varies_over_surface = textured(self.n, self.k, self.m, self.s, self.d, self.albedo,
                                             *(self.film[1:] if self.film is not None else ()))
         self._albedo = None
-        if diffuse_layering == "albedo_scaling" and self.has_specular and self.has_diffuse:
+        if self.diffuse_layering == "albedo_scaling" and self.has_specular and self.has_diffuse:
             self._albedo = self._albedo_table()
+
+    def _lobe_flags(self) -> BSDFFlags:
+        """The model's BSDFFlags from its lobes (``_init_lobes``), index and film."""
         constant = all(getattr(v, "is_constant", False) for v in
                        (self.n, self.k) + ((self.albedo,) if self.has_diffuse else ()))
         # The facet lobe is reported unless a diffuse term replaces it (s = 0): a TS with neither
         # weight (black) still has its — zero — glossy lobe, so it is never taken for Dirac-only.
-        self.flags = (BSDFFlags.when(self.has_specular or not self.has_diffuse, BSDFFlags.GLOSSY_REFLECTION)
-                      | BSDFFlags.when(self.has_diffuse, BSDFFlags.DIFFUSE_REFLECTION | BSDFFlags.SEPARABLE_DIFFUSE)
-                      | BSDFFlags.when(self.has_specular, BSDFFlags.POLARISING)
-                      | BSDFFlags.when(self.has_specular and self._may_retard(), BSDFFlags.RETARDING)
-                      | BSDFFlags.when(not constant or self.film is not None, BSDFFlags.WAVELENGTH_DEPENDENT))
+        flags = (BSDFFlags.when(self.has_specular or not self.has_diffuse, BSDFFlags.GLOSSY_REFLECTION)
+                 | BSDFFlags.when(self.has_diffuse, BSDFFlags.DIFFUSE_REFLECTION | BSDFFlags.SEPARABLE_DIFFUSE)
+                 | BSDFFlags.when(self.has_specular, BSDFFlags.POLARISING)
+                 | BSDFFlags.when(self.has_specular and self._may_retard(), BSDFFlags.RETARDING)
+                 | BSDFFlags.when(not constant or self.film is not None, BSDFFlags.WAVELENGTH_DEPENDENT))
         if self.film is not None and self.has_specular:
-            self.flags |= BSDFFlags.RETARDING       # the film's s–p phase difference
+            flags |= BSDFFlags.RETARDING       # the film's s–p phase difference
+        return flags
 
     def _may_retard(self) -> bool:
         """False only if κ ≡ 0 and n/exterior_n ≥ 1 (real η above 1: no TIR, no retardance)."""
