@@ -574,106 +574,31 @@ def _illuminant(d: dict, field: str, key: str):
     return RGBIlluminantSpectrum(rgb, scale)
 
 
+#: Keys every object may have, and the keys of each shape.
+OBJECT_KEYS = {"name", "shape", "material", "materials", "emission", "transform", "note", "normal"}
+OBJECT_SHAPE_KEYS = {"mesh": {"file", "smooth"}, "sphere": {"center", "radius", "subdivisions"},
+                     "quad": {"vertices", "uv"},
+                     "triangles": {"vertices", "faces", "normals", "material_ids", "uv", "colors", "tangents"}}
+
+
 def _parse_object_base(d: dict, field: str, base_dir: str, material_names) -> Mesh:
+    """An object's Mesh from its JSON object (without the emitter options of parse_object): shape,
+    per-vertex attributes, transform, materials, emission and ray visibility, validated in that order."""
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object")
     shape = choice(_require(d, "shape", field), f"{field}.shape", ("mesh", "sphere", "quad", "triangles"))
     name = str(d.get("name", field))
-    allowed = {"name", "shape", "material", "materials", "emission", "transform", "note", "normal"} | OBJECT_RAY_KEYS
-    per_shape = {"mesh": {"file", "smooth"}, "sphere": {"center", "radius", "subdivisions"},
-                 "quad": {"vertices", "uv"},
-                 "triangles": {"vertices", "faces", "normals", "material_ids", "uv", "colors", "tangents"}}
-    _check_keys(d, field, allowed | per_shape[shape])
-
-    group_names, ungrouped_line = None, None
-    if shape == "mesh":
-        path = _require(d, "file", field)
-        if not isinstance(path, str):
-            raise SceneError(f"{field}.file", "must be a file path (string)")
-        data = read_mesh(os.path.join(base_dir, path), field=f"{field}.file")
-        group_names = data.group_names
-        ungrouped_line = getattr(data, "ungrouped_line", None)
-        if d.get("smooth", True) is False:
-            data.vertex_normals = None
-    elif shape == "sphere":
-        center = vec3(d.get("center", [0, 0, 0]), f"{field}.center")
-        radius = number(d.get("radius", 1.0), f"{field}.radius", 0, math.inf, lo_open=True)
-        # UVs (Blender's UV-sphere map, shapes.sphere_uv_map) need extra seam and pole vertices: only
-        # for textured materials, so untextured spheres keep the peer meshes' exact vertex numbering
-        data = icosphere(integer(d.get("subdivisions", 6), f"{field}.subdivisions", 0, 9),
-                         uv=_any_textured(d, material_names))
-        data = transform_mesh(data, transform_matrix(translate=center, scale=radius))
-    elif shape == "quad":
-        verts = _require(d, "vertices", field)
-        if not isinstance(verts, list) or len(verts) != 4:
-            raise SceneError(f"{field}.vertices", "must be a list of 4 points [x, y, z]")
-        data = quad(*[vec3(v, f"{field}.vertices[{i}]") for i, v in enumerate(verts)])
-    else:
-        data = _parse_triangles(d, field)
-    # per-vertex attributes (transforms keep the vertex order, so they stay valid)
-    uv = colors = tangents = None
-    if shape == "quad":
-        uv = _vertex_uv(d.get("uv", QUAD_UV), f"{field}.uv", 4)
-    elif shape in ("mesh", "sphere"):      # from the file (PLY u, v and colours; OBJ vt) or the sphere map
-        uv, colors = data.uv, dict(data.colors) or None
-    elif shape == "triangles":
-        uv = None if d.get("uv") is None else _vertex_uv(d["uv"], f"{field}.uv", len(data.vertices))
-        colors = _vertex_colors(d.get("colors", {}), f"{field}.colors", len(data.vertices))
-        if d.get("tangents") is not None:
-            tangents = _vertex_tangents(d["tangents"], f"{field}.tangents", len(data.vertices))
-
+    _check_keys(d, field, OBJECT_KEYS | OBJECT_RAY_KEYS | OBJECT_SHAPE_KEYS[shape])
+    data, group_names, ungrouped_line = _object_geometry(d, field, shape, base_dir, material_names)
+    uv, colors, tangents = _object_vertex_attributes(d, field, shape, data)
     if "transform" in d:
         matrix = parse_transform(d["transform"], f"{field}.transform")
         data = transform_mesh(data, matrix)
-        if tangents is not None:      # directions: the linear part; a mirror flips the handedness
-            a = np.asarray(matrix, np.float64)[:3, :3]
-            xyz = tangents[:, :3] @ a.T
-            w = tangents[:, 3] * (1.0 if np.linalg.det(a) > 0 else -1.0)
-            tangents = np.column_stack((xyz / np.linalg.norm(xyz, axis=1)[:, None], w))
-
-    faces = np.asarray(data.faces, dtype=np.int64)
-    n_faces = len(faces)
-    if n_faces == 0:
-        raise SceneError(field, f"object {name!r} has no triangles")
-    if not np.all(np.isfinite(data.vertices)):
-        raise SceneError(field, f"object {name!r} has non-finite vertex coordinates")
-    if np.abs(data.vertices).max() > MAX_COORDINATE:
-        raise SceneError(field, f"object {name!r} has coordinates beyond ±{MAX_COORDINATE:g} (ray casting is "
-                                "single precision)")
-
-    # Materials: one for the whole object, or a list indexed per face.
-    if "materials" in d:
-        mats = d["materials"]
-        if isinstance(mats, dict) and group_names is not None:
-            if ungrouped_line is not None:   # OBJ faces before the first usemtl: no name to map them by
-                raise SceneError(f"{field}.file", f"line {ungrouped_line}: this face comes before the first "
-                                                  "'usemtl', so no material name applies to it; add a 'usemtl' "
-                                                  "line before it, or give the object one 'material'")
-            mat_list = []
-            for g in group_names:
-                if g not in mats:
-                    raise SceneError(f"{field}.materials", f"has no entry for the mesh's material group {g!r}")
-                mat_list.append(mats[g])
-        elif isinstance(mats, list) and mats:
-            mat_list = mats
-        else:
-            raise SceneError(f"{field}.materials", "must be a non-empty list of material names (or, for OBJ "
-                                                   "files, an object mapping usemtl names to materials)")
-        ids = d.get("material_ids") if shape == "triangles" else data.face_groups
-        if ids is None:
-            ids = np.zeros(n_faces, dtype=np.int64)
-        ids = _index_array(ids, f"{field}.material_ids", "one material index per triangle")
-        if ids.shape != (n_faces,) or (ids.size and (ids.min() < 0 or ids.max() >= len(mat_list))):
-            raise SceneError(f"{field}.material_ids",
-                             f"must hold one index in [0, {len(mat_list) - 1}] per triangle ({n_faces})")
-    else:
-        mat_list = [_require(d, "material", field)]
-        ids = np.zeros(n_faces, dtype=np.int64)
-    for i, m in enumerate(mat_list):
-        if not isinstance(m, str) or m not in material_names:
-            f = f"{field}.material" if "materials" not in d else f"{field}.materials[{i}]"
-            raise SceneError(f, f"unknown material {m!r} (defined: {', '.join(sorted(material_names)) or 'none'})")
-
+        if tangents is not None:
+            tangents = _transform_tangents(tangents, matrix)
+    faces = _object_faces(data, field, name)
+    mat_list, ids = _object_materials(d, field, shape, data, len(faces), group_names, ungrouped_line)
+    _check_material_names(d, field, mat_list, material_names)
     emission = _parse_emission(d["emission"], f"{field}.emission", base_dir) if d.get("emission") is not None \
         else None
     mesh = Mesh(name=name, vertices=np.asarray(data.vertices, dtype=np.float64), faces=faces,
@@ -681,6 +606,124 @@ def _parse_object_base(d: dict, field: str, base_dir: str, material_names) -> Me
                 emission=emission, uv=uv, colors=colors or {}, tangents=tangents)
     _parse_ray_visibility(d, field, mesh, base_dir)
     return mesh
+
+
+def _object_geometry(d: dict, field: str, shape: str, base_dir: str, material_names):
+    """The untransformed mesh data of an object's ``shape``, with the mesh file's material group names
+    and the line of its first face before any 'usemtl' (both None unless the shape is "mesh")."""
+    if shape == "mesh":
+        return _mesh_file_geometry(d, field, base_dir)
+    if shape == "sphere":
+        center = vec3(d.get("center", [0, 0, 0]), f"{field}.center")
+        radius = number(d.get("radius", 1.0), f"{field}.radius", 0, math.inf, lo_open=True)
+        # UVs (Blender's UV-sphere map, shapes.sphere_uv_map) need extra seam and pole vertices: only
+        # for textured materials, so untextured spheres keep the peer meshes' exact vertex numbering
+        data = icosphere(integer(d.get("subdivisions", 6), f"{field}.subdivisions", 0, 9),
+                         uv=_any_textured(d, material_names))
+        return transform_mesh(data, transform_matrix(translate=center, scale=radius)), None, None
+    if shape == "quad":
+        verts = _require(d, "vertices", field)
+        if not isinstance(verts, list) or len(verts) != 4:
+            raise SceneError(f"{field}.vertices", "must be a list of 4 points [x, y, z]")
+        return quad(*[vec3(v, f"{field}.vertices[{i}]") for i, v in enumerate(verts)]), None, None
+    return _parse_triangles(d, field), None, None
+
+
+def _mesh_file_geometry(d: dict, field: str, base_dir: str):
+    """A "mesh" object's data read from its ``file`` (relative to ``base_dir``; vertex normals dropped
+    when ``smooth`` is false), with its material group names and first ungrouped face line."""
+    path = _require(d, "file", field)
+    if not isinstance(path, str):
+        raise SceneError(f"{field}.file", "must be a file path (string)")
+    data = read_mesh(os.path.join(base_dir, path), field=f"{field}.file")
+    if d.get("smooth", True) is False:
+        data.vertex_normals = None
+    return data, data.group_names, getattr(data, "ungrouped_line", None)
+
+
+def _object_vertex_attributes(d: dict, field: str, shape: str, data):
+    """(uv, colors, tangents) per vertex, each None when absent: a quad's ``uv`` (default QUAD_UV), a
+    mesh file's or sphere map's own, or a "triangles" object's ``uv``, ``colors`` and ``tangents``.
+    Transforms keep the vertex order, so they stay valid."""
+    if shape == "quad":
+        return _vertex_uv(d.get("uv", QUAD_UV), f"{field}.uv", 4), None, None
+    if shape in ("mesh", "sphere"):      # from the file (PLY u, v and colours; OBJ vt) or the sphere map
+        return data.uv, dict(data.colors) or None, None
+    n_vertices = len(data.vertices)
+    uv = None if d.get("uv") is None else _vertex_uv(d["uv"], f"{field}.uv", n_vertices)
+    colors = _vertex_colors(d.get("colors", {}), f"{field}.colors", n_vertices)
+    tangents = None
+    if d.get("tangents") is not None:
+        tangents = _vertex_tangents(d["tangents"], f"{field}.tangents", n_vertices)
+    return uv, colors, tangents
+
+
+def _transform_tangents(tangents: np.ndarray, matrix) -> np.ndarray:
+    """(V, 4) tangents under a 4×4 transform: directions by its linear part (renormalised); a mirror
+    flips the handedness w."""
+    a = np.asarray(matrix, np.float64)[:3, :3]
+    xyz = tangents[:, :3] @ a.T
+    w = tangents[:, 3] * (1.0 if np.linalg.det(a) > 0 else -1.0)
+    return np.column_stack((xyz / np.linalg.norm(xyz, axis=1)[:, None], w))
+
+
+def _object_faces(data, field: str, name: str) -> np.ndarray:
+    """The (F, 3) int64 faces of object ``name``'s transformed data, refused when there are none or a
+    vertex coordinate is non-finite or beyond ±MAX_COORDINATE."""
+    faces = np.asarray(data.faces, dtype=np.int64)
+    if len(faces) == 0:
+        raise SceneError(field, f"object {name!r} has no triangles")
+    if not np.all(np.isfinite(data.vertices)):
+        raise SceneError(field, f"object {name!r} has non-finite vertex coordinates")
+    if np.abs(data.vertices).max() > MAX_COORDINATE:
+        raise SceneError(field, f"object {name!r} has coordinates beyond ±{MAX_COORDINATE:g} (ray casting is "
+                                "single precision)")
+    return faces
+
+
+def _object_materials(d: dict, field: str, shape: str, data, n_faces: int, group_names, ungrouped_line):
+    """(material names, int64 index per face): one ``material`` for the whole object, or a list of
+    ``materials`` indexed per face (by ``material_ids`` or the mesh file's groups; default 0).
+    The names are not checked here (_check_material_names)."""
+    if "materials" not in d:
+        return [_require(d, "material", field)], np.zeros(n_faces, dtype=np.int64)
+    mat_list = _material_list(d["materials"], field, group_names, ungrouped_line)
+    ids = d.get("material_ids") if shape == "triangles" else data.face_groups
+    if ids is None:
+        ids = np.zeros(n_faces, dtype=np.int64)
+    ids = _index_array(ids, f"{field}.material_ids", "one material index per triangle")
+    if ids.shape != (n_faces,) or (ids.size and (ids.min() < 0 or ids.max() >= len(mat_list))):
+        raise SceneError(f"{field}.material_ids",
+                         f"must hold one index in [0, {len(mat_list) - 1}] per triangle ({n_faces})")
+    return mat_list, ids
+
+
+def _material_list(mats, field: str, group_names, ungrouped_line) -> list:
+    """An object's ``materials``: a non-empty list, or (mesh files with material groups) an object
+    mapping each group name to a material, listed in group order."""
+    if isinstance(mats, dict) and group_names is not None:
+        if ungrouped_line is not None:   # OBJ faces before the first usemtl: no name to map them by
+            raise SceneError(f"{field}.file", f"line {ungrouped_line}: this face comes before the first "
+                                              "'usemtl', so no material name applies to it; add a 'usemtl' "
+                                              "line before it, or give the object one 'material'")
+        mat_list = []
+        for g in group_names:
+            if g not in mats:
+                raise SceneError(f"{field}.materials", f"has no entry for the mesh's material group {g!r}")
+            mat_list.append(mats[g])
+        return mat_list
+    if isinstance(mats, list) and mats:
+        return mats
+    raise SceneError(f"{field}.materials", "must be a non-empty list of material names (or, for OBJ "
+                                           "files, an object mapping usemtl names to materials)")
+
+
+def _check_material_names(d: dict, field: str, mat_list: list, material_names) -> None:
+    """Each material of the object must be the name of a defined material."""
+    for i, m in enumerate(mat_list):
+        if not isinstance(m, str) or m not in material_names:
+            f = f"{field}.material" if "materials" not in d else f"{field}.materials[{i}]"
+            raise SceneError(f, f"unknown material {m!r} (defined: {', '.join(sorted(material_names)) or 'none'})")
 
 
 def _any_textured(d: dict, materials) -> bool:
