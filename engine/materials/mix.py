@@ -187,10 +187,9 @@ def _usable_frame(x: np.ndarray, n_s: np.ndarray, k: np.ndarray) -> tuple[np.nda
     return np.where(ok[None, :], x, plane_of_incidence_axis(n_s, k)), True
 
 
-def add_values(terms, n: int, L: int, k_in: np.ndarray, k_out: np.ndarray, n_s: np.ndarray) -> MuellerValue:
-    """Σ scale·value over ``terms`` [(scale (N,) or float, MuellerValue)], all for the same beams
-    k_in = −ω_i, k_out = ω_o (3, N) (see the module docstring, "Frames"); the cheapest kind that holds
-    the sum."""
+def _split_terms(terms) -> tuple[np.ndarray | float | None, list[MuellerValue]]:
+    """The scaled terms [(scale (N,) or float, MuellerValue)] apart: the sum of the depolarising
+    ones' A (L, N) (None: there are none) and the polarising ones, scaled, in order."""
     dep = None
     pol = []
     for scale, v in terms:
@@ -200,36 +199,75 @@ def add_values(terms, n: int, L: int, k_in: np.ndarray, k_out: np.ndarray, n_s: 
             dep = a if dep is None else dep + a
         else:
             pol.append(v.scaled(s))
-    if not pol:
-        return depolarising_value(np.zeros((L, n)) if dep is None else np.broadcast_to(dep, (L, n)).copy(), n)
-    if len(pol) == 1:
-        v = pol[0]
-        if dep is None:
-            return v
-        if v.kind == "abcs":
-            depol = dep if v.depol is None else v.depol + dep
-            return MuellerValue("abcs", v.x_in, v.x_out, v.A, v.B, v.C, v.S, depol=depol)
-        M = v.M.copy()
-        M[0, 0] = M[0, 0] + dep
-        return MuellerValue("general", v.x_in, v.x_out, M=M)
+    return dep, pol
+
+
+def _plus_depolariser(v: MuellerValue, dep) -> MuellerValue:
+    """One polarising value plus a depolarising A (L, N) (None: nothing), of the value's kind and
+    frames (ABCS: added to its depol share; general: to M00)."""
+    if dep is None:
+        return v
+    if v.kind == "abcs":
+        depol = dep if v.depol is None else v.depol + dep
+        return MuellerValue("abcs", v.x_in, v.x_out, v.A, v.B, v.C, v.S, depol=depol)
+    M = v.M.copy()
+    M[0, 0] = M[0, 0] + dep
+    return MuellerValue("general", v.x_in, v.x_out, M=M)
+
+
+def _common_frames(pol: list[MuellerValue], k_in: np.ndarray, k_out: np.ndarray, n_s: np.ndarray):
+    """The common frame pair (x_in, x_out) (3, N) of several polarising values (the first's, made
+    usable) and each value's rotation into it: (cos 2φ_in, sin 2φ_in, cos 2φ_out, sin 2φ_out) (N,)
+    each, None for the first value when its frames were kept."""
     ref = pol[0]
     x_in, moved_in = _usable_frame(ref.x_in, n_s, k_in)
     x_out, moved_out = _usable_frame(ref.x_out, n_s, k_out)
     rotations = [None if (i == 0 and not (moved_in or moved_out)) else
                  frame_rotation(v.x_in, x_in, k_in) + frame_rotation(v.x_out, x_out, k_out)
                  for i, v in enumerate(pol)]
-    if all(v.kind == "abcs" for v in pol) and all(
-            r is None or (np.all(np.abs(r[1]) <= _SAME_FRAME) and np.all(np.abs(r[3]) <= _SAME_FRAME)
-                          and np.all(r[0] > 0) and np.all(r[2] > 0)) for r in rotations):
-        A, B, C, S = (sum(getattr(v, f) for v in pol) for f in "ABCS")
-        shares = [v.depol for v in pol if v.depol is not None] + ([dep] if dep is not None else [])
-        return MuellerValue("abcs", x_in, x_out, A, B, C, S, depol=sum(shares) if shares else None)
+    return x_in, x_out, rotations
+
+
+def _is_identity_rotation(r) -> bool:
+    """Whether a rotation from ``_common_frames`` leaves both beams' frames as they are
+    (|sin 2φ| ≤ _SAME_FRAME, cos 2φ > 0 on every lane)."""
+    return r is None or (np.all(np.abs(r[1]) <= _SAME_FRAME) and np.all(np.abs(r[3]) <= _SAME_FRAME)
+                         and np.all(r[0] > 0) and np.all(r[2] > 0))
+
+
+def _sum_abcs(pol: list[MuellerValue], dep, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
+    """Σ of ABCS values already in the frames (x_in, x_out), plus a depolarising A (L, N) (None:
+    nothing), as an ABCS value."""
+    A, B, C, S = (sum(getattr(v, f) for v in pol) for f in "ABCS")
+    shares = [v.depol for v in pol if v.depol is not None] + ([dep] if dep is not None else [])
+    return MuellerValue("abcs", x_in, x_out, A, B, C, S, depol=sum(shares) if shares else None)
+
+
+def _sum_general(pol: list[MuellerValue], rotations, dep, x_in: np.ndarray, x_out: np.ndarray,
+                 n: int, L: int) -> MuellerValue:
+    """Σ of the values rotated into the frames (x_in, x_out) (``rotations`` from ``_common_frames``),
+    plus a depolarising A (L, N) (None: nothing) on M00, as a general value (4, 4, L, n)."""
     M = np.zeros((4, 4, L, n))
     for v, r in zip(pol, rotations):
         M += v.matrix() if r is None else rotate_mueller_batch(v.matrix(), r[0], r[1], r[2], r[3])
     if dep is not None:
         M[0, 0] += dep
     return MuellerValue("general", x_in, x_out, M=M)
+
+
+def add_values(terms, n: int, L: int, k_in: np.ndarray, k_out: np.ndarray, n_s: np.ndarray) -> MuellerValue:
+    """Σ scale·value over ``terms`` [(scale (N,) or float, MuellerValue)], all for the same beams
+    k_in = −ω_i, k_out = ω_o (3, N) (see the module docstring, "Frames"); the cheapest kind that holds
+    the sum."""
+    dep, pol = _split_terms(terms)
+    if not pol:
+        return depolarising_value(np.zeros((L, n)) if dep is None else np.broadcast_to(dep, (L, n)).copy(), n)
+    if len(pol) == 1:
+        return _plus_depolariser(pol[0], dep)
+    x_in, x_out, rotations = _common_frames(pol, k_in, k_out, n_s)
+    if all(v.kind == "abcs" for v in pol) and all(_is_identity_rotation(r) for r in rotations):
+        return _sum_abcs(pol, dep, x_in, x_out)
+    return _sum_general(pol, rotations, dep, x_in, x_out, n, L)
 
 
 def _take_value(v: MuellerValue, idx: np.ndarray) -> MuellerValue:
