@@ -685,13 +685,14 @@ def emission_weight(bsdf: BSDF):
     "Emission (attenuated by sheen and coat)"): f(cosθ) (N,) = Π over the sheen and coat layers (``Layered`` with
     ``role`` "sheen" or "coat", outermost first) of max(0, 1 − weight·E_layer(θ)), θ the viewing angle from the
     surface normal, E the layer's albedo as it weights what lies below; None where no layer covers the emission.
-    Needs constant layer weights (a per-point weight: None, and the caller warns); the coat's tint is not applied
+    Needs layers whose weight and albedo are the same everywhere (else None, and the caller warns); the coat's tint
+    is not applied
     to the emission (its layering is).  The layers' normal maps are not seen (the geometric frame)."""
     layers = []
     b = bsdf
     while isinstance(b, Layered) and getattr(b, "role", None) in ("sheen", "coat"):
-        if isinstance(b.top_weight, TexturedNumber):
-            return None
+        if isinstance(b.top_weight, TexturedNumber) or b.components[0].varies_over_surface:
+            return None         # (a layer whose weight or albedo varies over the surface: not without its points)
         layers.append(b)
         nxt = b.components[1] if len(b.components) == 2 else None
         b = nxt if getattr(nxt, "role", None) in ("sheen", "coat") else None

@@ -351,7 +351,12 @@ def _coat(p, below):
     (engine.materials.tinted.CoatTinted; an index-matched coat still tints)."""
     from .mix import Layered
     from .torrance_sparrow import M_MIN
-    n = max(p["coat_ior"], 1.0)
+    ior = p["coat_ior"]
+    if _textured(ior):          # an index per point (≥ 1, as Cycles clamps it)
+        from ..textures.inputs import NumberSpectrum
+        n = NumberSpectrum(ior, lambda x: np.clip(x, 1.0, 100.0), max(ior.lo, 1.0), min(max(ior.hi, 1.0), 100.0))
+    else:
+        n = max(ior, 1.0)
     tint = p["coat_tint"]
     if not (getattr(tint, "is_constant", False) and tint.linear_srgb()[0] == 1.0):
         from .mix import Mix
@@ -360,7 +365,7 @@ def _coat(p, below):
         # each part of a mixture tinted on its own, so the mixture stays flat under the coat (mix.Layered)
         below = below.with_components([CoatTinted(c, tint, n, w) for c in below.components]) \
             if type(below) is Mix else CoatTinted(below, tint, n, w)
-    if n == 1.0:                # an index-matched coat reflects nothing
+    if (n.hi if _textured(n) else n) == 1.0:                # an index-matched coat reflects nothing
         return below
     alpha = _alpha_of(p["coat_roughness"])
     decl = torrance_sparrow.DECLARATION
@@ -412,7 +417,7 @@ DECLARATION = ModelDeclaration(
                default=0.0),
      Parameter("coat_weight", "coat (> 0: a coat over the dielectric)", lo=0.0, hi=1.0, default=0.0, texturable=True),
      Parameter("coat_roughness", "coat roughness r", lo=0.0, hi=1.0, default=0.03, texturable=True),
-     Parameter("coat_ior", "coat index", lo=1.0, hi=100.0, default=1.5),
+     Parameter("coat_ior", "coat index", lo=1.0, hi=100.0, default=1.5, texturable=True),
      Parameter("coat_tint", "coat colour: its transmittance at normal incidence (Cycles' Coat Tint: everything "
                             "below × tint^(1/cosθ_t), blended by coat_weight)", kind="spectrum", spectrum="reflectance",
                lo=0.0, hi=1.0, default=1.0, texturable=True),
@@ -429,8 +434,9 @@ DECLARATION = ModelDeclaration(
                kind="choice", choices=DISTRIBUTIONS, default="multi_ggx")])
 
 DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission", "coat_tint", "coat_weight",
-                                   "coat_roughness", "specular_tint", "specular_ior_level", "thin_film_thickness",
-                                   "diffuse_roughness", "sheen_weight", "sheen_roughness", "sheen_tint"})
+                                   "coat_roughness", "coat_ior", "specular_tint", "specular_ior_level",
+                                   "thin_film_thickness", "diffuse_roughness", "sheen_weight", "sheen_roughness",
+                                   "sheen_tint"})
 
 
 @DECLARATION.builder

@@ -178,13 +178,14 @@ class CoatTinted(_ScaledLobes):
     lobe below (reflection and transmission alike).  A scalar per wavelength ≥ 0: polarisation unchanged,
     realisability kept.  θ_o is taken from the lobe's own shading normal (the coat's where no map differs)."""
 
-    def __init__(self, base: BSDF, tint: Spectrum, n: float, weight: float):
-        self.base, self.tint, self.n = base, tint, float(n)
+    def __init__(self, base: BSDF, tint: Spectrum, n, weight: float):
+        # the coat's index: a number, or per point (a NumberSpectrum: engine.textures.inputs)
+        self.base, self.tint, self.n = base, tint, n if isinstance(n, TexturedSpectrum) else float(n)
         self.weight = weight if isinstance(weight, TexturedNumber) else float(weight)     # per point or constant
         self.name = base.name
         self.flags = base.flags | (BSDFFlags.NONE if _grey(tint) else BSDFFlags.WAVELENGTH_DEPENDENT)
         self.varies_over_surface = base.varies_over_surface or isinstance(tint, TexturedSpectrum) or \
-            isinstance(weight, TexturedNumber)
+            isinstance(weight, TexturedNumber) or isinstance(n, TexturedSpectrum)
         self.two_sided = base.two_sided
 
     def with_base(self, base: BSDF) -> CoatTinted:
@@ -198,7 +199,8 @@ class CoatTinted(_ScaledLobes):
     def factor(self, sp: ShadingPoint) -> np.ndarray:
         """(L, N) the tint factor at the points' view directions."""
         cos_o = np.clip(np.abs(sp.cos_o), 0.0, 1.0)
-        cos_t = np.sqrt(1.0 - (1.0 - cos_o * cos_o) / (self.n * self.n))
+        n = self.n.numbers(sp.surface_points()) if isinstance(self.n, TexturedSpectrum) else self.n
+        cos_t = np.sqrt(1.0 - (1.0 - cos_o * cos_o) / (n * n))
         t = np.maximum(sp.spectrum(self.tint), 0.0) * np.ones(sp.lam.shape)
         return 1.0 + sp.number(self.weight) * (np.power(t, (1.0 / cos_t)[None, :]) - 1.0)
 
@@ -210,7 +212,8 @@ class CoatTinted(_ScaledLobes):
         return None if value is None else value.scaled(self.factor(sp))
 
     def describe(self) -> dict[str, object]:
-        return {**self.base.describe(), "coat_tint": f"{self.tint!r} (coat n {self.n:g}, weight {self.weight!r})"}
+        n = repr(self.n) if isinstance(self.n, TexturedSpectrum) else f"{self.n:g}"
+        return {**self.base.describe(), "coat_tint": f"{self.tint!r} (coat n {n}, weight {self.weight!r})"}
 
 
 #: the reflectance curves F82Reflectance follows

@@ -827,6 +827,17 @@ def _ior(r, name):
     return max(r.float(name), IOR_MIN)
 
 
+def _coat_ior(r):
+    """Coat IOR as Cycles reads it (≥ 1; Polar's range ends at 100): a TextureInput (values clamped to [1, 100])
+    where linked, else the constant."""
+    if r._socket("Coat IOR").is_linked:
+        source = r.texture("Coat IOR", lo=1.0, hi=100.0)
+        if source is not None:
+            return source
+        return min(max(r._checked_float("Coat IOR", -math.inf, math.inf), 1.0), 100.0)
+    return min(max(r.float("Coat IOR"), 1.0), 100.0)
+
+
 def _specular_level(r, node):
     """Specular IOR Level: a TextureInput in [0, 1] where linked (glTF's KHR_materials_specular map), else the
     constant; with a non-white Specular Tint or an anisotropy its own value (per point there: not yet, one
@@ -901,7 +912,7 @@ def _principled(node, mat, warnings, bake=None):
               "specular_tint": _grey(r.rgb_or_texture("Specular Tint", 0.0)),
               "coat_weight": _fraction(r, "Coat Weight"),
               "coat_roughness": r.roughness_texture_or_float("Coat Roughness"),
-              "coat_ior": min(max(r.float("Coat IOR"), 1.0), 100.0),
+              "coat_ior": _coat_ior(r),
               "coat_tint": _grey(r.rgb_or_texture("Coat Tint", 0.0, 1.0)),
               "sheen_weight": _sheen_weight(r),
               "sheen_roughness": r.roughness_texture_or_float("Sheen Roughness"),
@@ -1279,8 +1290,8 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
             # Cycles attenuates the Principled emission by its sheen and coat (engine.materials.mix.emission_weight)
             from ...engine.materials.mix import emission_weight
             if emission_weight(bsdf) is None:
-                warnings.append(f"material {mat!r}: the emission of {node.name!r} under a coat or sheen whose weight "
-                                "varies over the surface is not attenuated by them")
+                warnings.append(f"material {mat!r}: the emission of {node.name!r} under a coat or sheen that varies "
+                                "over the surface is not attenuated by them")
             else:
                 bsdf.emission_under_layers = True
         return bsdf, emission

@@ -62,6 +62,10 @@ CASES = {
     "Specular IOR Level  ": ((0.2, 0.9), {"Base Color": (0.3, 0.3, 0.6), "Roughness": 0.4,           # Oren–Nayar
                                           "Diffuse Roughness": 0.8}),
     "Diffuse Roughness": ((0.0, 1.0), {"Base Color": (0.8, 0.5, 0.3), "Roughness": 0.5}),
+    "Coat IOR": ((1.1, 2.2), {"Base Color": (0.4, 0.1, 0.05), "Roughness": 0.5, "Coat Weight": 1.0,
+                              "Coat Roughness": 0.1}),
+    "Coat IOR ": ((1.2, 2.0), {"Base Color": (0.8, 0.8, 0.8), "Roughness": 0.3, "Metallic": 1.0,   # smooth, tinted
+                               "Coat Weight": 0.8, "Coat Roughness": 0.0, "Coat Tint": (1.0, 0.5, 0.2)}),
     "Coat Roughness": ((0.02, 0.6), {"Base Color": (0.5, 0.1, 0.1), "Roughness": 0.4, "Coat Weight": 1.0}),
     "Coat Roughness ": ((0.0, 0.35), {"Base Color": (0.9, 0.8, 0.6), "Roughness": 0.2, "Metallic": 1.0,  # metal
                                       "Coat Weight": 0.7, "Coat IOR": 1.6}),
