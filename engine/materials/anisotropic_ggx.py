@@ -356,7 +356,7 @@ class AnisotropicGGX(BSDF):
         self._reflection_table = None
         # the tangent frame needs the surface's attributes (an explicit callable may read them too)
         self.varies_over_surface = (not self.isotropic) or textured(self.n, self.k,
-                                                                    *(self.film[1:] if self.film is not None else ()))
+                                                                    *(self.film if self.film is not None else ()))
         constant = all(getattr(v, "is_constant", False) for v in (self.n, self.k))
         filmed = self.film is not None          # the film's s–p phase difference and its colours
         self.flags = (BSDFFlags.GLOSSY_REFLECTION | BSDFFlags.POLARISING

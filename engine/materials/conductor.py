@@ -122,7 +122,7 @@ class SmoothConductor(BSDF):
         self.exterior_n = float(exterior_n)
         # a thin film on the mirror (module docstring): (index, thickness nm) or None (none, or ≤ 0.1 nm)
         self.film = facet_film(film_n, film_thickness)
-        self.varies_over_surface = textured(n, k, *(self.film[1:] if self.film is not None else ()))
+        self.varies_over_surface = textured(n, k, *(self.film if self.film is not None else ()))
         self._tables = type(n) is TabulatedSpectrum and type(k) is TabulatedSpectrum
         if self._tables:
             self._table_arrays = tuple(np.ascontiguousarray(a, dtype=np.float64)
@@ -218,7 +218,8 @@ METAL = Parameter("metal", f"measured metal ({' | '.join(NAMED_METALS)}) instead
 THIN_FILM_THICKNESS = Parameter("thin_film_thickness", "a thin film on the mirror (0: none; Airy's sum over the "
                                                        "film on the metal replaces its Fresnel matrix)", unit="nm",
                                 lo=0.0, hi=1e6, default=0.0, texturable=True)
-THIN_FILM_IOR = Parameter("thin_film_ior", "the thin film's index", lo=0.0, lo_open=True, default=1.33)
+THIN_FILM_IOR = Parameter("thin_film_ior", "the thin film's index", lo=0.0, lo_open=True, default=1.33,
+                          texturable=True)
 
 
 def complex_index(p):
@@ -236,7 +237,7 @@ DECLARATION = ModelDeclaration(
     node="CONDUCTOR")
 
 
-DECLARATION.per_point = frozenset({"n", "k", "thin_film_thickness"})
+DECLARATION.per_point = frozenset({"n", "k", "thin_film_thickness", "thin_film_ior"})
 
 
 @DECLARATION.builder

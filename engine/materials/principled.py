@@ -429,14 +429,14 @@ DECLARATION = ModelDeclaration(
      Parameter("thin_film_thickness", "thin film on the smooth transmission, the metal and the dielectric specular "
                                       "layer (Airy's sum, per facet where rough)", unit="nm", lo=0.0, hi=1e6,
                default=0.0, texturable=True),
-     Parameter("thin_film_ior", "thin film's index", lo=0.0, lo_open=True, default=1.33),
+     Parameter("thin_film_ior", "thin film's index", lo=0.0, lo_open=True, default=1.33, texturable=True),
      Parameter("distribution", "microfacet distribution: Multiscatter GGX (Cycles' default) or GGX",
                kind="choice", choices=DISTRIBUTIONS, default="multi_ggx")])
 
 DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission", "coat_tint", "coat_weight",
                                    "coat_roughness", "coat_ior", "specular_tint", "specular_ior_level",
-                                   "thin_film_thickness", "diffuse_roughness", "sheen_weight", "sheen_roughness",
-                                   "sheen_tint"})
+                                   "thin_film_thickness", "thin_film_ior", "diffuse_roughness", "sheen_weight",
+                                   "sheen_roughness", "sheen_tint"})
 
 
 @DECLARATION.builder

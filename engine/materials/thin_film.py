@@ -33,23 +33,21 @@ class ThinFilmDielectric(SmoothDielectric):
 
     def __init__(self, n: float, film_n: float, thickness, exterior_n: float = 1.0):
         super().__init__(n, exterior_n)
-        per_point = isinstance(thickness, TexturedNumber)         # a thickness that varies over the surface
-        self.film_n, self.thickness = float(film_n), thickness if per_point else float(thickness)
-        for name, v, lo in (("film_n", self.film_n, 0.0),) + ((("thickness", self.thickness, -1.0),)
-                                                                if not per_point else ()):
-            if not (np.isfinite(v) and v > lo and (name != "thickness" or v >= 0)):
-                raise ValueError(f"{name} must be a finite number {'> 0' if lo == 0 else '>= 0'}, got {v!r}")
-        if per_point:
-            if not (np.isfinite(thickness.lo) and np.isfinite(thickness.hi) and thickness.lo >= 0):
-                raise ValueError(f"thickness must be finite and >= 0, got values in [{thickness.lo}, {thickness.hi}]")
-            self.varies_over_surface = True
+        # the film's index and thickness: numbers, or TexturedNumbers (per point: Blender's Thin Film inputs linked)
+        self.film_n = film_n if isinstance(film_n, TexturedNumber) else float(film_n)
+        self.thickness = thickness if isinstance(thickness, TexturedNumber) else float(thickness)
+        for name, v, strict in (("film_n", self.film_n, True), ("thickness", self.thickness, False)):
+            lo, hi = (v.lo, v.hi) if isinstance(v, TexturedNumber) else (v, v)
+            if not (np.isfinite(lo) and np.isfinite(hi) and (lo > 0 if strict else lo >= 0)):
+                raise ValueError(f"{name} must be a finite number {'> 0' if strict else '>= 0'}, got {v!r}")
+        self.varies_over_surface = isinstance(self.film_n, TexturedNumber) or isinstance(self.thickness, TexturedNumber)
 
     def _film(self, sp, c):
         """(A, B, C, S) (L, N) of the coated interface's reflection at incidence cosines c (N,)."""
         outside = sp.cos_o >= 0
         n1 = np.where(outside, self.n_ext, self.n_int)[None, :]
         n3 = np.where(outside, self.n_int, self.n_ext)[None, :]
-        return film_reflection_abcs(c[None, :], n1, self.film_n, sp.number(self.thickness), n3, sp.lam)
+        return film_reflection_abcs(c[None, :], n1, sp.number(self.film_n), sp.number(self.thickness), n3, sp.lam)
 
     def delta_reflection(self, sp):
         c, _, nn = self._sides(sp)
@@ -80,8 +78,8 @@ class ThinFilmDielectric(SmoothDielectric):
         return False            # no fused step: the film's reflectance depends on the wavelength
 
     def describe(self):
-        thickness = repr(self.thickness) if isinstance(self.thickness, TexturedNumber) else self.thickness
-        return {"type": self.name, "n": self.n_int, "film_n": self.film_n, "thickness_nm": thickness,
+        thickness, film_n = (repr(v) if isinstance(v, TexturedNumber) else v for v in (self.thickness, self.film_n))
+        return {"type": self.name, "n": self.n_int, "film_n": film_n, "thickness_nm": thickness,
                 "exterior_n": self.n_ext}
 
 

@@ -525,7 +525,7 @@ class TorranceSparrow(BSDF):
         self.has_specular = positive(self.s)
         self.has_diffuse = positive(self.d) and self.albedo is not None
         self.varies_over_surface = textured(self.n, self.k, self.m, self.s, self.d, self.albedo,
-                                            *(self.film[1:] if self.film is not None else ()))
+                                            *(self.film if self.film is not None else ()))
         self._albedo = None
         if self.diffuse_layering == "albedo_scaling" and self.has_specular and self.has_diffuse:
             self._albedo = self._albedo_table()
@@ -785,7 +785,7 @@ class FilmedMirrorWithDiffuse(MirrorWithDiffuse):
         super().__init__(n, k, exterior_n, diffuse_albedo, specular_weight, diffuse_weight, diffuse_layering)
         self.film = facet_film(film_n, film_thickness)
         if self.film is not None:
-            self.varies_over_surface = self.varies_over_surface or textured(self.film[1])
+            self.varies_over_surface = self.varies_over_surface or textured(*self.film)
             if diffuse_layering == "albedo_scaling" and textured(self.n, self.k):
                 raise ValueError("diffuse_layering='albedo_scaling' under a thin film needs an n and k that do not "
                                  "vary over the surface (the film's layering albedo is estimated per model)")
@@ -857,7 +857,7 @@ DECLARATION = ModelDeclaration(
 
 
 DECLARATION.per_point = frozenset({"n", "k", "m", "diffuse_albedo", "diffuse_weight", "specular_weight",
-                                   "thin_film_thickness"})
+                                   "thin_film_thickness", "thin_film_ior"})
 
 
 @DECLARATION.builder

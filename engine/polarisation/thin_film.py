@@ -32,32 +32,34 @@ FILM_CUTOFF_NM = 0.1
 
 def facet_film(film_n, thickness_nm) -> tuple | None:
     """(index, thickness nm) of a film on a model's facets, or None (no index, or thinner than FILM_CUTOFF_NM
-    everywhere); the thickness a number or a per-point one (engine.textures.TexturedNumber: its bounds ``lo``,
-    ``hi``; resolved at shading points by :func:`film_at` — where thinner than the cutoff, Airy's sum is the bare
-    interface's to rounding).  ValueError for a non-finite or non-positive index or a non-finite or negative
-    thickness."""
+    everywhere); the thickness and the index each a number or a per-point one (engine.textures.TexturedNumber:
+    its bounds ``lo``, ``hi``; resolved at shading points by :func:`film_at` — where thinner than the cutoff,
+    Airy's sum is the bare interface's to rounding).  ValueError for a non-finite or non-positive index or a
+    non-finite or negative thickness."""
     per_point = hasattr(thickness_nm, "hi")
     hi = thickness_nm.hi if per_point else thickness_nm
     if film_n is None or not hi > FILM_CUTOFF_NM:
         return None
     lo = thickness_nm.lo if per_point else thickness_nm
-    if not (np.isfinite(film_n) and film_n > 0 and np.isfinite(lo) and np.isfinite(hi) and lo >= 0):
+    n_lo, n_hi = (film_n.lo, film_n.hi) if hasattr(film_n, "hi") else (film_n, film_n)
+    if not (np.isfinite(n_lo) and np.isfinite(n_hi) and n_lo > 0 and np.isfinite(lo) and np.isfinite(hi) and lo >= 0):
         raise ValueError(f"a thin film needs a finite index > 0 and thickness >= 0, got {film_n!r}, {thickness_nm!r}")
-    return float(film_n), (thickness_nm if per_point else float(thickness_nm))
+    return (film_n if hasattr(film_n, "hi") else float(film_n)), (thickness_nm if per_point else float(thickness_nm))
 
 
 def film_at(film, sp):
-    """The film (index, thickness) with its thickness at the shading points ``sp`` ((N,) where per point, through
+    """The film (index, thickness) at the shading points ``sp`` (each (N,) where per point, through
     ``sp.number``), or None."""
-    if film is None or not hasattr(film[1], "hi"):
+    if film is None or not (hasattr(film[0], "hi") or hasattr(film[1], "hi")):
         return film
-    return film[0], sp.number(film[1])
+    return (sp.number(film[0]) if hasattr(film[0], "hi") else film[0],
+            sp.number(film[1]) if hasattr(film[1], "hi") else film[1])
 
 
 def film_label(film) -> str:
     """The film for a model's describe()."""
-    d = film[1]
-    return f"n {film[0]:g}, {d!r} nm" if hasattr(d, "hi") else f"n {film[0]:g}, {d:g} nm"
+    n, d = (repr(v) if hasattr(v, "hi") else f"{v:g}" for v in film)
+    return f"n {n}, {d} nm"
 
 
 def film_amplitudes(cos_theta, n1, n_film, d_nm, n3, lam_nm):

@@ -742,7 +742,8 @@ def _facet_conductor(n, k, m, mat, node, warnings, film=None, aniso=None):
             from ...engine.materials.anisotropic_ggx import AnisotropicGGX
             n_s, k_s = (_rgb_spectrum(list(v), "unbounded") if isinstance(v, (list, tuple)) else v for v in (n, k))
             return AnisotropicGGX(n_s, k_s, max(aniso[0], _ts_min()), max(aniso[1], _ts_min()), rotation=aniso[2],
-                                  multiscatter=kw["multiscatter"], film_n=None if film is None else film[0],
+                                  multiscatter=kw["multiscatter"],
+                                  film_n=None if film is None else _film_number(film[0], IOR_MIN),
                                   film_thickness=0.0 if film is None else _film_number(film[1]))
         warnings.append(f"material {mat!r}: the anisotropy of {node.name!r} is simulated with GGX only; rendered "
                         "isotropic (Beckmann)")
@@ -1038,13 +1039,19 @@ def _film(r):
         thickness = r.float("Thin Film Thickness")
     if (TexturedNumber(thickness).hi if isinstance(thickness, TextureInput) else thickness) <= 0.1:
         return None
-    return max(r.float("Thin Film IOR"), IOR_MIN), thickness
+    ior = None
+    if r._socket("Thin Film IOR").is_linked:
+        ior = r.texture("Thin Film IOR", lo=IOR_MIN, hi=1e6)          # (not mapped: its own value, warned)
+    if ior is None:
+        ior = max(r._checked_float("Thin Film IOR", -math.inf, math.inf), IOR_MIN)
+    return ior, thickness
 
 
-def _film_number(thickness):
-    """A film thickness for a model built here directly: a number, or a TexturedNumber of a TextureInput."""
+def _film_number(value, lo=0.0):
+    """A film thickness (or, ``lo`` IOR_MIN, index) for a model built here directly: a number, or a TexturedNumber
+    of a TextureInput."""
     from ...engine.textures.inputs import TexturedNumber
-    return TexturedNumber(thickness, clip=(0.0, 1e6)) if isinstance(thickness, TextureInput) else thickness
+    return TexturedNumber(value, clip=(lo, 1e6)) if isinstance(value, TextureInput) else value
 
 
 def _glass(ior, roughness, distribution, film=None, warn=None):
@@ -1056,7 +1063,7 @@ def _glass(ior, roughness, distribution, film=None, warn=None):
     if film is not None:
         if alpha < ALPHA_MIN:         # a smooth coated interface: interference and its elliptical polarisation
             from ...engine.materials.thin_film import ThinFilmDielectric
-            return ThinFilmDielectric(ior, film[0], _film_number(film[1]))
+            return ThinFilmDielectric(ior, _film_number(film[0], IOR_MIN), _film_number(film[1]))
         if warn is not None:
             warn("its Thin Film on a rough surface is not simulated (smooth surfaces only)")
     if distribution == "BECKMANN":
