@@ -256,29 +256,13 @@ def test_textured_film_thickness_is_the_constant_film_per_texel(tmp_path, materi
     film is Cycles' film estimate; where the texture gives no film its S0 is rescaled to the F82-Tint curve as the
     unfilmed metal's, so there S0 agrees (to the energy compensation's F_ss of the two indices, 0.3 %) and the
     polarisation is the film estimate's."""
-    from engine.scene.loader import parse_material
-    from tests.scene.test_textures import _points_at, _shading_points, _texture_file
-    texels = np.array([[0.0, 180.0, 420.0]])
-    name = _texture_file(tmp_path, texels)
-    textured = parse_material({**material, "thin_film_thickness": {"texture": name, "interpolation": "Closest"}},
-                              "materials.m", base_dir=str(tmp_path))
+    from tests.support.texel_rows import textured_and_constant
+    sp, wi, u_lobe, u_dir, textured, rows = textured_and_constant(tmp_path, material, "thin_film_thickness",
+                                                                  [0.0, 180.0, 420.0], reps=40, seed=21)
     assert textured.varies_over_surface
-    reps = 40
-    uv = np.repeat(np.array([[1 / 6, 3 / 6, 5 / 6], [0.5, 0.5, 0.5]]), reps, axis=1)
-    rng = np.random.default_rng(21)
-    n = uv.shape[1]
-    sp = _shading_points(n, rng, _points_at(uv))
-    wi = rng.normal(size=(3, n))
-    wi[2] = np.abs(wi[2])
-    wi /= np.linalg.norm(wi, axis=0)
-    u_lobe, u_dir = rng.uniform(size=n), rng.uniform(size=(2, n))
     got_eval, got_delta = textured.eval(sp, wi).matrix(), textured.delta_reflection(sp)
     got_sample = textured.sample(sp, u_lobe, u_dir)
-    for i, d in enumerate(texels[0]):
-        sel = np.arange(i * reps, (i + 1) * reps)
-        const = parse_material({**material, "thin_film_thickness": float(d)}, "materials.m")
-        sub = sp.take(sel)
-        sub.surface = None
+    for sel, d, const, sub in rows:
         if d == 0 and material.get("metallic") == 1.0:
             np.testing.assert_allclose(got_eval[0, 0][..., sel], const.eval(sub, wi[:, sel]).matrix()[0, 0],
                                        rtol=1e-2, atol=1e-12)
@@ -297,28 +281,12 @@ def test_textured_film_thickness_is_the_constant_film_per_texel(tmp_path, materi
     {"type": "principled", "transmission": 1.0, "roughness": 0.0, "thin_film_thickness": 300.0}])
 def test_textured_film_index_is_the_constant_film_per_texel(tmp_path, material):
     """thin_film_ior from a texture: at each texel the model with that constant film index (1.2, 1.6, 2.3)."""
-    from engine.scene.loader import parse_material
-    from tests.scene.test_textures import _points_at, _shading_points, _texture_file
-    texels = np.array([[1.2, 1.6, 2.3]])
-    name = _texture_file(tmp_path, texels)
-    textured = parse_material({**material, "thin_film_ior": {"texture": name, "interpolation": "Closest"}},
-                              "materials.m", base_dir=str(tmp_path))
+    from tests.support.texel_rows import textured_and_constant
+    sp, wi, u_lobe, u_dir, textured, rows = textured_and_constant(tmp_path, material, "thin_film_ior",
+                                                                  [1.2, 1.6, 2.3], reps=30, seed=23)
     assert textured.varies_over_surface
-    reps = 30
-    uv = np.repeat(np.array([[1 / 6, 3 / 6, 5 / 6], [0.5, 0.5, 0.5]]), reps, axis=1)
-    rng = np.random.default_rng(23)
-    n = uv.shape[1]
-    sp = _shading_points(n, rng, _points_at(uv))
-    wi = rng.normal(size=(3, n))
-    wi[2] = np.abs(wi[2])
-    wi /= np.linalg.norm(wi, axis=0)
-    u_lobe, u_dir = rng.uniform(size=n), rng.uniform(size=(2, n))
     got_eval, got_sample = textured.eval(sp, wi).matrix(), textured.sample(sp, u_lobe, u_dir)
-    for i, film_n in enumerate(texels[0].astype(np.float32).astype(np.float64)):
-        sel = np.arange(i * reps, (i + 1) * reps)
-        const = parse_material({**material, "thin_film_ior": float(film_n)}, "materials.m")
-        sub = sp.take(sel)
-        sub.surface = None
+    for sel, _, const, sub in rows:
         np.testing.assert_allclose(got_eval[..., sel], const.eval(sub, wi[:, sel]).matrix(), rtol=1e-10, atol=1e-14)
         cs = const.sample(sub, u_lobe[sel], u_dir[:, sel])
         np.testing.assert_allclose(got_sample.weight.matrix()[..., sel], cs.weight.matrix(), rtol=1e-10, atol=1e-14)

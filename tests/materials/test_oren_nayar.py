@@ -57,27 +57,12 @@ def test_zero_roughness_is_lambert_and_sampling_is_consistent():
 def test_textured_roughness_is_the_constant_model_per_texel(tmp_path):
     """σ from a texture (Cycles' Diffuse Roughness linked): at each texel the constant-σ model bit for bit,
     Lambert (no multiple-scattering term) where σ = 0."""
-    from engine.scene.loader import parse_material
-    from tests.scene.test_textures import _points_at, _shading_points, _texture_file
-    texels = np.array([[0.0, 0.35, 1.0]])
-    name = _texture_file(tmp_path, texels)
-    mat = parse_material({"type": "oren_nayar", "albedo": [0.8, 0.5, 0.3],
-                          "roughness": {"texture": name, "interpolation": "Closest"}}, "materials.o",
-                         base_dir=str(tmp_path))
+    from tests.support.texel_rows import textured_and_constant
+    sp, wi, _, _, mat, rows = textured_and_constant(tmp_path, {"type": "oren_nayar", "albedo": [0.8, 0.5, 0.3]},
+                                                    "roughness", [0.0, 0.35, 1.0], reps=30, seed=5)
     assert mat.varies_over_surface
-    reps = 30
-    uv = np.repeat(np.array([[1 / 6, 3 / 6, 5 / 6], [0.5, 0.5, 0.5]]), reps, axis=1)
-    rng = np.random.default_rng(5)
-    n = uv.shape[1]
-    sp = _shading_points(n, rng, _points_at(uv))
-    wi = rng.normal(size=(3, n))
-    wi[2] = np.abs(wi[2])
-    wi /= np.linalg.norm(wi, axis=0)
     f, est = mat.eval(sp, wi).matrix(), mat.albedo_estimate(sp)
-    for i, sigma in enumerate(texels[0].astype(np.float32).astype(np.float64)):
-        sel = np.arange(i * reps, (i + 1) * reps)
-        const = OrenNayar(mat.albedo, float(sigma))
-        sub = sp.take(sel)
-        sub.surface = None
+    for sel, sigma, _, sub in rows:
+        const = OrenNayar(mat.albedo, sigma)
         np.testing.assert_array_equal(f[..., sel], const.eval(sub, wi[:, sel]).matrix())
         np.testing.assert_array_equal(est[sel], const.albedo_estimate(sub))
