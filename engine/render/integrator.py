@@ -175,6 +175,41 @@ class _Scattered:
     eta_step: np.ndarray
 
 
+@dataclass(eq=False)
+class _VertexNumbers:
+    """A bounce's random numbers (dimensions 1–8): the light sample ``u_light`` (4, n) (None where
+    ``nee`` is False: skipped), the BSDF sample ``u_bsdf`` (3, n), or (1, n) (the lobe) while
+    ``direction_dims`` still holds the direction's two (every group a one-step delta material), the
+    roulette number ``u_rr`` (n,) (empty without roulette); ``pixel``, ``sample`` (n,): the paths'
+    pixels and sample indices at a stratified first vertex, else None."""
+    nee: bool
+    u_light: np.ndarray | None
+    u_bsdf: np.ndarray
+    direction_dims: PathSampler | None
+    pixel: np.ndarray | None
+    sample: np.ndarray | None
+    u_rr: np.ndarray | None = None
+
+
+@dataclass(eq=False)
+class _LightSamples:
+    """Next-event light samples of n vertices: direction ``wi`` (3, n), distance ``dist``, radiance
+    scale ``scale``, the light's solid-angle ``pdf_l``, ``ok`` (n,), ``delta`` (bool, or (n,) for
+    several lights), ``emitted`` (L, n), the selection probability ``select_prob`` (scalar or (n,)),
+    ``owners``: (light index, its vertices: slice(None) or indices) per chosen light, and ``points``:
+    the sampled points (triangle, b1, b2) of chosen lights whose radiance varies over the surface."""
+    wi: np.ndarray
+    dist: np.ndarray
+    scale: np.ndarray
+    pdf_l: np.ndarray
+    ok: np.ndarray
+    delta: bool | np.ndarray
+    emitted: np.ndarray
+    select_prob: float | np.ndarray
+    owners: list
+    points: dict
+
+
 # ----------------------------------------------------------------------------- denoising guides
 
 class DenoiseGuides:
@@ -581,11 +616,10 @@ class PathTracer:
     def _scatter(self, state: PathState, acc: _Accumulators, surf: _SurfaceHits, bounce: int) -> _Scattered:
         """Per material group: next-event estimation (into the radiance) and BSDF sampling of the
         next segment with the Mueller update T ← T·R(x_out → x_T)·M (into a new T)."""
-        st, light_set = self.settings, self.lights
         # T is read through its column map (PathState.T_col); the scatter writes a new, dense one
-        n, T, sampler, lk, lk_m = state.n, state.T_store, state.sampler, state.lk, state.lk_m
-        p, n_g, n_s, wo = surf.p, surf.n_g, surf.n_s, surf.wo
-        n_side = n_g * np.sign(dot(n_g, wo))[None, :] if light_set.spatial else None
+        n, T = state.n, state.T_store
+        n_g, n_s, wo = surf.n_g, surf.n_s, surf.wo
+        n_side = n_g * np.sign(dot(n_g, wo))[None, :] if self.lights.spatial else None
         # Stokes frame of the arriving segment: x_T is already ⟂ d.
         # each path's material, and the paths sorted by material group (ascending within a group)
         mat, counts, order = material_groups(surf.prim, self.scene.tri_material, self.group_of, len(self.shaders))
@@ -602,12 +636,42 @@ class PathTracer:
         fused = [self.shaders[g].flags.is_delta_only and type(self.shaders[g]).scatter_delta is not BSDF.scatter_delta
                  for g in groups]
         columns = not whole or fused[0]
+        nums = self._vertex_numbers(state, acc, groups, fused, bounce)
+        nxt = self._new_scattered(nums.u_rr, n_side, T.shape[:3] + (n,), columns)
+        # (every path belongs to one material group, which writes its columns of nxt.T, d, x_T and valid:
+        # scatter_delta at its rows, else from its sample; is_delta, pdf and eta_step keep their presets
+        # where a one-step delta material leaves them)
+        for g, one_step in zip(groups, fused):
+            sel = slice(None) if whole else order[ends[g] - counts[g]:ends[g]]
+            bsdf = self.shaders[g]
+            rows = np.arange(n) if isinstance(sel, slice) else sel
+            t_cols = state.T_columns(sel)           # T's columns of these paths (None: rows)
+            if one_step and self._scatter_delta(bsdf, state, surf, nxt, rows, n_s_delta, nums.u_bsdf[0], t_cols):
+                continue            # pdf 0 and is_delta True: as preset
+            if nums.direction_dims is not None:
+                self._late_direction_numbers(nums)
+            sp = self._shading_point(bsdf, state, surf, mat, flip, sel)
+            xTm = gather(state.x_T, sel)
+            if nums.nee and not bsdf.flags.is_delta_only:
+                self._group_next_event(state, acc, surf, bsdf, sp, sel, rows, xTm, t_cols, nums.u_light)
+            bs = self._sample_bsdf(bsdf, sp, nums.u_bsdf, sel)
+            if acc.guides is not None and not bsdf.flags.is_delta_only:
+                acc.guides.record(gather(state.path, sel), T[0, 0][:, rows if t_cols is None else t_cols], bs.weight,
+                                  bs.valid, sp.n_s, sp.wo, acc.w_rgb)
+            scatter_throughput(nxt.T, T, rows, bs.weight, xTm, sp.wo, t_cols)
+            self._store_sample(nxt, bs, sel, columns)
+        return nxt
+
+    def _vertex_numbers(self, state: PathState, acc: _Accumulators, groups: np.ndarray, fused: list[bool],
+                        bounce: int) -> _VertexNumbers:
+        """The bounce's random numbers for the material ``groups`` present (``fused``: one-step delta
+        materials), drawn from the paths' sampler in dimension order (1–4 light, 5–7 BSDF, 8 roulette)."""
+        st, sampler = self.settings, state.sampler
         # Dimensions 1–4 light sampling, 5–7 the BSDF (lobe, direction), 8 roulette; only those this
         # bounce reads are hashed (at delta vertices, before rr_depth, most are not): the numbers are
         # stateless in the dimension, so skipping leaves every other one as it was.
-        nee = (bool(len(light_set)) and bounce + 2 <= st.max_depth
+        nee = (bool(len(self.lights)) and bounce + 2 <= st.max_depth
                and not all(self.shaders[g].flags.is_delta_only for g in groups))
-        stratified_vertex = bounce == 0 and acc.pixel is not None
         u_light = sampler.next(4) if nee else sampler.skip(4)
         direction_dims = None
         if all(fused):
@@ -617,97 +681,127 @@ class PathTracer:
             sampler.skip(2)
         else:
             u_bsdf = sampler.next(3)
-        if stratified_vertex:
-            # The first vertex's light sample (choice, point) and BSDF sample (lobe, direction) are
-            # stratified over the pixel's samples like the jitter (Sobol' dimensions 3–8, each pair with
-            # its own per-pixel scramble: still uniform and independent per sample, so unbiased): a
-            # lamp's direct light is most of a lit floor's noise.  Only the numbers read are computed
-            # (each stratified number depends on its own hashed one and the pair's scramble alone).
-            pixel, sample = acc.pixel[state.path], acc.sample[state.path]
-            if nee:
-                u_light[1], u_light[2] = stratified_pair(st.seed, pixel, sample, u_light[1], u_light[2],
-                                                         pair=PAIR_LIGHT_POINT)
-            if direction_dims is None:
-                u_bsdf[1], u_bsdf[2] = stratified_pair(st.seed, pixel, sample, u_bsdf[1], u_bsdf[2],
-                                                       pair=PAIR_BSDF_DIRECTION)
-            choice, u_bsdf[0] = stratified_pair(st.seed, pixel, sample, u_light[0] if nee else u_bsdf[0], u_bsdf[0],
-                                                pair=PAIR_CHOICES)
-            if nee:
-                u_light[0] = choice
+        nums = _VertexNumbers(nee=nee, u_light=u_light, u_bsdf=u_bsdf, direction_dims=direction_dims,
+                              pixel=None, sample=None)
+        if bounce == 0 and acc.pixel is not None:
+            nums.pixel, nums.sample = acc.pixel[state.path], acc.sample[state.path]
+            self._stratify_vertex(nums)
         if bounce + 1 >= st.rr_depth:
-            u_rr = sampler.next(1)[0]
+            nums.u_rr = sampler.next(1)[0]
         else:
             sampler.skip(1)
-            u_rr = np.empty(0)                      # not read without roulette
-        nxt = _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty(T.shape[:3] + (n,)),
-                         d=np.empty((3, n)) if columns else None, x_T=np.empty((3, n)) if columns else None,
-                         valid=np.empty(n, bool) if columns else None,
-                         is_delta=np.ones(n, bool) if columns else None, pdf=np.zeros(n) if columns else None,
-                         eta_step=np.ones(n))
-        # (every path belongs to one material group, which writes its columns of nxt.T, d, x_T and valid:
-        # scatter_delta at its rows, else from its sample; is_delta, pdf and eta_step keep their presets
-        # where a one-step delta material leaves them)
-        for g, one_step in zip(groups, fused):
-            sel = slice(None) if whole else order[ends[g] - counts[g]:ends[g]]
-            bsdf = self.shaders[g]
-            rows = np.arange(n) if isinstance(sel, slice) else sel
-            t_cols = state.T_columns(sel)           # T's columns of these paths (None: rows)
-            if one_step and bsdf.scatter_delta(DeltaVertices(rows, n_s_delta, wo, lk_m.lam, self.mono, u_bsdf[0], T,
-                                                             state.x_T, nxt.T, nxt.d, nxt.x_T, nxt.valid,
-                                                             nxt.eta_step, t_cols)):
-                if not bsdf.radiance_scaling:       # Cycles' convention: the refraction's 1/η² taken back
-                    nxt.T[..., rows] *= nxt.eta_step[rows]
-                    nxt.eta_step[rows] = 1.0
-                continue            # pdf 0 and is_delta True: as preset
-            if direction_dims is not None:
-                # a one-step material fell back to ``sample``: its direction numbers after all
-                extra = direction_dims.next(2)
-                if stratified_vertex:
-                    extra[0], extra[1] = stratified_pair(st.seed, pixel, sample, extra[0], extra[1],
-                                                         pair=PAIR_BSDF_DIRECTION)
-                u_bsdf = np.concatenate((u_bsdf, extra))
-                direction_dims = None
-            sp = ShadingPoint(gather(p, sel), gather(n_s, sel), gather(n_g, sel), gather(wo, sel),
-                              gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
-                              self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None,
-                              None if surf.at is None else surf.at.take(sel))
-            sp = bsdf.shading_point(sp)        # a normal/bump-mapped shading normal, else sp itself
-            if flip is not None:
-                sp = sp.flipped(gather(flip, sel))
-            xTm = gather(state.x_T, sel)
+            nums.u_rr = np.empty(0)                 # not read without roulette
+        return nums
 
-            if not bsdf.flags.is_delta_only and len(light_set) and bounce + 2 <= st.max_depth:
-                medium = None
-                if self.media is not None:      # the vertices' volumes and transmittance (shadow rays)
-                    medium = (gather(state.media, sel), None if state.tau is None else gather(state.tau, sel),
-                              gather(surf.prim, sel), gather(n_g, sel), gather(wo, sel))
-                contrib = self._next_event(sp, lk.take(sel), bsdf, T, rows, xTm, u_light[:, sel], acc.stats, t_cols,
-                                           medium)
-                add_to_paths(acc.radiance, gather(state.path, sel), contrib)
-                if acc.path_cost is not None:
-                    acc.path_cost[gather(state.path, sel)] += VERTEX_COST     # a light sample (cost)
+    def _stratify_vertex(self, nums: _VertexNumbers) -> None:
+        """Stratify the first vertex's numbers in place (``nums.pixel``, ``nums.sample`` set)."""
+        # The first vertex's light sample (choice, point) and BSDF sample (lobe, direction) are
+        # stratified over the pixel's samples like the jitter (Sobol' dimensions 3–8, each pair with
+        # its own per-pixel scramble: still uniform and independent per sample, so unbiased): a
+        # lamp's direct light is most of a lit floor's noise.  Only the numbers read are computed
+        # (each stratified number depends on its own hashed one and the pair's scramble alone).
+        seed, pixel, sample = self.settings.seed, nums.pixel, nums.sample
+        nee, u_light, u_bsdf = nums.nee, nums.u_light, nums.u_bsdf
+        if nee:
+            u_light[1], u_light[2] = stratified_pair(seed, pixel, sample, u_light[1], u_light[2],
+                                                     pair=PAIR_LIGHT_POINT)
+        if nums.direction_dims is None:
+            u_bsdf[1], u_bsdf[2] = stratified_pair(seed, pixel, sample, u_bsdf[1], u_bsdf[2],
+                                                   pair=PAIR_BSDF_DIRECTION)
+        choice, u_bsdf[0] = stratified_pair(seed, pixel, sample, u_light[0] if nee else u_bsdf[0], u_bsdf[0],
+                                            pair=PAIR_CHOICES)
+        if nee:
+            u_light[0] = choice
 
-            bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
-            if not bsdf.radiance_scaling and bs.eta_sq is not None:     # Cycles' convention (BSDF.radiance_scaling)
-                bs = BSDFSample(bs.wi, bs.weight.scaled(bs.eta_sq[None, :]), bs.pdf, bs.is_delta, bs.valid, None)
-            if acc.guides is not None and not bsdf.flags.is_delta_only:
-                acc.guides.record(gather(state.path, sel), T[0, 0][:, rows if t_cols is None else t_cols], bs.weight,
-                                  bs.valid, sp.n_s, sp.wo, acc.w_rgb)
-            scatter_throughput(nxt.T, T, rows, bs.weight, xTm, sp.wo, t_cols)
-            if not columns:
-                nxt.d, nxt.x_T, nxt.is_delta, nxt.pdf = bs.wi, bs.weight.x_in, bs.is_delta, bs.pdf
-                nxt.valid = np.array(bs.valid, dtype=bool)      # own copy: the roulette updates it in place
-                if bs.eta_sq is not None:
-                    nxt.eta_step[:] = bs.eta_sq
-                continue
-            nxt.d[:, sel] = bs.wi
-            nxt.x_T[:, sel] = bs.weight.x_in
-            nxt.valid[sel] = bs.valid
-            nxt.is_delta[sel] = bs.is_delta
-            nxt.pdf[sel] = bs.pdf
+    def _late_direction_numbers(self, nums: _VertexNumbers) -> None:
+        """A one-step material fell back to ``sample``: its direction numbers (2, n) after all, appended
+        to ``nums.u_bsdf`` (stratified at a stratified first vertex); ``nums.direction_dims`` is spent."""
+        extra = nums.direction_dims.next(2)
+        if nums.pixel is not None:
+            extra[0], extra[1] = stratified_pair(self.settings.seed, nums.pixel, nums.sample, extra[0], extra[1],
+                                                 pair=PAIR_BSDF_DIRECTION)
+        nums.u_bsdf = np.concatenate((nums.u_bsdf, extra))
+        nums.direction_dims = None
+
+    @staticmethod
+    def _new_scattered(u_rr: np.ndarray, n_side: np.ndarray | None, T_shape: tuple, columns: bool) -> _Scattered:
+        """The bounce's continuation record: T (``T_shape`` (P, P, Lm, n)) to be written and eta_step
+        preset 1; with ``columns`` (groups write their columns) also d, x_T, valid, is_delta (preset
+        True) and pdf (preset 0), else those come from the single group's sample."""
+        n = T_shape[3]
+        return _Scattered(u_rr=u_rr, n_side=n_side, T=np.empty(T_shape),
+                          d=np.empty((3, n)) if columns else None, x_T=np.empty((3, n)) if columns else None,
+                          valid=np.empty(n, bool) if columns else None,
+                          is_delta=np.ones(n, bool) if columns else None, pdf=np.zeros(n) if columns else None,
+                          eta_step=np.ones(n))
+
+    def _scatter_delta(self, bsdf: BSDF, state: PathState, surf: _SurfaceHits, nxt: _Scattered, rows: np.ndarray,
+                       n_s: np.ndarray, u_lobe: np.ndarray, t_cols: np.ndarray | None) -> bool:
+        """The delta fast path: a one-step delta material writes the columns ``rows`` of ``nxt`` in
+        place (BSDF.scatter_delta; ``n_s`` (3, n): all paths' shading normals, back faces flipped,
+        ``u_lobe`` (n,)).  False where it falls back to ``sample`` (nothing written)."""
+        if not bsdf.scatter_delta(DeltaVertices(rows, n_s, surf.wo, state.lk_m.lam, self.mono, u_lobe, state.T_store,
+                                                state.x_T, nxt.T, nxt.d, nxt.x_T, nxt.valid, nxt.eta_step, t_cols)):
+            return False
+        if not bsdf.radiance_scaling:       # Cycles' convention: the refraction's 1/η² taken back
+            nxt.T[..., rows] *= nxt.eta_step[rows]
+            nxt.eta_step[rows] = 1.0
+        return True
+
+    def _shading_point(self, bsdf: BSDF, state: PathState, surf: _SurfaceHits, mat: np.ndarray,
+                       flip: np.ndarray | None, sel: slice | np.ndarray) -> ShadingPoint:
+        """The shading point of the paths ``sel`` for ``bsdf``: mapped normal, back faces flipped."""
+        lk_m = state.lk_m
+        sp = ShadingPoint(gather(surf.p, sel), gather(surf.n_s, sel), gather(surf.n_g, sel), gather(surf.wo, sel),
+                          gather(lk_m.lam, sel), self.mono, lk_m.take(sel),
+                          self.slot_of[gather(mat, sel)] if bsdf.flags.has(BSDFFlags.BATCHED) else None,
+                          None if surf.at is None else surf.at.take(sel))
+        sp = bsdf.shading_point(sp)        # a normal/bump-mapped shading normal, else sp itself
+        if flip is not None:
+            sp = sp.flipped(gather(flip, sel))
+        return sp
+
+    def _group_next_event(self, state: PathState, acc: _Accumulators, surf: _SurfaceHits, bsdf: BSDF,
+                          sp: ShadingPoint, sel: slice | np.ndarray, rows: np.ndarray, x_T: np.ndarray,
+                          t_cols: np.ndarray | None, u_light: np.ndarray) -> None:
+        """Next-event estimation at the paths ``sel`` (batch rows ``rows``, frames ``x_T`` (3, m)) of one
+        non-delta group, added to their radiance (and their cost); ``u_light`` (4, n) of all paths."""
+        medium = None
+        if self.media is not None:      # the vertices' volumes and transmittance (shadow rays)
+            medium = (gather(state.media, sel), None if state.tau is None else gather(state.tau, sel),
+                      gather(surf.prim, sel), gather(surf.n_g, sel), gather(surf.wo, sel))
+        contrib = self._next_event(sp, state.lk.take(sel), bsdf, state.T_store, rows, x_T, u_light[:, sel], acc.stats,
+                                   t_cols, medium)
+        add_to_paths(acc.radiance, gather(state.path, sel), contrib)
+        if acc.path_cost is not None:
+            acc.path_cost[gather(state.path, sel)] += VERTEX_COST     # a light sample (cost)
+
+    @staticmethod
+    def _sample_bsdf(bsdf: BSDF, sp: ShadingPoint, u_bsdf: np.ndarray, sel: slice | np.ndarray) -> BSDFSample:
+        """BSDF sample of the paths ``sel`` (``u_bsdf`` (3, n) of all paths), its weight in Cycles'
+        convention where the material asks for it (BSDF.radiance_scaling)."""
+        bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
+        if not bsdf.radiance_scaling and bs.eta_sq is not None:     # Cycles' convention (BSDF.radiance_scaling)
+            bs = BSDFSample(bs.wi, bs.weight.scaled(bs.eta_sq[None, :]), bs.pdf, bs.is_delta, bs.valid, None)
+        return bs
+
+    @staticmethod
+    def _store_sample(nxt: _Scattered, bs: BSDFSample, sel: slice | np.ndarray, columns: bool) -> None:
+        """The sampled segments of the paths ``sel`` into ``nxt``: their columns, or (not ``columns``:
+        a single group) the sample's arrays themselves."""
+        if not columns:
+            nxt.d, nxt.x_T, nxt.is_delta, nxt.pdf = bs.wi, bs.weight.x_in, bs.is_delta, bs.pdf
+            nxt.valid = np.array(bs.valid, dtype=bool)      # own copy: the roulette updates it in place
             if bs.eta_sq is not None:
-                nxt.eta_step[sel] = bs.eta_sq
-        return nxt
+                nxt.eta_step[:] = bs.eta_sq
+            return
+        nxt.d[:, sel] = bs.wi
+        nxt.x_T[:, sel] = bs.weight.x_in
+        nxt.valid[sel] = bs.valid
+        nxt.is_delta[sel] = bs.is_delta
+        nxt.pdf[sel] = bs.pdf
+        if bs.eta_sq is not None:
+            nxt.eta_step[sel] = bs.eta_sq
 
     def _back_faces(self, mat: np.ndarray, n_g: np.ndarray, wo: np.ndarray) -> np.ndarray | None:
         """(n,) True where a path sees the back of a two-sided material (n_g·wo < 0), or None for none."""
@@ -821,123 +915,181 @@ class PathTracer:
         columns of T holding their throughputs (None: ``rows``; PathState.T_col).  ``medium``: the
         vertices' absorbing volumes and transmittance (see ``_shadow_media``; None: no interiors).
         """
-        light_set = self.lights
         n = sp.n
         P = self.P
         L = 3 if self.rgb_mode else lookup.lam.shape[0]
-        n_side = sp.n_g * np.sign(dot(sp.n_g, sp.wo))[None, :] if light_set.spatial else None
-        choice, u_rest, chosen_prob = light_set.choose(u[0], sp.p, n_side)
-        lights_chosen = np.unique(choice)
-        points = {}         # the sampled points (triangle, b1, b2) of lights whose radiance varies over them
-        if len(lights_chosen) == 1:
-            # one light for every path: its arrays as they are, no gathered copies
-            li = int(lights_chosen[0])
-            light = light_set.lights[li]
-            # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
-            if light.varies_over_surface:
-                wi, dist, scale, pdf_l, ok, points[li] = light.sample_points(sp.p, np.stack((u_rest, u[1], u[2])))
-                emitted = light.emitted_at(points[li], lookup, self.rgb_mode, self.mono)
-            else:
-                wi, dist, scale, pdf_l, ok = light.sample(sp.p, np.stack((u_rest, u[1], u[2])))
-                emitted = self._emitted(light, lookup, wi)
-            delta = light.is_delta
-            if light.shades_nothing:         # hidden from indirect rays: lights nothing (Cycles)
-                ok = np.zeros_like(ok)
-            select_prob = light_set.prob[li] if chosen_prob is None else chosen_prob
-            owners = [(li, slice(None))]
-        else:
-            wi, dist, scale, pdf_l = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n)
-            ok, delta, emitted = np.empty(n, bool), np.empty(n, bool), np.empty((L, n))
-            select_prob = light_set.prob[choice] if chosen_prob is None else chosen_prob
-            owners = []
-            for li in lights_chosen:
-                li = int(li)
-                sel = np.nonzero(choice == li)[0]
-                light = light_set.lights[li]
-                u_sel = np.stack((gather(u_rest, sel), gather(u[1], sel), gather(u[2], sel)))
-                if light.varies_over_surface:
-                    w, d, sc, pdf, valid, points[li] = light.sample_points(gather(sp.p, sel), u_sel)
-                    emitted[:, sel] = light.emitted_at(points[li], lookup.take(sel), self.rgb_mode, self.mono)
-                else:
-                    w, d, sc, pdf, valid = light.sample(gather(sp.p, sel), u_sel)
-                    emitted[:, sel] = self._emitted(light, lookup.take(sel), w)
-                wi[:, sel], dist[sel], scale[sel], pdf_l[sel], ok[sel] = w, d, sc, pdf, valid
-                if light.shades_nothing:
-                    ok[sel] = False
-                delta[sel] = light.is_delta
-                owners.append((li, sel))
-        direct = getattr(bsdf, "direct_light", None)
-        if direct is not None:
-            # Lambert: the BSDF's value, pdf, MIS and the light's weight in one pass (the same numbers)
-            S, weight, ok = direct(sp, wi, emitted, scale, ok, pdf_l, select_prob, delta)
-            if not ok.any():
-                return np.zeros((P, L, n))
-        else:
-            value = emitted * scale[None, :]
-            cos_i = np.abs(dot(sp.n_s, wi))
-            ok &= cos_i > 0
-            if not ok.any():
-                return np.zeros((P, L, n))
-            f = bsdf.eval(sp, wi)
-            if not bsdf.radiance_scaling:          # Cycles' convention (BSDF.radiance_scaling)
-                k = bsdf.refraction_eta_sq(sp)
-                if k is not None:
-                    through = dot(wi, sp.n_g) * dot(sp.wo, sp.n_g) < 0
-                    f = f.scaled(np.where(through, k, 1.0)[None, :])
-            # light leaving a depolariser has only S0
-            S = unpolarised_response(f, 1 if f.kind == "depolarising" else P)
-            if P > 1 and f.kind != "depolarising":
-                c2, s2 = frame_rotation(f.x_out, x_T, sp.wo)
-                S = rotate_stokes(S, c2, s2)
-            if isinstance(delta, np.ndarray):       # several lights: delta ones have no MIS
-                mis = np.where(delta, 1.0, power_heuristic(pdf_l * select_prob, bsdf.pdf(sp, wi)))
-            elif delta:
-                mis = np.ones(n)
-            else:
-                mis = power_heuristic(pdf_l * select_prob, bsdf.pdf(sp, wi))
-            weight = value * (cos_i * mis / select_prob * ok)[None, :]
-        p = sp.p
-        # every path's shadow ray (origin off the surface, length short of the light) in one pass
-        o, t_max = shadow_rays(p, sp.n_g, wi, dist, RAY_EPSILON)
+        ls = self._sample_lights(sp, lookup, u, L)
+        weighted = self._light_weight(sp, bsdf, x_T, ls)
+        if weighted is None:
+            return np.zeros((P, L, n))
+        S, weight = weighted
         crossings = [] if medium is not None else None
-        if self.visibility is not None and self.visibility.affects_shadows:
-            # shadow-invisible and pass-through (alpha) surfaces let (part of) the light through
-            weight = weight * self._shadow_transmittance(p, sp.n_g, wi, t_max, ok, stats, crossings)[None, :]
-        else:
-            if ok.all():
-                blocked = self.scene.occluded(o, wi, t_max)
-                stats["shadow_rays"] += n
-            else:
-                test = ok.nonzero()[0]
-                blocked = np.zeros(n, bool)
-                # np.take: contiguous (3, m) columns (o[:, test] would be a transposed copy)
-                blocked[test] = self.scene.occluded(gather(o, test), gather(wi, test), t_max[test])
-                stats["shadow_rays"] += test.size
-            if blocked.any():
-                for li, sel in owners:
-                    light = light_set.lights[li]
-                    if light.blocks_own_shadow_rays and blocked[sel].any():
-                        d, pdf = dist[sel], pdf_l[sel]
-                        if li in points:        # at the sampled points (their pdf need not be by area)
-                            cos_l = light.cos_at(points[li], gather(wi, sel))
-                        else:                   # cosθ at the light from the area pdf dist²/(cosθ·A)
-                            cos_l = np.minimum(d * d / np.maximum(pdf * light.total_area, 1e-300), 1.0)
-                        blocked[sel] = self.scene.unblock_own_hits(li, gather(p, sel), gather(sp.n_g, sel),
-                                                                   gather(wi, sel), d, cos_l, blocked[sel])
-            weight = weight * (~blocked)[None, :]
+        weight = weight * self._shadow_visibility(sp, ls, stats, crossings)[None, :]
         if medium is not None:
-            absorbed = self._shadow_media(medium, wi, dist, lookup, crossings)
+            absorbed = self._shadow_media(medium, ls.wi, ls.dist, lookup, crossings)
             if absorbed is not None:
                 weight = weight * absorbed
         light_out = throughput_times_stokes(T, rows if T_cols is None else T_cols, S, weight)
-        for _, sel in owners:
-            if len(owners) > 1 and not ok[sel].any():
+        for _, sel in ls.owners:
+            if len(ls.owners) > 1 and not ls.ok[sel].any():
                 light_out[:, :, sel] = 0.0          # a light none of whose samples counts adds nothing
         if light_out.shape == (P, L, n):
             return light_out
         out = np.zeros((P, L, n))
         out[:] = light_out
         return out
+
+    def _sample_lights(self, sp: ShadingPoint, lookup: WavelengthLookup, u: np.ndarray, L: int) -> _LightSamples:
+        """One light sample per vertex: the light chosen by u[0] (its fraction within the light's slot
+        reused), the point on it by u[1], u[2] ((4, n)); ``L``: the radiance's wavelength count."""
+        light_set = self.lights
+        n_side = sp.n_g * np.sign(dot(sp.n_g, sp.wo))[None, :] if light_set.spatial else None
+        choice, u_rest, chosen_prob = light_set.choose(u[0], sp.p, n_side)
+        lights_chosen = np.unique(choice)
+        if len(lights_chosen) == 1:
+            return self._sample_one_light(int(lights_chosen[0]), sp, lookup, u, u_rest, chosen_prob)
+        return self._sample_several_lights(lights_chosen, choice, sp, lookup, u, u_rest, chosen_prob, L)
+
+    def _sample_one_light(self, li: int, sp: ShadingPoint, lookup: WavelengthLookup, u: np.ndarray,
+                          u_rest: np.ndarray, chosen_prob: np.ndarray | None) -> _LightSamples:
+        """Light ``li`` sampled for every vertex: its arrays as they are, no gathered copies."""
+        light_set = self.lights
+        points = {}
+        light = light_set.lights[li]
+        # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
+        if light.varies_over_surface:
+            wi, dist, scale, pdf_l, ok, points[li] = light.sample_points(sp.p, np.stack((u_rest, u[1], u[2])))
+            emitted = light.emitted_at(points[li], lookup, self.rgb_mode, self.mono)
+        else:
+            wi, dist, scale, pdf_l, ok = light.sample(sp.p, np.stack((u_rest, u[1], u[2])))
+            emitted = self._emitted(light, lookup, wi)
+        delta = light.is_delta
+        if light.shades_nothing:         # hidden from indirect rays: lights nothing (Cycles)
+            ok = np.zeros_like(ok)
+        select_prob = light_set.prob[li] if chosen_prob is None else chosen_prob
+        return _LightSamples(wi=wi, dist=dist, scale=scale, pdf_l=pdf_l, ok=ok, delta=delta, emitted=emitted,
+                             select_prob=select_prob, owners=[(li, slice(None))], points=points)
+
+    def _sample_several_lights(self, lights_chosen: np.ndarray, choice: np.ndarray, sp: ShadingPoint,
+                               lookup: WavelengthLookup, u: np.ndarray, u_rest: np.ndarray,
+                               chosen_prob: np.ndarray | None, L: int) -> _LightSamples:
+        """Each light of ``lights_chosen`` sampled for its vertices (``choice`` (n,)), put together."""
+        light_set = self.lights
+        n = sp.n
+        points = {}
+        wi, dist, scale, pdf_l = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n)
+        ok, delta, emitted = np.empty(n, bool), np.empty(n, bool), np.empty((L, n))
+        select_prob = light_set.prob[choice] if chosen_prob is None else chosen_prob
+        owners = []
+        for li in lights_chosen:
+            li = int(li)
+            sel = np.nonzero(choice == li)[0]
+            light = light_set.lights[li]
+            u_sel = np.stack((gather(u_rest, sel), gather(u[1], sel), gather(u[2], sel)))
+            if light.varies_over_surface:
+                w, d, sc, pdf, valid, points[li] = light.sample_points(gather(sp.p, sel), u_sel)
+                emitted[:, sel] = light.emitted_at(points[li], lookup.take(sel), self.rgb_mode, self.mono)
+            else:
+                w, d, sc, pdf, valid = light.sample(gather(sp.p, sel), u_sel)
+                emitted[:, sel] = self._emitted(light, lookup.take(sel), w)
+            wi[:, sel], dist[sel], scale[sel], pdf_l[sel], ok[sel] = w, d, sc, pdf, valid
+            if light.shades_nothing:
+                ok[sel] = False
+            delta[sel] = light.is_delta
+            owners.append((li, sel))
+        return _LightSamples(wi=wi, dist=dist, scale=scale, pdf_l=pdf_l, ok=ok, delta=delta, emitted=emitted,
+                             select_prob=select_prob, owners=owners, points=points)
+
+    def _light_weight(self, sp: ShadingPoint, bsdf: BSDF, x_T: np.ndarray,
+                      ls: _LightSamples) -> tuple[np.ndarray, np.ndarray] | None:
+        """(S, weight) of the light samples before shadowing: the BSDF's Stokes response S ((P or 1, L, n)
+        in frame ``x_T``) to the unpolarised light and its weight (L, n): radiance × |cosθ| × MIS / selection
+        probability; ``ls.ok`` narrowed to the samples that count.  None where none does."""
+        direct = getattr(bsdf, "direct_light", None)
+        if direct is not None:
+            # Lambert: the BSDF's value, pdf, MIS and the light's weight in one pass (the same numbers)
+            S, weight, ls.ok = direct(sp, ls.wi, ls.emitted, ls.scale, ls.ok, ls.pdf_l, ls.select_prob, ls.delta)
+            return (S, weight) if ls.ok.any() else None
+        value = ls.emitted * ls.scale[None, :]
+        cos_i = np.abs(dot(sp.n_s, ls.wi))
+        ls.ok &= cos_i > 0
+        if not ls.ok.any():
+            return None
+        S = self._unpolarised_bsdf_response(sp, bsdf, x_T, ls.wi)
+        mis = self._light_mis(sp, bsdf, ls)
+        return S, value * (cos_i * mis / ls.select_prob * ls.ok)[None, :]
+
+    def _unpolarised_bsdf_response(self, sp: ShadingPoint, bsdf: BSDF, x_T: np.ndarray, wi: np.ndarray) -> np.ndarray:
+        """The Stokes vector (P, L, n) (depolarisers: (1, L, n)) the BSDF scatters towards wo from unpolarised
+        light arriving along wi (3, n), in the paths' frames ``x_T``."""
+        P = self.P
+        f = bsdf.eval(sp, wi)
+        if not bsdf.radiance_scaling:          # Cycles' convention (BSDF.radiance_scaling)
+            k = bsdf.refraction_eta_sq(sp)
+            if k is not None:
+                through = dot(wi, sp.n_g) * dot(sp.wo, sp.n_g) < 0
+                f = f.scaled(np.where(through, k, 1.0)[None, :])
+        # light leaving a depolariser has only S0
+        S = unpolarised_response(f, 1 if f.kind == "depolarising" else P)
+        if P > 1 and f.kind != "depolarising":
+            c2, s2 = frame_rotation(f.x_out, x_T, sp.wo)
+            S = rotate_stokes(S, c2, s2)
+        return S
+
+    @staticmethod
+    def _light_mis(sp: ShadingPoint, bsdf: BSDF, ls: _LightSamples) -> np.ndarray:
+        """Power-heuristic MIS weights (n,) of the light samples against BSDF sampling (delta lights: 1)."""
+        if isinstance(ls.delta, np.ndarray):       # several lights: delta ones have no MIS
+            return np.where(ls.delta, 1.0, power_heuristic(ls.pdf_l * ls.select_prob, bsdf.pdf(sp, ls.wi)))
+        if ls.delta:
+            return np.ones(sp.n)
+        return power_heuristic(ls.pdf_l * ls.select_prob, bsdf.pdf(sp, ls.wi))
+
+    def _shadow_visibility(self, sp: ShadingPoint, ls: _LightSamples, stats: dict[str, int],
+                           crossings: list | None) -> np.ndarray:
+        """The fraction (n,) of each light sample's light that reaches its vertex (0 where ``ls.ok`` is
+        False: no shadow ray is cast there): the transmittance through shadow-invisible and pass-through
+        surfaces (float; ``crossings`` collects the pass-through surfaces), else unoccluded (bool)."""
+        p = sp.p
+        # every path's shadow ray (origin off the surface, length short of the light) in one pass
+        o, t_max = shadow_rays(p, sp.n_g, ls.wi, ls.dist, RAY_EPSILON)
+        if self.visibility is not None and self.visibility.affects_shadows:
+            # shadow-invisible and pass-through (alpha) surfaces let (part of) the light through
+            return self._shadow_transmittance(p, sp.n_g, ls.wi, t_max, ls.ok, stats, crossings)
+        blocked = self._occluded(o, ls.wi, t_max, ls.ok, stats)
+        if blocked.any():
+            self._unblock_own_hits(sp, ls, blocked)
+        return ~blocked
+
+    def _occluded(self, o: np.ndarray, wi: np.ndarray, t_max: np.ndarray, ok: np.ndarray,
+                  stats: dict[str, int]) -> np.ndarray:
+        """(n,) True where the shadow ray from o (3, n) along wi is blocked short of t_max (only where
+        ``ok``: elsewhere False, no ray cast)."""
+        n = wi.shape[1]
+        if ok.all():
+            blocked = self.scene.occluded(o, wi, t_max)
+            stats["shadow_rays"] += n
+            return blocked
+        test = ok.nonzero()[0]
+        blocked = np.zeros(n, bool)
+        # np.take: contiguous (3, m) columns (o[:, test] would be a transposed copy)
+        blocked[test] = self.scene.occluded(gather(o, test), gather(wi, test), t_max[test])
+        stats["shadow_rays"] += test.size
+        return blocked
+
+    def _unblock_own_hits(self, sp: ShadingPoint, ls: _LightSamples, blocked: np.ndarray) -> None:
+        """In place: ``blocked`` (n,) cleared where the shadow ray towards a light that blocks its own
+        shadow rays was stopped by that light itself (CompiledScene.unblock_own_hits)."""
+        for li, sel in ls.owners:
+            light = self.lights.lights[li]
+            if light.blocks_own_shadow_rays and blocked[sel].any():
+                d, pdf = ls.dist[sel], ls.pdf_l[sel]
+                if li in ls.points:        # at the sampled points (their pdf need not be by area)
+                    cos_l = light.cos_at(ls.points[li], gather(ls.wi, sel))
+                else:                   # cosθ at the light from the area pdf dist²/(cosθ·A)
+                    cos_l = np.minimum(d * d / np.maximum(pdf * light.total_area, 1e-300), 1.0)
+                blocked[sel] = self.scene.unblock_own_hits(li, gather(sp.p, sel), gather(sp.n_g, sel),
+                                                           gather(ls.wi, sel), d, cos_l, blocked[sel])
 
     def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, cols, idx: np.ndarray,
                       prims: np.ndarray, dists: np.ndarray, d: np.ndarray, lk: WavelengthLookup, prev_delta: np.ndarray,
