@@ -9,22 +9,25 @@ diffuse base, the base weighted by one minus the specular layer's albedo at the 
 - weights: an engine Mix (engine.materials.mix) of metal, transmission and dielectric with the per-point
   weights metallic, (1 − metallic)·transmission, (1 − metallic)(1 − transmission) (nested mixes);
 - metal: a GGX Torrance–Sparrow conductor (α = roughness², Cycles' height-correlated G, ``multiscatter``
-  for ``distribution`` "multi_ggx") whose complex index per wavelength and point makes its reflectance the
-  base colour at 0° and Schlick's value at θ₈₂ — Cycles' F82 curve for a white Specular Tint
-  (engine.spectral.gulbrandsen); a thin film on its facets where ``thin_film_thickness`` > 0 (Airy's sum on
-  that complex index, as Cycles' iridescence on its Gulbrandsen estimate);
-- transmission: the smooth dielectric at roughness 0 (with ``thin_film_thickness`` > 0 the thin-film
-  dielectric), else the GGX rough dielectric (compensated for "multi_ggx"), each refraction tinted by
-  √(base colour) (engine.materials.tinted);
+  for ``distribution`` "multi_ggx"; anisotropic GGX for ``anisotropic`` > 0) whose complex index per
+  wavelength and point reflects the base colour at 0° and Cycles' F82-Tint value at θ₈₂
+  (engine.spectral.gulbrandsen), its unpolarised reflectance rescaled to Cycles' F82-Tint curve at every facet
+  angle (engine.materials.tinted.F82Reflectance); under a thin film (``thin_film_thickness`` > 0, rough or
+  smooth) Cycles' own index estimate filmed by Airy's sum instead;
+- transmission: the smooth dielectric at roughness 0 (with a film the thin-film dielectric), else the GGX
+  rough dielectric (compensated for "multi_ggx"), each refraction tinted by √(base colour) and the glass's
+  Fresnel by Specular Tint (engine.materials.tinted);
 - dielectric: a GGX Torrance–Sparrow dielectric (index from ``ior`` and ``specular_ior_level``: F0 =
-  F0(ior)·2·level; a thin film on its facets as the metal's, on the substrate of that index — Cycles films
-  the IOR's own interface and rescales by F0, the same at level 0.5) with the albedo-scaled Lambertian base,
-  its smooth limit at roughness 0; a coat (Cycles' ``coat_weight`` > 0) with Cycles' ``coat_tint``;
+  F0(ior)·2·level, per point through engine.textures.inputs.NumberSpectrum; a thin film on it as on the
+  metal) with the albedo-scaled Lambertian (or Oren–Nayar) base, its smooth limit at roughness 0;
 - coat: a GGX dielectric reflection of ``coat_ior`` and α = coat_roughness² (compensated, as Cycles
   always compensates its coat) over everything below — metal, transmission and dielectric — which is
-  weighted by 1 − coat_weight·E_coat(ω_o) (engine.materials.mix.Layered: Cycles' layering).
-``base_color``, ``metallic``, ``roughness`` and ``transmission`` may vary per point.  Inputs of Blender's
-node that are not parameters here (sheen, subsurface, anisotropy, tints, …) are the exporter's to warn about.
+  weighted by 1 − coat_weight·E_coat(ω_o) (engine.materials.mix.Layered: Cycles' layering) and seen
+  through ``coat_tint``; sheen (engine.materials.sheen) over everything, layered the same way; the
+  emission under both (engine.materials.mix.emission_weight).
+Every parameter in ``DECLARATION.per_point`` may vary per point (textures, colour attributes, baked graphs);
+the rest are constants, and inputs of Blender's node that are not parameters here (subsurface, newer
+Blenders' inputs) are the exporter's to warn about.
 """
 
 from __future__ import annotations
