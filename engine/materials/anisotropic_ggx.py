@@ -90,7 +90,7 @@ from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflectance, fresnel_reflection_abcs
 from ..polarisation.thin_film import facet_film, film_at, film_label, film_layering_albedo, film_reflection_abcs
 from ..spectral import RGB_WAVELENGTHS_NM, ConstantSpectrum, as_spectrum
-from ..textures import textured
+from ..textures import TexturedNumber, textured
 from ..vec3 import cross, dot, local_frame, to_local
 
 __all__ = ["AnisotropicGGX", "MULTISCATTER_ALBEDOS", "anisotropic_albedo", "cycles_alphas", "ggx_aniso_D",
@@ -327,13 +327,16 @@ class AnisotropicGGX(BSDF):
                  film_thickness: float = 0.0):
         self.n = as_spectrum(n, "n")
         self.k = as_spectrum(k, "k")
-        ax, ay = float(alpha_x), float(alpha_y)
+        # α_x, α_y and the rotation: numbers, or per point (TexturedNumbers: a per-point Anisotropic, Rotation)
+        self.per_point = any(isinstance(v, TexturedNumber) for v in (alpha_x, alpha_y))
+        ax, ay = ((v if isinstance(v, TexturedNumber) else float(v)) for v in (alpha_x, alpha_y))
         for label, a in (("alpha_x", ax), ("alpha_y", ay)):
-            if not (math.isfinite(a) and a >= M_MIN):
+            lo, hi = (a.lo, a.hi) if isinstance(a, TexturedNumber) else (a, a)
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo >= M_MIN):
                 raise ValueError(f"{label} must be a finite number >= {M_MIN:g}, got {a!r}")
         self.alpha_x, self.alpha_y = ax, ay
-        self.rotation = float(rotation)
-        if not math.isfinite(self.rotation):
+        self.rotation = rotation if isinstance(rotation, TexturedNumber) else float(rotation)
+        if not isinstance(self.rotation, TexturedNumber) and not math.isfinite(self.rotation):
             raise ValueError(f"rotation must be a finite number of turns, got {rotation!r}")
         if tangent is not None and not callable(tangent):
             raise ValueError(f"tangent must be a callable sp -> (3, N) or None, got {tangent!r}")
@@ -345,17 +348,21 @@ class AnisotropicGGX(BSDF):
         if multiscatter_albedo not in MULTISCATTER_ALBEDOS:
             raise ValueError(f"multiscatter_albedo must be one of {MULTISCATTER_ALBEDOS}, got {multiscatter_albedo!r}")
         self.multiscatter_albedo = multiscatter_albedo
-        if self.multiscatter and not max(ax, ay) <= ALPHA_MAX:
+        highest = max(getattr(ax, "hi", ax), getattr(ay, "hi", ay))
+        if self.multiscatter and not highest <= ALPHA_MAX:
             raise ValueError(f"multiscatter needs alpha_x, alpha_y <= {ALPHA_MAX:g} (Cycles clamps GGX alpha to 1), "
                              f"got {ax!r}, {ay!r}")
+        if self.per_point and multiscatter_albedo != "cycles":
+            raise ValueError("per-point roughnesses need multiscatter_albedo='cycles' (one lobe table per α pair)")
         self.film = facet_film(film_n, film_thickness)
-        self.isotropic = ax == ay
-        #: the single α of Cycles' energy tables for this lobe (rough = √√(α_x α_y) in its kernel)
-        self.alpha_cycles = ax if self.isotropic else math.sqrt(ax * ay)
+        self.isotropic = not self.per_point and ax == ay
+        #: the single α of Cycles' energy tables for this lobe (rough = √√(α_x α_y) in its kernel); per point: None
+        #: (``_alphas``)
+        self.alpha_cycles = None if self.per_point else (ax if self.isotropic else math.sqrt(ax * ay))
         self._lobe_table = None
         self._reflection_table = None
         # the tangent frame needs the surface's attributes (an explicit callable may read them too)
-        self.varies_over_surface = (not self.isotropic) or textured(self.n, self.k,
+        self.varies_over_surface = (not self.isotropic) or textured(self.n, self.k, self.rotation,
                                                                     *(self.film if self.film is not None else ()))
         constant = all(getattr(v, "is_constant", False) for v in (self.n, self.k))
         filmed = self.film is not None          # the film's s–p phase difference and its colours
@@ -389,9 +396,10 @@ class AnisotropicGGX(BSDF):
             T = sp.surface.tangent_frame(n)[0]
         else:
             T = t0
-        if self.rotation != 0.0:      # Rodrigues about n: a quarter turn takes T to n × T
-            ang = 2.0 * math.pi * self.rotation
-            c, s = math.cos(ang), math.sin(ang)
+        rotation = sp.number(self.rotation)
+        if np.any(rotation != 0.0):      # Rodrigues about n: a quarter turn takes T to n × T
+            ang = 2.0 * math.pi * rotation
+            c, s = np.cos(ang), np.sin(ang)
             T = c * T + s * cross(n, T) + (1.0 - c) * dot(n, T)[None, :] * n
         Y = cross(n, T)
         with np.errstate(invalid="ignore", over="ignore"):
@@ -418,6 +426,13 @@ class AnisotropicGGX(BSDF):
                              f"n={self.n!r}, k={self.k!r}")
         return complex(self.n.value, self.k.value) / self.exterior_n
 
+    def _alphas(self, sp: ShadingPoint):
+        """(α_x, α_y, α for Cycles' energy tables): numbers, or (N,) at the points where per point."""
+        if not self.per_point:
+            return self.alpha_x, self.alpha_y, self.alpha_cycles
+        ax, ay = sp.number(self.alpha_x), sp.number(self.alpha_y)
+        return ax, ay, np.sqrt(ax * ay)
+
     def _local(self, sp: ShadingPoint, *ws):
         X, Y = self.tangent_frame(sp)
         return [to_local(w, X, Y, sp.n_s) for w in ws]
@@ -432,7 +447,7 @@ class AnisotropicGGX(BSDF):
     def _extra(self, sp: ShadingPoint, wo_l: np.ndarray) -> np.ndarray:
         mu = np.clip(wo_l[2], 0.0, 1.0)
         if self.multiscatter_albedo == "cycles":
-            return conductor_extra(mu, self.alpha_cycles, self._eta(sp), correlated=True)
+            return conductor_extra(mu, self._alphas(sp)[2], self._eta(sp), correlated=True)
         table = self._white_table()
         E = np.clip(table(wo_l), E_FLOOR, 1.0)
         E_avg = min(max(table.average, E_FLOOR), 1.0)
@@ -460,9 +475,13 @@ class AnisotropicGGX(BSDF):
                                         RGB_WAVELENGTHS_NM)
         if self.multiscatter_albedo == "cycles":
             if self._reflection_table is None:
-                a = self.alpha_cycles
-                self._reflection_table = SpecularAlbedoTable(eta, a, a, "smith_correlated", "ggx")
-            E = self._reflection_table(cos_o, self.alpha_cycles)
+                if self.per_point:          # √(α_x α_y) lies between the least and the largest α
+                    lo = max(min(self.alpha_x.lo, self.alpha_y.lo), M_MIN)
+                    hi = max(self.alpha_x.hi, self.alpha_y.hi)
+                else:
+                    lo = hi = self.alpha_cycles
+                self._reflection_table = SpecularAlbedoTable(eta, lo, hi, "smith_correlated", "ggx")
+            E = self._reflection_table(cos_o, self._alphas(sp)[2])
         else:
             if self._reflection_table is None:
                 self._reflection_table = LobeAlbedoTable(self.alpha_x, self.alpha_y, eta)
@@ -481,7 +500,7 @@ class AnisotropicGGX(BSDF):
         valid = (cos_i > 0) & (cos_o > 0)
         h, cos_f, ok = half_vector(wi_l, wo_l)
         ok &= valid & (cos_i * cos_o > 0)       # a product underflowing to 0: f = 0, not 0/0
-        ax, ay = self.alpha_x, self.alpha_y
+        ax, ay, _ = self._alphas(sp)
         D = ggx_aniso_D(h, ax, ay)
         G = _chi_plus(wi_l, h) * _chi_plus(wo_l, h) / (1.0 + ggx_aniso_lambda(wi_l, ax, ay)
                                                        + ggx_aniso_lambda(wo_l, ax, ay))
@@ -504,7 +523,8 @@ class AnisotropicGGX(BSDF):
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         wo_l, wi_l = self._local(sp, sp.wo, wi)
         valid = (wi_l[2] > 0) & (wo_l[2] > 0)
-        return np.where(valid, _pdf_reflected(wo_l, wi_l, self.alpha_x, self.alpha_y), 0.0)
+        ax, ay, _ = self._alphas(sp)
+        return np.where(valid, _pdf_reflected(wo_l, wi_l, ax, ay), 0.0)
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         X, Y = self.tangent_frame(sp)
@@ -513,14 +533,16 @@ class AnisotropicGGX(BSDF):
         cos_o = wo_l[2]
         wi_l = np.zeros((3, sp.n))
         sel = np.nonzero(cos_o > 0)[0]
+        ax, ay, _ = self._alphas(sp)
         if sel.size:
-            h = ggx_aniso_sample(wo_l[:, sel], u_dir[:, sel], self.alpha_x, self.alpha_y)
+            h = ggx_aniso_sample(wo_l[:, sel], u_dir[:, sel], ax[sel] if np.ndim(ax) else ax,
+                                 ay[sel] if np.ndim(ay) else ay)
             wi_l[:, sel] = reflect_local(wo_l[:, sel], h)
         wi = X * wi_l[0] + Y * wi_l[1] + n_s * wi_l[2]
         # the density at the returned (world) ω_i, as ``pdf`` computes it: the exact quotient of eval and pdf
         # there (at α ~ 1e-4 and grazing views the local → world rounding moves the pdf by ~1e-9)
         wi_l = to_local(wi, X, Y, n_s)
-        pdf = np.where((wi_l[2] > 0) & (cos_o > 0), _pdf_reflected(wo_l, wi_l, self.alpha_x, self.alpha_y), 0.0)
+        pdf = np.where((wi_l[2] > 0) & (cos_o > 0), _pdf_reflected(wo_l, wi_l, ax, ay), 0.0)
         valid = (cos_o > 0) & (wi_l[2] > 0) & (pdf > 0) & np.all(np.isfinite(wi), axis=0)
         cos_i = np.maximum(dot(n_s, wi), 0.0)
         factor = np.where(valid, cos_i / np.where(valid, pdf, 1.0), 0.0)
@@ -532,8 +554,10 @@ class AnisotropicGGX(BSDF):
         return None
 
     def describe(self) -> dict:
-        out = {"type": self.name, "n": repr(self.n), "k": repr(self.k), "alpha_x": self.alpha_x,
-               "alpha_y": self.alpha_y, "rotation": self.rotation,
+        shown = (repr(v) if isinstance(v, TexturedNumber) else v for v in (self.alpha_x, self.alpha_y, self.rotation))
+        ax, ay, rotation = shown
+        out = {"type": self.name, "n": repr(self.n), "k": repr(self.k), "alpha_x": ax,
+               "alpha_y": ay, "rotation": rotation,
                "tangent": "callable" if self.tangent is not None else "surface", "shadowing": "smith_correlated",
                "exterior_n": self.exterior_n}
         if self.multiscatter:

@@ -188,14 +188,29 @@ def _metal_of(n, k, p, alpha):
 def _anisotropic_lobe(p, n, k, alpha):
     """Cycles' anisotropic GGX reflection (engine.materials.anisotropic_ggx) of index n + iκ for Anisotropic > 0
     and a constant roughness (a textured one stays isotropic: the exporter warns), else None: α_x = r²/aspect,
-    α_y = r²·aspect, aspect = √(1 − 0.9·a), along the surface tangent rotated by Anisotropic Rotation."""
-    if p["anisotropic"] <= 0.0 or _textured(alpha):
+    α_y = r²·aspect, aspect = √(1 − 0.9·a), along the surface tangent rotated by Anisotropic Rotation.  The
+    Anisotropic and its Rotation may vary per point (α_x, α_y per point: engine.textures.inputs.MappedNumber)."""
+    aniso = p["anisotropic"]
+    if (aniso.hi if _textured(aniso) else aniso) <= 0.0 or _textured(alpha):
         return None
     from .anisotropic_ggx import AnisotropicGGX, cycles_alphas
     from .torrance_sparrow import M_MIN
-    ax, ay = cycles_alphas(math.sqrt(alpha), p["anisotropic"])
+    r = math.sqrt(alpha)
+    if _textured(aniso):
+        from ..textures.inputs import MappedNumber
+
+        def alphas(a):
+            a = np.clip(a, 0.0, 1.0)
+            aspect = np.sqrt(1.0 - 0.9 * a)
+            return (np.maximum(np.minimum(alpha / aspect, 1.0), M_MIN),
+                    np.maximum(np.minimum(alpha * aspect, 1.0), M_MIN))
+        ends = [alphas(np.array(v)) for v in (aniso.lo, aniso.hi)]
+        ax = MappedNumber(aniso, lambda a: alphas(a)[0], min(e[0] for e in ends), max(e[0] for e in ends))
+        ay = MappedNumber(aniso, lambda a: alphas(a)[1], min(e[1] for e in ends), max(e[1] for e in ends))
+    else:
+        ax, ay = (max(v, M_MIN) for v in cycles_alphas(r, aniso))
     film = _film_values(p)
-    return AnisotropicGGX(n, k, max(ax, M_MIN), max(ay, M_MIN), rotation=p["anisotropic_rotation"],
+    return AnisotropicGGX(n, k, ax, ay, rotation=p["anisotropic_rotation"],
                           multiscatter=p["distribution"] == "multi_ggx",
                           film_n=film.get("thin_film_ior"), film_thickness=film.get("thin_film_thickness", 0.0))
 
@@ -415,9 +430,9 @@ DECLARATION = ModelDeclaration(
                kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6, default=1.0, texturable=True),
      Parameter("anisotropic", "Cycles' Anisotropic: the metal's and the specular layer's GGX stretched along the "
                               "surface tangent, α = r²/aspect and r²·aspect, aspect = √(1 − 0.9·a) (a constant "
-                              "roughness)", lo=0.0, hi=1.0, default=0.0),
+                              "roughness)", lo=0.0, hi=1.0, default=0.0, texturable=True),
      Parameter("anisotropic_rotation", "the tangent's rotation about the normal, in turns", lo=-1e6, hi=1e6,
-               default=0.0),
+               default=0.0, texturable=True),
      Parameter("coat_weight", "coat (> 0: a coat over the dielectric)", lo=0.0, hi=1.0, default=0.0, texturable=True),
      Parameter("coat_roughness", "coat roughness r", lo=0.0, hi=1.0, default=0.03, texturable=True),
      Parameter("coat_ior", "coat index", lo=1.0, hi=100.0, default=1.5, texturable=True),
@@ -439,7 +454,7 @@ DECLARATION = ModelDeclaration(
 DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission", "coat_tint", "coat_weight",
                                    "coat_roughness", "coat_ior", "specular_tint", "specular_ior_level",
                                    "thin_film_thickness", "thin_film_ior", "diffuse_roughness", "sheen_weight",
-                                   "sheen_roughness", "sheen_tint"})
+                                   "sheen_roughness", "sheen_tint", "anisotropic", "anisotropic_rotation"})
 
 
 @DECLARATION.builder

@@ -416,3 +416,21 @@ class NumberSpectrum(TexturedSpectrum):
     def rgb_at(self, points) -> np.ndarray:
         v = self.numbers(points)
         return np.stack((v, v, v))
+
+
+class MappedNumber(TexturedNumber):
+    """A number that is ``fn`` of a textured number at each point (e.g. the anisotropic GGX α_x of a per-point
+    Anisotropic); ``lo``, ``hi`` bound every value fn gives on the number's range (the caller states them)."""
+
+    def __init__(self, of: TexturedNumber, fn, lo: float, hi: float):
+        self.of, self.fn, self.source, self.clip = of, fn, of.source, None
+        self.lo, self.hi = float(lo), float(hi)
+
+    def clamped_to(self, lo: float = -math.inf, hi: float = math.inf) -> MappedNumber:
+        return self
+
+    def at(self, points) -> np.ndarray:
+        return points.memo((self, "mapped"), lambda: np.asarray(self.fn(self.of.at(points)), np.float64))
+
+    def __repr__(self):
+        return f"MappedNumber({self.of!r}, {getattr(self.fn, '__name__', 'fn')})"

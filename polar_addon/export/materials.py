@@ -828,6 +828,17 @@ def _ior(r, name):
     return max(r.float(name), IOR_MIN)
 
 
+def _rotation(r, name):
+    """A rotation in turns (Anisotropic Rotation): a TextureInput where linked (an image, a baked graph — glTF's
+    anisotropy direction through the importer's nodes), else the constant."""
+    if r._socket(name).is_linked:
+        source = r.texture(name, lo=-1e6, hi=1e6)
+        if source is not None:
+            return source
+        return r._checked_float(name, -1e6, 1e6)
+    return r.float(name, -1e6, 1e6)
+
+
 def _coat_ior(r):
     """Coat IOR as Cycles reads it (≥ 1; Polar's range ends at 100): a TextureInput (values clamped to [1, 100])
     where linked, else the constant."""
@@ -918,8 +929,8 @@ def _principled(node, mat, warnings, bake=None):
               "sheen_weight": _sheen_weight(r),
               "sheen_roughness": r.roughness_texture_or_float("Sheen Roughness"),
               "sheen_tint": _grey(r.rgb_or_texture("Sheen Tint", 0.0)),
-              "anisotropic": r.float("Anisotropic", 0.0, 1.0) if _anisotropic(node) else 0.0,
-              "anisotropic_rotation": r.float("Anisotropic Rotation", -1e6, 1e6),
+              "anisotropic": _fraction(r, "Anisotropic") if _anisotropic(node) else 0.0,
+              "anisotropic_rotation": _rotation(r, "Anisotropic Rotation"),
               "diffuse_roughness": (r.roughness_texture_or_float("Diffuse Roughness")
                                     if node.inputs.get("Diffuse Roughness") is not None else 0.0),
               "distribution": "ggx" if getattr(node, "distribution", "MULTI_GGX") == "GGX" else "multi_ggx"}
@@ -930,7 +941,7 @@ def _principled(node, mat, warnings, bake=None):
     film = _film(r)
     if film is not None:
         values["thin_film_ior"], values["thin_film_thickness"] = film
-    if values["anisotropic"] > 0.0:
+    if isinstance(values["anisotropic"], TextureInput) or values["anisotropic"] > 0.0:
         _tangent_note(node, mat, warnings, isinstance(roughness, TextureInput))
     _unsimulated_principled_inputs(node, mat, warnings)
     gaps = film_gaps(metallic, transmission, roughness, values.get("transmission_roughness")) if film else []

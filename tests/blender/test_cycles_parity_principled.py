@@ -352,3 +352,25 @@ def test_diffuse_bsdf_roughness_per_point_matches_cycles(addon, lighting):
     tree.links.new(tex.outputs["Color"], diffuse.inputs["Roughness"])
     tree.links.new(diffuse.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
     compare_with_cycles(scene, "Diffuse BSDF Roughness", lighting)
+
+
+#: Anisotropic and Anisotropic Rotation per point (glTF's KHR_materials_anisotropy map through the importer's
+#: nodes): a checker on the input, along a Tangent node's UV tangent
+ANISOTROPY_INPUTS = {
+    "Anisotropic": ((0.1, 0.9), {"Roughness": 0.4, "Metallic": 1.0, "Base Color": (0.9, 0.7, 0.5)}),
+    "Anisotropic Rotation": ((0.0, 0.25), {"Roughness": 0.4, "Metallic": 1.0, "Anisotropic": 0.8,
+                                           "Base Color": (0.9, 0.7, 0.5)}),
+    "Anisotropic ": ((0.0, 1.0), {"Roughness": 0.35, "Base Color": (0.6, 0.2, 0.1)}),          # the dielectric
+}
+
+
+@pytest.mark.parametrize("lighting", ap.LIGHTINGS)
+@pytest.mark.parametrize("socket", list(ANISOTROPY_INPUTS))
+def test_anisotropy_per_point_matches_cycles(addon, socket, lighting):
+    values, others = ANISOTROPY_INPUTS[socket]
+    scene = sphere_scene(socket, values, others, lighting)
+    tree = bpy.data.materials["P"].node_tree
+    tangent = tree.nodes.new("ShaderNodeTangent")
+    tangent.direction_type = "UV_MAP"
+    tree.links.new(tangent.outputs["Tangent"], tree.nodes["Principled BSDF"].inputs["Tangent"])
+    compare_with_cycles(scene, f"Principled {socket.strip()} per point", lighting)

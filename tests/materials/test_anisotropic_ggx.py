@@ -614,3 +614,23 @@ def test_invalid_parameters(kw, match):
     args = {"alpha_x": 0.3, "alpha_y": 0.1, **kw}
     with pytest.raises(ValueError, match=match):
         AnisotropicGGX(0.2, 3.0, **args)
+
+
+@pytest.mark.parametrize("key, texels, base", [
+    ("anisotropic", [0.0, 0.45, 1.0], {"type": "principled", "metallic": 1.0, "roughness": 0.4}),
+    ("anisotropic", [0.2, 0.9], {"type": "principled", "roughness": 0.35, "base_color": [0.6, 0.2, 0.1]}),
+    ("anisotropic_rotation", [0.0, 0.125, 0.3], {"type": "principled", "metallic": 1.0, "roughness": 0.4,
+                                                 "anisotropic": 0.8})])
+def test_per_point_anisotropy_is_the_constant_lobe_per_texel(tmp_path, key, texels, base):
+    """Anisotropic (α_x, α_y per point) or its Rotation from a texture: at each texel the lobe with that constant
+    value (eval, pdf, sample)."""
+    from tests.support.texel_rows import textured_and_constant
+    sp, wi, u_lobe, u_dir, textured, rows = textured_and_constant(tmp_path, base, key, texels, reps=30, seed=3)
+    assert textured.varies_over_surface
+    f, pdf, s = textured.eval(sp, wi).matrix(), textured.pdf(sp, wi), textured.sample(sp, u_lobe, u_dir)
+    for sel, _, const, sub in rows:
+        np.testing.assert_allclose(f[..., sel], const.eval(sub, wi[:, sel]).matrix(), rtol=1e-9, atol=1e-13)
+        np.testing.assert_allclose(pdf[sel], const.pdf(sub, wi[:, sel]), rtol=1e-9, atol=1e-13)
+        cs = const.sample(sub, u_lobe[sel], u_dir[:, sel])
+        np.testing.assert_allclose(s.wi[:, sel], cs.wi, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(s.weight.matrix()[..., sel], cs.weight.matrix(), rtol=1e-9, atol=1e-13)
