@@ -79,6 +79,20 @@ def _specular_index(ior: float, level):
     return NumberSpectrum(level, index, ends[0], ends[1])
 
 
+def _ior_index(ior, level: float):
+    """The dielectric's index for an IOR that varies over the surface (a TexturedNumber, every value on one side of
+    1) and a constant Specular IOR Level: per point ``specular_ior``'s rule, a NumberSpectrum."""
+    from ..textures.inputs import NumberSpectrum
+
+    def index(x):
+        x = np.maximum(x, IOR_MIN)
+        root = np.sqrt(np.minimum(((x - 1.0) / (x + 1.0)) ** 2 * 2.0 * level, 0.99))
+        eta = (1.0 + root) / (1.0 - root)
+        return np.where(x < 1.0, 1.0 / eta, eta)
+    ends = sorted(float(index(np.array(v))) for v in (ior.lo, ior.hi))
+    return NumberSpectrum(ior, index, ends[0], ends[1])
+
+
 def _textured(v) -> bool:
     return isinstance(v, (TexturedNumber, TexturedSpectrum))
 
@@ -267,7 +281,13 @@ def _dielectric(p, alpha, ior):
     from .torrance_sparrow import M_MIN
     base = p["base_color"]
     level = p["specular_ior_level"]
-    eta = _specular_index(ior, level) if _textured(level) else specular_ior(ior, level)
+    if _textured(ior):
+        if _textured(level):
+            raise SceneError(p.field("ior"), "cannot vary per point together with specular_ior_level")
+        eta = _ior_index(ior, level)
+    else:
+        eta = _specular_index(ior, level) if _textured(level) else specular_ior(ior, level)
+    per_point_index = "ior" if _textured(ior) else "specular_ior_level" if _textured(level) else None
     smooth = not _textured(alpha) and alpha < M_MIN
     values = {"n": eta, "k": 0.0, "diffuse_layering": "albedo_scaling", "m": 0.0 if smooth else alpha,
               **_film_values(p)}
@@ -277,9 +297,9 @@ def _dielectric(p, alpha, ior):
     tint = p["specular_tint"]
     tinted = not _white(tint)
     aniso = None if smooth else _anisotropic_lobe(p, eta, 0.0, alpha)
-    if _textured(level) and (tinted or aniso is not None):
-        raise SceneError(p.field("specular_ior_level"), "cannot vary per point with a Specular Tint or an "
-                                                        "anisotropy (give a constant level)")
+    if per_point_index and (tinted or aniso is not None):
+        raise SceneError(p.field(per_point_index), "cannot vary per point with a Specular Tint or an anisotropy "
+                                                   "(give a constant value)")
     rough_base = not _never(p["diffuse_roughness"])          # an Oren–Nayar base somewhere (a σ per point too)
     if rough_base or tinted or aniso is not None:
         # the specular layer over Cycles' diffuse base as two parts (mix.Layered): an Oren–Nayar base, a tint,
@@ -417,7 +437,8 @@ DECLARATION = ModelDeclaration(
      Parameter("metallic", "metal's weight", lo=0.0, hi=1.0, default=0.0, texturable=True),
      Parameter("roughness", "Blender roughness r (α = r² for every lobe)", lo=0.0, hi=1.0, default=0.5,
                texturable=True),
-     Parameter("ior", "index of the dielectric and the transmission", lo=0.0, lo_open=True, default=1.5),
+     Parameter("ior", "index of the dielectric and the transmission (per point: the dielectric's only)", lo=0.0,
+               lo_open=True, default=1.5, texturable=True),
      Parameter("transmission", "transmission's weight (of what the metal leaves)", lo=0.0, hi=1.0, default=0.0,
                texturable=True),
      Parameter("transmission_roughness", "the transmission's roughness where it differs (default: roughness; "
@@ -454,7 +475,7 @@ DECLARATION = ModelDeclaration(
 DECLARATION.per_point = frozenset({"base_color", "metallic", "roughness", "transmission", "coat_tint", "coat_weight",
                                    "coat_roughness", "coat_ior", "specular_tint", "specular_ior_level",
                                    "thin_film_thickness", "thin_film_ior", "diffuse_roughness", "sheen_weight",
-                                   "sheen_roughness", "sheen_tint", "anisotropic", "anisotropic_rotation"})
+                                   "sheen_roughness", "sheen_tint", "anisotropic", "anisotropic_rotation", "ior"})
 
 
 @DECLARATION.builder
@@ -462,7 +483,15 @@ def _principled(p):
     p["thin_film_ior"]          # validated even where no film uses it (a NaN is refused, not ignored)
     metallic, transmission = p["metallic"], p["transmission"]
     alpha = _alpha_of(p["roughness"])
-    ior = max(p["ior"], IOR_MIN)
+    ior = p["ior"]
+    if _textured(ior):
+        if ior.lo < 1.0 < ior.hi:
+            raise SceneError(p.field("ior"), f"a per-point index must lie on one side of 1, got values in "
+                                             f"[{ior.lo:g}, {ior.hi:g}]")
+        if not _always(metallic) and not _never(transmission):
+            raise SceneError(p.field("ior"), "cannot vary per point on a transmitting material (give a constant IOR)")
+    else:
+        ior = max(ior, IOR_MIN)
     metal = glass = dielectric = None
     if not _never(metallic):
         metal = _metal(p, alpha)

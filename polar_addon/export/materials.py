@@ -850,6 +850,26 @@ def _coat_ior(r):
     return min(max(r.float("Coat IOR"), 1.0), 100.0)
 
 
+def _principled_ior(r, node, transmission):
+    """The Principled IOR: a TextureInput where linked on an opaque material without Specular Tint, anisotropy or
+    a linked Specular IOR Level (the dielectric's index per point), else as Cycles reads the constant (linked:
+    its own value, one warning)."""
+    if r._socket("IOR").is_linked:
+        tint = node.inputs["Specular Tint"]
+        plain = not (tint.is_linked or [float(c) for c in tint.default_value[:3]] != [1.0, 1.0, 1.0]
+                     or _anisotropic(node) or node.inputs["Specular IOR Level"].is_linked)
+        if plain and not isinstance(transmission, TextureInput) and transmission == 0.0:
+            source = r.texture("IOR", lo=IOR_MIN, hi=1e6)
+            if source is not None:
+                return source
+        else:
+            r.warnings.append(f"material {r.mat!r}: IOR of {node.name!r} cannot vary over the surface with a "
+                              "transmission, a Specular Tint, an anisotropy or a linked Specular IOR Level yet; its "
+                              "own value is used")
+        return max(r._checked_float("IOR", -math.inf, math.inf), IOR_MIN)
+    return _ior(r, "IOR")
+
+
 def _specular_level(r, node):
     """Specular IOR Level: a TextureInput in [0, 1] where linked (glTF's KHR_materials_specular map), else the
     constant; with a non-white Specular Tint or an anisotropy its own value (per point there: not yet, one
@@ -919,7 +939,7 @@ def _principled(node, mat, warnings, bake=None):
     transmission = _fraction(r, "Transmission Weight")
     roughness = r.roughness_texture_or_float("Roughness")
     values = {"base_color": _grey(r.rgb_or_texture("Base Color", 0.0, 1.0)), "metallic": metallic,
-              "roughness": roughness, "transmission": transmission, "ior": _ior(r, "IOR"),
+              "roughness": roughness, "transmission": transmission, "ior": _principled_ior(r, node, transmission),
               "specular_ior_level": _specular_level(r, node),
               "specular_tint": _grey(r.rgb_or_texture("Specular Tint", 0.0)),
               "coat_weight": _fraction(r, "Coat Weight"),

@@ -66,6 +66,8 @@ CASES = {
                               "Coat Roughness": 0.1}),
     "Coat IOR ": ((1.2, 2.0), {"Base Color": (0.8, 0.8, 0.8), "Roughness": 0.3, "Metallic": 1.0,   # smooth, tinted
                                "Coat Weight": 0.8, "Coat Roughness": 0.0, "Coat Tint": (1.0, 0.5, 0.2)}),
+    "IOR": ((1.2, 2.4), {"Base Color": (0.05, 0.05, 0.05), "Roughness": 0.3}),
+    "IOR ": ((1.1, 1.9), {"Base Color": (0.4, 0.2, 0.1), "Roughness": 0.0}),                       # smooth
     "Coat Roughness": ((0.02, 0.6), {"Base Color": (0.5, 0.1, 0.1), "Roughness": 0.4, "Coat Weight": 1.0}),
     "Coat Roughness ": ((0.0, 0.35), {"Base Color": (0.9, 0.8, 0.6), "Roughness": 0.2, "Metallic": 1.0,  # metal
                                       "Coat Weight": 0.7, "Coat IOR": 1.6}),
@@ -374,3 +376,9 @@ def test_anisotropy_per_point_matches_cycles(addon, socket, lighting):
     tangent.direction_type = "UV_MAP"
     tree.links.new(tangent.outputs["Tangent"], tree.nodes["Principled BSDF"].inputs["Tangent"])
     compare_with_cycles(scene, f"Principled {socket.strip()} per point", lighting)
+
+
+def test_a_per_point_ior_on_a_glass_says_it_takes_its_own_value(addon):
+    scene = sphere_scene("IOR", (1.2, 2.0), {"Transmission Weight": 1.0, "Roughness": 0.2}, "lamps")
+    _, _, warnings = ap.export_polar(scene, 1, 8)
+    assert len(warnings) == 1 and "IOR of" in warnings[0] and "own value" in warnings[0]

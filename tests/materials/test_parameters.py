@@ -122,6 +122,7 @@ def test_texturable_parameters_are_the_surface_varying_ones():
         ("principled", "specular_ior_level"), ("principled", "diffuse_roughness"), ("oren_nayar", "roughness"),
         ("principled", "coat_ior"), ("principled", "thin_film_ior"), ("conductor", "thin_film_ior"),
         ("torrance_sparrow", "thin_film_ior"), ("principled", "anisotropic"), ("principled", "anisotropic_rotation"),
+        ("principled", "ior"),
         ("conductor", "thin_film_thickness"), ("torrance_sparrow", "thin_film_thickness"), ("oren_nayar", "albedo"),
         ("sheen", "tint"), ("sheen", "roughness")}
 

@@ -129,3 +129,24 @@ def test_specular_tint_on_a_glass_keeps_reflection_plus_transmission_one():
     total = F[None, :] * r + (1 - F[None, :]) * t
     np.testing.assert_allclose(total, 1.0, rtol=1e-12)
     assert not np.allclose(r, 1.0)                                   # the tint does change the split
+
+
+def test_a_per_point_ior_is_refused_where_it_cannot_be_rendered(tmp_path):
+    """An IOR texture: the dielectric's index per point; on a transmitting material, with a per-point Specular
+    IOR Level, or across 1: one line naming the field."""
+    import OpenEXR
+    OpenEXR.File({"type": OpenEXR.scanlineimage},
+                 {"R": np.array([[1.2, 2.0]], np.float32)}).write(str(tmp_path / "ior.exr"))
+    OpenEXR.File({"type": OpenEXR.scanlineimage},
+                 {"R": np.array([[0.8, 1.2]], np.float32)}).write(str(tmp_path / "across.exr"))
+    OpenEXR.File({"type": OpenEXR.scanlineimage},
+                 {"R": np.array([[0.2, 0.7]], np.float32)}).write(str(tmp_path / "level.exr"))
+    tex = {"texture": "ior.exr", "color_space": "Non-Color"}
+    model = parse_material({"type": "principled", "ior": tex}, "materials.p", base_dir=str(tmp_path))
+    assert model.varies_over_surface
+    level = {**tex, "texture": "level.exr"}
+    for extra, name in (({"transmission": 1.0}, "ior.exr"), ({"specular_ior_level": level}, "ior.exr"),
+                        ({}, "across.exr")):
+        with pytest.raises(SceneError, match=r"^materials\.p\.ior: "):
+            parse_material({"type": "principled", "ior": {**tex, "texture": name}, **extra}, "materials.p",
+                           base_dir=str(tmp_path))
