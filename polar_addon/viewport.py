@@ -227,6 +227,44 @@ def _instance_key(inst):
             tuple(getattr(inst, "persistent_id", ())))
 
 
+class _SyncPass:
+    """The working state of one :meth:`IncrementalExport.sync`: what it (re)did and the scene parts it collected."""
+
+    def __init__(self, export: IncrementalExport, full: bool, changes: Changes):
+        self.export = export
+        self.full = full              # export everything
+        self.changes = changes
+        self.counts = {"arrays": 0, "placed": 0, "materials": 0, "lights": 0, "world": 0}
+        self.warnings = []
+        self.rebuild = self.restart = False
+        self.reconverted = set()      # keys of the materials dropped to be converted again
+        self.emissions, self.alphas = {}, {}
+        self.meshes, self.lights = [], []
+        self.seen_placed, self.seen_lights, self.seen_arrays = set(), set(), set()
+        self.used = {}   # material keys in order of first use: stable under material edits, so that the
+        #                  compiled scene's material indices stay valid and a material swap needs no rebuild
+
+    def material_key(self, material):
+        """The key of ``material`` (None: the default), converted once; records its emission and alpha."""
+        materials = self.export.materials
+        name = material.name_full if material is not None else None
+        if name not in materials:
+            key = f"mat:{name}" if name is not None else "mat:<default>"
+            bsdf, emission, alpha = self.export._material_entry(material, self.warnings)
+            materials[name] = (key, bsdf, emission, alpha)
+            self.counts["materials"] += 1
+        key, _, emission, alpha = materials[name]
+        self.emissions[key], self.alphas[key] = emission, alpha
+        return key
+
+    def material_of(self, key):
+        """(emission, alpha) of the converted material ``key``; (None, 1.0) if there is none."""
+        for k, _, e, a in self.export.materials.values():
+            if k == key:
+                return e, a
+        return None, 1.0
+
+
 class IncrementalExport:
     """Per-object exports of a depsgraph, redone only where :class:`Changes` says so.
 
@@ -271,47 +309,28 @@ class IncrementalExport:
 
     def sync(self, depsgraph, changes: Changes | None, settings) -> SyncResult:
         """Bring the caches up to date with ``depsgraph`` (``changes`` None: export everything)."""
-        from ..engine.materials.lambert import Lambert
-        from ..engine.scene.description import Camera, Mesh
-        from ..engine.errors import SceneError
-        from ..engine.spectral import ConstantSpectrum
-        from .export.scene import BLACK, CONVERTED_TYPES, GEOMETRY_TYPES, UNSUPPORTED_TYPES
-
         full = changes is None or not self.initialised
-        changes = changes or Changes()
-        counts = {"arrays": 0, "placed": 0, "materials": 0, "lights": 0, "world": 0}
-        warnings = []
-        rebuild = restart = False
+        run = _SyncPass(self, full, changes or Changes())
+        self._reconvert_materials(run)
+        self._walk_instances(depsgraph, run)
+        self._drop_gone(run)
+        self._sync_world(depsgraph, run)
+        self._compare_settings(settings, run)
+        return self._assemble(depsgraph, settings, run)
 
-        # Materials: re-convert the edited ones; an emission that changes re-places its meshes.
-        reconverted = set()
+    def _reconvert_materials(self, run):
+        """Drop the edited materials (all of them on a full sync); their keys go to ``run.reconverted``."""
+        # An emission that changes re-places its meshes (_reuse_placed).
         for name in list(self.materials):
-            if full or changes.all_materials or name in changes.materials:
+            if run.full or run.changes.all_materials or name in run.changes.materials:
                 del self.materials[name]
-                reconverted.add(f"mat:{name}" if name is not None else "mat:<default>")
-                restart = True
-        emissions, alphas = {}, {}
+                run.reconverted.add(f"mat:{name}" if name is not None else "mat:<default>")
+                run.restart = True
 
-        def material_key(material):
-            name = material.name_full if material is not None else None
-            if name not in self.materials:
-                key = f"mat:{name}" if name is not None else "mat:<default>"
-                bsdf, emission, alpha = self._material_entry(material, warnings)
-                self.materials[name] = (key, bsdf, emission, alpha)
-                counts["materials"] += 1
-            key, _, emission, alpha = self.materials[name]
-            emissions[key], alphas[key] = emission, alpha
-            return key
+    def _walk_instances(self, depsgraph, run):
+        """Export or re-use each instance of ``depsgraph.object_instances``, as export_scene walks them."""
+        from .export.scene import CONVERTED_TYPES, GEOMETRY_TYPES, UNSUPPORTED_TYPES
 
-        def material_of(key):
-            for k, _, e, a in self.materials.values():
-                if k == key:
-                    return e, a
-            return None, 1.0
-
-        meshes, lights, seen_placed, seen_lights, seen_arrays = [], [], set(), set(), set()
-        used = {}     # material keys in order of first use: stable under material edits, so that the
-        #               compiled scene's material indices stay valid and a material swap needs no rebuild
         view_layer = getattr(depsgraph, "view_layer", None)
         meshed = {inst.object.original.name_full for inst in depsgraph.object_instances
                   if inst.object.type == "MESH" and inst.object.original.type in CONVERTED_TYPES}
@@ -321,107 +340,145 @@ class IncrementalExport:
             ikey = _instance_key(inst)
             name = obj.original.name_full
             if obj.type == "LIGHT":
-                data_name = obj.data.name_full if obj.data is not None else ""
-                entry = self.lights.get(ikey)
-                if (full or entry is None or entry[0] != M.tobytes() or data_name in changes.lights_data
-                        or name in changes.objects_shading or name in changes.objects_geometry):
-                    entry = (M.tobytes(), self._export_light(obj, M, warnings))
-                    self.lights[ikey] = entry
-                    counts["lights"] += 1
-                    rebuild = restart = True
-                seen_lights.add(ikey)
-                light = entry[1]
-                if isinstance(light, Mesh):
-                    meshes.append(light)
-                elif light is not None:
-                    lights.append(light)
-                continue
-            if obj.type in UNSUPPORTED_TYPES:
-                warnings.append(f"object {obj.name!r}: {UNSUPPORTED_TYPES[obj.type]} are not supported; skipped")
-                continue
-            if obj.type not in GEOMETRY_TYPES or (obj.type in CONVERTED_TYPES and name in meshed):
-                continue
-            data_name = obj.data.name_full if obj.data is not None else ""
-            dkey = (name, obj.type, data_name)
-            reread = full or dkey not in self.arrays or (dkey not in seen_arrays and (
-                name in changes.objects_geometry or data_name in changes.data_geometry
-                or (name in changes.objects_geometry_unconfirmed
-                    and not self._geometry_unchanged(obj, self.arrays[dkey]))))
-            if not reread and dkey not in seen_arrays and (changes.materials or changes.all_materials):
-                reread = self._attributes_outdated(obj, self.arrays[dkey])   # a texture added or removed
-            if reread:
-                self.arrays[dkey] = self._geometry_arrays(obj)
-                counts["arrays"] += 1
-            seen_arrays.add(dkey)
-            arrays = self.arrays[dkey]
-            if arrays is None:
-                continue
-            slots = [s.material for s in obj.material_slots] or [None]
-            rays = self._object_rays(obj, view_layer, warnings)     # cheap; its flags may change unflagged
-            signature = (M.tobytes(), tuple(m.name_full if m is not None else None for m in slots),
-                         tuple(sorted(rays.items())))
-            entry = self.placed.get(ikey)
-            if reread or entry is None or entry[0] != signature:
-                entry = (signature, self._object_meshes(obj.name, arrays, M, slots, material_key, emissions, alphas,
-                                                        lambda rays=rays: rays, warnings))
-                self.placed[ikey] = entry
-                counts["placed"] += 1
-                rebuild = restart = True
-            else:
-                for m in slots:
-                    material_key(m)
-                if any(mesh.materials[0] in reconverted for mesh in entry[1]):
-                    fresh = [dataclasses.replace(mesh, emission=material_of(mesh.materials[0])[0],
-                                                 alpha=material_of(mesh.materials[0])[1]) for mesh in entry[1]]
-                    if any((a.emission is not None) or (b.emission is not None) or a.alpha != b.alpha
-                           for a, b in zip(entry[1], fresh)):
-                        rebuild = True
-                    entry = (signature, fresh)
-                    self.placed[ikey] = entry
-            seen_placed.add(ikey)
-            used.update(dict.fromkeys(mesh.materials[0] for mesh in entry[1]))
-            meshes.extend(entry[1])
+                self._sync_light(run, obj, M, ikey, name)
+            elif obj.type in UNSUPPORTED_TYPES:
+                run.warnings.append(f"object {obj.name!r}: {UNSUPPORTED_TYPES[obj.type]} are not supported; skipped")
+            elif obj.type in GEOMETRY_TYPES and not (obj.type in CONVERTED_TYPES and name in meshed):
+                self._sync_geometry(run, obj, M, ikey, name, view_layer)
 
-        # Objects that disappeared (deleted, hidden, moved out of the view layer).
-        for cache, seen in ((self.placed, seen_placed), (self.lights, seen_lights), (self.arrays, seen_arrays)):
+    def _sync_light(self, run, obj, M, ikey, name):
+        """Re-export a light instance that moved or changed, and collect it (an area light is a Mesh)."""
+        from ..engine.scene.description import Mesh
+
+        changes = run.changes
+        data_name = obj.data.name_full if obj.data is not None else ""
+        entry = self.lights.get(ikey)
+        if (run.full or entry is None or entry[0] != M.tobytes() or data_name in changes.lights_data
+                or name in changes.objects_shading or name in changes.objects_geometry):
+            entry = (M.tobytes(), self._export_light(obj, M, run.warnings))
+            self.lights[ikey] = entry
+            run.counts["lights"] += 1
+            run.rebuild = run.restart = True
+        run.seen_lights.add(ikey)
+        light = entry[1]
+        if isinstance(light, Mesh):
+            run.meshes.append(light)
+        elif light is not None:
+            run.lights.append(light)
+
+    def _sync_geometry(self, run, obj, M, ikey, name, view_layer):
+        """Re-read the object's local arrays if needed, place the instance and collect its meshes."""
+        data_name = obj.data.name_full if obj.data is not None else ""
+        dkey = (name, obj.type, data_name)
+        reread = self._needs_reread(run, obj, name, data_name, dkey)
+        if reread:
+            self.arrays[dkey] = self._geometry_arrays(obj)
+            run.counts["arrays"] += 1
+        run.seen_arrays.add(dkey)
+        arrays = self.arrays[dkey]
+        if arrays is None:
+            return
+        entry = self._place(run, obj, M, ikey, arrays, reread, view_layer)
+        run.seen_placed.add(ikey)
+        run.used.update(dict.fromkeys(mesh.materials[0] for mesh in entry[1]))
+        run.meshes.extend(entry[1])
+
+    def _needs_reread(self, run, obj, name, data_name, dkey):
+        """Whether the (object, data) arrays ``dkey`` must be read again from Blender (once per sync)."""
+        changes = run.changes
+        reread = run.full or dkey not in self.arrays or (dkey not in run.seen_arrays and (
+            name in changes.objects_geometry or data_name in changes.data_geometry
+            or (name in changes.objects_geometry_unconfirmed
+                and not self._geometry_unchanged(obj, self.arrays[dkey]))))
+        if not reread and dkey not in run.seen_arrays and (changes.materials or changes.all_materials):
+            reread = self._attributes_outdated(obj, self.arrays[dkey])   # a texture added or removed
+        return reread
+
+    def _place(self, run, obj, M, ikey, arrays, reread, view_layer):
+        """The instance's (signature, [Mesh]) entry: placed again if its arrays or signature changed."""
+        slots = [s.material for s in obj.material_slots] or [None]
+        rays = self._object_rays(obj, view_layer, run.warnings)     # cheap; its flags may change unflagged
+        signature = (M.tobytes(), tuple(m.name_full if m is not None else None for m in slots),
+                     tuple(sorted(rays.items())))
+        entry = self.placed.get(ikey)
+        if reread or entry is None or entry[0] != signature:
+            entry = (signature, self._object_meshes(obj.name, arrays, M, slots, run.material_key, run.emissions,
+                                                    run.alphas, lambda rays=rays: rays, run.warnings))
+            self.placed[ikey] = entry
+            run.counts["placed"] += 1
+            run.rebuild = run.restart = True
+            return entry
+        return self._reuse_placed(run, ikey, signature, slots, entry)
+
+    def _reuse_placed(self, run, ikey, signature, slots, entry):
+        """Keep placed meshes, refreshing emission and alpha of re-converted materials (a rebuild if they matter)."""
+        for m in slots:
+            run.material_key(m)
+        if not any(mesh.materials[0] in run.reconverted for mesh in entry[1]):
+            return entry
+        fresh = [dataclasses.replace(mesh, emission=run.material_of(mesh.materials[0])[0],
+                                     alpha=run.material_of(mesh.materials[0])[1]) for mesh in entry[1]]
+        if any((a.emission is not None) or (b.emission is not None) or a.alpha != b.alpha
+               for a, b in zip(entry[1], fresh)):
+            run.rebuild = True
+        entry = (signature, fresh)
+        self.placed[ikey] = entry
+        return entry
+
+    def _drop_gone(self, run):
+        """Forget objects that disappeared (deleted, hidden, moved out of the view layer)."""
+        for cache, seen in ((self.placed, run.seen_placed), (self.lights, run.seen_lights),
+                            (self.arrays, run.seen_arrays)):
             gone = set(cache) - seen
             if gone and cache is not self.arrays:
-                rebuild = restart = True
+                run.rebuild = run.restart = True
             for k in gone:
                 del cache[k]
 
+    def _sync_world(self, depsgraph, run):
+        """Re-export the world if it changed or was swapped, and collect it with the lights."""
         scene_world = depsgraph.scene.world
         world_name = scene_world.name_full if scene_world is not None else None
-        if full or changes.world or world_name != self.world_name:
-            self.world = self._export_world(scene_world, warnings)
+        if run.full or run.changes.world or world_name != self.world_name:
+            self.world = self._export_world(scene_world, run.warnings)
             self.world_name = world_name
-            counts["world"] += 1
-            restart = True
+            run.counts["world"] += 1
+            run.restart = True
         if self.world is not None:
-            lights.append(self.world)
+            run.lights.append(self.world)
 
-        # The viewport sample count only sets how far accumulation goes: changing it restarts nothing.
+    def _compare_settings(self, settings, run):
+        """Restart if the settings changed; the viewport sample count only sets how far accumulation goes."""
         comparable = dataclasses.replace(settings, spp=0) if dataclasses.is_dataclass(settings) else settings
         if comparable != self.settings:
             self.settings = comparable
-            restart = True
+            run.restart = True
+
+    def _assemble(self, depsgraph, settings, run) -> SyncResult:
+        """The engine Scene of the collected meshes, lights and used materials, and what to redo."""
+        from ..engine.errors import SceneError
+        from ..engine.materials.lambert import Lambert
+        from ..engine.scene.description import Camera
+        from ..engine.spectral import ConstantSpectrum
+        from .export.scene import BLACK
+
         # A SCENE/COLLECTION update by itself changes nothing the walk above has not compared
         # (objects added, removed or hidden; world; settings), e.g. editing the viewport sample count.
-        restart = restart or full
-        rebuild = rebuild or full
-        if not meshes:
+        restart = run.restart or run.full
+        rebuild = run.rebuild or run.full
+        if not run.meshes:
             raise SceneError("scene", "nothing to render: the scene has no visible geometry")
         bsdfs = {key: bsdf for key, bsdf, _, _ in self.materials.values()}
         materials = {BLACK: Lambert(ConstantSpectrum(0.0))}
-        materials.update((key, bsdfs[key]) for key in used if key != BLACK)
+        materials.update((key, bsdfs[key]) for key in run.used if key != BLACK)
         # The viewport camera replaces this placeholder (ViewportSession.set_view).
         placeholder = Camera(origin=np.zeros(3), target=np.array([0.0, 0.0, -1.0]), up=np.array([0.0, 1.0, 0.0]),
                              width=1, height=1)
         self.initialised = True
-        self.counts = counts
-        scene = self._finish_scene(placeholder, meshes, materials, lights, settings,
-                                   f"blender-viewport:{depsgraph.scene.name}", warnings)
-        return SyncResult(scene, rebuild=rebuild, restart=restart, warnings=list(dict.fromkeys(warnings)))
+        self.counts = run.counts
+        scene = self._finish_scene(placeholder, run.meshes, materials, run.lights, settings,
+                                   f"blender-viewport:{depsgraph.scene.name}", run.warnings)
+        return SyncResult(scene, rebuild=rebuild, restart=restart, warnings=list(dict.fromkeys(run.warnings)))
 
 
 # ---------------------------------------------------------------------------------- render thread
