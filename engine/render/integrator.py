@@ -314,6 +314,10 @@ class PathTracer:
         # light's spectrum integrated against the CIE observer, so trace in RGB with those exact
         # light colours: no wavelength sampling and no chromatic noise (same expectation).
         self.rgb_mode = self.channels or (reduce in ("auto", True) and independent and not self.mono)
+        # a textured emitter's colour in RGB: its spectrum integrated against the observer (the expectation of
+        # the spectral estimator), except in the "rgb" transport, whose texels are the channels themselves (as a
+        # constant light's channel_rgb: Cycles' arithmetic)
+        self._integrated_rgb = self.rgb_mode and not self.channels
         # absorbing interiors (None: the scene has none, and nothing below reads a medium)
         self.media = Media(compiled, self.rgb_mode, self.mono) if compiled.has_volumes else None
         # Object ray visibility / holdout / alpha (None: none used) and film transparency (Cycles).
@@ -959,7 +963,7 @@ class PathTracer:
         # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
         if light.varies_over_surface:
             wi, dist, scale, pdf_l, ok, points[li] = light.sample_points(sp.p, np.stack((u_rest, u[1], u[2])))
-            emitted = light.emitted_at(points[li], lookup, self.rgb_mode, self.mono)
+            emitted = light.emitted_at(points[li], lookup, self._integrated_rgb, self.mono)
         else:
             wi, dist, scale, pdf_l, ok = light.sample(sp.p, np.stack((u_rest, u[1], u[2])))
             emitted = self._emitted(light, lookup, wi)
@@ -988,7 +992,7 @@ class PathTracer:
             u_sel = np.stack((gather(u_rest, sel), gather(u[1], sel), gather(u[2], sel)))
             if light.varies_over_surface:
                 w, d, sc, pdf, valid, points[li] = light.sample_points(gather(sp.p, sel), u_sel)
-                emitted[:, sel] = light.emitted_at(points[li], lookup.take(sel), self.rgb_mode, self.mono)
+                emitted[:, sel] = light.emitted_at(points[li], lookup.take(sel), self._integrated_rgb, self.mono)
             else:
                 w, d, sc, pdf, valid = light.sample(gather(sp.p, sel), u_sel)
                 emitted[:, sel] = self._emitted(light, lookup.take(sel), w)
@@ -1125,7 +1129,7 @@ class PathTracer:
                     b1, b2 = bary[0][rows], bary[1][rows]
                 else:
                     b1, b2 = light.barycentrics(hit_prim, o[:, sel] + d[:, sel] * dists[rows][None, :])
-                Le = light.emitted_at((hit_prim, b1, b2), lk.take(sel), self.rgb_mode, self.mono)
+                Le = light.emitted_at((hit_prim, b1, b2), lk.take(sel), self._integrated_rgb, self.mono)
             else:
                 Le = self._emitted(light, lk.take(sel))
             factor = light.emission_factor(cos_l)
