@@ -434,3 +434,34 @@ class MappedNumber(TexturedNumber):
 
     def __repr__(self):
         return f"MappedNumber({self.of!r}, {getattr(self.fn, '__name__', 'fn')})"
+
+
+class ColouredEmission(TexturedSpectrum):
+    """An emitter's radiance whose strength varies over the surface and whose colour is constant (Blender: a
+    texture into Emission Strength, a constant Emission Color): per point exactly a constant
+    ``RGBIlluminantSpectrum(colour, strength)`` of the texel's strength (``source``: a number, offset + scale·t;
+    negative strengths emit nothing)."""
+
+    def __init__(self, source: TextureInput, colour):
+        self.source, self.kind = source, "illuminant"
+        self.colour = np.maximum(np.asarray(colour, np.float64).reshape(3), 0.0)
+        lo, hi = source.bounds(rgb=False)
+        self.clip = (0.0, math.inf) if lo < 0 else None
+        lo, hi = max(lo, 0.0), max(hi, 0.0)
+        self.lo, self.hi = lo * float(self.colour.min()), hi * float(self.colour.max())
+
+    def clamped_to(self, lo: float = -math.inf, hi: float = math.inf) -> ColouredEmission:
+        return self
+
+    def scaled(self, weight: float) -> ColouredEmission:
+        """The same emission × weight (a shader mix's)."""
+        src = self.source
+        return ColouredEmission(TextureInput(src.texture, src.channel, src.scale * weight, src.offset * weight,
+                                             src.power), self.colour)
+
+    def __repr__(self):
+        return f"ColouredEmission({self.source!r}, {self.colour.tolist()})"
+
+    def rgb_at(self, points) -> np.ndarray:
+        strength = np.maximum(self.source.number(points), 0.0)
+        return self.colour[:, None] * strength[None, :]

@@ -1111,10 +1111,17 @@ def _emission(node, mat, warnings, colour_name="Color", strength_name="Strength"
     constant or varying over the surface (an image, a colour attribute, a baked graph: Cycles'
     Emission Color from a texture); None where nothing is emitted.  Cycles clamps neither; a negative
     strength or colour emits nothing, as a zero one."""
-    from ...engine.textures.inputs import textured_emission
+    from ...engine.textures.inputs import ColouredEmission, textured_emission
     r = _Reader(mat, node, warnings, bake)
-    strength = r.float(strength_name)
     colour = r.rgb_or_texture(colour_name, -math.inf)
+    if r._socket(strength_name).is_linked and not isinstance(colour, TextureInput):
+        source = r.texture(strength_name)          # a strength per point (not mapped: its own value, warned)
+        if source is not None:
+            emission = ColouredEmission(source, colour)
+            return emission if emission.hi > 0 else None
+        strength = r._checked_float(strength_name, -math.inf, math.inf)
+    else:
+        strength = r.float(strength_name)
     if strength <= 0:
         return None
     if isinstance(colour, TextureInput):
@@ -1137,6 +1144,8 @@ def _weighted_emission(parts, mat, node, warnings):
             warnings.append(f"material {mat!r}: {node.name!r} mixes a textured emission with other emission; only "
                             "the textured one is rendered")
         w, e = textured[0]
+        if hasattr(e, "scaled"):            # a strength per point (engine.textures.inputs.ColouredEmission)
+            return e.scaled(w)
         src = e.source
         scaled = TextureInput(src.texture, src.channel, src.scale * w, src.offset * w, src.power)
         return TexturedSpectrum(scaled, "illuminant", e.clip)

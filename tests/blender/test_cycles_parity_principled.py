@@ -29,6 +29,7 @@ CASES = {
     "Roughness ": ((0.05, 0.7), {"Base Color": (0.3, 0.5, 0.2)}),          # the dielectric's
     "Transmission Weight": ((0.0, 1.0), {"Roughness": 0.3, "Base Color": (0.9, 0.9, 0.9)}),
     "Emission Color": (((2.0, 0.5, 0.1), (0.0, 0.0, 0.0)), {"Emission Strength": 1.5}),
+    "Emission Strength": ((0.5, 3.0), {"Emission Color": (1.0, 0.5, 0.2), "Base Color": (0.2, 0.2, 0.2)}),
     "Alpha": ((0.0, 1.0), {"Base Color": (0.8, 0.2, 0.1), "Roughness": 0.5}),        # a cut-out
     "Metallic ": ((0.0, 1.0), {"Base Color": (0.8, 0.2, 0.1), "Roughness": 0.4,     # under a clear coat
                                "Coat Weight": 1.0, "Coat Roughness": 0.1}),
@@ -382,3 +383,16 @@ def test_a_per_point_ior_on_a_glass_says_it_takes_its_own_value(addon):
     scene = sphere_scene("IOR", (1.2, 2.0), {"Transmission Weight": 1.0, "Roughness": 0.2}, "lamps")
     _, _, warnings = ap.export_polar(scene, 1, 8)
     assert len(warnings) == 1 and "IOR of" in warnings[0] and "own value" in warnings[0]
+
+
+@pytest.mark.parametrize("lighting", ap.LIGHTINGS)
+def test_emission_shader_strength_per_point_matches_cycles(addon, lighting):
+    """An Emission shader whose Strength comes from a texture (a constant Color): Color × Strength per point."""
+    scene = sphere_scene("Base Color", ((0.5, 0.5, 0.5), (3.0, 3.0, 3.0)), {}, lighting)
+    tree = bpy.data.materials["P"].node_tree
+    emission = tree.nodes.new("ShaderNodeEmission")
+    emission.inputs["Color"].default_value = (0.2, 0.6, 1.0, 1.0)
+    tex = tree.nodes["Image Texture"]
+    tree.links.new(tex.outputs["Color"], emission.inputs["Strength"])
+    tree.links.new(emission.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    compare_with_cycles(scene, "Emission shader Strength", lighting)

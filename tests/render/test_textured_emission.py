@@ -179,11 +179,12 @@ def test_a_floor_under_a_textured_lamp_has_the_integrated_irradiance(cells):
     assert np.all(np.abs(split.sum(axis=(0, 1)) - totals.mean(0)) < 5 * t_se + 0.01 * expected.sum(axis=(0, 1)))
 
 
-@pytest.mark.parametrize("mode", [{}, {"reduce_spectral": "off"}, {"spectral": "mono"}])
+@pytest.mark.parametrize("mode", [{}, {"reduce_spectral": "off"}, {"spectral": "mono"}, {"spectral": "rgb"}])
 def test_a_uniform_texture_renders_as_the_constant_emitter_of_its_colour(mode):
     """A rectangle lamp whose texture is one colour everywhere: sampled as the constant emitter is (by
     solid angle), so the lit floor and the lamp seen directly equal the constant emitter's render with
-    the same random numbers, to rounding (RGB, spectral and mono)."""
+    the same random numbers, to rounding (RGB, spectral and mono; the "rgb" transport too, where both are the
+    colour's own channels — before, the textured one was its integrated illuminant, 2e-4 off)."""
     colour, strength = (0.8, 0.4, 0.2), 3.0
     textured = grid_mesh("lamp", (-0.5, 0.5, 0.6), (1, 0, 0), (0, -1, 0), 1, 1,
                          textured_emission(TextureInput(image(np.full((3, 5, 3), colour))), strength))
@@ -432,3 +433,20 @@ def test_a_textured_emission_needs_an_illuminant_and_a_known_sampling():
     plain = grid_mesh("lamp", (-0.5, 0.5, 1.0), (1, 0, 0), (0, -1, 0), 1, 1,
                       textured_emission(TextureInput(image(TEXELS))))
     assert isinstance(light_of(floor_scene([plain]), "lamp")[1], TexturedAreaEmitter)
+
+
+@pytest.mark.parametrize("mode", [{"spectral": "rgb"}, {"spectral": "spectral"}, {"spectral": "mono"}])
+def test_a_uniform_strength_texture_renders_as_the_constant_emitter(mode):
+    """Emission Strength from a texture with a constant colour (engine.textures.inputs.ColouredEmission): a
+    texture of one strength everywhere renders as the constant emitter colour × strength, lit floor and lamp
+    seen directly, to rounding (RGB, spectral and mono)."""
+    from engine.textures.inputs import ColouredEmission
+    colour, strength = (0.8, 0.4, 0.2), 2.5
+    textured = grid_mesh("lamp", (-0.5, 0.5, 0.6), (1, 0, 0), (0, -1, 0), 1, 1,
+                         ColouredEmission(TextureInput(image(np.full((3, 5, 1), strength))), colour))
+    constant = grid_mesh("lamp", (-0.5, 0.5, 0.6), (1, 0, 0), (0, -1, 0), 1, 1,
+                         RGBIlluminantSpectrum(list(colour), float(np.float32(strength))))
+    scenes = [floor_scene([m], res=8, spp=8, max_depth=3) for m in (textured, constant)]
+    a, b = (render(s, **mode).stokes()[0] for s in scenes)
+    assert b.max() > 0
+    np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-13)
