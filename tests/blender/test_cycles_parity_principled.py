@@ -258,12 +258,14 @@ METAL_NODES = {
 }
 
 
-def metal_node_scene(case, lighting):
-    kind, socket, colours, others = METAL_NODES[case]
+def node_scene(kind, socket, colours, others, lighting):
+    """The checker sphere with the shader node ``kind`` at the output in place of the Principled BSDF: the checker
+    (``colours``) into its ``socket``, its other inputs ``others`` (``"tangent"``: a Tangent node on the UV map)."""
     scene = sphere_scene("Base Color", colours, {}, lighting)
     tree = bpy.data.materials["P"].node_tree
     node = tree.nodes.new(kind)
-    node.distribution = "MULTI_GGX"
+    if hasattr(node, "distribution"):
+        node.distribution = "MULTI_GGX"
     for k, v in others.items():
         if k == "tangent":
             tangent = tree.nodes.new("ShaderNodeTangent")
@@ -274,6 +276,10 @@ def metal_node_scene(case, lighting):
     tree.links.new(tree.nodes["Image Texture"].outputs["Color"], node.inputs[socket])
     tree.links.new(node.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
     return scene
+
+
+def metal_node_scene(case, lighting):
+    return node_scene(*METAL_NODES[case], lighting)
 
 
 @pytest.mark.parametrize("lighting", ap.LIGHTINGS)
@@ -346,14 +352,8 @@ def test_a_per_point_specular_level_with_a_tint_says_it_takes_its_own_value(addo
 @pytest.mark.parametrize("lighting", ap.LIGHTINGS)
 def test_diffuse_bsdf_roughness_per_point_matches_cycles(addon, lighting):
     """The Diffuse BSDF's Roughness from a texture: Cycles' Oren–Nayar per point, Lambert where it is 0."""
-    scene = sphere_scene("Base Color", ((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)), {}, lighting)
-    tree = bpy.data.materials["P"].node_tree
-    diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
-    diffuse.inputs["Color"].default_value = (0.8, 0.5, 0.3, 1.0)
-    tex = tree.nodes["Image Texture"]
-    tex.image.colorspace_settings.name = "Non-Color"
-    tree.links.new(tex.outputs["Color"], diffuse.inputs["Roughness"])
-    tree.links.new(diffuse.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    scene = node_scene("ShaderNodeBsdfDiffuse", "Roughness", ((0.0, 0.0, 0.0), (1.0, 1.0, 1.0)),
+                       {"Color": (0.8, 0.5, 0.3)}, lighting)
     compare_with_cycles(scene, "Diffuse BSDF Roughness", lighting)
 
 
@@ -388,11 +388,6 @@ def test_a_per_point_ior_on_a_glass_says_it_takes_its_own_value(addon):
 @pytest.mark.parametrize("lighting", ap.LIGHTINGS)
 def test_emission_shader_strength_per_point_matches_cycles(addon, lighting):
     """An Emission shader whose Strength comes from a texture (a constant Color): Color × Strength per point."""
-    scene = sphere_scene("Base Color", ((0.5, 0.5, 0.5), (3.0, 3.0, 3.0)), {}, lighting)
-    tree = bpy.data.materials["P"].node_tree
-    emission = tree.nodes.new("ShaderNodeEmission")
-    emission.inputs["Color"].default_value = (0.2, 0.6, 1.0, 1.0)
-    tex = tree.nodes["Image Texture"]
-    tree.links.new(tex.outputs["Color"], emission.inputs["Strength"])
-    tree.links.new(emission.outputs[0], tree.nodes["Material Output"].inputs["Surface"])
+    scene = node_scene("ShaderNodeEmission", "Strength", ((0.5, 0.5, 0.5), (3.0, 3.0, 3.0)),
+                       {"Color": (0.2, 0.6, 1.0)}, lighting)
     compare_with_cycles(scene, "Emission shader Strength", lighting)
