@@ -527,16 +527,17 @@ class _Reader:
         r = self.float(name, 0.0, 1.0)
         return r * r, r
 
-    def roughness_texture_or_float(self, name):
-        """A roughness r itself (not squared): a TextureInput of r in [0, 1] where textured or baked, else
-        the validated constant."""
+    def number_or_texture(self, name, lo=0.0, hi=1.0):
+        """A number input in [lo, hi] (default: a roughness or weight r itself, not squared): a TextureInput where
+        textured or baked (values clamped to [lo, hi]), else the validated constant (linked but not mapped: its
+        own value, one warning)."""
         sock = self._socket(name)
         if sock.is_linked:
-            source = self.texture(name, lo=0.0, hi=1.0)
+            source = self.texture(name, lo=lo, hi=hi)
             if source is not None:
                 return source
-            return self._checked_float(name, 0.0, 1.0)
-        return self.float(name, 0.0, 1.0)
+            return self._checked_float(name, lo, hi)
+        return self.float(name, lo, hi)
 
     def _checked_rgb(self, name, lo, hi):
         v = [float(c) for c in self._socket(name).default_value[:3]]
@@ -828,17 +829,6 @@ def _ior(r, name):
     return max(r.float(name), IOR_MIN)
 
 
-def _rotation(r, name):
-    """A rotation in turns (Anisotropic Rotation): a TextureInput where linked (an image, a baked graph — glTF's
-    anisotropy direction through the importer's nodes), else the constant."""
-    if r._socket(name).is_linked:
-        source = r.texture(name, lo=-1e6, hi=1e6)
-        if source is not None:
-            return source
-        return r._checked_float(name, -1e6, 1e6)
-    return r.float(name, -1e6, 1e6)
-
-
 def _coat_ior(r):
     """Coat IOR as Cycles reads it (≥ 1; Polar's range ends at 100): a TextureInput (values clamped to [1, 100])
     where linked, else the constant."""
@@ -850,14 +840,19 @@ def _coat_ior(r):
     return min(max(r.float("Coat IOR"), 1.0), 100.0)
 
 
+def _tinted_or_anisotropic(node) -> bool:
+    """A Principled BSDF whose Specular Tint is linked or not white, or which is anisotropic: its dielectric's index
+    cannot vary per point (engine.materials.principled)."""
+    tint = node.inputs["Specular Tint"]
+    return tint.is_linked or [float(c) for c in tint.default_value[:3]] != [1.0, 1.0, 1.0] or _anisotropic(node)
+
+
 def _principled_ior(r, node, transmission):
     """The Principled IOR: a TextureInput where linked on an opaque material without Specular Tint, anisotropy or
     a linked Specular IOR Level (the dielectric's index per point), else as Cycles reads the constant (linked:
     its own value, one warning)."""
     if r._socket("IOR").is_linked:
-        tint = node.inputs["Specular Tint"]
-        plain = not (tint.is_linked or [float(c) for c in tint.default_value[:3]] != [1.0, 1.0, 1.0]
-                     or _anisotropic(node) or node.inputs["Specular IOR Level"].is_linked)
+        plain = not (_tinted_or_anisotropic(node) or node.inputs["Specular IOR Level"].is_linked)
         if plain and not isinstance(transmission, TextureInput) and transmission == 0.0:
             source = r.texture("IOR", lo=IOR_MIN, hi=1e6)
             if source is not None:
@@ -875,13 +870,11 @@ def _specular_level(r, node):
     constant; with a non-white Specular Tint or an anisotropy its own value (per point there: not yet, one
     warning)."""
     if r._socket("Specular IOR Level").is_linked:
-        tint = node.inputs["Specular Tint"]
-        tinted = tint.is_linked or [float(c) for c in tint.default_value[:3]] != [1.0, 1.0, 1.0]
-        if tinted or _anisotropic(node):
+        if _tinted_or_anisotropic(node):
             r.warnings.append(f"material {r.mat!r}: Specular IOR Level of {node.name!r} cannot vary over the surface "
                               "with a Specular Tint or an anisotropy yet; its own value is used")
             return r._checked_float("Specular IOR Level", 0.0, 1.0)
-        return r.roughness_texture_or_float("Specular IOR Level")
+        return r.number_or_texture("Specular IOR Level")
     return r.float("Specular IOR Level", 0.0, 1.0)
 
 
@@ -937,21 +930,21 @@ def _principled(node, mat, warnings, bake=None):
     r = _Reader(mat, node, warnings, bake)
     metallic = _fraction(r, "Metallic")
     transmission = _fraction(r, "Transmission Weight")
-    roughness = r.roughness_texture_or_float("Roughness")
+    roughness = r.number_or_texture("Roughness")
     values = {"base_color": _grey(r.rgb_or_texture("Base Color", 0.0, 1.0)), "metallic": metallic,
               "roughness": roughness, "transmission": transmission, "ior": _principled_ior(r, node, transmission),
               "specular_ior_level": _specular_level(r, node),
               "specular_tint": _grey(r.rgb_or_texture("Specular Tint", 0.0)),
               "coat_weight": _fraction(r, "Coat Weight"),
-              "coat_roughness": r.roughness_texture_or_float("Coat Roughness"),
+              "coat_roughness": r.number_or_texture("Coat Roughness"),
               "coat_ior": _coat_ior(r),
               "coat_tint": _grey(r.rgb_or_texture("Coat Tint", 0.0, 1.0)),
               "sheen_weight": _sheen_weight(r),
-              "sheen_roughness": r.roughness_texture_or_float("Sheen Roughness"),
+              "sheen_roughness": r.number_or_texture("Sheen Roughness"),
               "sheen_tint": _grey(r.rgb_or_texture("Sheen Tint", 0.0)),
               "anisotropic": _fraction(r, "Anisotropic") if _anisotropic(node) else 0.0,
-              "anisotropic_rotation": _rotation(r, "Anisotropic Rotation"),
-              "diffuse_roughness": (r.roughness_texture_or_float("Diffuse Roughness")
+              "anisotropic_rotation": r.number_or_texture("Anisotropic Rotation", -1e6, 1e6),
+              "diffuse_roughness": (r.number_or_texture("Diffuse Roughness")
                                     if node.inputs.get("Diffuse Roughness") is not None else 0.0),
               "distribution": "ggx" if getattr(node, "distribution", "MULTI_GGX") == "GGX" else "multi_ggx"}
     if isinstance(roughness, TextureInput) and transmission != 0.0:
@@ -1302,7 +1295,7 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
     r = _Reader(mat, node, warnings, bake)
     if kind == "ShaderNodeBsdfDiffuse":
         colour = r.rgb_or_texture("Color", 0.0, 1.0)
-        sigma = r.roughness_texture_or_float("Roughness")          # (a σ per point: Oren–Nayar, Lambert where 0)
+        sigma = r.number_or_texture("Roughness")          # (a σ per point: Oren–Nayar, Lambert where 0)
         if isinstance(sigma, TextureInput) or sigma > 0:       # Cycles' Oren–Nayar (Fujii/EON) above roughness 0
             return _textured_model("oren_nayar", {"albedo": colour, "roughness": sigma}, mat, node), None
         return _lambert(colour, mat, node), None
@@ -1328,7 +1321,7 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
             warnings.append(f"material {mat!r}: Sheen BSDF {node.name!r} with the {node.distribution.title()} "
                             "distribution is rendered as Microfiber (Cycles' default)")
         tint = r.rgb_or_texture("Color", 0.0)
-        return _textured_model("sheen", {"tint": _grey(tint), "roughness": r.roughness_texture_or_float("Roughness")},
+        return _textured_model("sheen", {"tint": _grey(tint), "roughness": r.number_or_texture("Roughness")},
                                mat, node), None
     if kind == "ShaderNodeBsdfPrincipled":
         emission = _emission(node, mat, warnings, "Emission Color", "Emission Strength", bake)
