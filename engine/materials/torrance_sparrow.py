@@ -252,15 +252,19 @@ class IndexAlbedoTables:
 
     def __call__(self, cos_o: np.ndarray, m, eta: np.ndarray) -> np.ndarray:
         """E (N,) at cosθ_o (N,), m (a number or (N,)) and the points' real relative index eta (N,)."""
-        values = np.stack([table(cos_o, m) for table in self.tables])          # (nodes, N)
         if len(self.tables) == 1:
-            return values[0]
+            return self.tables[0](cos_o, m)
         x = (np.clip(_root_f0(eta), self.f_lo, self.f_hi) - self.f_lo) / (self.f_hi - self.f_lo) \
             * (len(self.tables) - 1)
         i = np.minimum(x.astype(np.int64), len(self.tables) - 2)
         t = x - i
-        cols = np.arange(values.shape[1])
-        return (1.0 - t) * values[i, cols] + t * values[i + 1, cols]
+        m = np.broadcast_to(np.asarray(m, np.float64), np.shape(cos_o))
+        E = np.empty(np.shape(cos_o))
+        for k in np.unique(i):          # only the two tables each point lies between
+            sel = np.nonzero(i == k)[0]
+            c, mk = cos_o[sel], m[sel]
+            E[sel] = (1.0 - t[sel]) * self.tables[k](c, mk) + t[sel] * self.tables[k + 1](c, mk)
+        return E
 
 
 def _root_f0(eta):
