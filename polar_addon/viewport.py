@@ -3,7 +3,7 @@
 Three parts, only the last touches Blender's drawing API:
 
 * :func:`classify` turns ``depsgraph.updates`` into :class:`Changes` (which objects, meshes,
-  materials, lights, world changed), and :class:`IncrementalExport` keeps per-object exports and
+  materials, lights, world changed), and the scene walk (``export.scene.SceneWalk``) keeps per-object exports and
   redoes only what a change invalidates: a moved object is re-placed from its cached local arrays
   (no ``to_mesh``), an edited mesh is re-read with ``foreach_get`` for that object only, an edited
   material is re-converted and swapped into the compiled scene without touching the BVH.
@@ -31,6 +31,7 @@ import weakref
 import numpy as np
 
 from ..engine.render.allocator import render_heap
+from .export.scene import Changes, SceneWalk, SyncResult  # noqa: F401  (SyncResult: the sessions' input)
 from .ui_names import ui_message
 
 #: Samples traced per viewport pass: the image is rendered at a reduced resolution so that one
@@ -58,29 +59,6 @@ def viewport_resolution(width: int, height: int, budget: int = VIEWPORT_PIXELS_P
 
 
 # ---------------------------------------------------------------------------------- what changed
-
-@dataclasses.dataclass
-class Changes:
-    """What a batch of depsgraph updates invalidates (names are original ``name_full``)."""
-    objects_geometry: set = dataclasses.field(default_factory=set)   # evaluated mesh changed
-    #: objects flagged as changed geometry in a batch that edits materials: Blender 5.3 flags the
-    #: objects using an edited material so; the sync re-reads them only if their geometry differs
-    objects_geometry_unconfirmed: set = dataclasses.field(default_factory=set)
-    objects_transform: set = dataclasses.field(default_factory=set)
-    objects_shading: set = dataclasses.field(default_factory=set)    # e.g. material slots reassigned
-    data_geometry: set = dataclasses.field(default_factory=set)      # mesh / curve data edited
-    lights_data: set = dataclasses.field(default_factory=set)
-    materials: set = dataclasses.field(default_factory=set)
-    all_materials: bool = False      # a shared node group, texture or image changed
-    world: bool = False
-    scene: bool = False              # settings, visibility, objects added or removed (IncrementalExport
-    #                                  compares these itself: this flag alone restarts nothing)
-
-    def any(self) -> bool:
-        return bool(self.objects_geometry or self.objects_geometry_unconfirmed or self.objects_transform
-                    or self.objects_shading
-                    or self.data_geometry or self.lights_data or self.materials or self.all_materials
-                    or self.world or self.scene)
 
 
 def depsgraph_updates(depsgraph):
@@ -142,7 +120,7 @@ class ViewportSync:
     """View bookkeeping: restarts accumulation when the view changes; counts samples.
 
     ``on_updates`` is the coarse rule kept for callers that only need to know whether to restart;
-    the session uses :func:`classify` and :class:`IncrementalExport` to decide what to redo.
+    the session uses :func:`classify` and :class:`SceneWalk` to decide what to redo.
     """
 
     def __init__(self, target_samples: int = 16):
@@ -207,278 +185,6 @@ def camera_from_view(view_matrix, projection_matrix, width, height, is_perspecti
     return cam
 
 
-# ---------------------------------------------------------------------------------- incremental export
-
-@dataclasses.dataclass
-class SyncResult:
-    """An assembled engine Scene and what the session must do with it."""
-    scene: object
-    rebuild: bool      # geometry, transforms or emitters changed: rebuild the BVH and light set
-    restart: bool      # anything visible changed: restart accumulation
-    warnings: list
-
-
-def _instance_key(inst):
-    obj = inst.object
-    if not getattr(inst, "is_instance", False):
-        return (obj.original.name_full,)
-    parent = getattr(inst, "parent", None)
-    return (parent.original.name_full if parent is not None else "", obj.original.name_full,
-            tuple(getattr(inst, "persistent_id", ())))
-
-
-class _SyncPass:
-    """The working state of one :meth:`IncrementalExport.sync`: what it (re)did and the scene parts it collected."""
-
-    def __init__(self, export: IncrementalExport, full: bool, changes: Changes):
-        self.export = export
-        self.full = full              # export everything
-        self.changes = changes
-        self.counts = {"arrays": 0, "placed": 0, "materials": 0, "lights": 0, "world": 0}
-        self.warnings = []
-        self.rebuild = self.restart = False
-        self.reconverted = set()      # keys of the materials dropped to be converted again
-        self.emissions, self.alphas = {}, {}
-        self.meshes, self.lights = [], []
-        self.seen_placed, self.seen_lights, self.seen_arrays = set(), set(), set()
-        self.used = {}   # material keys in order of first use: stable under material edits, so that the
-        #                  compiled scene's material indices stay valid and a material swap needs no rebuild
-
-    def material_key(self, material):
-        """The key of ``material`` (None: the default), converted once; records its emission and alpha."""
-        materials = self.export.materials
-        name = material.name_full if material is not None else None
-        if name not in materials:
-            key = f"mat:{name}" if name is not None else "mat:<default>"
-            bsdf, emission, alpha = self.export._material_entry(material, self.warnings)
-            materials[name] = (key, bsdf, emission, alpha)
-            self.counts["materials"] += 1
-        key, _, emission, alpha = materials[name]
-        self.emissions[key], self.alphas[key] = emission, alpha
-        return key
-
-    def material_of(self, key):
-        """(emission, alpha) of the converted material ``key``; (None, 1.0) if there is none."""
-        for k, _, e, a in self.export.materials.values():
-            if k == key:
-                return e, a
-        return None, 1.0
-
-
-class IncrementalExport:
-    """Per-object exports of a depsgraph, redone only where :class:`Changes` says so.
-
-    It walks ``depsgraph.object_instances`` with the same rules as ``export.scene.export_scene``
-    (object types, converted curves/text, unsupported types) and places each instance with the same
-    ``export.scene.object_meshes``, so the viewport shows what F12 renders.
-    Caches: local triangle arrays per (object, data) (``geometry_arrays``: the to_mesh + foreach_get
-    step), placed world-space engine Meshes per instance (keyed by its matrix and material slots),
-    lights per instance, converted materials per name, and the world.  ``counts`` records what the
-    last :meth:`sync` (re)did: "arrays" (meshes read from Blender), "placed" (instances
-    transformed), "materials", "lights", "world".  The export functions are injectable so that
-    the logic is testable without Blender.
-    """
-
-    def __init__(self, geometry_arrays=None, object_meshes=None, material_entry=None, export_light=None,
-                 export_world=None, object_rays=None, geometry_unchanged=None):
-        from .export import scene as scene_export
-        from .export.lights import export_light as _light
-        from .export.materials import VIEWPORT_NO_BAKE
-        from .export.world import export_world as _world
-        self._geometry_arrays = geometry_arrays or scene_export.geometry_arrays
-        self._object_meshes = object_meshes or scene_export.object_meshes
-        # (BSDF, emission, alpha) as F12 takes them (export.scene.material_entry), except that the viewport
-        # does not bake linked inputs (materials.VIEWPORT_NO_BAKE says why; F12 does)
-        self._material_entry = material_entry or (
-            lambda m, w: scene_export.material_entry(m, w, bake=VIEWPORT_NO_BAKE))
-        self._finish_scene = scene_export.finish_scene
-        self._export_light = export_light or _light
-        self._export_world = export_world or _world
-        self._object_rays = object_rays or scene_export.object_rays
-        self._attributes_outdated = scene_export.attributes_outdated
-        self._geometry_unchanged = geometry_unchanged or scene_export.geometry_unchanged
-        self.arrays = {}      # (object, data) name → local arrays or None
-        self.placed = {}      # instance key → ((matrix bytes, slot names), [Mesh])
-        self.lights = {}      # instance key → (matrix bytes, light or None)
-        self.materials = {}   # material name (None = default) → (key, bsdf, emission, alpha)
-        self.world = None
-        self.world_name = None
-        self.settings = None
-        self.initialised = False
-        self.counts = {}
-
-    def sync(self, depsgraph, changes: Changes | None, settings) -> SyncResult:
-        """Bring the caches up to date with ``depsgraph`` (``changes`` None: export everything)."""
-        full = changes is None or not self.initialised
-        run = _SyncPass(self, full, changes or Changes())
-        self._reconvert_materials(run)
-        self._walk_instances(depsgraph, run)
-        self._drop_gone(run)
-        self._sync_world(depsgraph, run)
-        self._compare_settings(settings, run)
-        return self._assemble(depsgraph, settings, run)
-
-    def _reconvert_materials(self, run):
-        """Drop the edited materials (all of them on a full sync); their keys go to ``run.reconverted``."""
-        # An emission that changes re-places its meshes (_reuse_placed).
-        for name in list(self.materials):
-            if run.full or run.changes.all_materials or name in run.changes.materials:
-                del self.materials[name]
-                run.reconverted.add(f"mat:{name}" if name is not None else "mat:<default>")
-                run.restart = True
-
-    def _walk_instances(self, depsgraph, run):
-        """Export or re-use each instance of ``depsgraph.object_instances``, as export_scene walks them."""
-        from .export.scene import CONVERTED_TYPES, GEOMETRY_TYPES, UNSUPPORTED_TYPES
-
-        view_layer = getattr(depsgraph, "view_layer", None)
-        meshed = {inst.object.original.name_full for inst in depsgraph.object_instances
-                  if inst.object.type == "MESH" and inst.object.original.type in CONVERTED_TYPES}
-        for inst in depsgraph.object_instances:
-            obj = inst.object
-            M = np.array(inst.matrix_world, dtype=np.float64)
-            ikey = _instance_key(inst)
-            name = obj.original.name_full
-            if obj.type == "LIGHT":
-                self._sync_light(run, obj, M, ikey, name)
-            elif obj.type in UNSUPPORTED_TYPES:
-                run.warnings.append(f"object {obj.name!r}: {UNSUPPORTED_TYPES[obj.type]} are not supported; skipped")
-            elif obj.type in GEOMETRY_TYPES and not (obj.type in CONVERTED_TYPES and name in meshed):
-                self._sync_geometry(run, obj, M, ikey, name, view_layer)
-
-    def _sync_light(self, run, obj, M, ikey, name):
-        """Re-export a light instance that moved or changed, and collect it (an area light is a Mesh)."""
-        from ..engine.scene.description import Mesh
-
-        changes = run.changes
-        data_name = obj.data.name_full if obj.data is not None else ""
-        entry = self.lights.get(ikey)
-        if (run.full or entry is None or entry[0] != M.tobytes() or data_name in changes.lights_data
-                or name in changes.objects_shading or name in changes.objects_geometry):
-            entry = (M.tobytes(), self._export_light(obj, M, run.warnings))
-            self.lights[ikey] = entry
-            run.counts["lights"] += 1
-            run.rebuild = run.restart = True
-        run.seen_lights.add(ikey)
-        light = entry[1]
-        if isinstance(light, Mesh):
-            run.meshes.append(light)
-        elif light is not None:
-            run.lights.append(light)
-
-    def _sync_geometry(self, run, obj, M, ikey, name, view_layer):
-        """Re-read the object's local arrays if needed, place the instance and collect its meshes."""
-        data_name = obj.data.name_full if obj.data is not None else ""
-        dkey = (name, obj.type, data_name)
-        reread = self._needs_reread(run, obj, name, data_name, dkey)
-        if reread:
-            self.arrays[dkey] = self._geometry_arrays(obj)
-            run.counts["arrays"] += 1
-        run.seen_arrays.add(dkey)
-        arrays = self.arrays[dkey]
-        if arrays is None:
-            return
-        entry = self._place(run, obj, M, ikey, arrays, reread, view_layer)
-        run.seen_placed.add(ikey)
-        run.used.update(dict.fromkeys(mesh.materials[0] for mesh in entry[1]))
-        run.meshes.extend(entry[1])
-
-    def _needs_reread(self, run, obj, name, data_name, dkey):
-        """Whether the (object, data) arrays ``dkey`` must be read again from Blender (once per sync)."""
-        changes = run.changes
-        reread = run.full or dkey not in self.arrays or (dkey not in run.seen_arrays and (
-            name in changes.objects_geometry or data_name in changes.data_geometry
-            or (name in changes.objects_geometry_unconfirmed
-                and not self._geometry_unchanged(obj, self.arrays[dkey]))))
-        if not reread and dkey not in run.seen_arrays and (changes.materials or changes.all_materials):
-            reread = self._attributes_outdated(obj, self.arrays[dkey])   # a texture added or removed
-        return reread
-
-    def _place(self, run, obj, M, ikey, arrays, reread, view_layer):
-        """The instance's (signature, [Mesh]) entry: placed again if its arrays or signature changed."""
-        slots = [s.material for s in obj.material_slots] or [None]
-        rays = self._object_rays(obj, view_layer, run.warnings)     # cheap; its flags may change unflagged
-        signature = (M.tobytes(), tuple(m.name_full if m is not None else None for m in slots),
-                     tuple(sorted(rays.items())))
-        entry = self.placed.get(ikey)
-        if reread or entry is None or entry[0] != signature:
-            entry = (signature, self._object_meshes(obj.name, arrays, M, slots, run.material_key, run.emissions,
-                                                    run.alphas, lambda rays=rays: rays, run.warnings))
-            self.placed[ikey] = entry
-            run.counts["placed"] += 1
-            run.rebuild = run.restart = True
-            return entry
-        return self._reuse_placed(run, ikey, signature, slots, entry)
-
-    def _reuse_placed(self, run, ikey, signature, slots, entry):
-        """Keep placed meshes, refreshing emission and alpha of re-converted materials (a rebuild if they matter)."""
-        for m in slots:
-            run.material_key(m)
-        if not any(mesh.materials[0] in run.reconverted for mesh in entry[1]):
-            return entry
-        fresh = [dataclasses.replace(mesh, emission=run.material_of(mesh.materials[0])[0],
-                                     alpha=run.material_of(mesh.materials[0])[1]) for mesh in entry[1]]
-        if any((a.emission is not None) or (b.emission is not None) or a.alpha != b.alpha
-               for a, b in zip(entry[1], fresh)):
-            run.rebuild = True
-        entry = (signature, fresh)
-        self.placed[ikey] = entry
-        return entry
-
-    def _drop_gone(self, run):
-        """Forget objects that disappeared (deleted, hidden, moved out of the view layer)."""
-        for cache, seen in ((self.placed, run.seen_placed), (self.lights, run.seen_lights),
-                            (self.arrays, run.seen_arrays)):
-            gone = set(cache) - seen
-            if gone and cache is not self.arrays:
-                run.rebuild = run.restart = True
-            for k in gone:
-                del cache[k]
-
-    def _sync_world(self, depsgraph, run):
-        """Re-export the world if it changed or was swapped, and collect it with the lights."""
-        scene_world = depsgraph.scene.world
-        world_name = scene_world.name_full if scene_world is not None else None
-        if run.full or run.changes.world or world_name != self.world_name:
-            self.world = self._export_world(scene_world, run.warnings)
-            self.world_name = world_name
-            run.counts["world"] += 1
-            run.restart = True
-        if self.world is not None:
-            run.lights.append(self.world)
-
-    def _compare_settings(self, settings, run):
-        """Restart if the settings changed; the viewport sample count only sets how far accumulation goes."""
-        comparable = dataclasses.replace(settings, spp=0) if dataclasses.is_dataclass(settings) else settings
-        if comparable != self.settings:
-            self.settings = comparable
-            run.restart = True
-
-    def _assemble(self, depsgraph, settings, run) -> SyncResult:
-        """The engine Scene of the collected meshes, lights and used materials, and what to redo."""
-        from ..engine.errors import SceneError
-        from ..engine.materials.lambert import Lambert
-        from ..engine.scene.description import Camera
-        from ..engine.spectral import ConstantSpectrum
-        from .export.scene import BLACK
-
-        # A SCENE/COLLECTION update by itself changes nothing the walk above has not compared
-        # (objects added, removed or hidden; world; settings), e.g. editing the viewport sample count.
-        restart = run.restart or run.full
-        rebuild = run.rebuild or run.full
-        if not run.meshes:
-            raise SceneError("scene", "nothing to render: the scene has no visible geometry")
-        bsdfs = {key: bsdf for key, bsdf, _, _ in self.materials.values()}
-        materials = {BLACK: Lambert(ConstantSpectrum(0.0))}
-        materials.update((key, bsdfs[key]) for key in run.used if key != BLACK)
-        # The viewport camera replaces this placeholder (ViewportSession.set_view).
-        placeholder = Camera(origin=np.zeros(3), target=np.array([0.0, 0.0, -1.0]), up=np.array([0.0, 1.0, 0.0]),
-                             width=1, height=1)
-        self.initialised = True
-        self.counts = run.counts
-        scene = self._finish_scene(placeholder, run.meshes, materials, run.lights, settings,
-                                   f"blender-viewport:{depsgraph.scene.name}", run.warnings)
-        return SyncResult(scene, rebuild=rebuild, restart=restart, warnings=list(dict.fromkeys(run.warnings)))
 
 
 # ---------------------------------------------------------------------------------- render thread
@@ -496,7 +202,7 @@ class ViewportSession:
     renderer (BVH); it is called on the render thread so that a rebuild does not block the UI.
     """
 
-    def __init__(self, settings_for=None, exporter: IncrementalExport | None = None,
+    def __init__(self, settings_for=None, exporter: SceneWalk | None = None,
                  renderer_factory=_default_renderer):
         #: settings_for(scene, preview=True) → engine RenderSettings (render_engine.engine_settings,
         #: passed in so that this module does not import the render engine that owns the session)
@@ -523,7 +229,7 @@ class ViewportSession:
     # ------------------------------------------------------------------ main thread: state changes
 
     def update_scene(self, result: SyncResult, target_samples: int | None = None):
-        """A new scene from :class:`IncrementalExport` (a restart only if something visible changed)."""
+        """A new scene from :class:`SceneWalk` (a restart only if something visible changed)."""
         with self._cond:
             if target_samples is not None:
                 self.target_samples = int(target_samples)
@@ -650,7 +356,7 @@ class ViewportSession:
     def sync(self, depsgraph, context):
         """view_update: classify the depsgraph's updates and re-export only what they invalidate."""
         if self.exporter is None:
-            self.exporter = IncrementalExport()
+            self.exporter = SceneWalk(source="blender-viewport")
         scene = depsgraph.scene
         changes = classify(depsgraph_updates(depsgraph)) if self.exporter.initialised else None
         try:

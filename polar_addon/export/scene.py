@@ -1,511 +1,373 @@
-"""Evaluated depsgraph → engine Scene (geometry with modifiers and instances, materials, lights,
-world, camera), using ``foreach_get`` fast paths.  Warnings for things that are approximated or
-skipped are collected and reported once each; real mistakes raise SceneError naming the object.
+"""The one walk over an evaluated depsgraph → engine Scene, for F12 and for the rendered viewport.
 
-Geometry follows Cycles: meshes (including the evaluated meshes of text, metaballs, surfaces and
-bevelled curves, which the depsgraph delivers as mesh instances), hair curves (``CURVES``, as
-tubes of their ``radius``) and point clouds (spheres of their ``radius``).  Curves that geometry
-nodes leave on a mesh or curve object (a ``CURVE`` instance without a mesh) are not rendered by
-Cycles either: they are skipped with a warning.  Per object: ray visibility (camera, shadow,
-diffuse/glossy/transmission), holdout and each material's Principled Alpha.  Meshes whose
-materials read textures also carry per-corner UVs (one UV map), colour attributes and MikkTSpace
-tangents (``corner_attributes``); meshes of untextured materials carry none (unchanged export).
+:class:`SceneWalk` walks ``depsgraph.object_instances`` once per sync, keeps what it exported (local
+triangle arrays per object data, placed meshes per instance, converted materials, lights, the world) and
+redoes only what :class:`Changes` invalidates.  F12 (:func:`export_scene`) is one full sync of a fresh walk
+that bakes linked material inputs (``bake_resolution``) and has the render camera; the viewport keeps one
+walk alive, syncs it with each batch of depsgraph updates and bakes nothing (``materials.VIEWPORT_NO_BAKE``
+says why).  Both end in :func:`finish_scene`, where the rules for the whole scene live (two-sided emitters,
+emission under layers, camera-only materials, light selection), so the viewport shows what F12 renders.
+Warnings for what is approximated or skipped are collected and reported once each; real mistakes raise
+SceneError naming the object.  Geometry is read by ``export.geometry``.
 """
+
+import dataclasses
 
 import numpy as np
 
-from ...engine.materials.lambert import Lambert
-from ...engine.scene.description import Mesh, RenderSettings, Scene
-from ...engine.scene.shapes import icosphere
 from ...engine.errors import SceneError
+from ...engine.materials.lambert import Lambert
+from ...engine.scene.description import Camera, Mesh, RenderSettings, Scene
 from ...engine.spectral import ConstantSpectrum
-from .. import compat
+from . import geometry
 from .camera import export_camera
-from .lights import export_light
-from .materials import (BakeTarget, _follow, attribute_needs, export_material, normal_input_unsupported,
-                        texture_source)
+from .geometry import CONVERTED_TYPES, GEOMETRY_TYPES, UNSUPPORTED_TYPES
+from .lights import export_light as export_light_
+from .materials import VIEWPORT_NO_BAKE, BakeTarget, export_material
 from .texture_bake import RESOLUTION_MAX, RESOLUTION_MIN
-from .world import export_world
+from .world import export_world as export_world_
 
-GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES", "POINTCLOUD"}
-#: Object types whose evaluated mesh the depsgraph also lists as a mesh instance of the object.
-CONVERTED_TYPES = {"CURVE", "SURFACE", "FONT", "META"}
-#: Object types Cycles renders that Polar does not (warned once per object).
-UNSUPPORTED_TYPES = {"VOLUME": "volumes", "GREASEPENCIL": "Grease Pencil strokes"}
-#: Sides of the tube around each hair segment; icosphere level of each point of a point cloud.
-HAIR_SIDES = 6
-POINT_SUBDIVISIONS = 1
-#: Cycles' radius of hair points without a ``radius`` attribute (scene units).
-DEFAULT_HAIR_RADIUS = 0.005
 BLACK = "__polar_black__"
 
 
-def mesh_arrays(obj):
-    """World-independent triangle data of an evaluated object: positions (T·3, 3) per corner,
-    split (shading) normals per corner, and the material slot index per triangle; None if empty
-    (also when the object has no mesh, e.g. curves without a surface)."""
-    try:
-        me = obj.to_mesh()
-    except RuntimeError:              # "Object does not have geometry data"
-        return None
-    if me is None:
-        obj.to_mesh_clear()
-        return None
-    try:
-        me.calc_loop_triangles()
-        nv, nt = len(me.vertices), len(me.loop_triangles)
-        if nt == 0:
+# ---------------------------------------------------------------------------------- what changed
+
+@dataclasses.dataclass
+class Changes:
+    """What a batch of depsgraph updates invalidates (names are original ``name_full``)."""
+    objects_geometry: set = dataclasses.field(default_factory=set)   # evaluated mesh changed
+    #: objects flagged as changed geometry in a batch that edits materials: Blender 5.3 flags the
+    #: objects using an edited material so; the sync re-reads them only if their geometry differs
+    objects_geometry_unconfirmed: set = dataclasses.field(default_factory=set)
+    objects_transform: set = dataclasses.field(default_factory=set)
+    objects_shading: set = dataclasses.field(default_factory=set)    # e.g. material slots reassigned
+    data_geometry: set = dataclasses.field(default_factory=set)      # mesh / curve data edited
+    lights_data: set = dataclasses.field(default_factory=set)
+    materials: set = dataclasses.field(default_factory=set)
+    all_materials: bool = False      # a shared node group, texture or image changed
+    world: bool = False
+    scene: bool = False              # settings, visibility, objects added or removed (SceneWalk
+    #                                  compares these itself: this flag alone restarts nothing)
+
+    def any(self) -> bool:
+        return bool(self.objects_geometry or self.objects_geometry_unconfirmed or self.objects_transform
+                    or self.objects_shading
+                    or self.data_geometry or self.lights_data or self.materials or self.all_materials
+                    or self.world or self.scene)
+
+
+# ---------------------------------------------------------------------------------- the walk
+
+@dataclasses.dataclass
+class SyncResult:
+    """An assembled engine Scene and what the session must do with it."""
+    scene: object
+    rebuild: bool      # geometry, transforms or emitters changed: rebuild the BVH and light set
+    restart: bool      # anything visible changed: restart accumulation
+    warnings: list
+
+
+def _instance_key(inst):
+    obj = inst.object
+    if not getattr(inst, "is_instance", False):
+        return (obj.original.name_full,)
+    parent = getattr(inst, "parent", None)
+    return (parent.original.name_full if parent is not None else "", obj.original.name_full,
+            tuple(getattr(inst, "persistent_id", ())))
+
+
+class _SyncPass:
+    """The working state of one :meth:`SceneWalk.sync`: what it (re)did and the scene parts it collected."""
+
+    def __init__(self, walk: "SceneWalk", full: bool, changes: Changes):
+        self.walk = walk
+        self.full = full              # export everything
+        self.changes = changes
+        self.counts = {"arrays": 0, "placed": 0, "materials": 0, "lights": 0, "world": 0}
+        self.warnings = []
+        self.rebuild = self.restart = False
+        self.reconverted = set()      # keys of the materials dropped to be converted again
+        self.emissions, self.alphas = {}, {}
+        self.meshes, self.lights = [], []
+        self.seen_placed, self.seen_lights, self.seen_arrays = set(), set(), set()
+        self.used = {}   # material keys in order of first use: stable under material edits, so that the
+        #                  compiled scene's material indices stay valid and a material swap needs no rebuild
+
+    def material_key(self, material, obj=None, M=None, uv_map=None):
+        """The key of ``material`` (None: the default) on object ``obj`` (placed by ``M``, its exported UVs
+        ``uv_map``), converted once; records its emission and alpha.  A material that bakes a linked input
+        (F12 only) is converted once per object (the bake is on that object's UV map; instances share the
+        first instance's); any other once for all objects."""
+        materials = self.walk.materials
+        name = material.name_full if material is not None else None
+        per_object = (name, obj.name_full if obj is not None else None)
+        cache_key = name if name in materials else per_object
+        if cache_key not in materials:
+            target = self.walk.bake_target(material, obj, M, uv_map)
+            bsdf, emission, alpha = self.walk._material_entry(material, self.warnings, target)
+            key = f"mat:{name}" if name is not None else "mat:<default>"
+            if getattr(target, "baked", False):
+                key = f"mat:{name}@{obj.name_full}"
+            cache_key = per_object if getattr(target, "requested", False) else name
+            materials[cache_key] = (key, bsdf, emission, alpha)
+            self.counts["materials"] += 1
+        key, _, emission, alpha = materials[cache_key]
+        self.emissions[key], self.alphas[key] = emission, alpha
+        return key
+
+    def material_of(self, key):
+        """(emission, alpha) of the converted material ``key``; (None, 1.0) if there is none."""
+        for k, _, e, a in self.walk.materials.values():
+            if k == key:
+                return e, a
+        return None, 1.0
+
+
+class SceneWalk:
+    """The exports of a depsgraph's instances, kept and redone only where :class:`Changes` says so.
+
+    ``bake_resolution``: texels of the bakes of linked material inputs (F12), or None to bake nothing (the
+    viewport: linked inputs keep their own value, one warning each).  Caches: local triangle arrays per
+    (object, data) (``geometry_arrays``: the to_mesh + foreach_get step), placed world-space engine Meshes per
+    instance (keyed by its matrix, material slots and ray visibility), lights per instance, converted
+    materials per name (per (name, object) where baked), and the world.  ``counts`` records what the last
+    :meth:`sync` (re)did: "arrays" (meshes read from Blender), "placed" (instances transformed), "materials",
+    "lights", "world".  The export functions are injectable so that the logic is testable without Blender
+    (``material_entry(material, warnings, bake)`` → (BSDF, emission, alpha)).
+    """
+
+    def __init__(self, bake_resolution: int | None = None, geometry_arrays=None, object_meshes=None,
+                 material_entry=None, export_light=None, export_world=None, object_rays=None,
+                 geometry_unchanged=None, source: str = "blender"):
+        self.bake_resolution = bake_resolution
+        self.source = source
+        self._geometry_arrays = geometry_arrays or geometry.geometry_arrays
+        self._object_meshes = object_meshes or geometry.object_meshes
+        self._material_entry = material_entry or _material_entry
+        self._export_light = export_light or export_light_
+        self._export_world = export_world or export_world_
+        self._object_rays = object_rays or geometry.object_rays
+        self._attributes_outdated = geometry.attributes_outdated
+        self._geometry_unchanged = geometry_unchanged or geometry.geometry_unchanged
+        self.arrays = {}      # (object, data) name → local arrays or None
+        self.placed = {}      # instance key → ((matrix bytes, slot names, rays), [Mesh])
+        self.lights = {}      # instance key → (matrix bytes, light or None)
+        self.materials = {}   # material name (None: the default) or, baked, (name, object) → (key, bsdf, emission,
+        #                       alpha)
+        self.world = None
+        self.world_name = None
+        self.settings = None
+        self.initialised = False
+        self.counts = {}
+
+    def bake_target(self, material, obj, M, uv_map):
+        """What ``export_material`` bakes linked inputs on: nothing in the viewport (VIEWPORT_NO_BAKE), the
+        object's UV map at ``bake_resolution`` texels for F12 (None for the default material)."""
+        if self.bake_resolution is None:
+            return VIEWPORT_NO_BAKE
+        if obj is None or material is None:
             return None
-        P = np.empty(nv * 3, np.float32)
-        me.attributes["position"].data.foreach_get("vector", P)
-        F = np.empty(nt * 3, np.int32)
-        me.loop_triangles.foreach_get("vertices", F)
-        SN = np.empty(nt * 9, np.float32)
-        me.loop_triangles.foreach_get("split_normals", SN)
-        tri_poly = np.empty(nt, np.int32)
-        me.loop_triangle_polygons.foreach_get("value", tri_poly)
-        mi = me.attributes.get("material_index")
-        if mi is not None and len(me.polygons):
-            poly_mat = np.empty(len(me.polygons), np.int32)
-            mi.data.foreach_get("value", poly_mat)
-            tri_mat = poly_mat[tri_poly]
-        else:
-            tri_mat = np.zeros(nt, np.int32)
-        arrays = (P.reshape(nv, 3).astype(np.float64), F.reshape(nt, 3), SN.reshape(nt * 3, 3).astype(np.float64),
-                  tri_mat)
-        needs = _attribute_needs(obj)
-        if needs is None:
-            return arrays
-        return arrays + (corner_attributes(me, obj.name, needs),)
-    finally:
-        obj.to_mesh_clear()
+        return BakeTarget(obj, M, material, self.bake_resolution, uv_map)
 
+    def sync(self, depsgraph, changes: Changes | None, settings, camera=None) -> SyncResult:
+        """Bring the caches up to date with ``depsgraph`` (``changes`` None: export everything) and assemble
+        the Scene (``camera`` None: a placeholder the viewport replaces with its view)."""
+        full = changes is None or not self.initialised
+        run = _SyncPass(self, full, changes or Changes())
+        self._reconvert_materials(run)
+        self._walk_instances(depsgraph, run)
+        self._drop_gone(run)
+        self._sync_world(depsgraph, run)
+        self._compare_settings(settings, run)
+        return self._assemble(depsgraph, settings, run, camera)
 
-def attributes_outdated(obj, arrays) -> bool:
-    """True if ``arrays`` (from :func:`geometry_arrays`) lack mesh attributes that the object's
-    materials now read, or carry ones they no longer read (the viewport re-reads the mesh after a
-    material edit that adds or removes a texture)."""
-    if arrays is None or obj.type in ("POINTCLOUD", "CURVES"):
-        return False
-    stored = arrays[4]["needs"] if len(arrays) > 4 else None
-    return _attribute_needs(obj) != stored
+    def _reconvert_materials(self, run):
+        """Drop the edited materials (all of them on a full sync); their keys go to ``run.reconverted``."""
+        # An emission that changes re-places its meshes (_reuse_placed).
+        for cache_key, entry in list(self.materials.items()):
+            name = cache_key[0] if isinstance(cache_key, tuple) else cache_key
+            if run.full or run.changes.all_materials or name in run.changes.materials:
+                del self.materials[cache_key]
+                run.reconverted.add(entry[0])
+                run.restart = True
 
+    def _walk_instances(self, depsgraph, run):
+        """Export or re-use each instance of ``depsgraph.object_instances``.
 
-def geometry_unchanged(obj, arrays) -> bool:
-    """True if the evaluated mesh object ``obj`` still has the vertex positions and triangles of
-    ``arrays`` (from :func:`geometry_arrays`), compared exactly; False for other object types
-    (which the caller then re-reads).  Reads positions and triangle indices only: a fraction of
-    :func:`mesh_arrays`' cost (no normals, attributes or to_mesh copy)."""
-    if arrays is None or obj.type != "MESH":
-        return False
-    me = obj.data
-    P, F = arrays[0], arrays[1]
-    if len(me.vertices) != len(P) or len(me.loop_triangles) != len(F):
-        return False
-    positions = np.empty(P.size, np.float32)
-    me.attributes["position"].data.foreach_get("vector", positions)
-    if not np.array_equal(positions.reshape(P.shape), P):
-        return False
-    triangles = np.empty(F.size, np.int32)
-    me.loop_triangles.foreach_get("vertices", triangles)
-    return np.array_equal(triangles.reshape(F.shape), F)
+        Text, metaballs, surfaces and bevelled curves come twice (also inside collection instances): as
+        themselves and as a mesh instance of their evaluated mesh (what Cycles renders); the latter is taken."""
+        view_layer = getattr(depsgraph, "view_layer", None)
+        meshed = {inst.object.original.name_full for inst in depsgraph.object_instances
+                  if inst.object.type == "MESH" and inst.object.original.type in CONVERTED_TYPES}
+        for inst in depsgraph.object_instances:
+            obj = inst.object
+            M = np.array(inst.matrix_world, dtype=np.float64)
+            ikey = _instance_key(inst)
+            name = obj.original.name_full
+            if obj.type == "LIGHT":
+                self._sync_light(run, obj, M, ikey, name)
+            elif obj.type in UNSUPPORTED_TYPES:
+                run.warnings.append(f"object {obj.name!r}: {UNSUPPORTED_TYPES[obj.type]} are not supported; skipped")
+            elif obj.type in GEOMETRY_TYPES and not (obj.type in CONVERTED_TYPES and name in meshed):
+                if self._sync_geometry(run, obj, M, ikey, name, view_layer) is None and obj.type == "CURVE" \
+                        and getattr(inst, "is_instance", False):
+                    owner = inst.parent.name if getattr(inst, "parent", None) is not None else obj.name
+                    run.warnings.append(f"object {owner!r}: geometry-nodes curves without a mesh are not rendered "
+                                        "(nor by Cycles): convert them with Curve to Mesh")
 
+    def _sync_light(self, run, obj, M, ikey, name):
+        """Re-export a light instance that moved or changed, and collect it (an area light is a Mesh)."""
+        changes = run.changes
+        data_name = obj.data.name_full if obj.data is not None else ""
+        entry = self.lights.get(ikey)
+        if (run.full or entry is None or entry[0] != M.tobytes() or data_name in changes.lights_data
+                or name in changes.objects_shading or name in changes.objects_geometry):
+            entry = (M.tobytes(), self._export_light(obj, M, run.warnings))
+            self.lights[ikey] = entry
+            run.counts["lights"] += 1
+            run.rebuild = run.restart = True
+        run.seen_lights.add(ikey)
+        light = entry[1]
+        if isinstance(light, Mesh):
+            run.meshes.append(light)
+        elif light is not None:
+            run.lights.append(light)
 
-def _attribute_needs(obj):
-    """What the materials of ``obj`` read from its mesh (materials.attribute_needs, merged), or None."""
-    merged = {"uv": [], "tangents": [], "colors": [], "bake": []}
-    for slot in obj.material_slots:
-        if slot.material is None or compat.node_tree_in_use(slot.material) is None:
-            continue
-        for k, v in attribute_needs(slot.material).items():
-            merged[k].extend(v)
-    merged = {k: list(dict.fromkeys(v)) for k, v in merged.items()}
-    return merged if any(merged.values()) else None
+    def _sync_geometry(self, run, obj, M, ikey, name, view_layer):
+        """Re-read the object's local arrays if needed, place the instance and collect its meshes; returns
+        the arrays (None: the object has no renderable geometry)."""
+        data_name = obj.data.name_full if obj.data is not None else ""
+        dkey = (name, obj.type, data_name)
+        reread = self._needs_reread(run, obj, name, data_name, dkey)
+        if reread:
+            self.arrays[dkey] = self._geometry_arrays(obj)
+            run.counts["arrays"] += 1
+        run.seen_arrays.add(dkey)
+        arrays = self.arrays[dkey]
+        if arrays is None:
+            return None
+        entry = self._place(run, obj, M, ikey, arrays, reread, view_layer)
+        run.seen_placed.add(ikey)
+        run.used.update(dict.fromkeys(mesh.materials[0] for mesh in entry[1]))
+        run.meshes.extend(entry[1])
+        return arrays
 
+    def _needs_reread(self, run, obj, name, data_name, dkey):
+        """Whether the (object, data) arrays ``dkey`` must be read again from Blender (at most once per sync:
+        instances of one object share its arrays)."""
+        if dkey in run.seen_arrays:
+            return False
+        changes = run.changes
+        reread = run.full or dkey not in self.arrays or (
+            name in changes.objects_geometry or data_name in changes.data_geometry
+            or (name in changes.objects_geometry_unconfirmed
+                and not self._geometry_unchanged(obj, self.arrays[dkey])))
+        if not reread and (changes.materials or changes.all_materials):
+            reread = self._attributes_outdated(obj, self.arrays[dkey])   # a texture added or removed
+        return reread
 
-def corner_attributes(me, name, needs) -> dict:
-    """Per loop-triangle corner (nt·3 rows, the order of ``mesh_arrays``' corners) UVs (nt·3, 2),
-    colour attributes {name: (nt·3, 4) linear} and MikkTSpace tangents (nt·3, 4: object-space xyz,
-    bitangent sign), as ``needs`` asks; "warnings" lists what could not be read.  The engine has
-    one UV map per mesh: the first map a texture asks for (the active render map for ''), else —
-    when only baked inputs need one — the active render map; "uv_map" names it (baked inputs are
-    baked on it), None if none is exported (a missing map the bake warns about itself)."""
-    nt = len(me.loop_triangles)
-    loops = np.empty(nt * 3, np.int32)
-    me.loop_triangles.foreach_get("loops", loops)
-    out = {"warnings": [], "uv": None, "uv_map": None, "tangents": None, "colors": {}, "needs": needs}
-    active = next((layer.name for layer in me.uv_layers if layer.active_render), None)
-    maps = [m or active for m in needs["uv"] + needs["tangents"]]
-    maps = list(dict.fromkeys(m for m in maps if m is not None))
-    found = [m for m in maps if m in me.uv_layers]
-    if len(found) < len(maps) or (needs["uv"] and not maps):
-        out["warnings"].append(f"object {name!r}: UV map {next((m for m in maps if m not in found), '')!r} asked for "
-                               "by its materials is missing; textures read (0, 0) there")
-    if len(found) > 1:
-        out["warnings"].append(f"object {name!r}: its materials use UV maps {', '.join(map(repr, found))}; only "
-                               f"{found[0]!r} is exported (one UV map per mesh)")
-    if not found and needs.get("bake") and active is not None:     # baked inputs only: the active render map
-        found = [active]
-    if found:
-        out["uv_map"] = found[0]
-        uv = np.empty(len(me.loops) * 2, np.float32)
-        me.uv_layers[found[0]].uv.foreach_get("vector", uv)
-        out["uv"] = uv.reshape(-1, 2)[loops].astype(np.float64)
-        if needs["tangents"]:
-            try:
-                me.calc_tangents(uvmap=found[0])
-            except RuntimeError as e:       # n-gons: MikkTSpace in Blender needs tris/quads
-                out["warnings"].append(f"object {name!r}: no UV tangents ({e}); normal maps use tangents from the "
-                                       "UV gradients")
-            else:
-                t = np.empty(len(me.loops) * 3, np.float32)
-                me.loops.foreach_get("tangent", t)
-                sign = np.empty(len(me.loops), np.float32)
-                me.loops.foreach_get("bitangent_sign", sign)
-                out["tangents"] = np.column_stack((t.reshape(-1, 3)[loops], sign[loops])).astype(np.float64)
-    vertex_of_loop = None
-    for key in needs["colors"]:
-        layer_name = key or me.color_attributes.default_color_name or \
-            (me.color_attributes.active_color.name if me.color_attributes.active_color is not None else "")
-        attr = me.color_attributes.get(layer_name)
-        if attr is None:
-            out["warnings"].append(f"object {name!r}: colour attribute {layer_name!r} asked for by its materials is "
-                                   "missing; it reads 0")
-            continue
-        values = np.empty(len(attr.data) * 4, np.float32)
-        attr.data.foreach_get("color", values)          # linear for byte and float colours alike
-        values = values.reshape(-1, 4)
-        if attr.domain == "POINT":
-            if vertex_of_loop is None:
-                vertex_of_loop = np.empty(len(me.loops), np.int32)
-                me.loops.foreach_get("vertex_index", vertex_of_loop)
-            values = values[vertex_of_loop]
-        out["colors"][key] = values[loops].astype(np.float64)
-    return out
+    def _place(self, run, obj, M, ikey, arrays, reread, view_layer):
+        """The instance's (signature, [Mesh]) entry: placed again if its arrays or signature changed."""
+        slots = [s.material for s in obj.material_slots] or [None]
+        rays = self._object_rays(obj, view_layer, run.warnings)     # cheap; its flags may change unflagged
+        signature = (M.tobytes(), tuple(m.name_full if m is not None else None for m in slots),
+                     tuple(sorted(rays.items())))
+        uv_map = arrays[4]["uv_map"] if len(arrays) > 4 else None       # baked inputs: on the exported UVs
 
+        def material_key(m):
+            return run.material_key(m, obj, M, uv_map)
 
-def _attribute(data, name, n, width=1):
-    """Float attribute ``name`` of a point domain as an (n,) or (n, width) array, or None."""
-    attr = data.attributes.get(name)
-    if attr is None or len(attr.data) != n:
-        return None
-    out = np.empty(n * width, np.float32)
-    attr.data.foreach_get("vector" if width == 3 else "value", out)
-    return out.reshape(n, width) if width > 1 else out
+        entry = self.placed.get(ikey)
+        if reread or entry is None or entry[0] != signature:
+            entry = (signature, self._object_meshes(obj.name, arrays, M, slots, material_key, run.emissions,
+                                                    run.alphas, lambda rays=rays: rays, run.warnings))
+            self.placed[ikey] = entry
+            run.counts["placed"] += 1
+            run.rebuild = run.restart = True
+            return entry
+        return self._reuse_placed(run, ikey, signature, slots, entry, material_key)
 
+    def _reuse_placed(self, run, ikey, signature, slots, entry, material_key):
+        """Keep placed meshes, refreshing emission and alpha of re-converted materials (a rebuild if they matter)."""
+        for m in slots:
+            material_key(m)
+        if not any(mesh.materials[0] in run.reconverted for mesh in entry[1]):
+            return entry
+        fresh = [dataclasses.replace(mesh, emission=run.material_of(mesh.materials[0])[0],
+                                     alpha=run.material_of(mesh.materials[0])[1]) for mesh in entry[1]]
+        if any((a.emission is not None) or (b.emission is not None) or a.alpha != b.alpha
+               for a, b in zip(entry[1], fresh)):
+            run.rebuild = True
+        entry = (signature, fresh)
+        self.placed[ikey] = entry
+        return entry
 
-def _icosphere_template():
-    """Unit icosphere scaled so its surface area is the sphere's 4π: by Cauchy's formula its mean
-    projected area (the coverage seen from a random direction) is then that of the true sphere."""
-    ico = icosphere(POINT_SUBDIVISIONS)
-    v, f = np.asarray(ico.vertices, np.float64), np.asarray(ico.faces, np.int32)
-    area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum()
-    return v * np.sqrt(4 * np.pi / area), f
+    def _drop_gone(self, run):
+        """Forget objects that disappeared (deleted, hidden, moved out of the view layer)."""
+        for cache, seen in ((self.placed, run.seen_placed), (self.lights, run.seen_lights),
+                            (self.arrays, run.seen_arrays)):
+            gone = set(cache) - seen
+            if gone and cache is not self.arrays:
+                run.rebuild = run.restart = True
+            for k in gone:
+                del cache[k]
 
+    def _sync_world(self, depsgraph, run):
+        """Re-export the world if it changed or was swapped, and collect it with the lights."""
+        scene_world = depsgraph.scene.world
+        world_name = scene_world.name_full if scene_world is not None else None
+        if run.full or run.changes.world or world_name != self.world_name:
+            self.world = self._export_world(scene_world, run.warnings)
+            self.world_name = world_name
+            run.counts["world"] += 1
+            run.restart = True
+        if self.world is not None:
+            run.lights.append(self.world)
 
-def pointcloud_arrays(obj):
-    """Spheres (icospheres with smooth normals) of each point's ``radius`` (default 0.01), in the
-    ``mesh_arrays`` layout; None for an empty cloud."""
-    data = obj.data
-    n = len(data.points)
-    if n == 0:
-        return None
-    centres = _attribute(data, "position", n, 3).astype(np.float64)
-    radius = _attribute(data, "radius", n)
-    radius = np.full(n, 0.01) if radius is None else np.abs(radius.astype(np.float64))
-    unit, faces = _icosphere_template()
-    nv = unit.shape[0]
-    P = (centres[:, None, :] + radius[:, None, None] * unit[None]).reshape(-1, 3)
-    F = (faces[None] + (np.arange(n) * nv)[:, None, None]).reshape(-1, 3)
-    SN = np.tile((unit / np.linalg.norm(unit, axis=1, keepdims=True))[faces].reshape(-1, 3), (n, 1))
-    keep = np.repeat(radius > 0, faces.shape[0])
-    if not keep.any():
-        return None
-    corner_keep = np.repeat(keep, 3)
-    return P, F[keep], SN[corner_keep], np.zeros(int(keep.sum()), np.int32)
+    def _compare_settings(self, settings, run):
+        """Restart if the settings changed; the viewport sample count only sets how far accumulation goes."""
+        comparable = dataclasses.replace(settings, spp=0) if dataclasses.is_dataclass(settings) else settings
+        if comparable != self.settings:
+            self.settings = comparable
+            run.restart = True
 
-
-def hair_arrays(obj):
-    """Tubes of HAIR_SIDES sides around every segment of a hair-curves object (radius per point,
-    Cycles' default 0.005), in the ``mesh_arrays`` layout; None if there is no segment."""
-    data = obj.data
-    n_curves, n_points = len(data.curves), len(data.points)
-    if n_curves == 0 or n_points < 2:
-        return None
-    pos = _attribute(data, "position", n_points, 3).astype(np.float64)
-    radius = _attribute(data, "radius", n_points)
-    radius = np.full(n_points, DEFAULT_HAIR_RADIUS) if radius is None else np.abs(radius.astype(np.float64))
-    offsets = np.empty(n_curves + 1, np.int32)
-    data.curve_offset_data.foreach_get("value", offsets)
-    last = np.zeros(n_points, bool)
-    last[offsets[1:] - 1] = True                   # a segment starts at every point but a curve's last
-    start = np.nonzero(~last)[0]
-    a, b = pos[start], pos[start + 1]
-    axis = b - a
-    length = np.linalg.norm(axis, axis=1)
-    ok = length > 0
-    start, a, b, axis, length = start[ok], a[ok], b[ok], axis[ok], length[ok]
-    if start.size == 0:
-        return None
-    t = axis / length[:, None]
-    helper = np.where(np.abs(t[:, 2:3]) < 0.9, [[0.0, 0.0, 1.0]], [[1.0, 0.0, 0.0]])
-    e1 = np.cross(t, helper)
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.cross(t, e1)
-    ang = 2 * np.pi * np.arange(HAIR_SIDES) / HAIR_SIDES
-    # polygon of the tube scaled to the circle's mean width (perimeter / π = 2r): same average coverage
-    widen = np.pi / (HAIR_SIDES * np.sin(np.pi / HAIR_SIDES))
-    radius = radius * widen
-    ring = np.cos(ang)[None, :, None] * e1[:, None, :] + np.sin(ang)[None, :, None] * e2[:, None, :]  # (S, K, 3)
-    ra, rb = radius[start][:, None, None], radius[start + 1][:, None, None]
-    verts = np.concatenate((a[:, None] + ra * ring, b[:, None] + rb * ring), axis=1)          # (S, 2K, 3)
-    normals = np.concatenate((ring, ring), axis=1)
-    k = np.arange(HAIR_SIDES)
-    k1 = (k + 1) % HAIR_SIDES
-    # quad (a_k, a_k1, b_k1, b_k) as two counter-clockwise triangles seen from outside
-    quad = np.stack((np.stack((k, k1, HAIR_SIDES + k1), 1), np.stack((k, HAIR_SIDES + k1, HAIR_SIDES + k), 1)), 1)
-    quad = quad.reshape(-1, 3)
-    nseg = start.size
-    F = (quad[None] + (np.arange(nseg) * 2 * HAIR_SIDES)[:, None, None]).reshape(-1, 3).astype(np.int32)
-    P = verts.reshape(-1, 3)
-    SN = normals.reshape(-1, 3)[F.ravel()]
-    return P, F, SN, np.zeros(F.shape[0], np.int32)
-
-
-def geometry_arrays(obj):
-    """``mesh_arrays`` for any renderable object type (mesh, hair curves, point cloud)."""
-    if obj.type == "POINTCLOUD":
-        return pointcloud_arrays(obj)
-    if obj.type == "CURVES":
-        return hair_arrays(obj)
-    return mesh_arrays(obj)
-
-
-def _times_alpha(a, b, material, warnings):
-    """The product of two alphas (numbers or TexturedNumbers): a Principled Alpha and a Mix Shader's
-    transparency; two textured ones: the first, one warning."""
-    from ...engine.textures import TextureInput, TexturedNumber
-    if not isinstance(a, TexturedNumber) and not isinstance(b, TexturedNumber):
-        return float(a) * float(b)
-    if isinstance(a, TexturedNumber) and isinstance(b, TexturedNumber):
-        warnings.append(f"material {material.name!r}: two textured transparencies (Alpha and a Transparent mix); "
-                        "only the Alpha is rendered")
-        return a
-    tex, c = (a, float(b)) if isinstance(a, TexturedNumber) else (b, float(a))
-    if c == 1.0:
-        return tex
-    src = tex.source
-    scaled = TextureInput(src.texture, src.channel, src.scale * c, src.offset * c, src.power)
-    return TexturedNumber(scaled).clamped_to(0.0, 1.0)
-
-
-def material_alpha(material, warnings):
-    """Principled Alpha of a material's surface shader (1 if none): a number, or a TexturedNumber where
-    Alpha comes from an image (its alpha or a channel), a Separate Color of one or a colour attribute —
-    anything else linked keeps its own value with one warning; also warns about a linked Normal input
-    that is not an exported normal or bump map (materials.normal_input_unsupported)."""
-    tree = compat.node_tree_in_use(material) if material is not None else None
-    if tree is None:
-        return 1.0
-    output = tree.get_output_node("ALL") or tree.get_output_node("CYCLES")
-    node = _follow(output.inputs["Surface"]) if output is not None else None
-    if node is None:
-        # a volume alone: Cycles' surface is transparent (the interior is the material's: materials.py)
-        volume = output.inputs.get("Volume") if output is not None else None
-        return 0.0 if volume is not None and _follow(volume) is not None else 1.0
-    if normal_input_unsupported(node):
-        warnings.append(f"material {material.name!r}: bump and normal maps (linked Normal input) are not "
-                        "supported; the geometric shading normals are used")
-    alpha = node.inputs.get("Alpha") if node.bl_idname == "ShaderNodeBsdfPrincipled" else None
-    if alpha is None:
-        return 1.0
-    if alpha.is_linked:
-        # an image's alpha (glTF cut-outs and blends), a channel of one, a colour attribute: per point
-        source = texture_source(alpha, material.name, warnings)
-        if source is not None:
-            from ...engine.textures import TexturedNumber
-            return TexturedNumber(source).clamped_to(0.0, 1.0)
-        warnings.append(f"material {material.name!r}: Alpha is linked to a graph that is not an image or colour "
-                        "attribute (not baked for alpha); its own value is used")
-    value = float(alpha.default_value)
-    if not np.isfinite(value):
-        raise SceneError(f"material {material.name!r}", "input 'Alpha' must be a number in [0, 1]")
-    return min(max(value, 0.0), 1.0)
-
-
-def object_rays(obj, view_layer, warnings) -> dict:
-    """Cycles' Object ▸ Visibility of an (evaluated) object as engine Mesh fields."""
-    diffuse, glossy, transmission = (bool(getattr(obj, f"visible_{k}", True))
-                                     for k in ("diffuse", "glossy", "transmission"))
-    if len({diffuse, glossy, transmission}) > 1:
-        warnings.append(f"object {obj.name!r}: visibility to only some of diffuse, glossy and transmission rays "
-                        "is not supported; it is " + ("visible to all of them" if diffuse or glossy or transmission
-                                                      else "hidden from all of them"))
-    if not getattr(obj, "visible_volume_scatter", True):
-        pass                              # no volumes in Polar: nothing to hide from
-    holdout = bool(getattr(obj, "is_holdout", False))
-    try:
-        holdout = holdout or bool(obj.original.holdout_get(view_layer=view_layer))
-    except (AttributeError, TypeError, RuntimeError):
-        pass
-    return {"visible_camera": bool(getattr(obj, "visible_camera", True)),
-            "visible_shadow": bool(getattr(obj, "visible_shadow", True)),
-            "visible_indirect": diffuse or glossy or transmission, "holdout": holdout}
-
-
-def object_meshes(name, arrays, M, slots, material_key, emissions, alphas, rays, warnings):
-    """Engine Meshes of one object instance: ``arrays`` from :func:`geometry_arrays` placed by the
-    4×4 world matrix ``M``, one Mesh per material slot used.  ``slots``: the slots' materials;
-    ``material_key(material)``: its name in the scene's materials (exported on first use), whose
-    ``emissions[key]`` and ``alphas[key]`` the Meshes take; ``rays()``: the object's ray visibility
-    (:func:`object_rays`).  [] (with a warning) if nothing is left.  Used per instance by
-    :func:`export_scene` and by the viewport's incremental export."""
-    P, F, SN, tri_mat = arrays[:4]
-    attributes = arrays[4] if len(arrays) > 4 else None     # per-corner UVs, colours, tangents (textures)
-    if attributes is not None:
-        warnings.extend(attributes["warnings"])
-    if not np.all(np.isfinite(P)):
-        raise SceneError(f"object {name!r}", "has non-finite vertex coordinates")
-    Pw = P @ M[:3, :3].T + M[:3, 3]
-    normal_matrix = np.linalg.inv(M[:3, :3]).T if abs(np.linalg.det(M[:3, :3])) > 1e-300 else None
-    if normal_matrix is None:
-        warnings.append(f"object {name!r} has a singular transform (zero scale); skipped")
-        return []
-    tri = Pw[F]
-    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-    degenerate = ~(area2 > 0)
-    if degenerate.all():
-        warnings.append(f"object {name!r} has only zero-area faces; skipped")
-        return []
-    if degenerate.any():
-        warnings.append(f"object {name!r}: {int(degenerate.sum())} zero-area faces ignored")
-    N = SN @ normal_matrix.T
-    length = np.linalg.norm(N, axis=1, keepdims=True)
-    N = np.where(length > 0, N / np.where(length > 0, length, 1.0), 0.0)
-    mirrored = np.linalg.det(M[:3, :3]) < 0   # keep front faces in front under negative scale
-    ray_fields = rays()
-    keys = [material_key(slots[i] if i < len(slots) else None) for i in range(len(slots))]
-    tri_mat = np.clip(tri_mat, 0, len(keys) - 1)
-    meshes = []
-    # One engine Mesh per (object, emissive material) so that emitters are separate lights.
-    for slot in np.unique(tri_mat):
-        sel = np.nonzero(tri_mat == slot)[0]
-        key = keys[slot]
-        corner = (sel[:, None] * 3 + np.arange(3)[None, :]).ravel()
-        local_faces = np.arange(corner.size, dtype=np.int64).reshape(-1, 3)
-        if mirrored:
-            local_faces = local_faces[:, [0, 2, 1]]
-        extra = {} if attributes is None else _corner_fields(attributes, corner, M, mirrored)
-        meshes.append(Mesh(name=f"{name}:{slot}", vertices=Pw[F[sel]].reshape(-1, 3),
-                           faces=local_faces, materials=[key], material_ids=np.zeros(len(sel), np.int32),
-                           normals=N[corner], emission=emissions.get(key), alpha=alphas.get(key, 1.0),
-                           **ray_fields, **extra))
-    return meshes
-
-
-def _corner_fields(attributes, corner, M, mirrored) -> dict:
-    """Mesh fields uv, colors, tangents of the corners ``corner`` (vertices are split per corner, so
-    per-corner data is per-vertex data).  Tangents are directions: placed by the linear part of M;
-    a mirroring transform flips the handedness (bitangent = w·(n × t) must stay the +v direction)."""
-    out = {}
-    if attributes.get("uv") is not None:
-        out["uv"] = attributes["uv"][corner]
-    if attributes.get("colors"):
-        out["colors"] = {k: v[corner] for k, v in attributes["colors"].items()}
-    if attributes.get("tangents") is not None:
-        t = attributes["tangents"][corner]
-        xyz = t[:, :3] @ M[:3, :3].T
-        length = np.linalg.norm(xyz, axis=1, keepdims=True)
-        xyz = np.where(length > 0, xyz / np.where(length > 0, length, 1.0), 0.0)   # 0: derived from the UVs
-        w = np.where(t[:, 3] < 0, -1.0, 1.0) * (-1.0 if mirrored else 1.0)
-        out["tangents"] = np.column_stack((xyz, w))
-    return out
+    def _assemble(self, depsgraph, settings, run, camera) -> SyncResult:
+        """The engine Scene of the collected meshes, lights and used materials, and what to redo."""
+        # A SCENE/COLLECTION update by itself changes nothing the walk above has not compared
+        # (objects added, removed or hidden; world; settings), e.g. editing the viewport sample count.
+        restart = run.restart or run.full
+        rebuild = run.rebuild or run.full
+        if not run.meshes:
+            raise SceneError("scene", "nothing to render: the scene has no visible geometry")
+        bsdfs = {key: bsdf for key, bsdf, _, _ in self.materials.values()}
+        materials = {BLACK: Lambert(ConstantSpectrum(0.0))}
+        materials.update((key, bsdfs[key]) for key in run.used if key != BLACK)
+        if camera is None:      # the viewport camera replaces this placeholder (ViewportSession.set_view)
+            camera = Camera(origin=np.zeros(3), target=np.array([0.0, 0.0, -1.0]), up=np.array([0.0, 1.0, 0.0]),
+                            width=1, height=1)
+        self.initialised = True
+        self.counts = run.counts
+        scene = finish_scene(camera, run.meshes, materials, run.lights, settings,
+                             f"{self.source}:{depsgraph.scene.name}", run.warnings)
+        return SyncResult(scene, rebuild=rebuild, restart=restart, warnings=list(dict.fromkeys(run.warnings)))
 
 
 def export_scene(depsgraph, camera_object, width, height, settings: RenderSettings):
-    """(engine Scene, list of warnings) for an evaluated depsgraph."""
+    """(engine Scene, list of warnings) of an evaluated depsgraph, as F12 renders it: one full sync of a fresh
+    :class:`SceneWalk` that bakes linked material inputs at the scene's Texture Bake Resolution."""
     scene = depsgraph.scene
-    warnings = []
-    camera = export_camera(scene, camera_object, width, height, warnings)
-    materials = {BLACK: Lambert(ConstantSpectrum(0.0))}
-    mat_keys = {}                 # material name → key of materials exported once for all objects
-    object_mat_keys = {}          # (material, object) → key of materials whose export bakes inputs
     resolution = int(getattr(getattr(scene, "polar", None), "texture_bake_resolution", 512))
     if not RESOLUTION_MIN <= resolution <= RESOLUTION_MAX:
         raise SceneError("render settings", f"Texture Bake Resolution must be in [{RESOLUTION_MIN}, {RESOLUTION_MAX}], "
                                             f"got {resolution}")
-    emissions = {}
-    alphas = {}
-    meshes, lights = [], []
-    cache = {}
+    warnings = []
+    camera = export_camera(scene, camera_object, width, height, warnings)
+    result = SceneWalk(bake_resolution=resolution).sync(depsgraph, None, settings, camera=camera)
+    return result.scene, list(dict.fromkeys(warnings + result.warnings))
 
-    def material_key(material, obj=None, M=None, uv_map=None):
-        # A material that bakes an input is exported once per object (the bake is on the object's UV
-        # map and coordinates; instances share the first instance's); where nothing was baked (no UV
-        # map: its own values) and for any other material, once for all objects.
-        name = material.name_full if material is not None else None
-        if name in mat_keys:
-            return mat_keys[name]
-        per_object = (name, obj.name_full if obj is not None else None)
-        if per_object in object_mat_keys:
-            return object_mat_keys[per_object]
-        target = BakeTarget(obj, M, material, resolution, uv_map) if obj is not None and material is not None else None
-        bsdf, emission, alpha = material_entry(material, warnings, bake=target)
-        key = f"mat:{name}" if name is not None else "mat:<default>"
-        if target is not None and target.baked:
-            key = f"mat:{name}@{obj.name_full}"
-        if target is not None and target.requested:
-            object_mat_keys[per_object] = key
-        else:
-            mat_keys[name] = key
-        materials[key] = bsdf
-        emissions[key] = emission
-        alphas[key] = alpha
-        return key
 
-    # Text, metaballs, surfaces and bevelled curves come twice (also inside collection instances): as
-    # themselves and as a mesh instance of their evaluated mesh (what Cycles renders); export the latter.
-    meshed = {inst.object.original.name_full for inst in depsgraph.object_instances
-              if inst.object.type == "MESH" and inst.object.original.type in CONVERTED_TYPES}
-    view_layer = depsgraph.view_layer
-    for inst in depsgraph.object_instances:
-        obj = inst.object
-        M = np.array(inst.matrix_world, dtype=np.float64)
-        if obj.type == "LIGHT":
-            light = export_light(obj, M, warnings)
-            if isinstance(light, Mesh):
-                meshes.append(light)
-            elif light is not None:
-                lights.append(light)
-            continue
-        if obj.type in UNSUPPORTED_TYPES:
-            warnings.append(f"object {obj.name!r}: {UNSUPPORTED_TYPES[obj.type]} are not supported; skipped")
-            continue
-        if obj.type not in GEOMETRY_TYPES:
-            continue
-        if obj.type in CONVERTED_TYPES and obj.original.name_full in meshed:
-            continue
-        data_key = (obj.original.name_full, obj.type, obj.data.name_full if obj.data is not None else "")
-        if data_key not in cache or not inst.is_instance:
-            cache[data_key] = geometry_arrays(obj)
-        arrays = cache[data_key]
-        if arrays is None:
-            if obj.type == "CURVE" and inst.is_instance:
-                owner = inst.parent.name if inst.parent is not None else obj.name
-                warnings.append(f"object {owner!r}: geometry-nodes curves without a mesh are not rendered (nor by "
-                                "Cycles): convert them with Curve to Mesh")
-            continue
-        slots = [s.material for s in obj.material_slots] or [None]
-        uv_map = arrays[4]["uv_map"] if len(arrays) > 4 else None       # baked inputs: on the exported UVs
-        meshes.extend(object_meshes(obj.name, arrays, M, slots,
-                                    lambda m, obj=obj, M=M, uv_map=uv_map: material_key(m, obj, M, uv_map),
-                                    emissions, alphas, lambda obj=obj: object_rays(obj, view_layer, warnings),
-                                    warnings))
-    world = export_world(scene.world, warnings) if meshes else None
-    if world is not None:
-        lights.append(world)
-    return finish_scene(camera, meshes, materials, lights, settings, f"blender:{scene.name}", warnings), \
-        list(dict.fromkeys(warnings))
+def _material_entry(material, warnings, bake=None):
+    return material_entry(material, warnings, bake)
 
 
 def material_entry(material, warnings, bake=None):
@@ -513,13 +375,14 @@ def material_entry(material, warnings, bake=None):
     ``export_material``'s BSDF and emission, and the object alpha — Principled Alpha × a Mix Shader's
     transparency (``alpha_factor``)."""
     bsdf, emission = export_material(material, warnings, bake=bake)
-    alpha = _times_alpha(material_alpha(material, warnings), getattr(bsdf, "alpha_factor", 1.0), material, warnings)
+    alpha = geometry.times_alpha(geometry.material_alpha(material, warnings), getattr(bsdf, "alpha_factor", 1.0),
+                                 material, warnings)
     return bsdf, emission, alpha
 
 
 def finish_scene(camera, meshes, materials, lights, settings, source, warnings) -> Scene:
     """The engine Scene of a walk over a Blender scene (F12's ``export_scene`` and the viewport's
-    ``IncrementalExport.sync`` both end here, so that the viewport shows what F12 renders): the rules that
+    ``SceneWalk.sync`` both end here, so that the viewport shows what F12 renders): the rules that
     hold for the whole scene — emissive meshes emit from both faces (Cycles' Emission shader; lamps stay
     one-sided), a Principled emission lies under its sheen and coat, a material seen by camera rays only
     (Light Path ▸ Is Camera Ray) is transparent to every other ray, lights are picked by power (the closest

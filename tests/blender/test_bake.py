@@ -445,7 +445,7 @@ def test_viewport_does_not_bake_and_says_so():
     from polar_render.polar_addon.render_engine import engine_settings
     scene, plane, mat, _ = checker_scene()
     tb.BAKE_CACHE.clear()
-    result = vp.IncrementalExport().sync(bpy.context.evaluated_depsgraph_get(), None,
+    result = vp.SceneWalk().sync(bpy.context.evaluated_depsgraph_get(), None,
                                          engine_settings(scene, preview=True))
     about = [w for w in result.warnings if "'Color'" in w and "'Checker'" in w]
     assert len(about) == 1 and "final renders (F12) only, not in the viewport" in about[0], result.warnings

@@ -409,7 +409,7 @@ def test_untextured_scene_exports_no_mesh_attributes():
     """Without textures the exporter adds nothing to the meshes (so the engine takes its untextured
     path and renders bit-identically), and the local arrays keep their four fields."""
     load_addon()
-    from polar_render.polar_addon.export.scene import geometry_arrays
+    from polar_render.polar_addon.export.geometry import geometry_arrays
     mat, _ = _material("Plain")
     scene = base_scene(mat)
     bpy.ops.mesh.primitive_uv_sphere_add(radius=0.3, location=(0, 0, 0.5))
@@ -452,7 +452,7 @@ def test_viewport_re_reads_a_mesh_when_a_material_gains_a_texture():
         tex = link.from_node
         mat.node_tree.links.remove(link)
         bpy.context.view_layer.update()
-        export = vp.IncrementalExport()
+        export = vp.SceneWalk()
         results = []
 
         def on_update(_scene, depsgraph):
@@ -485,7 +485,7 @@ def test_other_links_keep_their_own_value_with_one_warning_each():
     are not exported: the input's own value (one warning naming it), the geometric normals."""
     load_addon()
     from polar_render.polar_addon.export.materials import export_material
-    from polar_render.polar_addon.export.scene import material_alpha
+    from polar_render.polar_addon.export.geometry import material_alpha
     mat, diffuse = _material("Procedural")
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     noise = nodes.new("ShaderNodeTexNoise")

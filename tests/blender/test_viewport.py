@@ -28,7 +28,7 @@ def test_real_depsgraph_updates_re_export_only_what_changed(addon):
     ball = add_sphere(0.5, (0, 0, 0.5), polar_material("Ball", "DIELECTRIC"))
     bpy.context.view_layer.update()
 
-    export = vp.IncrementalExport()
+    export = vp.SceneWalk()
     results = []
 
     def on_update(_scene, depsgraph):
@@ -118,7 +118,7 @@ def test_engine_field_names_become_ui_labels_in_messages(addon):
 def test_geometry_unchanged_compares_the_evaluated_mesh(addon):
     """The check behind the viewport's unconfirmed geometry flags (Blender 5.3's material edits): true
     for the geometry that was read, with or without modifiers; false once positions or triangles differ."""
-    from polar_render.polar_addon.export.scene import geometry_arrays, geometry_unchanged
+    from polar_render.polar_addon.export.geometry import geometry_arrays, geometry_unchanged
     empty_scene()
     sphere = add_sphere(0.5, (0, 0, 0.5))
     sphere.modifiers.new("Subdivision", "SUBSURF").levels = 1

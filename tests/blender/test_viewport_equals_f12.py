@@ -1,5 +1,5 @@
 """The viewport's scene is F12's (issue 34: one way through the house): the same fixture exported by F12
-(``export.scene.export_scene``) and by the viewport's incremental walk (``viewport.IncrementalExport``) gives the
+(``export.scene.export_scene``) and by the viewport's incremental walk (``export.scene.SceneWalk``) gives the
 same engine scene except the camera — every mesh with its emission, emitter sides, layers over the emission,
 visibility and alpha, every material, every light, the light selection.  The fixture has no baked inputs (the
 viewport does not bake: materials.VIEWPORT_NO_BAKE)."""
@@ -90,7 +90,7 @@ def test_the_viewport_exports_the_scene_f12_renders(addon):
     depsgraph = bpy.context.evaluated_depsgraph_get()
     settings = engine_settings(scene)
     f12, f12_warnings = export_scene(depsgraph, scene.camera, 32, 24, settings)
-    live = vp.IncrementalExport().sync(depsgraph, None, settings)
+    live = vp.SceneWalk().sync(depsgraph, None, settings)
     view = live.scene
     assert sorted(map(_mesh_record, view.meshes)) == sorted(map(_mesh_record, f12.meshes))
     used = {m.materials[0] for m in f12.meshes}
@@ -105,3 +105,37 @@ def test_the_viewport_exports_the_scene_f12_renders(addon):
     unlit = [m for m in view.meshes if not m.visible_indirect]
     assert len(unlit) == 1 and not unlit[0].visible_shadow and unlit[0].visible_camera
     assert any(float(m.alpha) == pytest.approx(0.4) for m in view.meshes), by_name
+
+
+def test_one_walk_over_the_depsgraph():
+    """Only the scene walk (export/scene.py) iterates the depsgraph's instances: F12 and the viewport share it."""
+    import pathlib
+    root = pathlib.Path(__file__).resolve().parents[2] / "polar_addon"
+    walkers = sorted(str(p.relative_to(root)) for p in root.rglob("*.py") if "object_instances" in p.read_text())
+    assert walkers == ["export/scene.py"]
+
+
+def test_f12_bakes_where_the_viewport_keeps_the_sockets_value(addon):
+    """The one difference between the two walks: F12 bakes a linked input on the object's UV map (a material
+    per object), the viewport takes the socket's own value with one warning."""
+    from polar_render.polar_addon import viewport as vp
+    from polar_render.polar_addon.export.scene import export_scene
+    from polar_render.polar_addon.render_engine import engine_settings
+    scene = empty_scene()
+    white_world(scene, 0.5)
+    brewster_camera(scene)
+
+    def noisy(tree):
+        noise = tree.nodes.new("ShaderNodeTexNoise")
+        tree.links.new(noise.outputs["Fac"], tree.nodes["Principled BSDF"].inputs["Roughness"])
+
+    add_sphere(0.5, (0, 0, 0.5), _material("Noisy", noisy))
+    bpy.context.view_layer.update()
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    settings = engine_settings(scene)
+    f12, f12_warnings = export_scene(depsgraph, scene.camera, 16, 12, settings)
+    live = vp.SceneWalk(source="blender-viewport").sync(depsgraph, None, settings)
+    assert any(k.startswith("mat:Noisy@") for k in f12.materials)
+    assert "mat:Noisy" in live.scene.materials and not any("@" in k for k in live.scene.materials)
+    assert any("Roughness" in w and "own value" in w for w in live.warnings)
+    assert not any("Roughness" in w and "own value" in w for w in f12_warnings)

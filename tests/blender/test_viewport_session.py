@@ -75,8 +75,8 @@ class Exporter:
         self.lambert = lambda v: Lambert(ConstantSpectrum(v))
         self.emissive = set()
         self.reshaped = set()      # objects whose evaluated geometry differs from what was read
-        from polar_render.polar_addon.export.scene import object_meshes
-        self.export = vp.IncrementalExport(geometry_arrays=self.mesh_arrays, object_meshes=object_meshes,
+        from polar_render.polar_addon.export.geometry import object_meshes
+        self.export = vp.SceneWalk(geometry_arrays=self.mesh_arrays, object_meshes=object_meshes,
                                            material_entry=self.material, export_light=self.light,
                                            export_world=self.world,
                                            geometry_unchanged=self.geometry_unchanged)
@@ -90,7 +90,7 @@ class Exporter:
         P = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
         return P, np.array([[0, 1, 2]]), np.tile([0.0, 0, 1], (3, 1)), np.zeros(1, np.int32)
 
-    def material(self, material, warnings):
+    def material(self, material, warnings, bake=None):
         from polar_render.engine.spectral import ConstantSpectrum
         name = material.name_full if material is not None else None
         self.calls.append(("material", name))

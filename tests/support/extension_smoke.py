@@ -80,7 +80,7 @@ def viewport_edits(ext, scene):
     """What the viewport's incremental export re-reads for a material, a mesh and a modifier edit."""
     vp = sys.modules[ext.__name__ + ".polar_addon.viewport"]
     engine_settings = sys.modules[ext.__name__ + ".polar_addon.render_engine"].engine_settings
-    export = vp.IncrementalExport()
+    export = vp.SceneWalk()
     counts = []
 
     def on_update(_scene, depsgraph):
