@@ -8,7 +8,8 @@ material's batched formulas (engine.materials.rough_dielectric, where the twins 
 written here in the same operation order, so the compiled pass gives their bits.
 
 Distribution codes: 0 Beckmann, 1 GGX.  The value is the same at every wavelength (one real index),
-written to each of the L rows.
+written to each of the L rows.  The roughness α is one number (a one-element array) or one per path (N,)
+(a textured roughness), read with ``at``.
 """
 
 from __future__ import annotations
@@ -21,6 +22,7 @@ from .fresnel import abcs_at
 from .microfacet import (beckmann_d_at, beckmann_g1_at, beckmann_lambda_at, beckmann_vndf_at, chi_plus_at,
                          ggx_d_at, ggx_lambda_at, ggx_vndf_at, smith_a_at)
 from .geometry import local_frame_at, to_local_at, unit_cross_at
+from .torrance_sparrow import at
 
 DISTRIBUTION_CODES = {"beckmann": 0, "ggx": 1}
 _ERFCX_COEF = np.ascontiguousarray(ERFCX_COEF, dtype=np.float64)
@@ -146,7 +148,7 @@ def _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational,
 def _eval_loop(n_s, wo, wi, eta_out, eta_in, dist, rational, alpha, coef, k, A, B, C, S, x):
     for i in range(n_s.shape[1]):
         n0, n1, n2, eta, t0, t1, t2, b0, b1, b2 = _viewer_side(n_s, wo, i, eta_out, eta_in)
-        _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational, alpha, coef, k, 1.0,
+        _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational, at(alpha, i), coef, k, 1.0,
                  A, B, C, S, x)
 
 
@@ -158,7 +160,8 @@ def _pdf_loop(n_s, wo, wi, eta_out, eta_in, dist, alpha, coef, k, out):
         w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
         out[i] = _pdf_local_at(dist, w0 * t0 + w1 * t1 + w2 * t2, w0 * b0 + w1 * b1 + w2 * b2,
                                w0 * n0 + w1 * n1 + w2 * n2, o0 * t0 + o1 * t1 + o2 * t2,
-                               o0 * b0 + o1 * b1 + o2 * b2, o0 * n0 + o1 * n1 + o2 * n2, eta, alpha, coef, k)
+                               o0 * b0 + o1 * b1 + o2 * b2, o0 * n0 + o1 * n1 + o2 * n2, eta, at(alpha, i), coef,
+                               k)
 
 
 @jit
@@ -166,6 +169,7 @@ def _sample_loop(n_s, wo, u_lobe, u_dir, eta_out, eta_in, dist, rational, alpha,
                  wi, pdf, valid, eta_sq, A, B, C, S, x):
     for i in range(n_s.shape[1]):
         n0, n1, n2, eta, t0, t1, t2, b0, b1, b2 = _viewer_side(n_s, wo, i, eta_out, eta_in)
+        a = at(alpha, i)
         o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
         lo0 = o0 * t0 + o1 * t1 + o2 * t2
         lo1 = o0 * b0 + o1 * b1 + o2 * b2
@@ -174,9 +178,9 @@ def _sample_loop(n_s, wo, u_lobe, u_dir, eta_out, eta_in, dist, rational, alpha,
         if not front:
             lo0, lo1, lo2 = 0.0, 0.0, 1.0
         if dist == 0:
-            h0, h1, h2 = beckmann_vndf_at(lo0, lo1, lo2, u_dir[0, i], u_dir[1, i], alpha, coef, k)
+            h0, h1, h2 = beckmann_vndf_at(lo0, lo1, lo2, u_dir[0, i], u_dir[1, i], a, coef, k)
         else:
-            h0, h1, h2 = ggx_vndf_at(lo0, lo1, lo2, u_dir[0, i], u_dir[1, i], alpha)
+            h0, h1, h2 = ggx_vndf_at(lo0, lo1, lo2, u_dir[0, i], u_dir[1, i], a)
         c = min(max(lo0 * h0 + lo1 * h1 + lo2 * h2, 0.0), 1.0)
         F = abcs_at(c, complex(eta, 0.0))[0]          # 1 under total internal reflection
         reflect = u_lobe[i] < F
@@ -198,13 +202,13 @@ def _sample_loop(n_s, wo, u_lobe, u_dir, eta_out, eta_in, dist, rational, alpha,
         w1 = t1 * l0 + b1 * l1 + n1 * l2
         w2 = t2 * l0 + b2 * l1 + n2 * l2
         wi[0, i], wi[1, i], wi[2, i] = w0, w1, w2
-        q = _pdf_local_at(dist, l0, l1, l2, lo0, lo1, lo2, eta, alpha, coef, k)
+        q = _pdf_local_at(dist, l0, l1, l2, lo0, lo1, lo2, eta, a, coef, k)
         ok = (front and q > 0 and ((l2 > 0) if reflect else (l2 < 0)) and np.isfinite(w0) and np.isfinite(w1)
               and np.isfinite(w2))
         valid[i] = ok
         pdf[i] = q if ok else 0.0
         eta_sq[i] = 1.0 if reflect else eta * eta
-        _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational, alpha, coef, k,
+        _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational, a, coef, k,
                  abs(l2) / q if ok else 0.0, A, B, C, S, x)
 
 
@@ -214,19 +218,26 @@ def _f64(a):
     return np.ascontiguousarray(a, dtype=np.float64)
 
 
+def _alphas(alpha):
+    """α as the loops read it (``at``): a number as a one-element array, else (N,) contiguous float64."""
+    if np.ndim(alpha) == 0:
+        return np.array([float(alpha)])
+    return np.array(alpha, dtype=np.float64)
+
+
 def rough_dielectric_eval_numba(n_s, wo, wi, L, n_int, n_ext, distribution, rational, alpha):
     n = n_s.shape[1]
     A, B, C, S = (np.empty((L, n)) for _ in range(4))
     x = np.empty((3, n))
     _eval_loop(_f64(n_s), _f64(wo), _f64(wi), n_int / n_ext, n_ext / n_int, DISTRIBUTION_CODES[distribution],
-               bool(rational), float(alpha), _ERFCX_COEF, _ERFCX_K, A, B, C, S, x)
+               bool(rational), _alphas(alpha), _ERFCX_COEF, _ERFCX_K, A, B, C, S, x)
     return x, A, B, C, S
 
 
 def rough_dielectric_pdf_numba(n_s, wo, wi, n_int, n_ext, distribution, alpha):
     out = np.empty(n_s.shape[1])
     _pdf_loop(_f64(n_s), _f64(wo), _f64(wi), n_int / n_ext, n_ext / n_int, DISTRIBUTION_CODES[distribution],
-              float(alpha), _ERFCX_COEF, _ERFCX_K, out)
+              _alphas(alpha), _ERFCX_COEF, _ERFCX_K, out)
     return out
 
 
@@ -236,7 +247,7 @@ def rough_dielectric_sample_numba(n_s, wo, u_lobe, u_dir, L, n_int, n_ext, distr
     wi, x = np.empty((3, n)), np.empty((3, n))
     pdf, eta_sq, valid = np.empty(n), np.empty(n), np.empty(n, np.bool_)
     _sample_loop(_f64(n_s), _f64(wo), _f64(u_lobe), _f64(u_dir), n_int / n_ext, n_ext / n_int,
-                 DISTRIBUTION_CODES[distribution], bool(rational), float(alpha), _ERFCX_COEF, _ERFCX_K,
+                 DISTRIBUTION_CODES[distribution], bool(rational), _alphas(alpha), _ERFCX_COEF, _ERFCX_K,
                  wi, pdf, valid, eta_sq, A, B, C, S, x)
     return wi, pdf, valid, eta_sq, x, A, B, C, S
 

@@ -68,7 +68,8 @@ reflectance at the view angle, the largest over the RGB channels' wavelengths).
 Helpers: ``multiscatter_extra(sp)`` (k, as Torrance–Sparrow's), ``reflection_albedo(sp)`` (the lobe's
 directional albedo with its own Fresnel at ω_o, times 1 + k with ``multiscatter``: the layering albedo a
 Principled specular layer subtracts from the diffuse base; Cycles' estimate at α = √(α_x α_y), or the
-anisotropic table with ``multiscatter_albedo="lobe"``; needs a constant index), ``tangent_frame(sp)``.
+anisotropic table with ``multiscatter_albedo="lobe"``; a constant index, or a real one per point — a
+NumberSpectrum, engine.textures.inputs — from torrance_sparrow.IndexAlbedoTables), ``tangent_frame(sp)``.
 Vectorised NumPy throughout (no compiled kernel).
 """
 
@@ -467,9 +468,24 @@ class AnisotropicGGX(BSDF):
         this lobe's own (anisotropic quadrature table).  With a thin film: the film's reflectance at the view
         angle, the largest over the RGB channels' wavelengths (Torrance–Sparrow's ``film_albedo``: Cycles has no
         table for iridescence)."""
-        eta = self._constant_eta()
+        from ..textures.inputs import NumberSpectrum
         (wo_l,) = self._local(sp, sp.wo)
         cos_o = np.clip(wo_l[2], 0.0, 1.0)
+        if isinstance(self.n, NumberSpectrum) and self.film is None and self.multiscatter_albedo == "cycles" and \
+                isinstance(self.k, ConstantSpectrum) and self.k.value == 0.0:
+            # a real index per point (the Principled dielectric's per-point IOR or Specular IOR Level): Cycles'
+            # estimate from the index tables (engine.materials.torrance_sparrow.IndexAlbedoTables)
+            if self._reflection_table is None:
+                from .torrance_sparrow import IndexAlbedoTables
+                lo = max(min(getattr(self.alpha_x, "lo", self.alpha_x), getattr(self.alpha_y, "lo", self.alpha_y)),
+                         M_MIN)
+                hi = max(getattr(self.alpha_x, "hi", self.alpha_x), getattr(self.alpha_y, "hi", self.alpha_y))
+                self._reflection_table = IndexAlbedoTables(self.n.lo / self.exterior_n, self.n.hi / self.exterior_n,
+                                                           lo, hi, "smith_correlated", "ggx")
+            E = self._reflection_table(cos_o, self._alphas(sp)[2], self.n.numbers(sp.surface_points()) /
+                                       self.exterior_n)
+            return E * (1.0 + self._extra(sp, wo_l)[0]) if self.multiscatter else E
+        eta = self._constant_eta()
         if self.film is not None:
             return film_layering_albedo(cos_o, self.exterior_n, film_at(self.film, sp), eta * self.exterior_n,
                                         RGB_WAVELENGTHS_NM)

@@ -51,7 +51,8 @@ Tables (built once, stored by engine.materials.table_cache):
   refraction, the unpolarised Fresnel of the material's own real index) seen from either side, on
   ``DIELECTRIC_MU_NODES`` nodes in √μ, linear in between.  A rough dielectric has one index and one
   roughness, so its table is 1-D and exact in both (Cycles interpolates a 16³ table over roughness,
-  μ and the index).
+  μ and the index).  A roughness that varies over the surface (``DielectricAlbedoRange``): those tables at
+  the conductor table's nodes in r = √α spanning its range, bilinear in (√μ, √α).
 
 E is clamped to [``E_FLOOR``, 1] where it is used, so every compensation factor is finite and the
 added energy never negative.
@@ -302,6 +303,42 @@ class DielectricAlbedo:
     def extra(self, mu: np.ndarray, outside: np.ndarray) -> np.ndarray:
         """k = 1/E − 1 ≥ 0 (N,): f = f_ss·(1 + k)."""
         return 1.0 / np.clip(self(mu, outside), E_FLOOR, 1.0) - 1.0
+
+
+class DielectricAlbedoRange:
+    """E(μ, α) of one rough GGX dielectric interface (index ratio ``n_ratio``) whose roughness varies over the
+    surface within [α_lo, α_hi] (a textured α): the 1-D tables of :class:`DielectricAlbedo` at the nodes
+    r_j = j/(ROUGH_NODES − 1) of r = √α that span the range (the conductor table's roughness axis; r = 0 is the
+    smooth limit E = 1), bilinear in (√μ, √α)."""
+
+    def __init__(self, n_ratio: float, alpha_lo: float, alpha_hi: float):
+        self.n_ratio = float(n_ratio)
+        last = ROUGH_NODES - 1
+        lo = math.sqrt(min(max(float(alpha_lo), 0.0), ALPHA_MAX)) * last
+        hi = math.sqrt(min(max(float(alpha_hi), 0.0), ALPHA_MAX)) * last
+        j0 = min(int(math.floor(lo)), last - 1)
+        j1 = max(int(math.ceil(hi)), j0 + 1)
+        r = _t_nodes(ROUGH_NODES)
+        self.first = j0
+        self.E = np.stack([np.ones((2, DIELECTRIC_MU_NODES)) if j == 0 else
+                           _dielectric_table(self.n_ratio, float(r[j] * r[j])) for j in range(j0, j1 + 1)], axis=-1)
+
+    def __call__(self, mu: np.ndarray, outside: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+        """E (N,) at viewing cosines |μ| (N,) from outside (True) or inside (False), roughness α (N,)."""
+        x = np.sqrt(np.clip(np.abs(np.asarray(mu, np.float64)), 0.0, 1.0)) * (DIELECTRIC_MU_NODES - 1)
+        i = np.minimum(x.astype(np.int64), DIELECTRIC_MU_NODES - 2)
+        f = x - i
+        y = np.sqrt(np.clip(np.asarray(alpha, np.float64), 0.0, ALPHA_MAX)) * (ROUGH_NODES - 1) - self.first
+        j = np.clip(np.floor(y).astype(np.int64), 0, self.E.shape[2] - 2)
+        g = np.clip(y - j, 0.0, 1.0)
+        row = np.where(outside, 0, 1)
+        E = self.E
+        return ((E[row, i, j] * (1.0 - f) + E[row, i + 1, j] * f) * (1.0 - g)
+                + (E[row, i, j + 1] * (1.0 - f) + E[row, i + 1, j + 1] * f) * g)
+
+    def extra(self, mu: np.ndarray, outside: np.ndarray, alpha: np.ndarray) -> np.ndarray:
+        """k = 1/E − 1 ≥ 0 (N,): f = f_ss·(1 + k)."""
+        return 1.0 / np.clip(self(mu, outside, alpha), E_FLOOR, 1.0) - 1.0
 
 
 @functools.lru_cache(maxsize=64)

@@ -15,10 +15,11 @@ diffuse base, the base weighted by one minus the specular layer's albedo at the 
   angle (engine.materials.tinted.F82Reflectance); under a thin film (``thin_film_thickness`` > 0, rough or
   smooth) Cycles' own index estimate filmed by Airy's sum instead;
 - transmission: the smooth dielectric at roughness 0 (with a film the thin-film dielectric), else the GGX
-  rough dielectric (compensated for "multi_ggx"), each refraction tinted by √(base colour) and the glass's
-  Fresnel by Specular Tint (engine.materials.tinted);
+  rough dielectric (compensated for "multi_ggx"; a roughness texture gives its α = r² per point), each refraction
+  tinted by √(base colour) and the glass's Fresnel by Specular Tint (engine.materials.tinted);
 - dielectric: a GGX Torrance–Sparrow dielectric (index from ``ior`` and ``specular_ior_level``: F0 =
-  F0(ior)·2·level, per point through engine.textures.inputs.NumberSpectrum; a thin film on it as on the
+  F0(ior)·2·level, per point through engine.textures.inputs.NumberSpectrum, beside a Specular Tint or an
+  anisotropy too; a thin film on it as on the
   metal) with the albedo-scaled Lambertian (or Oren–Nayar) base, its smooth limit at roughness 0;
 - coat: a GGX dielectric reflection of ``coat_ior`` and α = coat_roughness² (compensated, as Cycles
   always compensates its coat) over everything below — metal, transmission and dielectric — which is
@@ -200,29 +201,35 @@ def _metal_of(n, k, p, alpha):
 
 
 def _anisotropic_lobe(p, n, k, alpha):
-    """Cycles' anisotropic GGX reflection (engine.materials.anisotropic_ggx) of index n + iκ for Anisotropic > 0
-    and a constant roughness (a textured one stays isotropic: the exporter warns), else None: α_x = r²/aspect,
-    α_y = r²·aspect, aspect = √(1 − 0.9·a), along the surface tangent rotated by Anisotropic Rotation.  The
-    Anisotropic and its Rotation may vary per point (α_x, α_y per point: engine.textures.inputs.MappedNumber)."""
+    """Cycles' anisotropic GGX reflection (engine.materials.anisotropic_ggx) of index n + iκ for Anisotropic > 0,
+    else None: α_x = r²/aspect, α_y = r²·aspect, aspect = √(1 − 0.9·a), each in [M_MIN, 1], along the surface tangent
+    rotated by Anisotropic Rotation.  The roughness, the Anisotropic and its Rotation may vary per point (α_x, α_y
+    per point: engine.textures.inputs.MappedNumbers of α = r² and a)."""
     aniso = p["anisotropic"]
-    if (aniso.hi if _textured(aniso) else aniso) <= 0.0 or _textured(alpha):
+    if (aniso.hi if _textured(aniso) else aniso) <= 0.0:
         return None
-    from .anisotropic_ggx import AnisotropicGGX, cycles_alphas
+    from .anisotropic_ggx import ASPECT_SLOPE, AnisotropicGGX, cycles_alphas
     from .torrance_sparrow import M_MIN
-    r = math.sqrt(alpha)
-    if _textured(aniso):
-        from ..textures.inputs import MappedNumber
+    if _textured(aniso) or _textured(alpha):
+        from ..textures.inputs import MappedNumbers
 
-        def alphas(a):
-            a = np.clip(a, 0.0, 1.0)
-            aspect = np.sqrt(1.0 - 0.9 * a)
-            return (np.maximum(np.minimum(alpha / aspect, 1.0), M_MIN),
-                    np.maximum(np.minimum(alpha * aspect, 1.0), M_MIN))
-        ends = [alphas(np.array(v)) for v in (aniso.lo, aniso.hi)]
-        ax = MappedNumber(aniso, lambda a: alphas(a)[0], min(e[0] for e in ends), max(e[0] for e in ends))
-        ay = MappedNumber(aniso, lambda a: alphas(a)[1], min(e[1] for e in ends), max(e[1] for e in ends))
+        def aspect_of(a):
+            return np.sqrt(1.0 - ASPECT_SLOPE * np.clip(a, 0.0, 1.0))
+
+        def alpha_x(al, a):
+            return np.maximum(np.minimum(al / aspect_of(a), 1.0), M_MIN)
+
+        def alpha_y(al, a):
+            return np.maximum(np.minimum(al * aspect_of(a), 1.0), M_MIN)
+        al_range = (alpha.lo, alpha.hi) if _textured(alpha) else (alpha, alpha)
+        a_range = (aniso.lo, aniso.hi) if _textured(aniso) else (aniso, aniso)
+        # α_x grows with α and a, α_y grows with α and falls with a
+        ax = MappedNumbers((alpha, aniso), alpha_x, float(alpha_x(al_range[0], a_range[0])),
+                           float(alpha_x(al_range[1], a_range[1])))
+        ay = MappedNumbers((alpha, aniso), alpha_y, float(alpha_y(al_range[0], a_range[1])),
+                           float(alpha_y(al_range[1], a_range[0])))
     else:
-        ax, ay = (max(v, M_MIN) for v in cycles_alphas(r, aniso))
+        ax, ay = (max(v, M_MIN) for v in cycles_alphas(math.sqrt(alpha), aniso))
     film = _film_values(p)
     return AnisotropicGGX(n, k, ax, ay, rotation=p["anisotropic_rotation"],
                           multiscatter=p["distribution"] == "multi_ggx",
@@ -246,8 +253,11 @@ def film_gaps(metallic, transmission, roughness, transmission_roughness=None) ->
     roughness counts as rough)."""
     from .rough_dielectric import ALPHA_MIN
     trans = roughness if transmission_roughness is None else transmission_roughness
+    per_point = (TexturedNumber, TexturedSpectrum, TextureInput)         # a texture: somewhere rough, weighted
     gaps = []
-    if not _always(metallic) and not _never(transmission) and (_textured(trans) or trans * trans >= ALPHA_MIN):
+    if (isinstance(metallic, per_point) or not _always(metallic)) and \
+            (isinstance(transmission, per_point) or not _never(transmission)) and \
+            (isinstance(trans, per_point) or trans * trans >= ALPHA_MIN):
         gaps.append("rough transmission")
     return gaps
 
@@ -258,12 +268,15 @@ def _transmission(p, alpha, ior):
     from .tinted import Tinted
     from .thin_film import ThinFilmDielectric
     rough = p["transmission_roughness"] if p.given("transmission_roughness") else p["roughness"]
-    if _textured(rough):
-        raise SceneError(p.field("transmission_roughness"), "the transmission's roughness cannot vary per point yet: "
-                                                            "give a constant transmission_roughness")
-    a = float(rough) ** 2
+    if _textured(rough):        # α = r² per point, the reflection lobes' (≥ M_MIN = the rough glass's least α)
+        a = alpha
+    else:
+        a = float(rough) ** 2
     film = bool(_film_values(p))
-    if a < ALPHA_MIN and film:
+    if _textured(a):
+        glass = SmoothDielectric(ior) if index_matched(ior, 1.0) else \
+            RoughDielectric(ior, a, "ggx", multiscatter=p["distribution"] == "multi_ggx")
+    elif a < ALPHA_MIN and film:
         glass = ThinFilmDielectric(ior, p["thin_film_ior"], p["thin_film_thickness"])
     elif a < ALPHA_MIN or index_matched(ior, 1.0):
         glass = SmoothDielectric(ior)
@@ -297,8 +310,8 @@ def _dielectric(p, alpha, ior):
     tint = p["specular_tint"]
     tinted = not _white(tint)
     aniso = None if smooth else _anisotropic_lobe(p, eta, 0.0, alpha)
-    if per_point_index and (tinted or aniso is not None):
-        raise SceneError(p.field(per_point_index), "cannot vary per point with a Specular Tint or an anisotropy "
+    if per_point_index and aniso is not None and aniso.film is not None:
+        raise SceneError(p.field(per_point_index), "cannot vary per point on an anisotropic layer under a thin film "
                                                    "(give a constant value)")
     rough_base = not _never(p["diffuse_roughness"])          # an Oren–Nayar base somewhere (a σ per point too)
     if rough_base or tinted or aniso is not None:
@@ -341,8 +354,10 @@ def _tinted_albedo(albedo, top, n, alpha, smooth, t):
     takes the largest; a number or a function of the shading point): E_t = E_F + F0(t − 1)(E_1 − E_F)/(1 − F0),
     E_F the untinted albedo, E_1 the F = 1 albedo (1 where compensated or smooth)."""
     from .ggx_energy import conductor_albedo
-    f0 = ((n - 1.0) / (n + 1.0)) ** 2
-    if f0 >= 1.0:
+    from ..textures.inputs import NumberSpectrum
+    per_point = isinstance(n, NumberSpectrum)           # an index per point (a per-point IOR or Specular IOR Level)
+    f0 = None if per_point else ((n - 1.0) / (n + 1.0)) ** 2
+    if not per_point and f0 >= 1.0:
         return albedo
 
     def tinted(sp):
@@ -352,6 +367,10 @@ def _tinted_albedo(albedo, top, n, alpha, smooth, t):
         else:
             E1 = conductor_albedo(np.clip(sp.cos_o, 0.0, 1.0), sp.number(alpha), correlated=True)
         peak = t(sp) if callable(t) else t
+        if per_point:
+            x = n.numbers(sp.surface_points())
+            f = ((x - 1.0) / (x + 1.0)) ** 2
+            return np.maximum(E + f * (peak - 1.0) * (E1 - E) / (1.0 - f), 0.0)
         return np.maximum(E + f0 * (peak - 1.0) * (E1 - E) / (1.0 - f0), 0.0)
     return tinted
 
@@ -441,8 +460,8 @@ DECLARATION = ModelDeclaration(
                lo_open=True, default=1.5, texturable=True),
      Parameter("transmission", "transmission's weight (of what the metal leaves)", lo=0.0, hi=1.0, default=0.0,
                texturable=True),
-     Parameter("transmission_roughness", "the transmission's roughness where it differs (default: roughness; "
-                                         "constant)", lo=0.0, hi=1.0, default=0.5),
+     Parameter("transmission_roughness", "the transmission's roughness where it differs (default: roughness, "
+                                         "per point where that is; constant)", lo=0.0, hi=1.0, default=0.5),
      Parameter("specular_ior_level", "Cycles' Specular IOR Level: F0 × 2·level", lo=0.0, hi=1.0, default=0.5,
                texturable=True),
      Parameter("diffuse_roughness", "the base's Oren–Nayar roughness σ (0: Lambert)", lo=0.0, hi=1.0, default=0.0,
@@ -450,8 +469,8 @@ DECLARATION = ModelDeclaration(
      Parameter("specular_tint", "Cycles' Specular Tint: the dielectric's F0 × tint (its F82 tint for the metal)",
                kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6, default=1.0, texturable=True),
      Parameter("anisotropic", "Cycles' Anisotropic: the metal's and the specular layer's GGX stretched along the "
-                              "surface tangent, α = r²/aspect and r²·aspect, aspect = √(1 − 0.9·a) (a constant "
-                              "roughness)", lo=0.0, hi=1.0, default=0.0, texturable=True),
+                              "surface tangent, α = r²/aspect and r²·aspect, aspect = √(1 − 0.9·a)", lo=0.0, hi=1.0,
+               default=0.0, texturable=True),
      Parameter("anisotropic_rotation", "the tangent's rotation about the normal, in turns", lo=-1e6, hi=1e6,
                default=0.0, texturable=True),
      Parameter("coat_weight", "coat (> 0: a coat over the dielectric)", lo=0.0, hi=1.0, default=0.0, texturable=True),

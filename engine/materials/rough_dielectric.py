@@ -52,6 +52,11 @@ interpolates a 16³ table).  Not reciprocal (the scale depends on ω_o only), as
 facets are refused with it: Cycles has no multiple-scattering Beckmann and its tables are GGX's.
 Sampling is unchanged; the weight is the compensated f·|cosθ_i|/pdf.
 
+Roughness per point (``alpha`` a TexturedNumber, e.g. the Principled BSDF's Roughness texture: α = r² at each
+point): every formula above is elementwise in α, so each point gets exactly the constant-α lobe of its own
+value (the compiled passes read α per path); the compensation's E is then bilinear in (√cosθ_o, √α) between
+the per-α tables at the conductor table's roughness nodes (engine.materials.ggx_energy.DielectricAlbedoRange).
+
 Implementation: eval, pdf and sample are one compiled pass each over the batch
 (engine.kernels.rough_dielectric); the NumPy references are ``_eval``, ``_pdf_local`` and ``_sample``
 of this module, declared with kernels.twin.
@@ -66,7 +71,7 @@ import numpy as np
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
 from .dielectric import IOR_SOCKET, SmoothDielectric
 from .ggx import GGX
-from .ggx_energy import ALPHA_MAX, DielectricAlbedo
+from .ggx_energy import ALPHA_MAX, DielectricAlbedo, DielectricAlbedoRange
 from .microfacet import Beckmann, reflect_local
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from .sampling import local_to_world
@@ -76,6 +81,7 @@ from ..kernels.rough_dielectric import (rough_dielectric_eval_numba, rough_diele
                                         rough_dielectric_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_transmission_abcs
+from ..textures import TexturedNumber
 from ..vec3 import dot, local_frame, to_local
 
 #: Smallest accepted roughness α (0 is the smooth dielectric).
@@ -176,8 +182,10 @@ def _sample(dist, rational, n_s, wo, u_lobe, u_dir, L, n_int, n_ext):
     return wi, np.where(valid, pdf, 0.0), valid, eta_sq, x, A * factor, B * factor, C * factor, S * factor
 
 
-def _distribution(distribution: str, alpha: float):
-    return Beckmann(alpha) if distribution == "beckmann" else GGX(alpha)
+def _distribution(distribution: str, alpha):
+    """The facet distribution of roughness α: a number, or (N,) one per path (a textured roughness)."""
+    kind = Beckmann if distribution == "beckmann" else GGX
+    return kind.per_point(alpha) if np.ndim(alpha) else kind(alpha)
 
 
 def rough_dielectric_eval_numpy(n_s, wo, wi, L, n_int, n_ext, distribution, rational, alpha):
@@ -222,10 +230,13 @@ class RoughDielectric(BSDF):
         for name, v in (("n", self.n_int), ("exterior_n", self.n_ext)):
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
-        alpha = float(alpha)
-        if not (math.isfinite(alpha) and alpha >= ALPHA_MIN):
+        # α: a number, or per point (a TexturedNumber: a Principled roughness texture, α = r² per point)
+        self.per_point = isinstance(alpha, TexturedNumber)
+        lo, hi = (alpha.lo, alpha.hi) if self.per_point else (float(alpha), float(alpha))
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo >= ALPHA_MIN):
             raise ValueError(f"roughness alpha must be a finite number >= {ALPHA_MIN:g}, got {alpha!r}")
-        self.alpha = alpha
+        self.alpha = alpha if self.per_point else lo
+        self.varies_over_surface = self.per_point
         if distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
         if shadowing not in SHADOWING:
@@ -233,29 +244,37 @@ class RoughDielectric(BSDF):
         if shadowing == "smith_rational" and distribution != "beckmann":
             raise ValueError("shadowing 'smith_rational' exists for the beckmann distribution only")
         self.distribution, self.shadowing = distribution, shadowing
-        self.dist = _distribution(distribution, alpha)
+        self.dist = None if self.per_point else _distribution(distribution, self.alpha)
         self.multiscatter = bool(multiscatter)
         self._energy = None
         if self.multiscatter:
             if distribution != "ggx":
                 raise ValueError("multiscatter (Cycles' Multiscatter GGX) needs distribution='ggx'")
-            if not alpha <= ALPHA_MAX:
+            if not hi <= ALPHA_MAX:
                 raise ValueError(f"multiscatter needs alpha <= {ALPHA_MAX:g} (Cycles clamps GGX alpha to 1), "
                                  f"got {alpha!r}")
-            self._energy = DielectricAlbedo(self.n_int / self.n_ext, alpha)
+            ratio = self.n_int / self.n_ext
+            self._energy = DielectricAlbedoRange(ratio, lo, hi) if self.per_point else DielectricAlbedo(ratio, lo)
+
+    def _alpha(self, sp: ShadingPoint):
+        """α at the points: the number, or (N,) for a textured roughness."""
+        return sp.number(self.alpha)
 
     def _multiscatter_depol(self, sp: ShadingPoint, A: np.ndarray) -> np.ndarray | None:
         """(1/E(cosθ_o) − 1)·A (L, N), the depolarised multiple-scattering term; None without it."""
         if self._energy is None:
             return None
         cos_o = dot(sp.n_s, sp.wo)
+        if self.per_point:
+            return A * self._energy.extra(np.abs(cos_o), cos_o >= 0, self._alpha(sp))[None, :]
         return A * self._energy.extra(np.abs(cos_o), cos_o >= 0)[None, :]
 
     # --- BSDF interface ---------------------------------------------------------------------------
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
         x, A, B, C, S = rough_dielectric_eval(sp.n_s, sp.wo, wi, sp.lam.shape[0], self.n_int, self.n_ext,
-                                              self.distribution, self.shadowing == "smith_rational", self.alpha)
+                                              self.distribution, self.shadowing == "smith_rational",
+                                              self._alpha(sp))
         return MuellerValue("abcs", x, x, A, B, C, S, depol=self._multiscatter_depol(sp, A))
 
     def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray:
@@ -263,17 +282,18 @@ class RoughDielectric(BSDF):
         return np.where(sp.cos_o >= 0, eta * eta, 1.0 / (eta * eta))
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        return rough_dielectric_pdf(sp.n_s, sp.wo, wi, self.n_int, self.n_ext, self.distribution, self.alpha)
+        return rough_dielectric_pdf(sp.n_s, sp.wo, wi, self.n_int, self.n_ext, self.distribution, self._alpha(sp))
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         wi, pdf, valid, eta_sq, x, A, B, C, S = rough_dielectric_sample(
             sp.n_s, sp.wo, u_lobe, u_dir, sp.lam.shape[0], self.n_int, self.n_ext, self.distribution,
-            self.shadowing == "smith_rational", self.alpha)
+            self.shadowing == "smith_rational", self._alpha(sp))
         weight = MuellerValue("abcs", x, x, A, B, C, S, depol=self._multiscatter_depol(sp, A))
         return BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=eta_sq)
 
     def describe(self) -> dict:
-        out = {"type": self.name, "n": self.n_int, "alpha": self.alpha, "distribution": self.distribution,
+        out = {"type": self.name, "n": self.n_int, "alpha": repr(self.alpha) if self.per_point else self.alpha,
+               "distribution": self.distribution,
                "shadowing": self.shadowing, "exterior_n": self.n_ext}
         if self.multiscatter:
             out["multiscatter"] = True

@@ -108,12 +108,17 @@ class FresnelTinted(_ScaledLobes):
     transmits: Principled's transmission) the refraction carries Cycles' transmittance 1 − F too,
     × (1 − F_t)/(1 − F_real) (``_glass_factor``)."""
 
-    def __init__(self, base: BSDF, n: float, tint: Spectrum):
-        self.base, self.n, self.tint = base, float(n), tint
+    def __init__(self, base: BSDF, n, tint: Spectrum):
+        # the index: a number, or per point on an opaque layer (a NumberSpectrum: a per-point IOR or Specular IOR
+        # Level of the Principled dielectric)
+        self.per_point = isinstance(n, TexturedSpectrum)
+        if self.per_point and base.flags.transmits:
+            raise ValueError("a glass's Specular Tint needs a constant index")
+        self.base, self.n, self.tint = base, n if self.per_point else float(n), tint
         self.name = base.name
-        self.f0 = ((self.n - 1.0) / (self.n + 1.0)) ** 2
+        self.f0 = None if self.per_point else ((self.n - 1.0) / (self.n + 1.0)) ** 2
         self.flags = base.flags | (BSDFFlags.NONE if _grey(tint) else BSDFFlags.WAVELENGTH_DEPENDENT)
-        self.varies_over_surface = base.varies_over_surface or isinstance(tint, TexturedSpectrum)
+        self.varies_over_surface = base.varies_over_surface or isinstance(tint, TexturedSpectrum) or self.per_point
 
     @property
     def multiscatter(self):
@@ -121,6 +126,13 @@ class FresnelTinted(_ScaledLobes):
 
     def _fresnel_factor(self, sp: ShadingPoint, cos_facet: np.ndarray) -> np.ndarray:
         from ..polarisation.fresnel import fresnel_reflectance
+        if self.per_point:                  # the same per point: n (N,) real, F0 < 1
+            n = self.n.numbers(sp.surface_points())
+            F = fresnel_reflectance(np.clip(cos_facet, 0.0, 1.0), n.astype(np.complex128))
+            f0 = ((n - 1.0) / (n + 1.0)) ** 2
+            t = sp.spectrum(self.tint)
+            tinted = F[None, :] + f0[None, :] * (t - 1.0) * (1.0 - F[None, :]) / (1.0 - f0[None, :])
+            return np.where(F[None, :] > 0, np.maximum(tinted, 0.0) / np.where(F > 0, F, 1.0)[None, :], 1.0)
         F = fresnel_reflectance(np.clip(cos_facet, 0.0, 1.0), complex(self.n))
         t = sp.spectrum(self.tint)
         if self.f0 >= 1.0:

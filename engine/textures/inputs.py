@@ -436,6 +436,29 @@ class MappedNumber(TexturedNumber):
         return f"MappedNumber({self.of!r}, {getattr(self.fn, '__name__', 'fn')})"
 
 
+class MappedNumbers(TexturedNumber):
+    """A number that is ``fn`` of several numbers at each point, each textured (a TexturedNumber) or constant (e.g.
+    the anisotropic GGX α_x of a per-point roughness and a per-point Anisotropic); ``lo``, ``hi`` bound every value
+    fn gives on the numbers' ranges (the caller states them)."""
+
+    def __init__(self, of: tuple, fn, lo: float, hi: float):
+        self.of, self.fn, self.clip = tuple(of), fn, None
+        self.source = next(v.source for v in self.of if isinstance(v, TexturedNumber))
+        self.lo, self.hi = float(lo), float(hi)
+
+    def clamped_to(self, lo: float = -math.inf, hi: float = math.inf) -> MappedNumbers:
+        return self
+
+    def at(self, points) -> np.ndarray:
+        def compute():
+            args = (v.at(points) if isinstance(v, TexturedNumber) else v for v in self.of)
+            return np.asarray(self.fn(*args), np.float64)
+        return points.memo((self, "mapped"), compute)
+
+    def __repr__(self):
+        return f"MappedNumbers({', '.join(repr(v) for v in self.of)}, {getattr(self.fn, '__name__', 'fn')})"
+
+
 class ColouredEmission(TexturedSpectrum):
     """An emitter's radiance whose strength varies over the surface and whose colour is constant (Blender: a
     texture into Emission Strength, a constant Emission Color): per point exactly a constant
@@ -465,3 +488,65 @@ class ColouredEmission(TexturedSpectrum):
     def rgb_at(self, points) -> np.ndarray:
         strength = np.maximum(self.source.number(points), 0.0)
         return self.colour[:, None] * strength[None, :]
+
+
+class _ProductTexture:
+    """What an emitter's estimates read of ``source.texture`` (engine.render.lights.textured) for a product of two
+    textures: the finer resolution of the two over each triangle."""
+
+    def __init__(self, *inputs: TextureInput):
+        self.inputs = inputs
+        self.channels = 3
+        self.name = " × ".join(getattr(i.texture, "name", "texture") for i in inputs)
+
+    def texels_per_triangle(self, attributes, prim: np.ndarray) -> np.ndarray:
+        return np.maximum.reduce([i.texture.texels_per_triangle(attributes, prim) for i in self.inputs])
+
+    def __repr__(self):
+        return f"_ProductTexture({', '.join(repr(i.texture) for i in self.inputs)})"
+
+
+class _ProductSource:
+    """The ``source`` of a :class:`ProductEmission`: its texture (``_ProductTexture``) and where it may emit."""
+
+    def __init__(self, colour: TextureInput, strength: TextureInput):
+        self.colour, self.strength = colour, strength
+        self.texture = _ProductTexture(colour, strength)
+
+    def may_be_positive(self, attributes, prim: np.ndarray) -> np.ndarray:
+        """(T,) bool, conservative: the product is ≤ 0 wherever either factor is."""
+        return self.colour.may_be_positive(attributes, prim) & self.strength.may_be_positive(attributes, prim)
+
+    def __repr__(self):
+        return f"{self.colour!r} × {self.strength!r}"
+
+
+class ProductEmission(TexturedSpectrum):
+    """An emitter's radiance whose colour and strength both vary over the surface (Blender: a texture into Emission
+    Color and another, or the same, into Emission Strength): per point exactly a constant
+    ``RGBIlluminantSpectrum(colour, strength)`` of the colour texel and the strength texel there (negative colours
+    and strengths emit nothing).  An emitter samples it for next-event estimation by the luminance of that product
+    (``luminance_at``: engine.render.lights.textured)."""
+
+    def __init__(self, colour: TextureInput, strength: TextureInput):
+        self.colour, self.strength, self.kind, self.clip = colour, strength, "illuminant", None
+        self.source = _ProductSource(colour, strength)
+        c_lo, c_hi = (max(v, 0.0) for v in colour.bounds(rgb=True))
+        s_lo, s_hi = (max(v, 0.0) for v in strength.bounds(rgb=False))
+        self.lo, self.hi = c_lo * s_lo, c_hi * s_hi
+
+    def clamped_to(self, lo: float = -math.inf, hi: float = math.inf) -> ProductEmission:
+        return self
+
+    def scaled(self, weight: float) -> ProductEmission:
+        """The same emission × weight (a shader mix's)."""
+        src = self.strength
+        return ProductEmission(self.colour, TextureInput(src.texture, src.channel, src.scale * weight,
+                                                         src.offset * weight, src.power))
+
+    def __repr__(self):
+        return f"ProductEmission({self.colour!r}, {self.strength!r})"
+
+    def rgb_at(self, points) -> np.ndarray:
+        strength = np.maximum(self.strength.number(points), 0.0)
+        return np.maximum(self.colour.rgb(points), 0.0) * strength[None, :]

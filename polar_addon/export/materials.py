@@ -840,39 +840,39 @@ def _coat_ior(r):
     return min(max(r.float("Coat IOR"), 1.0), 100.0)
 
 
-def _tinted_or_anisotropic(node) -> bool:
-    """A Principled BSDF whose Specular Tint is linked or not white, or which is anisotropic: its dielectric's index
-    cannot vary per point (engine.materials.principled)."""
-    tint = node.inputs["Specular Tint"]
-    return tint.is_linked or [float(c) for c in tint.default_value[:3]] != [1.0, 1.0, 1.0] or _anisotropic(node)
+def _filmed_anisotropy(node) -> bool:
+    """A Principled BSDF that is anisotropic under a Thin Film: its dielectric's index cannot vary per point
+    (engine.materials.principled)."""
+    film = node.inputs.get("Thin Film Thickness")
+    return _anisotropic(node) and film is not None and (film.is_linked or float(film.default_value) > 0.0)
 
 
 def _principled_ior(r, node, transmission):
-    """The Principled IOR: a TextureInput where linked on an opaque material without Specular Tint, anisotropy or
-    a linked Specular IOR Level (the dielectric's index per point), else as Cycles reads the constant (linked:
-    its own value, one warning)."""
+    """The Principled IOR: a TextureInput where linked on an opaque material without a linked Specular IOR Level
+    (the dielectric's index per point, with or without a Specular Tint or an anisotropy), else as Cycles reads the
+    constant (linked: its own value, one warning)."""
     if r._socket("IOR").is_linked:
-        plain = not (_tinted_or_anisotropic(node) or node.inputs["Specular IOR Level"].is_linked)
+        plain = not (node.inputs["Specular IOR Level"].is_linked or _filmed_anisotropy(node))
         if plain and not isinstance(transmission, TextureInput) and transmission == 0.0:
             source = r.texture("IOR", lo=IOR_MIN, hi=1e6)
             if source is not None:
                 return source
         else:
             r.warnings.append(f"material {r.mat!r}: IOR of {node.name!r} cannot vary over the surface with a "
-                              "transmission, a Specular Tint, an anisotropy or a linked Specular IOR Level yet; its "
-                              "own value is used")
+                              "transmission, a linked Specular IOR Level or a filmed anisotropy yet; its own value is "
+                              "used")
         return max(r._checked_float("IOR", -math.inf, math.inf), IOR_MIN)
     return _ior(r, "IOR")
 
 
 def _specular_level(r, node):
-    """Specular IOR Level: a TextureInput in [0, 1] where linked (glTF's KHR_materials_specular map), else the
-    constant; with a non-white Specular Tint or an anisotropy its own value (per point there: not yet, one
-    warning)."""
+    """Specular IOR Level: a TextureInput in [0, 1] where linked (glTF's KHR_materials_specular map; with a Specular
+    Tint or an anisotropy too; not yet on an anisotropic layer under a Thin Film: its own value, one warning), else
+    the constant."""
     if r._socket("Specular IOR Level").is_linked:
-        if _tinted_or_anisotropic(node):
+        if _filmed_anisotropy(node):
             r.warnings.append(f"material {r.mat!r}: Specular IOR Level of {node.name!r} cannot vary over the surface "
-                              "with a Specular Tint or an anisotropy yet; its own value is used")
+                              "on an anisotropic layer under a Thin Film yet; its own value is used")
             return r._checked_float("Specular IOR Level", 0.0, 1.0)
         return r.number_or_texture("Specular IOR Level")
     return r.float("Specular IOR Level", 0.0, 1.0)
@@ -947,17 +947,13 @@ def _principled(node, mat, warnings, bake=None):
               "diffuse_roughness": (r.number_or_texture("Diffuse Roughness")
                                     if node.inputs.get("Diffuse Roughness") is not None else 0.0),
               "distribution": "ggx" if getattr(node, "distribution", "MULTI_GGX") == "GGX" else "multi_ggx"}
-    if isinstance(roughness, TextureInput) and transmission != 0.0:
-        warnings.append(f"material {mat!r}: the Roughness texture of {node.name!r} does not reach its transmission "
-                        "(a constant roughness there: the socket's own value)")
-        values["transmission_roughness"] = min(max(float(node.inputs["Roughness"].default_value), 0.0), 1.0)
     film = _film(r)
     if film is not None:
         values["thin_film_ior"], values["thin_film_thickness"] = film
     if isinstance(values["anisotropic"], TextureInput) or values["anisotropic"] > 0.0:
-        _tangent_note(node, mat, warnings, isinstance(roughness, TextureInput))
+        _tangent_note(node, mat, warnings, False)          # α_x, α_y per point with a Roughness texture
     _unsimulated_principled_inputs(node, mat, warnings)
-    gaps = film_gaps(metallic, transmission, roughness, values.get("transmission_roughness")) if film else []
+    gaps = film_gaps(metallic, transmission, roughness) if film else []
     if gaps:
         warnings.append(f"material {mat!r}: the Thin Film of {node.name!r} is not simulated on its "
                         f"{' and '.join(gaps)} (there: no film)")
@@ -1100,17 +1096,18 @@ def _glass(ior, roughness, distribution, film=None, warn=None):
 
 
 def _emission(node, mat, warnings, colour_name="Color", strength_name="Strength", bake=None):
-    """The emitted spectrum of an Emission shader or a Principled BSDF: Color × Strength, the colour
-    constant or varying over the surface (an image, a colour attribute, a baked graph: Cycles'
-    Emission Color from a texture); None where nothing is emitted.  Cycles clamps neither; a negative
+    """The emitted spectrum of an Emission shader or a Principled BSDF: Color × Strength, each constant or
+    varying over the surface (an image, a colour attribute, a baked graph: Cycles' Emission Color from a
+    texture; both per point: their product per point); None where nothing is emitted.  Cycles clamps neither; a negative
     strength or colour emits nothing, as a zero one."""
-    from ...engine.textures.inputs import ColouredEmission, textured_emission
+    from ...engine.textures.inputs import ColouredEmission, ProductEmission, textured_emission
     r = _Reader(mat, node, warnings, bake)
     colour = r.rgb_or_texture(colour_name, -math.inf)
-    if r._socket(strength_name).is_linked and not isinstance(colour, TextureInput):
+    if r._socket(strength_name).is_linked:
         source = r.texture(strength_name)          # a strength per point (not mapped: its own value, warned)
-        if source is not None:
-            emission = ColouredEmission(source, colour)
+        if source is not None:                     # × the colour, constant or per point
+            emission = ProductEmission(colour, source) if isinstance(colour, TextureInput) else \
+                ColouredEmission(source, colour)
             return emission if emission.hi > 0 else None
         strength = r._checked_float(strength_name, -math.inf, math.inf)
     else:
@@ -1137,7 +1134,7 @@ def _weighted_emission(parts, mat, node, warnings):
             warnings.append(f"material {mat!r}: {node.name!r} mixes a textured emission with other emission; only "
                             "the textured one is rendered")
         w, e = textured[0]
-        if hasattr(e, "scaled"):            # a strength per point (engine.textures.inputs.ColouredEmission)
+        if hasattr(e, "scaled"):            # a strength per point (inputs.ColouredEmission, ProductEmission)
             return e.scaled(w)
         src = e.source
         scaled = TextureInput(src.texture, src.channel, src.scale * w, src.offset * w, src.power)

@@ -207,14 +207,14 @@ def test_anisotropic_ggx_matches_cycles(addon, part, lighting):
 
 def test_anisotropy_without_a_tangent_node_says_which_tangent_it_takes(addon):
     """Tangent unlinked: Cycles' radial tangent about the object's Z becomes the UV map's (one warning naming
-    both); a textured Roughness keeps the anisotropic lobe isotropic (one warning)."""
+    both); a textured Roughness keeps the lobe anisotropic (that one warning only)."""
     scene = sphere_scene("Base Color", ((0.9, 0.6, 0.3), (0.8, 0.8, 0.8)),
                          {"Roughness": 0.4, "Metallic": 1.0, "Anisotropic": 0.8}, "lamps")
     _, _, warnings = ap.export_polar(scene, 1, 8)
     assert len(warnings) == 1 and "radial tangent about the object's Z" in warnings[0] and "UV map" in warnings[0]
     scene = sphere_scene("Roughness", (0.2, 0.6), {"Metallic": 1.0, "Anisotropic": 0.8}, "lamps")
     _, _, warnings = ap.export_polar(scene, 1, 8)
-    assert any("needs a constant Roughness; rendered isotropic" in w for w in warnings)
+    assert len(warnings) == 1 and "radial tangent about the object's Z" in warnings[0]
 
 
 def test_sheen_bsdf_node_exports_the_sheen_model_and_names_ashikhmin(addon):
@@ -342,11 +342,29 @@ def test_thin_film_inputs_per_point_match_cycles(addon, socket, part, lighting):
     compare_with_cycles(scene, f"{socket} on {part}", lighting, spectral="SPECTRAL")
 
 
-def test_a_per_point_specular_level_with_a_tint_says_it_takes_its_own_value(addon):
-    scene = sphere_scene("Specular IOR Level", (0.1, 1.0), {"Specular Tint": (1.0, 0.5, 0.2), "Roughness": 0.3},
-                         "lamps")
-    _, _, warnings = ap.export_polar(scene, 1, 8)
-    assert len(warnings) == 1 and "Specular IOR Level" in warnings[0] and "own value" in warnings[0]
+#: the dielectric's index per point beside a Specular Tint or an anisotropy (a Tangent node's UV tangent)
+INDEX_BESIDE = {
+    "level, tint": ("Specular IOR Level", (0.1, 1.0), {"Specular Tint": (1.0, 0.5, 0.2), "Roughness": 0.3,
+                                                       "Base Color": (0.1, 0.1, 0.1)}),
+    "ior, tint": ("IOR", (1.2, 2.4), {"Specular Tint": (0.3, 0.6, 1.0), "Roughness": 0.25,
+                                      "Base Color": (0.3, 0.1, 0.05)}),
+    "ior, anisotropy": ("IOR", (1.2, 2.4), {"Anisotropic": 0.6, "Roughness": 0.35, "Base Color": (0.05, 0.05, 0.05)}),
+    "level, anisotropy": ("Specular IOR Level", (0.1, 1.0), {"Anisotropic": 0.8, "Roughness": 0.3,
+                                                             "Base Color": (0.3, 0.3, 0.6)}),
+}
+
+
+@pytest.mark.parametrize("lighting", ap.LIGHTINGS)
+@pytest.mark.parametrize("case", list(INDEX_BESIDE))
+def test_per_point_index_beside_a_tint_or_an_anisotropy_matches_cycles(addon, case, lighting):
+    socket, values, others = INDEX_BESIDE[case]
+    scene = sphere_scene(socket, values, others, lighting)
+    if "Anisotropic" in others:
+        tree = bpy.data.materials["P"].node_tree
+        tangent = tree.nodes.new("ShaderNodeTangent")
+        tangent.direction_type = "UV_MAP"
+        tree.links.new(tangent.outputs["Tangent"], tree.nodes["Principled BSDF"].inputs["Tangent"])
+    compare_with_cycles(scene, f"Principled {case} per point", lighting)
 
 
 @pytest.mark.parametrize("lighting", ap.LIGHTINGS)
@@ -358,12 +376,15 @@ def test_diffuse_bsdf_roughness_per_point_matches_cycles(addon, lighting):
 
 
 #: Anisotropic and Anisotropic Rotation per point (glTF's KHR_materials_anisotropy map through the importer's
-#: nodes): a checker on the input, along a Tangent node's UV tangent
+#: nodes), and the Roughness per point under a constant Anisotropic: a checker on the input, along a Tangent node's
+#: UV tangent
 ANISOTROPY_INPUTS = {
     "Anisotropic": ((0.1, 0.9), {"Roughness": 0.4, "Metallic": 1.0, "Base Color": (0.9, 0.7, 0.5)}),
     "Anisotropic Rotation": ((0.0, 0.25), {"Roughness": 0.4, "Metallic": 1.0, "Anisotropic": 0.8,
                                            "Base Color": (0.9, 0.7, 0.5)}),
     "Anisotropic ": ((0.0, 1.0), {"Roughness": 0.35, "Base Color": (0.6, 0.2, 0.1)}),          # the dielectric
+    "Roughness": ((0.2, 0.6), {"Metallic": 1.0, "Anisotropic": 0.6, "Base Color": (0.9, 0.7, 0.5)}),  # α_x, α_y of r²
+    "Roughness ": ((0.15, 0.5), {"Anisotropic": 0.6, "Base Color": (0.6, 0.2, 0.1)}),          # the dielectric's
 }
 
 
@@ -391,3 +412,55 @@ def test_emission_shader_strength_per_point_matches_cycles(addon, lighting):
     scene = node_scene("ShaderNodeEmission", "Strength", ((0.5, 0.5, 0.5), (3.0, 3.0, 3.0)),
                        {"Color": (0.2, 0.6, 1.0)}, lighting)
     compare_with_cycles(scene, "Emission shader Strength", lighting)
+
+
+@pytest.mark.parametrize("lighting", ap.LIGHTINGS)
+def test_roughness_per_point_on_a_glass_matches_cycles(addon, lighting):
+    """A Roughness checker on a transmitting Principled BSDF: the rough glass's α = r² per point, as the reflection
+    lobes' (no warning)."""
+    scene = sphere_scene("Roughness", (0.1, 0.4), {"Transmission Weight": 1.0, "Base Color": (0.9, 0.9, 0.9)},
+                         lighting)
+    compare_with_cycles(scene, "Principled Roughness on a glass", lighting)
+
+
+def _colour_texture(tree, name, socket):
+    """A 2 × 2 colour image (four colours, Closest) into ``socket``: a colour that varies beside the checker."""
+    img = bpy.data.images.new(name, 2, 2, alpha=False, float_buffer=True)
+    img.pixels = [2.0, 0.5, 0.1, 1.0, 0.2, 0.6, 1.5, 1.0, 1.0, 1.0, 1.0, 1.0, 0.1, 1.2, 0.3, 1.0]
+    img.pack()
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    tex.image = img
+    tex.interpolation = "Closest"
+    tree.links.new(tex.outputs["Color"], socket)
+
+
+def _lit_floor():
+    """A white diffuse floor under the sphere, lit by it (the emitter's next-event estimation is exercised)."""
+    bpy.ops.mesh.primitive_plane_add(size=8.0, location=(0.0, 0.0, -1.0))
+    mat = bpy.data.materials.new("Floor")
+    load_addon().polar_addon.compat.ensure_node_tree(mat)
+    p = mat.node_tree.nodes["Principled BSDF"]
+    p.inputs["Base Color"].default_value = (0.8, 0.8, 0.8, 1.0)
+    p.inputs["Roughness"].default_value = 1.0
+    bpy.context.object.data.materials.append(mat)
+
+
+@pytest.mark.parametrize("lighting", ap.LIGHTINGS)
+def test_emission_strength_per_point_beside_a_textured_colour_matches_cycles(addon, lighting):
+    """A Strength checker beside a textured Emission Color: colour × strength per point, what the emitter is seen
+    as and what its next-event estimation samples by (the floor it lights); no warning."""
+    scene = sphere_scene("Emission Strength", (0.5, 3.0), {"Base Color": (0.2, 0.2, 0.2)}, lighting)
+    tree = bpy.data.materials["P"].node_tree
+    _colour_texture(tree, "colours", tree.nodes["Principled BSDF"].inputs["Emission Color"])
+    _lit_floor()
+    compare_with_cycles(scene, "Principled Emission Strength × Color", lighting)
+
+
+@pytest.mark.parametrize("lighting", ap.LIGHTINGS)
+def test_emission_shader_strength_beside_a_textured_colour_matches_cycles(addon, lighting):
+    """The Emission shader's Strength checker beside a textured Color, over a floor it lights."""
+    scene = node_scene("ShaderNodeEmission", "Strength", ((0.5, 0.5, 0.5), (3.0, 3.0, 3.0)), {}, lighting)
+    tree = bpy.data.materials["P"].node_tree
+    _colour_texture(tree, "colours", tree.nodes["Emission"].inputs["Color"])
+    _lit_floor()
+    compare_with_cycles(scene, "Emission shader Strength × Color", lighting)
