@@ -127,7 +127,7 @@ SETTING_OPTIONS = ("spp", "seed", "max_depth", "spectral", "polarisation", "wave
 
 
 def _settings_from_options(scene, args):
-    """The scene's RenderSettings with the options given applied (and set on ``scene``), validated by the
+    """The scene's RenderSettings with the options given applied (a new object), validated by the
     scene loader's own rules (engine.scene.loader.parse_settings: ``--spp`` in [1, 2²⁴], ``--seed`` in
     [0, 2⁶³ − 1], …) — the same for every command; an error names the option (``--spp``)."""
     from .scene.loader import parse_settings
@@ -145,20 +145,27 @@ def _settings_from_options(scene, args):
         if key not in overrides:
             raise
         raise SceneError("--" + key.replace("_", "-"), e.reason) from None
-    scene.settings = st
     return st
 
 
 def _render(args) -> int:
+    import dataclasses
+
     from .output.destination import check_destination, remove_stale_temporaries
-    from .render.renderer import Renderer
+    from .render.renderer import Renderer, RenderRequest
     from .render.resume import resume_state, scene_fingerprint
 
     _finite("--exposure", args.exposure, -EXPOSURE_LIMIT_STOPS, EXPOSURE_LIMIT_STOPS)
     if args.resume and args.scheduler:
         raise SceneError("--scheduler", "cannot be combined with --resume yet")
+    if getattr(args, "denoise_data", False):
+        for option, used in (("--resume", args.resume), ("--scheduler", args.scheduler)):
+            if used:
+                raise SceneError("--denoise-data", f"cannot be combined with {option} yet")
     scene = _load_scene(args.scene)
     st = _settings_from_options(scene, args)
+    if getattr(args, "denoise_data", False):
+        st = dataclasses.replace(st, denoise_data=True)
     adaptive = _adaptive_settings(args, st.spp)
     out = args.output
     if not out.lower().endswith(".exr"):
@@ -173,23 +180,13 @@ def _render(args) -> int:
     scene_hash = scene_fingerprint(scene)      # before compiling: nothing has filled a cache yet
 
     renderer = Renderer(scene)
-    resume_film = resume_halves = None
+    resumed = None
     if args.resume:
-        resume_film, st, resume_halves = resume_state(args.resume, scene, renderer.compiled, st, scene_hash,
-                                                      spp=args.spp, seed=args.seed, with_halves=True,
-                                                      sampler=args.sampler) \
-            if adaptive is not None else (*resume_state(args.resume, scene, renderer.compiled, st, scene_hash,
-                                                        spp=args.spp, seed=args.seed, sampler=args.sampler), None)
-        scene.settings = st
+        resumed = resume_state(args.resume, renderer, st, scene_hash, spp=args.spp, seed=args.seed,
+                               sampler=args.sampler, adaptive=adaptive is not None)
+        st = resumed.settings
         if adaptive is not None:
             adaptive = _adaptive_settings(args, st.spp)      # --spp may come from the file
-    if getattr(args, "denoise_data", False):
-        for option, used in (("--resume", args.resume), ("--scheduler", args.scheduler)):
-            if used:
-                raise SceneError("--denoise-data", f"cannot be combined with {option} yet")
-        import dataclasses
-        st = dataclasses.replace(st, denoise_data=True)
-        scene.settings = st
     cam = scene.camera
     print(f"polar: {os.path.basename(args.scene)}: {cam.width}×{cam.height}, {st.spp} spp, "
           f"{len(renderer.compiled.faces)} triangles, {len(renderer.lights)} lights, "
@@ -197,46 +194,50 @@ def _render(args) -> int:
           f"{'' if st.spectral == 'spectral' else f' at {st.wavelength_nm:g} nm'}", file=sys.stderr)
     with StopSignals() as signals:
         bar = None if args.quiet else ProgressBar("rendering")
+        prediction = _Prediction(st, adaptive)
+        request = RenderRequest(st, adaptive=adaptive, resume=resumed.film if resumed else None,
+                                resume_halves=resumed.halves if resumed and adaptive else None,
+                                scheduler=args.scheduler, progress=bar, should_stop=lambda: signals.requested,
+                                on_first_pass=prediction if adaptive else None,
+                                unit_times=prediction.unit_times if adaptive else None)
         try:
-            if args.scheduler:
-                from .render.distributed import render_distributed
-                try:
-                    result = render_distributed(scene, args.scheduler, st, progress=bar,
-                                                should_stop=lambda: signals.requested, adaptive=adaptive)
-                except OSError as e:
-                    raise SceneError("--scheduler",
-                                     f"cannot reach the Dask scheduler at {args.scheduler}: {e}") from None
-                except RuntimeError as e:
-                    raise SceneError("--scheduler", str(e)) from None
-            elif adaptive is not None:
-                result = _render_adaptive(renderer, st, adaptive, bar, signals, resume_film, resume_halves)
-            else:
-                result = renderer.render(st, progress=bar, should_stop=lambda: signals.requested,
-                                         resume=resume_film)
+            result = _render_request(renderer, request)
         finally:
             if bar is not None:
                 bar.close()
+        result.stats.update(prediction.first)
         # Still inside: a signal while the files are written must not lose them.
         status = _write_render(args, out, result, st, scene_hash, adaptive)
     return status if status else signals.exit_status(130 if result.cancelled else 0)
 
 
-def _render_adaptive(renderer, st, adaptive, bar, signals, resume_film, resume_halves):
-    """An adaptive render; records in its stats the prediction made after the first pass."""
-    from .render.estimate import cost_map, predict, tile_cost_per_sample
-    first, unit_times = {}, []
+def _render_request(renderer, request):
+    """``renderer.render(request)``; a Dask scheduler that cannot be reached or used is a SceneError
+    naming --scheduler."""
+    if request.scheduler is None:
+        return renderer.render(request)
+    try:
+        return renderer.render(request)
+    except OSError as e:
+        raise SceneError("--scheduler", f"cannot reach the Dask scheduler at {request.scheduler}: {e}") from None
+    except RuntimeError as e:
+        raise SceneError("--scheduler", str(e)) from None
 
-    def on_first_pass(film, halves, seconds, samples):
-        if samples > 0 and adaptive.threshold > 0 and unit_times:
-            costs = cost_map(unit_times, film.count.size, seconds, tile_cost_per_sample(film, halves))
-            first["prediction"] = predict(film, halves, adaptive.quantity, adaptive.threshold, adaptive.min_spp,
-                                          st.spp, costs)
 
-    result = renderer.render(st, progress=bar, should_stop=lambda: signals.requested, resume=resume_film,
-                             adaptive=adaptive, adaptive_resume=resume_halves, on_first_pass=on_first_pass,
-                             unit_times=unit_times)
-    result.stats.update(first)
-    return result
+class _Prediction:
+    """An adaptive render's ``on_first_pass``: records in ``first`` the prediction made after the first
+    pass (from the pass's ``unit_times``)."""
+
+    def __init__(self, settings, adaptive):
+        self.settings, self.adaptive, self.first, self.unit_times = settings, adaptive, {}, []
+
+    def __call__(self, film, halves, seconds, samples):
+        from .render.estimate import cost_map, predict, tile_cost_per_sample
+        ad = self.adaptive
+        if samples > 0 and ad.threshold > 0 and self.unit_times:
+            costs = cost_map(self.unit_times, film.count.size, seconds, tile_cost_per_sample(film, halves))
+            self.first["prediction"] = predict(film, halves, ad.quantity, ad.threshold, ad.min_spp,
+                                               self.settings.spp, costs)
 
 
 def _adaptive_report(result, adaptive) -> tuple[dict, dict]:
@@ -290,10 +291,7 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
     if result.cancelled:
         print(f"polar: {'stopped' if error else 'interrupted'} — writing the {stats['samples']} finished samples",
               file=sys.stderr)
-    print(f"polar: transport: {stats['transport_reason']}; spectral: {stats['spectral']}; "
-          f"kernels: {stats.get('kernels', '?')}", file=sys.stderr)
-    for why in stats.get("simplified", []):
-        print(f"polar: simplified: {why}", file=sys.stderr)
+    print(f"polar: {result.stats_line()}", file=sys.stderr)
     film = result.film
     if result.cancelled and not film.count.any():
         if error:
@@ -363,11 +361,6 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
             written += write_previews(os.path.splitext(out)[0], stokes, exposure=args.exposure)
         except Exception as e:          # noqa: BLE001 — the EXR is written; previews are a convenience
             print(f"warning: previews not written: {_reason(e)}", file=sys.stderr)
-    msamples = stats["samples"] / max(stats["seconds"], 1e-9) / 1e6
-    print(f"polar: {stats['samples']} samples in {stats['seconds']:.2f} s ({msamples:.3f} Msamples/s), "
-          f"{stats['rays']} rays + {stats['shadow_rays']} shadow rays"
-          f"{'; dropped non-finite samples: ' + str(stats['nonfinite']) if stats['nonfinite'] else ''}",
-          file=sys.stderr)
     for path in written:
         print(path)
     if error:

@@ -112,7 +112,7 @@ def main(argv=None):
     if args.scheduler:
         from importlib import import_module
         pkg = "bl_ext.user_default.polar_render" if args.installed else "polar_render"
-        import_module(pkg + ".polar_addon.render_engine").distributed_scheduler["address"] = args.scheduler
+        import_module(pkg + ".polar_addon.render_engine").CONTROL.scheduler = args.scheduler
     import bpy
     bpy.ops.wm.open_mainfile(filepath=os.path.abspath(args.blend))
     scene = bpy.context.scene

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..engine.polarisation.stokes import (angle_of_linear_polarisation, degree_of_circular_polarisation,
                                           degree_of_linear_polarisation, degree_of_polarisation)
-from ..engine.render.renderer import Renderer
+from ..engine.render.renderer import Renderer, RenderRequest, msamples_per_second
 from ..engine.scene.description import RenderSettings
 from ..engine.errors import SceneError
 from .export.camera import border_window
@@ -41,10 +41,20 @@ LIVE_DISPLAY_SHARE = 0.02
 #: Passes refreshed by live display updates (cheap copies); the derived and false-colour passes
 #: (DoP, AoLP, Polariser, Vis…) are computed once, from the finished image.
 LIVE_PASSES = ("S0", "S1", "S2", "S3")
-#: Extra cancel hook for scripted use and tests (test_break() is always False headless).
-cancel_requested = {"value": False}
-#: Dask scheduler address for distributed final renders (set by examples/batch_render.py --scheduler).
-distributed_scheduler = {"address": None}
+
+
+class RenderControl:
+    """What scripts, tests and farms ask of final renders besides Blender's UI: ``cancel`` stops them as
+    Esc does (test_break() is always False headless); ``scheduler``: a Dask scheduler address to trace
+    them on (examples/batch_render.py --scheduler; None: this machine)."""
+
+    def __init__(self):
+        self.cancel = False
+        self.scheduler = None
+
+
+#: The final renders' control (PolarRenderEngine.control).
+CONTROL = RenderControl()
 
 
 #: Render properties ▸ Spectral → the engine's RenderSettings.spectral
@@ -151,7 +161,7 @@ def pass_images(stokes_rgb, polariser=None, wanted=None, alpha=None, mosaic=None
 
 def _live_alpha(renderer):
     """Alpha of the render in progress (None while every sample is opaque)."""
-    film = getattr(renderer, "_live_film", None)
+    film = renderer.live_film
     return film.alpha() if film is not None and film.has_alpha else None
 
 
@@ -162,6 +172,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
     bl_use_postprocess = True
     bl_use_shading_nodes_custom = False
     bl_use_eevee_viewport = True
+    #: requests from outside the UI (cancel, a Dask scheduler)
+    control = CONTROL
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -227,8 +239,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
 
         def progress(fraction, stats):
             self.update_progress(fraction)
-            rate = stats["samples"] / max(stats.get("seconds", 1e-9), 1e-9) / 1e6
-            self.update_stats("", f"Polar | {stats['transport']} | {100 * fraction:.0f}% | {rate:.2f} Msamples/s")
+            self.update_stats("", f"Polar | {stats['transport']} | {100 * fraction:.0f}% | "
+                                  f"{msamples_per_second(stats):.2f} Msamples/s")
             now = time.perf_counter()
             if now - live["last"] > live["interval"]:
                 self._live_display(result, renderer, window, enabled)
@@ -236,21 +248,17 @@ class PolarRenderEngine(bpy.types.RenderEngine):
                 live["interval"] = max(DISPLAY_INTERVAL, (live["last"] - now) / LIVE_DISPLAY_SHARE)
 
         def should_stop():
-            return self.test_break() or cancel_requested["value"]
+            return self.test_break() or self.control.cancel
 
         adaptive = adaptive_settings(scene, self.is_preview)
-        if distributed_scheduler["address"] and not self.is_preview:
-            from ..engine.render.distributed import render_distributed
-            if getattr(settings, "denoise_data", False):   # not collected from Dask workers yet
-                import dataclasses
-                settings = dataclasses.replace(settings, denoise_data=False)
-                self.report({"WARNING"}, "Polar: the Denoising Albedo / Normal passes are not rendered on a "
-                                         "Dask cluster yet: they stay empty")
-            out = render_distributed(engine_scene, distributed_scheduler["address"], settings, progress=progress,
-                                     should_stop=should_stop, window=window)
-        else:
-            out = renderer.render(settings, progress=progress, should_stop=should_stop, window=window,
-                                  adaptive=adaptive)
+        scheduler = None if self.is_preview else self.control.scheduler
+        if scheduler and settings.denoise_data:     # not collected from Dask workers yet
+            import dataclasses
+            settings = dataclasses.replace(settings, denoise_data=False)
+            self.report({"WARNING"}, "Polar: the Denoising Albedo / Normal passes are not rendered on a "
+                                     "Dask cluster yet: they stay empty")
+        out = renderer.render(RenderRequest(settings, window, adaptive, scheduler=scheduler, progress=progress,
+                                            should_stop=should_stop))
         self._write_passes(result, out.stokes(), window, enabled, polariser,
                            out.film.alpha() if out.film.has_alpha else None)
         if out.halves is not None and "Noise" in enabled:
@@ -258,25 +266,26 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         if getattr(out.film, "has_denoise_data", False):
             self._write_denoise_data(result, out.film, window, enabled)
         self.end_result(result)
+        message = self._stats_message(out, adaptive, time.perf_counter() - t0, bake_note)
+        self.update_stats("", message)
+        self.report({"INFO"}, message)
+
+    @staticmethod
+    def _stats_message(out, adaptive, wall_seconds: float, bake_note: str) -> str:
+        """The final render's stats line (engine.render.renderer.stats_line) with Blender's notes."""
         stats = out.stats
-        message = (f"Polar | {stats['transport_reason']} | {stats['samples']} samples in {stats['seconds']:.1f} s"
-                   f" (export + BVH {time.perf_counter() - t0 - stats['seconds']:.1f} s)")
+        message = f"Polar | {out.stats_line(' | ')} | export + BVH {wall_seconds - stats['seconds']:.1f} s"
         if bake_note:
             message += f" | {bake_note}"
         if stats.get("kernels") == "numpy":
             message += " | NumPy kernels (numba not loaded: slower)"
-        if stats.get("simplified"):
-            message += f" | skipped {len(stats['simplified'])} clear layer(s): " + "; ".join(stats["simplified"])
         if out.cancelled:
             message += " | cancelled: partial image"
         if stats.get("error"):          # a Dask cluster that failed mid-render: the finished part is shown
             message += f" | {stats['error']}"
-        if stats["nonfinite"]:
-            message += f" | dropped {stats['nonfinite']} non-finite samples"
         if out.halves is not None:
             message += adaptive_summary(out, adaptive)
-        self.update_stats("", message)
-        self.report({"INFO"}, message)
+        return message
 
     def _write_noise(self, result, out, adaptive, window):
         """The Noise pass: per-pixel standard error of the adaptive quantity (−1: no estimate)."""

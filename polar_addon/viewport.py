@@ -22,7 +22,6 @@ Three parts, only the last touches Blender's drawing API:
 from __future__ import annotations
 
 import contextlib
-import copy
 import dataclasses
 import math
 import threading
@@ -327,14 +326,12 @@ class ViewportSession:
                         renderer.scene = scene                       # new materials, same geometry
                         view = None
                 if camera is not view:
-                    from ..engine.render.camera import CameraModel
-                    renderer.scene = dataclasses.replace(renderer.scene, camera=camera)
-                    renderer.camera = CameraModel(camera)
+                    renderer.set_camera(camera)
                     view = camera
-                st = copy.copy(settings)
-                st.spp = 1
-                st.seed = settings.seed + n
-                out = renderer.render(st, should_stop=lambda g=generation: self._stop or self._generation != g)
+                from ..engine.render.renderer import RenderRequest
+                out = renderer.render(RenderRequest(dataclasses.replace(settings, spp=1, seed=settings.seed + n),
+                                                    should_stop=lambda g=generation: self._stop
+                                                    or self._generation != g))
             except Exception as e:  # noqa: BLE001 — shown in the viewport header instead
                 with self._cond:
                     if self._generation == generation:

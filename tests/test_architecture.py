@@ -353,3 +353,107 @@ def test_no_function_above_cyclomatic_grade_d_but_the_listed_ones():
     found = _functions_above_grade_d()
     assert not found - ABOVE_GRADE_D, f"above grade D (split them): {sorted(found - ABOVE_GRADE_D)}"
     assert not ABOVE_GRADE_D - found, f"now at D or below (remove from ABOVE_GRADE_D): {sorted(ABOVE_GRADE_D - found)}"
+
+
+# ------------------------------------------------------------------------------------ one render entry point
+
+#: Modules of the render driver: the front ends (engine/cli.py, polar_addon/) never import them; they render
+#: through the entry point, engine.render.renderer (``Renderer``, ``RenderRequest``, the stats line).
+DRIVER_MODULES = {"engine.render.driver", "engine.render.distributed", "engine.render.plan",
+                  "engine.render.integrator", "engine.render.path_state", "engine.render.film", "engine.render.accel",
+                  "engine.render.camera", "engine.render.sampler", "engine.render.worker_package"}
+#: Driver internals, wherever they live: the front ends never call them.
+DRIVER_INTERNALS = {"trace_in_order", "drive", "LocalThreads", "DaskCluster", "UniformPasses", "AdaptiveRounds",
+                    "BandJob", "PathJob", "render_adaptive", "render_distributed", "_render_adaptive_on",
+                    "add_in_sample_order", "adaptive_units", "round_unit_paths", "unit_paths", "work_units",
+                    "unit_pixels", "trace_on_worker", "RenderPlan", "PathTracer", "SampleSums", "OrderedSamples"}
+
+
+def render_imports(name: str, path: str):
+    """(module, imported name) of every ``from <engine.render.X> import name`` in module ``name`` (relative
+    imports resolved; a subpackage's ``engine`` as in the extension, ``polar_addon/..engine`` → ``engine``)."""
+    tree = ast.parse(open(path, encoding="utf-8").read(), filename=path)
+    package = name.split(".")[:-1]
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[:len(package) - (node.level - 1)]
+                target = ".".join(base + ([node.module] if node.module else []))
+            else:
+                target = node.module or ""
+            if target.startswith("engine.render"):
+                out += [(target, alias.name) for alias in node.names]
+        elif isinstance(node, ast.Import):
+            out += [(alias.name, "*") for alias in node.names if alias.name.startswith("engine.render")]
+    return out
+
+
+def test_front_ends_import_the_render_entry_point_and_no_driver_internals():
+    """engine/cli.py and the add-on render through ``Renderer.render(RenderRequest)`` only: no driver,
+    executor, schedule, tracer, film or work-unit code."""
+    modules = module_files()
+    front = {m: p for m, p in modules.items() if m == "engine.cli" or m.startswith("polar_addon")}
+    bad, entry = [], set()
+    for name, path in front.items():
+        for module, imported in render_imports(name, path):
+            if module in DRIVER_MODULES or f"{module}.{imported}" in DRIVER_MODULES or imported in DRIVER_INTERNALS:
+                bad.append(f"{name}: from {module} import {imported}")
+            if module == "engine.render.renderer" and imported == "RenderRequest":
+                entry.add(name)
+    assert not bad, "\n".join(sorted(bad))
+    assert {"engine.cli", "polar_addon.render_engine", "polar_addon.viewport"} <= entry, entry
+
+
+#: The film's accumulators: written by engine/render/film.py alone (Film.add, Film.merge, …).
+FILM_ACCUMULATORS = {"sums", "count", "sumsq_y", "alpha_sums", "half_y", "denoise_sums"}
+
+
+def _film_writes(tree):
+    """(line, target) of every assignment, augmented assignment or ``np.add.at`` into an attribute named as a
+    film accumulator (``x.sums = …``, ``x.count[i] += …``, ``np.add.at(x.sumsq_y[k], …)``)."""
+    def accumulator(node):
+        while isinstance(node, ast.Subscript):
+            node = node.value
+        return isinstance(node, ast.Attribute) and node.attr in FILM_ACCUMULATORS
+    for node in ast.walk(tree):
+        targets = []
+        if isinstance(node, ast.Assign):
+            targets = node.targets
+        elif isinstance(node, (ast.AugAssign, ast.AnnAssign)):
+            targets = [node.target]
+        elif isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "at" \
+                and node.args:
+            targets = [node.args[0]]
+        for t in targets:
+            for item in (t.elts if isinstance(t, ast.Tuple) else [t]):
+                if accumulator(item):
+                    yield node.lineno, ast.unparse(item)
+
+
+def test_film_sums_and_counts_are_written_only_by_the_film():
+    bad, film_writes = [], 0
+    for name, path in module_files().items():
+        writes = list(_film_writes(ast.parse(open(path, encoding="utf-8").read(), filename=path)))
+        if name == "engine.render.film":
+            film_writes = len(writes)
+        else:
+            bad += [f"{os.path.relpath(path, REPO)}:{line}: {target}" for line, target in writes]
+    assert not bad, "written outside engine/render/film.py:\n" + "\n".join(sorted(bad))
+    assert film_writes > 20            # the scan reads the film's own writes (it is not blind)
+
+
+def test_effects_and_transport_are_resolved_by_the_plan_alone():
+    """engine/render/effects.py's choices (simplified materials, transport) are made in one place, the
+    RenderPlan (engine/render/plan.py); the tracer, resume, Dask workers and front ends ask the plan."""
+    resolvers = {"effective_materials", "resolve_transport", "choose_transport"}
+    bad = []
+    for name, path in module_files().items():
+        if name in ("engine.render.effects", "engine.render.plan"):
+            continue
+        tree = ast.parse(open(path, encoding="utf-8").read(), filename=path)
+        for node in ast.walk(tree):
+            ids = [node.id] if isinstance(node, ast.Name) else [node.attr] if isinstance(node, ast.Attribute) \
+                else [a.name for a in node.names] if isinstance(node, ast.ImportFrom) else []
+            bad += [f"{name}:{node.lineno}: {i}" for i in ids if i in resolvers]
+    assert not bad, "\n".join(sorted(set(bad)))

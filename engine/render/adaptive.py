@@ -67,15 +67,14 @@ batch size or resumption.
 from __future__ import annotations
 
 import math
-import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import SceneError
 from ..spectral.cie import LUMINANCE_WEIGHTS
+from .film import Film, HalfBuffers, OrderedSamples
 
 #: Quantities the threshold can apply to.
 QUANTITIES = ("s0", "dolp", "aolp", "docp", "stokes")
@@ -383,62 +382,16 @@ def first_pass_allocation(halves: HalfBuffers, quantity: str, threshold: float, 
 
 # ------------------------------------------------------------------------------------ accumulation
 
-class HalfBuffers:
-    """Luminance Stokes sums of the even (A) and odd (B) sample passes per pixel: ``sums`` (2, 4, n),
-    and the cost of the pixel's samples: ``cost`` (n,) int64 (engine.render.integrator's per-path
-    count, :data:`~engine.render.integrator.PATH_COST`: the deterministic cost the allocation weighs by).
-
-    ``first``: (sums (2, 4, n), counts (n,), cost (n,)) as they were when every pixel of the window
-    had its ``min_spp`` samples (None before): the allocation level μ is computed from it, so that it
-    is the same after an interruption and for any threshold given on resumption."""
-
-    def __init__(self, n: int):
-        self.sums = np.zeros((2, 4, n))
-        self.cost = np.zeros(n, np.int64)
-        self.first = None
-
-    def keep_first(self, counts: np.ndarray) -> None:
-        self.first = (self.sums.copy(), np.asarray(counts, np.int64).copy(), self.cost.copy())
-
-    def means(self, counts: np.ndarray):
-        """(mean_A, mean_B), each (4, n); samples 0…c−1 give A ⌈c/2⌉ and B ⌊c/2⌋ of them."""
-        c = np.asarray(counts, np.int64)
-        return _ratio(self.sums[0], (c + 1) // 2), _ratio(self.sums[1], c // 2)
-
-
 def add_in_sample_order(film, halves: HalfBuffers, pixel: np.ndarray, sample: np.ndarray,
                         values: np.ndarray, alpha: np.ndarray | None = None,
                         path_cost: np.ndarray | None = None) -> None:
-    """Add samples in ascending sample index (each pixel at most once per sample index), so every
-    pixel's sums are built in ascending sample order whatever the batching.
-    ``alpha`` (per sample; None = 1) is the camera-ray coverage of a transparent film or holdout;
-    ``path_cost`` (per sample, integers; None: not counted) each sample's cost."""
-    if path_cost is not None:       # integer sums: exact in any order
-        np.add.at(halves.cost, pixel, np.asarray(path_cost, np.int64))
-    if alpha is not None and film.alpha_sums is None:
-        film.alpha_sums = film.count.astype(np.float64)   # every earlier sample had alpha 1
-    y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, values)
-    n = film.count.size
-    sums, vals = film.sums.reshape(12, n), values.reshape(12, -1)
-    # np.add.at adds element by element in index order: with the samples sorted by sample index,
-    # every pixel's sums are built in ascending sample order, the same additions as one sample pass
-    # at a time (30× faster than a Python loop over passes where a unit holds many passes of few pixels)
-    order = np.argsort(sample, kind="stable")
-    if np.any(order != np.arange(order.size)):
-        pixel, sample, vals, y = pixel[order], sample[order], vals[:, order], y[:, order]
-        alpha = None if alpha is None else np.asarray(alpha)[order]
-    for r in range(12):
-        np.add.at(sums[r], pixel, vals[r])
-    for k in range(4):
-        np.add.at(film.sumsq_y[k], pixel, y[k] * y[k])
-    for h in (0, 1):
-        m = sample % 2 == h
-        pix_h = pixel[m]
-        for k in range(4):
-            np.add.at(halves.sums[h, k], pix_h, y[k, m])
-    if film.alpha_sums is not None:
-        np.add.at(film.alpha_sums, pixel, 1.0 if alpha is None else alpha)
-    np.add.at(film.count, pixel, 1)
+    """Add samples (pixel, sample (N,), values (4, 3, N)) to ``film`` and ``halves`` in ascending sample
+    index (each pixel at most once per sample index), so every pixel's sums are built in ascending
+    sample order whatever the batching (engine.render.film.OrderedSamples).  ``alpha`` (N,) or None
+    (all 1): camera-ray coverage; ``path_cost`` (N,) integers or None (not counted)."""
+    part = OrderedSamples(pixel, sample, values, alpha, path_cost)
+    film.add(part)
+    halves.add(part)
 
 
 def film_noise(film, halves: HalfBuffers, quantity: str, pixels: np.ndarray | None = None):
@@ -538,125 +491,140 @@ def unit_paths(unit):
     return np.concatenate(pixel), np.concatenate(sample)
 
 
-# ------------------------------------------------------------------------------------ the render loop
+# ------------------------------------------------------------------------------------ the schedule
 
-def render_adaptive(tracer, film, halves: HalfBuffers, spp: int, batch_rays: int, adaptive: AdaptiveSettings,
-                    window, run_units: Callable, stats: dict, progress=None, should_stop=None,
-                    clock: Callable[[], float] = time.perf_counter, on_first_pass=None, workers: int = 1,
-                    unit_times: list | None = None) -> str:
-    """Sample ``film`` adaptively; returns the stop reason (one of :data:`STOP_REASONS`).
+class PathJob:
+    """Traces an adaptive unit (pixels, start, target, pass0, pass1) → (OrderedSamples, stats, the unit's
+    pixels, seconds of tracing on this machine), or None if aborted (engine.render.driver's job)."""
 
-    ``run_units(units, trace_unit, add_result, stop_requested, abort)`` traces units concurrently
-    and adds them in order (engine.render.renderer.trace_in_order); returns True if stopped.
-    ``clock`` gives seconds (injected by tests).  ``on_first_pass(film, halves, seconds, samples)``
-    is called once every pixel has ``min_spp`` samples (for the prediction check).  A round is
-    split into units by :func:`round_unit_paths` (late rounds hold few tiles: one unit, or a small
-    last one, would leave all but one worker idle); how units are cut never changes the result.
-    ``unit_times``: a list that receives (pixels, paths, seconds, cost) of every unit of the first pass,
-    cut into small pixel chunks for the purpose (where the samples cost more: engine.render.estimate).
-    """
-    W, H = film.width, film.height
-    x0, y0, x1, y1 = window or (0, 0, W, H)
-    ys, xs = np.mgrid[y0:y1, x0:x1]
-    pixels = (ys * W + xs).ravel().astype(np.int64)
-    tiles = tile_ids(W, H)
-    marks = checkpoints(adaptive.min_spp, spp)
-    spp_is_a_step = len(marks) == 1 or int(marks[-1]) == int(checkpoints(adaptive.min_spp, spp + 1)[len(marks) - 1])
-    t0 = clock()
-    time_up = (lambda: clock() - t0 >= adaptive.time_limit) if adaptive.time_limit > 0 else (lambda: False)
-    user_stop = (lambda: False) if should_stop is None else should_stop
-    reason = {"value": None}
-    budget = max(pixels.size * spp - int(film.count[pixels].sum()), 1)
-    done = {"samples": 0}
-    abort = threading.Event()
+    count_cost = True
 
-    def stop_requested():
-        if user_stop():
-            reason["value"] = "cancelled"
-            return True
-        if time_up():
-            reason["value"] = "time_limit"
-            return True
-        return False
+    def __init__(self, settings):
+        self.settings = settings
 
-    timing = {"on": False}
-
-    def trace_unit(unit):
+    def __call__(self, tracer, unit, abort=None):
         pixel, sample = unit_paths(unit)
         started = time.perf_counter()         # a measurement of this machine, not the time limit's clock
         traced = tracer.trace(pixel, sample, abort=abort)
-        if traced is not None and timing["on"]:
-            cost = traced[1].get("path_cost")
-            unit_times.append((unit[0], pixel.size, time.perf_counter() - started,
-                               None if cost is None else int(np.sum(cost))))
-        return None if traced is None else (pixel, sample, *traced)
+        if traced is None:
+            return None
+        values, s = traced
+        part = OrderedSamples(pixel, sample, values, s.pop("alpha", None), s.pop("path_cost", None),
+                              s.pop("denoise", None))
+        return part, s, unit[0], time.perf_counter() - started
 
-    def add_result(result):
-        pixel, sample, values, s = result
-        add_in_sample_order(film, halves, pixel, sample, values, s.get("alpha"), s.get("path_cost"))
-        if "denoise" in s:
-            film.add_denoise_data(pixel, *s["denoise"])
-        for k in ("rays", "shadow_rays", "nonfinite"):
-            stats[k] += s[k]
-        done["samples"] += pixel.size
-        stats["samples"] = done["samples"]
-        stats["seconds"] = clock() - t0
-        if progress is not None:
-            frac = done["samples"] / budget
-            if adaptive.time_limit > 0:
-                frac = max(frac, stats["seconds"] / adaptive.time_limit)
-            progress(min(frac, 0.999), stats)
 
-    # the error formulas treat ∞ and NaN explicitly (no estimate yet, a tile that stops): no warnings
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
-        first_pass_reported = False
-        level = None
-        while True:
-            counts = film.count[pixels]
-            if counts.min() >= adaptive.min_spp:
-                if halves.first is None:        # every pixel has exactly min_spp samples now (or a resumed state)
-                    halves.keep_first(film.count)
-                if level is None:
-                    level = first_pass_allocation(halves, adaptive.quantity, adaptive.threshold, tiles, pixels, W)
-                    stats["allocation_level"] = level.level
-                    stats["cost_per_sample"] = level.mean_cost
-                e, _ = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level.mean_y)
-                w = cost_weight(halves.cost, film.count, tiles, pixels, level.mean_cost)
-                _, _, noise = film_noise(film, halves, adaptive.quantity, pixels)
-                # the tile's error pooled with its neighbourhood's (rare paths its first pass missed); a
-                # tile goes on while that error is above T and above its share of the error at equal
-                # cost, σ̂/(n·w) > μ (σ̂ = e·√n, w = √(c/c̄))
-                root_n = np.sqrt(counts)
-                noise = pooled_error(noise, counts, level.sigma_nb, level.n_nb)
-                e = pooled_error(e, counts, level.sigma_nb, level.n_nb)
-                noise = np.where(e / (root_n * w) > level.level, noise, -np.inf)
-            else:                                              # first pass: only bring every pixel to min_spp
-                noise = np.full(counts.shape, -np.inf)
-            if not first_pass_reported and counts.min() >= adaptive.min_spp:
-                first_pass_reported = True
-                timing["on"] = False
-                if on_first_pass is not None:
-                    on_first_pass(film, halves, clock() - t0, done["samples"])
-            target = next_targets(counts, noise, marks, adaptive.threshold)
-            todo = target > counts
-            stats["adaptive_rounds"] = stats.get("adaptive_rounds", 0) + 1
-            if not todo.any():
-                # max_spp: the cap decided some tile's count — it wanted more, or it stopped at a clipped
-                # last checkpoint that a larger --spp would have stepped over
-                at_cap = counts >= spp
-                return "max_spp" if at_cap.any() and (not spp_is_a_step or (noise[at_cap] > adaptive.threshold).any()) \
-                    else "threshold"
-            if stop_requested():
-                return reason["value"]
-            paths = int((target - counts)[todo].sum())
-            per_unit = round_unit_paths(paths, int(todo.sum()), int((target - counts).max()), batch_rays, workers)
-            timing["on"] = unit_times is not None and counts.min() < adaptive.min_spp
-            units = adaptive_units(pixels[todo], counts[todo], target[todo], tiles, per_unit,
-                                   chunk_pixels=max(COST_CHUNK_PIXELS, pixels.size // 128) if timing["on"] else None)
-            stopped = run_units(units, trace_unit, add_result, stop_requested, abort)
-            stats["seconds"] = clock() - t0
-            if stopped:
-                return reason["value"] or "cancelled"
+class AdaptiveRounds:
+    """The schedule of an adaptive render (engine.render.driver): rounds of units that bring the tiles
+    that go on to their next checkpoint, until none does, ``spp`` is reached or the time limit passes.
+
+    ``halves``: the half-buffers the parts are added to (a resumed render's, or new); ``workers``: the
+    executor's (rounds are cut for them, :func:`round_unit_paths`); ``stats`` receives
+    ``adaptive_rounds``, ``allocation_level``, ``cost_per_sample`` and at the end ``stop_reason``.
+    ``on_first_pass(film, halves, seconds, samples)`` is called once every pixel has ``min_spp``
+    samples; ``unit_times`` receives (pixels, paths, seconds, cost) of every unit of the first pass,
+    cut into small pixel chunks for the purpose (engine.render.estimate).  How units are cut never
+    changes the result."""
+
+    def __init__(self, plan, film, halves: HalfBuffers, adaptive: AdaptiveSettings, workers: int, stats: dict,
+                 on_first_pass=None, unit_times: list | None = None):
+        W, H = film.width, film.height
+        self.film, self.halves, self.adaptive, self.workers, self.stats = film, halves, adaptive, workers, stats
+        self.spp, self.batch_rays, self.stratified = plan.settings.spp, plan.settings.batch_rays, plan.stratified
+        self.on_first_pass, self.unit_times = on_first_pass, unit_times
+        self.job = PathJob(plan.settings)
+        self.time_limit = adaptive.time_limit
+        self.pixels = plan.pixels()
+        self.tiles = tile_ids(W, H)
+        self.marks = checkpoints(adaptive.min_spp, self.spp)
+        marks = self.marks
+        self.spp_is_a_step = len(marks) == 1 or \
+            int(marks[-1]) == int(checkpoints(adaptive.min_spp, self.spp + 1)[len(marks) - 1])
+        self.budget = max(self.pixels.size * self.spp - int(film.count[self.pixels].sum()), 1)
+        self.level = None
+        self.first_pass_reported = False
+        self.timing = False
+        self.reason = None
+
+    def errstate(self):
+        # the error formulas treat ∞ and NaN explicitly (no estimate yet, a tile that stops): no warnings
+        return np.errstate(over="ignore", invalid="ignore", divide="ignore")
+
+    def _noise(self, counts):
+        """Per pixel: the tile error where the tile goes on (above its share of the error), else −∞."""
+        film, halves, adaptive, pixels, tiles = self.film, self.halves, self.adaptive, self.pixels, self.tiles
+        if halves.first is None:        # every pixel has exactly min_spp samples now (or a resumed state)
+            halves.keep_first(film.count)
+        if self.level is None:
+            self.level = first_pass_allocation(halves, adaptive.quantity, adaptive.threshold, tiles, pixels,
+                                               film.width)
+            self.stats["allocation_level"] = self.level.level
+            self.stats["cost_per_sample"] = self.level.mean_cost
+        level = self.level
+        e, _ = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level.mean_y)
+        w = cost_weight(halves.cost, film.count, tiles, pixels, level.mean_cost)
+        _, _, noise = film_noise(film, halves, adaptive.quantity, pixels)
+        # the tile's error pooled with its neighbourhood's (rare paths its first pass missed); a tile goes
+        # on while that error is above T and above its share of the error at equal cost, σ̂/(n·w) > μ
+        # (σ̂ = e·√n, w = √(c/c̄))
+        root_n = np.sqrt(counts)
+        noise = pooled_error(noise, counts, level.sigma_nb, level.n_nb)
+        e = pooled_error(e, counts, level.sigma_nb, level.n_nb)
+        return np.where(e / (root_n * w) > level.level, noise, -np.inf)
+
+    def next_round(self, film, stop, tally):
+        """The units of the next round, or None when sampling ends (``reason`` says why)."""
+        adaptive, pixels = self.adaptive, self.pixels
+        counts = film.count[pixels]
+        first_done = counts.min() >= adaptive.min_spp
+        # first pass: only bring every pixel to min_spp
+        noise = self._noise(counts) if first_done else np.full(counts.shape, -np.inf)
+        if first_done and not self.first_pass_reported:
+            self.first_pass_reported = True
+            self.timing = False
+            if self.on_first_pass is not None:
+                self.on_first_pass(film, self.halves, tally.seconds(), tally.samples)
+        target = next_targets(counts, noise, self.marks, adaptive.threshold)
+        todo = target > counts
+        self.stats["adaptive_rounds"] = self.stats.get("adaptive_rounds", 0) + 1
+        if not todo.any():
+            # max_spp: the cap decided some tile's count — it wanted more, or it stopped at a clipped
+            # last checkpoint that a larger --spp would have stepped over
+            at_cap = counts >= self.spp
+            self.reason = "max_spp" if at_cap.any() and (not self.spp_is_a_step
+                                                         or (noise[at_cap] > adaptive.threshold).any()) \
+                else "threshold"
+            return None
+        if stop():
+            self.reason = stop.reason
+            return None
+        paths = int((target - counts)[todo].sum())
+        per_unit = round_unit_paths(paths, int(todo.sum()), int((target - counts).max()), self.batch_rays,
+                                    self.workers)
+        self.timing = self.unit_times is not None and counts.min() < adaptive.min_spp
+        return adaptive_units(pixels[todo], counts[todo], target[todo], self.tiles, per_unit,
+                              chunk_pixels=max(COST_CHUNK_PIXELS, pixels.size // 128) if self.timing else None)
+
+    def added(self, result) -> None:
+        part, s, chunk, seconds = result
+        self.halves.add(part)
+        if self.timing:
+            cost = part.path_cost
+            self.unit_times.append((chunk, part.n_samples, seconds, None if cost is None else int(np.sum(cost))))
+
+    def fraction(self, samples: int, seconds: float) -> float:
+        frac = samples / self.budget
+        if self.time_limit > 0:
+            frac = max(frac, seconds / self.time_limit)
+        return min(frac, 0.999)
+
+    def finish(self, film, stats, stopped: str | None) -> bool:
+        """Record the stop reason (one of :data:`STOP_REASONS`); True if the render was cancelled."""
+        stats["stop_reason"] = reason = stopped or self.reason
+        if self.stratified:
+            film.keep_half_sums(self.halves.sums)       # the half-buffers are the even/odd luminance sums
+        stats.setdefault("seconds", 0.0)
+        return reason == "cancelled"
 
 
 # ------------------------------------------------------------------------------------ storage in the EXR
@@ -838,29 +806,18 @@ def state_from_channels(channels: dict, counts: np.ndarray, source: str = "the f
     """(Film, HalfBuffers) rebuilt exactly from :func:`state_channels` and the ``spp`` counts (H, W);
     a damaged state is a SceneError naming --resume, ``source`` and the channel (:func:`check_state`,
     ``means``: the Stokes image stored beside the state)."""
-    from .film import Film
     H, W = counts.shape
     state = check_state(channels, counts, source, means)
-    film, halves = Film(W, H), HalfBuffers(W * H)
-    film.count[:] = counts.reshape(-1).astype(np.int64)
-
-    def get(name):
-        return state[name]
-    for k in range(4):
-        for c, cname in enumerate("RGB"):
-            film.sums[k, c] = get(f"sum.S{k}.{cname}")
-        film.sumsq_y[k] = get(f"sumsq.S{k}.Y")
-        halves.sums[0, k] = get(f"A.S{k}.Y")
-        halves.sums[1, k] = get(f"B.S{k}.Y")
-
-    def has(name):
-        return name in state
+    sums = np.stack([np.stack([state[f"sum.S{k}.{c}"] for c in "RGB"]) for k in range(4)])
+    sumsq_y = np.stack([state[f"sumsq.S{k}.Y"] for k in range(4)])
+    film = Film.from_sums(W, H, counts.reshape(-1).astype(np.int64), sums, sumsq_y)
+    halves_sums = np.stack([np.stack([state[f"{h}.S{k}.Y"] for k in range(4)]) for h in "AB"])
     # Files of older versions counted no cost, or rays (``rays``, ``first.rays``: segments and light
     # samples, another unit than PATH_COST's): they resume with equal costs (c̄ = 0, every weight 1).
-    if has("cost"):
-        halves.cost = get("cost").astype(np.int64)
-    if has("first.count"):                                # … nor kept the first pass
-        sums = np.stack([np.stack([get(f"first.{h}.S{k}.Y") for k in range(4)]) for h in "AB"])
-        cost = get("first.cost").astype(np.int64) if has("first.cost") else np.zeros(W * H, np.int64)
-        halves.first = (sums, get("first.count").astype(np.int64), cost)
-    return film, halves
+    cost = state["cost"].astype(np.int64) if "cost" in state else None
+    first = None
+    if "first.count" in state:                              # … nor kept the first pass
+        first_sums = np.stack([np.stack([state[f"first.{h}.S{k}.Y"] for k in range(4)]) for h in "AB"])
+        first_cost = state["first.cost"].astype(np.int64) if "first.cost" in state else np.zeros(W * H, np.int64)
+        first = (first_sums, state["first.count"].astype(np.int64), first_cost)
+    return film, HalfBuffers.from_state(halves_sums, cost, first)

@@ -25,7 +25,7 @@ a bound no allocation exceeds.  v is estimated per tile as e²·n (e: tile error
 
 from __future__ import annotations
 
-import copy
+import dataclasses
 import math
 import time
 from dataclasses import dataclass
@@ -35,6 +35,7 @@ import numpy as np
 from ..errors import SceneError
 from .adaptive import (QUANTITIES, TILE, UNITS, AdaptiveSettings, allocation_from, checkpoints, film_noise,
                        pooled_error, tile_cost, tile_ids)
+from .plan import RenderRequest
 
 
 @dataclass
@@ -111,7 +112,7 @@ def best_mse_time_gain(variance, seconds_per_sample) -> float:
 
 
 def tile_cost_per_sample(film, halves) -> np.ndarray:
-    """Cost per sample of every pixel's tile (H·W,) (:attr:`~engine.render.adaptive.HalfBuffers.cost`
+    """Cost per sample of every pixel's tile (H·W,) (:attr:`~engine.render.film.HalfBuffers.cost`
     ÷ samples, summed over the tile; 0 where the tile has no sample or no cost was counted)."""
     return tile_cost(halves.cost, film.count, tile_ids(film.width, film.height), np.arange(film.count.size))
 
@@ -214,12 +215,11 @@ def parse_target(text: str) -> tuple[str, float]:
 def pilot_render(renderer, settings, pilot_spp: int, quantity: str = "s0"):
     """Render every pixel with ``pilot_spp`` samples keeping the half-buffers;
     (RenderResult, seconds per sample of every pixel (H·W,))."""
-    st = copy.copy(settings)
-    st.spp = pilot_spp
     unit_times = []
-    result = renderer.render(st, adaptive=AdaptiveSettings(threshold=math.inf, quantity=quantity,
-                                                           min_spp=pilot_spp, time_limit=0.0),
-                             unit_times=unit_times)
+    result = renderer.render(RenderRequest(dataclasses.replace(settings, spp=pilot_spp),
+                                           adaptive=AdaptiveSettings(threshold=math.inf, quantity=quantity,
+                                                                     min_spp=pilot_spp, time_limit=0.0),
+                                           unit_times=unit_times))
     return result, cost_map(unit_times, result.film.count.size, result.stats["seconds"],
                             tile_cost_per_sample(result.film, result.halves))
 
@@ -242,11 +242,10 @@ def round_overhead(renderer, settings, pilot, seconds_per_sample, min_spp: int) 
     y, x = divmod(p, film.width)
     x0, y0 = x - x % TILE, y - y % TILE
     window = (x0, y0, min(x0 + TILE, film.width), min(y0 + TILE, film.height))
-    st = copy.copy(settings)
-    st.spp = min(int(settings.spp), ROUND_PROBE_MAX_SPP)
+    st = dataclasses.replace(settings, spp=min(int(settings.spp), ROUND_PROBE_MAX_SPP))
     started = time.perf_counter()
-    probe = renderer.render(st, adaptive=AdaptiveSettings(threshold=0.0, quantity="s0",
-                                                          min_spp=min(int(min_spp), st.spp)), window=window)
+    probe = renderer.render(RenderRequest(st, window, AdaptiveSettings(threshold=0.0, quantity="s0",
+                                                                       min_spp=min(int(min_spp), st.spp))))
     seconds = time.perf_counter() - started
     sps = np.broadcast_to(np.asarray(seconds_per_sample, np.float64), probe.film.count.shape)
     samples = float(np.sum(probe.film.count * sps))

@@ -14,6 +14,11 @@ With the "stratified" sampler a pixel's samples are not independent, and the i.i
 luminance Stokes sums of the even and of the odd samples (``half_y``: two independently scrambled
 sequences, engine.render.sampler.stratified_pair), whose difference is an unbiased, if one-degree-
 of-freedom, estimate of the mean's variance (``stderr_luminance``).
+
+The film's accumulators are written here alone: a render adds parts with ``Film.add`` (``SampleSums`` of a
+work unit, or ``OrderedSamples`` added in ascending sample order: adaptive sampling, whose even/odd half
+sums are ``HalfBuffers``), a resumed render's film is merged (``merge``) or rebuilt (``film_from_stokes``,
+``Film.from_sums``).
 """
 
 from __future__ import annotations
@@ -41,11 +46,13 @@ class Film:
         (N,) or None (all 1)."""
         self.add(SampleSums.of(pixel, stokes_rgb, alpha))
 
-    def add(self, part: SampleSums) -> None:
-        """Add the sums of a batch of samples (``SampleSums.of``, computed on any thread).
-
-        The same additions as summing the batch over the whole film: pixels outside the part's
-        range would only have had 0 added."""
+    def add(self, part: SampleSums | OrderedSamples) -> None:
+        """Add a part: the sums of a batch of samples (``SampleSums.of``, computed on any thread; the same
+        additions as summing the batch over the whole film: pixels outside the part's range would only
+        have had 0 added), or ``OrderedSamples``, added one by one in ascending sample index."""
+        if isinstance(part, OrderedSamples):
+            self._add_in_sample_order(part)
+            return
         if not self._added:
             # Adding a whole-film bincount turned any −0.0 (a resumed film) into +0.0: do it once.
             self._added = True
@@ -68,6 +75,39 @@ class Film:
             if self.denoise_sums is None:
                 self.denoise_sums = np.zeros((6, self.count.shape[0]))
             self.denoise_sums[:, lo:hi] += part.denoise
+
+    def _add_in_sample_order(self, part: OrderedSamples) -> None:
+        """Every sample added to its pixel in ascending sample index (np.add.at adds element by element in
+        index order: the same additions as one sample pass at a time, whatever the batching)."""
+        if part.alpha is not None and self.alpha_sums is None:
+            self.alpha_sums = self.count.astype(np.float64)   # every earlier sample had alpha 1
+        pixel, _, values, y, alpha = part.ordered()
+        n = self.count.size
+        sums, vals = self.sums.reshape(12, n), values.reshape(12, -1)
+        for r in range(12):
+            np.add.at(sums[r], pixel, vals[r])
+        for k in range(4):
+            np.add.at(self.sumsq_y[k], pixel, y[k] * y[k])
+        if self.alpha_sums is not None:
+            np.add.at(self.alpha_sums, pixel, 1.0 if alpha is None else alpha)
+        np.add.at(self.count, pixel, 1)
+        if part.denoise is not None:
+            self.add_denoise_data(part.pixel, *part.denoise)
+
+    def keep_half_sums(self, half_y: np.ndarray) -> None:
+        """Use ``half_y`` (2, 4, n) as the even/odd luminance Stokes sums (adaptive sampling's
+        half-buffers, ``HalfBuffers.sums``: shared, not copied)."""
+        self.half_y = half_y
+
+    @classmethod
+    def from_sums(cls, width: int, height: int, count: np.ndarray, sums: np.ndarray, sumsq_y: np.ndarray) -> Film:
+        """A film holding finished samples exactly: ``count`` (n,), Stokes sums (4, 3, n), luminance sums
+        of squares (4, n)."""
+        film = cls(width, height)
+        film.count[:] = count
+        film.sums[:] = sums
+        film.sumsq_y[:] = sumsq_y
+        return film
 
     def add_denoise_data(self, pixel: np.ndarray, albedo: np.ndarray, normal: np.ndarray) -> None:
         """Add the denoising guides of samples already added with ``add_samples``: albedo (3, N) linear
@@ -233,6 +273,88 @@ class SampleSums:
             for s in range(4):
                 half_y[:, s] = np.bincount(slot, weights=y[s], minlength=2 * span).reshape(2, span)
         return cls(lo, hi, sums, sumsq_y, count, alpha_sums, guides, pixel.shape[0], half_y)
+
+
+class OrderedSamples:
+    """A batch of samples that ``Film.add`` adds one by one in ascending sample index (adaptive
+    sampling: each pixel's sums are then built in ascending sample order whatever the batching).
+
+    ``pixel``, ``sample`` (N,) with each pixel at most once per sample index, ``values`` (4, 3, N),
+    ``alpha`` (N,) or None (all 1), ``path_cost`` (N,) integers or None (not counted), ``denoise``
+    (albedo (3, N), normal (3, N)) or None."""
+
+    __slots__ = ("pixel", "sample", "values", "alpha", "path_cost", "denoise", "_ordered")
+
+    def __init__(self, pixel, sample, values, alpha=None, path_cost=None, denoise=None):
+        self.pixel, self.sample, self.values, self.alpha = pixel, sample, values, alpha
+        self.path_cost, self.denoise, self._ordered = path_cost, denoise, None
+
+    @property
+    def n_samples(self) -> int:
+        return int(self.pixel.shape[0])
+
+    def ordered(self):
+        """(pixel, sample, values (12, N), luminance Stokes y (4, N), alpha) sorted by sample index (stable)."""
+        if self._ordered is None:
+            pixel, sample, alpha = self.pixel, self.sample, self.alpha
+            y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, self.values)
+            vals = self.values.reshape(12, -1)
+            order = np.argsort(sample, kind="stable")
+            if np.any(order != np.arange(order.size)):
+                pixel, sample, vals, y = pixel[order], sample[order], vals[:, order], y[:, order]
+                alpha = None if alpha is None else np.asarray(alpha)[order]
+            self._ordered = (pixel, sample, vals, y, alpha)
+        return self._ordered
+
+
+class HalfBuffers:
+    """Luminance Stokes sums of the even (A) and odd (B) sample passes per pixel: ``sums`` (2, 4, n),
+    and the cost of the pixel's samples: ``cost`` (n,) int64 (engine.render.integrator's per-path
+    count, :data:`~engine.render.integrator.PATH_COST`: the deterministic cost adaptive sampling weighs by).
+
+    ``first``: (sums (2, 4, n), counts (n,), cost (n,)) as they were when every pixel of the window
+    had its ``min_spp`` samples (None before): the allocation level μ is computed from it, so that it
+    is the same after an interruption and for any threshold given on resumption."""
+
+    def __init__(self, n: int):
+        self.sums = np.zeros((2, 4, n))
+        self.cost = np.zeros(n, np.int64)
+        self.first = None
+
+    @classmethod
+    def from_state(cls, sums: np.ndarray, cost: np.ndarray | None = None, first=None) -> HalfBuffers:
+        """Half-buffers holding ``sums`` (2, 4, n) exactly, ``cost`` (n,) (None: 0) and ``first``."""
+        halves = cls(sums.shape[-1])
+        halves.sums[:] = sums
+        if cost is not None:
+            halves.cost = np.asarray(cost, np.int64)
+        halves.first = first
+        return halves
+
+    def add(self, part: OrderedSamples) -> None:
+        """Add the part's costs, and its luminance to A or B by sample parity, in ascending sample order."""
+        if part.path_cost is not None:       # integer sums: exact in any order
+            np.add.at(self.cost, part.pixel, np.asarray(part.path_cost, np.int64))
+        pixel, sample, _, y, _ = part.ordered()
+        for h in (0, 1):
+            m = sample % 2 == h
+            pix_h = pixel[m]
+            for k in range(4):
+                np.add.at(self.sums[h, k], pix_h, y[k, m])
+
+    def keep_first(self, counts: np.ndarray) -> None:
+        self.first = (self.sums.copy(), np.asarray(counts, np.int64).copy(), self.cost.copy())
+
+    def means(self, counts: np.ndarray):
+        """(mean_A, mean_B), each (4, n); samples 0…c−1 give A ⌈c/2⌉ and B ⌊c/2⌋ of them (0 where none)."""
+        c = np.asarray(counts, np.int64)
+        return _ratio(self.sums[0], (c + 1) // 2), _ratio(self.sums[1], c // 2)
+
+
+def _ratio(num, den):
+    out = np.zeros(np.broadcast(num, den).shape)
+    np.divide(num, den, out=out, where=den > 0)
+    return out
 
 
 def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray | None = None,

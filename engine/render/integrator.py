@@ -44,10 +44,11 @@ from ..kernels.shadow_rays import shadow_rays
 from ..kernels.transport import (add_light, add_to_paths, identity_throughput, next_segments,
                                  spectral_stokes_rgb_samples, stokes_rgb_samples, throughput_times_stokes, update_abcs,
                                  update_depolarising, update_general)
-from .effects import TRANSPORT_SIZES, effective_materials
+from .effects import TRANSPORT_SIZES
 from .lights.lamps import PointEmitter
 from .media import Media, cross
 from .path_state import PathState
+from .plan import rendered_materials, spectral_reduction
 from .sampler import (PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_JITTER, PAIR_LENS, PAIR_LIGHT_POINT, PAIR_WAVELENGTH,
                       PathSampler, stratified_pair)
 from .visibility import ray_visibility
@@ -268,9 +269,9 @@ class PathTracer:
 
     def __init__(self, compiled: CompiledScene, lights: LightSet, camera: CameraModel, settings: RenderSettings,
                  materials: list[BSDF] | None = None, count_cost: bool = True):
-        """``materials``: the compiled scene's materials as rendered (by material index), if the
-        caller has already applied the exact simplifications (engine.render.effects); otherwise
-        they are applied here, the same way on every worker.  ``count_cost``: report each path's
+        """``materials``: the compiled scene's materials as rendered (by material index:
+        ``RenderPlan.materials``); None: the plan's rule (engine.render.plan.rendered_materials).
+        ``settings``: as rendered (``polarisation`` resolved).  ``count_cost``: report each path's
         cost (``stats["path_cost"]``), which only adaptive sampling reads; without it the per-vertex
         counting is skipped (a masked scatter-add per bounce and per next-event vertex)."""
         self.scene = compiled
@@ -279,9 +280,7 @@ class PathTracer:
         self.camera = camera
         self.settings = settings
         if materials is None:
-            simplified, _ = effective_materials(dict(zip(compiled.material_names, compiled.materials)),
-                                                simplify=getattr(settings, "simplify", "auto"))
-            materials = [simplified[name] for name in compiled.material_names]
+            materials, _ = rendered_materials(compiled, getattr(settings, "simplify", "auto"))
         self.materials: list[BSDF] = list(materials)
         self.has_area_lights = compiled.has_area_lights     # once, not per bounce (scans every triangle)
         # emitters whose radiance varies over the surface read it at the hits' barycentrics
@@ -306,14 +305,10 @@ class PathTracer:
         # Where no material depends on λ, every wavelength of a path has the same Mueller product:
         # carry T for one wavelength and apply the spectral emission and colour matching at the
         # lights (exactly the same estimate, a quarter of the Mueller arithmetic).
-        used = {self.materials[i] for i in compiled.used_materials}
-        independent = not any(m.flags.has(BSDFFlags.WAVELENGTH_DEPENDENT) for m in used)
-        reduce = settings.reduce_spectral
-        self.uniform = reduce in ("auto", "exact", True) and independent and not self.channels
         # "auto": with λ-independent materials the spectral estimator's expectation is T times each
         # light's spectrum integrated against the CIE observer, so trace in RGB with those exact
         # light colours: no wavelength sampling and no chromatic noise (same expectation).
-        self.rgb_mode = self.channels or (reduce in ("auto", True) and independent and not self.mono)
+        self.uniform, self.rgb_mode = spectral_reduction(settings, self.materials, compiled.used_materials)
         # a textured emitter's colour in RGB: its spectrum integrated against the observer (the expectation of
         # the spectral estimator), except in the "rgb" transport, whose texels are the channels themselves (as a
         # constant light's channel_rgb: Cycles' arithmetic)

@@ -26,18 +26,17 @@ refused with one line naming each difference.
 
 from __future__ import annotations
 
-import copy
 import dataclasses
 import hashlib
 import math
 import os
 import re
 import stat
+from typing import NamedTuple
 
 import numpy as np
 
 from ..errors import SceneError
-from .effects import effective_materials, resolve_transport
 from .film import film_from_stokes
 
 #: Header keys that must match between a stored render and its continuation, with the option
@@ -115,13 +114,6 @@ def scene_fingerprint(scene) -> str:
     for part in (scene.camera, scene.meshes, scene.materials, scene.lights):
         _feed(h, dataclasses.asdict(part) if dataclasses.is_dataclass(part) else part, seen)
     return h.hexdigest()
-
-
-def resolved_polarisation(scene, compiled, settings) -> str:
-    """The transport ("full", "linear", "off") that ``settings.polarisation`` resolves to for the scene."""
-    used = compiled.used_material_names
-    materials, _ = effective_materials(scene.materials, used, settings.simplify)
-    return resolve_transport(settings.polarisation, materials, used)[0]
 
 
 def estimator_identity(scene_hash: str, settings, resolved: str, window=None, size=None) -> dict:
@@ -251,32 +243,37 @@ def read_resumable(path: str):
     return stokes, channels, header
 
 
-def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None, seed=None, with_halves=False,
-                 sampler=None):
-    """(Film of the finished samples, settings to continue with) for the render stored at ``path``.
+class Resumed(NamedTuple):
+    """A stored render to continue: its ``film`` of finished samples, the ``settings`` to continue with
+    and, for a file of an adaptive render, its ``halves`` (engine.render.film.HalfBuffers; else None)."""
+    film: object
+    settings: object
+    halves: object = None
 
-    ``with_halves``: also return the adaptive half-buffers (engine.render.adaptive.HalfBuffers), or
-    raise a SceneError if the file has none.
+
+def resume_state(path: str, renderer, settings, scene_hash: str, spp=None, seed=None, sampler=None,
+                 adaptive: bool = False) -> Resumed:
+    """The render stored at ``path``, to continue with ``renderer`` (its scene; the transport that
+    ``settings`` resolve to is its plan's).
 
     ``spp``/``seed``/``sampler`` are the values given on the command line (None: take the stored ones;
     a file without ``polar.sampler`` was rendered with the "independent" sampler, the default until
-    the stratified one became it).
-    Raises SceneError naming every setting that differs from the stored render's.
+    the stratified one became it); ``adaptive``: to continue adaptively (a SceneError if the file has no
+    half-buffers).  Raises SceneError naming every setting that differs from the stored render's.
     """
+    scene = renderer.scene
     stokes, channels, header = read_resumable(path)
     H, W = stokes.shape[1:3]
     if (W, H) != (scene.camera.width, scene.camera.height):
         raise SceneError("--resume", f"{path!r} is {W}×{H} but the scene renders "
                                      f"{scene.camera.width}×{scene.camera.height}")
-    st = copy.copy(settings)
     if seed is not None and str(seed) != str(header["polar.seed"]):
         raise SceneError("--seed", f"must be the resumed render's seed ({header['polar.seed']}) to continue it")
-    st.seed = int(header["polar.seed"])
-    if sampler is None:
-        st.sampler = header.get("polar.sampler", "independent")
-    if spp is None:
-        st.spp = int(header["polar.spp"])
-    ident = estimator_identity(scene_hash, st, resolved_polarisation(scene, compiled, st), size=(W, H))
+    stored_sampler = header.get("polar.sampler", "independent")
+    st = dataclasses.replace(settings, seed=int(header["polar.seed"]),
+                             sampler=stored_sampler if sampler is None else settings.sampler,
+                             spp=int(header["polar.spp"]) if spp is None else settings.spp)
+    ident = estimator_identity(scene_hash, st, renderer.plan(st).settings.polarisation, size=(W, H))
     diff = differences(header, ident)
     if diff:
         raise SceneError("--resume", f"{os.path.basename(path)!r} is another render: " + "; ".join(diff))
@@ -287,9 +284,9 @@ def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None
     if has_state(channels):
         film, halves = state_from_channels(channels, counts, repr(path), means=stokes)
         if st.stratified:
-            film.half_y = halves.sums.copy()        # even/odd luminance sums: the stratified standard error
+            film.keep_half_sums(halves.sums.copy())     # even/odd luminance sums: the stratified standard error
     else:
-        if with_halves:
+        if adaptive:
             raise SceneError("--noise-threshold", f"{os.path.basename(path)!r} was rendered without adaptive "
                                                   "sampling, so it has no half-buffers to continue adaptively "
                                                   "(resume it without --noise-threshold)")
@@ -300,4 +297,4 @@ def resume_state(path: str, scene, compiled, settings, scene_hash: str, spp=None
             even = np.stack([channels[f"S{i}.Y.even"] for i in range(4)])
             stderr = np.stack([channels[f"S{i}.Y.stderr_iid"] for i in range(4)])
         film, halves = film_from_stokes(stokes, counts, stderr, channels.get("A"), even), None
-    return (film, st, halves) if with_halves else (film, st)
+    return Resumed(film, st, halves)

@@ -64,7 +64,7 @@ from engine.output.png import write_png  # noqa: E402
 from engine.render.adaptive import AdaptiveSettings, film_noise, tile_ids  # noqa: E402
 from engine.render.estimate import (best_mse_time_gain, mse_time_gain, pilot_render, predict,  # noqa: E402
                                     round_overhead)
-from engine.render.renderer import Renderer  # noqa: E402
+from engine.render.renderer import Renderer, RenderRequest  # noqa: E402
 from engine.scene.loader import load_scene  # noqa: E402
 from engine.spectral.cie import LUMINANCE_WEIGHTS  # noqa: E402
 
@@ -147,7 +147,7 @@ def mse(y, ref: Reference):
 
 def timed(renderer, st, adaptive=None):
     t0 = time.perf_counter()
-    result = renderer.render(st, adaptive=adaptive)
+    result = renderer.render(RenderRequest(st, adaptive=adaptive))
     return result, time.perf_counter() - t0
 
 
@@ -164,7 +164,7 @@ def costed(renderer, st, adaptive=None):
     cpu = []
     for _ in range(CPU_REPEATS):
         c0 = time.process_time()
-        result = renderer.render(one, adaptive=adaptive)
+        result = renderer.render(RenderRequest(one, adaptive=adaptive))
         cpu.append(time.process_time() - c0)
     _, wall = timed(renderer, st, adaptive)
     return result, min(cpu), wall
@@ -243,7 +243,8 @@ def bias(name, renderer, scene, ref: Reference, threshold, seeds, rows):
     for seed in range(seeds):
         st = copy.copy(scene.settings)
         st.spp, st.seed = MAX_SPP, 1000 + seed
-        ys.append(lum(renderer.render(st, adaptive=AdaptiveSettings(threshold, "s0", MIN_SPP)).stokes()))
+        ys.append(lum(renderer.render(RenderRequest(st, adaptive=AdaptiveSettings(threshold, "s0", MIN_SPP)))
+                      .stokes()))
     ys = np.stack(ys)                                              # (K, 4, H, W)
     K = seeds
     H, W = ys.shape[2:]

@@ -20,8 +20,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, REPO)
 
-from engine.render.distributed import render_distributed  # noqa: E402
-from engine.render.renderer import Renderer  # noqa: E402
+from engine.render.renderer import Renderer, RenderRequest  # noqa: E402
 from engine.scene.loader import load_scene  # noqa: E402
 
 SHARED = os.environ.get("POLAR_SHARED", os.path.join(os.path.dirname(REPO), "shared"))
@@ -45,9 +44,10 @@ def main():
     for n in (1, 2):
         with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
                                       silence_logs=40) as cluster, distributed.Client(cluster) as client:
-            render_distributed(scene, None, client=client)          # warm-up: workers compile the scene
+            renderer = Renderer(scene)
+            renderer.render(RenderRequest(scheduler=client))          # warm-up: workers compile the scene
             t0 = time.perf_counter()
-            result = render_distributed(scene, None, client=client)
+            result = renderer.render(RenderRequest(scheduler=client))
             rows.append((f"Dask, {n} worker{'s' if n > 1 else ''}", time.perf_counter() - t0,
                          bool(np.array_equal(result.stokes(), local.stokes()))))
     samples = args.res * args.res * args.spp

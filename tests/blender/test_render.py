@@ -111,11 +111,11 @@ def test_cancel_keeps_a_partial_image(addon, tmp_path):
     scene = brewster_scene(samples=64)
     scene.polar.batch_rays = 1024
     scene.polar.threads = 1
-    polar_engine.cancel_requested["value"] = True
+    polar_engine.CONTROL.cancel = True
     try:
         passes = read_multilayer(render_to_exr(scene, str(tmp_path / "cancelled")))
     finally:
-        polar_engine.cancel_requested["value"] = False
+        polar_engine.CONTROL.cancel = False
     assert np.all(passes["S0"] == 0)           # cancelled before the first batch: nothing traced, no crash
 
 

@@ -253,7 +253,12 @@ class FakeRenderer:
         self.log, self.delay, self.block = log, delay, block
         log.append(("build", threading.current_thread().name))
 
-    def render(self, settings, should_stop=None):
+    def set_camera(self, camera):
+        import dataclasses
+        self.scene = dataclasses.replace(self.scene, camera=camera)
+
+    def render(self, request):
+        settings, should_stop = request.settings, request.should_stop
         self.log.append(("render", threading.current_thread().name))
         if self.block is not None:
             while not should_stop():       # like the tracer: polls between bounces

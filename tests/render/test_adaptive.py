@@ -17,11 +17,11 @@ from engine.render.adaptive import (AdaptiveSettings, HalfBuffers, TILE, checkpo
                                     pixel_noise, state_channels, state_from_channels, tile_ids, tile_noise)
 from engine.render.estimate import best_mse_time_gain, mse_time_gain, parse_target, predict
 from engine.render.film import Film
-from engine.render.renderer import Renderer
+from engine.render.renderer import Renderer, RenderRequest
 from engine.scene.loader import load_scene
 from engine.errors import SceneError
 from tests.conftest import shared_path
-from tests.support.adaptive import empty_stats, run_units_in_order
+from tests.support.adaptive import adaptive_render
 
 
 def col(*v):
@@ -127,7 +127,7 @@ AD = AdaptiveSettings(threshold=0.05, quantity="s0", min_spp=8)
 @pytest.fixture(scope="module")
 def reference(sphere):
     scene, renderer = sphere
-    return renderer.render(adaptive=AD)
+    return renderer.render(RenderRequest(adaptive=AD))
 
 
 def test_adaptive_render_spends_samples_unevenly_and_says_why_it_stopped(reference):
@@ -143,7 +143,7 @@ def test_counts_and_image_do_not_depend_on_threads_or_batch_size(sphere, referen
     scene, renderer = sphere
     st = copy.copy(scene.settings)
     st.threads, st.batch_rays = threads, batch_rays
-    other = renderer.render(st, adaptive=AD)
+    other = renderer.render(RenderRequest(st, adaptive=AD))
     np.testing.assert_array_equal(other.film.count, reference.film.count)
     np.testing.assert_array_equal(other.film.sums, reference.film.sums)
     np.testing.assert_array_equal(other.halves.sums, reference.halves.sums)
@@ -155,8 +155,8 @@ def test_resume_after_a_cancel_through_the_exr_gives_the_same_counts_and_image(s
     st = copy.copy(scene.settings)
     st.batch_rays = 200                                    # many units: stop after a few
     calls = {"n": 0}
-    partial = renderer.render(st, adaptive=AD,
-                              should_stop=lambda: calls.__setitem__("n", calls["n"] + 1) or calls["n"] > 12)
+    partial = renderer.render(RenderRequest(st, adaptive=AD, should_stop=lambda: calls.__setitem__("n", calls["n"] + 1)
+                                            or calls["n"] > 12))
     assert partial.cancelled and partial.stats["stop_reason"] == "cancelled"
     assert partial.film.count.sum() < reference.film.count.sum()
     path = str(tmp_path / "part.exr")
@@ -165,7 +165,7 @@ def test_resume_after_a_cancel_through_the_exr_gives_the_same_counts_and_image(s
     _, channels, _ = read_stokes_exr(path)
     film, halves = state_from_channels(channels, channels["spp"])
     np.testing.assert_array_equal(film.sums, partial.film.sums)
-    resumed = renderer.render(resume=film, adaptive=AD, adaptive_resume=halves)
+    resumed = renderer.render(RenderRequest(adaptive=AD, resume=film, resume_halves=halves))
     np.testing.assert_array_equal(resumed.film.count, reference.film.count)
     np.testing.assert_array_equal(resumed.film.sums, reference.film.sums)
     np.testing.assert_array_equal(resumed.halves.cost, reference.halves.cost)
@@ -175,15 +175,14 @@ def test_resume_after_a_cancel_through_the_exr_gives_the_same_counts_and_image(s
 @pytest.mark.subprocess
 def test_a_dask_cluster_gives_the_local_counts_and_image(sphere, reference):
     distributed = pytest.importorskip("distributed")
-    from engine.render.distributed import render_distributed
-    scene, _ = sphere
+    scene, renderer = sphere
     st = copy.copy(scene.settings)
     st.batch_rays = 2000                                   # several tasks per round
     cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                                        silence_logs=40)
     client = distributed.Client(cluster)
     try:
-        remote = render_distributed(scene, None, st, client=client, adaptive=AD)
+        remote = renderer.render(RenderRequest(st, adaptive=AD, scheduler=client))
     finally:
         client.close()
         cluster.close()
@@ -203,26 +202,26 @@ def test_the_time_limit_stops_sampling_on_an_injected_clock(sphere, reference):
         ticks["t"] += 1.0
         return ticks["t"]
 
-    limited = renderer.render(st, adaptive=AdaptiveSettings(0.05, "s0", 8, time_limit=40.0), clock=clock)
+    limited = renderer.render(RenderRequest(st, adaptive=AdaptiveSettings(0.05, "s0", 8, time_limit=40.0), clock=clock))
     assert limited.stats["stop_reason"] == "time_limit" and not limited.cancelled
     assert limited.film.count.sum() < reference.film.count.sum()
     assert limited.film.count.min() >= 0
     # what was done is the beginning of the unlimited render: continuing it gives the same result
-    resumed = renderer.render(resume=limited.film, adaptive=AD, adaptive_resume=limited.halves)
+    resumed = renderer.render(RenderRequest(adaptive=AD, resume=limited.film, resume_halves=limited.halves))
     np.testing.assert_array_equal(resumed.film.count, reference.film.count)
     np.testing.assert_array_equal(resumed.film.sums, reference.film.sums)
 
 
 def test_a_scene_that_converges_at_min_spp_stops_there():
     scene = small_scene("plane_brewster", res=16, spp=64)
-    result = Renderer(scene).render(adaptive=AdaptiveSettings(0.02, "s0", 4))
+    result = Renderer(scene).render(RenderRequest(adaptive=AdaptiveSettings(0.02, "s0", 4)))
     assert result.stats["stop_reason"] == "threshold"
     assert np.all(result.film.count == 4)
 
 
 def test_a_threshold_of_zero_samples_every_pixel_to_the_maximum():
     scene = small_scene("plane_brewster", res=8, spp=12)
-    result = Renderer(scene).render(adaptive=AdaptiveSettings(0.0, "s0", 4))
+    result = Renderer(scene).render(RenderRequest(adaptive=AdaptiveSettings(0.0, "s0", 4)))
     assert result.stats["stop_reason"] == "max_spp" and np.all(result.film.count == 12)
     uniform = Renderer(scene).render()
     np.testing.assert_allclose(result.stokes(), uniform.stokes(), rtol=1e-12, atol=1e-15)
@@ -500,14 +499,12 @@ class GaussianTracer:
 
 def synthetic_render(sigma_tiles, threshold, min_spp=16, spp=4096, side=8):
     """Adaptive render (s0) of a side×side-tile image whose tiles have per-sample σ ``sigma_tiles``."""
-    from engine.render.adaptive import render_adaptive
     W = H = side * TILE
     sigma = np.asarray(sigma_tiles, np.float64)[tile_ids(W, H)]
     film, halves = Film(W, H), HalfBuffers(W * H)
 
-    stats = empty_stats()
-    reason = render_adaptive(GaussianTracer(sigma), film, halves, spp, 1 << 16,
-                             AdaptiveSettings(threshold, "s0", min_spp), None, run_units_in_order, stats)
+    reason, stats = adaptive_render(GaussianTracer(sigma), film, halves, spp, 1 << 16,
+                                    AdaptiveSettings(threshold, "s0", min_spp))
     return film, halves, reason, stats
 
 

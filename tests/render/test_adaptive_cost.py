@@ -12,13 +12,13 @@ import numpy as np
 import pytest
 
 from engine.render.adaptive import (AdaptiveSettings, HalfBuffers, TILE, allocation_level, cost_weight,
-                                    cost_per_sample, render_adaptive, state_channels, state_from_channels, tile_ids)
+                                    cost_per_sample, state_channels, state_from_channels, tile_ids)
 from engine.render.estimate import cost_map, mse_time_gain, predict, tile_cost_per_sample
 from engine.render.film import Film
 from engine.render.integrator import PathTracer
-from engine.render.renderer import Renderer
+from engine.render.renderer import Renderer, RenderRequest
 from tests.render.test_adaptive import GaussianTracer, small_scene
-from tests.support.adaptive import empty_stats, run_units_in_order
+from tests.support.adaptive import adaptive_render
 
 
 class CostlyGaussianTracer(GaussianTracer):
@@ -41,9 +41,7 @@ def costly_render(sigma_tiles, rays_tiles, threshold, side, min_spp=16, spp=4096
     film = Film(W, H) if film is None else film
     halves = HalfBuffers(W * H) if halves is None else halves
 
-    stats = empty_stats()
-    reason = render_adaptive(tracer, film, halves, spp, 1 << 16, AdaptiveSettings(threshold, "s0", min_spp), None,
-                             run_units_in_order, stats)
+    reason, stats = adaptive_render(tracer, film, halves, spp, 1 << 16, AdaptiveSettings(threshold, "s0", min_spp))
     return film, halves, reason, stats
 
 
@@ -217,8 +215,8 @@ def test_a_tracer_that_does_not_count_costs_traces_the_same_paths(sphere):
     assert "path_cost" in stats and "path_cost" not in stats_silent
     assert {k: stats[k] for k in ("rays", "shadow_rays", "nonfinite")} == \
         {k: stats_silent[k] for k in ("rays", "shadow_rays", "nonfinite")}
-    assert not renderer._tracer(st)[1].count_cost
-    assert renderer._tracer(st, count_cost=True)[1].count_cost
+    assert not renderer.tracer(renderer.plan(st)).count_cost
+    assert renderer.tracer(renderer.plan(st), count_cost=True).count_cost
 
 
 def test_rays_of_an_adaptive_render_do_not_depend_on_threads_or_batches_and_weigh_the_counts(sphere):
@@ -226,10 +224,10 @@ def test_rays_of_an_adaptive_render_do_not_depend_on_threads_or_batches_and_weig
     ad = AdaptiveSettings(threshold=0.02, quantity="s0", min_spp=8)
     st = copy.copy(scene.settings)
     st.spp = 64
-    ref = renderer.render(st, adaptive=ad)
+    ref = renderer.render(RenderRequest(st, adaptive=ad))
     st2 = copy.copy(st)
     st2.threads, st2.batch_rays = 2, 300
-    other = renderer.render(st2, adaptive=ad)
+    other = renderer.render(RenderRequest(st2, adaptive=ad))
     np.testing.assert_array_equal(other.halves.cost, ref.halves.cost)
     np.testing.assert_array_equal(other.film.count, ref.film.count)
     np.testing.assert_array_equal(other.film.sums, ref.film.sums)

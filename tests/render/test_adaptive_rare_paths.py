@@ -13,14 +13,14 @@ import pytest
 
 import engine.render.adaptive as adaptive
 from engine.render.adaptive import (TILE, AdaptiveSettings, HalfBuffers, neighbourhood_sigma, pooled_error,
-                                    render_adaptive, state_channels, state_from_channels, tile_ids)
+                                    state_channels, state_from_channels, tile_ids)
 from engine.render.estimate import predict
 from engine.render.film import Film
 from engine.render.integrator import PATH_COST, VERTEX_COST
 from engine.render.renderer import Renderer
 from tests.render.test_adaptive import GaussianTracer, small_scene
 from tests.render.test_adaptive_cost import costly_render, tracer_of
-from tests.support.adaptive import empty_stats, run_units_in_order
+from tests.support.adaptive import adaptive_render
 
 SIDE = 5                                     # tiles per side of the synthetic images
 HIDDEN = 2 * SIDE + 2                        # the centre tile
@@ -52,9 +52,7 @@ def polarised_render(sigma_tiles, threshold, hidden_tiles=None, quantity="dolp",
     film = Film(W, H) if film is None else film
     halves = HalfBuffers(W * H) if halves is None else halves
 
-    stats = empty_stats()
-    reason = render_adaptive(tracer, film, halves, spp, 1 << 16, AdaptiveSettings(threshold, quantity, min_spp),
-                             None, run_units_in_order, stats)
+    reason, stats = adaptive_render(tracer, film, halves, spp, 1 << 16, AdaptiveSettings(threshold, quantity, min_spp))
     return film, halves, reason, stats
 
 

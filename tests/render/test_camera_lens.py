@@ -8,7 +8,7 @@ import pytest
 
 from engine.errors import SceneError
 from engine.render.camera import CameraModel, aperture_sample
-from engine.render.renderer import Renderer
+from engine.render.renderer import Renderer, RenderRequest
 from engine.scene.loader import parse_camera, parse_scene
 
 
@@ -233,7 +233,8 @@ def test_resume_keeps_the_alpha_of_the_finished_samples():
     st = copy.copy(scene.settings)
     st.spp = 3
     part = renderer.render(st).film
-    resumed = renderer.render(resume=film_from_stokes(part.mean(), part.spp_image(), alpha=part.alpha())).film
+    resumed = renderer.render(RenderRequest(resume=film_from_stokes(part.mean(), part.spp_image(),
+                                                                    alpha=part.alpha()))).film
     assert np.allclose(resumed.alpha(), full.alpha(), atol=1e-12)
     assert np.allclose(resumed.mean(), full.mean(), rtol=1e-6, atol=1e-9)
 

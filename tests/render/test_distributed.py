@@ -8,8 +8,7 @@ import pytest
 
 distributed = pytest.importorskip("distributed")
 
-from engine.render.distributed import render_distributed  # noqa: E402
-from engine.render.renderer import Renderer  # noqa: E402
+from engine.render.renderer import Renderer, RenderRequest  # noqa: E402
 from engine.scene.loader import load_scene  # noqa: E402
 from tests.conftest import shared_path  # noqa: E402
 
@@ -38,7 +37,7 @@ def scene(name="fresnel_sphere", res=32, spp=6):
 def test_merged_image_equals_the_single_process_render(cluster, name):
     sc = scene(name)
     local = Renderer(sc).render()
-    remote = render_distributed(sc, None, client=cluster)
+    remote = Renderer(sc).render(RenderRequest(scheduler=cluster))
     assert remote.stats["workers"] == 3
     np.testing.assert_array_equal(remote.stokes(), local.stokes())
     np.testing.assert_array_equal(remote.film.count, local.film.count)
@@ -49,7 +48,7 @@ def test_alpha_of_a_transparent_film_is_merged(cluster):
     sc.camera.target = np.array([0.0, 0.0, sc.camera.origin[2]])     # level view: half of it is sky
     sc.camera.film_transparent = True
     local = Renderer(sc).render()
-    remote = render_distributed(sc, None, client=cluster)
+    remote = Renderer(sc).render(RenderRequest(scheduler=cluster))
     assert local.film.alpha().min() < 1
     np.testing.assert_array_equal(remote.film.alpha(), local.film.alpha())
     np.testing.assert_array_equal(remote.stokes(), local.stokes())
@@ -66,7 +65,7 @@ def test_a_worker_dying_mid_render_does_not_change_the_image(cluster):
             killed["done"] = True
             os.kill(sorted(pids.items())[0][1], signal.SIGKILL)   # no goodbye: the process just vanishes
 
-    remote = render_distributed(sc, None, client=cluster, progress=kill_one)
+    remote = Renderer(sc).render(RenderRequest(scheduler=cluster, progress=kill_one))
     assert killed["done"]
     np.testing.assert_array_equal(remote.stokes(), local.stokes())
 
@@ -120,7 +119,7 @@ def test_losing_every_worker_returns_the_finished_units_and_an_error(fragile_clu
             killed["samples"] = stats["samples"]
             _kill_workers(client)
 
-    result = render_distributed(sc, None, client=client, progress=kill_all)
+    result = Renderer(sc).render(RenderRequest(scheduler=client, progress=kill_all))
     assert killed and result.cancelled and "Dask cluster failed" in result.stats["error"]
     count = result.film.count
     assert 0 < count.sum() < 16 * 16 * 800 and count.sum() == result.stats["samples"]
@@ -146,7 +145,7 @@ def test_a_cluster_without_workers_is_an_error_not_a_hang(monkeypatch):
     try:
         monkeypatch.setenv("POLAR_DASK_TIMEOUT", "1")
         with pytest.raises(RuntimeError, match="no Dask worker joined the scheduler within 1 s"):
-            render_distributed(scene(res=8, spp=1), None, client=client)
+            Renderer(scene(res=8, spp=1)).render(RenderRequest(scheduler=client))
     finally:
         client.close()
         cluster.close()

@@ -6,7 +6,7 @@ import copy
 import numpy as np
 import pytest
 
-from engine.render.renderer import Renderer
+from engine.render.renderer import Renderer, RenderRequest
 from engine.scene.description import Camera, EnvironmentLight, Mesh, RenderSettings, Scene
 from engine.scene.loader import load_scene
 from engine.scene.shapes import icosphere
@@ -122,8 +122,8 @@ def test_cancel_keeps_finished_samples():
     def stop():
         return state["progress"] >= 1              # cancel as soon as one unit is finished
 
-    result = Renderer(scene).render(should_stop=stop, progress=lambda f, s: state.__setitem__("progress",
-                                                                                          state["progress"] + 1))
+    result = Renderer(scene).render(RenderRequest(should_stop=stop, progress=lambda f, s: state.__setitem__(
+        "progress", state["progress"] + 1)))
     assert result.cancelled
     spp = result.film.spp_image()
     assert 1 <= spp.min() == spp.max() < 16          # whole passes only, the in-flight ones discarded
@@ -142,7 +142,7 @@ def test_cancel_aborts_the_units_in_flight():
         calls["n"] += 1
         return calls["n"] > 1
 
-    result = Renderer(scene).render(should_stop=stop)
+    result = Renderer(scene).render(RenderRequest(should_stop=stop))
     assert result.cancelled and result.film.spp_image().max() == 0 and calls["n"] >= 2
 
 
@@ -150,7 +150,7 @@ def test_window_render_traces_only_the_window_and_matches_the_full_render():
     scene = peer_scene("fresnel_sphere", 2, res=32)
     renderer = Renderer(scene)
     full = renderer.render()
-    part = renderer.render(window=(8, 4, 20, 30))
+    part = renderer.render(RenderRequest(window=(8, 4, 20, 30)))
     spp = part.film.spp_image()
     assert np.all(spp[4:30, 8:20] == 2) and spp.sum() == 2 * 12 * 26
     np.testing.assert_array_equal(part.stokes()[:, 4:30, 8:20], full.stokes()[:, 4:30, 8:20])

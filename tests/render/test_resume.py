@@ -9,7 +9,7 @@ import numpy as np
 
 from engine.output.exr import read_stokes_exr
 from engine.render.film import film_from_stokes
-from engine.render.renderer import Renderer
+from engine.render.renderer import Renderer, RenderRequest
 from engine.scene.loader import load_scene
 from tests.conftest import REPO, shared_path
 
@@ -23,11 +23,12 @@ def test_resume_from_stored_means_equals_the_uninterrupted_render():
     renderer = Renderer(scene)
     full = renderer.render()
     calls = {"n": 0}
-    partial = renderer.render(should_stop=lambda: calls.__setitem__("n", calls["n"] + 1) or calls["n"] > 2)
+    partial = renderer.render(RenderRequest(should_stop=lambda: calls.__setitem__("n", calls["n"] + 1)
+                                            or calls["n"] > 2))
     assert partial.cancelled and partial.film.spp_image().max() < 6
     stored = film_from_stokes(partial.stokes().astype(np.float32), partial.film.spp_image(),
                               partial.film.stderr_luminance().astype(np.float32))
-    resumed = renderer.render(resume=stored)
+    resumed = renderer.render(RenderRequest(resume=stored))
     assert np.all(resumed.film.spp_image() == 6)
     np.testing.assert_allclose(resumed.stokes(), full.stokes(), rtol=2e-6, atol=1e-8)
     np.testing.assert_allclose(resumed.film.stderr_luminance(), full.film.stderr_luminance(), rtol=1e-3, atol=1e-7)

@@ -11,7 +11,7 @@ from engine.errors import SceneError
 from engine.materials.lambert import Lambert
 from engine.output.exr import read_stokes_exr
 from engine.render.film import Film
-from engine.render.renderer import Renderer
+from engine.render.renderer import Renderer, RenderRequest
 from engine.scene.description import Camera, Mesh, RenderSettings, Scene
 from engine.scene.loader import parse_settings
 from engine.scene.shapes import quad
@@ -274,7 +274,7 @@ def test_a_resumed_stratified_render_equals_the_uninterrupted_one(lamp_reference
     renderer = Renderer(scene)
     first = renderer.render(st).film
     st.spp = 8
-    r = renderer.render(st, resume=first)
+    r = renderer.render(RenderRequest(st, resume=first))
     np.testing.assert_allclose(r.film.sums, ref.film.sums, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(r.film.half_y, ref.film.half_y, rtol=1e-12, atol=1e-12)
 
@@ -340,7 +340,7 @@ def test_stratified_adaptive_sampling_is_deterministic_and_reports_the_stratifie
     for threads, batch in ((1, 1 << 17), (2, 700)):
         st = copy.copy(scene.settings)
         st.threads, st.batch_rays = threads, batch
-        runs.append(renderer.render(st, adaptive=ad))
+        runs.append(renderer.render(RenderRequest(st, adaptive=ad)))
     a, b = runs
     assert np.array_equal(a.film.count, b.film.count) and len(np.unique(a.film.count)) > 1
     assert np.array_equal(a.film.sums, b.film.sums)

@@ -9,7 +9,7 @@ import time
 import numpy as np
 
 from engine.render.film import Film, SampleSums
-from engine.render.renderer import trace_in_order
+from engine.render.driver import trace_in_order
 from engine.spectral.cie import LUMINANCE_WEIGHTS
 
 

@@ -1,6 +1,6 @@
 """The work split: a small image gives every worker a unit, and the image does not depend on it.
 
-engine.render.renderer.work_units groups the passes by ``batch_rays`` alone (the grouping fixes the
+engine.render.plan.work_units groups the passes by ``batch_rays`` alone (the grouping fixes the
 bits of each pixel's sums) and cuts the rows into at least ``workers`` bands (which changes no
 pixel's additions)."""
 
@@ -9,8 +9,9 @@ import copy
 import numpy as np
 import pytest
 
-from engine.render import renderer as renderer_module
-from engine.render.renderer import Renderer, work_units
+from engine.render import driver as driver_module
+from engine.render.plan import work_units
+from engine.render.renderer import Renderer
 from tests.render.test_render_acceptance import peer_scene
 
 
@@ -65,13 +66,13 @@ def test_two_threads_trace_at_least_two_units_and_give_the_same_bits(monkeypatch
     scene.settings.batch_rays = 1 << 17           # every pass fits one batch: one unit per worker count before
     renderer = Renderer(scene)
     traced = []
-    real = renderer_module.trace_in_order
+    real = driver_module.trace_in_order
 
     def spy(units, trace_unit, add_result, workers, stop_requested, abort):
         traced.append((workers, list(units)))
         return real(units, trace_unit, add_result, workers, stop_requested, abort)
 
-    monkeypatch.setattr(renderer_module, "trace_in_order", spy)
+    monkeypatch.setattr(driver_module, "trace_in_order", spy)
     results = {}
     for threads in (1, 2):
         st = copy.copy(scene.settings)
