@@ -1,6 +1,6 @@
 """Simulate only the effects a scene calls for: pick the cheapest exact transport.
 
-Lights are unpolarised, so polarisation can only be created by materials:
+Without polarised sources, polarisation can only be created by materials:
 
 - no material changes polarisation (only depolarisers such as Lambert)
   → scalar transport ("off"): S1 = S2 = S3 = 0 exactly;
@@ -18,6 +18,10 @@ Before choosing, materials are simplified where that is exact (``simplify="auto"
 Each material reports what it can do through its ``flags`` (engine.materials.flags.BSDFFlags:
 POLARISING, RETARDING).  The choice comes with a human-readable reason for logs and Blender's
 render stats, and is overridden by asking for "full", "linear" or "off" explicitly.
+
+Polarised sources (lights and emitters with a ``polarisation``, the polarised sky: ``source_needs``) count
+like materials: a linearly polarised source needs at least linear Stokes, a circularly polarised one full
+Stokes.  Asking for a smaller transport explicitly renders them unpolarised, with a warning in the reason.
 
 Absorbing interiors (``material.interior``, engine.scene.description.Interior) scale the Stokes
 vector by exp(−σ_a d) per wavelength and so never change the choice; the reason lists them.
@@ -68,13 +72,43 @@ def choose_transport(materials: Mapping[str, BSDF], used: set[str] | None = None
     return "off", "scalar transport (S1..S3 = 0): every material depolarises and all lights are unpolarised"
 
 
-def resolve_transport(requested: str, materials: Mapping[str, BSDF], used: set[str] | None = None) -> tuple[str, str]:
+def resolve_transport(requested: str, materials: Mapping[str, BSDF], used: set[str] | None = None,
+                      sources: tuple[str, list[str]] = ("off", [])) -> tuple[str, str]:
     """The transport to run for a requested mode ("auto" or explicit) and why (absorbing interiors
-    listed after it: they never change the choice)."""
+    listed after it: they never change the choice).  ``sources``: (the transport the scene's polarised
+    sources need, their names) — ``source_needs``."""
+    need, names = sources
     if requested != "auto":
-        return requested, f"{requested} (requested)" + absorption_note(materials, used)
+        note = ""
+        if TRANSPORT_SIZES[requested] < TRANSPORT_SIZES[need]:
+            lost = "polarisation" if requested == "off" else "circular polarisation"
+            note = f"; the {lost} of {_list(names)} is not simulated in this transport"
+        return requested, f"{requested} (requested)" + note + absorption_note(materials, used)
     mode, reason = choose_transport(materials, used)
+    if TRANSPORT_SIZES[need] > TRANSPORT_SIZES[mode]:
+        what = "circularly" if need == "full" else "linearly"
+        mode, reason = need, (f"{'full' if need == 'full' else 'linear'} Stokes: {_list(names)} "
+                              f"emit{'s' if len(names) == 1 else ''} {what} polarised light")
+    elif names:
+        reason += f"; polarised sources: {_list(names)}"
     return mode, f"auto → {reason}" + absorption_note(materials, used)
+
+
+def source_needs(scene) -> tuple[str, list[str]]:
+    """(the transport the scene's polarised sources need: "off", "linear" or "full", their names): lights and
+    emissive meshes with a ``polarisation`` (engine.polarisation.sources), an environment with polarisation."""
+    need, names = "off", []
+    items = [(f"lights[{i}]", getattr(light, "polarisation", None)) for i, light in enumerate(scene.lights)]
+    items += [(mesh.name, getattr(mesh, "emission_polarisation", None))
+              for mesh in scene.meshes if mesh.emission is not None]
+    for name, pol in items:
+        kind = getattr(pol, "transport_need", None)
+        if pol is None or kind in (None, "off"):
+            continue
+        names.append(name)
+        if TRANSPORT_SIZES[kind] > TRANSPORT_SIZES[need]:
+            need = kind
+    return need, names
 
 
 def absorption_note(materials: Mapping[str, BSDF], used: set[str] | None = None) -> str:

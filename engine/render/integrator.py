@@ -10,7 +10,8 @@ value M is given in frames (x_in, x_out):
 
     T ← T · R(x_out → x_T) · M,   x_T ← x_in.
 
-Lights are unpolarised, so a light of radiance L_e adds T[:, 0]·L_e.  Paths
+An unpolarised light of radiance L_e adds T[:, 0]·L_e; a polarised one (engine.render.polarised_light)
+T·R(x_e → x_T)·s·L_e with its normalised Stokes vector s in its own frame x_e.  Paths
 are traced in bounded batches; all paths of a batch are at the same depth,
 random numbers come from the stateless sampler (engine.render.sampler), so
 results do not depend on batching.
@@ -48,6 +49,7 @@ from .effects import TRANSPORT_SIZES
 from .lights.lamps import PointEmitter
 from .media import Media, cross
 from .path_state import PathState
+from .polarised_light import in_frame, light_samples_polarisation, mueller_times_stokes
 from .plan import rendered_materials, spectral_reduction
 from .sampler import (PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_JITTER, PAIR_LENS, PAIR_LIGHT_POINT, PAIR_WAVELENGTH,
                       PathSampler, stratified_pair)
@@ -209,6 +211,9 @@ class _LightSamples:
     select_prob: float | np.ndarray
     owners: list
     points: dict
+    #: polarised lights among the chosen: (normalised Stokes (4, n), its frame x_e (3, n)) of each sample's
+    #: light (engine.render.polarised_light); None: every chosen light is unpolarised
+    polarised: tuple | None = None
 
 
 # ----------------------------------------------------------------------------- denoising guides
@@ -540,14 +545,15 @@ class PathTracer:
             rows = miss.nonzero()[0]
             if att is not None:
                 Le = Le * att(rows, np.full(rows.size, np.inf))
-            add_light(radiance, path, T, rows, Le, w, cols(rows))
+            self._add_light(radiance, path, T, rows, Le, w, cols(rows), env, d_miss, state.x_T)
         if self.has_area_lights:
             lit = (compiled.tri_emitter[hits.prim] >= 0) & hit
             if lit.any():
                 idx = lit.nonzero()[0]
                 self._emitter_hits(radiance, path, T, cols, idx, hits.prim[idx], hits.t[idx], d, lk,
                                    prev_delta, prev_pdf, at_prev, bounce == 0,
-                                   bary=(hits.u[idx], hits.v[idx]) if self.textured_lights else None, att=att)
+                                   bary=(hits.u[idx], hits.v[idx]) if self.textured_lights else None, att=att,
+                                   x_T=state.x_T)
         if light_set.hittable:
             # analytic lamps (sphere/disk lights, sun discs): seen, never occluding
             seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
@@ -562,18 +568,32 @@ class PathTracer:
                         Le = Le * att(rows, self._lamp_distances(light, o, d, seg, rows))
                     p_light = pdf_l * light_set.prob_at(li, *at_prev(rows))
                     w = np.where(prev_delta[rows], 1.0, power_heuristic(prev_pdf[rows], p_light))
-                    add_light(radiance, path, T, rows, Le, w, cols(rows))
+                    self._add_light(radiance, path, T, rows, Le, w, cols(rows), light, d[:, rows], state.x_T)
         if compiled.has_passthrough:
             # lamps (non-occluding emitters) crossed before the hit: they add light, the ray goes on
             seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
             for rows, prims, dists in compiled.passthrough_hits(o, d, seg):
                 self._emitter_hits(radiance, path, T, cols, rows, prims, dists, d, lk, prev_delta, prev_pdf,
-                                   at_prev, bounce == 0, o=o, att=att)
+                                   at_prev, bounce == 0, o=o, att=att, x_T=state.x_T)
         if segment is not None and segment.absorbs:
             # the paths' transmittance up to their hits (the paths that missed end here)
             every = np.arange(state.n)
             seg_tau = segment.transmittance(every, np.where(hit, hits.t, 0.0))
             state.tau = seg_tau if state.tau is None else state.tau * seg_tau
+
+    def _add_light(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, rows: np.ndarray, Le: np.ndarray,
+                   w: np.ndarray, T_cols: np.ndarray, light, d: np.ndarray, x_T: np.ndarray | None) -> None:
+        """Light of radiance ``Le`` (L, m) from ``light`` reaching the paths ``rows`` along their segments ``d``
+        (3, m), MIS weight ``w`` (m,): T[:, 0] · Le · w (add_light), or for a polarised light in a polarising
+        transport T · R(x_e → x_T) · s · Le · w with the light's Stokes vector s (engine.render.polarised_light)."""
+        if light.polarisation is None or self.P == 1 or x_T is None:
+            add_light(radiance, path, T, rows, Le, w, T_cols)
+            return
+        k = -d
+        s, x_e = light.emitted_polarisation(k)
+        s = in_frame(s, x_e, x_T[:, rows], k)[:self.P]
+        cols = rows if T_cols is None else T_cols
+        radiance[:, :, path[rows]] += throughput_times_stokes(T, cols, s[:, None, :], Le * w[None, :])
 
     @staticmethod
     def _attenuation(state: PathState, segment):
@@ -946,8 +966,12 @@ class PathTracer:
         choice, u_rest, chosen_prob = light_set.choose(u[0], sp.p, n_side)
         lights_chosen = np.unique(choice)
         if len(lights_chosen) == 1:
-            return self._sample_one_light(int(lights_chosen[0]), sp, lookup, u, u_rest, chosen_prob)
-        return self._sample_several_lights(lights_chosen, choice, sp, lookup, u, u_rest, chosen_prob, L)
+            ls = self._sample_one_light(int(lights_chosen[0]), sp, lookup, u, u_rest, chosen_prob)
+        else:
+            ls = self._sample_several_lights(lights_chosen, choice, sp, lookup, u, u_rest, chosen_prob, L)
+        if light_set.polarised and self.P > 1:
+            ls.polarised = light_samples_polarisation(light_set, ls.owners, ls.wi)
+        return ls
 
     def _sample_one_light(self, li: int, sp: ShadingPoint, lookup: WavelengthLookup, u: np.ndarray,
                           u_rest: np.ndarray, chosen_prob: np.ndarray | None) -> _LightSamples:
@@ -1014,13 +1038,15 @@ class PathTracer:
         ls.ok &= cos_i > 0
         if not ls.ok.any():
             return None
-        S = self._unpolarised_bsdf_response(sp, bsdf, x_T, ls.wi)
+        S = self._bsdf_response(sp, bsdf, x_T, ls.wi, ls.polarised)
         mis = self._light_mis(sp, bsdf, ls)
         return S, value * (cos_i * mis / ls.select_prob * ls.ok)[None, :]
 
-    def _unpolarised_bsdf_response(self, sp: ShadingPoint, bsdf: BSDF, x_T: np.ndarray, wi: np.ndarray) -> np.ndarray:
-        """The Stokes vector (P, L, n) (depolarisers: (1, L, n)) the BSDF scatters towards wo from unpolarised
-        light arriving along wi (3, n), in the paths' frames ``x_T``."""
+    def _bsdf_response(self, sp: ShadingPoint, bsdf: BSDF, x_T: np.ndarray, wi: np.ndarray,
+                       polarised: tuple | None = None) -> np.ndarray:
+        """The Stokes vector (P, L, n) (depolarisers: (1, L, n)) the BSDF scatters towards wo from light of unit
+        radiance arriving along wi (3, n), in the paths' frames ``x_T``: unpolarised light, or with ``polarised``
+        = (normalised Stokes (4, n), its frame x_e (3, n)) polarised light (engine.render.polarised_light)."""
         P = self.P
         f = bsdf.eval(sp, wi)
         if not bsdf.radiance_scaling:          # Cycles' convention (BSDF.radiance_scaling)
@@ -1028,8 +1054,12 @@ class PathTracer:
             if k is not None:
                 through = dot(wi, sp.n_g) * dot(sp.wo, sp.n_g) < 0
                 f = f.scaled(np.where(through, k, 1.0)[None, :])
-        # light leaving a depolariser has only S0
-        S = unpolarised_response(f, 1 if f.kind == "depolarising" else P)
+        if polarised is not None and f.kind != "depolarising":
+            s_in = in_frame(polarised[0], polarised[1], f.x_in, -wi)
+            S = mueller_times_stokes(f, s_in, P)
+        else:
+            # light leaving a depolariser has only S0
+            S = unpolarised_response(f, 1 if f.kind == "depolarising" else P)
         if P > 1 and f.kind != "depolarising":
             c2, s2 = frame_rotation(f.x_out, x_T, sp.wo)
             S = rotate_stokes(S, c2, s2)
@@ -1093,7 +1123,7 @@ class PathTracer:
     def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, cols, idx: np.ndarray,
                       prims: np.ndarray, dists: np.ndarray, d: np.ndarray, lk: WavelengthLookup, prev_delta: np.ndarray,
                       prev_pdf: np.ndarray, at_prev, camera: bool, bary=None, o: np.ndarray | None = None,
-                      att=None, scale: np.ndarray | None = None) -> None:
+                      att=None, scale: np.ndarray | None = None, x_T: np.ndarray | None = None) -> None:
         """Emission picked up where the rays ``idx`` (each at most once) hit or cross emitting
         triangles ``prims`` at distances ``dists``, MIS-weighted against next-event estimation
         from the vertices the rays left (``at_prev(rows)``: their positions and side normals).
@@ -1102,7 +1132,8 @@ class PathTracer:
         Lights whose radiance varies over the surface read it at the hits: their barycentrics
         ``bary`` = (u, v) (n,) each, or where None, at the points o + dists·d of the rays' origins
         ``o`` (3, N) (crossings of non-occluding emitters).  ``att(rows, s)``: the paths' absorption up
-        to distance s (PathTracer._attenuation; None: none).  ``scale`` (n,): a weight per ray ``idx`` (None: 1)."""
+        to distance s (PathTracer._attenuation; None: none).  ``scale`` (n,): a weight per ray ``idx`` (None: 1).
+        ``x_T`` (3, N): the paths' frames (polarised emitters' light is put into them)."""
         light_set = self.lights
         emitter = self.scene.tri_emitter[prims]
         cos_hit = -dot(d[:, idx], self.scene.tri_normal[prims].T)
@@ -1145,4 +1176,4 @@ class PathTracer:
                 p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], *where)
             p_light = p_light * light_set.prob_at(li, *prev)
             wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
-            add_light(radiance, path, T, sel, Le, wsel, cols(sel))
+            self._add_light(radiance, path, T, sel, Le, wsel, cols(sel), light, d[:, sel], x_T)

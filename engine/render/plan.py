@@ -19,7 +19,7 @@ import numpy as np
 
 from ..materials.base import BSDF, BSDFFlags
 from ..scene.description import RenderSettings
-from .effects import effective_materials, resolve_transport
+from .effects import effective_materials, resolve_transport, source_needs
 
 #: (x0, y0, x1, y1): a pixel rectangle, row 0 at the top, x1 and y1 exclusive.
 Window = tuple[int, int, int, int]
@@ -136,7 +136,7 @@ class RenderPlan:
         requested = settings or scene.settings
         materials, simplified = rendered_materials(compiled, requested.simplify, scene.materials)
         polarisation, reason = resolve_transport(requested.polarisation, dict(zip(compiled.material_names, materials)),
-                                                 compiled.used_material_names)
+                                                 compiled.used_material_names, sources=source_needs(scene))
         st = dataclasses.replace(requested, polarisation=polarisation)
         W, H = scene.camera.width, scene.camera.height
         if workers is None:

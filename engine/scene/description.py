@@ -191,6 +191,10 @@ class Mesh:
     #: attenuated by them, engine.materials.mix.emission_weight); scene files: ``"under_layers": true`` in the
     #: object's "emission".  A class attribute for the same reason as ``emission_sampling``
     emission_under_layers = False
+    #: the emission's polarisation and reference axis (as PointLight.polarisation; None: unpolarised; the axis
+    #: None: the surface's UV tangent, else world +X): scene files' ``"polarisation"`` in the object's "emission"
+    emission_polarisation = None
+    emission_axis = None
 
 
 @dataclass
@@ -205,6 +209,11 @@ class PointLight:
     radius: float = 0.0
     soft_falloff: bool = True
     visible_camera: bool = True   # camera rays see the disk/sphere (radius > 0)
+    #: the light's polarisation (engine.polarisation.sources.SourcePolarisation; None: unpolarised) and its
+    #: reference axis (3,) in world space (None: the default of engine.polarisation.sources); class
+    #: attributes set on the instance only when polarised, so the fingerprints of existing scenes are unchanged
+    polarisation = None
+    polarisation_axis = None
 
 
 @dataclass
@@ -220,6 +229,11 @@ class SpotLight:
     radius: float = 0.0           # as PointLight.radius
     soft_falloff: bool = True
     visible_camera: bool = True
+    #: the light's polarisation (engine.polarisation.sources.SourcePolarisation; None: unpolarised) and its
+    #: reference axis (3,) in world space (None: the default of engine.polarisation.sources); class
+    #: attributes set on the instance only when polarised, so the fingerprints of existing scenes are unchanged
+    polarisation = None
+    polarisation_axis = None
 
 
 @dataclass
@@ -230,6 +244,11 @@ class DirectionalLight:
     #: (Cycles' sun angle: soft shadows, same irradiance)
     angle_deg: float = 0.0
     visible_camera: bool = True   # camera rays see the sun's disc (angle > 0)
+    #: the light's polarisation (engine.polarisation.sources.SourcePolarisation; None: unpolarised) and its
+    #: reference axis (3,) in world space (None: the default of engine.polarisation.sources); class
+    #: attributes set on the instance only when polarised, so the fingerprints of existing scenes are unchanged
+    polarisation = None
+    polarisation_axis = None
 
 
 #: texel grids of an equirectangular map (column i always at u = (i + ½)/W):
@@ -255,6 +274,13 @@ class EnvironmentLight:
     rotation_deg: float = 0.0
     grid: str = "cycles"
     interpolation_space: str = "linear"
+    #: a polarised environment (class attributes, set on the instance only then, so the fingerprints of existing
+    #: scenes are unchanged): ``polarisation`` an engine.polarisation.sources.DirectionalPolarisation, and
+    #: ``stokes`` (H, W, 3) the map's normalised S1, S2, S3 (engine.render.lights.EnvironmentMapEmitter.set_stokes)
+    #: or ``sky`` the clear-sky model whose polarisation it has (engine.spectral.daylight.ClearSky)
+    polarisation = None
+    stokes = None
+    sky = None
 
 
 #: The spectral modes of RenderSettings.spectral.

@@ -26,6 +26,7 @@ from ..files import refuse_special_file
 from ..materials.catalogue import MODELS
 from ..materials.mix import MAX_COMPONENTS, Mix, map_normals
 from ..materials.normal_map import ShadingNormal
+from ..polarisation.sources import DirectionalPolarisation, parse_polarisation
 from ..textures import TexturedNumber, parse_texture_input, textured_emission
 from ..textures.image import read_image
 from .description import (EMISSION_SAMPLING, ENVMAP_GRIDS, SAMPLERS, SPECTRAL_MODES, Camera, DirectionalLight,
@@ -912,7 +913,9 @@ def parse_transform(d, field: str) -> np.ndarray:
 def _parse_light_base(d: dict, field: str, base_dir: str = "."):
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object with a 'type'")
-    kind = choice(_require(d, "type", field), f"{field}.type", ("environment", "point", "spot", "directional"))
+    kind = choice(_require(d, "type", field), f"{field}.type", ("environment", "sky", "point", "spot", "directional"))
+    if kind == "sky":
+        return _sky(d, field)
     if kind == "environment":
         if "image" in d:
             return _environment_map(d, field, base_dir)
@@ -947,11 +950,11 @@ def _parse_light_base(d: dict, field: str, base_dir: str = "."):
 # original meaning, so existing and peer scenes render exactly as before.
 
 #: optional keys of each light type
-LIGHT_OPTIONS = {"point": ("radius", "soft_falloff", "visible_camera"),
-                 "spot": ("radius", "soft_falloff", "visible_camera", "blend_profile"),
-                 "directional": ("angle_deg", "visible_camera")}
-#: optional emitter options inside "emission" (Mesh fields; defaults: one-sided, opaque, Lambertian)
-EMITTER_OPTIONS = ("two_sided", "occluder", "spread_deg", "sampling", "under_layers")
+LIGHT_OPTIONS = {"point": ("radius", "soft_falloff", "visible_camera", "polarisation"),
+                 "spot": ("radius", "soft_falloff", "visible_camera", "blend_profile", "polarisation"),
+                 "directional": ("angle_deg", "visible_camera", "polarisation")}
+#: optional emitter options inside "emission" (Mesh fields; defaults: one-sided, opaque, Lambertian, unpolarised)
+EMITTER_OPTIONS = ("two_sided", "occluder", "spread_deg", "sampling", "under_layers", "polarisation")
 
 
 def _flag(d, key: str, field: str, default: bool) -> bool:
@@ -966,7 +969,7 @@ def _environment_map(d: dict, field: str, base_dir: str) -> EnvironmentLight:
     with OpenEXR, PNG/JPEG/TIFF through engine.textures.image), ``strength``, ``rotation_deg``
     (about +Z, counter-clockwise seen from above; or Euler angles [x, y, z], order XYZ as Blender's)
     and the texel ``grid`` (default "cycles")."""
-    _check_keys(d, field, {"type", "image", "strength", "rotation_deg", "grid", "note"})
+    _check_keys(d, field, {"type", "image", "strength", "rotation_deg", "grid", "note", "polarisation"})
     path = d["image"]
     if not isinstance(path, str) or not path:
         raise SceneError(f"{field}.image", "must be the path of an image file")
@@ -992,8 +995,87 @@ def _environment_map(d: dict, field: str, base_dir: str) -> EnvironmentLight:
     else:
         rotation = number(rotation, f"{field}.rotation_deg", -360.0, 360.0)
     grid = choice(d.get("grid", "cycles"), f"{field}.grid", ENVMAP_GRIDS)
-    return EnvironmentLight(RGBIlluminantSpectrum([1.0, 1.0, 1.0], strength), image=rgb, strength=strength,
-                            rotation_deg=rotation, grid=grid)
+    light = EnvironmentLight(RGBIlluminantSpectrum([1.0, 1.0, 1.0], strength), image=rgb, strength=strength,
+                             rotation_deg=rotation, grid=grid)
+    if _flag(d, "polarisation", field, True):
+        stokes = stokes_channels(os.path.join(base_dir, path), rgb.shape[:2], f"{field}.image")
+        if stokes is not None:         # set only then: unpolarised maps keep their fingerprints
+            light.stokes = stokes
+            light.polarisation = DirectionalPolarisation(
+                "full" if np.abs(stokes[..., 2]).max(initial=0.0) > 0 else "linear", f"{field}.image")
+    return light
+
+
+#: texels (width, height) of the equirectangular map a ``sky`` environment's radiance is tabulated in
+SKY_MAP_SIZE = (512, 256)
+SKY_POLARISATION_KEYS = {"model", "delta", "max_degree", "neutral_separation_deg", "berry_degree"}
+
+
+def _sky(d: dict, field: str) -> EnvironmentLight:
+    """A clear sky (engine.spectral.daylight.ClearSky): Preetham's radiance × ``strength`` tabulated in an
+    equirectangular map (SKY_MAP_SIZE, importance-sampled), polarised by the model named in "polarisation"
+    ({"model": "berry" | "rayleigh", …}; "none": unpolarised)."""
+    from ..spectral.daylight import ClearSky, max_degree_for_turbidity
+    _check_keys(d, field, {"type", "sun_direction", "turbidity", "strength", "polarisation", "ground", "note"})
+    sun = vec3(_require(d, "sun_direction", field), f"{field}.sun_direction", unit=True)
+    strength = number(d.get("strength", 1.0), f"{field}.strength", 0, MAX_LIGHT)
+    pol = d.get("polarisation", {"model": "berry"})
+    if pol == "none":
+        pol = None
+    elif not isinstance(pol, dict):
+        raise SceneError(f"{field}.polarisation", 'must be an object such as {"model": "berry"} or "none"')
+    else:
+        _check_keys(pol, f"{field}.polarisation", SKY_POLARISATION_KEYS)
+    kwargs = {k: v for k, v in (pol or {}).items()}
+    kwargs.setdefault("model", "berry")
+    turbidity = d.get("turbidity", 2.2)
+    if "max_degree" not in kwargs and isinstance(turbidity, (int, float)) and not isinstance(turbidity, bool):
+        kwargs["max_degree"] = max_degree_for_turbidity(turbidity)      # hazier skies polarise less
+    try:
+        sky = ClearSky(sun_direction=tuple(sun), turbidity=turbidity, ground=d.get("ground", "horizon"), **kwargs)
+    except SceneError as e:
+        where = f"{field}.polarisation.{e.field}" if e.field in SKY_POLARISATION_KEYS else f"{field}.{e.field}"
+        raise SceneError(where, e.reason) from None
+    W, H = SKY_MAP_SIZE
+    v = (np.arange(H) + 0.5) / H                         # the "cycles" grid: row j at v = (j + ½)/H
+    u = (np.arange(W) + 0.5) / W
+    theta, phi = np.pi * v[:, None], np.pi * (1.0 - 2.0 * u[None, :])    # u = ½ − φ/2π (EnvironmentMapEmitter)
+    dirs = np.stack(np.broadcast_arrays(np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)),
+                    axis=-1).reshape(-1, 3)
+    image = (sky.rgb(dirs) * strength).reshape(H, W, 3)
+    light = EnvironmentLight(RGBIlluminantSpectrum([1.0, 1.0, 1.0], 1.0), image=image, strength=1.0,
+                             grid="cycles")
+    light.sky = sky
+    if pol is not None:
+        light.polarisation = DirectionalPolarisation("linear", f"{field} ({sky.model} clear sky)")
+    return light
+
+
+def stokes_channels(path: str, shape, field: str):
+    """The normalised linear and circular Stokes components (H, W, 3) of an EXR with Polar's channel names
+    (S0.R … S3.B: engine.output.exr), s_k = Y(S_k)/Y(S0) per texel (Y: Rec.709 luminance; 0 where Y(S0) ≤ 0),
+    scaled down where the degree would exceed 1; None for any other file.  Row 0 = the top of the image."""
+    if not path.lower().endswith(".exr"):
+        return None
+    import OpenEXR
+    try:
+        with OpenEXR.File(path, separate_channels=True) as f:
+            chans = {n: np.asarray(c.pixels, np.float64) for part in f.parts for n, c in part.channels.items()}
+    except Exception as e:          # the image itself was read; an unreadable header here is the same file
+        raise SceneError(field, f"cannot read its channels: {e}") from None
+    names = [f"S{k}.{c}" for k in range(4) for c in "RGB"]
+    if not all(n in chans for n in names[3:9]):         # S1 and S2 at least
+        return None
+    weights = (0.2126, 0.7152, 0.0722)
+    Y = [sum(w * chans.get(f"S{k}.{c}", 0.0) for w, c in zip(weights, "RGB")) for k in range(4)]
+    if any(np.shape(y) != tuple(shape) for y in Y[:3]):
+        raise SceneError(field, f"its Stokes channels are {np.shape(Y[1])}, its image {tuple(shape)}")
+    y0 = np.where(Y[0] > 0, Y[0], 1.0)
+    st = np.stack([np.where(Y[0] > 0, np.broadcast_to(Y[k], Y[0].shape) / y0, 0.0) for k in (1, 2, 3)], axis=-1)
+    if not np.isfinite(st).all():
+        raise SceneError(field, "its Stokes channels must be finite")
+    dop = np.sqrt((st ** 2).sum(axis=-1))
+    return st / np.maximum(dop, 1.0)[..., None]
 
 
 def parse_light(d: dict, field: str, base_dir: str = "."):
@@ -1009,6 +1091,9 @@ def parse_light(d: dict, field: str, base_dir: str = "."):
         light.angle_deg = number(d.get("angle_deg", 0.0), f"{field}.angle_deg", 0, 180, hi_open=True)
     if not isinstance(light, EnvironmentLight):
         light.visible_camera = _flag(d, "visible_camera", field, True)
+        pol, axis = parse_polarisation(d.get("polarisation"), f"{field}.polarisation")
+        if pol.polarised:          # (set only then: unpolarised lights keep their fingerprints)
+            light.polarisation, light.polarisation_axis = pol, axis
     return light
 
 
@@ -1034,6 +1119,9 @@ def _emitter_options(d, field: str) -> dict:
         out["emission_sampling"] = choice(d["sampling"], f"{field}.sampling", EMISSION_SAMPLING)
     if _flag(d, "under_layers", field, False):
         out["emission_under_layers"] = True
+    pol, axis = parse_polarisation(d.get("polarisation"), f"{field}.polarisation")
+    if pol.polarised:
+        out["emission_polarisation"], out["emission_axis"] = pol, axis
     return out
 
 

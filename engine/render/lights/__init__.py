@@ -1,7 +1,8 @@
 """Light sources for next-event estimation and for rays that hit emitters.
 
-All lights are unpolarised, so only their spectral radiance matters: a light
-contributes the Stokes vector L·(1, 0, 0, 0) in any frame.
+A light contributes the Stokes vector L·(1, 0, 0, 0) in any frame, unless it is polarised: then
+``polarisation`` is set and ``emitted_polarisation(k)`` gives its normalised Stokes vectors and their
+frame for light leaving along k (engine.polarisation.sources; the integrator's engine.render.polarised_light).
 
 ``sample(p, u)`` returns, for receiving points p (3, N), a direction wi
 towards the light, the distance to it (inf for lights at infinity), a factor

@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from ...materials.sampling import local_to_world
+from ...polarisation.sources import emitter_frame, reference_axes
 from ...spectral import GRID_NM, spectrum_to_linear_srgb
 
 
@@ -36,8 +37,27 @@ class _Light:
     shades_nothing = False
     varies_over_surface = False       # radiance per point (TexturedAreaEmitter: sample_points, emitted_at)
 
+    #: the emitted light's polarisation (engine.polarisation.sources.SourcePolarisation; None: unpolarised)
+    #: and its reference axes (axis, other), set by LightSet.set_polarisation
+    polarisation = None
+    polarisation_axes = None
+
     def __init__(self, spectrum):
         self.spectrum = spectrum
+
+    def set_polarisation(self, polarisation, axis=None) -> None:
+        """Polarise this light (``polarisation``: a SourcePolarisation; ``axis``: its reference axis (3,) in
+        world space, None: world +X); an unpolarised ``polarisation`` leaves it unpolarised."""
+        if polarisation is not None and polarisation.polarised:
+            self.polarisation, self.polarisation_axes = polarisation, reference_axes(axis)
+
+    def emitted_polarisation(self, k: np.ndarray):
+        """(normalised Stokes (4, n), frame x (3, n)) of the light leaving along the unit directions k (3, n)
+        (its frame: x ⟂ k, y = k × x), or None for an unpolarised light."""
+        if self.polarisation is None:
+            return None
+        x = emitter_frame(*self.polarisation_axes, k)
+        return np.repeat(self.polarisation.stokes()[:, None], k.shape[1], axis=1), x
 
     def radiance(self, lam, mono) -> np.ndarray:
         return self.spectrum.eval(lam, mono=mono)

@@ -150,6 +150,70 @@ class EnvironmentMapEmitter(_Light):
         piece_mean = 0.25 * (rows[:-1] + rows[1:] + rows_right[:-1] + rows_right[1:])
         self._rgb = self.strength * np.einsum("kwc,kw->c", piece_mean, omega) / (4.0 * math.pi)
 
+    def set_stokes(self, stokes, polarisation) -> None:
+        """Polarise the map: ``stokes`` (H, W, 3) the normalised S1, S2, S3 of each texel (degree ≤ 1) in the
+        map's frame (x = unit(Z × ω) in map coordinates: the tangent of increasing longitude, y = k × x, k = −ω,
+        as an equirectangular Polar render's frame), ``polarisation`` a DirectionalPolarisation."""
+        s = np.asarray(stokes, np.float64)
+        if s.shape != self.texels.shape:
+            raise SceneError("image", f"the Stokes channels have shape {s.shape}, the map {self.texels.shape}")
+        self._stokes = s
+        self.polarisation = polarisation
+
+    def set_sky(self, sky, polarisation) -> None:
+        """Polarise the map as the clear sky ``sky`` (engine.spectral.daylight.ClearSky, world frame:
+        its sun direction is not turned with the map) polarises daylight; ``polarisation`` a
+        DirectionalPolarisation."""
+        self._sky = sky
+        self.polarisation = polarisation
+
+    def _bilinear(self, img, u, v):
+        """Bilinear lookup of ``img`` (H, W, C) on the map's texel grid at (u, v) (N,) each → (N, C)."""
+        H, W = img.shape[:2]
+        x = np.mod(u * W - 0.5, W)
+        i0 = np.minimum(np.floor(x), W - 1).astype(np.int64)
+        fx = (x - i0)[:, None]
+        if self.grid == "mitsuba":
+            y = v * (H - 1)
+            j0 = np.minimum(np.floor(y), H - 2).astype(np.int64)
+            fy = (y - j0)[:, None]
+        else:
+            y = v * H - 0.5
+            j0 = np.clip(np.floor(y), 0, H - 2).astype(np.int64)
+            fy = np.clip(y - j0, 0.0, 1.0)[:, None]
+        i1 = (i0 + 1) % W
+        top = img[j0, i0] * (1 - fx) + img[j0, i1] * fx
+        bot = img[j0 + 1, i0] * (1 - fx) + img[j0 + 1, i1] * fx
+        return top * (1 - fy) + bot * fy
+
+    def emitted_polarisation(self, k):
+        """(normalised Stokes (4, n), frame x (3, n)) of the sky light travelling along k (3, n), ω = −k: a
+        clear sky's (``set_sky``), or the map's Stokes channels (bilinear) in its frame x = unit(Z_map × ω) (at
+        the poles the tangent of longitude 0) turned with the map into the world; None: unpolarised."""
+        if self.polarisation is None:
+            return None
+        w = -k
+        if getattr(self, "_sky", None) is not None:
+            # linear, along the sky's electric field e (⟂ ω): S = (1, P, 0, 0) in the frame x = e
+            dolp, e = self._sky.polarisation(w.T)
+            s = np.zeros((4, w.shape[1]))
+            s[0], s[1] = 1.0, dolp
+            return s, np.ascontiguousarray(e.T)
+        u, v = self._uv(w)
+        s = np.empty((4, w.shape[1]))
+        s[0] = 1.0
+        s[1:] = self._bilinear(self._stokes, u, v).T
+        wm = self._to_map(w)
+        x = np.stack((-wm[1], wm[0], np.zeros_like(wm[0])))
+        norm = np.sqrt(x[0] ** 2 + x[1] ** 2)
+        x = np.where(norm > 1e-12, x / np.where(norm > 1e-12, norm, 1.0), np.array([[0.0], [1.0], [0.0]]))
+        if self.turn is not None:
+            x = self.turn @ x
+        elif self.rotation:
+            c, sn = math.cos(self.rotation), math.sin(self.rotation)
+            x = np.stack((c * x[0] - sn * x[1], sn * x[0] + c * x[1], x[2]))
+        return s, x
+
     def _to_map(self, d):
         """Directions (3, N) turned by −rotation about +Z (world → map frame)."""
         if self.turn is not None:
@@ -169,23 +233,7 @@ class EnvironmentMapEmitter(_Light):
     def lookup_rgb(self, d):
         """Linear sRGB radiance (N, 3) × strength in the world directions d (3, N)."""
         u, v = self._uv(d)
-        H, W = self.texels.shape[:2]
-        x = np.mod(u * W - 0.5, W)
-        i0 = np.minimum(np.floor(x), W - 1).astype(np.int64)
-        fx = (x - i0)[:, None]
-        if self.grid == "mitsuba":
-            y = v * (H - 1)
-            j0 = np.minimum(np.floor(y), H - 2).astype(np.int64)
-            fy = (y - j0)[:, None]
-        else:
-            y = v * H - 0.5
-            j0 = np.clip(np.floor(y), 0, H - 2).astype(np.int64)
-            fy = np.clip(y - j0, 0.0, 1.0)[:, None]
-        i1 = (i0 + 1) % W
-        img = self._interpolated
-        top = img[j0, i0] * (1 - fx) + img[j0, i1] * fx
-        bot = img[j0 + 1, i0] * (1 - fx) + img[j0 + 1, i1] * fx
-        rgb = top * (1 - fy) + bot * fy
+        rgb = self._bilinear(self._interpolated, u, v)
         return (np.maximum(srgb_to_linear(rgb), 0.0) if self._decode else rgb) * self.strength
 
     def emitted(self, d, lookup, rgb_mode: bool, mono: bool):

@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...errors import SceneError
+from ...polarisation.sources import uv_tangent
 from ...kernels.light_sampling import (GLOBAL_SHARE, SELECT_CONSTANT, SELECTION_PARAMS, choose_light,
                                        selection_probabilities)
 from ...scene.description import DirectionalLight, EnvironmentLight, PointLight, SpotLight
@@ -39,6 +40,8 @@ class LightSet:
         self.camera_hidden = set()     # lights (indices) that camera rays do not see
         self._mesh_emitters(scene, compiled)
         self._lamps(scene)
+        #: some light emits polarised light (engine.render.polarised_light): the transport carries it
+        self.polarised = any(light.polarisation is not None for light in self.lights)
         self._selection(scene, compiled)
         self._spatial_records()
         self.hittable = [i for i, light in enumerate(self.lights) if light.hittable]
@@ -61,6 +64,10 @@ class LightSet:
                                                        f"meshes[{mesh_index}] ({mesh.name!r}).emission"))
             else:
                 self.lights.append(mesh_emitter(mesh.emission, tris, compiled, two_sided, spread))
+            if getattr(mesh, "emission_polarisation", None) is not None:
+                axis = getattr(mesh, "emission_axis", None)
+                self.lights[-1].set_polarisation(mesh.emission_polarisation, axis if axis is not None else
+                                                 uv_tangent(mesh.vertices, mesh.faces, mesh.uv))
             if getattr(mesh, "emission_under_layers", False):
                 _under_layers(self.lights[-1], compiled, tris)
             if not getattr(mesh, "visible_indirect", True):
@@ -77,6 +84,10 @@ class LightSet:
                                     EnvironmentMapEmitter(image, light.strength, light.rotation_deg, light.grid,
                                                           interpolation_space=getattr(light, "interpolation_space",
                                                                                       "linear")))
+                if getattr(light, "stokes", None) is not None and image is not None:
+                    self.environment.set_stokes(light.stokes, light.polarisation)
+                elif getattr(light, "sky", None) is not None and image is not None:
+                    self.environment.set_sky(light.sky, light.polarisation)
                 self.environment_index = len(self.lights)
                 self.lights.append(self.environment)
             elif isinstance(light, SpotLight):
@@ -93,6 +104,8 @@ class LightSet:
             else:       # e.g. a light of another copy of this package: never leave a light out silently
                 raise SceneError(f"lights[{index}]", f"is a {type(light).__module__}.{type(light).__name__}, not "
                                                      "one of engine.scene.description's light types")
+            self.lights[-1].set_polarisation(getattr(light, "polarisation", None),
+                                             getattr(light, "polarisation_axis", None))
 
     def _selection(self, scene, compiled) -> None:
         """Selection probabilities: uniform, or by power (``light_selection``)."""
