@@ -1,4 +1,5 @@
-"""Operators: put a Polarising BSDF into the active material."""
+"""Operators: put a Polarising BSDF into the active material, add the compositor groups, estimate the cost,
+the LCD screen preset of a light or an emission."""
 
 import copy
 
@@ -112,7 +113,34 @@ class POLAR_OT_estimate_cost(bpy.types.Operator):
         return {"FINISHED"}
 
 
+class POLAR_OT_lcd_screen_preset(bpy.types.Operator):
+    """Make this light, or this material's emission, an LCD screen: fully linearly polarised at 45° from its X
+    axis (the front polariser of twisted-nematic panels; docs/guide/polariser-and-passes.md says why)"""
+
+    bl_idname = "polar.lcd_screen_preset"
+    bl_label = "LCD Screen"
+    bl_options = {"REGISTER", "UNDO"}
+
+    target: bpy.props.EnumProperty(items=[("LIGHT", "Light", ""), ("MATERIAL", "Material", "")], default="LIGHT")
+
+    @classmethod
+    def poll(cls, context):
+        return getattr(context, "light", None) is not None or getattr(context, "material", None) is not None
+
+    def execute(self, context):
+        import math
+
+        from ..engine.polarisation.sources import LCD_ANGLE_DEG
+        owner = context.light if self.target == "LIGHT" else context.material
+        if owner is None:
+            self.report({"ERROR"}, f"Polar: no active {self.target.lower()}")
+            return {"CANCELLED"}
+        settings = owner.polar
+        settings.polarisation, settings.degree, settings.angle = "LINEAR", 1.0, math.radians(LCD_ANGLE_DEG)
+        return {"FINISHED"}
+
+
 classes = (POLAR_OT_add_polarising_bsdf, POLAR_OT_add_virtual_polariser, POLAR_OT_add_polar_denoise,
-           POLAR_OT_estimate_cost)
+           POLAR_OT_estimate_cost, POLAR_OT_lcd_screen_preset)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

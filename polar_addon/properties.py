@@ -1,9 +1,12 @@
-"""Polar's settings stored in .blend files: render settings (Scene), pass toggles (ViewLayer).
+"""Polar's settings stored in .blend files: render settings (Scene), pass toggles (ViewLayer), the
+polarisation of lights (Light), of a material's emission (Material) and of a Sky Texture (World).
 
 Enum items carry explicit numbers: Blender stores enums as integers in files,
 so the numbers are stable forever — add new items with new numbers, never
 renumber or reorder.
 """
+
+import math
 
 import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty, IntProperty,
@@ -206,7 +209,59 @@ class PolarViewLayerSettings(bpy.types.PropertyGroup):
         return [name for name in PASS_NAMES if getattr(self, pass_property(name))]
 
 
-classes = (PolarRenderSettings, PolarViewLayerSettings)
+SOURCE_POLARISATION_ITEMS = [
+    ("NONE", "Unpolarised", "The source emits unpolarised light (as every Cycles light)", 0),
+    ("LINEAR", "Linear", "Linearly polarised at an angle measured in the source's own frame (the light's local X "
+     "axis; on a mesh its UV map's U direction, else the object's local X), e.g. an LCD screen", 1),
+    ("CIRCULAR", "Circular", "Circularly polarised (e.g. a 3D cinema projector, an OLED screen's circular "
+     "polariser seen from behind)", 2),
+]
+HANDEDNESS_ITEMS = [
+    ("RIGHT", "Right", "Right-handed: S3 > 0 (optics convention: clockwise to a viewer looking into the beam)", 0),
+    ("LEFT", "Left", "Left-handed: S3 < 0", 1),
+]
+SOURCE_POLARISATION_TO_ENGINE = {"NONE": "none", "LINEAR": "linear", "CIRCULAR": "circular"}
+
+
+class PolarSourceSettings(bpy.types.PropertyGroup):
+    """The polarisation of a light, or of a material's emission (Emission shader, Principled emission)."""
+    polarisation: EnumProperty(name="Polarisation", items=SOURCE_POLARISATION_ITEMS, default="NONE",
+                               description="The polarisation of the emitted light")
+    degree: FloatProperty(name="Degree", min=0.0, max=1.0, default=1.0, subtype="FACTOR",
+                          description="Degree of polarisation: 1 fully polarised, 0 unpolarised")
+    angle: FloatProperty(name="Angle", default=0.0, subtype="ANGLE", soft_min=-math.pi, soft_max=math.pi,
+                         description="Angle of the electric field from the source's X axis towards its Y axis "
+                         "(seen along the light's travel)")
+    handedness: EnumProperty(name="Handedness", items=HANDEDNESS_ITEMS, default="RIGHT")
+
+    def engine_dict(self):
+        """The scene format's "polarisation" object (engine.polarisation.sources), None when unpolarised."""
+        kind = SOURCE_POLARISATION_TO_ENGINE[self.polarisation]
+        if kind == "none" or self.degree <= 0.0:
+            return None
+        if kind == "linear":
+            return {"type": "linear", "degree": float(self.degree), "angle": math.degrees(float(self.angle))}
+        return {"type": "circular", "degree": float(self.degree), "handedness": self.handedness.lower()}
+
+
+SKY_POLARISATION_ITEMS = [
+    ("BERRY", "Berry (neutral points)", "A Sky Texture's light is polarised as real clear skies are: maximum "
+     "degree 0.3–0.8 (lower with haze), angle across the plane of the sun, with the Arago, Babinet and Brewster "
+     "neutral points (Berry, Dennis & Lee 2004)", 0),
+    ("RAYLEIGH", "Rayleigh", "Single Rayleigh scattering by air (depolarisation factor 0.031): degree up to 0.94 "
+     "at 90° from the sun, neutral only at the sun and the antisun", 1),
+    ("OFF", "Off", "The sky is unpolarised (as in Cycles)", 2),
+]
+SKY_POLARISATION_TO_ENGINE = {"BERRY": "berry", "RAYLEIGH": "rayleigh", "OFF": None}
+
+
+class PolarWorldSettings(bpy.types.PropertyGroup):
+    """How Polar polarises a world's Sky Texture (its radiance stays Cycles' own)."""
+    sky_polarisation: EnumProperty(name="Sky Polarisation", items=SKY_POLARISATION_ITEMS, default="BERRY",
+                                   description="The polarisation of daylight from a Sky Texture in this world")
+
+
+classes = (PolarRenderSettings, PolarViewLayerSettings, PolarSourceSettings, PolarWorldSettings)
 
 
 def register():
@@ -214,9 +269,15 @@ def register():
         bpy.utils.register_class(cls)
     bpy.types.Scene.polar = PointerProperty(type=PolarRenderSettings)
     bpy.types.ViewLayer.polar = PointerProperty(type=PolarViewLayerSettings)
+    bpy.types.Light.polar = PointerProperty(type=PolarSourceSettings)
+    bpy.types.Material.polar = PointerProperty(type=PolarSourceSettings)
+    bpy.types.World.polar = PointerProperty(type=PolarWorldSettings)
 
 
 def unregister():
+    del bpy.types.World.polar
+    del bpy.types.Material.polar
+    del bpy.types.Light.polar
     del bpy.types.ViewLayer.polar
     del bpy.types.Scene.polar
     for cls in reversed(classes):

@@ -1,4 +1,4 @@
-"""Polar's panels in the Render and View Layer properties."""
+"""Polar's panels in the Render and View Layer properties, and the polarisation of lights and emission."""
 
 import bpy
 
@@ -127,6 +127,59 @@ class POLAR_PT_passes(_PolarPanel, bpy.types.Panel):
         layout.operator("polar.add_polar_denoise", icon="NODE_COMPOSITING")
 
 
-classes = (POLAR_PT_sampling, POLAR_PT_light_model, POLAR_PT_polariser, POLAR_PT_performance, POLAR_PT_passes)
+def draw_source_polarisation(layout, settings, target):
+    """The polarisation settings of a light or an emission (properties.PolarSourceSettings)."""
+    layout.use_property_split = True
+    layout.prop(settings, "polarisation")
+    if settings.polarisation != "NONE":
+        layout.prop(settings, "degree")
+        if settings.polarisation == "LINEAR":
+            layout.prop(settings, "angle")
+        else:
+            layout.prop(settings, "handedness")
+    layout.operator("polar.lcd_screen_preset", icon="PRESET").target = target
+
+
+class POLAR_PT_light_polarisation(_PolarPanel, bpy.types.Panel):
+    bl_label = "Polarisation"
+    bl_context = "data"
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES and getattr(context, "light", None) is not None
+
+    def draw(self, context):
+        draw_source_polarisation(self.layout, context.light.polar, "LIGHT")
+
+
+class POLAR_PT_emission_polarisation(_PolarPanel, bpy.types.Panel):
+    bl_label = "Emission Polarisation"
+    bl_context = "material"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES and getattr(context, "material", None) is not None
+
+    def draw(self, context):
+        draw_source_polarisation(self.layout, context.material.polar, "MATERIAL")
+
+
+class POLAR_PT_sky_polarisation(_PolarPanel, bpy.types.Panel):
+    bl_label = "Sky Polarisation"
+    bl_context = "world"
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES and getattr(context, "world", None) is not None
+
+    def draw(self, context):
+        layout = self.layout
+        layout.use_property_split = True
+        layout.prop(context.world.polar, "sky_polarisation", text="Sky Texture")
+
+
+classes = (POLAR_PT_sampling, POLAR_PT_light_model, POLAR_PT_polariser, POLAR_PT_performance, POLAR_PT_passes,
+           POLAR_PT_light_polarisation, POLAR_PT_emission_polarisation, POLAR_PT_sky_polarisation)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

@@ -19,6 +19,9 @@ kernel/light/light.h (lamps are not in the BVH: rays pass through them, they nev
   off: L = S/π; one-sided along local −Z, with Cycles' spread profile; a lamp, not an occluder
   (rays and shadows pass through it, also through its back); hidden from the camera when the
   object's camera visibility is off; portals are not lights.
+
+Polarisation (Light ▸ Polarisation, ``light.polar``; Polar's own, Cycles has none): linear or circular,
+in the light's own frame — its local X axis projected ⟂ each ray (engine.polarisation.sources).
 """
 
 import math
@@ -26,6 +29,7 @@ import math
 import numpy as np
 
 from ...engine.scene.description import DirectionalLight, Mesh, PointLight, SpotLight
+from ...engine.polarisation.sources import parse_polarisation
 from ...engine.spectral import RGBIlluminantSpectrum
 
 DISK_SEGMENTS = 64
@@ -40,7 +44,23 @@ def _power_colour(light):
 
 
 def export_light(obj, matrix_world, warnings: list):
-    """One engine light (or emissive lamp Mesh for area lights), or None for an empty light."""
+    """One engine light (or emissive lamp Mesh for area lights), or None for an empty light; polarised as the
+    light's Polarisation panel says (reference axis: the light's local X)."""
+    out = _export_light(obj, matrix_world, warnings)
+    settings = getattr(obj.data, "polar", None)
+    described = settings.engine_dict() if settings is not None else None
+    if out is not None and described is not None:
+        pol, _ = parse_polarisation(described, f"light {obj.name!r} polarisation")
+        axis = np.array(matrix_world, dtype=np.float64)[:3, 0]
+        axis = axis / np.linalg.norm(axis)
+        if isinstance(out, Mesh):
+            out.emission_polarisation, out.emission_axis = pol, axis
+        else:
+            out.polarisation, out.polarisation_axis = pol, axis
+    return out
+
+
+def _export_light(obj, matrix_world, warnings: list):
     light = obj.data
     M = np.array(matrix_world, dtype=np.float64)
     position = M[:3, 3]

@@ -17,6 +17,7 @@ import numpy as np
 
 from ...engine.errors import SceneError
 from ...engine.materials.lambert import Lambert
+from ...engine.polarisation.sources import parse_polarisation
 from ...engine.scene.description import Camera, Mesh, RenderSettings, Scene
 from ...engine.spectral import ConstantSpectrum
 from . import geometry
@@ -110,6 +111,7 @@ class _SyncPass:
                 key = f"mat:{name}@{obj.name_full}"
             cache_key = per_object if getattr(target, "requested", False) else name
             materials[cache_key] = (key, bsdf, emission, alpha)
+            self.walk.polarisations[key] = emission_polarisation(material) if emission is not None else None
             self.counts["materials"] += 1
         key, _, emission, alpha = materials[cache_key]
         self.emissions[key], self.alphas[key] = emission, alpha
@@ -154,6 +156,7 @@ class SceneWalk:
         self.lights = {}      # instance key → (matrix bytes, light or None)
         self.materials = {}   # material name (None: the default) or, baked, (name, object) → (key, bsdf, emission,
         #                       alpha)
+        self.polarisations = {}   # material key → its emission's SourcePolarisation (None: unpolarised)
         self.world = None
         self.world_name = None
         self.settings = None
@@ -281,13 +284,24 @@ class SceneWalk:
         if reread or entry is None or entry[0] != signature:
             entry = (signature, self._object_meshes(obj.name, arrays, M, slots, material_key, run.emissions,
                                                     run.alphas, lambda rays=rays: rays, run.warnings))
+            self._polarise_emitters(entry[1], M)
             self.placed[ikey] = entry
             run.counts["placed"] += 1
             run.rebuild = run.restart = True
             return entry
-        return self._reuse_placed(run, ikey, signature, slots, entry, material_key)
+        return self._reuse_placed(run, ikey, signature, slots, entry, material_key, M)
 
-    def _reuse_placed(self, run, ikey, signature, slots, entry, material_key):
+    def _polarise_emitters(self, meshes, M):
+        """Give the emissive meshes of an instance (placed by ``M``) their material's emission polarisation
+        (Material ▸ Emission Polarisation); reference axis: the UV map's U direction where the mesh has UVs
+        (engine.polarisation.sources.uv_tangent), else the object's local X."""
+        for mesh in meshes:
+            pol = self.polarisations.get(mesh.materials[0]) if mesh.emission is not None else None
+            if pol is not None:
+                mesh.emission_polarisation = pol
+                mesh.emission_axis = None if mesh.uv is not None else M[:3, 0] / np.linalg.norm(M[:3, 0])
+
+    def _reuse_placed(self, run, ikey, signature, slots, entry, material_key, M):
         """Keep placed meshes, refreshing emission and alpha of re-converted materials (a rebuild if they matter)."""
         for m in slots:
             material_key(m)
@@ -298,6 +312,7 @@ class SceneWalk:
         if any((a.emission is not None) or (b.emission is not None) or a.alpha != b.alpha
                for a, b in zip(entry[1], fresh)):
             run.rebuild = True
+        self._polarise_emitters(fresh, M)
         entry = (signature, fresh)
         self.placed[ikey] = entry
         return entry
@@ -368,6 +383,16 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
 
 def _material_entry(material, warnings, bake=None):
     return material_entry(material, warnings, bake)
+
+
+def emission_polarisation(material):
+    """The SourcePolarisation of a Blender material's emission (Material ▸ Emission Polarisation), None when
+    unpolarised or without the setting."""
+    settings = getattr(material, "polar", None) if material is not None else None
+    described = settings.engine_dict() if settings is not None and hasattr(settings, "engine_dict") else None
+    if described is None:
+        return None
+    return parse_polarisation(described, f"material {material.name!r} emission polarisation")[0]
 
 
 def material_entry(material, warnings, bake=None):

@@ -16,6 +16,18 @@
   Cycles into an equirectangular map (polar_addon.export.world_bake), resolution
   ``scene.polar.world_bake_resolution`` × half of it, ``world_bake_samples`` per texel, cached
   while the world is unchanged; a warning names what prevented the direct mapping.
+
+A Sky Texture is polarised (World ▸ Sky Polarisation, on by default; its radiance stays Cycles' bake):
+the clear-sky model of engine.spectral.daylight with the node's sun — Preetham and Hosek–Wilkie:
+its Sun Direction, turned by a Mapping rotation on its Vector as the radiance is; Nishita (4.5), Single and
+Multiple Scattering (5.x, no Vector input): Sun Elevation ε and Rotation ρ as Cycles' bake places the sun,
+(cos ε sin ρ, cos ε cos ρ, sin ε) (measured against the bake: tests/blender/test_polarised_sources.py);
+the haze: Preetham/Hosek–Wilkie turbidity T, else T = 2.2 × Aerosol (Dust) Density,
+clamped to [1.7, 10] (Blender's default density 1 ↔ its default turbidity 2.2); the Berry model's maximum
+degree follows T (daylight.max_degree_for_turbidity).  Altitude and Air and Ozone Density change the
+radiance only.  The sun disc and the ground below the horizon are unpolarised.  A sun below the horizon, a
+Vector that is not a rotation of the direction, or a texture mapping of the node's own: unpolarised, one
+warning.
 """
 
 import math
@@ -67,7 +79,82 @@ def export_world(world, warnings: list, bake_width=None, frame=None, bake_sample
             direct = _environment_texture(world, source, c, float(s.default_value), warnings, why)
             if direct is not None:
                 return direct
-    return _baked(world, warnings, bake_width, bake_samples, frame, why)
+    return _with_sky_polarisation(world, tree, _baked(world, warnings, bake_width, bake_samples, frame, why),
+                                  warnings)
+
+
+def _sky_nodes(tree):
+    """The Sky Texture nodes that feed the world's output (through any nodes), in walk order."""
+    out = tree.get_output_node("ALL")
+    found, seen, todo = [], set(), [out]
+    while todo:
+        node = todo.pop()
+        if node is None or node.name in seen or node.mute:
+            continue
+        seen.add(node.name)
+        if node.bl_idname == "ShaderNodeTexSky":
+            found.append(node)
+        for sock in node.inputs:
+            for link in sock.links:
+                if link.is_valid and not link.is_muted:
+                    todo.append(link.from_node)
+    return found
+
+
+def sky_sun_and_turbidity(node):
+    """(the unit direction towards the sun (3,) in the texture's frame, the turbidity T) of a Sky Texture node,
+    where Cycles' bake of it puts the sun, and the mapping in this module's docstring."""
+    from ...engine.spectral.daylight import TURBIDITY_RANGE
+    if node.sky_type in ("PREETHAM", "HOSEK_WILKIE"):
+        sun = np.array(node.sun_direction, np.float64)
+        turbidity = float(node.turbidity)
+    else:
+        e, r = float(node.sun_elevation), float(node.sun_rotation)
+        sun = np.array([math.cos(e) * math.sin(r), math.cos(e) * math.cos(r), math.sin(e)])
+        density = float(getattr(node, "aerosol_density", getattr(node, "dust_density", 1.0)))
+        turbidity = 2.2 * density
+    norm = np.linalg.norm(sun)
+    sun = sun / norm if norm > 0 else np.array([0.0, 0.0, 1.0])
+    return sun, min(max(turbidity, TURBIDITY_RANGE[0]), TURBIDITY_RANGE[1])
+
+
+def _with_sky_polarisation(world, tree, light, warnings):
+    """``light`` (a baked EnvironmentLight or None) polarised as the world's Sky Texture's daylight."""
+    from ...engine.polarisation.sources import DirectionalPolarisation
+    from ...engine.render.lights.environment import euler_xyz_matrix
+    from ...engine.spectral.daylight import ClearSky, max_degree_for_turbidity
+    settings = getattr(getattr(world, "original", world), "polar", None)
+    model = {"BERRY": "berry", "RAYLEIGH": "rayleigh"}.get(getattr(settings, "sky_polarisation", "BERRY"))
+    if light is None or light.image is None or model is None:
+        return light
+    skies = _sky_nodes(tree)
+    if not skies:
+        return light
+    node = skies[0]
+    what = f"world {world.name!r}: Sky Texture {node.name!r}"
+    if len(skies) > 1:
+        warnings.append(f"{what} is one of {len(skies)} Sky Textures; only its polarisation is simulated")
+    # Nishita (4.5), Single and Multiple Scattering (5.x) have no Vector input (unavailable: they always look up
+    # the ray direction, turned by Sun Rotation alone)
+    vector = next(sock for sock in node.inputs if sock.identifier == "Vector")
+    rotation = _vector_rotation(vector) if vector.enabled else 0.0
+    if rotation is None or not _identity_texture_mapping(node.texture_mapping):
+        warnings.append(f"{what}: its Vector is not the direction turned by a Mapping rotation; its light is "
+                        "rendered unpolarised")
+        return light
+    sun, turbidity = sky_sun_and_turbidity(node)
+    if isinstance(rotation, list):
+        sun = euler_xyz_matrix(np.radians(rotation)) @ sun
+    elif rotation:
+        c, s = math.cos(math.radians(rotation)), math.sin(math.radians(rotation))
+        sun = np.array([c * sun[0] - s * sun[1], s * sun[0] + c * sun[1], sun[2]])
+    if sun[2] < 0.0:
+        warnings.append(f"{what}: the sun is below the horizon; the twilight sky is rendered unpolarised")
+        return light
+    light.sky = ClearSky(sun_direction=tuple(sun), turbidity=turbidity, model=model,
+                         max_degree=max_degree_for_turbidity(turbidity))
+    light.polarisation = DirectionalPolarisation("linear", f"{what} ({model} daylight)")
+    return light
 
 
 def _source(socket):

@@ -135,11 +135,23 @@ def judge(result):
         found = result["normal_map_convention"]
         return None if found == expected else f"a DirectX Normal Map is read as {found} (expected {expected})"
 
+    def sources():
+        found = result["polarised_sources"]
+        if found["light"] != ["linear", 45.0]:
+            return f"the LCD preset exported {found['light']}"
+        skies = found["skies"]
+        expected = {"NISHITA", "PREETHAM", "HOSEK_WILKIE"} if result["series"] == "4.5" else \
+            {"SINGLE_SCATTERING", "MULTIPLE_SCATTERING", "PREETHAM", "HOSEK_WILKIE"}
+        if set(skies) != expected or any(model != "berry" or sun[2] <= 0 for model, sun in skies.values()):
+            return f"sky polarisation per type: {skies}"
+        return None
+
     check("passes", "render", passes)
     check("polariser", "polariser", polariser)
     check("denoise", "denoise", denoise)
     check("viewport", "viewport", viewport)
     check("normal_map", "normal_map", normal_map)
+    check("sources", "sources", sources)
     return checks
 
 

@@ -142,6 +142,31 @@ def normal_map_convention(ext):
     return "directx" if all(m.normal_green_down for m in maps) else "opengl"
 
 
+def polarised_sources(ext):
+    """Light ▸ Polarisation with the LCD preset and World ▸ Sky Polarisation on every Sky Texture type of this
+    Blender, through the extension's exporters: {"light": angle, "skies": {type: (model, sun)}}."""
+    lights = sys.modules[ext.__name__ + ".polar_addon.export.lights"]
+    world_export = sys.modules[ext.__name__ + ".polar_addon.export.world"]
+    compat = sys.modules[ext.__name__ + ".polar_addon.compat"]
+    data = bpy.data.lights.new("Screen", "AREA")
+    obj = bpy.data.objects.new("Screen", data)
+    bpy.context.scene.collection.objects.link(obj)
+    with bpy.context.temp_override(light=data):
+        if bpy.ops.polar.lcd_screen_preset(target="LIGHT") != {"FINISHED"}:
+            raise RuntimeError("the LCD Screen preset did not finish")
+    mesh = lights.export_light(obj, obj.matrix_world, [])
+    out = {"light": [mesh.emission_polarisation.kind, round(mesh.emission_polarisation.angle_deg, 3)], "skies": {}}
+    world = bpy.data.worlds.new("Sky")
+    tree = compat.ensure_node_tree(world)
+    sky = tree.nodes.new("ShaderNodeTexSky")
+    tree.links.new(sky.outputs["Color"], tree.nodes["Background"].inputs["Color"])
+    for kind in [item.identifier for item in sky.bl_rna.properties["sky_type"].enum_items]:
+        sky.sky_type = kind
+        light = world_export.export_world(world, [], bake_width=32, bake_samples=1)
+        out["skies"][kind] = [light.sky.model, [round(c, 6) for c in light.sky.sun_direction]]
+    return out
+
+
 def main(out_dir, angle):
     import addon_utils
     os.makedirs(out_dir, exist_ok=True)
@@ -195,6 +220,10 @@ def main(out_dir, angle):
     @stage(report, "normal_map")
     def _normal_map():
         report["normal_map_convention"] = normal_map_convention(state["ext"])
+
+    @stage(report, "sources")
+    def _sources():
+        report["polarised_sources"] = polarised_sources(state["ext"])
 
     addon_utils.disable(EXTENSION, default_set=False)
     return report
