@@ -86,7 +86,8 @@ from .ggx import visible_normals
 from .ggx_energy import ALPHA_MAX, E_FLOOR, MU_FLOOR, conductor_extra, f82_average_fresnel
 from .microfacet import _chi_plus, half_vector, reflect_local
 from .table_cache import cached_table
-from .torrance_sparrow import M_MIN, SpecularAlbedoTable
+from .roughness import ALPHA_MIN, checked_alpha
+from .torrance_sparrow import SpecularAlbedoTable
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflectance, fresnel_reflection_abcs
 from ..polarisation.thin_film import facet_film, film_at, film_label, film_layering_albedo, film_reflection_abcs
@@ -121,7 +122,7 @@ def cycles_alphas(roughness: float, anisotropic: float) -> tuple[float, float]:
     """(α_x, α_y) of Cycles' Principled BSDF for Blender roughness r and Anisotropic a: r² / aspect and
     r²·aspect with aspect = √(1 − 0.9·a), r and a clipped to [0, 1], each α saturated to ≤ 1 (as Cycles'
     ``bsdf_microfacet_ggx_setup``).  Cycles applies this only where a > 0 and a tangent exists; the caller
-    still keeps α ≥ M_MIN (or uses the smooth model)."""
+    still keeps α ≥ roughness.ALPHA_MIN (or, effectively smooth, uses the smooth model)."""
     r = min(max(float(roughness), 0.0), 1.0)
     a = min(max(float(anisotropic), 0.0), 1.0)
     alpha = r * r
@@ -308,7 +309,8 @@ class AnisotropicGGX(BSDF):
     n, k : Spectrum or float — complex index n + iκ (as Torrance–Sparrow's: constant, tabulated, a
         per-point TexturedSpectrum, or the Gulbrandsen index of engine.spectral.gulbrandsen /
         engine.textures.conductor_index, all read through ``sp.spectrum``).
-    alpha_x, alpha_y : float ≥ M_MIN (1e-4) — GGX roughness along the tangent T and the bitangent n × T.
+    alpha_x, alpha_y : float ≥ ALPHA_MIN (1e-4, engine.materials.roughness) — GGX roughness along the tangent T
+        and the bitangent n × T.
     rotation : float — turns about n_s applied to the tangent (Blender's Anisotropic Rotation).
     tangent : callable(sp) -> (3, N) (or one (3,) vector) or None — the tangent per point (None: the mesh's, see
         ``tangent_frame``; any frame ⟂ n_s where the scene has no surface attributes).
@@ -332,9 +334,7 @@ class AnisotropicGGX(BSDF):
         self.per_point = any(isinstance(v, TexturedNumber) for v in (alpha_x, alpha_y))
         ax, ay = ((v if isinstance(v, TexturedNumber) else float(v)) for v in (alpha_x, alpha_y))
         for label, a in (("alpha_x", ax), ("alpha_y", ay)):
-            lo, hi = (a.lo, a.hi) if isinstance(a, TexturedNumber) else (a, a)
-            if not (math.isfinite(lo) and math.isfinite(hi) and lo >= M_MIN):
-                raise ValueError(f"{label} must be a finite number >= {M_MIN:g}, got {a!r}")
+            checked_alpha(a, label)                  # (≥ roughness.ALPHA_MIN everywhere)
         self.alpha_x, self.alpha_y = ax, ay
         self.rotation = rotation if isinstance(rotation, TexturedNumber) else float(rotation)
         if not isinstance(self.rotation, TexturedNumber) and not math.isfinite(self.rotation):
@@ -478,7 +478,7 @@ class AnisotropicGGX(BSDF):
             if self._reflection_table is None:
                 from .torrance_sparrow import IndexAlbedoTables
                 lo = max(min(getattr(self.alpha_x, "lo", self.alpha_x), getattr(self.alpha_y, "lo", self.alpha_y)),
-                         M_MIN)
+                         ALPHA_MIN)
                 hi = max(getattr(self.alpha_x, "hi", self.alpha_x), getattr(self.alpha_y, "hi", self.alpha_y))
                 self._reflection_table = IndexAlbedoTables(self.n.lo / self.exterior_n, self.n.hi / self.exterior_n,
                                                            lo, hi, "smith_correlated", "ggx")
@@ -492,7 +492,7 @@ class AnisotropicGGX(BSDF):
         if self.multiscatter_albedo == "cycles":
             if self._reflection_table is None:
                 if self.per_point:          # √(α_x α_y) lies between the least and the largest α
-                    lo = max(min(self.alpha_x.lo, self.alpha_y.lo), M_MIN)
+                    lo = max(min(self.alpha_x.lo, self.alpha_y.lo), ALPHA_MIN)
                     hi = max(self.alpha_x.hi, self.alpha_y.hi)
                 else:
                     lo = hi = self.alpha_cycles

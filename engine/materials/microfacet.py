@@ -14,7 +14,7 @@ Distributions (both normalised, ∫ D(h) cosθ_h dω_h = 1 over the upper hemisp
   (no 1 − cos² cancellation near the specular peak).  D is *exactly* 0 where x > 800
   (exp underflows there anyway; the cut-off avoids 0·∞ for near-horizontal h) and for
   h_z ≤ 0.  Very small m are numerically fine (the peak is 1/(π m²)); the material
-  enforces m ≥ 1e-4 (engine.materials.torrance_sparrow.M_MIN).
+  enforces m ≥ 1e-4 (engine.materials.roughness.ALPHA_MIN).
   Sampling: **visible normals** (Heitz & d'Eon 2014), implemented from the paper's
   math: stretch ω_o by m, sample the visible slope x̃ from the marginal
   ∝ (1 − x̃ tanθ) e^{−x̃²} (x̃ < cotθ) by bisection-safeguarded Halley inversion of its CDF

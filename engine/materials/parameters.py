@@ -9,10 +9,11 @@ Polarising BSDF node socket that shows them in Blender.  From these tables come
 - the Blender node's sockets and the exporter's reads of them.
 
 Values are read through :class:`Values`, which gives every user mistake the same message:
-``SceneError("<field>.<name>", "must be a finite number in [lo, hi], got …")``.  Rules that tie
-parameters together (metal vs n/k, the smooth limit of Torrance–Sparrow, …) are small builder
-functions next to each declaration (``@DECLARATION.builder``); they take their ranges and messages
-from here.
+``SceneError("<field>.<name>", "must be a finite number in [lo, hi], got …")``; this is where a value is
+range-checked (once: the constructors keep only cheap guards for direct use).  Rules that tie
+parameters together (metal vs n/k, …) are small builder functions next to each declaration
+(``@DECLARATION.builder``); they take their ranges and messages from here, and every microfacet
+roughness its smooth limit and least slope from engine.materials.roughness (``declared_slope``).
 """
 
 from __future__ import annotations

@@ -41,6 +41,7 @@ from . import conductor, torrance_sparrow
 from .base import BSDF
 from .mix import Mix
 from .parameters import ModelDeclaration, Parameter
+from .roughness import ALPHA_MIN, effectively_smooth
 from ..errors import SceneError
 from ..spectral import ConstantSpectrum, RGBUnboundedSpectrum
 from ..spectral.gulbrandsen import GulbrandsenIndex
@@ -129,15 +130,14 @@ def _mixture(under, over, fraction):
 
 def _alpha_of(roughness):
     """α = r² of a roughness (a number, or a TexturedNumber whose texture is squared after interpolation,
-    kept ≥ the engine's least slope)."""
-    from .torrance_sparrow import M_MIN
+    kept ≥ the engine's least slope roughness.ALPHA_MIN)."""
     if not _textured(roughness):
         return roughness * roughness
     src = roughness.source
     if src.scale != 1.0 or src.offset != 0.0 or src.power != 1.0:       # (offset + scale·t)² per point
         from ..textures.inputs import SquaredNumber
-        return SquaredNumber(roughness, clip=(M_MIN, 1.0))
-    return TexturedNumber(TextureInput(src.texture, src.channel, power=2.0), clip=(M_MIN, 1.0))
+        return SquaredNumber(roughness, clip=(ALPHA_MIN, 1.0))
+    return TexturedNumber(TextureInput(src.texture, src.channel, power=2.0), clip=(ALPHA_MIN, 1.0))
 
 
 def _root(colour):
@@ -188,28 +188,26 @@ def _metal(p, alpha):
 
 def _metal_of(n, k, p, alpha):
     values = {"n": n, "k": k}
-    from .torrance_sparrow import M_MIN
-    if not _textured(alpha) and alpha < M_MIN:
+    if effectively_smooth(alpha):
         values.update(_film_values(p))
         return conductor.DECLARATION.build(conductor.DECLARATION.values(values, p.where))
     aniso = _anisotropic_lobe(p, n, k, alpha)
     if aniso is not None:
         return aniso
-    values.update(m=alpha if _textured(alpha) else max(alpha, M_MIN), distribution="ggx",
+    values.update(m=alpha, distribution="ggx",
                   multiscatter=p["distribution"] == "multi_ggx", **_film_values(p))
     return torrance_sparrow.DECLARATION.build(torrance_sparrow.DECLARATION.values(values, p.where))
 
 
 def _anisotropic_lobe(p, n, k, alpha):
     """Cycles' anisotropic GGX reflection (engine.materials.anisotropic_ggx) of index n + iκ for Anisotropic > 0,
-    else None: α_x = r²/aspect, α_y = r²·aspect, aspect = √(1 − 0.9·a), each in [M_MIN, 1], along the surface tangent
+    else None: α_x = r²/aspect, α_y = r²·aspect, aspect = √(1 − 0.9·a), each in [ALPHA_MIN, 1], along the tangent
     rotated by Anisotropic Rotation.  The roughness, the Anisotropic and its Rotation may vary per point (α_x, α_y
     per point: engine.textures.inputs.MappedNumbers of α = r² and a)."""
     aniso = p["anisotropic"]
     if (aniso.hi if _textured(aniso) else aniso) <= 0.0:
         return None
     from .anisotropic_ggx import ASPECT_SLOPE, AnisotropicGGX, cycles_alphas
-    from .torrance_sparrow import M_MIN
     if _textured(aniso) or _textured(alpha):
         from ..textures.inputs import MappedNumbers
 
@@ -217,10 +215,10 @@ def _anisotropic_lobe(p, n, k, alpha):
             return np.sqrt(1.0 - ASPECT_SLOPE * np.clip(a, 0.0, 1.0))
 
         def alpha_x(al, a):
-            return np.maximum(np.minimum(al / aspect_of(a), 1.0), M_MIN)
+            return np.maximum(np.minimum(al / aspect_of(a), 1.0), ALPHA_MIN)
 
         def alpha_y(al, a):
-            return np.maximum(np.minimum(al * aspect_of(a), 1.0), M_MIN)
+            return np.maximum(np.minimum(al * aspect_of(a), 1.0), ALPHA_MIN)
         al_range = (alpha.lo, alpha.hi) if _textured(alpha) else (alpha, alpha)
         a_range = (aniso.lo, aniso.hi) if _textured(aniso) else (aniso, aniso)
         # α_x grows with α and a, α_y grows with α and falls with a
@@ -229,7 +227,7 @@ def _anisotropic_lobe(p, n, k, alpha):
         ay = MappedNumbers((alpha, aniso), alpha_y, float(alpha_y(al_range[0], a_range[1])),
                            float(alpha_y(al_range[1], a_range[0])))
     else:
-        ax, ay = (max(v, M_MIN) for v in cycles_alphas(math.sqrt(alpha), aniso))
+        ax, ay = (max(v, ALPHA_MIN) for v in cycles_alphas(math.sqrt(alpha), aniso))
     film = _film_values(p)
     return AnisotropicGGX(n, k, ax, ay, rotation=p["anisotropic_rotation"],
                           multiscatter=p["distribution"] == "multi_ggx",
@@ -251,24 +249,23 @@ def film_gaps(metallic, transmission, roughness, transmission_roughness=None) ->
     """The parts of a principled material on which its Thin Film is not simulated (Cycles puts it on every
     Fresnel): a rough transmission.  The inputs as the declaration takes them (numbers or textures; a textured
     roughness counts as rough)."""
-    from .rough_dielectric import ALPHA_MIN
     trans = roughness if transmission_roughness is None else transmission_roughness
     per_point = (TexturedNumber, TexturedSpectrum, TextureInput)         # a texture: somewhere rough, weighted
     gaps = []
     if (isinstance(metallic, per_point) or not _always(metallic)) and \
             (isinstance(transmission, per_point) or not _never(transmission)) and \
-            (isinstance(trans, per_point) or trans * trans >= ALPHA_MIN):
+            (isinstance(trans, per_point) or not effectively_smooth(trans * trans)):
         gaps.append("rough transmission")
     return gaps
 
 
 def _transmission(p, alpha, ior):
     from .dielectric import SmoothDielectric
-    from .rough_dielectric import ALPHA_MIN, RoughDielectric, index_matched
+    from .rough_dielectric import RoughDielectric, index_matched
     from .tinted import Tinted
     from .thin_film import ThinFilmDielectric
     rough = p["transmission_roughness"] if p.given("transmission_roughness") else p["roughness"]
-    if _textured(rough):        # α = r² per point, the reflection lobes' (≥ M_MIN = the rough glass's least α)
+    if _textured(rough):        # α = r² per point, the reflection lobes' (≥ ALPHA_MIN = the rough glass's least α)
         a = alpha
     else:
         a = float(rough) ** 2
@@ -276,9 +273,9 @@ def _transmission(p, alpha, ior):
     if _textured(a):
         glass = SmoothDielectric(ior) if index_matched(ior, 1.0) else \
             RoughDielectric(ior, a, "ggx", multiscatter=p["distribution"] == "multi_ggx")
-    elif a < ALPHA_MIN and film:
+    elif effectively_smooth(a) and film:
         glass = ThinFilmDielectric(ior, p["thin_film_ior"], p["thin_film_thickness"])
-    elif a < ALPHA_MIN or index_matched(ior, 1.0):
+    elif effectively_smooth(a) or index_matched(ior, 1.0):
         glass = SmoothDielectric(ior)
     else:
         glass = RoughDielectric(ior, a, "ggx", multiscatter=p["distribution"] == "multi_ggx")
@@ -291,7 +288,6 @@ def _transmission(p, alpha, ior):
 
 
 def _dielectric(p, alpha, ior):
-    from .torrance_sparrow import M_MIN
     base = p["base_color"]
     level = p["specular_ior_level"]
     if _textured(ior):
@@ -301,7 +297,7 @@ def _dielectric(p, alpha, ior):
     else:
         eta = _specular_index(ior, level) if _textured(level) else specular_ior(ior, level)
     per_point_index = "ior" if _textured(ior) else "specular_ior_level" if _textured(level) else None
-    smooth = not _textured(alpha) and alpha < M_MIN
+    smooth = effectively_smooth(alpha)
     values = {"n": eta, "k": 0.0, "diffuse_layering": "albedo_scaling", "m": 0.0 if smooth else alpha,
               **_film_values(p)}
     if not smooth:
@@ -407,7 +403,6 @@ def _coat(p, below):
     1 − coat_weight·E_coat(ω_o) (engine.materials.mix.Layered) and seen through the coat's tint
     (engine.materials.tinted.CoatTinted; an index-matched coat still tints)."""
     from .mix import Layered
-    from .torrance_sparrow import M_MIN
     ior = p["coat_ior"]
     if _textured(ior):          # an index per point (≥ 1, as Cycles clamps it)
         from ..textures.inputs import NumberSpectrum
@@ -426,7 +421,7 @@ def _coat(p, below):
         return below
     alpha = _alpha_of(p["coat_roughness"])
     decl = torrance_sparrow.DECLARATION
-    smooth = not _textured(alpha) and alpha < M_MIN
+    smooth = effectively_smooth(alpha)
     values = {"n": n, "k": 0.0, "m": 0.0} if smooth else \
         {"n": n, "k": 0.0, "m": alpha, "distribution": "ggx", "multiscatter": True}
     top = decl.build(decl.values(values, p.where))

@@ -74,6 +74,7 @@ from .ggx import GGX
 from .ggx_energy import ALPHA_MAX, DielectricAlbedo, DielectricAlbedoRange
 from .microfacet import Beckmann, reflect_local
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
+from .roughness import SMOOTH_LIMIT, checked_alpha, declared_slope
 from .sampling import local_to_world
 from ..errors import SceneError
 from ..kernels import twin
@@ -84,8 +85,6 @@ from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_transmission
 from ..textures import TexturedNumber
 from ..vec3 import dot, local_frame, to_local
 
-#: Smallest accepted roughness α (0 is the smooth dielectric).
-ALPHA_MIN = 1e-4
 DISTRIBUTIONS = ("beckmann", "ggx")
 SHADOWING = ("smith", "smith_rational")
 
@@ -232,10 +231,7 @@ class RoughDielectric(BSDF):
                 raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
         # α: a number, or per point (a TexturedNumber: a Principled roughness texture, α = r² per point)
         self.per_point = isinstance(alpha, TexturedNumber)
-        lo, hi = (alpha.lo, alpha.hi) if self.per_point else (float(alpha), float(alpha))
-        if not (math.isfinite(lo) and math.isfinite(hi) and lo >= ALPHA_MIN):
-            raise ValueError(f"roughness alpha must be a finite number >= {ALPHA_MIN:g}, got {alpha!r}")
-        self.alpha = alpha if self.per_point else lo
+        self.alpha = checked_alpha(alpha, "roughness alpha")      # (≥ roughness.ALPHA_MIN everywhere)
         self.varies_over_surface = self.per_point
         if distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
@@ -250,6 +246,7 @@ class RoughDielectric(BSDF):
         if self.multiscatter:
             if distribution != "ggx":
                 raise ValueError("multiscatter (Cycles' Multiscatter GGX) needs distribution='ggx'")
+            lo, hi = (alpha.lo, alpha.hi) if self.per_point else (self.alpha, self.alpha)
             if not hi <= ALPHA_MAX:
                 raise ValueError(f"multiscatter needs alpha <= {ALPHA_MAX:g} (Cycles clamps GGX alpha to 1), "
                                  f"got {alpha!r}")
@@ -306,8 +303,8 @@ DECLARATION = ModelDeclaration(
     "rough_dielectric", "Rough Dielectric",
     "Frosted glass: microfacet reflection and refraction (Walter 2007), polarising per facet",
     [Parameter("n", "real index of the material", lo=0.0, lo_open=True, socket=IOR_SOCKET),
-     Parameter("alpha", f"microfacet roughness α (Beckmann rms slope or GGX α): 0 (the smooth dielectric) or "
-                        f"≥ {ALPHA_MIN:g}", lo=0.0, hi=10.0, default=0.1,
+     Parameter("alpha", f"microfacet roughness α (Beckmann rms slope or GGX α); below {SMOOTH_LIMIT:g} (e.g. 0) "
+                        "the smooth dielectric", lo=0.0, hi=10.0, default=0.1,
                socket=Socket("Roughness", "FLOAT", 0.1, 0.0, 2.0,
                              "Microfacet roughness α (Beckmann rms slope / GGX α); 0 = smooth glass")),
      Parameter("distribution", "microfacet distribution", kind="choice", choices=DISTRIBUTIONS,
@@ -323,10 +320,7 @@ DECLARATION = ModelDeclaration(
 
 @DECLARATION.builder
 def _rough_dielectric(p):
-    alpha = p["alpha"]
-    if 0 < alpha < ALPHA_MIN:
-        raise SceneError(p.field("alpha"), f"must be 0 (the smooth dielectric) or in [{ALPHA_MIN:g}, "
-                                           f"{p.model['alpha'].hi:g}], got {alpha:g}")
+    alpha, smooth = declared_slope(p, "alpha")        # (the one range check of α)
     distribution, shadowing = p["distribution"], p["shadowing"]
     if shadowing == "smith_rational" and distribution != "beckmann":
         raise SceneError(p.field("shadowing"), "'smith_rational' exists for distribution 'beckmann' only")
@@ -337,6 +331,6 @@ def _rough_dielectric(p):
     if multiscatter and alpha > ALPHA_MAX:
         raise SceneError(p.field("alpha"), f"must be at most {ALPHA_MAX:g} with multiscatter (Cycles clamps GGX α "
                                            f"to 1; the albedo tables span [0, 1]), got {alpha:g}")
-    if alpha == 0 or index_matched(p["n"], p["exterior_n"]):   # the smooth limit, or no interface at all
+    if smooth or index_matched(p["n"], p["exterior_n"]):   # the smooth limit, or no interface at all
         return SmoothDielectric(p["n"], p["exterior_n"])
     return RoughDielectric(p["n"], alpha, distribution, shadowing, p["exterior_n"], multiscatter=multiscatter)

@@ -88,9 +88,12 @@ DECLARATION = ModelDeclaration(
     "Smooth dielectric under a thin non-absorbing film (soap films, coatings): interference colours and "
     "elliptical polarisation of the reflection",
     [Parameter("n", "real index of the material under the film", lo=0.0, lo_open=True, socket=IOR_SOCKET),
-     Parameter("film_n", "real index of the film", lo=0.0, lo_open=True, default=1.33),
-     Parameter("thickness", "film thickness", unit="nm", lo=0.0, hi=1e6, default=500.0),
+     Parameter("film_n", "real index of the film", lo=0.0, lo_open=True, default=1.33, texturable=True),
+     Parameter("thickness", "film thickness", unit="nm", lo=0.0, hi=1e6, default=500.0, texturable=True),
      exterior_n_parameter()])
+
+#: the film may vary over the surface (Blender's Glass BSDF Thin Film inputs from a texture, as the Principled's)
+DECLARATION.per_point = frozenset({"film_n", "thickness"})
 
 
 @DECLARATION.builder

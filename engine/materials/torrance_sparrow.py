@@ -37,7 +37,7 @@ Diffuse layering (``diffuse_layering``):
   albedo can exceed 1 by the lobe's diattenuation share (the s-polarised reflectance
   is above the unpolarised one: for the smooth limit by (R_s − R_p)/2, at most 0.15 at
   n = 1.5, θ_o ≈ 79°).  E is tabulated once per
-  model over √cosθ_o (33 nodes) and log m (nodes M_MIN·1.5^k shared by all models, cached
+  model over √cosθ_o (33 nodes) and log m (nodes ALPHA_MIN·1.5^k shared by all models, cached
   per index and shadowing; only those spanning the model's m, or its texture's range) by a
   Gaussian slope-space quadrature (``specular_albedo``) for Beckmann facets, for GGX by the
   visible-normal quadrature of engine.materials.ggx_energy (``ggx_reflection_albedo``; α ≤ 1);
@@ -67,10 +67,11 @@ retardance).  Like Cycles' it is not reciprocal (k depends on ω_o only).  Sampl
 (the compensated lobe has the single-scattering lobe's shape); the sample weight is the compensated
 f·cosθ_i/pdf.
 
-Roughness range: m ≥ M_MIN = 1e-4 (ValueError below); with ``multiscatter`` m ≤ 1 (Cycles clamps
-GGX α to 1; the albedo tables span [0, 1]).  The lobe is evaluated as a
-function for every allowed m; there is no switch to a Dirac mirror (use the smooth
-``conductor`` model for m → 0).  At m = 1e-4 the peak D = 1/(π m²) ≈ 3.2e7 is still
+Roughness range: m ≥ ALPHA_MIN = 1e-4 (engine.materials.roughness; ValueError below); with ``multiscatter``
+m ≤ 1 (Cycles clamps GGX α to 1; the albedo tables span [0, 1]).  The lobe is evaluated as a
+function for every allowed m; there is no switch to a Dirac mirror in the class: the declaration builds
+the smooth limit (engine.materials.smooth_limit) for an effectively smooth m (below
+roughness.SMOOTH_LIMIT).  At m = 1e-4 the peak D = 1/(π m²) ≈ 3.2e7 is still
 resolved in double precision (tan²θ_h is computed from vector components).
 
 Sampling (``sample``/``pdf``): a two-lobe mixture chosen per shading point with u_lobe:
@@ -109,6 +110,7 @@ from .ggx_energy import ALPHA_MAX, conductor_extra, ggx_reflection_albedo
 from .microfacet import (SHADOWING, Beckmann, BlinnPhong, half_vector, reflect_local,
                                          shadowing_term)
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
+from .roughness import ALPHA_MIN, SMOOTH_LIMIT, checked_alpha, declared_slope
 from .sampling import cosine_hemisphere, local_to_world
 from .smooth_limit import MirrorWithDiffuse
 from ..errors import SceneError
@@ -123,8 +125,6 @@ from ..textures import TexturedNumber
 from ..textures.inputs import NumberSpectrum, textured
 from ..vec3 import dot, local_frame, to_local
 
-#: Smallest accepted Beckmann roughness m.
-M_MIN = 1e-4
 DISTRIBUTIONS = ("beckmann", "blinn", "ggx")
 #: The shadowing forms whose albedo tables the multiple-scattering compensation has.
 MULTISCATTER_SHADOWING = ("smith_correlated", "smith")
@@ -135,7 +135,7 @@ P_SPEC_RANGE = (0.1, 0.9)
 #: How the Lambert term combines with the specular lobe (module docstring).
 DIFFUSE_LAYERINGS = ("add", "albedo_scaling")
 #: Specular-albedo table (``"albedo_scaling"``): nodes in √cosθ_o, the ratio of neighbouring m nodes
-#: (nodes at M_MIN·ratio^k, shared by every model: a textured m gives at each point exactly what the
+#: (nodes at ALPHA_MIN·ratio^k, shared by every model: a textured m gives at each point exactly what the
 #: constant m gives), quadrature points per slope axis, slope range in units of m (weight e^{−R²}).
 ALBEDO_TABLE_MU_NODES = 33
 ALBEDO_TABLE_M_RATIO = 1.5
@@ -183,11 +183,11 @@ def specular_albedo(cos_o, m, eta: complex, shadowing: str = "ts",
 
 @functools.lru_cache(maxsize=1024)
 def _albedo_column(eta: complex, shadowing: str, k: int, distribution: str = "beckmann") -> np.ndarray:
-    """E at the √cosθ_o nodes for m = M_MIN·ratio^k (cached: models sharing an index share it); GGX:
+    """E at the √cosθ_o nodes for m = ALPHA_MIN·ratio^k (cached: models sharing an index share it); GGX:
     the single-scattering reflection albedo by the visible-normal quadrature of engine.materials.ggx_energy
     (α capped at 1, the largest Cycles renders)."""
     t = np.linspace(0.0, 1.0, ALBEDO_TABLE_MU_NODES)
-    m = M_MIN * ALBEDO_TABLE_M_RATIO ** k
+    m = ALPHA_MIN * ALBEDO_TABLE_M_RATIO ** k
     if distribution == "ggx":
         E = ggx_reflection_albedo(t * t, min(m, ALPHA_MAX), eta, correlated=shadowing == "smith_correlated")
     else:
@@ -203,8 +203,8 @@ class SpecularAlbedoTable:
 
     def __init__(self, eta: complex, m_lo: float, m_hi: float, shadowing: str, distribution: str = "beckmann"):
         r = math.log(ALBEDO_TABLE_M_RATIO)
-        self.k0 = max(int(math.floor(math.log(max(m_lo, M_MIN) / M_MIN) / r)), 0)
-        k1 = max(int(math.floor(math.log(max(m_hi, M_MIN) / M_MIN) / r)), 0) + 1
+        self.k0 = max(int(math.floor(math.log(max(m_lo, ALPHA_MIN) / ALPHA_MIN) / r)), 0)
+        k1 = max(int(math.floor(math.log(max(m_hi, ALPHA_MIN) / ALPHA_MIN) / r)), 0) + 1
         self.E = np.stack([_albedo_column(complex(eta), shadowing, k, distribution) for k in range(self.k0, k1 + 1)],
                           axis=1)
 
@@ -215,7 +215,7 @@ class SpecularAlbedoTable:
         x = np.sqrt(np.clip(cos_o, 0.0, 1.0)) * (ALBEDO_TABLE_MU_NODES - 1)
         i = np.minimum(x.astype(np.int64), ALBEDO_TABLE_MU_NODES - 2)
         fx = x - i
-        y = np.log(np.maximum(m, M_MIN) / M_MIN) / math.log(ALBEDO_TABLE_M_RATIO) - self.k0
+        y = np.log(np.maximum(m, ALPHA_MIN) / ALPHA_MIN) / math.log(ALBEDO_TABLE_M_RATIO) - self.k0
         j = np.clip(np.floor(y).astype(np.int64), 0, self.E.shape[1] - 2)
         fy = np.clip(y - j, 0.0, 1.0)
         E = self.E
@@ -390,19 +390,11 @@ torrance_sparrow_sample = twin(torrance_sparrow_sample_numba, torrance_sparrow_s
 # --------------------------------------------------------------------------- TorranceSparrow's parameter checks
 
 def _checked_roughness(m, distribution: str):
-    """m as given if a TexturedNumber (≥ M_MIN everywhere, Beckmann or GGX facets only), else float(m), finite and
-    ≥ M_MIN; ValueError otherwise."""
-    if isinstance(m, TexturedNumber):
-        if not m.lo >= M_MIN:
-            raise ValueError(f"a textured roughness m must be >= {M_MIN:g} everywhere (no per-point smooth "
-                             f"limit), its values reach {m.lo:g}")
-        if distribution not in ("beckmann", "ggx"):
-            raise ValueError("a textured roughness m needs distribution='beckmann' or 'ggx'")
-        return m
-    m = float(m)
-    if not (math.isfinite(m) and m >= M_MIN):
-        raise ValueError(f"roughness m must be a finite number >= {M_MIN:g}, got {m!r}")
-    return m
+    """m as given if a TexturedNumber (Beckmann or GGX facets only), else float(m); finite and ≥ ALPHA_MIN
+    everywhere (roughness.checked_alpha); ValueError otherwise."""
+    if isinstance(m, TexturedNumber) and distribution not in ("beckmann", "ggx"):
+        raise ValueError("a textured roughness m needs distribution='beckmann' or 'ggx'")
+    return checked_alpha(m, "roughness m")
 
 
 def _checked_shadowing(shadowing: str | None, distribution: str) -> str:
@@ -561,7 +553,7 @@ class TorranceSparrow(BSDF):
         if self.distribution not in ("beckmann", "ggx"):
             raise ValueError("diffuse_layering='albedo_scaling' needs distribution 'beckmann' or 'ggx' (the "
                              "specular-albedo tables)")
-        lo, hi = (max(self.m.lo, M_MIN), max(self.m.hi, M_MIN)) if isinstance(self.m, TexturedNumber) else \
+        lo, hi = (max(self.m.lo, ALPHA_MIN), max(self.m.hi, ALPHA_MIN)) if isinstance(self.m, TexturedNumber) else \
             (self.m, self.m)
         if isinstance(self.n, NumberSpectrum) and isinstance(self.k, ConstantSpectrum) and self.k.value == 0.0 \
                 and self.film is None:
@@ -829,8 +821,9 @@ DECLARATION = ModelDeclaration(
     "torrance_sparrow", "Torrance–Sparrow",
     "Rough microfacet reflection (Beckmann or GGX facets, complex index) with an optional Lambertian part",
     [N, K, METAL,
-     Parameter("m", f"roughness: the Beckmann rms slope (= Mitsuba α, SCATMECH s) or the GGX α; 0 (the smooth "
-                    f"limit: a Fresnel mirror) or ≥ {M_MIN:g}", lo=0.0, hi=100.0, texturable=True,
+     Parameter("m", f"roughness: the Beckmann rms slope (= Mitsuba α, SCATMECH s) or the GGX α; below "
+                    f"{SMOOTH_LIMIT:g} (e.g. 0) the smooth limit: a Fresnel mirror; a texture ≥ {ALPHA_MIN:g} "
+                    "everywhere", lo=0.0, hi=100.0, texturable=True,
                socket=Socket("Roughness", "FLOAT", 0.1, 0.0, 5.0,
                              "Beckmann rms slope m (Mitsuba's α); 0 = smooth mirror")),
      Parameter("distribution", "microfacet distribution (GGX: Cycles' and Blender's)", kind="choice",
@@ -877,29 +870,18 @@ def _torrance_sparrow(p):
     if multiscatter and shadowing not in (None,) + MULTISCATTER_SHADOWING:
         raise SceneError(p.field("multiscatter"), f"needs shadowing {' or '.join(map(repr, MULTISCATTER_SHADOWING))} "
                                                   f"(the albedo tables are of the Smith lobes), got {shadowing!r}")
-    m = p["m"]
-    if isinstance(m, TexturedNumber):
-        m = m.clamped_to(M_MIN)          # a texel stored as float32 just below the limit counts as the limit
-        if not m.lo >= M_MIN:
-            raise SceneError(p.field("m"), f"a roughness texture must stay in [{M_MIN:g}, {p.model['m'].hi:g}] "
-                                           f"(the smooth limit m = 0 cannot vary per point), its values reach "
-                                           f"{m.lo:g}")
-        m_const, m_hi = None, m.hi
-    else:
-        m_const = m_hi = m
+    m, smooth = declared_slope(p, "m")        # (the one range check of m; textured: ≥ ALPHA_MIN everywhere)
+    m_hi = m.hi if isinstance(m, TexturedNumber) else m
     if multiscatter and not m_hi <= ALPHA_MAX:
         raise SceneError(p.field("m"), f"must be at most {ALPHA_MAX:g} with multiscatter (Cycles clamps GGX α to 1; "
                                        f"the albedo tables span [0, 1]), got {m_hi:g}")
     kw = dict(exterior_n=p["exterior_n"], diffuse_albedo=p["diffuse_albedo"],
               diffuse_weight=p.get("diffuse_weight", 1.0 if p.given("diffuse_albedo") else 0.0),
               specular_weight=p["specular_weight"], diffuse_layering=p["diffuse_layering"])
-    if m_const is not None and 0 < m < M_MIN:
-        raise SceneError(p.field("m"), f"must be 0 (the smooth limit) or in [{M_MIN:g}, {p.model['m'].hi:g}], "
-                                       f"got {m:g}")
     film = facet_film(p["thin_film_ior"], p["thin_film_thickness"]) is not None     # (the ior validated always)
     film_n = p["thin_film_ior"]
     if film:
         kw.update(film_n=film_n, film_thickness=p["thin_film_thickness"])
-    if m_const == 0:   # the smooth limit: a Fresnel mirror (plus the Lambertian part); E = 1, nothing to add
+    if smooth:   # effectively smooth (roughness.SMOOTH_LIMIT): a Fresnel mirror (plus the Lambertian part); E = 1
         return (FilmedMirrorWithDiffuse if film else MirrorWithDiffuse)(n, k, **kw)
     return TorranceSparrow(n, k, m, shadowing=shadowing, distribution=distribution, multiscatter=multiscatter, **kw)

@@ -203,6 +203,7 @@ from .htsg import HTSG
 from .lambert import Lambert
 from .microfacet import Beckmann, BlinnPhong, half_vector, reflect_local, shadowing_term
 from .parameters import ModelDeclaration, Parameter, Socket
+from .roughness import SMOOTH_LIMIT, checked_alpha, declared_slope
 from .sampling import cosine_hemisphere, local_to_world
 from .table_cache import cached_table
 from ..errors import SceneError
@@ -223,8 +224,6 @@ TRANSMISSION_NORMALS = ("facet", "macro")
 DISTRIBUTIONS = ("smooth", "blinn", "beckmann")
 #: Shadowing terms accepted for the coat (valid masking functions, so E_top ≤ 1).
 COAT_SHADOWING = ("ts", "smith")
-#: Smallest accepted Beckmann roughness (as engine.materials.torrance_sparrow.M_MIN).
-M_MIN = 1e-4
 #: Lobe-selection probability bounds when both the coat and the layer contribute.
 P_TOP_RANGE = (0.05, 0.95)
 
@@ -329,9 +328,8 @@ class Coat:
         elif self.distribution == "beckmann":
             if self.m is None or self.exponent is not None:
                 raise ValueError("distribution 'beckmann' needs m (and no exponent)")
-            lo, hi = (self.m.lo, self.m.hi) if isinstance(self.m, TexturedNumber) else (float(self.m),) * 2
-            if not (math.isfinite(lo) and math.isfinite(hi) and lo >= M_MIN):
-                raise ValueError(f"Beckmann m must be a finite number >= {M_MIN:g}, got {self.m!r}")
+            m = checked_alpha(self.m, "Beckmann m")         # (≥ roughness.ALPHA_MIN everywhere)
+            lo = m.lo if isinstance(m, TexturedNumber) else m
             # a textured m: this is the distribution at its least value (for what is fixed per material)
             self.dist = Beckmann(lo)
         else:
@@ -1235,7 +1233,8 @@ COAT = ModelDeclaration(
                default="smooth"),
      Parameter("exponent", "Blinn–Phong exponent e", lo=0.0, lo_open=True, hi=1e7, texturable=True,
                only_with=("distribution", ("blinn",))),
-     Parameter("m", "Beckmann rms slope", lo=M_MIN, hi=100.0, texturable=True,
+     Parameter("m", f"Beckmann rms slope; below {SMOOTH_LIMIT:g} (e.g. 0) a smooth coat (the distribution then "
+                    "counts as 'smooth'); a texture ≥ the least slope everywhere", lo=0.0, hi=100.0, texturable=True,
                only_with=("distribution", ("beckmann",)),
                socket=Socket("Coat Roughness", "FLOAT", 0.0, 0.0, 5.0,
                              "Beckmann rms slope of the coat surface (0 = smooth)"))])
@@ -1247,7 +1246,10 @@ COAT.per_point = frozenset({"n", "thickness", "absorption", "m"})
 @COAT.builder
 def _coat(p):
     dist = p["distribution"]
-    kw = {"exponent": p["exponent"]} if dist == "blinn" else {"m": p["m"]} if dist == "beckmann" else {}
+    kw = {"exponent": p["exponent"]} if dist == "blinn" else {}
+    if dist == "beckmann":
+        m, smooth = declared_slope(p, "m")         # effectively smooth (roughness.SMOOTH_LIMIT): the smooth coat
+        dist, kw = ("smooth", {}) if smooth else (dist, {"m": m})
     return Coat(n=p["n"], thickness=p["thickness"], absorption=p["absorption"], distribution=dist, **kw)
 
 

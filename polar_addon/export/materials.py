@@ -10,9 +10,12 @@ A material's Surface may be
   (Metallic ≥ 0.5), dielectric or rough dielectric as Glass (Transmission ≥ 0.5), Weidlich–Wilkie
   coat (Coat Weight > 0) or Torrance–Sparrow dielectric + Lambert (otherwise); Emission → emitter;
 - anything else: grey Lambert with a warning.
-Roughness r maps to the Beckmann slope m = r² (as Cycles' α = r²); below m = 0.02 the smooth model
-is used.  Every value is validated; a NaN or out-of-range input is an error naming the material
-and the input.
+Roughness r maps to the slope m = r² (as Cycles' α = r²); the engine's rule decides where that is
+smooth (engine.materials.roughness: below SMOOTH_LIMIT = 1e-4 the smooth model, as for a scene file).
+Every converted shader becomes declaration values built through ``MODELS[name].build`` (the
+declaration range-checks them once; a NaN or out-of-range input is an error naming the material
+and the input); only wrappers without a declaration (tints, Cycles' F82 curve, the anisotropic GGX
+part of a Principled-like metal) are made here directly.
 
 Textures (docs/guide/blender.md, "Using it": existing scenes): an input that a texturable parameter
 reads may be linked to an Image Texture (the image's own pixels; its interpolation, extension and
@@ -34,12 +37,11 @@ import weakref
 
 import numpy as np
 
-from ...engine.materials.dielectric import SmoothDielectric
 from ...engine.materials.lambert import Lambert
 from ...engine.materials.catalogue import MODELS
 from ...engine.materials.normal_map import set_bump_correction
 from ...engine.materials.principled import IOR_MIN, WEIGHT_CUTOFF, film_gaps
-from ...engine.materials.torrance_sparrow import M_MIN
+from ...engine.materials.roughness import ALPHA_MIN, ROUGHNESS_MIN, effectively_smooth
 from ...engine.errors import SceneError
 from ...engine.textures import ImageTexture, TextureInput, VertexColour
 from ...engine.textures.image import linear_to_srgb, srgb_to_linear
@@ -51,7 +53,6 @@ from ..nodes.models import DIELECTRIC_PRESETS, NODE_MODELS
 from .texture_bake import bake_input
 from .world import interpolated_encoded
 
-SMOOTH_LIMIT = 0.02
 DEFAULT_ALBEDO = 0.8
 
 
@@ -83,9 +84,8 @@ INTERPOLATION = {"Closest": "Closest", "Linear": "Linear", "Cubic": "Cubic", "Sm
 #: byte-image colour spaces whose stored values are already linear numbers
 LINEAR_SPACES = ("Non-Color", "Linear Rec.709", "Raw", "Linear", "Generic Data")
 
-#: least texel of a roughness texture: the float32 nearest 0.01 whose square is ≥ M_MIN (a textured
-#: Beckmann m must stay ≥ M_MIN: there is no per-point smooth limit)
-ROUGHNESS_MIN = float(np.nextafter(np.float32(0.01), np.float32(1)))
+#: (roughness textures: image texels are kept ≥ engine.materials.roughness.ROUGHNESS_MIN, the least r whose
+#: square is the least slope ALPHA_MIN: a textured m must stay ≥ it, there is no per-point smooth limit)
 
 #: image name → (signature, pixel hash, linear float32 (H, W, 4) pixels, {texture key: ImageTexture},
 #: warnings about the image (repeated on every export that uses it), the sRGB-encoded float32
@@ -373,8 +373,8 @@ def texture_source(socket, mat, warnings, roughness=False, node_name=""):
     if kind in ("ShaderNodeVertexColor", "ShaderNodeAttribute"):
         name = node.layer_name if kind == "ShaderNodeVertexColor" else node.attribute_name
         alpha = out.name == "Alpha"
-        # colours in [0, 1]: a roughness maps to m = M_MIN + (1 − M_MIN)·r² (≥ M_MIN without clamping)
-        scale, offset = (1.0 - M_MIN, M_MIN) if roughness else (1.0, 0.0)
+        # colours in [0, 1]: a roughness maps to m = ALPHA_MIN + (1 − ALPHA_MIN)·r² (≥ ALPHA_MIN without clamping)
+        scale, offset = (1.0 - ALPHA_MIN, ALPHA_MIN) if roughness else (1.0, 0.0)
         return TextureInput(VertexColour(name, 4 if alpha else 3), "A" if alpha else None, scale, offset, power)
 
 
@@ -560,6 +560,10 @@ def _rgb_spectrum(rgb, kind="reflectance"):
     return RGBReflectanceSpectrum(rgb) if kind == "reflectance" else RGBUnboundedSpectrum(rgb)
 
 
+#: Polarising BSDF parameters that are microfacet slopes (engine.materials.roughness)
+_SLOPES = ("m",)
+
+
 def _socket_values(reader, decl) -> dict:
     """{parameter name: value} of a model's FLOAT and COLOR inputs (a grey colour as one number).
 
@@ -575,6 +579,8 @@ def _socket_values(reader, decl) -> dict:
         if sock.is_linked:
             if p.texturable and p.name in decl.per_point:
                 lo, hi = _declared_range(p)          # the node's inputs are the model's own parameters
+                if p.name in _SLOPES:                # a baked roughness: kept ≥ the least slope (no per-point smooth)
+                    lo = max(lo, ALPHA_MIN)
                 source = reader.texture(s.name, lo=lo, hi=hi)
                 if source is not None:
                     values[p.name] = source
@@ -596,12 +602,6 @@ def _declared(decl, values, where):
         socket = decl[name].socket if name in decl else None
         return socket.name if socket is not None else name
     return decl.values(values, where, label=label)
-
-
-def _slope(values, name, decl, where):
-    """A roughness input (Beckmann m) ≥ 0 within the declared maximum; small values map to the smooth model."""
-    p = decl[name]
-    return p.with_(lo=0.0).number(values.pop(name, p.socket.default), f"{where}.{p.socket.name}")
 
 
 def polar_node_bsdf(node, mat, warnings, depth=0, bake=None):
@@ -634,26 +634,21 @@ def _polar_node_bsdf(node, mat, warnings, depth, bake=None):
             if name == preset and v is not None:   # a named preset replaces the IOR input
                 values["n"] = v
     if model == "TORRANCE_SPARROW":
-        if not isinstance(values.get("m"), TextureInput):
-            m = _slope(values, "m", decl, where)
-            values["m"] = m if m >= M_MIN else 0.0    # roughness 0: the smooth limit (Fresnel mirror + Lambertian part)
+        values.setdefault("m", decl["m"].socket.default)   # (a roughness the engine calls smooth: its smooth limit)
         values["shadowing"] = "smith" if node.shadowing == "SMITH" else "ts"
         if values.get("diffuse_albedo") == 0.0:   # black: no Lambertian part at all
             del values["diffuse_albedo"]
     if model == "WEIDLICH_WILKIE":
         coat_decl = decl["coats"].members
         coat_values = _socket_values(r, coat_decl)
-        if isinstance(coat_values.get("m"), TextureInput):     # a textured Beckmann m (≥ M_MIN, checked at build)
-            coat_values["distribution"] = "beckmann"
-        else:
-            m = _slope(coat_values, "m", coat_decl, where)
-            if m >= SMOOTH_LIMIT:
-                coat_values.update(distribution="beckmann", m=m)
+        # a Beckmann coat: the engine builds a smooth one where its rule calls the roughness smooth (0 included)
+        coat_values.setdefault("m", coat_decl["m"].socket.default)
+        coat_values["distribution"] = "beckmann"
         base_node = _follow(node.inputs["Base"])
         if depth > 16:
             raise SceneError(f"material {mat!r}", "layered materials nest more than 16 coats deep")
         parts["coats"] = [coat_decl.build(_declared(coat_decl, coat_values, where))]
-        parts["base"] = Lambert(ConstantSpectrum(DEFAULT_ALBEDO)) if base_node is None else \
+        parts["base"] = _lambert(DEFAULT_ALBEDO, mat, node) if base_node is None else \
             surface_bsdf(base_node, mat, warnings, depth + 1, bake)[0]
         values["form"] = "published" if node.ww_form == "PUBLISHED" else "energy"
     return decl.build(_declared(decl, values, where), **parts)
@@ -679,11 +674,15 @@ def _textured(*values) -> bool:
     return any(isinstance(v, TextureInput) for v in values)
 
 
-def _lambert(albedo, mat, node):
-    """Lambert of a constant [r, g, b] or a colour texture."""
-    if isinstance(albedo, TextureInput):
-        return _textured_model("lambert", {"albedo": albedo}, mat, node)
-    return Lambert(_rgb_spectrum(albedo))
+def _lambert(albedo, mat, node=None):
+    """The ``lambert`` model of a constant (a number, [r, g, b] or a Spectrum) or a colour texture."""
+    if isinstance(albedo, (int, float)):
+        albedo = ConstantSpectrum(float(albedo))
+    elif isinstance(albedo, (list, tuple)):
+        albedo = _rgb_spectrum(list(albedo))
+    decl = MODELS["lambert"]
+    where = f"material {mat!r}" + (f".{node.name}" if node is not None else "")
+    return decl.build(decl.values({"albedo": albedo}, where))
 
 
 def _reflectance(value):
@@ -721,20 +720,15 @@ def facets(node, mat, warnings):
     return {"distribution": "ggx", "multiscatter": distribution == "MULTI_GGX"}
 
 
-def _smooth(m, kw) -> bool:
-    """A constant roughness m rendered by the smooth (mirror) model: below SMOOTH_LIMIT for Beckmann
-    facets, below the engine's least slope for GGX (whose lobe is exact down to it, as Cycles')."""
-    from ...engine.materials.torrance_sparrow import M_MIN as TS_MIN
-    return not isinstance(m, TextureInput) and m < (TS_MIN if kw.get("distribution") == "ggx" else SMOOTH_LIMIT)
-
-
 def _facet_conductor(n, k, m, mat, node, warnings, film=None, aniso=None):
     """A conductor of index n + iκ (spectra, [r, g, b] or textured) with facets as the node's Distribution
     and roughness m (α = r², constant or a TextureInput), or its smooth limit; ``film``: (IOR, thickness nm)
     of a Thin Film on its facets or its mirror (Cycles films the conductor's index);
-    ``aniso``: (α_x, α_y, rotation in turns) of Cycles' anisotropic GGX (a constant roughness; None: isotropic)."""
+    ``aniso``: (α_x, α_y, rotation in turns) of Cycles' anisotropic GGX (a constant roughness; None: isotropic).
+    Smooth where the engine's rule calls every α smooth (engine.materials.roughness.effectively_smooth): the
+    ``conductor`` model; else each α at least the least slope ALPHA_MIN (pbrt's rule)."""
     kw = facets(node, mat, warnings)
-    smooth = _smooth(m, kw) and (aniso is None or max(aniso[:2]) < _ts_min())
+    smooth = not isinstance(m, TextureInput) and effectively_smooth(m, *(() if aniso is None else aniso[:2]))
     films = {} if film is None else {"thin_film_ior": film[0], "thin_film_thickness": film[1]}
     if smooth:
         return _textured_model("conductor", {"n": n, "k": k, **films}, mat, node)
@@ -742,20 +736,16 @@ def _facet_conductor(n, k, m, mat, node, warnings, film=None, aniso=None):
         if kw["distribution"] == "ggx":
             from ...engine.materials.anisotropic_ggx import AnisotropicGGX
             n_s, k_s = (_rgb_spectrum(list(v), "unbounded") if isinstance(v, (list, tuple)) else v for v in (n, k))
-            return AnisotropicGGX(n_s, k_s, max(aniso[0], _ts_min()), max(aniso[1], _ts_min()), rotation=aniso[2],
+            # (no declaration: the anisotropic GGX is a part of Principled-like metals, engine.materials.principled)
+            return AnisotropicGGX(n_s, k_s, max(aniso[0], ALPHA_MIN), max(aniso[1], ALPHA_MIN), rotation=aniso[2],
                                   multiscatter=kw["multiscatter"],
                                   film_n=None if film is None else _film_number(film[0], IOR_MIN),
                                   film_thickness=0.0 if film is None else _film_number(film[1]))
         warnings.append(f"material {mat!r}: the anisotropy of {node.name!r} is simulated with GGX only; rendered "
                         "isotropic (Beckmann)")
     if not isinstance(m, TextureInput):
-        m = max(m, 1e-4)
+        m = max(m, ALPHA_MIN)          # (an anisotropic pair rendered isotropic: its m may lie below)
     return _textured_model("torrance_sparrow", {"n": n, "k": k, "m": m, **kw, **films}, mat, node)
-
-
-def _ts_min():
-    from ...engine.materials.torrance_sparrow import M_MIN
-    return M_MIN
 
 
 def _node_anisotropy(r, node, mat, warnings, m, kind):
@@ -1074,25 +1064,24 @@ def _film_number(value, lo=0.0):
     return TexturedNumber(value, clip=(lo, 1e6)) if isinstance(value, TextureInput) else value
 
 
-def _glass(ior, roughness, distribution, film=None, warn=None):
-    """Smooth dielectric at roughness 0 (below the engine's least α), else the rough dielectric with
-    α = roughness²: GGX as Cycles' GGX, Multiscatter GGX (Principled's and Glass' default) with Cycles'
-    energy compensation (``multiscatter``), Beckmann as Beckmann."""
-    from ...engine.materials.rough_dielectric import ALPHA_MIN, RoughDielectric, index_matched
+def _glass(ior, roughness, distribution, film=None, warn=None, where="material"):
+    """The ``rough_dielectric`` model of α = roughness² (the engine builds the smooth dielectric where its rule
+    calls α smooth, or the interface is index-matched): GGX as Cycles' GGX, Multiscatter GGX (Principled's and
+    Glass' default) with Cycles' energy compensation (``multiscatter``), Beckmann as Beckmann; with a ``film``
+    (IOR, thickness) on a smooth surface the ``thin_film`` model (a film on a rough one is not simulated:
+    ``warn``)."""
     alpha = roughness * roughness
     if film is not None:
-        if alpha < ALPHA_MIN:         # a smooth coated interface: interference and its elliptical polarisation
-            from ...engine.materials.thin_film import ThinFilmDielectric
-            return ThinFilmDielectric(ior, _film_number(film[0], IOR_MIN), _film_number(film[1]))
+        if effectively_smooth(alpha):    # a smooth coated interface: interference and its elliptical polarisation
+            decl = MODELS["thin_film"]
+            return decl.build(decl.values({"n": ior, "film_n": _film_number(film[0], IOR_MIN),
+                                           "thickness": _film_number(film[1])}, where))
         if warn is not None:
             warn("its Thin Film on a rough surface is not simulated (smooth surfaces only)")
-    if distribution == "BECKMANN":
-        if alpha < SMOOTH_LIMIT or index_matched(ior, 1.0):
-            return SmoothDielectric(ior)
-        return RoughDielectric(ior, max(alpha, ALPHA_MIN), "beckmann")
-    if alpha < ALPHA_MIN or index_matched(ior, 1.0):
-        return SmoothDielectric(ior)
-    return RoughDielectric(ior, alpha, "ggx", multiscatter=distribution == "MULTI_GGX")
+    beckmann = distribution == "BECKMANN"
+    decl = MODELS["rough_dielectric"]
+    return decl.build(decl.values({"n": ior, "alpha": alpha, "distribution": "beckmann" if beckmann else "ggx",
+                                   "multiscatter": distribution == "MULTI_GGX"}, where))
 
 
 def _emission(node, mat, warnings, colour_name="Color", strength_name="Strength", bake=None):
@@ -1311,7 +1300,8 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
         rough = r.float("Roughness", 0.0, 1.0)
         colour = r.rgb_or_texture("Color", 0.0)          # Cycles tints reflection and refraction by Color
         glass = _glass(_ior(r, "IOR"), rough, getattr(node, "distribution", ""), _film(r),
-                       lambda text: warnings.append(f"material {mat!r}: {node.name!r}: {text}"))
+                       lambda text: warnings.append(f"material {mat!r}: {node.name!r}: {text}"),
+                       f"material {mat!r}.{node.name}")
         return _tinted(glass, colour, colour), None
     if kind == "ShaderNodeBsdfSheen":
         if getattr(node, "distribution", "MICROFIBER") != "MICROFIBER":
@@ -1333,11 +1323,11 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
                 bsdf.emission_under_layers = True
         return bsdf, emission
     if kind == "ShaderNodeEmission":
-        return Lambert(ConstantSpectrum(0.0)), _emission(node, mat, warnings, bake=bake)
+        return _lambert(0.0, mat, node), _emission(node, mat, warnings, bake=bake)
     if kind in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
         return _shader_mix(node, mat, warnings, depth, bake)
     if kind == "ShaderNodeBsdfTransparent":
-        black = Lambert(ConstantSpectrum(0.0))
+        black = _lambert(0.0, mat, node)
         if depth == 0:          # the whole surface transparent: the object passes every ray
             _white_transparent(node, mat, warnings)
             black.alpha_factor = 0.0
@@ -1347,7 +1337,7 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
         return black, None
     else:
         warnings.append(f"material {mat!r}: shader {kind} is not supported; rendered as grey Lambert")
-    return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
+    return _lambert(DEFAULT_ALBEDO, mat, node), None
 
 
 def _black(bsdf) -> bool:
@@ -1386,7 +1376,7 @@ def _transparent_mix(node, shaders, mat, warnings, depth, bake):
             warnings.append(f"material {mat!r}: Light Path ▸ {fac_out.name} drives {node.name!r}; rendered as "
                             "the camera sees it")
         bsdf, emission = (surface_bsdf(other, mat, warnings, depth, bake) if other is not None
-                          else (Lambert(ConstantSpectrum(0.0)), None))
+                          else (_lambert(0.0, mat, node), None))
         bsdf.camera_only = True         # (hidden from indirect rays, its emission lights nothing: as Cycles)
         return bsdf, emission
     _white_transparent(clear, mat, warnings)
@@ -1394,7 +1384,7 @@ def _transparent_mix(node, shaders, mat, warnings, depth, bake):
     fac = _fraction(r, node.inputs[0].name)
     weight = _weight(fac, complement=not _transparent(first))       # the weight of X
     bsdf, emission = (surface_bsdf(other, mat, warnings, depth, bake) if other is not None
-                      else (Lambert(ConstantSpectrum(0.0)), None))
+                      else (_lambert(0.0, mat, node), None))
     bsdf.alpha_factor = weight
     return bsdf, emission
 
@@ -1413,7 +1403,6 @@ def _shader_mix(node, mat, warnings, depth, bake):
     shaders' BSDFs, nested mixes nesting.  An unlinked shader input adds nothing (as in Cycles).
     Emission adds up with the same weights; under a per-point Factor the emission is weighed by the
     Factor's own value (one warning: an emitter's strength does not follow a texture Factor)."""
-    from ...engine.materials.mix import Mix
     if depth > 32:
         raise SceneError(f"material {mat!r}", "shader mixes nest more than 32 deep")
     shaders = [s for s in node.inputs if s.type == "SHADER"]
@@ -1447,10 +1436,12 @@ def _shader_mix(node, mat, warnings, depth, bake):
             emitted.append((wk, emission))
     emission = _weighted_emission(emitted, mat, node, warnings)
     if not parts:
-        return Lambert(ConstantSpectrum(0.0)), emission
+        return _lambert(0.0, mat, node), emission
     if len(parts) == 1 and isinstance(part_weights[0], float) and part_weights[0] == 1.0:
         return parts[0], emission
-    return Mix(parts, part_weights), emission
+    decl = MODELS["mix"]
+    return decl.build(decl.values({"weights": part_weights}, f"material {mat!r}.{node.name}"), materials=parts), \
+        emission
 
 
 def export_material(material, warnings, bake=None):
@@ -1468,10 +1459,10 @@ def export_material(material, warnings, bake=None):
 
 def _material_bsdf(material, warnings, bake):
     if material is None:
-        return Lambert(ConstantSpectrum(DEFAULT_ALBEDO)), None
+        return _lambert(DEFAULT_ALBEDO, "default"), None
     tree = compat.node_tree_in_use(material)
     if tree is None:
-        return Lambert(_rgb_spectrum([float(c) for c in material.diffuse_color[:3]])), None
+        return _lambert([float(c) for c in material.diffuse_color[:3]], material.name), None
     output = tree.get_output_node("ALL") or tree.get_output_node("CYCLES")
     node = _follow(output.inputs["Surface"]) if output is not None else None
     sock = output.inputs.get("Displacement") if output is not None else None
@@ -1481,10 +1472,10 @@ def _material_bsdf(material, warnings, bake):
     volume = _follow(output.inputs["Volume"]) if output is not None and "Volume" in output.inputs else None
     if node is None and volume is not None:
         # Cycles: a material with only a volume has a transparent surface (the object's alpha: scene.py)
-        return _with_interior(Lambert(ConstantSpectrum(0.0)), volume, material.name, warnings), None
+        return _with_interior(_lambert(0.0, material.name), volume, material.name, warnings), None
     if node is None:
         warnings.append(f"material {material.name!r} has no surface shader; rendered black")
-        return Lambert(ConstantSpectrum(0.0)), None
+        return _lambert(0.0, material.name), None
     bsdf, emission = surface_bsdf(node, material.name, warnings, bake=bake)
     cycles = getattr(material, "cycles", None)      # Material ▸ Settings ▸ Bump Map Correction (Cycles' property)
     if not getattr(cycles, "use_bump_map_correction", True):

@@ -2,6 +2,7 @@
 (GGX, α = roughness², Cycles' multiple-scattering compensation for Multiscatter GGX), tinted as Cycles
 tints glass; the Rough/Thin Dielectric node models."""
 
+import numpy as np
 import pytest
 
 bpy = pytest.importorskip("bpy")
@@ -85,3 +86,26 @@ def test_rough_and_thin_dielectric_node_models(addon):
     assert bsdf.name == "dielectric"
     bsdf, _ = exported(polar_material("T", "THIN_DIELECTRIC", dielectric_preset="WATER"))
     assert bsdf.name == "thin_dielectric" and bsdf.n_int == pytest.approx(1.333)
+
+
+@pytest.mark.parametrize("kind,distribution", [("ShaderNodeBsdfGlass", "BECKMANN"), ("ShaderNodeBsdfGlass", "GGX"),
+                                               ("ShaderNodeBsdfGlossy", "BECKMANN"), ("ShaderNodeBsdfGlossy", "GGX")])
+def test_the_smooth_limit_is_the_engines_for_blender_and_scene_files(addon, kind, distribution):
+    """One rule (engine.materials.roughness): roughness r with α = r² below SMOOTH_LIMIT = 1e-4 (r < 0.01) is the
+    smooth model, from it on the rough lobe — Beckmann facets as GGX (they turned smooth below α = 0.02 before),
+    and the rough glass is the model a scene file's ``rough_dielectric`` of the same α builds."""
+    from polar_render.engine.materials.catalogue import MODELS
+    empty_scene()
+    glass = kind == "ShaderNodeBsdfGlass"
+    for r, rough in ((0.0, False), (0.0099, False), (0.0101, True), (0.1, True)):
+        bsdf, _ = exported(shader_material(kind, distribution, Roughness=r, **({"IOR": 1.5} if glass else {})))
+        model = untinted(bsdf) if glass else bsdf.base
+        if glass:
+            assert model.name == ("rough_dielectric" if rough else "dielectric"), (r, model.name)
+            decl = MODELS["rough_dielectric"]
+            r32 = float(np.float32(r))          # (as Blender stores the socket)
+            from_file = decl.build(decl.values({"n": 1.5, "alpha": r32 * r32, "distribution": distribution.lower()},
+                                               "x"))
+            assert model.describe() == from_file.describe()
+        else:
+            assert model.name == ("torrance_sparrow" if rough else "conductor"), (r, model.name)

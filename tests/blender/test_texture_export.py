@@ -286,7 +286,7 @@ def test_roughness_texture_gives_the_constant_model_at_each_texel(tmp_path):
     from polar_render.engine.materials.torrance_sparrow import TorranceSparrow
     from polar_render.engine.spectral import WavelengthLookup
     from polar_render.engine.textures import SurfacePoints, VertexAttributes
-    from polar_render.engine.materials.torrance_sparrow import M_MIN
+    from polar_render.engine.materials.roughness import ALPHA_MIN as M_MIN
     from PIL import Image
     r8 = np.array([[0, 60, 120], [180, 230, 255]], np.uint8)
     Image.fromarray(r8).save(tmp_path / "rough.png")

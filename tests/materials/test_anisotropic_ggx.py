@@ -25,7 +25,8 @@ from engine.materials.anisotropic_ggx import (AnisotropicGGX, LobeAlbedoTable, a
                                               ggx_aniso_D, ggx_aniso_lambda)
 from engine.materials.base import ShadingPoint
 from engine.materials.flags import BSDFFlags
-from engine.materials.torrance_sparrow import M_MIN, SpecularAlbedoTable, TorranceSparrow
+from engine.materials.roughness import ALPHA_MIN as M_MIN
+from engine.materials.torrance_sparrow import SpecularAlbedoTable, TorranceSparrow
 from engine.polarisation.fresnel import fresnel_reflectance, fresnel_reflection_abcs
 from engine.polarisation.mueller import is_realisable
 from engine.polarisation.thin_film import film_reflection_abcs

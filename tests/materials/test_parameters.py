@@ -82,7 +82,7 @@ def test_loader_and_catalogue_enforce_the_declared_range_identically(model, flat
         flat_params = dict(cat, **{flat: repr(v) if math.isfinite(v) else str(v)})
         if path[0] == "coats" and path[1] in COAT_CONTEXT:
             flat_params["coat_distribution"] = COAT_CONTEXT[path[1]]["distribution"]
-        if flat == "m" and model == "torrance_sparrow" and 0 < v < 1e-4:
+        if flat in ("m", "coat_m", "alpha") and 0 < v < 1e-4:
             continue   # between 0 and the smallest slope: the smooth-limit rule, tested below
         expected = param.contains(v)
         loader_field = _accepts(lambda d=d: parse_material(d, "m"))
@@ -124,7 +124,7 @@ def test_texturable_parameters_are_the_surface_varying_ones():
         ("torrance_sparrow", "thin_film_ior"), ("principled", "anisotropic"), ("principled", "anisotropic_rotation"),
         ("principled", "ior"),
         ("conductor", "thin_film_thickness"), ("torrance_sparrow", "thin_film_thickness"), ("oren_nayar", "albedo"),
-        ("sheen", "tint"), ("sheen", "roughness")}
+        ("sheen", "tint"), ("sheen", "roughness"), ("thin_film", "film_n"), ("thin_film", "thickness")}
 
 
 @pytest.mark.parametrize("coat,field", [
@@ -166,13 +166,24 @@ def test_torrance_sparrow_weights_have_a_finite_upper_bound():
         assert err.value.field == f"param.{key}" and "[0, 1e+06]" in str(err.value)
 
 
-def test_torrance_sparrow_slopes_below_the_smallest_are_the_smooth_limit_or_an_error():
-    for build in (lambda: parse_material({"type": "torrance_sparrow", "n": 1.5, "m": 5e-5}, "x"),
-                  lambda: make_model("torrance_sparrow", {"n": "1.5", "m": "5e-5"}, "x")):
-        with pytest.raises(SceneError, match="smooth limit") as err:
-            build()
-        assert err.value.field == "x.m"
-    assert make_model("torrance_sparrow", {"n": "1.5", "m": "0"}).m == 0.0
+def test_a_roughness_below_the_smooth_limit_builds_the_smooth_model_from_a_file_and_the_catalogue():
+    """engine.materials.roughness: one rule for every microfacet model and every front end: a constant slope below
+    SMOOTH_LIMIT (0 included) is the smooth model; from SMOOTH_LIMIT = ALPHA_MIN on, the rough lobe."""
+    from engine.materials.roughness import ALPHA_MIN, SMOOTH_LIMIT
+    assert SMOOTH_LIMIT == ALPHA_MIN == 1e-4
+    for m in ("0", "5e-5", repr(math.nextafter(SMOOTH_LIMIT, 0.0))):
+        for built in (parse_material({"type": "torrance_sparrow", "n": 1.5, "m": float(m)}, "x"),
+                      make_model("torrance_sparrow", {"n": "1.5", "m": m}, "x")):
+            assert type(built).__name__ == "MirrorWithDiffuse" and built.m == 0.0
+        for built in (parse_material({"type": "rough_dielectric", "n": 1.5, "alpha": float(m)}, "x"),
+                      make_model("rough_dielectric", {"n": "1.5", "alpha": m}, "x")):
+            assert built.name == "dielectric"
+        coat = make_model("weidlich_wilkie", {"coat_n": "1.5", "coat_distribution": "beckmann", "coat_m": m})
+        assert coat.coat.smooth
+    assert make_model("torrance_sparrow", {"n": "1.5", "m": repr(SMOOTH_LIMIT)}).m == SMOOTH_LIMIT
+    assert make_model("rough_dielectric", {"n": "1.5", "alpha": repr(SMOOTH_LIMIT)}).alpha == SMOOTH_LIMIT
+    assert not make_model("weidlich_wilkie", {"coat_n": "1.5", "coat_distribution": "beckmann",
+                                              "coat_m": "0.01"}).coat.smooth
 
 
 @pytest.mark.parametrize("model", list(MINIMAL))

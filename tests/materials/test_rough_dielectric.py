@@ -259,8 +259,10 @@ def test_scene_loader_and_catalogue():
     assert isinstance(scene, RoughDielectric) and isinstance(scene.dist, GGX)
     assert isinstance(parse_material({"type": "rough_dielectric", "n": 1.5}, "x").dist, Beckmann)
     assert isinstance(parse_material({"type": "rough_dielectric", "n": 1.5, "alpha": 0}, "x"), SmoothDielectric)
-    with pytest.raises(SceneError, match="smooth dielectric") as err:
-        parse_material({"type": "rough_dielectric", "n": 1.5, "alpha": 1e-5}, "x")
+    # below the smooth limit (engine.materials.roughness): the smooth dielectric too
+    assert isinstance(parse_material({"type": "rough_dielectric", "n": 1.5, "alpha": 1e-5}, "x"), SmoothDielectric)
+    with pytest.raises(SceneError, match=r"\[0, 10\]") as err:
+        parse_material({"type": "rough_dielectric", "n": 1.5, "alpha": -1e-5}, "x")
     assert err.value.field == "x.alpha"
     with pytest.raises(SceneError) as err:
         parse_material({"type": "rough_dielectric", "n": 1.5, "distribution": "ggx",
