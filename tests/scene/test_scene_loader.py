@@ -94,7 +94,7 @@ CASES = [
      "objects[0].transform.matrix", "singular"),
     ("objects.1.emission", {"radiance": -3}, "objects[1].emission.radiance", "[0,"),
     ("materials.gold", {"type": "torrance_sparrow", "metal": "Au"}, "materials.gold.m", "required"),
-    ("materials.gold", {"type": "torrance_sparrow", "metal": "Au", "m": 5e-5}, "materials.gold.m", "smooth limit"),
+    ("materials.gold", {"type": "torrance_sparrow", "metal": "Au", "m": -0.01}, "materials.gold.m", "[0,"),
     ("materials.gold", {"type": "torrance_sparrow", "n": 1.5, "m": 0.1, "shadowing": "magic"},
      "materials.gold.shadowing", "'smith'"),
     ("materials.gold", {"type": "htsg", "metal": "Al", "sigma0_um": -1, "tau_um": 3}, "materials.gold.sigma0_um",
@@ -125,6 +125,21 @@ def test_validation_errors_name_the_field(path, value, field, words):
         parse_scene(with_change(path, value))
     assert err.value.field == field, str(err.value)
     assert words in str(err.value)
+
+
+def test_a_roughness_below_the_least_slope_renders_the_smooth_model():
+    """engine.materials.roughness: m in (0, ALPHA_MIN) is effectively smooth — the mirror, as Blender's Glossy at
+    that roughness (it was an error before the rule was one)."""
+    from engine.materials.roughness import ALPHA_MIN
+    d = copy.deepcopy(BASE)
+    d["materials"]["gold"] = {"type": "torrance_sparrow", "metal": "Au", "m": 0.5 * ALPHA_MIN}
+    smooth = parse_scene(d).materials["gold"]
+    d["materials"]["gold"]["m"] = 2 * ALPHA_MIN
+    rough = parse_scene(d).materials["gold"]
+    from engine.materials.smooth_limit import MirrorWithDiffuse
+    from engine.materials.torrance_sparrow import TorranceSparrow
+    assert isinstance(smooth, MirrorWithDiffuse) and smooth.m == 0.0
+    assert isinstance(rough, TorranceSparrow) and rough.m == 2 * ALPHA_MIN
 
 
 def test_layered_material_can_reference_another_material_as_base():
