@@ -19,7 +19,10 @@ from ...engine.errors import SceneError
 from ...engine.scene.description import Mesh
 from ...engine.scene.shapes import icosphere
 from .. import compat
-from .materials import _follow, attribute_needs, normal_input_unsupported, texture_source
+from .images import texture_source
+from .materials import attribute_needs
+from .node_links import follow
+from .normal_maps import normal_input_unsupported
 
 
 GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES", "POINTCLOUD"}
@@ -297,16 +300,16 @@ def material_alpha(material, warnings):
     """Principled Alpha of a material's surface shader (1 if none): a number, or a TexturedNumber where
     Alpha comes from an image (its alpha or a channel), a Separate Color of one or a colour attribute —
     anything else linked keeps its own value with one warning; also warns about a linked Normal input
-    that is not an exported normal or bump map (materials.normal_input_unsupported)."""
+    that is not an exported normal or bump map (normal_maps.normal_input_unsupported)."""
     tree = compat.node_tree_in_use(material) if material is not None else None
     if tree is None:
         return 1.0
     output = tree.get_output_node("ALL") or tree.get_output_node("CYCLES")
-    node = _follow(output.inputs["Surface"]) if output is not None else None
+    node = follow(output.inputs["Surface"]) if output is not None else None
     if node is None:
         # a volume alone: Cycles' surface is transparent (the interior is the material's: materials.py)
         volume = output.inputs.get("Volume") if output is not None else None
-        return 0.0 if volume is not None and _follow(volume) is not None else 1.0
+        return 0.0 if volume is not None and follow(volume) is not None else 1.0
     if normal_input_unsupported(node):
         warnings.append(f"material {material.name!r}: bump and normal maps (linked Normal input) are not "
                         "supported; the geometric shading normals are used")

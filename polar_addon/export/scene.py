@@ -24,7 +24,8 @@ from . import geometry
 from .camera import export_camera
 from .geometry import CONVERTED_TYPES, GEOMETRY_TYPES, UNSUPPORTED_TYPES
 from .lights import export_light as export_light_
-from .materials import VIEWPORT_NO_BAKE, BakeTarget, export_material
+from .materials import VIEWPORT_NO_BAKE, export_material
+from .node_reader import BakeTarget
 from .texture_bake import RESOLUTION_MAX, RESOLUTION_MIN
 from .world import export_world as export_world_
 

@@ -5,7 +5,7 @@ other node graph feeding a colour or float input) into float images on the objec
 :class:`ImageTexture` (``resolution``² texels, row 0 at v = 0, looked up through the UV map the
 object's mesh exports: the active render map unless a texture of its materials names another)
 holding exactly the linear values the socket receives in Cycles (no view transform, no clamping:
-``materials._linked_input_fallback`` clamps to the input's range), or None with one warning naming
+``node_reader._linked_input_fallback`` clamps to the input's range), or None with one warning naming
 the material and the input when the object has no UV map (or is not a mesh).
 
 How: everything happens on temporary datablocks, all removed afterwards (the user's file is never

@@ -265,16 +265,16 @@ def test_float_input_fallback_gives_a_textured_number():
     """The hook returns a TexturedNumber for float sockets (for inputs that accept textures)."""
     _bake_module()
     from polar_render.engine.textures import TexturedNumber
-    from polar_render.polar_addon.export import materials
+    from polar_render.polar_addon.export import node_reader
     scene, plane, mat, _ = checker_scene("ShaderNodeBsdfPrincipled")
     nodes = mat.node_tree.nodes
     principled = nodes["Principled BSDF"]
     mat.node_tree.links.new(nodes.new("ShaderNodeTexNoise").outputs["Fac"], principled.inputs["Roughness"])
     warnings = []
-    reader = materials._Reader(mat.name, nodes["Principled BSDF"], warnings,
-                               materials.BakeTarget(plane, None, mat, 16))
-    value = TexturedNumber(materials._linked_input_fallback(reader, nodes["Principled BSDF"].inputs["Roughness"],
-                                                           0.0, 1.0))      # the hook gives a TextureInput
+    reader = node_reader.Reader(mat.name, nodes["Principled BSDF"], warnings,
+                                node_reader.BakeTarget(plane, None, mat, 16))
+    value = TexturedNumber(node_reader._linked_input_fallback(reader, nodes["Principled BSDF"].inputs["Roughness"],
+                                                             0.0, 1.0))      # the hook gives a TextureInput
     assert isinstance(value, TexturedNumber) and 0.0 <= value.lo < value.hi <= 1.0 and warnings == []
 
 
@@ -328,7 +328,7 @@ def test_baked_roughness_is_m_squared_with_the_least_textured_slope():
     becomes m = r² per point (TextureInput power 2), r clamped at ROUGHNESS_MIN as an image roughness:
     at texel centres m is (max(Fac, ROUGHNESS_MIN))² of the analytic checker."""
     tb = _bake_module()
-    from polar_render.polar_addon.export.materials import ROUGHNESS_MIN
+    from polar_render.engine.materials.roughness import ROUGHNESS_MIN
     scale, res = 4.0, 64
     scene, plane, mat, _ = checker_scene("ShaderNodeBsdfPrincipled", scale=scale, uv_vector=True)
     nodes = mat.node_tree.nodes

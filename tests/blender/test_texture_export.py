@@ -372,7 +372,7 @@ def test_metal_base_colour_texture_gives_the_constant_conversion_at_each_texel(t
     centre the material is, bit for bit, the exporter's conversion of that texel's (linear) colour."""
     load_addon()
     from PIL import Image
-    from polar_render.polar_addon.export import materials
+    from polar_render.polar_addon.export import images
     Image.fromarray(np.array([[[250, 200, 60], [200, 200, 200]], [[180, 90, 40], [240, 240, 250]]],
                              np.uint8)).save(tmp_path / "metal.png")
     bpy.ops.wm.read_homefile(use_empty=True)
@@ -388,7 +388,7 @@ def test_metal_base_colour_texture_gives_the_constant_conversion_at_each_texel(t
     key = next(m for m in exported.meshes if m.name.startswith("Plane")).materials[0]
     bsdf = exported.materials[key]
     assert bsdf.varies_over_surface and bsdf.name == "torrance_sparrow"
-    linear = materials._IMAGES[tex.image.name_full][2]            # the image's linear texels (row 0 bottom)
+    linear = images._IMAGES[tex.image.name_full][2]            # the image's linear texels (row 0 bottom)
     from polar_render.engine.textures.image import srgb_to_linear  # image.pixels of 8-bit files are not linear
     np.testing.assert_allclose(linear[..., :3], srgb_to_linear(np.asarray(Image.open(tmp_path / "metal.png"))[::-1]
                                                                / 255.0), rtol=1e-6)
@@ -443,7 +443,7 @@ def test_viewport_re_reads_a_mesh_when_a_material_gains_a_texture():
     with UVs); an untouched image is not read again (cached per image)."""
     load_addon()
     from polar_render.polar_addon import viewport as vp
-    from polar_render.polar_addon.export import materials
+    from polar_render.polar_addon.export import images
     from polar_render.polar_addon.render_engine import engine_settings
     with tempfile.TemporaryDirectory() as tmp:
         scene = checker(tmp)
@@ -470,12 +470,12 @@ def test_viewport_re_reads_a_mesh_when_a_material_gains_a_texture():
             assert counts["arrays"] == 1 and counts["materials"] == 1 and synced.rebuild
             plane = next(m for m in synced.scene.meshes if m.name.startswith("Plane"))
             assert plane.uv is not None and synced.scene.materials[plane.materials[0]].varies_over_surface
-            entry = materials._IMAGES[tex.image.name_full]
+            entry = images._IMAGES[tex.image.name_full]
             mat.node_tree.nodes["Diffuse BSDF"].inputs["Roughness"].default_value = 0.5   # another edit
             bpy.context.view_layer.update()
             synced, counts = results[-1]
             assert counts["arrays"] == 0 and counts["materials"] == 1
-            assert materials._IMAGES[tex.image.name_full] is entry        # pixels not read again
+            assert images._IMAGES[tex.image.name_full] is entry        # pixels not read again
         finally:
             bpy.app.handlers.depsgraph_update_post.remove(on_update)
 
@@ -538,7 +538,7 @@ def test_alpha_output_is_a_one_channel_texture(tmp_path):
     """An Image Texture's Alpha output on a number input reads the alpha channel (linear, as stored)."""
     load_addon()
     from PIL import Image
-    from polar_render.polar_addon.export.materials import texture_source
+    from polar_render.polar_addon.export.images import texture_source
     rgba = np.array([[[255, 0, 0, 51], [0, 255, 0, 204]]], np.uint8)
     Image.fromarray(rgba, "RGBA").save(tmp_path / "alpha.png")
     bpy.ops.wm.read_homefile(use_empty=True)
@@ -630,7 +630,7 @@ def _transition_scene(tmp, kind):
 def transition_renders():
     """kind → (Cycles, Polar) per-column-strip luminance (mean, standard error), exported texture."""
     load_addon()
-    from polar_render.polar_addon.export import materials
+    from polar_render.polar_addon.export.images import _IMAGES
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         for kind in ("png", "exr", "packed"):
@@ -638,7 +638,7 @@ def transition_renders():
             polar, warnings = polar_renders(scene)
             assert warnings == [], warnings
             image = bpy.data.materials[f"Edge_{kind}"].node_tree.nodes["Image Texture"].image
-            texture = next(iter(materials._IMAGES[image.name_full][3].values()))
+            texture = next(iter(_IMAGES[image.name_full][3].values()))
             stats = []
             for images in (cycles_renders(scene, tmp), polar):          # 8 strips of 4 columns
                 lum = images @ REC709
