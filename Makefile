@@ -9,6 +9,8 @@ $(VENV)/.installed: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test]'
+	@echo "Compiling the render kernels into the cache (once, a minute or two: renders then start at once)"
+	$(PY) -m engine precompile || echo "warning: precompiling failed: the first render compiles its kernels"
 	touch $@
 
 demo: $(VENV)/.installed

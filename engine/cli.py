@@ -29,23 +29,48 @@ class ProgressBar:
         self.label, self.stream, self.width = label, stream, width
         self.t0 = time.perf_counter()
         self._last = None
+        self._first = None          # (elapsed, fraction) at the first traced batch
 
     def __call__(self, fraction: float, stats: dict) -> None:
         filled = int(round(fraction * self.width))
         elapsed = time.perf_counter() - self.t0
-        eta = elapsed * (1 - fraction) / fraction if fraction > 0 else 0.0
+        # The estimate starts at the first traced batch: what came before it (loading or compiling
+        # kernels, the first batch's set-up) says nothing about the batches to come.
+        if self._first is None:
+            self._first = (elapsed, fraction)
+        t1, f1 = self._first
+        left = (f"{(elapsed - t1) * (1 - fraction) / (fraction - f1):6.1f}s left" if fraction > f1
+                else "     ?s left")
         rate = stats.get("samples", 0) / max(elapsed, 1e-9) / 1e3
         line = (f"\r{self.label} [{'#' * filled}{'.' * (self.width - filled)}] {100 * fraction:5.1f}% "
-                f"{elapsed:6.1f}s elapsed, {eta:6.1f}s left, {rate:7.1f} ksamples/s")
+                f"{elapsed:6.1f}s elapsed, {left}, {rate:7.1f} ksamples/s")
         if line != self._last:
             self.stream.write(line)
             self.stream.flush()
             self._last = line
 
+    def note(self, text: str) -> None:
+        """Print ``text`` on a line of its own (after the bar's line, if one is drawn)."""
+        self.stream.write(("\n" if self._last is not None else "") + text + "\n")
+        self.stream.flush()
+        self._last = None
+
     def close(self):
         if self._last is not None:
             self.stream.write("\n")
             self.stream.flush()
+
+
+#: What the command line says when a kernel starts compiling (once per process).
+COMPILING_MESSAGE = "polar: compiling kernels (first run only)…"
+
+
+def _say_compiling(bar: ProgressBar | None) -> None:
+    """Say that kernels are being compiled (called by engine.kernels.COMPILES at the first compile)."""
+    if bar is not None:
+        bar.note(COMPILING_MESSAGE)
+    else:
+        print(COMPILING_MESSAGE, file=sys.stderr, flush=True)
 
 
 #: Bounds of --exposure (stops): 2**±64 already maps any representable radiance to black or white.
@@ -148,7 +173,20 @@ def _settings_from_options(scene, args):
     return st
 
 
+def _precompile(args) -> int:
+    from .render.precompile import precompile
+    return precompile(force=args.force, threads=args.threads, verbose=getattr(args, "verbose", False))
+
+
 def _render(args) -> int:
+    """``render``: says so when kernels start compiling (the first run: engine.kernels.COMPILES)."""
+    from .kernels import COMPILES
+    bars = []       # the progress bar, once it exists: the message goes around it
+    with COMPILES.watch(lambda: _say_compiling(bars[0] if bars else None)):
+        return _render_scene(args, bars)
+
+
+def _render_scene(args, bars: list) -> int:
     import dataclasses
 
     from .output.destination import check_destination, remove_stale_temporaries
@@ -192,8 +230,14 @@ def _render(args) -> int:
           f"{len(renderer.compiled.faces)} triangles, {len(renderer.lights)} lights, "
           f"polarisation {st.polarisation}, {st.spectral}"
           f"{'' if st.spectral == 'spectral' else f' at {st.wavelength_nm:g} nm'}", file=sys.stderr)
+    if args.scheduler is None:
+        # Load (or, the first time, compile) the render's kernels before the clock starts: the
+        # stats' sampling time and the progress estimate are then the render's own (Ctrl-C here
+        # stops with nothing to write).
+        renderer.warm_up(st)
     with StopSignals() as signals:
         bar = None if args.quiet else ProgressBar("rendering")
+        bars.append(bar)
         prediction = _Prediction(st, adaptive)
         request = RenderRequest(st, adaptive=adaptive, resume=resumed.film if resumed else None,
                                 resume_halves=resumed.halves if resumed and adaptive else None,
@@ -693,6 +737,12 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--min-spp", type=int, default=None, help="adaptive minimum samples per pixel (default 16)")
     e.add_argument("--seed", type=int, help="random seed (default: the scene's)")
     e.set_defaults(func=_estimate)
+
+    k = sub.add_parser("precompile", help="compile every kernel into the on-disk cache (what the first render "
+                                          "would otherwise do; instant when already done)")
+    k.add_argument("--force", action="store_true", help="render every case even if the cache is marked complete")
+    k.add_argument("--threads", type=int, default=0, help="worker threads (default: one per core)")
+    k.set_defaults(func=_precompile)
 
     from .materials.catalogue import MODEL_PARAMETERS, parameter_help   # the declared models and parameters
     m = sub.add_parser("mueller", help="print one model's Mueller BRDF at one geometry as JSON",

@@ -18,8 +18,12 @@ def register():
         module.register()
     from ..engine import kernels
     kernel_cache.warn_if_numpy_fallback(kernels)
+    # Compile every kernel in a background process now, not in the first render (that waits for it).
+    kernel_cache.start_precompile(__package__.rpartition(".")[0])
 
 
 def unregister():
+    from . import kernel_cache
+    kernel_cache.stop_precompile()
     for module in reversed(_modules()):
         module.unregister()

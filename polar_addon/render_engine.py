@@ -30,7 +30,7 @@ from .properties import (DEFAULT_PASSES, DENOISE_PASSES, NOISE_QUANTITY_TO_ENGIN
 from .ui_names import ui_message
 from .viewport import ViewportSession, stop_all_sessions
 from ..engine import kernels
-from .kernel_cache import first_compile_pending
+from .kernel_cache import first_compile_pending, wait_for_precompile
 
 #: Seconds between progressive updates of the image shown while rendering (at least).
 DISPLAY_INTERVAL = 1.0
@@ -210,6 +210,12 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             self.report({"ERROR"}, f"Polar render failed: {type(e).__name__}: {e}")
 
     def _render(self, depsgraph):
+        # The kernels compiling in the background since the extension was enabled: wait (Esc stops).
+        waited = wait_for_precompile(lambda text: self.update_stats("", text),
+                                     lambda: self.test_break() or self.control.cancel)
+        if waited == "cancelled":
+            self.report({"INFO"}, "Polar: render cancelled while the kernels were compiling")
+            return
         scene = depsgraph.scene
         W, H = self.resolution_x, self.resolution_y
         settings = engine_settings(scene, preview=self.is_preview)

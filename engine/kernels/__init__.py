@@ -26,8 +26,10 @@ stays there and is paired with its compiled loop by :func:`twin` where it is def
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import os
+import time
 import warnings
 from typing import NamedTuple
 from collections.abc import Callable
@@ -115,6 +117,89 @@ def cache_base() -> str:
 
 _SOURCES_DIGEST = compiled_sources_digest()
 
+#: Every compiled kernel :func:`jit` made in this process (engine.kernels.precompile counts them).
+DISPATCHERS: list = []
+
+
+class CompileLog:
+    """This process's compilations of the package's kernels (loads from Numba's cache are not compiles).
+
+    ``compiled``: kernels compiled (a kernel's helpers compiled with it count too); ``seconds``: the wall
+    time of the outermost compilations.  Numba compiles one kernel at a time under its compiler lock,
+    and announces each (the "numba:compile" event) only when the on-disk cache had no entry for it:
+    ``watch`` calls a function at the start of the first compilation while it is active, which is
+    how the command line says "compiling kernels (first run only)" exactly when it happens.
+    """
+
+    def __init__(self):
+        self.compiled = 0
+        self.seconds = 0.0
+        self._depth = 0
+        self._t0 = 0.0
+        self._watchers: list = []
+
+    def snapshot(self) -> tuple[int, float]:
+        """(compiled, seconds) so far; subtract two snapshots for what happened in between."""
+        return self.compiled, self.seconds
+
+    @contextlib.contextmanager
+    def watch(self, on_first_compile: Callable[[], None]):
+        """While active, call ``on_first_compile()`` (once, in the compiling thread) when a kernel starts
+        compiling."""
+        entry = [on_first_compile]
+        self._watchers.append(entry)
+        try:
+            yield self
+        finally:
+            self._watchers.remove(entry)
+
+    # called by a numba.core.event.Listener registered for "numba:compile" (when numba is in use)
+    def on_start(self, event) -> None:
+        if not _ours(event):
+            return
+        self.compiled += 1
+        self._depth += 1
+        if self._depth == 1:
+            self._t0 = time.perf_counter()
+            for entry in list(self._watchers):
+                if entry[0] is not None:
+                    callback, entry[0] = entry[0], None
+                    callback()
+
+    def on_end(self, event) -> None:
+        if not _ours(event):
+            return
+        self._depth -= 1
+        if self._depth == 0:
+            self.seconds += time.perf_counter() - self._t0
+
+
+
+def _ours(event) -> bool:
+    dispatcher = (event.data or {}).get("dispatcher")
+    module = getattr(getattr(dispatcher, "py_func", None), "__module__", "") or ""
+    return module == _PACKAGE or module.startswith(_PACKAGE + ".")
+
+
+def uses_cache() -> bool:
+    """True when the compiled kernels are in use, and so Numba's on-disk cache (engine.render.precompile)."""
+    return COMPILED
+
+
+#: The process's compile log (engine.render.renderer puts it in a render's stats, the CLI says when it starts).
+COMPILES = CompileLog()
+if COMPILED:
+    from numba.core import event as _numba_event
+
+    class _CompileListener(_numba_event.Listener):
+        def on_start(self, event):
+            COMPILES.on_start(event)
+
+        def on_end(self, event):
+            COMPILES.on_end(event)
+
+    _numba_event.register("numba:compile", _CompileListener())
+
 
 def jit(fn, *, refcounts=True):
     """Compile ``fn`` with Numba (no fast-math: IEEE results like NumPy), or return None.
@@ -128,9 +213,11 @@ def jit(fn, *, refcounts=True):
     previous = config.CACHE_DIR
     config.CACHE_DIR = cache_dir()
     try:
-        return _numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy", _nrt=refcounts)(fn)
+        dispatcher = _numba.njit(cache=True, nogil=True, fastmath=False, error_model="numpy", _nrt=refcounts)(fn)
     finally:
         config.CACHE_DIR = previous
+    DISPATCHERS.append(dispatcher)
+    return dispatcher
 
 
 def jit_inner(fn):

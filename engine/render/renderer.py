@@ -30,6 +30,7 @@ from .adaptive import AdaptiveRounds
 from .allocator import keep_freed_memory, render_heap, return_freed_memory
 from .blas_threads import one_blas_thread
 from ..kernels import BACKEND as KERNEL_BACKEND
+from ..kernels import COMPILES as KERNEL_COMPILES
 from .camera import CameraModel
 from .driver import LocalThreads, UniformPasses, drive
 from .film import Film, HalfBuffers, SampleSums
@@ -48,14 +49,26 @@ def msamples_per_second(stats: dict) -> float:
     return stats.get("samples", 0) / max(stats.get("seconds", 0.0), 1e-9) / 1e6
 
 
+def kernel_compiles() -> tuple[int, float]:
+    """(kernels compiled, seconds) in this process so far (engine.kernels.CompileLog)."""
+    return KERNEL_COMPILES.snapshot()
+
+
 def stats_line(stats: dict, sep: str = "; ") -> str:
     """The summary of a render's ``stats`` in one line (parts joined by ``sep``): samples, seconds,
     Msamples/s and rays; transport and why; how the spectrum is carried; the kernels; each exact
-    simplification; non-finite samples dropped.  The CLI and Blender both show this line."""
+    simplification; non-finite samples dropped.  The CLI and Blender both show this line.
+
+    ``seconds`` is the sampling time; kernels compiled for this render (``kernels_compiled``, in
+    ``kernel_compile_seconds``: Numba compiles, not loads from its cache) are named with the kernels,
+    and said to be outside the render time when they all compiled in ``Renderer.warm_up``."""
+    kernels = f"kernels: {stats.get('kernels', '?')}"
+    if stats.get("kernels_compiled"):
+        kernels += (f", {stats['kernels_compiled']} compiled in {stats.get('kernel_compile_seconds', 0.0):.1f} s "
+                    f"(first run only{'' if stats.get('compiled_in_render') else '; not in the render time'})")
     parts = [f"{stats['samples']} samples in {stats.get('seconds', 0.0):.2f} s ({msamples_per_second(stats):.3f} "
              f"Msamples/s), {stats['rays']} rays + {stats['shadow_rays']} shadow rays",
-             f"transport: {stats['transport_reason']}", f"spectral: {stats['spectral']}",
-             f"kernels: {stats.get('kernels', '?')}"]
+             f"transport: {stats['transport_reason']}", f"spectral: {stats['spectral']}", kernels]
     parts += [f"simplified: {why}" for why in stats.get("simplified", [])]
     if stats.get("nonfinite"):
         parts.append(f"dropped non-finite samples: {stats['nonfinite']}")
@@ -130,8 +143,11 @@ class Renderer:
         self.compiled = CompiledScene(scene)
         self.lights = LightSet(scene, self.compiled)
         self.camera = CameraModel(scene.camera)
+        #: seconds spent building the scene (BVH, lights, camera): not kernel compilation
         self.compile_seconds = time.perf_counter() - t0
         self._live_film = None
+        #: kernels compiled (count, seconds) in warm_up since the last render reported them
+        self._warm_compiles = (0, 0.0)
 
     def plan(self, settings: RenderSettings | None = None, window=None, workers: int | None = None) -> RenderPlan:
         """The RenderPlan of rendering this scene with ``settings`` (default: the scene's)."""
@@ -154,6 +170,7 @@ class Renderer:
         are unchanged.
         """
         t0 = time.perf_counter()
+        before = kernel_compiles()
         plan = self.plan(settings)
         tracer = self.tracer(plan)
         W, H = self.scene.camera.width, self.scene.camera.height
@@ -167,6 +184,8 @@ class Renderer:
             # and the film's per-unit sums (their kernel loaded in a render stalled the other worker)
             SampleSums.of(pixel, values, stats.get("alpha"), stats.get("denoise"),
                           np.zeros_like(pixel) if plan.stratified else None)
+        count, seconds = (a - b for a, b in zip(kernel_compiles(), before))
+        self._warm_compiles = (self._warm_compiles[0] + count, self._warm_compiles[1] + seconds)
         return time.perf_counter() - t0
 
     def set_camera(self, camera) -> None:
@@ -228,12 +247,19 @@ class Renderer:
             halves = request.resume_halves if request.resume_halves is not None else HalfBuffers(W * H)
             schedule = AdaptiveRounds(plan, film, halves, request.adaptive, executor.workers, stats,
                                       request.on_first_pass, request.unit_times)
+        before = kernel_compiles()
         tracer = self.tracer(plan, count_cost=schedule.job.count_cost) if executor.local else None
         self._live_film = film
         try:
             cancelled = drive(schedule, film, tracer, executor, stats, request)
         finally:
             self._live_film = None
+        # kernels compiled by this render's warm-up and inside it (Numba compiles, not cache loads)
+        count, seconds = (a - b for a, b in zip(kernel_compiles(), before))
+        warm_count, warm_seconds = self._warm_compiles
+        self._warm_compiles = (0, 0.0)
+        stats.update(kernels_compiled=warm_count + count, kernel_compile_seconds=warm_seconds + seconds,
+                     compiled_in_render=count > 0)
         if executor.error:
             stats["error"] = executor.error
         return RenderResult(film=film, settings=plan.settings, stats=stats, cancelled=cancelled,
