@@ -711,10 +711,12 @@ def build_parser() -> argparse.ArgumentParser:
                         "(sampled λ, one Mueller product per path) or off")
     r.add_argument("--simplify", choices=("auto", "off"),
                    help="auto (default): skip layered coats that are index-matched and clear; off: keep all")
-    r.add_argument("--sampler", choices=("independent", "stratified"),
-                   help="stratified (the default, as in Blender: per-pixel scrambled Sobol' pixel jitter, lens, "
-                        "wavelengths and first-vertex light/BSDF numbers: less noise, same expectation; --stderr "
-                        "then comes from the even/odd halves) or independent (hashed numbers)")
+    r.add_argument("--sampler", choices=("sobol", "stratified", "independent"),
+                   help="sobol (the default, as in Blender: stratified's numbers at the camera and first vertex, "
+                        "per-pixel shuffled, Owen-scrambled Sobol' pairs at every deeper vertex: less noise, same "
+                        "expectation; --stderr then comes from the even/odd halves), stratified (Sobol' pixel "
+                        "jitter, lens, wavelengths and first-vertex light/BSDF numbers, deeper ones hashed) or "
+                        "independent (hashed numbers)")
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")
     r.add_argument("--stderr", action="store_true", help="also write per-pixel standard errors")

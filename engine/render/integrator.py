@@ -52,7 +52,8 @@ from .path_state import PathState
 from .polarised_light import in_frame, light_samples_polarisation, mueller_times_stokes
 from .plan import rendered_materials, spectral_reduction
 from .sampler import (PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_JITTER, PAIR_LENS, PAIR_LIGHT_POINT, PAIR_WAVELENGTH,
-                      PathSampler, stratified_pair)
+                      SOBOL_CHOICES, SOBOL_DIRECTION, SOBOL_LIGHT_POINT, SOBOL_ROULETTE, PathSampler, sobol_pair_index,
+                      sobol_pairs, stratified_pair)
 from .visibility import ray_visibility
 from ..spectral import RGB_WAVELENGTHS_NM, WavelengthLookup, rgb_channel_tables, rgb_weights, sample_wavelengths
 from ..vec3 import dot
@@ -137,8 +138,8 @@ class _Accumulators:
     transparency: np.ndarray | None
     guides: DenoiseGuides | None
     stats: dict[str, int]
-    #: (N,) the batch's pixels and sample indices with the "stratified" sampler (its first vertex's
-    #: numbers depend on them), else None
+    #: (N,) the batch's pixels and sample indices with the "stratified" and "sobol" samplers (their
+    #: numbers depend on them; the film's even/odd half sums too), else None
     pixel: np.ndarray | None = None
     sample: np.ndarray | None = None
     count_cost: bool = True
@@ -184,7 +185,8 @@ class _VertexNumbers:
     ``nee`` is False: skipped), the BSDF sample ``u_bsdf`` (3, n), or (1, n) (the lobe) while
     ``direction_dims`` still holds the direction's two (every group a one-step delta material), the
     roulette number ``u_rr`` (n,) (empty without roulette); ``pixel``, ``sample`` (n,): the paths'
-    pixels and sample indices at a stratified first vertex, else None."""
+    pixels and sample indices at a stratified first vertex or with the "sobol" sampler, else None;
+    ``sobol_direction``: with "sobol" and the direction numbers still to draw, their pair of dimensions."""
     nee: bool
     u_light: np.ndarray | None
     u_bsdf: np.ndarray
@@ -192,6 +194,7 @@ class _VertexNumbers:
     pixel: np.ndarray | None
     sample: np.ndarray | None
     u_rr: np.ndarray | None = None
+    sobol_direction: int | None = None
 
 
 @dataclass(eq=False)
@@ -398,9 +401,9 @@ class PathTracer:
         # the paths' keys and every random number of this stage in one pass: the camera's dimensions
         # (pixel jitter, lens), then the wavelengths'
         k_camera = 2 + self.camera.lens_dimensions
-        sampler, u = PathSampler.start(self.settings.seed, pixel, sample,
-                                       k_camera + (1 if self.samples_wavelengths else 0))
-        stratified = self.settings.stratified
+        k = k_camera + (1 if self.samples_wavelengths else 0)
+        sampler, u = PathSampler.start(self.settings.seed, pixel, sample, k)
+        stratified = self.settings.stratified           # "stratified" and "sobol": the same numbers here
         if stratified:
             # pixel jitter stratified over each pixel's samples: edges of bright camera-visible emitters
             # (a lamp, a sun disc) are otherwise most of the image's noise (see stratified_pair); the
@@ -667,7 +670,7 @@ class PathTracer:
             t_cols = state.T_columns(sel)           # T's columns of these paths (None: rows)
             if one_step and self._scatter_delta(bsdf, state, surf, nxt, rows, n_s_delta, nums.u_bsdf[0], t_cols):
                 continue            # pdf 0 and is_delta True: as preset
-            if nums.direction_dims is not None:
+            if nums.direction_dims is not None or nums.sobol_direction is not None:
                 self._late_direction_numbers(nums)
             sp = self._shading_point(bsdf, state, surf, mat, flip, sel)
             xTm = gather(state.x_T, sel)
@@ -691,6 +694,9 @@ class PathTracer:
         # stateless in the dimension, so skipping leaves every other one as it was.
         nee = (bool(len(self.lights)) and bounce + 2 <= st.max_depth
                and not all(self.shaders[g].flags.is_delta_only for g in groups))
+        if st.sampler == "sobol" and bounce > 0:
+            # deeper vertices: the padded Owen-scrambled pairs (the first one as "stratified" draws it)
+            return self._sobol_vertex_numbers(state, acc, nee, all(fused), bounce + 1 >= st.rr_depth, bounce)
         u_light = sampler.next(4) if nee else sampler.skip(4)
         direction_dims = None
         if all(fused):
@@ -702,7 +708,7 @@ class PathTracer:
             u_bsdf = sampler.next(3)
         nums = _VertexNumbers(nee=nee, u_light=u_light, u_bsdf=u_bsdf, direction_dims=direction_dims,
                               pixel=None, sample=None)
-        if bounce == 0 and acc.pixel is not None:
+        if bounce == 0 and st.stratified:
             nums.pixel, nums.sample = acc.pixel[state.path], acc.sample[state.path]
             self._stratify_vertex(nums)
         if bounce + 1 >= st.rr_depth:
@@ -710,6 +716,31 @@ class PathTracer:
         else:
             sampler.skip(1)
             nums.u_rr = np.empty(0)                 # not read without roulette
+        return nums
+
+    def _sobol_vertex_numbers(self, state: PathState, acc: _Accumulators, nee: bool, delta_only: bool,
+                              roulette: bool, bounce: int) -> _VertexNumbers:
+        """The numbers of vertex ``bounce`` ≥ 1 with the "sobol" sampler, from its pairs of dimensions
+        (engine.render.sampler.SOBOL_*): (light choice, lobe), the light point, (roulette, light number 3),
+        the direction (deferred where every group is a one-step delta material: ``delta_only``); only the
+        pairs this bounce reads are computed (each number depends on its own pair alone)."""
+        pixel, sample = acc.pixel[state.path], acc.sample[state.path]
+        roles = [SOBOL_CHOICES] + ([SOBOL_LIGHT_POINT] if nee else []) + ([SOBOL_ROULETTE] if nee or roulette else [])
+        roles += [] if delta_only else [SOBOL_DIRECTION]
+        out = sobol_pairs(self.settings.seed, pixel, sample, [sobol_pair_index(bounce, r) for r in roles])
+        row = {r: 2 * m for m, r in enumerate(roles)}
+        u_light = None
+        if nee:
+            lp, rr = row[SOBOL_LIGHT_POINT], row[SOBOL_ROULETTE]
+            u_light = out[[0, lp, lp + 1, rr + 1]]
+        if delta_only:
+            u_bsdf = out[1:2].copy()                # the lobe choice only; the direction if a group asks
+        else:
+            d = row[SOBOL_DIRECTION]
+            u_bsdf = out[[1, d, d + 1]]
+        nums = _VertexNumbers(nee=nee, u_light=u_light, u_bsdf=u_bsdf, direction_dims=None, pixel=pixel,
+                              sample=sample, u_rr=out[row[SOBOL_ROULETTE]] if roulette else np.empty(0),
+                              sobol_direction=sobol_pair_index(bounce, SOBOL_DIRECTION) if delta_only else None)
         return nums
 
     def _stratify_vertex(self, nums: _VertexNumbers) -> None:
@@ -734,7 +765,13 @@ class PathTracer:
 
     def _late_direction_numbers(self, nums: _VertexNumbers) -> None:
         """A one-step material fell back to ``sample``: its direction numbers (2, n) after all, appended
-        to ``nums.u_bsdf`` (stratified at a stratified first vertex); ``nums.direction_dims`` is spent."""
+        to ``nums.u_bsdf`` (stratified at a stratified first vertex, from their pair with "sobol");
+        ``nums.direction_dims`` (``nums.sobol_direction``) is spent."""
+        if nums.sobol_direction is not None:
+            extra = sobol_pairs(self.settings.seed, nums.pixel, nums.sample, [nums.sobol_direction])
+            nums.u_bsdf = np.concatenate((nums.u_bsdf, extra))
+            nums.sobol_direction = None
+            return
         extra = nums.direction_dims.next(2)
         if nums.pixel is not None:
             extra[0], extra[1] = stratified_pair(self.settings.seed, nums.pixel, nums.sample, extra[0], extra[1],

@@ -5,10 +5,20 @@ render is bit-for-bit reproducible whatever the batching, tiling, number of
 workers or resumption order: sample s of pixel p always sees the same
 numbers.  The hash is splitmix64's finaliser (Steele et al. 2014), which
 passes BigCrush as a counter-based generator; 53 bits are turned into a
-float64 in [0, 1).  With ``RenderSettings.sampler`` "stratified" the camera's numbers (pixel
-jitter, lens, wavelengths) and the first vertex's light and BSDF numbers are replaced by
-``stratified_pair`` (per-pixel XOR-scrambled Sobol' points, two independent sequences for the even
-and the odd samples), still functions of (seed, pixel, sample index) only.
+float64 in [0, 1).  That is the "independent" sampler.  With ``RenderSettings.sampler`` "stratified" the
+camera's numbers (pixel jitter, lens, wavelengths) and the first vertex's light and BSDF numbers are
+replaced by ``stratified_pair`` (per-pixel XOR-scrambled Sobol' points, two independent sequences for
+the even and the odd samples), still functions of (seed, pixel, sample index) only.
+
+With "sobol" (the default) the camera's and the first vertex's numbers are "stratified"'s, bit for bit
+(one jointly stratified Sobol' point set: pixel position × light point × BSDF direction, which padded
+pairs would stratify only pair by pair), and every number of the deeper vertices — light choice, light
+point, lobe choice, BSDF direction, roulette, where "stratified" hashes them — is a coordinate of a
+pair of dimensions (``sobol_pairs``, layout ``SOBOL_*`` below) drawn from its own shuffled,
+Owen-scrambled 2-D Sobol' (0, 2)-sequence per (seed, pixel, pair, parity of the sample)
+(engine.kernels.sobol): a pixel's first 2^m even (or odd) samples of every pair form a (0, m, 2)-net,
+pairs are decorrelated by the per-pair index shuffle, each number is uniform and independent of the
+other pairs (unbiased), and a function of (seed, pixel, sample, pair) only.
 """
 
 from __future__ import annotations
@@ -18,6 +28,7 @@ import functools
 import numpy as np
 
 from ..kernels.hashing import mix64, path_keys_and_uniforms, scrambled_sobol_pair, uniforms
+from ..kernels.sobol import owen_sobol_pairs
 
 _MASK64 = (1 << 64) - 1
 
@@ -123,3 +134,27 @@ def stratified_pair(seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.nda
     # adaptive sampling's half-buffers A (even) and B (odd) must be independent estimates
     return scrambled_sobol_pair(_seed_key(seed), pixel, sample, _PAIR_KEYS[pair], _SOBOL_V[2 * pair],
                                 _SOBOL_V[2 * pair + 1], u0, u1)
+
+
+#: The "sobol" sampler's pairs of dimensions (``sobol_pairs``) at the vertices after the first (the camera
+#: and the first vertex draw "stratified"'s numbers): SOBOL_PER_BOUNCE per vertex, vertex b ≥ 1 at
+#: SOBOL_PER_BOUNCE·(b − 1) + role
+SOBOL_PER_BOUNCE = 4
+SOBOL_LIGHT_POINT = 0       # the point on the chosen light (next-event estimation: light numbers 1, 2)
+SOBOL_DIRECTION = 1         # the BSDF's direction numbers (BSDF numbers 1, 2)
+SOBOL_CHOICES = 2           # (the light choice, the BSDF lobe) (light number 0, BSDF number 0)
+SOBOL_ROULETTE = 3          # (Russian roulette, light number 3)
+
+
+def sobol_pair_index(bounce: int, role: int) -> int:
+    """The pair of dimensions of ``role`` (SOBOL_LIGHT_POINT … SOBOL_ROULETTE) at vertex ``bounce`` ≥ 1."""
+    if bounce < 1:
+        raise ValueError("the first vertex draws the stratified sampler's numbers")
+    return SOBOL_PER_BOUNCE * (bounce - 1) + role
+
+
+def sobol_pairs(seed: int, pixel: np.ndarray, sample: np.ndarray, pairs) -> np.ndarray:
+    """(2k, N) numbers in [0, 1) of the "sobol" sampler: rows 2m, 2m + 1 the pair ``pairs[m]`` of sample
+    ``sample`` (N,) of pixel ``pixel`` (N,) (engine.kernels.sobol: shuffled, Owen-scrambled Sobol'
+    (0, 2)-sequences per (seed, pixel, pair, parity of the sample))."""
+    return owen_sobol_pairs(_seed_key(seed), pixel, sample, np.asarray(pairs, dtype=np.int64))

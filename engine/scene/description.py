@@ -320,22 +320,26 @@ class RenderSettings:
     #: Also record the denoising guides (albedo and normal at the first non-delta vertex, as
     #: Cycles' Denoising Albedo / Normal passes); False: the renders are unchanged.
     denoise_data: bool = False
-    #: Random numbers of the paths (Cycles' sampling pattern): "stratified", the one default of the scene
-    #: format, the command line, the Python API and Blender (the camera's numbers — pixel jitter, lens,
-    #: wavelengths — and the first vertex's light and BSDF numbers are per-pixel scrambled Sobol' points,
-    #: engine.render.sampler.stratified_pair: same expectation, less noise; the standard error then
-    #: comes from the even/odd halves) or "independent" (every number a hash of (seed, pixel, sample,
-    #: dimension)).
-    sampler: str = "stratified"
+    #: Random numbers of the paths (Cycles' sampling pattern): "sobol", the one default of the scene
+    #: format, the command line, the Python API and Blender (the camera's and the first vertex's numbers
+    #: as "stratified" draws them, every deeper vertex's — light choice and point, lobe, direction,
+    #: roulette — from per-pixel shuffled, Owen-scrambled Sobol' (0, 2)-sequence pairs,
+    #: engine.render.sampler.sobol_pairs: same expectation, less noise; the standard error then comes
+    #: from the even/odd halves), "stratified" (the camera's numbers and the first vertex's light and BSDF
+    #: numbers one per-pixel XOR-scrambled Sobol' point set, engine.render.sampler.stratified_pair, the
+    #: deeper ones hashed; the default before "sobol") or "independent" (every number a hash of (seed,
+    #: pixel, sample, dimension)).
+    sampler: str = "sobol"
 
     @property
     def stratified(self) -> bool:
-        """True with the "stratified" sampler (the film then keeps even/odd half sums)."""
-        return self.sampler == "stratified"
+        """True with the "stratified" and "sobol" samplers (their even and odd samples are independent
+        sequences: the film then keeps even/odd half sums)."""
+        return self.sampler != "independent"
 
 
 #: RenderSettings.sampler's values
-SAMPLERS = ("independent", "stratified")
+SAMPLERS = ("independent", "stratified", "sobol")
 
 
 @dataclass

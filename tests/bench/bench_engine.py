@@ -74,6 +74,8 @@ SHARED = os.environ.get("POLAR_SHARED") or next(
 PEERS = os.path.join(SHARED, "peers")
 REF_DIR = os.path.join(REPO, "out", "bench_refs")
 DEFAULT_MITSUBA = "/work/peerenv/bin/python"
+#: our sampling patterns (engine.scene.description.SAMPLERS)
+SAMPLERS = ("independent", "stratified", "sobol")
 DEFAULT_SCENES = ["fresnel_sphere", "fresnel_sphere_au", "glass_sphere", "rough_sphere_a030", "cornell_lambert",
                   "plane_brewster"]
 #: Issue 16 targets.  Time to equal error (S0), ours ÷ Mitsuba LLVM, at least:
@@ -567,7 +569,7 @@ def main():
                     help="1- and 2-thread renders per scene for the thread scaling, alternated (at least 2)")
     ap.add_argument("--sampler", default=None,
                     help="our renders' RenderSettings.sampler (peer scenes and the Cycles scenes' Pattern): "
-                         "independent, stratified, or a comma list measured in the same run (default: "
+                         "independent, stratified, sobol, or a comma list measured in the same run (default: "
                          "independent; --full: independent,stratified)")
     ap.add_argument("--full", action="store_true", help="the published settings; rewrites docs/benchmarks.md's tables")
     ap.add_argument("--out", default="")
@@ -588,8 +590,8 @@ def main():
     skip = set(filter(None, args.skip.split(",")))
     samplers = (args.sampler or ("independent,stratified" if full else "independent")).split(",")
     for sampler in samplers:
-        if sampler not in ("independent", "stratified"):
-            ap.error(f"--sampler: {sampler!r} is not one of independent, stratified")
+        if sampler not in SAMPLERS:
+            ap.error(f"--sampler: {sampler!r} is not one of {', '.join(SAMPLERS)}")
 
     mitsuba = "" if "mitsuba" in skip else args.mitsuba_python
     if mitsuba and subprocess.run([mitsuba, "-c", "import mitsuba"], capture_output=True).returncode != 0:

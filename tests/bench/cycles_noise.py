@@ -33,6 +33,8 @@ REPO = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, REPO)
 
 REC709 = np.array([0.2126, 0.7152, 0.0722])
+#: our sampling patterns (engine.scene.description.SAMPLERS)
+SAMPLERS = ("independent", "stratified", "sobol")
 QUICK_SCENES = ["area_square", "point_radius", "all_lights", "eight_points_world"]
 
 
@@ -134,8 +136,8 @@ def main():
     args = ap.parse_args()
     samplers = args.sampler.split(",")
     for s in samplers:
-        if s not in ("independent", "stratified"):
-            ap.error(f"--sampler: {s!r} is not one of independent, stratified")
+        if s not in SAMPLERS:
+            ap.error(f"--sampler: {s!r} is not one of {', '.join(SAMPLERS)}")
     from tests.blender_support import load_addon
     import tests.blender.test_cycles_parity_lights as parity
     load_addon()

@@ -1,5 +1,6 @@
-"""RenderSettings.sampler "stratified": same expectation as the independent sampler, an honest
-standard error, and the determinism of every other render (threads, batches, resumption)."""
+"""RenderSettings.sampler "stratified" (and "sobol", the default, in the determinism tests): same expectation
+as the independent sampler, an honest standard error, and the determinism of every other render (threads,
+batches, resumption, adaptive rounds)."""
 
 import copy
 import math
@@ -87,11 +88,14 @@ def seed_renders(scene, sampler, seeds=SEEDS, spp=None):
 
 def test_the_sampler_setting_is_validated_naming_the_field_and_the_choices():
     # one default everywhere: the scene format, the command line, the Python API and Blender
-    assert RenderSettings().sampler == "stratified" and parse_settings({}).sampler == "stratified"
+    assert RenderSettings().sampler == "sobol" and parse_settings({}).sampler == "sobol"
     assert parse_settings({"sampler": "independent"}).sampler == "independent"
+    assert parse_settings({"sampler": "stratified"}).sampler == "stratified"
+    assert RenderSettings(sampler="sobol").stratified and RenderSettings(sampler="stratified").stratified
+    assert not RenderSettings(sampler="independent").stratified        # no even/odd half sums
     with pytest.raises(SceneError) as e:
-        parse_settings({"sampler": "sobol"})
-    assert "render.sampler" in str(e.value) and "'independent', 'stratified'" in str(e.value)
+        parse_settings({"sampler": "halton"})
+    assert "render.sampler" in str(e.value) and "'independent', 'stratified', 'sobol'" in str(e.value)
 
 
 # ---------------------------------------------------------------------------------------- unbiasedness
@@ -237,10 +241,10 @@ def test_the_variance_ratio_is_one_for_independent_halves_and_local():
 
 # -------------------------------------------------------------------------------------- determinism
 
-@pytest.fixture(scope="module")
-def lamp_reference():
+@pytest.fixture(scope="module", params=["stratified", "sobol"])
+def lamp_reference(request):
     scene = lamp_scene(40.0, 1.0, 16, 8)
-    scene.settings.sampler = "stratified"
+    scene.settings.sampler = request.param
     return scene, Renderer(scene).render()
 
 
@@ -280,16 +284,17 @@ def test_a_resumed_stratified_render_equals_the_uninterrupted_one(lamp_reference
 
 
 def test_cli_writes_the_sampler_and_resume_refuses_another(tmp_path, capsys):
-    """The default render is stratified (header polar.sampler); an independent one writes no sampler
+    """The default render is sobol (header polar.sampler); an independent one writes no sampler
     header, as every file before stratified became the default did, and resumes without naming it
-    (the sampler is read from the file, as the seed is); naming another one is refused."""
+    (the sampler is read from the file, as the seed is); naming another one is refused; a stratified
+    file (the default before sobol) resumes as stratified."""
     from engine import cli
     from tests.cli.test_robustness_cli import small_demo
     scene = small_demo(tmp_path, spp=4)
     out = tmp_path / "a.exr"
     assert cli.main(["render", scene, "-o", str(out), "--stderr", "--no-previews", "--quiet"]) == 0
     stokes, channels, header = read_stokes_exr(str(out))
-    assert header["polar.sampler"] == "stratified" and "S0.Y.stderr" in channels
+    assert header["polar.sampler"] == "sobol" and "S0.Y.stderr" in channels
     plain = tmp_path / "b.exr"
     assert cli.main(["render", scene, "-o", str(plain), "--sampler", "independent", "--no-previews",
                      "--quiet"]) == 0
@@ -300,19 +305,30 @@ def test_cli_writes_the_sampler_and_resume_refuses_another(tmp_path, capsys):
     assert status == 2 and "sampler" in capsys.readouterr().err
     assert cli.main(["render", scene, "-o", str(tmp_path / "d.exr"), "--resume", str(out), "--spp", "6",
                      "--no-previews", "--quiet"]) == 0
-    assert read_stokes_exr(str(tmp_path / "d.exr"))[2]["polar.sampler"] == "stratified"
+    assert read_stokes_exr(str(tmp_path / "d.exr"))[2]["polar.sampler"] == "sobol"
     assert cli.main(["render", scene, "-o", str(tmp_path / "e.exr"), "--resume", str(plain), "--spp", "6",
                      "--no-previews", "--quiet"]) == 0                  # an older (independent) file
     assert "polar.sampler" not in read_stokes_exr(str(tmp_path / "e.exr"))[2]
+    strat, whole = tmp_path / "f.exr", tmp_path / "g.exr"
+    assert cli.main(["render", scene, "-o", str(strat), "--sampler", "stratified", "--no-previews", "--quiet"]) == 0
+    assert cli.main(["render", scene, "-o", str(whole), "--sampler", "stratified", "--spp", "6", "--no-previews",
+                     "--quiet"]) == 0
+    resumed = tmp_path / "h.exr"
+    assert cli.main(["render", scene, "-o", str(resumed), "--resume", str(strat), "--spp", "6", "--no-previews",
+                     "--quiet"]) == 0                                  # an older (stratified) file
+    resumed_stokes, _, resumed_header = read_stokes_exr(str(resumed))
+    assert resumed_header["polar.sampler"] == "stratified"
+    np.testing.assert_allclose(resumed_stokes, read_stokes_exr(str(whole))[0], rtol=1e-5, atol=1e-7)
 
 
-def test_a_resumed_stratified_exr_keeps_the_stratified_standard_error(tmp_path, capsys):
+@pytest.mark.parametrize("sampler", ["stratified", "sobol"])
+def test_a_resumed_stratified_exr_keeps_the_stratified_standard_error(tmp_path, capsys, sampler):
     """--stderr of a stratified render writes the even samples' means (S*.Y.even) and names the
     estimate (polar.stderr); resuming from that file gives the uninterrupted render's error."""
     from engine import cli
     from tests.cli.test_robustness_cli import small_demo
     scene = small_demo(tmp_path, spp=4)
-    opts = ["--sampler", "stratified", "--stderr", "--no-previews", "--quiet"]
+    opts = ["--sampler", sampler, "--stderr", "--no-previews", "--quiet"]
     part, whole, resumed = (str(tmp_path / f"{n}.exr") for n in ("part", "whole", "resumed"))
     assert cli.main(["render", scene, "-o", part, *opts]) == 0
     assert cli.main(["render", scene, "-o", whole, "--spp", "8", *opts]) == 0
@@ -324,7 +340,8 @@ def test_a_resumed_stratified_exr_keeps_the_stratified_standard_error(tmp_path, 
         np.testing.assert_allclose(b[f"S{i}.Y.stderr"], a[f"S{i}.Y.stderr"], rtol=1e-3, atol=1e-7)
 
 
-def test_stratified_adaptive_sampling_is_deterministic_and_reports_the_stratified_error():
+@pytest.mark.parametrize("sampler", ["stratified", "sobol"])
+def test_stratified_adaptive_sampling_is_deterministic_and_reports_the_stratified_error(sampler):
     """Adaptive sampling with stratified numbers: its even/odd half-buffers are the film's half sums
     (so the reported standard error is the stratified one), and the counts and image do not depend
     on threads or batch size."""
@@ -333,7 +350,7 @@ def test_stratified_adaptive_sampling_is_deterministic_and_reports_the_stratifie
     from tests.conftest import shared_path
     scene = load_scene(shared_path("peers", "scenes", "fresnel_sphere.json"))
     scene.camera.width = scene.camera.height = 24
-    scene.settings.spp, scene.settings.sampler = 32, "stratified"
+    scene.settings.spp, scene.settings.sampler = 32, sampler
     ad = AdaptiveSettings(threshold=0.015, quantity="s0", min_spp=8)
     renderer = Renderer(scene)
     runs = []
