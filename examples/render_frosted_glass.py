@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import json
 import os
 import sys
@@ -43,9 +44,7 @@ def render_stokes(data: dict, material: str, spp: int, seed: int) -> np.ndarray:
         if obj["name"] == "sphere":
             obj["material"] = material
     scene = parse_scene(d, base_dir=HERE, source=SCENE)
-    scene.settings.spp = spp
-    scene.settings.seed = seed
-    scene.settings.polarisation = "full"
+    scene.settings = dataclasses.replace(scene.settings, spp=spp, seed=seed, polarisation="full")
     return Renderer(scene).render(scene.settings).stokes()
 
 

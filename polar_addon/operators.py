@@ -1,7 +1,7 @@
 """Operators: put a Polarising BSDF into the active material, add the compositor groups, estimate the cost,
 the LCD screen preset of a light or an emission."""
 
-import copy
+import dataclasses
 
 import bpy
 
@@ -96,8 +96,7 @@ class POLAR_OT_estimate_cost(bpy.types.Operator):
             engine_scene, _ = export_scene(context.evaluated_depsgraph_get(), scene.camera, W, H, settings)
             renderer = Renderer(engine_scene)
             pilot, sps = pilot_render(renderer, settings, max(2, min(16, min_spp)), quantity)
-            probe = copy.copy(settings)
-            probe.spp = max(p.samples, min_spp)
+            probe = dataclasses.replace(settings, spp=max(p.samples, min_spp))
             per_round = round_overhead(renderer, probe, pilot, sps, min_spp)     # the rounds' fixed time
         except SceneError as e:
             self.report({"ERROR"}, f"Polar: {e}")

@@ -287,7 +287,7 @@ class EnvironmentLight:
 SPECTRAL_MODES = ("spectral", "rgb", "mono")
 
 
-@dataclass
+@dataclass(frozen=True)
 class RenderSettings:
     """How to render.  ``max_depth`` counts path segments (as Mitsuba 3):
     1 = only directly visible light, 2 = direct lighting, ….
@@ -299,6 +299,8 @@ class RenderSettings:
     as they are, colours multiply channel by channel; models that need a wavelength — measured metals,
     thin layers, HTSG — are evaluated at engine.spectral.RGB_WAVELENGTHS_NM) or "mono" (one wavelength
     ``wavelength_nm``; RGB colours by their luminance).
+    Frozen: derive changed settings with ``dataclasses.replace(settings, spp=…)`` (a Scene's
+    ``settings`` attribute may be replaced the same way).
     """
 
     spp: int = 16

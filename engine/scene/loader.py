@@ -341,22 +341,23 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
     _check_keys(d, field, {"spp", "max_depth", "rr_depth", "seed", "spectral", "wavelength_nm",
                            "polarisation", "batch_rays", "threads", "reduce_spectral", "simplify",
                            "sampler"})
-    s = RenderSettings()
-    s.spp = integer(d.get("spp", s.spp), f"{field}.spp", 1, 1 << 24)
-    s.max_depth = integer(d.get("max_depth", s.max_depth), f"{field}.max_depth", 1, 1024)
-    s.rr_depth = integer(d.get("rr_depth", s.rr_depth), f"{field}.rr_depth", 1, 1024)
-    s.seed = integer(d.get("seed", s.seed), f"{field}.seed", 0, 2 ** 63 - 1)
-    s.spectral = choice(d.get("spectral", s.spectral), f"{field}.spectral", SPECTRAL_MODES)
-    s.wavelength_nm = number(d.get("wavelength_nm", s.wavelength_nm), f"{field}.wavelength_nm", 360, 830)
-    s.polarisation = choice(d.get("polarisation", s.polarisation), f"{field}.polarisation",
-                            ("auto", "full", "linear", "off"))
-    s.batch_rays = integer(d.get("batch_rays", s.batch_rays), f"{field}.batch_rays", 1024, 1 << 24)
-    s.threads = integer(d.get("threads", s.threads), f"{field}.threads", 0, 256)
-    s.reduce_spectral = choice(d.get("reduce_spectral", s.reduce_spectral), f"{field}.reduce_spectral",
-                               ("auto", "exact", "off"))
-    s.simplify = choice(d.get("simplify", s.simplify), f"{field}.simplify", ("auto", "off"))
-    s.sampler = choice(d.get("sampler", s.sampler), f"{field}.sampler", SAMPLERS)
-    return s
+    s = RenderSettings()                 # the defaults
+    return RenderSettings(
+        spp=integer(d.get("spp", s.spp), f"{field}.spp", 1, 1 << 24),
+        max_depth=integer(d.get("max_depth", s.max_depth), f"{field}.max_depth", 1, 1024),
+        rr_depth=integer(d.get("rr_depth", s.rr_depth), f"{field}.rr_depth", 1, 1024),
+        seed=integer(d.get("seed", s.seed), f"{field}.seed", 0, 2 ** 63 - 1),
+        spectral=choice(d.get("spectral", s.spectral), f"{field}.spectral", SPECTRAL_MODES),
+        wavelength_nm=number(d.get("wavelength_nm", s.wavelength_nm), f"{field}.wavelength_nm", 360, 830),
+        polarisation=choice(d.get("polarisation", s.polarisation), f"{field}.polarisation",
+                            ("auto", "full", "linear", "off")),
+        batch_rays=integer(d.get("batch_rays", s.batch_rays), f"{field}.batch_rays", 1024, 1 << 24),
+        threads=integer(d.get("threads", s.threads), f"{field}.threads", 0, 256),
+        reduce_spectral=choice(d.get("reduce_spectral", s.reduce_spectral), f"{field}.reduce_spectral",
+                               ("auto", "exact", "off")),
+        simplify=choice(d.get("simplify", s.simplify), f"{field}.simplify", ("auto", "off")),
+        sampler=choice(d.get("sampler", s.sampler), f"{field}.sampler", SAMPLERS),
+    )
 
 
 def _check_layer_stack(d, field: str, materials: dict | None = None) -> None:

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import copy
+import dataclasses
 import json
 import os
 import subprocess
@@ -70,9 +71,8 @@ def errors(img, ref):
 
 def render_ours(scene, spp, polarisation="auto", spectral="spectral", tolerance=None):
     scene = copy.copy(scene)
-    scene.settings = copy.copy(scene.settings)
-    scene.settings.spp, scene.settings.polarisation, scene.settings.spectral = spp, polarisation, spectral
-    scene.settings.seed = 1000 + spp
+    scene.settings = dataclasses.replace(scene.settings, spp=spp, polarisation=polarisation, spectral=spectral,
+                                         seed=1000 + spp)
     if tolerance is not None:
         scene.materials = {k: (HTSG(m.n, m.k, m.sigma0, m.tau, albedo=m.albedo if m.albedo is not None else 0.0,
                                     exterior_n=m.exterior_n, series_tolerance=tolerance) if isinstance(m, HTSG) else m)

@@ -47,7 +47,7 @@ examples/images/ (adaptive_noise.png, adaptive_spp.png).  Not run by the tests (
 from __future__ import annotations
 
 import argparse
-import copy
+import dataclasses
 import os
 import subprocess
 import sys
@@ -118,8 +118,7 @@ def our_reference(renderer, scene, spp, name, outdir):
         cam = scene.camera
         path = os.path.join(outdir, f"{name}__polar__{cam.width}x{cam.height}__{spp}spp__seed{seed}_lum.npy")
         if not os.path.exists(path):
-            st = copy.copy(scene.settings)
-            st.spp, st.seed = spp, seed
+            st = dataclasses.replace(scene.settings, spp=spp, seed=seed)
             np.save(path, lum(renderer.render(st).stokes()))
         ys.append(np.load(path))
     return make_reference(f"ours {spp} spp ×2", ys[0], ys[1], spp)
@@ -159,8 +158,7 @@ CPU_REPEATS = 2
 def costed(renderer, st, adaptive=None):
     """(result, CPU seconds of a 1-thread render, wall seconds of a render on every core): CPU time of
     one thread is robust when other processes share the machine, wall time is what a user waits."""
-    one = copy.copy(st)
-    one.threads = 1
+    one = dataclasses.replace(st, threads=1)
     cpu = []
     for _ in range(CPU_REPEATS):
         c0 = time.process_time()
@@ -195,8 +193,7 @@ def allocation_gains(name, renderer, scene, ref: Reference, thresholds, rows):
     # the variance of one render's pixel is 2 × that of the pair's mean; × spp: per sample
     v = {"S0": per_tile(2 * ref.spp * ref.var[0].ravel()),
          "DoLP": per_tile(np.where(ref.keep, 2 * ref.spp * ref.var_dolp, 0.0).ravel())}
-    st = copy.copy(scene.settings)
-    st.spp, st.seed = MAX_SPP, 7
+    st = dataclasses.replace(scene.settings, spp=MAX_SPP, seed=7)
     pilot, cost = pilot_render(renderer, st, MIN_SPP)
     for quantity, threshold in thresholds:
         counts = predict(pilot.film, pilot.halves, quantity, threshold, MIN_SPP, MAX_SPP, cost).counts
@@ -209,15 +206,13 @@ def allocation_gains(name, renderer, scene, ref: Reference, thresholds, rows):
 def efficiency(name, renderer, scene, refs, thresholds, rows):
     uniform = []
     for spp in (16, 64, 256):
-        st = copy.copy(scene.settings)
-        st.spp, st.seed = spp, 7
+        st = dataclasses.replace(scene.settings, spp=spp, seed=7)
         result, cpu, seconds = costed(renderer, st)
         y = lum(result.stokes())
         uniform.append((rays(result), cpu, seconds, [mse(y, r) for r in refs]))
         rows.append((name, f"uniform {spp} spp", spp, cpu, seconds, rays(result), uniform[-1][3], None))
     for quantity, threshold in thresholds:
-        st = copy.copy(scene.settings)
-        st.spp, st.seed = MAX_SPP, 7
+        st = dataclasses.replace(scene.settings, spp=MAX_SPP, seed=7)
         ad = AdaptiveSettings(threshold=threshold, quantity=quantity, min_spp=MIN_SPP)
         result, cpu, seconds = costed(renderer, st, ad)
         y = lum(result.stokes())
@@ -241,8 +236,7 @@ def bias(name, renderer, scene, ref: Reference, threshold, seeds, rows):
     """Part 1b: S0…S3 of ``seeds`` adaptive renders (s0 ≤ threshold) against our reference."""
     ys = []
     for seed in range(seeds):
-        st = copy.copy(scene.settings)
-        st.spp, st.seed = MAX_SPP, 1000 + seed
+        st = dataclasses.replace(scene.settings, spp=MAX_SPP, seed=1000 + seed)
         ys.append(lum(renderer.render(RenderRequest(st, adaptive=AdaptiveSettings(threshold, "s0", MIN_SPP)))
                       .stokes()))
     ys = np.stack(ys)                                              # (K, 4, H, W)
@@ -289,9 +283,8 @@ def prediction(cases, res, rows):
     for name, quantity, threshold in cases:
         scene = load(name, res)
         renderer = Renderer(scene)
-        renderer.render(copy.copy(scene.settings))           # warm-up
-        st = copy.copy(scene.settings)
-        st.spp, st.seed = 1024, 11
+        renderer.render(scene.settings)           # warm-up
+        st = dataclasses.replace(scene.settings, spp=1024, seed=11)
         pilot, sps = pilot_render(renderer, st, MIN_SPP)
         p = predict(pilot.film, pilot.halves, quantity, threshold, MIN_SPP, st.spp, sps,
                     round_seconds=round_overhead(renderer, st, pilot, sps, MIN_SPP))
@@ -330,7 +323,7 @@ def main():
     for name in [] if args.prediction_only else [n for n in thresholds if n in args.scenes.split(",")]:
         scene = load(name, args.res)
         renderer = Renderer(scene)
-        renderer.render(copy.copy(scene.settings))          # warm-up (kernels)
+        renderer.render(scene.settings)          # warm-up (kernels)
         refs = [our_reference(renderer, scene, args.ref_spp, name, args.out)]
         if mitsuba and name != "demo":
             refs.insert(0, mitsuba_reference(args.mitsuba_python, name, args.mitsuba_spp, args.res, args.out))

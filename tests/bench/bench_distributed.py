@@ -10,6 +10,7 @@ the speed-up.  Not part of the test command.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
 import sys
 import time
@@ -35,9 +36,7 @@ def main():
     args = ap.parse_args()
     scene = load_scene(os.path.join(SHARED, "peers", "scenes", f"{args.scene}.json"))
     scene.camera.width = scene.camera.height = args.res
-    scene.settings.spp = args.spp
-    scene.settings.batch_rays = 1 << 15
-    scene.settings.threads = 1
+    scene.settings = dataclasses.replace(scene.settings, spp=args.spp, batch_rays=1 << 15, threads=1)
     t0 = time.perf_counter()
     local = Renderer(scene).render()
     rows = [("local, 1 thread", time.perf_counter() - t0, True)]

@@ -56,6 +56,7 @@ Benchmarks never run as tests.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime
 import json
 import os
@@ -142,7 +143,6 @@ def steal_seconds():
 def ours_child(cfg):
     """Child mode: our renders of one scene, one JSON line each; images (luminance Stokes) to .npy."""
     sys.path.insert(0, REPO)
-    import copy
     from engine.render.renderer import Renderer
     from engine.scene.loader import load_scene
     from engine.spectral.cie import LUMINANCE_WEIGHTS
@@ -175,14 +175,12 @@ def ours_child(cfg):
                 inside[1] += 1
                 inside[2] += time.thread_time() - c
         setattr(compiled, name, timed)
-    base = copy.copy(scene.settings)
+    base = scene.settings
 
     def settings(job):
-        st = copy.copy(base)
-        st.spp, st.seed = job["spp"], job.get("seed", 0)
-        st.polarisation, st.threads = job.get("polarisation", "auto"), job.get("threads", 0)
-        st.sampler = job.get("sampler", st.sampler)
-        return st
+        return dataclasses.replace(base, spp=job["spp"], seed=job.get("seed", 0),
+                                   polarisation=job.get("polarisation", "auto"), threads=job.get("threads", 0),
+                                   sampler=job.get("sampler", base.sampler))
 
     # every kernel of every job's transport compiled or loaded before the timed renders
     for polarisation in dict.fromkeys(job.get("polarisation", "auto") for job in cfg["jobs"]):
@@ -273,7 +271,7 @@ def memory_child(cfg):
     from engine.scene.loader import load_scene
     scene = load_scene(os.path.join(REPO, "examples", "demo.json"))
     scene.camera.width, scene.camera.height = cfg["width"], cfg["height"]
-    scene.settings.spp = cfg["spp"]
+    scene.settings = dataclasses.replace(scene.settings, spp=cfg["spp"])
     t0 = time.perf_counter()
     Renderer(scene).render()
     print(json.dumps({"seconds": time.perf_counter() - t0}))

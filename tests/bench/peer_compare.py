@@ -29,6 +29,7 @@ Not part of the test command (it needs Mitsuba renders and minutes of time).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import glob
 import importlib.util
 import os
@@ -145,15 +146,15 @@ def main():
             continue
         scene = load_scene(os.path.join(PEERS, "scenes", f"{scene_name}.json"))
         spp = args.spp * (16 if scene_name == "conv_s3_check" else 1)
-        scene.settings.spp = spp
+        scene.settings = dataclasses.replace(scene.settings, spp=spp)
         scene.camera.width, scene.camera.height = m_size
         if scene_name in UNPOLARISED_PEER:
-            scene.settings.polarisation = "off"
+            scene.settings = dataclasses.replace(scene.settings, polarisation="off")
         renderer = Renderer(scene)
         ours = []
         t0 = time.perf_counter()
         for seed in range(args.renders):
-            scene.settings.seed = seed
+            scene.settings = dataclasses.replace(scene.settings, seed=seed)
             result = renderer.render(scene.settings)
             path = os.path.join(args.out, f"{scene_name}__polar__{scene.camera.width}x{scene.camera.height}__"
                                           f"{spp}spp__seed{seed}.npy")

@@ -22,7 +22,7 @@ Not part of the test command.
 from __future__ import annotations
 
 import argparse
-import copy
+import dataclasses
 import datetime
 import os
 import sys
@@ -45,8 +45,7 @@ NO_S1 = {"cornell_lambert"}
 
 def render_one(renderer, scene, sampler, spp, seed, threads):
     """(S0 image, S1 image) (H, W) of one render and its CPU seconds."""
-    st = copy.copy(scene.settings)
-    st.spp, st.seed, st.sampler, st.threads = spp, seed, sampler, threads
+    st = dataclasses.replace(scene.settings, spp=spp, seed=seed, sampler=sampler, threads=threads)
     t = time.process_time()
     result = renderer.render(st)
     cpu = time.process_time() - t
@@ -113,8 +112,7 @@ def main(argv=None):
         scene.camera.width = scene.camera.height = args.res
         renderer = Renderer(scene)
         for sampler in samplers:
-            st = copy.copy(scene.settings)
-            st.sampler, st.threads = sampler, args.threads
+            st = dataclasses.replace(scene.settings, sampler=sampler, threads=args.threads)
             renderer.warm_up(st)
         # one untimed full render: a scene's first one pays for growing the process's memory (measured
         # ~15 % more CPU time than the next), which would count against the sampler rendering first

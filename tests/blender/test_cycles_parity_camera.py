@@ -5,6 +5,7 @@ Small diffuse scenes rendered by both with a box pixel filter (Cycles' default i
 render engine's Combined pass.
 """
 
+import dataclasses
 import math
 
 import numpy as np
@@ -66,8 +67,7 @@ def polar(scene, spp):
     engine_settings = _engine_settings()
     from polar_render.polar_addon.export.scene import export_scene
     W, H = scene.render.resolution_x, scene.render.resolution_y
-    settings = engine_settings(scene)
-    settings.spp = spp
+    settings = dataclasses.replace(engine_settings(scene), spp=spp)
     exported, warnings = export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, W, H, settings)
     result = Renderer(exported).render(settings)
     return result.stokes_luminance()[0], result.film.stderr_luminance()[0], warnings

@@ -2,6 +2,7 @@
 plain objects with the attributes Blender's have), that tracing happens only on the session's
 thread, never in draw, and that stopping ends the thread promptly."""
 
+import dataclasses
 import threading
 import time
 
@@ -380,7 +381,7 @@ def test_session_renders_a_real_scene(vp):
     import os
     from tests.conftest import REPO
     scene = load_scene(os.path.join(REPO, "examples", "demo.json"))
-    scene.settings.spp = 1
+    scene.settings = dataclasses.replace(scene.settings, spp=1)
     session = vp.ViewportSession()
     try:
         session.update_scene(vp.SyncResult(scene, rebuild=True, restart=True, warnings=[]), target_samples=2)

@@ -6,6 +6,7 @@ edges the renderer meets: degenerate normals, zero rotations, one-wavelength row
 several, empty batches.  Skipped pieces say why when Numba is not installed.
 """
 
+import dataclasses
 import json
 import os
 import subprocess
@@ -178,7 +179,7 @@ def test_throughput_times_stokes(P, L_T, L_w):
 # ----------------------------------------------------------------------------- whole renders
 
 RENDER_SNIPPET = r"""
-import json, sys
+import dataclasses, json, sys
 import numpy as np
 sys.path.insert(0, {repo!r})
 from engine import kernels
@@ -186,8 +187,7 @@ from engine.render.renderer import Renderer
 from engine.scene.loader import load_scene
 scene = load_scene({scene!r})
 scene.camera.width = scene.camera.height = 20
-scene.settings.spp = 3
-scene.settings.threads = 1
+scene.settings = dataclasses.replace(scene.settings, spp=3, threads=1)
 np.save({out!r}, Renderer(scene).render().stokes())
 print(json.dumps(kernels.BACKEND))
 """
@@ -214,7 +214,7 @@ def test_render_with_numpy_kernels_equals_compiled(tmp_path, name):
 def test_backend_is_reported():
     scene = load_scene(shared_path("peers", "scenes", "plane_brewster.json"))
     scene.camera.width = scene.camera.height = 4
-    scene.settings.spp = 1
+    scene.settings = dataclasses.replace(scene.settings, spp=1)
     stats = Renderer(scene).render().stats
     assert stats["kernels"] == kernels.BACKEND
 

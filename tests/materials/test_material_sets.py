@@ -1,6 +1,6 @@
 """Materials shaded together (LambertSet) give exactly the image of materials shaded one by one."""
 
-import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -22,8 +22,7 @@ def one_by_one(materials):
 def cornell(spectral, res=24, spp=3):
     scene = load_scene(shared_path("peers", "scenes", "cornell_lambert.json"))
     scene.camera.width = scene.camera.height = res
-    scene.settings.spp = spp
-    scene.settings.spectral = spectral
+    scene.settings = dataclasses.replace(scene.settings, spp=spp, spectral=spectral)
     return scene
 
 
@@ -38,8 +37,7 @@ def test_lambert_set_render_is_bitwise_the_one_by_one_render(monkeypatch, spectr
             if isinstance(m, Lambert):
                 scene.materials[name] = Lambert(ConstantSpectrum(float(np.mean(m.albedo.linear_srgb()))))
     renderer = Renderer(scene)
-    settings = copy.copy(scene.settings)
-    settings.polarisation = "off"
+    settings = dataclasses.replace(scene.settings, polarisation="off")
     tracer = integrator.PathTracer(renderer.compiled, renderer.lights, renderer.camera, settings)
     assert any(isinstance(s, LambertSet) for s in tracer.shaders)
     batched = renderer.render().stokes()

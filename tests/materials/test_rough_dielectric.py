@@ -2,6 +2,7 @@
 realisability, the smooth limit, the sampler's chi-square, and a white-furnace render of a closed
 rough glass sphere against a transport prediction built from the same quadrature."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -378,9 +379,8 @@ def test_peer_scene_rough_glass_sphere_loads_and_renders():
     assert isinstance(glass, RoughDielectric)
     assert (glass.n_int, glass.alpha, glass.distribution, glass.shadowing) == (1.5, 0.2, "beckmann", "smith_rational")
     scene.camera.width = scene.camera.height = 16
-    scene.settings.spp = 4
     for pol in ("off", "full"):
-        scene.settings.polarisation = pol
+        scene.settings = dataclasses.replace(scene.settings, spp=4, polarisation=pol)
         S = Renderer(scene).render().stokes_luminance()
         assert np.all(np.isfinite(S)) and S[0].mean() > 0.2
         if pol == "full":

@@ -4,7 +4,7 @@ Error formulas are checked against half-buffers computed by hand; determinism co
 for bit.  No test times anything: the time limit runs on an injected clock.
 """
 
-import copy
+import dataclasses
 import math
 import os
 
@@ -110,8 +110,8 @@ def test_stopping_rule():
 def small_scene(name="fresnel_sphere", res=24, spp=48):
     scene = load_scene(shared_path("peers", "scenes", f"{name}.json"))
     scene.camera.width = scene.camera.height = res
-    scene.settings.spp = spp
-    scene.settings.sampler = "independent"          # the counts asserted below are the independent sampler's
+    # the counts asserted below are the independent sampler's
+    scene.settings = dataclasses.replace(scene.settings, spp=spp, sampler="independent")
     return scene
 
 
@@ -141,8 +141,7 @@ def test_adaptive_render_spends_samples_unevenly_and_says_why_it_stopped(referen
 @pytest.mark.parametrize("threads,batch_rays", [(1, 1 << 17), (2, 700), (1, 100)])
 def test_counts_and_image_do_not_depend_on_threads_or_batch_size(sphere, reference, threads, batch_rays):
     scene, renderer = sphere
-    st = copy.copy(scene.settings)
-    st.threads, st.batch_rays = threads, batch_rays
+    st = dataclasses.replace(scene.settings, threads=threads, batch_rays=batch_rays)
     other = renderer.render(RenderRequest(st, adaptive=AD))
     np.testing.assert_array_equal(other.film.count, reference.film.count)
     np.testing.assert_array_equal(other.film.sums, reference.film.sums)
@@ -152,8 +151,7 @@ def test_counts_and_image_do_not_depend_on_threads_or_batch_size(sphere, referen
 
 def test_resume_after_a_cancel_through_the_exr_gives_the_same_counts_and_image(sphere, reference, tmp_path):
     scene, renderer = sphere
-    st = copy.copy(scene.settings)
-    st.batch_rays = 200                                    # many units: stop after a few
+    st = dataclasses.replace(scene.settings, batch_rays=200)   # many units: stop after a few
     calls = {"n": 0}
     partial = renderer.render(RenderRequest(st, adaptive=AD, should_stop=lambda: calls.__setitem__("n", calls["n"] + 1)
                                             or calls["n"] > 12))
@@ -176,8 +174,7 @@ def test_resume_after_a_cancel_through_the_exr_gives_the_same_counts_and_image(s
 def test_a_dask_cluster_gives_the_local_counts_and_image(sphere, reference):
     distributed = pytest.importorskip("distributed")
     scene, renderer = sphere
-    st = copy.copy(scene.settings)
-    st.batch_rays = 2000                                   # several tasks per round
+    st = dataclasses.replace(scene.settings, batch_rays=2000)   # several tasks per round
     cluster = distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
                                        silence_logs=40)
     client = distributed.Client(cluster)
@@ -194,8 +191,7 @@ def test_a_dask_cluster_gives_the_local_counts_and_image(sphere, reference):
 
 def test_the_time_limit_stops_sampling_on_an_injected_clock(sphere, reference):
     scene, renderer = sphere
-    st = copy.copy(scene.settings)
-    st.batch_rays = 300
+    st = dataclasses.replace(scene.settings, batch_rays=300)
     ticks = {"t": 0.0}
 
     def clock():                                           # one "second" per look at the clock

@@ -5,7 +5,7 @@ n ∝ σ/√c (engine.render.adaptive).  Synthetic images with a known σ and co
 rule; real renders check that the ray counts are deterministic.  No test times anything.
 """
 
-import copy
+import dataclasses
 import math
 
 import numpy as np
@@ -178,8 +178,7 @@ def sphere():
 
 
 def tracer_of(scene, renderer):
-    st = copy.copy(scene.settings)
-    st.polarisation = "full"                 # what the renderer resolves "auto" to
+    st = dataclasses.replace(scene.settings, polarisation="full")   # what the renderer resolves "auto" to
     return PathTracer(renderer.compiled, renderer.lights, renderer.camera, st)
 
 
@@ -203,8 +202,7 @@ def test_a_tracer_that_does_not_count_costs_traces_the_same_paths(sphere):
     """Uniform renders skip the per-path cost counting (only adaptive sampling reads it): same values,
     same ray counts, no path_cost; the renderer counts only for adaptive renders."""
     scene, renderer = sphere
-    st = copy.copy(scene.settings)
-    st.polarisation = "full"
+    st = dataclasses.replace(scene.settings, polarisation="full")
     counting = PathTracer(renderer.compiled, renderer.lights, renderer.camera, st, count_cost=True)
     silent = PathTracer(renderer.compiled, renderer.lights, renderer.camera, st, count_cost=False)
     pixel = np.tile(np.arange(256), 4)
@@ -222,11 +220,9 @@ def test_a_tracer_that_does_not_count_costs_traces_the_same_paths(sphere):
 def test_rays_of_an_adaptive_render_do_not_depend_on_threads_or_batches_and_weigh_the_counts(sphere):
     scene, renderer = sphere
     ad = AdaptiveSettings(threshold=0.02, quantity="s0", min_spp=8)
-    st = copy.copy(scene.settings)
-    st.spp = 64
+    st = dataclasses.replace(scene.settings, spp=64)
     ref = renderer.render(RenderRequest(st, adaptive=ad))
-    st2 = copy.copy(st)
-    st2.threads, st2.batch_rays = 2, 300
+    st2 = dataclasses.replace(st, threads=2, batch_rays=300)
     other = renderer.render(RenderRequest(st2, adaptive=ad))
     np.testing.assert_array_equal(other.halves.cost, ref.halves.cost)
     np.testing.assert_array_equal(other.film.count, ref.film.count)

@@ -6,7 +6,6 @@ polarisation quantities its σ is pooled with its 3×3 tile neighbourhood's
 the rule; a real render checks the integrator's cost count.  No test times anything.
 """
 
-import copy
 
 import numpy as np
 import pytest
@@ -208,7 +207,7 @@ def test_a_paths_cost_is_one_plus_four_per_surface_hit_and_light_sample():
 
 def test_non_adaptive_renders_do_not_carry_the_cost():
     scene = small_scene("glass_sphere", res=8, spp=2)
-    result = Renderer(scene).render(copy.copy(scene.settings))
+    result = Renderer(scene).render(scene.settings)
     assert "path_cost" not in result.stats and "path_rays" not in result.stats
 
 

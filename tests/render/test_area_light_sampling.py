@@ -5,6 +5,7 @@ the claimed pdf, and the pdf that MIS evaluates for rays that hit the light."""
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from types import SimpleNamespace
 
@@ -183,8 +184,6 @@ def test_rays_that_reach_a_lone_rectangle_lamp_are_weighted_with_the_solid_angle
     each segment started, so a BSDF-sampled ray that reaches the lamp is MIS-weighted with 1/Ω, the
     pdf next-event estimation used; without its origin pdf_hit falls back to the area pdf and the two
     weights no longer sum to 1."""
-    import copy
-
     from engine.render.renderer import Renderer
     from engine.scene.loader import load_scene
     from tests.conftest import shared_path
@@ -198,7 +197,6 @@ def test_rays_that_reach_a_lone_rectangle_lamp_are_weighted_with_the_solid_angle
         return original(self, dist, cos_l, origin, *rest)
 
     monkeypatch.setattr(AreaEmitter, "pdf_hit", pdf_hit)
-    st = copy.copy(scene.settings)
-    st.spp, st.threads = 2, 1
+    st = dataclasses.replace(scene.settings, spp=2, threads=1)
     Renderer(scene).render(st)
     assert len(origins) > 1 and all(origins[1:])        # the first call: camera rays (not MIS-weighted)

@@ -1,6 +1,7 @@
 """Thin lens, equirectangular camera, ray visibility, holdout, film transparency and alpha
 pass-through in the engine (analytic limits; Cycles parity is in test_cycles_parity_camera.py)."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -224,14 +225,11 @@ def test_exr_alpha_channel(tmp_path):
 
 
 def test_resume_keeps_the_alpha_of_the_finished_samples():
-    import copy
-
     from engine.render.film import film_from_stokes
     scene = _scene([BALL], camera_extra={"film_transparent": True}, spp=8)
     renderer = Renderer(scene)
     full = renderer.render().film
-    st = copy.copy(scene.settings)
-    st.spp = 3
+    st = dataclasses.replace(scene.settings, spp=3)
     part = renderer.render(st).film
     resumed = renderer.render(RenderRequest(resume=film_from_stokes(part.mean(), part.spp_image(),
                                                                     alpha=part.alpha()))).film

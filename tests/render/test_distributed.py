@@ -1,5 +1,6 @@
 """Distributed rendering on a local Dask cluster of worker processes."""
 
+import dataclasses
 import os
 import signal
 
@@ -28,8 +29,8 @@ def cluster():
 def scene(name="fresnel_sphere", res=32, spp=6):
     s = load_scene(shared_path("peers", "scenes", f"{name}.json"))
     s.camera.width = s.camera.height = res
-    s.settings.spp = spp
-    s.settings.batch_rays = res * res          # one pass per task: several tasks per worker
+    # one pass per task: several tasks per worker
+    s.settings = dataclasses.replace(s.settings, spp=spp, batch_rays=res * res)
     return s
 
 
@@ -111,7 +112,7 @@ def _kill_workers(client):
 def test_losing_every_worker_returns_the_finished_units_and_an_error(fragile_cluster):
     client, _ = fragile_cluster
     sc = scene(res=16, spp=800)
-    sc.settings.batch_rays = 1024                # 4 passes per unit: 200 units
+    sc.settings = dataclasses.replace(sc.settings, batch_rays=1024)   # 4 passes per unit: 200 units
     killed = {}
 
     def kill_all(fraction, stats):
@@ -131,9 +132,7 @@ def test_losing_every_worker_returns_the_finished_units_and_an_error(fragile_clu
 
 def _partial_means(sc, count):
     """Means of the first count[p] sample passes per pixel, rendered locally (passes are stateless)."""
-    import copy
-    st = copy.copy(sc.settings)
-    st.spp = int(count.max())
+    st = dataclasses.replace(sc.settings, spp=int(count.max()))
     film = Renderer(sc).render(st).film
     assert np.all((count == 0) | (count == st.spp))        # whole passes of whole units
     return film.sums / np.maximum(film.count, 1)

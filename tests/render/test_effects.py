@@ -1,6 +1,6 @@
 """Automatic effect selection: the reduced transports are exact where Auto picks them."""
 
-import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -13,8 +13,8 @@ from tests.conftest import shared_path
 def peer(name, res, spp=2):
     scene = load_scene(shared_path("peers", "scenes", f"{name}.json"))
     scene.camera.width = scene.camera.height = res
-    scene.settings.spp = spp
-    scene.settings.sampler = "independent"          # the statistics below assume independent samples
+    # the statistics below assume independent samples
+    scene.settings = dataclasses.replace(scene.settings, spp=spp, sampler="independent")
     return scene
 
 
@@ -31,10 +31,9 @@ def test_auto_picks_the_cheapest_exact_transport(name, mode):
 def test_reduced_transport_equals_full_transport(name, reduced):
     scene = peer(name, 24)
     renderer = Renderer(scene)
-    settings = copy.copy(scene.settings)
-    settings.polarisation = "full"
+    settings = dataclasses.replace(scene.settings, polarisation="full")
     full = renderer.render(settings).stokes()
-    settings.polarisation = reduced
+    settings = dataclasses.replace(settings, polarisation=reduced)
     fast = renderer.render(settings).stokes()
     np.testing.assert_allclose(fast, full, rtol=1e-12, atol=1e-15)
     assert np.all(full[3] == 0)
@@ -44,11 +43,10 @@ def test_linear_transport_would_be_wrong_where_auto_keeps_full():
     # Counter-example: the conductor creates circular polarisation; dropping S3 changes the image.
     scene = peer("conv_s3_check", 8, 16)
     renderer = Renderer(scene)
-    settings = copy.copy(scene.settings)
-    settings.polarisation = "full"
+    settings = dataclasses.replace(scene.settings, polarisation="full")
     full = renderer.render(settings).stokes()
     assert np.abs(full[3]).max() > 0.01
-    settings.polarisation = "linear"
+    settings = dataclasses.replace(settings, polarisation="linear")
     assert np.all(renderer.render(settings).stokes()[3] == 0)
 
 
@@ -56,11 +54,9 @@ def test_linear_transport_would_be_wrong_where_auto_keeps_full():
 def test_one_mueller_product_per_path_is_exact_where_nothing_depends_on_wavelength(name):
     scene = peer(name, 16)
     renderer = Renderer(scene)
-    settings = copy.copy(scene.settings)
-    settings.polarisation = "full"
-    settings.reduce_spectral = "exact"
+    settings = dataclasses.replace(scene.settings, polarisation="full", reduce_spectral="exact")
     reduced = renderer.render(settings)
-    settings.reduce_spectral = "off"
+    settings = dataclasses.replace(settings, reduce_spectral="off")
     per_wavelength = renderer.render(settings)
     assert "one Mueller product" in reduced.stats["spectral"]
     np.testing.assert_allclose(reduced.stokes(), per_wavelength.stokes(), rtol=1e-9, atol=1e-12)
@@ -72,9 +68,9 @@ def test_rgb_light_integration_has_the_same_expectation_and_less_noise(name):
     # estimator with the same expectation (block z-test) and no chromatic noise (smaller errors).
     scene = peer(name, 32, spp=16)
     renderer = Renderer(scene)
-    settings = copy.copy(scene.settings)
+    settings = scene.settings
     auto = renderer.render(settings)
-    settings.reduce_spectral = "off"
+    settings = dataclasses.replace(settings, reduce_spectral="off")
     spectral = renderer.render(settings)
     assert auto.stats["spectral"].startswith("RGB")
     a, b = auto.stokes_luminance(), spectral.stokes_luminance()
@@ -116,11 +112,10 @@ def test_index_matched_clear_coat_is_skipped_reported_and_unbiased():
     from tests.render.test_render_acceptance import block_z
     scene = coated_ball_scene({"n": 1.0, "distribution": "beckmann", "m": 0.3})
     renderer = Renderer(scene)
-    settings = copy.copy(scene.settings)
-    settings.threads = 1
+    settings = dataclasses.replace(scene.settings, threads=1)
     auto = renderer.render(settings)
     assert any("index-matched" in why and "'ball'" in why for why in auto.stats["simplified"])
-    settings.simplify = "off"
+    settings = dataclasses.replace(settings, simplify="off")
     kept = renderer.render(settings)
     assert kept.stats["simplified"] == []
     assert not np.array_equal(auto.stokes(), kept.stokes())      # really different samplers
@@ -143,8 +138,7 @@ def test_index_matched_clear_coat_over_lambert_makes_the_scene_scalar():
     auto = renderer.render()
     assert auto.stats["transport"] == "off"
     assert "simplified" in auto.stats and auto.stats["simplified"]
-    settings = copy.copy(scene.settings)
-    settings.simplify = "off"
+    settings = dataclasses.replace(scene.settings, simplify="off")
     kept = renderer.render(settings)
     assert kept.stats["transport"] != "off"
     Y = kept.stokes_luminance()

@@ -4,6 +4,7 @@ the peer scene envmap_spheres."""
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.util
 import json
 import math
@@ -73,8 +74,7 @@ def test_escaped_rays_see_the_reference_lookup(tmp_path, mono):
     """Camera rays that escape get exactly lookup() (RGB mode) or its luminance (mono mode)."""
     scene = _escaped_scene(tmp_path, mono)
     r = Renderer(scene)
-    st = scene.settings
-    st.polarisation = "full"         # what the renderer resolves "auto" to is irrelevant here
+    st = dataclasses.replace(scene.settings, polarisation="full")   # what "auto" resolves to is irrelevant here
     tracer = PathTracer(r.compiled, r.lights, r.camera, st)
     pixel = np.arange(scene.camera.width * scene.camera.height)
     sample = np.zeros_like(pixel)
@@ -258,9 +258,7 @@ def test_scene_format_environment_map(tmp_path):
 def _spheres(res, spp, **settings):
     scene = load_scene(shared_path("peers", "scenes", "envmap_spheres.json"))
     scene.camera.width = scene.camera.height = res
-    scene.settings.spp = spp
-    for k, v in settings.items():
-        setattr(scene.settings, k, v)
+    scene.settings = dataclasses.replace(scene.settings, spp=spp, **settings)
     return scene
 
 

@@ -1,5 +1,6 @@
 """The glare demo of examples/: polarised reflections vanish or dim at the right polariser angle."""
 
+import dataclasses
 import os
 
 import numpy as np
@@ -13,8 +14,7 @@ from tests.conftest import REPO
 def test_glare_demo_reflections_vanish_behind_a_vertical_polariser():
     scene = load_scene(os.path.join(REPO, "examples", "glare_demo.json"))
     scene.camera.width, scene.camera.height = 96, 48
-    scene.settings.spp = 8
-    scene.settings.spectral = "mono"
+    scene.settings = dataclasses.replace(scene.settings, spp=8, spectral="mono")
     Y = Renderer(scene).render().stokes_luminance()
     smooth = Y[:, 18:30, 10:38]          # left half, around the image centre row (Brewster's angle)
     glossy = Y[:, 18:30, 52:70]          # right half, clear of the reference sphere

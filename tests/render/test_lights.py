@@ -1,6 +1,7 @@
 """Lights and cameras against closed forms: a Lambertian plane seen by an orthographic camera
 straight from above under point, spot, directional and small area lights."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -97,7 +98,7 @@ def test_emitter_seen_directly_has_its_radiance_front_side_only():
     up = quad(*[np.array(p, float) for p in ([-5, -5, 1], [5, -5, 1], [5, 5, 1], [-5, 5, 1])])      # faces +z
     scene = plane_scene([], [Mesh("lamp", up.vertices, up.faces, ["black"], np.zeros(2, np.int32),
                                   emission=white(L))], res=8, spp=2)
-    scene.settings.max_depth = 1
+    scene.settings = dataclasses.replace(scene.settings, max_depth=1)
     np.testing.assert_allclose(Renderer(scene).render().stokes_luminance()[0], L, rtol=1e-12)
     down = quad(*[np.array(p, float) for p in ([-5, 5, 1], [5, 5, 1], [5, -5, 1], [-5, -5, 1])])    # faces −z
     scene.meshes[1] = Mesh("lamp", down.vertices, down.faces, ["black"], np.zeros(2, np.int32), emission=white(L))
@@ -158,7 +159,7 @@ def test_camera_sees_sphere_and_disk_lights_with_their_radiance():
     for soft in (False, True):
         scene = plane_scene([PointLight(np.array([0.0, 0.0, H]), white(I), radius=r, soft_falloff=soft)], res=16,
                             spp=4)
-        scene.settings.max_depth = 1
+        scene.settings = dataclasses.replace(scene.settings, max_depth=1)
         S0 = Renderer(scene).render().stokes_luminance()[0]
         x, y = pixel_centres(16)
         np.testing.assert_allclose(S0[np.hypot(x, y) < 0.3], I / (math.pi * r * r), rtol=1e-12)
@@ -178,7 +179,7 @@ def test_sun_disc_is_seen_with_its_radiance():
     E, angle = 3.0, 2.0
     scene = plane_scene([DirectionalLight(np.array([0.0, 0.0, 1.0]), white(E), angle_deg=angle)], res=4, spp=2)
     scene.camera.origin, scene.camera.target = np.array([0.0, 0.0, -5.0]), np.array([0.0, 0.0, -10.0])
-    scene.settings.max_depth = 1
+    scene.settings = dataclasses.replace(scene.settings, max_depth=1)
     S0 = Renderer(scene).render().stokes_luminance()[0]            # every ray looks into the sun
     np.testing.assert_allclose(S0, E / (math.pi * math.sin(math.radians(angle / 2)) ** 2), rtol=1e-12)
     scene.lights[0].visible_camera = False

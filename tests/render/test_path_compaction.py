@@ -6,6 +6,7 @@ columns (``T_cols``) apart from the paths it writes (``rows``).  Reading through
 exactly what reading a gathered copy gives, on both backends.
 """
 
+import dataclasses
 import numpy as np
 import pytest
 
@@ -141,8 +142,7 @@ def test_camera_paths_share_one_identity_column():
     scene = load_scene(shared_path("peers", "scenes", "fresnel_sphere_au.json"))
     scene.camera.width = scene.camera.height = 8
     r = Renderer(scene)
-    st = scene.settings
-    st.polarisation = "full"
+    st = dataclasses.replace(scene.settings, polarisation="full")
     tracer = PathTracer(r.compiled, r.lights, r.camera, st)
     st, _ = tracer._camera_paths(np.arange(64, dtype=np.int64), np.zeros(64, np.int64))
     L = st.T_store.shape[2]

@@ -1,5 +1,6 @@
 """Virtual polarisers (post-process) against Malus's law and against physical filter sheets in the scene."""
 
+import dataclasses
 import math
 
 import numpy as np
@@ -71,7 +72,7 @@ def test_best_angle_minimises():
 def scene_with_sheets(sheets, spp=64):
     """conv_s3_check (narrow field, full Stokes incl. S3) with filter sheets in front of the camera."""
     scene = load_scene(shared_path("peers", "scenes", "conv_s3_check.json"))
-    scene.settings.spp = spp
+    scene.settings = dataclasses.replace(scene.settings, spp=spp)
     for i, (y, sheet) in enumerate(sheets):
         q = quad(*[np.array(p, float) for p in ([-1, y, 0], [-1, y, 2], [1, y, 2], [1, y, 0])])
         name = f"sheet{i}"

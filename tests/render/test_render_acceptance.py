@@ -1,7 +1,7 @@
 """Whole renders against exact answers: the S3 sign scene, the analytic Brewster plane,
 the Lambert null test, the white furnace, and determinism."""
 
-import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -19,9 +19,7 @@ def peer_scene(name, spp, res=None, **settings):
     scene = load_scene(shared_path("peers", "scenes", f"{name}.json"))
     if res is not None:
         scene.camera.width = scene.camera.height = res
-    scene.settings.spp = spp
-    for k, v in settings.items():
-        setattr(scene.settings, k, v)
+    scene.settings = dataclasses.replace(scene.settings, spp=spp, **settings)
     return scene
 
 
@@ -92,13 +90,28 @@ def test_white_furnace(spectral):
 def test_render_is_deterministic_and_independent_of_batching():
     scene = peer_scene("glass_sphere", 2, res=32)
     a = Renderer(scene).render()
-    other = copy.deepcopy(scene.settings)
-    other.batch_rays = 1024
+    other = dataclasses.replace(scene.settings, batch_rays=1024)
     b = Renderer(scene).render(other)
     np.testing.assert_allclose(a.stokes(), b.stokes(), rtol=0, atol=1e-12)
-    other.seed = 7
+    other = dataclasses.replace(other, seed=7)
     c = Renderer(scene).render(other)
     assert np.abs(a.stokes() - c.stokes()).max() > 0
+
+
+def test_render_settings_are_frozen_and_a_render_leaves_the_scenes_settings_unchanged():
+    """RenderSettings cannot be changed in place (changed settings are a new object made with
+    dataclasses.replace); a render resolves its own copy (RenderPlan.settings: "auto" transport
+    resolved) and the scene keeps the very object it had, with its values."""
+    scene = peer_scene("plane_brewster", 1, res=8, polarisation="auto")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        scene.settings.spp = 2
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        RenderSettings().polarisation = "off"
+    before, values = scene.settings, dataclasses.asdict(scene.settings)
+    result = Renderer(scene).render()
+    assert scene.settings is before and dataclasses.asdict(scene.settings) == values
+    assert result.settings is not before and result.settings.polarisation in ("full", "linear", "off")
+    assert dataclasses.replace(result.settings, polarisation="auto") == before
 
 
 def test_polarisation_off_gives_the_same_s0_where_paths_bounce_once():
@@ -106,8 +119,7 @@ def test_polarisation_off_gives_the_same_s0_where_paths_bounce_once():
     # transport with the same random numbers must give exactly the same S0 and zero S1..S3.
     scene = peer_scene("plane_brewster", 2, res=32)
     full = Renderer(scene).render()
-    off_settings = copy.deepcopy(scene.settings)
-    off_settings.polarisation = "off"
+    off_settings = dataclasses.replace(scene.settings, polarisation="off")
     off = Renderer(scene).render(off_settings)
     assert np.all(off.stokes()[1:] == 0)
     np.testing.assert_allclose(off.stokes()[0], full.stokes()[0], rtol=1e-12)
@@ -116,7 +128,7 @@ def test_polarisation_off_gives_the_same_s0_where_paths_bounce_once():
 
 def test_cancel_keeps_finished_samples():
     scene = peer_scene("plane_brewster", 16, res=64)
-    scene.settings.batch_rays = 64 * 64           # one pass per work unit
+    scene.settings = dataclasses.replace(scene.settings, batch_rays=64 * 64)   # one pass per work unit
     state = {"progress": 0}
 
     def stop():
@@ -134,8 +146,7 @@ def test_cancel_aborts_the_units_in_flight():
     # The first poll lets the first unit start, every later one asks to stop: the unit in flight (a
     # large one, 2 × 65536 paths) is abandoned between two bounces instead of being finished.
     scene = peer_scene("cornell_lambert", 64, res=64)
-    scene.settings.batch_rays = 1 << 17
-    scene.settings.threads = 1
+    scene.settings = dataclasses.replace(scene.settings, batch_rays=1 << 17, threads=1)
     calls = {"n": 0}
 
     def stop():
@@ -158,12 +169,10 @@ def test_window_render_traces_only_the_window_and_matches_the_full_render():
 
 def test_threads_do_not_change_the_image():
     scene = peer_scene("fresnel_sphere", 2, res=32)
-    scene.settings.batch_rays = 1024
+    scene.settings = dataclasses.replace(scene.settings, batch_rays=1024)
     renderer = Renderer(scene)
-    one = copy.copy(scene.settings)
-    one.threads = 1
-    two = copy.copy(scene.settings)
-    two.threads = 2
+    one = dataclasses.replace(scene.settings, threads=1)
+    two = dataclasses.replace(scene.settings, threads=2)
     np.testing.assert_array_equal(renderer.render(one).stokes(), renderer.render(two).stokes())
 
 

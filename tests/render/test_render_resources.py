@@ -1,6 +1,6 @@
 """The renderer's process resources: the kernel warm-up and the allocator settings for batches."""
 
-import copy
+import dataclasses
 import os
 import subprocess
 import sys
@@ -17,7 +17,7 @@ from tests.conftest import REPO, shared_path
 def small_scene(name="cornell_lambert", res=24, spp=2):
     scene = load_scene(shared_path("peers", "scenes", f"{name}.json"))
     scene.camera.width, scene.camera.height = res, res * 3 // 4
-    scene.settings.spp = spp
+    scene.settings = dataclasses.replace(scene.settings, spp=spp)
     return scene
 
 
@@ -44,8 +44,7 @@ def test_warm_up_traces_a_grid_spread_over_the_whole_image(monkeypatch):
 
 def test_a_render_after_the_warm_up_is_the_same_image():
     scene = small_scene()
-    st = copy.copy(scene.settings)
-    st.threads = 2
+    st = dataclasses.replace(scene.settings, threads=2)
     cold = Renderer(scene).render(st).stokes()
     warm = Renderer(scene)
     warm.warm_up(st)
@@ -55,7 +54,7 @@ def test_a_render_after_the_warm_up_is_the_same_image():
 #: Child process: warm-up then render each scene; prints the compiled kernels that gained a signature
 #: in a render (each loaded or compiled there, holding the GIL, instead of before it)
 _WARM_CHILD = """
-import copy, sys, numba
+import dataclasses, sys, numba
 from engine.render.renderer import Renderer
 from engine.scene.loader import load_scene
 from tests.conftest import shared_path
@@ -68,8 +67,7 @@ kernels = {f'{m.__name__}.{k}': v for m in mods for k, v in vars(m).items()
 for name, sampler in (('fresnel_sphere_au', 'stratified'), ('cornell_lambert', 'independent')):
     scene = load_scene(shared_path('peers', 'scenes', name + '.json'))
     scene.camera.width = scene.camera.height = 32
-    st = copy.copy(scene.settings)
-    st.spp, st.sampler, st.threads = 2, sampler, 1
+    st = dataclasses.replace(scene.settings, spp=2, sampler=sampler, threads=1)
     r = Renderer(scene)
     r.warm_up(st)
     before = {k: len(v.signatures) for k, v in kernels.items()}

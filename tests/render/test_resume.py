@@ -1,5 +1,6 @@
 """Resuming an interrupted render gives the image of an uninterrupted one."""
 
+import dataclasses
 import signal
 import subprocess
 import sys
@@ -17,9 +18,8 @@ from tests.conftest import REPO, shared_path
 def test_resume_from_stored_means_equals_the_uninterrupted_render():
     scene = load_scene(shared_path("peers", "scenes", "fresnel_sphere.json"))
     scene.camera.width = scene.camera.height = 24
-    scene.settings.spp = 6
-    scene.settings.batch_rays = 24 * 24              # one pass per unit
-    scene.settings.sampler = "independent"           # the stored standard error is the i.i.d. one
+    # one pass per unit; the stored standard error is the i.i.d. one
+    scene.settings = dataclasses.replace(scene.settings, spp=6, batch_rays=24 * 24, sampler="independent")
     renderer = Renderer(scene)
     full = renderer.render()
     calls = {"n": 0}
@@ -176,7 +176,7 @@ def test_scene_fingerprint_does_not_change_when_the_scene_is_rendered(tmp_path, 
     from engine.spectral.ior import NAMED_METALS, named_ior
     scene = load_scene(small_demo(tmp_path, **COATED_CHALK))
     before = scene_fingerprint(scene)
-    scene.settings.spectral = spectral
+    scene.settings = dataclasses.replace(scene.settings, spectral=spectral)
     Renderer(scene).render()
     for name in NAMED_METALS:                          # the shared, cached (n, κ) tables of every metal
         for spectrum in named_ior(name):

@@ -11,7 +11,7 @@ The determinism of whole renders (threads, batch size, resumption, adaptive roun
 the other samplers' tests in tests/render/test_stratified.py, parametrised by the sampler.
 """
 
-import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -162,8 +162,7 @@ def test_even_and_odd_samples_are_independent_sequences():
 def seed_images(scene, sampler, seeds, spp):
     renderer, out, se = Renderer(scene), [], []
     for seed in range(seeds):
-        st = copy.copy(scene.settings)
-        st.seed, st.sampler, st.spp = seed, sampler, spp
+        st = dataclasses.replace(scene.settings, seed=seed, sampler=sampler, spp=spp)
         r = renderer.render(st)
         out.append(r.stokes_luminance()[0])
         se.append(r.film.stderr_luminance()[0])
@@ -184,8 +183,7 @@ def test_the_camera_and_first_vertex_numbers_are_the_stratified_samplers(cornell
     BSDF-sampled segment) see exactly "stratified"'s numbers: the renders are equal bit for bit; one
     segment more and the second vertex's numbers differ (pairs where "stratified" hashes)."""
     def render(sampler, depth):
-        st = copy.copy(cornell.settings)
-        st.sampler, st.spp, st.max_depth, st.seed = sampler, 8, depth, 3
+        st = dataclasses.replace(cornell.settings, sampler=sampler, spp=8, max_depth=depth, seed=3)
         return Renderer(cornell).render(st).stokes_luminance()[0]
     np.testing.assert_array_equal(render("sobol", 2), render("stratified", 2))
     assert not np.array_equal(render("sobol", 3), render("stratified", 3))
@@ -242,13 +240,12 @@ def test_a_resumed_adaptive_sobol_render_equals_the_uninterrupted_one(tmp_path):
     from tests.conftest import shared_path
     scene = load_scene(shared_path("peers", "scenes", "fresnel_sphere.json"))
     scene.camera.width = scene.camera.height = 24
-    scene.settings.spp, scene.settings.sampler = 48, "sobol"
+    scene.settings = dataclasses.replace(scene.settings, spp=48, sampler="sobol")
     ad = AdaptiveSettings(threshold=0.02, quantity="s0", min_spp=8)
     renderer = Renderer(scene)
     reference = renderer.render(RenderRequest(adaptive=ad))
     assert len(np.unique(reference.film.count)) > 1
-    st = copy.copy(scene.settings)
-    st.batch_rays = 200
+    st = dataclasses.replace(scene.settings, batch_rays=200)
     calls = {"n": 0}
     partial = renderer.render(RenderRequest(st, adaptive=ad, should_stop=lambda: calls.__setitem__("n", calls["n"] + 1)
                                             or calls["n"] > 12))

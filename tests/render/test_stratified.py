@@ -3,6 +3,7 @@ as the independent sampler, an honest standard error, and the determinism of eve
 batches, resumption, adaptive rounds)."""
 
 import copy
+import dataclasses
 import math
 
 import numpy as np
@@ -74,10 +75,8 @@ def seed_renders(scene, sampler, seeds=SEEDS, spp=None):
     """(S0 images (seeds, H, W), their standard errors) of renders with seeds 0…seeds−1."""
     renderer, out, errors = Renderer(scene), [], []
     for seed in range(seeds):
-        st = copy.copy(scene.settings)
-        st.seed, st.sampler = seed, sampler
-        if spp is not None:
-            st.spp = spp
+        st = dataclasses.replace(scene.settings, seed=seed, sampler=sampler,
+                                 spp=scene.settings.spp if spp is None else spp)
         r = renderer.render(st)
         out.append(r.stokes_luminance()[0])
         errors.append(r.film.stderr_luminance()[0])
@@ -149,7 +148,7 @@ def test_stratified_wavelengths_keep_the_mean_and_cut_the_spectral_noise():
     wall = quad(*[np.array([x, y, 1.0]) for x, y in ((-9, -9), (9, -9), (9, 9), (-9, 9))])
     scene = plane_scene([Mesh("wall", wall.vertices, wall.faces, ["black"], np.zeros(2, np.int32),
                               emission=RGBIlluminantSpectrum([1.0, 0.25, 0.05], 2.0))], res, 16, max_depth=1)
-    scene.settings.spectral, scene.settings.reduce_spectral = "spectral", "off"
+    scene.settings = dataclasses.replace(scene.settings, spectral="spectral", reduce_spectral="off")
     strat, se = seed_renders(scene, "stratified")
     indep, se_i = seed_renders(scene, "independent")
     diff_se = np.sqrt(((se ** 2).sum() + (se_i ** 2).sum()) / SEEDS ** 2) / res
@@ -190,14 +189,12 @@ def test_the_stratified_standard_error_is_honest_against_a_reference():
     up = quad(*[np.array([x * 0.6, y * 0.6, 1.0]) for x, y in DIAMOND])
     glow = Mesh("glow", up.vertices, up.faces, ["black"], np.zeros(2, np.int32), emission=white(1.5))
     scene = plane_scene([lamp, glow], res, 16)
-    ref_st = copy.copy(scene.settings)
-    ref_st.spp, ref_st.seed = 1024, 99
+    ref_st = dataclasses.replace(scene.settings, spp=1024, seed=99)
     ref = Renderer(scene).render(ref_st)
     y_ref, se_ref = ref.stokes_luminance()[0], ref.film.stderr_luminance()[0]
     renderer, z, z_iid = Renderer(scene), [], []
     for seed in range(SEEDS):
-        st = copy.copy(scene.settings)
-        st.seed, st.sampler = seed, "stratified"
+        st = dataclasses.replace(scene.settings, seed=seed, sampler="stratified")
         r = renderer.render(st)
         y, se = r.stokes_luminance()[0], r.film.stderr_luminance()[0]
         iid = copy.copy(r.film)
@@ -244,15 +241,14 @@ def test_the_variance_ratio_is_one_for_independent_halves_and_local():
 @pytest.fixture(scope="module", params=["stratified", "sobol"])
 def lamp_reference(request):
     scene = lamp_scene(40.0, 1.0, 16, 8)
-    scene.settings.sampler = request.param
+    scene.settings = dataclasses.replace(scene.settings, sampler=request.param)
     return scene, Renderer(scene).render()
 
 
 @pytest.mark.parametrize("threads", [1, 2])
 def test_stratified_images_do_not_depend_on_threads(lamp_reference, threads):
     scene, ref = lamp_reference
-    st = copy.copy(scene.settings)
-    st.threads = threads
+    st = dataclasses.replace(scene.settings, threads=threads)
     r = Renderer(scene).render(st)
     assert np.array_equal(r.film.sums, ref.film.sums) and np.array_equal(r.film.half_y, ref.film.half_y)
     assert np.array_equal(r.film.stderr_luminance(), ref.film.stderr_luminance())
@@ -262,8 +258,7 @@ def test_stratified_images_do_not_depend_on_the_batch_size(lamp_reference):
     """Smaller batches split the sample passes into more work units: the same numbers per sample,
     sums added in another grouping (equal within float rounding)."""
     scene, ref = lamp_reference
-    st = copy.copy(scene.settings)
-    st.batch_rays = 1024
+    st = dataclasses.replace(scene.settings, batch_rays=1024)
     r = Renderer(scene).render(st)
     np.testing.assert_allclose(r.film.sums, ref.film.sums, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(r.film.half_y, ref.film.half_y, rtol=1e-12, atol=1e-12)
@@ -273,12 +268,9 @@ def test_a_resumed_stratified_render_equals_the_uninterrupted_one(lamp_reference
     """4 samples, then resumed to 8 from the film: the same sums (up to the addition order of a
     batch split, which is none here: passes 0–3 then 4–7) and half sums as one 8-sample render."""
     scene, ref = lamp_reference
-    st = copy.copy(scene.settings)
-    st.spp = 4
     renderer = Renderer(scene)
-    first = renderer.render(st).film
-    st.spp = 8
-    r = renderer.render(RenderRequest(st, resume=first))
+    first = renderer.render(dataclasses.replace(scene.settings, spp=4)).film
+    r = renderer.render(RenderRequest(dataclasses.replace(scene.settings, spp=8), resume=first))
     np.testing.assert_allclose(r.film.sums, ref.film.sums, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(r.film.half_y, ref.film.half_y, rtol=1e-12, atol=1e-12)
 
@@ -350,13 +342,12 @@ def test_stratified_adaptive_sampling_is_deterministic_and_reports_the_stratifie
     from tests.conftest import shared_path
     scene = load_scene(shared_path("peers", "scenes", "fresnel_sphere.json"))
     scene.camera.width = scene.camera.height = 24
-    scene.settings.spp, scene.settings.sampler = 32, sampler
+    scene.settings = dataclasses.replace(scene.settings, spp=32, sampler=sampler)
     ad = AdaptiveSettings(threshold=0.015, quantity="s0", min_spp=8)
     renderer = Renderer(scene)
     runs = []
     for threads, batch in ((1, 1 << 17), (2, 700)):
-        st = copy.copy(scene.settings)
-        st.threads, st.batch_rays = threads, batch
+        st = dataclasses.replace(scene.settings, threads=threads, batch_rays=batch)
         runs.append(renderer.render(RenderRequest(st, adaptive=ad)))
     a, b = runs
     assert np.array_equal(a.film.count, b.film.count) and len(np.unique(a.film.count)) > 1

@@ -3,7 +3,7 @@ Texture into Emission Color), against values computed without the textured emitt
 emitter of the texel's colour, a numerical integral over the emitter — and its own two samplings
 (by area / by emitted luminance), which must agree in the mean and differ in the variance."""
 
-import copy
+import dataclasses
 import math
 
 import numpy as np
@@ -63,10 +63,7 @@ def floor_scene(meshes, res=8, spp=16, width=2.0, max_depth=2, spectral="spectra
 
 
 def render(scene, **settings):
-    st = copy.copy(scene.settings)
-    for key, value in settings.items():
-        setattr(st, key, value)
-    return Renderer(scene).render(st)
+    return Renderer(scene).render(dataclasses.replace(scene.settings, **settings))
 
 
 def light_of(scene, name):

@@ -4,7 +4,7 @@ engine.render.plan.work_units groups the passes by ``batch_rays`` alone (the gro
 bits of each pixel's sums) and cuts the rows into at least ``workers`` bands (which changes no
 pixel's additions)."""
 
-import copy
+import dataclasses
 
 import numpy as np
 import pytest
@@ -63,7 +63,8 @@ def test_a_small_image_gives_both_workers_a_unit_of_every_pass_group():
 
 def test_two_threads_trace_at_least_two_units_and_give_the_same_bits(monkeypatch):
     scene = peer_scene("fresnel_sphere", 6, res=24)
-    scene.settings.batch_rays = 1 << 17           # every pass fits one batch: one unit per worker count before
+    # every pass fits one batch: one unit per worker count before
+    scene.settings = dataclasses.replace(scene.settings, batch_rays=1 << 17)
     renderer = Renderer(scene)
     traced = []
     real = driver_module.trace_in_order
@@ -75,9 +76,7 @@ def test_two_threads_trace_at_least_two_units_and_give_the_same_bits(monkeypatch
     monkeypatch.setattr(driver_module, "trace_in_order", spy)
     results = {}
     for threads in (1, 2):
-        st = copy.copy(scene.settings)
-        st.threads = threads
-        results[threads] = renderer.render(st)
+        results[threads] = renderer.render(dataclasses.replace(scene.settings, threads=threads))
     (w1, u1), (w2, u2) = traced
     assert (w1, len(u1)) == (1, 1) and w2 == 2 and len(u2) >= 2
     a, b = results[1].film, results[2].film

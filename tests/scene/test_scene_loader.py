@@ -1,6 +1,7 @@
 """Scene files: the engine format, the peer format, and validation messages that name the field."""
 
 import copy
+import dataclasses
 import json
 
 import numpy as np
@@ -156,7 +157,7 @@ def test_examples_load_and_render(name):
     from tests.conftest import REPO
     scene = load_scene(f"{REPO}/examples/{name}.json")
     scene.camera.width, scene.camera.height = 24, 16
-    scene.settings.spp = 1
+    scene.settings = dataclasses.replace(scene.settings, spp=1)
     result = Renderer(scene).render()
     assert result.stats["nonfinite"] == 0 and result.stokes()[0].max() > 0
 
