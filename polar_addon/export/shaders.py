@@ -29,6 +29,7 @@ from ...engine.materials.principled import IOR_MIN, WEIGHT_CUTOFF, film_gaps
 from ...engine.materials.roughness import ALPHA_MIN, effectively_smooth
 from ...engine.spectral import ConstantSpectrum, RGBIlluminantSpectrum
 from ...engine.textures import TextureInput
+from ...engine.textures.inputs import TexturedNumber
 from .lambert import DEFAULT_ALBEDO, lambert, rgb_spectrum
 from .node_links import follow, linked_source
 from .node_reader import Reader
@@ -95,7 +96,8 @@ def _facet_conductor(n, k, m, mat, node, warnings, film=None, aniso=None):
     """A conductor of index n + iκ (spectra, [r, g, b] or textured) with facets as the node's Distribution
     and roughness m (α = r², constant or a TextureInput), or its smooth limit; ``film``: (IOR, thickness nm)
     of a Thin Film on its facets or its mirror (Cycles films the conductor's index);
-    ``aniso``: (α_x, α_y, rotation in turns) of Cycles' anisotropic GGX (a constant roughness; None: isotropic).
+    ``aniso``: (α_x, α_y, rotation in turns) of Cycles' anisotropic GGX (each α a number, or per point an
+    engine.textures.inputs.MappedNumbers: ``_node_anisotropy``; None: isotropic).
     Smooth where the engine's rule calls every α smooth (engine.materials.roughness.effectively_smooth): the
     ``conductor`` model; else each α at least the least slope ALPHA_MIN (pbrt's rule)."""
     kw = facets(node, mat, warnings)
@@ -103,13 +105,14 @@ def _facet_conductor(n, k, m, mat, node, warnings, film=None, aniso=None):
     films = {} if film is None else {"thin_film_ior": film[0], "thin_film_thickness": film[1]}
     if smooth:
         return _textured_model("conductor", {"n": n, "k": k, **films}, mat, node)
-    if aniso is not None and aniso[0] != aniso[1]:
+    per_point = aniso is not None and any(isinstance(v, TexturedNumber) for v in aniso[:2])
+    if aniso is not None and (per_point or aniso[0] != aniso[1]):
         if kw["distribution"] == "ggx":
             from ...engine.materials.anisotropic_ggx import AnisotropicGGX
             n_s, k_s = (rgb_spectrum(list(v), "unbounded") if isinstance(v, (list, tuple)) else v for v in (n, k))
+            ax, ay = (v if isinstance(v, TexturedNumber) else max(v, ALPHA_MIN) for v in aniso[:2])
             # (no declaration: the anisotropic GGX is a part of Principled-like metals, engine.materials.principled)
-            return AnisotropicGGX(n_s, k_s, max(aniso[0], ALPHA_MIN), max(aniso[1], ALPHA_MIN), rotation=aniso[2],
-                                  multiscatter=kw["multiscatter"],
+            return AnisotropicGGX(n_s, k_s, ax, ay, rotation=aniso[2], multiscatter=kw["multiscatter"],
                                   film_n=None if film is None else _film_number(film[0], IOR_MIN),
                                   film_thickness=0.0 if film is None else _film_number(film[1]))
         warnings.append(f"material {mat!r}: the anisotropy of {node.name!r} is simulated with GGX only; rendered "
@@ -122,18 +125,25 @@ def _facet_conductor(n, k, m, mat, node, warnings, film=None, aniso=None):
 def _node_anisotropy(r, node, mat, warnings, m, kind):
     """(α_x, α_y, rotation) of a Glossy or Metallic BSDF's Anisotropy as Cycles sets it up, or None (isotropic):
     Metallic as the Principled BSDF (α = r²/aspect, r²·aspect, aspect = √(1 − 0.9·a), a ∈ [0, 1]); Glossy
-    α = r²(1 − a), r²/(1 − a) for a ∈ (0, 0.99], r²/(1 + a), r²(1 + a) below 0; each α ≤ 1.  Needs a constant
-    Roughness and Anisotropy (linked: its own value, one warning)."""
+    α = r²(1 − a), r²/(1 − a) for a ∈ (0, 0.99], r²/(1 + a), r²(1 + a) below 0 (|a| ≤ 10⁻⁴: isotropic); each
+    α ≤ 1.  The Roughness (m = r²) and the Anisotropy may each vary per point: then α_x, α_y per point
+    (engine.textures.inputs.MappedNumbers of α and a, each in [ALPHA_MIN, 1]).  The Rotation is a constant
+    (linked: its own value, one warning)."""
     sock = node.inputs.get("Anisotropy")
     if sock is None or (not sock.is_linked and float(sock.default_value) == 0.0):
         return None
-    a = r.float("Anisotropy", -1.0, 1.0)
-    textured = isinstance(m, TextureInput)
-    _tangent_note(node, mat, warnings, textured)
-    if textured:
-        return None
+    a = r.number_or_texture("Anisotropy", -1.0, 1.0)
+    _tangent_note(node, mat, warnings)
+    metallic = kind == "ShaderNodeBsdfMetallic"
+    if _textured(m, a):
+        if metallic and not isinstance(a, TextureInput) and a <= 0.0:
+            return None
+        ax, ay = _per_point_alphas(m, a, metallic)
+        if not isinstance(m, TextureInput) and max(ax.hi, ay.hi) <= ALPHA_MIN:
+            return None                 # (a constant Roughness that keeps every α at the least slope: isotropic)
+        return ax, ay, r.float("Rotation", -1e6, 1e6)
     rough = math.sqrt(m)
-    if kind == "ShaderNodeBsdfMetallic":
+    if metallic:
         if a <= 0.0:
             return None
         from ...engine.materials.anisotropic_ggx import cycles_alphas
@@ -142,10 +152,46 @@ def _node_anisotropy(r, node, mat, warnings, m, kind):
         a = min(max(a, -0.99), 0.99)
         if abs(a) <= 1e-4:
             return None
-        r2 = rough * rough
-        ax, ay = (r2 / (1.0 + a), r2 * (1.0 + a)) if a < 0 else (r2 * (1.0 - a), r2 / (1.0 - a))
-        ax, ay = min(ax, 1.0), min(ay, 1.0)
+        ax, ay = (min(float(v), 1.0) for v in _glossy_alphas(m, a))
     return ax, ay, r.float("Rotation", -1e6, 1e6)
+
+
+def _glossy_alphas(alpha, a):
+    """Cycles' Glossy BSDF (α_x, α_y) of α = r² and the Anisotropy a ∈ [−0.99, 0.99] (numbers or arrays)."""
+    below = a < 0
+    return np.where(below, alpha / (1.0 + a), alpha * (1.0 - a)), np.where(below, alpha * (1.0 + a), alpha / (1.0 - a))
+
+
+def _per_point_alphas(m, a, metallic):
+    """(α_x, α_y) per point (engine.textures.inputs.MappedNumbers of α = r² and the Anisotropy a, either textured
+    or constant) of a Metallic (as the Principled: engine.materials.principled._anisotropic_lobe) or Glossy BSDF,
+    each in [ALPHA_MIN, 1]; their bounds from the corners of the ranges of α and a (each α is monotone in both)."""
+    from ...engine.materials.anisotropic_ggx import ASPECT_SLOPE
+    from ...engine.textures.inputs import MappedNumbers
+    alpha = TexturedNumber(m, clip=(0.0, 1.0)) if isinstance(m, TextureInput) else m
+    aniso = TexturedNumber(a, clip=(-1.0, 1.0)) if isinstance(a, TextureInput) else a
+
+    def pair(al, an):
+        al = np.clip(al, 0.0, 1.0)
+        if metallic:
+            aspect = np.sqrt(1.0 - ASPECT_SLOPE * np.clip(an, 0.0, 1.0))
+            ax, ay = al / aspect, al * aspect
+        else:
+            an = np.clip(an, -0.99, 0.99)
+            ax, ay = _glossy_alphas(al, np.where(np.abs(an) <= 1e-4, 0.0, an))
+        return np.clip(ax, ALPHA_MIN, 1.0), np.clip(ay, ALPHA_MIN, 1.0)
+
+    def alpha_x(al, an):
+        return pair(al, an)[0]
+
+    def alpha_y(al, an):
+        return pair(al, an)[1]
+    al_lo, al_hi = (alpha.lo, alpha.hi) if isinstance(alpha, TexturedNumber) else (alpha, alpha)
+    a_lo, a_hi = (aniso.lo, aniso.hi) if isinstance(aniso, TexturedNumber) else (aniso, aniso)
+    # α_y grows with α; with a it falls (Metallic) or grows (Glossy); α_x grows with α and, opposite to α_y, with a
+    y_lo, y_hi = (a_hi, a_lo) if metallic else (a_lo, a_hi)
+    return (MappedNumbers((alpha, aniso), alpha_x, float(alpha_x(al_lo, y_hi)), float(alpha_x(al_hi, y_lo))),
+            MappedNumbers((alpha, aniso), alpha_y, float(alpha_y(al_lo, y_lo)), float(alpha_y(al_hi, y_hi))))
 
 
 def _conductor_from_colour(r, colour_name, edge_name, m, mat, node, warnings, mode="schlick"):
@@ -312,7 +358,7 @@ def _principled(node, mat, warnings, bake=None):
     if film is not None:
         values["thin_film_ior"], values["thin_film_thickness"] = film
     if isinstance(values["anisotropic"], TextureInput) or values["anisotropic"] > 0.0:
-        _tangent_note(node, mat, warnings, False)          # α_x, α_y per point with a Roughness texture
+        _tangent_note(node, mat, warnings)          # (α_x, α_y per point with a Roughness texture)
     _unsimulated_principled_inputs(node, mat, warnings)
     gaps = film_gaps(metallic, transmission, roughness) if film else []
     if gaps:
@@ -333,7 +379,7 @@ def anisotropic(node, name="Anisotropic") -> bool:
     return sock is not None and (sock.is_linked or float(sock.default_value) != 0.0)
 
 
-def _tangent_note(node, mat, warnings, textured_roughness):
+def _tangent_note(node, mat, warnings):
     """The warnings of an anisotropic Principled, Glossy or Metallic BSDF: Cycles stretches its GGX along the
     Tangent input — a Tangent node on a UV map is that map's MikkTSpace tangent, as Polar's; unlinked, Cycles'
     default is the radial tangent about the object's Z (generated coordinates), for which Polar takes the active UV
@@ -345,9 +391,6 @@ def _tangent_note(node, mat, warnings, textured_roughness):
             f"from {source.bl_idname} {source.name!r}"
         warnings.append(f"material {mat!r}: the Tangent of {node.name!r} is {what}; its anisotropy is rendered along "
                         "the active UV map's tangent")
-    if textured_roughness:
-        warnings.append(f"material {mat!r}: the anisotropy of {node.name!r} needs a constant Roughness; rendered "
-                        "isotropic")
 
 
 def _unsimulated_principled_inputs(node, mat, warnings):

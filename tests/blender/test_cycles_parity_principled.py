@@ -400,6 +400,29 @@ def test_anisotropy_per_point_matches_cycles(addon, socket, lighting):
     compare_with_cycles(scene, f"Principled {socket.strip()} per point", lighting)
 
 
+#: Cycles' metal nodes with a Roughness checker under a constant Anisotropy, or an Anisotropy checker (the Glossy's
+#: across its negative range) under a constant Roughness, along a Tangent node's UV tangent: α_x, α_y per point
+#: (Glossy: r²(1 − a), r²/(1 − a), below 0 r²/(1 + a), r²(1 + a); Metallic: as the Principled's)
+NODE_ANISOTROPY = {
+    "Glossy Roughness": ("ShaderNodeBsdfGlossy", "Roughness", ((0.2, 0.2, 0.2), (0.6, 0.6, 0.6)),
+                         {"Color": (0.9, 0.6, 0.3), "Anisotropy": 0.6}),
+    "Metallic Roughness": ("ShaderNodeBsdfMetallic", "Roughness", ((0.2, 0.2, 0.2), (0.6, 0.6, 0.6)),
+                           {"Base Color": (0.9, 0.6, 0.3), "Anisotropy": 0.6}),
+    "Glossy Anisotropy": ("ShaderNodeBsdfGlossy", "Anisotropy", ((-0.7, -0.7, -0.7), (0.2, 0.2, 0.2)),
+                          {"Color": (0.9, 0.6, 0.3), "Roughness": 0.4}),
+    "Metallic Anisotropy": ("ShaderNodeBsdfMetallic", "Anisotropy", ((0.1, 0.1, 0.1), (0.9, 0.9, 0.9)),
+                            {"Base Color": (0.9, 0.6, 0.3), "Roughness": 0.4}),
+}
+
+
+@pytest.mark.parametrize("lighting", ap.LIGHTINGS)
+@pytest.mark.parametrize("case", list(NODE_ANISOTROPY))
+def test_anisotropic_node_inputs_per_point_match_cycles(addon, case, lighting):
+    kind, socket, values, others = NODE_ANISOTROPY[case]
+    scene = node_scene(kind, socket, values, {**others, "tangent": True}, lighting)
+    compare_with_cycles(scene, f"{case} per point, anisotropic node", lighting)
+
+
 def test_a_per_point_ior_on_a_glass_says_it_takes_its_own_value(addon):
     scene = sphere_scene("IOR", (1.2, 2.0), {"Transmission Weight": 1.0, "Roughness": 0.2}, "lamps")
     _, _, warnings = ap.export_polar(scene, 1, 8)
