@@ -263,6 +263,10 @@ class PolarWorldSettings(bpy.types.PropertyGroup):
     sky_polarisation: EnumProperty(name="Sky Polarisation", items=SKY_POLARISATION_ITEMS, default="BERRY",
                                    description="The polarisation of daylight from a Sky Texture in this world")
 
+    def engine_model(self):
+        """The model of engine.spectral.daylight.ClearSky ("berry", "rayleigh"), None when off."""
+        return SKY_POLARISATION_TO_ENGINE[self.sky_polarisation]
+
 
 classes = (PolarRenderSettings, PolarViewLayerSettings, PolarSourceSettings, PolarWorldSettings)
 

@@ -140,38 +140,38 @@ def draw_source_polarisation(layout, settings, target):
     layout.operator("polar.lcd_screen_preset", icon="PRESET").target = target
 
 
-class POLAR_PT_light_polarisation(_PolarPanel, bpy.types.Panel):
-    bl_label = "Polarisation"
-    bl_context = "data"
+class _OwnerPanel(_PolarPanel):
+    """A panel of the Properties editor's tab of one data block: ``owner`` names it in the context
+    ("light", "material", "world"); the panel shows when the engine is Polar and that block exists."""
+    owner = ""
 
     @classmethod
     def poll(cls, context):
-        return context.engine in cls.COMPAT_ENGINES and getattr(context, "light", None) is not None
+        return context.engine in cls.COMPAT_ENGINES and getattr(context, cls.owner, None) is not None
 
+
+class _SourcePolarisationPanel(_OwnerPanel):
     def draw(self, context):
-        draw_source_polarisation(self.layout, context.light.polar, "LIGHT")
+        draw_source_polarisation(self.layout, getattr(context, self.owner).polar, self.owner.upper())
 
 
-class POLAR_PT_emission_polarisation(_PolarPanel, bpy.types.Panel):
+class POLAR_PT_light_polarisation(_SourcePolarisationPanel, bpy.types.Panel):
+    bl_label = "Polarisation"
+    bl_context = "data"
+    owner = "light"
+
+
+class POLAR_PT_emission_polarisation(_SourcePolarisationPanel, bpy.types.Panel):
     bl_label = "Emission Polarisation"
     bl_context = "material"
     bl_options = {"DEFAULT_CLOSED"}
-
-    @classmethod
-    def poll(cls, context):
-        return context.engine in cls.COMPAT_ENGINES and getattr(context, "material", None) is not None
-
-    def draw(self, context):
-        draw_source_polarisation(self.layout, context.material.polar, "MATERIAL")
+    owner = "material"
 
 
-class POLAR_PT_sky_polarisation(_PolarPanel, bpy.types.Panel):
+class POLAR_PT_sky_polarisation(_OwnerPanel, bpy.types.Panel):
     bl_label = "Sky Polarisation"
     bl_context = "world"
-
-    @classmethod
-    def poll(cls, context):
-        return context.engine in cls.COMPAT_ENGINES and getattr(context, "world", None) is not None
+    owner = "world"
 
     def draw(self, context):
         layout = self.layout

@@ -124,7 +124,7 @@ def _with_sky_polarisation(world, tree, light, warnings):
     from ...engine.render.lights.environment import euler_xyz_matrix
     from ...engine.spectral.daylight import ClearSky, max_degree_for_turbidity
     settings = getattr(getattr(world, "original", world), "polar", None)
-    model = {"BERRY": "berry", "RAYLEIGH": "rayleigh"}.get(getattr(settings, "sky_polarisation", "BERRY"))
+    model = settings.engine_model() if settings is not None else "berry"      # (World ▸ Sky Polarisation)
     if light is None or light.image is None or model is None:
         return light
     skies = _sky_nodes(tree)

@@ -207,12 +207,16 @@ class EnvironmentMapEmitter(_Light):
         x = np.stack((-wm[1], wm[0], np.zeros_like(wm[0])))
         norm = np.sqrt(x[0] ** 2 + x[1] ** 2)
         x = np.where(norm > 1e-12, x / np.where(norm > 1e-12, norm, 1.0), np.array([[0.0], [1.0], [0.0]]))
+        return s, self._to_world(x)
+
+    def _to_world(self, v):
+        """Vectors (3, N) of the map frame turned into the world (the map's rotation; ``_to_map``'s inverse)."""
         if self.turn is not None:
-            x = self.turn @ x
-        elif self.rotation:
-            c, sn = math.cos(self.rotation), math.sin(self.rotation)
-            x = np.stack((c * x[0] - sn * x[1], sn * x[0] + c * x[1], x[2]))
-        return s, x
+            return self.turn @ v
+        if self.rotation == 0.0:
+            return v
+        c, s = math.cos(self.rotation), math.sin(self.rotation)
+        return np.stack((c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]))
 
     def _to_map(self, d):
         """Directions (3, N) turned by −rotation about +Z (world → map frame)."""
@@ -264,11 +268,7 @@ class EnvironmentMapEmitter(_Light):
         sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
         phi = math.pi * (1.0 - 2.0 * ((i + 0.5 + u[2]) / W))
         dm = np.stack((sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t))
-        if self.turn is not None:
-            wi = self.turn @ dm
-        else:
-            c, s = math.cos(self.rotation), math.sin(self.rotation)
-            wi = np.stack((c * dm[0] - s * dm[1], s * dm[0] + c * dm[1], dm[2])) if self.rotation else dm
+        wi = self._to_world(dm)
         pdf = self.cell_pdf[j, i]
         valid = pdf > 0
         n = p.shape[1]
