@@ -200,6 +200,7 @@ def _render_scene(args, bars: list) -> int:
         for option, used in (("--resume", args.resume), ("--scheduler", args.scheduler)):
             if used:
                 raise SceneError("--denoise-data", f"cannot be combined with {option} yet")
+    data_request = _data_pass_request(args)
     scene = _load_scene(args.scene)
     st = _settings_from_options(scene, args)
     if getattr(args, "denoise_data", False):
@@ -250,9 +251,41 @@ def _render_scene(args, bars: list) -> int:
             if bar is not None:
                 bar.close()
         result.stats.update(prediction.first)
+        if data_request is not None and not (result.cancelled and not result.film.count.any()):
+            from .render.data_passes import render_data_passes
+            result.data_passes = render_data_passes(renderer, data_request, st)
         # Still inside: a signal while the files are written must not lose them.
         status = _write_render(args, out, result, st, scene_hash, adaptive)
     return status if status else signals.exit_status(130 if result.cancelled else 0)
+
+
+def _data_pass_request(args):
+    """The DataPassRequest of ``--data-passes`` (None without it); a bad value is a SceneError naming the option."""
+    spec = getattr(args, "data_passes", None)
+    if not spec:
+        return None
+    from .render.data_passes import ALL_PASSES, DataPassRequest, Mist
+    names = ALL_PASSES if spec.strip() == "all" else tuple(n.strip() for n in spec.split(",") if n.strip())
+    unknown = [n for n in names if n not in ALL_PASSES]
+    if unknown or not names:
+        raise SceneError("--data-passes", f"must be 'all' or a comma-separated list of {', '.join(ALL_PASSES)}; "
+                                          f"got {spec!r}")
+    mist = Mist()
+    if args.mist:
+        parts = [p.strip() for p in args.mist.split(",")]
+        try:
+            if len(parts) not in (2, 3):
+                raise ValueError("START,DEPTH[,FALLOFF] expected")
+            mist = Mist(float(parts[0]), float(parts[1]), *(parts[2:]))
+        except ValueError as e:
+            raise SceneError("--mist", f"START,DEPTH[,FALLOFF] with START, DEPTH ≥ 0 and FALLOFF quadratic, linear "
+                                       f"or inverse_quadratic; got {args.mist!r} ({e})") from None
+    for option, value, lo, hi in (("--cryptomatte-levels", args.cryptomatte_levels, 2, 16),
+                                  ("--data-samples", args.data_samples, 1, 1 << 24)):
+        if value is not None and not lo <= value <= hi:
+            raise SceneError(option, f"must be an integer in [{lo}, {hi}], got {value}")
+    return DataPassRequest(frozenset(names), cryptomatte_levels=args.cryptomatte_levels, mist=mist,
+                           samples=args.data_samples)
 
 
 def _render_request(renderer, request):
@@ -387,12 +420,19 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
             extra[f"denoise.normal.{c}"] = normal[..., i].astype("float32")
     stokes = result.stokes()
     alpha = film.alpha() if film.has_alpha else None   # coverage of camera rays (transparent film, holdout)
+    data = getattr(result, "data_passes", None)        # --data-passes (engine.render.data_passes)
+    data_channels = None
+    if data is not None:
+        meta.update(data.metadata())
+        meta["polar.data_samples"] = int(data.samples)
+        data_channels = data.channels()
     try:
-        write_stokes_exr(out, stokes, metadata=meta, extra=extra, alpha=alpha)
+        write_stokes_exr(out, stokes, metadata=meta, extra=extra, alpha=alpha, data=data_channels)
     except Exception as e:              # noqa: BLE001 — whatever failed, the samples must survive
         reason = _reason(e)
         try:
-            saved = save_rescue(out, stokes, meta, extra if alpha is None else {**extra, "A": alpha})
+            saved = save_rescue(out, stokes, meta, {**extra, **(data_channels or {}),
+                                                    **({} if alpha is None else {"A": alpha})})
         except OSError as lost:
             print(f"error: -o: cannot write {out!r}: {reason}; {lost}: the finished samples are lost",
                   file=sys.stderr)
@@ -723,6 +763,16 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--denoise-data", action="store_true",
                    help="also write denoising guides (channels denoise.albedo.R/G/B, denoise.normal.X/Y/Z: "
                         "albedo and shading normal at the first non-mirror hit, as Cycles' denoising data)")
+    r.add_argument("--data-passes", metavar="LIST",
+                   help="also write Cycles' data passes and Cryptomatte, comma-separated or 'all': depth, mist, "
+                        "normal, position, uv, vector, object_index, material_index, crypto_object, "
+                        "crypto_material, crypto_asset (channels Depth.Z, Normal.X/Y/Z, CryptoObject00.r/g/b/a …)")
+    r.add_argument("--data-samples", type=int, metavar="N",
+                   help="samples per pixel of the data passes (default min(spp, 64): the render's first camera rays)")
+    r.add_argument("--cryptomatte-levels", type=int, default=6, metavar="N",
+                   help="Cryptomatte ranks per pixel, 2..16 (default 6, as Cycles)")
+    r.add_argument("--mist", metavar="START,DEPTH[,FALLOFF]",
+                   help="the Mist pass's ramp (default 5,25,quadratic; falloff quadratic|linear|inverse_quadratic)")
     r.add_argument("--resume", metavar="EXR", help="continue the (interrupted) render stored in this EXR")
     r.add_argument("--scheduler", metavar="ADDRESS", help="render on a Dask cluster, e.g. tcp://host:8786 "
                                                           "(same image as a local render)")

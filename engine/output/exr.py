@@ -17,7 +17,16 @@ compression, float32 unless ``half=True``):
     radians in (−π/2, π/2], from image-right towards image-up;
 extra channels
     anything passed in ``extra`` (e.g. ``spp``, ``S0.Y.stderr``); integer
-    arrays are stored as EXR UINT, floating ones like the Stokes channels.
+    arrays are stored as EXR UINT, floating ones like the Stokes channels;
+data passes
+    ``data`` (engine.render.data_passes.DataPasses.channels), always float32 (also with
+    ``half=True``: depths of 1e10 and Cryptomatte ids need it), named as Blender names the passes:
+    ``Depth.Z`` (z along the camera axis, 1e10 on the background), ``Mist.Z``, ``Normal.X/Y/Z``,
+    ``Position.X/Y/Z``, ``UV.U/V/A``, ``Vector.X/Y/Z/W`` (pixels; x, y towards the previous frame,
+    z, w from the next), ``Object Index.X``, ``Material Index.X`` and the Cryptomatte layers
+    ``CryptoObject00.r/g/b/a`` … ``CryptoMaterial…``, ``CryptoAsset…`` (r, b: ids; g, a: coverage),
+    whose manifests are the header strings ``cryptomatte/<7 hex>/name|hash|conversion|manifest``
+    (the Cryptomatte specification; pass them in ``metadata``: DataPasses.metadata()).
 
 The frame convention is stored as the string attribute ``polar.conventions``
 (:data:`STOKES_EXR_CONVENTIONS`).
@@ -141,6 +150,7 @@ def write_stokes_exr(
     extra: dict[str, np.ndarray] | None = None,
     half: bool = False,
     alpha: np.ndarray | None = None,
+    data: dict[str, np.ndarray] | None = None,
 ) -> None:
     """Write a Stokes image (4, H, W, 3) to a ZIP-compressed multi-channel EXR, atomically.
 
@@ -154,6 +164,7 @@ def write_stokes_exr(
     truncated file and never damages an existing one.  Raises ValueError for
     bad shapes, unsupported metadata or values that are not finite once
     stored (float32 overflows beyond ±3.4e38); then nothing is written.
+    ``data``: data-pass channels (module docstring), float32 whatever ``half``.
     """
     s = check_stokes_image(stokes_rgb)
     _, height, width, _ = s.shape
@@ -184,6 +195,10 @@ def write_stokes_exr(
         channels[name] = _float_channel(name, values, half)
     for name, values in (extra or {}).items():
         channels[name] = _extra_channel(name, values, (height, width), half)
+    for name, values in (data or {}).items():
+        if name in channels:
+            raise ValueError(f"data channel {name!r} clashes with another channel")
+        channels[name] = _extra_channel(name, np.asarray(values, np.float32), (height, width), False)
 
     # The bindings need C-contiguous arrays (slices of s are strided).
     channels = {n: np.ascontiguousarray(a) for n, a in channels.items()}

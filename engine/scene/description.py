@@ -195,6 +195,18 @@ class Mesh:
     #: None: the surface's UV tangent, else world +X): scene files' ``"polarisation"`` in the object's "emission"
     emission_polarisation = None
     emission_axis = None
+    #: Identity for the data passes and Cryptomatte (engine.render.data_passes), class attributes set on the
+    #: instance only (so the fingerprints of existing scenes are unchanged; ``dataclasses.replace`` drops them):
+    #: ``object_name`` the object's name (None: ``name``), ``asset_name`` its top-level parent's (None: the
+    #: object name), ``pass_index`` its Object Index (int ≥ 0), ``material_names`` the names per entry of
+    #: ``materials`` (None: the material keys), ``material_pass_indices`` their Material Index (None: 0 each),
+    #: ``pass_uv`` (V, 2) the UV map the UV pass shows (None: ``uv``; neither: no UV map, the pass is 0)
+    object_name = None
+    asset_name = None
+    pass_index = 0
+    material_names = None
+    material_pass_indices = None
+    pass_uv = None
 
 
 @dataclass

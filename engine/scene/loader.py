@@ -590,7 +590,7 @@ def _parse_object_base(d: dict, field: str, base_dir: str, material_names) -> Me
         raise SceneError(field, "must be an object")
     shape = choice(_require(d, "shape", field), f"{field}.shape", ("mesh", "sphere", "quad", "triangles"))
     name = str(d.get("name", field))
-    _check_keys(d, field, OBJECT_KEYS | OBJECT_RAY_KEYS | OBJECT_SHAPE_KEYS[shape])
+    _check_keys(d, field, OBJECT_KEYS | OBJECT_RAY_KEYS | OBJECT_IDENTITY_KEYS | OBJECT_SHAPE_KEYS[shape])
     data, group_names, ungrouped_line = _object_geometry(d, field, shape, base_dir, material_names)
     uv, colors, tangents = _object_vertex_attributes(d, field, shape, data)
     if "transform" in d:
@@ -607,7 +607,26 @@ def _parse_object_base(d: dict, field: str, base_dir: str, material_names) -> Me
                 materials=list(mat_list), material_ids=ids.astype(np.int32), normals=data.vertex_normals,
                 emission=emission, uv=uv, colors=colors or {}, tangents=tangents)
     _parse_ray_visibility(d, field, mesh, base_dir)
+    _parse_identity(d, field, mesh)
     return mesh
+
+
+#: An object's identity in the data passes and Cryptomatte (optional; engine.render.data_passes): its Object
+#: Index ("pass_index", an integer ≥ 0) and asset name ("asset", default its own name).
+OBJECT_IDENTITY_KEYS = {"pass_index", "asset"}
+
+
+def _parse_identity(d: dict, field: str, mesh: Mesh) -> None:
+    """Set the Mesh's identity attributes (engine.scene.description.Mesh.pass_index, asset_name) given in ``d``."""
+    if "pass_index" in d:
+        value = d["pass_index"]
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value <= 2**31 - 1:
+            raise SceneError(f"{field}.pass_index", f"must be an integer in [0, 2^31 − 1], got {value!r}")
+        mesh.pass_index = value
+    if "asset" in d:
+        if not isinstance(d["asset"], str) or not d["asset"]:
+            raise SceneError(f"{field}.asset", f"must be a non-empty string, got {d['asset']!r}")
+        mesh.asset_name = d["asset"]
 
 
 def _object_geometry(d: dict, field: str, shape: str, base_dir: str, material_names):
