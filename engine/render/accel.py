@@ -15,9 +15,8 @@ from embreex.mesh_construction import TriangleMesh
 
 from ..kernels import twin
 from ..kernels.geometry import offset_origin as offset_origin_kernel, surface_attributes
-from ..kernels.rays import closest_hits_loop, embree_hits, embree_rays
+from ..kernels.rays import MAX_DISTANCE, closest_hits_loop, embree_hits, embree_rays
 from ..scene.description import Scene, interior_of
-from ..errors import SceneError
 from ..textures import SurfacePoints, VertexAttributes
 
 # Mitsuba 3's float32 ray epsilon: offsets scale with (1 + max|p_i|).
@@ -63,6 +62,21 @@ def ray_scene_numba(vertices: np.ndarray, faces: np.ndarray):
 ray_scene = twin(closest_hits_loop and ray_scene_numba, ray_scene_numpy)
 
 
+class NoTriangles:
+    """The queries of a scene without triangles (a world-only scene, or one of lamps alone): every ray
+    misses, as Embree's misses (prim −1, u = v = 0, t the ray's float32 length, unbounded: 1e37), no
+    shadow ray is blocked."""
+
+    def closest(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray | None, prims: np.ndarray | None):
+        n = o.shape[1]
+        t = (np.full(n, MAX_DISTANCE, np.float32) if t_max is None
+             else np.minimum(np.asarray(t_max, np.float64), MAX_DISTANCE).astype(np.float32))
+        return np.full(n, -1, np.int64), np.zeros(n), np.zeros(n), t.astype(np.float64)
+
+    def occluded(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray) -> np.ndarray:
+        return np.zeros(o.shape[1], bool)
+
+
 class Hits:
     """Closest hits of a ray batch: ``prim`` (N,) global triangle index (−1 = miss), barycentrics u, v, distance t."""
 
@@ -76,8 +90,8 @@ class CompiledScene:
     """Geometry ready for ray casting: merged triangles, normals, material and emitter ids."""
 
     def __init__(self, scene: Scene):
-        if not scene.meshes:
-            raise SceneError("objects", "the scene has no geometry: add at least one object")
+        # A scene without meshes (a world alone, as Cycles renders it) has empty triangle arrays: every
+        # camera ray misses and sees the environment.
         self.material_names = list(scene.materials)
         self.materials = [scene.materials[n] for n in self.material_names]
         mat_index = {n: i for i, n in enumerate(self.material_names)}
@@ -99,6 +113,9 @@ class CompiledScene:
                 vnormals.append(np.zeros_like(v))
                 has_vn.append(np.zeros(len(f), bool))
             offset += len(v)
+        if not scene.meshes:
+            verts, faces, vnormals = [np.zeros((0, 3))], [np.zeros((0, 3), np.int64)], [np.zeros((0, 3))]
+            tri_mat, tri_mesh, has_vn = [np.zeros(0, np.int32)], [np.zeros(0, np.int32)], [np.zeros(0, bool)]
         self.vertices = np.concatenate(verts)
         self.faces = np.concatenate(faces)
         self.tri_material = np.concatenate(tri_mat)
@@ -158,12 +175,12 @@ class CompiledScene:
         self.has_passthrough = self.passthrough_prims.size > 0
         self._main_prims = None
         if not self.has_passthrough:
-            self.rays = ray_scene(self.vertices, self.faces)
+            self.rays = ray_scene(self.vertices, self.faces) if len(self.faces) else NoTriangles()
             return
         self._main_prims = np.nonzero(self.tri_occluder)[0]
-        if self._main_prims.size == 0:
-            raise SceneError("objects", "the scene has only lights (non-occluding emitters): add geometry")
-        self.rays = ray_scene(self.vertices, self.faces[self._main_prims])
+        # lamps alone (no occluding geometry): the lamps are seen and light nothing
+        self.rays = (ray_scene(self.vertices, self.faces[self._main_prims]) if self._main_prims.size
+                     else NoTriangles())
         self.rays_passthrough = ray_scene(self.vertices, self.faces[self.passthrough_prims])
 
     @property
