@@ -103,3 +103,61 @@ def normal_map_convention(node) -> str:
     choice; before, every normal map is OpenGL's)."""
     return "directx" if getattr(node, "convention", "OPENGL") == "DIRECTX" else "opengl"
 
+
+
+# ----------------------------------------------------------------------------- OpenImageDenoise
+
+#: File names of Blender's OpenImageDenoise library (Linux, Windows, macOS), the one its compositor's Denoise node
+#: and Cycles use (OIDN 2.3 in Blender 4.5–5.0, 2.5 in 5.3).
+OIDN_NAMES = ("libOpenImageDenoise.so.2", "OpenImageDenoise.dll", "libOpenImageDenoise.2.dylib")
+
+
+def _oidn_folders():
+    """Folders that may hold Blender's libraries: ``lib`` beside or above the binary (Blender; macOS
+    ``Contents/Resources/lib``) and above the ``bpy`` module's scripts (the bpy wheel's ``bpy/lib``)."""
+    import os
+    starts = [os.path.dirname(bpy.app.binary_path or "")]
+    starts.append(os.path.dirname(os.path.abspath(bpy.__file__)))
+    folders = []
+    for start in starts:
+        folder = start
+        for _ in range(6):
+            if not folder:
+                break
+            folders += [folder, os.path.join(folder, "lib"), os.path.join(folder, "Resources", "lib"),
+                        os.path.join(folder, "blender.shared")]
+            parent = os.path.dirname(folder)
+            if parent == folder:
+                break
+            folder = parent
+    return folders
+
+
+_OIDN = []
+
+
+def oidn_library():
+    """Blender's own OpenImageDenoise as a ``ctypes.CDLL``, or None where it is not found.  Blender links it at
+    start-up, so loading it by name returns the copy already in the process; else it is looked for in
+    Blender's library folders."""
+    if _OIDN:
+        return _OIDN[0]
+    import ctypes
+    import os
+    lib = None
+    for name in OIDN_NAMES:
+        candidates = [name] + [os.path.join(folder, name) for folder in _oidn_folders()]
+        for path in candidates:
+            if path != name and not os.path.isfile(path):
+                continue
+            try:
+                lib = ctypes.CDLL(path)
+            except OSError:
+                continue
+            if hasattr(lib, "oidnNewDevice"):
+                break
+            lib = None
+        if lib is not None:
+            break
+    _OIDN.append(lib)
+    return lib

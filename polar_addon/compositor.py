@@ -11,6 +11,7 @@ from image right towards image up.  Output: I = r0·S0 + r1·S1 + r2·S2 + r3·S
 import math
 
 import bpy
+import numpy as np
 
 from . import compat
 
@@ -297,3 +298,121 @@ def add_denoise_to_compositor(scene, denoiser="CompositorNodeDenoise"):
             tree.links.new(layers.outputs[src], node.inputs[dst])
     _show(tree, node.outputs["S0"])            # the denoised intensity is the image shown
     return node
+
+
+# ----------------------------------------------------------------------------- the Denoise switch
+
+#: Render ▸ Performance ▸ Compositor ▸ Denoise quality (final) → OIDN's quality (oidn.h: FAST 4, BALANCED 5, HIGH 6)
+OIDN_QUALITY = {"FAST": 4, "BALANCED": 5, "HIGH": 6}
+_OIDN_CPU, _OIDN_FLOAT3 = 1, 3
+
+
+class DenoiseUnavailable(RuntimeError):
+    """Blender's OpenImageDenoise cannot be used here (not found, or it reported an error)."""
+
+
+def _oidn_api(lib):
+    """The OIDN C functions the Denoise switch calls, with their ctypes signatures (oidn.h, OIDN 2)."""
+    import ctypes
+    vp, cp, sz = ctypes.c_void_p, ctypes.c_char_p, ctypes.c_size_t
+    for name, res, args in (("oidnNewDevice", vp, [ctypes.c_int]), ("oidnCommitDevice", None, [vp]),
+                            ("oidnSetDeviceBool", None, [vp, cp, ctypes.c_bool]),
+                            ("oidnGetDeviceError", ctypes.c_int, [vp, ctypes.POINTER(cp)]),
+                            ("oidnReleaseDevice", None, [vp]), ("oidnNewFilter", vp, [vp, cp]),
+                            ("oidnSetSharedFilterImage", None, [vp, cp, vp, ctypes.c_int, sz, sz, sz, sz, sz]),
+                            ("oidnSetFilterBool", None, [vp, cp, ctypes.c_bool]),
+                            ("oidnSetFilterInt", None, [vp, cp, ctypes.c_int]),
+                            ("oidnCommitFilter", None, [vp]), ("oidnExecuteFilter", None, [vp]),
+                            ("oidnReleaseFilter", None, [vp])):
+        f = getattr(lib, name)
+        f.restype, f.argtypes = res, args
+    return lib
+
+
+def _oidn_run(lib, images, output, quality, settings, affinity=None):
+    """One OIDN "RT" filter on a new CPU device: ``images`` {name: (H, W, C) float32 C-contiguous} read as Float3
+    with the pixel stride of their C channels, the result written into ``output`` (which may be one of them),
+    ``settings`` {name: bool} the filter's flags (hdr, cleanAux)."""
+    import ctypes
+    device = lib.oidnNewDevice(_OIDN_CPU)
+    if not device:
+        raise DenoiseUnavailable("OpenImageDenoise could not create a CPU device")
+    try:
+        if affinity is not None:
+            lib.oidnSetDeviceBool(device, b"setAffinity", affinity)
+        lib.oidnCommitDevice(device)
+        filt = lib.oidnNewFilter(device, b"RT")
+        try:
+            height, width = output.shape[:2]
+            for name, image in list(images.items()) + [("output", output)]:
+                assert image.dtype == np.float32 and image.flags.c_contiguous and image.shape[:2] == (height, width)
+                stride = 4 * image.shape[2]
+                lib.oidnSetSharedFilterImage(filt, name.encode(), image.ctypes.data, _OIDN_FLOAT3, width, height, 0,
+                                             stride, stride * width)
+            for name, value in settings.items():
+                lib.oidnSetFilterBool(filt, name.encode(), value)
+            lib.oidnSetFilterInt(filt, b"quality", quality)
+            lib.oidnCommitFilter(filt)
+            lib.oidnExecuteFilter(filt)
+        finally:
+            lib.oidnReleaseFilter(filt)
+        message = ctypes.c_char_p()
+        if lib.oidnGetDeviceError(device, ctypes.byref(message)) != 0:
+            raise DenoiseUnavailable(f"OpenImageDenoise: {(message.value or b'error').decode(errors='replace')}")
+    finally:
+        lib.oidnReleaseDevice(device)
+
+
+def _rgba(image):
+    """(H, W, 3) → (H, W, 4) float32 with alpha 1: a colour as the compositor holds it (4 floats a pixel)."""
+    out = np.ones(image.shape[:2] + (4,), np.float32)
+    out[..., :3] = image
+    return out
+
+
+def denoise_stokes(stokes_rgb, albedo=None, normal=None, quality="HIGH", clamp_dop=True, lib=None):
+    """The Polar Denoise group's computation on a Stokes image, with Blender's OpenImageDenoise called directly:
+    its S0…S3 outputs (4, H, W, 3) float32 for the Stokes image ``stokes_rgb`` (4, H, W, 3) and the guides
+    ``albedo``, ``normal`` (H, W, 3) (None: without guides), all in Blender's row order (row 0 at the bottom, as
+    the compositor holds render passes: the network is not symmetric under a flip).
+
+    As the group's nodes do, in float32: the analyser images (S0 ± S_k)·½ are each denoised by an OIDN "RT"
+    filter on a CPU device (the Denoise node's defaults: HDR, prefilter Accurate — the albedo and the normal
+    denoised once beforehand, each alone, and given as clean auxiliary images —, the quality ``quality``: the
+    node's Follow Scene → Render ▸ Performance ▸ Compositor ▸ Denoise final quality), then S0 = (Σ sums)·⅓,
+    S_k = difference of each pair, scaled per colour channel by max(min(S0/|S|, 1), 0) where ``clamp_dop``
+    (the group's Clamp DoP = 1).  Raises DenoiseUnavailable where the library is missing or fails."""
+    lib = lib if lib is not None else compat.oidn_library()
+    if lib is None:
+        raise DenoiseUnavailable("Blender's OpenImageDenoise library was not found")
+    lib = _oidn_api(lib)
+    q = OIDN_QUALITY.get(quality, OIDN_QUALITY["HIGH"])
+    s = np.asarray(stokes_rgb, np.float32)
+    guides = {}
+    if albedo is not None and normal is not None:
+        guides["albedo"] = _rgba(np.asarray(albedo, np.float32))
+        guides["normal"] = np.ascontiguousarray(normal, np.float32)
+        for name, image in guides.items():          # Prefilter Accurate: each guide denoised alone, in place
+            _oidn_run(lib, {name: image}, image, q, {})
+    half = np.float32(0.5)
+    pairs = []
+    for k in (1, 2, 3):
+        pair = []
+        for analyser in ((s[0] + s[k]) * half, (s[0] - s[k]) * half):
+            out = np.empty(analyser.shape[:2] + (4,), np.float32)
+            _oidn_run(lib, {"color": _rgba(analyser), **guides}, out, q, {"hdr": True, "cleanAux": True},
+                      affinity=False)
+            pair.append(out[..., :3])
+        pairs.append(pair)
+    sums = [p + m for p, m in pairs]
+    result = np.empty(s.shape, np.float32)
+    result[0] = ((sums[0] + sums[1]) + sums[2]) * np.float32(1.0 / 3.0)
+    sk = [p - m for p, m in pairs]
+    length = np.power((sk[0] * sk[0] + sk[1] * sk[1]) + sk[2] * sk[2], np.float32(0.5))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(length != 0, result[0] / np.where(length != 0, length, np.float32(1.0)), np.float32(0.0))
+    limit = np.maximum(np.minimum(ratio, np.float32(1.0)), np.float32(0.0))
+    factor = (limit - np.float32(1.0)) * np.float32(1.0 if clamp_dop else 0.0) + np.float32(1.0)
+    for k in (1, 2, 3):
+        result[k] = sk[k - 1] * factor
+    return result

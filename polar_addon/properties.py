@@ -123,6 +123,15 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
     time_limit: FloatProperty(name="Time Limit", description="Stop sampling after this many seconds (0 = no "
                               "limit); the render then shows the samples done", default=0.0, min=0.0,
                               soft_max=3600.0)
+    use_denoising: BoolProperty(name="Denoise", description="Denoise the final render with OpenImageDenoise as "
+                                "the Polar Denoise compositor group does: the analyser images (S0 ± S1, S2, S3)/2 "
+                                "each denoised with the albedo and normal guides, recombined into S0…S3 (the "
+                                "Combined, derived and false-colour passes follow them; the Noise pass stays the "
+                                "render's). Quality: Render ▸ Performance ▸ Compositor ▸ Denoise (final)",
+                                default=False)
+    denoising_clamp_dop: BoolProperty(name="Clamp DoP", description="After denoising, scale S1…S3 per pixel and "
+                                      "colour channel so that the degree of polarisation stays ≤ 1 (the Polar "
+                                      "Denoise group's Clamp DoP)", default=True)
     estimate_report: StringProperty(name="Estimate", description="The last cost estimate", default="",
                                     options={"SKIP_SAVE"})
     polariser_type: EnumProperty(name="Filter", items=POLARISER_TYPE_ITEMS, default="LINEAR",

@@ -24,7 +24,8 @@ from ..engine.output.colormaps import diverging, hue_saturation, sequential
 from ..engine.postprocess.filters import apply_filter, filter_row
 from ..engine.postprocess.mosaic import mosaic as polarisation_mosaic
 from ..engine.spectral.cie import LUMINANCE_WEIGHTS
-from .compositor import polariser_inputs
+from . import passes
+from .compositor import DenoiseUnavailable, denoise_stokes, polariser_inputs
 from .properties import (DEFAULT_PASSES, DENOISE_PASSES, NOISE_QUANTITY_TO_ENGINE, PASS_NAMES,
                          POLARISATION_TO_ENGINE, SAMPLER_TO_ENGINE)
 from .ui_names import ui_message
@@ -197,6 +198,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
                 self.register_pass(scene, renderlayer, name, 3, "RGB", "COLOR")
             else:
                 self.register_pass(scene, renderlayer, name, 1, "X", "VALUE")
+        if renderlayer is not None:     # Cycles' data passes and Cryptomatte the view layer enables
+            passes.register_data_passes(self, scene, renderlayer)
 
     # ------------------------------------------------------------------ final render
 
@@ -223,7 +226,10 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         t0 = time.perf_counter()
         self.update_stats("", "Polar | exporting scene")
         bakes = BAKE_CACHE.mark()
-        engine_scene, warnings = export_scene(depsgraph, camera_object, W, H, settings)
+        data_request = None if self.is_preview else passes.data_pass_request(depsgraph.view_layer, scene)
+        with passes.exporting(data_request):
+            engine_scene, warnings = export_scene(depsgraph, camera_object, W, H, settings)
+        data_request = passes.add_motion(self, depsgraph, camera_object, W, H, engine_scene, data_request)
         bake_note = BAKE_CACHE.summary(since=bakes)
         for w in dict.fromkeys(warnings):
             self.report({"WARNING"}, f"Polar: {w}")
@@ -239,7 +245,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         self._mosaic = mosaic_inputs(scene.polar)
         if first_compile_pending(kernels):
             self.update_stats("", "Polar | compiling kernels (first render only)")
-        if enabled & set(DENOISE_PASSES):
+        denoise = bool(getattr(scene.polar, "use_denoising", False)) and not self.is_preview
+        if enabled & set(DENOISE_PASSES) or denoise:
             import dataclasses
             settings = dataclasses.replace(settings, denoise_data=True)
 
@@ -262,17 +269,24 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             import dataclasses
             settings = dataclasses.replace(settings, denoise_data=False)
             self.report({"WARNING"}, "Polar: the Denoising Albedo / Normal passes are not rendered on a "
-                                     "Dask cluster yet: they stay empty")
+                                     "Dask cluster yet: they stay empty"
+                                     + (" and Denoise runs without them" if denoise else ""))
         out = renderer.render(RenderRequest(settings, window, adaptive, scheduler=scheduler, progress=progress,
                                             should_stop=should_stop))
-        self._write_passes(result, out.stokes(), window, enabled, polariser,
+        stokes_rgb, denoise_note = out.stokes(), ""
+        if denoise and stokes_rgb is not None:
+            stokes_rgb, denoise_note = self._denoised(stokes_rgb, out.film, window, scene)
+        self._write_passes(result, stokes_rgb, window, enabled, polariser,
                            out.film.alpha() if out.film.has_alpha else None)
         if out.halves is not None and "Noise" in enabled:
             self._write_noise(result, out, adaptive, window)
         if getattr(out.film, "has_denoise_data", False):
             self._write_denoise_data(result, out.film, window, enabled)
+        if data_request is not None and not out.cancelled:
+            self.update_stats("", "Polar | data passes")
+            passes.write_data_passes(self, result, renderer, data_request, settings, window)
         self.end_result(result)
-        message = self._stats_message(out, adaptive, time.perf_counter() - t0, bake_note)
+        message = self._stats_message(out, adaptive, time.perf_counter() - t0, bake_note) + denoise_note
         self.update_stats("", message)
         self.report({"INFO"}, message)
 
@@ -292,6 +306,25 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         if out.halves is not None:
             message += adaptive_summary(out, adaptive)
         return message
+
+    def _denoised(self, stokes_rgb, film, window, scene):
+        """(the Stokes image with the rendered window denoised as the Polar Denoise group denoises the passes,
+        the stats note) — the image unchanged and a warning where Blender's OpenImageDenoise cannot be used."""
+        t0 = time.perf_counter()
+        x0, y0, x1, y1 = window if window is not None else (0, 0, stokes_rgb.shape[2], stokes_rgb.shape[1])
+        guides = film.denoise_data() if getattr(film, "has_denoise_data", False) else (None, None)
+        # the passes as written (float32, Blender's rows: bottom first), as the compositor would read them
+        crop = [None if g is None else np.asarray(g[y0:y1, x0:x1][::-1], np.float32) for g in guides]
+        quality = getattr(scene.render, "compositor_denoise_final_quality", "HIGH")
+        try:
+            denoised = denoise_stokes(np.asarray(stokes_rgb[:, y0:y1, x0:x1][:, ::-1], np.float32), *crop,
+                                      quality=quality, clamp_dop=scene.polar.denoising_clamp_dop)
+        except DenoiseUnavailable as e:
+            self.report({"WARNING"}, f"Polar: Denoise: {e}: the render is not denoised")
+            return stokes_rgb, " | not denoised"
+        out = np.array(stokes_rgb, np.float64)
+        out[:, y0:y1, x0:x1] = denoised[:, ::-1]
+        return out, f" | denoised (OpenImageDenoise, {quality.lower()}, {time.perf_counter() - t0:.1f} s)"
 
     def _write_noise(self, result, out, adaptive, window):
         """The Noise pass: per-pixel standard error of the adaptive quantity (−1: no estimate)."""
@@ -387,7 +420,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
 
 # Panels of other engines that should also show for Polar (as Hydra Storm does).
 COMPAT_PANELS = ("EEVEE_MATERIAL_PT_surface", "EEVEE_MATERIAL_PT_volume", "EEVEE_MATERIAL_PT_settings",
-                 "EEVEE_MATERIAL_PT_context_material", "MATERIAL_PT_preview", "EEVEE_WORLD_PT_surface")
+                 "EEVEE_MATERIAL_PT_context_material", "MATERIAL_PT_preview", "EEVEE_WORLD_PT_surface",
+                 "EEVEE_WORLD_PT_mist")          # the Mist pass's ramp (polar_addon.passes)
 
 
 def _compat_panels():

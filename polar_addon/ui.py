@@ -42,6 +42,12 @@ class POLAR_PT_sampling(_PolarPanel, bpy.types.Panel):
         layout.operator("polar.estimate_cost", icon="TIME")
         for line in p.estimate_report.splitlines():
             layout.label(text=line)
+        # Denoise as Cycles' Sampling ▸ Render ▸ Denoise: a check box heading its settings.
+        col = layout.column(heading="Denoise", align=True)
+        col.prop(p, "use_denoising", text="")
+        sub = col.column(align=True)
+        sub.active = p.use_denoising
+        sub.prop(p, "denoising_clamp_dop")
         layout.prop(p, "max_bounces")
         row = layout.row(align=True)
         row.prop(p, "seed")
@@ -127,6 +133,37 @@ class POLAR_PT_passes(_PolarPanel, bpy.types.Panel):
         layout.operator("polar.add_polar_denoise", icon="NODE_COMPOSITING")
 
 
+class POLAR_PT_data_passes(_PolarPanel, bpy.types.Panel):
+    """Cycles' data passes and Cryptomatte as Polar writes them (polar_addon.passes; the World's Mist panel
+    sets the Mist pass's ramp)."""
+    bl_label = "Data & Cryptomatte Passes"
+    bl_context = "view_layer"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    def draw(self, context):
+        layer = context.view_layer
+        layout = self.layout
+        layout.use_property_split = True
+        layout.use_property_decorate = False
+        col = layout.column(heading="Data", align=True)
+        for prop in ("use_pass_z", "use_pass_mist", "use_pass_position", "use_pass_normal", "use_pass_vector",
+                     "use_pass_uv"):
+            col.prop(layer, prop)
+        col = layout.column(heading="Indexes", align=True)
+        col.prop(layer, "use_pass_object_index")
+        col.prop(layer, "use_pass_material_index")
+        col = layout.column(heading="Alpha Threshold")
+        col.prop(layer, "pass_alpha_threshold", text="")
+        col = layout.column(heading="Cryptomatte", align=True)
+        col.prop(layer, "use_pass_cryptomatte_object", text="Object")
+        col.prop(layer, "use_pass_cryptomatte_material", text="Material")
+        col.prop(layer, "use_pass_cryptomatte_asset", text="Asset")
+        sub = layout.column()
+        sub.active = any((layer.use_pass_cryptomatte_object, layer.use_pass_cryptomatte_material,
+                          layer.use_pass_cryptomatte_asset))
+        sub.prop(layer, "pass_cryptomatte_depth", text="Levels")
+
+
 def draw_source_polarisation(layout, settings, target):
     """The polarisation settings of a light or an emission (properties.PolarSourceSettings)."""
     layout.use_property_split = True
@@ -180,6 +217,7 @@ class POLAR_PT_sky_polarisation(_OwnerPanel, bpy.types.Panel):
 
 
 classes = (POLAR_PT_sampling, POLAR_PT_light_model, POLAR_PT_polariser, POLAR_PT_performance, POLAR_PT_passes,
+           POLAR_PT_data_passes,
            POLAR_PT_light_polarisation, POLAR_PT_emission_polarisation, POLAR_PT_sky_polarisation)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

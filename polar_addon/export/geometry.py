@@ -11,7 +11,14 @@ Cycles either: they are skipped with a warning.  Per object: ray visibility (cam
 diffuse/glossy/transmission), holdout and each material's Principled Alpha.  Meshes whose
 materials read textures also carry per-corner UVs (one UV map), colour attributes and MikkTSpace
 tangents (``corner_attributes``); meshes of untextured materials carry none (unchanged export).
+
+Identity for the data passes and Cryptomatte (engine.render.data_passes): each Mesh carries its object's
+name, Object Index (``pass_index``) and asset (the top-level parent's name, as Cycles), its material's name
+(Cycles' "default_surface" for an empty slot) and Material Index; while :data:`PASS_UV` is set (a UV pass
+was asked for: ``polar_addon.passes``), also the active render UV map per corner (``Mesh.pass_uv``).
 """
+
+import contextvars
 
 import numpy as np
 
@@ -35,6 +42,13 @@ HAIR_SIDES = 6
 POINT_SUBDIVISIONS = 1
 #: Cycles' radius of hair points without a ``radius`` attribute (scene units).
 DEFAULT_HAIR_RADIUS = 0.005
+#: True while exporting for a render with a UV pass: meshes then carry their active render UV map
+#: (``Mesh.pass_uv``); False (the default): nothing is read for it
+PASS_UV = contextvars.ContextVar("polar_export_pass_uv", default=False)
+#: Keys of :func:`object_rays`' dict that are the object's identity (Mesh attributes, not dataclass fields)
+IDENTITY_KEYS = ("object_name", "pass_index", "asset_name")
+#: The material name Cycles hashes (Cryptomatte) for an empty material slot
+DEFAULT_MATERIAL_NAME = "default_surface"
 
 
 def mesh_arrays(obj):
@@ -71,11 +85,30 @@ def mesh_arrays(obj):
         arrays = (P.reshape(nv, 3).astype(np.float64), F.reshape(nt, 3), SN.reshape(nt * 3, 3).astype(np.float64),
                   tri_mat)
         needs = _attribute_needs(obj)
+        pass_uv = _pass_uv(me) if PASS_UV.get() else None
         if needs is None:
-            return arrays
-        return arrays + (corner_attributes(me, obj.name, needs),)
+            if pass_uv is None:
+                return arrays
+            return arrays + ({"warnings": [], "uv": None, "uv_map": None, "tangents": None, "colors": {},
+                              "needs": None, "pass_uv": pass_uv},)
+        attributes = corner_attributes(me, obj.name, needs)
+        attributes["pass_uv"] = pass_uv
+        return arrays + (attributes,)
     finally:
         obj.to_mesh_clear()
+
+
+def _pass_uv(me):
+    """The active render UV map per loop-triangle corner (nt·3, 2) float32 (the UV pass's), or None."""
+    layer = next((layer for layer in me.uv_layers if layer.active_render), None)
+    if layer is None:
+        return None
+    nt = len(me.loop_triangles)
+    loops = np.empty(nt * 3, np.int32)
+    me.loop_triangles.foreach_get("loops", loops)
+    uv = np.empty(len(me.loops) * 2, np.float32)
+    layer.uv.foreach_get("vector", uv)
+    return uv.reshape(-1, 2)[loops]
 
 
 def attributes_outdated(obj, arrays) -> bool:
@@ -347,7 +380,19 @@ def object_rays(obj, view_layer, warnings) -> dict:
         pass
     return {"visible_camera": bool(getattr(obj, "visible_camera", True)),
             "visible_shadow": bool(getattr(obj, "visible_shadow", True)),
-            "visible_indirect": diffuse or glossy or transmission, "holdout": holdout}
+            "visible_indirect": diffuse or glossy or transmission, "holdout": holdout, **object_identity(obj)}
+
+
+def object_identity(obj) -> dict:
+    """The object's identity for the data passes and Cryptomatte (IDENTITY_KEYS): its name, Object Index and
+    asset — the name of its top-level parent (itself without one), as Cycles hashes it."""
+    top = getattr(obj, "original", obj)
+    seen = set()
+    while getattr(top, "parent", None) is not None and id(top) not in seen:
+        seen.add(id(top))
+        top = top.parent
+    return {"object_name": str(obj.name), "pass_index": int(getattr(obj, "pass_index", 0)),
+            "asset_name": str(top.name)}
 
 
 def object_meshes(name, arrays, M, slots, material_key, emissions, alphas, rays, warnings):
@@ -380,7 +425,9 @@ def object_meshes(name, arrays, M, slots, material_key, emissions, alphas, rays,
     length = np.linalg.norm(N, axis=1, keepdims=True)
     N = np.where(length > 0, N / np.where(length > 0, length, 1.0), 0.0)
     mirrored = np.linalg.det(M[:3, :3]) < 0   # keep front faces in front under negative scale
-    ray_fields = rays()
+    ray_fields = dict(rays())
+    identity = {k: ray_fields.pop(k) for k in IDENTITY_KEYS if k in ray_fields}
+    pass_uv = attributes.get("pass_uv") if attributes is not None else None
     keys = [material_key(slots[i] if i < len(slots) else None) for i in range(len(slots))]
     tri_mat = np.clip(tri_mat, 0, len(keys) - 1)
     meshes = []
@@ -393,11 +440,28 @@ def object_meshes(name, arrays, M, slots, material_key, emissions, alphas, rays,
         if mirrored:
             local_faces = local_faces[:, [0, 2, 1]]
         extra = {} if attributes is None else _corner_fields(attributes, corner, M, mirrored)
-        meshes.append(Mesh(name=f"{name}:{slot}", vertices=Pw[F[sel]].reshape(-1, 3),
-                           faces=local_faces, materials=[key], material_ids=np.zeros(len(sel), np.int32),
-                           normals=N[corner], emission=emissions.get(key), alpha=alphas.get(key, 1.0),
-                           **ray_fields, **extra))
+        mesh = Mesh(name=f"{name}:{slot}", vertices=Pw[F[sel]].reshape(-1, 3),
+                    faces=local_faces, materials=[key], material_ids=np.zeros(len(sel), np.int32),
+                    normals=N[corner], emission=emissions.get(key), alpha=alphas.get(key, 1.0),
+                    **ray_fields, **extra)
+        _set_identity(mesh, identity, slots[slot] if slot < len(slots) else None,
+                      None if pass_uv is None else pass_uv[corner])
+        meshes.append(mesh)
     return meshes
+
+
+def _set_identity(mesh, identity, material, pass_uv) -> None:
+    """Give ``mesh`` its object's ``identity`` (object_identity), its Blender ``material``'s name and Material
+    Index (None: Cycles' default surface, index 0) and the UV pass's ``pass_uv`` — instance attributes of the
+    engine Mesh (engine.scene.description.Mesh), set only when they differ from its defaults."""
+    for key, value in identity.items():
+        setattr(mesh, key, value)
+    mesh.material_names = [material.name if material is not None else DEFAULT_MATERIAL_NAME]
+    index = int(getattr(material, "pass_index", 0)) if material is not None else 0
+    if index:
+        mesh.material_pass_indices = [index]
+    if pass_uv is not None:
+        mesh.pass_uv = pass_uv
 
 
 def _corner_fields(attributes, corner, M, mirrored) -> dict:

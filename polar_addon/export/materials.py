@@ -59,6 +59,10 @@ def _material_bsdf(material, warnings, bake):
     if sock is not None and follow(sock) is not None:
         warnings.append(f"material {material.name!r}: Material Output ▸ Displacement is not simulated; the surface "
                         "is rendered without it")
+    aovs = _aov_outputs(tree)
+    if aovs:
+        warnings.append(f"material {material.name!r}: AOV Output {', '.join(repr(a) for a in aovs)} not written "
+                        "(Polar renders no shader AOVs)")
     volume = follow(output.inputs["Volume"]) if output is not None and "Volume" in output.inputs else None
     if node is None and volume is not None:
         # Cycles: a material with only a volume has a transparent surface (the object's alpha: scene.py)
@@ -73,6 +77,23 @@ def _material_bsdf(material, warnings, bake):
     if volume is not None:
         bsdf = _with_interior(bsdf, volume, material.name, warnings)
     return bsdf, emission
+
+
+def _aov_outputs(tree, seen=None) -> list:
+    """Names of the AOV Output nodes (not muted) of a material's node tree and the node groups in it, sorted."""
+    seen = set() if seen is None else seen
+    if tree is None or tree.name_full in seen:
+        return []
+    seen.add(tree.name_full)
+    names = set()
+    for node in tree.nodes:
+        if node.mute:
+            continue
+        if node.bl_idname == "ShaderNodeOutputAOV":
+            names.add(getattr(node, "aov_name", "") or node.name)
+        elif getattr(node, "node_tree", None) is not None:
+            names.update(_aov_outputs(node.node_tree, seen))
+    return sorted(names)
 
 
 # --------------------------------------------------------------------------- mesh attributes

@@ -18,7 +18,7 @@ import numpy as np
 from ...engine.errors import SceneError
 from ...engine.materials.lambert import Lambert
 from ...engine.polarisation.sources import parse_polarisation
-from ...engine.scene.description import Camera, Mesh, RenderSettings, Scene
+from ...engine.scene.description import Camera, EnvironmentLight, Mesh, RenderSettings, Scene
 from ...engine.spectral import ConstantSpectrum
 from . import geometry
 from .camera import export_camera
@@ -353,8 +353,6 @@ class SceneWalk:
         # (objects added, removed or hidden; world; settings), e.g. editing the viewport sample count.
         restart = run.restart or run.full
         rebuild = run.rebuild or run.full
-        if not run.meshes:
-            raise SceneError("scene", "nothing to render: the scene has no visible geometry")
         bsdfs = {key: bsdf for key, bsdf, _, _ in self.materials.values()}
         materials = {BLACK: Lambert(ConstantSpectrum(0.0))}
         materials.update((key, bsdfs[key]) for key in run.used if key != BLACK)
@@ -379,7 +377,24 @@ def export_scene(depsgraph, camera_object, width, height, settings: RenderSettin
     warnings = []
     camera = export_camera(scene, camera_object, width, height, warnings)
     result = SceneWalk(bake_resolution=resolution).sync(depsgraph, None, settings, camera=camera)
+    view_layer_warnings(getattr(depsgraph, "view_layer", None), warnings)
     return result.scene, list(dict.fromkeys(warnings + result.warnings))
+
+
+def view_layer_warnings(view_layer, warnings) -> None:
+    """One warning each for the View Layer passes Polar does not write: its Shader AOVs and its Light Groups (the
+    lights of a group still light the Combined and Stokes passes; no per-group pass is written)."""
+    if view_layer is None:
+        return
+    layer = getattr(view_layer, "name", "")
+    aovs = [a.name for a in getattr(view_layer, "aovs", ()) if a.name]
+    if aovs:
+        warnings.append(f"view layer {layer!r}: Shader AOV {', '.join(repr(a) for a in aovs)} not written (Polar "
+                        "renders no shader AOVs)")
+    groups = [g.name for g in getattr(view_layer, "lightgroups", ()) if g.name]
+    if groups:
+        warnings.append(f"view layer {layer!r}: Light Group {', '.join(repr(g) for g in groups)} not written (no "
+                        "per-group passes; their lights light the Combined and Stokes passes as usual)")
 
 
 def _material_entry(material, warnings, bake=None):
@@ -413,9 +428,9 @@ def finish_scene(camera, meshes, materials, lights, settings, source, warnings) 
     one-sided), a Principled emission lies under its sheen and coat, a material seen by camera rays only
     (Light Path ▸ Is Camera Ray) is transparent to every other ray, lights are picked by power (the closest
     to Cycles' light tree for many lights of different strength) — and the warning for a black scene.
+    A scene without geometry renders as Cycles renders it: the world (an HDRI or sky preview), lamps the camera
+    sees, and black where neither is.
     Meshes are updated in place (the viewport's cached ones too: the rules are idempotent)."""
-    if not meshes:
-        raise SceneError("scene", "nothing to render: the scene has no visible geometry")
     for mesh in meshes:
         material = materials.get(mesh.materials[0])
         if mesh.emission is not None and mesh.occluder:
@@ -424,7 +439,11 @@ def finish_scene(camera, meshes, materials, lights, settings, source, warnings) 
             mesh.emission_under_layers = True
         if getattr(material, "camera_only", False):
             mesh.visible_shadow = mesh.visible_indirect = False
-    if not lights and not any(m.emission is not None for m in meshes):
+    world = any(isinstance(light, EnvironmentLight) for light in lights)
+    if not any(m.occluder or m.emission is None for m in meshes) and not world:
+        warnings.append("the scene has no visible geometry and a black world: the image is black"
+                        + (" but for the lamps the camera sees" if lights or meshes else ""))
+    elif not lights and not any(m.emission is not None for m in meshes):
         warnings.append("the scene has no lights, no emissive materials and a black world: the image is black")
     return Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings, source=source,
                  light_selection="power")

@@ -110,8 +110,10 @@ def test_engine_field_names_become_ui_labels_in_messages(addon):
         "material 'Floor'.Polarising BSDF.k: must be finite"                   # already Blender names
     # A real Blender error names the UI setting.
     scene = empty_scene()
-    brewster_camera(scene)                                     # nothing to render
-    with pytest.raises(RuntimeError, match=r"view layer \(Outliner\): nothing to render"):
+    brewster_camera(scene)
+    add_plane(10)
+    scene.render.resolution_x = scene.render.resolution_y = 90000        # too large a render
+    with pytest.raises(RuntimeError, match=r"Output Properties ▸ Format ▸ Resolution X"):
         bpy.ops.render.render(write_still=False)
 
 
