@@ -344,6 +344,30 @@ class RenderSettings:
     #: deeper ones hashed; the default before "sobol") or "independent" (every number a hash of (seed,
     #: pixel, sample, dimension)).
     sampler: str = "sobol"
+    #: Cycles' Light Paths ▸ Max Bounces per kind (engine.render.light_paths): a path whose diffuse, glossy,
+    #: transmission or transparent bounces exceed the limit ends at its next surface (that surface's emission
+    #: still counts), as Cycles' path_state_next; 0 = only the light found by the first bounce of that kind.
+    #: 1024 = no limit (the default: the total stays ``max_depth``).  A bounce's kind is the lobe it sampled.
+    max_diffuse_bounces: int = 1024
+    max_glossy_bounces: int = 1024
+    max_transmission_bounces: int = 1024
+    max_transparent_bounces: int = 1024
+    #: Cycles' Clamping ▸ Direct / Indirect Light: each light contribution of a sample (emission reached, a
+    #: light sample) whose linear-sRGB S0 sums to more than the limit (|R| + |G| + |B|, Cycles' film_clamp_light)
+    #: is scaled down to it, all four Stokes components by the same factor (the polarisation is unchanged);
+    #: "direct" = light reached by the camera ray or by the first vertex's light and BSDF samples.  0 = off.
+    clamp_direct: float = 0.0
+    clamp_indirect: float = 0.0
+    #: Cycles' Caustics ▸ Reflective / Refractive: False drops the glossy (and mirror) reflection / transmission
+    #: lobes at a vertex reached by a diffuse bounce (Cycles' PATH_RAY_DIFFUSE closures test).
+    caustics_reflective: bool = True
+    caustics_refractive: bool = True
+
+    @property
+    def light_paths_active(self) -> bool:
+        """True when any of Cycles' light-path limits above is set (the wavefront tracer then keeps the
+        per-path bounce counts; with none set it runs exactly the arithmetic it ran before they existed)."""
+        return any(getattr(self, f.name) != f.default for f in LIGHT_PATH_FIELDS)
 
     @property
     def stratified(self) -> bool:
@@ -354,6 +378,33 @@ class RenderSettings:
 
 #: RenderSettings.sampler's values
 SAMPLERS = ("independent", "stratified", "sobol")
+
+
+@dataclass(frozen=True)
+class LightPathField:
+    """One of Cycles' light-path settings of RenderSettings: its field ``name``, ``kind`` ("int", "float",
+    "bool"), range [lo, hi] and default; the scene format (``render.<name>``), the command line
+    (``--<name with dashes>``), the EXR header (``polar.<name>``, written only when not the default) and the
+    Blender exporter all read this one declaration."""
+    name: str
+    kind: str
+    default: object
+    lo: float = 0
+    hi: float = 0
+    help: str = ""
+
+
+#: Cycles' Light Paths settings (RenderSettings fields; engine.render.light_paths applies them)
+LIGHT_PATH_FIELDS = (
+    LightPathField("max_diffuse_bounces", "int", 1024, 0, 1024, "most diffuse bounces (Cycles' Light Paths)"),
+    LightPathField("max_glossy_bounces", "int", 1024, 0, 1024, "most glossy and mirror reflections"),
+    LightPathField("max_transmission_bounces", "int", 1024, 0, 1024, "most transmissions (refraction)"),
+    LightPathField("max_transparent_bounces", "int", 1024, 0, 1024, "most transparent (null-lobe) crossings"),
+    LightPathField("clamp_direct", "float", 0.0, 0.0, 1e30, "clamp of direct light per sample (sRGB sum; 0 off)"),
+    LightPathField("clamp_indirect", "float", 0.0, 0.0, 1e30, "clamp of indirect light per sample (0 off)"),
+    LightPathField("caustics_reflective", "bool", True, help="glossy reflection after a diffuse bounce"),
+    LightPathField("caustics_refractive", "bool", True, help="glossy transmission after a diffuse bounce"),
+)
 
 
 @dataclass
