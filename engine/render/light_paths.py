@@ -23,9 +23,12 @@ materials (filter sheets) are.
 
 Clamping (Cycles' film_clamp_light).  Every light contribution of a sample — the emission a segment
 reaches (with the alpha crossings' emission before it) and the light sample of a vertex — is converted to
-linear sRGB as the film converts it (per path: Σ_λ S0(λ)·w_rgb(λ)), and where |R| + |G| + |B| of its S0
-exceeds the limit, all its Stokes components at every wavelength are scaled by limit ÷ that sum: the
-polarisation (DoP, AoLP) of the contribution is unchanged.  Cycles' "direct" limit applies to the
+linear sRGB as the film converts it (per path: Σ_λ S0(λ)·w_rgb(λ)), and where the largest of |R|, |G|, |B|
+of its S0 exceeds the limit, all its Stokes components at every wavelength are scaled by limit ÷ that
+component: the polarisation (DoP, AoLP) of the contribution is unchanged.  (The kernel source shipped with
+bpy 5.0 reads ``reduce_add(fabs(L))``, but Cycles' renders clamp the largest component, measured: a white sky
+of radiance 1 stays 1 under Clamp Direct 1, a mirror's 0.81 becomes 0.5 under Clamp Indirect 0.5 —
+tests/blender/test_cycles_light_paths.py.)  Cycles' "direct" limit applies to the
 segments from the camera and from the first vertex and to the first vertex's light sample; every other
 contribution uses the "indirect" limit.  0 = no clamp (Cycles).
 
@@ -124,7 +127,7 @@ class LightPathBatch:
         added = acc.radiance[:, :, ids] - before
         factor = np.ones(ids.size)
         if np.isfinite(limit):
-            total = np.abs(contribution_rgb(added[0], acc.w_rgb, ids)).sum(axis=0)
+            total = np.abs(contribution_rgb(added[0], acc.w_rgb, ids)).max(axis=0)
             over = total > limit
             factor[over] = limit / total[over]
         if drop is not None:

@@ -353,7 +353,7 @@ class RenderSettings:
     max_transmission_bounces: int = 1024
     max_transparent_bounces: int = 1024
     #: Cycles' Clamping ▸ Direct / Indirect Light: each light contribution of a sample (emission reached, a
-    #: light sample) whose linear-sRGB S0 sums to more than the limit (|R| + |G| + |B|, Cycles' film_clamp_light)
+    #: light sample) whose linear-sRGB S0 has a component above the limit (max |R|, |G|, |B|, as Cycles renders)
     #: is scaled down to it, all four Stokes components by the same factor (the polarisation is unchanged);
     #: "direct" = light reached by the camera ray or by the first vertex's light and BSDF samples.  0 = off.
     clamp_direct: float = 0.0
@@ -400,7 +400,7 @@ LIGHT_PATH_FIELDS = (
     LightPathField("max_glossy_bounces", "int", 1024, 0, 1024, "most glossy and mirror reflections"),
     LightPathField("max_transmission_bounces", "int", 1024, 0, 1024, "most transmissions (refraction)"),
     LightPathField("max_transparent_bounces", "int", 1024, 0, 1024, "most transparent (null-lobe) crossings"),
-    LightPathField("clamp_direct", "float", 0.0, 0.0, 1e30, "clamp of direct light per sample (sRGB sum; 0 off)"),
+    LightPathField("clamp_direct", "float", 0.0, 0.0, 1e30, "clamp of direct light per sample (max sRGB; 0 off)"),
     LightPathField("clamp_indirect", "float", 0.0, 0.0, 1e30, "clamp of indirect light per sample (0 off)"),
     LightPathField("caustics_reflective", "bool", True, help="glossy reflection after a diffuse bounce"),
     LightPathField("caustics_refractive", "bool", True, help="glossy transmission after a diffuse bounce"),
