@@ -741,11 +741,11 @@ def _light_path_options(parser) -> None:
         option = "--" + f.name.replace("_", "-")
         if f.kind == "bool":
             group.add_argument(option, type=_on_off, metavar="on|off",
-                               help=f.help + f" (default {'on' if f.default else 'off'})")
+                               help=f.help + f" (default: the scene's; {'on' if f.default else 'off'} if unset)")
         else:
             rng = f"[{f.lo:g}, {f.hi:g}]"
             group.add_argument(option, type=int if f.kind == "int" else float, metavar="N" if f.kind == "int" else "X",
-                               help=f"{f.help}; {rng}, default {f.default:g}")
+                               help=f"{f.help}; {rng} (default: the scene's; {f.default:g} if unset: off)")
 
 
 def _on_off(text: str) -> bool:

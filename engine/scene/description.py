@@ -349,18 +349,23 @@ class RenderSettings:
     #: still counts), as Cycles' path_state_next; 0 = only the light found by the first bounce of that kind.
     #: 1024 = no limit (the default: the total stays ``max_depth``).  A bounce's kind is the lobe it sampled.
     max_diffuse_bounces: int = 1024
+    #: the same for glossy and mirror reflections (Cycles counts a mirror as glossy)
     max_glossy_bounces: int = 1024
+    #: the same for transmissions through a surface (refraction, diffuse transmission)
     max_transmission_bounces: int = 1024
+    #: the same for null-lobe pass-throughs (filter sheets; alpha pass-through keeps its own 32 per segment)
     max_transparent_bounces: int = 1024
     #: Cycles' Clamping ▸ Direct / Indirect Light: each light contribution of a sample (emission reached, a
     #: light sample) whose linear-sRGB S0 has a component above the limit (max |R|, |G|, |B|, as Cycles renders)
     #: is scaled down to it, all four Stokes components by the same factor (the polarisation is unchanged);
     #: "direct" = light reached by the camera ray or by the first vertex's light and BSDF samples.  0 = off.
     clamp_direct: float = 0.0
+    #: the same limit for every other light contribution (Cycles' Clamping ▸ Indirect Light); 0 = off
     clamp_indirect: float = 0.0
     #: Cycles' Caustics ▸ Reflective / Refractive: False drops the glossy (and mirror) reflection / transmission
     #: lobes at a vertex reached by a diffuse bounce (Cycles' PATH_RAY_DIFFUSE closures test).
     caustics_reflective: bool = True
+    #: False drops the glossy and smooth transmission lobes there (Cycles' Caustics ▸ Refractive)
     caustics_refractive: bool = True
 
     @property
