@@ -40,7 +40,10 @@ adds nothing either.  A material that keeps some lobe keeps its whole light samp
 separate the lobes).
 
 The compiled per-path loop (engine.render.path_loop) does not do this bookkeeping: it must refuse any
-settings whose ``light_paths_active`` is True, which leaves them to this wavefront loop.
+settings whose ``light_paths_active`` is True (``tracer.settings.light_paths_active``, equivalently
+``tracer.light_paths is not None``), which leaves them to this wavefront loop.  Limits at or above
+``max_depth`` − 2 cannot end a path earlier than ``max_depth`` and do not count as active (the Cycles parity
+tests set every kind's limit to the total bounces: those renders keep the plain loop).
 """
 
 from __future__ import annotations
@@ -58,8 +61,6 @@ if TYPE_CHECKING:
 #: The bounce kinds, in the order of the per-path counters
 KINDS = ("diffuse", "glossy", "transmission", "transparent")
 DIFFUSE, GLOSSY, TRANSMISSION, TRANSPARENT = range(4)
-#: a limit at or above this is no limit (engine.scene.description.LIGHT_PATH_FIELDS's default)
-NO_LIMIT = 1024
 
 
 class LightPathRules:
@@ -69,7 +70,8 @@ class LightPathRules:
     def __init__(self, settings, materials: list):
         self.limits = np.array([settings.max_diffuse_bounces, settings.max_glossy_bounces,
                                 settings.max_transmission_bounces, settings.max_transparent_bounces], np.int64)
-        self.counting = bool((self.limits < NO_LIMIT).any())
+        # (a limit at or above max_depth − 2 ends no path before max_depth does: RenderSettings.light_paths_active)
+        self.counting = bool((self.limits < settings.max_depth - 2).any())
         self.clamp_direct = float(settings.clamp_direct) or np.inf
         self.clamp_indirect = float(settings.clamp_indirect) or np.inf
         self.clamping = np.isfinite(self.clamp_direct) or np.isfinite(self.clamp_indirect)

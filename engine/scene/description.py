@@ -370,9 +370,13 @@ class RenderSettings:
 
     @property
     def light_paths_active(self) -> bool:
-        """True when any of Cycles' light-path limits above is set (the wavefront tracer then keeps the
-        per-path bounce counts; with none set it runs exactly the arithmetic it ran before they existed)."""
-        return any(getattr(self, f.name) != f.default for f in LIGHT_PATH_FIELDS)
+        """True when any of Cycles' light-path limits above can change the image: a clamp or a caustics switch
+        set, or a kind's bounce limit below ``max_depth`` − 2 (a path has at most ``max_depth`` − 1 scattering
+        vertices, and a limit reached at the last one ends the path where ``max_depth`` ends it anyway).  The
+        wavefront tracer then keeps the per-path bookkeeping; otherwise it runs exactly the arithmetic it ran
+        before they existed, and the compiled per-path loop may take the render."""
+        return any(getattr(self, f.name) < self.max_depth - 2 if f.kind == "int" else getattr(self, f.name) != f.default
+                   for f in LIGHT_PATH_FIELDS)
 
     @property
     def stratified(self) -> bool:

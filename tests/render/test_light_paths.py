@@ -48,14 +48,20 @@ def test_a_kinds_limit_ends_paths_where_max_depth_does(name, field):
 
 
 def test_defaults_and_unreached_limits_render_the_images_of_before():
-    """Defaults run the plain loop; limits no path reaches and a clamp no sample reaches run the light-path
-    loop and give the same bits (its stages and numbers are the plain loop's)."""
+    """Defaults, and limits at or above max_depth − 2 (they cannot end a path before max_depth does), run the
+    plain loop; with a clamp no sample reaches the light-path loop runs and gives the same bits (its stages and
+    numbers are the plain loop's)."""
     scene = peer("cornell_lambert")
     before = render(scene)
-    assert not scene.settings.light_paths_active
-    np.testing.assert_array_equal(before, render(scene, max_diffuse_bounces=1000, max_glossy_bounces=1000,
-                                                 max_transmission_bounces=1000, max_transparent_bounces=1000,
-                                                 clamp_direct=1e30, clamp_indirect=1e30))
+    st = scene.settings
+    assert not st.light_paths_active
+    limits = {f.name: st.max_depth - 2 for f in LIGHT_PATH_FIELDS if f.kind == "int"}
+    assert not dataclasses.replace(st, **limits).light_paths_active
+    assert dataclasses.replace(st, max_glossy_bounces=st.max_depth - 3).light_paths_active
+    assert dataclasses.replace(st, caustics_reflective=False).light_paths_active
+    np.testing.assert_array_equal(before, render(scene, **limits))
+    np.testing.assert_array_equal(before, render(scene, clamp_direct=1e30, clamp_indirect=1e30,
+                                                 max_diffuse_bounces=st.max_depth - 3))
 
 
 def glass_pair(**render):
