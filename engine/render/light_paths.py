@@ -63,6 +63,20 @@ KINDS = ("diffuse", "glossy", "transmission", "transparent")
 DIFFUSE, GLOSSY, TRANSMISSION, TRANSPARENT = range(4)
 
 
+def describe(settings) -> str:
+    """The light-path limits that can change the image, for the stats line ("" when none: the plain loop), e.g.
+    "diffuse ≤ 1, clamp indirect 0.5, no refractive caustics"."""
+    if not getattr(settings, "light_paths_active", False):
+        return ""
+    parts = [f"{kind} ≤ {getattr(settings, f'max_{kind}_bounces')}" for kind in KINDS
+             if getattr(settings, f"max_{kind}_bounces") < settings.max_depth - 2]
+    parts += [f"clamp {which} {getattr(settings, f'clamp_{which}'):g}" for which in ("direct", "indirect")
+              if getattr(settings, f"clamp_{which}") > 0]
+    parts += [f"no {which} caustics" for which in ("reflective", "refractive")
+              if not getattr(settings, f"caustics_{which}")]
+    return ", ".join(parts)
+
+
 class LightPathRules:
     """The light-path settings of a render, resolved once per tracer: the limits (4,), the clamps and, by
     material index, what each material's lobes are (see the module docstring)."""

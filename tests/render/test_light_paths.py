@@ -100,9 +100,13 @@ def test_clamp_direct_caps_a_visible_emitter():
            "objects": [{"shape": "quad", "vertices": [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]],
                         "material": "black", "emission": {"radiance": 1.0}}],
            "lights": []}
-    plain = Renderer(parse_scene(doc)).render().stokes()
+    plain_result = Renderer(parse_scene(doc)).render()
+    plain = plain_result.stokes()
     scene = parse_scene({**doc, "render": {**doc["render"], "clamp_direct": 0.6, "clamp_indirect": 0.01}})
-    clamped = Renderer(scene).render().stokes()
+    result = Renderer(scene).render()
+    clamped = result.stokes()
+    assert "light paths: clamp direct 0.6, clamp indirect 0.01" in result.stats_line()       # said, not silent
+    assert "light paths" not in plain_result.stats_line()
     np.testing.assert_allclose(plain[0], 1.0, rtol=1e-6)
     np.testing.assert_allclose(clamped[0], 0.6, rtol=1e-12)
 
