@@ -20,6 +20,7 @@ import sys
 import time
 
 from .errors import SceneError
+from .scene.description import LIGHT_PATH_FIELDS
 
 
 class ProgressBar:
@@ -148,7 +149,7 @@ def _load_scene(path):
 
 #: Options of `render` (and `estimate`, which has some of them) that override the scene's render block.
 SETTING_OPTIONS = ("spp", "seed", "max_depth", "spectral", "polarisation", "wavelength_nm", "simplify",
-                   "reduce_spectral", "sampler")
+                   "reduce_spectral", "sampler", *(f.name for f in LIGHT_PATH_FIELDS))
 
 
 def _settings_from_options(scene, args):
@@ -162,7 +163,8 @@ def _settings_from_options(scene, args):
         return st
     merged = {**{k: getattr(st, k) for k in ("spp", "max_depth", "rr_depth", "seed", "spectral",
                                               "wavelength_nm", "polarisation", "batch_rays", "threads",
-                                              "reduce_spectral", "simplify", "sampler")}, **overrides}
+                                              "reduce_spectral", "simplify", "sampler",
+                                              *(f.name for f in LIGHT_PATH_FIELDS))}, **overrides}
     try:
         st = parse_settings(merged, "option")
     except SceneError as e:
@@ -731,6 +733,27 @@ def _polariser_mosaic(args, ext: str) -> int:
 VERBOSE_HELP = "also show warnings from the libraries the engine uses (Numba, …), hidden by default"
 
 
+def _light_path_options(parser) -> None:
+    """Cycles' light-path settings (engine.scene.description.LIGHT_PATH_FIELDS) as options: --max-diffuse-bounces N,
+    --clamp-indirect X, --caustics-reflective on|off, …; the scene's values where not given."""
+    group = parser.add_argument_group("Cycles' light paths (default: the scene's; docs/guide/scene-format.md)")
+    for f in LIGHT_PATH_FIELDS:
+        option = "--" + f.name.replace("_", "-")
+        if f.kind == "bool":
+            group.add_argument(option, type=_on_off, metavar="on|off",
+                               help=f.help + f" (default: the scene's; {'on' if f.default else 'off'} if unset)")
+        else:
+            rng = f"[{f.lo:g}, {f.hi:g}]"
+            group.add_argument(option, type=int if f.kind == "int" else float, metavar="N" if f.kind == "int" else "X",
+                               help=f"{f.help}; {rng} (default: the scene's; {f.default:g} if unset: off)")
+
+
+def _on_off(text: str) -> bool:
+    if text not in ("on", "off"):
+        raise argparse.ArgumentTypeError(f"must be on or off, got {text!r}")
+    return text == "on"
+
+
 def build_parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(prog="python -m engine", description="Polar: polarised spectral path tracer")
     sub = ap.add_subparsers(dest="command", required=True)
@@ -758,6 +781,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "halves), stratified (XOR-scrambled Sobol' pixel "
                         "jitter, lens, wavelengths and first-vertex light/BSDF numbers, deeper ones hashed) or "
                         "independent (hashed numbers)")
+    _light_path_options(r)
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")
     r.add_argument("--stderr", action="store_true", help="also write per-pixel standard errors")

@@ -63,15 +63,51 @@ SPECTRAL_TO_ENGINE = {"SPECTRAL": "spectral", "MONO": "mono", "RGB": "rgb"}
 
 
 def engine_settings(scene, preview=False) -> RenderSettings:
-    """Engine RenderSettings from the scene's Polar settings (frame-dependent seed if asked)."""
+    """Engine RenderSettings from the scene's Polar settings (frame-dependent seed if asked) and its Cycles
+    Light Paths (cycles_light_paths)."""
     p = scene.polar
     seed = p.seed + (scene.frame_current if p.use_animated_seed else 0)
-    return RenderSettings(spp=p.preview_samples if preview else p.samples, max_depth=p.max_bounces + 2,
+    total, light_paths = cycles_light_paths(scene)
+    return RenderSettings(spp=p.preview_samples if preview else p.samples,
+                          max_depth=min(p.max_bounces, total) + 2,
                           rr_depth=5, seed=seed, spectral=SPECTRAL_TO_ENGINE[p.spectral],
                           wavelength_nm=p.wavelength_nm, polarisation=POLARISATION_TO_ENGINE[p.polarisation],
                           batch_rays=p.batch_rays, threads=p.threads,
                           simplify="auto" if p.skip_clear_layers else "off",
-                          sampler=SAMPLER_TO_ENGINE[p.sampler])
+                          sampler=SAMPLER_TO_ENGINE[p.sampler], **light_paths)
+
+
+#: Cycles' Light Paths properties (scene.cycles, the same names in Blender 4.5–5.3) → RenderSettings fields
+CYCLES_LIGHT_PATHS = {"diffuse_bounces": "max_diffuse_bounces", "glossy_bounces": "max_glossy_bounces",
+                      "transmission_bounces": "max_transmission_bounces",
+                      "transparent_max_bounces": "max_transparent_bounces",
+                      "sample_clamp_direct": "clamp_direct", "sample_clamp_indirect": "clamp_indirect",
+                      "caustics_reflective": "caustics_reflective", "caustics_refractive": "caustics_refractive"}
+
+
+def cycles_light_paths(scene) -> tuple[int, dict]:
+    """(Cycles' Max Bounces ▸ Total, the RenderSettings light-path fields) from the scene's Cycles settings
+    (Render Properties ▸ Light Paths, shown for Polar too), so a file renders with the trade-offs it was tuned
+    for in Cycles; the total caps Polar's own Max Bounces.  Without the Cycles add-on: no limits."""
+    c = getattr(scene, "cycles", None)
+    if c is None:
+        return 1 << 20, {}
+    out = {field: getattr(c, name) for name, field in CYCLES_LIGHT_PATHS.items()}
+    for field in ("max_diffuse_bounces", "max_glossy_bounces", "max_transmission_bounces", "max_transparent_bounces"):
+        out[field] = min(int(out[field]), 1024)
+    for field in ("clamp_direct", "clamp_indirect"):
+        out[field] = float(out[field])
+    return int(c.max_bounces), out
+
+
+def light_path_warnings(scene) -> list[str]:
+    """What Polar does not apply of the scene's Cycles Light Paths (said once per render, never dropped silently)."""
+    c = getattr(scene, "cycles", None)
+    blur = float(getattr(c, "blur_glossy", 0.0)) if c is not None else 0.0
+    if blur > 0:
+        return [f"Filter Glossy {blur:g} (Light Paths ▸ Caustics) is not applied: glossy surfaces keep their "
+                "roughness after diffuse bounces (set it to 0 to match Cycles)"]
+    return []
 
 
 def adaptive_settings(scene, preview=False):
@@ -231,7 +267,7 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             engine_scene, warnings = export_scene(depsgraph, camera_object, W, H, settings)
         data_request = passes.add_motion(self, depsgraph, camera_object, W, H, engine_scene, data_request)
         bake_note = BAKE_CACHE.summary(since=bakes)
-        for w in dict.fromkeys(warnings):
+        for w in dict.fromkeys([*warnings, *light_path_warnings(scene)]):
             self.report({"WARNING"}, f"Polar: {w}")
         self.update_stats("", "Polar | building BVH")
         renderer = Renderer(engine_scene)

@@ -16,7 +16,8 @@ _FIXED = "fixed by the Polar add-on (not a Blender setting)"
 #: Engine ``render.<field>`` → (property of Scene.polar or None, UI path).
 RENDER_SETTINGS = {
     "spp": ("samples", "Render Properties ▸ Sampling ▸ Samples: Render (Viewport for the viewport and previews)"),
-    "max_depth": ("max_bounces", "Render Properties ▸ Sampling ▸ Max Bounces (+2 segments, as Cycles counts bounces)"),
+    "max_depth": ("max_bounces", "Render Properties ▸ Sampling ▸ Max Bounces (+2 segments, as Cycles counts bounces; "
+                  "at most Light Paths ▸ Max Bounces ▸ Total)"),
     "rr_depth": (None, _FIXED),
     "seed": ("seed", "Render Properties ▸ Sampling ▸ Seed"),
     "spectral": ("spectral", "Render Properties ▸ Polarisation & Spectrum ▸ Spectral"),
@@ -28,6 +29,14 @@ RENDER_SETTINGS = {
     "simplify": ("skip_clear_layers", "Render Properties ▸ Polarisation & Spectrum ▸ Skip Clear Layers"),
     "sampler": ("sampler", "Render Properties ▸ Sampling ▸ Pattern"),
     "denoise_data": (None, "View Layer Properties ▸ Polarisation Passes ▸ Denoising Data"),
+    "max_diffuse_bounces": (None, "Render Properties ▸ Light Paths ▸ Max Bounces ▸ Diffuse"),
+    "max_glossy_bounces": (None, "Render Properties ▸ Light Paths ▸ Max Bounces ▸ Glossy"),
+    "max_transmission_bounces": (None, "Render Properties ▸ Light Paths ▸ Max Bounces ▸ Transmission"),
+    "max_transparent_bounces": (None, "Render Properties ▸ Light Paths ▸ Max Bounces ▸ Transparent"),
+    "clamp_direct": (None, "Render Properties ▸ Light Paths ▸ Clamping ▸ Direct Light"),
+    "clamp_indirect": (None, "Render Properties ▸ Light Paths ▸ Clamping ▸ Indirect Light"),
+    "caustics_reflective": (None, "Render Properties ▸ Light Paths ▸ Caustics ▸ Reflective"),
+    "caustics_refractive": (None, "Render Properties ▸ Light Paths ▸ Caustics ▸ Refractive"),
 }
 
 #: Engine ``camera.<field>`` → UI path (of the active camera, or the output format).

@@ -1,7 +1,7 @@
 """Panels for the Blender settings Polar reads the way Cycles does but that Blender only shows for
-Cycles or EEVEE: Film ▸ Transparent, the equirectangular panorama's ranges, and Object ▸
-Visibility (ray visibility and holdout).  They edit Blender's own properties, so a file keeps the
-same settings in Cycles and Polar."""
+Cycles or EEVEE: Film ▸ Transparent, the equirectangular panorama's ranges, Object ▸ Visibility (ray
+visibility and holdout) and Cycles' Light Paths (bounces per kind, clamping, caustics).  They edit Blender's
+own properties, so a file keeps the same settings in Cycles and Polar."""
 
 import bpy
 
@@ -74,6 +74,37 @@ class POLAR_PT_object_visibility(_PolarPanel, bpy.types.Panel):
         layout.prop(ob, "is_holdout", text="Holdout")
 
 
-classes = (POLAR_PT_film, POLAR_PT_camera_panorama, POLAR_PT_object_visibility)
+class POLAR_PT_light_paths(_PolarPanel, bpy.types.Panel):
+    """Cycles' Light Paths, which Polar reads (render_engine.cycles_light_paths): the same properties."""
+    bl_label = "Light Paths"
+    bl_context = "render"
+    bl_options = {"DEFAULT_CLOSED"}
+
+    @classmethod
+    def poll(cls, context):
+        return context.engine in cls.COMPAT_ENGINES and getattr(context.scene, "cycles", None) is not None
+
+    def draw(self, context):
+        c = context.scene.cycles
+        layout = self.layout
+        layout.use_property_split = True
+        col = layout.column(align=True, heading="Max Bounces")
+        col.prop(c, "max_bounces", text="Total (caps Sampling ▸ Max Bounces)")
+        col.prop(c, "diffuse_bounces", text="Diffuse")
+        col.prop(c, "glossy_bounces", text="Glossy")
+        col.prop(c, "transmission_bounces", text="Transmission")
+        col.prop(c, "transparent_max_bounces", text="Transparent")
+        col = layout.column(align=True, heading="Clamping")
+        col.prop(c, "sample_clamp_direct", text="Direct Light")
+        col.prop(c, "sample_clamp_indirect", text="Indirect Light")
+        col = layout.column(align=True, heading="Caustics")
+        col.prop(c, "blur_glossy", text="Filter Glossy")
+        if c.blur_glossy > 0:
+            col.label(text="Polar does not apply Filter Glossy", icon="ERROR")
+        col.prop(c, "caustics_reflective", text="Reflective")
+        col.prop(c, "caustics_refractive", text="Refractive")
+
+
+classes = (POLAR_PT_film, POLAR_PT_camera_panorama, POLAR_PT_object_visibility, POLAR_PT_light_paths)
 
 register, unregister = bpy.utils.register_classes_factory(classes)

@@ -40,8 +40,21 @@ def empty_scene(width=48, height=36, samples=4):
     scene.render.resolution_percentage = 100
     scene.polar.samples = samples
     scene.polar.max_bounces = 7
+    light_paths_off(scene)
     load_addon().polar_addon.compat.set_multilayer_exr(scene.render.image_settings)
     return scene
+
+
+def light_paths_off(scene, bounces=1024):
+    """Cycles' Light Paths as the tests keep them, read by both renderers (Polar reads them too:
+    polar_addon.render_engine.cycles_light_paths): ``bounces`` as the total and every kind's limit (1024: none),
+    no clamping, no Filter Glossy, both caustics on."""
+    c = scene.cycles
+    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = bounces
+    c.transparent_max_bounces = bounces
+    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
+    c.blur_glossy = 0.0
+    c.caustics_reflective = c.caustics_refractive = True
 
 
 def add_camera(scene, location, rotation, lens=50.0):
@@ -122,18 +135,20 @@ def render_to_exr(scene, path):
 def cycles_seed_renders(scene, tmp, spp, seeds, bounces, light_threshold=None):
     """(seeds, H, W, 3) linear RGB of Cycles' Combined pass, one render per seed 0, 1, …, with the parity
     settings the Cycles comparisons share: CPU, no adaptive sampling, no denoising, box filter 1 px, no
-    clamping, ``bounces`` as Max and Diffuse Bounces, 2 threads, a 32-bit multilayer EXR per seed in
-    ``tmp``; ``light_threshold``: Cycles' Light Threshold, if given (0: every light sampled)."""
+    clamping, no Filter Glossy, ``bounces`` as Max and every kind's bounces (Transparent kept), 2 threads, a
+    32-bit multilayer EXR per seed in ``tmp``; ``light_threshold``: Cycles' Light Threshold, if given (0: every
+    light sampled)."""
     import bpy
     import numpy as np
     scene.render.engine = "CYCLES"
     c = scene.cycles
     c.device, c.samples, c.use_adaptive_sampling, c.use_denoising = "CPU", spp, False, False
     c.pixel_filter_type, c.filter_width = "BOX", 1.0
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
     if light_threshold is not None:
         c.light_sampling_threshold = light_threshold
-    c.max_bounces = c.diffuse_bounces = bounces
+    transparent = c.transparent_max_bounces
+    light_paths_off(scene, bounces)            # no clamping, no Filter Glossy, caustics on; Max/Diffuse = bounces
+    c.transparent_max_bounces = transparent
     scene.render.threads_mode, scene.render.threads = "FIXED", 2
     load_addon().polar_addon.compat.set_multilayer_exr(scene.render.image_settings)
     scene.render.image_settings.color_depth = "32"

@@ -46,6 +46,7 @@ from ..kernels.transport import (add_light, add_to_paths, identity_throughput, n
                                  spectral_stokes_rgb_samples, stokes_rgb_samples, throughput_times_stokes, update_abcs,
                                  update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES
+from .light_paths import LightPathRules, trace_light_paths
 from .lights.lamps import PointEmitter
 from .media import Media, cross
 from .path_state import PathState
@@ -330,6 +331,9 @@ class PathTracer:
         # Denoising guides (Cycles' Denoising Albedo / Normal), only when asked: renders without
         # them run exactly the same arithmetic as before.
         self.denoise_data = bool(getattr(settings, "denoise_data", False))
+        # Cycles' light-path limits (engine.render.light_paths; None: none set, trace runs as before them)
+        self.light_paths = (LightPathRules(settings, self.materials)
+                            if getattr(settings, "light_paths_active", False) else None)
 
     def _emitted(self, light: _Light, lookup: WavelengthLookup, d: np.ndarray | None = None) -> np.ndarray:
         """Emitted radiance (L, n) of ``light`` for paths with these wavelengths (RGB (3, n) in RGB mode)
@@ -374,6 +378,8 @@ class PathTracer:
         estimation and BSDF sampling into the next segment) and ``_next_segments`` (Russian roulette,
         non-finite and black paths, the survivors kept and their next origins, in one compiled step).
         """
+        if self.light_paths is not None:
+            return trace_light_paths(self, pixel, sample, abort)
         st = self.settings
         n_total = pixel.shape[0]
         state, acc = self._camera_paths(pixel, sample)

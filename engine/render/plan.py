@@ -20,6 +20,7 @@ import numpy as np
 from ..materials.base import BSDF, BSDFFlags
 from ..scene.description import RenderSettings
 from .effects import effective_materials, resolve_transport, source_needs
+from .light_paths import describe as describe_light_paths
 
 #: (x0, y0, x1, y1): a pixel rectangle, row 0 at the top, x1 and y1 exclusive.
 Window = tuple[int, int, int, int]
@@ -165,7 +166,7 @@ class RenderPlan:
         """The render's statistics before any sample: counters at 0 and what the plan decided."""
         return {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0, "transport": self.settings.polarisation,
                 "transport_reason": self.transport_reason, "spectral": self.spectral,
-                "simplified": list(self.simplified)}
+                "simplified": list(self.simplified), "light_paths": describe_light_paths(self.settings)}
 
 
 def work_units(width: int, height: int, spp: int, batch_rays: int, first_pass: int = 0,

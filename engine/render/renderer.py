@@ -70,6 +70,8 @@ def stats_line(stats: dict, sep: str = "; ") -> str:
              f"Msamples/s), {stats['rays']} rays + {stats['shadow_rays']} shadow rays",
              f"transport: {stats['transport_reason']}", f"spectral: {stats['spectral']}", kernels]
     parts += [f"simplified: {why}" for why in stats.get("simplified", [])]
+    if stats.get("light_paths"):
+        parts.append(f"light paths: {stats['light_paths']}")
     if stats.get("nonfinite"):
         parts.append(f"dropped non-finite samples: {stats['nonfinite']}")
     return sep.join(parts)

@@ -38,6 +38,7 @@ import numpy as np
 
 from ..errors import SceneError
 from .film import film_from_stokes
+from ..scene.description import LIGHT_PATH_FIELDS
 
 #: Header keys that must match between a stored render and its continuation, with the option
 #: that sets each (for the error message).
@@ -54,6 +55,7 @@ MATCHED = {
     "polar.reduce_spectral": "--reduce-spectral",
     "polar.simplify": "--simplify",
     "polar.sampler": "--sampler",
+    **{f"polar.{f.name}": "--" + f.name.replace("_", "-") for f in LIGHT_PATH_FIELDS},
 }
 
 
@@ -127,6 +129,12 @@ def estimator_identity(scene_hash: str, settings, resolved: str, window=None, si
     if settings.stratified:
         # only then: the headers of independent renders stay as they were (and older files match)
         ident["polar.sampler"] = settings.sampler
+    for f in LIGHT_PATH_FIELDS:         # only where set: the headers of other renders stay as they were
+        value = getattr(settings, f.name, f.default)
+        if value != f.default:
+            # floats as their exact decimal text (a float32 header attribute would round them)
+            text = {"bool": "on" if value else "off", "float": repr(float(value))}
+            ident[f"polar.{f.name}"] = text.get(f.kind, value)
     if settings.spectral == "mono":
         ident["polar.wavelength_nm"] = float(settings.wavelength_nm)
     return ident

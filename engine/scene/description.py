@@ -344,6 +344,39 @@ class RenderSettings:
     #: engine.render.sampler.stratified_pair, the deeper ones hashed; the default before "sobol") or
     #: "independent" (every number a hash of (seed, pixel, sample, dimension)).
     sampler: str = "sobol"
+    #: Cycles' Light Paths ▸ Max Bounces per kind (engine.render.light_paths): a path whose diffuse, glossy,
+    #: transmission or transparent bounces exceed the limit ends at its next surface (that surface's emission
+    #: still counts), as Cycles' path_state_next; 0 = only the light found by the first bounce of that kind.
+    #: 1024 = no limit (the default: the total stays ``max_depth``).  A bounce's kind is the lobe it sampled.
+    max_diffuse_bounces: int = 1024
+    #: the same for glossy and mirror reflections (Cycles counts a mirror as glossy)
+    max_glossy_bounces: int = 1024
+    #: the same for transmissions through a surface (refraction, diffuse transmission)
+    max_transmission_bounces: int = 1024
+    #: the same for null-lobe pass-throughs (filter sheets; alpha pass-through keeps its own 32 per segment)
+    max_transparent_bounces: int = 1024
+    #: Cycles' Clamping ▸ Direct / Indirect Light: each light contribution of a sample (emission reached, a
+    #: light sample) whose linear-sRGB S0 has a component above the limit (max |R|, |G|, |B|, as Cycles renders)
+    #: is scaled down to it, all four Stokes components by the same factor (the polarisation is unchanged);
+    #: "direct" = light reached by the camera ray or by the first vertex's light and BSDF samples.  0 = off.
+    clamp_direct: float = 0.0
+    #: the same limit for every other light contribution (Cycles' Clamping ▸ Indirect Light); 0 = off
+    clamp_indirect: float = 0.0
+    #: Cycles' Caustics ▸ Reflective / Refractive: False drops the glossy (and mirror) reflection / transmission
+    #: lobes at a vertex reached by a diffuse bounce (Cycles' PATH_RAY_DIFFUSE closures test).
+    caustics_reflective: bool = True
+    #: False drops the glossy and smooth transmission lobes there (Cycles' Caustics ▸ Refractive)
+    caustics_refractive: bool = True
+
+    @property
+    def light_paths_active(self) -> bool:
+        """True when any of Cycles' light-path limits above can change the image: a clamp or a caustics switch
+        set, or a kind's bounce limit below ``max_depth`` − 2 (a path has at most ``max_depth`` − 1 scattering
+        vertices, and a limit reached at the last one ends the path where ``max_depth`` ends it anyway).  The
+        wavefront tracer then keeps the per-path bookkeeping; otherwise it runs exactly the arithmetic it ran
+        before they existed, and the compiled per-path loop may take the render."""
+        return any(getattr(self, f.name) < self.max_depth - 2 if f.kind == "int" else getattr(self, f.name) != f.default
+                   for f in LIGHT_PATH_FIELDS)
 
     @property
     def stratified(self) -> bool:
@@ -354,6 +387,33 @@ class RenderSettings:
 
 #: RenderSettings.sampler's values
 SAMPLERS = ("independent", "stratified", "sobol")
+
+
+@dataclass(frozen=True)
+class LightPathField:
+    """One of Cycles' light-path settings of RenderSettings: its field ``name``, ``kind`` ("int", "float",
+    "bool"), range [lo, hi] and default; the scene format (``render.<name>``), the command line
+    (``--<name with dashes>``), the EXR header (``polar.<name>``, written only when not the default) and the
+    Blender exporter all read this one declaration."""
+    name: str
+    kind: str
+    default: object
+    lo: float = 0
+    hi: float = 0
+    help: str = ""
+
+
+#: Cycles' Light Paths settings (RenderSettings fields; engine.render.light_paths applies them)
+LIGHT_PATH_FIELDS = (
+    LightPathField("max_diffuse_bounces", "int", 1024, 0, 1024, "most diffuse bounces (Cycles' Light Paths)"),
+    LightPathField("max_glossy_bounces", "int", 1024, 0, 1024, "most glossy and mirror reflections"),
+    LightPathField("max_transmission_bounces", "int", 1024, 0, 1024, "most transmissions (refraction)"),
+    LightPathField("max_transparent_bounces", "int", 1024, 0, 1024, "most transparent (null-lobe) crossings"),
+    LightPathField("clamp_direct", "float", 0.0, 0.0, 1e30, "clamp of direct light per sample (max sRGB; 0 off)"),
+    LightPathField("clamp_indirect", "float", 0.0, 0.0, 1e30, "clamp of indirect light per sample (0 off)"),
+    LightPathField("caustics_reflective", "bool", True, help="glossy reflection after a diffuse bounce"),
+    LightPathField("caustics_refractive", "bool", True, help="glossy transmission after a diffuse bounce"),
+)
 
 
 @dataclass

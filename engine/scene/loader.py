@@ -29,8 +29,9 @@ from ..materials.normal_map import ShadingNormal
 from ..polarisation.sources import DirectionalPolarisation, parse_polarisation
 from ..textures import TexturedNumber, parse_texture_input, textured_emission
 from ..textures.image import read_image
-from .description import (EMISSION_SAMPLING, ENVMAP_GRIDS, SAMPLERS, SPECTRAL_MODES, Camera, DirectionalLight,
-                          EnvironmentLight, Interior, Mesh, PointLight, RenderSettings, Scene, SpotLight)
+from .description import (EMISSION_SAMPLING, ENVMAP_GRIDS, LIGHT_PATH_FIELDS, SAMPLERS, SPECTRAL_MODES, Camera,
+                          DirectionalLight, EnvironmentLight, Interior, Mesh, PointLight, RenderSettings, Scene,
+                          SpotLight)
 from ..errors import SceneError
 from .meshio import read_mesh
 from .shapes import icosphere, quad, transform_matrix, transform_mesh
@@ -340,9 +341,10 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
         raise SceneError(field, "must be an object")
     _check_keys(d, field, {"spp", "max_depth", "rr_depth", "seed", "spectral", "wavelength_nm",
                            "polarisation", "batch_rays", "threads", "reduce_spectral", "simplify",
-                           "sampler"})
+                           "sampler", *(f.name for f in LIGHT_PATH_FIELDS)})
     s = RenderSettings()                 # the defaults
     return RenderSettings(
+        **light_path_settings(d, field),
         spp=integer(d.get("spp", s.spp), f"{field}.spp", 1, 1 << 24),
         max_depth=integer(d.get("max_depth", s.max_depth), f"{field}.max_depth", 1, 1024),
         rr_depth=integer(d.get("rr_depth", s.rr_depth), f"{field}.rr_depth", 1, 1024),
@@ -358,6 +360,25 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
         simplify=choice(d.get("simplify", s.simplify), f"{field}.simplify", ("auto", "off")),
         sampler=choice(d.get("sampler", s.sampler), f"{field}.sampler", SAMPLERS),
     )
+
+
+def light_path_settings(d: dict, field: str = "render") -> dict:
+    """The light-path settings (engine.scene.description.LIGHT_PATH_FIELDS) given in ``d``, checked: whole
+    numbers and numbers in their range, true or false."""
+    out = {}
+    for f in LIGHT_PATH_FIELDS:
+        if f.name not in d:
+            continue
+        value, name = d[f.name], f"{field}.{f.name}"
+        if f.kind == "int":
+            out[f.name] = integer(value, name, f.lo, f.hi)
+        elif f.kind == "float":
+            out[f.name] = number(value, name, f.lo, f.hi)
+        elif isinstance(value, bool):
+            out[f.name] = value
+        else:
+            raise SceneError(name, f"must be true or false, got {value!r}")
+    return out
 
 
 def _check_layer_stack(d, field: str, materials: dict | None = None) -> None:

@@ -275,8 +275,8 @@ def coverage(scene, width, height) -> np.ndarray:
 # --------------------------------------------------------------------------- renders
 
 def cycles_settings(scene, spp, bounces):
-    """Cycles as the parity tests run it."""
-    from tests.blender_support import load_addon
+    """Cycles as the parity tests run it (its Light Paths are read by Polar too: export_polar sets them again)."""
+    from tests.blender_support import light_paths_off, load_addon
     scene.render.engine = "CYCLES"
     c = scene.cycles
     c.device = "CPU"
@@ -285,14 +285,10 @@ def cycles_settings(scene, spp, bounces):
     c.use_denoising = False
     c.pixel_filter_type = "BOX"
     c.filter_width = 1.0
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-    c.blur_glossy = 0.0
     c.use_light_tree = False
     c.light_sampling_threshold = 0.0
-    c.max_bounces = c.diffuse_bounces = c.glossy_bounces = c.transmission_bounces = bounces
+    light_paths_off(scene, bounces)     # every kind's bounces, no clamping, no Filter Glossy, caustics on (both read)
     c.volume_bounces = 0
-    c.transparent_max_bounces = bounces
-    c.caustics_reflective = c.caustics_refractive = True
     scene.render.threads_mode = "FIXED"
     scene.render.threads = 2
     scene.render.use_persistent_data = True          # the seeds' renders share one scene sync
@@ -327,6 +323,8 @@ def export_polar(scene, spp, bounces, polarisation="AUTO", spectral="RGB"):
     from polar_render.engine.render.renderer import Renderer
     from polar_render.polar_addon.export.scene import export_scene
     from polar_render.polar_addon.render_engine import engine_settings
+    from tests.blender_support import light_paths_off
+    light_paths_off(scene, bounces)     # Polar reads Cycles' Light Paths: the parity settings, as render_cycles
     p = scene.polar
     p.samples, p.max_bounces, p.polarisation, p.seed, p.spectral = spp, bounces, polarisation, 0, spectral
     p.use_adaptive_sampling = False
