@@ -254,20 +254,19 @@ def _filmed_anisotropy(node) -> bool:
     return anisotropic(node) and film is not None and (film.is_linked or float(film.default_value) > 0.0)
 
 
-def _principled_ior(r, node, transmission):
-    """The Principled IOR: a TextureInput where linked on an opaque material without a linked Specular IOR Level
-    (the dielectric's index per point, with or without a Specular Tint or an anisotropy), else as Cycles reads the
-    constant (linked: its own value, one warning)."""
+def _principled_ior(r, node):
+    """The Principled IOR: a TextureInput where linked (the index per point of the dielectric — with a Specular Tint,
+    an anisotropy or a linked Specular IOR Level too — and of the transmission, smooth, rough, tinted or filmed), but
+    on an anisotropic specular layer under a Thin Film (its own value, one warning); else the constant as Cycles
+    reads it."""
     if r._socket("IOR").is_linked:
-        plain = not (node.inputs["Specular IOR Level"].is_linked or _filmed_anisotropy(node))
-        if plain and not isinstance(transmission, TextureInput) and transmission == 0.0:
+        if not _filmed_anisotropy(node):
             source = r.texture("IOR", lo=IOR_MIN, hi=1e6)
             if source is not None:
                 return source
         else:
-            r.warnings.append(f"material {r.mat!r}: IOR of {node.name!r} cannot vary over the surface with a "
-                              "transmission, a linked Specular IOR Level or a filmed anisotropy yet; its own value is "
-                              "used")
+            r.warnings.append(f"material {r.mat!r}: IOR of {node.name!r} cannot vary over the surface on an "
+                              "anisotropic specular layer under a Thin Film yet; its own value is used")
         return max(r._checked_float("IOR", -math.inf, math.inf), IOR_MIN)
     return _ior(r, "IOR")
 
@@ -339,7 +338,7 @@ def _principled(node, mat, warnings, bake=None):
     transmission = _fraction(r, "Transmission Weight")
     roughness = r.number_or_texture("Roughness")
     values = {"base_color": _grey(r.rgb_or_texture("Base Color", 0.0, 1.0)), "metallic": metallic,
-              "roughness": roughness, "transmission": transmission, "ior": _principled_ior(r, node, transmission),
+              "roughness": roughness, "transmission": transmission, "ior": _principled_ior(r, node),
               "specular_ior_level": _specular_level(r, node),
               "specular_tint": _grey(r.rgb_or_texture("Specular Tint", 0.0)),
               "coat_weight": _fraction(r, "Coat Weight"),

@@ -423,10 +423,30 @@ def test_anisotropic_node_inputs_per_point_match_cycles(addon, case, lighting):
     compare_with_cycles(scene, f"{case} per point, anisotropic node", lighting)
 
 
-def test_a_per_point_ior_on_a_glass_says_it_takes_its_own_value(addon):
-    scene = sphere_scene("IOR", (1.2, 2.0), {"Transmission Weight": 1.0, "Roughness": 0.2}, "lamps")
+#: an IOR checker on a glass: rough (Multiscatter GGX: the per-index compensation tables) and tinted by its Base
+#: Color; smooth, with a Specular Tint
+GLASS_IOR = {"rough tinted": {"Transmission Weight": 1.0, "Roughness": 0.2, "Base Color": (0.9, 0.7, 0.5)},
+             "smooth, specular tint": {"Transmission Weight": 1.0, "Roughness": 0.0, "Specular Tint": (1.0, 0.6, 0.3)}}
+
+
+@pytest.mark.parametrize("lighting", ap.LIGHTINGS)
+@pytest.mark.parametrize("case", list(GLASS_IOR))
+def test_ior_per_point_on_a_glass_matches_cycles(addon, case, lighting):
+    """An IOR checker (1.2 | 2.0, an image texture) on a transmitting Principled BSDF: the glass's index per point
+    (no warning: the comparison refuses any)."""
+    if case.startswith("smooth") and lighting != "lamps":
+        pytest.skip("one lighting for the smooth glass (the budget)")
+    scene = sphere_scene("IOR", (1.2, 2.0), dict(GLASS_IOR[case]), lighting)
+    compare_with_cycles(scene, f"Principled IOR per point on a {case} glass", lighting)
+
+
+def test_a_per_point_ior_on_a_filmed_anisotropy_says_it_takes_its_own_value(addon):
+    """The one case left: an anisotropic specular layer under a Thin Film keeps its constant IOR, one warning."""
+    scene = sphere_scene("IOR", (1.2, 2.0), {"Anisotropic": 0.5, "Roughness": 0.3, "Thin Film Thickness": 300.0},
+                         "lamps")
     _, _, warnings = ap.export_polar(scene, 1, 8)
-    assert len(warnings) == 1 and "IOR of" in warnings[0] and "own value" in warnings[0]
+    ior = [w for w in warnings if "IOR of" in w]
+    assert len(ior) == 1 and "own value" in ior[0] and "Thin Film" in ior[0]
 
 
 @pytest.mark.parametrize("lighting", ap.LIGHTINGS)
