@@ -317,7 +317,6 @@ def _dielectric(p, alpha, ior):
         eta = _ior_index(ior, level)
     else:
         eta = _specular_index(ior, level) if _textured(level) else specular_ior(ior, level)
-    per_point_index = "ior" if _textured(ior) else "specular_ior_level" if _textured(level) else None
     smooth = effectively_smooth(alpha)
     values = {"n": eta, "k": 0.0, "diffuse_layering": "albedo_scaling", "m": 0.0 if smooth else alpha,
               **_film_values(p)}
@@ -327,9 +326,6 @@ def _dielectric(p, alpha, ior):
     tint = p["specular_tint"]
     tinted = not _white(tint)
     aniso = None if smooth else _anisotropic_lobe(p, eta, 0.0, alpha)
-    if per_point_index and aniso is not None and aniso.film is not None:
-        raise SceneError(p.field(per_point_index), "cannot vary per point on an anisotropic layer under a thin film "
-                                                   "(give a constant value)")
     rough_base = not _never(p["diffuse_roughness"])          # an Oren–Nayar base somewhere (a σ per point too)
     if rough_base or tinted or aniso is not None:
         # the specular layer over Cycles' diffuse base as two parts (mix.Layered): an Oren–Nayar base, a tint,

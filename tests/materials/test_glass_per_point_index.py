@@ -431,3 +431,24 @@ def test_renders_per_point_index_as_the_constants(tmp_path, roughness, distribut
     # bit for bit but for Multiscatter GGX's compensation, interpolated between per-index tables (measured:
     # 4.6e-7 and 9.9e-6 of a largest pixel 17.4)
     assert max(d_lo, d_hi) <= (1e-4 if distribution == "multi_ggx" else 0.0) * np.max(np.abs(lo))
+
+
+@pytest.mark.parametrize("key, texels", [("ior", [1.2, 1.6, 2.2]), ("specular_ior_level", [0.1, 0.5, 0.9])])
+@pytest.mark.parametrize("colour", [0.0, [0.6, 0.3, 0.2]])
+def test_per_point_index_on_a_filmed_anisotropic_layer(tmp_path, key, texels, colour):
+    """A per-point IOR or Specular IOR Level on an anisotropic specular layer under a Thin Film: the filmed facets
+    over each point's own substrate index, and the layering albedo (Cycles' estimate: the film's reflectance at
+    the view angle) from it too — at each texel the constant material (to 1e-9; the pdf's lobe choice reads the
+    same albedo)."""
+    from tests.support.texel_rows import textured_and_constant
+    material = {"type": "principled", "base_color": colour, "anisotropic": 0.6, "roughness": 0.35,
+                "thin_film_thickness": 350.0, "thin_film_ior": 1.4}
+    sp, wi, u_lobe, u_dir, textured, rows = textured_and_constant(tmp_path, material, key, texels, reps=30, seed=14)
+    f, pdf = textured.eval(sp, wi).matrix(), textured.pdf(sp, wi)
+    s = textured.sample(sp, u_lobe, u_dir)
+    for sel, _, const, sub in rows:
+        g = const.eval(sub, wi[:, sel]).matrix()
+        np.testing.assert_allclose(f[..., sel], g, rtol=1e-9, atol=1e-13 * max(np.abs(g).max(), 1e-300))
+        np.testing.assert_allclose(pdf[sel], const.pdf(sub, wi[:, sel]), rtol=1e-9, atol=1e-14)
+        cs = const.sample(sub, u_lobe[sel], u_dir[:, sel])
+        np.testing.assert_allclose(s.wi[:, sel], cs.wi, rtol=1e-9, atol=1e-13)
