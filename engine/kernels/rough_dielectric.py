@@ -8,8 +8,9 @@ material's batched formulas (engine.materials.rough_dielectric, where the twins 
 written here in the same operation order, so the compiled pass gives their bits.
 
 Distribution codes: 0 Beckmann, 1 GGX.  The value is the same at every wavelength (one real index),
-written to each of the L rows.  The roughness α is one number (a one-element array) or one per path (N,)
-(a textured roughness), read with ``at``.
+written to each of the L rows.  The roughness α and the relative indices η (seen from outside, from inside) are
+each one number (a one-element array) or one per path (N,) (a textured roughness, a textured index), read with
+``at``.
 """
 
 from __future__ import annotations
@@ -60,9 +61,9 @@ def _viewer_side(n_s, wo, i, eta_out, eta_in):
     """(nn, η, t, b) at path i: the normal on the viewer's side, η = n_far/n_viewer and its frame."""
     n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
     if n0 * wo[0, i] + n1 * wo[1, i] + n2 * wo[2, i] >= 0:
-        eta = eta_out
+        eta = at(eta_out, i)
     else:
-        eta = eta_in
+        eta = at(eta_in, i)
         n0, n1, n2 = -n0, -n1, -n2
     t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
     return n0, n1, n2, eta, t0, t1, t2, b0, b1, b2
@@ -225,18 +226,27 @@ def _alphas(alpha):
     return np.array(alpha, dtype=np.float64)
 
 
+def _etas(n_int, n_ext):
+    """(η seen from outside, from inside) as the loops read them (``at``): n_int/n_ext and n_ext/n_int, one-element
+    arrays for a number, else (N,) for an index per path (the same IEEE quotients as the NumPy references')."""
+    if np.ndim(n_int) == 0:
+        return np.array([n_int / n_ext]), np.array([n_ext / n_int])
+    n = np.asarray(n_int, dtype=np.float64)
+    return np.ascontiguousarray(n / n_ext), np.ascontiguousarray(n_ext / n)
+
+
 def rough_dielectric_eval_numba(n_s, wo, wi, L, n_int, n_ext, distribution, rational, alpha):
     n = n_s.shape[1]
     A, B, C, S = (np.empty((L, n)) for _ in range(4))
     x = np.empty((3, n))
-    _eval_loop(_f64(n_s), _f64(wo), _f64(wi), n_int / n_ext, n_ext / n_int, DISTRIBUTION_CODES[distribution],
+    _eval_loop(_f64(n_s), _f64(wo), _f64(wi), *_etas(n_int, n_ext), DISTRIBUTION_CODES[distribution],
                bool(rational), _alphas(alpha), _ERFCX_COEF, _ERFCX_K, A, B, C, S, x)
     return x, A, B, C, S
 
 
 def rough_dielectric_pdf_numba(n_s, wo, wi, n_int, n_ext, distribution, alpha):
     out = np.empty(n_s.shape[1])
-    _pdf_loop(_f64(n_s), _f64(wo), _f64(wi), n_int / n_ext, n_ext / n_int, DISTRIBUTION_CODES[distribution],
+    _pdf_loop(_f64(n_s), _f64(wo), _f64(wi), *_etas(n_int, n_ext), DISTRIBUTION_CODES[distribution],
               _alphas(alpha), _ERFCX_COEF, _ERFCX_K, out)
     return out
 
@@ -246,7 +256,7 @@ def rough_dielectric_sample_numba(n_s, wo, u_lobe, u_dir, L, n_int, n_ext, distr
     A, B, C, S = (np.empty((L, n)) for _ in range(4))
     wi, x = np.empty((3, n)), np.empty((3, n))
     pdf, eta_sq, valid = np.empty(n), np.empty(n), np.empty(n, np.bool_)
-    _sample_loop(_f64(n_s), _f64(wo), _f64(u_lobe), _f64(u_dir), n_int / n_ext, n_ext / n_int,
+    _sample_loop(_f64(n_s), _f64(wo), _f64(u_lobe), _f64(u_dir), *_etas(n_int, n_ext),
                  DISTRIBUTION_CODES[distribution], bool(rational), _alphas(alpha), _ERFCX_COEF, _ERFCX_K,
                  wi, pdf, valid, eta_sq, A, B, C, S, x)
     return wi, pdf, valid, eta_sq, x, A, B, C, S

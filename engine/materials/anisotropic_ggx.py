@@ -485,10 +485,16 @@ class AnisotropicGGX(BSDF):
             E = self._reflection_table(cos_o, self._alphas(sp)[2], self.n.numbers(sp.surface_points()) /
                                        self.exterior_n)
             return E * (1.0 + self._extra(sp, wo_l)[0]) if self.multiscatter else E
-        eta = self._constant_eta()
         if self.film is not None:
-            return film_layering_albedo(cos_o, self.exterior_n, film_at(self.film, sp), eta * self.exterior_n,
+            if isinstance(self.n, NumberSpectrum) and isinstance(self.k, ConstantSpectrum):
+                # a real index per point (the Principled's per-point IOR or Specular IOR Level): the substrate's
+                # index at each point
+                substrate = self.n.numbers(sp.surface_points()) + 1j * self.k.value
+            else:
+                substrate = self._constant_eta() * self.exterior_n
+            return film_layering_albedo(cos_o, self.exterior_n, film_at(self.film, sp), substrate,
                                         RGB_WAVELENGTHS_NM)
+        eta = self._constant_eta()
         if self.multiscatter_albedo == "cycles":
             if self._reflection_table is None:
                 if self.per_point:          # √(α_x α_y) lies between the least and the largest α

@@ -22,10 +22,15 @@ sample weight, *not* of the Mueller matrix; it cancels for a path that enters
 and leaves a closed object (as in Mitsuba 3's ``dielectric``).
 
 The index must be the same at every wavelength (no dispersion): a refracted
-direction is shared by all wavelengths of a path.
+direction is shared by all wavelengths of a path.  It may vary over the surface (``n`` a TexturedNumber or a
+NumberSpectrum, e.g. a Principled IOR texture): every formula above is elementwise in η, so each point gets
+exactly the constant-index interface of its own value; such an instance has ``varies_over_surface`` set and no
+fused ``scatter_delta`` step (the integrator then samples it through ``sample``).
 """
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -35,6 +40,7 @@ from ..kernels import twin
 from ..kernels.delta_bounce import dielectric_loop
 from ..kernels.geometry import unit_cross_numpy
 from ..kernels.transport import update_abcs_numpy
+from ..textures import TexturedNumber, TexturedSpectrum
 from ..polarisation.frames import plane_of_incidence_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflection_abcs_numpy, \
     fresnel_transmission_abcs, refracted_cosine
@@ -80,19 +86,54 @@ def dielectric_scatter_numba(rows, n_s, wo, x_T, T, u_lobe, eta_front, eta_back,
 dielectric_scatter = twin(dielectric_loop and dielectric_scatter_numba, dielectric_scatter_numpy)
 
 
+def per_point_index(n) -> bool:
+    """An index that varies over the surface: a TexturedNumber, or a λ-independent TexturedSpectrum
+    (engine.textures.inputs.NumberSpectrum, e.g. the Principled IOR's index per point)."""
+    return isinstance(n, (TexturedNumber, TexturedSpectrum))
+
+
+def index_at(n, sp):
+    """An index at the shading points: the number itself, or its values (N,) where it varies over the surface."""
+    if isinstance(n, TexturedNumber):
+        return sp.number(n)
+    if isinstance(n, TexturedSpectrum):
+        return n.numbers(sp.surface_points())
+    return n
+
+
+def checked_index(n, name: str = "n"):
+    """A real index as the dielectric models keep it: a finite number > 0, or a per-point index whose bounds are."""
+    if per_point_index(n):
+        if not (math.isfinite(n.lo) and math.isfinite(n.hi) and n.lo > 0):
+            raise ValueError(f"{name} must be finite and > 0 everywhere, got values in [{n.lo:g}, {n.hi:g}]")
+        return n
+    return float(n)
+
+
 class SmoothDielectric(BSDF):
     name = "dielectric"
     # total internal reflection retards; the index is one number (no dispersion): λ-independent
     flags = BSDFFlags.DELTA_REFLECTION | BSDFFlags.DELTA_TRANSMISSION | BSDFFlags.POLARISING | BSDFFlags.RETARDING
 
-    def __init__(self, n: float, exterior_n: float = 1.0):
-        self.n_int = float(n)
+    def __init__(self, n, exterior_n: float = 1.0):
+        # the index: a number, or per point (a TexturedNumber / NumberSpectrum: a Principled IOR texture)
+        self.n_int = checked_index(n)
         self.n_ext = float(exterior_n)
+        self.per_point = per_point_index(self.n_int)
+        if self.per_point:
+            # (an instance attribute: a constant index keeps the class default, so compiled per-path loops that
+            # take ``type(bsdf) is SmoothDielectric`` for a constant-index delta material can refuse this one)
+            self.varies_over_surface = True
+
+    def _n(self, sp: ShadingPoint):
+        """The interior index at the points: a number, or (N,) where it varies over the surface."""
+        return index_at(self.n_int, sp)
 
     def _sides(self, sp: ShadingPoint):
         cos_o = sp.cos_o
         outside = cos_o >= 0
-        eta = np.where(outside, self.n_int / self.n_ext, self.n_ext / self.n_int)
+        n = self._n(sp)
+        eta = np.where(outside, n / self.n_ext, self.n_ext / n)
         nn = np.where(outside[None, :], sp.n_s, -sp.n_s)
         return np.abs(cos_o), eta, nn
 
@@ -145,13 +186,16 @@ class SmoothDielectric(BSDF):
                           valid=valid, eta_sq=eta_sq)
 
     def scatter_delta(self, v: DeltaVertices) -> bool:
-        """``sample`` + the throughput update in one step (see BSDF)."""
+        """``sample`` + the throughput update in one step (see BSDF); not for an index per point (the vertices
+        carry no surface points: ``sample`` then)."""
+        if self.per_point:
+            return False
         dielectric_scatter(v.rows, v.n_s, v.wo, v.x_T, v.T, v.u_lobe, self.n_int / self.n_ext, self.n_ext / self.n_int,
                            v.T_out, v.d, v.x_out, v.valid, v.eta_sq, T_cols=v.T_cols)
         return True
 
     def describe(self):
-        return {"type": self.name, "n": self.n_int, "exterior_n": self.n_ext}
+        return {"type": self.name, "n": repr(self.n_int) if self.per_point else self.n_int, "exterior_n": self.n_ext}
 
 
 # --------------------------------------------------------------------------- declaration

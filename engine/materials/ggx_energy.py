@@ -52,7 +52,11 @@ Tables (built once, stored by engine.materials.table_cache):
   ``DIELECTRIC_MU_NODES`` nodes in √μ, linear in between.  A rough dielectric has one index and one
   roughness, so its table is 1-D and exact in both (Cycles interpolates a 16³ table over roughness,
   μ and the index).  A roughness that varies over the surface (``DielectricAlbedoRange``): those tables at
-  the conductor table's nodes in r = √α spanning its range, bilinear in (√μ, √α).
+  the conductor table's nodes in r = √α spanning its range, bilinear in (√μ, √α).  An index that varies over the
+  surface too (``DielectricAlbedoIndex``, Cycles' ggx_glass_E is a table over the index as well): those tables at
+  the nodes ``INDEX_NODES`` of c = F0^¼ = √(|η − 1|/(η + 1)) spanning the index range (every 1/32, refined towards
+  η = 1; η and 1/η share c, so one axis serves both sides), linear in c between them; an index range of one value
+  (a texture of one value) is that index's own table, exactly.
 
 E is clamped to [``E_FLOOR``, 1] where it is used, so every compensation factor is finite and the
 added energy never negative.
@@ -75,6 +79,12 @@ ROUGH_NODES = 33
 AVG_NODES = 32
 #: Nodes of a dielectric's table in t = √μ (per side).
 DIELECTRIC_MU_NODES = 65
+#: Nodes of the index axis of a per-point index, in c = F0^¼ ∈ [0, 1] (c = 0: η = 1): every 1/32, and halving
+#: steps towards c = 0 down to 1/1024, where the grazing albedo turns fast (the Fresnel reflectance at cosθ rises
+#: from 0 at η = 1 to ~0.2 by η − 1 ≈ cos²θ/2: c ≈ cosθ/2)
+INDEX_NODES = np.concatenate(([0.0], 2.0 ** -np.arange(10, 5, -1), np.arange(1, 33) / 32.0))
+#: Largest F0^½ of an index node (c → 1 is η → ∞; IOR 1000 has c = 0.9990).
+_ROOT_F0_MAX = 0.999999
 #: Quadrature over the visible-normal disk: Gauss–Legendre nodes in the radius, midpoint nodes in the
 #: angle over the half disk (the integrand is even).
 QUAD_RADIUS = 96
@@ -339,6 +349,66 @@ class DielectricAlbedoRange:
     def extra(self, mu: np.ndarray, outside: np.ndarray, alpha: np.ndarray) -> np.ndarray:
         """k = 1/E − 1 ≥ 0 (N,): f = f_ss·(1 + k)."""
         return 1.0 / np.clip(self(mu, outside, alpha), E_FLOOR, 1.0) - 1.0
+
+
+def root_f0(eta):
+    """c = F0^¼ = √(|η − 1|/(η + 1)) of a real relative index (any shape; the same for η and 1/η)."""
+    return np.sqrt(np.abs((np.asarray(eta, np.float64) - 1.0) / (np.asarray(eta, np.float64) + 1.0)))
+
+
+def _index_of(c: float, above: bool) -> float:
+    """The index ≥ 1 (``above``) or ≤ 1 whose F0^¼ is c."""
+    root = min(c * c, _ROOT_F0_MAX)
+    eta = (1.0 + root) / (1.0 - root)
+    return eta if above else 1.0 / eta
+
+
+class DielectricAlbedoIndex:
+    """E(μ[, α], η) of one rough GGX dielectric interface whose index ratio varies over the surface within
+    [η_lo, η_hi] (all ≥ 1 or all ≤ 1), its roughness constant (``alpha`` a number) or within [α_lo, α_hi]
+    (``alpha`` a (lo, hi) pair): :class:`DielectricAlbedo` (or :class:`DielectricAlbedoRange`) at the index nodes
+    ``INDEX_NODES`` of c = F0^¼ spanning the range, linear in c between them; for η_lo = η_hi that index's own
+    table (the constant lobe's compensation, bit for bit)."""
+
+    def __init__(self, eta_lo: float, eta_hi: float, alpha):
+        if not (eta_lo > 0 and eta_hi >= eta_lo and (eta_lo >= 1.0 or eta_hi <= 1.0)):
+            raise ValueError(f"a per-point index range must lie on one side of 1, got [{eta_lo:g}, {eta_hi:g}]")
+        above = eta_lo >= 1.0
+        self.per_point_alpha = isinstance(alpha, tuple)
+
+        def table(eta):
+            return DielectricAlbedoRange(eta, *alpha) if self.per_point_alpha else DielectricAlbedo(eta, alpha)
+        if eta_lo == eta_hi:
+            self.nodes, self.tables = None, [table(float(eta_lo))]
+            return
+        last = INDEX_NODES.size - 1
+        c_lo, c_hi = sorted(float(root_f0(e)) for e in (eta_lo, eta_hi))
+        j0 = min(int(np.searchsorted(INDEX_NODES, c_lo, "right")) - 1, last - 1)
+        j1 = min(max(int(np.searchsorted(INDEX_NODES, c_hi, "left")), j0 + 1), last)
+        self.nodes = INDEX_NODES[j0:j1 + 1]
+        self.tables = [table(_index_of(float(c), above)) for c in self.nodes]
+
+    def __call__(self, mu, outside, eta, alpha=None) -> np.ndarray:
+        """E (N,) at viewing cosines |μ| (N,) from outside (True) or inside (False), the points' index ratio η (N,)
+        (and roughness α (N,) for a per-point roughness)."""
+        args = (alpha,) if self.per_point_alpha else ()
+        if len(self.tables) == 1:
+            return self.tables[0](mu, outside, *args)
+        mu, outside = np.asarray(mu, np.float64), np.broadcast_to(outside, np.shape(mu))
+        c = root_f0(eta)
+        j = np.clip(np.searchsorted(self.nodes, c, "right") - 1, 0, len(self.tables) - 2)
+        g = np.clip((c - self.nodes[j]) / (self.nodes[j + 1] - self.nodes[j]), 0.0, 1.0)
+        E = np.empty(np.shape(mu))
+        for k in np.unique(j):              # only the two tables each point lies between
+            sel = np.nonzero(j == k)[0]
+            sub = (alpha[sel],) if self.per_point_alpha else ()
+            E[sel] = ((1.0 - g[sel]) * self.tables[k](mu[sel], outside[sel], *sub)
+                      + g[sel] * self.tables[k + 1](mu[sel], outside[sel], *sub))
+        return E
+
+    def extra(self, mu, outside, eta, alpha=None) -> np.ndarray:
+        """k = 1/E − 1 ≥ 0 (N,): f = f_ss·(1 + k)."""
+        return 1.0 / np.clip(self(mu, outside, eta, alpha), E_FLOOR, 1.0) - 1.0
 
 
 @functools.lru_cache(maxsize=64)

@@ -81,18 +81,38 @@ def _specular_index(ior: float, level):
     return NumberSpectrum(level, index, ends[0], ends[1])
 
 
-def _ior_index(ior, level: float):
+def _ior_index(ior, level):
     """The dielectric's index for an IOR that varies over the surface (a TexturedNumber, every value on one side of
-    1) and a constant Specular IOR Level: per point ``specular_ior``'s rule, a NumberSpectrum."""
+    1) and a Specular IOR Level, constant or per point too (a TexturedNumber): per point ``specular_ior``'s rule, a
+    NumberSpectrum."""
+    from ..textures.inputs import MappedNumbers, NumberSpectrum
+
+    def index_of(x, lv):
+        x = np.maximum(x, IOR_MIN)
+        root = np.sqrt(np.minimum(((x - 1.0) / (x + 1.0)) ** 2 * 2.0 * np.clip(lv, 0.0, 1.0), 0.99))
+        eta = (1.0 + root) / (1.0 - root)
+        return np.where(x < 1.0, 1.0 / eta, eta)
+    if not _textured(level):
+        def index(x):
+            return index_of(x, level)
+        ends = sorted(float(index(np.array(v))) for v in (ior.lo, ior.hi))
+        return NumberSpectrum(ior, index, ends[0], ends[1])
+    # both per point: the index is monotone in each (away from 1 as |IOR − 1| and the level grow), so its bounds are
+    # among the four corners
+    corners = [float(index_of(np.array(x), np.array(lv))) for x in (ior.lo, ior.hi) for lv in (level.lo, level.hi)]
+    both = MappedNumbers((ior, level), index_of, min(corners), max(corners))
+    return NumberSpectrum(both, lambda v: v, min(corners), max(corners))
+
+
+def _glass_index(ior):
+    """The transmission's index for an IOR that varies over the surface (a TexturedNumber, every value on one side
+    of 1): max(IOR, IOR_MIN) per point (Cycles' clamp), a NumberSpectrum (the Specular IOR Level changes only the
+    specular layer's index, as in Cycles)."""
     from ..textures.inputs import NumberSpectrum
 
     def index(x):
-        x = np.maximum(x, IOR_MIN)
-        root = np.sqrt(np.minimum(((x - 1.0) / (x + 1.0)) ** 2 * 2.0 * level, 0.99))
-        eta = (1.0 + root) / (1.0 - root)
-        return np.where(x < 1.0, 1.0 / eta, eta)
-    ends = sorted(float(index(np.array(v))) for v in (ior.lo, ior.hi))
-    return NumberSpectrum(ior, index, ends[0], ends[1])
+        return np.maximum(x, IOR_MIN)
+    return NumberSpectrum(ior, index, max(ior.lo, IOR_MIN), max(ior.hi, IOR_MIN))
 
 
 def _textured(v) -> bool:
@@ -270,12 +290,15 @@ def _transmission(p, alpha, ior):
     else:
         a = float(rough) ** 2
     film = bool(_film_values(p))
+    if _textured(ior):          # an index per point
+        ior = _glass_index(ior)
+    matched = not _textured(ior) and index_matched(ior, 1.0)
     if _textured(a):
-        glass = SmoothDielectric(ior) if index_matched(ior, 1.0) else \
+        glass = SmoothDielectric(ior) if matched else \
             RoughDielectric(ior, a, "ggx", multiscatter=p["distribution"] == "multi_ggx")
     elif effectively_smooth(a) and film:
         glass = ThinFilmDielectric(ior, p["thin_film_ior"], p["thin_film_thickness"])
-    elif effectively_smooth(a) or index_matched(ior, 1.0):
+    elif effectively_smooth(a) or matched:
         glass = SmoothDielectric(ior)
     else:
         glass = RoughDielectric(ior, a, "ggx", multiscatter=p["distribution"] == "multi_ggx")
@@ -291,12 +314,9 @@ def _dielectric(p, alpha, ior):
     base = p["base_color"]
     level = p["specular_ior_level"]
     if _textured(ior):
-        if _textured(level):
-            raise SceneError(p.field("ior"), "cannot vary per point together with specular_ior_level")
         eta = _ior_index(ior, level)
     else:
         eta = _specular_index(ior, level) if _textured(level) else specular_ior(ior, level)
-    per_point_index = "ior" if _textured(ior) else "specular_ior_level" if _textured(level) else None
     smooth = effectively_smooth(alpha)
     values = {"n": eta, "k": 0.0, "diffuse_layering": "albedo_scaling", "m": 0.0 if smooth else alpha,
               **_film_values(p)}
@@ -306,9 +326,6 @@ def _dielectric(p, alpha, ior):
     tint = p["specular_tint"]
     tinted = not _white(tint)
     aniso = None if smooth else _anisotropic_lobe(p, eta, 0.0, alpha)
-    if per_point_index and aniso is not None and aniso.film is not None:
-        raise SceneError(p.field(per_point_index), "cannot vary per point on an anisotropic layer under a thin film "
-                                                   "(give a constant value)")
     rough_base = not _never(p["diffuse_roughness"])          # an Oren–Nayar base somewhere (a σ per point too)
     if rough_base or tinted or aniso is not None:
         # the specular layer over Cycles' diffuse base as two parts (mix.Layered): an Oren–Nayar base, a tint,
@@ -451,7 +468,7 @@ DECLARATION = ModelDeclaration(
      Parameter("metallic", "metal's weight", lo=0.0, hi=1.0, default=0.0, texturable=True),
      Parameter("roughness", "Blender roughness r (α = r² for every lobe)", lo=0.0, hi=1.0, default=0.5,
                texturable=True),
-     Parameter("ior", "index of the dielectric and the transmission (per point: the dielectric's only)", lo=0.0,
+     Parameter("ior", "index of the dielectric and the transmission", lo=0.0,
                lo_open=True, default=1.5, texturable=True),
      Parameter("transmission", "transmission's weight (of what the metal leaves)", lo=0.0, hi=1.0, default=0.0,
                texturable=True),
@@ -502,8 +519,6 @@ def _principled(p):
         if ior.lo < 1.0 < ior.hi:
             raise SceneError(p.field("ior"), f"a per-point index must lie on one side of 1, got values in "
                                              f"[{ior.lo:g}, {ior.hi:g}]")
-        if not _always(metallic) and not _never(transmission):
-            raise SceneError(p.field("ior"), "cannot vary per point on a transmitting material (give a constant IOR)")
     else:
         ior = max(ior, IOR_MIN)
     metal = glass = dielectric = None

@@ -57,6 +57,14 @@ point): every formula above is elementwise in α, so each point gets exactly the
 value (the compiled passes read α per path); the compensation's E is then bilinear in (√cosθ_o, √α) between
 the per-α tables at the conductor table's roughness nodes (engine.materials.ggx_energy.DielectricAlbedoRange).
 
+Index per point (``n`` a TexturedNumber or NumberSpectrum, e.g. the Principled IOR from a texture, all values on
+one side of ``exterior_n``): every formula above is elementwise in η as well, so each point gets exactly the
+constant-index lobe of its own value (the compiled passes read η per path); the compensation's E is then linear in
+c = F0^¼ between per-index tables (engine.materials.ggx_energy.DielectricAlbedoIndex; a texture of one value: that
+index's own table).  Where a point's index equals ``exterior_n`` exactly the interface is not there (the BTDF's
+η → 1 limit is a delta): those points pass light straight through as the smooth dielectric does
+(``index_matched``), a Dirac lobe of the sample (is_delta) and nothing in eval and pdf.
+
 Implementation: eval, pdf and sample are one compiled pass each over the batch
 (engine.kernels.rough_dielectric); the NumPy references are ``_eval``, ``_pdf_local`` and ``_sample``
 of this module, declared with kernels.twin.
@@ -69,9 +77,9 @@ import math
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
-from .dielectric import IOR_SOCKET, SmoothDielectric
+from .dielectric import IOR_SOCKET, SmoothDielectric, checked_index, index_at, per_point_index
 from .ggx import GGX
-from .ggx_energy import ALPHA_MAX, DielectricAlbedo, DielectricAlbedoRange
+from .ggx_energy import ALPHA_MAX, DielectricAlbedo, DielectricAlbedoIndex, DielectricAlbedoRange
 from .microfacet import Beckmann, reflect_local
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
 from .roughness import SMOOTH_LIMIT, checked_alpha, declared_slope
@@ -222,17 +230,27 @@ class RoughDielectric(BSDF):
     flags = (BSDFFlags.GLOSSY_REFLECTION | BSDFFlags.GLOSSY_TRANSMISSION | BSDFFlags.POLARISING
              | BSDFFlags.RETARDING)
 
-    def __init__(self, n: float, alpha: float, distribution: str = "beckmann", shadowing: str = "smith",
+    def __init__(self, n, alpha: float, distribution: str = "beckmann", shadowing: str = "smith",
                  exterior_n: float = 1.0, multiscatter: bool = False):
-        self.n_int = float(n)
+        # the index: a number, or per point (a TexturedNumber / NumberSpectrum: a Principled IOR texture)
+        self.n_int = checked_index(n)
         self.n_ext = float(exterior_n)
-        for name, v in (("n", self.n_int), ("exterior_n", self.n_ext)):
+        self.per_point_index = per_point_index(self.n_int)
+        n_lo, n_hi = (self.n_int.lo, self.n_int.hi) if self.per_point_index else (self.n_int, self.n_int)
+        for name, v in (("n", n_lo), ("exterior_n", self.n_ext)):
             if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} must be a finite number > 0, got {v!r}")
+        if n_lo < self.n_ext < n_hi:
+            raise ValueError(f"an index per point must lie on one side of exterior_n = {self.n_ext:g}, got values "
+                             f"in [{n_lo:g}, {n_hi:g}]")
+        #: some point's index equals exterior_n (no interface there: the smooth dielectric's pass-through)
+        self._matched_somewhere = self.per_point_index and n_lo <= self.n_ext <= n_hi
         # α: a number, or per point (a TexturedNumber: a Principled roughness texture, α = r² per point)
         self.per_point = isinstance(alpha, TexturedNumber)
         self.alpha = checked_alpha(alpha, "roughness alpha")      # (≥ roughness.ALPHA_MIN everywhere)
-        self.varies_over_surface = self.per_point
+        self.varies_over_surface = self.per_point or self.per_point_index
+        if self._matched_somewhere:
+            self.flags = self.flags | BSDFFlags.DELTA_TRANSMISSION
         if distribution not in DISTRIBUTIONS:
             raise ValueError(f"distribution must be one of {DISTRIBUTIONS}, got {distribution!r}")
         if shadowing not in SHADOWING:
@@ -250,18 +268,35 @@ class RoughDielectric(BSDF):
             if not hi <= ALPHA_MAX:
                 raise ValueError(f"multiscatter needs alpha <= {ALPHA_MAX:g} (Cycles clamps GGX alpha to 1), "
                                  f"got {alpha!r}")
-            ratio = self.n_int / self.n_ext
-            self._energy = DielectricAlbedoRange(ratio, lo, hi) if self.per_point else DielectricAlbedo(ratio, lo)
+            if self.per_point_index:
+                self._energy = DielectricAlbedoIndex(n_lo / self.n_ext, n_hi / self.n_ext,
+                                                     (lo, hi) if self.per_point else lo)
+            else:
+                ratio = self.n_int / self.n_ext
+                self._energy = DielectricAlbedoRange(ratio, lo, hi) if self.per_point else DielectricAlbedo(ratio, lo)
 
     def _alpha(self, sp: ShadingPoint):
         """α at the points: the number, or (N,) for a textured roughness."""
         return sp.number(self.alpha)
 
-    def _multiscatter_depol(self, sp: ShadingPoint, A: np.ndarray) -> np.ndarray | None:
+    def _n(self, sp: ShadingPoint):
+        """The interior index at the points: the number, or (N,) for a textured index."""
+        return index_at(self.n_int, sp)
+
+    def _matched(self, sp: ShadingPoint, n) -> np.ndarray | None:
+        """(N,) bool: the points whose index equals exterior_n (None where no point's can)."""
+        if not self._matched_somewhere:
+            return None
+        return np.asarray(n) == self.n_ext
+
+    def _multiscatter_depol(self, sp: ShadingPoint, A: np.ndarray, n) -> np.ndarray | None:
         """(1/E(cosθ_o) − 1)·A (L, N), the depolarised multiple-scattering term; None without it."""
         if self._energy is None:
             return None
         cos_o = dot(sp.n_s, sp.wo)
+        if self.per_point_index:
+            args = (self._alpha(sp),) if self.per_point else ()
+            return A * self._energy.extra(np.abs(cos_o), cos_o >= 0, n / self.n_ext, *args)[None, :]
         if self.per_point:
             return A * self._energy.extra(np.abs(cos_o), cos_o >= 0, self._alpha(sp))[None, :]
         return A * self._energy.extra(np.abs(cos_o), cos_o >= 0)[None, :]
@@ -269,27 +304,48 @@ class RoughDielectric(BSDF):
     # --- BSDF interface ---------------------------------------------------------------------------
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        x, A, B, C, S = rough_dielectric_eval(sp.n_s, sp.wo, wi, sp.lam.shape[0], self.n_int, self.n_ext,
+        n = self._n(sp)
+        x, A, B, C, S = rough_dielectric_eval(sp.n_s, sp.wo, wi, sp.lam.shape[0], n, self.n_ext,
                                               self.distribution, self.shadowing == "smith_rational",
                                               self._alpha(sp))
-        return MuellerValue("abcs", x, x, A, B, C, S, depol=self._multiscatter_depol(sp, A))
+        return MuellerValue("abcs", x, x, A, B, C, S, depol=self._multiscatter_depol(sp, A, n))
 
     def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray:
-        eta = self.n_int / self.n_ext
+        eta = self._n(sp) / self.n_ext
         return np.where(sp.cos_o >= 0, eta * eta, 1.0 / (eta * eta))
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        return rough_dielectric_pdf(sp.n_s, sp.wo, wi, self.n_int, self.n_ext, self.distribution, self._alpha(sp))
+        return rough_dielectric_pdf(sp.n_s, sp.wo, wi, self._n(sp), self.n_ext, self.distribution, self._alpha(sp))
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        n = self._n(sp)
         wi, pdf, valid, eta_sq, x, A, B, C, S = rough_dielectric_sample(
-            sp.n_s, sp.wo, u_lobe, u_dir, sp.lam.shape[0], self.n_int, self.n_ext, self.distribution,
+            sp.n_s, sp.wo, u_lobe, u_dir, sp.lam.shape[0], n, self.n_ext, self.distribution,
             self.shadowing == "smith_rational", self._alpha(sp))
-        weight = MuellerValue("abcs", x, x, A, B, C, S, depol=self._multiscatter_depol(sp, A))
-        return BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=eta_sq)
+        weight = MuellerValue("abcs", x, x, A, B, C, S, depol=self._multiscatter_depol(sp, A, n))
+        sample = BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=eta_sq)
+        matched = self._matched(sp, n)
+        if matched is not None and matched.any():
+            self._pass_through(sp, u_lobe, u_dir, np.flatnonzero(matched), sample)
+        return sample
+
+    def _pass_through(self, sp: ShadingPoint, u_lobe, u_dir, at: np.ndarray, sample: BSDFSample) -> None:
+        """At the index-matched points ``at``: the smooth dielectric's sample (light straight through, a Dirac
+        lobe), written into ``sample`` in place."""
+        smooth = SmoothDielectric(self.n_ext, self.n_ext).sample(sp.take(at), u_lobe[at], u_dir[:, at])
+        w, v = sample.weight, smooth.weight
+        sample.wi[:, at] = smooth.wi
+        w.x_in[:, at], w.x_out[:, at] = v.x_in, v.x_out
+        for name in "ABCS":
+            getattr(w, name)[:, at] = getattr(v, name)
+        if w.depol is not None:
+            w.depol[:, at] = 0.0
+        sample.pdf[at], sample.is_delta[at], sample.valid[at] = 0.0, True, smooth.valid
+        sample.eta_sq[at] = smooth.eta_sq
 
     def describe(self) -> dict:
-        out = {"type": self.name, "n": self.n_int, "alpha": repr(self.alpha) if self.per_point else self.alpha,
+        out = {"type": self.name, "n": repr(self.n_int) if self.per_point_index else self.n_int,
+               "alpha": repr(self.alpha) if self.per_point else self.alpha,
                "distribution": self.distribution,
                "shadowing": self.shadowing, "exterior_n": self.n_ext}
         if self.multiscatter:

@@ -40,13 +40,15 @@ class ThinFilmDielectric(SmoothDielectric):
             lo, hi = (v.lo, v.hi) if isinstance(v, TexturedNumber) else (v, v)
             if not (np.isfinite(lo) and np.isfinite(hi) and (lo > 0 if strict else lo >= 0)):
                 raise ValueError(f"{name} must be a finite number {'> 0' if strict else '>= 0'}, got {v!r}")
-        self.varies_over_surface = isinstance(self.film_n, TexturedNumber) or isinstance(self.thickness, TexturedNumber)
+        self.varies_over_surface = self.per_point or isinstance(self.film_n, TexturedNumber) or \
+            isinstance(self.thickness, TexturedNumber)
 
     def _film(self, sp, c):
         """(A, B, C, S) (L, N) of the coated interface's reflection at incidence cosines c (N,)."""
         outside = sp.cos_o >= 0
-        n1 = np.where(outside, self.n_ext, self.n_int)[None, :]
-        n3 = np.where(outside, self.n_int, self.n_ext)[None, :]
+        n = self._n(sp)             # (an index per point: (N,))
+        n1 = np.where(outside, self.n_ext, n)[None, :]
+        n3 = np.where(outside, n, self.n_ext)[None, :]
         return film_reflection_abcs(c[None, :], n1, sp.number(self.film_n), sp.number(self.thickness), n3, sp.lam)
 
     def delta_reflection(self, sp):
@@ -79,7 +81,8 @@ class ThinFilmDielectric(SmoothDielectric):
 
     def describe(self):
         thickness, film_n = (repr(v) if isinstance(v, TexturedNumber) else v for v in (self.thickness, self.film_n))
-        return {"type": self.name, "n": self.n_int, "film_n": film_n, "thickness_nm": thickness,
+        return {"type": self.name, "n": repr(self.n_int) if self.per_point else self.n_int, "film_n": film_n,
+                "thickness_nm": thickness,
                 "exterior_n": self.n_ext}
 
 

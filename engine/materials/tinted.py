@@ -109,11 +109,9 @@ class FresnelTinted(_ScaledLobes):
     × (1 − F_t)/(1 − F_real) (``_glass_factor``)."""
 
     def __init__(self, base: BSDF, n, tint: Spectrum):
-        # the index: a number, or per point on an opaque layer (a NumberSpectrum: a per-point IOR or Specular IOR
-        # Level of the Principled dielectric)
+        # the index: a number, or per point (a NumberSpectrum: a per-point IOR or Specular IOR Level of the
+        # Principled dielectric, a per-point IOR of its glass)
         self.per_point = isinstance(n, TexturedSpectrum)
-        if self.per_point and base.flags.transmits:
-            raise ValueError("a glass's Specular Tint needs a constant index")
         self.base, self.n, self.tint = base, n if self.per_point else float(n), tint
         self.name = base.name
         self.f0 = None if self.per_point else ((self.n - 1.0) / (self.n + 1.0)) ** 2
@@ -152,6 +150,8 @@ class FresnelTinted(_ScaledLobes):
         the viewer's side at the facet angle — of the half vector (reflection) or of Walter's refraction half
         vector −(n_i ω_i + n_o ω_o) (refraction); F = 1 (total internal reflection) changes nothing."""
         from ..polarisation.fresnel import fresnel_reflectance
+        if self.per_point:
+            return self._glass_factor_per_point(sp, wi)
         outside = sp.cos_o >= 0
         n_o = np.where(outside, 1.0, self.n)            # the viewer's medium, the other one
         n_i = np.where(outside, self.n, 1.0)
@@ -165,6 +165,25 @@ class FresnelTinted(_ScaledLobes):
         if self.f0 >= 1.0:
             return np.ones(sp.lam.shape)
         F_t = np.clip(F[None, :] + self.f0 * (t - 1.0) * (1.0 - F[None, :]) / (1.0 - self.f0), 0.0, 1.0)
+        refl = np.where(F[None, :] > 0, F_t / np.where(F > 0, F, 1.0)[None, :], 1.0)
+        trans = np.where(F[None, :] < 1, (1.0 - F_t) / np.where(F < 1, 1.0 - F, 1.0)[None, :], 1.0)
+        return np.where(through[None, :], trans, refl)
+
+    def _glass_factor_per_point(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
+        """``_glass_factor`` with the glass's index n (N,) per point: the same arithmetic at each point's own n."""
+        from ..polarisation.fresnel import fresnel_reflectance
+        n = self.n.numbers(sp.surface_points())
+        outside = sp.cos_o >= 0
+        n_o = np.where(outside, 1.0, n)
+        n_i = np.where(outside, n, 1.0)
+        through = dot(wi, sp.n_g) * dot(sp.wo, sp.n_g) < 0
+        h = np.where(through[None, :], -(n_i[None, :] * wi + n_o[None, :] * sp.wo), wi + sp.wo)
+        length = np.sqrt(dot(h, h))
+        cos_f = np.abs(dot(sp.wo, h)) / np.where(length > 0, length, 1.0)
+        F = fresnel_reflectance(np.clip(cos_f, 0.0, 1.0), np.where(outside, n, 1.0 / n).astype(np.complex128))
+        f0 = (((n - 1.0) / (n + 1.0)) ** 2)[None, :]
+        t = sp.spectrum(self.tint) * np.ones(sp.lam.shape)
+        F_t = np.clip(F[None, :] + f0 * (t - 1.0) * (1.0 - F[None, :]) / (1.0 - f0), 0.0, 1.0)
         refl = np.where(F[None, :] > 0, F_t / np.where(F > 0, F, 1.0)[None, :], 1.0)
         trans = np.where(F[None, :] < 1, (1.0 - F_t) / np.where(F < 1, 1.0 - F, 1.0)[None, :], 1.0)
         return np.where(through[None, :], trans, refl)

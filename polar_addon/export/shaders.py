@@ -247,40 +247,23 @@ def _coat_ior(r):
     return min(max(r.float("Coat IOR"), 1.0), 100.0)
 
 
-def _filmed_anisotropy(node) -> bool:
-    """A Principled BSDF that is anisotropic under a Thin Film: its dielectric's index cannot vary per point
-    (engine.materials.principled)."""
-    film = node.inputs.get("Thin Film Thickness")
-    return anisotropic(node) and film is not None and (film.is_linked or float(film.default_value) > 0.0)
-
-
-def _principled_ior(r, node, transmission):
-    """The Principled IOR: a TextureInput where linked on an opaque material without a linked Specular IOR Level
-    (the dielectric's index per point, with or without a Specular Tint or an anisotropy), else as Cycles reads the
-    constant (linked: its own value, one warning)."""
+def _principled_ior(r):
+    """The Principled IOR: a TextureInput where linked (the index per point of the dielectric — with a Specular Tint,
+    an anisotropy, a Thin Film or a linked Specular IOR Level too — and of the transmission, smooth, rough, tinted or
+    filmed), else the constant as Cycles reads it (linked where it cannot be read per point: its own value, the
+    reader's warning)."""
     if r._socket("IOR").is_linked:
-        plain = not (node.inputs["Specular IOR Level"].is_linked or _filmed_anisotropy(node))
-        if plain and not isinstance(transmission, TextureInput) and transmission == 0.0:
-            source = r.texture("IOR", lo=IOR_MIN, hi=1e6)
-            if source is not None:
-                return source
-        else:
-            r.warnings.append(f"material {r.mat!r}: IOR of {node.name!r} cannot vary over the surface with a "
-                              "transmission, a linked Specular IOR Level or a filmed anisotropy yet; its own value is "
-                              "used")
+        source = r.texture("IOR", lo=IOR_MIN, hi=1e6)
+        if source is not None:
+            return source
         return max(r._checked_float("IOR", -math.inf, math.inf), IOR_MIN)
     return _ior(r, "IOR")
 
 
-def _specular_level(r, node):
+def _specular_level(r):
     """Specular IOR Level: a TextureInput in [0, 1] where linked (glTF's KHR_materials_specular map; with a Specular
-    Tint or an anisotropy too; not yet on an anisotropic layer under a Thin Film: its own value, one warning), else
-    the constant."""
+    Tint, an anisotropy, a Thin Film or a per-point IOR too), else the constant."""
     if r._socket("Specular IOR Level").is_linked:
-        if _filmed_anisotropy(node):
-            r.warnings.append(f"material {r.mat!r}: Specular IOR Level of {node.name!r} cannot vary over the surface "
-                              "on an anisotropic layer under a Thin Film yet; its own value is used")
-            return r._checked_float("Specular IOR Level", 0.0, 1.0)
         return r.number_or_texture("Specular IOR Level")
     return r.float("Specular IOR Level", 0.0, 1.0)
 
@@ -339,8 +322,8 @@ def _principled(node, mat, warnings, bake=None):
     transmission = _fraction(r, "Transmission Weight")
     roughness = r.number_or_texture("Roughness")
     values = {"base_color": _grey(r.rgb_or_texture("Base Color", 0.0, 1.0)), "metallic": metallic,
-              "roughness": roughness, "transmission": transmission, "ior": _principled_ior(r, node, transmission),
-              "specular_ior_level": _specular_level(r, node),
+              "roughness": roughness, "transmission": transmission, "ior": _principled_ior(r),
+              "specular_ior_level": _specular_level(r),
               "specular_tint": _grey(r.rgb_or_texture("Specular Tint", 0.0)),
               "coat_weight": _fraction(r, "Coat Weight"),
               "coat_roughness": r.number_or_texture("Coat Roughness"),

@@ -423,10 +423,47 @@ def test_anisotropic_node_inputs_per_point_match_cycles(addon, case, lighting):
     compare_with_cycles(scene, f"{case} per point, anisotropic node", lighting)
 
 
-def test_a_per_point_ior_on_a_glass_says_it_takes_its_own_value(addon):
-    scene = sphere_scene("IOR", (1.2, 2.0), {"Transmission Weight": 1.0, "Roughness": 0.2}, "lamps")
-    _, _, warnings = ap.export_polar(scene, 1, 8)
-    assert len(warnings) == 1 and "IOR of" in warnings[0] and "own value" in warnings[0]
+#: an IOR checker on a glass: rough (Multiscatter GGX: the per-index compensation tables) and tinted by its Base
+#: Color; smooth, with a Specular Tint
+GLASS_IOR = {"rough tinted": {"Transmission Weight": 1.0, "Roughness": 0.2, "Base Color": (0.9, 0.7, 0.5)},
+             "smooth, specular tint": {"Transmission Weight": 1.0, "Roughness": 0.0, "Specular Tint": (1.0, 0.6, 0.3)}}
+
+
+@pytest.mark.parametrize("lighting", ap.LIGHTINGS)
+@pytest.mark.parametrize("case", list(GLASS_IOR))
+def test_ior_per_point_on_a_glass_matches_cycles(addon, case, lighting):
+    """An IOR checker (1.2 | 2.0, an image texture) on a transmitting Principled BSDF: the glass's index per point
+    (no warning: the comparison refuses any)."""
+    if case.startswith("smooth") and lighting != "lamps":
+        pytest.skip("one lighting for the smooth glass (the budget)")
+    scene = sphere_scene("IOR", (1.2, 2.0), dict(GLASS_IOR[case]), lighting)
+    compare_with_cycles(scene, f"Principled IOR per point on a {case} glass", lighting)
+
+
+@pytest.mark.parametrize("socket, values", [("IOR", (1.2, 2.0)), ("Specular IOR Level", (0.1, 0.9))])
+def test_per_point_index_on_a_filmed_anisotropy_matches_cycles(addon, socket, values):
+    """An IOR or a Specular IOR Level checker on an anisotropic specular layer under a Thin Film (a Tangent node's
+    UV tangent): the index per point under the film, no warning (the spectral mode, as the films above; lamps)."""
+    scene = sphere_scene(socket, values, {"Anisotropic": 0.5, "Roughness": 0.3, "Thin Film Thickness": 300.0,
+                                          "Thin Film IOR": 1.5, "Base Color": (0.1, 0.1, 0.1)}, "lamps")
+    tree = bpy.data.materials["P"].node_tree
+    tangent = tree.nodes.new("ShaderNodeTangent")
+    tangent.direction_type = "UV_MAP"
+    tree.links.new(tangent.outputs["Tangent"], tree.nodes["Principled BSDF"].inputs["Tangent"])
+    compare_with_cycles(scene, f"Principled {socket} per point, filmed anisotropy", "lamps", spectral="SPECTRAL")
+
+
+def test_ior_and_specular_ior_level_both_per_point_match_cycles(addon):
+    """An IOR checker and a Specular IOR Level checker (a second image) on a rough dielectric that half transmits:
+    the specular layer's index per point from both, the glass's from the IOR (no warning)."""
+    scene = sphere_scene("IOR", (1.3, 2.2), {"Roughness": 0.3, "Transmission Weight": 0.5,
+                                             "Base Color": (0.6, 0.4, 0.2)}, "lamps")
+    tree = bpy.data.materials["P"].node_tree
+    tex = tree.nodes.new("ShaderNodeTexImage")
+    # the same checker, values crossed: IOR 1.3 with level 0.9 (F0 above the IOR's), 2.2 with 0.1 (below)
+    tex.image, tex.interpolation = checker("level", 0.9, 0.1, False), "Closest"
+    tree.links.new(tex.outputs["Color"], tree.nodes["Principled BSDF"].inputs["Specular IOR Level"])
+    compare_with_cycles(scene, "Principled IOR and Specular IOR Level per point", "lamps")
 
 
 @pytest.mark.parametrize("lighting", ap.LIGHTINGS)

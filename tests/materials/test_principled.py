@@ -132,8 +132,8 @@ def test_specular_tint_on_a_glass_keeps_reflection_plus_transmission_one():
 
 
 def test_a_per_point_ior_is_refused_where_it_cannot_be_rendered(tmp_path):
-    """An IOR texture: the dielectric's index per point; on a transmitting material, with a per-point Specular
-    IOR Level, or across 1: one line naming the field."""
+    """An IOR texture: the dielectric's and the glass's index per point, beside a per-point Specular IOR Level too
+    (tests/materials/test_glass_per_point_index.py); across 1 (also on a glass): one line naming the field."""
     import OpenEXR
     OpenEXR.File({"type": OpenEXR.scanlineimage},
                  {"R": np.array([[1.2, 2.0]], np.float32)}).write(str(tmp_path / "ior.exr"))
@@ -145,8 +145,11 @@ def test_a_per_point_ior_is_refused_where_it_cannot_be_rendered(tmp_path):
     model = parse_material({"type": "principled", "ior": tex}, "materials.p", base_dir=str(tmp_path))
     assert model.varies_over_surface
     level = {**tex, "texture": "level.exr"}
-    for extra, name in (({"transmission": 1.0}, "ior.exr"), ({"specular_ior_level": level}, "ior.exr"),
-                        ({}, "across.exr")):
+    for extra in ({"transmission": 1.0}, {"specular_ior_level": level}, {"transmission": 0.5, "roughness": 0.3}):
+        assert parse_material({"type": "principled", "ior": tex, **extra}, "materials.p",
+                              base_dir=str(tmp_path)).varies_over_surface
+    for extra, name in (({}, "across.exr"), ({"transmission": 1.0}, "across.exr"),
+                        ({"transmission": 1.0, "roughness": 0.4}, "across.exr")):
         with pytest.raises(SceneError, match=r"^materials\.p\.ior: "):
             parse_material({"type": "principled", "ior": {**tex, "texture": name}, **extra}, "materials.p",
                            base_dir=str(tmp_path))
