@@ -316,7 +316,7 @@ class _Prediction:
         if samples > 0 and ad.threshold > 0 and self.unit_times:
             costs = cost_map(self.unit_times, film.count.size, seconds, tile_cost_per_sample(film, halves))
             self.first["prediction"] = predict(film, halves, ad.quantity, ad.threshold, ad.min_spp,
-                                               self.settings.spp, costs)
+                                               self.settings.spp, costs, sampler=self.settings.sampler)
 
 
 def _adaptive_report(result, adaptive) -> tuple[dict, dict]:
@@ -638,7 +638,10 @@ def _adaptive_options(r) -> None:
     g.add_argument("--noise-quantity", default="s0", metavar="Q",
                    help="s0 (default) | dolp | aolp | docp | stokes: what the threshold applies to")
     g.add_argument("--min-spp", type=int, metavar="N", help="samples every pixel gets first (default min(16, --spp))")
-    g.add_argument("--time-limit", type=float, metavar="S", help="stop sampling after S seconds (0 = no limit)")
+    g.add_argument("--time-limit", type=float, metavar="S",
+                   help="stop sampling after S seconds (0 = no limit); alone (no --noise-threshold): a time budget — "
+                        "rounds give each tile samples ∝ σ/√cost (the threshold's share rule) for a cost growing "
+                        "≈ 30 %% a round, until the time is up or every noisy tile has --spp")
 
 
 def _adaptive_spp(spp: int) -> None:
@@ -663,7 +666,7 @@ def _adaptive_settings(args, spp: int):
     threshold = args.noise_threshold
     ad = check_adaptive(threshold if threshold is not None else 1.0, args.noise_quantity, min_spp,
                         args.time_limit if args.time_limit is not None else 0.0, spp)
-    if threshold is None:                     # a time limit alone: sample everything until time or --spp
+    if threshold is None:      # a time limit alone: budget mode (engine.render.adaptive.budget_targets)
         ad.threshold = 0.0
     return ad
 
@@ -697,7 +700,8 @@ def _estimate(args) -> int:
     print(f"rounds: {per_round * 1e3:.0f} ms each besides their samples (one tile through the checkpoints up to "
           f"{min(st.spp, ROUND_PROBE_MAX_SPP)} spp)")
     for quantity, threshold in targets:
-        p = predict(pilot.film, pilot.halves, quantity, threshold, min_spp, st.spp, sps, round_seconds=per_round)
+        p = predict(pilot.film, pilot.halves, quantity, threshold, min_spp, st.spp, sps, round_seconds=per_round,
+                    sampler=st.sampler)
         print(f"target {p.describe()}")
     return 0
 

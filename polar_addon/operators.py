@@ -102,7 +102,7 @@ class POLAR_OT_estimate_cost(bpy.types.Operator):
             self.report({"ERROR"}, f"Polar: {e}")
             return {"CANCELLED"}
         pred = predict(pilot.film, pilot.halves, quantity, p.adaptive_threshold, min_spp, max(p.samples, min_spp),
-                       sps, round_seconds=per_round)
+                       sps, round_seconds=per_round, sampler=settings.sampler)
         p.estimate_report = (f"Adaptive: median {pred.median:.0f}, p95 {pred.p95:.0f} spp, "
                              f"{pred.adaptive_seconds:.1f} s\n"
                              f"Uniform: {pred.uniform_spp} spp, {pred.uniform_seconds:.1f} s"

@@ -121,7 +121,9 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                                       "is tested (at least 2: the error comes from even and odd samples)",
                                       default=16, min=2, max=1 << 20)
     time_limit: FloatProperty(name="Time Limit", description="Stop sampling after this many seconds (0 = no "
-                              "limit); the render then shows the samples done", default=0.0, min=0.0,
+                              "limit); the render then shows the samples done. Without Noise Threshold the time is "
+                              "spent where the noise is (samples ∝ noise/√cost per tile, as the threshold shares them)",
+                              default=0.0, min=0.0,
                               soft_max=3600.0)
     use_denoising: BoolProperty(name="Denoise", description="Denoise the final render with OpenImageDenoise as "
                                 "the Polar Denoise compositor group does: the analyser images (S0 ± S1, S2, S3)/2 "

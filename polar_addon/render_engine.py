@@ -129,7 +129,8 @@ def adaptive_summary(out, adaptive) -> str:
     sampled = film.count > 0
     counts, finite = film.count[sampled], tile_err[sampled & np.isfinite(err)]
     achieved = (f"{adaptive.quantity} error p95 {np.percentile(finite, 95):.3g} {UNITS[adaptive.quantity]}"
-                + (f" (threshold {adaptive.threshold:g})" if adaptive.threshold > 0 else "")) if finite.size else ""
+                + (f" (threshold {adaptive.threshold:g})" if adaptive.threshold > 0
+                   else f" (budget {adaptive.time_limit:g} s)")) if finite.size else ""
     return (f" | adaptive: {out.stats['stop_reason']}, {achieved}, spp {counts.min()}–{counts.max()} "
             f"(median {np.median(counts):.0f})") if counts.size else ""
 
@@ -222,7 +223,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", "COLOR")
         settings = getattr(renderlayer, "polar", None)
         enabled = settings.enabled_passes() if settings is not None else list(DEFAULT_PASSES)
-        adaptive = scene is not None and getattr(getattr(scene, "polar", None), "use_adaptive_sampling", False)
+        p = getattr(scene, "polar", None) if scene is not None else None
+        adaptive = p is not None and (p.use_adaptive_sampling or p.time_limit > 0)     # a time limit alone: budget
         for name in enabled:
             if name == "Noise" and not adaptive:
                 continue

@@ -30,13 +30,14 @@ class POLAR_PT_sampling(_PolarPanel, bpy.types.Panel):
         sub = row.row()
         sub.active = p.use_adaptive_sampling
         sub.prop(p, "adaptive_threshold", text="")
+        adaptive = p.use_adaptive_sampling or p.time_limit > 0        # a time limit alone: budget mode
         col = layout.column(align=True)
         sub = col.column(align=True)
-        sub.active = p.use_adaptive_sampling
+        sub.active = adaptive
         sub.prop(p, "noise_quantity")
-        col.prop(p, "samples", text="Max Samples" if p.use_adaptive_sampling else "Render")
+        col.prop(p, "samples", text="Max Samples" if adaptive else "Render")
         sub = col.column(align=True)
-        sub.active = p.use_adaptive_sampling
+        sub.active = adaptive
         sub.prop(p, "adaptive_min_samples", text="Min Samples")
         col.prop(p, "time_limit")
         layout.operator("polar.estimate_cost", icon="TIME")

@@ -34,6 +34,7 @@ import numpy as np
 
 from ..errors import SceneError
 from .adaptive import (QUANTITIES, TILE, UNITS, AdaptiveSettings, allocation_from, checkpoints, film_noise,
+                       ladder_of,
                        pooled_error, tile_cost, tile_ids)
 from .plan import RenderRequest
 
@@ -148,15 +149,17 @@ def cost_map(unit_times, n_pixels: int, seconds: float, cost_per_sample: np.ndar
 
 
 def predict(film, halves, quantity: str, threshold: float, min_spp: int, spp: int, seconds_per_sample,
-            pixels: np.ndarray | None = None, round_seconds: float = 0.0) -> Prediction:
+            pixels: np.ndarray | None = None, round_seconds: float = 0.0, sampler: str = "independent") -> Prediction:
     """Predicted counts from a film whose pixels all have the same count n (the pilot or first pass).
 
     ``seconds_per_sample``: one number, or per pixel over the whole image (:func:`cost_map`);
-    ``round_seconds``: the fixed time of an adaptive round (:func:`round_overhead`; 0: not counted)."""
+    ``round_seconds``: the fixed time of an adaptive round (:func:`round_overhead`; 0: not counted);
+    ``sampler``: the render's (its checkpoint ladder, engine.render.adaptive.ladder_of)."""
     if pixels is None:
         pixels = np.arange(film.count.size)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):   # extreme thresholds: need = ∞ or 0
-        return _predict(film, halves, quantity, threshold, min_spp, spp, seconds_per_sample, pixels, round_seconds)
+        return _predict(film, halves, quantity, threshold, min_spp, spp, seconds_per_sample, pixels, round_seconds,
+                        ladder_of(sampler))
 
 
 def _count(x: float, min_spp: int, spp: int) -> int:
@@ -165,14 +168,14 @@ def _count(x: float, min_spp: int, spp: int) -> int:
     return int(min(spp, max(min_spp, math.ceil(x - 1e-9)))) if x <= spp else int(spp)
 
 
-def _predict(film, halves, quantity, threshold, min_spp, spp, seconds_per_sample, pixels, round_seconds):
+def _predict(film, halves, quantity, threshold, min_spp, spp, seconds_per_sample, pixels, round_seconds, ladder):
     n = film.count[pixels].astype(np.float64)
     _, _, tile_err = film_noise(film, halves, quantity, pixels)
     alloc = allocation_from(halves.sums, film.count, quantity, threshold, tile_ids(film.width, film.height), pixels,
                             halves.cost, film.width)
     need = n * (tile_err / threshold) ** 2                # every tile below the threshold (uniform: its own error)
     sigma, mu = alloc.sigma, alloc.level
-    marks = checkpoints(min_spp, spp)
+    marks = checkpoints(min_spp, spp, ladder)
     if np.any(alloc.n_nb > 0):
         # the error pooled with the neighbourhood (engine.render.adaptive.pooled_error) at every
         # checkpoint m, the tile's own σ̂ staying what it is: the first m where e(m) ≤ T or σ(m)/(μ·w) ≤ m

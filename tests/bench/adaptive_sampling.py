@@ -2,6 +2,8 @@
 
     python tests/bench/adaptive_sampling.py [--res 64] [--ref-spp 2048] [--mitsuba-python PY]
                                             [--mitsuba-spp 8192] [--seeds 8] [--out out/adaptive]
+                                            [--modes threshold,budget] [--mse-seeds 1] [--no-bias]
+                                            [--no-prediction]
 
 References.  glass_sphere and fresnel_sphere_au: two Mitsuba 3 renders (llvm_ad_spectral_polarized,
 ``--mitsuba-spp`` each, seeds 100 and 101, ../shared/peers/render_peer.py; cached in --out) when
@@ -20,14 +22,20 @@ DoLP per 4×4 tile and the pilot's cost c per pixel give the predicted MSE × ti
 the rule would give from a 16-spp first pass (engine.render.estimate.predict), and the bound
 Σv·Σc/(Σ√(vc))² of any allocation (engine.render.estimate.mse_time_gain / best_mse_time_gain).
 
-Part 1 (efficiency, side by side in one run): uniform renders at 16, 64, 256 spp and adaptive
-renders (threshold on s0 and on dolp, min 16, max 512 spp; glass_sphere also dolp ≤ 0.03, a
-threshold reachable within 512 spp).  Cost: rays traced (camera + bounce +
+Part 1 (efficiency, both modes side by side in one run): uniform renders at 16, 64, 256 spp, adaptive
+renders in **threshold mode** (--noise-threshold on s0 and on dolp, min 16, max 512 spp) and in **budget
+mode** (--time-limit alone, quantity s0 and dolp, max 512 spp) with the time of the uniform 64 and 256 spp
+renders: the 1-thread render's limit is in CPU seconds of this process (RenderRequest.clock =
+time.process_time, robust to other jobs), the every-core render's in wall seconds.  Cost: rays traced (camera + bounce +
 shadow rays: deterministic), CPU seconds of a 1-thread render (robust when other processes share
 the machine) and wall seconds of a render on every core (what a user waits; noisy on a shared VM).
 The equal-cost gain is the MSE of a uniform render of the same cost (log-log interpolation between
 the uniform renders) ÷ the adaptive MSE (> 1: adaptive is better), in each of the three costs.
-References (Mitsuba's and ours) are cached in --out.  The table ends with the load average.
+``--mse-seeds`` K averages every MSE of part 1 over K seeds (the costs are the first seed's, except
+in budget mode: the mean of its K renders' costs): one render's DoLP MSE depends on the rare paths it
+finds, by ±30 % on glass_sphere.  References (Mitsuba's and ours) are cached in --out.  A last table
+puts the two modes side by side (CPU-second gains against the first reference).  The table ends with
+the load average.
 
 Part 1b (bias): ``--seeds`` adaptive renders (s0 threshold) with different seeds; for S0…S3 the
 mean over seeds of the image sum against our reference's (z = difference ÷ its standard error from
@@ -203,33 +211,90 @@ def allocation_gains(name, renderer, scene, ref: Reference, thresholds, rows):
                          best_mse_time_gain(var, cost), mse_time_gain(var, 1.0, counts), best_mse_time_gain(var, 1.0)))
 
 
-def efficiency(name, renderer, scene, refs, thresholds, rows):
+def budgeted(renderer, st, quantity, cpu_budget, wall_budget):
+    """Budget mode (a time limit without a threshold): (result of a 1-thread render whose time limit is
+    ``cpu_budget`` CPU seconds of this process — RenderRequest.clock = process_time, so other jobs on the
+    machine do not shorten it —, its CPU seconds, result of a render on every core limited to
+    ``wall_budget`` wall seconds, its wall seconds).  Each is one render: a budget render's counts
+    depend on the time, so there is no least of two."""
+    one = dataclasses.replace(st, threads=1)
+    ad = AdaptiveSettings(threshold=0.0, quantity=quantity, min_spp=MIN_SPP, time_limit=cpu_budget)
+    c0 = time.process_time()
+    result = renderer.render(RenderRequest(one, adaptive=ad, clock=time.process_time))
+    cpu = time.process_time() - c0
+    if wall_budget is None:
+        return result, cpu, None, None
+    t0 = time.perf_counter()
+    wall_result = renderer.render(RenderRequest(st, adaptive=dataclasses.replace(ad, time_limit=wall_budget)))
+    return result, cpu, wall_result, time.perf_counter() - t0
+
+
+def equal_cost_gains(uniform, errs, costs):
+    """[per reference: S0 (rays, CPU s, wall s), DoLP (rays, CPU s, wall s)] gains at equal cost: the
+    uniform renders' MSE interpolated at each cost ÷ the MSE (``errs``: per cost column, per reference)."""
+    gains = []
+    for j in range(len(uniform[0][3])):
+        g = []
+        for k in (0, 1):
+            for col, cost in enumerate(costs):
+                g.append(uniform_mse_at(cost, [u[col] for u in uniform], [u[3][j][k] for u in uniform])
+                         / errs[col][j][k])
+        gains.append(g)
+    return gains
+
+
+def seed_mse(renderer, st, refs, result, seeds, adaptive=None):
+    """[per reference: (MSE of S0, MSE of DoLP)] of ``result`` (seed 7) and of renders with the next
+    ``seeds`` − 1 seeds, averaged: one render's DoLP MSE is dominated by the rare paths it happens to find."""
+    errs = [[mse(lum(result.stokes()), r) for r in refs]]
+    for k in range(1, seeds):
+        other = renderer.render(RenderRequest(dataclasses.replace(st, seed=7 + k), adaptive=adaptive))
+        errs.append([mse(lum(other.stokes()), r) for r in refs])
+    return [tuple(float(np.mean([e[j][i] for e in errs])) for i in (0, 1)) for j in range(len(refs))]
+
+
+def efficiency(name, renderer, scene, refs, thresholds, rows, modes=("threshold", "budget"), budget_spp=(64, 256),
+               seeds=1):
+    """Part 1: uniform renders, then threshold mode (one row per threshold) and budget mode (a time limit
+    alone: per quantity, the time of the uniform renders of ``budget_spp``), side by side; MSEs averaged over
+    ``seeds`` seeds (the costs are the first seed's)."""
     uniform = []
     for spp in (16, 64, 256):
         st = dataclasses.replace(scene.settings, spp=spp, seed=7)
         result, cpu, seconds = costed(renderer, st)
-        y = lum(result.stokes())
-        uniform.append((rays(result), cpu, seconds, [mse(y, r) for r in refs]))
-        rows.append((name, f"uniform {spp} spp", spp, cpu, seconds, rays(result), uniform[-1][3], None))
-    for quantity, threshold in thresholds:
-        st = dataclasses.replace(scene.settings, spp=MAX_SPP, seed=7)
+        uniform.append((rays(result), cpu, seconds, seed_mse(renderer, st, refs, result, seeds)))
+        rows.append((name, "uniform", f"uniform {spp} spp", spp, cpu, seconds, rays(result), uniform[-1][3], None))
+    st = dataclasses.replace(scene.settings, spp=MAX_SPP, seed=7)
+    for quantity, threshold in thresholds if "threshold" in modes else ():
         ad = AdaptiveSettings(threshold=threshold, quantity=quantity, min_spp=MIN_SPP)
         result, cpu, seconds = costed(renderer, st, ad)
-        y = lum(result.stokes())
-        errs = [mse(y, r) for r in refs]
+        errs = seed_mse(renderer, st, refs, result, seeds, ad)
         r_ = rays(result)
-        gains = []
-        for j, (m0, md) in enumerate(errs):
-            g = []
-            for k, m in enumerate((m0, md)):
-                for cost, col in ((r_, 0), (cpu, 1), (seconds, 2)):
-                    g.append(uniform_mse_at(cost, [u[col] for u in uniform], [u[3][j][k] for u in uniform]) / m)
-            gains.append(g)                   # S0 (rays, CPU s, wall s), DoLP (rays, CPU s, wall s)
-        rows.append((name, f"adaptive {quantity} ≤ {threshold:g} ({result.stats['stop_reason']})",
+        gains = equal_cost_gains(uniform, [errs] * 3, (r_, cpu, seconds))
+        rows.append((name, "threshold", f"{quantity} ≤ {threshold:g} ({result.stats['stop_reason']})",
                      float(result.film.count.mean()), cpu, seconds, r_, errs, gains))
         print(rows[-1], flush=True)
         if name == "demo" and quantity == "dolp":
             save_maps(result, quantity)
+    for quantity in sorted({q for q, _ in thresholds}, reverse=True) if "budget" in modes else ():
+        for spp in budget_spp:
+            u = uniform[[16, 64, 256].index(spp)]
+            result, cpu, wall_result, seconds = budgeted(renderer, st, quantity, u[1], u[2])
+            errs = [[mse(lum(result.stokes()), r) for r in refs]]
+            r_, cpus = [rays(result)], [cpu]
+            for k in range(1, seeds):                # the same budget with other seeds: mean MSE and cost
+                other, c_k, _, _ = budgeted(renderer, dataclasses.replace(st, seed=7 + k), quantity, u[1], None)
+                errs.append([mse(lum(other.stokes()), r) for r in refs])
+                r_.append(rays(other))
+                cpus.append(c_k)
+            errs = [tuple(float(np.mean([e[j][i] for e in errs])) for i in (0, 1)) for j in range(len(refs))]
+            r_, cpu = float(np.mean(r_)), float(np.mean(cpus))
+            wall_errs = [mse(lum(wall_result.stokes()), r) for r in refs]
+            gains = equal_cost_gains(uniform, [errs, errs, wall_errs], (r_, cpu, seconds))
+            rows.append((name, "budget", f"{quantity}, time of uniform {spp} spp ({result.stats['stop_reason']}, "
+                                         f"{result.stats.get('adaptive_rounds', 0)} rounds)",
+                         float(result.film.count.mean()), cpu, seconds, r_, errs, gains))
+            print(rows[-1], flush=True)
 
 
 def bias(name, renderer, scene, ref: Reference, threshold, seeds, rows):
@@ -312,10 +377,16 @@ def main():
     ap.add_argument("--out", default=os.path.join(REPO, "out", "adaptive"))
     ap.add_argument("--prediction-only", action="store_true", help="part 2 only")
     ap.add_argument("--scenes", default="glass_sphere,fresnel_sphere_au,demo", help="scenes of parts 0–1b")
+    ap.add_argument("--modes", default="threshold,budget",
+                    help="adaptive modes of part 1: threshold (--noise-threshold) and/or budget (--time-limit alone)")
+    ap.add_argument("--mse-seeds", type=int, default=1, help="seeds each MSE of part 1 is averaged over")
+    ap.add_argument("--no-bias", action="store_true", help="skip part 1b")
+    ap.add_argument("--no-prediction", action="store_true", help="skip part 2")
     args = ap.parse_args()
     os.makedirs(args.out, exist_ok=True)
-    thresholds = {"glass_sphere": [("s0", 0.02), ("dolp", 0.01), ("dolp", 0.03)],
-                  "fresnel_sphere_au": [("s0", 0.01), ("dolp", 0.005)],
+    modes = tuple(args.modes.split(","))
+    thresholds = {"glass_sphere": [("s0", 0.02), ("s0", 0.05), ("dolp", 0.01), ("dolp", 0.03)],
+                  "fresnel_sphere_au": [("s0", 0.01), ("s0", 0.005), ("dolp", 0.005), ("dolp", 0.002)],
                   "demo": [("s0", 0.02), ("dolp", 0.01)]}
     mitsuba = has_mitsuba(args.mitsuba_python)
     load_before = os.getloadavg()
@@ -329,27 +400,44 @@ def main():
             refs.insert(0, mitsuba_reference(args.mitsuba_python, name, args.mitsuba_spp, args.res, args.out))
         labels[name] = [r.label for r in refs]
         allocation_gains(name, renderer, scene, refs[-1], thresholds[name], gains)
-        efficiency(name, renderer, scene, refs, thresholds[name], eff)
-        bias(name, renderer, scene, refs[-1], thresholds[name][0][1], args.seeds, biases)
+        efficiency(name, renderer, scene, refs, thresholds[name], eff, modes, seeds=args.mse_seeds)
+        if not args.no_bias:
+            bias(name, renderer, scene, refs[-1], thresholds[name][0][1], args.seeds, biases)
     pred = []
-    prediction([("glass_sphere", "dolp", 0.01), ("fresnel_sphere_au", "s0", 0.01), ("demo", "dolp", 0.01)],
-               args.res, pred)
+    if not args.no_prediction:
+        prediction([("glass_sphere", "dolp", 0.01), ("fresnel_sphere_au", "s0", 0.01), ("demo", "dolp", 0.01)],
+                   args.res, pred)
     lines = ["| scene | threshold | MSE of | σ per tile p5 / p50 / p95 | tiles at max spp | predicted gain of the "
              "rule, measured cost / equal cost | bound, measured cost / equal cost |",
              "|---|---|---|---|---|---|---|"]
     for name, q, t, label, pct, capped, g, best, g_eq, best_eq in gains:
         lines.append(f"| {name} | {q} ≤ {t:g} | {label} | {pct[0]:.2g} / {pct[1]:.2g} / {pct[2]:.2g} | "
                      f"{100 * capped:.0f} % | {g:.2f}× / {g_eq:.2f}× | {best:.2f}× / {best_eq:.2f}× |")
-    lines += ["", "| scene | reference | sampling | mean spp | CPU s (1 thread) | wall s | Mrays | MSE S0 | MSE DoLP | "
-              "equal-cost gain S0 (rays / CPU s / wall s) | equal-cost gain DoLP (rays / CPU s / wall s) |",
-              "|---|---|---|---|---|---|---|---|---|---|---|"]
-    for name, label, spp, cpu, s, r, errs, g in eff:
+    lines += ["", "| scene | reference | mode | sampling | mean spp | CPU s (1 thread) | wall s | Mrays | MSE S0 | "
+              "MSE DoLP | equal-cost gain S0 (rays / CPU s / wall s) | equal-cost gain DoLP (rays / CPU s / wall s) |",
+              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for name, mode, label, spp, cpu, s, r, errs, g in eff:
         for j, ref_label in enumerate(labels[name]):
             m0, md = errs[j]
             gain = ("", "") if g is None else tuple(f"{g[j][3 * k]:.2f}× / **{g[j][3 * k + 1]:.2f}×** / "
                                                     f"{g[j][3 * k + 2]:.2f}×" for k in (0, 1))
-            lines.append(f"| {name} | {ref_label} | {label} | {spp:.1f} | {cpu:.2f} | {s:.2f} | {r / 1e6:.2f} | "
-                         f"{m0:.3e} | {md:.3e} | {gain[0]} | {gain[1]} |")
+            lines.append(f"| {name} | {ref_label} | {mode} | {label} | {spp:.1f} | {cpu:.2f} | {s:.2f} | "
+                         f"{r / 1e6:.2f} | {m0:.3e} | {md:.3e} | {gain[0]} | {gain[1]} |")
+    # both modes side by side: the CPU-second gain of S0 and of DoLP (first reference), per row
+    lines += ["", "| scene | threshold mode: T (stop) — mean spp — gain S0 / DoLP (CPU s) | budget mode: the time of "
+              "— mean spp — gain S0 / DoLP (CPU s) |", "|---|---|---|"]
+    for name in labels:
+        th = [row for row in eff if row[0] == name and row[1] == "threshold"]
+        bu = [row for row in eff if row[0] == name and row[1] == "budget"]
+        for i in range(max(len(th), len(bu))):
+            cells = []
+            for part in (th, bu):
+                if i < len(part):
+                    _, _, label, spp, _, _, _, _, g = part[i]
+                    cells.append(f"{label} — {spp:.1f} — **{g[0][1]:.2f}× / {g[0][4]:.2f}×**")
+                else:
+                    cells.append("")
+            lines.append(f"| {name} | {cells[0]} | {cells[1]} |")
     lines += ["", "| scene | adaptive s0 ≤ | seeds | z of the image sum S0 / S1 / S2 / S3 | mean z² over 8×8 "
               "blocks S0 / S1 / S2 / S3 | image-sum difference ÷ ΣS0, S0 / S1 / S2 / S3 |", "|---|---|---|---|---|---|"]
     for name, t, K, out in biases:

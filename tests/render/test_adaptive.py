@@ -286,7 +286,9 @@ def test_cli_writes_counts_noise_stop_reason_and_resumes_to_a_tighter_threshold(
     np.testing.assert_array_equal(cb["noise"], ca["noise"])
 
 
-def test_a_time_limit_alone_samples_every_pixel_up_to_the_maximum(capsys, small_json, tmp_path):
+def test_a_time_limit_alone_that_does_not_run_out_samples_every_noisy_pixel_up_to_the_maximum(capsys, small_json,
+                                                                                              tmp_path):
+    # budget mode (engine.render.adaptive.budget_targets): every pixel of this scene is noisy
     path = str(tmp_path / "t.exr")
     status, out = run_cli(capsys, "render", small_json, "-o", path, "--spp", "6", "--min-spp", "2",
                           "--time-limit", "3600", "--no-previews", "-q")
