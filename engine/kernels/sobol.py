@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import jit, jit_inner, twin
-from .hashing import _mix64_one, mix64
+from .hashing import _mix64_one, mix64, sobol_xy, sobol_xy_at
 
 _M32 = np.uint64(0xFFFFFFFF)
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -181,12 +181,7 @@ def owen_sobol_joint_pair_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample:
     (the dimensions stratify jointly) — each coordinate Owen-scrambled with a seed per (seed key, pixel, parity,
     dimension), plus 16 random bits below 2^-32 (as ``owen_sobol_pairs``)."""
     smp = sample.astype(np.uint64)
-    i = (smp >> _S1) & _M32
-    x, y = np.zeros_like(i), np.zeros_like(i)
-    for j in range(int(i.max()).bit_length() if i.size else 0):
-        on = ((i >> np.uint64(j)) & np.uint64(1)).astype(bool)
-        x[on] ^= vx[j]
-        y[on] ^= vy[j]
+    x, y = sobol_xy((smp >> _S1) & _M32, vx, vy)
     base = mix64((seed_key[0] ^ (pixel.astype(np.uint64) * _GOLDEN) ^ ((smp & _S1) * _PARITY)) + _JOINT)
     hx = mix64(base + np.uint64(((dim + 1) * int(_PAIR)) & 0xFFFFFFFFFFFFFFFF))
     hy = mix64(base + np.uint64(((dim + 2) * int(_PAIR)) & 0xFFFFFFFFFFFFFFFF))
@@ -202,16 +197,7 @@ def owen_sobol_joint_pair_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample:
 def owen_sobol_joint_at(seed_key, pixel, sample, vx, vy, dim):
     """``owen_sobol_joint_pair`` for one path: (x, y)."""
     smp = np.uint64(sample)
-    i = (smp >> _S1) & _M32
-    x = np.uint64(0)
-    y = np.uint64(0)
-    j = 0
-    while i != np.uint64(0):
-        if i & np.uint64(1):
-            x ^= vx[j]
-            y ^= vy[j]
-        i >>= np.uint64(1)
-        j += 1
+    x, y = sobol_xy_at((smp >> _S1) & _M32, vx, vy)
     base = _mix64_one((seed_key ^ (np.uint64(pixel) * _GOLDEN) ^ ((smp & _S1) * _PARITY)) + _JOINT)
     hx = _mix64_one(base + np.uint64(dim + 1) * _PAIR)
     hy = _mix64_one(base + np.uint64(dim + 2) * _PAIR)
