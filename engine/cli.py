@@ -779,10 +779,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--simplify", choices=("auto", "off"),
                    help="auto (default): skip layered coats that are index-matched and clear; off: keep all")
     r.add_argument("--sampler", choices=("sobol", "stratified", "independent"),
-                   help="sobol (the default, as in Blender: jitter and first-vertex light/BSDF numbers from one "
-                        "Owen-scrambled Sobol' set, every other number from per-pixel shuffled, Owen-scrambled "
-                        "Sobol' pairs: less noise, same expectation; --stderr then comes from the even/odd "
-                        "halves), stratified (XOR-scrambled Sobol' pixel "
+                   help="sobol (the default, as in Blender: stratified's numbers at the camera and first vertex, "
+                        "per-pixel shuffled, Owen-scrambled Sobol' pairs at every deeper vertex: less noise, same "
+                        "expectation; --stderr then comes from the even/odd halves), stratified (Sobol' pixel "
                         "jitter, lens, wavelengths and first-vertex light/BSDF numbers, deeper ones hashed) or "
                         "independent (hashed numbers)")
     _light_path_options(r)

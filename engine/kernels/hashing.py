@@ -91,38 +91,17 @@ path_keys_and_uniforms = twin(_keys_and_uniforms_loop and path_keys_and_uniforms
                               path_keys_and_uniforms_numpy)
 
 
-def sobol_xy(i: np.ndarray, vx: np.ndarray, vy: np.ndarray):
-    """The 32-bit Sobol' coordinates (uint64 arrays) of indices ``i`` (uint64 (N,)) in the two dimensions of
-    direction numbers ``vx``, ``vy`` (32,): the XOR of the direction numbers of i's set bits."""
-    x, y = np.zeros_like(i), np.zeros_like(i)
-    for j in range(int(i.max()).bit_length() if i.size else 0):
-        on = ((i >> np.uint64(j)) & np.uint64(1)).astype(bool)
-        x[on] ^= vx[j]
-        y[on] ^= vy[j]
-    return x, y
-
-
-@jit_inner
-def sobol_xy_at(i, vx, vy):
-    """``sobol_xy`` for one index."""
-    x = np.uint64(0)
-    y = np.uint64(0)
-    j = 0
-    while i != np.uint64(0):
-        if i & np.uint64(1):
-            x ^= vx[j]
-            y ^= vy[j]
-        i >>= np.uint64(1)
-        j += 1
-    return x, y
-
-
 def scrambled_sobol_pair_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray, pair_key: np.ndarray,
                                vx: np.ndarray, vy: np.ndarray, u0: np.ndarray, u1: np.ndarray):
     """Two numbers (2 × (N,)) in [0, 1) per path: the 32-bit Sobol' points of index sample // 2 with
     direction numbers vx, vy (32,) (uint64), XOR-scrambled by mix64(seed_key ^ pixel·pair_key ^
     (sample & 1)·φ) (low and high 32 bits), plus u0, u1 (N,) below 2^-32 (engine.render.sampler.stratified_pair)."""
-    x, y = sobol_xy((sample.astype(np.uint64) >> np.uint64(1)) & np.uint64(0xFFFFFFFF), vx, vy)
+    i = (sample.astype(np.uint64) >> np.uint64(1)) & np.uint64(0xFFFFFFFF)
+    x, y = np.zeros_like(i), np.zeros_like(i)
+    for j in range(int(i.max()).bit_length() if i.size else 0):
+        on = ((i >> np.uint64(j)) & np.uint64(1)).astype(bool)
+        x[on] ^= vx[j]
+        y[on] ^= vy[j]
     half = (sample.astype(np.uint64) & np.uint64(1)) * _GOLDEN
     keys = mix64(seed_key[0] ^ (pixel.astype(np.uint64) * pair_key[0]) ^ half)
     mx = keys & np.uint64(0xFFFFFFFF)
@@ -141,7 +120,16 @@ def _sobol_pair_loop(seed_key, pixel, sample, pair_key, vx, vy, u0, u1, out):
     below_one = np.nextafter(1.0, 0.0)
     for n in range(pixel.shape[0]):
         smp = np.uint64(sample[n])
-        x, y = sobol_xy_at((smp >> np.uint64(1)) & low, vx, vy)
+        i = (smp >> np.uint64(1)) & low
+        x = np.uint64(0)
+        y = np.uint64(0)
+        j = 0
+        while i != np.uint64(0):
+            if i & np.uint64(1):
+                x ^= vx[j]
+                y ^= vy[j]
+            i >>= np.uint64(1)
+            j += 1
         h = _mix64_one(s ^ (np.uint64(pixel[n]) * pk) ^ ((smp & np.uint64(1)) * _GOLDEN))
         out[0, n] = min((np.float64(x ^ (h & low)) + u0[n]) * scale, below_one)
         out[1, n] = min((np.float64(y ^ (h >> np.uint64(32))) + u1[n]) * scale, below_one)

@@ -29,7 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import jit, jit_inner, twin
-from .hashing import _mix64_one, mix64, sobol_xy, sobol_xy_at
+from .hashing import _mix64_one, mix64
 
 _M32 = np.uint64(0xFFFFFFFF)
 _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
@@ -166,60 +166,3 @@ def owen_sobol_pairs_numba(seed_key: np.ndarray, pixel: np.ndarray, sample: np.n
 
 
 owen_sobol_pairs = twin(_owen_sobol_loop and owen_sobol_pairs_numba, owen_sobol_pairs_numpy)
-
-
-# ----------------------------------------------------------------------------- one Owen-scrambled Sobol' set
-
-#: key constant of the joint set's per-dimension scramble seeds (distinct from the padded pairs' keys)
-_JOINT = np.uint64(0x9FB21C651E98DF25)
-
-
-def owen_sobol_joint_pair_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray, vx: np.ndarray,
-                                vy: np.ndarray, dim: int) -> np.ndarray:
-    """(2, N) numbers in [0, 1): dimensions ``dim``, ``dim`` + 1 (direction numbers vx, vy (32,) uint64) of the
-    Sobol' point of index sample // 2 — one point set for all the dimensions of a sample, not shuffled per pair
-    (the dimensions stratify jointly) — each coordinate Owen-scrambled with a seed per (seed key, pixel, parity,
-    dimension), plus 16 random bits below 2^-32 (as ``owen_sobol_pairs``)."""
-    smp = sample.astype(np.uint64)
-    x, y = sobol_xy((smp >> _S1) & _M32, vx, vy)
-    base = mix64((seed_key[0] ^ (pixel.astype(np.uint64) * _GOLDEN) ^ ((smp & _S1) * _PARITY)) + _JOINT)
-    hx = mix64(base + np.uint64(((dim + 1) * int(_PAIR)) & 0xFFFFFFFFFFFFFFFF))
-    hy = mix64(base + np.uint64(((dim + 2) * int(_PAIR)) & 0xFFFFFFFFFFFFFFFF))
-    xs = reverse32(owen_permute(reverse32(x), hx & _M32))
-    ys = reverse32(owen_permute(reverse32(y), hy & _M32))
-    out = np.empty((2, pixel.shape[0]))
-    out[0] = ((xs << _S16) | ((hx >> _S32) & _LOW16)).astype(np.float64) * _TO_UNIT
-    out[1] = ((ys << _S16) | ((hy >> _S32) & _LOW16)).astype(np.float64) * _TO_UNIT
-    return out
-
-
-@jit_inner
-def owen_sobol_joint_at(seed_key, pixel, sample, vx, vy, dim):
-    """``owen_sobol_joint_pair`` for one path: (x, y)."""
-    smp = np.uint64(sample)
-    x, y = sobol_xy_at((smp >> _S1) & _M32, vx, vy)
-    base = _mix64_one((seed_key ^ (np.uint64(pixel) * _GOLDEN) ^ ((smp & _S1) * _PARITY)) + _JOINT)
-    hx = _mix64_one(base + np.uint64(dim + 1) * _PAIR)
-    hy = _mix64_one(base + np.uint64(dim + 2) * _PAIR)
-    xs = _reverse32_one(_owen_permute_one(_reverse32_one(x), hx & _M32))
-    ys = _reverse32_one(_owen_permute_one(_reverse32_one(y), hy & _M32))
-    return (np.float64((xs << _S16) | ((hx >> _S32) & _LOW16)) * _TO_UNIT,
-            np.float64((ys << _S16) | ((hy >> _S32) & _LOW16)) * _TO_UNIT)
-
-
-@jit
-def _owen_sobol_joint_loop(seed_key, pixel, sample, vx, vy, dim, out):
-    s = seed_key[0]
-    for n in range(pixel.shape[0]):
-        out[0, n], out[1, n] = owen_sobol_joint_at(s, pixel[n], sample[n], vx, vy, dim)
-
-
-def owen_sobol_joint_pair_numba(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray, vx: np.ndarray,
-                                vy: np.ndarray, dim: int) -> np.ndarray:
-    out = np.empty((2, pixel.shape[0]))
-    _owen_sobol_joint_loop(np.asarray(seed_key, np.uint64), np.ascontiguousarray(pixel, np.int64),
-                           np.ascontiguousarray(sample, np.int64), vx, vy, dim, out)
-    return out
-
-
-owen_sobol_joint_pair = twin(_owen_sobol_joint_loop and owen_sobol_joint_pair_numba, owen_sobol_joint_pair_numpy)

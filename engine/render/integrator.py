@@ -54,7 +54,7 @@ from .polarised_light import in_frame, light_samples_polarisation, mueller_times
 from .plan import rendered_materials, spectral_reduction
 from .sampler import (PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_JITTER, PAIR_LENS, PAIR_LIGHT_POINT, PAIR_WAVELENGTH,
                       SOBOL_CHOICES, SOBOL_DIRECTION, SOBOL_LIGHT_POINT, SOBOL_ROULETTE, PathSampler, sobol_pair_index,
-                      first_pair, sobol_pairs)
+                      sobol_pairs, stratified_pair)
 from .visibility import ray_visibility
 from ..spectral import RGB_WAVELENGTHS_NM, WavelengthLookup, rgb_channel_tables, rgb_weights, sample_wavelengths
 from ..vec3 import dot
@@ -409,21 +409,22 @@ class PathTracer:
         k_camera = 2 + self.camera.lens_dimensions
         k = k_camera + (1 if self.samples_wavelengths else 0)
         sampler, u = PathSampler.start(self.settings.seed, pixel, sample, k)
-        stratified = self.settings.stratified           # "stratified" and "sobol" (engine.render.sampler.first_pair)
+        stratified = self.settings.stratified           # "stratified" and "sobol": the same numbers here
         if stratified:
             # pixel jitter stratified over each pixel's samples: edges of bright camera-visible emitters
             # (a lamp, a sun disc) are otherwise most of the image's noise (see stratified_pair); the
             # lens point (a defocused edge's noise) and the wavelengths (a coloured metal's or a light's
             # spectrum: the spectral noise) likewise
-            u[0], u[1] = self._first_pair(pixel, sample, u[0], u[1], PAIR_JITTER)
+            seed = self.settings.seed
+            u[0], u[1] = stratified_pair(seed, pixel, sample, u[0], u[1], pair=PAIR_JITTER)
             if k_camera == 4:
-                u[2], u[3] = self._first_pair(pixel, sample, u[2], u[3], PAIR_LENS)
+                u[2], u[3] = stratified_pair(seed, pixel, sample, u[2], u[3], pair=PAIR_LENS)
             if self.samples_wavelengths:
                 # a path's wavelengths are frac(u + j/count), j < count: periodic in u with period 1/count, so
                 # the stratified x sets u within a period (the pixel's samples stratify that period, not
                 # [0, 1) count times over) and y which period (the hero's quarter, also stratified)
                 count = self.n_lambda
-                x, y = self._first_pair(pixel, sample, u[k_camera], u[k_camera], PAIR_WAVELENGTH)
+                x, y = stratified_pair(seed, pixel, sample, u[k_camera], u[k_camera], pair=PAIR_WAVELENGTH)
                 u[k_camera] = (x + np.floor(y * count)) / count
         o, d, x_T, t_min, t_max = self.camera.generate(pixel, u[:k_camera])
         lam, w_rgb = self._wavelengths(u[k_camera] if self.samples_wavelengths else None, n_total)
@@ -748,28 +749,23 @@ class PathTracer:
                               sobol_direction=sobol_pair_index(bounce, SOBOL_DIRECTION) if delta_only else None)
         return nums
 
-    def _first_pair(self, pixel: np.ndarray, sample: np.ndarray, u0: np.ndarray, u1: np.ndarray, pair: int):
-        """The camera's or the first vertex's pair ``pair`` (engine.render.sampler.first_pair) of the render's
-        stratifying sampler: 2 × (N,) numbers."""
-        return first_pair(self.settings.sampler, self.settings.seed, pixel, sample, u0, u1, pair)
-
     def _stratify_vertex(self, nums: _VertexNumbers) -> None:
         """Stratify the first vertex's numbers in place (``nums.pixel``, ``nums.sample`` set)."""
         # The first vertex's light sample (choice, point) and BSDF sample (lobe, direction) are
-        # stratified over the pixel's samples like the jitter (pairs PAIR_LIGHT_POINT … PAIR_CHOICES, each
-        # with its own per-pixel scramble: still uniform and independent per sample, so unbiased): a
+        # stratified over the pixel's samples like the jitter (Sobol' dimensions 3–8, each pair with
+        # its own per-pixel scramble: still uniform and independent per sample, so unbiased): a
         # lamp's direct light is most of a lit floor's noise.  Only the numbers read are computed
         # (each stratified number depends on its own hashed one and the pair's scramble alone).
-        pixel, sample = nums.pixel, nums.sample
+        seed, pixel, sample = self.settings.seed, nums.pixel, nums.sample
         nee, u_light, u_bsdf = nums.nee, nums.u_light, nums.u_bsdf
         if nee:
-            u_light[1], u_light[2] = self._first_pair(pixel, sample, u_light[1], u_light[2],
-                                                     PAIR_LIGHT_POINT)
+            u_light[1], u_light[2] = stratified_pair(seed, pixel, sample, u_light[1], u_light[2],
+                                                     pair=PAIR_LIGHT_POINT)
         if nums.direction_dims is None:
-            u_bsdf[1], u_bsdf[2] = self._first_pair(pixel, sample, u_bsdf[1], u_bsdf[2],
-                                                   PAIR_BSDF_DIRECTION)
-        choice, u_bsdf[0] = self._first_pair(pixel, sample, u_light[0] if nee else u_bsdf[0], u_bsdf[0],
-                                            PAIR_CHOICES)
+            u_bsdf[1], u_bsdf[2] = stratified_pair(seed, pixel, sample, u_bsdf[1], u_bsdf[2],
+                                                   pair=PAIR_BSDF_DIRECTION)
+        choice, u_bsdf[0] = stratified_pair(seed, pixel, sample, u_light[0] if nee else u_bsdf[0], u_bsdf[0],
+                                            pair=PAIR_CHOICES)
         if nee:
             u_light[0] = choice
 
@@ -784,8 +780,8 @@ class PathTracer:
             return
         extra = nums.direction_dims.next(2)
         if nums.pixel is not None:
-            extra[0], extra[1] = self._first_pair(nums.pixel, nums.sample, extra[0], extra[1],
-                                                 PAIR_BSDF_DIRECTION)
+            extra[0], extra[1] = stratified_pair(self.settings.seed, nums.pixel, nums.sample, extra[0], extra[1],
+                                                 pair=PAIR_BSDF_DIRECTION)
         nums.u_bsdf = np.concatenate((nums.u_bsdf, extra))
         nums.direction_dims = None
 

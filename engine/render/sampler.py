@@ -10,21 +10,15 @@ camera's numbers (pixel jitter, lens, wavelengths) and the first vertex's light 
 replaced by ``stratified_pair`` (per-pixel XOR-scrambled Sobol' points, two independent sequences for
 the even and the odd samples), still functions of (seed, pixel, sample index) only.
 
-With "sobol" (the default) every number is a coordinate of a stratified pair of dimensions.  At the camera
-and the first vertex (``first_pair``): the pixel jitter, the light point and the BSDF direction are Sobol'
-dimensions 1–6 of one point set per pixel, each coordinate Owen-scrambled (they stratify jointly, and Owen's
-nested scrambling converges faster on a pixel's edges than "stratified"'s XOR scramble); the (light choice,
-lobe), lens and wavelength pairs, and at every deeper vertex the light choice, light point, lobe choice,
-BSDF direction and roulette, are "padded" pairs (``sobol_pairs``, layout ``SOBOL_*`` below; as pbrt-v4's
-PaddedSobolSampler and Mitsuba's ldsampler): each from its own shuffled, Owen-scrambled 2-D Sobol'
-(0, 2)-sequence per (seed, pixel, pair, parity of the sample) (engine.kernels.sobol).  A pixel's first 2^m
-even (or odd) samples of every pair form a (0, m, 2)-net, each number is uniform and independent of the
-other pairs (unbiased), and a function of (seed, pixel, sample, pair) only.  Which first pairs are joint was
-measured (tests/bench/sampler_race.py, 2026-12-06, 64², 16–128 spp, 8 seeds; MSE of S0, "stratified" ÷
-"sobol"): all padded lost on cornell_lambert (0.66 at 128 spp) and rough_sphere_a030 (0.53), the XOR joint
-set of "stratified" lost on fresnel_sphere (1.5–1.9× more variance) and glass_sphere; this choice gives
-fresnel_sphere 1.5–1.8, fresnel_sphere_au 1.3–1.6, glass_sphere 1.0–2.2, cornell_lambert 0.90–0.95,
-rough_sphere_a030 0.80–1.08.
+With "sobol" (the default) the camera's and the first vertex's numbers are "stratified"'s, bit for bit
+(one jointly stratified Sobol' point set: pixel position × light point × BSDF direction, which padded
+pairs would stratify only pair by pair), and every number of the deeper vertices — light choice, light
+point, lobe choice, BSDF direction, roulette, where "stratified" hashes them — is a coordinate of a
+pair of dimensions (``sobol_pairs``, layout ``SOBOL_*`` below) drawn from its own shuffled,
+Owen-scrambled 2-D Sobol' (0, 2)-sequence per (seed, pixel, pair, parity of the sample)
+(engine.kernels.sobol): a pixel's first 2^m even (or odd) samples of every pair form a (0, m, 2)-net,
+pairs are decorrelated by the per-pair index shuffle, each number is uniform and independent of the
+other pairs (unbiased), and a function of (seed, pixel, sample, pair) only.
 """
 
 from __future__ import annotations
@@ -34,7 +28,7 @@ import functools
 import numpy as np
 
 from ..kernels.hashing import mix64, path_keys_and_uniforms, scrambled_sobol_pair, uniforms
-from ..kernels.sobol import owen_sobol_joint_pair, owen_sobol_pairs
+from ..kernels.sobol import owen_sobol_pairs
 
 _MASK64 = (1 << 64) - 1
 
@@ -142,10 +136,9 @@ def stratified_pair(seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.nda
                                 _SOBOL_V[2 * pair + 1], u0, u1)
 
 
-#: The "sobol" sampler's pairs of dimensions (``sobol_pairs``): pairs 0 … SOBOL_FIRST − 1 are the camera's and
-#: the first vertex's (the roles PAIR_JITTER … PAIR_WAVELENGTH, as "stratified" assigns them), then
-#: SOBOL_PER_BOUNCE per vertex b ≥ 1 at SOBOL_FIRST + SOBOL_PER_BOUNCE·(b − 1) + role
-SOBOL_FIRST = PAIR_WAVELENGTH + 1
+#: The "sobol" sampler's pairs of dimensions (``sobol_pairs``) at the vertices after the first (the camera
+#: and the first vertex draw "stratified"'s numbers): SOBOL_PER_BOUNCE per vertex, vertex b ≥ 1 at
+#: SOBOL_PER_BOUNCE·(b − 1) + role
 SOBOL_PER_BOUNCE = 4
 SOBOL_LIGHT_POINT = 0       # the point on the chosen light (next-event estimation: light numbers 1, 2)
 SOBOL_DIRECTION = 1         # the BSDF's direction numbers (BSDF numbers 1, 2)
@@ -156,31 +149,8 @@ SOBOL_ROULETTE = 3          # (Russian roulette, light number 3)
 def sobol_pair_index(bounce: int, role: int) -> int:
     """The pair of dimensions of ``role`` (SOBOL_LIGHT_POINT … SOBOL_ROULETTE) at vertex ``bounce`` ≥ 1."""
     if bounce < 1:
-        raise ValueError("the first vertex's pairs are the camera's (first_pair)")
-    return SOBOL_FIRST + SOBOL_PER_BOUNCE * (bounce - 1) + role
-
-
-#: The first vertex's pairs that the "sobol" sampler draws from one Owen-scrambled Sobol' point set with the
-#: pixel jitter (``first_pair``); its other first pairs are padded pairs
-JOINT_PAIRS = (PAIR_JITTER, PAIR_LIGHT_POINT, PAIR_BSDF_DIRECTION)
-
-
-def first_pair(sampler: str, seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.ndarray, u1: np.ndarray,
-               pair: int):
-    """Two numbers (2 × (N,)) of the camera's or the first vertex's pair ``pair`` (PAIR_JITTER …
-    PAIR_WAVELENGTH) for a stratifying ``sampler``.  "stratified": ``stratified_pair`` (u0, u1: the hashed
-    numbers filling its bits below 2^-32).  "sobol" (u0, u1 unused): the JOINT_PAIRS — pixel jitter, light
-    point, BSDF direction — are Sobol' dimensions 1–6 of one point set per pixel, each Owen-scrambled
-    (engine.kernels.sobol.owen_sobol_joint_pair: they stratify jointly, as a lamp's light over a pixel's
-    footprint needs), the others — (light choice, lobe), lens, wavelengths — padded pairs (``sobol_pairs``)."""
-    if sampler != "sobol":
-        return stratified_pair(seed, pixel, sample, u0, u1, pair=pair)
-    if pair in JOINT_PAIRS:
-        out = owen_sobol_joint_pair(_seed_key(seed), np.asarray(pixel), np.asarray(sample), _SOBOL_V[2 * pair],
-                                    _SOBOL_V[2 * pair + 1], 2 * pair)
-    else:
-        out = sobol_pairs(seed, pixel, sample, [pair])
-    return out[0], out[1]
+        raise ValueError("the first vertex draws the stratified sampler's numbers")
+    return SOBOL_PER_BOUNCE * (bounce - 1) + role
 
 
 def sobol_pairs(seed: int, pixel: np.ndarray, sample: np.ndarray, pairs) -> np.ndarray:
@@ -188,4 +158,3 @@ def sobol_pairs(seed: int, pixel: np.ndarray, sample: np.ndarray, pairs) -> np.n
     ``sample`` (N,) of pixel ``pixel`` (N,) (engine.kernels.sobol: shuffled, Owen-scrambled Sobol'
     (0, 2)-sequences per (seed, pixel, pair, parity of the sample))."""
     return owen_sobol_pairs(_seed_key(seed), pixel, sample, np.asarray(pairs, dtype=np.int64))
-

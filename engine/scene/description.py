@@ -335,14 +335,14 @@ class RenderSettings:
     #: Cycles' Denoising Albedo / Normal passes); False: the renders are unchanged.
     denoise_data: bool = False
     #: Random numbers of the paths (Cycles' sampling pattern): "sobol", the one default of the scene
-    #: format, the command line, the Python API and Blender (pixel jitter, first-vertex light point and BSDF
-    #: direction from one Owen-scrambled Sobol' set per pixel, every other number — lens, wavelengths, light
-    #: and lobe choices, every deeper vertex's numbers, roulette — from per-pixel shuffled, Owen-scrambled
-    #: Sobol' (0, 2)-sequence pairs, engine.render.sampler.first_pair / sobol_pairs: same expectation, less
-    #: noise; the standard error then comes from the even/odd halves), "stratified" (the camera's numbers
-    #: and the first vertex's light and BSDF numbers one per-pixel XOR-scrambled Sobol' point set,
-    #: engine.render.sampler.stratified_pair, the deeper ones hashed; the default before "sobol") or
-    #: "independent" (every number a hash of (seed, pixel, sample, dimension)).
+    #: format, the command line, the Python API and Blender (the camera's and the first vertex's numbers
+    #: as "stratified" draws them, every deeper vertex's — light choice and point, lobe, direction,
+    #: roulette — from per-pixel shuffled, Owen-scrambled Sobol' (0, 2)-sequence pairs,
+    #: engine.render.sampler.sobol_pairs: same expectation, less noise; the standard error then comes
+    #: from the even/odd halves), "stratified" (the camera's numbers and the first vertex's light and BSDF
+    #: numbers one per-pixel XOR-scrambled Sobol' point set, engine.render.sampler.stratified_pair, the
+    #: deeper ones hashed; the default before "sobol") or "independent" (every number a hash of (seed,
+    #: pixel, sample, dimension)).
     sampler: str = "sobol"
     #: Cycles' Light Paths ▸ Max Bounces per kind (engine.render.light_paths): a path whose diffuse, glossy,
     #: transmission or transparent bounces exceed the limit ends at its next surface (that surface's emission
