@@ -37,7 +37,7 @@ from ..output import cryptomatte as cm
 from ..scene.description import Camera, Scene
 from .accel import RAY_EPSILON, CompiledScene
 from .camera import CameraModel
-from .sampler import PAIR_JITTER, PAIR_LENS, PathSampler, stratified_pair
+from .sampler import camera_numbers
 from .visibility import MAX_PASS_THROUGH, ray_visibility
 
 #: Requestable data passes → (Blender/Cycles pass name, channel names)
@@ -306,13 +306,8 @@ class _Tracer:
 
     def rays(self, pixel: np.ndarray, sample: np.ndarray):
         """The integrator's camera rays of (pixel, sample) (engine.render.integrator._camera_paths)."""
-        k = 2 + self.camera.lens_dimensions
-        _, u = PathSampler.start(self.seed, pixel, sample, k)
-        if self.stratified:
-            u[0], u[1] = stratified_pair(self.seed, pixel, sample, u[0], u[1], pair=PAIR_JITTER)
-            if k == 4:
-                u[2], u[3] = stratified_pair(self.seed, pixel, sample, u[2], u[3], pair=PAIR_LENS)
-        o, d, _, t_min, t_max = self.camera.generate(pixel, u[:k])
+        _, u = camera_numbers(self.seed, self.stratified, pixel, sample, self.camera.lens_dimensions)
+        o, d, _, t_min, t_max = self.camera.generate(pixel, u)
         t_min = np.asarray(t_min, np.float64)
         t_max = np.asarray(t_max, np.float64)
         if np.any(t_min > 0):

@@ -52,8 +52,8 @@ from .media import Media, cross
 from .path_state import PathState
 from .polarised_light import in_frame, light_samples_polarisation, mueller_times_stokes
 from .plan import rendered_materials, spectral_reduction
-from .sampler import (PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_JITTER, PAIR_LENS, PAIR_LIGHT_POINT, PAIR_WAVELENGTH,
-                      SOBOL_CHOICES, SOBOL_DIRECTION, SOBOL_LIGHT_POINT, SOBOL_ROULETTE, PathSampler, sobol_pair_index,
+from .sampler import (PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_LIGHT_POINT, PAIR_WAVELENGTH, SOBOL_CHOICES,
+                      SOBOL_DIRECTION, SOBOL_LIGHT_POINT, SOBOL_ROULETTE, PathSampler, camera_numbers, sobol_pair_index,
                       sobol_pairs, stratified_pair)
 from .visibility import ray_visibility
 from ..spectral import RGB_WAVELENGTHS_NM, WavelengthLookup, rgb_channel_tables, rgb_weights, sample_wavelengths
@@ -408,17 +408,15 @@ class PathTracer:
         # (pixel jitter, lens), then the wavelengths'
         k_camera = 2 + self.camera.lens_dimensions
         k = k_camera + (1 if self.samples_wavelengths else 0)
-        sampler, u = PathSampler.start(self.settings.seed, pixel, sample, k)
         stratified = self.settings.stratified           # "stratified" and "sobol": the same numbers here
+        # pixel jitter stratified over each pixel's samples: edges of bright camera-visible emitters
+        # (a lamp, a sun disc) are otherwise most of the image's noise (see stratified_pair); the
+        # lens point (a defocused edge's noise) and the wavelengths (a coloured metal's or a light's
+        # spectrum: the spectral noise) likewise
+        sampler, u = camera_numbers(self.settings.seed, stratified, pixel, sample, self.camera.lens_dimensions,
+                                    k - k_camera)
         if stratified:
-            # pixel jitter stratified over each pixel's samples: edges of bright camera-visible emitters
-            # (a lamp, a sun disc) are otherwise most of the image's noise (see stratified_pair); the
-            # lens point (a defocused edge's noise) and the wavelengths (a coloured metal's or a light's
-            # spectrum: the spectral noise) likewise
             seed = self.settings.seed
-            u[0], u[1] = stratified_pair(seed, pixel, sample, u[0], u[1], pair=PAIR_JITTER)
-            if k_camera == 4:
-                u[2], u[3] = stratified_pair(seed, pixel, sample, u[2], u[3], pair=PAIR_LENS)
             if self.samples_wavelengths:
                 # a path's wavelengths are frac(u + j/count), j < count: periodic in u with period 1/count, so
                 # the stratified x sets u within a period (the pixel's samples stratify that period, not

@@ -136,6 +136,21 @@ def stratified_pair(seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.nda
                                 _SOBOL_V[2 * pair + 1], u0, u1)
 
 
+def camera_numbers(seed: int, stratified: bool, pixel: np.ndarray, sample: np.ndarray, lens_dimensions: int,
+                   extra: int = 0):
+    """(PathSampler, u (2 + lens_dimensions + extra, N)): the camera's numbers of sample ``sample`` of pixel
+    ``pixel`` — the pixel jitter, the thin lens's point (``lens_dimensions`` 0 or 2), then ``extra`` hashed
+    dimensions (the wavelengths' number) — with the jitter and lens pairs stratified (``stratified_pair``) for
+    the stratifying samplers.  The one source of camera rays' numbers: the integrator's paths and the data
+    passes (engine.render.data_passes) see the same rays."""
+    sampler, u = PathSampler.start(seed, pixel, sample, 2 + lens_dimensions + extra)
+    if stratified:
+        u[0], u[1] = stratified_pair(seed, pixel, sample, u[0], u[1], pair=PAIR_JITTER)
+        if lens_dimensions == 2:
+            u[2], u[3] = stratified_pair(seed, pixel, sample, u[2], u[3], pair=PAIR_LENS)
+    return sampler, u
+
+
 #: The "sobol" sampler's pairs of dimensions (``sobol_pairs``) at the vertices after the first (the camera
 #: and the first vertex draw "stratified"'s numbers): SOBOL_PER_BOUNCE per vertex, vertex b ≥ 1 at
 #: SOBOL_PER_BOUNCE·(b − 1) + role
