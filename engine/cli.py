@@ -483,19 +483,59 @@ def _parse_params(pairs):
 
 
 def _mueller(args) -> int:
-    from .materials.catalogue import make_model
+    from .materials.catalogue import CATALOGUE, make_model
     from .materials.evaluate import mueller_at
+    from .media.catalogue import PHASE_MODELS
 
-    for name, v, lo, hi in (("--theta-i", args.theta_i, 0, 90), ("--theta-o", args.theta_o, 0, 90),
-                            ("--wavelength-nm", args.wavelength_nm, 360, 830)):
-        if not (lo <= v <= hi):
-            raise SceneError(name, f"must be in [{lo}, {hi}], got {v:g}")
-    _finite("--phi-o", args.phi_o)
+    if not (360 <= args.wavelength_nm <= 830):
+        raise SceneError("--wavelength-nm", f"must be in [360, 830], got {args.wavelength_nm:g}")
+    if args.model in PHASE_MODELS:
+        return _mueller_phase(args)
+    if args.model not in CATALOGUE:
+        raise SceneError("model", f"unknown model {args.model!r} (BSDF models: {', '.join(CATALOGUE)}; phase "
+                                  f"functions: {', '.join(PHASE_MODELS)})")
     model = make_model(args.model, _parse_params(args.param))
-    result = mueller_at(model, args.theta_i, args.theta_o, args.phi_o, args.wavelength_nm, args.basis)
+    if args.scattering_angle is not None:
+        raise SceneError("--scattering-angle", f"is only for phase functions ({', '.join(PHASE_MODELS)}); for "
+                                               f"the BSDF {args.model!r} give --theta-i and --theta-o")
+    for name, v in (("--theta-i", args.theta_i), ("--theta-o", args.theta_o)):
+        if v is None:
+            raise SceneError(name, "is required for a BSDF model (an angle in [0, 90] degrees)")
+        if not (0 <= v <= 90):
+            raise SceneError(name, f"must be in [0, 90], got {v:g}")
+    phi_o = 0.0 if args.phi_o is None else args.phi_o
+    _finite("--phi-o", phi_o)
+    basis = args.basis or "sp"
+    result = mueller_at(model, args.theta_i, args.theta_o, phi_o, args.wavelength_nm, basis)
     result.update(model=args.model, params=_parse_params(args.param),
-                  geometry={"theta_i_deg": args.theta_i, "theta_o_deg": args.theta_o, "phi_o_deg": args.phi_o,
+                  geometry={"theta_i_deg": args.theta_i, "theta_o_deg": args.theta_o, "phi_o_deg": phi_o,
                             "wavelength_nm": args.wavelength_nm})
+    print(json.dumps(result))
+    return 0
+
+
+def _mueller_phase(args) -> int:
+    """`mueller` for a phase function: its matrices at the scattering angles, in the scattering-plane frames."""
+    from .media.catalogue import make_phase, phase_matrices_at
+
+    for name, given in (("--theta-i", args.theta_i), ("--theta-o", args.theta_o), ("--phi-o", args.phi_o)):
+        if given is not None:
+            raise SceneError(name, f"is only for BSDF models; the phase function {args.model!r} takes "
+                                   "--scattering-angle DEG (in [0, 180], repeatable)")
+    if args.basis not in (None, "scattering"):
+        raise SceneError("--basis", f"a phase function's matrices are given in the scattering-plane frames only "
+                                    f"(--basis scattering), got {args.basis!r}")
+    if not args.scattering_angle:
+        raise SceneError("--scattering-angle", "is required for a phase function (an angle in [0, 180] degrees, "
+                                               "repeatable)")
+    for v in args.scattering_angle:
+        if not (0 <= v <= 180):
+            raise SceneError("--scattering-angle", f"must be in [0, 180], got {v:g}")
+    params = _parse_params(args.param)
+    phase = make_phase(args.model, params)
+    result = {"model": args.model, "params": params, "basis": "scattering", "wavelength_nm": args.wavelength_nm,
+              "scattering_angles_deg": args.scattering_angle}
+    result.update(phase_matrices_at(phase, args.scattering_angle, args.wavelength_nm))
     print(json.dumps(result))
     return 0
 
@@ -825,15 +865,22 @@ def build_parser() -> argparse.ArgumentParser:
     k.set_defaults(func=_precompile)
 
     from .materials.catalogue import MODEL_PARAMETERS, parameter_help   # the declared models and parameters
-    m = sub.add_parser("mueller", help="print one model's Mueller BRDF at one geometry as JSON",
-                       epilog=parameter_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
-    m.add_argument("--model", required=True, help=" | ".join(MODEL_PARAMETERS))
+    from .media.catalogue import PHASE_MODELS, phase_parameter_help
+    m = sub.add_parser("mueller", help="print one model's Mueller BRDF at one geometry, or a phase function's "
+                                       "Mueller matrices at scattering angles, as JSON",
+                       epilog=parameter_help() + "\n\n" + phase_parameter_help(),
+                       formatter_class=argparse.RawDescriptionHelpFormatter)
+    m.add_argument("--model", required=True, help=" | ".join([*MODEL_PARAMETERS, *PHASE_MODELS]))
     m.add_argument("--param", action="append", metavar="NAME=VALUE", help="model parameter (repeatable)")
-    m.add_argument("--theta-i", type=float, required=True, help="incidence angle (deg)")
-    m.add_argument("--theta-o", type=float, required=True, help="viewing angle (deg)")
-    m.add_argument("--phi-o", type=float, default=0.0, help="viewing azimuth (deg), 0 = forward side")
+    m.add_argument("--theta-i", type=float, help="incidence angle (deg; BSDF models, required there)")
+    m.add_argument("--theta-o", type=float, help="viewing angle (deg; BSDF models, required there)")
+    m.add_argument("--phi-o", type=float, help="viewing azimuth (deg; BSDF models), 0 = forward side (the default)")
+    m.add_argument("--scattering-angle", type=float, action="append", metavar="DEG",
+                   help="scattering angle Θ in [0, 180] deg, 0 = straight on (phase functions, required there; "
+                        "repeatable)")
     m.add_argument("--wavelength-nm", type=float, default=550.0, help="wavelength (nm)")
-    m.add_argument("--basis", choices=("sp", "scattering"), default="sp", help="Stokes basis of the result")
+    m.add_argument("--basis", choices=("sp", "scattering"), help="Stokes basis of the result: sp (the default for "
+                   "BSDF models) or scattering (x ⟂ the scattering plane on both beams; phase functions use only it)")
     m.set_defaults(func=_mueller)
 
     p = sub.add_parser("polariser", help="what a virtual polarising filter would show, from a rendered EXR")

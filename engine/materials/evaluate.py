@@ -29,7 +29,7 @@ from ..vec3 import cross, dot
 BASES = ("sp", "scattering")
 
 
-def _cos_sin_deg(a: float):
+def cos_sin_deg(a: float):
     """cos and sin of an angle in degrees, exact at multiples of 90° (so θ = 90° is grazing, not 6e-17)."""
     if float(a) % 90.0 == 0.0:
         q = int(round(float(a) / 90.0)) % 4
@@ -40,9 +40,9 @@ def _cos_sin_deg(a: float):
 
 def oracle_directions(theta_i_deg: float, theta_o_deg: float, phi_o_deg: float):
     """(ω_i, ω_o) as (3,) arrays for the oracle geometry (normal +z, source in the −x half-plane)."""
-    ci, si = _cos_sin_deg(theta_i_deg)
-    co, so = _cos_sin_deg(theta_o_deg)
-    cp, sp = _cos_sin_deg(phi_o_deg)
+    ci, si = cos_sin_deg(theta_i_deg)
+    co, so = cos_sin_deg(theta_o_deg)
+    cp, sp = cos_sin_deg(phi_o_deg)
     return np.array([-si, 0.0, ci]), np.array([so * cp, so * sp, co])
 
 

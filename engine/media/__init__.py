@@ -1,0 +1,7 @@
+"""Participating media: phase functions as Mueller matrices and free-flight building blocks.
+
+One phase function per file, each with one declaration of its parameters (``DECLARATION``, as the
+material models: engine.materials.parameters) and the interface of engine.media.phase.PhaseFunction.
+``engine.media.catalogue`` lists them.  Not yet wired into the integrator (issue 37, item 1).
+Conventions and formulas: docs/physics.md, "Phase functions".
+"""
