@@ -111,7 +111,7 @@ class Mie(PhaseFunction):
 DECLARATION = ModelDeclaration(
     "mie", "Lorenz–Mie", "Exact Lorenz–Mie scattering by homogeneous spheres of one radius (full Stokes: "
     "polarising and retarding), tabulated per wavelength",
-    [Parameter("radius", "sphere radius", unit="µm", lo=0.001, hi=50.0, default=1.0),
+    [Parameter("radius", "sphere radius", unit="µm", lo=0.0001, hi=50.0, default=1.0),
      Parameter("n", "refractive index of the spheres (real part)", kind="spectrum", lo=0.0, lo_open=True,
                default=1.33),
      Parameter("k", "extinction coefficient κ of the spheres (index n + iκ)", kind="spectrum", lo=0.0, default=0.0),
