@@ -23,6 +23,7 @@ ENGINE_LAYERS = (
     ("engine.polarisation", "engine.spectral"),
     ("engine.textures",),
     ("engine.materials", "engine.output", "engine.postprocess"),
+    ("engine.media",),
     ("engine.scene",),
     ("engine.render",),
     ("engine.cli", "engine.__main__", "engine"),
@@ -266,7 +267,7 @@ def test_tests_live_by_package_and_blender_tests_are_marked():
     tests = os.path.join(REPO, "tests")
     loose = [f for f in os.listdir(tests) if f.startswith("test_") and f.endswith(".py")]
     assert loose == ["test_architecture.py"], loose
-    packages = {"materials", "kernels", "render", "scene", "cli", "blender"}
+    packages = {"materials", "media", "kernels", "render", "scene", "cli", "blender"}
     found = {os.path.basename(os.path.dirname(p)) for p in glob.glob(os.path.join(tests, "*", "test_*.py"))}
     assert found == packages, found
     unmarked = []
