@@ -19,8 +19,9 @@ NULL-lobe surfaces before it keep it "seen directly"):
   (T[:, 0]/T00: unpolarised when nothing polarising lies in front); Glossy or Transmission get the rest.
   Every contribution is divided without remainder, so the passes sum to Combined sample by sample;
 - **Color** is the vertex's albedo of the lobe: the one-sample estimate T00·(BSDF·cos/pdf) of the sampled
-  direction (the denoising albedo's estimator, engine.render.integrator.albedo_rgb), split by the same
-  fraction, unpolarised (S0 only); Direct and Indirect are their light's sum divided by Color's (Cycles'
+  direction, split by the same fraction, unpolarised (S0 only), as a colour under white light (per channel
+  the colour-matching weights × D65 at the sampled wavelengths, normalised: engine.render.integrator.albedo_rgb;
+  a grey albedo exactly); Direct and Indirect are their light's sum divided by Color's (Cycles'
   ``safe_divide_even_color``), so (Direct + Indirect)·Color + … recombine to Combined.
 
 The passes are traced as a second pass over the render's own samples (the same random numbers, hence the same
@@ -38,6 +39,7 @@ import numpy as np
 
 from ..kernels.transport import spectral_stokes_rgb_samples, stokes_rgb_samples
 from ..materials.flags import BSDFFlags
+from ..spectral.cie import d65_normalised
 from ..vec3 import dot
 from .integrator import albedo_rgb
 from .light_paths import TRANSMISSION, TRANSPARENT, LightPathRules, classify, trace_light_paths
@@ -86,6 +88,8 @@ class LightPassBatch:
         self.frac_now = np.zeros((Lm, n))
         self.rules = LightPathRules(tracer.settings, tracer.materials)
         self.unseparated: set[str] = set()
+        # albedos become colours under white light: the colour-matching weights times D65 at the sampled λ
+        self.white = None if acc.w_rgb is None or tracer.mono else acc.w_rgb * d65_normalised(state.lk.lam)[None]
         acc.lobes = self
 
     # ------------------------------------------------------------------ hooks of the integrator
@@ -216,7 +220,8 @@ class LightPassBatch:
             else:
                 light[k], _ = spectral_stokes_rgb_samples(self.sums[k], acc.w_rgb)
         path = np.arange(n)
-        color = np.stack([albedo_rgb(self.color[k], acc.w_rgb, path, tracer.channels) for k in range(len(COLORS))])
+        color = np.stack([albedo_rgb(self.color[k], acc.w_rgb if self.white is None else self.white, path,
+                                     tracer.channels) for k in range(len(COLORS))])
         # a sample with a non-finite value anywhere counts 0 everywhere (as the film drops it)
         bad = ~(np.isfinite(light).all(axis=(0, 1, 2)) & np.isfinite(color).all(axis=(0, 1)))
         light[..., bad] = 0.0
