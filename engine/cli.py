@@ -258,11 +258,7 @@ def _render_scene(args, bars: list) -> int:
             from .render.data_passes import render_data_passes
             result.data_passes = render_data_passes(renderer, data_request, st)
         if light_keys and not (result.cancelled and not result.film.count.any()):
-            from .render.light_passes import render_light_passes
-            result.light_passes = render_light_passes(renderer, st)
-            result.light_pass_keys = light_keys
-            for w in result.light_passes.warnings:
-                print(f"warning: {w}", file=sys.stderr)
+            _add_light_passes(renderer, st, light_keys, result)
         # Still inside: a signal while the files are written must not lose them.
         status = _write_render(args, out, result, st, scene_hash, adaptive)
     return status if status else signals.exit_status(130 if result.cancelled else 0)
@@ -308,6 +304,24 @@ def _light_pass_keys(args) -> tuple:
         raise SceneError("--light-passes", f"must be 'all' or a comma-separated list of {', '.join(ALL_LIGHT_PASSES)}; "
                                            f"got {spec!r}")
     return names
+
+
+def _add_light_passes(renderer, settings, keys: tuple, result) -> None:
+    """Trace the light passes (engine.render.light_passes) into ``result`` (the passes ``keys`` to write)."""
+    from .render.light_passes import render_light_passes
+    result.light_passes = render_light_passes(renderer, settings)
+    result.light_pass_keys = keys
+    for w in result.light_passes.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+
+
+def _light_pass_channels(result, meta: dict, channels: dict | None) -> dict | None:
+    """``channels`` with the light passes' EXR channels of ``--light-passes`` (and their header entry)."""
+    light = getattr(result, "light_passes", None)
+    if light is None:
+        return channels
+    meta["polar.light_samples"] = int(light.samples)
+    return {**(channels or {}), **light.channels(result.light_pass_keys)}
 
 
 def _render_request(renderer, request):
@@ -448,10 +462,7 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
         meta.update(data.metadata())
         meta["polar.data_samples"] = int(data.samples)
         data_channels = data.channels()
-    light = getattr(result, "light_passes", None)      # --light-passes (engine.render.light_passes)
-    if light is not None:
-        data_channels = {**(data_channels or {}), **light.channels(result.light_pass_keys)}
-        meta["polar.light_samples"] = int(light.samples)
+    data_channels = _light_pass_channels(result, meta, data_channels)
     try:
         write_stokes_exr(out, stokes, metadata=meta, extra=extra, alpha=alpha, data=data_channels)
     except Exception as e:              # noqa: BLE001 — whatever failed, the samples must survive

@@ -68,7 +68,7 @@ class LightPassBatch:
     """The light passes' bookkeeping of one batch (indexed by the batch's path index, never compacted): each
     path's level (0: before its first vertex, 1: its Direct segment, 2: Indirect), its first vertex's diffuse
     fraction (Lm, N), the Stokes direction of depolarised light behind the throughput there (P, Lm, N) and its
-    side (transmission), and the sums: ``sums`` (8, P, L, N) of light and colours (3, Lm, N)."""
+    side (transmission), and the sums: ``per_pass`` (8, P, L, N) of light and colours (3, Lm, N)."""
 
     def __init__(self, tracer, state, acc):
         n, P = acc.radiance.shape[2], acc.radiance.shape[0]
@@ -79,7 +79,7 @@ class LightPassBatch:
         self.col0 = np.zeros((P, Lm, n))
         self.col0[0] = 1.0
         self.transmit = np.zeros(n, bool)
-        self.sums = np.zeros((len(LIGHT_SUMS), P, L, n))
+        self.per_pass = np.zeros((len(LIGHT_SUMS), P, L, n))
         self.color = np.zeros((len(COLORS), Lm, n))
         # this vertex's: the light sample's diffuse part and side, the sampled direction's diffuse fraction
         self.nee_diffuse = np.zeros((P, L, n))
@@ -156,9 +156,9 @@ class LightPassBatch:
         diffuse = self.col0[:, :, ids] * s0[None]
         rest = added - diffuse
         trans = self.transmit[ids]
-        self.sums[2 * DIFFUSE + indirect][:, :, ids] += diffuse
-        self.sums[2 * GLOSSY + indirect][:, :, ids] += np.where(trans, 0.0, rest)
-        self.sums[2 * TRANS + indirect][:, :, ids] += np.where(trans, rest, 0.0)
+        self.per_pass[2 * DIFFUSE + indirect][:, :, ids] += diffuse
+        self.per_pass[2 * GLOSSY + indirect][:, :, ids] += np.where(trans, 0.0, rest)
+        self.per_pass[2 * TRANS + indirect][:, :, ids] += np.where(trans, rest, 0.0)
 
     def emitted(self, seen, hit: np.ndarray, background: np.ndarray) -> None:
         """The emission stage's light: Emission / Environment before the first vertex, else Direct / Indirect."""
@@ -167,7 +167,7 @@ class LightPassBatch:
         zero = level == 0
         for k, where in ((EMIT, zero & hit), (ENV, zero & ~hit)):
             if where.any():
-                self.sums[k][:, :, ids[where]] += added[:, :, where]
+                self.per_pass[k][:, :, ids[where]] += added[:, :, where]
         for lv in (1, 2):
             where = level == lv
             if where.any():
@@ -185,9 +185,9 @@ class LightPassBatch:
             diffuse = np.where(self.nee_pure[f_ids], added[:, :, first], diffuse)
             rest = added[:, :, first] - diffuse
             trans = self.nee_transmit[f_ids]
-            self.sums[2 * DIFFUSE][:, :, f_ids] += diffuse
-            self.sums[2 * GLOSSY][:, :, f_ids] += np.where(trans, 0.0, rest)
-            self.sums[2 * TRANS][:, :, f_ids] += np.where(trans, rest, 0.0)
+            self.per_pass[2 * DIFFUSE][:, :, f_ids] += diffuse
+            self.per_pass[2 * GLOSSY][:, :, f_ids] += np.where(trans, 0.0, rest)
+            self.per_pass[2 * TRANS][:, :, f_ids] += np.where(trans, rest, 0.0)
         self._split(ids[~first], added[:, :, ~first], 1)
         kind, _ = classify(self.rules, mat, surf.n_g, surf.wo, nxt.d, nxt.is_delta)
         new = first & (kind != TRANSPARENT)
@@ -216,9 +216,9 @@ class LightPassBatch:
         light = np.zeros((len(LIGHT_SUMS), 4, 3, n))
         for k in range(len(LIGHT_SUMS)):
             if tracer.rgb_mode:
-                light[k], _ = stokes_rgb_samples(self.sums[k])
+                light[k], _ = stokes_rgb_samples(self.per_pass[k])
             else:
-                light[k], _ = spectral_stokes_rgb_samples(self.sums[k], acc.w_rgb)
+                light[k], _ = spectral_stokes_rgb_samples(self.per_pass[k], acc.w_rgb)
         path = np.arange(n)
         color = np.stack([albedo_rgb(self.color[k], acc.w_rgb if self.white is None else self.white, path,
                                      tracer.channels) for k in range(len(COLORS))])
