@@ -19,10 +19,10 @@ NULL-lobe surfaces before it keep it "seen directly"):
   (T[:, 0]/T00: unpolarised when nothing polarising lies in front); Glossy or Transmission get the rest.
   Every contribution is divided without remainder, so the passes sum to Combined sample by sample;
 - **Color** is the vertex's albedo of the lobe: the one-sample estimate T00·(BSDF·cos/pdf) of the sampled
-  direction, split by the same fraction, unpolarised (S0 only), as a colour under white light (per channel
-  the colour-matching weights × D65 at the sampled wavelengths, normalised: engine.render.integrator.albedo_rgb;
-  a grey albedo exactly); Direct and Indirect are their light's sum divided by Color's (Cycles'
-  ``safe_divide_even_color``), so (Direct + Indirect)·Color + … recombine to Combined.
+  direction, split by the same fraction, unpolarised (S0 only), as a colour under white light (Σ_λ a·D65·w_rgb
+  at the sampled wavelengths: unbiased for the RGB of a·D65, the round trip of an RGB albedo; in RGB transport
+  the albedo itself, engine.render.integrator.albedo_rgb); Direct and Indirect are their light's sum divided
+  by Color's (Cycles' ``safe_divide_even_color``), so (Direct + Indirect)·Color + … recombine to Combined.
 
 The passes are traced as a second pass over the render's own samples (the same random numbers, hence the same
 paths: engine.render.light_paths.trace_light_paths with a recorder), so a render that does not ask for them
@@ -44,19 +44,21 @@ from ..vec3 import dot
 from .integrator import albedo_rgb
 from .light_paths import TRANSMISSION, TRANSPARENT, LightPathRules, classify, trace_light_paths
 
-#: CLI / engine key → Cycles' pass name, in Cycles' order
-LIGHT_PASSES = {"diffuse_direct": "DiffDir", "diffuse_indirect": "DiffInd", "diffuse_color": "DiffCol",
-                "glossy_direct": "GlossDir", "glossy_indirect": "GlossInd", "glossy_color": "GlossCol",
-                "transmission_direct": "TransDir", "transmission_indirect": "TransInd",
-                "transmission_color": "TransCol", "emission": "Emit", "environment": "Env"}
+#: CLI / engine key → the pass's name in Blender (Cycles' passes in Blender 4.5–5.x), in Cycles' order
+LIGHT_PASSES = {"diffuse_direct": "Diffuse Direct", "diffuse_indirect": "Diffuse Indirect",
+                "diffuse_color": "Diffuse Color", "glossy_direct": "Glossy Direct",
+                "glossy_indirect": "Glossy Indirect", "glossy_color": "Glossy Color",
+                "transmission_direct": "Transmission Direct", "transmission_indirect": "Transmission Indirect",
+                "transmission_color": "Transmission Color", "emission": "Emission", "environment": "Environment"}
 ALL_LIGHT_PASSES = tuple(LIGHT_PASSES)
 #: the light sums a batch keeps, in this order: per lobe Direct, Indirect; then Emission, Environment
-LIGHT_SUMS = ("DiffDir", "DiffInd", "GlossDir", "GlossInd", "TransDir", "TransInd", "Emit", "Env")
-COLORS = ("DiffCol", "GlossCol", "TransCol")
+LIGHT_SUMS = ("Diffuse Direct", "Diffuse Indirect", "Glossy Direct", "Glossy Indirect", "Transmission Direct",
+              "Transmission Indirect", "Emission", "Environment")
+COLORS = ("Diffuse Color", "Glossy Color", "Transmission Color")
 DIFFUSE, GLOSSY, TRANS = range(3)
 EMIT, ENV = 6, 7
-#: the Stokes components' passes: "<pass>_S1" … "<pass>_S3" beside "<pass>" (= S0, Cycles' own)
-STOKES_SUFFIXES = ("_S1", "_S2", "_S3")
+#: the Stokes components' passes: "<pass> S1" … "<pass> S3" beside "<pass>" (= S0, Cycles' own)
+STOKES_SUFFIXES = (" S1", " S2", " S3")
 
 
 def stokes_pass_names(name: str) -> tuple[str, ...]:
@@ -87,6 +89,7 @@ class LightPassBatch:
         self.nee_pure = np.zeros(n, bool)
         self.frac_now = np.zeros((Lm, n))
         self.rules = LightPathRules(tracer.settings, tracer.materials)
+        self.transmits = np.array([m.flags.transmits for m in tracer.materials], bool)
         self.unseparated: set[str] = set()
         # albedos become colours under white light: the colour-matching weights times D65 at the sampled λ
         self.white = None if acc.w_rgb is None or tracer.mono else acc.w_rgb * d65_normalised(state.lk.lam)[None]
@@ -118,7 +121,8 @@ class LightPassBatch:
         col = T[:, 0][..., cols]                    # (P, Lm, m): the throughput's response to depolarised light
         part = col * (d * weight)[None]
         self.nee_diffuse[:, :, ids] = part[:, :, first]
-        self.nee_transmit[ids] = (dot(wi, sp.n_g) * dot(sp.wo, sp.n_g) < 0)[first]
+        # a surface that cannot transmit reflects light from below its geometric plane (shading normals)
+        self.nee_transmit[ids] = ((dot(wi, sp.n_g) * dot(sp.wo, sp.n_g) < 0) & bsdf.flags.transmits)[first]
 
     def sampled(self, bsdf, sp, path, bs) -> None:
         """The BSDF sample of the paths ``path`` (a non-delta material's): the diffuse fraction of its value at
@@ -200,7 +204,7 @@ class LightPassBatch:
             T_pre = state.T_store[:, 0][..., rows if cols is None else cols]     # (P, Lm, m)
             t00 = T_pre[0]
             self.col0[:, :, n_ids] = np.where(t00 != 0, T_pre / np.where(t00 != 0, t00, 1.0), self.col0[:, :, n_ids])
-            self.transmit[n_ids] = kind[new] == TRANSMISSION
+            self.transmit[n_ids] = (kind[new] == TRANSMISSION) & self.transmits[mat[new]]
             a = np.where(nxt.valid[new], nxt.T[0, 0][:, new], 0.0)         # (Lm, m)
             trans = self.transmit[n_ids]
             self.color[DIFFUSE][:, n_ids] = frac * a
@@ -220,13 +224,15 @@ class LightPassBatch:
             else:
                 light[k], _ = spectral_stokes_rgb_samples(self.per_pass[k], acc.w_rgb)
         path = np.arange(n)
-        color = np.stack([albedo_rgb(self.color[k], acc.w_rgb if self.white is None else self.white, path,
-                                     tracer.channels) for k in range(len(COLORS))])
+        if self.white is None:
+            color = np.stack([albedo_rgb(self.color[k], acc.w_rgb, path, tracer.channels) for k in range(len(COLORS))])
+        else:       # Σ_λ a·D65·w: unbiased for the colour of a·D65 (white D65 gives 1 per channel in expectation)
+            color = np.einsum("kln,cln->kcn", self.color, self.white)
         # a sample with a non-finite value anywhere counts 0 everywhere (as the film drops it)
         bad = ~(np.isfinite(light).all(axis=(0, 1, 2)) & np.isfinite(color).all(axis=(0, 1)))
         light[..., bad] = 0.0
         color[..., bad] = 0.0
-        return {"light": light, "color": color, "unseparated": sorted(self.unseparated)}
+        return {"light": light, "color": color, "unseparated": sorted(self.unseparated), "dropped": bad}
 
 
 # ----------------------------------------------------------------------------- the passes of a render
@@ -245,7 +251,7 @@ class LightPasses:
 
     def images(self, keys=ALL_LIGHT_PASSES) -> dict:
         """{pass name: (H, W, 3)} of the passes ``keys`` (engine keys): S0 under Cycles' name, S1–S3 as
-        "<name>_S1" … (Color passes: one image)."""
+        "<name> S1" … (Color passes: one image)."""
         out = {}
         for key in keys:
             name = LIGHT_PASSES[key]
@@ -257,7 +263,7 @@ class LightPasses:
         return out
 
     def channels(self, keys=ALL_LIGHT_PASSES) -> dict:
-        """EXR channels {"DiffDir.R": (H, W), …, "DiffDir_S1.R": …} of the passes ``keys``."""
+        """EXR channels {"Diffuse Direct.R": (H, W), …, "Diffuse Direct S1.R": …} of the passes ``keys``."""
         return {f"{name}.{c}": img[..., i] for name, img in self.images(keys).items() for i, c in enumerate("RGB")}
 
 
@@ -298,6 +304,7 @@ def render_light_passes(renderer, settings=None, window=None, threads: int | Non
         out, stats = trace_light_paths(tracer, pixel, sample,
                                        passes=lambda state, acc: LightPassBatch(tracer, state, acc))
         lp = stats["light_passes"]
+        out[..., lp["dropped"]] = 0.0           # the samples the passes drop are dropped from their combined too
         m = c.size
         return (out.reshape(4, 3, m, spp).sum(-1), lp["light"].reshape(8, 4, 3, m, spp).sum(-1),
                 lp["color"].reshape(3, 3, m, spp).sum(-1), lp["unseparated"])

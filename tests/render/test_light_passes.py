@@ -36,7 +36,7 @@ def _glare(width=48, height=24, spp=8):
 
 
 def _recombined(lp):
-    out = lp.stokes["Emit"] + lp.stokes["Env"]
+    out = lp.stokes["Emission"] + lp.stokes["Environment"]
     for k, c in enumerate(COLORS):
         out = out + (lp.stokes[LIGHT_SUMS[2 * k]] + lp.stokes[LIGHT_SUMS[2 * k + 1]]) * lp.color[c][None]
     return out
@@ -60,19 +60,19 @@ def test_passes_recombine_to_the_render(glare):
 
 def test_glossy_direct_carries_the_polarisation_diffuse_none(glare):
     _, stokes, lp = glare
-    for name in ("DiffDir", "DiffInd"):
+    for name in ("Diffuse Direct", "Diffuse Indirect"):
         assert np.abs(lp.stokes[name][1:]).max() == 0.0, name
         assert lp.stokes[name][0].max() > 0.0, name
-    gloss = lp.stokes["GlossDir"]
+    gloss = lp.stokes["Glossy Direct"]
     y = (0.2126, 0.7152, 0.0722)
     s = [(gloss[k] * y).sum(-1) for k in range(3)]
     smooth = slice(None), slice(0, 20)             # the smooth panel: the image's left part
     dolp = np.hypot(s[1][smooth], s[2][smooth]) / np.maximum(s[0][smooth], 1e-12)
     assert np.median(dolp) > 0.8, np.median(dolp)
     # the mixed ball: its glossy light is polarised, its diffuse light not; both lobes present
-    ball = lp.color["DiffCol"].sum(-1) > 0
+    ball = lp.color["Diffuse Color"].sum(-1) > 0
     assert ball.sum() > 10
-    assert (lp.color["GlossCol"].sum(-1)[ball] > 0).all()
+    assert (lp.color["Glossy Color"].sum(-1)[ball] > 0).all()
 
 
 def test_lambert_floor_under_a_uniform_sky():
@@ -86,16 +86,16 @@ def test_lambert_floor_under_a_uniform_sky():
          "lights": [{"type": "environment", "radiance": 1.0}]}
     renderer = Renderer(parse_scene(d))
     lp = render_light_passes(renderer, threads=1)
-    sky = lp.stokes["Env"][0].sum(-1) > 0
-    floor = (lp.color["DiffCol"].sum(-1) > 0) & ~sky              # pixels entirely on the floor
+    sky = lp.stokes["Environment"][0].sum(-1) > 0
+    floor = (lp.color["Diffuse Color"].sum(-1) > 0) & ~sky              # pixels entirely on the floor
     assert floor.sum() > 50 and sky.sum() > 20
-    assert np.allclose(lp.color["DiffCol"][floor], 0.5, rtol=1e-9)   # cosine sampling: ρ exactly
-    direct = lp.stokes["DiffDir"][0][floor]
+    assert np.allclose(lp.color["Diffuse Color"][floor], 0.5, rtol=1e-9)   # cosine sampling: ρ exactly
+    direct = lp.stokes["Diffuse Direct"][0][floor]
     assert abs(direct.mean() - 1.0) < 0.01, direct.mean()
-    assert np.abs(lp.stokes["DiffInd"]).max() == 0.0 and np.abs(lp.stokes["GlossDir"]).max() == 0.0
-    only_sky = sky & (lp.color["DiffCol"].sum(-1) == 0)
+    assert np.abs(lp.stokes["Diffuse Indirect"]).max() == 0.0 and np.abs(lp.stokes["Glossy Direct"]).max() == 0.0
+    only_sky = sky & (lp.color["Diffuse Color"].sum(-1) == 0)
     assert only_sky.sum() > 20
-    assert np.allclose(lp.stokes["Env"][0][only_sky], 1.0, atol=2e-3)
+    assert np.allclose(lp.stokes["Environment"][0][only_sky], 1.0, atol=2e-3)
 
 
 def test_safe_divide_even_color():
@@ -113,8 +113,8 @@ def test_cli_writes_the_light_passes(tmp_path):
     _, channels, header = read_stokes_exr(out)
     names = set(channels)
     assert int(header["polar.light_samples"]) == 4
-    assert {"GlossDir.R", "GlossDir_S1.R", "GlossDir_S3.B", "DiffCol.G"} <= names
-    assert not any(n.startswith("DiffDir") for n in names)
+    assert {"Glossy Direct.R", "Glossy Direct S1.R", "Glossy Direct S3.B", "Diffuse Color.G"} <= names
+    assert not any(n.startswith("Diffuse Direct") for n in names)
     assert main(["render", str(scene), "-o", str(tmp_path / "bad.exr"), "--light-passes", "shiny",
                  "--no-previews", "--quiet"]) != 0
     assert not (tmp_path / "bad.exr").exists()
