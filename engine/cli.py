@@ -203,6 +203,7 @@ def _render_scene(args, bars: list) -> int:
             if used:
                 raise SceneError("--denoise-data", f"cannot be combined with {option} yet")
     data_request = _data_pass_request(args)
+    light_keys = _light_pass_keys(args)
     scene = _load_scene(args.scene)
     st = _settings_from_options(scene, args)
     if getattr(args, "denoise_data", False):
@@ -256,6 +257,8 @@ def _render_scene(args, bars: list) -> int:
         if data_request is not None and not (result.cancelled and not result.film.count.any()):
             from .render.data_passes import render_data_passes
             result.data_passes = render_data_passes(renderer, data_request, st)
+        if light_keys and not (result.cancelled and not result.film.count.any()):
+            _add_light_passes(renderer, st, light_keys, result)
         # Still inside: a signal while the files are written must not lose them.
         status = _write_render(args, out, result, st, scene_hash, adaptive)
     return status if status else signals.exit_status(130 if result.cancelled else 0)
@@ -288,6 +291,37 @@ def _data_pass_request(args):
             raise SceneError(option, f"must be an integer in [{lo}, {hi}], got {value}")
     return DataPassRequest(frozenset(names), cryptomatte_levels=args.cryptomatte_levels, mist=mist,
                            samples=args.data_samples)
+
+
+def _light_pass_keys(args) -> tuple:
+    """The light passes ``--light-passes`` asks for (engine keys; () without it); a bad value is a SceneError."""
+    spec = getattr(args, "light_passes", None)
+    if not spec:
+        return ()
+    from .render.light_passes import ALL_LIGHT_PASSES
+    names = ALL_LIGHT_PASSES if spec.strip() == "all" else tuple(n.strip() for n in spec.split(",") if n.strip())
+    if not names or any(n not in ALL_LIGHT_PASSES for n in names):
+        raise SceneError("--light-passes", f"must be 'all' or a comma-separated list of {', '.join(ALL_LIGHT_PASSES)}; "
+                                           f"got {spec!r}")
+    return names
+
+
+def _add_light_passes(renderer, settings, keys: tuple, result) -> None:
+    """Trace the light passes (engine.render.light_passes) into ``result`` (the passes ``keys`` to write)."""
+    from .render.light_passes import render_light_passes
+    result.light_passes = render_light_passes(renderer, settings)
+    result.light_pass_keys = keys
+    for w in result.light_passes.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+
+
+def _light_pass_channels(result, meta: dict, channels: dict | None) -> dict | None:
+    """``channels`` with the light passes' EXR channels of ``--light-passes`` (and their header entry)."""
+    light = getattr(result, "light_passes", None)
+    if light is None:
+        return channels
+    meta["polar.light_samples"] = int(light.samples)
+    return {**(channels or {}), **light.channels(result.light_pass_keys)}
 
 
 def _render_request(renderer, request):
@@ -428,6 +462,7 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
         meta.update(data.metadata())
         meta["polar.data_samples"] = int(data.samples)
         data_channels = data.channels()
+    data_channels = _light_pass_channels(result, meta, data_channels)
     try:
         write_stokes_exr(out, stokes, metadata=meta, extra=extra, alpha=alpha, data=data_channels)
     except Exception as e:              # noqa: BLE001 — whatever failed, the samples must survive
@@ -835,6 +870,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also write Cycles' data passes and Cryptomatte, comma-separated or 'all': depth, mist, "
                         "normal, position, uv, vector, object_index, material_index, crypto_object, "
                         "crypto_material, crypto_asset (channels Depth.Z, Normal.X/Y/Z, CryptoObject00.r/g/b/a …)")
+    r.add_argument("--light-passes", metavar="LIST",
+                   help="also write Cycles' light passes with their Stokes components, comma-separated or 'all': "
+                        "diffuse_direct, diffuse_indirect, diffuse_color, glossy_direct, glossy_indirect, "
+                        "glossy_color, transmission_direct, transmission_indirect, transmission_color, emission, "
+                        "environment (channels 'Diffuse Direct.R/G/B' = S0, 'Diffuse Direct S1.R' … 'S3.B'; "
+                        "Color passes S0 only); traced as a second pass over the render's samples")
     r.add_argument("--data-samples", type=int, metavar="N",
                    help="samples per pixel of the data passes (default min(spp, 64): the render's first camera rays)")
     r.add_argument("--cryptomatte-levels", type=int, default=6, metavar="N",

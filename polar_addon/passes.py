@@ -25,6 +25,7 @@ import numpy as np
 from ..engine.output.cryptomatte import pass_count
 from ..engine.render.data_passes import (CRYPTOMATTE_PASSES, DATA_PASSES, DataPassRequest, Mist, Motion,
                                          render_data_passes)
+from ..engine.render.light_passes import LIGHT_PASSES, render_light_passes, stokes_pass_names
 from .export import geometry
 
 #: View layer property → engine pass name (engine.render.data_passes.ALL_PASSES)
@@ -34,6 +35,11 @@ VIEW_LAYER_PASSES = (("use_pass_z", "depth"), ("use_pass_mist", "mist"), ("use_p
                      ("use_pass_cryptomatte_object", "crypto_object"),
                      ("use_pass_cryptomatte_material", "crypto_material"),
                      ("use_pass_cryptomatte_asset", "crypto_asset"))
+#: View layer property (Cycles' Light passes) → engine light pass (engine.render.light_passes.LIGHT_PASSES)
+VIEW_LAYER_LIGHT_PASSES = tuple((f"use_pass_{key}", key) for key in (
+    "diffuse_direct", "diffuse_indirect", "diffuse_color", "glossy_direct", "glossy_indirect", "glossy_color",
+    "transmission_direct", "transmission_indirect", "transmission_color")) + (
+    ("use_pass_emit", "emission"), ("use_pass_environment", "environment"))
 #: Cycles' pass types (list_render_passes in Cycles' engine.py)
 PASS_TYPES = {"Depth": "VALUE", "Mist": "VALUE", "Position": "VECTOR", "Normal": "VECTOR", "Vector": "VECTOR",
               "UV": "VECTOR", "Object Index": "VALUE", "Material Index": "VALUE"}
@@ -62,10 +68,33 @@ def pass_layout(view_layer) -> list:
     return out
 
 
+def light_pass_keys(view_layer) -> tuple:
+    """The engine keys of the light passes ``view_layer`` enables (View Layer ▸ Passes ▸ Light), Cycles' order."""
+    return tuple(key for prop, key in VIEW_LAYER_LIGHT_PASSES if getattr(view_layer, prop, False))
+
+
 def register_data_passes(engine, scene, view_layer) -> None:
-    """Register the enabled data and Cryptomatte passes (``RenderEngine.update_render_passes``)."""
+    """Register the enabled data, Cryptomatte and light passes (``RenderEngine.update_render_passes``); a light
+    pass as Cycles' RGB pass (S0) and, but for the Color passes, its Stokes components "<pass>_S1" … "_S3"."""
     for name, channels, kind in pass_layout(view_layer):
         engine.register_pass(scene, view_layer, name, len(channels), channels, kind)
+    for key in light_pass_keys(view_layer):
+        for name in stokes_pass_names(LIGHT_PASSES[key]):
+            engine.register_pass(scene, view_layer, name, 3, "RGB", "COLOR")
+
+
+def write_light_passes(engine, result, renderer, keys: tuple, settings, window=None):
+    """Trace the light passes (engine.render.light_passes) of ``renderer`` with ``settings`` over ``window`` and
+    write the passes ``keys`` into ``result``'s first layer; returns the engine's LightPasses (None without keys)."""
+    if not keys:
+        return None
+    light = render_light_passes(renderer, settings, window)
+    passes = result.layers[0].passes
+    for name, img in light.images(keys).items():
+        target = passes.get(name)
+        if target is not None:
+            target.rect.foreach_set(_blender_rows(img))
+    return light
 
 
 def data_pass_request(view_layer, scene) -> DataPassRequest | None:

@@ -323,6 +323,12 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         if data_request is not None and not out.cancelled:
             self.update_stats("", "Polar | data passes")
             passes.write_data_passes(self, result, renderer, data_request, settings, window)
+        light_keys = () if self.is_preview or out.cancelled else passes.light_pass_keys(depsgraph.view_layer)
+        if light_keys:
+            self.update_stats("", "Polar | light passes")
+            light = passes.write_light_passes(self, result, renderer, light_keys, settings, window)
+            for w in light.warnings:
+                self.report({"WARNING"}, f"Polar: {w}")
         self.end_result(result)
         message = self._stats_message(out, adaptive, time.perf_counter() - t0, bake_note) + denoise_note
         self.update_stats("", message)

@@ -154,6 +154,12 @@ class MuellerValue:
         return MuellerValue(self.kind, self.x_in, self.x_out, sc(self.A), sc(self.B), sc(self.C), sc(self.S),
                             depol=sc(self.depol))
 
+    def m00(self) -> np.ndarray:
+        """M00 (L, N): the value's response to unpolarised light (its S0)."""
+        if self.kind == "general":
+            return self.M[0, 0]
+        return self.A if self.depol is None else self.A + self.depol
+
     def masked(self, keep: np.ndarray) -> MuellerValue:
         """Zero the entries where ``keep`` (N,) is False."""
         return self.scaled(keep.astype(np.float64)[None, :])
@@ -270,6 +276,18 @@ class BSDF:
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         raise NotImplementedError
+
+    def diffuse_share(self, sp: ShadingPoint, wi: np.ndarray, f: MuellerValue) -> np.ndarray | None:
+        """M00 (L, N) of the diffuse lobes (Cycles' diffuse closures: Lambert, Oren–Nayar, sheen, translucent)
+        within ``f`` = ``eval(sp, wi)``, which the light passes count as Diffuse (engine.render.light_passes); a
+        diffuse lobe depolarises, so that part of f is M00·diag(1, 0, 0, 0).  By the lobes: none without a
+        diffuse lobe, all of f without a glossy one (Dirac lobes are not in ``eval``); models with both override
+        it, else None: not separated (the light passes then count the whole value as Glossy, with a warning)."""
+        if not self.flags.has(BSDFFlags.DIFFUSE):
+            return np.zeros_like(f.m00())
+        if not self.flags.has(BSDFFlags.GLOSSY):
+            return f.m00()
+        return None
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
         """Mueller weight of the mirror (Dirac) lobe for reflection of wo, or None."""

@@ -683,6 +683,14 @@ class TorranceSparrow(BSDF):
 
     # --- BSDF interface --------------------------------------------------------------------------
 
+    def diffuse_share(self, sp: ShadingPoint, wi: np.ndarray, f: MuellerValue) -> np.ndarray | None:
+        """The Lambert term of ``f`` = eval(sp, wi): its depolarised part without the multiscatter term."""
+        if not (self.has_diffuse and self.has_specular):
+            return super().diffuse_share(sp, wi, f)
+        if f.depol is None:
+            return np.zeros_like(f.A)
+        return f.depol - self.multiscatter_extra(sp) * f.A if self.multiscatter else f.depol
+
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
         if not self.has_specular:   # pure Lambert: a depolariser (frame-independent)
             n_s = sp.n_s

@@ -93,7 +93,7 @@ def unpolarised_response(m: MuellerValue, P: int) -> np.ndarray:
     if m.kind == "general":
         out[:] = m.M[:P, 0]
         return out
-    out[0] = m.A if m.depol is None else m.A + m.depol
+    out[0] = m.m00()
     if m.kind == "abcs" and P > 1:
         out[1] = m.B
     return out
@@ -145,6 +145,8 @@ class _Accumulators:
     sample: np.ndarray | None = None
     count_cost: bool = True
     path_cost: np.ndarray | None = field(init=False)
+    #: the light passes' first-vertex recorder (engine.render.light_passes.LightPassBatch; None: not asked)
+    lobes: object | None = None
 
     def __post_init__(self):
         self.path_cost = np.full(self.radiance.shape[-1], PATH_COST, np.int64) if self.count_cost else None
@@ -222,6 +224,25 @@ class _LightSamples:
 
 # ----------------------------------------------------------------------------- denoising guides
 
+def albedo_rgb(a: np.ndarray, w_rgb: np.ndarray | None, path: np.ndarray, channels: bool = False) -> np.ndarray:
+    """Linear sRGB (3, n) of per-wavelength albedos ``a`` (Lm, n) (reflectances, not radiances) of the batch
+    paths ``path``: each channel's colour-matching weights ``w_rgb`` (3, L, N) normalised to sum 1 (None: RGB
+    mode: the mean, or with ``channels`` (the "rgb" transport, Lm = 3) the channels themselves), kept within the
+    sampled values; non-finite albedos count 0."""
+    a = np.where(np.isfinite(a), a, 0.0)       # as the dropped non-finite samples
+    if w_rgb is None:
+        if channels and a.shape[0] == 3:
+            return a.copy()
+        return np.repeat(a.mean(axis=0)[None], 3, axis=0)
+    w = w_rgb[:, :, path]                              # (3, L, n); Lm is L or 1
+    den = w.sum(axis=1)
+    rgb = np.where(den != 0, np.einsum("cln,ln->cn", w, np.broadcast_to(a, w.shape[1:]))
+                   / np.where(den != 0, den, 1.0), 0.0)
+    # sRGB colour-matching weights can be negative: keep each channel within the sampled
+    # albedos (a weighted mean of them when the weights are positive)
+    return np.clip(rgb, a.min(axis=0), a.max(axis=0))
+
+
 class DenoiseGuides:
     """Per-path albedo and normal at the first non-delta vertex (Cycles' denoising data).
 
@@ -253,17 +274,7 @@ class DenoiseGuides:
         if not new.any():
             return
         a = np.where(valid, unpolarised_response(weight, 1)[0], 0.0) * T00     # (Lm, n)
-        a = np.where(np.isfinite(a), a, 0.0)       # as the dropped non-finite samples: no guide
-        if w_rgb is None:
-            rgb = np.repeat(a.mean(axis=0)[None], 3, axis=0)
-        else:
-            w = w_rgb[:, :, path]                              # (3, L, n); Lm is L or 1
-            den = w.sum(axis=1)
-            rgb = np.where(den != 0, np.einsum("cln,ln->cn", w, np.broadcast_to(a, w.shape[1:]))
-                           / np.where(den != 0, den, 1.0), 0.0)
-            # sRGB colour-matching weights can be negative: keep each channel within the sampled
-            # albedos (a weighted mean of them when the weights are positive)
-            rgb = np.clip(rgb, a.min(axis=0), a.max(axis=0))
+        rgb = albedo_rgb(a, w_rgb, path)
         facing = np.where(dot(n_s, wo) < 0, -1.0, 1.0)
         idx = path[new]
         self.albedo[:, idx] = rgb[:, new]
@@ -681,6 +692,8 @@ class PathTracer:
             if nums.nee and not bsdf.flags.is_delta_only:
                 self._group_next_event(state, acc, surf, bsdf, sp, sel, rows, xTm, t_cols, nums.u_light)
             bs = self._sample_bsdf(bsdf, sp, nums.u_bsdf, sel)
+            if acc.lobes is not None:
+                acc.lobes.sampled(bsdf, sp, gather(state.path, sel), bs)
             if acc.guides is not None and not bsdf.flags.is_delta_only:
                 acc.guides.record(gather(state.path, sel), T[0, 0][:, rows if t_cols is None else t_cols], bs.weight,
                                   bs.valid, sp.n_s, sp.wo, acc.w_rgb)
@@ -831,7 +844,8 @@ class PathTracer:
             medium = (gather(state.media, sel), None if state.tau is None else gather(state.tau, sel),
                       gather(surf.prim, sel), gather(surf.n_g, sel), gather(surf.wo, sel))
         contrib = self._next_event(sp, state.lk.take(sel), bsdf, state.T_store, rows, x_T, u_light[:, sel], acc.stats,
-                                   t_cols, medium)
+                                   t_cols, medium,
+                                   lobes=None if acc.lobes is None else (acc.lobes, gather(state.path, sel)))
         add_to_paths(acc.radiance, gather(state.path, sel), contrib)
         if acc.path_cost is not None:
             acc.path_cost[gather(state.path, sel)] += VERTEX_COST     # a light sample (cost)
@@ -964,7 +978,8 @@ class PathTracer:
 
     def _next_event(self, sp: ShadingPoint, lookup: WavelengthLookup, bsdf: BSDF, T: np.ndarray, rows: np.ndarray,
                     x_T: np.ndarray, u: np.ndarray, stats: dict[str, int],
-                    T_cols: np.ndarray | None = None, medium: tuple | None = None) -> np.ndarray:
+                    T_cols: np.ndarray | None = None, medium: tuple | None = None,
+                    lobes: tuple | None = None) -> np.ndarray:
         """Direct light at non-delta vertices, MIS-weighted against BSDF sampling; (P, L, n).
 
         ``lookup`` holds the path's wavelengths (lights are evaluated at all of them); the
@@ -973,7 +988,8 @@ class PathTracer:
         rays and the throughput run once over all paths (per path the same arithmetic as one
         light at a time).  ``rows``: the vertices' paths in the batch's state, ``T_cols``: the
         columns of T holding their throughputs (None: ``rows``; PathState.T_col).  ``medium``: the
-        vertices' absorbing volumes and transmittance (see ``_shadow_media``; None: no interiors).
+        vertices' absorbing volumes and transmittance (see ``_shadow_media``; None: no interiors).  ``lobes``:
+        (the light passes' recorder, the vertices' batch path indices), told each sample's direction and weight.
         """
         n = sp.n
         P = self.P
@@ -989,6 +1005,8 @@ class PathTracer:
             absorbed = self._shadow_media(medium, ls.wi, ls.dist, lookup, crossings)
             if absorbed is not None:
                 weight = weight * absorbed
+        if lobes is not None:
+            lobes[0].light(bsdf, sp, lobes[1], ls.wi, weight, T, rows if T_cols is None else T_cols)
         light_out = throughput_times_stokes(T, rows if T_cols is None else T_cols, S, weight)
         for _, sel in ls.owners:
             if len(ls.owners) > 1 and not ls.ok[sel].any():

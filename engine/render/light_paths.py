@@ -131,15 +131,16 @@ class LightPathBatch:
         ids = path.copy()
         return ids, acc.radiance[:, :, ids].copy()
 
-    def settle(self, acc, mark: tuple | None, direct: bool, drop: np.ndarray | None = None) -> None:
+    def settle(self, acc, mark: tuple | None, direct: bool, drop: np.ndarray | None = None) -> np.ndarray | None:
         """Clamp the light added since ``mark`` (per path: one contribution) with the direct or indirect
-        limit; ``drop`` (n,) bool: paths whose contribution is dropped entirely (caustics)."""
+        limit; ``drop`` (n,) bool: paths whose contribution is dropped entirely (caustics).  Returns the factor
+        (n,) each path's contribution was scaled by (None: 1)."""
         if mark is None:
-            return
+            return None
         ids, before = mark
         limit = self.rules.clamp_direct if direct else self.rules.clamp_indirect
         if not np.isfinite(limit) and (drop is None or not drop.any()):
-            return
+            return None
         added = acc.radiance[:, :, ids] - before
         factor = np.ones(ids.size)
         if np.isfinite(limit):
@@ -152,6 +153,7 @@ class LightPathBatch:
         if changed.any():
             rows = ids[changed]
             acc.radiance[:, :, rows] = before[:, :, changed] + added[:, :, changed] * factor[changed]
+        return factor
 
     # ------------------------------------------------------------------ bounces
 
@@ -220,22 +222,29 @@ def contribution_rgb(s0: np.ndarray, w_rgb: np.ndarray | None, ids: np.ndarray) 
 
 
 def trace_light_paths(tracer, pixel: np.ndarray, sample: np.ndarray,
-                      abort: threading.Event | None = None):
+                      abort: threading.Event | None = None, passes=None):
     """PathTracer.trace with Cycles' light-path rules (the same stages, in the same order, and the same
-    random numbers: a path that no rule touches gets the same light as without them)."""
-    st, rules = tracer.settings, tracer.light_paths
+    random numbers: a path that no rule touches gets the same light as without them).  ``passes``: a
+    function (state, acc) → the light passes' batch recorder (engine.render.light_passes.LightPassBatch),
+    told what each stage added (then the tracer need not have any rule active)."""
+    st = tracer.settings
+    rules = tracer.light_paths if tracer.light_paths is not None else LightPathRules(st, tracer.materials)
     n_total = pixel.shape[0]
     state, acc = tracer._camera_paths(pixel, sample)
     lp = rules.batch(n_total)
+    lpb = None if passes is None else passes(state, acc)
     for bounce in range(st.max_depth):
         if abort is not None and abort.is_set():
             return None
         if state.n == 0:
             break
         mark = lp.mark(acc, state.path)
+        seen = None if lpb is None else lpb.mark(state)
         hits, hit, background = tracer._intersect(state, acc, bounce)
         tracer._emission(state, acc, hits, hit, background, bounce)
         lp.settle(acc, mark, direct=bounce <= 1)
+        if lpb is not None:
+            lpb.emitted(seen, hit, background)
         if bounce + 1 >= st.max_depth:
             break
         surf = tracer._surface(state, hits, lp.continuing(state.path, hit))
@@ -243,8 +252,14 @@ def trace_light_paths(tracer, pixel: np.ndarray, sample: np.ndarray,
             break
         mat = lp.materials(tracer, surf.prim)
         mark = lp.mark(acc, state.path)
+        seen = None if lpb is None else lpb.mark(state)
         nxt = tracer._scatter(state, acc, surf, bounce)
-        lp.settle(acc, mark, direct=bounce == 0, drop=lp.dropped_light(state.path, mat))
+        factor = lp.settle(acc, mark, direct=bounce == 0, drop=lp.dropped_light(state.path, mat))
         lp.scattered(state.path, mat, surf.n_g, surf.wo, nxt)
+        if lpb is not None:
+            lpb.scattered(seen, factor, state, surf, mat, nxt)
         tracer._next_segments(state, acc, surf, nxt, bounce)
-    return tracer._finish(acc, n_total)
+    out = tracer._finish(acc, n_total)
+    if lpb is not None:
+        out[1]["light_passes"] = lpb.finish()
+    return out
