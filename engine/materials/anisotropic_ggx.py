@@ -461,6 +461,14 @@ class AnisotropicGGX(BSDF):
         (wo_l,) = self._local(sp, sp.wo)
         return self._extra(sp, wo_l)
 
+    def lobe_colors(self, sp: ShadingPoint):
+        """Glossy: ``reflection_albedo`` (Cycles' estimate) for a real constant index (a Principled specular
+        layer); None for a metal (engine.materials.tinted.F82Reflectance gives the Principled metal's)."""
+        from .base import LobeColors
+        if not (isinstance(self.k, ConstantSpectrum) and self.k.value == 0.0):
+            return None
+        return LobeColors.of(sp, glossy=self.reflection_albedo(sp))
+
     def reflection_albedo(self, sp: ShadingPoint) -> np.ndarray:
         """E(ω_o) (N,): the lobe's directional albedo for unpolarised light with its own (constant) Fresnel,
         times 1 + k with ``multiscatter`` (the layering albedo of a specular layer, as Torrance–Sparrow's):

@@ -44,7 +44,8 @@ if TYPE_CHECKING:
     from ..spectral import Spectrum, WavelengthLookup
     from ..textures import SurfacePoints
 
-__all__ = ["BSDF", "BSDFFlags", "BSDFSample", "DeltaVertices", "MuellerValue", "ShadingPoint", "depolarising_value"]
+__all__ = ["BSDF", "BSDFFlags", "BSDFSample", "DeltaVertices", "LobeColors", "MuellerValue", "ShadingPoint",
+           "depolarising_value"]
 
 
 @dataclass
@@ -172,6 +173,39 @@ def depolarising_value(a: np.ndarray, n: int) -> MuellerValue:
 
 
 @dataclass
+class LobeColors:
+    """A vertex's albedo by lobe, as Cycles' Color passes define it (``bsdf_albedo`` summed over the closures of
+    each kind): ``diffuse``, ``glossy`` (reflection) and ``transmission``, each M00 (L, N) per wavelength — the
+    share of unpolarised light from a uniform white sky that the lobe sends towards the viewer, deterministic
+    for the vertex (engine.render.light_passes divides the light by it)."""
+
+    diffuse: np.ndarray
+    glossy: np.ndarray
+    transmission: np.ndarray
+
+    @staticmethod
+    def of(sp: ShadingPoint, diffuse=0.0, glossy=0.0, transmission=0.0) -> LobeColors:
+        """The lobes' albedos at the points ``sp``, each a number, (N,) or (L, N), as (L, N) arrays."""
+        def full(v):
+            v = np.asarray(v, np.float64)
+            return np.broadcast_to(v[None, :] if v.ndim == 1 else v, sp.lam.shape).copy()
+        return LobeColors(full(diffuse), full(glossy), full(transmission))
+
+    def scaled(self, factor) -> LobeColors:
+        """Every lobe times ``factor`` (a number, (N,) per point or (L, N))."""
+        f = factor[None, :] if isinstance(factor, np.ndarray) and factor.ndim == 1 else factor
+        return LobeColors(self.diffuse * f, self.glossy * f, self.transmission * f)
+
+    def tinted(self, reflection, transmission) -> LobeColors:
+        """Diffuse and glossy times ``reflection``, transmission times ``transmission`` (numbers or (L, N))."""
+        return LobeColors(self.diffuse * reflection, self.glossy * reflection, self.transmission * transmission)
+
+    def __add__(self, other: LobeColors) -> LobeColors:
+        return LobeColors(self.diffuse + other.diffuse, self.glossy + other.glossy,
+                          self.transmission + other.transmission)
+
+
+@dataclass
 class BSDFSample:
     """Result of ``BSDF.sample`` for a batch of N shading points."""
 
@@ -287,6 +321,18 @@ class BSDF:
             return np.zeros_like(f.m00())
         if not self.flags.has(BSDFFlags.GLOSSY):
             return f.m00()
+        return None
+
+    def lobe_colors(self, sp: ShadingPoint) -> LobeColors | None:
+        """The albedo of each lobe at the points (LobeColors, M00 (L, N) each) by Cycles' definition: what its
+        Diffuse / Glossy / Transmission Color passes hold (kernel/closure/bsdf.h ``bsdf_albedo``; derivations in
+        docs/guide/polariser-and-passes.md).  By default: a mirror without other lobes, the M00 of its
+        ``delta_reflection``; models with other lobes override it, else None: not available (the light passes
+        then estimate the colour from the sampled direction, with a warning)."""
+        if self.flags.lobes == BSDFFlags.DELTA_REFLECTION:
+            value = self.delta_reflection(sp)
+            if value is not None:
+                return LobeColors.of(sp, glossy=value.m00())
         return None
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:

@@ -197,6 +197,12 @@ class SmoothDielectric(BSDF):
     def describe(self):
         return {"type": self.name, "n": repr(self.n_int) if self.per_point else self.n_int, "exterior_n": self.n_ext}
 
+    def lobe_colors(self, sp: ShadingPoint):
+        """Glossy: the mirror's M00 (R, its reflectance at the view angle, from either side; a film's where
+        ``delta_reflection`` has one); transmission: 1 − R (the energy; Cycles' glass colour at roughness 0)."""
+        from .glass_colors import smooth_glass_colors
+        return smooth_glass_colors(sp, self.delta_reflection(sp).m00())
+
 
 # --------------------------------------------------------------------------- declaration
 

@@ -247,7 +247,11 @@ def _rough_coordinate(alpha):
 
 def conductor_albedo(mu, alpha, correlated: bool = False) -> np.ndarray:
     """E(μ, α) of the F = 1 GGX reflection lobe, bilinear in (√μ, √α); μ (N,), α a number or (N,)."""
-    E = conductor_tables(correlated)
+    return _bilinear(conductor_tables(correlated), mu, alpha)
+
+
+def _bilinear(E: np.ndarray, mu, alpha) -> np.ndarray:
+    """A (√μ, √α) table's rows 0 … MU_NODES − 1 read bilinearly at μ (N,) and α (a number or (N,))."""
     mu = np.asarray(mu, np.float64)
     x = np.sqrt(np.clip(mu, 0.0, 1.0)) * (MU_NODES - 1)
     i = np.minimum(x.astype(np.int64), MU_NODES - 2)
@@ -255,6 +259,39 @@ def conductor_albedo(mu, alpha, correlated: bool = False) -> np.ndarray:
     j, fy = _rough_coordinate(np.broadcast_to(np.asarray(alpha, np.float64), mu.shape))
     return ((E[i, j] * (1.0 - fx) + E[i + 1, j] * fx) * (1.0 - fy)
             + (E[i, j + 1] * (1.0 - fx) + E[i + 1, j + 1] * fx) * fy)
+
+
+def _build_schlick_moments() -> np.ndarray:
+    """(2·MU_NODES, ROUGH_NODES): the height-correlated reflection lobe's E_S = ∫(1 − ω_o·h)⁵ W and
+    E_B = ∫(ω_o·h)(1 − ω_o·h)⁶ W over the disk rule (the F = 1 lobe weighted by Schlick's and the F82 term's
+    factors), at (t_i², r_j²); r = 0: the mirror, (1 − μ)⁵ and μ(1 − μ)⁶."""
+    t = _t_nodes(MU_NODES)
+    r = np.linspace(0.0, 1.0, ROUGH_NODES)
+    mu = t * t
+    out = np.empty((2 * MU_NODES, ROUGH_NODES))
+    out[:MU_NODES, 0], out[MU_NODES:, 0] = (1.0 - mu) ** 5, mu * (1.0 - mu) ** 6
+    for j in range(1, ROUGH_NODES):
+        for sl, _, _, w, _, _, d, refl in _reflection_batches(np.maximum(mu, MU_FLOOR), r[j] * r[j], True):
+            s = 1.0 - d
+            out[:MU_NODES][sl, j] = (s ** 5 * refl) @ w
+            out[MU_NODES:][sl, j] = (d * s ** 6 * refl) @ w
+    return out
+
+
+@functools.lru_cache(maxsize=1)
+def _schlick_moment_tables() -> np.ndarray:
+    table = cached_table("ggx_schlick_moments", (_TABLE_VERSION, MU_NODES, ROUGH_NODES, QUAD_RADIUS, QUAD_ANGLE,
+                                                 MU_FLOOR), (2 * MU_NODES, ROUGH_NODES), _build_schlick_moments)
+    table.setflags(write=False)
+    return table
+
+
+def schlick_moments(mu, alpha) -> tuple[np.ndarray, np.ndarray]:
+    """(E_S, E_B) (N,) of the height-correlated GGX reflection lobe at μ (N,), α (a number or (N,)): its albedo
+    with the Fresnel factors (1 − cosθ_h)⁵ and cosθ_h(1 − cosθ_h)⁶, so that a Schlick / F82-Tint reflectance
+    F = F0 + (1 − F0)(1 − c)⁵ − b·c(1 − c)⁶ gives the albedo F0·E + (1 − F0)·E_S − b·E_B (E: conductor_albedo)."""
+    table = _schlick_moment_tables()
+    return _bilinear(table[:MU_NODES], mu, alpha), _bilinear(table[MU_NODES:], mu, alpha)
 
 
 def conductor_average(alpha, correlated: bool = False) -> np.ndarray:

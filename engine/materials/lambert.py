@@ -11,7 +11,7 @@ import numpy as np
 
 from ..kernels import twin
 from ..kernels.diffuse import cosine_sample_numba, direct_light_numba, rgb_albedo_numba, set_albedo_numba
-from .base import BSDF, BSDFFlags, BSDFSample, ShadingPoint, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter, Socket
 from .sampling import cosine_hemisphere, local_to_world
 from ..spectral import ConstantSpectrum
@@ -95,6 +95,10 @@ class Lambert(BSDF):
 
     def _albedo(self, sp: ShadingPoint) -> np.ndarray:
         return sp.spectrum(self.albedo)
+
+    def lobe_colors(self, sp: ShadingPoint) -> LobeColors:
+        """Diffuse: ρ (Cycles' diffuse closure: its weight)."""
+        return LobeColors.of(sp, diffuse=self._albedo(sp))
 
     @property
     def scatters_nothing(self) -> bool:

@@ -57,7 +57,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ShadingPoint, depolarising_value
 from .lambert import Lambert
 from .normal_map import ShadingNormal
 from .parameters import ModelDeclaration, Parameter
@@ -509,6 +509,38 @@ class Mix(BSDF):
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
         return self._sum(sp, self._points(sp), self._weights(sp), wi, cosine=False)
+
+    def diffuse_share(self, sp: ShadingPoint, wi: np.ndarray, f: MuellerValue) -> np.ndarray | None:
+        """Σ w_k·d_k (L, N): each component's diffuse part at its own point, weighted as ``eval`` weights its
+        value (a Layered's base under the layer's attenuation); None if a component with both diffuse and
+        glossy lobes does not tell them apart."""
+        if not (self.flags.has(BSDFFlags.DIFFUSE) and self.flags.has(BSDFFlags.GLOSSY)):
+            return super().diffuse_share(sp, wi, f)
+        cos_s = np.abs(dot(sp.n_s, wi))
+        out = np.zeros(f.m00().shape)
+        for c, q, w in zip(self.components, self._points(sp), self._weights(sp)):
+            if not w.any() or not c.flags.has(BSDFFlags.DIFFUSE):
+                continue
+            d = c.diffuse_share(q, wi, c.eval(q, wi))
+            if d is None:
+                return None
+            if q is not sp:
+                w = w * np.where(cos_s > 0, np.abs(dot(q.n_s, wi)) / np.where(cos_s > 0, cos_s, 1.0), 0.0)
+            out = out + w[None, :] * d
+        return out
+
+    def lobe_colors(self, sp: ShadingPoint) -> LobeColors | None:
+        """Σ w_k·colours_k, each component's at its own point (a Layered's base under the layer's attenuation:
+        Cycles' closure weights after ``closure_layering_weight``); None if a component has none."""
+        out = LobeColors.of(sp)
+        for c, q, w in zip(self.components, self._points(sp), self._weights(sp)):
+            if not w.any():
+                continue
+            colors = c.lobe_colors(q)
+            if colors is None:
+                return None
+            out = out + colors.scaled(w)
+        return out
 
     def _pdf(self, points, p, wi) -> np.ndarray:
         out = np.zeros(wi.shape[1])

@@ -247,6 +247,16 @@ class ShadingNormal(BSDF):
     def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
         return self.base.refraction_eta_sq(sp)
 
+    def lobe_colors(self, sp: ShadingPoint):
+        """The base's at its point (the mapped normal; Cycles' closures take their albedo at their own N)."""
+        return self.base.lobe_colors(self._base_point(sp))
+
+    def diffuse_share(self, sp: ShadingPoint, wi: np.ndarray, f: MuellerValue) -> np.ndarray | None:
+        """The base's diffuse part (its value scaled as ``eval`` scales it)."""
+        q = self._base_point(sp)
+        d = self.base.diffuse_share(q, wi, self.base.eval(q, wi))
+        return None if d is None else d * self._factor(sp, wi)[None, :]
+
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         return self.base.pdf(self._base_point(sp), wi)
 

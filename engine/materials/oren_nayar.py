@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, depolarising_value
 from .parameters import ModelDeclaration, Parameter
 from .sampling import cosine_hemisphere, local_to_world
 from ..vec3 import dot
@@ -103,6 +103,10 @@ class OrenNayar(BSDF):
         weight = math.pi * self._value(sp, wi) * valid[None, :]      # f·cosθ/pdf with pdf = cosθ/π
         return BSDFSample(wi=wi, weight=depolarising_value(weight, sp.n), pdf=self.pdf(sp, wi),
                           is_delta=np.zeros(sp.n, bool), valid=valid)
+
+    def lobe_colors(self, sp) -> LobeColors:
+        """Diffuse: ρ (Cycles' energy-preserving Oren–Nayar closure: its weight, whatever the roughness)."""
+        return LobeColors.of(sp, diffuse=np.clip(sp.spectrum(self.albedo), 0.0, 1.0))
 
     def albedo_estimate(self, sp):
         """The view direction's albedo (N,) for mixtures' lobe choice: ρ's wavelength mean × E(cosθ_o)."""

@@ -352,6 +352,14 @@ class RoughDielectric(BSDF):
             out["multiscatter"] = True
         return out
 
+    def lobe_colors(self, sp: ShadingPoint):
+        """Cycles' glass colours (engine.materials.glass_colors.rough_glass_colors) for a constant index and
+        roughness; None where either varies over the surface."""
+        if self.per_point or self.per_point_index:
+            return None
+        from .glass_colors import rough_glass_colors
+        return rough_glass_colors(sp, self.n_int / self.n_ext, self.alpha)
+
 
 # --------------------------------------------------------------------------- declaration
 

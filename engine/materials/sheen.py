@@ -35,7 +35,7 @@ import os
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, ShadingPoint, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter
 from .sampling import cosine_hemisphere
 from ..textures import TexturedNumber, textured
@@ -172,6 +172,11 @@ class Sheen(BSDF):
         clamped to [0, 1] as Cycles reads it (so not 0 where wo is behind the shading normal)."""
         a, _, e = self._table(sp)
         return np.where((np.abs(a) >= CUTOFF) & (e >= CUTOFF), e, 0.0)
+
+    def lobe_colors(self, sp: ShadingPoint) -> LobeColors:
+        """Diffuse (Cycles counts its sheen closure as diffuse): tint × E(cosθ_o), its weight after
+        ``bsdf_sheen_setup`` scaled it by the albedo."""
+        return LobeColors.of(sp, diffuse=self._tint(sp) * self.albedo(sp)[None, :])
 
     def albedo_estimate(self, sp: ShadingPoint) -> np.ndarray:
         """The view direction's albedo (N,) for mixtures' lobe choice: the tint's wavelength mean × E."""

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, depolarising_value
 from .conductor import mirror_reflection
 from .sampling import cosine_hemisphere, local_to_world
 from ..polarisation.fresnel import fresnel_reflectance
@@ -64,6 +64,12 @@ class MirrorWithDiffuse(BSDF):
         """max(0, 1 − s·F(cosθ_o)) (L, N): one minus the mirror's albedo at the view direction."""
         F = fresnel_reflectance(np.clip(sp.cos_o, 0.0, 1.0)[None, :], self._eta(sp))
         return np.maximum(1.0 - sp.number(self.s) * F, 0.0)
+
+    def lobe_colors(self, sp) -> LobeColors | None:
+        """Glossy: s × the mirror's M00 (its reflectance at the view angle, per wavelength); diffuse: d·ρ (× the
+        ``"albedo_scaling"`` weight)."""
+        glossy = self.delta_reflection(sp).m00()
+        return LobeColors.of(sp, diffuse=self._diffuse(sp) if self.has_diffuse else 0.0, glossy=glossy)
 
     def _p_mirror(self, sp, mirror):
         spec = sp.number(self.s) * mirror.A.mean(axis=0)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
+from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ShadingPoint
 from ..spectral import Spectrum
 from ..textures import TexturedNumber, TexturedSpectrum
 from ..vec3 import dot
@@ -88,6 +88,12 @@ class Tinted(_ScaledLobes):
         if value is None or self.reflection is None:
             return value
         return value.scaled(self._tint(sp, self.reflection))
+
+    def lobe_colors(self, sp: ShadingPoint) -> LobeColors | None:
+        """The base's, reflected lobes × the reflection tint, the transmission × the transmission tint."""
+        colors = self.base.lobe_colors(sp)
+        return None if colors is None else colors.tinted(self._tint(sp, self.reflection),
+                                                          self._tint(sp, self.transmission))
 
     def describe(self) -> dict[str, object]:
         out = dict(self.base.describe())
@@ -238,6 +244,11 @@ class CoatTinted(_ScaledLobes):
     def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         return self.factor(sp)
 
+    def lobe_colors(self, sp: ShadingPoint) -> LobeColors | None:
+        """The base's, every lobe × the tint factor (Cycles' tint scales the closures' weights below the coat)."""
+        colors = self.base.lobe_colors(sp)
+        return None if colors is None else colors.scaled(self.factor(sp))
+
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
         value = self.base.delta_reflection(sp)
         return None if value is None else value.scaled(self.factor(sp))
@@ -322,6 +333,43 @@ class F82Reflectance(_ScaledLobes):
     def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         h = wi + sp.wo      # the facet angle: cosθ_h = |ω_i + ω_o| / 2
         return self._ratio(sp, 0.5 * np.sqrt(dot(h, h)))
+
+    def lobe_colors(self, sp: ShadingPoint) -> LobeColors | None:
+        """Glossy: the curve's albedo at the view direction — a mirror's curve at cosθ_o; a GGX lobe's (isotropic
+        Torrance–Sparrow, or anisotropic at α = √(α_x α_y) as Cycles reads its tables) F0·E + (1 − F0)·E_S −
+        b·E_B (engine.materials.ggx_energy.schlick_moments; the constant curve F0·E), × (1 + k) with the lobe's
+        multiscatter (the compensated lobe's albedo: Cycles' estimate mix(F0, 1, s) × its darkening; Cycles
+        leaves the tint's b term out of it).  None under a film, or over another base."""
+        from .anisotropic_ggx import AnisotropicGGX
+        from .normal_map import ShadingNormal
+        if self.unless_film is not None:
+            return None
+        base = self.base.base if isinstance(self.base, ShadingNormal) else self.base
+        mu = np.clip(sp.cos_o, 0.0, 1.0)
+        f0 = np.clip(sp.spectrum(self.f0), 0.0, 1.0) * np.ones(sp.lam.shape)
+        tint = None if self.tint is None else np.clip(sp.spectrum(self.tint), 0.0, 1.0)
+        if base.flags.lobes == BSDFFlags.DELTA_REFLECTION and getattr(base, "film", None) is None:
+            glossy = f82_curve(mu[None, :], f0, tint) if self.curve == "f82_tint" else f0
+            return LobeColors.of(sp, glossy=glossy)
+        if isinstance(base, AnisotropicGGX):
+            alpha = np.sqrt(sp.number(base.alpha_x) * sp.number(base.alpha_y))
+        elif getattr(base, "distribution", None) == "ggx" and getattr(base, "film", None) is None:
+            alpha = sp.number(base.m)
+        else:
+            return None
+        from .ggx_energy import conductor_albedo, schlick_moments
+        E = conductor_albedo(mu, alpha, correlated=True)
+        if self.curve == "f82_tint":
+            E_S, E_B = schlick_moments(mu, alpha)
+            glossy = f0 * E + (1.0 - f0) * E_S
+            if tint is not None:
+                f5 = _F82_SIX ** 5
+                glossy = glossy - (f0 + (1.0 - f0) * f5) * (7.0 / (f5 * _F82_SIX)) * (1.0 - tint) * E_B
+        else:
+            glossy = f0 * E
+        if getattr(base, "multiscatter", False):
+            glossy = glossy * (1.0 + base.multiscatter_extra(sp))
+        return LobeColors.of(sp, glossy=np.maximum(glossy, 0.0) * sp.number(getattr(base, "s", 1.0)))
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
         value = self.base.delta_reflection(sp)

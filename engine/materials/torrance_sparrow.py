@@ -103,7 +103,7 @@ import math
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, depolarising_value
+from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ShadingPoint, depolarising_value
 from .conductor import K, METAL, N, THIN_FILM_IOR, THIN_FILM_THICKNESS, complex_index, mirror_reflection
 from .ggx import GGX
 from .ggx_energy import ALPHA_MAX, conductor_extra, ggx_reflection_albedo
@@ -576,13 +576,50 @@ class TorranceSparrow(BSDF):
         """max(0, 1 − s·E(cosθ_o)) (N,) of ``"albedo_scaling"``; None for ``"add"`` (weight 1)."""
         if self._albedo is None:
             return None
+        return np.maximum(1.0 - sp.number(self.s) * self._layer_albedo(sp, cos_o, self._albedo), 0.0)
+
+    def _layer_albedo(self, sp: ShadingPoint, cos_o: np.ndarray, table) -> np.ndarray:
+        """E(cosθ_o) (N,) of the facet lobe (s = 1) from its albedo ``table`` (``_albedo_table``), × (1 + k) with
+        ``multiscatter`` (the compensated lobe's: Cycles' layering estimate), a filmed lobe's ``film_albedo``."""
         if self.film is not None:
-            E = self.film_albedo(sp, cos_o)
+            return self.film_albedo(sp, cos_o)
+        if isinstance(table, IndexAlbedoTables):
+            E = table(cos_o, sp.number(self.m), self.n.numbers(sp.surface_points()) / self.exterior_n)
         else:
-            E = self.lobe_albedo(sp, cos_o)
-            if self.multiscatter:   # the compensated lobe's albedo: (1 + k)·E_F (Cycles' layering estimate)
-                E = E * (1.0 + self.multiscatter_extra(sp)[0])
-        return np.maximum(1.0 - sp.number(self.s) * E, 0.0)
+            E = table(cos_o, sp.number(self.m))
+        if self.multiscatter:
+            E = E * (1.0 + self.multiscatter_extra(sp)[0])
+        return E
+
+    def lobe_colors(self, sp: ShadingPoint) -> LobeColors | None:
+        """Glossy: s·E(cosθ_o) (``_layer_albedo``; Cycles' estimate of a Principled specular layer); diffuse:
+        d·ρ, × max(0, 1 − s·E) with ``"albedo_scaling"``.  None where the facet lobe has no albedo table (Blinn
+        facets, an index that varies with the wavelength, a film outside ``"albedo_scaling"``)."""
+        cos_o = np.clip(sp.cos_o, 0.0, 1.0)
+        table = self._albedo
+        if self.has_specular and table is None:
+            table = self._colour_table()
+            if table is None:
+                return None
+        glossy = sp.number(self.s) * self._layer_albedo(sp, cos_o, table) if self.has_specular else 0.0
+        diffuse = 0.0
+        if self.has_diffuse:
+            diffuse = sp.spectrum(self.albedo) * sp.number(self.d)
+            scale = self.diffuse_scale(sp, cos_o)
+            if scale is not None:
+                diffuse = diffuse * scale[None, :]
+        return LobeColors.of(sp, diffuse=diffuse, glossy=glossy)
+
+    def _colour_table(self):
+        """The facet lobe's albedo table for ``lobe_colors`` outside ``"albedo_scaling"`` (built once), None where
+        there is none (``_albedo_table``'s conditions, no film)."""
+        if not hasattr(self, "_colour_albedo"):
+            constant = isinstance(self.n, ConstantSpectrum) and isinstance(self.k, ConstantSpectrum)
+            per_point = isinstance(self.n, NumberSpectrum) and isinstance(self.k, ConstantSpectrum) and \
+                self.k.value == 0.0
+            ok = self.distribution in ("beckmann", "ggx") and self.film is None and (constant or per_point)
+            self._colour_albedo = self._albedo_table() if ok else None
+        return self._colour_albedo
 
     def film_albedo(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray:
         """(N,) Cycles' layering estimate of a filmed facet lobe (bsdf_microfacet_estimate_albedo: no table for
@@ -805,6 +842,11 @@ class FilmedMirrorWithDiffuse(MirrorWithDiffuse):
         lam = np.asarray(RGB_WAVELENGTHS_NM, np.float64)
         n3 = (self.n.eval(lam) + 1j * self.k.eval(lam))[:, None]
         return film_layering_albedo(cos_o, self.exterior_n, film_at(self.film, sp), n3, lam)
+
+    def lobe_colors(self, sp: ShadingPoint) -> LobeColors | None:
+        """The mirror's (MirrorWithDiffuse.lobe_colors) without a film; under one None (Cycles' colour is the
+        film's reflectance per channel, its layering weight the largest channel's: not told apart here)."""
+        return super().lobe_colors(sp) if self.film is None else None
 
     def diffuse_scale(self, sp):
         """max(0, 1 − s·E(cosθ_o)) (1, N) under the film (E: ``film_albedo``), else the bare mirror's (L, N)."""

@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..kernels.transport import spectral_stokes_rgb_samples, stokes_rgb_samples
+from ..materials.base import LobeColors
 from ..materials.flags import BSDFFlags
 from ..spectral.cie import d65_normalised
 from ..vec3 import dot
@@ -91,6 +92,7 @@ class LightPassBatch:
         self.rules = LightPathRules(tracer.settings, tracer.materials)
         self.transmits = np.array([m.flags.transmits for m in tracer.materials], bool)
         self.unseparated: set[str] = set()
+        self.estimated: set[str] = set()           # materials without lobe_colors (one-sample colours)
         # albedos become colours under white light: the colour-matching weights times D65 at the sampled λ
         self.white = None if acc.w_rgb is None or tracer.mono else acc.w_rgb * d65_normalised(state.lk.lam)[None]
         acc.lobes = self
@@ -207,10 +209,32 @@ class LightPassBatch:
             self.transmit[n_ids] = (kind[new] == TRANSMISSION) & self.transmits[mat[new]]
             a = np.where(nxt.valid[new], nxt.T[0, 0][:, new], 0.0)         # (Lm, m)
             trans = self.transmit[n_ids]
-            self.color[DIFFUSE][:, n_ids] = frac * a
-            self.color[GLOSSY][:, n_ids] = np.where(trans, 0.0, (1.0 - frac) * a)
-            self.color[TRANS][:, n_ids] = np.where(trans, (1.0 - frac) * a, 0.0)
+            colors, known = self._colors(state, surf, mat, rows, t00)
+            self.color[DIFFUSE][:, n_ids] = np.where(known, colors.diffuse, frac * a)
+            self.color[GLOSSY][:, n_ids] = np.where(known, colors.glossy, np.where(trans, 0.0, (1.0 - frac) * a))
+            self.color[TRANS][:, n_ids] = np.where(known, colors.transmission, np.where(trans, (1.0 - frac) * a, 0.0))
         self.level[ids] = np.where(new, 1, np.where(level >= 1, 2, level))
+
+    def _colors(self, state, surf, mat: np.ndarray, rows: np.ndarray, t00: np.ndarray) -> tuple:
+        """The Color passes' albedos of the first vertices ``rows`` (batch rows; throughput T00 (Lm, m) before
+        them): (LobeColors T00 × BSDF.lobe_colors at each vertex's shading point, known (m,): where its material
+        has them; elsewhere the caller's one-sample estimate, the material named in a warning)."""
+        tracer = self.tracer
+        out = LobeColors(*(np.zeros(t00.shape) for _ in range(3)))
+        known = np.zeros(rows.size, bool)
+        flip = tracer._back_faces(mat, surf.n_g, surf.wo)
+        groups = tracer.group_of[mat[rows]]
+        for g in np.unique(groups):
+            at = np.flatnonzero(groups == g)
+            bsdf = tracer.shaders[g]
+            colors = bsdf.lobe_colors(tracer._shading_point(bsdf, state, surf, mat, flip, rows[at]))
+            if colors is None:
+                self.estimated.add(bsdf.name)
+                continue
+            known[at] = True
+            out.diffuse[:, at], out.glossy[:, at] = t00[:, at] * colors.diffuse, t00[:, at] * colors.glossy
+            out.transmission[:, at] = t00[:, at] * colors.transmission
+        return out, known
 
     def finish(self) -> dict:
         """The batch's passes per path: "light" (8, 4, 3, N) Stokes × RGB (as the film converts the radiance),
@@ -232,7 +256,8 @@ class LightPassBatch:
         bad = ~(np.isfinite(light).all(axis=(0, 1, 2)) & np.isfinite(color).all(axis=(0, 1)))
         light[..., bad] = 0.0
         color[..., bad] = 0.0
-        return {"light": light, "color": color, "unseparated": sorted(self.unseparated), "dropped": bad}
+        return {"light": light, "color": color, "unseparated": sorted(self.unseparated),
+                "estimated": sorted(self.estimated), "dropped": bad}
 
 
 # ----------------------------------------------------------------------------- the passes of a render
@@ -307,7 +332,7 @@ def render_light_passes(renderer, settings=None, window=None, threads: int | Non
         out[..., lp["dropped"]] = 0.0           # the samples the passes drop are dropped from their combined too
         m = c.size
         return (out.reshape(4, 3, m, spp).sum(-1), lp["light"].reshape(8, 4, 3, m, spp).sum(-1),
-                lp["color"].reshape(3, 3, m, spp).sum(-1), lp["unseparated"])
+                lp["color"].reshape(3, 3, m, spp).sum(-1), lp["unseparated"], lp["estimated"])
 
     workers = threads if threads is not None else settings.threads
     workers = max(1, workers if workers > 0 else (os.cpu_count() or 1))
@@ -318,10 +343,11 @@ def render_light_passes(renderer, settings=None, window=None, threads: int | Non
             results = list(pool.map(run, chunks))
     n = pixels.size
     combined, light, color = np.zeros((4, 3, n)), np.zeros((8, 4, 3, n)), np.zeros((3, 3, n))
-    unseparated = set()
-    for c, (o, li, co, un) in zip(chunks, results):
+    unseparated, estimated = set(), set()
+    for c, (o, li, co, un, est) in zip(chunks, results):
         combined[..., c], light[..., c], color[..., c] = o, li, co
         unseparated.update(un)
+        estimated.update(est)
     h, w = y1 - y0, x1 - x0
 
     def image(a):                                # (..., 3, n) sums → (..., h, w, 3)
@@ -336,4 +362,8 @@ def render_light_passes(renderer, settings=None, window=None, threads: int | Non
             stokes[name] = safe_divide_even_color(image(light[k]), image(color[k // 2])[None])
     warnings = [f"light passes: the diffuse and glossy lobes of {', '.join(repr(u) for u in sorted(unseparated))} "
                 "are not separated; their light counts as Glossy (or Transmission)"] if unseparated else []
+    if estimated:
+        warnings.append(f"light passes: no per-lobe albedo for {', '.join(repr(u) for u in sorted(estimated))}; "
+                        "their Color passes are one-sample estimates, so their Direct and Indirect passes (light / "
+                        "Color) run high at low sample counts")
     return LightPasses(stokes=stokes, color=color_img, combined=image(combined) * inv, samples=spp, warnings=warnings)
