@@ -43,7 +43,7 @@ from ..materials.flags import BSDFFlags
 from ..spectral.cie import d65_normalised
 from ..vec3 import dot
 from .integrator import albedo_rgb
-from .light_paths import TRANSMISSION, TRANSPARENT, LightPathRules, classify, trace_light_paths
+from .light_paths import TRANSPARENT, LightPathRules, classify, trace_light_paths
 
 #: CLI / engine key → the pass's name in Blender (Cycles' passes in Blender 4.5–5.x), in Cycles' order
 LIGHT_PASSES = {"diffuse_direct": "Diffuse Direct", "diffuse_indirect": "Diffuse Indirect",
@@ -123,8 +123,8 @@ class LightPassBatch:
         col = T[:, 0][..., cols]                    # (P, Lm, m): the throughput's response to depolarised light
         part = col * (d * weight)[None]
         self.nee_diffuse[:, :, ids] = part[:, :, first]
-        # a surface that cannot transmit reflects light from below its geometric plane (shading normals)
-        self.nee_transmit[ids] = ((dot(wi, sp.n_g) * dot(sp.wo, sp.n_g) < 0) & bsdf.flags.transmits)[first]
+        # transmitted: the light's side of the shading normal is not the viewer's (Cycles' glass closures)
+        self.nee_transmit[ids] = ((dot(wi, sp.n_s) * dot(sp.wo, sp.n_s) < 0) & bsdf.flags.transmits)[first]
 
     def sampled(self, bsdf, sp, path, bs) -> None:
         """The BSDF sample of the paths ``path`` (a non-delta material's): the diffuse fraction of its value at
@@ -206,7 +206,10 @@ class LightPassBatch:
             T_pre = state.T_store[:, 0][..., rows if cols is None else cols]     # (P, Lm, m)
             t00 = T_pre[0]
             self.col0[:, :, n_ids] = np.where(t00 != 0, T_pre / np.where(t00 != 0, t00, 1.0), self.col0[:, :, n_ids])
-            self.transmit[n_ids] = (kind[new] == TRANSMISSION) & self.transmits[mat[new]]
+            # Cycles' glass closure counts light as transmitted by the side of its shading normal (light_passes.h)
+            n_s = surf.n_s[:, rows]
+            crossed = dot(nxt.d[:, rows], n_s) * dot(surf.wo[:, rows], n_s) < 0
+            self.transmit[n_ids] = crossed & self.transmits[mat[new]]
             a = np.where(nxt.valid[new], nxt.T[0, 0][:, new], 0.0)         # (Lm, m)
             trans = self.transmit[n_ids]
             colors, known = self._colors(state, surf, mat, rows, t00)
