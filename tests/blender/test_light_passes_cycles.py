@@ -30,8 +30,8 @@ LIGHT = tuple(lobe + p for lobe in LOBES for p in ("Direct", "Indirect"))
 COLOR = tuple(lobe + "Color" for lobe in LOBES)
 #: not yet explained (measured 160 × 120, 16 spp, 3 seeds): the glass ball's Glossy Indirect, Polar 0.51 / 0.48 / 0.49
 #: against Cycles 0.47 / 0.44 / 0.44 (+9 %), while its Colors (0.94 transmission), Glossy Direct and the other
-#: objects' passes agree; reported, still checked for the record in the printed table
-RESIDUAL = {(0x26deb52a, "Glossy Indirect")}
+#: objects' passes agree; held to a looser bound (4σ + 15 %) so that it cannot grow unnoticed
+RESIDUAL = {(0x26deb52a, "Glossy Indirect"): 0.15}
 
 
 @pytest.fixture(scope="module")
@@ -160,11 +160,12 @@ def test_light_passes_match_cycles(addon, tmp_path):
                                  for s in seeds])                       # (3 seeds, RGB), rows top first
             mine, sigma = per_seed.mean(0), per_seed.std(0, ddof=1) / np.sqrt(len(seeds))
             cyc = theirs[name][..., :3][mask].mean(0)
-            tol = (0.05 * np.abs(cyc)) if name in COLOR else 4 * sigma + 0.05 * np.abs(cyc)
+            share = RESIDUAL.get((obj, name), 0.05)
+            tol = (0.05 * np.abs(cyc)) if name in COLOR else 4 * sigma + share * np.abs(cyc)
             tol = np.maximum(tol, 2e-3 * max(np.abs(cyc).max(), 1e-3))
             report.append(f"{obj:#x} {name}: Polar {np.round(mine, 4)} ± {np.round(sigma, 4)}, "
                           f"Cycles {np.round(cyc, 4)}")
-            ok = (np.abs(mine - cyc) <= tol).all() or (obj, name) in RESIDUAL
+            ok = (np.abs(mine - cyc) <= tol).all()
             report[-1] += "" if ok else "  <-- FAIL"
     print("\n".join(report))
     assert "FAIL" not in "\n".join(report), "\n".join(report)
