@@ -195,9 +195,9 @@ def test_a_paths_cost_is_one_plus_four_per_surface_hit_and_light_sample():
         current["path"] = state.path
         return scatter(state, acc, surf, bounce)
 
-    def counted_next_event(sp, lookup, bsdf, T, rows, *args):
+    def counted_next_event(sp, lookup, bsdf, T, rows, *args, **kwargs):
         np.add.at(lights, current["path"][rows], 1)
-        return next_event(sp, lookup, bsdf, T, rows, *args)
+        return next_event(sp, lookup, bsdf, T, rows, *args, **kwargs)
     tracer._intersect, tracer._scatter, tracer._next_event = counted_intersect, counted_scatter, counted_next_event
     cost = tracer.trace(pixel, sample)[1]["path_cost"]
     assert (PATH_COST, VERTEX_COST) == (1, 4)
