@@ -475,8 +475,8 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: s
         raise SceneError(f"{field}.radiance_scaling", f"must be true or false, got {radiance_scaling!r}")
     if not radiance_scaling:
         bsdf.radiance_scaling = False
-    if interior is not None and interior.absorbs:
-        bsdf.interior = interior            # (none when it absorbs nothing: the scene renders as without)
+    if interior is not None and (interior.absorbs or interior.scatters):
+        bsdf.interior = interior            # (none when it absorbs and scatters nothing: renders as without)
     return bsdf
 
 
