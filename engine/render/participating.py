@@ -35,8 +35,6 @@ media.  docs/physics.md "Participating media".
 
 from __future__ import annotations
 
-import warnings
-
 import numpy as np
 
 from ..kernels.hashing import uniforms
@@ -45,7 +43,7 @@ from ..materials.batching import shading_groups
 from ..media.henyey_greenstein import HenyeyGreenstein
 from .accel import surface_points
 from .integrator import PathTracer, _SurfaceHits
-from .media import Media, tracked_media
+from .media import Media, cross, tracked_media
 from .plan import spectral_reduction
 from .sampler import _offsets
 
@@ -211,11 +209,13 @@ class Tracking:
         s = self._values(it.scattering, lk, cols)
         return s, (s + self._values(it.absorption, lk, cols) if it.grid is not None else s)
 
-    def _members(self, stack: np.ndarray) -> list:
-        """[(k, paths (m,))] of the tracked media on the stacks (K, n) (the world's where empty)."""
-        eff = self.media.with_world(stack)
+    def _members(self, stack: np.ndarray, rows: np.ndarray, grids_only: bool = False) -> list:
+        """[(k, paths (m,))] of the tracked media on the stacks (K, n) (the world's where empty) of the
+        paths ``rows``."""
+        eff = self.media.with_world(stack[:, rows])
         tk = np.where(eff >= 0, self.index[np.maximum(eff, 0)], -1)
-        return [(int(k), np.flatnonzero((tk == k).any(axis=0))) for k in np.unique(tk[tk >= 0])]
+        out = [(int(k), rows[(tk == k).any(axis=0)]) for k in np.unique(tk[tk >= 0])]
+        return [(k, cols) for k, cols in out if not grids_only or self.grids[k] is not None]
 
     def _majorants(self, members: list, lk, n: int, o, d, t_end) -> tuple[np.ndarray, np.ndarray, list]:
         """(σ̄ (n,), the distance the tracking ends at (n,), [(k, paths, σ_s, σ_tracked)]) of the paths."""
@@ -238,94 +238,123 @@ class Tracking:
     def _densities(self, k: int, p: np.ndarray) -> np.ndarray | float:
         return 1.0 if self.grids[k] is None else self.grids[k].density(p)
 
-    def free_flight(self, stack, o, d, t_end, lk, keys, bounce: int) -> Tracks | None:
-        """Delta tracking of the segments o + t·d, t < t_end (n,), from the stacks (K, n); None where no
-        path runs through a tracked medium."""
-        members = self._members(stack)
-        if not members:
-            return None
+    def _at(self, coeffs: list, n: int, act: np.ndarray, x: np.ndarray, L: int) -> tuple[np.ndarray, np.ndarray]:
+        """(σ_s per medium (K, L, m), the tracked σ (L, m)) at the points x (3, m) of the paths ``act``."""
+        sig_s = np.zeros((len(self.interiors), L, act.size))
+        sig_t = np.zeros((L, act.size))
+        pos = np.full(n, -1, np.int64)
+        for k, cols, s, tr in coeffs:
+            pos[cols] = np.arange(cols.size)
+            c = pos[act]
+            on = np.flatnonzero(c >= 0)
+            pos[cols] = -1
+            if on.size == 0:
+                continue
+            rho = self._densities(k, x[:, on])
+            sig_s[k][:, on] = s[:, c[on]] * rho
+            sig_t[:, on] += tr[:, c[on]] * rho
+        return sig_s, sig_t
+
+    def pieces(self, start: np.ndarray, d: np.ndarray, crossings: list, t_end: np.ndarray):
+        """The segments cut at their pass-through crossings (``crossings``: layers of (rays, triangles,
+        distances), engine.render.visibility): yields (stacks (K, n), paths (m,), from (n,), to (n,)) per
+        piece, the stacks updated at each crossing as engine.render.media.Media.march updates them."""
+        n = d.shape[1]
+        count = np.zeros(n, np.int64)
+        numbered: list = []                 # crossing c of every ray: (rays, triangles, distances)
+        for rays, prims, t in crossings:
+            c = count[rays]
+            for cv in np.unique(c):
+                at = c == cv
+                while len(numbered) <= cv:
+                    numbered.append([])
+                numbered[cv].append((rays[at], prims[at], t[at]))
+            count[rays] += 1
+        stack, t_lo = start.copy(), np.zeros(n)
+        for c in range(len(numbered) + 1):
+            rows = np.arange(n) if c == 0 else np.flatnonzero(count >= c)
+            t_hi = t_end.copy()
+            if c < len(numbered):
+                rays, prims, t = (np.concatenate(a) for a in zip(*numbered[c]))
+                t_hi[rays] = np.minimum(t, t_end[rays])
+            yield stack, rows, t_lo, t_hi
+            if c < len(numbered):
+                vol = self.media.tri_volume[prims]
+                entering = (self.media.tri_normal[prims] * d[:, rays].T).sum(axis=1) < 0
+                cross(stack, rays, vol, entering)
+                t_lo = t_lo.copy()
+                t_lo[rays] = t
+
+    def free_flight(self, start, o, d, crossings, t_end, lk, keys, bounce: int) -> Tracks | None:
+        """Delta tracking of the segments o + t·d, t < t_end (n,), that start with the stacks (K, n) and
+        cross the pass-through surfaces ``crossings``; None where no path runs through a tracked medium."""
         n = d.shape[1]
         L = 3 if self.rgb_mode else lk.lam.shape[0]
-        sbar, end, coeffs = self._majorants(members, lk, n, o, d, t_end)
-        tracks = Tracks(n, L)
-        act = np.flatnonzero((sbar > 0) & (end > 0))
-        t = np.zeros(n)
+        tracks, j = None, 0
         first = TRACK_DIMENSION + bounce * BOUNCE_STRIDE
-        K = len(self.interiors)
-        slot = np.full((K, n), -1, np.int64)          # each path's column in its medium's coefficients
-        for k, cols, _, _ in coeffs:
-            slot[k, cols] = np.arange(cols.size)
-        for j in range(MAX_COLLISIONS):
-            if act.size == 0:
-                break
-            u = uniforms(keys[act], _offsets(first + 2 * j, 2))
-            t[act] -= np.log1p(-u[0]) / sbar[act]
-            go = t[act] < end[act]
-            act, u = act[go], u[:, go]
-            if act.size == 0:
-                break
-            p = o[:, act] + t[act] * d[:, act]
-            sig_s = np.zeros((K, L, act.size))
-            sig_t = np.zeros((L, act.size))
-            for k, _, s, tr in coeffs:
-                c = slot[k, act]
-                on = np.flatnonzero(c >= 0)
-                if on.size == 0:
-                    continue
-                rho = self._densities(k, p[:, on])
-                sig_s[k][:, on] = s[:, c[on]] * rho
-                sig_t[:, on] += tr[:, c[on]] * rho
-            sig_n = np.maximum(sbar[act] - sig_t, 0.0)
-            c = np.concatenate((sig_s.mean(axis=1), sig_n.mean(axis=0)[None]))        # (K + 1, m)
-            total = c.sum(axis=0)
-            cum = np.cumsum(c, axis=0)
-            event = np.minimum((u[1] * total >= cum).sum(axis=0), K)
-            chosen = np.take_along_axis(c, event[None], axis=0)[0]
-            sig = np.where(event[None] < K, sig_s[np.minimum(event, K - 1), :, np.arange(act.size)].T, sig_n)
-            ok = chosen > 0
-            w = np.where(ok[None], sig * (total / np.where(ok, chosen * sbar[act], 1.0))[None], 0.0)
-            scat = (event < K) & ok
-            tracks.rounds.append((act, t[act].copy(), w, scat))
-            tracks.scattered[act[scat]] = True
-            tracks.t[act[scat]] = t[act[scat]]
-            tracks.medium[act[scat]] = event[scat]
-            act = act[~scat & ok]
-        else:
-            if act.size:
+        for stack, rows, t_lo, t_hi in self.pieces(start, d, crossings, t_end):
+            if tracks is not None:
+                rows = rows[~tracks.scattered[rows]]
+            members = self._members(stack, rows)
+            if not members:
+                continue
+            tracks = tracks or Tracks(n, L)
+            sbar, end, coeffs = self._majorants(members, lk, n, o, d, t_hi)
+            act = np.flatnonzero((sbar > 0) & (end > t_lo))
+            t = t_lo.copy()
+            K = len(self.interiors)
+            while act.size and j < MAX_COLLISIONS:
+                u = uniforms(keys[act], _offsets(first + 2 * j, 2))
+                j += 1
+                t[act] -= np.log1p(-u[0]) / sbar[act]
+                go = t[act] < end[act]
+                act, u = act[go], u[:, go]
+                if act.size == 0:
+                    break
+                sig_s, sig_t = self._at(coeffs, n, act, o[:, act] + t[act] * d[:, act], L)
+                sig_n = np.maximum(sbar[act] - sig_t, 0.0)
+                c = np.concatenate((sig_s.mean(axis=1), sig_n.mean(axis=0)[None]))        # (K + 1, m)
+                total = c.sum(axis=0)
+                event = np.minimum((u[1] * total >= np.cumsum(c, axis=0)).sum(axis=0), K)
+                chosen = np.take_along_axis(c, event[None], axis=0)[0]
+                sig = np.where(event[None] < K, sig_s[np.minimum(event, K - 1), :, np.arange(act.size)].T, sig_n)
+                ok = chosen > 0
+                w = np.where(ok[None], sig * (total / np.where(ok, chosen * sbar[act], 1.0))[None], 0.0)
+                scat = (event < K) & ok
+                tracks.rounds.append((act, t[act].copy(), w, scat))
+                tracks.scattered[act[scat]] = True
+                tracks.t[act[scat]] = t[act[scat]]
+                tracks.medium[act[scat]] = event[scat]
+                act = act[~scat & ok]
+            if act.size:            # still going after MAX_COLLISIONS: dropped
                 tracks.rounds.append((act, t[act].copy(), np.zeros((L, act.size)), np.zeros(act.size, bool)))
         return tracks
 
-    def ratio_tracking(self, stack, p, wi, dist, lk, keys, bounce: int) -> np.ndarray | None:
-        """Transmittance (L, n) of the grid media on the stacks (K, n) along the shadow rays p + t·wi,
-        t < dist (n,): Π (1 − σ(λ, x_i)/σ̄) over the collisions x_i on the majorant σ̄ (None: no grid)."""
-        members = [(k, cols) for k, cols in self._members(stack) if self.grids[k] is not None]
-        if not members:
-            return None
+    def ratio_tracking(self, start, p, wi, crossings, dist, lk, keys, bounce: int) -> np.ndarray | None:
+        """Transmittance (L, n) of the grid media along the shadow rays p + t·wi, t < dist (n,), that start
+        with the stacks (K, n) and cross ``crossings``: Π (1 − σ(λ, x_i)/σ̄) over the collisions x_i on the
+        majorant σ̄ (None: no grid medium on the way)."""
         n = wi.shape[1]
         L = 3 if self.rgb_mode else lk.lam.shape[0]
-        sbar, end, coeffs = self._majorants(members, lk, n, p, wi, dist)
-        out = np.ones((L, n))
-        act = np.flatnonzero((sbar > 0) & (end > 0))
-        t = np.zeros(n)
+        out, j = None, 0
         first = RATIO_DIMENSION + bounce * BOUNCE_STRIDE
-        for j in range(MAX_COLLISIONS):
-            if act.size == 0:
-                break
-            t[act] -= np.log1p(-uniforms(keys[act], _offsets(first + j, 1))[0]) / sbar[act]
-            act = act[t[act] < end[act]]
-            if act.size == 0:
-                break
-            x = p[:, act] + t[act] * wi[:, act]
-            sig_t = np.zeros((L, act.size))
-            for k, cols, _, tr in coeffs:
-                pos = np.full(n, -1, np.int64)
-                pos[cols] = np.arange(cols.size)
-                c = pos[act]
-                on = np.flatnonzero(c >= 0)
-                sig_t[:, on] += tr[:, c[on]] * self._densities(k, x[:, on])
-            out[:, act] *= np.maximum(1.0 - sig_t / sbar[act], 0.0)
-            act = act[out[:, act].max(axis=0) > 0]
-        else:
+        for stack, rows, t_lo, t_hi in self.pieces(start, wi, crossings, dist):
+            members = self._members(stack, rows, grids_only=True)
+            if not members:
+                continue
+            out = np.ones((L, n)) if out is None else out
+            sbar, end, coeffs = self._majorants(members, lk, n, p, wi, t_hi)
+            act = np.flatnonzero((sbar > 0) & (end > t_lo))
+            t = t_lo.copy()
+            while act.size and j < MAX_COLLISIONS:
+                t[act] -= np.log1p(-uniforms(keys[act], _offsets(first + j, 1))[0]) / sbar[act]
+                j += 1
+                act = act[t[act] < end[act]]
+                if act.size == 0:
+                    break
+                _, sig_t = self._at(coeffs, n, act, p[:, act] + t[act] * wi[:, act], L)
+                out[:, act] *= np.maximum(1.0 - sig_t / sbar[act], 0.0)
+                act = act[out[:, act].max(axis=0) > 0]
             out[:, act] = 0.0
         return out
 
@@ -349,19 +378,15 @@ class ParticipatingPathTracer(PathTracer):
         self.media = ScatteringMedia(self.scene, world, self.rgb_mode, self.mono, shadow=False)
         self.extinction = ScatteringMedia(self.scene, world, self.rgb_mode, self.mono, shadow=True)
         self.tracking = Tracking(self.extinction, tracked, self.rgb_mode, self.mono)
-        if self.visibility is not None and self.visibility.affects_shadows:
-            warnings.warn("participating media entered or left through pass-through or shadow-invisible surfaces "
-                          "are not simulated on those segments (their coefficients are the segment start's)",
-                          stacklevel=2)
 
     # ------------------------------------------------------------------ segments
 
     def _intersect(self, state, acc, bounce):
         state.bounce = bounce
-        start = state.media.copy()          # the emission stage moves the stacks to the segments' ends
         hits, hit, background = super()._intersect(state, acc, bounce)
         t_end = np.where(hit, hits.t, np.inf if state.t_max is None else state.t_max)
-        tracks = self.tracking.free_flight(start, state.o, state.d, t_end, state.lk, state.sampler.keys, bounce)
+        tracks = self.tracking.free_flight(state.media, state.o, state.d, state.crossings or [], t_end, state.lk,
+                                           state.sampler.keys, bounce)
         state.tracks = tracks
         if tracks is None:
             return hits, hit, background
@@ -430,7 +455,7 @@ class ParticipatingPathTracer(PathTracer):
         n = stack.shape[1]
         segment = self.extinction.march(stack, wi, crossings, lookup)
         f = segment.transmittance(np.arange(n), dist) if segment.absorbs else None
-        g = self.tracking.ratio_tracking(start, p, wi, dist, lookup, keys, bounce)
+        g = self.tracking.ratio_tracking(start, p, wi, crossings, dist, lookup, keys, bounce)
         if g is not None:
             f = g if f is None else f * g
         if tau is not None:
