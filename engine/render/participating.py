@@ -43,6 +43,7 @@ from ..materials.batching import shading_groups
 from ..media.henyey_greenstein import HenyeyGreenstein
 from .accel import surface_points
 from .integrator import PathTracer, _SurfaceHits
+from .light_paths import LightPathRules
 from .media import Media, cross, tracked_media
 from .plan import spectral_reduction
 from .sampler import _offsets
@@ -148,14 +149,16 @@ class ScatteringMedia(Media):
 
 class Tracks:
     """The collisions of one bounce's delta tracking: rounds of (paths (m,), distances (m,), weights (L, m),
-    scattering (m,) bool); ``scattered`` (n,), ``t`` (n,) and ``medium`` (n,) of the scattering ones."""
+    scattering (m,) bool); ``scattered`` (n,), ``t`` (n,), ``medium`` (n,) and ``stack`` of the scattering ones."""
 
-    def __init__(self, n: int, L: int):
+    def __init__(self, n: int, L: int, K: int):
         self.n, self.L = n, L
         self.rounds: list = []
         self.scattered = np.zeros(n, bool)
         self.t = np.full(n, np.inf)
         self.medium = np.full(n, -1, np.int64)
+        #: the volume stacks (K, n) where the scattering paths scattered (their stacks from then on)
+        self.stack = np.full((K, n), -1, np.int32)
 
     def weight(self, rows: np.ndarray, s: np.ndarray) -> np.ndarray:
         """The weight (L, m) of light reached at distance s (m,) along the paths ``rows`` (m,): the product
@@ -298,7 +301,7 @@ class Tracking:
             members = self._members(stack, rows)
             if not members:
                 continue
-            tracks = tracks or Tracks(n, L)
+            tracks = tracks or Tracks(n, L, start.shape[0])
             sbar, end, coeffs = self._majorants(members, lk, n, o, d, t_hi)
             act = np.flatnonzero((sbar > 0) & (end > t_lo))
             t = t_lo.copy()
@@ -325,6 +328,7 @@ class Tracking:
                 tracks.scattered[act[scat]] = True
                 tracks.t[act[scat]] = t[act[scat]]
                 tracks.medium[act[scat]] = event[scat]
+                tracks.stack[:, act[scat]] = stack[:, act[scat]]
                 act = act[~scat & ok]
             if act.size:            # still going after MAX_COLLISIONS: dropped
                 tracks.rounds.append((act, t[act].copy(), np.zeros((L, act.size)), np.zeros(act.size, bool)))
@@ -378,6 +382,8 @@ class ParticipatingPathTracer(PathTracer):
         self.media = ScatteringMedia(self.scene, world, self.rgb_mode, self.mono, shadow=False)
         self.extinction = ScatteringMedia(self.scene, world, self.rgb_mode, self.mono, shadow=True)
         self.tracking = Tracking(self.extinction, tracked, self.rgb_mode, self.mono)
+        if self.light_paths is not None:        # Cycles' light paths: a medium vertex counts as a glossy bounce
+            self.light_paths = LightPathRules(settings, self.materials)
 
     # ------------------------------------------------------------------ segments
 
@@ -417,6 +423,8 @@ class ParticipatingPathTracer(PathTracer):
         tracks = getattr(state, "tracks", None)
         if tracks is not None:
             state.tau = state.tau * tracks.total()
+            if tracks.scattered.any():      # the stacks where they scattered, not at their segments' ends
+                state.media[:, tracks.scattered] = tracks.stack[:, tracks.scattered]
             state.tracks = None
 
     def _surface(self, state, hits, hit):

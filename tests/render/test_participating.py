@@ -159,6 +159,24 @@ def test_a_loose_majorant_gives_the_same_mean_as_a_tight_one():
     assert abs(m1 - m5) < 4 * np.hypot(e1, e5)
 
 
+def test_an_index_matched_boundary_and_a_volume_without_surface_give_the_same_multiple_scattering():
+    """The slab lit from below (albedo 0.8, up to 5 scattering events) bounded by an index-matched dielectric
+    (stack changed at the path's own vertices; next-event estimation blocked by the faces) and by no surface
+    (stack changed at pass-through crossings, mid-segment; shadow rays through): the same expectation.  A
+    path that scatters between two crossings keeps the stack where it scattered (a furnace cannot tell)."""
+    def slab(surface):
+        obj, material = cube(surface)
+        data = thick_slab({"albedo": 0.8, "density": 1.0, "phase": HG}, spp=32, size=16)
+        data["objects"][0] = {**obj, "material": "fog"}
+        data["materials"]["fog"] = {**material, "interior": data["materials"]["fog"]["interior"]}
+        data["render"]["max_depth"] = 6
+        return data
+    (m1, e1), (m2, e2) = (mean_and_error(render(slab(s)).stokes()[0][..., 1]) for s in ("pass-through",
+                                                                                      "index-matched"))
+    assert np.isfinite([m1, m2]).all() and m1 > 0.05
+    assert abs(m1 - m2) < 4 * np.hypot(e1, e2)
+
+
 # ----------------------------------------------------------------------------- scenes without scattering
 
 
