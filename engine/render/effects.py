@@ -139,11 +139,16 @@ def media_needs(scene, used: set[str] | None = None) -> tuple[str, list[str]]:
 
 def absorption_note(materials: Mapping[str, BSDF], used: set[str] | None = None) -> str:
     """"; absorbing interiors: 'glass' (…)" for the ``used`` materials with an interior, else ""."""
-    names = [n for n in sorted(used if used is not None else materials) if interior_of(materials[n]) is not None]
-    if not names:
-        return ""
-    return (f"; absorbing interiors: {_list(names)} (Beer–Lambert exp(−σ_a·d) per wavelength inside closed meshes, "
-            "polarisation unchanged)")
+    interiors = [(n, interior_of(materials[n])) for n in sorted(used if used is not None else materials)]
+    names = [n for n, it in interiors if it is not None and not it.tracked]
+    scattering = [n for n, it in interiors if it is not None and it.tracked]
+    note = ""
+    if names:
+        note = (f"; absorbing interiors: {_list(names)} (Beer–Lambert exp(−σ_a·d) per wavelength inside closed "
+                "meshes, polarisation unchanged)")
+    if scattering:
+        note += f"; participating media: {_list(scattering)} (delta tracking, phase functions at medium vertices)"
+    return note
 
 
 def _list(names: list[str]) -> str:
