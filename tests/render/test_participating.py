@@ -177,6 +177,54 @@ def test_an_index_matched_boundary_and_a_volume_without_surface_give_the_same_mu
     assert abs(m1 - m2) < 4 * np.hypot(e1, e2)
 
 
+# ----------------------------------------------------------------------------- multiple scattering: Chandrasekhar
+
+
+def chandrasekhar_h(omega: float, mu: float, nodes: int = 64) -> float:
+    """Chandrasekhar's H-function of isotropic scattering with albedo ω < 1 (Radiative Transfer, 1950, ch. V):
+    H(μ) = 1/(1 − (ω/2) μ ∫₀¹ H(μ')/(μ + μ') dμ'), iterated to convergence on Gauss–Legendre nodes."""
+    x, w = np.polynomial.legendre.leggauss(nodes)
+    x, w = 0.5 * (x + 1.0), 0.5 * w
+    H = np.ones_like(x)
+    for _ in range(20000):
+        new = 1.0 / (1.0 - 0.5 * omega * x * (w * H / (x[:, None] + x[None, :])).sum(axis=1))
+        done = np.max(np.abs(new - H)) < 1e-15
+        H = new
+        if done:
+            break
+    return float(1.0 / (1.0 - 0.5 * omega * mu * (w * H / (mu + x)).sum()))
+
+
+@pytest.mark.parametrize("omega", [0.5, 0.8, 0.95])
+def test_chandrasekhar_h_function_has_its_exact_zeroth_moment(omega):
+    """∫₀¹ H(μ) dμ = (2/ω)(1 − √(1 − ω)) (Chandrasekhar 1950, eq. V.(34)), by independent quadrature."""
+    x, w = np.polynomial.legendre.leggauss(200)
+    moment = sum(0.5 * wi * chandrasekhar_h(omega, 0.5 * (xi + 1.0)) for xi, wi in zip(x, w))
+    assert moment == pytest.approx(2.0 / omega * (1.0 - np.sqrt(1.0 - omega)), rel=1e-6)
+
+
+def test_multiple_scattering_from_a_semi_infinite_isotropic_medium_matches_chandrasekhar():
+    """A sun of irradiance E at zenith angle θ0 on a semi-infinite isotropic medium of albedo ω (a box 30 mean
+    free paths deep, 120 wide, no surface) seen at zenith angle θ: the reflected radiance, all orders of
+    scattering, is E ω μ0 H(μ) H(μ0)/(4π (μ + μ0)) (Chandrasekhar 1950, eq. V.(2)–(3) with πF = E)."""
+    omega, E, th0, th = 0.8, 3.0, 30.0, 50.0
+    mu0, mu = np.cos(np.radians(th0)), np.cos(np.radians(th))
+    expected = E * omega * mu0 * chandrasekhar_h(omega, mu) * chandrasekhar_h(omega, mu0) / (4 * np.pi * (mu + mu0))
+    obj = box([-60, -60, -30], [60, 60, 0])
+    obj["alpha"] = 0.0
+    v = np.array([-np.sin(np.radians(th)), 0.0, -np.cos(np.radians(th))])
+    cam = {"projection": "orthographic", "ortho_width": 1.0, "origin": (-10 * v).tolist(), "target": [0, 0, 0],
+           "up": [0, 1, 0]}
+    sun = [np.sin(np.radians(th0)), 0.0, -mu0]
+    data = scene([{**obj, "material": "fog"}],
+                 {"fog": {"type": "lambert", "albedo": 0.5, "interior": {"albedo": omega, "density": 1.0}}},
+                 camera=cam, lights=[{"type": "directional", "direction": sun, "irradiance": E}], spp=64, size=16,
+                 max_depth=400)
+    m, e = mean_and_error(render(data).stokes()[0][..., 1])
+    assert e < 0.01 * expected
+    assert abs(m - expected) < 4 * e + 2e-3 * expected
+
+
 # ----------------------------------------------------------------------------- scenes without scattering
 
 
