@@ -30,8 +30,9 @@ def phase_parameter_help() -> str:
     return "\n".join(lines)
 
 
-def make_phase(name: str, params: dict, field: str = "param"):
-    """A phase function (engine.media.phase.PhaseFunction) of model ``name`` with string or numeric parameters."""
+def make_phase(name: str, params: dict, field: str = "param", text: bool = True):
+    """A phase function (engine.media.phase.PhaseFunction) of model ``name`` with string (``text``: the
+    command line's NAME=VALUE) or scene-file values."""
     if name not in PHASE_MODELS:
         raise SceneError("model", f"unknown phase function {name!r} (available: {', '.join(PHASE_MODELS)})")
     decl = PHASE_MODELS[name]
@@ -39,7 +40,7 @@ def make_phase(name: str, params: dict, field: str = "param"):
     if unknown:
         raise SceneError(f"{field}.{unknown[0]}", f"is not a parameter of {name} (parameters: "
                                                  f"{', '.join(decl.names())})")
-    return decl.build(decl.values(params, field, text=True))
+    return decl.build(decl.values(params, field, text=text))
 
 
 def phase_matrices_at(phase, angles_deg, wavelength_nm: float = 550.0) -> dict:

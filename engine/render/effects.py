@@ -73,10 +73,17 @@ def choose_transport(materials: Mapping[str, BSDF], used: set[str] | None = None
 
 
 def resolve_transport(requested: str, materials: Mapping[str, BSDF], used: set[str] | None = None,
-                      sources: tuple[str, list[str]] = ("off", [])) -> tuple[str, str]:
+                      sources: tuple[str, list[str]] = ("off", []),
+                      media: tuple[str, list[str]] = ("off", [])) -> tuple[str, str]:
     """The transport to run for a requested mode ("auto" or explicit) and why (absorbing interiors
     listed after it: they never change the choice).  ``sources``: (the transport the scene's polarised
-    sources need, their names) — ``source_needs``."""
+    sources need, their names) — ``source_needs``; ``media``: the same for the participating media's phase
+    functions — ``media_needs``."""
+    if requested == "auto" and TRANSPORT_SIZES[media[0]] > TRANSPORT_SIZES[choose_transport(materials, used)[0]] \
+            and TRANSPORT_SIZES[media[0]] > TRANSPORT_SIZES[sources[0]]:
+        what = "retard (full Stokes)" if media[0] == "full" else "polarise (linear Stokes)"
+        return media[0], (f"auto → {media[0]} Stokes: the phase functions of {_list(media[1])} {what}"
+                          + absorption_note(materials, used))
     need, names = sources
     if requested != "auto":
         note = ""
@@ -111,13 +118,37 @@ def source_needs(scene) -> tuple[str, list[str]]:
     return need, names
 
 
+def media_needs(scene, used: set[str] | None = None) -> tuple[str, list[str]]:
+    """(the transport the participating media's phase functions need: "off", "linear" (POLARISING: Rayleigh)
+    or "full" (RETARDING: Lorenz–Mie), the media's names): the interiors of the ``used`` materials and the
+    world medium ``scene.medium``."""
+    items = [(name, interior_of(m)) for name, m in scene.materials.items() if used is None or name in used]
+    items.append(("world medium", getattr(scene, "medium", None)))
+    need, names = "off", []
+    for name, interior in items:
+        phase = getattr(interior, "phase", None)
+        if phase is None or not interior.tracked:
+            continue
+        kind = ("full" if phase.flags.has(BSDFFlags.RETARDING) else "linear" if phase.flags.has(BSDFFlags.POLARISING)
+                else "off")
+        if kind != "off":
+            names.append(name)
+            need = kind if TRANSPORT_SIZES[kind] > TRANSPORT_SIZES[need] else need
+    return need, names
+
+
 def absorption_note(materials: Mapping[str, BSDF], used: set[str] | None = None) -> str:
     """"; absorbing interiors: 'glass' (…)" for the ``used`` materials with an interior, else ""."""
-    names = [n for n in sorted(used if used is not None else materials) if interior_of(materials[n]) is not None]
-    if not names:
-        return ""
-    return (f"; absorbing interiors: {_list(names)} (Beer–Lambert exp(−σ_a·d) per wavelength inside closed meshes, "
-            "polarisation unchanged)")
+    interiors = [(n, interior_of(materials[n])) for n in sorted(used if used is not None else materials)]
+    names = [n for n, it in interiors if it is not None and not it.tracked]
+    scattering = [n for n, it in interiors if it is not None and it.tracked]
+    note = ""
+    if names:
+        note = (f"; absorbing interiors: {_list(names)} (Beer–Lambert exp(−σ_a·d) per wavelength inside closed "
+                "meshes, polarisation unchanged)")
+    if scattering:
+        note += f"; participating media: {_list(scattering)} (delta tracking, phase functions at medium vertices)"
+    return note
 
 
 def _list(names: list[str]) -> str:

@@ -842,7 +842,8 @@ class PathTracer:
         medium = None
         if self.media is not None:      # the vertices' volumes and transmittance (shadow rays)
             medium = (gather(state.media, sel), None if state.tau is None else gather(state.tau, sel),
-                      gather(surf.prim, sel), gather(surf.n_g, sel), gather(surf.wo, sel))
+                      gather(surf.prim, sel), gather(surf.n_g, sel), gather(surf.wo, sel), gather(surf.p, sel),
+                      gather(state.sampler.keys, sel), state.bounce)
         contrib = self._next_event(sp, state.lk.take(sel), bsdf, state.T_store, rows, x_T, u_light[:, sel], acc.stats,
                                    t_cols, medium,
                                    lobes=None if acc.lobes is None else (acc.lobes, gather(state.path, sel)))
@@ -961,20 +962,27 @@ class PathTracer:
                       crossings: list) -> np.ndarray | None:
         """Absorption (L, n) of the light arriving along the shadow rays wi over their lengths ``dist``
         (inf: from outside the scene) times the paths' transmittance so far, or None for none.
-        ``medium`` = (stacks (K, n), τ (L, n) or None, triangles, geometric normals, wo) of the vertices:
-        a shadow ray that leaves through the vertex's own face into (out of) its volume starts inside
-        (outside) it; ``crossings``: the pass-through surfaces the shadow rays cross."""
-        stack, tau, prim, n_g, wo = medium
-        n = stack.shape[1]
-        stack = stack.copy()
-        vol, entering = self.media.crossing_sides(prim, wo, wi, n_g)
-        if (vol >= 0).any():
-            cross(stack, np.arange(n), vol, entering)
-        segment = self.media.march(stack, wi, crossings, lookup)
+        ``medium`` = (stacks (K, n), τ (L, n) or None, triangles, geometric normals, wo, positions (3, n),
+        the paths' sampler keys, their bounce) of the vertices; ``crossings``: the pass-through surfaces the
+        shadow rays cross."""
+        tau = medium[1]
+        n = medium[0].shape[1]
+        segment = self.media.march(self._shadow_stack(medium, wi), wi, crossings, lookup)
         f = segment.transmittance(np.arange(n), dist) if segment.absorbs else None
         if tau is not None:
             f = tau if f is None else f * tau
         return f
+
+    def _shadow_stack(self, medium: tuple, wi: np.ndarray) -> np.ndarray:
+        """The volume stacks (K, n) (a copy) the shadow rays along wi start with (``medium`` as for
+        ``_shadow_media``): one that leaves through the vertex's own face into (out of) its volume starts
+        inside (outside) it."""
+        stack, _, prim, n_g, wo = medium[:5]
+        stack = stack.copy()
+        vol, entering = self.media.crossing_sides(prim, wo, wi, n_g)
+        if (vol >= 0).any():
+            cross(stack, np.arange(stack.shape[1]), vol, entering)
+        return stack
 
     def _next_event(self, sp: ShadingPoint, lookup: WavelengthLookup, bsdf: BSDF, T: np.ndarray, rows: np.ndarray,
                     x_T: np.ndarray, u: np.ndarray, stats: dict[str, int],

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..materials.flags import BSDFFlags
 from .accel import offset_origin
 
 #: Volumes a path can be inside at once (deeper nesting is ignored when entered, as Cycles' stack limit).
@@ -112,13 +113,19 @@ class Media:
         out = np.zeros((L, m))
         for v in np.unique(stack[occupied]):
             cols = np.flatnonzero((stack == v).any(axis=0))
-            if self.rgb_mode:
-                out[:, cols] += self.rgb[v][:, None]
-                continue
-            sub = lk.take(cols) if cols.size < m else lk
-            spec = self.spectra[v]
-            out[:, cols] += spec.eval(sub.lam, mono=True) if self.mono else spec.eval_cached(sub)
+            out[:, cols] += self.coefficient(int(v), lk, cols)
         return out
+
+    def coefficient(self, v: int, lk, cols: np.ndarray) -> np.ndarray:
+        """σ_a of volume ``v`` (L, m) (RGB: (3, 1)) for the paths ``cols`` of the lookup ``lk``."""
+        if self.rgb_mode:
+            return self.rgb[v][:, None]
+        return self.spectrum_values(self.spectra[v], lk, cols)
+
+    def spectrum_values(self, spec, lk, cols: np.ndarray) -> np.ndarray:
+        """A per-length coefficient's values (L, m) at the wavelengths of the paths ``cols`` of ``lk``."""
+        sub = lk.take(cols) if cols.size < lk.lam.shape[1] else lk
+        return spec.eval(sub.lam, mono=True) if self.mono else spec.eval_cached(sub)
 
     def crossing_sides(self, prim: np.ndarray, w_before: np.ndarray, w_after: np.ndarray,
                        n_g: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -239,3 +246,21 @@ class SegmentMedia:
     def transmittance(self, rows: np.ndarray, s: np.ndarray) -> np.ndarray:
         """exp(−∫σ_a) (L, m) of the segments ``rows`` up to distance s from their ray origins."""
         return np.exp(-self.optical_depth(rows, s))
+
+
+def tracked_media(compiled, world) -> list:
+    """[(volume id, or None for the world medium ``world``, Interior)] of the media a compiled scene renders by
+    delta tracking (engine.render.participating): those that scatter or have a density grid."""
+    out = [(v, interior) for v, (_, _, interior) in enumerate(compiled.volumes) if interior.tracked]
+    if world is not None and world.tracked:
+        out.append((None, world))
+    return out
+
+
+def media_flags(compiled, world) -> BSDFFlags:
+    """The capabilities (POLARISING, RETARDING, WAVELENGTH_DEPENDENT) of the tracked media's phase functions."""
+    flags = BSDFFlags.NONE
+    for _, interior in tracked_media(compiled, world):
+        if interior.phase is not None:
+            flags |= interior.phase.flags
+    return flags

@@ -66,6 +66,8 @@ class PathState:
         self.T_store, self.T_col = T, T_col
         self.tau, self.media, self.gap = tau, media, gap
         self.crossings: list | None = None
+        #: the bounce the paths are at (set by the participating-media tracer, which keys its numbers by it)
+        self.bounce = 0
 
     @property
     def T(self) -> np.ndarray:

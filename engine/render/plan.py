@@ -19,7 +19,8 @@ import numpy as np
 
 from ..materials.base import BSDF, BSDFFlags
 from ..scene.description import RenderSettings
-from .effects import effective_materials, resolve_transport, source_needs
+from .effects import effective_materials, media_needs, resolve_transport, source_needs
+from .media import media_flags
 from .light_paths import describe as describe_light_paths
 
 #: (x0, y0, x1, y1): a pixel rectangle, row 0 at the top, x1 and y1 exclusive.
@@ -63,23 +64,27 @@ class RenderRequest:
         return request if isinstance(request, RenderRequest) else cls(settings=request)
 
 
-def spectral_reduction(settings: RenderSettings, materials: Sequence[BSDF], used: Sequence[int]) -> tuple[bool, bool]:
-    """(uniform, rgb_mode) for ``settings`` and the ``used`` materials (indices into ``materials``).
+def spectral_reduction(settings: RenderSettings, materials: Sequence[BSDF], used: Sequence[int],
+                       extra: BSDFFlags = BSDFFlags.NONE) -> tuple[bool, bool]:
+    """(uniform, rgb_mode) for ``settings`` and the ``used`` materials (indices into ``materials``) and
+    ``extra`` flags (the participating media's phase functions: engine.render.media.media_flags).
 
     uniform: every wavelength of a path has the same Mueller product (no used material depends on λ),
     so one is carried; rgb_mode: paths carry RGB (the "rgb" transport, or, with ``reduce_spectral``
     "auto", each light's spectrum integrated exactly against the observer: the same expectation)."""
     channels = settings.spectral == "rgb"
-    independent = not any(m.flags.has(BSDFFlags.WAVELENGTH_DEPENDENT) for m in {materials[i] for i in used})
+    independent = not (any(m.flags.has(BSDFFlags.WAVELENGTH_DEPENDENT) for m in {materials[i] for i in used})
+                       or extra.has(BSDFFlags.WAVELENGTH_DEPENDENT))
     reduce = settings.reduce_spectral
     uniform = reduce in ("auto", "exact", True) and independent and not channels
     rgb_mode = channels or (reduce in ("auto", True) and independent and settings.spectral != "mono")
     return uniform, rgb_mode
 
 
-def spectral_description(settings: RenderSettings, materials: Sequence[BSDF], used: Sequence[int]) -> str:
+def spectral_description(settings: RenderSettings, materials: Sequence[BSDF], used: Sequence[int],
+                         extra: BSDFFlags = BSDFFlags.NONE) -> str:
     """How the paths carry the spectrum, as the render's stats report it."""
-    uniform, rgb_mode = spectral_reduction(settings, materials, used)
+    uniform, rgb_mode = spectral_reduction(settings, materials, used, extra)
     if settings.spectral == "rgb":
         return "RGB channels (Cycles' colour arithmetic)"
     if rgb_mode:
@@ -137,13 +142,15 @@ class RenderPlan:
         requested = settings or scene.settings
         materials, simplified = rendered_materials(compiled, requested.simplify, scene.materials)
         polarisation, reason = resolve_transport(requested.polarisation, dict(zip(compiled.material_names, materials)),
-                                                 compiled.used_material_names, sources=source_needs(scene))
+                                                 compiled.used_material_names, sources=source_needs(scene),
+                                                 media=media_needs(scene, compiled.used_material_names))
         st = dataclasses.replace(requested, polarisation=polarisation)
         W, H = scene.camera.width, scene.camera.height
         if workers is None:
             workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
         return cls(st, reason, tuple(materials), tuple(simplified),
-                   spectral_description(st, materials, compiled.used_materials), W, H,
+                   spectral_description(st, materials, compiled.used_materials,
+                                        media_flags(compiled, getattr(scene, "medium", None))), W, H,
                    check_window(window, W, H), int(workers))
 
     @property

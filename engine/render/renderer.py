@@ -35,6 +35,8 @@ from .camera import CameraModel
 from .driver import LocalThreads, UniformPasses, drive
 from .film import Film, HalfBuffers, SampleSums
 from .integrator import PathTracer
+from .media import tracked_media
+from .participating import ParticipatingPathTracer
 from .lights import LightSet
 from .plan import RenderPlan, RenderRequest
 from ..scene.description import RenderSettings, Scene
@@ -158,6 +160,10 @@ class Renderer:
     def tracer(self, plan: RenderPlan, count_cost: bool = False) -> PathTracer:
         """A PathTracer of ``plan`` (its settings and materials); ``count_cost``: per-path costs
         (adaptive sampling's)."""
+        world = getattr(self.scene, "medium", None)
+        if tracked_media(self.compiled, world):       # participating media: the tracer with medium vertices
+            return ParticipatingPathTracer(self.compiled, self.lights, self.camera, plan.settings,
+                                           materials=list(plan.materials), count_cost=count_cost, world=world)
         return PathTracer(self.compiled, self.lights, self.camera, plan.settings, materials=list(plan.materials),
                           count_cost=count_cost)
 

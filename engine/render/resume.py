@@ -113,7 +113,10 @@ def scene_fingerprint(scene) -> str:
     """SHA-256 (hex) of what a scene renders: camera, meshes, materials, lights (not settings/source)."""
     h = hashlib.sha256(b"polar-scene/1")
     seen: set = set()
-    for part in (scene.camera, scene.meshes, scene.materials, scene.lights):
+    parts = (scene.camera, scene.meshes, scene.materials, scene.lights)
+    if getattr(scene, "medium", None) is not None:     # only then: other scenes' fingerprints are unchanged
+        parts += (scene.medium,)
+    for part in parts:
         _feed(h, dataclasses.asdict(part) if dataclasses.is_dataclass(part) else part, seen)
     return h.hexdigest()
 

@@ -76,27 +76,35 @@ class Interior:
     "Absorbing interiors".  Set it on an instance only (``bsdf.interior = Interior(...)``), so the
     scene fingerprints of materials without one are unchanged; an interior that absorbs nothing
     (σ_a = 0 at every wavelength) is the same as none.
+
+    A participating medium also scatters: ``scattering`` σ_s(λ) ≥ 0 per scene unit (a Spectrum, as
+    ``absorption``; None: 0) with the phase function ``phase`` (engine.media.phase.PhaseFunction; None:
+    isotropic), and both coefficients are scaled by a density ``grid`` (engine.media.grid.DensityGrid; None:
+    1 everywhere, a homogeneous medium).  ``majorant`` (≥ the grid's largest value, or ≥ 1 without a grid;
+    None: that value) is the density bound of free-flight sampling (engine.render.participating); a looser
+    one costs null collisions, never bias.  Every medium that scatters or has a grid is *tracked*
+    (delta tracking); a homogeneous one's absorption stays exact Beer–Lambert.  The world medium
+    (``Scene.medium``) is an Interior too.  docs/physics.md "Participating media".
     """
 
     absorption: object
+    scattering: object = None
+    phase: object = None
+    grid: object = None
+    majorant: float | None = None
 
     def __post_init__(self):
         from ..errors import SceneError
-        from ..spectral import Spectrum, as_spectrum
-        if isinstance(self.absorption, (list, tuple, np.ndarray)) and np.shape(self.absorption) == (3,):
-            from ..spectral import RGBUnboundedSpectrum
-            self.absorption = RGBUnboundedSpectrum(self.absorption, field="interior.absorption")
-        elif not isinstance(self.absorption, Spectrum):
-            try:
-                self.absorption = as_spectrum(self.absorption, "interior.absorption")
-            except ValueError as e:
-                raise SceneError("interior.absorption", str(e)) from None
-        rgb = np.asarray(self.absorption.linear_srgb(), np.float64)
-        if not np.all(np.isfinite(rgb)) or np.any(rgb < 0):
-            raise SceneError("interior.absorption", f"must be ≥ 0 and finite (per unit length), got {rgb.tolist()}")
-        values = getattr(self.absorption, "values", None)      # a table: every value, not only its colour
-        if values is not None and (not np.all(np.isfinite(values)) or np.any(np.asarray(values) < 0)):
-            raise SceneError("interior.absorption", "table values must be ≥ 0 and finite (per unit length)")
+        self.absorption = _medium_spectrum(self.absorption, "interior.absorption")
+        if self.scattering is not None:
+            self.scattering = _medium_spectrum(self.scattering, "interior.scattering")
+        bound = 1.0 if self.grid is None else self.grid.max
+        if self.majorant is not None:
+            m = float(self.majorant)
+            if not np.isfinite(m) or m < bound:
+                raise SceneError("interior.majorant", f"must be a finite number ≥ {bound:g} (the largest density), "
+                                                      f"got {self.majorant!r}")
+            self.majorant = m
 
     @classmethod
     def from_color_density(cls, color, density: float) -> Interior:
@@ -114,17 +122,60 @@ class Interior:
     @property
     def absorbs(self) -> bool:
         """σ_a > 0 at some wavelength (an interior that absorbs nothing is treated as none)."""
-        values = getattr(self.absorption, "values", None)
-        if values is not None:
-            return bool(np.any(np.asarray(values) > 0))
-        return bool(np.any(np.asarray(self.absorption.linear_srgb()) > 0))
+        return _positive(self.absorption) and (self.grid is None or self.grid.max > 0)
+
+    @property
+    def scatters(self) -> bool:
+        """σ_s > 0 at some wavelength and somewhere (a participating medium)."""
+        return (self.scattering is not None and _positive(self.scattering)
+                and (self.grid is None or self.grid.max > 0))
+
+    @property
+    def tracked(self) -> bool:
+        """Rendered by delta tracking (it scatters, or its density varies): engine.render.participating."""
+        return self.scatters or (self.grid is not None and self.absorbs)
+
+    @property
+    def density_bound(self) -> float:
+        """The majorant density of free-flight sampling (``majorant``, else the largest density)."""
+        if self.majorant is not None:
+            return self.majorant
+        return 1.0 if self.grid is None else self.grid.max
+
+
+def _positive(spectrum) -> bool:
+    """The spectrum is > 0 at some wavelength (its table, else its colour)."""
+    values = getattr(spectrum, "values", None)
+    if values is not None:
+        return bool(np.any(np.asarray(values) > 0))
+    return bool(np.any(np.asarray(spectrum.linear_srgb()) > 0))
+
+
+def _medium_spectrum(value, field: str):
+    """A coefficient per unit length as a Spectrum (a number, [r, g, b] or a Spectrum), ≥ 0 and finite."""
+    from ..errors import SceneError
+    from ..spectral import RGBUnboundedSpectrum, Spectrum, as_spectrum
+    if isinstance(value, (list, tuple, np.ndarray)) and np.shape(value) == (3,):
+        value = RGBUnboundedSpectrum(value, field=field)
+    elif not isinstance(value, Spectrum):
+        try:
+            value = as_spectrum(value, field)
+        except ValueError as e:
+            raise SceneError(field, str(e)) from None
+    rgb = np.asarray(value.linear_srgb(), np.float64)
+    if not np.all(np.isfinite(rgb)) or np.any(rgb < 0):
+        raise SceneError(field, f"must be ≥ 0 and finite (per unit length), got {rgb.tolist()}")
+    values = getattr(value, "values", None)      # a table: every value, not only its colour
+    if values is not None and (not np.all(np.isfinite(values)) or np.any(np.asarray(values) < 0)):
+        raise SceneError(field, "table values must be ≥ 0 and finite (per unit length)")
+    return value
 
 
 def interior_of(material) -> Interior | None:
     """The material's absorbing interior (``material.interior``), or None when it has none or it
     absorbs nothing."""
     interior = getattr(material, "interior", None)
-    return interior if isinstance(interior, Interior) and interior.absorbs else None
+    return interior if isinstance(interior, Interior) and (interior.absorbs or interior.scatters) else None
 
 
 @dataclass
@@ -427,3 +478,5 @@ class Scene:
     #: how next-event estimation picks a light: "uniform" (as Mitsuba 3) or "power" (probability ∝
     #: each light's estimated power, for scenes of many lights of different strength)
     light_selection: str = "uniform"
+    #: the world medium (an Interior: fog everywhere outside the closed media), or None
+    medium: object = None

@@ -475,8 +475,8 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: s
         raise SceneError(f"{field}.radiance_scaling", f"must be true or false, got {radiance_scaling!r}")
     if not radiance_scaling:
         bsdf.radiance_scaling = False
-    if interior is not None and interior.absorbs:
-        bsdf.interior = interior            # (none when it absorbs nothing: the scene renders as without)
+    if interior is not None and (interior.absorbs or interior.scatters):
+        bsdf.interior = interior            # (none when it absorbs and scatters nothing: renders as without)
     return bsdf
 
 
@@ -485,26 +485,80 @@ _INTERIOR_DEFAULT_COLOR = [0.8, 0.8, 0.8]
 
 
 def _parse_interior(d, field: str) -> Interior:
-    """A material's absorbing interior (engine.scene.description.Interior): ``absorption`` σ_a per
-    scene unit (a number, [r, g, b] or a spectrum table, ≥ 0), or Blender's Volume Absorption
-    ``color`` (in [0, 1]) and ``density`` (≥ 0): σ_a = density·(1 − color)."""
+    """A material's interior or the world medium (engine.scene.description.Interior): ``absorption`` σ_a per
+    scene unit (a number, [r, g, b] or a spectrum table, ≥ 0), or Blender's Volume Absorption ``color`` (in
+    [0, 1]) and ``density`` (≥ 0): σ_a = density·(1 − color); a scattering medium adds ``scattering`` σ_s
+    (as absorption), or gives ``albedo`` (in [0, 1]) and ``density``: σ_s = albedo·density, σ_a = (1 −
+    albedo)·density; ``phase`` {"type": NAME, parameters} (engine.media.catalogue; default isotropic),
+    ``grid`` {"values": [x][y][z], "bounds": [[x0, y0, z0], [x1, y1, z1]]} scales both coefficients, and
+    ``majorant`` bounds its density for free-flight sampling."""
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object like {\"absorption\": [0.1, 0.2, 0.3]} (per scene unit) or "
                                 "{\"color\": [0.2, 0.8, 0.3], \"density\": 1.0} (Blender's Volume Absorption)")
-    _check_keys(d, field, {"absorption", "color", "density", "note"})
-    if "absorption" in d:
+    _check_keys(d, field, {"absorption", "color", "density", "note", "scattering", "albedo", "phase", "grid",
+                           "majorant"})
+    medium = {"phase": _parse_phase(d["phase"], f"{field}.phase") if d.get("phase") is not None else None,
+              "grid": _parse_grid(d["grid"], f"{field}.grid") if d.get("grid") is not None else None}
+    if "majorant" in d:
+        medium["majorant"] = number(d["majorant"], f"{field}.majorant", 0, lo_open=True)
+    if "albedo" in d:
+        for key in ("absorption", "color", "scattering"):
+            if key in d:
+                raise SceneError(f"{field}.{key}", "give either albedo and density or absorption and scattering")
+        density = number(_require(d, "density", field), f"{field}.density", 0)
+        albedo = np.array(_rgb_or_number(d["albedo"], f"{field}.albedo"))
+        return _interior(field, list(density * (1.0 - albedo)), scattering=list(density * albedo), **medium)
+    if "absorption" in d or "scattering" in d:
         if "color" in d or "density" in d:
-            raise SceneError(f"{field}.absorption", "give either absorption or color and density, not both")
-        return Interior(parse_spectrum(d["absorption"], f"{field}.absorption", kind="unbounded"))
+            key = "absorption" if "absorption" in d else "scattering"
+            raise SceneError(f"{field}.{key}", f"give either {key} or color and density, not both")
+        absorption = parse_spectrum(d.get("absorption", 0.0), f"{field}.absorption", kind="unbounded")
+        scattering = (parse_spectrum(d["scattering"], f"{field}.scattering", kind="unbounded")
+                      if "scattering" in d else None)
+        return _interior(field, absorption, scattering=scattering, **medium)
     density = number(_require(d, "density", field), f"{field}.density", 0)
-    color = d.get("color", _INTERIOR_DEFAULT_COLOR)
-    if isinstance(color, (list, tuple)) and len(color) == 3:
-        rgb = [number(c, f"{field}.color[{i}]", 0, 1) for i, c in enumerate(color)]
-    elif isinstance(color, (int, float)) and not isinstance(color, bool):
-        rgb = [number(color, f"{field}.color", 0, 1)] * 3
-    else:
-        raise SceneError(f"{field}.color", f"must be a number or an [r, g, b] list in [0, 1], got {color!r}")
-    return Interior.from_color_density(rgb, density)
+    rgb = _rgb_or_number(d.get("color", _INTERIOR_DEFAULT_COLOR), f"{field}.color")
+    interior = Interior.from_color_density(rgb, density)
+    return _interior(field, interior.absorption, **medium) if medium["phase"] or medium["grid"] else interior
+
+
+def _interior(field: str, absorption, **medium) -> Interior:
+    """An Interior whose validation errors name the scene file's field."""
+    try:
+        return Interior(absorption, **medium)
+    except SceneError as e:
+        raise SceneError(field + e.field[len("interior"):], e.reason) from None
+
+
+def _rgb_or_number(value, field: str) -> list:
+    """[r, g, b] in [0, 1] from a number or a list of three."""
+    if isinstance(value, (list, tuple)) and len(value) == 3:
+        return [number(c, f"{field}[{i}]", 0, 1) for i, c in enumerate(value)]
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        return [number(value, field, 0, 1)] * 3
+    raise SceneError(field, f"must be a number or an [r, g, b] list in [0, 1], got {value!r}")
+
+
+def _parse_phase(d, field: str):
+    """A phase function {"type": NAME, parameter: value, …} of engine.media.catalogue."""
+    from ..media.catalogue import PHASE_MODELS, make_phase
+    if not isinstance(d, dict) or "type" not in d:
+        raise SceneError(field, f"must be an object like {{\"type\": \"rayleigh\"}} (types: {', '.join(PHASE_MODELS)})")
+    name = choice(d["type"], f"{field}.type", tuple(PHASE_MODELS))
+    return make_phase(name, {k: v for k, v in d.items() if k not in ("type", "note")}, field, text=False)
+
+
+def _parse_grid(d, field: str):
+    """A dense density grid (engine.media.grid.DensityGrid)."""
+    from ..media.grid import DensityGrid
+    if not isinstance(d, dict):
+        raise SceneError(field, "must be an object {\"values\": [x][y][z] densities, \"bounds\": [[x0, y0, z0], "
+                                "[x1, y1, z1]]}")
+    _check_keys(d, field, {"values", "bounds", "note"})
+    bounds = _require(d, "bounds", field)
+    if not isinstance(bounds, list) or len(bounds) != 2:
+        raise SceneError(f"{field}.bounds", "must be [[x0, y0, z0], [x1, y1, z1]]")
+    return DensityGrid(_require(d, "values", field), bounds[0], bounds[1], field)
 
 
 def _shading_normal(bsdf, d: dict, field: str, base_dir):
@@ -1179,7 +1233,7 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
         raise SceneError("format", f"must be {FORMAT!r} (or a peer scene with 'light' and 'integrator'), "
                                    f"got {fmt!r}")
     _check_keys(data, "", {"format", "camera", "render", "materials", "objects", "lights", "description",
-                           "note", "name"})
+                           "note", "name", "medium"})
     camera = parse_camera(_require(data, "camera", ""), "camera")
     settings = parse_settings(data.get("render", {}), "render")
     mats_in = data.get("materials", {})
@@ -1216,6 +1270,9 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
         raise SceneError("lights", "at most one environment light is allowed")
     scene = Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings,
                   source=source)
+    if data.get("medium") is not None:
+        medium = _parse_interior(data["medium"], "medium")
+        scene.medium = medium if medium.absorbs or medium.scatters else None
     return scene
 
 

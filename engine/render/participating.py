@@ -1,0 +1,471 @@
+"""Participating media in the transport: free-flight sampling, medium vertices, shadow-ray transmittance.
+
+Media (engine.scene.description.Interior with ``scatters`` or a density grid: *tracked*) bound by closed
+meshes, as absorbing interiors, on the paths' volume stacks (engine.render.media), and the world medium
+(``Scene.medium``), which counts where a path's stack is empty (fog everywhere outside the closed media).
+Scenes with one are traced by :class:`ParticipatingPathTracer`, the integrator with these stages changed
+(every other scene keeps the plain PathTracer: its images are unchanged):
+
+- ``_intersect``: after the closest hit, **delta tracking** along [0, t_hit) (t_hit = ∞ on a miss) with a
+  majorant per path σ̄ = Σ_k ρ̄_k·max_λ σ_k(λ) over the tracked media k on its stack (ρ̄ the density bound,
+  σ_k the tracked coefficient: σ_s, plus σ_a for a grid medium, whose absorption varies in space; a
+  homogeneous medium's σ_a stays exact Beer–Lambert, engine.render.media).  At each tentative collision
+  the event — scattering by medium k or a null collision — is chosen with probability ∝ the mean over the
+  path's wavelengths of σ_{s,k}(λ, x) and of σ_n(λ, x) = σ̄ − Σ σ(λ, x), and the path's per-λ weight τ is
+  multiplied by σ_event(λ, x)/(σ̄·P_event): unbiased at every wavelength (the spectral-tracking /
+  null-scattering path-integral estimator of Kutz et al. 2017 and Miller, Georgiev & Jarosz 2019, with
+  the mean over λ as the event probabilities).  A grey medium under a tight majorant has no null
+  collisions and weight 1 (albedo via the analytic absorption).
+- A scattering collision becomes a **medium vertex**: a pseudo-triangle (index F + k past the scene's
+  triangles) whose pseudo-material (:class:`PhaseVertices`, index M + k) is medium k's phase function, so
+  the integrator's own scatter stage runs next-event estimation (the lights' sampling, MIS by the power
+  heuristic against phase sampling) and phase sampling, with the Mueller update T ← T·R(x_out → x_T)·M/pdf
+  in the scattering-plane frames (engine.media.phase), exactly as at a surface; no cosine, no offset
+  (zero normals), no stack change; Russian roulette as at surfaces.
+- ``_attenuation`` / ``_emission``: light reached along a segment at distance s is weighted by the
+  collisions before s (0 past a scattering one); afterwards every collision's weight folds into τ.
+- ``_shadow_media``: shadow rays through homogeneous media exactly, exp(−(σ_a + σ_s)·d); through grid
+  media by **ratio tracking** on the same majorant: Π (1 − σ(λ, x_i)/σ̄) per wavelength.
+
+Distances count from the segment's ray origin (the offset origin of a surface vertex; medium vertices
+start at the vertex).  The tracking's random numbers are their own hashed dimensions (``TRACK_DIMENSION``
+and ``RATIO_DIMENSION`` on, per bounce), so the other numbers of a path are those it would draw without
+media.  docs/physics.md "Participating media".
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..kernels.hashing import uniforms
+from ..materials.base import BSDF, BSDFFlags, BSDFSample
+from ..materials.batching import shading_groups
+from ..media.henyey_greenstein import HenyeyGreenstein
+from .accel import surface_points
+from .integrator import PathTracer, _SurfaceHits
+from .light_paths import LightPathRules
+from .media import Media, cross, tracked_media
+from .plan import spectral_reduction
+from .sampler import _offsets
+
+#: First hashed dimension of the delta-tracking numbers (two per collision), and its stride per bounce.
+TRACK_DIMENSION, BOUNCE_STRIDE = 1 << 40, 1 << 24
+#: First hashed dimension of the shadow rays' ratio-tracking numbers (one per collision).
+RATIO_DIMENSION = 1 << 41
+#: Collisions per segment at most (a path still going then is dropped: its weight 0).
+MAX_COLLISIONS = 1 << 16
+
+
+class PhaseVertices(BSDF):
+    """A medium's phase function as the integrator's material at its scattering vertices (no cosine:
+    ``eval`` is the phase matrix per steradian, ``sample`` its exact sampling at the hero wavelength)."""
+
+    name = "phase"
+    radiance_scaling = True
+
+    def __init__(self, phase):
+        self.phase = phase
+        self.flags = (BSDFFlags.GLOSSY_REFLECTION | BSDFFlags.GLOSSY_TRANSMISSION
+                      | (phase.flags & (BSDFFlags.POLARISING | BSDFFlags.RETARDING | BSDFFlags.WAVELENGTH_DEPENDENT)))
+
+    def eval(self, sp, wi):
+        return self.phase.eval(sp.wo, wi, sp.lam)
+
+    def pdf(self, sp, wi):
+        return self.phase.pdf(sp.wo, wi, sp.lam)
+
+    def sample(self, sp, u_lobe, u_dir) -> BSDFSample:
+        s = self.phase.sample(sp.wo, u_dir, sp.lam)
+        return BSDFSample(s.wi, s.weight, s.pdf, s.is_delta, s.valid)
+
+    def describe(self) -> dict:
+        return self.phase.describe()
+
+
+class _SceneWithMediumVertices:
+    """The compiled scene seen by the integrator's stages, with one pseudo-triangle per tracked medium
+    (index F + k: material M + k, no emitter, no volume, zero normal); everything else is the scene's."""
+
+    def __init__(self, compiled, n_media: int, n_materials: int):
+        self._compiled = compiled
+        F = len(compiled.tri_material)
+        self.tri_material = np.concatenate((compiled.tri_material,
+                                            np.arange(n_materials, n_materials + n_media, dtype=np.int32)))
+        self.tri_emitter = np.concatenate((compiled.tri_emitter, np.full(n_media, -1, np.int32)))
+        volume = compiled.tri_volume if compiled.tri_volume is not None else np.full(F, -1, np.int32)
+        self.tri_volume = np.concatenate((volume, np.full(n_media, -1, np.int32)))
+        self.tri_normal = np.concatenate((compiled.tri_normal, np.zeros((n_media, 3))))
+
+    def __getattr__(self, name):
+        return getattr(self._compiled, name)
+
+
+class ScatteringMedia(Media):
+    """The volume stacks' analytic Beer–Lambert part with tracked media and a world medium.
+
+    Volume ids are the compiled scene's, plus ``world`` = len(volumes) for the world medium, which a
+    stack holds where it is otherwise empty.  ``shadow``: shadow rays' coefficients (σ_a + σ_s of a
+    homogeneous tracked medium), else the paths' (its σ_a; its σ_s is tracked); a grid medium adds
+    nothing here (tracked entirely)."""
+
+    def __init__(self, scene, world_medium, rgb_mode: bool, mono: bool, shadow: bool):
+        super().__init__(scene, rgb_mode, mono)
+        interiors = [interior for _, _, interior in scene.volumes]
+        self.world = None
+        if world_medium is not None:
+            self.world = len(interiors)
+            interiors.append(world_medium)
+        self.parts = []
+        for it in interiors:
+            parts = [] if it.grid is not None else [it.absorption]
+            if shadow and it.grid is None and it.scattering is not None:
+                parts.append(it.scattering)
+            self.parts.append(parts)
+        self.rgb = np.array([sum((np.asarray(s.linear_srgb(), np.float64) for s in p), np.zeros(3))
+                             for p in self.parts]).reshape(-1, 3)
+
+    def with_world(self, stack: np.ndarray) -> np.ndarray:
+        """The stacks with the world medium in the empty ones (the same array where there is none)."""
+        if self.world is None:
+            return stack
+        empty = (stack < 0).all(axis=0)
+        if not empty.any():
+            return stack
+        out = stack.copy()
+        out[0, empty] = self.world
+        return out
+
+    def sigma(self, stack: np.ndarray, lk) -> np.ndarray | None:
+        return super().sigma(self.with_world(stack), lk)
+
+    def coefficient(self, v: int, lk, cols: np.ndarray) -> np.ndarray:
+        if self.rgb_mode:
+            return self.rgb[v][:, None]
+        out = np.zeros((lk.lam.shape[0], cols.size))
+        for spec in self.parts[v]:
+            out += self.spectrum_values(spec, lk, cols)
+        return out
+
+
+class Tracks:
+    """The collisions of one bounce's delta tracking: rounds of (paths (m,), distances (m,), weights (L, m),
+    scattering (m,) bool); ``scattered`` (n,), ``t`` (n,), ``medium`` (n,) and ``stack`` of the scattering ones."""
+
+    def __init__(self, n: int, L: int, K: int):
+        self.n, self.L = n, L
+        self.rounds: list = []
+        self.scattered = np.zeros(n, bool)
+        self.t = np.full(n, np.inf)
+        self.medium = np.full(n, -1, np.int64)
+        #: the volume stacks (K, n) where the scattering paths scattered (their stacks from then on)
+        self.stack = np.full((K, n), -1, np.int32)
+
+    def weight(self, rows: np.ndarray, s: np.ndarray) -> np.ndarray:
+        """The weight (L, m) of light reached at distance s (m,) along the paths ``rows`` (m,): the product
+        of the collisions' weights before s, 0 where the path scattered before s."""
+        out = np.ones((self.L, rows.size))
+        pos = np.full(self.n, -1, np.int64)
+        for paths, t, w, scat in self.rounds:
+            pos[paths] = np.arange(paths.size)
+            j = pos[rows]
+            at = np.flatnonzero(j >= 0)
+            before = at[t[j[at]] < s[at]]
+            jb = j[before]
+            out[:, before] *= np.where(scat[jb][None, :], 0.0, w[:, jb])
+            pos[paths] = -1
+        return out
+
+    def total(self) -> np.ndarray:
+        """Every collision's weight multiplied per path (L, n), the scattering one included."""
+        out = np.ones((self.L, self.n))
+        for paths, _, w, _ in self.rounds:
+            out[:, paths] *= w
+        return out
+
+
+class Tracking:
+    """Free-flight sampling and ratio tracking over the tracked media (see the module docstring)."""
+
+    def __init__(self, media: ScatteringMedia, tracked: list, rgb_mode: bool, mono: bool):
+        self.media = media
+        n_volumes = len(media.parts)
+        #: tracked index k of each volume id (the world's last), −1: not tracked
+        self.index = np.full(n_volumes, -1, np.int64)
+        self.interiors = []
+        for k, (v, interior) in enumerate(tracked):
+            self.index[media.world if v is None else v] = k
+            self.interiors.append(interior)
+        self.rgb_mode, self.mono = rgb_mode, mono
+        self.bound = np.array([it.density_bound for it in self.interiors])
+        self.grids = [it.grid for it in self.interiors]
+
+    def _values(self, spec, lk, cols: np.ndarray) -> np.ndarray:
+        if spec is None:
+            return np.zeros((3 if self.rgb_mode else lk.lam.shape[0], cols.size))
+        if self.rgb_mode:
+            return np.repeat(np.asarray(spec.linear_srgb(), np.float64)[:, None], cols.size, axis=1)
+        return self.media.spectrum_values(spec, lk, cols)
+
+    def _coefficients(self, k: int, lk, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(σ_s, the tracked σ) (L, m) of medium k at unit density for the paths ``cols``."""
+        it = self.interiors[k]
+        s = self._values(it.scattering, lk, cols)
+        return s, (s + self._values(it.absorption, lk, cols) if it.grid is not None else s)
+
+    def _members(self, stack: np.ndarray, rows: np.ndarray, grids_only: bool = False) -> list:
+        """[(k, paths (m,))] of the tracked media on the stacks (K, n) (the world's where empty) of the
+        paths ``rows``."""
+        eff = self.media.with_world(stack[:, rows])
+        tk = np.where(eff >= 0, self.index[np.maximum(eff, 0)], -1)
+        out = [(int(k), rows[(tk == k).any(axis=0)]) for k in np.unique(tk[tk >= 0])]
+        return [(k, cols) for k, cols in out if not grids_only or self.grids[k] is not None]
+
+    def _majorants(self, members: list, lk, n: int, o, d, t_end) -> tuple[np.ndarray, np.ndarray, list]:
+        """(σ̄ (n,), the distance the tracking ends at (n,), [(k, paths, σ_s, σ_tracked)]) of the paths."""
+        sbar = np.zeros(n)
+        homogeneous = np.zeros(n, bool)
+        grid_end = np.full(n, -np.inf)
+        coeffs = []
+        for k, cols in members:
+            s, tr = self._coefficients(k, lk, cols)
+            sbar[cols] += self.bound[k] * tr.max(axis=0)
+            coeffs.append((k, cols, s, tr))
+            if self.grids[k] is None:
+                homogeneous[cols] = True
+            else:
+                _, t1 = self.grids[k].box_range(o[:, cols], d[:, cols])
+                grid_end[cols] = np.maximum(grid_end[cols], t1)
+        end = np.where(homogeneous, t_end, np.minimum(t_end, grid_end))
+        return sbar, end, coeffs
+
+    def _densities(self, k: int, p: np.ndarray) -> np.ndarray | float:
+        return 1.0 if self.grids[k] is None else self.grids[k].density(p)
+
+    def _at(self, coeffs: list, n: int, act: np.ndarray, x: np.ndarray, L: int) -> tuple[np.ndarray, np.ndarray]:
+        """(σ_s per medium (K, L, m), the tracked σ (L, m)) at the points x (3, m) of the paths ``act``."""
+        sig_s = np.zeros((len(self.interiors), L, act.size))
+        sig_t = np.zeros((L, act.size))
+        pos = np.full(n, -1, np.int64)
+        for k, cols, s, tr in coeffs:
+            pos[cols] = np.arange(cols.size)
+            c = pos[act]
+            on = np.flatnonzero(c >= 0)
+            pos[cols] = -1
+            if on.size == 0:
+                continue
+            rho = self._densities(k, x[:, on])
+            sig_s[k][:, on] = s[:, c[on]] * rho
+            sig_t[:, on] += tr[:, c[on]] * rho
+        return sig_s, sig_t
+
+    def pieces(self, start: np.ndarray, d: np.ndarray, crossings: list, t_end: np.ndarray):
+        """The segments cut at their pass-through crossings (``crossings``: layers of (rays, triangles,
+        distances), engine.render.visibility): yields (stacks (K, n), paths (m,), from (n,), to (n,)) per
+        piece, the stacks updated at each crossing as engine.render.media.Media.march updates them."""
+        n = d.shape[1]
+        count = np.zeros(n, np.int64)
+        numbered: list = []                 # crossing c of every ray: (rays, triangles, distances)
+        for rays, prims, t in crossings:
+            c = count[rays]
+            for cv in np.unique(c):
+                at = c == cv
+                while len(numbered) <= cv:
+                    numbered.append([])
+                numbered[cv].append((rays[at], prims[at], t[at]))
+            count[rays] += 1
+        stack, t_lo = start.copy(), np.zeros(n)
+        for c in range(len(numbered) + 1):
+            rows = np.arange(n) if c == 0 else np.flatnonzero(count >= c)
+            t_hi = t_end.copy()
+            if c < len(numbered):
+                rays, prims, t = (np.concatenate(a) for a in zip(*numbered[c]))
+                t_hi[rays] = np.minimum(t, t_end[rays])
+            yield stack, rows, t_lo, t_hi
+            if c < len(numbered):
+                vol = self.media.tri_volume[prims]
+                entering = (self.media.tri_normal[prims] * d[:, rays].T).sum(axis=1) < 0
+                cross(stack, rays, vol, entering)
+                t_lo = t_lo.copy()
+                t_lo[rays] = t
+
+    def free_flight(self, start, o, d, crossings, t_end, lk, keys, bounce: int) -> Tracks | None:
+        """Delta tracking of the segments o + t·d, t < t_end (n,), that start with the stacks (K, n) and
+        cross the pass-through surfaces ``crossings``; None where no path runs through a tracked medium."""
+        n = d.shape[1]
+        L = 3 if self.rgb_mode else lk.lam.shape[0]
+        tracks, j = None, 0
+        first = TRACK_DIMENSION + bounce * BOUNCE_STRIDE
+        for stack, rows, t_lo, t_hi in self.pieces(start, d, crossings, t_end):
+            if tracks is not None:
+                rows = rows[~tracks.scattered[rows]]
+            members = self._members(stack, rows)
+            if not members:
+                continue
+            tracks = tracks or Tracks(n, L, start.shape[0])
+            sbar, end, coeffs = self._majorants(members, lk, n, o, d, t_hi)
+            act = np.flatnonzero((sbar > 0) & (end > t_lo))
+            t = t_lo.copy()
+            K = len(self.interiors)
+            while act.size and j < MAX_COLLISIONS:
+                u = uniforms(keys[act], _offsets(first + 2 * j, 2))
+                j += 1
+                t[act] -= np.log1p(-u[0]) / sbar[act]
+                go = t[act] < end[act]
+                act, u = act[go], u[:, go]
+                if act.size == 0:
+                    break
+                sig_s, sig_t = self._at(coeffs, n, act, o[:, act] + t[act] * d[:, act], L)
+                sig_n = np.maximum(sbar[act] - sig_t, 0.0)
+                c = np.concatenate((sig_s.mean(axis=1), sig_n.mean(axis=0)[None]))        # (K + 1, m)
+                total = c.sum(axis=0)
+                event = np.minimum((u[1] * total >= np.cumsum(c, axis=0)).sum(axis=0), K)
+                chosen = np.take_along_axis(c, event[None], axis=0)[0]
+                sig = np.where(event[None] < K, sig_s[np.minimum(event, K - 1), :, np.arange(act.size)].T, sig_n)
+                ok = chosen > 0
+                w = np.where(ok[None], sig * (total / np.where(ok, chosen * sbar[act], 1.0))[None], 0.0)
+                scat = (event < K) & ok
+                tracks.rounds.append((act, t[act].copy(), w, scat))
+                tracks.scattered[act[scat]] = True
+                tracks.t[act[scat]] = t[act[scat]]
+                tracks.medium[act[scat]] = event[scat]
+                tracks.stack[:, act[scat]] = stack[:, act[scat]]
+                act = act[~scat & ok]
+            if act.size:            # still going after MAX_COLLISIONS: dropped
+                tracks.rounds.append((act, t[act].copy(), np.zeros((L, act.size)), np.zeros(act.size, bool)))
+        return tracks
+
+    def ratio_tracking(self, start, p, wi, crossings, dist, lk, keys, bounce: int) -> np.ndarray | None:
+        """Transmittance (L, n) of the grid media along the shadow rays p + t·wi, t < dist (n,), that start
+        with the stacks (K, n) and cross ``crossings``: Π (1 − σ(λ, x_i)/σ̄) over the collisions x_i on the
+        majorant σ̄ (None: no grid medium on the way)."""
+        n = wi.shape[1]
+        L = 3 if self.rgb_mode else lk.lam.shape[0]
+        out, j = None, 0
+        first = RATIO_DIMENSION + bounce * BOUNCE_STRIDE
+        for stack, rows, t_lo, t_hi in self.pieces(start, wi, crossings, dist):
+            members = self._members(stack, rows, grids_only=True)
+            if not members:
+                continue
+            out = np.ones((L, n)) if out is None else out
+            sbar, end, coeffs = self._majorants(members, lk, n, p, wi, t_hi)
+            act = np.flatnonzero((sbar > 0) & (end > t_lo))
+            t = t_lo.copy()
+            while act.size and j < MAX_COLLISIONS:
+                t[act] -= np.log1p(-uniforms(keys[act], _offsets(first + j, 1))[0]) / sbar[act]
+                j += 1
+                act = act[t[act] < end[act]]
+                if act.size == 0:
+                    break
+                _, sig_t = self._at(coeffs, n, act, p[:, act] + t[act] * wi[:, act], L)
+                out[:, act] *= np.maximum(1.0 - sig_t / sbar[act], 0.0)
+                act = act[out[:, act].max(axis=0) > 0]
+            out[:, act] = 0.0
+        return out
+
+
+class ParticipatingPathTracer(PathTracer):
+    """The path tracer of scenes with tracked media (see the module docstring)."""
+
+    def __init__(self, compiled, lights, camera, settings, materials=None, count_cost: bool = True, world=None):
+        super().__init__(compiled, lights, camera, settings, materials, count_cost)
+        tracked = tracked_media(compiled, world)
+        M, F = len(self.materials), len(compiled.tri_material)
+        self.first_medium_prim = F
+        phases = [PhaseVertices(it.phase if it.phase is not None else HenyeyGreenstein(0.0)) for _, it in tracked]
+        self.materials += phases
+        self.scene = _SceneWithMediumVertices(compiled, len(tracked), M)
+        self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
+        self.two_sided = np.concatenate((self.two_sided, np.zeros(len(tracked), bool)))
+        used = np.concatenate((compiled.used_materials, np.arange(M, M + len(tracked))))
+        self.uniform, self.rgb_mode = spectral_reduction(settings, self.materials, used)
+        self._integrated_rgb = self.rgb_mode and not self.channels
+        self.media = ScatteringMedia(self.scene, world, self.rgb_mode, self.mono, shadow=False)
+        self.extinction = ScatteringMedia(self.scene, world, self.rgb_mode, self.mono, shadow=True)
+        self.tracking = Tracking(self.extinction, tracked, self.rgb_mode, self.mono)
+        if self.light_paths is not None:        # Cycles' light paths: a medium vertex counts as a glossy bounce
+            self.light_paths = LightPathRules(settings, self.materials)
+
+    # ------------------------------------------------------------------ segments
+
+    def _intersect(self, state, acc, bounce):
+        state.bounce = bounce
+        hits, hit, background = super()._intersect(state, acc, bounce)
+        t_end = np.where(hit, hits.t, np.inf if state.t_max is None else state.t_max)
+        tracks = self.tracking.free_flight(state.media, state.o, state.d, state.crossings or [], t_end, state.lk,
+                                           state.sampler.keys, bounce)
+        state.tracks = tracks
+        if tracks is None:
+            return hits, hit, background
+        med = tracks.scattered
+        if med.any():
+            hits.prim = np.where(med, self.first_medium_prim + tracks.medium, hits.prim)
+            hits.t = np.where(med, tracks.t, hits.t)
+            hit = hit | med
+            background = background & ~med
+        if state.tau is None:
+            state.tau = np.ones((tracks.L, state.n))
+        return hits, hit, background
+
+    def _attenuation(self, state, segment):
+        att = PathTracer._attenuation(state, segment)
+        tracks = getattr(state, "tracks", None)
+        if tracks is None:
+            return att
+
+        def tracked(rows, s):
+            f = att(rows, s)
+            w = tracks.weight(rows, s)
+            return w if f is None else f * w
+        return tracked
+
+    def _emission(self, state, acc, hits, hit, background, bounce):
+        super()._emission(state, acc, hits, hit, background, bounce)
+        tracks = getattr(state, "tracks", None)
+        if tracks is not None:
+            state.tau = state.tau * tracks.total()
+            if tracks.scattered.any():      # the stacks where they scattered, not at their segments' ends
+                state.media[:, tracks.scattered] = tracks.stack[:, tracks.scattered]
+            state.tracks = None
+
+    def _surface(self, state, hits, hit):
+        F = self.first_medium_prim
+        med = hits.prim >= F
+        p_med = np.zeros((3, state.n))
+        if med.any():
+            p_med[:, med] = state.o[:, med] + hits.t[med] * state.d[:, med]
+        state.o = state.t_max = state.prev_delta = state.prev_pdf = state.p_prev = state.n_prev = None
+        prim, u, v, p_med = state.compress(hit, hits.prim, hits.u, hits.v, p_med)
+        if state.n == 0:
+            return None
+        real = prim < F
+        p, n_g, n_s = p_med, np.zeros((3, state.n)), np.zeros((3, state.n))
+        if real.any():
+            at = np.flatnonzero(real)
+            p[:, at], n_g[:, at], n_s[:, at] = self.scene.surface(prim[at], u[at], v[at])
+        attrs = surface_points(self.scene._compiled, np.where(real, prim, 0), u, v) if self.textured else None
+        return _SurfaceHits(prim=prim, p=p, n_g=n_g, n_s=n_s, wo=-state.d, at=attrs)
+
+    # ------------------------------------------------------------------ next-event estimation
+
+    def _light_weight(self, sp, bsdf, x_T, ls):
+        if not isinstance(bsdf, PhaseVertices):
+            return super()._light_weight(sp, bsdf, x_T, ls)
+        if not ls.ok.any():
+            return None
+        S = self._bsdf_response(sp, bsdf, x_T, ls.wi, ls.polarised)
+        mis = self._light_mis(sp, bsdf, ls)
+        return S, ls.emitted * ls.scale[None, :] * (mis / ls.select_prob * ls.ok)[None, :]
+
+    def _shadow_media(self, medium, wi, dist, lookup, crossings):
+        stack = self._shadow_stack(medium, wi)
+        start = stack.copy()
+        tau, p, keys, bounce = medium[1], medium[5], medium[6], medium[7]
+        n = stack.shape[1]
+        segment = self.extinction.march(stack, wi, crossings, lookup)
+        f = segment.transmittance(np.arange(n), dist) if segment.absorbs else None
+        g = self.tracking.ratio_tracking(start, p, wi, crossings, dist, lookup, keys, bounce)
+        if g is not None:
+            f = g if f is None else f * g
+        if tau is not None:
+            f = tau if f is None else f * tau
+        return f
