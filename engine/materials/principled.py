@@ -514,12 +514,9 @@ def _principled(p):
     p["thin_film_ior"]          # validated even where no film uses it (a NaN is refused, not ignored)
     metallic, transmission = p["metallic"], p["transmission"]
     alpha = _alpha_of(p["roughness"])
-    ior = p["ior"]
-    if _textured(ior):
-        if ior.lo < 1.0 < ior.hi:
-            raise SceneError(p.field("ior"), f"a per-point index must lie on one side of 1, got values in "
-                                             f"[{ior.lo:g}, {ior.hi:g}]")
-    else:
+    from .dielectric import one_side_of
+    ior = one_side_of(p, "ior", 1.0)
+    if not _textured(ior):
         ior = max(ior, IOR_MIN)
     metal = glass = dielectric = None
     if not _never(metallic):
