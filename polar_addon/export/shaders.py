@@ -37,12 +37,21 @@ from .normal_maps import with_shading_normal
 from .polarising_node import polar_node_bsdf
 
 
-def _textured_model(model, values, mat, node):
+def _textured_model(model, values, mat, node, sockets=None):
     """A model built through its declaration from ``values`` some of which are TextureInputs
-    (validated: every value a texture can give must be in the parameter's range)."""
+    (validated: every value a texture can give must be in the parameter's range); ``sockets``: {parameter: the
+    node's socket it comes from} for the errors' field names."""
     decl = MODELS[model]
     values = {k: _grey(v) for k, v in values.items()}
-    return decl.build(decl.values(values, f"material {mat!r}.{node.name}"))
+    return decl.build(decl.values(values, f"material {mat!r}.{node.name}", label=_socket_label(sockets)))
+
+
+#: the Glass and Refraction BSDFs' sockets of the dielectric models' parameters (errors name the socket)
+_GLASS_SOCKETS = {"n": "IOR", "alpha": "Roughness"}
+
+
+def _socket_label(sockets):
+    return None if sockets is None else (lambda name: sockets.get(name, name))
 
 
 def _grey(v):
@@ -247,11 +256,11 @@ def _coat_ior(r):
     return min(max(r.float("Coat IOR"), 1.0), 100.0)
 
 
-def _principled_ior(r):
-    """The Principled IOR: a TextureInput where linked (the index per point of the dielectric — with a Specular Tint,
-    an anisotropy, a Thin Film or a linked Specular IOR Level too — and of the transmission, smooth, rough, tinted or
-    filmed), else the constant as Cycles reads it (linked where it cannot be read per point: its own value, the
-    reader's warning)."""
+def _ior_or_texture(r):
+    """The IOR of a Principled, Glass or Refraction BSDF: a TextureInput where linked (the index per point of the
+    Principled dielectric — with a Specular Tint, an anisotropy, a Thin Film or a linked Specular IOR Level too — and
+    of every transmission, smooth, rough, tinted or filmed), else the constant as Cycles reads it (linked where it
+    cannot be read per point: its own value, the reader's warning)."""
     if r._socket("IOR").is_linked:
         source = r.texture("IOR", lo=IOR_MIN, hi=1e6)
         if source is not None:
@@ -322,7 +331,7 @@ def _principled(node, mat, warnings, bake=None):
     transmission = _fraction(r, "Transmission Weight")
     roughness = r.number_or_texture("Roughness")
     values = {"base_color": _grey(r.rgb_or_texture("Base Color", 0.0, 1.0)), "metallic": metallic,
-              "roughness": roughness, "transmission": transmission, "ior": _principled_ior(r),
+              "roughness": roughness, "transmission": transmission, "ior": _ior_or_texture(r),
               "specular_ior_level": _specular_level(r),
               "specular_tint": _grey(r.rgb_or_texture("Specular Tint", 0.0)),
               "coat_weight": _fraction(r, "Coat Weight"),
@@ -461,24 +470,27 @@ def _film_number(value, lo=0.0):
     return TexturedNumber(value, clip=(lo, 1e6)) if isinstance(value, TextureInput) else value
 
 
-def _glass(ior, roughness, distribution, film=None, warn=None, where="material"):
+def _glass(ior, alpha, distribution, film=None, warn=None, where="material"):
     """The ``rough_dielectric`` model of α = roughness² (the engine builds the smooth dielectric where its rule
     calls α smooth, or the interface is index-matched): GGX as Cycles' GGX, Multiscatter GGX (Principled's and
     Glass' default) with Cycles' energy compensation (``multiscatter``), Beckmann as Beckmann; with a ``film``
     (IOR, thickness) on a smooth surface the ``thin_film`` model (a film on a rough one is not simulated:
-    ``warn``)."""
-    alpha = roughness * roughness
+    ``warn``).  The index and α may each be a TextureInput (linked IOR, Roughness: per point, as the Principled
+    transmission's)."""
     if film is not None:
-        if effectively_smooth(alpha):    # a smooth coated interface: interference and its elliptical polarisation
+        if not isinstance(alpha, TextureInput) and effectively_smooth(alpha):    # a smooth coated interface
             decl = MODELS["thin_film"]
             return decl.build(decl.values({"n": ior, "film_n": _film_number(film[0], IOR_MIN),
-                                           "thickness": _film_number(film[1])}, where))
+                                           "thickness": _film_number(film[1])}, where, label=_socket_label(
+                                              {"film_n": "Thin Film IOR", "thickness": "Thin Film Thickness",
+                                               **_GLASS_SOCKETS})))
         if warn is not None:
             warn("its Thin Film on a rough surface is not simulated (smooth surfaces only)")
     beckmann = distribution == "BECKMANN"
     decl = MODELS["rough_dielectric"]
     return decl.build(decl.values({"n": ior, "alpha": alpha, "distribution": "beckmann" if beckmann else "ggx",
-                                   "multiscatter": distribution == "MULTI_GGX"}, where))
+                                   "multiscatter": distribution == "MULTI_GGX"}, where,
+                                  label=_socket_label(_GLASS_SOCKETS)))
 
 
 def _emission(node, mat, warnings, colour_name="Color", strength_name="Strength", bake=None):
@@ -567,12 +579,18 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
                                     _node_anisotropy(r, node, mat, warnings, m, kind)), None
         return _conductor_from_colour(r, "Base Color", "Edge Tint", m, mat, node, warnings, mode="f82"), None
     if kind in ("ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction"):
-        rough = r.float("Roughness", 0.0, 1.0)
-        colour = r.rgb_or_texture("Color", 0.0)          # Cycles tints reflection and refraction by Color
-        glass = _glass(_ior(r, "IOR"), rough, getattr(node, "distribution", ""), _film(r),
+        alpha, _ = r.roughness_or_texture("Roughness")   # α = r², IOR and α per point where linked
+        colour = r.rgb_or_texture("Color", 0.0)
+        distribution = getattr(node, "distribution", "")
+        if kind == "ShaderNodeBsdfRefraction":           # refraction only, no Fresnel; Color is the closure's weight
+            model = _textured_model("refraction", {"n": _ior_or_texture(r), "alpha": alpha, "distribution":
+                                                   "beckmann" if distribution == "BECKMANN" else "ggx"}, mat, node,
+                                    _GLASS_SOCKETS)
+            return _tinted(model, None, colour), None
+        glass = _glass(_ior_or_texture(r), alpha, distribution, _film(r),
                        lambda text: warnings.append(f"material {mat!r}: {node.name!r}: {text}"),
                        f"material {mat!r}.{node.name}")
-        return _tinted(glass, colour, colour), None
+        return _tinted(glass, colour, colour), None      # Cycles tints reflection and refraction by Color
     if kind == "ShaderNodeBsdfSheen":
         if getattr(node, "distribution", "MICROFIBER") != "MICROFIBER":
             warnings.append(f"material {mat!r}: Sheen BSDF {node.name!r} with the {node.distribution.title()} "
