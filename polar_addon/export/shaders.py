@@ -2,9 +2,10 @@
 scenes), and ``surface_bsdf``, the conversion of the shader graph plugged into a Surface:
 
 - Diffuse → Lambert (Oren–Nayar above roughness 0); Glossy/Anisotropic → conductor from the colour
-  (Gulbrandsen 2014); Metallic (Physical Conductor) → conductor with its n, k; Glass/Refraction → smooth
-  dielectric, or with roughness r the rough dielectric (single-scattering GGX, α = r²; Cycles' Multiscatter
-  GGX adds energy compensation, which is not modelled: one warning); Principled → the engine's ``principled``
+  (Gulbrandsen 2014); Metallic (Physical Conductor) → conductor with its n, k; Glass → smooth
+  dielectric, or with roughness r the rough dielectric (α = r², the node's distribution, Multiscatter GGX
+  compensated); Refraction → the ``refraction`` model (Cycles' closure: no Fresnel, no reflection); both with IOR
+  and Roughness per point where linked; Principled → the engine's ``principled``
   model (Cycles' layer order); Sheen → sheen; Emission → emitter;
 - Mix / Add Shader → an engine Mix, a Transparent BSDF mixed in → the object's pass-through alpha;
 - a **Polarising BSDF** node → polarising_node (its model and inputs exactly);
