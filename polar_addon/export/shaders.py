@@ -26,7 +26,7 @@ import numpy as np
 from ...engine.errors import SceneError
 from ...engine.materials.catalogue import MODELS
 from ...engine.materials.lambert import Lambert
-from ...engine.materials.principled import IOR_MIN, WEIGHT_CUTOFF, film_gaps
+from ...engine.materials.principled import IOR_MIN, WEIGHT_CUTOFF
 from ...engine.materials.roughness import ALPHA_MIN, effectively_smooth
 from ...engine.spectral import ConstantSpectrum, RGBIlluminantSpectrum
 from ...engine.textures import TextureInput
@@ -48,7 +48,8 @@ def _textured_model(model, values, mat, node, sockets=None):
 
 
 #: the Glass and Refraction BSDFs' sockets of the dielectric models' parameters (errors name the socket)
-_GLASS_SOCKETS = {"n": "IOR", "alpha": "Roughness"}
+_GLASS_SOCKETS = {"n": "IOR", "alpha": "Roughness", "thin_film_ior": "Thin Film IOR",
+                  "thin_film_thickness": "Thin Film Thickness"}
 
 
 def _socket_label(sockets):
@@ -353,10 +354,6 @@ def _principled(node, mat, warnings, bake=None):
     if isinstance(values["anisotropic"], TextureInput) or values["anisotropic"] > 0.0:
         _tangent_note(node, mat, warnings)          # (α_x, α_y per point with a Roughness texture)
     _unsimulated_principled_inputs(node, mat, warnings)
-    gaps = film_gaps(metallic, transmission, roughness) if film else []
-    if gaps:
-        warnings.append(f"material {mat!r}: the Thin Film of {node.name!r} is not simulated on its "
-                        f"{' and '.join(gaps)} (there: no film)")
     decl = MODELS["principled"]
     return decl.build(decl.values(values, f"material {mat!r}.{node.name}"))
 
@@ -471,26 +468,19 @@ def _film_number(value, lo=0.0):
     return TexturedNumber(value, clip=(lo, 1e6)) if isinstance(value, TextureInput) else value
 
 
-def _glass(ior, alpha, distribution, film=None, warn=None, where="material"):
+def _glass(ior, alpha, distribution, film=None, where="material"):
     """The ``rough_dielectric`` model of α = roughness² (the engine builds the smooth dielectric where its rule
     calls α smooth, or the interface is index-matched): GGX as Cycles' GGX, Multiscatter GGX (Principled's and
     Glass' default) with Cycles' energy compensation (``multiscatter``), Beckmann as Beckmann; with a ``film``
-    (IOR, thickness) on a smooth surface the ``thin_film`` model (a film on a rough one is not simulated:
-    ``warn``).  The index and α may each be a TextureInput (linked IOR, Roughness: per point, as the Principled
-    transmission's)."""
-    if film is not None:
-        if not isinstance(alpha, TextureInput) and effectively_smooth(alpha):    # a smooth coated interface
-            decl = MODELS["thin_film"]
-            return decl.build(decl.values({"n": ior, "film_n": _film_number(film[0], IOR_MIN),
-                                           "thickness": _film_number(film[1])}, where, label=_socket_label(
-                                              {"film_n": "Thin Film IOR", "thickness": "Thin Film Thickness",
-                                               **_GLASS_SOCKETS})))
-        if warn is not None:
-            warn("its Thin Film on a rough surface is not simulated (smooth surfaces only)")
+    (IOR, thickness) Airy's sum on every facet, or on the smooth interface (the ``thin_film`` model there).  The
+    index, α and the film may each be a TextureInput (linked IOR, Roughness, Thin Film inputs: per point, as the
+    Principled transmission's)."""
     beckmann = distribution == "BECKMANN"
     decl = MODELS["rough_dielectric"]
+    films = {} if film is None else {"thin_film_ior": _film_number(film[0], IOR_MIN),
+                                     "thin_film_thickness": _film_number(film[1])}
     return decl.build(decl.values({"n": ior, "alpha": alpha, "distribution": "beckmann" if beckmann else "ggx",
-                                   "multiscatter": distribution == "MULTI_GGX"}, where,
+                                   "multiscatter": distribution == "MULTI_GGX", **films}, where,
                                   label=_socket_label(_GLASS_SOCKETS)))
 
 
@@ -588,9 +578,7 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
                                                    "beckmann" if distribution == "BECKMANN" else "ggx"}, mat, node,
                                     _GLASS_SOCKETS)
             return _tinted(model, None, colour), None
-        glass = _glass(_ior_or_texture(r), alpha, distribution, _film(r),
-                       lambda text: warnings.append(f"material {mat!r}: {node.name!r}: {text}"),
-                       f"material {mat!r}.{node.name}")
+        glass = _glass(_ior_or_texture(r), alpha, distribution, _film(r), f"material {mat!r}.{node.name}")
         return _tinted(glass, colour, colour), None      # Cycles tints reflection and refraction by Color
     if kind == "ShaderNodeBsdfSheen":
         if getattr(node, "distribution", "MICROFIBER") != "MICROFIBER":

@@ -126,6 +126,7 @@ def test_texturable_parameters_are_the_surface_varying_ones():
         ("conductor", "thin_film_thickness"), ("torrance_sparrow", "thin_film_thickness"), ("oren_nayar", "albedo"),
         ("sheen", "tint"), ("sheen", "roughness"), ("thin_film", "film_n"), ("thin_film", "thickness"),
         ("thin_film", "n"), ("rough_dielectric", "n"), ("rough_dielectric", "alpha"), ("refraction", "n"),
+        ("rough_dielectric", "thin_film_thickness"), ("rough_dielectric", "thin_film_ior"),
         ("refraction", "alpha")}
 
 
