@@ -469,8 +469,8 @@ def _film_number(value, lo=0.0):
 
 
 def _glass(ior, alpha, distribution, film=None, where="material"):
-    """The ``rough_dielectric`` model of α = roughness² (the engine builds the smooth dielectric where its rule
-    calls α smooth, or the interface is index-matched): GGX as Cycles' GGX, Multiscatter GGX (Principled's and
+    """The ``rough_dielectric`` model of α (Blender's roughness²; the engine builds the smooth dielectric where its
+    rule calls α smooth, or the interface is index-matched): GGX as Cycles' GGX, Multiscatter GGX (Principled's and
     Glass' default) with Cycles' energy compensation (``multiscatter``), Beckmann as Beckmann; with a ``film``
     (IOR, thickness) Airy's sum on every facet, or on the smooth interface (the ``thin_film`` model there).  The
     index, α and the film may each be a TextureInput (linked IOR, Roughness, Thin Film inputs: per point, as the
