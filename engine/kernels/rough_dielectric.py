@@ -7,10 +7,11 @@ visible-normal sample, the reflect/refract choice and the pdf.  The NumPy refere
 material's batched formulas (engine.materials.rough_dielectric, where the twins are declared),
 written here in the same operation order, so the compiled pass gives their bits.
 
-Distribution codes: 0 Beckmann, 1 GGX.  The value is the same at every wavelength (one real index),
-written to each of the L rows.  The roughness α and the relative indices η (seen from outside, from inside) are
-each one number (a one-element array) or one per path (N,) (a textured roughness, a textured index), read with
-``at``.
+Distribution codes: 0 Beckmann, 1 GGX.  ``no_fresnel`` (Cycles' Refraction BSDF, engine.materials.refraction): no
+reflection lobe, the transmission the identity Mueller matrix (1 at every facet, 0 under total internal
+reflection).  The value is the same at every wavelength (one real index), written to each of the L rows.  The
+roughness α and the relative indices η (seen from outside, from inside) are each one number (a one-element array) or
+one per path (N,) (a textured roughness, a textured index), read with ``at``.
 """
 
 from __future__ import annotations
@@ -89,14 +90,24 @@ def _half_vector_at(i0, i1, i2, o0, o1, o2, eta):
     return h0, h1, h2, refl, ok, d_i, d_o
 
 
+@jit_inner
+def _tir_at(c, eta):
+    """Total internal reflection at a facet of incidence cosine c (no refracted direction)."""
+    c = min(max(c, 0.0), 1.0)
+    return (1.0 - c * c) / (eta * eta) > 1.0
+
+
 @jit
-def _pdf_local_at(dist, i0, i1, i2, o0, o1, o2, eta, alpha, coef, k):
+def _pdf_local_at(dist, i0, i1, i2, o0, o1, o2, eta, alpha, coef, k, no_fresnel):
     """RoughDielectric._pdf_local for one pair of local directions."""
     h0, h1, h2, refl, ok, d_i, d_o = _half_vector_at(i0, i1, i2, o0, o1, o2, eta)
-    if not ok:
+    if not ok or (no_fresnel and refl):
         return 0.0
     vndf = _vndf_pdf_at(dist, o0, o1, o2, h0, h1, h2, alpha, coef, k)
-    F = abcs_at(d_o, complex(eta, 0.0))[0]
+    if no_fresnel:
+        F = 1.0 if _tir_at(d_o, eta) else 0.0
+    else:
+        F = abcs_at(d_o, complex(eta, 0.0))[0]
     if refl:
         return F * vndf / (4.0 * d_o)
     jac = eta * d_i + d_o
@@ -105,7 +116,7 @@ def _pdf_local_at(dist, i0, i1, i2, o0, o1, o2, eta, alpha, coef, k):
 
 @jit
 def _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational, alpha, coef, k, factor,
-             A, B, C, S, x):
+             A, B, C, S, x, no_fresnel):
     """RoughDielectric.eval at path i (times ``factor``) into A..S[:, i] and x[:, i]."""
     o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
     w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
@@ -127,7 +138,11 @@ def _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational,
             scalar = abs(d_i) * d_o * D * G / (den_cos * (jac * jac))
             c_f = d_o
     a_, b_, c_, s_ = abcs_at(c_f, complex(eta, 0.0))
-    if not refl:
+    if no_fresnel:
+        # Cycles' Refraction: no reflection; transmission the identity, 0 under total internal reflection
+        one = 0.0 if refl or _tir_at(c_f, eta) else 1.0
+        a_, b_, c_, s_ = one, 0.0, one, 0.0
+    elif not refl:
         # the transmission diattenuator (engine.polarisation.fresnel.fresnel_transmission_abcs)
         F_s = a_ + b_
         F_p = a_ - b_
@@ -146,15 +161,15 @@ def _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational,
 
 
 @jit
-def _eval_loop(n_s, wo, wi, eta_out, eta_in, dist, rational, alpha, coef, k, A, B, C, S, x):
+def _eval_loop(n_s, wo, wi, eta_out, eta_in, dist, rational, alpha, coef, k, A, B, C, S, x, no_fresnel):
     for i in range(n_s.shape[1]):
         n0, n1, n2, eta, t0, t1, t2, b0, b1, b2 = _viewer_side(n_s, wo, i, eta_out, eta_in)
         _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational, at(alpha, i), coef, k, 1.0,
-                 A, B, C, S, x)
+                 A, B, C, S, x, no_fresnel)
 
 
 @jit
-def _pdf_loop(n_s, wo, wi, eta_out, eta_in, dist, alpha, coef, k, out):
+def _pdf_loop(n_s, wo, wi, eta_out, eta_in, dist, alpha, coef, k, out, no_fresnel):
     for i in range(n_s.shape[1]):
         n0, n1, n2, eta, t0, t1, t2, b0, b1, b2 = _viewer_side(n_s, wo, i, eta_out, eta_in)
         o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
@@ -162,12 +177,12 @@ def _pdf_loop(n_s, wo, wi, eta_out, eta_in, dist, alpha, coef, k, out):
         out[i] = _pdf_local_at(dist, w0 * t0 + w1 * t1 + w2 * t2, w0 * b0 + w1 * b1 + w2 * b2,
                                w0 * n0 + w1 * n1 + w2 * n2, o0 * t0 + o1 * t1 + o2 * t2,
                                o0 * b0 + o1 * b1 + o2 * b2, o0 * n0 + o1 * n1 + o2 * n2, eta, at(alpha, i), coef,
-                               k)
+                               k, no_fresnel)
 
 
 @jit
 def _sample_loop(n_s, wo, u_lobe, u_dir, eta_out, eta_in, dist, rational, alpha, coef, k,
-                 wi, pdf, valid, eta_sq, A, B, C, S, x):
+                 wi, pdf, valid, eta_sq, A, B, C, S, x, no_fresnel):
     for i in range(n_s.shape[1]):
         n0, n1, n2, eta, t0, t1, t2, b0, b1, b2 = _viewer_side(n_s, wo, i, eta_out, eta_in)
         a = at(alpha, i)
@@ -183,7 +198,10 @@ def _sample_loop(n_s, wo, u_lobe, u_dir, eta_out, eta_in, dist, rational, alpha,
         else:
             h0, h1, h2 = ggx_vndf_at(lo0, lo1, lo2, u_dir[0, i], u_dir[1, i], a)
         c = min(max(lo0 * h0 + lo1 * h1 + lo2 * h2, 0.0), 1.0)
-        F = abcs_at(c, complex(eta, 0.0))[0]          # 1 under total internal reflection
+        if no_fresnel:                                # (a "reflection" then: no lobe, the sample is invalid)
+            F = 1.0 if _tir_at(c, eta) else 0.0
+        else:
+            F = abcs_at(c, complex(eta, 0.0))[0]      # 1 under total internal reflection
         reflect = u_lobe[i] < F
         if reflect:
             d = lo0 * h0 + lo1 * h1 + lo2 * h2
@@ -203,14 +221,14 @@ def _sample_loop(n_s, wo, u_lobe, u_dir, eta_out, eta_in, dist, rational, alpha,
         w1 = t1 * l0 + b1 * l1 + n1 * l2
         w2 = t2 * l0 + b2 * l1 + n2 * l2
         wi[0, i], wi[1, i], wi[2, i] = w0, w1, w2
-        q = _pdf_local_at(dist, l0, l1, l2, lo0, lo1, lo2, eta, a, coef, k)
+        q = _pdf_local_at(dist, l0, l1, l2, lo0, lo1, lo2, eta, a, coef, k, no_fresnel)
         ok = (front and q > 0 and ((l2 > 0) if reflect else (l2 < 0)) and np.isfinite(w0) and np.isfinite(w1)
               and np.isfinite(w2))
         valid[i] = ok
         pdf[i] = q if ok else 0.0
         eta_sq[i] = 1.0 if reflect else eta * eta
         _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational, a, coef, k,
-                 abs(l2) / q if ok else 0.0, A, B, C, S, x)
+                 abs(l2) / q if ok else 0.0, A, B, C, S, x, no_fresnel)
 
 
 # ----------------------------------------------------------------------------- wrappers (the compiled twins)
@@ -235,30 +253,31 @@ def _etas(n_int, n_ext):
     return np.ascontiguousarray(n / n_ext), np.ascontiguousarray(n_ext / n)
 
 
-def rough_dielectric_eval_numba(n_s, wo, wi, L, n_int, n_ext, distribution, rational, alpha):
+def rough_dielectric_eval_numba(n_s, wo, wi, L, n_int, n_ext, distribution, rational, alpha, no_fresnel=False):
     n = n_s.shape[1]
     A, B, C, S = (np.empty((L, n)) for _ in range(4))
     x = np.empty((3, n))
     _eval_loop(_f64(n_s), _f64(wo), _f64(wi), *_etas(n_int, n_ext), DISTRIBUTION_CODES[distribution],
-               bool(rational), _alphas(alpha), _ERFCX_COEF, _ERFCX_K, A, B, C, S, x)
+               bool(rational), _alphas(alpha), _ERFCX_COEF, _ERFCX_K, A, B, C, S, x, bool(no_fresnel))
     return x, A, B, C, S
 
 
-def rough_dielectric_pdf_numba(n_s, wo, wi, n_int, n_ext, distribution, alpha):
+def rough_dielectric_pdf_numba(n_s, wo, wi, n_int, n_ext, distribution, alpha, no_fresnel=False):
     out = np.empty(n_s.shape[1])
     _pdf_loop(_f64(n_s), _f64(wo), _f64(wi), *_etas(n_int, n_ext), DISTRIBUTION_CODES[distribution],
-              _alphas(alpha), _ERFCX_COEF, _ERFCX_K, out)
+              _alphas(alpha), _ERFCX_COEF, _ERFCX_K, out, bool(no_fresnel))
     return out
 
 
-def rough_dielectric_sample_numba(n_s, wo, u_lobe, u_dir, L, n_int, n_ext, distribution, rational, alpha):
+def rough_dielectric_sample_numba(n_s, wo, u_lobe, u_dir, L, n_int, n_ext, distribution, rational, alpha,
+                                  no_fresnel=False):
     n = n_s.shape[1]
     A, B, C, S = (np.empty((L, n)) for _ in range(4))
     wi, x = np.empty((3, n)), np.empty((3, n))
     pdf, eta_sq, valid = np.empty(n), np.empty(n), np.empty(n, np.bool_)
     _sample_loop(_f64(n_s), _f64(wo), _f64(u_lobe), _f64(u_dir), *_etas(n_int, n_ext),
                  DISTRIBUTION_CODES[distribution], bool(rational), _alphas(alpha), _ERFCX_COEF, _ERFCX_K,
-                 wi, pdf, valid, eta_sq, A, B, C, S, x)
+                 wi, pdf, valid, eta_sq, A, B, C, S, x, bool(no_fresnel))
     return wi, pdf, valid, eta_sq, x, A, B, C, S
 
 

@@ -9,8 +9,8 @@ coat) and ``base_…`` (a Lambertian base).
 
 from __future__ import annotations
 
-from . import (black_glass, conductor, dielectric, filter_sheet, htsg, lambert, mix, oren_nayar, principled, sheen,
-               rough_dielectric, thin_dielectric, thin_film, torrance_sparrow, weidlich_wilkie)
+from . import (black_glass, conductor, dielectric, filter_sheet, htsg, lambert, mix, oren_nayar, principled, refraction,
+               sheen, rough_dielectric, thin_dielectric, thin_film, torrance_sparrow, weidlich_wilkie)
 from .parameters import ModelDeclaration, Parameter
 from ..errors import SceneError
 
@@ -19,7 +19,8 @@ MODELS: dict[str, ModelDeclaration] = {d.name: d for d in (
     lambert.DECLARATION, oren_nayar.DECLARATION, conductor.DECLARATION, dielectric.DECLARATION, black_glass.DECLARATION,
     torrance_sparrow.DECLARATION, htsg.DECLARATION, weidlich_wilkie.DECLARATION,
     filter_sheet.POLARISER, filter_sheet.RETARDER, rough_dielectric.DECLARATION,
-    thin_dielectric.DECLARATION, thin_film.DECLARATION, mix.DECLARATION, principled.DECLARATION, sheen.DECLARATION)}
+    thin_dielectric.DECLARATION, thin_film.DECLARATION, mix.DECLARATION, principled.DECLARATION, sheen.DECLARATION,
+    refraction.DECLARATION)}
 
 #: Flat names of nested parts: a layered model's coats (one coat) and its base (a Lambert).
 _FLAT_PARTS = {"coats": ("coat_", weidlich_wilkie.COAT), "material": ("base_", lambert.DECLARATION)}

@@ -36,6 +36,7 @@ import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, DeltaVertices, MuellerValue, ShadingPoint, depolarising_value
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
+from ..errors import SceneError
 from ..kernels import twin
 from ..kernels.delta_bounce import dielectric_loop
 from ..kernels.geometry import unit_cross_numpy
@@ -98,6 +99,17 @@ def index_at(n, sp):
         return sp.number(n)
     if isinstance(n, TexturedSpectrum):
         return n.numbers(sp.surface_points())
+    return n
+
+
+def one_side_of(values, name: str, exterior_n: float):
+    """The declared index ``name`` of engine.materials.parameters.Values, refused (SceneError naming the field) where
+    it varies per point across ``exterior_n``: the interface would turn inside out between points (the Principled
+    IOR, the Glass and Refraction BSDFs' IOR)."""
+    n = values[name]
+    if per_point_index(n) and n.lo < exterior_n < n.hi:
+        raise SceneError(values.field(name), f"a per-point index must lie on one side of {exterior_n:g}, got values in "
+                                             f"[{n.lo:g}, {n.hi:g}]")
     return n
 
 

@@ -15,7 +15,8 @@ diffuse base, the base weighted by one minus the specular layer's albedo at the 
   angle (engine.materials.tinted.F82Reflectance); under a thin film (``thin_film_thickness`` > 0, rough or
   smooth) Cycles' own index estimate filmed by Airy's sum instead;
 - transmission: the smooth dielectric at roughness 0 (with a film the thin-film dielectric), else the GGX
-  rough dielectric (compensated for "multi_ggx"; a roughness texture gives its α = r² per point), each refraction
+  rough dielectric (compensated for "multi_ggx"; a roughness texture gives its α = r² per point; a film on every
+  facet), each refraction
   tinted by √(base colour) and the glass's Fresnel by Specular Tint (engine.materials.tinted);
 - dielectric: a GGX Torrance–Sparrow dielectric (index from ``ior`` and ``specular_ior_level``: F0 =
   F0(ior)·2·level, per point through engine.textures.inputs.NumberSpectrum, beside a Specular Tint or an
@@ -265,20 +266,6 @@ def _film_values(p) -> dict:
     return {"thin_film_thickness": p["thin_film_thickness"], "thin_film_ior": p["thin_film_ior"]}
 
 
-def film_gaps(metallic, transmission, roughness, transmission_roughness=None) -> list[str]:
-    """The parts of a principled material on which its Thin Film is not simulated (Cycles puts it on every
-    Fresnel): a rough transmission.  The inputs as the declaration takes them (numbers or textures; a textured
-    roughness counts as rough)."""
-    trans = roughness if transmission_roughness is None else transmission_roughness
-    per_point = (TexturedNumber, TexturedSpectrum, TextureInput)         # a texture: somewhere rough, weighted
-    gaps = []
-    if (isinstance(metallic, per_point) or not _always(metallic)) and \
-            (isinstance(transmission, per_point) or not _never(transmission)) and \
-            (isinstance(trans, per_point) or not effectively_smooth(trans * trans)):
-        gaps.append("rough transmission")
-    return gaps
-
-
 def _transmission(p, alpha, ior):
     from .dielectric import SmoothDielectric
     from .rough_dielectric import RoughDielectric, index_matched
@@ -293,15 +280,13 @@ def _transmission(p, alpha, ior):
     if _textured(ior):          # an index per point
         ior = _glass_index(ior)
     matched = not _textured(ior) and index_matched(ior, 1.0)
-    if _textured(a):
-        glass = SmoothDielectric(ior) if matched else \
-            RoughDielectric(ior, a, "ggx", multiscatter=p["distribution"] == "multi_ggx")
-    elif effectively_smooth(a) and film:
+    films = {"film_n": p["thin_film_ior"], "film_thickness": p["thin_film_thickness"]} if film else {}
+    if effectively_smooth(a) and film:
         glass = ThinFilmDielectric(ior, p["thin_film_ior"], p["thin_film_thickness"])
-    elif effectively_smooth(a) or matched:
+    elif matched or effectively_smooth(a):
         glass = SmoothDielectric(ior)
-    else:
-        glass = RoughDielectric(ior, a, "ggx", multiscatter=p["distribution"] == "multi_ggx")
+    else:               # (a roughness per point too: α = r² per point, ≥ the rough glass's least α)
+        glass = RoughDielectric(ior, a, "ggx", multiscatter=p["distribution"] == "multi_ggx", **films)
     spec_tint = p["specular_tint"]
     if not _white(spec_tint):
         from .tinted import FresnelTinted           # Cycles: the glass's F0 × Specular Tint, transmittance 1 − F
@@ -496,7 +481,7 @@ DECLARATION = ModelDeclaration(
      Parameter("sheen_roughness", "the sheen's roughness", lo=0.0, hi=1.0, default=0.5, texturable=True),
      Parameter("sheen_tint", "the sheen's colour", kind="spectrum", spectrum="unbounded", lo=0.0, hi=1e6,
                default=1.0, texturable=True),
-     Parameter("thin_film_thickness", "thin film on the smooth transmission, the metal and the dielectric specular "
+     Parameter("thin_film_thickness", "thin film on the transmission, the metal and the dielectric specular "
                                       "layer (Airy's sum, per facet where rough)", unit="nm", lo=0.0, hi=1e6,
                default=0.0, texturable=True),
      Parameter("thin_film_ior", "thin film's index", lo=0.0, lo_open=True, default=1.33, texturable=True),
@@ -514,12 +499,9 @@ def _principled(p):
     p["thin_film_ior"]          # validated even where no film uses it (a NaN is refused, not ignored)
     metallic, transmission = p["metallic"], p["transmission"]
     alpha = _alpha_of(p["roughness"])
-    ior = p["ior"]
-    if _textured(ior):
-        if ior.lo < 1.0 < ior.hi:
-            raise SceneError(p.field("ior"), f"a per-point index must lie on one side of 1, got values in "
-                                             f"[{ior.lo:g}, {ior.hi:g}]")
-    else:
+    from .dielectric import one_side_of
+    ior = one_side_of(p, "ior", 1.0)
+    if not _textured(ior):
         ior = max(ior, IOR_MIN)
     metal = glass = dielectric = None
     if not _never(metallic):

@@ -65,6 +65,14 @@ index's own table).  Where a point's index equals ``exterior_n`` exactly the int
 η → 1 limit is a delta): those points pass light straight through as the smooth dielectric does
 (``index_matched``), a Dirac lobe of the sample (is_delta) and nothing in eval and pdf.
 
+Thin film (``film_n``, ``film_thickness`` nm; Cycles' Thin Film on a rough Glass BSDF or Principled transmission): on
+every facet Airy's sum over the film (engine.polarisation.thin_film, between the viewer's medium and the far one)
+replaces M_F, and the refraction is the lossless film's transmission, 1 − R per polarisation (C = √(T_s T_p),
+S = 0), as on the smooth thin-film dielectric; per wavelength, so the lobe is chosen by the reflectance averaged over
+the path's wavelengths (as the smooth one's) and pdf uses that average.  These lobes run as the NumPy steps below
+(the compiled passes take one λ-independent Fresnel); the multiple-scattering term keeps the unfilmed interface's E,
+as Cycles' (its glass table has no film).
+
 Implementation: eval, pdf and sample are one compiled pass each over the batch
 (engine.kernels.rough_dielectric); the NumPy references are ``_eval``, ``_pdf_local`` and ``_sample``
 of this module, declared with kernels.twin.
@@ -77,7 +85,8 @@ import math
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
-from .dielectric import IOR_SOCKET, SmoothDielectric, checked_index, index_at, per_point_index
+from .conductor import THIN_FILM_IOR, THIN_FILM_THICKNESS
+from .dielectric import IOR_SOCKET, SmoothDielectric, checked_index, index_at, one_side_of, per_point_index
 from .ggx import GGX
 from .ggx_energy import ALPHA_MAX, DielectricAlbedo, DielectricAlbedoIndex, DielectricAlbedoRange
 from .microfacet import Beckmann, reflect_local
@@ -90,6 +99,7 @@ from ..kernels.rough_dielectric import (rough_dielectric_eval_numba, rough_diele
                                         rough_dielectric_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_transmission_abcs
+from ..polarisation.thin_film import facet_film, film_at, film_label, film_reflection_abcs, film_transmission_abcs
 from ..textures import TexturedNumber
 from ..vec3 import dot, local_frame, to_local
 
@@ -129,8 +139,17 @@ def _half_vector(wi_l, wo_l, eta):
     return h, refl, ok, d_i, d_o
 
 
-def _eval(dist, rational, n_s, wo, wi, L, n_int, n_ext):
-    """(x, A, B, C, S): the facet reflection or refraction in the scattering-plane frame x (3, N), (L, N)."""
+def _tir(c, eta):
+    """(N,) bool: total internal reflection at facets of incidence cosines c (no refracted direction)."""
+    c = np.clip(c, 0.0, 1.0)
+    return (1.0 - c * c) / (eta * eta) > 1.0
+
+
+def _eval(dist, rational, n_s, wo, wi, L, n_int, n_ext, no_fresnel=False, film=None):
+    """(x, A, B, C, S): the facet reflection or refraction in the scattering-plane frame x (3, N), (L, N);
+    ``no_fresnel``: no reflection, the refraction the identity (0 under total internal reflection); ``film``: a
+    function of the facet cosines c (N,) giving the coated facet's reflection (A, B, C, S) (L, N) seen from the
+    viewer's side (RoughDielectric._film_fresnel), its transmission 1 − R per polarisation."""
     _, eta, wo_l, wi_l = _local(n_s, wo, n_int, n_ext, wi)
     h, refl, ok, d_i, d_o = _half_vector(wi_l, wo_l, eta)
     D = dist.D(h)
@@ -147,16 +166,31 @@ def _eval(dist, rational, n_s, wo, wi, L, n_int, n_ext):
     c_f = np.where(ok, np.where(refl, d_i, d_o), 1.0)
     Ar, Br, Cr, Sr = fresnel_reflection_abcs(c_f, eta)
     At, Bt, Ct, St = fresnel_transmission_abcs(c_f, eta)
+    if no_fresnel:              # Cycles' Refraction BSDF (engine.materials.refraction)
+        one = np.where(refl | _tir(c_f, eta), 0.0, 1.0)
+        zero = np.zeros_like(one)
+        Ar, Br, Cr, Sr = zero, zero, zero, zero
+        At, Bt, Ct, St = one, zero, one, zero
     n = n_s.shape[1]
-    tile = lambda r, t: np.broadcast_to(np.where(refl, r, t) * scalar, (L, n)).copy()  # noqa: E731
     x = scattering_plane_axis(-wi, wo)
+    if film is not None:        # Airy's sum over the film on every facet, per wavelength
+        R = film(c_f)
+        T = film_transmission_abcs(R[0] + R[1], R[0] - R[1])
+        return (x, *(np.where(refl, r, t) * scalar for r, t in zip(R, T)))
+    tile = lambda r, t: np.broadcast_to(np.where(refl, r, t) * scalar, (L, n)).copy()  # noqa: E731
     return x, tile(Ar, At), tile(Br, Bt), tile(Cr, Ct), tile(Sr, St)
 
 
-def _pdf_local(dist, wi_l, wo_l, eta):
+def _pdf_local(dist, wi_l, wo_l, eta, no_fresnel=False, film=None):
     h, refl, ok, d_i, d_o = _half_vector(wi_l, wo_l, eta)
     vndf = dist.pdf(wo_l, h)
-    F = fresnel_reflection_abcs(np.where(ok, d_o, 1.0), eta)[0]
+    if film is not None:        # the lobe chosen by the film's reflectance averaged over the path's wavelengths
+        F = film(np.where(ok, d_o, 1.0))[0].mean(axis=0)
+    elif no_fresnel:
+        F = np.where(_tir(np.where(ok, d_o, 1.0), eta), 1.0, 0.0)
+        ok = ok & ~refl
+    else:
+        F = fresnel_reflection_abcs(np.where(ok, d_o, 1.0), eta)[0]
     jac = eta * d_i + d_o
     jac2 = np.where(ok & ~refl, jac * jac, 1.0)
     p_r = F * vndf / (4.0 * np.where(ok, d_o, 1.0))
@@ -164,7 +198,7 @@ def _pdf_local(dist, wi_l, wo_l, eta):
     return np.where(ok, np.where(refl, p_r, p_t), 0.0)
 
 
-def _sample(dist, rational, n_s, wo, u_lobe, u_dir, L, n_int, n_ext):
+def _sample(dist, rational, n_s, wo, u_lobe, u_dir, L, n_int, n_ext, no_fresnel=False, film=None):
     """(wi, pdf, valid, eta_sq, x, A, B, C, S): the sampled direction, its pdf (0 where invalid), η² on
     refraction (1 on reflection) and the weight f·|cosθ_i|/pdf."""
     nn, eta, wo_l = _local(n_s, wo, n_int, n_ext)
@@ -172,7 +206,12 @@ def _sample(dist, rational, n_s, wo, u_lobe, u_dir, L, n_int, n_ext):
     wo_s = np.where(front[None, :], wo_l, np.array([[0.0], [0.0], [1.0]]))
     h = dist.sample(wo_s, u_dir)
     c = np.clip(np.sum(wo_s * h, axis=0), 0.0, 1.0)
-    F = fresnel_reflection_abcs(c, eta)[0]          # 1 under total internal reflection
+    if film is not None:
+        F = film(c)[0].mean(axis=0)
+    elif no_fresnel:                                # (a "reflection" then: no lobe, the sample is invalid)
+        F = np.where(_tir(c, eta), 1.0, 0.0)
+    else:
+        F = fresnel_reflection_abcs(c, eta)[0]      # 1 under total internal reflection
     reflect = u_lobe < F
     wi_r = reflect_local(wo_s, h)
     inv_eta = 1.0 / eta
@@ -181,9 +220,9 @@ def _sample(dist, rational, n_s, wo, u_lobe, u_dir, L, n_int, n_ext):
     wi_l = np.where(reflect[None, :], wi_r, wi_t)
     wi_l = wi_l / np.sqrt(np.sum(wi_l * wi_l, axis=0))
     wi = local_to_world(wi_l, nn)
-    pdf = _pdf_local(dist, wi_l, wo_s, eta)
+    pdf = _pdf_local(dist, wi_l, wo_s, eta, no_fresnel, film)
     valid = front & (pdf > 0) & np.where(reflect, wi_l[2] > 0, wi_l[2] < 0) & np.all(np.isfinite(wi), axis=0)
-    x, A, B, C, S = _eval(dist, rational, n_s, wo, wi, L, n_int, n_ext)
+    x, A, B, C, S = _eval(dist, rational, n_s, wo, wi, L, n_int, n_ext, no_fresnel, film)
     factor = np.where(valid, np.abs(wi_l[2]) / np.where(valid, pdf, 1.0), 0.0)[None, :]
     eta_sq = np.where(reflect, 1.0, eta * eta)
     return wi, np.where(valid, pdf, 0.0), valid, eta_sq, x, A * factor, B * factor, C * factor, S * factor
@@ -195,20 +234,21 @@ def _distribution(distribution: str, alpha):
     return kind.per_point(alpha) if np.ndim(alpha) else kind(alpha)
 
 
-def rough_dielectric_eval_numpy(n_s, wo, wi, L, n_int, n_ext, distribution, rational, alpha):
+def rough_dielectric_eval_numpy(n_s, wo, wi, L, n_int, n_ext, distribution, rational, alpha, no_fresnel=False):
     """(x, A, B, C, S) of ``_eval``."""
-    return _eval(_distribution(distribution, alpha), rational, n_s, wo, wi, L, n_int, n_ext)
+    return _eval(_distribution(distribution, alpha), rational, n_s, wo, wi, L, n_int, n_ext, no_fresnel)
 
 
-def rough_dielectric_pdf_numpy(n_s, wo, wi, n_int, n_ext, distribution, alpha):
+def rough_dielectric_pdf_numpy(n_s, wo, wi, n_int, n_ext, distribution, alpha, no_fresnel=False):
     """The pdf (N,) of ω_i under ``_sample``."""
     _, eta, wo_l, wi_l = _local(n_s, wo, n_int, n_ext, wi)
-    return _pdf_local(_distribution(distribution, alpha), wi_l, wo_l, eta)
+    return _pdf_local(_distribution(distribution, alpha), wi_l, wo_l, eta, no_fresnel)
 
 
-def rough_dielectric_sample_numpy(n_s, wo, u_lobe, u_dir, L, n_int, n_ext, distribution, rational, alpha):
+def rough_dielectric_sample_numpy(n_s, wo, u_lobe, u_dir, L, n_int, n_ext, distribution, rational, alpha,
+                                  no_fresnel=False):
     """(wi, pdf, valid, eta_sq, x, A, B, C, S) of ``_sample``."""
-    return _sample(_distribution(distribution, alpha), rational, n_s, wo, u_lobe, u_dir, L, n_int, n_ext)
+    return _sample(_distribution(distribution, alpha), rational, n_s, wo, u_lobe, u_dir, L, n_int, n_ext, no_fresnel)
 
 
 rough_dielectric_eval = twin(rough_dielectric_eval_numba, rough_dielectric_eval_numpy)
@@ -216,10 +256,14 @@ rough_dielectric_pdf = twin(rough_dielectric_pdf_numba, rough_dielectric_pdf_num
 rough_dielectric_sample = twin(rough_dielectric_sample_numba, rough_dielectric_sample_numpy)
 
 
-def index_matched(n: float, exterior_n: float) -> bool:
+def index_matched(n, exterior_n: float) -> bool:
     """True for an interface between equal indices: it scatters nothing at any roughness (light passes
     straight through: the BTDF's η → 1 limit is a delta), which the smooth dielectric renders exactly;
-    the microfacet formulas degenerate there (the half vector η ω_i + ω_o of the one direction is 0)."""
+    the microfacet formulas degenerate there (the half vector η ω_i + ω_o of the one direction is 0).
+    An index per point is matched only where it is exterior_n everywhere (elsewhere: RoughDielectric's
+    pass-through at its matched points)."""
+    if per_point_index(n):
+        return n.lo == n.hi == float(exterior_n)
     return float(n) == float(exterior_n)
 
 
@@ -229,9 +273,11 @@ class RoughDielectric(BSDF):
     name = "rough_dielectric"
     flags = (BSDFFlags.GLOSSY_REFLECTION | BSDFFlags.GLOSSY_TRANSMISSION | BSDFFlags.POLARISING
              | BSDFFlags.RETARDING)
+    #: Cycles' Refraction BSDF (engine.materials.refraction): no Fresnel, no reflection lobe
+    no_fresnel = False
 
     def __init__(self, n, alpha: float, distribution: str = "beckmann", shadowing: str = "smith",
-                 exterior_n: float = 1.0, multiscatter: bool = False):
+                 exterior_n: float = 1.0, multiscatter: bool = False, film_n=None, film_thickness=0.0):
         # the index: a number, or per point (a TexturedNumber / NumberSpectrum: a Principled IOR texture)
         self.n_int = checked_index(n)
         self.n_ext = float(exterior_n)
@@ -260,6 +306,13 @@ class RoughDielectric(BSDF):
         self.distribution, self.shadowing = distribution, shadowing
         self.dist = None if self.per_point else _distribution(distribution, self.alpha)
         self.multiscatter = bool(multiscatter)
+        # a thin film on every facet (Cycles' Thin Film on a rough Glass or Principled transmission): Airy's sum
+        # replaces the facets' Fresnel matrices (engine.polarisation.thin_film); None below Cycles' 0.1 nm
+        self.film = facet_film(film_n, film_thickness)
+        if self.film is not None:
+            self.flags = self.flags | BSDFFlags.WAVELENGTH_DEPENDENT
+            self.varies_over_surface = self.varies_over_surface or any(isinstance(v, TexturedNumber)
+                                                                       for v in self.film)
         self._energy = None
         if self.multiscatter:
             if distribution != "ggx":
@@ -303,11 +356,27 @@ class RoughDielectric(BSDF):
 
     # --- BSDF interface ---------------------------------------------------------------------------
 
+    def _film_fresnel(self, sp: ShadingPoint, n):
+        """The coated facets' reflection (A, B, C, S) (L, N) as a function of the facet cosines c (N,), seen from
+        the viewer's side of each point (the film between the viewer's medium and the far one); None without a
+        film."""
+        if self.film is None:
+            return None
+        outside = sp.cos_o >= 0
+        n1 = np.where(outside, self.n_ext, n)[None, :]
+        n3 = np.where(outside, n, self.n_ext)[None, :]
+        film_n, thickness = film_at(self.film, sp)
+        return lambda c: film_reflection_abcs(c[None, :], n1, film_n, thickness, n3, sp.lam)
+
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
         n = self._n(sp)
-        x, A, B, C, S = rough_dielectric_eval(sp.n_s, sp.wo, wi, sp.lam.shape[0], n, self.n_ext,
-                                              self.distribution, self.shadowing == "smith_rational",
-                                              self._alpha(sp))
+        if self.film is not None:        # (NumPy: the compiled passes take a λ-independent Fresnel)
+            x, A, B, C, S = _eval(_distribution(self.distribution, self._alpha(sp)), self.shadowing == "smith_rational",
+                                  sp.n_s, sp.wo, wi, sp.lam.shape[0], n, self.n_ext, film=self._film_fresnel(sp, n))
+        else:
+            x, A, B, C, S = rough_dielectric_eval(sp.n_s, sp.wo, wi, sp.lam.shape[0], n, self.n_ext,
+                                                  self.distribution, self.shadowing == "smith_rational",
+                                                  self._alpha(sp), self.no_fresnel)
         return MuellerValue("abcs", x, x, A, B, C, S, depol=self._multiscatter_depol(sp, A, n))
 
     def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray:
@@ -315,13 +384,24 @@ class RoughDielectric(BSDF):
         return np.where(sp.cos_o >= 0, eta * eta, 1.0 / (eta * eta))
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        return rough_dielectric_pdf(sp.n_s, sp.wo, wi, self._n(sp), self.n_ext, self.distribution, self._alpha(sp))
+        if self.film is not None:
+            n = self._n(sp)
+            _, eta, wo_l, wi_l = _local(sp.n_s, sp.wo, n, self.n_ext, wi)
+            return _pdf_local(_distribution(self.distribution, self._alpha(sp)), wi_l, wo_l, eta,
+                              film=self._film_fresnel(sp, n))
+        return rough_dielectric_pdf(sp.n_s, sp.wo, wi, self._n(sp), self.n_ext, self.distribution, self._alpha(sp),
+                                    self.no_fresnel)
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         n = self._n(sp)
-        wi, pdf, valid, eta_sq, x, A, B, C, S = rough_dielectric_sample(
-            sp.n_s, sp.wo, u_lobe, u_dir, sp.lam.shape[0], n, self.n_ext, self.distribution,
-            self.shadowing == "smith_rational", self._alpha(sp))
+        if self.film is not None:
+            wi, pdf, valid, eta_sq, x, A, B, C, S = _sample(
+                _distribution(self.distribution, self._alpha(sp)), self.shadowing == "smith_rational", sp.n_s, sp.wo,
+                u_lobe, u_dir, sp.lam.shape[0], n, self.n_ext, film=self._film_fresnel(sp, n))
+        else:
+            wi, pdf, valid, eta_sq, x, A, B, C, S = rough_dielectric_sample(
+                sp.n_s, sp.wo, u_lobe, u_dir, sp.lam.shape[0], n, self.n_ext, self.distribution,
+                self.shadowing == "smith_rational", self._alpha(sp), self.no_fresnel)
         weight = MuellerValue("abcs", x, x, A, B, C, S, depol=self._multiscatter_depol(sp, A, n))
         sample = BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=np.zeros(sp.n, bool), valid=valid, eta_sq=eta_sq)
         matched = self._matched(sp, n)
@@ -350,6 +430,8 @@ class RoughDielectric(BSDF):
                "shadowing": self.shadowing, "exterior_n": self.n_ext}
         if self.multiscatter:
             out["multiscatter"] = True
+        if self.film is not None:
+            out["thin_film"] = film_label(self.film)
         return out
 
     def lobe_colors(self, sp: ShadingPoint):
@@ -366,9 +448,9 @@ class RoughDielectric(BSDF):
 DECLARATION = ModelDeclaration(
     "rough_dielectric", "Rough Dielectric",
     "Frosted glass: microfacet reflection and refraction (Walter 2007), polarising per facet",
-    [Parameter("n", "real index of the material", lo=0.0, lo_open=True, socket=IOR_SOCKET),
+    [Parameter("n", "real index of the material", lo=0.0, lo_open=True, socket=IOR_SOCKET, texturable=True),
      Parameter("alpha", f"microfacet roughness α (Beckmann rms slope or GGX α); below {SMOOTH_LIMIT:g} (e.g. 0) "
-                        "the smooth dielectric", lo=0.0, hi=10.0, default=0.1,
+                        "the smooth dielectric", lo=0.0, hi=10.0, default=0.1, texturable=True,
                socket=Socket("Roughness", "FLOAT", 0.1, 0.0, 2.0,
                              "Microfacet roughness α (Beckmann rms slope / GGX α); 0 = smooth glass")),
      Parameter("distribution", "microfacet distribution", kind="choice", choices=DISTRIBUTIONS,
@@ -378,8 +460,15 @@ DECLARATION = ModelDeclaration(
      Parameter("multiscatter", "add the energy of multiple scattering between facets as a depolarised term, as "
                                "Cycles' Multiscatter GGX glass (needs distribution 'ggx' and alpha ≤ 1)",
                kind="bool", default=False),
+     THIN_FILM_THICKNESS.with_(doc="a thin film on every facet, or on the smooth interface (0: none; Airy's sum over "
+                                   "the film replaces the Fresnel matrices, transmission 1 − R per polarisation)"),
+     THIN_FILM_IOR,
      exterior_n_parameter()],
     catalogue="rough_dielectric", node="ROUGH_DIELECTRIC")
+
+#: the index and the roughness may vary per point (Blender's Glass BSDF with linked IOR, Roughness; every formula is
+#: elementwise, the Principled transmission's machinery)
+DECLARATION.per_point = frozenset({"n", "alpha", "thin_film_thickness", "thin_film_ior"})
 
 
 @DECLARATION.builder
@@ -389,12 +478,20 @@ def _rough_dielectric(p):
     if shadowing == "smith_rational" and distribution != "beckmann":
         raise SceneError(p.field("shadowing"), "'smith_rational' exists for distribution 'beckmann' only")
     multiscatter = p["multiscatter"]
+    n = one_side_of(p, "n", p["exterior_n"])
     if multiscatter and distribution != "ggx":
         raise SceneError(p.field("multiscatter"), "needs distribution 'ggx' (Cycles' Multiscatter GGX; Cycles has "
                                                   f"no multiple-scattering Beckmann), got {distribution!r}")
-    if multiscatter and alpha > ALPHA_MAX:
+    top = alpha.hi if isinstance(alpha, TexturedNumber) else alpha
+    if multiscatter and top > ALPHA_MAX:
         raise SceneError(p.field("alpha"), f"must be at most {ALPHA_MAX:g} with multiscatter (Cycles clamps GGX α "
-                                           f"to 1; the albedo tables span [0, 1]), got {alpha:g}")
-    if smooth or index_matched(p["n"], p["exterior_n"]):   # the smooth limit, or no interface at all
-        return SmoothDielectric(p["n"], p["exterior_n"])
-    return RoughDielectric(p["n"], alpha, distribution, shadowing, p["exterior_n"], multiscatter=multiscatter)
+                                           f"to 1; the albedo tables span [0, 1]), got {top:g}")
+    film_n, thickness = p["thin_film_ior"], p["thin_film_thickness"]       # (the index validated always)
+    film = facet_film(film_n, thickness) is not None
+    if smooth and film:                             # a smooth coated interface: the thin-film dielectric
+        from .thin_film import ThinFilmDielectric
+        return ThinFilmDielectric(n, film_n, thickness, p["exterior_n"])
+    if smooth or index_matched(n, p["exterior_n"]):   # the smooth limit, or no interface at all
+        return SmoothDielectric(n, p["exterior_n"])
+    return RoughDielectric(n, alpha, distribution, shadowing, p["exterior_n"], multiscatter=multiscatter,
+                           **({"film_n": film_n, "film_thickness": thickness} if film else {}))

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from .base import BSDFFlags, BSDFSample, DeltaVertices, MuellerValue
-from .dielectric import IOR_SOCKET, SmoothDielectric
+from .dielectric import IOR_SOCKET, SmoothDielectric, one_side_of
 from .parameters import ModelDeclaration, Parameter, exterior_n_parameter
 from ..polarisation.frames import plane_of_incidence_axis
 from ..polarisation.thin_film import film_reflection_abcs, film_transmission_abcs
@@ -90,17 +90,20 @@ DECLARATION = ModelDeclaration(
     "thin_film", "Thin-Film Dielectric",
     "Smooth dielectric under a thin non-absorbing film (soap films, coatings): interference colours and "
     "elliptical polarisation of the reflection",
-    [Parameter("n", "real index of the material under the film", lo=0.0, lo_open=True, socket=IOR_SOCKET),
+    [Parameter("n", "real index of the material under the film", lo=0.0, lo_open=True, socket=IOR_SOCKET,
+               texturable=True),
      Parameter("film_n", "real index of the film", lo=0.0, lo_open=True, default=1.33, texturable=True),
      Parameter("thickness", "film thickness", unit="nm", lo=0.0, hi=1e6, default=500.0, texturable=True),
      exterior_n_parameter()])
 
-#: the film may vary over the surface (Blender's Glass BSDF Thin Film inputs from a texture, as the Principled's)
-DECLARATION.per_point = frozenset({"film_n", "thickness"})
+#: the film and the index under it may vary over the surface (Blender's Glass BSDF Thin Film and IOR inputs from a
+#: texture, as the Principled's)
+DECLARATION.per_point = frozenset({"film_n", "thickness", "n"})
 
 
 @DECLARATION.builder
 def _thin_film(p):
+    n = one_side_of(p, "n", p["exterior_n"])
     if p["thickness"] == 0:
-        return SmoothDielectric(p["n"], p["exterior_n"])
-    return ThinFilmDielectric(p["n"], p["film_n"], p["thickness"], p["exterior_n"])
+        return SmoothDielectric(n, p["exterior_n"])
+    return ThinFilmDielectric(n, p["film_n"], p["thickness"], p["exterior_n"])

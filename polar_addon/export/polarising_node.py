@@ -22,7 +22,7 @@ def _declared_range(p):
 
 
 #: Polarising BSDF parameters that are microfacet slopes (engine.materials.roughness)
-_SLOPES = ("m",)
+_SLOPES = ("m", "alpha")
 
 
 def _socket_values(reader, decl) -> dict:

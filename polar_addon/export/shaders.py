@@ -2,9 +2,10 @@
 scenes), and ``surface_bsdf``, the conversion of the shader graph plugged into a Surface:
 
 - Diffuse → Lambert (Oren–Nayar above roughness 0); Glossy/Anisotropic → conductor from the colour
-  (Gulbrandsen 2014); Metallic (Physical Conductor) → conductor with its n, k; Glass/Refraction → smooth
-  dielectric, or with roughness r the rough dielectric (single-scattering GGX, α = r²; Cycles' Multiscatter
-  GGX adds energy compensation, which is not modelled: one warning); Principled → the engine's ``principled``
+  (Gulbrandsen 2014); Metallic (Physical Conductor) → conductor with its n, k; Glass → smooth
+  dielectric, or with roughness r the rough dielectric (α = r², the node's distribution, Multiscatter GGX
+  compensated); Refraction → the ``refraction`` model (Cycles' closure: no Fresnel, no reflection); both with IOR
+  and Roughness per point where linked; Principled → the engine's ``principled``
   model (Cycles' layer order); Sheen → sheen; Emission → emitter;
 - Mix / Add Shader → an engine Mix, a Transparent BSDF mixed in → the object's pass-through alpha;
 - a **Polarising BSDF** node → polarising_node (its model and inputs exactly);
@@ -25,7 +26,7 @@ import numpy as np
 from ...engine.errors import SceneError
 from ...engine.materials.catalogue import MODELS
 from ...engine.materials.lambert import Lambert
-from ...engine.materials.principled import IOR_MIN, WEIGHT_CUTOFF, film_gaps
+from ...engine.materials.principled import IOR_MIN, WEIGHT_CUTOFF
 from ...engine.materials.roughness import ALPHA_MIN, effectively_smooth
 from ...engine.spectral import ConstantSpectrum, RGBIlluminantSpectrum
 from ...engine.textures import TextureInput
@@ -37,12 +38,22 @@ from .normal_maps import with_shading_normal
 from .polarising_node import polar_node_bsdf
 
 
-def _textured_model(model, values, mat, node):
+def _textured_model(model, values, mat, node, sockets=None):
     """A model built through its declaration from ``values`` some of which are TextureInputs
-    (validated: every value a texture can give must be in the parameter's range)."""
+    (validated: every value a texture can give must be in the parameter's range); ``sockets``: {parameter: the
+    node's socket it comes from} for the errors' field names."""
     decl = MODELS[model]
     values = {k: _grey(v) for k, v in values.items()}
-    return decl.build(decl.values(values, f"material {mat!r}.{node.name}"))
+    return decl.build(decl.values(values, f"material {mat!r}.{node.name}", label=_socket_label(sockets)))
+
+
+#: the Glass and Refraction BSDFs' sockets of the dielectric models' parameters (errors name the socket)
+_GLASS_SOCKETS = {"n": "IOR", "alpha": "Roughness", "thin_film_ior": "Thin Film IOR",
+                  "thin_film_thickness": "Thin Film Thickness"}
+
+
+def _socket_label(sockets):
+    return None if sockets is None else (lambda name: sockets.get(name, name))
 
 
 def _grey(v):
@@ -247,11 +258,11 @@ def _coat_ior(r):
     return min(max(r.float("Coat IOR"), 1.0), 100.0)
 
 
-def _principled_ior(r):
-    """The Principled IOR: a TextureInput where linked (the index per point of the dielectric — with a Specular Tint,
-    an anisotropy, a Thin Film or a linked Specular IOR Level too — and of the transmission, smooth, rough, tinted or
-    filmed), else the constant as Cycles reads it (linked where it cannot be read per point: its own value, the
-    reader's warning)."""
+def _ior_or_texture(r):
+    """The IOR of a Principled, Glass or Refraction BSDF: a TextureInput where linked (the index per point of the
+    Principled dielectric — with a Specular Tint, an anisotropy, a Thin Film or a linked Specular IOR Level too — and
+    of every transmission, smooth, rough, tinted or filmed), else the constant as Cycles reads it (linked where it
+    cannot be read per point: its own value, the reader's warning)."""
     if r._socket("IOR").is_linked:
         source = r.texture("IOR", lo=IOR_MIN, hi=1e6)
         if source is not None:
@@ -322,7 +333,7 @@ def _principled(node, mat, warnings, bake=None):
     transmission = _fraction(r, "Transmission Weight")
     roughness = r.number_or_texture("Roughness")
     values = {"base_color": _grey(r.rgb_or_texture("Base Color", 0.0, 1.0)), "metallic": metallic,
-              "roughness": roughness, "transmission": transmission, "ior": _principled_ior(r),
+              "roughness": roughness, "transmission": transmission, "ior": _ior_or_texture(r),
               "specular_ior_level": _specular_level(r),
               "specular_tint": _grey(r.rgb_or_texture("Specular Tint", 0.0)),
               "coat_weight": _fraction(r, "Coat Weight"),
@@ -343,10 +354,6 @@ def _principled(node, mat, warnings, bake=None):
     if isinstance(values["anisotropic"], TextureInput) or values["anisotropic"] > 0.0:
         _tangent_note(node, mat, warnings)          # (α_x, α_y per point with a Roughness texture)
     _unsimulated_principled_inputs(node, mat, warnings)
-    gaps = film_gaps(metallic, transmission, roughness) if film else []
-    if gaps:
-        warnings.append(f"material {mat!r}: the Thin Film of {node.name!r} is not simulated on its "
-                        f"{' and '.join(gaps)} (there: no film)")
     decl = MODELS["principled"]
     return decl.build(decl.values(values, f"material {mat!r}.{node.name}"))
 
@@ -461,24 +468,20 @@ def _film_number(value, lo=0.0):
     return TexturedNumber(value, clip=(lo, 1e6)) if isinstance(value, TextureInput) else value
 
 
-def _glass(ior, roughness, distribution, film=None, warn=None, where="material"):
-    """The ``rough_dielectric`` model of α = roughness² (the engine builds the smooth dielectric where its rule
-    calls α smooth, or the interface is index-matched): GGX as Cycles' GGX, Multiscatter GGX (Principled's and
+def _glass(ior, alpha, distribution, film=None, where="material"):
+    """The ``rough_dielectric`` model of α (Blender's roughness²; the engine builds the smooth dielectric where its
+    rule calls α smooth, or the interface is index-matched): GGX as Cycles' GGX, Multiscatter GGX (Principled's and
     Glass' default) with Cycles' energy compensation (``multiscatter``), Beckmann as Beckmann; with a ``film``
-    (IOR, thickness) on a smooth surface the ``thin_film`` model (a film on a rough one is not simulated:
-    ``warn``)."""
-    alpha = roughness * roughness
-    if film is not None:
-        if effectively_smooth(alpha):    # a smooth coated interface: interference and its elliptical polarisation
-            decl = MODELS["thin_film"]
-            return decl.build(decl.values({"n": ior, "film_n": _film_number(film[0], IOR_MIN),
-                                           "thickness": _film_number(film[1])}, where))
-        if warn is not None:
-            warn("its Thin Film on a rough surface is not simulated (smooth surfaces only)")
+    (IOR, thickness) Airy's sum on every facet, or on the smooth interface (the ``thin_film`` model there).  The
+    index, α and the film may each be a TextureInput (linked IOR, Roughness, Thin Film inputs: per point, as the
+    Principled transmission's)."""
     beckmann = distribution == "BECKMANN"
     decl = MODELS["rough_dielectric"]
+    films = {} if film is None else {"thin_film_ior": _film_number(film[0], IOR_MIN),
+                                     "thin_film_thickness": _film_number(film[1])}
     return decl.build(decl.values({"n": ior, "alpha": alpha, "distribution": "beckmann" if beckmann else "ggx",
-                                   "multiscatter": distribution == "MULTI_GGX"}, where))
+                                   "multiscatter": distribution == "MULTI_GGX", **films}, where,
+                                  label=_socket_label(_GLASS_SOCKETS)))
 
 
 def _emission(node, mat, warnings, colour_name="Color", strength_name="Strength", bake=None):
@@ -567,12 +570,16 @@ def _surface_bsdf(node, mat, warnings, depth, bake=None):
                                     _node_anisotropy(r, node, mat, warnings, m, kind)), None
         return _conductor_from_colour(r, "Base Color", "Edge Tint", m, mat, node, warnings, mode="f82"), None
     if kind in ("ShaderNodeBsdfGlass", "ShaderNodeBsdfRefraction"):
-        rough = r.float("Roughness", 0.0, 1.0)
-        colour = r.rgb_or_texture("Color", 0.0)          # Cycles tints reflection and refraction by Color
-        glass = _glass(_ior(r, "IOR"), rough, getattr(node, "distribution", ""), _film(r),
-                       lambda text: warnings.append(f"material {mat!r}: {node.name!r}: {text}"),
-                       f"material {mat!r}.{node.name}")
-        return _tinted(glass, colour, colour), None
+        alpha, _ = r.roughness_or_texture("Roughness")   # α = r², IOR and α per point where linked
+        colour = r.rgb_or_texture("Color", 0.0)
+        distribution = getattr(node, "distribution", "")
+        if kind == "ShaderNodeBsdfRefraction":           # refraction only, no Fresnel; Color is the closure's weight
+            model = _textured_model("refraction", {"n": _ior_or_texture(r), "alpha": alpha, "distribution":
+                                                   "beckmann" if distribution == "BECKMANN" else "ggx"}, mat, node,
+                                    _GLASS_SOCKETS)
+            return _tinted(model, None, colour), None
+        glass = _glass(_ior_or_texture(r), alpha, distribution, _film(r), f"material {mat!r}.{node.name}")
+        return _tinted(glass, colour, colour), None      # Cycles tints reflection and refraction by Color
     if kind == "ShaderNodeBsdfSheen":
         if getattr(node, "distribution", "MICROFIBER") != "MICROFIBER":
             warnings.append(f"material {mat!r}: Sheen BSDF {node.name!r} with the {node.distribution.title()} "

@@ -1,4 +1,4 @@
-"""Blender: Principled (Transmission, Roughness) and Glass/Refraction with roughness → rough_dielectric
+"""Blender: Principled (Transmission, Roughness) and Glass with roughness → rough_dielectric
 (GGX, α = roughness², Cycles' multiple-scattering compensation for Multiscatter GGX), tinted as Cycles
 tints glass; the Rough/Thin Dielectric node models."""
 
@@ -67,8 +67,7 @@ def test_principled_rough_transmission_is_ggx_tinted_by_the_root_of_the_base_col
 
 @pytest.mark.parametrize("kind,distribution,want", [("ShaderNodeBsdfGlass", "GGX", "ggx"),
                                                     ("ShaderNodeBsdfGlass", "BECKMANN", "beckmann"),
-                                                    ("ShaderNodeBsdfGlass", "MULTI_GGX", "ggx"),
-                                                    ("ShaderNodeBsdfRefraction", "GGX", "ggx")])
+                                                    ("ShaderNodeBsdfGlass", "MULTI_GGX", "ggx")])
 def test_glass_and_refraction_with_roughness(addon, kind, distribution, want):
     empty_scene()
     bsdf, warnings = exported(shader_material(kind, distribution, Roughness=0.4, IOR=1.6))

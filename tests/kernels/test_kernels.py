@@ -911,8 +911,8 @@ def test_torrance_sparrow_material_uses_the_declared_twins():
 @pytest.mark.parametrize("distribution,rational", [("beckmann", False), ("beckmann", True), ("ggx", False)])
 @pytest.mark.parametrize("n_int,n_ext,alpha", [(1.5, 1.0, 0.2), (1.33, 1.7, 0.9), (1.5, 1.0, 1e-4)])
 def test_rough_dielectric_eval_pdf_sample_bitwise(distribution, rational, n_int, n_ext, alpha):
-    """Viewers on both sides (η and its inverse), total internal reflection, ±z normals, wi = ±wo:
-    the compiled passes give the material's NumPy steps' bits."""
+    """Viewers on both sides (η and its inverse), total internal reflection, ±z normals, wi = ±wo, with and
+    without Fresnel: the compiled passes give the material's NumPy steps' bits."""
     from engine.materials import rough_dielectric as rd
     rng = np.random.default_rng(int(alpha * 1e4) + int(n_int * 100))
     n = 3000
@@ -922,16 +922,19 @@ def test_rough_dielectric_eval_pdf_sample_bitwise(distribution, rational, n_int,
     wi[:, 20:30] = -wo[:, 20:30]
     wi[:, 30:40] = wo[:, 30:40]
     args = (n_int, n_ext, distribution)
-    _bitwise(rd.rough_dielectric_eval_numba(n_s, wo, wi, 4, *args, rational, alpha),
-             rd.rough_dielectric_eval_numpy(n_s, wo, wi, 4, *args, rational, alpha))
-    _bitwise([rd.rough_dielectric_pdf_numba(n_s, wo, wi, *args, alpha)],
-             [rd.rough_dielectric_pdf_numpy(n_s, wo, wi, *args, alpha)])
     u_lobe, u_dir = rng.uniform(size=n), rng.uniform(size=(2, n))
-    got = rd.rough_dielectric_sample_numba(n_s, wo, u_lobe, u_dir, 1, *args, rational, alpha)
-    want = rd.rough_dielectric_sample_numpy(n_s, wo, u_lobe, u_dir, 1, *args, rational, alpha)
-    _bitwise(got, want)
-    refracted = want[3] != 1.0
-    assert 0.5 * n < want[2].sum() <= n and (refracted & want[2]).any() and (~refracted & want[2]).any()
+    for no_fresnel in (False, True):        # the rough dielectric; Cycles' Refraction (engine.materials.refraction)
+        _bitwise(rd.rough_dielectric_eval_numba(n_s, wo, wi, 4, *args, rational, alpha, no_fresnel),
+                 rd.rough_dielectric_eval_numpy(n_s, wo, wi, 4, *args, rational, alpha, no_fresnel))
+        _bitwise([rd.rough_dielectric_pdf_numba(n_s, wo, wi, *args, alpha, no_fresnel)],
+                 [rd.rough_dielectric_pdf_numpy(n_s, wo, wi, *args, alpha, no_fresnel)])
+        got = rd.rough_dielectric_sample_numba(n_s, wo, u_lobe, u_dir, 1, *args, rational, alpha, no_fresnel)
+        want = rd.rough_dielectric_sample_numpy(n_s, wo, u_lobe, u_dir, 1, *args, rational, alpha, no_fresnel)
+        _bitwise(got, want)
+        refracted = want[3] != 1.0
+        valid = want[2]
+        assert (refracted & valid).any() and (refracted[valid].all() if no_fresnel else (~refracted & valid).any())
+        assert 0.3 * n < valid.sum() <= n
 
 
 @needs_numba

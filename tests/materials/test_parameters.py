@@ -124,7 +124,10 @@ def test_texturable_parameters_are_the_surface_varying_ones():
         ("torrance_sparrow", "thin_film_ior"), ("principled", "anisotropic"), ("principled", "anisotropic_rotation"),
         ("principled", "ior"),
         ("conductor", "thin_film_thickness"), ("torrance_sparrow", "thin_film_thickness"), ("oren_nayar", "albedo"),
-        ("sheen", "tint"), ("sheen", "roughness"), ("thin_film", "film_n"), ("thin_film", "thickness")}
+        ("sheen", "tint"), ("sheen", "roughness"), ("thin_film", "film_n"), ("thin_film", "thickness"),
+        ("thin_film", "n"), ("rough_dielectric", "n"), ("rough_dielectric", "alpha"), ("refraction", "n"),
+        ("rough_dielectric", "thin_film_thickness"), ("rough_dielectric", "thin_film_ior"),
+        ("refraction", "alpha")}
 
 
 @pytest.mark.parametrize("coat,field", [
@@ -212,7 +215,7 @@ def test_mueller_help_lists_every_catalogue_model_and_parameter():
         for key in params:
             assert f"    {key}: " in text
     assert set(CATALOGUE) == {"lambert", "fresnel", "torrance_sparrow", "htsg", "weidlich_wilkie", "rough_dielectric",
-                              "thin_dielectric"}
+                              "thin_dielectric", "refraction"}
 
 
 # ------------------------------------------------------------------------------------------ Blender node

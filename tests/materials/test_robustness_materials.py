@@ -254,7 +254,7 @@ MINIMAL = {   # the least scene-file material each model builds from (the fuzzed
     "torrance_sparrow": {"n": 1.5, "k": 0.0, "m": 0.2}, "htsg": {"metal": "Al", "sigma0_um": 0.18, "tau_um": 3.0},
     "weidlich_wilkie": {"coats": [{"n": 1.5}], "base": {"type": "lambert", "albedo": 0.5}},
     "polariser": {}, "retarder": {}, "rough_dielectric": {"n": 1.5, "alpha": 0.2}, "thin_dielectric": {"n": 1.5},
-    "oren_nayar": {"roughness": 0.5}, "principled": {}, "sheen": {}, "thin_film": {"n": 1.5},
+    "oren_nayar": {"roughness": 0.5}, "principled": {}, "sheen": {}, "thin_film": {"n": 1.5}, "refraction": {"n": 1.5},
 }
 
 
