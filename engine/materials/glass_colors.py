@@ -38,3 +38,14 @@ def rough_glass_colors(sp: ShadingPoint, eta: float, alpha: float) -> LobeColors
     E = conductor_albedo(mu, alpha, correlated=True)
     glossy = np.where(E > 0, E_F / np.where(E > 0, E, 1.0), 0.0)
     return LobeColors.of(sp, glossy=np.clip(glossy, 0.0, 1.0), transmission=1.0 - F)
+
+
+def refraction_colors(sp: ShadingPoint, n, n_ext: float) -> LobeColors:
+    """Cycles' colours of its Refraction BSDF (no Fresnel: ``microfacet_fresnel`` gives transmittance 1 except
+    total internal reflection at cos NI, and no reflection) of index ``n`` (a number or (N,) per point) in
+    ``n_ext``: glossy 0, transmission 1 where the view direction refracts, 0 beyond the critical angle."""
+    cos_o = sp.cos_o
+    eta = np.where(cos_o >= 0, n / n_ext, n_ext / n)             # transmitted over incident index
+    tir = 1.0 - cos_o * cos_o > eta * eta
+    return LobeColors.of(sp, transmission=np.where(tir, 0.0, 1.0))
+

@@ -52,6 +52,11 @@ class Refraction(RoughDielectric):
         del out["shadowing"]
         return out
 
+    def lobe_colors(self, sp):
+        """Cycles' Refraction colours (engine.materials.glass_colors.refraction_colors): no glossy."""
+        from .glass_colors import refraction_colors
+        return refraction_colors(sp, self._n(sp), self.n_ext)
+
 
 class SmoothRefraction(SmoothDielectric):
     """Delta refraction without Fresnel (see the module docstring)."""
@@ -76,6 +81,11 @@ class SmoothRefraction(SmoothDielectric):
 
     def eval(self, sp, wi):
         return depolarising_value(np.zeros_like(sp.lam), sp.n)
+
+    def lobe_colors(self, sp):
+        """Cycles' Refraction colours (engine.materials.glass_colors.refraction_colors): no glossy."""
+        from .glass_colors import refraction_colors
+        return refraction_colors(sp, self._n(sp), self.n_ext)
 
 
 # --------------------------------------------------------------------------- declaration

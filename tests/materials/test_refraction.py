@@ -150,3 +150,15 @@ def test_scene_format_flags_and_bad_input():
             decl.build(decl.values({"n": tex, "alpha": 0.1}, "x"))
     per_point = MODELS["refraction"].build(MODELS["refraction"].values({"n": 1.5, "alpha": tex}, "x"))
     assert isinstance(per_point.alpha, TexturedNumber) and per_point.varies_over_surface
+
+
+@pytest.mark.parametrize("theta,inside", [(30.0, False), (85.0, False), (25.0, True), (60.0, True)])
+def test_light_pass_colours_are_cycles_refraction_albedo(theta, inside):
+    """Cycles' Refraction closure's colour (bsdf_albedo with no Fresnel): glossy 0, transmission 1, or 0 beyond the
+    critical angle (60° inside glass of 1.5) — smooth and rough alike."""
+    wo = sph(theta, 0.0, inside)
+    tir = math.sin(math.radians(theta)) > (1.0 / ETA if inside else ETA)
+    for model in (SmoothRefraction(ETA), Refraction(ETA, 0.3, "ggx")):
+        c = model.lobe_colors(point(wo[:, None]))
+        assert np.all(c.glossy == 0.0) and np.all(c.diffuse == 0.0)
+        assert np.all(c.transmission == (0.0 if tir else 1.0)), (model, theta, inside)
