@@ -27,6 +27,13 @@ SPECTRAL_ITEMS = [
      "with Cycles renders); models that need a wavelength use one per channel", 2),
 ]
 
+VOLUME_MIE_ITEMS = [
+    ("CYCLES", "Cycles' Fit", "Volume Scatter ▸ Mie as Cycles renders it: its fitted Henyey–Greenstein + Draine blend "
+     "for the droplet diameter (depolarising: the same brightness as Cycles)", 0),
+    ("LORENZ_MIE", "Lorenz–Mie", "Volume Scatter ▸ Mie as exact Lorenz–Mie scattering by water droplets (n = 1.33) "
+     "of that diameter: polarising and retarding (fog bows, glories; slower, full Stokes)", 1),
+]
+
 SAMPLER_ITEMS = [
     ("INDEPENDENT", "Independent", "Every random number an independent hash of (seed, pixel, sample, dimension)", 0),
     ("STRATIFIED", "Stratified", "Pixel jitter, lens, wavelengths and the first bounce's light and BSDF numbers "
@@ -164,6 +171,8 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                                     "world: they average each texel's footprint, so that a small bright sun disc "
                                     "keeps its power (16: within ~2 %; 128: within noise)",
                                     default=16, min=1, soft_max=256, max=4096)
+    volume_mie: EnumProperty(name="Volume Mie", items=VOLUME_MIE_ITEMS, default="CYCLES",
+                             description="How Volume Scatter's Mie phase is rendered")
 
 
 def pass_property(name: str) -> str:

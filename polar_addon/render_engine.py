@@ -80,7 +80,7 @@ def engine_settings(scene, preview=False) -> RenderSettings:
 #: Cycles' Light Paths properties (scene.cycles, the same names in Blender 4.5–5.3) → RenderSettings fields
 CYCLES_LIGHT_PATHS = {"diffuse_bounces": "max_diffuse_bounces", "glossy_bounces": "max_glossy_bounces",
                       "transmission_bounces": "max_transmission_bounces",
-                      "transparent_max_bounces": "max_transparent_bounces",
+                      "transparent_max_bounces": "max_transparent_bounces", "volume_bounces": "max_volume_bounces",
                       "sample_clamp_direct": "clamp_direct", "sample_clamp_indirect": "clamp_indirect",
                       "caustics_reflective": "caustics_reflective", "caustics_refractive": "caustics_refractive"}
 
@@ -93,7 +93,8 @@ def cycles_light_paths(scene) -> tuple[int, dict]:
     if c is None:
         return 1 << 20, {}
     out = {field: getattr(c, name) for name, field in CYCLES_LIGHT_PATHS.items()}
-    for field in ("max_diffuse_bounces", "max_glossy_bounces", "max_transmission_bounces", "max_transparent_bounces"):
+    for field in ("max_diffuse_bounces", "max_glossy_bounces", "max_transmission_bounces", "max_transparent_bounces",
+                  "max_volume_bounces"):
         out[field] = min(int(out[field]), 1024)
     for field in ("clamp_direct", "clamp_indirect"):
         out[field] = float(out[field])

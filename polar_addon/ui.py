@@ -87,6 +87,7 @@ class POLAR_PT_performance(_PolarPanel, bpy.types.Panel):
         col.prop(p, "world_bake_resolution")
         col.prop(p, "world_bake_samples", text="Samples")
         layout.prop(p, "texture_bake_resolution")
+        layout.prop(p, "volume_mie")
 
 
 class POLAR_PT_polariser(_PolarPanel, bpy.types.Panel):

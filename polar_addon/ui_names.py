@@ -33,6 +33,7 @@ RENDER_SETTINGS = {
     "max_glossy_bounces": (None, "Render Properties ▸ Light Paths ▸ Max Bounces ▸ Glossy"),
     "max_transmission_bounces": (None, "Render Properties ▸ Light Paths ▸ Max Bounces ▸ Transmission"),
     "max_transparent_bounces": (None, "Render Properties ▸ Light Paths ▸ Max Bounces ▸ Transparent"),
+    "max_volume_bounces": (None, "Render Properties ▸ Light Paths ▸ Max Bounces ▸ Volume"),
     "clamp_direct": (None, "Render Properties ▸ Light Paths ▸ Clamping ▸ Direct Light"),
     "clamp_indirect": (None, "Render Properties ▸ Light Paths ▸ Clamping ▸ Indirect Light"),
     "caustics_reflective": (None, "Render Properties ▸ Light Paths ▸ Caustics ▸ Reflective"),

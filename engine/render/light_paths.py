@@ -13,7 +13,10 @@ lobe's straight pass-through (ω_i = −ω_o at a material with a NULL lobe) "tr
 a reflection is "diffuse" at a material whose reflection lobes are diffuse only (Lambert), "glossy"
 otherwise (microfacet and mirror lobes: Cycles counts singular reflections as glossy).  A material with
 both diffuse and non-mirror glossy lobes in the sampled hemisphere (a Principled-like mixture, a coat over
-a diffuse base) does not report which lobe its sample took: its non-mirror bounces count as diffuse.
+a diffuse base) does not report which lobe its sample took: its non-mirror bounces count as diffuse.  A
+scattering event in a participating medium (a medium vertex, engine.render.participating) is a "volume" bounce
+(Cycles' Volume bounces: ``max_volume_bounces``; a path past it crosses media without scattering, as Cycles'
+absorption-only volumes — killing it at its next collision has that expectation).
 Cycles keeps a counter per kind; when a bounce makes its kind's counter exceed the kind's limit the path
 ends at its next surface, whose emission (MIS-weighted) still counts — as ``max_depth`` ends a path.  So
 ``max_diffuse_bounces`` 0 renders a diffuse surface's direct light only.  Transparent crossings of alpha
@@ -59,8 +62,8 @@ if TYPE_CHECKING:
     import threading
 
 #: The bounce kinds, in the order of the per-path counters
-KINDS = ("diffuse", "glossy", "transmission", "transparent")
-DIFFUSE, GLOSSY, TRANSMISSION, TRANSPARENT = range(4)
+KINDS = ("diffuse", "glossy", "transmission", "transparent", "volume")
+DIFFUSE, GLOSSY, TRANSMISSION, TRANSPARENT, VOLUME = range(5)
 
 
 def describe(settings) -> str:
@@ -78,12 +81,12 @@ def describe(settings) -> str:
 
 
 class LightPathRules:
-    """The light-path settings of a render, resolved once per tracer: the limits (4,), the clamps and, by
-    material index, what each material's lobes are (see the module docstring)."""
+    """The light-path settings of a render, resolved once per tracer: the limits (5,), the clamps and, by
+    material index, what each material's lobes are (see the module docstring); a material with a true
+    ``medium_vertex`` attribute (a medium's phase function: engine.render.participating) scatters volume bounces."""
 
     def __init__(self, settings, materials: list):
-        self.limits = np.array([settings.max_diffuse_bounces, settings.max_glossy_bounces,
-                                settings.max_transmission_bounces, settings.max_transparent_bounces], np.int64)
+        self.limits = np.array([getattr(settings, f"max_{kind}_bounces") for kind in KINDS], np.int64)
         # (a limit at or above max_depth − 2 ends no path before max_depth does: RenderSettings.light_paths_active)
         self.counting = bool((self.limits < settings.max_depth - 2).any())
         self.clamp_direct = float(settings.clamp_direct) or np.inf
@@ -104,6 +107,7 @@ class LightPathRules:
         self.diffuse_transmission = np.array([f.has(BSDFFlags.DIFFUSE_TRANSMISSION)
                                               and not f.has(BSDFFlags.GLOSSY_TRANSMISSION) for f in lobes], bool)
         self.null = np.array([f.has(BSDFFlags.NULL) for f in lobes], bool)
+        self.volume = np.array([bool(getattr(m, "medium_vertex", False)) for m in materials], bool)
         # every lobe dropped after a diffuse bounce (the light sample adds nothing there)
         self.all_dropped = np.array([bool(dropped) and (int(f) & ~self.dropped) == 0 for f in lobes], bool)
         self.dropping = bool(dropped)
@@ -113,12 +117,12 @@ class LightPathRules:
 
 
 class LightPathBatch:
-    """The bookkeeping of one batch: bounce counters (4, N), the paths that end at their next surface and
+    """The bookkeeping of one batch: bounce counters (5, N), the paths that end at their next surface and
     those whose last bounce was diffuse, by batch path index."""
 
     def __init__(self, rules: LightPathRules, n_total: int):
         self.rules = rules
-        self.counts = np.zeros((4, n_total), np.int32) if rules.counting else None
+        self.counts = np.zeros((len(KINDS), n_total), np.int32) if rules.counting else None
         self.stop = np.zeros(n_total, bool)
         self.after_diffuse = np.zeros(n_total, bool)
 
@@ -196,14 +200,15 @@ class LightPathBatch:
 
 def classify(rules: LightPathRules, mat: np.ndarray, n_g: np.ndarray, wo: np.ndarray, wi: np.ndarray,
              is_delta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(kind (n,) int: DIFFUSE, GLOSSY, TRANSMISSION or TRANSPARENT; lobe (n,) int: the BSDFFlags lobe bit
-    the sample is counted as) of sampled directions ``wi`` leaving ``wo`` (3, n) at materials ``mat``."""
+    """(kind (n,) int: DIFFUSE, GLOSSY, TRANSMISSION, TRANSPARENT or VOLUME (a medium vertex); lobe (n,) int: the
+    BSDFFlags lobe bit the sample is counted as) of sampled directions ``wi`` leaving ``wo`` (3, n) at materials
+    ``mat``."""
     transmit = dot(wi, n_g) * dot(wo, n_g) < 0
     straight = transmit & is_delta & rules.null[mat] & (dot(wi, wo) <= -1.0 + 1e-12)
     diffuse_r = ~transmit & ~is_delta & rules.diffuse_reflection[mat]
     diffuse_t = transmit & ~is_delta & rules.diffuse_transmission[mat]
     kind = np.where(transmit, TRANSMISSION, np.where(diffuse_r, DIFFUSE, GLOSSY))
-    kind = np.where(straight, TRANSPARENT, kind)
+    kind = np.where(straight, TRANSPARENT, np.where(rules.volume[mat], VOLUME, kind))
     lobe = np.where(transmit, np.where(is_delta, int(BSDFFlags.DELTA_TRANSMISSION),
                                        np.where(diffuse_t, int(BSDFFlags.DIFFUSE_TRANSMISSION),
                                                 int(BSDFFlags.GLOSSY_TRANSMISSION))),

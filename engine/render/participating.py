@@ -62,6 +62,8 @@ class PhaseVertices(BSDF):
 
     name = "phase"
     radiance_scaling = True
+    #: Cycles' light paths count its samples as volume bounces (engine.render.light_paths)
+    medium_vertex = True
 
     def __init__(self, phase):
         self.phase = phase
@@ -382,7 +384,9 @@ class ParticipatingPathTracer(PathTracer):
         self.media = ScatteringMedia(self.scene, world, self.rgb_mode, self.mono, shadow=False)
         self.extinction = ScatteringMedia(self.scene, world, self.rgb_mode, self.mono, shadow=True)
         self.tracking = Tracking(self.extinction, tracked, self.rgb_mode, self.mono)
-        if self.light_paths is not None:        # Cycles' light paths: a medium vertex counts as a glossy bounce
+        # Cycles' light paths: a medium vertex is a volume bounce; its limit (which RenderSettings.light_paths_active
+        # leaves out: it changes only scenes with scattering media) turns the bookkeeping on here
+        if self.light_paths is not None or settings.max_volume_bounces < settings.max_depth - 2:
             self.light_paths = LightPathRules(settings, self.materials)
 
     # ------------------------------------------------------------------ segments

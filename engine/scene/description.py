@@ -406,6 +406,10 @@ class RenderSettings:
     max_transmission_bounces: int = 1024
     #: the same for null-lobe pass-throughs (filter sheets; alpha pass-through keeps its own 32 per segment)
     max_transparent_bounces: int = 1024
+    #: the same for scattering events in participating media (Cycles' Light Paths ▸ Volume; medium vertices,
+    #: engine.render.participating).  It changes only scenes whose media scatter, so it is left out of
+    #: ``light_paths_active``: the participating tracer keeps the bookkeeping where it is below ``max_depth`` − 2
+    max_volume_bounces: int = 1024
     #: Cycles' Clamping ▸ Direct / Indirect Light: each light contribution of a sample (emission reached, a
     #: light sample) whose linear-sRGB S0 has a component above the limit (max |R|, |G|, |B|, as Cycles renders)
     #: is scaled down to it, all four Stokes components by the same factor (the polarisation is unchanged);
@@ -427,7 +431,7 @@ class RenderSettings:
         wavefront tracer then keeps the per-path bookkeeping; otherwise it runs exactly the arithmetic it ran
         before they existed, and the compiled per-path loop may take the render."""
         return any(getattr(self, f.name) < self.max_depth - 2 if f.kind == "int" else getattr(self, f.name) != f.default
-                   for f in LIGHT_PATH_FIELDS)
+                   for f in LIGHT_PATH_FIELDS if f.name != "max_volume_bounces")
 
     @property
     def stratified(self) -> bool:
@@ -460,6 +464,7 @@ LIGHT_PATH_FIELDS = (
     LightPathField("max_glossy_bounces", "int", 1024, 0, 1024, "most glossy and mirror reflections"),
     LightPathField("max_transmission_bounces", "int", 1024, 0, 1024, "most transmissions (refraction)"),
     LightPathField("max_transparent_bounces", "int", 1024, 0, 1024, "most transparent (null-lobe) crossings"),
+    LightPathField("max_volume_bounces", "int", 1024, 0, 1024, "most scattering events in participating media"),
     LightPathField("clamp_direct", "float", 0.0, 0.0, 1e30, "clamp of direct light per sample (max sRGB; 0 off)"),
     LightPathField("clamp_indirect", "float", 0.0, 0.0, 1e30, "clamp of indirect light per sample (0 off)"),
     LightPathField("caustics_reflective", "bool", True, help="glossy reflection after a diffuse bounce"),

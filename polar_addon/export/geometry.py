@@ -36,7 +36,7 @@ GEOMETRY_TYPES = {"MESH", "CURVE", "SURFACE", "FONT", "META", "CURVES", "POINTCL
 #: Object types whose evaluated mesh the depsgraph also lists as a mesh instance of the object.
 CONVERTED_TYPES = {"CURVE", "SURFACE", "FONT", "META"}
 #: Object types Cycles renders that Polar does not (warned once per object).
-UNSUPPORTED_TYPES = {"VOLUME": "volumes", "GREASEPENCIL": "Grease Pencil strokes"}
+UNSUPPORTED_TYPES = {"GREASEPENCIL": "Grease Pencil strokes"}      # (Volume objects: export.volumes)
 #: Sides of the tube around each hair segment; icosphere level of each point of a point cloud.
 HAIR_SIDES = 6
 POINT_SUBDIVISIONS = 1

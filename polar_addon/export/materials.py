@@ -1,12 +1,13 @@
 """Blender materials → engine BSDFs (and emission): the entry point of the material export.
 
 ``export_material`` reads a material's Material Output: its Surface through ``shaders.surface_bsdf``, its
-Volume as an absorbing interior (volumes, below), a Displacement only as a warning; a material without
+Volume as the medium of the object's interior (``volumes``), a Displacement only as a warning; a material without
 nodes is a Lambert of its viewport colour.  ``attribute_needs`` tells the mesh export which UV maps,
 tangents and colour attributes a material's graph reads, and whether an input may be baked.
 
 The material export, each module importing only those listed after it:
 
+- volumes: Volume graphs → media (interiors, the world medium, Volume objects);
 - shaders: the standard shaders (Principled, Glossy, Metallic, Glass, …), mixes and ``surface_bsdf``;
 - polarising_node: the Polarising BSDF node, its model and inputs exactly;
 - normal_maps: Normal Map and Bump nodes → the engine's shading normals;
@@ -16,18 +17,16 @@ The material export, each module importing only those listed after it:
 - node_links: what feeds an input socket.
 """
 
-import math
 
-import numpy as np
 
-from ...engine.errors import SceneError
 from ...engine.materials.normal_map import set_bump_correction
 from .. import compat
 from .images import baked_link, uv_source
 from .lambert import DEFAULT_ALBEDO, lambert
 from .node_links import follow
-from .node_reader import NoBake, Reader
+from .node_reader import NoBake
 from .shaders import NORMAL_SHADERS, anisotropic, surface_bsdf
+from .volumes import material_medium
 
 #: The viewport's target: baking there would run Cycles' bake operator inside view_update (its
 #: temporary datablocks feed back as depsgraph updates) and re-bake on every drag of an object.
@@ -146,64 +145,10 @@ def attribute_needs(material) -> dict:
 
 # --------------------------------------------------------------------------- volumes
 
-def _absorption(node, mat, warnings, weight=1.0, depth=0) -> np.ndarray:
-    """σ_a (3,) per unit length of the volume shader graph at ``node`` (Cycles' svm volume closures):
-    Volume Absorption ρ·(1 − Color); Principled Volume ρ·max(1 − Color, 0)·max(1 − √Absorption Color, 0)
-    (its scattering, emission and blackbody are not simulated: one warning); Volume Coefficients'
-    Absorption; Mix / Add Shader weighted; anything else (Volume Scatter, …) one warning, no absorption."""
-    kind = node.bl_idname
-    r = Reader(mat, node, warnings)
-    if kind in ("ShaderNodeMixShader", "ShaderNodeAddShader"):
-        if depth > 32:
-            raise SceneError(f"material {mat!r}", "volume shader mixes nest more than 32 deep")
-        shaders = [sk for sk in node.inputs if sk.type == "SHADER"]
-        if kind == "ShaderNodeMixShader":
-            fac = min(max(float(r._constant(node.inputs[0].name).default_value), 0.0), 1.0)
-            weights = (1.0 - fac, fac)
-        else:
-            weights = (1.0, 1.0)
-        total = np.zeros(3)
-        for sk, w in zip(shaders, weights):
-            child = follow(sk)
-            if child is not None and w > 0:
-                total += _absorption(child, mat, warnings, weight * w, depth + 1)
-        return total
-    if kind == "ShaderNodeVolumeAbsorption":
-        density = max(r.float("Density"), 0.0)
-        colour = np.array(r.rgb("Color", -math.inf))
-        return weight * density * (1.0 - colour)
-    if kind == "ShaderNodeVolumePrincipled":
-        density = max(r.float("Density"), 0.0)
-        colour = np.array(r.rgb("Color", -math.inf))
-        absorption_colour = np.array(r.rgb("Absorption Color", 0.0))
-        scattered = density * np.maximum(colour, 0.0)
-        emitted = max(r.float("Emission Strength"), 0.0) * max(r.rgb("Emission Color", 0.0)) + \
-            max(r.float("Blackbody Intensity"), 0.0)
-        if scattered.max() > 0 or emitted > 0:
-            warnings.append(f"material {mat!r}: the scattering and emission of Principled Volume {node.name!r} are not "
-                            "simulated; only its absorption is rendered")
-        return weight * density * np.maximum(1.0 - colour, 0.0) * np.maximum(1.0 - np.sqrt(absorption_colour), 0.0)
-    if kind == "ShaderNodeVolumeCoefficients":
-        sock = node.inputs.get("Absorption Coefficients")
-        if sock is None:
-            warnings.append(f"material {mat!r}: volume node {node.name!r} is not simulated")
-            return np.zeros(3)
-        value = np.array(sock.default_value[:3] if hasattr(sock.default_value, "__len__") else [sock.default_value] * 3)
-        warnings.append(f"material {mat!r}: only the absorption of Volume Coefficients {node.name!r} is simulated")
-        return weight * np.maximum(value, 0.0)
-    warnings.append(f"material {mat!r}: volume shader {kind} is not simulated (scattering volumes are not yet "
-                    "rendered); its object's interior is left clear")
-    return np.zeros(3)
-
-
 def _with_interior(bsdf, volume, mat, warnings):
-    """``bsdf`` carrying the absorbing interior of the material's Volume graph (engine Interior), if it
-    absorbs anything."""
-    from ...engine.scene.description import Interior
-    sigma = _absorption(volume, mat, warnings)
-    if not np.all(np.isfinite(sigma)):
-        raise SceneError(f"material {mat!r}", f"the volume's absorption must be finite, got {sigma.tolist()}")
-    sigma = np.maximum(sigma, 0.0)        # a Color above 1 would absorb negatively: Cycles' too, none here
-    if sigma.max() > 0:
-        bsdf.interior = Interior([float(x) for x in sigma])
+    """``bsdf`` carrying the medium of the material's Volume graph (engine Interior: export.volumes), if it
+    absorbs or scatters anything."""
+    interior = material_medium(volume, mat, warnings)
+    if interior is not None:
+        bsdf.interior = interior
     return bsdf

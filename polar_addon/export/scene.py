@@ -20,6 +20,7 @@ from ...engine.materials.lambert import Lambert
 from ...engine.polarisation.sources import parse_polarisation
 from ...engine.scene.description import Camera, EnvironmentLight, Mesh, RenderSettings, Scene
 from ...engine.spectral import ConstantSpectrum
+from .. import compat
 from . import geometry
 from .camera import export_camera
 from .geometry import CONVERTED_TYPES, GEOMETRY_TYPES, UNSUPPORTED_TYPES
@@ -27,6 +28,7 @@ from .lights import export_light as export_light_
 from .materials import VIEWPORT_NO_BAKE, export_material
 from .node_reader import BakeTarget
 from .texture_bake import RESOLUTION_MAX, RESOLUTION_MIN
+from .volumes import MIE_MODEL, volume_object, world_medium
 from .world import export_world as export_world_
 
 BLACK = "__polar_black__"
@@ -160,6 +162,7 @@ class SceneWalk:
         self.polarisations = {}   # material key → its emission's SourcePolarisation (None: unpolarised)
         self.world = None
         self.world_name = None
+        self.world_medium = None      # the World Output ▸ Volume medium (engine Interior) or None
         self.settings = None
         self.initialised = False
         self.counts = {}
@@ -178,6 +181,15 @@ class SceneWalk:
         the Scene (``camera`` None: a placeholder the viewport replaces with its view)."""
         full = changes is None or not self.initialised
         run = _SyncPass(self, full, changes or Changes())
+        # Render Properties ▸ Volumes ▸ Mie: Cycles' fit or exact Lorenz–Mie (export.volumes)
+        mie = getattr(getattr(depsgraph.scene, "polar", None), "volume_mie", "CYCLES")
+        token = MIE_MODEL.set("lorenz_mie" if mie == "LORENZ_MIE" else "cycles_mie")
+        try:
+            return self._sync(depsgraph, run, settings, camera)
+        finally:
+            MIE_MODEL.reset(token)
+
+    def _sync(self, depsgraph, run, settings, camera) -> SyncResult:
         self._reconvert_materials(run)
         self._walk_instances(depsgraph, run)
         self._drop_gone(run)
@@ -210,6 +222,8 @@ class SceneWalk:
             name = obj.original.name_full
             if obj.type == "LIGHT":
                 self._sync_light(run, obj, M, ikey, name)
+            elif obj.type == "VOLUME":
+                self._sync_volume(run, obj, M, ikey, name)
             elif obj.type in UNSUPPORTED_TYPES:
                 run.warnings.append(f"object {obj.name!r}: {UNSUPPORTED_TYPES[obj.type]} are not supported; skipped")
             elif obj.type in GEOMETRY_TYPES and not (obj.type in CONVERTED_TYPES and name in meshed):
@@ -255,6 +269,37 @@ class SceneWalk:
         run.used.update(dict.fromkeys(mesh.materials[0] for mesh in entry[1]))
         run.meshes.extend(entry[1])
         return arrays
+
+    def _sync_volume(self, run, obj, M, ikey, name):
+        """A Volume object: a transparent box around its OpenVDB grid whose interior is its material's medium with
+        that grid's density (export.volumes.volume_object); read again when the object, its material, its file
+        or the frame's file changed."""
+        material = next((s.material for s in obj.material_slots if s.material is not None), None)
+        changes = run.changes
+        signature = (M.tobytes(), material.name_full if material is not None else None, compat.volume_file(obj))
+        entry = self.placed.get(ikey)
+        if (run.full or entry is None or entry[0] != signature or name in changes.objects_geometry
+                or changes.all_materials or (material is not None and material.name_full in changes.materials)):
+            made = volume_object(obj, M, material, run.warnings) if material is not None else None
+            if made is None and material is None:
+                run.warnings.append(f"Volume object {obj.name!r} has no material (Cycles renders it with a "
+                                    "Principled Volume); skipped")
+            meshes = []
+            if made is not None:
+                mesh, interior = made
+                key = f"{material.name} ({obj.name} volume)"
+                bsdf = Lambert(ConstantSpectrum(0.0))
+                bsdf.interior = interior
+                self.materials[("__volume__", ikey)] = (key, bsdf, None, 0.0)
+                mesh.materials, mesh.alpha = [key], 0.0
+                meshes = [mesh]
+            entry = (signature, meshes)
+            self.placed[ikey] = entry
+            run.counts["placed"] += 1
+            run.rebuild = run.restart = True
+        run.seen_placed.add(ikey)
+        run.used.update(dict.fromkeys(mesh.materials[0] for mesh in entry[1]))
+        run.meshes.extend(entry[1])
 
     def _needs_reread(self, run, obj, name, data_name, dkey):
         """Whether the (object, data) arrays ``dkey`` must be read again from Blender (at most once per sync:
@@ -334,6 +379,7 @@ class SceneWalk:
         world_name = scene_world.name_full if scene_world is not None else None
         if run.full or run.changes.world or world_name != self.world_name:
             self.world = self._export_world(scene_world, run.warnings)
+            self.world_medium = world_medium(scene_world, run.warnings)
             self.world_name = world_name
             run.counts["world"] += 1
             run.restart = True
@@ -362,7 +408,7 @@ class SceneWalk:
         self.initialised = True
         self.counts = run.counts
         scene = finish_scene(camera, run.meshes, materials, run.lights, settings,
-                             f"{self.source}:{depsgraph.scene.name}", run.warnings)
+                             f"{self.source}:{depsgraph.scene.name}", run.warnings, medium=self.world_medium)
         return SyncResult(scene, rebuild=rebuild, restart=restart, warnings=list(dict.fromkeys(run.warnings)))
 
 
@@ -421,7 +467,7 @@ def material_entry(material, warnings, bake=None):
     return bsdf, emission, alpha
 
 
-def finish_scene(camera, meshes, materials, lights, settings, source, warnings) -> Scene:
+def finish_scene(camera, meshes, materials, lights, settings, source, warnings, medium=None) -> Scene:
     """The engine Scene of a walk over a Blender scene (F12's ``export_scene`` and the viewport's
     ``SceneWalk.sync`` both end here, so that the viewport shows what F12 renders): the rules that
     hold for the whole scene — emissive meshes emit from both faces (Cycles' Emission shader; lamps stay
@@ -429,7 +475,7 @@ def finish_scene(camera, meshes, materials, lights, settings, source, warnings) 
     (Light Path ▸ Is Camera Ray) is transparent to every other ray, lights are picked by power (the closest
     to Cycles' light tree for many lights of different strength) — and the warning for a black scene.
     A scene without geometry renders as Cycles renders it: the world (an HDRI or sky preview), lamps the camera
-    sees, and black where neither is.
+    sees, and black where neither is.  ``medium``: the world medium (World Output ▸ Volume), or None.
     Meshes are updated in place (the viewport's cached ones too: the rules are idempotent)."""
     for mesh in meshes:
         material = materials.get(mesh.materials[0])
@@ -446,4 +492,4 @@ def finish_scene(camera, meshes, materials, lights, settings, source, warnings) 
     elif not lights and not any(m.emission is not None for m in meshes):
         warnings.append("the scene has no lights, no emissive materials and a black world: the image is black")
     return Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings, source=source,
-                 light_selection="power")
+                 light_selection="power", medium=medium)
