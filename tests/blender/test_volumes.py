@@ -42,7 +42,8 @@ def _material(name, kind, inputs=None, phase=None, surface=False):
     return mat, node
 
 
-def _scene(volume_material, world_volume=None, lamp="sun"):
+def _scene(make_material=None, world_volume=None, lamp="sun"):
+    """The floor, camera and lamp, and a cube of the material ``make_material()`` makes (after the reset)."""
     from mathutils import Vector
     scene = ap.reset(SIZE, SIZE)
     compat = load_addon().polar_addon.compat
@@ -53,9 +54,9 @@ def _scene(volume_material, world_volume=None, lamp="sun"):
     grey.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = (0.5, 0.5, 0.5, 1.0)
     grey.node_tree.nodes["Principled BSDF"].inputs["Roughness"].default_value = 1.0
     floor.data.materials.append(grey)
-    if volume_material is not None:
-        bpy.ops.mesh.primitive_cube_add(size=1.5, location=(0.0, 0.0, 0.75))
-        bpy.context.object.data.materials.append(volume_material)
+    if make_material is not None:
+        bpy.ops.mesh.primitive_cube_add(size=1.5, location=(0.0, 0.0, 0.8))   # not coplanar with the floor
+        bpy.context.object.data.materials.append(make_material()[0])
     cam = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     cam.location = (0.0, -5.0, 2.5)
     cam.rotation_euler = (Vector((0.0, 0.0, 0.6)) - cam.location).to_track_quat("-Z", "Y").to_euler()
@@ -103,19 +104,19 @@ def _parity(scene, volume_bounces, bounces=4):
 
 def test_fog_box_on_a_floor_matches_cycles():
     """The issue's new-user case (was 0.51× Cycles' luminance, silently): Volume Scatter g = 0.3 alone in a cube."""
-    mat, _ = _material("Fog", "ShaderNodeVolumeScatter", {"Density": 1.2, "Anisotropy": 0.3,
-                                                            "Color": (0.9, 0.8, 0.7, 1.0)})
-    report = _parity(_scene(mat), volume_bounces=0)
+    scene = _scene(lambda: _material("Fog", "ShaderNodeVolumeScatter", {"Density": 1.2, "Anisotropy": 0.3,
+                                                                         "Color": (0.9, 0.8, 0.7, 1.0)}))
+    report = _parity(scene, volume_bounces=0)
     assert report.warnings == []
     assert report.fraction >= ap.PASS_FRACTION, (report.luminance_ratio, report.failing)
     assert abs(report.luminance_ratio - 1.0) < 0.03, report.luminance_ratio
 
 
 def test_principled_volume_matches_cycles():
-    mat, _ = _material("Smoke", "ShaderNodeVolumePrincipled", {"Density": 1.5, "Anisotropy": 0.5,
-                                                                "Color": (0.7, 0.75, 0.8, 1.0),
-                                                                "Absorption Color": (0.3, 0.2, 0.1, 1.0)})
-    report = _parity(_scene(mat), volume_bounces=3)
+    scene = _scene(lambda: _material("Smoke", "ShaderNodeVolumePrincipled",
+                                     {"Density": 1.5, "Anisotropy": 0.5, "Color": (0.7, 0.75, 0.8, 1.0),
+                                      "Absorption Color": (0.3, 0.2, 0.1, 1.0)}))
+    report = _parity(scene, volume_bounces=3)
     assert report.warnings == []
     assert report.fraction >= ap.PASS_FRACTION, (report.luminance_ratio, report.failing)
 
