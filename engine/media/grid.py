@@ -5,7 +5,7 @@ between them and 0 outside the box.
 axis ≥ 2 nodes; the box's corners are nodes).  A medium's coefficients are σ(λ)·ρ(x) with ρ this grid's
 trilinear value (engine.scene.description.Interior); free-flight sampling bounds ρ by ``majorant``
 (default the largest node value: trilinear interpolation never exceeds it).  File-backed grids (OpenVDB)
-come with the Blender side.
+are read by the Blender extension (polar_addon.export.volumes) into this dense form.
 """
 
 from __future__ import annotations
