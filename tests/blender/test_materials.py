@@ -295,7 +295,8 @@ def test_emission_colour_from_an_image_varies_over_the_surface(addon):
 
 def test_volume_absorption_becomes_the_absorbing_interior(addon):
     """Material Output ▸ Volume: Volume Absorption σ = ρ(1 − Color) (what glTF's KHR_materials_volume
-    becomes), Principled Volume's absorption, a mix of them; scattering is warned about."""
+    becomes), Principled Volume's absorption, a mix of them; Principled Volume's scattering is now rendered
+    (tests/blender/test_volumes.py): σ_s = ρ·Color with its Henyey–Greenstein, no warning."""
     empty_scene()
     mat = principled(**{"Transmission Weight": 1.0, "Roughness": 0.0})
     tree = mat.node_tree
@@ -316,7 +317,8 @@ def test_volume_absorption_becomes_the_absorbing_interior(addon):
     tree.links.new(add.outputs[0], tree.get_output_node("ALL").inputs["Volume"])
     bsdf, _, warnings = exported(mat)
     assert bsdf.interior.absorption.linear_srgb() == pytest.approx([1.6 + 0.25, 1.0 + 0.25, 0.25])
-    assert any("scattering" in w for w in warnings)
+    assert bsdf.interior.scattering.linear_srgb() == pytest.approx([0.5, 0.5, 0.5], rel=1e-3)
+    assert bsdf.interior.phase.name == "henyey_greenstein" and not warnings
 
 
 def test_layered_node_uses_the_linked_base(addon):
