@@ -8,11 +8,12 @@ import math
 import numpy as np
 import pytest
 
+from engine import kernels
 from engine.errors import SceneError
 from engine.materials.lambert import Lambert
 from engine.render.accel import CompiledScene
 from engine.render.lights import LightSet
-from engine.render.lights.tree import NO_LIGHT
+from engine.kernels.light_tree import NO_LIGHT
 from engine.render.renderer import Renderer
 from engine.scene.description import (Camera, DirectionalLight, EnvironmentLight, Mesh, PointLight, RenderSettings,
                                       Scene, SpotLight)
@@ -157,3 +158,23 @@ def test_light_tree_setting_is_checked_and_off_keeps_the_light_set_choice():
     big = LightSet(*(lambda s: (s, CompiledScene(s)))(many_lights_scene(count=90)))
     assert not small.uses_tree("auto") and big.uses_tree("auto")      # 9 + 12 + 3 vs 90 + 12 + 3 emitters
     assert small.uses_tree("on") and not big.uses_tree("off")
+
+
+@pytest.mark.skipif(not kernels.COMPILED, reason="needs Numba")
+def test_compiled_traversal_gives_the_numpy_twins_bits():
+    """The per-point loops (engine.kernels.light_tree) against their NumPy twins on random points and normals,
+    transmitting (zero) normals and a world and a sun included."""
+    from engine.kernels import light_tree as K
+    _, tree = tree_of(many_lights_scene(count=300, sky=True))
+    t = tree.arrays
+    rng = np.random.default_rng(11)
+    M = 5000
+    p = np.vstack((rng.uniform(-2.5, 2.5, M), rng.uniform(-2.5, 2.5, M), rng.uniform(0.0, 2.5, M)))
+    n = rng.normal(size=(3, M))
+    n /= np.linalg.norm(n, axis=0)
+    n[:, ::5] = 0.0
+    u = rng.random(M)
+    for got, want in zip(K.choose_numba(t, u, p, n), K.choose_numpy(t, u, p, n)):
+        assert np.array_equal(got, want)
+    e = rng.integers(-1, t.em_kind.size, M)
+    assert np.array_equal(K.probability_numba(t, e, p, n), K.probability_numpy(t, e, p, n))

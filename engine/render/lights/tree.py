@@ -35,31 +35,24 @@ import math
 
 import numpy as np
 
+from ...kernels import light_tree
+from ...kernels.light_tree import BACKGROUND, DISTANT, MESH, POINT, SPOT, TRIANGLE, TreeArrays, cone_cosines
 from ...spectral import luminance
-from ...vec3 import dot
 from .area import AreaEmitter
 from .environment import EnvironmentEmitter, EnvironmentMapEmitter
 from .lamps import DirectionalEmitter, PointEmitter, SpotEmitter
 from .textured import TexturedAreaEmitter
 
-#: emitter kinds
-TRIANGLE, POINT, SPOT, MESH, DISTANT, BACKGROUND = range(6)
 #: a leaf holds at most this many emitters (Cycles' max_lights_in_leaf)
 MAX_LEAF = 8
 #: buckets per axis of the split search (Cycles' LightTreeBucket::num_buckets)
 BUCKETS = 12
-#: a choice's probability where no emitter can contribute (all importances 0): the vertex takes no light sample
-NO_LIGHT = -1
 
 
 def splits_into_triangles(light) -> bool:
     """Whether the tree takes ``light``'s triangles as separate emitters: a mesh light sampled by area over its
     triangles (not a rectangle, disk or ellipse lamp, which keep their own sampling as one emitter)."""
     return type(light) in (AreaEmitter, TexturedAreaEmitter) and light.rect is None
-
-
-def _sin(c):
-    return np.sqrt(np.maximum(1.0 - c * c, 0.0))
 
 
 def _unit(v, axis=0):
@@ -74,34 +67,6 @@ def cone_measure(theta_o, theta_e):
     c, s = np.cos(theta_o), np.sin(theta_o)
     return (2.0 * math.pi * (1.0 - c)
             + 0.5 * math.pi * (2.0 * theta_w * s - np.cos(theta_o - 2.0 * theta_w) - 2.0 * theta_o * s + c))
-
-
-def importance(n, ptc, cos_u, axis, theta_o, theta_e, d_max, d_min, energy):
-    """Cycles' light_tree_importance (surface form): (I⁺, I⁻) (M,) of clusters or emitters seen from points
-    with side normals n (3, M) (zero: receives from every side), unit directions ptc (3, M) towards their
-    centres, half-angles acos(cos_u) they subtend, cones (axis (3, M), θ_o, θ_e), distances d_max ≥ d_min
-    and energies (M,)."""
-    sin_u = _sin(cos_u)
-    transmits = (n * n).sum(axis=0) == 0
-    cos_i = dot(ptc, n)
-    sin_i = _sin(cos_i)
-    cos_min_inc = np.where(transmits | (cos_i >= cos_u), 1.0, cos_i * cos_u + sin_i * sin_u)
-    cos_max_inc = np.where(transmits, 1.0, np.maximum(cos_i * cos_u - sin_i * sin_u, 0.0))
-    cos_t = np.clip(-dot(axis, ptc), -1.0, 1.0)
-    sin_t = _sin(cos_t)
-    cos_tmu = cos_t * cos_u + sin_t * sin_u
-    cos_o, sin_o = np.cos(theta_o), np.sin(theta_o)
-    inside = (cos_t >= cos_u) | (cos_tmu >= cos_o)
-    sin_tmu = _sin(cos_tmu)
-    cos_min_out = np.where(inside, 1.0, cos_tmu * cos_o + sin_tmu * sin_o)
-    visible = (inside | (theta_o + theta_e > math.pi) | (cos_tmu > np.cos(theta_o + theta_e))) & (cos_min_inc >= 0)
-    i_max = np.where(visible, np.abs(cos_min_inc * energy * cos_min_out / np.maximum(d_min * d_min, 1e-300)), 0.0)
-    cos_tpu = cos_t * cos_u - sin_t * sin_u
-    lower = ~((theta_e - theta_o < 0) | (cos_t < 0) | (cos_u < 0) | (cos_tpu < np.cos(theta_e - theta_o)))
-    cos_max_out = cos_tpu * cos_o - _sin(cos_tpu) * sin_o
-    i_min = np.where(visible & lower,
-                     np.abs(cos_max_inc * energy * cos_max_out / np.maximum(d_max * d_max, 1e-300)), 0.0)
-    return i_max, np.minimum(i_min, i_max)
 
 
 class LightTree:
@@ -278,295 +243,86 @@ class LightTree:
                 set_node(top, lo=[np.zeros(3)], hi=[np.zeros(3)], axis=[np.zeros(3)], theta_o=[0.0], theta_e=[0.0],
                          energy=[0.0], left=[root_local], right=[root], first=[-1], count=[0], distant=[False])
                 root = int(top[0])
-        self.root = root
         self.nodes = {key: np.array(v, dtype=np.float64 if key not in ("left", "right", "first", "count", "distant")
-                                    else bool if key == "distant" else np.int64) for key, v in nodes.items()}
-        if root is None:
-            return
-        self._paths()
+                                    else bool if key == "distant" else np.int64).reshape(
+                                        (len(v), 3) if key in ("lo", "hi", "axis") else (len(v),))
+                      for key, v in nodes.items()}
+        self._paths(-1 if root is None else root)
 
-    def _paths(self) -> None:
-        """Per emitter: the nodes from the root to its leaf and whether each step goes right (probability)."""
-        nd = self.nodes
+    def _paths(self, root: int) -> None:
+        """Per emitter: the nodes from the root to its leaf and whether each step goes right (``probability``),
+        the emitter of each triangle and whole light (MIS lookups) and the kernels' TreeArrays."""
+        nd, em = self.nodes, self.em
         K = nd["left"].shape[0]
         parent, right_child = np.full(K, -1), np.zeros(K, bool)
         inner = nd["left"] >= 0
         parent[nd["left"][inner]] = np.flatnonzero(inner)
         parent[nd["right"][inner]] = np.flatnonzero(inner)
         right_child[nd["right"][inner]] = True
-        E = self.em["kind"].shape[0]
-        leaf_of = np.full(E, -1)
         leaves = np.flatnonzero(~inner)
-        for k in leaves:
-            leaf_of[nd["first"][k]:nd["first"][k] + nd["count"][k]] = k
-        self.leaf_of = leaf_of
-        # walk up from every leaf (vectorised over leaves): its ancestors, root first
+        leaves = leaves[np.argsort(nd["first"][leaves], kind="stable")]
+        leaf_of = np.repeat(leaves, nd["count"][leaves])          # the leaves' ranges tile [0, E) in order
+        # walk up from every leaf at once: its ancestors, root first (−1 padding above shallow leaves)
         chain = [leaves]
         while (chain[-1] >= 0).any():
             chain.append(np.where(chain[-1] >= 0, parent[np.maximum(chain[-1], 0)], -1))
-        chain = np.array(chain[:-1])[::-1]            # (depth + 1, leaves), −1 padding at the top
-        steps_node, steps_right = [], []
-        for a, b in zip(chain[:-1], chain[1:]):
-            ok = (a >= 0) & (b >= 0)
-            steps_node.append(np.where(ok, a, -1))
-            steps_right.append(ok & right_child[np.maximum(b, 0)])
-        depth = len(steps_node)
+        chain = np.array(chain[:-1])[::-1]
+        steps_node = [np.where((a >= 0) & (b >= 0), a, -1) for a, b in zip(chain[:-1], chain[1:])]
+        steps_right = [(a >= 0) & (b >= 0) & right_child[np.maximum(b, 0)] for a, b in zip(chain[:-1], chain[1:])]
         by_leaf = np.full(K, -1)
         by_leaf[leaves] = np.arange(leaves.size)
         row = by_leaf[leaf_of]
-        self.path_node = (np.array(steps_node).reshape(depth, -1)[:, row] if depth else np.zeros((0, E), np.int64))
-        self.path_right = (np.array(steps_right).reshape(depth, -1)[:, row] if depth else np.zeros((0, E), bool))
+        path_node = np.array(steps_node, np.int64).reshape(len(steps_node), -1)[:, row]
+        path_right = np.array(steps_right, bool).reshape(len(steps_right), -1)[:, row]
         # where a triangle or a whole light is an emitter
+        tri = em["tri"]
         self.emitter_of_triangle = np.full(len(self.compiled.faces), -1, np.int64)
-        tri = self.em["tri"]
         self.emitter_of_triangle[tri[tri >= 0]] = np.flatnonzero(tri >= 0)
         self.emitter_of_light = np.full(self.split.shape[0], -1, np.int64)
-        whole = tri < 0
-        self.emitter_of_light[self.em["light"][whole]] = np.flatnonzero(whole)
+        self.emitter_of_light[em["light"][tri < 0]] = np.flatnonzero(tri < 0)
+        theta_o = np.where(em["kind"] == POINT, 0.0, em["theta_o"])       # a point light's cone faces the point
+        self.arrays = TreeArrays(
+            nd["lo"], nd["hi"], nd["axis"], nd["theta_o"], nd["theta_e"], cone_cosines(nd["theta_o"], nd["theta_e"]),
+            nd["energy"], nd["left"], nd["right"], nd["first"], nd["count"], nd["distant"], em["kind"],
+            np.ascontiguousarray(em["centre"]), np.ascontiguousarray(em["axis"]), theta_o, em["theta_e"],
+            cone_cosines(theta_o, em["theta_e"]), em["energy"], em["radius"], em["sphere"], em["cos_outer"],
+            em["cos_inner"], self._corners(), em["light"], em["tri"], np.ascontiguousarray(path_node),
+            np.ascontiguousarray(path_right), leaf_of.astype(np.int64), int(root))
 
-    # ------------------------------------------------------------------ importance
-
-    def _emitter_importance(self, e, p, n):
-        """(I⁺, I⁻) (M,) of emitters e (M,) at points p (3, M) with side normals n (3, M): Cycles'
-        light_tree_emitter_importance with the per-kind parameters of kernel/light/{triangle, point, spot,
-        area, distant, background}.h."""
-        em = self.em
-        kind = em["kind"][e]
-        centre = em["centre"][e].T
-        ptc, d = _unit(centre - p)
-        d_min = d.copy()
-        d_max = d.copy()
-        cos_u = np.ones(e.shape[0])
-        axis = em["axis"][e].T.copy()
-        theta_o, theta_e, energy = em["theta_o"][e].copy(), em["theta_e"][e], em["energy"][e].copy()
-        visible = np.ones(e.shape[0], bool)
-        transmits = (n * n).sum(axis=0) == 0
-        # triangles and whole meshes: the corners (a triangle's three, a box's eight)
-        poly = (kind == TRIANGLE) | (kind == MESH)
-        if poly.any():
-            r = np.flatnonzero(poly)
-            corners = self._corners(e[r])                      # (C, 3, m)
-            to = corners - p[:, r][None]
-            dist_c = np.sqrt((to * to).sum(axis=1))
-            unit_c = to / np.where(dist_c > 0, dist_c, 1.0)[:, None]
-            cos_u[r] = np.min((unit_c * ptc[:, r][None]).sum(axis=1), axis=0)
-            d_max[r] = np.maximum(d[r], dist_c.max(axis=0))
-            above = ((unit_c * n[:, r][None]).sum(axis=1) > 0).any(axis=0) | transmits[r]
-            front = (theta_o[r] != 0) | (dot(axis[:, r], ptc[:, r]) < 0)
-            visible[r] = above & front
-        lamp = (kind == POINT) | (kind == SPOT)
-        if lamp.any():
-            r = np.flatnonzero(lamp)
-            rad, dr = em["radius"][e[r]], np.maximum(d[r], 1e-300)
-            sphere = em["sphere"][e[r]]
-            outside = dr > rad
-            cos_sph = np.where(outside, _sin(np.minimum(rad / dr, 1.0)), -1.0)
-            hyp = np.sqrt(rad * rad + dr * dr)
-            cos_u[r] = np.where(sphere, cos_sph, dr / hyp)
-            inner = rad / math.sqrt(2.0)
-            d_max[r] = np.where(sphere, np.where(outside, dr / np.where(outside, cos_sph, 1.0), inner), hyp)
-            d_min[r] = np.where(sphere & ~outside, inner, d[r])
-            point = kind[r] == POINT
-            axis[:, r] = np.where(point[None], -ptc[:, r], axis[:, r])     # a point light's cone faces p
-            theta_o[r] = np.where(point, 0.0, theta_o[r])
-            spot = ~point
-            if spot.any():          # the spot's falloff at the least angle to its axis (Cycles' spot energy)
-                s = r[spot]
-                cos_a = np.clip(-dot(axis[:, s], ptc[:, s]), -1.0, 1.0)
-                cos_m = np.cos(np.maximum(0.0, np.arccos(cos_a) - np.arccos(np.clip(cos_u[s], -1.0, 1.0))))
-                energy[s] = energy[s] * _spot_edge(cos_m, em["cos_outer"][e[s]], em["cos_inner"][e[s]])
-        far = kind == DISTANT
-        if far.any():
-            r = np.flatnonzero(far)
-            ptc[:, r] = -axis[:, r]
-            cos_u[r] = np.cos(theta_e[r])
-            d_max[r], d_min[r] = 1.0 / cos_u[r], 1.0
-        sky = kind == BACKGROUND
-        if sky.any():
-            r = np.flatnonzero(sky)
-            ptc[:, r] = -axis[:, r]
-            cos_u[r], d_max[r], d_min[r] = -1.0, 1.0, 1.0
-        i_max, i_min = importance(n, ptc, cos_u, axis, theta_o, theta_e, d_max, d_min, energy)
-        return np.where(visible, i_max, 0.0), np.where(visible, i_min, 0.0)
-
-    def _corners(self, e):
-        """(C, 3, m) corners of emitters e: a triangle's three vertices (repeated to eight) or a box's eight."""
+    def _corners(self) -> np.ndarray:
+        """(E, 8, 3): a triangle's three vertices (repeated) or the eight corners of a box (the importance's
+        subtended angle and farthest distance)."""
         em, c = self.em, self.compiled
-        lo, hi = em["lo"][e], em["hi"][e]
-        box = np.stack([np.where(np.array([(k >> a) & 1 for a in range(3)], bool)[None], hi, lo) for k in range(8)])
-        tri = em["tri"][e]
+        lo, hi = em["lo"], em["hi"]
+        bits = np.array([[(k >> a) & 1 for a in range(3)] for k in range(8)], bool)      # (8, 3)
+        corners = np.where(bits[None], hi[:, None, :], lo[:, None, :])
+        tri = em["tri"]
         is_tri = tri >= 0
         if is_tri.any():
-            v = c.vertices[c.faces[np.maximum(tri, 0)]].astype(np.float64)     # (m, 3, 3)
-            v8 = v[:, [0, 1, 2, 0, 1, 2, 0, 1]].transpose(1, 0, 2)             # (8, m, 3)
-            box = np.where(is_tri[None, :, None], v8, box)
-        return box.transpose(0, 2, 1)
-
-    def _node_importance(self, k, p, n):
-        """(I⁺, I⁻) (M,) of nodes k (M,) seen from p, n (3, M): Cycles' light_tree_child_importance — a
-        leaf of one emitter by that emitter's own importance, another node by its box and cone."""
-        nd = self.nodes
-        single = (nd["count"][k] == 1)
-        i_max, i_min = np.zeros(k.shape[0]), np.zeros(k.shape[0])
-        if single.any():
-            r = np.flatnonzero(single)
-            i_max[r], i_min[r] = self._emitter_importance(nd["first"][k[r]], p[:, r], n[:, r])
-        rest = ~single
-        if rest.any():
-            r = np.flatnonzero(rest)
-            kk = k[r]
-            pp, nn = p[:, r], n[:, r]
-            lo, hi = nd["lo"][kk].T, nd["hi"][kk].T
-            centre = 0.5 * (lo + hi)
-            extent = hi - centre
-            axis = nd["axis"][kk].T
-            theta_o, theta_e = nd["theta_o"][kk], nd["theta_e"][kk]
-            transmits = (nn * nn).sum(axis=0) == 0
-            ptc, d = _unit(centre - pp)
-            r2 = dot(extent, extent)
-            cos_u = np.where(d * d <= r2, -1.0, np.sqrt(np.maximum(1.0 - r2 / np.maximum(d * d, 1e-300), 0.0)))
-            d = np.maximum(0.5 * np.sqrt(r2), d)
-            visible = transmits | (dot(nn, centre - pp) + dot(np.abs(nn), np.abs(extent)) > 0)
-            distant = nd["distant"][kk]
-            if distant.any():           # the distant node: its cone seen from anywhere
-                ptc = np.where(distant[None], -axis, ptc)
-                cos_u = np.where(distant, np.cos(np.minimum(theta_o + theta_e, math.pi)), cos_u)
-                d = np.where(distant, 1.0, d)
-                visible |= distant
-            a, b = importance(nn, ptc, cos_u, axis, theta_o, theta_e, d, d, nd["energy"][kk])
-            i_max[r], i_min[r] = np.where(visible, a, 0.0), np.where(visible, b, 0.0)
-        return i_max, i_min
-
-    def _left_probability(self, k, p, n):
-        """(probability (M,) of taking the left child of inner nodes k, valid (M,): some child can contribute)."""
-        nd = self.nodes
-        l_max, l_min = self._node_importance(nd["left"][k], p, n)
-        r_max, r_min = self._node_importance(nd["right"][k], p, n)
-        t_max, t_min = l_max + r_max, l_min + r_min
-        ok = t_max > 0
-        p_max = l_max / np.where(ok, t_max, 1.0)
-        p_min = np.where(t_min > 0, l_min / np.where(t_min > 0, t_min, 1.0),
-                         0.5 * ((l_max > 0).astype(np.float64) + (r_max == 0)))
-        return 0.5 * (p_max + p_min), ok
-
-    def _leaf_probabilities(self, k, p, n):
-        """(emitters (MAX, M) of leaves k (−1 padding), their probabilities (MAX, M), the ones sampled by the
-        upper bounds alone (MAX, M)): ½(I⁺/ΣI⁺ + I⁻/ΣI⁻), uniform over I⁺ > 0 where ΣI⁻ = 0."""
-        nd = self.nodes
-        first, count = nd["first"][k], nd["count"][k]
-        width = int(count.max()) if k.size else 0
-        slot = np.arange(width)[:, None]
-        e = np.where(slot < count[None], first[None] + slot, -1)
-        live = e >= 0
-        cols = np.broadcast_to(np.arange(k.shape[0]), e.shape)[live]
-        i_max, i_min = np.zeros(e.shape), np.zeros(e.shape)
-        i_max[live], i_min[live] = self._emitter_importance(e[live], p[:, cols], n[:, cols])
-        s_max, s_min = i_max.sum(axis=0), i_min.sum(axis=0)
-        has = i_max > 0
-        n_has = has.sum(axis=0)
-        q_max = i_max / np.where(s_max > 0, s_max, 1.0)
-        q_min = np.where(s_min > 0, i_min / np.where(s_min > 0, s_min, 1.0),
-                         has / np.maximum(n_has, 1))
-        return e, q_max, q_min
+            v = c.vertices[c.faces[tri[is_tri]]].astype(np.float64)         # (m, 3, 3)
+            corners[is_tri] = v[:, [0, 1, 2, 0, 1, 2, 0, 1]]
+        return np.ascontiguousarray(corners)
 
     # ------------------------------------------------------------------ choice and its probability
 
     def choose(self, u, p, n):
         """See the class docstring.  u (N,) in [0, 1), p (3, N), n (3, N) side normals (zero: transmitting)."""
-        N = u.shape[0]
-        light, tri = np.full(N, NO_LIGHT, np.int64), np.full(N, -1, np.int64)
-        prob, rest = np.zeros(N), np.zeros(N)
-        if self.root is None:
-            return light, rest, prob, tri
-        nd = self.nodes
-        node = np.full(N, self.root, np.int64)
-        pdf = np.ones(N)
-        u = u.astype(np.float64, copy=True)
-        alive = np.ones(N, bool)
-        below = np.nextafter(1.0, 0.0)
-        while True:
-            at = np.flatnonzero(alive & (nd["left"][node] >= 0))
-            if not at.size:
-                break
-            q, ok = self._left_probability(node[at], p[:, at], n[:, at])
-            go_left = u[at] < q
-            uu = np.where(go_left, u[at] / np.where(q > 0, q, 1.0), (u[at] - q) / np.where(q < 1, 1.0 - q, 1.0))
-            u[at] = np.clip(uu, 0.0, below)
-            pdf[at] *= np.where(go_left, q, 1.0 - q)
-            node[at] = np.where(go_left, nd["left"][node[at]], nd["right"][node[at]])
-            alive[at] &= ok
-        at = np.flatnonzero(alive)
-        if not at.size:
-            return light, rest, prob, tri
-        e, q_max, q_min = self._leaf_probabilities(node[at], p[:, at], n[:, at])
-        ua = u[at]
-        several = nd["count"][node[at]] > 1
-        by_max = ua > 0.5
-        ua = np.where(several, np.clip(2.0 * ua - by_max, 0.0, below), ua)
-        by_max = np.where(several, by_max, True)
-        q = np.where(by_max[None], q_max, q_min)
-        cdf = np.cumsum(q, axis=0)
-        total = cdf[-1]
-        pick = np.minimum((cdf <= (ua * total)[None]).sum(axis=0), e.shape[0] - 1)
-        cols = np.arange(at.size)
-        # never a slot of probability 0 (rounding at the top of the cdf)
-        pick = np.where(q[pick, cols] > 0, pick, np.argmax(q > 0, axis=0))
-        chosen = q[pick, cols]
-        lo = cdf[pick, cols] - chosen
-        ok = (total > 0) & (chosen > 0)
-        rest_a = np.clip((ua * total - lo) / np.where(chosen > 0, chosen, 1.0), 0.0, below)
-        pe = 0.5 * (q_max[pick, cols] + q_min[pick, cols])
-        emitter = e[pick, cols]
-        good = at[ok]
-        light[good] = self.em["light"][emitter[ok]]
-        tri[good] = self.em["tri"][emitter[ok]]
-        prob[good] = pdf[good] * pe[ok]
-        rest[good] = rest_a[ok]
-        return light, rest, prob, tri
+        return light_tree.choose(self.arrays, u, p, n)
 
     def probability(self, emitter, p, n):
-        """The probability (M,) that ``choose`` at points p, n (3, M) picks the emitters ``emitter`` (M,)
-        (−1: 0), re-traversing their nodes from the root with the arithmetic of ``choose``."""
-        M = emitter.shape[0]
-        out = np.zeros(M)
-        if self.root is None:
-            return out
-        ok = emitter >= 0
-        pdf = np.where(ok, 1.0, 0.0)
-        e = np.maximum(emitter, 0)
-        for level in range(self.path_node.shape[0]):
-            k = self.path_node[level, e]
-            at = np.flatnonzero(ok & (k >= 0))
-            if not at.size:
-                continue
-            q, valid = self._left_probability(k[at], p[:, at], n[:, at])
-            right = self.path_right[level, e[at]]
-            pdf[at] *= np.where(valid, np.where(right, 1.0 - q, q), 0.0)
-        at = np.flatnonzero(ok & (pdf > 0))
-        if at.size:
-            leaf = self.leaf_of[e[at]]
-            es, q_max, q_min = self._leaf_probabilities(leaf, p[:, at], n[:, at])
-            slot = e[at] - self.nodes["first"][leaf]
-            cols = np.arange(at.size)
-            out[at] = pdf[at] * 0.5 * (q_max[slot, cols] + q_min[slot, cols])
-        return out
+        """The probability (M,) that ``choose`` at points p, n (3, M) picks the emitters ``emitter`` (M,) (−1: 0),
+        re-traversing their nodes from the root with the arithmetic of ``choose`` (Cycles' light_tree_pdf)."""
+        return light_tree.probability(self.arrays, emitter, p, n)
 
     def probability_of_light(self, li, p, n):
-        """Pick probability (M,) of the whole light ``li`` at points p, n (3, M) (its triangles' sum is not
-        asked: a split light is found by its triangles)."""
+        """Pick probability (M,) of the whole light ``li`` at points p, n (3, M) (0 for a split light: its
+        triangles are the emitters)."""
         e = self.emitter_of_light[li] if li < self.emitter_of_light.shape[0] else -1
         return self.probability(np.full(p.shape[1], e, np.int64), p, n)
 
     def probability_of_triangles(self, prims, p, n):
         """Pick probability (M,) of the triangles ``prims`` (M,) (emitters of split lights) at points p, n."""
         return self.probability(self.emitter_of_triangle[prims], p, n)
-
-
-def _spot_edge(cos_a, cos_outer, cos_inner):
-    """A spot's falloff at cos of the angle to its axis: 1 inside cos_inner, 0 outside cos_outer, smoothstep."""
-    hard = cos_inner <= cos_outer
-    t = np.clip((cos_a - cos_outer) / np.where(hard, 1.0, cos_inner - cos_outer), 0.0, 1.0)
-    return np.where(hard, (cos_a >= cos_outer).astype(np.float64), t * t * (3.0 - 2.0 * t))
 
 
 def _cone(axis, theta_o, group, groups, sums=None):
