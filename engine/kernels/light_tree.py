@@ -64,6 +64,8 @@ class TreeArrays(NamedTuple):
     path_right: np.ndarray
     leaf_of: np.ndarray
     root: int
+    #: the same arrays row by row for the compiled loops (``pack``)
+    packed: tuple = ()
 
 
 def _dot(a, b):
@@ -329,7 +331,9 @@ def _sin_at(c):
 
 
 @jit_inner
-def _importance_at(n0, n1, n2, c0, c1, c2, cos_u, a0, a1, a2, theta_o, theta_e, trig, i, d_max, d_min, energy):
+def _importance_at(n0, n1, n2, c0, c1, c2, cos_u, a0, a1, a2, theta_o, theta_e, cos_o, sin_o, cos_sum, cos_diff,
+                   d_max, d_min, energy):
+    """importance_numpy for one point and cluster (``cos_o`` … ``cos_diff``: the cone's TreeArrays.node_trig)."""
     sin_u = _sin_at(cos_u)
     transmits = n0 == 0 and n1 == 0 and n2 == 0
     cos_i = c0 * n0 + c1 * n1 + c2 * n2
@@ -340,39 +344,58 @@ def _importance_at(n0, n1, n2, c0, c1, c2, cos_u, a0, a1, a2, theta_o, theta_e, 
     cos_t = min(max(cos_t, -1.0), 1.0)
     sin_t = _sin_at(cos_t)
     cos_tmu = cos_t * cos_u + sin_t * sin_u
-    cos_o, sin_o = trig[i, 0], trig[i, 1]
     inside = cos_t >= cos_u or cos_tmu >= cos_o
     cos_min_out = 1.0 if inside else cos_tmu * cos_o + _sin_at(cos_tmu) * sin_o
-    visible = (inside or theta_o + theta_e > math.pi or cos_tmu > trig[i, 2]) and cos_min_inc >= 0
+    visible = (inside or theta_o + theta_e > math.pi or cos_tmu > cos_sum) and cos_min_inc >= 0
     if not visible:
         return 0.0, 0.0
     i_max = abs(cos_min_inc * energy * cos_min_out / max(d_min * d_min, 1e-300))
     cos_tpu = cos_t * cos_u - sin_t * sin_u
-    if theta_e - theta_o < 0 or cos_t < 0 or cos_u < 0 or cos_tpu < trig[i, 3]:
+    if theta_e - theta_o < 0 or cos_t < 0 or cos_u < 0 or cos_tpu < cos_diff:
         return i_max, 0.0
     cos_max_out = cos_tpu * cos_o - _sin_at(cos_tpu) * sin_o
     i_min = abs(cos_max_inc * energy * cos_max_out / max(d_max * d_max, 1e-300))
     return i_max, min(i_min, i_max)
 
 
+# The compiled loops read the tree from four packed arrays (``pack``: one row per node or emitter), so that a
+# helper call passes four array structs instead of two dozen.
+_LO, _HI, _AXIS, _THETA_O, _THETA_E, _TRIG, _ENERGY = 0, 3, 6, 9, 10, 11, 15                 # node_f columns
+_LEFT, _RIGHT, _FIRST, _COUNT, _DISTANT = range(5)                                             # node_i columns
+_CENTRE, _EAXIS, _ETHETA_O, _ETHETA_E, _ETRIG, _EENERGY, _RADIUS, _COS_OUTER, _COS_INNER, _CORNERS = (
+    0, 3, 6, 7, 8, 12, 13, 14, 15, 16)                                                         # em_f columns
+_KIND, _SPHERE, _LIGHT, _TRI = range(4)                                                        # em_i columns
+
+
+def pack(t: TreeArrays):
+    """(node_f (K, 16), node_i (K, 5), em_f (E, 40), em_i (E, 4)): the tree's arrays row by row for the loops."""
+    node_f = np.concatenate((t.node_lo, t.node_hi, t.node_axis, t.node_theta_o[:, None], t.node_theta_e[:, None],
+                             t.node_trig, t.node_energy[:, None]), axis=1)
+    node_i = np.stack((t.node_left, t.node_right, t.node_first, t.node_count, t.node_distant.astype(np.int64)), axis=1)
+    em_f = np.concatenate((t.em_centre, t.em_axis, t.em_theta_o[:, None], t.em_theta_e[:, None], t.em_trig,
+                           t.em_energy[:, None], t.em_radius[:, None], t.em_cos_outer[:, None],
+                           t.em_cos_inner[:, None], t.em_corners.reshape(-1, 24)), axis=1)
+    em_i = np.stack((t.em_kind, t.em_sphere.astype(np.int64), t.em_light, t.em_tri), axis=1)
+    return tuple(np.ascontiguousarray(a) for a in (node_f, node_i.astype(np.int64), em_f, em_i.astype(np.int64)))
+
+
 @jit_inner
-def _emitter_importance_at(e, p0, p1, p2, n0, n1, n2, em):
-    """emitter_importance_numpy for emitter e at one point; ``em``: the emitter arrays (``_arrays``)."""
-    em_kind, em_centre, em_axis, em_theta_o, em_theta_e, em_trig, em_energy, em_radius, em_sphere, em_cos_outer, \
-        em_cos_inner, em_corners = em
-    kind = em_kind[e]
-    v0, v1, v2 = em_centre[e, 0] - p0, em_centre[e, 1] - p1, em_centre[e, 2] - p2
+def _emitter_importance_at(e, p0, p1, p2, n0, n1, n2, em_f, em_i):
+    """emitter_importance_numpy for emitter e at one point."""
+    kind = em_i[e, _KIND]
+    v0, v1, v2 = em_f[e, _CENTRE] - p0, em_f[e, _CENTRE + 1] - p1, em_f[e, _CENTRE + 2] - p2
     d = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     div = d if d > 0 else 1.0
     c0, c1, c2 = v0 / div, v1 / div, v2 / div
     d_min, d_max, cos_u = d, d, 1.0
-    a0, a1, a2 = em_axis[e, 0], em_axis[e, 1], em_axis[e, 2]
-    theta_o, theta_e, energy = em_theta_o[e], em_theta_e[e], em_energy[e]
+    a0, a1, a2 = em_f[e, _EAXIS], em_f[e, _EAXIS + 1], em_f[e, _EAXIS + 2]
+    theta_o, theta_e, energy = em_f[e, _ETHETA_O], em_f[e, _ETHETA_E], em_f[e, _EENERGY]
     transmits = n0 == 0 and n1 == 0 and n2 == 0
     if kind == TRIANGLE or kind == MESH:
         cos_min, far, above = np.inf, d, transmits
-        for k in range(8):
-            w0, w1, w2 = em_corners[e, k, 0] - p0, em_corners[e, k, 1] - p1, em_corners[e, k, 2] - p2
+        for k in range(3 if kind == TRIANGLE else 8):       # (a triangle's other five are repeats: same min, max)
+            col = _CORNERS + 3 * k
+            w0, w1, w2 = em_f[e, col] - p0, em_f[e, col + 1] - p1, em_f[e, col + 2] - p2
             dc = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
             dv = dc if dc > 0 else 1.0
             w0, w1, w2 = w0 / dv, w1 / dv, w2 / dv
@@ -384,12 +407,12 @@ def _emitter_importance_at(e, p0, p1, p2, n0, n1, n2, em):
         if not (above and front):
             return 0.0, 0.0
     elif kind == POINT or kind == SPOT:
-        rad, dr = em_radius[e], max(d, 1e-300)
+        rad, dr = em_f[e, _RADIUS], max(d, 1e-300)
         outside = dr > rad
         cos_sph = _sin_at(min(rad / dr, 1.0)) if outside else -1.0
         hyp = np.sqrt(rad * rad + dr * dr)
         inner = rad / math.sqrt(2.0)
-        if em_sphere[e]:
+        if em_i[e, _SPHERE] != 0:
             cos_u = cos_sph
             d_max = dr / cos_sph if outside else inner
             d_min = d if outside else inner
@@ -401,7 +424,7 @@ def _emitter_importance_at(e, p0, p1, p2, n0, n1, n2, em):
         else:
             cos_a = min(max(-(a0 * c0 + a1 * c1 + a2 * c2), -1.0), 1.0)
             cos_m = np.cos(max(0.0, np.arccos(cos_a) - np.arccos(min(max(cos_u, -1.0), 1.0))))
-            lo, hi = em_cos_outer[e], em_cos_inner[e]
+            lo, hi = em_f[e, _COS_OUTER], em_f[e, _COS_INNER]
             if hi <= lo:
                 edge = 1.0 if cos_m >= lo else 0.0
             else:
@@ -410,28 +433,26 @@ def _emitter_importance_at(e, p0, p1, p2, n0, n1, n2, em):
             energy = energy * edge
     elif kind == DISTANT:
         c0, c1, c2 = -a0, -a1, -a2
-        cos_u = em_trig[e, 2]
+        cos_u = em_f[e, _ETRIG + 2]
         d_max, d_min = 1.0 / cos_u, 1.0
     else:
         c0, c1, c2 = -a0, -a1, -a2
         cos_u, d_max, d_min = -1.0, 1.0, 1.0
-    return _importance_at(n0, n1, n2, c0, c1, c2, cos_u, a0, a1, a2, theta_o, theta_e, em_trig, e, d_max, d_min,
-                          energy)
+    return _importance_at(n0, n1, n2, c0, c1, c2, cos_u, a0, a1, a2, theta_o, theta_e, em_f[e, _ETRIG],
+                          em_f[e, _ETRIG + 1], em_f[e, _ETRIG + 2], em_f[e, _ETRIG + 3], d_max, d_min, energy)
 
 
 @jit_inner
-def _node_importance_at(k, p0, p1, p2, n0, n1, n2, nodes, em):
-    """node_importance_numpy for node k at one point; ``nodes``, ``em``: the arrays (``_arrays``)."""
-    node_lo, node_hi, node_axis, node_theta_o, node_theta_e, node_trig, node_energy, node_left, node_right, \
-        node_first, node_count, node_distant = nodes
-    if node_count[k] == 1:
-        return _emitter_importance_at(node_first[k], p0, p1, p2, n0, n1, n2, em)
-    m0 = 0.5 * (node_lo[k, 0] + node_hi[k, 0])
-    m1 = 0.5 * (node_lo[k, 1] + node_hi[k, 1])
-    m2 = 0.5 * (node_lo[k, 2] + node_hi[k, 2])
-    x0, x1, x2 = node_hi[k, 0] - m0, node_hi[k, 1] - m1, node_hi[k, 2] - m2
-    a0, a1, a2 = node_axis[k, 0], node_axis[k, 1], node_axis[k, 2]
-    theta_o, theta_e = node_theta_o[k], node_theta_e[k]
+def _node_importance_at(k, p0, p1, p2, n0, n1, n2, node_f, node_i, em_f, em_i):
+    """node_importance_numpy for node k at one point."""
+    if node_i[k, _COUNT] == 1:
+        return _emitter_importance_at(node_i[k, _FIRST], p0, p1, p2, n0, n1, n2, em_f, em_i)
+    m0 = 0.5 * (node_f[k, _LO] + node_f[k, _HI])
+    m1 = 0.5 * (node_f[k, _LO + 1] + node_f[k, _HI + 1])
+    m2 = 0.5 * (node_f[k, _LO + 2] + node_f[k, _HI + 2])
+    x0, x1, x2 = node_f[k, _HI] - m0, node_f[k, _HI + 1] - m1, node_f[k, _HI + 2] - m2
+    a0, a1, a2 = node_f[k, _AXIS], node_f[k, _AXIS + 1], node_f[k, _AXIS + 2]
+    theta_o, theta_e = node_f[k, _THETA_O], node_f[k, _THETA_E]
     transmits = n0 == 0 and n1 == 0 and n2 == 0
     v0, v1, v2 = m0 - p0, m1 - p1, m2 - p2
     d = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
@@ -442,23 +463,22 @@ def _node_importance_at(k, p0, p1, p2, n0, n1, n2, nodes, em):
     d = max(0.5 * np.sqrt(r2), d)
     visible = transmits or ((n0 * v0 + n1 * v1 + n2 * v2)
                             + (abs(n0) * abs(x0) + abs(n1) * abs(x1) + abs(n2) * abs(x2))) > 0
-    if node_distant[k]:
+    if node_i[k, _DISTANT] != 0:
         c0, c1, c2 = -a0, -a1, -a2
-        cos_u = node_trig[k, 2] if theta_o + theta_e < math.pi else -1.0
+        cos_u = node_f[k, _TRIG + 2] if theta_o + theta_e < math.pi else -1.0
         d = 1.0
         visible = True
     if not visible:
         return 0.0, 0.0
-    return _importance_at(n0, n1, n2, c0, c1, c2, cos_u, a0, a1, a2, theta_o, theta_e, node_trig, k, d, d,
-                          node_energy[k])
+    return _importance_at(n0, n1, n2, c0, c1, c2, cos_u, a0, a1, a2, theta_o, theta_e, node_f[k, _TRIG],
+                          node_f[k, _TRIG + 1], node_f[k, _TRIG + 2], node_f[k, _TRIG + 3], d, d, node_f[k, _ENERGY])
 
 
 @jit_inner
-def _left_probability_at(k, p0, p1, p2, n0, n1, n2, nodes, em):
+def _left_probability_at(k, p0, p1, p2, n0, n1, n2, node_f, node_i, em_f, em_i):
     """left_probability_numpy for inner node k at one point."""
-    node_left, node_right = nodes[7], nodes[8]
-    l_max, l_min = _node_importance_at(node_left[k], p0, p1, p2, n0, n1, n2, nodes, em)
-    r_max, r_min = _node_importance_at(node_right[k], p0, p1, p2, n0, n1, n2, nodes, em)
+    l_max, l_min = _node_importance_at(node_i[k, _LEFT], p0, p1, p2, n0, n1, n2, node_f, node_i, em_f, em_i)
+    r_max, r_min = _node_importance_at(node_i[k, _RIGHT], p0, p1, p2, n0, n1, n2, node_f, node_i, em_f, em_i)
     t_max, t_min = l_max + r_max, l_min + r_min
     ok = t_max > 0
     p_max = l_max / (t_max if ok else 1.0)
@@ -470,12 +490,12 @@ def _left_probability_at(k, p0, p1, p2, n0, n1, n2, nodes, em):
 
 
 @jit_inner
-def _leaf_at(k, p0, p1, p2, n0, n1, n2, nodes, em, i_max, i_min):
+def _leaf_at(k, p0, p1, p2, n0, n1, n2, node_i, em_f, em_i, i_max, i_min):
     """Fills i_max, i_min (≥ count) with leaf k's emitters' importances; returns (ΣI⁺, ΣI⁻, count with I⁺ > 0)."""
-    first, count = nodes[9][k], nodes[10][k]
+    first, count = node_i[k, _FIRST], node_i[k, _COUNT]
     s_max, s_min, n_has = 0.0, 0.0, 0
     for w in range(count):
-        a, b = _emitter_importance_at(first + w, p0, p1, p2, n0, n1, n2, em)
+        a, b = _emitter_importance_at(first + w, p0, p1, p2, n0, n1, n2, em_f, em_i)
         i_max[w], i_min[w] = a, b
         s_max += a
         s_min += b
@@ -495,10 +515,9 @@ def _share(w, by_max, i_max, i_min, s_max, s_min, n_has):
 
 
 @jit
-def _choose_loop(u, p, n, root, nodes, em, em_light, em_tri, light, rest, prob, tri):
+def _choose_loop(u, p, n, root, node_f, node_i, em_f, em_i, light, rest, prob, tri):
     below = np.nextafter(1.0, 0.0)
-    node_left, node_right, node_first, node_count = nodes[7], nodes[8], nodes[9], nodes[10]
-    width = max(1, node_count.max())
+    width = max(1, node_i[:, _COUNT].max())
     i_max, i_min = np.empty(width), np.empty(width)
     for j in range(u.shape[0]):
         light[j], tri[j], prob[j], rest[j] = -1, -1, 0.0, 0.0
@@ -506,8 +525,8 @@ def _choose_loop(u, p, n, root, nodes, em, em_light, em_tri, light, rest, prob, 
             continue
         p0, p1, p2, n0, n1, n2 = p[0, j], p[1, j], p[2, j], n[0, j], n[1, j], n[2, j]
         node, pdf, uj, alive = root, 1.0, u[j], True
-        while node_left[node] >= 0:
-            q, ok = _left_probability_at(node, p0, p1, p2, n0, n1, n2, nodes, em)
+        while node_i[node, _LEFT] >= 0:
+            q, ok = _left_probability_at(node, p0, p1, p2, n0, n1, n2, node_f, node_i, em_f, em_i)
             go_left = uj < q
             if go_left:
                 uu = uj / (q if q > 0 else 1.0)
@@ -515,14 +534,14 @@ def _choose_loop(u, p, n, root, nodes, em, em_light, em_tri, light, rest, prob, 
                 uu = (uj - q) / (1.0 - q if q < 1 else 1.0)
             uj = min(max(uu, 0.0), below)
             pdf = pdf * (q if go_left else 1.0 - q)
-            node = node_left[node] if go_left else node_right[node]
+            node = node_i[node, _LEFT] if go_left else node_i[node, _RIGHT]
             if not ok:
                 alive = False
                 break
         if not alive:
             continue
-        s_max, s_min, n_has = _leaf_at(node, p0, p1, p2, n0, n1, n2, nodes, em, i_max, i_min)
-        count = node_count[node]
+        s_max, s_min, n_has = _leaf_at(node, p0, p1, p2, n0, n1, n2, node_i, em_f, em_i, i_max, i_min)
+        count = node_i[node, _COUNT]
         by_max = uj > 0.5
         if count > 1:
             uj = min(max(2.0 * uj - (1.0 if by_max else 0.0), 0.0), below)
@@ -549,8 +568,8 @@ def _choose_loop(u, p, n, root, nodes, em, em_light, em_tri, light, rest, prob, 
         lo = lo - chosen
         if not (total > 0 and chosen > 0):
             continue
-        e = node_first[node] + pick
-        light[j], tri[j] = em_light[e], em_tri[e]
+        e = node_i[node, _FIRST] + pick
+        light[j], tri[j] = em_i[e, _LIGHT], em_i[e, _TRI]
         q_max = _share(pick, True, i_max, i_min, s_max, s_min, n_has)
         q_min = _share(pick, False, i_max, i_min, s_max, s_min, n_has)
         prob[j] = pdf * (0.5 * (q_max + q_min))
@@ -558,9 +577,8 @@ def _choose_loop(u, p, n, root, nodes, em, em_light, em_tri, light, rest, prob, 
 
 
 @jit
-def _probability_loop(emitter, p, n, root, nodes, em, path_node, path_right, leaf_of, out):
-    node_first, node_count = nodes[9], nodes[10]
-    width = max(1, node_count.max())
+def _probability_loop(emitter, p, n, root, node_f, node_i, em_f, em_i, path_node, path_right, leaf_of, out):
+    width = max(1, node_i[:, _COUNT].max())
     i_max, i_min = np.empty(width), np.empty(width)
     for j in range(emitter.shape[0]):
         out[j] = 0.0
@@ -573,26 +591,18 @@ def _probability_loop(emitter, p, n, root, nodes, em, path_node, path_right, lea
             k = path_node[level, e]
             if k < 0:
                 continue
-            q, ok = _left_probability_at(k, p0, p1, p2, n0, n1, n2, nodes, em)
+            q, ok = _left_probability_at(k, p0, p1, p2, n0, n1, n2, node_f, node_i, em_f, em_i)
             pdf = pdf * (1.0 - q if path_right[level, e] else q) if ok else 0.0
             if not pdf > 0:
                 break
         if not pdf > 0:
             continue
         leaf = leaf_of[e]
-        s_max, s_min, n_has = _leaf_at(leaf, p0, p1, p2, n0, n1, n2, nodes, em, i_max, i_min)
-        w = e - node_first[leaf]
+        s_max, s_min, n_has = _leaf_at(leaf, p0, p1, p2, n0, n1, n2, node_i, em_f, em_i, i_max, i_min)
+        w = e - node_i[leaf, _FIRST]
         q_max = _share(w, True, i_max, i_min, s_max, s_min, n_has)
         q_min = _share(w, False, i_max, i_min, s_max, s_min, n_has)
         out[j] = pdf * (0.5 * (q_max + q_min))
-
-
-def _arrays(t: TreeArrays):
-    """(the node arrays, the emitter arrays) as the compiled loops take them (tuples)."""
-    return ((t.node_lo, t.node_hi, t.node_axis, t.node_theta_o, t.node_theta_e, t.node_trig, t.node_energy,
-             t.node_left, t.node_right, t.node_first, t.node_count, t.node_distant),
-            (t.em_kind, t.em_centre, t.em_axis, t.em_theta_o, t.em_theta_e, t.em_trig, t.em_energy, t.em_radius,
-             t.em_sphere, t.em_cos_outer, t.em_cos_inner, t.em_corners))
 
 
 def choose_numba(t: TreeArrays, u, p, n):
@@ -600,14 +610,14 @@ def choose_numba(t: TreeArrays, u, p, n):
     light, tri = np.empty(N, np.int64), np.empty(N, np.int64)
     prob, rest = np.empty(N), np.empty(N)
     _choose_loop(np.ascontiguousarray(u, np.float64), np.ascontiguousarray(p, np.float64),
-                 np.ascontiguousarray(n, np.float64), t.root, *_arrays(t), t.em_light, t.em_tri, light, rest, prob, tri)
+                 np.ascontiguousarray(n, np.float64), t.root, *t.packed, light, rest, prob, tri)
     return light, rest, prob, tri
 
 
 def probability_numba(t: TreeArrays, emitter, p, n):
     out = np.empty(emitter.shape[0])
     _probability_loop(np.ascontiguousarray(emitter, np.int64), np.ascontiguousarray(p, np.float64),
-                      np.ascontiguousarray(n, np.float64), t.root, *_arrays(t), t.path_node, t.path_right, t.leaf_of,
+                      np.ascontiguousarray(n, np.float64), t.root, *t.packed, t.path_node, t.path_right, t.leaf_of,
                       out)
     return out
 

@@ -288,6 +288,7 @@ class LightTree:
             cone_cosines(theta_o, em["theta_e"]), em["energy"], em["radius"], em["sphere"], em["cos_outer"],
             em["cos_inner"], self._corners(), em["light"], em["tri"], np.ascontiguousarray(path_node),
             np.ascontiguousarray(path_right), leaf_of.astype(np.int64), int(root))
+        self.arrays = self.arrays._replace(packed=light_tree.pack(self.arrays))
 
     def _corners(self) -> np.ndarray:
         """(E, 8, 3): a triangle's three vertices (repeated) or the eight corners of a box (the importance's
