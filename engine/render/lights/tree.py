@@ -211,7 +211,17 @@ class LightTree:
                 lo, hi, axis, theta_o, theta_e, energy = _segment_measure(level, seg, rel)
                 set_node(ids, lo=lo, hi=hi, axis=axis, theta_o=theta_o, theta_e=theta_e, energy=energy,
                          distant=[False] * ids.size)
-                middle, perm = _splits(level, seg, rel, rel + count, lo, hi, axis, theta_o, theta_e, energy)
+                middle, perm = np.full(starts.size, -1), np.arange(idx.size)
+                multi = count >= 2          # (single emitters are leaves: no split search over them)
+                if multi.any():
+                    sub = np.flatnonzero(multi[seg])
+                    c_sub = count[multi]
+                    r_sub = np.concatenate(([0], np.cumsum(c_sub)[:-1]))
+                    m_sub, p_sub = _splits({key: v[sub] for key, v in level.items()},
+                                           np.repeat(np.arange(c_sub.size), c_sub), r_sub, r_sub + c_sub, lo[multi],
+                                           hi[multi], axis[multi], theta_o[multi], theta_e[multi], energy[multi])
+                    middle[multi] = np.where(m_sub >= 0, rel[multi] + m_sub - r_sub, -1)
+                    perm[sub] = sub[p_sub]
                 order[idx] = order[idx][perm]
                 split = middle >= 0
                 leaves = ~split
