@@ -74,21 +74,12 @@ def many_lights(triangles: int, seed: int = 1) -> None:
 def measure(width, height, spp, triangles, tmp):
     import bpy
     import tests.blender.test_cycles_parity_lights as parity
-    from cycles_noise import render_luminance
+    from cycles_noise import race_settings, render_luminance
     scene = parity.base_scene()
     many_lights(triangles)
-    scene.render.resolution_x, scene.render.resolution_y = width, height
+    race_settings(scene, width, height, spp)
     c = scene.cycles
-    c.device, c.samples, c.use_adaptive_sampling, c.use_denoising = "CPU", spp, False, False
-    c.pixel_filter_type, c.filter_width = "BOX", 1.0
-    c.sample_clamp_direct = c.sample_clamp_indirect = 0.0
-    c.light_sampling_threshold = 0.0
-    c.max_bounces = c.diffuse_bounces = parity.BOUNCES
-    c.caustics_reflective = c.caustics_refractive = True
-    c.blur_glossy = 0.0
-    scene.render.threads_mode, scene.render.threads = "FIXED", 2
-    ims = scene.render.image_settings
-    ims.media_type, ims.color_depth = "MULTI_LAYER_IMAGE", "32"
+    c.blur_glossy = 0.0                 # (Polar warns that it does not apply it; nothing here is glossy)
     runs = {"Cycles": ("CYCLES", True), "Polar tree": ("POLAR", True), "Polar no tree": ("POLAR", False)}
     out = {}
     for name, (engine, tree) in runs.items():
