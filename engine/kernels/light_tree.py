@@ -517,7 +517,7 @@ def _share(w, by_max, i_max, i_min, s_max, s_min, n_has):
 @jit
 def _choose_loop(u, p, n, root, node_f, node_i, em_f, em_i, light, rest, prob, tri):
     below = np.nextafter(1.0, 0.0)
-    width = max(1, node_i[:, _COUNT].max())
+    width = max(1, node_i[:, _COUNT].max()) if node_i.shape[0] else 1
     i_max, i_min = np.empty(width), np.empty(width)
     for j in range(u.shape[0]):
         light[j], tri[j], prob[j], rest[j] = -1, -1, 0.0, 0.0
@@ -578,7 +578,7 @@ def _choose_loop(u, p, n, root, node_f, node_i, em_f, em_i, light, rest, prob, t
 
 @jit
 def _probability_loop(emitter, p, n, root, node_f, node_i, em_f, em_i, path_node, path_right, leaf_of, out):
-    width = max(1, node_i[:, _COUNT].max())
+    width = max(1, node_i[:, _COUNT].max()) if node_i.shape[0] else 1
     i_max, i_min = np.empty(width), np.empty(width)
     for j in range(emitter.shape[0]):
         out[j] = 0.0

@@ -178,3 +178,22 @@ def test_compiled_traversal_gives_the_numpy_twins_bits():
         assert np.array_equal(got, want)
     e = rng.integers(-1, t.em_kind.size, M)
     assert np.array_equal(K.probability_numba(t, e, p, n), K.probability_numpy(t, e, p, n))
+
+
+@pytest.mark.parametrize("lamps", [1, 2, 0])
+def test_trees_of_one_emitter_or_none_choose_it_or_nothing(lamps):
+    """A tree whose root is a leaf (one lamp), a root over two, and none at all (a black emitter only)."""
+    scene = many_lights_scene(count=3)
+    scene.meshes = scene.meshes[:1] + [scene.meshes[-1]] * (lamps == 0)
+    scene.meshes[-1].emission = textured_emission(TextureInput(image(np.zeros((2, 2, 3)))), 1.0) if not lamps \
+        else scene.meshes[-1].emission
+    scene.lights = scene.lights[:lamps]
+    lights, tree = tree_of(scene)
+    p, n = np.array([[0.1], [0.0], [0.0]]), np.array([[0.0], [0.0], [1.0]])
+    light, rest, prob, tri = tree.choose(np.array([0.3]), p, n)
+    if lamps == 0:
+        assert light[0] == NO_LIGHT and prob[0] == 0.0
+    else:
+        assert light[0] >= 0 and 0 < prob[0] <= 1 and prob[0] == tree.probability_of_light(int(light[0]), p, n)[0]
+    st = dataclasses.replace(scene.settings, light_tree="on", spp=2)
+    assert np.isfinite(Renderer(scene).render(st).stokes_luminance()).all()

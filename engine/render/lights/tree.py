@@ -282,8 +282,9 @@ class LightTree:
         by_leaf = np.full(K, -1)
         by_leaf[leaves] = np.arange(leaves.size)
         row = by_leaf[leaf_of]
-        path_node = np.array(steps_node, np.int64).reshape(len(steps_node), -1)[:, row]
-        path_right = np.array(steps_right, bool).reshape(len(steps_right), -1)[:, row]
+        depth = len(steps_node)        # (0: the root is a leaf, or there is no emitter)
+        path_node = np.array(steps_node, np.int64).reshape(depth, leaves.size)[:, row]
+        path_right = np.array(steps_right, bool).reshape(depth, leaves.size)[:, row]
         # where a triangle or a whole light is an emitter
         tri = em["tri"]
         self.emitter_of_triangle = np.full(len(self.compiled.faces), -1, np.int64)
