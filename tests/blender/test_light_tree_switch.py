@@ -9,7 +9,8 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from tests.blender_support import add_camera, add_plane, add_sphere, light_paths_off, load_addon  # noqa: E402
+from tests.blender_support import (add_camera, add_plane, add_sphere, drawn_properties, light_paths_off,  # noqa: E402
+                                   load_addon)
 from tests.blender.test_cycles_light_paths import diffuse, emitter  # noqa: E402
 
 W, H = 32, 24
@@ -50,3 +51,10 @@ def test_the_light_tree_follows_cycles_switch_and_keeps_the_mean():
     se = np.sqrt(means["on"].var(ddof=1) / 6 + means["off"].var(ddof=1) / 6)
     assert abs(means["on"].mean() - means["off"].mean()) < 4.0 * se
     assert renderer.lights.uses_tree("on") and renderer.lights.light_tree().split.sum() == 3
+
+
+def test_sampling_panel_shows_cycles_light_tree_switch():
+    load_addon()
+    from polar_render.polar_addon.ui import POLAR_PT_sampling
+    scene = scene_with_emitters()
+    assert (scene.cycles, "use_light_tree") in drawn_properties(POLAR_PT_sampling, scene)

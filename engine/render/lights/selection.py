@@ -30,6 +30,8 @@ class LightSet:
     ``GLOBAL_SHARE`` of the power distribution (so no light that can contribute gets
     probability 0); for more lights ∝ power alone.  Every MIS pdf includes the probability
     with which the light would have been chosen at the vertex the ray left (``prob_at``).
+    With RenderSettings.light_tree the integrator chooses with ``light_tree()`` instead (engine.render.lights.tree,
+    built on first use; ``uses_tree`` says when).
     """
 
     SPATIAL_MAX = 64

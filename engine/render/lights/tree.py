@@ -24,7 +24,8 @@ docs/architecture.md, "Light tree"):
   (rescaled to its slot) at each level; in a leaf one emitter with probability ½(I⁺_i/ΣI⁺ + I⁻_i/ΣI⁻)
   (uniform among I⁺ > 0 where ΣI⁻ = 0).  The probability of the path taken is the pick probability.
 - ``probability`` re-traverses the same nodes towards a given emitter with the same arithmetic (Cycles'
-  light_tree_pdf), so MIS at emitter hits uses exactly the probability with which NEE picks it.
+  light_tree_pdf), so MIS at emitter hits uses exactly the probability with which NEE picks it.  The traversal's
+  arithmetic is engine.kernels.light_tree's (compiled per-point loops and their NumPy twins); this module builds.
 
 Arrays: points (3, N), emitters on the first axis, world units; angles in radians.
 """
