@@ -27,13 +27,15 @@ NO_LIGHT = -1
 class TreeArrays(NamedTuple):
     """A built light tree.  Nodes (K): box ``node_lo``/``node_hi`` (K, 3), cone ``node_axis`` (K, 3),
     ``node_theta_o``, ``node_theta_e``, ``node_trig`` (K, 4) = (cos θ_o, sin θ_o, cos(θ_o + θ_e), cos(θ_e − θ_o)),
-    ``node_energy``, children ``node_left``/``node_right`` (−1: a leaf), a leaf's emitters ``node_first`` …
-    + ``node_count``, ``node_distant`` (the distant lights' leaf).  Emitters (E, in leaf order): ``em_kind``,
-    ``em_centre`` (E, 3), cone ``em_axis``, ``em_theta_o`` (a point light's 0: its cone faces the shading point),
-    ``em_theta_e``, ``em_trig`` (E, 4) as ``node_trig``, ``em_energy``, lamp ``em_radius``/``em_sphere``, spot
-    edge ``em_cos_outer``/``em_cos_inner``, ``em_corners`` (E, 8, 3) (a triangle's vertices repeated, a box's
-    corners), ``em_light``, ``em_tri`` (−1: a whole light).  Per emitter the way from the root: ``path_node``
-    (D, E) (−1 padding) and ``path_right`` (D, E), its leaf ``leaf_of`` (E,); ``root`` (−1: no emitter)."""
+    ``node_energy``, the box's ``node_centre``, ``node_extent`` (hi − centre) (K, 3), ``node_r2`` = |extent|²,
+    ``node_half_r`` = ½|extent| (``box_measures``), children ``node_left``/``node_right`` (−1: a leaf), a leaf's
+    emitters ``node_first`` … + ``node_count``, ``node_distant`` (the distant lights' leaf).  Emitters (E, in
+    leaf order): ``em_kind``, ``em_centre`` (E, 3), cone ``em_axis``, ``em_theta_o`` (a point light's 0: its cone
+    faces the shading point), ``em_theta_e``, ``em_trig`` (E, 4) as ``node_trig``, ``em_energy``, lamp
+    ``em_radius``/``em_sphere``, spot edge ``em_cos_outer``/``em_cos_inner``, ``em_corners`` (E, 8, 3) (a
+    triangle's vertices repeated, a box's corners), ``em_light``, ``em_tri`` (−1: a whole light).  Per emitter the
+    way from the root: ``path_node`` (D, E) (−1 padding) and ``path_right`` (D, E), its leaf ``leaf_of`` (E,);
+    ``root`` (−1: no emitter)."""
     node_lo: np.ndarray
     node_hi: np.ndarray
     node_axis: np.ndarray
@@ -41,6 +43,10 @@ class TreeArrays(NamedTuple):
     node_theta_e: np.ndarray
     node_trig: np.ndarray
     node_energy: np.ndarray
+    node_centre: np.ndarray
+    node_extent: np.ndarray
+    node_r2: np.ndarray
+    node_half_r: np.ndarray
     node_left: np.ndarray
     node_right: np.ndarray
     node_first: np.ndarray
@@ -189,15 +195,13 @@ def node_importance_numpy(t: TreeArrays, k, p, n):
     r = np.flatnonzero(~single)
     if r.size:
         kk, pp, nn = k[r], p[:, r], n[:, r]
-        lo, hi = t.node_lo[kk].T, t.node_hi[kk].T
-        centre = 0.5 * (lo + hi)
-        extent = hi - centre
+        centre, extent = t.node_centre[kk].T, t.node_extent[kk].T
         axis, theta_o, theta_e, trig = t.node_axis[kk].T, t.node_theta_o[kk], t.node_theta_e[kk], t.node_trig[kk].T
         transmits = (nn[0] == 0) & (nn[1] == 0) & (nn[2] == 0)
         ptc, d = _unit(centre - pp)
-        r2 = _dot(extent, extent)
+        r2 = t.node_r2[kk]
         cos_u = np.where(d * d <= r2, -1.0, np.sqrt(np.maximum(1.0 - r2 / np.maximum(d * d, 1e-300), 0.0)))
-        d = np.maximum(0.5 * np.sqrt(r2), d)
+        d = np.maximum(t.node_half_r[kk], d)
         visible = transmits | (_dot(nn, centre - pp) + _dot(np.abs(nn), np.abs(extent)) > 0)
         distant = t.node_distant[kk]
         ptc = np.where(distant[None], -axis, ptc)
@@ -360,7 +364,7 @@ def _importance_at(n0, n1, n2, c0, c1, c2, cos_u, a0, a1, a2, theta_o, theta_e, 
 
 # The compiled loops read the tree from four packed arrays (``pack``: one row per node or emitter), so that a
 # helper call passes four array structs instead of two dozen.
-_LO, _HI, _AXIS, _THETA_O, _THETA_E, _TRIG, _ENERGY = 0, 3, 6, 9, 10, 11, 15                 # node_f columns
+_MID, _EXT, _AXIS, _THETA_O, _THETA_E, _TRIG, _ENERGY, _R2, _HALF_R = 0, 3, 6, 9, 10, 11, 15, 16, 17  # node_f
 _LEFT, _RIGHT, _FIRST, _COUNT, _DISTANT = range(5)                                             # node_i columns
 _CENTRE, _EAXIS, _ETHETA_O, _ETHETA_E, _ETRIG, _EENERGY, _RADIUS, _COS_OUTER, _COS_INNER, _CORNERS = (
     0, 3, 6, 7, 8, 12, 13, 14, 15, 16)                                                         # em_f columns
@@ -368,9 +372,10 @@ _KIND, _SPHERE, _LIGHT, _TRI = range(4)                                         
 
 
 def pack(t: TreeArrays):
-    """(node_f (K, 16), node_i (K, 5), em_f (E, 40), em_i (E, 4)): the tree's arrays row by row for the loops."""
-    node_f = np.concatenate((t.node_lo, t.node_hi, t.node_axis, t.node_theta_o[:, None], t.node_theta_e[:, None],
-                             t.node_trig, t.node_energy[:, None]), axis=1)
+    """(node_f (K, 18), node_i (K, 5), em_f (E, 40), em_i (E, 4)): the tree's arrays row by row for the loops."""
+    node_f = np.concatenate((t.node_centre, t.node_extent, t.node_axis, t.node_theta_o[:, None],
+                             t.node_theta_e[:, None], t.node_trig, t.node_energy[:, None], t.node_r2[:, None],
+                             t.node_half_r[:, None]), axis=1)
     node_i = np.stack((t.node_left, t.node_right, t.node_first, t.node_count, t.node_distant.astype(np.int64)), axis=1)
     em_f = np.concatenate((t.em_centre, t.em_axis, t.em_theta_o[:, None], t.em_theta_e[:, None], t.em_trig,
                            t.em_energy[:, None], t.em_radius[:, None], t.em_cos_outer[:, None],
@@ -447,10 +452,8 @@ def _node_importance_at(k, p0, p1, p2, n0, n1, n2, node_f, node_i, em_f, em_i):
     """node_importance_numpy for node k at one point."""
     if node_i[k, _COUNT] == 1:
         return _emitter_importance_at(node_i[k, _FIRST], p0, p1, p2, n0, n1, n2, em_f, em_i)
-    m0 = 0.5 * (node_f[k, _LO] + node_f[k, _HI])
-    m1 = 0.5 * (node_f[k, _LO + 1] + node_f[k, _HI + 1])
-    m2 = 0.5 * (node_f[k, _LO + 2] + node_f[k, _HI + 2])
-    x0, x1, x2 = node_f[k, _HI] - m0, node_f[k, _HI + 1] - m1, node_f[k, _HI + 2] - m2
+    m0, m1, m2 = node_f[k, _MID], node_f[k, _MID + 1], node_f[k, _MID + 2]
+    x0, x1, x2 = node_f[k, _EXT], node_f[k, _EXT + 1], node_f[k, _EXT + 2]
     a0, a1, a2 = node_f[k, _AXIS], node_f[k, _AXIS + 1], node_f[k, _AXIS + 2]
     theta_o, theta_e = node_f[k, _THETA_O], node_f[k, _THETA_E]
     transmits = n0 == 0 and n1 == 0 and n2 == 0
@@ -458,9 +461,9 @@ def _node_importance_at(k, p0, p1, p2, n0, n1, n2, node_f, node_i, em_f, em_i):
     d = np.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
     div = d if d > 0 else 1.0
     c0, c1, c2 = v0 / div, v1 / div, v2 / div
-    r2 = x0 * x0 + x1 * x1 + x2 * x2
+    r2 = node_f[k, _R2]
     cos_u = -1.0 if d * d <= r2 else np.sqrt(max(1.0 - r2 / max(d * d, 1e-300), 0.0))
-    d = max(0.5 * np.sqrt(r2), d)
+    d = max(node_f[k, _HALF_R], d)
     visible = transmits or ((n0 * v0 + n1 * v1 + n2 * v2)
                             + (abs(n0) * abs(x0) + abs(n1) * abs(x1) + abs(n2) * abs(x2))) > 0
     if node_i[k, _DISTANT] != 0:
@@ -633,3 +636,12 @@ def cone_cosines(theta_o, theta_e):
     """(cos θ_o, sin θ_o, cos(θ_o + θ_e), cos(θ_e − θ_o)) (M, 4) of cones: TreeArrays.node_trig / em_trig."""
     return np.ascontiguousarray(np.stack((np.cos(theta_o), np.sin(theta_o), np.cos(theta_o + theta_e),
                                           np.cos(theta_e - theta_o)), axis=1))
+
+
+def box_measures(lo, hi):
+    """(centre, extent = hi − centre (K, 3), |extent|², ½|extent| (K,)) of boxes lo, hi (K, 3): what a node's
+    importance reads of its box (TreeArrays.node_centre …)."""
+    centre = 0.5 * (lo + hi)
+    extent = hi - centre
+    r2 = extent[:, 0] * extent[:, 0] + extent[:, 1] * extent[:, 1] + extent[:, 2] * extent[:, 2]
+    return np.ascontiguousarray(centre), np.ascontiguousarray(extent), r2, 0.5 * np.sqrt(r2)

@@ -295,7 +295,8 @@ class LightTree:
         theta_o = np.where(em["kind"] == POINT, 0.0, em["theta_o"])       # a point light's cone faces the point
         self.arrays = TreeArrays(
             nd["lo"], nd["hi"], nd["axis"], nd["theta_o"], nd["theta_e"], cone_cosines(nd["theta_o"], nd["theta_e"]),
-            nd["energy"], nd["left"], nd["right"], nd["first"], nd["count"], nd["distant"], em["kind"],
+            nd["energy"], *light_tree.box_measures(nd["lo"], nd["hi"]), nd["left"], nd["right"], nd["first"],
+            nd["count"], nd["distant"], em["kind"],
             np.ascontiguousarray(em["centre"]), np.ascontiguousarray(em["axis"]), theta_o, em["theta_e"],
             cone_cosines(theta_o, em["theta_e"]), em["energy"], em["radius"], em["sphere"], em["cos_outer"],
             em["cos_inner"], self._corners(), em["light"], em["tri"], np.ascontiguousarray(path_node),
