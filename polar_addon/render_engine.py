@@ -63,18 +63,21 @@ SPECTRAL_TO_ENGINE = {"SPECTRAL": "spectral", "MONO": "mono", "RGB": "rgb"}
 
 
 def engine_settings(scene, preview=False) -> RenderSettings:
-    """Engine RenderSettings from the scene's Polar settings (frame-dependent seed if asked) and its Cycles
-    Light Paths (cycles_light_paths)."""
+    """Engine RenderSettings from the scene's Polar settings (frame-dependent seed if asked), its Cycles
+    Light Paths (cycles_light_paths) and Cycles' Light Tree switch."""
     p = scene.polar
     seed = p.seed + (scene.frame_current if p.use_animated_seed else 0)
     total, light_paths = cycles_light_paths(scene)
+    c = getattr(scene, "cycles", None)
+    # Cycles' Light Tree (Render Properties ▸ Sampling ▸ Lights), on by default: the same choice of lights
+    light_tree = "auto" if c is None else "on" if getattr(c, "use_light_tree", True) else "off"
     return RenderSettings(spp=p.preview_samples if preview else p.samples,
                           max_depth=min(p.max_bounces, total) + 2,
                           rr_depth=5, seed=seed, spectral=SPECTRAL_TO_ENGINE[p.spectral],
                           wavelength_nm=p.wavelength_nm, polarisation=POLARISATION_TO_ENGINE[p.polarisation],
                           batch_rays=p.batch_rays, threads=p.threads,
                           simplify="auto" if p.skip_clear_layers else "off",
-                          sampler=SAMPLER_TO_ENGINE[p.sampler], **light_paths)
+                          sampler=SAMPLER_TO_ENGINE[p.sampler], light_tree=light_tree, **light_paths)
 
 
 #: Cycles' Light Paths properties (scene.cycles, the same names in Blender 4.5–5.3) → RenderSettings fields

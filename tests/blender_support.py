@@ -160,3 +160,32 @@ def cycles_seed_renders(scene, tmp, spp, seeds, bounces, light_threshold=None):
         out.append(read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3])
     return np.array(out)
 
+
+
+def drawn_properties(panel_class, scene) -> list:
+    """(data, property name) of every property ``panel_class.draw`` puts in its layout for ``scene`` (headless
+    Blender has no window: a recording layout stands in)."""
+    class Layout:
+        def __init__(self, drawn):
+            self.drawn, self.use_property_split, self.active, self.enabled = drawn, False, True, True
+
+        def column(self, **_):
+            return Layout(self.drawn)
+
+        row = column
+
+        def prop(self, data, name, **_):
+            self.drawn.append((data, name))
+
+        def operator(self, *_, **__):
+            pass
+
+        def label(self, **_):
+            pass
+
+        def separator(self, **_):
+            pass
+
+    drawn = []
+    panel_class.draw(type("P", (), {"layout": Layout(drawn)})(), type("C", (), {"scene": scene})())
+    return drawn

@@ -305,8 +305,13 @@ class PathTracer:
         self.has_area_lights = compiled.has_area_lights     # once, not per bounce (scans every triangle)
         # emitters whose radiance varies over the surface read it at the hits' barycentrics
         self.textured_lights = any(light.varies_over_surface for light in lights.lights)
+        #: the light tree (engine.render.lights.tree) where RenderSettings.light_tree asks for it, else None: the
+        #: LightSet chooses (uniformly or by power, as before the tree)
+        self.tree = lights.light_tree() if lights.uses_tree(getattr(settings, "light_tree", "auto")) else None
+        #: the light choice needs each vertex's position and side normal
+        self.spatial = lights.spatial or self.tree is not None
         # where segments start is kept for light selection, analytic lamps and warp-sampled lamps' pdfs
-        self.keep_origins = (lights.spatial or bool(lights.hittable)
+        self.keep_origins = (self.spatial or bool(lights.hittable)
                              or any(light.hit_pdf_needs_origin or light.hit_pdf_needs_direction
                                     for light in lights.lights))
         # materials shaded together (e.g. all RGB Lambert materials in one call)
@@ -557,8 +562,7 @@ class PathTracer:
             w = np.ones(int(miss.sum()))
             nd = ~prev_delta[miss]
             if nd.any():
-                p_light = env.pdf(d_miss) * light_set.prob_at(
-                    light_set.environment_index, *at_prev(miss))
+                p_light = env.pdf(d_miss) * self._pick_probability(light_set.environment_index, at_prev(miss))
                 w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
             rows = miss.nonzero()[0]
             if att is not None:
@@ -584,7 +588,7 @@ class PathTracer:
                     Le = self._emitted(light, lk.take(rows)) * factor[None, :]
                     if att is not None:
                         Le = Le * att(rows, self._lamp_distances(light, o, d, seg, rows))
-                    p_light = pdf_l * light_set.prob_at(li, *at_prev(rows))
+                    p_light = pdf_l * self._pick_probability(li, at_prev(rows))
                     w = np.where(prev_delta[rows], 1.0, power_heuristic(prev_pdf[rows], p_light))
                     self._add_light(radiance, path, T, rows, Le, w, cols(rows), light, d[:, rows], state.x_T)
         if compiled.has_passthrough:
@@ -656,7 +660,7 @@ class PathTracer:
         # T is read through its column map (PathState.T_col); the scatter writes a new, dense one
         n, T = state.n, state.T_store
         n_g, n_s, wo = surf.n_g, surf.n_s, surf.wo
-        n_side = n_g * np.sign(dot(n_g, wo))[None, :] if self.lights.spatial else None
+        n_side = n_g * np.sign(dot(n_g, wo))[None, :] if self.spatial else None
         # Stokes frame of the arriving segment: x_T is already ⟂ d.
         # each path's material, and the paths sorted by material group (ascending within a group)
         mat, counts, order = material_groups(surf.prim, self.scene.tri_material, self.group_of, len(self.shaders))
@@ -689,6 +693,8 @@ class PathTracer:
                 self._late_direction_numbers(nums)
             sp = self._shading_point(bsdf, state, surf, mat, flip, sel)
             xTm = gather(state.x_T, sel)
+            if self.tree is not None and bsdf.flags.transmits:
+                nxt.n_side[:, sel] = 0.0        # the tree's light choice: light from either side counts
             if nums.nee and not bsdf.flags.is_delta_only:
                 self._group_next_event(state, acc, surf, bsdf, sp, sel, rows, xTm, t_cols, nums.u_light)
             bs = self._sample_bsdf(bsdf, sp, nums.u_bsdf, sel)
@@ -1002,7 +1008,7 @@ class PathTracer:
         n = sp.n
         P = self.P
         L = 3 if self.rgb_mode else lookup.lam.shape[0]
-        ls = self._sample_lights(sp, lookup, u, L)
+        ls = self._sample_lights(sp, lookup, u, L, bsdf.flags.transmits)
         weighted = self._light_weight(sp, bsdf, x_T, ls)
         if weighted is None:
             return np.zeros((P, L, n))
@@ -1025,34 +1031,56 @@ class PathTracer:
         out[:] = light_out
         return out
 
-    def _sample_lights(self, sp: ShadingPoint, lookup: WavelengthLookup, u: np.ndarray, L: int) -> _LightSamples:
+    def _sample_lights(self, sp: ShadingPoint, lookup: WavelengthLookup, u: np.ndarray, L: int,
+                       transmits: bool = False) -> _LightSamples:
         """One light sample per vertex: the light chosen by u[0] (its fraction within the light's slot
-        reused), the point on it by u[1], u[2] ((4, n)); ``L``: the radiance's wavelength count."""
+        reused), the point on it by u[1], u[2] ((4, n)); ``L``: the radiance's wavelength count.  With the
+        light tree the choice may be a triangle of a mesh light (sampled by area within it) or no light at all
+        (nothing can reach the vertex: no sample); ``transmits``: the material transmits (light from both sides)."""
         light_set = self.lights
-        n_side = sp.n_g * np.sign(dot(sp.n_g, sp.wo))[None, :] if light_set.spatial else None
-        choice, u_rest, chosen_prob = light_set.choose(u[0], sp.p, n_side)
-        lights_chosen = np.unique(choice)
-        if len(lights_chosen) == 1:
-            ls = self._sample_one_light(int(lights_chosen[0]), sp, lookup, u, u_rest, chosen_prob)
+        n_side = sp.n_g * np.sign(dot(sp.n_g, sp.wo))[None, :] if self.spatial else None
+        tri = None
+        if self.tree is not None:
+            if transmits:
+                n_side = np.zeros_like(n_side)
+            choice, u_rest, chosen_prob, tri = self.tree.choose(u[0], sp.p, n_side)
         else:
-            ls = self._sample_several_lights(lights_chosen, choice, sp, lookup, u, u_rest, chosen_prob, L)
+            choice, u_rest, chosen_prob = light_set.choose(u[0], sp.p, n_side)
+        lights_chosen = np.unique(choice)
+        if len(lights_chosen) == 1 and lights_chosen[0] >= 0:
+            ls = self._sample_one_light(int(lights_chosen[0]), sp, lookup, u, u_rest, chosen_prob, tri)
+        else:
+            ls = self._sample_several_lights(lights_chosen, choice, sp, lookup, u, u_rest, chosen_prob, L, tri)
         if light_set.polarised and self.P > 1:
             ls.polarised = light_samples_polarisation(light_set, ls.owners, ls.wi)
         return ls
 
+    def _light_points(self, light, li: int, p: np.ndarray, u: np.ndarray, tri: np.ndarray | None, lookup, points):
+        """(wi, dist, scale, pdf, valid, emitted) of light ``li`` sampled from p (3, m) with u (3, m): on the
+        triangles ``tri`` (m,) the light tree chose (a split light), else by the light's own sampling; the
+        sampled points of lights that vary over the surface or were sampled by triangle go into ``points``."""
+        if tri is not None and self.tree.split[li]:
+            wi, dist, scale, pdf_l, ok, points[li] = light.sample_triangles(p, tri, u[1], u[2])
+            emitted = (light.emitted_at(points[li], lookup, self._integrated_rgb, self.mono)
+                       if light.varies_over_surface else self._emitted(light, lookup, wi))
+        elif light.varies_over_surface:
+            wi, dist, scale, pdf_l, ok, points[li] = light.sample_points(p, u)
+            emitted = light.emitted_at(points[li], lookup, self._integrated_rgb, self.mono)
+        else:
+            wi, dist, scale, pdf_l, ok = light.sample(p, u)
+            emitted = self._emitted(light, lookup, wi)
+        return wi, dist, scale, pdf_l, ok, emitted
+
     def _sample_one_light(self, li: int, sp: ShadingPoint, lookup: WavelengthLookup, u: np.ndarray,
-                          u_rest: np.ndarray, chosen_prob: np.ndarray | None) -> _LightSamples:
+                          u_rest: np.ndarray, chosen_prob: np.ndarray | None,
+                          tri: np.ndarray | None = None) -> _LightSamples:
         """Light ``li`` sampled for every vertex: its arrays as they are, no gathered copies."""
         light_set = self.lights
         points = {}
         light = light_set.lights[li]
         # Reuse u[0]'s fraction within the chosen light's slot for triangle choice.
-        if light.varies_over_surface:
-            wi, dist, scale, pdf_l, ok, points[li] = light.sample_points(sp.p, np.stack((u_rest, u[1], u[2])))
-            emitted = light.emitted_at(points[li], lookup, self._integrated_rgb, self.mono)
-        else:
-            wi, dist, scale, pdf_l, ok = light.sample(sp.p, np.stack((u_rest, u[1], u[2])))
-            emitted = self._emitted(light, lookup, wi)
+        wi, dist, scale, pdf_l, ok, emitted = self._light_points(light, li, sp.p, np.stack((u_rest, u[1], u[2])), tri,
+                                                                 lookup, points)
         delta = light.is_delta
         if light.shades_nothing:         # hidden from indirect rays: lights nothing (Cycles)
             ok = np.zeros_like(ok)
@@ -1062,26 +1090,29 @@ class PathTracer:
 
     def _sample_several_lights(self, lights_chosen: np.ndarray, choice: np.ndarray, sp: ShadingPoint,
                                lookup: WavelengthLookup, u: np.ndarray, u_rest: np.ndarray,
-                               chosen_prob: np.ndarray | None, L: int) -> _LightSamples:
-        """Each light of ``lights_chosen`` sampled for its vertices (``choice`` (n,)), put together."""
+                               chosen_prob: np.ndarray | None, L: int, tri: np.ndarray | None = None) -> _LightSamples:
+        """Each light of ``lights_chosen`` sampled for its vertices (``choice`` (n,)), put together; vertices
+        whose choice is no light (the light tree's NO_LIGHT, < 0) get no valid sample."""
         light_set = self.lights
         n = sp.n
         points = {}
         wi, dist, scale, pdf_l = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n)
         ok, delta, emitted = np.empty(n, bool), np.empty(n, bool), np.empty((L, n))
         select_prob = light_set.prob[choice] if chosen_prob is None else chosen_prob
+        if lights_chosen[0] < 0:            # no light: an invalid sample of weight 0 (probability 1: no 0/0)
+            none = np.flatnonzero(choice < 0)
+            wi[:, none], dist[none], scale[none], pdf_l[none], ok[none], delta[none] = 0.0, 1.0, 0.0, 0.0, False, False
+            emitted[:, none] = 0.0
+            select_prob = np.where(choice < 0, 1.0, select_prob)
+            lights_chosen = lights_chosen[1:]
         owners = []
         for li in lights_chosen:
             li = int(li)
             sel = np.nonzero(choice == li)[0]
             light = light_set.lights[li]
             u_sel = np.stack((gather(u_rest, sel), gather(u[1], sel), gather(u[2], sel)))
-            if light.varies_over_surface:
-                w, d, sc, pdf, valid, points[li] = light.sample_points(gather(sp.p, sel), u_sel)
-                emitted[:, sel] = light.emitted_at(points[li], lookup.take(sel), self._integrated_rgb, self.mono)
-            else:
-                w, d, sc, pdf, valid = light.sample(gather(sp.p, sel), u_sel)
-                emitted[:, sel] = self._emitted(light, lookup.take(sel), w)
+            w, d, sc, pdf, valid, emitted[:, sel] = self._light_points(
+                light, li, gather(sp.p, sel), u_sel, None if tri is None else tri[sel], lookup.take(sel), points)
             wi[:, sel], dist[sel], scale[sel], pdf_l[sel], ok[sel] = w, d, sc, pdf, valid
             if light.shades_nothing:
                 ok[sel] = False
@@ -1187,6 +1218,15 @@ class PathTracer:
                 blocked[sel] = self.scene.unblock_own_hits(li, gather(sp.p, sel), gather(sp.n_g, sel),
                                                            gather(ls.wi, sel), d, cos_l, blocked[sel])
 
+    def _pick_probability(self, li: int, prev: tuple):
+        """The probability (m,) or scalar with which next-event estimation at the vertices ``prev`` = (positions,
+        side normals) (3, m) or (None, None) picks light ``li`` (a whole light: the tree's, or the LightSet's)."""
+        if self.tree is None:
+            return self.lights.prob_at(li, *prev)
+        if prev[0] is None:         # camera rays: never MIS-weighted
+            return 1.0
+        return self.tree.probability_of_light(li, *prev)
+
     def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, cols, idx: np.ndarray,
                       prims: np.ndarray, dists: np.ndarray, d: np.ndarray, lk: WavelengthLookup, prev_delta: np.ndarray,
                       prev_pdf: np.ndarray, at_prev, camera: bool, bary=None, o: np.ndarray | None = None,
@@ -1237,10 +1277,16 @@ class PathTracer:
             prev = at_prev(sel)
             # lamps sampled by a warp need the arrival point, hence the direction (EllipseEmitter)
             where = (d[:, sel],) if light.hit_pdf_needs_direction else ()
-            if hit_prim is not None:
-                p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], prim=hit_prim)
+            if self.tree is not None and self.tree.split[li]:
+                # the tree picks this light's triangles one by one: the hit triangle's pick probability × its pdf
+                prim_hit = prims[np.flatnonzero(mine)[front]]
+                p_light = light.triangle_pdf(dists[mine][front], cos_l, prim_hit)
+                p_light = p_light * (1.0 if prev[0] is None else self.tree.probability_of_triangles(prim_hit, *prev))
             else:
-                p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], *where)
-            p_light = p_light * light_set.prob_at(li, *prev)
+                if hit_prim is not None:
+                    p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], prim=hit_prim)
+                else:
+                    p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], *where)
+                p_light = p_light * self._pick_probability(li, prev)
             wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
             self._add_light(radiance, path, T, sel, Le, wsel, cols(sel), light, d[:, sel], x_T)

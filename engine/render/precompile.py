@@ -296,6 +296,7 @@ CASES = (
                                                    "denoise_data": True}, False),
     ("plain", "adaptive sampling", {"spp": 4}, True),
     ("plain", "lights chosen by power (as Blender scenes are)", {"light_selection": "power"}, False),
+    ("plain", "lights chosen by the light tree (Blender's default)", {"light_tree": "on"}, False),
     ("textured", "textures, normal and bump maps, vertex colours, image environment; spectral", {}, False),
     ("textured", "textures in RGB, linear Stokes", {"spectral": "rgb", "polarisation": "linear"}, False),
     ("textured", "textures, scalar transport, denoising data", {"polarisation": "off", "denoise_data": True}, False),

@@ -12,8 +12,9 @@ EXR written by the CLI carries the estimator's identity in its header (:func:`es
     the rendered pixel rectangle "x0 y0 x1 y1" (the resolution is the image's own size);
 ``polar.max_depth``, ``polar.rr_depth``, ``polar.seed``, ``polar.spectral``, ``polar.wavelength_nm``
 (mono only), ``polar.polarisation_requested`` and ``polar.polarisation`` (as resolved),
-``polar.reduce_spectral``, ``polar.simplify``, and ``polar.sampler`` (written only for the
-"stratified" sampler: a file without it was rendered with the "independent" one).
+``polar.reduce_spectral``, ``polar.simplify``, ``polar.sampler`` (written only for the
+"stratified" sampler: a file without it was rendered with the "independent" one), and
+``polar.light_tree`` (written only when not "auto").
 
 What may differ on resume: the total sample count (raised, never below the samples done), threads,
 batch size, Dask scheduler, previews, exposure, and the adaptive sampling settings (threshold,
@@ -55,6 +56,7 @@ MATCHED = {
     "polar.reduce_spectral": "--reduce-spectral",
     "polar.simplify": "--simplify",
     "polar.sampler": "--sampler",
+    "polar.light_tree": "--light-tree",
     **{f"polar.{f.name}": "--" + f.name.replace("_", "-") for f in LIGHT_PATH_FIELDS},
 }
 
@@ -132,6 +134,8 @@ def estimator_identity(scene_hash: str, settings, resolved: str, window=None, si
     if settings.stratified:
         # only then: the headers of independent renders stay as they were (and older files match)
         ident["polar.sampler"] = settings.sampler
+    if getattr(settings, "light_tree", "auto") != "auto":      # (only where set, as the light paths below)
+        ident["polar.light_tree"] = settings.light_tree
     for f in LIGHT_PATH_FIELDS:         # only where set: the headers of other renders stay as they were
         value = getattr(settings, f.name, f.default)
         if value != f.default:

@@ -395,6 +395,13 @@ class RenderSettings:
     #: deeper ones hashed; the default before "sobol") or "independent" (every number a hash of (seed,
     #: pixel, sample, dimension)).
     sampler: str = "sobol"
+    #: How next-event estimation chooses among many lights (Cycles' Light Tree, scene.cycles.use_light_tree):
+    #: "on" — the light tree over lamps and emissive triangles (engine.render.lights.tree: Conty & Kulla 2018 as
+    #: Cycles builds it: importance by energy, distance, bounds and orientation per shading point); "off" — the
+    #: scene's ``light_selection`` (uniform or by power) over whole lights, as before the tree; "auto" (default)
+    #: — the tree where the scene has more than 64 emitters (lamps and each triangle of a mesh light sampled by
+    #: area), where it helps; otherwise "off".  Same expectation either way.
+    light_tree: str = "auto"
     #: Cycles' Light Paths ▸ Max Bounces per kind (engine.render.light_paths): a path whose diffuse, glossy,
     #: transmission or transparent bounces exceed the limit ends at its next surface (that surface's emission
     #: still counts), as Cycles' path_state_next; 0 = only the light found by the first bounce of that kind.
@@ -442,6 +449,8 @@ class RenderSettings:
 
 #: RenderSettings.sampler's values
 SAMPLERS = ("independent", "stratified", "sobol")
+#: RenderSettings.light_tree's values
+LIGHT_TREE_MODES = ("auto", "on", "off")
 
 
 @dataclass(frozen=True)

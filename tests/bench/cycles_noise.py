@@ -77,12 +77,11 @@ def render_luminance(scene, path):
     return seconds, read_multilayer(path + ".exr")["Combined"][..., :3] @ REC709
 
 
-def measure(name, width, height, spp, tmp, samplers=("independent",)):
-    """One result per Polar sampling pattern in ``samplers``, each beside the same Cycles renders
-    (Cycles renders once: its time and noise do not depend on Polar's pattern)."""
+def race_settings(scene, width, height, spp):
+    """Both renderers' settings of a race: the size, Cycles on the CPU with 2 threads, ``spp`` samples without
+    adaptive sampling, denoising, clamps or light threshold, a box pixel filter, the parity tests' bounces, and
+    multilayer float EXR output."""
     import tests.blender.test_cycles_parity_lights as parity
-    scene = parity.base_scene()
-    {**parity.SCENES, **BENCH_SCENES}[name]()
     scene.render.resolution_x, scene.render.resolution_y = width, height
     c = scene.cycles
     scene.render.engine = "CYCLES"
@@ -95,6 +94,16 @@ def measure(name, width, height, spp, tmp, samplers=("independent",)):
     scene.render.threads_mode, scene.render.threads = "FIXED", 2
     ims = scene.render.image_settings
     ims.media_type, ims.color_depth = "MULTI_LAYER_IMAGE", "32"
+
+
+def measure(name, width, height, spp, tmp, samplers=("independent",)):
+    """One result per Polar sampling pattern in ``samplers``, each beside the same Cycles renders
+    (Cycles renders once: its time and noise do not depend on Polar's pattern)."""
+    import tests.blender.test_cycles_parity_lights as parity
+    scene = parity.base_scene()
+    {**parity.SCENES, **BENCH_SCENES}[name]()
+    race_settings(scene, width, height, spp)
+    c = scene.cycles
     out = {}
     for engine, sampler in [("CYCLES", None)] + [("POLAR", s) for s in samplers]:
         key = engine if sampler is None else (engine, sampler)

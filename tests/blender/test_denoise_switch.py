@@ -17,7 +17,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from tests.blender.test_denoise import demo_like_scene, read_all, render_group_outputs  # noqa: E402
-from tests.blender_support import load_addon, read_multilayer, render_to_exr  # noqa: E402
+from tests.blender_support import drawn_properties, load_addon, read_multilayer, render_to_exr  # noqa: E402
 from tests.conftest import REPO  # noqa: E402
 from tests.support import blender_envs  # noqa: E402
 
@@ -96,28 +96,7 @@ def test_blenders_openimagedenoise_is_found(addon):
 def test_sampling_panel_draws_the_switch(addon):
     from polar_render.polar_addon.ui import POLAR_PT_sampling
     scene = demo_like_scene(8, 6, 1)
-
-    class Layout:                     # records the properties a panel draws (no window headless)
-        def __init__(self, drawn):
-            self.drawn, self.use_property_split, self.active = drawn, False, True
-
-        def column(self, **_):
-            return Layout(self.drawn)
-
-        row = column
-
-        def prop(self, data, name, **_):
-            self.drawn.append(name)
-
-        def operator(self, *_, **__):
-            pass
-
-        def label(self, **_):
-            pass
-
-    drawn = []
-    panel = type("P", (), {"layout": Layout(drawn)})()
-    POLAR_PT_sampling.draw(panel, type("C", (), {"scene": scene})())
+    drawn = [name for _, name in drawn_properties(POLAR_PT_sampling, scene)]
     assert "use_denoising" in drawn and "denoising_clamp_dop" in drawn
 
 

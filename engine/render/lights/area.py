@@ -108,6 +108,8 @@ class AreaEmitter(_Light):
         self.compiled = compiled
         self.two_sided = bool(two_sided)
         self.profile = spread_profile(math.radians(spread_deg))
+        #: half the spread (rad, ≤ π/2): the emission cone about the normal (the light tree's θ_e)
+        self.spread_half = min(0.5 * math.pi, 0.5 * math.radians(spread_deg))
         # Opaque emitters can stop their own grazing shadow rays (see CompiledScene.unblock_own_hits).
         # The correction is applied to two-sided (Blender) emitters only: for the scene format's
         # one-sided emitters it would change peer renders (cornell_lambert: 2 of 25,600 pixels at 2 spp).
@@ -169,6 +171,45 @@ class AreaEmitter(_Light):
             scale = scale * self.profile(cos_l)
             valid &= scale > 0
         return wi, dist, scale, pdf, valid
+
+    def points_on(self, p, tri, u1, u2):
+        """Points uniform by area on the triangles ``tri`` (n,) (u1, u2 (n,) in [0, 1)) seen from p (3, n):
+        (wi, dist, cosθ at the emitting side (``facing``), (triangle, b1, b2))."""
+        c = self.compiled
+        f = c.faces[tri]
+        su = np.sqrt(u1)
+        b1 = 1.0 - su
+        b2 = u2 * su
+        V = c.vertices
+        x = (V[f[:, 0]] * (1.0 - b1 - b2)[:, None] + V[f[:, 1]] * b1[:, None] + V[f[:, 2]] * b2[:, None]).T
+        to = x - p
+        dist = np.sqrt(dot(to, to))
+        wi = to / np.where(dist > 0, dist, 1.0)
+        return wi, dist, self.facing(-dot(wi, c.tri_normal[tri].T)), (tri, b1, b2)
+
+    def sample_triangles(self, p, tri, u1, u2):
+        """Next-event samples on given triangles (the light tree's choice): a point uniform by area on
+        triangle ``tri`` (n,) seen from p (3, n), ``sample``'s (wi, dist, scale, pdf, valid) with the pdf of
+        the point given its triangle (``triangle_pdf``), and the points (triangle, b1, b2)."""
+        wi, dist, cos_l, where = self.points_on(p, tri, u1, u2)
+        pdf = self.triangle_pdf(dist, cos_l, tri)
+        valid = pdf > 0
+        scale = np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0)
+        if self.profile is not None:
+            scale = scale * self.profile(cos_l)
+            valid &= scale > 0
+        return wi, dist, scale, pdf, valid, where
+
+    def triangle_pdf(self, dist, cos_l, prim):
+        """Solid-angle pdf dist²/(cosθ·A) (n,) of points at dist, cos_l (emitting side) sampled uniformly by
+        area on their triangles ``prim`` (n,) (``sample_triangles``)."""
+        ok = (cos_l > 0) & (dist > 0)
+        area = self.compiled.tri_area[prim]
+        return np.where(ok, dist * dist / np.where(ok, cos_l * area, 1.0), 0.0)
+
+    def cos_at(self, where, wi: np.ndarray) -> np.ndarray:
+        """cosθ at the emitter (its emitting side) of the directions wi (3, n) towards the points ``where``."""
+        return self.facing(-dot(wi, self.compiled.tri_normal[where[0]].T))
 
     def facing(self, cos_l):
         """cosθ at the emitter of rays arriving with −dot(d, n) = cos_l, as seen by the emitting side

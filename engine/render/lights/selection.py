@@ -4,6 +4,7 @@ Part of engine.render.lights (its package docstring states the light interface).
 
 from __future__ import annotations
 
+import threading
 
 import numpy as np
 
@@ -17,6 +18,7 @@ from .area import mesh_emitter
 from .environment import EnvironmentEmitter, EnvironmentMapEmitter
 from .lamps import DirectionalEmitter, PointEmitter, SpotEmitter
 from .textured import TexturedAreaEmitter
+from .tree import LightTree, splits_into_triangles
 
 
 class LightSet:
@@ -28,6 +30,8 @@ class LightSet:
     ``GLOBAL_SHARE`` of the power distribution (so no light that can contribute gets
     probability 0); for more lights ∝ power alone.  Every MIS pdf includes the probability
     with which the light would have been chosen at the vertex the ray left (``prob_at``).
+    With RenderSettings.light_tree the integrator chooses with ``light_tree()`` instead (engine.render.lights.tree,
+    built on first use; ``uses_tree`` says when).
     """
 
     SPATIAL_MAX = 64
@@ -45,6 +49,27 @@ class LightSet:
         self._selection(scene, compiled)
         self._spatial_records()
         self.hittable = [i for i, light in enumerate(self.lights) if light.hittable]
+        self._compiled = compiled
+        self._tree = None
+        self._tree_lock = threading.Lock()
+
+    def uses_tree(self, mode: str) -> bool:
+        """Whether RenderSettings.light_tree ``mode`` ("on", "off", "auto") chooses lights with the light tree:
+        "auto" where the scene has more emitters — lamps, and each triangle of a mesh light sampled by area —
+        than the per-point selection weighs one by one (SPATIAL_MAX)."""
+        if mode == "off" or not self.lights:
+            return False
+        if mode == "on":
+            return True
+        count = sum(len(light.tris) if splits_into_triangles(light) else 1 for light in self.lights)
+        return count > self.SPATIAL_MAX
+
+    def light_tree(self) -> LightTree:
+        """The scene's light tree, built on first use (once, whichever thread asks first)."""
+        with self._tree_lock:
+            if self._tree is None:
+                self._tree = LightTree(self, self._compiled)
+            return self._tree
 
     def _mesh_emitters(self, scene, compiled) -> None:
         """The emissive meshes' lights (tri_emitter filled in)."""

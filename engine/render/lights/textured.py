@@ -81,9 +81,7 @@ class TexturedAreaEmitter(AreaEmitter):
         areas = compiled.tri_area[self.tris]
         self.tri_luminance, self.tri_may_emit = self._triangle_luminance()
         self._power_area = float((areas * self.tri_luminance).sum())
-        mean = self._power_area / self.total_area
-        floor = self.FLOOR * mean if mean > 0 else 1.0
-        weight = np.where(self.tri_may_emit, np.maximum(self.tri_luminance, floor), 0.0)
+        weight = self._luminance_weight()
         self.black = not bool(self.tri_may_emit.any())
         self.density = None             # area pdf per triangle (luminance sampling), else None
         # equal weights (a uniform texture, up to the estimate's rounding): sampled as a constant emitter
@@ -221,18 +219,22 @@ class TexturedAreaEmitter(AreaEmitter):
         """Points on the triangle that ``cdf`` picks with u0, uniform within it (u1, u2), seen from p:
         (wi, dist, cosθ at the emitting side, (triangle, b1, b2))."""
         idx = np.minimum(np.searchsorted(cdf, u0, side="right"), len(self.tris) - 1)
-        tri = self.tris[idx]
-        c = self.compiled
-        f = c.faces[tri]
-        su = np.sqrt(u1)
-        b1 = 1.0 - su
-        b2 = u2 * su
-        V = c.vertices
-        x = (V[f[:, 0]] * (1.0 - b1 - b2)[:, None] + V[f[:, 1]] * b1[:, None] + V[f[:, 2]] * b2[:, None]).T
-        to = x - p
-        dist = np.sqrt(dot(to, to))
-        wi = to / np.where(dist > 0, dist, 1.0)
-        return wi, dist, self.facing(-dot(wi, c.tri_normal[tri].T)), (tri, b1, b2)
+        return self.points_on(p, self.tris[idx], u1, u2)
+
+    def tree_luminance(self) -> np.ndarray:
+        """Per triangle (T,): the luminance the light tree weighs its area with — the luminance-sampling weight
+        (the estimate, floored where the texture may be positive, 0 where it cannot), the mean with "area"."""
+        if self.black:
+            return np.zeros(len(self.tris))
+        if self.sampling != "luminance":
+            return np.full(len(self.tris), self.mean_luminance())
+        return self._luminance_weight()
+
+    def _luminance_weight(self) -> np.ndarray:
+        """w_t (T,): the estimated luminance, raised to FLOOR × the mean where the texture may be positive, else 0."""
+        mean = self._power_area / self.total_area
+        floor = self.FLOOR * mean if mean > 0 else 1.0
+        return np.where(self.tri_may_emit, np.maximum(self.tri_luminance, floor), 0.0)
 
     def _area_pdf(self, dist, cos_l, prim):
         """Solid-angle pdf of points at dist, cos_l on triangles ``prim`` sampled with the area density
@@ -256,10 +258,6 @@ class TexturedAreaEmitter(AreaEmitter):
             scale = scale * self.profile(cos_l)
             valid &= scale > 0
         return wi, dist, scale, pdf, valid
-
-    def cos_at(self, where, wi: np.ndarray) -> np.ndarray:
-        """cosθ at the emitter (its emitting side) of the directions wi (3, n) towards the points ``where``."""
-        return self.facing(-dot(wi, self.compiled.tri_normal[where[0]].T))
 
     @property
     def hit_pdf_needs_origin(self) -> bool:
