@@ -19,9 +19,10 @@ Output: per scene, S0 (luminance and each of R, G, B) compared with ../shared/pe
 z-scores (σ from the ``seeds`` renders on both sides, its variance floor): the share of blocks within 4σ (issue
 37 asks ≥ 99 %).  Then, on each scene, the time to equal S0 error: each renderer's wall time per render
 (warm: kernels compiled, the first render discarded) times the variance of one render's luminance (mean over
-pixels of the across-seed variance), for Polar with Auto transport (scalar here) and full Stokes and for
-Mitsuba's `llvm_ad_rgb` volpath (its fastest) and `llvm_ad_spectral_polarized`; the ratio is Polar's time to
-reach the error Mitsuba reaches in its time.  Not part of the test command (needs Mitsuba and minutes).
+pixels of the across-seed variance), for Polar with Auto transport (scalar here) and full Stokes (its default
+sobol sampler) and for Mitsuba's `llvm_ad_rgb` volpath (its fastest) and `llvm_ad_spectral_polarized`, each with
+its samplers (``--mitsuba-samplers``); the last column is each row's time to equal error relative to the first
+row's (Mitsuba llvm_ad_rgb, independent).  Not part of the test command (needs Mitsuba and minutes).
 """
 
 from __future__ import annotations
@@ -85,7 +86,7 @@ def mitsuba_medium(mi, interior: dict, obj: dict) -> dict:
             "sigma_t": {"type": "gridvolume", "grid": grid, "raw": True, "to_world": to_world}, **medium}
 
 
-def mitsuba_scene(mi, peer, scene: dict, variant: str, spp: int, seed: int) -> dict:
+def mitsuba_scene(mi, peer, scene: dict, variant: str, spp: int, seed: int, sampler: str = "independent") -> dict:
     """The subset of Polar's scene format these scenes use, as a Mitsuba scene dictionary."""
     cam, settings = scene["camera"], scene["render"]
     nested = {"type": "volpath", "max_depth": int(settings["max_depth"]), "rr_depth": int(settings["rr_depth"])}
@@ -97,7 +98,7 @@ def mitsuba_scene(mi, peer, scene: dict, variant: str, spp: int, seed: int) -> d
                                                                up=cam["up"]),
                     "film": {"type": "hdrfilm", "width": int(cam["width"]), "height": int(cam["height"]),
                              "rfilter": {"type": "box"}, "pixel_format": "rgb", "component_format": "float32"},
-                    "sampler": {"type": "independent", "sample_count": int(spp), "seed": int(seed)}}}
+                    "sampler": {"type": sampler, "sample_count": int(spp), "seed": int(seed)}}}
     for i, light in enumerate(scene["lights"]):
         if light["type"] == "directional":
             d[f"light{i}"] = {"type": "directional", "direction": light["direction"],
@@ -134,7 +135,7 @@ def mitsuba_side(job_file: str) -> None:
     times, files = [], []
     peer.render(mi, mi.load_dict(mitsuba_scene(mi, peer, scene, variant, 4, 999)), 4, 999)    # JIT warm-up
     for seed in range(job["seeds"]):
-        loaded = mi.load_dict(mitsuba_scene(mi, peer, scene, variant, job["spp"], seed))
+        loaded = mi.load_dict(mitsuba_scene(mi, peer, scene, variant, job["spp"], seed, job["sampler"]))
         img, seconds = peer.render(mi, loaded, job["spp"], seed)
         path = f"{job['prefix']}__seed{seed}.npy"
         np.save(path, peer.stokes_array(np, img, variant))
@@ -147,10 +148,12 @@ def mitsuba_side(job_file: str) -> None:
 # ----------------------------------------------------------------------------- the Polar side
 
 
-def run_mitsuba(python: str, scene: dict, variant: str, spp: int, seeds: int, prefix: str) -> dict:
+def run_mitsuba(python: str, scene: dict, variant: str, spp: int, seeds: int, prefix: str,
+                sampler: str = "independent") -> dict:
     job = f"{prefix}.job.json"
     with open(job, "w") as f:
-        json.dump({"scene": scene, "variant": variant, "spp": spp, "seeds": seeds, "prefix": prefix}, f)
+        json.dump({"scene": scene, "variant": variant, "spp": spp, "seeds": seeds, "prefix": prefix,
+                   "sampler": sampler}, f)
     subprocess.run([python, os.path.abspath(__file__), "--mitsuba-side", job], check=True)
     with open(f"{prefix}.json") as f:
         return json.load(f)
@@ -190,6 +193,8 @@ def main() -> None:
     ap.add_argument("--res", type=int, default=64)
     ap.add_argument("--timing-spp", type=int, default=32)
     ap.add_argument("--timing-scenes", default="media_hg_box")
+    ap.add_argument("--mitsuba-samplers", default="independent,stratified,multijitter,ldsampler",
+                    help="Mitsuba samplers timed (spp a power of 4 suits them all)")
     ap.add_argument("--out", default=os.path.join(REPO, "out", "media_peer"))
     ap.add_argument("--mitsuba-python", default="/work/peerenv/bin/python")
     args = ap.parse_args()
@@ -203,7 +208,7 @@ def main() -> None:
     print(f"machine load before: {os.getloadavg()}")
     print(f"{'scene':14s} {'channel':7s} {'Polar S0':>9s} {'Mitsuba S0':>10s} {'rms z':>6s} {'max|z|':>7s} "
           f"{'within 4σ':>9s}")
-    for name in args.scenes.split(","):
+    for name in filter(None, args.scenes.split(",")):
         with open(os.path.join(SCENES, f"{name}.json")) as f:
             scene = with_resolution(json.load(f), args.res)
         prefix = os.path.join(args.out, f"{name}__{args.res}__{args.spp}spp")
@@ -215,15 +220,17 @@ def main() -> None:
                                args.spp * args.seeds, compare)["S0"]
             print(f"{name:14s} {ch:7s} {s0[0]:9.5f} {s0[1]:10.5f} {s0[2]:6.2f} {s0[3]:7.2f} {100 * s0[4]:8.1f}%")
     print(f"\ntime to equal S0 error ({args.timing_spp} spp, {args.seeds} seeds, {args.res}², warm)")
-    print(f"{'scene':14s} {'renderer':38s} {'s/render':>9s} {'var(Y)':>10s} {'s × var':>10s} {'× Mitsuba rgb':>13s}")
-    for name in args.timing_scenes.split(","):
+    print(f"{'scene':14s} {'renderer':44s} {'s/render':>9s} {'var(Y)':>10s} {'s × var':>10s} {'× first':>8s}")
+    for name in filter(None, args.timing_scenes.split(",")):
         with open(os.path.join(SCENES, f"{name}.json")) as f:
             scene = with_resolution(json.load(f), args.res)
         prefix = os.path.join(args.out, f"{name}__{args.res}__{args.timing_spp}spp__timing")
         rows = {}
         for variant in reversed(MITSUBA_VARIANTS):
-            r = run_mitsuba(args.mitsuba_python, scene, variant, args.timing_spp, args.seeds, f"{prefix}__{variant}")
-            rows[f"Mitsuba {variant} volpath"] = r
+            for sampler in args.mitsuba_samplers.split(","):
+                r = run_mitsuba(args.mitsuba_python, scene, variant, args.timing_spp, args.seeds,
+                                f"{prefix}__{variant}__{sampler}", sampler)
+                rows[f"Mitsuba {variant} {sampler}"] = r
         for transport in ("auto", "full"):
             r = run_polar(scene, args.timing_spp, args.seeds, f"{prefix}__polar_{transport}", transport)
             rows[f"Polar {transport} ({r['transport']})"] = r
@@ -231,7 +238,7 @@ def main() -> None:
         for label, r in rows.items():
             t, v = float(np.median(r["times"])), luminance_variance(r["files"], compare)
             base = base or t * v
-            print(f"{name:14s} {label:38s} {t:9.3f} {v:10.3e} {t * v:10.3e} {t * v / base:13.2f}")
+            print(f"{name:14s} {label:44s} {t:9.3f} {v:10.3e} {t * v:10.3e} {t * v / base:8.2f}")
     print(f"machine load after: {os.getloadavg()}")
 
 
