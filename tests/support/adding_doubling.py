@@ -132,25 +132,20 @@ class Slab:
 
     def _double(self, R, T, Rs, Ts, mu4, t):
         """A layer (R, T, R*, T*) of thickness t under itself (Hansen & Travis eqs. 3.9–3.13, per Fourier mode;
-        the direct beam e^{−t/μ} kept apart)."""
-        C = self.C
+        the direct beam e^{−t/μ} kept apart).  Light from below sees the same equations with the roles of
+        (R, T) and (R*, T*) exchanged."""
         e = np.exp(-t / mu4)
-        eye = np.eye(len(mu4))
-        # from above: Q = R* ∘ R, S = Σ Qⁿ, D and U the diffuse down- and upwelling at the interface
+        return self._from_one_side(R, T, Rs, Ts, e) + self._from_one_side(Rs, Ts, R, T, e)
+
+    def _from_one_side(self, R, T, Rs, Ts, e):
+        """(R, T) of two identical layers for light entering the first: Q = R* ∘ R, S = Σ Qⁿ, D and U the
+        diffuse down- and upwelling at the interface."""
+        C = self.C
         Q = Rs * C[None, None, :] @ R
-        S = Q @ np.linalg.inv(eye - C[:, None] * Q)
+        S = Q @ np.linalg.inv(np.eye(len(e)) - C[:, None] * Q)
         D = T + (S * C) @ T + S * e[None, None, :]
         U = (R * C) @ D + R * e[None, None, :]
-        R2 = R + e[:, None] * U + (Ts * C) @ U
-        T2 = e[:, None] * D + (T * C) @ D + T * e[None, None, :]
-        # from below, the same with the roles of (R, T) and (R*, T*) exchanged
-        Q = R * C[None, None, :] @ Rs
-        S = Q @ np.linalg.inv(eye - C[:, None] * Q)
-        D = Ts + (S * C) @ Ts + S * e[None, None, :]
-        U = (Rs * C) @ D + Rs * e[None, None, :]
-        Rs2 = Rs + e[:, None] * U + (T * C) @ U
-        Ts2 = e[:, None] * D + (Ts * C) @ D + Ts * e[None, None, :]
-        return R2, T2, Rs2, Ts2
+        return R + e[:, None] * U + (Ts * C) @ U, e[:, None] * D + (T * C) @ D + T * e[None, None, :]
 
     def _node(self, mu: float) -> int:
         i = np.flatnonzero(np.abs(self.mu - mu) < 1e-12)
