@@ -1,11 +1,12 @@
-"""The three polariser previews of the user guide: a lake under the polarised sky, an LCD screen behind
+"""The polariser previews of the user guide: a lake under the polarised sky, an LCD screen behind
 polarised sunglasses, a car windscreen in daylight — each rendered once and seen through an ideal linear
-polariser at 0°, 45°, 90° and 135° (from image right towards image up).
+polariser at 0°, 45°, 90° and 135° (from image right towards image up) — and hills in Rayleigh haze and murky
+water (participating media, issue 37) at 0° and 90°.
 
-    python examples/polariser_previews.py [--spp 256] [--out docs/images]
+    python examples/polariser_previews.py [--spp 256] [--out docs/images] [--scenes media_haze,media_underwater]
 
-Runs ``python -m engine render`` on examples/daylight_water.json, lcd_sunglasses.json and windscreen.json
-and ``python -m engine polariser --sweep 0:135:45`` on each result; writes <name>.png into --out.
+Runs ``python -m engine render`` on examples/<name>.json and ``python -m engine polariser --sweep …`` on each
+result; writes <name>.png into --out.
 """
 
 from __future__ import annotations
@@ -17,7 +18,9 @@ import sys
 import tempfile
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-SCENES = ("daylight_water", "lcd_sunglasses", "windscreen")
+# name: (polariser sweep, exposure added to --exposure)
+SCENES = {"daylight_water": ("0:135:45", 0.0), "lcd_sunglasses": ("0:135:45", 0.0), "windscreen": ("0:135:45", 0.0),
+          "media_haze": ("0:90:90", 1.0), "media_underwater": ("0:90:90", 0.0)}
 
 
 def main(argv=None) -> int:
@@ -25,16 +28,18 @@ def main(argv=None) -> int:
     p.add_argument("--spp", type=int, default=256)
     p.add_argument("--out", default=os.path.join(REPO, "docs", "images"))
     p.add_argument("--exposure", type=float, default=0.0)
+    p.add_argument("--scenes", default=",".join(SCENES), help="comma-separated names of examples/<name>.json")
     a = p.parse_args(argv)
     os.makedirs(a.out, exist_ok=True)
     with tempfile.TemporaryDirectory() as tmp:
-        for name in SCENES:
+        for name in a.scenes.split(","):
+            sweep, exposure = SCENES[name]
             exr = os.path.join(tmp, f"{name}.exr")
             subprocess.run([sys.executable, "-m", "engine", "render", os.path.join(REPO, "examples", f"{name}.json"),
                             "-o", exr, "--spp", str(a.spp), "--no-previews", "-q"], check=True, cwd=REPO)
             png = os.path.join(a.out, f"{name}.png")
-            subprocess.run([sys.executable, "-m", "engine", "polariser", exr, "--sweep", "0:135:45", "--exposure",
-                            str(a.exposure), "-o", png], check=True, cwd=REPO)
+            subprocess.run([sys.executable, "-m", "engine", "polariser", exr, "--sweep", sweep, "--exposure",
+                            str(a.exposure + exposure), "-o", png], check=True, cwd=REPO)
     return 0
 
 

@@ -151,7 +151,7 @@ def test_layered_material_can_reference_another_material_as_base():
 
 
 @pytest.mark.parametrize("name", ["demo", "glare_demo", "thesis_fresnel_gold", "thesis_ts_gold",
-                                  "thesis_htsg_aluminium", "thesis_ww_coat_red"])
+                                  "thesis_htsg_aluminium", "thesis_ww_coat_red", "media_haze", "media_underwater"])
 def test_examples_load_and_render(name):
     from engine.render.renderer import Renderer
     from tests.conftest import REPO
