@@ -74,23 +74,23 @@ def choose_transport(materials: Mapping[str, BSDF], used: set[str] | None = None
 
 def resolve_transport(requested: str, materials: Mapping[str, BSDF], used: set[str] | None = None,
                       sources: tuple[str, list[str]] = ("off", []),
-                      media: tuple[str, list[str]] = ("off", [])) -> tuple[str, str]:
+                      media: tuple[str, list[str]] = ("off", []), world=None) -> tuple[str, str]:
     """The transport to run for a requested mode ("auto" or explicit) and why (absorbing interiors
     listed after it: they never change the choice).  ``sources``: (the transport the scene's polarised
     sources need, their names) — ``source_needs``; ``media``: the same for the participating media's phase
-    functions — ``media_needs``."""
+    functions — ``media_needs``; ``world``: the world medium (an Interior, or None), named with the media."""
     if requested == "auto" and TRANSPORT_SIZES[media[0]] > TRANSPORT_SIZES[choose_transport(materials, used)[0]] \
             and TRANSPORT_SIZES[media[0]] > TRANSPORT_SIZES[sources[0]]:
         what = "retard (full Stokes)" if media[0] == "full" else "polarise (linear Stokes)"
         return media[0], (f"auto → {media[0]} Stokes: the phase functions of {_list(media[1])} {what}"
-                          + absorption_note(materials, used))
+                          + absorption_note(materials, used, world))
     need, names = sources
     if requested != "auto":
         note = ""
         if TRANSPORT_SIZES[requested] < TRANSPORT_SIZES[need]:
             lost = "polarisation" if requested == "off" else "circular polarisation"
             note = f"; the {lost} of {_list(names)} is not simulated in this transport"
-        return requested, f"{requested} (requested)" + note + absorption_note(materials, used)
+        return requested, f"{requested} (requested)" + note + absorption_note(materials, used, world)
     mode, reason = choose_transport(materials, used)
     if TRANSPORT_SIZES[need] > TRANSPORT_SIZES[mode]:
         what = "circularly" if need == "full" else "linearly"
@@ -98,7 +98,7 @@ def resolve_transport(requested: str, materials: Mapping[str, BSDF], used: set[s
                               f"emit{'s' if len(names) == 1 else ''} {what} polarised light")
     elif names:
         reason += f"; polarised sources: {_list(names)}"
-    return mode, f"auto → {reason}" + absorption_note(materials, used)
+    return mode, f"auto → {reason}" + absorption_note(materials, used, world)
 
 
 def source_needs(scene) -> tuple[str, list[str]]:
@@ -137,9 +137,11 @@ def media_needs(scene, used: set[str] | None = None) -> tuple[str, list[str]]:
     return need, names
 
 
-def absorption_note(materials: Mapping[str, BSDF], used: set[str] | None = None) -> str:
-    """"; absorbing interiors: 'glass' (…)" for the ``used`` materials with an interior, else ""."""
+def absorption_note(materials: Mapping[str, BSDF], used: set[str] | None = None, world=None) -> str:
+    """"; absorbing interiors: 'glass' (…)" for the ``used`` materials with an interior and the world medium
+    ``world`` (an Interior or None), else ""."""
     interiors = [(n, interior_of(materials[n])) for n in sorted(used if used is not None else materials)]
+    interiors += [("world medium", world)] if world is not None else []
     names = [n for n, it in interiors if it is not None and not it.tracked]
     scattering = [n for n, it in interiors if it is not None and it.tracked]
     note = ""

@@ -29,6 +29,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..materials.flags import BSDFFlags
+from ..spectral.spectrum import RGBReflectanceSpectrum, RGBUnboundedSpectrum
 from .accel import offset_origin
 
 #: Volumes a path can be inside at once (deeper nesting is ignored when entered, as Cycles' stack limit).
@@ -258,9 +259,30 @@ def tracked_media(compiled, world) -> list:
 
 
 def media_flags(compiled, world) -> BSDFFlags:
-    """The capabilities (POLARISING, RETARDING, WAVELENGTH_DEPENDENT) of the tracked media's phase functions."""
+    """The capabilities (POLARISING, RETARDING, WAVELENGTH_DEPENDENT) of the media: the tracked media's phase
+    functions, and WAVELENGTH_DEPENDENT where a medium's coefficient needs wavelengths (``spectral_media``)."""
     flags = BSDFFlags.NONE
     for _, interior in tracked_media(compiled, world):
         if interior.phase is not None:
             flags |= interior.phase.flags
+    if spectral_media(compiled, world):
+        flags |= BSDFFlags.WAVELENGTH_DEPENDENT
     return flags
+
+
+def defined_by_rgb(spectrum) -> bool:
+    """A coefficient that RGB transport uses exactly as given: None, constant (grey) or an RGB triple (Cycles'
+    colour arithmetic, per channel); a spectral table (TabulatedSpectrum) is not."""
+    return spectrum is None or getattr(spectrum, "is_constant", False) or isinstance(spectrum, (RGBReflectanceSpectrum, RGBUnboundedSpectrum))
+
+
+def spectral_media(compiled, world) -> list[str]:
+    """The names of the media that need wavelengths (the compiled scene's volumes by material name, "world
+    medium"): a coefficient σ_a or σ_s that is not ``defined_by_rgb``, or a tracked medium's phase function that
+    depends on λ (Lorenz–Mie tables).  Grey and RGB media with Henyey–Greenstein or Rayleigh phases need none."""
+    items = [(compiled.material_names[k], interior) for _, k, interior in compiled.volumes]
+    items.append(("world medium", world))
+    names = [name for name, it in items if it is not None
+             and (not (defined_by_rgb(it.absorption) and defined_by_rgb(it.scattering))
+                  or (it.tracked and it.phase is not None and it.phase.flags.wavelength_dependent))]
+    return list(dict.fromkeys(names))

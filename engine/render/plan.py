@@ -20,7 +20,7 @@ import numpy as np
 from ..materials.base import BSDF, BSDFFlags
 from ..scene.description import RenderSettings
 from .effects import effective_materials, media_needs, resolve_transport, source_needs
-from .media import media_flags
+from .media import media_flags, spectral_media
 from .light_paths import describe as describe_light_paths
 
 #: (x0, y0, x1, y1): a pixel rectangle, row 0 at the top, x1 and y1 exclusive.
@@ -82,16 +82,27 @@ def spectral_reduction(settings: RenderSettings, materials: Sequence[BSDF], used
 
 
 def spectral_description(settings: RenderSettings, materials: Sequence[BSDF], used: Sequence[int],
-                         extra: BSDFFlags = BSDFFlags.NONE) -> str:
-    """How the paths carry the spectrum, as the render's stats report it."""
+                         extra: BSDFFlags = BSDFFlags.NONE, needs: Sequence[str] = ()) -> str:
+    """How the paths carry the spectrum, as the render's stats report it; ``needs``: the names of what depends
+    on λ (materials, media), reported when they keep the paths spectral."""
     uniform, rgb_mode = spectral_reduction(settings, materials, used, extra)
     if settings.spectral == "rgb":
         return "RGB channels (Cycles' colour arithmetic)"
     if rgb_mode:
-        return "RGB with exactly integrated light spectra (no material depends on λ)"
+        return "RGB with exactly integrated light spectra (nothing depends on λ)"
     if uniform:
-        return "spectral, one Mueller product per path (no material depends on λ)"
+        return "spectral, one Mueller product per path (nothing depends on λ)"
+    if settings.spectral == "spectral" and settings.reduce_spectral in ("auto", "exact", True) and needs:
+        return f"spectral ({', '.join(repr(n) for n in needs)} depend{'s' if len(needs) == 1 else ''} on λ)"
     return settings.spectral
+
+
+def wavelength_needs(compiled, materials: Sequence[BSDF], world) -> list[str]:
+    """The names of the used materials (by the compiled scene's index) and media (engine.render.media.spectral_media)
+    whose values depend on λ: what keeps a render's paths spectral."""
+    names = [compiled.material_names[i] for i in sorted(set(compiled.used_materials))
+             if materials[i].flags.has(BSDFFlags.WAVELENGTH_DEPENDENT)]
+    return names + [n for n in spectral_media(compiled, world) if n not in names]
 
 
 def rendered_materials(compiled, simplify: str = "auto", materials=None) -> tuple[list[BSDF], list[str]]:
@@ -143,14 +154,22 @@ class RenderPlan:
         materials, simplified = rendered_materials(compiled, requested.simplify, scene.materials)
         polarisation, reason = resolve_transport(requested.polarisation, dict(zip(compiled.material_names, materials)),
                                                  compiled.used_material_names, sources=source_needs(scene),
-                                                 media=media_needs(scene, compiled.used_material_names))
+                                                 media=media_needs(scene, compiled.used_material_names),
+                                                 world=getattr(scene, "medium", None))
         st = dataclasses.replace(requested, polarisation=polarisation)
+        world = getattr(scene, "medium", None)
+        extra = media_flags(compiled, world)
+        if spectral_reduction(st, materials, compiled.used_materials, extra) \
+                != spectral_reduction(st, materials, compiled.used_materials):
+            # a medium's coefficients need λ (the tracers see only the materials and phase functions): no reduction
+            st = dataclasses.replace(st, reduce_spectral="off")
         W, H = scene.camera.width, scene.camera.height
         if workers is None:
             workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
         return cls(st, reason, tuple(materials), tuple(simplified),
-                   spectral_description(st, materials, compiled.used_materials,
-                                        media_flags(compiled, getattr(scene, "medium", None))), W, H,
+                   spectral_description(dataclasses.replace(st, reduce_spectral=requested.reduce_spectral),
+                                        materials, compiled.used_materials, extra,
+                                        wavelength_needs(compiled, materials, world)), W, H,
                    check_window(window, W, H), int(workers))
 
     @property

@@ -6,7 +6,9 @@ A box of Henyey–Greenstein fog (g = 0.6, albedo 0.9, optical thickness 4 acros
 Lambert floor under a sun and a sky, rendered with the scalar ("off"), linear and full Stokes transports
 (the phase function depolarises, so all three estimate the same S0), and the same box with Rayleigh fog
 (linear, full).  Prints the best-of-``repeat`` wall time of each and its ratio to scalar (issue 37 asks
-full Stokes ≤ 1.5× scalar in media), and the rays per path.  Not part of the test command.
+full Stokes ≤ 1.5× scalar in media), and the rays per path.  Then the Rayleigh box in linear Stokes with the
+spectral reduction "auto" (grey media and surfaces: RGB transport) against "off" (four sampled wavelengths
+per path): the speed of RGB transport in media.  Not part of the test command.
 """
 
 from __future__ import annotations
@@ -42,9 +44,10 @@ def fog_scene(phase: dict, res: int, spp: int) -> dict:
                        {"type": "environment", "radiance": 0.2}]}
 
 
-def timed(data: dict, transport: str, repeat: int) -> tuple[float, dict]:
+def timed(data: dict, transport: str, repeat: int, reduce: str = "auto") -> tuple[float, dict]:
     d = copy.deepcopy(data)
     d["render"]["polarisation"] = transport
+    d["render"]["reduce_spectral"] = reduce
     renderer = Renderer(parse_scene(d))
     renderer.render()                        # kernels compiled, caches filled
     best, stats = float("inf"), None
@@ -72,6 +75,11 @@ def main() -> None:
         for t, (sec, stats) in times.items():
             print(f"{name:26s} {t:7s} {sec:7.3f} s  ×{sec / base:5.2f} of {transports[0]}  "
                   f"{stats['rays'] / paths:5.2f} rays/path, {stats['shadow_rays'] / paths:5.2f} shadow rays/path")
+    data = fog_scene(cases[1][1], args.res, args.spp)
+    times = {r: timed(data, "linear", args.repeat, r) for r in ("off", "auto")}
+    for r, (sec, stats) in times.items():
+        print(f"rayleigh linear reduce={r:4s} {sec:7.3f} s  ×{sec / times['off'][0]:5.2f} of spectral  "
+              f"({stats['spectral']})")
 
 
 if __name__ == "__main__":
