@@ -273,7 +273,8 @@ def media_flags(compiled, world) -> BSDFFlags:
 def defined_by_rgb(spectrum) -> bool:
     """A coefficient that RGB transport uses exactly as given: None, constant (grey) or an RGB triple (Cycles'
     colour arithmetic, per channel); a spectral table (TabulatedSpectrum) is not."""
-    return spectrum is None or getattr(spectrum, "is_constant", False) or isinstance(spectrum, (RGBReflectanceSpectrum, RGBUnboundedSpectrum))
+    return (spectrum is None or getattr(spectrum, "is_constant", False)
+            or isinstance(spectrum, (RGBReflectanceSpectrum, RGBUnboundedSpectrum)))
 
 
 def spectral_media(compiled, world) -> list[str]:
