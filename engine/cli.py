@@ -877,8 +877,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--light-passes", metavar="LIST",
                    help="also write Cycles' light passes with their Stokes components, comma-separated or 'all': "
                         "diffuse_direct, diffuse_indirect, diffuse_color, glossy_direct, glossy_indirect, "
-                        "glossy_color, transmission_direct, transmission_indirect, transmission_color, emission, "
-                        "environment (channels 'Diffuse Direct.R/G/B' = S0, 'Diffuse Direct S1.R' … 'S3.B'; "
+                        "glossy_color, transmission_direct, transmission_indirect, transmission_color, volume_direct, "
+                        "volume_indirect, emission, environment "
+                        "(channels 'Diffuse Direct.R/G/B' = S0, 'Diffuse Direct S1.R' … 'S3.B'; "
                         "Color passes S0 only); traced as a second pass over the render's samples")
     r.add_argument("--data-samples", type=int, metavar="N",
                    help="samples per pixel of the data passes (default min(spp, 64): the render's first camera rays)")

@@ -35,10 +35,12 @@ VIEW_LAYER_PASSES = (("use_pass_z", "depth"), ("use_pass_mist", "mist"), ("use_p
                      ("use_pass_cryptomatte_object", "crypto_object"),
                      ("use_pass_cryptomatte_material", "crypto_material"),
                      ("use_pass_cryptomatte_asset", "crypto_asset"))
-#: View layer property (Cycles' Light passes) → engine light pass (engine.render.light_passes.LIGHT_PASSES)
+#: View layer property (Cycles' Light passes; "cycles.": on view_layer.cycles) → engine light pass
+#: (engine.render.light_passes.LIGHT_PASSES)
 VIEW_LAYER_LIGHT_PASSES = tuple((f"use_pass_{key}", key) for key in (
     "diffuse_direct", "diffuse_indirect", "diffuse_color", "glossy_direct", "glossy_indirect", "glossy_color",
     "transmission_direct", "transmission_indirect", "transmission_color")) + (
+    ("cycles.use_pass_volume_direct", "volume_direct"), ("cycles.use_pass_volume_indirect", "volume_indirect"),
     ("use_pass_emit", "emission"), ("use_pass_environment", "environment"))
 #: Cycles' pass types (list_render_passes in Cycles' engine.py)
 PASS_TYPES = {"Depth": "VALUE", "Mist": "VALUE", "Position": "VECTOR", "Normal": "VECTOR", "Vector": "VECTOR",
@@ -70,7 +72,10 @@ def pass_layout(view_layer) -> list:
 
 def light_pass_keys(view_layer) -> tuple:
     """The engine keys of the light passes ``view_layer`` enables (View Layer ▸ Passes ▸ Light), Cycles' order."""
-    return tuple(key for prop, key in VIEW_LAYER_LIGHT_PASSES if getattr(view_layer, prop, False))
+    def enabled(prop):
+        owner, _, name = prop.rpartition(".")
+        return getattr(getattr(view_layer, owner, None) if owner else view_layer, name, False)
+    return tuple(key for prop, key in VIEW_LAYER_LIGHT_PASSES if enabled(prop))
 
 
 def register_data_passes(engine, scene, view_layer) -> None:

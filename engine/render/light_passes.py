@@ -1,6 +1,6 @@
 """Cycles' light passes with their Stokes components: Diffuse / Glossy / Transmission × Direct / Indirect /
-Color, Emission and Environment (docs/guide/polariser-and-passes.md, "Light passes"; the rules are Cycles'
-kernel/film/light_passes.h, data_passes.h and read.h).
+Color, Volume Direct / Indirect, Emission and Environment (docs/guide/polariser-and-passes.md, "Light passes";
+the rules are Cycles' kernel/film/light_passes.h, data_passes.h and read.h).
 
 A path's light is put into a pass by its first non-transparent scattering vertex (crossings of alpha and
 NULL-lobe surfaces before it keep it "seen directly"):
@@ -22,7 +22,11 @@ NULL-lobe surfaces before it keep it "seen directly"):
   direction, split by the same fraction, unpolarised (S0 only), as a colour under white light (Σ_λ a·D65·w_rgb
   at the sampled wavelengths: unbiased for the RGB of a·D65, the round trip of an RGB albedo; in RGB transport
   the albedo itself, engine.render.integrator.albedo_rgb); Direct and Indirect are their light's sum divided
-  by Color's (Cycles' ``safe_divide_even_color``), so (Direct + Indirect)·Color + … recombine to Combined.
+  by Color's (Cycles' ``safe_divide_even_color``), so (Direct + Indirect)·Color + … recombine to Combined;
+- a path whose first vertex is a **medium vertex** (a participating medium's scattering: engine.render.participating)
+  puts all its later light into **Volume Direct** (the light sample there and the emission its sampled segment
+  reaches) and **Volume Indirect**, undivided (Cycles' PATH_RAY_VOLUME_PASS, set by path_state_next for a
+  LABEL_VOLUME_SCATTER bounce before any pass flag; Cycles has no Volume Color).
 
 The passes are traced as a second pass over the render's own samples (the same random numbers, hence the same
 paths: engine.render.light_paths.trace_light_paths with a recorder), so a render that does not ask for them
@@ -50,14 +54,16 @@ LIGHT_PASSES = {"diffuse_direct": "Diffuse Direct", "diffuse_indirect": "Diffuse
                 "diffuse_color": "Diffuse Color", "glossy_direct": "Glossy Direct",
                 "glossy_indirect": "Glossy Indirect", "glossy_color": "Glossy Color",
                 "transmission_direct": "Transmission Direct", "transmission_indirect": "Transmission Indirect",
-                "transmission_color": "Transmission Color", "emission": "Emission", "environment": "Environment"}
+                "transmission_color": "Transmission Color", "volume_direct": "Volume Direct",
+                "volume_indirect": "Volume Indirect", "emission": "Emission", "environment": "Environment"}
 ALL_LIGHT_PASSES = tuple(LIGHT_PASSES)
-#: the light sums a batch keeps, in this order: per lobe Direct, Indirect; then Emission, Environment
+#: the light sums a batch keeps, in this order: per lobe Direct, Indirect; then Emission, Environment, Volume
+#: Direct, Indirect (the last four are not divided by a Color)
 LIGHT_SUMS = ("Diffuse Direct", "Diffuse Indirect", "Glossy Direct", "Glossy Indirect", "Transmission Direct",
-              "Transmission Indirect", "Emission", "Environment")
+              "Transmission Indirect", "Emission", "Environment", "Volume Direct", "Volume Indirect")
 COLORS = ("Diffuse Color", "Glossy Color", "Transmission Color")
 DIFFUSE, GLOSSY, TRANS = range(3)
-EMIT, ENV = 6, 7
+EMIT, ENV, VOLUME = 6, 7, 8
 #: the Stokes components' passes: "<pass> S1" … "<pass> S3" beside "<pass>" (= S0, Cycles' own)
 STOKES_SUFFIXES = (" S1", " S2", " S3")
 
@@ -70,8 +76,9 @@ def stokes_pass_names(name: str) -> tuple[str, ...]:
 class LightPassBatch:
     """The light passes' bookkeeping of one batch (indexed by the batch's path index, never compacted): each
     path's level (0: before its first vertex, 1: its Direct segment, 2: Indirect), its first vertex's diffuse
-    fraction (Lm, N), the Stokes direction of depolarised light behind the throughput there (P, Lm, N) and its
-    side (transmission), and the sums: ``per_pass`` (8, P, L, N) of light and colours (3, Lm, N)."""
+    fraction (Lm, N), the Stokes direction of depolarised light behind the throughput there (P, Lm, N), its
+    side (transmission) and whether it was a medium vertex (``volume``), and the sums: ``per_pass`` (10, P, L, N)
+    of light and colours (3, Lm, N)."""
 
     def __init__(self, tracer, state, acc):
         n, P = acc.radiance.shape[2], acc.radiance.shape[0]
@@ -82,6 +89,7 @@ class LightPassBatch:
         self.col0 = np.zeros((P, Lm, n))
         self.col0[0] = 1.0
         self.transmit = np.zeros(n, bool)
+        self.volume = np.zeros(n, bool)
         self.per_pass = np.zeros((len(LIGHT_SUMS), P, L, n))
         self.color = np.zeros((len(COLORS), Lm, n))
         # this vertex's: the light sample's diffuse part and side, the sampled direction's diffuse fraction
@@ -91,6 +99,7 @@ class LightPassBatch:
         self.frac_now = np.zeros((Lm, n))
         self.rules = LightPathRules(tracer.settings, tracer.materials)
         self.transmits = np.array([m.flags.transmits for m in tracer.materials], bool)
+        self.medium = self.rules.volume                 # per material: a medium vertex's pseudo-material
         self.unseparated: set[str] = set()
         self.estimated: set[str] = set()           # materials without lobe_colors (one-sample colours)
         # albedos become colours under white light: the colour-matching weights times D65 at the sampled λ
@@ -158,6 +167,10 @@ class LightPassBatch:
         """Light ``added`` (P, L, m) of paths past their first vertex into Direct (``indirect`` 0) or Indirect (1)."""
         if ids.size == 0:
             return
+        vol = self.volume[ids]
+        if vol.any():
+            self.per_pass[VOLUME + indirect][:, :, ids[vol]] += added[:, :, vol]
+            ids, added = ids[~vol], added[:, :, ~vol]
         s0 = self.frac[:, ids] * added[0]                  # (L, m): the diffuse share of S0
         diffuse = self.col0[:, :, ids] * s0[None]
         rest = added - diffuse
@@ -185,11 +198,16 @@ class LightPassBatch:
         ids, added = self._added(seen)
         level = self.level[ids]
         first = level == 0
-        if first.any():
-            f_ids = ids[first]
-            diffuse = self.nee_diffuse[:, :, f_ids] * (1.0 if factor is None else factor[first])
-            diffuse = np.where(self.nee_pure[f_ids], added[:, :, first], diffuse)
-            rest = added[:, :, first] - diffuse
+        medium = self.medium[mat]
+        vol_first = first & medium
+        if vol_first.any():                     # a medium vertex's light sample: Volume Direct, undivided
+            self.per_pass[VOLUME][:, :, ids[vol_first]] += added[:, :, vol_first]
+        surf_first = first & ~medium
+        if surf_first.any():
+            f_ids = ids[surf_first]
+            diffuse = self.nee_diffuse[:, :, f_ids] * (1.0 if factor is None else factor[surf_first])
+            diffuse = np.where(self.nee_pure[f_ids], added[:, :, surf_first], diffuse)
+            rest = added[:, :, surf_first] - diffuse
             trans = self.nee_transmit[f_ids]
             self.per_pass[2 * DIFFUSE][:, :, f_ids] += diffuse
             self.per_pass[2 * GLOSSY][:, :, f_ids] += np.where(trans, 0.0, rest)
@@ -197,6 +215,8 @@ class LightPassBatch:
         self._split(ids[~first], added[:, :, ~first], 1)
         kind, _ = classify(self.rules, mat, surf.n_g, surf.wo, nxt.d, nxt.is_delta)
         new = first & (kind != TRANSPARENT)
+        self.volume[ids[new]] = medium[new]
+        new = new & ~medium                     # surface first vertices: their lobe records and colours
         if new.any():
             n_ids = ids[new]
             frac = self.frac_now[:, n_ids]
@@ -216,7 +236,7 @@ class LightPassBatch:
             self.color[DIFFUSE][:, n_ids] = np.where(known, colors.diffuse, frac * a)
             self.color[GLOSSY][:, n_ids] = np.where(known, colors.glossy, np.where(trans, 0.0, (1.0 - frac) * a))
             self.color[TRANS][:, n_ids] = np.where(known, colors.transmission, np.where(trans, (1.0 - frac) * a, 0.0))
-        self.level[ids] = np.where(new, 1, np.where(level >= 1, 2, level))
+        self.level[ids] = np.where(first & (kind != TRANSPARENT), 1, np.where(level >= 1, 2, level))
 
     def _colors(self, state, surf, mat: np.ndarray, rows: np.ndarray, t00: np.ndarray) -> tuple:
         """The Color passes' albedos of the first vertices ``rows`` (batch rows; throughput T00 (Lm, m) before
@@ -240,7 +260,7 @@ class LightPassBatch:
         return out, known
 
     def finish(self) -> dict:
-        """The batch's passes per path: "light" (8, 4, 3, N) Stokes × RGB (as the film converts the radiance),
+        """The batch's passes per path: "light" (10, 4, 3, N) Stokes × RGB (as the film converts the radiance),
         "color" (3, 3, N) linear sRGB albedos, "unseparated" (the materials whose lobes were not told apart)."""
         tracer, acc = self.tracer, self.acc
         n = self.level.size
@@ -290,6 +310,15 @@ class LightPasses:
                     out[pass_name] = self.stokes[name][k]
         return out
 
+    def recombined(self) -> np.ndarray:
+        """Combined (4, H, W, 3) from the passes as Cycles' compositing adds them: (Direct + Indirect)·Color per
+        lobe, plus Volume Direct + Indirect, Emission and Environment (equal to ``combined`` wherever no lobe has
+        light with a Color of 0: a division that cannot be undone, Cycles' too)."""
+        out = sum(self.stokes[name] for name in LIGHT_SUMS[EMIT:])
+        for k, c in enumerate(COLORS):
+            out = out + (self.stokes[LIGHT_SUMS[2 * k]] + self.stokes[LIGHT_SUMS[2 * k + 1]]) * self.color[c][None]
+        return out
+
     def channels(self, keys=ALL_LIGHT_PASSES) -> dict:
         """EXR channels {"Diffuse Direct.R": (H, W), …, "Diffuse Direct S1.R": …} of the passes ``keys``."""
         return {f"{name}.{c}": img[..., i] for name, img in self.images(keys).items() for i, c in enumerate("RGB")}
@@ -334,7 +363,7 @@ def render_light_passes(renderer, settings=None, window=None, threads: int | Non
         lp = stats["light_passes"]
         out[..., lp["dropped"]] = 0.0           # the samples the passes drop are dropped from their combined too
         m = c.size
-        return (out.reshape(4, 3, m, spp).sum(-1), lp["light"].reshape(8, 4, 3, m, spp).sum(-1),
+        return (out.reshape(4, 3, m, spp).sum(-1), lp["light"].reshape(len(LIGHT_SUMS), 4, 3, m, spp).sum(-1),
                 lp["color"].reshape(3, 3, m, spp).sum(-1), lp["unseparated"], lp["estimated"])
 
     workers = threads if threads is not None else settings.threads
@@ -345,7 +374,7 @@ def render_light_passes(renderer, settings=None, window=None, threads: int | Non
         with ThreadPoolExecutor(workers) as pool:
             results = list(pool.map(run, chunks))
     n = pixels.size
-    combined, light, color = np.zeros((4, 3, n)), np.zeros((8, 4, 3, n)), np.zeros((3, 3, n))
+    combined, light, color = np.zeros((4, 3, n)), np.zeros((len(LIGHT_SUMS), 4, 3, n)), np.zeros((3, 3, n))
     unseparated, estimated = set(), set()
     for c, (o, li, co, un, est) in zip(chunks, results):
         combined[..., c], light[..., c], color[..., c] = o, li, co

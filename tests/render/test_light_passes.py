@@ -18,7 +18,7 @@ import pytest
 
 from engine.cli import main
 from engine.output.exr import read_stokes_exr
-from engine.render.light_passes import COLORS, LIGHT_SUMS, render_light_passes, safe_divide_even_color
+from engine.render.light_passes import render_light_passes, safe_divide_even_color
 from engine.render.renderer import Renderer
 from engine.scene.loader import parse_scene
 
@@ -36,10 +36,7 @@ def _glare(width=48, height=24, spp=8):
 
 
 def _recombined(lp):
-    out = lp.stokes["Emission"] + lp.stokes["Environment"]
-    for k, c in enumerate(COLORS):
-        out = out + (lp.stokes[LIGHT_SUMS[2 * k]] + lp.stokes[LIGHT_SUMS[2 * k + 1]]) * lp.color[c][None]
-    return out
+    return lp.recombined()
 
 
 @pytest.fixture(scope="module")
