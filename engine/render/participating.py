@@ -450,6 +450,9 @@ class ParticipatingPathTracer(PathTracer):
     def _intersect(self, state, acc, bounce):
         state.bounce = bounce
         hits, hit, background = super()._intersect(state, acc, bounce)
+        # camera rays that reached a transparent film's background (each added 1 to the transparency)
+        state.see_through = (np.flatnonzero(hits.prim < 0) if bounce == 0 and self.film_transparent
+                             and acc.transparency is not None else None)
         t_end = np.where(hit, hits.t, np.inf if state.t_max is None else state.t_max)
         tracks = self.tracking.free_flight(state.media, state.o, state.d, state.crossings or [], t_end, state.lk,
                                            state.sampler.keys, bounce)
@@ -483,21 +486,37 @@ class ParticipatingPathTracer(PathTracer):
         super()._emission(state, acc, hits, hit, background, bounce)
         tracks = getattr(state, "tracks", None)
         if tracks is not None:
-            self._volume_emission(state, acc, tracks)
+            att = getattr(state, "tracked_att", None)
+            state.tracked_att = None
+            self._volume_emission(state, acc, tracks, att)
+            if getattr(state, "see_through", None) is not None:
+                self._film_transparency(state, acc, tracks, att)
             state.tau = state.tau * tracks.total()
             if tracks.scattered.any():      # the stacks where they scattered, not at their segments' ends
                 state.media[:, tracks.scattered] = tracks.stack[:, tracks.scattered]
             state.tracks = None
 
-    def _volume_emission(self, state, acc, tracks) -> None:
+    def _volume_emission(self, state, acc, tracks, att) -> None:
         """The media's emission met along the segments: ε(x)/σ̄ at each collision x, weighted by the collisions
-        before it and the analytic absorption up to it (unpolarised: the throughput's first column)."""
-        att = getattr(state, "tracked_att", None)
-        state.tracked_att = None
+        before it and the analytic absorption up to it (``att``; unpolarised: the throughput's first column)."""
         for rows, t, e in tracks.emitted:
             f = att(rows, t) if att is not None else tracks.weight(rows, t)
             Le = e if f is None else e * f
             add_light(acc.radiance, state.path, state.T_store, rows, Le, np.ones(rows.size), state.T_columns(rows))
+
+    @staticmethod
+    def _film_transparency(state, acc, tracks, att) -> None:
+        """A transparent film's camera rays that missed every surface: their transparency is the mean over the
+        wavelengths of their throughput at the background (Cycles' film_write_transparent: average(throughput)),
+        0 where they scattered in a medium (their light is the medium's), not the 1 the surface pass gave."""
+        rows = state.see_through
+        state.see_through = None
+        if rows.size == 0:
+            return
+        inf = np.full(rows.size, np.inf)
+        f = att(rows, inf) if att is not None else tracks.weight(rows, inf)
+        left = 1.0 if f is None else f.mean(axis=0)
+        acc.transparency[state.path[rows]] += left - 1.0
 
     def _surface(self, state, hits, hit):
         F = self.first_medium_prim

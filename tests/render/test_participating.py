@@ -341,3 +341,23 @@ def test_an_emitting_box_with_a_coloured_emission_in_spectral_transport_develops
     for c in range(3):
         m, e = mean_and_error(img[..., c])
         assert abs(m - expected[c]) < 4 * e + 1e-2 * expected[c], (c, m, expected[c], e)
+
+
+# ----------------------------------------------------------------------------- transparent film
+
+
+def test_a_transparent_film_counts_camera_rays_that_scatter_in_fog_as_opaque():
+    """Nothing but fog under a transparent film: in world fog every camera ray scatters (alpha 1 everywhere,
+    Cycles' too); through a 2-unit box of grey fog σ_t = 0.6 the alpha is the chance to scatter or be absorbed,
+    1 − e^{−1.2}, within 4σ (it was 0: every ray that missed the surfaces counted as transparent)."""
+    world = glowing_box({"albedo": 1.0, "density": 0.6, "phase": HG}, spp=16, size=8)
+    world["objects"] = []
+    world["medium"] = {"albedo": 1.0, "density": 0.6, "phase": HG}
+    world["camera"]["film_transparent"] = True
+    a = Renderer(parse_scene(world)).render().film.alpha()
+    np.testing.assert_array_equal(a, 1.0)
+    box_fog = glowing_box({"albedo": 0.5, "density": 0.6, "phase": HG}, spp=64, size=8, max_depth=4)
+    box_fog["camera"]["film_transparent"] = True
+    m, e = mean_and_error(Renderer(parse_scene(box_fog)).render().film.alpha())
+    expected = -np.expm1(-1.2)
+    assert abs(m - expected) < 4 * e + 1e-3, (m, expected, e)
