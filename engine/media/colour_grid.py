@@ -13,17 +13,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import SceneError
-from .grid import DensityGrid
+from .grid import DensityGrid, node_values
 
 
 class ColourGrid:
     """Trilinear linear-sRGB values g(x) (3,) on a dense lattice over the box [lo, hi] (see the module docstring)."""
 
     def __init__(self, values, lo, hi, field: str = "grid"):
-        try:
-            v = np.asarray(values, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise SceneError(f"{field}.values", "must be a nested list [r, g, b][x][y][z] of numbers ≥ 0") from None
+        v = node_values(values, field, "[r, g, b][x][y][z]")
         if v.ndim != 4 or v.shape[0] != 3:
             raise SceneError(f"{field}.values", f"must be a 4-D array [channel r, g, b][x][y][z], got shape "
                                                 f"{list(v.shape)}")

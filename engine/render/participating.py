@@ -278,38 +278,38 @@ class Tracking:
         """(σ_s per medium (K, L, m), the tracked σ (L, m)) at the points x (3, m) of the paths ``act``."""
         sig_s = np.zeros((len(self.interiors), L, act.size))
         sig_t = np.zeros((L, act.size))
+        for k, s, tr, _, on, c in self._on_paths(coeffs, n, act):
+            rho = self._densities(k, x[:, on])
+            sig_s[k][:, on] = s[:, c] * rho
+            sig_t[:, on] += tr[:, c] * rho
+        return sig_s, sig_t
+
+    @staticmethod
+    def _on_paths(coeffs: list, n: int, act: np.ndarray):
+        """Per medium of ``coeffs`` on some of the paths ``act``: (k, σ_s, tracked σ, emission basis, the places
+        ``on`` of its paths in ``act``, their columns in its arrays)."""
         pos = np.full(n, -1, np.int64)
-        for k, cols, s, tr, _ in coeffs:
+        for k, cols, s, tr, basis in coeffs:
             pos[cols] = np.arange(cols.size)
             c = pos[act]
             on = np.flatnonzero(c >= 0)
             pos[cols] = -1
-            if on.size == 0:
-                continue
-            rho = self._densities(k, x[:, on])
-            sig_s[k][:, on] = s[:, c[on]] * rho
-            sig_t[:, on] += tr[:, c[on]] * rho
-        return sig_s, sig_t
+            if on.size:
+                yield k, s, tr, basis, on, c[on]
 
     def _emitted_at(self, coeffs: list, n: int, act: np.ndarray, x: np.ndarray, L: int) -> np.ndarray | None:
         """ε (L, m) summed over the emitting media at the points x (3, m) of the paths ``act`` (None: none emits)."""
-        out, pos = None, np.full(n, -1, np.int64)
-        for k, cols, _, _, basis in coeffs:
+        out = None
+        for k, _, _, basis, on, c in self._on_paths(coeffs, n, act):
             if basis is None:
-                continue
-            pos[cols] = np.arange(cols.size)
-            c = pos[act]
-            on = np.flatnonzero(c >= 0)
-            pos[cols] = -1
-            if on.size == 0:
                 continue
             out = np.zeros((L, act.size)) if out is None else out
             grid = self.interiors[k].emission_grid
             if grid is None:
-                out[:, on] += basis[0][:, c[on]]
+                out[:, on] += basis[0][:, c]
             else:
                 g = grid.rgb(x[:, on])                                      # (3, m_on) linear sRGB
-                out[:, on] += np.einsum("clm,cm->lm", basis[:, :, c[on]], g)
+                out[:, on] += np.einsum("clm,cm->lm", basis[:, :, c], g)
         return out
 
     def pieces(self, start: np.ndarray, d: np.ndarray, crossings: list, t_end: np.ndarray):

@@ -269,6 +269,21 @@ def _export(scene):
     return export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, 8, 8, engine_settings(scene))
 
 
+def _volume_object(scene, name, path, mat, location=(0.0, 0.0, 0.0)):
+    """(box mesh, Interior) of a Volume object ``name`` reading the file ``path`` with ``mat``, exported without a
+    warning about it."""
+    vol = bpy.data.volumes.new(name)
+    vol.filepath = path
+    obj = bpy.data.objects.new(name, vol)
+    obj.location = location
+    obj.data.materials.append(mat)
+    scene.collection.objects.link(obj)
+    engine_scene, warnings = _export(scene)
+    assert not any(name in w for w in warnings), warnings
+    box = next(m for m in engine_scene.meshes if m.name.startswith(name))
+    return box, engine_scene.materials[box.materials[0]].interior
+
+
 def test_volume_object_reads_its_openvdb_grid(tmp_path):
     """A file-backed Volume object: its density grid, placed by the object's matrix, × Principled's Density."""
     load_addon()
@@ -284,16 +299,7 @@ def test_volume_object_reads_its_openvdb_grid(tmp_path):
     openvdb.write(path, grids=[grid])
     scene = _scene(None)
     mat, node = _material("Smoke", "ShaderNodeVolumePrincipled", {"Density": 2.0, "Color": (1.0, 1.0, 1.0, 1.0)})
-    vol = bpy.data.volumes.new("Smoke")
-    vol.filepath = path
-    obj = bpy.data.objects.new("Smoke", vol)
-    obj.location = (1.0, 0.0, 0.0)
-    obj.data.materials.append(mat)
-    scene.collection.objects.link(obj)
-    engine_scene, warnings = _export(scene)
-    assert not any("Smoke" in w for w in warnings), warnings
-    box = next(m for m in engine_scene.meshes if m.name.startswith("Smoke"))
-    interior = engine_scene.materials[box.materials[0]].interior
+    box, interior = _volume_object(scene, "Smoke", path, mat, location=(1.0, 0.0, 0.0))
     assert box.alpha == 0.0
     g = interior.grid
     assert g.values.shape == (4, 3, 2)
@@ -337,15 +343,7 @@ def test_volume_object_blackbody_reads_its_temperature_grid(tmp_path):
     scene = _scene(None)
     mat, node = _material("Fire", "ShaderNodeVolumePrincipled",
                           {"Blackbody Intensity": 1.0, "Temperature": 1500.0, "Emission Strength": 0.1})
-    vol = bpy.data.volumes.new("Fire")
-    vol.filepath = path
-    obj = bpy.data.objects.new("Fire", vol)
-    obj.data.materials.append(mat)
-    scene.collection.objects.link(obj)
-    engine_scene, warnings = _export(scene)
-    assert not any("Fire" in w for w in warnings), warnings
-    box = next(m for m in engine_scene.meshes if m.name.startswith("Fire"))
-    interior = engine_scene.materials[box.materials[0]].interior
+    _, interior = _volume_object(scene, "Fire", path, mat)
     assert interior.emission is None and interior.emits
     values = np.stack([c.values for c in interior.emission_grid.channels], axis=-1)
     expected = 0.1 * np.ones(3) + blackbody.emission(1500.0 * temperature.astype(np.float64), 1.0, np.ones(3))
