@@ -15,14 +15,19 @@ import numpy as np
 from ..errors import SceneError
 
 
+def node_values(values, field: str, layout: str) -> np.ndarray:
+    """``values`` as a float64 array; else a SceneError naming ``field``.values (nested lists in ``layout``)."""
+    try:
+        return np.asarray(values, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise SceneError(f"{field}.values", f"must be a nested list {layout} of numbers ≥ 0") from None
+
+
 class DensityGrid:
     """Trilinear density ρ(x) on a dense lattice over the box [lo, hi] (see the module docstring)."""
 
     def __init__(self, values, lo, hi, field: str = "grid"):
-        try:
-            v = np.asarray(values, dtype=np.float64)
-        except (TypeError, ValueError):
-            raise SceneError(f"{field}.values", "must be a nested list [x][y][z] of numbers ≥ 0") from None
+        v = node_values(values, field, "[x][y][z]")
         if v.ndim != 3 or min(v.shape) < 2:
             raise SceneError(f"{field}.values", f"must be a 3-D array [x][y][z] with ≥ 2 nodes per axis, got shape "
                                                 f"{list(v.shape)}")

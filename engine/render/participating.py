@@ -40,7 +40,9 @@ import numpy as np
 from ..kernels.hashing import uniforms
 from ..materials.base import BSDF, BSDFFlags, BSDFSample
 from ..materials.batching import shading_groups
+from ..kernels.transport import add_light
 from ..media.henyey_greenstein import HenyeyGreenstein
+from ..spectral.cie import LUMINANCE_WEIGHTS
 from .accel import surface_points
 from .integrator import PathTracer, _SurfaceHits
 from .light_paths import LightPathRules
@@ -54,6 +56,9 @@ TRACK_DIMENSION, BOUNCE_STRIDE = 1 << 40, 1 << 24
 RATIO_DIMENSION = 1 << 41
 #: Collisions per segment at most (a path still going then is dropped: its weight 0).
 MAX_COLLISIONS = 1 << 16
+#: Smallest majorant (per scene unit) of a path in an emitting medium bounded by a mesh or a grid, so that a
+#: medium that emits without extinction still has collisions to count its emission at
+EMISSION_RATE = 1.0
 
 
 class PhaseVertices(BSDF):
@@ -119,7 +124,8 @@ class ScatteringMedia(Media):
             interiors.append(world_medium)
         self.parts = []
         for it in interiors:
-            parts = [] if it.grid is not None else [it.absorption]
+            # a grid medium is tracked entirely; an emitting one too along the paths (its shadow rays: exact)
+            parts = [] if it.grid is not None or (it.emits and not shadow) else [it.absorption]
             if shadow and it.grid is None and it.scattering is not None:
                 parts.append(it.scattering)
             self.parts.append(parts)
@@ -156,6 +162,8 @@ class Tracks:
     def __init__(self, n: int, L: int, K: int):
         self.n, self.L = n, L
         self.rounds: list = []
+        #: the emission met at the collisions: rounds of (paths (m,), distances (m,), ε/σ̄ (L, m))
+        self.emitted: list = []
         self.scattered = np.zeros(n, bool)
         self.t = np.full(n, np.inf)
         self.medium = np.full(n, -1, np.int64)
@@ -200,6 +208,10 @@ class Tracking:
         self.rgb_mode, self.mono = rgb_mode, mono
         self.bound = np.array([it.density_bound for it in self.interiors])
         self.grids = [it.grid for it in self.interiors]
+        self.emits = [it.emits for it in self.interiors]
+        #: an emitting medium bounded by a mesh or a grid: its collisions' rate at least EMISSION_RATE
+        self.bounded_emitter = np.array([it.emits and (v is not None or it.grid is not None)
+                                         for v, it in tracked], bool)
 
     def _values(self, spec, lk, cols: np.ndarray) -> np.ndarray:
         if spec is None:
@@ -212,7 +224,22 @@ class Tracking:
         """(σ_s, the tracked σ) (L, m) of medium k at unit density for the paths ``cols``."""
         it = self.interiors[k]
         s = self._values(it.scattering, lk, cols)
-        return s, (s + self._values(it.absorption, lk, cols) if it.grid is not None else s)
+        return s, (s + self._values(it.absorption, lk, cols) if it.grid is not None or it.emits else s)
+
+    def _emission_basis(self, k: int, lk, cols: np.ndarray) -> np.ndarray | None:
+        """Medium k's emission for the paths ``cols``: ε (1, L, m) of a homogeneous one, or the spectra (3, L, m)
+        of unit linear sRGB channels that its emission grid's values weigh (None: it does not emit)."""
+        it = self.interiors[k]
+        if not self.emits[k]:
+            return None
+        if it.emission_grid is None:
+            return self._values(it.emission, lk, cols)[None]
+        if self.rgb_mode:
+            return np.repeat(np.eye(3)[:, :, None], cols.size, axis=2)
+        if self.mono:
+            return np.repeat(np.asarray(LUMINANCE_WEIGHTS, np.float64)[:, None, None], cols.size, axis=2)
+        sub = lk.take(cols) if cols.size < lk.lam.shape[1] else lk
+        return sub.d65[None] * sub.basis
 
     def _members(self, stack: np.ndarray, rows: np.ndarray, grids_only: bool = False) -> list:
         """[(k, paths (m,))] of the tracked media on the stacks (K, n) (the world's where empty) of the
@@ -226,18 +253,22 @@ class Tracking:
         """(σ̄ (n,), the distance the tracking ends at (n,), [(k, paths, σ_s, σ_tracked)]) of the paths."""
         sbar = np.zeros(n)
         homogeneous = np.zeros(n, bool)
+        emitter = np.zeros(n, bool)
         grid_end = np.full(n, -np.inf)
         coeffs = []
         for k, cols in members:
             s, tr = self._coefficients(k, lk, cols)
             sbar[cols] += self.bound[k] * tr.max(axis=0)
-            coeffs.append((k, cols, s, tr))
+            coeffs.append((k, cols, s, tr, self._emission_basis(k, lk, cols)))
+            emitter[cols] |= self.bounded_emitter[k]
             if self.grids[k] is None:
                 homogeneous[cols] = True
             else:
                 _, t1 = self.grids[k].box_range(o[:, cols], d[:, cols])
                 grid_end[cols] = np.maximum(grid_end[cols], t1)
         end = np.where(homogeneous, t_end, np.minimum(t_end, grid_end))
+        # an emitter without extinction still needs collisions to count its emission (σ_n = σ̄ there)
+        sbar = np.where(emitter & (sbar < EMISSION_RATE), np.maximum(sbar, EMISSION_RATE), sbar)
         return sbar, end, coeffs
 
     def _densities(self, k: int, p: np.ndarray) -> np.ndarray | float:
@@ -247,18 +278,39 @@ class Tracking:
         """(σ_s per medium (K, L, m), the tracked σ (L, m)) at the points x (3, m) of the paths ``act``."""
         sig_s = np.zeros((len(self.interiors), L, act.size))
         sig_t = np.zeros((L, act.size))
+        for k, s, tr, _, on, c in self._on_paths(coeffs, n, act):
+            rho = self._densities(k, x[:, on])
+            sig_s[k][:, on] = s[:, c] * rho
+            sig_t[:, on] += tr[:, c] * rho
+        return sig_s, sig_t
+
+    @staticmethod
+    def _on_paths(coeffs: list, n: int, act: np.ndarray):
+        """Per medium of ``coeffs`` on some of the paths ``act``: (k, σ_s, tracked σ, emission basis, the places
+        ``on`` of its paths in ``act``, their columns in its arrays)."""
         pos = np.full(n, -1, np.int64)
-        for k, cols, s, tr in coeffs:
+        for k, cols, s, tr, basis in coeffs:
             pos[cols] = np.arange(cols.size)
             c = pos[act]
             on = np.flatnonzero(c >= 0)
             pos[cols] = -1
-            if on.size == 0:
+            if on.size:
+                yield k, s, tr, basis, on, c[on]
+
+    def _emitted_at(self, coeffs: list, n: int, act: np.ndarray, x: np.ndarray, L: int) -> np.ndarray | None:
+        """ε (L, m) summed over the emitting media at the points x (3, m) of the paths ``act`` (None: none emits)."""
+        out = None
+        for k, _, _, basis, on, c in self._on_paths(coeffs, n, act):
+            if basis is None:
                 continue
-            rho = self._densities(k, x[:, on])
-            sig_s[k][:, on] = s[:, c[on]] * rho
-            sig_t[:, on] += tr[:, c[on]] * rho
-        return sig_s, sig_t
+            out = np.zeros((L, act.size)) if out is None else out
+            grid = self.interiors[k].emission_grid
+            if grid is None:
+                out[:, on] += basis[0][:, c]
+            else:
+                g = grid.rgb(x[:, on])                                      # (3, m_on) linear sRGB
+                out[:, on] += np.einsum("clm,cm->lm", basis[:, :, c], g)
+        return out
 
     def pieces(self, start: np.ndarray, d: np.ndarray, crossings: list, t_end: np.ndarray):
         """The segments cut at their pass-through crossings (``crossings``: layers of (rays, triangles,
@@ -316,7 +368,11 @@ class Tracking:
                 act, u = act[go], u[:, go]
                 if act.size == 0:
                     break
-                sig_s, sig_t = self._at(coeffs, n, act, o[:, act] + t[act] * d[:, act], L)
+                x = o[:, act] + t[act] * d[:, act]
+                sig_s, sig_t = self._at(coeffs, n, act, x, L)
+                eps = self._emitted_at(coeffs, n, act, x, L)
+                if eps is not None:         # every tentative collision counts ε/σ̄ (the null-scattering estimator)
+                    tracks.emitted.append((act, t[act].copy(), eps / sbar[act]))
                 sig_n = np.maximum(sbar[act] - sig_t, 0.0)
                 c = np.concatenate((sig_s.mean(axis=1), sig_n.mean(axis=0)[None]))        # (K + 1, m)
                 total = c.sum(axis=0)
@@ -394,6 +450,9 @@ class ParticipatingPathTracer(PathTracer):
     def _intersect(self, state, acc, bounce):
         state.bounce = bounce
         hits, hit, background = super()._intersect(state, acc, bounce)
+        # camera rays that reached a transparent film's background (each added 1 to the transparency)
+        state.see_through = (np.flatnonzero(hits.prim < 0) if bounce == 0 and self.film_transparent
+                             and acc.transparency is not None else None)
         t_end = np.where(hit, hits.t, np.inf if state.t_max is None else state.t_max)
         tracks = self.tracking.free_flight(state.media, state.o, state.d, state.crossings or [], t_end, state.lk,
                                            state.sampler.keys, bounce)
@@ -420,16 +479,44 @@ class ParticipatingPathTracer(PathTracer):
             f = att(rows, s)
             w = tracks.weight(rows, s)
             return w if f is None else f * w
+        state.tracked_att = tracked
         return tracked
 
     def _emission(self, state, acc, hits, hit, background, bounce):
         super()._emission(state, acc, hits, hit, background, bounce)
         tracks = getattr(state, "tracks", None)
         if tracks is not None:
+            att = getattr(state, "tracked_att", None)
+            state.tracked_att = None
+            self._volume_emission(state, acc, tracks, att)
+            if getattr(state, "see_through", None) is not None:
+                self._film_transparency(state, acc, tracks, att)
             state.tau = state.tau * tracks.total()
             if tracks.scattered.any():      # the stacks where they scattered, not at their segments' ends
                 state.media[:, tracks.scattered] = tracks.stack[:, tracks.scattered]
             state.tracks = None
+
+    def _volume_emission(self, state, acc, tracks, att) -> None:
+        """The media's emission met along the segments: ε(x)/σ̄ at each collision x, weighted by the collisions
+        before it and the analytic absorption up to it (``att``; unpolarised: the throughput's first column)."""
+        for rows, t, e in tracks.emitted:
+            f = att(rows, t) if att is not None else tracks.weight(rows, t)
+            Le = e if f is None else e * f
+            add_light(acc.radiance, state.path, state.T_store, rows, Le, np.ones(rows.size), state.T_columns(rows))
+
+    @staticmethod
+    def _film_transparency(state, acc, tracks, att) -> None:
+        """A transparent film's camera rays that missed every surface: their transparency is the mean over the
+        wavelengths of their throughput at the background (Cycles' film_write_transparent: average(throughput)),
+        0 where they scattered in a medium (their light is the medium's), not the 1 the surface pass gave."""
+        rows = state.see_through
+        state.see_through = None
+        if rows.size == 0:
+            return
+        inf = np.full(rows.size, np.inf)
+        f = att(rows, inf) if att is not None else tracks.weight(rows, inf)
+        left = 1.0 if f is None else f.mean(axis=0)
+        acc.transparency[state.path[rows]] += left - 1.0
 
     def _surface(self, state, hits, hit):
         F = self.first_medium_prim

@@ -85,6 +85,12 @@ class Interior:
     one costs null collisions, never bias.  Every medium that scatters or has a grid is *tracked*
     (delta tracking); a homogeneous one's absorption stays exact Beer–Lambert.  The world medium
     (``Scene.medium``) is an Interior too.  docs/physics.md "Participating media".
+
+    A medium may emit unpolarised (thermal) light: ``emission`` ε(λ) ≥ 0, radiance per unit length (a number
+    or [r, g, b]: an RGBIlluminantSpectrum, as a lamp's colour; or a Spectrum), or per point ``emission_grid``
+    (engine.media.colour_grid.ColourGrid of linear sRGB ε(x), instead of ``emission``).  ε is Cycles' volume
+    emission (its Emission closure's value: not scaled by the density), dL/ds = ε − σ_t·L; an emitting medium
+    is tracked with its whole σ_t (docs/physics.md "Volume emission").
     """
 
     absorption: object
@@ -92,12 +98,24 @@ class Interior:
     phase: object = None
     grid: object = None
     majorant: float | None = None
+    emission: object = None
+    emission_grid: object = None
 
     def __post_init__(self):
         from ..errors import SceneError
+        from ..spectral import RGBIlluminantSpectrum
         self.absorption = _medium_spectrum(self.absorption, "interior.absorption")
         if self.scattering is not None:
             self.scattering = _medium_spectrum(self.scattering, "interior.scattering")
+        if self.emission is not None:
+            if self.emission_grid is not None:
+                raise SceneError("interior.emission", "give either emission or an emission grid, not both")
+            e = self.emission
+            if isinstance(e, (int, float)) and not isinstance(e, bool):
+                e = [e] * 3
+            if isinstance(e, (list, tuple, np.ndarray)) and np.shape(e) == (3,):
+                e = RGBIlluminantSpectrum(e, field="interior.emission")
+            self.emission = _medium_spectrum(e, "interior.emission")
         bound = 1.0 if self.grid is None else self.grid.max
         if self.majorant is not None:
             m = float(self.majorant)
@@ -131,9 +149,21 @@ class Interior:
                 and (self.grid is None or self.grid.max > 0))
 
     @property
+    def emits(self) -> bool:
+        """ε > 0 at some wavelength and somewhere (an emitting medium)."""
+        if self.emission_grid is not None:
+            return bool(self.emission_grid.max.max() > 0)
+        return self.emission is not None and _positive(self.emission)
+
+    @property
     def tracked(self) -> bool:
-        """Rendered by delta tracking (it scatters, or its density varies): engine.render.participating."""
-        return self.scatters or (self.grid is not None and self.absorbs)
+        """Rendered by delta tracking (it scatters, emits, or its density varies): engine.render.participating."""
+        return self.scatters or self.emits or (self.grid is not None and self.absorbs)
+
+    @property
+    def renders(self) -> bool:
+        """It absorbs, scatters or emits (an interior that does none of them is the same as none)."""
+        return self.absorbs or self.scatters or self.emits
 
     @property
     def density_bound(self) -> float:
@@ -175,7 +205,7 @@ def interior_of(material) -> Interior | None:
     """The material's absorbing interior (``material.interior``), or None when it has none or it
     absorbs nothing."""
     interior = getattr(material, "interior", None)
-    return interior if isinstance(interior, Interior) and (interior.absorbs or interior.scatters) else None
+    return interior if isinstance(interior, Interior) and interior.renders else None
 
 
 @dataclass

@@ -476,7 +476,7 @@ def parse_material(d: dict, field: str, lookup=None, depth: int = 0, base_dir: s
         raise SceneError(f"{field}.radiance_scaling", f"must be true or false, got {radiance_scaling!r}")
     if not radiance_scaling:
         bsdf.radiance_scaling = False
-    if interior is not None and (interior.absorbs or interior.scatters):
+    if interior is not None and interior.renders:
         bsdf.interior = interior            # (none when it absorbs and scatters nothing: renders as without)
     return bsdf
 
@@ -491,15 +491,21 @@ def _parse_interior(d, field: str) -> Interior:
     [0, 1]) and ``density`` (≥ 0): σ_a = density·(1 − color); a scattering medium adds ``scattering`` σ_s
     (as absorption), or gives ``albedo`` (in [0, 1]) and ``density``: σ_s = albedo·density, σ_a = (1 −
     albedo)·density; ``phase`` {"type": NAME, parameters} (engine.media.catalogue; default isotropic),
-    ``grid`` {"values": [x][y][z], "bounds": [[x0, y0, z0], [x1, y1, z1]]} scales both coefficients, and
-    ``majorant`` bounds its density for free-flight sampling."""
+    ``grid`` {"values": [x][y][z], "bounds": [[x0, y0, z0], [x1, y1, z1]]} scales both coefficients,
+    ``majorant`` bounds its density for free-flight sampling; an emitting medium gives ``emission`` ε, radiance
+    per scene unit of length (an illuminant: a number, [r, g, b] or a table; not scaled by the density), or
+    ``emission_grid`` {"values": [r, g, b][x][y][z] (linear sRGB), "bounds"} per point."""
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object like {\"absorption\": [0.1, 0.2, 0.3]} (per scene unit) or "
                                 "{\"color\": [0.2, 0.8, 0.3], \"density\": 1.0} (Blender's Volume Absorption)")
     _check_keys(d, field, {"absorption", "color", "density", "note", "scattering", "albedo", "phase", "grid",
-                           "majorant"})
+                           "majorant", "emission", "emission_grid"})
     medium = {"phase": _parse_phase(d["phase"], f"{field}.phase") if d.get("phase") is not None else None,
               "grid": _parse_grid(d["grid"], f"{field}.grid") if d.get("grid") is not None else None}
+    if d.get("emission") is not None:
+        medium["emission"] = parse_spectrum(d["emission"], f"{field}.emission", kind="illuminant")
+    if d.get("emission_grid") is not None:
+        medium["emission_grid"] = _parse_grid(d["emission_grid"], f"{field}.emission_grid", colour=True)
     if "majorant" in d:
         medium["majorant"] = number(d["majorant"], f"{field}.majorant", 0, lo_open=True)
     if "albedo" in d:
@@ -509,7 +515,8 @@ def _parse_interior(d, field: str) -> Interior:
         density = number(_require(d, "density", field), f"{field}.density", 0)
         albedo = np.array(_rgb_or_number(d["albedo"], f"{field}.albedo"))
         return _interior(field, list(density * (1.0 - albedo)), scattering=list(density * albedo), **medium)
-    if "absorption" in d or "scattering" in d:
+    emits_only = ("emission" in d or "emission_grid" in d) and "density" not in d and "color" not in d
+    if "absorption" in d or "scattering" in d or emits_only:
         if "color" in d or "density" in d:
             key = "absorption" if "absorption" in d else "scattering"
             raise SceneError(f"{field}.{key}", f"give either {key} or color and density, not both")
@@ -520,7 +527,8 @@ def _parse_interior(d, field: str) -> Interior:
     density = number(_require(d, "density", field), f"{field}.density", 0)
     rgb = _rgb_or_number(d.get("color", _INTERIOR_DEFAULT_COLOR), f"{field}.color")
     interior = Interior.from_color_density(rgb, density)
-    return _interior(field, interior.absorption, **medium) if medium["phase"] or medium["grid"] else interior
+    extra = any(medium.get(k) is not None for k in ("phase", "grid", "emission", "emission_grid"))
+    return _interior(field, interior.absorption, **medium) if extra else interior
 
 
 def _interior(field: str, absorption, **medium) -> Interior:
@@ -549,17 +557,19 @@ def _parse_phase(d, field: str):
     return make_phase(name, {k: v for k, v in d.items() if k not in ("type", "note")}, field, text=False)
 
 
-def _parse_grid(d, field: str):
-    """A dense density grid (engine.media.grid.DensityGrid)."""
+def _parse_grid(d, field: str, colour: bool = False):
+    """A dense density grid (engine.media.grid.DensityGrid), or with ``colour`` an RGB one
+    (engine.media.colour_grid.ColourGrid: values [r, g, b][x][y][z])."""
+    from ..media.colour_grid import ColourGrid
     from ..media.grid import DensityGrid
     if not isinstance(d, dict):
-        raise SceneError(field, "must be an object {\"values\": [x][y][z] densities, \"bounds\": [[x0, y0, z0], "
-                                "[x1, y1, z1]]}")
+        raise SceneError(field, f"must be an object {{\"values\": {'[r, g, b]' if colour else ''}[x][y][z] values, "
+                                "\"bounds\": [[x0, y0, z0], [x1, y1, z1]]}")
     _check_keys(d, field, {"values", "bounds", "note"})
     bounds = _require(d, "bounds", field)
     if not isinstance(bounds, list) or len(bounds) != 2:
         raise SceneError(f"{field}.bounds", "must be [[x0, y0, z0], [x1, y1, z1]]")
-    return DensityGrid(_require(d, "values", field), bounds[0], bounds[1], field)
+    return (ColourGrid if colour else DensityGrid)(_require(d, "values", field), bounds[0], bounds[1], field)
 
 
 def _shading_normal(bsdf, d: dict, field: str, base_dir):
@@ -1273,7 +1283,7 @@ def parse_scene(data: dict, base_dir: str = ".", source: str = "") -> Scene:
                   source=source)
     if data.get("medium") is not None:
         medium = _parse_interior(data["medium"], "medium")
-        scene.medium = medium if medium.absorbs or medium.scatters else None
+        scene.medium = medium if medium.renders else None
     return scene
 
 

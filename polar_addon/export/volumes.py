@@ -9,8 +9,11 @@ grids), as Cycles' svm volume closures (kernel/svm/closure.h) define them, per u
   retarding);
 - Volume Absorption: σ_a = ρ·(1 − Color);
 - Principled Volume: σ_s = ρ·Color with HG(Anisotropy), σ_a = ρ·max(1 − Color, 0)·max(1 − √Absorption Color, 0);
-  its emission and blackbody are not simulated (one warning);
-- Volume Coefficients: σ_s, σ_a its coefficients, the phase as Volume Scatter's; its emission one warning;
+  emission ε = Emission Strength·Emission Color + Blackbody Tint·σ/π·10⁻⁶·mix(1, T⁴, Blackbody Intensity)·
+  colour(T) (polar_addon.export.blackbody; not scaled by ρ), T = Temperature × the Volume object's Temperature
+  Attribute grid per point (an emission grid on the density grid's lattice), or Temperature alone on a mesh;
+  its Color Attribute (a per-point colour grid) is not read: one warning naming it;
+- Volume Coefficients: σ_s, σ_a its coefficients, the phase as Volume Scatter's, ε its Emission Coefficients;
 - Mix Shader (1 − Fac, Fac) and Add Shader: the coefficients add up with the weights; where several scattering
   closures have different phase functions the medium's phase function is their mixture
   (engine.media.mixture) weighted by each one's mean σ_s over R, G, B (Cycles picks a closure per colour
@@ -33,10 +36,12 @@ import numpy as np
 
 from ...engine.errors import SceneError
 from ...engine.media.catalogue import make_phase
+from ...engine.media.colour_grid import ColourGrid
 from ...engine.media.grid import DensityGrid
 from ...engine.media.mixture import PhaseMixture
 from ...engine.scene.description import Interior, Mesh
 from .. import compat
+from . import blackbody
 from .node_links import follow
 from .node_reader import Reader
 
@@ -60,6 +65,10 @@ class Closure:
     absorption: np.ndarray
     phase: object = None
     attribute: str | None = None
+    #: emission ε (3,) per unit length (linear Rec. 709) where it does not vary, and the blackbody read per point:
+    #: (Blackbody Intensity, Temperature, weight·Tint (3,), temperature attribute) or None
+    emission: np.ndarray | None = None
+    blackbody: tuple | None = None
 
 
 def _phase(node, r, owner):
@@ -127,36 +136,70 @@ def volume_closures(node, owner, warnings, weight=1.0, depth=0) -> list[Closure]
         return [Closure(sigma_s, zero, _phase(node, r, owner), attribute)]
     if kind == "ShaderNodeVolumePrincipled":
         density = max(r.float("Density"), 0.0)
-        sock = node.inputs.get("Density Attribute")
-        attribute = (sock.default_value if sock is not None else "") or None
+        attribute = _attribute_name(node, "Density Attribute")
         colour = np.array(r.rgb("Color", -math.inf))
         absorption_colour = np.array(r.rgb("Absorption Color", 0.0))
-        emitted = max(r.float("Emission Strength"), 0.0) * max(r.rgb("Emission Color", 0.0)) + \
-            max(r.float("Blackbody Intensity"), 0.0)
-        if emitted > 0:
-            warnings.append(f"{owner}: the emission and blackbody of Principled Volume {node.name!r} are not "
-                            "simulated (media do not emit in Polar); its scattering and absorption are rendered")
+        colour_attribute = _attribute_name(node, "Color Attribute")
+        if colour_attribute is not None:
+            warnings.append(f"{owner}: the Color Attribute {colour_attribute!r} of Principled Volume {node.name!r} "
+                            "(a per-point colour grid) is not read; its Color is used everywhere")
+        emission = weight * max(r.float("Emission Strength"), 0.0) * np.maximum(r.rgb("Emission Color", 0.0), 0.0)
+        bb = max(r.float("Blackbody Intensity"), 0.0)
+        blackbody = None
+        if bb > 0:
+            tint = weight * np.maximum(np.array(r.rgb("Blackbody Tint", 0.0)), 0.0)
+            blackbody = (bb, max(r.float("Temperature"), 0.0), tint, _attribute_name(node, "Temperature Attribute"))
         sigma_s = weight * density * np.maximum(colour, 0.0)
         sigma_a = weight * density * np.maximum(1.0 - colour, 0.0) * np.maximum(1.0 - np.sqrt(absorption_colour), 0.0)
         g = min(max(r.float("Anisotropy"), -1.0), 1.0)
         return [Closure(sigma_s, sigma_a, make_phase("henyey_greenstein", {"g": g}, f"{owner}.{node.name}",
-                                                     text=False), attribute)]
+                                                     text=False), attribute, emission, blackbody)]
     if kind == "ShaderNodeVolumeCoefficients":
         sigma_s = weight * np.maximum(_vector(node.inputs["Scatter Coefficients"]), 0.0)
         sigma_a = weight * np.maximum(_vector(node.inputs["Absorption Coefficients"]), 0.0)
-        emission = node.inputs.get("Emission Coefficients")
-        if emission is not None and np.any(_vector(emission) > 0):
-            warnings.append(f"{owner}: the emission of Volume Coefficients {node.name!r} is not simulated (media do "
-                            "not emit in Polar); its scattering and absorption are rendered")
-        return [Closure(sigma_s, sigma_a, _phase(node, r, owner) if sigma_s.max() > 0 else None)]
+        sock = node.inputs.get("Emission Coefficients")
+        emission = weight * np.maximum(_vector(sock), 0.0) if sock is not None else None
+        return [Closure(sigma_s, sigma_a, _phase(node, r, owner) if sigma_s.max() > 0 else None, emission=emission)]
     warnings.append(f"{owner}: volume shader {kind} is not simulated (Polar renders Volume Scatter, Volume "
                     "Absorption, Principled Volume, Volume Coefficients and their mixes); it is left clear")
     return []
 
 
-def medium_of(closures, owner, warnings, grid=None) -> Interior | None:
-    """The Interior of the closures (None when it neither absorbs nor scatters): their summed coefficients and
-    their phase functions (one, or their mixture: see the module docstring); ``grid`` scales both."""
+def _attribute_name(node, socket) -> str | None:
+    """The grid name a Principled Volume attribute socket (a string) names, None when empty or absent."""
+    sock = node.inputs.get(socket)
+    return (sock.default_value if sock is not None else "") or None
+
+
+def _emission(closures, grid, temperature) -> dict:
+    """Interior keywords of the closures' emission: ``emission`` (3,) where it does not vary, or ``emission_grid``
+    (a ColourGrid on the density ``grid``'s lattice) where a blackbody reads the ``temperature`` grid."""
+    constant = sum((c.emission for c in closures if c.emission is not None), np.zeros(3))
+    per_point = []
+    for c in closures:
+        if c.blackbody is None:
+            continue
+        intensity, T, tint, _ = c.blackbody
+        if temperature is not None and grid is not None:
+            per_point.append((intensity, T, tint))
+        else:                       # no temperature grid (a mesh, or none read): Temperature alone, as Cycles
+            constant = constant + blackbody.emission(T, intensity, tint)
+    if not per_point:
+        return {"emission": [float(x) for x in constant]} if constant.max() > 0 else {}
+    n = grid.values.shape
+    axes = [np.linspace(grid.lo[a], grid.hi[a], n[a]) for a in range(3)]
+    X, Y, Z = np.meshgrid(*axes, indexing="ij")
+    t_nodes = temperature.density(np.stack((X.ravel(), Y.ravel(), Z.ravel()))).reshape(n)
+    values = np.broadcast_to(constant, n + (3,)).copy()
+    for intensity, T, tint in per_point:
+        values += blackbody.emission(T * t_nodes, intensity, tint)
+    return {"emission_grid": ColourGrid(np.moveaxis(values, -1, 0), grid.lo, grid.hi, field="emission grid")}
+
+
+def medium_of(closures, owner, warnings, grid=None, temperature=None) -> Interior | None:
+    """The Interior of the closures (None when it neither absorbs, scatters nor emits): their summed coefficients
+    and their phase functions (one, or their mixture: see the module docstring); ``grid`` scales both; their
+    emission (not scaled), per point where a blackbody reads the ``temperature`` grid (a DensityGrid)."""
     if not closures:
         return None
     sigma_s = sum(c.scattering for c in closures)
@@ -165,11 +208,12 @@ def medium_of(closures, owner, warnings, grid=None) -> Interior | None:
         raise SceneError(owner, f"the volume's coefficients must be finite, got σ_s {sigma_s.tolist()}, "
                                 f"σ_a {sigma_a.tolist()}")
     sigma_a = np.maximum(sigma_a, 0.0)      # a Color above 1 would absorb negatively: Cycles' too, none here
+    emits = _emission(closures, grid, temperature)
     scatterers = [c for c in closures if c.phase is not None and c.scattering.max() > 0]
     if not scatterers:
-        if sigma_a.max() <= 0:
+        if sigma_a.max() <= 0 and not emits:
             return None
-        return Interior([float(x) for x in sigma_a], grid=grid)
+        return Interior([float(x) for x in sigma_a], grid=grid, **emits)
     phases, weights = [], []
     for c in scatterers:
         described = c.phase.describe()
@@ -189,7 +233,8 @@ def medium_of(closures, owner, warnings, grid=None) -> Interior | None:
             warnings.append(f"{owner}: its volume mixes phase functions whose scattering colours differ; Polar "
                             "weights the phase functions by their mean scattering coefficient (Cycles per colour "
                             "channel)")
-    return Interior([float(x) for x in sigma_a], scattering=[float(x) for x in sigma_s], phase=phase, grid=grid)
+    return Interior([float(x) for x in sigma_a], scattering=[float(x) for x in sigma_s], phase=phase, grid=grid,
+                    **emits)
 
 
 def material_medium(volume_node, material_name, warnings) -> Interior | None:
@@ -243,7 +288,9 @@ def volume_object(obj, M, material, warnings):
     grid = read_grid(path, attributes[0], M, warnings, name)
     if grid is None:
         return None
-    interior = medium_of(closures, owner, warnings, grid=grid)
+    hot = list(dict.fromkeys(c.blackbody[3] for c in closures if c.blackbody is not None and c.blackbody[3]))
+    temperature = read_grid(path, hot[0], M, warnings, name) if hot else None
+    interior = medium_of(closures, owner, warnings, grid=grid, temperature=temperature)
     if interior is None:
         return None
     return box_mesh(f"{obj.name} (volume)", grid.lo, grid.hi), interior

@@ -121,6 +121,28 @@ def test_principled_volume_matches_cycles():
     assert report.fraction >= ap.PASS_FRACTION, (report.luminance_ratio, report.failing)
 
 
+def test_emitting_principled_volume_matches_cycles():
+    """A glowing smoke cube: Emission Strength 1.5 × an orange Emission Color over a scattering Principled
+    Volume (density 0.8), the sun and floor as in the other cases."""
+    scene = _scene(lambda: _material("Glow", "ShaderNodeVolumePrincipled",
+                                     {"Density": 0.8, "Anisotropy": 0.3, "Color": (0.6, 0.6, 0.6, 1.0),
+                                      "Emission Strength": 1.5, "Emission Color": (1.0, 0.45, 0.1, 1.0)}))
+    report = _parity(scene, volume_bounces=2)
+    assert report.warnings == []
+    assert report.fraction >= ap.PASS_FRACTION, (report.luminance_ratio, report.failing)
+
+
+def test_blackbody_principled_volume_matches_cycles():
+    """Fire: Blackbody Intensity 1 at Temperature 2200 K (no temperature grid on a mesh: the socket's value, as
+    Cycles), in a thin absorbing smoke."""
+    scene = _scene(lambda: _material("Flame", "ShaderNodeVolumePrincipled",
+                                     {"Density": 0.5, "Color": (0.3, 0.3, 0.3, 1.0), "Blackbody Intensity": 1.0,
+                                      "Temperature": 2200.0}))
+    report = _parity(scene, volume_bounces=1)
+    assert report.warnings == []
+    assert report.fraction >= ap.PASS_FRACTION, (report.luminance_ratio, report.failing)
+
+
 def test_world_volume_matches_cycles():
     """World Output ▸ Volume is the world medium; a point lamp inside it (a sun does not reach through it, in
     either renderer)."""
@@ -202,17 +224,31 @@ def test_mixed_volumes_add_coefficients_and_mix_phases():
     assert np.all(phase.matrix(0.0)[1, 0] != 0)          # the Rayleigh part polarises
 
 
-def test_not_simulated_emission_warns_once():
+def test_emission_and_blackbody_are_exported_as_cycles_defines_them():
+    """Principled Volume: ε = Emission Strength·Emission Color + Tint·σ/π·10⁻⁶·mix(1, T⁴, Blackbody Intensity)·
+    colour(T), not scaled by Density, no warning; Volume Coefficients: ε its Emission Coefficients; the Color
+    Attribute (not read) one warning naming it."""
     ap.reset(8, 8)
-    mat, node = _material("Fire", "ShaderNodeVolumePrincipled", {"Emission Strength": 2.0, "Blackbody Intensity": 1.0})
+    load_addon()
+    from polar_render.polar_addon.export import blackbody
+    mat, node = _material("Fire", "ShaderNodeVolumePrincipled",
+                          {"Density": 3.0, "Emission Strength": 2.0, "Emission Color": (1.0, 0.5, 0.25, 1.0),
+                           "Blackbody Intensity": 0.5, "Temperature": 1800.0,
+                           "Blackbody Tint": (1.0, 0.8, 0.6, 1.0)})
     warnings = []
     interior = _interior(mat, warnings)
-    assert len(warnings) == 1 and "emission" in warnings[0] and "Fire" in warnings[0]
-    assert interior.scatters
-    mat, node = _material("Glow", "ShaderNodeVolumeCoefficients", {"Emission Coefficients": (1.0, 0.0, 0.0)})
+    assert warnings == [] and interior.scatters and interior.emits
+    T4 = 1800.0 ** 4
+    bb = np.array([1.0, 0.8, 0.6]) * 5.670373e-8 * 1e-6 / np.pi * (0.5 + 0.5 * T4) * blackbody.colour(1800.0)
+    assert np.allclose(interior.emission.linear_srgb(), 2.0 * np.array([1.0, 0.5, 0.25]) + bb, rtol=1e-6)
+    assert bb[:2].min() > 0 and bb[0] > bb[1] > bb[2] >= 0     # red-hot (Cycles: blue −0.02·… at 1800 K, 0 here)
+    mat, node = _material("Glow", "ShaderNodeVolumeCoefficients", {"Emission Coefficients": (1.0, 0.0, 0.5)})
+    warnings = []
+    assert np.allclose(_interior(mat, warnings).emission.linear_srgb(), [1.0, 0.0, 0.5]) and warnings == []
+    mat, node = _material("Tinted", "ShaderNodeVolumePrincipled", {"Color Attribute": "color"})
     warnings = []
     _interior(mat, warnings)
-    assert len(warnings) == 1 and "emission" in warnings[0]
+    assert len(warnings) == 1 and "'color'" in warnings[0] and "Color Attribute" in warnings[0]
 
 
 def test_linked_density_keeps_its_value_with_one_warning():
@@ -233,6 +269,21 @@ def _export(scene):
     return export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, 8, 8, engine_settings(scene))
 
 
+def _volume_object(scene, name, path, mat, location=(0.0, 0.0, 0.0)):
+    """(box mesh, Interior) of a Volume object ``name`` reading the file ``path`` with ``mat``, exported without a
+    warning about it."""
+    vol = bpy.data.volumes.new(name)
+    vol.filepath = path
+    obj = bpy.data.objects.new(name, vol)
+    obj.location = location
+    obj.data.materials.append(mat)
+    scene.collection.objects.link(obj)
+    engine_scene, warnings = _export(scene)
+    assert not any(name in w for w in warnings), warnings
+    box = next(m for m in engine_scene.meshes if m.name.startswith(name))
+    return box, engine_scene.materials[box.materials[0]].interior
+
+
 def test_volume_object_reads_its_openvdb_grid(tmp_path):
     """A file-backed Volume object: its density grid, placed by the object's matrix, × Principled's Density."""
     load_addon()
@@ -248,16 +299,7 @@ def test_volume_object_reads_its_openvdb_grid(tmp_path):
     openvdb.write(path, grids=[grid])
     scene = _scene(None)
     mat, node = _material("Smoke", "ShaderNodeVolumePrincipled", {"Density": 2.0, "Color": (1.0, 1.0, 1.0, 1.0)})
-    vol = bpy.data.volumes.new("Smoke")
-    vol.filepath = path
-    obj = bpy.data.objects.new("Smoke", vol)
-    obj.location = (1.0, 0.0, 0.0)
-    obj.data.materials.append(mat)
-    scene.collection.objects.link(obj)
-    engine_scene, warnings = _export(scene)
-    assert not any("Smoke" in w for w in warnings), warnings
-    box = next(m for m in engine_scene.meshes if m.name.startswith("Smoke"))
-    interior = engine_scene.materials[box.materials[0]].interior
+    box, interior = _volume_object(scene, "Smoke", path, mat, location=(1.0, 0.0, 0.0))
     assert box.alpha == 0.0
     g = interior.grid
     assert g.values.shape == (4, 3, 2)
@@ -277,3 +319,32 @@ def test_generated_volume_object_warns_once():
     _, warnings = _export(scene)
     mine = [w for w in warnings if "Generated" in w]
     assert len(mine) == 1 and "not read from a file" in mine[0]
+
+
+def test_volume_object_blackbody_reads_its_temperature_grid(tmp_path):
+    """Fire from a file: Principled Volume's Temperature Attribute reads the object's "temperature" grid; the
+    emission grid holds Cycles' blackbody emission of Temperature × that grid at the density grid's nodes (plus
+    the constant Emission), no warning."""
+    load_addon()
+    from polar_render.polar_addon import compat
+    from polar_render.polar_addon.export import blackbody
+    openvdb = compat.openvdb_module()
+    grids = []
+    density = np.full((3, 3, 3), 0.5, np.float32)
+    temperature = np.linspace(0.5, 1.5, 27, dtype=np.float32).reshape(3, 3, 3)   # × 1500 K: 750–2250 K
+    for name, values in (("density", density), ("temperature", temperature)):
+        g = openvdb.FloatGrid()
+        g.name = name
+        g.copyFromArray(values, ijk=(0, 0, 0))
+        g.transform = openvdb.createLinearTransform(voxelSize=0.5)
+        grids.append(g)
+    path = str(tmp_path / "fire.vdb")
+    openvdb.write(path, grids=grids)
+    scene = _scene(None)
+    mat, node = _material("Fire", "ShaderNodeVolumePrincipled",
+                          {"Blackbody Intensity": 1.0, "Temperature": 1500.0, "Emission Strength": 0.1})
+    _, interior = _volume_object(scene, "Fire", path, mat)
+    assert interior.emission is None and interior.emits
+    values = np.stack([c.values for c in interior.emission_grid.channels], axis=-1)
+    expected = 0.1 * np.ones(3) + blackbody.emission(1500.0 * temperature.astype(np.float64), 1.0, np.ones(3))
+    assert np.allclose(values, expected, rtol=1e-5)
