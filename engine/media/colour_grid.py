@@ -3,7 +3,8 @@ between them and 0 outside the box (engine.media.grid.DensityGrid per channel).
 
 ``values`` (3, nx, ny, nz) ≥ 0 (linear sRGB), node (i, j, k) at lo + (i, j, k)·(hi − lo)/(n − 1) in world
 units.  A medium's per-point emission (Interior.emission_grid: linear sRGB radiance per unit length, upsampled
-as an illuminant, D65n(λ)·Σ_c g_c(x)·B_c(λ): engine.spectral) reads it; ``max`` (3,) is each channel's largest
+as an illuminant, D65n(λ)·Σ_c g_c(x)·B_c(λ): engine.spectral) and its per-point colour (Interior.colour_grid:
+upsampled as a reflectance, Σ_c g_c(x)·B_c(λ), scaling σ_s and σ_a) read it; ``max`` (3,) is each channel's largest
 node value, which trilinear interpolation never exceeds.  File-backed grids (OpenVDB colour or temperature
 grids) are read by the Blender extension (polar_addon.export.volumes) into this dense form.
 """

@@ -220,11 +220,27 @@ class Tracking:
             return np.repeat(np.asarray(spec.linear_srgb(), np.float64)[:, None], cols.size, axis=1)
         return self.media.spectrum_values(spec, lk, cols)
 
-    def _coefficients(self, k: int, lk, cols: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(σ_s, the tracked σ) (L, m) of medium k at unit density for the paths ``cols``."""
+    def _coefficients(self, k: int, lk, cols: np.ndarray):
+        """(σ_s, the tracked σ — with a colour grid its bound —, None or (colour basis (3, L, m), σ_a)) (L, m) of
+        medium k at unit density for the paths ``cols``.  A colour grid's σ_s·C + σ_a·max(1 − C, 0) ≤
+        σ_s·Σ_c C̄_c·B_c + σ_a (C̄ the channels' largest node values, B_c ≥ 0), the majorant's per-λ bound."""
         it = self.interiors[k]
         s = self._values(it.scattering, lk, cols)
-        return s, (s + self._values(it.absorption, lk, cols) if it.grid is not None or it.emits else s)
+        if it.colour_grid is not None:
+            a = self._values(it.absorption, lk, cols)
+            basis = self._rgb_basis(lk, cols)
+            return s, s * np.einsum("clm,c->lm", basis, it.colour_grid.max) + a, (basis, a)
+        return s, (s + self._values(it.absorption, lk, cols) if it.grid is not None or it.emits else s), None
+
+    def _rgb_basis(self, lk, cols: np.ndarray, illuminant: bool = False) -> np.ndarray:
+        """The spectra (3, L, m) of unit linear sRGB channels for the paths ``cols``: reflectances (Σ_c B_c = 1), or
+        with ``illuminant`` D65n-weighted (the channels of an RGBIlluminantSpectrum)."""
+        if self.rgb_mode:
+            return np.repeat(np.eye(3)[:, :, None], cols.size, axis=2)
+        if self.mono:
+            return np.repeat(np.asarray(LUMINANCE_WEIGHTS, np.float64)[:, None, None], cols.size, axis=2)
+        sub = lk.take(cols) if cols.size < lk.lam.shape[1] else lk
+        return sub.d65[None] * sub.basis if illuminant else sub.basis
 
     def _emission_basis(self, k: int, lk, cols: np.ndarray) -> np.ndarray | None:
         """Medium k's emission for the paths ``cols``: ε (1, L, m) of a homogeneous one, or the spectra (3, L, m)
@@ -234,12 +250,7 @@ class Tracking:
             return None
         if it.emission_grid is None:
             return self._values(it.emission, lk, cols)[None]
-        if self.rgb_mode:
-            return np.repeat(np.eye(3)[:, :, None], cols.size, axis=2)
-        if self.mono:
-            return np.repeat(np.asarray(LUMINANCE_WEIGHTS, np.float64)[:, None, None], cols.size, axis=2)
-        sub = lk.take(cols) if cols.size < lk.lam.shape[1] else lk
-        return sub.d65[None] * sub.basis
+        return self._rgb_basis(lk, cols, illuminant=True)
 
     def _members(self, stack: np.ndarray, rows: np.ndarray, grids_only: bool = False) -> list:
         """[(k, paths (m,))] of the tracked media on the stacks (K, n) (the world's where empty) of the
@@ -250,16 +261,17 @@ class Tracking:
         return [(k, cols) for k, cols in out if not grids_only or self.grids[k] is not None]
 
     def _majorants(self, members: list, lk, n: int, o, d, t_end) -> tuple[np.ndarray, np.ndarray, list]:
-        """(σ̄ (n,), the distance the tracking ends at (n,), [(k, paths, σ_s, σ_tracked)]) of the paths."""
+        """(σ̄ (n,), the distance the tracking ends at (n,), [(k, paths, σ_s, σ_tracked, emission basis, colour)])
+        of the paths (engine.render.participating.Tracking._coefficients)."""
         sbar = np.zeros(n)
         homogeneous = np.zeros(n, bool)
         emitter = np.zeros(n, bool)
         grid_end = np.full(n, -np.inf)
         coeffs = []
         for k, cols in members:
-            s, tr = self._coefficients(k, lk, cols)
+            s, tr, colour = self._coefficients(k, lk, cols)
             sbar[cols] += self.bound[k] * tr.max(axis=0)
-            coeffs.append((k, cols, s, tr, self._emission_basis(k, lk, cols)))
+            coeffs.append((k, cols, s, tr, self._emission_basis(k, lk, cols), colour))
             emitter[cols] |= self.bounded_emitter[k]
             if self.grids[k] is None:
                 homogeneous[cols] = True
@@ -278,29 +290,35 @@ class Tracking:
         """(σ_s per medium (K, L, m), the tracked σ (L, m)) at the points x (3, m) of the paths ``act``."""
         sig_s = np.zeros((len(self.interiors), L, act.size))
         sig_t = np.zeros((L, act.size))
-        for k, s, tr, _, on, c in self._on_paths(coeffs, n, act):
+        for k, s, tr, _, colour, on, c in self._on_paths(coeffs, n, act):
             rho = self._densities(k, x[:, on])
-            sig_s[k][:, on] = s[:, c] * rho
-            sig_t[:, on] += tr[:, c] * rho
+            if colour is None:
+                sig_s[k][:, on] = s[:, c] * rho
+                sig_t[:, on] += tr[:, c] * rho
+                continue
+            basis, a = colour                # C(λ, x) = Σ_c C_c(x)·B_c(λ): σ_s·C and σ_a·max(1 − C, 0)
+            C = np.einsum("clm,cm->lm", basis[:, :, c], self.interiors[k].colour_grid.rgb(x[:, on]))
+            sig_s[k][:, on] = s[:, c] * C * rho
+            sig_t[:, on] += (s[:, c] * C + a[:, c] * np.maximum(1.0 - C, 0.0)) * rho
         return sig_s, sig_t
 
     @staticmethod
     def _on_paths(coeffs: list, n: int, act: np.ndarray):
-        """Per medium of ``coeffs`` on some of the paths ``act``: (k, σ_s, tracked σ, emission basis, the places
-        ``on`` of its paths in ``act``, their columns in its arrays)."""
+        """Per medium of ``coeffs`` on some of the paths ``act``: (k, σ_s, tracked σ, emission basis, (colour basis,
+        σ_a) of a colour grid, the places ``on`` of its paths in ``act``, their columns in its arrays)."""
         pos = np.full(n, -1, np.int64)
-        for k, cols, s, tr, basis in coeffs:
+        for k, cols, s, tr, basis, colour in coeffs:
             pos[cols] = np.arange(cols.size)
             c = pos[act]
             on = np.flatnonzero(c >= 0)
             pos[cols] = -1
             if on.size:
-                yield k, s, tr, basis, on, c[on]
+                yield k, s, tr, basis, colour, on, c[on]
 
     def _emitted_at(self, coeffs: list, n: int, act: np.ndarray, x: np.ndarray, L: int) -> np.ndarray | None:
         """ε (L, m) summed over the emitting media at the points x (3, m) of the paths ``act`` (None: none emits)."""
         out = None
-        for k, _, _, basis, on, c in self._on_paths(coeffs, n, act):
+        for k, _, _, basis, _, on, c in self._on_paths(coeffs, n, act):
             if basis is None:
                 continue
             out = np.zeros((L, act.size)) if out is None else out

@@ -91,6 +91,11 @@ class Interior:
     (engine.media.colour_grid.ColourGrid of linear sRGB ε(x), instead of ``emission``).  ε is Cycles' volume
     emission (its Emission closure's value: not scaled by the density), dL/ds = ε − σ_t·L; an emitting medium
     is tracked with its whole σ_t (docs/physics.md "Volume emission").
+
+    A grid medium may have a colour per point, ``colour_grid`` (engine.media.colour_grid.ColourGrid of linear
+    sRGB C(x), upsampled as a reflectance, C(λ, x) = Σ_c C_c(x)·B_c(λ)): σ_s(λ, x) = ρ(x)·σ_s(λ)·C(λ, x) and
+    σ_a(λ, x) = ρ(x)·σ_a(λ)·max(1 − C(λ, x), 0) — Cycles' Principled Volume (Color × Color Attribute = C)
+    with σ_s = 1 and σ_a = 1 − √(Absorption Color); it needs ``grid`` (docs/physics.md "Colour grids").
     """
 
     absorption: object
@@ -100,10 +105,18 @@ class Interior:
     majorant: float | None = None
     emission: object = None
     emission_grid: object = None
+    colour_grid: object = None
 
     def __post_init__(self):
         from ..errors import SceneError
+        from ..media.colour_grid import ColourGrid
         from ..spectral import RGBIlluminantSpectrum
+        if self.colour_grid is not None:
+            if not isinstance(self.colour_grid, ColourGrid):
+                raise SceneError("interior.colour_grid", "must be an engine.media.colour_grid.ColourGrid (linear sRGB "
+                                                         "per node, ≥ 0)")
+            if self.grid is None:
+                raise SceneError("interior.colour_grid", "needs a density grid (interior.grid) over the medium")
         self.absorption = _medium_spectrum(self.absorption, "interior.absorption")
         if self.scattering is not None:
             self.scattering = _medium_spectrum(self.scattering, "interior.scattering")
@@ -146,7 +159,8 @@ class Interior:
     def scatters(self) -> bool:
         """σ_s > 0 at some wavelength and somewhere (a participating medium)."""
         return (self.scattering is not None and _positive(self.scattering)
-                and (self.grid is None or self.grid.max > 0))
+                and (self.grid is None or self.grid.max > 0)
+                and (self.colour_grid is None or bool(self.colour_grid.max.max() > 0)))
 
     @property
     def emits(self) -> bool:

@@ -494,18 +494,21 @@ def _parse_interior(d, field: str) -> Interior:
     ``grid`` {"values": [x][y][z], "bounds": [[x0, y0, z0], [x1, y1, z1]]} scales both coefficients,
     ``majorant`` bounds its density for free-flight sampling; an emitting medium gives ``emission`` ε, radiance
     per scene unit of length (an illuminant: a number, [r, g, b] or a table; not scaled by the density), or
-    ``emission_grid`` {"values": [r, g, b][x][y][z] (linear sRGB), "bounds"} per point."""
+    ``emission_grid`` {"values": [r, g, b][x][y][z] (linear sRGB), "bounds"} per point; a grid medium's colour
+    per point, ``colour_grid`` (as ``emission_grid``), scales σ_s by it and σ_a by max(1 − it, 0)."""
     if not isinstance(d, dict):
         raise SceneError(field, "must be an object like {\"absorption\": [0.1, 0.2, 0.3]} (per scene unit) or "
                                 "{\"color\": [0.2, 0.8, 0.3], \"density\": 1.0} (Blender's Volume Absorption)")
     _check_keys(d, field, {"absorption", "color", "density", "note", "scattering", "albedo", "phase", "grid",
-                           "majorant", "emission", "emission_grid"})
+                           "majorant", "emission", "emission_grid", "colour_grid"})
     medium = {"phase": _parse_phase(d["phase"], f"{field}.phase") if d.get("phase") is not None else None,
               "grid": _parse_grid(d["grid"], f"{field}.grid") if d.get("grid") is not None else None}
     if d.get("emission") is not None:
         medium["emission"] = parse_spectrum(d["emission"], f"{field}.emission", kind="illuminant")
     if d.get("emission_grid") is not None:
         medium["emission_grid"] = _parse_grid(d["emission_grid"], f"{field}.emission_grid", colour=True)
+    if d.get("colour_grid") is not None:
+        medium["colour_grid"] = _parse_grid(d["colour_grid"], f"{field}.colour_grid", colour=True)
     if "majorant" in d:
         medium["majorant"] = number(d["majorant"], f"{field}.majorant", 0, lo_open=True)
     if "albedo" in d:
@@ -527,7 +530,7 @@ def _parse_interior(d, field: str) -> Interior:
     density = number(_require(d, "density", field), f"{field}.density", 0)
     rgb = _rgb_or_number(d.get("color", _INTERIOR_DEFAULT_COLOR), f"{field}.color")
     interior = Interior.from_color_density(rgb, density)
-    extra = any(medium.get(k) is not None for k in ("phase", "grid", "emission", "emission_grid"))
+    extra = any(medium.get(k) is not None for k in ("phase", "grid", "emission", "emission_grid", "colour_grid"))
     return _interior(field, interior.absorption, **medium) if extra else interior
 
 
