@@ -12,7 +12,10 @@ grids), as Cycles' svm volume closures (kernel/svm/closure.h) define them, per u
   emission ε = Emission Strength·Emission Color + Blackbody Tint·σ/π·10⁻⁶·mix(1, T⁴, Blackbody Intensity)·
   colour(T) (polar_addon.export.blackbody; not scaled by ρ), T = Temperature × the Volume object's Temperature
   Attribute grid per point (an emission grid on the density grid's lattice), or Temperature alone on a mesh;
-  its Color Attribute (a per-point colour grid) is not read: one warning naming it;
+  its Color Attribute: the Volume object's RGB grid g per point (a Vec3 OpenVDB grid, resampled on the density
+  grid's nodes), Color·g the medium's colour grid (engine Interior.colour_grid: σ_s = ρ·Color·g, σ_a =
+  ρ·max(1 − Color·g, 0)·max(1 − √Absorption Color, 0)) where the Principled Volume is the volume's only closure
+  (otherwise, and on a mesh where the attribute does not exist, its Color alone, one warning);
 - Volume Coefficients: σ_s, σ_a its coefficients, the phase as Volume Scatter's, ε its Emission Coefficients;
 - Mix Shader (1 − Fac, Fac) and Add Shader: the coefficients add up with the weights; where several scattering
   closures have different phase functions the medium's phase function is their mixture
@@ -69,6 +72,8 @@ class Closure:
     #: (Blackbody Intensity, Temperature, weight·Tint (3,), temperature attribute) or None
     emission: np.ndarray | None = None
     blackbody: tuple | None = None
+    #: a Principled Volume's Color Attribute: (grid name, weight·ρ, Color (3,), max(1 − √Absorption Color, 0) (3,))
+    coloured: tuple | None = None
 
 
 def _phase(node, r, owner):
@@ -140,20 +145,19 @@ def volume_closures(node, owner, warnings, weight=1.0, depth=0) -> list[Closure]
         colour = np.array(r.rgb("Color", -math.inf))
         absorption_colour = np.array(r.rgb("Absorption Color", 0.0))
         colour_attribute = _attribute_name(node, "Color Attribute")
-        if colour_attribute is not None:
-            warnings.append(f"{owner}: the Color Attribute {colour_attribute!r} of Principled Volume {node.name!r} "
-                            "(a per-point colour grid) is not read; its Color is used everywhere")
         emission = weight * max(r.float("Emission Strength"), 0.0) * np.maximum(r.rgb("Emission Color", 0.0), 0.0)
         bb = max(r.float("Blackbody Intensity"), 0.0)
         blackbody = None
         if bb > 0:
             tint = weight * np.maximum(np.array(r.rgb("Blackbody Tint", 0.0)), 0.0)
             blackbody = (bb, max(r.float("Temperature"), 0.0), tint, _attribute_name(node, "Temperature Attribute"))
+        tint = np.maximum(1.0 - np.sqrt(absorption_colour), 0.0)
         sigma_s = weight * density * np.maximum(colour, 0.0)
-        sigma_a = weight * density * np.maximum(1.0 - colour, 0.0) * np.maximum(1.0 - np.sqrt(absorption_colour), 0.0)
+        sigma_a = weight * density * np.maximum(1.0 - colour, 0.0) * tint
         g = min(max(r.float("Anisotropy"), -1.0), 1.0)
+        coloured = (colour_attribute, weight * density, colour, tint) if colour_attribute is not None else None
         return [Closure(sigma_s, sigma_a, make_phase("henyey_greenstein", {"g": g}, f"{owner}.{node.name}",
-                                                     text=False), attribute, emission, blackbody)]
+                                                     text=False), attribute, emission, blackbody, coloured)]
     if kind == "ShaderNodeVolumeCoefficients":
         sigma_s = weight * np.maximum(_vector(node.inputs["Scatter Coefficients"]), 0.0)
         sigma_a = weight * np.maximum(_vector(node.inputs["Absorption Coefficients"]), 0.0)
@@ -187,21 +191,51 @@ def _emission(closures, grid, temperature) -> dict:
     if not per_point:
         return {"emission": [float(x) for x in constant]} if constant.max() > 0 else {}
     n = grid.values.shape
-    axes = [np.linspace(grid.lo[a], grid.hi[a], n[a]) for a in range(3)]
-    X, Y, Z = np.meshgrid(*axes, indexing="ij")
-    t_nodes = temperature.density(np.stack((X.ravel(), Y.ravel(), Z.ravel()))).reshape(n)
+    t_nodes = temperature.density(_nodes(grid)).reshape(n)
     values = np.broadcast_to(constant, n + (3,)).copy()
     for intensity, T, tint in per_point:
         values += blackbody.emission(T * t_nodes, intensity, tint)
     return {"emission_grid": ColourGrid(np.moveaxis(values, -1, 0), grid.lo, grid.hi, field="emission grid")}
 
 
-def medium_of(closures, owner, warnings, grid=None, temperature=None) -> Interior | None:
+def _nodes(grid) -> np.ndarray:
+    """The world positions (3, N) of a DensityGrid's nodes, in its values' (C) order."""
+    n = grid.values.shape
+    X, Y, Z = np.meshgrid(*(np.linspace(grid.lo[a], grid.hi[a], n[a]) for a in range(3)), indexing="ij")
+    return np.stack((X.ravel(), Y.ravel(), Z.ravel()))
+
+
+def _coloured(closures, grid, temperature, colour) -> Interior | None:
+    """The medium of a lone Principled Volume whose Color Attribute read the RGB grid ``colour`` (3 DensityGrids):
+    σ_s = weight·ρ, σ_a = weight·ρ·max(1 − √Absorption Color, 0), its colour grid Color·g on the density ``grid``'s
+    nodes (engine Interior.colour_grid; None where that does not apply: see the module docstring)."""
+    c = closures[0]
+    if len(closures) != 1 or c.coloured is None or colour is None or grid is None:
+        return None
+    _, scale, rgb, tint = c.coloured
+    at = _nodes(grid)
+    values = np.stack([np.maximum(rgb[i] * colour[i].density(at), 0.0) for i in range(3)])
+    return Interior([float(x) for x in scale * tint], scattering=[scale] * 3, phase=c.phase, grid=grid,
+                    colour_grid=ColourGrid(values.reshape((3,) + grid.values.shape), grid.lo, grid.hi,
+                                           field="colour grid"),
+                    **_emission(closures, grid, temperature))
+
+
+def medium_of(closures, owner, warnings, grid=None, temperature=None, colour=None) -> Interior | None:
     """The Interior of the closures (None when it neither absorbs, scatters nor emits): their summed coefficients
     and their phase functions (one, or their mixture: see the module docstring); ``grid`` scales both; their
-    emission (not scaled), per point where a blackbody reads the ``temperature`` grid (a DensityGrid)."""
+    emission (not scaled), per point where a blackbody reads the ``temperature`` grid (a DensityGrid); a lone
+    Principled Volume's colour per point where its Color Attribute read ``colour`` (3 DensityGrids: r, g, b)."""
     if not closures:
         return None
+    coloured = _coloured(closures, grid, temperature, colour)
+    if coloured is not None:
+        return coloured
+    for c in closures:              # (on a mesh the attribute does not exist: Cycles uses Color alone, as here)
+        if c.coloured is not None and colour is not None:
+            warnings.append(f"{owner}: the Color Attribute {c.coloured[0]!r} of its Principled Volume is read only "
+                            "where that Principled Volume is the volume's one closure (no mixes); its Color is used "
+                            "everywhere")
     sigma_s = sum(c.scattering for c in closures)
     sigma_a = sum(c.absorption for c in closures)
     if not (np.all(np.isfinite(sigma_s)) and np.all(np.isfinite(sigma_a))):
@@ -290,7 +324,9 @@ def volume_object(obj, M, material, warnings):
         return None
     hot = list(dict.fromkeys(c.blackbody[3] for c in closures if c.blackbody is not None and c.blackbody[3]))
     temperature = read_grid(path, hot[0], M, warnings, name) if hot else None
-    interior = medium_of(closures, owner, warnings, grid=grid, temperature=temperature)
+    tinted = list(dict.fromkeys(c.coloured[0] for c in closures if c.coloured is not None))
+    colour = read_grid(path, tinted[0], M, warnings, name, channels=3) if tinted else None
+    interior = medium_of(closures, owner, warnings, grid=grid, temperature=temperature, colour=colour)
     if interior is None:
         return None
     return box_mesh(f"{obj.name} (volume)", grid.lo, grid.hi), interior
@@ -305,12 +341,13 @@ def box_mesh(name, lo, hi) -> Mesh:
     return Mesh(name, c, faces, [], np.zeros(len(faces), np.int64))
 
 
-def read_grid(path, grid_name, M, warnings, what, max_nodes=MAX_GRID_NODES) -> DensityGrid | None:
+def read_grid(path, grid_name, M, warnings, what, max_nodes=MAX_GRID_NODES, channels=1):
     """The float grid ``grid_name`` of the OpenVDB file ``path`` as a dense DensityGrid in world space (object
     matrix ``M``): its active voxels' index box, averaged over blocks of f³ voxels where it has more than
     ``max_nodes`` voxels (the mean density, hence the mean optical depth, is kept; detail finer than f voxels is
     lost: one warning), then resampled trilinearly onto a lattice over the box's world bounds with as many nodes
-    per axis (an object rotation resamples; negative values count as 0)."""
+    per axis (an object rotation resamples; negative values count as 0).  ``channels`` 3: a vector grid (Vec3, e.g.
+    a Color Attribute; a float grid counts as grey) as a list of three DensityGrids (r, g, b) on one lattice."""
     openvdb = compat.openvdb_module()
     if openvdb is None:
         warnings.append(f"{what}: this Blender has no openvdb module to read {os.path.basename(path)!r}; skipped")
@@ -329,13 +366,27 @@ def read_grid(path, grid_name, M, warnings, what, max_nodes=MAX_GRID_NODES) -> D
     if f > 1:
         warnings.append(f"{what}: grid {grid_name!r} ({'×'.join(map(str, shape))} voxels) is averaged over "
                         f"{f}×{f}×{f}-voxel blocks to fit {max_nodes} nodes")
-    pooled = _pooled(grid, (i0, j0, k0), shape, f)
+    vector = "vec3" in type(grid).__name__.lower()
+    if vector != (channels == 3):
+        warnings.append(f"{what}: grid {grid_name!r} is a {'vector' if vector else 'float'} grid, read as "
+                        f"{'its first component' if vector else 'grey'}")
+    pooled = _pooled(grid, (i0, j0, k0), shape, f, 3 if vector else 1)
+    if vector and channels == 1:
+        pooled = pooled[..., 0]
+    elif channels == 3:
+        pooled = pooled if vector else np.repeat(pooled[..., None], 3, axis=-1)
+        return [_resampled(pooled[..., c], grid, M, f, (i0, j0, k0), what) for c in range(3)]
+    return _resampled(pooled, grid, M, f, (i0, j0, k0), what)
+
+
+def _resampled(pooled, grid, M, f, start, what) -> DensityGrid:
+    """The pooled index-space values (read_grid) resampled onto a world-space lattice over their box."""
     # index → object space (a linear VDB transform: origin and three axes), then → world
     origin = np.array(grid.transform.indexToWorld((0.0, 0.0, 0.0)))
     axes = np.array([np.array(grid.transform.indexToWorld(tuple(e))) - origin for e in np.eye(3)]).T
     A = M[:3, :3] @ axes
     t = M[:3, :3] @ origin + M[:3, 3]
-    first = np.array([i0, j0, k0], np.float64) + 0.5 * (f - 1)          # the pooled nodes' index positions
+    first = np.array(start, np.float64) + 0.5 * (f - 1)          # the pooled nodes' index positions
     for a in range(3):                                                  # one node along an axis: two equal ones
         if pooled.shape[a] == 1:
             pooled = np.concatenate((pooled, pooled), axis=a)
@@ -354,17 +405,19 @@ def read_grid(path, grid_name, M, warnings, what, max_nodes=MAX_GRID_NODES) -> D
     return DensityGrid(values, lo, hi, field=f"{what}.grid")
 
 
-def _pooled(grid, start, shape, f) -> np.ndarray:
-    """Block means of f³ voxels of the grid's index box from ``start`` of ``shape``, read slab by slab."""
+def _pooled(grid, start, shape, f, channels=1) -> np.ndarray:
+    """Block means of f³ voxels of the grid's index box from ``start`` of ``shape``, read slab by slab (a vector
+    grid's ``channels`` 3 on a last axis)."""
     out_shape = tuple(int(math.ceil(s / f)) for s in shape)
-    out = np.zeros(out_shape, np.float64)
+    tail = (channels,) if channels > 1 else ()
+    out = np.zeros(out_shape + tail, np.float64)
     for a in range(out_shape[0]):
         nx = int(min(f, shape[0] - a * f))
-        slab = np.zeros((nx, int(shape[1]), int(shape[2])), np.float32)
+        slab = np.zeros((nx, int(shape[1]), int(shape[2])) + tail, np.float32)
         grid.copyToArray(slab, ijk=(int(start[0] + a * f), int(start[1]), int(start[2])))
-        pad = [(0, f - nx), (0, out_shape[1] * f - shape[1]), (0, out_shape[2] * f - shape[2])]
+        pad = [(0, f - nx), (0, out_shape[1] * f - shape[1]), (0, out_shape[2] * f - shape[2])] + [(0, 0)] * len(tail)
         block = np.pad(slab.astype(np.float64), pad)
-        block = block.reshape(f, out_shape[1], f, out_shape[2], f).sum(axis=(0, 2, 4))
+        block = block.reshape((f, out_shape[1], f, out_shape[2], f) + tail).sum(axis=(0, 2, 4))
         out[a] = block / (f ** 3)
     return out
 

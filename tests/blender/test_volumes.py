@@ -227,7 +227,7 @@ def test_mixed_volumes_add_coefficients_and_mix_phases():
 def test_emission_and_blackbody_are_exported_as_cycles_defines_them():
     """Principled Volume: ε = Emission Strength·Emission Color + Tint·σ/π·10⁻⁶·mix(1, T⁴, Blackbody Intensity)·
     colour(T), not scaled by Density, no warning; Volume Coefficients: ε its Emission Coefficients; the Color
-    Attribute (not read) one warning naming it."""
+    Attribute on a mesh (where the attribute does not exist: Cycles uses Color alone) no warning."""
     ap.reset(8, 8)
     load_addon()
     from polar_render.polar_addon.export import blackbody
@@ -247,8 +247,8 @@ def test_emission_and_blackbody_are_exported_as_cycles_defines_them():
     assert np.allclose(_interior(mat, warnings).emission.linear_srgb(), [1.0, 0.0, 0.5]) and warnings == []
     mat, node = _material("Tinted", "ShaderNodeVolumePrincipled", {"Color Attribute": "color"})
     warnings = []
-    _interior(mat, warnings)
-    assert len(warnings) == 1 and "'color'" in warnings[0] and "Color Attribute" in warnings[0]
+    assert np.allclose(_interior(mat, warnings).scattering.linear_srgb(), node.inputs["Color"].default_value[:3],
+                       rtol=1e-3) and warnings == []
 
 
 def test_linked_density_keeps_its_value_with_one_warning():
@@ -348,3 +348,35 @@ def test_volume_object_blackbody_reads_its_temperature_grid(tmp_path):
     values = np.stack([c.values for c in interior.emission_grid.channels], axis=-1)
     expected = 0.1 * np.ones(3) + blackbody.emission(1500.0 * temperature.astype(np.float64), 1.0, np.ones(3))
     assert np.allclose(values, expected, rtol=1e-5)
+
+
+def test_volume_object_colour_attribute_reads_its_vector_grid(tmp_path):
+    """Smoke from a file with a colour: Principled Volume's Color Attribute reads the object's Vec3 "color" grid
+    (written with Blender's openvdb), and the medium's colour grid holds Color × that grid at the density grid's
+    nodes, σ_s = Density, σ_a = Density·(1 − √Absorption Color) (Cycles' svm_node_principled_volume), no warning."""
+    load_addon()
+    from polar_render.polar_addon import compat
+    openvdb = compat.openvdb_module()
+    density = np.full((3, 4, 2), 0.5, np.float32)
+    rgb = np.random.default_rng(7).uniform(0.0, 1.0, (3, 4, 2, 3)).astype(np.float32)
+    grids = []
+    for name, values, kind in (("density", density, openvdb.FloatGrid), ("color", rgb, openvdb.Vec3SGrid)):
+        g = kind()
+        g.name = name
+        g.copyFromArray(values, ijk=(1, 0, 0))
+        g.transform = openvdb.createLinearTransform(voxelSize=0.5)
+        grids.append(g)
+    path = str(tmp_path / "coloured.vdb")
+    openvdb.write(path, grids=grids)
+    scene = _scene(None)
+    colour, absorption_colour = np.array([0.8, 0.5, 1.0]), np.array([0.25, 0.0, 1.0])
+    mat, node = _material("Tinted", "ShaderNodeVolumePrincipled",
+                          {"Density": 2.0, "Color": (*colour, 1.0), "Absorption Color": (*absorption_colour, 1.0),
+                           "Color Attribute": "color"})
+    _, interior = _volume_object(scene, "Tinted", path, mat)
+    assert np.allclose(interior.grid.values, density)
+    values = np.stack([c.values for c in interior.colour_grid.channels], axis=-1)
+    assert values.shape == (3, 4, 2, 3)
+    assert np.allclose(values, colour * rgb.astype(np.float64), atol=1e-6)
+    assert np.allclose(interior.scattering.linear_srgb(), 2.0, rtol=1e-3)
+    assert np.allclose(interior.absorption.linear_srgb(), 2.0 * (1.0 - np.sqrt(absorption_colour)), atol=2e-3)
