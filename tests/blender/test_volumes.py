@@ -329,17 +329,10 @@ def test_volume_object_blackbody_reads_its_temperature_grid(tmp_path):
     from polar_render.polar_addon import compat
     from polar_render.polar_addon.export import blackbody
     openvdb = compat.openvdb_module()
-    grids = []
     density = np.full((3, 3, 3), 0.5, np.float32)
     temperature = np.linspace(0.5, 1.5, 27, dtype=np.float32).reshape(3, 3, 3)   # × 1500 K: 750–2250 K
-    for name, values in (("density", density), ("temperature", temperature)):
-        g = openvdb.FloatGrid()
-        g.name = name
-        g.copyFromArray(values, ijk=(0, 0, 0))
-        g.transform = openvdb.createLinearTransform(voxelSize=0.5)
-        grids.append(g)
-    path = str(tmp_path / "fire.vdb")
-    openvdb.write(path, grids=grids)
+    path = _write_vdb(openvdb, str(tmp_path / "fire.vdb"), [("density", density, openvdb.FloatGrid),
+                                                            ("temperature", temperature, openvdb.FloatGrid)], (0, 0, 0))
     scene = _scene(None)
     mat, node = _material("Fire", "ShaderNodeVolumePrincipled",
                           {"Blackbody Intensity": 1.0, "Temperature": 1500.0, "Emission Strength": 0.1})
@@ -359,15 +352,8 @@ def test_volume_object_colour_attribute_reads_its_vector_grid(tmp_path):
     openvdb = compat.openvdb_module()
     density = np.full((3, 4, 2), 0.5, np.float32)
     rgb = np.random.default_rng(7).uniform(0.0, 1.0, (3, 4, 2, 3)).astype(np.float32)
-    grids = []
-    for name, values, kind in (("density", density, openvdb.FloatGrid), ("color", rgb, openvdb.Vec3SGrid)):
-        g = kind()
-        g.name = name
-        g.copyFromArray(values, ijk=(1, 0, 0))
-        g.transform = openvdb.createLinearTransform(voxelSize=0.5)
-        grids.append(g)
-    path = str(tmp_path / "coloured.vdb")
-    openvdb.write(path, grids=grids)
+    path = _write_vdb(openvdb, str(tmp_path / "coloured.vdb"), [("density", density, openvdb.FloatGrid),
+                                                                ("color", rgb, openvdb.Vec3SGrid)], (1, 0, 0))
     scene = _scene(None)
     colour, absorption_colour = np.array([0.8, 0.5, 1.0]), np.array([0.25, 0.0, 1.0])
     mat, node = _material("Tinted", "ShaderNodeVolumePrincipled",
@@ -380,3 +366,16 @@ def test_volume_object_colour_attribute_reads_its_vector_grid(tmp_path):
     assert np.allclose(values, colour * rgb.astype(np.float64), atol=1e-6)
     assert np.allclose(interior.scattering.linear_srgb(), 2.0, rtol=1e-3)
     assert np.allclose(interior.absorption.linear_srgb(), 2.0 * (1.0 - np.sqrt(absorption_colour)), atol=2e-3)
+
+
+def _write_vdb(openvdb, path, grids, ijk, voxel=0.5) -> str:
+    """An OpenVDB file at ``path`` of the grids [(name, values, grid class)], each from index ``ijk``."""
+    out = []
+    for name, values, kind in grids:
+        g = kind()
+        g.name = name
+        g.copyFromArray(values, ijk=ijk)
+        g.transform = openvdb.createLinearTransform(voxelSize=voxel)
+        out.append(g)
+    openvdb.write(path, grids=out)
+    return path
