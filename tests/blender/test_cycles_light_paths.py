@@ -12,7 +12,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from tests.blender_support import add_camera, add_plane, add_sphere, light_paths_off, load_addon  # noqa: E402
+from tests.blender_support import add_camera, add_plane, add_sphere, light_paths_off, load_addon, white_world  # noqa: E402
 from tests.support import asset_parity as ap  # noqa: E402
 
 W, H = 96, 64
@@ -46,11 +46,7 @@ def base(world=0.0):
     bpy.ops.wm.read_homefile(use_empty=True)
     scene = bpy.context.scene
     scene.render.resolution_x, scene.render.resolution_y, scene.render.resolution_percentage = W, H, 100
-    world_data = bpy.data.worlds.new("World")
-    scene.world = world_data
-    bg = world_data.node_tree.nodes["Background"]
-    bg.inputs["Color"].default_value = (1, 1, 1, 1)
-    bg.inputs["Strength"].default_value = world
+    white_world(scene, world)
     return scene
 
 
