@@ -529,11 +529,15 @@ next_segments = twin(_next_segments_loop and next_segments_numba, next_segments_
 
 # ----------------------------------------------------------------------------- the batch's film values
 
-def stokes_rgb_samples_numpy(rgb):
+def stokes_rgb_samples_numpy(rgb, in_place=False):
     """(out, nonfinite): the batch's Stokes × RGB samples (4, 3, n) from rgb (P, 3, n) (components
-    beyond P zero), samples with a non-finite component zeroed and counted."""
-    out = np.zeros((4, 3, rgb.shape[2]))
-    out[:rgb.shape[0]] = rgb
+    beyond P zero), samples with a non-finite component zeroed and counted.  ``in_place``: with P = 4
+    ``rgb`` itself is zeroed there and returned (no copy; the caller is done with it)."""
+    if in_place and rgb.shape[0] == 4:
+        out = rgb
+    else:
+        out = np.zeros((4, 3, rgb.shape[2]))
+        out[:rgb.shape[0]] = rgb
     finite = np.isfinite(out).all(axis=(0, 1))
     out[:, :, ~finite] = 0.0
     return out, int((~finite).sum())
@@ -559,19 +563,22 @@ def _zero_nonfinite_samples(out, P, j0, j1):
 
 
 @jit
-def _stokes_rgb_loop(rgb, out):
+def _stokes_rgb_loop(rgb, out, in_place):
     P, n = rgb.shape[0], rgb.shape[2]
-    # component rows outermost: each (p, c) row is one contiguous stream over the samples
-    for p in range(4):
-        for c in range(3):
-            for j in range(n):
-                out[p, c, j] = rgb[p, c, j] if p < P else 0.0
+    if not in_place:
+        # component rows outermost: each (p, c) row is one contiguous stream over the samples
+        for p in range(4):
+            for c in range(3):
+                for j in range(n):
+                    out[p, c, j] = rgb[p, c, j] if p < P else 0.0
     return _zero_nonfinite_samples(out, P, 0, n)
 
 
-def stokes_rgb_samples_numba(rgb):
-    out = np.empty((4, 3, rgb.shape[2]))
-    nonfinite = _stokes_rgb_loop(np.ascontiguousarray(rgb, dtype=np.float64), out)
+def stokes_rgb_samples_numba(rgb, in_place=False):
+    rgb = np.ascontiguousarray(rgb, dtype=np.float64)
+    in_place = in_place and rgb.shape[0] == 4
+    out = rgb if in_place else np.empty((4, 3, rgb.shape[2]))
+    nonfinite = _stokes_rgb_loop(rgb, out, in_place)
     return out, int(nonfinite)
 
 
@@ -624,10 +631,13 @@ spectral_stokes_rgb_samples = twin(_spectral_stokes_rgb_loop and spectral_stokes
 
 # ----------------------------------------------------------------------------- per-pixel sums of a batch
 
-def pixel_sums_numpy(local, span, stokes_rgb, y):
-    """(sums (4, 3, span), sums of y² (4, span), counts (span,) int64) of a batch's samples at pixels
-    ``local`` (n,) int64 in [0, span): stokes_rgb (4, 3, n) and luminance Stokes y (4, n) summed per
-    pixel in the samples' order (np.bincount, as engine.render.film.SampleSums.of)."""
+def pixel_sums_numpy(local, span, stokes_rgb, weights, sample=None):
+    """(sums (4, 3, span), sums of y² (4, span), counts (span,) int64, half sums (2, 4, span) or None) of a
+    batch's samples at pixels ``local`` (n,) int64 in [0, span): stokes_rgb (4, 3, n) and its luminance
+    Stokes y = Σ_c weights[c]·stokes_rgb[:, c] (4, n) (einsum's order) summed per pixel in the samples'
+    order (np.bincount, as engine.render.film.SampleSums.of); with the samples' indices ``sample`` (n,)
+    int64 also y's sums over the even (row 0) and the odd (row 1) samples."""
+    y = np.einsum("c,scn->sn", weights, stokes_rgb)
     sums = np.empty((4, 3, span))
     for s in range(4):
         for c in range(3):
@@ -635,32 +645,46 @@ def pixel_sums_numpy(local, span, stokes_rgb, y):
     sumsq_y = np.empty((4, span))
     for s in range(4):
         sumsq_y[s] = np.bincount(local, weights=y[s] * y[s], minlength=span)
-    return sums, sumsq_y, np.bincount(local, minlength=span)
+    half_y = None
+    if sample is not None:
+        half_y = np.empty((2, 4, span))
+        slot = local + span * (sample & 1)            # even samples' pixels, then odd samples'
+        for s in range(4):
+            half_y[:, s] = np.bincount(slot, weights=y[s], minlength=2 * span).reshape(2, span)
+    return sums, sumsq_y, np.bincount(local, minlength=span), half_y
 
 
 @jit
-def _pixel_sums_loop(local, stokes_rgb, y, sums, sumsq_y, count):
-    # the 17 bincounts as compiled loops without the GIL or temporaries (y²): every sum still adds its
-    # samples in order, starting from +0.0, so each pixel's sums have the bincounts' bits.  One sum at
-    # a time, as bincount: a pass over the samples that updated all 17 at once touched 17 rows a
-    # pixel apart (4× slower where every sample has a pixel of its own).
+def _pixel_sums_loop(local, stokes_rgb, weights, sample, has_half, sums, sumsq_y, count, half_y):
+    # the bincounts as compiled loops without the GIL or temporaries (y, y², the half slots): every sum
+    # still adds its samples in order, starting from +0.0, so each pixel's sums have the bincounts' bits.
+    # One Stokes row at a time, as bincount: a pass over the samples that updated all 17 sums at once
+    # touched 17 rows a pixel apart (4× slower where every sample has a pixel of its own); y is made
+    # where it is added (its square and its half sum in one pass), as einsum makes it: (w0·x0 + w1·x1) + w2·x2.
     n = local.shape[0]
+    w0, w1, w2 = weights[0], weights[1], weights[2]
     for s in range(4):
         for c in range(3):
             for j in range(n):
                 sums[s, c, local[j]] += stokes_rgb[s, c, j]
         for j in range(n):
-            v = y[s, j]
+            v = (w0 * stokes_rgb[s, 0, j] + w1 * stokes_rgb[s, 1, j]) + w2 * stokes_rgb[s, 2, j]
             sumsq_y[s, local[j]] += v * v
+            if has_half:
+                half_y[sample[j] & 1, s, local[j]] += v
     for j in range(n):
         count[local[j]] += 1
 
 
-def pixel_sums_numba(local, span, stokes_rgb, y):
+def pixel_sums_numba(local, span, stokes_rgb, weights, sample=None):
     sums, sumsq_y, count = np.zeros((4, 3, span)), np.zeros((4, span)), np.zeros(span, np.int64)
+    has_half = sample is not None
+    half_y = np.zeros((2, 4, span) if has_half else (2, 4, 0))
     _pixel_sums_loop(np.ascontiguousarray(local, dtype=np.int64), np.ascontiguousarray(stokes_rgb, dtype=np.float64),
-                     np.ascontiguousarray(y, dtype=np.float64), sums, sumsq_y, count)
-    return sums, sumsq_y, count
+                     np.ascontiguousarray(weights, dtype=np.float64),
+                     np.ascontiguousarray(sample, dtype=np.int64) if has_half else np.zeros(0, np.int64), has_half,
+                     sums, sumsq_y, count, half_y)
+    return sums, sumsq_y, count, half_y if has_half else None
 
 
 pixel_sums = twin(_pixel_sums_loop and pixel_sums_numba, pixel_sums_numpy)

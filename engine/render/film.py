@@ -257,21 +257,15 @@ class SampleSums:
         ``sample`` (N,) (the stratified sampler) also the even and odd samples' luminance sums."""
         lo, hi = (int(pixel.min()), int(pixel.max()) + 1) if pixel.size else (0, 0)
         local, span = pixel - lo, hi - lo
-        y = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, stokes_rgb)
-        # the Stokes sums, the luminance squares and the counts in one compiled pass (same bits)
-        sums, sumsq_y, count = pixel_sums(local, span, stokes_rgb, y)
+        # the Stokes sums, the luminance squares, the counts and the even/odd luminance sums in one compiled
+        # pass (the bincounts' bits)
+        sums, sumsq_y, count, half_y = pixel_sums(local, span, stokes_rgb, LUMINANCE_WEIGHTS, sample)
         alpha_sums = None if alpha is None else np.bincount(local, weights=alpha, minlength=span)
         guides = None
         if denoise is not None:
             guides = np.empty((6, span))
             for i, values in enumerate((*denoise[0], *denoise[1])):
                 guides[i] = np.bincount(local, weights=values, minlength=span)
-        half_y = None
-        if sample is not None:
-            half_y = np.empty((2, 4, span))
-            slot = local + span * (sample & 1)            # even samples' pixels, then odd samples'
-            for s in range(4):
-                half_y[:, s] = np.bincount(slot, weights=y[s], minlength=2 * span).reshape(2, span)
         return cls(lo, hi, sums, sumsq_y, count, alpha_sums, guides, pixel.shape[0], half_y)
 
 

@@ -932,7 +932,7 @@ class PathTracer:
         stats = acc.stats
         radiance = acc.radiance
         if self.rgb_mode:
-            out, nonfinite = stokes_rgb_samples(radiance)
+            out, nonfinite = stokes_rgb_samples(radiance, in_place=True)     # the accumulators end here
         else:
             out, nonfinite = spectral_stokes_rgb_samples(radiance, acc.w_rgb)
         stats["nonfinite"] += nonfinite

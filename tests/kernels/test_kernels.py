@@ -1025,6 +1025,11 @@ def test_stokes_rgb_samples_bitwise(P):
     b, bad_b = transport.stokes_rgb_samples_numba(rgb)
     assert a.tobytes() == b.tobytes() and bad_a == bad_b == 15
     assert not a[P:].any() and not a[:, :, :15].any() and np.array_equal(a[:P, :, 15:], rgb[:, :, 15:])
+    # in place (the integrator's accumulators): the same bits; with P = 4 the input itself is the output
+    for kernel in (transport.stokes_rgb_samples_numpy, transport.stokes_rgb_samples_numba):
+        mine = rgb.copy()
+        c, bad_c = kernel(mine, in_place=True)
+        assert c.tobytes() == a.tobytes() and bad_c == 15 and (c is mine) == (P == 4)
 
 
 @needs_numba
@@ -1050,25 +1055,35 @@ def test_spectral_stokes_rgb_samples_bitwise(P, L):
 
 @needs_numba
 @pytest.mark.parametrize("n,span", [(0, 0), (1, 1), (5000, 37), (3000, 4096)])
-def test_pixel_sums_bitwise(n, span):
-    """A batch's per-pixel Stokes sums, luminance squares and counts in one pass: the 17 bincounts'
-    bits (each pixel's samples added in order from +0.0; −0.0 samples, unsorted and repeated pixels,
-    pixels without samples), and the sums themselves."""
+@pytest.mark.parametrize("halves", [False, True])
+def test_pixel_sums_bitwise(n, span, halves):
+    """A batch's per-pixel Stokes sums, luminance squares, counts and even/odd luminance sums in one pass: the
+    bincounts' bits (each pixel's samples added in order from +0.0; −0.0 samples, unsorted and repeated
+    pixels, pixels without samples), y made as einsum makes it, and the sums themselves."""
     rng = np.random.default_rng(n + span)
     local = rng.integers(0, max(span, 1), n) if span else np.zeros(0, np.int64)
     x = rng.lognormal(size=(4, 3, n)) * rng.choice([-1.0, 1.0], size=(4, 3, n))
     x[:, :, :7] = -0.0
-    y = rng.normal(size=(4, n))
-    a = transport.pixel_sums_numpy(local, span, x, y)
-    b = transport.pixel_sums_numba(local, span, x, y)
+    w = np.array([0.2126, 0.7152, 0.0722])
+    sample = rng.integers(0, 64, n) if halves else None
+    a = transport.pixel_sums_numpy(local, span, x, w, sample)
+    b = transport.pixel_sums_numba(local, span, x, w, sample)
+    assert (a[3] is None) == (b[3] is None) == (not halves)
     for u, v in zip(a, b):
-        assert u.dtype == v.dtype and u.shape == v.shape and u.tobytes() == v.tobytes()
+        if u is not None:
+            assert u.dtype == v.dtype and u.shape == v.shape and u.tobytes() == v.tobytes()
     if n:
+        y = np.einsum("c,scn->sn", w, x)
         p = local[0]
         mine = local == p
         np.testing.assert_allclose(a[0][:, :, p], x[:, :, mine].sum(-1), rtol=1e-12)
         np.testing.assert_allclose(a[1][:, p], (y[:, mine] ** 2).sum(-1), rtol=1e-12)
         assert a[2][p] == mine.sum() and a[2].sum() == n
+        if halves:
+            odd = mine & (sample % 2 == 1)
+            np.testing.assert_allclose(a[3][1, :, p], y[:, odd].sum(-1), rtol=1e-12, atol=1e-300)
+            np.testing.assert_allclose(a[3].sum(axis=0), np.stack([np.bincount(local, y[s], span) for s in range(4)]),
+                                       rtol=1e-12, atol=1e-12)
 
 
 @needs_numba
