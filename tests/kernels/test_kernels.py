@@ -174,6 +174,11 @@ def test_throughput_times_stokes(P, L_T, L_w):
     b = transport.throughput_times_stokes_numba(T, rows, S, w)
     assert a.shape == b.shape
     np.testing.assert_allclose(b, a, rtol=1e-12, atol=1e-14)
+    # the compiled sums bit for bit: Σ_m T[i, m]·S[m] added in m order from 0, then × the weight
+    acc = np.zeros((P, L_T, n))
+    for m in range(P):
+        acc = acc + T[:, m][..., rows] * S[m][None]
+    assert b.tobytes() == (acc * w[None]).tobytes()
 
 
 # ----------------------------------------------------------------------------- whole renders
