@@ -351,14 +351,20 @@ class PathTracer:
         self.light_paths = (LightPathRules(settings, self.materials)
                             if getattr(settings, "light_paths_active", False) else None)
 
-    def _emitted(self, light: _Light, lookup: WavelengthLookup, d: np.ndarray | None = None) -> np.ndarray:
+    def _emitted(self, light: _Light, lookup: WavelengthLookup, d: np.ndarray | None = None,
+                 rows: np.ndarray | None = None) -> np.ndarray:
         """Emitted radiance (L, n) of ``light`` for paths with these wavelengths (RGB (3, n) in RGB mode)
-        arriving along the directions d (3, n) (used by lights whose radiance varies with direction)."""
+        arriving along the directions d (3, n) (used by lights whose radiance varies with direction).
+        ``rows``: a mask of ``lookup``'s paths (the n taken; None: all), taken only where the wavelengths
+        are read (not in RGB mode)."""
         if d is not None and getattr(light, "varies_with_direction", False):
-            return light.emitted(d, lookup, self.rgb_mode, self.mono)
+            return light.emitted(d, lookup if rows is None else lookup.take(rows), self.rgb_mode, self.mono)
         if self.rgb_mode:
             rgb = light.channel_rgb() if self.channels else light.rgb()
-            return np.repeat(rgb[:, None], lookup.lam.shape[1], axis=1)
+            n = lookup.lam.shape[1] if rows is None else int(np.count_nonzero(rows))
+            return np.repeat(rgb[:, None], n, axis=1)
+        if rows is not None:
+            lookup = lookup.take(rows)
         if self.mono:
             return light.radiance(lookup.lam, True)
         return light.spectrum.eval_cached(lookup)
@@ -557,10 +563,14 @@ class PathTracer:
 
         if env is not None and background.any():
             miss = background
-            d_miss = np.compress(miss, d, axis=1)       # contiguous (3, m), unlike d[:, miss]
-            Le = self._emitted(env, lk.take(miss), d_miss)
-            w = np.ones(int(miss.sum()))
             nd = ~prev_delta[miss]
+            # the missed directions, where something reads them (contiguous (3, m), unlike d[:, miss]): a
+            # sky that varies with direction, MIS against its sampling, a polarised sky's frames
+            reads_d = (getattr(env, "varies_with_direction", False) or nd.any()
+                       or (env.polarisation is not None and self.P > 1))
+            d_miss = np.compress(miss, d, axis=1) if reads_d else None
+            Le = self._emitted(env, lk, d_miss, rows=miss)
+            w = np.ones(nd.shape[0])
             if nd.any():
                 p_light = env.pdf(d_miss) * self._pick_probability(light_set.environment_index, at_prev(miss))
                 w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)

@@ -8,9 +8,10 @@ the integrator's stages, the Embree queries, the Mueller update and the film's s
 read the calling thread's CPU clock (``time.thread_time_ns``) and charge each call's *own* time (nested timed
 calls subtracted) to its stage, so the stages add up to the traced CPU time.  "other" is the process CPU time
 of the render minus the stages (Python between the batches, the film's adding thread, thread start-up).  The
-fastest of ``--repeats`` renders per thread count is reported.  The wrappers cost a few hundred ns a call
-(≈ 1–2 % of a render).  ``--cprofile N``: also print the N costliest functions (cumulative) of a 1-thread
-render under cProfile.  The load average is printed; not a test.
+fastest of ``--repeats`` renders per thread count is reported.  A timed call costs two thread-clock reads
+(≈ 1 µs); a render makes a few thousand (≈ 0.2 % of its time).  ``--cprofile N``: also print the N functions
+of most own time while one thread traces the render's units under cProfile (which sees one thread only).  The
+load average is printed; not a test.
 """
 
 from __future__ import annotations
