@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import jit_inner
+from . import jit, jit_inner, twin
 from ..vec3 import cross, dot
 
 
@@ -59,3 +59,42 @@ def frame_rotation_at(x, xt, k, j):
     if not r2 > 0:
         r2 = 1.0
     return (c * c - s * s) / r2, 2.0 * c * s / r2
+
+
+# ----------------------------------------------------------------------------- a BSDF's response to unpolarised light
+
+def unpolarised_response_in_frame_numpy(m00, b, x_out, x_T, wo, P):
+    """The Stokes vector (P, L, N) that an ABCS Mueller value (M00 = ``m00``, M10 = ``b``, (L, N) each, in frame
+    ``x_out``) scatters towards ``wo`` from unpolarised light, re-expressed in the frames ``x_T`` ((3, N) each;
+    P ≥ 3): (m00, b, 0, 0) rotated by frame_rotation(x_out, x_T, wo) (rotate_stokes's arithmetic)."""
+    S = np.zeros((P,) + np.shape(m00))
+    S[0] = m00
+    S[1] = b
+    return rotate_stokes(S, *frame_rotation(x_out, x_T, wo))
+
+
+@jit
+def _response_in_frame_loop(m00, b, x_out, x_T, wo, out):
+    P, L, n = out.shape
+    for j in range(n):
+        c2, s2 = frame_rotation_at(x_out, x_T, wo, j)
+        for q in range(L):
+            s1 = b[q, j]
+            out[0, q, j] = m00[q, j]
+            out[1, q, j] = c2 * s1 + s2 * 0.0         # rotate_stokes of (m00, b, 0, 0): S2 = 0
+            out[2, q, j] = -s2 * s1 + c2 * 0.0
+            for p in range(3, P):
+                out[p, q, j] = 0.0
+
+
+def unpolarised_response_in_frame_numba(m00, b, x_out, x_T, wo, P):
+    L, n = np.shape(m00)
+    c = np.ascontiguousarray
+    out = np.empty((P, L, n))
+    _response_in_frame_loop(c(m00, dtype=np.float64), c(np.broadcast_to(b, (L, n)), dtype=np.float64),
+                            *(c(np.broadcast_to(x, (3, n)), dtype=np.float64) for x in (x_out, x_T, wo)), out)
+    return out
+
+
+unpolarised_response_in_frame = twin(_response_in_frame_loop and unpolarised_response_in_frame_numba,
+                                     unpolarised_response_in_frame_numpy)

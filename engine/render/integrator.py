@@ -42,6 +42,7 @@ from .accel import RAY_EPSILON, Hits, offset_origin, surface_points
 from ..kernels.light_sampling import lamp_hits
 from ..kernels.material_groups import material_groups
 from ..kernels.shadow_rays import shadow_rays
+from ..kernels.stokes_rotation import unpolarised_response_in_frame
 from ..kernels.transport import (add_light, add_to_paths, identity_throughput, next_segments,
                                  spectral_stokes_rgb_samples, stokes_rgb_samples, throughput_times_stokes, update_abcs,
                                  update_depolarising, update_general)
@@ -1162,6 +1163,9 @@ class PathTracer:
             if k is not None:
                 through = dot(wi, sp.n_g) * dot(sp.wo, sp.n_g) < 0
                 f = f.scaled(np.where(through, k, 1.0)[None, :])
+        if polarised is None and f.kind == "abcs" and P > 2:
+            # (M00, M10, 0, 0) in the paths' frames, in one compiled pass (the same arithmetic)
+            return unpolarised_response_in_frame(f.m00(), f.B, f.x_out, x_T, sp.wo, P)
         if polarised is not None and f.kind != "depolarising":
             s_in = in_frame(polarised[0], polarised[1], f.x_in, -wi)
             S = mueller_times_stokes(f, s_in, P)

@@ -1182,3 +1182,33 @@ def test_vcavity_shadowing_bitwise():
             want = g_vcavity_numpy(*args)
         got = g_vcavity_numba(*args)
         assert got.shape == want.shape and got.tobytes() == want.tobytes()
+
+
+@needs_numba
+@pytest.mark.parametrize("P,L", [(3, 1), (4, 1), (4, 3)])
+def test_unpolarised_response_in_frame_bitwise(P, L):
+    """A BSDF's response to unpolarised light, (M00, M10, 0, 0) rotated into the paths' frames: the compiled
+    pass gives the NumPy chain's bits (zeros, rows, frame_rotation, rotate_stokes), keeps S0 and the polarised
+    intensity |M10| (a rotation), is the identity where the frames coincide and finite where x_T is degenerate."""
+    from engine.kernels import stokes_rotation as sr
+    rng = np.random.default_rng(P + 10 * L)
+    n = 500
+    wo = rng.normal(size=(3, n))
+    wo /= np.linalg.norm(wo, axis=0)
+    x_out = np.cross(wo.T, rng.normal(size=(n, 3))).T
+    x_out /= np.linalg.norm(x_out, axis=0)
+    x_T = np.cross(wo.T, rng.normal(size=(n, 3))).T
+    x_T /= np.linalg.norm(x_T, axis=0)
+    x_T[:, :20] = x_out[:, :20]                 # the same frame: no rotation
+    x_T[:, 20:25] = 0.0                         # degenerate: the identity
+    m00, b = rng.random((L, n)), rng.normal(size=(L, n))
+    b[:, 25:30] = -0.0
+    a = sr.unpolarised_response_in_frame_numpy(m00, b, x_out, x_T, wo, P)
+    c = sr.unpolarised_response_in_frame_numba(m00, b, x_out, x_T, wo, P)
+    assert a.shape == c.shape == (P, L, n) and a.tobytes() == c.tobytes()
+    assert np.array_equal(c[0], m00) and not c[3:].any()
+    ok = np.ones(n, bool)
+    ok[20:25] = False
+    np.testing.assert_allclose(np.hypot(c[1], c[2])[:, ok], np.abs(b)[:, ok], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(c[1, :, :20], b[:, :20], rtol=1e-12, atol=1e-15)
+    assert np.isfinite(c).all()
