@@ -26,6 +26,8 @@ def frame_rotation(x_from: np.ndarray, x_to: np.ndarray, k: np.ndarray):
     c = dot(x_from, x_to)
     s = dot(cross(k, x_from), x_to)
     r2 = c * c + s * s
+    zero = r2 == 0
+    c = np.where(zero, 1.0, c)                              # degenerate: the identity (cos 2φ, sin 2φ) = (1, 0)
     r2 = np.where(r2 > 0, r2, 1.0)
     return (c * c - s * s) / r2, 2.0 * c * s / r2
 
@@ -56,6 +58,8 @@ def frame_rotation_at(x, xt, k, j):
     y2 = k[0, j] * x[1, j] - k[1, j] * x[0, j]
     s = (y0 * xt[0, j] + y1 * xt[1, j]) + y2 * xt[2, j]
     r2 = c * c + s * s
+    if r2 == 0:
+        return 1.0, 0.0                                     # degenerate: the identity
     if not r2 > 0:
         r2 = 1.0
     return (c * c - s * s) / r2, 2.0 * c * s / r2

@@ -1212,3 +1212,19 @@ def test_unpolarised_response_in_frame_bitwise(P, L):
     np.testing.assert_allclose(np.hypot(c[1], c[2])[:, ok], np.abs(b)[:, ok], rtol=1e-12, atol=1e-15)
     np.testing.assert_allclose(c[1, :, :20], b[:, :20], rtol=1e-12, atol=1e-15)
     assert np.isfinite(c).all()
+
+
+def test_frame_rotation_is_the_identity_where_a_frame_is_degenerate():
+    """A zero frame (or one along the beam) keeps S1 and S2 (the docstring's identity), in both twins; a NaN
+    frame stays NaN (the NaN rules see it) rather than becoming a silent identity."""
+    from engine.kernels.stokes_rotation import frame_rotation, frame_rotation_at
+    k = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 0.0], [1.0, 1.0, 1.0]])
+    x_from = np.array([[1.0, 0.0, np.nan], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    x_to = np.array([[0.0, 1.0, 1.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    x_to[:, 0] = (0.0, 0.0, 1.0)                            # along the beam: degenerate
+    c2, s2 = frame_rotation(x_from, x_to, k)
+    assert (c2[:2] == 1.0).all() and (s2[:2] == 0.0).all()
+    assert np.isnan(c2[2])
+    for j in range(3):
+        cj, sj = frame_rotation_at(x_from, x_to, k, j)
+        assert (cj == c2[j] or (np.isnan(cj) and np.isnan(c2[j]))) and (sj == s2[j] or np.isnan(sj))
