@@ -111,12 +111,15 @@ def mitsuba_side(python, scene, sampler, spp, res, seeds, out):
     return imgs[:, 0], imgs[:, 1], float(np.median(secs[1:] or secs)), mitsuba_count(sampler, asked)
 
 
-def our_side(scene_name, spp, res, seeds, threads):
-    """(S0 luminance (k, H, W), S1 luminance, seconds per render, sampler) of our renders at our defaults."""
+def our_side(scene_name, spp, res, seeds, threads, sampler=None):
+    """(S0 luminance (k, H, W), S1 luminance, seconds per render, sampler) of our renders at our defaults
+    (``sampler``: that sampler instead of the default)."""
     scene = load_scene(os.path.join(PEERS, "scenes", f"{scene_name}.json"))
     scene.camera.width = scene.camera.height = res
     renderer = Renderer(scene)
     base = dataclasses.replace(scene.settings, spp=spp, threads=threads)
+    if sampler:
+        base = dataclasses.replace(base, sampler=sampler)
     renderer.render(dataclasses.replace(base, seed=seeds))             # warm-up: kernels, memory
     imgs, secs = [], []
     for seed in range(seeds):
@@ -136,6 +139,7 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--samplers", default=",".join(MITSUBA_SAMPLERS), help="Mitsuba's samplers raced")
+    ap.add_argument("--ours", default="", help="our sampler (default: the scene's, i.e. the default sampler)")
     ap.add_argument("--mitsuba-python", default=os.environ.get("MITSUBA_PYTHON", "/work/peerenv/bin/python"))
     a = ap.parse_args(argv)
     if a.seeds < 3:
@@ -146,12 +150,12 @@ def main(argv=None):
     print(f"# peer race, {datetime.datetime.now():%Y-%m-%d %H:%M}: {a.res}², {a.spp} spp asked, {a.seeds} seeds, "
           f"ours {a.threads} thread(s); load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
     print("| scene | ours (sampler) s, MSE S0 / S1 | Mitsuba best (spp) s, MSE S0 / S1 | S0 ratio (target) | S1 ratio "
-          "| every Mitsuba sampler: S0 ratio | throughput ours ÷ Mitsuba |")
+          "| every Mitsuba sampler: S0 ratio (S0 MSE per sample ours ÷ Mitsuba's) | throughput ours ÷ Mitsuba |")
     print("|---|---|---|---|---|---|---|")
     misses = 0
     with tempfile.TemporaryDirectory() as out:
         for scene in a.scenes.split(","):
-            o0, o1, t_o, ours_sampler = our_side(scene, a.spp, a.res, a.seeds, a.threads)
+            o0, o1, t_o, ours_sampler = our_side(scene, a.spp, a.res, a.seeds, a.threads, a.ours)
             e_o = (mse(o0), mse(o1))
             sides = {}
             for s in a.samplers.split(","):
@@ -170,7 +174,9 @@ def main(argv=None):
                 thr = f"{tr:.2f}" + ((" PASS" if tr >= 0.5 else " MISS") if scene in THROUGHPUT_SCENES else "")
                 misses += scene in THROUGHPUT_SCENES and tr < 0.5
             misses += not ok
-            every = ", ".join(f"{s} {r:.2f}" for s, r in ratio.items())
+            # noise per sample (MSE × spp: Monte Carlo MSE ∝ 1/spp), ours ÷ Mitsuba's, each sampler
+            per_sample = {s: a.spp * e_o[0] / (v[1] * v[2]) for s, v in sides.items()}
+            every = ", ".join(f"{s} {r:.2f} ({per_sample[s]:.2f})" for s, r in ratio.items())
             print(f"| {scene} | {t_o:.2f} ({ours_sampler}), {e_o[0]:.2e} / {e_o[1]:.2e} | {best} ({n_b}) {t_b:.2f}, "
                   f"{e_b0:.2e} / {e_b1:.2e} | {ratio[best]:.2f} (≥ {target:g}) {'PASS' if ok else 'MISS'} | {r1} "
                   f"| {every} | {thr} |", flush=True)
