@@ -492,7 +492,7 @@ class RenderSettings:
 
 
 #: RenderSettings.sampler's values
-SAMPLERS = ("independent", "stratified", "sobol")
+SAMPLERS = ("independent", "stratified", "sobol", "padded")
 #: RenderSettings.light_tree's values
 LIGHT_TREE_MODES = ("auto", "on", "off")
 
