@@ -14,6 +14,8 @@ van der Corput radical inverse and the first primitive polynomial's dimension) a
   with seeds per (seed, pixel, parity, pair);
 - the even and the odd samples (parity = sample & 1) are two independently scrambled sequences (index
   sample // 2): adaptive sampling's half-buffers A (even) and B (odd) are independent estimates;
+- optionally (the "padded" sampler's pairs other than the jitter) a random XOR of both coordinates, a digital
+  shift, instead of the Owen scramble (still a (0, m, 2)-net and uniform);
 - the 16 bits below 2^-32 are a random offset per (seed, pixel, parity, pair) (a sub-resolution shift:
   the numbers are exactly uniform on the 2^-48 grid, not confined to the 2^-32 one); every number is < 1.
 

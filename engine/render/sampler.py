@@ -19,6 +19,11 @@ Owen-scrambled 2-D Sobol' (0, 2)-sequence per (seed, pixel, pair, parity of the 
 (engine.kernels.sobol): a pixel's first 2^m even (or odd) samples of every pair form a (0, m, 2)-net,
 pairs are decorrelated by the per-pair index shuffle, each number is uniform and independent of the
 other pairs (unbiased), and a function of (seed, pixel, sample, pair) only.
+
+With "padded" every number — the camera's (PADDED_*) and every vertex's from the first on (SOBOL_* roles at
+``vertex_pair``) — is a coordinate of such a pair (``padded_pairs``), the pixel jitter Owen-scrambled and every
+other pair XOR-scrambled (a random digital shift: less variance than Owen's on the smooth direction and light
+integrands, measured in docs/benchmarks.md, "Sampling patterns: padded").
 """
 
 from __future__ import annotations

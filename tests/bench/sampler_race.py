@@ -171,6 +171,7 @@ def pattern(spec: str, spp: int):
             kw["owen_pairs"] = tuple(int(v) for v in k[5:].split("+"))
         elif k == "whole":
             kw["split"] = False
+    joint = "joint" in knobs            # the jitter and the first light point from stratified's joint 12-D set
     for k in knobs:
         if k == "bN":
             kw["block_bits"] = (spp if kw.get("split") is False else spp // 2).bit_length() - 1
@@ -178,8 +179,18 @@ def pattern(spec: str, spp: int):
             kw["block_bits"] = int(k[1:])
 
     def pairs_function(seed, pixel, sample, pairs):
-        key = sys.modules[SAMPLER_MODULE]._seed_key(seed)
-        return variant_pairs(key, np.asarray(pixel), np.asarray(sample), np.asarray(pairs, np.int64), **kw)
+        module = sys.modules[SAMPLER_MODULE]
+        pixel, sample, pairs = np.asarray(pixel), np.asarray(sample), np.asarray(pairs, np.int64)
+        out = (variant_pairs(module._seed_key(seed), pixel, sample, pairs, **kw) if kw
+               else module.owen_sobol_pairs(module._seed_key(seed), pixel, sample, pairs,
+                                            np.isin(pairs, list(module.PADDED_OWEN))))
+        if joint:
+            light = module.vertex_pair("padded", 0, module.SOBOL_LIGHT_POINT)
+            for p, named in ((module.PADDED_JITTER, module.PAIR_JITTER), (light, module.PAIR_LIGHT_POINT)):
+                for r in np.nonzero(pairs == p)[0]:
+                    u = np.random.default_rng().random((2, pixel.size))
+                    out[2 * r], out[2 * r + 1] = module.stratified_pair(seed, pixel, sample, u[0], u[1], pair=named)
+        return out
     return name, pairs_function
 
 
