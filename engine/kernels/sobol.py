@@ -116,13 +116,11 @@ def owen_sobol_pairs_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample: np.n
         j = reverse32(owen_permute(ri, h & _M32))                  # the shuffled index
         ry = (SOBOL2_REVERSED[0][j & np.uint64(255)] ^ SOBOL2_REVERSED[1][(j >> _S8) & np.uint64(255)]
               ^ SOBOL2_REVERSED[2][(j >> _S16) & np.uint64(255)] ^ SOBOL2_REVERSED[3][j >> _S24])
-        if owen is None or owen[m]:
-            x = reverse32(owen_permute(j, h >> _S32))
-            y = reverse32(owen_permute(ry, h2 & _M32))
-        else:
+        if owen is None or owen[m]:                                 # Owen's scramble of each coordinate
+            x, y = (reverse32(owen_permute(r, seed)) for r, seed in ((j, h >> _S32), (ry, h2 & _M32)))
+        else:                                                       # a digital shift of each coordinate
             shift = mix64(h ^ _XOR)
-            x = reverse32(j) ^ (shift & _M32)
-            y = reverse32(ry) ^ (shift >> _S32)
+            x, y = (reverse32(r) ^ s for r, s in ((j, shift & _M32), (ry, shift >> _S32)))
         out[2 * m] = ((x << _S16) | ((h2 >> _S32) & _LOW16)).astype(np.float64) * _TO_UNIT
         out[2 * m + 1] = ((y << _S16) | (h2 >> _S48)).astype(np.float64) * _TO_UNIT
     return out

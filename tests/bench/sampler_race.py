@@ -151,6 +151,24 @@ def variant_pairs(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray, p
     return out
 
 
+def owen_joint(module, seed_key, pixel, sample, first_dim):
+    """(2, N): Sobol' dimensions first_dim + 1, first_dim + 2 of the unshuffled index sample // 2 (one point set
+    for all dimensions: they stratify jointly), each coordinate Owen-scrambled per (seed, pixel, parity, dimension)."""
+    smp = sample.astype(U)
+    i = (smp >> _S1) & _M32
+    base = mix64((seed_key[0] ^ (pixel.astype(U) * _GOLDEN) ^ ((smp & _S1) * _PARITY)) + U(0x9FB21C651E98DF25))
+    out = np.empty((2, pixel.size))
+    for c in range(2):
+        v = module._SOBOL_V[first_dim + c]
+        x = np.zeros_like(i)
+        for b in range(int(i.max()).bit_length() if i.size else 0):
+            x[((i >> U(b)) & _S1).astype(bool)] ^= v[b]
+        h = mix64(base + U(((first_dim + c + 1) * int(_PAIR)) & 0xFFFFFFFFFFFFFFFF))
+        xs = reverse32(owen_permute(reverse32(x), h & _M32))
+        out[c] = ((xs << _S16) | ((h >> _S32) & _LOW16)).astype(np.float64) * _TO_UNIT
+    return out
+
+
 def pattern(spec: str, spp: int):
     """A sampler spec → (RenderSettings.sampler, the "padded" sampler's pairs function or None: the engine's).
     "padded:KNOB:…" races the pattern variants of ``variant_pairs`` (numbers of every pair): ``xor``, ``exact``,
@@ -172,6 +190,7 @@ def pattern(spec: str, spp: int):
         elif k == "whole":
             kw["split"] = False
     joint = "joint" in knobs            # the jitter and the first light point from stratified's joint 12-D set
+    joint_owen = "jointowen" in knobs   # … from Sobol' dimensions 1–4 of one point set, each Owen-scrambled
     for k in knobs:
         if k == "bN":
             kw["block_bits"] = (spp if kw.get("split") is False else spp // 2).bit_length() - 1
@@ -184,6 +203,11 @@ def pattern(spec: str, spp: int):
         out = (variant_pairs(module._seed_key(seed), pixel, sample, pairs, **kw) if kw
                else module.owen_sobol_pairs(module._seed_key(seed), pixel, sample, pairs,
                                             np.isin(pairs, list(module.PADDED_OWEN))))
+        if joint_owen:
+            light = module.vertex_pair("padded", 0, module.SOBOL_LIGHT_POINT)
+            for p, first_dim in ((module.PADDED_JITTER, 0), (light, 2)):
+                for r in np.nonzero(pairs == p)[0]:
+                    out[2 * r:2 * r + 2] = owen_joint(module, module._seed_key(seed), pixel, sample, first_dim)
         if joint:
             light = module.vertex_pair("padded", 0, module.SOBOL_LIGHT_POINT)
             for p, named in ((module.PADDED_JITTER, module.PAIR_JITTER), (light, module.PAIR_LIGHT_POINT)):
