@@ -853,12 +853,13 @@ def build_parser() -> argparse.ArgumentParser:
                         "(sampled λ, one Mueller product per path) or off")
     r.add_argument("--simplify", choices=("auto", "off"),
                    help="auto (default): skip layered coats that are index-matched and clear; off: keep all")
-    r.add_argument("--sampler", choices=("sobol", "stratified", "independent"),
+    r.add_argument("--sampler", choices=("sobol", "padded", "stratified", "independent"),
                    help="sobol (the default, as in Blender: stratified's numbers at the camera and first vertex, "
                         "per-pixel shuffled, Owen-scrambled Sobol' pairs at every deeper vertex: less noise, same "
-                        "expectation; --stderr then comes from the even/odd halves), stratified (Sobol' pixel "
-                        "jitter, lens, wavelengths and first-vertex light/BSDF numbers, deeper ones hashed) or "
-                        "independent (hashed numbers)")
+                        "expectation; --stderr then comes from the even/odd halves), padded (every number from its "
+                        "own shuffled Sobol' pair, the pixel jitter Owen-scrambled, the others digitally shifted), "
+                        "stratified (Sobol' pixel jitter, lens, wavelengths and first-vertex light/BSDF numbers, "
+                        "deeper ones hashed) or independent (hashed numbers)")
     r.add_argument("--light-tree", choices=LIGHT_TREE_MODES,
                    help="next-event estimation's light choice: on (the light tree over lamps and emissive triangles, "
                         "as Cycles' Light Tree), off (the scene's light_selection over whole lights) or auto (default: "

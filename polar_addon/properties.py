@@ -41,9 +41,12 @@ SAMPLER_ITEMS = [
      "the edges of bright lights seen by the camera, on lamp-lit surfaces, in depth of field and in colour", 1),
     ("SOBOL", "Sobol", "Stratified's numbers at the camera and first bounce, and every deeper bounce's (light "
      "choice and point, BSDF lobe and direction, roulette) from per-pixel shuffled, Owen-scrambled Sobol' "
-     "sequences (as Cycles' Sobol-Burley pattern): same expectation, the least noise (most in glass)", 2),
+     "sequences (as Cycles' Sobol-Burley pattern): same expectation, less noise (most in glass)", 2),
+    ("PADDED", "Padded Sobol", "Every number of every bounce, the camera's too, from its own per-pixel shuffled "
+     "Sobol' (0, 2)-sequence pair (as Mitsuba's ldsampler and pbrt's PaddedSobol), the pixel jitter Owen-"
+     "scrambled, the others digitally shifted: same expectation, the least noise (rough metals, edges)", 3),
 ]
-SAMPLER_TO_ENGINE = {"INDEPENDENT": "independent", "STRATIFIED": "stratified", "SOBOL": "sobol"}
+SAMPLER_TO_ENGINE = {"INDEPENDENT": "independent", "STRATIFIED": "stratified", "SOBOL": "sobol", "PADDED": "padded"}
 
 PASS_NAMES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP", "Polariser",
               "VisDoP", "VisS1", "VisS2", "VisS3", "VisAoLP", "Noise", "Polarisation Mosaic",

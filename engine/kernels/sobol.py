@@ -14,6 +14,8 @@ van der Corput radical inverse and the first primitive polynomial's dimension) a
   with seeds per (seed, pixel, parity, pair);
 - the even and the odd samples (parity = sample & 1) are two independently scrambled sequences (index
   sample // 2): adaptive sampling's half-buffers A (even) and B (odd) are independent estimates;
+- optionally (the "padded" sampler's pairs other than the jitter) a random XOR of both coordinates, a digital
+  shift, instead of the Owen scramble (still a (0, m, 2)-net and uniform);
 - the 16 bits below 2^-32 are a random offset per (seed, pixel, parity, pair) (a sub-resolution shift:
   the numbers are exactly uniform on the 2^-48 grid, not confined to the 2^-32 one); every number is < 1.
 
@@ -39,6 +41,8 @@ _SALT = np.uint64(0x2545F4914F6CDD1D)
 _PARITY = np.uint64(0xD6E8FEB86659FD93)
 _PAIR = np.uint64(0xA0761D6478BD642F)
 _SECOND = np.uint64(0xE7037ED1A0B428DB)
+#: key constant of the XOR-scrambled pairs' digital shift
+_XOR = np.uint64(0x7FB5D329728EA185)
 #: the FastOwenScrambler's multipliers
 _C1, _C2, _C3 = np.uint64(0x3D20ADEA), np.uint64(0x05526C56), np.uint64(0x53A22864)
 _B1, _B2, _B4, _B8, _B16 = (np.uint64(v) for v in (0x55555555, 0x33333333, 0x0F0F0F0F, 0x00FF00FF, 0xFFFF))
@@ -94,9 +98,12 @@ def owen_permute(r: np.ndarray, seed: np.ndarray) -> np.ndarray:
 
 
 def owen_sobol_pairs_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray,
-                           pairs: np.ndarray) -> np.ndarray:
+                           pairs: np.ndarray, owen: np.ndarray | None = None) -> np.ndarray:
     """(2k, N) numbers in [0, 1): rows 2m, 2m + 1 are pair ``pairs[m]`` (int64 (k,)) of sample ``sample``
-    (N,) of pixel ``pixel`` (N,) for the render's mixed seed ``seed_key`` (uint64 (1,)) (module docstring)."""
+    (N,) of pixel ``pixel`` (N,) for the render's mixed seed ``seed_key`` (uint64 (1,)) (module docstring);
+    ``owen`` (bool (k,), default all True): pair m Owen-scrambled, else XOR-scrambled (a random digital shift
+    of both coordinates per (seed, pixel, parity, pair): the points keep the sequence's exact digit structure,
+    lower variance than Owen's on smooth integrands)."""
     n = pixel.shape[0]
     out = np.empty((2 * pairs.shape[0], n))
     smp = sample.astype(np.uint64)
@@ -107,10 +114,13 @@ def owen_sobol_pairs_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample: np.n
         h = mix64(base + np.uint64(((int(pairs[m]) + 1) * int(_PAIR)) & 0xFFFFFFFFFFFFFFFF))
         h2 = mix64(h ^ _SECOND)
         j = reverse32(owen_permute(ri, h & _M32))                  # the shuffled index
-        x = reverse32(owen_permute(j, h >> _S32))
         ry = (SOBOL2_REVERSED[0][j & np.uint64(255)] ^ SOBOL2_REVERSED[1][(j >> _S8) & np.uint64(255)]
               ^ SOBOL2_REVERSED[2][(j >> _S16) & np.uint64(255)] ^ SOBOL2_REVERSED[3][j >> _S24])
-        y = reverse32(owen_permute(ry, h2 & _M32))
+        if owen is None or owen[m]:                                 # Owen's scramble of each coordinate
+            x, y = (reverse32(owen_permute(r, seed)) for r, seed in ((j, h >> _S32), (ry, h2 & _M32)))
+        else:                                                       # a digital shift of each coordinate
+            shift = mix64(h ^ _XOR)
+            x, y = (reverse32(r) ^ s for r, s in ((j, shift & _M32), (ry, shift >> _S32)))
         out[2 * m] = ((x << _S16) | ((h2 >> _S32) & _LOW16)).astype(np.float64) * _TO_UNIT
         out[2 * m + 1] = ((y << _S16) | (h2 >> _S48)).astype(np.float64) * _TO_UNIT
     return out
@@ -135,7 +145,7 @@ def _owen_permute_one(r, seed):
 
 
 @jit
-def _owen_sobol_loop(seed_key, pixel, sample, pairs, table, base, ri, out):
+def _owen_sobol_loop(seed_key, pixel, sample, pairs, owen, table, base, ri, out):
     s = seed_key[0]
     byte = np.uint64(255)
     for n in range(pixel.shape[0]):            # per path: its key and reversed index
@@ -148,19 +158,25 @@ def _owen_sobol_loop(seed_key, pixel, sample, pairs, table, base, ri, out):
             h = _mix64_one(base[n] + key)
             h2 = _mix64_one(h ^ _SECOND)
             j = _reverse32_one(_owen_permute_one(ri[n], h & _M32))
-            x = _reverse32_one(_owen_permute_one(j, h >> _S32))
             ry = table[0, j & byte] ^ table[1, (j >> _S8) & byte] ^ table[2, (j >> _S16) & byte] ^ table[3, j >> _S24]
-            y = _reverse32_one(_owen_permute_one(ry, h2 & _M32))
+            if owen[m]:
+                x = _reverse32_one(_owen_permute_one(j, h >> _S32))
+                y = _reverse32_one(_owen_permute_one(ry, h2 & _M32))
+            else:
+                shift = _mix64_one(h ^ _XOR)
+                x = _reverse32_one(j) ^ (shift & _M32)
+                y = _reverse32_one(ry) ^ (shift >> _S32)
             out[2 * m, n] = np.float64((x << _S16) | ((h2 >> _S32) & _LOW16)) * _TO_UNIT
             out[2 * m + 1, n] = np.float64((y << _S16) | (h2 >> _S48)) * _TO_UNIT
 
 
 def owen_sobol_pairs_numba(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray,
-                           pairs: np.ndarray) -> np.ndarray:
+                           pairs: np.ndarray, owen: np.ndarray | None = None) -> np.ndarray:
     n = pixel.shape[0]
     out = np.empty((2 * pairs.shape[0], n))
+    owen = np.ones(pairs.shape[0], np.bool_) if owen is None else np.ascontiguousarray(owen, np.bool_)
     _owen_sobol_loop(np.asarray(seed_key, np.uint64), np.ascontiguousarray(pixel, np.int64),
-                     np.ascontiguousarray(sample, np.int64), np.ascontiguousarray(pairs, np.int64),
+                     np.ascontiguousarray(sample, np.int64), np.ascontiguousarray(pairs, np.int64), owen,
                      SOBOL2_REVERSED, np.empty(n, np.uint64), np.empty(n, np.uint64), out)
     return out
 

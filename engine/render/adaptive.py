@@ -53,8 +53,8 @@ on by its own σ̂.  At ``min_spp`` the error is the quadratic mean of the tile'
 neighbourhood's RMS error, so an image whose every tile is below T there still stops there.
 
 **Schedule.** Every pixel first gets ``min_spp`` samples; then tiles that go on get more,
-checkpoint by checkpoint (:func:`checkpoints`, even steps so both halves stay equal: with the ``sobol``
-and ``stratified`` samplers the counts 2^k and 3·2^(k−1), where a pixel's low-discrepancy points are whole
+checkpoint by checkpoint (:func:`checkpoints`, even steps so both halves stay equal: with the ``sobol``,
+``padded`` and ``stratified`` samplers the counts 2^k and 3·2^(k−1), where a pixel's low-discrepancy points are whole
 nets — their error is up to 2× lower there than at the counts between; with ``independent`` steps of
 about +25 %), until no tile goes on, ``spp`` is reached or the time limit passes.
 
@@ -167,7 +167,7 @@ LADDERS = ("quarter", "nets")
 
 
 #: The ladder of each sampler (``RenderSettings.sampler``): whole nets for the low-discrepancy ones.
-SAMPLER_LADDERS = {"sobol": "nets", "stratified": "nets", "independent": "quarter"}
+SAMPLER_LADDERS = {"sobol": "nets", "padded": "nets", "stratified": "nets", "independent": "quarter"}
 
 
 def ladder_of(sampler: str) -> str:

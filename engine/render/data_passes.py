@@ -283,10 +283,10 @@ class _Tracer:
     """The first-hit tracing of one request over a scene (shared by the worker threads: read-only)."""
 
     def __init__(self, scene: Scene, compiled: CompiledScene, camera: CameraModel, request: DataPassRequest,
-                 seed: int, stratified: bool, pixels: np.ndarray):
+                 seed: int, sampler: str, pixels: np.ndarray):
         self.scene, self.compiled, self.camera, self.request = scene, compiled, camera, request
         self.pixels = pixels            # flat indices of the window's pixels (row-major)
-        self.seed, self.stratified = seed, stratified
+        self.seed, self.sampler = seed, sampler
         self.passes = request.passes
         self.vis = ray_visibility(compiled)
         self.identity = _Identity(scene, compiled)
@@ -306,7 +306,7 @@ class _Tracer:
 
     def rays(self, pixel: np.ndarray, sample: np.ndarray):
         """The integrator's camera rays of (pixel, sample) (engine.render.integrator._camera_paths)."""
-        _, u = camera_numbers(self.seed, self.stratified, pixel, sample, self.camera.lens_dimensions)
+        _, u = camera_numbers(self.seed, self.sampler, pixel, sample, self.camera.lens_dimensions)
         o, d, _, t_min, t_max = self.camera.generate(pixel, u)
         t_min = np.asarray(t_min, np.float64)
         t_max = np.asarray(t_max, np.float64)
@@ -444,7 +444,7 @@ def render_data_passes(renderer, request: DataPassRequest, settings=None, window
     w, h = x1 - x0, y1 - y0
     n_samples = request.samples_for(settings.spp)
     rows, cols = np.mgrid[y0:y1, x0:x1]
-    tracer = _Tracer(scene, compiled, camera, request, int(settings.seed), settings.stratified,
+    tracer = _Tracer(scene, compiled, camera, request, int(settings.seed), settings.sampler,
                      (rows * W + cols).ravel().astype(np.int64))
     n_pix = tracer.pixels.size
     per_chunk = max(1, BATCH_RAYS // n_samples)

@@ -53,9 +53,9 @@ from .media import Media, cross
 from .path_state import PathState
 from .polarised_light import in_frame, light_samples_polarisation, mueller_times_stokes
 from .plan import rendered_materials, spectral_reduction
-from .sampler import (PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_LIGHT_POINT, PAIR_WAVELENGTH, SOBOL_CHOICES,
-                      SOBOL_DIRECTION, SOBOL_LIGHT_POINT, SOBOL_ROULETTE, PathSampler, camera_numbers, sobol_pair_index,
-                      sobol_pairs, stratified_pair)
+from .sampler import (PADDED_WAVELENGTH, PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_LIGHT_POINT, PAIR_WAVELENGTH,
+                      SOBOL_CHOICES, SOBOL_DIRECTION, SOBOL_LIGHT_POINT, SOBOL_ROULETTE, PathSampler, camera_numbers,
+                      pattern_pairs, stratified_pair, vertex_pair)
 from .visibility import ray_visibility
 from ..spectral import RGB_WAVELENGTHS_NM, WavelengthLookup, rgb_channel_tables, rgb_weights, sample_wavelengths
 from ..vec3 import dot
@@ -436,8 +436,8 @@ class PathTracer:
         # (a lamp, a sun disc) are otherwise most of the image's noise (see stratified_pair); the
         # lens point (a defocused edge's noise) and the wavelengths (a coloured metal's or a light's
         # spectrum: the spectral noise) likewise
-        sampler, u = camera_numbers(self.settings.seed, stratified, pixel, sample, self.camera.lens_dimensions,
-                                    k - k_camera)
+        sampler, u = camera_numbers(self.settings.seed, self.settings.sampler, pixel, sample,
+                                    self.camera.lens_dimensions, k - k_camera)
         if stratified:
             seed = self.settings.seed
             if self.samples_wavelengths:
@@ -445,7 +445,10 @@ class PathTracer:
                 # the stratified x sets u within a period (the pixel's samples stratify that period, not
                 # [0, 1) count times over) and y which period (the hero's quarter, also stratified)
                 count = self.n_lambda
-                x, y = stratified_pair(seed, pixel, sample, u[k_camera], u[k_camera], pair=PAIR_WAVELENGTH)
+                if self.settings.sampler == "padded":
+                    x, y = pattern_pairs("padded", seed, pixel, sample, [PADDED_WAVELENGTH])
+                else:
+                    x, y = stratified_pair(seed, pixel, sample, u[k_camera], u[k_camera], pair=PAIR_WAVELENGTH)
                 u[k_camera] = (x + np.floor(y * count)) / count
         o, d, x_T, t_min, t_max = self.camera.generate(pixel, u[:k_camera])
         lam, w_rgb = self._wavelengths(u[k_camera] if self.samples_wavelengths else None, n_total)
@@ -728,8 +731,9 @@ class PathTracer:
         # stateless in the dimension, so skipping leaves every other one as it was.
         nee = (bool(len(self.lights)) and bounce + 2 <= st.max_depth
                and not all(self.shaders[g].flags.is_delta_only for g in groups))
-        if st.sampler == "sobol" and bounce > 0:
-            # deeper vertices: the padded Owen-scrambled pairs (the first one as "stratified" draws it)
+        if st.sampler == "sobol" and bounce > 0 or st.sampler == "padded":
+            # deeper vertices (every vertex with "padded"): the padded Owen-scrambled pairs (with "sobol" the
+            # first one as "stratified" draws it)
             return self._sobol_vertex_numbers(state, acc, nee, all(fused), bounce + 1 >= st.rr_depth, bounce)
         u_light = sampler.next(4) if nee else sampler.skip(4)
         direction_dims = None
@@ -761,7 +765,9 @@ class PathTracer:
         pixel, sample = acc.pixel[state.path], acc.sample[state.path]
         roles = [SOBOL_CHOICES] + ([SOBOL_LIGHT_POINT] if nee else []) + ([SOBOL_ROULETTE] if nee or roulette else [])
         roles += [] if delta_only else [SOBOL_DIRECTION]
-        out = sobol_pairs(self.settings.seed, pixel, sample, [sobol_pair_index(bounce, r) for r in roles])
+        sampler = self.settings.sampler
+        pairs = [vertex_pair(sampler, bounce, r) for r in roles]
+        out = pattern_pairs(sampler, self.settings.seed, pixel, sample, pairs)
         row = {r: 2 * m for m, r in enumerate(roles)}
         u_light = None
         if nee:
@@ -774,7 +780,7 @@ class PathTracer:
             u_bsdf = out[[1, d, d + 1]]
         nums = _VertexNumbers(nee=nee, u_light=u_light, u_bsdf=u_bsdf, direction_dims=None, pixel=pixel,
                               sample=sample, u_rr=out[row[SOBOL_ROULETTE]] if roulette else np.empty(0),
-                              sobol_direction=sobol_pair_index(bounce, SOBOL_DIRECTION) if delta_only else None)
+                              sobol_direction=vertex_pair(sampler, bounce, SOBOL_DIRECTION) if delta_only else None)
         return nums
 
     def _stratify_vertex(self, nums: _VertexNumbers) -> None:
@@ -802,7 +808,8 @@ class PathTracer:
         to ``nums.u_bsdf`` (stratified at a stratified first vertex, from their pair with "sobol");
         ``nums.direction_dims`` (``nums.sobol_direction``) is spent."""
         if nums.sobol_direction is not None:
-            extra = sobol_pairs(self.settings.seed, nums.pixel, nums.sample, [nums.sobol_direction])
+            extra = pattern_pairs(self.settings.sampler, self.settings.seed, nums.pixel, nums.sample,
+                                  [nums.sobol_direction])
             nums.u_bsdf = np.concatenate((nums.u_bsdf, extra))
             nums.sobol_direction = None
             return

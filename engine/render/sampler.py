@@ -19,6 +19,11 @@ Owen-scrambled 2-D Sobol' (0, 2)-sequence per (seed, pixel, pair, parity of the 
 (engine.kernels.sobol): a pixel's first 2^m even (or odd) samples of every pair form a (0, m, 2)-net,
 pairs are decorrelated by the per-pair index shuffle, each number is uniform and independent of the
 other pairs (unbiased), and a function of (seed, pixel, sample, pair) only.
+
+With "padded" every number — the camera's (PADDED_*) and every vertex's from the first on (SOBOL_* roles at
+``vertex_pair``) — is a coordinate of such a pair (``padded_pairs``), the pixel jitter Owen-scrambled and every
+other pair XOR-scrambled (a random digital shift: less variance than Owen's on the smooth direction and light
+integrands, measured in docs/benchmarks.md, "Sampling patterns: padded").
 """
 
 from __future__ import annotations
@@ -136,19 +141,23 @@ def stratified_pair(seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.nda
                                 _SOBOL_V[2 * pair + 1], u0, u1)
 
 
-def camera_numbers(seed: int, stratified: bool, pixel: np.ndarray, sample: np.ndarray, lens_dimensions: int,
+def camera_numbers(seed: int, sampler: str, pixel: np.ndarray, sample: np.ndarray, lens_dimensions: int,
                    extra: int = 0):
     """(PathSampler, u (2 + lens_dimensions + extra, N)): the camera's numbers of sample ``sample`` of pixel
-    ``pixel`` — the pixel jitter, the thin lens's point (``lens_dimensions`` 0 or 2), then ``extra`` hashed
-    dimensions (the wavelengths' number) — with the jitter and lens pairs stratified (``stratified_pair``) for
-    the stratifying samplers.  The one source of camera rays' numbers: the integrator's paths and the data
-    passes (engine.render.data_passes) see the same rays."""
-    sampler, u = PathSampler.start(seed, pixel, sample, 2 + lens_dimensions + extra)
-    if stratified:
+    ``pixel`` with ``sampler`` (RenderSettings.sampler) — the pixel jitter, the thin lens's point
+    (``lens_dimensions`` 0 or 2), then ``extra`` hashed dimensions (the wavelengths' number) — with the jitter and
+    lens pairs stratified (``stratified_pair``; "padded": its pairs PADDED_JITTER, PADDED_LENS) for the
+    stratifying samplers.  The one source of camera rays' numbers: the integrator's paths and the data passes
+    (engine.render.data_passes) see the same rays."""
+    ps, u = PathSampler.start(seed, pixel, sample, 2 + lens_dimensions + extra)
+    if sampler == "padded":
+        pairs = padded_pairs(seed, pixel, sample, [PADDED_JITTER, PADDED_LENS][:1 + lens_dimensions // 2])
+        u[:2 + lens_dimensions] = pairs
+    elif sampler != "independent":
         u[0], u[1] = stratified_pair(seed, pixel, sample, u[0], u[1], pair=PAIR_JITTER)
         if lens_dimensions == 2:
             u[2], u[3] = stratified_pair(seed, pixel, sample, u[2], u[3], pair=PAIR_LENS)
-    return sampler, u
+    return ps, u
 
 
 #: The "sobol" sampler's pairs of dimensions (``sobol_pairs``) at the vertices after the first (the camera
@@ -166,6 +175,36 @@ def sobol_pair_index(bounce: int, role: int) -> int:
     if bounce < 1:
         raise ValueError("the first vertex draws the stratified sampler's numbers")
     return SOBOL_PER_BOUNCE * (bounce - 1) + role
+
+
+#: The "padded" sampler's pairs: the camera's (jitter, lens, wavelengths), then SOBOL_PER_BOUNCE per vertex b ≥ 0
+#: at PADDED_FIRST + SOBOL_PER_BOUNCE·b + role (roles SOBOL_LIGHT_POINT … SOBOL_ROULETTE)
+PADDED_JITTER, PADDED_LENS, PADDED_WAVELENGTH = 0, 1, 2
+PADDED_FIRST = 3
+
+
+def vertex_pair(sampler: str, bounce: int, role: int) -> int:
+    """The pair of dimensions of ``role`` at vertex ``bounce`` for the pair-drawing ``sampler`` ("sobol": bounce
+    ≥ 1, ``sobol_pair_index``; "padded": every bounce ≥ 0)."""
+    if sampler == "padded":
+        return PADDED_FIRST + SOBOL_PER_BOUNCE * bounce + role
+    return sobol_pair_index(bounce, role)
+
+
+#: The "padded" sampler's Owen-scrambled pairs (the others XOR-scrambled)
+PADDED_OWEN = frozenset({PADDED_JITTER})
+
+
+def padded_pairs(seed: int, pixel: np.ndarray, sample: np.ndarray, pairs) -> np.ndarray:
+    """(2k, N) numbers of the "padded" sampler's ``pairs`` (as ``sobol_pairs``): the same shuffled Sobol' pairs,
+    PADDED_OWEN Owen-scrambled, every other pair XOR-scrambled (engine.kernels.sobol.owen_sobol_pairs)."""
+    pairs = np.asarray(pairs, dtype=np.int64)
+    return owen_sobol_pairs(_seed_key(seed), pixel, sample, pairs, np.isin(pairs, list(PADDED_OWEN)))
+
+
+def pattern_pairs(sampler: str, seed: int, pixel: np.ndarray, sample: np.ndarray, pairs) -> np.ndarray:
+    """``sobol_pairs`` or ``padded_pairs`` for ``sampler``."""
+    return (padded_pairs if sampler == "padded" else sobol_pairs)(seed, pixel, sample, pairs)
 
 
 def sobol_pairs(seed: int, pixel: np.ndarray, sample: np.ndarray, pairs) -> np.ndarray:

@@ -111,12 +111,15 @@ def mitsuba_side(python, scene, sampler, spp, res, seeds, out):
     return imgs[:, 0], imgs[:, 1], float(np.median(secs[1:] or secs)), mitsuba_count(sampler, asked)
 
 
-def our_side(scene_name, spp, res, seeds, threads):
-    """(S0 luminance (k, H, W), S1 luminance, seconds per render, sampler) of our renders at our defaults."""
+def our_side(scene_name, spp, res, seeds, threads, sampler=None):
+    """(S0 luminance (k, H, W), S1 luminance, seconds per render, sampler) of our renders at our defaults
+    (``sampler``: that sampler instead of the default)."""
     scene = load_scene(os.path.join(PEERS, "scenes", f"{scene_name}.json"))
     scene.camera.width = scene.camera.height = res
     renderer = Renderer(scene)
     base = dataclasses.replace(scene.settings, spp=spp, threads=threads)
+    if sampler:
+        base = dataclasses.replace(base, sampler=sampler)
     renderer.render(dataclasses.replace(base, seed=seeds))             # warm-up: kernels, memory
     imgs, secs = [], []
     for seed in range(seeds):
@@ -128,6 +131,30 @@ def our_side(scene_name, spp, res, seeds, threads):
     return imgs[:, 0], imgs[:, 1], float(np.median(secs)), base.sampler
 
 
+def row(scene, e_o, t_o, ours_sampler, sides, spp, first=True) -> int:
+    """Print the table row of one of our samplers against Mitsuba's ``sides``; the targets it misses (counted for
+    the first of ``--ours`` only)."""
+    ratio = {s: v[0] * v[2] / (t_o * e_o[0]) for s, v in sides.items()}
+    best = min(sides, key=lambda s: sides[s][0] * sides[s][2])
+    t_b, n_b, e_b0, e_b1 = sides[best]
+    r1 = "—" if scene in NO_S1 or e_o[1] == 0 else f"{t_b * e_b1 / (t_o * e_o[1]):.2f}"
+    target = S0_TARGET.get(scene, 0.5)
+    ok = ratio[best] >= target
+    thr, misses = "", int(not ok)
+    if "independent" in sides:
+        t_i, n_i = sides["independent"][:2]
+        tr = (spp / t_o) / (n_i / t_i)
+        thr = f"{tr:.2f}" + ((" PASS" if tr >= 0.5 else " MISS") if scene in THROUGHPUT_SCENES else "")
+        misses += scene in THROUGHPUT_SCENES and tr < 0.5
+    # noise per sample (MSE × spp: Monte Carlo MSE ∝ 1/spp), ours ÷ Mitsuba's, each sampler
+    per_sample = {s: spp * e_o[0] / (v[1] * v[2]) for s, v in sides.items()}
+    every = ", ".join(f"{s} {r:.2f} ({per_sample[s]:.2f})" for s, r in ratio.items())
+    print(f"| {scene} | {t_o:.2f} ({ours_sampler}), {e_o[0]:.2e} / {e_o[1]:.2e} | {best} ({n_b}) {t_b:.2f}, "
+          f"{e_b0:.2e} / {e_b1:.2e} | {ratio[best]:.2f} (≥ {target:g}) {'PASS' if ok else 'MISS'} | {r1} "
+          f"| {every} | {thr} |", flush=True)
+    return misses if first else 0
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenes", default=",".join(SCENES))
@@ -136,6 +163,8 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--samplers", default=",".join(MITSUBA_SAMPLERS), help="Mitsuba's samplers raced")
+    ap.add_argument("--ours", default="", help="our samplers, a comma list, each raced against the same Mitsuba "
+                    "renders (default: the scene's, i.e. the default sampler)")
     ap.add_argument("--mitsuba-python", default=os.environ.get("MITSUBA_PYTHON", "/work/peerenv/bin/python"))
     a = ap.parse_args(argv)
     if a.seeds < 3:
@@ -146,34 +175,18 @@ def main(argv=None):
     print(f"# peer race, {datetime.datetime.now():%Y-%m-%d %H:%M}: {a.res}², {a.spp} spp asked, {a.seeds} seeds, "
           f"ours {a.threads} thread(s); load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
     print("| scene | ours (sampler) s, MSE S0 / S1 | Mitsuba best (spp) s, MSE S0 / S1 | S0 ratio (target) | S1 ratio "
-          "| every Mitsuba sampler: S0 ratio | throughput ours ÷ Mitsuba |")
+          "| every Mitsuba sampler: S0 ratio (S0 MSE per sample ours ÷ Mitsuba's) | throughput ours ÷ Mitsuba |")
     print("|---|---|---|---|---|---|---|")
     misses = 0
     with tempfile.TemporaryDirectory() as out:
         for scene in a.scenes.split(","):
-            o0, o1, t_o, ours_sampler = our_side(scene, a.spp, a.res, a.seeds, a.threads)
-            e_o = (mse(o0), mse(o1))
             sides = {}
             for s in a.samplers.split(","):
                 m0, m1, t_m, real = mitsuba_side(a.mitsuba_python, scene, s, a.spp, a.res, a.seeds, out)
                 sides[s] = (t_m, real, mse(m0), mse(m1))
-            ratio = {s: v[0] * v[2] / (t_o * e_o[0]) for s, v in sides.items()}
-            best = min(sides, key=lambda s: sides[s][0] * sides[s][2])
-            t_b, n_b, e_b0, e_b1 = sides[best]
-            r1 = "—" if scene in NO_S1 or e_o[1] == 0 else f"{t_b * e_b1 / (t_o * e_o[1]):.2f}"
-            target = S0_TARGET.get(scene, 0.5)
-            ok = ratio[best] >= target
-            thr = ""
-            if "independent" in sides:
-                t_i, n_i = sides["independent"][:2]
-                tr = (a.spp / t_o) / (n_i / t_i)
-                thr = f"{tr:.2f}" + ((" PASS" if tr >= 0.5 else " MISS") if scene in THROUGHPUT_SCENES else "")
-                misses += scene in THROUGHPUT_SCENES and tr < 0.5
-            misses += not ok
-            every = ", ".join(f"{s} {r:.2f}" for s, r in ratio.items())
-            print(f"| {scene} | {t_o:.2f} ({ours_sampler}), {e_o[0]:.2e} / {e_o[1]:.2e} | {best} ({n_b}) {t_b:.2f}, "
-                  f"{e_b0:.2e} / {e_b1:.2e} | {ratio[best]:.2f} (≥ {target:g}) {'PASS' if ok else 'MISS'} | {r1} "
-                  f"| {every} | {thr} |", flush=True)
+            for k, ours in enumerate(a.ours.split(",")):
+                o0, o1, t_o, ours_sampler = our_side(scene, a.spp, a.res, a.seeds, a.threads, ours)
+                misses += row(scene, (mse(o0), mse(o1)), t_o, ours_sampler, sides, a.spp, first=k == 0)
     print(f"# {misses} target(s) missed")
     return 0
 

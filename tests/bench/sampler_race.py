@@ -34,6 +34,8 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, REPO)
 
+from engine.kernels.hashing import mix64  # noqa: E402
+from engine.kernels.sobol import SOBOL2_REVERSED, owen_permute, reverse32  # noqa: E402
 from engine.render.renderer import Renderer  # noqa: E402
 from engine.scene.loader import load_scene  # noqa: E402
 
@@ -42,10 +44,192 @@ SCENES = ["fresnel_sphere", "fresnel_sphere_au", "glass_sphere", "rough_sphere_a
 #: scenes whose S1 is 0 (nothing polarises): no S1 column
 NO_S1 = {"cornell_lambert"}
 
+U = np.uint64
+_M32, _S1, _S2, _S8, _S16, _S24, _S32, _S48, _LOW16 = (U(v) for v in (0xFFFFFFFF, 1, 2, 8, 16, 24, 32, 48, 0xFFFF))
+_GOLDEN, _SALT, _PARITY, _PAIR, _SECOND = (U(v) for v in (0x9E3779B97F4A7C15, 0x2545F4914F6CDD1D, 0xD6E8FEB86659FD93,
+                                                          0xA0761D6478BD642F, 0xE7037ED1A0B428DB))
+_TO_UNIT = 1.0 / float(1 << 48)
+# ------------------------------------------------- pattern variants raced against the "padded" sampler
 
-def render_one(renderer, scene, sampler, spp, seed, threads):
-    """(S0 image, S1 image) (H, W) of one render and its CPU seconds."""
-    st = dataclasses.replace(scene.settings, spp=spp, seed=seed, sampler=sampler, threads=threads)
+_KENSLER = U(0x4F1BBCDCBFA53E0B)
+_XOR = U(0x7FB5D329728EA185)
+
+
+def kensler_permute(v: np.ndarray, bits: int, p: np.ndarray) -> np.ndarray:
+    """A pseudo-random permutation of the 2^bits values v (uint64 < 2^bits) per 32-bit seed p (uint64, broadcast):
+    Kensler 2013's hash ("Correlated Multi-Jittered Sampling", permute()), whose steps (XOR with constants,
+    multiplication by odd numbers, XOR with right shifts of the masked value) each map the low ``bits`` bits
+    bijectively, so no cycle walking is needed for a power-of-two length."""
+    w = U((1 << bits) - 1)
+    i = v ^ p
+    i = (i * U(0xE170893D)) & _M32
+    i ^= p >> _S16
+    i ^= (i & w) >> U(4)
+    i ^= p >> _S8
+    i = (i * U(0x0929EB3F)) & _M32
+    i ^= p >> U(23)
+    i ^= (i & w) >> _S1
+    i = (i * ((p >> U(27)) | _S1)) & _M32
+    i = (i * U(0x6935FA69)) & _M32
+    i ^= (i & w) >> U(11)
+    i = (i * U(0x74DCB303)) & _M32
+    i ^= (i & w) >> _S2
+    i = (i * U(0x9E501CC3)) & _M32
+    i ^= (i & w) >> _S2
+    i = (i * U(0xC860A3DF)) & _M32
+    i &= w
+    i ^= i >> U(5)
+    return (i + p) & w
+
+
+_EXACT = U(0x3C6EF372FE94F82B)
+
+
+def exact_nested_index(i: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """Nested uniform scramble of index bits: bit m flipped by a hash of (seed, m, the bits above m)."""
+    j = i.copy()
+    for m in range(24):
+        flip = mix64(seed ^ ((i >> U(m + 1)) * _GOLDEN) ^ (U(m + 1) * _EXACT)) >> U(63)
+        j ^= flip << U(m)
+    return j
+
+
+def exact_owen(v: np.ndarray, seed: np.ndarray) -> np.ndarray:
+    """Owen's nested uniform scramble of 32-bit values: digit d (from the top) flipped by a hash of (seed, d, the
+    digits above), exact for the top 20 digits, the 12 below random per 20-digit prefix."""
+    out = v.copy()
+    for d in range(20):
+        bit = 31 - d
+        flip = mix64(seed ^ ((v >> U(bit + 1)) * _GOLDEN) ^ (U(d + 1) * _EXACT)) >> U(63)
+        out ^= flip << U(bit)
+    low = mix64(seed ^ ((v >> U(12)) * _GOLDEN) ^ _XOR) & U(0xFFF)
+    return (out & U(0xFFFFF000)) | low
+
+
+def variant_pairs(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray, pairs: np.ndarray,
+                       block_bits: int = 0, xor: bool = False, split: bool = True, exact: bool = False,
+                       owen_pairs: tuple = ()) -> np.ndarray:
+    """engine.kernels.sobol.owen_sobol_pairs_numpy's numbers with the pattern's variants: ``block_bits`` > 0
+    permutes the shuffled index within each aligned block of 2^block_bits by a Kensler permutation per (pair,
+    block) (a uniform permutation where the nested shuffle allows only the block-preserving ones); ``xor``: a
+    random XOR (digital shift) per pair instead of the Owen scramble; ``split`` False: one sequence over all
+    samples (index ``sample``), not two (even, odd); ``exact``: Owen's scramble by a hash per digit and prefix
+    (and the index shuffle alike) instead of the Laine–Karras-style hash; ``owen_pairs`` (with ``xor``): these
+    pairs Owen-scrambled.  With the defaults the bits equal owen_sobol_pairs_numpy's."""
+    n = pixel.shape[0]
+    out = np.empty((2 * pairs.shape[0], n))
+    smp = sample.astype(U)
+    i = ((smp >> _S1) if split else smp) & _M32
+    par = (smp & _S1) if split else np.zeros_like(smp)
+    base = mix64((seed_key[0] ^ (pixel.astype(U) * _GOLDEN) ^ (par * _PARITY)) + _SALT)
+    ri = reverse32(i)
+    for m in range(pairs.shape[0]):
+        h = mix64(base + U(((int(pairs[m]) + 1) * int(_PAIR)) & 0xFFFFFFFFFFFFFFFF))
+        h2 = mix64(h ^ _SECOND)
+        j = exact_nested_index(i, h & _M32) if exact else reverse32(owen_permute(ri, h & _M32))
+        if block_bits:
+            low = U((1 << block_bits) - 1)
+            seed = mix64(h2 ^ ((j >> U(block_bits)) * _GOLDEN) ^ _KENSLER) & _M32
+            j = (j & ~low) | kensler_permute(j & low, block_bits, seed)
+        ry = (SOBOL2_REVERSED[0][j & U(255)] ^ SOBOL2_REVERSED[1][(j >> _S8) & U(255)]
+              ^ SOBOL2_REVERSED[2][(j >> _S16) & U(255)] ^ SOBOL2_REVERSED[3][j >> _S24])
+        if xor and int(pairs[m]) in owen_pairs:
+            x = reverse32(owen_permute(j, h >> _S32))
+            y = reverse32(owen_permute(ry, h2 & _M32))
+        elif exact and not xor:
+            x = exact_owen(reverse32(j), h >> _S32)
+            y = exact_owen(reverse32(ry), h2 & _M32)
+        elif xor:
+            s = mix64(h ^ _XOR)
+            x = reverse32(j) ^ (s & _M32)
+            y = reverse32(ry) ^ (s >> _S32)
+        else:
+            x = reverse32(owen_permute(j, h >> _S32))
+            y = reverse32(owen_permute(ry, h2 & _M32))
+        out[2 * m] = ((x << _S16) | ((h2 >> _S32) & _LOW16)).astype(np.float64) * _TO_UNIT
+        out[2 * m + 1] = ((y << _S16) | (h2 >> _S48)).astype(np.float64) * _TO_UNIT
+    return out
+
+
+def owen_joint(module, seed_key, pixel, sample, first_dim):
+    """(2, N): Sobol' dimensions first_dim + 1, first_dim + 2 of the unshuffled index sample // 2 (one point set
+    for all dimensions: they stratify jointly), each coordinate Owen-scrambled per (seed, pixel, parity, dimension)."""
+    smp = sample.astype(U)
+    i = (smp >> _S1) & _M32
+    base = mix64((seed_key[0] ^ (pixel.astype(U) * _GOLDEN) ^ ((smp & _S1) * _PARITY)) + U(0x9FB21C651E98DF25))
+    out = np.empty((2, pixel.size))
+    for c in range(2):
+        v = module._SOBOL_V[first_dim + c]
+        x = np.zeros_like(i)
+        for b in range(int(i.max()).bit_length() if i.size else 0):
+            x[((i >> U(b)) & _S1).astype(bool)] ^= v[b]
+        h = mix64(base + U(((first_dim + c + 1) * int(_PAIR)) & 0xFFFFFFFFFFFFFFFF))
+        xs = reverse32(owen_permute(reverse32(x), h & _M32))
+        out[c] = ((xs << _S16) | ((h >> _S32) & _LOW16)).astype(np.float64) * _TO_UNIT
+    return out
+
+
+def pattern(spec: str, spp: int):
+    """A sampler spec → (RenderSettings.sampler, the "padded" sampler's pairs function or None: the engine's).
+    "padded:KNOB:…" races the pattern variants of ``variant_pairs`` (numbers of every pair): ``xor``, ``exact``,
+    ``owen=0+1`` (those pairs Owen, the others XOR), ``whole`` (one sequence over even and odd samples), ``bK``
+    Kensler permutations within blocks of 2^K shuffled indices, ``bN`` within the whole render's count per
+    sequence (as Mitsuba's ldsampler permutes its whole sample count — not progressive)."""
+    name, *knobs = spec.split(":")
+    if not knobs:
+        return name, None
+    kw = {}
+    for k in knobs:
+        if k == "xor":
+            kw["xor"] = True
+        elif k == "exact":
+            kw["exact"] = True
+        elif k.startswith("owen="):            # these pairs Owen-scrambled, the others XOR
+            kw["xor"] = True
+            kw["owen_pairs"] = tuple(int(v) for v in k[5:].split("+"))
+        elif k == "whole":
+            kw["split"] = False
+    joint = "joint" in knobs            # the jitter and the first light point from stratified's joint 12-D set
+    joint_owen = "jointowen" in knobs   # … from Sobol' dimensions 1–4 of one point set, each Owen-scrambled
+    for k in knobs:
+        if k == "bN":
+            kw["block_bits"] = (spp if kw.get("split") is False else spp // 2).bit_length() - 1
+        elif k.startswith("b"):
+            kw["block_bits"] = int(k[1:])
+
+    def pairs_function(seed, pixel, sample, pairs):
+        module = sys.modules[SAMPLER_MODULE]
+        pixel, sample, pairs = np.asarray(pixel), np.asarray(sample), np.asarray(pairs, np.int64)
+        out = (variant_pairs(module._seed_key(seed), pixel, sample, pairs, **kw) if kw
+               else module.owen_sobol_pairs(module._seed_key(seed), pixel, sample, pairs,
+                                            np.isin(pairs, list(module.PADDED_OWEN))))
+        if joint_owen:
+            light = module.vertex_pair("padded", 0, module.SOBOL_LIGHT_POINT)
+            for p, first_dim in ((module.PADDED_JITTER, 0), (light, 2)):
+                for r in np.nonzero(pairs == p)[0]:
+                    out[2 * r:2 * r + 2] = owen_joint(module, module._seed_key(seed), pixel, sample, first_dim)
+        if joint:
+            light = module.vertex_pair("padded", 0, module.SOBOL_LIGHT_POINT)
+            for p, named in ((module.PADDED_JITTER, module.PAIR_JITTER), (light, module.PAIR_LIGHT_POINT)):
+                for r in np.nonzero(pairs == p)[0]:
+                    u = np.random.default_rng().random((2, pixel.size))
+                    out[2 * r], out[2 * r + 1] = module.stratified_pair(seed, pixel, sample, u[0], u[1], pair=named)
+        return out
+    return name, pairs_function
+
+
+#: the engine's sampler module the renders read (in an asset race: the extension's copy, polar_render.engine)
+SAMPLER_MODULE = "engine.render.sampler"
+_ENGINE_PAIRS = {}
+
+
+def render_one(renderer, scene, sampler, spp, seed, threads, settings=None):
+    """(S0 image, S1 image) (H, W) of one render and its CPU seconds (``settings``: instead of the scene's)."""
+    module = sys.modules[SAMPLER_MODULE]
+    engine_pairs = _ENGINE_PAIRS.setdefault(SAMPLER_MODULE, module.padded_pairs)
+    sampler, variant = pattern(sampler, spp)
+    module.padded_pairs = variant or engine_pairs
+    st = dataclasses.replace(settings or scene.settings, spp=spp, seed=seed, sampler=sampler, threads=threads)
     t = time.process_time()
     result = renderer.render(st)
     cpu = time.process_time() - t
@@ -53,13 +237,13 @@ def render_one(renderer, scene, sampler, spp, seed, threads):
     return y[0], y[1], cpu
 
 
-def renders(renderer, scene, samplers, spp, seeds, threads):
+def renders(renderer, scene, samplers, spp, seeds, threads, settings=None):
     """{sampler: (S0 images, S1 images) (seeds, H, W), CPU seconds of its renders}; the samplers take
     turns seed by seed (a drift of the machine's speed is shared)."""
     got = {s: ([], [], 0.0) for s in samplers}
     for seed in range(seeds):
         for s in samplers:
-            a, b, cpu = render_one(renderer, scene, s, spp, seed, threads)
+            a, b, cpu = render_one(renderer, scene, s, spp, seed, threads, settings)
             got[s][0].append(a)
             got[s][1].append(b)
             got[s] = (got[s][0], got[s][1], got[s][2] + cpu)
@@ -82,6 +266,13 @@ def mse_rel_se(images):
     return float(np.sqrt(2 / (k - 1) * (v * v).sum() / (1 + 2 / (k - 1))) / total) if total > 0 else 0.0
 
 
+def trimmed(images):
+    """``mse`` over the pixels without the 1 % of largest variance (a few fireflies' pixels hold most of a
+    glossy asset's error, and their variance estimates from a few seeds are themselves noisy)."""
+    v = np.sort(images.reshape(images.shape[0], -1).var(axis=0, ddof=1))
+    return float(v[:int(0.99 * v.size)].mean())
+
+
 def bias_z(a, b):
     """Difference of the image means of two sets of renders ÷ its standard error."""
     ma, mb = a.mean(axis=(1, 2)), b.mean(axis=(1, 2))
@@ -98,7 +289,12 @@ def main(argv=None):
     ap.add_argument("--samplers", default="sobol,stratified,independent",
                     help="comma list; the first is compared with each other one")
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--assets", default="", help="race on these real assets (tests/support/asset_parity: "
+                    "Blender imports, lights and exports them as F12 does) instead of the peer scenes")
+    ap.add_argument("--lighting", default="hdri", help="the assets' lighting (lamps or hdri)")
     args = ap.parse_args(argv)
+    if args.assets:
+        return asset_race(args)
     samplers = args.samplers.split(",")
     spps = [int(s) for s in args.spp.split(",")]
     first, others = samplers[0], samplers[1:]
@@ -112,7 +308,7 @@ def main(argv=None):
         scene.camera.width = scene.camera.height = args.res
         renderer = Renderer(scene)
         for sampler in samplers:
-            st = dataclasses.replace(scene.settings, sampler=sampler, threads=args.threads)
+            st = dataclasses.replace(scene.settings, sampler=pattern(sampler, 1)[0], threads=args.threads)
             renderer.warm_up(st)
         # one untimed full render: a scene's first one pays for growing the process's memory (measured
         # ~15 % more CPU time than the next), which would count against the sampler rendering first
@@ -137,6 +333,35 @@ def main(argv=None):
     for name, spp, other, var_ratio, cpu_ratio, r0, se, r1, z in rows:
         print(f"| {name} | {spp} | {other} | {var_ratio:.2f} | {1 / cpu_ratio:.2f} | {r0:.2f} ± {se:.2f} | "
               f"{'—' if r1 is None else f'{r1:.2f}'} | {z:+.1f} |")
+
+
+def asset_race(args):
+    """The race on real assets: σ² = mean over the pixels where the camera sees the asset of the per-pixel
+    variance over the seeds of the S0 luminance (the asset suite's noise, tests/bench/asset_speed.py), per
+    sampler, and each sampler's σ² ÷ the first one's (± its standard error); equal samples, MSE only."""
+    from tests.support import asset_parity as ap
+    global SAMPLER_MODULE
+    SAMPLER_MODULE = "polar_render.engine.render.sampler"
+    samplers = args.samplers.split(",")
+    load = os.getloadavg()
+    print(f"# asset sampler race, {datetime.date.today()}: {args.lighting}, {args.seeds} seeds, spp {args.spp}; "
+          f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
+    for name in args.assets.split(","):
+        asset = ap.CATALOGUE[name]
+        w, h = asset.size if not args.res else (args.res, args.res)
+        scene = ap.build(asset, args.lighting, w, h)
+        hit = ap.coverage(scene, w, h)
+        for spp in [int(s) for s in args.spp.split(",")]:
+            renderer, settings, _ = ap.export_polar(scene, spp, 8)
+            got = renders(renderer, None, samplers, spp, args.seeds, args.threads, settings)
+            first = got[samplers[0]][0][:, hit]
+            for s in samplers:
+                img = got[s][0][:, hit]
+                se = np.hypot(mse_rel_se(img[:, :, None]), mse_rel_se(first[:, :, None]))
+                print(f"{name:20s} {spp:4d} spp {s:22s} σ² {mse(img):.4e}  ÷ {samplers[0]}'s "
+                      f"{mse(img) / mse(first):.2f} ± {se * mse(img) / mse(first):.2f}  without the 1 % noisiest "
+                      f"pixels {trimmed(img) / trimmed(first):.2f}  CPU {got[s][2]:6.1f} s", flush=True)
+    return 0
 
 
 if __name__ == "__main__":

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from engine.render.renderer import Renderer, RenderRequest
-from engine.render.sampler import SOBOL_PER_BOUNCE, sobol_pair_index, sobol_pairs
+from engine.render.sampler import SOBOL_PER_BOUNCE, padded_pairs, sobol_pair_index, sobol_pairs
 
 #: pairs tested: the second vertex's, the third's, a deep vertex's, a very deep one
 PAIRS = [0, 1, 2, 3, SOBOL_PER_BOUNCE, sobol_pair_index(7, 1), sobol_pair_index(300, 2)]
@@ -43,7 +43,12 @@ def test_pair_layout():
 
 # ------------------------------------------------------------------------------ determinism
 
-def test_numbers_depend_only_on_seed_pixel_sample_and_pair():
+#: the samplers drawing pairs: "sobol" (every pair Owen-scrambled) and "padded" (the jitter Owen, the others XOR)
+PAIRS_OF = [sobol_pairs, padded_pairs]
+
+
+@pytest.mark.parametrize("sobol_pairs", PAIRS_OF)
+def test_numbers_depend_only_on_seed_pixel_sample_and_pair(sobol_pairs):
     """Any batch split, path order and pair list gives each (seed, pixel, sample, pair) the same number."""
     rng = np.random.default_rng(1)
     n = 3000
@@ -74,15 +79,17 @@ def test_the_compiled_numbers_are_the_numpy_twins_bit_for_bit(n):
     sample = np.where(rng.random(n) < 0.5, rng.integers(0, 64, n), rng.integers(0, 1 << 40, n))
     pairs = np.array([0, 1, 2, 3, 17, 1 << 20], np.int64)
     for seed in (0, 5, 2 ** 63 - 1):
-        a = sobol.owen_sobol_pairs_numpy(_seed_key(seed), pixel, sample, pairs)
-        b = sobol.owen_sobol_pairs_numba(_seed_key(seed), pixel, sample, pairs)
-        assert np.array_equal(a, b)
+        for owen in (None, np.array([True, False, False, True, False, False])):     # "sobol"'s, "padded"'s
+            a = sobol.owen_sobol_pairs_numpy(_seed_key(seed), pixel, sample, pairs, owen)
+            b = sobol.owen_sobol_pairs_numba(_seed_key(seed), pixel, sample, pairs, owen)
+            assert np.array_equal(a, b)
 
 
 # ---------------------------------------------------------------------------- stratification
 
+@pytest.mark.parametrize("sobol_pairs", PAIRS_OF)
 @pytest.mark.parametrize("pair", PAIRS)
-def test_each_pixels_first_samples_of_every_pair_are_nets(pair):
+def test_each_pixels_first_samples_of_every_pair_are_nets(pair, sobol_pairs):
     """For a pixel, the first 2^k even samples of a pair (and the first 2^k odd ones) are a (0, k, 2)-net
     for every k ≤ 7: each of the 2^k elementary intervals of every shape holds exactly one point (so each
     coordinate alone is stratified in 2^k strata); also a later aligned block (samples 2^k·c … of the half)."""
@@ -137,7 +144,8 @@ def test_every_number_is_uniform_over_pixels():
         assert abs(np.corrcoef(x, y)[0, 1]) < 0.01
 
 
-def test_even_and_odd_samples_are_independent_sequences():
+@pytest.mark.parametrize("sobol_pairs", PAIRS_OF)
+def test_even_and_odd_samples_are_independent_sequences(sobol_pairs):
     """Sample 2i and sample 2i + 1 of a pixel come from independently scrambled sequences: over pixels
     their numbers are uncorrelated, and within a pixel the odd half is not the even half's points again
     (each half alone is a net: test_each_pixels_first_samples_of_every_pair_are_nets)."""
@@ -167,6 +175,26 @@ def seed_images(scene, sampler, seeds, spp):
         out.append(r.stokes_luminance()[0])
         se.append(r.film.stderr_luminance()[0])
     return np.array(out), np.array(se)
+
+
+def peer_scene(name, res):
+    """The shared peer scene ``name`` at res × res."""
+    from engine.scene.loader import load_scene
+    from tests.conftest import shared_path
+    scene = load_scene(shared_path("peers", "scenes", f"{name}.json"))
+    scene.camera.width = scene.camera.height = res
+    return scene
+
+
+def unbiased_variances(scene, samplers, seeds, spp):
+    """Per-pixel variances over ``seeds`` renders of each of ``samplers`` (the first one tested, "independent"
+    among them), after asserting that the first one's image mean is the independent sampler's within 4σ."""
+    images = {s: seed_images(scene, s, seeds, spp)[0] for s in samplers}
+    v = {s: a.var(0, ddof=1) for s, a in images.items()}
+    first = samplers[0]
+    se = np.sqrt(((v[first] + v["independent"]) / seeds).sum()) / v[first].size
+    assert abs(images[first].mean() - images["independent"].mean()) < 4 * se
+    return v
 
 
 @pytest.fixture(scope="module")
@@ -215,16 +243,8 @@ def test_a_glass_sphere_keeps_the_mean_with_less_variance():
     vertices' lobe choices, hashed by "stratified", are stratified pairs here), 24², 32 spp, 6 seeds: the
     mean = the independent sampler's within 4σ; the pixel variance > 1.3× lower than the stratified
     sampler's (measured 1.50×; independent ÷ sobol 2.6×; the race at 128² gives 1.8×)."""
-    from engine.scene.loader import load_scene
-    from tests.conftest import shared_path
-    scene = load_scene(shared_path("peers", "scenes", "glass_sphere.json"))
-    scene.camera.width = scene.camera.height = 24
-    seeds, spp = 6, 32
-    sob, _ = seed_images(scene, "sobol", seeds, spp)
-    ind, _ = seed_images(scene, "independent", seeds, spp)
-    strat, _ = seed_images(scene, "stratified", seeds, spp)
-    v_sob, v_ind, v_strat = (a.var(0, ddof=1) for a in (sob, ind, strat))
-    assert abs(sob.mean() - ind.mean()) < 4 * np.sqrt(((v_sob + v_ind) / seeds).sum()) / v_sob.size
+    v = unbiased_variances(peer_scene("glass_sphere", 24), ["sobol", "independent", "stratified"], 6, 32)
+    v_sob, v_ind, v_strat = v["sobol"], v["independent"], v["stratified"]
     print(f"variance independent ÷ sobol {v_ind.mean() / v_sob.mean():.2f}, "
           f"stratified ÷ sobol {v_strat.mean() / v_sob.mean():.2f}")
     assert v_ind.mean() > 2 * v_sob.mean()
