@@ -93,9 +93,10 @@ def _node_sphere(kind, distribution, checkers, others, lighting):
 #: means scatter by ≈ 9 %; it was once taken for a 5–8 % gap).  At 256 spp × 16 seeds over the sphere it agrees:
 #: IOR 1.3 | 1.8, roughness 0.3, GGX 1.005 ± 0.012, Multiscatter GGX 1.005 ± 0.012, the Principled's 1.2 | 2.0
 #: 1.007 ± 0.009.  Under the area lamp alone the checker is 0.981 ± 0.007, one index alone 0.991 ± 0.006 (1.8) and
-#: 0.934 ± 0.018 (1.3): a gap of low-index rough glass under a small source (about 2 % of it Cycles' light samples
-#: through refraction pairs no facet makes, tests/materials/test_rough_glass_energy.py; the rest not found,
-#: docs/physics.md), not of neighbouring faces of different index.
+#: 0.934 ± 0.018 (1.3): low-index rough glass under a small source, not neighbouring faces of different index —
+#: Cycles' light samples through refraction pairs no facet makes (+1.8 %, tests/materials/test_rough_glass_energy.py),
+#: polarisation over the many crossings and total reflections (−2.1 % in Polar's S0), Cycles' height-correlated
+#: shadowing (+0.1–0.7 %) (docs/physics.md).
 PARITY = {
     "Refraction GGX, Roughness per point": ("ShaderNodeBsdfRefraction", "GGX", {"Roughness": (0.1, 0.5)},
                                             {"IOR": 1.45, "Color": (0.9, 0.8, 0.6)}, "lamps"),
