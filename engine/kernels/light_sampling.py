@@ -515,11 +515,10 @@ def _point_light_loop(p, u1, u2, position, radius, soft, delta, spot, wi, dist, 
         ok = d > 0
         s = d if ok else 1.0
         w0, w1, w2 = t0 / s, t1 / s, t2 / s
-        falloff = _spot(spot, w0, w1, w2)
         if delta:
             wi[0, j], wi[1, j], wi[2, j] = w0, w1, w2
             dist[j] = d
-            scale[j] = falloff / d2 if ok else 0.0
+            scale[j] = _spot(spot, w0, w1, w2) / d2 if ok else 0.0
             pdf[j] = 0.0
             valid[j] = ok
             continue
@@ -538,7 +537,7 @@ def _point_light_loop(p, u1, u2, position, radius, soft, delta, spot, wi, dist, 
             wi[0, j], wi[1, j], wi[2, j] = v0, v1, v2
             dist[j] = e
             pdf[j] = e2 / (cos_l * math.pi * r * r) if ok else 0.0
-            scale[j] = falloff * cos_l / e2 if ok else 0.0
+            scale[j] = _spot(spot, v0, v1, v2) * cos_l / e2 if ok else 0.0     # by the sampled ray, as Cycles
             valid[j] = ok
             continue
         # a sphere: uniform in its cone, the hit distance by the law of cosines
@@ -554,7 +553,7 @@ def _point_light_loop(p, u1, u2, position, radius, soft, delta, spot, wi, dist, 
         wi[0, j], wi[1, j], wi[2, j] = v0, v1, v2
         dist[j] = maximum_at(t, 0.0)
         pdf[j] = 1.0 / (two_pi * omc_max) if ok else 0.0
-        scale[j] = falloff * 2.0 * omc_max / (r * r) if ok else 0.0
+        scale[j] = _spot(spot, v0, v1, v2) * 2.0 * omc_max / (r * r) if ok else 0.0
         valid[j] = ok
 
 

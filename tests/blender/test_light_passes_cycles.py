@@ -25,13 +25,20 @@ from tests.blender_support import load_addon  # noqa: E402
 W, H, SPP = fixture.W, fixture.H, fixture.SPP
 ERRORS = []
 EXTRA = {}
+REC709 = np.array([0.2126, 0.7152, 0.0722])
 LOBES = ("Diffuse ", "Glossy ", "Transmission ")
 LIGHT = tuple(lobe + p for lobe in LOBES for p in ("Direct", "Indirect"))
 COLOR = tuple(lobe + "Color" for lobe in LOBES)
-#: not yet explained (measured 160 × 120, 16 spp, 3 seeds): the glass ball's Glossy Indirect, Polar 0.51 / 0.48 / 0.49
-#: against Cycles 0.47 / 0.44 / 0.44 (+9 %), while its Colors (0.94 transmission), Glossy Direct and the other
-#: objects' passes agree; held to a looser bound (4σ + 15 %) so that it cannot grow unnoticed
-RESIDUAL = {(0x26deb52a, "Glossy Indirect"): 0.15}
+#: the glass ball, whose Glossy Indirect is light polarised by one glossy reflection (the floor's specular layer, the
+#: box's Glossy, the metal ball) and then reflected by the glass, which reflects s more than p: Polar's S0 of it is
+#: above Cycles' (which has no polarisation) by the physics of the two reflections, not by a fault — measured at
+#: 256 Cycles spp, Polar 32 spp × 6 seeds: +4.5 / +5.4 / +7.2 % (R, G, B) polarised, +0.6 / +0.9 / +1.7 % with
+#: polarisation off (docs/guide/polariser-and-passes.md).  So this object's passes are compared with Cycles in a
+#: scalar render of its window (polarisation off: Cycles' arithmetic) under the common rule, and the polarised
+#: render's Glossy Indirect is held to the scalar one's (POLARISED_GAIN)
+GLASS = 0x26deb52a
+#: Polar's polarised ÷ scalar Glossy Indirect of the glass ball (luminance; measured 1.05 at 32 spp × 6 seeds)
+POLARISED_GAIN = (1.01, 1.12)
 
 
 @pytest.fixture(scope="module")
@@ -69,6 +76,7 @@ def _shim_class():
                 for k in range(4):
                     result.layers[0].passes[f"S{k}"].rect.foreach_set(passes._blender_rows(light.combined[k]))
                 EXTRA["warnings"] = light.warnings
+                EXTRA["renderer"], EXTRA["settings"] = renderer, settings
                 EXTRA["seeds"] = [light] + [render_light_passes(renderer, dataclasses.replace(settings, seed=s))
                                             for s in (2, 3)]
                 self.end_result(result)
@@ -149,23 +157,41 @@ def test_light_passes_match_cycles(addon, tmp_path):
         for dx in (-1, 0, 1):
             interior[1:-1, 1:-1] &= ids[1 + dy:H - 1 + dy, 1 + dx:W - 1 + dx] == ids[1:-1, 1:-1]
     interior[0, :] = interior[-1, :] = interior[:, 0] = interior[:, -1] = False
+    from polar_render.engine.render.light_passes import render_light_passes
     seeds = EXTRA["seeds"]
+    glass = interior & (ids == GLASS)
+    rows, cols = np.nonzero(glass)
+    window = (int(cols.min()), int(rows.min()), int(cols.max()) + 1, int(rows.max()) + 1)     # (rows top first)
+    scalar = [render_light_passes(EXTRA["renderer"], dataclasses.replace(EXTRA["settings"], seed=s,
+                                                                         polarisation="off"), window=window)
+              for s in (EXTRA["settings"].seed, 2, 3)]       # the polarised seeds' numbers
+    x0, y0, x1, y1 = window
     report = []
     for obj in np.unique(ids[interior]):
         mask = interior & (ids == obj)
         if mask.sum() < 200:
             continue
+        runs = (scalar, mask[y0:y1, x0:x1]) if obj == GLASS else (seeds, mask)
         for name in COLOR + LIGHT:
-            per_seed = np.array([(s.color[name] if name in s.color else s.stokes[name][0])[mask].mean(0)
-                                 for s in seeds])                       # (3 seeds, RGB), rows top first
-            mine, sigma = per_seed.mean(0), per_seed.std(0, ddof=1) / np.sqrt(len(seeds))
+            mine, sigma = _mean(*runs, name)
             cyc = theirs[name][..., :3][mask].mean(0)
-            share = RESIDUAL.get((obj, name), 0.05)
-            tol = (0.05 * np.abs(cyc)) if name in COLOR else 4 * sigma + share * np.abs(cyc)
+            tol = (0.05 * np.abs(cyc)) if name in COLOR else 4 * sigma + 0.05 * np.abs(cyc)
             tol = np.maximum(tol, 2e-3 * max(np.abs(cyc).max(), 1e-3))
             report.append(f"{obj:#x} {name}: Polar {np.round(mine, 4)} ± {np.round(sigma, 4)}, "
-                          f"Cycles {np.round(cyc, 4)}")
+                          f"Cycles {np.round(cyc, 4)}{' (polarisation off)' if obj == GLASS else ''}")
             ok = (np.abs(mine - cyc) <= tol).all()
             report[-1] += "" if ok else "  <-- FAIL"
+    # the polarised render's Glossy Indirect of the glass ball: above the scalar one by the polarisation's gain
+    gain = (_mean(seeds, glass, "Glossy Indirect")[0] @ REC709) / \
+        (_mean(scalar, glass[y0:y1, x0:x1], "Glossy Indirect")[0] @ REC709)
+    report.append(f"{GLASS:#x} Glossy Indirect polarised ÷ polarisation off: {gain:.3f} (in {POLARISED_GAIN})")
+    report[-1] += "" if POLARISED_GAIN[0] <= gain <= POLARISED_GAIN[1] else "  <-- FAIL"
     print("\n".join(report))
     assert "FAIL" not in "\n".join(report), "\n".join(report)
+
+
+def _mean(runs, mask, name):
+    """(mean, its standard error) (RGB) over ``mask`` of the pass ``name`` in the seeds' LightPasses ``runs``."""
+    per_seed = np.array([(s.color[name] if name in s.color else s.stokes[name][0])[mask].mean(0)
+                         for s in runs])                       # (seeds, RGB), rows top first
+    return per_seed.mean(0), per_seed.std(0, ddof=1) / np.sqrt(len(runs))

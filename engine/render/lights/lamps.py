@@ -27,10 +27,12 @@ def point_light_sample_numpy(p, u, position, radius, soft_falloff, spot):
     dist = np.sqrt(dist2)
     valid = dist > 0
     wi = to / np.where(valid, dist, 1.0)
-    # by the direction to the centre, as Cycles' spot_light_attenuation
-    falloff = 1.0 if spot[0] == 0 else spot_falloff(wi, spot[1:4], spot[4], spot[5])
+    # the spot attenuation by the direction of each sampled ray (to the centre for a delta light), as Cycles'
+    # spot_light_sample / spot_light_sample_from_intersection (kernel/light/spot.h: spot_light_attenuation of −ls→D)
+    def falloff(w):
+        return 1.0 if spot[0] == 0 else spot_falloff(w, spot[1:4], spot[4], spot[5])
     if radius <= 0:
-        scale = np.where(valid, falloff / np.where(valid, dist2, 1.0), 0.0)
+        scale = np.where(valid, falloff(wi) / np.where(valid, dist2, 1.0), 0.0)
         return wi, dist, scale, np.zeros(p.shape[1]), valid
     r = radius
     if soft_falloff:
@@ -45,7 +47,7 @@ def point_light_sample_numpy(p, u, position, radius, soft_falloff, spot):
         cos_l = dot(w, wi)                # the disk's normal is −wi (it faces p)
         valid &= (cos_l > 0) & (t > 0)
         pdf = np.where(valid, t2 / np.where(valid, cos_l * math.pi * r * r, 1.0), 0.0)
-        scale = np.where(valid, falloff * cos_l / np.where(valid, t2, 1.0), 0.0)
+        scale = np.where(valid, falloff(w) * cos_l / np.where(valid, t2, 1.0), 0.0)
         return w, t, scale, pdf, valid
     # sphere: uniform cone of half-angle asin(r/d), hit distance by the law of cosines
     valid &= dist > r
@@ -54,7 +56,7 @@ def point_light_sample_numpy(p, u, position, radius, soft_falloff, spot):
     w, cos_t = uniform_cone(u[1], u[2], one_minus_cos_max, wi)
     t = dist * cos_t - np.sqrt(np.maximum(r * r - dist2 * (1.0 - cos_t * cos_t), 0.0))
     pdf = np.where(valid, 1.0 / (2.0 * math.pi * np.where(valid, one_minus_cos_max, 1.0)), 0.0)
-    scale = np.where(valid, falloff * 2.0 * one_minus_cos_max / (r * r), 0.0)
+    scale = np.where(valid, falloff(w) * 2.0 * one_minus_cos_max / (r * r), 0.0)
     return w, np.maximum(t, 0.0), scale, pdf, valid
 
 
@@ -86,17 +88,15 @@ class PointEmitter(_Light):
         """Rays o + t·d, 0 < t < seg, that reach the sphere or disk: (rows, radiance factor relative
         to the intensity spectrum (n,), solid-angle pdf of next-event estimation from p_ref (n,)).
 
-        The disk faces the ray origin (Cycles' point_light_intersect); the spot attenuation is
-        that of the origin's direction, so from outside the cone the light is black."""
+        The disk faces the ray origin (Cycles' point_light_intersect); the spot attenuation is that of the
+        ray's direction, as next-event estimation's of its sampled rays (Cycles' spot.h)."""
         r = self.radius
         c = self.position[:, None]
         ok, t, cos_l = lamp_hits(o, d, seg, self.position, r, self.soft_falloff)
         rows = ok.nonzero()[0]
         if rows.size == 0:
             return rows, np.zeros(0), np.zeros(0)
-        to_c = c - o[:, rows]
-        wi = to_c / np.sqrt(dot(to_c, to_c))
-        factor = self._falloff(wi) / (math.pi * r * r) * np.ones(rows.size)
+        factor = self._falloff(d[:, rows]) / (math.pi * r * r) * np.ones(rows.size)
         q = p_ref[:, rows] if p_ref is not None else o[:, rows]
         if self.soft_falloff:
             pdf = t[rows] ** 2 / (cos_l[rows] * math.pi * r * r)
