@@ -146,13 +146,13 @@ class MaterialSet(BSDF):
     # --- BSDF interface --------------------------------------------------------------------------
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        parts = [(idx, m.eval(q, wi[:, idx])) for m, idx, q in self._split(sp)]
+        parts = [(idx, m.eval(q, np.take(wi, idx, axis=1))) for m, idx, q in self._split(sp)]
         return _assemble(parts, sp.n, sp.lam.shape[0], self._frames(sp, wi))
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         out = np.zeros(sp.n)
         for m, idx, q in self._split(sp):
-            out[idx] = m.pdf(q, wi[:, idx])
+            out[idx] = m.pdf(q, np.take(wi, idx, axis=1))
         return out
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
@@ -161,7 +161,7 @@ class MaterialSet(BSDF):
         is_delta, valid, eta_sq = np.empty(n, bool), np.empty(n, bool), np.ones(n)
         parts = []
         for m, idx, q in self._split(sp):
-            bs = m.sample(q, u_lobe[idx], u_dir[:, idx])
+            bs = m.sample(q, u_lobe[idx], np.take(u_dir, idx, axis=1))
             wi[:, idx], pdf[idx], is_delta[idx], valid[idx] = bs.wi, bs.pdf, bs.is_delta, bs.valid
             if bs.eta_sq is not None:
                 eta_sq[idx] = bs.eta_sq
@@ -190,7 +190,7 @@ class MaterialSet(BSDF):
     def diffuse_share(self, sp: ShadingPoint, wi: np.ndarray, f: MuellerValue) -> np.ndarray | None:
         out = np.zeros(f.m00().shape)
         for m, idx, q in self._split(sp):
-            d = m.diffuse_share(q, wi[:, idx], _take_value(f, idx))
+            d = m.diffuse_share(q, np.take(wi, idx, axis=1), _take_value(f, idx))
             if d is None:
                 return None
             out[:, idx] = d
