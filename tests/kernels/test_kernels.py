@@ -1162,3 +1162,25 @@ def test_vcavity_shadowing_bitwise():
             want = g_vcavity_numpy(*args)
         got = g_vcavity_numba(*args)
         assert got.shape == want.shape and got.tobytes() == want.tobytes()
+
+
+@needs_numba
+@pytest.mark.parametrize("correlated", [False, True])
+@pytest.mark.parametrize("alpha_kind,eta_cols", [("number", "per_point"), ("per_point", "per_point"),
+                                                 ("per_point", "one")])
+def test_conductor_compensation_twins(correlated, alpha_kind, eta_cols):
+    """The GGX conductor's multiscatter share k (engine.materials.ggx_energy.conductor_extra): the compiled loop
+    against the NumPy twin on cosines 0 … 1 (the ends included), roughness 0 … 1 and metal-like indices."""
+    from engine.materials import ggx_energy as g
+    assert "materials.ggx_energy.conductor_extra" in kernels.TWINS
+    rng = np.random.default_rng(11)
+    n = 4000
+    mu = rng.uniform(0.0, 1.0, n)
+    mu[:4] = 0.0, 1.0, 1e-12, 0.5
+    alpha = 0.3 if alpha_kind == "number" else rng.uniform(0.0, 1.0, n)
+    cols = n if eta_cols == "per_point" else 1
+    eta = rng.uniform(0.05, 3.0, (3, cols)) + 1j * rng.uniform(0.0, 6.0, (3, cols))
+    got = g.conductor_extra_numba(mu, alpha, eta, correlated)
+    want = g.conductor_extra_numpy(mu, alpha, eta, correlated)
+    assert got.shape == want.shape == (3, n) and want.max() > 0.1 and want.min() >= 0.0
+    _bitwise([got], [want])
