@@ -1184,3 +1184,25 @@ def test_conductor_compensation_twins(correlated, alpha_kind, eta_cols):
     want = g.conductor_extra_numpy(mu, alpha, eta, correlated)
     assert got.shape == want.shape == (3, n) and want.max() > 0.1 and want.min() >= 0.0
     _bitwise([got], [want])
+
+
+@needs_numba
+@pytest.mark.parametrize("extension", ["REPEAT", "EXTEND", "CLIP", "MIRROR"])
+def test_bilinear_texture_lookup_twins(extension):
+    """Linear image lookups (engine.textures.texture.bilinear_lookup): the compiled loop against the NumPy filter
+    for float texels (linear and sRGB-encoded) and 8/16-bit codes with 1, 3 and 4 channels, at coordinates inside,
+    on and beyond the image's edges."""
+    from engine.textures import texture as T
+    assert "textures.texture.bilinear_lookup" in kernels.TWINS
+    rng = np.random.default_rng(4)
+    uv = rng.uniform(-2.5, 3.5, (2, 3000))
+    uv[:, :4] = [[0.0, 1.0, 0.5, -1e-12], [0.0, 1.0, 1.0 - 1e-12, 2.0]]
+    for dtype, spaces in ((np.float32, ("linear", "srgb")), (np.uint8, ("srgb",)), (np.uint16, ("srgb",))):
+        for C in (1, 3, 4):
+            pix = rng.uniform(0.0, 1.0, (7, 9, C))
+            pix = pix.astype(np.float32) * 1.7 if dtype == np.float32 else (pix * np.iinfo(dtype).max).astype(dtype)
+            for space in spaces:
+                tex = T.ImageTexture(pix, "Linear", extension, interpolation_space=space)
+                got, want = T.bilinear_lookup_numba(tex, uv), T.bilinear_lookup_numpy(tex, uv)
+                assert got.shape == want.shape == (C, uv.shape[1]) and np.ptp(want) > 0.5
+                _bitwise([got], [want])
