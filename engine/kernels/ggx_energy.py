@@ -4,7 +4,8 @@
 in the same order: E(μ, α) and E_avg(α) read bilinearly from the conductor table (rows 0 … mu_nodes − 1: E at
 nodes in √μ and √α; row mu_nodes: E_avg), each clipped to [e_floor, 1]; Cycles' average Fresnel F_ss of the
 F82-tint fit through F(0°) and F(θ₈₂) (the compiled Fresnel ``abcs_at``, as the NumPy twin calls it when kernels
-are compiled); k = F_ms·(1 − E)/E.  One call per batch instead of some forty NumPy passes over small arrays.
+are compiled; once per run of equal indices along the points: a metal of one colour); k = F_ms·(1 − E)/E.
+One call per batch instead of some forty NumPy passes over small arrays.
 """
 
 from __future__ import annotations
@@ -42,9 +43,10 @@ def _conductor_extra_loop(mu, alpha, eta, table, mu_nodes, rough_nodes, alpha_ma
     L, M = eta.shape
     n = mu.shape[0]
     fss_col = np.empty(L)
-    if M == 1:
-        for q in range(L):
-            fss_col[q] = _average_fresnel(eta[q, 0])
+    last = np.empty(L, np.complex128)      # (M = N) the last index seen per row and its F_ss: one metal's
+    for q in range(L if M > 0 else 0):     # index repeated over the points is evaluated once
+        fss_col[q] = _average_fresnel(eta[q, 0])
+        last[q] = eta[q, 0]
     for k in range(n):
         m, a = mu[k], alpha[k]
         if m != m or a != a:
@@ -60,7 +62,12 @@ def _conductor_extra_loop(mu, alpha, eta, table, mu_nodes, rough_nodes, alpha_ma
         E_avg = min(max(E_avg, e_floor), 1.0)
         share = (1.0 - E) / E
         for q in range(L):
-            Fss = fss_col[q] if M == 1 else _average_fresnel(eta[q, k])
+            if M > 1:
+                e = eta[q, k]
+                if e.real != last[q].real or e.imag != last[q].imag:
+                    fss_col[q] = _average_fresnel(e)
+                    last[q] = e
+            Fss = fss_col[q]
             Fms = Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
             out[q, k] = Fms * share
 

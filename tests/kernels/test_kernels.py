@@ -1180,10 +1180,15 @@ def test_conductor_compensation_twins(correlated, alpha_kind, eta_cols):
     alpha = 0.3 if alpha_kind == "number" else rng.uniform(0.0, 1.0, n)
     cols = n if eta_cols == "per_point" else 1
     eta = rng.uniform(0.05, 3.0, (3, cols)) + 1j * rng.uniform(0.0, 6.0, (3, cols))
+    if cols > 1:            # runs of one metal's index (evaluated once per run), and a NaN
+        eta[:, 100:300] = eta[:, 100:101]
+        eta[1, 50] = np.nan
     got = g.conductor_extra_numba(mu, alpha, eta, correlated)
     want = g.conductor_extra_numpy(mu, alpha, eta, correlated)
-    assert got.shape == want.shape == (3, n) and want.max() > 0.1 and want.min() >= 0.0
+    assert got.shape == want.shape == (3, n) and np.nanmax(want) > 0.1 and np.nanmin(want) >= 0.0
     _bitwise([got], [want])
+    assert g.conductor_extra_numba(mu[:0], alpha if np.ndim(alpha) == 0 else alpha[:0], eta[:, :0], correlated
+                                   ).shape == (3, 0)
 
 
 @needs_numba
