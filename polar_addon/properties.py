@@ -107,7 +107,9 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
     skip_clear_layers: BoolProperty(name="Skip Clear Layers", description="Skip layered-material coats whose "
                                     "index equals the medium above and that absorb nothing (exact; reported "
                                     "in the render stats)", default=True)
-    threads: IntProperty(name="Threads", description="Worker threads (0 = one per CPU core)", default=0, min=0,
+    threads: IntProperty(name="Threads", description="Worker threads (0 = automatic: one per CPU core, or one "
+                                                     "where many materials would make two threads slower)",
+                         default=0, min=0,
                          max=256)
     batch_rays: IntProperty(name="Batch Size", description="Paths traced at once; lower it to save memory",
                             default=1 << 17, min=1024, max=1 << 24)

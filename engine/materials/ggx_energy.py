@@ -70,6 +70,8 @@ import math
 import numpy as np
 
 from .table_cache import cached_table
+from ..kernels import twin
+from ..kernels.ggx_energy import conductor_extra_loop
 from ..polarisation.fresnel import fresnel_reflectance
 
 #: Nodes of the conductor table in t = √μ and in r = √α ∈ [0, 1].
@@ -316,7 +318,7 @@ def f82_average_fresnel(eta: np.ndarray) -> np.ndarray:
     return np.clip(F0 + (1.0 - F0) / 21.0 - b / 126.0, 0.0, 1.0)
 
 
-def conductor_extra(mu, alpha, eta, correlated: bool = False) -> np.ndarray:
+def conductor_extra_numpy(mu, alpha, eta, correlated: bool = False) -> np.ndarray:
     """The compensation's share k (L, N) ≥ 0 for a conductor: f = f_ss·(1 + k), so the added
     (depolarised) term is k·M00(f_ss):  k = F_ms·(1 − E)/E, F_ms = F_ss·E_avg/(1 − F_ss·(1 − E_avg)).
     ``mu`` (N,) viewing cosines, ``alpha`` a number or (N,), ``eta`` (L, N) or (L, 1) complex;
@@ -326,6 +328,25 @@ def conductor_extra(mu, alpha, eta, correlated: bool = False) -> np.ndarray:
     Fss = f82_average_fresnel(eta)
     Fms = Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
     return Fms * ((1.0 - E) / E)
+
+
+def conductor_extra_numba(mu, alpha, eta, correlated: bool = False) -> np.ndarray:
+    """conductor_extra_numpy in one compiled loop (engine.kernels.ggx_energy), the same bits where the NumPy twin
+    calls the compiled Fresnel; other shapes than (N,) cosines and (L, 1 or N) indices go to the NumPy twin."""
+    mu = np.asarray(mu, np.float64)
+    eta = np.asarray(eta, np.complex128)
+    n = mu.shape[0] if mu.ndim == 1 else -1
+    if n < 0 or eta.ndim != 2 or eta.shape[1] not in (1, n) or np.ndim(alpha) > 1:
+        return conductor_extra_numpy(mu, alpha, eta, correlated)
+    out = np.empty((eta.shape[0], n))
+    alpha = np.ascontiguousarray(np.broadcast_to(np.asarray(alpha, np.float64), (n,)))
+    conductor_extra_loop(np.ascontiguousarray(mu), alpha, np.ascontiguousarray(eta), conductor_tables(correlated),
+                         MU_NODES, ROUGH_NODES, ALPHA_MAX, E_FLOOR, out)
+    return out
+
+
+#: k of the multiple-scattering compensation of a conductor (conductor_extra_numpy), compiled where available.
+conductor_extra = twin(conductor_extra_loop and conductor_extra_numba, conductor_extra_numpy)
 
 
 # --------------------------------------------------------------------------- a dielectric's table

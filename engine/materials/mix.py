@@ -273,7 +273,7 @@ def add_values(terms, n: int, L: int, k_in: np.ndarray, k_out: np.ndarray, n_s: 
 def _take_value(v: MuellerValue, idx: np.ndarray) -> MuellerValue:
     """The lanes ``idx`` of a value."""
     def t(a):
-        return None if a is None else a[..., idx]
+        return None if a is None else np.take(a, idx, axis=-1)
     if v.kind == "general":
         return MuellerValue("general", t(v.x_in), t(v.x_out), M=t(v.M))
     return MuellerValue(v.kind, t(v.x_in), t(v.x_out), t(v.A), t(v.B), t(v.C), t(v.S), depol=t(v.depol))
@@ -586,7 +586,7 @@ class Mix(BSDF):
             sel = np.flatnonzero(some & (k == j))
             if not sel.size:
                 continue
-            bs = c.sample(points[j].take(sel), u_rest[sel], u_dir[:, sel])
+            bs = c.sample(points[j].take(sel), u_rest[sel], np.take(u_dir, sel, axis=1))
             wi[:, sel] = bs.wi
             is_delta[sel], valid[sel] = bs.is_delta, bs.valid
             if bs.eta_sq is not None:
@@ -600,7 +600,7 @@ class Mix(BSDF):
             sub = sp.take(smooth)
             sub_points = [sub if q is sp else q.take(smooth) for q in points]
             w_sub = [w[smooth] for w in weights]
-            d_sub = wi[:, smooth]
+            d_sub = np.take(wi, smooth, axis=1)
             density = self._pdf(sub_points, p[:, smooth], d_sub)
             good = density > 0
             value = self._sum(sub, sub_points, w_sub, d_sub, cosine=True)

@@ -109,7 +109,9 @@ class MappedShadingPoint(ShadingPoint):
                                   base.material, base.surface, n_smooth)
 
     def take(self, sel) -> MappedShadingPoint:
-        return self._with(super().take(sel), self.n_smooth[:, sel])
+        sub = super().take(sel)
+        return self._with(sub, np.take(self.n_smooth, sel, axis=-1) if isinstance(sel, np.ndarray) and
+                          sel.dtype != np.bool_ else self.n_smooth[:, sel])
 
     def flipped(self, where: np.ndarray) -> MappedShadingPoint:
         return self._with(super().flipped(where), self.n_smooth * np.where(where, -1.0, 1.0)[None, :])

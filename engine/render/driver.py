@@ -32,6 +32,19 @@ STOP_POLL_SECONDS = 0.05
 UNITS_AHEAD = 2
 #: Counters of the tracer's stats that a render sums over its units.
 RAY_COUNTERS = ("rays", "shadow_rays", "nonfinite")
+#: With this many materials or more shaded by Python calls (every material but a LambertSet's), one worker thread
+#: traces as fast as two or faster: each bounce runs each material's NumPy calls on its share of the paths, and two
+#: threads hand the GIL to each other at every call (docs/benchmarks.md "Real assets against Cycles").
+CONVOY_MATERIALS = 3
+
+
+def local_workers(cores: int, materials) -> int:
+    """Worker threads for a render whose threads are not set (``cores``: one per CPU core): one where the scene's
+    used ``materials`` (BSDFs) are shaded by ``CONVOY_MATERIALS`` or more separate Python calls per bounce (two
+    threads then convoy on the GIL), else ``cores``.  The image does not depend on it (engine.render.plan)."""
+    from ..materials.lambert import LambertSet
+    python_shaded = [m for m in materials if not LambertSet.batchable(m)]
+    return 1 if len(python_shaded) >= CONVOY_MATERIALS else cores
 
 
 class StopCheck:

@@ -67,6 +67,7 @@ class PhaseVertices(BSDF):
 
     name = "phase"
     radiance_scaling = True
+    shade_alone = True      # the scatter stage tells medium vertices apart by type (never in a MaterialSet)
     #: Cycles' light paths count its samples as volume bounces (engine.render.light_paths)
     medium_vertex = True
 

@@ -32,7 +32,7 @@ from .blas_threads import one_blas_thread
 from ..kernels import BACKEND as KERNEL_BACKEND
 from ..kernels import COMPILES as KERNEL_COMPILES
 from .camera import CameraModel
-from .driver import LocalThreads, UniformPasses, drive
+from .driver import LocalThreads, UniformPasses, drive, local_workers
 from .film import Film, HalfBuffers, SampleSums
 from .integrator import PathTracer
 from .media import tracked_media
@@ -154,8 +154,13 @@ class Renderer:
         self._warm_compiles = (0, 0.0)
 
     def plan(self, settings: RenderSettings | None = None, window=None, workers: int | None = None) -> RenderPlan:
-        """The RenderPlan of rendering this scene with ``settings`` (default: the scene's)."""
-        return RenderPlan.resolve(self.scene, self.compiled, settings, window, workers)
+        """The RenderPlan of rendering this scene with ``settings`` (default: the scene's); threads not set
+        (``workers`` None and ``settings.threads`` 0): as many as ``driver.local_workers`` decides."""
+        plan = RenderPlan.resolve(self.scene, self.compiled, settings, window, workers)
+        if workers is None and plan.settings.threads <= 0:
+            used = [plan.materials[i] for i in self.compiled.used_materials]
+            plan = dataclasses.replace(plan, workers=local_workers(plan.workers, used))
+        return plan
 
     def tracer(self, plan: RenderPlan, count_cost: bool = False) -> PathTracer:
         """A PathTracer of ``plan`` (its settings and materials); ``count_cost``: per-path costs

@@ -418,7 +418,7 @@ class RenderSettings:
     wavelength_nm: float = 550.0
     polarisation: str = "auto"
     batch_rays: int = 1 << 17
-    threads: int = 0              # worker threads; 0 = one per CPU core
+    threads: int = 0              # worker threads; 0 = automatic (one per CPU core; one where materials convoy)
     #: Where no material depends on λ: "auto" traces in RGB with each light's exactly integrated
     #: colour (no chromatic noise, same expectation); "exact" keeps the 4 sampled wavelengths but
     #: one Mueller product per path (bit-for-bit the per-wavelength estimator); "off" never reduces.

@@ -118,6 +118,8 @@ def index_of(r, edge, mode: str):
 
 
 EDGE_MODES = ("tint", "f82", "schlick", "schlick_tint", "cycles_film")
+#: one object per mode: memo keys match by identity (WavelengthLookup.memo)
+_MODE_KEYS = {mode: object() for mode in EDGE_MODES}
 
 
 class GulbrandsenIndex(Spectrum):
@@ -141,8 +143,11 @@ class GulbrandsenIndex(Spectrum):
         return self._pick(*index_of(self.reflectivity.eval(lam), self.edge_tint.eval(lam), self.mode))
 
     def eval_cached(self, lookup):
-        return lookup.memo(self, lambda: self._pick(*index_of(self.reflectivity.eval_cached(lookup),
-                                                              self.edge_tint.eval_cached(lookup), self.mode)))
+        # (n, κ) once per lookup: the n and the κ of one metal (the same two spectra) share one Gulbrandsen map
+        nk = lookup.memo((self.reflectivity, self.edge_tint, _MODE_KEYS[self.mode]),
+                         lambda: np.stack(index_of(self.reflectivity.eval_cached(lookup),
+                                                   self.edge_tint.eval_cached(lookup), self.mode)))
+        return nk[0] if self.part == "n" else nk[1]
 
     def linear_srgb(self) -> np.ndarray:
         return self._pick(*index_of(self.reflectivity.linear_srgb(), self.edge_tint.linear_srgb(), self.mode))

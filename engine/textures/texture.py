@@ -29,6 +29,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import SceneError
+from ..kernels import twin
+from ..kernels.texture_lookup import bilinear_loop
 from .image import srgb_to_linear
 
 INTERPOLATIONS = ("Closest", "Linear", "Cubic")
@@ -217,6 +219,12 @@ class ImageTexture(Texture):
         if self.uv_transform is not None:
             uv = self.uv_transform[0] @ uv + self.uv_transform[1][:, None]
         uv = _reduce_coordinates(uv, self.extension)
+        if self.interpolation == "Linear":
+            return bilinear_lookup(self, uv)
+        return self._filtered(uv)
+
+    def _filtered(self, uv: np.ndarray) -> np.ndarray:
+        """Values (C, N) at reduced texture coordinates uv (2, N) (after the transform): the NumPy filter."""
         x = uv[0] * self.width
         y = uv[1] * self.height
         if self.interpolation == "Closest":
@@ -306,6 +314,27 @@ class ImageTexture(Texture):
         x0, x1, y0, y1 = ax[0] // block, ax[1] // block + 1, ay[0] // block, ay[1] // block + 1
         count = table[y1, x1] - table[y0, x1] - table[y1, x0] + table[y0, x0]
         return ~known | (~(ax[2] | ay[2]) & (count > 0))
+
+
+def bilinear_lookup_numpy(texture: ImageTexture, uv: np.ndarray) -> np.ndarray:
+    """Values (C, N) of a Linear ``texture`` at reduced texture coordinates uv (2, N): its NumPy filter."""
+    return texture._filtered(uv)
+
+
+def bilinear_lookup_numba(texture: ImageTexture, uv: np.ndarray) -> np.ndarray:
+    """bilinear_lookup_numpy in one compiled loop (engine.kernels.texture_lookup), the same values."""
+    out = np.empty((texture.channels, uv.shape[1]))
+    srgb = texture.interpolation_space == "srgb"
+    lo, hi = texture._encoded_range if srgb else (_NO_RANGE, _NO_RANGE)
+    bilinear_loop(np.ascontiguousarray(uv, np.float64), texture.pixels, texture.width, texture.height,
+                  EXTENSIONS.index(texture.extension), texture._code_scale or 0.0, texture._colour, srgb,
+                  np.ascontiguousarray(lo, np.float64), np.ascontiguousarray(hi, np.float64), out)
+    return out
+
+
+_NO_RANGE = np.zeros(1)
+#: A Linear image texture's lookup at reduced coordinates, compiled where available.
+bilinear_lookup = twin(bilinear_loop and bilinear_lookup_numba, bilinear_lookup_numpy)
 
 
 def _axis_interval(lo: np.ndarray, hi: np.ndarray, n: int, extension: str):

@@ -18,7 +18,8 @@ the two renderers side by side:
 * σ² = mean over the asset's pixels of the per-pixel variance of the S0 luminance between the seeds;
 * **var × time ratio** = (σ²_Polar · t_Polar) ÷ (σ²_Cycles · t_Cycles): how much longer Polar needs for
   Cycles' noise (< 1: Polar is more efficient);
-* the parity numbers of the case (blocks passing the rule, luminance ratio Polar ÷ Cycles).
+* the parity numbers of the case (blocks passing the rule, luminance ratio Polar ÷ Cycles);
+* the load average before and after (the machine may be shared: the ratios race the two renderers in one run).
 
 A case whose scene Polar refuses prints the reason.  ``--figure PATH`` also writes, per asset, a PNG of
 Cycles | Polar S0 | Polar DoLP under ``--figure-lighting`` into a folder beside PATH and stacks them
@@ -65,6 +66,7 @@ def main(argv=None):
     names = [n for n in a.assets.split(",") if n]
     lightings = [x for x in a.lighting.split(",") if x]
     panels = tempfile.mkdtemp(prefix="asset_panels_") if a.figure else None
+    print(f"load average {' / '.join(f'{v:.2f}' for v in os.getloadavg())} ({os.cpu_count()} cores)", flush=True)
     print(f"{'asset':20s} {'light':5s} | {'Cycles s':>8s} {'σ²':>9s} {'sync s':>7s} | {'Polar s':>8s} {'σ²':>9s} "
           f"{'setup s':>7s} | {'var×time P÷C':>12s} | parity")
     for name in names:
@@ -88,6 +90,7 @@ def main(argv=None):
                                   "cycles_sync_s": sync, "polar_setup_s": setup, "cycles_var": vc, "polar_var": vp,
                                   "var_time_ratio": ratio, "blocks": r.blocks, "passed": r.passed,
                                   "luminance_ratio": r.luminance_ratio, "warnings": r.warnings}))
+    print(f"load average {' / '.join(f'{v:.2f}' for v in os.getloadavg())} at the end", flush=True)
     if a.figure:
         done = [n for n in names if os.path.exists(os.path.join(panels, f"{n}_{a.figure_lighting}.png"))]
         print(ap.figure(panels, a.figure, done, a.figure_lighting))

@@ -1,5 +1,5 @@
-"""Cycles' Light Tree switch read by Polar (polar_addon.render_engine.engine_settings): on by default, off when
-scene.cycles.use_light_tree is off; an exported Blender scene (two-sided emissive spheres, which block their own
+"""Cycles' Light Tree switch read by Polar (polar_addon.render_engine.engine_settings): on (Cycles' default) → "auto"
+(the tree above 64 emitters), off → "off"; an exported Blender scene (two-sided emissive spheres, which block their own
 shadow rays, and a point lamp) renders the same mean with and without the tree."""
 
 import dataclasses
@@ -40,7 +40,7 @@ def test_the_light_tree_follows_cycles_switch_and_keeps_the_mean():
     scene = scene_with_emitters()
     scene.render.engine = "POLAR"
     scene.polar.samples, scene.polar.max_bounces = 16, 3
-    assert scene.cycles.use_light_tree and engine_settings(scene).light_tree == "on"
+    assert scene.cycles.use_light_tree and engine_settings(scene).light_tree == "auto"
     scene.cycles.use_light_tree = False
     assert engine_settings(scene).light_tree == "off"
     settings = engine_settings(scene)

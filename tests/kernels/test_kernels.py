@@ -1228,3 +1228,52 @@ def test_frame_rotation_is_the_identity_where_a_frame_is_degenerate():
     for j in range(3):
         cj, sj = frame_rotation_at(x_from, x_to, k, j)
         assert (cj == c2[j] or (np.isnan(cj) and np.isnan(c2[j]))) and (sj == s2[j] or np.isnan(sj))
+
+
+@needs_numba
+@pytest.mark.parametrize("correlated", [False, True])
+@pytest.mark.parametrize("alpha_kind,eta_cols", [("number", "per_point"), ("per_point", "per_point"),
+                                                 ("per_point", "one")])
+def test_conductor_compensation_twins(correlated, alpha_kind, eta_cols):
+    """The GGX conductor's multiscatter share k (engine.materials.ggx_energy.conductor_extra): the compiled loop
+    against the NumPy twin on cosines 0 … 1 (the ends included), roughness 0 … 1 and metal-like indices."""
+    from engine.materials import ggx_energy as g
+    assert "materials.ggx_energy.conductor_extra" in kernels.TWINS
+    rng = np.random.default_rng(11)
+    n = 4000
+    mu = rng.uniform(0.0, 1.0, n)
+    mu[:4] = 0.0, 1.0, 1e-12, 0.5
+    alpha = 0.3 if alpha_kind == "number" else rng.uniform(0.0, 1.0, n)
+    cols = n if eta_cols == "per_point" else 1
+    eta = rng.uniform(0.05, 3.0, (3, cols)) + 1j * rng.uniform(0.0, 6.0, (3, cols))
+    if cols > 1:            # runs of one metal's index (evaluated once per run), and a NaN
+        eta[:, 100:300] = eta[:, 100:101]
+        eta[1, 50] = np.nan
+    got = g.conductor_extra_numba(mu, alpha, eta, correlated)
+    want = g.conductor_extra_numpy(mu, alpha, eta, correlated)
+    assert got.shape == want.shape == (3, n) and np.nanmax(want) > 0.1 and np.nanmin(want) >= 0.0
+    _bitwise([got], [want])
+    assert g.conductor_extra_numba(mu[:0], alpha if np.ndim(alpha) == 0 else alpha[:0], eta[:, :0], correlated
+                                   ).shape == (3, 0)
+
+
+@needs_numba
+@pytest.mark.parametrize("extension", ["REPEAT", "EXTEND", "CLIP", "MIRROR"])
+def test_bilinear_texture_lookup_twins(extension):
+    """Linear image lookups (engine.textures.texture.bilinear_lookup): the compiled loop against the NumPy filter
+    for float texels (linear and sRGB-encoded) and 8/16-bit codes with 1, 3 and 4 channels, at coordinates inside,
+    on and beyond the image's edges."""
+    from engine.textures import texture as T
+    assert "textures.texture.bilinear_lookup" in kernels.TWINS
+    rng = np.random.default_rng(4)
+    uv = rng.uniform(-2.5, 3.5, (2, 3000))
+    uv[:, :4] = [[0.0, 1.0, 0.5, -1e-12], [0.0, 1.0, 1.0 - 1e-12, 2.0]]
+    for dtype, spaces in ((np.float32, ("linear", "srgb")), (np.uint8, ("srgb",)), (np.uint16, ("srgb",))):
+        for C in (1, 3, 4):
+            pix = rng.uniform(0.0, 1.0, (7, 9, C))
+            pix = pix.astype(np.float32) * 1.7 if dtype == np.float32 else (pix * np.iinfo(dtype).max).astype(dtype)
+            for space in spaces:
+                tex = T.ImageTexture(pix, "Linear", extension, interpolation_space=space)
+                got, want = T.bilinear_lookup_numba(tex, uv), T.bilinear_lookup_numpy(tex, uv)
+                assert got.shape == want.shape == (C, uv.shape[1]) and np.ptp(want) > 0.5
+                _bitwise([got], [want])

@@ -141,3 +141,41 @@ def test_a_unit_finished_after_an_ended_one_is_not_added():
     added = []
     assert trace_in_order(list(range(4)), lambda k: trace(k, abort), added.append, 2, done2.is_set, abort)
     assert added == [0]
+
+
+def test_threads_not_set_one_worker_where_many_materials_are_shaded_by_python_calls(tmp_path):
+    """The thread policy (driver.local_workers): with threads 0, a scene whose used materials are shaded by
+    CONVOY_MATERIALS or more separate calls per bounce (two threads convoy on the GIL) gets one worker, a scene of
+    Lambert materials (one LambertSet) or of fewer others one per core; set threads are kept; the image is the same
+    with one worker as with two (added in the same order)."""
+    import dataclasses
+    import os
+
+    from engine.render.driver import CONVOY_MATERIALS
+    from engine.render.renderer import Renderer
+    from engine.scene.loader import parse_scene
+
+    def scene(materials):
+        names = list(materials)
+        objects = [{"shape": "quad", "material": name,
+                    "vertices": [[k - 2.0, -1, 0], [k - 1.0, -1, 0], [k - 1.0, 1, 0], [k - 2.0, 1, 0]]}
+                   for k, name in enumerate(names)]
+        return parse_scene({"format": "polar-scene/1",
+                            "camera": {"origin": [0, -4, 3], "target": [0, 0, 0], "up": [0, 0, 1], "width": 12,
+                                       "height": 8, "fov_deg": 50},
+                            "render": {"spp": 2, "max_depth": 3}, "materials": materials, "objects": objects,
+                            "lights": [{"type": "point", "position": [0, 0, 2], "intensity": 10}]}, str(tmp_path))
+    cores = os.cpu_count() or 1
+    metals = {f"m{k}": {"type": "principled", "base_color": [0.8, 0.5, 0.2], "metallic": 1.0, "roughness": 0.2 + k / 10}
+              for k in range(CONVOY_MATERIALS)}
+    lamberts = {f"d{k}": {"type": "lambert", "albedo": 0.2 + k / 10} for k in range(4)}
+    many = Renderer(scene(metals))
+    assert many.plan().workers == 1
+    assert many.plan(dataclasses.replace(many.scene.settings, threads=2)).workers == 2
+    assert Renderer(scene(lamberts)).plan().workers == cores
+    fewer = dict(list(metals.items())[:CONVOY_MATERIALS - 1], **lamberts)
+    assert Renderer(scene(fewer)).plan().workers == cores
+    one = many.render().stokes()
+    two = many.render(dataclasses.replace(many.scene.settings, threads=2)).stokes()
+    assert one.max() > 0
+    np.testing.assert_array_equal(one, two)

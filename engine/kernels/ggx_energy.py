@@ -1,0 +1,77 @@
+"""The multiple-scattering compensation share of a rough GGX conductor as one compiled loop.
+
+``conductor_extra_loop`` is engine.materials.ggx_energy.conductor_extra_numpy per element, the same arithmetic
+in the same order: E(μ, α) and E_avg(α) read bilinearly from the conductor table (rows 0 … mu_nodes − 1: E at
+nodes in √μ and √α; row mu_nodes: E_avg), each clipped to [e_floor, 1]; Cycles' average Fresnel F_ss of the
+F82-tint fit through F(0°) and F(θ₈₂) (the compiled Fresnel ``abcs_at``, as the NumPy twin calls it when kernels
+are compiled; once per run of equal indices along the points: a metal of one colour); k = F_ms·(1 − E)/E.
+One call per batch instead of some forty NumPy passes over small arrays.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import jit, jit_inner
+from .fresnel import abcs_at
+
+#: F82-tint constants of engine.materials.ggx_energy.f82_average_fresnel (the same Python floats)
+_F = 6.0 / 7.0
+_F5 = _F ** 5
+_B_SCALE = 7.0 / (_F5 * _F)
+_COS_82 = 1.0 / 7.0
+
+
+@jit_inner
+def _cell(v, hi, nodes):
+    """(cell index, fraction) of v clipped to [0, hi] on nodes in √v (NumPy: sqrt(clip)·(nodes − 1), astype)."""
+    x = np.sqrt(min(max(v, 0.0), hi)) * (nodes - 1)
+    i = min(int(x), nodes - 2)
+    return i, x - i
+
+
+@jit_inner
+def _average_fresnel(e):
+    F0 = abcs_at(1.0, e)[0]
+    F82 = abcs_at(_COS_82, e)[0]
+    b = _B_SCALE * (F0 + (1.0 - F0) * _F5 - F82)
+    return min(max(F0 + (1.0 - F0) / 21.0 - b / 126.0, 0.0), 1.0)
+
+
+@jit
+def _conductor_extra_loop(mu, alpha, eta, table, mu_nodes, rough_nodes, alpha_max, e_floor, out):
+    L, M = eta.shape
+    n = mu.shape[0]
+    fss_col = np.empty(L)
+    last = np.empty(L, np.complex128)      # (M = N) the last index seen per row and its F_ss: one metal's
+    for q in range(L if M > 0 else 0):     # index repeated over the points is evaluated once
+        fss_col[q] = _average_fresnel(eta[q, 0])
+        last[q] = eta[q, 0]
+    for k in range(n):
+        m, a = mu[k], alpha[k]
+        if m != m or a != a:
+            for q in range(L):
+                out[q, k] = np.nan
+            continue
+        i, fx = _cell(m, 1.0, mu_nodes)
+        j, fy = _cell(a, alpha_max, rough_nodes)
+        E = ((table[i, j] * (1.0 - fx) + table[i + 1, j] * fx) * (1.0 - fy)
+             + (table[i, j + 1] * (1.0 - fx) + table[i + 1, j + 1] * fx) * fy)
+        E = min(max(E, e_floor), 1.0)
+        E_avg = table[mu_nodes, j] * (1.0 - fy) + table[mu_nodes, j + 1] * fy
+        E_avg = min(max(E_avg, e_floor), 1.0)
+        share = (1.0 - E) / E
+        for q in range(L):
+            if M > 1:
+                e = eta[q, k]
+                if e.real != last[q].real or e.imag != last[q].imag:
+                    fss_col[q] = _average_fresnel(e)
+                    last[q] = e
+            Fss = fss_col[q]
+            Fms = Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
+            out[q, k] = Fms * share
+
+
+#: (mu (N,), alpha (N,), eta (L, 1 or N) complex, table, mu_nodes, rough_nodes, alpha_max, e_floor, out (L, N));
+#: None without Numba.
+conductor_extra_loop = _conductor_extra_loop
