@@ -74,6 +74,12 @@ class SetShadingPoint(ShadingPoint):
                                base.surface, self.owner, tuple(parts), self.pos)
 
 
+def _member_value(m: BSDF, q: ShadingPoint, wi_m: np.ndarray, f: MuellerValue, idx: np.ndarray) -> MuellerValue:
+    """Member m's own value at its points: the set's lanes ``idx``, unless the set's value became a general matrix
+    (a member's is), which no longer holds a member's depolarised part (``depol``) apart: then m's own eval."""
+    return m.eval(q, wi_m) if f.kind == "general" else _take_value(f, idx)
+
+
 class MaterialSet(BSDF):
     """Members (BSDFs) shaded as one batch; point i is shaded by ``members[sp.material[i]]``."""
 
@@ -190,10 +196,21 @@ class MaterialSet(BSDF):
     def diffuse_share(self, sp: ShadingPoint, wi: np.ndarray, f: MuellerValue) -> np.ndarray | None:
         out = np.zeros(f.m00().shape)
         for m, idx, q in self._split(sp):
-            d = m.diffuse_share(q, np.take(wi, idx, axis=1), _take_value(f, idx))
+            wi_m = np.take(wi, idx, axis=1)
+            d = m.diffuse_share(q, wi_m, _member_value(m, q, wi_m, f, idx))
             if d is None:
                 return None
             out[:, idx] = d
+        return out
+
+    def member_parts(self, sp: ShadingPoint, wi: np.ndarray | None = None, f: MuellerValue | None = None) -> list:
+        """[(member, indices (k,) of its points in ``sp``, its shading point, its ``wi`` (3, k), its part of ``f``)]
+        of the members present (``wi``/``f`` None where not given): for callers that treat members one by one
+        (the light passes name the member whose lobes they cannot separate)."""
+        out = []
+        for m, idx, q in self._split(sp):
+            wi_m = None if wi is None else np.take(wi, idx, axis=1)
+            out.append((m, idx, q, wi_m, None if f is None else _member_value(m, q, wi_m, f, idx)))
         return out
 
     def lobe_colors(self, sp: ShadingPoint) -> LobeColors | None:

@@ -46,6 +46,7 @@ from ..materials.base import LobeColors
 from ..materials.flags import BSDFFlags
 from ..spectral.cie import d65_normalised
 from ..vec3 import dot
+from ..materials.material_set import MaterialSet
 from .integrator import albedo_rgb
 from .light_paths import TRANSPARENT, LightPathRules, classify, trace_light_paths
 
@@ -113,8 +114,13 @@ class LightPassBatch:
         f = bsdf.eval(sp, wi)
         d = bsdf.diffuse_share(sp, wi, f)
         if d is None:
-            self.unseparated.add(bsdf.name)
             d = np.zeros_like(f.m00())
+            for m, idx, q, wi_m, f_m in _members(bsdf, sp, wi, f):     # a set: its members one by one
+                dm = None if idx is None else m.diffuse_share(q, wi_m, f_m)
+                if dm is None:
+                    self.unseparated.add(m.name)
+                else:
+                    d[:, idx] = dm
         return d, f.m00()
 
     def light(self, bsdf, sp, path, wi, weight, T, cols) -> None:
@@ -250,13 +256,19 @@ class LightPassBatch:
         for g in np.unique(groups):
             at = np.flatnonzero(groups == g)
             bsdf = tracer.shaders[g]
-            colors = bsdf.lobe_colors(tracer._shading_point(bsdf, state, surf, mat, flip, rows[at]))
-            if colors is None:
-                self.estimated.add(bsdf.name)
-                continue
-            known[at] = True
-            out.diffuse[:, at], out.glossy[:, at] = t00[:, at] * colors.diffuse, t00[:, at] * colors.glossy
-            out.transmission[:, at] = t00[:, at] * colors.transmission
+            sp = tracer._shading_point(bsdf, state, surf, mat, flip, rows[at])
+            colors = bsdf.lobe_colors(sp)
+            parts = [(bsdf, None, colors)]
+            if colors is None:                          # a set: its members one by one
+                parts = [(m, idx, None if idx is None else m.lobe_colors(q)) for m, idx, q, _, _ in _members(bsdf, sp)]
+            for m, idx, c in parts:
+                if c is None:
+                    self.estimated.add(m.name)
+                    continue
+                sub = at if idx is None else at[idx]
+                known[sub] = True
+                out.diffuse[:, sub], out.glossy[:, sub] = t00[:, sub] * c.diffuse, t00[:, sub] * c.glossy
+                out.transmission[:, sub] = t00[:, sub] * c.transmission
         return out, known
 
     def finish(self) -> dict:
@@ -284,6 +296,14 @@ class LightPassBatch:
 
 
 # ----------------------------------------------------------------------------- the passes of a render
+
+
+def _members(bsdf, sp, wi=None, f=None) -> list:
+    """A MaterialSet's ``member_parts``; any other BSDF as one part without indices (idx None: nothing to split)."""
+    if isinstance(bsdf, MaterialSet):
+        return bsdf.member_parts(sp, wi, f)
+    return [(bsdf, None, sp, wi, f)]
+
 
 @dataclass
 class LightPasses:

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from engine.cli import main
+from engine.materials.batching import shading_groups
 from engine.output.exr import read_stokes_exr
 from engine.render.light_passes import render_light_passes, safe_divide_even_color
 from engine.render.renderer import Renderer
@@ -115,3 +116,22 @@ def test_cli_writes_the_light_passes(tmp_path):
     assert main(["render", str(scene), "-o", str(tmp_path / "bad.exr"), "--light-passes", "shiny",
                  "--no-previews", "--quiet"]) != 0
     assert not (tmp_path / "bad.exr").exists()
+
+
+def test_a_material_set_keeps_its_members_passes_apart():
+    """Materials shaded as one MaterialSet (the glossy panel made a Weidlich–Wilkie coat, whose lobes the passes
+    cannot separate, beside the mixed Torrance–Sparrow ball): the warning names the member's model, not the set,
+    and the ball's Diffuse Direct is the one it has without that neighbour (it was counted Glossy: the set's value,
+    a general matrix because of the coat, no longer held the ball's depolarised part apart)."""
+    d = _glare(spp=4)
+    ref = render_light_passes(Renderer(parse_scene(d)), threads=1)
+    d["materials"]["glossy"] = {"type": "weidlich_wilkie", "coats": [{"n": 1.5, "distribution": "beckmann", "m": 0.2}],
+                                "base": {"type": "lambert", "albedo": 0.5}}
+    scene = parse_scene(d)
+    shaders = shading_groups(list(scene.materials.values()))[0]
+    assert any(type(s).__name__ == "MaterialSet" for s in shaders)         # the case under test
+    lp = render_light_passes(Renderer(scene), threads=1)
+    assert any("weidlich_wilkie" in w for w in lp.warnings) and not any("material_set" in w for w in lp.warnings)
+    ball = ref.stokes["Diffuse Direct"][0].sum(-1) > 0
+    assert ball.sum() > 20
+    np.testing.assert_allclose(lp.stokes["Diffuse Direct"][0][ball], ref.stokes["Diffuse Direct"][0][ball], rtol=1e-9)
