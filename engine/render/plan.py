@@ -144,6 +144,8 @@ class RenderPlan:
     height: int
     window: Window | None = None
     workers: int = 1
+    #: why that many local threads, where chosen automatically (reported; '' otherwise)
+    threads_reason: str = ""
 
     @classmethod
     def resolve(cls, scene, compiled, settings: RenderSettings | None = None, window=None,
@@ -192,7 +194,8 @@ class RenderPlan:
         """The render's statistics before any sample: counters at 0 and what the plan decided."""
         return {"rays": 0, "shadow_rays": 0, "nonfinite": 0, "samples": 0, "transport": self.settings.polarisation,
                 "transport_reason": self.transport_reason, "spectral": self.spectral,
-                "simplified": list(self.simplified), "light_paths": describe_light_paths(self.settings)}
+                "simplified": list(self.simplified), "light_paths": describe_light_paths(self.settings),
+                **({"threads": self.workers, "threads_reason": self.threads_reason} if self.threads_reason else {})}
 
 
 def work_units(width: int, height: int, spp: int, batch_rays: int, first_pass: int = 0,

@@ -71,6 +71,8 @@ def stats_line(stats: dict, sep: str = "; ") -> str:
     parts = [f"{stats['samples']} samples in {stats.get('seconds', 0.0):.2f} s ({msamples_per_second(stats):.3f} "
              f"Msamples/s), {stats['rays']} rays + {stats['shadow_rays']} shadow rays",
              f"transport: {stats['transport_reason']}", f"spectral: {stats['spectral']}", kernels]
+    if stats.get("threads_reason"):
+        parts.append(f"threads: {stats['threads']} ({stats['threads_reason']})")
     parts += [f"simplified: {why}" for why in stats.get("simplified", [])]
     if stats.get("light_paths"):
         parts.append(f"light paths: {stats['light_paths']}")
@@ -159,7 +161,11 @@ class Renderer:
         plan = RenderPlan.resolve(self.scene, self.compiled, settings, window, workers)
         if workers is None and plan.settings.threads <= 0:
             used = [plan.materials[i] for i in self.compiled.used_materials]
-            plan = dataclasses.replace(plan, workers=local_workers(plan.workers, used))
+            n = local_workers(plan.workers, used)
+            why = ("automatic: one per CPU core" if n == plan.workers else
+                   "automatic: one, as the scene's materials are shaded by Python calls that two threads would "
+                   "contend for (threads > 0 overrides)")
+            plan = dataclasses.replace(plan, workers=n, threads_reason=why)
         return plan
 
     def tracer(self, plan: RenderPlan, count_cost: bool = False) -> PathTracer:

@@ -147,7 +147,7 @@ def test_threads_not_set_one_worker_where_many_materials_are_shaded_by_python_ca
     """The thread policy (driver.local_workers): with threads 0, a scene whose used materials are shaded by
     CONVOY_MATERIALS or more separate calls per bounce (two threads convoy on the GIL) gets one worker, a scene of
     Lambert materials (one LambertSet) or of fewer others one per core; set threads are kept; the image is the same
-    with one worker as with two (added in the same order)."""
+    with one worker as with two (added in the same order); an automatic choice is reported in the stats."""
     import dataclasses
     import os
 
@@ -171,6 +171,8 @@ def test_threads_not_set_one_worker_where_many_materials_are_shaded_by_python_ca
     lamberts = {f"d{k}": {"type": "lambert", "albedo": 0.2 + k / 10} for k in range(4)}
     many = Renderer(scene(metals))
     assert many.plan().workers == 1
+    assert "contend" in many.plan().stats()["threads_reason"]          # reported (the stats line shows it)
+    assert "threads_reason" not in many.plan(dataclasses.replace(many.scene.settings, threads=2)).stats()
     assert many.plan(dataclasses.replace(many.scene.settings, threads=2)).workers == 2
     assert Renderer(scene(lamberts)).plan().workers == cores
     fewer = dict(list(metals.items())[:CONVOY_MATERIALS - 1], **lamberts)
