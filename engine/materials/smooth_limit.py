@@ -9,7 +9,9 @@ cosine-weighted direction; the weights are divided by the chosen probability.  O
 ``diffuse_layering="albedo_scaling"`` (Cycles' Principled energy sharing, as in Torrance–Sparrow)
 weights the Lambertian part by max(0, 1 − s·F(cosθ_o)), F the unpolarised Fresnel reflectance
 at the view direction (exactly the mirror's albedo, per wavelength): albedo s·F + d·(1 − s·F)·ρ ≤ 1
-for unpolarised light.  Not reciprocal (the weight depends on ω_o only).  The default ``"add"``
+for unpolarised light.  With ``cycles_estimate`` (a GGX Torrance–Sparrow at m = 0: the Principled specular layer)
+F is Cycles' estimate instead, the reflectance's chord between the nodes of its table (docs/physics.md).
+Not reciprocal (the weight depends on ω_o only).  The default ``"add"``
 adds the Lambertian part as is.
 """
 

@@ -32,7 +32,10 @@ Diffuse layering (``diffuse_layering``):
   directional albedo (M00, unpolarised light) at the *outgoing* (view) direction:
       f = s·M_F·D·G/(4 cosθ_i cosθ_o) + d·max(0, 1 − s·E(cosθ_o))·(ρ/π)·diag(1, 0, 0, 0).
   The albedo at ω_o is then s·E + d·(1 − s·E)·ρ ≤ 1 for unpolarised light (= 1 for
-  s = d = ρ = 1, up to the table error ≲ 5e-3, largest at grazing).  Like Cycles' it is *not reciprocal*
+  s = d = ρ = 1, up to the table error ≲ 5e-3, largest at grazing).  A GGX dielectric lobe (``cycles_layering``:
+  Cycles' G, a real index, no film; also at m = 0) takes Cycles' *estimate* for E instead, as a Principled
+  specular layer in Cycles (engine.materials.ggx_energy.cycles_layering_albedo; docs/physics.md, "Albedo scaling").
+  Like Cycles' it is *not reciprocal*
   (the diffuse weight depends on ω_o only), and for fully polarised incident light the
   albedo can exceed 1 by the lobe's diattenuation share (the s-polarised reflectance
   is above the unpolarised one: for the smooth limit by (R_s − R_p)/2, at most 0.15 at
