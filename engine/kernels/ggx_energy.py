@@ -4,7 +4,8 @@
 in the same order: E(μ, α) and E_avg(α) read bilinearly from the conductor table (rows 0 … mu_nodes − 1: E at
 nodes in √μ and √α; row mu_nodes: E_avg), each clipped to [e_floor, 1]; Cycles' average Fresnel F_ss of the
 F82-tint fit through F(0°) and F(θ₈₂) (the compiled Fresnel ``abcs_at``, as the NumPy twin calls it when kernels
-are compiled; once per run of equal indices along the points: a metal of one colour); k = F_ms·(1 − E)/E.
+are compiled; once per run of equal indices along the points: a metal of one colour), for a real index (κ = 0: a
+dielectric layer) Cycles' dielectric fit instead; k = F_ms·(1 − E)/E.
 One call per batch instead of some forty NumPy passes over small arrays.
 """
 
@@ -32,6 +33,11 @@ def _cell(v, hi, nodes):
 
 @jit_inner
 def _average_fresnel(e):
+    if e.imag == 0.0:                      # a dielectric: Cycles' fresnel_dielectric_Fss (dielectric_average_fresnel)
+        x = e.real
+        if x < 1.0:
+            return 0.997118 + x * (0.1014 - x * (0.965241 + x * 0.130607))
+        return (x - 1.0) / (4.08567 + 1.00071 * x)
     F0 = abcs_at(1.0, e)[0]
     F82 = abcs_at(_COS_82, e)[0]
     b = _B_SCALE * (F0 + (1.0 - F0) * _F5 - F82)

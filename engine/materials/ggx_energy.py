@@ -318,14 +318,23 @@ def f82_average_fresnel(eta: np.ndarray) -> np.ndarray:
     return np.clip(F0 + (1.0 - F0) / 21.0 - b / 126.0, 0.0, 1.0)
 
 
+def average_fresnel(eta) -> np.ndarray:
+    """Cycles' F_ss of a reflection lobe of relative index ``eta`` (complex, any shape): the F82-tint fit
+    (:func:`f82_average_fresnel`, ``fresnel_conductor_Fss``) where κ ≠ 0, the dielectric fit
+    (:func:`dielectric_average_fresnel`, ``fresnel_dielectric_Fss``: a Principled specular layer or coat) at κ = 0."""
+    eta = np.asarray(eta, np.complex128)
+    return np.where(eta.imag == 0.0, dielectric_average_fresnel(eta.real), f82_average_fresnel(eta))
+
+
 def conductor_extra_numpy(mu, alpha, eta, correlated: bool = False) -> np.ndarray:
     """The compensation's share k (L, N) ≥ 0 for a conductor: f = f_ss·(1 + k), so the added
-    (depolarised) term is k·M00(f_ss):  k = F_ms·(1 − E)/E, F_ms = F_ss·E_avg/(1 − F_ss·(1 − E_avg)).
+    (depolarised) term is k·M00(f_ss):  k = F_ms·(1 − E)/E, F_ms = F_ss·E_avg/(1 − F_ss·(1 − E_avg)), F_ss of
+    :func:`average_fresnel` (a real index: a dielectric layer, Cycles' dielectric fit).
     ``mu`` (N,) viewing cosines, ``alpha`` a number or (N,), ``eta`` (L, N) or (L, 1) complex;
     ``correlated``: the lobe's Smith shadowing is height-correlated (else separable)."""
     E = np.clip(conductor_albedo(mu, alpha, correlated), E_FLOOR, 1.0)
     E_avg = np.clip(conductor_average(alpha, correlated), E_FLOOR, 1.0)
-    Fss = f82_average_fresnel(eta)
+    Fss = average_fresnel(eta)
     Fms = Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
     return Fms * ((1.0 - E) / E)
 
@@ -479,3 +488,93 @@ def _dielectric_table(n_ratio: float, alpha: float) -> np.ndarray:
                          (2, DIELECTRIC_MU_NODES), build)
     table.setflags(write=False)
     return table
+
+
+# --------------------------------------------------------------------------- Cycles' layering estimate
+
+#: Nodes per axis of Cycles' ``ggx_gen_schlick_ior_s`` table: r = √α, μ and z = F0^¼, each i/15 (clamped as Cycles).
+SCHLICK_NODES = 16
+
+
+def _schlick_s(mu, alpha, eta: float) -> np.ndarray:
+    """s (M,) of Cycles' table at viewing cosines ``mu`` (M,), roughness ``alpha``, index ``eta`` ≥ 1: the mean over
+    the visible normals of ω_o of (F(ω_o·h) − F0)/(1 − F0), 0 where the mirrored direction lies below the surface
+    (Cycles' sampler rejects it; the table generator averages eval.x/eval.y of the accepted samples, 0 otherwise)."""
+    mu = np.atleast_1d(np.asarray(mu, np.float64))
+    F0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+    out = np.empty(mu.size)
+    for sl, _, _, w, _, _, d, refl in _reflection_batches(mu, alpha, True):
+        s = np.clip((fresnel_reflectance(d, complex(eta)) - F0) / (1.0 - F0), 0.0, 1.0)
+        out[sl] = np.where(refl > 0, s, 0.0) @ w
+    return out
+
+
+def _build_schlick_table() -> np.ndarray:
+    n = SCHLICK_NODES
+    x = np.arange(n) / (n - 1.0)
+    rough, mu = np.clip(x, 1e-4, 1.0), np.clip(x, 1e-4, 1.0)
+    R, M = np.meshgrid(rough, mu, indexing="ij")
+    table = np.empty((n, n, n))                                   # [z, r, μ]
+    for k, z in enumerate(np.clip(x, 1e-4, 0.99)):
+        root = math.sqrt(min(z ** 4, 0.99))                       # Cycles' ior_from_F0(z⁴)
+        eta = (1.0 + root) / (1.0 - root)
+        table[k] = _schlick_s(M.ravel(), (R * R).ravel(), eta).reshape(n, n)
+    return table
+
+
+@functools.lru_cache(maxsize=1)
+def schlick_table() -> np.ndarray:
+    """Cycles' ``ggx_gen_schlick_ior_s`` (16, 16, 16) over [z, r, μ] by this module's quadrature (not Monte Carlo)."""
+    table = cached_table("ggx_gen_schlick_ior_s", (_TABLE_VERSION, SCHLICK_NODES, QUAD_RADIUS, QUAD_ANGLE),
+                         (SCHLICK_NODES,) * 3, _build_schlick_table)
+    table.setflags(write=False)
+    return table
+
+
+def _lerp_coordinate(x):
+    """(index, next index, fraction) of Cycles' ``lookup_table_read`` on 16 nodes over [0, 1]."""
+    x = np.clip(np.asarray(x, np.float64), 0.0, 1.0) * (SCHLICK_NODES - 1)
+    i = np.minimum(x.astype(np.int64), SCHLICK_NODES - 1)
+    return i, np.minimum(i + 1, SCHLICK_NODES - 1), x - i
+
+
+def cycles_layering_albedo(mu, alpha, eta) -> np.ndarray:
+    """Cycles' estimate (N,) of a dielectric GGX reflection layer's albedo (``bsdf_microfacet_estimate_albedo``,
+    what ``closure_layering_weight`` subtracts from the layers below): F0 + (1 − F0)·s, s read from
+    :func:`schlick_table` trilinearly at (√α, μ, √(|η − 1|/(η + 1))) as Cycles reads it — on its 16 nodes, so
+    its interpolation error (up to a few 10⁻² at grazing) is Cycles' too.  ``mu`` (N,) viewing cosines (clipped
+    to [0, 1]), ``alpha`` and ``eta`` (> 0, real) numbers or (N,).  Independent of multiple-scattering
+    compensation, as Cycles' estimate is; for α = 0 the smooth Fresnel reflectance interpolated between nodes."""
+    mu = np.asarray(mu, np.float64)
+    eta = np.broadcast_to(np.asarray(eta, np.float64), mu.shape)
+    t = schlick_table()
+    iz, jz, fz = _lerp_coordinate(root_f0(eta))
+    ir, jr, fr = _lerp_coordinate(np.sqrt(np.broadcast_to(np.asarray(alpha, np.float64), mu.shape)))
+    im, jm, fm = _lerp_coordinate(mu)
+
+    def plane(z):
+        return ((1.0 - fm) * ((1.0 - fr) * t[z, ir, im] + fr * t[z, jr, im])
+                + fm * ((1.0 - fr) * t[z, ir, jm] + fr * t[z, jr, jm]))
+    s = (1.0 - fz) * plane(iz) + fz * plane(jz)
+    F0 = ((eta - 1.0) / (eta + 1.0)) ** 2
+    return F0 + (1.0 - F0) * s
+
+
+def dielectric_average_fresnel(eta) -> np.ndarray:
+    """Cycles' fit of a dielectric's average Fresnel reflectance ∫ 2μ F(μ) dμ (``fresnel_dielectric_Fss``) for a
+    real relative index ``eta`` (any shape): (η − 1)/(4.08567 + 1.00071 η) above 1, a cubic below."""
+    eta = np.asarray(eta, np.float64)
+    below = 0.997118 + eta * (0.1014 - eta * (0.965241 + eta * 0.130607))
+    return np.where(eta < 1.0, below, (eta - 1.0) / (4.08567 + 1.00071 * eta))
+
+
+def cycles_layering_darkening(mu, alpha, eta) -> np.ndarray:
+    """E + F_ms·(1 − E) (N,): the factor by which Cycles' multiple-scattering compensation scales a dielectric GGX
+    reflection closure's weight (``microfacet_ggx_preserve_energy``: ``darkening``·``energy_scale``⁻¹), which its
+    layering albedo (``bsdf_albedo``: closure weight × estimate) carries; E the F = 1 albedo at ``mu`` (N,),
+    F_ms from Cycles' dielectric F_ss (:func:`dielectric_average_fresnel`) of ``eta``; ``alpha`` a number or (N,)."""
+    E = np.clip(conductor_albedo(mu, alpha, correlated=True), E_FLOOR, 1.0)
+    E_avg = np.clip(conductor_average(alpha, correlated=True), E_FLOOR, 1.0)
+    Fss = dielectric_average_fresnel(eta)
+    Fms = Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
+    return E + Fms * (1.0 - E)

@@ -304,9 +304,9 @@ def _dielectric(p, alpha, ior):
         eta = _specular_index(ior, level) if _textured(level) else specular_ior(ior, level)
     smooth = effectively_smooth(alpha)
     values = {"n": eta, "k": 0.0, "diffuse_layering": "albedo_scaling", "m": 0.0 if smooth else alpha,
-              **_film_values(p)}
+              "distribution": "ggx", **_film_values(p)}
     if not smooth:
-        values.update(distribution="ggx", multiscatter=p["distribution"] == "multi_ggx")
+        values.update(multiscatter=p["distribution"] == "multi_ggx")
     decl = torrance_sparrow.DECLARATION
     tint = p["specular_tint"]
     tinted = not _white(tint)
@@ -351,7 +351,7 @@ def _tinted_albedo(albedo, top, n, alpha, smooth, t):
     """The layering albedo of a specular layer with Specular Tint t (its largest channel, as Cycles' layering
     takes the largest; a number or a function of the shading point): E_t = E_F + F0(t − 1)(E_1 − E_F)/(1 − F0),
     E_F the untinted albedo, E_1 the F = 1 albedo (1 where compensated or smooth)."""
-    from .ggx_energy import conductor_albedo
+    from .ggx_energy import conductor_albedo, cycles_layering_darkening
     from ..textures.inputs import NumberSpectrum
     per_point = isinstance(n, NumberSpectrum)           # an index per point (a per-point IOR or Specular IOR Level)
     f0 = None if per_point else ((n - 1.0) / (n + 1.0)) ** 2
@@ -360,7 +360,13 @@ def _tinted_albedo(albedo, top, n, alpha, smooth, t):
 
     def tinted(sp):
         E = albedo(sp)
-        if smooth or top.multiscatter:
+        cycles = getattr(top, "cycles_layering", False)       # (an anisotropic layer keeps its own estimate)
+        if smooth or (cycles and not top.multiscatter):
+            E1 = 1.0
+        elif cycles:        # Cycles' estimate mix(F0·t, 1, s) × its compensation's weight
+            mu = np.clip(sp.cos_o, 0.0, 1.0)
+            E1 = cycles_layering_darkening(mu, sp.number(alpha), n.numbers(sp.surface_points()) if per_point else n)
+        elif top.multiscatter:
             E1 = 1.0
         else:
             E1 = conductor_albedo(np.clip(sp.cos_o, 0.0, 1.0), sp.number(alpha), correlated=True)
@@ -374,29 +380,19 @@ def _tinted_albedo(albedo, top, n, alpha, smooth, t):
 
 
 def _reflection_albedo(top, n, alpha, smooth):
-    """E(ω_o) (N,) of a dielectric reflection layer of index n: its Fresnel reflectance when smooth, else the
-    GGX reflection albedo table × (1 + k) of its compensation (Cycles' layering estimate)."""
-    from ..polarisation.fresnel import fresnel_reflectance
+    """E(ω_o) (N,) of a dielectric reflection layer of index n (a number or per point), Cycles' layering albedo: its
+    film's reflectance under a film, else Cycles' estimate (engine.materials.ggx_energy.cycles_layering_albedo), when
+    rough × the weight of its compensation (TorranceSparrow.cycles_layer_albedo)."""
+    from .ggx_energy import cycles_layering_albedo
     from ..textures.inputs import NumberSpectrum
     if getattr(top, "film", None) is not None:       # a filmed layer: Cycles' estimate, its film's reflectance
         return lambda sp: top.film_albedo(sp, sp.cos_o)
+    if not smooth:
+        return lambda sp: top.cycles_layer_albedo(sp, np.clip(sp.cos_o, 0.0, 1.0))
+    # smooth: the Fresnel reflectance interpolated between the nodes of Cycles' table (its estimate at α = 0)
     if isinstance(n, NumberSpectrum):                 # an index per point (a per-point Specular IOR Level)
-        if smooth:
-            return lambda sp: fresnel_reflectance(np.clip(sp.cos_o, 0.0, 1.0), n.numbers(sp.surface_points()))
-        tables = top._albedo_table()
-
-        def per_point(sp):
-            E = tables(np.clip(sp.cos_o, 0.0, 1.0), sp.number(alpha), n.numbers(sp.surface_points()))
-            return E * (1.0 + top.multiscatter_extra(sp)[0]) if top.multiscatter else E
-        return per_point
-    if smooth:
-        return lambda sp: fresnel_reflectance(np.clip(sp.cos_o, 0.0, 1.0), complex(n))
-    table = top._albedo_table()
-
-    def albedo(sp):
-        E = table(np.clip(sp.cos_o, 0.0, 1.0), sp.number(alpha))
-        return E * (1.0 + top.multiscatter_extra(sp)[0]) if top.multiscatter else E
-    return albedo
+        return lambda sp: cycles_layering_albedo(np.clip(sp.cos_o, 0.0, 1.0), 0.0, n.numbers(sp.surface_points()))
+    return lambda sp: cycles_layering_albedo(np.clip(sp.cos_o, 0.0, 1.0), 0.0, float(n))
 
 
 def _coat(p, below):

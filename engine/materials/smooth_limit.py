@@ -9,7 +9,9 @@ cosine-weighted direction; the weights are divided by the chosen probability.  O
 ``diffuse_layering="albedo_scaling"`` (Cycles' Principled energy sharing, as in Torrance–Sparrow)
 weights the Lambertian part by max(0, 1 − s·F(cosθ_o)), F the unpolarised Fresnel reflectance
 at the view direction (exactly the mirror's albedo, per wavelength): albedo s·F + d·(1 − s·F)·ρ ≤ 1
-for unpolarised light.  Not reciprocal (the weight depends on ω_o only).  The default ``"add"``
+for unpolarised light.  With ``cycles_estimate`` (a GGX Torrance–Sparrow at m = 0: the Principled specular layer)
+F is Cycles' estimate instead, the reflectance's chord between the nodes of its table (docs/physics.md).
+Not reciprocal (the weight depends on ω_o only).  The default ``"add"``
 adds the Lambertian part as is.
 """
 
@@ -30,10 +32,12 @@ class MirrorWithDiffuse(BSDF):
     name = "torrance_sparrow"      # the m = 0 member of the Torrance–Sparrow family
 
     def __init__(self, n, k, exterior_n=1.0, diffuse_albedo=0.0, specular_weight=1.0, diffuse_weight=0.0,
-                 diffuse_layering="add"):
+                 diffuse_layering="add", cycles_estimate=False):
         if diffuse_layering not in ("add", "albedo_scaling"):
             raise ValueError(f"diffuse_layering must be one of ('add', 'albedo_scaling'), got {diffuse_layering!r}")
         self.diffuse_layering = diffuse_layering
+        #: "albedo_scaling" by Cycles' estimate of the mirror's albedo (a GGX layer at roughness 0, a real index)
+        self.cycles_estimate = bool(cycles_estimate)
         self.n, self.k = as_spectrum(n, "n"), as_spectrum(k, "k")
         self.exterior_n = float(exterior_n)
         self.albedo = as_spectrum(diffuse_albedo, "diffuse_albedo")
@@ -61,8 +65,15 @@ class MirrorWithDiffuse(BSDF):
         return sp.spectrum(self.albedo) * sp.number(self.d) * self.diffuse_scale(sp)
 
     def diffuse_scale(self, sp):
-        """max(0, 1 − s·F(cosθ_o)) (L, N): one minus the mirror's albedo at the view direction."""
-        F = fresnel_reflectance(np.clip(sp.cos_o, 0.0, 1.0)[None, :], self._eta(sp))
+        """max(0, 1 − s·F(cosθ_o)) (L, N): one minus the mirror's albedo at the view direction; with
+        ``cycles_estimate`` (and a real index) F is Cycles' estimate, the Fresnel reflectance interpolated between
+        the nodes of its table (engine.materials.ggx_energy.cycles_layering_albedo at α = 0)."""
+        eta = self._eta(sp)
+        if self.cycles_estimate and not np.any(eta.imag):
+            from .ggx_energy import cycles_layering_albedo
+            F = cycles_layering_albedo(np.clip(sp.cos_o, 0.0, 1.0), 0.0, eta.real[0])[None, :]
+            return np.maximum(1.0 - sp.number(self.s) * F, 0.0)
+        F = fresnel_reflectance(np.clip(sp.cos_o, 0.0, 1.0)[None, :], eta)
         return np.maximum(1.0 - sp.number(self.s) * F, 0.0)
 
     def lobe_colors(self, sp) -> LobeColors | None:

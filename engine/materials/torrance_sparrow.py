@@ -32,7 +32,10 @@ Diffuse layering (``diffuse_layering``):
   directional albedo (M00, unpolarised light) at the *outgoing* (view) direction:
       f = s·M_F·D·G/(4 cosθ_i cosθ_o) + d·max(0, 1 − s·E(cosθ_o))·(ρ/π)·diag(1, 0, 0, 0).
   The albedo at ω_o is then s·E + d·(1 − s·E)·ρ ≤ 1 for unpolarised light (= 1 for
-  s = d = ρ = 1, up to the table error ≲ 5e-3, largest at grazing).  Like Cycles' it is *not reciprocal*
+  s = d = ρ = 1, up to the table error ≲ 5e-3, largest at grazing).  A GGX dielectric lobe (``cycles_layering``:
+  Cycles' G, a real index, no film; also at m = 0) takes Cycles' *estimate* for E instead, as a Principled
+  specular layer in Cycles (engine.materials.ggx_energy.cycles_layering_albedo; docs/physics.md, "Albedo scaling").
+  Like Cycles' it is *not reciprocal*
   (the diffuse weight depends on ω_o only), and for fully polarised incident light the
   albedo can exceed 1 by the lobe's diattenuation share (the s-polarised reflectance
   is above the unpolarised one: for the smooth limit by (R_s − R_p)/2, at most 0.15 at
@@ -106,7 +109,8 @@ import numpy as np
 from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ShadingPoint, depolarising_value
 from .conductor import K, METAL, N, THIN_FILM_IOR, THIN_FILM_THICKNESS, complex_index, mirror_reflection
 from .ggx import GGX
-from .ggx_energy import ALPHA_MAX, conductor_extra, ggx_reflection_albedo
+from .ggx_energy import (ALPHA_MAX, conductor_extra, cycles_layering_albedo, cycles_layering_darkening,
+                         ggx_reflection_albedo)
 from .microfacet import (SHADOWING, Beckmann, BlinnPhong, half_vector, reflect_local,
                                          shadowing_term)
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
@@ -583,6 +587,8 @@ class TorranceSparrow(BSDF):
         ``multiscatter`` (the compensated lobe's: Cycles' layering estimate), a filmed lobe's ``film_albedo``."""
         if self.film is not None:
             return self.film_albedo(sp, cos_o)
+        if self.cycles_layering:
+            return self.cycles_layer_albedo(sp, cos_o)
         if isinstance(table, IndexAlbedoTables):
             E = table(cos_o, sp.number(self.m), self.n.numbers(sp.surface_points()) / self.exterior_n)
         else:
@@ -590,6 +596,24 @@ class TorranceSparrow(BSDF):
         if self.multiscatter:
             E = E * (1.0 + self.multiscatter_extra(sp)[0])
         return E
+
+    @property
+    def cycles_layering(self) -> bool:
+        """A dielectric GGX lobe with Cycles' shadowing, a real index (constant or per point) and no film: its layering
+        albedo is Cycles' estimate (``cycles_layer_albedo``), as a Principled specular layer's or coat's."""
+        return (self.distribution == "ggx" and self.shadowing == "smith_correlated" and self.film is None
+                and isinstance(self.k, ConstantSpectrum) and self.k.value == 0.0
+                and isinstance(self.n, (ConstantSpectrum, NumberSpectrum)))
+
+    def cycles_layer_albedo(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray:
+        """(N,) Cycles' layering albedo of this dielectric facet lobe (s = 1) at cosθ_o: its estimate F0 + (1 − F0)·s
+        (engine.materials.ggx_energy.cycles_layering_albedo), × E + F_ms(1 − E) with ``multiscatter`` (the
+        compensation's weight, which Cycles' ``bsdf_albedo`` carries: cycles_layering_darkening)."""
+        eta = (self.n.numbers(sp.surface_points()) if isinstance(self.n, NumberSpectrum) else self.n.value) \
+            / self.exterior_n
+        m = sp.number(self.m)
+        E = cycles_layering_albedo(cos_o, m, eta)
+        return E * cycles_layering_darkening(cos_o, m, eta) if self.multiscatter else E
 
     def lobe_colors(self, sp: ShadingPoint) -> LobeColors | None:
         """Glossy: s·E(cosθ_o) (``_layer_albedo``; Cycles' estimate of a Principled specular layer); diffuse:
@@ -933,5 +957,8 @@ def _torrance_sparrow(p):
     if film:
         kw.update(film_n=film_n, film_thickness=p["thin_film_thickness"])
     if smooth:   # effectively smooth (roughness.SMOOTH_LIMIT): a Fresnel mirror (plus the Lambertian part); E = 1
-        return (FilmedMirrorWithDiffuse if film else MirrorWithDiffuse)(n, k, **kw)
+        if film:
+            return FilmedMirrorWithDiffuse(n, k, **kw)
+        # GGX: Cycles' layering estimate at roughness 0 (a Principled specular layer)
+        return MirrorWithDiffuse(n, k, cycles_estimate=distribution == "ggx", **kw)
     return TorranceSparrow(n, k, m, shadowing=shadowing, distribution=distribution, multiscatter=multiscatter, **kw)

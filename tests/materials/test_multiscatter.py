@@ -392,3 +392,26 @@ def test_tables_are_cached_on_disk(tmp_path, monkeypatch):
     finally:
         ggx_energy.conductor_tables.cache_clear()
         ggx_energy._dielectric_table.cache_clear()
+
+
+def test_layering_estimate_reproduces_cycles_gen_schlick_table():
+    """Cycles' estimate of a dielectric layer's albedo, F0 + (1 − F0)·s with s its ggx_gen_schlick_ior_s table read
+    trilinearly on 16 nodes (kernel/closure/bsdf_microfacet.h, bsdf_microfacet_estimate_albedo): s for IOR 1.5 at
+    r = √α ∈ {0, 0.25, 0.5, 1} and μ ∈ {1, 0.7, 0.4, 0.1} read from Cycles' table (4 decimals, a port's test
+    vectors), to 2e-4; at α = 0 the Fresnel reflectance at the nodes μ = i/15 and its chord between them."""
+    cycles_s = {0.0: [0.0000, 0.0117, 0.0955, 0.5628], 0.25: [0.0001, 0.0126, 0.0927, 0.4092],
+                0.5: [0.0006, 0.0138, 0.0639, 0.1705], 1.0: [0.0014, 0.0058, 0.0161, 0.0403]}
+    mu = np.array([1.0, 0.7, 0.4, 0.1])
+    F0 = 0.04
+    for r, s in cycles_s.items():
+        est = ggx_energy.cycles_layering_albedo(mu, r * r, 1.5)
+        np.testing.assert_allclose((est - F0) / (1.0 - F0), s, atol=2e-4)
+    nodes = np.arange(1, 16) / 15.0
+    est = ggx_energy.cycles_layering_albedo(nodes, 0.0, 1.5)
+    np.testing.assert_allclose(est, fresnel_reflectance(nodes, 1.5 + 0j), atol=2e-3)   # (z between its nodes)
+    mid = 0.5 * (nodes[:-1] + nodes[1:])
+    assert np.all(ggx_energy.cycles_layering_albedo(mid, 0.0, 1.5) >= fresnel_reflectance(mid, 1.5 + 0j) - 1e-3)
+    # the compensation's weight E + F_ms(1 − E) ≤ 1, = 1 at α → 0; Cycles' F_ss of a dielectric
+    d = ggx_energy.cycles_layering_darkening(np.linspace(0.01, 1, 20), 1.0, 1.5)
+    assert np.all((d > 0.3) & (d <= 1.0))
+    assert ggx_energy.dielectric_average_fresnel(1.5) == pytest.approx(0.5 / (4.08567 + 1.00071 * 1.5))

@@ -305,12 +305,17 @@ def _fresnel_unpolarised(c, n):
 
 
 def test_emission_under_a_smooth_coat_is_weighted_by_one_minus_weight_times_fresnel():
-    """Cycles: the Principled emission × (1 − coat_weight·E_coat(θ)); a smooth coat's E is its Fresnel reflectance."""
+    """Cycles: the Principled emission × (1 − coat_weight·E_coat(θ)); a smooth coat's E is Cycles' estimate, its
+    Fresnel reflectance at the 16 nodes of the table in cosθ (i/15), linear between them."""
     from engine.materials.mix import emission_weight
     coat = parse_material({"type": "principled", "coat_weight": 0.6, "coat_roughness": 0.0, "coat_ior": 1.7,
                            "base_color": 0.2}, "materials.p")
-    c = np.linspace(0.05, 1.0, 9)
-    np.testing.assert_allclose(emission_weight(coat)(c), 1.0 - 0.6 * _fresnel_unpolarised(c, 1.7), rtol=1e-12)
+    nodes = np.arange(16) / 15.0
+    c = np.linspace(1.0 / 15.0, 1.0, 15)                       # the nodes: the Fresnel reflectance itself
+    np.testing.assert_allclose(emission_weight(coat)(c), 1.0 - 0.6 * _fresnel_unpolarised(c, 1.7), rtol=2e-3)
+    c = np.linspace(0.07, 0.99, 9)                             # between them: its chord
+    chord = np.interp(c, nodes, _fresnel_unpolarised(np.maximum(nodes, 1e-4), 1.7))
+    np.testing.assert_allclose(emission_weight(coat)(c), 1.0 - 0.6 * chord, rtol=2e-3)
     assert emission_weight(parse_material({"type": "principled"}, "materials.p")) is None     # nothing over it
     sheen = parse_material({"type": "principled", "sheen_weight": 1.0, "sheen_roughness": 0.5}, "materials.p")
     w = emission_weight(sheen)(c)
