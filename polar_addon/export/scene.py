@@ -467,13 +467,6 @@ def material_entry(material, warnings, bake=None):
     return bsdf, emission, alpha
 
 
-def light_selection(settings: RenderSettings) -> str:
-    """Scene.light_selection of a Blender scene: Cycles' own without its light tree ("cycles": lights uniformly, a
-    constant world by BSDF sampling alone) where Light Tree is off, else "power" (the tree's per-point importance
-    where RenderSettings.light_tree "auto" leaves few lights to it)."""
-    return "cycles" if settings.light_tree == "off" else "power"
-
-
 def finish_scene(camera, meshes, materials, lights, settings, source, warnings, medium=None) -> Scene:
     """The engine Scene of a walk over a Blender scene (F12's ``export_scene`` and the viewport's
     ``SceneWalk.sync`` both end here, so that the viewport shows what F12 renders): the rules that
@@ -499,4 +492,4 @@ def finish_scene(camera, meshes, materials, lights, settings, source, warnings, 
     elif not lights and not any(m.emission is not None for m in meshes):
         warnings.append("the scene has no lights, no emissive materials and a black world: the image is black")
     return Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings, source=source,
-                 light_selection=light_selection(settings), medium=medium)
+                 light_selection="power", medium=medium)
