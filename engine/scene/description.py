@@ -534,8 +534,10 @@ class Scene:
     lights: list = field(default_factory=list)
     settings: RenderSettings = field(default_factory=RenderSettings)
     source: str = ""
-    #: how next-event estimation picks a light: "uniform" (as Mitsuba 3) or "power" (probability ∝
-    #: each light's estimated power, for scenes of many lights of different strength)
+    #: how next-event estimation picks a light: "uniform" (as Mitsuba 3), "power" (probability ∝
+    #: each light's estimated power, for scenes of many lights of different strength) or "cycles" (as Cycles
+    #: without its light tree: whole lights uniformly, a constant sky beside other lights left to BSDF
+    #: sampling; Blender scenes with Light Tree off; docs/benchmarks.md "Real assets against Cycles")
     light_selection: str = "uniform"
     #: the world medium (an Interior: fog everywhere outside the closed media), or None
     medium: object = None

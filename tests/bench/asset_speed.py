@@ -16,6 +16,9 @@ the two renderers side by side:
   Polar: the export through the extension plus its first render's excess). The ratio races warm renders:
   what an animation or a re-render pays per frame;
 * σ² = mean over the asset's pixels of the per-pixel variance of the S0 luminance between the seeds;
+* the share of σ² in the top 1 % of pixels (Cycles / Polar) and the ratio Polar ÷ Cycles of σ² over the other
+  99 %: a share near 1 means a few fireflies carry σ², and a few seeds' ratio is then luck (a warning line
+  says so; Sunglasses under lamps read 13.5× with seeds 0–3 and 0.6× with 16, docs/benchmarks.md);
 * **var × time ratio** = (σ²_Polar · t_Polar) ÷ (σ²_Cycles · t_Cycles): how much longer Polar needs for
   Cycles' noise (< 1: Polar is more efficient);
 * the parity numbers of the case (blocks passing the rule, luminance ratio Polar ÷ Cycles);
@@ -38,6 +41,10 @@ import tempfile
 HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, REPO)
+
+
+#: above this share of σ² in the top 1 % of pixels (either renderer) the line warns that σ² is fireflies' luck
+FIREFLY_SHARE = 0.5
 
 
 def warm(times):
@@ -82,13 +89,20 @@ def main(argv=None):
             setup = r.seconds["export"] + first
             vc, vp = r.noise["cycles"], r.noise["polar"]
             ratio = (vp * tp) / (vc * tc) if vc * tc > 0 else float("inf")
+            (sc, rc), (sp, rp) = r.tails["cycles"], r.tails["polar"]
             print(f"{name:20s} {lighting:5s} | {tc:8.3f} {vc:9.2e} {sync:7.2f} | {tp:8.3f} {vp:9.2e} {setup:7.2f} "
-                  f"| {ratio:12.2f} | {r.passed}/{r.blocks} blocks, Y {r.luminance_ratio:.3f}", flush=True)
+                  f"| {ratio:12.2f} | {r.passed}/{r.blocks} blocks, Y {r.luminance_ratio:.3f} "
+                  f"| top 1 %: {sc:.2f} / {sp:.2f} of σ², rest P÷C {rp / rc if rc > 0 else float('inf'):.2f}",
+                  flush=True)
+            if max(sc, sp) > FIREFLY_SHARE:
+                print(f"{'':26s}  σ² is mostly fireflies ({max(sc, sp):.0%} in the top 1 % of pixels): with "
+                      f"{r.seeds} seeds its ratio is luck; rerun with more --seeds", flush=True)
             if a.json:
                 print(json.dumps({"asset": name, "lighting": lighting, "spp": r.spp, "seeds": r.seeds,
                                   "cycles_s": tc, "polar_s": tp,
                                   "cycles_sync_s": sync, "polar_setup_s": setup, "cycles_var": vc, "polar_var": vp,
-                                  "var_time_ratio": ratio, "blocks": r.blocks, "passed": r.passed,
+                                  "var_time_ratio": ratio, "top1_share": [sc, sp], "rest_var": [rc, rp],
+                                  "blocks": r.blocks, "passed": r.passed,
                                   "luminance_ratio": r.luminance_ratio, "warnings": r.warnings}))
     print(f"load average {' / '.join(f'{v:.2f}' for v in os.getloadavg())} at the end", flush=True)
     if a.figure:

@@ -46,6 +46,7 @@ BLOCK = 16                 # pixels per block side
 COVERAGE = 0.25            # a block is the asset's when at least this share of its pixels hit it
 SIGMAS = 4.0               # tolerance: SIGMAS standard errors …
 RELATIVE = 0.02            # … + this fraction of Cycles' block mean
+TOP_SHARE = 0.01           # noise_tail: the brightest pixels' share of σ² is read over this fraction of pixels
 PASS_FRACTION = 0.95       # a case passes when at least this share of its blocks does
 
 
@@ -110,6 +111,7 @@ class CaseReport:
     failing: list = field(default_factory=list)    # (row, column, Polar ÷ Cycles, tolerance) per failing block
     seconds: dict = field(default_factory=dict)    # cycles, polar (render time, all seeds), export; *_each per seed
     noise: dict = field(default_factory=dict)      # per renderer: mean per-pixel S0 variance over asset pixels
+    tails: dict = field(default_factory=dict)      # per renderer: noise_tail of those variances
     error: str = ""                                # the export or render error, if Polar refused the scene
 
     @property
@@ -356,6 +358,17 @@ def block_means(images, mask_blocks_shape):
     return images[:, :rows * BLOCK, :cols * BLOCK].reshape(k, rows, BLOCK, cols, BLOCK).mean(axis=(2, 4))
 
 
+def noise_tail(var: np.ndarray, top: float = TOP_SHARE) -> tuple[float, float]:
+    """(share of Σ var in the ``top`` fraction of pixels with the largest variance, mean var of the other pixels)
+    for per-pixel variances ``var`` (m,).  A share near 1 is a few fireflies (rare bright paths): the mean σ²
+    of a few seeds then depends on whether they happened to catch one (docs/benchmarks.md, Sunglasses)."""
+    v = np.sort(np.asarray(var, float).ravel())[::-1]
+    if v.size == 0 or v.sum() <= 0:
+        return 0.0, 0.0
+    k = max(1, int(round(top * v.size)))
+    return float(v[:k].sum() / v.sum()), float(v[k:].mean()) if v.size > k else 0.0
+
+
 def compare(cycles_rgb, polar_s0_rgb, hit, report: CaseReport):
     """Apply the rule to (seeds, H, W, 3) images of both renderers and the (H, W) asset mask; fills the report."""
     H, W = hit.shape
@@ -378,8 +391,9 @@ def compare(cycles_rgb, polar_s0_rgb, hit, report: CaseReport):
         c = cycles_rgb.mean(0)[pix].sum(0)
         p = polar_s0_rgb.mean(0)[pix].sum(0)
         report.channel_ratios = tuple(float(x) for x in p / np.maximum(c, 1e-30))
-        report.noise = {"cycles": float((cycles_rgb @ REC709).var(0, ddof=1)[pix].mean()),
-                        "polar": float((polar_s0_rgb @ REC709).var(0, ddof=1)[pix].mean())}
+        var_c, var_p = (cycles_rgb @ REC709).var(0, ddof=1)[pix], (polar_s0_rgb @ REC709).var(0, ddof=1)[pix]
+        report.noise = {"cycles": float(var_c.mean()), "polar": float(var_p.mean())}
+        report.tails = {"cycles": noise_tail(var_c), "polar": noise_tail(var_p)}
     report.failing = [(int(i), int(j), float(mp[i, j] / mc[i, j]) if mc[i, j] > 0 else float("inf"),
                        float(tol[i, j] / mc[i, j]) if mc[i, j] > 0 else float("inf"))
                       for i, j in zip(*np.nonzero(mine & ~good))]

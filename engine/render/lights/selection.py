@@ -21,9 +21,15 @@ from .textured import TexturedAreaEmitter
 from .tree import LightTree, splits_into_triangles
 
 
+#: Scene.light_selection's values (engine.scene.description.Scene)
+SELECTIONS = ("uniform", "power", "cycles")
+
+
 class LightSet:
     """All lights of a compiled scene.  NEE picks one light per vertex: uniformly (probability
-    1/count, ``Scene.light_selection`` "uniform"; ``prob[i]``) or, with "power", by importance:
+    1/count, ``Scene.light_selection`` "uniform"; ``prob[i]``), with "cycles" uniformly but a constant
+    sky beside other lights never (probability 0: BSDF sampling alone finds it, as Cycles does), or, with
+    "power", by importance:
     for up to ``SPATIAL_MAX`` lights, per shading point ∝ each light's estimated irradiance
     there (power/dist² × ``facing_factor``, as the importance of Cycles' light tree without the
     tree), mixed with
@@ -137,11 +143,18 @@ class LightSet:
         count = len(self.lights)
         self.select_prob = 1.0 / count if count else 0.0
         self.selection = getattr(scene, "light_selection", "uniform")
-        if self.selection not in ("uniform", "power"):
-            raise SceneError("light_selection", f"must be 'uniform' or 'power', got {self.selection!r}")
+        if self.selection not in SELECTIONS:
+            raise SceneError("light_selection", f"must be one of {SELECTIONS}, got {self.selection!r}")
         self.prob = np.full(count, self.select_prob)
         self.mix_prob = self.prob
         self.cdf = None
+        sky = np.array([type(lt) is EnvironmentEmitter for lt in self.lights], bool)
+        if self.selection == "cycles" and sky.any() and not sky.all():
+            # Cycles without its light tree: whole lights uniformly, a constant sky beside them left to BSDF
+            # sampling (scene/light.cpp test_enabled_lights: background MIS off unless the world varies)
+            self.prob = np.where(sky, 0.0, 1.0 / (~sky).sum())
+            self.cdf = np.cumsum(self.prob)
+            self.cdf[-1] = 1.0
         if self.selection == "power" and count > 1:
             radius = max(float(np.linalg.norm(compiled.vertices - compiled.vertices.mean(0), axis=1).max()), 1e-9)
             power = np.array([0.0 if lt.shades_nothing else lt.power(radius) if lt.at_infinity else lt.power()
@@ -159,7 +172,7 @@ class LightSet:
     def _spatial_records(self) -> None:
         """Every light's importance formula as (kind, parameters) for the per-point selection (≤ SPATIAL_MAX)."""
         count = len(self.lights)
-        self.spatial = self.cdf is not None and count <= self.SPATIAL_MAX
+        self.spatial = self.selection == "power" and self.cdf is not None and count <= self.SPATIAL_MAX
         if self.spatial:
             records = [light.selection_record() for light in self.lights]
             self._kinds = np.array([k for k, _ in records], np.int64)
