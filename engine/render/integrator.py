@@ -731,7 +731,7 @@ class PathTracer:
         # stateless in the dimension, so skipping leaves every other one as it was.
         nee = (bool(len(self.lights)) and bounce + 2 <= st.max_depth
                and not all(self.shaders[g].flags.is_delta_only for g in groups))
-        if st.sampler == "sobol" and bounce > 0 or st.sampler == "padded":
+        if st.sampler == "padded" or (st.sampler == "sobol" and bounce > 0):
             # deeper vertices (every vertex with "padded"): the padded Owen-scrambled pairs (with "sobol" the
             # first one as "stratified" draws it)
             return self._sobol_vertex_numbers(state, acc, nee, all(fused), bounce + 1 >= st.rr_depth, bounce)
