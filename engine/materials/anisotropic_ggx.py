@@ -90,8 +90,9 @@ from .roughness import ALPHA_MIN, checked_alpha
 from .torrance_sparrow import SpecularAlbedoTable
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflectance, fresnel_reflection_abcs
-from ..polarisation.thin_film import facet_film, film_at, film_label, film_layering_albedo, film_reflection_abcs
-from ..spectral import RGB_WAVELENGTHS_NM, ConstantSpectrum, as_spectrum
+from ..polarisation.thin_film import (facet_film, film_at, film_label, film_layering_albedo, film_reflection_abcs,
+                                      layering_wavelengths)
+from ..spectral import ConstantSpectrum, as_spectrum
 from ..textures import TexturedNumber, textured
 from ..vec3 import cross, dot, local_frame, to_local
 
@@ -501,7 +502,7 @@ class AnisotropicGGX(BSDF):
             else:
                 substrate = self._constant_eta() * self.exterior_n
             return film_layering_albedo(cos_o, self.exterior_n, film_at(self.film, sp), substrate,
-                                        RGB_WAVELENGTHS_NM)
+                                        layering_wavelengths(sp))
         eta = self._constant_eta()
         if self.multiscatter_albedo == "cycles":
             if self._reflection_table is None:

@@ -123,7 +123,8 @@ from ..kernels.torrance_sparrow import (SHADOWING_CODES, torrance_sparrow_eval_n
                                         torrance_sparrow_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
-from ..polarisation.thin_film import facet_film, film_at, film_label, film_layering_albedo, film_reflection_abcs
+from ..polarisation.thin_film import (facet_film, film_at, film_label, film_layering_albedo, film_reflection_abcs,
+                                      layering_wavelengths)
 from ..spectral import RGB_WAVELENGTHS_NM, ConstantSpectrum, as_spectrum
 from ..textures import TexturedNumber
 from ..textures.inputs import NumberSpectrum, textured
@@ -647,11 +648,13 @@ class TorranceSparrow(BSDF):
 
     def film_albedo(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray:
         """(N,) Cycles' layering estimate of a filmed facet lobe (bsdf_microfacet_estimate_albedo: no table for
-        iridescence, the film's reflectance at the view angle): the largest over the RGB channels' wavelengths
-        (engine.spectral.RGB_WAVELENGTHS_NM, whatever the path's own), as Cycles layers by the largest channel."""
+        iridescence, the film's reflectance at the view angle): the largest over the colour channels, each channel's
+        band average as the spectral transport develops it, or in "rgb" transport its wavelength
+        (engine.polarisation.thin_film.film_layering_albedo, layering_wavelengths), as Cycles layers by the largest
+        channel."""
         # (a constant index: "albedo_scaling" needs one, _albedo_table)
         return film_layering_albedo(cos_o, self.exterior_n, film_at(self.film, sp), self.n.value + 1j * self.k.value,
-                                    RGB_WAVELENGTHS_NM)
+                                    layering_wavelengths(sp))
 
     def as_layers(self):
         """With ``"albedo_scaling"``, the same material as Cycles' two closures: this specular lobe alone over
@@ -861,11 +864,12 @@ class FilmedMirrorWithDiffuse(MirrorWithDiffuse):
         return mirror_reflection(sp, self._eta(sp), film_at(self.film, sp), self.exterior_n)
 
     def film_albedo(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray:
-        """(N,) the film's layering albedo at cosθ_o (engine.polarisation.thin_film.film_layering_albedo at the RGB
-        channels' wavelengths, as TorranceSparrow.film_albedo — the same signature; n, κ evaluated there)."""
+        """(N,) the film's layering albedo at cosθ_o (engine.polarisation.thin_film.film_layering_albedo, as
+        TorranceSparrow.film_albedo — the same signature; n, κ at each channel's wavelength
+        engine.spectral.RGB_WAVELENGTHS_NM, one per channel as in Cycles)."""
         lam = np.asarray(RGB_WAVELENGTHS_NM, np.float64)
         n3 = (self.n.eval(lam) + 1j * self.k.eval(lam))[:, None]
-        return film_layering_albedo(cos_o, self.exterior_n, film_at(self.film, sp), n3, lam)
+        return film_layering_albedo(cos_o, self.exterior_n, film_at(self.film, sp), n3, layering_wavelengths(sp))
 
     def lobe_colors(self, sp: ShadingPoint) -> LobeColors | None:
         """The mirror's (MirrorWithDiffuse.lobe_colors) without a film; under one None (Cycles' colour is the

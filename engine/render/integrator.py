@@ -455,7 +455,8 @@ class PathTracer:
         L = 3 if self.rgb_mode else lam.shape[0]
         # table values at the path's wavelengths, once; "rgb" transport: the identity basis and a white
         # D65, so every RGB colour evaluates to its own channel values
-        lk = WavelengthLookup(lam, *rgb_channel_tables(n_total)) if self.channels else WavelengthLookup(lam)
+        lk = WavelengthLookup(lam, *rgb_channel_tables(n_total), channels=True) if self.channels \
+            else WavelengthLookup(lam)
         # wavelengths the materials are evaluated at (one where nothing depends on λ)
         lk_m = WavelengthLookup(lam[:1]) if self.uniform else lk
         Lm = lk_m.lam.shape[0]

@@ -10,6 +10,7 @@ Tables are read from ``data/*.csv`` (made once by ``data/generate_tables.py``) a
 
 from __future__ import annotations
 
+import functools
 import os
 
 import numpy as np
@@ -171,3 +172,35 @@ def spectrum_to_xyz(values_on_grid, illuminant: bool = False) -> np.ndarray:
 def spectrum_to_linear_srgb(values_on_grid, illuminant: bool = False) -> np.ndarray:
     """Linear sRGB of ``spectrum_to_xyz`` (last axis RGB)."""
     return spectrum_to_xyz(values_on_grid, illuminant) @ XYZ_TO_LINEAR_SRGB.T
+
+
+#: optical path differences (nm) up to which ``channel_fourier_table`` is tabulated; beyond, a film is incoherent
+#: (|S| < 1e-3 there, and the channel averages of its interference terms are taken as 0), as in Cycles (60 µm)
+FOURIER_X_MAX = 60000.0
+
+
+@functools.lru_cache(maxsize=1)
+def channel_fourier_table() -> tuple[float, np.ndarray]:
+    """(h nm, S (3, J) complex): S_c(x) = ∫ s_c(λ) e^{2πix/λ} dλ at x = 0, h, …, (J − 1)·h ≈ FOURIER_X_MAX nm, the
+    average over linear-sRGB channel c of the phase factor e^{2πix/λ} of an optical path difference x, each
+    channel's sensitivity s_c = D65n·(M·cmf)_c normalised to ∫ s_c dλ = 1 (so S_c(0) = 1): the white of the
+    spectral transport (``spectrum_to_linear_srgb`` with the D65 illuminant) developed to RGB.  Computed once
+    (≈ 0.3 s): the integral over ν = 1/λ on a uniform grid of 1024 intervals (trapezoid rule) by an FFT padded to
+    h ≈ 2 nm (docs/physics.md, thin films: accurate to ≈ 1e-5 against 0.05 nm quadrature)."""
+    m, h_target = 1024, 2.0
+    nu0, nu1 = 1.0 / LAMBDA_MAX, 1.0 / LAMBDA_MIN
+    dnu = (nu1 - nu0) / m
+    lam = 1.0 / (nu0 + dnu * np.arange(m + 1))
+    g = np.tensordot(XYZ_TO_LINEAR_SRGB, cmf_xyz(lam), axes=1) * d65_normalised(lam) * lam ** 2   # per unit ν
+    g[:, 0] *= 0.5
+    g[:, -1] *= 0.5
+    g /= g.sum(axis=1, keepdims=True)
+    n = int(round(1.0 / (dnu * h_target)))
+    h = 1.0 / (n * dnu)
+    count = int(FOURIER_X_MAX / h) + 2
+    padded = np.zeros((3, n), np.complex128)
+    padded[:, :m + 1] = g
+    S = np.fft.ifft(padded, axis=1)[:, :count] * n          # Σ_m g_m e^{2πi j m / n}
+    S *= np.exp(2j * np.pi * h * np.arange(count) * nu0)[None, :]
+    S.setflags(write=False)
+    return h, S

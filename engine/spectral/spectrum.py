@@ -95,12 +95,19 @@ class WavelengthLookup:
     integrator takes many subsets — material groups, lights — of which most never read a table).
     """
 
-    __slots__ = ("_root", "_idx", "_lam", "_basis", "_d65", "_memo")
+    __slots__ = ("_root", "_idx", "_lam", "_basis", "_d65", "_memo", "_channels")
 
-    def __init__(self, lam, basis=None, d65=None):
+    def __init__(self, lam, basis=None, d65=None, channels: bool = False):
         self._root, self._idx = None, None
         self._lam, self._basis, self._d65 = lam, basis, d65
         self._memo = None
+        self._channels = channels
+
+    @property
+    def channels(self) -> bool:
+        """True when the three "wavelengths" are the R, G, B channels of "rgb" transport (``rgb_channel_tables``):
+        a model that needs a wavelength evaluates each channel at engine.spectral.RGB_WAVELENGTHS_NM."""
+        return self._channels if self._root is None else self._root._channels
 
     def memo(self, key, compute):
         """``compute()`` once per lookup and ``key`` (read-only array: callers must not modify it).
@@ -127,6 +134,7 @@ class WavelengthLookup:
         sub = cls.__new__(cls)
         sub._root, sub._idx = root, idx
         sub._lam = sub._basis = sub._d65 = sub._memo = None
+        sub._channels = None
         return sub
 
     @property

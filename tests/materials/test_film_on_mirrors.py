@@ -16,7 +16,7 @@ from engine.materials.torrance_sparrow import FilmedMirrorWithDiffuse, TorranceS
 from engine.polarisation.mueller import is_realisable
 from engine.polarisation.thin_film import film_layering_albedo
 from engine.scene.loader import parse_material
-from engine.spectral import RGB_WAVELENGTHS_NM, ConstantSpectrum
+from engine.spectral import ConstantSpectrum
 
 LAMBDAS = (420.0, 550.0, 680.0)
 THETAS = (0.0, 25.0, 50.0, 70.0, 85.0)
@@ -181,7 +181,7 @@ def test_smooth_filmed_dielectric_layer_mirror_and_diffuse_base():
     # the diffuse base
     wi = np.tile([[-0.2], [0.4], [0.8]], (1, sp.n))
     wi /= np.linalg.norm(wi, axis=0)
-    E = film_layering_albedo(sp.cos_o, 1.0, (nf, d), n, RGB_WAVELENGTHS_NM)
+    E = film_layering_albedo(sp.cos_o, 1.0, (nf, d), n)        # the channels' band averages (spectral transport)
     want = rho * np.maximum(1.0 - s * E, 0.0) / math.pi
     got = model.eval(sp, wi).matrix()[0, 0]
     np.testing.assert_allclose(got, np.broadcast_to(want, got.shape), rtol=1e-12)
