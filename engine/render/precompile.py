@@ -295,7 +295,10 @@ CASES = (
     ("plain", "full Stokes, RGB, denoising data", {"polarisation": "full", "spectral": "rgb",
                                                    "denoise_data": True}, False),
     ("plain", "adaptive sampling", {"spp": 4}, True),
-    ("plain", "lights chosen by power (as Blender scenes are)", {"light_selection": "power"}, False),
+    ("plain", "lights chosen by power (Blender scenes with Light Tree on and few emitters)",
+     {"light_selection": "power"}, False),
+    ("textured", "lights chosen as Cycles without its tree (Blender scenes with Light Tree off)",
+     {"light_selection": "cycles", "light_tree": "off"}, False),
     ("plain", "lights chosen by the light tree (Blender's default)", {"light_tree": "on"}, False),
     ("textured", "textures, normal and bump maps, vertex colours, image environment; spectral", {}, False),
     ("textured", "textures in RGB, linear Stokes", {"spectral": "rgb", "polarisation": "linear"}, False),
@@ -316,7 +319,7 @@ def run_case(scene, overrides: dict, adaptive: bool, threads: int = 0):
     from .adaptive import AdaptiveSettings
     from .renderer import Renderer, RenderRequest
     overrides = dict(overrides)
-    if "light_selection" in overrides:          # (a Scene field: the Blender exporter sets "power")
+    if "light_selection" in overrides:          # (a Scene field: the Blender exporter sets it)
         scene = dataclasses.replace(scene, light_selection=overrides.pop("light_selection"))
     settings = dataclasses.replace(scene.settings, threads=threads, **overrides)
     renderer = Renderer(scene)

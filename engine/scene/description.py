@@ -443,7 +443,7 @@ class RenderSettings:
     #: How next-event estimation chooses among many lights (Cycles' Light Tree, scene.cycles.use_light_tree):
     #: "on" — the light tree over lamps and emissive triangles (engine.render.lights.tree: Conty & Kulla 2018 as
     #: Cycles builds it: importance by energy, distance, bounds and orientation per shading point); "off" — the
-    #: scene's ``light_selection`` (uniform or by power) over whole lights, as before the tree; "auto" (default)
+    #: scene's ``light_selection`` (uniform, by power or as Cycles) over whole lights; "auto" (default)
     #: — the tree where the scene has more than 64 emitters (lamps and each triangle of a mesh light sampled by
     #: area), where it helps; otherwise "off".  Same expectation either way.
     light_tree: str = "auto"
@@ -536,8 +536,9 @@ class Scene:
     source: str = ""
     #: how next-event estimation picks a light: "uniform" (as Mitsuba 3), "power" (probability ∝
     #: each light's estimated power, for scenes of many lights of different strength) or "cycles" (as Cycles
-    #: without its light tree: whole lights uniformly, a constant sky beside other lights left to BSDF
-    #: sampling; Blender scenes with Light Tree off; docs/benchmarks.md "Real assets against Cycles")
+    #: without its light tree: emissive meshes by area, other lights uniformly, half each where both exist, a
+    #: constant sky beside other lights left to BSDF sampling, engine.render.lights.selection.cycles_probabilities;
+    #: Blender scenes with Light Tree off; docs/benchmarks.md "Real assets against Cycles")
     light_selection: str = "uniform"
     #: the world medium (an Interior: fog everywhere outside the closed media), or None
     medium: object = None

@@ -467,13 +467,20 @@ def material_entry(material, warnings, bake=None):
     return bsdf, emission, alpha
 
 
+def light_selection(settings: RenderSettings) -> str:
+    """Scene.light_selection for a Blender scene: Cycles' Light Tree off (RenderSettings.light_tree "off",
+    polar_addon.render_engine.engine_settings) → "cycles", the engine's choice as Cycles makes it without its tree;
+    on → "power" (what RenderSettings.light_tree "auto" uses where it leaves the few lights to the light set)."""
+    return "cycles" if settings.light_tree == "off" else "power"
+
+
 def finish_scene(camera, meshes, materials, lights, settings, source, warnings, medium=None) -> Scene:
     """The engine Scene of a walk over a Blender scene (F12's ``export_scene`` and the viewport's
     ``SceneWalk.sync`` both end here, so that the viewport shows what F12 renders): the rules that
     hold for the whole scene — emissive meshes emit from both faces (Cycles' Emission shader; lamps stay
     one-sided), a Principled emission lies under its sheen and coat, a material seen by camera rays only
-    (Light Path ▸ Is Camera Ray) is transparent to every other ray, lights are picked by power (the closest
-    to Cycles' light tree for many lights of different strength) — and the warning for a black scene.
+    (Light Path ▸ Is Camera Ray) is transparent to every other ray, lights are picked as Cycles' Light Tree switch
+    says (``light_selection``) — and the warning for a black scene.
     A scene without geometry renders as Cycles renders it: the world (an HDRI or sky preview), lamps the camera
     sees, and black where neither is.  ``medium``: the world medium (World Output ▸ Volume), or None.
     Meshes are updated in place (the viewport's cached ones too: the rules are idempotent)."""
@@ -492,4 +499,4 @@ def finish_scene(camera, meshes, materials, lights, settings, source, warnings, 
     elif not lights and not any(m.emission is not None for m in meshes):
         warnings.append("the scene has no lights, no emissive materials and a black world: the image is black")
     return Scene(camera=camera, meshes=meshes, materials=materials, lights=lights, settings=settings, source=source,
-                 light_selection="power", medium=medium)
+                 light_selection=light_selection(settings), medium=medium)

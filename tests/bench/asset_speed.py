@@ -24,6 +24,10 @@ the two renderers side by side:
 * the parity numbers of the case (blocks passing the rule, luminance ratio Polar ÷ Cycles);
 * the load average before and after (the machine may be shared: the ratios race the two renderers in one run).
 
+``--selections power,cycles`` races Polar's light choices (Scene.light_selection) on each case instead: one Cycles
+render per seed, the scene exported once, and Polar rendered with each choice in turn, seed by seed (the load
+falls on each alike); one line per choice, then the var × time ratio of each later choice ÷ the first.
+
 A case whose scene Polar refuses prints the reason.  ``--figure PATH`` also writes, per asset, a PNG of
 Cycles | Polar S0 | Polar DoLP under ``--figure-lighting`` into a folder beside PATH and stacks them
 into PATH (the documentation figure docs/images/assets.png).  Runs in the bpy module; not part of the
@@ -54,6 +58,41 @@ def warm(times):
     return mean, max(times[0] - mean, 0.0)
 
 
+def run_selections(name, lighting, selections, spp, seeds, width=None, height=None, bounces=8):
+    """{selection: CaseReport} of one asset case: Cycles once, Polar with each Scene.light_selection of
+    ``selections``, the choices alternating seed by seed (tests/support/asset_parity.run_case's steps)."""
+    import dataclasses
+    import time
+
+    import numpy as np
+
+    from tests.support import asset_parity as ap
+    from polar_render.engine.render.renderer import Renderer
+    asset = ap.CATALOGUE[name]
+    width, height = width or asset.size[0], height or asset.size[1]
+    scene = ap.build(asset, lighting, width, height)
+    hit = ap.coverage(scene, width, height)
+    times_c = []
+    with tempfile.TemporaryDirectory() as tmp:
+        cyc = ap.render_cycles(scene, spp, seeds, bounces, tmp, times_c)
+    t = time.perf_counter()
+    renderer, settings, warnings = ap.export_polar(scene, spp, bounces)
+    export = time.perf_counter() - t
+    renderers = {s: Renderer(dataclasses.replace(renderer.scene, light_selection=s)) for s in selections}
+    images, times = {s: [] for s in selections}, {s: [] for s in selections}
+    for seed in range(seeds):
+        for s in (selections if seed % 2 == 0 else selections[::-1]):     # each choice first on every other seed
+            t = time.perf_counter()
+            images[s].append(renderers[s].render(dataclasses.replace(settings, seed=seed)).stokes())
+            times[s].append(time.perf_counter() - t)
+    reports = {}
+    for s in selections:
+        r = reports[s] = ap.CaseReport(asset.name, lighting, spp, seeds, width, height, warnings=list(warnings))
+        r.seconds = {"cycles_each": times_c, "polar_each": times[s], "export": export}
+        ap.compare(cyc, np.array(images[s])[:, 0], hit, r)
+    return reports
+
+
 def main(argv=None):
     from tests.support import asset_parity as ap
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -65,6 +104,8 @@ def main(argv=None):
     p.add_argument("--json", action="store_true", help="also print the reports as JSON lines")
     p.add_argument("--figure", default="", help="write the Cycles | Polar S0 | Polar DoLP figure to this PNG")
     p.add_argument("--figure-lighting", default="hdri", choices=ap.LIGHTINGS)
+    p.add_argument("--selections", default="", help="Polar's light choices to race, e.g. power,cycles "
+                                                     "(Scene.light_selection; default: the exporter's)")
     a = p.parse_args(argv)
 
     import bpy  # noqa: F401  (the bpy module must be importable)
@@ -80,34 +121,55 @@ def main(argv=None):
         for lighting in lightings:
             out = panels if (panels and lighting == a.figure_lighting) else None
             res = (a.res, a.res) if a.res else (None, None)
+            if a.selections:
+                selections = a.selections.split(",")
+                reports = run_selections(name, lighting, selections, a.spp, a.seeds, *res)
+                for s in selections:
+                    line(f"{name[:20 - len(s) - 1]} {s}", lighting, reports[s], a.json)
+                first = var_time(reports[selections[0]])
+                print(f"{'':26s}  var × time " + ", ".join(f"{s} ÷ {selections[0]} {var_time(reports[s]) / first:.2f}"
+                                                           for s in selections[1:]), flush=True)
+                continue
             r = ap.run_case(name, lighting, spp=a.spp, seeds=a.seeds, width=res[0], height=res[1], out_dir=out)
             if r.error:
                 print(f"{name:20s} {lighting:5s} | Polar refused the scene: {r.error}")
                 continue
-            tc, sync = warm(r.seconds["cycles_each"])
-            tp, first = warm(r.seconds["polar_each"])
-            setup = r.seconds["export"] + first
-            vc, vp = r.noise["cycles"], r.noise["polar"]
-            ratio = (vp * tp) / (vc * tc) if vc * tc > 0 else float("inf")
-            (sc, rc), (sp, rp) = r.tails["cycles"], r.tails["polar"]
-            print(f"{name:20s} {lighting:5s} | {tc:8.3f} {vc:9.2e} {sync:7.2f} | {tp:8.3f} {vp:9.2e} {setup:7.2f} "
-                  f"| {ratio:12.2f} | {r.passed}/{r.blocks} blocks, Y {r.luminance_ratio:.3f} "
-                  f"| top 1 %: {sc:.2f} / {sp:.2f} of σ², rest P÷C {rp / rc if rc > 0 else float('inf'):.2f}",
-                  flush=True)
-            if max(sc, sp) > FIREFLY_SHARE:
-                print(f"{'':26s}  σ² is mostly fireflies ({max(sc, sp):.0%} in the top 1 % of pixels): with "
-                      f"{r.seeds} seeds its ratio is luck; rerun with more --seeds", flush=True)
-            if a.json:
-                print(json.dumps({"asset": name, "lighting": lighting, "spp": r.spp, "seeds": r.seeds,
-                                  "cycles_s": tc, "polar_s": tp,
-                                  "cycles_sync_s": sync, "polar_setup_s": setup, "cycles_var": vc, "polar_var": vp,
-                                  "var_time_ratio": ratio, "top1_share": [sc, sp], "rest_var": [rc, rp],
-                                  "blocks": r.blocks, "passed": r.passed,
-                                  "luminance_ratio": r.luminance_ratio, "warnings": r.warnings}))
+            line(name, lighting, r, a.json)
     print(f"load average {' / '.join(f'{v:.2f}' for v in os.getloadavg())} at the end", flush=True)
     if a.figure:
         done = [n for n in names if os.path.exists(os.path.join(panels, f"{n}_{a.figure_lighting}.png"))]
         print(ap.figure(panels, a.figure, done, a.figure_lighting))
+
+
+def var_time(r):
+    """(σ²_Polar · t_Polar) ÷ (σ²_Cycles · t_Cycles) of a CaseReport, warm seconds."""
+    tc, tp = warm(r.seconds["cycles_each"])[0], warm(r.seconds["polar_each"])[0]
+    vc, vp = r.noise["cycles"], r.noise["polar"]
+    return (vp * tp) / (vc * tc) if vc * tc > 0 else float("inf")
+
+
+def line(name, lighting, r, as_json=False):
+    """Print one case's line (and its JSON with ``as_json``)."""
+    tc, sync = warm(r.seconds["cycles_each"])
+    tp, first = warm(r.seconds["polar_each"])
+    setup = r.seconds["export"] + first
+    vc, vp = r.noise["cycles"], r.noise["polar"]
+    ratio = var_time(r)
+    (sc, rc), (sp, rp) = r.tails["cycles"], r.tails["polar"]
+    print(f"{name:20s} {lighting:5s} | {tc:8.3f} {vc:9.2e} {sync:7.2f} | {tp:8.3f} {vp:9.2e} {setup:7.2f} "
+          f"| {ratio:12.2f} | {r.passed}/{r.blocks} blocks, Y {r.luminance_ratio:.3f} "
+          f"| top 1 %: {sc:.2f} / {sp:.2f} of σ², rest P÷C {rp / rc if rc > 0 else float('inf'):.2f}",
+          flush=True)
+    if max(sc, sp) > FIREFLY_SHARE:
+        print(f"{'':26s}  σ² is mostly fireflies ({max(sc, sp):.0%} in the top 1 % of pixels): with "
+              f"{r.seeds} seeds its ratio is luck; rerun with more --seeds", flush=True)
+    if as_json:
+        print(json.dumps({"asset": name, "lighting": lighting, "spp": r.spp, "seeds": r.seeds,
+                          "cycles_s": tc, "polar_s": tp,
+                          "cycles_sync_s": sync, "polar_setup_s": setup, "cycles_var": vc, "polar_var": vp,
+                          "var_time_ratio": ratio, "top1_share": [sc, sp], "rest_var": [rc, rp],
+                          "blocks": r.blocks, "passed": r.passed,
+                          "luminance_ratio": r.luminance_ratio, "warnings": r.warnings}))
 
 
 if __name__ == "__main__":

@@ -175,6 +175,9 @@ FILMS = {
 
 #: (a smooth metal mirroring the HDRI in the spectral mode is 3.6 % dark against Cycles without any film — Y 0.964,
 #: the spectral products of a mirror and the sky, within its large chromatic noise; with the film Y 0.956, 12/12)
+#: (the film on the smooth dielectric under the lamps read R +4 % in two blocks, z ≈ 55, with either light choice:
+#: the base under the film was weighted by single wavelengths' reflectance instead of the film's channel averages,
+#: fixed in c46c48a — docs/physics.md, thin films; now R 1.012, 12/12)
 FILM_CASES = [(part, lighting) for part in FILMS for lighting in ap.LIGHTINGS]
 
 

@@ -1,6 +1,8 @@
 """Cycles' Light Tree switch read by Polar (polar_addon.render_engine.engine_settings): on (Cycles' default) → "auto"
-(the tree above 64 emitters), off → "off"; an exported Blender scene (two-sided emissive spheres, which block their own
-shadow rays, and a point lamp) renders the same mean with and without the tree."""
+(the tree above 64 emitters) with the light set's "power" selection, off → "off" with Scene.light_selection "cycles"
+(Cycles' own choice without its tree, polar_addon.export.scene.light_selection); an exported Blender scene (two-sided
+emissive spheres, which block their own shadow rays, and a point lamp) renders the same mean with and without the
+tree."""
 
 import dataclasses
 
@@ -41,10 +43,13 @@ def test_the_light_tree_follows_cycles_switch_and_keeps_the_mean():
     scene.render.engine = "POLAR"
     scene.polar.samples, scene.polar.max_bounces = 16, 3
     assert scene.cycles.use_light_tree and engine_settings(scene).light_tree == "auto"
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    assert export_scene(depsgraph, scene.camera, W, H, engine_settings(scene))[0].light_selection == "power"
     scene.cycles.use_light_tree = False
     assert engine_settings(scene).light_tree == "off"
     settings = engine_settings(scene)
     engine_scene, _ = export_scene(bpy.context.evaluated_depsgraph_get(), scene.camera, W, H, settings)
+    assert engine_scene.light_selection == "cycles"
     renderer = Renderer(engine_scene)
     means = {mode: np.array([renderer.render(dataclasses.replace(settings, seed=s, light_tree=mode))
                              .stokes_luminance()[0].mean() for s in range(6)]) for mode in ("on", "off")}

@@ -1,9 +1,12 @@
-"""Scene.light_selection "cycles" (Blender scenes with Light Tree off): whole lights uniformly, a constant sky
-beside other lights never chosen by next-event estimation (BSDF sampling alone finds it, MIS weight 1), as Cycles
-disables background MIS for a world that does not vary (scene/light.cpp test_enabled_lights).
+"""Scene.light_selection "cycles" (Blender scenes with Light Tree off): as Cycles without its tree, emissive meshes
+by area and every other light uniformly (half each where both exist: scene/light.cpp device_update_distribution), a
+constant sky beside other lights never chosen by next-event estimation (BSDF sampling alone finds it, MIS weight 1),
+as Cycles disables background MIS for a world that does not vary (test_enabled_lights); which light is a constant
+sky is the emitter's own ``constant_sky``.
 
-Oracle: the analytic radiance of a Lambert floor under a sun and a constant sky, ρ/π·E·cosθ + ρ·L (the floor
-sees the upper hemisphere only); the variance against "power" selection from 8 seeds of the same scene."""
+Oracles: Cycles' distribution pdfs by hand; the analytic radiance of a Lambert floor under a sun and a constant
+sky, ρ/π·E·cosθ + ρ·L (the floor sees the upper hemisphere only), and under two emissive squares and a point lamp
+(Lambert's polygon formula); the variance against "power" selection from 8 seeds of the same scene."""
 
 from __future__ import annotations
 
@@ -75,3 +78,102 @@ def test_cycles_selection_is_less_noisy_than_power_beside_a_dim_lamp():
         ys = np.array([_luminance(_scene(_lights(point=True), selection, seed=s)) for s in range(8)])
         var[selection] = ys.var(0, ddof=1).mean()
     assert var["cycles"] < 0.1 * var["power"], var          # measured: 7.8e-7 against 2.4e-4
+
+
+# --------------------------------------------------------------------------- emissive triangles by area (Cycles)
+
+#: two coplanar emissive squares facing down at z = 1 (areas 1 and 0.25, radiances 2 and 6) and a point lamp below
+#: them; a Lambert floor seen from z = 0.8 straight down
+SQUARES = (((-0.8, 0.2), (-0.5, 0.5), 2.0), ((0.4, 0.9), (-0.25, 0.25), 6.0))
+LAMP, LAMP_I, EYE, FOV = np.array([0.3, 0.6, 0.5]), 0.2, 0.8, 40.0
+
+
+def _square_scene(selection, spp=64, seed=0, lamp=True):
+    objects = [{"shape": "quad", "material": "floor", "vertices": [[-50, -50, 0], [50, -50, 0], [50, 50, 0],
+                                                                   [-50, 50, 0]]}]
+    for (x0, x1), (y0, y1), radiance in SQUARES:       # this winding's front faces down (−z)
+        objects.append({"shape": "quad", "material": "floor", "emission": {"radiance": radiance},
+                        "vertices": [[x0, y0, 1], [x0, y1, 1], [x1, y1, 1], [x1, y0, 1]]})
+    data = {"format": "polar-scene/1",
+            "camera": {"origin": [0, 0, EYE], "target": [0, 0, 0], "up": [0, 1, 0], "fov_deg": FOV,
+                       "width": 12, "height": 12},
+            "materials": {"floor": {"type": "lambert", "albedo": RHO}},
+            "objects": objects,
+            "lights": [{"type": "point", "position": LAMP.tolist(), "intensity": LAMP_I}] if lamp else [],
+            "render": {"spp": spp, "max_depth": 2, "seed": seed}}
+    return dataclasses.replace(parse_scene(data), light_selection=selection)
+
+
+def _polygon_irradiance(p, corners):
+    """Irradiance (m,) at floor points p (m, 3) (normal +z) from a Lambertian polygon of radiance 1 (Lambert's
+    formula: ½ Σ over its edges of the angle they subtend × the z component of their unit normals)."""
+    u = corners[None, :, :] - p[:, None, :]
+    u /= np.linalg.norm(u, axis=-1, keepdims=True)
+    v = np.roll(u, -1, axis=1)
+    angle = np.arccos(np.clip((u * v).sum(-1), -1.0, 1.0))
+    cross = np.cross(u, v)
+    return np.abs(0.5 * (angle * cross[..., 2] / np.linalg.norm(cross, axis=-1)).sum(-1))
+
+
+def test_cycles_probabilities_are_cycles_distribution():
+    """Cycles' distribution_pdf_lights / _triangles by hand: lamps 1/num_lights, triangles ∝ area, half each where
+    both exist; a constant sky and lights that light nothing 0; the sky alone 1; nothing usable: None."""
+    from engine.render.lights.selection import cycles_probabilities
+    area, sky, none = np.array([1.0, 0.25, 0.0, 0.0, 0.0]), np.array([0, 0, 0, 0, 1], bool), np.zeros(5, bool)
+    np.testing.assert_allclose(cycles_probabilities(area, sky, none), [0.4, 0.1, 0.25, 0.25, 0.0])
+    np.testing.assert_allclose(cycles_probabilities(area, np.zeros(5, bool), none), [0.4, 0.1, 1 / 6, 1 / 6, 1 / 6])
+    np.testing.assert_allclose(cycles_probabilities(area[:2], sky[:2], none[:2]), [0.8, 0.2])     # triangles only
+    np.testing.assert_allclose(cycles_probabilities(area[2:], sky[2:], none[2:]), [0.5, 0.5, 0.0])  # lamps only
+    hidden = np.array([0, 1, 0, 1, 0], bool)            # a hidden mesh and a hidden lamp: 0, the rest renormalised
+    np.testing.assert_allclose(cycles_probabilities(area, sky, hidden), [0.5, 0.0, 0.5, 0.0, 0.0])
+    np.testing.assert_allclose(cycles_probabilities(area[4:], sky[4:], none[4:]), [1.0])
+    assert cycles_probabilities(area[:1], sky[:1], np.ones(1, bool)) is None
+
+
+def test_emissive_squares_by_area_and_a_lamp_give_the_analytic_floor():
+    """Two emissive squares (areas 1 and 0.25) and a point lamp: picked with 0.4, 0.1 and 0.5 (Cycles without its
+    tree: half to the triangles by area); the floor's mean radiance within 0.5 % of ρ/π·E from Lambert's polygon
+    formula and the lamp's I·cosθ/d²."""
+    renderer = Renderer(_square_scene("cycles"))
+    kinds = [type(lt).__name__ for lt in renderer.lights.lights]
+    np.testing.assert_allclose(renderer.lights.prob, [0.4, 0.1, 0.5], err_msg=str(kinds))
+    half = EYE * math.tan(math.radians(FOV / 2))
+    g = (np.arange(200) + 0.5) / 200 * 2 * half - half
+    p = np.stack(np.meshgrid(g, g) + [np.zeros((200, 200))], -1).reshape(-1, 3)
+    E = sum(radiance * _polygon_irradiance(p, np.array([[x0, y0, 1], [x0, y1, 1], [x1, y1, 1], [x1, y0, 1]], float))
+            for (x0, x1), (y0, y1), radiance in SQUARES)
+    d = LAMP[None, :] - p
+    E = E + LAMP_I * d[:, 2] / np.linalg.norm(d, axis=1) ** 3
+    expected = RHO / math.pi * E.mean()
+    y = renderer.render(renderer.scene.settings).stokes()[0].mean(-1)
+    assert y.mean() == pytest.approx(expected, rel=5e-3)
+
+
+# --------------------------------------------------------------------------- which light is a constant sky
+
+def test_constant_sky_is_a_property_of_the_emitter(monkeypatch):
+    """``constant_sky`` is the emitter's own: only the constant world says it (not a world map, a sky model, a
+    sun, lamps or meshes); a sky class derived from the constant one is constant unless it says it varies with
+    direction, and "cycles" gives such a varying sky its share beside the lamps."""
+    from engine.render.lights import selection
+    from engine.render.lights.environment import EnvironmentEmitter
+    sky_model = {"type": "sky", "sun_direction": [0.3, 0.2, 0.9], "turbidity": 3.0, "polarisation": "none"}
+    spot = {"type": "spot", "position": [0, 0, 2], "direction": [0, 0, -1], "intensity": 1.0}
+    lights = Renderer(_scene(_lights(point=True) + [spot], "cycles")).lights.lights
+    assert [lt.constant_sky for lt in lights] == [True, False, False, False]
+    assert not any(lt.constant_sky for lt in Renderer(_square_scene("cycles")).lights.lights)
+    mapped = Renderer(_scene([sky_model] + _lights()[1:], "cycles")).lights
+    assert [lt.constant_sky for lt in mapped.lights] == [False, False]
+    np.testing.assert_array_equal(mapped.prob, [0.5, 0.5])
+
+    class PlainSky(EnvironmentEmitter):            # a new constant sky class: still left to BSDF sampling
+        pass
+
+    class VaryingSky(EnvironmentEmitter):          # a sky that varies: sampled as a light
+        varies_with_direction = True
+
+    for cls, prob in ((PlainSky, [0.0, 0.5, 0.5]), (VaryingSky, [1 / 3, 1 / 3, 1 / 3])):
+        monkeypatch.setattr(selection, "EnvironmentEmitter", cls)
+        light_set = Renderer(_scene(_lights(point=True), "cycles")).lights
+        assert type(light_set.lights[0]) is cls
+        np.testing.assert_allclose(light_set.prob, prob, err_msg=cls.__name__)

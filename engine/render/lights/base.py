@@ -36,6 +36,15 @@ class _Light:
     #: a mesh light from the ray types its object is invisible to); camera rays still see it
     shades_nothing = False
     varies_over_surface = False       # radiance per point (TexturedAreaEmitter: sample_points, emitted_at)
+    #: the radiance depends on the direction the light leaves along (the integrator reads it per direction only
+    #: then: a world map); False: one radiance in every direction it emits
+    varies_with_direction = False
+
+    @property
+    def constant_sky(self) -> bool:
+        """A world of one radiance from every direction: Cycles turns its MIS off, and LightSet's "cycles" selection
+        leaves it to BSDF sampling beside other lights.  False but for a whole-sphere sky that does not vary."""
+        return False
 
     #: the emitted light's polarisation (engine.polarisation.sources.SourcePolarisation; None: unpolarised)
     #: and its reference axes (axis, other), set by LightSet.set_polarisation

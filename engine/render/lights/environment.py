@@ -23,6 +23,11 @@ class EnvironmentEmitter(_Light):
 
     at_infinity = True
 
+    @property
+    def constant_sky(self) -> bool:
+        # a sky derived from this one that varies must say varies_with_direction (else it renders as constant)
+        return not self.varies_with_direction
+
     def sample(self, p, u):
         wi = uniform_sphere(u)
         n = p.shape[1]

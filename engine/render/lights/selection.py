@@ -27,8 +27,9 @@ SELECTIONS = ("uniform", "power", "cycles")
 
 class LightSet:
     """All lights of a compiled scene.  NEE picks one light per vertex: uniformly (probability
-    1/count, ``Scene.light_selection`` "uniform"; ``prob[i]``), with "cycles" uniformly but a constant
-    sky beside other lights never (probability 0: BSDF sampling alone finds it, as Cycles does), or, with
+    1/count, ``Scene.light_selection`` "uniform"; ``prob[i]``), with "cycles" as Cycles without its light tree
+    (``cycles_probabilities``: emissive meshes by area, other lights uniformly, a constant sky beside them never:
+    BSDF sampling alone finds it), or, with
     "power", by importance:
     for up to ``SPATIAL_MAX`` lights, per shading point ∝ each light's estimated irradiance
     there (power/dist² × ``facing_factor``, as the importance of Cycles' light tree without the
@@ -48,8 +49,10 @@ class LightSet:
         self.environment = None
         self.environment_index = -1
         self.camera_hidden = set()     # lights (indices) that camera rays do not see
+        self._triangle_area = []       # per mesh light: its area where Cycles counts its triangles, else 0
         self._mesh_emitters(scene, compiled)
         self._lamps(scene)
+        self._triangle_area += [0.0] * (len(self.lights) - len(self._triangle_area))
         #: some light emits polarised light (engine.render.polarised_light): the transport carries it
         self.polarised = any(light.polarisation is not None for light in self.lights)
         self._selection(scene, compiled)
@@ -86,6 +89,9 @@ class LightSet:
             if len(tris) == 0:
                 continue
             compiled.tri_emitter[tris] = len(self.lights)
+            # Cycles' emissive triangles (a mesh that occludes; one that does not is a lamp in Cycles' sense)
+            self._triangle_area.append(float(compiled.tri_area[tris].sum()) if getattr(mesh, "occluder", True)
+                                       else 0.0)
             if not getattr(mesh, "visible_camera", True) and not getattr(mesh, "occluder", True):
                 self.camera_hidden.add(len(self.lights))
             two_sided, spread = getattr(mesh, "two_sided", False), getattr(mesh, "spread_deg", 180.0)
@@ -139,7 +145,7 @@ class LightSet:
                                              getattr(light, "polarisation_axis", None))
 
     def _selection(self, scene, compiled) -> None:
-        """Selection probabilities: uniform, or by power (``light_selection``)."""
+        """Selection probabilities: uniform, as Cycles without its tree, or by power (``light_selection``)."""
         count = len(self.lights)
         self.select_prob = 1.0 / count if count else 0.0
         self.selection = getattr(scene, "light_selection", "uniform")
@@ -148,13 +154,13 @@ class LightSet:
         self.prob = np.full(count, self.select_prob)
         self.mix_prob = self.prob
         self.cdf = None
-        sky = np.array([type(lt) is EnvironmentEmitter for lt in self.lights], bool)
-        if self.selection == "cycles" and sky.any() and not sky.all():
-            # Cycles without its light tree: whole lights uniformly, a constant sky beside them left to BSDF
-            # sampling (scene/light.cpp test_enabled_lights: background MIS off unless the world varies)
-            self.prob = np.where(sky, 0.0, 1.0 / (~sky).sum())
-            self.cdf = np.cumsum(self.prob)
-            self.cdf[-1] = 1.0
+        sky = np.array([lt.constant_sky for lt in self.lights], bool)
+        if self.selection == "cycles" and count > 1:
+            prob = cycles_probabilities(np.array(self._triangle_area), sky,
+                                        np.array([lt.shades_nothing for lt in self.lights], bool))
+            if prob is not None:
+                self.prob, self.cdf = prob, np.cumsum(prob)
+                self.cdf[-1] = 1.0
         if self.selection == "power" and count > 1:
             radius = max(float(np.linalg.norm(compiled.vertices - compiled.vertices.mean(0), axis=1).max()), 1e-9)
             power = np.array([0.0 if lt.shades_nothing else lt.power(radius) if lt.at_infinity else lt.power()
@@ -166,7 +172,7 @@ class LightSet:
                 self.cdf[-1] = 1.0
                 # the global share mixed into the per-point probabilities leaves a constant sky out
                 # beside other lights (EnvironmentEmitter.SELECTION_SHARE)
-                local = np.where([type(lt) is EnvironmentEmitter for lt in self.lights], 0.0, power)
+                local = np.where(sky, 0.0, power)
                 self.mix_prob = local / local.sum() if local.sum() > 0 else self.prob
 
     def _spatial_records(self) -> None:
@@ -212,6 +218,25 @@ class LightSet:
 
     def __len__(self):
         return len(self.lights)
+
+
+def cycles_probabilities(triangle_area: np.ndarray, constant_sky: np.ndarray, shades_nothing: np.ndarray):
+    """Selection probabilities (count,) as Cycles picks lights without its light tree (scene/light.cpp
+    device_update_distribution, kernel/light/distribution.h), or None where no light qualifies: the emissive
+    triangles (``triangle_area`` > 0: each mesh light's area where Cycles counts its triangles) ∝ area, every other
+    light uniformly (1/num_lights), half each where both kinds exist.  A constant sky beside other lights gets 0
+    (test_enabled_lights: background MIS off unless the world varies; BSDF rays find it, MIS weight 1), and so do
+    lights that light nothing (``shades_nothing``: Cycles leaves objects invisible to indirect rays out)."""
+    usable = ~shades_nothing
+    if (usable & ~constant_sky).any():
+        usable &= ~constant_sky
+    area = np.where(usable, triangle_area, 0.0)
+    lamps = usable & (triangle_area <= 0.0)
+    if area.sum() <= 0.0 and not lamps.any():
+        return None
+    share = 0.5 if area.sum() > 0.0 and lamps.any() else 1.0
+    prob = np.where(lamps, share / max(lamps.sum(), 1), 0.0)
+    return prob + (share * area / area.sum() if area.sum() > 0.0 else 0.0)
 
 
 def _under_layers(light, compiled, tris) -> None:
