@@ -299,7 +299,7 @@ CASES = (
      {"light_selection": "power"}, False),
     ("textured", "lights chosen as Cycles without its tree (Blender scenes with Light Tree off)",
      {"light_selection": "cycles", "light_tree": "off"}, False),
-    ("plain", "lights chosen by the light tree (Blender's default)", {"light_tree": "on"}, False),
+    ("plain", "lights chosen by the light tree (Blender's Light Tree on, many emitters)", {"light_tree": "on"}, False),
     ("textured", "textures, normal and bump maps, vertex colours, image environment; spectral", {}, False),
     ("textured", "textures in RGB, linear Stokes", {"spectral": "rgb", "polarisation": "linear"}, False),
     ("textured", "textures, scalar transport, denoising data", {"polarisation": "off", "denoise_data": True}, False),
