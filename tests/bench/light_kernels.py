@@ -6,7 +6,8 @@ Each pair (engine.kernels.TWINS) runs on the same inputs, alternating NumPy and 
 32 MB written before each call (a render's other work evicts the tables between its calls); printed: the median
 thread-CPU µs per call of each and their ratio, and whether the outputs are bit-identical.
 Inputs: an equirectangular sky the size of the asset suite's (512 × 256, float32, a sun, tests/data/assets/
-environment/make_sky.py's shape) turned by Euler angles, ``--n`` random directions and numbers.  The load average
+environment/make_sky.py's shape) turned by Euler angles, ``--n`` random directions and numbers; a mesh light of
+15 k triangles for the light tree's triangle samples.  The load average
 is printed; not a test.
 """
 
@@ -65,6 +66,18 @@ def main(argv=None):
     race("render.lights.environment.sample", (env.cdf, env.cdf_guide, env.cos_knots, env.cell_pdf, numbers),
          args.repeats)
     race("render.lights.environment.uniform_sample", (numbers,), args.repeats)
+    # the light tree's per-triangle samples on a 15 k-triangle emitter (SpecGlossEmission's size), as many points
+    # as the asset's calls take (≈ 100) and a batch's worth
+    V = rng.normal(size=(8000, 3)).astype(np.float32)
+    faces = rng.integers(0, 8000, size=(15000, 3)).astype(np.int32)
+    cross = np.cross(V[faces[:, 1]] - V[faces[:, 0]], V[faces[:, 2]] - V[faces[:, 0]])
+    length = np.linalg.norm(cross, axis=1)
+    normal, area = cross / np.where(length > 0, length, 1.0)[:, None], 0.5 * length
+    for n in (100, args.n):
+        p = rng.normal(size=(3, n)) * 3.0
+        print(f"  {n} points:")
+        race("kernels.geometry.triangle_sample", (p, rng.integers(0, 15000, n), numbers[0, :n], numbers[1, :n], faces,
+                                                  V, normal, area, False), args.repeats)
     print(f"load average after: {os.getloadavg()}")
 
 

@@ -82,3 +82,31 @@ def test_constant_sky_sample_bitwise():
     pair = kernels.TWINS["render.lights.environment.uniform_sample"]
     for a, b in zip(pair.compiled(u), pair.reference(u)):
         assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b)
+
+
+@numba_only
+@pytest.mark.parametrize("two_sided", [False, True])
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+def test_triangle_sample_bitwise(two_sided, dtype):
+    """The light tree's per-triangle sample (AreaEmitter.sample_triangles): points in front, behind, on the
+    triangle's plane and at a vertex (distance 0), a degenerate triangle (area 0)."""
+    rng = np.random.default_rng(11)
+    V = rng.normal(size=(30, 3)).astype(dtype)
+    faces = rng.integers(0, 30, size=(20, 3)).astype(np.int32)
+    faces[0] = [4, 4, 5]                                                    # zero area
+    e1, e2 = V[faces[:, 1]] - V[faces[:, 0]], V[faces[:, 2]] - V[faces[:, 0]]
+    cross = np.cross(e1, e2)
+    length = np.linalg.norm(cross, axis=1)
+    area, normal = 0.5 * length, cross / np.where(length > 0, length, 1.0)[:, None]
+    n = 4000
+    p = rng.normal(size=(3, n)) * 2.0
+    tri = rng.integers(0, 20, n)
+    u1, u2 = rng.uniform(size=n), rng.uniform(size=n)
+    u1[:3], u2[:3] = 1.0, 0.0                                               # b1 = 0, b2 = 0: vertex 0 …
+    p[:, :3] = V[faces[tri[:3], 0]].T                                       # … where p is (distance 0)
+    pair = kernels.TWINS["kernels.geometry.triangle_sample"]
+    args = (p, tri, u1, u2, faces, V, normal, area, two_sided)
+    for a, b in zip(pair.compiled(*args), pair.reference(*args)):
+        assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b)
+    wi, dist, scale, pdf, valid, cos_l, b1, b2 = pair.reference(*args)
+    assert valid.any() and not valid.all() and np.all(pdf[~valid] == 0) and np.all(scale[valid] * pdf[valid] > 0)
