@@ -268,20 +268,28 @@ def area_light_sample_numpy(p, u, cdf, tris, faces, vertices, tri_normal, total_
     return wi, dist, np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0), pdf, valid
 
 
+@jit_inner
+def triangle_point_at(V, faces, t, u1, u2, p0, p1, p2):
+    """The point of triangle t at b1 = 1 − √u1, b2 = u2·√u1 (Embree's weights: 1 − b1 − b2, b1, b2 on its
+    vertices V[faces[t]]) less (p0, p1, p2): (b1, b2, t0, t1, t2), in area_light_sample_numpy's order."""
+    a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
+    su = np.sqrt(u1)
+    b1 = 1.0 - su
+    b2 = u2 * su
+    w0 = 1.0 - b1 - b2
+    t0 = ((V[a, 0] * w0 + V[b, 0] * b1) + V[c, 0] * b2) - p0
+    t1 = ((V[a, 1] * w0 + V[b, 1] * b1) + V[c, 1] * b2) - p1
+    t2 = ((V[a, 2] * w0 + V[b, 2] * b1) + V[c, 2] * b2) - p2
+    return b1, b2, t0, t1, t2
+
+
 @jit
 def _area_light_loop(p, u, cdf, tris, faces, V, tri_normal, total_area, wi, dist, scale, pdf, valid):
     last = tris.shape[0] - 1
     for i in range(p.shape[1]):
         k = min(np.searchsorted(cdf, u[0, i], side="right"), last)
         t = tris[k]
-        a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
-        su = np.sqrt(u[1, i])
-        b1 = 1.0 - su
-        b2 = u[2, i] * su
-        w0 = 1.0 - b1 - b2
-        t0 = ((V[a, 0] * w0 + V[b, 0] * b1) + V[c, 0] * b2) - p[0, i]
-        t1 = ((V[a, 1] * w0 + V[b, 1] * b1) + V[c, 1] * b2) - p[1, i]
-        t2 = ((V[a, 2] * w0 + V[b, 2] * b1) + V[c, 2] * b2) - p[2, i]
+        _, _, t0, t1, t2 = triangle_point_at(V, faces, t, u[1, i], u[2, i], p[0, i], p[1, i], p[2, i])
         d2 = (t0 * t0 + t1 * t1) + t2 * t2
         d = np.sqrt(d2)
         s = d if d > 0 else 1.0
@@ -310,6 +318,62 @@ def area_light_sample_numba(p, u, cdf, tris, faces, vertices, tri_normal, total_
 
 
 area_light_sample = twin(_area_light_loop and area_light_sample_numba, area_light_sample_numpy)
+
+
+def triangle_sample_numpy(p, tri, u1, u2, faces, vertices, tri_normal, tri_area, two_sided):
+    """A point uniform by area on each given triangle ``tri`` (N,) seen from p (3, N) (the light tree's triangle
+    choice; engine.render.lights.area.AreaEmitter.sample_triangles): b1 = 1 − √u1, b2 = u2·√u1 (u1, u2 (N,)).
+    Returns (wi (3, N) unit towards the point, dist (N,), 1/pdf (N,) (0 where the pdf is 0), pdf (N,) solid angle
+    = dist²/(cosθ_light·A_triangle), pdf > 0 (N,), cosθ at the emitter (N,) (|cosθ| for ``two_sided``), b1, b2)."""
+    f = faces[tri]
+    su = np.sqrt(u1)
+    b1 = 1.0 - su
+    b2 = u2 * su
+    V = vertices
+    x = (V[f[:, 0]] * (1.0 - b1 - b2)[:, None] + V[f[:, 1]] * b1[:, None] + V[f[:, 2]] * b2[:, None]).T
+    to = x - p
+    dist = np.sqrt(to[0] * to[0] + to[1] * to[1] + to[2] * to[2])
+    wi = to / np.where(dist > 0, dist, 1.0)
+    n_l = tri_normal[tri].T
+    cos_l = -(wi[0] * n_l[0] + wi[1] * n_l[1] + wi[2] * n_l[2])
+    if two_sided:
+        cos_l = np.abs(cos_l)
+    ok = (cos_l > 0) & (dist > 0)
+    pdf = np.where(ok, dist * dist / np.where(ok, cos_l * tri_area[tri], 1.0), 0.0)
+    valid = pdf > 0
+    return wi, dist, np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0), pdf, valid, cos_l, b1, b2
+
+
+@jit
+def _triangle_sample_loop(p, tri, u1, u2, faces, V, tri_normal, tri_area, two_sided, wi, dist, scale, pdf, valid,
+                          cos_out, b1_out, b2_out):
+    for i in range(p.shape[1]):
+        t = tri[i]
+        b1, b2, t0, t1, t2 = triangle_point_at(V, faces, t, u1[i], u2[i], p[0, i], p[1, i], p[2, i])
+        d = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        s = d if d > 0 else 1.0
+        x0, x1, x2 = t0 / s, t1 / s, t2 / s
+        cos_l = -(x0 * tri_normal[t, 0] + x1 * tri_normal[t, 1] + x2 * tri_normal[t, 2])
+        if two_sided:
+            cos_l = abs(cos_l)
+        q = d * d / (cos_l * tri_area[t]) if (cos_l > 0 and d > 0) else 0.0
+        wi[0, i], wi[1, i], wi[2, i] = x0, x1, x2
+        dist[i], pdf[i], valid[i], cos_out[i], b1_out[i], b2_out[i] = d, q, q > 0, cos_l, b1, b2
+        scale[i] = 1.0 / q if q > 0 else 0.0
+
+
+def triangle_sample_numba(p, tri, u1, u2, faces, vertices, tri_normal, tri_area, two_sided):
+    n = p.shape[1]
+    out = (np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_), np.empty(n), np.empty(n),
+           np.empty(n))
+    f64 = np.float64
+    _triangle_sample_loop(np.ascontiguousarray(p, dtype=f64), np.ascontiguousarray(tri, dtype=np.int64),
+                          np.ascontiguousarray(u1, dtype=f64), np.ascontiguousarray(u2, dtype=f64), faces, vertices,
+                          tri_normal, tri_area, bool(two_sided), *out)
+    return out
+
+
+triangle_sample = twin(_triangle_sample_loop and triangle_sample_numba, triangle_sample_numpy)
 
 
 def interpolate_vertex_attribute(faces, values, prim, u, v):

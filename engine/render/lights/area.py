@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from ...kernels.geometry import area_light_sample
+from ...kernels.geometry import area_light_sample, triangle_sample
 from ...kernels.lamp_sampling import bilinear_warp_pdf, bilinear_warp_sample, ellipse_lamp_pdf, ellipse_lamp_sample
 from ...kernels.light_sampling import (MIN_RECT_SOLID_ANGLE, SELECT_AREA, area_importance, rect_angles,
                                        rect_light_sample, rect_local, rect_sample)
@@ -191,14 +191,13 @@ class AreaEmitter(_Light):
         """Next-event samples on given triangles (the light tree's choice): a point uniform by area on
         triangle ``tri`` (n,) seen from p (3, n), ``sample``'s (wi, dist, scale, pdf, valid) with the pdf of
         the point given its triangle (``triangle_pdf``), and the points (triangle, b1, b2)."""
-        wi, dist, cos_l, where = self.points_on(p, tri, u1, u2)
-        pdf = self.triangle_pdf(dist, cos_l, tri)
-        valid = pdf > 0
-        scale = np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0)
+        c = self.compiled
+        wi, dist, scale, pdf, valid, cos_l, b1, b2 = triangle_sample(p, tri, u1, u2, c.faces, c.vertices, c.tri_normal,
+                                                                     c.tri_area, self.two_sided)
         if self.profile is not None:
             scale = scale * self.profile(cos_l)
             valid &= scale > 0
-        return wi, dist, scale, pdf, valid, where
+        return wi, dist, scale, pdf, valid, (tri, b1, b2)
 
     def triangle_pdf(self, dist, cos_l, prim):
         """Solid-angle pdf dist²/(cosθ·A) (n,) of points at dist, cos_l (emitting side) sampled uniformly by

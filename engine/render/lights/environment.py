@@ -9,6 +9,7 @@ import math
 import numpy as np
 
 from ...errors import SceneError
+from ...kernels import environment_map, twin
 from ...kernels.light_sampling import SELECT_CONSTANT
 from ...materials.sampling import uniform_sphere
 from ...spectral import luminance
@@ -29,9 +30,7 @@ class EnvironmentEmitter(_Light):
         return not self.varies_with_direction
 
     def sample(self, p, u):
-        wi = uniform_sphere(u)
-        n = p.shape[1]
-        return wi, np.full(n, np.inf), np.full(n, 4.0 * math.pi), np.full(n, 1.0 / (4.0 * math.pi)), np.ones(n, bool)
+        return _uniform_sample(u)
 
     def pdf(self, d):
         return np.full(d.shape[1], 1.0 / (4.0 * math.pi))
@@ -149,6 +148,7 @@ class EnvironmentMapEmitter(_Light):
         self.cell_pdf = np.where(omega > 0, prob / np.where(omega > 0, omega, 1.0), 0.0)   # per sr
         self.cdf = np.cumsum(prob.ravel())
         self.cdf[-1] = 1.0
+        self.cdf_guide = environment_map.cdf_guide(self.cdf)
         # mean radiance over the sphere (light selection): ∫ L dω / 4π
         rows = knot_rows.astype(np.float64)
         rows_right = np.roll(rows, -1, axis=1)
@@ -172,25 +172,6 @@ class EnvironmentMapEmitter(_Light):
         self._sky = sky
         self.polarisation = polarisation
 
-    def _bilinear(self, img, u, v):
-        """Bilinear lookup of ``img`` (H, W, C) on the map's texel grid at (u, v) (N,) each → (N, C)."""
-        H, W = img.shape[:2]
-        x = np.mod(u * W - 0.5, W)
-        i0 = np.minimum(np.floor(x), W - 1).astype(np.int64)
-        fx = (x - i0)[:, None]
-        if self.grid == "mitsuba":
-            y = v * (H - 1)
-            j0 = np.minimum(np.floor(y), H - 2).astype(np.int64)
-            fy = (y - j0)[:, None]
-        else:
-            y = v * H - 0.5
-            j0 = np.clip(np.floor(y), 0, H - 2).astype(np.int64)
-            fy = np.clip(y - j0, 0.0, 1.0)[:, None]
-        i1 = (i0 + 1) % W
-        top = img[j0, i0] * (1 - fx) + img[j0, i1] * fx
-        bot = img[j0 + 1, i0] * (1 - fx) + img[j0 + 1, i1] * fx
-        return top * (1 - fy) + bot * fy
-
     def emitted_polarisation(self, k):
         """(normalised Stokes (4, n), frame x (3, n)) of the sky light travelling along k (3, n), ω = −k: a
         clear sky's (``set_sky``), or the map's Stokes channels (bilinear) in its frame x = unit(Z_map × ω) (at
@@ -204,11 +185,11 @@ class EnvironmentMapEmitter(_Light):
             s = np.zeros((4, w.shape[1]))
             s[0], s[1] = 1.0, dolp
             return s, np.ascontiguousarray(e.T)
-        u, v = self._uv(w)
+        wm = self._to_map(w)
+        u, v = _uv_numpy(wm)
         s = np.empty((4, w.shape[1]))
         s[0] = 1.0
-        s[1:] = self._bilinear(self._stokes, u, v).T
-        wm = self._to_map(w)
+        s[1:] = bilinear_numpy(self._stokes, u, v, self.grid == "mitsuba").T
         x = np.stack((-wm[1], wm[0], np.zeros_like(wm[0])))
         norm = np.sqrt(x[0] ** 2 + x[1] ** 2)
         x = np.where(norm > 1e-12, x / np.where(norm > 1e-12, norm, 1.0), np.array([[0.0], [1.0], [0.0]]))
@@ -232,18 +213,11 @@ class EnvironmentMapEmitter(_Light):
         c, s = math.cos(self.rotation), math.sin(self.rotation)
         return np.stack((c * d[0] + s * d[1], -s * d[0] + c * d[1], d[2]))
 
-    def _uv(self, d):
-        dm = self._to_map(d)
-        norm = np.sqrt(dot(dm, dm))
-        u = np.mod(0.5 - np.arctan2(dm[1], dm[0]) / (2.0 * math.pi), 1.0)
-        v = np.arccos(np.clip(dm[2] / np.where(norm > 0, norm, 1.0), -1.0, 1.0)) / math.pi
-        return u, v
-
     def lookup_rgb(self, d):
-        """Linear sRGB radiance (N, 3) × strength in the world directions d (3, N)."""
-        u, v = self._uv(d)
-        rgb = self._bilinear(self._interpolated, u, v)
-        return (np.maximum(srgb_to_linear(rgb), 0.0) if self._decode else rgb) * self.strength
+        """Linear sRGB radiance (N, 3) × strength in the world directions d (3, N) (a view of a (3, N) array)."""
+        rgb = _map_lookup(*_uv_numpy(self._to_map(d)), self._interpolated, self.grid == "mitsuba",
+                          1.0 if self._decode else self.strength)
+        return (np.maximum(srgb_to_linear(rgb), 0.0) * self.strength if self._decode else rgb).T
 
     def emitted(self, d, lookup, rgb_mode: bool, mono: bool):
         """Radiance towards −d for rays travelling along d (3, n): RGB (3, n), mono luminance (1, n)
@@ -256,32 +230,13 @@ class EnvironmentMapEmitter(_Light):
         basis = lookup.basis
         return lookup.d65 * (rgb[0] * basis[0] + rgb[1] * basis[1] + rgb[2] * basis[2])
 
-    def _cell(self, u, v):
-        H, W = self.texels.shape[:2]
-        i = np.mod(np.floor(u * W - 0.5).astype(np.int64), W)
-        if self.grid == "mitsuba":
-            j = np.minimum(np.floor(v * (H - 1)), H - 2).astype(np.int64)
-        else:
-            j = np.clip(np.floor(v * H + 0.5), 0, H).astype(np.int64)
-        return j, i
-
     def sample(self, p, u):
-        W = self.texels.shape[1]
-        k = np.minimum(np.searchsorted(self.cdf, u[0], side="right"), self.cdf.size - 1)
-        j, i = np.divmod(k, W)
-        cos_t = self.cos_knots[j] + u[1] * (self.cos_knots[j + 1] - self.cos_knots[j])
-        sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
-        phi = math.pi * (1.0 - 2.0 * ((i + 0.5 + u[2]) / W))
-        dm = np.stack((sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t))
-        wi = self._to_world(dm)
-        pdf = self.cell_pdf[j, i]
-        valid = pdf > 0
-        n = p.shape[1]
-        return wi, np.full(n, np.inf), np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0), pdf, valid
+        dm, scale, pdf = _map_sample(self.cdf, self.cdf_guide, self.cos_knots, self.cell_pdf, u)
+        return self._to_world(dm), np.full(p.shape[1], np.inf), scale, pdf, pdf > 0
 
     def pdf(self, d):
         """Solid-angle pdf (N,) of ``sample`` producing the world directions d (3, N)."""
-        return self.cell_pdf[self._cell(*self._uv(d))]
+        return _map_pdf(*_uv_numpy(self._to_map(d)), self.cell_pdf, self.texels.shape[0], self.grid == "mitsuba")
 
     def rgb(self):
         """Mean linear sRGB radiance over the sphere (for light selection)."""
@@ -301,3 +256,83 @@ def _srgb_encode(linear):
     """sRGB transfer function (IEC 61966-2-1), the power law continued above 1; float64."""
     linear = np.asarray(linear, np.float64)
     return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.maximum(linear, 0.0031308) ** (1 / 2.4) - 0.055)
+
+
+# ----------------------------------------------------------------------------- the map's per-direction arithmetic
+# (NumPy references of engine.kernels.environment_map's compiled loops, paired below)
+
+def _uv_numpy(dm):
+    """(u, v) (N,) each of map-frame directions dm (3, N) (EnvironmentMapEmitter's convention)."""
+    norm = np.sqrt(dot(dm, dm))
+    u = np.mod(0.5 - np.arctan2(dm[1], dm[0]) / (2.0 * math.pi), 1.0)
+    v = np.arccos(np.clip(dm[2] / np.where(norm > 0, norm, 1.0), -1.0, 1.0)) / math.pi
+    return u, v
+
+
+def bilinear_numpy(img, u, v, mitsuba):
+    """Bilinear lookup of ``img`` (H, W, C) on the map's texel grid (``mitsuba``: knots at the rows, else Cycles'
+    texel centres) at (u, v) (N,) each, periodic in u → (N, C)."""
+    H, W = img.shape[:2]
+    x = np.mod(u * W - 0.5, W)
+    i0 = np.minimum(np.floor(x), W - 1).astype(np.int64)
+    fx = (x - i0)[:, None]
+    if mitsuba:
+        y = v * (H - 1)
+        j0 = np.minimum(np.floor(y), H - 2).astype(np.int64)
+        fy = (y - j0)[:, None]
+    else:
+        y = v * H - 0.5
+        j0 = np.clip(np.floor(y), 0, H - 2).astype(np.int64)
+        fy = np.clip(y - j0, 0.0, 1.0)[:, None]
+    i1 = (i0 + 1) % W
+    top = img[j0, i0] * (1 - fx) + img[j0, i1] * fx
+    bot = img[j0 + 1, i0] * (1 - fx) + img[j0 + 1, i1] * fx
+    return top * (1 - fy) + bot * fy
+
+
+def lookup_numpy(u, v, img, mitsuba, strength):
+    """The bilinear value (C, N) of ``img`` (H, W, C) at the map coordinates u, v (N,) each (``_uv_numpy``),
+    × ``strength``."""
+    return (bilinear_numpy(img, u, v, mitsuba) * strength).T
+
+
+def pdf_numpy(u, v, cell_pdf, H, mitsuba):
+    """Solid-angle pdf (N,) at the map coordinates u, v (N,) each: cell_pdf (K, W) of the bilinear piece holding
+    each (H: the map's rows)."""
+    W = cell_pdf.shape[1]
+    i = np.mod(np.floor(u * W - 0.5).astype(np.int64), W)
+    if mitsuba:
+        j = np.minimum(np.floor(v * (H - 1)), H - 2).astype(np.int64)
+    else:
+        j = np.clip(np.floor(v * H + 0.5), 0, H).astype(np.int64)
+    return cell_pdf[j, i]
+
+
+def sample_numpy(cdf, guide, cos_knots, cell_pdf, u):
+    """(map-frame directions (3, n), 1/pdf (0 where the pdf is 0) (n,), solid-angle pdf (n,)) for the numbers
+    u (3, n): the piece by u[0] on ``cdf`` (flat, row by row), uniform in solid angle inside it by u[1], u[2].
+    ``guide``: the cdf's coarse index (kernels.environment_map.cdf_guide), read by the compiled twin only."""
+    W = cell_pdf.shape[1]
+    k = np.minimum(np.searchsorted(cdf, u[0], side="right"), cdf.size - 1)
+    j, i = np.divmod(k, W)
+    cos_t = cos_knots[j] + u[1] * (cos_knots[j + 1] - cos_knots[j])
+    sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
+    phi = math.pi * (1.0 - 2.0 * ((i + 0.5 + u[2]) / W))
+    dm = np.stack((sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t))
+    pdf = cell_pdf[j, i]
+    valid = pdf > 0
+    return dm, np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0), pdf
+
+
+_map_lookup = twin(environment_map.lookup_numba, lookup_numpy)
+_map_pdf = twin(environment_map.pdf_numba, pdf_numpy)
+def uniform_sample_numpy(u):
+    """(directions uniform on the sphere (3, n), distance ∞, 1/pdf = 4π, pdf = 1/4π, valid (n,) each) from u (≥ 2, n)
+    (a constant sky's sample)."""
+    n = u.shape[1]
+    return (uniform_sphere(u), np.full(n, np.inf), np.full(n, 4.0 * math.pi), np.full(n, 1.0 / (4.0 * math.pi)),
+            np.ones(n, bool))
+
+
+_uniform_sample = twin(environment_map.uniform_sample_numba, uniform_sample_numpy)
+_map_sample = twin(environment_map.sample_numba, sample_numpy)
