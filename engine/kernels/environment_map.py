@@ -10,10 +10,11 @@ runs the same arithmetic in the same order per direction, without the batch-size
   v·(H − 1); else Cycles' texel centres, v·H − ½ clamped to the first and last rows), periodic in u,
   × ``strength`` → out (C, N) (an sRGB-interpolated map is decoded after, in NumPy);
 - ``pdf``: the solid-angle pdf cell_pdf[j, i] (per sr) of the bilinear piece holding each (u, v);
-- ``sample``: the piece by ``cdf`` (flat, over pieces row by row; u₀, numpy.searchsorted's "right" side, found
-  in the cells that ``cdf_guide``'s coarse index leaves), a
-  direction uniform in solid angle inside it (u₁ on cos θ between its knot rows, u₂ on its longitude) → the
-  map-frame direction (3, N), its pdf and 1/pdf (0 where the pdf is 0);
+- ``sample``: as Cycles' background map (light/background.h), the pair u₁, u₂ alone: the row by u₁ on the rows'
+  marginal ``row_cdf``, the piece within it by u₂ on the row's part of the flat ``cdf`` (numpy.searchsorted's
+  "right" side both), each number's remainder within its step placing the direction uniformly in solid angle
+  inside the piece (cos θ between its knot rows, longitude) → the map-frame direction (3, N), its pdf and 1/pdf
+  (0 where the pdf is 0); one continuous map of the pair, so a stratified pair stays stratified on the sphere;
 - ``uniform_sample``: a constant sky's sample (EnvironmentEmitter.sample): directions uniform on the sphere
   (z = 1 − 2u₀, φ = 2πu₁, as engine.materials.sampling.uniform_sphere), distance ∞, 1/pdf = 4π, pdf = 1/4π.
 """
@@ -65,44 +66,34 @@ def _pdf_loop(u_, v_, cell_pdf, H, mitsuba, out):
         out[k] = cell_pdf[j, i]
 
 
-#: buckets of ``cdf_guide`` at most: 8 KB, which stay cached between a render's calls.  Measured on the asset
-#: suite's 512 × 256 sky, 20 k samples with the caches flushed before each call: 3.4 ms a call without a guide,
-#: 2.3 ms with 1024 buckets, 2.5 ms with 16 k, 3.8 ms with one bucket a piece (2 MB, each bucket a cache miss).
-GUIDE_BUCKETS = 1024
-
-
-def cdf_guide(cdf):
-    """A coarse index (G + 1,) of the non-decreasing ``cdf`` (M,) ending at 1, G = the power of 2 ≥ M, at most
-    GUIDE_BUCKETS: guide[g] is the first index whose cdf exceeds g/G (numpy.searchsorted's "right" side), so the
-    first index whose cdf exceeds t ∈ [g/G, (g + 1)/G) lies in [guide[g], guide[g + 1]]: ``sample`` searches
-    those cells only."""
-    G = min(1 << max(int(cdf.shape[0] - 1).bit_length(), 0), GUIDE_BUCKETS)
-    return np.searchsorted(cdf, np.arange(G + 1) / G, side="right").astype(np.int64)
+@jit
+def _search_right(cdf, target, lo, hi):
+    """The first index in [lo, hi) whose ``cdf`` exceeds ``target`` (numpy.searchsorted's "right" side), hi if none."""
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if cdf[mid] <= target:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
 
 
 @jit
-def _sample_loop(cdf, guide, cos_knots, cell_pdf, u, dm, scale, pdf):
+def _sample_loop(cdf, row_cdf, row_prob, row_start, cos_knots, cell_pdf, u, dm, scale, pdf):
     W = cell_pdf.shape[1]
-    last = cdf.shape[0] - 1
-    G = guide.shape[0] - 1
+    K = row_prob.shape[0]
     for k in range(u.shape[1]):
-        target = u[0, k]
-        if target >= 0.0:                           # g/G ≤ target < (g + 1)/G exactly (G a power of 2)
-            g = min(np.int64(np.floor(target * G)), G - 1)
-            lo, hi = guide[g], guide[g + 1]
-        else:
-            lo, hi = 0, cdf.shape[0]
-        while lo < hi:                              # the first index whose cdf exceeds target
-            mid = (lo + hi) >> 1
-            if cdf[mid] <= target:
-                lo = mid + 1
-            else:
-                hi = mid
-        cell = min(lo, last)
-        j, i = cell // W, cell % W
-        cos_t = cos_knots[j] + u[1, k] * (cos_knots[j + 1] - cos_knots[j])
+        j = min(_search_right(row_cdf, u[1, k], 0, K), K - 1)
+        pj = row_prob[j]
+        dv = min(max((u[1, k] - (row_cdf[j] - pj)) / (pj if pj > 0 else 1.0), 0.0), 1.0)
+        target = row_start[j] + u[2, k] * pj
+        c = min(max(_search_right(cdf, target, j * W, j * W + W), j * W), j * W + W - 1)
+        i = c - j * W
+        cell = cdf[c] - (cdf[c - 1] if c > 0 else 0.0)
+        du = min(max((target - (cdf[c] - cell)) / (cell if cell > 0 else 1.0), 0.0), 1.0)
+        cos_t = cos_knots[j] + dv * (cos_knots[j + 1] - cos_knots[j])
         sin_t = np.sqrt(max(1.0 - cos_t * cos_t, 0.0))
-        phi = math.pi * (1.0 - 2.0 * ((i + 0.5 + u[2, k]) / W))
+        phi = math.pi * (1.0 - 2.0 * ((i + 0.5 + du) / W))
         dm[0, k] = sin_t * np.cos(phi)
         dm[1, k] = sin_t * np.sin(phi)
         dm[2, k] = cos_t
@@ -133,11 +124,11 @@ def pdf_numba(u, v, cell_pdf, H, mitsuba):
     return out
 
 
-def sample_numba(cdf, guide, cos_knots, cell_pdf, u):
+def sample_numba(cdf, row_cdf, row_prob, row_start, cos_knots, cell_pdf, u):
     u = np.asarray(u, np.float64)
     n = u.shape[1]
     dm, scale, pdf = np.empty((3, n)), np.empty(n), np.empty(n)
-    _sample_loop(cdf, guide, cos_knots, cell_pdf, u, dm, scale, pdf)
+    _sample_loop(cdf, row_cdf, row_prob, row_start, cos_knots, cell_pdf, u, dm, scale, pdf)
     return dm, scale, pdf
 
 

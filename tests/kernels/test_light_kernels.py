@@ -33,7 +33,7 @@ def _map(rng, dtype, grid, space, rotation=0.0, shape=(9, 16)):
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
 @pytest.mark.parametrize("grid", ["cycles", "mitsuba"])
 @pytest.mark.parametrize("space", ["linear", "srgb"])
-@pytest.mark.parametrize("shape", [(9, 16), (64, 128)])          # a guide of one bucket a piece, and of 1024
+@pytest.mark.parametrize("shape", [(9, 16), (64, 128)])
 def test_environment_map_lookup_pdf_and_sample_bitwise(dtype, grid, space, shape):
     from engine.render.lights import environment as env_module
     rng = np.random.default_rng(7)
@@ -47,13 +47,14 @@ def test_environment_map_lookup_pdf_and_sample_bitwise(dtype, grid, space, shape
         a, b = pair.compiled(*args), pair.reference(*args)
         assert a.shape == b.shape and np.array_equal(a, b), name
     u = rng.uniform(size=(3, 3000))
-    u[0, :3] = [0.0, np.nextafter(1.0, 0.0), env.cdf[5]]     # the ends of the cdf and a value on a step
-    G = env.cdf_guide.size - 1
-    u[0, 3:103] = rng.integers(0, G, 100) / G                  # on the guide's bucket boundaries
-    u[0, 103:203] = env.cdf[rng.integers(0, env.cdf.size - 1, 100)]     # on the cdf's steps
+    u[1, :3] = [0.0, np.nextafter(1.0, 0.0), env.row_cdf[5]]     # the ends of the rows' cdf and a value on a step
+    u[2, :3] = [np.nextafter(1.0, 0.0), 0.0, 0.5]
+    u[1, 103:203] = env.row_cdf[rng.integers(0, env.row_cdf.size - 1, 100)]     # on the rows' steps
+    u[2, 203:303] = 0.0                                                          # a row's first piece
+    u[2, 303:403] = np.nextafter(1.0, 0.0)                                       # … and its last
     pair = kernels.TWINS["render.lights.environment.sample"]
-    for a, b in zip(pair.compiled(env.cdf, env.cdf_guide, env.cos_knots, env.cell_pdf, u),
-                    pair.reference(env.cdf, env.cdf_guide, env.cos_knots, env.cell_pdf, u)):
+    args = (env.cdf, env.row_cdf, env.row_prob, env.row_start, env.cos_knots, env.cell_pdf, u)
+    for a, b in zip(pair.compiled(*args), pair.reference(*args)):
         assert a.shape == b.shape and np.array_equal(a, b)
 
 

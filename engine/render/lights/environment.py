@@ -148,7 +148,11 @@ class EnvironmentMapEmitter(_Light):
         self.cell_pdf = np.where(omega > 0, prob / np.where(omega > 0, omega, 1.0), 0.0)   # per sr
         self.cdf = np.cumsum(prob.ravel())
         self.cdf[-1] = 1.0
-        self.cdf_guide = environment_map.cdf_guide(self.cdf)
+        # rows (the marginal) and the flat cdf's value before each row: sample() picks the row, then the piece in it
+        self.row_prob = prob.sum(axis=1)
+        self.row_cdf = np.cumsum(self.row_prob)
+        self.row_cdf[-1] = 1.0
+        self.row_start = np.concatenate(([0.0], self.cdf[W - 1:-1:W]))
         # mean radiance over the sphere (light selection): ∫ L dω / 4π
         rows = knot_rows.astype(np.float64)
         rows_right = np.roll(rows, -1, axis=1)
@@ -231,7 +235,8 @@ class EnvironmentMapEmitter(_Light):
         return lookup.d65 * (rgb[0] * basis[0] + rgb[1] * basis[1] + rgb[2] * basis[2])
 
     def sample(self, p, u):
-        dm, scale, pdf = _map_sample(self.cdf, self.cdf_guide, self.cos_knots, self.cell_pdf, u)
+        dm, scale, pdf = _map_sample(self.cdf, self.row_cdf, self.row_prob, self.row_start, self.cos_knots,
+                                     self.cell_pdf, u)
         return self._to_world(dm), np.full(p.shape[1], np.inf), scale, pdf, pdf > 0
 
     def pdf(self, d):
@@ -308,16 +313,26 @@ def pdf_numpy(u, v, cell_pdf, H, mitsuba):
     return cell_pdf[j, i]
 
 
-def sample_numpy(cdf, guide, cos_knots, cell_pdf, u):
+def sample_numpy(cdf, row_cdf, row_prob, row_start, cos_knots, cell_pdf, u):
     """(map-frame directions (3, n), 1/pdf (0 where the pdf is 0) (n,), solid-angle pdf (n,)) for the numbers
-    u (3, n): the piece by u[0] on ``cdf`` (flat, row by row), uniform in solid angle inside it by u[1], u[2].
-    ``guide``: the cdf's coarse index (kernels.environment_map.cdf_guide), read by the compiled twin only."""
+    u (3, n), u[0] unused, as Cycles' background map (light/background.h): u[1] picks the row by the rows'
+    marginal ``row_cdf`` (``row_prob`` each), u[2] the piece within it by the row's part of the flat ``cdf`` (row by
+    row; ``row_start`` its value before each row), and each number's remainder within its step places the direction
+    uniformly in solid angle inside the piece.  One continuous map of the pair, so a stratified pair stays
+    stratified on the sphere (the flat cdf on one number stratified the rows only: BoomBox's σ² under its HDRI,
+    docs/benchmarks.md)."""
     W = cell_pdf.shape[1]
-    k = np.minimum(np.searchsorted(cdf, u[0], side="right"), cdf.size - 1)
-    j, i = np.divmod(k, W)
-    cos_t = cos_knots[j] + u[1] * (cos_knots[j + 1] - cos_knots[j])
+    j = np.minimum(np.searchsorted(row_cdf, u[1], side="right"), row_prob.size - 1)
+    pj = row_prob[j]
+    dv = np.clip((u[1] - (row_cdf[j] - pj)) / np.where(pj > 0, pj, 1.0), 0.0, 1.0)
+    target = row_start[j] + u[2] * pj
+    k = np.clip(np.searchsorted(cdf, target, side="right"), j * W, j * W + W - 1)
+    i = k - j * W
+    cell = cdf[k] - np.where(k > 0, cdf[k - 1], 0.0)
+    du = np.clip((target - (cdf[k] - cell)) / np.where(cell > 0, cell, 1.0), 0.0, 1.0)
+    cos_t = cos_knots[j] + dv * (cos_knots[j + 1] - cos_knots[j])
     sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
-    phi = math.pi * (1.0 - 2.0 * ((i + 0.5 + u[2]) / W))
+    phi = math.pi * (1.0 - 2.0 * ((i + 0.5 + du) / W))
     dm = np.stack((sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t))
     pdf = cell_pdf[j, i]
     valid = pdf > 0
@@ -326,6 +341,8 @@ def sample_numpy(cdf, guide, cos_knots, cell_pdf, u):
 
 _map_lookup = twin(environment_map.lookup_numba, lookup_numpy)
 _map_pdf = twin(environment_map.pdf_numba, pdf_numpy)
+
+
 def uniform_sample_numpy(u):
     """(directions uniform on the sphere (3, n), distance ∞, 1/pdf = 4π, pdf = 1/4π, valid (n,) each) from u (≥ 2, n)
     (a constant sky's sample)."""
