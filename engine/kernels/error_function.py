@@ -223,10 +223,10 @@ def erfcinv_giles(q: np.ndarray) -> np.ndarray:
     return np.maximum(np.where(lo, p1, p2) * y, 0.0)
 
 
-def erfcinv(q: np.ndarray) -> np.ndarray:
-    """x ≥ 0 with erfc(x) = q for q ∈ [1e-300, 1] (Giles' start, Newton polish to ~1e-15)."""
+def erfcinv(q: np.ndarray, start=erfcinv_giles) -> np.ndarray:
+    """x ≥ 0 with erfc(x) = q for q ∈ [1e-300, 1] (Newton polish to ~1e-15 from ``start(q)``, Giles')."""
     q = np.clip(q, 1e-300, 1.0)
-    x = erfcinv_giles(q)
+    x = start(q)
     # Giles' fit is single precision (and poor for q < 1e-7): Newton on ln erfc(x) = ln q, i.e.
     # x ← x + (ln erfc(x) − ln q)·(√π/2)·erfcx(x), which converges fast in the tail as well.
     # Only the points that have not converged are iterated.
@@ -255,12 +255,12 @@ def erfinv(y) -> np.ndarray:
     return np.where(q > 0, x, np.where(y > 0, np.inf, -np.inf))
 
 
-def erfinv_2u_minus_1(u: np.ndarray) -> np.ndarray:
-    """erfinv(2u − 1) for u ∈ [0, 1], computed from min(u, 1 − u) (accurate in both tails)."""
+def erfinv_2u_minus_1(u: np.ndarray, start=erfcinv_giles) -> np.ndarray:
+    """erfinv(2u − 1) for u ∈ [0, 1], computed from min(u, 1 − u) (accurate in both tails); ``start``: as erfcinv's."""
     u = np.clip(u, 1e-16, 1.0 - 1e-16)
     lower = u < 0.5
     q = 2.0 * np.where(lower, u, 1.0 - u)  # erfc(|x|) = q
-    x = erfcinv(q)
+    x = erfcinv(q, start)
     return np.where(lower, -x, x)
 
 
