@@ -206,11 +206,12 @@ GILES_HIGH = (-0.000200214257, 0.000100950558, 0.00134934322, -0.00367342844, 0.
               0.00943887047, 1.00167406, 2.83297682)
 
 
-def erfcinv_giles(q: np.ndarray) -> np.ndarray:
+def erfcinv_giles(q: np.ndarray, log=np.log) -> np.ndarray:
     """Approximate x ≥ 0 with erfc(x) = q ∈ (0, 1]: M. Giles (2010), "Approximating the erfinv
-    function" (single-precision fit, relative error ~1e-7 for q ≳ 1e-7, cruder beyond)."""
+    function" (single-precision fit, relative error ~1e-7 for q ≳ 1e-7, cruder beyond); ``log``: NumPy's or
+    another elementwise logarithm."""
     y = 1.0 - q  # erf(x) = y ∈ [0, 1)
-    w = -np.log(q * (2.0 - q))  # −log((1 − y)(1 + y)) without cancellation
+    w = -log(q * (2.0 - q))  # −log((1 − y)(1 + y)) without cancellation
     lo = w < 5.0
     wl = w - 2.5
     p1 = GILES_LOW[0]

@@ -31,10 +31,10 @@ _EXP_CUTOFF = 800.0           # engine.materials.microfacet._EXP_CUTOFF
 _PI = math.pi
 
 
-def _visible_slope_cdf(x: np.ndarray, t: np.ndarray) -> np.ndarray:
+def _visible_slope_cdf(x: np.ndarray, t: np.ndarray, exp=np.exp, erfcx=erfcx_nonneg) -> np.ndarray:
     """F(x) = erfc(−x) + t e^{−x²}/√π (unnormalised CDF of the visible slope x̃), tail-accurate."""
-    e = np.exp(-x * x)
-    r = erfcx_nonneg(np.abs(x))
+    e = exp(-x * x)
+    r = erfcx(np.abs(x))
     tp = t * _INV_SQRT_PI
     return np.where(x < 0, e * (r + tp), 2.0 + e * (tp - r))
 
@@ -44,25 +44,31 @@ def visible_slope_x_numpy(tan_t: np.ndarray, u1: np.ndarray) -> np.ndarray:
     return _visible_slope_x_solve(tan_t, u1, True)
 
 
-def _visible_slope_x_solve(tan_t: np.ndarray, u1: np.ndarray, use_table: bool) -> np.ndarray:
+def _visible_slope_x_solve(tan_t: np.ndarray, u1: np.ndarray, use_table: bool, libm: bool = False) -> np.ndarray:
     """visible_slope_x_numpy, started from the table (``use_table``) or, as before it existed, from the
-    Gaussian quantile / left-tail inverse everywhere (what builds the table)."""
+    Gaussian quantile / left-tail inverse everywhere; ``libm``: with exp, log and erfcx from the C library
+    (math.exp, math.log, math.erfc: what builds the table, see _start_table; erfcx for arguments ≤ 26)."""
+    if libm:
+        exp, log = _libm(math.exp, -math.inf, 700.0), _libm(math.log, 5e-324, math.inf)
+        erfcx = _libm(_erfcx_scalar, 0.0, 26.0)
+    else:
+        exp, log, erfcx = np.exp, np.log, erfcx_nonneg
     n = tan_t.shape[0]
     cot = np.where(tan_t > 0, 1.0 / np.where(tan_t > 0, tan_t, 1.0), np.inf)
     lo = np.full(n, -8.0)
     hi = np.minimum(cot, 8.0)
     # F(cotθ) = 2 exactly in double precision for cotθ ≥ 6 (e^{−36}·|t/√π − erfcx(cotθ)| < 2.3e-17)
-    z = np.where(cot >= 6.0, 2.0, _visible_slope_cdf(np.minimum(cot, 30.0), tan_t))
+    z = np.where(cot >= 6.0, 2.0, _visible_slope_cdf(np.minimum(cot, 30.0), tan_t, exp, erfcx))
     u = np.clip(u1, 0.0, 1.0)
     # Start: the tabulated x̃ at the Gaussian quantile g of u (_start_lookup_numpy); outside the table
     # the Gaussian quantile itself (exact for θ = 0) or, for large tanθ, the inverse of the left tail
     # ≈ e^{−x²}·(tanθ/√π)/F(cotθ).
     uc = np.clip(u, 1e-300, 1.0 - 1e-16)
     lower = uc < 0.5
-    xg = erfcinv_giles(2.0 * np.where(lower, uc, 1.0 - uc))
+    xg = erfcinv_giles(2.0 * np.where(lower, uc, 1.0 - uc), log)
     xg = np.where(lower, -xg, xg)
     arg = uc * z * SQRT_PI / np.maximum(tan_t, 1e-300)
-    xr = -np.sqrt(np.maximum(-np.log(np.minimum(arg, 1.0)), 0.0))
+    xr = -np.sqrt(np.maximum(-log(np.minimum(arg, 1.0)), 0.0))
     x = np.where(tan_t > 1.0, np.minimum(xr, hi), xg)
     if use_table:
         s = tan_t / (1.0 + tan_t)
@@ -74,12 +80,12 @@ def _visible_slope_x_solve(tan_t: np.ndarray, u1: np.ndarray, use_table: bool) -
     active = np.arange(n)
     xa, la, ha, ta, tga, tola = x.copy(), lo, hi, tan_t, target, tol
     for _ in range(100):
-        f = _visible_slope_cdf(xa, ta) - tga
+        f = _visible_slope_cdf(xa, ta, exp, erfcx) - tga
         hit = np.abs(f) <= tola
         la = np.where(f < 0, xa, la)
         ha = np.where(f > 0, xa, ha)
         # Halley step (F' = (2/√π) e^{−x²}(1 − x t), F'' = −(2/√π) e^{−x²}(2x(1 − x t) + t)).
-        g = _TWO_OVER_SQRT_PI * np.exp(-xa * xa)
+        g = _TWO_OVER_SQRT_PI * exp(-xa * xa)
         d1 = g * (1.0 - xa * ta)
         d2 = -g * (2.0 * xa * (1.0 - xa * ta) + ta)
         den = 2.0 * d1 * d1 - f * d2
@@ -116,16 +122,35 @@ START_G = 4.0           # g ∈ [−START_G, START_G]
 START_U_MIN = 7.7e-9
 
 
+def _libm(fn, lo, hi):
+    """``fn`` of the C library (math) over an array, its arguments clipped to [lo, hi] (NaN stays NaN)."""
+    def apply(a):
+        a = np.clip(np.asarray(a, dtype=np.float64), lo, hi)
+        return np.fromiter(map(fn, a.ravel().tolist()), np.float64, a.size).reshape(a.shape)
+    return apply
+
+
+def _erfcx_scalar(x: float) -> float:
+    """e^{x²} erfc(x) from the C library, 0 ≤ x ≤ 26 (relative error ≲ x²·1e-16: the table's needs)."""
+    return math.exp(x * x) * math.erfc(x)
+
+
 def _start_table() -> np.ndarray:
-    """x̃ (START_NS, START_NG) at s_i = i/(NS − 1), g_j = −G + 2Gj/(NG − 1), solved by the untabulated iteration."""
-    from .error_function import erfc
+    """x̃ (START_NS, START_NG) at s_i = i/(NS − 1), g_j = −G + 2Gj/(NG − 1), solved by the untabulated iteration.
+
+    The compiled kernels hold the table as a constant of their cached machine code, so every process must build
+    the same bits: the iteration's exp, log and erfcx are the C library's (NumPy's SIMD exp and log, and the
+    erfcx series fitted through LAPACK at import, differ in the last bit between CPUs and settings, and the
+    root moves with them by up to the stopping rule's tolerance); the rest is IEEE arithmetic, the same
+    everywhere.
+    """
     s = np.linspace(0.0, 1.0, START_NS)
     g = np.linspace(-START_G, START_G, START_NG)
     ss, gg = np.meshgrid(s, g, indexing="ij")
     t = np.where(ss < 1.0, ss / np.where(ss < 1.0, 1.0 - ss, 1.0), 1e300)
-    u = 0.5 * erfc(-gg)
-    with np.errstate(over="ignore", invalid="ignore"):
-        x = _visible_slope_x_solve(t.ravel(), u.ravel(), False).reshape(ss.shape)
+    u = 0.5 * _libm(math.erfc, -math.inf, math.inf)(-gg.ravel())
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        x = _visible_slope_x_solve(t.ravel(), u, False, libm=True).reshape(ss.shape)
     x = np.ascontiguousarray(x)
     x.setflags(write=False)
     return x
@@ -295,16 +320,27 @@ visible_slope_x = twin(_visible_slope_x_loop and visible_slope_x_numba, visible_
 # ỹ = erfc⁻¹(q), q = 2 min(u, 1 − u), polished by Newton steps on ln erfc that stop after a step below
 # 1e-9·(1 + ỹ) (engine.kernels.error_function.erfcinv).  Giles' single-precision start (~1e-7) takes two
 # steps; this one, ỹ = (1 − q)·p(w) with w = −ln(q(2 − q)) as Giles' but p fitted to double precision
-# (degree 14 in w on [0, 6.25], degree 14 in √w on [2.5, √18.5]; within 5·10⁻¹¹·(1 + ỹ), fitted at import to
-# the Newton-polished erfcinv), takes one.  Beyond w = 18.5 (q < 9.2·10⁻⁹) it is Giles' start.
+# (degree 14 in w on [0, 6.25], degree 14 in √w on [2.5, √18.5]; within 5·10⁻¹¹·(1 + ỹ), fitted to the
+# Newton-polished erfcinv), takes one.  Beyond w = 18.5 (q < 9.2·10⁻⁹) it is Giles' start.
 
 _YS_W_SPLIT = 6.25
 _YS_W_MAX = 18.5
 _YS_DEGREE = 14
+#: p in the mapped variable τ ∈ [−1, 1] of each branch, highest power first (_fit_erfcinv_start(); literals, so
+#: that the compiled code holds the same numbers in every process whatever NumPy's and LAPACK's last bits)
+_YS_LOW = (6.485665386852146e-07, 3.488932720750327e-06, -1.3011284502003529e-05, -9.812452713544168e-06,
+           9.468735105027324e-05, -0.00012076343388982066, -0.00026496810930874654, 0.0012340416918009698,
+           -0.001271553330574061, -0.004137636926633445, 0.017808345085603243, -0.022604417876217437,
+           -0.05892256632919925, 0.7504943192936285, 1.6536545626771852)
+_YS_HIGH = (1.915660485331897e-07, -4.7195013564991414e-07, -4.929129408087878e-07, 4.126279383197585e-06,
+            -9.00504326266143e-06, 5.150244274590919e-06, 3.279933031301438e-05, -0.000138091272050015,
+            0.0003250300478840566, -0.0005852306198228581, 0.00098903579776517, -0.0018804422948674592,
+            0.0032153358016027062, 0.9065714566349685, 3.235368966244533)
 
 
 def _fit_erfcinv_start():
-    """Monomial coefficients (highest first) of p in the mapped variable τ ∈ [−1, 1] of each branch."""
+    """The fit behind _YS_LOW and _YS_HIGH: Chebyshev least squares of p = erfc⁻¹(q)/(1 − q) at 400 nodes of
+    each branch (w, resp. √w, mapped to τ), converted to powers of τ (tests/kernels/test_beckmann_sampling.py)."""
     from .error_function import erfcinv
     cheb = np.polynomial.chebyshev
     n = 400
@@ -321,7 +357,6 @@ def _fit_erfcinv_start():
     return out
 
 
-_YS_LOW, _YS_HIGH = _fit_erfcinv_start()
 _YS_LOW_MID = 0.5 * _YS_W_SPLIT
 _YS_HIGH_A = math.sqrt(_YS_W_SPLIT)
 _YS_HIGH_MID = 0.5 * (math.sqrt(_YS_W_MAX) + _YS_HIGH_A)

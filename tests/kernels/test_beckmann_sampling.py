@@ -151,3 +151,24 @@ def test_sampled_slopes_follow_their_density(t):
     chi2.assert_accepted(chi2.interval_sampler_test(x, px, edges, order=8, sub=2), test_count=tests, what="x̃")
     chi2.assert_accepted(chi2.interval_sampler_test(y, lambda v: np.exp(-v * v) / math.sqrt(math.pi),
                                                     np.linspace(-6, 6, 41), order=8), test_count=tests, what="ỹ")
+
+
+def test_start_constants_are_reproducible():
+    """The compiled kernels hold the x̃ table and ỹ's coefficients as constants of their cached machine code:
+    the table is the same bits whatever NumPy's SIMD loops (a process with NumPy's AVX-512 loops allowed builds
+    it too), and the coefficients' polynomials are what their fit gives (to 1e-12; the least squares' last bits
+    differ between LAPACK kernels)."""
+    import hashlib
+    import os
+    import subprocess
+    import sys
+    from tests.conftest import REPO
+    env = {k: v for k, v in os.environ.items() if k not in ("NPY_DISABLE_CPU_FEATURES", "OPENBLAS_CORETYPE")}
+    code = ("import hashlib, engine.kernels.microfacet as mf; "
+            "print(hashlib.sha256(mf.START_TABLE.tobytes()).hexdigest())")
+    other = subprocess.run([sys.executable, "-c", code], cwd=REPO, env=env, capture_output=True, text=True, check=True)
+    assert other.stdout.strip() == hashlib.sha256(mf.START_TABLE.tobytes()).hexdigest()
+    assert np.array_equal(mf._start_table(), mf.START_TABLE)
+    tau = np.linspace(-1, 1, 1001)
+    for fitted, literal in zip(mf._fit_erfcinv_start(), (mf._YS_LOW, mf._YS_HIGH)):
+        assert np.max(np.abs(np.polyval(fitted, tau) - np.polyval(literal, tau))) <= 1e-12
