@@ -187,6 +187,8 @@ def _lagrange4(f):
     return (-(f * fm1 * fm2) / 6.0, (fp1 * fm1 * fm2) / 2.0, -(fp1 * f * fm2) / 2.0, (fp1 * f * fm1) / 6.0)
 
 
+_lagrange4_at = jit_inner(_lagrange4)
+
 @jit_inner
 def _start_lookup_at(s, g):
     """_start_lookup_numpy for one (s, g)."""
@@ -197,20 +199,8 @@ def _start_lookup_at(s, g):
     pg = (g + START_G) * _G_SCALE
     j = int(min(max(np.floor(pg), 1.0), START_NG - 3.0))
     fg = pg - j
-    fp1 = fs + 1.0
-    fm1 = fs - 1.0
-    fm2 = fs - 2.0
-    ws0 = -(fs * fm1 * fm2) / 6.0
-    ws1 = (fp1 * fm1 * fm2) / 2.0
-    ws2 = -(fp1 * fs * fm2) / 2.0
-    ws3 = (fp1 * fs * fm1) / 6.0
-    fp1 = fg + 1.0
-    fm1 = fg - 1.0
-    fm2 = fg - 2.0
-    wg0 = -(fg * fm1 * fm2) / 6.0
-    wg1 = (fp1 * fm1 * fm2) / 2.0
-    wg2 = -(fp1 * fg * fm2) / 2.0
-    wg3 = (fp1 * fg * fm1) / 6.0
+    ws0, ws1, ws2, ws3 = _lagrange4_at(fs)
+    wg0, wg1, wg2, wg3 = _lagrange4_at(fg)
     r0 = ((wg0 * tab[i - 1, j - 1] + wg1 * tab[i - 1, j]) + wg2 * tab[i - 1, j + 1]) + wg3 * tab[i - 1, j + 2]
     r1 = ((wg0 * tab[i, j - 1] + wg1 * tab[i, j]) + wg2 * tab[i, j + 1]) + wg3 * tab[i, j + 2]
     r2 = ((wg0 * tab[i + 1, j - 1] + wg1 * tab[i + 1, j]) + wg2 * tab[i + 1, j + 1]) + wg3 * tab[i + 1, j + 2]
@@ -495,30 +485,11 @@ def beckmann_g1_at(w0, w1, w2, h0, h1, h2, m, rational, coef, k):
     return chi_plus_at(w0, w1, w2, h0, h1, h2) / (1.0 + beckmann_lambda_at(a, coef, k))
 
 
-@jit
-def erfinv_2u_minus_1_at(u, coef, k):
-    """engine.kernels.error_function.erfinv_2u_minus_1 for one u (Giles' start, the same Newton steps)."""
-    u = min(max(u, 1e-16), 1.0 - 1e-16)
-    lower = u < 0.5
-    q = 2.0 * (u if lower else 1.0 - u)
-    q = min(max(q, 1e-300), 1.0)
-    x = erfcinv_giles_scalar(q)
-    log_q = np.log(q)
-    for _ in range(12):
-        ex = erfcx_nonneg_scalar(x, coef, k)
-        step = (np.log(ex) - x * x - log_q) * _HALF_SQRT_PI * ex
-        xn = max(x + step, 0.0)
-        x = xn
-        if not abs(step) > 1e-9 * (1.0 + xn):
-            break
-    return -x if lower else x
-
-
 @jit_inner
 def beckmann_vndf_at(o0, o1, o2, u0, u1, m, coef, k):
     """A visible facet normal h of ω_o = (o0, o1, o2) (engine.materials.microfacet.Beckmann.sample).
 
-    x̃ (visible_slope_x_at) and ỹ (erfinv_2u_minus_1_at) are independent: their iterations run in
+    x̃ (visible_slope_x_at) and ỹ (visible_slope_y_at) are independent: their iterations run in
     one loop, each with its own stopping rule and the same arithmetic, so the two latency-bound
     chains (erfcx, exp, log) overlap in the processor instead of running one after the other.
     """
@@ -537,7 +508,7 @@ def _beckmann_vndf_with(o0, o1, o2, u0, u1, m, coef, k, use_table):
         cos_p, sin_p = 1.0, 0.0
     # x̃: the start of visible_slope_x_at
     x, lo, hi, target, tol = _slope_x_start_with(t, u0, coef, k, use_table)
-    # ỹ: the start of erfinv_2u_minus_1_at
+    # ỹ: the start of visible_slope_y_at (Giles' before the fitted start, for tests/bench)
     v = min(max(u1, 1e-16), 1.0 - 1e-16)
     lower = v < 0.5
     q = 2.0 * (v if lower else 1.0 - v)
