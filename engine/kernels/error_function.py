@@ -206,11 +206,12 @@ GILES_HIGH = (-0.000200214257, 0.000100950558, 0.00134934322, -0.00367342844, 0.
               0.00943887047, 1.00167406, 2.83297682)
 
 
-def erfcinv_giles(q: np.ndarray) -> np.ndarray:
+def erfcinv_giles(q: np.ndarray, log=np.log) -> np.ndarray:
     """Approximate x ≥ 0 with erfc(x) = q ∈ (0, 1]: M. Giles (2010), "Approximating the erfinv
-    function" (single-precision fit, relative error ~1e-7 for q ≳ 1e-7, cruder beyond)."""
+    function" (single-precision fit, relative error ~1e-7 for q ≳ 1e-7, cruder beyond); ``log``: NumPy's or
+    another elementwise logarithm."""
     y = 1.0 - q  # erf(x) = y ∈ [0, 1)
-    w = -np.log(q * (2.0 - q))  # −log((1 − y)(1 + y)) without cancellation
+    w = -log(q * (2.0 - q))  # −log((1 − y)(1 + y)) without cancellation
     lo = w < 5.0
     wl = w - 2.5
     p1 = GILES_LOW[0]
@@ -223,10 +224,10 @@ def erfcinv_giles(q: np.ndarray) -> np.ndarray:
     return np.maximum(np.where(lo, p1, p2) * y, 0.0)
 
 
-def erfcinv(q: np.ndarray) -> np.ndarray:
-    """x ≥ 0 with erfc(x) = q for q ∈ [1e-300, 1] (Giles' start, Newton polish to ~1e-15)."""
+def erfcinv(q: np.ndarray, start=erfcinv_giles) -> np.ndarray:
+    """x ≥ 0 with erfc(x) = q for q ∈ [1e-300, 1] (Newton polish to ~1e-15 from ``start(q)``, Giles')."""
     q = np.clip(q, 1e-300, 1.0)
-    x = erfcinv_giles(q)
+    x = start(q)
     # Giles' fit is single precision (and poor for q < 1e-7): Newton on ln erfc(x) = ln q, i.e.
     # x ← x + (ln erfc(x) − ln q)·(√π/2)·erfcx(x), which converges fast in the tail as well.
     # Only the points that have not converged are iterated.
@@ -255,12 +256,12 @@ def erfinv(y) -> np.ndarray:
     return np.where(q > 0, x, np.where(y > 0, np.inf, -np.inf))
 
 
-def erfinv_2u_minus_1(u: np.ndarray) -> np.ndarray:
-    """erfinv(2u − 1) for u ∈ [0, 1], computed from min(u, 1 − u) (accurate in both tails)."""
+def erfinv_2u_minus_1(u: np.ndarray, start=erfcinv_giles) -> np.ndarray:
+    """erfinv(2u − 1) for u ∈ [0, 1], computed from min(u, 1 − u) (accurate in both tails); ``start``: as erfcinv's."""
     u = np.clip(u, 1e-16, 1.0 - 1e-16)
     lower = u < 0.5
     q = 2.0 * np.where(lower, u, 1.0 - u)  # erfc(|x|) = q
-    x = erfcinv(q)
+    x = erfcinv(q, start)
     return np.where(lower, -x, x)
 
 

@@ -46,8 +46,8 @@ Gaussian_Slope_Distribution_Function and Mitsuba 3), not Torrance & Sparrow's 19
 the facet angle θ_h itself (docs/physics.md §3, Eq. 3.4).
 
 erf/erfc/erfcx/erfinv come from engine.kernels.error_function (NumPy only, no scipy), the
-visible-slope inversion from engine.kernels.microfacet (compiled when Numba is available; in
-NumPy it costs ~1.5 µs per sample: 3–4 Halley steps, each one erfcx).
+visible-slope inversion from engine.kernels.microfacet (compiled when Numba is available; one
+Halley step from a tabulated start, one Newton step for ỹ, each one erfcx).
 """
 
 from __future__ import annotations
@@ -58,7 +58,7 @@ import numpy as np
 
 # erf, erfc, erfcx, erfinv: re-exported, the special functions of this model's formulas
 from ..kernels.error_function import SQRT_PI, erf, erfc, erfcx, erfcx_nonneg, erfinv, erfinv_2u_minus_1  # noqa: F401
-from ..kernels.microfacet import g_vcavity, visible_slope_x
+from ..kernels.microfacet import g_vcavity, visible_slope_x, visible_slope_y
 
 _INV_SQRT_PI = 1.0 / SQRT_PI
 #: exp(−x) for x beyond this is exactly 0 in double precision (and D is set to 0 there).
@@ -218,9 +218,9 @@ class Beckmann(MicrofacetDistribution):
         """Visible slopes (x̃, ỹ) of the unit-roughness Beckmann surface seen from θ with tanθ = tan_t ≥ 0.
 
         x̃ has density ∝ (1 − x̃ tanθ) e^{−x̃²} on x̃ < cotθ (engine.kernels.microfacet); ỹ is
-        independent with density e^{−ỹ²}/√π: ỹ = erfinv(2u₂ − 1).
+        independent with density e^{−ỹ²}/√π: ỹ = erfinv(2u₂ − 1) (engine.kernels.microfacet.visible_slope_y).
         """
-        return visible_slope_x(tan_t, u1), erfinv_2u_minus_1(u2)
+        return visible_slope_x(tan_t, u1), visible_slope_y(u2)
 
     def sample(self, wo: np.ndarray, u: np.ndarray) -> np.ndarray:
         m = self.m
