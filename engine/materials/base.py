@@ -45,7 +45,7 @@ if TYPE_CHECKING:
     from ..textures import SurfacePoints
 
 __all__ = ["BSDF", "BSDFFlags", "BSDFSample", "DeltaVertices", "LobeColors", "MuellerValue", "ShadingPoint",
-           "depolarising_value"]
+           "assemble_values", "depolarising_value", "take_value"]
 
 
 @dataclass
@@ -361,3 +361,43 @@ class BSDF:
     def describe(self) -> dict[str, object]:
         """Parameters for logs and file headers."""
         return {"type": self.name}
+
+
+def take_value(v: MuellerValue, idx: np.ndarray) -> MuellerValue:
+    """The lanes ``idx`` (integer indices) of a value: every array along its last axis."""
+    def t(a):
+        return None if a is None else np.take(a, idx, axis=-1)
+    if v.kind == "general":
+        return MuellerValue("general", t(v.x_in), t(v.x_out), M=t(v.M))
+    return MuellerValue(v.kind, t(v.x_in), t(v.x_out), t(v.A), t(v.B), t(v.C), t(v.S), depol=t(v.depol))
+
+
+def assemble_values(parts, n: int, L: int, frames) -> MuellerValue:
+    """One value over n lanes from [(lanes idx, value over those lanes)] (zero elsewhere), of the
+    cheapest kind that holds them all; ``frames()`` gives (x_in, x_out) for the lanes whose value
+    is depolarising (any frame holds a depolariser)."""
+    kinds = {v.kind for _, v in parts}
+    if kinds <= {"depolarising"}:
+        A = np.zeros((L, n))
+        for idx, v in parts:
+            A[:, idx] = v.A
+        return depolarising_value(A, n)
+    x_in, x_out = frames()
+    for idx, v in parts:
+        if v.kind != "depolarising":
+            x_in[:, idx], x_out[:, idx] = v.x_in, v.x_out
+    if kinds <= {"depolarising", "abcs"}:
+        A, B, C, S, D = (np.zeros((L, n)) for _ in range(5))
+        shared = False
+        for idx, v in parts:
+            if v.kind == "depolarising":
+                D[:, idx], shared = v.A, True
+                continue
+            A[:, idx], B[:, idx], C[:, idx], S[:, idx] = v.A, v.B, v.C, v.S
+            if v.depol is not None:
+                D[:, idx], shared = v.depol, True
+        return MuellerValue("abcs", x_in, x_out, A, B, C, S, depol=D if shared else None)
+    M = np.zeros((4, 4, L, n))
+    for idx, v in parts:
+        M[..., idx] = v.matrix()
+    return MuellerValue("general", x_in, x_out, M=M)

@@ -57,7 +57,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ShadingPoint, depolarising_value
+from .base import (BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ShadingPoint, assemble_values,
+                   depolarising_value, take_value)
 from .lambert import Lambert
 from .normal_map import ShadingNormal
 from .parameters import ModelDeclaration, Parameter
@@ -268,46 +269,6 @@ def add_values(terms, n: int, L: int, k_in: np.ndarray, k_out: np.ndarray, n_s: 
     if all(v.kind == "abcs" for v in pol) and all(_is_identity_rotation(r) for r in rotations):
         return _sum_abcs(pol, dep, x_in, x_out)
     return _sum_general(pol, rotations, dep, x_in, x_out, n, L)
-
-
-def _take_value(v: MuellerValue, idx: np.ndarray) -> MuellerValue:
-    """The lanes ``idx`` of a value."""
-    def t(a):
-        return None if a is None else np.take(a, idx, axis=-1)
-    if v.kind == "general":
-        return MuellerValue("general", t(v.x_in), t(v.x_out), M=t(v.M))
-    return MuellerValue(v.kind, t(v.x_in), t(v.x_out), t(v.A), t(v.B), t(v.C), t(v.S), depol=t(v.depol))
-
-
-def _assemble(parts, n: int, L: int, frames) -> MuellerValue:
-    """One value over n lanes from [(lanes idx, value over those lanes)] (zero elsewhere), of the
-    cheapest kind that holds them all; ``frames()`` gives (x_in, x_out) for the lanes whose value
-    is depolarising (any frame holds a depolariser)."""
-    kinds = {v.kind for _, v in parts}
-    if kinds <= {"depolarising"}:
-        A = np.zeros((L, n))
-        for idx, v in parts:
-            A[:, idx] = v.A
-        return depolarising_value(A, n)
-    x_in, x_out = frames()
-    for idx, v in parts:
-        if v.kind != "depolarising":
-            x_in[:, idx], x_out[:, idx] = v.x_in, v.x_out
-    if kinds <= {"depolarising", "abcs"}:
-        A, B, C, S, D = (np.zeros((L, n)) for _ in range(5))
-        shared = False
-        for idx, v in parts:
-            if v.kind == "depolarising":
-                D[:, idx], shared = v.A, True
-                continue
-            A[:, idx], B[:, idx], C[:, idx], S[:, idx] = v.A, v.B, v.C, v.S
-            if v.depol is not None:
-                D[:, idx], shared = v.depol, True
-        return MuellerValue("abcs", x_in, x_out, A, B, C, S, depol=D if shared else None)
-    M = np.zeros((4, 4, L, n))
-    for idx, v in parts:
-        M[..., idx] = v.matrix()
-    return MuellerValue("general", x_in, x_out, M=M)
 
 
 # --------------------------------------------------------------------------- shading points
@@ -594,7 +555,7 @@ class Mix(BSDF):
             d = np.flatnonzero(bs.is_delta & bs.valid)
             if d.size:
                 ratio = weights[j][sel[d]] / p[j, sel[d]]
-                parts.append((sel[d], _take_value(bs.weight, d).scaled(ratio[None, :])))
+                parts.append((sel[d], take_value(bs.weight, d).scaled(ratio[None, :])))
         smooth = np.flatnonzero(valid & ~is_delta)
         if smooth.size:
             sub = sp.take(smooth)
@@ -611,7 +572,7 @@ class Mix(BSDF):
 
         def frames():
             return plane_of_incidence_axis(sp.n_s, -wi), plane_of_incidence_axis(sp.n_s, sp.wo)
-        return BSDFSample(wi=wi, weight=_assemble(parts, n, L, frames), pdf=pdf, is_delta=is_delta & valid,
+        return BSDFSample(wi=wi, weight=assemble_values(parts, n, L, frames), pdf=pdf, is_delta=is_delta & valid,
                           valid=valid, eta_sq=eta_sq)
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
