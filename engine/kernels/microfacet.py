@@ -26,6 +26,7 @@ _TWO_OVER_SQRT_PI = 2.0 / SQRT_PI
 _HALF_SQRT_PI = 0.5 * SQRT_PI
 _EXP_CUTOFF = 800.0           # engine.materials.microfacet._EXP_CUTOFF
 _PI = math.pi
+_GGX_FLAT_TAN2 = 1e150       # engine.materials.ggx._FLAT_TAN2
 
 
 def _visible_slope_cdf(x: np.ndarray, t: np.ndarray) -> np.ndarray:
@@ -309,6 +310,8 @@ def ggx_d_at(h0, h1, h2, alpha):
     if not (h2 > 0 and np.isfinite(t2)):
         return 0.0
     a2 = alpha * alpha
+    if t2 > _GGX_FLAT_TAN2:         # cosθ_h < 1e-75: (1 + t)² would overflow; GGX.D's limit α²/π
+        return a2 / _PI
     q = 1.0 + t2 / a2
     one_t = 1.0 + t2
     return one_t * one_t / (_PI * a2 * q * q)
