@@ -70,7 +70,23 @@ class ShadingPoint:
 
     @property
     def cos_o(self) -> np.ndarray:
-        return self.n_s[0] * self.wo[0] + self.n_s[1] * self.wo[1] + self.n_s[2] * self.wo[2]
+        """n_s·ω_o (N,) (computed once per batch: ``memo``)."""
+        return self.memo(None, "cos_o", lambda: self.n_s[0] * self.wo[0] + self.n_s[1] * self.wo[1]
+                         + self.n_s[2] * self.wo[2])
+
+    def memo(self, owner, key: str, compute):
+        """``compute()`` once per batch for ``owner`` (a material, or None) and ``key``: a value that is a function
+        of these points alone (cosθ_o, a mixture's weights, a model's index …), kept on this object; ``take`` and
+        ``flipped`` make new batches, without it.  The value is shared: callers must not write into it."""
+        memo = self.__dict__.get("_memo")
+        if memo is None:
+            memo = self.__dict__["_memo"] = {}
+        hit = memo.get((id(owner), key))
+        if hit is not None and hit[0] is owner:
+            return hit[1]
+        value = compute()
+        memo[(id(owner), key)] = (owner, value)
+        return value
 
     def spectrum(self, spec: Spectrum) -> np.ndarray:
         """A material parameter (engine.spectral Spectrum) at this batch's wavelengths, (L, N);

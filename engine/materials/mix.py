@@ -432,6 +432,15 @@ class Mix(BSDF):
     def _weights(self, sp: ShadingPoint) -> list[np.ndarray]:
         return [_weight_at(sp, w) for w in self.weights]
 
+    def _weights_at(self, sp: ShadingPoint) -> list[np.ndarray]:
+        """``_weights(sp)``, computed once per batch (ShadingPoint.memo: next-event estimation evaluates and
+        asks the pdf at the same points; a Layered's weights read its top layer's albedo)."""
+        return sp.memo(self, "weights", lambda: self._weights(sp))
+
+    def _probabilities_at(self, sp: ShadingPoint, points) -> np.ndarray:
+        """``_probabilities`` at the batch ``sp`` (its ``_points``), computed once per batch."""
+        return sp.memo(self, "probabilities", lambda: self._probabilities(points, self._weights_at(sp)))
+
     def _probabilities(self, points, weights) -> np.ndarray:
         """(K, N) lobe-selection probabilities p_k ∝ w_k·a_k (0 where every weight is 0)."""
         if not self.components:
@@ -469,7 +478,7 @@ class Mix(BSDF):
         return None
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        return self._sum(sp, self._points(sp), self._weights(sp), wi, cosine=False)
+        return self._sum(sp, self._points(sp), self._weights_at(sp), wi, cosine=False)
 
     def diffuse_share(self, sp: ShadingPoint, wi: np.ndarray, f: MuellerValue) -> np.ndarray | None:
         """Σ w_k·d_k (L, N): each component's diffuse part at its own point, weighted as ``eval`` weights its
@@ -479,7 +488,7 @@ class Mix(BSDF):
             return super().diffuse_share(sp, wi, f)
         cos_s = np.abs(dot(sp.n_s, wi))
         out = np.zeros(f.m00().shape)
-        for c, q, w in zip(self.components, self._points(sp), self._weights(sp)):
+        for c, q, w in zip(self.components, self._points(sp), self._weights_at(sp)):
             if not w.any() or not c.flags.has(BSDFFlags.DIFFUSE):
                 continue
             d = c.diffuse_share(q, wi, c.eval(q, wi))
@@ -494,7 +503,7 @@ class Mix(BSDF):
         """Σ w_k·colours_k, each component's at its own point (a Layered's base under the layer's attenuation:
         Cycles' closure weights after ``closure_layering_weight``); None if a component has none."""
         out = LobeColors.of(sp)
-        for c, q, w in zip(self.components, self._points(sp), self._weights(sp)):
+        for c, q, w in zip(self.components, self._points(sp), self._weights_at(sp)):
             if not w.any():
                 continue
             colors = c.lobe_colors(q)
@@ -512,20 +521,20 @@ class Mix(BSDF):
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         points = self._points(sp)
-        return self._pdf(points, self._probabilities(points, self._weights(sp)), wi)
+        return self._pdf(points, self._probabilities_at(sp, points), wi)
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         n, L = sp.n, sp.lam.shape[0]
         if not self.components:     # every weight was 0: black
             return BSDFSample(wi=sp.n_s.copy(), weight=depolarising_value(np.zeros((L, n)), n), pdf=np.zeros(n),
                               is_delta=np.zeros(n, bool), valid=np.zeros(n, bool), eta_sq=np.ones(n))
-        points, weights = self._points(sp), self._weights(sp)
+        points, weights = self._points(sp), self._weights_at(sp)
         if len(self.components) == 1:
             bs = self.components[0].sample(points[0], u_lobe, u_dir)
             w = weights[0]
             return BSDFSample(wi=bs.wi, weight=bs.weight.scaled(w[None, :]), pdf=bs.pdf, is_delta=bs.is_delta,
                               valid=bs.valid & (w > 0), eta_sq=bs.eta_sq)
-        p = self._probabilities(points, weights)
+        p = self._probabilities_at(sp, points)
         cols = np.arange(n)
         some = p.sum(axis=0) > 0
         cdf = np.cumsum(p, axis=0)
@@ -576,7 +585,7 @@ class Mix(BSDF):
                           valid=valid, eta_sq=eta_sq)
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
-        points, weights = self._points(sp), self._weights(sp)
+        points, weights = self._points(sp), self._weights_at(sp)
         terms = []
         for c, q, w in zip(self.components, points, weights):
             if not c.flags.has(BSDFFlags.DELTA_REFLECTION) or not w.any():

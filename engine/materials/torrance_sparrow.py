@@ -692,7 +692,9 @@ class TorranceSparrow(BSDF):
         return per_point(m if sel is None else m[sel])
 
     def relative_eta(self, sp: ShadingPoint) -> np.ndarray:
-        return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
+        """(n + iκ)/exterior_n (L, N) at the points (once per batch: ShadingPoint.memo)."""
+        return sp.memo(self, "relative_eta",
+                       lambda: (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n)
 
     def _p_spec(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray:
         """Probability of sampling the specular lobe (N,), a function of ω_o only."""
@@ -739,9 +741,10 @@ class TorranceSparrow(BSDF):
 
     def multiscatter_extra(self, sp: ShadingPoint) -> np.ndarray:
         """k (L, N) or (1, N) of the multiple-scattering compensation (module docstring): the facet
-        lobe's S0 is (1 + k) times its single-scattering value."""
-        return conductor_extra(np.clip(sp.cos_o, 0.0, 1.0), sp.number(self.m), self._eta(sp),
-                               correlated=self.shadowing == "smith_correlated")
+        lobe's S0 is (1 + k) times its single-scattering value (once per batch: ShadingPoint.memo)."""
+        correlated = self.shadowing == "smith_correlated"
+        return sp.memo(self, "multiscatter_extra", lambda: conductor_extra(
+            np.clip(sp.cos_o, 0.0, 1.0), sp.number(self.m), self._eta(sp), correlated=correlated))
 
     def _depol(self, sp: ShadingPoint, valid: np.ndarray, cos_o) -> np.ndarray | None:
         """The Lambert term d·ρ/π (L, N) (times the ``"albedo_scaling"`` weight), 0 where not valid."""
