@@ -794,15 +794,18 @@ class TorranceSparrow(BSDF):
 
     def _eta(self, sp: ShadingPoint) -> np.ndarray:
         """The relative index for the twins: (1, 1) for constant n and κ (the value every entry of
-        ``relative_eta`` has, computed the same way), else ``relative_eta`` (L, N)."""
-        # not cached: a configured copy may change exterior_n (engine.materials.weidlich_wilkie)
+        ``relative_eta`` has, computed the same way), else ``relative_eta`` (L, N); once per batch (a configured
+        copy that changes exterior_n, engine.materials.weidlich_wilkie, is another owner)."""
         if isinstance(self.n, ConstantSpectrum) and isinstance(self.k, ConstantSpectrum):
-            return (np.full((1, 1), self.n.value) + 1j * np.full((1, 1), self.k.value)) / self.exterior_n
+            return sp.memo(self, "eta", lambda: (np.full((1, 1), self.n.value) + 1j * np.full((1, 1), self.k.value))
+                           / self.exterior_n)
         return self.relative_eta(sp)
 
     def _mixture_inputs(self, sp: ShadingPoint, compact: bool = False):
-        """(p_given, eta, s, w_d) for the mixture pdf and sampling (``compact``: eta as ``_eta``)."""
-        p_given, w_d = self._p_spec_inputs(sp, sp.cos_o if self._albedo is not None else None)
+        """(p_given, eta, s, w_d) for the mixture pdf and sampling (``compact``: eta as ``_eta``); the lobe choice's
+        inputs once per batch."""
+        p_given, w_d = sp.memo(self, "p_spec_inputs",
+                               lambda: self._p_spec_inputs(sp, sp.cos_o if self._albedo is not None else None))
         return p_given, self._eta(sp) if compact else self.relative_eta(sp), sp.number(self.s), w_d
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
