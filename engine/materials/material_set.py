@@ -53,8 +53,8 @@ class SetShadingPoint(ShadingPoint):
     parts: tuple = ()
     pos: np.ndarray | None = None
 
-    def take(self, sel) -> SetShadingPoint:
-        base = super().take(sel)
+    def take(self, sel, shared: dict | None = None) -> SetShadingPoint:
+        base = super().take(sel, shared)
         sel = np.arange(self.n)[sel]
         parts, pos = [None] * len(self.parts), np.empty(sel.size, np.int64)
         for j, idx in _members(base.material, len(self.parts)):

@@ -286,8 +286,9 @@ class MixShadingPoint(ShadingPoint):
         return MixShadingPoint(base.p, base.n_s, base.n_g, base.wo, base.lam, base.mono, base.lookup, base.material,
                                base.surface, self.owner, tuple(parts))
 
-    def take(self, sel) -> MixShadingPoint:
-        return self._with(super().take(sel), (None if q is None else q.take(sel) for q in self.parts))
+    def take(self, sel, shared: dict | None = None) -> MixShadingPoint:
+        shared = {} if shared is None else shared       # the components' points share the hit's arrays
+        return self._with(super().take(sel, shared), (None if q is None else q.take(sel, shared) for q in self.parts))
 
     def flipped(self, where: np.ndarray) -> MixShadingPoint:
         return self._with(super().flipped(where), (None if q is None else q.flipped(where) for q in self.parts))
@@ -567,8 +568,9 @@ class Mix(BSDF):
                 parts.append((sel[d], take_value(bs.weight, d).scaled(ratio[None, :])))
         smooth = np.flatnonzero(valid & ~is_delta)
         if smooth.size:
-            sub = sp.take(smooth)
-            sub_points = [sub if q is sp else q.take(smooth) for q in points]
+            shared = {}         # (the components' points share the hit's arrays: gathered once)
+            sub = sp.take(smooth, shared)
+            sub_points = [sub if q is sp else q.take(smooth, shared) for q in points]
             w_sub = [w[smooth] for w in weights]
             d_sub = np.take(wi, smooth, axis=1)
             density = self._pdf(sub_points, p[:, smooth], d_sub)

@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
+from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, take_lanes
 from ..textures import ImageTexture, TextureInput
 from ..vec3 import dot, reflect
 
@@ -108,10 +108,8 @@ class MappedShadingPoint(ShadingPoint):
         return MappedShadingPoint(base.p, base.n_s, base.n_g, base.wo, base.lam, base.mono, base.lookup,
                                   base.material, base.surface, n_smooth)
 
-    def take(self, sel) -> MappedShadingPoint:
-        sub = super().take(sel)
-        return self._with(sub, np.take(self.n_smooth, sel, axis=-1) if isinstance(sel, np.ndarray) and
-                          sel.dtype != np.bool_ else self.n_smooth[:, sel])
+    def take(self, sel, shared: dict | None = None) -> MappedShadingPoint:
+        return self._with(super().take(sel, shared), take_lanes(self.n_smooth, sel, shared))
 
     def flipped(self, where: np.ndarray) -> MappedShadingPoint:
         return self._with(super().flipped(where), self.n_smooth * np.where(where, -1.0, 1.0)[None, :])
