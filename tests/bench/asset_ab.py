@@ -10,7 +10,8 @@ twice to warm up (kernels compiled or loaded, tables built).  The driver then as
 prints per case the median over ``--rounds`` of each side's process CPU seconds per render (all its
 threads; wall seconds beside), the ratio this ÷ base of the medians and its range over the rounds' pairs,
 and the load average before and after.  ``--identical`` also checks that both trees give the same Stokes
-image (seed 0) bit for bit (each side then builds its albedo tables itself: POLAR_TABLE_CACHE=0).  Not part of the test command (it times).
+image (seed 0) bit for bit (each side then builds its albedo tables itself: POLAR_TABLE_CACHE=0).  Not part of
+the test command (it times).
 """
 
 from __future__ import annotations

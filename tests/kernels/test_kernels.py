@@ -956,6 +956,20 @@ def test_ggx_torrance_sparrow_material_compiled_equals_numpy_steps(kw, monkeypat
     assert 0.5 * n < want[9].sum() and np.count_nonzero(want[2]) > n // 3
 
 
+@needs_numba
+def test_ggx_d_at_takes_the_flat_limit_as_ggx_d():
+    """Facets within 1e-75 of the horizon: (1 + tan²θ_h)² overflows, both D's give the limit α²/π (the compiled
+    one gave NaN), and elsewhere the same bits."""
+    from engine.kernels.microfacet import ggx_d_at
+    from engine.materials.ggx import GGX
+    h = np.array([[1.0, 0.6, 0.0, 0.3], [0.0, 0.0, 0.0, 0.1], [1e-80, 0.8, 1.0, 1e-70]])
+    h /= np.linalg.norm(h, axis=0)
+    for alpha in (1e-4, 0.3, 1.0):
+        got = np.array([ggx_d_at(*h[:, i], alpha) for i in range(h.shape[1])])
+        want = GGX(alpha).D(h)
+        assert np.array_equal(got, want) and got[0] == alpha * alpha / np.pi and np.all(np.isfinite(got))
+
+
 # ----------------------------------------------------------------------------- rough dielectric passes
 
 @needs_numba
