@@ -327,7 +327,7 @@ def ggx_lambda_at(w0, w1, w2, alpha):
     return 0.5 * x / (np.sqrt(1.0 + x) + 1.0)
 
 
-@jit
+@jit_inner
 def ggx_vndf_at(o0, o1, o2, u0, u1, alpha):
     """A visible facet normal of ω_o (Heitz 2018; engine.materials.ggx.GGX.sample)."""
     v0, v1, v2 = alpha * o0, alpha * o1, max(o2, 0.0)
