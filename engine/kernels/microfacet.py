@@ -29,6 +29,7 @@ _TWO_OVER_SQRT_PI = 2.0 / SQRT_PI
 _HALF_SQRT_PI = 0.5 * SQRT_PI
 _EXP_CUTOFF = 800.0           # engine.materials.microfacet._EXP_CUTOFF
 _PI = math.pi
+_GGX_FLAT_TAN2 = 1e150       # engine.materials.ggx._FLAT_TAN2
 
 
 def _visible_slope_cdf(x: np.ndarray, t: np.ndarray, exp=np.exp, erfcx=erfcx_nonneg) -> np.ndarray:
@@ -558,6 +559,8 @@ def ggx_d_at(h0, h1, h2, alpha):
     if not (h2 > 0 and np.isfinite(t2)):
         return 0.0
     a2 = alpha * alpha
+    if t2 > _GGX_FLAT_TAN2:         # cosθ_h < 1e-75: (1 + t)² would overflow; GGX.D's limit α²/π
+        return a2 / _PI
     q = 1.0 + t2 / a2
     one_t = 1.0 + t2
     return one_t * one_t / (_PI * a2 * q * q)
@@ -573,7 +576,7 @@ def ggx_lambda_at(w0, w1, w2, alpha):
     return 0.5 * x / (np.sqrt(1.0 + x) + 1.0)
 
 
-@jit
+@jit_inner
 def ggx_vndf_at(o0, o1, o2, u0, u1, alpha):
     """A visible facet normal of ω_o (Heitz 2018; engine.materials.ggx.GGX.sample)."""
     v0, v1, v2 = alpha * o0, alpha * o1, max(o2, 0.0)

@@ -1,17 +1,20 @@
-"""Torrance–Sparrow (Beckmann facets) eval, pdf and sample as one compiled pass each.
+"""Torrance–Sparrow (Beckmann or GGX facets) eval, pdf and sample as one compiled pass each.
 
 Per path, in the local shading frame (t, b, n) of engine.vec3.local_frame: the half vector, the
-Beckmann D, the shadowing G ("ts" V-cavity, exact or rational Smith, none), the facet Fresnel
+Beckmann or GGX D, the shadowing G ("ts" V-cavity, exact or rational Smith, height-correlated Smith,
+none), the facet Fresnel
 (A, B, C, S) per wavelength (engine.kernels.fresnel.abcs_at), the scattering-plane frame
 x_in = x_out = unit(−ω_i × ω_o) (engine.kernels.geometry.unit_cross), the two-lobe choice and the
-mixture pdf, visible-normal sampling (engine.kernels.microfacet.beckmann_vndf_at).
+mixture pdf, visible-normal sampling (engine.kernels.microfacet.beckmann_vndf_at, ggx_vndf_at).
 The NumPy references are the material's own batched formulas (engine.materials.torrance_sparrow,
 where the twins are declared); each step here is the same arithmetic in the same operation order,
 so the compiled pass gives the reference's bits (the reference's compiled pieces, Fresnel and the
 visible slope, are the same arithmetic; exp, log, sin and cos are the C library's in both).  A
 constant index is evaluated once per path, not once per wavelength (same inputs, same bits).
 
-Shadowing codes (``SHADOWING_CODES``): 0 "ts", 1 "smith", 2 "smith_rational", 3 "none".
+Shadowing codes (``SHADOWING_CODES``): 0 "ts", 1 "smith", 2 "smith_rational" (Beckmann only), 3 "none",
+4 "smith_correlated".  Distribution codes (``DISTRIBUTION_CODES``): 0 Beckmann, 1 GGX (Cycles' and the
+Principled BSDF's lobes: engine.materials.ggx, one direction at a time in its operation order).
 """
 
 from __future__ import annotations
@@ -24,10 +27,13 @@ from . import jit, jit_inner
 from .error_function import ERFCX_COEF, ERFCX_K
 from .fresnel import abcs_at
 from .geometry import local_frame_at, to_local_at, unit_cross_at
-from .microfacet import chi_plus_at, beckmann_d_at, beckmann_g1_at, beckmann_lambda_at, beckmann_vndf_at, smith_a_at
+from .microfacet import (beckmann_d_at, beckmann_g1_at, beckmann_lambda_at, beckmann_vndf_at, chi_plus_at, ggx_d_at,
+                         ggx_lambda_at, ggx_vndf_at, smith_a_at)
 
 #: The shadowing names of engine.materials.microfacet.SHADOWING, by kernel code.
-SHADOWING_CODES = {"ts": 0, "smith": 1, "smith_rational": 2, "none": 3}
+SHADOWING_CODES = {"ts": 0, "smith": 1, "smith_rational": 2, "none": 3, "smith_correlated": 4}
+#: The facet distributions of engine.materials.torrance_sparrow with a compiled pass, by kernel code.
+DISTRIBUTION_CODES = {"beckmann": 0, "ggx": 1}
 _DEGENERATE = 1e-12           # engine.polarisation.frames._DEGENERATE
 _PI = math.pi
 _ERFCX_COEF = np.ascontiguousarray(ERFCX_COEF, dtype=np.float64)
@@ -51,8 +57,22 @@ def eta_at(eta, lam, i):
 
 
 @jit_inner
-def shadowing_at(kind, i0, i1, i2, o0, o1, o2, h0, h1, h2, m, coef, k):
-    """G of engine.materials.microfacet.shadowing_term for the kernel code ``kind``."""
+def facet_d_at(dist, h0, h1, h2, m):
+    """D(h) of the distribution code ``dist`` (Beckmann.D / GGX.D)."""
+    return beckmann_d_at(h0, h1, h2, m) if dist == 0 else ggx_d_at(h0, h1, h2, m)
+
+
+@jit_inner
+def smith_lambda_at(dist, w0, w1, w2, m, coef, k):
+    """Smith Λ(ω) of the distribution code ``dist`` (the distributions' ``smith_lambda``)."""
+    if dist == 0:
+        return beckmann_lambda_at(smith_a_at(w0, w1, w2, m), coef, k)
+    return ggx_lambda_at(w0, w1, w2, m)
+
+
+@jit_inner
+def shadowing_at(kind, dist, i0, i1, i2, o0, o1, o2, h0, h1, h2, m, coef, k):
+    """G of engine.materials.microfacet.shadowing_term for the kernel codes ``kind`` and ``dist``."""
     if kind == 0:
         di = i0 * h0 + i1 * h1 + i2 * h2
         do = o0 * h0 + o1 * h1 + o2 * h2
@@ -63,14 +83,21 @@ def shadowing_at(kind, i0, i1, i2, o0, o1, o2, h0, h1, h2, m, coef, k):
         return min(1.0, min(g_o, g_i))
     if kind == 3:
         return chi_plus_at(i0, i1, i2, h0, h1, h2) * chi_plus_at(o0, o1, o2, h0, h1, h2)
+    if kind == 4:           # g_smith_correlated
+        return (chi_plus_at(i0, i1, i2, h0, h1, h2) * chi_plus_at(o0, o1, o2, h0, h1, h2)
+                / (1.0 + smith_lambda_at(dist, i0, i1, i2, m, coef, k) + smith_lambda_at(dist, o0, o1, o2, m, coef, k)))
+    if dist == 1:           # g_smith with GGX's G1 = χ⁺/(1 + Λ)
+        return (chi_plus_at(i0, i1, i2, h0, h1, h2) / (1.0 + ggx_lambda_at(i0, i1, i2, m))
+                * (chi_plus_at(o0, o1, o2, h0, h1, h2) / (1.0 + ggx_lambda_at(o0, o1, o2, m))))
     rational = kind == 2
     return (beckmann_g1_at(i0, i1, i2, h0, h1, h2, m, rational, coef, k)
             * beckmann_g1_at(o0, o1, o2, h0, h1, h2, m, rational, coef, k))
 
 
 @jit_inner
-def specular_pdf_at(i0, i1, i2, o0, o1, o2, m, coef, k):
-    """Density of ω_i under visible-normal sampling and reflection (TorranceSparrow._specular_pdf_local)."""
+def specular_pdf_at(dist, i0, i1, i2, o0, o1, o2, m, coef, k):
+    """Density of ω_i under visible-normal sampling and reflection (TorranceSparrow._specular_pdf_local):
+    Beckmann.pdf_reflected, or for GGX the generic pdf(h)/(4 ω_o·h) in its order."""
     hv0, hv1, hv2 = i0 + o0, i1 + o1, i2 + o2
     length = np.sqrt(hv0 * hv0 + hv1 * hv1 + hv2 * hv2)
     if not length > 0:
@@ -79,8 +106,10 @@ def specular_pdf_at(i0, i1, i2, o0, o1, o2, m, coef, k):
     d = o0 * h0 + o1 * h1 + o2 * h2
     if not (o2 > 0 and d > 0):
         return 0.0
-    g1 = 1.0 / (1.0 + beckmann_lambda_at(smith_a_at(o0, o1, o2, m), coef, k))
-    return g1 * beckmann_d_at(h0, h1, h2, m) / (4.0 * o2)
+    g1 = 1.0 / (1.0 + smith_lambda_at(dist, o0, o1, o2, m, coef, k))
+    if dist == 0:
+        return g1 * beckmann_d_at(h0, h1, h2, m) / (4.0 * o2)
+    return g1 * max(d, 0.0) * ggx_d_at(h0, h1, h2, m) / o2 / (4.0 * d)
 
 
 @jit_inner
@@ -105,7 +134,7 @@ def p_spec_at(i, cos_o, p_given, use_given, eta, L, s, w_d):
 
 
 @jit_inner
-def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, kind, coef, k, factor, A, B, C, S, x):
+def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, dist, kind, coef, k, factor, A, B, C, S, x):
     """Facet lobe at path i into A..S[:, i] (times ``factor``) and x[:, i]; returns cosθ_i > 0 and cosθ_o > 0."""
     o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
     w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
@@ -114,13 +143,13 @@ def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, kind, coef
     valid = li2 > 0 and lo2 > 0
     hv0, hv1, hv2 = li0 + lo0, li1 + lo1, li2 + lo2
     length = np.sqrt(hv0 * hv0 + hv1 * hv1 + hv2 * hv2)
-    ok = length > 0 and valid
+    ok = length > 0 and valid and li2 * lo2 > 0     # a product underflowing to 0: f = 0 (as _facet_eval), not x/0
     fr = 0.0
     c = 1.0
     if ok:
         h0, h1, h2 = hv0 / length, hv1 / length, hv2 / length
-        D = beckmann_d_at(h0, h1, h2, m)
-        G = shadowing_at(kind, li0, li1, li2, lo0, lo1, lo2, h0, h1, h2, m, coef, k)
+        D = facet_d_at(dist, h0, h1, h2, m)
+        G = shadowing_at(kind, dist, li0, li1, li2, lo0, lo1, lo2, h0, h1, h2, m, coef, k)
         fr = s * D * G / (4.0 * (li2 * lo2))
         c = min(0.5 * length, 1.0)
     e = eta_at(eta, 0, i)
@@ -139,7 +168,7 @@ def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, kind, coef
 
 
 @jit_inner
-def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, p_spec, has_specular, has_diffuse, coef, k):
+def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, dist, p_spec, has_specular, has_diffuse, coef, k):
     """The two-lobe mixture density of ω_i = wi[:, i] (TorranceSparrow.pdf)."""
     o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
     w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
@@ -149,7 +178,7 @@ def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, p_spec, has_specula
         return 0.0
     out = 0.0
     if has_specular:
-        out = out + p_spec * specular_pdf_at(li0, li1, li2, lo0, lo1, lo2, m, coef, k)
+        out = out + p_spec * specular_pdf_at(dist, li0, li1, li2, lo0, lo1, lo2, m, coef, k)
     if has_diffuse:
         out = out + (1.0 - p_spec) * max(li2, 0.0) / _PI
     return out
@@ -158,27 +187,27 @@ def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, p_spec, has_specula
 # ----------------------------------------------------------------------------- batch loops
 
 @jit
-def _eval_loop(n_s, wo, wi, eta, s, m, kind, coef, k, A, B, C, S, x, valid):
+def _eval_loop(n_s, wo, wi, eta, s, m, dist, kind, coef, k, A, B, C, S, x, valid):
     for i in range(n_s.shape[1]):
         n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
         t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
-        valid[i] = eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, at(s, i), at(m, i), kind, coef, k, 1.0,
-                           A, B, C, S, x)
+        valid[i] = eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, at(s, i), at(m, i), dist, kind, coef, k,
+                           1.0, A, B, C, S, x)
 
 
 @jit
-def _pdf_loop(n_s, wo, wi, m, p_given, use_given, eta, L, s, w_d, has_specular, has_diffuse, coef, k, out):
+def _pdf_loop(n_s, wo, wi, m, dist, p_given, use_given, eta, L, s, w_d, has_specular, has_diffuse, coef, k, out):
     for i in range(n_s.shape[1]):
         n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
         t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
         cos_o = (wo[0, i] * n0 + wo[1, i] * n1) + wo[2, i] * n2
         p = p_spec_at(i, cos_o, p_given, use_given, eta, L, s, w_d)
-        out[i] = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, at(m, i), p, has_specular, has_diffuse,
+        out[i] = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, at(m, i), dist, p, has_specular, has_diffuse,
                         coef, k)
 
 
 @jit
-def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, kind, p_given, use_given, w_d, has_diffuse, coef, k,
+def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef, k,
                  wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
     for i in range(n_s.shape[1]):
         n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
@@ -192,8 +221,11 @@ def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, kind, p_given, use_given, w_
         l0 = l1 = l2 = 0.0
         mi = at(m, i)
         if pick_spec and cos_o > 0:
-            # visible-normal sampling (engine.materials.microfacet.Beckmann.sample)
-            h0, h1, h2 = beckmann_vndf_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi, coef, k)
+            # visible-normal sampling (engine.materials.microfacet.Beckmann.sample, engine.materials.ggx.GGX.sample)
+            if dist == 0:
+                h0, h1, h2 = beckmann_vndf_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi, coef, k)
+            else:
+                h0, h1, h2 = ggx_vndf_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi)
             d = lo0 * h0 + lo1 * h1 + cos_o * h2
             l0 = 2.0 * d * h0 - lo0
             l1 = 2.0 * d * h1 - lo1
@@ -215,15 +247,15 @@ def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, kind, p_given, use_given, w_
         w1 = t1 * l0 + b1 * l1 + n1 * l2
         w2 = t2 * l0 + b2 * l1 + n2 * l2
         wi[0, i], wi[1, i], wi[2, i] = w0, w1, w2
-        q = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, mi, p, True, has_diffuse, coef, k)
+        q = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, mi, dist, p, True, has_diffuse, coef, k)
         ok = cos_o > 0 and l2 > 0 and q > 0 and np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)
         cos_i = max(n0 * w0 + n1 * w1 + n2 * w2, 0.0)
         f = cos_i / q if ok else 0.0
         valid[i] = ok
         pdf[i] = q if ok else 0.0
         factor[i] = f
-        eval_valid[i] = eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, at(s, i), mi, kind, coef, k, f,
-                                A, B, C, S, x)
+        eval_valid[i] = eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, at(s, i), mi, dist, kind, coef, k,
+                                f if scale else 1.0, A, B, C, S, x)
 
 
 # ----------------------------------------------------------------------------- wrappers (the compiled twins)
@@ -251,27 +283,30 @@ def _f64(a):
     return np.ascontiguousarray(a, dtype=np.float64)
 
 
-def torrance_sparrow_eval_numba(n_s, wo, wi, eta, L, s, m, shadowing):
+def torrance_sparrow_eval_numba(n_s, wo, wi, eta, L, s, m, shadowing, distribution="beckmann"):
     n = n_s.shape[1]
     A, B, C, S = (np.empty((L, n)) for _ in range(4))
     x, valid = np.empty((3, n)), np.empty(n, np.bool_)
     _eval_loop(_f64(n_s), _f64(wo), _f64(wi), _eta_rows(eta), _per_point(s, n), _per_point(m, n),
-               SHADOWING_CODES[shadowing], _ERFCX_COEF, _ERFCX_K, A, B, C, S, x, valid)
+               DISTRIBUTION_CODES[distribution], SHADOWING_CODES[shadowing], _ERFCX_COEF, _ERFCX_K, A, B, C, S, x,
+               valid)
     return x, A, B, C, S, valid
 
 
-def torrance_sparrow_pdf_numba(n_s, wo, wi, m, p_given, eta, L, s, w_d, has_specular, has_diffuse):
+def torrance_sparrow_pdf_numba(n_s, wo, wi, m, p_given, eta, L, s, w_d, has_specular, has_diffuse,
+                               distribution="beckmann"):
     n = n_s.shape[1]
     p, use_given, wd = _p_inputs(p_given, w_d, n)
     out = np.empty(n)
-    _pdf_loop(_f64(n_s), _f64(wo), _f64(wi), _per_point(m, n), p, use_given,
+    _pdf_loop(_f64(n_s), _f64(wo), _f64(wi), _per_point(m, n), DISTRIBUTION_CODES[distribution], p, use_given,
               np.zeros((1, 1), np.complex128) if use_given else _eta_rows(eta), int(L),
               np.zeros(1) if use_given else _per_point(s, n), wd, bool(has_specular), bool(has_diffuse),
               _ERFCX_COEF, _ERFCX_K, out)
     return out
 
 
-def torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowing, p_given, w_d, has_diffuse):
+def torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowing, p_given, w_d, has_diffuse,
+                                  distribution="beckmann", scale=True):
     n = n_s.shape[1]
     p, use_given, wd = _p_inputs(p_given, w_d, n)
     A, B, C, S = (np.empty((L, n)) for _ in range(4))
@@ -279,8 +314,9 @@ def torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowin
     pdf, factor = np.empty(n), np.empty(n)
     valid, eval_valid = np.empty(n, np.bool_), np.empty(n, np.bool_)
     _sample_loop(_f64(n_s), _f64(wo), _per_point(u_lobe, n), _f64(u_dir), _eta_rows(eta), _per_point(s, n),
-                 _per_point(m, n), SHADOWING_CODES[shadowing], p, use_given, wd, bool(has_diffuse),
-                 _ERFCX_COEF, _ERFCX_K, wi, pdf, valid, factor, A, B, C, S, x, eval_valid)
+                 _per_point(m, n), DISTRIBUTION_CODES[distribution], SHADOWING_CODES[shadowing], p, use_given, wd,
+                 bool(has_diffuse), bool(scale), _ERFCX_COEF, _ERFCX_K, wi, pdf, valid, factor, A, B, C, S, x,
+                 eval_valid)
     return wi, pdf, valid, factor, x, A, B, C, S, eval_valid
 
 

@@ -45,7 +45,7 @@ if TYPE_CHECKING:
     from ..textures import SurfacePoints
 
 __all__ = ["BSDF", "BSDFFlags", "BSDFSample", "DeltaVertices", "LobeColors", "MuellerValue", "ShadingPoint",
-           "depolarising_value"]
+           "assemble_values", "depolarising_value", "take_lanes", "take_value"]
 
 
 @dataclass
@@ -70,7 +70,23 @@ class ShadingPoint:
 
     @property
     def cos_o(self) -> np.ndarray:
-        return self.n_s[0] * self.wo[0] + self.n_s[1] * self.wo[1] + self.n_s[2] * self.wo[2]
+        """n_s·ω_o (N,) (computed once per batch: ``memo``)."""
+        return self.memo(None, "cos_o", lambda: self.n_s[0] * self.wo[0] + self.n_s[1] * self.wo[1]
+                         + self.n_s[2] * self.wo[2])
+
+    def memo(self, owner, key: str, compute):
+        """``compute()`` once per batch for ``owner`` (a material, or None) and ``key``: a value that is a function
+        of these points alone (cosθ_o, a mixture's weights, a model's index …), kept on this object; ``take`` and
+        ``flipped`` make new batches, without it.  The value is shared: callers must not write into it."""
+        memo = self.__dict__.get("_memo")
+        if memo is None:
+            memo = self.__dict__["_memo"] = {}
+        hit = memo.get((id(owner), key))
+        if hit is not None and hit[0] is owner:
+            return hit[1]
+        value = compute()
+        memo[(id(owner), key)] = (owner, value)
+        return value
 
     def spectrum(self, spec: Spectrum) -> np.ndarray:
         """A material parameter (engine.spectral Spectrum) at this batch's wavelengths, (L, N);
@@ -95,16 +111,18 @@ class ShadingPoint:
                              "(ShadingPoint.surface)")
         return self.surface
 
-    def take(self, sel) -> ShadingPoint:
-        """The points ``sel`` (integer indices) of this batch."""
-        gather = isinstance(sel, np.ndarray) and sel.dtype != np.bool_
-
-        def pick(a):            # np.take: ~4× faster than fancy indexing of (3, N) columns, the same values
-            return np.take(a, sel, axis=-1) if gather else a[..., sel]
-        return ShadingPoint(pick(self.p), pick(self.n_s), pick(self.n_g), pick(self.wo), pick(self.lam), self.mono,
-                            self.lookup.take(sel) if self.lookup is not None else None,
-                            None if self.material is None else self.material[sel],
-                            None if self.surface is None else self.surface.take(sel))
+    def take(self, sel, shared: dict | None = None) -> ShadingPoint:
+        """The points ``sel`` (integer indices) of this batch.  ``shared``: one dict passed to the takes of several
+        batches at the same ``sel`` (a mixture's components' points), so that what they share — arrays, wavelength
+        lookup, surface points — is gathered once and shared by the subsets (with the memos of the surface points)."""
+        def sub(v):
+            return v.take(sel)
+        return ShadingPoint(take_lanes(self.p, sel, shared), take_lanes(self.n_s, sel, shared),
+                            take_lanes(self.n_g, sel, shared), take_lanes(self.wo, sel, shared),
+                            take_lanes(self.lam, sel, shared), self.mono,
+                            None if self.lookup is None else _shared(self.lookup, sub, shared),
+                            None if self.material is None else take_lanes(self.material, sel, shared),
+                            None if self.surface is None else _shared(self.surface, sub, shared))
 
     def flipped(self, where: np.ndarray) -> ShadingPoint:
         """This batch with n_s and n_g negated at the points ``where`` (N,) bool: the back faces of a
@@ -112,6 +130,26 @@ class ShadingPoint:
         sign = np.where(where, -1.0, 1.0)[None, :]
         return ShadingPoint(self.p, self.n_s * sign, self.n_g * sign, self.wo, self.lam, self.mono, self.lookup,
                             self.material, self.surface)
+
+
+def take_lanes(a: np.ndarray, sel, shared: dict | None = None) -> np.ndarray:
+    """``a``'s lanes (last axis) ``sel`` (integer indices, a mask or a slice); with ``shared`` (ShadingPoint.take) an
+    array gathered before for the same ``sel`` is returned again."""
+    def gather():           # np.take: ~4× faster than fancy indexing of (3, N) columns, the same values
+        return np.take(a, sel, axis=-1) if isinstance(sel, np.ndarray) and sel.dtype != np.bool_ else a[..., sel]
+    return gather() if shared is None else _shared(a, lambda _: gather(), shared)
+
+
+def _shared(obj, take, shared: dict | None):
+    """``take(obj)``, or what it gave before for the same object in ``shared`` (kept with it: ids stay unique)."""
+    if shared is None:
+        return take(obj)
+    hit = shared.get(id(obj))
+    if hit is not None and hit[0] is obj:
+        return hit[1]
+    value = take(obj)
+    shared[id(obj)] = (obj, value)
+    return value
 
 
 @dataclass
@@ -361,3 +399,43 @@ class BSDF:
     def describe(self) -> dict[str, object]:
         """Parameters for logs and file headers."""
         return {"type": self.name}
+
+
+def take_value(v: MuellerValue, idx: np.ndarray) -> MuellerValue:
+    """The lanes ``idx`` (integer indices) of a value: every array along its last axis."""
+    def t(a):
+        return None if a is None else np.take(a, idx, axis=-1)
+    if v.kind == "general":
+        return MuellerValue("general", t(v.x_in), t(v.x_out), M=t(v.M))
+    return MuellerValue(v.kind, t(v.x_in), t(v.x_out), t(v.A), t(v.B), t(v.C), t(v.S), depol=t(v.depol))
+
+
+def assemble_values(parts, n: int, L: int, frames) -> MuellerValue:
+    """One value over n lanes from [(lanes idx, value over those lanes)] (zero elsewhere), of the
+    cheapest kind that holds them all; ``frames()`` gives (x_in, x_out) for the lanes whose value
+    is depolarising (any frame holds a depolariser)."""
+    kinds = {v.kind for _, v in parts}
+    if kinds <= {"depolarising"}:
+        A = np.zeros((L, n))
+        for idx, v in parts:
+            A[:, idx] = v.A
+        return depolarising_value(A, n)
+    x_in, x_out = frames()
+    for idx, v in parts:
+        if v.kind != "depolarising":
+            x_in[:, idx], x_out[:, idx] = v.x_in, v.x_out
+    if kinds <= {"depolarising", "abcs"}:
+        A, B, C, S, D = (np.zeros((L, n)) for _ in range(5))
+        shared = False
+        for idx, v in parts:
+            if v.kind == "depolarising":
+                D[:, idx], shared = v.A, True
+                continue
+            A[:, idx], B[:, idx], C[:, idx], S[:, idx] = v.A, v.B, v.C, v.S
+            if v.depol is not None:
+                D[:, idx], shared = v.depol, True
+        return MuellerValue("abcs", x_in, x_out, A, B, C, S, depol=D if shared else None)
+    M = np.zeros((4, 4, L, n))
+    for idx, v in parts:
+        M[..., idx] = v.matrix()
+    return MuellerValue("general", x_in, x_out, M=M)

@@ -23,9 +23,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import BSDF, BSDFSample, LobeColors, MuellerValue, ShadingPoint, depolarising_value
+from .base import (BSDF, BSDFSample, LobeColors, MuellerValue, ShadingPoint, assemble_values, depolarising_value,
+                   take_value)
 from .flags import BSDFFlags
-from .mix import _assemble, _take_value
 from ..polarisation.frames import plane_of_incidence_axis
 from ..vec3 import reflect
 
@@ -53,8 +53,8 @@ class SetShadingPoint(ShadingPoint):
     parts: tuple = ()
     pos: np.ndarray | None = None
 
-    def take(self, sel) -> SetShadingPoint:
-        base = super().take(sel)
+    def take(self, sel, shared: dict | None = None) -> SetShadingPoint:
+        base = super().take(sel, shared)
         sel = np.arange(self.n)[sel]
         parts, pos = [None] * len(self.parts), np.empty(sel.size, np.int64)
         for j, idx in _members(base.material, len(self.parts)):
@@ -77,7 +77,7 @@ class SetShadingPoint(ShadingPoint):
 def _member_value(m: BSDF, q: ShadingPoint, wi_m: np.ndarray, f: MuellerValue, idx: np.ndarray) -> MuellerValue:
     """Member m's own value at its points: the set's lanes ``idx``, unless the set's value became a general matrix
     (a member's is), which no longer holds a member's depolarised part (``depol``) apart: then m's own eval."""
-    return m.eval(q, wi_m) if f.kind == "general" else _take_value(f, idx)
+    return m.eval(q, wi_m) if f.kind == "general" else take_value(f, idx)
 
 
 class MaterialSet(BSDF):
@@ -153,7 +153,7 @@ class MaterialSet(BSDF):
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
         parts = [(idx, m.eval(q, np.take(wi, idx, axis=1))) for m, idx, q in self._split(sp)]
-        return _assemble(parts, sp.n, sp.lam.shape[0], self._frames(sp, wi))
+        return assemble_values(parts, sp.n, sp.lam.shape[0], self._frames(sp, wi))
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         out = np.zeros(sp.n)
@@ -172,7 +172,7 @@ class MaterialSet(BSDF):
             if bs.eta_sq is not None:
                 eta_sq[idx] = bs.eta_sq
             parts.append((idx, bs.weight))
-        weight = _assemble(parts, n, sp.lam.shape[0], self._frames(sp, wi))
+        weight = assemble_values(parts, n, sp.lam.shape[0], self._frames(sp, wi))
         return BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=is_delta, valid=valid, eta_sq=eta_sq)
 
     def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
@@ -191,7 +191,7 @@ class MaterialSet(BSDF):
             parts.append((idx, v if v is not None else depolarising_value(np.zeros((L, idx.size)), idx.size)))
         if all(v.kind == "depolarising" and not v.A.any() for _, v in parts):
             return None
-        return _assemble(parts, sp.n, L, self._frames(sp, -reflect(sp.wo, sp.n_s)))
+        return assemble_values(parts, sp.n, L, self._frames(sp, -reflect(sp.wo, sp.n_s)))
 
     def diffuse_share(self, sp: ShadingPoint, wi: np.ndarray, f: MuellerValue) -> np.ndarray | None:
         out = np.zeros(f.m00().shape)

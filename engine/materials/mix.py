@@ -57,7 +57,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ShadingPoint, depolarising_value
+from .base import (BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ShadingPoint, assemble_values,
+                   depolarising_value, take_value)
 from .lambert import Lambert
 from .normal_map import ShadingNormal
 from .parameters import ModelDeclaration, Parameter
@@ -270,46 +271,6 @@ def add_values(terms, n: int, L: int, k_in: np.ndarray, k_out: np.ndarray, n_s: 
     return _sum_general(pol, rotations, dep, x_in, x_out, n, L)
 
 
-def _take_value(v: MuellerValue, idx: np.ndarray) -> MuellerValue:
-    """The lanes ``idx`` of a value."""
-    def t(a):
-        return None if a is None else np.take(a, idx, axis=-1)
-    if v.kind == "general":
-        return MuellerValue("general", t(v.x_in), t(v.x_out), M=t(v.M))
-    return MuellerValue(v.kind, t(v.x_in), t(v.x_out), t(v.A), t(v.B), t(v.C), t(v.S), depol=t(v.depol))
-
-
-def _assemble(parts, n: int, L: int, frames) -> MuellerValue:
-    """One value over n lanes from [(lanes idx, value over those lanes)] (zero elsewhere), of the
-    cheapest kind that holds them all; ``frames()`` gives (x_in, x_out) for the lanes whose value
-    is depolarising (any frame holds a depolariser)."""
-    kinds = {v.kind for _, v in parts}
-    if kinds <= {"depolarising"}:
-        A = np.zeros((L, n))
-        for idx, v in parts:
-            A[:, idx] = v.A
-        return depolarising_value(A, n)
-    x_in, x_out = frames()
-    for idx, v in parts:
-        if v.kind != "depolarising":
-            x_in[:, idx], x_out[:, idx] = v.x_in, v.x_out
-    if kinds <= {"depolarising", "abcs"}:
-        A, B, C, S, D = (np.zeros((L, n)) for _ in range(5))
-        shared = False
-        for idx, v in parts:
-            if v.kind == "depolarising":
-                D[:, idx], shared = v.A, True
-                continue
-            A[:, idx], B[:, idx], C[:, idx], S[:, idx] = v.A, v.B, v.C, v.S
-            if v.depol is not None:
-                D[:, idx], shared = v.depol, True
-        return MuellerValue("abcs", x_in, x_out, A, B, C, S, depol=D if shared else None)
-    M = np.zeros((4, 4, L, n))
-    for idx, v in parts:
-        M[..., idx] = v.matrix()
-    return MuellerValue("general", x_in, x_out, M=M)
-
-
 # --------------------------------------------------------------------------- shading points
 
 @dataclass
@@ -325,8 +286,9 @@ class MixShadingPoint(ShadingPoint):
         return MixShadingPoint(base.p, base.n_s, base.n_g, base.wo, base.lam, base.mono, base.lookup, base.material,
                                base.surface, self.owner, tuple(parts))
 
-    def take(self, sel) -> MixShadingPoint:
-        return self._with(super().take(sel), (None if q is None else q.take(sel) for q in self.parts))
+    def take(self, sel, shared: dict | None = None) -> MixShadingPoint:
+        shared = {} if shared is None else shared       # the components' points share the hit's arrays
+        return self._with(super().take(sel, shared), (None if q is None else q.take(sel, shared) for q in self.parts))
 
     def flipped(self, where: np.ndarray) -> MixShadingPoint:
         return self._with(super().flipped(where), (None if q is None else q.flipped(where) for q in self.parts))
@@ -471,6 +433,15 @@ class Mix(BSDF):
     def _weights(self, sp: ShadingPoint) -> list[np.ndarray]:
         return [_weight_at(sp, w) for w in self.weights]
 
+    def _weights_at(self, sp: ShadingPoint) -> list[np.ndarray]:
+        """``_weights(sp)``, computed once per batch (ShadingPoint.memo: next-event estimation evaluates and
+        asks the pdf at the same points; a Layered's weights read its top layer's albedo)."""
+        return sp.memo(self, "weights", lambda: self._weights(sp))
+
+    def _probabilities_at(self, sp: ShadingPoint, points) -> np.ndarray:
+        """``_probabilities`` at the batch ``sp`` (its ``_points``), computed once per batch."""
+        return sp.memo(self, "probabilities", lambda: self._probabilities(points, self._weights_at(sp)))
+
     def _probabilities(self, points, weights) -> np.ndarray:
         """(K, N) lobe-selection probabilities p_k ∝ w_k·a_k (0 where every weight is 0)."""
         if not self.components:
@@ -508,7 +479,7 @@ class Mix(BSDF):
         return None
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        return self._sum(sp, self._points(sp), self._weights(sp), wi, cosine=False)
+        return self._sum(sp, self._points(sp), self._weights_at(sp), wi, cosine=False)
 
     def diffuse_share(self, sp: ShadingPoint, wi: np.ndarray, f: MuellerValue) -> np.ndarray | None:
         """Σ w_k·d_k (L, N): each component's diffuse part at its own point, weighted as ``eval`` weights its
@@ -518,7 +489,7 @@ class Mix(BSDF):
             return super().diffuse_share(sp, wi, f)
         cos_s = np.abs(dot(sp.n_s, wi))
         out = np.zeros(f.m00().shape)
-        for c, q, w in zip(self.components, self._points(sp), self._weights(sp)):
+        for c, q, w in zip(self.components, self._points(sp), self._weights_at(sp)):
             if not w.any() or not c.flags.has(BSDFFlags.DIFFUSE):
                 continue
             d = c.diffuse_share(q, wi, c.eval(q, wi))
@@ -533,7 +504,7 @@ class Mix(BSDF):
         """Σ w_k·colours_k, each component's at its own point (a Layered's base under the layer's attenuation:
         Cycles' closure weights after ``closure_layering_weight``); None if a component has none."""
         out = LobeColors.of(sp)
-        for c, q, w in zip(self.components, self._points(sp), self._weights(sp)):
+        for c, q, w in zip(self.components, self._points(sp), self._weights_at(sp)):
             if not w.any():
                 continue
             colors = c.lobe_colors(q)
@@ -551,20 +522,20 @@ class Mix(BSDF):
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         points = self._points(sp)
-        return self._pdf(points, self._probabilities(points, self._weights(sp)), wi)
+        return self._pdf(points, self._probabilities_at(sp, points), wi)
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         n, L = sp.n, sp.lam.shape[0]
         if not self.components:     # every weight was 0: black
             return BSDFSample(wi=sp.n_s.copy(), weight=depolarising_value(np.zeros((L, n)), n), pdf=np.zeros(n),
                               is_delta=np.zeros(n, bool), valid=np.zeros(n, bool), eta_sq=np.ones(n))
-        points, weights = self._points(sp), self._weights(sp)
+        points, weights = self._points(sp), self._weights_at(sp)
         if len(self.components) == 1:
             bs = self.components[0].sample(points[0], u_lobe, u_dir)
             w = weights[0]
             return BSDFSample(wi=bs.wi, weight=bs.weight.scaled(w[None, :]), pdf=bs.pdf, is_delta=bs.is_delta,
                               valid=bs.valid & (w > 0), eta_sq=bs.eta_sq)
-        p = self._probabilities(points, weights)
+        p = self._probabilities_at(sp, points)
         cols = np.arange(n)
         some = p.sum(axis=0) > 0
         cdf = np.cumsum(p, axis=0)
@@ -594,11 +565,12 @@ class Mix(BSDF):
             d = np.flatnonzero(bs.is_delta & bs.valid)
             if d.size:
                 ratio = weights[j][sel[d]] / p[j, sel[d]]
-                parts.append((sel[d], _take_value(bs.weight, d).scaled(ratio[None, :])))
+                parts.append((sel[d], take_value(bs.weight, d).scaled(ratio[None, :])))
         smooth = np.flatnonzero(valid & ~is_delta)
         if smooth.size:
-            sub = sp.take(smooth)
-            sub_points = [sub if q is sp else q.take(smooth) for q in points]
+            shared = {}         # (the components' points share the hit's arrays: gathered once)
+            sub = sp.take(smooth, shared)
+            sub_points = [sub if q is sp else q.take(smooth, shared) for q in points]
             w_sub = [w[smooth] for w in weights]
             d_sub = np.take(wi, smooth, axis=1)
             density = self._pdf(sub_points, p[:, smooth], d_sub)
@@ -611,11 +583,11 @@ class Mix(BSDF):
 
         def frames():
             return plane_of_incidence_axis(sp.n_s, -wi), plane_of_incidence_axis(sp.n_s, sp.wo)
-        return BSDFSample(wi=wi, weight=_assemble(parts, n, L, frames), pdf=pdf, is_delta=is_delta & valid,
+        return BSDFSample(wi=wi, weight=assemble_values(parts, n, L, frames), pdf=pdf, is_delta=is_delta & valid,
                           valid=valid, eta_sq=eta_sq)
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
-        points, weights = self._points(sp), self._weights(sp)
+        points, weights = self._points(sp), self._weights_at(sp)
         terms = []
         for c, q, w in zip(self.components, points, weights):
             if not c.flags.has(BSDFFlags.DELTA_REFLECTION) or not w.any():

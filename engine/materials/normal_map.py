@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
+from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, take_lanes
 from ..textures import ImageTexture, TextureInput
 from ..vec3 import dot, reflect
 
@@ -108,10 +108,8 @@ class MappedShadingPoint(ShadingPoint):
         return MappedShadingPoint(base.p, base.n_s, base.n_g, base.wo, base.lam, base.mono, base.lookup,
                                   base.material, base.surface, n_smooth)
 
-    def take(self, sel) -> MappedShadingPoint:
-        sub = super().take(sel)
-        return self._with(sub, np.take(self.n_smooth, sel, axis=-1) if isinstance(sel, np.ndarray) and
-                          sel.dtype != np.bool_ else self.n_smooth[:, sel])
+    def take(self, sel, shared: dict | None = None) -> MappedShadingPoint:
+        return self._with(super().take(sel, shared), take_lanes(self.n_smooth, sel, shared))
 
     def flipped(self, where: np.ndarray) -> MappedShadingPoint:
         return self._with(super().flipped(where), self.n_smooth * np.where(where, -1.0, 1.0)[None, :])
@@ -168,7 +166,14 @@ class ShadingNormal(BSDF):
     # --- the shading normal ----------------------------------------------------------------------
 
     def shading_normal(self, sp: ShadingPoint) -> np.ndarray:
-        """The mapped shading normal (3, N) at the points."""
+        """The mapped shading normal (3, N) at the points; a normal map alone is mapped once per batch and map
+        (ShadingPoint.memo: mix.map_normals gives each lobe of a material the same map)."""
+        if self.bump_map is None:
+            key = f"normal_map {self.normal_strength!r} {self.normal_green_down}"
+            return sp.memo(self.normal_map, key, lambda: self._mapped_normal(sp))
+        return self._mapped_normal(sp)
+
+    def _mapped_normal(self, sp: ShadingPoint) -> np.ndarray:
         points = sp.surface_points()
         n = sp.n_s
         if self.bump_map is not None:
@@ -209,7 +214,11 @@ class ShadingNormal(BSDF):
     def shading_point(self, sp: ShadingPoint) -> ShadingPoint:
         n = self.shading_normal(sp)
         if self._specular and self.bump_correction:
-            n = valid_specular_normal(n, sp.n_g, sp.wo)
+            if self.bump_map is None:       # (the same map's corrected normal for every specular lobe)
+                key = f"specular normal {self.normal_strength!r} {self.normal_green_down}"
+                n = sp.memo(self.normal_map, key, lambda: valid_specular_normal(n, sp.n_g, sp.wo))
+            else:
+                n = valid_specular_normal(n, sp.n_g, sp.wo)
         return MappedShadingPoint(sp.p, n, sp.n_g, sp.wo, sp.lam, sp.mono, sp.lookup, sp.material, sp.surface,
                                   sp.n_s)
 
@@ -231,9 +240,13 @@ class ShadingNormal(BSDF):
 
     def _base_point(self, sp: ShadingPoint) -> ShadingPoint:
         """The point the base lobe sees: a diffuse lobe's view mirrored into the front of its mapped
-        normal where the viewer is behind it but in front of the smooth surface (see the module docstring)."""
+        normal where the viewer is behind it but in front of the smooth surface (see the module docstring);
+        made once per batch (ShadingPoint.memo), so that the base's own memos hold across eval, pdf, sample."""
         if not self._diffuse:
             return sp
+        return sp.memo(self, "base_point", lambda: self._mirrored_view(sp))
+
+    def _mirrored_view(self, sp: ShadingPoint) -> ShadingPoint:
         c = dot(sp.n_s, sp.wo)
         behind = (c < 0) & (dot(_smooth_normal(sp), sp.wo) > 0)
         if not behind.any():

@@ -92,11 +92,12 @@ Sampling (``sample``/``pdf``): a two-lobe mixture chosen per shading point with 
   With ``"albedo_scaling"`` the lobe weights are the lobes' albedos at ω_o instead:
   w_s = s·E(cosθ_o), w_d = d·ρ̄·max(0, 1 − s·E(cosθ_o)) (same clamping).
 
-Implementation: with Beckmann facets eval, pdf and sample are one compiled pass each over the batch
-(engine.kernels.torrance_sparrow, declared with kernels.twin below); their NumPy references are the
-batched functions ``_facet_eval``, ``_mixture_pdf`` and ``_mixture_sample`` of this module, which the
-GGX and Blinn distributions, the height-correlated shadowing and a TS without a facet lobe use directly
-(``_facet_eval`` returns 0 where cosθ_i·cosθ_o underflows, where the compiled pass divides 0 by 0).
+Implementation: with Beckmann or GGX facets (every shadowing form, no film) eval, pdf and sample are one
+compiled pass each over the batch (engine.kernels.torrance_sparrow, declared with kernels.twin below); their
+NumPy references are the batched functions ``_facet_eval``, ``_mixture_pdf`` and ``_mixture_sample`` of this
+module, which Blinn facets, a filmed facet lobe and a TS without a facet lobe use directly (both return 0
+where cosθ_i·cosθ_o underflows to 0).  The multiscatter term, the Lambert term and its layering weight are
+added to the pass's value in NumPy, in ``eval``'s order (the same bits as before the GGX pass existed).
 """
 
 from __future__ import annotations
@@ -119,8 +120,8 @@ from .sampling import cosine_hemisphere, local_to_world
 from .smooth_limit import MirrorWithDiffuse
 from ..errors import SceneError
 from ..kernels import twin
-from ..kernels.torrance_sparrow import (SHADOWING_CODES, torrance_sparrow_eval_numba, torrance_sparrow_pdf_numba,
-                                        torrance_sparrow_sample_numba)
+from ..kernels.torrance_sparrow import (DISTRIBUTION_CODES, SHADOWING_CODES, torrance_sparrow_eval_numba,
+                                        torrance_sparrow_pdf_numba, torrance_sparrow_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
 from ..polarisation.thin_film import (facet_film, film_at, film_label, film_layering_albedo, film_reflection_abcs,
@@ -282,8 +283,8 @@ def _root_f0(eta):
 # of the batch: ``dist`` is a microfacet distribution (engine.materials.microfacet), ``s`` the specular
 # weight (a number or (N,)), ``eta`` the relative index (L, N); ``p_given`` the specular-lobe
 # probability (N,) or None for the Fresnel estimate against the diffuse weight ``w_d`` (N,)
-# (TorranceSparrow._p_spec).  For Beckmann facets the twins below run them as one compiled pass each
-# (engine.kernels.torrance_sparrow); Blinn facets use these functions directly.
+# (TorranceSparrow._p_spec).  For Beckmann and GGX facets the twins below run them as one compiled pass
+# each (engine.kernels.torrance_sparrow); Blinn facets and films use these functions directly.
 
 def _facet_eval(dist, n_s, wo, wi, eta, s, shadowing, fresnel=None):
     """(x, A, B, C, S, valid): the facet lobe s·M_F·D·G/(4 cosθ_i cosθ_o) in the scattering-plane frame
@@ -363,26 +364,37 @@ def _mixture_sample(dist, n_s, wo, u_lobe, u_dir, p_given, eta, s, w_d, has_spec
     return wi, np.where(valid, pdf, 0.0), valid, factor
 
 
-def torrance_sparrow_eval_numpy(n_s, wo, wi, eta, L, s, m, shadowing):
-    """(x, A, B, C, S, valid) of the Beckmann facet lobe with roughness m (``_facet_eval``); eta
+def _distribution(distribution: str, m):
+    """The facet distribution of a compiled pass ("beckmann" or "ggx") with roughness m (a number or (N,))."""
+    return (GGX if distribution == "ggx" else Beckmann).per_point(m)
+
+
+def torrance_sparrow_eval_numpy(n_s, wo, wi, eta, L, s, m, shadowing, distribution="beckmann"):
+    """(x, A, B, C, S, valid) of the Beckmann or GGX facet lobe with roughness m (``_facet_eval``); eta
     broadcasts to (L, N)."""
     eta = np.broadcast_to(eta, (L, n_s.shape[1]))
-    return _facet_eval(Beckmann.per_point(m), n_s, wo, wi, eta, s, shadowing)
+    return _facet_eval(_distribution(distribution, m), n_s, wo, wi, eta, s, shadowing)
 
 
-def torrance_sparrow_pdf_numpy(n_s, wo, wi, m, p_given, eta, L, s, w_d, has_specular, has_diffuse):
-    """The mixture pdf (N,) with Beckmann facets of roughness m (``_mixture_pdf``)."""
+def torrance_sparrow_pdf_numpy(n_s, wo, wi, m, p_given, eta, L, s, w_d, has_specular, has_diffuse,
+                               distribution="beckmann"):
+    """The mixture pdf (N,) with Beckmann or GGX facets of roughness m (``_mixture_pdf``)."""
     eta = np.broadcast_to(eta, (L, n_s.shape[1]))
-    return _mixture_pdf(Beckmann.per_point(m), n_s, wo, wi, p_given, eta, s, w_d, has_specular, has_diffuse)
+    return _mixture_pdf(_distribution(distribution, m), n_s, wo, wi, p_given, eta, s, w_d, has_specular,
+                        has_diffuse)
 
 
-def torrance_sparrow_sample_numpy(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowing, p_given, w_d, has_diffuse):
-    """(wi, pdf, valid, factor, x, A, B, C, S, eval_valid) of a Beckmann facet lobe (roughness m)
-    and an optional diffuse lobe: ``_mixture_sample``, then ``_facet_eval`` at wi with A..S times factor."""
+def torrance_sparrow_sample_numpy(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowing, p_given, w_d, has_diffuse,
+                                  distribution="beckmann", scale=True):
+    """(wi, pdf, valid, factor, x, A, B, C, S, eval_valid) of a Beckmann or GGX facet lobe (roughness m)
+    and an optional diffuse lobe: ``_mixture_sample``, then ``_facet_eval`` at wi with A..S times factor
+    (``scale``; else the lobe's value itself)."""
     eta = np.broadcast_to(eta, (L, n_s.shape[1]))
-    dist = Beckmann.per_point(m)
+    dist = _distribution(distribution, m)
     wi, pdf, valid, factor = _mixture_sample(dist, n_s, wo, u_lobe, u_dir, p_given, eta, s, w_d, True, has_diffuse)
     x, A, B, C, S, eval_valid = _facet_eval(dist, n_s, wo, wi, eta, s, shadowing)
+    if not scale:
+        return wi, pdf, valid, factor, x, A, B, C, S, eval_valid
     f = factor[None, :]
     return wi, pdf, valid, factor, x, A * f, B * f, C * f, S * f, eval_valid
 
@@ -683,7 +695,9 @@ class TorranceSparrow(BSDF):
         return per_point(m if sel is None else m[sel])
 
     def relative_eta(self, sp: ShadingPoint) -> np.ndarray:
-        return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
+        """(n + iκ)/exterior_n (L, N) at the points (once per batch: ShadingPoint.memo)."""
+        return sp.memo(self, "relative_eta",
+                       lambda: (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n)
 
     def _p_spec(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray:
         """Probability of sampling the specular lobe (N,), a function of ω_o only."""
@@ -711,10 +725,10 @@ class TorranceSparrow(BSDF):
 
     @property
     def _compiled_lobe(self) -> bool:
-        """The facet lobe runs as the Beckmann twins (engine.kernels.torrance_sparrow), which have the
-        shadowing forms of SHADOWING_CODES (the height-correlated one runs the NumPy functions)."""
-        return self.has_specular and self.distribution == "beckmann" and self.shadowing in SHADOWING_CODES and \
-            self.film is None
+        """The facet lobe runs as the twins (engine.kernels.torrance_sparrow): Beckmann or GGX facets without a
+        film (Blinn facets and a filmed lobe run the NumPy functions)."""
+        return self.has_specular and self.distribution in DISTRIBUTION_CODES and \
+            self.shadowing in SHADOWING_CODES and self.film is None
 
     def _facet_fresnel(self, sp: ShadingPoint):
         """The facet's reflection (A, B, C, S) as a function of (cos_f, η) for _facet_eval: None (the bare
@@ -730,9 +744,10 @@ class TorranceSparrow(BSDF):
 
     def multiscatter_extra(self, sp: ShadingPoint) -> np.ndarray:
         """k (L, N) or (1, N) of the multiple-scattering compensation (module docstring): the facet
-        lobe's S0 is (1 + k) times its single-scattering value."""
-        return conductor_extra(np.clip(sp.cos_o, 0.0, 1.0), sp.number(self.m), self._eta(sp),
-                               correlated=self.shadowing == "smith_correlated")
+        lobe's S0 is (1 + k) times its single-scattering value (once per batch: ShadingPoint.memo)."""
+        correlated = self.shadowing == "smith_correlated"
+        return sp.memo(self, "multiscatter_extra", lambda: conductor_extra(
+            np.clip(sp.cos_o, 0.0, 1.0), sp.number(self.m), self._eta(sp), correlated=correlated))
 
     def _depol(self, sp: ShadingPoint, valid: np.ndarray, cos_o) -> np.ndarray | None:
         """The Lambert term d·ρ/π (L, N) (times the ``"albedo_scaling"`` weight), 0 where not valid."""
@@ -765,7 +780,8 @@ class TorranceSparrow(BSDF):
             return depolarising_value(depol if depol is not None else np.zeros((sp.lam.shape[0], sp.n)), sp.n)
         if self._compiled_lobe:
             x, A, B, C, S, valid = torrance_sparrow_eval(sp.n_s, sp.wo, wi, self._eta(sp), sp.lam.shape[0],
-                                                         sp.number(self.s), self._m(sp), self.shadowing)
+                                                         sp.number(self.s), self._m(sp), self.shadowing,
+                                                         self.distribution)
         else:
             x, A, B, C, S, valid = _facet_eval(self._dist(sp), sp.n_s, sp.wo, wi, self.relative_eta(sp),
                                                sp.number(self.s), self.shadowing, self._facet_fresnel(sp))
@@ -781,33 +797,43 @@ class TorranceSparrow(BSDF):
 
     def _eta(self, sp: ShadingPoint) -> np.ndarray:
         """The relative index for the twins: (1, 1) for constant n and κ (the value every entry of
-        ``relative_eta`` has, computed the same way), else ``relative_eta`` (L, N)."""
-        # not cached: a configured copy may change exterior_n (engine.materials.weidlich_wilkie)
+        ``relative_eta`` has, computed the same way), else ``relative_eta`` (L, N); once per batch (a configured
+        copy that changes exterior_n, engine.materials.weidlich_wilkie, is another owner)."""
         if isinstance(self.n, ConstantSpectrum) and isinstance(self.k, ConstantSpectrum):
-            return (np.full((1, 1), self.n.value) + 1j * np.full((1, 1), self.k.value)) / self.exterior_n
+            return sp.memo(self, "eta", lambda: (np.full((1, 1), self.n.value) + 1j * np.full((1, 1), self.k.value))
+                           / self.exterior_n)
         return self.relative_eta(sp)
 
     def _mixture_inputs(self, sp: ShadingPoint, compact: bool = False):
-        """(p_given, eta, s, w_d) for the mixture pdf and sampling (``compact``: eta as ``_eta``)."""
-        p_given, w_d = self._p_spec_inputs(sp, sp.cos_o if self._albedo is not None else None)
+        """(p_given, eta, s, w_d) for the mixture pdf and sampling (``compact``: eta as ``_eta``); the lobe choice's
+        inputs once per batch."""
+        p_given, w_d = sp.memo(self, "p_spec_inputs",
+                               lambda: self._p_spec_inputs(sp, sp.cos_o if self._albedo is not None else None))
         return p_given, self._eta(sp) if compact else self.relative_eta(sp), sp.number(self.s), w_d
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         p_given, eta, s, w_d = self._mixture_inputs(sp, compact=self._compiled_lobe)
         if self._compiled_lobe:
             return torrance_sparrow_pdf(sp.n_s, sp.wo, wi, self._m(sp), p_given, eta, sp.lam.shape[0], s, w_d, True,
-                                        self.has_diffuse)
+                                        self.has_diffuse, self.distribution)
         return _mixture_pdf(self._dist(sp) if self.has_specular else None, sp.n_s, sp.wo, wi, p_given, eta, s,
                             w_d, self.has_specular, self.has_diffuse)
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         p_given, eta, s, w_d = self._mixture_inputs(sp, compact=self._compiled_lobe)
         if self._compiled_lobe:
+            # with multiscatter the lobe's value itself (k·A joins depol before the factor, as in ``eval``)
             wi, pdf, valid, factor, x, A, B, C, S, eval_valid = torrance_sparrow_sample(
                 sp.n_s, sp.wo, u_lobe, u_dir, eta, sp.lam.shape[0], s, self._m(sp), self.shadowing, p_given, w_d,
-                self.has_diffuse)
+                self.has_diffuse, self.distribution, not self.multiscatter)
             depol = self._depol(sp, eval_valid, lambda: sp.cos_o)
-            weight = MuellerValue("abcs", x, x, A, B, C, S, depol=None if depol is None else depol * factor[None, :])
+            if self.multiscatter:
+                extra = self.multiscatter_extra(sp) * A
+                weight = MuellerValue("abcs", x, x, A, B, C, S, depol=extra if depol is None else depol + extra)
+                weight = weight.scaled(factor[None, :])
+            else:
+                weight = MuellerValue("abcs", x, x, A, B, C, S,
+                                      depol=None if depol is None else depol * factor[None, :])
         else:
             wi, pdf, valid, factor = _mixture_sample(self._dist(sp) if self.has_specular else None, sp.n_s, sp.wo,
                                                      u_lobe, u_dir, p_given, eta, s, w_d, self.has_specular,

@@ -846,13 +846,16 @@ def _bitwise(got, want):
 
 
 @needs_numba
-@pytest.mark.parametrize("shadowing", ["ts", "smith", "smith_rational", "none"])
+@pytest.mark.parametrize("distribution,shadowing", [("beckmann", "ts"), ("beckmann", "smith"),
+                                                    ("beckmann", "smith_rational"), ("beckmann", "none"),
+                                                    ("beckmann", "smith_correlated"), ("ggx", "smith_correlated"),
+                                                    ("ggx", "smith"), ("ggx", "ts"), ("ggx", "none")])
 @pytest.mark.parametrize("L,eta_kind", [(4, "constant"), (4, "varying"), (1, "varying"), (1, "constant")])
-def test_torrance_sparrow_eval_bitwise(shadowing, L, eta_kind):
+def test_torrance_sparrow_eval_bitwise(distribution, shadowing, L, eta_kind):
     from engine.materials import torrance_sparrow as ts
     _, n_s, wo, wi, eta, m, s, _ = _ts_batch(1, L, eta_kind)
-    got = ts.torrance_sparrow_eval_numba(n_s, wo, wi, eta, L, s, m, shadowing)
-    want = ts.torrance_sparrow_eval_numpy(n_s, wo, wi, eta, L, s, m, shadowing)
+    got = ts.torrance_sparrow_eval_numba(n_s, wo, wi, eta, L, s, m, shadowing, distribution)
+    want = ts.torrance_sparrow_eval_numpy(n_s, wo, wi, eta, L, s, m, shadowing, distribution)
     _bitwise(got, want)
     assert 0 < want[5].sum() < n_s.shape[1] and np.count_nonzero(want[1]) > 1000
 
@@ -861,24 +864,27 @@ def test_torrance_sparrow_eval_bitwise(shadowing, L, eta_kind):
 @pytest.mark.parametrize("p_kind", ["fresnel", "given", "specular_only"])
 @pytest.mark.parametrize("has_diffuse", [False, True])
 @pytest.mark.parametrize("eta_kind", ["constant", "varying"])
-def test_torrance_sparrow_pdf_and_sample_bitwise(p_kind, has_diffuse, eta_kind):
+@pytest.mark.parametrize("distribution", ["beckmann", "ggx"])
+def test_torrance_sparrow_pdf_and_sample_bitwise(p_kind, has_diffuse, eta_kind, distribution):
     """The mixture pdf and the sampled direction, pdf, validity, weight and frame: the same bits as
-    the material's NumPy steps (lobe choice by the Fresnel estimate or a given P_spec)."""
+    the material's NumPy steps (lobe choice by the Fresnel estimate or a given P_spec), the weight
+    times the factor or not (``scale``: a multiscatter lobe adds its term first)."""
     from engine.materials import torrance_sparrow as ts
     rng, n_s, wo, wi, eta, m, s, w_d = _ts_batch(2, 4, eta_kind)
     n = n_s.shape[1]
     p_given = {"fresnel": None, "given": np.clip(rng.uniform(size=n), 0.1, 0.9), "specular_only": np.ones(n)}[p_kind]
-    got = ts.torrance_sparrow_pdf_numba(n_s, wo, wi, m, p_given, eta, 4, s, w_d, True, has_diffuse)
-    want = ts.torrance_sparrow_pdf_numpy(n_s, wo, wi, m, p_given, eta, 4, s, w_d, True, has_diffuse)
+    got = ts.torrance_sparrow_pdf_numba(n_s, wo, wi, m, p_given, eta, 4, s, w_d, True, has_diffuse, distribution)
+    want = ts.torrance_sparrow_pdf_numpy(n_s, wo, wi, m, p_given, eta, 4, s, w_d, True, has_diffuse, distribution)
     _bitwise([got], [want])
     u_lobe = rng.uniform(size=n)
     u_dir = rng.uniform(size=(2, n))
     u_dir[:, :4] = [[0.5, 0.0, 1 - 1e-16, 0.25], [0.5, 0.0, 1e-300, 0.25]]
-    for shadowing in ("ts", "smith_rational"):
+    forms = ("ts", "smith_rational") if distribution == "beckmann" else ("smith_correlated", "smith")
+    for shadowing, scale in zip(forms, (True, False)):
         got = ts.torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, 4, s, m, shadowing, p_given, w_d,
-                                               has_diffuse)
+                                               has_diffuse, distribution, scale)
         want = ts.torrance_sparrow_sample_numpy(n_s, wo, u_lobe, u_dir, eta, 4, s, m, shadowing, p_given, w_d,
-                                                has_diffuse)
+                                                has_diffuse, distribution, scale)
         _bitwise(got, want)
         assert 0.3 * n < want[2].sum() < n
 
@@ -908,6 +914,60 @@ def test_torrance_sparrow_material_uses_the_declared_twins():
         f = mat.eval(sp, bs.wi)
         cos_i = (n_s * bs.wi).sum(0)
         np.testing.assert_allclose(bs.weight.A[:, ok], (f.A * cos_i / np.where(ok, bs.pdf, 1.0))[:, ok], rtol=1e-13)
+
+
+@needs_numba
+@pytest.mark.parametrize("kw", [
+    dict(multiscatter=True),                                                   # Principled's metal lobe
+    dict(diffuse_albedo="rgb", diffuse_weight=1.0, diffuse_layering="albedo_scaling",
+         multiscatter=True),                                                   # its dielectric over the base
+    dict(shadowing="smith", diffuse_albedo=0.5, diffuse_weight=0.7),           # Fresnel lobe choice, "add"
+], ids=["metal", "layered", "separable"])
+def test_ggx_torrance_sparrow_material_compiled_equals_numpy_steps(kw, monkeypatch):
+    """A GGX Torrance–Sparrow (the Principled BSDF's metal and specular lobes) through the compiled passes
+    gives the bits of its NumPy steps (``_facet_eval``, ``_mixture_pdf``, ``_mixture_sample``, which it ran
+    before): eval, pdf and the sample's direction, pdf, validity and weight, multiscatter term included."""
+    from engine.materials import torrance_sparrow as ts
+    from engine.materials.base import ShadingPoint
+    from engine.spectral.spectrum import RGBReflectanceSpectrum
+    if kw.get("diffuse_albedo") == "rgb":
+        kw = dict(kw, diffuse_albedo=RGBReflectanceSpectrum((0.6, 0.3, 0.2)))
+    rng = np.random.default_rng(11)
+    n = 3000
+    n_s, wo = unit(rng, n), unit(rng, n)
+    wo *= np.where((n_s * wo).sum(0) < 0, -1.0, 1.0)[None, :]
+    sp = ShadingPoint(np.zeros((3, n)), n_s, n_s, wo, np.tile([[450.0], [520.0], [600.0], [680.0]], (1, n)))
+    mat = ts.TorranceSparrow(1.5 if "diffuse_albedo" in kw else 0.2, 0.0 if "diffuse_albedo" in kw else 3.1, 0.25,
+                             distribution="ggx", **kw)
+    assert mat._compiled_lobe
+    u = rng.uniform(size=(3, n))
+    wi = unit(rng, n)
+
+    def run():
+        bs = mat.sample(sp, u[0], u[1:])
+        f = mat.eval(sp, wi)
+        return [mat.pdf(sp, wi), f.x_in, f.A, f.B, f.C, f.S, f.depol, bs.wi, bs.pdf, bs.valid, bs.weight.x_in,
+                bs.weight.A, bs.weight.B, bs.weight.C, bs.weight.S, bs.weight.depol]
+    got = run()
+    monkeypatch.setattr(ts.TorranceSparrow, "_compiled_lobe", property(lambda self: False))
+    want = run()
+    _bitwise([g for g in got if g is not None], [w for w in want if w is not None])
+    assert [g is None for g in got] == [w is None for w in want]
+    assert 0.5 * n < want[9].sum() and np.count_nonzero(want[2]) > n // 3
+
+
+@needs_numba
+def test_ggx_d_at_takes_the_flat_limit_as_ggx_d():
+    """Facets within 1e-75 of the horizon: (1 + tan²θ_h)² overflows, both D's give the limit α²/π (the compiled
+    one gave NaN), and elsewhere the same bits."""
+    from engine.kernels.microfacet import ggx_d_at
+    from engine.materials.ggx import GGX
+    h = np.array([[1.0, 0.6, 0.0, 0.3], [0.0, 0.0, 0.0, 0.1], [1e-80, 0.8, 1.0, 1e-70]])
+    h /= np.linalg.norm(h, axis=0)
+    for alpha in (1e-4, 0.3, 1.0):
+        got = np.array([ggx_d_at(*h[:, i], alpha) for i in range(h.shape[1])])
+        want = GGX(alpha).D(h)
+        assert np.array_equal(got, want) and got[0] == alpha * alpha / np.pi and np.all(np.isfinite(got))
 
 
 # ----------------------------------------------------------------------------- rough dielectric passes

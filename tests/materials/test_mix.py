@@ -580,3 +580,30 @@ def test_two_sided_mix_with_a_mapped_material_renders_its_back_as_its_front(tmp_
     front_image = _render(_scene(mat, vertices=front, **kw)).stokes()
     assert front_image[0].max() > 0
     np.testing.assert_allclose(back, front_image, rtol=1e-6, atol=1e-7)
+
+
+def test_a_batch_computes_a_mixtures_weights_once_and_its_subsets_share_arrays(monkeypatch):
+    """ShadingPoint.memo: next-event estimation's eval and pdf at one batch compute the mixture's weights and
+    probabilities once (the values are those of a fresh batch); a taken or flipped batch computes its own.
+    ShadingPoint.take(sel, shared): batches that share arrays get one gathered copy, the same values as apart."""
+    rng = np.random.default_rng(3)
+    sp = points(200, rng)
+    mix = Mix([lambert(0.2), SmoothDielectric(1.5), lambert(0.7)], [0.3, 0.5, 0.2])
+    calls = []
+    original = Mix._weights
+    monkeypatch.setattr(Mix, "_weights", lambda self, q: calls.append(q) or original(self, q))
+    wi = upper(200, rng)
+    f, pdf = mix.eval(sp, wi), mix.pdf(sp, wi)
+    assert len(calls) == 1
+    fresh = points(200, np.random.default_rng(3))
+    assert np.array_equal(mix.pdf(fresh, wi), pdf) and np.array_equal(mix.eval(fresh, wi).A, f.A)
+    sel = np.arange(0, 200, 3)
+    mix.pdf(sp.take(sel), wi[:, sel])
+    mix.pdf(sp.flipped(np.zeros(200, bool)), wi)
+    assert len(calls) == 4          # (the fresh batch's, the subset's and the flipped batch's own)
+    other = ShadingPoint(sp.p, -sp.n_s, sp.n_g, sp.wo, sp.lam, False, sp.lookup, None, None)
+    shared = {}
+    a, b = sp.take(sel, shared), other.take(sel, shared)
+    assert a.wo is b.wo and a.lam is b.lam and a.lookup is b.lookup and a.n_s is not b.n_s
+    c = other.take(sel)
+    assert np.array_equal(b.n_s, c.n_s) and np.array_equal(b.wo, c.wo) and b.wo is not c.wo
