@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 
-from . import jit
+from . import jit, jit_inner
 
 
 @jit
@@ -66,7 +66,7 @@ def _pdf_loop(u_, v_, cell_pdf, H, mitsuba, out):
         out[k] = cell_pdf[j, i]
 
 
-@jit
+@jit_inner
 def _search_right(cdf, target, lo, hi):
     """The first index in [lo, hi) whose ``cdf`` exceeds ``target`` (numpy.searchsorted's "right" side), hi if none."""
     while lo < hi:

@@ -90,8 +90,8 @@ from .roughness import ALPHA_MIN, checked_alpha
 from .torrance_sparrow import SpecularAlbedoTable
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflectance, fresnel_reflection_abcs
-from ..polarisation.thin_film import (facet_film, film_at, film_label, film_layering_albedo, film_reflection_abcs,
-                                      layering_wavelengths)
+from ..polarisation.thin_film import facet_film, film_at, film_label, film_reflection_abcs
+from ..spectral.film_channels import film_layering_albedo, layering_wavelengths
 from ..spectral import ConstantSpectrum, as_spectrum
 from ..textures import TexturedNumber, textured
 from ..vec3 import cross, dot, local_frame, to_local

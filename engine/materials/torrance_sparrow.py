@@ -124,8 +124,8 @@ from ..kernels.torrance_sparrow import (DISTRIBUTION_CODES, SHADOWING_CODES, tor
                                         torrance_sparrow_pdf_numba, torrance_sparrow_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
-from ..polarisation.thin_film import (facet_film, film_at, film_label, film_layering_albedo, film_reflection_abcs,
-                                      layering_wavelengths)
+from ..polarisation.thin_film import facet_film, film_at, film_label, film_reflection_abcs
+from ..spectral.film_channels import film_layering_albedo, layering_wavelengths
 from ..spectral import RGB_WAVELENGTHS_NM, ConstantSpectrum, as_spectrum
 from ..textures import TexturedNumber
 from ..textures.inputs import NumberSpectrum, textured
@@ -662,7 +662,7 @@ class TorranceSparrow(BSDF):
         """(N,) Cycles' layering estimate of a filmed facet lobe (bsdf_microfacet_estimate_albedo: no table for
         iridescence, the film's reflectance at the view angle): the largest over the colour channels, each channel's
         band average as the spectral transport develops it, or in "rgb" transport its wavelength
-        (engine.polarisation.thin_film.film_layering_albedo, layering_wavelengths), as Cycles layers by the largest
+        (engine.spectral.film_channels.film_layering_albedo, layering_wavelengths), as Cycles layers by the largest
         channel."""
         # (a constant index: "albedo_scaling" needs one, _albedo_table)
         return film_layering_albedo(cos_o, self.exterior_n, film_at(self.film, sp), self.n.value + 1j * self.k.value,
@@ -890,7 +890,7 @@ class FilmedMirrorWithDiffuse(MirrorWithDiffuse):
         return mirror_reflection(sp, self._eta(sp), film_at(self.film, sp), self.exterior_n)
 
     def film_albedo(self, sp: ShadingPoint, cos_o: np.ndarray) -> np.ndarray:
-        """(N,) the film's layering albedo at cosθ_o (engine.polarisation.thin_film.film_layering_albedo, as
+        """(N,) the film's layering albedo at cosθ_o (engine.spectral.film_channels.film_layering_albedo, as
         TorranceSparrow.film_albedo — the same signature; n, κ at each channel's wavelength
         engine.spectral.RGB_WAVELENGTHS_NM, one per channel as in Cycles)."""
         lam = np.asarray(RGB_WAVELENGTHS_NM, np.float64)

@@ -29,7 +29,8 @@ from engine.materials.roughness import ALPHA_MIN as M_MIN
 from engine.materials.torrance_sparrow import SpecularAlbedoTable, TorranceSparrow
 from engine.polarisation.fresnel import fresnel_reflectance, fresnel_reflection_abcs
 from engine.polarisation.mueller import is_realisable
-from engine.polarisation.thin_film import film_band_reflectance, film_reflection_abcs
+from engine.polarisation.thin_film import film_reflection_abcs
+from engine.spectral.film_channels import film_band_reflectance
 from engine.spectral import RGBUnboundedSpectrum, named_ior
 from engine.spectral.gulbrandsen import GulbrandsenIndex
 from engine.textures.conductor_index import TexturedGulbrandsenIndex

@@ -14,7 +14,7 @@ from engine.materials.smooth_limit import MirrorWithDiffuse
 from engine.materials.thin_film import ThinFilmDielectric
 from engine.materials.torrance_sparrow import FilmedMirrorWithDiffuse, TorranceSparrow
 from engine.polarisation.mueller import is_realisable
-from engine.polarisation.thin_film import film_layering_albedo
+from engine.spectral.film_channels import film_layering_albedo
 from engine.scene.loader import parse_material
 from engine.spectral import ConstantSpectrum
 

@@ -1,7 +1,7 @@
 """A thin film's colour-channel reflectances and the layering weight of what lies under a filmed layer.
 
 ``film_band_reflectance`` averages Airy's reflectance over each linear-sRGB channel's band under the D65 white by a
-Fourier series (engine.polarisation.thin_film); the oracle is a direct quadrature every 0.05 nm of the exact
+Fourier series (engine.spectral.film_channels); the oracle is a direct quadrature every 0.05 nm of the exact
 per-wavelength reflectance.  The layering weight of a filmed Principled layer is one minus the largest channel's
 reflectance (Cycles' rule), which in the spectral transport must be the channels the film itself develops to: a
 white base under a film then reflects exactly all the light in its brightest channel and no more in any.
@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from engine.materials.base import ShadingPoint
-from engine.polarisation.thin_film import (film_band_reflectance, film_layering_albedo, film_reflection_abcs,
-                                           layering_wavelengths)
+from engine.polarisation.thin_film import film_reflection_abcs
+from engine.spectral.film_channels import film_band_reflectance, film_layering_albedo, layering_wavelengths
 from engine.scene.loader import parse_material
 from engine.spectral import RGB_WAVELENGTHS_NM, WavelengthLookup, cie, rgb_channel_tables
 
