@@ -149,6 +149,11 @@ class EnvironmentMapEmitter(_Light):
         self.cell_pdf = np.where(omega > 0, prob / np.where(omega > 0, omega, 1.0), 0.0)   # per sr
         self.cdf = np.cumsum(prob.ravel())
         self.cdf[-1] = 1.0
+        # rows (marginal) and the flat cdf's value before each row: sample() inverts rows, then columns within one
+        self.row_prob = prob.sum(axis=1)
+        self.row_cdf = np.cumsum(self.row_prob)
+        self.row_cdf[-1] = 1.0
+        self.row_start = np.concatenate(([0.0], self.cdf[W - 1:-1:W]))
         # mean radiance over the sphere (light selection): ∫ L dω / 4π
         rows = knot_rows.astype(np.float64)
         rows_right = np.roll(rows, -1, axis=1)
@@ -266,12 +271,23 @@ class EnvironmentMapEmitter(_Light):
         return j, i
 
     def sample(self, p, u):
+        """Directions from the pair u[1], u[2] ((3, N); u[0] unused), as Cycles' background map
+        (light/background.h): u[1] picks the row by the marginal cdf, u[2] the cell within it by the
+        row's conditional cdf, and each number's remainder within its cell places the direction there
+        (cosθ, φ linear: uniform in solid angle).  One continuous map of the pair, so a stratified
+        pair stays stratified over the sphere (a flat 1-D cdf stratifies rows only: BoomBox's σ² 2×)."""
         W = self.texels.shape[1]
-        k = np.minimum(np.searchsorted(self.cdf, u[0], side="right"), self.cdf.size - 1)
-        j, i = np.divmod(k, W)
-        cos_t = self.cos_knots[j] + u[1] * (self.cos_knots[j + 1] - self.cos_knots[j])
+        j = np.minimum(np.searchsorted(self.row_cdf, u[1], side="right"), self.row_prob.size - 1)
+        row_before = self.row_cdf[j] - self.row_prob[j]
+        dv = np.clip((u[1] - row_before) / np.where(self.row_prob[j] > 0, self.row_prob[j], 1.0), 0.0, 1.0)
+        target = self.row_start[j] + u[2] * self.row_prob[j]
+        k = np.clip(np.searchsorted(self.cdf, target, side="right"), j * W, j * W + W - 1)
+        i = k - j * W
+        cell = self.cdf[k] - np.where(k > 0, self.cdf[k - 1], 0.0)
+        du = np.clip((target - (self.cdf[k] - cell)) / np.where(cell > 0, cell, 1.0), 0.0, 1.0)
+        cos_t = self.cos_knots[j] + dv * (self.cos_knots[j + 1] - self.cos_knots[j])
         sin_t = np.sqrt(np.maximum(1.0 - cos_t * cos_t, 0.0))
-        phi = math.pi * (1.0 - 2.0 * ((i + 0.5 + u[2]) / W))
+        phi = math.pi * (1.0 - 2.0 * ((i + 0.5 + du) / W))
         dm = np.stack((sin_t * np.cos(phi), sin_t * np.sin(phi), cos_t))
         wi = self._to_world(dm)
         pdf = self.cell_pdf[j, i]
