@@ -107,8 +107,11 @@ class Exporter:
         self.calls.append(("world", None if world is None else world.name))
         return None
 
-    def sync(self, depsgraph, updates=None, settings="settings"):
+    def sync(self, depsgraph, updates=None, settings=None):
+        from polar_render.engine.scene.description import RenderSettings
         from polar_render.polar_addon.viewport import classify, depsgraph_updates
+        # (the walk reads the settings' light_tree; seed 1: later syncs with other settings restart the render)
+        settings = RenderSettings(seed=1) if settings is None else settings
         self.calls.clear()
         changes = classify(depsgraph_updates(depsgraph)) if self.export.initialised else None
         return self.export.sync(depsgraph, changes, settings)
@@ -187,7 +190,8 @@ def test_editing_one_mesh_reads_only_that_mesh(scene):
 def test_editing_a_material_swaps_it_without_a_bvh_rebuild(vp, scene):
     ex, instances, (a, b, lamp, red, blue) = scene
     old = ex.export.materials["Red"][1]
-    order = list(ex.export.sync(Depsgraph(instances), vp.Changes(), "settings").scene.materials)
+    from polar_render.engine.scene.description import RenderSettings
+    order = list(ex.export.sync(Depsgraph(instances), vp.Changes(), RenderSettings()).scene.materials)
     r = ex.sync(Depsgraph(instances, updates=[Update(red, shading=True)]))
     assert ex.calls == [("material", "Red")]
     assert r.restart and not r.rebuild
@@ -221,7 +225,8 @@ def test_light_edit_and_object_removal(scene):
 
 def test_settings_change_restarts_without_re_export(scene):
     ex, instances, _ = scene
-    r = ex.sync(Depsgraph(instances, updates=[Update(ID("Scene", "SCENE"))]), settings="other")
+    from polar_render.engine.scene.description import RenderSettings
+    r = ex.sync(Depsgraph(instances, updates=[Update(ID("Scene", "SCENE"))]), settings=RenderSettings(spp=2))
     assert ex.calls == [] and r.restart and not r.rebuild
 
 
