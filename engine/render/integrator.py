@@ -730,7 +730,7 @@ class PathTracer:
         # Dimensions 1–4 light sampling, 5–7 the BSDF (lobe, direction), 8 roulette; only those this
         # bounce reads are hashed (at delta vertices, before rr_depth, most are not): the numbers are
         # stateless in the dimension, so skipping leaves every other one as it was.
-        nee = (bool(len(self.lights)) and bounce + 2 <= st.max_depth
+        nee = (self.lights.sampled and bounce + 2 <= st.max_depth
                and not all(self.shaders[g].flags.is_delta_only for g in groups))
         if st.sampler == "padded" or (st.sampler == "sobol" and bounce > 0):
             # deeper vertices (every vertex with "padded"): the padded Owen-scrambled pairs (with "sobol" the

@@ -537,8 +537,9 @@ class Scene:
     #: how next-event estimation picks a light: "uniform" (as Mitsuba 3), "power" (probability ∝
     #: each light's estimated power, for scenes of many lights of different strength) or "cycles" (as Cycles
     #: without its light tree: emissive meshes by area, other lights uniformly, half each where both exist, a
-    #: constant sky beside other lights left to BSDF sampling, engine.render.lights.selection.cycles_probabilities;
-    #: Blender scenes with Light Tree off; docs/benchmarks.md "Real assets against Cycles")
+    #: constant sky, beside other lights or alone, left to BSDF sampling,
+    #: engine.render.lights.selection.cycles_probabilities; Blender scenes with Light Tree off; docs/benchmarks.md
+    #: "Real assets against Cycles")
     light_selection: str = "uniform"
     #: the world medium (an Interior: fog everywhere outside the closed media), or None
     medium: object = None

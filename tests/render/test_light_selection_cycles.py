@@ -56,8 +56,9 @@ def test_probabilities_leave_a_constant_sky_to_bsdf_sampling():
     choice = lights.choose(u, np.zeros((3, u.size)))[0]
     assert not np.any(choice == sky.index(True))
     assert abs(np.mean(choice == (sky.index(True) + 1) % 3) - 0.5) < 0.01
-    alone = Renderer(_scene(_lights()[:1], "cycles")).lights         # the sky alone: chosen always
-    np.testing.assert_array_equal(alone.prob, [1.0])
+    alone = Renderer(_scene(_lights()[:1], "cycles")).lights         # the sky alone: never, no light is sampled
+    np.testing.assert_array_equal(alone.prob, [0.0])
+    assert not alone.sampled and Renderer(_scene(_lights()[:1], "power")).lights.sampled
     uniform = Renderer(_scene(_lights(point=True), "uniform")).lights     # "uniform" as before
     np.testing.assert_allclose(uniform.prob, 1.0 / 3.0)
 
@@ -68,6 +69,18 @@ def test_floor_under_sun_and_sky_is_the_analytic_radiance():
     for selection in ("cycles", "power"):
         y = _luminance(_scene(_lights(), selection, spp=32))
         assert y.mean() == pytest.approx(expected, rel=2e-3), selection
+
+
+def test_a_constant_sky_alone_is_left_to_bsdf_rays_as_cycles_does():
+    """Cycles disables a world that does not vary as a light (test_enabled_lights, also when it is the only light):
+    a Lambert floor under it is found by cosine-sampled BSDF rays alone, each sample ρ·L exactly — no noise at
+    all, where light-sampling the sphere ("power") is noisy; the same mean."""
+    ys = {sel: np.array([_luminance(_scene(_lights()[:1], sel, spp=4, seed=s)) for s in range(3)])
+          for sel in ("cycles", "power")}
+    assert ys["cycles"].var(0).max() < 1e-24                    # every pixel of every seed the same value
+    np.testing.assert_allclose(ys["cycles"], RHO * SKY, rtol=1e-4)   # (D65 white → sRGB: within 3.4e-5)
+    assert ys["power"].var(0, ddof=1).mean() > 1e-6
+    assert ys["power"].mean() == pytest.approx(RHO * SKY, rel=2e-2)
 
 
 def test_cycles_selection_is_less_noisy_than_power_beside_a_dim_lamp():
@@ -117,7 +130,7 @@ def _polygon_irradiance(p, corners):
 
 def test_cycles_probabilities_are_cycles_distribution():
     """Cycles' distribution_pdf_lights / _triangles by hand: lamps 1/num_lights, triangles ∝ area, half each where
-    both exist; a constant sky and lights that light nothing 0; the sky alone 1; nothing usable: None."""
+    both exist; a constant sky and lights that light nothing 0; the sky alone 0 too; nothing usable: None."""
     from engine.render.lights.selection import cycles_probabilities
     area, sky, none = np.array([1.0, 0.25, 0.0, 0.0, 0.0]), np.array([0, 0, 0, 0, 1], bool), np.zeros(5, bool)
     np.testing.assert_allclose(cycles_probabilities(area, sky, none), [0.4, 0.1, 0.25, 0.25, 0.0])
@@ -126,7 +139,7 @@ def test_cycles_probabilities_are_cycles_distribution():
     np.testing.assert_allclose(cycles_probabilities(area[2:], sky[2:], none[2:]), [0.5, 0.5, 0.0])  # lamps only
     hidden = np.array([0, 1, 0, 1, 0], bool)            # a hidden mesh and a hidden lamp: 0, the rest renormalised
     np.testing.assert_allclose(cycles_probabilities(area, sky, hidden), [0.5, 0.0, 0.5, 0.0, 0.0])
-    np.testing.assert_allclose(cycles_probabilities(area[4:], sky[4:], none[4:]), [1.0])
+    np.testing.assert_allclose(cycles_probabilities(area[4:], sky[4:], none[4:]), [0.0])    # the sky alone: none
     assert cycles_probabilities(area[:1], sky[:1], np.ones(1, bool)) is None
 
 

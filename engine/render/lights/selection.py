@@ -155,7 +155,7 @@ class LightSet:
         self.mix_prob = self.prob
         self.cdf = None
         sky = np.array([lt.constant_sky for lt in self.lights], bool)
-        if self.selection == "cycles" and count > 1:
+        if self.selection == "cycles" and count >= 1:
             prob = cycles_probabilities(np.array(self._triangle_area), sky,
                                         np.array([lt.shades_nothing for lt in self.lights], bool))
             if prob is not None:
@@ -174,6 +174,8 @@ class LightSet:
                 # beside other lights (EnvironmentEmitter.SELECTION_SHARE)
                 local = np.where(sky, 0.0, power)
                 self.mix_prob = local / local.sum() if local.sum() > 0 else self.prob
+        #: whether next-event estimation samples any light (not where "cycles" leaves a constant sky alone to BSDF rays)
+        self.sampled = bool(count) and bool(np.any(self.prob > 0))
 
     def _spatial_records(self) -> None:
         """Every light's importance formula as (kind, parameters) for the per-point selection (≤ SPATIAL_MAX)."""
@@ -224,12 +226,14 @@ def cycles_probabilities(triangle_area: np.ndarray, constant_sky: np.ndarray, sh
     """Selection probabilities (count,) as Cycles picks lights without its light tree (scene/light.cpp
     device_update_distribution, kernel/light/distribution.h), or None where no light qualifies: the emissive
     triangles (``triangle_area`` > 0: each mesh light's area where Cycles counts its triangles) ∝ area, every other
-    light uniformly (1/num_lights), half each where both kinds exist.  A constant sky beside other lights gets 0
-    (test_enabled_lights: background MIS off unless the world varies; BSDF rays find it, MIS weight 1), and so do
-    lights that light nothing (``shades_nothing``: Cycles leaves objects invisible to indirect rays out)."""
+    light uniformly (1/num_lights), half each where both kinds exist.  A constant sky gets 0, beside other lights or
+    alone (test_enabled_lights: background MIS off unless the world varies or has a portal; BSDF rays find it, MIS
+    weight 1: all zeros where it is the only light), and so do lights that light nothing (``shades_nothing``: Cycles
+    leaves objects invisible to indirect rays out)."""
     usable = ~shades_nothing
-    if (usable & ~constant_sky).any():
-        usable &= ~constant_sky
+    if (usable & constant_sky).any() and not (usable & ~constant_sky).any():
+        return np.zeros(constant_sky.size)
+    usable &= ~constant_sky
     area = np.where(usable, triangle_area, 0.0)
     lamps = usable & (triangle_area <= 0.0)
     if area.sum() <= 0.0 and not lamps.any():
