@@ -56,10 +56,15 @@ class MirrorWithDiffuse(BSDF):
                       | BSDFFlags.when(not constant, BSDFFlags.WAVELENGTH_DEPENDENT))
 
     def _eta(self, sp):
-        return (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n
+        """The relative index (L, N), once per batch (ShadingPoint.memo)."""
+        return sp.memo(self, "eta", lambda: (sp.spectrum(self.n) + 1j * sp.spectrum(self.k)) / self.exterior_n)
 
     def _diffuse(self, sp):
-        """d·ρ (L, N), times max(0, 1 − s·F(cosθ_o)) with ``"albedo_scaling"``."""
+        """d·ρ (L, N), times max(0, 1 − s·F(cosθ_o)) with ``"albedo_scaling"``; once per batch (next-event
+        estimation's eval, MIS's pdf and the sample read it at the same points)."""
+        return sp.memo(self, "diffuse", lambda: self._diffuse_now(sp))
+
+    def _diffuse_now(self, sp):
         if self.diffuse_layering == "add":
             return sp.spectrum(self.albedo) * sp.number(self.d)
         return sp.spectrum(self.albedo) * sp.number(self.d) * self.diffuse_scale(sp)
@@ -89,8 +94,9 @@ class MirrorWithDiffuse(BSDF):
         return np.where(total > 0, spec / np.where(total > 0, total, 1.0), 1.0)
 
     def _mirror(self, sp):
-        """(wi, MuellerValue, valid) of the mirror, weight 1 (engine.materials.conductor.mirror_reflection)."""
-        return mirror_reflection(sp, self._eta(sp))
+        """(wi, MuellerValue, valid) of the mirror, weight 1 (engine.materials.conductor.mirror_reflection); once per
+        batch."""
+        return sp.memo(self, "mirror", lambda: mirror_reflection(sp, self._eta(sp)))
 
     def delta_reflection(self, sp):
         return self._mirror(sp)[1].scaled(sp.number(self.s))
