@@ -125,11 +125,11 @@ def _eval_at(i, n0, n1, n2, eta, t0, t1, t2, b0, b1, b2, wo, wi, dist, rational,
     h0, h1, h2, refl, ok, d_i, d_o = _half_vector_at(li0, li1, li2, lo0, lo1, lo2, eta)
     scalar = 0.0
     c_f = 1.0
-    if ok:
+    den_cos = abs(li2) * lo2
+    if ok and den_cos > 0.0:         # a product underflowing to 0 (both directions at grazing): f = 0, not 0/0
         D = _d_at(dist, h0, h1, h2, alpha)
         G = (_g1_at(dist, rational, li0, li1, li2, h0, h1, h2, alpha, coef, k)
              * _g1_at(dist, rational, lo0, lo1, lo2, h0, h1, h2, alpha, coef, k))
-        den_cos = abs(li2) * lo2
         if refl:
             scalar = D * G / (4.0 * den_cos)
             c_f = d_i

@@ -156,6 +156,7 @@ def _eval(dist, rational, n_s, wo, wi, L, n_int, n_ext, no_fresnel=False, film=N
     G = dist.G1(wi_l, h, rational) * dist.G1(wo_l, h, rational)
     ci = np.abs(wi_l[2])
     co = wo_l[2]
+    ok = ok & (ci * co > 0)          # a product underflowing to 0 (both directions at grazing): f = 0, not 0/0
     den_cos = np.where(ok, ci * co, 1.0)
     jac = eta * d_i + d_o
     jac2 = np.where(ok & ~refl, jac * jac, 1.0)
