@@ -179,6 +179,13 @@ def spectrum_to_linear_srgb(values_on_grid, illuminant: bool = False) -> np.ndar
 FOURIER_X_MAX = 60000.0
 
 
+def channel_sensitivity(lam_nm) -> np.ndarray:
+    """(3, *lam.shape) the linear-sRGB channels' sensitivities under the unit D65 white, D65n(λ)·(M·cmf(λ))_c
+    (unnormalised): how the spectral transport develops light at λ into each channel."""
+    lam = np.asarray(lam_nm, np.float64)
+    return np.tensordot(XYZ_TO_LINEAR_SRGB, cmf_xyz(lam), axes=1) * d65_normalised(lam)
+
+
 @functools.lru_cache(maxsize=1)
 def channel_fourier_table() -> tuple[float, np.ndarray]:
     """(h nm, S (3, J) complex): S_c(x) = ∫ s_c(λ) e^{2πix/λ} dλ at x = 0, h, …, (J − 1)·h ≈ FOURIER_X_MAX nm, the
@@ -191,7 +198,7 @@ def channel_fourier_table() -> tuple[float, np.ndarray]:
     nu0, nu1 = 1.0 / LAMBDA_MAX, 1.0 / LAMBDA_MIN
     dnu = (nu1 - nu0) / m
     lam = 1.0 / (nu0 + dnu * np.arange(m + 1))
-    g = np.tensordot(XYZ_TO_LINEAR_SRGB, cmf_xyz(lam), axes=1) * d65_normalised(lam) * lam ** 2   # per unit ν
+    g = channel_sensitivity(lam) * lam ** 2           # per unit ν
     g[:, 0] *= 0.5
     g[:, -1] *= 0.5
     g /= g.sum(axis=1, keepdims=True)

@@ -113,7 +113,7 @@ def _band_quadrature(c, n1, nf, d, n3, channel) -> np.ndarray:
     sensitivity as in engine.spectral.cie.channel_fourier_table) of films whose phase factor is not a pure
     phase (evanescent) or whose series converges slowly."""
     lam = np.arange(cie.LAMBDA_MIN, cie.LAMBDA_MAX + 0.5 * BAND_STEP_NM, BAND_STEP_NM)
-    sens = np.tensordot(cie.XYZ_TO_LINEAR_SRGB, cie.cmf_xyz(lam), axes=1) * cie.d65_normalised(lam)
+    sens = cie.channel_sensitivity(lam)
     sens /= sens.sum(axis=1, keepdims=True)
     A = film_reflection_abcs(c[None, :], n1, nf[None, :], d[None, :], n3[None, :], lam[:, None])[0]   # (G, M)
     return np.einsum("gm,mg->m", A, sens[channel])
