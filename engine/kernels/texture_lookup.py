@@ -51,14 +51,19 @@ def _bilinear_loop(uv, pixels, width, height, extension, code_scale, colour, srg
         fy = y - y0
         i0 = np.int64(x0)
         j0 = np.int64(y0)
+        # the four texels' indices (and CLIP's inside tests) depend on the point alone: wrapped once, not per channel
+        jj_0, in_y0 = _wrap(j0, height, extension)
+        jj_1, in_y1 = _wrap(j0 + 1, height, extension)
+        ii_0, in_x0 = _wrap(i0, width, extension)
+        ii_1, in_x1 = _wrap(i0 + 1, width, extension)
         for c in range(C):
             acc = 0.0
             for b in range(2):
-                jj, in_y = _wrap(j0 + b, height, extension)
+                jj, in_y = (jj_0, in_y0) if b == 0 else (jj_1, in_y1)
                 wy = 1.0 - fy if b == 0 else fy
                 row = 0.0
                 for a in range(2):
-                    ii, in_x = _wrap(i0 + a, width, extension)
+                    ii, in_x = (ii_0, in_x0) if a == 0 else (ii_1, in_x1)
                     wx = 1.0 - fx if a == 0 else fx
                     t = np.float64(pixels[jj, ii, c])
                     if code_scale > 0.0:
