@@ -74,10 +74,11 @@ class ShadingPoint:
         return self.memo(None, "cos_o", lambda: self.n_s[0] * self.wo[0] + self.n_s[1] * self.wo[1]
                          + self.n_s[2] * self.wo[2])
 
-    def memo(self, owner, key: str, compute):
-        """``compute()`` once per batch for ``owner`` (a material, or None) and ``key``: a value that is a function
-        of these points alone (cosθ_o, a mixture's weights, a model's index …), kept on this object; ``take`` and
-        ``flipped`` make new batches, without it.  The value is shared: callers must not write into it."""
+    def memo(self, owner, key, compute):
+        """``compute()`` once per batch for ``owner`` (a material, or None) and ``key`` (hashable: a string or a
+        tuple): a value that is a function of these points alone (cosθ_o, a mixture's weights, a model's index …),
+        kept on this object; ``take`` and ``flipped`` make new batches, without it.  The value is shared: callers
+        must not write into it."""
         memo = self.__dict__.get("_memo")
         if memo is None:
             memo = self.__dict__["_memo"] = {}

@@ -169,7 +169,7 @@ class ShadingNormal(BSDF):
         """The mapped shading normal (3, N) at the points; a normal map alone is mapped once per batch and map
         (ShadingPoint.memo: mix.map_normals gives each lobe of a material the same map)."""
         if self.bump_map is None:
-            key = f"normal_map {self.normal_strength!r} {self.normal_green_down}"
+            key = ("normal_map", self.normal_strength, self.normal_green_down)
             return sp.memo(self.normal_map, key, lambda: self._mapped_normal(sp))
         return self._mapped_normal(sp)
 
@@ -215,7 +215,7 @@ class ShadingNormal(BSDF):
         n = self.shading_normal(sp)
         if self._specular and self.bump_correction:
             if self.bump_map is None:       # (the same map's corrected normal for every specular lobe)
-                key = f"specular normal {self.normal_strength!r} {self.normal_green_down}"
+                key = ("specular normal", self.normal_strength, self.normal_green_down)
                 n = sp.memo(self.normal_map, key, lambda: valid_specular_normal(n, sp.n_g, sp.wo))
             else:
                 n = valid_specular_normal(n, sp.n_g, sp.wo)
