@@ -174,18 +174,12 @@ class AreaEmitter(_Light):
 
     def points_on(self, p, tri, u1, u2):
         """Points uniform by area on the triangles ``tri`` (n,) (u1, u2 (n,) in [0, 1)) seen from p (3, n):
-        (wi, dist, cosθ at the emitting side (``facing``), (triangle, b1, b2))."""
+        (wi, dist, cosθ at the emitting side (``facing``), (triangle, b1, b2)): ``sample_triangles``' points
+        (engine.kernels.geometry.triangle_sample)."""
         c = self.compiled
-        f = c.faces[tri]
-        su = np.sqrt(u1)
-        b1 = 1.0 - su
-        b2 = u2 * su
-        V = c.vertices
-        x = (V[f[:, 0]] * (1.0 - b1 - b2)[:, None] + V[f[:, 1]] * b1[:, None] + V[f[:, 2]] * b2[:, None]).T
-        to = x - p
-        dist = np.sqrt(dot(to, to))
-        wi = to / np.where(dist > 0, dist, 1.0)
-        return wi, dist, self.facing(-dot(wi, c.tri_normal[tri].T)), (tri, b1, b2)
+        wi, dist, _, _, _, cos_l, b1, b2 = triangle_sample(p, tri, u1, u2, c.faces, c.vertices, c.tri_normal,
+                                                           c.tri_area, self.two_sided)
+        return wi, dist, cos_l, (tri, b1, b2)
 
     def sample_triangles(self, p, tri, u1, u2):
         """Next-event samples on given triangles (the light tree's choice): a point uniform by area on
