@@ -83,7 +83,8 @@ import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint
 from .ggx import visible_normals
-from .ggx_energy import ALPHA_MAX, E_FLOOR, MU_FLOOR, conductor_extra, f82_average_fresnel
+from .ggx_energy import (ALPHA_MAX, E_FLOOR, MU_FLOOR, conductor_extra, f82_average_fresnel,
+                         multiscatter_fresnel)
 from .microfacet import _chi_plus, half_vector, reflect_local
 from .table_cache import cached_table
 from .roughness import ALPHA_MIN, checked_alpha
@@ -453,8 +454,7 @@ class AnisotropicGGX(BSDF):
         table = self._white_table()
         E = np.clip(table(wo_l), E_FLOOR, 1.0)
         E_avg = min(max(table.average, E_FLOOR), 1.0)
-        Fss = f82_average_fresnel(self._eta(sp))
-        Fms = Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
+        Fms = multiscatter_fresnel(f82_average_fresnel(self._eta(sp)), E_avg)
         return Fms * ((1.0 - E) / E)[None, :]
 
     def multiscatter_extra(self, sp: ShadingPoint) -> np.ndarray:

@@ -326,6 +326,13 @@ def average_fresnel(eta) -> np.ndarray:
     return np.where(eta.imag == 0.0, dielectric_average_fresnel(eta.real), f82_average_fresnel(eta))
 
 
+def multiscatter_fresnel(Fss, E_avg):
+    """F_ms = F_ss·E_avg/(1 − F_ss·(1 − E_avg)): the Fresnel factor of the light that scatters more than once
+    among the facets (Kulla–Conty; Cycles' ``microfacet_ggx_preserve_energy``), from the lobe's average Fresnel F_ss
+    and its white albedo's average E_avg (arrays broadcast)."""
+    return Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
+
+
 def conductor_extra_numpy(mu, alpha, eta, correlated: bool = False) -> np.ndarray:
     """The compensation's share k (L, N) ≥ 0 for a conductor: f = f_ss·(1 + k), so the added
     (depolarised) term is k·M00(f_ss):  k = F_ms·(1 − E)/E, F_ms = F_ss·E_avg/(1 − F_ss·(1 − E_avg)), F_ss of
@@ -334,8 +341,7 @@ def conductor_extra_numpy(mu, alpha, eta, correlated: bool = False) -> np.ndarra
     ``correlated``: the lobe's Smith shadowing is height-correlated (else separable)."""
     E = np.clip(conductor_albedo(mu, alpha, correlated), E_FLOOR, 1.0)
     E_avg = np.clip(conductor_average(alpha, correlated), E_FLOOR, 1.0)
-    Fss = average_fresnel(eta)
-    Fms = Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
+    Fms = multiscatter_fresnel(average_fresnel(eta), E_avg)
     return Fms * ((1.0 - E) / E)
 
 
@@ -575,6 +581,5 @@ def cycles_layering_darkening(mu, alpha, eta) -> np.ndarray:
     F_ms from Cycles' dielectric F_ss (:func:`dielectric_average_fresnel`) of ``eta``; ``alpha`` a number or (N,)."""
     E = np.clip(conductor_albedo(mu, alpha, correlated=True), E_FLOOR, 1.0)
     E_avg = np.clip(conductor_average(alpha, correlated=True), E_FLOOR, 1.0)
-    Fss = dielectric_average_fresnel(eta)
-    Fms = Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
+    Fms = multiscatter_fresnel(dielectric_average_fresnel(eta), E_avg)
     return E + Fms * (1.0 - E)
