@@ -486,23 +486,61 @@ def test_emission_shader_strength_per_point_matches_cycles(addon, lighting):
     compare_with_cycles(scene, "Emission shader Strength", lighting)
 
 
-#: a measured gap under the HDRI: the sphere's centre block (2, 2) reads 0.970 of Cycles' (tolerance 0.027), 8 seeds,
-#: the same at 0d1b48f (before the environment map's two-level sampling) and now; Y 0.989 (lamps: 12/12, Y 0.996).
-#: With seeds 0–3 it passed before and fails now (0.971 against a tolerance of 0.029).  Cause not isolated: candidates
-#: the light samples through rough glass that Cycles counts and its sampler never produces (+1.8 % on a low-index
-#: glass under a small lamp, docs/physics.md) and the HDRI's bright sun seen through the glass.
-GLASS_ROUGHNESS_GAPS = {"hdri"}
+#: Under the HDRI Cycles' default estimate of a rough glass is not one image: its next-event estimation evaluates
+#: refraction pairs no facet can refract (bsdf_microfacet_eval: "TODO: check if the refraction configuration is
+#: valid"), which its BSDF sampling never produces, so turning the world's light samples off (World ▸ Settings ▸
+#: Sampling: None) darkens its roughness-0.4 glass sphere by 4.5 % (0.3491 → 0.3339, 256 spp × 8 seeds).  Polar's
+#: glass is 0 on those pairs (Walter's χ⁺): 0.3367, its BSDF-only estimate's image (1.008 ± 0.006), 0.964 of Cycles'
+#: default; the roughness-0.1 glass (fewer pairs beyond the critical angle) 0.999 ± 0.005 of Cycles' default; under
+#: a uniform world 1.000 and 1.011 (docs/physics.md, "Rough glass against Cycles under a small bright source").  So
+#: the HDRI case is judged against Cycles' BSDF-sampled world ("hdri"); its default ("hdri, world light samples")
+#: stays a measured gap of Cycles' own (its centre block 0.962–0.971 in 2 of 6 sets of 4 seeds, the rest pass).
+GLASS_LIGHTINGS = {"lamps": ("lamps", True), "hdri": ("hdri", False), "hdri, world light samples": ("hdri", True)}
+GLASS_ROUGHNESS_GAPS = {"hdri, world light samples"}
 
 
-@pytest.mark.parametrize("lighting", [pytest.param(x, marks=pytest.mark.xfail(
-    reason="measured gap: the centre block 0.970 of Cycles' under the HDRI (GLASS_ROUGHNESS_GAPS)", strict=False))
-    if x in GLASS_ROUGHNESS_GAPS else x for x in ap.LIGHTINGS])
-def test_roughness_per_point_on_a_glass_matches_cycles(addon, lighting):
+@pytest.mark.parametrize("case", [pytest.param(x, marks=pytest.mark.xfail(
+    reason="Cycles' next-event estimation adds refraction its sampler never produces (GLASS_ROUGHNESS_GAPS)",
+    strict=False)) if x in GLASS_ROUGHNESS_GAPS else x for x in GLASS_LIGHTINGS])
+def test_roughness_per_point_on_a_glass_matches_cycles(addon, case):
     """A Roughness checker on a transmitting Principled BSDF: the rough glass's α = r² per point, as the reflection
-    lobes' (no warning)."""
+    lobes' (no warning); under the HDRI against Cycles with and without the world's light samples."""
+    lighting, world_light_samples = GLASS_LIGHTINGS[case]
     scene = sphere_scene("Roughness", (0.1, 0.4), {"Transmission Weight": 1.0, "Base Color": (0.9, 0.9, 0.9)},
                          lighting)
+    if not world_light_samples:
+        scene.world.cycles.sampling_method = "NONE"       # Cycles: BSDF sampling only (Polar ignores the setting)
     compare_with_cycles(scene, "Principled Roughness on a glass", lighting)
+
+
+def sphere_luminance(images, hit):
+    """(mean, standard error) over seeds of the mean luminance of (seeds, H, W, 3) images over the (H, W) mask."""
+    y = (images @ ap.REC709)[:, hit].mean(axis=1)
+    return float(y.mean()), float(y.std(ddof=1) / np.sqrt(len(y)))
+
+
+def test_rough_glass_under_the_hdri_is_cycles_bsdf_sampled_image(addon):
+    """A roughness-0.4 Principled glass sphere under the HDRI (64², 256 spp × 8 seeds): Polar's S0 equals Cycles'
+    BSDF-sampled estimate (the world's light samples off) within 3σ + 1.5 % (Cycles under-compensates inside rough
+    glass by ≈ 1 %: ggx_glass_inv_E, docs/physics.md); Cycles' default is ≥ 1.5 % + 3σ brighter than that (measured
+    4.5 %): its next-event estimation through back-facing facets, absent from Polar's glass (GLASS_LIGHTINGS)."""
+    import tempfile
+    spp, seeds = 256, 8
+    scene = sphere_scene("Roughness", (0.4, 0.4), {"Transmission Weight": 1.0, "Base Color": (0.9, 0.9, 0.9)}, "hdri")
+    hit = ap.coverage(scene, SIZE, SIZE)
+    with tempfile.TemporaryDirectory() as tmp:
+        mc, sc = sphere_luminance(ap.render_cycles(scene, spp, seeds, 8, tmp), hit)
+        scene.world.cycles.sampling_method = "NONE"
+        mb, sb = sphere_luminance(ap.render_cycles(scene, spp, seeds, 8, tmp), hit)
+    renderer, settings, warnings = ap.export_polar(scene, spp, 8)
+    mp, sp = sphere_luminance(ap.render_polar(renderer, settings, seeds)[:, 0], hit)
+    assert not warnings, warnings
+    ratio, se = mp / mb, mp / mb * np.hypot(sp / mp, sb / mb)
+    print(f"rough glass, HDRI: Polar {mp:.4f} ± {sp:.4f}, Cycles BSDF-sampled {mb:.4f} ± {sb:.4f}, default {mc:.4f} ± "
+          f"{sc:.4f}: Polar/Cycles(BSDF sampling) {ratio:.4f} ± {se:.4f}")
+    assert abs(ratio - 1.0) <= 3.0 * se + 0.015, (f"Polar/Cycles(BSDF sampling) {ratio:.4f} ± {se:.4f} "
+                                                  f"(Polar {mp:.4f}, Cycles {mb:.4f}, default {mc:.4f} ± {sc:.4f})")
+    assert mc > mb * 1.015 + 3.0 * np.hypot(sc, sb), (mc, sc, mb, sb)
 
 
 def _colour_texture(tree, name, socket):
