@@ -105,15 +105,17 @@ def _arguments(flags: int, features: int) -> np.ndarray:
 class DirectScene:
     """One triangle mesh (vertices (V, 3), triangles (F, 3)) as an Embree scene queried from compiled loops;
     the queries of embreex's ``EmbreeScene.run``: the same numbers in one-ray queries (``width`` 1), within
-    float rounding in packets of ``width`` 4, 8 or 16 rays.  ``scene_flags`` and ``quality`` (an
-    RTCBuildQuality, None: Embree's default) are Embree's build settings."""
+    float rounding in packets of ``width`` 4, 8 or 16 rays.  ``scene_flags``, ``quality`` (an RTCBuildQuality,
+    None: Embree's default), ``features`` (the queries' RTCFeatureFlags) and ``config`` (rtcNewDevice's
+    configuration string) are Embree's settings (the defaults: measured best, tests/bench/embree_calls.py)."""
 
     def __init__(self, lib, vertices: np.ndarray, faces: np.ndarray, width: int = PACKET,
-                 scene_flags: int = _ROBUST, quality: int | None = None, features: int = _ALL_FEATURES):
+                 scene_flags: int = _ROBUST, quality: int | None = None, features: int = _ALL_FEATURES,
+                 config: str | None = None):
         self._lib = lib
         self.width = width
         self._features = features
-        device = lib.rtcNewDevice(None)
+        device = lib.rtcNewDevice(config.encode() if config else None)
         scene = lib.rtcNewScene(device)
         self._finalizer = weakref.finalize(self, _release, lib, scene, device)
         lib.rtcSetSceneFlags(scene, scene_flags)

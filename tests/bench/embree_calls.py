@@ -19,7 +19,8 @@ the same order), and random rays aimed at the scene's first mesh.  Shadow rays: 
 hits towards random points around the mesh (bounded).  Each table row also counts the packets' hits that
 differ from the one-ray query's: another triangle (and where not a tie, t within 1e-6 relative), t beyond
 1e-6 relative, u or v beyond 1e-5, and the bits of u that differ.  ``--builds`` adds rows for build
-settings (quality HIGH, RTC_SCENE_FLAG_COMPACT, a triangle-only feature mask).  Needs Numba and the
+settings (quality HIGH, RTC_SCENE_FLAG_COMPACT, a triangle-only feature mask, Embree's AVX2 kernels instead of
+AVX-512, huge pages).  Needs Numba and the
 Embree library next to embreex (engine.render.embree_direct.library).  Benchmarks never run as tests.
 """
 
@@ -76,6 +77,8 @@ def main():
         paths["16, quality HIGH"] = DirectScene(lib, V, F, width=16, quality=2)
         paths["16, COMPACT"] = DirectScene(lib, V, F, width=16, scene_flags=_ROBUST | _COMPACT)
         paths["16, triangles only"] = DirectScene(lib, V, F, width=16, features=1 << 1)
+        paths["16, isa=avx2"] = DirectScene(lib, V, F, width=16, config="isa=avx2")
+        paths["16, hugepages=1"] = DirectScene(lib, V, F, width=16, config="hugepages=1")
     rng = np.random.default_rng(0)
     n_pix = args.res * args.res
     mesh = scene.meshes[0]
