@@ -1,6 +1,7 @@
 """Embree queries by call path, ns per ray: embreex, the engine's compiled one-ray loop, packets of 4, 8, 16.
 
     python tests/bench/embree_calls.py [--scene glass_sphere] [--res 128] [--spp 16] [--repeats 5] [--builds]
+    python tests/bench/embree_calls.py --render fresnel_sphere,glass_sphere [--res 256] [--spp 8] [--widths 1,16]
 
 Side by side in one run, on one scene's geometry (robust traversal), each from the renderer's (3, N)
 float64 rays to its (prim, u, v, t) float64 hits (closest) or blocked flags (shadow):
@@ -21,7 +22,12 @@ differ from the one-ray query's: another triangle (and where not a tie, t within
 1e-6 relative, u or v beyond 1e-5, and the bits of u that differ.  ``--builds`` adds rows for build
 settings (quality HIGH, RTC_SCENE_FLAG_COMPACT, a triangle-only feature mask, Embree's AVX2 kernels instead of
 AVX-512, huge pages).  Needs Numba and the
-Embree library next to embreex (engine.render.embree_direct.library).  Benchmarks never run as tests.
+Embree library next to embreex (engine.render.embree_direct.library).
+
+``--render``: the rays of real renders instead (1 thread, the scenes' settings, ``--spp``, after a warm-up
+render): every Embree query of the render is made once per width of ``--widths``, in random order, each timed
+by the thread's CPU clock (the render goes on with the first width's answer), and the CPU ns per ray are
+printed by kind (camera rays, later segments, shadow rays).  Benchmarks never run as tests.
 """
 
 from __future__ import annotations
@@ -49,6 +55,70 @@ def differences(a, b):
             int((same & (b[1] != a[1])).sum()), int(other.sum()), int(hit.sum()))
 
 
+def in_render(scenes, res, spp, widths):
+    """Each scene rendered with every Embree query made at every width (paired); prints ns per ray by kind."""
+    import threading
+    from engine.render import integrator
+    from engine.render.renderer import Renderer
+    from engine.scene.loader import load_scene
+    shared = os.environ.get("POLAR_SHARED") or os.path.join(os.path.dirname(REPO), "shared")
+    bounce = threading.local()
+    intersect = integrator.PathTracer._intersect
+
+    def tagged(self, state, acc, b):
+        bounce.b = b
+        try:
+            return intersect(self, state, acc, b)
+        finally:
+            bounce.b = None
+
+    integrator.PathTracer._intersect = tagged
+    for name in scenes:
+        scene = load_scene(os.path.join(shared, "peers", "scenes", f"{name}.json"))
+        scene.camera.width = scene.camera.height = res
+        totals = paired_render(Renderer(scene), scene, spp, widths, bounce)
+        print(f"{name} ({res}², {spp} spp, load average {os.getloadavg()[0]:.2f}), CPU ns per ray by width: " +
+              "; ".join(f"{kind} ({v[widths[0]][1]} rays) " + ", ".join(f"{w}: {v[w][0] / v[w][1]:.0f}" for w in widths)
+                        for kind, v in totals.items()))
+
+
+def paired_render(renderer, scene, spp, widths, bounce):
+    """{kind: {width: [CPU ns, rays]}} of one render whose every Embree query is made at each width."""
+    import dataclasses
+    from engine.render.embree_direct import DirectScene
+    rays = renderer.compiled.rays
+    if not isinstance(rays, DirectScene):
+        raise SystemExit("the render's scene is not a DirectScene (no Numba, or no Embree library)")
+    rng = np.random.default_rng(0)
+    totals = {}
+
+    def paired(kind, n, query):
+        out = None
+        for w in rng.permutation(widths):
+            rays.width = int(w)
+            t0 = time.thread_time_ns()
+            res_w = query()
+            ns = totals.setdefault(kind, {}).setdefault(int(w), [0, 0])
+            ns[0] += time.thread_time_ns() - t0
+            ns[1] += n
+            out = res_w if out is None or w == widths[0] else out
+        return out
+
+    def closest(o, d, t_max, prims, **kw):
+        b = getattr(bounce, "b", None)
+        kind = "camera" if b == 0 else "later segments" if b is not None else "other closest"
+        return paired(kind, o.shape[1], lambda: DirectScene.closest(rays, o, d, t_max, prims))
+
+    def occluded(o, d, t_max):
+        return paired("shadow", o.shape[1], lambda: DirectScene.occluded(rays, o, d, t_max))
+
+    settings = dataclasses.replace(scene.settings, spp=spp, threads=1, seed=0)
+    renderer.render(dataclasses.replace(settings, seed=9))
+    rays.closest, rays.occluded = closest, occluded
+    renderer.render(settings)
+    return totals
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scene", default="glass_sphere")
@@ -56,7 +126,13 @@ def main():
     ap.add_argument("--spp", type=int, default=16)
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--builds", action="store_true", help="also time build settings (quality, compact, features)")
+    ap.add_argument("--render", help="scenes whose renders' own queries are timed at every width (comma-separated)")
+    ap.add_argument("--widths", default="1,16")
     args = ap.parse_args()
+    if args.render:
+        in_render(args.render.split(","), args.res if args.res != 128 else 256, args.spp if args.spp != 16 else 8,
+                  [int(w) for w in args.widths.split(",")])
+        return 0
     from engine.render.accel import EmbreexScene
     from engine.render.embree_direct import _COMPACT, _ROBUST, DirectScene, library
     from engine.render.renderer import Renderer
