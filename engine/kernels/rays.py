@@ -164,30 +164,21 @@ def _packet_setup(rh, ri, valid, i0, o, d, t_max, has_t):
 
 
 @jit
-def closest_hits_packets(intersect, scene, valid, rh, args, o, d, t_max, has_t, prims, mapped, prim, u, v, t):
-    """closest_hits_loop's queries in packets of W rays (W = len(valid): 4, 8 or 16) by Embree's
-    ``rtcIntersectW(valid, scene, rayhit, args)`` (``intersect``: its ctypes function pointer; ``valid``:
-    int32 (W,), ``rh``: float32 RTCRayHitW, both 4W-byte aligned; ``args``: an RTCIntersectArguments buffer).
-    The same hits within float rounding (Embree's packet traversal and triangle test)."""
+def packet_queries(query, scene, valid, rh, args, o, d, t_max, has_t, shadow, prims, mapped, prim, u, v, t, blocked):
+    """closest_hits_loop's (``shadow`` False: prim, u, v, t written) or occluded_loop's (True: ``blocked``
+    written) queries in packets of W rays (W = len(valid): 4, 8 or 16) by Embree's ``rtcIntersectW`` /
+    ``rtcOccludedW(valid, scene, rayhit, args)`` (``query``: its ctypes function pointer; ``valid``: int32
+    (W,), ``rh``: float32 RTCRayHitW, both 4W-byte aligned; ``args``: an RTCIntersectArguments /
+    RTCOccludedArguments buffer).  The one-ray queries' hits and answers bit for bit (measured:
+    tests/render/test_accel.py)."""
     ri = rh.view(np.uint32)
     width = valid.shape[0]
     addr, vaddr, aaddr = rh.ctypes.data, valid.ctypes.data, args.ctypes.data
     for i0 in range(0, o.shape[1], width):
         m = _packet_setup(rh, ri, valid, i0, o, d, t_max, has_t)
-        intersect(vaddr, scene, addr, aaddr)
+        query(vaddr, scene, addr, aaddr)
         for k in range(m):
-            _read_hit(rh, ri, width, k, i0 + k, prims, mapped, prim, u, v, t)
-
-
-@jit
-def occluded_packets(occluded, scene, valid, rh, args, o, d, t_max, blocked):
-    """occluded_loop's queries in packets of W rays by Embree's ``rtcOccludedW(valid, scene, ray, args)``
-    (buffers as closest_hits_packets')."""
-    ri = rh.view(np.uint32)
-    width = valid.shape[0]
-    addr, vaddr, aaddr = rh.ctypes.data, valid.ctypes.data, args.ctypes.data
-    for i0 in range(0, o.shape[1], width):
-        m = _packet_setup(rh, ri, valid, i0, o, d, t_max, True)
-        occluded(vaddr, scene, addr, aaddr)
-        for k in range(m):
-            blocked[i0 + k] = rh[_TFAR * width + k] < 0
+            if shadow:
+                blocked[i0 + k] = rh[_TFAR * width + k] < 0
+            else:
+                _read_hit(rh, ri, width, k, i0 + k, prims, mapped, prim, u, v, t)

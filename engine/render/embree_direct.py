@@ -25,7 +25,7 @@ import weakref
 
 import numpy as np
 
-from ..kernels.rays import closest_hits_loop, closest_hits_packets, occluded_loop, occluded_packets
+from ..kernels.rays import closest_hits_loop, occluded_loop, packet_queries
 
 _COMPACT, _ROBUST = 1 << 1, 1 << 2   # RTC_SCENE_FLAG_*
 _COHERENT = 1                        # RTC_RAY_QUERY_FLAG_COHERENT (0: incoherent)
@@ -158,8 +158,8 @@ class DirectScene:
             closest_hits_loop(self._lib.intersect1, self.handle, rh, o, d, t_max, has_t, prims, mapped, prim, u, v, t)
         else:
             args = _arguments(_COHERENT if coherent else 0, self._features)
-            closest_hits_packets(self._lib.intersect[self.width], self.handle, valid, rh, args, o, d, t_max, has_t,
-                                 prims, mapped, prim, u, v, t)
+            packet_queries(self._lib.intersect[self.width], self.handle, valid, rh, args, o, d, t_max, has_t, False,
+                           prims, mapped, prim, u, v, t, np.empty(0, np.bool_))
         return prim, u, v, t
 
     def occluded(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray) -> np.ndarray:
@@ -170,6 +170,8 @@ class DirectScene:
         if self.width == 1:
             occluded_loop(self._lib.occluded1, self.handle, rh, o, d, t_max, blocked)
         else:
-            occluded_packets(self._lib.occluded[self.width], self.handle, valid, rh, _arguments(0, self._features),
-                             o, d, t_max, blocked)
+            empty = np.empty(0)
+            packet_queries(self._lib.occluded[self.width], self.handle, valid, rh, _arguments(0, self._features),
+                           o, d, t_max, True, True, np.empty(0, np.int64), False, np.empty(0, np.int64), empty, empty,
+                           empty, blocked)
         return blocked

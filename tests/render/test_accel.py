@@ -33,7 +33,7 @@ def unit(a):
 
 
 def direct_scenes():
-    """(width, DirectScene factory) for the one-ray and packet queries, or skip without them."""
+    """Embree's library for DirectScene (one-ray and packet queries), or skip without it or Numba."""
     from engine import kernels
     from engine.render.embree_direct import library
     if library() is None or not kernels.COMPILED:
