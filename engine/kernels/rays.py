@@ -91,25 +91,37 @@ embree_hits = twin(_hits_loop and embree_hits_numba, embree_hits_numpy)
 # ----------------------------------------------------------------------------- Embree called per ray
 
 #: Float32 word offsets in Embree 4's RTCRayHit (RTCRay: org, tnear, dir, time, tfar, mask, id, flags;
-#: RTCHit: Ng, u, v, primID, geomID, instID[0]); RTCRay is its first 12 words.
+#: RTCHit: Ng, u, v, primID, geomID, instID[0]); RTCRay is its first 12 words.  A packet of W rays
+#: (RTCRayHitW, structure of arrays) holds field f of lane k at word f·W + k.
 _TFAR, _MASK, _U, _V, _PRIM_ID, _GEOM_ID, _INST_ID = 8, 9, 15, 16, 17, 18, 19
 _INVALID = 0xFFFFFFFF
 
 
 @jit_inner
-def _ray_setup(rh, ri, o, d, t_max, has_t, i):
-    """Ray i of the (3, N) float64 batch into the RTCRayHit ``rh`` as embreex's ``run`` sets it up (the
-    casts of _rays_loop; tnear 0, every mask bit, time 0, no flags, no hit).  u and v are left as the
-    previous query wrote them, as embreex leaves them (a miss keeps them)."""
-    rh[0], rh[1], rh[2], rh[3] = np.float32(o[0, i]), np.float32(o[1, i]), np.float32(o[2, i]), 0.0
-    rh[4], rh[5], rh[6], rh[7] = np.float32(d[0, i]), np.float32(d[1, i]), np.float32(d[2, i]), 0.0
+def _ray_setup(rh, ri, width, k, o, d, t_max, has_t, i):
+    """Ray i of the (3, N) float64 batch into lane k of the RTCRayHitW ``rh`` (``width`` W lanes; 1: an
+    RTCRayHit) as embreex's ``run`` sets it up (the casts of _rays_loop; tnear 0, every mask bit, time 0,
+    no flags, no hit).  u and v are left as the previous query wrote them, as embreex leaves them (a miss
+    keeps them)."""
+    rh[k], rh[width + k], rh[2 * width + k] = np.float32(o[0, i]), np.float32(o[1, i]), np.float32(o[2, i])
+    rh[3 * width + k] = 0.0
+    rh[4 * width + k], rh[5 * width + k] = np.float32(d[0, i]), np.float32(d[1, i])
+    rh[6 * width + k], rh[7 * width + k] = np.float32(d[2, i]), 0.0
     if has_t:
         t = t_max[i]
-        rh[_TFAR] = np.float32(MAX_DISTANCE if t > MAX_DISTANCE else t)
+        rh[_TFAR * width + k] = np.float32(MAX_DISTANCE if t > MAX_DISTANCE else t)
     else:
-        rh[_TFAR] = np.float32(MAX_DISTANCE)
-    ri[_MASK], ri[_MASK + 1], ri[_MASK + 2] = _INVALID, 0, 0
-    ri[_PRIM_ID], ri[_GEOM_ID], ri[_INST_ID] = _INVALID, _INVALID, _INVALID
+        rh[_TFAR * width + k] = np.float32(MAX_DISTANCE)
+    ri[_MASK * width + k], ri[(_MASK + 1) * width + k], ri[(_MASK + 2) * width + k] = _INVALID, 0, 0
+    ri[_PRIM_ID * width + k], ri[_GEOM_ID * width + k], ri[_INST_ID * width + k] = _INVALID, _INVALID, _INVALID
+
+
+@jit_inner
+def _read_hit(rh, ri, width, k, j, prims, mapped, prim, u, v, t):
+    """Lane k of the RTCRayHitW ``rh`` (``width`` W lanes) as hit j (_store_hit)."""
+    p = ri[_PRIM_ID * width + k]
+    _store_hit(j, np.int64(-1) if p == _INVALID else np.int64(p), rh[_U * width + k], rh[_V * width + k],
+               rh[_TFAR * width + k], prims, mapped, prim, u, v, t)
 
 
 @jit
@@ -121,10 +133,9 @@ def closest_hits_loop(intersect1, scene, rh, o, d, t_max, has_t, prims, mapped, 
     ri = rh.view(np.uint32)
     addr = rh.ctypes.data
     for i in range(o.shape[1]):
-        _ray_setup(rh, ri, o, d, t_max, has_t, i)
+        _ray_setup(rh, ri, 1, 0, o, d, t_max, has_t, i)
         intersect1(scene, addr, 0)
-        p = np.int64(-1) if ri[_PRIM_ID] == _INVALID else np.int64(ri[_PRIM_ID])
-        _store_hit(i, p, rh[_U], rh[_V], rh[_TFAR], prims, mapped, prim, u, v, t)
+        _read_hit(rh, ri, 1, 0, i, prims, mapped, prim, u, v, t)
 
 
 @jit
@@ -134,6 +145,40 @@ def occluded_loop(occluded1, scene, rh, o, d, t_max, blocked):
     ri = rh.view(np.uint32)
     addr = rh.ctypes.data
     for i in range(o.shape[1]):
-        _ray_setup(rh, ri, o, d, t_max, True, i)
+        _ray_setup(rh, ri, 1, 0, o, d, t_max, True, i)
         occluded1(scene, addr, 0)
         blocked[i] = rh[_TFAR] < 0
+
+
+@jit_inner
+def _packet_setup(rh, ri, valid, i0, o, d, t_max, has_t):
+    """Rays i0, i0 + 1, … of the batch into the lanes of the packet ``rh`` (width: valid's length); lanes
+    past the batch's end invalid.  Returns the number of valid lanes."""
+    width = valid.shape[0]
+    m = min(width, o.shape[1] - i0)
+    for k in range(width):
+        valid[k] = -1 if k < m else 0
+        if k < m:
+            _ray_setup(rh, ri, width, k, o, d, t_max, has_t, i0 + k)
+    return m
+
+
+@jit
+def packet_queries(query, scene, valid, rh, args, o, d, t_max, has_t, shadow, prims, mapped, prim, u, v, t, blocked):
+    """closest_hits_loop's (``shadow`` False: prim, u, v, t written) or occluded_loop's (True: ``blocked``
+    written) queries in packets of W rays (W = len(valid): 4, 8 or 16) by Embree's ``rtcIntersectW`` /
+    ``rtcOccludedW(valid, scene, rayhit, args)`` (``query``: its ctypes function pointer; ``valid``: int32
+    (W,), ``rh``: float32 RTCRayHitW, both 4W-byte aligned; ``args``: an RTCIntersectArguments /
+    RTCOccludedArguments buffer).  The one-ray queries' hits and answers bit for bit (measured:
+    tests/render/test_accel.py)."""
+    ri = rh.view(np.uint32)
+    width = valid.shape[0]
+    addr, vaddr, aaddr = rh.ctypes.data, valid.ctypes.data, args.ctypes.data
+    for i0 in range(0, o.shape[1], width):
+        m = _packet_setup(rh, ri, valid, i0, o, d, t_max, has_t)
+        query(vaddr, scene, addr, aaddr)
+        for k in range(m):
+            if shadow:
+                blocked[i0 + k] = rh[_TFAR * width + k] < 0
+            else:
+                _read_hit(rh, ri, width, k, i0 + k, prims, mapped, prim, u, v, t)

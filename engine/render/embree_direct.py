@@ -4,9 +4,11 @@ embreex's ``EmbreeScene.run`` wants float32 (N, 3) copies of the rays and alloca
 call (the geometric normal included).  :class:`DirectScene` builds the same scene through Embree's C API
 (ctypes) — robust traversal, Embree's default build quality, vertices and triangles copied into Embree's
 own buffers with embreex's strides — and queries it from the compiled loops of engine.kernels.rays,
-which read the renderer's (3, N) float64 rays directly and call ``rtcIntersect1`` / ``rtcOccluded1`` per
-ray with the ray set up as embreex sets it up.  The hits are embreex's bit for bit (triangle, distance
-and barycentrics of every hit ray; tests/render/test_accel.py); a miss's barycentrics mean nothing in either.
+which read the renderer's (3, N) float64 rays directly and call ``rtcIntersect16`` / ``rtcOccluded16`` on
+packets of 16 rays (or ``rtcIntersect1`` / ``rtcOccluded1`` per ray), each ray set up as embreex sets it
+up.  The hits are embreex's bit for bit either way (triangle, distance and barycentrics of every hit ray,
+the shadow answers; tests/render/test_accel.py); a miss's barycentrics mean nothing in either.  Packets
+cost 10–25 % less a ray (docs/benchmarks.md, tests/bench/embree_calls.py).
 
 The library is the one embreex itself loaded: ``embreex.libs/`` (Linux and Windows wheels) or
 ``embreex/.dylibs/`` (macOS).  :func:`library` returns None where it is not found; the scene is then
@@ -23,14 +25,18 @@ import weakref
 
 import numpy as np
 
-from ..kernels.rays import closest_hits_loop, occluded_loop
+from ..kernels.rays import closest_hits_loop, occluded_loop, packet_queries
 
-_ROBUST = 1 << 2                   # RTC_SCENE_FLAG_ROBUST
-_TRIANGLE = 0                      # RTC_GEOMETRY_TYPE_TRIANGLE
-_INDEX, _VERTEX = 0, 1             # RTC_BUFFER_TYPE_*
-_UINT3, _FLOAT3 = 0x5003, 0x9003   # RTC_FORMAT_*
-#: float32 words of an RTCRayHit buffer (80 bytes in Embree 4; room for optional instance fields)
+_COMPACT, _ROBUST = 1 << 1, 1 << 2   # RTC_SCENE_FLAG_*
+_COHERENT = 1                        # RTC_RAY_QUERY_FLAG_COHERENT (0: incoherent)
+_ALL_FEATURES = 0xFFFFFFFF           # RTC_FEATURE_FLAG_ALL
+_TRIANGLE = 0                        # RTC_GEOMETRY_TYPE_TRIANGLE
+_INDEX, _VERTEX = 0, 1               # RTC_BUFFER_TYPE_*
+_UINT3, _FLOAT3 = 0x5003, 0x9003     # RTC_FORMAT_*
+#: float32 words a lane of an RTCRayHit(W) buffer (20 in Embree 4; room for optional instance fields)
 _RAYHIT_WORDS = 32
+#: rays per query: packets of 16 (rtcIntersect16 / rtcOccluded16; 4 and 8 measured slower, 1: one-ray queries)
+PACKET = 16
 
 
 def _candidates() -> list[str]:
@@ -56,15 +62,21 @@ def library():
                                     ("rtcNewGeometry", vp, [vp, c_int]), ("rtcReleaseGeometry", None, [vp]),
                                     ("rtcSetNewGeometryBuffer", vp, [vp, c_int, ctypes.c_uint, c_int, sz, sz]),
                                     ("rtcCommitGeometry", None, [vp]), ("rtcAttachGeometry", ctypes.c_uint, [vp, vp]),
-                                    ("rtcCommitScene", None, [vp])]:
+                                    ("rtcCommitScene", None, [vp]),
+                                    ("rtcSetSceneBuildQuality", None, [vp, c_int])]:
                 f = getattr(lib, name)
                 f.restype, f.argtypes = res, args
-            address = ctypes.cast(lib.rtcIntersect1, vp).value, ctypes.cast(lib.rtcOccluded1, vp).value
+            address = {(query, w): ctypes.cast(getattr(lib, f"rtc{query}{w}"), vp).value
+                       for query in ("Intersect", "Occluded") for w in (1, 4, 8, 16)}
         except (OSError, AttributeError):
             continue
         # (scene, ray, arguments) as integers: the compiled loops pass the buffer's address
-        query = ctypes.CFUNCTYPE(None, sz, sz, sz)
-        lib.intersect1, lib.occluded1 = query(address[0]), query(address[1])
+        one = ctypes.CFUNCTYPE(None, sz, sz, sz)
+        lib.intersect1, lib.occluded1 = one(address["Intersect", 1]), one(address["Occluded", 1])
+        # (valid, scene, ray packet, arguments): rtcIntersectW / rtcOccludedW by width W
+        packet = ctypes.CFUNCTYPE(None, sz, sz, sz, sz)
+        lib.intersect = {w: packet(address["Intersect", w]) for w in (4, 8, 16)}
+        lib.occluded = {w: packet(address["Occluded", w]) for w in (4, 8, 16)}
         return lib
     return None
 
@@ -74,16 +86,41 @@ def _release(lib, scene, device):
     lib.rtcReleaseDevice(device)
 
 
+def _aligned(n: int, dtype) -> np.ndarray:
+    """A zeroed (n,) array whose data is 64-byte aligned (Embree's RTCRayHit16 alignment)."""
+    buf = np.zeros(n + 64, dtype)
+    start = (-buf.ctypes.data % 64) // buf.itemsize
+    return buf[start:start + n]
+
+
+def _arguments(flags: int, features: int) -> np.ndarray:
+    """An RTCIntersectArguments / RTCOccludedArguments buffer: query flags, feature mask, no context,
+    filter or user-geometry callback (room for optional fields)."""
+    args = np.zeros(8, np.uint64)
+    words = args.view(np.uint32)
+    words[0], words[1] = flags, features
+    return args
+
+
 class DirectScene:
     """One triangle mesh (vertices (V, 3), triangles (F, 3)) as an Embree scene queried from compiled loops;
-    the queries of embreex's ``EmbreeScene.run``, the same numbers."""
+    the queries of embreex's ``EmbreeScene.run``: the same numbers in one-ray queries (``width`` 1), within
+    float rounding in packets of ``width`` 4, 8 or 16 rays.  ``scene_flags``, ``quality`` (an RTCBuildQuality,
+    None: Embree's default), ``features`` (the queries' RTCFeatureFlags) and ``config`` (rtcNewDevice's
+    configuration string) are Embree's settings (the defaults: measured best, tests/bench/embree_calls.py)."""
 
-    def __init__(self, lib, vertices: np.ndarray, faces: np.ndarray):
+    def __init__(self, lib, vertices: np.ndarray, faces: np.ndarray, width: int = PACKET,
+                 scene_flags: int = _ROBUST, quality: int | None = None, features: int = _ALL_FEATURES,
+                 config: str | None = None):
         self._lib = lib
-        device = lib.rtcNewDevice(None)
+        self.width = width
+        self._features = features
+        device = lib.rtcNewDevice(config.encode() if config else None)
         scene = lib.rtcNewScene(device)
         self._finalizer = weakref.finalize(self, _release, lib, scene, device)
-        lib.rtcSetSceneFlags(scene, _ROBUST)
+        lib.rtcSetSceneFlags(scene, scene_flags)
+        if quality is not None:
+            lib.rtcSetSceneBuildQuality(scene, quality)
         geom = lib.rtcNewGeometry(device, _TRIANGLE)
         n_v, n_f = len(vertices), len(faces)
         v = lib.rtcSetNewGeometryBuffer(geom, _VERTEX, 0, _FLOAT3, 16, n_v)
@@ -100,26 +137,41 @@ class DirectScene:
         lib.rtcCommitScene(scene)
         self.handle = scene
 
-    @staticmethod
-    def _rayhit() -> np.ndarray:
-        """A 16-byte aligned float32 RTCRayHit buffer (one per call: calls run in parallel threads)."""
-        buf = np.zeros(_RAYHIT_WORDS + 4, np.float32)
-        start = (-buf.ctypes.data % 16) // 4
-        return buf[start:start + _RAYHIT_WORDS]
+    def _buffers(self):
+        """(valid (W,) int32, RTCRayHitW float32) for one call (calls run in parallel threads)."""
+        w = self.width
+        return _aligned(w, np.int32), _aligned(_RAYHIT_WORDS * w, np.float32)
 
-    def closest(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray | None, prims: np.ndarray | None):
-        """(prim (N,) int64, −1 = miss, mapped through ``prims`` unless None; u, v, t (N,) float64)."""
+    def closest(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray | None, prims: np.ndarray | None,
+                coherent: bool = False):
+        """(prim (N,) int64, −1 = miss, mapped through ``prims`` unless None; u, v, t (N,) float64).
+        ``coherent``: rays of neighbouring pixels in a row (Embree's coherent query flag)."""
         n = o.shape[1]
         prim, u, v, t = np.empty(n, np.int64), np.empty(n), np.empty(n), np.empty(n)
         has_t = t_max is not None
-        closest_hits_loop(self._lib.intersect1, self.handle, self._rayhit(), np.asarray(o, np.float64),
-                          np.asarray(d, np.float64), np.asarray(t_max, np.float64) if has_t else np.empty(0), has_t,
-                          prims if prims is not None else np.empty(0, np.int64), prims is not None, prim, u, v, t)
+        o, d = np.asarray(o, np.float64), np.asarray(d, np.float64)
+        t_max = np.asarray(t_max, np.float64) if has_t else np.empty(0)
+        mapped = prims is not None
+        prims = prims if mapped else np.empty(0, np.int64)
+        valid, rh = self._buffers()
+        if self.width == 1:
+            closest_hits_loop(self._lib.intersect1, self.handle, rh, o, d, t_max, has_t, prims, mapped, prim, u, v, t)
+        else:
+            args = _arguments(_COHERENT if coherent else 0, self._features)
+            packet_queries(self._lib.intersect[self.width], self.handle, valid, rh, args, o, d, t_max, has_t, False,
+                           prims, mapped, prim, u, v, t, np.empty(0, np.bool_))
         return prim, u, v, t
 
     def occluded(self, o: np.ndarray, d: np.ndarray, t_max: np.ndarray) -> np.ndarray:
         """True where the segment o → o + t_max·d is blocked."""
         blocked = np.empty(o.shape[1], np.bool_)
-        occluded_loop(self._lib.occluded1, self.handle, self._rayhit(), np.asarray(o, np.float64),
-                      np.asarray(d, np.float64), np.asarray(t_max, np.float64), blocked)
+        o, d, t_max = np.asarray(o, np.float64), np.asarray(d, np.float64), np.asarray(t_max, np.float64)
+        valid, rh = self._buffers()
+        if self.width == 1:
+            occluded_loop(self._lib.occluded1, self.handle, rh, o, d, t_max, blocked)
+        else:
+            empty = np.empty(0)
+            packet_queries(self._lib.occluded[self.width], self.handle, valid, rh, _arguments(0, self._features),
+                           o, d, t_max, True, True, np.empty(0, np.int64), False, np.empty(0, np.int64), empty, empty,
+                           empty, blocked)
         return blocked
