@@ -525,16 +525,27 @@ class Mix(BSDF):
         return self._pdf(points, self._probabilities_at(sp, points), wi)
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        return self._sample(sp, u_lobe, u_dir, weighted=True)
+
+    def sample_direction(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        """``sample`` without the mixture's value at the non-Dirac directions (a mix inside a mix: the outer
+        one evaluates them)."""
+        return self._sample(sp, u_lobe, u_dir, weighted=False)
+
+    def _sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray, weighted: bool) -> BSDFSample:
+        """``sample``; not ``weighted``: the weight only on the Dirac lanes (BSDF.sample_direction).  The
+        components sample their directions only (their values are the mixture's to sum)."""
         n, L = sp.n, sp.lam.shape[0]
         if not self.components:     # every weight was 0: black
             return BSDFSample(wi=sp.n_s.copy(), weight=depolarising_value(np.zeros((L, n)), n), pdf=np.zeros(n),
                               is_delta=np.zeros(n, bool), valid=np.zeros(n, bool), eta_sq=np.ones(n))
         points, weights = self._points(sp), self._weights_at(sp)
         if len(self.components) == 1:
-            bs = self.components[0].sample(points[0], u_lobe, u_dir)
+            c = self.components[0]
+            bs = c.sample(points[0], u_lobe, u_dir) if weighted else c.sample_direction(points[0], u_lobe, u_dir)
             w = weights[0]
-            return BSDFSample(wi=bs.wi, weight=bs.weight.scaled(w[None, :]), pdf=bs.pdf, is_delta=bs.is_delta,
-                              valid=bs.valid & (w > 0), eta_sq=bs.eta_sq)
+            return BSDFSample(wi=bs.wi, weight=None if bs.weight is None else bs.weight.scaled(w[None, :]),
+                              pdf=bs.pdf, is_delta=bs.is_delta, valid=bs.valid & (w > 0), eta_sq=bs.eta_sq)
         p = self._probabilities_at(sp, points)
         cols = np.arange(n)
         some = p.sum(axis=0) > 0
@@ -557,7 +568,7 @@ class Mix(BSDF):
             sel = np.flatnonzero(some & (k == j))
             if not sel.size:
                 continue
-            bs = c.sample(points[j].take(sel), u_rest[sel], np.take(u_dir, sel, axis=1))
+            bs = c.sample_direction(points[j].take(sel), u_rest[sel], np.take(u_dir, sel, axis=1))
             wi[:, sel] = bs.wi
             is_delta[sel], valid[sel] = bs.is_delta, bs.valid
             if bs.eta_sq is not None:
@@ -571,20 +582,21 @@ class Mix(BSDF):
             shared = {}         # (the components' points share the hit's arrays: gathered once)
             sub = sp.take(smooth, shared)
             sub_points = [sub if q is sp else q.take(smooth, shared) for q in points]
-            w_sub = [w[smooth] for w in weights]
             d_sub = np.take(wi, smooth, axis=1)
             density = self._pdf(sub_points, p[:, smooth], d_sub)
             good = density > 0
-            value = self._sum(sub, sub_points, w_sub, d_sub, cosine=True)
-            value = value.scaled(np.where(good, 1.0 / np.where(good, density, 1.0), 0.0)[None, :])
             valid[smooth] = good
             pdf[smooth] = density
-            parts.append((smooth, value))
+            if weighted:
+                w_sub = [w[smooth] for w in weights]
+                value = self._sum(sub, sub_points, w_sub, d_sub, cosine=True)
+                value = value.scaled(np.where(good, 1.0 / np.where(good, density, 1.0), 0.0)[None, :])
+                parts.append((smooth, value))
 
         def frames():
             return plane_of_incidence_axis(sp.n_s, -wi), plane_of_incidence_axis(sp.n_s, sp.wo)
-        return BSDFSample(wi=wi, weight=assemble_values(parts, n, L, frames), pdf=pdf, is_delta=is_delta & valid,
-                          valid=valid, eta_sq=eta_sq)
+        weight = assemble_values(parts, n, L, frames) if parts or weighted else None
+        return BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=is_delta & valid, valid=valid, eta_sq=eta_sq)
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
         points, weights = self._points(sp), self._weights_at(sp)

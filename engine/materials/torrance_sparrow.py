@@ -842,6 +842,19 @@ class TorranceSparrow(BSDF):
         return BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=np.zeros(sp.n, bool), valid=valid,
                           eta_sq=np.ones(sp.n))
 
+    def sample_direction(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        """``sample`` without the weight (no Dirac lanes: None)."""
+        p_given, eta, s, w_d = self._mixture_inputs(sp, compact=self._compiled_lobe)
+        if self._compiled_lobe:
+            wi, pdf, valid = torrance_sparrow_sample(
+                sp.n_s, sp.wo, u_lobe, u_dir, eta, sp.lam.shape[0], s, self._m(sp), self.shadowing, p_given, w_d,
+                self.has_diffuse, self.distribution, not self.multiscatter)[:3]
+        else:
+            wi, pdf, valid, _ = _mixture_sample(self._dist(sp) if self.has_specular else None, sp.n_s, sp.wo, u_lobe,
+                                                u_dir, p_given, eta, s, w_d, self.has_specular, self.has_diffuse)
+        return BSDFSample(wi=wi, weight=None, pdf=pdf, is_delta=np.zeros(sp.n, bool), valid=valid,
+                          eta_sq=np.ones(sp.n))
+
     def delta_reflection(self, sp: ShadingPoint):
         return None
 
