@@ -110,8 +110,7 @@ import numpy as np
 from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ShadingPoint, depolarising_value
 from .conductor import K, METAL, N, THIN_FILM_IOR, THIN_FILM_THICKNESS, complex_index, mirror_reflection
 from .ggx import GGX
-from .ggx_energy import (ALPHA_MAX, conductor_extra, cycles_layering_albedo, cycles_layering_darkening,
-                         ggx_reflection_albedo)
+from .ggx_energy import ALPHA_MAX, conductor_extra, cycles_layer_weight, ggx_reflection_albedo
 from .microfacet import (SHADOWING, Beckmann, BlinnPhong, half_vector, reflect_local,
                                          shadowing_term)
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
@@ -624,9 +623,7 @@ class TorranceSparrow(BSDF):
         compensation's weight, which Cycles' ``bsdf_albedo`` carries: cycles_layering_darkening)."""
         eta = (self.n.numbers(sp.surface_points()) if isinstance(self.n, NumberSpectrum) else self.n.value) \
             / self.exterior_n
-        m = sp.number(self.m)
-        E = cycles_layering_albedo(cos_o, m, eta)
-        return E * cycles_layering_darkening(cos_o, m, eta) if self.multiscatter else E
+        return cycles_layer_weight(cos_o, sp.number(self.m), eta, self.multiscatter)
 
     def lobe_colors(self, sp: ShadingPoint) -> LobeColors | None:
         """Glossy: s·E(cosθ_o) (``_layer_albedo``; Cycles' estimate of a Principled specular layer); diffuse:

@@ -1318,6 +1318,30 @@ def test_conductor_compensation_twins(correlated, alpha_kind, eta_cols):
 
 
 @needs_numba
+@pytest.mark.parametrize("darken", [False, True])
+@pytest.mark.parametrize("alpha_kind,eta_kind", [("number", "number"), ("per_point", "number"),
+                                                 ("number", "per_point"), ("per_point", "per_point")])
+def test_cycles_layer_weight_twins(darken, alpha_kind, eta_kind):
+    """Cycles' layering weight of a dielectric GGX layer (engine.materials.ggx_energy.cycles_layer_weight: its albedo
+    estimate, × the compensation's darkening): the compiled loop against the NumPy twin on cosines beyond 0 … 1 (the
+    ends and the table's nodes included), roughness 0 … 1 and indices below and above 1 (IOR 1000 included)."""
+    from engine.materials import ggx_energy as g
+    assert "materials.ggx_energy.cycles_layer_weight" in kernels.TWINS
+    rng = np.random.default_rng(12)
+    n = 4000
+    mu = rng.uniform(-0.1, 1.1, n)
+    mu[:8] = 0.0, 1.0, 1e-12, 0.5, 1.0 / 15.0, 7.0 / 15.0, 0.25, 1.0 - 1e-15
+    alpha = 0.09 if alpha_kind == "number" else np.concatenate(([0.0, 1.0, 1.0 / 225.0], rng.uniform(0, 1, n - 3)))
+    eta = 1.45 if eta_kind == "number" else np.concatenate(([1.0, 1000.0, 0.5, 1.0 / 1.45],
+                                                            rng.uniform(0.3, 4.0, n - 4)))
+    got = g.cycles_layer_weight_numba(mu, alpha, eta, darken)
+    want = g.cycles_layer_weight_numpy(mu, alpha, eta, darken)
+    assert got.shape == want.shape == (n,) and np.ptp(want) > 0.3 and np.all(want >= 0.0)
+    _bitwise([got], [want])
+    assert g.cycles_layer_weight_numba(mu[:0], 0.3, 1.5, darken).shape == (0,)
+
+
+@needs_numba
 @pytest.mark.parametrize("extension", ["REPEAT", "EXTEND", "CLIP", "MIRROR"])
 def test_bilinear_texture_lookup_twins(extension):
     """Linear image lookups (engine.textures.texture.bilinear_lookup): the compiled loop against the NumPy filter
