@@ -63,6 +63,8 @@ from .lambert import Lambert
 from .normal_map import ShadingNormal
 from .parameters import ModelDeclaration, Parameter
 from ..errors import SceneError
+from ..kernels import twin
+from ..kernels.mueller_sum import abcs_sum_loop
 from ..kernels.stokes_rotation import frame_rotation
 from ..polarisation.frames import plane_of_incidence_axis
 from ..textures import TexturedNumber
@@ -256,18 +258,55 @@ def _sum_general(pol: list[MuellerValue], rotations, dep, x_in: np.ndarray, x_ou
     return MuellerValue("general", x_in, x_out, M=M)
 
 
+def abcs_sum_numpy(terms, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
+    """Σ scale·value over ``terms`` [(scale (N,) or float, MuellerValue)] whose polarising values are ABCS values
+    in the frames (x_in, x_out) (3, N), as an ABCS value."""
+    dep, pol = _split_terms(terms)
+    return _sum_abcs(pol, dep, x_in, x_out)
+
+
+def abcs_sum_numba(terms, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
+    """abcs_sum_numpy with the A, B, C, S blocks summed in one compiled loop (engine.kernels.mueller_sum), the same
+    bits; the depolarised shares as the NumPy twin adds them.  Blocks of other shapes than the first value's
+    (L, N) go to the NumPy twin."""
+    pol = [(s, v) for s, v in terms if v.kind != "depolarising"]
+    shape = pol[0][1].A.shape
+    n = shape[-1]
+    if len(shape) != 2 or any(np.shape(getattr(v, f)) != shape or getattr(v, f).dtype != np.float64
+                              for _, v in pol for f in "ABCS") \
+            or any(isinstance(s, np.ndarray) and s.shape != (n,) for s, _ in pol):
+        return abcs_sum_numpy(terms, x_in, x_out)
+
+    def blocks(f):
+        return tuple(np.ascontiguousarray(getattr(v, f)) for _, v in pol)
+    scales = tuple(np.ascontiguousarray(s, np.float64) if isinstance(s, np.ndarray) else np.full(n, s, np.float64)
+                   for s, _ in pol)
+    A, B, C, S = (np.empty(shape) for _ in range(4))
+    abcs_sum_loop(blocks("A"), blocks("B"), blocks("C"), blocks("S"), scales, A, B, C, S)
+    dep, _ = _split_terms([(s, v) for s, v in terms if v.kind == "depolarising"])
+    shares = [v.depol * (s[None, :] if isinstance(s, np.ndarray) else s) for s, v in pol if v.depol is not None]
+    shares += [dep] if dep is not None else []
+    return MuellerValue("abcs", x_in, x_out, A, B, C, S, depol=sum(shares) if shares else None)
+
+
+#: Σ scale·value of ABCS values in shared frames (abcs_sum_numpy), compiled where available.
+abcs_sum = twin(abcs_sum_loop and abcs_sum_numba, abcs_sum_numpy)
+
+
 def add_values(terms, n: int, L: int, k_in: np.ndarray, k_out: np.ndarray, n_s: np.ndarray) -> MuellerValue:
     """Σ scale·value over ``terms`` [(scale (N,) or float, MuellerValue)], all for the same beams
     k_in = −ω_i, k_out = ω_o (3, N) (see the module docstring, "Frames"); the cheapest kind that holds
     the sum."""
+    polarising = [v for _, v in terms if v.kind != "depolarising"]
+    if len(polarising) > 1:
+        x_in, x_out, rotations = _common_frames(polarising, k_in, k_out, n_s)
+        if all(v.kind == "abcs" for v in polarising) and all(_is_identity_rotation(r) for r in rotations):
+            return abcs_sum(terms, x_in, x_out)
     dep, pol = _split_terms(terms)
     if not pol:
         return depolarising_value(np.zeros((L, n)) if dep is None else np.broadcast_to(dep, (L, n)).copy(), n)
     if len(pol) == 1:
         return _plus_depolariser(pol[0], dep)
-    x_in, x_out, rotations = _common_frames(pol, k_in, k_out, n_s)
-    if all(v.kind == "abcs" for v in pol) and all(_is_identity_rotation(r) for r in rotations):
-        return _sum_abcs(pol, dep, x_in, x_out)
     return _sum_general(pol, rotations, dep, x_in, x_out, n, L)
 
 

@@ -644,3 +644,36 @@ def test_sampled_directions_alone_are_the_samples_and_nested_mixes_sum_once(valu
                        M=full.weight.matrix()[..., smooth])
     np.testing.assert_allclose(in_basis(got, wi, sub.wo), in_basis(MuellerValue("general", f.x_in, f.x_out, M=want),
                                                                    wi, sub.wo), rtol=1e-10, atol=1e-13)
+
+
+@pytest.mark.skipif(not __import__("engine.kernels", fromlist=["COMPILED"]).COMPILED, reason="needs Numba")
+@pytest.mark.parametrize("shape", ["two", "three_with_depolarisers", "shared_depol"])
+def test_compiled_abcs_sum_is_the_numpy_sum_bit_for_bit(shape):
+    """The mixture's sum of ABCS values in shared frames (mix.abcs_sum): the compiled loop against the NumPy twin —
+    scales per point and numbers, ABCS values with and without a depolarised share, depolarising terms between
+    them — bit for bit, negative zeros included (0 + x, as Python's sum)."""
+    from engine.kernels import TWINS
+    from engine.materials import mix as M
+    assert TWINS["materials.mix.abcs_sum"].compiled is M.abcs_sum_numba
+    rng = np.random.default_rng(21)
+    L, n = 4, 700
+    x = unit(rng.normal(size=(3, n)))
+
+    def abcs(depol):
+        A, B, C, S = (rng.normal(size=(L, n)) for _ in range(4))
+        A[0, :5] = -0.0
+        return MuellerValue("abcs", x, x, A, B, C, S, depol=rng.uniform(0, 1, (L, n)) if depol else None)
+
+    def depolarising():
+        return MuellerValue("depolarising", x, x, A=rng.uniform(0, 1, (L, n)))
+    terms = {"two": [(rng.uniform(0, 2, n), abcs(False)), (0.7, abcs(False))],
+             "three_with_depolarisers": [(rng.uniform(0, 2, n), abcs(True)), (1.3, depolarising()),
+                                         (rng.uniform(0, 1, n), abcs(False)), (0.25, abcs(True)),
+                                         (rng.uniform(0, 1, n), depolarising())],
+             "shared_depol": [(0.5, abcs(True)), (rng.uniform(0, 1, n), abcs(True))]}[shape]
+    got, want = M.abcs_sum_numba(terms, x, x), M.abcs_sum_numpy(terms, x, x)
+    for f in ("A", "B", "C", "S", "depol"):
+        g, w = getattr(got, f), getattr(want, f)
+        assert (g is None) == (w is None), f
+        if w is not None:
+            assert g.shape == w.shape and g.tobytes() == w.tobytes(), f
