@@ -49,6 +49,17 @@ def _average_fresnel(e):
     return min(max(F0 + (1.0 - F0) / 21.0 - b / 126.0, 0.0), 1.0)
 
 
+@jit_inner
+def _white_albedo(m, a, table, mu_nodes, rough_nodes, alpha_max, e_floor):
+    """(E(μ, α), E_avg(α)) of the F = 1 lobe read bilinearly from the conductor table, each clipped to [e_floor, 1]."""
+    i, fx = _cell(m, 1.0, mu_nodes)
+    j, fy = _cell(a, alpha_max, rough_nodes)
+    E = ((table[i, j] * (1.0 - fx) + table[i + 1, j] * fx) * (1.0 - fy)
+         + (table[i, j + 1] * (1.0 - fx) + table[i + 1, j + 1] * fx) * fy)
+    E_avg = table[mu_nodes, j] * (1.0 - fy) + table[mu_nodes, j + 1] * fy
+    return min(max(E, e_floor), 1.0), min(max(E_avg, e_floor), 1.0)
+
+
 @jit
 def _conductor_extra_loop(mu, alpha, eta, table, mu_nodes, rough_nodes, alpha_max, e_floor, out):
     L, M = eta.shape
@@ -64,13 +75,7 @@ def _conductor_extra_loop(mu, alpha, eta, table, mu_nodes, rough_nodes, alpha_ma
             for q in range(L):
                 out[q, k] = np.nan
             continue
-        i, fx = _cell(m, 1.0, mu_nodes)
-        j, fy = _cell(a, alpha_max, rough_nodes)
-        E = ((table[i, j] * (1.0 - fx) + table[i + 1, j] * fx) * (1.0 - fy)
-             + (table[i, j + 1] * (1.0 - fx) + table[i + 1, j + 1] * fx) * fy)
-        E = min(max(E, e_floor), 1.0)
-        E_avg = table[mu_nodes, j] * (1.0 - fy) + table[mu_nodes, j + 1] * fy
-        E_avg = min(max(E_avg, e_floor), 1.0)
+        E, E_avg = _white_albedo(m, a, table, mu_nodes, rough_nodes, alpha_max, e_floor)
         share = (1.0 - E) / E
         for q in range(L):
             if M > 1:
@@ -108,13 +113,7 @@ def _layer_albedo_loop(mu, alpha, eta, schlick, table, mu_nodes, rough_nodes, al
         F0 = q * q
         value = F0 + (1.0 - F0) * s
         if darken:
-            i, fx = _cell(m, 1.0, mu_nodes)
-            j, fy = _cell(a, alpha_max, rough_nodes)
-            E = ((table[i, j] * (1.0 - fx) + table[i + 1, j] * fx) * (1.0 - fy)
-                 + (table[i, j + 1] * (1.0 - fx) + table[i + 1, j + 1] * fx) * fy)
-            E = min(max(E, e_floor), 1.0)
-            E_avg = table[mu_nodes, j] * (1.0 - fy) + table[mu_nodes, j + 1] * fy
-            E_avg = min(max(E_avg, e_floor), 1.0)
+            E, E_avg = _white_albedo(m, a, table, mu_nodes, rough_nodes, alpha_max, e_floor)
             Fss = _average_fresnel(complex(e, 0.0))
             Fms = Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
             value = value * (E + Fms * (1.0 - E))
