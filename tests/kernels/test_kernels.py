@@ -1318,6 +1318,25 @@ def test_conductor_compensation_twins(correlated, alpha_kind, eta_cols):
 
 
 @needs_numba
+@pytest.mark.parametrize("mode", ["f82", "schlick", "schlick_tint", "tint"])
+def test_metal_index_twins(mode):
+    """A textured metal's complex index from its colour (engine.textures.conductor_index.metal_index: Gulbrandsen's
+    map with the edge tint solved for the F82 value): the compiled loop against the NumPy twin bit for bit, on
+    reflectivities and edges beyond [0, 1] (the clips), 0, 1 and R_MAX, in (L, N) batches and broadcast."""
+    from engine.textures import conductor_index as ci
+    assert "textures.conductor_index.metal_index" in kernels.TWINS
+    rng = np.random.default_rng(13)
+    r = rng.uniform(-0.05, 1.05, (4, 900))
+    r[0, :4] = 0.0, 1.0, 0.999, 1e-9
+    edge = rng.uniform(-0.1, 1.1, (4, 900))
+    for e in (edge, edge[:1], 0.7):
+        got, want = ci.metal_index_numba(r, e, mode), ci.metal_index_numpy(r, e, mode)
+        for g, w in zip(got, want):
+            assert g.shape == w.shape == r.shape and np.ptp(w) > 0.5
+            _bitwise([g], [w])
+
+
+@needs_numba
 @pytest.mark.parametrize("darken", [False, True])
 @pytest.mark.parametrize("alpha_kind,eta_kind", [("number", "number"), ("per_point", "number"),
                                                  ("number", "per_point"), ("per_point", "per_point")])
