@@ -7,6 +7,11 @@ F82-tint fit through F(0°) and F(θ₈₂) (the compiled Fresnel ``abcs_at``, a
 are compiled; once per run of equal indices along the points: a metal of one colour), for a real index (κ = 0: a
 dielectric layer) Cycles' dielectric fit instead; k = F_ms·(1 − E)/E.
 One call per batch instead of some forty NumPy passes over small arrays.
+
+``layer_albedo_loop`` is engine.materials.ggx_energy.cycles_layer_weight_numpy per point, the same arithmetic in
+the same order: Cycles' layering estimate F0 + (1 − F0)·s of a dielectric GGX layer (s read trilinearly from the
+16³ table at (F0^¼, √α, μ), Cycles' ``lookup_table_read``), with ``darken`` × E + F_ms·(1 − E) (E, E_avg from
+the height-correlated conductor table as above, F_ms of Cycles' dielectric F_ss).
 """
 
 from __future__ import annotations
@@ -44,6 +49,17 @@ def _average_fresnel(e):
     return min(max(F0 + (1.0 - F0) / 21.0 - b / 126.0, 0.0), 1.0)
 
 
+@jit_inner
+def _white_albedo(m, a, table, mu_nodes, rough_nodes, alpha_max, e_floor):
+    """(E(μ, α), E_avg(α)) of the F = 1 lobe read bilinearly from the conductor table, each clipped to [e_floor, 1]."""
+    i, fx = _cell(m, 1.0, mu_nodes)
+    j, fy = _cell(a, alpha_max, rough_nodes)
+    E = ((table[i, j] * (1.0 - fx) + table[i + 1, j] * fx) * (1.0 - fy)
+         + (table[i, j + 1] * (1.0 - fx) + table[i + 1, j + 1] * fx) * fy)
+    E_avg = table[mu_nodes, j] * (1.0 - fy) + table[mu_nodes, j + 1] * fy
+    return min(max(E, e_floor), 1.0), min(max(E_avg, e_floor), 1.0)
+
+
 @jit
 def _conductor_extra_loop(mu, alpha, eta, table, mu_nodes, rough_nodes, alpha_max, e_floor, out):
     L, M = eta.shape
@@ -59,13 +75,7 @@ def _conductor_extra_loop(mu, alpha, eta, table, mu_nodes, rough_nodes, alpha_ma
             for q in range(L):
                 out[q, k] = np.nan
             continue
-        i, fx = _cell(m, 1.0, mu_nodes)
-        j, fy = _cell(a, alpha_max, rough_nodes)
-        E = ((table[i, j] * (1.0 - fx) + table[i + 1, j] * fx) * (1.0 - fy)
-             + (table[i, j + 1] * (1.0 - fx) + table[i + 1, j + 1] * fx) * fy)
-        E = min(max(E, e_floor), 1.0)
-        E_avg = table[mu_nodes, j] * (1.0 - fy) + table[mu_nodes, j + 1] * fy
-        E_avg = min(max(E_avg, e_floor), 1.0)
+        E, E_avg = _white_albedo(m, a, table, mu_nodes, rough_nodes, alpha_max, e_floor)
         share = (1.0 - E) / E
         for q in range(L):
             if M > 1:
@@ -77,6 +87,42 @@ def _conductor_extra_loop(mu, alpha, eta, table, mu_nodes, rough_nodes, alpha_ma
             Fms = Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
             out[q, k] = Fms * share
 
+
+@jit_inner
+def _lerp(v, nodes):
+    """(index, next index, fraction) of v clipped to [0, 1] on ``nodes`` nodes (ggx_energy._lerp_coordinate)."""
+    x = min(max(v, 0.0), 1.0) * (nodes - 1)
+    i = min(int(x), nodes - 1)
+    return i, min(i + 1, nodes - 1), x - i
+
+
+@jit
+def _layer_albedo_loop(mu, alpha, eta, schlick, table, mu_nodes, rough_nodes, alpha_max, e_floor, darken, out):
+    nodes = schlick.shape[0]
+    for k in range(mu.shape[0]):
+        m, a, e = mu[k], alpha[k], eta[k]
+        q = (e - 1.0) / (e + 1.0)
+        iz, jz, fz = _lerp(np.sqrt(abs(q)), nodes)
+        ir, jr, fr = _lerp(np.sqrt(a), nodes)
+        im, jm, fm = _lerp(m, nodes)
+        lo = ((1.0 - fm) * ((1.0 - fr) * schlick[iz, ir, im] + fr * schlick[iz, jr, im])
+              + fm * ((1.0 - fr) * schlick[iz, ir, jm] + fr * schlick[iz, jr, jm]))
+        hi = ((1.0 - fm) * ((1.0 - fr) * schlick[jz, ir, im] + fr * schlick[jz, jr, im])
+              + fm * ((1.0 - fr) * schlick[jz, ir, jm] + fr * schlick[jz, jr, jm]))
+        s = (1.0 - fz) * lo + fz * hi
+        F0 = q * q
+        value = F0 + (1.0 - F0) * s
+        if darken:
+            E, E_avg = _white_albedo(m, a, table, mu_nodes, rough_nodes, alpha_max, e_floor)
+            Fss = _average_fresnel(complex(e, 0.0))
+            Fms = Fss * E_avg / (1.0 - Fss * (1.0 - E_avg))
+            value = value * (E + Fms * (1.0 - E))
+        out[k] = value
+
+
+#: (mu (N,), alpha (N,), eta (N,) real, schlick (S, S, S), table, mu_nodes, rough_nodes, alpha_max, e_floor, darken,
+#: out (N,)); None without Numba.
+layer_albedo_loop = _layer_albedo_loop
 
 #: (mu (N,), alpha (N,), eta (L, 1 or N) complex, table, mu_nodes, rough_nodes, alpha_max, e_floor, out (L, N));
 #: None without Numba.

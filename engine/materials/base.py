@@ -352,6 +352,13 @@ class BSDF:
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         raise NotImplementedError
 
+    def sample_direction(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        """``sample`` for a caller that evaluates the non-Dirac directions itself (a mixture,
+        engine.materials.mix): the same wi, pdf, is_delta, valid and eta_sq; the weight is ``sample``'s on the
+        Dirac lanes (is_delta & valid) and unspecified elsewhere, None where there is none.  By default ``sample``;
+        models whose weight costs more than their direction skip it."""
+        return self.sample(sp, u_lobe, u_dir)
+
     def diffuse_share(self, sp: ShadingPoint, wi: np.ndarray, f: MuellerValue) -> np.ndarray | None:
         """M00 (L, N) of the diffuse lobes (Cycles' diffuse closures: Lambert, Oren–Nayar, sheen, translucent)
         within ``f`` = ``eval(sp, wi)``, which the light passes count as Diffuse (engine.render.light_passes); a

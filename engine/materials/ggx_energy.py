@@ -71,7 +71,7 @@ import numpy as np
 
 from .table_cache import cached_table
 from ..kernels import twin
-from ..kernels.ggx_energy import conductor_extra_loop
+from ..kernels.ggx_energy import conductor_extra_loop, layer_albedo_loop
 from ..polarisation.fresnel import fresnel_reflectance
 
 #: Nodes of the conductor table in t = √μ and in r = √α ∈ [0, 1].
@@ -564,6 +564,35 @@ def cycles_layering_albedo(mu, alpha, eta) -> np.ndarray:
     s = (1.0 - fz) * plane(iz) + fz * plane(jz)
     F0 = ((eta - 1.0) / (eta + 1.0)) ** 2
     return F0 + (1.0 - F0) * s
+
+
+def cycles_layer_weight_numpy(mu, alpha, eta, darken: bool) -> np.ndarray:
+    """(N,) what a dielectric GGX layer takes from the layers below in Cycles: its estimate
+    :func:`cycles_layering_albedo`, with ``darken`` (a compensated lobe) × :func:`cycles_layering_darkening`.
+    ``mu`` (N,) viewing cosines, ``alpha`` and ``eta`` (> 0, real) numbers or (N,)."""
+    E = cycles_layering_albedo(mu, alpha, eta)
+    return E * cycles_layering_darkening(mu, alpha, eta) if darken else E
+
+
+def cycles_layer_weight_numba(mu, alpha, eta, darken: bool) -> np.ndarray:
+    """cycles_layer_weight_numpy in one compiled loop (engine.kernels.ggx_energy), the same bits; other shapes than
+    (N,) cosines and numbers or (N,) for α and η go to the NumPy twin."""
+    mu = np.asarray(mu, np.float64)
+    n = mu.shape[0] if mu.ndim == 1 else -1
+    if n < 0 or any(np.ndim(v) > 1 or (np.ndim(v) == 1 and len(v) != n) for v in (alpha, eta)) \
+            or np.iscomplexobj(eta):
+        return cycles_layer_weight_numpy(mu, alpha, eta, darken)
+
+    def full(v):
+        return np.ascontiguousarray(v, np.float64) if np.ndim(v) == 1 else np.full(n, v, np.float64)
+    out = np.empty(n)
+    layer_albedo_loop(np.ascontiguousarray(mu), full(alpha), full(eta), schlick_table(), conductor_tables(True),
+                      MU_NODES, ROUGH_NODES, ALPHA_MAX, E_FLOOR, bool(darken), out)
+    return out
+
+
+#: Cycles' layering weight of a dielectric GGX layer (cycles_layer_weight_numpy), compiled where available.
+cycles_layer_weight = twin(layer_albedo_loop and cycles_layer_weight_numba, cycles_layer_weight_numpy)
 
 
 def dielectric_average_fresnel(eta) -> np.ndarray:

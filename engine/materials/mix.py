@@ -63,6 +63,8 @@ from .lambert import Lambert
 from .normal_map import ShadingNormal
 from .parameters import ModelDeclaration, Parameter
 from ..errors import SceneError
+from ..kernels import twin
+from ..kernels.mueller_sum import abcs_sum_loop
 from ..kernels.stokes_rotation import frame_rotation
 from ..polarisation.frames import plane_of_incidence_axis
 from ..textures import TexturedNumber
@@ -256,18 +258,55 @@ def _sum_general(pol: list[MuellerValue], rotations, dep, x_in: np.ndarray, x_ou
     return MuellerValue("general", x_in, x_out, M=M)
 
 
+def abcs_sum_numpy(terms, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
+    """Σ scale·value over ``terms`` [(scale (N,) or float, MuellerValue)] whose polarising values are ABCS values
+    in the frames (x_in, x_out) (3, N), as an ABCS value."""
+    dep, pol = _split_terms(terms)
+    return _sum_abcs(pol, dep, x_in, x_out)
+
+
+def abcs_sum_numba(terms, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
+    """abcs_sum_numpy with the A, B, C, S blocks summed in one compiled loop (engine.kernels.mueller_sum), the same
+    bits; the depolarised shares as the NumPy twin adds them.  Blocks of other shapes than the first value's
+    (L, N) go to the NumPy twin."""
+    pol = [(s, v) for s, v in terms if v.kind != "depolarising"]
+    shape = pol[0][1].A.shape
+    n = shape[-1]
+    if len(shape) != 2 or any(np.shape(getattr(v, f)) != shape or getattr(v, f).dtype != np.float64
+                              for _, v in pol for f in "ABCS") \
+            or any(isinstance(s, np.ndarray) and s.shape != (n,) for s, _ in pol):
+        return abcs_sum_numpy(terms, x_in, x_out)
+
+    def blocks(f):
+        return tuple(np.ascontiguousarray(getattr(v, f)) for _, v in pol)
+    scales = tuple(np.ascontiguousarray(s, np.float64) if isinstance(s, np.ndarray) else np.full(n, s, np.float64)
+                   for s, _ in pol)
+    A, B, C, S = (np.empty(shape) for _ in range(4))
+    abcs_sum_loop(blocks("A"), blocks("B"), blocks("C"), blocks("S"), scales, A, B, C, S)
+    dep, _ = _split_terms([(s, v) for s, v in terms if v.kind == "depolarising"])
+    shares = [v.depol * (s[None, :] if isinstance(s, np.ndarray) else s) for s, v in pol if v.depol is not None]
+    shares += [dep] if dep is not None else []
+    return MuellerValue("abcs", x_in, x_out, A, B, C, S, depol=sum(shares) if shares else None)
+
+
+#: Σ scale·value of ABCS values in shared frames (abcs_sum_numpy), compiled where available.
+abcs_sum = twin(abcs_sum_loop and abcs_sum_numba, abcs_sum_numpy)
+
+
 def add_values(terms, n: int, L: int, k_in: np.ndarray, k_out: np.ndarray, n_s: np.ndarray) -> MuellerValue:
     """Σ scale·value over ``terms`` [(scale (N,) or float, MuellerValue)], all for the same beams
     k_in = −ω_i, k_out = ω_o (3, N) (see the module docstring, "Frames"); the cheapest kind that holds
     the sum."""
+    polarising = [v for _, v in terms if v.kind != "depolarising"]
+    if len(polarising) > 1:
+        x_in, x_out, rotations = _common_frames(polarising, k_in, k_out, n_s)
+        if all(v.kind == "abcs" for v in polarising) and all(_is_identity_rotation(r) for r in rotations):
+            return abcs_sum(terms, x_in, x_out)
     dep, pol = _split_terms(terms)
     if not pol:
         return depolarising_value(np.zeros((L, n)) if dep is None else np.broadcast_to(dep, (L, n)).copy(), n)
     if len(pol) == 1:
         return _plus_depolariser(pol[0], dep)
-    x_in, x_out, rotations = _common_frames(pol, k_in, k_out, n_s)
-    if all(v.kind == "abcs" for v in pol) and all(_is_identity_rotation(r) for r in rotations):
-        return _sum_abcs(pol, dep, x_in, x_out)
     return _sum_general(pol, rotations, dep, x_in, x_out, n, L)
 
 
@@ -525,16 +564,27 @@ class Mix(BSDF):
         return self._pdf(points, self._probabilities_at(sp, points), wi)
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        return self._sample(sp, u_lobe, u_dir, weighted=True)
+
+    def sample_direction(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        """``sample`` without the mixture's value at the non-Dirac directions (a mix inside a mix: the outer
+        one evaluates them)."""
+        return self._sample(sp, u_lobe, u_dir, weighted=False)
+
+    def _sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray, weighted: bool) -> BSDFSample:
+        """``sample``; not ``weighted``: the weight only on the Dirac lanes (BSDF.sample_direction).  The
+        components sample their directions only (their values are the mixture's to sum)."""
         n, L = sp.n, sp.lam.shape[0]
         if not self.components:     # every weight was 0: black
             return BSDFSample(wi=sp.n_s.copy(), weight=depolarising_value(np.zeros((L, n)), n), pdf=np.zeros(n),
                               is_delta=np.zeros(n, bool), valid=np.zeros(n, bool), eta_sq=np.ones(n))
         points, weights = self._points(sp), self._weights_at(sp)
         if len(self.components) == 1:
-            bs = self.components[0].sample(points[0], u_lobe, u_dir)
+            c = self.components[0]
+            bs = c.sample(points[0], u_lobe, u_dir) if weighted else c.sample_direction(points[0], u_lobe, u_dir)
             w = weights[0]
-            return BSDFSample(wi=bs.wi, weight=bs.weight.scaled(w[None, :]), pdf=bs.pdf, is_delta=bs.is_delta,
-                              valid=bs.valid & (w > 0), eta_sq=bs.eta_sq)
+            return BSDFSample(wi=bs.wi, weight=None if bs.weight is None else bs.weight.scaled(w[None, :]),
+                              pdf=bs.pdf, is_delta=bs.is_delta, valid=bs.valid & (w > 0), eta_sq=bs.eta_sq)
         p = self._probabilities_at(sp, points)
         cols = np.arange(n)
         some = p.sum(axis=0) > 0
@@ -557,7 +607,7 @@ class Mix(BSDF):
             sel = np.flatnonzero(some & (k == j))
             if not sel.size:
                 continue
-            bs = c.sample(points[j].take(sel), u_rest[sel], np.take(u_dir, sel, axis=1))
+            bs = c.sample_direction(points[j].take(sel), u_rest[sel], np.take(u_dir, sel, axis=1))
             wi[:, sel] = bs.wi
             is_delta[sel], valid[sel] = bs.is_delta, bs.valid
             if bs.eta_sq is not None:
@@ -571,20 +621,21 @@ class Mix(BSDF):
             shared = {}         # (the components' points share the hit's arrays: gathered once)
             sub = sp.take(smooth, shared)
             sub_points = [sub if q is sp else q.take(smooth, shared) for q in points]
-            w_sub = [w[smooth] for w in weights]
             d_sub = np.take(wi, smooth, axis=1)
             density = self._pdf(sub_points, p[:, smooth], d_sub)
             good = density > 0
-            value = self._sum(sub, sub_points, w_sub, d_sub, cosine=True)
-            value = value.scaled(np.where(good, 1.0 / np.where(good, density, 1.0), 0.0)[None, :])
             valid[smooth] = good
             pdf[smooth] = density
-            parts.append((smooth, value))
+            if weighted:
+                w_sub = [w[smooth] for w in weights]
+                value = self._sum(sub, sub_points, w_sub, d_sub, cosine=True)
+                value = value.scaled(np.where(good, 1.0 / np.where(good, density, 1.0), 0.0)[None, :])
+                parts.append((smooth, value))
 
         def frames():
             return plane_of_incidence_axis(sp.n_s, -wi), plane_of_incidence_axis(sp.n_s, sp.wo)
-        return BSDFSample(wi=wi, weight=assemble_values(parts, n, L, frames), pdf=pdf, is_delta=is_delta & valid,
-                          valid=valid, eta_sq=eta_sq)
+        weight = assemble_values(parts, n, L, frames) if parts or weighted else None
+        return BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=is_delta & valid, valid=valid, eta_sq=eta_sq)
 
     def delta_reflection(self, sp: ShadingPoint) -> MuellerValue | None:
         points, weights = self._points(sp), self._weights_at(sp)

@@ -282,6 +282,14 @@ class ShadingNormal(BSDF):
         return BSDFSample(wi=bs.wi, weight=bs.weight.scaled(factor[None, :]), pdf=np.where(keep, bs.pdf, 0.0),
                           is_delta=bs.is_delta, valid=bs.valid & keep, eta_sq=bs.eta_sq)
 
+    def sample_direction(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        bs = self.base.sample_direction(self._base_point(sp), u_lobe, u_dir)
+        factor = self._factor(sp, bs.wi)
+        keep = factor > 0
+        return BSDFSample(wi=bs.wi, weight=None if bs.weight is None else bs.weight.scaled(factor[None, :]),
+                          pdf=np.where(keep, bs.pdf, 0.0), is_delta=bs.is_delta, valid=bs.valid & keep,
+                          eta_sq=bs.eta_sq)
+
     def delta_reflection(self, sp: ShadingPoint):
         value = self.base.delta_reflection(sp)
         if value is None:

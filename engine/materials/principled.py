@@ -383,7 +383,7 @@ def _reflection_albedo(top, n, alpha, smooth):
     """E(ω_o) (N,) of a dielectric reflection layer of index n (a number or per point), Cycles' layering albedo: its
     film's reflectance under a film, else Cycles' estimate (engine.materials.ggx_energy.cycles_layering_albedo), when
     rough × the weight of its compensation (TorranceSparrow.cycles_layer_albedo)."""
-    from .ggx_energy import cycles_layering_albedo
+    from .ggx_energy import cycles_layer_weight
     from ..textures.inputs import NumberSpectrum
     if getattr(top, "film", None) is not None:       # a filmed layer: Cycles' estimate, its film's reflectance
         return lambda sp: top.film_albedo(sp, sp.cos_o)
@@ -391,8 +391,8 @@ def _reflection_albedo(top, n, alpha, smooth):
         return lambda sp: top.cycles_layer_albedo(sp, np.clip(sp.cos_o, 0.0, 1.0))
     # smooth: the Fresnel reflectance interpolated between the nodes of Cycles' table (its estimate at α = 0)
     if isinstance(n, NumberSpectrum):                 # an index per point (a per-point Specular IOR Level)
-        return lambda sp: cycles_layering_albedo(np.clip(sp.cos_o, 0.0, 1.0), 0.0, n.numbers(sp.surface_points()))
-    return lambda sp: cycles_layering_albedo(np.clip(sp.cos_o, 0.0, 1.0), 0.0, float(n))
+        return lambda sp: cycles_layer_weight(np.clip(sp.cos_o, 0.0, 1.0), 0.0, n.numbers(sp.surface_points()), False)
+    return lambda sp: cycles_layer_weight(np.clip(sp.cos_o, 0.0, 1.0), 0.0, float(n), False)
 
 
 def _coat(p, below):

@@ -54,6 +54,12 @@ class _ScaledLobes(BSDF):
         bs = self.base.sample(sp, u_lobe, u_dir)
         return BSDFSample(bs.wi, bs.weight.scaled(self._factor(sp, bs.wi)), bs.pdf, bs.is_delta, bs.valid, bs.eta_sq)
 
+    def sample_direction(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        bs = self.base.sample_direction(sp, u_lobe, u_dir)
+        if bs.weight is None or not (bs.is_delta & bs.valid).any():
+            return BSDFSample(bs.wi, None, bs.pdf, bs.is_delta, bs.valid, bs.eta_sq)
+        return BSDFSample(bs.wi, bs.weight.scaled(self._factor(sp, bs.wi)), bs.pdf, bs.is_delta, bs.valid, bs.eta_sq)
+
 
 class Tinted(_ScaledLobes):
     """``base`` with its reflected light × ``reflection`` and its transmitted light × ``transmission``."""

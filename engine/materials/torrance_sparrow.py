@@ -110,8 +110,7 @@ import numpy as np
 from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ShadingPoint, depolarising_value
 from .conductor import K, METAL, N, THIN_FILM_IOR, THIN_FILM_THICKNESS, complex_index, mirror_reflection
 from .ggx import GGX
-from .ggx_energy import (ALPHA_MAX, conductor_extra, cycles_layering_albedo, cycles_layering_darkening,
-                         ggx_reflection_albedo)
+from .ggx_energy import ALPHA_MAX, conductor_extra, cycles_layer_weight, ggx_reflection_albedo
 from .microfacet import (SHADOWING, Beckmann, BlinnPhong, half_vector, reflect_local,
                                          shadowing_term)
 from .parameters import ModelDeclaration, Parameter, Socket, exterior_n_parameter
@@ -624,9 +623,7 @@ class TorranceSparrow(BSDF):
         compensation's weight, which Cycles' ``bsdf_albedo`` carries: cycles_layering_darkening)."""
         eta = (self.n.numbers(sp.surface_points()) if isinstance(self.n, NumberSpectrum) else self.n.value) \
             / self.exterior_n
-        m = sp.number(self.m)
-        E = cycles_layering_albedo(cos_o, m, eta)
-        return E * cycles_layering_darkening(cos_o, m, eta) if self.multiscatter else E
+        return cycles_layer_weight(cos_o, sp.number(self.m), eta, self.multiscatter)
 
     def lobe_colors(self, sp: ShadingPoint) -> LobeColors | None:
         """Glossy: s·E(cosθ_o) (``_layer_albedo``; Cycles' estimate of a Principled specular layer); diffuse:
@@ -840,6 +837,19 @@ class TorranceSparrow(BSDF):
                                                      self.has_diffuse)
             weight = self.eval(sp, wi).scaled(factor[None, :])
         return BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=np.zeros(sp.n, bool), valid=valid,
+                          eta_sq=np.ones(sp.n))
+
+    def sample_direction(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
+        """``sample`` without the weight (no Dirac lanes: None)."""
+        p_given, eta, s, w_d = self._mixture_inputs(sp, compact=self._compiled_lobe)
+        if self._compiled_lobe:
+            wi, pdf, valid = torrance_sparrow_sample(
+                sp.n_s, sp.wo, u_lobe, u_dir, eta, sp.lam.shape[0], s, self._m(sp), self.shadowing, p_given, w_d,
+                self.has_diffuse, self.distribution, not self.multiscatter)[:3]
+        else:
+            wi, pdf, valid, _ = _mixture_sample(self._dist(sp) if self.has_specular else None, sp.n_s, sp.wo, u_lobe,
+                                                u_dir, p_given, eta, s, w_d, self.has_specular, self.has_diffuse)
+        return BSDFSample(wi=wi, weight=None, pdf=pdf, is_delta=np.zeros(sp.n, bool), valid=valid,
                           eta_sq=np.ones(sp.n))
 
     def delta_reflection(self, sp: ShadingPoint):

@@ -353,13 +353,13 @@ class PathTracer:
                             if getattr(settings, "light_paths_active", False) else None)
 
     def _emitted(self, light: _Light, lookup: WavelengthLookup, d: np.ndarray | None = None,
-                 rows: np.ndarray | None = None) -> np.ndarray:
+                 rows: np.ndarray | None = None, uv=None) -> np.ndarray:
         """Emitted radiance (L, n) of ``light`` for paths with these wavelengths (RGB (3, n) in RGB mode)
         arriving along the directions d (3, n) (used by lights whose radiance varies with direction).
         ``rows``: a mask of ``lookup``'s paths (the n taken; None: all), taken only where the wavelengths
-        are read (not in RGB mode)."""
+        are read (not in RGB mode); ``uv``: the light's ``map_coordinates(d)`` if the caller has them."""
         if d is not None and getattr(light, "varies_with_direction", False):
-            return light.emitted(d, lookup if rows is None else lookup.take(rows), self.rgb_mode, self.mono)
+            return light.emitted(d, lookup if rows is None else lookup.take(rows), self.rgb_mode, self.mono, uv=uv)
         if self.rgb_mode:
             rgb = light.channel_rgb() if self.channels else light.rgb()
             n = lookup.lam.shape[1] if rows is None else int(np.count_nonzero(rows))
@@ -574,10 +574,11 @@ class PathTracer:
             reads_d = (getattr(env, "varies_with_direction", False) or nd.any()
                        or (env.polarisation is not None and self.P > 1))
             d_miss = np.compress(miss, d, axis=1) if reads_d else None
-            Le = self._emitted(env, lk, d_miss, rows=miss)
+            uv = None if d_miss is None else env.map_coordinates(d_miss)     # (a map's: once for both)
+            Le = self._emitted(env, lk, d_miss, rows=miss, uv=uv)
             w = np.ones(nd.shape[0])
             if nd.any():
-                p_light = env.pdf(d_miss) * self._pick_probability(light_set.environment_index, at_prev(miss))
+                p_light = env.pdf(d_miss, uv=uv) * self._pick_probability(light_set.environment_index, at_prev(miss))
                 w = np.where(nd, power_heuristic(prev_pdf[miss], p_light), 1.0)
             rows = miss.nonzero()[0]
             if att is not None:

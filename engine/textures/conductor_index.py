@@ -11,10 +11,43 @@ from __future__ import annotations
 import numpy as np
 
 from .inputs import TexturedSpectrum
+from ..kernels import twin
+from ..kernels.gulbrandsen import F82, SCHLICK, SCHLICK_TINT, index_loop
 from ..spectral import Spectrum
-from ..spectral.gulbrandsen import EDGE_MODES, R_MAX, gulbrandsen_nk, index_of
+from ..spectral import gulbrandsen
+from ..spectral.gulbrandsen import COS_82, EDGE_MODES, R_MAX, gulbrandsen_nk, index_of
 
 __all__ = ["TexturedGulbrandsenIndex"]
+
+
+def metal_index_numpy(r, edge, mode: str):
+    """(n, κ) of reflectivities r and ``edge`` values (arrays, broadcast) by ``mode``
+    (engine.spectral.gulbrandsen.index_of)."""
+    return index_of(r, edge, mode)
+
+
+_MODE_CODES = {"f82": F82, "schlick": SCHLICK, "schlick_tint": SCHLICK_TINT}
+#: Schlick's (1 − cos θ₈₂)⁵, the same Python float as gulbrandsen.schlick_f82's
+_SCHLICK_82 = (1.0 - COS_82) ** 5
+
+
+def metal_index_numba(r, edge, mode: str):
+    """metal_index_numpy in one compiled loop (engine.kernels.gulbrandsen) for the modes that solve for the edge
+    tint, the same bits; the others ("tint", "cycles_film": no Fresnel) go to the NumPy twin."""
+    if mode not in _MODE_CODES:
+        return index_of(r, edge, mode)
+    r, edge = np.broadcast_arrays(np.asarray(r, np.float64), np.asarray(edge, np.float64))
+    shape = r.shape
+    if gulbrandsen._EDGE is None:       # (the edge-tint table, built once on first use)
+        gulbrandsen.edge_tint_for_f82(0.0, 0.0)
+    n, k = np.empty(r.size), np.empty(r.size)
+    index_loop(np.ascontiguousarray(r).reshape(-1), np.ascontiguousarray(edge).reshape(-1), _MODE_CODES[mode],
+               _SCHLICK_82, COS_82, R_MAX, gulbrandsen._EDGE, n, k)
+    return n.reshape(shape), k.reshape(shape)
+
+
+#: A metal's (n, κ) from its reflectivity and edge (metal_index_numpy), compiled where available.
+metal_index = twin(index_loop and metal_index_numba, metal_index_numpy)
 
 
 def _values(spec, points, lam, mono, basis):
@@ -60,7 +93,7 @@ class TexturedGulbrandsenIndex(TexturedSpectrum):
         def compute():
             r = _values(self.reflectivity, points, lam, mono, basis)
             g = _values(self.edge_tint, points, lam, mono, basis)
-            return index_of(r, g, self.mode)
+            return metal_index(r, g, self.mode)
         # (n, κ) once per batch: the n and the κ of the same metal share one Gulbrandsen map
         key = ("gulbrandsen_nk", self.reflectivity, self.edge_tint, self.mode, mono, lam.shape[0])
         return points.memo(key, compute)[0 if self.part == "n" else 1]

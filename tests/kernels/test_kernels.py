@@ -1318,6 +1318,49 @@ def test_conductor_compensation_twins(correlated, alpha_kind, eta_cols):
 
 
 @needs_numba
+@pytest.mark.parametrize("mode", ["f82", "schlick", "schlick_tint", "tint"])
+def test_metal_index_twins(mode):
+    """A textured metal's complex index from its colour (engine.textures.conductor_index.metal_index: Gulbrandsen's
+    map with the edge tint solved for the F82 value): the compiled loop against the NumPy twin bit for bit, on
+    reflectivities and edges beyond [0, 1] (the clips), 0, 1 and R_MAX, in (L, N) batches and broadcast."""
+    from engine.textures import conductor_index as ci
+    assert "textures.conductor_index.metal_index" in kernels.TWINS
+    rng = np.random.default_rng(13)
+    r = rng.uniform(-0.05, 1.05, (4, 900))
+    r[0, :4] = 0.0, 1.0, 0.999, 1e-9
+    edge = rng.uniform(-0.1, 1.1, (4, 900))
+    for e in (edge, edge[:1], 0.7):
+        got, want = ci.metal_index_numba(r, e, mode), ci.metal_index_numpy(r, e, mode)
+        for g, w in zip(got, want):
+            assert g.shape == w.shape == r.shape and np.ptp(w) > 0.5
+            _bitwise([g], [w])
+
+
+@needs_numba
+@pytest.mark.parametrize("darken", [False, True])
+@pytest.mark.parametrize("alpha_kind,eta_kind", [("number", "number"), ("per_point", "number"),
+                                                 ("number", "per_point"), ("per_point", "per_point")])
+def test_cycles_layer_weight_twins(darken, alpha_kind, eta_kind):
+    """Cycles' layering weight of a dielectric GGX layer (engine.materials.ggx_energy.cycles_layer_weight: its albedo
+    estimate, × the compensation's darkening): the compiled loop against the NumPy twin on cosines beyond 0 … 1 (the
+    ends and the table's nodes included), roughness 0 … 1 and indices below and above 1 (IOR 1000 included)."""
+    from engine.materials import ggx_energy as g
+    assert "materials.ggx_energy.cycles_layer_weight" in kernels.TWINS
+    rng = np.random.default_rng(12)
+    n = 4000
+    mu = rng.uniform(-0.1, 1.1, n)
+    mu[:8] = 0.0, 1.0, 1e-12, 0.5, 1.0 / 15.0, 7.0 / 15.0, 0.25, 1.0 - 1e-15
+    alpha = 0.09 if alpha_kind == "number" else np.concatenate(([0.0, 1.0, 1.0 / 225.0], rng.uniform(0, 1, n - 3)))
+    eta = 1.45 if eta_kind == "number" else np.concatenate(([1.0, 1000.0, 0.5, 1.0 / 1.45],
+                                                            rng.uniform(0.3, 4.0, n - 4)))
+    got = g.cycles_layer_weight_numba(mu, alpha, eta, darken)
+    want = g.cycles_layer_weight_numpy(mu, alpha, eta, darken)
+    assert got.shape == want.shape == (n,) and np.ptp(want) > 0.3 and np.all(want >= 0.0)
+    _bitwise([got], [want])
+    assert g.cycles_layer_weight_numba(mu[:0], 0.3, 1.5, darken).shape == (0,)
+
+
+@needs_numba
 @pytest.mark.parametrize("extension", ["REPEAT", "EXTEND", "CLIP", "MIRROR"])
 def test_bilinear_texture_lookup_twins(extension):
     """Linear image lookups (engine.textures.texture.bilinear_lookup): the compiled loop against the NumPy filter

@@ -14,7 +14,7 @@ from engine.materials.dielectric import SmoothDielectric
 from engine.materials.evaluate import mueller_at
 from engine.materials.normal_map import ShadingNormal
 from engine.materials.lambert import Lambert
-from engine.materials.mix import Mix, MixShadingPoint, rotate_mueller_batch
+from engine.materials.mix import Layered, Mix, MixShadingPoint, rotate_mueller_batch
 from engine.materials.sampling import cosine_hemisphere, local_to_world
 from engine.polarisation.frames import rotate_mueller_frames, scattering_plane_axis, sp_basis_axis
 from engine.polarisation.mueller import is_realisable, mueller_from_jones
@@ -607,3 +607,73 @@ def test_a_batch_computes_a_mixtures_weights_once_and_its_subsets_share_arrays(m
     assert a.wo is b.wo and a.lam is b.lam and a.lookup is b.lookup and a.n_s is not b.n_s
     c = other.take(sel)
     assert np.array_equal(b.n_s, c.n_s) and np.array_equal(b.wo, c.wo) and b.wo is not c.wo
+
+
+@pytest.mark.parametrize("values", [
+    {"metallic": 0.5, "roughness": 0.4},                            # F82 metal + layered dielectric over Lambert
+    {"metallic": 0.3, "transmission": 0.5, "roughness": 0.0},       # Dirac glass and mirror lanes beside rough ones
+    {"metallic": 0.2, "transmission": 0.6, "roughness": 0.3, "coat_weight": 0.5, "sheen_weight": 0.4},
+])
+def test_sampled_directions_alone_are_the_samples_and_nested_mixes_sum_once(values):
+    """BSDF.sample_direction (what a mix asks of its components, nested mixes included): the same directions,
+    densities, Dirac flags, validity and η² as ``sample``, the same weight on the Dirac lanes; and the mixture's
+    weight on the other lanes is still Σ w_k·f_k·|cosθ_i| / Σ p_k·pdf_k."""
+    model = parse_material({"type": "principled", **values}, "materials.p")
+    # the specular layer over its diffuse base as two lobes (as normal maps split them): a mix inside the mix
+    model = model.with_components([(getattr(c, "as_layers", lambda: None)() or c) for c in model.components])
+    if not any(isinstance(c, Mix) for c in model.components):    # (the smooth one: under a layer, beside a Lambert)
+        model = Mix([Layered(lambert(0.2), model, 0.3, lambda sp: np.full(sp.n, 0.5)), lambert(0.4)], [0.7, 0.3])
+    n, rng = 3000, np.random.default_rng(11)
+    u_lobe, u_dir = rng.random(n), rng.random((2, n))
+    full = model.sample(points(n, np.random.default_rng(5)), u_lobe, u_dir)
+    alone = model.sample_direction(points(n, np.random.default_rng(5)), u_lobe, u_dir)
+    for field in ("wi", "pdf", "is_delta", "valid", "eta_sq"):
+        assert np.array_equal(getattr(full, field), getattr(alone, field)), field
+    delta = np.flatnonzero(full.is_delta & full.valid)
+    if "transmission" in values and values["roughness"] == 0.0:
+        assert delta.size
+        assert np.array_equal(full.weight.matrix()[..., delta], alone.weight.matrix()[..., delta])
+    else:
+        assert alone.weight is None
+    sp = points(n, np.random.default_rng(5))
+    smooth = np.flatnonzero(full.valid & ~full.is_delta)
+    sub, wi = sp.take(smooth), full.wi[:, smooth]
+    f = model.eval(sub, wi)
+    want = f.matrix() * (np.abs(dot(sub.n_s, wi)) / model.pdf(sub, wi))[None, None, None, :]
+    got = MuellerValue("general", full.weight.x_in[:, smooth], full.weight.x_out[:, smooth],
+                       M=full.weight.matrix()[..., smooth])
+    np.testing.assert_allclose(in_basis(got, wi, sub.wo), in_basis(MuellerValue("general", f.x_in, f.x_out, M=want),
+                                                                   wi, sub.wo), rtol=1e-10, atol=1e-13)
+
+
+@pytest.mark.skipif(not __import__("engine.kernels", fromlist=["COMPILED"]).COMPILED, reason="needs Numba")
+@pytest.mark.parametrize("shape", ["two", "three_with_depolarisers", "shared_depol"])
+def test_compiled_abcs_sum_is_the_numpy_sum_bit_for_bit(shape):
+    """The mixture's sum of ABCS values in shared frames (mix.abcs_sum): the compiled loop against the NumPy twin —
+    scales per point and numbers, ABCS values with and without a depolarised share, depolarising terms between
+    them — bit for bit, negative zeros included (0 + x, as Python's sum)."""
+    from engine.kernels import TWINS
+    from engine.materials import mix as M
+    assert TWINS["materials.mix.abcs_sum"].compiled is M.abcs_sum_numba
+    rng = np.random.default_rng(21)
+    L, n = 4, 700
+    x = unit(rng.normal(size=(3, n)))
+
+    def abcs(depol):
+        A, B, C, S = (rng.normal(size=(L, n)) for _ in range(4))
+        A[0, :5] = -0.0
+        return MuellerValue("abcs", x, x, A, B, C, S, depol=rng.uniform(0, 1, (L, n)) if depol else None)
+
+    def depolarising():
+        return MuellerValue("depolarising", x, x, A=rng.uniform(0, 1, (L, n)))
+    terms = {"two": [(rng.uniform(0, 2, n), abcs(False)), (0.7, abcs(False))],
+             "three_with_depolarisers": [(rng.uniform(0, 2, n), abcs(True)), (1.3, depolarising()),
+                                         (rng.uniform(0, 1, n), abcs(False)), (0.25, abcs(True)),
+                                         (rng.uniform(0, 1, n), depolarising())],
+             "shared_depol": [(0.5, abcs(True)), (rng.uniform(0, 1, n), abcs(True))]}[shape]
+    got, want = M.abcs_sum_numba(terms, x, x), M.abcs_sum_numpy(terms, x, x)
+    for f in ("A", "B", "C", "S", "depol"):
+        g, w = getattr(got, f), getattr(want, f)
+        assert (g is None) == (w is None), f
+        if w is not None:
+            assert g.shape == w.shape and g.tobytes() == w.tobytes(), f

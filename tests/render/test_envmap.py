@@ -101,6 +101,25 @@ def test_spectral_emission_develops_to_the_lookup():
     np.testing.assert_allclose(developed, ME.lookup(SKY, d.T), rtol=1e-3, atol=1e-6)
 
 
+@pytest.mark.parametrize("rotation", [0.0, 30.0, [10.0, -20.0, 45.0]])
+def test_map_coordinates_computed_once_give_the_same_radiance_and_pdf(rotation):
+    """The integrator computes a missed ray's map coordinates once (``map_coordinates``) and passes them to
+    ``emitted`` and ``pdf``: the same bits as each computing them, in a turned map too; a constant sky has none."""
+    from engine.render.lights import EnvironmentEmitter
+    from engine.spectral import GRID_NM, ConstantSpectrum, WavelengthLookup
+    env = EnvironmentMapEmitter(SKY, strength=1.7, rotation_deg=rotation, interpolation_space="srgb")
+    d = random_directions(500, seed=4)
+    uv = env.map_coordinates(d)
+    lk = WavelengthLookup(np.repeat(np.asarray(GRID_NM[::7], float)[:, None], d.shape[1], axis=1))
+    for mode in ((True, False), (False, True), (False, False)):
+        assert np.array_equal(env.emitted(d, lk, *mode, uv=uv), env.emitted(d, lk, *mode))
+    assert np.array_equal(env.pdf(d, uv=uv), env.pdf(d))
+    swapped = (uv[0][::-1], uv[1][::-1])        # (the coordinates given are the ones read)
+    assert not np.array_equal(env.pdf(d, uv=swapped), env.pdf(d))
+    assert not np.array_equal(env.emitted(d, lk, True, False, uv=swapped), env.emitted(d, lk, True, False))
+    assert EnvironmentEmitter(ConstantSpectrum(1.0)).map_coordinates(d) is None
+
+
 def test_cycles_grid_puts_rows_at_texel_centres():
     img = np.random.default_rng(3).uniform(0.1, 2.0, size=(6, 10, 3))
     env = EnvironmentMapEmitter(img, grid="cycles")

@@ -71,6 +71,11 @@ class _Light:
     def radiance(self, lam, mono) -> np.ndarray:
         return self.spectrum.eval(lam, mono=mono)
 
+    def map_coordinates(self, d: np.ndarray):
+        """The coordinates a world map reads at the world directions d (3, N) — (u, v) (N,) each, computed once
+        for its ``emitted`` and ``pdf`` (their ``uv``) — or None: a light that reads no map."""
+        return None
+
     def channel_rgb(self) -> np.ndarray:
         """Linear sRGB (3,) as an RGB renderer uses this light ("rgb" transport): an RGB-defined
         spectrum's own colour (Cycles' light colour × strength), else :meth:`rgb`."""

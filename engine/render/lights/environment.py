@@ -32,7 +32,7 @@ class EnvironmentEmitter(_Light):
     def sample(self, p, u):
         return _uniform_sample(u)
 
-    def pdf(self, d):
+    def pdf(self, d, uv=None):
         return np.full(d.shape[1], 1.0 / (4.0 * math.pi))
 
     def power(self, scene_radius=1.0):
@@ -217,16 +217,22 @@ class EnvironmentMapEmitter(_Light):
         c, s = math.cos(self.rotation), math.sin(self.rotation)
         return np.stack((c * d[0] + s * d[1], -s * d[0] + c * d[1], d[2]))
 
-    def lookup_rgb(self, d):
-        """Linear sRGB radiance (N, 3) × strength in the world directions d (3, N) (a view of a (3, N) array)."""
-        rgb = _map_lookup(*_uv_numpy(self._to_map(d)), self._interpolated, self.grid == "mitsuba",
-                          1.0 if self._decode else self.strength)
+    def map_coordinates(self, d):
+        """(u, v) (N,) each: the map's coordinates of the world directions d (3, N) (the class docstring's)."""
+        return _uv_numpy(self._to_map(d))
+
+    def lookup_rgb(self, d, uv=None):
+        """Linear sRGB radiance (N, 3) × strength in the world directions d (3, N) (a view of a (3, N) array);
+        ``uv``: their ``map_coordinates`` if the caller has them."""
+        rgb = _map_lookup(*(self.map_coordinates(d) if uv is None else uv), self._interpolated,
+                          self.grid == "mitsuba", 1.0 if self._decode else self.strength)
         return (np.maximum(srgb_to_linear(rgb), 0.0) * self.strength if self._decode else rgb).T
 
-    def emitted(self, d, lookup, rgb_mode: bool, mono: bool):
+    def emitted(self, d, lookup, rgb_mode: bool, mono: bool, uv=None):
         """Radiance towards −d for rays travelling along d (3, n): RGB (3, n), mono luminance (1, n)
-        or the illuminant spectrum D65n · Σ rgb_c B_c at ``lookup``'s wavelengths (L, n)."""
-        rgb = self.lookup_rgb(d).T
+        or the illuminant spectrum D65n · Σ rgb_c B_c at ``lookup``'s wavelengths (L, n).  ``uv``: the directions'
+        ``map_coordinates`` if the caller has them (the same numbers)."""
+        rgb = self.lookup_rgb(d, uv).T
         if rgb_mode:
             return rgb
         if mono:
@@ -239,9 +245,11 @@ class EnvironmentMapEmitter(_Light):
                                      self.cell_pdf, u)
         return self._to_world(dm), np.full(p.shape[1], np.inf), scale, pdf, pdf > 0
 
-    def pdf(self, d):
-        """Solid-angle pdf (N,) of ``sample`` producing the world directions d (3, N)."""
-        return _map_pdf(*_uv_numpy(self._to_map(d)), self.cell_pdf, self.texels.shape[0], self.grid == "mitsuba")
+    def pdf(self, d, uv=None):
+        """Solid-angle pdf (N,) of ``sample`` producing the world directions d (3, N) (``uv``: their
+        ``map_coordinates`` if the caller has them)."""
+        return _map_pdf(*(self.map_coordinates(d) if uv is None else uv), self.cell_pdf, self.texels.shape[0],
+                        self.grid == "mitsuba")
 
     def rgb(self):
         """Mean linear sRGB radiance over the sphere (for light selection)."""
