@@ -873,8 +873,8 @@ class PathTracer:
             medium = (gather(state.media, sel), None if state.tau is None else gather(state.tau, sel),
                       gather(surf.prim, sel), gather(surf.n_g, sel), gather(surf.wo, sel), gather(surf.p, sel),
                       gather(state.sampler.keys, sel), state.bounce)
-        contrib = self._next_event(sp, state.lk.take(sel), bsdf, state.T_store, rows, x_T, u_light[:, sel], acc.stats,
-                                   t_cols, medium,
+        contrib = self._next_event(sp, state.lk.take(sel), bsdf, state.T_store, rows, x_T, gather(u_light, sel),
+                                   acc.stats, t_cols, medium,
                                    lobes=None if acc.lobes is None else (acc.lobes, gather(state.path, sel)))
         add_to_paths(acc.radiance, gather(state.path, sel), contrib)
         if acc.path_cost is not None:
@@ -884,7 +884,7 @@ class PathTracer:
     def _sample_bsdf(bsdf: BSDF, sp: ShadingPoint, u_bsdf: np.ndarray, sel: slice | np.ndarray) -> BSDFSample:
         """BSDF sample of the paths ``sel`` (``u_bsdf`` (3, n) of all paths), its weight in Cycles'
         convention where the material asks for it (BSDF.radiance_scaling)."""
-        bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
+        bs = bsdf.sample(sp, gather(u_bsdf[0], sel), gather(u_bsdf[1:], sel))
         if not bsdf.radiance_scaling and bs.eta_sq is not None:     # Cycles' convention (BSDF.radiance_scaling)
             bs = BSDFSample(bs.wi, bs.weight.scaled(bs.eta_sq[None, :]), bs.pdf, bs.is_delta, bs.valid, None)
         return bs
