@@ -219,9 +219,31 @@ def _slope_cdf(x, t, coef, k):
 @jit_inner
 def _slope_cdf_e(x, e, t, coef, k):
     """F(x) given e = e^{−x²} (the Halley step needs the same exponential)."""
-    r = erfcx_nonneg_scalar(abs(x), coef, k)
+    return _slope_cdf_er(x, e, erfcx_nonneg_scalar(abs(x), coef, k), t)
+
+
+@jit_inner
+def _slope_cdf_er(x, e, r, t):
+    """F(x) given e = e^{−x²} and r = erfcx(|x|)."""
     tp = t * _INV_SQRT_PI
     return e * (r + tp) if x < 0 else 2.0 + e * (tp - r)
+
+
+@jit_inner
+def erfcx3_at(x1, x2, x3, coef, k):
+    """erfcx_nonneg_scalar of three x ≥ 0, their series summed in one loop: the same operations per value (the
+    same bits), three independent chains for the processor to overlap instead of three latency-bound ones."""
+    c1, c2, c3 = min(x1, 1e150), min(x2, 1e150), min(x3, 1e150)
+    t1, t2, t3 = (c1 - k) / (c1 + k), (c2 - k) / (c2 + k), (c3 - k) / (c3 + k)
+    d1, d2, d3 = 2.0 * t1, 2.0 * t2, 2.0 * t3
+    p1 = q1 = p2 = q2 = p3 = q3 = 0.0
+    for j in range(coef.shape[0] - 1, 0, -1):
+        cj = coef[j]
+        p1, q1 = (d1 * p1 - q1) + cj, p1
+        p2, q2 = (d2 * p2 - q2) + cj, p2
+        p3, q3 = (d3 * p3 - q3) + cj, p3
+    return ((coef[0] + t1 * p1 - q1) / (c1 + k), (coef[0] + t2 * p2 - q2) / (c2 + k),
+            (coef[0] + t3 * p3 - q3) / (c3 + k))
 
 
 @jit_inner
@@ -231,20 +253,33 @@ def _slope_x_start(t, u1, coef, k):
 
 
 @jit_inner
-def _slope_x_start_with(t, u1, coef, k, use_table):
-    """_slope_x_start, from the table where ``use_table`` and it applies, else as before the table."""
-    cot = 1.0 / t if t > 0 else np.inf
-    lo = -8.0
-    hi = min(cot, 8.0)
-    z = 2.0 if cot >= 6.0 else _slope_cdf(min(cot, 30.0), t, coef, k)
+def _slope_x_quantile(u1):
+    """(u1 clamped to [0, 1], to [1e-300, 1 − 1e-16], its Gaussian quantile g by Giles' erfc⁻¹)."""
     u = min(max(u1, 0.0), 1.0)
     uc = min(max(u, 1e-300), 1.0 - 1e-16)
     if uc < 0.5:
         xg = -erfcinv_giles_scalar(2.0 * uc)
     else:
         xg = erfcinv_giles_scalar(2.0 * (1.0 - uc))
+    return u, uc, xg
+
+
+@jit_inner
+def _in_start_table(uc, xg, s):
+    """Whether x̃'s start is read from the table at (s, g = xg) for the clamped u ``uc``."""
+    return min(uc, 1.0 - uc) > START_U_MIN and abs(xg) < START_G and s >= 0.0 and s <= 1.0
+
+
+@jit_inner
+def _slope_x_start_with(t, u1, coef, k, use_table):
+    """_slope_x_start, from the table where ``use_table`` and it applies, else as before the table."""
+    cot = 1.0 / t if t > 0 else np.inf
+    lo = -8.0
+    hi = min(cot, 8.0)
+    z = 2.0 if cot >= 6.0 else _slope_cdf(min(cot, 30.0), t, coef, k)
+    u, uc, xg = _slope_x_quantile(u1)
     s = t / (1.0 + t)
-    if use_table and min(uc, 1.0 - uc) > START_U_MIN and abs(xg) < START_G and s >= 0.0 and s <= 1.0:
+    if use_table and _in_start_table(uc, xg, s):
         x = _start_lookup_at(s, xg)
     else:
         arg = uc * z * SQRT_PI / max(t, 1e-300)
@@ -261,7 +296,13 @@ def _slope_x_start_with(t, u1, coef, k, use_table):
 def _slope_x_step(x, lo, hi, t, target, tol, coef, k):
     """One safeguarded Halley step of x̃ (CDF(x) = target within tol): (new x, lo, hi, converged)."""
     e = np.exp(-x * x)
-    f = _slope_cdf_e(x, e, t, coef, k) - target
+    return _slope_x_step_er(x, e, erfcx_nonneg_scalar(abs(x), coef, k), lo, hi, t, target, tol)
+
+
+@jit_inner
+def _slope_x_step_er(x, e, r, lo, hi, t, target, tol):
+    """_slope_x_step given e = e^{−x²} and r = erfcx(|x|)."""
+    f = _slope_cdf_er(x, e, r, t) - target
     hit = abs(f) <= tol
     if f < 0:
         lo = x
@@ -464,8 +505,14 @@ def smith_a_at(w0, w1, w2, m):
 @jit_inner
 def beckmann_lambda_at(a, coef, k):
     """Smith Λ(a) of engine.materials.microfacet.beckmann_lambda."""
+    return _beckmann_lambda_given(a, erfcx_nonneg_scalar(a, coef, k) if a > 0 and a <= 6.0 else 0.0)
+
+
+@jit_inner
+def _beckmann_lambda_given(a, r):
+    """beckmann_lambda_at given r = erfcx(a) (read where 0 < a ≤ 6 only)."""
     if a > 0 and a <= 6.0:
-        lam = 0.5 * np.exp(-a * a) * (_INV_SQRT_PI / a - erfcx_nonneg_scalar(a, coef, k))
+        lam = 0.5 * np.exp(-a * a) * (_INV_SQRT_PI / a - r)
         return max(lam, 0.0)
     return 0.0 if a > 0 else np.inf
 
@@ -485,6 +532,20 @@ def beckmann_g1_at(w0, w1, w2, h0, h1, h2, m, rational, coef, k):
         g = 1.0 if a >= 1.6 else (3.535 * af + 2.181 * af * af) / (1.0 + 2.276 * af + 2.577 * af * af)
         return g * chi_plus_at(w0, w1, w2, h0, h1, h2)
     return chi_plus_at(w0, w1, w2, h0, h1, h2) / (1.0 + beckmann_lambda_at(a, coef, k))
+
+
+@jit_inner
+def beckmann_g1_pair_at(i0, i1, i2, o0, o1, o2, h0, h1, h2, m, rational, coef, k):
+    """beckmann_g1_at(ω_i)·beckmann_g1_at(ω_o) (the separable Smith G), the two Λ's erfcx summed in one loop
+    (erfcx3_at: the same bits)."""
+    if rational:
+        return (beckmann_g1_at(i0, i1, i2, h0, h1, h2, m, True, coef, k)
+                * beckmann_g1_at(o0, o1, o2, h0, h1, h2, m, True, coef, k))
+    a_i = smith_a_at(i0, i1, i2, m)
+    a_o = smith_a_at(o0, o1, o2, m)
+    r_i, r_o, _ = erfcx3_at(a_i, a_o, 0.0, coef, k)
+    return (chi_plus_at(i0, i1, i2, h0, h1, h2) / (1.0 + _beckmann_lambda_given(a_i, r_i))
+            * (chi_plus_at(o0, o1, o2, h0, h1, h2) / (1.0 + _beckmann_lambda_given(a_o, r_o))))
 
 
 @jit_inner
@@ -508,8 +569,6 @@ def _beckmann_vndf_with(o0, o1, o2, u0, u1, m, coef, k, use_table):
         cos_p, sin_p = o0 / sxy, o1 / sxy
     else:
         cos_p, sin_p = 1.0, 0.0
-    # x̃: the start of visible_slope_x_at
-    x, lo, hi, target, tol = _slope_x_start_with(t, u0, coef, k, use_table)
     # ỹ: the start of visible_slope_y_at (Giles' before the fitted start, for tests/bench)
     v = min(max(u1, 1e-16), 1.0 - 1e-16)
     lower = v < 0.5
@@ -519,7 +578,35 @@ def _beckmann_vndf_with(o0, o1, o2, u0, u1, m, coef, k, use_table):
     log_q = np.log(q)
     x_on = True
     y_on = True
-    for it in range(100):
+    first = 0
+    # x̃: the start of visible_slope_x_at.  From the table (nearly every draw), F(cotθ), the first x̃ step and the
+    # first ỹ step need erfcx at three independent points: computed together (erfcx3_at), then the steps as below
+    cot = 1.0 / t if t > 0 else np.inf
+    u, uc, xg = _slope_x_quantile(u0)
+    s = t / (1.0 + t)
+    if use_table and _in_start_table(uc, xg, s):
+        lo = -8.0
+        hi = min(cot, 8.0)
+        x = _start_lookup_at(s, xg)
+        if not (x > lo and x < hi):
+            x = 0.5 * (lo + max(hi, lo))
+        zc = min(cot, 30.0)
+        r_z, r_x, r_y = erfcx3_at(zc, abs(x), y, coef, k)
+        z = 2.0 if cot >= 6.0 else _slope_cdf_er(zc, np.exp(-zc * zc), r_z, t)
+        target = u * z
+        tol = 1e-14 * z
+        x, lo, hi, done = _slope_x_step_er(x, np.exp(-x * x), r_x, lo, hi, t, target, tol)
+        x_on = not done
+        step = (np.log(r_y) - y * y - log_q) * _HALF_SQRT_PI * r_y
+        yn = max(y + step, 0.0)
+        y = yn
+        y_on = abs(step) > 1e-9 * (1.0 + yn)
+        first = 1
+    else:
+        x, lo, hi, target, tol = _slope_x_start_with(t, u0, coef, k, use_table)
+    for it in range(first, 100):
+        if not (x_on or y_on):
+            break
         if x_on:
             x, lo, hi, done = _slope_x_step(x, lo, hi, t, target, tol, coef, k)
             x_on = not done
@@ -529,8 +616,6 @@ def _beckmann_vndf_with(o0, o1, o2, u0, u1, m, coef, k, use_table):
             yn = max(y + step, 0.0)
             y = yn
             y_on = it < 11 and abs(step) > 1e-9 * (1.0 + yn)
-        if not (x_on or y_on):
-            break
     sx = x
     sy = -y if lower else y
     hx = m * (cos_p * sx - sin_p * sy)

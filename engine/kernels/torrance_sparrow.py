@@ -27,8 +27,8 @@ from . import jit, jit_inner
 from .error_function import ERFCX_COEF, ERFCX_K
 from .fresnel import abcs_at
 from .geometry import local_frame_at, to_local_at, unit_cross_at
-from .microfacet import (beckmann_d_at, beckmann_g1_at, beckmann_lambda_at, beckmann_vndf_at, chi_plus_at, ggx_d_at,
-                         ggx_lambda_at, ggx_vndf_at, smith_a_at)
+from .microfacet import (beckmann_d_at, beckmann_g1_pair_at, beckmann_lambda_at, beckmann_vndf_at, chi_plus_at,
+                         ggx_d_at, ggx_lambda_at, ggx_vndf_at, smith_a_at)
 
 #: The shadowing names of engine.materials.microfacet.SHADOWING, by kernel code.
 SHADOWING_CODES = {"ts": 0, "smith": 1, "smith_rational": 2, "none": 3, "smith_correlated": 4}
@@ -89,9 +89,7 @@ def shadowing_at(kind, dist, i0, i1, i2, o0, o1, o2, h0, h1, h2, m, coef, k):
     if dist == 1:           # g_smith with GGX's G1 = χ⁺/(1 + Λ)
         return (chi_plus_at(i0, i1, i2, h0, h1, h2) / (1.0 + ggx_lambda_at(i0, i1, i2, m))
                 * (chi_plus_at(o0, o1, o2, h0, h1, h2) / (1.0 + ggx_lambda_at(o0, o1, o2, m))))
-    rational = kind == 2
-    return (beckmann_g1_at(i0, i1, i2, h0, h1, h2, m, rational, coef, k)
-            * beckmann_g1_at(o0, o1, o2, h0, h1, h2, m, rational, coef, k))
+    return beckmann_g1_pair_at(i0, i1, i2, o0, o1, o2, h0, h1, h2, m, kind == 2, coef, k)
 
 
 @jit_inner

@@ -459,6 +459,29 @@ def keep_columns_numba(a, idx):
 keep_columns = twin(_keep_columns_loop and keep_columns_numba, keep_columns_numpy)
 
 
+def put_columns_numpy(out, idx, a):
+    """out[..., idx] = a: the columns ``idx`` (distinct valid int64 indices of the last axis) of a C-contiguous
+    per-path array written from ``a`` (broadcast to out's shape with idx.shape[0] columns, cast to out's dtype)."""
+    out[..., idx] = a
+
+
+@jit_inner
+def _put_columns_loop(out, idx, a):
+    for r in range(out.shape[0]):
+        for j in range(idx.shape[0]):
+            out[r, idx[j]] = a[r, j]
+
+
+def put_columns_numba(out, idx, a):
+    rows = math.prod(out.shape[:-1])
+    a = np.ascontiguousarray(np.broadcast_to(a, out.shape[:-1] + (idx.shape[0],)), dtype=out.dtype)
+    _put_columns_loop(out.reshape(rows, out.shape[-1]), np.ascontiguousarray(idx, dtype=np.int64),
+                      a.reshape(rows, idx.shape[0]))
+
+
+put_columns = twin(_put_columns_loop and put_columns_numba, put_columns_numpy)
+
+
 # ----------------------------------------------------------------------------- roulette, survivors, next origins
 
 def next_segments_numpy(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path, keys, is_delta, pdf, p, n_g,

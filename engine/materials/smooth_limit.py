@@ -88,6 +88,11 @@ class MirrorWithDiffuse(BSDF):
         return LobeColors.of(sp, diffuse=self._diffuse(sp) if self.has_diffuse else 0.0, glossy=glossy)
 
     def _p_mirror(self, sp, mirror):
+        """The mirror's probability P (N,) with ``mirror`` = self._mirror(sp)[1]; once per batch (MIS's pdf and the
+        sample read it at the same points)."""
+        return sp.memo(self, "p_mirror", lambda: self._p_mirror_now(sp, mirror))
+
+    def _p_mirror_now(self, sp, mirror):
         spec = sp.number(self.s) * mirror.A.mean(axis=0)
         diff = self._diffuse(sp).mean(axis=0) if self.has_diffuse else np.zeros(sp.n)
         total = spec + diff

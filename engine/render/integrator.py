@@ -43,7 +43,7 @@ from ..kernels.light_sampling import lamp_hits
 from ..kernels.material_groups import material_groups
 from ..kernels.shadow_rays import shadow_rays
 from ..kernels.stokes_rotation import unpolarised_response_in_frame
-from ..kernels.transport import (add_light, add_to_paths, identity_throughput, next_segments,
+from ..kernels.transport import (add_light, add_to_paths, identity_throughput, keep_columns, next_segments, put_columns,
                                  spectral_stokes_rgb_samples, stokes_rgb_samples, throughput_times_stokes, update_abcs,
                                  update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES
@@ -101,10 +101,14 @@ def unpolarised_response(m: MuellerValue, P: int) -> np.ndarray:
 
 
 def gather(a: np.ndarray, sel: slice | np.ndarray) -> np.ndarray:
-    """a[..., sel] for integer indices (np.take: ~2× faster than fancy indexing); ``a`` itself for
+    """a[..., sel] for ascending int64 indices ``sel`` (a material group's paths; kernels.transport.keep_columns for
+    a C-contiguous ``a``, 1.6× np.take's speed, else np.take: ~2× faster than fancy indexing); ``a`` itself for
     slice(None) (the same object, so per-object memos such as a LambertSet's albedo still match)."""
     if isinstance(sel, slice):
         return a if sel == slice(None) else a[..., sel]
+    if (a.ndim and a.flags.c_contiguous and sel.dtype == np.int64 and sel.shape[0]
+            and 0 <= sel[0] and sel[-1] < a.shape[-1]):
+        return keep_columns(a, sel)
     return np.take(a, sel, axis=-1)
 
 
@@ -870,8 +874,8 @@ class PathTracer:
             medium = (gather(state.media, sel), None if state.tau is None else gather(state.tau, sel),
                       gather(surf.prim, sel), gather(surf.n_g, sel), gather(surf.wo, sel), gather(surf.p, sel),
                       gather(state.sampler.keys, sel), state.bounce)
-        contrib = self._next_event(sp, state.lk.take(sel), bsdf, state.T_store, rows, x_T, u_light[:, sel], acc.stats,
-                                   t_cols, medium,
+        contrib = self._next_event(sp, state.lk.take(sel), bsdf, state.T_store, rows, x_T, gather(u_light, sel),
+                                   acc.stats, t_cols, medium,
                                    lobes=None if acc.lobes is None else (acc.lobes, gather(state.path, sel)))
         add_to_paths(acc.radiance, gather(state.path, sel), contrib)
         if acc.path_cost is not None:
@@ -881,7 +885,7 @@ class PathTracer:
     def _sample_bsdf(bsdf: BSDF, sp: ShadingPoint, u_bsdf: np.ndarray, sel: slice | np.ndarray) -> BSDFSample:
         """BSDF sample of the paths ``sel`` (``u_bsdf`` (3, n) of all paths), its weight in Cycles'
         convention where the material asks for it (BSDF.radiance_scaling)."""
-        bs = bsdf.sample(sp, u_bsdf[0, sel], u_bsdf[1:, sel])
+        bs = bsdf.sample(sp, gather(u_bsdf[0], sel), gather(u_bsdf[1:], sel))
         if not bsdf.radiance_scaling and bs.eta_sq is not None:     # Cycles' convention (BSDF.radiance_scaling)
             bs = BSDFSample(bs.wi, bs.weight.scaled(bs.eta_sq[None, :]), bs.pdf, bs.is_delta, bs.valid, None)
         return bs
@@ -896,13 +900,15 @@ class PathTracer:
             if bs.eta_sq is not None:
                 nxt.eta_step[:] = bs.eta_sq
             return
-        nxt.d[:, sel] = bs.wi
-        nxt.x_T[:, sel] = bs.weight.x_in
-        nxt.valid[sel] = bs.valid
-        nxt.is_delta[sel] = bs.is_delta
-        nxt.pdf[sel] = bs.pdf
+        if isinstance(sel, slice):
+            sel = np.arange(nxt.pdf.shape[0])[sel]
+        put_columns(nxt.d, sel, bs.wi)
+        put_columns(nxt.x_T, sel, bs.weight.x_in)
+        put_columns(nxt.valid, sel, bs.valid)
+        put_columns(nxt.is_delta, sel, bs.is_delta)
+        put_columns(nxt.pdf, sel, bs.pdf)
         if bs.eta_sq is not None:
-            nxt.eta_step[sel] = bs.eta_sq
+            put_columns(nxt.eta_step, sel, bs.eta_sq)
 
     def _back_faces(self, mat: np.ndarray, n_g: np.ndarray, wo: np.ndarray) -> np.ndarray | None:
         """(n,) True where a path sees the back of a two-sided material (n_g·wo < 0), or None for none."""

@@ -108,16 +108,18 @@ def test_compiled_twins():
 
 @needs_numba
 def test_vndf_kernel_equals_the_slopes():
-    """beckmann_vndf_at (the x̃ and ỹ iterations interleaved) gives the normal of the separate twins' slopes."""
+    """beckmann_vndf_at (the x̃ and ỹ iterations interleaved, their first steps' erfcx fused) gives the normal of
+    the separate twins' slopes, bit for bit, also at the ends of u and of the start table."""
     from engine.kernels.error_function import ERFCX_COEF, ERFCX_K
     rng = np.random.default_rng(3)
-    n = 3000
+    n = 3000 + len(_U_HARD) ** 2
     c = rng.random(n)
     c[:4] = [1.0, 1e-12, 0.0, 1e-300]
     s = np.sqrt(1 - c * c)
     phi = 2 * np.pi * rng.random(n)
     wo = np.stack((s * np.cos(phi), s * np.sin(phi), c))
     u = rng.random((2, n))
+    u[:, 3000:] = [a.ravel() for a in np.meshgrid(_U_HARD, _U_HARD, indexing="ij")]
     m = 10 ** rng.uniform(-4, 1, n)
     coef = np.ascontiguousarray(ERFCX_COEF)
     got = np.array([mf.beckmann_vndf_at(*wo[:, i], u[0, i], u[1, i], m[i], coef, float(ERFCX_K)) for i in range(n)]).T
@@ -128,6 +130,42 @@ def test_vndf_kernel_equals_the_slopes():
     hx, hy = m * (cp * sx - sp * sy), m * (sp * sx + cp * sy)
     r = np.sqrt(hx * hx + hy * hy + 1)
     assert np.array_equal(got, np.stack((-hx / r, -hy / r, 1 / r)))
+
+
+@needs_numba
+def test_erfcx3_equals_erfcx():
+    """erfcx3_at (three series summed in one loop) gives erfcx_nonneg_scalar's bits for each of its arguments."""
+    from engine.kernels.error_function import ERFCX_COEF, ERFCX_K, erfcx_nonneg_scalar
+    coef, k = np.ascontiguousarray(ERFCX_COEF), float(ERFCX_K)
+    x = np.concatenate([[0.0, 1e-300, 1e-8, 2.9999999999999996, 3.0, 26.0, 30.0, 1e150, 1e300, np.inf, np.nan],
+                        10 ** np.random.default_rng(5).uniform(-6, 3, 3000)])
+    one = np.array([erfcx_nonneg_scalar(v, coef, k) for v in x])
+    three = np.array([mf.erfcx3_at(a, b, c, coef, k) for a, b, c in zip(x, np.roll(x, 1), np.roll(x, 2))])
+    for j in range(3):
+        assert np.array_equal(three[:, j], np.roll(one, j), equal_nan=True)
+
+
+@needs_numba
+@pytest.mark.parametrize("rational", [False, True])
+def test_g1_pair_equals_the_product(rational):
+    """beckmann_g1_pair_at (the two Λ's erfcx fused) gives beckmann_g1_at(ω_i)·beckmann_g1_at(ω_o)'s bits: normal
+    incidence (a = ∞), a > 6, grazing and back-facing directions, χ⁺ = 0, m from 1e-4 to 10."""
+    from engine.kernels.error_function import ERFCX_COEF, ERFCX_K
+    coef, k = np.ascontiguousarray(ERFCX_COEF), float(ERFCX_K)
+    rng = np.random.default_rng(7)
+    n = 4000
+    w = rng.normal(size=(3, 3, n))
+    hard = np.array([[0, 0, 1], [1e-9, 0, 1], [1, 0, 1e-12], [1, 0, 0], [0, 1, -1], [0.3, 0.1, 1]], float).T
+    w[0, :, :6] = hard          # ω_i
+    w[1, :, 6:12] = hard        # ω_o
+    w /= np.linalg.norm(w, axis=1, keepdims=True)
+    wi, wo, h = w
+    m = 10 ** rng.uniform(-4, 1, n)
+    for j in range(n):
+        a, b, c = wi[:, j], wo[:, j], h[:, j]
+        want = mf.beckmann_g1_at(*a, *c, m[j], rational, coef, k) * mf.beckmann_g1_at(*b, *c, m[j], rational, coef, k)
+        got = mf.beckmann_g1_pair_at(*a, *b, *c, m[j], rational, coef, k)
+        assert got == want or (np.isnan(got) and np.isnan(want)), (j, got, want)
 
 
 @pytest.mark.parametrize("t", [0.0, 0.2, 1.0, 4.0, 1e3])

@@ -178,6 +178,32 @@ def test_keep_columns_bitwise_for_every_field_shape_and_dtype():
             assert transport.keep_columns_numpy(a, idx).tobytes() == want.tobytes()
 
 
+@needs_numba
+def test_put_columns_bitwise_for_every_field_shape_and_dtype():
+    """The compiled scatter of a material group's sample into the bounce's columns writes exactly NumPy's
+    out[..., idx] = a (NaN payloads, signed zeros, bools; a broadcast or non-contiguous source; no, some or every
+    column, in any order) and leaves the other columns alone."""
+    from engine.kernels import transport
+    rng = np.random.default_rng(16)
+    n = 1000
+    outs = [rng.normal(size=(3, n)), rng.normal(size=n), rng.random(n) < 0.5, rng.normal(size=(2, 4, n))]
+    for idx in (np.empty(0, np.int64), rng.permutation(n)[:600], np.arange(n)):
+        m = idx.shape[0]
+        for out in outs:
+            sources = [rng.normal(size=out.shape[:-1] + (m,)), np.array([np.nan, -0.0, np.inf] * m)[:m],
+                       rng.random(m) < 0.5, np.asfortranarray(rng.normal(size=out.shape[:-1] + (m,)))]
+            for a in sources + [np.float64(2.5)]:
+                if np.ndim(a) == 1 and out.ndim > 1:
+                    a = np.broadcast_to(a, out.shape[:-1] + (m,))
+                want, got = out.copy(), out.copy()
+                want[..., idx] = a
+                transport.put_columns_numba(got, idx, a)
+                assert got.dtype == want.dtype and got.tobytes() == want.tobytes()
+                numpy_twin = out.copy()
+                transport.put_columns_numpy(numpy_twin, idx, a)
+                assert numpy_twin.tobytes() == want.tobytes()
+
+
 def test_path_state_compress_keeps_the_masked_paths_in_every_field():
     from engine.render.path_state import ARRAY_FIELDS, PathState
     from engine.render.sampler import PathSampler
