@@ -238,7 +238,7 @@ def test_the_variance_ratio_is_one_for_independent_halves_and_local():
 
 # -------------------------------------------------------------------------------------- determinism
 
-@pytest.fixture(scope="module", params=["stratified", "sobol", "padded"])
+@pytest.fixture(scope="module", params=["stratified", "sobol", "padded", "cycles"])
 def lamp_reference(request):
     scene = lamp_scene(40.0, 1.0, 16, 8)
     scene.settings = dataclasses.replace(scene.settings, sampler=request.param)
@@ -313,7 +313,7 @@ def test_cli_writes_the_sampler_and_resume_refuses_another(tmp_path, capsys):
     np.testing.assert_allclose(resumed_stokes, read_stokes_exr(str(whole))[0], rtol=1e-5, atol=1e-7)
 
 
-@pytest.mark.parametrize("sampler", ["stratified", "sobol", "padded"])
+@pytest.mark.parametrize("sampler", ["stratified", "sobol", "padded", "cycles"])
 def test_a_resumed_stratified_exr_keeps_the_stratified_standard_error(tmp_path, capsys, sampler):
     """--stderr of a stratified render writes the even samples' means (S*.Y.even) and names the
     estimate (polar.stderr); resuming from that file gives the uninterrupted render's error."""
@@ -332,7 +332,7 @@ def test_a_resumed_stratified_exr_keeps_the_stratified_standard_error(tmp_path, 
         np.testing.assert_allclose(b[f"S{i}.Y.stderr"], a[f"S{i}.Y.stderr"], rtol=1e-3, atol=1e-7)
 
 
-@pytest.mark.parametrize("sampler", ["stratified", "sobol", "padded"])
+@pytest.mark.parametrize("sampler", ["stratified", "sobol", "padded", "cycles"])
 def test_stratified_adaptive_sampling_is_deterministic_and_reports_the_stratified_error(sampler):
     """Adaptive sampling with stratified numbers: its even/odd half-buffers are the film's half sums
     (so the reported standard error is the stratified one), and the counts and image do not depend
