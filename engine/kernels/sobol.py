@@ -82,8 +82,8 @@ SOBOL_V = sobol_direction_numbers()
 
 
 def _sobol_byte_tables(dims: int) -> np.ndarray:
-    """(dims, 4, 256) uint64: byte b of the index → the XOR of Sobol' dimension d's direction numbers (SOBOL_V)
-    of that byte's set bits: sobol_d(i) is the XOR of the four bytes' entries."""
+    """(dims, 4, 256) uint64: byte b of the index → the bit-reversed XOR of Sobol' dimension d's direction numbers
+    (SOBOL_V) of that byte's set bits: reverse(sobol_d(i)) is the XOR of the four bytes' entries."""
     table = np.zeros((dims, 4, 256), np.uint64)
     for d in range(dims):
         for b in range(4):
@@ -92,16 +92,16 @@ def _sobol_byte_tables(dims: int) -> np.ndarray:
                 for t in range(8):
                     if (byte >> t) & 1:
                         acc ^= int(SOBOL_V[d, 8 * b + t])
-                table[d, b, byte] = acc
+                table[d, b, byte] = _reverse32_py(acc)
     return table
-
-
-#: Sobol' dimensions 0–3 (the coordinates of a dimension set's point) by bytes of the index
-SOBOL4_BYTES = _sobol_byte_tables(4)
 
 
 def _reverse32_py(x: int) -> int:
     return int(f"{x:032b}"[::-1], 2)
+
+
+#: reverse(sobol_d(i)) for dimensions d 0–3 (the coordinates of a dimension set's point) by bytes of the index
+SOBOL4_REVERSED = _sobol_byte_tables(4)
 
 
 def _reversed_sobol2_tables() -> np.ndarray:
@@ -264,10 +264,10 @@ def owen_sobol_sets_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample: np.nd
     out = np.empty((row_set.shape[0], pixel.shape[0]))
     byte = np.uint64(255)
     for k in range(row_set.shape[0]):
-        t, jk = SOBOL4_BYTES[row_coord[k]], j[row_set[k]]
-        x = t[0][jk & byte] ^ t[1][(jk >> _S8) & byte] ^ t[2][(jk >> _S16) & byte] ^ t[3][jk >> _S24]
+        t, jk = SOBOL4_REVERSED[row_coord[k]], j[row_set[k]]
+        rx = t[0][jk & byte] ^ t[1][(jk >> _S8) & byte] ^ t[2][(jk >> _S16) & byte] ^ t[3][jk >> _S24]
         hc = mix64(h[row_set[k]] + np.uint64(((int(row_coord[k]) + 1) * int(_COORD)) & 0xFFFFFFFFFFFFFFFF))
-        xs = reverse32(owen_permute(reverse32(x), hc & _M32))
+        xs = reverse32(owen_permute(rx, hc & _M32))
         out[k] = ((xs << _S16) | ((hc >> _S32) & _LOW16)).astype(np.float64) * _TO_UNIT
     return out
 
@@ -276,23 +276,25 @@ def owen_sobol_sets_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample: np.nd
 def _owen_sobol_sets_loop(seed_key, pixel, sample, sets, row_set, row_coord, table, h, j, out):
     s = seed_key[0]
     byte = np.uint64(255)
-    for n in range(pixel.shape[0]):            # per path: each set's key and shuffled index
+    for n in range(pixel.shape[0]):            # per path: its key and reversed index (in the last rows)
         smp = np.uint64(sample[n])
-        base = _mix64_one((s ^ (np.uint64(pixel[n]) * _GOLDEN) ^ ((smp & _S1) * _PARITY)) + _SET_SALT)
-        ri = _reverse32_one((smp >> _S1) & _M32)
-        for k in range(sets.shape[0]):
-            hk = _mix64_one(base + np.uint64(sets[k] + 1) * _SET)
+        h[-1, n] = _mix64_one((s ^ (np.uint64(pixel[n]) * _GOLDEN) ^ ((smp & _S1) * _PARITY)) + _SET_SALT)
+        j[-1, n] = _reverse32_one((smp >> _S1) & _M32)
+    for k in range(sets.shape[0]):             # per set, over the paths: its key and shuffled index
+        key = np.uint64(sets[k] + 1) * _SET
+        for n in range(pixel.shape[0]):
+            hk = _mix64_one(h[-1, n] + key)
             h[k, n] = hk
-            j[k, n] = _reverse32_one(_owen_permute_one(ri, hk & _M32))
+            j[k, n] = _reverse32_one(_owen_permute_one(j[-1, n], hk & _M32))
     for k in range(row_set.shape[0]):          # per number, over the paths
         c, q = row_coord[k], row_set[k]
         key = np.uint64(c + 1) * _COORD
         for n in range(pixel.shape[0]):
             jk = j[q, n]
-            x = (table[c, 0, jk & byte] ^ table[c, 1, (jk >> _S8) & byte] ^ table[c, 2, (jk >> _S16) & byte]
-                 ^ table[c, 3, jk >> _S24])
+            rx = (table[c, 0, jk & byte] ^ table[c, 1, (jk >> _S8) & byte] ^ table[c, 2, (jk >> _S16) & byte]
+                  ^ table[c, 3, jk >> _S24])
             hc = _mix64_one(h[q, n] + key)
-            xs = _reverse32_one(_owen_permute_one(_reverse32_one(x), hc & _M32))
+            xs = _reverse32_one(_owen_permute_one(rx, hc & _M32))
             out[k, n] = np.float64((xs << _S16) | ((hc >> _S32) & _LOW16)) * _TO_UNIT
 
 
@@ -303,7 +305,8 @@ def owen_sobol_sets_numba(seed_key: np.ndarray, pixel: np.ndarray, sample: np.nd
     _owen_sobol_sets_loop(np.asarray(seed_key, np.uint64), np.ascontiguousarray(pixel, np.int64),
                           np.ascontiguousarray(sample, np.int64), np.ascontiguousarray(sets, np.int64),
                           np.ascontiguousarray(row_set, np.int64), np.ascontiguousarray(row_coord, np.int64),
-                          SOBOL4_BYTES, np.empty((n_sets, n), np.uint64), np.empty((n_sets, n), np.uint64), out)
+                          SOBOL4_REVERSED, np.empty((n_sets + 1, n), np.uint64), np.empty((n_sets + 1, n), np.uint64),
+                          out)
     return out
 
 
