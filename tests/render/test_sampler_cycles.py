@@ -3,11 +3,11 @@ Owen-scrambled Sobol' set (engine.render.sampler.cycles_pairs, sets CYCLES_*; en
 the light's 4-D set (point, choice, light number 3), the BSDF's 3-D one (direction, lobe), roulette's 1-D one, the
 camera's 2-D ones, each index shuffled per (seed, pixel, parity, set), in the padded layout of pairs.
 
-Tested here: compiled = NumPy twin bit for bit; the numbers are functions of (seed, pixel, sample, pair) alone;
-a pixel's first 2^m even (odd) samples of each set's first two coordinates are a (0, m, 2)-net and the light's and
-BSDF's 3-D points (1, m, 3)-nets (the choice stratified jointly with the point); every coordinate uniform over
-pixels; the even and odd halves independent; renders keep the independent sampler's mean with less noise.  The
-determinism of whole renders (threads, batches, resumption, adaptive rounds) is in test_stratified.py.
+Tested here (compiled = NumPy twin bit for bit: test_sampler_sobol.py): the numbers are functions of (seed, pixel,
+sample, pair) alone; a pixel's first 2^m even (odd) samples of each set's first two coordinates are a (0, m, 2)-net
+and the light's and BSDF's 3-D points (1, m, 3)-nets (the choice stratified jointly with the point); every coordinate
+uniform over pixels; the even and odd halves independent; renders keep the independent sampler's mean with less
+noise.  The determinism of whole renders (threads, batches, resumption, adaptive rounds) is in test_stratified.py.
 """
 
 import itertools
@@ -42,25 +42,6 @@ def cells(points, ks):
     for p, k in zip(points, ks):
         idx = idx * 2 ** k + np.floor(p * 2 ** k).astype(np.int64)
     return idx
-
-
-@pytest.mark.parametrize("n", [0, 1, 2000])
-def test_the_compiled_numbers_are_the_numpy_twins_bit_for_bit(n):
-    from engine import kernels
-    from engine.kernels import sobol
-    from engine.render.sampler import _seed_key
-    if not kernels.COMPILED:
-        pytest.skip("Numba kernels disabled")
-    rng = np.random.default_rng(n + 11)
-    pixel = rng.integers(0, 1 << 22, n)
-    sample = np.where(rng.random(n) < 0.5, rng.integers(0, 64, n), rng.integers(0, 1 << 40, n))
-    sets = np.array([0, 2, 3, 4, 5, 1 << 20], np.int64)
-    row_set = np.array([0, 0, 2, 2, 2, 2, 3, 5, 1, 4], np.int64)
-    row_coord = np.array([0, 1, 0, 1, 2, 3, 2, 0, 1, 0], np.int64)
-    for seed in (0, 5, 2 ** 63 - 1):
-        a = sobol.owen_sobol_sets_numpy(_seed_key(seed), pixel, sample, sets, row_set, row_coord)
-        b = sobol.owen_sobol_sets_numba(_seed_key(seed), pixel, sample, sets, row_set, row_coord)
-        assert np.array_equal(a, b)
 
 
 def test_numbers_depend_only_on_seed_pixel_sample_and_pair():
