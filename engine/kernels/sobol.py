@@ -254,12 +254,13 @@ def _set_keys(seed_key, pixel, sample, sets):
 
 
 def owen_sobol_sets_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray, sets: np.ndarray,
-                          row_set: np.ndarray, row_coord: np.ndarray) -> np.ndarray:
+                          row_set: np.ndarray, row_coord: np.ndarray, shift: np.ndarray) -> np.ndarray:
     """(r, N) numbers in [0, 1): row k is coordinate ``row_coord[k]`` (0–3) of the point of dimension set
     ``sets[row_set[k]]`` (``sets`` int64 (S,), distinct) of sample ``sample`` (N,) of pixel ``pixel`` (N,) for the
     render's mixed seed ``seed_key`` (uint64 (1,)): Sobol' dimension ``row_coord[k]`` of the index sample // 2
-    shuffled per (seed, pixel, parity, set), Owen-scrambled per (…, coordinate), the 16 bits below 2^-32 a random
-    offset.  A pixel's first 2^m even (odd) samples of coordinates 0 and 1 of a set are a (0, m, 2)-net."""
+    shuffled per (seed, pixel, parity, set), Owen-scrambled per (…, coordinate) (``shift`` (bool (S,)) True: that
+    set's coordinates digitally shifted instead, a random XOR), the 16 bits below 2^-32 a random offset.  A pixel's
+    first 2^m even (odd) samples of coordinates 0 and 1 of a set are a (0, m, 2)-net."""
     h, j = _set_keys(seed_key, pixel, sample, sets)
     out = np.empty((row_set.shape[0], pixel.shape[0]))
     byte = np.uint64(255)
@@ -267,13 +268,13 @@ def owen_sobol_sets_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample: np.nd
         t, jk = SOBOL4_REVERSED[row_coord[k]], j[row_set[k]]
         rx = t[0][jk & byte] ^ t[1][(jk >> _S8) & byte] ^ t[2][(jk >> _S16) & byte] ^ t[3][jk >> _S24]
         hc = mix64(h[row_set[k]] + np.uint64(((int(row_coord[k]) + 1) * int(_COORD)) & 0xFFFFFFFFFFFFFFFF))
-        xs = reverse32(owen_permute(rx, hc & _M32))
+        xs = (reverse32(rx) ^ (hc & _M32)) if shift[row_set[k]] else reverse32(owen_permute(rx, hc & _M32))
         out[k] = ((xs << _S16) | ((hc >> _S32) & _LOW16)).astype(np.float64) * _TO_UNIT
     return out
 
 
 @jit
-def _owen_sobol_sets_loop(seed_key, pixel, sample, sets, row_set, row_coord, table, h, j, out):
+def _owen_sobol_sets_loop(seed_key, pixel, sample, sets, row_set, row_coord, shift, table, h, j, out):
     s = seed_key[0]
     byte = np.uint64(255)
     for n in range(pixel.shape[0]):            # per path: its key and reversed index (in the last rows)
@@ -288,25 +289,28 @@ def _owen_sobol_sets_loop(seed_key, pixel, sample, sets, row_set, row_coord, tab
             j[k, n] = _reverse32_one(_owen_permute_one(j[-1, n], hk & _M32))
     for k in range(row_set.shape[0]):          # per number, over the paths
         c, q = row_coord[k], row_set[k]
-        key = np.uint64(c + 1) * _COORD
+        key, shifted = np.uint64(c + 1) * _COORD, shift[q]
         for n in range(pixel.shape[0]):
             jk = j[q, n]
             rx = (table[c, 0, jk & byte] ^ table[c, 1, (jk >> _S8) & byte] ^ table[c, 2, (jk >> _S16) & byte]
                   ^ table[c, 3, jk >> _S24])
             hc = _mix64_one(h[q, n] + key)
-            xs = _reverse32_one(_owen_permute_one(rx, hc & _M32))
+            if shifted:
+                xs = _reverse32_one(rx) ^ (hc & _M32)
+            else:
+                xs = _reverse32_one(_owen_permute_one(rx, hc & _M32))
             out[k, n] = np.float64((xs << _S16) | ((hc >> _S32) & _LOW16)) * _TO_UNIT
 
 
 def owen_sobol_sets_numba(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray, sets: np.ndarray,
-                          row_set: np.ndarray, row_coord: np.ndarray) -> np.ndarray:
+                          row_set: np.ndarray, row_coord: np.ndarray, shift: np.ndarray) -> np.ndarray:
     n, n_sets = pixel.shape[0], sets.shape[0]
     out = np.empty((row_set.shape[0], n))
     _owen_sobol_sets_loop(np.asarray(seed_key, np.uint64), np.ascontiguousarray(pixel, np.int64),
                           np.ascontiguousarray(sample, np.int64), np.ascontiguousarray(sets, np.int64),
                           np.ascontiguousarray(row_set, np.int64), np.ascontiguousarray(row_coord, np.int64),
-                          SOBOL4_REVERSED, np.empty((n_sets + 1, n), np.uint64), np.empty((n_sets + 1, n), np.uint64),
-                          out)
+                          np.ascontiguousarray(shift, np.bool_), SOBOL4_REVERSED, np.empty((n_sets + 1, n), np.uint64),
+                          np.empty((n_sets + 1, n), np.uint64), out)
     return out
 
 

@@ -211,7 +211,7 @@ def cycles_set(module, seed_key, pixel, sample, dim_set: int, dims: int, xor: bo
         t = tables[c]
         x = t[0][j & U(255)] ^ t[1][(j >> _S8) & U(255)] ^ t[2][(j >> _S16) & U(255)] ^ t[3][j >> _S24]
         hc = mix64(h + U(((c + 1) * int(_CYCLES_COORD)) & 0xFFFFFFFFFFFFFFFF))
-        if xor and dim_set != CYCLES_FILTER:
+        if (xor and dim_set != CYCLES_FILTER) or dim_set == CYCLES_WAVELENGTH:      # the engine's: wavelengths shifted
             xs = x ^ (hc & _M32)
         else:
             xs = reverse32(owen_permute(reverse32(x), hc & _M32))
