@@ -853,7 +853,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "(sampled λ, one Mueller product per path) or off")
     r.add_argument("--simplify", choices=("auto", "off"),
                    help="auto (default): skip layered coats that are index-matched and clear; off: keep all")
-    r.add_argument("--sampler", choices=("sobol", "padded", "stratified", "independent"),
+    r.add_argument("--sampler", choices=("sobol", "padded", "cycles", "stratified", "independent"),
                    help="sobol (the default, as in Blender: stratified's numbers at the camera and first vertex, "
                         "per-pixel shuffled, Owen-scrambled Sobol' pairs at every deeper vertex: less noise, same "
                         "expectation; --stderr then comes from the even/odd halves), padded (every number from its "

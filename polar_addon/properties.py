@@ -45,8 +45,12 @@ SAMPLER_ITEMS = [
     ("PADDED", "Padded Sobol", "Every number of every bounce, the camera's too, from its own per-pixel shuffled "
      "Sobol' (0, 2)-sequence pair (as Mitsuba's ldsampler and pbrt's PaddedSobol), the pixel jitter Owen-"
      "scrambled, the others digitally shifted: same expectation, the least noise (rough metals, edges)", 3),
+    ("CYCLES", "Cycles Sobol", "Cycles' Sobol-Burley pattern: each role's numbers (pixel jitter, lens, the light's "
+     "choice and point, the BSDF's lobe and direction, roulette) one point of a per-pixel shuffled, Owen-scrambled "
+     "Sobol' set, so a choice is stratified with its point: same expectation, less noise", 4),
 ]
-SAMPLER_TO_ENGINE = {"INDEPENDENT": "independent", "STRATIFIED": "stratified", "SOBOL": "sobol", "PADDED": "padded"}
+SAMPLER_TO_ENGINE = {"INDEPENDENT": "independent", "STRATIFIED": "stratified", "SOBOL": "sobol", "PADDED": "padded",
+                     "CYCLES": "cycles"}
 
 PASS_NAMES = ("S0", "S1", "S2", "S3", "DoP", "DoLP", "AoLP", "DoCP", "Polariser",
               "VisDoP", "VisS1", "VisS2", "VisS3", "VisAoLP", "Noise", "Polarisation Mosaic",

@@ -1,5 +1,9 @@
 """Owen-scrambled, shuffled Sobol' pairs: the "sobol" sampler's numbers (engine.render.sampler.sobol_pairs).
 
+``owen_sobol_sets`` draws the "cycles" sampler's numbers instead: Cycles' pattern (sample/sobol_burley.h),
+each number a coordinate of one point of a 1- to 4-D Sobol' set (dimensions 0–3 of the shuffled index) per
+dimension set (a role at a vertex), each coordinate Owen-scrambled with its own seed (below).
+
 Every pair of dimensions d of a sample is a point of the 2-D Sobol' (0, 2)-sequence (dimensions 1–2: the
 van der Corput radical inverse and the first primitive polynomial's dimension) as in pbrt-v4's
 ``PaddedSobolSampler`` and Burley 2020 ("Practical Hash-based Owen Scrambling", JCGT 9(4)):
@@ -51,8 +55,53 @@ _LOW16 = np.uint64(0xFFFF)
 _TO_UNIT = 1.0 / float(1 << 48)
 
 
+#: Sobol' dimensions 2–12 as (degree s, coefficients a, initial m) of their primitive polynomials
+#: (Joe & Kuo 2008, new-joe-kuo-6.21201); dimension 1 is the bit reversal
+SOBOL_POLYNOMIALS = [(1, 0, [1]), (2, 1, [1, 3]), (3, 1, [1, 3, 1]), (3, 2, [1, 1, 1]), (4, 1, [1, 1, 3, 3]),
+                     (4, 4, [1, 3, 5, 13]), (5, 2, [1, 1, 5, 5, 17]), (5, 4, [1, 1, 5, 5, 5]),
+                     (5, 7, [1, 1, 7, 11, 19]), (5, 11, [1, 1, 5, 1, 1]), (5, 13, [1, 1, 1, 3, 11])]
+
+
+def sobol_direction_numbers() -> np.ndarray:
+    """Direction numbers (12, 32) (uint64 holding 32 bits) of Sobol' dimensions 1–12."""
+    v = np.zeros((len(SOBOL_POLYNOMIALS) + 1, 32), dtype=np.uint64)
+    v[0] = [1 << (31 - k) for k in range(32)]
+    for d, (deg, a, m) in enumerate(SOBOL_POLYNOMIALS, start=1):
+        w = [m[k] << (31 - k) for k in range(deg)]
+        for k in range(deg, 32):
+            x = w[k - deg] ^ (w[k - deg] >> deg)
+            for j in range(1, deg):
+                if (a >> (deg - 1 - j)) & 1:
+                    x ^= w[k - j]
+            w.append(x)
+        v[d] = w
+    return v
+
+
+SOBOL_V = sobol_direction_numbers()
+
+
+def _sobol_byte_tables(dims: int) -> np.ndarray:
+    """(dims, 4, 256) uint64: byte b of the index → the bit-reversed XOR of Sobol' dimension d's direction numbers
+    (SOBOL_V) of that byte's set bits: reverse(sobol_d(i)) is the XOR of the four bytes' entries."""
+    table = np.zeros((dims, 4, 256), np.uint64)
+    for d in range(dims):
+        for b in range(4):
+            for byte in range(256):
+                acc = 0
+                for t in range(8):
+                    if (byte >> t) & 1:
+                        acc ^= int(SOBOL_V[d, 8 * b + t])
+                table[d, b, byte] = _reverse32_py(acc)
+    return table
+
+
 def _reverse32_py(x: int) -> int:
     return int(f"{x:032b}"[::-1], 2)
+
+
+#: reverse(sobol_d(i)) for dimensions d 0–3 (the coordinates of a dimension set's point) by bytes of the index
+SOBOL4_REVERSED = _sobol_byte_tables(4)
 
 
 def _reversed_sobol2_tables() -> np.ndarray:
@@ -182,3 +231,87 @@ def owen_sobol_pairs_numba(seed_key: np.ndarray, pixel: np.ndarray, sample: np.n
 
 
 owen_sobol_pairs = twin(_owen_sobol_loop and owen_sobol_pairs_numba, owen_sobol_pairs_numpy)
+
+
+#: key constants of the dimension sets: their salt, the set index, the coordinate
+_SET_SALT = np.uint64(0x8BB84B93962EACC9)
+_SET = np.uint64(0x4BE98134A5976FD3)
+_COORD = np.uint64(0x3BC0993A5AD19A13)
+
+
+def _set_keys(seed_key, pixel, sample, sets):
+    """(h, j) (S, N) uint64: each dimension set's key and shuffled index (the index sample // 2 under a nested
+    uniform scramble of its bits seeded by the key's low word)."""
+    smp = sample.astype(np.uint64)
+    base = mix64((seed_key[0] ^ (pixel.astype(np.uint64) * _GOLDEN) ^ ((smp & _S1) * _PARITY)) + _SET_SALT)
+    ri = reverse32((smp >> _S1) & _M32)
+    h = np.empty((sets.shape[0], pixel.shape[0]), np.uint64)
+    j = np.empty_like(h)
+    for k in range(sets.shape[0]):
+        h[k] = mix64(base + np.uint64(((int(sets[k]) + 1) * int(_SET)) & 0xFFFFFFFFFFFFFFFF))
+        j[k] = reverse32(owen_permute(ri, h[k] & _M32))
+    return h, j
+
+
+def owen_sobol_sets_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray, sets: np.ndarray,
+                          row_set: np.ndarray, row_coord: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    """(r, N) numbers in [0, 1): row k is coordinate ``row_coord[k]`` (0–3) of the point of dimension set
+    ``sets[row_set[k]]`` (``sets`` int64 (S,), distinct) of sample ``sample`` (N,) of pixel ``pixel`` (N,) for the
+    render's mixed seed ``seed_key`` (uint64 (1,)): Sobol' dimension ``row_coord[k]`` of the index sample // 2
+    shuffled per (seed, pixel, parity, set), Owen-scrambled per (…, coordinate) (``shift`` (bool (S,)) True: that
+    set's coordinates digitally shifted instead, a random XOR), the 16 bits below 2^-32 a random offset.  A pixel's
+    first 2^m even (odd) samples of coordinates 0 and 1 of a set are a (0, m, 2)-net."""
+    h, j = _set_keys(seed_key, pixel, sample, sets)
+    out = np.empty((row_set.shape[0], pixel.shape[0]))
+    byte = np.uint64(255)
+    for k in range(row_set.shape[0]):
+        t, jk = SOBOL4_REVERSED[row_coord[k]], j[row_set[k]]
+        rx = t[0][jk & byte] ^ t[1][(jk >> _S8) & byte] ^ t[2][(jk >> _S16) & byte] ^ t[3][jk >> _S24]
+        hc = mix64(h[row_set[k]] + np.uint64(((int(row_coord[k]) + 1) * int(_COORD)) & 0xFFFFFFFFFFFFFFFF))
+        xs = (reverse32(rx) ^ (hc & _M32)) if shift[row_set[k]] else reverse32(owen_permute(rx, hc & _M32))
+        out[k] = ((xs << _S16) | ((hc >> _S32) & _LOW16)).astype(np.float64) * _TO_UNIT
+    return out
+
+
+@jit
+def _owen_sobol_sets_loop(seed_key, pixel, sample, sets, row_set, row_coord, shift, table, h, j, out):
+    s = seed_key[0]
+    byte = np.uint64(255)
+    for n in range(pixel.shape[0]):            # per path: its key and reversed index (in the last rows)
+        smp = np.uint64(sample[n])
+        h[-1, n] = _mix64_one((s ^ (np.uint64(pixel[n]) * _GOLDEN) ^ ((smp & _S1) * _PARITY)) + _SET_SALT)
+        j[-1, n] = _reverse32_one((smp >> _S1) & _M32)
+    for k in range(sets.shape[0]):             # per set, over the paths: its key and shuffled index
+        key = np.uint64(sets[k] + 1) * _SET
+        for n in range(pixel.shape[0]):
+            hk = _mix64_one(h[-1, n] + key)
+            h[k, n] = hk
+            j[k, n] = _reverse32_one(_owen_permute_one(j[-1, n], hk & _M32))
+    for k in range(row_set.shape[0]):          # per number, over the paths
+        c, q = row_coord[k], row_set[k]
+        key, shifted = np.uint64(c + 1) * _COORD, shift[q]
+        for n in range(pixel.shape[0]):
+            jk = j[q, n]
+            rx = (table[c, 0, jk & byte] ^ table[c, 1, (jk >> _S8) & byte] ^ table[c, 2, (jk >> _S16) & byte]
+                  ^ table[c, 3, jk >> _S24])
+            hc = _mix64_one(h[q, n] + key)
+            if shifted:
+                xs = _reverse32_one(rx) ^ (hc & _M32)
+            else:
+                xs = _reverse32_one(_owen_permute_one(rx, hc & _M32))
+            out[k, n] = np.float64((xs << _S16) | ((hc >> _S32) & _LOW16)) * _TO_UNIT
+
+
+def owen_sobol_sets_numba(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray, sets: np.ndarray,
+                          row_set: np.ndarray, row_coord: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    n, n_sets = pixel.shape[0], sets.shape[0]
+    out = np.empty((row_set.shape[0], n))
+    _owen_sobol_sets_loop(np.asarray(seed_key, np.uint64), np.ascontiguousarray(pixel, np.int64),
+                          np.ascontiguousarray(sample, np.int64), np.ascontiguousarray(sets, np.int64),
+                          np.ascontiguousarray(row_set, np.int64), np.ascontiguousarray(row_coord, np.int64),
+                          np.ascontiguousarray(shift, np.bool_), SOBOL4_REVERSED, np.empty((n_sets + 1, n), np.uint64),
+                          np.empty((n_sets + 1, n), np.uint64), out)
+    return out
+
+
+owen_sobol_sets = twin(_owen_sobol_sets_loop and owen_sobol_sets_numba, owen_sobol_sets_numpy)

@@ -167,7 +167,7 @@ LADDERS = ("quarter", "nets")
 
 
 #: The ladder of each sampler (``RenderSettings.sampler``): whole nets for the low-discrepancy ones.
-SAMPLER_LADDERS = {"sobol": "nets", "padded": "nets", "stratified": "nets", "independent": "quarter"}
+SAMPLER_LADDERS = {"sobol": "nets", "padded": "nets", "cycles": "nets", "stratified": "nets", "independent": "quarter"}
 
 
 def ladder_of(sampler: str) -> str:

@@ -53,9 +53,9 @@ from .media import Media, cross
 from .path_state import PathState
 from .polarised_light import in_frame, light_samples_polarisation, mueller_times_stokes
 from .plan import rendered_materials, spectral_reduction
-from .sampler import (PADDED_WAVELENGTH, PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_LIGHT_POINT, PAIR_WAVELENGTH,
-                      SOBOL_CHOICES, SOBOL_DIRECTION, SOBOL_LIGHT_POINT, SOBOL_ROULETTE, PathSampler, camera_numbers,
-                      pattern_pairs, stratified_pair, vertex_pair)
+from .sampler import (PADDED_LAYOUT, PADDED_WAVELENGTH, PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_LIGHT_POINT,
+                      PAIR_WAVELENGTH, SOBOL_CHOICES, SOBOL_DIRECTION, SOBOL_LIGHT_POINT, SOBOL_ROULETTE, PathSampler,
+                      camera_numbers, pattern_pairs, stratified_pair, vertex_pair)
 from .visibility import ray_visibility
 from ..spectral import RGB_WAVELENGTHS_NM, WavelengthLookup, rgb_channel_tables, rgb_weights, sample_wavelengths
 from ..vec3 import dot
@@ -449,8 +449,8 @@ class PathTracer:
                 # the stratified x sets u within a period (the pixel's samples stratify that period, not
                 # [0, 1) count times over) and y which period (the hero's quarter, also stratified)
                 count = self.n_lambda
-                if self.settings.sampler == "padded":
-                    x, y = pattern_pairs("padded", seed, pixel, sample, [PADDED_WAVELENGTH])
+                if self.settings.sampler in PADDED_LAYOUT:
+                    x, y = pattern_pairs(self.settings.sampler, seed, pixel, sample, [PADDED_WAVELENGTH])
                 else:
                     x, y = stratified_pair(seed, pixel, sample, u[k_camera], u[k_camera], pair=PAIR_WAVELENGTH)
                 u[k_camera] = (x + np.floor(y * count)) / count
@@ -737,9 +737,9 @@ class PathTracer:
         # stateless in the dimension, so skipping leaves every other one as it was.
         nee = (self.lights.sampled and bounce + 2 <= st.max_depth
                and not all(self.shaders[g].flags.is_delta_only for g in groups))
-        if st.sampler == "padded" or (st.sampler == "sobol" and bounce > 0):
-            # deeper vertices (every vertex with "padded"): the padded Owen-scrambled pairs (with "sobol" the
-            # first one as "stratified" draws it)
+        if st.sampler in PADDED_LAYOUT or (st.sampler == "sobol" and bounce > 0):
+            # deeper vertices (every vertex with "padded" and "cycles"): the padded layout's pairs (with "sobol"
+            # the first one as "stratified" draws it)
             return self._sobol_vertex_numbers(state, acc, nee, all(fused), bounce + 1 >= st.rr_depth, bounce)
         u_light = sampler.next(4) if nee else sampler.skip(4)
         direction_dims = None

@@ -24,6 +24,13 @@ With "padded" every number — the camera's (PADDED_*) and every vertex's from t
 ``vertex_pair``) — is a coordinate of such a pair (``padded_pairs``), the pixel jitter Owen-scrambled and every
 other pair XOR-scrambled (a random digital shift: less variance than Owen's on the smooth direction and light
 integrands, measured in docs/benchmarks.md, "Sampling patterns: padded").
+
+With "cycles" the numbers are Cycles' (sample/sobol_burley.h, ``cycles_pairs``): the padded layout's pairs, but
+every role's numbers are coordinates of ONE point of a small Owen-scrambled Sobol' set (CYCLES_*: the jitter, lens
+and wavelengths 2-D; per vertex the light's 4-D set (point, choice, light number 3), the BSDF's 3-D one
+(direction, lobe), roulette's 1-D one) whose index is shuffled per (seed, pixel, parity, set): the light choice
+stratified jointly with the light point, the lobe with the direction (engine.kernels.sobol.owen_sobol_sets).
+Unlike Cycles the even and odd samples are two independently scrambled sequences (adaptive's half-buffers).
 """
 
 from __future__ import annotations
@@ -33,7 +40,7 @@ import functools
 import numpy as np
 
 from ..kernels.hashing import mix64, path_keys_and_uniforms, scrambled_sobol_pair, uniforms
-from ..kernels.sobol import owen_sobol_pairs
+from ..kernels.sobol import SOBOL_V, owen_sobol_pairs, owen_sobol_sets
 
 _MASK64 = (1 << 64) - 1
 
@@ -90,12 +97,6 @@ class PathSampler:
         self.keys = self.keys[keep]
 
 
-#: Sobol' dimensions 2–12 as (degree s, coefficients a, initial m) of their primitive polynomials
-#: (Joe & Kuo 2008, new-joe-kuo-6.21201); dimension 1 is the bit reversal
-_SOBOL_POLYNOMIALS = [(1, 0, [1]), (2, 1, [1, 3]), (3, 1, [1, 3, 1]), (3, 2, [1, 1, 1]), (4, 1, [1, 1, 3, 3]),
-                      (4, 4, [1, 3, 5, 13]), (5, 2, [1, 1, 5, 5, 17]), (5, 4, [1, 1, 5, 5, 5]),
-                      (5, 7, [1, 1, 7, 11, 19]), (5, 11, [1, 1, 5, 1, 1]), (5, 13, [1, 1, 1, 3, 11])]
-
 #: What each pair of Sobol' dimensions (2·pair + 1, 2·pair + 2) stratifies (``stratified_pair``'s pair)
 PAIR_JITTER = 0             # the pixel jitter (x, y)
 PAIR_LIGHT_POINT = 1        # first vertex: the point on the chosen light (next-event estimation)
@@ -105,23 +106,7 @@ PAIR_LENS = 4               # the thin lens's point (depth of field)
 PAIR_WAVELENGTH = 5         # the wavelengths' number: its place within a period 1/count, and which period
 
 
-def _sobol_direction_numbers() -> np.ndarray:
-    """Direction numbers (12, 32) (uint64 holding 32 bits) of Sobol' dimensions 1–12."""
-    v = np.zeros((len(_SOBOL_POLYNOMIALS) + 1, 32), dtype=np.uint64)
-    v[0] = [1 << (31 - k) for k in range(32)]
-    for d, (deg, a, m) in enumerate(_SOBOL_POLYNOMIALS, start=1):
-        w = [m[k] << (31 - k) for k in range(deg)]
-        for k in range(deg, 32):
-            x = w[k - deg] ^ (w[k - deg] >> deg)
-            for j in range(1, deg):
-                if (a >> (deg - 1 - j)) & 1:
-                    x ^= w[k - j]
-            w.append(x)
-        v[d] = w
-    return v
-
-
-_SOBOL_V = _sobol_direction_numbers()
+_SOBOL_V = SOBOL_V
 #: per-pair constants of the scramble hash
 _PAIR_KEYS = tuple(np.array([k], np.uint64) for k in (0xD1B54A32D192ED03, 0x8CB92BA72F3D8DD7, 0xABC98388FB8FAC03,
                                                        0xE7037ED1A0B428DB, 0x94D049BB133111EB, 0xBF58476D1CE4E5B9))
@@ -146,12 +131,12 @@ def camera_numbers(seed: int, sampler: str, pixel: np.ndarray, sample: np.ndarra
     """(PathSampler, u (2 + lens_dimensions + extra, N)): the camera's numbers of sample ``sample`` of pixel
     ``pixel`` with ``sampler`` (RenderSettings.sampler) — the pixel jitter, the thin lens's point
     (``lens_dimensions`` 0 or 2), then ``extra`` hashed dimensions (the wavelengths' number) — with the jitter and
-    lens pairs stratified (``stratified_pair``; "padded": its pairs PADDED_JITTER, PADDED_LENS) for the
-    stratifying samplers.  The one source of camera rays' numbers: the integrator's paths and the data passes
-    (engine.render.data_passes) see the same rays."""
+    lens pairs stratified (``stratified_pair``; "padded": its pairs PADDED_JITTER, PADDED_LENS; "cycles": its sets
+    CYCLES_FILTER, CYCLES_LENS) for the stratifying samplers.  The one source of camera rays' numbers: the
+    integrator's paths and the data passes (engine.render.data_passes) see the same rays."""
     ps, u = PathSampler.start(seed, pixel, sample, 2 + lens_dimensions + extra)
-    if sampler == "padded":
-        pairs = padded_pairs(seed, pixel, sample, [PADDED_JITTER, PADDED_LENS][:1 + lens_dimensions // 2])
+    if sampler in PADDED_LAYOUT:
+        pairs = pattern_pairs(sampler, seed, pixel, sample, [PADDED_JITTER, PADDED_LENS][:1 + lens_dimensions // 2])
         u[:2 + lens_dimensions] = pairs
     elif sampler != "independent":
         u[0], u[1] = stratified_pair(seed, pixel, sample, u[0], u[1], pair=PAIR_JITTER)
@@ -181,12 +166,14 @@ def sobol_pair_index(bounce: int, role: int) -> int:
 #: at PADDED_FIRST + SOBOL_PER_BOUNCE·b + role (roles SOBOL_LIGHT_POINT … SOBOL_ROULETTE)
 PADDED_JITTER, PADDED_LENS, PADDED_WAVELENGTH = 0, 1, 2
 PADDED_FIRST = 3
+#: the samplers drawing every number, the camera's too, in the padded layout of pairs
+PADDED_LAYOUT = ("padded", "cycles")
 
 
 def vertex_pair(sampler: str, bounce: int, role: int) -> int:
     """The pair of dimensions of ``role`` at vertex ``bounce`` for the pair-drawing ``sampler`` ("sobol": bounce
-    ≥ 1, ``sobol_pair_index``; "padded": every bounce ≥ 0)."""
-    if sampler == "padded":
+    ≥ 1, ``sobol_pair_index``; "padded" and "cycles": every bounce ≥ 0)."""
+    if sampler in PADDED_LAYOUT:
         return PADDED_FIRST + SOBOL_PER_BOUNCE * bounce + role
     return sobol_pair_index(bounce, role)
 
@@ -203,8 +190,47 @@ def padded_pairs(seed: int, pixel: np.ndarray, sample: np.ndarray, pairs) -> np.
 
 
 def pattern_pairs(sampler: str, seed: int, pixel: np.ndarray, sample: np.ndarray, pairs) -> np.ndarray:
-    """``sobol_pairs`` or ``padded_pairs`` for ``sampler``."""
-    return (padded_pairs if sampler == "padded" else sobol_pairs)(seed, pixel, sample, pairs)
+    """``sobol_pairs``, ``padded_pairs`` or ``cycles_pairs`` for ``sampler``."""
+    draw = padded_pairs if sampler == "padded" else cycles_pairs if sampler == "cycles" else sobol_pairs
+    return draw(seed, pixel, sample, pairs)
+
+
+#: The "cycles" sampler's dimension sets (Cycles' PRNG_FILTER, PRNG_LENS_TIME, then per vertex b at CYCLES_FIRST +
+#: CYCLES_PER_BOUNCE·b + role: PRNG_LIGHT, PRNG_SURFACE_BSDF, PRNG_TERMINATE); the camera's sets are the padded
+#: pairs' indices
+CYCLES_FILTER, CYCLES_LENS, CYCLES_WAVELENGTH = PADDED_JITTER, PADDED_LENS, PADDED_WAVELENGTH
+CYCLES_FIRST = 3
+CYCLES_LIGHT, CYCLES_BSDF, CYCLES_TERMINATE = 0, 1, 2
+CYCLES_PER_BOUNCE = 3
+#: per padded vertex role (SOBOL_LIGHT_POINT … SOBOL_ROULETTE): the (set role, coordinate) of its two numbers —
+#: the light point = the light set's 0, 1 (Cycles' rand.x, y), the direction the BSDF set's 0, 1, (light choice,
+#: lobe) = the light set's 2 (rand.z) and the BSDF set's 2, (roulette, light number 3) = roulette's 0 and the
+#: light set's 3
+_CYCLES_ROLES = {SOBOL_LIGHT_POINT: ((CYCLES_LIGHT, 0), (CYCLES_LIGHT, 1)),
+                 SOBOL_DIRECTION: ((CYCLES_BSDF, 0), (CYCLES_BSDF, 1)),
+                 SOBOL_CHOICES: ((CYCLES_LIGHT, 2), (CYCLES_BSDF, 2)),
+                 SOBOL_ROULETTE: ((CYCLES_TERMINATE, 0), (CYCLES_LIGHT, 3))}
+
+
+def cycles_pairs(seed: int, pixel: np.ndarray, sample: np.ndarray, pairs) -> np.ndarray:
+    """(2k, N) numbers of the "cycles" sampler for the padded layout's ``pairs`` (as ``padded_pairs``): each
+    number a coordinate of its dimension set's point (CYCLES_*, _CYCLES_ROLES; engine.kernels.sobol.owen_sobol_sets),
+    so a role's numbers are stratified jointly; a function of (seed, pixel, sample, pair) only.  The wavelengths' set
+    (Cycles has none) is digitally shifted as "padded"'s and "stratified"'s: its integrand is smooth and periodic,
+    where the shift's lattice gains 30× over Owen's scramble (tests/render/test_stratified.py)."""
+    rows = []
+    for p in (int(q) for q in np.atleast_1d(pairs)):
+        if p < PADDED_FIRST:
+            rows += [(p, 0), (p, 1)]
+        else:
+            bounce, role = divmod(p - PADDED_FIRST, SOBOL_PER_BOUNCE)
+            first = CYCLES_FIRST + CYCLES_PER_BOUNCE * bounce
+            rows += [(first + r, c) for r, c in _CYCLES_ROLES[role]]
+    if not rows:
+        return np.empty((0, np.shape(pixel)[0]))
+    sets, row_set = np.unique(np.array([r for r, _ in rows], np.int64), return_inverse=True)
+    return owen_sobol_sets(_seed_key(seed), np.asarray(pixel), np.asarray(sample), sets, row_set.astype(np.int64),
+                           np.array([c for _, c in rows], np.int64), sets == CYCLES_WAVELENGTH)
 
 
 def sobol_pairs(seed: int, pixel: np.ndarray, sample: np.ndarray, pairs) -> np.ndarray:

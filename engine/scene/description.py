@@ -437,8 +437,9 @@ class RenderSettings:
     #: from the even/odd halves), "stratified" (the camera's numbers and the first vertex's light and BSDF
     #: numbers one per-pixel XOR-scrambled Sobol' point set, engine.render.sampler.stratified_pair, the
     #: deeper ones hashed; the default before "sobol"), "padded" (every number, the camera's and the first
-    #: vertex's too, from its own shuffled Sobol' pair, engine.render.sampler.padded_pairs) or "independent"
-    #: (every number a hash of (seed, pixel, sample, dimension)).
+    #: vertex's too, from its own shuffled Sobol' pair, engine.render.sampler.padded_pairs), "cycles" (Cycles'
+    #: pattern: each role's numbers one point of a shuffled Owen-scrambled Sobol' set, sampler.cycles_pairs) or
+    #: "independent" (every number a hash of (seed, pixel, sample, dimension)).
     sampler: str = "sobol"
     #: How next-event estimation chooses among many lights (Cycles' Light Tree, scene.cycles.use_light_tree):
     #: "on" — the light tree over lamps and emissive triangles (engine.render.lights.tree: Conty & Kulla 2018 as
@@ -493,7 +494,7 @@ class RenderSettings:
 
 
 #: RenderSettings.sampler's values
-SAMPLERS = ("independent", "stratified", "sobol", "padded")
+SAMPLERS = ("independent", "stratified", "sobol", "padded", "cycles")
 #: RenderSettings.light_tree's values
 LIGHT_TREE_MODES = ("auto", "on", "off")
 

@@ -169,12 +169,96 @@ def owen_joint(module, seed_key, pixel, sample, first_dim):
     return out
 
 
+def _sobol_byte_tables(module, dims: int) -> np.ndarray:
+    """(dims, 4, 256) uint64: byte b of the index → the XOR of Sobol' dimension d's direction numbers of that
+    byte's set bits (dimension 0 the van der Corput radical inverse)."""
+    table = np.zeros((dims, 4, 256), np.uint64)
+    for d in range(dims):
+        v = module._SOBOL_V[d]
+        for b in range(4):
+            for byte in range(256):
+                acc = 0
+                for t in range(8):
+                    if (byte >> t) & 1:
+                        acc ^= int(v[8 * b + t])
+                table[d, b, byte] = acc
+    return table
+
+
+#: Cycles' dimension sets (the camera's, then per vertex b: CYCLES_FIRST + CYCLES_PER_BOUNCE·b + role) and their
+#: sizes: the light's (point x, point y, choice, light number 3), the BSDF's (direction x, y, lobe), roulette's
+CYCLES_FILTER, CYCLES_LENS, CYCLES_WAVELENGTH, CYCLES_FIRST = 0, 1, 2, 3
+CYCLES_LIGHT, CYCLES_BSDF, CYCLES_TERMINATE, CYCLES_PER_BOUNCE = 0, 1, 2, 3
+_CYCLES_SALT, _CYCLES_SET, _CYCLES_COORD = U(0x8BB84B93962EACC9), U(0x4BE98134A5976FD3), U(0x3BC0993A5AD19A13)
+_SOBOL_BYTES = {}
+
+
+def cycles_set(module, seed_key, pixel, sample, dim_set: int, dims: int, xor: bool = False,
+               split: bool = True) -> np.ndarray:
+    """(dims, N): one point of a ``dims``-D Owen-scrambled Sobol' set per path, as Cycles' sobol_burley_sample_nD:
+    the index sample // 2 shuffled (nested uniform scramble) per (seed, pixel, parity, dimension set), Sobol'
+    dimensions 0 … dims − 1 of it, each coordinate Owen-scrambled (``xor``: digitally shifted) with its own seed;
+    ``split`` False: one sequence over all samples (index ``sample``; not allowed in the engine: adaptive's halves)."""
+    tables = _SOBOL_BYTES.setdefault(id(module), _sobol_byte_tables(module, 4))
+    smp = sample.astype(U)
+    i = ((smp >> _S1) if split else smp) & _M32
+    par = (smp & _S1) if split else np.zeros_like(smp)
+    base = mix64((seed_key[0] ^ (pixel.astype(U) * _GOLDEN) ^ (par * _PARITY)) + _CYCLES_SALT)
+    h = mix64(base + U(((dim_set + 1) * int(_CYCLES_SET)) & 0xFFFFFFFFFFFFFFFF))
+    j = reverse32(owen_permute(reverse32(i), h & _M32))
+    out = np.empty((dims, pixel.size))
+    for c in range(dims):
+        t = tables[c]
+        x = t[0][j & U(255)] ^ t[1][(j >> _S8) & U(255)] ^ t[2][(j >> _S16) & U(255)] ^ t[3][j >> _S24]
+        hc = mix64(h + U(((c + 1) * int(_CYCLES_COORD)) & 0xFFFFFFFFFFFFFFFF))
+        if (xor and dim_set != CYCLES_FILTER) or dim_set == CYCLES_WAVELENGTH:      # the engine's: wavelengths shifted
+            xs = x ^ (hc & _M32)
+        else:
+            xs = reverse32(owen_permute(reverse32(x), hc & _M32))
+        out[c] = ((xs << _S16) | ((hc >> _S32) & _LOW16)).astype(np.float64) * _TO_UNIT
+    return out
+
+
+def cycles_pairs(module, seed_key, pixel, sample, pairs, xor=False, split=True) -> np.ndarray:
+    """(2k, N): the "padded" sampler's pairs (its layout: PADDED_*, then SOBOL_* roles per vertex) drawn from Cycles'
+    dimension sets: the jitter, lens and wavelengths each a 2-D set; per vertex the light's 4-D set (point, choice,
+    light number 3), the BSDF's 3-D set (direction, lobe) and roulette's 1-D one, so (light choice, lobe) and
+    (roulette, light number 3) take one coordinate from each of two sets."""
+    cache = {}
+
+    def point(dim_set, dims):
+        if dim_set not in cache:
+            cache[dim_set] = cycles_set(module, seed_key, pixel, sample, dim_set, dims, xor, split)
+        return cache[dim_set]
+
+    out = np.empty((2 * len(pairs), pixel.size))
+    for m, p in enumerate(int(q) for q in pairs):
+        if p < module.PADDED_FIRST:
+            out[2 * m:2 * m + 2] = point({module.PADDED_JITTER: CYCLES_FILTER, module.PADDED_LENS: CYCLES_LENS,
+                                          module.PADDED_WAVELENGTH: CYCLES_WAVELENGTH}[p], 2)
+            continue
+        b, role = divmod(p - module.PADDED_FIRST, module.SOBOL_PER_BOUNCE)
+        first = CYCLES_FIRST + CYCLES_PER_BOUNCE * b
+        light, bsdf = point(first + CYCLES_LIGHT, 4), point(first + CYCLES_BSDF, 3)
+        if role == module.SOBOL_LIGHT_POINT:
+            out[2 * m:2 * m + 2] = light[:2]
+        elif role == module.SOBOL_DIRECTION:
+            out[2 * m:2 * m + 2] = bsdf[:2]
+        elif role == module.SOBOL_CHOICES:
+            out[2 * m], out[2 * m + 1] = light[2], bsdf[2]
+        else:
+            out[2 * m], out[2 * m + 1] = point(first + CYCLES_TERMINATE, 1)[0], light[3]
+    return out
+
+
 def pattern(spec: str, spp: int):
     """A sampler spec → (RenderSettings.sampler, the "padded" sampler's pairs function or None: the engine's).
     "padded:KNOB:…" races the pattern variants of ``variant_pairs`` (numbers of every pair): ``xor``, ``exact``,
     ``owen=0+1`` (those pairs Owen, the others XOR), ``whole`` (one sequence over even and odd samples), ``bK``
     Kensler permutations within blocks of 2^K shuffled indices, ``bN`` within the whole render's count per
-    sequence (as Mitsuba's ldsampler permutes its whole sample count — not progressive)."""
+    sequence (as Mitsuba's ldsampler permutes its whole sample count — not progressive); ``cycles``: Cycles' dimension
+    sets (``cycles_pairs``, the engine's "cycles" numbers bit for bit), with ``xor`` digitally shifted but the jitter,
+    with ``whole`` one sequence over even and odd samples (Cycles' own; not allowed in the engine)."""
     name, *knobs = spec.split(":")
     if not knobs:
         return name, None
@@ -189,6 +273,7 @@ def pattern(spec: str, spp: int):
             kw["owen_pairs"] = tuple(int(v) for v in k[5:].split("+"))
         elif k == "whole":
             kw["split"] = False
+    cycles = "cycles" in knobs          # Cycles' dimension sets (cycles_pairs)
     joint = "joint" in knobs            # the jitter and the first light point from stratified's joint 12-D set
     joint_owen = "jointowen" in knobs   # … from Sobol' dimensions 1–4 of one point set, each Owen-scrambled
     for k in knobs:
@@ -200,6 +285,9 @@ def pattern(spec: str, spp: int):
     def pairs_function(seed, pixel, sample, pairs):
         module = sys.modules[SAMPLER_MODULE]
         pixel, sample, pairs = np.asarray(pixel), np.asarray(sample), np.asarray(pairs, np.int64)
+        if cycles:
+            return cycles_pairs(module, module._seed_key(seed), pixel, sample, pairs, xor=bool(kw.get("xor")),
+                                split=kw.get("split", True))
         out = (variant_pairs(module._seed_key(seed), pixel, sample, pairs, **kw) if kw
                else module.owen_sobol_pairs(module._seed_key(seed), pixel, sample, pairs,
                                             np.isin(pairs, list(module.PADDED_OWEN))))
@@ -292,6 +380,8 @@ def main(argv=None):
     ap.add_argument("--assets", default="", help="race on these real assets (tests/support/asset_parity: "
                     "Blender imports, lights and exports them as F12 does) instead of the peer scenes")
     ap.add_argument("--lighting", default="hdri", help="the assets' lighting (lamps or hdri)")
+    ap.add_argument("--edit", default="", help="assets: 'diffuse' replaces every material by a grey 0.5 Diffuse BSDF")
+    ap.add_argument("--bounces", type=int, default=8, help="assets: max bounces (0: direct light only)")
     args = ap.parse_args(argv)
     if args.assets:
         return asset_race(args)
@@ -335,6 +425,20 @@ def main(argv=None):
               f"{'—' if r1 is None else f'{r1:.2f}'} | {z:+.1f} |")
 
 
+def diffuse_materials():
+    """Every material's output replaced by a grey 0.5 Diffuse BSDF (docs/benchmarks.md, "Why BoomBox under the
+    HDRI is noisier than Cycles outside its fireflies": the diffuse box)."""
+    import bpy
+    for mat in bpy.data.materials:
+        if not mat.use_nodes:
+            continue
+        tree = mat.node_tree
+        out = next(n for n in tree.nodes if n.type == "OUTPUT_MATERIAL")
+        diffuse = tree.nodes.new("ShaderNodeBsdfDiffuse")
+        diffuse.inputs["Color"].default_value = (0.5, 0.5, 0.5, 1.0)
+        tree.links.new(diffuse.outputs["BSDF"], out.inputs["Surface"])
+
+
 def asset_race(args):
     """The race on real assets: σ² = mean over the pixels where the camera sees the asset of the per-pixel
     variance over the seeds of the S0 luminance (the asset suite's noise, tests/bench/asset_speed.py), per
@@ -344,15 +448,18 @@ def asset_race(args):
     SAMPLER_MODULE = "polar_render.engine.render.sampler"
     samplers = args.samplers.split(",")
     load = os.getloadavg()
-    print(f"# asset sampler race, {datetime.date.today()}: {args.lighting}, {args.seeds} seeds, spp {args.spp}; "
+    print(f"# asset sampler race, {datetime.date.today()}: {args.lighting} {args.edit} {args.bounces} bounces, "
+          f"{args.seeds} seeds, spp {args.spp}; "
           f"load average {load[0]:.2f} {load[1]:.2f} {load[2]:.2f}")
     for name in args.assets.split(","):
         asset = ap.CATALOGUE[name]
         w, h = asset.size if not args.res else (args.res, args.res)
         scene = ap.build(asset, args.lighting, w, h)
         hit = ap.coverage(scene, w, h)
+        if args.edit == "diffuse":
+            diffuse_materials()
         for spp in [int(s) for s in args.spp.split(",")]:
-            renderer, settings, _ = ap.export_polar(scene, spp, 8)
+            renderer, settings, _ = ap.export_polar(scene, spp, args.bounces)
             got = renders(renderer, None, samplers, spp, args.seeds, args.threads, settings)
             first = got[samplers[0]][0][:, hit]
             for s in samplers:

@@ -83,6 +83,13 @@ def test_the_compiled_numbers_are_the_numpy_twins_bit_for_bit(n):
             a = sobol.owen_sobol_pairs_numpy(_seed_key(seed), pixel, sample, pairs, owen)
             b = sobol.owen_sobol_pairs_numba(_seed_key(seed), pixel, sample, pairs, owen)
             assert np.array_equal(a, b)
+        # "cycles"' sets (rows: a set's coordinates 0–3, sets in any order)
+        sets, row_set = np.array([0, 2, 3, 4, 5, 1 << 20], np.int64), np.array([0, 0, 2, 2, 2, 2, 3, 5, 1, 4], np.int64)
+        row_coord = np.array([0, 1, 0, 1, 2, 3, 2, 0, 1, 0], np.int64)
+        shift = np.array([False, True, False, False, False, True])                       # the wavelengths' set
+        a = sobol.owen_sobol_sets_numpy(_seed_key(seed), pixel, sample, sets, row_set, row_coord, shift)
+        b = sobol.owen_sobol_sets_numba(_seed_key(seed), pixel, sample, sets, row_set, row_coord, shift)
+        assert np.array_equal(a, b)
 
 
 # ---------------------------------------------------------------------------- stratification

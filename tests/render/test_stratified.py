@@ -138,18 +138,20 @@ def test_an_area_lamp_on_a_floor_keeps_the_closed_form_and_the_independent_mean(
     assert abs((mean - indep.mean(0)).sum()) < 4 * diff_se
 
 
-def test_stratified_wavelengths_keep_the_mean_and_cut_the_spectral_noise():
+@pytest.mark.parametrize("sampler", ["stratified", "cycles"])
+def test_stratified_wavelengths_keep_the_mean_and_cut_the_spectral_noise(sampler):
     """A coloured emitter filling the view, seen directly and traced spectrally without the RGB
     reduction: a pixel's only noise is its sampled wavelengths.  Stratified over the pixel's samples,
     the image mean = the independent sampler's within 4σ, and the pixel variance falls > 100×
     (measured 620× at 16 spp: the estimate is smooth in the wavelengths' number; 1.1× if the
-    stratified number ignored that the wavelengths repeat with period 1/count in it)."""
+    stratified number ignored that the wavelengths repeat with period 1/count in it; "cycles" 463×, 17× with its
+    wavelengths' set Owen-scrambled instead of digitally shifted)."""
     res = 8
     wall = quad(*[np.array([x, y, 1.0]) for x, y in ((-9, -9), (9, -9), (9, 9), (-9, 9))])
     scene = plane_scene([Mesh("wall", wall.vertices, wall.faces, ["black"], np.zeros(2, np.int32),
                               emission=RGBIlluminantSpectrum([1.0, 0.25, 0.05], 2.0))], res, 16, max_depth=1)
     scene.settings = dataclasses.replace(scene.settings, spectral="spectral", reduce_spectral="off")
-    strat, se = seed_renders(scene, "stratified")
+    strat, se = seed_renders(scene, sampler)
     indep, se_i = seed_renders(scene, "independent")
     diff_se = np.sqrt(((se ** 2).sum() + (se_i ** 2).sum()) / SEEDS ** 2) / res
     assert abs(strat.mean() - indep.mean()) < 4 * diff_se
@@ -158,15 +160,17 @@ def test_stratified_wavelengths_keep_the_mean_and_cut_the_spectral_noise():
     assert ratio > 100, ratio
 
 
-def test_a_stratified_lens_keeps_the_mean_and_cuts_the_defocus_noise():
+@pytest.mark.parametrize("sampler", ["stratified", "cycles"])
+def test_a_stratified_lens_keeps_the_mean_and_cuts_the_defocus_noise(sampler):
     """The tilted emitter square seen through a thin lens focused far in front of it (blur ≈ ±2.4 pixels,
     so the pixel jitter's share of the noise is small): stratified and independent means agree within
     4σ over the blurred edge, whose pixel variance falls > 1.8× at 64 spp (measured 2.6–2.7×; 0.9–1.1×
-    with only the jitter stratified: an edge across the lens disk gains ~√n, less than a smooth integrand)."""
+    with only the jitter stratified: an edge across the lens disk gains ~√n, less than a smooth integrand; "cycles"
+    3.8×)."""
     res, seeds = 16, 8
     scene = emitter_scene(2.0, res, 64)
     scene.camera.aperture_radius, scene.camera.focus_distance = 0.2, 1.0
-    strat, se = seed_renders(scene, "stratified", seeds)
+    strat, se = seed_renders(scene, sampler, seeds)
     indep, se_i = seed_renders(scene, "independent", seeds)
     mean = strat.mean(0)
     edge = (mean > 0.1) & (mean < 1.9)
@@ -238,7 +242,7 @@ def test_the_variance_ratio_is_one_for_independent_halves_and_local():
 
 # -------------------------------------------------------------------------------------- determinism
 
-@pytest.fixture(scope="module", params=["stratified", "sobol", "padded"])
+@pytest.fixture(scope="module", params=["stratified", "sobol", "padded", "cycles"])
 def lamp_reference(request):
     scene = lamp_scene(40.0, 1.0, 16, 8)
     scene.settings = dataclasses.replace(scene.settings, sampler=request.param)
@@ -313,7 +317,7 @@ def test_cli_writes_the_sampler_and_resume_refuses_another(tmp_path, capsys):
     np.testing.assert_allclose(resumed_stokes, read_stokes_exr(str(whole))[0], rtol=1e-5, atol=1e-7)
 
 
-@pytest.mark.parametrize("sampler", ["stratified", "sobol", "padded"])
+@pytest.mark.parametrize("sampler", ["stratified", "sobol", "padded", "cycles"])
 def test_a_resumed_stratified_exr_keeps_the_stratified_standard_error(tmp_path, capsys, sampler):
     """--stderr of a stratified render writes the even samples' means (S*.Y.even) and names the
     estimate (polar.stderr); resuming from that file gives the uninterrupted render's error."""
@@ -332,7 +336,7 @@ def test_a_resumed_stratified_exr_keeps_the_stratified_standard_error(tmp_path, 
         np.testing.assert_allclose(b[f"S{i}.Y.stderr"], a[f"S{i}.Y.stderr"], rtol=1e-3, atol=1e-7)
 
 
-@pytest.mark.parametrize("sampler", ["stratified", "sobol", "padded"])
+@pytest.mark.parametrize("sampler", ["stratified", "sobol", "padded", "cycles"])
 def test_stratified_adaptive_sampling_is_deterministic_and_reports_the_stratified_error(sampler):
     """Adaptive sampling with stratified numbers: its even/odd half-buffers are the film's half sums
     (so the reported standard error is the stratified one), and the counts and image do not depend
