@@ -101,6 +101,9 @@ def _layer_albedo_loop(mu, alpha, eta, schlick, table, mu_nodes, rough_nodes, al
     nodes = schlick.shape[0]
     for k in range(mu.shape[0]):
         m, a, e = mu[k], alpha[k], eta[k]
+        if m != m or a != a or e != e:     # NaN in, NaN out (as the NumPy twin)
+            out[k] = np.nan
+            continue
         q = (e - 1.0) / (e + 1.0)
         iz, jz, fz = _lerp(np.sqrt(abs(q)), nodes)
         ir, jr, fr = _lerp(np.sqrt(a), nodes)

@@ -34,6 +34,9 @@ def _index_loop(r_, edge_, mode, schlick_82, cos_82, r_max, table, n_out, k_out)
     R, T = table.shape
     for k in range(r_.shape[0]):
         r, edge = r_[k], edge_[k]
+        if r != r or edge != edge:         # NaN in, NaN out (as the NumPy twin)
+            n_out[k], k_out[k] = np.nan, np.nan
+            continue
         if mode == F82:
             f82 = edge
         else:

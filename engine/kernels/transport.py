@@ -443,6 +443,10 @@ def keep_columns_numpy(a, idx):
 
 @jit_inner
 def _keep_columns_loop(a, idx, out):
+    n = a.shape[1]
+    for j in range(idx.shape[0]):
+        if idx[j] < 0 or idx[j] >= n:
+            raise IndexError("keep_columns: a path index is out of range")
     for r in range(a.shape[0]):
         for j in range(idx.shape[0]):
             out[r, j] = a[r, idx[j]]
@@ -467,12 +471,18 @@ def put_columns_numpy(out, idx, a):
 
 @jit_inner
 def _put_columns_loop(out, idx, a):
+    n = out.shape[1]
+    for j in range(idx.shape[0]):
+        if idx[j] < 0 or idx[j] >= n:
+            raise IndexError("put_columns: a path index is out of range")
     for r in range(out.shape[0]):
         for j in range(idx.shape[0]):
             out[r, idx[j]] = a[r, j]
 
 
 def put_columns_numba(out, idx, a):
+    if not out.flags.c_contiguous:          # a reshaped view would be a copy: the writes would be lost
+        return put_columns_numpy(out, idx, a)
     rows = math.prod(out.shape[:-1])
     a = np.ascontiguousarray(np.broadcast_to(a, out.shape[:-1] + (idx.shape[0],)), dtype=out.dtype)
     _put_columns_loop(out.reshape(rows, out.shape[-1]), np.ascontiguousarray(idx, dtype=np.int64),

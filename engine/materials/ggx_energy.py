@@ -569,7 +569,13 @@ def cycles_layering_albedo(mu, alpha, eta) -> np.ndarray:
 def cycles_layer_weight_numpy(mu, alpha, eta, darken: bool) -> np.ndarray:
     """(N,) what a dielectric GGX layer takes from the layers below in Cycles: its estimate
     :func:`cycles_layering_albedo`, with ``darken`` (a compensated lobe) × :func:`cycles_layering_darkening`.
-    ``mu`` (N,) viewing cosines, ``alpha`` and ``eta`` (> 0, real) numbers or (N,)."""
+    ``mu`` (N,) viewing cosines, ``alpha`` and ``eta`` (> 0, real) numbers or (N,); NaN where any of them is NaN."""
+    mu, alpha, eta = np.broadcast_arrays(np.asarray(mu, np.float64), alpha, eta)
+    bad = np.isnan(mu) | np.isnan(alpha) | np.isnan(eta)
+    if bad.any():                       # (a NaN would index the tables at INT_MIN)
+        E = cycles_layer_weight_numpy(np.where(bad, 1.0, mu), np.where(bad, 0.5, alpha), np.where(bad, 1.5, eta),
+                                      darken)
+        return np.where(bad, np.nan, E)
     E = cycles_layering_albedo(mu, alpha, eta)
     return E * cycles_layering_darkening(mu, alpha, eta) if darken else E
 

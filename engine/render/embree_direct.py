@@ -8,7 +8,7 @@ which read the renderer's (3, N) float64 rays directly and call ``rtcIntersect16
 packets of 16 rays (or ``rtcIntersect1`` / ``rtcOccluded1`` per ray), each ray set up as embreex sets it
 up.  The hits are embreex's bit for bit either way (triangle, distance and barycentrics of every hit ray,
 the shadow answers; tests/render/test_accel.py); a miss's barycentrics mean nothing in either.  Packets
-cost 10–25 % less a ray (docs/benchmarks.md, tests/bench/embree_calls.py).
+cost 6–21 % less a ray by its kind (docs/benchmarks.md, tests/bench/embree_calls.py).
 
 The library is the one embreex itself loaded: ``embreex.libs/`` (Linux and Windows wheels) or
 ``embreex/.dylibs/`` (macOS).  :func:`library` returns None where it is not found; the scene is then
@@ -104,8 +104,8 @@ def _arguments(flags: int, features: int) -> np.ndarray:
 
 class DirectScene:
     """One triangle mesh (vertices (V, 3), triangles (F, 3)) as an Embree scene queried from compiled loops;
-    the queries of embreex's ``EmbreeScene.run``: the same numbers in one-ray queries (``width`` 1), within
-    float rounding in packets of ``width`` 4, 8 or 16 rays.  ``scene_flags``, ``quality`` (an RTCBuildQuality,
+    the queries of embreex's ``EmbreeScene.run``: the same numbers bit for bit in one-ray queries (``width`` 1) and
+    in packets of ``width`` 4, 8 or 16 rays.  ``scene_flags``, ``quality`` (an RTCBuildQuality,
     None: Embree's default), ``features`` (the queries' RTCFeatureFlags) and ``config`` (rtcNewDevice's
     configuration string) are Embree's settings (the defaults: measured best, tests/bench/embree_calls.py)."""
 

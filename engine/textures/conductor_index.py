@@ -22,7 +22,12 @@ __all__ = ["TexturedGulbrandsenIndex"]
 
 def metal_index_numpy(r, edge, mode: str):
     """(n, κ) of reflectivities r and ``edge`` values (arrays, broadcast) by ``mode``
-    (engine.spectral.gulbrandsen.index_of)."""
+    (engine.spectral.gulbrandsen.index_of); NaN where r or the edge is NaN."""
+    r, edge = np.broadcast_arrays(np.asarray(r, np.float64), np.asarray(edge, np.float64))
+    bad = np.isnan(r) | np.isnan(edge)
+    if bad.any():                       # (a NaN would index the edge-tint table at INT_MIN)
+        n, k = index_of(np.where(bad, 0.5, r), np.where(bad, 0.5, edge), mode)
+        return np.where(bad, np.nan, n), np.where(bad, np.nan, k)
     return index_of(r, edge, mode)
 
 
@@ -33,15 +38,16 @@ _SCHLICK_82 = (1.0 - COS_82) ** 5
 
 def metal_index_numba(r, edge, mode: str):
     """metal_index_numpy in one compiled loop (engine.kernels.gulbrandsen) for the modes that solve for the edge
-    tint, the same bits; the others ("tint", "cycles_film": no Fresnel) go to the NumPy twin."""
+    tint, the same bits (NaN in, NaN out); the others ("tint", "cycles_film": no Fresnel) go to the NumPy twin."""
     if mode not in _MODE_CODES:
-        return index_of(r, edge, mode)
+        return metal_index_numpy(r, edge, mode)
     r, edge = np.broadcast_arrays(np.asarray(r, np.float64), np.asarray(edge, np.float64))
     shape = r.shape
     if gulbrandsen._EDGE is None:       # (the edge-tint table, built once on first use)
         gulbrandsen.edge_tint_for_f82(0.0, 0.0)
     n, k = np.empty(r.size), np.empty(r.size)
-    index_loop(np.ascontiguousarray(r).reshape(-1), np.ascontiguousarray(edge).reshape(-1), _MODE_CODES[mode],
+    # (copies: a broadcast view handed to Numba draws NumPy's writeable-broadcast FutureWarning)
+    index_loop(r.reshape(-1).copy(), edge.reshape(-1).copy(), _MODE_CODES[mode],
                _SCHLICK_82, COS_82, R_MAX, gulbrandsen._EDGE, n, k)
     return n.reshape(shape), k.reshape(shape)
 

@@ -85,6 +85,8 @@ def main(argv=None) -> int:
     ap.add_argument("--warm", type=int, default=3, help="warm F12s after the first, per session")
     ap.add_argument("--keep", default="", help="a folder to work in and keep (default: a temporary one)")
     a = ap.parse_args(argv)
+    if a.warm < 1:
+        ap.error("--warm: must be at least 1 (the warm F12s the first is compared with)")
     from polar_addon.packaging import build
     with tempfile.TemporaryDirectory() as tmp:
         root = a.keep or tmp

@@ -202,6 +202,17 @@ def test_put_columns_bitwise_for_every_field_shape_and_dtype():
                 numpy_twin = out.copy()
                 transport.put_columns_numpy(numpy_twin, idx, a)
                 assert numpy_twin.tobytes() == want.tobytes()
+    # a non-contiguous destination (a view): written in place, not into a reshaped copy
+    base = rng.normal(size=(4, 2, n))
+    view, want = base.transpose(1, 0, 2), base.copy().transpose(1, 0, 2)
+    idx = rng.permutation(n)[:300]
+    want[..., idx] = 16.0
+    transport.put_columns_numba(view, idx, 16.0)
+    assert np.array_equal(view, want)
+    with pytest.raises(IndexError):     # an index out of range raises, as NumPy's assignment does
+        transport.put_columns_numba(rng.normal(size=(3, n)), np.array([5, n], np.int64), 1.0)
+    with pytest.raises(IndexError):
+        transport.keep_columns(rng.normal(size=(3, n)), np.array([5, n + 3], np.int64))
 
 
 def test_path_state_compress_keeps_the_masked_paths_in_every_field():

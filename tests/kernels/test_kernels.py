@@ -1328,11 +1328,14 @@ def test_metal_index_twins(mode):
     rng = np.random.default_rng(13)
     r = rng.uniform(-0.05, 1.05, (4, 900))
     r[0, :4] = 0.0, 1.0, 0.999, 1e-9
+    r[1, :2] = np.nan                   # NaN in, NaN out on both sides (not a table read at INT_MIN)
     edge = rng.uniform(-0.1, 1.1, (4, 900))
+    edge[0, 7] = np.nan
     for e in (edge, edge[:1], 0.7):
         got, want = ci.metal_index_numba(r, e, mode), ci.metal_index_numpy(r, e, mode)
         for g, w in zip(got, want):
-            assert g.shape == w.shape == r.shape and np.ptp(w) > 0.5
+            assert g.shape == w.shape == r.shape and np.nanmax(w) - np.nanmin(w) > 0.5
+            assert np.isnan(w[1, :2]).all() and (np.ndim(e) == 0 or np.isnan(w[0, 7]))
             _bitwise([g], [w])
 
 
@@ -1353,9 +1356,16 @@ def test_cycles_layer_weight_twins(darken, alpha_kind, eta_kind):
     alpha = 0.09 if alpha_kind == "number" else np.concatenate(([0.0, 1.0, 1.0 / 225.0], rng.uniform(0, 1, n - 3)))
     eta = 1.45 if eta_kind == "number" else np.concatenate(([1.0, 1000.0, 0.5, 1.0 / 1.45],
                                                             rng.uniform(0.3, 4.0, n - 4)))
+    mu[8] = np.nan                      # NaN in, NaN out on both sides (not a table read at INT_MIN)
+    if alpha_kind == "per_point":
+        alpha[9] = np.nan
+    if eta_kind == "per_point":
+        eta[10] = np.nan
     got = g.cycles_layer_weight_numba(mu, alpha, eta, darken)
     want = g.cycles_layer_weight_numpy(mu, alpha, eta, darken)
-    assert got.shape == want.shape == (n,) and np.ptp(want) > 0.3 and np.all(want >= 0.0)
+    bad = np.isnan(mu) | np.isnan(np.broadcast_to(alpha, n)) | np.isnan(np.broadcast_to(eta, n))
+    assert np.isnan(want[bad]).all() and not np.isnan(want[~bad]).any()
+    assert got.shape == want.shape == (n,) and np.ptp(want[~bad]) > 0.3 and np.all(want[~bad] >= 0.0)
     _bitwise([got], [want])
     assert g.cycles_layer_weight_numba(mu[:0], 0.3, 1.5, darken).shape == (0,)
 
