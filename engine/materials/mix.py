@@ -265,6 +265,11 @@ def abcs_sum_numpy(terms, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
     return _sum_abcs(pol, dep, x_in, x_out)
 
 
+#: The most polarising values abcs_sum_numba sums in its compiled loop (the precompiled scenes' mixtures hold 2–4;
+#: more go to the NumPy twin, the same bits).
+_MAX_COMPILED_TERMS = 4
+
+
 def abcs_sum_numba(terms, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
     """abcs_sum_numpy with the A, B, C, S blocks summed in one compiled loop (engine.kernels.mueller_sum), the same
     bits; the depolarised shares as the NumPy twin adds them.  Blocks of other shapes than the first value's
@@ -272,8 +277,11 @@ def abcs_sum_numba(terms, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
     pol = [(s, v) for s, v in terms if v.kind != "depolarising"]
     shape = pol[0][1].A.shape
     n = shape[-1]
-    if len(shape) != 2 or any(np.shape(getattr(v, f)) != shape or getattr(v, f).dtype != np.float64
-                              for _, v in pol for f in "ABCS") \
+    # (the loop is compiled per count of values and per writeable flag: the counts the precompiled scenes hold,
+    # up to _MAX_COMPILED_TERMS, and writeable blocks run compiled, so that no render waits for a compile)
+    if len(shape) != 2 or len(pol) > _MAX_COMPILED_TERMS \
+            or any(np.shape(getattr(v, f)) != shape or getattr(v, f).dtype != np.float64
+                   or not getattr(v, f).flags.writeable for _, v in pol for f in "ABCS") \
             or any(isinstance(s, np.ndarray) and s.shape != (n,) for s, _ in pol):
         return abcs_sum_numpy(terms, x_in, x_out)
 

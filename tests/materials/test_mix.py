@@ -647,7 +647,7 @@ def test_sampled_directions_alone_are_the_samples_and_nested_mixes_sum_once(valu
 
 
 @pytest.mark.skipif(not __import__("engine.kernels", fromlist=["COMPILED"]).COMPILED, reason="needs Numba")
-@pytest.mark.parametrize("shape", ["two", "three_with_depolarisers", "shared_depol"])
+@pytest.mark.parametrize("shape", ["two", "three_with_depolarisers", "shared_depol", "six", "read_only"])
 def test_compiled_abcs_sum_is_the_numpy_sum_bit_for_bit(shape):
     """The mixture's sum of ABCS values in shared frames (mix.abcs_sum): the compiled loop against the NumPy twin —
     scales per point and numbers, ABCS values with and without a depolarised share, depolarising terms between
@@ -670,8 +670,16 @@ def test_compiled_abcs_sum_is_the_numpy_sum_bit_for_bit(shape):
              "three_with_depolarisers": [(rng.uniform(0, 2, n), abcs(True)), (1.3, depolarising()),
                                          (rng.uniform(0, 1, n), abcs(False)), (0.25, abcs(True)),
                                          (rng.uniform(0, 1, n), depolarising())],
-             "shared_depol": [(0.5, abcs(True)), (rng.uniform(0, 1, n), abcs(True))]}[shape]
+             "shared_depol": [(0.5, abcs(True)), (rng.uniform(0, 1, n), abcs(True))],
+             # more values than the precompiled counts, and read-only blocks: the NumPy twin, no new compile
+             "six": [(rng.uniform(0, 1, n), abcs(k % 2 == 0)) for k in range(6)],
+             "read_only": [(0.5, abcs(False)), (0.25, abcs(False))]}[shape]
+    if shape == "read_only":
+        terms[1][1].A.flags.writeable = False
+    signatures = len(M.abcs_sum_loop.signatures)
     got, want = M.abcs_sum_numba(terms, x, x), M.abcs_sum_numpy(terms, x, x)
+    if shape in ("six", "read_only"):
+        assert len(M.abcs_sum_loop.signatures) == signatures
     for f in ("A", "B", "C", "S", "depol"):
         g, w = getattr(got, f), getattr(want, f)
         assert (g is None) == (w is None), f
