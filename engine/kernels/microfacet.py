@@ -231,19 +231,27 @@ def _slope_cdf_er(x, e, r, t):
 
 @jit_inner
 def erfcx3_at(x1, x2, x3, coef, k):
-    """erfcx_nonneg_scalar of three x ≥ 0, their series summed in one loop: the same operations per value (the
-    same bits), three independent chains for the processor to overlap instead of three latency-bound ones."""
-    c1, c2, c3 = min(x1, 1e150), min(x2, 1e150), min(x3, 1e150)
-    t1, t2, t3 = (c1 - k) / (c1 + k), (c2 - k) / (c2 + k), (c3 - k) / (c3 + k)
-    d1, d2, d3 = 2.0 * t1, 2.0 * t2, 2.0 * t3
-    p1 = q1 = p2 = q2 = p3 = q3 = 0.0
+    """erfcx_nonneg_scalar of three x ≥ 0 (erfcx4_at: the same bits)."""
+    r1, r2, r3, _ = erfcx4_at(x1, x2, x3, 0.0, coef, k)
+    return r1, r2, r3
+
+
+@jit_inner
+def erfcx4_at(x1, x2, x3, x4, coef, k):
+    """erfcx_nonneg_scalar of four x ≥ 0, their series summed in one loop: the same operations per value (the
+    same bits), four independent chains for the processor to overlap instead of four latency-bound ones."""
+    c1, c2, c3, c4 = min(x1, 1e150), min(x2, 1e150), min(x3, 1e150), min(x4, 1e150)
+    t1, t2, t3, t4 = (c1 - k) / (c1 + k), (c2 - k) / (c2 + k), (c3 - k) / (c3 + k), (c4 - k) / (c4 + k)
+    d1, d2, d3, d4 = 2.0 * t1, 2.0 * t2, 2.0 * t3, 2.0 * t4
+    p1 = q1 = p2 = q2 = p3 = q3 = p4 = q4 = 0.0
     for j in range(coef.shape[0] - 1, 0, -1):
         cj = coef[j]
         p1, q1 = (d1 * p1 - q1) + cj, p1
         p2, q2 = (d2 * p2 - q2) + cj, p2
         p3, q3 = (d3 * p3 - q3) + cj, p3
+        p4, q4 = (d4 * p4 - q4) + cj, p4
     return ((coef[0] + t1 * p1 - q1) / (c1 + k), (coef[0] + t2 * p2 - q2) / (c2 + k),
-            (coef[0] + t3 * p3 - q3) / (c3 + k))
+            (coef[0] + t3 * p3 - q3) / (c3 + k), (coef[0] + t4 * p4 - q4) / (c4 + k))
 
 
 @jit_inner
@@ -556,12 +564,22 @@ def beckmann_vndf_at(o0, o1, o2, u0, u1, m, coef, k):
     one loop, each with its own stopping rule and the same arithmetic, so the two latency-bound
     chains (erfcx, exp, log) overlap in the processor instead of running one after the other.
     """
-    return _beckmann_vndf_with(o0, o1, o2, u0, u1, m, coef, k, True)
+    return _beckmann_vndf_with(o0, o1, o2, u0, u1, m, coef, k, True, 0.0)[:3]
 
 
 @jit_inner
-def _beckmann_vndf_with(o0, o1, o2, u0, u1, m, coef, k, use_table):
-    """beckmann_vndf_at with x̃ started from the table (``use_table``) or as before it (tests/bench)."""
+def beckmann_vndf_lambda_at(o0, o1, o2, u0, u1, m, coef, k):
+    """(h0, h1, h2, Λ(ω_o)): beckmann_vndf_at and beckmann_lambda_at(smith_a_at(ω_o)) (the same bits), Λ's erfcx
+    summed with the sampler's first three (erfcx4_at), off the serial chain of the pdf that follows."""
+    a = smith_a_at(o0, o1, o2, m)
+    h0, h1, h2, r = _beckmann_vndf_with(o0, o1, o2, u0, u1, m, coef, k, True, a if a > 0 and a <= 6.0 else 0.0)
+    return h0, h1, h2, _beckmann_lambda_given(a, r)
+
+
+@jit_inner
+def _beckmann_vndf_with(o0, o1, o2, u0, u1, m, coef, k, use_table, a_extra):
+    """(h0, h1, h2, erfcx(a_extra)): beckmann_vndf_at with x̃ started from the table (``use_table``) or as before it
+    (tests/bench), and erfcx of a further ``a_extra`` ≥ 0 for the caller."""
     sxy = np.sqrt(o0 * o0 + o1 * o1)
     cz = max(o2, 0.0)
     t = min(m * sxy / cz if cz > 0 else 1e300, 1e300)
@@ -591,7 +609,7 @@ def _beckmann_vndf_with(o0, o1, o2, u0, u1, m, coef, k, use_table):
         if not (x > lo and x < hi):
             x = 0.5 * (lo + max(hi, lo))
         zc = min(cot, 30.0)
-        r_z, r_x, r_y = erfcx3_at(zc, abs(x), y, coef, k)
+        r_z, r_x, r_y, r_extra = erfcx4_at(zc, abs(x), y, a_extra, coef, k)
         z = 2.0 if cot >= 6.0 else _slope_cdf_er(zc, np.exp(-zc * zc), r_z, t)
         target = u * z
         tol = 1e-14 * z
@@ -604,6 +622,7 @@ def _beckmann_vndf_with(o0, o1, o2, u0, u1, m, coef, k, use_table):
         first = 1
     else:
         x, lo, hi, target, tol = _slope_x_start_with(t, u0, coef, k, use_table)
+        r_extra = erfcx_nonneg_scalar(a_extra, coef, k)
     for it in range(first, 100):
         if not (x_on or y_on):
             break
@@ -621,7 +640,7 @@ def _beckmann_vndf_with(o0, o1, o2, u0, u1, m, coef, k, use_table):
     hx = m * (cos_p * sx - sin_p * sy)
     hy = m * (sin_p * sx + cos_p * sy)
     r = np.sqrt(hx * hx + hy * hy + 1.0)
-    return -hx / r, -hy / r, 1.0 / r
+    return -hx / r, -hy / r, 1.0 / r, r_extra
 
 
 # ----------------------------------------------------------------------------- per-path GGX pieces

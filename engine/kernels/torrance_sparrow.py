@@ -27,8 +27,8 @@ from . import jit, jit_inner
 from .error_function import ERFCX_COEF, ERFCX_K
 from .fresnel import abcs_at
 from .geometry import local_frame_at, to_local_at, unit_cross_at
-from .microfacet import (beckmann_d_at, beckmann_g1_pair_at, beckmann_lambda_at, beckmann_vndf_at, chi_plus_at,
-                         ggx_d_at, ggx_lambda_at, ggx_vndf_at, smith_a_at)
+from .microfacet import (beckmann_d_at, beckmann_g1_pair_at, beckmann_lambda_at, beckmann_vndf_lambda_at,
+                         chi_plus_at, ggx_d_at, ggx_lambda_at, ggx_vndf_at, smith_a_at)
 
 #: The shadowing names of engine.materials.microfacet.SHADOWING, by kernel code.
 SHADOWING_CODES = {"ts": 0, "smith": 1, "smith_rational": 2, "none": 3, "smith_correlated": 4}
@@ -93,9 +93,10 @@ def shadowing_at(kind, dist, i0, i1, i2, o0, o1, o2, h0, h1, h2, m, coef, k):
 
 
 @jit_inner
-def specular_pdf_at(dist, i0, i1, i2, o0, o1, o2, m, coef, k):
+def specular_pdf_at(dist, i0, i1, i2, o0, o1, o2, m, coef, k, lam_o, have_lam):
     """Density of ω_i under visible-normal sampling and reflection (TorranceSparrow._specular_pdf_local):
-    Beckmann.pdf_reflected, or for GGX the generic pdf(h)/(4 ω_o·h) in its order."""
+    Beckmann.pdf_reflected, or for GGX the generic pdf(h)/(4 ω_o·h) in its order; Smith Λ(ω_o) is ``lam_o``
+    where ``have_lam``, else computed here."""
     hv0, hv1, hv2 = i0 + o0, i1 + o1, i2 + o2
     length = np.sqrt(hv0 * hv0 + hv1 * hv1 + hv2 * hv2)
     if not length > 0:
@@ -104,7 +105,7 @@ def specular_pdf_at(dist, i0, i1, i2, o0, o1, o2, m, coef, k):
     d = o0 * h0 + o1 * h1 + o2 * h2
     if not (o2 > 0 and d > 0):
         return 0.0
-    g1 = 1.0 / (1.0 + smith_lambda_at(dist, o0, o1, o2, m, coef, k))
+    g1 = 1.0 / (1.0 + (lam_o if have_lam else smith_lambda_at(dist, o0, o1, o2, m, coef, k)))
     if dist == 0:
         return g1 * beckmann_d_at(h0, h1, h2, m) / (4.0 * o2)
     return g1 * max(d, 0.0) * ggx_d_at(h0, h1, h2, m) / o2 / (4.0 * d)
@@ -166,8 +167,10 @@ def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, dist, kind
 
 
 @jit_inner
-def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, dist, p_spec, has_specular, has_diffuse, coef, k):
-    """The two-lobe mixture density of ω_i = wi[:, i] (TorranceSparrow.pdf)."""
+def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, dist, p_spec, has_specular, has_diffuse, coef, k,
+           lam_o, have_lam):
+    """The two-lobe mixture density of ω_i = wi[:, i] (TorranceSparrow.pdf); ``lam_o``, ``have_lam`` as for
+    specular_pdf_at."""
     o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
     w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
     lo0, lo1, lo2 = to_local_at(o0, o1, o2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
@@ -176,7 +179,7 @@ def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, dist, p_spec, has_s
         return 0.0
     out = 0.0
     if has_specular:
-        out = out + p_spec * specular_pdf_at(dist, li0, li1, li2, lo0, lo1, lo2, m, coef, k)
+        out = out + p_spec * specular_pdf_at(dist, li0, li1, li2, lo0, lo1, lo2, m, coef, k, lam_o, have_lam)
     if has_diffuse:
         out = out + (1.0 - p_spec) * max(li2, 0.0) / _PI
     return out
@@ -201,7 +204,7 @@ def _pdf_loop(n_s, wo, wi, m, dist, p_given, use_given, eta, L, s, w_d, has_spec
         cos_o = (wo[0, i] * n0 + wo[1, i] * n1) + wo[2, i] * n2
         p = p_spec_at(i, cos_o, p_given, use_given, eta, L, s, w_d)
         out[i] = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, at(m, i), dist, p, has_specular, has_diffuse,
-                        coef, k)
+                        coef, k, 0.0, False)
 
 
 @jit
@@ -218,10 +221,13 @@ def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_giv
         pick_spec = u_lobe[i] < p
         l0 = l1 = l2 = 0.0
         mi = at(m, i)
+        lam_o = 0.0
+        have_lam = False
         if pick_spec and cos_o > 0:
             # visible-normal sampling (engine.materials.microfacet.Beckmann.sample, engine.materials.ggx.GGX.sample)
-            if dist == 0:
-                h0, h1, h2 = beckmann_vndf_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi, coef, k)
+            if dist == 0:       # with the pdf's Λ(ω_o), its erfcx beside the sampler's
+                h0, h1, h2, lam_o = beckmann_vndf_lambda_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi, coef, k)
+                have_lam = True
             else:
                 h0, h1, h2 = ggx_vndf_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi)
             d = lo0 * h0 + lo1 * h1 + cos_o * h2
@@ -245,7 +251,8 @@ def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_giv
         w1 = t1 * l0 + b1 * l1 + n1 * l2
         w2 = t2 * l0 + b2 * l1 + n2 * l2
         wi[0, i], wi[1, i], wi[2, i] = w0, w1, w2
-        q = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, mi, dist, p, True, has_diffuse, coef, k)
+        q = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, mi, dist, p, True, has_diffuse, coef, k, lam_o,
+                   have_lam)
         ok = cos_o > 0 and l2 > 0 and q > 0 and np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)
         cos_i = max(n0 * w0 + n1 * w1 + n2 * w2, 0.0)
         f = cos_i / q if ok else 0.0

@@ -30,7 +30,8 @@ from engine.kernels.microfacet import _beckmann_vndf_with  # noqa: E402
 @jit
 def _sample_loop(wo, u, m, coef, k, use_table, out):
     for i in range(wo.shape[1]):
-        h0, h1, h2 = _beckmann_vndf_with(wo[0, i], wo[1, i], wo[2, i], u[0, i], u[1, i], m[i], coef, k, use_table)
+        h0, h1, h2, _ = _beckmann_vndf_with(wo[0, i], wo[1, i], wo[2, i], u[0, i], u[1, i], m[i], coef, k, use_table,
+                                            0.0)
         out[0, i] = h0
         out[1, i] = h1
         out[2, i] = h2

@@ -130,11 +130,19 @@ def test_vndf_kernel_equals_the_slopes():
     hx, hy = m * (cp * sx - sp * sy), m * (sp * sx + cp * sy)
     r = np.sqrt(hx * hx + hy * hy + 1)
     assert np.array_equal(got, np.stack((-hx / r, -hy / r, 1 / r)))
+    # with the pdf's Λ(ω_o) (its erfcx beside the sampler's): the same normal, and Λ's bits (a = ∞, 0, > 6 included)
+    with_lam = np.array([mf.beckmann_vndf_lambda_at(*wo[:, i], u[0, i], u[1, i], m[i], coef, float(ERFCX_K))
+                         for i in range(n)]).T
+    lam = np.array([mf.beckmann_lambda_at(mf.smith_a_at(*wo[:, i], m[i]), coef, float(ERFCX_K)) for i in range(n)])
+    assert np.array_equal(with_lam[:3], got)
+    assert np.array_equal(with_lam[3], lam)
+    assert np.isinf(lam).any() and (lam == 0).any() and ((lam > 0) & np.isfinite(lam)).any()
 
 
 @needs_numba
 def test_erfcx3_equals_erfcx():
-    """erfcx3_at (three series summed in one loop) gives erfcx_nonneg_scalar's bits for each of its arguments."""
+    """erfcx3_at and erfcx4_at (three, four series summed in one loop) give erfcx_nonneg_scalar's bits for each of
+    their arguments."""
     from engine.kernels.error_function import ERFCX_COEF, ERFCX_K, erfcx_nonneg_scalar
     coef, k = np.ascontiguousarray(ERFCX_COEF), float(ERFCX_K)
     x = np.concatenate([[0.0, 1e-300, 1e-8, 2.9999999999999996, 3.0, 26.0, 30.0, 1e150, 1e300, np.inf, np.nan],
@@ -143,6 +151,9 @@ def test_erfcx3_equals_erfcx():
     three = np.array([mf.erfcx3_at(a, b, c, coef, k) for a, b, c in zip(x, np.roll(x, 1), np.roll(x, 2))])
     for j in range(3):
         assert np.array_equal(three[:, j], np.roll(one, j), equal_nan=True)
+    four = np.array([mf.erfcx4_at(a, b, c, d, coef, k) for a, b, c, d in zip(*(np.roll(x, j) for j in range(4)))])
+    for j in range(4):
+        assert np.array_equal(four[:, j], np.roll(one, j), equal_nan=True)
 
 
 @needs_numba
