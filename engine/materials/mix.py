@@ -287,7 +287,8 @@ def abcs_sum_numba(terms, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
 
     def blocks(f):
         return tuple(np.ascontiguousarray(getattr(v, f)) for _, v in pol)
-    scales = tuple(np.ascontiguousarray(s, np.float64) if isinstance(s, np.ndarray) else np.full(n, s, np.float64)
+    # (writeable C arrays: a tuple mixing read-only and writeable arrays is heterogeneous, which Numba cannot index)
+    scales = tuple(np.require(s, np.float64, ["C", "W"]) if isinstance(s, np.ndarray) else np.full(n, s, np.float64)
                    for s, _ in pol)
     A, B, C, S = (np.empty(shape) for _ in range(4))
     abcs_sum_loop(blocks("A"), blocks("B"), blocks("C"), blocks("S"), scales, A, B, C, S)

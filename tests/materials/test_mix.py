@@ -647,7 +647,8 @@ def test_sampled_directions_alone_are_the_samples_and_nested_mixes_sum_once(valu
 
 
 @pytest.mark.skipif(not __import__("engine.kernels", fromlist=["COMPILED"]).COMPILED, reason="needs Numba")
-@pytest.mark.parametrize("shape", ["two", "three_with_depolarisers", "shared_depol", "six", "read_only"])
+@pytest.mark.parametrize("shape", ["two", "three_with_depolarisers", "shared_depol", "six", "read_only",
+                                   "read_only_scale"])
 def test_compiled_abcs_sum_is_the_numpy_sum_bit_for_bit(shape):
     """The mixture's sum of ABCS values in shared frames (mix.abcs_sum): the compiled loop against the NumPy twin —
     scales per point and numbers, ABCS values with and without a depolarised share, depolarising terms between
@@ -673,9 +674,12 @@ def test_compiled_abcs_sum_is_the_numpy_sum_bit_for_bit(shape):
              "shared_depol": [(0.5, abcs(True)), (rng.uniform(0, 1, n), abcs(True))],
              # more values than the precompiled counts, and read-only blocks: the NumPy twin, no new compile
              "six": [(rng.uniform(0, 1, n), abcs(k % 2 == 0)) for k in range(6)],
-             "read_only": [(0.5, abcs(False)), (0.25, abcs(False))]}[shape]
+             "read_only": [(0.5, abcs(False)), (0.25, abcs(False))],
+             "read_only_scale": [(rng.uniform(0, 1, n), abcs(False)), (rng.uniform(0, 1, n), abcs(True))]}[shape]
     if shape == "read_only":
         terms[1][1].A.flags.writeable = False
+    if shape == "read_only_scale":      # a read-only per-point weight (a texture's) beside a writeable one
+        terms[1][0].flags.writeable = False
     signatures = len(M.abcs_sum_loop.signatures)
     got, want = M.abcs_sum_numba(terms, x, x), M.abcs_sum_numpy(terms, x, x)
     if shape in ("six", "read_only"):
