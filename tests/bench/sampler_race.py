@@ -253,14 +253,14 @@ def cycles_pairs(module, seed_key, pixel, sample, pairs, xor=False, split=True) 
 
 #: "cycles:jointK" variants: the first vertex's roles drawn from the jitter's set (coordinates 2, 3: the light point;
 #: with K = 6 coordinates 4, 5: the BSDF direction), stratified jointly with the pixel position as "sobol"'s
-_JOINT_ROWS = {0: {}, 4: {0: ((0, 2), (0, 3))}, 6: {0: ((0, 2), (0, 3)), 1: ((0, 4), (0, 5))}}
+_JOINT_ROWS = {1: {1: ((0, 0), (0, 1))}, 0: {}, 4: {0: ((0, 2), (0, 3))}, 6: {0: ((0, 2), (0, 3)), 1: ((0, 4), (0, 5))}}
 _JOINT_TABLES = {}
 
 
 def cycles_joint_pairs(joint: int, shift: bool = False):
     """The engine's ``cycles_pairs`` with the first vertex's light point (``joint`` 6: and BSDF direction) taken
     from further coordinates of the jitter's set (CYCLES_FILTER, Owen-scrambled; ``shift``: digitally shifted),
-    compiled kernel."""
+    compiled kernel; ``joint`` 1: the roles swapped, the direction coordinates 0, 1 of that set, the jitter 2, 3."""
     def draw(seed, pixel, sample, pairs):
         module = sys.modules[SAMPLER_MODULE]
         kernels = sys.modules[SAMPLER_MODULE.replace("render.sampler", "kernels.sobol")]
@@ -268,7 +268,7 @@ def cycles_joint_pairs(joint: int, shift: bool = False):
         rows = []
         for p in (int(q) for q in np.atleast_1d(pairs)):
             if p < module.PADDED_FIRST:
-                rows += [(p, 0), (p, 1)]
+                rows += [(p, 2), (p, 3)] if joint == 1 and p == module.PADDED_JITTER else [(p, 0), (p, 1)]
                 continue
             bounce, role = divmod(p - module.PADDED_FIRST, module.SOBOL_PER_BOUNCE)
             if bounce == 0 and role in _JOINT_ROWS[joint]:
@@ -300,8 +300,8 @@ def pattern(spec: str, spp: int):
     sequence (as Mitsuba's ldsampler permutes its whole sample count — not progressive); ``cycles``: Cycles' dimension
     sets (``cycles_pairs``, the engine's "cycles" numbers bit for bit), with ``xor`` digitally shifted but the jitter,
     with ``whole`` one sequence over even and odd samples (Cycles' own; not allowed in the engine).  "cycles:jointK"
-    (K 0, 4, 6; ``cycles_joint_pairs``) races the engine's "cycles" with the first vertex's light point (K 4) and
-    direction (K 6) in the jitter's set, ``:shift`` with the jitter's set digitally shifted."""
+    (``cycles_joint_pairs``) races the engine's "cycles" with the first vertex's light point (K 4) and direction
+    (K 6) in the jitter's set (K 1: direction and jitter swapped), ``:shift``: the jitter's set shifted."""
     name, *knobs = spec.split(":")
     if not knobs:
         return name, None
