@@ -251,6 +251,47 @@ def cycles_pairs(module, seed_key, pixel, sample, pairs, xor=False, split=True) 
     return out
 
 
+#: "cycles:jointK" variants: the first vertex's roles drawn from the jitter's set (coordinates 2, 3: the light point;
+#: with K = 6 coordinates 4, 5: the BSDF direction), stratified jointly with the pixel position as "sobol"'s
+_JOINT_ROWS = {1: {1: ((0, 0), (0, 1))}, 0: {}, 4: {0: ((0, 2), (0, 3))}, 6: {0: ((0, 2), (0, 3)), 1: ((0, 4), (0, 5))}}
+_JOINT_TABLES = {}
+
+
+def cycles_joint_pairs(joint: int, shift: bool = False):
+    """The engine's ``cycles_pairs`` with the first vertex's light point (``joint`` 6: and BSDF direction) taken
+    from further coordinates of the jitter's set (CYCLES_FILTER, Owen-scrambled; ``shift``: digitally shifted),
+    compiled kernel; ``joint`` 1: the roles swapped, the direction coordinates 0, 1 of that set, the jitter 2, 3."""
+    def draw(seed, pixel, sample, pairs):
+        module = sys.modules[SAMPLER_MODULE]
+        kernels = sys.modules[SAMPLER_MODULE.replace("render.sampler", "kernels.sobol")]
+        table = _JOINT_TABLES.setdefault((SAMPLER_MODULE, joint), kernels._sobol_byte_tables(max(joint, 4)))
+        rows = []
+        for p in (int(q) for q in np.atleast_1d(pairs)):
+            if p < module.PADDED_FIRST:
+                rows += [(p, 2), (p, 3)] if joint == 1 and p == module.PADDED_JITTER else [(p, 0), (p, 1)]
+                continue
+            bounce, role = divmod(p - module.PADDED_FIRST, module.SOBOL_PER_BOUNCE)
+            if bounce == 0 and role in _JOINT_ROWS[joint]:
+                rows += list(_JOINT_ROWS[joint][role])
+                continue
+            first = module.CYCLES_FIRST + module.CYCLES_PER_BOUNCE * bounce
+            rows += [(first + r, c) for r, c in module._CYCLES_ROLES[role]]
+        pixel, sample = np.asarray(pixel), np.asarray(sample)
+        if not rows:
+            return np.empty((0, pixel.shape[0]))
+        sets, row_set = np.unique(np.array([r for r, _ in rows], np.int64), return_inverse=True)
+        n = pixel.shape[0]
+        out = np.empty((len(rows), n))
+        kernels._owen_sobol_sets_loop(module._seed_key(seed), np.ascontiguousarray(pixel, np.int64),
+                                      np.ascontiguousarray(sample, np.int64), sets, row_set.astype(np.int64),
+                                      np.array([c for _, c in rows], np.int64),
+                                      (sets == module.CYCLES_WAVELENGTH) | (shift & (sets == module.CYCLES_FILTER)),
+                                      table, np.empty((sets.size + 1, n), np.uint64),
+                                      np.empty((sets.size + 1, n), np.uint64), out)
+        return out
+    return draw
+
+
 def pattern(spec: str, spp: int):
     """A sampler spec → (RenderSettings.sampler, the "padded" sampler's pairs function or None: the engine's).
     "padded:KNOB:…" races the pattern variants of ``variant_pairs`` (numbers of every pair): ``xor``, ``exact``,
@@ -258,10 +299,14 @@ def pattern(spec: str, spp: int):
     Kensler permutations within blocks of 2^K shuffled indices, ``bN`` within the whole render's count per
     sequence (as Mitsuba's ldsampler permutes its whole sample count — not progressive); ``cycles``: Cycles' dimension
     sets (``cycles_pairs``, the engine's "cycles" numbers bit for bit), with ``xor`` digitally shifted but the jitter,
-    with ``whole`` one sequence over even and odd samples (Cycles' own; not allowed in the engine)."""
+    with ``whole`` one sequence over even and odd samples (Cycles' own; not allowed in the engine).  "cycles:jointK"
+    (``cycles_joint_pairs``) races the engine's "cycles" with the first vertex's light point (K 4) and direction
+    (K 6) in the jitter's set (K 1: direction and jitter swapped), ``:shift``: the jitter's set shifted."""
     name, *knobs = spec.split(":")
     if not knobs:
         return name, None
+    if name == "cycles":                # the engine's "cycles" with its first vertex jointly stratified (cycles:joint4)
+        return name, cycles_joint_pairs(int(knobs[0][5:]), "shift" in knobs)
     kw = {}
     for k in knobs:
         if k == "xor":
@@ -314,9 +359,10 @@ _ENGINE_PAIRS = {}
 def render_one(renderer, scene, sampler, spp, seed, threads, settings=None):
     """(S0 image, S1 image) (H, W) of one render and its CPU seconds (``settings``: instead of the scene's)."""
     module = sys.modules[SAMPLER_MODULE]
-    engine_pairs = _ENGINE_PAIRS.setdefault(SAMPLER_MODULE, module.padded_pairs)
+    engine_pairs = _ENGINE_PAIRS.setdefault(SAMPLER_MODULE, (module.padded_pairs, module.cycles_pairs))
     sampler, variant = pattern(sampler, spp)
-    module.padded_pairs = variant or engine_pairs
+    module.padded_pairs = variant if variant and sampler == "padded" else engine_pairs[0]
+    module.cycles_pairs = variant if variant and sampler == "cycles" else engine_pairs[1]
     st = dataclasses.replace(settings or scene.settings, spp=spp, seed=seed, sampler=sampler, threads=threads)
     t = time.process_time()
     result = renderer.render(st)
