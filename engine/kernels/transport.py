@@ -442,11 +442,16 @@ def keep_columns_numpy(a, idx):
 
 
 @jit_inner
-def _keep_columns_loop(a, idx, out):
-    n = a.shape[1]
+def _check_columns(idx, n):
+    """IndexError (as NumPy's) where a path index is outside [0, n): the loops below read and write unchecked."""
     for j in range(idx.shape[0]):
         if idx[j] < 0 or idx[j] >= n:
-            raise IndexError("keep_columns: a path index is out of range")
+            raise IndexError("a path index is out of range")
+
+
+@jit_inner
+def _keep_columns_loop(a, idx, out):
+    _check_columns(idx, a.shape[1])
     for r in range(a.shape[0]):
         for j in range(idx.shape[0]):
             out[r, j] = a[r, idx[j]]
@@ -471,10 +476,7 @@ def put_columns_numpy(out, idx, a):
 
 @jit_inner
 def _put_columns_loop(out, idx, a):
-    n = out.shape[1]
-    for j in range(idx.shape[0]):
-        if idx[j] < 0 or idx[j] >= n:
-            raise IndexError("put_columns: a path index is out of range")
+    _check_columns(idx, out.shape[1])
     for r in range(out.shape[0]):
         for j in range(idx.shape[0]):
             out[r, idx[j]] = a[r, j]
