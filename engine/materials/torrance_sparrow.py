@@ -820,9 +820,8 @@ class TorranceSparrow(BSDF):
         p_given, eta, s, w_d = self._mixture_inputs(sp, compact=self._compiled_lobe)
         if self._compiled_lobe:
             # with multiscatter the lobe's value itself (k·A joins depol before the factor, as in ``eval``)
-            wi, pdf, valid, factor, x, A, B, C, S, eval_valid = torrance_sparrow_sample(
-                sp.n_s, sp.wo, u_lobe, u_dir, eta, sp.lam.shape[0], s, self._m(sp), self.shadowing, p_given, w_d,
-                self.has_diffuse, self.distribution, not self.multiscatter)
+            wi, pdf, valid, factor, x, A, B, C, S, eval_valid = self._compiled_sample(sp, u_lobe, u_dir, p_given,
+                                                                                      eta, s, w_d)
             depol = self._depol(sp, eval_valid, lambda: sp.cos_o)
             if self.multiscatter:
                 extra = self.multiscatter_extra(sp) * A
@@ -839,13 +838,18 @@ class TorranceSparrow(BSDF):
         return BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=np.zeros(sp.n, bool), valid=valid,
                           eta_sq=np.ones(sp.n))
 
+    def _compiled_sample(self, sp: ShadingPoint, u_lobe, u_dir, p_given, eta, s, w_d) -> tuple:
+        """The compiled sample pass (torrance_sparrow_sample's tuple) with this lobe's settings; with multiscatter
+        the lobe's value unscaled by the sample's factor (``sample`` adds k·A first)."""
+        return torrance_sparrow_sample(sp.n_s, sp.wo, u_lobe, u_dir, eta, sp.lam.shape[0], s, self._m(sp),
+                                       self.shadowing, p_given, w_d, self.has_diffuse, self.distribution,
+                                       not self.multiscatter)
+
     def sample_direction(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         """``sample`` without the weight (no Dirac lanes: None)."""
         p_given, eta, s, w_d = self._mixture_inputs(sp, compact=self._compiled_lobe)
         if self._compiled_lobe:
-            wi, pdf, valid = torrance_sparrow_sample(
-                sp.n_s, sp.wo, u_lobe, u_dir, eta, sp.lam.shape[0], s, self._m(sp), self.shadowing, p_given, w_d,
-                self.has_diffuse, self.distribution, not self.multiscatter)[:3]
+            wi, pdf, valid = self._compiled_sample(sp, u_lobe, u_dir, p_given, eta, s, w_d)[:3]
         else:
             wi, pdf, valid, _ = _mixture_sample(self._dist(sp) if self.has_specular else None, sp.n_s, sp.wo, u_lobe,
                                                 u_dir, p_given, eta, s, w_d, self.has_specular, self.has_diffuse)
