@@ -43,7 +43,7 @@ Our renders run in one child process per scene (kernels loaded by ``Renderer.war
 each transport the jobs use; the times are those of ``Renderer.render``, as Mitsuba's are of its
 render call), Mitsuba's through ``render_peer.py`` (its first render of a scene includes its JIT
 compilation; the fastest of three is kept).  ``--full`` uses 256², more samples and every scene,
-renders the demo at 1080p, and rewrites the tables in docs/benchmarks.md between the
+renders the demo at 1080p, and rewrites the tables in docs/benchmarks/performance.md between the
 ``bench:begin`` / ``bench:end`` markers.
 
 ``--sampler`` takes a comma list (``--full``: ``independent,stratified``): every sampler's renders
@@ -533,13 +533,13 @@ def measure_memory(args):
 
 
 def update_readme(text):
-    """Rewrite the performance tables of docs/benchmarks.md (between its bench markers)."""
-    path = os.path.join(REPO, "docs", "benchmarks.md")
+    """Rewrite the performance tables of docs/benchmarks/performance.md (between its bench markers)."""
+    path = os.path.join(REPO, "docs", "benchmarks", "performance.md")
     with open(path) as fh:
         readme = fh.read()
     begin, end = "<!-- bench:begin -->", "<!-- bench:end -->"
     if begin not in readme or end not in readme:
-        raise SystemExit("docs/benchmarks.md has no bench:begin / bench:end markers")
+        raise SystemExit("docs/benchmarks/performance.md has no bench:begin / bench:end markers")
     head, rest = readme.split(begin, 1)
     _, tail = rest.split(end, 1)
     with open(path, "w") as fh:
@@ -569,7 +569,8 @@ def main():
                     help="our renders' RenderSettings.sampler (peer scenes and the Cycles scenes' Pattern): "
                          "independent, stratified, sobol, or a comma list measured in the same run (default: "
                          "independent; --full: independent,stratified)")
-    ap.add_argument("--full", action="store_true", help="the published settings; rewrites docs/benchmarks.md's tables")
+    ap.add_argument("--full", action="store_true",
+                    help="the published settings; rewrites docs/benchmarks/performance.md's tables")
     ap.add_argument("--out", default="")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--memory-child", help=argparse.SUPPRESS)
