@@ -2,7 +2,7 @@
 
     python tests/bench/bench_engine.py [--scenes a,b] [--res 128] [--spp 32] [--mitsuba-spp 128]
                                        [--ref-spp 2048] [--mitsuba-python PY] [--skip blender,cycles,memory]
-                                       [--out bench.md] [--sampler independent,stratified] [--full]
+                                       [--out bench.md] [--sampler sobol,cycles] [--full]
 
 Prints one Markdown table per target (the issue's target next to each measured ratio):
 
@@ -46,7 +46,7 @@ compilation; the fastest of three is kept).  ``--full`` uses 256², more samples
 renders the demo at 1080p, and rewrites the tables in docs/benchmarks/performance.md between the
 ``bench:begin`` / ``bench:end`` markers.
 
-``--sampler`` takes a comma list (``--full``: ``independent,stratified``): every sampler's renders
+``--sampler`` takes a comma list (``--full``: the default ``sobol`` and ``cycles``): every sampler's renders
 are measured in the same run against the same references and Mitsuba renders (and, for Cycles, the
 same Cycles renders).  The first sampler gets tables 1–8; each further one the tables that depend on
 our sampler (1–5 and 8), numbered with its initial (1s, 2s, 3s–5s, 8s).
@@ -75,8 +75,6 @@ SHARED = os.environ.get("POLAR_SHARED") or next(
 PEERS = os.path.join(SHARED, "peers")
 REF_DIR = os.path.join(REPO, "out", "bench_refs")
 DEFAULT_MITSUBA = "/work/peerenv/bin/python"
-#: our sampling patterns (engine.scene.description.SAMPLERS)
-SAMPLERS = ("independent", "stratified", "sobol")
 DEFAULT_SCENES = ["fresnel_sphere", "fresnel_sphere_au", "glass_sphere", "rough_sphere_a030", "cornell_lambert",
                   "plane_brewster"]
 #: Issue 16 targets.  Time to equal error (S0), ours ÷ Mitsuba LLVM, at least:
@@ -568,7 +566,7 @@ def main():
     ap.add_argument("--sampler", default=None,
                     help="our renders' RenderSettings.sampler (peer scenes and the Cycles scenes' Pattern): "
                          "independent, stratified, sobol, or a comma list measured in the same run (default: "
-                         "independent; --full: independent,stratified)")
+                         "the engine's default, sobol; --full: sobol,cycles)")
     ap.add_argument("--full", action="store_true",
                     help="the published settings; rewrites docs/benchmarks/performance.md's tables")
     ap.add_argument("--out", default="")
@@ -587,7 +585,11 @@ def main():
     args.mitsuba_spp = args.mitsuba_spp or (512 if full else 128)
     args.ref_spp = args.ref_spp or (8192 if full else 2048)
     skip = set(filter(None, args.skip.split(",")))
-    samplers = (args.sampler or ("independent,stratified" if full else "independent")).split(",")
+    # ours at the engine's default pattern (RenderSettings.sampler); --full also races the selectable `cycles`
+    sys.path.insert(0, REPO)
+    from engine.scene.description import SAMPLERS, RenderSettings
+    default = RenderSettings().sampler
+    samplers = (args.sampler or (f"{default},cycles" if full else default)).split(",")
     for sampler in samplers:
         if sampler not in SAMPLERS:
             ap.error(f"--sampler: {sampler!r} is not one of {', '.join(SAMPLERS)}")
