@@ -144,10 +144,18 @@ class GulbrandsenIndex(Spectrum):
 
     def eval_cached(self, lookup):
         # (n, κ) once per lookup: the n and the κ of one metal (the same two spectra) share one Gulbrandsen map
-        nk = lookup.memo((self.reflectivity, self.edge_tint, _MODE_KEYS[self.mode]),
-                         lambda: np.stack(index_of(self.reflectivity.eval_cached(lookup),
-                                                   self.edge_tint.eval_cached(lookup), self.mode)))
+        nk = lookup.memo((self.reflectivity, self.edge_tint, _MODE_KEYS[self.mode]), lambda: self._nk(lookup))
         return nk[0] if self.part == "n" else nk[1]
+
+    def _nk(self, lookup) -> np.ndarray:
+        """(2, L, N) n and κ at the lookup's paths.  "rgb" transport (``lookup.channels``): every path holds the
+        same three channel values (the spectra are not textured), so the map runs on one path's column and the
+        result is a read-only view of it for all (elementwise: the same values, 12 % of a many-metal render)."""
+        r, edge = self.reflectivity.eval_cached(lookup), self.edge_tint.eval_cached(lookup)
+        if lookup.channels and r.shape[-1] > 1:
+            nk = np.stack(index_of(r[..., :1], edge[..., :1], self.mode))
+            return np.broadcast_to(nk, nk.shape[:-1] + r.shape[-1:])
+        return np.stack(index_of(r, edge, self.mode))
 
     def linear_srgb(self) -> np.ndarray:
         return self._pick(*index_of(self.reflectivity.linear_srgb(), self.edge_tint.linear_srgb(), self.mode))
