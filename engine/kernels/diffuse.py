@@ -104,16 +104,25 @@ def _direct_light_loop(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, selec
             weight[k, j] = emitted[k, j] * scale[j] * g[j]
 
 
+def _read_only(a):
+    """A read-only view of ``a`` (no copy): Numba types read-only arrays apart, so a kernel's inputs that are
+    sometimes a memoised (read-only) value or a broadcast, sometimes a fresh array, pass as one type — one
+    compiled signature, which the precompile's scenes then cover whatever paths they happen to take."""
+    v = a.view()
+    v.flags.writeable = False
+    return v
+
+
 def direct_light_numba(n_s, wo, wi, albedo, emitted, scale, ok, pdf_light, select_prob, delta):
     n = n_s.shape[1]
     f64 = np.float64
     A, weight, ok_out = np.empty((albedo.shape[0], n)), np.empty((emitted.shape[0], n)), np.empty(n, np.bool_)
     _direct_light_loop(np.ascontiguousarray(n_s, dtype=f64), np.ascontiguousarray(wo, dtype=f64),
-                       np.ascontiguousarray(wi, dtype=f64), np.ascontiguousarray(albedo, dtype=f64),
+                       np.ascontiguousarray(wi, dtype=f64), _read_only(np.ascontiguousarray(albedo, dtype=f64)),
                        np.ascontiguousarray(emitted, dtype=f64), np.ascontiguousarray(scale, dtype=f64),
                        np.ascontiguousarray(ok, dtype=np.bool_), np.ascontiguousarray(pdf_light, dtype=f64),
-                       np.ascontiguousarray(np.broadcast_to(select_prob, (n,)), dtype=f64),
-                       np.ascontiguousarray(np.broadcast_to(delta, (n,)), dtype=np.bool_),
+                       _read_only(np.ascontiguousarray(np.broadcast_to(select_prob, (n,)), dtype=f64)),
+                       _read_only(np.ascontiguousarray(np.broadcast_to(delta, (n,)), dtype=np.bool_)),
                        A, weight, ok_out)
     return A[None], weight, ok_out
 

@@ -383,3 +383,89 @@ def interpolate_vertex_attribute(faces, values, prim, u, v):
     w0 = 1.0 - u - v
     A = values
     return (A[tri[:, 0]] * w0[:, None] + A[tri[:, 1]] * u[:, None] + A[tri[:, 2]] * v[:, None]).T
+
+
+# ----------------------------------------------------------------------------- tangent frames of normal maps
+
+def _dot3(a, b):
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+
+
+def tangent_frame_numpy(n_s, t, dpdv, ok, t4, has_t4):
+    """(T, B) (3, N) of engine.textures.SurfacePoints.tangent_frame: unit T ⟂ n_s from the per-vertex tangents t4
+    (4, N) (xyz, w = handedness; used where has_t4 and xyz ≠ 0) else from ∂p/∂u ``t`` (Gram–Schmidt against n_s),
+    any perpendicular (the least aligned axis, projected) where neither exists (``ok``: ∂p/∂u exists); B =
+    ±(n_s × T), the sign from ∂p/∂v ``dpdv`` or w.  All (3, N) but ``ok`` (N,)."""
+    sign = np.where(_dot3(np.cross(n_s.T, t.T).T, dpdv) < 0, -1.0, 1.0)
+    if has_t4:      # given tangents win where the mesh has them
+        given = np.any(t4[:3] != 0, axis=0)
+        t = np.where(given[None, :], t4[:3], t)
+        sign = np.where(given, np.where(t4[3] < 0, -1.0, 1.0), sign)
+        ok = ok | given
+    t = t - n_s * _dot3(n_s, t)[None, :]
+    length = np.sqrt(_dot3(t, t))
+    ok = ok & (length > 1e-12)
+    axis = np.zeros_like(n_s)
+    axis[np.argmin(np.abs(n_s), axis=0), np.arange(n_s.shape[1])] = 1.0
+    fb = axis - n_s * _dot3(n_s, axis)[None, :]
+    fb = fb / np.sqrt(_dot3(fb, fb))[None, :]
+    t = np.where(ok[None, :], t / np.where(ok, length, 1.0)[None, :], fb)
+    b = sign[None, :] * np.cross(n_s.T, t.T).T
+    return t, b
+
+
+@jit
+def _tangent_frame_loop(n_s, t_in, dpdv, ok_in, t4, has_t4, t_out, b_out):
+    for j in range(n_s.shape[1]):
+        n0, n1, n2 = n_s[0, j], n_s[1, j], n_s[2, j]
+        t0, t1, t2 = t_in[0, j], t_in[1, j], t_in[2, j]
+        c0, c1, c2 = n1 * t2 - n2 * t1, n2 * t0 - n0 * t2, n0 * t1 - n1 * t0
+        sign = -1.0 if c0 * dpdv[0, j] + c1 * dpdv[1, j] + c2 * dpdv[2, j] < 0 else 1.0
+        ok = ok_in[j]
+        if has_t4 and (t4[0, j] != 0 or t4[1, j] != 0 or t4[2, j] != 0):
+            t0, t1, t2 = t4[0, j], t4[1, j], t4[2, j]
+            sign = -1.0 if t4[3, j] < 0 else 1.0
+            ok = True
+        d = n0 * t0 + n1 * t1 + n2 * t2
+        t0, t1, t2 = t0 - n0 * d, t1 - n1 * d, t2 - n2 * d
+        length = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+        ok = ok and length > 1e-12
+        if ok:
+            t0, t1, t2 = t0 / length, t1 / length, t2 / length
+        else:       # np.argmin of |n|: the first least component (the first NaN if any)
+            a0, a1, a2 = abs(n0), abs(n1), abs(n2)
+            k = 0
+            if a0 != a0:
+                k = 0
+            elif a1 != a1:
+                k = 1
+            elif a2 != a2:
+                k = 2
+            else:
+                if a1 < a0:
+                    k = 1
+                if a2 < (a1 if k == 1 else a0):
+                    k = 2
+            e0, e1, e2 = (1.0 if k == 0 else 0.0), (1.0 if k == 1 else 0.0), (1.0 if k == 2 else 0.0)
+            d = n0 * e0 + n1 * e1 + n2 * e2
+            t0, t1, t2 = e0 - n0 * d, e1 - n1 * d, e2 - n2 * d
+            length = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
+            t0, t1, t2 = t0 / length, t1 / length, t2 / length
+        t_out[0, j], t_out[1, j], t_out[2, j] = t0, t1, t2
+        b_out[0, j] = sign * (n1 * t2 - n2 * t1)
+        b_out[1, j] = sign * (n2 * t0 - n0 * t2)
+        b_out[2, j] = sign * (n0 * t1 - n1 * t0)
+
+
+def tangent_frame_numba(n_s, t, dpdv, ok, t4, has_t4):
+    f64 = np.float64
+    n = n_s.shape[1]
+    t_out, b_out = np.empty((3, n)), np.empty((3, n))
+    _tangent_frame_loop(np.ascontiguousarray(n_s, dtype=f64), np.ascontiguousarray(t, dtype=f64),
+                        np.ascontiguousarray(dpdv, dtype=f64), np.ascontiguousarray(ok, dtype=np.bool_),
+                        np.ascontiguousarray(t4 if has_t4 else np.zeros((4, 0)), dtype=f64), bool(has_t4),
+                        t_out, b_out)
+    return t_out, b_out
+
+
+tangent_frame = twin(_tangent_frame_loop and tangent_frame_numba, tangent_frame_numpy)

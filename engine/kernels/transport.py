@@ -494,6 +494,30 @@ def put_columns_numba(out, idx, a):
 put_columns = twin(_put_columns_loop and put_columns_numba, put_columns_numpy)
 
 
+def scale_columns_numpy(out, idx, s):
+    """out[..., idx] *= s: the columns ``idx`` (distinct valid int64 indices of the last axis) of a per-path array
+    scaled in place by ``s`` (idx.shape[0],) (a refraction's 1/η² taken back: Cycles' radiance convention)."""
+    out[..., idx] *= s
+
+
+@jit_inner
+def _scale_columns_loop(out, idx, s):
+    _check_columns(idx, out.shape[1])
+    for r in range(out.shape[0]):
+        for j in range(idx.shape[0]):
+            out[r, idx[j]] = out[r, idx[j]] * s[j]        # in s's precision, rounded to out's: as NumPy's *=
+
+
+def scale_columns_numba(out, idx, s):
+    if not out.flags.c_contiguous:          # a reshaped view would be a copy: the writes would be lost
+        return scale_columns_numpy(out, idx, s)
+    _scale_columns_loop(out.reshape(math.prod(out.shape[:-1]), out.shape[-1]),
+                        np.ascontiguousarray(idx, dtype=np.int64), np.ascontiguousarray(s, dtype=np.float64))
+
+
+scale_columns = twin(_scale_columns_loop and scale_columns_numba, scale_columns_numpy)
+
+
 # ----------------------------------------------------------------------------- roulette, survivors, next origins
 
 def next_segments_numpy(T, eta_sq, eta_step, u_rr, valid, apply_rr, x_T, d, path, keys, is_delta, pdf, p, n_g,

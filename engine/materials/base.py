@@ -44,8 +44,15 @@ if TYPE_CHECKING:
     from ..spectral import Spectrum, WavelengthLookup
     from ..textures import SurfacePoints
 
-__all__ = ["BSDF", "BSDFFlags", "BSDFSample", "DeltaVertices", "LobeColors", "MuellerValue", "ShadingPoint",
-           "assemble_values", "depolarising_value", "take_lanes", "take_value"]
+__all__ = ["BSDF", "BSDFFlags", "BSDFSample", "DeltaVertices", "LobeColors", "MuellerValue", "PER_POINT_MEMOS",
+           "ShadingPoint", "assemble_values", "depolarising_value", "take_lanes", "take_value"]
+
+
+#: ShadingPoint.memo keys whose values are per point (arrays with the points along their last axis), which a batch
+#: made by ``take`` reads from the batch it was taken from instead of computing them again: a mix's sampled points
+#: after next-event estimation at the same vertices (Torrance–Sparrow's complex index and multiscatter term: the
+#: same per-point arithmetic, so the same values)
+PER_POINT_MEMOS = frozenset({"relative_eta", "multiscatter_extra"})
 
 
 @dataclass
@@ -85,9 +92,29 @@ class ShadingPoint:
         hit = memo.get((id(owner), key))
         if hit is not None and hit[0] is owner:
             return hit[1]
-        value = compute()
+        value = self._inherited(owner, key) if key in PER_POINT_MEMOS else None
+        if value is None:
+            value = compute()
         memo[(id(owner), key)] = (owner, value)
         return value
+
+    def _inherited(self, owner, key):
+        """The memo of ``key`` (one of PER_POINT_MEMOS) at these points from the batch this one was taken from (or
+        its parent …), or None."""
+        link = self.__dict__.get("_parent_sel")
+        if link is None:
+            return None
+        parent, sel = link
+        hit = parent.__dict__.get("_memo", {}).get((id(owner), key))
+        value = hit[1] if hit is not None and hit[0] is owner else parent._inherited(owner, key)
+        if not isinstance(value, np.ndarray) or value.ndim == 0 or value.shape[-1] != parent.n:
+            return None
+        return take_lanes(value, sel)
+
+    def _taken_from(self, parent: ShadingPoint, sel) -> ShadingPoint:
+        """This batch, noted as ``parent``'s points ``sel`` (``take``: its per-point memos are read from there)."""
+        self.__dict__["_parent_sel"] = (parent, sel)
+        return self
 
     def spectrum(self, spec: Spectrum) -> np.ndarray:
         """A material parameter (engine.spectral Spectrum) at this batch's wavelengths, (L, N);
@@ -123,7 +150,7 @@ class ShadingPoint:
                             take_lanes(self.lam, sel, shared), self.mono,
                             None if self.lookup is None else _shared(self.lookup, sub, shared),
                             None if self.material is None else take_lanes(self.material, sel, shared),
-                            None if self.surface is None else _shared(self.surface, sub, shared))
+                            None if self.surface is None else _shared(self.surface, sub, shared))._taken_from(self, sel)
 
     def flipped(self, where: np.ndarray) -> ShadingPoint:
         """This batch with n_s and n_g negated at the points ``where`` (N,) bool: the back faces of a

@@ -8,6 +8,12 @@ not delta-only form one MaterialSet per ``set_key`` (each point shaded by its ow
 sampling, shadow rays and throughput updates once for the whole set); delta-only materials (one-step
 scatter) stay groups of their own.  ``batch=False`` gives every material but the LambertSet's its own
 group (the per-material groups, for comparison).
+
+Materials of one set that are the same model with the same parameters (``same_material``: an exported glTF
+sample's 18 emissive variants share 2 BSDFs, their emission being lights) share one member slot, so each
+distinct BSDF runs once per bounce over all its points: per point the same arithmetic (bit-identical images),
+without the per-member calls (SpecGlossEmission: 17 members → 2); so do such twins among the materials shaded
+alone (AttenuationTest: 18 delta-only glasses → 10 groups).
 """
 
 from __future__ import annotations
@@ -28,6 +34,68 @@ def set_key(m):
     return (bool(m.radiance_scaling), bool(m.flags.transmits))
 
 
+#: the engine's package ("engine", or "polar_render.engine" in the extension): its objects are compared field by field
+_ENGINE = __name__.rsplit(".materials", 1)[0] + "."
+#: arrays with more elements are compared by identity only (a texture's pixels: shared objects, or different)
+_COMPARED_ELEMENTS = 4096
+
+
+def same_material(a, b) -> bool:
+    """Whether materials ``a`` and ``b`` are the same model with the same parameters: the same type and, field by
+    field (recursively, through the engine's objects: spectra, textures' inputs, wrapped models), equal numbers,
+    strings and small arrays; large arrays, functions and objects of other packages only when the same object.  Caches a
+    class fills on first use (``_cached_fields``) are not compared.  False where unsure: materials then stay apart."""
+    return _same(a, b, set())
+
+
+def _fields(obj) -> dict | None:
+    fields = dict(vars(obj)) if hasattr(obj, "__dict__") else {}
+    for cls in type(obj).__mro__:
+        for name in getattr(cls, "__slots__", ()):
+            if hasattr(obj, name):
+                fields[name] = getattr(obj, name)
+    for name in getattr(type(obj), "_cached_fields", ()):
+        fields.pop(name, None)
+    return fields
+
+
+def _same(a, b, seen: set) -> bool:
+    if a is b:
+        return True
+    if type(a) is not type(b):
+        return False
+    if a is None or isinstance(a, (bool, int, float, complex, str, bytes, np.number, np.bool_)):
+        return bool(a == b)
+    if isinstance(a, np.ndarray):
+        return (a.shape == b.shape and a.dtype == b.dtype and a.dtype != object and a.size <= _COMPARED_ELEMENTS
+                and bool(np.array_equal(a, b)))
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y, seen) for x, y in zip(a, b))
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k], seen) for k in a)
+    if isinstance(a, (set, frozenset)):
+        return a == b
+    if not type(a).__module__.startswith(_ENGINE):
+        return False                                # functions, classes, others' objects: only the same object
+    if (id(a), id(b)) in seen:                      # a cycle: equal unless a field on the way differs
+        return True
+    seen.add((id(a), id(b)))
+    fa, fb = _fields(a), _fields(b)
+    return fa.keys() == fb.keys() and all(_same(fa[k], fb[k], seen) for k in fa)
+
+
+def _distinct(materials: list, idx: list) -> tuple[list, list]:
+    """(indices of the distinct materials among ``idx`` in order, each index's slot among them)."""
+    first, slots = [], []
+    for i in idx:
+        slot = next((k for k, j in enumerate(first) if same_material(materials[i], materials[j])), None)
+        if slot is None:
+            slot = len(first)
+            first.append(i)
+        slots.append(slot)
+    return first, slots
+
+
 def shading_groups(materials: list, batch: bool = True):
     """(shaders list, group_of (M,) int64, slot_of (M,) int64) for the material list."""
     group_of = np.zeros(len(materials), np.int64)
@@ -46,14 +114,24 @@ def shading_groups(materials: list, batch: bool = True):
             if key is not None:
                 sets.setdefault(key, []).append(i)
     members = {i for idx in sets.values() if len(idx) >= 2 for i in idx}
+    alone = []                  # the first of each distinct material shaded alone (batch: its twins join its group)
     for i, m in enumerate(materials):
         if i in batched or i in members:
+            continue
+        twin = None
+        if batch and not getattr(m, "shade_alone", False):
+            twin = next((j for j in alone if same_material(m, materials[j])), None)
+            if twin is None:
+                alone.append(i)
+        if twin is not None:
+            group_of[i] = group_of[twin]
             continue
         group_of[i] = len(shaders)
         shaders.append(m)
     for idx in sets.values():
         if len(idx) >= 2:
+            first, slots = _distinct(materials, idx)
             group_of[idx] = len(shaders)
-            slot_of[idx] = np.arange(len(idx))
-            shaders.append(MaterialSet([materials[i] for i in idx]))
+            slot_of[idx] = slots
+            shaders.append(MaterialSet([materials[i] for i in first]) if len(first) >= 2 else materials[first[0]])
     return shaders, group_of, slot_of

@@ -55,14 +55,14 @@ class SetShadingPoint(ShadingPoint):
 
     def take(self, sel, shared: dict | None = None) -> SetShadingPoint:
         base = super().take(sel, shared)
-        sel = np.arange(self.n)[sel]
-        parts, pos = [None] * len(self.parts), np.empty(sel.size, np.int64)
+        rows = np.arange(self.n)[sel]
+        parts, pos = [None] * len(self.parts), np.empty(rows.size, np.int64)
         for j, idx in _members(base.material, len(self.parts)):
             if self.parts[j] is not None:
-                parts[j] = self.parts[j].take(self.pos[sel[idx]])
+                parts[j] = self.parts[j].take(self.pos[rows[idx]])
             pos[idx] = np.arange(idx.size)
         return SetShadingPoint(base.p, base.n_s, base.n_g, base.wo, base.lam, base.mono, base.lookup, base.material,
-                               base.surface, self.owner, tuple(parts), pos)
+                               base.surface, self.owner, tuple(parts), pos)._taken_from(self, sel)
 
     def flipped(self, where: np.ndarray) -> SetShadingPoint:
         base = super().flipped(where)

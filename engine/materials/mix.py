@@ -336,7 +336,8 @@ class MixShadingPoint(ShadingPoint):
 
     def take(self, sel, shared: dict | None = None) -> MixShadingPoint:
         shared = {} if shared is None else shared       # the components' points share the hit's arrays
-        return self._with(super().take(sel, shared), (None if q is None else q.take(sel, shared) for q in self.parts))
+        return self._with(super().take(sel, shared),
+                          (None if q is None else q.take(sel, shared) for q in self.parts))._taken_from(self, sel)
 
     def flipped(self, where: np.ndarray) -> MixShadingPoint:
         return self._with(super().flipped(where), (None if q is None else q.flipped(where) for q in self.parts))

@@ -109,7 +109,7 @@ class MappedShadingPoint(ShadingPoint):
                                   base.material, base.surface, n_smooth)
 
     def take(self, sel, shared: dict | None = None) -> MappedShadingPoint:
-        return self._with(super().take(sel, shared), take_lanes(self.n_smooth, sel, shared))
+        return self._with(super().take(sel, shared), take_lanes(self.n_smooth, sel, shared))._taken_from(self, sel)
 
     def flipped(self, where: np.ndarray) -> MappedShadingPoint:
         return self._with(super().flipped(where), self.n_smooth * np.where(where, -1.0, 1.0)[None, :])

@@ -10,7 +10,10 @@ and read back bit for bit.  Any edit of the engine (or an upgrade) starts a fres
 
 A file that cannot be read as the expected array is built again and replaced; a folder that cannot
 be written only costs the build (the render goes on).  Files are written to a temporary name and
-renamed into place, so a reader never sees half a table and two processes may race harmlessly.
+renamed into place, so a reader never sees half a table and two processes may race harmlessly.  Within a
+process one thread reads or builds at a time (``_LOCK``): ``np.load`` parses the file's header with
+``ast.literal_eval``, which CPython 3.11 does not allow on two threads at once (a two-thread render's first
+use of a table raised "SystemError: AST constructor recursion depth mismatch").
 ``POLAR_TABLE_CACHE=0`` turns the cache off.
 """
 
@@ -20,11 +23,16 @@ import functools
 import hashlib
 import os
 import tempfile
+import threading
 from collections.abc import Callable
 
 import numpy as np
 
 from ..kernels import cache_base, compiled_sources_digest
+
+#: one reader or builder of a table at a time in this process (the module docstring); re-entrant, as a build
+#: may read another table
+_LOCK = threading.RLock()
 
 
 @functools.lru_cache(maxsize=1)
@@ -54,6 +62,11 @@ def table_path(name: str, key: tuple) -> str:
 def cached_table(name: str, key: tuple, shape: tuple[int, ...], build: Callable[[], np.ndarray]) -> np.ndarray:
     """The float64 array ``build()`` of the given shape, read from the disk cache when a process
     has built it before for the same ``name``, ``key`` (numbers and strings) and engine source."""
+    with _LOCK:
+        return _cached_table(name, key, shape, build)
+
+
+def _cached_table(name, key, shape, build) -> np.ndarray:
     if not enabled():
         return build()
     path = table_path(name, key)

@@ -11,7 +11,9 @@ the output, not the sums, between its threads.
 
 threadpoolctl (scikit-learn's; it finds OpenBLAS, MKL or BLIS in the process and calls their
 own ``set_num_threads``) does it; where it is not installed nothing changes.  The limit is
-process-wide and restored when the render ends.
+process-wide and restored when the render ends.  The libraries are looked up once per process (a
+``ThreadpoolController``; NumPy's BLAS is loaded with the engine): the lookup reads the process's memory
+map, 2.4 ms per render inside Blender (5 % of a small asset's render).
 """
 
 from __future__ import annotations
@@ -20,25 +22,28 @@ import contextlib
 import threading
 
 try:
-    from threadpoolctl import threadpool_limits
+    from threadpoolctl import ThreadpoolController
 except ImportError:             # optional: only the speed depends on it
-    threadpool_limits = None
+    ThreadpoolController = None
 
 _lock = threading.Lock()
 _depth = 0                      # renders (or warm-ups) running now, in any thread
 _limiter = None                 # the active limit, restored by the last one to finish
+_controller = None              # the process's thread pools, found on first use
 
 
 @contextlib.contextmanager
 def one_blas_thread():
     """Within the block, BLAS calls use one thread each (nested and concurrent uses share one limit)."""
-    global _depth, _limiter
-    if threadpool_limits is None:
+    global _depth, _limiter, _controller
+    if ThreadpoolController is None:
         yield
         return
     with _lock:
         if _depth == 0:
-            _limiter = threadpool_limits(limits=1, user_api="blas")
+            if _controller is None:
+                _controller = ThreadpoolController()
+            _limiter = _controller.limit(limits=1, user_api="blas")
         _depth += 1
     try:
         yield

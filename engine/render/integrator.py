@@ -44,8 +44,8 @@ from ..kernels.material_groups import material_groups
 from ..kernels.shadow_rays import shadow_rays
 from ..kernels.stokes_rotation import unpolarised_response_in_frame
 from ..kernels.transport import (add_light, add_to_paths, identity_throughput, keep_columns, next_segments, put_columns,
-                                 spectral_stokes_rgb_samples, stokes_rgb_samples, throughput_times_stokes, update_abcs,
-                                 update_depolarising, update_general)
+                                 scale_columns, spectral_stokes_rgb_samples, stokes_rgb_samples,
+                                 throughput_times_stokes, update_abcs, update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES
 from .light_paths import LightPathRules, trace_light_paths
 from .lights.lamps import PointEmitter
@@ -846,7 +846,7 @@ class PathTracer:
                                                 state.x_T, nxt.T, nxt.d, nxt.x_T, nxt.valid, nxt.eta_step, t_cols)):
             return False
         if not bsdf.radiance_scaling:       # Cycles' convention: the refraction's 1/η² taken back
-            nxt.T[..., rows] *= nxt.eta_step[rows]
+            scale_columns(nxt.T, rows, nxt.eta_step[rows])      # nxt.T[..., rows] *= eta_step[rows], in place
             nxt.eta_step[rows] = 1.0
         return True
 

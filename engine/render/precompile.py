@@ -129,6 +129,7 @@ PLAIN_MATERIALS = {
     "nk_metal": {"type": "conductor", "n": 0.2, "k": 3.0, "thin_film_thickness": 300.0},
     "gold_film": {"type": "conductor", "metal": "Au", "thin_film_thickness": 250.0},
     "glass": {"type": "dielectric", "n": 1.5},
+    "cycles_glass": {"type": "dielectric", "n": 1.45, "radiance_scaling": False},     # Blender's: 1/η² taken back
     "green_glass": {"type": "dielectric", "n": 1.5, "interior": {"color": [0.2, 0.8, 0.3], "density": 2.0}},
     "black_glass": {"type": "black_glass", "n": 1.5},
     "ts_beckmann": {"type": "torrance_sparrow", "metal": "Cu", "m": 0.3},

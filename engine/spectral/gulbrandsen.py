@@ -21,6 +21,8 @@ RGB renderer uses: exact per channel).
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from .spectrum import Spectrum
@@ -122,6 +124,11 @@ EDGE_MODES = ("tint", "f82", "schlick", "schlick_tint", "cycles_film")
 _MODE_KEYS = {mode: object() for mode in EDGE_MODES}
 
 
+#: "rgb" transport's (n, κ) (2, 3, 1) per GulbrandsenIndex (GulbrandsenIndex._nk; not a field: the scene's
+#: fingerprint, engine.render.resume, hashes the fields)
+_CHANNEL_NK: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
 class GulbrandsenIndex(Spectrum):
     """n(λ) (``part`` "n") or κ(λ) (``part`` "k") of the reflectivity spectrum r and the ``edge``
     spectrum (constant engine.spectral Spectra; reflectances in [0, 1]) read by ``mode`` (:func:`index_of`:
@@ -144,10 +151,24 @@ class GulbrandsenIndex(Spectrum):
 
     def eval_cached(self, lookup):
         # (n, κ) once per lookup: the n and the κ of one metal (the same two spectra) share one Gulbrandsen map
-        nk = lookup.memo((self.reflectivity, self.edge_tint, _MODE_KEYS[self.mode]),
-                         lambda: np.stack(index_of(self.reflectivity.eval_cached(lookup),
-                                                   self.edge_tint.eval_cached(lookup), self.mode)))
+        nk = lookup.memo((self.reflectivity, self.edge_tint, _MODE_KEYS[self.mode]), lambda: self._nk(lookup))
         return nk[0] if self.part == "n" else nk[1]
+
+    def _nk(self, lookup) -> np.ndarray:
+        """(2, L, N) n and κ at the lookup's paths.  "rgb" transport (``lookup.channels``): every path of every
+        lookup holds the same three channel values (the spectra are not textured), so the map runs once per
+        spectrum on one path's column and the result is a read-only view of it (elementwise: the same values;
+        the map per lookup was 12 % of a many-metal render)."""
+        if lookup.channels:
+            nk = _CHANNEL_NK.get(self)
+            if nk is None:
+                r, edge = self.reflectivity.eval_cached(lookup), self.edge_tint.eval_cached(lookup)
+                nk = np.stack(index_of(r[..., :1], edge[..., :1], self.mode))
+                nk.setflags(write=False)
+                _CHANNEL_NK[self] = nk
+            return np.broadcast_to(nk, nk.shape[:-1] + lookup.lam.shape[-1:])
+        return np.stack(index_of(self.reflectivity.eval_cached(lookup), self.edge_tint.eval_cached(lookup),
+                                 self.mode))
 
     def linear_srgb(self) -> np.ndarray:
         return self._pick(*index_of(self.reflectivity.linear_srgb(), self.edge_tint.linear_srgb(), self.mode))

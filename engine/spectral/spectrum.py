@@ -86,6 +86,13 @@ def rgb_channel_tables(n: int):
     return np.broadcast_to(np.eye(3)[:, :, None], (3, 3, n)), np.ones((3, n))
 
 
+def _same_columns(table: np.ndarray, n: int) -> np.ndarray:
+    """``table`` (..., N) whose columns are all equal (the "rgb" transport's tables, ``rgb_channel_tables``) for n
+    paths: a read-only view of its first column, what ``np.take`` of any n columns holds, without the gather (which
+    first copied the whole broadcast table: 7 % of a textured emitter's render)."""
+    return np.broadcast_to(table[..., :1], table.shape[:-1] + (n,))
+
+
 class WavelengthLookup:
     """The table values every RGB spectrum needs at a batch of path wavelengths, computed once.
 
@@ -147,14 +154,25 @@ class WavelengthLookup:
     @property
     def basis(self) -> np.ndarray:
         if self._basis is None:
-            self._basis = basis_rgb(self.lam) if self._root is None else np.take(self._root.basis, self._idx, axis=-1)
+            root = self._root
+            if root is None:
+                self._basis = basis_rgb(self.lam)
+            elif root._channels:
+                self._basis = _same_columns(root.basis, self._idx.shape[0])
+            else:
+                self._basis = np.take(root.basis, self._idx, axis=-1)
         return self._basis
 
     @property
     def d65(self) -> np.ndarray:
         if self._d65 is None:
             root = self._root
-            self._d65 = cie.d65_normalised(self.lam) if root is None else np.take(root.d65, self._idx, axis=-1)
+            if root is None:
+                self._d65 = cie.d65_normalised(self.lam)
+            elif root._channels:
+                self._d65 = _same_columns(root.d65, self._idx.shape[0])
+            else:
+                self._d65 = np.take(root.d65, self._idx, axis=-1)
         return self._d65
 
     def take(self, idx) -> WavelengthLookup:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kernels.geometry import interpolate_vertex_attribute
+from ..kernels.geometry import interpolate_vertex_attribute, tangent_frame
 
 
 class VertexAttributes:
@@ -116,24 +116,8 @@ class SurfacePoints:
         (Gram–Schmidt against n_s); any perpendicular pair where neither exists."""
         a = self.attributes
         t, dpdv, ok = self.position_derivatives()
-        sign = np.where(_dot(np.cross(n_s.T, t.T).T, dpdv) < 0, -1.0, 1.0)
-        if a.tangents is not None:      # given tangents win where the mesh has them
-            t4 = self._interpolate(a.tangents)
-            given = np.any(t4[:3] != 0, axis=0)
-            t = np.where(given[None, :], t4[:3], t)
-            sign = np.where(given, np.where(t4[3] < 0, -1.0, 1.0), sign)
-            ok = ok | given
-        t = t - n_s * _dot(n_s, t)[None, :]
-        length = np.sqrt(_dot(t, t))
-        ok = ok & (length > 1e-12)
-        # fallback: any unit vector ⟂ n_s (the least aligned axis, projected)
-        axis = np.zeros_like(n_s)
-        axis[np.argmin(np.abs(n_s), axis=0), np.arange(n_s.shape[1])] = 1.0
-        fb = axis - n_s * _dot(n_s, axis)[None, :]
-        fb = fb / np.sqrt(_dot(fb, fb))[None, :]
-        t = np.where(ok[None, :], t / np.where(ok, length, 1.0)[None, :], fb)
-        b = sign[None, :] * np.cross(n_s.T, t.T).T
-        return t, b
+        t4 = self._interpolate(a.tangents) if a.tangents is not None else None
+        return tangent_frame(n_s, t, dpdv, ok, t4, t4 is not None)      # (engine.kernels.geometry)
 
     def attribute(self, name: str, channels: int) -> np.ndarray:
         """Colour attribute ``name`` (channels, N), 0 where the scene has no such attribute."""
@@ -144,10 +128,6 @@ class SurfacePoints:
         if value.shape[0] >= channels:
             return value[:channels]
         return np.concatenate((value, np.zeros((channels - value.shape[0], self.n))))
-
-
-def _dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 
 
 def _is_subset(sel) -> bool:

@@ -269,3 +269,34 @@ def test_path_state_keep_gathers_only_the_fields_not_given():
                 assert (x is None and y is None) or np.array_equal(x, y)
         assert np.array_equal(a.sampler.keys, b.sampler.keys) and np.array_equal(a.lk.lam, b.lk.lam)
         assert b.lk_m is b.lk and b.n == mask.sum()
+
+
+@needs_numba
+def test_scale_columns_bitwise_as_numpys_in_place_product():
+    """The compiled in-place scale of a group's columns (a Blender glass's 1/η² taken back) is NumPy's
+    out[..., idx] *= s bit for bit — float32 throughputs rounded from the float64 product as NumPy rounds them —
+    and leaves the other columns alone; a non-contiguous destination is written in place."""
+    from engine.kernels import transport
+    rng = np.random.default_rng(23)
+    n = 900
+    s_all = np.concatenate((rng.uniform(0.3, 3.0, n - 3), [np.nan, np.inf, -0.0]))
+    for shape, dtype in (((4, 4, 3, n), np.float64), ((3, 3, 1, n), np.float64), ((4, 4, 3, n), np.float32),
+                         ((n,), np.float64)):
+        out = rng.normal(size=shape).astype(dtype)
+        for idx in (np.empty(0, np.int64), np.sort(rng.permutation(n)[:500]), rng.permutation(n)[:300],
+                    np.arange(n)):
+            s = s_all[idx]
+            want, got, twin_out = out.copy(), out.copy(), out.copy()
+            want[..., idx] *= s
+            transport.scale_columns_numba(got, idx, s)
+            transport.scale_columns_numpy(twin_out, idx, s)
+            assert got.dtype == want.dtype and got.tobytes() == want.tobytes()
+            assert twin_out.tobytes() == want.tobytes()
+    base = rng.normal(size=(4, 2, n))
+    view, want = base.transpose(1, 0, 2), base.copy().transpose(1, 0, 2)
+    idx = rng.permutation(n)[:200]
+    want[..., idx] *= s_all[idx]
+    transport.scale_columns_numba(view, idx, s_all[idx])
+    assert np.array_equal(view, want, equal_nan=True)
+    with pytest.raises(IndexError):
+        transport.scale_columns_numba(rng.normal(size=(3, n)), np.array([5, n], np.int64), np.ones(2))

@@ -1390,3 +1390,53 @@ def test_bilinear_texture_lookup_twins(extension):
                 got, want = T.bilinear_lookup_numba(tex, uv), T.bilinear_lookup_numpy(tex, uv)
                 assert got.shape == want.shape == (C, uv.shape[1]) and np.ptp(want) > 0.5
                 _bitwise([got], [want])
+
+
+@pytest.mark.skipif(not kernels.COMPILED, reason="Numba kernels disabled")
+def test_tangent_frame_twins_agree_bit_for_bit():
+    """A normal map's tangent frame (engine.textures.SurfacePoints.tangent_frame) compiled and in NumPy: given
+    tangents or ∂p/∂u, Gram–Schmidt, the least-aligned-axis fallback (ties: the first axis, as np.argmin) where
+    neither exists or T ∥ n."""
+    from engine.kernels.geometry import tangent_frame_numba, tangent_frame_numpy
+    rng = np.random.default_rng(5)
+    for _ in range(24):
+        n = int(rng.integers(1, 2000))
+        n_s = rng.normal(size=(3, n))
+        n_s /= np.linalg.norm(n_s, axis=0)
+        n_s[:, ::7] = [[0.0], [0.0], [1.0]]
+        n_s[:, 1::11] = [[0.0], [1.0], [0.0]]
+        n_s[:, 2::13] = np.sqrt(1 / 3)
+        t, dpdv = rng.normal(size=(3, n)), rng.normal(size=(3, n))
+        t[:, ::5] = 0.0
+        t[:, 1::9] = 2.0 * n_s[:, 1::9]
+        ok = rng.random(n) < 0.8
+        t4 = rng.normal(size=(4, n))
+        t4[:3, ::3] = 0.0
+        for has_t4 in (False, True):
+            with np.errstate(all="ignore"):
+                want = tangent_frame_numpy(n_s, t, dpdv, ok, t4, has_t4)
+            got = tangent_frame_numba(n_s, t, dpdv, ok, t4, has_t4)
+            assert all(g.tobytes() == w.tobytes() for g, w in zip(got, want))
+
+
+@pytest.mark.skipif(not kernels.COMPILED, reason="Numba kernels disabled")
+def test_lambert_direct_light_compiles_one_signature_for_any_input_flags():
+    """A memoised (read-only) or fresh albedo, a scalar or per-path light choice probability, a broadcast or array
+    delta flag: one compiled signature, so the precompile covers it whichever paths its scenes take (a Lambert
+    scene rendered after the precompile compiled one again)."""
+    from engine.kernels import diffuse
+    rng = np.random.default_rng(2)
+    n = 50
+    n_s = np.tile([[0.0], [0.0], [1.0]], n)
+    wo = wi = n_s.copy()
+    albedo, emitted = rng.random((3, n)), rng.random((3, n))
+    frozen = albedo.copy()
+    frozen.flags.writeable = False
+    scale, ok, pdf = rng.random(n), np.ones(n, bool), rng.random(n) + 0.1
+    results = []
+    for a in (albedo, frozen):
+        for sel in (0.5, np.full(n, 0.5)):
+            for delta in (False, np.zeros(n, bool)):
+                results.append(diffuse.direct_light_numba(n_s, wo, wi, a, emitted, scale, ok, pdf, sel, delta))
+    assert len(diffuse._direct_light_loop.signatures) == 1
+    assert all(np.array_equal(r[1], results[0][1]) and np.array_equal(r[0], results[0][0]) for r in results)

@@ -69,3 +69,21 @@ def test_edge_tint_matches_cycles_f82_curve_at_both_angles():
     r2, target = np.full(5, 0.6), np.array([0.6, 0.65, 0.7, 0.8, 0.9])
     n2, k2 = gulbrandsen_nk(r2, edge_tint_for_f82(r2, target))
     np.testing.assert_allclose(fresnel_reflectance(COS_82, n2 + 1j * k2), target, atol=4e-4)
+
+
+@pytest.mark.parametrize("mode", ["tint", "f82", "schlick", "schlick_tint", "cycles_film"])
+def test_rgb_transport_maps_one_column_with_the_same_bits(mode):
+    """"rgb" transport (a channels lookup): every path holds the same channel values, so the map runs once on one
+    column and is shared (a stride-0 view) — bit for bit the map of every path's values, for subsets too."""
+    from engine.spectral import RGB_WAVELENGTHS_NM, WavelengthLookup, rgb_channel_tables
+    from engine.spectral.gulbrandsen import index_of
+    n = 37
+    lam = np.repeat(np.array(RGB_WAVELENGTHS_NM)[:, None], n, axis=1)
+    root = WavelengthLookup(lam, *rgb_channel_tables(n), channels=True)
+    r, edge = RGBReflectanceSpectrum((0.9, 0.55, 0.2)), RGBReflectanceSpectrum((0.7, 0.8, 0.95))
+    for lk in (root, root.take(np.array([3, 5, 30, 31])).take(np.array([0, 2, 3]))):
+        want = index_of(r.eval_cached(lk).copy(), edge.eval_cached(lk).copy(), mode)
+        for part, w in zip("nk", want):
+            got = GulbrandsenIndex(r, edge, part, mode).eval_cached(lk)
+            assert got.shape == w.shape and got.strides[-1] == 0
+            assert np.array_equal(got, w)

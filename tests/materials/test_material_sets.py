@@ -87,10 +87,12 @@ def test_only_batchable_lambert_materials_are_grouped():
 
 # --------------------------------------------------------------------------- MaterialSet
 
-def _glossy_box(tmp_path, spectral):
+def _glossy_box(tmp_path, spectral, twins=False):
     """A box (floor, back, left, right, ceiling) and two panes as Blender's materials (Principled: rough metals, a
     plastic, a clear coat with a normal map, a sheen, two rough glasses, and a Mix), every one two-sided in Cycles'
-    convention as the exporter writes them, lit by a point lamp; 16 × 16 at 4 spp, 5 segments."""
+    convention as the exporter writes them, lit by a point lamp; 16 × 16 at 4 spp, 5 segments.  ``twins``: the
+    white, red and frosted materials again under other names on the box's halves, and two smooth glass panes of
+    twin materials."""
     import OpenEXR
     tilt = np.array([0.5, 0.0, np.sqrt(0.75)])
     OpenEXR.File({"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage},
@@ -118,6 +120,18 @@ def _glossy_box(tmp_path, spectral):
                quad("green", [1, 1, 0], [1, -1, 0], [1, -1, 2], [1, 1, 2]),
                quad("glass", [-0.6, -0.2, 0.1], [0.1, -0.2, 0.1], [0.1, -0.2, 1.2], [-0.6, -0.2, 1.2]),
                quad("frosted", [0.2, 0.3, 0.1], [0.8, 0.1, 0.1], [0.8, 0.1, 1.0], [0.2, 0.3, 1.0])]
+    if twins:
+        smooth = {"type": "dielectric", "n": 1.5, **blender}
+        materials.update({"white_2": materials["white"], "red_2": materials["red"], "frosted_2": materials["frosted"],
+                          "pane": smooth, "pane_2": dict(smooth)})
+        objects = objects[1:] + [quad("white_2", [-1, -1, 0], [0, -1, 0], [0, 1, 0], [-1, 1, 0]),
+                                 quad("white", [0, -1, 0], [1, -1, 0], [1, 1, 0], [0, 1, 0]),
+                                 quad("red_2", [-1, -1, 1], [-1, 1, 1], [-1, 1, 2], [-1, -1, 2]),
+                                 quad("frosted_2", [0.2, 0.6, 0.1], [0.8, 0.4, 0.1], [0.8, 0.4, 1.0], [0.2, 0.6, 1.0]),
+                                 quad("pane", [-0.9, -0.6, 0.2], [-0.5, -0.6, 0.2], [-0.5, -0.6, 0.9],
+                                      [-0.9, -0.6, 0.9]),
+                                 quad("pane_2", [0.4, -0.6, 0.2], [0.8, -0.6, 0.2], [0.8, -0.6, 0.9],
+                                      [0.4, -0.6, 0.9])]
     return parse_scene({
         "format": "polar-scene/1",
         "camera": {"origin": [0, -3.8, 1], "target": [0, 0, 1], "up": [0, 0, 1], "width": 16, "height": 16,
@@ -162,3 +176,61 @@ def test_material_sets_group_what_the_integrator_reads_alike():
         MaterialSet([rough[0], rough[2]])
     with pytest.raises(ValueError, match="delta-only"):
         MaterialSet([rough[0], mats[2]])
+
+
+# --------------------------------------------------------------------------- twins: one member, one group
+
+def test_twin_materials_are_one_member_and_one_group():
+    """Materials of one model with the same parameters (an exported glTF sample's emissive variants) share a set
+    slot, and twins shaded alone share a group; different parameters, or large arrays that are not the same
+    object, keep them apart; batch=False (the per-material groups) leaves every material its own group."""
+    from engine.materials.conductor import SmoothConductor
+    from engine.materials.material_set import MaterialSet
+    from engine.materials.torrance_sparrow import TorranceSparrow
+
+    def rough(m=0.3):
+        return TorranceSparrow(ConstantSpectrum(0.2), RGBReflectanceSpectrum([0.5, 0.4, 0.3]), m)
+
+    def mirror():
+        return SmoothConductor(ConstantSpectrum(0.2), ConstantSpectrum(3.0))
+    mats = [rough(), rough(0.5), rough(), mirror(), rough(), mirror(), Lambert(ConstantSpectrum(0.5))]
+    assert batching.same_material(mats[0], mats[2]) and not batching.same_material(mats[0], mats[1])
+    shaders, group_of, slot_of = batching.shading_groups(mats)
+    sets = [s for s in shaders if isinstance(s, MaterialSet)]
+    assert len(shaders) == 3 and len(sets) == 1 and sets[0].members == [mats[0], mats[1]]
+    assert group_of[[0, 1, 2, 4]].tolist() == [group_of[0]] * 4 and slot_of[[0, 1, 2, 4]].tolist() == [0, 1, 0, 0]
+    assert group_of[3] == group_of[5] and shaders[group_of[3]] is mats[3]
+    alone, _, _ = batching.shading_groups([rough(), rough()])
+    assert len(alone) == 1 and isinstance(alone[0], TorranceSparrow)       # all twins: the one material
+    assert len(batching.shading_groups(mats, batch=False)[0]) == 7
+
+
+def test_same_material_compares_large_arrays_by_identity():
+    from engine.materials.torrance_sparrow import TorranceSparrow
+    from engine.spectral.spectrum import TabulatedSpectrum
+    wl = np.linspace(360.0, 830.0, 5000)
+    one, other = TabulatedSpectrum(wl, np.full(wl.size, 0.5)), TabulatedSpectrum(wl, np.full(wl.size, 0.5))
+    small = [TabulatedSpectrum([360.0, 830.0], [0.5, 0.6]) for _ in range(2)]
+    assert not batching.same_material(TorranceSparrow(ConstantSpectrum(0.2), one, 0.3),
+                                      TorranceSparrow(ConstantSpectrum(0.2), other, 0.3))
+    assert batching.same_material(TorranceSparrow(ConstantSpectrum(0.2), one, 0.3),
+                                  TorranceSparrow(ConstantSpectrum(0.2), one, 0.3))
+    assert batching.same_material(TorranceSparrow(ConstantSpectrum(0.2), small[0], 0.3),
+                                  TorranceSparrow(ConstantSpectrum(0.2), small[1], 0.3))
+
+
+@pytest.mark.parametrize("spectral", ["rgb", "spectral"])
+def test_twins_shaded_together_render_the_same_bits(tmp_path, monkeypatch, spectral):
+    """The box with twins of its materials (glossy twins in the sets, smooth-glass twins shaded alone): one member
+    or group per distinct material gives bit for bit the image of one per material."""
+    renderer = Renderer(_glossy_box(tmp_path, spectral, twins=True))
+    tracer = renderer.tracer(renderer.plan())
+    together = renderer.render().stokes()
+    monkeypatch.setattr(batching, "same_material", lambda a, b: False)
+    apart_tracer = renderer.tracer(renderer.plan())
+    def slots(t):
+        return sum(len(getattr(s, "members", [s])) for s in t.shaders)
+    assert slots(tracer) + 4 == slots(apart_tracer)         # the white, red, frosted and glass twins
+    apart = renderer.render().stokes()
+    assert np.abs(apart[0]).max() > 0
+    np.testing.assert_array_equal(together, apart)

@@ -104,3 +104,32 @@ def test_the_cache_can_be_turned_off(cache, monkeypatch):
     monkeypatch.setenv("POLAR_TABLE_CACHE", "0")
     ww._albedo_table(*ARGS)
     assert files(cache) == []
+
+
+def test_threads_read_a_table_one_at_a_time(cache, monkeypatch):
+    """np.load parses the header with ast.literal_eval, which CPython 3.11 breaks on two threads at once
+    ("AST constructor recursion depth mismatch" in a two-thread render's first use of a table): reads are
+    serialised.  Two threads meet at a barrier inside the read; with the lock the second waits instead."""
+    import threading
+    table_cache.cached_table("t", (1,), (3,), lambda: np.arange(3.0))
+    inside, most, barrier = [0], [0], threading.Barrier(2, timeout=0.5)
+    real_load = np.load
+
+    def load(*a, **k):
+        inside[0] += 1
+        most[0] = max(most[0], inside[0])
+        try:
+            barrier.wait()              # the other thread inside too: two readers at once
+        except threading.BrokenBarrierError:
+            pass
+        inside[0] -= 1
+        return real_load(*a, **k)
+    monkeypatch.setattr(table_cache.np, "load", load)
+    got = []
+    threads = [threading.Thread(target=lambda: got.append(table_cache.cached_table("t", (1,), (3,), None)))
+               for _ in range(2)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert most[0] == 1 and len(got) == 2 and all(np.array_equal(g, np.arange(3.0)) for g in got)

@@ -144,3 +144,21 @@ def test_a_textured_metals_n_and_kappa_share_one_gulbrandsen_map(monkeypatch, mo
     # a subset of the points takes its (n, κ) from the batch's
     sel = np.array([2, 3, 11])
     assert np.array_equal(k_part.at(points.take(sel), lam[:, sel], mono), k[:, sel]) and len(calls) == 3
+
+
+def test_rgb_channel_subsets_share_the_tables_without_a_gather():
+    """A channels lookup's subsets read the root's identity basis and white D65 as stride-0 views: the values
+    np.take would gather (every column is the same), for subsets of subsets too."""
+    from engine.spectral import RGB_WAVELENGTHS_NM, WavelengthLookup, rgb_channel_tables
+    n = 50
+    lam = np.repeat(np.array(RGB_WAVELENGTHS_NM)[:, None], n, axis=1)
+    root = WavelengthLookup(lam, *rgb_channel_tables(n), channels=True)
+    idx = np.array([1, 4, 4, 49])
+    for sub, rows in ((root.take(idx), idx), (root.take(idx).compress(np.array([True, False, True, True])),
+                                             idx[[0, 2, 3]])):
+        assert sub.basis.shape == (3, 3, rows.size) and sub.basis.strides[-1] == 0
+        assert np.array_equal(sub.basis, np.take(root.basis, rows, axis=-1))
+        assert np.array_equal(sub.d65, np.take(root.d65, rows, axis=-1)) and sub.d65.strides[-1] == 0
+        assert np.array_equal(sub.lam, np.take(lam, rows, axis=-1))
+    plain = WavelengthLookup(np.full((4, n), 550.0))
+    assert plain.take(idx).basis.strides[-1] != 0       # spectral lookups still gather their own tables
