@@ -39,6 +39,9 @@ from ..materials.base import BSDF, BSDFFlags, BSDFSample, DeltaVertices, Mueller
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import RAY_EPSILON, Hits, offset_origin, surface_points
+from ..kernels import COMPILED
+from ..kernels.error_function import ERFCX_COEF, ERFCX_K
+from ..kernels.glossy_light import add_light_terms_loop, light_terms_loop
 from ..kernels.light_sampling import lamp_hits
 from ..kernels.material_groups import material_groups
 from ..kernels.shadow_rays import shadow_rays
@@ -67,6 +70,13 @@ if TYPE_CHECKING:
     from .camera import CameraModel
     from .lights import LightSet, _Light
     from ..scene.description import RenderSettings
+
+
+#: Next-event estimation at rough conductors in compiled steps (engine.kernels.glossy_light; False: the NumPy chain,
+#: its twin, as without Numba)
+GLOSSY_LIGHT = COMPILED and light_terms_loop is not None
+ERFCX_COEF_F64 = np.ascontiguousarray(ERFCX_COEF, dtype=np.float64)
+ERFCX_K_F64 = float(ERFCX_K)
 
 
 # ----------------------------------------------------------------------------- Mueller kernels
@@ -873,12 +883,68 @@ class PathTracer:
             medium = (gather(state.media, sel), None if state.tau is None else gather(state.tau, sel),
                       gather(surf.prim, sel), gather(surf.n_g, sel), gather(surf.wo, sel), gather(surf.p, sel),
                       gather(state.sampler.keys, sel), state.bounce)
-        contrib = self._next_event(sp, state.lk.take(sel), bsdf, state.T_store, rows, x_T, gather(u_light, sel),
-                                   acc.stats, t_cols, medium,
-                                   lobes=None if acc.lobes is None else (acc.lobes, gather(state.path, sel)))
-        add_to_paths(acc.radiance, gather(state.path, sel), contrib)
+        terms = None if medium is not None or acc.lobes is not None else self._light_terms_inputs(bsdf, sp, state)
+        if terms is not None:           # a rough conductor: its NEE in two compiled steps (the same numbers)
+            self._glossy_next_event(sp, state.lk.take(sel), bsdf, terms, state.T_store, rows, x_T,
+                                    gather(u_light, sel), acc, gather(state.path, sel), t_cols)
+        else:
+            contrib = self._next_event(sp, state.lk.take(sel), bsdf, state.T_store, rows, x_T, gather(u_light, sel),
+                                       acc.stats, t_cols, medium,
+                                       lobes=None if acc.lobes is None else (acc.lobes, gather(state.path, sel)))
+            add_to_paths(acc.radiance, gather(state.path, sel), contrib)
         if acc.path_cost is not None:
             acc.path_cost[gather(state.path, sel)] += VERTEX_COST     # a light sample (cost)
+
+    def _light_terms_inputs(self, bsdf: BSDF, sp: ShadingPoint, state: PathState) -> tuple | None:
+        """The BSDF's inputs of engine.kernels.glossy_light (BSDF.light_terms_inputs), or None where next-event
+        estimation takes the NumPy chain: NumPy kernels, polarised lights, shadow rays through see-through
+        surfaces, a transport or wavelength layout the kernel does not take."""
+        get = getattr(bsdf, "light_terms_inputs", None)
+        if get is None or not GLOSSY_LIGHT or (self.lights.polarised and self.P > 1) or self.P == 2 \
+                or (self.visibility is not None and self.visibility.affects_shadows):
+            return None
+        L, LT = 3 if self.rgb_mode else state.lk.lam.shape[0], state.T_store.shape[2]
+        if LT not in (1, L) or sp.lam.shape[0] not in (1, L):
+            return None
+        return get(sp)
+
+    def _glossy_next_event(self, sp: ShadingPoint, lookup: WavelengthLookup, bsdf: BSDF, terms: tuple,
+                           T: np.ndarray, rows: np.ndarray, x_T: np.ndarray, u: np.ndarray, acc: _Accumulators,
+                           path: np.ndarray, T_cols: np.ndarray | None) -> None:
+        """``_next_event`` and ``add_to_paths`` of a group whose BSDF gave ``terms`` (``_light_terms_inputs``): the
+        light weight, MIS, response and T·S in one compiled step (light_terms_loop), the shadow rays whose answer
+        can change the radiance, then T·S·weight·visibility into ``acc.radiance`` at ``path`` (the chain's bits)."""
+        n, P = sp.n, self.P
+        L = 3 if self.rgb_mode else lookup.lam.shape[0]
+        ls = self._sample_lights(sp, lookup, u, L, bsdf.flags.transmits)
+        c = np.ascontiguousarray
+        ok = np.array(ls.ok, dtype=bool)
+        Lm = sp.lam.shape[0]
+        A, B, C, S = (np.empty((Lm, n)) for _ in range(4))
+        x, o, o_t, wi_t = (np.empty((3, n)) for _ in range(4))
+        terms_acc, weight = np.empty((P, L, n)), np.empty((L, n))
+        skip, t_t, test = np.empty(n, bool), np.empty(n), np.empty(n, np.int64)
+        cols = c(rows if T_cols is None else T_cols, dtype=np.int64)
+        f64 = np.float64
+        k = light_terms_loop(c(sp.n_s, dtype=f64), c(sp.wo, dtype=f64), c(x_T, dtype=f64), c(sp.p, dtype=f64),
+                             c(sp.n_g, dtype=f64), c(ls.wi, dtype=f64), c(ls.dist, dtype=f64), c(ls.scale, dtype=f64),
+                             c(ls.pdf_l, dtype=f64), ok, c(np.atleast_1d(ls.delta), dtype=bool),
+                             c(ls.emitted, dtype=f64), c(np.atleast_1d(ls.select_prob), dtype=f64), *terms,
+                             ERFCX_COEF_F64, ERFCX_K_F64, T, cols, RAY_EPSILON, A, B, C, S, x, o, terms_acc, weight,
+                             skip, o_t, wi_t, t_t, test)
+        if not ok.any():            # no sample counts: nothing added (as _light_weight)
+            return
+        blocked = np.zeros(n, bool)
+        if k:
+            blocked[test[:k]] = self.scene.occluded(c(o_t[:, :k]), c(wi_t[:, :k]), t_t[:k])
+            acc.stats["shadow_rays"] += k
+            if blocked.any():
+                self._unblock_own_hits(sp, ls, blocked)
+        if len(ls.owners) > 1:
+            for _, sel in ls.owners:
+                if not ok[sel].any():
+                    skip[sel] = True        # a light none of whose samples counts adds nothing
+        add_light_terms_loop(acc.radiance, c(path, dtype=np.int64), terms_acc, weight, skip, blocked)
 
     @staticmethod
     def _sample_bsdf(bsdf: BSDF, sp: ShadingPoint, u_bsdf: np.ndarray, sel: slice | np.ndarray) -> BSDFSample:

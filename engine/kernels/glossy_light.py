@@ -1,0 +1,143 @@
+"""Next-event estimation at Torrance–Sparrow vertices in two compiled steps around the shadow rays.
+
+At the paths of one rough-conductor group (engine.materials.torrance_sparrow with its compiled facet lobe and no
+Lambert or multiscatter term), given their light samples (engine.render.integrator._LightSamples: direction wi,
+distance, 1/pdf scale, solid-angle pdf, ok, delta, emitted radiance (L, m), selection probability), the
+integrator's NumPy chain (PathTracer._light_weight, _shadow_visibility, throughput_times_stokes, add_to_paths)
+computes the facet value (Fresnel Mueller at the half vector), the mixture pdf, the power-heuristic weight, the
+response (M00, M10, 0, 0) rotated into the path's frame, T·S and the light's weight, with some twenty (L, m)
+temporaries and a dozen calls.  Here ``light_terms_loop`` does all of it per path (the twins' per-path pieces:
+torrance_sparrow.eval_at, p_spec_at, pdf_at; stokes_rotation.frame_rotation_at; geometry.offset_origin_at) and
+lays out the shadow rays; the caller casts them (CompiledScene.occluded) and ``add_light_terms_loop`` adds
+T·S·weight·visibility into the radiance.
+
+Every step repeats the arithmetic of the NumPy chain in its order, so the radiance is the chain's bit for bit.
+One thing differs: a shadow ray is cast only where its answer can change the radiance.  Where a path's T·S is
+±0 at every wavelength (the sampled direction below the shading horizon: the one-sided lobe is 0 there, about
+half of a uniform sky's samples) and its weight finite, T·S·weight·v is ±0 for v = 0 and 1, and adding ±0 leaves
+an accumulator unchanged (it starts at +0 and never becomes −0): the chain casts the ray, this does not (the
+stats count fewer shadow rays).  The NumPy chain is the reference; tests/render/test_glossy_light.py pairs them.
+
+Shapes: per-path arrays (3, m) or (m,) of the group's m paths (gathered); T (P, P, LT, ·) read at the columns
+``cols`` (engine.render.path_state.PathState.T_col); ``emitted`` (L, m) with LT and the lobe's wavelength rows
+Lm each 1 or L; ``acc`` (P, L, m) = T·S per output wavelength, ``weight`` (L, m) the light's weight before
+shadowing.  Per-point inputs given once for the batch are one-element arrays (torrance_sparrow.at).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import jit
+from .geometry import local_frame_at, offset_origin_at
+from .stokes_rotation import frame_rotation_at
+from .torrance_sparrow import (at, facet_at, facet_fresnel_at, p_spec_at, pdf_at, pdf_from_facet_at,
+                               scattering_axis_at)
+
+
+@jit
+def light_terms_loop(n_s, wo, x_T, p, n_g, wi, dist, scale, pdf_l, ok, delta, emitted, select_prob,
+                     eta, s, m, dist_code, kind, p_given, use_given, eta_p, s_p, w_d, L_p, coef, k,
+                     T, cols, epsilon, A, B, C, S, x, o, acc, weight, skip, o_t, wi_t, t_t, test):
+    """Per path j: ok[j] &= |n_s·wi| > 0 (as _light_weight narrows it), the facet value at wi (A..S, x: eval_at),
+    the MIS weight against the lobe's pdf (1 where delta), weight[:, j] = emitted·scale·(|cosθ_i|·mis/select·ok),
+    acc[i, q, j] = Σ_c T[i, c, q, col]·S[c, q, j] with S = (M00, M10, 0, 0) rotated from x into x_T (P ≥ 3; P = 1:
+    M00), skip[j] where T·S·weight·v is ±0 whatever the visibility v.  The shadow rays of the ok paths not
+    skipped go to o_t, wi_t, t_t (3, ·), (·) and their paths to ``test``; returns how many.
+
+    Where the facet value f is 0 (ω_i or ω_o below the horizon, D or G = 0) S is ±0 (a finite Fresnel value and
+    rotation times 0) and T is finite (next_segments ends the others), so T·S is ±0: the path is skipped
+    without its Fresnel value, frame or T·S where its weight is finite (A..S, x and acc are then not written).
+    The pdf shares the lobe's half vector and D (pdf_from_facet_at: pdf_at's arithmetic)."""
+    P, LT = T.shape[0], T.shape[2]
+    L = emitted.shape[0]
+    Lm = A.shape[0]
+    n_test = 0
+    for j in range(n_s.shape[1]):
+        n0, n1, n2 = n_s[0, j], n_s[1, j], n_s[2, j]
+        w0, w1, w2 = wi[0, j], wi[1, j], wi[2, j]
+        cos_i = abs((n0 * w0 + n1 * w1) + n2 * w2)
+        okj = ok[j] and cos_i > 0
+        ok[j] = okj
+        t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
+        mj = at(m, j)
+        _, lobe, lo0, lo1, lo2, li2, h0, h1, h2, D, fr, c = facet_at(j, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi,
+                                                                     at(s, j), mj, dist_code, kind, coef, k)
+        if at(delta, j):
+            mis = 1.0
+        else:
+            cos_o = (wo[0, j] * n0 + wo[1, j] * n1) + wo[2, j] * n2
+            pp = p_spec_at(j, cos_o, p_given, use_given, eta_p, L_p, s_p, w_d)
+            if lobe:            # pdf_at with the lobe's h and D
+                q = pdf_from_facet_at(lo0, lo1, lo2, li2, h0, h1, h2, D, mj, dist_code, pp, True, False, coef, k, 0.0,
+                                      False)
+            else:
+                q = pdf_at(j, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, mj, dist_code, pp, True, False, coef, k,
+                           0.0, False)
+            a = pdf_l[j] * at(select_prob, j)
+            a2 = a * a
+            b2q = q * q
+            den = a2 + b2q
+            mis = a2 / den if den > 0 else 0.0
+        f = cos_i * mis / at(select_prob, j) * (1.0 if okj else 0.0)
+        finite = True
+        for q in range(L):
+            w = (emitted[q, j] * scale[j]) * f
+            weight[q, j] = w
+            finite = finite and np.isfinite(w)
+        if fr == 0.0 and finite:
+            skip[j] = True
+            continue
+        facet_fresnel_at(j, eta, c, fr, 1.0, A, B, C, S)
+        scattering_axis_at(j, wo, wi, x)
+        if P >= 3:
+            c2, s2 = frame_rotation_at(x, x_T, wo, j)
+        else:
+            c2, s2 = 1.0, 0.0
+        col = cols[j]
+        zero = True
+        for q in range(L):
+            w = weight[q, j]
+            lt = q if LT > 1 else 0
+            ls = q if Lm > 1 else 0
+            m00 = A[ls, j]
+            b = B[ls, j]
+            r1 = c2 * b + s2 * 0.0
+            r2 = -s2 * b + c2 * 0.0
+            for i in range(P):
+                v = 0.0
+                v += T[i, 0, lt, col] * m00
+                if P >= 3:
+                    v += T[i, 1, lt, col] * r1
+                    v += T[i, 2, lt, col] * r2
+                    if P == 4:
+                        v += T[i, 3, lt, col] * 0.0
+                acc[i, q, j] = v
+                if not (np.isfinite(v) and np.isfinite(w) and (v == 0.0 or w == 0.0)):
+                    zero = False
+        skip[j] = zero
+        if okj and not zero:
+            mx = offset_origin_at(p, n_g, wi, epsilon, j, o)
+            d = dist[j]
+            for c3 in range(3):
+                o_t[c3, n_test] = o[c3, j]
+                wi_t[c3, n_test] = wi[c3, j]
+            t_t[n_test] = d * (1.0 - 1e-4) - 1e-4 * (1.0 + mx) if np.isfinite(d) else np.inf
+            test[n_test] = j
+            n_test += 1
+    return n_test
+
+
+@jit
+def add_light_terms_loop(radiance, path, acc, weight, skip, blocked):
+    """radiance[i, q, path[j]] += acc[i, q, j]·(weight[q, j]·v), v = 0 where ``blocked`` else 1 (the chain's
+    weight·visibility, T·S·weight and add_to_paths), for the paths not skipped (light_terms_loop)."""
+    P, L = acc.shape[0], acc.shape[1]
+    for j in range(acc.shape[2]):
+        if skip[j]:
+            continue
+        v = 0.0 if blocked[j] else 1.0
+        pj = path[j]
+        for i in range(P):
+            for q in range(L):
+                radiance[i, q, pj] += acc[i, q, j] * (weight[q, j] * v)
