@@ -247,68 +247,79 @@ def _pdf_loop(n_s, wo, wi, m, dist, p_given, use_given, eta, L, s, w_d, has_spec
                         coef, k, 0.0, False)
 
 
+@jit_inner
+def sample_at(i, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef, k,
+              wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
+    """The sample pass at path i: direction wi[:, i], pdf, valid, the weight's factor cosθ_i/pdf, the lobe's value
+    (times the factor where ``scale``) A..S[:, i] in the frame x[:, i] and eval's valid (TorranceSparrow.sample).
+    Returns Smith Λ(ω_o) where the Beckmann sampler computed it (specular_pdf_at's bits), else NaN."""
+    n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
+    t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
+    o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
+    lo0 = o0 * t0 + o1 * t1 + o2 * t2
+    lo1 = o0 * b0 + o1 * b1 + o2 * b2
+    cos_o = o0 * n0 + o1 * n1 + o2 * n2
+    p = p_spec_at(i, cos_o, p_given, use_given, eta, A.shape[0], s, w_d)
+    pick_spec = u_lobe[i] < p
+    l0 = l1 = l2 = 0.0
+    mi = at(m, i)
+    lam_o = 0.0
+    have_lam = False
+    if pick_spec and cos_o > 0:
+        # visible-normal sampling (engine.materials.microfacet.Beckmann.sample, engine.materials.ggx.GGX.sample)
+        if dist == 0:       # with the pdf's Λ(ω_o), its erfcx beside the sampler's
+            h0, h1, h2, lam_o = beckmann_vndf_lambda_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi, coef, k)
+            have_lam = True
+        else:
+            h0, h1, h2 = ggx_vndf_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi)
+        d = lo0 * h0 + lo1 * h1 + cos_o * h2
+        l0 = 2.0 * d * h0 - lo0
+        l1 = 2.0 * d * h1 - lo1
+        l2 = 2.0 * d * h2 - cos_o
+    elif has_diffuse and not pick_spec:
+        # cosine-weighted (engine.materials.sampling.cosine_hemisphere)
+        a = 2.0 * u_dir[0, i] - 1.0
+        bb = 2.0 * u_dir[1, i] - 1.0
+        if abs(a) > abs(bb):
+            r = a
+            phi = (np.pi / 4) * (bb / (a if a != 0 else 1.0))
+        else:
+            r = bb
+            phi = np.pi / 2 - (np.pi / 4) * (a / (bb if bb != 0 else 1.0))
+        l0 = r * np.cos(phi)
+        l1 = r * np.sin(phi)
+        l2 = np.sqrt(max(1.0 - l0 * l0 - l1 * l1, 0.0))
+    w0 = t0 * l0 + b0 * l1 + n0 * l2
+    w1 = t1 * l0 + b1 * l1 + n1 * l2
+    w2 = t2 * l0 + b2 * l1 + n2 * l2
+    wi[0, i], wi[1, i], wi[2, i] = w0, w1, w2
+    # the lobe at wi (eval_at's first half), whose half vector and D the pdf shares (pdf_at's bits)
+    e_valid, lobe, fo0, fo1, fo2, fi2, h0, h1, h2, D, fr, c = facet_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo,
+                                                                     wi, at(s, i), mi, dist, kind, coef, k)
+    if lobe:
+        q = pdf_from_facet_at(fo0, fo1, fo2, fi2, h0, h1, h2, D, mi, dist, p, True, has_diffuse, coef, k, lam_o,
+                              have_lam)
+    else:
+        q = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, mi, dist, p, True, has_diffuse, coef, k, lam_o,
+                   have_lam)
+    ok = cos_o > 0 and l2 > 0 and q > 0 and np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)
+    cos_i = max(n0 * w0 + n1 * w1 + n2 * w2, 0.0)
+    f = cos_i / q if ok else 0.0
+    valid[i] = ok
+    pdf[i] = q if ok else 0.0
+    factor[i] = f
+    facet_fresnel_at(i, eta, c, fr, f if scale else 1.0, A, B, C, S)       # eval_at's second half
+    scattering_axis_at(i, wo, wi, x)
+    eval_valid[i] = e_valid
+    return lam_o if have_lam else np.nan
+
+
 @jit
 def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef, k,
                  wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
     for i in range(n_s.shape[1]):
-        n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
-        t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
-        o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
-        lo0 = o0 * t0 + o1 * t1 + o2 * t2
-        lo1 = o0 * b0 + o1 * b1 + o2 * b2
-        cos_o = o0 * n0 + o1 * n1 + o2 * n2
-        p = p_spec_at(i, cos_o, p_given, use_given, eta, A.shape[0], s, w_d)
-        pick_spec = u_lobe[i] < p
-        l0 = l1 = l2 = 0.0
-        mi = at(m, i)
-        lam_o = 0.0
-        have_lam = False
-        if pick_spec and cos_o > 0:
-            # visible-normal sampling (engine.materials.microfacet.Beckmann.sample, engine.materials.ggx.GGX.sample)
-            if dist == 0:       # with the pdf's Λ(ω_o), its erfcx beside the sampler's
-                h0, h1, h2, lam_o = beckmann_vndf_lambda_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi, coef, k)
-                have_lam = True
-            else:
-                h0, h1, h2 = ggx_vndf_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi)
-            d = lo0 * h0 + lo1 * h1 + cos_o * h2
-            l0 = 2.0 * d * h0 - lo0
-            l1 = 2.0 * d * h1 - lo1
-            l2 = 2.0 * d * h2 - cos_o
-        elif has_diffuse and not pick_spec:
-            # cosine-weighted (engine.materials.sampling.cosine_hemisphere)
-            a = 2.0 * u_dir[0, i] - 1.0
-            bb = 2.0 * u_dir[1, i] - 1.0
-            if abs(a) > abs(bb):
-                r = a
-                phi = (np.pi / 4) * (bb / (a if a != 0 else 1.0))
-            else:
-                r = bb
-                phi = np.pi / 2 - (np.pi / 4) * (a / (bb if bb != 0 else 1.0))
-            l0 = r * np.cos(phi)
-            l1 = r * np.sin(phi)
-            l2 = np.sqrt(max(1.0 - l0 * l0 - l1 * l1, 0.0))
-        w0 = t0 * l0 + b0 * l1 + n0 * l2
-        w1 = t1 * l0 + b1 * l1 + n1 * l2
-        w2 = t2 * l0 + b2 * l1 + n2 * l2
-        wi[0, i], wi[1, i], wi[2, i] = w0, w1, w2
-        # the lobe at wi (eval_at's first half), whose half vector and D the pdf shares (pdf_at's bits)
-        e_valid, lobe, fo0, fo1, fo2, fi2, h0, h1, h2, D, fr, c = facet_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo,
-                                                                         wi, at(s, i), mi, dist, kind, coef, k)
-        if lobe:
-            q = pdf_from_facet_at(fo0, fo1, fo2, fi2, h0, h1, h2, D, mi, dist, p, True, has_diffuse, coef, k, lam_o,
-                                  have_lam)
-        else:
-            q = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, mi, dist, p, True, has_diffuse, coef, k, lam_o,
-                       have_lam)
-        ok = cos_o > 0 and l2 > 0 and q > 0 and np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)
-        cos_i = max(n0 * w0 + n1 * w1 + n2 * w2, 0.0)
-        f = cos_i / q if ok else 0.0
-        valid[i] = ok
-        pdf[i] = q if ok else 0.0
-        factor[i] = f
-        facet_fresnel_at(i, eta, c, fr, f if scale else 1.0, A, B, C, S)       # eval_at's second half
-        scattering_axis_at(i, wo, wi, x)
-        eval_valid[i] = e_valid
+        sample_at(i, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef,
+                  k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid)
 
 
 # ----------------------------------------------------------------------------- wrappers (the compiled twins)

@@ -860,13 +860,14 @@ class TorranceSparrow(BSDF):
     def delta_reflection(self, sp: ShadingPoint):
         return None
 
-    def light_terms_inputs(self, sp: ShadingPoint) -> tuple | None:
-        """The facet lobe's inputs of engine.kernels.glossy_light.light_terms_loop (``eval``'s and ``pdf``'s, as their
-        compiled twins take them: eta, s, m, distribution and shadowing codes, then p_given, use_given, the pdf's
-        eta and s, w_d and its wavelength count), or None where the value is not the compiled facet lobe alone
-        (a Lambert or multiscatter term, a film, Blinn facets, a subclass's own eval or pdf)."""
-        if (not self._compiled_lobe or self.has_diffuse or self.multiscatter
-                or type(self).eval is not TorranceSparrow.eval or type(self).pdf is not TorranceSparrow.pdf):
+    def lobe_kernel_inputs(self, sp: ShadingPoint) -> tuple | None:
+        """The facet lobe's inputs of engine.kernels.glossy_bounce (``eval``'s, ``pdf``'s and ``sample``'s, as their
+        compiled twins take them: eta, s, m, distribution and shadowing codes, p_given, use_given, the pdf's eta and
+        s, w_d and its wavelength count), or None where the value is not the compiled facet lobe alone (a Lambert
+        or multiscatter term, a film, Blinn facets, a subclass's own eval, pdf or sample)."""
+        cls = type(self)
+        if (not self._compiled_lobe or self.has_diffuse or self.multiscatter or cls.eval is not TorranceSparrow.eval
+                or cls.pdf is not TorranceSparrow.pdf or cls.sample is not TorranceSparrow.sample):
             return None
         n = sp.n
         p_given, eta_p, s, w_d = self._mixture_inputs(sp, compact=True)

@@ -1,27 +1,33 @@
-"""Next-event estimation at Torrance–Sparrow vertices in two compiled steps around the shadow rays.
+"""The glossy group's vertex in compiled steps: next-event estimation and the BSDF sample with its T update.
 
 At the paths of one rough-conductor group (engine.materials.torrance_sparrow with its compiled facet lobe and no
-Lambert or multiscatter term), given their light samples (engine.render.integrator._LightSamples: direction wi,
-distance, 1/pdf scale, solid-angle pdf, ok, delta, emitted radiance (L, m), selection probability), the
-integrator's NumPy chain (PathTracer._light_weight, _shadow_visibility, throughput_times_stokes, add_to_paths)
-computes the facet value (Fresnel Mueller at the half vector), the mixture pdf, the power-heuristic weight, the
-response (M00, M10, 0, 0) rotated into the path's frame, T·S and the light's weight, with some twenty (L, m)
-temporaries and a dozen calls.  Here ``light_terms_loop`` does all of it per path (the twins' per-path pieces:
-torrance_sparrow.eval_at, p_spec_at, pdf_at; stokes_rotation.frame_rotation_at; geometry.offset_origin_at) and
-lays out the shadow rays; the caller casts them (CompiledScene.occluded) and ``add_light_terms_loop`` adds
-T·S·weight·visibility into the radiance.
+Lambert or multiscatter term) the integrator's NumPy chain runs a dozen calls with some twenty (L, m) temporaries
+per step.  Here, as engine.kernels.delta_bounce does for delta materials, per path:
 
-Every step repeats the arithmetic of the NumPy chain in its order, so the radiance is the chain's bit for bit.
-One thing differs: a shadow ray is cast only where its answer can change the radiance.  Where a path's T·S is
-±0 at every wavelength (the sampled direction below the shading horizon: the one-sided lobe is 0 there, about
-half of a uniform sky's samples) and its weight finite, T·S·weight·v is ±0 for v = 0 and 1, and adding ±0 leaves
-an accumulator unchanged (it starts at +0 and never becomes −0): the chain casts the ray, this does not (the
-stats count fewer shadow rays).  The NumPy chain is the reference; tests/render/test_glossy_light.py pairs them.
+- ``light_terms_loop``: given the light samples (engine.render.integrator._LightSamples: direction wi, distance,
+  1/pdf scale, solid-angle pdf, ok, delta, emitted radiance (L, m), selection probability), the facet value
+  (Fresnel Mueller at the half vector), the mixture pdf, the power-heuristic weight, the response (M00, M10, 0, 0)
+  rotated into the path's frame, T·S and the light's weight (PathTracer._light_weight, throughput_times_stokes),
+  and the shadow rays (shadow_rays); the caller casts them (CompiledScene.occluded) and ``add_light_terms_loop``
+  adds T·S·weight·visibility into the radiance (add_to_paths);
+- ``sample_update_loop``: the sample pass (torrance_sparrow.sample_at: visible normal, Fresnel Mueller, pdf) and,
+  a chunk of paths at a time, T_new = T·R(x → x_T)·M (delta_bounce._update_chunk: update_abcs's arithmetic) and
+  the next segment's columns (PathTracer._sample_bsdf, scatter_throughput, _store_sample).
+
+Every step repeats the arithmetic of the NumPy chain in its order (the per-path pieces of
+engine.kernels.torrance_sparrow, stokes_rotation.frame_rotation_at, geometry.offset_origin_at), so the numbers are
+the chain's bit for bit.  One thing differs: a shadow ray is cast only where its answer can change the radiance.
+Where a path's T·S is ±0 at every wavelength (the sampled direction below the shading horizon: the one-sided lobe
+is 0 there, about half of a uniform sky's samples) and its weight finite, T·S·weight·v is ±0 for v = 0 and 1, and
+adding ±0 leaves an accumulator unchanged (it starts at +0 and never becomes −0): the chain casts the ray, this
+does not (the stats count fewer shadow rays).  The NumPy chain is the reference (the route is off without
+compiled kernels); tests/render/test_glossy_bounce.py pairs them.
 
 Shapes: per-path arrays (3, m) or (m,) of the group's m paths (gathered); T (P, P, LT, ·) read at the columns
 ``cols`` (engine.render.path_state.PathState.T_col); ``emitted`` (L, m) with LT and the lobe's wavelength rows
 Lm each 1 or L; ``acc`` (P, L, m) = T·S per output wavelength, ``weight`` (L, m) the light's weight before
-shadowing.  Per-point inputs given once for the batch are one-element arrays (torrance_sparrow.at).
+shadowing.  Per-point inputs given once for the batch are one-element arrays (torrance_sparrow.at); outputs of
+the sample are written at the batch rows ``rows``.
 """
 
 from __future__ import annotations
@@ -29,15 +35,16 @@ from __future__ import annotations
 import numpy as np
 
 from . import jit
+from .delta_bounce import _CHUNK, _chunk_buffers, _update_chunk
 from .geometry import local_frame_at, offset_origin_at
 from .stokes_rotation import frame_rotation_at
-from .torrance_sparrow import (at, facet_at, facet_fresnel_at, p_spec_at, pdf_at, pdf_from_facet_at,
+from .torrance_sparrow import (at, facet_at, facet_fresnel_at, p_spec_at, pdf_at, pdf_from_facet_at, sample_at,
                                scattering_axis_at)
 
 
 @jit
 def light_terms_loop(n_s, wo, x_T, p, n_g, wi, dist, scale, pdf_l, ok, delta, emitted, select_prob,
-                     eta, s, m, dist_code, kind, p_given, use_given, eta_p, s_p, w_d, L_p, coef, k,
+                     eta, s, m, dist_code, kind, p_given, use_given, eta_p, s_p, w_d, L_p, coef, k, lam_o,
                      T, cols, epsilon, A, B, C, S, x, o, acc, weight, skip, o_t, wi_t, t_t, test):
     """Per path j: ok[j] &= |n_s·wi| > 0 (as _light_weight narrows it), the facet value at wi (A..S, x: eval_at),
     the MIS weight against the lobe's pdf (1 where delta), weight[:, j] = emitted·scale·(|cosθ_i|·mis/select·ok),
@@ -48,7 +55,8 @@ def light_terms_loop(n_s, wo, x_T, p, n_g, wi, dist, scale, pdf_l, ok, delta, em
     Where the facet value f is 0 (ω_i or ω_o below the horizon, D or G = 0) S is ±0 (a finite Fresnel value and
     rotation times 0) and T is finite (next_segments ends the others), so T·S is ±0: the path is skipped
     without its Fresnel value, frame or T·S where its weight is finite (A..S, x and acc are then not written).
-    The pdf shares the lobe's half vector and D (pdf_from_facet_at: pdf_at's arithmetic)."""
+    The pdf shares the lobe's half vector and D (pdf_from_facet_at: pdf_at's arithmetic) and takes Smith Λ(ω_o)
+    from ``lam_o`` (m,) where it is not NaN (sample_update_loop's, the same bits; an empty array: none)."""
     P, LT = T.shape[0], T.shape[2]
     L = emitted.shape[0]
     Lm = A.shape[0]
@@ -69,8 +77,9 @@ def light_terms_loop(n_s, wo, x_T, p, n_g, wi, dist, scale, pdf_l, ok, delta, em
             cos_o = (wo[0, j] * n0 + wo[1, j] * n1) + wo[2, j] * n2
             pp = p_spec_at(j, cos_o, p_given, use_given, eta_p, L_p, s_p, w_d)
             if lobe:            # pdf_at with the lobe's h and D
-                q = pdf_from_facet_at(lo0, lo1, lo2, li2, h0, h1, h2, D, mj, dist_code, pp, True, False, coef, k, 0.0,
-                                      False)
+                lam = lam_o[j] if lam_o.shape[0] > 0 else np.nan
+                q = pdf_from_facet_at(lo0, lo1, lo2, li2, h0, h1, h2, D, mj, dist_code, pp, True, False, coef, k,
+                                      lam, not np.isnan(lam))
             else:
                 q = pdf_at(j, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, mj, dist_code, pp, True, False, coef, k,
                            0.0, False)
@@ -141,3 +150,41 @@ def add_light_terms_loop(radiance, path, acc, weight, skip, blocked):
         for i in range(P):
             for q in range(L):
                 radiance[i, q, pj] += acc[i, q, j] * (weight[q, j] * v)
+
+
+@jit
+def sample_update_loop(rows, cols, n_s, wo, x_T, u_lobe, u_dir, eta, s, m, dist_code, kind, p_given, use_given, w_d,
+                       coef, k, T, wi, pdf, valid, factor, A, B, C, S, x, eval_valid, lam_o,
+                       T_out, d_out, x_out, valid_out, pdf_out, is_delta_out, eta_step_out):
+    """TorranceSparrow.sample at the group's paths (sample_at into the scratch wi .. eval_valid, indexed by j; Smith
+    Λ(ω_o) into lam_o[j], NaN where not computed), then at their batch rows m = rows[j]: T_out[..., m] =
+    T[..., cols[j]]·R(x → x_T)·M, M the sample's weight (ABCS, frame x), and the next segment d, x_T, valid, pdf,
+    is_delta (False), eta_step (1)."""
+    P = T.shape[0]
+    Lm = A.shape[0]
+    abcs, rot = _chunk_buffers(Lm)
+    n = rows.shape[0]
+    for j0 in range(0, n, _CHUNK):
+        j1 = min(j0 + _CHUNK, n)
+        for j in range(j0, j1):
+            jj = j - j0
+            lam_o[j] = sample_at(j, n_s, wo, u_lobe, u_dir, eta, s, m, dist_code, kind, p_given, use_given, w_d, False,
+                                 True, coef, k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid)
+            mm = rows[j]
+            for c in range(3):
+                d_out[c, mm] = wi[c, j]
+                x_out[c, mm] = x[c, j]
+            valid_out[mm] = valid[j]
+            pdf_out[mm] = pdf[j]
+            is_delta_out[mm] = False
+            eta_step_out[mm] = 1.0
+            for q in range(Lm):
+                abcs[q, 0, jj] = A[q, j]
+                abcs[q, 1, jj] = B[q, j]
+                abcs[q, 2, jj] = C[q, j]
+                abcs[q, 3, jj] = S[q, j]
+            if P >= 3:
+                rot[0, jj], rot[1, jj] = frame_rotation_at(x, x_T, wo, j)
+            else:
+                rot[0, jj], rot[1, jj] = 1.0, 0.0
+        _update_chunk(T, cols, T_out, rows, j0, j1, abcs, rot)

@@ -1,5 +1,6 @@
-"""Next-event estimation at rough conductors in compiled steps (engine.kernels.glossy_light) against its twin, the
-integrator's NumPy chain (PathTracer._next_event then add_to_paths).
+"""Next-event estimation and the BSDF sample at rough conductors in compiled steps (engine.kernels.glossy_bounce)
+against their twin, the integrator's NumPy chain (PathTracer._next_event then add_to_paths; _sample_bsdf,
+scatter_throughput and _store_sample).
 
 The compiled route must leave every image bit for bit as the chain makes it, in every transport (full, linear
 and scalar Stokes; spectral, RGB, mono; a wavelength-dependent metal; several lights with delta lamps and the
@@ -20,7 +21,7 @@ from engine.render import precompile
 from engine.render.renderer import Renderer
 from engine.scene.loader import load_scene, parse_scene
 
-needs_numba = pytest.mark.skipif(not integrator.GLOSSY_LIGHT, reason="compiled kernels not in use")
+needs_numba = pytest.mark.skipif(not integrator.GLOSSY_BOUNCE, reason="compiled kernels not in use")
 
 PEERS = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "..", "shared",
                      "peers", "scenes")
@@ -38,7 +39,7 @@ METALS = {"cu": {"type": "torrance_sparrow", "metal": "Cu", "m": 0.3},
 def scenes(tmp_path_factory):
     """Per METALS entry: tiles and a floor of it under a sky, lamps and an emitting quad (engine.render.precompile's
     scenes write the texture)."""
-    folder = tmp_path_factory.mktemp("glossy_light")
+    folder = tmp_path_factory.mktemp("glossy_bounce")
     precompile.scenes(str(folder))
     out = {}
     for name, metal in METALS.items():
@@ -50,22 +51,27 @@ def scenes(tmp_path_factory):
         scene = precompile._scene({"metal": metal, "lambert": {"type": "lambert", "albedo": 0.5}}, objects,
                                   [{"type": "environment", "radiance": 0.5}] + precompile.LAMPS, spp=4)
         out[name] = parse_scene(scene, base_dir=str(folder), source=name)
+    # the metal alone (one material group: its sample's arrays become the next segments, _new_scattered)
+    alone = precompile._scene({"metal": METALS["cu"]}, precompile._row(["metal"], 0.5) + [precompile._floor("metal")],
+                              [{"type": "environment", "radiance": 0.5}, precompile.LAMPS[0]], spp=4)
+    out["alone"] = parse_scene(alone, base_dir=str(folder), source="alone")
     return out
 
 
 def render_both(monkeypatch, scene, **overrides):
     """(compiled route's Stokes image, the chain's, the compiled route's calls, shadow rays of each)."""
     calls = []
-    kernel = integrator.light_terms_loop
+    for name in ("light_terms_loop", "sample_update_loop"):
+        kernel = getattr(integrator, name)
 
-    def counted(*args):
-        calls.append(args[0].shape[1])
-        return kernel(*args)
-    monkeypatch.setattr(integrator, "light_terms_loop", counted)
+        def counted(*args, kernel=kernel, name=name):
+            calls.append(name)
+            return kernel(*args)
+        monkeypatch.setattr(integrator, name, counted)
     settings = dataclasses.replace(scene.settings, threads=1, **overrides)
     images, rays = [], []
     for on in (True, False):
-        monkeypatch.setattr(integrator, "GLOSSY_LIGHT", on)
+        monkeypatch.setattr(integrator, "GLOSSY_BOUNCE", on)
         result = Renderer(scene).render(settings)
         images.append(result.stokes())
         rays.append(result.stats["shadow_rays"])
@@ -76,14 +82,15 @@ CASES = [("cu", {}), ("cu", {"polarisation": "linear", "spectral": "rgb", "sampl
          ("cu", {"polarisation": "off", "spectral": "mono", "sampler": "stratified"}),
          ("cu", {"light_tree": "on"}), ("nk_smith", {}), ("nk_smith", {"reduce_spectral": "off"}),
          ("ggx", {"polarisation": "linear"}),
-         ("textured", {}), ("textured", {"spectral": "rgb", "polarisation": "off"})]
+         ("textured", {}), ("textured", {"spectral": "rgb", "polarisation": "off"}), ("alone", {}),
+         ("alone", {"polarisation": "linear", "spectral": "rgb"})]
 
 
 @needs_numba
 @pytest.mark.parametrize("name, overrides", CASES)
 def test_the_compiled_route_gives_the_chains_image_bit_for_bit(monkeypatch, scenes, name, overrides):
     fused, chain, calls, rays = render_both(monkeypatch, scenes[name], **overrides)
-    assert calls, "the rough conductor's next-event estimation did not take the compiled route"
+    assert set(calls) == {"light_terms_loop", "sample_update_loop"}, "the compiled steps were not taken"
     assert np.array_equal(fused, chain, equal_nan=True)
     assert rays[0] <= rays[1]
 
@@ -94,7 +101,7 @@ def test_rough_sphere_casts_only_the_shadow_rays_that_count(monkeypatch):
     scene = load_scene(os.path.join(PEERS, "rough_sphere_a030.json"))
     scene.camera.width = scene.camera.height = 24
     fused, chain, calls, rays = render_both(monkeypatch, scene, spp=4, seed=5)
-    assert calls and np.array_equal(fused, chain)
+    assert set(calls) == {"light_terms_loop", "sample_update_loop"} and np.array_equal(fused, chain)
     assert rays[0] < 0.75 * rays[1]           # a uniform sky's samples below the horizon cast none
 
 
@@ -106,7 +113,7 @@ def test_edge_samples_pair_with_the_chain(monkeypatch, scenes):
     settings = dataclasses.replace(scene.settings, threads=1)
     plan = renderer.plan(settings)
     tracer = renderer.tracer(plan)
-    ts = next(m for m in tracer.materials if type(m).__name__ == "TorranceSparrow" and m.light_terms_inputs)
+    ts = next(m for m in tracer.materials if type(m).__name__ == "TorranceSparrow" and m.lobe_kernel_inputs)
     rng = np.random.default_rng(7)
     n, P = 64, tracer.P
     from engine.materials.base import ShadingPoint
@@ -153,11 +160,11 @@ def test_edge_samples_pair_with_the_chain(monkeypatch, scenes):
     integrator.add_to_paths(chain, path, contrib)
     acc = integrator._Accumulators(radiance=np.zeros((P, 4, n)), w_rgb=None, transparency=None, guides=None,
                                    stats={"shadow_rays": 0})
-    terms = ts.light_terms_inputs(sp)
+    terms = ts.lobe_kernel_inputs(sp)
     tracer._glossy_next_event(sp, lk, ts, terms, T, rows, x_T, np.zeros((4, n)), acc, path, None)
     assert np.array_equal(acc.radiance, chain, equal_nan=True)
     assert np.isnan(chain).any()                            # the infinite weight's NaN reached both alike
 
 
 def test_the_route_is_off_without_compiled_kernels():
-    assert integrator.GLOSSY_LIGHT == (kernels.COMPILED and integrator.light_terms_loop is not None)
+    assert integrator.GLOSSY_BOUNCE == (kernels.COMPILED and integrator.light_terms_loop is not None)
