@@ -25,9 +25,9 @@ compiled kernels); tests/render/test_glossy_bounce.py pairs them.
 
 Shapes: per-path arrays (3, m) or (m,) of the group's m paths (gathered); T (P, P, LT, ·) read at the columns
 ``cols`` (engine.render.path_state.PathState.T_col); ``emitted`` (L, m) with LT and the lobe's wavelength rows
-Lm each 1 or L; ``acc`` (P, L, m) = T·S per output wavelength, ``weight`` (L, m) the light's weight before
-shadowing.  Per-point inputs given once for the batch are one-element arrays (torrance_sparrow.at); outputs of
-the sample are written at the batch rows ``rows``.
+Lm each 1 or L; ``acc`` (m, P, L) = T·S per output wavelength, ``weight`` (m, L) the light's weight before
+shadowing (path-major: one stream each).  Per-point inputs given once for the batch are one-element arrays
+(torrance_sparrow.at); outputs of the sample are written at the batch rows ``rows``.
 """
 
 from __future__ import annotations
@@ -47,8 +47,8 @@ def light_terms_loop(n_s, wo, x_T, p, n_g, wi, dist, scale, pdf_l, ok, delta, em
                      eta, s, m, dist_code, kind, p_given, use_given, eta_p, s_p, w_d, L_p, coef, k, lam_o,
                      T, cols, epsilon, A, B, C, S, x, o, acc, weight, skip, o_t, wi_t, t_t, test):
     """Per path j: ok[j] &= |n_s·wi| > 0 (as _light_weight narrows it), the facet value at wi (A..S, x: eval_at),
-    the MIS weight against the lobe's pdf (1 where delta), weight[:, j] = emitted·scale·(|cosθ_i|·mis/select·ok),
-    acc[i, q, j] = Σ_c T[i, c, q, col]·S[c, q, j] with S = (M00, M10, 0, 0) rotated from x into x_T (P ≥ 3; P = 1:
+    the MIS weight against the lobe's pdf (1 where delta), weight[j, :] = emitted·scale·(|cosθ_i|·mis/select·ok),
+    acc[j, i, q] = Σ_c T[i, c, q, col]·S[c, q, j] with S = (M00, M10, 0, 0) rotated from x into x_T (P ≥ 3; P = 1:
     M00), skip[j] where T·S·weight·v is ±0 whatever the visibility v.  The shadow rays of the ok paths not
     skipped go to o_t, wi_t, t_t (3, ·), (·) and their paths to ``test``; returns how many.
 
@@ -92,7 +92,7 @@ def light_terms_loop(n_s, wo, x_T, p, n_g, wi, dist, scale, pdf_l, ok, delta, em
         finite = True
         for q in range(L):
             w = (emitted[q, j] * scale[j]) * f
-            weight[q, j] = w
+            weight[j, q] = w
             finite = finite and np.isfinite(w)
         if fr == 0.0 and finite:
             skip[j] = True
@@ -106,7 +106,7 @@ def light_terms_loop(n_s, wo, x_T, p, n_g, wi, dist, scale, pdf_l, ok, delta, em
         col = cols[j]
         zero = True
         for q in range(L):
-            w = weight[q, j]
+            w = weight[j, q]
             lt = q if LT > 1 else 0
             ls = q if Lm > 1 else 0
             m00 = A[ls, j]
@@ -121,7 +121,7 @@ def light_terms_loop(n_s, wo, x_T, p, n_g, wi, dist, scale, pdf_l, ok, delta, em
                     v += T[i, 2, lt, col] * r2
                     if P == 4:
                         v += T[i, 3, lt, col] * 0.0
-                acc[i, q, j] = v
+                acc[j, i, q] = v
                 if not (np.isfinite(v) and np.isfinite(w) and (v == 0.0 or w == 0.0)):
                     zero = False
         skip[j] = zero
@@ -139,17 +139,17 @@ def light_terms_loop(n_s, wo, x_T, p, n_g, wi, dist, scale, pdf_l, ok, delta, em
 
 @jit
 def add_light_terms_loop(radiance, path, acc, weight, skip, blocked):
-    """radiance[i, q, path[j]] += acc[i, q, j]·(weight[q, j]·v), v = 0 where ``blocked`` else 1 (the chain's
+    """radiance[i, q, path[j]] += acc[j, i, q]·(weight[j, q]·v), v = 0 where ``blocked`` else 1 (the chain's
     weight·visibility, T·S·weight and add_to_paths), for the paths not skipped (light_terms_loop)."""
-    P, L = acc.shape[0], acc.shape[1]
-    for j in range(acc.shape[2]):
+    P, L = acc.shape[1], acc.shape[2]
+    for j in range(acc.shape[0]):
         if skip[j]:
             continue
         v = 0.0 if blocked[j] else 1.0
         pj = path[j]
         for i in range(P):
             for q in range(L):
-                radiance[i, q, pj] += acc[i, q, j] * (weight[q, j] * v)
+                radiance[i, q, pj] += acc[j, i, q] * (weight[j, q] * v)
 
 
 @jit

@@ -969,7 +969,7 @@ class PathTracer:
         Lm = sp.lam.shape[0]
         A, B, C, S = (np.empty((Lm, n)) for _ in range(4))
         x, o, o_t, wi_t = (np.empty((3, n)) for _ in range(4))
-        terms_acc, weight = np.empty((P, L, n)), np.empty((L, n))
+        terms_acc, weight = np.empty((n, P, L)), np.empty((n, L))
         skip, t_t, test = np.empty(n, bool), np.empty(n), np.empty(n, np.int64)
         cols = c(rows if T_cols is None else T_cols, dtype=np.int64)
         f64 = np.float64
