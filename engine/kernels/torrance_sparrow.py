@@ -141,11 +141,12 @@ def p_spec_at(i, cos_o, p_given, use_given, eta, L, s, w_d):
 
 
 @jit_inner
-def facet_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, s, m, dist, kind, coef, k):
-    """The facet lobe's scalars at path i: (valid: cosθ_i > 0 and cosθ_o > 0, ok: the lobe is evaluated there,
-    ω_o local (3), cosθ_i, h (3), D(h), f = s·D·G/(4 cosθ_i cosθ_o), the facet cosine c) (0 and 1 where not ok)."""
-    lo0, lo1, lo2 = to_local_at(wo[0, i], wo[1, i], wo[2, i], t0, t1, t2, b0, b1, b2, n0, n1, n2)
-    li0, li1, li2 = to_local_at(wi[0, i], wi[1, i], wi[2, i], t0, t1, t2, b0, b1, b2, n0, n1, n2)
+def facet_at(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1, o2, w0, w1, w2, s, m, dist, kind, coef, k):
+    """The facet lobe's scalars at ω_o = (o0, o1, o2), ω_i = (w0, w1, w2): (valid: cosθ_i > 0 and cosθ_o > 0, ok:
+    the lobe is evaluated there, ω_o local (3), cosθ_i, h (3), D(h), f = s·D·G/(4 cosθ_i cosθ_o), the facet cosine
+    c) (0 and 1 where not ok)."""
+    lo0, lo1, lo2 = to_local_at(o0, o1, o2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
+    li0, li1, li2 = to_local_at(w0, w1, w2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
     valid = li2 > 0 and lo2 > 0
     hv0, hv1, hv2 = li0 + lo0, li1 + lo1, li2 + lo2
     length = np.sqrt(hv0 * hv0 + hv1 * hv1 + hv2 * hv2)
@@ -163,34 +164,36 @@ def facet_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, s, m, dist, kind, co
 
 
 @jit_inner
-def facet_fresnel_at(i, eta, c, fr, factor, A, B, C, S):
-    """A..S[:, i] = the facet Fresnel (A, B, C, S)(c) per wavelength times f·``factor`` (eval_at's second half)."""
+def facet_fresnel_at(i, o, eta, c, fr, factor, A, B, C, S):
+    """A..S[:, o] = the facet Fresnel (A, B, C, S)(c) of path i's index per wavelength times f·``factor`` (eval_at's
+    second half)."""
     e = eta_at(eta, 0, i)
     a_, b_, c_, s_ = abcs_at(c, e)
     for lam in range(A.shape[0]):
         if lam > 0 and eta_at(eta, lam, i) != e:    # a constant index: one Fresnel evaluation serves every λ
             e = eta_at(eta, lam, i)
             a_, b_, c_, s_ = abcs_at(c, e)
-        A[lam, i] = a_ * fr * factor
-        B[lam, i] = b_ * fr * factor
-        C[lam, i] = c_ * fr * factor
-        S[lam, i] = s_ * fr * factor
+        A[lam, o] = a_ * fr * factor
+        B[lam, o] = b_ * fr * factor
+        C[lam, o] = c_ * fr * factor
+        S[lam, o] = s_ * fr * factor
 
 
 @jit_inner
-def scattering_axis_at(i, wo, wi, x):
-    """x[:, i] = unit(k_i × k_o), k_i = −ω_i (engine.kernels.geometry.unit_cross, same order)."""
-    x[0, i], x[1, i], x[2, i] = unit_cross_at(-wi[0, i], -wi[1, i], -wi[2, i], wo[0, i], wo[1, i], wo[2, i],
-                                              _DEGENERATE)
+def scattering_axis(w0, w1, w2, o0, o1, o2):
+    """unit(k_i × k_o), k_i = −ω_i, k_o = ω_o (engine.kernels.geometry.unit_cross, same order)."""
+    return unit_cross_at(-w0, -w1, -w2, o0, o1, o2, _DEGENERATE)
 
 
 @jit_inner
 def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, dist, kind, coef, k, factor, A, B, C, S, x):
     """Facet lobe at path i into A..S[:, i] (times ``factor``) and x[:, i]; returns cosθ_i > 0 and cosθ_o > 0."""
-    valid, _, _, _, _, _, _, _, _, _, fr, c = facet_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, s, m, dist,
-                                                       kind, coef, k)
-    facet_fresnel_at(i, eta, c, fr, factor, A, B, C, S)
-    scattering_axis_at(i, wo, wi, x)
+    o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
+    w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
+    valid, _, _, _, _, _, _, _, _, _, fr, c = facet_at(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1, o2, w0, w1, w2, s,
+                                                       m, dist, kind, coef, k)
+    facet_fresnel_at(i, i, eta, c, fr, factor, A, B, C, S)
+    x[0, i], x[1, i], x[2, i] = scattering_axis(w0, w1, w2, o0, o1, o2)
     return valid
 
 
@@ -199,8 +202,14 @@ def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, dist, p_spec, has_s
            lam_o, have_lam):
     """The two-lobe mixture density of ω_i = wi[:, i] (TorranceSparrow.pdf); ``lam_o``, ``have_lam`` as for
     specular_pdf_at."""
-    o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
-    w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
+    return pdf_of(n0, n1, n2, t0, t1, t2, b0, b1, b2, wo[0, i], wo[1, i], wo[2, i], wi[0, i], wi[1, i], wi[2, i], m,
+                  dist, p_spec, has_specular, has_diffuse, coef, k, lam_o, have_lam)
+
+
+@jit_inner
+def pdf_of(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1, o2, w0, w1, w2, m, dist, p_spec, has_specular, has_diffuse,
+           coef, k, lam_o, have_lam):
+    """pdf_at of ω_o = (o0, o1, o2) and ω_i = (w0, w1, w2) given as numbers."""
     lo0, lo1, lo2 = to_local_at(o0, o1, o2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
     li0, li1, li2 = to_local_at(w0, w1, w2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
     if not (li2 > 0 and lo2 > 0):
@@ -249,11 +258,12 @@ def _pdf_loop(n_s, wo, wi, m, dist, p_given, use_given, eta, L, s, w_d, has_spec
 
 
 @jit_inner
-def sample_at(i, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef, k,
-              wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
-    """The sample pass at path i: direction wi[:, i], pdf, valid, the weight's factor cosθ_i/pdf, the lobe's value
-    (times the factor where ``scale``) A..S[:, i] in the frame x[:, i] and eval's valid (TorranceSparrow.sample).
-    Returns Smith Λ(ω_o) where the Beckmann sampler computed it (specular_pdf_at's bits), else NaN."""
+def sample_at(i, o, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef,
+              k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
+    """The sample pass at path i into column o: direction wi[:, o], pdf, valid, the weight's factor cosθ_i/pdf, the
+    lobe's value (times the factor where ``scale``) A..S[:, o] in the frame x[:, o] and eval's valid
+    (TorranceSparrow.sample).  Returns Smith Λ(ω_o) where the Beckmann sampler computed it (specular_pdf_at's
+    bits), else NaN."""
     n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
     t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
     o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
@@ -282,25 +292,25 @@ def sample_at(i, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_giv
     w0 = t0 * l0 + b0 * l1 + n0 * l2
     w1 = t1 * l0 + b1 * l1 + n1 * l2
     w2 = t2 * l0 + b2 * l1 + n2 * l2
-    wi[0, i], wi[1, i], wi[2, i] = w0, w1, w2
+    wi[0, o], wi[1, o], wi[2, o] = w0, w1, w2
     # the lobe at wi (eval_at's first half), whose half vector and D the pdf shares (pdf_at's bits)
-    e_valid, lobe, fo0, fo1, fo2, fi2, h0, h1, h2, D, fr, c = facet_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo,
-                                                                     wi, at(s, i), mi, dist, kind, coef, k)
+    e_valid, lobe, fo0, fo1, fo2, fi2, h0, h1, h2, D, fr, c = facet_at(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1,
+                                                                     o2, w0, w1, w2, at(s, i), mi, dist, kind, coef, k)
     if lobe:
         q = pdf_from_facet_at(fo0, fo1, fo2, fi2, h0, h1, h2, D, mi, dist, p, True, has_diffuse, coef, k, lam_o,
                               have_lam)
     else:
-        q = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, mi, dist, p, True, has_diffuse, coef, k, lam_o,
-                   have_lam)
+        q = pdf_of(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1, o2, w0, w1, w2, mi, dist, p, True, has_diffuse, coef,
+                   k, lam_o, have_lam)
     ok = cos_o > 0 and l2 > 0 and q > 0 and np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)
     cos_i = max(n0 * w0 + n1 * w1 + n2 * w2, 0.0)
     f = cos_i / q if ok else 0.0
-    valid[i] = ok
-    pdf[i] = q if ok else 0.0
-    factor[i] = f
-    facet_fresnel_at(i, eta, c, fr, f if scale else 1.0, A, B, C, S)       # eval_at's second half
-    scattering_axis_at(i, wo, wi, x)
-    eval_valid[i] = e_valid
+    valid[o] = ok
+    pdf[o] = q if ok else 0.0
+    factor[o] = f
+    facet_fresnel_at(i, o, eta, c, fr, f if scale else 1.0, A, B, C, S)       # eval_at's second half
+    x[0, o], x[1, o], x[2, o] = scattering_axis(w0, w1, w2, o0, o1, o2)
+    eval_valid[o] = e_valid
     return lam_o if have_lam else np.nan
 
 
@@ -308,8 +318,8 @@ def sample_at(i, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_giv
 def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef, k,
                  wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
     for i in range(n_s.shape[1]):
-        sample_at(i, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef,
-                  k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid)
+        sample_at(i, i, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale,
+                  coef, k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid)
 
 
 # ----------------------------------------------------------------------------- wrappers (the compiled twins)

@@ -940,18 +940,14 @@ class PathTracer:
             nxt.is_delta, nxt.pdf = np.empty(N, bool), np.empty(N)
         c = np.ascontiguousarray
         eta, s, m, dist, kind, p, use_given, _, _, w_d, _ = lobe
-        Lm = sp.lam.shape[0]
-        A, B, C, S = (np.empty((Lm, n)) for _ in range(4))
-        wi, x = np.empty((3, n)), np.empty((3, n))
-        pdf, factor = np.empty(n), np.empty(n)
-        valid, eval_valid, lam_o = np.empty(n, bool), np.empty(n, bool), np.empty(n)
+        lam_o = np.empty(n)
         u_lobe = gather(u_bsdf[0], sel)
         sample_update_loop(c(rows, dtype=np.int64), c(rows if T_cols is None else T_cols, dtype=np.int64),
                            c(sp.n_s, dtype=np.float64), c(sp.wo, dtype=np.float64), c(x_T, dtype=np.float64),
                            c(np.broadcast_to(u_lobe, (n,)), dtype=np.float64),
                            c(gather(u_bsdf[1:], sel), dtype=np.float64), eta, s, m, dist, kind, p, use_given, w_d,
-                           ERFCX_COEF_F64, ERFCX_K_F64, T, wi, pdf, valid, factor, A, B, C, S, x, eval_valid, lam_o,
-                           nxt.T, nxt.d, nxt.x_T, nxt.valid, nxt.pdf, nxt.is_delta, nxt.eta_step)
+                           ERFCX_COEF_F64, ERFCX_K_F64, T, sp.lam.shape[0], lam_o, nxt.T, nxt.d, nxt.x_T, nxt.valid,
+                           nxt.pdf, nxt.is_delta, nxt.eta_step)
         return lam_o
 
     def _glossy_next_event(self, sp: ShadingPoint, lookup: WavelengthLookup, bsdf: BSDF, terms: tuple,
@@ -966,9 +962,8 @@ class PathTracer:
         ls = self._sample_lights(sp, lookup, u, L, bsdf.flags.transmits)
         c = np.ascontiguousarray
         ok = np.array(ls.ok, dtype=bool)
-        Lm = sp.lam.shape[0]
-        A, B, C, S = (np.empty((Lm, n)) for _ in range(4))
-        x, o, o_t, wi_t = (np.empty((3, n)) for _ in range(4))
+        A, B, C, S = (np.empty((sp.lam.shape[0], 1)) for _ in range(4))
+        o, o_t, wi_t = (np.empty((3, n)) for _ in range(3))
         terms_acc, weight = np.empty((n, P, L)), np.empty((n, L))
         skip, t_t, test = np.empty(n, bool), np.empty(n), np.empty(n, np.int64)
         cols = c(rows if T_cols is None else T_cols, dtype=np.int64)
@@ -978,7 +973,7 @@ class PathTracer:
                              c(ls.pdf_l, dtype=f64), ok, c(np.atleast_1d(ls.delta), dtype=bool),
                              c(ls.emitted, dtype=f64), c(np.atleast_1d(ls.select_prob), dtype=f64), *terms,
                              ERFCX_COEF_F64, ERFCX_K_F64, _NO_LAMBDA if lam_o is None else lam_o, T, cols,
-                             RAY_EPSILON, A, B, C, S, x, o, terms_acc, weight, skip, o_t, wi_t, t_t, test)
+                             RAY_EPSILON, A, B, C, S, o, terms_acc, weight, skip, o_t, wi_t, t_t, test)
         if not ok.any():            # no sample counts: nothing added (as _light_weight)
             return
         blocked = np.zeros(n, bool)
