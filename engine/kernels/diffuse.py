@@ -13,31 +13,26 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import jit, jit_inner
+from . import jit
 from .geometry import to_world_at
-
-
-@jit_inner
-def cosine_hemisphere_at(u0, u1):
-    """The local direction (x, y, z) of engine.materials.sampling.cosine_hemisphere for one (u0, u1): the
-    concentric disk map lifted to the hemisphere, in its operation order."""
-    a = 2.0 * u0 - 1.0
-    b = 2.0 * u1 - 1.0
-    if abs(a) > abs(b):
-        r = a
-        phi = (np.pi / 4) * (b / (a if a != 0 else 1.0))
-    else:
-        r = b
-        phi = np.pi / 2 - (np.pi / 4) * (a / (b if b != 0 else 1.0))
-    x = r * np.cos(phi)
-    y = r * np.sin(phi)
-    return x, y, np.sqrt(max(1.0 - x * x - y * y, 0.0))
 
 
 @jit
 def _cosine_sample_loop(u, n_s, wo, wi, valid, pdf):
     for j in range(n_s.shape[1]):
-        x, y, z = cosine_hemisphere_at(u[0, j], u[1, j])
+        # concentric disk map (engine.materials.sampling.cosine_hemisphere)
+        a = 2.0 * u[0, j] - 1.0
+        b = 2.0 * u[1, j] - 1.0
+        use_a = abs(a) > abs(b)
+        if use_a:
+            r = a
+            phi = (np.pi / 4) * (b / (a if a != 0 else 1.0))
+        else:
+            r = b
+            phi = np.pi / 2 - (np.pi / 4) * (a / (b if b != 0 else 1.0))
+        x = r * np.cos(phi)
+        y = r * np.sin(phi)
+        z = np.sqrt(max(1.0 - x * x - y * y, 0.0))
         n0, n1, n2 = n_s[0, j], n_s[1, j], n_s[2, j]
         wi[0, j], wi[1, j], wi[2, j] = to_world_at(n0, n1, n2, x, y, z)
         cos_o = n0 * wo[0, j] + n1 * wo[1, j] + n2 * wo[2, j]

@@ -24,7 +24,6 @@ import math
 import numpy as np
 
 from . import jit, jit_inner
-from .diffuse import cosine_hemisphere_at
 from .error_function import ERFCX_COEF, ERFCX_K
 from .fresnel import abcs_at
 from .geometry import local_frame_at, to_local_at, unit_cross_at
@@ -288,7 +287,18 @@ def sample_at(i, o, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_
         l1 = 2.0 * d * h1 - lo1
         l2 = 2.0 * d * h2 - cos_o
     elif has_diffuse and not pick_spec:
-        l0, l1, l2 = cosine_hemisphere_at(u_dir[0, i], u_dir[1, i])      # cosine-weighted
+        # cosine-weighted (engine.materials.sampling.cosine_hemisphere)
+        a = 2.0 * u_dir[0, i] - 1.0
+        bb = 2.0 * u_dir[1, i] - 1.0
+        if abs(a) > abs(bb):
+            r = a
+            phi = (np.pi / 4) * (bb / (a if a != 0 else 1.0))
+        else:
+            r = bb
+            phi = np.pi / 2 - (np.pi / 4) * (a / (bb if bb != 0 else 1.0))
+        l0 = r * np.cos(phi)
+        l1 = r * np.sin(phi)
+        l2 = np.sqrt(max(1.0 - l0 * l0 - l1 * l1, 0.0))
     w0 = t0 * l0 + b0 * l1 + n0 * l2
     w1 = t1 * l0 + b1 * l1 + n1 * l2
     w2 = t2 * l0 + b2 * l1 + n2 * l2
