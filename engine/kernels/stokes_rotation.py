@@ -52,11 +52,17 @@ def rotate_stokes(S: np.ndarray, c2, s2, in_place: bool = False) -> np.ndarray:
 @jit_inner
 def frame_rotation_at(x, xt, k, j):
     """(cos 2φ, sin 2φ) of frame_rotation(x, xt, k) for column j of (3, N) arrays, same operation order."""
-    c = (x[0, j] * xt[0, j] + x[1, j] * xt[1, j]) + x[2, j] * xt[2, j]
-    y0 = k[1, j] * x[2, j] - k[2, j] * x[1, j]
-    y1 = k[2, j] * x[0, j] - k[0, j] * x[2, j]
-    y2 = k[0, j] * x[1, j] - k[1, j] * x[0, j]
-    s = (y0 * xt[0, j] + y1 * xt[1, j]) + y2 * xt[2, j]
+    return frame_rotation_of(x[0, j], x[1, j], x[2, j], xt[0, j], xt[1, j], xt[2, j], k[0, j], k[1, j], k[2, j])
+
+
+@jit_inner
+def frame_rotation_of(x0, x1, x2, xt0, xt1, xt2, k0, k1, k2):
+    """frame_rotation_at of one frame x, target frame xt and direction k given as numbers."""
+    c = (x0 * xt0 + x1 * xt1) + x2 * xt2
+    y0 = k1 * x2 - k2 * x1
+    y1 = k2 * x0 - k0 * x2
+    y2 = k0 * x1 - k1 * x0
+    s = (y0 * xt0 + y1 * xt1) + y2 * xt2
     r2 = c * c + s * s
     if r2 == 0:
         return 1.0, 0.0                                     # degenerate: the identity

@@ -102,13 +102,20 @@ def specular_pdf_at(dist, i0, i1, i2, o0, o1, o2, m, coef, k, lam_o, have_lam):
     if not length > 0:
         return 0.0
     h0, h1, h2 = hv0 / length, hv1 / length, hv2 / length
+    return specular_pdf_h_at(dist, o0, o1, o2, h0, h1, h2, facet_d_at(dist, h0, h1, h2, m), m, coef, k, lam_o,
+                             have_lam)
+
+
+@jit_inner
+def specular_pdf_h_at(dist, o0, o1, o2, h0, h1, h2, D, m, coef, k, lam_o, have_lam):
+    """specular_pdf_at given the half vector h = unit(ω_i + ω_o) and D(h) (facet_at's: the same bits)."""
     d = o0 * h0 + o1 * h1 + o2 * h2
     if not (o2 > 0 and d > 0):
         return 0.0
     g1 = 1.0 / (1.0 + (lam_o if have_lam else smith_lambda_at(dist, o0, o1, o2, m, coef, k)))
     if dist == 0:
-        return g1 * beckmann_d_at(h0, h1, h2, m) / (4.0 * o2)
-    return g1 * max(d, 0.0) * ggx_d_at(h0, h1, h2, m) / o2 / (4.0 * d)
+        return g1 * D / (4.0 * o2)
+    return g1 * max(d, 0.0) * D / o2 / (4.0 * d)
 
 
 @jit_inner
@@ -133,10 +140,10 @@ def p_spec_at(i, cos_o, p_given, use_given, eta, L, s, w_d):
 
 
 @jit_inner
-def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, dist, kind, coef, k, factor, A, B, C, S, x):
-    """Facet lobe at path i into A..S[:, i] (times ``factor``) and x[:, i]; returns cosθ_i > 0 and cosθ_o > 0."""
-    o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
-    w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
+def facet_at(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1, o2, w0, w1, w2, s, m, dist, kind, coef, k):
+    """The facet lobe's scalars at ω_o = (o0, o1, o2), ω_i = (w0, w1, w2): (valid: cosθ_i > 0 and cosθ_o > 0, ok:
+    the lobe is evaluated there, ω_o local (3), cosθ_i, h (3), D(h), f = s·D·G/(4 cosθ_i cosθ_o), the facet cosine
+    c) (0 and 1 where not ok)."""
     lo0, lo1, lo2 = to_local_at(o0, o1, o2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
     li0, li1, li2 = to_local_at(w0, w1, w2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
     valid = li2 > 0 and lo2 > 0
@@ -145,24 +152,47 @@ def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, dist, kind
     ok = length > 0 and valid and li2 * lo2 > 0     # a product underflowing to 0: f = 0 (as _facet_eval), not x/0
     fr = 0.0
     c = 1.0
+    h0 = h1 = h2 = D = 0.0
     if ok:
         h0, h1, h2 = hv0 / length, hv1 / length, hv2 / length
         D = facet_d_at(dist, h0, h1, h2, m)
         G = shadowing_at(kind, dist, li0, li1, li2, lo0, lo1, lo2, h0, h1, h2, m, coef, k)
         fr = s * D * G / (4.0 * (li2 * lo2))
         c = min(0.5 * length, 1.0)
+    return valid, ok, lo0, lo1, lo2, li2, h0, h1, h2, D, fr, c
+
+
+@jit_inner
+def facet_fresnel_at(i, o, eta, c, fr, factor, A, B, C, S):
+    """A..S[:, o] = the facet Fresnel (A, B, C, S)(c) of path i's index per wavelength times f·``factor`` (eval_at's
+    second half)."""
     e = eta_at(eta, 0, i)
     a_, b_, c_, s_ = abcs_at(c, e)
     for lam in range(A.shape[0]):
         if lam > 0 and eta_at(eta, lam, i) != e:    # a constant index: one Fresnel evaluation serves every λ
             e = eta_at(eta, lam, i)
             a_, b_, c_, s_ = abcs_at(c, e)
-        A[lam, i] = a_ * fr * factor
-        B[lam, i] = b_ * fr * factor
-        C[lam, i] = c_ * fr * factor
-        S[lam, i] = s_ * fr * factor
-    # x = unit(k_i × k_o), k_i = −ω_i (engine.kernels.geometry.unit_cross, same order)
-    x[0, i], x[1, i], x[2, i] = unit_cross_at(-w0, -w1, -w2, o0, o1, o2, _DEGENERATE)
+        A[lam, o] = a_ * fr * factor
+        B[lam, o] = b_ * fr * factor
+        C[lam, o] = c_ * fr * factor
+        S[lam, o] = s_ * fr * factor
+
+
+@jit_inner
+def scattering_axis(w0, w1, w2, o0, o1, o2):
+    """unit(k_i × k_o), k_i = −ω_i, k_o = ω_o (engine.kernels.geometry.unit_cross, same order)."""
+    return unit_cross_at(-w0, -w1, -w2, o0, o1, o2, _DEGENERATE)
+
+
+@jit_inner
+def eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, s, m, dist, kind, coef, k, factor, A, B, C, S, x):
+    """Facet lobe at path i into A..S[:, i] (times ``factor``) and x[:, i]; returns cosθ_i > 0 and cosθ_o > 0."""
+    o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
+    w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
+    valid, _, _, _, _, _, _, _, _, _, fr, c = facet_at(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1, o2, w0, w1, w2, s,
+                                                       m, dist, kind, coef, k)
+    facet_fresnel_at(i, i, eta, c, fr, factor, A, B, C, S)
+    x[0, i], x[1, i], x[2, i] = scattering_axis(w0, w1, w2, o0, o1, o2)
     return valid
 
 
@@ -171,8 +201,14 @@ def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, dist, p_spec, has_s
            lam_o, have_lam):
     """The two-lobe mixture density of ω_i = wi[:, i] (TorranceSparrow.pdf); ``lam_o``, ``have_lam`` as for
     specular_pdf_at."""
-    o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
-    w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
+    return pdf_of(n0, n1, n2, t0, t1, t2, b0, b1, b2, wo[0, i], wo[1, i], wo[2, i], wi[0, i], wi[1, i], wi[2, i], m,
+                  dist, p_spec, has_specular, has_diffuse, coef, k, lam_o, have_lam)
+
+
+@jit_inner
+def pdf_of(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1, o2, w0, w1, w2, m, dist, p_spec, has_specular, has_diffuse,
+           coef, k, lam_o, have_lam):
+    """pdf_at of ω_o = (o0, o1, o2) and ω_i = (w0, w1, w2) given as numbers."""
     lo0, lo1, lo2 = to_local_at(o0, o1, o2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
     li0, li1, li2 = to_local_at(w0, w1, w2, t0, t1, t2, b0, b1, b2, n0, n1, n2)
     if not (li2 > 0 and lo2 > 0):
@@ -180,6 +216,19 @@ def pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, m, dist, p_spec, has_s
     out = 0.0
     if has_specular:
         out = out + p_spec * specular_pdf_at(dist, li0, li1, li2, lo0, lo1, lo2, m, coef, k, lam_o, have_lam)
+    if has_diffuse:
+        out = out + (1.0 - p_spec) * max(li2, 0.0) / _PI
+    return out
+
+
+@jit_inner
+def pdf_from_facet_at(lo0, lo1, lo2, li2, h0, h1, h2, D, m, dist, p_spec, has_specular, has_diffuse, coef, k, lam_o,
+                      have_lam):
+    """pdf_at where facet_at evaluated the lobe (its ``ok``: cosθ_i, cosθ_o > 0), from its ω_o, cosθ_i, h and D
+    (the same bits: the same half vector and D)."""
+    out = 0.0
+    if has_specular:
+        out = out + p_spec * specular_pdf_h_at(dist, lo0, lo1, lo2, h0, h1, h2, D, m, coef, k, lam_o, have_lam)
     if has_diffuse:
         out = out + (1.0 - p_spec) * max(li2, 0.0) / _PI
     return out
@@ -207,60 +256,80 @@ def _pdf_loop(n_s, wo, wi, m, dist, p_given, use_given, eta, L, s, w_d, has_spec
                         coef, k, 0.0, False)
 
 
+@jit_inner
+def sample_at(i, o, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef,
+              k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
+    """The sample pass at path i into column o: direction wi[:, o], pdf, valid, the weight's factor cosθ_i/pdf, the
+    lobe's value (times the factor where ``scale``) A..S[:, o] in the frame x[:, o] and eval's valid
+    (TorranceSparrow.sample).  Returns Smith Λ(ω_o) where the Beckmann sampler computed it (specular_pdf_at's
+    bits), else NaN."""
+    n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
+    t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
+    o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
+    lo0 = o0 * t0 + o1 * t1 + o2 * t2
+    lo1 = o0 * b0 + o1 * b1 + o2 * b2
+    cos_o = o0 * n0 + o1 * n1 + o2 * n2
+    p = p_spec_at(i, cos_o, p_given, use_given, eta, A.shape[0], s, w_d)
+    pick_spec = u_lobe[i] < p
+    l0 = l1 = l2 = 0.0
+    mi = at(m, i)
+    lam_o = 0.0
+    have_lam = False
+    if pick_spec and cos_o > 0:
+        # visible-normal sampling (engine.materials.microfacet.Beckmann.sample, engine.materials.ggx.GGX.sample)
+        if dist == 0:       # with the pdf's Λ(ω_o), its erfcx beside the sampler's
+            h0, h1, h2, lam_o = beckmann_vndf_lambda_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi, coef, k)
+            have_lam = True
+        else:
+            h0, h1, h2 = ggx_vndf_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi)
+        d = lo0 * h0 + lo1 * h1 + cos_o * h2
+        l0 = 2.0 * d * h0 - lo0
+        l1 = 2.0 * d * h1 - lo1
+        l2 = 2.0 * d * h2 - cos_o
+    elif has_diffuse and not pick_spec:
+        # cosine-weighted (engine.materials.sampling.cosine_hemisphere)
+        a = 2.0 * u_dir[0, i] - 1.0
+        bb = 2.0 * u_dir[1, i] - 1.0
+        if abs(a) > abs(bb):
+            r = a
+            phi = (np.pi / 4) * (bb / (a if a != 0 else 1.0))
+        else:
+            r = bb
+            phi = np.pi / 2 - (np.pi / 4) * (a / (bb if bb != 0 else 1.0))
+        l0 = r * np.cos(phi)
+        l1 = r * np.sin(phi)
+        l2 = np.sqrt(max(1.0 - l0 * l0 - l1 * l1, 0.0))
+    w0 = t0 * l0 + b0 * l1 + n0 * l2
+    w1 = t1 * l0 + b1 * l1 + n1 * l2
+    w2 = t2 * l0 + b2 * l1 + n2 * l2
+    wi[0, o], wi[1, o], wi[2, o] = w0, w1, w2
+    # the lobe at wi (eval_at's first half), whose half vector and D the pdf shares (pdf_at's bits)
+    e_valid, lobe, fo0, fo1, fo2, fi2, h0, h1, h2, D, fr, c = facet_at(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1,
+                                                                     o2, w0, w1, w2, at(s, i), mi, dist, kind, coef, k)
+    if lobe:
+        q = pdf_from_facet_at(fo0, fo1, fo2, fi2, h0, h1, h2, D, mi, dist, p, True, has_diffuse, coef, k, lam_o,
+                              have_lam)
+    else:
+        q = pdf_of(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1, o2, w0, w1, w2, mi, dist, p, True, has_diffuse, coef,
+                   k, lam_o, have_lam)
+    ok = cos_o > 0 and l2 > 0 and q > 0 and np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)
+    cos_i = max(n0 * w0 + n1 * w1 + n2 * w2, 0.0)
+    f = cos_i / q if ok else 0.0
+    valid[o] = ok
+    pdf[o] = q if ok else 0.0
+    factor[o] = f
+    facet_fresnel_at(i, o, eta, c, fr, f if scale else 1.0, A, B, C, S)       # eval_at's second half
+    x[0, o], x[1, o], x[2, o] = scattering_axis(w0, w1, w2, o0, o1, o2)
+    eval_valid[o] = e_valid
+    return lam_o if have_lam else np.nan
+
+
 @jit
 def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef, k,
                  wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
     for i in range(n_s.shape[1]):
-        n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
-        t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
-        o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
-        lo0 = o0 * t0 + o1 * t1 + o2 * t2
-        lo1 = o0 * b0 + o1 * b1 + o2 * b2
-        cos_o = o0 * n0 + o1 * n1 + o2 * n2
-        p = p_spec_at(i, cos_o, p_given, use_given, eta, A.shape[0], s, w_d)
-        pick_spec = u_lobe[i] < p
-        l0 = l1 = l2 = 0.0
-        mi = at(m, i)
-        lam_o = 0.0
-        have_lam = False
-        if pick_spec and cos_o > 0:
-            # visible-normal sampling (engine.materials.microfacet.Beckmann.sample, engine.materials.ggx.GGX.sample)
-            if dist == 0:       # with the pdf's Λ(ω_o), its erfcx beside the sampler's
-                h0, h1, h2, lam_o = beckmann_vndf_lambda_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi, coef, k)
-                have_lam = True
-            else:
-                h0, h1, h2 = ggx_vndf_at(lo0, lo1, cos_o, u_dir[0, i], u_dir[1, i], mi)
-            d = lo0 * h0 + lo1 * h1 + cos_o * h2
-            l0 = 2.0 * d * h0 - lo0
-            l1 = 2.0 * d * h1 - lo1
-            l2 = 2.0 * d * h2 - cos_o
-        elif has_diffuse and not pick_spec:
-            # cosine-weighted (engine.materials.sampling.cosine_hemisphere)
-            a = 2.0 * u_dir[0, i] - 1.0
-            bb = 2.0 * u_dir[1, i] - 1.0
-            if abs(a) > abs(bb):
-                r = a
-                phi = (np.pi / 4) * (bb / (a if a != 0 else 1.0))
-            else:
-                r = bb
-                phi = np.pi / 2 - (np.pi / 4) * (a / (bb if bb != 0 else 1.0))
-            l0 = r * np.cos(phi)
-            l1 = r * np.sin(phi)
-            l2 = np.sqrt(max(1.0 - l0 * l0 - l1 * l1, 0.0))
-        w0 = t0 * l0 + b0 * l1 + n0 * l2
-        w1 = t1 * l0 + b1 * l1 + n1 * l2
-        w2 = t2 * l0 + b2 * l1 + n2 * l2
-        wi[0, i], wi[1, i], wi[2, i] = w0, w1, w2
-        q = pdf_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, mi, dist, p, True, has_diffuse, coef, k, lam_o,
-                   have_lam)
-        ok = cos_o > 0 and l2 > 0 and q > 0 and np.isfinite(w0) and np.isfinite(w1) and np.isfinite(w2)
-        cos_i = max(n0 * w0 + n1 * w1 + n2 * w2, 0.0)
-        f = cos_i / q if ok else 0.0
-        valid[i] = ok
-        pdf[i] = q if ok else 0.0
-        factor[i] = f
-        eval_valid[i] = eval_at(i, n0, n1, n2, t0, t1, t2, b0, b1, b2, wo, wi, eta, at(s, i), mi, dist, kind, coef, k,
-                                f if scale else 1.0, A, B, C, S, x)
+        sample_at(i, i, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale,
+                  coef, k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid)
 
 
 # ----------------------------------------------------------------------------- wrappers (the compiled twins)

@@ -119,8 +119,9 @@ from .sampling import cosine_hemisphere, local_to_world
 from .smooth_limit import MirrorWithDiffuse
 from ..errors import SceneError
 from ..kernels import twin
-from ..kernels.torrance_sparrow import (DISTRIBUTION_CODES, SHADOWING_CODES, torrance_sparrow_eval_numba,
-                                        torrance_sparrow_pdf_numba, torrance_sparrow_sample_numba)
+from ..kernels.torrance_sparrow import (DISTRIBUTION_CODES, SHADOWING_CODES, _eta_rows, _p_inputs, _per_point,
+                                        torrance_sparrow_eval_numba, torrance_sparrow_pdf_numba,
+                                        torrance_sparrow_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
 from ..polarisation.thin_film import facet_film, film_at, film_label, film_reflection_abcs
@@ -858,6 +859,23 @@ class TorranceSparrow(BSDF):
 
     def delta_reflection(self, sp: ShadingPoint):
         return None
+
+    def lobe_kernel_inputs(self, sp: ShadingPoint) -> tuple | None:
+        """The facet lobe's inputs of engine.kernels.glossy_bounce (``eval``'s, ``pdf``'s and ``sample``'s, as their
+        compiled twins take them: eta, s, m, distribution and shadowing codes, p_given, use_given, the pdf's eta and
+        s, w_d and its wavelength count), or None where the value is not the compiled facet lobe alone (a Lambert
+        or multiscatter term, a film, Blinn facets, a subclass's own eval, pdf or sample)."""
+        cls = type(self)
+        if (not self._compiled_lobe or self.has_diffuse or self.multiscatter or cls.eval is not TorranceSparrow.eval
+                or cls.pdf is not TorranceSparrow.pdf or cls.sample is not TorranceSparrow.sample):
+            return None
+        n = sp.n
+        p_given, eta_p, s, w_d = self._mixture_inputs(sp, compact=True)
+        p, use_given, wd = _p_inputs(p_given, w_d, n)
+        return (_eta_rows(self._eta(sp)), _per_point(s, n), _per_point(self._m(sp), n),
+                DISTRIBUTION_CODES[self.distribution], SHADOWING_CODES[self.shadowing], p, use_given,
+                np.zeros((1, 1), np.complex128) if use_given else _eta_rows(eta_p),
+                np.zeros(1) if use_given else _per_point(s, n), wd, int(sp.lam.shape[0]))
 
     def describe(self) -> dict:
         out = {"type": self.name, "n": repr(self.n), "k": repr(self.k), "m": self.m,

@@ -39,6 +39,9 @@ from ..materials.base import BSDF, BSDFFlags, BSDFSample, DeltaVertices, Mueller
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import RAY_EPSILON, Hits, offset_origin, surface_points
+from ..kernels import COMPILED
+from ..kernels.error_function import ERFCX_COEF, ERFCX_K
+from ..kernels.glossy_bounce import add_light_terms_loop, light_terms_loop, sample_update_loop
 from ..kernels.light_sampling import lamp_hits
 from ..kernels.material_groups import material_groups
 from ..kernels.shadow_rays import shadow_rays
@@ -67,6 +70,14 @@ if TYPE_CHECKING:
     from .camera import CameraModel
     from .lights import LightSet, _Light
     from ..scene.description import RenderSettings
+
+
+#: Next-event estimation and the BSDF sample at rough conductors in compiled steps (engine.kernels.glossy_bounce;
+#: False: the NumPy chain, their twin, as without Numba)
+GLOSSY_BOUNCE = COMPILED and light_terms_loop is not None
+ERFCX_COEF_F64 = np.ascontiguousarray(ERFCX_COEF, dtype=np.float64)
+ERFCX_K_F64 = float(ERFCX_K)
+_NO_LAMBDA = np.empty(0)
 
 
 # ----------------------------------------------------------------------------- Mueller kernels
@@ -714,8 +725,16 @@ class PathTracer:
             xTm = gather(state.x_T, sel)
             if self.tree is not None and bsdf.flags.transmits:
                 nxt.n_side[:, sel] = 0.0        # the tree's light choice: light from either side counts
+            lobe = self._lobe_kernel_inputs(bsdf, sp, state, acc)      # (a rough conductor: compiled steps)
+            # its sample first: next-event estimation reads the sampler's Smith Λ(ω_o) (neither reads what the
+            # other writes: the order changes no number)
+            lam_o = None
+            if lobe is not None and acc.guides is None:
+                lam_o = self._sample_update(bsdf, sp, lobe, nums.u_bsdf, sel, rows, T, xTm, t_cols, nxt)
             if nums.nee and not bsdf.flags.is_delta_only:
-                self._group_next_event(state, acc, surf, bsdf, sp, sel, rows, xTm, t_cols, nums.u_light)
+                self._group_next_event(state, acc, surf, bsdf, sp, sel, rows, xTm, t_cols, nums.u_light, lobe, lam_o)
+            if lam_o is not None:
+                continue
             bs = self._sample_bsdf(bsdf, sp, nums.u_bsdf, sel)
             if acc.lobes is not None:
                 acc.lobes.sampled(bsdf, sp, gather(state.path, sel), bs)
@@ -865,20 +884,109 @@ class PathTracer:
 
     def _group_next_event(self, state: PathState, acc: _Accumulators, surf: _SurfaceHits, bsdf: BSDF,
                           sp: ShadingPoint, sel: slice | np.ndarray, rows: np.ndarray, x_T: np.ndarray,
-                          t_cols: np.ndarray | None, u_light: np.ndarray) -> None:
+                          t_cols: np.ndarray | None, u_light: np.ndarray, lobe: tuple | None = None,
+                          lam_o: np.ndarray | None = None) -> None:
         """Next-event estimation at the paths ``sel`` (batch rows ``rows``, frames ``x_T`` (3, m)) of one
-        non-delta group, added to their radiance (and their cost); ``u_light`` (4, n) of all paths."""
+        non-delta group, added to their radiance (and their cost); ``u_light`` (4, n) of all paths; ``lobe``: the
+        BSDF's compiled-step inputs (``_lobe_kernel_inputs``; None: the NumPy chain), ``lam_o`` (m,) its sample's Smith
+        Λ(ω_o) (``_sample_update``; None: not sampled yet)."""
         medium = None
         if self.media is not None:      # the vertices' volumes and transmittance (shadow rays)
             medium = (gather(state.media, sel), None if state.tau is None else gather(state.tau, sel),
                       gather(surf.prim, sel), gather(surf.n_g, sel), gather(surf.wo, sel), gather(surf.p, sel),
                       gather(state.sampler.keys, sel), state.bounce)
-        contrib = self._next_event(sp, state.lk.take(sel), bsdf, state.T_store, rows, x_T, gather(u_light, sel),
-                                   acc.stats, t_cols, medium,
-                                   lobes=None if acc.lobes is None else (acc.lobes, gather(state.path, sel)))
-        add_to_paths(acc.radiance, gather(state.path, sel), contrib)
+        if lobe is not None and medium is None and self._compiled_light_terms(state, sp):
+            # a rough conductor: its NEE in two compiled steps around the shadow rays (the same numbers)
+            self._glossy_next_event(sp, state.lk.take(sel), bsdf, lobe, state.T_store, rows, x_T,
+                                    gather(u_light, sel), acc, gather(state.path, sel), t_cols, lam_o)
+        else:
+            contrib = self._next_event(sp, state.lk.take(sel), bsdf, state.T_store, rows, x_T, gather(u_light, sel),
+                                       acc.stats, t_cols, medium,
+                                       lobes=None if acc.lobes is None else (acc.lobes, gather(state.path, sel)))
+            add_to_paths(acc.radiance, gather(state.path, sel), contrib)
         if acc.path_cost is not None:
             acc.path_cost[gather(state.path, sel)] += VERTEX_COST     # a light sample (cost)
+
+    def _lobe_kernel_inputs(self, bsdf: BSDF, sp: ShadingPoint, state: PathState, acc: _Accumulators) -> tuple | None:
+        """The BSDF's inputs of engine.kernels.glossy_bounce (BSDF.lobe_kernel_inputs), or None where its next-event
+        estimation and sample take the NumPy chain: NumPy kernels, the light passes' recorder, a transport or
+        wavelength layout the kernels do not take."""
+        get = getattr(bsdf, "lobe_kernel_inputs", None)
+        if get is None or not GLOSSY_BOUNCE or acc.lobes is not None or self.P == 2:
+            return None
+        if sp.lam.shape[0] not in (1, state.T_store.shape[2]):
+            return None
+        return get(sp)
+
+    def _compiled_light_terms(self, state: PathState, sp: ShadingPoint) -> bool:
+        """Whether next-event estimation at a ``_lobe_kernel_inputs`` group runs the compiled steps: not with
+        polarised lights or shadow rays through see-through surfaces, and where each wavelength row count (the
+        radiance's L, T's, the lobe's) is 1 or L."""
+        if (self.lights.polarised and self.P > 1) or (self.visibility is not None and self.visibility.affects_shadows):
+            return False
+        L = 3 if self.rgb_mode else state.lk.lam.shape[0]
+        return state.T_store.shape[2] in (1, L) and sp.lam.shape[0] in (1, L)
+
+    def _sample_update(self, bsdf: BSDF, sp: ShadingPoint, lobe: tuple, u_bsdf: np.ndarray, sel: slice | np.ndarray,
+                       rows: np.ndarray, T: np.ndarray, x_T: np.ndarray, T_cols: np.ndarray | None,
+                       nxt: _Scattered) -> np.ndarray:
+        """``_sample_bsdf``, ``scatter_throughput`` and ``_store_sample`` of a group whose BSDF gave ``lobe``
+        (``_lobe_kernel_inputs``) in one compiled pass (glossy_bounce.sample_update_loop; the same numbers): the
+        sampled segments and new throughputs of the paths ``sel`` (batch rows ``rows``, frames ``x_T``) into ``nxt``;
+        returns the sampler's Smith Λ(ω_o) (m,) (NaN where not computed) for next-event estimation."""
+        n, N = sp.n, nxt.T.shape[3]
+        if nxt.d is None:           # a single group's record (_new_scattered): its columns, written in full here
+            nxt.d, nxt.x_T, nxt.valid = np.empty((3, N)), np.empty((3, N)), np.empty(N, bool)
+            nxt.is_delta, nxt.pdf = np.empty(N, bool), np.empty(N)
+        c = np.ascontiguousarray
+        eta, s, m, dist, kind, p, use_given, _, _, w_d, _ = lobe
+        lam_o = np.empty(n)
+        u_lobe = gather(u_bsdf[0], sel)
+        sample_update_loop(c(rows, dtype=np.int64), c(rows if T_cols is None else T_cols, dtype=np.int64),
+                           c(sp.n_s, dtype=np.float64), c(sp.wo, dtype=np.float64), c(x_T, dtype=np.float64),
+                           c(np.broadcast_to(u_lobe, (n,)), dtype=np.float64),
+                           c(gather(u_bsdf[1:], sel), dtype=np.float64), eta, s, m, dist, kind, p, use_given, w_d,
+                           ERFCX_COEF_F64, ERFCX_K_F64, T, sp.lam.shape[0], lam_o, nxt.T, nxt.d, nxt.x_T, nxt.valid,
+                           nxt.pdf, nxt.is_delta, nxt.eta_step)
+        return lam_o
+
+    def _glossy_next_event(self, sp: ShadingPoint, lookup: WavelengthLookup, bsdf: BSDF, terms: tuple,
+                           T: np.ndarray, rows: np.ndarray, x_T: np.ndarray, u: np.ndarray, acc: _Accumulators,
+                           path: np.ndarray, T_cols: np.ndarray | None, lam_o: np.ndarray | None = None) -> None:
+        """``_next_event`` and ``add_to_paths`` of a group whose BSDF gave ``terms`` (``_lobe_kernel_inputs``): the
+        light weight, MIS, response and T·S in one compiled step (light_terms_loop), the shadow rays whose answer
+        can change the radiance, then T·S·weight·visibility into ``acc.radiance`` at ``path`` (the chain's bits);
+        ``lam_o``: the sample's Smith Λ(ω_o) (m,) (NaN: not computed; None: none)."""
+        n, P = sp.n, self.P
+        L = 3 if self.rgb_mode else lookup.lam.shape[0]
+        ls = self._sample_lights(sp, lookup, u, L, bsdf.flags.transmits)
+        c = np.ascontiguousarray
+        ok = np.array(ls.ok, dtype=bool)
+        A, B, C, S = (np.empty((sp.lam.shape[0], 1)) for _ in range(4))
+        o, o_t, wi_t = (np.empty((3, n)) for _ in range(3))
+        terms_acc, weight = np.empty((n, P, L)), np.empty((n, L))
+        skip, t_t, test = np.empty(n, bool), np.empty(n), np.empty(n, np.int64)
+        cols = c(rows if T_cols is None else T_cols, dtype=np.int64)
+        f64 = np.float64
+        k = light_terms_loop(c(sp.n_s, dtype=f64), c(sp.wo, dtype=f64), c(x_T, dtype=f64), c(sp.p, dtype=f64),
+                             c(sp.n_g, dtype=f64), c(ls.wi, dtype=f64), c(ls.dist, dtype=f64), c(ls.scale, dtype=f64),
+                             c(ls.pdf_l, dtype=f64), ok, c(np.atleast_1d(ls.delta), dtype=bool),
+                             c(ls.emitted, dtype=f64), c(np.atleast_1d(ls.select_prob), dtype=f64), *terms,
+                             ERFCX_COEF_F64, ERFCX_K_F64, _NO_LAMBDA if lam_o is None else lam_o, T, cols,
+                             RAY_EPSILON, A, B, C, S, o, terms_acc, weight, skip, o_t, wi_t, t_t, test)
+        if not ok.any():            # no sample counts: nothing added (as _light_weight)
+            return
+        blocked = np.zeros(n, bool)
+        if k:
+            blocked[test[:k]] = self.scene.occluded(c(o_t[:, :k]), c(wi_t[:, :k]), t_t[:k])
+            acc.stats["shadow_rays"] += k
+            if blocked.any():
+                self._unblock_own_hits(sp, ls, blocked)
+        if len(ls.owners) > 1:
+            for _, sel in ls.owners:
+                if not ok[sel].any():
+                    skip[sel] = True        # a light none of whose samples counts adds nothing
+        add_light_terms_loop(acc.radiance, c(path, dtype=np.int64), terms_acc, weight, skip, blocked)
 
     @staticmethod
     def _sample_bsdf(bsdf: BSDF, sp: ShadingPoint, u_bsdf: np.ndarray, sel: slice | np.ndarray) -> BSDFSample:

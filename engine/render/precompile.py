@@ -277,10 +277,13 @@ def scenes(folder: str) -> dict:
                    "polarisation": pol}])
 
     # no material depends on the wavelength: the spectral reductions (RGB with exact light colours, exact)
+    # (a rough conductor alone in its group, no cut-outs: its next-event estimation's compiled steps,
+    # engine.kernels.glossy_light)
     grey = _scene({"chalk": {"type": "lambert", "albedo": [0.8, 0.7, 0.6]}, "glass": {"type": "dielectric", "n": 1.5},
                    "mirror": {"type": "conductor", "n": 0.2, "k": 3.0},
-                   "blue": {"type": "lambert", "albedo": [0.2, 0.3, 0.7]}},
-                  _row(["chalk", "glass", "mirror", "blue"], 0.5, balls=("glass",)) + [_floor("chalk")],
+                   "blue": {"type": "lambert", "albedo": [0.2, 0.3, 0.7]},
+                   "rough_metal": {"type": "torrance_sparrow", "n": 0.2, "k": 3.0, "m": 0.3}},
+                  _row(["chalk", "glass", "mirror", "blue", "rough_metal"], 0.5, balls=("glass",)) + [_floor("chalk")],
                   [{"type": "environment", "radiance": 1.0}] + LAMPS)
     return {"plain": plain, "textured": textured, "sky": sky, "grey": grey}
 
