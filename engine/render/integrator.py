@@ -39,7 +39,7 @@ from ..materials.base import BSDF, BSDFFlags, BSDFSample, DeltaVertices, Mueller
 from ..materials.batching import shading_groups
 from ..polarisation.frames import frame_rotation, rotate_stokes
 from .accel import RAY_EPSILON, Hits, offset_origin, surface_points
-from ..kernels import COMPILED
+from ..kernels import uses_cache
 from ..kernels.error_function import ERFCX_COEF, ERFCX_K
 from ..kernels.glossy_bounce import add_light_terms_loop, light_terms_loop, sample_update_loop
 from ..kernels.light_sampling import lamp_hits
@@ -74,7 +74,7 @@ if TYPE_CHECKING:
 
 #: Next-event estimation and the BSDF sample at rough conductors in compiled steps (engine.kernels.glossy_bounce;
 #: False: the NumPy chain, their twin, as without Numba)
-GLOSSY_BOUNCE = COMPILED and light_terms_loop is not None
+GLOSSY_BOUNCE = uses_cache() and light_terms_loop is not None
 ERFCX_COEF_F64 = np.ascontiguousarray(ERFCX_COEF, dtype=np.float64)
 ERFCX_K_F64 = float(ERFCX_K)
 _NO_LAMBDA = np.empty(0)
