@@ -137,6 +137,7 @@ def trace_delta_paths(query, scene, valid16, rh, args, o0, d0, t_max0, has_t, x_
             roulette = bounce + 1 >= rr_depth
             dims = k_camera + 8 * bounce
             nc = nm = nd = 0
+            complex_c = False       # some constant mirror of a complex index (else abcs_at alone: black glass)
             for a in range(count):
                 j = live[a]
                 i = c0 + j
@@ -183,6 +184,7 @@ def trace_delta_paths(query, scene, valid16, rh, args, o0, d0, t_max0, has_t, x_
                     constant_mirror_at(j, nc, n_s, wo, x_T, P, d, x_out, valid, eta_step, cos_c, w_c, rot_c)
                     e_c[0, 0, nc] = eta_c[mat].real
                     e_c[0, 1, nc] = eta_c[mat].imag
+                    complex_c = complex_c or eta_c[mat].imag != 0.0
                     rows_c[nc] = j
                     nc += 1
                 else:
@@ -193,7 +195,7 @@ def trace_delta_paths(query, scene, valid16, rh, args, o0, d0, t_max0, has_t, x_
                     nm += 1
             # the Fresnel values of the mirrors' vertices, a wavelength at a time (SIMD), and the throughputs
             if nc > 0:
-                _chunk_fresnel(cos_c, w_c, e_c, nc, abcs_c, fast, True)
+                _chunk_fresnel(cos_c, w_c, e_c, nc, abcs_c, fast, complex_c)
                 _update_chunk(T, rows_c, Tn, rows_c, 0, nc, abcs_c, rot_c)
             if nm > 0:
                 _chunk_fresnel(cos_m, w_m, e_m, nm, abcs_m, fast, True)
