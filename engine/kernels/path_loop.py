@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import jit
+from . import jit, jit_inner
 from .delta_bounce import (_CHUNK, _chunk_buffers, _chunk_fresnel, _fresnel_buffers, _update_chunk,
                            constant_mirror_at, dielectric_at, tabulated_mirror_at)
 from .geometry import offset_origin_at, surface_at
@@ -40,6 +40,133 @@ _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 
 #: Paths traced together (the delta steps' chunk: their scratch buffers hold one value per path)
 CHUNK = _CHUNK
+
+
+@jit_inner
+def _start_chunk(c0, m, o0, d0, x_T0, lam, Le, t_max0, has_t, pixel, sample, s, T, rad, o, d, x_T, lam_c, Le_c, t_c,
+                 eta_sq, base, rev, live):
+    """The chunk's paths c0 … c0 + m − 1 at the camera: T = identity, no light yet, their columns of the batch's
+    arrays copied in a row at a time (reading a path's column directly touches rows n·8 bytes apart, which share
+    cache sets), their Sobol' keys, all live."""
+    P, Lm = T.shape[0], T.shape[2]
+    for c in range(3):
+        for j in range(m):
+            o[c, j] = o0[c, c0 + j]
+        for j in range(m):
+            d[c, j] = d0[c, c0 + j]
+        for j in range(m):
+            x_T[c, j] = x_T0[c, c0 + j]
+    for q in range(Lm):
+        for j in range(m):
+            lam_c[q, j] = lam[q, c0 + j]
+    for k in range(Le.shape[0]):
+        for j in range(m):
+            Le_c[k, j] = Le[k, c0 + j]
+        for b in range(P):
+            for j in range(m):
+                rad[b, k, j] = 0.0
+    for j in range(m):
+        t_c[j] = t_max0[c0 + j] if has_t else 0.0
+        for a in range(P):
+            for b in range(P):
+                for k in range(Lm):
+                    T[a, b, k, j] = 1.0 if a == b else 0.0
+        eta_sq[j] = 1.0
+        base[j], rev[j] = owen_path_at(s, pixel[c0 + j], sample[c0 + j])
+        live[j] = j
+
+
+@jit_inner
+def _closest_hits(query, scene, rh, ri, valid16, addr, vaddr, aaddr, live, count, o, d, t_c, has_t, no_prims, prim, u,
+                  v, t):
+    """Closest hits of the live paths' segments, 16 at a time (engine.kernels.rays.packet_queries' set-up and
+    reading)."""
+    for k0 in range(0, count, 16):
+        w16 = min(16, count - k0)
+        for k in range(16):
+            valid16[k] = -1 if k < w16 else 0
+            if k < w16:
+                _ray_setup(rh, ri, 16, k, o, d, t_c, has_t, live[k0 + k])
+        query(vaddr, scene, addr, aaddr)
+        for k in range(w16):
+            _read_hit(rh, ri, 16, k, live[k0 + k], no_prims, False, prim, u, v, t)
+
+
+@jit_inner
+def _environment_light(rad, T, Le_c, j):
+    """The environment's light reached by path j (MIS weight 1: every vertex is delta): add_light's arithmetic."""
+    Lm = T.shape[2]
+    for b in range(T.shape[0]):
+        for k in range(Le_c.shape[0]):
+            rad[b, k, j] += T[b, 0, k if Lm > 1 else 0, j] * (Le_c[k, j] * 1.0)
+
+
+@jit_inner
+def _shading_normal(faces, V, N, has_vn, tri_normal, any_vn, tri, uj, vj, j, two_sided, d, wo, p, n_g, n_s):
+    """Hit j's point, geometric and shading normals (a two-sided material's back face: the shading normal flipped,
+    PathTracer._back_faces) and wo = −d."""
+    for c in range(3):
+        wo[c, j] = -d[c, j]
+    surface_at(faces, V, N, has_vn, tri_normal, any_vn, tri, uj, vj, j, p, n_g, n_s)
+    flip = two_sided and (n_g[0, j] * wo[0, j] + n_g[1, j] * wo[1, j]) + n_g[2, j] * wo[2, j] < 0
+    for c in range(3):
+        ns = n_s[c, j] if any_vn else n_g[c, j]
+        n_s[c, j] = -ns if flip else ns
+
+
+@jit_inner
+def _vertex_numbers(sampler, bounce, lobe, roulette, base, rev, key, dims, pix, smp, s, choice_vx, choice_vy,
+                    choice_key, owen_table):
+    """(lobe number, roulette number) of a path's vertex ``bounce`` (each only where asked; PathTracer._vertex_numbers
+    and _sobol_vertex_numbers: the first vertex's hashed dimensions ``dims`` + 5 and + 8, the lobe stratified by the
+    (light choice, lobe) pair; deeper "sobol" vertices their SOBOL_CHOICES and SOBOL_ROULETTE pairs)."""
+    u_lobe = u_rr = 0.0
+    pairs = sampler == SOBOL and bounce > 0
+    if roulette:
+        if pairs:
+            u_rr, _ = owen_pair_at(base, rev, np.int64(4 * (bounce - 1) + 3), True, owen_table)
+        else:
+            u_rr = uniform_at(key, np.uint64(dims + 8) * _GOLDEN)
+    if lobe and pairs:
+        _, u_lobe = owen_pair_at(base, rev, np.int64(4 * (bounce - 1) + 2), True, owen_table)
+    elif lobe:
+        u_lobe = uniform_at(key, np.uint64(dims + 5) * _GOLDEN)
+        if bounce == 0 and sampler != INDEPENDENT:
+            _, u_lobe = sobol_pair_at(s, choice_key, pix, smp, choice_vx, choice_vy, u_lobe, u_lobe)
+    return u_lobe, u_rr
+
+
+@jit_inner
+def _goes_on(Tn, j, step, scaled, eta_sq, ok, roulette, u_rr):
+    """(goes on, non-finite, η²) of path j after its vertex: the 1/η² taken back where the material is not
+    ``scaled`` (Cycles' convention), η² ← η²·step, Russian roulette, non-finite and black paths
+    (transport._roulette_loop's arithmetic; Tn divided in place)."""
+    P, Lm = Tn.shape[0], Tn.shape[2]
+    if not scaled:
+        for a in range(P):
+            for b in range(P):
+                for k in range(Lm):
+                    Tn[a, b, k, j] *= step
+        step = 1.0
+    eta_sq = eta_sq * step
+    scale = 1.0
+    if roulette:
+        q = roulette_probability(Tn, j, eta_sq)
+        if u_rr < q:
+            scale = q
+        else:
+            ok = False
+    finite = True
+    for a in range(P):
+        for b in range(P):
+            for k in range(Lm):
+                x = Tn[a, b, k, j]
+                if roulette:
+                    x = x / scale
+                    Tn[a, b, k, j] = x
+                if not np.isfinite(x):
+                    finite = False
+    return ok and finite and not is_black(Tn, j), ok and not finite, eta_sq
 
 
 @jit
@@ -77,175 +204,96 @@ def trace_delta_paths(query, scene, valid16, rh, args, o0, d0, t_max0, has_t, x_
     # the chunk's paths: throughput before and after the vertex, segments, frames, hits (a column per path)
     T, Tn = np.empty((P, P, Lm, C)), np.empty((P, P, Lm, C))
     o, d, wo, x_T, x_out = np.empty((3, C)), np.empty((3, C)), np.empty((3, C)), np.empty((3, C)), np.empty((3, C))
-    p, n_g, n_s, lamC = np.empty((3, C)), np.empty((3, C)), np.empty((3, C)), np.empty((Lm, C))
-    # the chunk's columns of the batch's arrays, copied in (and its light out) a row at a time: reading or
-    # writing a path's column directly touches rows n·8 bytes apart, which share cache sets
+    p, n_g, n_s, lam_c = np.empty((3, C)), np.empty((3, C)), np.empty((3, C)), np.empty((Lm, C))
     t_c, Le_c, rad = np.empty(C), np.empty((L, C)), np.empty((P, L, C))
     prim, u, v, t = np.empty(C, np.int64), np.empty(C), np.empty(C), np.empty(C)
     valid, eta_step, eta_sq, u_rr = np.empty(C, np.bool_), np.empty(C), np.empty(C), np.empty(C)
     base, rev = np.empty(C, np.uint64), np.empty(C, np.uint64)
     live, live_next = np.empty(C, np.int64), np.empty(C, np.int64)
     # the bounce's vertices by step: constant mirrors, measured mirrors, dielectrics (each its lanes' buffers)
-    rows_c, rows_m, rows_d = np.empty(C, np.int64), np.empty(C, np.int64), np.empty(C, np.int64)
+    rows = np.empty((3, C), np.int64)
     abcs_c, rot_c = _chunk_buffers(1)
     abcs_m, rot_m = _chunk_buffers(Lm)
     abcs_d, rot_d = _chunk_buffers(1)
     cos_c, w_c, e_c, fast = _fresnel_buffers(1)
     cos_m, w_m, e_m, _ = _fresnel_buffers(Lm)
     s = seed_key[0]
-    counted = cost.shape[0] > 0
     rays = 0
     nonfinite = 0
     for c0 in range(0, n, C):
         m = min(C, n - c0)
-        T[:] = 0.0
-        rad[:] = 0.0
-        for c in range(3):
-            o[c, :m] = o0[c, c0:c0 + m]
-            d[c, :m] = d0[c, c0:c0 + m]
-            x_T[c, :m] = x_T0[c, c0:c0 + m]
-        for q in range(Lm):
-            lamC[q, :m] = lam[q, c0:c0 + m]
-        for k in range(L):
-            Le_c[k, :m] = Le[k, c0:c0 + m]
-        if has_t:
-            t_c[:m] = t_max0[c0:c0 + m]
-        for j in range(m):
-            i = c0 + j
-            for a in range(P):
-                for k in range(Lm):
-                    T[a, a, k, j] = 1.0
-            eta_sq[j] = 1.0
-            base[j], rev[j] = owen_path_at(s, pixel[i], sample[i])
-            live[j] = j
+        _start_chunk(c0, m, o0, d0, x_T0, lam, Le, t_max0, has_t, pixel, sample, s, T, rad, o, d, x_T, lam_c, Le_c,
+                     t_c, eta_sq, base, rev, live)
         count = m
         for bounce in range(max_depth):
             if count == 0:
                 break
-            # closest hits of the live paths, 16 at a time (packet_queries' set-up and reading)
-            for k0 in range(0, count, 16):
-                w16 = min(16, count - k0)
-                for k in range(16):
-                    valid16[k] = -1 if k < w16 else 0
-                    if k < w16:
-                        _ray_setup(rh, ri, 16, k, o, d, t_c, has_t and bounce == 0, live[k0 + k])
-                query(vaddr, scene, addr, aaddr)
-                for k in range(w16):
-                    _read_hit(rh, ri, 16, k, live[k0 + k], no_prims, False, prim, u, v, t)
+            _closest_hits(query, scene, rh, ri, valid16, addr, vaddr, aaddr, live, count, o, d, t_c,
+                          has_t and bounce == 0, no_prims, prim, u, v, t)
             rays += count
-            last = bounce + 1 >= max_depth
-            roulette = bounce + 1 >= rr_depth
-            dims = k_camera + 8 * bounce
             nc = nm = nd = 0
             complex_c = False       # some constant mirror of a complex index (else abcs_at alone: black glass)
             for a in range(count):
                 j = live[a]
-                i = c0 + j
                 tri = prim[j]
                 if tri < 0:
-                    if env_on:      # the environment's light (MIS weight 1: every vertex is delta): add_light's
-                        for b in range(P):
-                            for k in range(L):
-                                rad[b, k, j] += T[b, 0, k if Lm > 1 else 0, j] * (Le_c[k, j] * 1.0)
+                    if env_on:
+                        _environment_light(rad, T, Le_c, j)
                     continue
-                if counted:
-                    cost[i] += vertex_cost
-                if last:
+                if cost.shape[0] > 0:
+                    cost[c0 + j] += vertex_cost
+                if bounce + 1 >= max_depth:
                     continue
-                for c in range(3):
-                    wo[c, j] = -d[c, j]
-                surface_at(faces, V, N, has_vn, tri_normal, any_vn, tri, u[j], v[j], j, p, n_g, n_s)
                 mat = tri_material[tri]
-                flip = two_sided[mat] and (n_g[0, j] * wo[0, j] + n_g[1, j] * wo[1, j]) + n_g[2, j] * wo[2, j] < 0
-                for c in range(3):
-                    ns = n_s[c, j] if any_vn else n_g[c, j]
-                    n_s[c, j] = -ns if flip else ns
-                # the vertex's numbers: the lobe (dielectrics only) and the roulette's (PathTracer._vertex_numbers)
+                _shading_normal(faces, V, N, has_vn, tri_normal, any_vn, tri, u[j], v[j], j, two_sided[mat], d, wo,
+                                p, n_g, n_s)
                 kd = kind[mat]
-                if roulette:
-                    if sampler == SOBOL and bounce > 0:
-                        u_rr[j], _ = owen_pair_at(base[j], rev[j], np.int64(4 * (bounce - 1) + 3), True, owen_table)
-                    else:
-                        u_rr[j] = uniform_at(keys[i], np.uint64(dims + 8) * _GOLDEN)
+                u_lobe, u_rr[j] = _vertex_numbers(sampler, bounce, kd == DIELECTRIC, bounce + 1 >= rr_depth, base[j],
+                                                  rev[j], keys[c0 + j], k_camera + 8 * bounce, pixel[c0 + j],
+                                                  sample[c0 + j], s, choice_vx, choice_vy, choice_key, owen_table)
                 # the material's step (engine.kernels.delta_bounce), its lanes in the step's buffers
                 if kd == DIELECTRIC:
-                    if sampler == SOBOL and bounce > 0:
-                        _, u_lobe = owen_pair_at(base[j], rev[j], np.int64(4 * (bounce - 1) + 2), True, owen_table)
-                    else:
-                        u_lobe = uniform_at(keys[i], np.uint64(dims + 5) * _GOLDEN)
-                        if bounce == 0 and sampler != INDEPENDENT:
-                            _, u_lobe = sobol_pair_at(s, choice_key, pixel[i], sample[i], choice_vx, choice_vy,
-                                                      u_lobe, u_lobe)
                     dielectric_at(j, nd, n_s, wo, x_T, P, u_lobe, eta_front[mat], eta_back[mat], d, x_out, valid,
                                   eta_step, abcs_d, rot_d)
-                    rows_d[nd] = j
+                    rows[2, nd] = j
                     nd += 1
                 elif kd == CONSTANT_MIRROR:
                     constant_mirror_at(j, nc, n_s, wo, x_T, P, d, x_out, valid, eta_step, cos_c, w_c, rot_c)
                     e_c[0, 0, nc] = eta_c[mat].real
                     e_c[0, 1, nc] = eta_c[mat].imag
                     complex_c = complex_c or eta_c[mat].imag != 0.0
-                    rows_c[nc] = j
+                    rows[0, nc] = j
                     nc += 1
                 else:
-                    tabulated_mirror_at(j, nm, n_s, wo, x_T, P, lamC, wl_n, tab_n, wl_k, tab_k, tab_scale,
+                    tabulated_mirror_at(j, nm, n_s, wo, x_T, P, lam_c, wl_n, tab_n, wl_k, tab_k, tab_scale,
                                         tab_shared, tab_first, tab_hints, d, x_out, valid, eta_step, cos_m, w_m, e_m,
                                         rot_m)
-                    rows_m[nm] = j
+                    rows[1, nm] = j
                     nm += 1
             # the Fresnel values of the mirrors' vertices, a wavelength at a time (SIMD), and the throughputs
-            if nc > 0:
-                _chunk_fresnel(cos_c, w_c, e_c, nc, abcs_c, fast, complex_c)
-                _update_chunk(T, rows_c, Tn, rows_c, 0, nc, abcs_c, rot_c)
-            if nm > 0:
-                _chunk_fresnel(cos_m, w_m, e_m, nm, abcs_m, fast, True)
-                _update_chunk(T, rows_m, Tn, rows_m, 0, nm, abcs_m, rot_m)
-            if nd > 0:
-                _update_chunk(T, rows_d, Tn, rows_d, 0, nd, abcs_d, rot_d)
-            # roulette, non-finite and black paths (transport._roulette_loop's arithmetic); the survivors go on
+            _chunk_fresnel(cos_c, w_c, e_c, nc, abcs_c, fast, complex_c)
+            _update_chunk(T, rows[0], Tn, rows[0], 0, nc, abcs_c, rot_c)
+            _chunk_fresnel(cos_m, w_m, e_m, nm, abcs_m, fast, True)
+            _update_chunk(T, rows[1], Tn, rows[1], 0, nm, abcs_m, rot_m)
+            _update_chunk(T, rows[2], Tn, rows[2], 0, nd, abcs_d, rot_d)
+            # roulette, non-finite and black paths; the survivors go on from their offset hit points
             count = 0
-            for g in range(3):
-                rows = rows_c if g == 0 else rows_m if g == 1 else rows_d
-                for r in range(nc if g == 0 else nm if g == 1 else nd):
-                    j = rows[r]
-                    step = eta_step[j]
-                    if not scaling[tri_material[prim[j]]]:      # Cycles' convention: the refraction's 1/η² back
-                        for a in range(P):
-                            for b in range(P):
-                                for k in range(Lm):
-                                    Tn[a, b, k, j] *= step
-                        step = 1.0
-                    eta_sq[j] = eta_sq[j] * step
-                    ok = valid[j]
-                    scale = 1.0
-                    if roulette:
-                        q = roulette_probability(Tn, j, eta_sq[j])
-                        if u_rr[j] < q:
-                            scale = q
-                        else:
-                            ok = False
-                    finite = True
-                    for a in range(P):
-                        for b in range(P):
-                            for k in range(Lm):
-                                x = Tn[a, b, k, j]
-                                if roulette:
-                                    x = x / scale
-                                    Tn[a, b, k, j] = x
-                                if not np.isfinite(x):
-                                    finite = False
-                    if ok and not finite:
-                        nonfinite += 1
-                    if not ok or not finite or is_black(Tn, j):
-                        continue
-                    offset_origin_at(p, n_g, d, epsilon, j, o)
-                    for c in range(3):
-                        x_T[c, j] = x_out[c, j]
-                    live_next[count] = j
-                    count += 1
+            for g, ng in ((0, nc), (1, nm), (2, nd)):
+                for r in range(ng):
+                    j = rows[g, r]
+                    on, bad, eta_sq[j] = _goes_on(Tn, j, eta_step[j], scaling[tri_material[prim[j]]], eta_sq[j],
+                                                  valid[j], bounce + 1 >= rr_depth, u_rr[j])
+                    nonfinite += bad
+                    if on:
+                        offset_origin_at(p, n_g, d, epsilon, j, o)
+                        for c in range(3):
+                            x_T[c, j] = x_out[c, j]
+                        live_next[count] = j
+                        count += 1
             T, Tn = Tn, T
             live, live_next = live_next, live
         for b in range(P):
             for k in range(L):
-                radiance[b, k, c0:c0 + m] = rad[b, k, :m]
+                for j in range(m):
+                    radiance[b, k, c0 + j] = rad[b, k, j]
     return rays, nonfinite

@@ -358,8 +358,8 @@ class PathTracer:
         #: the compiled per-path bounce loop where it covers the scene (engine.render.path_loop), else None: the
         #: wavefront below traces every batch; ``tracer_name`` names the transport for the stats, ``tracer_reason`` why
         #: the loop does not run (None where it does)
-        self.tracer_reason = coverage(self)
-        self.path_loop = DeltaScene(self) if self.tracer_reason is None else None
+        self.tracer_reason = coverage(self, plain=type(self) is PathTracer)
+        self.path_loop = DeltaScene(self, VERTEX_COST) if self.tracer_reason is None else None
         self.tracer_name = LOOP if self.path_loop is not None else WAVEFRONT
 
     def _emitted(self, light: _Light, lookup: WavelengthLookup, d: np.ndarray | None = None,

@@ -13,8 +13,6 @@ loop where it covers the scene.  The render's stats say which ran (``stats["trac
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import numpy as np
 
 from .. import kernels
@@ -28,9 +26,6 @@ from .accel import RAY_EPSILON
 from .embree_direct import _RAYHIT_WORDS, _aligned, _arguments
 from .lights.environment import EnvironmentEmitter
 from .sampler import PAIR_CHOICES, _PAIR_KEYS, _SOBOL_V, _seed_key
-
-if TYPE_CHECKING:
-    from .integrator import PathTracer
 
 #: RenderSettings.tracer's values
 TRACERS = ("auto", "wavefront")
@@ -55,15 +50,16 @@ def _material_kind(m, mono: bool) -> int:
     return 0
 
 
-def coverage(tracer: PathTracer) -> str | None:
-    """None where the loop covers ``tracer``'s scene and settings, else why not (a few words)."""
-    from .integrator import PathTracer
+def coverage(tracer, plain: bool = True) -> str | None:
+    """None where the loop covers the scene and settings of ``tracer`` (an engine.render.integrator.PathTracer),
+    else why not (a few words); ``plain``: the
+    tracer is a plain PathTracer (not one with medium vertices, engine.render.participating)."""
     st = tracer.settings
     if getattr(st, "tracer", "auto") == "wavefront":
         return "tracer 'wavefront' asked for"
-    if not kernels.COMPILED:
+    if not kernels.uses_cache():
         return "no compiled kernels"
-    if type(tracer) is not PathTracer:
+    if not plain:
         return "participating media"
     compiled = tracer.scene
     if getattr(compiled.rays, "_lib", None) is None or compiled.has_passthrough:
@@ -97,8 +93,9 @@ class DeltaScene:
     """The loop's view of a covered scene (``coverage`` None): the Embree query, geometry and per-material arrays
     of engine.kernels.path_loop.trace_delta_paths."""
 
-    def __init__(self, tracer: PathTracer):
+    def __init__(self, tracer, vertex_cost: int):
         self.tracer = tracer
+        self.vertex_cost = vertex_cost
         compiled, st = tracer.scene, tracer.settings
         rays = compiled.rays
         self.query, self.handle, self.features = rays._lib.intersect[16], rays.handle, rays._features
@@ -142,7 +139,6 @@ class DeltaScene:
 
     def trace(self, pixel: np.ndarray, sample: np.ndarray):
         """PathTracer.trace's result for the batch, or None where this batch must take the wavefront."""
-        from .integrator import VERTEX_COST
         tracer = self.tracer
         st = tracer.settings
         state, acc = tracer._camera_paths(pixel, sample)
@@ -165,7 +161,8 @@ class DeltaScene:
             c(state.x_T, np.float64), lam, c(state.sampler.keys, np.uint64), c(pixel, np.int64), c(sample, np.int64),
             *self.geometry, self.kind, self.eta_c, self.eta_front, self.eta_back, self.scaling, self.two_sided,
             *self.tables, env is not None, Le, tracer.P, st.max_depth, st.rr_depth, RAY_EPSILON,
-            self.sampler, self.seed_key, k_camera, *self.choices, SOBOL2_REVERSED, acc.radiance, cost, VERTEX_COST)
+            self.sampler, self.seed_key, k_camera, *self.choices, SOBOL2_REVERSED, acc.radiance, cost,
+            self.vertex_cost)
         acc.stats["rays"] += int(rays)
         acc.stats["nonfinite"] += int(nonfinite)
         return tracer._finish(acc, n)

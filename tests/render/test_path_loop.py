@@ -169,13 +169,13 @@ def test_scenes_the_loop_does_not_cover_take_the_wavefront_and_say_why(name, ove
 
 def test_participating_media_take_the_wavefront():
     from engine.render.participating import ParticipatingPathTracer
-    from engine.render.path_loop import coverage
     scene = scene_at("glass_sphere", 8, 8)
     renderer = Renderer(scene)
     plan = renderer.plan(scene.settings)
-    tracer = ParticipatingPathTracer.__new__(ParticipatingPathTracer)
-    tracer.__dict__.update(renderer.tracer(plan).__dict__)
-    assert coverage(tracer) in ("participating media", "no compiled kernels")
+    tracer = ParticipatingPathTracer(renderer.compiled, renderer.lights, renderer.camera, plan.settings,
+                                     materials=list(plan.materials))
+    assert tracer.path_loop is None
+    assert tracer.tracer_reason in ("participating media", "no compiled kernels")
 
 
 def test_the_tracer_setting_is_validated():
