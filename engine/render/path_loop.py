@@ -115,8 +115,8 @@ class DeltaScene:
                 self.eta_c[i] = m._eta
             elif kd == DIELECTRIC:
                 self.eta_front[i], self.eta_back[i] = m.n_int / m.n_ext, m.n_ext / m.n_int
-            else:       # the wavefront's tabulated_mirror_scatter_numba arguments
-                wl_n, n, wl_k, k = m._table_arrays
+            else:       # the wavefront's tabulated_mirror_scatter_numba arguments (writable copies: one compiled
+                wl_n, n, wl_k, k = (np.array(a, np.float64) for a in m._table_arrays)      # loop for every scene)
                 tables = (wl_n, n, wl_k, k, 1.0 / float(m.exterior_n))
                 self.table_range = (max(wl_n[0], wl_k[0]), min(wl_n[-1], wl_k[-1]))
         wl_n, _, wl_k, _, _ = tables
