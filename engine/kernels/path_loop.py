@@ -42,35 +42,28 @@ _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 CHUNK = _CHUNK
 
 
-@jit_inner
+@jit
 def _start_chunk(c0, m, o0, d0, x_T0, lam, Le, t_max0, has_t, pixel, sample, s, T, rad, o, d, x_T, lam_c, Le_c, t_c,
                  eta_sq, base, rev, live):
     """The chunk's paths c0 … c0 + m − 1 at the camera: T = identity, no light yet, their columns of the batch's
     arrays copied in a row at a time (reading a path's column directly touches rows n·8 bytes apart, which share
     cache sets), their Sobol' keys, all live."""
-    P, Lm = T.shape[0], T.shape[2]
+    T[:] = 0.0
+    rad[:] = 0.0
     for c in range(3):
-        for j in range(m):
-            o[c, j] = o0[c, c0 + j]
-        for j in range(m):
-            d[c, j] = d0[c, c0 + j]
-        for j in range(m):
-            x_T[c, j] = x_T0[c, c0 + j]
-    for q in range(Lm):
-        for j in range(m):
-            lam_c[q, j] = lam[q, c0 + j]
+        o[c, :m] = o0[c, c0:c0 + m]
+        d[c, :m] = d0[c, c0:c0 + m]
+        x_T[c, :m] = x_T0[c, c0:c0 + m]
+    for q in range(lam.shape[0]):
+        lam_c[q, :m] = lam[q, c0:c0 + m]
     for k in range(Le.shape[0]):
-        for j in range(m):
-            Le_c[k, j] = Le[k, c0 + j]
-        for b in range(P):
-            for j in range(m):
-                rad[b, k, j] = 0.0
+        Le_c[k, :m] = Le[k, c0:c0 + m]
+    if has_t:
+        t_c[:m] = t_max0[c0:c0 + m]
     for j in range(m):
-        t_c[j] = t_max0[c0 + j] if has_t else 0.0
-        for a in range(P):
-            for b in range(P):
-                for k in range(Lm):
-                    T[a, b, k, j] = 1.0 if a == b else 0.0
+        for a in range(T.shape[0]):
+            for k in range(T.shape[2]):
+                T[a, a, k, j] = 1.0
         eta_sq[j] = 1.0
         base[j], rev[j] = owen_path_at(s, pixel[c0 + j], sample[c0 + j])
         live[j] = j
@@ -93,25 +86,71 @@ def _closest_hits(query, scene, rh, ri, valid16, addr, vaddr, aaddr, live, count
 
 
 @jit_inner
-def _environment_light(rad, T, Le_c, j):
-    """The environment's light reached by path j (MIS weight 1: every vertex is delta): add_light's arithmetic."""
-    Lm = T.shape[2]
-    for b in range(T.shape[0]):
-        for k in range(Le_c.shape[0]):
-            rad[b, k, j] += T[b, 0, k if Lm > 1 else 0, j] * (Le_c[k, j] * 1.0)
+def _hit_points(live, count, prim, u, v, faces, V, N, has_vn, tri_normal, any_vn, tri_material, two_sided, d, wo, p,
+                n_g, n_s):
+    """The live paths' hit points, geometric and shading normals (a two-sided material's back face: the shading
+    normal flipped, PathTracer._back_faces) and wo = −d, where they hit."""
+    for a in range(count):
+        j = live[a]
+        tri = prim[j]
+        if tri < 0:
+            continue
+        for c in range(3):
+            wo[c, j] = -d[c, j]
+        surface_at(faces, V, N, has_vn, tri_normal, any_vn, tri, u[j], v[j], j, p, n_g, n_s)
+        flip = two_sided[tri_material[tri]] and (n_g[0, j] * wo[0, j] + n_g[1, j] * wo[1, j]) + n_g[2, j] * wo[2, j] < 0
+        for c in range(3):
+            ns = n_s[c, j] if any_vn else n_g[c, j]
+            n_s[c, j] = -ns if flip else ns
 
 
 @jit_inner
-def _shading_normal(faces, V, N, has_vn, tri_normal, any_vn, tri, uj, vj, j, two_sided, d, wo, p, n_g, n_s):
-    """Hit j's point, geometric and shading normals (a two-sided material's back face: the shading normal flipped,
-    PathTracer._back_faces) and wo = −d."""
-    for c in range(3):
-        wo[c, j] = -d[c, j]
-    surface_at(faces, V, N, has_vn, tri_normal, any_vn, tri, uj, vj, j, p, n_g, n_s)
-    flip = two_sided and (n_g[0, j] * wo[0, j] + n_g[1, j] * wo[1, j]) + n_g[2, j] * wo[2, j] < 0
-    for c in range(3):
-        ns = n_s[c, j] if any_vn else n_g[c, j]
-        n_s[c, j] = -ns if flip else ns
+def _survivors(rows, nr, Tn, eta_step, scaled, mat_of, eta_sq, valid, roulette, u_rr, p, n_g, d, epsilon, o, x_T,
+               x_out, live_next, count):
+    """The paths ``rows[:nr]`` after their vertex: the 1/η² taken back where the material is not ``scaled`` (Cycles'
+    convention), η² ← η²·step, Russian roulette, non-finite and black paths (transport._roulette_loop's arithmetic,
+    Tn divided in place); the survivors' next origins and frames, appended to ``live_next`` from ``count``.
+    Returns (live paths, non-finite paths)."""
+    P, Lm = Tn.shape[0], Tn.shape[2]
+    nonfinite = 0
+    for r in range(nr):
+        j = rows[r]
+        step = eta_step[j]
+        if not scaled[mat_of[j]]:
+            for a in range(P):
+                for b in range(P):
+                    for k in range(Lm):
+                        Tn[a, b, k, j] *= step
+            step = 1.0
+        eta_sq[j] = eta_sq[j] * step
+        ok = valid[j]
+        scale = 1.0
+        if roulette:
+            q = roulette_probability(Tn, j, eta_sq[j])
+            if u_rr[j] < q:
+                scale = q
+            else:
+                ok = False
+        finite = True
+        for a in range(P):
+            for b in range(P):
+                for k in range(Lm):
+                    x = Tn[a, b, k, j]
+                    if roulette:
+                        x = x / scale
+                        Tn[a, b, k, j] = x
+                    if not np.isfinite(x):
+                        finite = False
+        if ok and not finite:
+            nonfinite += 1
+        if not ok or not finite or is_black(Tn, j):
+            continue
+        offset_origin_at(p, n_g, d, epsilon, j, o)
+        for c in range(3):
+            x_T[c, j] = x_out[c, j]
+        live_next[count] = j
+        count += 1
+    return count, nonfinite
 
 
 @jit_inner
@@ -134,39 +173,6 @@ def _vertex_numbers(sampler, bounce, lobe, roulette, base, rev, key, dims, pix, 
         if bounce == 0 and sampler != INDEPENDENT:
             _, u_lobe = sobol_pair_at(s, choice_key, pix, smp, choice_vx, choice_vy, u_lobe, u_lobe)
     return u_lobe, u_rr
-
-
-@jit_inner
-def _goes_on(Tn, j, step, scaled, eta_sq, ok, roulette, u_rr):
-    """(goes on, non-finite, η²) of path j after its vertex: the 1/η² taken back where the material is not
-    ``scaled`` (Cycles' convention), η² ← η²·step, Russian roulette, non-finite and black paths
-    (transport._roulette_loop's arithmetic; Tn divided in place)."""
-    P, Lm = Tn.shape[0], Tn.shape[2]
-    if not scaled:
-        for a in range(P):
-            for b in range(P):
-                for k in range(Lm):
-                    Tn[a, b, k, j] *= step
-        step = 1.0
-    eta_sq = eta_sq * step
-    scale = 1.0
-    if roulette:
-        q = roulette_probability(Tn, j, eta_sq)
-        if u_rr < q:
-            scale = q
-        else:
-            ok = False
-    finite = True
-    for a in range(P):
-        for b in range(P):
-            for k in range(Lm):
-                x = Tn[a, b, k, j]
-                if roulette:
-                    x = x / scale
-                    Tn[a, b, k, j] = x
-                if not np.isfinite(x):
-                    finite = False
-    return ok and finite and not is_black(Tn, j), ok and not finite, eta_sq
 
 
 @jit
@@ -204,14 +210,14 @@ def trace_delta_paths(query, scene, valid16, rh, args, o0, d0, t_max0, has_t, x_
     # the chunk's paths: throughput before and after the vertex, segments, frames, hits (a column per path)
     T, Tn = np.empty((P, P, Lm, C)), np.empty((P, P, Lm, C))
     o, d, wo, x_T, x_out = np.empty((3, C)), np.empty((3, C)), np.empty((3, C)), np.empty((3, C)), np.empty((3, C))
-    p, n_g, n_s, lam_c = np.empty((3, C)), np.empty((3, C)), np.empty((3, C)), np.empty((Lm, C))
+    p, n_g, n_s, lamC = np.empty((3, C)), np.empty((3, C)), np.empty((3, C)), np.empty((Lm, C))
     t_c, Le_c, rad = np.empty(C), np.empty((L, C)), np.empty((P, L, C))
     prim, u, v, t = np.empty(C, np.int64), np.empty(C), np.empty(C), np.empty(C)
     valid, eta_step, eta_sq, u_rr = np.empty(C, np.bool_), np.empty(C), np.empty(C), np.empty(C)
     base, rev = np.empty(C, np.uint64), np.empty(C, np.uint64)
-    live, live_next = np.empty(C, np.int64), np.empty(C, np.int64)
+    live, live_next, mat_of = np.empty(C, np.int64), np.empty(C, np.int64), np.empty(C, np.int64)
     # the bounce's vertices by step: constant mirrors, measured mirrors, dielectrics (each its lanes' buffers)
-    rows = np.empty((3, C), np.int64)
+    rows_c, rows_m, rows_d = np.empty(C, np.int64), np.empty(C, np.int64), np.empty(C, np.int64)
     abcs_c, rot_c = _chunk_buffers(1)
     abcs_m, rot_m = _chunk_buffers(Lm)
     abcs_d, rot_d = _chunk_buffers(1)
@@ -222,7 +228,7 @@ def trace_delta_paths(query, scene, valid16, rh, args, o0, d0, t_max0, has_t, x_
     nonfinite = 0
     for c0 in range(0, n, C):
         m = min(C, n - c0)
-        _start_chunk(c0, m, o0, d0, x_T0, lam, Le, t_max0, has_t, pixel, sample, s, T, rad, o, d, x_T, lam_c, Le_c,
+        _start_chunk(c0, m, o0, d0, x_T0, lam, Le, t_max0, has_t, pixel, sample, s, T, rad, o, d, x_T, lamC, Le_c,
                      t_c, eta_sq, base, rev, live)
         count = m
         for bounce in range(max_depth):
@@ -231,69 +237,70 @@ def trace_delta_paths(query, scene, valid16, rh, args, o0, d0, t_max0, has_t, x_
             _closest_hits(query, scene, rh, ri, valid16, addr, vaddr, aaddr, live, count, o, d, t_c,
                           has_t and bounce == 0, no_prims, prim, u, v, t)
             rays += count
+            roulette = bounce + 1 >= rr_depth
+            _hit_points(live, count, prim, u, v, faces, V, N, has_vn, tri_normal, any_vn, tri_material, two_sided, d,
+                        wo, p, n_g, n_s)
             nc = nm = nd = 0
             complex_c = False       # some constant mirror of a complex index (else abcs_at alone: black glass)
             for a in range(count):
                 j = live[a]
+                i = c0 + j
                 tri = prim[j]
                 if tri < 0:
-                    if env_on:
-                        _environment_light(rad, T, Le_c, j)
+                    if env_on:      # the environment's light (MIS weight 1: every vertex is delta): add_light's
+                        for b in range(P):
+                            for k in range(L):
+                                rad[b, k, j] += T[b, 0, min(k, Lm - 1), j] * (Le_c[k, j] * 1.0)
                     continue
                 if cost.shape[0] > 0:
-                    cost[c0 + j] += vertex_cost
+                    cost[i] += vertex_cost
                 if bounce + 1 >= max_depth:
                     continue
-                mat = tri_material[tri]
-                _shading_normal(faces, V, N, has_vn, tri_normal, any_vn, tri, u[j], v[j], j, two_sided[mat], d, wo,
-                                p, n_g, n_s)
+                mat = mat_of[j] = tri_material[tri]
+                # the vertex's numbers: the lobe (dielectrics only) and the roulette's
                 kd = kind[mat]
-                u_lobe, u_rr[j] = _vertex_numbers(sampler, bounce, kd == DIELECTRIC, bounce + 1 >= rr_depth, base[j],
-                                                  rev[j], keys[c0 + j], k_camera + 8 * bounce, pixel[c0 + j],
-                                                  sample[c0 + j], s, choice_vx, choice_vy, choice_key, owen_table)
+                u_lobe = 0.0
+                if kd == DIELECTRIC or roulette:
+                    u_lobe, u_rr[j] = _vertex_numbers(sampler, bounce, kd == DIELECTRIC, roulette, base[j], rev[j],
+                                                      keys[i], k_camera + 8 * bounce, pixel[i], sample[i], s,
+                                                      choice_vx, choice_vy, choice_key, owen_table)
                 # the material's step (engine.kernels.delta_bounce), its lanes in the step's buffers
                 if kd == DIELECTRIC:
                     dielectric_at(j, nd, n_s, wo, x_T, P, u_lobe, eta_front[mat], eta_back[mat], d, x_out, valid,
                                   eta_step, abcs_d, rot_d)
-                    rows[2, nd] = j
+                    rows_d[nd] = j
                     nd += 1
                 elif kd == CONSTANT_MIRROR:
                     constant_mirror_at(j, nc, n_s, wo, x_T, P, d, x_out, valid, eta_step, cos_c, w_c, rot_c)
                     e_c[0, 0, nc] = eta_c[mat].real
                     e_c[0, 1, nc] = eta_c[mat].imag
                     complex_c = complex_c or eta_c[mat].imag != 0.0
-                    rows[0, nc] = j
+                    rows_c[nc] = j
                     nc += 1
                 else:
-                    tabulated_mirror_at(j, nm, n_s, wo, x_T, P, lam_c, wl_n, tab_n, wl_k, tab_k, tab_scale,
+                    tabulated_mirror_at(j, nm, n_s, wo, x_T, P, lamC, wl_n, tab_n, wl_k, tab_k, tab_scale,
                                         tab_shared, tab_first, tab_hints, d, x_out, valid, eta_step, cos_m, w_m, e_m,
                                         rot_m)
-                    rows[1, nm] = j
+                    rows_m[nm] = j
                     nm += 1
             # the Fresnel values of the mirrors' vertices, a wavelength at a time (SIMD), and the throughputs
-            _chunk_fresnel(cos_c, w_c, e_c, nc, abcs_c, fast, complex_c)
-            _update_chunk(T, rows[0], Tn, rows[0], 0, nc, abcs_c, rot_c)
-            _chunk_fresnel(cos_m, w_m, e_m, nm, abcs_m, fast, True)
-            _update_chunk(T, rows[1], Tn, rows[1], 0, nm, abcs_m, rot_m)
-            _update_chunk(T, rows[2], Tn, rows[2], 0, nd, abcs_d, rot_d)
-            # roulette, non-finite and black paths; the survivors go on from their offset hit points
+            if nc > 0:
+                _chunk_fresnel(cos_c, w_c, e_c, nc, abcs_c, fast, complex_c)
+                _update_chunk(T, rows_c, Tn, rows_c, 0, nc, abcs_c, rot_c)
+            if nm > 0:
+                _chunk_fresnel(cos_m, w_m, e_m, nm, abcs_m, fast, True)
+                _update_chunk(T, rows_m, Tn, rows_m, 0, nm, abcs_m, rot_m)
+            if nd > 0:
+                _update_chunk(T, rows_d, Tn, rows_d, 0, nd, abcs_d, rot_d)
+            # roulette, non-finite and black paths (transport._roulette_loop's arithmetic); the survivors go on
             count = 0
-            for g, ng in ((0, nc), (1, nm), (2, nd)):
-                for r in range(ng):
-                    j = rows[g, r]
-                    on, bad, eta_sq[j] = _goes_on(Tn, j, eta_step[j], scaling[tri_material[prim[j]]], eta_sq[j],
-                                                  valid[j], bounce + 1 >= rr_depth, u_rr[j])
-                    nonfinite += bad
-                    if on:
-                        offset_origin_at(p, n_g, d, epsilon, j, o)
-                        for c in range(3):
-                            x_T[c, j] = x_out[c, j]
-                        live_next[count] = j
-                        count += 1
+            for rows, nr in ((rows_c, nc), (rows_m, nm), (rows_d, nd)):
+                count, bad = _survivors(rows, nr, Tn, eta_step, scaling, mat_of, eta_sq, valid, roulette, u_rr, p, n_g,
+                                        d, epsilon, o, x_T, x_out, live_next, count)
+                nonfinite += bad
             T, Tn = Tn, T
             live, live_next = live_next, live
         for b in range(P):
             for k in range(L):
-                for j in range(m):
-                    radiance[b, k, c0 + j] = rad[b, k, j]
+                radiance[b, k, c0:c0 + m] = rad[b, k, :m]
     return rays, nonfinite
