@@ -865,9 +865,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "as Cycles' Light Tree), off (the scene's light_selection over whole lights) or auto (default: "
                         "the tree where the scene has more than 64 emitters)")
     r.add_argument("--tracer", choices=TRACERS,
-                   help="auto (default): the compiled per-path bounce loop where it covers the scene (smooth mirrors "
-                        "and dielectrics under a constant environment: the same image, faster), else the wavefront; "
-                        "wavefront: always the wavefront")
+                   help="wavefront (default): the wavefront tracer; auto: the compiled per-path bounce loop where it "
+                        "covers the scene (smooth mirrors and dielectrics under a constant environment: the same "
+                        "image), else the wavefront")
     _light_path_options(r)
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")

@@ -7,7 +7,7 @@ unpolarised environment (or none), without media, ray visibility, holdouts, tran
 emitters, textures or Cycles' light-path rules, drawn by the "independent", "stratified" or "sobol" sampler, with
 the compiled kernels and Embree's C API in use.  :func:`coverage` says why a scene is not covered; the tracer then
 runs the wavefront, which is the loop's twin: the same numbers bit for bit (tests/render/test_path_loop.py), and
-what every other scene runs.  RenderSettings.tracer "wavefront" forces the wavefront; "auto" (default) takes the
+what every other scene runs.  RenderSettings.tracer "wavefront" (default) runs the wavefront; "auto" takes the
 loop where it covers the scene.  The render's stats say which ran (``stats["tracer"]``).
 """
 
@@ -31,6 +31,8 @@ from .sampler import PAIR_CHOICES, _PAIR_KEYS, _SOBOL_V, _seed_key
 TRACERS = ("auto", "wavefront")
 #: How the stats name the transports
 WAVEFRONT = "wavefront"
+#: coverage's reason where the settings ask for the wavefront (the stats then name it without a reason)
+ASKED = "tracer 'wavefront'"
 LOOP = "per-path loop (delta-only materials)"
 _SAMPLERS = {"independent": INDEPENDENT, "stratified": STRATIFIED, "sobol": SOBOL}
 
@@ -56,7 +58,7 @@ def coverage(tracer, plain: bool = True) -> str | None:
     tracer is a plain PathTracer (not one with medium vertices, engine.render.participating)."""
     st = tracer.settings
     if getattr(st, "tracer", "auto") == "wavefront":
-        return "tracer 'wavefront' asked for"
+        return ASKED
     if not kernels.uses_cache():
         return "no compiled kernels"
     if not plain:

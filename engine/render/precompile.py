@@ -314,7 +314,7 @@ CASES = (
     ("grey", "spectral reduction: exact", {"reduce_spectral": "exact"}, False),
     ("grey", "no reduction, independent sampler", {"reduce_spectral": "off", "sampler": "independent"}, False),
     ("grey", "scalar, RGB", {"polarisation": "off", "spectral": "rgb"}, False),
-    ("delta", "smooth mirrors and glass: the compiled per-path loop", {}, False),
+    ("delta", "smooth mirrors and glass: the compiled per-path loop", {"tracer": "auto"}, False),
 )
 
 

@@ -271,8 +271,7 @@ class Renderer:
         before = kernel_compiles()
         tracer = self.tracer(plan, count_cost=schedule.job.count_cost) if executor.local else None
         if tracer is not None:
-            stats["tracer"] = tracer.tracer_name if tracer.path_loop is not None else (
-                f"{tracer.tracer_name} ({tracer.tracer_reason})")
+            stats["tracer"] = tracer.tracer_name
         self._live_film = film
         try:
             cancelled = drive(schedule, film, tracer, executor, stats, request)
