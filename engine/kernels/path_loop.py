@@ -42,28 +42,37 @@ _GOLDEN = np.uint64(0x9E3779B97F4A7C15)
 CHUNK = _CHUNK
 
 
-@jit
+@jit_inner
 def _start_chunk(c0, m, o0, d0, x_T0, lam, Le, t_max0, has_t, pixel, sample, s, T, rad, o, d, x_T, lam_c, Le_c, t_c,
                  eta_sq, base, rev, live):
     """The chunk's paths c0 … c0 + m − 1 at the camera: T = identity, no light yet, their columns of the batch's
     arrays copied in a row at a time (reading a path's column directly touches rows n·8 bytes apart, which share
     cache sets), their Sobol' keys, all live."""
-    T[:] = 0.0
-    rad[:] = 0.0
+    P, Lm = T.shape[0], T.shape[2]
+    for a in range(P):
+        for b in range(P):
+            for k in range(Lm):
+                one = 1.0 if a == b else 0.0
+                for j in range(m):
+                    T[a, b, k, j] = one
+        for k in range(Le.shape[0]):
+            for j in range(m):
+                rad[a, k, j] = 0.0
     for c in range(3):
-        o[c, :m] = o0[c, c0:c0 + m]
-        d[c, :m] = d0[c, c0:c0 + m]
-        x_T[c, :m] = x_T0[c, c0:c0 + m]
-    for q in range(lam.shape[0]):
-        lam_c[q, :m] = lam[q, c0:c0 + m]
+        for j in range(m):
+            o[c, j] = o0[c, c0 + j]
+        for j in range(m):
+            d[c, j] = d0[c, c0 + j]
+        for j in range(m):
+            x_T[c, j] = x_T0[c, c0 + j]
+    for q in range(Lm):
+        for j in range(m):
+            lam_c[q, j] = lam[q, c0 + j]
     for k in range(Le.shape[0]):
-        Le_c[k, :m] = Le[k, c0:c0 + m]
-    if has_t:
-        t_c[:m] = t_max0[c0:c0 + m]
+        for j in range(m):
+            Le_c[k, j] = Le[k, c0 + j]
     for j in range(m):
-        for a in range(T.shape[0]):
-            for k in range(T.shape[2]):
-                T[a, a, k, j] = 1.0
+        t_c[j] = t_max0[c0 + j] if has_t else 0.0
         eta_sq[j] = 1.0
         base[j], rev[j] = owen_path_at(s, pixel[c0 + j], sample[c0 + j])
         live[j] = j
