@@ -450,8 +450,8 @@ class RenderSettings:
     light_tree: str = "auto"
     #: Which transport traces the paths (engine.render.path_loop): "wavefront" (default) — the wavefront always;
     #: "auto" — the compiled per-path bounce loop where it covers the scene (every material a smooth mirror or
-    #: dielectric, a constant environment the only light, no media: the same image bit for bit; measured within
-    #: −7 … +9 % of the wavefront's CPU time, docs/benchmarks.md), else the wavefront (the loop's twin).  Which
+    #: dielectric, a constant environment the only light, no media: the same image bit for bit; measured at
+    #: 0.95–1.15× the wavefront's CPU time, docs/benchmarks.md), else the wavefront (the loop's twin).  Which
     #: one ran is in the render's stats.
     tracer: str = "wavefront"
     #: Cycles' Light Paths ▸ Max Bounces per kind (engine.render.light_paths): a path whose diffuse, glossy,
