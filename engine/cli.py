@@ -20,7 +20,7 @@ import sys
 import time
 
 from .errors import SceneError
-from .scene.description import LIGHT_PATH_FIELDS, LIGHT_TREE_MODES, TRACERS
+from .scene.description import LIGHT_PATH_FIELDS, LIGHT_TREE_MODES
 
 
 class ProgressBar:
@@ -149,7 +149,7 @@ def _load_scene(path):
 
 #: Options of `render` (and `estimate`, which has some of them) that override the scene's render block.
 SETTING_OPTIONS = ("spp", "seed", "max_depth", "spectral", "polarisation", "wavelength_nm", "simplify",
-                   "reduce_spectral", "sampler", "light_tree", "tracer", *(f.name for f in LIGHT_PATH_FIELDS))
+                   "reduce_spectral", "sampler", "light_tree", *(f.name for f in LIGHT_PATH_FIELDS))
 
 
 def _settings_from_options(scene, args):
@@ -163,7 +163,7 @@ def _settings_from_options(scene, args):
         return st
     merged = {**{k: getattr(st, k) for k in ("spp", "max_depth", "rr_depth", "seed", "spectral",
                                               "wavelength_nm", "polarisation", "batch_rays", "threads",
-                                              "reduce_spectral", "simplify", "sampler", "light_tree", "tracer",
+                                              "reduce_spectral", "simplify", "sampler", "light_tree",
                                               *(f.name for f in LIGHT_PATH_FIELDS))}, **overrides}
     try:
         st = parse_settings(merged, "option")
@@ -864,10 +864,6 @@ def build_parser() -> argparse.ArgumentParser:
                    help="next-event estimation's light choice: on (the light tree over lamps and emissive triangles, "
                         "as Cycles' Light Tree), off (the scene's light_selection over whole lights) or auto (default: "
                         "the tree where the scene has more than 64 emitters)")
-    r.add_argument("--tracer", choices=TRACERS,
-                   help="wavefront (default): the wavefront tracer; auto: the compiled per-path bounce loop where it "
-                        "covers the scene (smooth mirrors and dielectrics under a constant environment: the same "
-                        "image), else the wavefront")
     _light_path_options(r)
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")

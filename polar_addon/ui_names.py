@@ -29,7 +29,6 @@ RENDER_SETTINGS = {
     "simplify": ("skip_clear_layers", "Render Properties ▸ Polarisation & Spectrum ▸ Skip Clear Layers"),
     "sampler": ("sampler", "Render Properties ▸ Sampling ▸ Pattern"),
     "light_tree": (None, "Render Properties ▸ Sampling ▸ Light Tree (Cycles' Sampling ▸ Lights ▸ Light Tree)"),
-    "tracer": (None, _FIXED),
     "denoise_data": (None, "View Layer Properties ▸ Polarisation Passes ▸ Denoising Data"),
     "max_diffuse_bounces": (None, "Render Properties ▸ Light Paths ▸ Max Bounces ▸ Diffuse"),
     "max_glossy_bounces": (None, "Render Properties ▸ Light Paths ▸ Max Bounces ▸ Glossy"),

@@ -159,22 +159,16 @@ def constant_mirror_loop(rows, n_s, wo, x_T, T, eta, T_out, d, x_out, valid, eta
     for j0 in range(0, rows.shape[0], _CHUNK):
         j1 = min(j0 + _CHUNK, rows.shape[0])
         for jj in range(j1 - j0):
-            constant_mirror_at(rows[j0 + jj], jj, n_s, wo, x_T, P, d, x_out, valid, eta_sq, cos, w, rot)
+            m = rows[j0 + jj]
+            cos_o, s = _mirror_geometry(n_s, wo, d, m)
+            ok = cos_o >= 0
+            w[jj] = 1.0 if ok else 0.0
+            cos[jj] = cos_o if (cos_o >= 0.0 or np.isnan(cos_o)) else 0.0        # np.maximum(cos_o, 0.0)
+            _new_frame(x_out, x_T, wo, m, s[0], s[1], s[2], P, rot, jj)
+            valid[m] = ok
+            eta_sq[m] = 1.0
         _chunk_fresnel(cos, w, e, j1 - j0, abcs, fast, eta.imag != 0.0)
         _update_chunk(T, T_cols, T_out, rows, j0, j1, abcs, rot)
-
-
-@jit_inner
-def constant_mirror_at(m, jj, n_s, wo, x_T, P, d, x_out, valid, eta_sq, cos, w, rot):
-    """constant_mirror_loop's geometry of path m (lane jj of the chunk): direction, frame and rotation, the
-    Fresnel cosine and weight (cos[jj], w[jj]) for _chunk_fresnel."""
-    cos_o, s = _mirror_geometry(n_s, wo, d, m)
-    ok = cos_o >= 0
-    w[jj] = 1.0 if ok else 0.0
-    cos[jj] = cos_o if (cos_o >= 0.0 or np.isnan(cos_o)) else 0.0        # np.maximum(cos_o, 0.0)
-    _new_frame(x_out, x_T, wo, m, s[0], s[1], s[2], P, rot, jj)
-    valid[m] = ok
-    eta_sq[m] = 1.0
 
 
 @jit
@@ -244,34 +238,25 @@ def tabulated_mirror_loop(rows, n_s, wo, x_T, T, lam, wl_n, n, wl_k, k, scale, T
     for j0 in range(0, rows.shape[0], _CHUNK):
         j1 = min(j0 + _CHUNK, rows.shape[0])
         for jj in range(j1 - j0):
-            tabulated_mirror_at(rows[j0 + jj], jj, n_s, wo, x_T, P, lam, wl_n, n, wl_k, k, scale, shared_grid, first,
-                                hints, d, x_out, valid, eta_sq, cos, w, e, rot)
+            m = rows[j0 + jj]
+            cos_o, s = _mirror_geometry(n_s, wo, d, m)
+            cos[jj] = cos_o
+            w[jj] = 1.0 if cos_o >= 0 else 0.0
+            for q in range(L):
+                if shared_grid:
+                    x = lam[q, m]
+                    eq = _index_on_grid(wl_n, n, k, x, _last_knot(wl_n, x, first, hints), scale)
+                else:
+                    eq, _ = relative_index_at(wl_n, n, wl_k, k, lam[q, m], scale)
+                e[q, 0, jj] = eq.real
+                e[q, 1, jj] = eq.imag
+            _new_frame(x_out, x_T, wo, m, s[0], s[1], s[2], P, rot, jj)
+            valid[m] = cos_o >= 0
+            eta_sq[m] = 1.0
         # the Fresnel values a wavelength at a time over the chunk's paths (SIMD: fresnel.abcs_row)
         _chunk_fresnel(cos, w, e, j1 - j0, abcs, fast, True)
         _update_chunk(T, T_cols, T_out, rows, j0, j1, abcs, rot)
     return True
-
-
-@jit_inner
-def tabulated_mirror_at(m, jj, n_s, wo, x_T, P, lam, wl_n, n, wl_k, k, scale, shared_grid, first, hints, d, x_out,
-                        valid, eta_sq, cos, w, e, rot):
-    """tabulated_mirror_loop's geometry and relative indices of path m (lane jj of the chunk): direction, frame,
-    rotation, the Fresnel cosine, weight and indices (cos[jj], w[jj], e[:, :, jj]) for _chunk_fresnel; every
-    wavelength lam[:, m] within the tables (``shared_grid``: one grid, searched from ``first``, ``hints``)."""
-    cos_o, s = _mirror_geometry(n_s, wo, d, m)
-    cos[jj] = cos_o
-    w[jj] = 1.0 if cos_o >= 0 else 0.0
-    for q in range(lam.shape[0]):
-        if shared_grid:
-            x = lam[q, m]
-            eq = _index_on_grid(wl_n, n, k, x, _last_knot(wl_n, x, first, hints), scale)
-        else:
-            eq, _ = relative_index_at(wl_n, n, wl_k, k, lam[q, m], scale)
-        e[q, 0, jj] = eq.real
-        e[q, 1, jj] = eq.imag
-    _new_frame(x_out, x_T, wo, m, s[0], s[1], s[2], P, rot, jj)
-    valid[m] = cos_o >= 0
-    eta_sq[m] = 1.0
 
 
 @jit_inner
@@ -293,62 +278,55 @@ def dielectric_loop(rows, n_s, wo, x_T, T, u_lobe, eta_front, eta_back, T_out, d
     abcs, rot = _chunk_buffers(1)
     for j in range(rows.shape[0]):
         jj = j % _CHUNK
-        dielectric_at(rows[j], jj, n_s, wo, x_T, P, u_lobe[rows[j]], eta_front, eta_back, d, x_out, valid, eta_sq,
-                      abcs, rot)
+        m = rows[j]
+        n0, n1, n2 = n_s[0, m], n_s[1, m], n_s[2, m]
+        w0, w1, w2 = wo[0, m], wo[1, m], wo[2, m]
+        cos_o = (n0 * w0 + n1 * w1) + n2 * w2
+        front = cos_o >= 0
+        eta = eta_front if front else eta_back
+        if not front:
+            n0, n1, n2 = -n0, -n1, -n2
+        c = abs(cos_o)
+        a, b, cc, ss = abcs_at(c, complex(eta, 0.0))
+        reflect_lobe = u_lobe[m] < a
+        # sampled direction: mirror, or the refracted d/η + (c/η − cosθ_t)·n of the camera ray d = −wo
+        cl = _clip01(c)
+        sin2_t = (1.0 - cl * cl) / (eta * eta)
+        tir = sin2_t > 1.0
+        r = 1.0 - sin2_t
+        cos_t = np.sqrt(r if (r >= 0.0 or np.isnan(r)) else 0.0)
+        inv_eta = 1.0 / eta
+        if reflect_lobe:
+            t = 2.0 * ((w0 * n0 + w1 * n1) + w2 * n2)
+            d0, d1, d2 = t * n0 - w0, t * n1 - w1, t * n2 - w2
+        else:
+            f = c * inv_eta - cos_t
+            d0, d1, d2 = -w0 * inv_eta + f * n0, -w1 * inv_eta + f * n1, -w2 * inv_eta + f * n2
+        d[0, m] = d0
+        d[1, m] = d1
+        d[2, m] = d2
+        s = unit_cross_at(n0, n1, n2, -d0, -d1, -d2, _DEGENERATE)
+        # the chosen lobe's weight (fresnel_transmission_abcs for refraction)
+        if reflect_lobe:
+            p_r = a if a > 0 else 1.0
+            va, vb, vc, vs = a / p_r, b / p_r, cc / p_r, ss / p_r
+        else:
+            F_s = a + b
+            F_p = a - b
+            T_s = 0.0 if tir else _clip01(1.0 - F_s)
+            T_p = 0.0 if tir else _clip01(1.0 - F_p)
+            p_t = 1.0 - a if a < 1 else 1.0
+            scale_t = (inv_eta * inv_eta) / p_t
+            va = (0.5 * (T_s + T_p)) * scale_t
+            vb = (0.5 * (T_s - T_p)) * scale_t
+            vc = np.sqrt(T_s * T_p) * scale_t
+            vs = 0.0 * scale_t
+        _set_abcs(abcs, 0, jj, va, vb, vc, vs)
+        _new_frame(x_out, x_T, wo, m, s[0], s[1], s[2], P, rot, jj)
+        valid[m] = reflect_lobe or not tir
+        eta_sq[m] = 1.0 if reflect_lobe else eta * eta
         if jj == _CHUNK - 1 or j == rows.shape[0] - 1:
             _update_chunk(T, T_cols, T_out, rows, j - jj, j + 1, abcs, rot)
-
-
-@jit_inner
-def dielectric_at(m, jj, n_s, wo, x_T, P, u, eta_front, eta_back, d, x_out, valid, eta_sq, abcs, rot):
-    """dielectric_loop's step of path m (lane jj of the chunk) with lobe number ``u``: direction, frame,
-    rotation and the chosen lobe's Mueller value (abcs[0, :, jj]) for _update_chunk."""
-    n0, n1, n2 = n_s[0, m], n_s[1, m], n_s[2, m]
-    w0, w1, w2 = wo[0, m], wo[1, m], wo[2, m]
-    cos_o = (n0 * w0 + n1 * w1) + n2 * w2
-    front = cos_o >= 0
-    eta = eta_front if front else eta_back
-    if not front:
-        n0, n1, n2 = -n0, -n1, -n2
-    c = abs(cos_o)
-    a, b, cc, ss = abcs_at(c, complex(eta, 0.0))
-    reflect_lobe = u < a
-    # sampled direction: mirror, or the refracted d/η + (c/η − cosθ_t)·n of the camera ray d = −wo
-    cl = _clip01(c)
-    sin2_t = (1.0 - cl * cl) / (eta * eta)
-    tir = sin2_t > 1.0
-    r = 1.0 - sin2_t
-    cos_t = np.sqrt(r if (r >= 0.0 or np.isnan(r)) else 0.0)
-    inv_eta = 1.0 / eta
-    if reflect_lobe:
-        t = 2.0 * ((w0 * n0 + w1 * n1) + w2 * n2)
-        d0, d1, d2 = t * n0 - w0, t * n1 - w1, t * n2 - w2
-    else:
-        f = c * inv_eta - cos_t
-        d0, d1, d2 = -w0 * inv_eta + f * n0, -w1 * inv_eta + f * n1, -w2 * inv_eta + f * n2
-    d[0, m] = d0
-    d[1, m] = d1
-    d[2, m] = d2
-    s = unit_cross_at(n0, n1, n2, -d0, -d1, -d2, _DEGENERATE)
-    # the chosen lobe's weight (fresnel_transmission_abcs for refraction)
-    if reflect_lobe:
-        p_r = a if a > 0 else 1.0
-        va, vb, vc, vs = a / p_r, b / p_r, cc / p_r, ss / p_r
-    else:
-        F_s = a + b
-        F_p = a - b
-        T_s = 0.0 if tir else _clip01(1.0 - F_s)
-        T_p = 0.0 if tir else _clip01(1.0 - F_p)
-        p_t = 1.0 - a if a < 1 else 1.0
-        scale_t = (inv_eta * inv_eta) / p_t
-        va = (0.5 * (T_s + T_p)) * scale_t
-        vb = (0.5 * (T_s - T_p)) * scale_t
-        vc = np.sqrt(T_s * T_p) * scale_t
-        vs = 0.0 * scale_t
-    _set_abcs(abcs, 0, jj, va, vb, vc, vs)
-    _new_frame(x_out, x_T, wo, m, s[0], s[1], s[2], P, rot, jj)
-    valid[m] = reflect_lobe or not tir
-    eta_sq[m] = 1.0 if reflect_lobe else eta * eta
 
 
 @jit

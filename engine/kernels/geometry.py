@@ -59,34 +59,29 @@ def surface_attributes_numpy(faces, vertices, vertex_normals, tri_has_normals, t
     return p, n_g, n_s
 
 
-@jit_inner
-def surface_at(faces, V, N, has_vn, tri_normal, any_vn, t, ui, vi, i, p, n_g, n_s):
-    """Column i of p, n_g, n_s (3, ·) at the hit on triangle t with barycentrics (ui, vi): surface_attributes'
-    arithmetic for one hit (n_s left unwritten without vertex normals: it is n_g then)."""
-    a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
-    w0 = 1.0 - ui - vi
-    for k in range(3):
-        p[k, i] = V[a, k] * w0 + V[b, k] * ui + V[c, k] * vi
-        n_g[k, i] = tri_normal[t, k]
-    if any_vn:
-        x = N[a, 0] * w0 + N[b, 0] * ui + N[c, 0] * vi
-        y = N[a, 1] * w0 + N[b, 1] * ui + N[c, 1] * vi
-        z = N[a, 2] * w0 + N[b, 2] * ui + N[c, 2] * vi
-        length = np.sqrt(x * x + y * y + z * z)
-        if has_vn[t] and length > 0:
-            n_s[0, i] = x / length
-            n_s[1, i] = y / length
-            n_s[2, i] = z / length
-        else:
-            n_s[0, i] = n_g[0, i]
-            n_s[1, i] = n_g[1, i]
-            n_s[2, i] = n_g[2, i]
-
-
 @jit
 def _surface_loop(faces, V, N, has_vn, tri_normal, any_vn, prim, u, v, p, n_g, n_s):
     for i in range(prim.shape[0]):
-        surface_at(faces, V, N, has_vn, tri_normal, any_vn, prim[i], u[i], v[i], i, p, n_g, n_s)
+        t = prim[i]
+        a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
+        ui, vi = u[i], v[i]
+        w0 = 1.0 - ui - vi
+        for k in range(3):
+            p[k, i] = V[a, k] * w0 + V[b, k] * ui + V[c, k] * vi
+            n_g[k, i] = tri_normal[t, k]
+        if any_vn:
+            x = N[a, 0] * w0 + N[b, 0] * ui + N[c, 0] * vi
+            y = N[a, 1] * w0 + N[b, 1] * ui + N[c, 1] * vi
+            z = N[a, 2] * w0 + N[b, 2] * ui + N[c, 2] * vi
+            length = np.sqrt(x * x + y * y + z * z)
+            if has_vn[t] and length > 0:
+                n_s[0, i] = x / length
+                n_s[1, i] = y / length
+                n_s[2, i] = z / length
+            else:
+                n_s[0, i] = n_g[0, i]
+                n_s[1, i] = n_g[1, i]
+                n_s[2, i] = n_g[2, i]
 
 
 def surface_attributes_numba(faces, vertices, vertex_normals, tri_has_normals, tri_normal, any_vertex_normals,

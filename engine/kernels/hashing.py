@@ -38,17 +38,12 @@ def uniforms_numpy(keys: np.ndarray, offsets: np.ndarray) -> np.ndarray:
     return out
 
 
-@jit_inner
-def uniform_at(key, offset):
-    """The number of one path (``key``) in one dimension (its hash ``offset``): uniforms' arithmetic."""
-    return np.float64(_mix64_one(key + offset) >> _S11) * _TO_UNIT
-
-
 @jit
 def _uniforms_loop(keys, offsets, out):
     for i in range(keys.shape[0]):
         for j in range(offsets.shape[0]):
-            out[j, i] = uniform_at(keys[i], offsets[j])
+            x = _mix64_one(keys[i] + offsets[j])
+            out[j, i] = np.float64(x >> _S11) * _TO_UNIT
 
 
 def uniforms_numba(keys: np.ndarray, offsets: np.ndarray) -> np.ndarray:
@@ -117,34 +112,27 @@ def scrambled_sobol_pair_numpy(seed_key: np.ndarray, pixel: np.ndarray, sample: 
             np.minimum(((y ^ my).astype(np.float64) + u1) * scale, below_one))
 
 
-@jit_inner
-def sobol_pair_at(s, pk, pixel, sample, vx, vy, u0, u1):
-    """scrambled_sobol_pair's two numbers of one path (pixel, sample) for the mixed seed ``s`` and pair key
-    ``pk`` (uint64 each), its hashed numbers u0, u1 below 2^-32 (the same operations in the same order)."""
-    low = np.uint64(0xFFFFFFFF)
-    scale = 1.0 / 4294967296.0
-    below_one = np.nextafter(1.0, 0.0)
-    smp = np.uint64(sample)
-    i = (smp >> np.uint64(1)) & low
-    x = np.uint64(0)
-    y = np.uint64(0)
-    j = 0
-    while i != np.uint64(0):
-        if i & np.uint64(1):
-            x ^= vx[j]
-            y ^= vy[j]
-        i >>= np.uint64(1)
-        j += 1
-    h = _mix64_one(s ^ (np.uint64(pixel) * pk) ^ ((smp & np.uint64(1)) * _GOLDEN))
-    return (min((np.float64(x ^ (h & low)) + u0) * scale, below_one),
-            min((np.float64(y ^ (h >> np.uint64(32))) + u1) * scale, below_one))
-
-
 @jit
 def _sobol_pair_loop(seed_key, pixel, sample, pair_key, vx, vy, u0, u1, out):
     s, pk = seed_key[0], pair_key[0]
+    low = np.uint64(0xFFFFFFFF)
+    scale = 1.0 / 4294967296.0
+    below_one = np.nextafter(1.0, 0.0)
     for n in range(pixel.shape[0]):
-        out[0, n], out[1, n] = sobol_pair_at(s, pk, pixel[n], sample[n], vx, vy, u0[n], u1[n])
+        smp = np.uint64(sample[n])
+        i = (smp >> np.uint64(1)) & low
+        x = np.uint64(0)
+        y = np.uint64(0)
+        j = 0
+        while i != np.uint64(0):
+            if i & np.uint64(1):
+                x ^= vx[j]
+                y ^= vy[j]
+            i >>= np.uint64(1)
+            j += 1
+        h = _mix64_one(s ^ (np.uint64(pixel[n]) * pk) ^ ((smp & np.uint64(1)) * _GOLDEN))
+        out[0, n] = min((np.float64(x ^ (h & low)) + u0[n]) * scale, below_one)
+        out[1, n] = min((np.float64(y ^ (h >> np.uint64(32))) + u1[n]) * scale, below_one)
 
 
 def scrambled_sobol_pair_numba(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray, pair_key: np.ndarray,

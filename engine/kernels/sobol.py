@@ -196,39 +196,27 @@ def _owen_permute_one(r, seed):
 @jit
 def _owen_sobol_loop(seed_key, pixel, sample, pairs, owen, table, base, ri, out):
     s = seed_key[0]
-    for n in range(pixel.shape[0]):            # per path: its key and reversed index
-        base[n], ri[n] = owen_path_at(s, pixel[n], sample[n])
-    for m in range(pairs.shape[0]):            # per pair, over the paths (the faster order)
-        for n in range(pixel.shape[0]):
-            out[2 * m, n], out[2 * m + 1, n] = owen_pair_at(base[n], ri[n], pairs[m], owen[m], table)
-
-
-@jit_inner
-def owen_path_at(s, pixel, sample):
-    """(key, reversed index) of one path (pixel, sample) for the mixed seed ``s``: owen_pair_at's inputs."""
-    smp = np.uint64(sample)
-    return (_mix64_one((s ^ (np.uint64(pixel) * _GOLDEN) ^ ((smp & _S1) * _PARITY)) + _SALT),
-            _reverse32_one((smp >> _S1) & _M32))
-
-
-@jit_inner
-def owen_pair_at(base, ri, pair, owen, table):
-    """The two numbers of ``pair`` of one path (owen_path_at's ``base``, ``ri``): owen_sobol_pairs' arithmetic
-    (``owen``: Owen-scrambled, else XOR-scrambled; ``table``: SOBOL2_REVERSED)."""
     byte = np.uint64(255)
-    h = _mix64_one(base + np.uint64(pair + 1) * _PAIR)
-    h2 = _mix64_one(h ^ _SECOND)
-    j = _reverse32_one(_owen_permute_one(ri, h & _M32))
-    ry = table[0, j & byte] ^ table[1, (j >> _S8) & byte] ^ table[2, (j >> _S16) & byte] ^ table[3, j >> _S24]
-    if owen:
-        x = _reverse32_one(_owen_permute_one(j, h >> _S32))
-        y = _reverse32_one(_owen_permute_one(ry, h2 & _M32))
-    else:
-        shift = _mix64_one(h ^ _XOR)
-        x = _reverse32_one(j) ^ (shift & _M32)
-        y = _reverse32_one(ry) ^ (shift >> _S32)
-    return (np.float64((x << _S16) | ((h2 >> _S32) & _LOW16)) * _TO_UNIT,
-            np.float64((y << _S16) | (h2 >> _S48)) * _TO_UNIT)
+    for n in range(pixel.shape[0]):            # per path: its key and reversed index
+        smp = np.uint64(sample[n])
+        base[n] = _mix64_one((s ^ (np.uint64(pixel[n]) * _GOLDEN) ^ ((smp & _S1) * _PARITY)) + _SALT)
+        ri[n] = _reverse32_one((smp >> _S1) & _M32)
+    for m in range(pairs.shape[0]):            # per pair, over the paths (the faster order)
+        key = np.uint64(pairs[m] + 1) * _PAIR
+        for n in range(pixel.shape[0]):
+            h = _mix64_one(base[n] + key)
+            h2 = _mix64_one(h ^ _SECOND)
+            j = _reverse32_one(_owen_permute_one(ri[n], h & _M32))
+            ry = table[0, j & byte] ^ table[1, (j >> _S8) & byte] ^ table[2, (j >> _S16) & byte] ^ table[3, j >> _S24]
+            if owen[m]:
+                x = _reverse32_one(_owen_permute_one(j, h >> _S32))
+                y = _reverse32_one(_owen_permute_one(ry, h2 & _M32))
+            else:
+                shift = _mix64_one(h ^ _XOR)
+                x = _reverse32_one(j) ^ (shift & _M32)
+                y = _reverse32_one(ry) ^ (shift >> _S32)
+            out[2 * m, n] = np.float64((x << _S16) | ((h2 >> _S32) & _LOW16)) * _TO_UNIT
+            out[2 * m + 1, n] = np.float64((y << _S16) | (h2 >> _S48)) * _TO_UNIT
 
 
 def owen_sobol_pairs_numba(seed_key: np.ndarray, pixel: np.ndarray, sample: np.ndarray,

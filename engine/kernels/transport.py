@@ -350,39 +350,23 @@ def roulette_numpy(T, eta_sq, u_rr, valid, apply_rr):
     return T, nonfinite
 
 
-@jit_inner
-def roulette_probability(T, j, eta_sq):
-    """The survival probability q = min(max_λ T00 · η², 0.95) of column j of T (P, P, L, ·) (NaN where
-    a T00 is NaN: np.max, and np.minimum keeps a NaN)."""
-    m = T[0, 0, 0, j]
-    for k in range(1, T.shape[2]):
-        v = T[0, 0, k, j]
-        if v > m or np.isnan(v):
-            m = v
-        if np.isnan(m):
-            break
-    q = m * eta_sq
-    if not np.isnan(q) and q > 0.95:
-        q = 0.95
-    return q
-
-
-@jit_inner
-def is_black(T, j):
-    """True where T00 of column j is 0 at every wavelength (the path carries nothing)."""
-    for k in range(T.shape[2]):
-        if T[0, 0, k, j] != 0.0:
-            return False
-    return True
-
-
 @jit
 def _roulette_loop(T, eta_sq, u_rr, valid, apply_rr):
     P, L, n = T.shape[0], T.shape[2], T.shape[3]
     scale = np.ones(n)
     if apply_rr:
         for j in range(n):
-            q = roulette_probability(T, j, eta_sq[j])
+            # max over λ as np.max: NaN if any entry is NaN
+            m = T[0, 0, 0, j]
+            for k in range(1, L):
+                v = T[0, 0, k, j]
+                if v > m or np.isnan(v):
+                    m = v
+                if np.isnan(m):
+                    break
+            q = m * eta_sq[j]
+            if not np.isnan(q) and q > 0.95:      # np.minimum keeps a NaN
+                q = 0.95
             if u_rr[j] < q:
                 scale[j] = q
             else:
@@ -405,8 +389,14 @@ def _roulette_loop(T, eta_sq, u_rr, valid, apply_rr):
             nonfinite += 1
         if not finite[j]:
             valid[j] = False
-        elif valid[j] and is_black(T, j):
-            valid[j] = False
+        elif valid[j]:
+            black = True
+            for k in range(L):
+                if T[0, 0, k, j] != 0.0:
+                    black = False
+                    break
+            if black:
+                valid[j] = False
     return nonfinite
 
 

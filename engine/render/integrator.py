@@ -53,7 +53,6 @@ from .effects import TRANSPORT_SIZES
 from .light_paths import LightPathRules, trace_light_paths
 from .lights.lamps import PointEmitter
 from .media import Media, cross
-from .path_loop import ASKED, LOOP, WAVEFRONT, DeltaScene, coverage
 from .path_state import PathState
 from .polarised_light import in_frame, light_samples_polarisation, mueller_times_stokes
 from .plan import rendered_materials, spectral_reduction
@@ -366,13 +365,6 @@ class PathTracer:
         # Cycles' light-path limits (engine.render.light_paths; None: none set, trace runs as before them)
         self.light_paths = (LightPathRules(settings, self.materials)
                             if getattr(settings, "light_paths_active", False) else None)
-        #: the compiled per-path bounce loop where it covers the scene (engine.render.path_loop), else None: the
-        #: wavefront below traces every batch; ``tracer_name`` names the transport for the stats (with why the loop
-        #: does not run, ``tracer_reason``, unless the settings asked for the wavefront; None where the loop runs)
-        self.tracer_reason = coverage(self, plain=type(self) is PathTracer)
-        self.path_loop = DeltaScene(self, VERTEX_COST) if self.tracer_reason is None else None
-        self.tracer_name = (LOOP if self.path_loop is not None else WAVEFRONT if self.tracer_reason == ASKED
-                            else f"{WAVEFRONT} ({self.tracer_reason})")
 
     def _emitted(self, light: _Light, lookup: WavelengthLookup, d: np.ndarray | None = None,
                  rows: np.ndarray | None = None, uv=None) -> np.ndarray:
@@ -425,12 +417,6 @@ class PathTracer:
         """
         if self.light_paths is not None:
             return trace_light_paths(self, pixel, sample, abort)
-        if self.path_loop is not None:
-            if abort is not None and abort.is_set():
-                return None
-            out = self.path_loop.trace(pixel, sample)
-            if out is not None:         # (None: a batch the loop does not cover, engine.render.path_loop)
-                return out
         st = self.settings
         n_total = pixel.shape[0]
         state, acc = self._camera_paths(pixel, sample)

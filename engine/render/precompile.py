@@ -7,10 +7,10 @@ material model (plain, textured, normal- and bump-mapped, mixed, layered, with a
 every kind of light (lamps, emissive and textured emissive meshes, a uniform environment, an image
 environment, the polarised sky, polarised sources), cut-outs and holdouts, and every transport
 (polarisation full / linear / off, spectral / RGB / mono, the spectral reductions, both samplers,
-denoising data, adaptive sampling, the per-path loop of delta-only scenes): each compiles what it
-calls, or loads it from the cache.  When all of them rendered, it writes a marker into the cache
-folder (:func:`precompiled`), keyed by the engine's sources (their time stamps and sizes, which is
-what Numba checks its cache against): running it again then returns at once.
+denoising data, adaptive sampling): each compiles what it calls, or loads it from the cache.  When
+all of them rendered, it writes a marker into the cache folder (:func:`precompiled`), keyed by the
+engine's sources (their time stamps and sizes, which is what Numba checks its cache against):
+running it again then returns at once.
 
 The Makefile's install step runs it, and the Blender extension runs it in a background process when
 it is enabled (polar_addon.kernel_cache).  Each case is independent: one that fails is reported and
@@ -285,12 +285,7 @@ def scenes(folder: str) -> dict:
                    "rough_metal": {"type": "torrance_sparrow", "n": 0.2, "k": 3.0, "m": 0.3}},
                   _row(["chalk", "glass", "mirror", "blue", "rough_metal"], 0.5, balls=("glass",)) + [_floor("chalk")],
                   [{"type": "environment", "radiance": 1.0}] + LAMPS)
-    # smooth mirrors and glass under a constant sky: the compiled per-path loop (engine.render.path_loop)
-    delta = _scene({k: PLAIN_MATERIALS[k] for k in ("gold", "glass", "black_glass")}
-                   | {"mirror": {"type": "conductor", "n": 0.2, "k": 3.0}},
-                   _row(["gold", "glass", "mirror"], 0.5, balls=("glass",)) + [_floor("black_glass")],
-                   [{"type": "environment", "radiance": 1.0}])
-    return {"plain": plain, "textured": textured, "sky": sky, "grey": grey, "delta": delta}
+    return {"plain": plain, "textured": textured, "sky": sky, "grey": grey}
 
 
 #: (scene, what it covers, RenderSettings overrides, adaptive): every transport the engine has (the
@@ -318,7 +313,6 @@ CASES = (
     ("grey", "spectral reduction: exact", {"reduce_spectral": "exact"}, False),
     ("grey", "no reduction, independent sampler", {"reduce_spectral": "off", "sampler": "independent"}, False),
     ("grey", "scalar, RGB", {"polarisation": "off", "spectral": "rgb"}, False),
-    ("delta", "smooth mirrors and glass: the compiled per-path loop", {"tracer": "auto"}, False),
 )
 
 

@@ -71,8 +71,6 @@ def stats_line(stats: dict, sep: str = "; ") -> str:
     parts = [f"{stats['samples']} samples in {stats.get('seconds', 0.0):.2f} s ({msamples_per_second(stats):.3f} "
              f"Msamples/s), {stats['rays']} rays + {stats['shadow_rays']} shadow rays",
              f"transport: {stats['transport_reason']}", f"spectral: {stats['spectral']}", kernels]
-    if stats.get("tracer"):
-        parts.append(f"tracer: {stats['tracer']}")
     if stats.get("threads_reason"):
         parts.append(f"threads: {stats['threads']} ({stats['threads_reason']})")
     parts += [f"simplified: {why}" for why in stats.get("simplified", [])]
@@ -270,8 +268,6 @@ class Renderer:
                                       request.on_first_pass, request.unit_times)
         before = kernel_compiles()
         tracer = self.tracer(plan, count_cost=schedule.job.count_cost) if executor.local else None
-        if tracer is not None:
-            stats["tracer"] = tracer.tracer_name
         self._live_film = film
         try:
             cancelled = drive(schedule, film, tracer, executor, stats, request)

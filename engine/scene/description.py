@@ -448,12 +448,6 @@ class RenderSettings:
     #: — the tree where the scene has more than 64 emitters (lamps and each triangle of a mesh light sampled by
     #: area), where it helps; otherwise "off".  Same expectation either way.
     light_tree: str = "auto"
-    #: Which transport traces the paths (engine.render.path_loop): "wavefront" (default) — the wavefront always;
-    #: "auto" — the compiled per-path bounce loop where it covers the scene (every material a smooth mirror or
-    #: dielectric, a constant environment the only light, no media: the same image bit for bit; measured at
-    #: 0.95–1.15× the wavefront's CPU time, docs/benchmarks.md), else the wavefront (the loop's twin).  Which
-    #: one ran is in the render's stats.
-    tracer: str = "wavefront"
     #: Cycles' Light Paths ▸ Max Bounces per kind (engine.render.light_paths): a path whose diffuse, glossy,
     #: transmission or transparent bounces exceed the limit ends at its next surface (that surface's emission
     #: still counts), as Cycles' path_state_next; 0 = only the light found by the first bounce of that kind.
@@ -503,8 +497,6 @@ class RenderSettings:
 SAMPLERS = ("independent", "stratified", "sobol", "padded", "cycles")
 #: RenderSettings.light_tree's values
 LIGHT_TREE_MODES = ("auto", "on", "off")
-#: RenderSettings.tracer's values
-TRACERS = ("auto", "wavefront")
 
 
 @dataclass(frozen=True)

@@ -29,7 +29,7 @@ from ..materials.normal_map import ShadingNormal
 from ..polarisation.sources import DirectionalPolarisation, parse_polarisation
 from ..textures import TexturedNumber, parse_texture_input, textured_emission
 from ..textures.image import read_image
-from .description import (EMISSION_SAMPLING, ENVMAP_GRIDS, LIGHT_PATH_FIELDS, LIGHT_TREE_MODES, SAMPLERS, TRACERS,
+from .description import (EMISSION_SAMPLING, ENVMAP_GRIDS, LIGHT_PATH_FIELDS, LIGHT_TREE_MODES, SAMPLERS,
                           SPECTRAL_MODES, Camera, DirectionalLight, EnvironmentLight, Interior, Mesh, PointLight,
                           RenderSettings, Scene, SpotLight)
 from ..errors import SceneError
@@ -341,7 +341,7 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
         raise SceneError(field, "must be an object")
     _check_keys(d, field, {"spp", "max_depth", "rr_depth", "seed", "spectral", "wavelength_nm",
                            "polarisation", "batch_rays", "threads", "reduce_spectral", "simplify",
-                           "sampler", "light_tree", "tracer", *(f.name for f in LIGHT_PATH_FIELDS)})
+                           "sampler", "light_tree", *(f.name for f in LIGHT_PATH_FIELDS)})
     s = RenderSettings()                 # the defaults
     return RenderSettings(
         **light_path_settings(d, field),
@@ -360,7 +360,6 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
         simplify=choice(d.get("simplify", s.simplify), f"{field}.simplify", ("auto", "off")),
         sampler=choice(d.get("sampler", s.sampler), f"{field}.sampler", SAMPLERS),
         light_tree=choice(d.get("light_tree", s.light_tree), f"{field}.light_tree", LIGHT_TREE_MODES),
-        tracer=choice(d.get("tracer", s.tracer), f"{field}.tracer", TRACERS),
     )
 
 

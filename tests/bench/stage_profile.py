@@ -1,7 +1,7 @@
 """Where a sample's CPU time goes: per-stage CPU µs per sample of the peer scenes (issue 36 item 2).
 
     python tests/bench/stage_profile.py [--scenes a,b] [--res 256] [--spp 32] [--threads 1,2] [--repeats 2]
-                                        [--tracers auto,wavefront] [--cprofile N]
+                                        [--cprofile N]
 
 Each scene is rendered at its defaults (the scene's settings, ``--threads`` workers) after a warm-up render;
 the integrator's stages, the Embree queries, the Mueller update and the film's sums are wrapped by timers that
@@ -11,8 +11,7 @@ of the render minus the stages (Python between the batches, the film's adding th
 fastest of ``--repeats`` renders per thread count is reported.  A timed call costs two thread-clock reads
 (≈ 1 µs); a render makes a few thousand (≈ 0.2 % of its time).  ``--cprofile N``: also print the N functions
 of most own time while one thread traces the render's units under cProfile (which sees one thread only).  The
-load average is printed; not a test.  ``--tracers``: the transports to profile, a column each (RenderSettings.tracer:
-"auto" runs the compiled per-path loop where it covers the scene, engine.render.path_loop; it is one stage then).
+load average is printed; not a test.
 """
 
 from __future__ import annotations
@@ -31,7 +30,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, REPO)
 
-from engine.render import accel, film, integrator, path_loop  # noqa: E402
+from engine.render import accel, film, integrator  # noqa: E402
 from engine.render.driver import BandJob  # noqa: E402
 from engine.render.renderer import Renderer  # noqa: E402
 from engine.scene.loader import load_scene  # noqa: E402
@@ -42,7 +41,6 @@ SCENES = ["fresnel_sphere", "glass_sphere", "rough_sphere_a030"]
 #: (label, owner object, attribute): what is timed, in the table's order
 STAGES = [
     ("camera", integrator.PathTracer, "_camera_paths"),
-    ("per-path loop (compiled: rays, vertices, light)", path_loop, "trace_delta_paths"),
     ("Embree closest hits", accel.CompiledScene, "intersect"),
     ("intersect stage (rest)", integrator.PathTracer, "_intersect"),
     ("emission", integrator.PathTracer, "_emission"),
@@ -123,14 +121,14 @@ def render_once(renderer, settings):
     return time.process_time() - c0, time.perf_counter() - w0
 
 
-def profile_scene(name, res, spp, threads, repeats, tracer="auto"):
+def profile_scene(name, res, spp, threads, repeats):
     """{threads: (own ns per label, process CPU s, wall s)} of the fastest of ``repeats`` renders."""
     scene = load_scene(os.path.join(SHARED, "peers", "scenes", f"{name}.json"))
     scene.camera.width = scene.camera.height = res
     renderer = Renderer(scene)
     out = {}
     for t in threads:
-        settings = dataclasses.replace(scene.settings, spp=spp, threads=t, seed=0, tracer=tracer)
+        settings = dataclasses.replace(scene.settings, spp=spp, threads=t, seed=0)
         renderer.render(dataclasses.replace(settings, seed=99))         # warm-up
         best = None
         for _ in range(repeats):
@@ -153,7 +151,6 @@ def main(argv=None):
     ap.add_argument("--spp", type=int, default=32)
     ap.add_argument("--threads", default="1,2")
     ap.add_argument("--repeats", type=int, default=2)
-    ap.add_argument("--tracers", default="auto")
     ap.add_argument("--cprofile", type=int, default=0)
     args = ap.parse_args(argv)
     scenes = args.scenes.split(",")
@@ -161,11 +158,9 @@ def main(argv=None):
     samples = args.res * args.res * args.spp
     print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f}; "
           f"{args.res}², {args.spp} spp; CPU µs per sample (own time of each stage)")
-    tracers = args.tracers.split(",")
-    results = {(name, tr): profile_scene(name, args.res, args.spp, threads, args.repeats, tr)
-               for name in scenes for tr in tracers}
-    cols = [((name, tr), t) for name in scenes for tr in tracers for t in threads]
-    print("| stage | " + " | ".join(f"{n} {tr} {t} thr" for (n, tr), t in cols) + " |")
+    results = {name: profile_scene(name, args.res, args.spp, threads, args.repeats) for name in scenes}
+    cols = [(name, t) for name in scenes for t in threads]
+    print("| stage | " + " | ".join(f"{n} {t} thr" for n, t in cols) + " |")
     print("|---|" + "---|" * len(cols))
     for label, owner, _ in STAGES:
         if owner is None:
