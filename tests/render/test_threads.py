@@ -146,8 +146,9 @@ def test_a_unit_finished_after_an_ended_one_is_not_added():
 def test_threads_not_set_one_worker_where_many_materials_are_shaded_by_python_calls(tmp_path):
     """The thread policy (driver.local_workers): with threads 0, a scene whose used materials are shaded by
     CONVOY_MATERIALS or more separate calls per bounce (two threads convoy on the GIL) gets one worker, a scene of
-    Lambert materials (one LambertSet) or of fewer others one per core; set threads are kept; the image is the same
-    with one worker as with two (added in the same order); an automatic choice is reported in the stats."""
+    Lambert materials (one LambertSet), of smooth (delta-only) materials or of fewer others one per core; set threads
+    are kept; the image is the same with one worker as with two (added in the same order); an automatic choice is
+    reported in the stats."""
     import dataclasses
     import os
 
@@ -177,6 +178,10 @@ def test_threads_not_set_one_worker_where_many_materials_are_shaded_by_python_ca
     assert Renderer(scene(lamberts)).plan().workers == cores
     fewer = dict(list(metals.items())[:CONVOY_MATERIALS - 1], **lamberts)
     assert Renderer(scene(fewer)).plan().workers == cores
+    # smooth glasses and mirrors: a few calls around compiled steps, no light sampling; they do not count
+    glasses = {f"g{k}": {"type": "dielectric", "n": 1.3 + k / 10} for k in range(CONVOY_MATERIALS + 2)}
+    glasses.update({f"c{k}": {"type": "conductor", "n": 0.2 + k / 10, "k": 3.0} for k in range(CONVOY_MATERIALS)})
+    assert Renderer(scene(dict(list(metals.items())[:CONVOY_MATERIALS - 1], **glasses))).plan().workers == cores
     one = many.render().stokes()
     two = many.render(dataclasses.replace(many.scene.settings, threads=2)).stokes()
     assert one.max() > 0
