@@ -48,14 +48,18 @@ def same_material(a, b) -> bool:
     return _same(a, b, set())
 
 
-def _fields(obj) -> dict | None:
+def object_fields(obj) -> dict:
+    """An object's fields by name (``vars`` and every class's ``__slots__``), the caches its class fills on first
+    use (``_cached_fields``) as None, as if not filled yet: what a material is, not what it has computed (also
+    engine.render.resume.scene_fingerprint's)."""
     fields = dict(vars(obj)) if hasattr(obj, "__dict__") else {}
     for cls in type(obj).__mro__:
         for name in getattr(cls, "__slots__", ()):
             if hasattr(obj, name):
                 fields[name] = getattr(obj, name)
     for name in getattr(type(obj), "_cached_fields", ()):
-        fields.pop(name, None)
+        if name in fields:
+            fields[name] = None
     return fields
 
 
@@ -80,7 +84,7 @@ def _same(a, b, seen: set) -> bool:
     if (id(a), id(b)) in seen:                      # a cycle: equal unless a field on the way differs
         return True
     seen.add((id(a), id(b)))
-    fa, fb = _fields(a), _fields(b)
+    fa, fb = object_fields(a), object_fields(b)
     return fa.keys() == fb.keys() and all(_same(fa[k], fb[k], seen) for k in fa)
 
 

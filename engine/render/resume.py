@@ -38,6 +38,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..errors import SceneError
+from ..materials.batching import object_fields
 from .film import film_from_stokes
 from ..scene.description import LIGHT_PATH_FIELDS
 
@@ -97,18 +98,10 @@ def _feed(h, obj, seen: set) -> None:
         seen.add(id(obj))
         t = type(obj)
         h.update(f"o{t.__module__}.{t.__qualname__}".encode())
-        fields = dict(vars(obj)) if hasattr(obj, "__dict__") else {}
-        for cls in t.__mro__:
-            for name in getattr(cls, "__slots__", ()):
-                if hasattr(obj, name):
-                    fields[name] = getattr(obj, name)
-        # caches a class fills on first use (from its other fields): a render, or a lookup anywhere in
-        # the process, must not change the fingerprint of the scene that holds the object.  Hashed as
-        # not filled yet (None), so fingerprints of files written before stay valid.
-        for name in getattr(t, "_cached_fields", ()):
-            if name in fields:
-                fields[name] = None
-        _feed(h, fields, seen)
+        # caches a class fills on first use (from its other fields) are hashed as not filled yet (None): a render,
+        # or a lookup anywhere in the process, must not change the fingerprint of the scene that holds the object,
+        # and fingerprints of files written before stay valid
+        _feed(h, object_fields(obj), seen)
 
 
 def scene_fingerprint(scene) -> str:
