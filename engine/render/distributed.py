@@ -21,17 +21,27 @@ import time
 
 from .driver import STOP_POLL_SECONDS
 
+# How often a unit whose task failed (a lost worker, the lost scene) is submitted again before the render
+# gives up with the units finished so far (POLAR_DASK_RETRIES overrides it).
+UNIT_RETRIES = 3
 
-def _ordered_on_cluster(client, submit, units, add_result, stop_requested) -> tuple[bool, str | None]:
-    """Submit ``units`` (``submit(unit)`` → future), pass results to ``add_result`` in unit order.
+
+def _ordered_on_cluster(client, submit, units, add_result, stop_requested,
+                        retries: int | None = None) -> tuple[bool, str | None]:
+    """Submit ``units`` (``submit(unit, again)`` → future; ``again``: the unit failed before), pass results to
+    ``add_result`` in unit order.  A failed unit is submitted again up to ``retries`` times (default
+    ``UNIT_RETRIES``): a re-run unit returns the same numbers, so the image does not change.
 
     While nothing finishes, the stop request is polled (a cluster may stall for long; Ctrl-C /
     SIGTERM must still end the render with its finished units).  Returns (stopped, error): stopped by
     a stop request, or by a failed cluster (then ``error`` says why).
     """
     from distributed import as_completed
-    futures = [submit(unit) for unit in units]
+    if retries is None:
+        retries = int(os.environ.get("POLAR_DASK_RETRIES", UNIT_RETRIES))
+    futures = [submit(unit, False) for unit in units]
     index = {f.key: i for i, f in enumerate(futures)}
+    tries = [0] * len(units)
     results, next_to_add, stopped, error = {}, 0, False, None
     pending = as_completed(futures)
     while not pending.is_empty() and not stopped:
@@ -43,12 +53,20 @@ def _ordered_on_cluster(client, submit, units, add_result, stop_requested) -> tu
             time.sleep(STOP_POLL_SECONDS)
             continue
         for future in batch:
+            i = index[future.key]
             try:
-                results[index[future.key]] = future.result()
-            except Exception as e:      # noqa: BLE001 — lost workers, lost scene data, a failed unit
+                results[i] = future.result()
+            except Exception as failure:        # noqa: BLE001 — lost workers, lost scene data, a failed unit
+                again = _resubmit(submit, units, futures, i) if tries[i] < retries and not stop_requested() \
+                    else failure
+                if not isinstance(again, BaseException):
+                    tries[i] += 1
+                    index[again.key] = i
+                    pending.add(again)
+                    continue
                 stopped = True
                 error = (f"the Dask cluster failed after {next_to_add} of {len(units)} work units "
-                         f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else ''})")
+                         f"({type(again).__name__}: {str(again).splitlines()[0] if str(again) else ''})")
                 break
             future.release()          # the worker may free the unit's result now
         # Add in unit order so that the sums (and so the image) do not depend on timing.
@@ -61,6 +79,16 @@ def _ordered_on_cluster(client, submit, units, add_result, stop_requested) -> tu
         for f in futures:
             f.cancel()
     return stopped, error
+
+
+def _resubmit(submit, units, futures, i):
+    """Submit unit ``i`` again (its future replaces the failed one): the new future, or the exception
+    that submitting raised (the scheduler itself is gone)."""
+    try:
+        futures[i] = submit(units[i], True)
+    except Exception as e:      # noqa: BLE001
+        return e
+    return futures[i]
 
 
 def _share_enclosing_package(client):
@@ -108,6 +136,7 @@ class DaskCluster:
         try:
             _share_enclosing_package(self.client)
             self.key = scene_key(scene)
+            self._scene_data, self._timeout = scene, timeout
             try:
                 self.scene = self.client.scatter(scene, broadcast=True, timeout=timeout)
             except TimeoutError:
@@ -134,8 +163,13 @@ class DaskCluster:
     def run(self, units, job, tracer, add_result, stop_requested, abort) -> bool:
         """Trace ``units`` on the workers (``tracer`` is not used: each worker builds its own), add the
         results in unit order; True if stopped (a stop request, or a failed cluster: ``error``)."""
-        stopped, error = _ordered_on_cluster(
-            self.client, lambda unit: self.client.submit(self.task, self.key, self.scene, job, unit, pure=False),
-            units, add_result, stop_requested)
+        stopped, error = _ordered_on_cluster(self.client, lambda unit, again: self._submit(job, unit, again),
+                                             units, add_result, stop_requested)
         self.error = self.error or error
         return stopped
+
+    def _submit(self, job, unit, again: bool):
+        """The task of ``unit``; on a retry, the scene is scattered again first if the cluster lost it."""
+        if again and self.scene.status != "finished":
+            self.scene = self.client.scatter(self._scene_data, broadcast=True, hash=False, timeout=self._timeout)
+        return self.client.submit(self.task, self.key, self.scene, job, unit, pure=False)

@@ -109,7 +109,29 @@ def _kill_workers(client):
         os.kill(pid, signal.SIGKILL)
 
 
-def test_losing_every_worker_returns_the_finished_units_and_an_error(fragile_cluster):
+def test_a_lost_scene_is_sent_again_and_the_image_is_unchanged(fragile_cluster):
+    """The one worker holds the only copy of the scene (as Dask's memory manager may leave it on a big
+    cluster): killing it loses the scene; the units are submitted again with the scene sent again to the
+    restarted worker, and the image is the local one.  Before the retry the render ended with an error."""
+    client, _ = fragile_cluster
+    sc = scene(res=16, spp=40)
+    sc.settings = dataclasses.replace(sc.settings, batch_rays=1024)   # 4 passes per unit: 10 units
+    killed = {}
+
+    def kill_all(fraction, stats):
+        if stats["samples"] and not killed:
+            killed["samples"] = stats["samples"]
+            _kill_workers(client)
+
+    result = Renderer(sc).render(RenderRequest(scheduler=client, progress=kill_all))
+    assert killed and killed["samples"] < 16 * 16 * 40
+    assert not result.cancelled and "error" not in result.stats
+    np.testing.assert_array_equal(result.stokes(), Renderer(sc).render().stokes())
+
+
+def test_losing_every_worker_returns_the_finished_units_and_an_error(fragile_cluster, monkeypatch):
+    from engine.render import distributed as dask_executor
+    monkeypatch.setattr(dask_executor, "UNIT_RETRIES", 0)          # the workers do not come back in time
     client, _ = fragile_cluster
     sc = scene(res=16, spp=800)
     sc.settings = dataclasses.replace(sc.settings, batch_rays=1024)   # 4 passes per unit: 200 units
@@ -162,7 +184,8 @@ def test_cli_writes_the_finished_units_when_the_cluster_dies(fragile_cluster, tm
     out = str(tmp_path / "part.exr")
     proc = subprocess.Popen([sys.executable, "-m", "engine", "render", small_demo(tmp_path, spp=4000), "-o", out,
                              "--no-previews", "--scheduler", cluster.scheduler.address], cwd=REPO,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**os.environ, "POLAR_DASK_RETRIES": "0"})   # the restarted worker is not used
     buf, deadline = "", time.time() + 120
     while time.time() < deadline and not any(float(p) > 0 for p in re.findall(r"(\d+\.\d)%", buf)):
         c = proc.stderr.read(1)
