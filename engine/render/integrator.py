@@ -1353,13 +1353,14 @@ class PathTracer:
                     cos_l = light.cos_at(ls.points[li], gather(ls.wi, sel))
                 else:                   # cosθ at the light from the area pdf dist²/(cosθ·A)
                     cos_l = np.minimum(d * d / np.maximum(pdf * light.total_area, 1e-300), 1.0)
-                rows.append(np.arange(sp.n) if isinstance(sel, slice) else sel)
+                rows.append(sel)
                 lights.append(np.full(d.shape[0], li, np.int64))
                 dists.append(d)
                 cosines.append(cos_l)
         if not rows:
             return
-        sel = rows[0] if len(rows) == 1 else np.concatenate(rows)
+        # (one light: its rows as they are, slice(None) included, so gather copies nothing)
+        sel = rows[0] if len(rows) == 1 else np.concatenate(rows)      # (several lights: index arrays)
         light = lights[0][0] if len(rows) == 1 else np.concatenate(lights)
         d, cos_l = (dists[0], cosines[0]) if len(rows) == 1 else (np.concatenate(dists), np.concatenate(cosines))
         blocked[sel] = self.scene.unblock_own_hits(light, gather(sp.p, sel), gather(sp.n_g, sel), gather(ls.wi, sel),
