@@ -27,10 +27,11 @@ less.  ``--extra N`` adds N timing-only pairs (seeds re-rendered, images not kep
   longer Polar needs for Cycles' noise (< 1: Polar is more efficient);
 * **IQR** (new 2026-12-07): the interquartile range of that ratio over the warm pairs (σ² ratio × each pair's
   time ratio), the spread of the time measurement; the σ² ratio is the seeds' and has no spread here (its luck is
-  the top-1 % columns').  Two runs of one tree at load 8–15 repeated 11 of 14 ratios within each other's IQR
-  (docs/benchmarks/real-assets.md).  The IQR is the pairs' spread at the run's load, not across loads: on an
-  oversubscribed machine Cycles' two threads lose more than Polar's, and every ratio falls (compare runs at
-  similar load averages).  ``--json`` adds "var_time_iqr", "var_time_range" (min–max over the pairs), "pairs";
+  the top-1 % columns').  Between two runs of one tree each side's seconds moved ±18–23 %, the ratio ±5–10 %
+  (medians; docs/benchmarks/real-assets.md).  The IQR is the pairs' spread within the run, not a bound between
+  runs: a change of background load slows Cycles' two threads more than Polar's, and on a loaded machine every
+  ratio falls (compare runs at similar load averages).  ``--json`` adds "var_time_iqr", "var_time_range"
+  (min–max over the pairs) and "pairs";
 * the parity numbers of the case (blocks passing the rule, luminance ratio Polar ÷ Cycles);
 * the load average before and after (the machine may be shared: the ratios race the two renderers in one run).
 
