@@ -234,10 +234,10 @@ class CompiledScene:
         """True where the segment o → o + t_max·d is blocked."""
         return self.rays.occluded(o, d, t_max)
 
-    def unblock_own_hits(self, emitter: int, p: np.ndarray, n_g: np.ndarray, wi: np.ndarray, dist: np.ndarray,
-                         cos_l: np.ndarray, blocked: np.ndarray) -> np.ndarray:
-        """``blocked`` with the shadow rays p → p + dist·wi towards emitter ``emitter`` cleared where
-        they were stopped by that emitter itself.
+    def unblock_own_hits(self, emitter: int | np.ndarray, p: np.ndarray, n_g: np.ndarray, wi: np.ndarray,
+                         dist: np.ndarray, cos_l: np.ndarray, blocked: np.ndarray) -> np.ndarray:
+        """``blocked`` with the shadow rays p → p + dist·wi towards emitter ``emitter`` (an index, or one per ray
+        (N,)) cleared where they were stopped by that emitter itself.
 
         A shadow ray starts at p offset along n_g, parallel to p → x, so it meets the emitter's
         plane earlier than ``dist`` by about offset/cosθ_light (``cos_l``); at grazing angles that
@@ -250,7 +250,8 @@ class CompiledScene:
         hits = self.intersect(o, wi[:, idx], d * 1.001 + 1e-3)
         slack = (4.0 * RAY_EPSILON * (1.0 + np.abs(p[:, idx]).max(0)) / np.maximum(cos_l[idx], 1e-3)
                  + 1e-4 * (1.0 + d))
-        own = (hits.prim >= 0) & (self.tri_emitter[np.maximum(hits.prim, 0)] == emitter) & (hits.t >= d - slack)
+        mine = emitter if np.ndim(emitter) == 0 else np.asarray(emitter)[idx]
+        own = (hits.prim >= 0) & (self.tri_emitter[np.maximum(hits.prim, 0)] == mine) & (hits.t >= d - slack)
         out = blocked.copy()
         out[idx[own]] = False
         return out

@@ -1342,7 +1342,9 @@ class PathTracer:
 
     def _unblock_own_hits(self, sp: ShadingPoint, ls: _LightSamples, blocked: np.ndarray) -> None:
         """In place: ``blocked`` (n,) cleared where the shadow ray towards a light that blocks its own
-        shadow rays was stopped by that light itself (CompiledScene.unblock_own_hits)."""
+        shadow rays was stopped by that light itself (CompiledScene.unblock_own_hits; the lights' rays in one
+        query: each ray's answer is its own, whichever rays share the call)."""
+        rows, lights, dists, cosines = [], [], [], []
         for li, sel in ls.owners:
             light = self.lights.lights[li]
             if light.blocks_own_shadow_rays and blocked[sel].any():
@@ -1351,8 +1353,18 @@ class PathTracer:
                     cos_l = light.cos_at(ls.points[li], gather(ls.wi, sel))
                 else:                   # cosθ at the light from the area pdf dist²/(cosθ·A)
                     cos_l = np.minimum(d * d / np.maximum(pdf * light.total_area, 1e-300), 1.0)
-                blocked[sel] = self.scene.unblock_own_hits(li, gather(sp.p, sel), gather(sp.n_g, sel),
-                                                           gather(ls.wi, sel), d, cos_l, blocked[sel])
+                rows.append(sel)
+                lights.append(np.full(d.shape[0], li, np.int64))
+                dists.append(d)
+                cosines.append(cos_l)
+        if not rows:
+            return
+        # (one light: its rows as they are, slice(None) included, so gather copies nothing)
+        sel = rows[0] if len(rows) == 1 else np.concatenate(rows)      # (several lights: index arrays)
+        light = lights[0][0] if len(rows) == 1 else np.concatenate(lights)
+        d, cos_l = (dists[0], cosines[0]) if len(rows) == 1 else (np.concatenate(dists), np.concatenate(cosines))
+        blocked[sel] = self.scene.unblock_own_hits(light, gather(sp.p, sel), gather(sp.n_g, sel), gather(ls.wi, sel),
+                                                   d, cos_l, blocked[sel])
 
     def _pick_probability(self, li: int, prev: tuple):
         """The probability (m,) or scalar with which next-event estimation at the vertices ``prev`` = (positions,
@@ -1362,6 +1374,23 @@ class PathTracer:
         if prev[0] is None:         # camera rays: never MIS-weighted
             return 1.0
         return self.tree.probability_of_light(li, *prev)
+
+    def _hit_pdf(self, light, li: int, dist: np.ndarray, cos_l: np.ndarray, prim: np.ndarray, prev: tuple,
+                 d: np.ndarray, sel: np.ndarray) -> np.ndarray:
+        """The probability density (m,) (solid angle) with which next-event estimation from the vertices ``prev`` =
+        (positions, side normals) (3, m) would have produced the hits of ``light`` (index ``li``) at distances
+        ``dist`` on triangles ``prim`` facing the rays ``sel`` (directions d[:, sel]) at ``cos_l``: the light's
+        (or, for a light the tree splits, the hit triangle's) pick probability × the light's pdf of the point."""
+        if self.tree is not None and self.tree.split[li]:
+            # the tree picks this light's triangles one by one: the hit triangle's pick probability × its pdf
+            p_light = light.triangle_pdf(dist, cos_l, prim)
+            return p_light * (1.0 if prev[0] is None else self.tree.probability_of_triangles(prim, *prev))
+        if light.varies_over_surface:
+            p_light = light.pdf_hit(dist, cos_l, prev[0], prim=prim)
+        else:
+            # lamps sampled by a warp need the arrival point, hence the direction (EllipseEmitter)
+            p_light = light.pdf_hit(dist, cos_l, prev[0], *((d[:, sel],) if light.hit_pdf_needs_direction else ()))
+        return p_light * self._pick_probability(li, prev)
 
     def _emitter_hits(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, cols, idx: np.ndarray,
                       prims: np.ndarray, dists: np.ndarray, d: np.ndarray, lk: WavelengthLookup, prev_delta: np.ndarray,
@@ -1380,24 +1409,28 @@ class PathTracer:
         light_set = self.lights
         emitter = self.scene.tri_emitter[prims]
         cos_hit = -dot(d[:, idx], self.scene.tri_normal[prims].T)
-        for li in np.unique(emitter):
+        # each light's hits: ascending rows of one stable sort (np.flatnonzero(emitter == li) without a pass each)
+        order = np.argsort(emitter, kind="stable")
+        lights, starts = np.unique(emitter[order], return_index=True)
+        ends = np.append(starts[1:], order.size)
+        for li, start, end in zip(lights, starts, ends):
             if li < 0 or (camera and li in light_set.camera_hidden):
                 continue
             light = light_set.lights[li]
-            mine = emitter == li
-            cos_l = light.facing(cos_hit[mine])
+            rows = order[start:end]
+            cos_l = light.facing(cos_hit[rows])
             front = cos_l > 0             # one-sided emitters shine only from their front faces
-            sel, cos_l = idx[mine][front], cos_l[front]
+            rows, cos_l = rows[front], cos_l[front]
+            sel = idx[rows]
             if sel.size == 0:
                 continue
-            hit_prim = None
+            hit_prim = prims[rows]
+            dist_l = dists[rows]
             if light.varies_over_surface:
-                rows = np.flatnonzero(mine)[front]
-                hit_prim = prims[rows]
                 if bary is not None:
                     b1, b2 = bary[0][rows], bary[1][rows]
                 else:
-                    b1, b2 = light.barycentrics(hit_prim, o[:, sel] + d[:, sel] * dists[rows][None, :])
+                    b1, b2 = light.barycentrics(hit_prim, o[:, sel] + d[:, sel] * dist_l[None, :])
                 Le = light.emitted_at((hit_prim, b1, b2), lk.take(sel), self._integrated_rgb, self.mono)
             else:
                 Le = self._emitted(light, lk.take(sel))
@@ -1405,24 +1438,18 @@ class PathTracer:
             if factor is not None:
                 Le = Le * factor[None, :]
             if scale is not None:
-                Le = Le * scale[mine][front][None, :]
+                Le = Le * scale[rows][None, :]
             if att is not None:
-                a = att(sel, dists[mine][front])
+                a = att(sel, dist_l)
                 if a is not None:
                     Le = Le * a
-            prev = at_prev(sel)
-            # lamps sampled by a warp need the arrival point, hence the direction (EllipseEmitter)
-            where = (d[:, sel],) if light.hit_pdf_needs_direction else ()
-            if self.tree is not None and self.tree.split[li]:
-                # the tree picks this light's triangles one by one: the hit triangle's pick probability × its pdf
-                prim_hit = prims[np.flatnonzero(mine)[front]]
-                p_light = light.triangle_pdf(dists[mine][front], cos_l, prim_hit)
-                p_light = p_light * (1.0 if prev[0] is None else self.tree.probability_of_triangles(prim_hit, *prev))
-            else:
-                if hit_prim is not None:
-                    p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], prim=hit_prim)
-                else:
-                    p_light = light.pdf_hit(dists[mine][front], cos_l, prev[0], *where)
-                p_light = p_light * self._pick_probability(li, prev)
-            wsel = np.where(prev_delta[sel], 1.0, power_heuristic(prev_pdf[sel], p_light))
+            # MIS against next-event estimation, only where the path's last bounce was not a delta one (weight 1
+            # there: camera rays, smooth surfaces), so its light-pick probability is not traversed for nothing
+            wsel = np.ones(sel.size)
+            nd = ~prev_delta[sel]
+            if nd.any():
+                part = slice(None) if nd.all() else np.flatnonzero(nd)
+                s_nd = sel[part]
+                wsel[part] = power_heuristic(prev_pdf[s_nd], self._hit_pdf(
+                    light, li, dist_l[part], cos_l[part], hit_prim[part], at_prev(s_nd), d, s_nd))
             self._add_light(radiance, path, T, sel, Le, wsel, cols(sel), light, d[:, sel], x_T)

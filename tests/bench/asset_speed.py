@@ -7,9 +7,13 @@
 Runs each case of tests/blender/test_real_assets.py (tests/support/asset_parity.run_case: the glTF
 imported by Blender, framed, lit, rendered by Cycles with the parity settings and by Polar through the
 extension's exporter, both at ``--spp`` samples with ``--seeds`` seeds) and prints one line per case,
-the two renderers side by side:
+the two renderers side by side.  The renderers take turns seed by seed (asset_parity.render_alternated:
+Cycles then Polar for seed 0, Polar then Cycles for seed 1, …), so the two renders of a seed share the load of
+this shared 2-core VM: one side's seconds move ±15–30 % between identical runs, the ratio of a seed's pair much
+less.  ``--extra N`` adds N timing-only pairs (seeds re-rendered, images not kept) when few seeds give few pairs;
+``--sequential`` times as before 2026-12-07 (all Cycles renders, then all Polar renders; means, no spread).
 
-* seconds per render, warm, on both sides: the mean over seeds 1, 2, … (the first seed's render left out:
+* seconds per render, warm, on both sides: the median over seeds 1, 2, … (the first seed's renders left out:
   Cycles syncs the scene there, 0.9 s against 0.03–0.1 s for a later render of these small images; Polar's
   first render after the export is left out alike); Cycles' render call includes its EXR write. The
   one-time costs are printed beside them (Cycles: the first render's excess over a warm one, scene sync;
@@ -19,8 +23,15 @@ the two renderers side by side:
 * the share of σ² in the top 1 % of pixels (Cycles / Polar) and the ratio Polar ÷ Cycles of σ² over the other
   99 %: a share near 1 means a few fireflies carry σ², and a few seeds' ratio is then luck (a warning line
   says so; Sunglasses under lamps read 13.5× with seeds 0–3 and 0.6× with 16, docs/benchmarks.md);
-* **var × time ratio** = (σ²_Polar · t_Polar) ÷ (σ²_Cycles · t_Cycles): how much longer Polar needs for
-  Cycles' noise (< 1: Polar is more efficient);
+* **var × time ratio** = (σ²_Polar ÷ σ²_Cycles) · median over the warm pairs of t_Polar ÷ t_Cycles: how much
+  longer Polar needs for Cycles' noise (< 1: Polar is more efficient);
+* **IQR** (new 2026-12-07): the interquartile range of that ratio over the warm pairs (σ² ratio × each pair's
+  time ratio), the spread of the time measurement; the σ² ratio is the seeds' and has no spread here (its luck is
+  the top-1 % columns').  Between two runs of one tree each side's seconds moved ±18–23 %, the ratio ±5–10 %
+  (medians; docs/benchmarks/real-assets.md).  The IQR is the pairs' spread within the run, not a bound between
+  runs: a change of background load slows Cycles' two threads more than Polar's, and on a loaded machine every
+  ratio falls (compare runs at similar load averages).  ``--json`` adds "var_time_iqr", "var_time_range"
+  (min–max over the pairs) and "pairs";
 * the parity numbers of the case (blocks passing the rule, luminance ratio Polar ÷ Cycles);
 * the load average before and after (the machine may be shared: the ratios race the two renderers in one run).
 
@@ -104,6 +115,9 @@ def main(argv=None):
     p.add_argument("--json", action="store_true", help="also print the reports as JSON lines")
     p.add_argument("--figure", default="", help="write the Cycles | Polar S0 | Polar DoLP figure to this PNG")
     p.add_argument("--figure-lighting", default="hdri", choices=ap.LIGHTINGS)
+    p.add_argument("--extra", type=int, default=0, help="timing-only render pairs beyond the seeds' (alternated)")
+    p.add_argument("--sequential", action="store_true",
+                   help="time all Cycles renders, then all Polar ones (the timing before 2026-12-07; no spread)")
     p.add_argument("--selections", default="", help="Polar's light choices to race, e.g. power,cycles "
                                                      "(Scene.light_selection; default: the exporter's)")
     a = p.parse_args(argv)
@@ -116,7 +130,7 @@ def main(argv=None):
     panels = tempfile.mkdtemp(prefix="asset_panels_") if a.figure else None
     print(f"load average {' / '.join(f'{v:.2f}' for v in os.getloadavg())} ({os.cpu_count()} cores)", flush=True)
     print(f"{'asset':20s} {'light':5s} | {'Cycles s':>8s} {'σ²':>9s} {'sync s':>7s} | {'Polar s':>8s} {'σ²':>9s} "
-          f"{'setup s':>7s} | {'var×time P÷C':>12s} | parity")
+          f"{'setup s':>7s} | {'var×time P÷C':>12s} {'IQR':>11s} | parity")
     for name in names:
         for lighting in lightings:
             out = panels if (panels and lighting == a.figure_lighting) else None
@@ -130,7 +144,8 @@ def main(argv=None):
                 print(f"{'':26s}  var × time " + ", ".join(f"{s} ÷ {selections[0]} {var_time(reports[s]) / first:.2f}"
                                                            for s in selections[1:]), flush=True)
                 continue
-            r = ap.run_case(name, lighting, spp=a.spp, seeds=a.seeds, width=res[0], height=res[1], out_dir=out)
+            r = ap.run_case(name, lighting, spp=a.spp, seeds=a.seeds, width=res[0], height=res[1], out_dir=out,
+                            alternate=not a.sequential, extra=a.extra)
             if r.error:
                 print(f"{name:20s} {lighting:5s} | Polar refused the scene: {r.error}")
                 continue
@@ -141,33 +156,52 @@ def main(argv=None):
         print(ap.figure(panels, a.figure, done, a.figure_lighting))
 
 
+def seconds(r):
+    """(warm Cycles s, Cycles sync s, warm Polar s, Polar first-render excess s, timing or None) of a CaseReport:
+    medians and asset_parity.timing of the pairs when the renders alternated, else warm's means."""
+    tc, sync = warm(r.seconds["cycles_each"])
+    tp, first = warm(r.seconds["polar_each"])
+    if not r.seconds.get("alternated"):
+        return tc, sync, tp, first, None
+    from tests.support import asset_parity as ap
+    t = ap.timing(r.seconds["cycles_each"], r.seconds["polar_each"])
+    each_c, each_p = r.seconds["cycles_each"], r.seconds["polar_each"]
+    return t["cycles"], max(each_c[0] - t["cycles"], 0.0), t["polar"], max(each_p[0] - t["polar"], 0.0), t
+
+
 def var_time(r):
-    """(σ²_Polar · t_Polar) ÷ (σ²_Cycles · t_Cycles) of a CaseReport, warm seconds."""
-    tc, tp = warm(r.seconds["cycles_each"])[0], warm(r.seconds["polar_each"])[0]
+    """(σ²_Polar · t_Polar) ÷ (σ²_Cycles · t_Cycles) of a CaseReport, warm seconds (the pairs' median time ratio
+    when the renders alternated)."""
+    tc, _, tp, _, t = seconds(r)
     vc, vp = r.noise["cycles"], r.noise["polar"]
-    return (vp * tp) / (vc * tc) if vc * tc > 0 else float("inf")
+    if vc * tc <= 0:
+        return float("inf")
+    return vp / vc * t["ratio"] if t else (vp * tp) / (vc * tc)
 
 
 def line(name, lighting, r, as_json=False):
     """Print one case's line (and its JSON with ``as_json``)."""
-    tc, sync = warm(r.seconds["cycles_each"])
-    tp, first = warm(r.seconds["polar_each"])
+    tc, sync, tp, first, t = seconds(r)
     setup = r.seconds["export"] + first
     vc, vp = r.noise["cycles"], r.noise["polar"]
     ratio = var_time(r)
+    k = vp / vc if vc > 0 else float("inf")
+    iqr = f"{k * t['q1']:5.2f}–{k * t['q3']:5.2f}" if t else f"{'–':>11s}"
     (sc, rc), (sp, rp) = r.tails["cycles"], r.tails["polar"]
     print(f"{name:20s} {lighting:5s} | {tc:8.3f} {vc:9.2e} {sync:7.2f} | {tp:8.3f} {vp:9.2e} {setup:7.2f} "
-          f"| {ratio:12.2f} | {r.passed}/{r.blocks} blocks, Y {r.luminance_ratio:.3f} "
+          f"| {ratio:12.2f} {iqr:>11s} | {r.passed}/{r.blocks} blocks, Y {r.luminance_ratio:.3f} "
           f"| top 1 %: {sc:.2f} / {sp:.2f} of σ², rest P÷C {rp / rc if rc > 0 else float('inf'):.2f}",
           flush=True)
     if max(sc, sp) > FIREFLY_SHARE:
         print(f"{'':26s}  σ² is mostly fireflies ({max(sc, sp):.0%} in the top 1 % of pixels): with "
               f"{r.seeds} seeds its ratio is luck; rerun with more --seeds", flush=True)
     if as_json:
+        spread = {"var_time_iqr": [k * t["q1"], k * t["q3"]], "var_time_range": [k * t["lo"], k * t["hi"]],
+                  "pairs": t["n"]} if t else {}
         print(json.dumps({"asset": name, "lighting": lighting, "spp": r.spp, "seeds": r.seeds,
                           "cycles_s": tc, "polar_s": tp,
                           "cycles_sync_s": sync, "polar_setup_s": setup, "cycles_var": vc, "polar_var": vp,
-                          "var_time_ratio": ratio, "top1_share": [sc, sp], "rest_var": [rc, rp],
+                          "var_time_ratio": ratio, **spread, "top1_share": [sc, sp], "rest_var": [rc, rp],
                           "blocks": r.blocks, "passed": r.passed,
                           "luminance_ratio": r.luminance_ratio, "warnings": r.warnings}))
 

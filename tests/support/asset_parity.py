@@ -301,19 +301,22 @@ def cycles_settings(scene, spp, bounces):
 def render_cycles(scene, spp, seeds, bounces, tmp, times=None):
     """(seeds, H, W, 3) linear RGB of Cycles' Combined pass, one render per seed; ``times``: a list to which each
     render call's seconds are appended (the first one syncs the scene, the later ones reuse it)."""
+    cycles_settings(scene, spp, bounces)
+    return np.array([cycles_once(scene, seed, tmp, times) for seed in range(seeds)])
+
+
+def cycles_once(scene, seed, tmp, times=None):
+    """(H, W, 3) one Cycles render of ``seed`` (settings as cycles_settings left them), its seconds appended to
+    ``times``."""
     import bpy
     from tests.blender_support import read_multilayer
-    cycles_settings(scene, spp, bounces)
-    out = []
-    for seed in range(seeds):
-        scene.cycles.seed = seed
-        scene.render.filepath = os.path.join(tmp, f"cycles_{seed}")
-        t = time.perf_counter()
-        bpy.ops.render.render(write_still=True)
-        if times is not None:
-            times.append(time.perf_counter() - t)
-        out.append(read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3])
-    return np.array(out)
+    scene.cycles.seed = seed
+    scene.render.filepath = os.path.join(tmp, f"cycles_{seed}")
+    t = time.perf_counter()
+    bpy.ops.render.render(write_still=True)
+    if times is not None:
+        times.append(time.perf_counter() - t)
+    return read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3]
 
 
 def export_polar(scene, spp, bounces, polarisation="AUTO", spectral="RGB"):
@@ -339,14 +342,38 @@ def export_polar(scene, spp, bounces, polarisation="AUTO", spectral="RGB"):
 def render_polar(renderer, settings, seeds, times=None):
     """(seeds, 4, H, W, 3) Stokes images, one render per seed (seeds 0, 1, …); ``times``: a list to which each
     render's seconds are appended."""
+    return np.array([polar_once(renderer, settings, seed, times) for seed in range(seeds)])
+
+
+def polar_once(renderer, settings, seed, times=None):
+    """(4, H, W, 3) one Polar render of ``seed``, its seconds appended to ``times``."""
     import dataclasses
-    out = []
-    for seed in range(seeds):
-        t = time.perf_counter()
-        out.append(renderer.render(dataclasses.replace(settings, seed=seed)).stokes())
-        if times is not None:
-            times.append(time.perf_counter() - t)
-    return np.array(out)
+    t = time.perf_counter()
+    out = renderer.render(dataclasses.replace(settings, seed=seed)).stokes()
+    if times is not None:
+        times.append(time.perf_counter() - t)
+    return out
+
+
+def render_alternated(scene, renderer, settings, seeds, tmp, times_c, times_p, extra=0):
+    """(cycles (seeds, H, W, 3), stokes (seeds, 4, H, W, 3)): both renderers seed by seed in turn — Cycles then
+    Polar on even steps, Polar then Cycles on odd ones — so that the two renders of a step see the same load of a
+    shared machine; ``extra`` more steps re-render seeds 0, 1, … for their seconds only (images not kept).  Cycles'
+    settings must be set (cycles_settings) and the scene exported before; the seconds go to ``times_c``/``times_p``
+    in step order (the first step's renders sync / warm up: see timing)."""
+    cyc, stokes = [], []
+    for step in range(seeds + extra):
+        seed = step % seeds
+        if step % 2 == 0:
+            c = cycles_once(scene, seed, tmp, times_c)
+            p = polar_once(renderer, settings, seed, times_p)
+        else:
+            p = polar_once(renderer, settings, seed, times_p)
+            c = cycles_once(scene, seed, tmp, times_c)
+        if step < seeds:
+            cyc.append(c)
+            stokes.append(p)
+    return np.array(cyc), np.array(stokes)
 
 
 # --------------------------------------------------------------------------- the rule
@@ -401,11 +428,14 @@ def compare(cycles_rgb, polar_s0_rgb, hit, report: CaseReport):
 
 
 def run_case(asset: Asset | str, lighting: str, spp=16, seeds=4, width=None, height=None, bounces=8,
-             polarisation="AUTO", out_dir=None, edit=None, spectral="RGB") -> CaseReport:
+             polarisation="AUTO", out_dir=None, edit=None, spectral="RGB", alternate=False, extra=0) -> CaseReport:
     """Build, render both ways, compare; with ``out_dir``, also write the images (see write_images).
 
     ``edit(scene)``, if given, changes the built scene before both renders (e.g. unlinks one material
-    input): how a failing case is narrowed down to the material feature that causes it."""
+    input): how a failing case is narrowed down to the material feature that causes it.  ``alternate``: the
+    scene is exported first and the two renderers take turns seed by seed (render_alternated, ``extra`` timing-only
+    steps): the same images, seconds measured side by side (tests/bench/asset_speed.py); else all Cycles renders,
+    then the export and all Polar renders."""
     if isinstance(asset, str):
         asset = CATALOGUE[asset]
     width, height = width or asset.size[0], height or asset.size[1]
@@ -414,24 +444,45 @@ def run_case(asset: Asset | str, lighting: str, spp=16, seeds=4, width=None, hei
     if edit is not None:
         edit(scene)
     hit = coverage(scene, width, height)
+    times_c, times_p = report.seconds.setdefault("cycles_each", []), report.seconds.setdefault("polar_each", [])
     with tempfile.TemporaryDirectory() as tmp:
-        t = time.perf_counter()
-        cyc = render_cycles(scene, spp, seeds, bounces, tmp, report.seconds.setdefault("cycles_each", []))
-        report.seconds["cycles"] = time.perf_counter() - t
-    t = time.perf_counter()
-    try:
-        renderer, settings, report.warnings = export_polar(scene, spp, bounces, polarisation, spectral)
-        report.seconds["export"] = time.perf_counter() - t
-        t = time.perf_counter()
-        stokes = render_polar(renderer, settings, seeds, report.seconds.setdefault("polar_each", []))
-    except Exception as e:          # a refused scene is a result of the case, reported, not a crash of the suite
-        report.error = f"{type(e).__name__}: {e}"
-        return report
-    report.seconds["polar"] = time.perf_counter() - t
+        if not alternate:
+            t = time.perf_counter()
+            cyc = render_cycles(scene, spp, seeds, bounces, tmp, times_c)
+            report.seconds["cycles"] = time.perf_counter() - t
+        else:
+            cycles_settings(scene, spp, bounces)
+        try:
+            t = time.perf_counter()
+            renderer, settings, report.warnings = export_polar(scene, spp, bounces, polarisation, spectral)
+            report.seconds["export"] = time.perf_counter() - t
+            t = time.perf_counter()
+            if alternate:
+                cyc, stokes = render_alternated(scene, renderer, settings, seeds, tmp, times_c, times_p, extra)
+                report.seconds["cycles"] = sum(times_c)
+                report.seconds["alternated"] = True
+            else:
+                stokes = render_polar(renderer, settings, seeds, times_p)
+        except Exception as e:      # a refused scene is a result of the case, reported, not a crash of the suite
+            report.error = f"{type(e).__name__}: {e}"
+            return report
+    report.seconds["polar"] = sum(times_p) if alternate else time.perf_counter() - t
     compare(cyc, stokes[:, 0], hit, report)
     if out_dir is not None:
         write_images(out_dir, asset.name, lighting, cyc.mean(0), stokes.mean(0))
     return report
+
+
+def timing(times_c, times_p, skip=1):
+    """Warm seconds of alternated renders (render_alternated's per-step lists, the first ``skip`` steps left out:
+    Cycles' scene sync, Polar's first render): {cycles, polar: median seconds; ratio: median over the steps of
+    t_Polar ÷ t_Cycles of one step; q1, q3, lo, hi: quartiles and range of those per-step ratios; n: steps}.
+    A step's two renders share the machine's load, so their ratio moves less than either side's seconds."""
+    c, p = np.asarray(times_c[skip:] or times_c, float), np.asarray(times_p[skip:] or times_p, float)
+    r = p / c
+    q1, med, q3 = np.quantile(r, (0.25, 0.5, 0.75))
+    return {"cycles": float(np.median(c)), "polar": float(np.median(p)), "ratio": float(med), "q1": float(q1),
+            "q3": float(q3), "lo": float(r.min()), "hi": float(r.max()), "n": int(r.size)}
 
 
 # --------------------------------------------------------------------------- images
