@@ -275,6 +275,14 @@ class ShadingNormal(BSDF):
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         return self.base.pdf(self._base_point(sp), wi)
 
+    def eval_and_pdf(self, sp: ShadingPoint, wi: np.ndarray) -> tuple[MuellerValue, np.ndarray]:
+        """(``eval``, ``pdf``) through the base's eval_and_pdf at its point (one pass where it has one)."""
+        cls = type(self)
+        if cls.eval is not ShadingNormal.eval or cls.pdf is not ShadingNormal.pdf:
+            return super().eval_and_pdf(sp, wi)
+        f, pdf = self.base.eval_and_pdf(self._base_point(sp), wi)
+        return f.scaled(self._factor(sp, wi)[None, :]), pdf
+
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         bs = self.base.sample(self._base_point(sp), u_lobe, u_dir)
         factor = self._factor(sp, bs.wi)
