@@ -1,12 +1,14 @@
-"""A BSDF's value and density at the same directions in one call (BSDF.eval_and_pdf): next-event estimation against
-a non-delta light and a mixture's sample ask each component once for both, and a Torrance–Sparrow facet lobe
-computes both in one compiled pass (engine.kernels.torrance_sparrow._eval_pdf_loop).
+"""The real assets' Principled vertices in fewer steps.  A BSDF's value and density at the same directions in one
+call (BSDF.eval_and_pdf): next-event estimation against a non-delta light and a mixture's sample ask each component
+once for both, and a Torrance–Sparrow facet lobe computes both in one compiled pass
+(engine.kernels.torrance_sparrow._eval_pdf_loop).  A normal map's factor on its lobe (the leak rule and the
+terminator softening) in one compiled pass (engine.kernels.normal_map).
 
 The route is paired with the chain it replaces (``eval`` then ``pdf``, each through the mixture, normal-map and tint
 wrappers): the same image bit for bit for the real assets' material shapes (Principled with a normal map and
 textured metallic and roughness, a plain Principled, a Torrance–Sparrow with a diffuse lobe, several of them shaded
 together as a MaterialSet) under a sky, lamps and an emitting quad, in several transports; and the compiled pass
-against its NumPy twin on crafted directions.
+against its NumPy twin on crafted directions; the normal map's factor likewise (its NumPy twin as the chain).
 """
 
 import dataclasses
@@ -15,6 +17,7 @@ import numpy as np
 import pytest
 
 from engine import kernels
+from engine.kernels import normal_map as normal_map_kernels
 from engine.materials import mix, normal_map, tinted
 from engine.materials import torrance_sparrow as ts
 from engine.materials.base import BSDF
@@ -126,3 +129,46 @@ def test_the_one_pass_kernel_matches_its_twin_and_the_two_passes(distribution, s
     for g, w in zip(got, twin):
         assert np.allclose(g, w, rtol=1e-12, atol=0, equal_nan=True)
     assert 0 < want[6].astype(bool).sum() < n
+
+
+@needs_numba
+@pytest.mark.parametrize("name, overrides", [("t_principled", {}), ("several", {"spectral": "rgb"})])
+def test_the_compiled_normal_factor_gives_the_chains_image_bit_for_bit(monkeypatch, scenes, name, overrides):
+    scene = scenes[name]
+    settings = dataclasses.replace(scene.settings, threads=1, **overrides)
+    calls = []
+    loop = normal_map_kernels._normal_factor_loop
+
+    def counted(*args):
+        calls.append(args[4])
+        return loop(*args)
+    monkeypatch.setattr(normal_map_kernels, "_normal_factor_loop", counted)
+    route = Renderer(scene).render(settings).stokes()
+    assert set(calls) == {True, False}, "the compiled factor did not run for both lobe kinds"
+    monkeypatch.setattr(normal_map, "normal_factor", normal_map.normal_factor_numpy)
+    chain = Renderer(scene).render(settings).stokes()
+    assert np.array_equal(route, chain, equal_nan=True)
+
+
+@pytest.mark.parametrize("soften", [False, True])
+def test_the_normal_factor_matches_its_twin(soften):
+    """Crafted normals: N = N_s (cosθ_d = 1), ω_i ⟂ N_s, ω_i = N_s, opposite sides, a NaN, a tilted map."""
+    rng, n, _, wi = _batch(2000, seed=11)
+    n_g = n.copy()
+    tilt = rng.normal(scale=0.4, size=n.shape)
+    mapped = (n + tilt) / np.linalg.norm(n + tilt, axis=0)
+    n_smooth = n.copy()
+    mapped[:, 10] = n_smooth[:, 10]                         # cosθ_d = 1
+    wi[:, 11] = np.cross(n_smooth[:, 11], mapped[:, 11])
+    wi[:, 11] /= np.linalg.norm(wi[:, 11])                  # cosθ_i = 0
+    wi[:, 12] = n_smooth[:, 12]                             # cosθ_i = 1
+    wi[:, 13] = -n_g[:, 13]                                 # below the surface
+    wi[:, 14] = np.nan
+    got = normal_map.normal_factor(n_g, mapped, wi, n_smooth, soften)
+    want = normal_map.normal_factor_numpy(n_g, mapped, wi, n_smooth, soften)
+    assert np.array_equal(got, want, equal_nan=True)
+    assert 0 < np.count_nonzero(want == 0) < len(want)
+    if soften:          # (the side rule alone gives 0 at a NaN direction, the softening NaN)
+        assert np.count_nonzero((want > 0) & (want < 1)) > 100 and np.isnan(want[14])
+    else:
+        assert want[14] == 0
