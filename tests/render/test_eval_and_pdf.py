@@ -39,6 +39,17 @@ def use_chain(monkeypatch):
     monkeypatch.setattr(mix.Mix, "_sum_and_pdf", _chain_sum_and_pdf)
 
 
+def counted(monkeypatch, module, name) -> list:
+    """``module.name`` replaced by a wrapper that records each call's arguments in the returned list."""
+    calls, fn = [], getattr(module, name)
+
+    def wrapper(*args):
+        calls.append(args)
+        return fn(*args)
+    monkeypatch.setattr(module, name, wrapper)
+    return calls
+
+
 @pytest.fixture(scope="module")
 def scenes(tmp_path_factory):
     """Tiles and a floor of each material set (engine.render.precompile's textures) under a sky, lamps and an
@@ -75,13 +86,7 @@ CASES = [("t_principled", {}), ("t_principled", {"polarisation": "linear", "spec
 def test_eval_and_pdf_gives_the_chains_image_bit_for_bit(monkeypatch, scenes, name, overrides):
     scene = scenes[name]
     settings = dataclasses.replace(scene.settings, threads=1, **overrides)
-    calls = []
-    fused = ts.torrance_sparrow_eval_pdf
-
-    def counted(*args):
-        calls.append(1)
-        return fused(*args)
-    monkeypatch.setattr(ts, "torrance_sparrow_eval_pdf", counted)
+    calls = counted(monkeypatch, ts, "torrance_sparrow_eval_pdf")
     route = Renderer(scene).render(settings).stokes()
     assert calls, "the one-pass value and density were not taken"
     use_chain(monkeypatch)
@@ -136,15 +141,9 @@ def test_the_one_pass_kernel_matches_its_twin_and_the_two_passes(distribution, s
 def test_the_compiled_normal_factor_gives_the_chains_image_bit_for_bit(monkeypatch, scenes, name, overrides):
     scene = scenes[name]
     settings = dataclasses.replace(scene.settings, threads=1, **overrides)
-    calls = []
-    loop = normal_map_kernels._normal_factor_loop
-
-    def counted(*args):
-        calls.append(args[4])
-        return loop(*args)
-    monkeypatch.setattr(normal_map_kernels, "_normal_factor_loop", counted)
+    calls = counted(monkeypatch, normal_map_kernels, "_normal_factor_loop")
     route = Renderer(scene).render(settings).stokes()
-    assert set(calls) == {True, False}, "the compiled factor did not run for both lobe kinds"
+    assert {args[4] for args in calls} == {True, False}, "the compiled factor did not run for both lobe kinds"
     monkeypatch.setattr(normal_map, "normal_factor", normal_map.normal_factor_numpy)
     chain = Renderer(scene).render(settings).stokes()
     assert np.array_equal(route, chain, equal_nan=True)
