@@ -256,6 +256,33 @@ def _pdf_loop(n_s, wo, wi, m, dist, p_given, use_given, eta, L, s, w_d, has_spec
                         coef, k, 0.0, False)
 
 
+@jit
+def _eval_pdf_loop(n_s, wo, wi, eta, s, m, dist, kind, p_given, use_given, eta_p, L, s_p, w_d, has_diffuse, coef, k,
+                   A, B, C, S, x, valid, pdf):
+    """_eval_loop and _pdf_loop (has_specular) at the same ω_o, ω_i in one pass: the pdf shares the lobe's frame, half
+    vector and D (pdf_from_facet_at: pdf_at's bits) where facet_at evaluated the lobe, else pdf_of."""
+    for i in range(n_s.shape[1]):
+        n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
+        t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
+        o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
+        w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
+        mi = at(m, i)
+        e_valid, lobe, lo0, lo1, lo2, li2, h0, h1, h2, D, fr, c = facet_at(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1,
+                                                                         o2, w0, w1, w2, at(s, i), mi, dist, kind,
+                                                                         coef, k)
+        facet_fresnel_at(i, i, eta, c, fr, 1.0, A, B, C, S)
+        x[0, i], x[1, i], x[2, i] = scattering_axis(w0, w1, w2, o0, o1, o2)
+        valid[i] = e_valid
+        cos_o = (o0 * n0 + o1 * n1) + o2 * n2
+        p = p_spec_at(i, cos_o, p_given, use_given, eta_p, L, s_p, w_d)
+        if lobe:
+            pdf[i] = pdf_from_facet_at(lo0, lo1, lo2, li2, h0, h1, h2, D, mi, dist, p, True, has_diffuse, coef, k,
+                                       0.0, False)
+        else:
+            pdf[i] = pdf_of(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1, o2, w0, w1, w2, mi, dist, p, True,
+                            has_diffuse, coef, k, 0.0, False)
+
+
 @jit_inner
 def sample_at(i, o, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef,
               k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
@@ -379,6 +406,22 @@ def torrance_sparrow_pdf_numba(n_s, wo, wi, m, p_given, eta, L, s, w_d, has_spec
     return out
 
 
+def torrance_sparrow_eval_pdf_numba(n_s, wo, wi, eta, L, s, m, shadowing, p_given, eta_p, s_p, w_d, has_diffuse,
+                                    distribution="beckmann"):
+    """torrance_sparrow_eval_numba's (x, A, B, C, S, valid) and torrance_sparrow_pdf_numba's pdf (has_specular) at
+    the same directions in one pass (the same bits); ``eta``, ``s``: the lobe's, ``eta_p``, ``s_p``: the pdf's."""
+    n = n_s.shape[1]
+    p, use_given, wd = _p_inputs(p_given, w_d, n)
+    A, B, C, S = (np.empty((L, n)) for _ in range(4))
+    x, valid, pdf = np.empty((3, n)), np.empty(n, np.bool_), np.empty(n)
+    _eval_pdf_loop(_f64(n_s), _f64(wo), _f64(wi), _eta_rows(eta), _per_point(s, n), _per_point(m, n),
+                   DISTRIBUTION_CODES[distribution], SHADOWING_CODES[shadowing], p, use_given,
+                   np.zeros((1, 1), np.complex128) if use_given else _eta_rows(eta_p), int(L),
+                   np.zeros(1) if use_given else _per_point(s_p, n), wd, bool(has_diffuse), _ERFCX_COEF, _ERFCX_K,
+                   A, B, C, S, x, valid, pdf)
+    return x, A, B, C, S, valid, pdf
+
+
 def torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowing, p_given, w_d, has_diffuse,
                                   distribution="beckmann", scale=True):
     n = n_s.shape[1]
@@ -398,3 +441,4 @@ def torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowin
 torrance_sparrow_eval_numba = _eval_loop and torrance_sparrow_eval_numba
 torrance_sparrow_pdf_numba = _pdf_loop and torrance_sparrow_pdf_numba
 torrance_sparrow_sample_numba = _sample_loop and torrance_sparrow_sample_numba
+torrance_sparrow_eval_pdf_numba = _eval_pdf_loop and torrance_sparrow_eval_pdf_numba

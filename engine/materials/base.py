@@ -376,6 +376,11 @@ class BSDF:
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         raise NotImplementedError
 
+    def eval_and_pdf(self, sp: ShadingPoint, wi: np.ndarray) -> tuple[MuellerValue, np.ndarray]:
+        """(``eval(sp, wi)``, ``pdf(sp, wi)``): a model that computes both in one pass overrides it (the same
+        numbers as the two calls)."""
+        return self.eval(sp, wi), self.pdf(sp, wi)
+
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         raise NotImplementedError
 

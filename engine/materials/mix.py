@@ -164,6 +164,17 @@ def _weight_at(sp: ShadingPoint, w) -> np.ndarray:
 
 # --------------------------------------------------------------------------- Mueller sums
 
+def _component_scale(sp: ShadingPoint, q: ShadingPoint, w: np.ndarray, wi: np.ndarray, cos_s: np.ndarray,
+                     cosine: bool) -> np.ndarray:
+    """A component's factor in Mix._sum: w·|n_q·ω_i| (``cosine``), w at the mix's own point, else
+    w·|n_q·ω_i|/|n_s·ω_i| (0 where ``cos_s`` = |n_s·ω_i| is 0)."""
+    if cosine:
+        return w * np.abs(dot(q.n_s, wi))
+    if q is sp:
+        return w
+    return w * np.where(cos_s > 0, np.abs(dot(q.n_s, wi)) / np.where(cos_s > 0, cos_s, 1.0), 0.0)
+
+
 def rotate_mueller_batch(M: np.ndarray, c_in, s_in, c_out, s_out) -> np.ndarray:
     """R_out·M·R_inᵀ for M (4, 4, L, N) with the frame rotations (cos 2φ, sin 2φ) of each beam (N,)
     (engine.kernels.stokes_rotation.frame_rotation): rows 1–2 by the output's, columns 1–2 by the
@@ -509,14 +520,28 @@ class Mix(BSDF):
         for c, q, w in zip(self.components, points, weights):
             if not w.any():
                 continue
-            if cosine:
-                scale = w * np.abs(dot(q.n_s, wi))
-            elif q is sp:
-                scale = w
-            else:
-                scale = w * np.where(cos_s > 0, np.abs(dot(q.n_s, wi)) / np.where(cos_s > 0, cos_s, 1.0), 0.0)
-            terms.append((scale, c.eval(q, wi)))
+            terms.append((_component_scale(sp, q, w, wi, cos_s, cosine), c.eval(q, wi)))
         return add_values(terms, sp.n, sp.lam.shape[0], -wi, sp.wo, sp.n_s)
+
+    def _sum_and_pdf(self, sp, points, weights, p, wi, cosine: bool) -> tuple[MuellerValue, np.ndarray]:
+        """(``_sum(sp, points, weights, wi, cosine)``, ``_pdf(points, p, wi)``), a component asked for both once
+        (BSDF.eval_and_pdf: one pass where it has one; the same numbers)."""
+        cos_s = np.abs(dot(sp.n_s, wi))
+        terms = []
+        out = np.zeros(wi.shape[1])
+        for c, q, w, pk in zip(self.components, points, weights, p):
+            value, density = w.any(), pk.any() and not c.flags.is_delta_only
+            if value and density:
+                f, d = c.eval_and_pdf(q, wi)
+            elif value:
+                f = c.eval(q, wi)
+            elif density:
+                d = c.pdf(q, wi)
+            if density:
+                out += pk * d
+            if value:
+                terms.append((_component_scale(sp, q, w, wi, cos_s, cosine), f))
+        return add_values(terms, sp.n, sp.lam.shape[0], -wi, sp.wo, sp.n_s), out
 
     def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
         """The first transmitting component's (a mix's transmitting materials are taken to share one index,
@@ -572,6 +597,14 @@ class Mix(BSDF):
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         points = self._points(sp)
         return self._pdf(points, self._probabilities_at(sp, points), wi)
+
+    def eval_and_pdf(self, sp: ShadingPoint, wi: np.ndarray) -> tuple[MuellerValue, np.ndarray]:
+        """(``eval``, ``pdf``) with each component asked once for both (``_sum_and_pdf``)."""
+        cls = type(self)
+        if cls.eval is not Mix.eval or cls.pdf is not Mix.pdf or not self.components:
+            return super().eval_and_pdf(sp, wi)
+        points = self._points(sp)
+        return self._sum_and_pdf(sp, points, self._weights_at(sp), self._probabilities_at(sp, points), wi, False)
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         return self._sample(sp, u_lobe, u_dir, weighted=True)
@@ -632,13 +665,15 @@ class Mix(BSDF):
             sub = sp.take(smooth, shared)
             sub_points = [sub if q is sp else q.take(smooth, shared) for q in points]
             d_sub = np.take(wi, smooth, axis=1)
-            density = self._pdf(sub_points, p[:, smooth], d_sub)
+            if weighted:        # the components' values and densities at once (the same numbers)
+                value, density = self._sum_and_pdf(sub, sub_points, [w[smooth] for w in weights], p[:, smooth],
+                                                   d_sub, cosine=True)
+            else:
+                density = self._pdf(sub_points, p[:, smooth], d_sub)
             good = density > 0
             valid[smooth] = good
             pdf[smooth] = density
             if weighted:
-                w_sub = [w[smooth] for w in weights]
-                value = self._sum(sub, sub_points, w_sub, d_sub, cosine=True)
                 value = value.scaled(np.where(good, 1.0 / np.where(good, density, 1.0), 0.0)[None, :])
                 parts.append((smooth, value))
 

@@ -49,6 +49,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, MuellerValue, ShadingPoint, take_lanes
+from ..kernels import twin
+from ..kernels.normal_map import normal_factor_numba
 from ..textures import ImageTexture, TextureInput
 from ..vec3 import dot, reflect
 
@@ -95,6 +97,20 @@ def _normalise(v: np.ndarray, fallback: np.ndarray) -> np.ndarray:
     unit = v / np.where(ok, length, 1.0)[None, :]
     ok &= np.isfinite(unit).all(axis=0)
     return np.where(ok[None, :], unit, fallback)
+
+
+def normal_factor_numpy(n_g: np.ndarray, n: np.ndarray, wi: np.ndarray, n_smooth: np.ndarray,
+                        soften: bool) -> np.ndarray:
+    """(N,) ShadingNormal's factor on its lobe's value: the leak rule (n_g·ω_i)(n_g·N)(N·ω_i) ≥ 0 as 1 or 0 and,
+    with ``soften`` (a diffuse lobe with bump map correction), times ``terminator_softening(n_smooth, n, wi)``."""
+    keep = (dot(n_g, wi) * dot(n_g, n) * dot(n, wi) >= 0).astype(np.float64)
+    if soften:
+        keep = keep * terminator_softening(n_smooth, n, wi)
+    return keep
+
+
+#: normal_factor_numpy, compiled where available (engine.kernels.normal_map; the same bits).
+normal_factor = twin(normal_factor_numba, normal_factor_numpy)
 
 
 @dataclass
@@ -232,11 +248,9 @@ class ShadingNormal(BSDF):
         return dot(sp.n_g, wi) * dot(sp.n_g, sp.n_s) * dot(sp.n_s, wi) >= 0
 
     def _factor(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
-        """(N,) the leak rule times, for a diffuse lobe with correction, the terminator softening."""
-        keep = self.geometric_agreement(sp, wi).astype(np.float64)
-        if self._diffuse and self.bump_correction:
-            keep = keep * terminator_softening(_smooth_normal(sp), sp.n_s, wi)
-        return keep
+        """(N,) the leak rule times, for a diffuse lobe with correction, the terminator softening (normal_factor:
+        one compiled pass where available)."""
+        return normal_factor(sp.n_g, sp.n_s, wi, _smooth_normal(sp), self._diffuse and self.bump_correction)
 
     def _base_point(self, sp: ShadingPoint) -> ShadingPoint:
         """The point the base lobe sees: a diffuse lobe's view mirrored into the front of its mapped
@@ -274,6 +288,14 @@ class ShadingNormal(BSDF):
 
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         return self.base.pdf(self._base_point(sp), wi)
+
+    def eval_and_pdf(self, sp: ShadingPoint, wi: np.ndarray) -> tuple[MuellerValue, np.ndarray]:
+        """(``eval``, ``pdf``) through the base's eval_and_pdf at its point (one pass where it has one)."""
+        cls = type(self)
+        if cls.eval is not ShadingNormal.eval or cls.pdf is not ShadingNormal.pdf:
+            return super().eval_and_pdf(sp, wi)
+        f, pdf = self.base.eval_and_pdf(self._base_point(sp), wi)
+        return f.scaled(self._factor(sp, wi)[None, :]), pdf
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         bs = self.base.sample(self._base_point(sp), u_lobe, u_dir)

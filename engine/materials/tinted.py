@@ -50,6 +50,14 @@ class _ScaledLobes(BSDF):
     def pdf(self, sp: ShadingPoint, wi: np.ndarray) -> np.ndarray:
         return self.base.pdf(sp, wi)
 
+    def eval_and_pdf(self, sp: ShadingPoint, wi: np.ndarray) -> tuple[MuellerValue, np.ndarray]:
+        """(``eval``, ``pdf``) through the base's eval_and_pdf (one pass where it has one)."""
+        cls = type(self)
+        if cls.eval is not _ScaledLobes.eval or cls.pdf is not _ScaledLobes.pdf:
+            return super().eval_and_pdf(sp, wi)
+        f, pdf = self.base.eval_and_pdf(sp, wi)
+        return f.scaled(self._factor(sp, wi)), pdf
+
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         bs = self.base.sample(sp, u_lobe, u_dir)
         return BSDFSample(bs.wi, bs.weight.scaled(self._factor(sp, bs.wi)), bs.pdf, bs.is_delta, bs.valid, bs.eta_sq)

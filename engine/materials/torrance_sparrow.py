@@ -120,8 +120,8 @@ from .smooth_limit import MirrorWithDiffuse
 from ..errors import SceneError
 from ..kernels import twin
 from ..kernels.torrance_sparrow import (DISTRIBUTION_CODES, SHADOWING_CODES, _eta_rows, _p_inputs, _per_point,
-                                        torrance_sparrow_eval_numba, torrance_sparrow_pdf_numba,
-                                        torrance_sparrow_sample_numba)
+                                        torrance_sparrow_eval_numba, torrance_sparrow_eval_pdf_numba,
+                                        torrance_sparrow_pdf_numba, torrance_sparrow_sample_numba)
 from ..polarisation.frames import scattering_plane_axis
 from ..polarisation.fresnel import fresnel_reflection_abcs, fresnel_reflectance
 from ..polarisation.thin_film import facet_film, film_at, film_label, film_reflection_abcs
@@ -399,7 +399,16 @@ def torrance_sparrow_sample_numpy(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowin
     return wi, pdf, valid, factor, x, A * f, B * f, C * f, S * f, eval_valid
 
 
+def torrance_sparrow_eval_pdf_numpy(n_s, wo, wi, eta, L, s, m, shadowing, p_given, eta_p, s_p, w_d, has_diffuse,
+                                    distribution="beckmann"):
+    """(x, A, B, C, S, valid, pdf): ``torrance_sparrow_eval_numpy`` and ``torrance_sparrow_pdf_numpy`` (the facet
+    lobe present) at the same directions (``eta``, ``s``: the lobe's; ``eta_p``, ``s_p``: the pdf's)."""
+    return torrance_sparrow_eval_numpy(n_s, wo, wi, eta, L, s, m, shadowing, distribution) + (
+        torrance_sparrow_pdf_numpy(n_s, wo, wi, m, p_given, eta_p, L, s_p, w_d, True, has_diffuse, distribution),)
+
+
 torrance_sparrow_eval = twin(torrance_sparrow_eval_numba, torrance_sparrow_eval_numpy)
+torrance_sparrow_eval_pdf = twin(torrance_sparrow_eval_pdf_numba, torrance_sparrow_eval_pdf_numpy)
 torrance_sparrow_pdf = twin(torrance_sparrow_pdf_numba, torrance_sparrow_pdf_numpy)
 torrance_sparrow_sample = twin(torrance_sparrow_sample_numba, torrance_sparrow_sample_numpy)
 
@@ -783,11 +792,29 @@ class TorranceSparrow(BSDF):
         else:
             x, A, B, C, S, valid = _facet_eval(self._dist(sp), sp.n_s, sp.wo, wi, self.relative_eta(sp),
                                                sp.number(self.s), self.shadowing, self._facet_fresnel(sp))
+        return self._facet_value(sp, x, A, B, C, S, valid)
+
+    def _facet_value(self, sp: ShadingPoint, x, A, B, C, S, valid) -> MuellerValue:
+        """``eval``'s value from the facet lobe's blocks: the Lambert and multiscatter terms added."""
         depol = self._depol(sp, valid, lambda: sp.cos_o)
         if self.multiscatter:   # the multiply scattered energy, depolarised: k·M00 of the facet lobe
             extra = self.multiscatter_extra(sp) * A
             depol = extra if depol is None else depol + extra
         return MuellerValue("abcs", x, x, A, B, C, S, depol=depol)
+
+    def eval_and_pdf(self, sp: ShadingPoint, wi: np.ndarray) -> tuple[MuellerValue, np.ndarray]:
+        """(``eval``, ``pdf``) at the same directions: with the compiled facet lobe one pass for both
+        (torrance_sparrow_eval_pdf, the same bits), else the two calls."""
+        cls = type(self)
+        if not (self.has_specular and self._compiled_lobe and cls.eval is TorranceSparrow.eval
+                and cls.pdf is TorranceSparrow.pdf and cls._facet_value is TorranceSparrow._facet_value):
+            return super().eval_and_pdf(sp, wi)
+        p_given, eta_p, s_p, w_d = self._mixture_inputs(sp, compact=True)
+        x, A, B, C, S, valid, pdf = torrance_sparrow_eval_pdf(sp.n_s, sp.wo, wi, self._eta(sp), sp.lam.shape[0],
+                                                              sp.number(self.s), self._m(sp), self.shadowing,
+                                                              p_given, eta_p, s_p, w_d, self.has_diffuse,
+                                                              self.distribution)
+        return self._facet_value(sp, x, A, B, C, S, valid), pdf
 
     def _m(self, sp: ShadingPoint):
         """The roughness at the points: a number, or (N,) for a textured m."""

@@ -1269,17 +1269,21 @@ class PathTracer:
         ls.ok &= cos_i > 0
         if not ls.ok.any():
             return None
-        S = self._bsdf_response(sp, bsdf, x_T, ls.wi, ls.polarised)
-        mis = self._light_mis(sp, bsdf, ls)
+        f = pdf = None
+        if isinstance(ls.delta, np.ndarray) or not ls.delta:      # the MIS reads the BSDF's pdf: asked with eval
+            f, pdf = bsdf.eval_and_pdf(sp, ls.wi)
+        S = self._bsdf_response(sp, bsdf, x_T, ls.wi, ls.polarised, f)
+        mis = self._light_mis(sp, bsdf, ls, pdf)
         return S, value * (cos_i * mis / ls.select_prob * ls.ok)[None, :]
 
     def _bsdf_response(self, sp: ShadingPoint, bsdf: BSDF, x_T: np.ndarray, wi: np.ndarray,
-                       polarised: tuple | None = None) -> np.ndarray:
+                       polarised: tuple | None = None, f: MuellerValue | None = None) -> np.ndarray:
         """The Stokes vector (P, L, n) (depolarisers: (1, L, n)) the BSDF scatters towards wo from light of unit
         radiance arriving along wi (3, n), in the paths' frames ``x_T``: unpolarised light, or with ``polarised``
-        = (normalised Stokes (4, n), its frame x_e (3, n)) polarised light (engine.render.polarised_light)."""
+        = (normalised Stokes (4, n), its frame x_e (3, n)) polarised light (engine.render.polarised_light).
+        ``f``: ``bsdf.eval(sp, wi)`` if the caller has it."""
         P = self.P
-        f = bsdf.eval(sp, wi)
+        f = bsdf.eval(sp, wi) if f is None else f
         if not bsdf.radiance_scaling:          # Cycles' convention (BSDF.radiance_scaling)
             k = bsdf.refraction_eta_sq(sp)
             if k is not None:
@@ -1300,13 +1304,15 @@ class PathTracer:
         return S
 
     @staticmethod
-    def _light_mis(sp: ShadingPoint, bsdf: BSDF, ls: _LightSamples) -> np.ndarray:
-        """Power-heuristic MIS weights (n,) of the light samples against BSDF sampling (delta lights: 1)."""
-        if isinstance(ls.delta, np.ndarray):       # several lights: delta ones have no MIS
-            return np.where(ls.delta, 1.0, power_heuristic(ls.pdf_l * ls.select_prob, bsdf.pdf(sp, ls.wi)))
-        if ls.delta:
+    def _light_mis(sp: ShadingPoint, bsdf: BSDF, ls: _LightSamples, pdf: np.ndarray | None = None) -> np.ndarray:
+        """Power-heuristic MIS weights (n,) of the light samples against BSDF sampling (delta lights: 1); ``pdf``:
+        ``bsdf.pdf(sp, ls.wi)`` if the caller has it."""
+        if not isinstance(ls.delta, np.ndarray) and ls.delta:
             return np.ones(sp.n)
-        return power_heuristic(ls.pdf_l * ls.select_prob, bsdf.pdf(sp, ls.wi))
+        pdf = bsdf.pdf(sp, ls.wi) if pdf is None else pdf
+        if isinstance(ls.delta, np.ndarray):       # several lights: delta ones have no MIS
+            return np.where(ls.delta, 1.0, power_heuristic(ls.pdf_l * ls.select_prob, pdf))
+        return power_heuristic(ls.pdf_l * ls.select_prob, pdf)
 
     def _shadow_visibility(self, sp: ShadingPoint, ls: _LightSamples, stats: dict[str, int],
                            crossings: list | None) -> np.ndarray:
