@@ -60,6 +60,7 @@ from .sampler import (PADDED_LAYOUT, PADDED_WAVELENGTH, PAIR_BSDF_DIRECTION, PAI
                       PAIR_WAVELENGTH, SOBOL_CHOICES, SOBOL_DIRECTION, SOBOL_LIGHT_POINT, SOBOL_ROULETTE, PathSampler,
                       camera_numbers, pattern_pairs, sequence_index, stratified_pair, vertex_pair)
 from .visibility import ray_visibility
+from ..scene.description import resolve_halves
 from ..spectral import RGB_WAVELENGTHS_NM, WavelengthLookup, rgb_channel_tables, rgb_weights, sample_wavelengths
 from ..vec3 import dot
 
@@ -306,14 +307,15 @@ class PathTracer:
                  materials: list[BSDF] | None = None, count_cost: bool = True):
         """``materials``: the compiled scene's materials as rendered (by material index:
         ``RenderPlan.materials``); None: the plan's rule (engine.render.plan.rendered_materials).
-        ``settings``: as rendered (``polarisation`` resolved).  ``count_cost``: report each path's
+        ``settings``: as rendered (``polarisation`` and ``halves`` resolved; ``halves`` "auto" traces as a uniform
+        render resolves it, engine.scene.description.resolve_halves).  ``count_cost``: report each path's
         cost (``stats["path_cost"]``), which only adaptive sampling reads; without it the per-vertex
         counting is skipped (a masked scatter-add per bounce and per next-event vertex)."""
         self.scene = compiled
         self.count_cost = count_cost
         self.lights = lights
         self.camera = camera
-        self.settings = settings
+        self.settings = resolve_halves(settings, reads_halves=False)
         if materials is None:
             materials, _ = rendered_materials(compiled, getattr(settings, "simplify", "auto"))
         self.materials: list[BSDF] = list(materials)
