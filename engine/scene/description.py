@@ -436,8 +436,8 @@ class RenderSettings:
     #: format, the command line, the Python API and Blender (the camera's and the first vertex's numbers
     #: as "stratified" draws them, every deeper vertex's — light choice and point, lobe, direction,
     #: roulette — from per-pixel shuffled, Owen-scrambled Sobol' (0, 2)-sequence pairs,
-    #: engine.render.sampler.sobol_pairs: same expectation, less noise; the standard error then comes
-    #: from the even/odd halves), "stratified" (the camera's numbers and the first vertex's light and BSDF
+    #: engine.render.sampler.sobol_pairs: same expectation, less noise; with independent ``halves`` the standard
+    #: error comes from the even/odd halves), "stratified" (the camera's numbers and the first vertex's light and BSDF
     #: numbers one per-pixel XOR-scrambled Sobol' point set, engine.render.sampler.stratified_pair, the
     #: deeper ones hashed; the default before "sobol"), "padded" (every number, the camera's and the first
     #: vertex's too, from its own shuffled Sobol' pair, engine.render.sampler.padded_pairs), "cycles" (Cycles'
@@ -449,8 +449,9 @@ class RenderSettings:
     #: means are independent estimates, as adaptive sampling's half-buffer error estimate needs),
     #: "one_sequence" (the sample index used whole: one scrambled sequence per pixel and pair, so a pixel's
     #: first 2^m samples are one (0, m, 2)-net; the halves are then correlated and no half-buffer error
-    #: estimate is made) or "auto" (one sequence unless the render reads the halves: adaptive sampling, a
-    #: time budget, the CLI's --stderr; resolve_halves below).  Same expectation either way.
+    #: estimate is made: the film's standard error is the i.i.d. one, marked as such) or "auto" (one sequence unless
+    #: the render reads the halves: adaptive sampling, a time budget, ``estimate``; resolve_halves below).  Same
+    #: expectation either way.
     halves: str = "auto"
     #: How next-event estimation chooses among many lights (Cycles' Light Tree, scene.cycles.use_light_tree):
     #: "on" — the light tree over lamps and emissive triangles (engine.render.lights.tree: Conty & Kulla 2018 as

@@ -175,9 +175,10 @@ def test_one_sequence_has_the_expectation_of_independent_halves():
 # ------------------------------------------------------------------------------- the CLI and its files
 
 def test_cli_records_the_resolved_halves_and_resume_never_mixes_them(tmp_path, capsys):
-    """A uniform render writes polar.halves one_sequence; --stderr (which reads the halves) and --halves
-    independent write none (two independent sequences, as every file before); a resume with "auto" continues
-    the file's mode, naming another is refused, and continuing a one-sequence file adaptively is refused."""
+    """A uniform render writes polar.halves one_sequence, with --stderr too (the i.i.d. error, marked: the option
+    does not change the image); --halves independent writes none (two independent sequences, as every file before)
+    and --stderr's half-split estimate; a resume with "auto" continues the file's mode, naming another is refused,
+    and continuing a one-sequence file adaptively is refused."""
     from engine import cli
     from engine.output.exr import read_stokes_exr
     from tests.cli.test_robustness_cli import small_demo
@@ -187,11 +188,18 @@ def test_cli_records_the_resolved_halves_and_resume_never_mixes_them(tmp_path, c
     assert cli.main(["render", scene, "-o", one, *base]) == 0
     assert cli.main(["render", scene, "-o", split, "--halves", "independent", *base]) == 0
     assert cli.main(["render", scene, "-o", err, "--stderr", *base]) == 0
-    assert read_stokes_exr(one)[2]["polar.halves"] == "one_sequence"
-    for path in (split, err):
+    split_err = str(tmp_path / "split_err.exr")
+    assert cli.main(["render", scene, "-o", split_err, "--stderr", "--halves", "independent", *base]) == 0
+    for path in (one, err):
+        assert read_stokes_exr(path)[2]["polar.halves"] == "one_sequence"
+    np.testing.assert_array_equal(read_stokes_exr(err)[0], read_stokes_exr(one)[0])
+    _, channels, header = read_stokes_exr(err)
+    assert "S0.Y.stderr" in channels and "S0.Y.even" not in channels and "not an estimate" in header["polar.stderr"]
+    for path in (split, split_err):
         _, channels, header = read_stokes_exr(path)
         assert "polar.halves" not in header and header["polar.sampler"] == "sobol"
-    assert "S0.Y.even" in read_stokes_exr(err)[1] and read_stokes_exr(err)[2]["polar.stderr"].startswith("stratified")
+    _, channels, header = read_stokes_exr(split_err)
+    assert "S0.Y.even" in channels and header["polar.stderr"].startswith("stratified")
     capsys.readouterr()
     more = str(tmp_path / "more.exr")
     assert cli.main(["render", scene, "-o", more, "--resume", one, "--spp", "6", *base]) == 0
