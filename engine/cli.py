@@ -873,8 +873,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sampler", choices=("sobol", "padded", "cycles", "stratified", "independent"),
                    help="sobol (the default, as in Blender: stratified's numbers at the camera and first vertex, "
                         "per-pixel shuffled, Owen-scrambled Sobol' pairs at every deeper vertex: less noise, same "
-                        "expectation; with --halves independent --stderr comes from the even/odd halves), padded (every number from its "
-                        "own shuffled Sobol' pair, the pixel jitter Owen-scrambled, the others digitally shifted), "
+                        "expectation; with --halves independent --stderr comes from the even/odd halves), padded "
+                        "(every number from its own shuffled Sobol' pair, the pixel jitter Owen-scrambled, the others "
+                        "digitally shifted), "
                         "stratified (Sobol' pixel jitter, lens, wavelengths and first-vertex light/BSDF numbers, "
                         "deeper ones hashed) or independent (hashed numbers)")
     r.add_argument("--halves", choices=HALVES_MODES,
