@@ -20,7 +20,7 @@ import sys
 import time
 
 from .errors import SceneError
-from .scene.description import LIGHT_PATH_FIELDS, LIGHT_TREE_MODES
+from .scene.description import HALVES_MODES, LIGHT_PATH_FIELDS, LIGHT_TREE_MODES
 
 
 class ProgressBar:
@@ -149,7 +149,7 @@ def _load_scene(path):
 
 #: Options of `render` (and `estimate`, which has some of them) that override the scene's render block.
 SETTING_OPTIONS = ("spp", "seed", "max_depth", "spectral", "polarisation", "wavelength_nm", "simplify",
-                   "reduce_spectral", "sampler", "light_tree", *(f.name for f in LIGHT_PATH_FIELDS))
+                   "reduce_spectral", "sampler", "halves", "light_tree", *(f.name for f in LIGHT_PATH_FIELDS))
 
 
 def _settings_from_options(scene, args):
@@ -163,7 +163,7 @@ def _settings_from_options(scene, args):
         return st
     merged = {**{k: getattr(st, k) for k in ("spp", "max_depth", "rr_depth", "seed", "spectral",
                                               "wavelength_nm", "polarisation", "batch_rays", "threads",
-                                              "reduce_spectral", "simplify", "sampler", "light_tree",
+                                              "reduce_spectral", "simplify", "sampler", "halves", "light_tree",
                                               *(f.name for f in LIGHT_PATH_FIELDS))}, **overrides}
     try:
         st = parse_settings(merged, "option")
@@ -209,6 +209,7 @@ def _render_scene(args, bars: list) -> int:
     if getattr(args, "denoise_data", False):
         st = dataclasses.replace(st, denoise_data=True)
     adaptive = _adaptive_settings(args, st.spp)
+    st = _resolve_halves(st, adaptive is not None, args.resume)
     out = args.output
     if not out.lower().endswith(".exr"):
         raise SceneError("-o", f"the output must be an .exr file, got {out!r}")
@@ -254,14 +255,26 @@ def _render_scene(args, bars: list) -> int:
             if bar is not None:
                 bar.close()
         result.stats.update(prediction.first)
+        ran = dataclasses.replace(st, halves=result.settings.halves)     # the passes trace the render's own rays
         if data_request is not None and not (result.cancelled and not result.film.count.any()):
             from .render.data_passes import render_data_passes
-            result.data_passes = render_data_passes(renderer, data_request, st)
+            result.data_passes = render_data_passes(renderer, data_request, ran)
         if light_keys and not (result.cancelled and not result.film.count.any()):
-            _add_light_passes(renderer, st, light_keys, result)
+            _add_light_passes(renderer, ran, light_keys, result)
         # Still inside: a signal while the files are written must not lose them.
         status = _write_render(args, out, result, st, scene_hash, adaptive)
     return status if status else signals.exit_status(130 if result.cancelled else 0)
+
+
+def _resolve_halves(st, adaptive: bool, resume):
+    """``st`` with ``halves`` resolved for this render (engine.scene.description.resolve_halves; a SceneError naming
+    --halves where one sequence meets adaptive sampling): "auto" is one sequence unless adaptive sampling reads the
+    even/odd halves (``--stderr`` does not change the image: with one sequence it writes the i.i.d. error, and says
+    so); a resumed render's "auto" is left for engine.render.resume.resume_state (the file's)."""
+    from .scene.description import resolve_halves
+    if st.halves == "auto" and resume:
+        return st
+    return resolve_halves(st, adaptive, "--halves")
 
 
 def _data_pass_request(args):
@@ -397,6 +410,8 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
     from .output.exr import write_stokes_exr
     from .output.previews import write_previews
     from .output.rescue import save_rescue
+    import dataclasses
+
     from .render.resume import estimator_identity
 
     stats = result.stats
@@ -428,7 +443,9 @@ def _write_render(args, out, result, st, scene_hash, adaptive=None) -> int:
             "polar.kernels": stats.get("kernels", ""), "polar.simplified": "; ".join(stats.get("simplified", []))}
     if st.spectral == "mono":
         meta["polar.wavelength_nm"] = float(st.wavelength_nm)
-    meta.update(estimator_identity(scene_hash, st, stats["transport"], size=(film.width, film.height)))
+    # the halves as the render resolved them (the resume fingerprint: a resume never mixes them)
+    meta.update(estimator_identity(scene_hash, dataclasses.replace(st, halves=result.settings.halves),
+                                   stats["transport"], size=(film.width, film.height)))
     extra = {"spp": spp_image.astype("uint32")}
     if adaptive is not None and result.halves is not None:
         more_extra, more_meta = _adaptive_report(result, adaptive)
@@ -856,10 +873,17 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sampler", choices=("sobol", "padded", "cycles", "stratified", "independent"),
                    help="sobol (the default, as in Blender: stratified's numbers at the camera and first vertex, "
                         "per-pixel shuffled, Owen-scrambled Sobol' pairs at every deeper vertex: less noise, same "
-                        "expectation; --stderr then comes from the even/odd halves), padded (every number from its "
-                        "own shuffled Sobol' pair, the pixel jitter Owen-scrambled, the others digitally shifted), "
+                        "expectation; with --halves independent --stderr comes from the even/odd halves), padded "
+                        "(every number from its own shuffled Sobol' pair, the pixel jitter Owen-scrambled, the others "
+                        "digitally shifted), "
                         "stratified (Sobol' pixel jitter, lens, wavelengths and first-vertex light/BSDF numbers, "
                         "deeper ones hashed) or independent (hashed numbers)")
+    r.add_argument("--halves", choices=HALVES_MODES,
+                   help="how a pixel's even and odd samples draw the low-discrepancy pattern: one_sequence (the "
+                        "sample index used whole: the first 2^m samples one net; less noise), independent (two "
+                        "independently scrambled sequences, whose means give adaptive sampling's and --stderr's "
+                        "half-split error estimate) or auto (default: one sequence unless adaptive sampling reads "
+                        "the halves; --stderr then writes the i.i.d. error)")
     r.add_argument("--light-tree", choices=LIGHT_TREE_MODES,
                    help="next-event estimation's light choice: on (the light tree over lamps and emissive triangles, "
                         "as Cycles' Light Tree), off (the scene's light_selection over whole lights) or auto (default: "

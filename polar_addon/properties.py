@@ -49,6 +49,15 @@ SAMPLER_ITEMS = [
      "choice and point, the BSDF's lobe and direction, roulette) one point of a per-pixel shuffled, Owen-scrambled "
      "Sobol' set, so a choice is stratified with its point: same expectation, less noise", 4),
 ]
+HALVES_ITEMS = [
+    ("AUTO", "Auto", "One sequence unless adaptive sampling (Noise Threshold or Time Limit) reads the even and odd "
+     "samples as two independent estimates", 0),
+    ("ONE_SEQUENCE", "One Sequence", "A pixel's samples are one low-discrepancy sequence (as Cycles): less noise; "
+     "no half-split error estimate (not allowed with adaptive sampling)", 1),
+    ("INDEPENDENT", "Independent Halves", "The even and the odd samples are two independently scrambled sequences, "
+     "whose difference estimates the error (adaptive sampling's)", 2),
+]
+HALVES_TO_ENGINE = {"AUTO": "auto", "ONE_SEQUENCE": "one_sequence", "INDEPENDENT": "independent"}
 SAMPLER_TO_ENGINE = {"INDEPENDENT": "independent", "STRATIFIED": "stratified", "SOBOL": "sobol", "PADDED": "padded",
                      "CYCLES": "cycles"}
 
@@ -102,6 +111,8 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                       min=0)
     sampler: EnumProperty(name="Pattern", items=SAMPLER_ITEMS, default="SOBOL",
                           description="Random number pattern (Cycles' Sampling Pattern)")
+    halves: EnumProperty(name="Even/Odd Samples", items=HALVES_ITEMS, default="AUTO",
+                         description="How a pixel's even and odd samples draw the pattern (not with Independent)")
     use_animated_seed: BoolProperty(name="Animated Seed", description="Add the frame number to the seed so "
                                     "that noise changes from frame to frame", default=False)
     spectral: EnumProperty(name="Spectral", items=SPECTRAL_ITEMS, default="SPECTRAL")

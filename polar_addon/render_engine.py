@@ -6,6 +6,7 @@ Errors become Blender errors (``report({'ERROR'})``), so a failed render never s
 black image; cancelling (Esc, ``test_break``) stops between batches and keeps the finished samples.
 """
 
+import dataclasses
 import time
 import traceback
 
@@ -26,7 +27,7 @@ from ..engine.postprocess.mosaic import mosaic as polarisation_mosaic
 from ..engine.spectral.cie import LUMINANCE_WEIGHTS
 from . import passes
 from .compositor import DenoiseUnavailable, denoise_stokes, polariser_inputs
-from .properties import (DEFAULT_PASSES, DENOISE_PASSES, NOISE_QUANTITY_TO_ENGINE, PASS_NAMES,
+from .properties import (DEFAULT_PASSES, DENOISE_PASSES, HALVES_TO_ENGINE, NOISE_QUANTITY_TO_ENGINE, PASS_NAMES,
                          POLARISATION_TO_ENGINE, SAMPLER_TO_ENGINE)
 from .ui_names import ui_message
 from .viewport import ViewportSession, stop_all_sessions
@@ -79,7 +80,8 @@ def engine_settings(scene, preview=False) -> RenderSettings:
                           wavelength_nm=p.wavelength_nm, polarisation=POLARISATION_TO_ENGINE[p.polarisation],
                           batch_rays=p.batch_rays, threads=p.threads,
                           simplify="auto" if p.skip_clear_layers else "off",
-                          sampler=SAMPLER_TO_ENGINE[p.sampler], light_tree=light_tree, **light_paths)
+                          sampler=SAMPLER_TO_ENGINE[p.sampler], halves=HALVES_TO_ENGINE[p.halves],
+                          light_tree=light_tree, **light_paths)
 
 
 #: Cycles' Light Paths properties (scene.cycles, the same names in Blender 4.5–5.3) → RenderSettings fields
@@ -291,7 +293,6 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             self.update_stats("", "Polar | compiling kernels (first render only)")
         denoise = bool(getattr(scene.polar, "use_denoising", False)) and not self.is_preview
         if enabled & set(DENOISE_PASSES) or denoise:
-            import dataclasses
             settings = dataclasses.replace(settings, denoise_data=True)
 
         def progress(fraction, stats):
@@ -310,7 +311,6 @@ class PolarRenderEngine(bpy.types.RenderEngine):
         adaptive = adaptive_settings(scene, self.is_preview)
         scheduler = None if self.is_preview else self.control.scheduler
         if scheduler and settings.denoise_data:     # not collected from Dask workers yet
-            import dataclasses
             settings = dataclasses.replace(settings, denoise_data=False)
             self.report({"WARNING"}, "Polar: the Denoising Albedo / Normal passes are not rendered on a "
                                      "Dask cluster yet: they stay empty"
@@ -326,6 +326,8 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             self._write_noise(result, out, adaptive, window)
         if getattr(out.film, "has_denoise_data", False):
             self._write_denoise_data(result, out.film, window, enabled)
+        # the passes trace the render's own camera rays: its even/odd halves as resolved (adaptive: independent)
+        settings = dataclasses.replace(settings, halves=out.settings.halves)
         if data_request is not None and not out.cancelled:
             self.update_stats("", "Polar | data passes")
             passes.write_data_passes(self, result, renderer, data_request, settings, window)

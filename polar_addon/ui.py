@@ -54,6 +54,9 @@ class POLAR_PT_sampling(_PolarPanel, bpy.types.Panel):
         row.prop(p, "seed")
         row.prop(p, "use_animated_seed", text="", icon="TIME")
         layout.prop(p, "sampler")
+        sub = layout.row()
+        sub.active = p.sampler != "INDEPENDENT"
+        sub.prop(p, "halves")
         c = getattr(context.scene, "cycles", None)
         if c is not None and hasattr(c, "use_light_tree"):       # Cycles' own switch: a file keeps one setting
             layout.prop(c, "use_light_tree", text="Light Tree")

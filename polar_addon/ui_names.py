@@ -28,6 +28,7 @@ RENDER_SETTINGS = {
     "reduce_spectral": (None, _FIXED),
     "simplify": ("skip_clear_layers", "Render Properties ▸ Polarisation & Spectrum ▸ Skip Clear Layers"),
     "sampler": ("sampler", "Render Properties ▸ Sampling ▸ Pattern"),
+    "halves": ("halves", "Render Properties ▸ Sampling ▸ Even/Odd Samples"),
     "light_tree": (None, "Render Properties ▸ Sampling ▸ Light Tree (Cycles' Sampling ▸ Lights ▸ Light Tree)"),
     "denoise_data": (None, "View Layer Properties ▸ Polarisation Passes ▸ Denoising Data"),
     "max_diffuse_bounces": (None, "Render Properties ▸ Light Paths ▸ Max Bounces ▸ Diffuse"),

@@ -624,7 +624,7 @@ class AdaptiveRounds:
                  on_first_pass=None, unit_times: list | None = None):
         W, H = film.width, film.height
         self.film, self.halves, self.adaptive, self.workers, self.stats = film, halves, adaptive, workers, stats
-        self.spp, self.batch_rays, self.stratified = plan.settings.spp, plan.settings.batch_rays, plan.stratified
+        self.spp, self.batch_rays, self.stratified = plan.settings.spp, plan.settings.batch_rays, plan.split_halves
         self.on_first_pass, self.unit_times = on_first_pass, unit_times
         self.job = PathJob(plan.settings)
         self.time_limit = adaptive.time_limit

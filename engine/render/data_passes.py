@@ -38,6 +38,7 @@ from ..scene.description import Camera, Scene
 from .accel import RAY_EPSILON, CompiledScene
 from .camera import CameraModel
 from .sampler import camera_numbers
+from ..scene.description import resolve_halves
 from .visibility import MAX_PASS_THROUGH, ray_visibility
 
 #: Requestable data passes → (Blender/Cycles pass name, channel names)
@@ -283,10 +284,10 @@ class _Tracer:
     """The first-hit tracing of one request over a scene (shared by the worker threads: read-only)."""
 
     def __init__(self, scene: Scene, compiled: CompiledScene, camera: CameraModel, request: DataPassRequest,
-                 seed: int, sampler: str, pixels: np.ndarray):
+                 seed: int, sampler: str, pixels: np.ndarray, halves: str = "independent"):
         self.scene, self.compiled, self.camera, self.request = scene, compiled, camera, request
         self.pixels = pixels            # flat indices of the window's pixels (row-major)
-        self.seed, self.sampler = seed, sampler
+        self.seed, self.sampler, self.halves = seed, sampler, halves
         self.passes = request.passes
         self.vis = ray_visibility(compiled)
         self.identity = _Identity(scene, compiled)
@@ -306,7 +307,7 @@ class _Tracer:
 
     def rays(self, pixel: np.ndarray, sample: np.ndarray):
         """The integrator's camera rays of (pixel, sample) (engine.render.integrator._camera_paths)."""
-        _, u = camera_numbers(self.seed, self.sampler, pixel, sample, self.camera.lens_dimensions)
+        _, u = camera_numbers(self.seed, self.sampler, pixel, sample, self.camera.lens_dimensions, 0, self.halves)
         o, d, _, t_min, t_max = self.camera.generate(pixel, u)
         t_min = np.asarray(t_min, np.float64)
         t_max = np.asarray(t_max, np.float64)
@@ -429,14 +430,15 @@ class _Tracer:
 def render_data_passes(renderer, request: DataPassRequest, settings=None, window=None,
                        threads: int | None = None) -> DataPasses:
     """The data passes and Cryptomatte layers ``request`` asks for, of ``renderer`` (an
-    engine.render.renderer.Renderer, or a Scene) with ``settings`` (None: the scene's: its seed, sampler
-    and spp), over ``window`` (x0, y0, x1, y1) or the whole image.  Deterministic for a seed; independent of
+    engine.render.renderer.Renderer, or a Scene) with ``settings`` (None: the scene's: its seed, sampler, halves
+    and spp; ``halves`` "auto" as a uniform render resolves it: pass an adaptive render's resolved settings for
+    its rays), over ``window`` (x0, y0, x1, y1) or the whole image.  Deterministic for a seed; independent of
     ``threads`` (None: settings.threads, 0: one per core)."""
     if isinstance(renderer, Scene):
         scene, compiled, camera = renderer, CompiledScene(renderer), CameraModel(renderer.camera)
     else:
         scene, compiled, camera = renderer.scene, renderer.compiled, renderer.camera
-    settings = settings or scene.settings
+    settings = resolve_halves(settings or scene.settings, reads_halves=False)
     W, H = scene.camera.width, scene.camera.height
     x0, y0, x1, y1 = window or (0, 0, W, H)
     if not (0 <= x0 < x1 <= W and 0 <= y0 < y1 <= H):
@@ -445,7 +447,7 @@ def render_data_passes(renderer, request: DataPassRequest, settings=None, window
     n_samples = request.samples_for(settings.spp)
     rows, cols = np.mgrid[y0:y1, x0:x1]
     tracer = _Tracer(scene, compiled, camera, request, int(settings.seed), settings.sampler,
-                     (rows * W + cols).ravel().astype(np.int64))
+                     (rows * W + cols).ravel().astype(np.int64), settings.halves)
     n_pix = tracer.pixels.size
     per_chunk = max(1, BATCH_RAYS // n_samples)
     chunks = [np.arange(a, min(a + per_chunk, n_pix)) for a in range(0, n_pix, per_chunk)]

@@ -162,7 +162,7 @@ class BandJob:
     """Traces a uniform render's unit (row0, row1, pass0, pass1) → (SampleSums, stats), or None if aborted.
 
     Passes a pixel already has (``done`` (n,): a resumed film's counts) are skipped; with ``stratified``
-    the part also holds the even/odd luminance sums."""
+    (independently scrambled halves, RenderSettings.split_halves) the part also holds the even/odd luminance sums."""
 
     count_cost = False
 
@@ -206,7 +206,7 @@ class UniformPasses:
             x0, y0, x1, y1 = plan.window or (0, 0, plan.width, plan.height)
             total = int(np.maximum(st.spp - done.reshape(plan.height, plan.width)[y0:y1, x0:x1], 0).sum())
         self.total = max(total, 1)
-        stratified = st.stratified and (resume is None or resume.half_y is not None)
+        stratified = st.split_halves and (resume is None or resume.half_y is not None)
         self.job = BandJob(st, plan.width, plan.window, stratified, done)
         self._given = False
 

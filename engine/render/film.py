@@ -13,7 +13,10 @@ With the "stratified" sampler a pixel's samples are not independent, and the i.i
 (from the sums of squares) overestimates the error of its mean; the film then also keeps the
 luminance Stokes sums of the even and of the odd samples (``half_y``: two independently scrambled
 sequences, engine.render.sampler.stratified_pair), whose difference is an unbiased, if one-degree-
-of-freedom, estimate of the mean's variance (``stderr_luminance``).
+of-freedom, estimate of the mean's variance (``stderr_luminance``).  Where the even and odd samples are one
+sequence (``RenderSettings.halves`` "one_sequence", ``Film.one_sequence``) their halves are correlated, so the film
+keeps no half sums and its standard error is the i.i.d. formula, which ``stderr_method`` says is no estimate of
+those samples' error (usually larger than it).
 
 The film's accumulators are written here alone: a render adds parts with ``Film.add`` (``SampleSums`` of a
 work unit, or ``OrderedSamples`` added in ascending sample order: adaptive sampling, whose even/odd half
@@ -39,6 +42,9 @@ class Film:
         self.alpha_sums = None          # None: every sample so far had alpha 1 (no memory spent)
         self.denoise_sums = None        # None: no denoising data asked for; else (6, n): albedo RGB, normal XYZ
         self.half_y = None              # None: independent samples; else (2, 4, n): even/odd luminance Stokes sums
+        #: a low-discrepancy render whose even and odd samples are one sequence (set by the renderer): no half
+        #: sums, and ``stderr_method`` says the i.i.d. error is not an estimate of its error
+        self.one_sequence = False
         self._added = False             # samples added yet (see ``add``)
 
     def add_samples(self, pixel: np.ndarray, stokes_rgb: np.ndarray, alpha: np.ndarray | None = None) -> None:
@@ -185,6 +191,10 @@ class Film:
     def stderr_method(self) -> str:
         """What ``stderr_luminance`` is (the EXR header's ``polar.stderr``)."""
         if self.half_y is None:
+            if self.one_sequence:
+                return ("iid: sample standard deviation / sqrt(spp), not an estimate of this render's error: its "
+                        "samples are one low-discrepancy sequence per pixel (halves one_sequence), whose error is "
+                        "usually smaller")
             return "iid: sample standard deviation / sqrt(spp)"
         return ("stratified: iid variance of the mean x the 5x5-pixel mean of (A - B)^2 nA nB / spp^2 / iid variance "
                 "(A, B: means of the even and the odd samples, independently scrambled)")

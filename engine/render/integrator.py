@@ -58,8 +58,9 @@ from .polarised_light import in_frame, light_samples_polarisation, mueller_times
 from .plan import rendered_materials, spectral_reduction
 from .sampler import (PADDED_LAYOUT, PADDED_WAVELENGTH, PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_LIGHT_POINT,
                       PAIR_WAVELENGTH, SOBOL_CHOICES, SOBOL_DIRECTION, SOBOL_LIGHT_POINT, SOBOL_ROULETTE, PathSampler,
-                      camera_numbers, pattern_pairs, stratified_pair, vertex_pair)
+                      camera_numbers, pattern_pairs, sequence_index, stratified_pair, vertex_pair)
 from .visibility import ray_visibility
+from ..scene.description import resolve_halves
 from ..spectral import RGB_WAVELENGTHS_NM, WavelengthLookup, rgb_channel_tables, rgb_weights, sample_wavelengths
 from ..vec3 import dot
 
@@ -154,8 +155,8 @@ class _Accumulators:
     transparency: np.ndarray | None
     guides: DenoiseGuides | None
     stats: dict[str, int]
-    #: (N,) the batch's pixels and sample indices with the "stratified" and "sobol" samplers (their
-    #: numbers depend on them; the film's even/odd half sums too), else None
+    #: (N,) the batch's pixels and the patterns' sample indices (engine.render.sampler.sequence_index) with the
+    #: low-discrepancy samplers (their numbers depend on them), else None
     pixel: np.ndarray | None = None
     sample: np.ndarray | None = None
     count_cost: bool = True
@@ -306,14 +307,15 @@ class PathTracer:
                  materials: list[BSDF] | None = None, count_cost: bool = True):
         """``materials``: the compiled scene's materials as rendered (by material index:
         ``RenderPlan.materials``); None: the plan's rule (engine.render.plan.rendered_materials).
-        ``settings``: as rendered (``polarisation`` resolved).  ``count_cost``: report each path's
+        ``settings``: as rendered (``polarisation`` and ``halves`` resolved; ``halves`` "auto" traces as a uniform
+        render resolves it, engine.scene.description.resolve_halves).  ``count_cost``: report each path's
         cost (``stats["path_cost"]``), which only adaptive sampling reads; without it the per-vertex
         counting is skipped (a masked scatter-add per bounce and per next-event vertex)."""
         self.scene = compiled
         self.count_cost = count_cost
         self.lights = lights
         self.camera = camera
-        self.settings = settings
+        self.settings = resolve_halves(settings, reads_halves=False)
         if materials is None:
             materials, _ = rendered_materials(compiled, getattr(settings, "simplify", "auto"))
         self.materials: list[BSDF] = list(materials)
@@ -451,8 +453,11 @@ class PathTracer:
         # lens point (a defocused edge's noise) and the wavelengths (a coloured metal's or a light's
         # spectrum: the spectral noise) likewise
         sampler, u = camera_numbers(self.settings.seed, self.settings.sampler, pixel, sample,
-                                    self.camera.lens_dimensions, k - k_camera)
+                                    self.camera.lens_dimensions, k - k_camera, self.settings.halves)
         if stratified:
+            # from here on the patterns' index: the sample itself, or 2·sample where even and odd samples are one
+            # sequence (engine.render.sampler.sequence_index)
+            sample = sequence_index(sample, self.settings.halves)
             seed = self.settings.seed
             if self.samples_wavelengths:
                 # a path's wavelengths are frac(u + j/count), j < count: periodic in u with period 1/count, so

@@ -21,6 +21,7 @@ from ..materials.base import BSDF, BSDFFlags
 from ..scene.description import RenderSettings
 from .effects import effective_materials, media_needs, resolve_transport, source_needs
 from .media import media_flags, spectral_media
+from ..scene.description import resolve_halves
 from .light_paths import describe as describe_light_paths
 
 #: (x0, y0, x1, y1): a pixel rectangle, row 0 at the top, x1 and y1 exclusive.
@@ -129,7 +130,7 @@ def check_window(window, width: int, height: int) -> Window | None:
 class RenderPlan:
     """A render resolved from a scene and settings.
 
-    ``settings``: as rendered (``polarisation`` resolved; a copy, never changed); ``transport_reason``:
+    ``settings``: as rendered (``polarisation`` and ``halves`` resolved; a copy, never changed); ``transport_reason``:
     why that transport; ``materials``: the compiled scene's materials by index with the exact
     simplifications applied, ``simplified``: their reasons; ``spectral``: how paths carry the spectrum
     (reported); ``width`` × ``height`` pixels, ``window`` (or None: all); ``workers``: threads (or Dask
@@ -149,10 +150,12 @@ class RenderPlan:
 
     @classmethod
     def resolve(cls, scene, compiled, settings: RenderSettings | None = None, window=None,
-                workers: int | None = None) -> RenderPlan:
+                workers: int | None = None, reads_halves: bool = False) -> RenderPlan:
         """The plan of rendering ``scene`` (compiled as ``compiled``) with ``settings`` (None: the
-        scene's); ``workers`` None: ``settings.threads``, or one per CPU core."""
-        requested = settings or scene.settings
+        scene's); ``workers`` None: ``settings.threads``, or one per CPU core; ``reads_halves``: the render
+        reads the even/odd halves as independent estimates (adaptive sampling), which resolves ``halves``
+        (engine.scene.description.resolve_halves)."""
+        requested = resolve_halves(settings or scene.settings, reads_halves)
         materials, simplified = rendered_materials(compiled, requested.simplify, scene.materials)
         polarisation, reason = resolve_transport(requested.polarisation, dict(zip(compiled.material_names, materials)),
                                                  compiled.used_material_names, sources=source_needs(scene),
@@ -176,8 +179,14 @@ class RenderPlan:
 
     @property
     def stratified(self) -> bool:
-        """The stratified sampler (the film then keeps even/odd half sums)."""
+        """A low-discrepancy sampler (its numbers depend on the pixel and sample)."""
         return self.settings.stratified
+
+    @property
+    def split_halves(self) -> bool:
+        """A low-discrepancy sampler with independently scrambled even and odd samples: the film then keeps
+        even/odd half sums (RenderSettings.split_halves)."""
+        return self.settings.split_halves
 
     def units(self, first_pass: int = 0) -> list[tuple[int, int, int, int]]:
         """The uniform render's work units (row0, row1, pass0, pass1) from sample pass ``first_pass`` on."""

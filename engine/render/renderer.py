@@ -155,10 +155,12 @@ class Renderer:
         #: kernels compiled (count, seconds) in warm_up since the last render reported them
         self._warm_compiles = (0, 0.0)
 
-    def plan(self, settings: RenderSettings | None = None, window=None, workers: int | None = None) -> RenderPlan:
+    def plan(self, settings: RenderSettings | None = None, window=None, workers: int | None = None,
+             reads_halves: bool = False) -> RenderPlan:
         """The RenderPlan of rendering this scene with ``settings`` (default: the scene's); threads not set
-        (``workers`` None and ``settings.threads`` 0): as many as ``driver.local_workers`` decides."""
-        plan = RenderPlan.resolve(self.scene, self.compiled, settings, window, workers)
+        (``workers`` None and ``settings.threads`` 0): as many as ``driver.local_workers`` decides;
+        ``reads_halves``: an adaptive render's (RenderPlan.resolve)."""
+        plan = RenderPlan.resolve(self.scene, self.compiled, settings, window, workers, reads_halves)
         if workers is None and plan.settings.threads <= 0:
             used = [plan.materials[i] for i in self.compiled.used_materials]
             n = local_workers(plan.workers, used)
@@ -202,7 +204,7 @@ class Renderer:
             values, stats = tracer.trace(pixel, np.zeros_like(pixel))
             # and the film's per-unit sums (their kernel loaded in a render stalled the other worker)
             SampleSums.of(pixel, values, stats.get("alpha"), stats.get("denoise"),
-                          np.zeros_like(pixel) if plan.stratified else None)
+                          np.zeros_like(pixel) if plan.split_halves else None)
         count, seconds = (a - b for a, b in zip(kernel_compiles(), before))
         self._warm_compiles = (self._warm_compiles[0] + count, self._warm_compiles[1] + seconds)
         return time.perf_counter() - t0
@@ -234,7 +236,8 @@ class Renderer:
         """
         request = RenderRequest.of(request)
         with render_heap():      # inside Blender: the allocator settings for this render only
-            plan = self.plan(request.settings, request.window)
+            # adaptive sampling reads the even/odd halves as independent estimates: "auto" halves resolve so
+            plan = self.plan(request.settings, request.window, reads_halves=request.adaptive is not None)
             with self._executor(request, plan) as executor:
                 if not executor.local:
                     plan = dataclasses.replace(plan, workers=executor.workers)
@@ -253,6 +256,8 @@ class Renderer:
     def _render(self, plan: RenderPlan, request: RenderRequest, executor) -> RenderResult:
         W, H = plan.width, plan.height
         film = Film(W, H)
+        # even and odd samples one sequence: no half sums, and the film says what its error estimate is then
+        film.one_sequence = plan.stratified and not plan.split_halves
         resume = request.resume
         if resume is not None:
             if (resume.width, resume.height) != (W, H):

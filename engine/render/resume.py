@@ -13,8 +13,10 @@ EXR written by the CLI carries the estimator's identity in its header (:func:`es
 ``polar.max_depth``, ``polar.rr_depth``, ``polar.seed``, ``polar.spectral``, ``polar.wavelength_nm``
 (mono only), ``polar.polarisation_requested`` and ``polar.polarisation`` (as resolved),
 ``polar.reduce_spectral``, ``polar.simplify``, ``polar.sampler`` (written only for the
-"stratified" sampler: a file without it was rendered with the "independent" one), and
-``polar.light_tree`` (written only when not "auto").
+"stratified" sampler: a file without it was rendered with the "independent" one), ``polar.halves`` (the
+resolved RenderSettings.halves, written only when "one_sequence": a file of a low-discrepancy sampler without it
+drew its even and odd samples from two independent sequences), and ``polar.light_tree`` (written only when not
+"auto").  A continuation with ``halves`` "auto" takes the file's, so a resume never mixes the two.
 
 What may differ on resume: the total sample count (raised, never below the samples done), threads,
 batch size, Dask scheduler, previews, exposure, and the adaptive sampling settings (threshold,
@@ -40,6 +42,7 @@ import numpy as np
 from ..errors import SceneError
 from ..materials.batching import object_fields
 from .film import film_from_stokes
+from ..scene.description import resolve_halves
 from ..scene.description import LIGHT_PATH_FIELDS
 
 #: Header keys that must match between a stored render and its continuation, with the option
@@ -57,6 +60,7 @@ MATCHED = {
     "polar.reduce_spectral": "--reduce-spectral",
     "polar.simplify": "--simplify",
     "polar.sampler": "--sampler",
+    "polar.halves": "--halves",
     "polar.light_tree": "--light-tree",
     **{f"polar.{f.name}": "--" + f.name.replace("_", "-") for f in LIGHT_PATH_FIELDS},
 }
@@ -127,6 +131,9 @@ def estimator_identity(scene_hash: str, settings, resolved: str, window=None, si
     if settings.stratified:
         # only then: the headers of independent renders stay as they were (and older files match)
         ident["polar.sampler"] = settings.sampler
+        if settings.halves != "independent":
+            # (resolved: "one_sequence"; "auto" here is a caller's bug, recorded as such so that it never matches)
+            ident["polar.halves"] = settings.halves
     if getattr(settings, "light_tree", "auto") != "auto":      # (only where set, as the light paths below)
         ident["polar.light_tree"] = settings.light_tree
     for f in LIGHT_PATH_FIELDS:         # only where set: the headers of other renders stay as they were
@@ -281,6 +288,15 @@ def resume_state(path: str, renderer, settings, scene_hash: str, spp=None, seed=
     st = dataclasses.replace(settings, seed=int(header["polar.seed"]),
                              sampler=stored_sampler if sampler is None else settings.sampler,
                              spp=int(header["polar.spp"]) if spp is None else settings.spp)
+    stored_halves = header.get("polar.halves", "independent")
+    if st.halves == "auto":             # continue as the file was drawn (adaptively only from independent halves)
+        if adaptive and stored_halves == "one_sequence":        # (a uniform render's file: no half-buffers either)
+            raise SceneError("--noise-threshold", f"{os.path.basename(path)!r} was rendered without adaptive "
+                                                  "sampling, its even and odd samples one sequence, so it has no "
+                                                  "half-buffers to continue adaptively (resume it without "
+                                                  "--noise-threshold)")
+        st = dataclasses.replace(st, halves=stored_halves)
+    st = resolve_halves(st, adaptive, "--halves")
     ident = estimator_identity(scene_hash, st, renderer.plan(st).settings.polarisation, size=(W, H))
     diff = differences(header, ident)
     if diff:
@@ -291,7 +307,7 @@ def resume_state(path: str, renderer, settings, scene_hash: str, spp=None, seed=
     from .adaptive import has_state, state_from_channels
     if has_state(channels):
         film, halves = state_from_channels(channels, counts, repr(path), means=stokes)
-        if st.stratified:
+        if st.split_halves:
             film.keep_half_sums(halves.sums.copy())     # even/odd luminance sums: the stratified standard error
     else:
         if adaptive:
@@ -300,7 +316,7 @@ def resume_state(path: str, renderer, settings, scene_hash: str, spp=None, seed=
                                                   "(resume it without --noise-threshold)")
         stderr = np.stack([channels[f"S{i}.Y.stderr"] for i in range(4)]) if "S0.Y.stderr" in channels else None
         even = None
-        if st.stratified and "S0.Y.even" in channels:
+        if st.split_halves and "S0.Y.even" in channels:
             # the i.i.d. error restores the sums of squares; the even means the half sums
             even = np.stack([channels[f"S{i}.Y.even"] for i in range(4)])
             stderr = np.stack([channels[f"S{i}.Y.stderr_iid"] for i in range(4)])

@@ -30,7 +30,15 @@ every role's numbers are coordinates of ONE point of a small Owen-scrambled Sobo
 and wavelengths 2-D; per vertex the light's 4-D set (point, choice, light number 3), the BSDF's 3-D one
 (direction, lobe), roulette's 1-D one) whose index is shuffled per (seed, pixel, parity, set): the light choice
 stratified jointly with the light point, the lobe with the direction (engine.kernels.sobol.owen_sobol_sets).
-Unlike Cycles the even and odd samples are two independently scrambled sequences (adaptive's half-buffers).
+With independent halves (below), unlike Cycles, the even and odd samples are two independently scrambled sequences
+(adaptive's half-buffers); with one sequence, as Cycles' own.
+
+**Halves** (``RenderSettings.halves``, resolved per render by engine.scene.description.resolve_halves): with
+"independent" every pattern above draws sample s at index s // 2 of the sequence of parity s & 1 (two independently
+scrambled sequences); with "one_sequence" at index s of one sequence — ``sequence_index`` gives the patterns 2·s,
+whose parity is 0 and index s: the even sequence's point s, so the same kernels draw it and a pixel's first 2^m
+samples of every pair (set) are one (0, m, 2)-net, and every number is still a function of (seed, pixel, sample,
+dimension) only.  The hashed dimensions (``PathSampler``) are keyed by the sample itself either way.
 """
 
 from __future__ import annotations
@@ -43,6 +51,17 @@ from ..kernels.hashing import mix64, path_keys_and_uniforms, scrambled_sobol_pai
 from ..kernels.sobol import SOBOL_V, owen_sobol_pairs, owen_sobol_sets
 
 _MASK64 = (1 << 64) - 1
+
+
+def sequence_index(sample: np.ndarray, halves: str) -> np.ndarray:
+    """The index the patterns' kernels draw sample ``sample`` (N,) at (module docstring, "Halves"): ``sample``
+    itself with "independent" halves (index sample // 2 of the sequence of parity sample & 1), 2·sample with
+    "one_sequence" (index sample of the one sequence)."""
+    if halves == "one_sequence":
+        return 2 * np.asarray(sample, np.int64)
+    if halves != "independent":
+        raise ValueError(f"halves must be resolved ('independent' or 'one_sequence'), got {halves!r}")
+    return sample
 
 
 def _seed_key(seed: int) -> np.ndarray:
@@ -121,20 +140,23 @@ def stratified_pair(seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.nda
     intervals of each shape; the pairs with it make a 12-D Sobol' point set (each dimension
     stratified too; what each pair stratifies: PAIR_JITTER … PAIR_WAVELENGTH)."""
     # the even and the odd samples are two independently scrambled sequences (index sample // 2):
-    # adaptive sampling's half-buffers A (even) and B (odd) must be independent estimates
+    # adaptive sampling's half-buffers A (even) and B (odd) must be independent estimates; one sequence
+    # ("one_sequence" halves) is its even sequence at 2·sample (sequence_index)
     return scrambled_sobol_pair(_seed_key(seed), pixel, sample, _PAIR_KEYS[pair], _SOBOL_V[2 * pair],
                                 _SOBOL_V[2 * pair + 1], u0, u1)
 
 
 def camera_numbers(seed: int, sampler: str, pixel: np.ndarray, sample: np.ndarray, lens_dimensions: int,
-                   extra: int = 0):
+                   extra: int = 0, halves: str = "independent"):
     """(PathSampler, u (2 + lens_dimensions + extra, N)): the camera's numbers of sample ``sample`` of pixel
     ``pixel`` with ``sampler`` (RenderSettings.sampler) — the pixel jitter, the thin lens's point
     (``lens_dimensions`` 0 or 2), then ``extra`` hashed dimensions (the wavelengths' number) — with the jitter and
     lens pairs stratified (``stratified_pair``; "padded": its pairs PADDED_JITTER, PADDED_LENS; "cycles": its sets
-    CYCLES_FILTER, CYCLES_LENS) for the stratifying samplers.  The one source of camera rays' numbers: the
-    integrator's paths and the data passes (engine.render.data_passes) see the same rays."""
+    CYCLES_FILTER, CYCLES_LENS) for the stratifying samplers, at ``sequence_index(sample, halves)`` (``halves``
+    resolved).  The one source of camera rays' numbers: the integrator's paths and the data passes
+    (engine.render.data_passes) see the same rays."""
     ps, u = PathSampler.start(seed, pixel, sample, 2 + lens_dimensions + extra)
+    sample = sequence_index(sample, halves)
     if sampler in PADDED_LAYOUT:
         pairs = pattern_pairs(sampler, seed, pixel, sample, [PADDED_JITTER, PADDED_LENS][:1 + lens_dimensions // 2])
         u[:2 + lens_dimensions] = pairs

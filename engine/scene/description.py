@@ -8,9 +8,12 @@ to linear sRGB (1, 1, 1)).  World space is right-handed; any axis may be up.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 
 import numpy as np
+
+from ..errors import SceneError
 
 
 @dataclass
@@ -433,14 +436,23 @@ class RenderSettings:
     #: format, the command line, the Python API and Blender (the camera's and the first vertex's numbers
     #: as "stratified" draws them, every deeper vertex's — light choice and point, lobe, direction,
     #: roulette — from per-pixel shuffled, Owen-scrambled Sobol' (0, 2)-sequence pairs,
-    #: engine.render.sampler.sobol_pairs: same expectation, less noise; the standard error then comes
-    #: from the even/odd halves), "stratified" (the camera's numbers and the first vertex's light and BSDF
+    #: engine.render.sampler.sobol_pairs: same expectation, less noise; with independent ``halves`` the standard
+    #: error comes from the even/odd halves), "stratified" (the camera's numbers and the first vertex's light and BSDF
     #: numbers one per-pixel XOR-scrambled Sobol' point set, engine.render.sampler.stratified_pair, the
     #: deeper ones hashed; the default before "sobol"), "padded" (every number, the camera's and the first
     #: vertex's too, from its own shuffled Sobol' pair, engine.render.sampler.padded_pairs), "cycles" (Cycles'
     #: pattern: each role's numbers one point of a shuffled Owen-scrambled Sobol' set, sampler.cycles_pairs) or
     #: "independent" (every number a hash of (seed, pixel, sample, dimension)).
     sampler: str = "sobol"
+    #: How a pixel's even and odd samples draw the pattern's numbers (the stratifying samplers; "independent"
+    #: has nothing to split): "independent" (two independently scrambled sequences, index sample // 2: their
+    #: means are independent estimates, as adaptive sampling's half-buffer error estimate needs),
+    #: "one_sequence" (the sample index used whole: one scrambled sequence per pixel and pair, so a pixel's
+    #: first 2^m samples are one (0, m, 2)-net; the halves are then correlated and no half-buffer error
+    #: estimate is made: the film's standard error is the i.i.d. one, marked as such) or "auto" (one sequence unless
+    #: the render reads the halves: adaptive sampling, a time budget, ``estimate``; resolve_halves below).  Same
+    #: expectation either way.
+    halves: str = "auto"
     #: How next-event estimation chooses among many lights (Cycles' Light Tree, scene.cycles.use_light_tree):
     #: "on" — the light tree over lamps and emissive triangles (engine.render.lights.tree: Conty & Kulla 2018 as
     #: Cycles builds it: importance by energy, distance, bounds and orientation per shading point); "off" — the
@@ -488,13 +500,40 @@ class RenderSettings:
 
     @property
     def stratified(self) -> bool:
-        """True with the "stratified" and "sobol" samplers (their even and odd samples are independent
-        sequences: the film then keeps even/odd half sums)."""
+        """True with the low-discrepancy samplers ("stratified", "sobol", "padded", "cycles"): a pixel's samples
+        are not independent."""
         return self.sampler != "independent"
+
+    @property
+    def split_halves(self) -> bool:
+        """True where the film keeps even/odd half sums: a low-discrepancy sampler whose even and odd samples are
+        two independently scrambled sequences (``halves`` "independent", as resolved:
+        ``resolve_halves``; "auto" unresolved counts as not split)."""
+        return self.stratified and self.halves == "independent"
 
 
 #: RenderSettings.sampler's values
 SAMPLERS = ("independent", "stratified", "sobol", "padded", "cycles")
+def resolve_halves(settings, reads_halves: bool, field: str = "render.halves"):
+    """``settings`` (RenderSettings) with ``halves`` resolved for a render that reads the even/odd halves as two
+    independent estimates (``reads_halves``: adaptive sampling, a time budget, a half-split error estimate) or
+    not: "auto" → "one_sequence" unless it does; the "independent" sampler → "independent" (it has no sequence
+    to split: its headers and numbers stay as they were).  "one_sequence" where the halves are read is a
+    SceneError naming ``field``.  Idempotent."""
+    mode = settings.halves
+    if not settings.stratified:
+        mode = "independent"
+    elif mode == "auto":
+        mode = "independent" if reads_halves else "one_sequence"
+    elif mode == "one_sequence" and reads_halves:
+        raise SceneError(field, "must be 'independent' or 'auto' with adaptive sampling (a noise threshold or a "
+                                "time limit), whose error estimate needs the even and odd samples as two "
+                                "independent sequences; got 'one_sequence'")
+    return settings if mode == settings.halves else dataclasses.replace(settings, halves=mode)
+
+
+#: RenderSettings.halves' values
+HALVES_MODES = ("auto", "independent", "one_sequence")
 #: RenderSettings.light_tree's values
 LIGHT_TREE_MODES = ("auto", "on", "off")
 

@@ -29,9 +29,9 @@ from ..materials.normal_map import ShadingNormal
 from ..polarisation.sources import DirectionalPolarisation, parse_polarisation
 from ..textures import TexturedNumber, parse_texture_input, textured_emission
 from ..textures.image import read_image
-from .description import (EMISSION_SAMPLING, ENVMAP_GRIDS, LIGHT_PATH_FIELDS, LIGHT_TREE_MODES, SAMPLERS,
-                          SPECTRAL_MODES, Camera, DirectionalLight, EnvironmentLight, Interior, Mesh, PointLight,
-                          RenderSettings, Scene, SpotLight)
+from .description import (EMISSION_SAMPLING, ENVMAP_GRIDS, HALVES_MODES, LIGHT_PATH_FIELDS, LIGHT_TREE_MODES,
+                          SAMPLERS, SPECTRAL_MODES, Camera, DirectionalLight, EnvironmentLight, Interior, Mesh,
+                          PointLight, RenderSettings, Scene, SpotLight)
 from ..errors import SceneError
 from .meshio import read_mesh
 from .shapes import icosphere, quad, transform_matrix, transform_mesh
@@ -341,7 +341,7 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
         raise SceneError(field, "must be an object")
     _check_keys(d, field, {"spp", "max_depth", "rr_depth", "seed", "spectral", "wavelength_nm",
                            "polarisation", "batch_rays", "threads", "reduce_spectral", "simplify",
-                           "sampler", "light_tree", *(f.name for f in LIGHT_PATH_FIELDS)})
+                           "sampler", "halves", "light_tree", *(f.name for f in LIGHT_PATH_FIELDS)})
     s = RenderSettings()                 # the defaults
     return RenderSettings(
         **light_path_settings(d, field),
@@ -359,6 +359,7 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
                                ("auto", "exact", "off")),
         simplify=choice(d.get("simplify", s.simplify), f"{field}.simplify", ("auto", "off")),
         sampler=choice(d.get("sampler", s.sampler), f"{field}.sampler", SAMPLERS),
+        halves=choice(d.get("halves", s.halves), f"{field}.halves", HALVES_MODES),
         light_tree=choice(d.get("light_tree", s.light_tree), f"{field}.light_tree", LIGHT_TREE_MODES),
     )
 

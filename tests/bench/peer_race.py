@@ -118,8 +118,9 @@ def our_side(scene_name, spp, res, seeds, threads, sampler=None):
     scene.camera.width = scene.camera.height = res
     renderer = Renderer(scene)
     base = dataclasses.replace(scene.settings, spp=spp, threads=threads)
-    if sampler:
-        base = dataclasses.replace(base, sampler=sampler)
+    if sampler:                 # "sobol" or "sobol/one_sequence": a sampler and its RenderSettings.halves
+        name, _, halves = sampler.partition("/")
+        base = dataclasses.replace(base, sampler=name, **({"halves": halves} if halves else {}))
     renderer.render(dataclasses.replace(base, seed=seeds))             # warm-up: kernels, memory
     imgs, secs = [], []
     for seed in range(seeds):
@@ -128,7 +129,7 @@ def our_side(scene_name, spp, res, seeds, threads, sampler=None):
         secs.append(time.perf_counter() - t)
         imgs.append(stokes[:2] @ Y)
     imgs = np.array(imgs)
-    return imgs[:, 0], imgs[:, 1], float(np.median(secs)), base.sampler
+    return imgs[:, 0], imgs[:, 1], float(np.median(secs)), f"{base.sampler}/{base.halves}"
 
 
 def row(scene, e_o, t_o, ours_sampler, sides, spp, first=True) -> int:
@@ -164,7 +165,8 @@ def main(argv=None):
     ap.add_argument("--threads", type=int, default=2)
     ap.add_argument("--samplers", default=",".join(MITSUBA_SAMPLERS), help="Mitsuba's samplers raced")
     ap.add_argument("--ours", default="", help="our samplers, a comma list, each raced against the same Mitsuba "
-                    "renders (default: the scene's, i.e. the default sampler)")
+                    "renders (default: the scene's, i.e. the default sampler); 'sobol/independent': with those "
+                    "RenderSettings.halves")
     ap.add_argument("--mitsuba-python", default=os.environ.get("MITSUBA_PYTHON", "/work/peerenv/bin/python"))
     a = ap.parse_args(argv)
     if a.seeds < 3:

@@ -3,6 +3,10 @@
     python tests/bench/sampler_race.py [--scenes a,b] [--res 128] [--spp 32,128] [--seeds 4]
                                        [--samplers sobol,stratified,independent] [--threads 1]
 
+A sampler spec "NAME/HALVES" renders with RenderSettings.halves HALVES (``--samplers
+sobol/one_sequence,sobol/independent``: one sequence over a pixel's even and odd samples against two independent
+ones); without it the scene's halves (default "auto": one sequence in these uniform renders).
+
 For each peer scene (``shared/peers/scenes``, at --res × --res) and each sample count of ``--spp``,
 every sampler renders the scene ``--seeds`` times (seeds 0, 1, …).  All our samplers are unbiased, so
 a render's mean squared error is its variance: per pixel the variance over the seeds (ddof 1), averaged
@@ -292,6 +296,13 @@ def cycles_joint_pairs(joint: int, shift: bool = False):
     return draw
 
 
+def halves_of(spec: str) -> tuple[str, str | None]:
+    """("sobol", "one_sequence") of "sobol/one_sequence": a sampler spec and its RenderSettings.halves (None: the
+    settings' own, "auto" by default)."""
+    name, _, halves = spec.partition("/")
+    return name, halves or None
+
+
 def pattern(spec: str, spp: int):
     """A sampler spec → (RenderSettings.sampler, the "padded" sampler's pairs function or None: the engine's).
     "padded:KNOB:…" races the pattern variants of ``variant_pairs`` (numbers of every pair): ``xor``, ``exact``,
@@ -302,7 +313,7 @@ def pattern(spec: str, spp: int):
     with ``whole`` one sequence over even and odd samples (Cycles' own; not allowed in the engine).  "cycles:jointK"
     (``cycles_joint_pairs``) races the engine's "cycles" with the first vertex's light point (K 4) and direction
     (K 6) in the jitter's set (K 1: direction and jitter swapped), ``:shift``: the jitter's set shifted."""
-    name, *knobs = spec.split(":")
+    name, *knobs = halves_of(spec)[0].split(":")
     if not knobs:
         return name, None
     if name == "cycles":                # the engine's "cycles" with its first vertex jointly stratified (cycles:joint4)
@@ -356,14 +367,18 @@ SAMPLER_MODULE = "engine.render.sampler"
 _ENGINE_PAIRS = {}
 
 
-def render_one(renderer, scene, sampler, spp, seed, threads, settings=None):
-    """(S0 image, S1 image) (H, W) of one render and its CPU seconds (``settings``: instead of the scene's)."""
+def render_one(renderer, scene, spec, spp, seed, threads, settings=None):
+    """(S0 image, S1 image) (H, W) of one render of sampler ``spec`` (``pattern``; "…/one_sequence" or
+    "…/independent": with those halves) and its CPU seconds (``settings``: instead of the scene's)."""
     module = sys.modules[SAMPLER_MODULE]
     engine_pairs = _ENGINE_PAIRS.setdefault(SAMPLER_MODULE, (module.padded_pairs, module.cycles_pairs))
-    sampler, variant = pattern(sampler, spp)
+    sampler, variant = pattern(spec, spp)
     module.padded_pairs = variant if variant and sampler == "padded" else engine_pairs[0]
     module.cycles_pairs = variant if variant and sampler == "cycles" else engine_pairs[1]
     st = dataclasses.replace(settings or scene.settings, spp=spp, seed=seed, sampler=sampler, threads=threads)
+    halves = halves_of(spec)[1]
+    if halves:
+        st = dataclasses.replace(st, halves=halves)
     t = time.process_time()
     result = renderer.render(st)
     cpu = time.process_time() - t

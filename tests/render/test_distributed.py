@@ -34,14 +34,19 @@ def scene(name="fresnel_sphere", res=32, spp=6):
     return s
 
 
-@pytest.mark.parametrize("name", ["fresnel_sphere", "cornell_lambert"])
-def test_merged_image_equals_the_single_process_render(cluster, name):
+@pytest.mark.parametrize("name, halves", [("fresnel_sphere", "auto"), ("cornell_lambert", "auto"),
+                                          ("cornell_lambert", "independent")])
+def test_merged_image_equals_the_single_process_render(cluster, name, halves):
     sc = scene(name)
+    sc.settings = dataclasses.replace(sc.settings, halves=halves)       # "auto": one sequence (a uniform render)
     local = Renderer(sc).render()
     remote = Renderer(sc).render(RenderRequest(scheduler=cluster))
     assert remote.stats["workers"] == 3
+    assert remote.settings.halves == local.settings.halves == ("independent" if halves == "independent"
+                                                                else "one_sequence")
     np.testing.assert_array_equal(remote.stokes(), local.stokes())
     np.testing.assert_array_equal(remote.film.count, local.film.count)
+    assert (remote.film.half_y is None) == (local.film.half_y is None) == (halves == "auto")
 
 
 def test_alpha_of_a_transparent_film_is_merged(cluster):

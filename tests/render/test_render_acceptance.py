@@ -43,7 +43,8 @@ def test_conv_s3_check_sign_and_frames(spectral):
 @pytest.mark.parametrize("spectral", ["mono", "spectral"])
 def test_plane_brewster_matches_the_analytic_image(spectral):
     analytic = np.load(shared_path("peers", "analytic", "plane_brewster_analytic_256.npy")).astype(np.float64)
-    result = Renderer(peer_scene("plane_brewster", 8, spectral=spectral)).render()
+    # independent halves: the film's error is then the half-split estimate the z-scores test (one sequence: i.i.d.)
+    result = Renderer(peer_scene("plane_brewster", 8, spectral=spectral, halves="independent")).render()
     Y = result.stokes_luminance()
     se = result.film.stderr_luminance()
     white = 1.0 if spectral == "mono" else float(np.dot([0.2126, 0.7152, 0.0722], [1.00016, 0.99998, 0.99976]))
@@ -101,7 +102,7 @@ def test_render_is_deterministic_and_independent_of_batching():
 def test_render_settings_are_frozen_and_a_render_leaves_the_scenes_settings_unchanged():
     """RenderSettings cannot be changed in place (changed settings are a new object made with
     dataclasses.replace); a render resolves its own copy (RenderPlan.settings: "auto" transport
-    resolved) and the scene keeps the very object it had, with its values."""
+    resolved, and "auto" halves) and the scene keeps the very object it had, with its values."""
     scene = peer_scene("plane_brewster", 1, res=8, polarisation="auto")
     with pytest.raises(dataclasses.FrozenInstanceError):
         scene.settings.spp = 2
@@ -111,7 +112,8 @@ def test_render_settings_are_frozen_and_a_render_leaves_the_scenes_settings_unch
     result = Renderer(scene).render()
     assert scene.settings is before and dataclasses.asdict(scene.settings) == values
     assert result.settings is not before and result.settings.polarisation in ("full", "linear", "off")
-    assert dataclasses.replace(result.settings, polarisation="auto") == before
+    assert result.settings.halves == "one_sequence"
+    assert dataclasses.replace(result.settings, polarisation="auto", halves="auto") == before
 
 
 def test_polarisation_off_gives_the_same_s0_where_paths_bounce_once():
