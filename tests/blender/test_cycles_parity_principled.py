@@ -133,15 +133,15 @@ def sphere_scene(socket, values, others, lighting):
     return scene
 
 
-def compare_with_cycles(scene, name, lighting, spectral="RGB"):
-    """Render ``scene`` with Cycles and Polar at SPP × SEEDS and assert the asset rule with no warnings."""
+def compare_with_cycles(scene, name, lighting, spectral="RGB", seeds=SEEDS):
+    """Render ``scene`` with Cycles and Polar at SPP × ``seeds`` and assert the asset rule with no warnings."""
     import tempfile
-    report = ap.CaseReport(name, lighting, SPP, SEEDS, SIZE, SIZE)
+    report = ap.CaseReport(name, lighting, SPP, seeds, SIZE, SIZE)
     hit = ap.coverage(scene, SIZE, SIZE)
     with tempfile.TemporaryDirectory() as tmp:
-        cyc = ap.render_cycles(scene, SPP, SEEDS, 8, tmp)
+        cyc = ap.render_cycles(scene, SPP, seeds, 8, tmp)
     renderer, settings, report.warnings = ap.export_polar(scene, SPP, 8, spectral=spectral)
-    stokes = ap.render_polar(renderer, settings, SEEDS)
+    stokes = ap.render_polar(renderer, settings, seeds)
     ap.compare(cyc, stokes[:, 0], hit, report)
     print(report.line())
     assert not report.warnings, report.warnings
@@ -508,7 +508,9 @@ def test_roughness_per_point_on_a_glass_matches_cycles(addon, case):
                          lighting)
     if not world_light_samples:
         scene.world.cycles.sampling_method = "NONE"       # Cycles: BSDF sampling only (Polar ignores the setting)
-    compare_with_cycles(scene, "Principled Roughness on a glass", lighting)
+    # 8 seeds: with 4, σ from 3 degrees of freedom let one block of 12 fail by chance (seen with one sequence over
+    # the even and odd samples: block 1.074 against 0.062 at seeds 0-3, all 12 pass at 8 and 16 seeds, Y 0.991-0.998)
+    compare_with_cycles(scene, "Principled Roughness on a glass", lighting, seeds=8)
 
 
 def sphere_luminance(images, hit):
