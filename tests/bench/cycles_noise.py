@@ -1,7 +1,7 @@
 """Polar against Cycles on the Cycles parity scenes: time and noise at equal samples.
 
     python tests/bench/cycles_noise.py [--scenes all_lights,point_radius] [--res 160x120] [--spp 16]
-                                       [--sampler independent|stratified|independent,stratified] [--json]
+                                       [--sampler PATTERN[,PATTERN…]] [--json]
 
 Builds each scene of tests/blender/test_cycles_parity_lights.py in bpy (diffuse floor and box, one kind of light
 each; ``all_lights`` has 8 point/spot/area/sun lights of 1–1000 W and an emitter; plus
@@ -32,9 +32,9 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 REPO = os.path.dirname(os.path.dirname(HERE))
 sys.path.insert(0, REPO)
 
+from engine.scene.description import SAMPLERS  # noqa: E402  (our sampling patterns: the engine's one list)
+
 REC709 = np.array([0.2126, 0.7152, 0.0722])
-#: our sampling patterns (engine.scene.description.SAMPLERS)
-SAMPLERS = ("independent", "stratified", "sobol")
 QUICK_SCENES = ["area_square", "point_radius", "all_lights", "eight_points_world"]
 
 
