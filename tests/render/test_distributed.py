@@ -114,13 +114,9 @@ def _kill_workers(client):
         os.kill(pid, signal.SIGKILL)
 
 
-def test_a_lost_scene_is_sent_again_and_the_image_is_unchanged(fragile_cluster):
-    """The one worker holds the only copy of the scene (as Dask's memory manager may leave it on a big
-    cluster): killing it loses the scene; the units are submitted again with the scene sent again to the
-    restarted worker, and the image is the local one.  Before the retry the render ended with an error."""
-    client, _ = fragile_cluster
-    sc = scene(res=16, spp=40)
-    sc.settings = dataclasses.replace(sc.settings, batch_rays=1024)   # 4 passes per unit: 10 units
+def _render_killing_every_worker(client, sc):
+    """(result, killed): ``sc`` rendered on ``client``, every worker killed once the first samples are in
+    (``killed["samples"]``: how many)."""
     killed = {}
 
     def kill_all(fraction, stats):
@@ -128,7 +124,17 @@ def test_a_lost_scene_is_sent_again_and_the_image_is_unchanged(fragile_cluster):
             killed["samples"] = stats["samples"]
             _kill_workers(client)
 
-    result = Renderer(sc).render(RenderRequest(scheduler=client, progress=kill_all))
+    return Renderer(sc).render(RenderRequest(scheduler=client, progress=kill_all)), killed
+
+
+def test_a_lost_scene_is_sent_again_and_the_image_is_unchanged(fragile_cluster):
+    """The one worker holds the only copy of the scene (as Dask's memory manager may leave it on a big
+    cluster): killing it loses the scene; the units are submitted again with the scene sent again to the
+    restarted worker, and the image is the local one.  Before the retry the render ended with an error."""
+    client, _ = fragile_cluster
+    sc = scene(res=16, spp=40)
+    sc.settings = dataclasses.replace(sc.settings, batch_rays=1024)   # 4 passes per unit: 10 units
+    result, killed = _render_killing_every_worker(client, sc)
     assert killed and killed["samples"] < 16 * 16 * 40
     assert not result.cancelled and "error" not in result.stats
     np.testing.assert_array_equal(result.stokes(), Renderer(sc).render().stokes())
@@ -140,14 +146,7 @@ def test_losing_every_worker_returns_the_finished_units_and_an_error(fragile_clu
     client, _ = fragile_cluster
     sc = scene(res=16, spp=800)
     sc.settings = dataclasses.replace(sc.settings, batch_rays=1024)   # 4 passes per unit: 200 units
-    killed = {}
-
-    def kill_all(fraction, stats):
-        if stats["samples"] and not killed:
-            killed["samples"] = stats["samples"]
-            _kill_workers(client)
-
-    result = Renderer(sc).render(RenderRequest(scheduler=client, progress=kill_all))
+    result, killed = _render_killing_every_worker(client, sc)
     assert killed and result.cancelled and "Dask cluster failed" in result.stats["error"]
     count = result.film.count
     assert 0 < count.sum() < 16 * 16 * 800 and count.sum() == result.stats["samples"]
