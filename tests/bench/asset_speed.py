@@ -1,13 +1,15 @@
 """Polar against Cycles on the real-asset suite: noise × time of S0 at equal samples, per asset.
 
     python tests/bench/asset_speed.py [--assets BoomBox,UnlitTest] [--lighting lamps,hdri] [--spp 16]
-                                      [--seeds 4] [--res 96] [--json]
+                                      [--seeds 4] [--res 96] [--json] [--light-tree off|on]
                                       [--figure docs/images/assets.png [--figure-lighting hdri]]
 
 Runs each case of tests/blender/test_real_assets.py (tests/support/asset_parity.run_case: the glTF
 imported by Blender, framed, lit, rendered by Cycles with the parity settings and by Polar through the
 extension's exporter, both at ``--spp`` samples with ``--seeds`` seeds) and prints one line per case,
-the two renderers side by side.  The renderers take turns seed by seed (asset_parity.render_alternated:
+the two renderers side by side.  ``--light-tree on`` renders both with Cycles' Light Tree on (Cycles' default, and
+what issue 36's race against Cycles asks for; Polar reads the switch as F12 does: its "auto"); the default ``off`` is
+the parity settings (issue 33's benchmark).  The renderers take turns seed by seed (asset_parity.render_alternated:
 Cycles then Polar for seed 0, Polar then Cycles for seed 1, …), so the two renders of a seed share the load of
 this shared 2-core VM: one side's seconds move ±15–30 % between identical runs, the ratio of a seed's pair much
 less.  ``--extra N`` adds N timing-only pairs (seeds re-rendered, images not kept) when few seeds give few pairs;
@@ -118,6 +120,9 @@ def main(argv=None):
     p.add_argument("--extra", type=int, default=0, help="timing-only render pairs beyond the seeds' (alternated)")
     p.add_argument("--sequential", action="store_true",
                    help="time all Cycles renders, then all Polar ones (the timing before 2026-12-07; no spread)")
+    p.add_argument("--light-tree", default="off", choices=("off", "on"),
+                   help="Cycles' Light Tree (Polar reads the switch as F12 does): off = the parity settings "
+                        "(issue 33's benchmark), on = Cycles' default (issue 36's race against Cycles)")
     p.add_argument("--selections", default="", help="Polar's light choices to race, e.g. power,cycles "
                                                      "(Scene.light_selection; default: the exporter's)")
     a = p.parse_args(argv)
@@ -128,7 +133,8 @@ def main(argv=None):
     names = [n for n in a.assets.split(",") if n]
     lightings = [x for x in a.lighting.split(",") if x]
     panels = tempfile.mkdtemp(prefix="asset_panels_") if a.figure else None
-    print(f"load average {' / '.join(f'{v:.2f}' for v in os.getloadavg())} ({os.cpu_count()} cores)", flush=True)
+    print(f"load average {' / '.join(f'{v:.2f}' for v in os.getloadavg())} ({os.cpu_count()} cores); "
+          f"Cycles' Light Tree {a.light_tree}", flush=True)
     print(f"{'asset':20s} {'light':5s} | {'Cycles s':>8s} {'σ²':>9s} {'sync s':>7s} | {'Polar s':>8s} {'σ²':>9s} "
           f"{'setup s':>7s} | {'var×time P÷C':>12s} {'IQR':>11s} | parity")
     for name in names:
@@ -145,7 +151,7 @@ def main(argv=None):
                                                            for s in selections[1:]), flush=True)
                 continue
             r = ap.run_case(name, lighting, spp=a.spp, seeds=a.seeds, width=res[0], height=res[1], out_dir=out,
-                            alternate=not a.sequential, extra=a.extra)
+                            alternate=not a.sequential, extra=a.extra, light_tree=a.light_tree == "on")
             if r.error:
                 print(f"{name:20s} {lighting:5s} | Polar refused the scene: {r.error}")
                 continue

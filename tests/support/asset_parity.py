@@ -276,8 +276,10 @@ def coverage(scene, width, height) -> np.ndarray:
 
 # --------------------------------------------------------------------------- renders
 
-def cycles_settings(scene, spp, bounces):
-    """Cycles as the parity tests run it (its Light Paths are read by Polar too: export_polar sets them again)."""
+def cycles_settings(scene, spp, bounces, light_tree=False):
+    """Cycles as the parity tests run it (its Light Paths are read by Polar too: export_polar sets them again);
+    ``light_tree``: Cycles' Light Tree on (its default; Polar reads the switch as Blender's F12 does) instead of the
+    parity settings' off (tests/bench/asset_speed.py --light-tree on: issue 36's race against Cycles)."""
     from tests.blender_support import light_paths_off, load_addon
     scene.render.engine = "CYCLES"
     c = scene.cycles
@@ -287,7 +289,7 @@ def cycles_settings(scene, spp, bounces):
     c.use_denoising = False
     c.pixel_filter_type = "BOX"
     c.filter_width = 1.0
-    c.use_light_tree = False
+    c.use_light_tree = bool(light_tree)
     c.light_sampling_threshold = 0.0
     light_paths_off(scene, bounces)     # every kind's bounces, no clamping, no Filter Glossy, caustics on (both read)
     c.volume_bounces = 0
@@ -298,10 +300,10 @@ def cycles_settings(scene, spp, bounces):
     scene.render.image_settings.color_depth = "32"
 
 
-def render_cycles(scene, spp, seeds, bounces, tmp, times=None):
+def render_cycles(scene, spp, seeds, bounces, tmp, times=None, light_tree=False):
     """(seeds, H, W, 3) linear RGB of Cycles' Combined pass, one render per seed; ``times``: a list to which each
     render call's seconds are appended (the first one syncs the scene, the later ones reuse it)."""
-    cycles_settings(scene, spp, bounces)
+    cycles_settings(scene, spp, bounces, light_tree)
     return np.array([cycles_once(scene, seed, tmp, times) for seed in range(seeds)])
 
 
@@ -428,14 +430,16 @@ def compare(cycles_rgb, polar_s0_rgb, hit, report: CaseReport):
 
 
 def run_case(asset: Asset | str, lighting: str, spp=16, seeds=4, width=None, height=None, bounces=8,
-             polarisation="AUTO", out_dir=None, edit=None, spectral="RGB", alternate=False, extra=0) -> CaseReport:
+             polarisation="AUTO", out_dir=None, edit=None, spectral="RGB", alternate=False, extra=0,
+             light_tree=False) -> CaseReport:
     """Build, render both ways, compare; with ``out_dir``, also write the images (see write_images).
 
     ``edit(scene)``, if given, changes the built scene before both renders (e.g. unlinks one material
     input): how a failing case is narrowed down to the material feature that causes it.  ``alternate``: the
     scene is exported first and the two renderers take turns seed by seed (render_alternated, ``extra`` timing-only
     steps): the same images, seconds measured side by side (tests/bench/asset_speed.py); else all Cycles renders,
-    then the export and all Polar renders."""
+    then the export and all Polar renders.  ``light_tree``: both renderers with Cycles' Light Tree on
+    (cycles_settings)."""
     if isinstance(asset, str):
         asset = CATALOGUE[asset]
     width, height = width or asset.size[0], height or asset.size[1]
@@ -448,10 +452,10 @@ def run_case(asset: Asset | str, lighting: str, spp=16, seeds=4, width=None, hei
     with tempfile.TemporaryDirectory() as tmp:
         if not alternate:
             t = time.perf_counter()
-            cyc = render_cycles(scene, spp, seeds, bounces, tmp, times_c)
+            cyc = render_cycles(scene, spp, seeds, bounces, tmp, times_c, light_tree)
             report.seconds["cycles"] = time.perf_counter() - t
         else:
-            cycles_settings(scene, spp, bounces)
+            cycles_settings(scene, spp, bounces, light_tree)
         try:
             t = time.perf_counter()
             renderer, settings, report.warnings = export_polar(scene, spp, bounces, polarisation, spectral)
