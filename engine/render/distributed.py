@@ -18,19 +18,43 @@ import hashlib
 import os
 import pickle
 import time
+from concurrent.futures import CancelledError
 
 from .driver import STOP_POLL_SECONDS
 
-# How often a unit whose task failed (a lost worker, the lost scene) is submitted again before the render
+# How often a unit whose task was lost (its worker died, the scene was lost) is submitted again before the render
 # gives up with the units finished so far (POLAR_DASK_RETRIES overrides it).
 UNIT_RETRIES = 3
+
+
+def unit_retries() -> int:
+    """``POLAR_DASK_RETRIES`` (a whole number ≥ 0), else ``UNIT_RETRIES``; RuntimeError naming it if malformed."""
+    text = os.environ.get("POLAR_DASK_RETRIES", "").strip()
+    if not text:
+        return UNIT_RETRIES
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise RuntimeError(f"POLAR_DASK_RETRIES must be a whole number ≥ 0 (units submitted again after a lost "
+                           f"worker or scene), got {text!r}")
+    return value
+
+
+def retryable(failure: BaseException) -> bool:
+    """True for a task that was lost rather than failed: Dask cancels the tasks whose data (the scattered scene)
+    or worker it lost, and a re-run unit returns the same numbers.  Not for an exception raised by the unit itself
+    (it would raise again) nor for KilledWorker (the unit killed Dask's allowed number of workers already: retrying
+    it would take down more of a farm)."""
+    return isinstance(failure, CancelledError)
 
 
 def _ordered_on_cluster(client, submit, units, add_result, stop_requested,
                         retries: int | None = None) -> tuple[bool, str | None]:
     """Submit ``units`` (``submit(unit, again)`` → future; ``again``: the unit failed before), pass results to
-    ``add_result`` in unit order.  A failed unit is submitted again up to ``retries`` times (default
-    ``UNIT_RETRIES``): a re-run unit returns the same numbers, so the image does not change.
+    ``add_result`` in unit order.  A lost unit (``retryable``) is submitted again up to ``retries`` times (default
+    ``unit_retries()``): a re-run unit returns the same numbers, so the image does not change.
 
     While nothing finishes, the stop request is polled (a cluster may stall for long; Ctrl-C /
     SIGTERM must still end the render with its finished units).  Returns (stopped, error): stopped by
@@ -38,7 +62,7 @@ def _ordered_on_cluster(client, submit, units, add_result, stop_requested,
     """
     from distributed import as_completed
     if retries is None:
-        retries = int(os.environ.get("POLAR_DASK_RETRIES", UNIT_RETRIES))
+        retries = unit_retries()
     futures = [submit(unit, False) for unit in units]
     index = {f.key: i for i, f in enumerate(futures)}
     tries = [0] * len(units)
@@ -57,8 +81,8 @@ def _ordered_on_cluster(client, submit, units, add_result, stop_requested,
             try:
                 results[i] = future.result()
             except Exception as failure:        # noqa: BLE001 — lost workers, lost scene data, a failed unit
-                again = _resubmit(submit, units, futures, i) if tries[i] < retries and not stop_requested() \
-                    else failure
+                again = _resubmit(submit, units, futures, i) \
+                    if retryable(failure) and tries[i] < retries and not stop_requested() else failure
                 if not isinstance(again, BaseException):
                     tries[i] += 1
                     index[again.key] = i
@@ -124,7 +148,14 @@ class DaskCluster:
         except ImportError:
             raise RuntimeError("distributed rendering needs Dask: pip install \"dask[distributed]\"") from None
         # How long to try to reach the scheduler, and for a worker to receive the scene (seconds).
-        timeout = float(os.environ.get("POLAR_DASK_TIMEOUT", "20"))
+        text = os.environ.get("POLAR_DASK_TIMEOUT", "").strip() or "20"
+        try:
+            timeout = float(text)
+        except ValueError:
+            timeout = float("nan")
+        if not timeout > 0 or timeout == float("inf"):
+            raise RuntimeError(f"POLAR_DASK_TIMEOUT must be a number of seconds > 0, got {text!r}")
+        self.retries = unit_retries()         # checked before the cluster is reached
         self.own_client = isinstance(scheduler, str)
         if self.own_client:
             try:
@@ -164,7 +195,7 @@ class DaskCluster:
         """Trace ``units`` on the workers (``tracer`` is not used: each worker builds its own), add the
         results in unit order; True if stopped (a stop request, or a failed cluster: ``error``)."""
         stopped, error = _ordered_on_cluster(self.client, lambda unit, again: self._submit(job, unit, again),
-                                             units, add_result, stop_requested)
+                                             units, add_result, stop_requested, self.retries)
         self.error = self.error or error
         return stopped
 

@@ -94,6 +94,40 @@ def test_cli_scheduler_option_gives_the_local_image(cluster, tmp_path):
                           "--scheduler", "tcp://127.0.0.1:9"], cwd=REPO, capture_output=True, text=True, timeout=120,
                          env={**os.environ, "POLAR_DASK_TIMEOUT": "2"})
     assert bad.returncode == 2 and "--scheduler" in bad.stderr and "Traceback" not in bad.stderr
+    # malformed settings of the cluster: one line naming the variable, before any work is sent
+    for name, value in (("POLAR_DASK_RETRIES", "3.0"), ("POLAR_DASK_TIMEOUT", "soon")):
+        bad = subprocess.run([sys.executable, "-m", "engine", "render", path, "-o", str(tmp_path / "y.exr"),
+                              "--scheduler", cluster.scheduler.address], cwd=REPO, capture_output=True, text=True,
+                             timeout=120, env={**os.environ, name: value})
+        errors = [line for line in bad.stderr.splitlines() if line.startswith("error:")]
+        assert bad.returncode == 2 and len(errors) == 1 and name in errors[0], bad.stderr
+        assert "Traceback" not in bad.stderr and not os.path.exists(tmp_path / "y.exr")
+
+
+def _raise_on_unit_one(unit):
+    if unit == 1:
+        raise ValueError("unit 1 is broken")
+    return unit
+
+
+def test_a_unit_that_raises_is_not_submitted_again_and_a_lost_one_is(cluster):
+    from distributed import KilledWorker
+    from distributed.client import FutureCancelledError
+    from engine.render.distributed import _ordered_on_cluster, retryable
+    submitted, added = [], []
+
+    def submit(unit, again):
+        submitted.append(unit)
+        return cluster.submit(_raise_on_unit_one, unit, pure=False)
+
+    stopped, error = _ordered_on_cluster(cluster, submit, [0, 1, 2], added.append, lambda: False, retries=3)
+    # the unit's own exception would repeat: the render stops with it at once (keeping unit 0 if it was back first)
+    assert stopped and "ValueError: unit 1 is broken" in error
+    assert submitted.count(1) == 1 and added in ([], [0])
+    # lost tasks (Dask cancels those whose worker or scattered data it lost) are retried; KilledWorker (the unit
+    # already killed Dask's allowed number of workers) and a unit's own exception are not
+    assert retryable(FutureCancelledError("k", "lost"))
+    assert not retryable(KilledWorker("k", "worker", 3)) and not retryable(ValueError())
 
 
 # --- a cluster that fails mid-render -------------------------------------------------------------
