@@ -111,6 +111,7 @@ def _batch(n=4000, seed=3):
     return rng, n_s, wo, wi
 
 
+@needs_numba        # (without Numba the fused pass is its two NumPy parts: nothing to compare)
 @pytest.mark.parametrize("distribution, shadowing", [("beckmann", "ts"), ("beckmann", "smith"),
                                                      ("ggx", "smith_correlated")])
 @pytest.mark.parametrize("p_kind", ["fresnel", "given"])
@@ -149,6 +150,7 @@ def test_the_compiled_normal_factor_gives_the_chains_image_bit_for_bit(monkeypat
     assert np.array_equal(route, chain, equal_nan=True)
 
 
+@needs_numba        # (without Numba normal_factor is the twin itself)
 @pytest.mark.parametrize("soften", [False, True])
 def test_the_normal_factor_matches_its_twin(soften):
     """Crafted normals: N = N_s (cosθ_d = 1), ω_i ⟂ N_s, ω_i = N_s, opposite sides, a NaN, a tilted map."""
