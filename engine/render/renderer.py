@@ -236,7 +236,7 @@ class Renderer:
         """
         request = RenderRequest.of(request)
         with render_heap():      # inside Blender: the allocator settings for this render only
-            # adaptive sampling reads the even/odd halves as independent estimates: "auto" halves resolve so
+            # "auto" halves resolve to one sequence, adaptive or not (engine.render.halves: classes A/B)
             plan = self.plan(request.settings, request.window, reads_halves=request.adaptive is not None)
             with self._executor(request, plan) as executor:
                 if not executor.local:
@@ -256,8 +256,8 @@ class Renderer:
     def _render(self, plan: RenderPlan, request: RenderRequest, executor) -> RenderResult:
         W, H = plan.width, plan.height
         film = Film(W, H)
-        # even and odd samples one sequence: no half sums, and the film says what its error estimate is then
-        film.one_sequence = plan.stratified and not plan.split_halves
+        # samples one sequence: the half sums are its classes A/B (engine.render.halves), and the film says so
+        film.one_sequence = plan.stratified and plan.settings.halves == "one_sequence"
         resume = request.resume
         if resume is not None:
             if (resume.width, resume.height) != (W, H):
@@ -268,7 +268,8 @@ class Renderer:
         if request.adaptive is None:
             schedule = UniformPasses(plan, resume)
         else:
-            halves = request.resume_halves if request.resume_halves is not None else HalfBuffers(W * H)
+            halves = request.resume_halves if request.resume_halves is not None \
+                else HalfBuffers(W * H, plan.settings.halves)
             schedule = AdaptiveRounds(plan, film, halves, request.adaptive, executor.workers, stats,
                                       request.on_first_pass, request.unit_times)
         before = kernel_compiles()
