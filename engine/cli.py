@@ -209,7 +209,7 @@ def _render_scene(args, bars: list) -> int:
     if getattr(args, "denoise_data", False):
         st = dataclasses.replace(st, denoise_data=True)
     adaptive = _adaptive_settings(args, st.spp)
-    st = _resolve_halves(st, adaptive is not None, args.resume)
+    st = _resolve_halves(st, args.resume)
     out = args.output
     if not out.lower().endswith(".exr"):
         raise SceneError("-o", f"the output must be an .exr file, got {out!r}")
@@ -266,14 +266,14 @@ def _render_scene(args, bars: list) -> int:
     return status if status else signals.exit_status(130 if result.cancelled else 0)
 
 
-def _resolve_halves(st, adaptive: bool, resume):
+def _resolve_halves(st, resume):
     """``st`` with ``halves`` resolved for this render (engine.scene.description.resolve_halves): "auto" is one
     sequence, adaptive or not (the error estimate splits it into two classes, engine.render.halves); a resumed
     render's "auto" is left for engine.render.resume.resume_state (the file's)."""
     from .scene.description import resolve_halves
     if st.halves == "auto" and resume:
         return st
-    return resolve_halves(st, adaptive, "--halves")
+    return resolve_halves(st)
 
 
 def _data_pass_request(args):

@@ -155,12 +155,10 @@ class Renderer:
         #: kernels compiled (count, seconds) in warm_up since the last render reported them
         self._warm_compiles = (0, 0.0)
 
-    def plan(self, settings: RenderSettings | None = None, window=None, workers: int | None = None,
-             reads_halves: bool = False) -> RenderPlan:
+    def plan(self, settings: RenderSettings | None = None, window=None, workers: int | None = None) -> RenderPlan:
         """The RenderPlan of rendering this scene with ``settings`` (default: the scene's); threads not set
-        (``workers`` None and ``settings.threads`` 0): as many as ``driver.local_workers`` decides;
-        ``reads_halves``: an adaptive render's (RenderPlan.resolve)."""
-        plan = RenderPlan.resolve(self.scene, self.compiled, settings, window, workers, reads_halves)
+        (``workers`` None and ``settings.threads`` 0): as many as ``driver.local_workers`` decides."""
+        plan = RenderPlan.resolve(self.scene, self.compiled, settings, window, workers)
         if workers is None and plan.settings.threads <= 0:
             used = [plan.materials[i] for i in self.compiled.used_materials]
             n = local_workers(plan.workers, used)
@@ -237,7 +235,7 @@ class Renderer:
         request = RenderRequest.of(request)
         with render_heap():      # inside Blender: the allocator settings for this render only
             # "auto" halves resolve to one sequence, adaptive or not (engine.render.halves: classes A/B)
-            plan = self.plan(request.settings, request.window, reads_halves=request.adaptive is not None)
+            plan = self.plan(request.settings, request.window)
             with self._executor(request, plan) as executor:
                 if not executor.local:
                     plan = dataclasses.replace(plan, workers=executor.workers)

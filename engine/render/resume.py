@@ -291,7 +291,7 @@ def resume_state(path: str, renderer, settings, scene_hash: str, spp=None, seed=
     stored_halves = header.get("polar.halves", "independent")
     if st.halves == "auto":             # continue as the file was drawn
         st = dataclasses.replace(st, halves=stored_halves)
-    st = resolve_halves(st, adaptive, "--halves")
+    st = resolve_halves(st)
     ident = estimator_identity(scene_hash, st, renderer.plan(st).settings.polarisation, size=(W, H))
     diff = differences(header, ident)
     if diff:

@@ -511,12 +511,11 @@ class RenderSettings:
 
 #: RenderSettings.sampler's values
 SAMPLERS = ("independent", "stratified", "sobol", "padded", "cycles")
-def resolve_halves(settings, reads_halves: bool = False, field: str = "render.halves"):
-    """``settings`` (RenderSettings) with ``halves`` resolved: "auto" → "one_sequence", whether or not the render
-    reads the half sums (``reads_halves``: adaptive sampling, a time budget, ``estimate``; their error estimate
-    splits one sequence into two classes, engine.render.halves — kept in the signature for the callers, it no
-    longer changes the result, and ``field`` names nothing to refuse); the "independent" sampler → "independent"
-    (it has no sequence to split: its headers and numbers stay as they were).  Idempotent."""
+def resolve_halves(settings):
+    """``settings`` (RenderSettings) with ``halves`` resolved: "auto" → "one_sequence", adaptive sampling, a time
+    budget and ``estimate`` included (their error estimate splits one sequence into two classes,
+    engine.render.halves); the "independent" sampler → "independent" (it has no sequence to split: its headers
+    and numbers stay as they were).  Idempotent."""
     mode = settings.halves
     if not settings.stratified:
         mode = "independent"

@@ -88,13 +88,13 @@ def test_the_setting_is_validated_and_auto_resolves_to_one_sequence():
         parse_settings({"halves": "whole"})
     assert "render.halves" in str(e.value) and "'auto', 'independent', 'one_sequence'" in str(e.value)
     st = RenderSettings(sampler="sobol")
-    assert resolve_halves(st, False).halves == "one_sequence" and resolve_halves(st, True).halves == "one_sequence"
-    assert resolve_halves(RenderSettings(sampler="independent", halves="one_sequence"), True).halves == "independent"
-    once = resolve_halves(st, False)
-    assert resolve_halves(once, False) is once                                         # idempotent
+    assert resolve_halves(st).halves == "one_sequence"
+    assert resolve_halves(RenderSettings(sampler="independent", halves="one_sequence")).halves == "independent"
+    once = resolve_halves(st)
+    assert resolve_halves(once) is once                                         # idempotent
     assert once.split_halves and not st.split_halves and not RenderSettings(sampler="independent").split_halves
-    assert resolve_halves(dataclasses.replace(st, halves="one_sequence"), True).halves == "one_sequence"
-    assert resolve_halves(dataclasses.replace(st, halves="independent"), True).halves == "independent"
+    assert resolve_halves(dataclasses.replace(st, halves="one_sequence")).halves == "one_sequence"
+    assert resolve_halves(dataclasses.replace(st, halves="independent")).halves == "independent"
 
 
 def test_each_octave_class_of_one_sequence_is_a_net_and_even_odd_is_not():
@@ -306,3 +306,15 @@ def test_cli_adaptive_renders_resume_in_their_own_halves(tmp_path, capsys):
         np.testing.assert_array_equal(a[1]["spp"], b[1]["spp"])
         assert a[2].get("polar.halves") == header.get("polar.halves")
     capsys.readouterr()
+
+
+def test_the_estimates_pilot_draws_one_sequence():
+    """``estimate``'s pilot (an adaptive first pass) resolves "auto" to one sequence, its half-buffers the octave
+    classes, and predicts from them."""
+    from engine.render.estimate import pilot_render, predict
+    scene = _scene(spp=8)
+    pilot, seconds = pilot_render(Renderer(scene), scene.settings, 8)
+    assert pilot.settings.halves == "one_sequence" and pilot.halves.halves == "one_sequence"
+    np.testing.assert_array_equal(pilot.halves.sums[0].sum(axis=0) != 0, pilot.film.sums[0].sum(axis=0) != 0)
+    p = predict(pilot.film, pilot.halves, "s0", 0.05, 8, 64, seconds, sampler="sobol")
+    assert p.counts.min() >= 8 and p.counts.max() <= 64 and np.isfinite(p.variance).all()
