@@ -14,8 +14,9 @@ of the pixel value.  Which sample is in which class depends on how the samples d
   (0, m, 2)-net of every pair of dimensions (at c = 3·2^k, a net of 2^(k+1) and one of 2^k).  A split fixed per
   sample cannot do that: of the splits by a parity of index bits (Cycles' ``popcount(i & 0xaaaaaaaa)`` among
   them) only popcount(i >> 1) leaves each class covering the 2^m intervals of both pixel-jitter dimensions at
-  every m, none a (0, m, 2)-net, and with it ½|A − B| overstated the true error 1.4–26× (growing with the spp;
-  the halves each a net: 0.8–2.1×) — docs/guide/adaptive-sampling.md, "Error estimate".  The classes move as
+  every m, none a (0, m, 2)-net, and with it ½|A − B| overstated the image's true S0 error 1.4–26× (growing with
+  the spp; the octave classes: 0.75–2.1×) — docs/guide/adaptive-sampling.md, "The two classes of one sequence".
+  The classes move as
   the count grows: when sample 2^k is added, B is folded into A (A ← A + B, B ← 0), so the sums are streamed in
   ascending sample order (``fold_part`` for a part's sums, ``add_in_order`` sample by sample).  A and B are
   correlated (two halves of one net), so ½|A − B| is multiplied by ``ERROR_FACTOR`` (measured against

@@ -268,6 +268,9 @@ class Renderer:
         else:
             halves = request.resume_halves if request.resume_halves is not None \
                 else HalfBuffers(W * H, plan.settings.halves)
+            # the render's split of its samples into classes (a resumed state is the same render's, so its sums
+            # were split this way: engine.render.halves)
+            halves.halves = plan.settings.halves
             schedule = AdaptiveRounds(plan, film, halves, request.adaptive, executor.workers, stats,
                                       request.on_first_pass, request.unit_times)
         before = kernel_compiles()
