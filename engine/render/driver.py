@@ -185,7 +185,7 @@ class BandJob:
         values, s = traced
         # the unit's film sums, here on the worker: the adding thread only adds them in order
         return SampleSums.of(pixel, values, s.pop("alpha", None), s.pop("denoise", None),
-                             part_classes(pixel, sample, self.settings.halves) if self.stratified else None), s
+                             part_classes(pixel, sample, self.settings.halves, p1) if self.stratified else None), s
 
 
 class UniformPasses:

@@ -61,15 +61,18 @@ def _check(halves: str) -> None:
         raise ValueError(f"halves must be resolved ('independent' or 'one_sequence'), got {halves!r}")
 
 
-def part_classes(pixel: np.ndarray, sample: np.ndarray, halves: str) -> np.ndarray:
+def part_classes(pixel: np.ndarray, sample: np.ndarray, halves: str, end: int | None = None) -> np.ndarray:
     """An int64 array (N,) whose bit 0 is the class (0: A, 1: B) of the samples (``pixel``, ``sample``) (N,) of a
     part added to a film whose pixels hold the samples before the part's (engine.render.film.SampleSums,
     ``fold_part``): "independent": ``sample`` itself (its parity); "one_sequence": B where the sample is at or
-    beyond the octave q(e) of the pixel's count e after the part (its largest sample in the part + 1)."""
+    beyond the octave q(e) of the pixel's count e after the part (its largest sample in the part + 1; ``end``:
+    that count where every pixel of the part ends there, a uniform render's unit)."""
     if halves == "independent":
         return sample
     _check(halves)
     pixel, sample = np.asarray(pixel, np.int64), np.asarray(sample, np.int64)
+    if end is not None:
+        return (sample >= int(octave(np.array([end]))[0])).astype(np.int64)
     if not pixel.size:
         return np.zeros(0, np.int64)
     lo = int(pixel.min())

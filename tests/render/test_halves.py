@@ -127,6 +127,10 @@ def test_class_counts_and_the_streamed_octave_split():
     np.testing.assert_array_equal(class_counts(np.arange(10), "independent")[0], (np.arange(10) + 1) // 2)
     sample = np.arange(8)
     assert part_classes(np.zeros(8, np.int64), sample, "independent") is sample        # the old split, unchanged
+    pix = np.repeat(np.arange(3), 5)
+    smp = np.tile(np.arange(4, 9), 3)                                 # every pixel's samples 4 … 8 (end 9: q = 8)
+    np.testing.assert_array_equal(part_classes(pix, smp, "one_sequence"), smp >= 8)
+    np.testing.assert_array_equal(part_classes(pix, smp, "one_sequence", 9), smp >= 8)
     rng = np.random.default_rng(3)
     n, spp = 6, 37
     y = rng.random((4, n, spp))
