@@ -209,7 +209,7 @@ def _render_scene(args, bars: list) -> int:
     if getattr(args, "denoise_data", False):
         st = dataclasses.replace(st, denoise_data=True)
     adaptive = _adaptive_settings(args, st.spp)
-    st = _resolve_halves(st, adaptive is not None, args.resume)
+    st = _resolve_halves(st, args.resume)
     out = args.output
     if not out.lower().endswith(".exr"):
         raise SceneError("-o", f"the output must be an .exr file, got {out!r}")
@@ -266,15 +266,14 @@ def _render_scene(args, bars: list) -> int:
     return status if status else signals.exit_status(130 if result.cancelled else 0)
 
 
-def _resolve_halves(st, adaptive: bool, resume):
-    """``st`` with ``halves`` resolved for this render (engine.scene.description.resolve_halves; a SceneError naming
-    --halves where one sequence meets adaptive sampling): "auto" is one sequence unless adaptive sampling reads the
-    even/odd halves (``--stderr`` does not change the image: with one sequence it writes the i.i.d. error, and says
-    so); a resumed render's "auto" is left for engine.render.resume.resume_state (the file's)."""
+def _resolve_halves(st, resume):
+    """``st`` with ``halves`` resolved for this render (engine.scene.description.resolve_halves): "auto" is one
+    sequence, adaptive or not (the error estimate splits it into two classes, engine.render.halves); a resumed
+    render's "auto" is left for engine.render.resume.resume_state (the file's)."""
     from .scene.description import resolve_halves
     if st.halves == "auto" and resume:
         return st
-    return resolve_halves(st, adaptive, "--halves")
+    return resolve_halves(st)
 
 
 def _data_pass_request(args):
@@ -873,17 +872,17 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--sampler", choices=("sobol", "padded", "cycles", "stratified", "independent"),
                    help="sobol (the default, as in Blender: stratified's numbers at the camera and first vertex, "
                         "per-pixel shuffled, Owen-scrambled Sobol' pairs at every deeper vertex: less noise, same "
-                        "expectation; with --halves independent --stderr comes from the even/odd halves), padded "
+                        "expectation; --stderr comes from two classes of the samples), padded "
                         "(every number from its own shuffled Sobol' pair, the pixel jitter Owen-scrambled, the others "
                         "digitally shifted), "
                         "stratified (Sobol' pixel jitter, lens, wavelengths and first-vertex light/BSDF numbers, "
                         "deeper ones hashed) or independent (hashed numbers)")
     r.add_argument("--halves", choices=HALVES_MODES,
-                   help="how a pixel's even and odd samples draw the low-discrepancy pattern: one_sequence (the "
-                        "sample index used whole: the first 2^m samples one net; less noise), independent (two "
-                        "independently scrambled sequences, whose means give adaptive sampling's and --stderr's "
-                        "half-split error estimate) or auto (default: one sequence unless adaptive sampling reads "
-                        "the halves; --stderr then writes the i.i.d. error)")
+                   help="how a pixel's samples draw the low-discrepancy pattern: one_sequence (the sample index used "
+                        "whole: the first 2^m samples one net; less noise; adaptive sampling and --stderr take the "
+                        "error from two classes of its samples, calibrated), independent (the even and odd samples "
+                        "two independently scrambled sequences, whose means give the error: the images of earlier "
+                        "versions) or auto (default: one sequence)")
     r.add_argument("--light-tree", choices=LIGHT_TREE_MODES,
                    help="next-event estimation's light choice: on (the light tree over lamps and emissive triangles, "
                         "as Cycles' Light Tree), off (the scene's light_selection over whole lights) or auto (default: "

@@ -50,10 +50,9 @@ SAMPLER_ITEMS = [
      "Sobol' set, so a choice is stratified with its point: same expectation, less noise", 4),
 ]
 HALVES_ITEMS = [
-    ("AUTO", "Auto", "One sequence unless adaptive sampling (Noise Threshold or Time Limit) reads the even and odd "
-     "samples as two independent estimates", 0),
+    ("AUTO", "Auto", "One sequence (as One Sequence), with adaptive sampling too", 0),
     ("ONE_SEQUENCE", "One Sequence", "A pixel's samples are one low-discrepancy sequence (as Cycles): less noise; "
-     "no half-split error estimate (not allowed with adaptive sampling)", 1),
+     "adaptive sampling takes the error from two classes of its samples, as Cycles", 1),
     ("INDEPENDENT", "Independent Halves", "The even and the odd samples are two independently scrambled sequences, "
      "whose difference estimates the error (adaptive sampling's)", 2),
 ]

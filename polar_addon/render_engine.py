@@ -326,7 +326,7 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             self._write_noise(result, out, adaptive, window)
         if getattr(out.film, "has_denoise_data", False):
             self._write_denoise_data(result, out.film, window, enabled)
-        # the passes trace the render's own camera rays: its even/odd halves as resolved (adaptive: independent)
+        # the passes trace the render's own camera rays: its halves as resolved
         settings = dataclasses.replace(settings, halves=out.settings.halves)
         if data_request is not None and not out.cancelled:
             self.update_stats("", "Polar | data passes")

@@ -17,7 +17,8 @@ van der Corput radical inverse and the first primitive polynomial's dimension) a
   by a random function of the digits above it; still a (0, m, 2)-net, and every point uniform on [0, 1)²)
   with seeds per (seed, pixel, parity, pair);
 - the even and the odd samples (parity = sample & 1) are two independently scrambled sequences (index
-  sample // 2): adaptive sampling's half-buffers A (even) and B (odd) are independent estimates;
+  sample // 2): with independent halves the error estimate's classes A (even) and B (odd) are independent
+  estimates; one sequence (engine.render.sampler.sequence_index) draws sample s at 2·s, the even sequence;
 - optionally (the "padded" sampler's pairs other than the jitter) a random XOR of both coordinates, a digital
   shift, instead of the Owen scramble (still a (0, m, 2)-net and uniform);
 - the 16 bits below 2^-32 are a random offset per (seed, pixel, parity, pair) (a sub-resolution shift:

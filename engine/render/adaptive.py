@@ -1,9 +1,12 @@
 """Adaptive sampling: sample passes go only where the estimated error is above a threshold.
 
-**Error estimate.** The film keeps, besides its sums, the luminance Stokes sums of the even and the
-odd sample passes of each pixel (half-buffers A and B; sample k goes to A if k is even).  A and B
-are two independent estimates of the pixel, so their difference estimates the standard error of
-the pixel value (the mean of both).  Per pixel, from the luminance Stokes means S_A, S_B:
+**Error estimate.** The film keeps, besides its sums, the luminance Stokes sums of two classes of
+each pixel's samples (half-buffers A and B, engine.render.halves): with independent halves the even and
+the odd samples, two independent estimates of the pixel; with one sequence (the default) the samples
+below and from the largest power of two under the count, two nets of one sequence, correlated, whose
+difference is scaled by the calibration factor (engine.render.halves.ERROR_FACTOR, applied in the
+means).  Their difference estimates the standard error of the pixel value.  Per pixel, from the
+luminance Stokes means S_A, S_B:
 
 * ``s0``     |Y_A − Y_B| / (Y_A + Y_B): relative standard error of the luminance S0 (0 where both are 0);
 * ``dolp``   ½|DoLP_A − DoLP_B| (absolute);
@@ -90,6 +93,7 @@ import numpy as np
 from ..errors import SceneError
 from ..spectral.cie import LUMINANCE_WEIGHTS
 from .film import Film, HalfBuffers, OrderedSamples
+from .halves import class_means
 
 #: Quantities the threshold can apply to.
 QUANTITIES = ("s0", "dolp", "aolp", "docp", "stokes")
@@ -271,7 +275,7 @@ def next_targets(counts: np.ndarray, noise: np.ndarray, marks: np.ndarray, thres
 
 
 def allocation_noise(quantity: str, sums: np.ndarray, counts: np.ndarray, tiles: np.ndarray, pixels: np.ndarray,
-                     mean_y: float) -> tuple[np.ndarray, np.ndarray]:
+                     mean_y: float, halves: str = "independent") -> tuple[np.ndarray, np.ndarray]:
     """(e, counted) over ``pixels``: the error of each pixel's tile in the units the allocation
     minimises, and whether the pixel counts in the image's RMS error.
 
@@ -280,10 +284,11 @@ def allocation_noise(quantity: str, sums: np.ndarray, counts: np.ndarray, tiles:
     image's luminance error; every pixel counts.  The other quantities: the tile error
     (:func:`tile_noise`) of :func:`pixel_noise` (``stokes`` keeps its relative s0 part); the pixels
     that count are the lit ones (S0 > 0: DoLP, DoCP and S_k/S0 of a black pixel are not defined),
-    for ``aolp`` those with DoLP > 0.05.  e = ∞ where a pixel has < 2 samples.
+    for ``aolp`` those with DoLP > 0.05.  e = ∞ where a pixel has < 2 samples.  ``halves``: how ``sums`` split
+    the samples (engine.render.halves: class sizes and the one-sequence calibration).
     """
     c = np.asarray(counts, np.int64)
-    a, b = _ratio(sums[0], (c + 1) // 2), _ratio(sums[1], c // 2)
+    a, b = class_means(sums, c, halves)
     if quantity == "s0":
         err = 0.5 * np.abs(a[0] - b[0]) / mean_y if mean_y > 0 else np.zeros(c.size)
         defined = np.ones(c.size, bool)
@@ -387,14 +392,15 @@ class Allocation:
 
 
 def allocation_from(sums: np.ndarray, counts: np.ndarray, quantity: str, threshold: float, tiles: np.ndarray,
-                    pixels: np.ndarray, cost: np.ndarray | None = None, width: int | None = None) -> Allocation:
+                    pixels: np.ndarray, cost: np.ndarray | None = None, width: int | None = None,
+                    halves: str = "independent") -> Allocation:
     """The :class:`Allocation` from half-buffer ``sums`` (2, 4, n), ``counts`` (n,) and ``cost`` (n,)
     (None: not counted, every weight 1) of a first pass, over ``pixels`` of an image ``width`` pixels
     wide (default: tiles in one row); ``threshold`` 0 gives μ = 0 (every noisy tile to ``spp``), ∞
-    gives μ = ∞ (every tile stops at once)."""
+    gives μ = ∞ (every tile stops at once); ``halves``: how ``sums`` split the samples (engine.render.halves)."""
     y = _ratio(sums[0, 0] + sums[1, 0], counts)
     mean_y = float(np.mean(y[pixels])) if pixels.size else 0.0
-    e, counted = allocation_noise(quantity, sums, counts, tiles, pixels, mean_y)
+    e, counted = allocation_noise(quantity, sums, counts, tiles, pixels, mean_y, halves)
     n = counts[pixels]
     sigma_nb, n_nb = np.zeros(pixels.size), np.zeros(pixels.size)
     if quantity in POOLED and pixels.size and NEIGHBOURHOOD_WEIGHT > 0:
@@ -418,7 +424,8 @@ def first_pass_allocation(halves: HalfBuffers, quantity: str, threshold: float, 
                           pixels: np.ndarray, width: int | None = None) -> Allocation:
     """The :class:`Allocation` of the half-buffers' first pass (:attr:`HalfBuffers.first`)."""
     sums, counts, *cost = halves.first
-    return allocation_from(sums, counts, quantity, threshold, tiles, pixels, cost[0] if cost else None, width)
+    return allocation_from(sums, counts, quantity, threshold, tiles, pixels, cost[0] if cost else None, width,
+                           halves.halves)
 
 
 # ------------------------------------------------------------------------------------ budget mode
@@ -508,7 +515,7 @@ def image_error(film, halves: HalfBuffers, quantity: str, pixels: np.ndarray | N
     sums, counts = halves.first[:2] if halves.first is not None else (halves.sums, film.count)
     mean_y = float(np.mean(_ratio(sums[0, 0] + sums[1, 0], counts)[pixels])) if pixels.size else 0.0
     e, counted = allocation_noise(quantity, halves.sums, film.count, tile_ids(film.width, film.height), pixels,
-                                  mean_y)
+                                  mean_y, halves.halves)
     e = e[counted & np.isfinite(e)]
     return float(np.sqrt(np.mean(e ** 2))) if e.size else math.nan
 
@@ -662,7 +669,8 @@ class AdaptiveRounds:
         """Per pixel: the tile error where the tile goes on (above its share of the error), else −∞."""
         film, halves, adaptive, pixels, tiles = self.film, self.halves, self.adaptive, self.pixels, self.tiles
         level = self._first_allocation()
-        e, _ = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level.mean_y)
+        e, _ = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level.mean_y,
+                                halves.halves)
         w = cost_weight(halves.cost, film.count, tiles, pixels, level.mean_cost)
         _, _, noise = film_noise(film, halves, adaptive.quantity, pixels)
         # the tile's error pooled with its neighbourhood's (rare paths its first pass missed); a tile goes
@@ -679,7 +687,8 @@ class AdaptiveRounds:
         quantities, w = √(c/c̄) from its counted cost), and ∞ where the tile is noisy (σ > 0), else −∞."""
         film, halves, adaptive, pixels, tiles = self.film, self.halves, self.adaptive, self.pixels, self.tiles
         level = self._first_allocation()
-        e, counted = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level.mean_y)
+        e, counted = allocation_noise(adaptive.quantity, halves.sums, film.count, tiles, pixels, level.mean_y,
+                                      halves.halves)
         e = pooled_error(e, counts, level.sigma_nb, level.n_nb)
         sigma = np.where(counted | (adaptive.quantity == "s0"), e * np.sqrt(counts), 0.0)
         c = tile_cost(halves.cost, film.count, tiles, pixels)
@@ -931,8 +940,10 @@ def _check_consistency(state: dict[str, np.ndarray], source: str) -> None:
                                              f"at {int(big.sum())} pixels")
 
 
-def state_from_channels(channels: dict, counts: np.ndarray, source: str = "the file", means: np.ndarray | None = None):
-    """(Film, HalfBuffers) rebuilt exactly from :func:`state_channels` and the ``spp`` counts (H, W);
+def state_from_channels(channels: dict, counts: np.ndarray, source: str = "the file", means: np.ndarray | None = None,
+                        halves: str = "independent"):
+    """(Film, HalfBuffers) rebuilt exactly from :func:`state_channels` and the ``spp`` counts (H, W), the half-buffers
+    splitting the samples as ``halves`` (the file's ``polar.halves``, engine.render.halves);
     a damaged state is a SceneError naming --resume, ``source`` and the channel (:func:`check_state`,
     ``means``: the Stokes image stored beside the state)."""
     H, W = counts.shape
@@ -949,4 +960,5 @@ def state_from_channels(channels: dict, counts: np.ndarray, source: str = "the f
         first_sums = np.stack([np.stack([state[f"first.{h}.S{k}.Y"] for k in range(4)]) for h in "AB"])
         first_cost = state["first.cost"].astype(np.int64) if "first.cost" in state else np.zeros(W * H, np.int64)
         first = (first_sums, state["first.count"].astype(np.int64), first_cost)
-    return film, HalfBuffers.from_state(halves_sums, cost, first)
+    film.one_sequence = halves == "one_sequence"
+    return film, HalfBuffers.from_state(halves_sums, cost, first, halves)

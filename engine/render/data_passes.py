@@ -438,7 +438,7 @@ def render_data_passes(renderer, request: DataPassRequest, settings=None, window
         scene, compiled, camera = renderer, CompiledScene(renderer), CameraModel(renderer.camera)
     else:
         scene, compiled, camera = renderer.scene, renderer.compiled, renderer.camera
-    settings = resolve_halves(settings or scene.settings, reads_halves=False)
+    settings = resolve_halves(settings or scene.settings)
     W, H = scene.camera.width, scene.camera.height
     x0, y0, x1, y1 = window or (0, 0, W, H)
     if not (0 <= x0 < x1 <= W and 0 <= y0 < y1 <= H):

@@ -23,6 +23,7 @@ import numpy as np
 
 from .blas_threads import one_blas_thread
 from .film import SampleSums
+from .halves import part_classes
 from .plan import RenderPlan, RenderRequest, unit_pixels
 
 #: How often (seconds) the caller's stop request is polled while units are in flight.
@@ -162,7 +163,8 @@ class BandJob:
     """Traces a uniform render's unit (row0, row1, pass0, pass1) → (SampleSums, stats), or None if aborted.
 
     Passes a pixel already has (``done`` (n,): a resumed film's counts) are skipped; with ``stratified``
-    (independently scrambled halves, RenderSettings.split_halves) the part also holds the even/odd luminance sums."""
+    (RenderSettings.split_halves) the part also holds the luminance sums of the sample classes A and B
+    (engine.render.halves: even/odd with independent halves)."""
 
     count_cost = False
 
@@ -183,7 +185,7 @@ class BandJob:
         values, s = traced
         # the unit's film sums, here on the worker: the adding thread only adds them in order
         return SampleSums.of(pixel, values, s.pop("alpha", None), s.pop("denoise", None),
-                             sample if self.stratified else None), s
+                             part_classes(pixel, sample, self.settings.halves, p1) if self.stratified else None), s
 
 
 class UniformPasses:

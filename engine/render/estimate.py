@@ -172,7 +172,7 @@ def _predict(film, halves, quantity, threshold, min_spp, spp, seconds_per_sample
     n = film.count[pixels].astype(np.float64)
     _, _, tile_err = film_noise(film, halves, quantity, pixels)
     alloc = allocation_from(halves.sums, film.count, quantity, threshold, tile_ids(film.width, film.height), pixels,
-                            halves.cost, film.width)
+                            halves.cost, film.width, halves.halves)
     need = n * (tile_err / threshold) ** 2                # every tile below the threshold (uniform: its own error)
     sigma, mu = alloc.sigma, alloc.level
     marks = checkpoints(min_spp, spp, ladder)

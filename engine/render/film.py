@@ -9,14 +9,14 @@ the transparent background or a holdout, as Cycles' alpha; 1 for samples added
 without alpha).  With denoising data (``add_denoise_data``) it also sums the per-sample albedo
 and shading normal of the first non-delta vertex (Cycles' Denoising Albedo / Normal).
 
-With the "stratified" sampler a pixel's samples are not independent, and the i.i.d. standard error
+With the low-discrepancy samplers a pixel's samples are not independent, and the i.i.d. standard error
 (from the sums of squares) overestimates the error of its mean; the film then also keeps the
-luminance Stokes sums of the even and of the odd samples (``half_y``: two independently scrambled
-sequences, engine.render.sampler.stratified_pair), whose difference is an unbiased, if one-degree-
-of-freedom, estimate of the mean's variance (``stderr_luminance``).  Where the even and odd samples are one
-sequence (``RenderSettings.halves`` "one_sequence", ``Film.one_sequence``) their halves are correlated, so the film
-keeps no half sums and its standard error is the i.i.d. formula, which ``stderr_method`` says is no estimate of
-those samples' error (usually larger than it).
+luminance Stokes sums of two classes of its samples (``half_y``, engine.render.halves): with ``halves``
+"independent" the even and the odd samples (two independently scrambled sequences), whose difference is an
+unbiased, if one-degree-of-freedom, estimate of the mean's variance (``stderr_luminance``); with "one_sequence"
+(``Film.one_sequence``) the classes A and B of one sequence, correlated, whose difference is scaled by the
+calibration factor (engine.render.halves.ERROR_FACTOR).  A film without half sums (a resumed file of a version
+that kept none) has the i.i.d. formula, which ``stderr_method`` says is no estimate of one sequence's error.
 
 The film's accumulators are written here alone: a render adds parts with ``Film.add`` (``SampleSums`` of a
 work unit, or ``OrderedSamples`` added in ascending sample order: adaptive sampling, whose even/odd half
@@ -30,6 +30,7 @@ import numpy as np
 
 from ..kernels.transport import pixel_sums
 from ..spectral.cie import LUMINANCE_WEIGHTS
+from .halves import add_in_order, class_counts, class_means, error_factor, fold_part
 
 
 class Film:
@@ -41,9 +42,10 @@ class Film:
         self.count = np.zeros(n, np.int64)
         self.alpha_sums = None          # None: every sample so far had alpha 1 (no memory spent)
         self.denoise_sums = None        # None: no denoising data asked for; else (6, n): albedo RGB, normal XYZ
-        self.half_y = None              # None: independent samples; else (2, 4, n): even/odd luminance Stokes sums
-        #: a low-discrepancy render whose even and odd samples are one sequence (set by the renderer): no half
-        #: sums, and ``stderr_method`` says the i.i.d. error is not an estimate of its error
+        self.half_y = None              # None: independent samples; else (2, 4, n): class A/B luminance Stokes sums
+        #: a low-discrepancy render whose samples are one sequence (set by the renderer): its half sums are
+        #: classes A/B (engine.render.halves), and without them ``stderr_method`` says the i.i.d. error is not an
+        #: estimate of its error
         self.one_sequence = False
         self._added = False             # samples added yet (see ``add``)
 
@@ -72,11 +74,14 @@ class Film:
             self.alpha_sums[lo:hi] += part.count if part.alpha is None else part.alpha
         self.sums[:, :, lo:hi] += part.sums
         self.sumsq_y[:, lo:hi] += part.sumsq_y
-        self.count[lo:hi] += part.count
         if part.half_y is not None:
             if self.half_y is None:
                 self.half_y = np.zeros((2, 4, self.count.shape[0]))
-            self.half_y[:, :, lo:hi] += part.half_y
+            if self.one_sequence:       # the octave split moves with the count (engine.render.halves)
+                fold_part(self.half_y[:, :, lo:hi], self.count[lo:hi], part.count, part.half_y)
+            else:
+                self.half_y[:, :, lo:hi] += part.half_y
+        self.count[lo:hi] += part.count
         if part.denoise is not None:
             if self.denoise_sums is None:
                 self.denoise_sums = np.zeros((6, self.count.shape[0]))
@@ -100,8 +105,13 @@ class Film:
         if part.denoise is not None:
             self.add_denoise_data(part.pixel, *part.denoise)
 
+    @property
+    def halves(self) -> str:
+        """How ``half_y`` splits the samples (engine.render.halves): "one_sequence" or "independent"."""
+        return "one_sequence" if self.one_sequence else "independent"
+
     def keep_half_sums(self, half_y: np.ndarray) -> None:
-        """Use ``half_y`` (2, 4, n) as the even/odd luminance Stokes sums (adaptive sampling's
+        """Use ``half_y`` (2, 4, n) as the class A/B luminance Stokes sums (adaptive sampling's
         half-buffers, ``HalfBuffers.sums``: shared, not copied)."""
         self.half_y = half_y
 
@@ -182,7 +192,7 @@ class Film:
         var_mean = np.maximum(var, 0.0) / np.maximum(c, 1)
         if self.half_y is not None and not iid:
             var_mean = var_mean * stratified_variance_ratio(self.half_y, self.count, var_mean, self.width,
-                                                            self.height)
+                                                            self.height, self.halves)
         se = np.sqrt(var_mean)
         se[:, c < 2] = 0.0
         return se.reshape(4, self.height, self.width)
@@ -196,12 +206,19 @@ class Film:
                         "samples are one low-discrepancy sequence per pixel (halves one_sequence), whose error is "
                         "usually smaller")
             return "iid: sample standard deviation / sqrt(spp)"
+        if self.one_sequence:
+            return ("stratified one sequence: iid variance of the mean x the 5x5-pixel mean of (A - B)^2 nA nB / "
+                    f"spp^2 / iid variance x {error_factor('one_sequence'):.4g}^2 (A, B: means of the samples below "
+                    "and from the largest power of two under spp, the two halves of one low-discrepancy sequence, "
+                    "correlated; the factor calibrated against reference renders, within 0.6-1.8x of the true error "
+                    "on the peer scenes)")
         return ("stratified: iid variance of the mean x the 5x5-pixel mean of (A - B)^2 nA nB / spp^2 / iid variance "
                 "(A, B: means of the even and the odd samples, independently scrambled)")
 
     def even_means_luminance(self) -> np.ndarray:
-        """Means of the even samples' luminance Stokes components (4, H, W) (0 where none)."""
-        n_a = (self.count + 1) // 2
+        """Means of class A's (the even samples' with independent halves) luminance Stokes components (4, H, W)
+        (0 where none)."""
+        n_a = class_counts(self.count, self.halves)[0]
         return (self.half_y[0] / np.maximum(n_a, 1)).reshape(4, self.height, self.width)
 
     def spp_image(self) -> np.ndarray:
@@ -225,7 +242,7 @@ def _box_mean(a: np.ndarray, ok: np.ndarray, width: int, height: int, r: int) ->
 
 
 def stratified_variance_ratio(half_y: np.ndarray, count: np.ndarray, var_iid: np.ndarray, width: int,
-                              height: int) -> np.ndarray:
+                              height: int, halves: str = "independent") -> np.ndarray:
     """Per pixel (4, n): how much smaller the variance of the pixel mean is with stratified samples
     than the i.i.d. estimate ``var_iid`` (4, n) says.
 
@@ -235,10 +252,14 @@ def stratified_variance_ratio(half_y: np.ndarray, count: np.ndarray, var_iid: np
     n_A = n_B), but with one degree of freedom (its z-scores would be Cauchy-tailed).  So the
     per-pixel ratio of it to ``var_iid`` (in [0, c − 1]: the between-halves part of the sum of
     squares) is averaged over the 5 × 5 pixels around (pixels with c ≥ 2 and var_iid > 0): ~25
-    degrees of freedom, at the price of a ratio that is local, not per pixel."""
+    degrees of freedom, at the price of a ratio that is local, not per pixel.  With ``halves`` "one_sequence" the
+    classes A and B of one sequence (engine.render.halves: their sizes, and d scaled by the calibration factor)."""
     c = count.astype(np.float64)
-    n_a, n_b = np.ceil(c / 2), np.floor(c / 2)
+    n_a, n_b = (k.astype(np.float64) for k in class_counts(count, halves))
     d = half_y[0] / np.maximum(n_a, 1) - half_y[1] / np.maximum(n_b, 1)
+    f = error_factor(halves)
+    if f != 1.0:
+        d = f * d
     var_split = d * d * n_a * n_b / np.maximum(c * c, 1)
     ok = (c >= 2) & (var_iid > 0)
     ratio = np.where(ok, var_split / np.where(ok, var_iid, 1.0), 0.0)
@@ -264,7 +285,8 @@ class SampleSums:
            denoise: tuple[np.ndarray, np.ndarray] | None = None, sample: np.ndarray | None = None) -> SampleSums:
         """Sums of samples ``stokes_rgb`` (4, 3, N) at flat pixels (N,), their alpha (N,) or None (all
         1) and denoising guides (albedo (3, N), normal (3, N)) or None; with the samples' indices
-        ``sample`` (N,) (the stratified sampler) also the even and odd samples' luminance sums."""
+        ``sample`` (N,) (the stratified sampler; or any int64 array whose bit 0 is the sample's class,
+        engine.render.halves.part_classes) also the luminance sums of classes A (bit 0 clear) and B."""
         lo, hi = (int(pixel.min()), int(pixel.max()) + 1) if pixel.size else (0, 0)
         local, span = pixel - lo, hi - lo
         # the Stokes sums, the luminance squares, the counts and the even/odd luminance sums in one compiled
@@ -312,7 +334,9 @@ class OrderedSamples:
 
 
 class HalfBuffers:
-    """Luminance Stokes sums of the even (A) and odd (B) sample passes per pixel: ``sums`` (2, 4, n),
+    """Luminance Stokes sums of the sample classes A and B per pixel (``halves``: how the samples are split,
+    engine.render.halves — "independent": even and odd sample passes; "one_sequence": the classes of one
+    sequence): ``sums`` (2, 4, n),
     and the cost of the pixel's samples: ``cost`` (n,) int64 (engine.render.integrator's per-path
     count, :data:`~engine.render.integrator.PATH_COST`: the deterministic cost adaptive sampling weighs by).
 
@@ -320,15 +344,17 @@ class HalfBuffers:
     had its ``min_spp`` samples (None before): the allocation level μ is computed from it, so that it
     is the same after an interruption and for any threshold given on resumption."""
 
-    def __init__(self, n: int):
+    def __init__(self, n: int, halves: str = "independent"):
         self.sums = np.zeros((2, 4, n))
         self.cost = np.zeros(n, np.int64)
         self.first = None
+        self.halves = halves
 
     @classmethod
-    def from_state(cls, sums: np.ndarray, cost: np.ndarray | None = None, first=None) -> HalfBuffers:
+    def from_state(cls, sums: np.ndarray, cost: np.ndarray | None = None, first=None,
+                   halves: str = "independent") -> HalfBuffers:
         """Half-buffers holding ``sums`` (2, 4, n) exactly, ``cost`` (n,) (None: 0) and ``first``."""
-        halves = cls(sums.shape[-1])
+        halves = cls(sums.shape[-1], halves)
         halves.sums[:] = sums
         if cost is not None:
             halves.cost = np.asarray(cost, np.int64)
@@ -336,10 +362,14 @@ class HalfBuffers:
         return halves
 
     def add(self, part: OrderedSamples) -> None:
-        """Add the part's costs, and its luminance to A or B by sample parity, in ascending sample order."""
+        """Add the part's costs, and its luminance to A or B by sample class (engine.render.halves), in ascending
+        sample order."""
         if part.path_cost is not None:       # integer sums: exact in any order
             np.add.at(self.cost, part.pixel, np.asarray(part.path_cost, np.int64))
         pixel, sample, _, y, _ = part.ordered()
+        if self.halves == "one_sequence":
+            add_in_order(self.sums, pixel, sample, y)
+            return
         for h in (0, 1):
             m = sample % 2 == h
             pix_h = pixel[m]
@@ -350,19 +380,14 @@ class HalfBuffers:
         self.first = (self.sums.copy(), np.asarray(counts, np.int64).copy(), self.cost.copy())
 
     def means(self, counts: np.ndarray):
-        """(mean_A, mean_B), each (4, n); samples 0…c−1 give A ⌈c/2⌉ and B ⌊c/2⌋ of them (0 where none)."""
-        c = np.asarray(counts, np.int64)
-        return _ratio(self.sums[0], (c + 1) // 2), _ratio(self.sums[1], c // 2)
-
-
-def _ratio(num, den):
-    out = np.zeros(np.broadcast(num, den).shape)
-    np.divide(num, den, out=out, where=den > 0)
-    return out
+        """(mean_A, mean_B), each (4, n), calibrated (engine.render.halves.class_means; samples 0…c−1 give A
+        ⌈c/2⌉ and B ⌊c/2⌋ of them with independent halves; 0 where none)."""
+        return class_means(self.sums, counts, self.halves)
 
 
 def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray | None = None,
-                     alpha: np.ndarray | None = None, even_y: np.ndarray | None = None) -> Film:
+                     alpha: np.ndarray | None = None, even_y: np.ndarray | None = None,
+                     halves: str = "independent") -> Film:
     """A Film holding finished samples, rebuilt from pixel means (4, H, W, 3) and counts (H, W).
 
     Sums are mean × count (float32 means lose ~1e-7 relative).  With the per-pixel standard errors
@@ -370,7 +395,8 @@ def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray
     that the resumed render's error estimate treats the old samples as noise-free.  ``alpha``
     (H, W): the stored alpha (mean coverage), restored as alpha × count.  ``even_y`` (4, H, W): the
     even samples' luminance means of a stratified render (``Film.even_means_luminance``), restored
-    as the even/odd half sums (float32-rounded: they only serve the error estimate).
+    as the even/odd half sums (float32-rounded: they only serve the error estimate); with ``halves``
+    "one_sequence" the class A means and class sums (engine.render.halves).
     """
     H, W = spp.shape
     film = Film(W, H)
@@ -387,6 +413,7 @@ def film_from_stokes(mean_rgb: np.ndarray, spp: np.ndarray, stderr_y: np.ndarray
         film.alpha_sums = np.asarray(alpha, np.float64).reshape(-1) * count
     if even_y is not None:
         film.half_y = np.empty((2, 4, count.shape[0]))
-        film.half_y[0] = np.asarray(even_y, np.float64).reshape(4, -1) * ((count + 1) // 2)
+        film.one_sequence = halves == "one_sequence"
+        film.half_y[0] = np.asarray(even_y, np.float64).reshape(4, -1) * class_counts(count, halves)[0]
         film.half_y[1] = np.einsum("c,scn->sn", LUMINANCE_WEIGHTS, film.sums) - film.half_y[0]
     return film

@@ -315,7 +315,7 @@ class PathTracer:
         self.count_cost = count_cost
         self.lights = lights
         self.camera = camera
-        self.settings = resolve_halves(settings, reads_halves=False)
+        self.settings = resolve_halves(settings)
         if materials is None:
             materials, _ = rendered_materials(compiled, getattr(settings, "simplify", "auto"))
         self.materials: list[BSDF] = list(materials)

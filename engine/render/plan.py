@@ -150,12 +150,11 @@ class RenderPlan:
 
     @classmethod
     def resolve(cls, scene, compiled, settings: RenderSettings | None = None, window=None,
-                workers: int | None = None, reads_halves: bool = False) -> RenderPlan:
+                workers: int | None = None) -> RenderPlan:
         """The plan of rendering ``scene`` (compiled as ``compiled``) with ``settings`` (None: the
-        scene's); ``workers`` None: ``settings.threads``, or one per CPU core; ``reads_halves``: the render
-        reads the even/odd halves as independent estimates (adaptive sampling), which resolves ``halves``
+        scene's); ``workers`` None: ``settings.threads``, or one per CPU core; ``halves`` resolved
         (engine.scene.description.resolve_halves)."""
-        requested = resolve_halves(settings or scene.settings, reads_halves)
+        requested = resolve_halves(settings or scene.settings)
         materials, simplified = rendered_materials(compiled, requested.simplify, scene.materials)
         polarisation, reason = resolve_transport(requested.polarisation, dict(zip(compiled.material_names, materials)),
                                                  compiled.used_material_names, sources=source_needs(scene),

@@ -155,12 +155,10 @@ class Renderer:
         #: kernels compiled (count, seconds) in warm_up since the last render reported them
         self._warm_compiles = (0, 0.0)
 
-    def plan(self, settings: RenderSettings | None = None, window=None, workers: int | None = None,
-             reads_halves: bool = False) -> RenderPlan:
+    def plan(self, settings: RenderSettings | None = None, window=None, workers: int | None = None) -> RenderPlan:
         """The RenderPlan of rendering this scene with ``settings`` (default: the scene's); threads not set
-        (``workers`` None and ``settings.threads`` 0): as many as ``driver.local_workers`` decides;
-        ``reads_halves``: an adaptive render's (RenderPlan.resolve)."""
-        plan = RenderPlan.resolve(self.scene, self.compiled, settings, window, workers, reads_halves)
+        (``workers`` None and ``settings.threads`` 0): as many as ``driver.local_workers`` decides."""
+        plan = RenderPlan.resolve(self.scene, self.compiled, settings, window, workers)
         if workers is None and plan.settings.threads <= 0:
             used = [plan.materials[i] for i in self.compiled.used_materials]
             n = local_workers(plan.workers, used)
@@ -236,8 +234,8 @@ class Renderer:
         """
         request = RenderRequest.of(request)
         with render_heap():      # inside Blender: the allocator settings for this render only
-            # adaptive sampling reads the even/odd halves as independent estimates: "auto" halves resolve so
-            plan = self.plan(request.settings, request.window, reads_halves=request.adaptive is not None)
+            # "auto" halves resolve to one sequence, adaptive or not (engine.render.halves: classes A/B)
+            plan = self.plan(request.settings, request.window)
             with self._executor(request, plan) as executor:
                 if not executor.local:
                     plan = dataclasses.replace(plan, workers=executor.workers)
@@ -256,8 +254,8 @@ class Renderer:
     def _render(self, plan: RenderPlan, request: RenderRequest, executor) -> RenderResult:
         W, H = plan.width, plan.height
         film = Film(W, H)
-        # even and odd samples one sequence: no half sums, and the film says what its error estimate is then
-        film.one_sequence = plan.stratified and not plan.split_halves
+        # samples one sequence: the half sums are its classes A/B (engine.render.halves), and the film says so
+        film.one_sequence = plan.stratified and plan.settings.halves == "one_sequence"
         resume = request.resume
         if resume is not None:
             if (resume.width, resume.height) != (W, H):
@@ -268,7 +266,11 @@ class Renderer:
         if request.adaptive is None:
             schedule = UniformPasses(plan, resume)
         else:
-            halves = request.resume_halves if request.resume_halves is not None else HalfBuffers(W * H)
+            halves = request.resume_halves if request.resume_halves is not None \
+                else HalfBuffers(W * H, plan.settings.halves)
+            # the render's split of its samples into classes (a resumed state is the same render's, so its sums
+            # were split this way: engine.render.halves)
+            halves.halves = plan.settings.halves
             schedule = AdaptiveRounds(plan, film, halves, request.adaptive, executor.workers, stats,
                                       request.on_first_pass, request.unit_times)
         before = kernel_compiles()

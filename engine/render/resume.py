@@ -289,14 +289,9 @@ def resume_state(path: str, renderer, settings, scene_hash: str, spp=None, seed=
                              sampler=stored_sampler if sampler is None else settings.sampler,
                              spp=int(header["polar.spp"]) if spp is None else settings.spp)
     stored_halves = header.get("polar.halves", "independent")
-    if st.halves == "auto":             # continue as the file was drawn (adaptively only from independent halves)
-        if adaptive and stored_halves == "one_sequence":        # (a uniform render's file: no half-buffers either)
-            raise SceneError("--noise-threshold", f"{os.path.basename(path)!r} was rendered without adaptive "
-                                                  "sampling, its even and odd samples one sequence, so it has no "
-                                                  "half-buffers to continue adaptively (resume it without "
-                                                  "--noise-threshold)")
+    if st.halves == "auto":             # continue as the file was drawn
         st = dataclasses.replace(st, halves=stored_halves)
-    st = resolve_halves(st, adaptive, "--halves")
+    st = resolve_halves(st)
     ident = estimator_identity(scene_hash, st, renderer.plan(st).settings.polarisation, size=(W, H))
     diff = differences(header, ident)
     if diff:
@@ -306,9 +301,9 @@ def resume_state(path: str, renderer, settings, scene_hash: str, spp=None, seed=
         raise SceneError("--spp", f"must be at least the samples already done ({int(counts.max())})")
     from .adaptive import has_state, state_from_channels
     if has_state(channels):
-        film, halves = state_from_channels(channels, counts, repr(path), means=stokes)
+        film, halves = state_from_channels(channels, counts, repr(path), means=stokes, halves=st.halves)
         if st.split_halves:
-            film.keep_half_sums(halves.sums.copy())     # even/odd luminance sums: the stratified standard error
+            film.keep_half_sums(halves.sums.copy())     # class A/B luminance sums: the stratified standard error
     else:
         if adaptive:
             raise SceneError("--noise-threshold", f"{os.path.basename(path)!r} was rendered without adaptive "
@@ -320,5 +315,5 @@ def resume_state(path: str, renderer, settings, scene_hash: str, spp=None, seed=
             # the i.i.d. error restores the sums of squares; the even means the half sums
             even = np.stack([channels[f"S{i}.Y.even"] for i in range(4)])
             stderr = np.stack([channels[f"S{i}.Y.stderr_iid"] for i in range(4)])
-        film, halves = film_from_stokes(stokes, counts, stderr, channels.get("A"), even), None
+        film, halves = film_from_stokes(stokes, counts, stderr, channels.get("A"), even, st.halves), None
     return Resumed(film, st, halves)

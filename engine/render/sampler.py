@@ -139,9 +139,9 @@ def stratified_pair(seed: int, pixel: np.ndarray, sample: np.ndarray, u0: np.nda
     jitter) is a (0, 2)-sequence: a pixel's first 2^m even (or odd) samples fill the 2^m elementary
     intervals of each shape; the pairs with it make a 12-D Sobol' point set (each dimension
     stratified too; what each pair stratifies: PAIR_JITTER … PAIR_WAVELENGTH)."""
-    # the even and the odd samples are two independently scrambled sequences (index sample // 2):
-    # adaptive sampling's half-buffers A (even) and B (odd) must be independent estimates; one sequence
-    # ("one_sequence" halves) is its even sequence at 2·sample (sequence_index)
+    # the even and the odd samples are two independently scrambled sequences (index sample // 2; "independent"
+    # halves: the error estimate's classes A (even) and B (odd) are then independent); one sequence ("one_sequence"
+    # halves, the default) is its even sequence at 2·sample (sequence_index)
     return scrambled_sobol_pair(_seed_key(seed), pixel, sample, _PAIR_KEYS[pair], _SOBOL_V[2 * pair],
                                 _SOBOL_V[2 * pair + 1], u0, u1)
 

@@ -13,7 +13,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..errors import SceneError
 
 
 @dataclass
@@ -444,14 +443,13 @@ class RenderSettings:
     #: pattern: each role's numbers one point of a shuffled Owen-scrambled Sobol' set, sampler.cycles_pairs) or
     #: "independent" (every number a hash of (seed, pixel, sample, dimension)).
     sampler: str = "sobol"
-    #: How a pixel's even and odd samples draw the pattern's numbers (the stratifying samplers; "independent"
-    #: has nothing to split): "independent" (two independently scrambled sequences, index sample // 2: their
-    #: means are independent estimates, as adaptive sampling's half-buffer error estimate needs),
-    #: "one_sequence" (the sample index used whole: one scrambled sequence per pixel and pair, so a pixel's
-    #: first 2^m samples are one (0, m, 2)-net; the halves are then correlated and no half-buffer error
-    #: estimate is made: the film's standard error is the i.i.d. one, marked as such) or "auto" (one sequence unless
-    #: the render reads the halves: adaptive sampling, a time budget, ``estimate``; resolve_halves below).  Same
-    #: expectation either way.
+    #: How a pixel's samples draw the pattern's numbers (the stratifying samplers; "independent" has nothing to
+    #: split): "one_sequence" (the sample index used whole: one scrambled sequence per pixel and pair, so a pixel's
+    #: first 2^m samples are one (0, m, 2)-net; the error estimate splits them into two classes, engine.render.halves,
+    #: whose correlated difference is calibrated), "independent" (the even and odd samples two independently
+    #: scrambled sequences, index sample // 2: their means are independent estimates; the images of the versions
+    #: before one sequence) or "auto" (= "one_sequence", also for adaptive sampling, a time budget and
+    #: ``estimate``; resolve_halves below).  Same expectation either way.
     halves: str = "auto"
     #: How next-event estimation chooses among many lights (Cycles' Light Tree, scene.cycles.use_light_tree):
     #: "on" — the light tree over lamps and emissive triangles (engine.render.lights.tree: Conty & Kulla 2018 as
@@ -506,29 +504,23 @@ class RenderSettings:
 
     @property
     def split_halves(self) -> bool:
-        """True where the film keeps even/odd half sums: a low-discrepancy sampler whose even and odd samples are
-        two independently scrambled sequences (``halves`` "independent", as resolved:
-        ``resolve_halves``; "auto" unresolved counts as not split)."""
-        return self.stratified and self.halves == "independent"
+        """True where the film keeps the half sums of two sample classes (engine.render.halves): a low-discrepancy
+        sampler with ``halves`` resolved (``resolve_halves``; "auto" unresolved counts as not split)."""
+        return self.stratified and self.halves != "auto"
 
 
 #: RenderSettings.sampler's values
 SAMPLERS = ("independent", "stratified", "sobol", "padded", "cycles")
-def resolve_halves(settings, reads_halves: bool, field: str = "render.halves"):
-    """``settings`` (RenderSettings) with ``halves`` resolved for a render that reads the even/odd halves as two
-    independent estimates (``reads_halves``: adaptive sampling, a time budget, a half-split error estimate) or
-    not: "auto" → "one_sequence" unless it does; the "independent" sampler → "independent" (it has no sequence
-    to split: its headers and numbers stay as they were).  "one_sequence" where the halves are read is a
-    SceneError naming ``field``.  Idempotent."""
+def resolve_halves(settings):
+    """``settings`` (RenderSettings) with ``halves`` resolved: "auto" → "one_sequence", adaptive sampling, a time
+    budget and ``estimate`` included (their error estimate splits one sequence into two classes,
+    engine.render.halves); the "independent" sampler → "independent" (it has no sequence to split: its headers
+    and numbers stay as they were).  Idempotent."""
     mode = settings.halves
     if not settings.stratified:
         mode = "independent"
     elif mode == "auto":
-        mode = "independent" if reads_halves else "one_sequence"
-    elif mode == "one_sequence" and reads_halves:
-        raise SceneError(field, "must be 'independent' or 'auto' with adaptive sampling (a noise threshold or a "
-                                "time limit), whose error estimate needs the even and odd samples as two "
-                                "independent sequences; got 'one_sequence'")
+        mode = "one_sequence"
     return settings if mode == settings.halves else dataclasses.replace(settings, halves=mode)
 
 

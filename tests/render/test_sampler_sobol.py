@@ -281,7 +281,8 @@ def test_a_resumed_adaptive_sobol_render_equals_the_uninterrupted_one(tmp_path):
     write_stokes_exr(path, partial.stokes(), extra={"spp": partial.film.spp_image().astype("uint32"),
                                                      **state_channels(partial.film, partial.halves)})
     _, channels, _ = read_stokes_exr(path)
-    film, halves = state_from_channels(channels, channels["spp"])
+    film, halves = state_from_channels(channels, channels["spp"], halves=partial.settings.halves)
+    assert halves.halves == partial.halves.halves == "one_sequence"
     resumed = renderer.render(RenderRequest(adaptive=ad, resume=film, resume_halves=halves))
     np.testing.assert_array_equal(resumed.film.count, reference.film.count)
     np.testing.assert_array_equal(resumed.film.sums, reference.film.sums)
