@@ -232,7 +232,7 @@ class Renderer:
         cancelled result with ``stats["error"]``.  A bad scheduler address or a cluster without workers
         raises RuntimeError, an unreachable scheduler OSError.
         """
-        request = RenderRequest.of(request)
+        request = continue_as_drawn(RenderRequest.of(request), self.scene.settings)
         with render_heap():      # inside Blender: the allocator settings for this render only
             # "auto" halves resolve to one sequence, adaptive or not (engine.render.halves: classes A/B)
             plan = self.plan(request.settings, request.window)
@@ -260,6 +260,10 @@ class Renderer:
         if resume is not None:
             if (resume.width, resume.height) != (W, H):
                 raise ValueError(f"cannot resume a {resume.width}×{resume.height} render at {W}×{H}")
+            if resume.half_y is not None and resume.halves != film.halves:
+                raise ValueError(f"halves: cannot resume a film whose class sums split {resume.halves!r} samples "
+                                 f"with {plan.settings.halves!r} ones (leave render.halves 'auto' to continue as "
+                                 "it was drawn)")
             film.merge(resume)
         stats = {**plan.stats(), "compile_seconds": self.compile_seconds, "kernels": KERNEL_BACKEND,
                  **executor.stats()}
@@ -290,6 +294,16 @@ class Renderer:
             stats["error"] = executor.error
         return RenderResult(film=film, settings=plan.settings, stats=stats, cancelled=cancelled,
                             halves=schedule.halves)
+
+
+def continue_as_drawn(request: RenderRequest, scene_settings: RenderSettings) -> RenderRequest:
+    """``request`` with ``halves`` "auto" set to the resumed film's split (as the command line's --resume takes the
+    file's), so that a continuation never adds samples of the other split to the film's class sums."""
+    film = request.resume
+    settings = request.settings or scene_settings
+    if film is None or film.half_y is None or settings.halves != "auto" or not settings.stratified:
+        return request
+    return dataclasses.replace(request, settings=dataclasses.replace(settings, halves=film.halves))
 
 
 class _WorkerScenes:

@@ -60,7 +60,7 @@ MATCHED = {
     "polar.reduce_spectral": "--reduce-spectral",
     "polar.simplify": "--simplify",
     "polar.sampler": "--sampler",
-    "polar.halves": "--halves",
+    "polar.halves": "--halves or render.halves",
     "polar.light_tree": "--light-tree",
     **{f"polar.{f.name}": "--" + f.name.replace("_", "-") for f in LIGHT_PATH_FIELDS},
 }
@@ -156,11 +156,15 @@ def _same(a, b) -> bool:
     return str(a) == str(b)          # ints beyond int32 are stored as decimal strings
 
 
+#: What a key's absence means (written only where it differs from this)
+ABSENT_MEANS = {"polar.halves": "independent"}
+
+
 def differences(header: dict, identity: dict) -> list[str]:
     """What differs between a stored render's header and this render's identity (empty: resumable)."""
     out = []
     for key, option in MATCHED.items():
-        stored, now = header.get(key), identity.get(key)
+        stored, now = header.get(key, ABSENT_MEANS.get(key)), identity.get(key, ABSENT_MEANS.get(key))
         if stored is None and now is None:
             continue
         if not _same(stored, now):

@@ -515,8 +515,12 @@ def resolve_halves(settings):
     """``settings`` (RenderSettings) with ``halves`` resolved: "auto" → "one_sequence", adaptive sampling, a time
     budget and ``estimate`` included (their error estimate splits one sequence into two classes,
     engine.render.halves); the "independent" sampler → "independent" (it has no sequence to split: its headers
-    and numbers stay as they were).  Idempotent."""
+    and numbers stay as they were).  Idempotent; SceneError naming ``render.halves`` for a value not in HALVES_MODES
+    (settings built in Python skip the scene loader's check)."""
     mode = settings.halves
+    if mode not in HALVES_MODES:
+        from ..errors import SceneError
+        raise SceneError("render.halves", f"must be one of {', '.join(map(repr, HALVES_MODES))}, got {mode!r}")
     if not settings.stratified:
         mode = "independent"
     elif mode == "auto":

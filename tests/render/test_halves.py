@@ -95,6 +95,8 @@ def test_the_setting_is_validated_and_auto_resolves_to_one_sequence():
     assert once.split_halves and not st.split_halves and not RenderSettings(sampler="independent").split_halves
     assert resolve_halves(dataclasses.replace(st, halves="one_sequence")).halves == "one_sequence"
     assert resolve_halves(dataclasses.replace(st, halves="independent")).halves == "independent"
+    with pytest.raises(SceneError, match="render.halves: must be one of 'auto', 'independent', 'one_sequence'"):
+        resolve_halves(dataclasses.replace(st, halves="one-sequence"))       # (settings built in Python)
 
 
 def test_each_octave_class_of_one_sequence_is_a_net_and_even_odd_is_not():
@@ -198,6 +200,21 @@ def test_one_sequence_windows_give_the_one_shot_pixels(one_shot):
         np.testing.assert_array_equal(r.film.sums[:, :, pix], ref.film.sums[:, :, pix])
 
 
+def test_a_resumed_film_continues_in_its_own_halves_and_a_mismatch_is_refused(one_shot):
+    """The Python API as the CLI's --resume: "auto" takes the film's split; an explicit other split is refused, never
+    mixed into the film's class sums."""
+    scene, renderer, _ = one_shot
+    first = renderer.render(dataclasses.replace(scene.settings, spp=3, halves="independent")).film
+    assert first.half_y is not None and first.halves == "independent"
+    whole = renderer.render(dataclasses.replace(scene.settings, spp=6, halves="independent"))
+    resumed = renderer.render(RenderRequest(dataclasses.replace(scene.settings, spp=6), resume=first))
+    assert resumed.settings.halves == "independent" and not resumed.film.one_sequence
+    np.testing.assert_allclose(resumed.film.half_y, whole.film.half_y, rtol=1e-12, atol=1e-12)
+    with pytest.raises(ValueError, match="halves: cannot resume a film whose class sums split 'independent'"):
+        renderer.render(RenderRequest(dataclasses.replace(scene.settings, spp=6, halves="one_sequence"),
+                                      resume=first))
+
+
 def test_a_resumed_one_sequence_render_equals_the_one_shot_render(one_shot):
     scene, renderer, ref = one_shot
     first = renderer.render(dataclasses.replace(scene.settings, spp=3)).film
@@ -275,8 +292,9 @@ def test_cli_records_the_resolved_halves_and_resume_never_mixes_them(tmp_path, c
     assert cli.main(["render", scene, "-o", more, "--resume", split, "--spp", "6", *base]) == 0
     assert "polar.halves" not in read_stokes_exr(more)[2]
     capsys.readouterr()
-    for args, named in ((["--resume", one, "--halves", "independent"], "halves"),
-                        (["--resume", split, "--halves", "one_sequence"], "halves"),
+    for args, named in ((["--resume", one, "--halves", "independent"], "halves is 'one_sequence' in the file but "
+                                                                         "'independent' now"),
+                        (["--resume", split, "--halves", "one_sequence"], "halves is 'independent' in the file"),
                         (["--resume", one, "--noise-threshold", "0.1"], "half-buffers")):
         status = cli.main(["render", scene, "-o", str(tmp_path / "x.exr"), "--spp", "6", *args, *base])
         lines = [line for line in capsys.readouterr().err.splitlines() if line.startswith("error:")]
