@@ -287,6 +287,7 @@ class WorkerPool:
         self.replies: queue.Queue = queue.Queue()
         self.flag = SharedFlag()
         self.lock = threading.Lock()
+        self.rounds = 0              # rounds run (LocalProcesses.run), the id of a round's job
         self.command = None          # (tests: a child that cannot start)
 
     @property
@@ -415,7 +416,7 @@ class LocalProcesses:
         except BaseException:
             self.pool.lock.release()
             raise
-        self._run = 0
+        self._run = None
 
     def close(self) -> None:
         if self.pool is not None:
@@ -440,7 +441,8 @@ class LocalProcesses:
         (this process's) traces the units left when every worker died."""
         p = self.pool
         p.flag.clear()
-        self._run += 1
+        p.rounds += 1           # (a pool-wide count: a worker holds the job of the last round it was sent)
+        self._run = p.rounds
         job_message = ("job", self._run, pickle.dumps(job, protocol=pickle.HIGHEST_PROTOCOL))
         workers = [w for w in p.workers if w.alive][:self.workers]
         todo, results, next_add = deque(range(len(units))), {}, 0
