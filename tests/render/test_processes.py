@@ -76,6 +76,12 @@ def test_processes_give_the_threaded_image_uniform_and_seed_after_seed(many_mate
         same(procs, threads)
     assert procs.stats["parallel"] == "processes" and "2 processes" in procs.stats_line() or os.cpu_count() == 1
     assert processes.pool_running() >= 2
+    # auto with the pool running: processes where the materials convoy (this scene), threads where not
+    auto = render(r, "auto", st)
+    same(auto, threads)
+    assert auto.stats.get("parallel") == "processes" and "processes (automatic: " in auto.stats_line() \
+        or os.cpu_count() == 1
+    assert render(Renderer(peer(res=8, spp=1)), "auto").stats.get("parallel") is None
 
 
 def test_processes_give_the_threaded_image_adaptive_resume_window():
@@ -167,6 +173,7 @@ def test_bad_parallel_value_is_one_line_naming_the_field():
 def test_auto_takes_processes_where_threads_convoy_and_the_start_pays(monkeypatch):
     choose = processes.choose_parallel
     monkeypatch.setattr(processes, "pool_running", lambda: 0)
+    monkeypatch.setattr(processes, "kernels_ready", lambda: True)
     big, small = processes.AMORTISED_PATHS, processes.AMORTISED_PATHS // 8
     assert choose("auto", 2, True, big)[0] == "processes"
     assert "automatic" in choose("auto", 2, True, big)[1]
@@ -175,5 +182,30 @@ def test_auto_takes_processes_where_threads_convoy_and_the_start_pays(monkeypatc
     assert choose("auto", 1, True, big)[0] == "threads"          # one worker
     assert choose("threads", 2, True, big) == ("threads", "set by render.parallel")
     assert choose("processes", 2, False, 1)[0] == "processes"
+    monkeypatch.setattr(processes, "kernels_ready", lambda: False)
+    assert choose("auto", 2, True, big)[0] == "threads"          # each worker would compile the kernels
     monkeypatch.setattr(processes, "pool_running", lambda: 2)
     assert choose("auto", 2, True, small)[0] == "processes"       # running: always amortised
+
+
+def test_command_line_parallel_option_and_scene_field(tmp_path, capsys):
+    import json
+
+    from engine import cli
+    processes.close_pool()
+    from engine.render import precompile
+    scene = precompile.scenes(str(tmp_path))["grey"]          # a native scene file (its textures in tmp_path)
+    path = tmp_path / "s.json"
+    path.write_text(json.dumps(scene))
+    status = cli.main(["render", str(path), "--spp", "2", "--parallel", "processes", "-o", str(tmp_path / "a.exr"),
+                       "--no-previews"])
+    err = capsys.readouterr().err
+    assert status == 0, err
+    assert err.count("starting worker processes (first render only)") == 1 and "2 processes (set by" in err \
+        or os.cpu_count() == 1
+    scene["render"] = {**scene.get("render", {}), "parallel": "gpu"}
+    path.write_text(json.dumps(scene))
+    status = cli.main(["render", str(path), "-o", str(tmp_path / "b.exr")])
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
+    assert status == 2 and len(lines) == 1 and lines[0].startswith("error: render.parallel: "), err
