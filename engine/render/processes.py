@@ -44,7 +44,11 @@ ABORT_TIMEOUT = 30.0
 #: Paths (pixels × samples) from which a render amortises starting the pool (≈ 1 s on 2 cores, measured:
 #: docs/benchmarks/performance.md "Worker processes"); a running pool is always used.
 AMORTISED_PATHS = 1 << 21
-#: Bytes of a worker's compiled scene per byte of the pickled scene (BVH, lights, tracers; check_memory).
+#: Memory of a worker (check_memory): ``WORKER_BYTES`` (the interpreter with the engine imported, 115 MB, and its
+#: loaded kernels) + ``SCENE_COPY_FACTOR`` × the pickled scene (BVH, lights, tracers), besides its batches; measured
+#: on the real assets (a worker's RSS grew by 70 MB + 2.8 × the pickle after its first render: AttenuationTest 2.7 MB
+#: → 77 MB, BoomBox 6.6 → 84, SpecGlossEmission 16.1 → 115, of which ≈ 35 MB its batch).
+WORKER_BYTES = 160 << 20
 SCENE_COPY_FACTOR = 3
 
 _HEADER = struct.Struct("<Q")

@@ -263,8 +263,10 @@ class Renderer:
 
     def _local_executor(self, request: RenderRequest, plan: RenderPlan):
         """Worker processes or threads for a local render of ``plan`` (RenderSettings.parallel, decided by
-        engine.render.processes.choose_parallel); processes that cannot start: threads, whose ``warning`` says why."""
-        from .processes import SCENE_COPY_FACTOR, LocalProcesses, StartFailed, choose_parallel, dumps_scene
+        engine.render.processes.choose_parallel); processes that cannot start (or whose scene copies would not fit in
+        memory: check_memory): threads, whose ``warning`` says why."""
+        from .processes import SCENE_COPY_FACTOR, WORKER_BYTES, LocalProcesses, StartFailed, choose_parallel, \
+            dumps_scene
         st = plan.settings
         workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
         x0, y0, x1, y1 = plan.window or (0, 0, plan.width, plan.height)
@@ -274,7 +276,11 @@ class Renderer:
         if mode == "processes":
             try:
                 blob = dumps_scene(self.scene)
-                check_memory(dataclasses.replace(plan, workers=workers), workers * len(blob) * SCENE_COPY_FACTOR)
+                try:        # each worker holds its own compiled scene
+                    check_memory(dataclasses.replace(plan, workers=workers),
+                                 workers * (WORKER_BYTES + SCENE_COPY_FACTOR * len(blob)))
+                except SceneError as e:
+                    raise StartFailed(f"{workers} copies of the scene do not fit: {e.reason}") from None
                 return LocalProcesses(blob, workers, why, request.progress)
             except StartFailed as e:
                 warning = f"worker processes could not start ({e}); rendered on threads"
@@ -322,8 +328,13 @@ class Renderer:
                             halves=schedule.halves)
 
 
+#: Tracers (settings) a worker keeps for its scene.
+WORKER_TRACERS = 4
+
+
 class _WorkerScenes:
-    """On a Dask worker: the compiled scene of the render in progress and its tracers (one scene at a time)."""
+    """On a Dask worker or a local worker process (engine.render.processes): the compiled scene of the render in
+    progress and the tracers of its last ``WORKER_TRACERS`` settings (one scene at a time)."""
 
     def __init__(self):
         self.lock = threading.Lock()
@@ -336,6 +347,8 @@ class _WorkerScenes:
                 self.renderer, self.key = Renderer(scene), key
             which = (repr(settings), count_cost)
             if which not in self.tracers:
+                if len(self.tracers) >= WORKER_TRACERS:     # a pool kept for many renders (seeds): the oldest goes
+                    self.tracers.pop(next(iter(self.tracers)))
                 self.tracers[which] = self.renderer.tracer(self.renderer.plan(settings), count_cost)
             return self.tracers[which]
 

@@ -209,3 +209,24 @@ def test_command_line_parallel_option_and_scene_field(tmp_path, capsys):
     err = capsys.readouterr().err
     lines = [ln for ln in err.splitlines() if ln.startswith("error:")]
     assert status == 2 and len(lines) == 1 and lines[0].startswith("error: render.parallel: "), err
+
+
+def test_a_worker_keeps_a_few_tracers_of_its_scene():
+    from engine.render import renderer as module
+    scenes = module._WorkerScenes()
+    sc = peer(res=8, spp=1)
+    for seed in range(module.WORKER_TRACERS + 3):       # e.g. one seed per frame of an animation
+        scenes.tracer("k", sc, dataclasses.replace(sc.settings, seed=seed), False)
+    assert len(scenes.tracers) == module.WORKER_TRACERS
+
+
+def test_memory_check_counts_the_workers_scene_copies(monkeypatch):
+    from engine.render import renderer as module
+    sc = peer(res=16, spp=2)
+    r = Renderer(sc)
+    plan = r.plan(sc.settings)
+    threads_need = module.memory_estimate(plan.width, plan.height, plan.settings.batch_rays, plan.workers)
+    monkeypatch.setattr(module, "available_memory", lambda: int((threads_need + (64 << 20)) / 0.8))
+    out = render(r, "processes")            # 2 workers × (160 MB + the scene) do not fit in 64 MB more
+    assert out.stats.get("parallel") is None and "copies of the scene do not fit" in out.stats_line()
+    same(out, render(r, "threads"))
