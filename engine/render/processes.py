@@ -4,7 +4,7 @@ would convoy on the GIL (engine.render.driver.CONVOY_MATERIALS).
 
 The pool (``pool()``) is module-level: started lazily by the first render that asks for it, reused by later
 renders and scenes, closed at exit (and by the Blender add-on on unregister: ``close_pool``).  A worker is a plain
-``sys.executable -c _BOOTSTRAP`` child — never multiprocessing's spawn, which re-imports the caller's ``__main__``
+``sys.executable -c`` child — never multiprocessing's spawn, which re-imports the caller's ``__main__``
 — that imports this engine under the caller's package name without running the enclosing package's ``__init__``
 (the Blender extension's imports bpy), with the caller's ``sys.path`` (the extension's wheels).  Messages are
 length-prefixed pickles over the child's stdin/stdout (its own prints go to stderr).  Each worker keeps the
@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import atexit
 import hashlib
-import json
 import mmap
 import os
 import pickle
@@ -35,6 +34,7 @@ import threading
 import time
 from collections import deque
 
+from . import bootstrap
 from .driver import STOP_POLL_SECONDS, UNITS_AHEAD, trace_in_order
 
 #: Seconds a worker may take to start (import the engine) before the pool gives up (POLAR_WORKER_START_TIMEOUT).
@@ -53,27 +53,15 @@ SCENE_COPY_FACTOR = 3
 
 _HEADER = struct.Struct("<Q")
 
-# The child: the engine imported as the parent's package (no enclosing __init__), then serve() until EOF.
-_BOOTSTRAP = r"""
-import importlib, json, os, signal, sys, types
-package, folder, paths = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
-sys.path[:0] = [p for p in paths if p not in sys.path]
+# The child's own part (engine.render.bootstrap makes ``engine`` importable first).
+_BEFORE = r"""
+import signal
 signal.signal(signal.SIGINT, signal.SIG_IGN)          # Ctrl-C is the parent's: it stops the render
 inp, out = os.fdopen(os.dup(0), "rb"), os.fdopen(os.dup(1), "wb")
 os.dup2(2, 1)                                         # prints go to stderr, never into the messages
-parts = package.split(".") if package else []
-for i in range(len(parts)):
-    name = ".".join(parts[:i + 1])
-    if name not in sys.modules:
-        module = types.ModuleType(name)
-        module.__path__ = [folder] if i == len(parts) - 1 else []
-        sys.modules[name] = module
-        if i:
-            setattr(sys.modules[".".join(parts[:i])], parts[i], module)
-if not package:
-    sys.path.insert(0, folder)
-engine = (package + ".engine") if package else "engine"
-importlib.import_module(engine + ".render.processes").serve(inp, out)
+"""
+_BODY = """
+importlib.import_module(engine + ".render.worker_process").serve(inp, out)
 """
 
 
@@ -182,42 +170,6 @@ class SharedFlag:
                 pass
 
 
-def serve(inp, out) -> None:
-    """A worker's loop: ``("scene", key, blob)``, ``("job", id, blob)``, ``("unit", index, unit)`` (answered by
-    ``("done", index, result or None if stopped)`` or ``("failed", index, text)``), ``("exit",)``; ends at EOF."""
-    import traceback
-    try:
-        from .renderer import _WORKER_SCENES
-        from .blas_threads import one_blas_thread
-    except BaseException as e:               # noqa: BLE001 — said to the parent, which falls back to threads
-        send(out, ("broken", f"{type(e).__name__}: {e}"))
-        raise
-    send(out, ("ready", os.getpid()))
-    flag, key, scene, job = None, None, None, None
-    while True:
-        try:
-            message = receive(inp)
-        except EOFError:
-            return
-        kind = message[0]
-        if kind == "exit":
-            return
-        if kind == "flag":
-            flag = SharedFlag(message[1])
-        elif kind == "scene":
-            key, scene = message[1], pickle.loads(message[2])
-        elif kind == "job":
-            job = pickle.loads(message[2])
-        elif kind == "unit":
-            try:
-                tracer = _WORKER_SCENES.tracer(key, scene, job.settings, job.count_cost)
-                with one_blas_thread():     # the processes are the parallelism (engine.render.blas_threads)
-                    result = job(tracer, message[2], flag)
-                send(out, ("done", message[1], result))
-            except Exception as e:          # noqa: BLE001 — the parent raises it
-                send(out, ("failed", message[1], f"{type(e).__name__}: {e}\n{traceback.format_exc()}"))
-
-
 class StartFailed(RuntimeError):
     """The worker processes could not start (the message says why); the render falls back to threads."""
 
@@ -275,12 +227,9 @@ class _Worker:
 
 
 def child_command() -> list:
-    """The command of a worker: this interpreter, the bootstrap, this engine's package and folder, sys.path."""
-    engine_pkg = __name__.rsplit(".render.processes", 1)[0]        # "engine" or "<extension package>.engine"
-    package = engine_pkg.rsplit(".", 1)[0] if "." in engine_pkg else ""
-    folder = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    paths = [p for p in sys.path if p and os.path.isdir(p)]
-    return [sys.executable, "-c", _BOOTSTRAP, package, folder, json.dumps(paths)]
+    """The command of a worker: this interpreter importing this engine as this process does (engine.render.
+    bootstrap), then engine.render.worker_process.serve."""
+    return bootstrap.child_command(_BODY, _BEFORE)
 
 
 class WorkerPool:
@@ -381,11 +330,10 @@ atexit.register(close_pool)
 
 def kernels_ready() -> bool:
     """True when the workers will load every compiled kernel from the cache (engine.render.precompile ran for these
-    sources, or Numba is not in use): with a cold cache each worker would compile the same kernels at once
-    (fresnel_sphere's first render: 27.6 s on 2 processes against 13.7 s on threads)."""
-    from .. import kernels
-    from .precompile import precompiled
-    return not kernels.COMPILED or precompiled()
+    sources, or Numba is not in use: kernel_marker.precompiled): with a cold cache each worker would compile the
+    same kernels at once (fresnel_sphere's first render: 27.6 s on 2 processes against 13.7 s on threads)."""
+    from .kernel_marker import precompiled
+    return precompiled()
 
 
 def choose_parallel(mode: str, workers: int, convoy: bool, paths: int) -> tuple[str, str]:
@@ -408,8 +356,8 @@ def choose_parallel(mode: str, workers: int, convoy: bool, paths: int) -> tuple[
 
 
 class LocalProcesses:
-    """The executor of a local render on ``workers`` worker processes of the pool (a context manager: holds the
-    pool for this render).  ``blob``: the scene, pickled once by the caller; ``stats()`` says how many and why,
+    """The executor of a local render on ``workers`` worker processes of the pool (holds the pool for this render
+    until ``close``).  ``blob``: the scene, pickled once by the caller; ``stats()`` says how many and why,
     and the pool's start-up seconds when this render started it; ``warning``: a worker died (its units were
     traced again)."""
 
@@ -434,16 +382,10 @@ class LocalProcesses:
         self._run = None
 
     def close(self) -> None:
+        """Hand the pool back (the workers keep running for the next render)."""
         if self.pool is not None:
             self.pool.lock.release()
             self.pool = None
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
-        return False
 
     def stats(self) -> dict:
         s = {"parallel": "processes", "parallel_reason": self.reason, "threads": self.workers}

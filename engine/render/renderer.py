@@ -281,7 +281,7 @@ class Renderer:
                                  workers * (WORKER_BYTES + SCENE_COPY_FACTOR * len(blob)))
                 except SceneError as e:
                     raise StartFailed(f"{workers} copies of the scene do not fit: {e.reason}") from None
-                return LocalProcesses(blob, workers, why, request.progress)
+                return contextlib.closing(LocalProcesses(blob, workers, why, request.progress))
             except StartFailed as e:
                 warning = f"worker processes could not start ({e}); rendered on threads"
         check_memory(plan)

@@ -188,10 +188,11 @@ def test_auto_takes_processes_where_threads_convoy_and_the_start_pays(monkeypatc
     assert choose("auto", 2, True, small)[0] == "processes"       # running: always amortised
 
 
-def test_command_line_parallel_option_and_scene_field(tmp_path, capsys):
+def test_command_line_parallel_option_and_scene_field(tmp_path, capsys, monkeypatch):
     import json
 
     from engine import cli
+    monkeypatch.setattr(cli.ProgressBar.__init__, "__defaults__", (sys.stderr, 30))    # this test's stderr
     processes.close_pool()
     from engine.render import precompile
     scene = precompile.scenes(str(tmp_path))["grey"]          # a native scene file (its textures in tmp_path)
