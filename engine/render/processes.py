@@ -210,6 +210,14 @@ class _Worker:
         code = self.proc.poll()
         return lines[-1].strip() if lines else f"exit code {code}"
 
+    def reap(self, wait: float = 5.0) -> None:
+        """Wait for a worker whose messages ended (killed if it does not exit)."""
+        try:
+            self.proc.wait(wait)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait()
+
     def stop(self, wait: float = 2.0) -> None:
         self.alive = False
         if self.proc.poll() is None:
@@ -250,6 +258,9 @@ class WorkerPool:
     def ensure(self, n: int, timeout: float | None = None) -> float:
         """Start workers until ``n`` are alive; returns the seconds it took (0: none started).  StartFailed (with
         the child's last error line) if one does not start within ``timeout`` (default START_TIMEOUT)."""
+        for w in self.workers:
+            if not w.alive:
+                w.stop(0.1)         # (reaped; its log closed)
         self.workers = [w for w in self.workers if w.alive]
         missing = n - len(self.workers)
         if missing <= 0:
@@ -282,7 +293,7 @@ class WorkerPool:
                 waiting.discard(worker)
                 worker.send(("flag", self.flag.path))
             else:
-                worker.proc.wait(5)
+                worker.reap()
                 failure = message[1] if message[0] == "broken" else worker.last_error()
         if failure is not None:
             for w in new:
@@ -454,7 +465,7 @@ class LocalProcesses:
                     if w not in workers:
                         continue
                     if message[0] == "eof":
-                        w.proc.wait(5)
+                        w.reap()
                         lost(w)
                     elif message[0] == "failed":
                         w.outstanding.remove(message[1])

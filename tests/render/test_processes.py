@@ -162,6 +162,22 @@ def test_processes_that_cannot_start_fall_back_to_threads_with_one_warning(comma
         processes.close_pool()
 
 
+def test_no_python_or_a_worker_that_never_answers_falls_back_to_threads(monkeypatch):
+    processes.close_pool()
+    r = Renderer(peer(res=16, spp=2))
+    try:
+        monkeypatch.setattr(sys, "executable", "")
+        assert "no Python executable" in render(r, "processes").stats_line()
+        monkeypatch.undo()
+        processes.pool().command = [sys.executable, "-c", "import time; time.sleep(60)"]
+        monkeypatch.setenv("POLAR_WORKER_START_TIMEOUT", "1")
+        out = render(r, "processes")
+        assert "no worker answered within 1 s" in out.stats_line() and out.stats.get("parallel") is None
+        assert not processes.pool().workers
+    finally:
+        processes.close_pool()
+
+
 def test_bad_parallel_value_is_one_line_naming_the_field():
     with pytest.raises(SceneError) as e:
         parse_settings({"parallel": "gpu"})
