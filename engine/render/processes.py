@@ -416,8 +416,8 @@ class LocalProcesses:
         todo, results, next_add = deque(range(len(units))), {}, 0
         cancelled, gap = False, False
 
-        def feed(w: _Worker) -> None:
-            while w.alive and todo and not cancelled and len(w.outstanding) < UNITS_AHEAD:
+        def feed(w: _Worker, ahead: int = UNITS_AHEAD) -> None:
+            while w.alive and todo and not cancelled and len(w.outstanding) < ahead:
                 if w.key != self.key:
                     w.key = self.key if w.send(("scene", self.key, self.blob)) else None
                 if w.job != self._run:
@@ -442,8 +442,9 @@ class LocalProcesses:
             workers.remove(w)
 
         try:
-            for w in workers:
-                feed(w)
+            for ahead in range(1, UNITS_AHEAD + 1):     # round robin: a round's first units go one to each worker
+                for w in workers:
+                    feed(w, ahead)
             while next_add < len(units) and not (cancelled and not any(w.outstanding for w in workers)):
                 if not workers and not cancelled:
                     cancelled = self._trace_here(units, todo, results, job, tracer, stop_requested, abort)
