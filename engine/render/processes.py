@@ -8,7 +8,7 @@ renders and scenes, closed at exit (and by the Blender add-on on unregister: ``c
 — that imports this engine under the caller's package name without running the enclosing package's ``__init__``
 (the Blender extension's imports bpy), with the caller's ``sys.path`` (the extension's wheels).  Messages are
 length-prefixed pickles over the child's stdin/stdout (its own prints go to stderr).  Each worker keeps the
-compiled scene of the last scene key it was sent (renderer.trace_on_worker's cache): a render pickles its scene
+compiled scene of the last scene key it was sent (renderer._WORKER_SCENES, as a Dask worker): a render pickles its scene
 once and sends it to a worker only when the worker's key differs; the job once per round, then unit indices.
 
 Results are added in unit order by the one driver, and the sampler is stateless, so the image is bit-for-bit the
@@ -41,8 +41,9 @@ from .driver import STOP_POLL_SECONDS, UNITS_AHEAD, trace_in_order
 START_TIMEOUT = 120.0
 #: Seconds the workers may take to end their units once a stop is requested, before they are killed.
 ABORT_TIMEOUT = 30.0
-#: Paths (pixels × samples) from which a render amortises starting the pool (≈ 1 s on 2 cores, measured:
-#: docs/benchmarks/performance.md "Worker processes"); a running pool is always used.
+#: Paths (pixels × samples) from which a render amortises starting the pool: its start and the workers' first
+#: units cost ≈ 1.7 s more than a first render on threads (this 2-core VM, warm kernel cache), about 3 s of
+#: convoying threads here (docs/benchmarks/performance.md "Worker processes"); a running pool is always used.
 AMORTISED_PATHS = 1 << 21
 #: Memory of a worker (check_memory): ``WORKER_BYTES`` (the interpreter with the engine imported, 115 MB, and its
 #: loaded kernels) + ``SCENE_COPY_FACTOR`` × the pickled scene (BVH, lights, tracers), besides its batches; measured
