@@ -20,7 +20,7 @@ import sys
 import time
 
 from .errors import SceneError
-from .scene.description import HALVES_MODES, LIGHT_PATH_FIELDS, LIGHT_TREE_MODES
+from .scene.description import HALVES_MODES, LIGHT_PATH_FIELDS, LIGHT_TREE_MODES, PARALLEL_MODES
 
 
 class ProgressBar:
@@ -33,6 +33,9 @@ class ProgressBar:
         self._first = None          # (elapsed, fraction) at the first traced batch
 
     def __call__(self, fraction: float, stats: dict) -> None:
+        if stats.get("message"):            # a note before the first batch (engine.render.processes)
+            self.note(f"polar: {stats['message']}…")
+            return
         filled = int(round(fraction * self.width))
         elapsed = time.perf_counter() - self.t0
         # The estimate starts at the first traced batch: what came before it (loading or compiling
@@ -149,7 +152,8 @@ def _load_scene(path):
 
 #: Options of `render` (and `estimate`, which has some of them) that override the scene's render block.
 SETTING_OPTIONS = ("spp", "seed", "max_depth", "spectral", "polarisation", "wavelength_nm", "simplify",
-                   "reduce_spectral", "sampler", "halves", "light_tree", *(f.name for f in LIGHT_PATH_FIELDS))
+                   "reduce_spectral", "sampler", "halves", "light_tree", "parallel",
+                   *(f.name for f in LIGHT_PATH_FIELDS))
 
 
 def _settings_from_options(scene, args):
@@ -164,7 +168,7 @@ def _settings_from_options(scene, args):
     merged = {**{k: getattr(st, k) for k in ("spp", "max_depth", "rr_depth", "seed", "spectral",
                                               "wavelength_nm", "polarisation", "batch_rays", "threads",
                                               "reduce_spectral", "simplify", "sampler", "halves", "light_tree",
-                                              *(f.name for f in LIGHT_PATH_FIELDS))}, **overrides}
+                                              "parallel", *(f.name for f in LIGHT_PATH_FIELDS))}, **overrides}
     try:
         st = parse_settings(merged, "option")
     except SceneError as e:
@@ -887,6 +891,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="next-event estimation's light choice: on (the light tree over lamps and emissive triangles, "
                         "as Cycles' Light Tree), off (the scene's light_selection over whole lights) or auto (default: "
                         "the tree where the scene has more than 64 emitters)")
+    r.add_argument("--parallel", choices=PARALLEL_MODES,
+                   help="how the local workers run: threads, processes (a pool of worker processes: every core, also "
+                        "where Python-shaded materials make threads convoy on the GIL) or auto (default: processes "
+                        "where threads would convoy and the render is large enough to pay for starting them)")
     _light_path_options(r)
     r.add_argument("--exposure", type=float, default=0.0, help="preview exposure in stops")
     r.add_argument("--no-previews", action="store_true", help="write only the EXR")

@@ -25,5 +25,7 @@ def register():
 def unregister():
     from . import kernel_cache
     kernel_cache.stop_precompile()
+    from ..engine.render.processes import close_pool
+    close_pool()                # the render's worker processes (engine.render.processes)
     for module in reversed(_modules()):
         module.unregister()

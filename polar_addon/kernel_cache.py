@@ -19,12 +19,10 @@ stopped when the extension is disabled or Blender quits.
 """
 
 import atexit
-import json
 import logging
 import os
 import shutil
 import subprocess
-import sys
 import time
 import tomllib
 
@@ -94,35 +92,23 @@ WAIT_POLL = 0.2
 #: The background compile's process (subprocess.Popen), its log file, and whether its end was reported.
 _PRECOMPILE = {"process": None, "log": None, "reported": False, "installed": False}
 
-#: Child process: import the engine under the extension's own package name (its modules' names are in
-#: Numba's cache entries) without running the extension's __init__ (which needs bpy), then precompile.
-_BOOTSTRAP = """
-import importlib, json, os, sys, types
-package, folder, paths = sys.argv[1], sys.argv[2], json.loads(sys.argv[3])
-sys.path[:0] = [p for p in paths if p not in sys.path]
+#: Child process: the engine imported under the extension's own package name (its modules' names are in Numba's
+#: cache entries) without running the extension's __init__ (which needs bpy: engine.render.bootstrap), then precompile.
+_NICE = """
 try:
     os.nice(10)                  # behind Blender's own work
 except (AttributeError, OSError):
     pass
-parts = package.split(".") if package else []
-for i in range(len(parts)):
-    name = ".".join(parts[:i + 1])
-    module = types.ModuleType(name)
-    module.__path__ = [folder] if i == len(parts) - 1 else []
-    sys.modules[name] = module
-    if i:
-        setattr(sys.modules[".".join(parts[:i])], parts[i], module)
-if not package:
-    sys.path.insert(0, folder)
-engine = (package + ".engine") if package else "engine"
+"""
+_PRECOMPILE_BODY = """
 sys.exit(importlib.import_module(engine + ".render.precompile").main(["--threads", "1"]))
 """
 
 
 def precompile_command(extension_package: str) -> list:
     """The command of the background compile (tests replace it with a slow or failing one)."""
-    paths = [p for p in sys.path if p and os.path.isdir(p)]
-    return [sys.executable, "-c", _BOOTSTRAP, extension_package, _ROOT, json.dumps(paths)]
+    from ..engine.render.bootstrap import child_command
+    return child_command(_PRECOMPILE_BODY, _NICE, extension_package, _ROOT)
 
 
 def _wanted(installed: bool) -> bool:

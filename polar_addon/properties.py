@@ -57,6 +57,14 @@ HALVES_ITEMS = [
      "whose difference estimates the error (adaptive sampling's)", 2),
 ]
 HALVES_TO_ENGINE = {"AUTO": "auto", "ONE_SEQUENCE": "one_sequence", "INDEPENDENT": "independent"}
+PARALLEL_ITEMS = [
+    ("AUTO", "Auto", "Worker processes where many materials would make threads slower and the render pays for "
+     "starting them (a second or two, once per Blender session); otherwise threads", 0),
+    ("THREADS", "Threads", "Worker threads of Blender's process", 1),
+    ("PROCESSES", "Processes", "A pool of worker processes kept between renders: every core, also for scenes "
+     "whose materials make threads contend (the first render starts them)", 2),
+]
+PARALLEL_TO_ENGINE = {"AUTO": "auto", "THREADS": "threads", "PROCESSES": "processes"}
 SAMPLER_TO_ENGINE = {"INDEPENDENT": "independent", "STRATIFIED": "stratified", "SOBOL": "sobol", "PADDED": "padded",
                      "CYCLES": "cycles"}
 
@@ -125,6 +133,8 @@ class PolarRenderSettings(bpy.types.PropertyGroup):
                                                      "where many materials would make two threads slower)",
                          default=0, min=0,
                          max=256)
+    parallel: EnumProperty(name="Parallel", items=PARALLEL_ITEMS, default="AUTO",
+                           description="How the workers run: threads or worker processes (the image is the same)")
     batch_rays: IntProperty(name="Batch Size", description="Paths traced at once; lower it to save memory",
                             default=1 << 17, min=1024, max=1 << 24)
     texture_bake_resolution: IntProperty(name="Texture Bake Resolution", description="Texels per side of the "

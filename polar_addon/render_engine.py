@@ -27,8 +27,8 @@ from ..engine.postprocess.mosaic import mosaic as polarisation_mosaic
 from ..engine.spectral.cie import LUMINANCE_WEIGHTS
 from . import passes
 from .compositor import DenoiseUnavailable, denoise_stokes, polariser_inputs
-from .properties import (DEFAULT_PASSES, DENOISE_PASSES, HALVES_TO_ENGINE, NOISE_QUANTITY_TO_ENGINE, PASS_NAMES,
-                         POLARISATION_TO_ENGINE, SAMPLER_TO_ENGINE)
+from .properties import (DEFAULT_PASSES, DENOISE_PASSES, HALVES_TO_ENGINE, NOISE_QUANTITY_TO_ENGINE,
+                         PARALLEL_TO_ENGINE, PASS_NAMES, POLARISATION_TO_ENGINE, SAMPLER_TO_ENGINE)
 from .ui_names import ui_message
 from .viewport import ViewportSession, stop_all_sessions
 from ..engine import kernels
@@ -78,7 +78,7 @@ def engine_settings(scene, preview=False) -> RenderSettings:
                           max_depth=min(p.max_bounces, total) + 2,
                           rr_depth=5, seed=seed, spectral=SPECTRAL_TO_ENGINE[p.spectral],
                           wavelength_nm=p.wavelength_nm, polarisation=POLARISATION_TO_ENGINE[p.polarisation],
-                          batch_rays=p.batch_rays, threads=p.threads,
+                          batch_rays=p.batch_rays, threads=p.threads, parallel=PARALLEL_TO_ENGINE[p.parallel],
                           simplify="auto" if p.skip_clear_layers else "off",
                           sampler=SAMPLER_TO_ENGINE[p.sampler], halves=HALVES_TO_ENGINE[p.halves],
                           light_tree=light_tree, **light_paths)
@@ -296,6 +296,9 @@ class PolarRenderEngine(bpy.types.RenderEngine):
             settings = dataclasses.replace(settings, denoise_data=True)
 
         def progress(fraction, stats):
+            if stats.get("message"):            # before the first unit (engine.render.processes)
+                self.update_stats("", f"Polar | {stats['message']}")
+                return
             self.update_progress(fraction)
             self.update_stats("", f"Polar | {stats['transport']} | {100 * fraction:.0f}% | "
                                   f"{msamples_per_second(stats):.2f} Msamples/s")

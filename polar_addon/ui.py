@@ -88,6 +88,7 @@ class POLAR_PT_performance(_PolarPanel, bpy.types.Panel):
         layout = self.layout
         layout.use_property_split = True
         layout.prop(p, "threads")
+        layout.prop(p, "parallel")
         layout.prop(p, "batch_rays")
         col = layout.column(align=True)
         col.prop(p, "world_bake_resolution")

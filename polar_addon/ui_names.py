@@ -25,6 +25,7 @@ RENDER_SETTINGS = {
     "polarisation": ("polarisation", "Render Properties ▸ Polarisation & Spectrum ▸ Polarisation"),
     "batch_rays": ("batch_rays", "Render Properties ▸ Performance ▸ Batch Size"),
     "threads": ("threads", "Render Properties ▸ Performance ▸ Threads"),
+    "parallel": ("parallel", "Render Properties ▸ Performance ▸ Parallel"),
     "reduce_spectral": (None, _FIXED),
     "simplify": ("skip_clear_layers", "Render Properties ▸ Polarisation & Spectrum ▸ Skip Clear Layers"),
     "sampler": ("sampler", "Render Properties ▸ Sampling ▸ Pattern"),

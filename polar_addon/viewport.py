@@ -329,7 +329,10 @@ class ViewportSession:
                     renderer.set_camera(camera)
                     view = camera
                 from ..engine.render.renderer import RenderRequest
-                out = renderer.render(RenderRequest(dataclasses.replace(settings, spp=1, seed=settings.seed + n),
+                # threads: a 1-sample pass per redraw, and every camera move would send and compile the scene
+                # in each worker process again (engine.render.processes)
+                out = renderer.render(RenderRequest(dataclasses.replace(settings, spp=1, seed=settings.seed + n,
+                                                                        parallel="threads"),
                                                     should_stop=lambda g=generation: self._stop
                                                     or self._generation != g))
             except Exception as e:  # noqa: BLE001 — shown in the viewport header instead

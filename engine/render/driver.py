@@ -46,9 +46,15 @@ def local_workers(cores: int, materials) -> int:
     threads then convoy on the GIL), else ``cores``.  Lambert materials (one LambertSet) and smooth (delta-only)
     materials do not count: a smooth vertex is a few calls around compiled steps, no light sampling.  The image does
     not depend on it (engine.render.plan)."""
+    return 1 if convoys(materials) else cores
+
+
+def convoys(materials) -> bool:
+    """True where ``CONVOY_MATERIALS`` or more of the scene's used ``materials`` are shaded by separate Python
+    calls per bounce (``local_workers``): threads then convoy on the GIL, worker processes do not
+    (engine.render.processes)."""
     from ..materials.lambert import LambertSet
-    python_shaded = [m for m in materials if not (LambertSet.batchable(m) or m.flags.is_delta_only)]
-    return 1 if len(python_shaded) >= CONVOY_MATERIALS else cores
+    return sum(not (LambertSet.batchable(m) or m.flags.is_delta_only) for m in materials) >= CONVOY_MATERIALS
 
 
 class StopCheck:
@@ -146,6 +152,7 @@ class LocalThreads:
 
     local = True
     error = None
+    warning = None          # why worker processes were asked for but not used (engine.render.processes)
 
     def __init__(self, workers: int):
         self.workers = max(1, int(workers))

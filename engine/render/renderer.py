@@ -32,7 +32,7 @@ from .blas_threads import one_blas_thread
 from ..kernels import BACKEND as KERNEL_BACKEND
 from ..kernels import COMPILES as KERNEL_COMPILES
 from .camera import CameraModel
-from .driver import LocalThreads, UniformPasses, drive, local_workers
+from .driver import LocalThreads, UniformPasses, convoys, drive, local_workers
 from .film import Film, HalfBuffers, SampleSums
 from .integrator import PathTracer
 from .media import tracked_media
@@ -71,8 +71,14 @@ def stats_line(stats: dict, sep: str = "; ") -> str:
     parts = [f"{stats['samples']} samples in {stats.get('seconds', 0.0):.2f} s ({msamples_per_second(stats):.3f} "
              f"Msamples/s), {stats['rays']} rays + {stats['shadow_rays']} shadow rays",
              f"transport: {stats['transport_reason']}", f"spectral: {stats['spectral']}", kernels]
-    if stats.get("threads_reason"):
+    if stats.get("parallel") == "processes":
+        started = (f"; started in {stats['pool_start_seconds']:.1f} s, first render only"
+                   if stats.get("pool_start_seconds") else "")
+        parts.append(f"parallel: {stats['threads']} processes ({stats['parallel_reason']}{started})")
+    elif stats.get("threads_reason"):
         parts.append(f"threads: {stats['threads']} ({stats['threads_reason']})")
+    if stats.get("parallel_warning"):
+        parts.append(f"parallel: {stats['parallel_warning']}")
     parts += [f"simplified: {why}" for why in stats.get("simplified", [])]
     if stats.get("light_paths"):
         parts.append(f"light paths: {stats['light_paths']}")
@@ -124,12 +130,13 @@ def available_memory() -> int:
         return 0
 
 
-def check_memory(plan: RenderPlan) -> None:
-    """A SceneError if a local render of ``plan`` needs more than 80 % of this machine's memory."""
+def check_memory(plan: RenderPlan, scene_copies: int = 0) -> None:
+    """A SceneError if a local render of ``plan`` needs more than 80 % of this machine's memory; ``scene_copies``:
+    bytes of the worker processes' compiled scenes (engine.render.processes)."""
     W, H, st = plan.width, plan.height, plan.settings
-    need, have = memory_estimate(W, H, st.batch_rays, plan.workers), available_memory()
+    need, have = memory_estimate(W, H, st.batch_rays, plan.workers) + scene_copies, available_memory()
     if have and need > 0.8 * have:
-        max_pixels = max(int((0.8 * have - plan.workers * st.batch_rays * BATCH_BYTES_PER_PATH)
+        max_pixels = max(int((0.8 * have - plan.workers * st.batch_rays * BATCH_BYTES_PER_PATH - scene_copies)
                              / FILM_BYTES_PER_PIXEL), 0)
         raise SceneError("camera.width", f"a {W}×{H} render needs about {need / 2**30:.1f} GiB but this machine "
                                          f"has {have / 2**30:.1f} GiB: use at most ~{max_pixels:,} pixels "
@@ -237,19 +244,48 @@ class Renderer:
             # "auto" halves resolve to one sequence, adaptive or not (engine.render.halves: classes A/B)
             plan = self.plan(request.settings, request.window)
             with self._executor(request, plan) as executor:
-                if not executor.local:
-                    plan = dataclasses.replace(plan, workers=executor.workers)
+                if executor.workers != plan.workers:
+                    plan = dataclasses.replace(plan, workers=executor.workers,
+                                               threads_reason="" if executor.local else plan.threads_reason)
                 return self._render(plan, request, executor)
 
     @contextlib.contextmanager
     def _executor(self, request: RenderRequest, plan: RenderPlan):
         if request.scheduler is None:
-            check_memory(plan)
-            yield LocalThreads(plan.workers)
+            with self._local_executor(request, plan) as executor:
+                yield executor
             return
         from .distributed import DaskCluster
         with DaskCluster(request.scheduler, self.scene, trace_on_worker) as cluster:
             yield cluster
+
+    def _local_executor(self, request: RenderRequest, plan: RenderPlan):
+        """Worker processes or threads for a local render of ``plan`` (RenderSettings.parallel, decided by
+        engine.render.processes.choose_parallel); processes that cannot start (or whose scene copies would not fit in
+        memory: check_memory): threads, whose ``warning`` says why."""
+        from .processes import SCENE_COPY_FACTOR, WORKER_BYTES, LocalProcesses, StartFailed, choose_parallel, \
+            dumps_scene
+        st = plan.settings
+        workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
+        x0, y0, x1, y1 = plan.window or (0, 0, plan.width, plan.height)
+        used = [plan.materials[i] for i in self.compiled.used_materials]
+        mode, why = choose_parallel(st.parallel, workers, convoys(used), (x1 - x0) * (y1 - y0) * st.spp)
+        warning = None
+        if mode == "processes":
+            try:
+                blob = dumps_scene(self.scene)
+                try:        # each worker holds its own compiled scene
+                    check_memory(dataclasses.replace(plan, workers=workers),
+                                 workers * (WORKER_BYTES + SCENE_COPY_FACTOR * len(blob)))
+                except SceneError as e:
+                    raise StartFailed(f"{workers} copies of the scene do not fit: {e.reason}") from None
+                return contextlib.closing(LocalProcesses(blob, workers, why, request.progress))
+            except StartFailed as e:
+                warning = f"worker processes could not start ({e}); rendered on threads"
+        check_memory(plan)
+        threads = LocalThreads(plan.workers)
+        threads.warning = warning
+        return contextlib.nullcontext(threads)
 
     def _render(self, plan: RenderPlan, request: RenderRequest, executor) -> RenderResult:
         W, H = plan.width, plan.height
@@ -292,6 +328,8 @@ class Renderer:
                      compiled_in_render=count > 0)
         if executor.error:
             stats["error"] = executor.error
+        if getattr(executor, "warning", None):
+            stats["parallel_warning"] = executor.warning
         return RenderResult(film=film, settings=plan.settings, stats=stats, cancelled=cancelled,
                             halves=schedule.halves)
 
@@ -306,8 +344,13 @@ def continue_as_drawn(request: RenderRequest, scene_settings: RenderSettings) ->
     return dataclasses.replace(request, settings=dataclasses.replace(settings, halves=film.halves))
 
 
+#: Tracers (settings) a worker keeps for its scene.
+WORKER_TRACERS = 4
+
+
 class _WorkerScenes:
-    """On a Dask worker: the compiled scene of the render in progress and its tracers (one scene at a time)."""
+    """On a Dask worker or a local worker process (engine.render.processes): the compiled scene of the render in
+    progress and the tracers of its last ``WORKER_TRACERS`` settings (one scene at a time)."""
 
     def __init__(self):
         self.lock = threading.Lock()
@@ -320,6 +363,8 @@ class _WorkerScenes:
                 self.renderer, self.key = Renderer(scene), key
             which = (repr(settings), count_cost)
             if which not in self.tracers:
+                if len(self.tracers) >= WORKER_TRACERS:     # a pool kept for many renders (seeds): the oldest goes
+                    self.tracers.pop(next(iter(self.tracers)))
                 self.tracers[which] = self.renderer.tracer(self.renderer.plan(settings), count_cost)
             return self.tracers[which]
 

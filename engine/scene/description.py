@@ -421,6 +421,10 @@ class RenderSettings:
     polarisation: str = "auto"
     batch_rays: int = 1 << 17
     threads: int = 0              # worker threads; 0 = automatic (one per CPU core; one where materials convoy)
+    #: How the local workers run (engine.render.processes): "threads" (of this process), "processes" (a pool of
+    #: worker processes kept between renders: every core, also where Python-shaded materials make threads convoy on
+    #: the GIL) or "auto" (processes where threads would convoy and the pool's start is amortised).  Same image.
+    parallel: str = "auto"
     #: Where no material depends on λ: "auto" traces in RGB with each light's exactly integrated
     #: colour (no chromatic noise, same expectation); "exact" keeps the 4 sampled wavelengths but
     #: one Mueller product per path (bit-for-bit the per-wavelength estimator); "off" never reduces.
@@ -530,6 +534,8 @@ def resolve_halves(settings):
 
 #: RenderSettings.halves' values
 HALVES_MODES = ("auto", "independent", "one_sequence")
+#: RenderSettings.parallel's values
+PARALLEL_MODES = ("auto", "threads", "processes")
 #: RenderSettings.light_tree's values
 LIGHT_TREE_MODES = ("auto", "on", "off")
 

@@ -30,8 +30,8 @@ from ..polarisation.sources import DirectionalPolarisation, parse_polarisation
 from ..textures import TexturedNumber, parse_texture_input, textured_emission
 from ..textures.image import read_image
 from .description import (EMISSION_SAMPLING, ENVMAP_GRIDS, HALVES_MODES, LIGHT_PATH_FIELDS, LIGHT_TREE_MODES,
-                          SAMPLERS, SPECTRAL_MODES, Camera, DirectionalLight, EnvironmentLight, Interior, Mesh,
-                          PointLight, RenderSettings, Scene, SpotLight)
+                          PARALLEL_MODES, SAMPLERS, SPECTRAL_MODES, Camera, DirectionalLight, EnvironmentLight,
+                          Interior, Mesh, PointLight, RenderSettings, Scene, SpotLight)
 from ..errors import SceneError
 from .meshio import read_mesh
 from .shapes import icosphere, quad, transform_matrix, transform_mesh
@@ -341,7 +341,7 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
         raise SceneError(field, "must be an object")
     _check_keys(d, field, {"spp", "max_depth", "rr_depth", "seed", "spectral", "wavelength_nm",
                            "polarisation", "batch_rays", "threads", "reduce_spectral", "simplify",
-                           "sampler", "halves", "light_tree", *(f.name for f in LIGHT_PATH_FIELDS)})
+                           "sampler", "halves", "light_tree", "parallel", *(f.name for f in LIGHT_PATH_FIELDS)})
     s = RenderSettings()                 # the defaults
     return RenderSettings(
         **light_path_settings(d, field),
@@ -355,6 +355,7 @@ def parse_settings(d: dict, field: str = "render") -> RenderSettings:
                             ("auto", "full", "linear", "off")),
         batch_rays=integer(d.get("batch_rays", s.batch_rays), f"{field}.batch_rays", 1024, 1 << 24),
         threads=integer(d.get("threads", s.threads), f"{field}.threads", 0, 256),
+        parallel=choice(d.get("parallel", s.parallel), f"{field}.parallel", PARALLEL_MODES),
         reduce_spectral=choice(d.get("reduce_spectral", s.reduce_spectral), f"{field}.reduce_spectral",
                                ("auto", "exact", "off")),
         simplify=choice(d.get("simplify", s.simplify), f"{field}.simplify", ("auto", "off")),

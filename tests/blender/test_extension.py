@@ -146,16 +146,17 @@ def test_smoke_set_installs_enables_renders_and_runs_the_operators(smoke, series
     enables, a Principled + Polarising BSDF scene renders every pass, the Virtual Polariser's
     composite is Malus' law on the passes, the Polar Denoise group denoises, and a material edit
     re-exports the material alone in the viewport (Blender 5.3 also flags the geometry of the
-    objects using it), a Normal Map set to the DirectX convention (5.1 on) is exported as such, and the LCD
-    preset and the Sky Polarisation of every sky type of that Blender export polarised sources."""
+    objects using it), the render on worker processes equals the threaded one pass for pass (and the processes
+    end when the extension is disabled), a Normal Map set to the DirectX convention (5.1 on) is exported as such,
+    and the LCD preset and the Sky Polarisation of every sky type of that Blender export polarised sources."""
     result = smoke(series)
     assert result["install"] == "ok", result["log"]
     release, python = blender_envs.RELEASES[series]
     assert result["blender"].startswith(release) and result["python"] == python, result
-    for stage in ("enable", "render", "polariser", "denoise", "viewport", "normal_map", "sources"):
+    for stage in ("enable", "render", "processes", "polariser", "denoise", "viewport", "normal_map", "sources"):
         assert result.get(stage) == "ok", (stage, result.get(stage), result["log"])
     assert result["backend"].startswith("numba")          # the bundled wheels of this Python loaded
-    assert judge(result) == {"passes": "ok", "polariser": "ok", "denoise": "ok", "viewport": "ok",
+    assert judge(result) == {"passes": "ok", "processes": "ok", "polariser": "ok", "denoise": "ok", "viewport": "ok",
                              "normal_map": "ok", "sources": "ok"}
 
 

@@ -107,6 +107,15 @@ def judge(result):
             return "the Brewster floor is not polarised"
         return None
 
+    def processes():
+        threads, procs = read_layer(os.path.join(out, "render.exr")), read_layer(os.path.join(out, "processes.exr"))
+        differ = [p for p in PASSES if not np.array_equal(threads[p], procs[p])]
+        if differ:
+            return f"worker processes changed {', '.join(differ)}"
+        if result.get("processes_after_disable"):
+            return f"{result['processes_after_disable']} worker process(es) outlived the extension"
+        return None
+
     def polariser():
         path = os.path.join(out, "polariser.exr")
         S = read_layer(path)
@@ -150,6 +159,7 @@ def judge(result):
         return None
 
     check("passes", "render", passes)
+    check("processes", "processes", processes)
     check("polariser", "polariser", polariser)
     check("denoise", "denoise", denoise)
     check("viewport", "viewport", viewport)

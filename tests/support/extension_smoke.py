@@ -196,6 +196,18 @@ def main(out_dir, angle):
         return report
     scene, compat = state["scene"], state["compat"]
 
+    @stage(report, "processes")
+    def _processes():       # the same render on the worker processes (engine.render.processes): judged identical
+        processes = sys.modules[EXTENSION + ".engine.render.processes"]
+        scene.polar.parallel = "PROCESSES"
+        try:
+            render(scene, out_dir, "processes")
+        finally:
+            scene.polar.parallel = "AUTO"
+        if processes.pool_running() < 1:
+            raise RuntimeError("no worker process ran")
+        state["pids"] = [w.proc.pid for w in processes.pool().workers]
+
     @stage(report, "polariser")
     def _polariser():
         scene.polar.polariser_type = "LINEAR"
@@ -226,7 +238,19 @@ def main(out_dir, angle):
         report["polarised_sources"] = polarised_sources(state["ext"])
 
     addon_utils.disable(EXTENSION, default_set=False)
+    if state.get("pids"):       # unregister ends the worker processes
+        alive = [p for p in state["pids"] if os.path.exists(f"/proc/{p}") and "Z" not in _state_of(p)]
+        report["processes_after_disable"] = len(alive) if sys.platform.startswith("linux") else 0
     return report
+
+
+def _state_of(pid) -> str:
+    """A Linux process's state letter ("Z": ended, not yet reaped)."""
+    try:
+        with open(f"/proc/{pid}/stat") as f:
+            return f.read().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return "Z"
 
 
 if __name__ == "__main__":
