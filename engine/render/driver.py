@@ -49,12 +49,18 @@ def local_workers(cores: int, materials) -> int:
     return 1 if convoys(materials) else cores
 
 
-def convoys(materials) -> bool:
-    """True where ``CONVOY_MATERIALS`` or more of the scene's used ``materials`` are shaded by separate Python
-    calls per bounce (``local_workers``): threads then convoy on the GIL, worker processes do not
-    (engine.render.processes)."""
+def python_shaded(materials) -> int:
+    """How many of the scene's used ``materials`` are shaded by separate Python (NumPy) calls per bounce: all but a
+    LambertSet's and the smooth (delta-only) ones, whose vertices are a few calls around compiled steps."""
     from ..materials.lambert import LambertSet
-    return sum(not (LambertSet.batchable(m) or m.flags.is_delta_only) for m in materials) >= CONVOY_MATERIALS
+    return sum(not (LambertSet.batchable(m) or m.flags.is_delta_only) for m in materials)
+
+
+def convoys(materials) -> bool:
+    """True where ``CONVOY_MATERIALS`` or more of the scene's used ``materials`` are shaded by Python calls
+    (``python_shaded``, ``local_workers``): two threads then convoy on the GIL, worker processes do not
+    (engine.render.processes)."""
+    return python_shaded(materials) >= CONVOY_MATERIALS
 
 
 class StopCheck:

@@ -251,6 +251,8 @@ class WorkerPool:
         self.lock = threading.Lock()
         self.rounds = 0              # rounds run (LocalProcesses.run), the id of a round's job
         self.command = None          # (tests: a child that cannot start)
+        self.starting = False        # start_in_background's thread is starting workers
+        self.unavailable = None      # why a background start failed (auto does not try again)
 
     @property
     def running(self) -> int:
@@ -348,23 +350,49 @@ def kernels_ready() -> bool:
     return precompiled()
 
 
-def choose_parallel(mode: str, workers: int, convoy: bool, paths: int) -> tuple[str, str]:
-    """("threads" | "processes", why) for a local render: ``mode`` RenderSettings.parallel; ``workers`` the worker
-    count (one per core, or ``threads``); ``convoy``: the scene's materials would make two threads convoy on the
-    GIL (driver.convoys); ``paths``: pixels × samples to trace.  "auto" takes processes where threads convoy and
-    the pool's start is amortised: the pool runs already, or the render traces ``AMORTISED_PATHS`` or more and
-    the kernel cache is filled (``kernels_ready``); else threads (the peer scenes, which do not convoy, scale as
-    well on threads)."""
+def choose_parallel(mode: str, workers: int, shaded: bool, paths: int) -> tuple[str, str, bool]:
+    """("threads" | "processes", why, start the pool in the background) for a local render: ``mode``
+    RenderSettings.parallel; ``workers`` the worker count (one per core, or ``threads``); ``shaded``: the scene has
+    materials shaded by Python calls per bounce (driver.python_shaded), on which two threads hand the GIL to each
+    other (the real assets: 2 processes took 0.74–0.92× the wall time of threads on 12 of 14 cases; the peer scenes,
+    delta and Lambert only, 1.11× on fresnel_sphere: threads); ``paths``: pixels × samples to trace.  "auto" takes
+    processes there when the pool runs already, or the render traces ``AMORTISED_PATHS`` or more and the kernel
+    cache is filled (``kernels_ready``); a smaller render runs on threads and starts the pool in the background
+    (the third value), so that the renders after it (an animation's frames, re-renders) find it running."""
     if mode != "auto":
-        return mode, "set by render.parallel"
-    if workers < 2 or not convoy:
-        return "threads", ""
+        return mode, "set by render.parallel", False
+    if workers < 2 or not shaded:
+        return "threads", "", False
     why = "automatic: the scene's materials are shaded by Python calls that threads would contend for"
-    if pool_running():
-        return "processes", why
-    if paths >= AMORTISED_PATHS and kernels_ready():
-        return "processes", why + "; starting the workers pays at this size"
-    return "threads", ""
+    if pool_running() >= workers:
+        return "processes", why, False
+    if not kernels_ready():
+        return "threads", "", False
+    if paths >= AMORTISED_PATHS:
+        return "processes", why + "; starting the workers pays at this size", False
+    return "threads", "", True
+
+
+def start_in_background(workers: int) -> bool:
+    """Start the pool's ``workers`` processes on a daemon thread, holding the pool (a render that asks for it
+    meanwhile waits: LocalProcesses); False if they run or are starting already.  A pool that cannot start is not
+    tried again in this process (``pool().unavailable`` says why)."""
+    p = pool()
+    with _POOL_LOCK:
+        if p.starting or p.unavailable or p.running >= workers:
+            return False
+        p.starting = True
+
+    def start():
+        try:
+            with p.lock:
+                p.ensure(workers)
+        except StartFailed as e:
+            p.unavailable = str(e)
+        finally:
+            p.starting = False
+    threading.Thread(target=start, daemon=True, name="polar-pool-start").start()
+    return True
 
 
 class LocalProcesses:
@@ -376,12 +404,14 @@ class LocalProcesses:
     local = True
     error = None
 
-    def __init__(self, blob: bytes, workers: int, reason: str, progress=None):
+    def __init__(self, blob: bytes, workers: int, reason: str, progress=None, key: str | None = None):
         self.workers, self.reason, self.warning = max(1, int(workers)), reason, None
         self.blob = blob
-        self.key = hashlib.sha1(self.blob).hexdigest()      # as distributed.scene_key, from the one pickle
+        # as distributed.scene_key, from the one pickle (``key``: the caller's, of the same blob)
+        self.key = key or hashlib.sha1(self.blob).hexdigest()
         self.pool = pool()
-        if not self.pool.lock.acquire(blocking=False):
+        waits = self.pool.starting          # the background start holds the pool until its workers answer
+        if not self.pool.lock.acquire(timeout=START_TIMEOUT if waits else 0):
             raise StartFailed("the worker processes are busy with another render")
         try:
             if self.pool.running < self.workers and progress is not None:

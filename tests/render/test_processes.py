@@ -186,22 +186,46 @@ def test_bad_parallel_value_is_one_line_naming_the_field():
     assert parse_settings({"parallel": "processes"}).parallel == "processes"
 
 
-def test_auto_takes_processes_where_threads_convoy_and_the_start_pays(monkeypatch):
+def test_auto_takes_processes_where_python_shades_and_the_start_pays(monkeypatch):
     choose = processes.choose_parallel
     monkeypatch.setattr(processes, "pool_running", lambda: 0)
     monkeypatch.setattr(processes, "kernels_ready", lambda: True)
     big, small = processes.AMORTISED_PATHS, processes.AMORTISED_PATHS // 8
     assert choose("auto", 2, True, big)[0] == "processes"
     assert "automatic" in choose("auto", 2, True, big)[1]
-    assert choose("auto", 2, True, small)[0] == "threads"        # not worth starting the pool
-    assert choose("auto", 2, False, big)[0] == "threads"         # threads scale
-    assert choose("auto", 1, True, big)[0] == "threads"          # one worker
-    assert choose("threads", 2, True, big) == ("threads", "set by render.parallel")
+    # not worth waiting for the pool: threads now, the pool started in the background for the next renders
+    assert choose("auto", 2, True, small) == ("threads", "", True)
+    assert choose("auto", 2, False, big) == ("threads", "", False)     # delta/Lambert only: threads scale
+    assert choose("auto", 1, True, big)[0] == "threads"                # one worker
+    assert choose("threads", 2, True, big) == ("threads", "set by render.parallel", False)
     assert choose("processes", 2, False, 1)[0] == "processes"
     monkeypatch.setattr(processes, "kernels_ready", lambda: False)
-    assert choose("auto", 2, True, big)[0] == "threads"          # each worker would compile the kernels
+    assert choose("auto", 2, True, big) == ("threads", "", False)      # each worker would compile the kernels
     monkeypatch.setattr(processes, "pool_running", lambda: 2)
-    assert choose("auto", 2, True, small)[0] == "processes"       # running: always amortised
+    assert choose("auto", 2, True, small)[0] == "processes"            # running: always amortised
+
+
+def test_a_small_auto_render_starts_the_pool_for_the_next_ones(monkeypatch, many_materials):
+    """A render too small to wait for the workers runs on threads and starts them in the background; the next
+    render of the scene finds them and runs on processes, with the same image."""
+    import time
+    processes.close_pool()
+    monkeypatch.setattr(processes, "kernels_ready", lambda: True)
+    settings = dataclasses.replace(many_materials.settings, spp=2, threads=2, parallel="auto")
+    renderer = Renderer(many_materials)
+    first = renderer.render(settings)
+    assert first.stats.get("parallel", "threads") == "threads"
+    deadline = time.time() + 120
+    while processes.pool().starting and time.time() < deadline:
+        time.sleep(0.1)
+    assert processes.pool_running() == 2 and processes.pool().unavailable is None
+    second = renderer.render(settings)
+    assert second.stats["parallel"] == "processes" and "automatic" in second.stats["parallel_reason"]
+    same(second, first)
+    # threads asked for: the pool is neither used nor started
+    processes.close_pool()
+    renderer.render(dataclasses.replace(settings, parallel="threads"))
+    assert not processes.pool().starting and processes.pool_running() == 0
 
 
 def test_command_line_parallel_option_and_scene_field(tmp_path, capsys, monkeypatch):
