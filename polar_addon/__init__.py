@@ -20,12 +20,16 @@ def register():
     kernel_cache.warn_if_numpy_fallback(kernels)
     # Compile every kernel in a background process now, not in the first render (that waits for it).
     kernel_cache.start_precompile(__package__.rpartition(".")[0])
+    # A Blender session renders again and again: "auto" may start the worker processes after a small render
+    from ..engine.render.processes import keep_pool_warm
+    keep_pool_warm()
 
 
 def unregister():
     from . import kernel_cache
     kernel_cache.stop_precompile()
-    from ..engine.render.processes import close_pool
+    from ..engine.render.processes import close_pool, keep_pool_warm
+    keep_pool_warm(False)
     close_pool()                # the render's worker processes (engine.render.processes)
     for module in reversed(_modules()):
         module.unregister()

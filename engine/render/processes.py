@@ -313,6 +313,17 @@ class WorkerPool:
 
 _POOL: WorkerPool | None = None
 _POOL_LOCK = threading.Lock()
+#: Whether "auto" may start the pool in the background after a render too small to wait for it: only a host that
+#: renders again in this process (Blender: F12 after F12, an animation's frames) says so (``keep_pool_warm``); a
+#: command-line render is one render, whose process would start two workers only to end them.
+_WARM = False
+
+
+def keep_pool_warm(on: bool = True) -> None:
+    """Let "auto" start the pool in the background after small renders (``choose_parallel``): for hosts that render
+    again in this process (the Blender add-on on register; tests/bench/asset_speed.py's warm renders)."""
+    global _WARM
+    _WARM = bool(on)
 
 
 def pool() -> WorkerPool:
@@ -357,8 +368,9 @@ def choose_parallel(mode: str, workers: int, shaded: bool, paths: int) -> tuple[
     other (the real assets: 2 processes took 0.74–0.92× the wall time of threads on 12 of 14 cases; the peer scenes,
     delta and Lambert only, 1.11× on fresnel_sphere: threads); ``paths``: pixels × samples to trace.  "auto" takes
     processes there when the pool runs already, or the render traces ``AMORTISED_PATHS`` or more and the kernel
-    cache is filled (``kernels_ready``); a smaller render runs on threads and starts the pool in the background
-    (the third value), so that the renders after it (an animation's frames, re-renders) find it running."""
+    cache is filled (``kernels_ready``); a smaller render runs on threads and, where the host renders again in this
+    process (``keep_pool_warm``), starts the pool in the background (the third value), so that the renders after
+    it (an animation's frames, re-renders) find it running."""
     if mode != "auto":
         return mode, "set by render.parallel", False
     if workers < 2 or not shaded:
@@ -370,7 +382,7 @@ def choose_parallel(mode: str, workers: int, shaded: bool, paths: int) -> tuple[
         return "threads", "", False
     if paths >= AMORTISED_PATHS:
         return "processes", why + "; starting the workers pays at this size", False
-    return "threads", "", True
+    return "threads", "", _WARM
 
 
 def start_in_background(workers: int) -> bool:

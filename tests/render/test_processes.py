@@ -193,7 +193,10 @@ def test_auto_takes_processes_where_python_shades_and_the_start_pays(monkeypatch
     big, small = processes.AMORTISED_PATHS, processes.AMORTISED_PATHS // 8
     assert choose("auto", 2, True, big)[0] == "processes"
     assert "automatic" in choose("auto", 2, True, big)[1]
-    # not worth waiting for the pool: threads now, the pool started in the background for the next renders
+    # not worth waiting for the pool: threads now, and where the host renders again (keep_pool_warm: Blender) the pool
+    # starts in the background for the next renders; not for a command-line render (one render, then the exit)
+    assert choose("auto", 2, True, small) == ("threads", "", False)
+    monkeypatch.setattr(processes, "_WARM", True)
     assert choose("auto", 2, True, small) == ("threads", "", True)
     assert choose("auto", 2, False, big) == ("threads", "", False)     # delta/Lambert only: threads scale
     assert choose("auto", 1, True, big)[0] == "threads"                # one worker
@@ -211,6 +214,7 @@ def test_a_small_auto_render_starts_the_pool_for_the_next_ones(monkeypatch, many
     import time
     processes.close_pool()
     monkeypatch.setattr(processes, "kernels_ready", lambda: True)
+    monkeypatch.setattr(processes, "_WARM", True)           # (the Blender add-on's keep_pool_warm)
     settings = dataclasses.replace(many_materials.settings, spp=2, threads=2, parallel="auto")
     renderer = Renderer(many_materials)
     first = renderer.render(settings)
