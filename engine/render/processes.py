@@ -399,6 +399,10 @@ def start_in_background(workers: int) -> bool:
         try:
             with p.lock:
                 p.ensure(workers)
+                with _POOL_LOCK:
+                    orphaned = _POOL is not p        # close_pool ran meanwhile (the extension was disabled)
+                if orphaned:
+                    p.close()
         except StartFailed as e:
             p.unavailable = str(e)
         finally:

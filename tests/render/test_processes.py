@@ -232,6 +232,22 @@ def test_a_small_auto_render_starts_the_pool_for_the_next_ones(monkeypatch, many
     assert not processes.pool().starting and processes.pool_running() == 0
 
 
+def test_a_pool_closed_while_it_starts_in_the_background_leaves_no_workers():
+    """close_pool (the extension disabled) during a background start: the workers it was starting end too."""
+    import time
+    processes.close_pool()
+    before = children()
+    started = processes.pool()
+    assert processes.start_in_background(2)
+    processes.close_pool()
+    deadline = time.time() + 120
+    while started.starting and time.time() < deadline:
+        time.sleep(0.05)
+    time.sleep(0.5)
+    assert not started.starting and started.running == 0
+    assert children() - before == set()
+
+
 def test_command_line_parallel_option_and_scene_field(tmp_path, capsys, monkeypatch):
     import json
 
