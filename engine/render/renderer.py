@@ -161,14 +161,15 @@ class Renderer:
         self._live_film = None
         #: kernels compiled (count, seconds) in warm_up since the last render reported them
         self._warm_compiles = (0, 0.0)
+        #: (scene, its pickle for worker processes, the pickle's SHA-1): _scene_blob
+        self._blob = None
 
     def plan(self, settings: RenderSettings | None = None, window=None, workers: int | None = None) -> RenderPlan:
         """The RenderPlan of rendering this scene with ``settings`` (default: the scene's); threads not set
         (``workers`` None and ``settings.threads`` 0): as many as ``driver.local_workers`` decides."""
         plan = RenderPlan.resolve(self.scene, self.compiled, settings, window, workers)
         if workers is None and plan.settings.threads <= 0:
-            used = [plan.materials[i] for i in self.compiled.used_materials]
-            n = local_workers(plan.workers, used)
+            n = local_workers(plan.workers, self._used_materials(plan))
             why = ("automatic: one per CPU core" if n == plan.workers else
                    "automatic: one, as the scene's materials are shaded by Python calls that two threads would "
                    "contend for (threads > 0 overrides)")
@@ -268,8 +269,7 @@ class Renderer:
         st = plan.settings
         workers = st.threads if st.threads > 0 else (os.cpu_count() or 1)
         x0, y0, x1, y1 = plan.window or (0, 0, plan.width, plan.height)
-        used = [plan.materials[i] for i in self.compiled.used_materials]
-        mode, why, prestart = choose_parallel(st.parallel, workers, python_shaded(used) > 0,
+        mode, why, prestart = choose_parallel(st.parallel, workers, python_shaded(self._used_materials(plan)) > 0,
                                               (x1 - x0) * (y1 - y0) * st.spp)
         warning = None
         if prestart:
@@ -290,12 +290,16 @@ class Renderer:
         threads.warning = warning
         return contextlib.nullcontext(threads)
 
+    def _used_materials(self, plan: RenderPlan) -> list:
+        """The BSDFs of ``plan`` (its simplified materials) that the scene's objects use."""
+        return [plan.materials[i] for i in self.compiled.used_materials]
+
     def _scene_blob(self, dumps) -> tuple[bytes, str]:
         """(the scene pickled for worker processes, its SHA-1) (``dumps``: processes.dumps_scene), once per scene
         object: the compiled state follows ``self.scene`` (set_camera replaces it); pickling and hashing
         SpecGlossEmission's 16 MB took 20 ms a render."""
         import hashlib
-        cached = getattr(self, "_blob", None)
+        cached = self._blob
         if cached is None or cached[0] is not self.scene:
             blob = dumps(self.scene)
             cached = self._blob = (self.scene, blob, hashlib.sha1(blob).hexdigest())

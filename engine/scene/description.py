@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import SceneError
 
 
 @dataclass
@@ -423,7 +424,8 @@ class RenderSettings:
     threads: int = 0              # worker threads; 0 = automatic (one per CPU core; one where materials convoy)
     #: How the local workers run (engine.render.processes): "threads" (of this process), "processes" (a pool of
     #: worker processes kept between renders: every core, also where Python-shaded materials make threads convoy on
-    #: the GIL) or "auto" (processes where threads would convoy and the pool's start is amortised).  Same image.
+    #: the GIL) or "auto" (processes for scenes with Python-shaded materials once the pool runs or its start is
+    #: amortised: engine.render.processes.choose_parallel).  Same image.
     parallel: str = "auto"
     #: Where no material depends on λ: "auto" traces in RGB with each light's exactly integrated
     #: colour (no chromatic noise, same expectation); "exact" keeps the 4 sampled wavelengths but
@@ -523,7 +525,6 @@ def resolve_halves(settings):
     (settings built in Python skip the scene loader's check)."""
     mode = settings.halves
     if mode not in HALVES_MODES:
-        from ..errors import SceneError
         raise SceneError("render.halves", f"must be one of {', '.join(map(repr, HALVES_MODES))}, got {mode!r}")
     if not settings.stratified:
         mode = "independent"
