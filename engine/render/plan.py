@@ -210,26 +210,31 @@ def work_units(width: int, height: int, spp: int, batch_rays: int, first_pass: i
                window: Window | None = None, workers: int = 1) -> Iterator[tuple[int, int, int, int]]:
     """Yield (row0, row1, pass0, pass1) covering the window's rows × passes [first_pass, spp).
 
-    ``window`` restricts the rows here and the columns in ``unit_pixels``.  The passes are grouped by
-    ``batch_rays`` alone: a pixel's sums are added group by group, so the grouping fixes the image's
-    bits.  When that gives fewer than ``UNITS_PER_WORKER`` units per worker and fewer bands of rows than
-    ``workers`` (a small image, whose passes fit one batch), the rows are cut into ``workers`` (nearly)
-    equal bands, so that every worker gets a unit of each group.  Bands change no pixel's additions: the
-    image is the same for any ``workers`` (and on a Dask cluster).
+    ``window`` restricts the rows here and the columns in ``unit_pixels``.  The passes are grouped by the image's
+    size and ``batch_rays`` alone, never by ``workers``: a pixel's sums are added group by group, so the grouping
+    fixes the image's bits.  Groups are of equal size (16 passes that need two batches: 8 + 8, not 14 + 2, whose
+    small batch would pay a whole batch's per-bounce calls for a few paths), and an image whose rows fit one batch
+    but whose passes do not is grouped for bands of half its rows (96 × 96 at 16 spp: two bands of all 16 passes,
+    one batch for each of two workers, instead of two batches each).  When that gives fewer than
+    ``UNITS_PER_WORKER`` units per worker and fewer bands of rows than ``workers``, the rows are cut into
+    ``workers`` bands, so that every worker gets a unit of each group; bands are (nearly) equal.  Bands change no
+    pixel's additions: the image is the same for any ``workers`` (and on a Dask cluster).
     """
     x0, y0, x1, y1 = window or (0, 0, width, height)
     cols = max(x1 - x0, 1)
     rows = y1 - y0
+    todo = max(spp - first_pass, 0)
     rows_per_unit = max(1, min(rows, batch_rays // cols))
-    passes_per_unit = max(1, batch_rays // (rows_per_unit * cols))
-    bands, groups = -(-rows // rows_per_unit), -(-max(spp - first_pass, 0) // passes_per_unit)
+    if rows_per_unit == rows > 1 and rows * cols * todo > batch_rays:
+        rows_per_unit = -(-rows // 2)           # the passes do not fit one batch: group them for half-height bands
+    most = max(1, batch_rays // (rows_per_unit * cols))
+    groups = max(1, -(-todo // most))
+    bands = -(-rows // rows_per_unit)
     if bands < workers and groups * bands < UNITS_PER_WORKER * workers:
-        bands = min(workers, rows)      # (nearly) equal bands, one per worker
-        cuts = [y0 + i * rows // bands for i in range(bands + 1)]
-    else:
-        cuts = list(range(y0, y1, rows_per_unit)) + [y1]
-    for p0 in range(first_pass, spp, passes_per_unit):
-        p1 = min(spp, p0 + passes_per_unit)
+        bands = min(workers, rows)      # one band per worker
+    cuts = [y0 + i * rows // bands for i in range(bands + 1)]       # (nearly) equal bands
+    for g in range(groups if todo else 0):         # (nearly) equal groups, each within ``most``
+        p0, p1 = first_pass + g * todo // groups, first_pass + (g + 1) * todo // groups
         for r0, r1 in zip(cuts[:-1], cuts[1:]):
             yield r0, r1, p0, p1
 

@@ -26,7 +26,7 @@ def _coverage(units, width, window, spp, first_pass=0):
 
 
 @pytest.mark.parametrize("W,H,spp,batch,window,first_pass", [
-    (96, 96, 16, 1 << 17, None, 0),           # the asset suite's render: passes 14 + 2 before, one unit each
+    (96, 96, 16, 1 << 17, None, 0),           # the asset suite's render: two half-height bands of 16 passes
     (96, 96, 16, 73728, None, 0),
     (32, 32, 2, 1024, None, 0),
     (33, 7, 5, 1 << 17, None, 0),             # rows not divisible by the workers
@@ -55,10 +55,24 @@ def test_units_cover_every_row_and_pass_once_and_keep_the_pass_grouping(W, H, sp
         assert units == single
 
 
-def test_a_small_image_gives_both_workers_a_unit_of_every_pass_group():
-    units = list(work_units(96, 96, 16, 1 << 17, workers=2))
-    assert units == [(0, 48, 0, 14), (48, 96, 0, 14), (0, 48, 14, 16), (48, 96, 14, 16)]
-    assert list(work_units(96, 96, 16, 1 << 17)) == [(0, 96, 0, 14), (0, 96, 14, 16)]
+def test_a_small_image_gives_each_of_two_workers_one_batch_of_every_pass():
+    # 96 × 96 at 16 spp needs two batches of 2**17 paths: grouped for half-height bands, all 16 passes in one group,
+    # one unit per worker (before: 14 + 2 passes, two batches per worker, the second of 9,216 paths paying a whole
+    # batch's per-bounce calls)
+    for workers in (1, 2):
+        assert list(work_units(96, 96, 16, 1 << 17, workers=workers)) == [(0, 48, 0, 16), (48, 96, 0, 16)]
+    # an image that fits one batch stays one unit for one worker
+    assert list(work_units(24, 24, 6, 1 << 17)) == [(0, 24, 0, 6)]
+
+
+@pytest.mark.parametrize("W,H,spp,batch", [(96, 96, 128, 1 << 17), (64, 64, 16, 4096), (640, 480, 7, 1 << 17),
+                                           (1920, 1080, 16, 1 << 17), (33, 7, 50, 256)])
+def test_pass_groups_and_bands_are_balanced(W, H, spp, batch):
+    units = list(work_units(W, H, spp, batch))
+    sizes = {p1 - p0 for *_, p0, p1 in units}
+    heights = {r1 - r0 for r0, r1, *_ in units}
+    assert max(sizes) - min(sizes) <= 1 and max(heights) - min(heights) <= 1, (sizes, heights)
+    assert all((r1 - r0) * W * (p1 - p0) <= batch for r0, r1, p0, p1 in units)
 
 
 def test_two_threads_trace_at_least_two_units_and_give_the_same_bits(monkeypatch):
