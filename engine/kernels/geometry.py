@@ -241,13 +241,13 @@ def pinhole_rays_numba(pixel, u, W, H, shift_x, shift_y, tx, ty, forward, right,
 pinhole_rays = twin(_pinhole_loop and pinhole_rays_numba, pinhole_rays_numpy)
 
 
-def area_light_sample_numpy(p, u, cdf, tris, faces, vertices, tri_normal, total_area):
+def area_light_sample_numpy(p, u, cdf, tris, faces, vertices, tri_normal, total_area, two_sided=False):
     """Uniform-by-area points on an emitter's triangles seen from p (3, N), u (3, N) ∈ [0, 1).
 
     Row 0 of u picks the triangle (inverting ``cdf`` over ``tris``), rows 1–2 the point
     (b1 = 1 − √u1, b2 = u2·√u1).  Returns (wi (3, N) unit towards the point, dist (N,),
     scale = 1/pdf (N,), pdf (N,) solid angle = dist²/(cosθ_light·A_total), valid (N,): the
-    point's front face sees p).
+    point's front face sees p; ``two_sided``: either face, cosθ_light taken as |cosθ|).
     """
     idx = np.minimum(np.searchsorted(cdf, u[0], side="right"), len(tris) - 1)
     tri = tris[idx]
@@ -263,6 +263,8 @@ def area_light_sample_numpy(p, u, cdf, tris, faces, vertices, tri_normal, total_
     wi = to / np.where(dist > 0, dist, 1.0)
     n_l = tri_normal[tri].T
     cos_l = -((wi[0] * n_l[0] + wi[1] * n_l[1]) + wi[2] * n_l[2])
+    if two_sided:
+        cos_l = np.abs(cos_l)
     valid = (cos_l > 0) & (dist > 0)
     pdf = np.where(valid, dist2 / np.where(valid, cos_l, 1.0) / total_area, 0.0)
     return wi, dist, np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0), pdf, valid
@@ -284,7 +286,7 @@ def triangle_point_at(V, faces, t, u1, u2, p0, p1, p2):
 
 
 @jit
-def _area_light_loop(p, u, cdf, tris, faces, V, tri_normal, total_area, wi, dist, scale, pdf, valid):
+def _area_light_loop(p, u, cdf, tris, faces, V, tri_normal, total_area, two_sided, wi, dist, scale, pdf, valid):
     last = tris.shape[0] - 1
     for i in range(p.shape[1]):
         k = min(np.searchsorted(cdf, u[0, i], side="right"), last)
@@ -295,6 +297,8 @@ def _area_light_loop(p, u, cdf, tris, faces, V, tri_normal, total_area, wi, dist
         s = d if d > 0 else 1.0
         x0, x1, x2 = t0 / s, t1 / s, t2 / s
         cos_l = -((x0 * tri_normal[t, 0] + x1 * tri_normal[t, 1]) + x2 * tri_normal[t, 2])
+        if two_sided:
+            cos_l = abs(cos_l)
         ok = cos_l > 0 and d > 0
         wi[0, i], wi[1, i], wi[2, i] = x0, x1, x2
         dist[i] = d
@@ -308,12 +312,12 @@ def _area_light_loop(p, u, cdf, tris, faces, V, tri_normal, total_area, wi, dist
             scale[i] = 0.0
 
 
-def area_light_sample_numba(p, u, cdf, tris, faces, vertices, tri_normal, total_area):
+def area_light_sample_numba(p, u, cdf, tris, faces, vertices, tri_normal, total_area, two_sided=False):
     n = p.shape[1]
     wi, dist, scale, pdf, valid = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
     _area_light_loop(np.ascontiguousarray(p, dtype=np.float64), np.ascontiguousarray(u, dtype=np.float64), cdf,
                      np.ascontiguousarray(tris, dtype=np.int64), faces, vertices, tri_normal, float(total_area),
-                     wi, dist, scale, pdf, valid)
+                     bool(two_sided), wi, dist, scale, pdf, valid)
     return wi, dist, scale, pdf, valid
 
 

@@ -291,7 +291,8 @@ def test_spectral_table_interpolation_bitwise():
 
 
 @needs_numba
-def test_area_light_sampling_bitwise():
+@pytest.mark.parametrize("two_sided", [False, True])
+def test_area_light_sampling_bitwise(two_sided):
     scene = load_scene(shared_path("peers", "scenes", "cornell_lambert.json"))
     r = Renderer(scene)
     light = next(lt for lt in r.lights.lights if hasattr(lt, "cdf"))
@@ -299,12 +300,18 @@ def test_area_light_sampling_bitwise():
     rng = np.random.default_rng(7)
     p = rng.uniform(-1, 1, (3, 5000))
     p[:, :3] = c.vertices[c.faces[light.tris[0]]].T       # on the light itself: dist 0 → invalid
+    normal = c.tri_normal[light.tris[0]].astype(np.float64)
+    centre = c.vertices[c.faces[light.tris]].reshape(-1, 3).mean(axis=0)
     u = rng.random((3, 5000))
-    args = (p, u, light.cdf, light.tris, c.faces, c.vertices, c.tri_normal, light.total_area)
+    p[:, 2500:] = (centre - normal)[:, None] + 0.1 * rng.uniform(-1, 1, (3, 2500))     # behind the light
+    args = (p, u, light.cdf, light.tris, c.faces, c.vertices, c.tri_normal, light.total_area, two_sided)
     want, got = geometry.area_light_sample_numpy(*args), geometry.area_light_sample_numba(*args)
     for w, g in zip(want, got):
         np.testing.assert_array_equal(w, g)
     assert not got[4][:3].any() and got[4].any()
+    # two-sided: the back faces' samples count as well (one-sided: only the front faces')
+    back = (normal @ got[0] > 0) & (got[1] > 0)
+    assert back.sum() > 100 and (got[4][back].all() if two_sided else not got[4][back].any())
 
 
 @needs_numba

@@ -146,9 +146,10 @@ class AreaEmitter(_Light):
     def _sample_area(self, p, u):
         """Uniform sampling by area (module docstring's ``sample`` contract)."""
         c = self.compiled
-        if not self.two_sided and self.profile is None:
-            return area_light_sample(p, u, self.cdf, self.tris, c.faces, c.vertices, c.tri_normal, self.total_area)
-        # the same sampling, with both faces / the spread profile (NumPy: only Blender lamps use it)
+        if self.profile is None:
+            return area_light_sample(p, u, self.cdf, self.tris, c.faces, c.vertices, c.tri_normal, self.total_area,
+                                     self.two_sided)
+        # the same sampling, with the spread profile (NumPy: only Blender lamps use it)
         idx = np.minimum(np.searchsorted(self.cdf, u[0], side="right"), len(self.tris) - 1)
         tri = self.tris[idx]
         f = c.faces[tri]
