@@ -380,13 +380,39 @@ def triangle_sample_numba(p, tri, u1, u2, faces, vertices, tri_normal, tri_area,
 triangle_sample = twin(_triangle_sample_loop and triangle_sample_numba, triangle_sample_numpy)
 
 
-def interpolate_vertex_attribute(faces, values, prim, u, v):
+def interpolate_vertex_attribute_numpy(faces, values, prim, u, v):
     """Per-vertex ``values`` (V, C) interpolated at hits on triangles ``prim`` with barycentrics
     (u, v) (weights 1 − u − v, u, v of the triangle's vertices 0, 1, 2, as Embree's): (C, N) float64."""
     tri = faces[prim]
     w0 = 1.0 - u - v
     A = values
     return (A[tri[:, 0]] * w0[:, None] + A[tri[:, 1]] * u[:, None] + A[tri[:, 2]] * v[:, None]).T
+
+
+@jit
+def _interpolate_loop(faces, values, prim, u, v, out):
+    for i in range(prim.shape[0]):
+        t = prim[i]
+        a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
+        ui, vi = u[i], v[i]
+        w0 = 1.0 - ui - vi
+        for k in range(values.shape[1]):
+            out[k, i] = (values[a, k] * w0 + values[b, k] * ui) + values[c, k] * vi
+
+
+def interpolate_vertex_attribute_numba(faces, values, prim, u, v):
+    """interpolate_vertex_attribute_numpy in one compiled pass (the same products and sums, no gathered copies),
+    C-contiguous (C, N)."""
+    out = np.empty((values.shape[1], np.shape(prim)[0]))
+    f64 = np.float64
+    # (the scene's tables as they are, as surface_attributes: converted, they would be copied at every call)
+    _interpolate_loop(faces, values, np.ascontiguousarray(prim, dtype=np.int64), np.ascontiguousarray(u, dtype=f64),
+                      np.ascontiguousarray(v, dtype=f64), out)
+    return out
+
+
+interpolate_vertex_attribute = twin(_interpolate_loop and interpolate_vertex_attribute_numba,
+                                    interpolate_vertex_attribute_numpy)
 
 
 # ----------------------------------------------------------------------------- tangent frames of normal maps

@@ -1378,6 +1378,26 @@ def test_cycles_layer_weight_twins(darken, alpha_kind, eta_kind):
 
 
 @needs_numba
+@pytest.mark.parametrize("faces_dtype", [np.int32, np.int64])
+def test_interpolate_vertex_attribute_twins(faces_dtype):
+    """Per-vertex attributes (UVs, colours, tangents) at hits (engine.textures.SurfacePoints): the compiled pass
+    against the NumPy gathers, bit for bit, for 1–4 channels, barycentrics inside and beyond the triangle, no hits."""
+    from engine.kernels.geometry import interpolate_vertex_attribute_numba, interpolate_vertex_attribute_numpy
+    assert "kernels.geometry.interpolate_vertex_attribute" in kernels.TWINS
+    rng = np.random.default_rng(9)
+    faces = rng.integers(0, 50, (40, 3)).astype(faces_dtype)
+    for C in (1, 2, 3, 4):
+        values = rng.normal(0.0, 10.0, (50, C))
+        for n in (0, 1, 2000):
+            prim = rng.integers(0, 40, n)
+            u, v = rng.uniform(-0.2, 1.0, n), rng.uniform(-0.2, 1.0, n)
+            got = interpolate_vertex_attribute_numba(faces, values, prim, u, v)
+            want = interpolate_vertex_attribute_numpy(faces, values, prim, u, v)
+            assert got.shape == want.shape == (C, n) and got.flags.c_contiguous
+            assert np.array_equal(got, want)        # (products and sums only: the same bits everywhere)
+
+
+@needs_numba
 @pytest.mark.parametrize("extension", ["REPEAT", "EXTEND", "CLIP", "MIRROR"])
 def test_bilinear_texture_lookup_twins(extension):
     """Linear image lookups (engine.textures.texture.bilinear_lookup): the compiled loop against the NumPy filter
