@@ -1364,16 +1364,25 @@ class PathTracer:
         rows, lights, dists, cosines = [], [], [], []
         for li, sel in ls.owners:
             light = self.lights.lights[li]
-            if light.blocks_own_shadow_rays and blocked[sel].any():
-                d, pdf = ls.dist[sel], ls.pdf_l[sel]
-                if li in ls.points:        # at the sampled points (their pdf need not be by area)
-                    cos_l = light.cos_at(ls.points[li], gather(ls.wi, sel))
-                else:                   # cosθ at the light from the area pdf dist²/(cosθ·A)
-                    cos_l = np.minimum(d * d / np.maximum(pdf * light.total_area, 1e-300), 1.0)
-                rows.append(sel)
-                lights.append(np.full(d.shape[0], li, np.int64))
-                dists.append(d)
-                cosines.append(cos_l)
+            if not light.blocks_own_shadow_rays:
+                continue
+            # only the light's blocked rays are looked at again (the others stay as they are)
+            mine = blocked if isinstance(sel, slice) else blocked[sel]      # (slice(None): every vertex)
+            if not mine.any():
+                continue
+            every = mine.all()
+            if not every:
+                sel = np.flatnonzero(mine) if isinstance(sel, slice) else sel[mine]
+            d, pdf = ls.dist[sel], ls.pdf_l[sel]
+            if li in ls.points:        # at the sampled points (their pdf need not be by area)
+                tri = ls.points[li][0]
+                cos_l = light.cos_at((tri if every else tri[mine],), gather(ls.wi, sel))
+            else:                   # cosθ at the light from the area pdf dist²/(cosθ·A)
+                cos_l = np.minimum(d * d / np.maximum(pdf * light.total_area, 1e-300), 1.0)
+            rows.append(sel)
+            lights.append(np.full(d.shape[0], li, np.int64))
+            dists.append(d)
+            cosines.append(cos_l)
         if not rows:
             return
         # (one light: its rows as they are, slice(None) included, so gather copies nothing)
