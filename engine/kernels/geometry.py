@@ -324,6 +324,63 @@ def area_light_sample_numba(p, u, cdf, tris, faces, vertices, tri_normal, total_
 area_light_sample = twin(_area_light_loop and area_light_sample_numba, area_light_sample_numpy)
 
 
+def area_lights_sample_numpy(p, u, light, cdf, start, tris, faces, vertices, tri_normal, total_area, two_sided):
+    """area_light_sample for several emitters at once: point i on emitter ``light[i]`` (k) of a group whose
+    triangles and cdfs are concatenated — emitter k's are ``tris[start[k]:start[k + 1]]``, ``cdf[…]`` the same
+    slice; ``total_area`` (K,), ``two_sided`` (K,) bool.  Per point exactly area_light_sample's result (the same
+    arithmetic); (wi (3, N), dist, scale, pdf, valid (N,))."""
+    n = p.shape[1]
+    wi, dist, scale, pdf, valid = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n, bool)
+    for k in np.unique(light):
+        rows = np.flatnonzero(light == k)
+        a, b = start[k], start[k + 1]
+        wi[:, rows], dist[rows], scale[rows], pdf[rows], valid[rows] = area_light_sample_numpy(
+            p[:, rows], u[:, rows], cdf[a:b], tris[a:b], faces, vertices, tri_normal, total_area[k], two_sided[k])
+    return wi, dist, scale, pdf, valid
+
+
+@jit
+def _area_lights_loop(p, u, light, cdf, start, tris, faces, V, tri_normal, total_area, two_sided, wi, dist, scale,
+                      pdf, valid):
+    for i in range(p.shape[1]):
+        e = light[i]
+        a, b = start[e], start[e + 1]
+        k = min(np.searchsorted(cdf[a:b], u[0, i], side="right"), b - a - 1)
+        t = tris[a + k]
+        _, _, t0, t1, t2 = triangle_point_at(V, faces, t, u[1, i], u[2, i], p[0, i], p[1, i], p[2, i])
+        d2 = (t0 * t0 + t1 * t1) + t2 * t2
+        d = np.sqrt(d2)
+        s = d if d > 0 else 1.0
+        x0, x1, x2 = t0 / s, t1 / s, t2 / s
+        cos_l = -((x0 * tri_normal[t, 0] + x1 * tri_normal[t, 1]) + x2 * tri_normal[t, 2])
+        if two_sided[e]:
+            cos_l = abs(cos_l)
+        ok = cos_l > 0 and d > 0
+        wi[0, i], wi[1, i], wi[2, i] = x0, x1, x2
+        dist[i] = d
+        valid[i] = ok
+        if ok:
+            q = d2 / cos_l / total_area[e]
+            pdf[i] = q
+            scale[i] = 1.0 / q
+        else:
+            pdf[i] = 0.0
+            scale[i] = 0.0
+
+
+def area_lights_sample_numba(p, u, light, cdf, start, tris, faces, vertices, tri_normal, total_area, two_sided):
+    n = p.shape[1]
+    wi, dist, scale, pdf, valid = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
+    f64, i64 = np.float64, np.int64
+    _area_lights_loop(np.ascontiguousarray(p, dtype=f64), np.ascontiguousarray(u, dtype=f64),
+                      np.ascontiguousarray(light, dtype=i64), cdf, start, tris, faces, vertices, tri_normal,
+                      total_area, two_sided, wi, dist, scale, pdf, valid)
+    return wi, dist, scale, pdf, valid
+
+
+area_lights_sample = twin(_area_lights_loop and area_lights_sample_numba, area_lights_sample_numpy)
+
+
 def triangle_sample_numpy(p, tri, u1, u2, faces, vertices, tri_normal, tri_area, two_sided):
     """A point uniform by area on each given triangle ``tri`` (N,) seen from p (3, N) (the light tree's triangle
     choice; engine.render.lights.area.AreaEmitter.sample_triangles): b1 = 1 − √u1, b2 = u2·√u1 (u1, u2 (N,)).

@@ -51,6 +51,7 @@ from ..kernels.transport import (add_light, add_to_paths, identity_throughput, k
                                  throughput_times_stokes, update_abcs, update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES
 from .light_paths import LightPathRules, trace_light_paths
+from .lights.area import AreaGroup
 from .lights.lamps import PointEmitter
 from .media import Media, cross
 from .path_state import PathState
@@ -325,6 +326,8 @@ class PathTracer:
         #: the light tree (engine.render.lights.tree) where RenderSettings.light_tree asks for it, else None: the
         #: LightSet chooses (uniformly or by power, as before the tree)
         self.tree = lights.light_tree() if lights.uses_tree(getattr(settings, "light_tree", "auto")) else None
+        #: the emitters sampled uniformly by area, sampled together when several lights are chosen at a bounce
+        self.area_group = AreaGroup(lights.lights)
         #: the light choice needs each vertex's position and side normal
         self.spatial = lights.spatial or self.tree is not None
         # where segments start is kept for light selection, analytic lamps and warp-sampled lamps' pdfs
@@ -1249,19 +1252,32 @@ class PathTracer:
             select_prob = np.where(choice < 0, 1.0, select_prob)
             first = 1
         u_all = np.stack((u_rest, u[1], u[2]))      # (3, n): one gather per light
-        owners = []
+        owners, by_area, group = [], [], self.area_group
         for k in range(first, len(lights_chosen)):
             li = int(lights_chosen[k])
             sel = order[(bounds[k - 1] if k else 0):bounds[k]]
             light = light_set.lights[li]
+            owners.append((li, sel))
+            delta[sel] = light.is_delta
+            if group.index[li] >= 0 and (tri is None or not self.tree.split[li]):
+                by_area.append((li, sel))            # sampled below, with the group's other emitters
+                emitted[:, sel] = self._emitted(light, lookup.take(sel))
+                continue
             w, d, sc, pdf, valid, emitted[:, sel] = self._light_points(
                 light, li, gather(sp.p, sel), gather(u_all, sel), None if tri is None else tri[sel], lookup.take(sel),
                 points)
             wi[:, sel], dist[sel], scale[sel], pdf_l[sel], ok[sel] = w, d, sc, pdf, valid
             if light.shades_nothing:
                 ok[sel] = False
-            delta[sel] = light.is_delta
-            owners.append((li, sel))
+        if by_area:
+            # the emitters sampled by area, in one compiled pass (per point the same arithmetic as their ``sample``)
+            rows = by_area[0][1] if len(by_area) == 1 else np.concatenate([sel for _, sel in by_area])
+            member = np.repeat(group.index[[li for li, _ in by_area]], [sel.size for _, sel in by_area])
+            wi[:, rows], dist[rows], scale[rows], pdf_l[rows], ok[rows] = group.sample(
+                gather(sp.p, rows), gather(u_all, rows), member)
+            for li, sel in by_area:
+                if light_set.lights[li].shades_nothing:
+                    ok[sel] = False
         return _LightSamples(wi=wi, dist=dist, scale=scale, pdf_l=pdf_l, ok=ok, delta=delta, emitted=emitted,
                              select_prob=select_prob, owners=owners, points=points)
 

@@ -1378,6 +1378,34 @@ def test_cycles_layer_weight_twins(darken, alpha_kind, eta_kind):
 
 
 @needs_numba
+def test_area_lights_sampled_together_as_each_alone():
+    """Several emitters sampled by area in one pass (kernels.geometry.area_lights_sample, next-event estimation's
+    AreaGroup): per point the bits of its own emitter's area_light_sample, compiled and NumPy, one- and two-sided."""
+    scene = load_scene(shared_path("peers", "scenes", "cornell_lambert.json"))
+    c = Renderer(scene).compiled
+    rng = np.random.default_rng(11)
+    groups = [np.sort(rng.choice(len(c.faces), k, replace=False)) for k in (2, 1, 7, 30)]
+    two_sided = np.array([False, True, True, False])
+    areas = [c.tri_area[t] for t in groups]
+    cdfs = [np.cumsum(a) / a.sum() for a in areas]
+    total = np.array([a.sum() for a in areas])
+    start = np.concatenate(([0], np.cumsum([len(t) for t in groups]))).astype(np.int64)
+    cdf, tris = np.concatenate(cdfs), np.concatenate(groups).astype(np.int64)
+    n = 4000
+    p, u = rng.uniform(-1, 1, (3, n)), rng.random((3, n))
+    member = rng.integers(0, len(groups), n)
+    args = (p, u, member, cdf, start, tris, c.faces, c.vertices, c.tri_normal, total, two_sided)
+    got, want = geometry.area_lights_sample_numba(*args), geometry.area_lights_sample_numpy(*args)
+    for k in range(len(groups)):
+        rows = np.flatnonzero(member == k)
+        alone = geometry.area_light_sample_numba(p[:, rows], u[:, rows], cdfs[k], groups[k], c.faces, c.vertices,
+                                                 c.tri_normal, total[k], two_sided[k])
+        for g, w, a in zip(got, want, alone):
+            assert np.array_equal(g[..., rows], a) and np.array_equal(w[..., rows], a)
+    assert got[4].any() and not got[4].all()
+
+
+@needs_numba
 @pytest.mark.parametrize("faces_dtype", [np.int32, np.int64])
 def test_interpolate_vertex_attribute_twins(faces_dtype):
     """Per-vertex attributes (UVs, colours, tangents) at hits (engine.textures.SurfacePoints): the compiled pass
