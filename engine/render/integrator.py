@@ -381,7 +381,7 @@ class PathTracer:
             return light.emitted(d, lookup if rows is None else lookup.take(rows), self.rgb_mode, self.mono, uv=uv)
         if self.rgb_mode:
             rgb = light.channel_rgb() if self.channels else light.rgb()
-            n = lookup.lam.shape[1] if rows is None else int(np.count_nonzero(rows))
+            n = lookup.n if rows is None else int(np.count_nonzero(rows))
             return np.repeat(rgb[:, None], n, axis=1)
         if rows is not None:
             lookup = lookup.take(rows)
