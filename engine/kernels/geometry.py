@@ -285,31 +285,38 @@ def triangle_point_at(V, faces, t, u1, u2, p0, p1, p2):
     return b1, b2, t0, t1, t2
 
 
+@jit_inner
+def _area_point_at(V, faces, tri_normal, t, p, u, i, two_sided, total_area, wi, dist, scale, pdf, valid):
+    """Point i of area_light_sample_numpy on triangle t (from u[1, i], u[2, i]) seen from p[:, i], written into
+    the outputs' column i (its operation order)."""
+    _, _, t0, t1, t2 = triangle_point_at(V, faces, t, u[1, i], u[2, i], p[0, i], p[1, i], p[2, i])
+    d2 = (t0 * t0 + t1 * t1) + t2 * t2
+    d = np.sqrt(d2)
+    s = d if d > 0 else 1.0
+    x0, x1, x2 = t0 / s, t1 / s, t2 / s
+    cos_l = -((x0 * tri_normal[t, 0] + x1 * tri_normal[t, 1]) + x2 * tri_normal[t, 2])
+    if two_sided:
+        cos_l = abs(cos_l)
+    ok = cos_l > 0 and d > 0
+    wi[0, i], wi[1, i], wi[2, i] = x0, x1, x2
+    dist[i] = d
+    valid[i] = ok
+    if ok:
+        q = d2 / cos_l / total_area
+        pdf[i] = q
+        scale[i] = 1.0 / q
+    else:
+        pdf[i] = 0.0
+        scale[i] = 0.0
+
+
 @jit
 def _area_light_loop(p, u, cdf, tris, faces, V, tri_normal, total_area, two_sided, wi, dist, scale, pdf, valid):
     last = tris.shape[0] - 1
     for i in range(p.shape[1]):
         k = min(np.searchsorted(cdf, u[0, i], side="right"), last)
         t = tris[k]
-        _, _, t0, t1, t2 = triangle_point_at(V, faces, t, u[1, i], u[2, i], p[0, i], p[1, i], p[2, i])
-        d2 = (t0 * t0 + t1 * t1) + t2 * t2
-        d = np.sqrt(d2)
-        s = d if d > 0 else 1.0
-        x0, x1, x2 = t0 / s, t1 / s, t2 / s
-        cos_l = -((x0 * tri_normal[t, 0] + x1 * tri_normal[t, 1]) + x2 * tri_normal[t, 2])
-        if two_sided:
-            cos_l = abs(cos_l)
-        ok = cos_l > 0 and d > 0
-        wi[0, i], wi[1, i], wi[2, i] = x0, x1, x2
-        dist[i] = d
-        valid[i] = ok
-        if ok:
-            q = d2 / cos_l / total_area
-            pdf[i] = q
-            scale[i] = 1.0 / q
-        else:
-            pdf[i] = 0.0
-            scale[i] = 0.0
+        _area_point_at(V, faces, tri_normal, t, p, u, i, two_sided, total_area, wi, dist, scale, pdf, valid)
 
 
 def area_light_sample_numba(p, u, cdf, tris, faces, vertices, tri_normal, total_area, two_sided=False):
@@ -347,25 +354,7 @@ def _area_lights_loop(p, u, light, cdf, start, tris, faces, V, tri_normal, total
         a, b = start[e], start[e + 1]
         k = min(np.searchsorted(cdf[a:b], u[0, i], side="right"), b - a - 1)
         t = tris[a + k]
-        _, _, t0, t1, t2 = triangle_point_at(V, faces, t, u[1, i], u[2, i], p[0, i], p[1, i], p[2, i])
-        d2 = (t0 * t0 + t1 * t1) + t2 * t2
-        d = np.sqrt(d2)
-        s = d if d > 0 else 1.0
-        x0, x1, x2 = t0 / s, t1 / s, t2 / s
-        cos_l = -((x0 * tri_normal[t, 0] + x1 * tri_normal[t, 1]) + x2 * tri_normal[t, 2])
-        if two_sided[e]:
-            cos_l = abs(cos_l)
-        ok = cos_l > 0 and d > 0
-        wi[0, i], wi[1, i], wi[2, i] = x0, x1, x2
-        dist[i] = d
-        valid[i] = ok
-        if ok:
-            q = d2 / cos_l / total_area[e]
-            pdf[i] = q
-            scale[i] = 1.0 / q
-        else:
-            pdf[i] = 0.0
-            scale[i] = 0.0
+        _area_point_at(V, faces, tri_normal, t, p, u, i, two_sided[e], total_area[e], wi, dist, scale, pdf, valid)
 
 
 def area_lights_sample_numba(p, u, light, cdf, start, tris, faces, vertices, tri_normal, total_area, two_sided):
