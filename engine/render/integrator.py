@@ -631,8 +631,7 @@ class PathTracer:
                     self._add_light(radiance, path, T, rows, Le, w, cols(rows), light, d[:, rows], state.x_T)
         if compiled.has_passthrough:
             # lamps (non-occluding emitters) crossed before the hit: they add light, the ray goes on
-            if not light_set.hittable:          # (else as the lamps above)
-                seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
+            seg = np.where(hit, hits.t, np.inf if t_max is None else t_max)
             for rows, prims, dists in compiled.passthrough_hits(o, d, seg):
                 self._emitter_hits(radiance, path, T, cols, rows, prims, dists, d, lk, prev_delta, prev_pdf,
                                    at_prev, bounce == 0, o=o, att=att, x_T=state.x_T)
