@@ -241,13 +241,13 @@ def pinhole_rays_numba(pixel, u, W, H, shift_x, shift_y, tx, ty, forward, right,
 pinhole_rays = twin(_pinhole_loop and pinhole_rays_numba, pinhole_rays_numpy)
 
 
-def area_light_sample_numpy(p, u, cdf, tris, faces, vertices, tri_normal, total_area):
+def area_light_sample_numpy(p, u, cdf, tris, faces, vertices, tri_normal, total_area, two_sided=False):
     """Uniform-by-area points on an emitter's triangles seen from p (3, N), u (3, N) ∈ [0, 1).
 
     Row 0 of u picks the triangle (inverting ``cdf`` over ``tris``), rows 1–2 the point
     (b1 = 1 − √u1, b2 = u2·√u1).  Returns (wi (3, N) unit towards the point, dist (N,),
     scale = 1/pdf (N,), pdf (N,) solid angle = dist²/(cosθ_light·A_total), valid (N,): the
-    point's front face sees p).
+    point's front face sees p; ``two_sided``: either face, cosθ_light taken as |cosθ|).
     """
     idx = np.minimum(np.searchsorted(cdf, u[0], side="right"), len(tris) - 1)
     tri = tris[idx]
@@ -263,6 +263,8 @@ def area_light_sample_numpy(p, u, cdf, tris, faces, vertices, tri_normal, total_
     wi = to / np.where(dist > 0, dist, 1.0)
     n_l = tri_normal[tri].T
     cos_l = -((wi[0] * n_l[0] + wi[1] * n_l[1]) + wi[2] * n_l[2])
+    if two_sided:
+        cos_l = np.abs(cos_l)
     valid = (cos_l > 0) & (dist > 0)
     pdf = np.where(valid, dist2 / np.where(valid, cos_l, 1.0) / total_area, 0.0)
     return wi, dist, np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0), pdf, valid
@@ -283,41 +285,89 @@ def triangle_point_at(V, faces, t, u1, u2, p0, p1, p2):
     return b1, b2, t0, t1, t2
 
 
+@jit_inner
+def _area_point_at(V, faces, tri_normal, t, p, u, i, two_sided, total_area, wi, dist, scale, pdf, valid):
+    """Point i of area_light_sample_numpy on triangle t (from u[1, i], u[2, i]) seen from p[:, i], written into
+    the outputs' column i (its operation order)."""
+    _, _, t0, t1, t2 = triangle_point_at(V, faces, t, u[1, i], u[2, i], p[0, i], p[1, i], p[2, i])
+    d2 = (t0 * t0 + t1 * t1) + t2 * t2
+    d = np.sqrt(d2)
+    s = d if d > 0 else 1.0
+    x0, x1, x2 = t0 / s, t1 / s, t2 / s
+    cos_l = -((x0 * tri_normal[t, 0] + x1 * tri_normal[t, 1]) + x2 * tri_normal[t, 2])
+    if two_sided:
+        cos_l = abs(cos_l)
+    ok = cos_l > 0 and d > 0
+    wi[0, i], wi[1, i], wi[2, i] = x0, x1, x2
+    dist[i] = d
+    valid[i] = ok
+    if ok:
+        q = d2 / cos_l / total_area
+        pdf[i] = q
+        scale[i] = 1.0 / q
+    else:
+        pdf[i] = 0.0
+        scale[i] = 0.0
+
+
 @jit
-def _area_light_loop(p, u, cdf, tris, faces, V, tri_normal, total_area, wi, dist, scale, pdf, valid):
+def _area_light_loop(p, u, cdf, tris, faces, V, tri_normal, total_area, two_sided, wi, dist, scale, pdf, valid):
     last = tris.shape[0] - 1
     for i in range(p.shape[1]):
         k = min(np.searchsorted(cdf, u[0, i], side="right"), last)
         t = tris[k]
-        _, _, t0, t1, t2 = triangle_point_at(V, faces, t, u[1, i], u[2, i], p[0, i], p[1, i], p[2, i])
-        d2 = (t0 * t0 + t1 * t1) + t2 * t2
-        d = np.sqrt(d2)
-        s = d if d > 0 else 1.0
-        x0, x1, x2 = t0 / s, t1 / s, t2 / s
-        cos_l = -((x0 * tri_normal[t, 0] + x1 * tri_normal[t, 1]) + x2 * tri_normal[t, 2])
-        ok = cos_l > 0 and d > 0
-        wi[0, i], wi[1, i], wi[2, i] = x0, x1, x2
-        dist[i] = d
-        valid[i] = ok
-        if ok:
-            q = d2 / cos_l / total_area
-            pdf[i] = q
-            scale[i] = 1.0 / q
-        else:
-            pdf[i] = 0.0
-            scale[i] = 0.0
+        _area_point_at(V, faces, tri_normal, t, p, u, i, two_sided, total_area, wi, dist, scale, pdf, valid)
 
 
-def area_light_sample_numba(p, u, cdf, tris, faces, vertices, tri_normal, total_area):
+def area_light_sample_numba(p, u, cdf, tris, faces, vertices, tri_normal, total_area, two_sided=False):
     n = p.shape[1]
     wi, dist, scale, pdf, valid = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
     _area_light_loop(np.ascontiguousarray(p, dtype=np.float64), np.ascontiguousarray(u, dtype=np.float64), cdf,
                      np.ascontiguousarray(tris, dtype=np.int64), faces, vertices, tri_normal, float(total_area),
-                     wi, dist, scale, pdf, valid)
+                     bool(two_sided), wi, dist, scale, pdf, valid)
     return wi, dist, scale, pdf, valid
 
 
 area_light_sample = twin(_area_light_loop and area_light_sample_numba, area_light_sample_numpy)
+
+
+def area_lights_sample_numpy(p, u, light, cdf, start, tris, faces, vertices, tri_normal, total_area, two_sided):
+    """area_light_sample for several emitters at once: point i on emitter ``light[i]`` (k) of a group whose
+    triangles and cdfs are concatenated — emitter k's are ``tris[start[k]:start[k + 1]]``, ``cdf[…]`` the same
+    slice; ``total_area`` (K,), ``two_sided`` (K,) bool.  Per point exactly area_light_sample's result (the same
+    arithmetic); (wi (3, N), dist, scale, pdf, valid (N,))."""
+    n = p.shape[1]
+    wi, dist, scale, pdf, valid = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n, bool)
+    for k in np.unique(light):
+        rows = np.flatnonzero(light == k)
+        a, b = start[k], start[k + 1]
+        wi[:, rows], dist[rows], scale[rows], pdf[rows], valid[rows] = area_light_sample_numpy(
+            p[:, rows], u[:, rows], cdf[a:b], tris[a:b], faces, vertices, tri_normal, total_area[k], two_sided[k])
+    return wi, dist, scale, pdf, valid
+
+
+@jit
+def _area_lights_loop(p, u, light, cdf, start, tris, faces, V, tri_normal, total_area, two_sided, wi, dist, scale,
+                      pdf, valid):
+    for i in range(p.shape[1]):
+        e = light[i]
+        a, b = start[e], start[e + 1]
+        k = min(np.searchsorted(cdf[a:b], u[0, i], side="right"), b - a - 1)
+        t = tris[a + k]
+        _area_point_at(V, faces, tri_normal, t, p, u, i, two_sided[e], total_area[e], wi, dist, scale, pdf, valid)
+
+
+def area_lights_sample_numba(p, u, light, cdf, start, tris, faces, vertices, tri_normal, total_area, two_sided):
+    n = p.shape[1]
+    wi, dist, scale, pdf, valid = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
+    f64, i64 = np.float64, np.int64
+    _area_lights_loop(np.ascontiguousarray(p, dtype=f64), np.ascontiguousarray(u, dtype=f64),
+                      np.ascontiguousarray(light, dtype=i64), cdf, start, tris, faces, vertices, tri_normal,
+                      total_area, two_sided, wi, dist, scale, pdf, valid)
+    return wi, dist, scale, pdf, valid
+
+
+area_lights_sample = twin(_area_lights_loop and area_lights_sample_numba, area_lights_sample_numpy)
 
 
 def triangle_sample_numpy(p, tri, u1, u2, faces, vertices, tri_normal, tri_area, two_sided):
@@ -376,13 +426,39 @@ def triangle_sample_numba(p, tri, u1, u2, faces, vertices, tri_normal, tri_area,
 triangle_sample = twin(_triangle_sample_loop and triangle_sample_numba, triangle_sample_numpy)
 
 
-def interpolate_vertex_attribute(faces, values, prim, u, v):
+def interpolate_vertex_attribute_numpy(faces, values, prim, u, v):
     """Per-vertex ``values`` (V, C) interpolated at hits on triangles ``prim`` with barycentrics
     (u, v) (weights 1 − u − v, u, v of the triangle's vertices 0, 1, 2, as Embree's): (C, N) float64."""
     tri = faces[prim]
     w0 = 1.0 - u - v
     A = values
     return (A[tri[:, 0]] * w0[:, None] + A[tri[:, 1]] * u[:, None] + A[tri[:, 2]] * v[:, None]).T
+
+
+@jit
+def _interpolate_loop(faces, values, prim, u, v, out):
+    for i in range(prim.shape[0]):
+        t = prim[i]
+        a, b, c = faces[t, 0], faces[t, 1], faces[t, 2]
+        ui, vi = u[i], v[i]
+        w0 = 1.0 - ui - vi
+        for k in range(values.shape[1]):
+            out[k, i] = (values[a, k] * w0 + values[b, k] * ui) + values[c, k] * vi
+
+
+def interpolate_vertex_attribute_numba(faces, values, prim, u, v):
+    """interpolate_vertex_attribute_numpy in one compiled pass (the same products and sums, no gathered copies),
+    C-contiguous (C, N)."""
+    out = np.empty((values.shape[1], np.shape(prim)[0]))
+    f64 = np.float64
+    # (the scene's tables as they are, as surface_attributes: converted, they would be copied at every call)
+    _interpolate_loop(faces, values, np.ascontiguousarray(prim, dtype=np.int64), np.ascontiguousarray(u, dtype=f64),
+                      np.ascontiguousarray(v, dtype=f64), out)
+    return out
+
+
+interpolate_vertex_attribute = twin(_interpolate_loop and interpolate_vertex_attribute_numba,
+                                    interpolate_vertex_attribute_numpy)
 
 
 # ----------------------------------------------------------------------------- tangent frames of normal maps

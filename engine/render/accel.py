@@ -213,8 +213,10 @@ class CompiledScene:
         idx = np.arange(o.shape[1])
         start = np.zeros(o.shape[1])
         o_cur, t_left = o, np.asarray(t_max, np.float64)
-        for _ in range(max_layers):
-            local, _, _, t = self.rays_passthrough.closest(o_cur, d[:, idx], t_left, None)
+        for layer in range(max_layers):
+            # (the first layer: every ray, d as it is, not a gathered copy)
+            d_cur = d if layer == 0 and d.flags.c_contiguous else d[:, idx]
+            local, _, _, t = self.rays_passthrough.closest(o_cur, d_cur, t_left, None)
             got = local >= 0
             if not got.any():
                 break

@@ -51,6 +51,7 @@ from ..kernels.transport import (add_light, add_to_paths, identity_throughput, k
                                  throughput_times_stokes, update_abcs, update_depolarising, update_general)
 from .effects import TRANSPORT_SIZES
 from .light_paths import LightPathRules, trace_light_paths
+from .lights.area import AreaGroup
 from .lights.lamps import PointEmitter
 from .media import Media, cross
 from .path_state import PathState
@@ -325,6 +326,8 @@ class PathTracer:
         #: the light tree (engine.render.lights.tree) where RenderSettings.light_tree asks for it, else None: the
         #: LightSet chooses (uniformly or by power, as before the tree)
         self.tree = lights.light_tree() if lights.uses_tree(getattr(settings, "light_tree", "auto")) else None
+        #: the emitters sampled uniformly by area, sampled together when several lights are chosen at a bounce
+        self.area_group = AreaGroup(lights.lights)
         #: the light choice needs each vertex's position and side normal
         self.spatial = lights.spatial or self.tree is not None
         # where segments start is kept for light selection, analytic lamps and warp-sampled lamps' pdfs
@@ -378,7 +381,7 @@ class PathTracer:
             return light.emitted(d, lookup if rows is None else lookup.take(rows), self.rgb_mode, self.mono, uv=uv)
         if self.rgb_mode:
             rgb = light.channel_rgb() if self.channels else light.rgb()
-            n = lookup.lam.shape[1] if rows is None else int(np.count_nonzero(rows))
+            n = lookup.n if rows is None else int(np.count_nonzero(rows))
             return np.repeat(rgb[:, None], n, axis=1)
         if rows is not None:
             lookup = lookup.take(rows)
@@ -1237,25 +1240,43 @@ class PathTracer:
         wi, dist, scale, pdf_l = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n)
         ok, delta, emitted = np.empty(n, bool), np.empty(n, bool), np.empty((L, n))
         select_prob = light_set.prob[choice] if chosen_prob is None else chosen_prob
+        # each light's vertices: ascending rows of one stable sort (np.nonzero(choice == li) without a pass each)
+        order = np.argsort(choice, kind="stable")
+        bounds = np.searchsorted(choice[order], lights_chosen, side="right")
+        first = 0
         if lights_chosen[0] < 0:            # no light: an invalid sample of weight 0 (probability 1: no 0/0)
             none = np.flatnonzero(choice < 0)
             wi[:, none], dist[none], scale[none], pdf_l[none], ok[none], delta[none] = 0.0, 1.0, 0.0, 0.0, False, False
             emitted[:, none] = 0.0
             select_prob = np.where(choice < 0, 1.0, select_prob)
-            lights_chosen = lights_chosen[1:]
-        owners = []
-        for li in lights_chosen:
-            li = int(li)
-            sel = np.nonzero(choice == li)[0]
+            first = 1
+        u_all = np.stack((u_rest, u[1], u[2]))      # (3, n): one gather per light
+        owners, by_area, group = [], [], self.area_group
+        for k in range(first, len(lights_chosen)):
+            li = int(lights_chosen[k])
+            sel = order[(bounds[k - 1] if k else 0):bounds[k]]
             light = light_set.lights[li]
-            u_sel = np.stack((gather(u_rest, sel), gather(u[1], sel), gather(u[2], sel)))
+            owners.append((li, sel))
+            delta[sel] = light.is_delta
+            if group.index[li] >= 0 and (tri is None or not self.tree.split[li]):
+                by_area.append((li, sel))            # sampled below, with the group's other emitters
+                emitted[:, sel] = self._emitted(light, lookup.take(sel))
+                continue
             w, d, sc, pdf, valid, emitted[:, sel] = self._light_points(
-                light, li, gather(sp.p, sel), u_sel, None if tri is None else tri[sel], lookup.take(sel), points)
+                light, li, gather(sp.p, sel), gather(u_all, sel), None if tri is None else tri[sel], lookup.take(sel),
+                points)
             wi[:, sel], dist[sel], scale[sel], pdf_l[sel], ok[sel] = w, d, sc, pdf, valid
             if light.shades_nothing:
                 ok[sel] = False
-            delta[sel] = light.is_delta
-            owners.append((li, sel))
+        if by_area:
+            # the emitters sampled by area, in one compiled pass (per point the same arithmetic as their ``sample``)
+            rows = by_area[0][1] if len(by_area) == 1 else np.concatenate([sel for _, sel in by_area])
+            member = np.repeat(group.index[[li for li, _ in by_area]], [sel.size for _, sel in by_area])
+            wi[:, rows], dist[rows], scale[rows], pdf_l[rows], ok[rows] = group.sample(
+                gather(sp.p, rows), gather(u_all, rows), member)
+            for li, sel in by_area:
+                if light_set.lights[li].shades_nothing:
+                    ok[sel] = False
         return _LightSamples(wi=wi, dist=dist, scale=scale, pdf_l=pdf_l, ok=ok, delta=delta, emitted=emitted,
                              select_prob=select_prob, owners=owners, points=points)
 
@@ -1358,16 +1379,25 @@ class PathTracer:
         rows, lights, dists, cosines = [], [], [], []
         for li, sel in ls.owners:
             light = self.lights.lights[li]
-            if light.blocks_own_shadow_rays and blocked[sel].any():
-                d, pdf = ls.dist[sel], ls.pdf_l[sel]
-                if li in ls.points:        # at the sampled points (their pdf need not be by area)
-                    cos_l = light.cos_at(ls.points[li], gather(ls.wi, sel))
-                else:                   # cosθ at the light from the area pdf dist²/(cosθ·A)
-                    cos_l = np.minimum(d * d / np.maximum(pdf * light.total_area, 1e-300), 1.0)
-                rows.append(sel)
-                lights.append(np.full(d.shape[0], li, np.int64))
-                dists.append(d)
-                cosines.append(cos_l)
+            if not light.blocks_own_shadow_rays:
+                continue
+            # only the light's blocked rays are looked at again (the others stay as they are)
+            mine = blocked if isinstance(sel, slice) else blocked[sel]      # (slice(None): every vertex)
+            if not mine.any():
+                continue
+            every = mine.all()
+            if not every:
+                sel = np.flatnonzero(mine) if isinstance(sel, slice) else sel[mine]
+            d, pdf = ls.dist[sel], ls.pdf_l[sel]
+            if li in ls.points:        # at the sampled points (their pdf need not be by area)
+                tri = ls.points[li][0]
+                cos_l = light.cos_at((tri if every else tri[mine],), gather(ls.wi, sel))
+            else:                   # cosθ at the light from the area pdf dist²/(cosθ·A)
+                cos_l = np.minimum(d * d / np.maximum(pdf * light.total_area, 1e-300), 1.0)
+            rows.append(sel)
+            lights.append(np.full(d.shape[0], li, np.int64))
+            dists.append(d)
+            cosines.append(cos_l)
         if not rows:
             return
         # (one light: its rows as they are, slice(None) included, so gather copies nothing)
@@ -1420,26 +1450,43 @@ class PathTracer:
         light_set = self.lights
         emitter = self.scene.tri_emitter[prims]
         cos_hit = -dot(d[:, idx], self.scene.tri_normal[prims].T)
-        # each light's hits: ascending rows of one stable sort (np.flatnonzero(emitter == li) without a pass each)
+        # each light's hits: ascending rows of one stable sort (np.flatnonzero(emitter == li) without a pass each),
+        # every per-hit array put in that order once, so that a light's hits are slices of it
         order = np.argsort(emitter, kind="stable")
         lights, starts = np.unique(emitter[order], return_index=True)
         ends = np.append(starts[1:], order.size)
+        cos_s = cos_hit[order]
+        front = np.zeros(order.size, bool)
+        emitting = []
         for li, start, end in zip(lights, starts, ends):
             if li < 0 or (camera and li in light_set.camera_hidden):
                 continue
             light = light_set.lights[li]
-            rows = order[start:end]
-            cos_l = light.facing(cos_hit[rows])
-            front = cos_l > 0             # one-sided emitters shine only from their front faces
-            rows, cos_l = rows[front], cos_l[front]
-            sel = idx[rows]
-            if sel.size == 0:
+            part = slice(start, end)
+            cos_s[part] = light.facing(cos_s[part])
+            front[part] = cos_s[part] > 0       # one-sided emitters shine only from their front faces
+            emitting.append((int(li), light, start, end))
+        kept = np.flatnonzero(front)
+        if kept.size == 0:
+            return
+        rows_all = order[kept]
+        sel_all, prim_all, dist_all, cos_all = idx[rows_all], prims[rows_all], dists[rows_all], cos_s[kept]
+        bary_all = None if bary is None else (bary[0][rows_all], bary[1][rows_all])
+        scale_all = None if scale is None else scale[rows_all]
+        bounds = np.searchsorted(kept, [[s for _, _, s, _ in emitting], [e for _, _, _, e in emitting]])
+        # MIS against next-event estimation, only where the path's last bounce was not a delta one (weight 1
+        # there: camera rays, smooth surfaces), so its light-pick probability is not traversed for nothing
+        nd_all = ~prev_delta[sel_all]
+        p_light_all = np.zeros(kept.size)
+        per_light, Le_all, polarised = [], None, False
+        for (li, light, _, _), a, b in zip(emitting, bounds[0], bounds[1]):
+            if a == b:
                 continue
-            hit_prim = prims[rows]
-            dist_l = dists[rows]
+            part = slice(a, b)
+            sel, hit_prim, dist_l, cos_l = sel_all[part], prim_all[part], dist_all[part], cos_all[part]
             if light.varies_over_surface:
-                if bary is not None:
-                    b1, b2 = bary[0][rows], bary[1][rows]
+                if bary_all is not None:
+                    b1, b2 = bary_all[0][part], bary_all[1][part]
                 else:
                     b1, b2 = light.barycentrics(hit_prim, o[:, sel] + d[:, sel] * dist_l[None, :])
                 Le = light.emitted_at((hit_prim, b1, b2), lk.take(sel), self._integrated_rgb, self.mono)
@@ -1448,19 +1495,31 @@ class PathTracer:
             factor = light.emission_factor(cos_l)
             if factor is not None:
                 Le = Le * factor[None, :]
-            if scale is not None:
-                Le = Le * scale[rows][None, :]
+            if scale_all is not None:
+                Le = Le * scale_all[part][None, :]
             if att is not None:
-                a = att(sel, dist_l)
-                if a is not None:
-                    Le = Le * a
-            # MIS against next-event estimation, only where the path's last bounce was not a delta one (weight 1
-            # there: camera rays, smooth surfaces), so its light-pick probability is not traversed for nothing
-            wsel = np.ones(sel.size)
-            nd = ~prev_delta[sel]
+                f = att(sel, dist_l)
+                if f is not None:
+                    Le = Le * f
+            if Le_all is None:
+                Le_all = np.empty((Le.shape[0], kept.size))
+            Le_all[:, part] = Le
+            nd = nd_all[part]
             if nd.any():
-                part = slice(None) if nd.all() else np.flatnonzero(nd)
-                s_nd = sel[part]
-                wsel[part] = power_heuristic(prev_pdf[s_nd], self._hit_pdf(
-                    light, li, dist_l[part], cos_l[part], hit_prim[part], at_prev(s_nd), d, s_nd))
-            self._add_light(radiance, path, T, sel, Le, wsel, cols(sel), light, d[:, sel], x_T)
+                which = slice(None) if nd.all() else np.flatnonzero(nd)
+                s_nd = sel[which]
+                p_light_all[part][which] = self._hit_pdf(light, li, dist_l[which], cos_l[which], hit_prim[which],
+                                                         at_prev(s_nd), d, s_nd)
+            polarised = polarised or light.polarisation is not None
+            per_light.append((light, part))
+        # the MIS weights, and the light into the paths: in one pass for all the lights (each ray hits once)
+        w_all = np.ones(kept.size)
+        nd_rows = np.flatnonzero(nd_all)
+        if nd_rows.size:
+            w_all[nd_rows] = power_heuristic(prev_pdf[sel_all[nd_rows]], p_light_all[nd_rows])
+        if not polarised or self.P == 1 or x_T is None:
+            add_light(radiance, path, T, sel_all, Le_all, w_all, cols(sel_all))
+            return
+        for light, part in per_light:
+            sel = sel_all[part]
+            self._add_light(radiance, path, T, sel, Le_all[:, part], w_all[part], cols(sel), light, d[:, sel], x_T)

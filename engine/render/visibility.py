@@ -58,6 +58,9 @@ class RayVisibility:
             self.tri_null = null[compiled.tri_material] if tri_null.any() else None
         self.any_holdout = bool(self.holdout.any())
         self.affects_shadows = bool(self.shadow_hidden.any() or self.any_alpha)
+        #: (camera rays, indirect rays): whether ``pass_through`` can skip any surface for them
+        self._skips = (self.any_alpha or bool(self.camera_hidden.any()),
+                       self.any_alpha or bool(self.indirect_hidden.any()))
 
     def alpha_at(self, mesh: np.ndarray, prim: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Alpha (N,) at hits on triangles ``prim`` (of meshes ``mesh``) at barycentrics u, v: the mesh's
@@ -89,6 +92,8 @@ class RayVisibility:
         always instead of with probability 1 − alpha, and the crossing appended as (rays, triangles, u, v,
         distances, alpha) — the caller adds alpha × its emission and weights the ray by 1 − alpha, as Cycles
         handles a Transparent BSDF mixed with an emission (no random choice: far less noise, same mean)."""
+        if not self._skips[0 if camera else 1]:
+            return hits, 0          # nothing these rays could cross: their hits as they are
         hidden = self.camera_hidden if camera else self.indirect_hidden
         prim, u, v, t = hits.prim.copy(), hits.u.copy(), hits.v.copy(), hits.t.copy()
         active = np.arange(prim.shape[0])

@@ -146,6 +146,11 @@ class WavelengthLookup:
         return sub
 
     @property
+    def n(self) -> int:
+        """The number of paths (``lam.shape[1]``, without gathering a subset's wavelengths)."""
+        return self._lam.shape[1] if self._root is None else self._idx.shape[0]
+
+    @property
     def lam(self) -> np.ndarray:
         if self._lam is None:
             self._lam = np.take(self._root.lam, self._idx, axis=-1)

@@ -291,7 +291,8 @@ def test_spectral_table_interpolation_bitwise():
 
 
 @needs_numba
-def test_area_light_sampling_bitwise():
+@pytest.mark.parametrize("two_sided", [False, True])
+def test_area_light_sampling_bitwise(two_sided):
     scene = load_scene(shared_path("peers", "scenes", "cornell_lambert.json"))
     r = Renderer(scene)
     light = next(lt for lt in r.lights.lights if hasattr(lt, "cdf"))
@@ -299,12 +300,18 @@ def test_area_light_sampling_bitwise():
     rng = np.random.default_rng(7)
     p = rng.uniform(-1, 1, (3, 5000))
     p[:, :3] = c.vertices[c.faces[light.tris[0]]].T       # on the light itself: dist 0 → invalid
+    normal = c.tri_normal[light.tris[0]].astype(np.float64)
+    centre = c.vertices[c.faces[light.tris]].reshape(-1, 3).mean(axis=0)
     u = rng.random((3, 5000))
-    args = (p, u, light.cdf, light.tris, c.faces, c.vertices, c.tri_normal, light.total_area)
+    p[:, 2500:] = (centre - normal)[:, None] + 0.1 * rng.uniform(-1, 1, (3, 2500))     # behind the light
+    args = (p, u, light.cdf, light.tris, c.faces, c.vertices, c.tri_normal, light.total_area, two_sided)
     want, got = geometry.area_light_sample_numpy(*args), geometry.area_light_sample_numba(*args)
     for w, g in zip(want, got):
         np.testing.assert_array_equal(w, g)
     assert not got[4][:3].any() and got[4].any()
+    # two-sided: the back faces' samples count as well (one-sided: only the front faces')
+    back = (normal @ got[0] > 0) & (got[1] > 0)
+    assert back.sum() > 100 and (got[4][back].all() if two_sided else not got[4][back].any())
 
 
 @needs_numba
@@ -1368,6 +1375,54 @@ def test_cycles_layer_weight_twins(darken, alpha_kind, eta_kind):
     assert got.shape == want.shape == (n,) and np.ptp(want[~bad]) > 0.3 and np.all(want[~bad] >= 0.0)
     _bitwise([got], [want])
     assert g.cycles_layer_weight_numba(mu[:0], 0.3, 1.5, darken).shape == (0,)
+
+
+@needs_numba
+def test_area_lights_sampled_together_as_each_alone():
+    """Several emitters sampled by area in one pass (kernels.geometry.area_lights_sample, next-event estimation's
+    AreaGroup): per point the bits of its own emitter's area_light_sample, compiled and NumPy, one- and two-sided."""
+    scene = load_scene(shared_path("peers", "scenes", "cornell_lambert.json"))
+    c = Renderer(scene).compiled
+    rng = np.random.default_rng(11)
+    groups = [np.sort(rng.choice(len(c.faces), k, replace=False)) for k in (2, 1, 7, 30)]
+    two_sided = np.array([False, True, True, False])
+    areas = [c.tri_area[t] for t in groups]
+    cdfs = [np.cumsum(a) / a.sum() for a in areas]
+    total = np.array([a.sum() for a in areas])
+    start = np.concatenate(([0], np.cumsum([len(t) for t in groups]))).astype(np.int64)
+    cdf, tris = np.concatenate(cdfs), np.concatenate(groups).astype(np.int64)
+    n = 4000
+    p, u = rng.uniform(-1, 1, (3, n)), rng.random((3, n))
+    member = rng.integers(0, len(groups), n)
+    args = (p, u, member, cdf, start, tris, c.faces, c.vertices, c.tri_normal, total, two_sided)
+    got, want = geometry.area_lights_sample_numba(*args), geometry.area_lights_sample_numpy(*args)
+    for k in range(len(groups)):
+        rows = np.flatnonzero(member == k)
+        alone = geometry.area_light_sample_numba(p[:, rows], u[:, rows], cdfs[k], groups[k], c.faces, c.vertices,
+                                                 c.tri_normal, total[k], two_sided[k])
+        for g, w, a in zip(got, want, alone):
+            assert np.array_equal(g[..., rows], a) and np.array_equal(w[..., rows], a)
+    assert got[4].any() and not got[4].all()
+
+
+@needs_numba
+@pytest.mark.parametrize("faces_dtype", [np.int32, np.int64])
+def test_interpolate_vertex_attribute_twins(faces_dtype):
+    """Per-vertex attributes (UVs, colours, tangents) at hits (engine.textures.SurfacePoints): the compiled pass
+    against the NumPy gathers, bit for bit, for 1–4 channels, barycentrics inside and beyond the triangle, no hits."""
+    from engine.kernels.geometry import interpolate_vertex_attribute_numba, interpolate_vertex_attribute_numpy
+    assert "kernels.geometry.interpolate_vertex_attribute" in kernels.TWINS
+    rng = np.random.default_rng(9)
+    faces = rng.integers(0, 50, (40, 3)).astype(faces_dtype)
+    for C in (1, 2, 3, 4):
+        values = rng.normal(0.0, 10.0, (50, C))
+        for n in (0, 1, 2000):
+            prim = rng.integers(0, 40, n)
+            u, v = rng.uniform(-0.2, 1.0, n), rng.uniform(-0.2, 1.0, n)
+            got = interpolate_vertex_attribute_numba(faces, values, prim, u, v)
+            want = interpolate_vertex_attribute_numpy(faces, values, prim, u, v)
+            assert got.shape == want.shape == (C, n) and got.flags.c_contiguous
+            assert np.array_equal(got, want)        # (products and sums only: the same bits everywhere)
 
 
 @needs_numba

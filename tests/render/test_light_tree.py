@@ -197,3 +197,18 @@ def test_trees_of_one_emitter_or_none_choose_it_or_nothing(lamps):
         assert light[0] >= 0 and 0 < prob[0] <= 1 and prob[0] == tree.probability_of_light(int(light[0]), p, n)[0]
     st = dataclasses.replace(scene.settings, light_tree="on", spp=2)
     assert np.isfinite(Renderer(scene).render(st).stokes_luminance()).all()
+
+
+@pytest.mark.parametrize("tree", ["off", "on"])
+def test_emitters_sampled_together_give_the_same_image_as_one_by_one(tree, monkeypatch):
+    """Next-event estimation samples the emitters sampled by area (one- and two-sided meshes) together, in one
+    compiled pass (lights.area.AreaGroup): the image is the one of sampling each light by itself, bit for bit."""
+    from engine.render.lights.area import AreaGroup
+    scene = many_lights_scene(count=30, res=12, spp=4, sky=True)
+    settings = dataclasses.replace(scene.settings, light_tree=tree, spectral="rgb", polarisation="linear")
+    renderer = Renderer(scene)
+    together = renderer.render(settings).stokes()
+    assert (AreaGroup(renderer.lights.lights).index >= 0).sum() == 3
+    monkeypatch.setattr(AreaGroup, "by_area", staticmethod(lambda light: False))
+    alone = Renderer(scene).render(settings).stokes()
+    assert np.array_equal(together, alone) and together[0].max() > 0

@@ -447,3 +447,27 @@ def test_a_uniform_strength_texture_renders_as_the_constant_emitter(mode):
     a, b = (render(s, **mode).stokes()[0] for s in scenes)
     assert b.max() > 0
     np.testing.assert_allclose(a, b, rtol=1e-9, atol=1e-13)
+
+
+def test_rgb_transport_reads_a_textured_emitters_texels_without_the_channel_tables():
+    """"rgb" transport (WavelengthLookup with the channels' identity basis and D65 = 1): a textured emitter's radiance
+    is the texels' RGB × strength, the value of the spectral formula with those tables, without gathering them for
+    the paths (a subset's ``n`` does not gather its wavelengths either)."""
+    from engine.spectral import WavelengthLookup, rgb_channel_tables
+    rng = np.random.default_rng(3)
+    texels = rng.uniform(0.0, 1.0, (4, 4, 3)) ** 2
+    texels[0, 0] = 0.25                                     # a grey texel (the formula's own branch)
+    panel = grid_mesh("panel", [-0.5, -0.5, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], 3, 2,
+                      textured_emission(TextureInput(image(texels, "Linear")), 7.0))
+    _, light = light_of(floor_scene([panel]), "panel")
+    n = 500
+    lam = np.repeat(np.array([610.0, 550.0, 465.0])[:, None], n, axis=1)
+    lookup = WavelengthLookup(lam, *rgb_channel_tables(n), channels=True)
+    sub = lookup.take(np.flatnonzero(rng.random(n) < 0.6))
+    assert sub.n == sub._idx.shape[0] and sub._lam is None       # no wavelengths gathered for the count
+    where = (rng.choice(light.tris, sub.n), rng.uniform(0, 0.5, sub.n), rng.uniform(0, 0.5, sub.n))
+    got = light.emitted_at(where, sub, False, False)
+    assert sub._basis is None and sub._d65 is None               # the tables were not read
+    from engine.render.accel import surface_points
+    want = light.spectrum.at(surface_points(light.compiled, *where), sub.lam, False, sub.basis, sub.d65)
+    assert got.shape == (3, sub.n) and np.array_equal(got, want) and got.max() > 1.0

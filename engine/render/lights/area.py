@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from ...kernels.geometry import area_light_sample, triangle_sample
+from ...kernels.geometry import area_light_sample, area_lights_sample, triangle_sample
 from ...kernels.lamp_sampling import bilinear_warp_pdf, bilinear_warp_sample, ellipse_lamp_pdf, ellipse_lamp_sample
 from ...kernels.light_sampling import (MIN_RECT_SOLID_ANGLE, SELECT_AREA, area_importance, rect_angles,
                                        rect_light_sample, rect_local, rect_sample)
@@ -146,9 +146,10 @@ class AreaEmitter(_Light):
     def _sample_area(self, p, u):
         """Uniform sampling by area (module docstring's ``sample`` contract)."""
         c = self.compiled
-        if not self.two_sided and self.profile is None:
-            return area_light_sample(p, u, self.cdf, self.tris, c.faces, c.vertices, c.tri_normal, self.total_area)
-        # the same sampling, with both faces / the spread profile (NumPy: only Blender lamps use it)
+        if self.profile is None:
+            return area_light_sample(p, u, self.cdf, self.tris, c.faces, c.vertices, c.tri_normal, self.total_area,
+                                     self.two_sided)
+        # the same sampling, with the spread profile (NumPy: only Blender lamps use it)
         idx = np.minimum(np.searchsorted(self.cdf, u[0], side="right"), len(self.tris) - 1)
         tri = self.tris[idx]
         f = c.faces[tri]
@@ -451,3 +452,36 @@ def mesh_emitter(spectrum, tris, compiled, two_sided=False, spread_deg=180.0):
     if not two_sided and len(tris) == 2 and spread_profile(math.radians(spread_deg)) is not None:
         return SpreadRectangleEmitter(spectrum, tris, compiled, False, spread_deg)
     return AreaEmitter(spectrum, tris, compiled, two_sided, spread_deg)
+
+
+class AreaGroup:
+    """The emitters of a light set that ``AreaEmitter.sample`` samples uniformly by area (no rectangle, no spread
+    profile, radiance constant over the surface and in direction), their triangles and cdfs concatenated, so that
+    next-event estimation samples all of them in one compiled pass (engine.kernels.geometry.area_lights_sample):
+    per point exactly its emitter's ``sample``.  ``index`` (lights,): each light's place in the group, −1 outside."""
+
+    def __init__(self, lights):
+        members = [i for i, light in enumerate(lights) if self.by_area(light)]
+        self.index = np.full(len(lights), -1, np.int64)
+        self.index[members] = np.arange(len(members))
+        group = [lights[i] for i in members]
+        self.compiled = group[0].compiled if group else None
+        sizes = [len(light.tris) for light in group]
+        self.start = np.concatenate(([0], np.cumsum(sizes))).astype(np.int64)
+        self.cdf = np.concatenate([light.cdf for light in group] or [np.zeros(0)]).astype(np.float64)
+        self.tris = np.concatenate([light.tris for light in group] or [np.zeros(0, np.int64)]).astype(np.int64)
+        self.total_area = np.array([light.total_area for light in group], np.float64)
+        self.two_sided = np.array([light.two_sided for light in group], np.bool_)
+
+    @staticmethod
+    def by_area(light) -> bool:
+        return (isinstance(light, AreaEmitter) and type(light).sample is AreaEmitter.sample and light.rect is None
+                and light.profile is None and not light.varies_over_surface
+                and not getattr(light, "varies_with_direction", False))
+
+    def sample(self, p: np.ndarray, u: np.ndarray, member: np.ndarray):
+        """``sample``'s (wi, dist, scale, pdf, valid) of the points p (3, n) with u (3, n), point i on the group's
+        emitter ``member[i]`` (its place in the group, ``index``)."""
+        c = self.compiled
+        return area_lights_sample(p, u, member, self.cdf, self.start, self.tris, c.faces, c.vertices, c.tri_normal,
+                                  self.total_area, self.two_sided)

@@ -133,6 +133,12 @@ class TexturedAreaEmitter(AreaEmitter):
         points = surface_points(self.compiled, prim, b1, b2)
         if rgb_mode:
             return self.spectrum.linear_srgb_at(points)
+        if not mono and lookup.channels and type(self.spectrum).at is TexturedSpectrum.at:
+            # "rgb" transport (rgb_channel_tables: basis the identity, D65 1): ``spectrum.at`` is the texels'
+            # RGB itself (up to the sign of zeros) where they are finite; without the tables' gathers and products
+            rgb = self.spectrum.rgb_at(points)
+            if np.isfinite(rgb).all():
+                return rgb
         if mono:
             return self.spectrum.at(points, lookup.lam, True)
         return self.spectrum.at(points, lookup.lam, False, lookup.basis, lookup.d65)
