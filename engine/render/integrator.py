@@ -758,7 +758,8 @@ class PathTracer:
     def _vertex_numbers(self, state: PathState, acc: _Accumulators, groups: np.ndarray, fused: list[bool],
                         bounce: int, mat: np.ndarray | None = None) -> _VertexNumbers:
         """The bounce's random numbers for the material ``groups`` present (``fused``: one-step delta
-        materials; ``mat`` (n,): each path's material), drawn from the paths' sampler in dimension order (1–4 light, 5–7 BSDF, 8 roulette)."""
+        materials; ``mat`` (n,): each path's material), drawn from the paths' sampler in dimension order
+        (1–4 light, 5–7 BSDF, 8 roulette)."""
         st, sampler = self.settings, state.sampler
         # Dimensions 1–4 light sampling, 5–7 the BSDF (lobe, direction), 8 roulette; only those this
         # bounce reads are hashed (at delta vertices, before rr_depth, most are not): the numbers are
