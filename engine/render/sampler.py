@@ -197,8 +197,10 @@ def vertex_pattern(sampler: str, bounce: int) -> str:
     """The pattern whose pairs (sets) draw vertex ``bounce``'s numbers with ``sampler``: "cycles" at "sobol"'s first
     vertex (its light numbers one Owen-scrambled 4-D set, its lobe and direction one 3-D set, each shuffled per pixel:
     ``cycles_pairs``), else ``sampler``.  Not "stratified"'s Sobol' dimensions 3–8: for a pixel's first 16 samples
-    (one sequence) dimensions 7, 8 (light choice, lobe) equal dimension 2 (the jitter's y) to their first two
-    digits, so each light's or lobe's samples covered half of the pixel (docs/benchmarks/real-assets.md, helper F)."""
+    (one sequence) the first two binary digits of dimensions 7, 8 (light choice, lobe) are fixed functions of
+    dimension 2's (the jitter's y), so each light's or lobe's samples covered half of the pixel
+    (docs/benchmarks/real-assets.md, helper F).  The integrator gives one-lobe materials (no lobe choice: Lambert, a
+    rough conductor) "stratified"'s direction back, one net with the jitter (PathTracer._sobol_vertex_numbers)."""
     return "cycles" if sampler == "sobol" and bounce == 0 else sampler
 
 

@@ -1,8 +1,8 @@
 """The "sobol" sampler's first vertex (engine.render.sampler.vertex_pattern): its light choice and lobe must not
 repeat the pixel jitter.  Until 2026-12-07 they were "stratified"'s Sobol' dimensions 7, 8, which over a pixel's
-first 16 samples (one sequence) equal the jitter's y (dimension 2) to their first digits: with two lights each one
-lit only one half of the pixel, an error that did not shrink with the samples (TextureTransform under the sun and the
-area light: σ² 2.1× Cycles', docs/benchmarks/real-assets.md, helper F).
+first 16 samples (one sequence) are fixed functions of the jitter's y (dimension 2) in their first two digits: with
+two lights each one lit only one half of the pixel, an error that did not shrink with the samples (TextureTransform
+under the sun and the area light: σ² 2.1× Cycles', docs/benchmarks/real-assets.md, helper F).
 
 Oracle: a Lambert floor of black and white stripes, half a pixel wide along the image's y, under two suns of different
 irradiance (delta: the light choice is the only light number), 16 spp, 12 seeds; every estimator is unbiased, so the
