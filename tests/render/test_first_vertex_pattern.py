@@ -14,6 +14,7 @@ import dataclasses
 import math
 
 import numpy as np
+import pytest
 
 from engine.render.renderer import Renderer
 from engine.scene.loader import parse_scene
@@ -62,3 +63,24 @@ def test_two_lights_on_sub_pixel_stripes_converge_with_sobol():
     assert abs(m_sob - m_ind) < 4 * math.sqrt((v_sob + v_ind) / 12 / N_PIX ** 2)
     assert v_sob < 0.5 * v_ind
     assert v_sob < 1.5 * v_cyc
+
+
+
+@pytest.mark.parametrize("material, one", [({"type": "lambert", "albedo": 0.5}, True),
+                                           ({"type": "torrance_sparrow", "n": 0.47, "k": 2.4, "m": 0.3}, True),
+                                           ({"type": "torrance_sparrow", "n": 1.5, "m": 0.3, "diffuse_albedo": 0.5},
+                                            False),
+                                           ({"type": "rough_dielectric", "n": 1.5, "alpha": 0.3}, False)])
+def test_one_lobe_materials_keep_the_direction_stratified_with_the_jitter(material, one):
+    """PathTracer.one_lobe: the materials without a lobe choice (Lambert, a rough conductor), whose first-vertex
+    direction "sobol" draws as "stratified" does (one net with the jitter), and not those with one (a glossy lobe
+    over a diffuse one, a rough dielectric's reflection and refraction: Cycles' (lobe, direction) set)."""
+    data = {"format": "polar-scene/1",
+            "camera": {"origin": [0, 0, 3], "target": [0, 0, 0], "up": [0, 1, 0], "fov_deg": 20, "width": 4,
+                       "height": 4},
+            "materials": {"m": material},
+            "objects": [{"shape": "quad", "material": "m",
+                         "vertices": [[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0]]}],
+            "lights": [{"type": "environment", "radiance": 1.0}]}
+    renderer = Renderer(parse_scene(data))
+    assert renderer.tracer(renderer.plan()).one_lobe.tolist() == [one]
