@@ -199,6 +199,11 @@ class _Scattered:
     eta_step: np.ndarray
 
 
+def one_lobe(shaders) -> np.ndarray:
+    """(groups,) bool: the shading groups with one lobe and so no lobe choice (Lambert, a rough conductor)."""
+    return np.array([bin(int(s.flags & BSDFFlags.LOBES)).count("1") == 1 for s in shaders], bool)
+
+
 @dataclass(eq=False)
 class _VertexNumbers:
     """A bounce's random numbers (dimensions 1–8): the light sample ``u_light`` (4, n) (None where
@@ -337,7 +342,7 @@ class PathTracer:
         self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
         # by group: one lobe and no lobe choice (a rough conductor, Lambert): "sobol"'s first vertex draws its
         # direction jointly with the pixel jitter (_sobol_vertex_numbers)
-        self.one_lobe = np.array([bin(int(s.flags & BSDFFlags.LOBES)).count("1") == 1 for s in self.shaders], bool)
+        self.one_lobe = one_lobe(self.shaders)
         # by material index: opaque two-sided materials, whose back faces shade with flipped normals
         # (BSDF.two_sided; read from the scene's materials, which simplification may have replaced)
         self.two_sided = np.array([bool(m.two_sided) and not m.flags.transmits for m in compiled.materials], bool)
