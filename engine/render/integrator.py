@@ -820,7 +820,7 @@ class PathTracer:
             u_bsdf = out[[1, d, d + 1]]
             if sampler != self.settings.sampler and mat is not None:
                 # "sobol"'s first vertex: without a lobe choice the direction is "stratified"'s, one Sobol' net with
-                # the jitter (rough_sphere_a030: MSE 0.84× Cycles' set); with one, the lobe and direction are Cycles'
+                # the jitter (rough_sphere_a030: MSE 0.81× Cycles' set); with one, the lobe and direction are Cycles'
                 # 3-D set (docs/benchmarks/real-assets.md, helper F)
                 one = np.flatnonzero(self.one_lobe[self.group_of[mat]])
                 u_bsdf[1, one], u_bsdf[2, one] = stratified_pair(self.settings.seed, pixel[one], sample[one],
