@@ -199,9 +199,9 @@ class _Scattered:
     eta_step: np.ndarray
 
 
-def one_lobe(shaders) -> np.ndarray:
-    """(groups,) bool: the shading groups with one lobe and so no lobe choice (Lambert, a rough conductor)."""
-    return np.array([bin(int(s.flags & BSDFFlags.LOBES)).count("1") == 1 for s in shaders], bool)
+def one_lobe(materials) -> np.ndarray:
+    """(materials,) bool: the materials with one lobe and so no lobe choice (Lambert, a rough conductor)."""
+    return np.array([bin(int(m.flags & BSDFFlags.LOBES)).count("1") == 1 for m in materials], bool)
 
 
 @dataclass(eq=False)
@@ -340,9 +340,10 @@ class PathTracer:
                                     for light in lights.lights))
         # materials shaded together (e.g. all RGB Lambert materials in one call)
         self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
-        # by group: one lobe and no lobe choice (a rough conductor, Lambert): "sobol"'s first vertex draws its
-        # direction jointly with the pixel jitter (_sobol_vertex_numbers)
-        self.one_lobe = one_lobe(self.shaders)
+        # by material index: one lobe and no lobe choice (a rough conductor, Lambert): "sobol"'s first vertex draws
+        # its direction jointly with the pixel jitter (_sobol_vertex_numbers); per material, not per shading group,
+        # so that the image does not depend on how materials are batched
+        self.one_lobe = one_lobe(self.materials)
         # by material index: opaque two-sided materials, whose back faces shade with flipped normals
         # (BSDF.two_sided; read from the scene's materials, which simplification may have replaced)
         self.two_sided = np.array([bool(m.two_sided) and not m.flags.transmits for m in compiled.materials], bool)
@@ -822,7 +823,7 @@ class PathTracer:
                 # "sobol"'s first vertex: without a lobe choice the direction is "stratified"'s, one Sobol' net with
                 # the jitter (rough_sphere_a030: MSE 0.81× Cycles' set); with one, the lobe and direction are Cycles'
                 # 3-D set (docs/benchmarks/real-assets.md, helper F)
-                one = np.flatnonzero(self.one_lobe[self.group_of[mat]])
+                one = np.flatnonzero(self.one_lobe[mat])
                 u_bsdf[1, one], u_bsdf[2, one] = stratified_pair(self.settings.seed, pixel[one], sample[one],
                                                                  u_bsdf[1, one], u_bsdf[2, one],
                                                                  pair=PAIR_BSDF_DIRECTION)

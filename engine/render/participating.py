@@ -452,7 +452,7 @@ class ParticipatingPathTracer(PathTracer):
         self.materials += phases
         self.scene = _SceneWithMediumVertices(compiled, len(tracked), M)
         self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
-        self.one_lobe = one_lobe(self.shaders)
+        self.one_lobe = one_lobe(self.materials)
         self.two_sided = np.concatenate((self.two_sided, np.zeros(len(tracked), bool)))
         used = np.concatenate((compiled.used_materials, np.arange(M, M + len(tracked))))
         self.uniform, self.rgb_mode = spectral_reduction(settings, self.materials, used)

@@ -72,9 +72,10 @@ def test_two_lights_on_sub_pixel_stripes_converge_with_sobol():
                                             False),
                                            ({"type": "rough_dielectric", "n": 1.5, "alpha": 0.3}, False)])
 def test_one_lobe_materials_keep_the_direction_stratified_with_the_jitter(material, one):
-    """PathTracer.one_lobe: the materials without a lobe choice (Lambert, a rough conductor), whose first-vertex
-    direction "sobol" draws as "stratified" does (one net with the jitter), and not those with one (a glossy lobe
-    over a diffuse one, a rough dielectric's reflection and refraction: Cycles' (lobe, direction) set)."""
+    """PathTracer.one_lobe (by material index, so that batching does not change the image): the materials without
+    a lobe choice (Lambert, a rough conductor), whose first-vertex direction "sobol" draws as "stratified" does (one
+    net with the jitter), and not those with one (a glossy lobe over a diffuse one, a rough dielectric's reflection
+    and refraction: Cycles' (lobe, direction) set)."""
     data = {"format": "polar-scene/1",
             "camera": {"origin": [0, 0, 3], "target": [0, 0, 0], "up": [0, 1, 0], "fov_deg": 20, "width": 4,
                        "height": 4},
