@@ -874,9 +874,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--simplify", choices=("auto", "off"),
                    help="auto (default): skip layered coats that are index-matched and clear; off: keep all")
     r.add_argument("--sampler", choices=("sobol", "padded", "cycles", "stratified", "independent"),
-                   help="sobol (the default, as in Blender: stratified's numbers at the camera and first vertex, "
-                        "per-pixel shuffled, Owen-scrambled Sobol' pairs at every deeper vertex: less noise, same "
-                        "expectation; --stderr comes from two classes of the samples), padded "
+                   help="sobol (the default, as in Blender: stratified's numbers at the camera, Cycles' sets at the "
+                        "first vertex, per-pixel shuffled, Owen-scrambled Sobol' pairs at every deeper vertex: less "
+                        "noise, same expectation; --stderr comes from two classes of the samples), padded "
                         "(every number from its own shuffled Sobol' pair, the pixel jitter Owen-scrambled, the others "
                         "digitally shifted), "
                         "stratified (Sobol' pixel jitter, lens, wavelengths and first-vertex light/BSDF numbers, "

@@ -59,7 +59,8 @@ from .polarised_light import in_frame, light_samples_polarisation, mueller_times
 from .plan import rendered_materials, spectral_reduction
 from .sampler import (PADDED_LAYOUT, PADDED_WAVELENGTH, PAIR_BSDF_DIRECTION, PAIR_CHOICES, PAIR_LIGHT_POINT,
                       PAIR_WAVELENGTH, SOBOL_CHOICES, SOBOL_DIRECTION, SOBOL_LIGHT_POINT, SOBOL_ROULETTE, PathSampler,
-                      camera_numbers, pattern_pairs, sequence_index, stratified_pair, vertex_pair)
+                      camera_numbers, pattern_pairs, sequence_index, stratified_pair, vertex_pair,
+                      vertex_pattern)
 from .visibility import ray_visibility
 from ..scene.description import resolve_halves
 from ..spectral import RGB_WAVELENGTHS_NM, WavelengthLookup, rgb_channel_tables, rgb_weights, sample_wavelengths
@@ -199,6 +200,11 @@ class _Scattered:
     eta_step: np.ndarray
 
 
+def one_lobe(materials) -> np.ndarray:
+    """(materials,) bool: the materials with one lobe and so no lobe choice (Lambert, a rough conductor)."""
+    return np.array([bin(int(m.flags & BSDFFlags.LOBES)).count("1") == 1 for m in materials], bool)
+
+
 @dataclass(eq=False)
 class _VertexNumbers:
     """A bounce's random numbers (dimensions 1–8): the light sample ``u_light`` (4, n) (None where
@@ -215,6 +221,7 @@ class _VertexNumbers:
     sample: np.ndarray | None
     u_rr: np.ndarray | None = None
     sobol_direction: int | None = None
+    pattern: str = ""                   # the pattern of ``sobol_direction`` (sampler.vertex_pattern)
 
 
 @dataclass(eq=False)
@@ -336,6 +343,10 @@ class PathTracer:
                                     for light in lights.lights))
         # materials shaded together (e.g. all RGB Lambert materials in one call)
         self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
+        # by material index: one lobe and no lobe choice (a rough conductor, Lambert): "sobol"'s first vertex draws
+        # its direction jointly with the pixel jitter (_sobol_vertex_numbers); per material, not per shading group,
+        # so that the image does not depend on how materials are batched
+        self.one_lobe = one_lobe(self.materials)
         # by material index: opaque two-sided materials, whose back faces shade with flipped normals
         # (BSDF.two_sided; read from the scene's materials, which simplification may have replaced)
         self.two_sided = np.array([bool(m.two_sided) and not m.flags.transmits for m in compiled.materials], bool)
@@ -715,7 +726,7 @@ class PathTracer:
         fused = [self.shaders[g].flags.is_delta_only and type(self.shaders[g]).scatter_delta is not BSDF.scatter_delta
                  for g in groups]
         columns = not whole or fused[0]
-        nums = self._vertex_numbers(state, acc, groups, fused, bounce)
+        nums = self._vertex_numbers(state, acc, groups, fused, bounce, mat)
         nxt = self._new_scattered(nums.u_rr, n_side, T.shape[:3] + (n,), columns)
         # (every path belongs to one material group, which writes its columns of nxt.T, d, x_T and valid:
         # scatter_delta at its rows, else from its sample; is_delta, pdf and eta_step keep their presets
@@ -754,19 +765,19 @@ class PathTracer:
         return nxt
 
     def _vertex_numbers(self, state: PathState, acc: _Accumulators, groups: np.ndarray, fused: list[bool],
-                        bounce: int) -> _VertexNumbers:
+                        bounce: int, mat: np.ndarray | None = None) -> _VertexNumbers:
         """The bounce's random numbers for the material ``groups`` present (``fused``: one-step delta
-        materials), drawn from the paths' sampler in dimension order (1–4 light, 5–7 BSDF, 8 roulette)."""
+        materials; ``mat`` (n,): each path's material), drawn from the paths' sampler in dimension order
+        (1–4 light, 5–7 BSDF, 8 roulette)."""
         st, sampler = self.settings, state.sampler
         # Dimensions 1–4 light sampling, 5–7 the BSDF (lobe, direction), 8 roulette; only those this
         # bounce reads are hashed (at delta vertices, before rr_depth, most are not): the numbers are
         # stateless in the dimension, so skipping leaves every other one as it was.
         nee = (self.lights.sampled and bounce + 2 <= st.max_depth
                and not all(self.shaders[g].flags.is_delta_only for g in groups))
-        if st.sampler in PADDED_LAYOUT or (st.sampler == "sobol" and bounce > 0):
-            # deeper vertices (every vertex with "padded" and "cycles"): the padded layout's pairs (with "sobol"
-            # the first one as "stratified" draws it)
-            return self._sobol_vertex_numbers(state, acc, nee, all(fused), bounce + 1 >= st.rr_depth, bounce)
+        if st.sampler in PADDED_LAYOUT or st.sampler == "sobol":
+            # the padded layout's pairs (with "sobol" the first vertex's from Cycles' sets: sampler.vertex_pattern)
+            return self._sobol_vertex_numbers(state, acc, nee, all(fused), bounce + 1 >= st.rr_depth, bounce, mat)
         u_light = sampler.next(4) if nee else sampler.skip(4)
         direction_dims = None
         if all(fused):
@@ -789,15 +800,16 @@ class PathTracer:
         return nums
 
     def _sobol_vertex_numbers(self, state: PathState, acc: _Accumulators, nee: bool, delta_only: bool,
-                              roulette: bool, bounce: int) -> _VertexNumbers:
-        """The numbers of vertex ``bounce`` ≥ 1 with the "sobol" sampler, from its pairs of dimensions
-        (engine.render.sampler.SOBOL_*): (light choice, lobe), the light point, (roulette, light number 3),
+                              roulette: bool, bounce: int, mat: np.ndarray | None = None) -> _VertexNumbers:
+        """The numbers of vertex ``bounce`` with the pair-drawing patterns (engine.render.sampler.vertex_pattern:
+        "sobol"'s first vertex from Cycles' sets), by role (engine.render.sampler.SOBOL_*): (light choice, lobe),
+        the light point, (roulette, light number 3),
         the direction (deferred where every group is a one-step delta material: ``delta_only``); only the
         pairs this bounce reads are computed (each number depends on its own pair alone)."""
         pixel, sample = acc.pixel[state.path], acc.sample[state.path]
         roles = [SOBOL_CHOICES] + ([SOBOL_LIGHT_POINT] if nee else []) + ([SOBOL_ROULETTE] if nee or roulette else [])
         roles += [] if delta_only else [SOBOL_DIRECTION]
-        sampler = self.settings.sampler
+        sampler = vertex_pattern(self.settings.sampler, bounce)
         pairs = [vertex_pair(sampler, bounce, r) for r in roles]
         out = pattern_pairs(sampler, self.settings.seed, pixel, sample, pairs)
         row = {r: 2 * m for m, r in enumerate(roles)}
@@ -810,9 +822,18 @@ class PathTracer:
         else:
             d = row[SOBOL_DIRECTION]
             u_bsdf = out[[1, d, d + 1]]
+            if sampler != self.settings.sampler and mat is not None:
+                # "sobol"'s first vertex: without a lobe choice the direction is "stratified"'s, one Sobol' net with
+                # the jitter (rough_sphere_a030: MSE 0.81× Cycles' set); with one, the lobe and direction are Cycles'
+                # 3-D set (docs/benchmarks/real-assets.md, helper F)
+                one = np.flatnonzero(self.one_lobe[mat])
+                u_bsdf[1, one], u_bsdf[2, one] = stratified_pair(self.settings.seed, pixel[one], sample[one],
+                                                                 u_bsdf[1, one], u_bsdf[2, one],
+                                                                 pair=PAIR_BSDF_DIRECTION)
         nums = _VertexNumbers(nee=nee, u_light=u_light, u_bsdf=u_bsdf, direction_dims=None, pixel=pixel,
                               sample=sample, u_rr=out[row[SOBOL_ROULETTE]] if roulette else np.empty(0),
-                              sobol_direction=vertex_pair(sampler, bounce, SOBOL_DIRECTION) if delta_only else None)
+                              sobol_direction=vertex_pair(sampler, bounce, SOBOL_DIRECTION) if delta_only else None,
+                              pattern=sampler)
         return nums
 
     def _stratify_vertex(self, nums: _VertexNumbers) -> None:
@@ -840,8 +861,7 @@ class PathTracer:
         to ``nums.u_bsdf`` (stratified at a stratified first vertex, from their pair with "sobol");
         ``nums.direction_dims`` (``nums.sobol_direction``) is spent."""
         if nums.sobol_direction is not None:
-            extra = pattern_pairs(self.settings.sampler, self.settings.seed, nums.pixel, nums.sample,
-                                  [nums.sobol_direction])
+            extra = pattern_pairs(nums.pattern, self.settings.seed, nums.pixel, nums.sample, [nums.sobol_direction])
             nums.u_bsdf = np.concatenate((nums.u_bsdf, extra))
             nums.sobol_direction = None
             return

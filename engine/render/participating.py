@@ -44,7 +44,7 @@ from ..kernels.transport import add_light
 from ..media.henyey_greenstein import HenyeyGreenstein
 from ..spectral.cie import LUMINANCE_WEIGHTS
 from .accel import surface_points
-from .integrator import PathTracer, _SurfaceHits
+from .integrator import PathTracer, _SurfaceHits, one_lobe
 from .light_paths import LightPathRules
 from .media import Media, cross, tracked_media
 from .plan import spectral_reduction
@@ -452,6 +452,7 @@ class ParticipatingPathTracer(PathTracer):
         self.materials += phases
         self.scene = _SceneWithMediumVertices(compiled, len(tracked), M)
         self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
+        self.one_lobe = one_lobe(self.materials)
         self.two_sided = np.concatenate((self.two_sided, np.zeros(len(tracked), bool)))
         used = np.concatenate((compiled.used_materials, np.arange(M, M + len(tracked))))
         self.uniform, self.rgb_mode = spectral_reduction(settings, self.materials, used)

@@ -10,9 +10,10 @@ camera's numbers (pixel jitter, lens, wavelengths) and the first vertex's light 
 replaced by ``stratified_pair`` (per-pixel XOR-scrambled Sobol' points, two independent sequences for
 the even and the odd samples), still functions of (seed, pixel, sample index) only.
 
-With "sobol" (the default) the camera's and the first vertex's numbers are "stratified"'s, bit for bit
-(one jointly stratified Sobol' point set: pixel position × light point × BSDF direction, which padded
-pairs would stratify only pair by pair), and every number of the deeper vertices — light choice, light
+With "sobol" (the default) the camera's numbers are "stratified"'s, bit for bit, the first vertex's are Cycles'
+(``vertex_pattern``: the "cycles" sampler's light and BSDF sets of vertex 0; until 2026-12-07 "stratified"'s jointly
+stratified Sobol' dimensions 3–8, whose light and lobe choices repeat the jitter's y over a pixel's first 16
+samples), and every number of the deeper vertices — light choice, light
 point, lobe choice, BSDF direction, roulette, where "stratified" hashes them — is a coordinate of a
 pair of dimensions (``sobol_pairs``, layout ``SOBOL_*`` below) drawn from its own shuffled,
 Owen-scrambled 2-D Sobol' (0, 2)-sequence per (seed, pixel, pair, parity of the sample)
@@ -190,6 +191,17 @@ PADDED_JITTER, PADDED_LENS, PADDED_WAVELENGTH = 0, 1, 2
 PADDED_FIRST = 3
 #: the samplers drawing every number, the camera's too, in the padded layout of pairs
 PADDED_LAYOUT = ("padded", "cycles")
+
+
+def vertex_pattern(sampler: str, bounce: int) -> str:
+    """The pattern whose pairs (sets) draw vertex ``bounce``'s numbers with ``sampler``: "cycles" at "sobol"'s first
+    vertex (its light numbers one Owen-scrambled 4-D set, its lobe and direction one 3-D set, each shuffled per pixel:
+    ``cycles_pairs``), else ``sampler``.  Not "stratified"'s Sobol' dimensions 3–8: for a pixel's first 16 samples
+    (one sequence) the first two binary digits of dimensions 7, 8 (light choice, lobe) are fixed functions of
+    dimension 2's (the jitter's y), so each light's or lobe's samples covered half of the pixel
+    (docs/benchmarks/real-assets.md, helper F).  The integrator gives one-lobe materials (no lobe choice: Lambert, a
+    rough conductor) "stratified"'s direction back, one net with the jitter (PathTracer._sobol_vertex_numbers)."""
+    return "cycles" if sampler == "sobol" and bounce == 0 else sampler
 
 
 def vertex_pair(sampler: str, bounce: int, role: int) -> int:

@@ -438,9 +438,9 @@ class RenderSettings:
     #: Cycles' Denoising Albedo / Normal passes); False: the renders are unchanged.
     denoise_data: bool = False
     #: Random numbers of the paths (Cycles' sampling pattern): "sobol", the one default of the scene
-    #: format, the command line, the Python API and Blender (the camera's and the first vertex's numbers
-    #: as "stratified" draws them, every deeper vertex's — light choice and point, lobe, direction,
-    #: roulette — from per-pixel shuffled, Owen-scrambled Sobol' (0, 2)-sequence pairs,
+    #: format, the command line, the Python API and Blender (the camera's numbers as "stratified" draws them, the
+    #: first vertex's as "cycles" does, engine.render.sampler.vertex_pattern, every deeper vertex's — light choice
+    #: and point, lobe, direction, roulette — from per-pixel shuffled, Owen-scrambled Sobol' (0, 2)-sequence pairs,
     #: engine.render.sampler.sobol_pairs: same expectation, less noise; with independent ``halves`` the standard
     #: error comes from the even/odd halves), "stratified" (the camera's numbers and the first vertex's light and BSDF
     #: numbers one per-pixel XOR-scrambled Sobol' point set, engine.render.sampler.stratified_pair, the

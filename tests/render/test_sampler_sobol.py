@@ -1,12 +1,12 @@
-"""The "sobol" sampler (the default): the camera's and the first vertex's numbers exactly as "stratified"
-draws them (one jointly stratified per-pixel Sobol' point set), every deeper vertex's numbers from
+"""The "sobol" sampler (the default): the camera's numbers exactly as "stratified" draws them, the first vertex's
+as "cycles" does (engine.render.sampler.vertex_pattern), every deeper vertex's numbers from
 shuffled, Owen-scrambled Sobol' (0, 2)-sequence pairs (engine.kernels.sobol, engine.render.sampler.sobol_pairs)
 where "stratified" hashes them.
 
 The pairs' numbers are functions of (seed, pixel, sample, pair) alone, every pair of a pixel's first 2^m
 even (or odd) samples is a (0, m, 2)-net, the pairs and pixels are decorrelated, the even and odd samples
 are independent sequences; renders keep the independent sampler's expectation, equal "stratified"'s bit
-for bit where paths end at the first vertex, and have less noise where deeper vertices matter.
+for bit for camera rays alone, and have less noise where deeper vertices matter.
 The determinism of whole renders (threads, batch size, resumption, adaptive rounds) is tested with
 the other samplers' tests in tests/render/test_stratified.py, parametrised by the sampler.
 """
@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from engine.render.renderer import Renderer, RenderRequest
-from engine.render.sampler import SOBOL_PER_BOUNCE, padded_pairs, sobol_pair_index, sobol_pairs
+from engine.render.sampler import SOBOL_PER_BOUNCE, padded_pairs, sobol_pair_index, sobol_pairs, vertex_pattern
 
 #: pairs tested: the second vertex's, the third's, a deep vertex's, a very deep one
 PAIRS = [0, 1, 2, 3, SOBOL_PER_BOUNCE, sobol_pair_index(7, 1), sobol_pair_index(300, 2)]
@@ -34,7 +34,7 @@ def is_net(x, y, m):
 
 
 def test_pair_layout():
-    """The pairs start at the second vertex (bounce 1); the first one draws "stratified"'s numbers."""
+    """The pairs start at the second vertex (bounce 1); the first one draws "cycles"' sets."""
     assert sobol_pair_index(1, 0) == 0
     assert sobol_pair_index(3, 1) == 2 * SOBOL_PER_BOUNCE + 1
     with pytest.raises(ValueError):
@@ -213,15 +213,17 @@ def cornell():
     return scene
 
 
-def test_the_camera_and_first_vertex_numbers_are_the_stratified_samplers(cornell):
-    """Paths ended after the first vertex (max_depth 2: the camera ray, the first vertex's light sample and
-    BSDF-sampled segment) see exactly "stratified"'s numbers: the renders are equal bit for bit; one
-    segment more and the second vertex's numbers differ (pairs where "stratified" hashes)."""
+def test_the_camera_numbers_are_the_stratified_samplers_and_the_first_vertex_cycles(cornell):
+    """Camera rays alone (max_depth 1) see exactly "stratified"'s numbers: the renders are equal bit for bit; the
+    first vertex (max_depth 2) draws "cycles"' sets (sampler.vertex_pattern), no longer "stratified"'s Sobol'
+    dimensions 3–8 (tests/render/test_first_vertex_pattern.py: why); the deeper vertices "sobol"'s own pairs."""
     def render(sampler, depth):
         st = dataclasses.replace(cornell.settings, sampler=sampler, spp=8, max_depth=depth, seed=3)
         return Renderer(cornell).render(st).stokes_luminance()[0]
-    np.testing.assert_array_equal(render("sobol", 2), render("stratified", 2))
-    assert not np.array_equal(render("sobol", 3), render("stratified", 3))
+    np.testing.assert_array_equal(render("sobol", 1), render("stratified", 1))
+    assert not np.array_equal(render("sobol", 2), render("stratified", 2))
+    assert [vertex_pattern("sobol", b) for b in range(3)] == ["cycles", "sobol", "sobol"]
+    assert [vertex_pattern(s, 0) for s in ("padded", "cycles")] == ["padded", "cycles"]
 
 
 def test_a_diffuse_scene_keeps_the_independent_mean_and_the_stratified_variance(cornell):
