@@ -159,7 +159,14 @@ def addon():
 @pytest.mark.parametrize("socket", list(CASES))
 def test_principled_input_per_point_matches_cycles(addon, socket, lighting):
     values, others = CASES[socket]
-    compare_with_cycles(sphere_scene(socket, values, others, lighting), f"Principled {socket.strip()}", lighting)
+    compare_with_cycles(sphere_scene(socket, values, others, lighting), f"Principled {socket.strip()}", lighting,
+                        seeds=CASE_SEEDS.get((socket, lighting), SEEDS))
+
+
+#: cases judged on more seeds: with 4 (σ from 3 degrees of freedom) one block of 12 failed by chance after the first
+#: vertex's numbers changed (2026-12-07, "sobol" drawing Cycles' light and BSDF sets; block 1.071 against a
+#: tolerance of 0.068); 12/12 at 8 and at 16 seeds
+CASE_SEEDS = {("Coat Tint ", "lamps"): 8}
 
 
 #: a constant Thin Film over a Base Color checker: rough metal and rough dielectric (Cycles' iridescence on

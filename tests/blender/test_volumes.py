@@ -83,21 +83,21 @@ def _scene(make_material=None, world_volume=None, lamp="sun"):
     return scene
 
 
-def _parity(scene, volume_bounces, bounces=4):
-    """The asset rule's report over every block, and Polar's warnings."""
-    report = ap.CaseReport("volume", "sun", SPP, SEEDS, SIZE, SIZE)
+def _parity(scene, volume_bounces, bounces=4, seeds=SEEDS):
+    """The asset rule's report over every block, and Polar's warnings (``seeds`` renders a side)."""
+    report = ap.CaseReport("volume", "sun", SPP, seeds, SIZE, SIZE)
     cyc = []
     ap.cycles_settings(scene, SPP, bounces)
     scene.cycles.volume_bounces = volume_bounces
     with tempfile.TemporaryDirectory() as tmp:
-        for seed in range(SEEDS):
+        for seed in range(seeds):
             scene.cycles.seed = seed
             scene.render.filepath = os.path.join(tmp, f"cycles_{seed}")
             bpy.ops.render.render(write_still=True)
             cyc.append(read_multilayer(scene.render.filepath + ".exr")["Combined"][..., :3])
     renderer, settings, report.warnings = ap.export_polar(scene, SPP, bounces)
     assert settings.max_volume_bounces == volume_bounces
-    stokes = ap.render_polar(renderer, settings, SEEDS)
+    stokes = ap.render_polar(renderer, settings, seeds)
     ap.compare(np.array(cyc), stokes[:, 0], np.ones((SIZE, SIZE), bool), report)
     return report
 
@@ -116,7 +116,9 @@ def test_principled_volume_matches_cycles():
     scene = _scene(lambda: _material("Smoke", "ShaderNodeVolumePrincipled",
                                      {"Density": 1.5, "Anisotropy": 0.5, "Color": (0.7, 0.75, 0.8, 1.0),
                                       "Absorption Color": (0.3, 0.2, 0.1, 1.0)}))
-    report = _parity(scene, volume_bounces=3)
+    # 8 seeds: with 4 (σ from 3 degrees of freedom) one block of 16 failed by chance after the first vertex's
+    # numbers changed (2026-12-07, "sobol" drawing Cycles' light and BSDF sets): 16/16 at 8 and at 16 seeds, Y 1.001
+    report = _parity(scene, volume_bounces=3, seeds=8)
     assert report.warnings == []
     assert report.fraction >= ap.PASS_FRACTION, (report.luminance_ratio, report.failing)
 
