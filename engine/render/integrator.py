@@ -202,7 +202,7 @@ class _Scattered:
 
 def one_lobe(materials) -> np.ndarray:
     """(materials,) bool: the materials with one lobe and so no lobe choice (Lambert, a rough conductor)."""
-    return np.array([bin(int(m.flags & BSDFFlags.LOBES)).count("1") == 1 for m in materials], bool)
+    return np.array([bin(int(m.flags.lobes)).count("1") == 1 for m in materials], bool)
 
 
 @dataclass(eq=False)
@@ -826,10 +826,12 @@ class PathTracer:
                 # "sobol"'s first vertex: without a lobe choice the direction is "stratified"'s, one Sobol' net with
                 # the jitter (rough_sphere_a030: MSE 0.81× Cycles' set); with one, the lobe and direction are Cycles'
                 # 3-D set (docs/benchmarks/real-assets.md, helper F)
+                # (the Cycles numbers of those rows are still drawn: stratified_pair takes them as its bits below 2^-32)
                 one = np.flatnonzero(self.one_lobe[mat])
-                u_bsdf[1, one], u_bsdf[2, one] = stratified_pair(self.settings.seed, pixel[one], sample[one],
-                                                                 u_bsdf[1, one], u_bsdf[2, one],
-                                                                 pair=PAIR_BSDF_DIRECTION)
+                if one.size:
+                    u_bsdf[1, one], u_bsdf[2, one] = stratified_pair(self.settings.seed, pixel[one], sample[one],
+                                                                     u_bsdf[1, one], u_bsdf[2, one],
+                                                                     pair=PAIR_BSDF_DIRECTION)
         nums = _VertexNumbers(nee=nee, u_light=u_light, u_bsdf=u_bsdf, direction_dims=None, pixel=pixel,
                               sample=sample, u_rr=out[row[SOBOL_ROULETTE]] if roulette else np.empty(0),
                               sobol_direction=vertex_pair(sampler, bounce, SOBOL_DIRECTION) if delta_only else None,
@@ -1402,7 +1404,7 @@ class PathTracer:
             if not light.blocks_own_shadow_rays:
                 continue
             # only the light's blocked rays are looked at again (the others stay as they are)
-            mine = blocked if isinstance(sel, slice) else blocked[sel]      # (slice(None): every vertex)
+            mine = blocked[sel]          # (sel may be slice(None): every vertex)
             if not mine.any():
                 continue
             every = mine.all()

@@ -228,12 +228,12 @@ def work_units(width: int, height: int, spp: int, batch_rays: int, first_pass: i
     if rows_per_unit == rows > 1 and rows * cols * todo > batch_rays:
         rows_per_unit = -(-rows // 2)           # the passes do not fit one batch: group them for half-height bands
     most = max(1, batch_rays // (rows_per_unit * cols))
-    groups = max(1, -(-todo // most))
+    groups = -(-todo // most)
     bands = -(-rows // rows_per_unit)
     if bands < workers and groups * bands < UNITS_PER_WORKER * workers:
         bands = min(workers, rows)      # one band per worker
     cuts = [y0 + i * rows // bands for i in range(bands + 1)]       # (nearly) equal bands
-    for g in range(groups if todo else 0):         # (nearly) equal groups, each within ``most``
+    for g in range(groups):                         # (nearly) equal groups, each within ``most``
         p0, p1 = first_pass + g * todo // groups, first_pass + (g + 1) * todo // groups
         for r0, r1 in zip(cuts[:-1], cuts[1:]):
             yield r0, r1, p0, p1

@@ -168,9 +168,8 @@ class AreaEmitter(_Light):
         valid = (cos_l > 0) & (dist > 0)
         pdf = np.where(valid, dist2 / np.where(valid, cos_l, 1.0) / self.total_area, 0.0)
         scale = np.where(valid, 1.0 / np.where(valid, pdf, 1.0), 0.0)
-        if self.profile is not None:
-            scale = scale * self.profile(cos_l)
-            valid &= scale > 0
+        scale = scale * self.profile(cos_l)
+        valid &= scale > 0
         return wi, dist, scale, pdf, valid
 
     def points_on(self, p, tri, u1, u2):
