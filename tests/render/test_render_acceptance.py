@@ -6,6 +6,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from engine.render.plan import work_units
 from engine.render.renderer import Renderer, RenderRequest
 from engine.scene.description import Camera, EnvironmentLight, Mesh, RenderSettings, Scene
 from engine.scene.loader import load_scene
@@ -134,7 +135,7 @@ def test_polarisation_off_gives_the_same_s0_where_paths_bounce_once():
 
 def test_cancel_keeps_finished_samples():
     scene = peer_scene("plane_brewster", 16, res=64)
-    scene.settings = dataclasses.replace(scene.settings, batch_rays=64 * 64)   # one pass per work unit
+    scene.settings = dataclasses.replace(scene.settings, batch_rays=64 * 64)   # bands of 32 rows × 2 passes
     state = {"progress": 0}
 
     def stop():
@@ -144,8 +145,16 @@ def test_cancel_keeps_finished_samples():
         "progress", state["progress"] + 1)))
     assert result.cancelled
     spp = result.film.spp_image()
-    assert 1 <= spp.min() == spp.max() < 16          # whole passes only, the in-flight ones discarded
-    assert np.all(np.isfinite(result.stokes())) and result.stokes()[0].min() > 0
+    units = list(work_units(64, 64, 16, 64 * 64))
+    assert {(r1 - r0, p1 - p0) for r0, r1, p0, p1 in units} == {(32, 2)}
+    # whole units only, the in-flight ones discarded: each band holds a whole number of its pass groups
+    group_ends = {0} | {p1 for _, _, _, p1 in units}
+    for r0, r1 in {(r0, r1) for r0, r1, _, _ in units}:
+        band = spp[r0:r1]
+        assert band.min() == band.max() and int(band.min()) in group_ends
+    assert 1 <= spp.max() and spp.min() < 16
+    s0 = result.stokes()[0]
+    assert np.all(np.isfinite(result.stokes())) and s0[spp > 0].min() > 0
 
 
 def test_cancel_aborts_the_units_in_flight():
