@@ -15,11 +15,12 @@ def lamp_scene():
     """A floor and two non-occluding emissive quads (one tilted) above it."""
     cam = Camera(origin=np.array([0.0, -4.0, 1.0]), target=np.zeros(3), up=np.array([0.0, 0.0, 1.0]), width=8,
                  height=8, fov_deg=40.0)
-    floor = Mesh("floor", np.array([[-5.0, -5, 0], [5, -5, 0], [5, 5, 0], [-5, 5, 0]]), np.array([[0, 1, 2], [0, 2, 3]]),
-                 ["grey"], np.zeros(2, np.int32))
+    two = np.array([[0, 1, 2], [0, 2, 3]])
+    floor = Mesh("floor", np.array([[-5.0, -5, 0], [5, -5, 0], [5, 5, 0], [-5, 5, 0]]), two, ["grey"],
+                 np.zeros(2, np.int32))
     quad = np.array([[-0.5, -0.5, 2.0], [0.5, -0.5, 2.0], [0.5, 0.5, 2.0], [-0.5, 0.5, 2.0]])
     tilted = quad @ np.array([[1.0, 0, 0], [0, 0.8, -0.6], [0, 0.6, 0.8]]).T + np.array([1.5, 0.0, 0.5])
-    lamps = [Mesh(name, v, np.array([[0, 1, 2], [0, 2, 3]]), ["grey"], np.zeros(2, np.int32),
+    lamps = [Mesh(name, v, two, ["grey"], np.zeros(2, np.int32),
                   emission=ConstantSpectrum(1.0), occluder=False) for name, v in (("lamp", quad), ("panel", tilted))]
     return CompiledScene(Scene(camera=cam, meshes=[floor, *lamps], materials={"grey": Lambert(ConstantSpectrum(0.5))}))
 
