@@ -245,8 +245,9 @@ def _near_box_loop(o, d, t_max, lo, hi, out):
 def segments_near_box_numba(o: np.ndarray, d: np.ndarray, t_max: np.ndarray, lo: np.ndarray,
                             hi: np.ndarray) -> np.ndarray:
     out = np.empty(o.shape[1], np.bool_)
-    _near_box_loop(np.asarray(o, np.float64), np.asarray(d, np.float64), np.asarray(t_max, np.float64),
-                   np.asarray(lo, np.float64), np.asarray(hi, np.float64), out)
+    # (contiguous: one compiled signature, the precompiled one, whatever views the callers pass)
+    c = np.ascontiguousarray
+    _near_box_loop(c(o, np.float64), c(d, np.float64), c(t_max, np.float64), c(lo, np.float64), c(hi, np.float64), out)
     return out
 
 

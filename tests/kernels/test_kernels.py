@@ -540,6 +540,7 @@ def test_segments_near_box_twins_agree():
     assert np.array_equal(rays.segments_near_box_numba(o, d, t, lo, hi), want)
     view = o[:, ::2], d[:, ::2], t[::2]                         # non-contiguous inputs
     assert np.array_equal(rays.segments_near_box_numba(*view, lo, hi), want[::2])
+    assert len(rays._near_box_loop.signatures) == 1          # the precompiled one, whatever the callers' layouts
 
 @needs_numba
 def test_embree_ray_and_hit_conversions_bitwise():
