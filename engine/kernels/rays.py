@@ -182,3 +182,73 @@ def packet_queries(query, scene, valid, rh, args, o, d, t_max, has_t, shadow, pr
                 blocked[i0 + k] = rh[_TFAR * width + k] < 0
             else:
                 _read_hit(rh, ri, width, k, i0 + k, prims, mapped, prim, u, v, t)
+
+
+# ----------------------------------------------------------------------------- a box test before Embree
+
+#: The box test's margin relative to the coordinates' size: Embree computes in float32 (rounding 2^-24 ≈ 6e-8 of the
+#: coordinates), so a segment that stays farther than this from a box cannot be reported to cross a triangle in it.
+BOX_MARGIN = 1e-5
+
+
+def segments_near_box_numpy(o: np.ndarray, d: np.ndarray, t_max: np.ndarray, lo: np.ndarray,
+                            hi: np.ndarray) -> np.ndarray:
+    """(N,) bool: False only where the segment o + t·d, 0 ≤ t ≤ t_max (o, d (3, N), t_max (N,), inf: a ray) stays
+    outside the box [lo, hi] (3,) widened by pad = BOX_MARGIN·(1 + max|o| + max|lo, hi|), its length widened to
+    t_max·(1 + BOX_MARGIN) + pad: a slab test in float64 that Embree's float32 hits of triangles inside the box
+    cannot contradict.  Segments with a NaN or an infinite origin or direction, or a NaN length, are True."""
+    size = 1.0 + np.abs(o).max(axis=0) + max(float(np.abs(lo).max()), float(np.abs(hi).max()))
+    pad = BOX_MARGIN * size
+    t_lo = np.zeros(o.shape[1])
+    t_hi = t_max * (1.0 + BOX_MARGIN) + pad
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for k in range(3):
+            a = (lo[k] - pad - o[k]) / d[k]
+            b = (hi[k] + pad - o[k]) / d[k]
+            flat = d[k] == 0.0
+            inside = (o[k] >= lo[k] - pad) & (o[k] <= hi[k] + pad)
+            t_lo = np.where(flat, np.where(inside, t_lo, np.inf), np.maximum(t_lo, np.minimum(a, b)))
+            t_hi = np.where(flat, t_hi, np.minimum(t_hi, np.maximum(a, b)))
+    finite = np.isfinite(o).all(axis=0) & np.isfinite(d).all(axis=0) & ~np.isnan(t_max)
+    return ~finite | (t_lo <= t_hi)
+
+
+@jit
+def _near_box_loop(o, d, t_max, lo, hi, out):
+    box = 0.0
+    for k in range(3):
+        box = max(box, abs(lo[k]), abs(hi[k]))
+    for i in range(o.shape[1]):
+        finite = not np.isnan(t_max[i])
+        size = 0.0
+        for k in range(3):
+            finite = finite and np.isfinite(o[k, i]) and np.isfinite(d[k, i])
+            size = max(size, abs(o[k, i]))
+        if not finite:
+            out[i] = True
+            continue
+        pad = BOX_MARGIN * (1.0 + size + box)
+        t_lo = 0.0
+        t_hi = t_max[i] * (1.0 + BOX_MARGIN) + pad
+        for k in range(3):
+            if d[k, i] == 0.0:
+                if not (o[k, i] >= lo[k] - pad and o[k, i] <= hi[k] + pad):
+                    t_lo = np.inf
+            else:
+                a = (lo[k] - pad - o[k, i]) / d[k, i]
+                b = (hi[k] + pad - o[k, i]) / d[k, i]
+                t_lo = max(t_lo, min(a, b))
+                t_hi = min(t_hi, max(a, b))
+        out[i] = t_lo <= t_hi
+
+
+def segments_near_box_numba(o: np.ndarray, d: np.ndarray, t_max: np.ndarray, lo: np.ndarray,
+                            hi: np.ndarray) -> np.ndarray:
+    out = np.empty(o.shape[1], np.bool_)
+    # (contiguous: one compiled signature, the precompiled one, whatever views the callers pass)
+    c = np.ascontiguousarray
+    _near_box_loop(c(o, np.float64), c(d, np.float64), c(t_max, np.float64), c(lo, np.float64), c(hi, np.float64), out)
+    return out
+
+
+segments_near_box = twin(_near_box_loop and segments_near_box_numba, segments_near_box_numpy)

@@ -453,14 +453,19 @@ def take_value(v: MuellerValue, idx: np.ndarray) -> MuellerValue:
 def assemble_values(parts, n: int, L: int, frames) -> MuellerValue:
     """One value over n lanes from [(lanes idx, value over those lanes)] (zero elsewhere), of the
     cheapest kind that holds them all; ``frames()`` gives (x_in, x_out) for the lanes whose value
-    is depolarising (any frame holds a depolariser)."""
+    is depolarising (any frame holds a depolariser), asked only where some lane has no other value's frames."""
     kinds = {v.kind for _, v in parts}
     if kinds <= {"depolarising"}:
         A = np.zeros((L, n))
         for idx, v in parts:
             A[:, idx] = v.A
         return depolarising_value(A, n)
-    x_in, x_out = frames()
+    framed = np.zeros(n, bool)
+    for idx, v in parts:
+        if v.kind != "depolarising":
+            framed[idx] = True
+    # every lane's frames are some value's (written below): frames() would be overwritten everywhere
+    x_in, x_out = (np.empty((3, n)), np.empty((3, n))) if framed.all() else frames()
     for idx, v in parts:
         if v.kind != "depolarising":
             x_in[:, idx], x_out[:, idx] = v.x_in, v.x_out

@@ -161,6 +161,18 @@ class MaterialSet(BSDF):
             out[idx] = m.pdf(q, np.take(wi, idx, axis=1))
         return out
 
+    def eval_and_pdf(self, sp: ShadingPoint, wi: np.ndarray) -> tuple[MuellerValue, np.ndarray]:
+        """(``eval``, ``pdf``) with each member asked once for both (its eval_and_pdf: one compiled pass where it has
+        one, the same numbers as its two calls)."""
+        cls = type(self)
+        if cls.eval is not MaterialSet.eval or cls.pdf is not MaterialSet.pdf:
+            return super().eval_and_pdf(sp, wi)
+        parts, pdf = [], np.zeros(sp.n)
+        for m, idx, q in self._split(sp):
+            value, pdf[idx] = m.eval_and_pdf(q, np.take(wi, idx, axis=1))
+            parts.append((idx, value))
+        return assemble_values(parts, sp.n, sp.lam.shape[0], self._frames(sp, wi)), pdf
+
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         n = sp.n
         wi, pdf = np.empty((3, n)), np.empty(n)

@@ -15,7 +15,7 @@ from embreex.mesh_construction import TriangleMesh
 
 from ..kernels import twin
 from ..kernels.geometry import offset_origin as offset_origin_kernel, surface_attributes
-from ..kernels.rays import MAX_DISTANCE, closest_hits_loop, embree_hits, embree_rays
+from ..kernels.rays import MAX_DISTANCE, closest_hits_loop, embree_hits, embree_rays, segments_near_box
 from ..scene.description import Scene, interior_of
 from ..textures import SurfacePoints, VertexAttributes
 
@@ -182,6 +182,8 @@ class CompiledScene:
         self.rays = (ray_scene(self.vertices, self.faces[self._main_prims]) if self._main_prims.size
                      else NoTriangles())
         self.rays_passthrough = ray_scene(self.vertices, self.faces[self.passthrough_prims])
+        corners = self.vertices[self.faces[self.passthrough_prims].ravel()]
+        self.passthrough_box = (corners.min(axis=0), corners.max(axis=0))
 
     @property
     def used_material_names(self) -> set[str]:
@@ -205,17 +207,27 @@ class CompiledScene:
         emitters, as a list of layers (ray index, global triangle, distance from o): layer k holds
         each ray's k-th crossing (so a ray appears at most once per layer), up to ``max_layers``.
 
-        Each layer restarts just past the previous crossing (Embree has no t_near).
+        Each layer restarts just past the previous crossing (Embree has no t_near).  Only the segments that pass
+        near the emitters' bounding box (``passthrough_box``; engine.kernels.rays.segments_near_box, a conservative
+        test) are handed to Embree: the others cannot cross them, and Embree answers each ray alike whatever rays
+        share its query.
         """
         layers = []
         if not self.has_passthrough or o.shape[1] == 0:
             return layers
-        idx = np.arange(o.shape[1])
-        start = np.zeros(o.shape[1])
-        o_cur, t_left = o, np.asarray(t_max, np.float64)
+        t_left = np.asarray(t_max, np.float64)
+        near = segments_near_box(o, d, t_left, *self.passthrough_box)
+        if near.all():
+            idx, o_cur, whole = np.arange(o.shape[1]), o, True
+        else:
+            idx = np.flatnonzero(near)
+            if idx.size == 0:
+                return layers
+            o_cur, t_left, whole = np.take(o, idx, axis=1), t_left[idx], False
+        start = np.zeros(idx.size)
         for layer in range(max_layers):
-            # (the first layer: every ray, d as it is, not a gathered copy)
-            d_cur = d if layer == 0 and d.flags.c_contiguous else d[:, idx]
+            # (the first layer with every ray: d as it is, not a gathered copy)
+            d_cur = d if layer == 0 and whole and d.flags.c_contiguous else d[:, idx]
             local, _, _, t = self.rays_passthrough.closest(o_cur, d_cur, t_left, None)
             got = local >= 0
             if not got.any():

@@ -30,6 +30,8 @@ never allocate or read either, so their images are unchanged.
 
 from __future__ import annotations
 
+import copy
+import dataclasses
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
@@ -381,6 +383,18 @@ class PathTracer:
         # Cycles' light-path limits (engine.render.light_paths; None: none set, trace runs as before them)
         self.light_paths = (LightPathRules(settings, self.materials)
                             if getattr(settings, "light_paths_active", False) else None)
+
+    def reseeded(self, settings: RenderSettings) -> PathTracer:
+        """This tracer for ``settings`` (as rendered) that differ from its own in the seed alone: a shallow copy with
+        those settings, everything else shared (nothing the constructor builds reads the seed, and tracing changes no
+        attribute); a worker's next render of the scene skips building the shading groups and light tables again
+        (renderer._WorkerScenes).  ValueError where anything else differs."""
+        settings = resolve_halves(settings)
+        if dataclasses.replace(settings, seed=self.settings.seed) != self.settings:
+            raise ValueError("reseeded: the settings differ in more than the seed")
+        tracer = copy.copy(self)
+        tracer.settings = settings
+        return tracer
 
     def _emitted(self, light: _Light, lookup: WavelengthLookup, d: np.ndarray | None = None,
                  rows: np.ndarray | None = None, uv=None) -> np.ndarray:

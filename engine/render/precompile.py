@@ -4,7 +4,7 @@ Numba compiles a kernel on its first call (for the argument types of that call) 
 code on disk (engine.kernels.cache_dir); a render that finds the cache empty spends tens of seconds
 compiling, once.  This module renders a few tiny built-in scenes that between them touch every
 material model (plain, textured, normal- and bump-mapped, mixed, layered, with an absorbing interior),
-every kind of light (lamps, emissive and textured emissive meshes, a uniform environment, an image
+every kind of light (lamps, emissive and textured emissive meshes, non-occluding ones, a uniform environment, an image
 environment, the polarised sky, polarised sources), cut-outs and holdouts, and every transport
 (polarisation full / linear / off, spectral / RGB / mono, the spectral reductions, both samplers,
 denoising data, adaptive sampling): each compiles what it calls, or loads it from the cache.  When
@@ -202,6 +202,9 @@ def scenes(folder: str) -> dict:
                         {"name": "panel", "shape": "quad", "material": "lambert",
                          "vertices": [[-3, 3, 2.5], [-2, 3, 2.5], [-2, 4, 2.5], [-3, 4, 2.5]],
                          "emission": {"radiance": 3, "spread_deg": 60}},
+                        {"name": "bulb", "shape": "quad", "material": "lambert",      # a lamp rays pass through
+                         "vertices": [[1.5, 3, 2.8], [2.5, 3, 2.8], [2.5, 4, 2.8], [1.5, 4, 2.8]],
+                         "emission": {"radiance": 2, "occluder": False}},
                         {"name": "veil", "shape": "quad", "material": "lambert", "alpha": 0.4,
                          "vertices": [[2.5, 1, -1.5], [3.5, 1, -1.5], [3.5, 1, -0.5], [2.5, 1, -0.5]]},
                         {"name": "hole", "shape": "quad", "material": "lambert", "holdout": True,

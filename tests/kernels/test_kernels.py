@@ -521,6 +521,28 @@ def test_rgb_albedo_of_a_lambert_set_bitwise():
 
 
 @needs_numba
+def test_segments_near_box_twins_agree():
+    # the conservative box test before Embree (CompiledScene.passthrough_hits): segments into, past, along and
+    # away from the box, axis-parallel ones, unbounded, negative and NaN lengths, non-finite origins and directions
+    from engine.kernels import rays
+    rng = np.random.default_rng(11)
+    n = 4000
+    lo, hi = np.array([-1.0, -0.5, 2.0]), np.array([1.0, 0.5, 2.0])           # a flat box (one quad)
+    o = rng.uniform(-3, 3, (3, n)) * 10.0 ** rng.integers(-3, 3, (1, n))
+    d = rng.uniform(lo, hi, (n, 3)).T - o
+    d[:, ::3] = rng.normal(size=(3, (n + 2) // 3))
+    d[rng.integers(0, 3, n // 5), rng.integers(0, n, n // 5)] = 0.0
+    d /= np.linalg.norm(d, axis=0)
+    t = np.where(rng.random(n) < 0.4, np.inf, rng.uniform(-1, 10, n))
+    t[:2], o[1, 2], d[0, 3], o[2, 4] = np.nan, np.nan, np.inf, -np.inf
+    want = rays.segments_near_box_numpy(o, d, t, lo, hi)
+    assert 0 < want.sum() < n and want[:5].all()
+    assert np.array_equal(rays.segments_near_box_numba(o, d, t, lo, hi), want)
+    view = o[:, ::2], d[:, ::2], t[::2]                         # non-contiguous inputs
+    assert np.array_equal(rays.segments_near_box_numba(*view, lo, hi), want[::2])
+    assert len(rays._near_box_loop.signatures) == 1          # the precompiled one, whatever the callers' layouts
+
+@needs_numba
 def test_embree_ray_and_hit_conversions_bitwise():
     # the casts Embree's float32 layout needs: rounding, overflow to inf, NaN, capped lengths,
     # misses (−1) with and without a map from the BVH's triangles to the scene's

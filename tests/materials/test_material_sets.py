@@ -234,3 +234,35 @@ def test_twins_shaded_together_render_the_same_bits(tmp_path, monkeypatch, spect
     apart = renderer.render().stokes()
     assert np.abs(apart[0]).max() > 0
     np.testing.assert_array_equal(together, apart)
+
+
+def test_assembled_values_ask_for_frames_only_where_a_lane_has_none():
+    """assemble_values (a MaterialSet's members' values into one): where the members' own values (with their frames)
+    cover every lane, the frames for depolarising lanes are not computed (they would all be overwritten); where a
+    depolarising value leaves lanes without frames they are, and hold there.  The same numbers either way."""
+    from engine.materials.base import MuellerValue, assemble_values, depolarising_value
+    rng = np.random.default_rng(5)
+    n, L = 12, 3
+    lanes = rng.permutation(n)
+    a, b = np.sort(lanes[:7]), np.sort(lanes[7:])
+
+    def abcs(m):
+        x = rng.normal(size=(3, m))
+        return MuellerValue("abcs", x, x.copy(), *(rng.normal(size=(L, m)) for _ in range(4)),
+                            depol=rng.random((L, m)))
+    asked = []
+
+    def frames():
+        asked.append(1)
+        return np.full((3, n), 7.0), np.full((3, n), -7.0)
+    va, vb = abcs(a.size), abcs(b.size)
+    whole = assemble_values([(a, va), (b, vb)], n, L, frames)
+    assert not asked
+    for idx, v in ((a, va), (b, vb)):
+        assert np.array_equal(whole.x_in[:, idx], v.x_in) and np.array_equal(whole.x_out[:, idx], v.x_out)
+        assert np.array_equal(whole.A[:, idx], v.A) and np.array_equal(whole.depol[:, idx], v.depol)
+    grey = depolarising_value(rng.random((L, b.size)), b.size)
+    mixed = assemble_values([(a, va), (b, grey)], n, L, frames)
+    assert asked == [1]
+    assert np.array_equal(mixed.x_in[:, b], np.full((3, b.size), 7.0)) and np.array_equal(mixed.x_in[:, a], va.x_in)
+    assert np.array_equal(mixed.depol[:, b], grey.A) and not mixed.A[:, b].any()

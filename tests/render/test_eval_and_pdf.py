@@ -18,7 +18,7 @@ import pytest
 
 from engine import kernels
 from engine.kernels import normal_map as normal_map_kernels
-from engine.materials import mix, normal_map, tinted
+from engine.materials import material_set, mix, normal_map, tinted
 from engine.materials import torrance_sparrow as ts
 from engine.materials.base import BSDF
 from engine.render import precompile
@@ -34,7 +34,7 @@ def _chain_sum_and_pdf(self, sp, points, weights, p, wi, cosine):
 
 def use_chain(monkeypatch):
     """Every eval_and_pdf back to its two calls (BSDF's default), the mixture's too."""
-    for cls in (ts.TorranceSparrow, normal_map.ShadingNormal, tinted._ScaledLobes, mix.Mix):
+    for cls in (ts.TorranceSparrow, normal_map.ShadingNormal, tinted._ScaledLobes, mix.Mix, material_set.MaterialSet):
         monkeypatch.setattr(cls, "eval_and_pdf", BSDF.eval_and_pdf)
     monkeypatch.setattr(mix.Mix, "_sum_and_pdf", _chain_sum_and_pdf)
 
@@ -93,6 +93,23 @@ def test_eval_and_pdf_gives_the_chains_image_bit_for_bit(monkeypatch, scenes, na
     n = len(calls)
     chain = Renderer(scene).render(settings).stokes()
     assert len(calls) == n
+    assert np.array_equal(route, chain, equal_nan=True)
+
+
+@needs_numba
+@pytest.mark.parametrize("overrides", [{}, {"spectral": "rgb"}])
+def test_a_material_set_asks_each_member_once_for_value_and_density(monkeypatch, scenes, overrides):
+    """A MaterialSet's eval_and_pdf (SpecGlossEmission's 18 rough materials are one): each member's eval_and_pdf, the
+    image of its eval then pdf bit for bit."""
+    scene = scenes["several"]
+    settings = dataclasses.replace(scene.settings, threads=1, **overrides)
+    calls = counted(monkeypatch, material_set.MaterialSet, "eval_and_pdf")
+    pdfs = counted(monkeypatch, material_set.MaterialSet, "pdf")
+    route = Renderer(scene).render(settings).stokes()
+    assert calls and not pdfs, "the material set's value and density were not taken in one call"
+    monkeypatch.setattr(material_set.MaterialSet, "eval_and_pdf", BSDF.eval_and_pdf)
+    chain = Renderer(scene).render(settings).stokes()
+    assert pdfs            # (the chain: eval, then pdf)
     assert np.array_equal(route, chain, equal_nan=True)
 
 

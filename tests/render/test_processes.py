@@ -281,6 +281,55 @@ def test_a_worker_keeps_a_few_tracers_of_its_scene():
     assert len(scenes.tracers) == module.WORKER_TRACERS
 
 
+def test_a_worker_reseeds_the_tracer_of_another_seed_and_traces_as_a_new_one(many_materials):
+    """A worker's render of the next seed copies the tracer of the last (PathTracer.reseeded: the shading groups and
+    light tables shared) and traces the numbers a tracer built for that seed traces; other settings build anew."""
+    from engine.render import renderer as module
+    sc = many_materials
+    scenes = module._WorkerScenes()
+    first = scenes.tracer("k", sc, dataclasses.replace(sc.settings, seed=1), False)
+    second = scenes.tracer("k", sc, dataclasses.replace(sc.settings, seed=2), False)
+    assert second is not first and second.shaders is first.shaders and second.settings.seed == 2
+    other = scenes.tracer("k", sc, dataclasses.replace(sc.settings, seed=3, max_depth=3), False)
+    assert other.shaders is not first.shaders
+    r = Renderer(sc)
+    plan = r.plan(dataclasses.replace(sc.settings, seed=2))
+    fresh = r.tracer(plan)
+    job = BandJob(plan.settings, plan.width, plan.window, plan.stratified)
+    for unit in list(plan.units())[:2]:
+        got, want = job(second, unit)[0], job(fresh, unit)[0]
+        assert got.sums.tobytes() == want.sums.tobytes() and got.count.tobytes() == want.count.tobytes()
+    with pytest.raises(ValueError, match="more than the seed"):
+        first.reseeded(dataclasses.replace(first.settings, seed=5, spp=1))
+
+
+def test_processes_whose_workers_all_died_build_the_tracer_here():
+    """The renderer hands worker processes a functools.partial for its own tracer (built only if every worker dies,
+    not before each render's units go out); the units then traced here are the threads' units."""
+    import collections
+    import functools
+    import threading
+    sc = peer(res=8, spp=2)
+    r = Renderer(sc)
+    plan = r.plan(sc.settings)
+    job = BandJob(plan.settings, plan.width, plan.window, plan.stratified)
+    units = list(plan.units())
+    built = []
+
+    def tracer():
+        built.append(1)
+        return r.tracer(plan)
+    here = object.__new__(processes.LocalProcesses)
+    results = {}
+    todo = collections.deque(range(len(units)))
+    here._trace_here(units, todo, results, job, functools.partial(tracer), lambda: False, threading.Event())
+    assert built == [1] and sorted(results) == list(range(len(units)))
+    want = r.tracer(plan)
+    for i, unit in enumerate(units):
+        assert results[i][0].sums.tobytes() == job(want, unit)[0].sums.tobytes()
+    assert processes.LocalProcesses.traces_elsewhere
+
+
 def test_memory_check_counts_the_workers_scene_copies(monkeypatch):
     from engine.render import renderer as module
     sc = peer(res=16, spp=2)
