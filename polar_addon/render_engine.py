@@ -70,10 +70,11 @@ def engine_settings(scene, preview=False) -> RenderSettings:
     seed = p.seed + (scene.frame_current if p.use_animated_seed else 0)
     total, light_paths = cycles_light_paths(scene)
     c = getattr(scene, "cycles", None)
-    # Cycles' Light Tree (Render Properties ▸ Sampling ▸ Lights), on by default: on → the engine's "auto" (the tree
-    # above 64 emitters; below, per-point selection over the whole lights, never worse in variance × time on the
-    # real-asset suite: docs/benchmarks.md "Real assets"), off → "off"
-    light_tree = "auto" if c is None or getattr(c, "use_light_tree", True) else "off"
+    # Cycles' Light Tree (Render Properties ▸ Sampling ▸ Lights), on by default: on → the engine's "on" (Cycles
+    # chooses with its tree whatever the count of lights; with the tree's choice as Cycles' the real-asset suite's σ²
+    # is lower than or equal to the per-point power selection's on every cell: docs/benchmarks/light-tree.md,
+    # session 6), off → "off"
+    light_tree = "on" if c is None or getattr(c, "use_light_tree", True) else "off"
     return RenderSettings(spp=p.preview_samples if preview else p.samples,
                           max_depth=min(p.max_bounces, total) + 2,
                           rr_depth=5, seed=seed, spectral=SPECTRAL_TO_ENGINE[p.spectral],

@@ -470,7 +470,8 @@ def material_entry(material, warnings, bake=None):
 def light_selection(settings: RenderSettings) -> str:
     """Scene.light_selection for a Blender scene: Cycles' Light Tree off (RenderSettings.light_tree "off",
     polar_addon.render_engine.engine_settings) → "cycles", the engine's choice as Cycles makes it without its tree;
-    on → "power" (what RenderSettings.light_tree "auto" uses where it leaves the few lights to the light set)."""
+    on → "power" (unused by F12, which then chooses with the tree, light_tree "on"; what the exported scene chooses
+    with where it is rendered with light_tree "auto" and few lights)."""
     return "cycles" if settings.light_tree == "off" else "power"
 
 

@@ -8,7 +8,7 @@ Runs each case of tests/blender/test_real_assets.py (tests/support/asset_parity.
 imported by Blender, framed, lit, rendered by Cycles with the parity settings and by Polar through the
 extension's exporter, both at ``--spp`` samples with ``--seeds`` seeds) and prints one line per case,
 the two renderers side by side.  ``--light-tree on`` renders both with Cycles' Light Tree on (Cycles' default, and
-what issue 36's race against Cycles asks for; Polar reads the switch as F12 does: its "auto"); the default ``off`` is
+what issue 36's race against Cycles asks for; Polar reads the switch as F12 does: its "on"); the default ``off`` is
 the parity settings (issue 33's benchmark).  The renderers take turns seed by seed (asset_parity.render_alternated:
 Cycles then Polar for seed 0, Polar then Cycles for seed 1, …), so the two renders of a seed share the load of
 this shared 2-core VM: one side's seconds move ±15–30 % between identical runs, the ratio of a seed's pair much

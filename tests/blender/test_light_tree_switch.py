@@ -1,5 +1,5 @@
-"""Cycles' Light Tree switch read by Polar (polar_addon.render_engine.engine_settings): on (Cycles' default) → "auto"
-(the tree above 64 emitters) with the light set's "power" selection, off → "off" with Scene.light_selection "cycles"
+"""Cycles' Light Tree switch read by Polar (polar_addon.render_engine.engine_settings): on (Cycles' default) → "on"
+(the tree, as Cycles, whatever the count of lights), off → "off" with Scene.light_selection "cycles"
 (Cycles' own choice without its tree, polar_addon.export.scene.light_selection); an exported Blender scene (two-sided
 emissive spheres, which block their own shadow rays, and a point lamp) renders the same mean with and without the
 tree."""
@@ -42,7 +42,7 @@ def test_the_light_tree_follows_cycles_switch_and_keeps_the_mean():
     scene = scene_with_emitters()
     scene.render.engine = "POLAR"
     scene.polar.samples, scene.polar.max_bounces = 16, 3
-    assert scene.cycles.use_light_tree and engine_settings(scene).light_tree == "auto"
+    assert scene.cycles.use_light_tree and engine_settings(scene).light_tree == "on"
     depsgraph = bpy.context.evaluated_depsgraph_get()
     assert export_scene(depsgraph, scene.camera, W, H, engine_settings(scene))[0].light_selection == "power"
     scene.cycles.use_light_tree = False

@@ -80,7 +80,7 @@ def picked_emitters(tree, light, tri):
 def test_pick_probabilities_are_the_frequencies_of_the_picks(sky):
     lights, tree = tree_of(many_lights_scene(sky=sky))
     E = tree.em["kind"].shape[0]
-    assert E == 150 + 12 + 3 + 2 * sky            # every triangle, the lamps, the world and the sun
+    assert E == 150 + 12 + 3 + sky            # every triangle, the lamps and the sun (a constant world is none)
     rng = np.random.default_rng(7)
     cases = [((0.3, -0.4, 0.0), (0, 0, 1.0)), ((-1.0, 0.8, 0.0), (0, 0, 1.0)), ((0.5, 0.5, 1.2), (0, 0, 0.0)),
              ((1.0, -1.0, 1.5), (0.6, 0.0, 0.8))]
@@ -109,6 +109,24 @@ def test_pick_probabilities_sum_to_one_where_every_emitter_can_light_the_point()
         prob = tree.probability(np.arange(E), np.repeat(p, E, 1), np.repeat(np.array([[0.0], [0.0], [1.0]]), E, 1))
         # no traversal ends without a light: every emitter but the spot faces the point (its sibling then does)
         assert prob.sum() == pytest.approx(1.0, abs=1e-12)
+
+
+def test_a_constant_sky_is_left_to_bsdf_sampling():
+    """Cycles leaves a world of one radiance out of its tree (scene/light.cpp test_enabled_lights: its MIS off):
+    beside other lights it is never picked and its pick probability (MIS at world misses) is 0; alone, no light
+    is picked at all.  (Before 2026-12-07 session 6 it took a share of every point's samples.)"""
+    scene = many_lights_scene(count=6, sky=True)
+    lights, tree = tree_of(scene)
+    sky = next(i for i, lt in enumerate(lights.lights) if lt.constant_sky)
+    p = np.array([[0.2], [0.1], [0.0]]).repeat(4096, 1)
+    n = np.array([[0.0], [0.0], [1.0]]).repeat(4096, 1)
+    light, _, prob, _ = tree.choose((np.arange(4096) + 0.5) / 4096, p, n)
+    assert not (light == sky).any() and (light >= 0).all() and (prob > 0).all()
+    assert np.all(tree.probability_of_light(sky, p[:, :1], n[:, :1]) == 0.0)
+    scene.meshes, scene.lights = scene.meshes[:1], [lt for lt in scene.lights if isinstance(lt, EnvironmentLight)]
+    lights, tree = tree_of(scene)
+    light, _, prob, _ = tree.choose(np.array([0.3]), p[:, :1], n[:, :1])
+    assert tree.arrays.root == -1 and light[0] == NO_LIGHT and prob[0] == 0.0
 
 
 def test_whole_lights_and_triangles_are_found_by_mis_lookups():

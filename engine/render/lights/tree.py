@@ -11,7 +11,9 @@ docs/architecture.md, "Light tree"):
   disk / ellipse lamps, a textured rectangle).  Each has a bounding box, an orientation cone (axis, θ_o
   bounding the normals, θ_e the emission about them) and an energy (luminance units: radiance × area,
   intensity, irradiance).  Lights with no energy (black, hidden from indirect rays) are left out: never
-  chosen, pick probability 0 (MIS then gives BSDF sampling their whole weight).
+  chosen, pick probability 0 (MIS then gives BSDF sampling their whole weight).  So is a world of one radiance
+  (``constant_sky``): Cycles turns its MIS off and leaves it out of its tree (scene/light.cpp
+  test_enabled_lights), as LightSet's "cycles" choice does without the tree.
 - Distant lights (the world, suns) sit outside the local tree: the root's right child is one leaf of
   them (Cycles' distant node), its left child the local tree.
 - Build (once per scene, level by level over all nodes at once in NumPy): each node splits at the bucket
@@ -105,7 +107,7 @@ class LightTree:
                 rows[key].append(value)
 
         for li, light in enumerate(light_set.lights):
-            if light.shades_nothing:
+            if light.shades_nothing or light.constant_sky:      # (a constant sky: BSDF sampling alone, as Cycles)
                 continue
             if isinstance(light, (EnvironmentEmitter, EnvironmentMapEmitter)):
                 energy = math.pi * float(luminance(light._rgb if isinstance(light, EnvironmentMapEmitter)
