@@ -125,7 +125,7 @@ def _offset_loop(p, n_g, w, epsilon, out):
 
 
 def offset_origin_numba(p, n_g, w, epsilon):
-    out = np.empty_like(p, dtype=np.float64)
+    out = np.empty(p.shape)             # C order whatever p's: the one precompiled signature
     _offset_loop(np.ascontiguousarray(p, dtype=np.float64), np.ascontiguousarray(n_g, dtype=np.float64),
                  np.ascontiguousarray(w, dtype=np.float64), float(epsilon), out)
     return out

@@ -205,6 +205,9 @@ def scenes(folder: str) -> dict:
                         {"name": "bulb", "shape": "quad", "material": "lambert",      # a lamp rays pass through
                          "vertices": [[1.5, 3, 2.8], [2.5, 3, 2.8], [2.5, 4, 2.8], [1.5, 4, 2.8]],
                          "emission": {"radiance": 2, "occluder": False}},
+                        {"name": "shard", "shape": "triangles", "material": "lambert",      # sampled by area
+                         "vertices": [[2, 4, 3], [3, 4, 3], [2.5, 5, 3]], "faces": [[0, 1, 2]],
+                         "emission": {"radiance": 2}},
                         {"name": "veil", "shape": "quad", "material": "lambert", "alpha": 0.4,
                          "vertices": [[2.5, 1, -1.5], [3.5, 1, -1.5], [3.5, 1, -0.5], [2.5, 1, -0.5]]},
                         {"name": "hole", "shape": "quad", "material": "lambert", "holdout": True,

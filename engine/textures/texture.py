@@ -149,6 +149,10 @@ class ImageTexture(Texture):
             raise SceneError(field or "pixels", f"texels must be floats or unsigned integer codes, got {pixels.dtype}")
         if not np.all(np.isfinite(pixels)):
             raise SceneError(field, f"image {name!r} has non-finite pixel values")
+        # one layout and read-only (a view: the caller's array keeps its flags), whether the texels come from a
+        # file (read-only) or from Blender: the compiled lookups' one precompiled signature
+        pixels = np.ascontiguousarray(pixels).view()
+        pixels.flags.writeable = False
         self.pixels = pixels
         self.height, self.width, self.channels = pixels.shape
         self.interpolation, self.extension, self.name = interpolation, extension, name

@@ -60,6 +60,10 @@ def test_offset_origin_bitwise():
     w[:, :10] = np.cross(n_g[:, :10].T, rng.normal(size=(10, 3))).T   # grazing: n_g·w ≈ 0
     np.testing.assert_array_equal(geometry.offset_origin_numpy(p, n_g, w, 8.9e-5),
                                   geometry.offset_origin_numba(p, n_g, w, 8.9e-5))
+    # an F-ordered input (a gather of a transposed array) gives a C-ordered result: the precompiled signature
+    f = np.asfortranarray(p)
+    out = geometry.offset_origin_numba(f, n_g, w, 8.9e-5)
+    assert out.flags.c_contiguous and np.array_equal(out, geometry.offset_origin_numpy(p, n_g, w, 8.9e-5))
 
 
 @needs_numba

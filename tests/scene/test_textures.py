@@ -882,3 +882,18 @@ def test_scene_file_srgb_images_are_filtered_encoded_and_white_stays_in_range(tm
         assert source.bounds(rgb=True) == (0.0, 1.0)
     mat = parse_material({"type": "lambert", "albedo": {"texture": "bw.png"}}, "materials.m", base_dir=str(tmp_path))
     assert (mat.albedo.lo, mat.albedo.hi) == (0.0, 1.0)
+
+
+def test_texels_are_stored_read_only_and_contiguous_without_touching_the_callers_array():
+    """Blender hands writeable (and possibly strided) pixels, image files read-only ones: stored alike, the compiled
+    lookups have one signature (the one the precompile compiles), and the caller's array keeps its flags."""
+    base = np.random.default_rng(3).random((6, 10, 3)).astype(np.float32)
+    strided = base[:, ::2]
+    t = ImageTexture(strided, "Linear", "REPEAT")
+    assert t.pixels.flags.c_contiguous and not t.pixels.flags.writeable
+    assert base.flags.writeable and np.array_equal(t.pixels, strided)
+    c = ImageTexture(base, "Linear", "REPEAT")
+    assert not c.pixels.flags.writeable and base.flags.writeable
+    uv = np.array([[0.13, 0.57, 0.91], [0.2, 0.44, 0.8]])
+    copy = ImageTexture(np.ascontiguousarray(strided), "Linear", "REPEAT")
+    np.testing.assert_array_equal(t.lookup(uv), copy.lookup(uv))
