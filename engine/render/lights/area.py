@@ -49,8 +49,8 @@ class SphericalRectangle:
 
     @classmethod
     def from_triangles(cls, corners, tol=1e-9):
-        """The rectangle covered exactly by two triangles (2, 3, 3) (world coordinates), or None
-        when they do not form one (e.g. a sheared parallelogram or a disk fan)."""
+        """The rectangle covered by two triangles (2, 3, 3) (world coordinates), exactly or to float32 rounding, or
+        None when they do not form one (e.g. a sheared parallelogram or a disk fan)."""
         pts = corners.reshape(-1, 3)
         unique = []
         for q in pts:
@@ -67,8 +67,12 @@ class SphericalRectangle:
             return None
         scale = max(lx, ly)
         tri_area = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
-        if (abs(np.dot(ex, ey)) > tol * lx * ly or np.abs(diag - ex - ey).max() > tol * scale
-                or abs(tri_area.sum() - lx * ly) > 1e-7 * lx * ly):
+        # corners rounded to float32 (Blender's vertices and matrices) miss a rectangle by up to ≈ 2.4 units of
+        # float32 rounding of the largest coordinate (measured over random rotations, sizes and places): allowed
+        slack = 8.0 * 2.0 ** -24 * (1.0 + np.abs(pts).max())
+        if (abs(np.dot(ex, ey)) > tol * lx * ly + slack * (lx + ly)
+                or np.abs(diag - ex - ey).max() > tol * scale + slack
+                or abs(tri_area.sum() - lx * ly) > 1e-7 * lx * ly + slack * (lx + ly)):
             return None
         return cls(a, ex, ey)
 
