@@ -334,6 +334,13 @@ class BSDF:
     #: files: ``"two_sided": true``); the Blender exporter sets it on every material it converts.
     #: Set on an instance only when true, so a one-sided material's scene fingerprint is unchanged.
     two_sided: bool = False
+    #: A direction (sampled, or towards a light) counts only where it lies on the same side of the surface
+    #: (geometric normal n_g) as of the shading normal: reflected light must leave above the faceted surface,
+    #: refracted light below it, as Cycles' closures require (kernel/closure/bsdf_microfacet.h, "the same
+    #: hemisphere w.r.t. both normals").  Without it, an interpolated normal lets a rough lobe sample
+    #: directions into the object (a smooth-shaded emitter then lit itself: +2 % on SpecGlossEmission).  The
+    #: Blender exporter sets it on every material; scene files keep the shading normal alone (False).
+    geometric_sides: bool = False
     #: Refraction scales radiance by (n_o/n_i)² = 1/η² (the physics, as Mitsuba 3 and pbrt; a path that
     #: enters and leaves a closed object gets both factors, which cancel).  False: Cycles' convention, no
     #: such factor (the integrator multiplies it back: each sampled refraction's weight by its η²,

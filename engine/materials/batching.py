@@ -31,7 +31,7 @@ def set_key(m):
     tells apart by type, ``shade_alone``)."""
     if m.flags.is_delta_only or getattr(m, "direct_light", None) is not None or getattr(m, "shade_alone", False):
         return None
-    return (bool(m.radiance_scaling), bool(m.flags.transmits))
+    return (bool(m.radiance_scaling), bool(m.flags.transmits), bool(m.geometric_sides))
 
 
 #: the engine's package ("engine", or "polar_render.engine" in the extension): its objects are compared field by field

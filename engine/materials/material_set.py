@@ -91,8 +91,8 @@ class MaterialSet(BSDF):
             raise ValueError(f"a MaterialSet needs at least 2 members, got {len(members)}")
         if any(m.flags.is_delta_only for m in members):
             raise ValueError("MaterialSet members must not be delta-only (they have their own one-step scatter)")
-        if len({(m.radiance_scaling, m.flags.transmits) for m in members}) != 1:
-            raise ValueError("MaterialSet members must agree on radiance_scaling and transmits")
+        if len({(m.radiance_scaling, m.flags.transmits, m.geometric_sides) for m in members}) != 1:
+            raise ValueError("MaterialSet members must agree on radiance_scaling, transmits and geometric_sides")
         self.members = members
         F = BSDFFlags
         flags = F.BATCHED
@@ -101,6 +101,8 @@ class MaterialSet(BSDF):
         self.flags = flags
         if not members[0].radiance_scaling:
             self.radiance_scaling = False
+        if members[0].geometric_sides:
+            self.geometric_sides = True
         self.varies_over_surface = any(m.varies_over_surface for m in members)
 
     @property

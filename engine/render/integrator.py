@@ -146,6 +146,12 @@ PATH_COST = 1
 VERTEX_COST = 4
 
 
+def same_side(n_g: np.ndarray, n_s: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """(n,) True where the directions w (3, n) lie on the same side of the geometric normal n_g as of the shading
+    normal n_s (BSDF.geometric_sides): above both (reflection) or below both (refraction)."""
+    return (dot(n_g, w) > 0.0) == (dot(n_s, w) > 0.0)
+
+
 @dataclass(eq=False)
 class _Accumulators:
     """What a batch accumulates per path of the batch (indexed by ``PathState.path``): the
@@ -751,6 +757,8 @@ class PathTracer:
             rows = np.arange(n) if isinstance(sel, slice) else sel
             t_cols = state.T_columns(sel)           # T's columns of these paths (None: rows)
             if one_step and self._scatter_delta(bsdf, state, surf, nxt, rows, n_s_delta, nums.u_bsdf[0], t_cols):
+                if bsdf.geometric_sides:
+                    nxt.valid[rows] &= same_side(gather(n_g, sel), gather(n_s, sel), nxt.d[:, rows])
                 continue            # pdf 0 and is_delta True: as preset
             if nums.direction_dims is not None or nums.sobol_direction is not None:
                 self._late_direction_numbers(nums)
@@ -767,8 +775,12 @@ class PathTracer:
             if nums.nee and not bsdf.flags.is_delta_only:
                 self._group_next_event(state, acc, surf, bsdf, sp, sel, rows, xTm, t_cols, nums.u_light, lobe, lam_o)
             if lam_o is not None:
+                if bsdf.geometric_sides:
+                    nxt.valid[rows] &= same_side(sp.n_g, sp.n_s, nxt.d[:, rows])
                 continue
             bs = self._sample_bsdf(bsdf, sp, nums.u_bsdf, sel)
+            if bsdf.geometric_sides:            # (BSDF.geometric_sides) a direction into the other side: no sample
+                bs = dataclasses.replace(bs, valid=bs.valid & same_side(sp.n_g, sp.n_s, bs.wi))
             if acc.lobes is not None:
                 acc.lobes.sampled(bsdf, sp, gather(state.path, sel), bs)
             if acc.guides is not None and not bsdf.flags.is_delta_only:
@@ -1003,7 +1015,7 @@ class PathTracer:
         ``lam_o``: the sample's Smith Λ(ω_o) (m,) (NaN: not computed; None: none)."""
         n, P = sp.n, self.P
         L = 3 if self.rgb_mode else lookup.lam.shape[0]
-        ls = self._sample_lights(sp, lookup, u, L, bsdf.flags.transmits)
+        ls = self._sample_lights(sp, lookup, u, L, bsdf.flags.transmits, bsdf.geometric_sides)
         c = np.ascontiguousarray
         ok = np.array(ls.ok, dtype=bool)
         A, B, C, S = (np.empty((sp.lam.shape[0], 1)) for _ in range(4))
@@ -1185,7 +1197,7 @@ class PathTracer:
         n = sp.n
         P = self.P
         L = 3 if self.rgb_mode else lookup.lam.shape[0]
-        ls = self._sample_lights(sp, lookup, u, L, bsdf.flags.transmits)
+        ls = self._sample_lights(sp, lookup, u, L, bsdf.flags.transmits, bsdf.geometric_sides)
         weighted = self._light_weight(sp, bsdf, x_T, ls)
         if weighted is None:
             return np.zeros((P, L, n))
@@ -1209,7 +1221,7 @@ class PathTracer:
         return out
 
     def _sample_lights(self, sp: ShadingPoint, lookup: WavelengthLookup, u: np.ndarray, L: int,
-                       transmits: bool = False) -> _LightSamples:
+                       transmits: bool = False, geometric_sides: bool = False) -> _LightSamples:
         """One light sample per vertex: the light chosen by u[0] (its fraction within the light's slot
         reused), the point on it by u[1], u[2] ((4, n)); ``L``: the radiance's wavelength count.  With the
         light tree the choice may be a triangle of a mesh light (sampled by area within it) or no light at all
@@ -1230,6 +1242,8 @@ class PathTracer:
             ls = self._sample_several_lights(lights_chosen, choice, sp, lookup, u, u_rest, chosen_prob, L, tri)
         if light_set.polarised and self.P > 1:
             ls.polarised = light_samples_polarisation(light_set, ls.owners, ls.wi)
+        if geometric_sides:         # (BSDF.geometric_sides) a light on the other side of the surface than of n_s: none
+            ls.ok = ls.ok & same_side(sp.n_g, sp.n_s, ls.wi)
         return ls
 
     def _light_points(self, light, li: int, p: np.ndarray, u: np.ndarray, tri: np.ndarray | None, lookup, points):

@@ -37,10 +37,12 @@ def export_material(material, warnings, bake=None):
     """(BSDF, emission or None) for a Blender material (None → default grey).  ``bake``: a
     BakeTarget (the object the material is exported for) to bake linked inputs on, or None or a
     NoBake (their own values, one warning each).  Every Blender material is two-sided, as in Cycles
-    (BSDF.two_sided: an opaque one seen from the back shades with flipped normals), and refracts without
+    (BSDF.two_sided: an opaque one seen from the back shades with flipped normals), counts a direction only on
+    the surface's side of its shading normal (BSDF.geometric_sides), and refracts without
     scaling radiance by 1/η², as Cycles' closures do (BSDF.radiance_scaling)."""
     bsdf, emission = _material_bsdf(material, warnings, bake)
     bsdf.two_sided = True
+    bsdf.geometric_sides = True             # directions on the surface's side of the shading normal, as Cycles
     if bsdf.flags.transmits:
         bsdf.radiance_scaling = False
     return bsdf, emission
