@@ -338,3 +338,25 @@ def set_bump_correction(bsdf: BSDF, on: bool) -> None:
     base = getattr(bsdf, "base", None)
     if isinstance(base, BSDF):
         set_bump_correction(base, on)
+
+
+def has_mapped_normals(bsdf) -> bool:
+    """Whether a normal or bump map shades any lobe of ``bsdf`` (a ShadingNormal anywhere in it: mixes, layers,
+    wrappers).  Such lobes keep their own side rule (the module docstring) with their own normal, so a material's
+    side rule about its one shading normal (BSDF.geometric_sides) must not be laid over them."""
+    seen = set()
+
+    def walk(x) -> bool:
+        if isinstance(x, ShadingNormal):
+            return True
+        if id(x) in seen:
+            return False
+        seen.add(id(x))
+        if isinstance(x, (list, tuple)):
+            return any(walk(v) for v in x)
+        if isinstance(x, dict):
+            return any(walk(v) for v in x.values())
+        if isinstance(x, BSDF):
+            return any(walk(v) for v in getattr(x, "__dict__", {}).values())
+        return False
+    return walk(bsdf)

@@ -19,7 +19,7 @@ The material export, each module importing only those listed after it:
 
 
 
-from ...engine.materials.normal_map import set_bump_correction
+from ...engine.materials.normal_map import has_mapped_normals, set_bump_correction
 from .. import compat
 from .images import baked_link, uv_source
 from .lambert import DEFAULT_ALBEDO, lambert
@@ -42,7 +42,8 @@ def export_material(material, warnings, bake=None):
     scaling radiance by 1/η², as Cycles' closures do (BSDF.radiance_scaling)."""
     bsdf, emission = _material_bsdf(material, warnings, bake)
     bsdf.two_sided = True
-    bsdf.geometric_sides = True             # directions on the surface's side of the shading normal, as Cycles
+    # directions on the surface's side of the shading normal, as Cycles (mapped lobes keep their own rule)
+    bsdf.geometric_sides = not has_mapped_normals(bsdf)
     if bsdf.flags.transmits:
         bsdf.radiance_scaling = False
     return bsdf, emission
