@@ -344,6 +344,7 @@ def has_mapped_normals(bsdf) -> bool:
     """Whether a normal or bump map shades any lobe of ``bsdf`` (a ShadingNormal anywhere in it: mixes, layers,
     wrappers).  Such lobes keep their own side rule (the module docstring) with their own normal, so a material's
     side rule about its one shading normal (BSDF.geometric_sides) must not be laid over them."""
+    from .batching import object_fields         # (the fields same_material compares: vars and slots)
     seen = set()
 
     def walk(x) -> bool:
@@ -357,6 +358,6 @@ def has_mapped_normals(bsdf) -> bool:
         if isinstance(x, dict):
             return any(walk(v) for v in x.values())
         if isinstance(x, BSDF):
-            return any(walk(v) for v in getattr(x, "__dict__", {}).values())
+            return any(walk(v) for v in object_fields(x).values())
         return False
     return walk(bsdf)
