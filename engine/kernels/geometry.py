@@ -310,25 +310,13 @@ def _area_point_at(V, faces, tri_normal, t, p, u, i, two_sided, total_area, wi, 
         scale[i] = 0.0
 
 
-@jit
-def _area_light_loop(p, u, cdf, tris, faces, V, tri_normal, total_area, two_sided, wi, dist, scale, pdf, valid):
-    last = tris.shape[0] - 1
-    for i in range(p.shape[1]):
-        k = min(np.searchsorted(cdf, u[0, i], side="right"), last)
-        t = tris[k]
-        _area_point_at(V, faces, tri_normal, t, p, u, i, two_sided, total_area, wi, dist, scale, pdf, valid)
-
-
 def area_light_sample_numba(p, u, cdf, tris, faces, vertices, tri_normal, total_area, two_sided=False):
+    """area_light_sample_numpy compiled: the group loop (_area_lights_loop) with one emitter, the same bits."""
     n = p.shape[1]
-    wi, dist, scale, pdf, valid = np.empty((3, n)), np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.bool_)
-    _area_light_loop(np.ascontiguousarray(p, dtype=np.float64), np.ascontiguousarray(u, dtype=np.float64), cdf,
-                     np.ascontiguousarray(tris, dtype=np.int64), faces, vertices, tri_normal, float(total_area),
-                     bool(two_sided), wi, dist, scale, pdf, valid)
-    return wi, dist, scale, pdf, valid
-
-
-area_light_sample = twin(_area_light_loop and area_light_sample_numba, area_light_sample_numpy)
+    return area_lights_sample_numba(p, u, np.zeros(n, np.int64), np.ascontiguousarray(cdf, dtype=np.float64),
+                                    np.array([0, len(tris)], np.int64), np.ascontiguousarray(tris, dtype=np.int64),
+                                    faces, vertices, tri_normal, np.array([float(total_area)]),
+                                    np.array([bool(two_sided)]))
 
 
 def area_lights_sample_numpy(p, u, light, cdf, start, tris, faces, vertices, tri_normal, total_area, two_sided):
@@ -368,6 +356,7 @@ def area_lights_sample_numba(p, u, light, cdf, start, tris, faces, vertices, tri
 
 
 area_lights_sample = twin(_area_lights_loop and area_lights_sample_numba, area_lights_sample_numpy)
+area_light_sample = twin(_area_lights_loop and area_light_sample_numba, area_light_sample_numpy)
 
 
 def triangle_sample_numpy(p, tri, u1, u2, faces, vertices, tri_normal, tri_area, two_sided):
