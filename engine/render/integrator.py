@@ -349,12 +349,6 @@ class PathTracer:
         self.keep_origins = (self.spatial or bool(lights.hittable)
                              or any(light.hit_pdf_needs_origin or light.hit_pdf_needs_direction
                                     for light in lights.lights))
-        # materials shaded together (e.g. all RGB Lambert materials in one call)
-        self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
-        # by material index: one lobe and no lobe choice (a rough conductor, Lambert): "sobol"'s first vertex draws
-        # its direction jointly with the pixel jitter (_sobol_vertex_numbers); per material, not per shading group,
-        # so that the image does not depend on how materials are batched
-        self.one_lobe = one_lobe(self.materials)
         # by material index: opaque two-sided materials, whose back faces shade with flipped normals
         # (BSDF.two_sided; read from the scene's materials, which simplification may have replaced)
         self.two_sided = np.array([bool(m.two_sided) and not m.flags.transmits for m in compiled.materials], bool)
@@ -366,17 +360,7 @@ class PathTracer:
         #: "rgb" transport: the path's wavelength axis carries the R, G, B channels (Cycles' arithmetic)
         self.channels = settings.spectral == "rgb"
         self.n_lambda = 1 if self.mono else 3 if self.channels else 4
-        # Where no material depends on λ, every wavelength of a path has the same Mueller product:
-        # carry T for one wavelength and apply the spectral emission and colour matching at the
-        # lights (exactly the same estimate, a quarter of the Mueller arithmetic).
-        # "auto": with λ-independent materials the spectral estimator's expectation is T times each
-        # light's spectrum integrated against the CIE observer, so trace in RGB with those exact
-        # light colours: no wavelength sampling and no chromatic noise (same expectation).
-        self.uniform, self.rgb_mode = spectral_reduction(settings, self.materials, compiled.used_materials)
-        # a textured emitter's colour in RGB: its spectrum integrated against the observer (the expectation of
-        # the spectral estimator), except in the "rgb" transport, whose texels are the channels themselves (as a
-        # constant light's channel_rgb: Cycles' arithmetic)
-        self._integrated_rgb = self.rgb_mode and not self.channels
+        self._material_tables(compiled.used_materials)
         # absorbing interiors (None: the scene has none, and nothing below reads a medium)
         self.media = Media(compiled, self.rgb_mode, self.mono) if compiled.has_volumes else None
         # Object ray visibility / holdout / alpha (None: none used) and film transparency (Cycles).
@@ -389,6 +373,27 @@ class PathTracer:
         # Cycles' light-path limits (engine.render.light_paths; None: none set, trace runs as before them)
         self.light_paths = (LightPathRules(settings, self.materials)
                             if getattr(settings, "light_paths_active", False) else None)
+
+    def _material_tables(self, used: np.ndarray) -> None:
+        """The tables read by material index while tracing, from ``self.materials`` (``used``: the indices the
+        scene's triangles use); a subclass that adds materials (participating media's phase vertices) calls it again."""
+        # materials shaded together (e.g. all RGB Lambert materials in one call)
+        self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
+        # one lobe and no lobe choice (a rough conductor, Lambert): "sobol"'s first vertex draws its direction
+        # jointly with the pixel jitter (_sobol_vertex_numbers); per material, not per shading group, so that the
+        # image does not depend on how materials are batched
+        self.one_lobe = one_lobe(self.materials)
+        # Where no material depends on λ, every wavelength of a path has the same Mueller product:
+        # carry T for one wavelength and apply the spectral emission and colour matching at the
+        # lights (exactly the same estimate, a quarter of the Mueller arithmetic).
+        # "auto": with λ-independent materials the spectral estimator's expectation is T times each
+        # light's spectrum integrated against the CIE observer, so trace in RGB with those exact
+        # light colours: no wavelength sampling and no chromatic noise (same expectation).
+        self.uniform, self.rgb_mode = spectral_reduction(self.settings, self.materials, used)
+        # a textured emitter's colour in RGB: its spectrum integrated against the observer (the expectation of
+        # the spectral estimator), except in the "rgb" transport, whose texels are the channels themselves (as a
+        # constant light's channel_rgb: Cycles' arithmetic)
+        self._integrated_rgb = self.rgb_mode and not self.channels
 
     def reseeded(self, settings: RenderSettings) -> PathTracer:
         """This tracer for ``settings`` (as rendered) that differ from its own in the seed alone: a shallow copy with

@@ -39,15 +39,13 @@ import numpy as np
 
 from ..kernels.hashing import uniforms
 from ..materials.base import BSDF, BSDFFlags, BSDFSample
-from ..materials.batching import shading_groups
 from ..kernels.transport import add_light
 from ..media.henyey_greenstein import HenyeyGreenstein
 from ..spectral.cie import LUMINANCE_WEIGHTS
 from .accel import surface_points
-from .integrator import PathTracer, _SurfaceHits, one_lobe
+from .integrator import PathTracer, _SurfaceHits
 from .light_paths import LightPathRules
 from .media import Media, cross, tracked_media
-from .plan import spectral_reduction
 from .sampler import _offsets
 
 #: First hashed dimension of the delta-tracking numbers (two per collision), and its stride per bounce.
@@ -451,12 +449,8 @@ class ParticipatingPathTracer(PathTracer):
         phases = [PhaseVertices(it.phase if it.phase is not None else HenyeyGreenstein(0.0)) for _, it in tracked]
         self.materials += phases
         self.scene = _SceneWithMediumVertices(compiled, len(tracked), M)
-        self.shaders, self.group_of, self.slot_of = shading_groups(self.materials)
-        self.one_lobe = one_lobe(self.materials)
         self.two_sided = np.concatenate((self.two_sided, np.zeros(len(tracked), bool)))
-        used = np.concatenate((compiled.used_materials, np.arange(M, M + len(tracked))))
-        self.uniform, self.rgb_mode = spectral_reduction(settings, self.materials, used)
-        self._integrated_rgb = self.rgb_mode and not self.channels
+        self._material_tables(np.concatenate((compiled.used_materials, np.arange(M, M + len(tracked)))))
         self.media = ScatteringMedia(self.scene, world, self.rgb_mode, self.mono, shadow=False)
         self.extinction = ScatteringMedia(self.scene, world, self.rgb_mode, self.mono, shadow=True)
         self.tracking = Tracking(self.extinction, tracked, self.rgb_mode, self.mono)
