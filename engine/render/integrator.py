@@ -677,12 +677,17 @@ class PathTracer:
             seg_tau = segment.transmittance(every, np.where(hit, hits.t, 0.0))
             state.tau = seg_tau if state.tau is None else state.tau * seg_tau
 
+    def _stokes_of_light(self, polarised: bool, x_T: np.ndarray | None) -> bool:
+        """Whether light enters the paths as a Stokes vector (a polarised light, ``polarised``, in a polarising
+        transport whose paths carry frames ``x_T``); else as S0 alone (add_light)."""
+        return polarised and self.P > 1 and x_T is not None
+
     def _add_light(self, radiance: np.ndarray, path: np.ndarray, T: np.ndarray, rows: np.ndarray, Le: np.ndarray,
                    w: np.ndarray, T_cols: np.ndarray, light, d: np.ndarray, x_T: np.ndarray | None) -> None:
         """Light of radiance ``Le`` (L, m) from ``light`` reaching the paths ``rows`` along their segments ``d``
         (3, m), MIS weight ``w`` (m,): T[:, 0] · Le · w (add_light), or for a polarised light in a polarising
         transport T · R(x_e → x_T) · s · Le · w with the light's Stokes vector s (engine.render.polarised_light)."""
-        if light.polarisation is None or self.P == 1 or x_T is None:
+        if not self._stokes_of_light(light.polarisation is not None, x_T):
             add_light(radiance, path, T, rows, Le, w, T_cols)
             return
         k = -d
@@ -1572,7 +1577,7 @@ class PathTracer:
         nd_rows = np.flatnonzero(nd_all)
         if nd_rows.size:
             w_all[nd_rows] = power_heuristic(prev_pdf[sel_all[nd_rows]], p_light_all[nd_rows])
-        if not polarised or self.P == 1 or x_T is None:
+        if not self._stokes_of_light(polarised, x_T):
             add_light(radiance, path, T, sel_all, Le_all, w_all, cols(sel_all))
             return
         for light, part in per_light:
