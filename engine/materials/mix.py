@@ -21,8 +21,8 @@ general matrix.
 albedo estimate: the wavelength-mean albedo of a Lambert component, a component's own
 ``albedo_estimate(sp)`` if it has one, else 1 (a Layered's top layer: its albedo E_top(ω_o), as Cycles weights
 a closure by its albedo estimate; a Layered in a mix: Σ of its layers' w·a); a_k is clipped to
-[ALBEDO_FLOOR, 1], so p_k > 0 wherever w_k > 0.  The component samples with the rest of u_lobe rescaled to [0, 1) as its own
-lobe number.  A direction from a non-Dirac lobe gets the mixture's weight
+[ALBEDO_FLOOR, 1], so p_k > 0 wherever w_k > 0.  The component samples with the rest of u_lobe rescaled to
+[0, 1) as its own lobe number.  A direction from a non-Dirac lobe gets the mixture's weight
 Σ_j w_j·f_j·|cosθ_i| / Σ_j p_j·pdf_j (so MIS and next-event estimation see the mixture's true
 density, ``pdf``); a Dirac one (w_k/p_k)·M_k with pdf 0.  η² (the radiance scale for Russian
 roulette) is the chosen component's.  With one component the sample is that component's, its
