@@ -19,9 +19,10 @@ general matrix.
 
 **Sampling.**  Component k is chosen with probability p_k = w_k·a_k / Σ_j w_j·a_j, a_k a cheap
 albedo estimate: the wavelength-mean albedo of a Lambert component, a component's own
-``albedo_estimate(sp)`` if it has one, else 1; a_k is clipped to [ALBEDO_FLOOR, 1], so p_k > 0
-wherever w_k > 0.  The component samples with the rest of u_lobe rescaled to [0, 1) as its own
-lobe number.  A direction from a non-Dirac lobe gets the mixture's weight
+``albedo_estimate(sp)`` if it has one, else 1 (a Layered's top layer: its albedo E_top(ω_o), as Cycles weights
+a closure by its albedo estimate; a Layered in a mix: Σ of its layers' w·a); a_k is clipped to
+[ALBEDO_FLOOR, 1], so p_k > 0 wherever w_k > 0.  The component samples with the rest of u_lobe rescaled to
+[0, 1) as its own lobe number.  A direction from a non-Dirac lobe gets the mixture's weight
 Σ_j w_j·f_j·|cosθ_i| / Σ_j p_j·pdf_j (so MIS and next-event estimation see the mixture's true
 density, ``pdf``); a Dirac one (w_k/p_k)·M_k with pdf 0.  η² (the radiance scale for Russian
 roulette) is the chosen component's.  With one component the sample is that component's, its
@@ -775,8 +776,31 @@ class Layered(Mix):
     def _weights(self, sp: ShadingPoint) -> list[np.ndarray]:
         weights = super()._weights(sp)
         top = self._points(sp)[0]       # the top's albedo at its own normal (a corrected mapped one: Cycles')
-        scale = np.maximum(1.0 - weights[0] * self.albedo(top), 0.0)     # the top's weight at each point
+        scale = np.maximum(1.0 - weights[0] * self._top_albedo(top), 0.0)     # the top's weight at each point
         return weights[:1] + [w * scale for w in weights[1:]]
+
+    def _top_albedo(self, top: ShadingPoint):
+        """E_top(ω_o) at the top layer's point ``top``, once per batch."""
+        return top.memo(self, "top albedo", lambda: self.albedo(top))
+
+    def _estimates(self, points, weights) -> list:
+        """w_k·a_k per component: the top layer's a is its albedo E_top(ω_o) (what it takes from the base; Cycles'
+        sample weight of that closure, bsdf_microfacet_estimate_albedo), the others' as in a Mix."""
+        raw = [w * _albedo_estimate(c, q) for c, q, w in zip(self.components, points, weights)]
+        raw[0] = weights[0] * np.clip(self._top_albedo(points[0]), ALBEDO_FLOOR, 1.0)
+        return raw
+
+    def _probabilities(self, points, weights) -> np.ndarray:
+        """(K, N) p_k ∝ w_k·a_k with the top layer's albedo as its a (``_estimates``), as Cycles picks a closure by
+        its sample weight: a specular layer of albedo 0.05 over a diffuse base is sampled in proportion to that."""
+        raw = np.array(self._estimates(points, weights))
+        total = raw.sum(axis=0)
+        return raw / np.where(total > 0, total, 1.0)[None, :]
+
+    def albedo_estimate(self, sp: ShadingPoint) -> np.ndarray:
+        """Σ_k w_k·a_k (``_estimates``): how much the layered material reflects at the points, so that a mix over
+        it picks it as it would pick its layers flattened (Cycles' closures side by side)."""
+        return sum(self._estimates(self._points(sp), self._weights_at(sp)))
 
 
 

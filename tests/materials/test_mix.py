@@ -689,3 +689,31 @@ def test_compiled_abcs_sum_is_the_numpy_sum_bit_for_bit(shape):
         assert (g is None) == (w is None), f
         if w is not None:
             assert g.shape == w.shape and g.tobytes() == w.tobytes(), f
+
+
+def test_layered_picks_its_layers_by_their_albedos_as_cycles_picks_closures():
+    """Cycles picks a closure by its sample weight, weight × albedo estimate (bsdf_microfacet_estimate_albedo): a
+    specular layer of albedo E over a diffuse base (what a normal map splits a Principled dielectric into,
+    TorranceSparrow.as_layers) is sampled with p = E / (E + d·(1 − E)·ρ), not as if it reflected everything
+    (p = 1 / (1 + d·(1 − E)·ρ): 4–6× too often beside a base that reflects most of the light; TextureTransform's σ²
+    under lamps 1.14× Cycles' with it, docs/benchmarks/real-assets.md); and a mix over the layered material picks
+    it by Σ w·a of its layers, as it would pick the layers flattened beside its other components."""
+    from engine.materials.torrance_sparrow import TorranceSparrow
+    model = parse_material({"type": "principled", "metallic": 0.0, "roughness": 0.6,
+                            "base_color": [0.5, 0.5, 0.5]}, "materials.p")
+    ts = model if isinstance(model, TorranceSparrow) else next(c for c in model.components
+                                                               if isinstance(c, TorranceSparrow))
+    layered = ts.as_layers()
+    top, base = layered.components
+    n, rng = 400, np.random.default_rng(3)
+    sp, wi = points(n, rng), upper(n, rng)
+    E = layered.albedo(sp)
+    assert 0.02 < E.min() and E.max() < 0.5                  # a weak specular layer over a bright base
+    a_base = layered.weights[1] * (1.0 - E) * 0.5
+    p_top = E / (E + a_base)
+    want = p_top * top.pdf(sp, wi) + (1.0 - p_top) * base.pdf(sp, wi)
+    np.testing.assert_allclose(layered.pdf(points(n, np.random.default_rng(3)), wi), want, rtol=1e-12)
+    mix = Mix([layered, lambert(0.3)], [0.4, 0.6])
+    p_layered = 0.4 * (E + a_base) / (0.4 * (E + a_base) + 0.6 * 0.3)
+    want_mix = p_layered * want + (1.0 - p_layered) * lambert(0.3).pdf(sp, wi)
+    np.testing.assert_allclose(mix.pdf(points(n, np.random.default_rng(3)), wi), want_mix, rtol=1e-12)

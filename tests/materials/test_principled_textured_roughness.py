@@ -153,8 +153,9 @@ def test_per_point_index_with_a_tint_or_an_anisotropy(tmp_path, base, key, texel
     black = colour == 0.0
     for sel, _, const, sub in rows:
         want = _matrix(const.eval(sub, wi[:, sel]))
-        # the pdf's lobe choice reads the layering albedo too (the index tables: within 1e-3)
-        np.testing.assert_allclose(pdf[sel], const.pdf(sub, wi[:, sel]), rtol=1e-3)
+        # the pdf's lobe choice reads the layering albedo too, the specular layer's as its sample weight (Cycles'):
+        # the index tables' E within 2e-3 (1.15e-3 at most here: a black base, anisotropic, IOR 2.2)
+        np.testing.assert_allclose(pdf[sel], const.pdf(sub, wi[:, sel]), rtol=2e-3)
         if black:
             np.testing.assert_allclose(f[..., sel], want, rtol=1e-9, atol=1e-13)
         else:
