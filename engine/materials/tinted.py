@@ -42,7 +42,7 @@ class _ScaledLobes(BSDF):
         raise NotImplementedError
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        return self.base.eval(sp, wi).scaled(self._factor(sp, wi))
+        return self.base.eval(sp, wi).times(self._factor(sp, wi))
 
     def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
         return self.base.refraction_eta_sq(sp)
@@ -56,7 +56,7 @@ class _ScaledLobes(BSDF):
         if cls.eval is not _ScaledLobes.eval or cls.pdf is not _ScaledLobes.pdf:
             return super().eval_and_pdf(sp, wi)
         f, pdf = self.base.eval_and_pdf(sp, wi)
-        return f.scaled(self._factor(sp, wi)), pdf
+        return f.times(self._factor(sp, wi)), pdf
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         bs = self.base.sample(sp, u_lobe, u_dir)

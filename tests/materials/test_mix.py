@@ -680,12 +680,73 @@ def test_compiled_abcs_sum_is_the_numpy_sum_bit_for_bit(shape):
         terms[1][1].A.flags.writeable = False
     if shape == "read_only_scale":      # a read-only per-point weight (a texture's) beside a writeable one
         terms[1][0].flags.writeable = False
-    signatures = len(M.abcs_sum_loop.signatures)
+    signatures = len(M.chain_sum_loop.signatures)
     got, want = M.abcs_sum_numba(terms, x, x), M.abcs_sum_numpy(terms, x, x)
     if shape in ("six", "read_only"):
-        assert len(M.abcs_sum_loop.signatures) == signatures
+        assert len(M.chain_sum_loop.signatures) == signatures
     for f in ("A", "B", "C", "S", "depol"):
         g, w = getattr(got, f), getattr(want, f)
         assert (g is None) == (w is None), f
         if w is not None:
             assert g.shape == w.shape and g.tobytes() == w.tobytes(), f
+
+
+@pytest.mark.skipif(not __import__("engine.kernels", fromlist=["COMPILED"]).COMPILED, reason="needs Numba")
+@pytest.mark.parametrize("shape", ["sum_of_chains", "sum_with_depolariser", "one_with_depolarisers", "one_alone",
+                                   "one_shared_depol", "long_chain"])
+def test_compiled_sums_of_scaled_values_are_the_numpy_sums_bit_for_bit(shape):
+    """ScaledValue terms (a normal map's factor, a tint per wavelength, deferred: MuellerValue.times) in the compiled
+    sums (mix.abcs_sum and mix.one_abcs: the factors multiplied in the loop, in order) against the NumPy twins, which
+    multiply them out first — bit for bit, negative zeros included; and a ScaledValue's blocks read directly are
+    those of the eager ``scaled`` chain."""
+    from engine.kernels import TWINS
+    from engine.materials import mix as M
+    from engine.materials.base import ScaledValue
+    assert TWINS["materials.mix.one_abcs"].compiled is M.one_abcs_numba
+    rng = np.random.default_rng(5)
+    L, n = 4, 500
+    x = unit(rng.normal(size=(3, n)))
+
+    def abcs(depol):
+        A, B, C, S = (rng.normal(size=(L, n)) for _ in range(4))
+        A[0, :5], B[1, :7] = -0.0, 0.0
+        return MuellerValue("abcs", x, x, A, B, C, S, depol=rng.uniform(0, 1, (L, n)) if depol else None)
+
+    def leak():         # a normal map's factor: 1 or 0 per point, (1, N)
+        return (rng.uniform(0, 1, n) > 0.2).astype(np.float64)[None, :]
+
+    def chained(v, *factors):
+        for f in factors:
+            v = v.times(f)
+        assert isinstance(v, ScaledValue)
+        return v
+    lam = MuellerValue("depolarising", x, x, A=rng.uniform(0, 1, (L, n)))
+    terms = {"sum_of_chains": [(rng.uniform(0, 2, n), chained(abcs(True), leak(), rng.uniform(0, 2, (L, n)))),
+                               (rng.uniform(0, 1, n), chained(abcs(True), leak()))],
+             "sum_with_depolariser": [(rng.uniform(0, 2, n), abcs(False)), (0.3, chained(abcs(True), 0.7)),
+                                      (rng.uniform(0, 1, n), chained(lam, leak()))],
+             "one_with_depolarisers": [(rng.uniform(0, 2, n), chained(abcs(False), leak())),
+                                       (rng.uniform(0, 1, n), chained(lam, rng.uniform(0, 1, n)[None, :])),
+                                       (0.5, lam)],
+             "one_alone": [(rng.uniform(0, 2, n), chained(abcs(False), leak()))],
+             "one_shared_depol": [(rng.uniform(0, 2, n), chained(abcs(True), leak())),
+                                  (rng.uniform(0, 1, n), lam)],
+             "long_chain": [(0.5, chained(abcs(True), *(rng.uniform(0.5, 1.5, (L, n)) for _ in range(5))))]}[shape]
+    one = sum(v.kind == "abcs" for _, v in terms) == 1
+    if one:
+        got, want = M.one_abcs_numba(terms), M.one_abcs_numpy(terms)
+    else:
+        got, want = M.abcs_sum_numba(terms, x, x), M.abcs_sum_numpy(terms, x, x)
+    for f in ("A", "B", "C", "S", "depol"):
+        g, w = getattr(got, f), getattr(want, f)
+        assert (g is None) == (w is None), f
+        if w is not None:
+            assert g.shape == w.shape and g.tobytes() == w.tobytes(), f
+    # the deferred product read directly: the eager chain's bits
+    v, factors = abcs(True), (leak(), rng.uniform(0, 2, (L, n)), 0.3)
+    eager = v
+    for f in factors:
+        eager = eager.scaled(f)
+    lazy = chained(v, *factors)
+    for f in ("A", "B", "C", "S", "depol"):
+        assert getattr(lazy, f).tobytes() == getattr(eager, f).tobytes(), f
