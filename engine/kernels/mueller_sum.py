@@ -8,8 +8,6 @@ sums 0 + t₁ + t₂ + … (Python's ``sum`` of the scaled arrays), without the 
 
 from __future__ import annotations
 
-import numpy as np
-
 from . import jit, jit_inner
 
 
