@@ -249,6 +249,19 @@ def _is_identity_rotation(r) -> bool:
                          and np.all(r[0] > 0) and np.all(r[2] > 0))
 
 
+def _shared_abcs_frames(pol: list[MuellerValue], k_in: np.ndarray, k_out: np.ndarray) -> bool:
+    """Whether ABCS values are all in the first one's frames, equal to the bit, those usable (|x|² > 0.25) about
+    finite beams: then ``_common_frames`` keeps them and finds every rotation the identity (cos 2φ ≈ 1, sin 2φ a
+    rounding error of x·(k × x) = 0), so the sum is ``abcs_sum`` in them, without the rotations computed."""
+    ref = pol[0]
+    if any(v.kind != "abcs" for v in pol) or not all(
+            (v.x_in is ref.x_in or np.array_equal(v.x_in, ref.x_in))
+            and (v.x_out is ref.x_out or np.array_equal(v.x_out, ref.x_out)) for v in pol[1:]):
+        return False
+    return bool(np.all(dot(ref.x_in, ref.x_in) > 0.25) and np.all(dot(ref.x_out, ref.x_out) > 0.25)
+                and np.isfinite(k_in).all() and np.isfinite(k_out).all())
+
+
 def _sum_abcs(pol: list[MuellerValue], dep, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
     """Σ of ABCS values already in the frames (x_in, x_out), plus a depolarising A (L, N) (None:
     nothing), as an ABCS value."""
@@ -385,6 +398,8 @@ def add_values(terms, n: int, L: int, k_in: np.ndarray, k_out: np.ndarray, n_s: 
     k_in = −ω_i, k_out = ω_o (3, N) (see the module docstring, "Frames"); the cheapest kind that holds
     the sum."""
     polarising = [v for _, v in terms if v.kind != "depolarising"]
+    if len(polarising) > 1 and _shared_abcs_frames(polarising, k_in, k_out):
+        return abcs_sum(terms, polarising[0].x_in, polarising[0].x_out)
     if len(polarising) > 1:
         x_in, x_out, rotations = _common_frames(polarising, k_in, k_out, n_s)
         if all(v.kind == "abcs" for v in polarising) and all(_is_identity_rotation(r) for r in rotations):

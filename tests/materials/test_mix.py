@@ -750,3 +750,34 @@ def test_compiled_sums_of_scaled_values_are_the_numpy_sums_bit_for_bit(shape):
     lazy = chained(v, *factors)
     for f in ("A", "B", "C", "S", "depol"):
         assert getattr(lazy, f).tobytes() == getattr(eager, f).tobytes(), f
+
+
+def test_abcs_values_in_equal_frames_skip_the_rotations_only_where_those_are_the_identity():
+    """add_values sums ABCS values whose frames are equal to the bit without computing the rotations
+    (mix._shared_abcs_frames): only where _common_frames keeps the first value's frames and finds every rotation the
+    identity — not for frames that differ by a rounding, a degenerate frame, or a beam that is not finite."""
+    from engine.materials import mix as M
+    rng = np.random.default_rng(3)
+    n, L = 400, 4
+    wi, wo = unit(rng.normal(size=(3, n))), unit(rng.normal(size=(3, n)))
+    x = unit(cross(-wi, wo))
+
+    def value(frame):
+        A, B, C, S = (rng.normal(size=(L, n)) for _ in range(4))
+        return MuellerValue("abcs", frame, frame, A, B, C, S)
+    same = [value(x), value(x.copy())]
+    assert M._shared_abcs_frames(same, -wi, wo)
+    x_in, x_out, rotations = M._common_frames(same, -wi, wo, unit(wi + wo))
+    assert x_in is x and x_out is x and all(M._is_identity_rotation(r) for r in rotations)
+    terms = [(rng.uniform(0, 1, n), v) for v in same]
+    fast, slow = M.add_values(terms, n, L, -wi, wo, unit(wi + wo)), M.abcs_sum(terms, x_in, x_out)
+    assert all(getattr(fast, f).tobytes() == getattr(slow, f).tobytes() for f in "ABCS")
+    nudged = x.copy()
+    nudged[0, 7] = np.nextafter(nudged[0, 7], 2.0)
+    assert not M._shared_abcs_frames([value(x), value(nudged)], -wi, wo)
+    degenerate = x.copy()
+    degenerate[:, 5] = 0.0
+    assert not M._shared_abcs_frames([value(degenerate), value(degenerate.copy())], -wi, wo)
+    bad = wi.copy()
+    bad[1, 9] = np.nan
+    assert not M._shared_abcs_frames(same, -bad, wo)
