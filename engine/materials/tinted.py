@@ -317,8 +317,10 @@ def f82_ratio_numba(cos_facet, eta, f0, tint, curve: str, shape: tuple) -> np.nd
     if cos_facet.shape != (n,) or np.ndim(eta) != 2 or eta.shape[0] not in (1, L) or eta.shape[1] not in (1, n):
         return f82_ratio_numpy(cos_facet, eta, f0, tint, curve, shape)
 
-    def spread(a, dtype):     # (L, N) writeable C arrays (one type for the loop)
-        return np.require(np.broadcast_to(np.asarray(a, dtype), shape), dtype, ["C", "W"])
+    def spread(a, dtype):     # (L, N) read-only C arrays (one type for the loop; a read-only input is not copied)
+        out = np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype), shape)).view()
+        out.flags.writeable = False
+        return out
     c = np.clip(cos_facet, 0.0, 1.0)
     s = 1.0 - c
     s5 = s ** 5         # (NumPy's power, as f82_curve's)
