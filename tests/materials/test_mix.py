@@ -646,6 +646,28 @@ def test_sampled_directions_alone_are_the_samples_and_nested_mixes_sum_once(valu
                                                                    wi, sub.wo), rtol=1e-10, atol=1e-13)
 
 
+def _sum_inputs(seed: int, n: int, L: int = 4):
+    """(rng, x (3, n) frames, abcs(depol): a random ABCS value in them with negative and positive zeros in a few
+    entries (the sums' zero rules)) for the mixture sums' bit-for-bit tests."""
+    rng = np.random.default_rng(seed)
+    x = unit(rng.normal(size=(3, n)))
+
+    def abcs(depol):
+        A, B, C, S = (rng.normal(size=(L, n)) for _ in range(4))
+        A[0, :5], B[1, :7] = -0.0, 0.0
+        return MuellerValue("abcs", x, x, A, B, C, S, depol=rng.uniform(0, 1, (L, n)) if depol else None)
+    return rng, x, abcs
+
+
+def _assert_same_blocks(got, want):
+    """The blocks A..S and depol of two values: both None or the same shape and bits."""
+    for f in ("A", "B", "C", "S", "depol"):
+        g, w = getattr(got, f), getattr(want, f)
+        assert (g is None) == (w is None), f
+        if w is not None:
+            assert g.shape == w.shape and g.tobytes() == w.tobytes(), f
+
+
 @pytest.mark.skipif(not __import__("engine.kernels", fromlist=["COMPILED"]).COMPILED, reason="needs Numba")
 @pytest.mark.parametrize("shape", ["two", "three_with_depolarisers", "shared_depol", "six", "read_only",
                                    "read_only_scale"])
@@ -656,14 +678,8 @@ def test_compiled_abcs_sum_is_the_numpy_sum_bit_for_bit(shape):
     from engine.kernels import TWINS
     from engine.materials import mix as M
     assert TWINS["materials.mix.abcs_sum"].compiled is M.abcs_sum_numba
-    rng = np.random.default_rng(21)
     L, n = 4, 700
-    x = unit(rng.normal(size=(3, n)))
-
-    def abcs(depol):
-        A, B, C, S = (rng.normal(size=(L, n)) for _ in range(4))
-        A[0, :5] = -0.0
-        return MuellerValue("abcs", x, x, A, B, C, S, depol=rng.uniform(0, 1, (L, n)) if depol else None)
+    rng, x, abcs = _sum_inputs(21, n)
 
     def depolarising():
         return MuellerValue("depolarising", x, x, A=rng.uniform(0, 1, (L, n)))
@@ -684,11 +700,7 @@ def test_compiled_abcs_sum_is_the_numpy_sum_bit_for_bit(shape):
     got, want = M.abcs_sum_numba(terms, x, x), M.abcs_sum_numpy(terms, x, x)
     if shape in ("six", "read_only"):
         assert len(M.chain_sum_loop.signatures) == signatures
-    for f in ("A", "B", "C", "S", "depol"):
-        g, w = getattr(got, f), getattr(want, f)
-        assert (g is None) == (w is None), f
-        if w is not None:
-            assert g.shape == w.shape and g.tobytes() == w.tobytes(), f
+    _assert_same_blocks(got, want)
 
 
 @pytest.mark.skipif(not __import__("engine.kernels", fromlist=["COMPILED"]).COMPILED, reason="needs Numba")
@@ -703,14 +715,8 @@ def test_compiled_sums_of_scaled_values_are_the_numpy_sums_bit_for_bit(shape):
     from engine.materials import mix as M
     from engine.materials.base import ScaledValue
     assert TWINS["materials.mix.one_abcs"].compiled is M.one_abcs_numba
-    rng = np.random.default_rng(5)
     L, n = 4, 500
-    x = unit(rng.normal(size=(3, n)))
-
-    def abcs(depol):
-        A, B, C, S = (rng.normal(size=(L, n)) for _ in range(4))
-        A[0, :5], B[1, :7] = -0.0, 0.0
-        return MuellerValue("abcs", x, x, A, B, C, S, depol=rng.uniform(0, 1, (L, n)) if depol else None)
+    rng, x, abcs = _sum_inputs(5, n)
 
     def leak():         # a normal map's factor: 1 or 0 per point, (1, N)
         return (rng.uniform(0, 1, n) > 0.2).astype(np.float64)[None, :]
@@ -737,11 +743,7 @@ def test_compiled_sums_of_scaled_values_are_the_numpy_sums_bit_for_bit(shape):
         got, want = M.one_abcs_numba(terms), M.one_abcs_numpy(terms)
     else:
         got, want = M.abcs_sum_numba(terms, x, x), M.abcs_sum_numpy(terms, x, x)
-    for f in ("A", "B", "C", "S", "depol"):
-        g, w = getattr(got, f), getattr(want, f)
-        assert (g is None) == (w is None), f
-        if w is not None:
-            assert g.shape == w.shape and g.tobytes() == w.tobytes(), f
+    _assert_same_blocks(got, want)
     # the deferred product read directly: the eager chain's bits
     v, factors = abcs(True), (leak(), rng.uniform(0, 2, (L, n)), 0.3)
     eager = v
