@@ -338,11 +338,11 @@ def _eval_pdf_rows_loop(n_s, wo, wi, eta, s, m, dist, kind, p_given, use_given, 
 
 @jit_inner
 def sample_at(i, o, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef,
-              k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
+              k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid, value=True):
     """The sample pass at path i into column o: direction wi[:, o], pdf, valid, the weight's factor cosθ_i/pdf, the
-    lobe's value (times the factor where ``scale``) A..S[:, o] in the frame x[:, o] and eval's valid
-    (TorranceSparrow.sample).  Returns Smith Λ(ω_o) where the Beckmann sampler computed it (specular_pdf_at's
-    bits), else NaN."""
+    lobe's value (times the factor where ``scale``) A..S[:, o] in the frame x[:, o] (not written unless ``value``:
+    the direction alone) and eval's valid (TorranceSparrow.sample).  Returns Smith Λ(ω_o) where the Beckmann
+    sampler computed it (specular_pdf_at's bits), else NaN."""
     n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
     t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
     o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
@@ -398,18 +398,19 @@ def sample_at(i, o, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_
     valid[o] = ok
     pdf[o] = q if ok else 0.0
     factor[o] = f
-    facet_fresnel_at(i, o, eta, c, fr, f if scale else 1.0, A, B, C, S)       # eval_at's second half
-    x[0, o], x[1, o], x[2, o] = scattering_axis(w0, w1, w2, o0, o1, o2)
+    if value:
+        facet_fresnel_at(i, o, eta, c, fr, f if scale else 1.0, A, B, C, S)       # eval_at's second half
+        x[0, o], x[1, o], x[2, o] = scattering_axis(w0, w1, w2, o0, o1, o2)
     eval_valid[o] = e_valid
     return lam_o if have_lam else np.nan
 
 
 @jit
 def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef, k,
-                 wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
+                 wi, pdf, valid, factor, A, B, C, S, x, eval_valid, value):
     for i in range(n_s.shape[1]):
         sample_at(i, i, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale,
-                  coef, k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid)
+                  coef, k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid, value)
 
 
 # ----------------------------------------------------------------------------- wrappers (the compiled twins)
@@ -479,7 +480,9 @@ def torrance_sparrow_eval_pdf_numba(n_s, wo, wi, eta, L, s, m, shadowing, p_give
 
 
 def torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowing, p_given, w_d, has_diffuse,
-                                  distribution="beckmann", scale=True):
+                                  distribution="beckmann", scale=True, value=True):
+    """The sample pass's (wi, pdf, valid, factor, x, A, B, C, S, eval_valid); not ``value``: x and A..S None (the
+    direction alone: the lobe's Fresnel values are not computed)."""
     n = n_s.shape[1]
     p, use_given, wd = _p_inputs(p_given, w_d, n)
     A, B, C, S = (np.empty((L, n)) for _ in range(4))
@@ -489,7 +492,9 @@ def torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowin
     _sample_loop(_f64(n_s), _f64(wo), _per_point(u_lobe, n), _f64(u_dir), _eta_rows(eta), _per_point(s, n),
                  _per_point(m, n), DISTRIBUTION_CODES[distribution], SHADOWING_CODES[shadowing], p, use_given, wd,
                  bool(has_diffuse), bool(scale), _ERFCX_COEF, _ERFCX_K, wi, pdf, valid, factor, A, B, C, S, x,
-                 eval_valid)
+                 eval_valid, bool(value))
+    if not value:
+        return wi, pdf, valid, factor, None, None, None, None, None, eval_valid
     return wi, pdf, valid, factor, x, A, B, C, S, eval_valid
 
 
