@@ -312,6 +312,21 @@ def _factor_block(f, L: int, n: int, scale: bool):
     return np.require(a, np.float64, ["C", "W"])
 
 
+def _term_arrays(scale, v: MuellerValue, polarising: bool, shape: tuple):
+    """One term's arrays for the compiled loop: (its blocks A, B, C, S, depol — dummies where it has none —, its
+    factors padded to _MAX_FACTORS, their count), or None where the loop does not take it."""
+    L, n = shape
+    base, chain = (v.base, v.factors) if isinstance(v, ScaledValue) else (v, ())
+    fs = [_factor_block(f, L, n, False) for f in chain] + [_factor_block(scale, L, n, True)]
+    if len(fs) > _MAX_FACTORS or any(f is None for f in fs):
+        return None
+    blocks = (base.A, base.B, base.C, base.S, base.depol) if polarising else (base.A, None, None, None, None)
+    if any(a is not None and (a.shape != shape or a.dtype != np.float64) for a in blocks):
+        return None
+    blocks = tuple(_NO_BLOCK if a is None else np.require(a, np.float64, ["C", "W"]) for a in blocks)
+    return blocks, tuple(fs) + (fs[0],) * (_MAX_FACTORS - len(fs)), len(fs)
+
+
 def _compiled_sum(terms, summed: bool):
     """The blocks (A, B, C, S, depol or None) of Σ scale·value over ``terms`` in one compiled loop
     (engine.kernels.mueller_sum.chain_sum_loop): ``summed`` as abcs_sum_numpy adds them, else as _plus_depolariser
@@ -325,31 +340,14 @@ def _compiled_sum(terms, summed: bool):
     shape = (first.base if isinstance(first, ScaledValue) else first).A.shape
     if len(shape) != 2:
         return None
-    L, n = shape
-    blocks, factors, n_factors = {f: [] for f in "ABCSD"}, [], []
-    for i, (scale, v) in enumerate(ordered):
-        base, chain = (v.base, v.factors) if isinstance(v, ScaledValue) else (v, ())
-        fs = [_factor_block(f, L, n, False) for f in chain] + [_factor_block(scale, L, n, True)]
-        if len(fs) > _MAX_FACTORS or any(f is None for f in fs):
-            return None
-        factors.append(tuple(fs) + (fs[0],) * (_MAX_FACTORS - len(fs)))
-        n_factors.append(len(fs))
-        for f, a in zip("ABCSD", (base.A, base.B, base.C, base.S, base.depol) if i < n_pol else (base.A,)):
-            if a is None:
-                blocks[f].append(_NO_BLOCK)
-                continue
-            if a.shape != shape or a.dtype != np.float64:
-                return None
-            blocks[f].append(np.require(a, np.float64, ["C", "W"]))
-        for f in "BCSD"[(4 if i < n_pol else 0):]:
-            blocks[f].append(_NO_BLOCK)
-    has_depol = np.array([i < n_pol and (v.base if isinstance(v, ScaledValue) else v).depol is not None
-                          for i, (_, v) in enumerate(ordered)])
+    arrays = [_term_arrays(scale, v, i < n_pol, shape) for i, (scale, v) in enumerate(ordered)]
+    if any(t is None for t in arrays):
+        return None
+    has_depol = np.array([t[0][4] is not _NO_BLOCK for t in arrays])
     A, B, C, S, D = (np.zeros(shape) if summed else np.empty(shape) for _ in range(5))
     dep = np.empty(shape) if n_pol < len(ordered) else _NO_BLOCK
-    chain_sum_loop(*(tuple(blocks[f]) for f in "ABCSD"), has_depol, tuple(factors), np.array(n_factors), n_pol,
-                   summed, A, B, C, S, D,
-                   dep)
+    chain_sum_loop(*(tuple(t[0][j] for t in arrays) for j in range(5)), has_depol, tuple(t[1] for t in arrays),
+                   np.array([t[2] for t in arrays]), n_pol, summed, A, B, C, S, D, dep)
     if n_pol < len(ordered):        # the depolarisers' own sum, added last
         D = D + dep if summed or has_depol[0] else dep
     elif not has_depol.any():
