@@ -25,7 +25,7 @@ import numpy as np
 
 from . import jit, jit_inner
 from .error_function import ERFCX_COEF, ERFCX_K
-from .fresnel import abcs_at
+from .fresnel import abcs_at, abcs_fixups, abcs_row
 from .geometry import local_frame_at, to_local_at, unit_cross_at
 from .microfacet import (beckmann_d_at, beckmann_g1_pair_at, beckmann_lambda_at, beckmann_vndf_lambda_at,
                          chi_plus_at, ggx_d_at, ggx_lambda_at, ggx_vndf_at, smith_a_at)
@@ -283,13 +283,66 @@ def _eval_pdf_loop(n_s, wo, wi, eta, s, m, dist, kind, p_given, use_given, eta_p
                             has_diffuse, coef, k, 0.0, False)
 
 
+#: lanes per block of _eval_pdf_rows_loop (its Fresnel values are taken a wavelength at a time over a block)
+_CHUNK = 256
+
+
+@jit
+def _eval_pdf_rows_loop(n_s, wo, wi, eta, s, m, dist, kind, p_given, use_given, eta_p, L, s_p, w_d, has_diffuse, coef,
+                        k, A, B, C, S, x, valid, pdf):
+    """_eval_pdf_loop for an index per wavelength and path (eta (L, N), a textured metal's): the same per-path pass,
+    the facet Fresnel values of each block of paths taken a wavelength at a time by fresnel.abcs_row (SIMD) and
+    abcs_fixups — abcs_at's bits — then A..S = (value·f)·1 as facet_fresnel_at writes them."""
+    N = n_s.shape[1]
+    La = A.shape[0]
+    cos, fr_, w = np.empty(_CHUNK), np.empty(_CHUNK), np.ones(_CHUNK)
+    e, abcs, fast = np.empty((La, 2, _CHUNK)), np.empty((La, 4, _CHUNK)), np.empty(_CHUNK, np.bool_)
+    for j0 in range(0, N, _CHUNK):
+        mm = min(_CHUNK, N - j0)
+        for jj in range(mm):
+            i = j0 + jj
+            n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
+            t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
+            o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
+            w0, w1, w2 = wi[0, i], wi[1, i], wi[2, i]
+            mi = at(m, i)
+            e_valid, lobe, lo0, lo1, lo2, li2, h0, h1, h2, D, fr, c = facet_at(n0, n1, n2, t0, t1, t2, b0, b1, b2,
+                                                                             o0, o1, o2, w0, w1, w2, at(s, i), mi,
+                                                                             dist, kind, coef, k)
+            cos[jj], fr_[jj] = c, fr
+            for q in range(La):
+                v = eta[q, i]
+                e[q, 0, jj] = v.real
+                e[q, 1, jj] = v.imag
+            x[0, i], x[1, i], x[2, i] = scattering_axis(w0, w1, w2, o0, o1, o2)
+            valid[i] = e_valid
+            cos_o = (o0 * n0 + o1 * n1) + o2 * n2
+            p = p_spec_at(i, cos_o, p_given, use_given, eta_p, L, s_p, w_d)
+            if lobe:
+                pdf[i] = pdf_from_facet_at(lo0, lo1, lo2, li2, h0, h1, h2, D, mi, dist, p, True, has_diffuse, coef,
+                                           k, 0.0, False)
+            else:
+                pdf[i] = pdf_of(n0, n1, n2, t0, t1, t2, b0, b1, b2, o0, o1, o2, w0, w1, w2, mi, dist, p, True,
+                                has_diffuse, coef, k, 0.0, False)
+        for q in range(La):
+            abcs_row(cos, w, e, q, mm, abcs, fast)
+            abcs_fixups(cos, w, e, q, mm, abcs, fast)
+            for jj in range(mm):
+                i = j0 + jj
+                f = fr_[jj]
+                A[q, i] = abcs[q, 0, jj] * f * 1.0
+                B[q, i] = abcs[q, 1, jj] * f * 1.0
+                C[q, i] = abcs[q, 2, jj] * f * 1.0
+                S[q, i] = abcs[q, 3, jj] * f * 1.0
+
+
 @jit_inner
 def sample_at(i, o, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef,
-              k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
+              k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid, value=True):
     """The sample pass at path i into column o: direction wi[:, o], pdf, valid, the weight's factor cosθ_i/pdf, the
-    lobe's value (times the factor where ``scale``) A..S[:, o] in the frame x[:, o] and eval's valid
-    (TorranceSparrow.sample).  Returns Smith Λ(ω_o) where the Beckmann sampler computed it (specular_pdf_at's
-    bits), else NaN."""
+    lobe's value (times the factor where ``scale``) A..S[:, o] in the frame x[:, o] (not written unless ``value``:
+    the direction alone) and eval's valid (TorranceSparrow.sample).  Returns Smith Λ(ω_o) where the Beckmann
+    sampler computed it (specular_pdf_at's bits), else NaN."""
     n0, n1, n2 = n_s[0, i], n_s[1, i], n_s[2, i]
     t0, t1, t2, b0, b1, b2 = local_frame_at(n0, n1, n2)
     o0, o1, o2 = wo[0, i], wo[1, i], wo[2, i]
@@ -345,18 +398,19 @@ def sample_at(i, o, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_
     valid[o] = ok
     pdf[o] = q if ok else 0.0
     factor[o] = f
-    facet_fresnel_at(i, o, eta, c, fr, f if scale else 1.0, A, B, C, S)       # eval_at's second half
-    x[0, o], x[1, o], x[2, o] = scattering_axis(w0, w1, w2, o0, o1, o2)
+    if value:
+        facet_fresnel_at(i, o, eta, c, fr, f if scale else 1.0, A, B, C, S)       # eval_at's second half
+        x[0, o], x[1, o], x[2, o] = scattering_axis(w0, w1, w2, o0, o1, o2)
     eval_valid[o] = e_valid
     return lam_o if have_lam else np.nan
 
 
 @jit
 def _sample_loop(n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale, coef, k,
-                 wi, pdf, valid, factor, A, B, C, S, x, eval_valid):
+                 wi, pdf, valid, factor, A, B, C, S, x, eval_valid, value):
     for i in range(n_s.shape[1]):
         sample_at(i, i, n_s, wo, u_lobe, u_dir, eta, s, m, dist, kind, p_given, use_given, w_d, has_diffuse, scale,
-                  coef, k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid)
+                  coef, k, wi, pdf, valid, factor, A, B, C, S, x, eval_valid, value)
 
 
 # ----------------------------------------------------------------------------- wrappers (the compiled twins)
@@ -414,7 +468,10 @@ def torrance_sparrow_eval_pdf_numba(n_s, wo, wi, eta, L, s, m, shadowing, p_give
     p, use_given, wd = _p_inputs(p_given, w_d, n)
     A, B, C, S = (np.empty((L, n)) for _ in range(4))
     x, valid, pdf = np.empty((3, n)), np.empty(n, np.bool_), np.empty(n)
-    _eval_pdf_loop(_f64(n_s), _f64(wo), _f64(wi), _eta_rows(eta), _per_point(s, n), _per_point(m, n),
+    eta = _eta_rows(eta)
+    # an index per wavelength and path (a textured metal's): the Fresnel values a block of paths at a time (SIMD)
+    loop = _eval_pdf_rows_loop if eta.shape == (L, n) and L > 1 and np.iscomplexobj(eta) else _eval_pdf_loop
+    loop(_f64(n_s), _f64(wo), _f64(wi), eta, _per_point(s, n), _per_point(m, n),
                    DISTRIBUTION_CODES[distribution], SHADOWING_CODES[shadowing], p, use_given,
                    np.zeros((1, 1), np.complex128) if use_given else _eta_rows(eta_p), int(L),
                    np.zeros(1) if use_given else _per_point(s_p, n), wd, bool(has_diffuse), _ERFCX_COEF, _ERFCX_K,
@@ -423,7 +480,9 @@ def torrance_sparrow_eval_pdf_numba(n_s, wo, wi, eta, L, s, m, shadowing, p_give
 
 
 def torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowing, p_given, w_d, has_diffuse,
-                                  distribution="beckmann", scale=True):
+                                  distribution="beckmann", scale=True, value=True):
+    """The sample pass's (wi, pdf, valid, factor, x, A, B, C, S, eval_valid); not ``value``: x and A..S None (the
+    direction alone: the lobe's Fresnel values are not computed)."""
     n = n_s.shape[1]
     p, use_given, wd = _p_inputs(p_given, w_d, n)
     A, B, C, S = (np.empty((L, n)) for _ in range(4))
@@ -433,7 +492,9 @@ def torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowin
     _sample_loop(_f64(n_s), _f64(wo), _per_point(u_lobe, n), _f64(u_dir), _eta_rows(eta), _per_point(s, n),
                  _per_point(m, n), DISTRIBUTION_CODES[distribution], SHADOWING_CODES[shadowing], p, use_given, wd,
                  bool(has_diffuse), bool(scale), _ERFCX_COEF, _ERFCX_K, wi, pdf, valid, factor, A, B, C, S, x,
-                 eval_valid)
+                 eval_valid, bool(value))
+    if not value:
+        return wi, pdf, valid, factor, None, None, None, None, None, eval_valid
     return wi, pdf, valid, factor, x, A, B, C, S, eval_valid
 
 

@@ -45,7 +45,7 @@ if TYPE_CHECKING:
     from ..textures import SurfacePoints
 
 __all__ = ["BSDF", "BSDFFlags", "BSDFSample", "DeltaVertices", "LobeColors", "MuellerValue", "PER_POINT_MEMOS",
-           "ShadingPoint", "assemble_values", "depolarising_value", "take_lanes", "take_value"]
+           "ScaledValue", "ShadingPoint", "assemble_values", "depolarising_value", "take_lanes", "take_value"]
 
 
 #: ShadingPoint.memo keys whose values are per point (arrays with the points along their last axis), which a batch
@@ -223,6 +223,13 @@ class MuellerValue:
         return MuellerValue(self.kind, self.x_in, self.x_out, sc(self.A), sc(self.B), sc(self.C), sc(self.S),
                             depol=sc(self.depol))
 
+    def times(self, factor: np.ndarray | float) -> MuellerValue:
+        """``scaled(factor)`` with the products put off (a ScaledValue) for an ABCS or depolarising value: they are
+        multiplied out on first read, the same bits; a mixture's sum multiplies them in its own pass instead."""
+        if self.kind == "general":
+            return self.scaled(factor)
+        return ScaledValue(self, factor)
+
     def m00(self) -> np.ndarray:
         """M00 (L, N): the value's response to unpolarised light (its S0)."""
         if self.kind == "general":
@@ -232,6 +239,44 @@ class MuellerValue:
     def masked(self, keep: np.ndarray) -> MuellerValue:
         """Zero the entries where ``keep`` (N,) is False."""
         return self.scaled(keep.astype(np.float64)[None, :])
+
+
+class ScaledValue(MuellerValue):
+    """An ABCS or depolarising ``base`` times factors f₁, f₂, … (each a number, (N,) made (1, N), or broadcastable
+    to (L, N)), applied in order: every block is ((b·f₁)·f₂)·…, the bits of ``base.scaled(f₁).scaled(f₂)…``.  The
+    blocks (A, B, C, S, depol) are multiplied out on first read and kept; engine.materials.mix's compiled sums read
+    ``base`` and ``factors`` and multiply them in their own pass, without the scaled copies."""
+
+    def __init__(self, base: MuellerValue, factor):
+        if isinstance(base, ScaledValue):
+            base, factors = base.base, base.factors + (factor,)
+        else:
+            factors = (factor,)
+        if base.kind not in ("abcs", "depolarising"):
+            raise ValueError(f"a ScaledValue scales an ABCS or depolarising value, got {base.kind!r}")
+        self.kind, self.x_in, self.x_out, self.M = base.kind, base.x_in, base.x_out, None
+        self.base, self.factors = base, factors
+        self._blocks = None
+
+    def _value(self) -> MuellerValue:
+        if self._blocks is None:
+            v = self.base
+            for f in self.factors:
+                v = MuellerValue.scaled(v, f)
+            self._blocks = v
+        return self._blocks
+
+    A = property(lambda self: self._value().A)
+    B = property(lambda self: self._value().B)
+    C = property(lambda self: self._value().C)
+    S = property(lambda self: self._value().S)
+    depol = property(lambda self: self._value().depol)
+
+    def scaled(self, factor) -> MuellerValue:
+        return self._value().scaled(factor)
+
+    def times(self, factor) -> MuellerValue:
+        return ScaledValue(self, factor)
 
 
 def depolarising_value(a: np.ndarray, n: int) -> MuellerValue:

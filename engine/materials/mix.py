@@ -58,14 +58,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import (BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ShadingPoint, assemble_values,
-                   depolarising_value, take_value)
+from .base import (BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ScaledValue, ShadingPoint,
+                   assemble_values, depolarising_value, take_value)
 from .lambert import Lambert
 from .normal_map import ShadingNormal
 from .parameters import ModelDeclaration, Parameter
 from ..errors import SceneError
 from ..kernels import twin
-from ..kernels.mueller_sum import abcs_sum_loop
+from ..kernels.mueller_sum import chain_sum_loop
 from ..kernels.stokes_rotation import frame_rotation
 from ..polarisation.frames import plane_of_incidence_axis
 from ..textures import TexturedNumber
@@ -250,6 +250,19 @@ def _is_identity_rotation(r) -> bool:
                          and np.all(r[0] > 0) and np.all(r[2] > 0))
 
 
+def _shared_abcs_frames(pol: list[MuellerValue], k_in: np.ndarray, k_out: np.ndarray) -> bool:
+    """Whether ABCS values are all in the first one's frames, equal to the bit, those usable (|x|² > 0.25) about
+    finite beams: then ``_common_frames`` keeps them and finds every rotation the identity (cos 2φ ≈ 1, sin 2φ a
+    rounding error of x·(k × x) = 0), so the sum is ``abcs_sum`` in them, without the rotations computed."""
+    ref = pol[0]
+    if any(v.kind != "abcs" for v in pol) or not all(
+            (v.x_in is ref.x_in or np.array_equal(v.x_in, ref.x_in))
+            and (v.x_out is ref.x_out or np.array_equal(v.x_out, ref.x_out)) for v in pol[1:]):
+        return False
+    return bool(np.all(dot(ref.x_in, ref.x_in) > 0.25) and np.all(dot(ref.x_out, ref.x_out) > 0.25)
+                and np.isfinite(k_in).all() and np.isfinite(k_out).all())
+
+
 def _sum_abcs(pol: list[MuellerValue], dep, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
     """Σ of ABCS values already in the frames (x_in, x_out), plus a depolarising A (L, N) (None:
     nothing), as an ABCS value."""
@@ -277,41 +290,106 @@ def abcs_sum_numpy(terms, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
     return _sum_abcs(pol, dep, x_in, x_out)
 
 
-#: The most polarising values abcs_sum_numba sums in its compiled loop (the precompiled scenes' mixtures hold 2–4;
-#: more go to the NumPy twin, the same bits).
+#: The most terms (values and depolarisers) the compiled sums take in one loop (the precompiled scenes' mixtures hold
+#: 2–4; more go to the NumPy twins, the same bits).
 _MAX_COMPILED_TERMS = 4
+#: The most factors one term carries into the compiled sums (a lobe's normal-map factor, a tint, the mixture's
+#: weight: a ScaledValue's factors and the term's scale), shorter chains padded with ones (x·1 = x, the same bits).
+_MAX_FACTORS = 4
+_NO_BLOCK = np.zeros((1, 1))
+def _factor_block(f, L: int, n: int, scale: bool):
+    """A factor as the compiled loop reads it: a (1 or L, n) float64 C array (a number spread over the row); None
+    where it is not one (``scale``: a term's scale, a number or (n,), read as (1, n), as _split_terms reads it)."""
+    a = np.asarray(f)
+    if scale and a.ndim not in (0, 1):
+        return None
+    a = a.reshape(1, 1) if a.ndim == 0 else (a[None, :] if a.ndim == 1 else a)
+    if a.ndim != 2 or a.shape[0] not in (1, L) or a.shape[1] not in (1, n) or a.dtype.kind not in "biuf":
+        return None
+    if a.shape[1] != n:
+        return np.full((a.shape[0], n), a[:, 0], np.float64) if a.shape[0] == 1 else \
+            np.ascontiguousarray(np.broadcast_to(a, (a.shape[0], n)), np.float64)
+    # (writeable C arrays: a tuple mixing read-only and writeable arrays is heterogeneous, which Numba cannot index)
+    return np.require(a, np.float64, ["C", "W"])
+
+
+def _term_arrays(scale, v: MuellerValue, polarising: bool, shape: tuple):
+    """One term's arrays for the compiled loop: (its blocks A, B, C, S, depol — dummies where it has none —, its
+    factors padded to _MAX_FACTORS, their count), or None where the loop does not take it."""
+    L, n = shape
+    base, chain = (v.base, v.factors) if isinstance(v, ScaledValue) else (v, ())
+    fs = [_factor_block(f, L, n, False) for f in chain] + [_factor_block(scale, L, n, True)]
+    if len(fs) > _MAX_FACTORS or any(f is None for f in fs):
+        return None
+    blocks = (base.A, base.B, base.C, base.S, base.depol) if polarising else (base.A, None, None, None, None)
+    if any(a is not None and (a.shape != shape or a.dtype != np.float64) for a in blocks):
+        return None
+    blocks = tuple(_NO_BLOCK if a is None else np.require(a, np.float64, ["C", "W"]) for a in blocks)
+    return blocks, tuple(fs) + (fs[0],) * (_MAX_FACTORS - len(fs)), len(fs)
+
+
+def _compiled_sum(terms, summed: bool):
+    """The blocks (A, B, C, S, depol or None) of Σ scale·value over ``terms`` in one compiled loop
+    (engine.kernels.mueller_sum.chain_sum_loop): ``summed`` as abcs_sum_numpy adds them, else as _plus_depolariser
+    adds one ABCS value and the depolarisers; a ScaledValue's factors are multiplied there, in its order.  None
+    where the loop does not take the terms (too many, blocks not (L, N) float64, long chains)."""
+    ordered = [t for t in terms if t[1].kind == "abcs"] + [t for t in terms if t[1].kind == "depolarising"]
+    n_pol = len(ordered) - sum(v.kind == "depolarising" for _, v in terms)
+    if len(ordered) != len(terms) or len(ordered) > _MAX_COMPILED_TERMS or n_pol == 0:
+        return None
+    first = ordered[0][1]
+    shape = (first.base if isinstance(first, ScaledValue) else first).A.shape
+    if len(shape) != 2:
+        return None
+    arrays = [_term_arrays(scale, v, i < n_pol, shape) for i, (scale, v) in enumerate(ordered)]
+    if any(t is None for t in arrays):
+        return None
+    has_depol = np.array([t[0][4] is not _NO_BLOCK for t in arrays])
+    A, B, C, S, D = (np.zeros(shape) if summed else np.empty(shape) for _ in range(5))
+    dep = np.empty(shape) if n_pol < len(ordered) else _NO_BLOCK
+    chain_sum_loop(*(tuple(t[0][j] for t in arrays) for j in range(5)), has_depol, tuple(t[1] for t in arrays),
+                   np.array([t[2] for t in arrays]), n_pol, summed, A, B, C, S, D, dep)
+    if n_pol < len(ordered):        # the depolarisers' own sum, added last
+        D = D + dep if summed or has_depol[0] else dep
+    elif not has_depol.any():
+        D = None
+    return A, B, C, S, D
 
 
 def abcs_sum_numba(terms, x_in: np.ndarray, x_out: np.ndarray) -> MuellerValue:
-    """abcs_sum_numpy with the A, B, C, S blocks summed in one compiled loop (engine.kernels.mueller_sum), the same
-    bits; the depolarised shares as the NumPy twin adds them.  Blocks of other shapes than the first value's
-    (L, N) go to the NumPy twin."""
-    pol = [(s, v) for s, v in terms if v.kind != "depolarising"]
-    shape = pol[0][1].A.shape
-    n = shape[-1]
-    # (the loop is compiled per count of values and per writeable flag: the counts the precompiled scenes hold,
-    # up to _MAX_COMPILED_TERMS, and writeable blocks run compiled, so that no render waits for a compile)
-    if len(shape) != 2 or len(pol) > _MAX_COMPILED_TERMS \
-            or any(np.shape(getattr(v, f)) != shape or getattr(v, f).dtype != np.float64
-                   or not getattr(v, f).flags.writeable for _, v in pol for f in "ABCS") \
-            or any(isinstance(s, np.ndarray) and s.shape != (n,) for s, _ in pol):
+    """abcs_sum_numpy in one compiled loop (``_compiled_sum``: the blocks, the depolarised shares and the
+    depolarisers, each term's factors multiplied there), the same bits; terms the loop does not take go to the
+    NumPy twin."""
+    out = _compiled_sum(terms, True)
+    if out is None:
         return abcs_sum_numpy(terms, x_in, x_out)
-
-    def blocks(f):
-        return tuple(np.ascontiguousarray(getattr(v, f)) for _, v in pol)
-    # (writeable C arrays: a tuple mixing read-only and writeable arrays is heterogeneous, which Numba cannot index)
-    scales = tuple(np.require(s, np.float64, ["C", "W"]) if isinstance(s, np.ndarray) else np.full(n, s, np.float64)
-                   for s, _ in pol)
-    A, B, C, S = (np.empty(shape) for _ in range(4))
-    abcs_sum_loop(blocks("A"), blocks("B"), blocks("C"), blocks("S"), scales, A, B, C, S)
-    dep, _ = _split_terms([(s, v) for s, v in terms if v.kind == "depolarising"])
-    shares = [v.depol * (s[None, :] if isinstance(s, np.ndarray) else s) for s, v in pol if v.depol is not None]
-    shares += [dep] if dep is not None else []
-    return MuellerValue("abcs", x_in, x_out, A, B, C, S, depol=sum(shares) if shares else None)
+    A, B, C, S, D = out
+    return MuellerValue("abcs", x_in, x_out, A, B, C, S, depol=D)
 
 
 #: Σ scale·value of ABCS values in shared frames (abcs_sum_numpy), compiled where available.
-abcs_sum = twin(abcs_sum_loop and abcs_sum_numba, abcs_sum_numpy)
+abcs_sum = twin(chain_sum_loop and abcs_sum_numba, abcs_sum_numpy)
+
+
+def one_abcs_numpy(terms) -> MuellerValue:
+    """Σ scale·value over ``terms`` holding one polarising value, an ABCS one, and depolarisers: that value scaled,
+    in its frames, the depolarisers added to its depolarised share (``_plus_depolariser``)."""
+    dep, pol = _split_terms(terms)
+    return _plus_depolariser(pol[0], dep)
+
+
+def one_abcs_numba(terms) -> MuellerValue:
+    """one_abcs_numpy in one compiled loop (``_compiled_sum``), the same bits."""
+    out = _compiled_sum(terms, False)
+    if out is None:
+        return one_abcs_numpy(terms)
+    v = next(v for _, v in terms if v.kind == "abcs")
+    A, B, C, S, D = out
+    return MuellerValue("abcs", v.x_in, v.x_out, A, B, C, S, depol=D)
+
+
+#: One ABCS value plus depolarisers (one_abcs_numpy), compiled where available.
+one_abcs = twin(chain_sum_loop and one_abcs_numba, one_abcs_numpy)
 
 
 def add_values(terms, n: int, L: int, k_in: np.ndarray, k_out: np.ndarray, n_s: np.ndarray) -> MuellerValue:
@@ -319,10 +397,14 @@ def add_values(terms, n: int, L: int, k_in: np.ndarray, k_out: np.ndarray, n_s: 
     k_in = −ω_i, k_out = ω_o (3, N) (see the module docstring, "Frames"); the cheapest kind that holds
     the sum."""
     polarising = [v for _, v in terms if v.kind != "depolarising"]
+    if len(polarising) > 1 and _shared_abcs_frames(polarising, k_in, k_out):
+        return abcs_sum(terms, polarising[0].x_in, polarising[0].x_out)
     if len(polarising) > 1:
         x_in, x_out, rotations = _common_frames(polarising, k_in, k_out, n_s)
         if all(v.kind == "abcs" for v in polarising) and all(_is_identity_rotation(r) for r in rotations):
             return abcs_sum(terms, x_in, x_out)
+    if len(polarising) == 1 and polarising[0].kind == "abcs":
+        return one_abcs(terms)
     dep, pol = _split_terms(terms)
     if not pol:
         return depolarising_value(np.zeros((L, n)) if dep is None else np.broadcast_to(dep, (L, n)).copy(), n)

@@ -271,7 +271,7 @@ class ShadingNormal(BSDF):
     # --- BSDF interface (at the mapped shading point) ---------------------------------------------
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        return self.base.eval(self._base_point(sp), wi).scaled(self._factor(sp, wi)[None, :])
+        return self.base.eval(self._base_point(sp), wi).times(self._factor(sp, wi)[None, :])
 
     def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
         return self.base.refraction_eta_sq(sp)
@@ -295,7 +295,7 @@ class ShadingNormal(BSDF):
         if cls.eval is not ShadingNormal.eval or cls.pdf is not ShadingNormal.pdf:
             return super().eval_and_pdf(sp, wi)
         f, pdf = self.base.eval_and_pdf(self._base_point(sp), wi)
-        return f.scaled(self._factor(sp, wi)[None, :]), pdf
+        return f.times(self._factor(sp, wi)[None, :]), pdf
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         bs = self.base.sample(self._base_point(sp), u_lobe, u_dir)

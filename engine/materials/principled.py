@@ -199,11 +199,14 @@ def _metal(p, alpha):
         f82 = [float(schlick_f82(c)) * min(t, 1.0) for c, t in zip(base.linear_srgb(), tint.linear_srgb())]
         edge = ConstantSpectrum(f82[0]) if min(f82) == max(f82) else RGBUnboundedSpectrum(f82)
         n, k = GulbrandsenIndex(base, edge, "n", "f82"), GulbrandsenIndex(base, edge, "k", "f82")
-    elif not white:         # a textured base or tint: the same curve per point and wavelength
-        n, k = (TexturedGulbrandsenIndex(base, tint, part, "schlick_tint") for part in ("n", "k"))
+    # (a textured metallic: the index only where the metal has weight, engine.textures.conductor_index)
+    live = p["metallic"] if isinstance(p["metallic"], TexturedNumber) else None
+    if not white:           # a textured base or tint: the same curve per point and wavelength
+        n, k = (TexturedGulbrandsenIndex(base, tint, part, "schlick_tint", live) for part in ("n", "k"))
+    elif _textured(base):
+        n, k = (TexturedGulbrandsenIndex(base, base, part, "schlick", live) for part in ("n", "k"))
     else:
-        kind = TexturedGulbrandsenIndex if _textured(base) else GulbrandsenIndex
-        n, k = kind(base, base, "n", "schlick"), kind(base, base, "k", "schlick")
+        n, k = GulbrandsenIndex(base, base, "n", "schlick"), GulbrandsenIndex(base, base, "k", "schlick")
     return F82Reflectance(_metal_of(n, k, p, alpha), base, None if white else tint)
 
 

@@ -18,6 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from .base import BSDF, BSDFFlags, BSDFSample, LobeColors, MuellerValue, ShadingPoint
+from ..kernels import twin
+from ..kernels.f82 import f82_ratio_loop
 from ..spectral import Spectrum
 from ..textures import TexturedNumber, TexturedSpectrum
 from ..vec3 import dot
@@ -42,7 +44,7 @@ class _ScaledLobes(BSDF):
         raise NotImplementedError
 
     def eval(self, sp: ShadingPoint, wi: np.ndarray) -> MuellerValue:
-        return self.base.eval(sp, wi).scaled(self._factor(sp, wi))
+        return self.base.eval(sp, wi).times(self._factor(sp, wi))
 
     def refraction_eta_sq(self, sp: ShadingPoint) -> np.ndarray | None:
         return self.base.refraction_eta_sq(sp)
@@ -56,7 +58,7 @@ class _ScaledLobes(BSDF):
         if cls.eval is not _ScaledLobes.eval or cls.pdf is not _ScaledLobes.pdf:
             return super().eval_and_pdf(sp, wi)
         f, pdf = self.base.eval_and_pdf(sp, wi)
-        return f.scaled(self._factor(sp, wi)), pdf
+        return f.times(self._factor(sp, wi)), pdf
 
     def sample(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         bs = self.base.sample(sp, u_lobe, u_dir)
@@ -293,6 +295,47 @@ def f82_curve(cos_theta: np.ndarray, f0: np.ndarray, tint: np.ndarray | None) ->
     return np.clip(schlick - b * c * s5 * s, 0.0, 1.0)
 
 
+def f82_ratio_numpy(cos_facet: np.ndarray, eta: np.ndarray, f0: np.ndarray, tint: np.ndarray | None, curve: str,
+                    shape: tuple) -> np.ndarray:
+    """F82Reflectance's ratio F_curve(θ)/F(θ) (``shape`` (L, N)) at facet cosines (N,), for the metal's index η, its
+    F0 and tint (L, N) (clipped to [0, 1] here; tint None: none) and ``curve``; 1 where F = 0."""
+    from ..polarisation.fresnel import fresnel_reflectance
+    cos_f = np.clip(cos_facet, 0.0, 1.0)[None, :]
+    F = fresnel_reflectance(cos_f, eta) * np.ones(shape)
+    f0 = np.clip(f0, 0.0, 1.0)
+    tint = None if tint is None else np.clip(tint, 0.0, 1.0)
+    target = (f82_curve(cos_f, f0, tint) if curve == "f82_tint" else f0) * np.ones(shape)
+    return np.where(F > 0, target / np.where(F > 0, F, 1.0), 1.0)
+
+
+def f82_ratio_numba(cos_facet, eta, f0, tint, curve: str, shape: tuple) -> np.ndarray:
+    """f82_ratio_numpy in one compiled loop (engine.kernels.f82), the bits of the NumPy code with compiled Fresnel;
+    inputs of other shapes go to the NumPy twin."""
+    L, n = shape
+    cos_facet = np.asarray(cos_facet, np.float64)
+    eta = np.asarray(eta)
+    if cos_facet.shape != (n,) or np.ndim(eta) != 2 or eta.shape[0] not in (1, L) or eta.shape[1] not in (1, n):
+        return f82_ratio_numpy(cos_facet, eta, f0, tint, curve, shape)
+
+    def spread(a, dtype):     # (L, N) read-only C arrays (one type for the loop; a read-only input is not copied)
+        out = np.ascontiguousarray(np.broadcast_to(np.asarray(a, dtype), shape)).view()
+        out.flags.writeable = False
+        return out
+    c = np.clip(cos_facet, 0.0, 1.0)
+    s = 1.0 - c
+    s5 = s ** 5         # (NumPy's power, as f82_curve's)
+    out = np.empty(shape)
+    f5 = _F82_SIX ** 5
+    f82_ratio_loop(c, s, s5, spread(eta, np.complex128), spread(f0, np.float64),
+                   spread(0.0 if tint is None else tint, np.float64), tint is not None, curve == "f82_tint", f5,
+                   7.0 / (f5 * _F82_SIX), out)
+    return out
+
+
+#: F82Reflectance's ratio (f82_ratio_numpy), compiled where available.
+f82_ratio = twin(f82_ratio_loop and f82_ratio_numba, f82_ratio_numpy)
+
+
 class F82Reflectance(_ScaledLobes):
     """A metal lobe (a conductor Torrance–Sparrow, anisotropic GGX or mirror of complex index n + iκ) whose
     unpolarised reflectance follows Cycles' F82-Tint curve (:func:`f82_curve`; the Principled BSDF's metal): the
@@ -332,13 +375,10 @@ class F82Reflectance(_ScaledLobes):
         return getattr(self.base, "multiscatter", False)
 
     def _ratio(self, sp: ShadingPoint, cos_facet: np.ndarray) -> np.ndarray:
-        from ..polarisation.fresnel import fresnel_reflectance
-        cos_f = np.clip(cos_facet, 0.0, 1.0)[None, :]
-        F = fresnel_reflectance(cos_f, self.index.relative_eta(sp)) * np.ones(sp.lam.shape)
-        f0 = np.clip(sp.spectrum(self.f0), 0.0, 1.0)
-        tint = None if self.tint is None else np.clip(sp.spectrum(self.tint), 0.0, 1.0)
-        target = (f82_curve(cos_f, f0, tint) if self.curve == "f82_tint" else f0) * np.ones(sp.lam.shape)
-        ratio = np.where(F > 0, target / np.where(F > 0, F, 1.0), 1.0)
+        """F_F82(θ)/F(θ) (L, N) at the facet cosines (N,) (1 where F = 0; f82_ratio)."""
+        f0 = sp.spectrum(self.f0)
+        tint = None if self.tint is None else sp.spectrum(self.tint)
+        ratio = f82_ratio(cos_facet, self.index.relative_eta(sp), f0, tint, self.curve, sp.lam.shape)
         if self.unless_film is not None:
             from ..polarisation.thin_film import FILM_CUTOFF_NM
             ratio = np.where((sp.number(self.unless_film) > FILM_CUTOFF_NM)[None, :], 1.0, ratio)

@@ -385,14 +385,16 @@ def torrance_sparrow_pdf_numpy(n_s, wo, wi, m, p_given, eta, L, s, w_d, has_spec
 
 
 def torrance_sparrow_sample_numpy(n_s, wo, u_lobe, u_dir, eta, L, s, m, shadowing, p_given, w_d, has_diffuse,
-                                  distribution="beckmann", scale=True):
+                                  distribution="beckmann", scale=True, value=True):
     """(wi, pdf, valid, factor, x, A, B, C, S, eval_valid) of a Beckmann or GGX facet lobe (roughness m)
     and an optional diffuse lobe: ``_mixture_sample``, then ``_facet_eval`` at wi with A..S times factor
-    (``scale``; else the lobe's value itself)."""
+    (``scale``; else the lobe's value itself); not ``value``: x and A..S None (the direction alone)."""
     eta = np.broadcast_to(eta, (L, n_s.shape[1]))
     dist = _distribution(distribution, m)
     wi, pdf, valid, factor = _mixture_sample(dist, n_s, wo, u_lobe, u_dir, p_given, eta, s, w_d, True, has_diffuse)
     x, A, B, C, S, eval_valid = _facet_eval(dist, n_s, wo, wi, eta, s, shadowing)
+    if not value:
+        return wi, pdf, valid, factor, None, None, None, None, None, eval_valid
     if not scale:
         return wi, pdf, valid, factor, x, A, B, C, S, eval_valid
     f = factor[None, :]
@@ -866,18 +868,19 @@ class TorranceSparrow(BSDF):
         return BSDFSample(wi=wi, weight=weight, pdf=pdf, is_delta=np.zeros(sp.n, bool), valid=valid,
                           eta_sq=np.ones(sp.n))
 
-    def _compiled_sample(self, sp: ShadingPoint, u_lobe, u_dir, p_given, eta, s, w_d) -> tuple:
+    def _compiled_sample(self, sp: ShadingPoint, u_lobe, u_dir, p_given, eta, s, w_d, value: bool = True) -> tuple:
         """The compiled sample pass (torrance_sparrow_sample's tuple) with this lobe's settings; with multiscatter
-        the lobe's value unscaled by the sample's factor (``sample`` adds k·A first)."""
+        the lobe's value unscaled by the sample's factor (``sample`` adds k·A first); not ``value``: the direction
+        alone (x and A..S None, no Fresnel values computed)."""
         return torrance_sparrow_sample(sp.n_s, sp.wo, u_lobe, u_dir, eta, sp.lam.shape[0], s, self._m(sp),
                                        self.shadowing, p_given, w_d, self.has_diffuse, self.distribution,
-                                       not self.multiscatter)
+                                       not self.multiscatter, value)
 
     def sample_direction(self, sp: ShadingPoint, u_lobe: np.ndarray, u_dir: np.ndarray) -> BSDFSample:
         """``sample`` without the weight (no Dirac lanes: None)."""
         p_given, eta, s, w_d = self._mixture_inputs(sp, compact=self._compiled_lobe)
         if self._compiled_lobe:
-            wi, pdf, valid = self._compiled_sample(sp, u_lobe, u_dir, p_given, eta, s, w_d)[:3]
+            wi, pdf, valid = self._compiled_sample(sp, u_lobe, u_dir, p_given, eta, s, w_d, value=False)[:3]
         else:
             wi, pdf, valid, _ = _mixture_sample(self._dist(sp) if self.has_specular else None, sp.n_s, sp.wo, u_lobe,
                                                 u_dir, p_given, eta, s, w_d, self.has_specular, self.has_diffuse)

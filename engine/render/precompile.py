@@ -108,6 +108,13 @@ PLAIN_MATERIALS = {
     "thin_glass": {"type": "thin_dielectric", "n": 1.5},
     "thin_film": {"type": "thin_film", "n": 1.5, "film_n": 1.33, "thickness": 500.0},
     "mix": {"type": "mix", "materials": ["gold", {"type": "lambert", "albedo": 0.3}], "weights": [0.5, 0.5]},
+    # (the mixtures' compiled sum, engine.kernels.mueller_sum, per count of terms: 1, 3 and 4 here, 2 above)
+    "mix_one": {"type": "mix", "materials": [{"type": "torrance_sparrow", "metal": "Au", "m": 0.3}], "weights": [0.8]},
+    "mix_three": {"type": "mix", "materials": [{"type": "torrance_sparrow", "metal": m, "m": 0.3}
+                                               for m in ("Au", "Ag", "Cu")], "weights": [0.3, 0.3, 0.3]},
+    "mix_four": {"type": "mix", "materials": [{"type": "torrance_sparrow", "metal": m, "m": 0.2} for m in ("Au", "Al")]
+                 + [{"type": "torrance_sparrow", "n": 1.5, "m": 0.4}, {"type": "lambert", "albedo": 0.4}],
+                 "weights": [0.25, 0.25, 0.25, 0.25]},
     "principled": {"type": "principled", "base_color": [0.8, 0.4, 0.2], "roughness": 0.4},
     "principled_metal": {"type": "principled", "metallic": 1.0, "roughness": 0.2, "anisotropic": 0.5},
     "principled_glass": {"type": "principled", "transmission": 1.0, "roughness": 0.1},

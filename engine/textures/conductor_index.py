@@ -62,11 +62,27 @@ def _values(spec, points, lam, mono, basis):
     return spec.eval(lam, mono=mono)
 
 
+def _on_lanes(r, g, keep: np.ndarray, mode: str):
+    """metal_index(r, g, mode) at the points ``keep`` (N,) bool, n = 1 and κ = 0 at the others; None where r and g
+    do not broadcast to points along their last axis."""
+    r, g = np.broadcast_arrays(np.asarray(r, np.float64), np.asarray(g, np.float64))
+    if r.ndim == 0 or r.shape[-1] != keep.size:
+        return None
+    sel = np.flatnonzero(keep)
+    n, k = np.ones(r.shape), np.zeros(r.shape)
+    if sel.size:
+        n[..., sel], k[..., sel] = metal_index(np.take(r, sel, axis=-1), np.take(g, sel, axis=-1), mode)
+    return n, k
+
+
 class TexturedGulbrandsenIndex(TexturedSpectrum):
     """n (``part`` "n") or κ ("k") at surface points of a reflectivity and an edge tint, either or both
-    textured (the others constant spectra); both reflectances in [0, 1]."""
+    textured (the others constant spectra); both reflectances in [0, 1].  ``live``: a weight ≥ 0 per point (a
+    TexturedNumber, the metal's weight in a mixture: engine.materials.principled), or None: where it is 0 nothing
+    reads the index unweighted, so it is n = 1, κ = 0 there (no reflection) instead of Gulbrandsen's map."""
 
-    def __init__(self, reflectivity: Spectrum, edge_tint: Spectrum, part: str, mode: str = "tint"):
+    def __init__(self, reflectivity: Spectrum, edge_tint: Spectrum, part: str, mode: str = "tint", live=None):
+        self.live = live
         if part not in ("n", "k"):
             raise ValueError(f"part must be 'n' or 'k', got {part!r}")
         if mode not in EDGE_MODES:
@@ -99,7 +115,13 @@ class TexturedGulbrandsenIndex(TexturedSpectrum):
         def compute():
             r = _values(self.reflectivity, points, lam, mono, basis)
             g = _values(self.edge_tint, points, lam, mono, basis)
+            if self.live is not None:
+                keep = np.asarray(self.live.at(points)) > 0
+                if keep.ndim == 1 and not keep.all():
+                    nk = _on_lanes(r, g, keep, self.mode)
+                    if nk is not None:
+                        return nk
             return metal_index(r, g, self.mode)
         # (n, κ) once per batch: the n and the κ of the same metal share one Gulbrandsen map
-        key = ("gulbrandsen_nk", self.reflectivity, self.edge_tint, self.mode, mono, lam.shape[0])
+        key = ("gulbrandsen_nk", self.reflectivity, self.edge_tint, self.mode, mono, lam.shape[0], self.live)
         return points.memo(key, compute)[0 if self.part == "n" else 1]

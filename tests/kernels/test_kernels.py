@@ -920,6 +920,11 @@ def test_torrance_sparrow_pdf_and_sample_bitwise(p_kind, has_diffuse, eta_kind, 
                                                 has_diffuse, distribution, scale)
         _bitwise(got, want)
         assert 0.3 * n < want[2].sum() < n
+        # the direction alone (TorranceSparrow.sample_direction): the same direction, pdf and validity, no value
+        alone = ts.torrance_sparrow_sample_numba(n_s, wo, u_lobe, u_dir, eta, 4, s, m, shadowing, p_given, w_d,
+                                                 has_diffuse, distribution, scale, False)
+        assert all(v is None for v in alone[4:9])
+        _bitwise(alone[:4] + alone[9:], got[:4] + got[9:])
 
 
 def test_torrance_sparrow_material_uses_the_declared_twins():

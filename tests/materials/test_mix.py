@@ -646,6 +646,28 @@ def test_sampled_directions_alone_are_the_samples_and_nested_mixes_sum_once(valu
                                                                    wi, sub.wo), rtol=1e-10, atol=1e-13)
 
 
+def _sum_inputs(seed: int, n: int, L: int = 4):
+    """(rng, x (3, n) frames, abcs(depol): a random ABCS value in them with negative and positive zeros in a few
+    entries (the sums' zero rules)) for the mixture sums' bit-for-bit tests."""
+    rng = np.random.default_rng(seed)
+    x = unit(rng.normal(size=(3, n)))
+
+    def abcs(depol):
+        A, B, C, S = (rng.normal(size=(L, n)) for _ in range(4))
+        A[0, :5], B[1, :7] = -0.0, 0.0
+        return MuellerValue("abcs", x, x, A, B, C, S, depol=rng.uniform(0, 1, (L, n)) if depol else None)
+    return rng, x, abcs
+
+
+def _assert_same_blocks(got, want):
+    """The blocks A..S and depol of two values: both None or the same shape and bits."""
+    for f in ("A", "B", "C", "S", "depol"):
+        g, w = getattr(got, f), getattr(want, f)
+        assert (g is None) == (w is None), f
+        if w is not None:
+            assert g.shape == w.shape and g.tobytes() == w.tobytes(), f
+
+
 @pytest.mark.skipif(not __import__("engine.kernels", fromlist=["COMPILED"]).COMPILED, reason="needs Numba")
 @pytest.mark.parametrize("shape", ["two", "three_with_depolarisers", "shared_depol", "six", "read_only",
                                    "read_only_scale"])
@@ -656,14 +678,8 @@ def test_compiled_abcs_sum_is_the_numpy_sum_bit_for_bit(shape):
     from engine.kernels import TWINS
     from engine.materials import mix as M
     assert TWINS["materials.mix.abcs_sum"].compiled is M.abcs_sum_numba
-    rng = np.random.default_rng(21)
     L, n = 4, 700
-    x = unit(rng.normal(size=(3, n)))
-
-    def abcs(depol):
-        A, B, C, S = (rng.normal(size=(L, n)) for _ in range(4))
-        A[0, :5] = -0.0
-        return MuellerValue("abcs", x, x, A, B, C, S, depol=rng.uniform(0, 1, (L, n)) if depol else None)
+    rng, x, abcs = _sum_inputs(21, n)
 
     def depolarising():
         return MuellerValue("depolarising", x, x, A=rng.uniform(0, 1, (L, n)))
@@ -680,15 +696,62 @@ def test_compiled_abcs_sum_is_the_numpy_sum_bit_for_bit(shape):
         terms[1][1].A.flags.writeable = False
     if shape == "read_only_scale":      # a read-only per-point weight (a texture's) beside a writeable one
         terms[1][0].flags.writeable = False
-    signatures = len(M.abcs_sum_loop.signatures)
+    signatures = len(M.chain_sum_loop.signatures)
     got, want = M.abcs_sum_numba(terms, x, x), M.abcs_sum_numpy(terms, x, x)
     if shape in ("six", "read_only"):
-        assert len(M.abcs_sum_loop.signatures) == signatures
+        assert len(M.chain_sum_loop.signatures) == signatures
+    _assert_same_blocks(got, want)
+
+
+@pytest.mark.skipif(not __import__("engine.kernels", fromlist=["COMPILED"]).COMPILED, reason="needs Numba")
+@pytest.mark.parametrize("shape", ["sum_of_chains", "sum_with_depolariser", "one_with_depolarisers", "one_alone",
+                                   "one_shared_depol", "long_chain"])
+def test_compiled_sums_of_scaled_values_are_the_numpy_sums_bit_for_bit(shape):
+    """ScaledValue terms (a normal map's factor, a tint per wavelength, deferred: MuellerValue.times) in the compiled
+    sums (mix.abcs_sum and mix.one_abcs: the factors multiplied in the loop, in order) against the NumPy twins, which
+    multiply them out first — bit for bit, negative zeros included; and a ScaledValue's blocks read directly are
+    those of the eager ``scaled`` chain."""
+    from engine.kernels import TWINS
+    from engine.materials import mix as M
+    from engine.materials.base import ScaledValue
+    assert TWINS["materials.mix.one_abcs"].compiled is M.one_abcs_numba
+    L, n = 4, 500
+    rng, x, abcs = _sum_inputs(5, n)
+
+    def leak():         # a normal map's factor: 1 or 0 per point, (1, N)
+        return (rng.uniform(0, 1, n) > 0.2).astype(np.float64)[None, :]
+
+    def chained(v, *factors):
+        for f in factors:
+            v = v.times(f)
+        assert isinstance(v, ScaledValue)
+        return v
+    lam = MuellerValue("depolarising", x, x, A=rng.uniform(0, 1, (L, n)))
+    terms = {"sum_of_chains": [(rng.uniform(0, 2, n), chained(abcs(True), leak(), rng.uniform(0, 2, (L, n)))),
+                               (rng.uniform(0, 1, n), chained(abcs(True), leak()))],
+             "sum_with_depolariser": [(rng.uniform(0, 2, n), abcs(False)), (0.3, chained(abcs(True), 0.7)),
+                                      (rng.uniform(0, 1, n), chained(lam, leak()))],
+             "one_with_depolarisers": [(rng.uniform(0, 2, n), chained(abcs(False), leak())),
+                                       (rng.uniform(0, 1, n), chained(lam, rng.uniform(0, 1, n)[None, :])),
+                                       (0.5, lam)],
+             "one_alone": [(rng.uniform(0, 2, n), chained(abcs(False), leak()))],
+             "one_shared_depol": [(rng.uniform(0, 2, n), chained(abcs(True), leak())),
+                                  (rng.uniform(0, 1, n), lam)],
+             "long_chain": [(0.5, chained(abcs(True), *(rng.uniform(0.5, 1.5, (L, n)) for _ in range(5))))]}[shape]
+    one = sum(v.kind == "abcs" for _, v in terms) == 1
+    if one:
+        got, want = M.one_abcs_numba(terms), M.one_abcs_numpy(terms)
+    else:
+        got, want = M.abcs_sum_numba(terms, x, x), M.abcs_sum_numpy(terms, x, x)
+    _assert_same_blocks(got, want)
+    # the deferred product read directly: the eager chain's bits
+    v, factors = abcs(True), (leak(), rng.uniform(0, 2, (L, n)), 0.3)
+    eager = v
+    for f in factors:
+        eager = eager.scaled(f)
+    lazy = chained(v, *factors)
     for f in ("A", "B", "C", "S", "depol"):
-        g, w = getattr(got, f), getattr(want, f)
-        assert (g is None) == (w is None), f
-        if w is not None:
-            assert g.shape == w.shape and g.tobytes() == w.tobytes(), f
+        assert getattr(lazy, f).tobytes() == getattr(eager, f).tobytes(), f
 
 
 def test_layered_picks_its_layers_by_their_albedos_as_cycles_picks_closures():
@@ -717,3 +780,34 @@ def test_layered_picks_its_layers_by_their_albedos_as_cycles_picks_closures():
     p_layered = 0.4 * (E + a_base) / (0.4 * (E + a_base) + 0.6 * 0.3)
     want_mix = p_layered * want + (1.0 - p_layered) * lambert(0.3).pdf(sp, wi)
     np.testing.assert_allclose(mix.pdf(points(n, np.random.default_rng(3)), wi), want_mix, rtol=1e-12)
+
+
+def test_abcs_values_in_equal_frames_skip_the_rotations_only_where_those_are_the_identity():
+    """add_values sums ABCS values whose frames are equal to the bit without computing the rotations
+    (mix._shared_abcs_frames): only where _common_frames keeps the first value's frames and finds every rotation the
+    identity — not for frames that differ by a rounding, a degenerate frame, or a beam that is not finite."""
+    from engine.materials import mix as M
+    rng = np.random.default_rng(3)
+    n, L = 400, 4
+    wi, wo = unit(rng.normal(size=(3, n))), unit(rng.normal(size=(3, n)))
+    x = unit(cross(-wi, wo))
+
+    def value(frame):
+        A, B, C, S = (rng.normal(size=(L, n)) for _ in range(4))
+        return MuellerValue("abcs", frame, frame, A, B, C, S)
+    same = [value(x), value(x.copy())]
+    assert M._shared_abcs_frames(same, -wi, wo)
+    x_in, x_out, rotations = M._common_frames(same, -wi, wo, unit(wi + wo))
+    assert x_in is x and x_out is x and all(M._is_identity_rotation(r) for r in rotations)
+    terms = [(rng.uniform(0, 1, n), v) for v in same]
+    fast, slow = M.add_values(terms, n, L, -wi, wo, unit(wi + wo)), M.abcs_sum(terms, x_in, x_out)
+    assert all(getattr(fast, f).tobytes() == getattr(slow, f).tobytes() for f in "ABCS")
+    nudged = x.copy()
+    nudged[0, 7] = np.nextafter(nudged[0, 7], 2.0)
+    assert not M._shared_abcs_frames([value(x), value(nudged)], -wi, wo)
+    degenerate = x.copy()
+    degenerate[:, 5] = 0.0
+    assert not M._shared_abcs_frames([value(degenerate), value(degenerate.copy())], -wi, wo)
+    bad = wi.copy()
+    bad[1, 9] = np.nan
+    assert not M._shared_abcs_frames(same, -bad, wo)

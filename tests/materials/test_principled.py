@@ -153,3 +153,56 @@ def test_a_per_point_ior_is_refused_where_it_cannot_be_rendered(tmp_path):
         with pytest.raises(SceneError, match=r"^materials\.p\.ior: "):
             parse_material({"type": "principled", "ior": {**tex, "texture": name}, **extra}, "materials.p",
                            base_dir=str(tmp_path))
+
+
+@pytest.mark.parametrize("tint", [None, [1.0, 0.6, 0.3]])
+def test_metal_index_only_where_the_metallic_weight_is_positive_gives_the_same_bits(tmp_path, tint):
+    """A textured Metallic: the metal's textured Gulbrandsen index is computed only at the points whose metallic
+    weight is > 0 (TexturedGulbrandsenIndex ``live``; n = 1, κ = 0 elsewhere), and the Principled's value, pdf and
+    sample are the bits of the index computed everywhere (every other read of it is weighted by the metallic)."""
+    from engine.scene.loader import parse_material
+    from engine.textures.conductor_index import TexturedGulbrandsenIndex
+    from tests.scene.test_textures import _points_at, _shading_points, _texture_file
+    texels = np.array([[0.0, 0.4, 0.0, 1.0, 0.0, 0.7]])
+    name = _texture_file(tmp_path, texels)
+    colour = _texture_file(tmp_path, np.array([[0.9, 0.2, 0.6, 0.05, 0.3, 0.8]]), "c.exr")
+    texture = {"texture": name, "interpolation": "Closest"}
+    material = {"type": "principled", "metallic": texture, "roughness": 0.4,
+                "base_color": {"texture": colour, "interpolation": "Closest"}}
+    if tint is not None:
+        material["specular_tint"] = tint
+    m = parse_material(material, "materials.p", base_dir=str(tmp_path))
+    seen, stack, indices = set(), [m], []
+    while stack:                    # the metal's index objects, through mixes and wrappers
+        x = stack.pop()
+        if id(x) in seen:
+            continue
+        seen.add(id(x))
+        if isinstance(x, TexturedGulbrandsenIndex):
+            indices.append(x)
+        elif hasattr(x, "__dict__"):
+            stack += [v for v in vars(x).values() if hasattr(v, "__dict__") or isinstance(v, (list, tuple))]
+        elif isinstance(x, (list, tuple)):
+            stack += list(x)
+    assert len(indices) == 2 and all(i.live is not None for i in indices)
+
+    def run():
+        rng = np.random.default_rng(4)
+        n = 6 * 50
+        uv = np.repeat(np.stack(((np.arange(6) + 0.5) / 6, np.full(6, 0.5))), 50, axis=1)
+        sp = _shading_points(n, rng, _points_at(uv))
+        wi = rng.normal(size=(3, n))
+        wi[2] = np.abs(wi[2])
+        wi /= np.linalg.norm(wi, axis=0)
+        q = m.shading_point(sp)
+        f, pdf = m.eval_and_pdf(q, wi)
+        s = m.sample(q, rng.uniform(size=n), rng.uniform(size=(2, n)))
+        eta = next(i for i in indices if i.part == "n").at(sp.surface, sp.lam, False)
+        return [f.matrix(), pdf, s.wi, s.pdf, s.weight.matrix()], eta
+    live, eta = run()
+    assert (eta[:, :50] == 1.0).all() and (eta[:, 50:100] != 1.0).all()       # texel 0: metallic 0
+    for i in indices:
+        i.live = None
+    everywhere, _ = run()
+    for a, b in zip(live, everywhere):
+        assert a.tobytes() == b.tobytes()

@@ -142,3 +142,25 @@ def test_f82_metal_rough_lobe_is_rescaled_at_the_half_vector():
     a, b = wrapped.sample(sp, u[0], u[1:]), base.sample(sp, u[0], u[1:])
     np.testing.assert_array_equal(a.wi, b.wi)
     assert np.all(np.isfinite(a.weight.matrix()))
+
+
+@pytest.mark.skipif(not __import__("engine.kernels", fromlist=["COMPILED"]).COMPILED, reason="needs Numba")
+@pytest.mark.parametrize("curve, tinted", [("f82_tint", True), ("f82_tint", False), ("constant", False)])
+def test_compiled_f82_ratio_is_the_numpy_ratio_bit_for_bit(curve, tinted):
+    """F82Reflectance's ratio in one compiled loop (tinted.f82_ratio) against its NumPy twin with the compiled
+    Fresnel (the twin's own when kernels are compiled): bit for bit, with cosines and reflectances outside [0, 1],
+    negative zeros, NaN, and lanes where F = 0."""
+    from engine.kernels import TWINS
+    from engine.materials import tinted as T
+    assert TWINS["materials.tinted.f82_ratio"].compiled is T.f82_ratio_numba
+    rng = np.random.default_rng(82)
+    L, n = 4, 900
+    cos = rng.uniform(-0.2, 1.2, n)
+    cos[:4] = (-0.0, 0.0, 1.0, np.nan)
+    eta = rng.uniform(0.2, 3.0, (L, n)) + 1j * rng.uniform(0.0, 5.0, (L, n))
+    eta[:, 10:14] = 1.0         # F = 0 at matched indices
+    f0, tint = rng.uniform(-0.1, 1.1, (L, n)), rng.uniform(-0.1, 1.1, (L, n))
+    f0[0, :3], tint[1, :3], f0[2, 20], tint[3, 21] = -0.0, -0.0, np.nan, np.nan
+    args = (cos, eta, f0, tint if tinted else None, curve, (L, n))
+    got, want = T.f82_ratio_numba(*args), T.f82_ratio_numpy(*args)
+    assert got.shape == want.shape == (L, n) and got.tobytes() == want.tobytes()

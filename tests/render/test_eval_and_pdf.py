@@ -133,11 +133,19 @@ def _batch(n=4000, seed=3):
                                                      ("ggx", "smith_correlated")])
 @pytest.mark.parametrize("p_kind", ["fresnel", "given"])
 @pytest.mark.parametrize("has_diffuse", [False, True])
-def test_the_one_pass_kernel_matches_its_twin_and_the_two_passes(distribution, shadowing, p_kind, has_diffuse):
-    """The fused pass (its twin where Numba is off) against the eval and pdf twins, bit for bit."""
+@pytest.mark.parametrize("per_point", [False, True])
+def test_the_one_pass_kernel_matches_its_twin_and_the_two_passes(distribution, shadowing, p_kind, has_diffuse,
+                                                                 per_point):
+    """The fused pass (its twin where Numba is off) against the eval and pdf twins, bit for bit; with an index per
+    wavelength and path (``per_point``: a textured metal's, whose Fresnel values the fused pass takes a block of
+    paths at a time: _eval_pdf_rows_loop), real ones among them (abcs_at's other branch)."""
     rng, n_s, wo, wi = _batch()
     n = n_s.shape[1]
-    eta = (rng.uniform(0.2, 1.6, (4, 1)) + 1j * rng.uniform(0, 3, (4, 1)))
+    shape = (4, n) if per_point else (4, 1)
+    eta = (rng.uniform(0.2, 1.6, shape) + 1j * rng.uniform(0, 3, shape))
+    if per_point:
+        eta[:, 5:40] = eta[:, 5:40].real
+        eta[2, 100] = complex(np.nan, 1.0)
     m = rng.uniform(0.05, 0.6, n)
     s, w_d = 0.9, rng.uniform(0, 1, n)
     p_given = None if p_kind == "fresnel" else np.clip(rng.uniform(size=n), 0.1, 0.9)
