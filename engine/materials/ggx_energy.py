@@ -170,12 +170,15 @@ def _reflection_batches(mu, alpha, correlated: bool):
         yield sl, wo, h, w, a, lam_o, d, np.where(wr[2] > 0, _weight(wr, lam_o, a, correlated), 0.0)
 
 
-def ggx_albedo(mu, alpha, eta: float | None = None, correlated: bool = False) -> np.ndarray:
+def ggx_albedo(mu, alpha, eta: float | None = None, correlated: bool = False,
+               viewer_side_refraction: bool = False) -> np.ndarray:
     """E(μ) (M,) of the single-scattering GGX lobe at viewing cosines ``mu`` (M,), roughness ``alpha`` > 0
     (a number or (M,)): the reflection lobe with F = 1 (``eta`` None), or a dielectric interface of real
     relative index ``eta`` = n_far/n_viewer, reflection plus refraction with the unpolarised Fresnel
     reflectance (energy: no 1/η²).  Shadowing: separable Smith G1(ω_i)·G1(ω_o), or with ``correlated``
-    the height-correlated 1/(1 + Λ(ω_i) + Λ(ω_o)) (Heitz 2014; Cycles' form)."""
+    the height-correlated 1/(1 + Λ(ω_i) + Λ(ω_o)) (Heitz 2014; Cycles' form).  ``viewer_side_refraction``:
+    refracted directions that end on the viewer's side count too (no BSDF produces them; Cycles' table
+    generator counts them, so its ``ggx_glass_inv_E`` is this with ``correlated``, docs/physics.md)."""
     mu = np.atleast_1d(np.asarray(mu, np.float64))
     out = np.empty(mu.size)
     for sl, wo, h, w, a, lam_o, d, refl in _reflection_batches(mu, alpha, correlated):
@@ -188,7 +191,7 @@ def ggx_albedo(mu, alpha, eta: float | None = None, correlated: bool = False) ->
         tir = cos_t2 <= 0.0
         cos_t = np.sqrt(np.maximum(cos_t2, 0.0))
         wt = -wo * inv + (d * inv - cos_t) * h
-        refr = np.where(~tir & (wt[2] < 0), _weight(wt, lam_o, a, correlated), 0.0)
+        refr = np.where(~tir & ((wt[2] < 0) | viewer_side_refraction), _weight(wt, lam_o, a, correlated), 0.0)
         F = np.where(tir, 1.0, F)
         out[sl] = (F * refl + (1.0 - F) * refr) @ w
     return out
@@ -371,9 +374,9 @@ class DielectricAlbedo:
     row 0 seen from outside (η = n_ratio), row 1 from inside (η = 1/n_ratio); the compensation
     factor is 1/E (Cycles' glass: F_ss = 1, so F_ms = 1)."""
 
-    def __init__(self, n_ratio: float, alpha: float):
+    def __init__(self, n_ratio: float, alpha: float, cycles_dense_side: bool = False):
         self.n_ratio, self.alpha = float(n_ratio), float(alpha)
-        self.E = _dielectric_table(self.n_ratio, self.alpha)
+        self.E = _dielectric_table(self.n_ratio, self.alpha, cycles_dense_side)
 
     def __call__(self, mu: np.ndarray, outside: np.ndarray) -> np.ndarray:
         """E (N,) at viewing cosines |μ| (N,) from outside (True) or inside (False)."""
@@ -394,7 +397,7 @@ class DielectricAlbedoRange:
     r_j = j/(ROUGH_NODES − 1) of r = √α that span the range (the conductor table's roughness axis; r = 0 is the
     smooth limit E = 1), bilinear in (√μ, √α)."""
 
-    def __init__(self, n_ratio: float, alpha_lo: float, alpha_hi: float):
+    def __init__(self, n_ratio: float, alpha_lo: float, alpha_hi: float, cycles_dense_side: bool = False):
         self.n_ratio = float(n_ratio)
         last = ROUGH_NODES - 1
         lo = math.sqrt(min(max(float(alpha_lo), 0.0), ALPHA_MAX)) * last
@@ -404,7 +407,8 @@ class DielectricAlbedoRange:
         r = _t_nodes(ROUGH_NODES)
         self.first = j0
         self.E = np.stack([np.ones((2, DIELECTRIC_MU_NODES)) if j == 0 else
-                           _dielectric_table(self.n_ratio, float(r[j] * r[j])) for j in range(j0, j1 + 1)], axis=-1)
+                           _dielectric_table(self.n_ratio, float(r[j] * r[j]), cycles_dense_side)
+                           for j in range(j0, j1 + 1)], axis=-1)
 
     def __call__(self, mu: np.ndarray, outside: np.ndarray, alpha: np.ndarray) -> np.ndarray:
         """E (N,) at viewing cosines |μ| (N,) from outside (True) or inside (False), roughness α (N,)."""
@@ -443,14 +447,16 @@ class DielectricAlbedoIndex:
     ``INDEX_NODES`` of c = F0^¼ spanning the range, linear in c between them; for η_lo = η_hi that index's own
     table (the constant lobe's compensation, bit for bit)."""
 
-    def __init__(self, eta_lo: float, eta_hi: float, alpha):
+    def __init__(self, eta_lo: float, eta_hi: float, alpha, cycles_dense_side: bool = False):
         if not (eta_lo > 0 and eta_hi >= eta_lo and (eta_lo >= 1.0 or eta_hi <= 1.0)):
             raise ValueError(f"a per-point index range must lie on one side of 1, got [{eta_lo:g}, {eta_hi:g}]")
         above = eta_lo >= 1.0
         self.per_point_alpha = isinstance(alpha, tuple)
 
         def table(eta):
-            return DielectricAlbedoRange(eta, *alpha) if self.per_point_alpha else DielectricAlbedo(eta, alpha)
+            if self.per_point_alpha:
+                return DielectricAlbedoRange(eta, *alpha, cycles_dense_side)
+            return DielectricAlbedo(eta, alpha, cycles_dense_side)
         if eta_lo == eta_hi:
             self.nodes, self.tables = None, [table(float(eta_lo))]
             return
@@ -485,12 +491,24 @@ class DielectricAlbedoIndex:
 
 
 @functools.lru_cache(maxsize=64)
-def _dielectric_table(n_ratio: float, alpha: float) -> np.ndarray:
+def _dielectric_table(n_ratio: float, alpha: float, cycles_dense_side: bool = False) -> np.ndarray:
+    """E (2, DIELECTRIC_MU_NODES) at the nodes in √μ, seen from outside (η = ``n_ratio``) and inside (1/``n_ratio``).
+    ``cycles_dense_side``: on the denser side (η < 1) E_own·E_counted/E_true, E_counted and E_true the
+    height-correlated albedos with and without refracted directions that end on the viewer's side: compensated by
+    1/E there, the interface returns E_true/E_counted, what Cycles' compensation from its ggx_glass_inv_E table
+    returns (docs/physics.md, "Multiple-scattering compensation")."""
     def build():
         t = _t_nodes(DIELECTRIC_MU_NODES)
-        return np.clip(np.stack([ggx_albedo(t * t, alpha, eta) for eta in (n_ratio, 1.0 / n_ratio)]), 0.0, 1.0)
-    table = cached_table("ggx_dielectric_albedo",
-                         (_TABLE_VERSION, n_ratio, alpha, DIELECTRIC_MU_NODES, QUAD_RADIUS, QUAD_ANGLE, MU_FLOOR),
+        rows = []
+        for eta in (n_ratio, 1.0 / n_ratio):
+            E = ggx_albedo(t * t, alpha, eta)
+            if cycles_dense_side and eta < 1.0:
+                true = ggx_albedo(t * t, alpha, eta, correlated=True)
+                E = E * ggx_albedo(t * t, alpha, eta, correlated=True, viewer_side_refraction=True) / true
+            rows.append(E)
+        return np.clip(np.stack(rows), 0.0, 1.0)
+    key = (_TABLE_VERSION, n_ratio, alpha, DIELECTRIC_MU_NODES, QUAD_RADIUS, QUAD_ANGLE, MU_FLOOR)
+    table = cached_table("ggx_dielectric_albedo", key + (("cycles_dense_side",) if cycles_dense_side else ()),
                          (2, DIELECTRIC_MU_NODES), build)
     table.setflags(write=False)
     return table

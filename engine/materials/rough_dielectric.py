@@ -315,19 +315,38 @@ class RoughDielectric(BSDF):
             self.varies_over_surface = self.varies_over_surface or any(isinstance(v, TexturedNumber)
                                                                        for v in self.film)
         self._energy = None
+        #: the denser side's compensation as Cycles' (compensate_dense_side_as_cycles); False: energy conserved
+        self.cycles_dense_side = False
         if self.multiscatter:
             if distribution != "ggx":
                 raise ValueError("multiscatter (Cycles' Multiscatter GGX) needs distribution='ggx'")
-            lo, hi = (alpha.lo, alpha.hi) if self.per_point else (self.alpha, self.alpha)
+            hi = alpha.hi if self.per_point else self.alpha
             if not hi <= ALPHA_MAX:
                 raise ValueError(f"multiscatter needs alpha <= {ALPHA_MAX:g} (Cycles clamps GGX alpha to 1), "
                                  f"got {alpha!r}")
-            if self.per_point_index:
-                self._energy = DielectricAlbedoIndex(n_lo / self.n_ext, n_hi / self.n_ext,
-                                                     (lo, hi) if self.per_point else lo)
-            else:
-                ratio = self.n_int / self.n_ext
-                self._energy = DielectricAlbedoRange(ratio, lo, hi) if self.per_point else DielectricAlbedo(ratio, lo)
+            self._index_range = (n_lo, n_hi) if self.per_point_index else None
+            self._energy = self._energy_table()
+
+    def _energy_table(self):
+        """The compensation's albedo table (engine.materials.ggx_energy) of this interface's index and roughness."""
+        lo, hi = (self.alpha.lo, self.alpha.hi) if self.per_point else (self.alpha, self.alpha)
+        if self._index_range is not None:
+            n_lo, n_hi = self._index_range
+            return DielectricAlbedoIndex(n_lo / self.n_ext, n_hi / self.n_ext, (lo, hi) if self.per_point else lo,
+                                         self.cycles_dense_side)
+        ratio = self.n_int / self.n_ext
+        if self.per_point:
+            return DielectricAlbedoRange(ratio, lo, hi, self.cycles_dense_side)
+        return DielectricAlbedo(ratio, lo, self.cycles_dense_side)
+
+    def compensate_dense_side_as_cycles(self) -> None:
+        """Seen from the denser side, compensate as Cycles does (its ggx_glass_inv_E table counts refracted
+        directions that no BSDF produces, so a rough interface returns less than all the light there: 0.5–2 % of a
+        rough glass sphere's brightness; docs/physics.md).  For Blender's glass, whose reference is Cycles; scene
+        files keep the energy-conserving compensation.  No effect without ``multiscatter``."""
+        if self.multiscatter and not self.cycles_dense_side:
+            self.cycles_dense_side = True
+            self._energy = self._energy_table()
 
     def _alpha(self, sp: ShadingPoint):
         """α at the points: the number, or (N,) for a textured roughness."""
@@ -430,7 +449,7 @@ class RoughDielectric(BSDF):
                "distribution": self.distribution,
                "shadowing": self.shadowing, "exterior_n": self.n_ext}
         if self.multiscatter:
-            out["multiscatter"] = True
+            out["multiscatter"] = "cycles_dense_side" if self.cycles_dense_side else True
         if self.film is not None:
             out["thin_film"] = film_label(self.film)
         return out
@@ -496,3 +515,27 @@ def _rough_dielectric(p):
         return SmoothDielectric(n, p["exterior_n"])
     return RoughDielectric(n, alpha, distribution, shadowing, p["exterior_n"], multiscatter=multiscatter,
                            **({"film_n": film_n, "film_thickness": thickness} if film else {}))
+
+
+def compensate_dense_sides_as_cycles(bsdf) -> None:
+    """In place: every rough dielectric in ``bsdf`` (mixes, layers, wrappers) compensates its denser side as
+    Cycles (RoughDielectric.compensate_dense_side_as_cycles): what Blender's materials render with."""
+    from .batching import object_fields         # (the fields same_material compares: vars and slots)
+    seen = set()
+
+    def walk(x) -> None:
+        if id(x) in seen:
+            return
+        seen.add(id(x))
+        if isinstance(x, RoughDielectric):
+            x.compensate_dense_side_as_cycles()
+        elif isinstance(x, (list, tuple)):
+            for v in x:
+                walk(v)
+        elif isinstance(x, dict):
+            for v in x.values():
+                walk(v)
+        elif isinstance(x, BSDF):
+            for v in object_fields(x).values():
+                walk(v)
+    walk(bsdf)

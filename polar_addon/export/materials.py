@@ -20,6 +20,7 @@ The material export, each module importing only those listed after it:
 
 
 from ...engine.materials.normal_map import has_mapped_normals, set_bump_correction
+from ...engine.materials.rough_dielectric import compensate_dense_sides_as_cycles
 from .. import compat
 from .images import baked_link, uv_source
 from .lambert import DEFAULT_ALBEDO, lambert
@@ -38,14 +39,17 @@ def export_material(material, warnings, bake=None):
     BakeTarget (the object the material is exported for) to bake linked inputs on, or None or a
     NoBake (their own values, one warning each).  Every Blender material is two-sided, as in Cycles
     (BSDF.two_sided: an opaque one seen from the back shades with flipped normals), counts a direction only on
-    the surface's side of its shading normal (BSDF.geometric_sides), and refracts without
-    scaling radiance by 1/η², as Cycles' closures do (BSDF.radiance_scaling)."""
+    the surface's side of its shading normal (BSDF.geometric_sides), refracts without
+    scaling radiance by 1/η², as Cycles' closures do (BSDF.radiance_scaling), and compensates rough glass for
+    multiple scattering as Cycles' tables do (rough_dielectric.compensate_dense_sides_as_cycles)."""
     bsdf, emission = _material_bsdf(material, warnings, bake)
     bsdf.two_sided = True
     # directions on the surface's side of the shading normal, as Cycles (mapped lobes keep their own rule)
     bsdf.geometric_sides = not has_mapped_normals(bsdf)
     if bsdf.flags.transmits:
         bsdf.radiance_scaling = False
+        # rough glass seen from its denser side loses what Cycles' compensation loses there (docs/physics.md)
+        compensate_dense_sides_as_cycles(bsdf)
     return bsdf, emission
 
 

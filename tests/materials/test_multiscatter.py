@@ -129,6 +129,30 @@ def test_tables_reproduce_cycles_albedo_tables_at_their_nodes():
         assert ggx_energy.ggx_albedo([mu], (8 / 15) ** 2, 1.5569, correlated=True)[0] == pytest.approx(value, abs=5e-4)
 
 
+def test_blender_glass_compensates_its_dense_side_as_cycles_inv_table():
+    """Cycles' ggx_glass_inv_E (light inside the glass; α = 1, η = 1/1.557: 0.732, 0.623, 0.519 at μ = 1/15, 2/15,
+    5/15, docs/physics.md) counts refracted directions that end on the viewer's side, which its BSDF never
+    produces (its albedo there: 0.548, 0.519, 0.502).  ggx_albedo with ``viewer_side_refraction`` is that table;
+    compensate_dense_side_as_cycles makes a rough interface seen from inside return E_true/E_counted, what Cycles'
+    returns, and leaves the outside and the energy-conserving default (scene files) alone."""
+    mu = np.array([1 / 15, 2 / 15, 5 / 15])
+    counted = ggx_energy.ggx_albedo(mu, 1.0, 1 / 1.557, correlated=True, viewer_side_refraction=True)
+    true = ggx_energy.ggx_albedo(mu, 1.0, 1 / 1.557, correlated=True)
+    np.testing.assert_allclose(counted, [0.732, 0.623, 0.519], atol=1.5e-3)
+    np.testing.assert_allclose(true, [0.548, 0.519, 0.502], atol=1.5e-3)
+    own = RoughDielectric(1.557, 1.0, "ggx", multiscatter=True)
+    cycles = RoughDielectric(1.557, 1.0, "ggx", multiscatter=True)
+    cycles.compensate_dense_side_as_cycles()
+    inside = np.zeros(3, bool)
+    E_own = ggx_energy.ggx_albedo(mu, 1.0, 1 / 1.557)           # the lobe's own albedo (separable G)
+    # the interface's albedo seen from inside, E_lobe/E_table: 1 by default, Cycles' E_true/E_counted
+    np.testing.assert_allclose(E_own / own._energy(mu, inside), 1.0, atol=2e-3)
+    np.testing.assert_allclose(E_own / cycles._energy(mu, inside), true / counted, rtol=2e-3)
+    assert np.all(true / counted < 0.99)
+    outside = np.ones(3, bool)
+    np.testing.assert_array_equal(cycles._energy(mu, outside), own._energy(mu, outside))
+
+
 def test_conductor_table_interpolation_and_quadrature_accuracy():
     """The 33 × 33 (√μ, √α) table against the direct quadrature at random points (μ ≥ 0.05) and the 96 × 96
     disk rule against a 4× finer one."""
