@@ -343,7 +343,7 @@ FILM_INPUTS = {"Thin Film Thickness": (250.0, 600.0), "Thin Film IOR": (1.4, 2.0
 
 #: a measured gap, not noise: Thin Film IOR 1.4 | 2.0 on the rough metal under the lamps reads Y 0.983–0.988 with one
 #: block at 0.97 at 4 and at 16 seeds, with the first sobol and the current one alike (each constant index alone
-#: passes); open in issue 33's notes.
+#: passes); docs/physics.md, "Cycles' white is equal-energy".
 FILM_GAPS = {("Thin Film IOR", "metal", "lamps")}
 
 
