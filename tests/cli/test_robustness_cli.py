@@ -247,7 +247,8 @@ def test_sigterm_writes_the_finished_samples_and_exits_143(tmp_path, scene_dir, 
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 143, err
     stokes, channels, header = read_stokes_exr(out)
-    assert header["polar.complete"] == 0 and 0 < channels["spp"].max() < 4000
+    # partial: some pixels unfinished (a band on the other worker process may have finished all its samples)
+    assert header["polar.complete"] == 0 and channels["spp"].max() > 0 and channels["spp"].min() < 4000
     assert np.all(np.isfinite(stokes)) and "Traceback" not in err
     assert not [n for n in os.listdir(tmp_path) if n.startswith(".")]
     # and it continues like an interrupted render
