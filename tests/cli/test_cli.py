@@ -66,7 +66,7 @@ def test_ctrl_c_writes_the_finished_samples(tmp_path):
     stokes, channels, header = read_stokes_exr(str(out))
     assert header["polar.complete"] == 0
     spp = channels["spp"]
-    assert 0 < spp.max() < 400 and header["polar.spp_max"] == spp.max()
+    assert 0 < spp.max() and spp.min() < 400 and header["polar.spp_max"] == spp.max()
     done = spp > 0
     assert np.all(stokes[0][done] > 0) and np.all(np.isfinite(stokes))
     assert not [f for f in os.listdir(tmp_path) if f.startswith(".")]     # no temporary file left

@@ -48,7 +48,7 @@ def test_cli_resume_after_ctrl_c(tmp_path):
     proc.send_signal(signal.SIGINT)
     proc.communicate(timeout=120)
     _, channels, _ = read_stokes_exr(part)
-    assert channels["spp"].max() < 24
+    assert channels["spp"].min() < 24      # partial (a band may have finished before the signal)
     done = subprocess.run([sys.executable, "-m", "engine", "render", scene, "-o", final, "--resume", part,
                            "--no-previews", "--stderr", "-q"], cwd=REPO, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr
