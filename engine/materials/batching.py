@@ -63,6 +63,30 @@ def object_fields(obj) -> dict:
     return fields
 
 
+def bsdfs_within(bsdf) -> list:
+    """Every BSDF reachable from ``bsdf`` (itself first) through its fields (``object_fields``) and the lists,
+    tuples and dicts among them — a mixture's components, a layer, a wrapper's base —, each once."""
+    from .base import BSDF
+    found, seen = [], set()
+
+    def walk(x) -> None:
+        if id(x) in seen:
+            return
+        seen.add(id(x))
+        if isinstance(x, (list, tuple)):
+            for v in x:
+                walk(v)
+        elif isinstance(x, dict):
+            for v in x.values():
+                walk(v)
+        elif isinstance(x, BSDF):
+            found.append(x)
+            for v in object_fields(x).values():
+                walk(v)
+    walk(bsdf)
+    return found
+
+
 def _same(a, b, seen: set) -> bool:
     if a is b:
         return True

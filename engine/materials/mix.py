@@ -585,11 +585,15 @@ class Mix(BSDF):
         """``_probabilities`` at the batch ``sp`` (its ``_points``), computed once per batch."""
         return sp.memo(self, "probabilities", lambda: self._probabilities(points, self._weights_at(sp)))
 
+    def _estimates(self, points, weights) -> list:
+        """w_k·a_k per component (the module docstring, "Sampling")."""
+        return [w * _albedo_estimate(c, q) for c, q, w in zip(self.components, points, weights)]
+
     def _probabilities(self, points, weights) -> np.ndarray:
-        """(K, N) lobe-selection probabilities p_k ∝ w_k·a_k (0 where every weight is 0)."""
+        """(K, N) lobe-selection probabilities p_k ∝ w_k·a_k (``_estimates``; 0 where every weight is 0)."""
         if not self.components:
             return np.zeros((0, 0))
-        raw = np.array([w * _albedo_estimate(c, q) for c, q, w in zip(self.components, points, weights)])
+        raw = np.array(self._estimates(points, weights))
         total = raw.sum(axis=0)
         return raw / np.where(total > 0, total, 1.0)[None, :]
 
@@ -867,17 +871,11 @@ class Layered(Mix):
 
     def _estimates(self, points, weights) -> list:
         """w_k·a_k per component: the top layer's a is its albedo E_top(ω_o) (what it takes from the base; Cycles'
-        sample weight of that closure, bsdf_microfacet_estimate_albedo), the others' as in a Mix."""
-        raw = [w * _albedo_estimate(c, q) for c, q, w in zip(self.components, points, weights)]
+        sample weight of that closure, bsdf_microfacet_estimate_albedo: a specular layer of albedo 0.05 over a
+        diffuse base is sampled in proportion to that), the others' as in a Mix."""
+        raw = super()._estimates(points, weights)
         raw[0] = weights[0] * np.clip(self._top_albedo(points[0]), ALBEDO_FLOOR, 1.0)
         return raw
-
-    def _probabilities(self, points, weights) -> np.ndarray:
-        """(K, N) p_k ∝ w_k·a_k with the top layer's albedo as its a (``_estimates``), as Cycles picks a closure by
-        its sample weight: a specular layer of albedo 0.05 over a diffuse base is sampled in proportion to that."""
-        raw = np.array(self._estimates(points, weights))
-        total = raw.sum(axis=0)
-        return raw / np.where(total > 0, total, 1.0)[None, :]
 
     def albedo_estimate(self, sp: ShadingPoint) -> np.ndarray:
         """Σ_k w_k·a_k (``_estimates``): how much the layered material reflects at the points, so that a mix over

@@ -344,20 +344,5 @@ def has_mapped_normals(bsdf) -> bool:
     """Whether a normal or bump map shades any lobe of ``bsdf`` (a ShadingNormal anywhere in it: mixes, layers,
     wrappers).  Such lobes keep their own side rule (the module docstring) with their own normal, so a material's
     side rule about its one shading normal (BSDF.geometric_sides) must not be laid over them."""
-    from .batching import object_fields         # (the fields same_material compares: vars and slots)
-    seen = set()
-
-    def walk(x) -> bool:
-        if isinstance(x, ShadingNormal):
-            return True
-        if id(x) in seen:
-            return False
-        seen.add(id(x))
-        if isinstance(x, (list, tuple)):
-            return any(walk(v) for v in x)
-        if isinstance(x, dict):
-            return any(walk(v) for v in x.values())
-        if isinstance(x, BSDF):
-            return any(walk(v) for v in object_fields(x).values())
-        return False
-    return walk(bsdf)
+    from .batching import bsdfs_within
+    return any(isinstance(m, ShadingNormal) for m in bsdfs_within(bsdf))

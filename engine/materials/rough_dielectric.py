@@ -520,22 +520,7 @@ def _rough_dielectric(p):
 def compensate_dense_sides_as_cycles(bsdf) -> None:
     """In place: every rough dielectric in ``bsdf`` (mixes, layers, wrappers) compensates its denser side as
     Cycles (RoughDielectric.compensate_dense_side_as_cycles): what Blender's materials render with."""
-    from .batching import object_fields         # (the fields same_material compares: vars and slots)
-    seen = set()
-
-    def walk(x) -> None:
-        if id(x) in seen:
-            return
-        seen.add(id(x))
-        if isinstance(x, RoughDielectric):
-            x.compensate_dense_side_as_cycles()
-        elif isinstance(x, (list, tuple)):
-            for v in x:
-                walk(v)
-        elif isinstance(x, dict):
-            for v in x.values():
-                walk(v)
-        elif isinstance(x, BSDF):
-            for v in object_fields(x).values():
-                walk(v)
-    walk(bsdf)
+    from .batching import bsdfs_within
+    for m in bsdfs_within(bsdf):
+        if isinstance(m, RoughDielectric):
+            m.compensate_dense_side_as_cycles()

@@ -278,27 +278,12 @@ def test_exported_rough_glass_compensates_its_inside_as_cycles(kind):
     of a Glass BSDF or a transmissive Principled compensates its denser side as Cycles' tables
     (RoughDielectric.cycles_dense_side); a scene file's stays energy-conserving."""
     load_addon()
-    from polar_render.engine.materials.batching import object_fields
+    from polar_render.engine.materials.batching import bsdfs_within
     from polar_render.engine.materials.rough_dielectric import RoughDielectric
     from polar_render.polar_addon.export.materials import export_material
     inputs = {"Roughness": 0.4, "IOR": 1.5} if kind.endswith("Glass") else {"Roughness": 0.4,
                                                                              "Transmission Weight": 1.0}
     bsdf, _ = export_material(shader(kind, "MULTI_GGX", inputs), [])
-    found, seen = [], set()
-
-    def walk(x):
-        if id(x) in seen:
-            return
-        seen.add(id(x))
-        if isinstance(x, RoughDielectric):
-            found.append(x)
-        elif isinstance(x, (list, tuple)):
-            for v in x:
-                walk(v)
-        elif hasattr(x, "__dict__") or hasattr(x, "__slots__"):
-            if type(x).__module__.startswith("polar_render.engine.materials"):
-                for v in object_fields(x).values():
-                    walk(v)
-    walk(bsdf)
+    found = [m for m in bsdfs_within(bsdf) if isinstance(m, RoughDielectric)]
     assert found and all(d.multiscatter and d.cycles_dense_side for d in found), found
     assert not RoughDielectric(1.5, 0.16, "ggx", multiscatter=True).cycles_dense_side
